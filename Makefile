@@ -1,0 +1,34 @@
+# make run: set up .venv and run the demo (server + demo client, writes out/demo.mp4).
+# make test: set up .venv and run the test suite.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed-stamp
+DEPS := pyproject.toml proto/pyproject.toml client_sdk/python/pyproject.toml scripts/system-deps.sh
+
+.PHONY: run test proto bench clean
+
+$(STAMP): $(DEPS)
+	bash scripts/system-deps.sh
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e proto -e client_sdk/python -e '.[dev]'
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/camdirector demo --out out
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+# Regenerates the committed wire-contract code after an edit of proto/camdirector/v1/*.proto.
+proto: $(STAMP)
+	$(BIN)/python -m grpc_tools.protoc -I proto --python_out=proto --pyi_out=proto \
+		--grpc_python_out=proto proto/camdirector/v1/director.proto
+
+bench: $(STAMP)
+	$(BIN)/python -m load_tests.stream --transport grpc --sessions 1 --seconds 10 --json out/bench-grpc-1.json
+	$(BIN)/python -m load_tests.stream --transport zmq --sessions 1 --seconds 10 --json out/bench-zmq-1.json
+
+clean:
+	rm -rf $(VENV) out

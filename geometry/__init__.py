@@ -1,0 +1,1 @@
+"""Shared low-level geometry: meshes, transforms, Toric math, ray casting, rendering."""

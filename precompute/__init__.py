@@ -1,0 +1,1 @@
+"""Offline computations (camera tracks, motion overview)."""

@@ -1,0 +1,312 @@
+from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
+from google.protobuf import descriptor as _descriptor
+from google.protobuf import message as _message
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
+from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
+
+DESCRIPTOR: _descriptor.FileDescriptor
+
+class VisibilityMode(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    VISIBILITY_MODE_UNSPECIFIED: _ClassVar[VisibilityMode]
+    ANTICIPATION: _ClassVar[VisibilityMode]
+    NO_ANTICIPATION: _ClassVar[VisibilityMode]
+    RAYCAST: _ClassVar[VisibilityMode]
+    REACTIVE: _ClassVar[VisibilityMode]
+    FRAMING_ONLY: _ClassVar[VisibilityMode]
+VISIBILITY_MODE_UNSPECIFIED: VisibilityMode
+ANTICIPATION: VisibilityMode
+NO_ANTICIPATION: VisibilityMode
+RAYCAST: VisibilityMode
+REACTIVE: VisibilityMode
+FRAMING_ONLY: VisibilityMode
+
+class Vec3(_message.Message):
+    __slots__ = ("x", "y", "z")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    Z_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    z: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ...) -> None: ...
+
+class Quat(_message.Message):
+    __slots__ = ("x", "y", "z", "w")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    Z_FIELD_NUMBER: _ClassVar[int]
+    W_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    z: float
+    w: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ..., w: _Optional[float] = ...) -> None: ...
+
+class Transform(_message.Message):
+    __slots__ = ("position", "rotation", "scale")
+    POSITION_FIELD_NUMBER: _ClassVar[int]
+    ROTATION_FIELD_NUMBER: _ClassVar[int]
+    SCALE_FIELD_NUMBER: _ClassVar[int]
+    position: Vec3
+    rotation: Quat
+    scale: Vec3
+    def __init__(self, position: _Optional[_Union[Vec3, _Mapping]] = ..., rotation: _Optional[_Union[Quat, _Mapping]] = ..., scale: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+
+class TriangleMesh(_message.Message):
+    __slots__ = ("vertices", "indices")
+    VERTICES_FIELD_NUMBER: _ClassVar[int]
+    INDICES_FIELD_NUMBER: _ClassVar[int]
+    vertices: _containers.RepeatedScalarFieldContainer[float]
+    indices: _containers.RepeatedScalarFieldContainer[int]
+    def __init__(self, vertices: _Optional[_Iterable[float]] = ..., indices: _Optional[_Iterable[int]] = ...) -> None: ...
+
+class Primitive(_message.Message):
+    __slots__ = ("box", "sphere", "cylinder", "capsule")
+    class Box(_message.Message):
+        __slots__ = ("size",)
+        SIZE_FIELD_NUMBER: _ClassVar[int]
+        size: Vec3
+        def __init__(self, size: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+    class Sphere(_message.Message):
+        __slots__ = ("radius",)
+        RADIUS_FIELD_NUMBER: _ClassVar[int]
+        radius: float
+        def __init__(self, radius: _Optional[float] = ...) -> None: ...
+    class Cylinder(_message.Message):
+        __slots__ = ("radius", "height")
+        RADIUS_FIELD_NUMBER: _ClassVar[int]
+        HEIGHT_FIELD_NUMBER: _ClassVar[int]
+        radius: float
+        height: float
+        def __init__(self, radius: _Optional[float] = ..., height: _Optional[float] = ...) -> None: ...
+    class Capsule(_message.Message):
+        __slots__ = ("radius", "height")
+        RADIUS_FIELD_NUMBER: _ClassVar[int]
+        HEIGHT_FIELD_NUMBER: _ClassVar[int]
+        radius: float
+        height: float
+        def __init__(self, radius: _Optional[float] = ..., height: _Optional[float] = ...) -> None: ...
+    BOX_FIELD_NUMBER: _ClassVar[int]
+    SPHERE_FIELD_NUMBER: _ClassVar[int]
+    CYLINDER_FIELD_NUMBER: _ClassVar[int]
+    CAPSULE_FIELD_NUMBER: _ClassVar[int]
+    box: Primitive.Box
+    sphere: Primitive.Sphere
+    cylinder: Primitive.Cylinder
+    capsule: Primitive.Capsule
+    def __init__(self, box: _Optional[_Union[Primitive.Box, _Mapping]] = ..., sphere: _Optional[_Union[Primitive.Sphere, _Mapping]] = ..., cylinder: _Optional[_Union[Primitive.Cylinder, _Mapping]] = ..., capsule: _Optional[_Union[Primitive.Capsule, _Mapping]] = ...) -> None: ...
+
+class Mesh(_message.Message):
+    __slots__ = ("glb", "obj", "triangles", "primitive")
+    GLB_FIELD_NUMBER: _ClassVar[int]
+    OBJ_FIELD_NUMBER: _ClassVar[int]
+    TRIANGLES_FIELD_NUMBER: _ClassVar[int]
+    PRIMITIVE_FIELD_NUMBER: _ClassVar[int]
+    glb: bytes
+    obj: bytes
+    triangles: TriangleMesh
+    primitive: Primitive
+    def __init__(self, glb: _Optional[bytes] = ..., obj: _Optional[bytes] = ..., triangles: _Optional[_Union[TriangleMesh, _Mapping]] = ..., primitive: _Optional[_Union[Primitive, _Mapping]] = ...) -> None: ...
+
+class SceneObject(_message.Message):
+    __slots__ = ("id", "mesh", "transform", "dynamic")
+    ID_FIELD_NUMBER: _ClassVar[int]
+    MESH_FIELD_NUMBER: _ClassVar[int]
+    TRANSFORM_FIELD_NUMBER: _ClassVar[int]
+    DYNAMIC_FIELD_NUMBER: _ClassVar[int]
+    id: str
+    mesh: Mesh
+    transform: Transform
+    dynamic: bool
+    def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., dynamic: _Optional[bool] = ...) -> None: ...
+
+class Target(_message.Message):
+    __slots__ = ("id", "mesh", "transform", "aim_offset")
+    ID_FIELD_NUMBER: _ClassVar[int]
+    MESH_FIELD_NUMBER: _ClassVar[int]
+    TRANSFORM_FIELD_NUMBER: _ClassVar[int]
+    AIM_OFFSET_FIELD_NUMBER: _ClassVar[int]
+    id: str
+    mesh: Mesh
+    transform: Transform
+    aim_offset: Vec3
+    def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., aim_offset: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+
+class Lens(_message.Message):
+    __slots__ = ("vertical_fov_deg", "aspect")
+    VERTICAL_FOV_DEG_FIELD_NUMBER: _ClassVar[int]
+    ASPECT_FIELD_NUMBER: _ClassVar[int]
+    vertical_fov_deg: float
+    aspect: float
+    def __init__(self, vertical_fov_deg: _Optional[float] = ..., aspect: _Optional[float] = ...) -> None: ...
+
+class ScreenPoint(_message.Message):
+    __slots__ = ("x", "y")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ...) -> None: ...
+
+class Style(_message.Message):
+    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2")
+    SCREEN_A_FIELD_NUMBER: _ClassVar[int]
+    SCREEN_B_FIELD_NUMBER: _ClassVar[int]
+    VISIBILITY_FIELD_NUMBER: _ClassVar[int]
+    GAZE_ROOM_M_FIELD_NUMBER: _ClassVar[int]
+    PREFERRED_THETA_RATIO_FIELD_NUMBER: _ClassVar[int]
+    PREFERRED_PHI_DEG_FIELD_NUMBER: _ClassVar[int]
+    RESPONSE_TIME_S_FIELD_NUMBER: _ClassVar[int]
+    MAX_SPEED_M_S_FIELD_NUMBER: _ClassVar[int]
+    MAX_ACCEL_M_S2_FIELD_NUMBER: _ClassVar[int]
+    screen_a: ScreenPoint
+    screen_b: ScreenPoint
+    visibility: VisibilityMode
+    gaze_room_m: float
+    preferred_theta_ratio: float
+    preferred_phi_deg: float
+    response_time_s: float
+    max_speed_m_s: float
+    max_accel_m_s2: float
+    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ...) -> None: ...
+
+class CreateSessionRequest(_message.Message):
+    __slots__ = ("objects", "targets", "lens", "style", "seed", "record")
+    OBJECTS_FIELD_NUMBER: _ClassVar[int]
+    TARGETS_FIELD_NUMBER: _ClassVar[int]
+    LENS_FIELD_NUMBER: _ClassVar[int]
+    STYLE_FIELD_NUMBER: _ClassVar[int]
+    SEED_FIELD_NUMBER: _ClassVar[int]
+    RECORD_FIELD_NUMBER: _ClassVar[int]
+    objects: _containers.RepeatedCompositeFieldContainer[SceneObject]
+    targets: _containers.RepeatedCompositeFieldContainer[Target]
+    lens: Lens
+    style: Style
+    seed: int
+    record: bool
+    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ...) -> None: ...
+
+class CreateSessionResponse(_message.Message):
+    __slots__ = ("session_id", "recording_path")
+    SESSION_ID_FIELD_NUMBER: _ClassVar[int]
+    RECORDING_PATH_FIELD_NUMBER: _ClassVar[int]
+    session_id: str
+    recording_path: str
+    def __init__(self, session_id: _Optional[str] = ..., recording_path: _Optional[str] = ...) -> None: ...
+
+class ObjectState(_message.Message):
+    __slots__ = ("id", "transform")
+    ID_FIELD_NUMBER: _ClassVar[int]
+    TRANSFORM_FIELD_NUMBER: _ClassVar[int]
+    id: str
+    transform: Transform
+    def __init__(self, id: _Optional[str] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ...) -> None: ...
+
+class FrameUpdate(_message.Message):
+    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms")
+    SESSION_ID_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_S_FIELD_NUMBER: _ClassVar[int]
+    STATES_FIELD_NUMBER: _ClassVar[int]
+    PACKED_IDS_FIELD_NUMBER: _ClassVar[int]
+    PACKED_TRANSFORMS_FIELD_NUMBER: _ClassVar[int]
+    session_id: str
+    frame: int
+    time_s: float
+    states: _containers.RepeatedCompositeFieldContainer[ObjectState]
+    packed_ids: _containers.RepeatedScalarFieldContainer[str]
+    packed_transforms: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ...) -> None: ...
+
+class CameraPose(_message.Message):
+    __slots__ = ("position", "rotation", "vertical_fov_deg")
+    POSITION_FIELD_NUMBER: _ClassVar[int]
+    ROTATION_FIELD_NUMBER: _ClassVar[int]
+    VERTICAL_FOV_DEG_FIELD_NUMBER: _ClassVar[int]
+    position: Vec3
+    rotation: Quat
+    vertical_fov_deg: float
+    def __init__(self, position: _Optional[_Union[Vec3, _Mapping]] = ..., rotation: _Optional[_Union[Quat, _Mapping]] = ..., vertical_fov_deg: _Optional[float] = ...) -> None: ...
+
+class Diagnostics(_message.Message):
+    __slots__ = ("theta", "phi", "alpha", "stage_ms", "flags")
+    class StageMsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    THETA_FIELD_NUMBER: _ClassVar[int]
+    PHI_FIELD_NUMBER: _ClassVar[int]
+    ALPHA_FIELD_NUMBER: _ClassVar[int]
+    STAGE_MS_FIELD_NUMBER: _ClassVar[int]
+    FLAGS_FIELD_NUMBER: _ClassVar[int]
+    theta: float
+    phi: float
+    alpha: float
+    stage_ms: _containers.ScalarMap[str, float]
+    flags: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, theta: _Optional[float] = ..., phi: _Optional[float] = ..., alpha: _Optional[float] = ..., stage_ms: _Optional[_Mapping[str, float]] = ..., flags: _Optional[_Iterable[str]] = ...) -> None: ...
+
+class CameraUpdate(_message.Message):
+    __slots__ = ("frame", "time_s", "pose", "cut", "shot_id", "visibility", "compute_ms", "stale", "message", "diagnostics")
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_S_FIELD_NUMBER: _ClassVar[int]
+    POSE_FIELD_NUMBER: _ClassVar[int]
+    CUT_FIELD_NUMBER: _ClassVar[int]
+    SHOT_ID_FIELD_NUMBER: _ClassVar[int]
+    VISIBILITY_FIELD_NUMBER: _ClassVar[int]
+    COMPUTE_MS_FIELD_NUMBER: _ClassVar[int]
+    STALE_FIELD_NUMBER: _ClassVar[int]
+    MESSAGE_FIELD_NUMBER: _ClassVar[int]
+    DIAGNOSTICS_FIELD_NUMBER: _ClassVar[int]
+    frame: int
+    time_s: float
+    pose: CameraPose
+    cut: bool
+    shot_id: int
+    visibility: float
+    compute_ms: float
+    stale: bool
+    message: str
+    diagnostics: Diagnostics
+    def __init__(self, frame: _Optional[int] = ..., time_s: _Optional[float] = ..., pose: _Optional[_Union[CameraPose, _Mapping]] = ..., cut: _Optional[bool] = ..., shot_id: _Optional[int] = ..., visibility: _Optional[float] = ..., compute_ms: _Optional[float] = ..., stale: _Optional[bool] = ..., message: _Optional[str] = ..., diagnostics: _Optional[_Union[Diagnostics, _Mapping]] = ...) -> None: ...
+
+class UpdateStyleRequest(_message.Message):
+    __slots__ = ("session_id", "style")
+    SESSION_ID_FIELD_NUMBER: _ClassVar[int]
+    STYLE_FIELD_NUMBER: _ClassVar[int]
+    session_id: str
+    style: Style
+    def __init__(self, session_id: _Optional[str] = ..., style: _Optional[_Union[Style, _Mapping]] = ...) -> None: ...
+
+class UpdateStyleResponse(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class CloseSessionRequest(_message.Message):
+    __slots__ = ("session_id",)
+    SESSION_ID_FIELD_NUMBER: _ClassVar[int]
+    session_id: str
+    def __init__(self, session_id: _Optional[str] = ...) -> None: ...
+
+class CloseSessionResponse(_message.Message):
+    __slots__ = ("frames",)
+    FRAMES_FIELD_NUMBER: _ClassVar[int]
+    frames: int
+    def __init__(self, frames: _Optional[int] = ...) -> None: ...
+
+class RecordEntry(_message.Message):
+    __slots__ = ("create", "frame", "style", "camera")
+    CREATE_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    STYLE_FIELD_NUMBER: _ClassVar[int]
+    CAMERA_FIELD_NUMBER: _ClassVar[int]
+    create: CreateSessionRequest
+    frame: FrameUpdate
+    style: UpdateStyleRequest
+    camera: CameraUpdate
+    def __init__(self, create: _Optional[_Union[CreateSessionRequest, _Mapping]] = ..., frame: _Optional[_Union[FrameUpdate, _Mapping]] = ..., style: _Optional[_Union[UpdateStyleRequest, _Mapping]] = ..., camera: _Optional[_Union[CameraUpdate, _Mapping]] = ...) -> None: ...

@@ -1,0 +1,1 @@
+"""Realtime director service."""

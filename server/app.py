@@ -1,0 +1,75 @@
+"""`camdirector serve`: the front process with its transports, and the worker pool."""
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import signal
+import socket
+import sys
+
+import uvicorn
+
+from camdirector.server.grpc_transport import start_grpc
+from camdirector.server.http_api import build_app
+from camdirector.server.metrics import Metrics
+from camdirector.server.session_router import SessionRouter
+from camdirector.server.settings import ServerSettings
+from camdirector.server.zmq_transport import ZmqTransport
+
+log = logging.getLogger("camdirector.serve")
+
+
+def _bind_http(address: str) -> socket.socket:
+    host, _, port = address.rpartition(":")
+    sock = socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind((host.strip("[]"), int(port)))
+    return sock
+
+
+async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> None:
+    """Runs until `stop` is set or SIGINT/SIGTERM arrives. Prints one JSON line when ready:
+    {"event": "ready", "grpc": ..., "zmq": ..., "http": ...} with the bound addresses."""
+    stop = stop or asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    metrics = Metrics()
+    router = SessionRouter(settings, metrics)
+    await router.start()
+    bound: dict[str, str] = {}
+    grpc_server = zmq_transport = http_server = http_task = None
+    try:
+        if settings.grpc_addr:
+            grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr)
+        if settings.zmq_addr:
+            zmq_transport = ZmqTransport(router, settings.zmq_addr)
+            zmq_transport.start()
+            bound["zmq"] = zmq_transport.address
+        if settings.http_addr:
+            sock = _bind_http(settings.http_addr)
+            bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
+            config = uvicorn.Config(build_app(router, bound), log_level="warning", lifespan="off")
+            http_server = uvicorn.Server(config)
+            http_server.install_signal_handlers = lambda: None  # ours above
+            http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
+        print(json.dumps({"event": "ready", **bound, "workers": settings.workers}), flush=True)
+        await stop.wait()
+    finally:
+        log.info("stopping")
+        if http_server is not None:
+            http_server.should_exit = True
+            await http_task
+        if grpc_server is not None:
+            await grpc_server.stop(grace=1.0)
+        if zmq_transport is not None:
+            await zmq_transport.stop()
+        await router.stop()
+
+
+def run(settings: ServerSettings) -> int:
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    asyncio.run(serve(settings))
+    return 0

@@ -1,0 +1,65 @@
+"""The `camdirector` command."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from camdirector.server.settings import ServerSettings
+
+
+def _serve_parser(sub) -> None:
+    p = sub.add_parser("serve", help="run the director service")
+    p.add_argument("--grpc", dest="grpc_addr", help="gRPC HOST:PORT ('' turns it off; port 0 picks one)")
+    p.add_argument("--zmq", dest="zmq_addr", help="ZeroMQ tcp://HOST:PORT ('' turns it off; port * picks one)")
+    p.add_argument("--http", dest="http_addr", help="HTTP HOST:PORT for /healthz, /metrics, REST ('' turns it off)")
+    p.add_argument("--workers", type=int, help="worker processes (0: sessions in the front process)")
+    p.add_argument("--max-sessions", dest="max_sessions", type=int)
+    p.add_argument("--max-objects", dest="max_objects", type=int)
+    p.add_argument("--max-triangles", dest="max_triangles", type=int)
+    p.add_argument("--max-message-bytes", dest="max_message_bytes", type=int)
+    p.add_argument("--session-resume-s", dest="session_resume_s", type=float,
+                   help="seconds an idle session without a stream is kept for a client to resume")
+    p.add_argument("--data-dir", dest="data_dir", help="recordings and artifacts")
+    p.add_argument("--record-all", dest="record_all", action="store_const", const=True,
+                   help="record every session")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="camdirector", description="Automated cinematographer service")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _serve_parser(sub)
+    p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
+    p.add_argument("file", type=Path)
+    p = sub.add_parser("demo", help="server plus demo client on a built-in scene; writes a video")
+    p.add_argument("--out", type=Path, default=Path("out"))
+    p.add_argument("--seconds", type=float, default=20.0)
+    p.add_argument("--transport", choices=("grpc", "zmq"), default="grpc")
+    args = parser.parse_args(argv)
+
+    if args.command == "serve":
+        overrides = {k: v for k, v in vars(args).items() if k != "command"}
+        try:
+            settings = ServerSettings.from_env(**overrides)
+        except ValueError as exc:
+            parser.error(str(exc))
+        from camdirector.server.app import run
+        return run(settings)
+    if args.command == "replay":
+        from camdirector.server.recording import replay
+        try:
+            report = replay(args.file)
+        except (OSError, ValueError) as exc:
+            print(f"camdirector replay: {exc}", file=sys.stderr)
+            return 2
+        print(json.dumps(report.as_dict()))
+        return 0 if report.ok else 1
+    if args.command == "demo":
+        from camdirector.server.demo.client import run_demo
+        return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

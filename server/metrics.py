@@ -1,0 +1,29 @@
+"""Prometheus metrics of the front process (served at /metrics on the HTTP address)."""
+from __future__ import annotations
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+
+# 50 us .. 1 s: per-frame work is sub-millisecond when healthy.
+_SECONDS_BUCKETS = (5e-5, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1, 0.25, 1.0)
+
+
+class Metrics:
+    def __init__(self):
+        self.registry = CollectorRegistry()
+        r = self.registry
+        self.sessions = Gauge("camdirector_sessions", "Open sessions", registry=r)
+        self.sessions_created = Counter("camdirector_sessions_created", "Sessions created", registry=r)
+        self.sessions_reclaimed = Counter("camdirector_sessions_reclaimed",
+                                          "Sessions reclaimed after the resume window or a worker loss", registry=r)
+        self.frames = Counter("camdirector_frames", "Frames answered", ["transport"], registry=r)
+        self.stale_frames = Counter("camdirector_stale_frames", "Frames answered stale (late or repeated)",
+                                    registry=r)
+        self.errors = Counter("camdirector_errors", "Requests answered with an error status",
+                              ["transport", "code"], registry=r)
+        self.frame_compute = Histogram("camdirector_frame_compute_seconds",
+                                       "Server compute time per frame (CameraUpdate.compute_ms)",
+                                       buckets=_SECONDS_BUCKETS, registry=r)
+        self.stage = Histogram("camdirector_stage_seconds", "Time per pipeline stage per frame", ["stage"],
+                               buckets=_SECONDS_BUCKETS, registry=r)
+        self.request = Histogram("camdirector_request_seconds", "Front-process time per request, routing included",
+                                 ["transport", "rpc"], buckets=_SECONDS_BUCKETS, registry=r)

@@ -1,0 +1,47 @@
+"""The per-frame director pipeline: the order of its stages and the state passed along them.
+
+Stage order (one module each):
+  INGEST      session.py        apply the frame's transforms to targets and the ray scene
+  FRAMING     framing.py        framed points A and B (gaze room for one target), the torus
+  MOTION      camera_motion.py  where on the torus the camera goes, damped and speed-limited
+  VISIBILITY  visibility.py     the rig's own estimate of how much of the targets is visible
+  OUTPUT      wire.py           the CameraUpdate
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.toric import Torus
+
+
+class Stage(enum.IntEnum):
+    INGEST = 0
+    FRAMING = 1
+    MOTION = 2
+    VISIBILITY = 3
+    OUTPUT = 4
+
+
+@dataclass
+class FrameState:
+    """What one frame computes, filled stage by stage."""
+
+    frame: int
+    time_s: float
+    dt_s: float                                  # since the previous answered frame, s (0 on the first)
+    aim_points_world: list[np.ndarray] = field(default_factory=list)  # (3,) per target
+    a_world: np.ndarray | None = None            # (3,) framed point A
+    b_world: np.ndarray | None = None            # (3,) framed point B
+    torus: Torus | None = None
+    theta: float = 0.0                           # rad
+    phi: float = 0.0                             # rad
+    pose: CameraPose | None = None
+    cut: bool = False
+    shot_id: int = 0
+    visibility: float = 1.0                      # [0, 1]
+    flags: list[str] = field(default_factory=list)  # degraded-mode notes for diagnostics
+    stage_ms: dict[str, float] = field(default_factory=dict)

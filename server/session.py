@@ -1,0 +1,114 @@
+"""One director session: its scene, the latest transforms, and the camera rig's state.
+
+`Session.frame` runs the pipeline stages in the order pipeline.py writes down. The session never
+raises inside the frame loop for a geometric difficulty: it degrades (holds the pose, frames one
+target) and flags it in the diagnostics.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
+from camdirector.server.camera_motion import ToricMotion
+from camdirector.server.framing import Framing
+from camdirector.server.pipeline import FrameState, Stage
+from camdirector.server.style import Style
+from camdirector.server.visibility import VisibilityEstimate
+from camdirector.server.wire import FrameInput, SceneSpec
+
+
+class Session:
+    def __init__(self, session_id: str, scene: SceneSpec, clock: Callable[[], float] = time.perf_counter):
+        self.id = session_id
+        self.clock = clock
+        self.rng = np.random.default_rng(scene.seed)
+        self.lens = scene.lens
+        self.style = scene.style
+        self.targets = scene.targets
+        self.target_index = {t.id: i for i, t in enumerate(scene.targets)}
+        self.target_transforms = [t.transform for t in scene.targets]
+        self.static_ids = {o.id for o in scene.objects if not o.dynamic}
+        self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
+        self.ray_scene = RayScene([_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic])
+        for o in scene.objects:
+            if o.dynamic:
+                self.ray_scene.add_dynamic(o.id, o.mesh, o.transform)
+        self.framing = Framing(self.lens, self.style, scene.targets[0].transform.rotation_xyzw)
+        self.motion = ToricMotion(self.style, self.lens)
+        self.visibility = VisibilityEstimate(self.ray_scene, [t.mesh for t in scene.targets], self.rng)
+        self.last_state: FrameState | None = None
+        self.frames_answered = 0
+        self.shot_id = 0
+        self._style_cut = False
+
+    def set_style(self, style: Style) -> None:
+        """From the next frame on. A changed composition cannot be reached smoothly: it is a cut."""
+        if (style.screen_a, style.screen_b) != (self.style.screen_a, self.style.screen_b):
+            self._style_cut = True
+        self.style = style
+        self.framing.set_style(style)
+        self.motion.set_style(style)
+
+    def is_stale(self, frame: int) -> bool:
+        return self.last_state is not None and frame <= self.last_state.frame
+
+    def frame(self, update: FrameInput) -> FrameState:
+        """Runs one frame. The caller has checked that update.frame is newer than the last."""
+        last = self.last_state
+        dt_s = 0.0 if last is None else max(0.0, update.time_s - last.time_s)
+        state = FrameState(frame=update.frame, time_s=update.time_s, dt_s=dt_s)
+        if last is not None and update.time_s < last.time_s:
+            state.flags.append("time_went_back")
+        t0 = self.clock()
+        for object_id, transform in update.states:  # Stage.INGEST
+            index = self.target_index.get(object_id)
+            if index is None:
+                self.ray_scene.set_transform(object_id, transform)
+            else:
+                self.target_transforms[index] = transform
+        state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0]
+                                  for tf, t in zip(self.target_transforms, self.targets)]
+        t1 = self.clock()
+        self.framing.run(state)  # Stage.FRAMING
+        t2 = self.clock()
+        self.motion.run(state)  # Stage.MOTION
+        if state.pose is None:
+            state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
+        t3 = self.clock()
+        self.visibility.run(state, self.target_transforms)  # Stage.VISIBILITY
+        t4 = self.clock()
+        state.cut = last is None or self._style_cut
+        self._style_cut = False
+        if state.cut:
+            self.shot_id += 1
+        state.shot_id = self.shot_id
+        state.stage_ms = {
+            Stage.INGEST.name.lower(): (t1 - t0) * 1e3,
+            Stage.FRAMING.name.lower(): (t2 - t1) * 1e3,
+            Stage.MOTION.name.lower(): (t3 - t2) * 1e3,
+            Stage.VISIBILITY.name.lower(): (t4 - t3) * 1e3,
+        }
+        self.last_state = state
+        self.frames_answered += 1
+        return state
+
+
+def _to_world(mesh: TriMesh, transform: RigidTransform) -> TriMesh:
+    return TriMesh(transform.apply(mesh.vertices), mesh.faces)
+
+
+def _fallback_pose(state: FrameState, fov_deg: float) -> CameraPose:
+    """Only when the very first frame has no usable torus: behind and above A, looking at it."""
+    target = state.aim_points_world[0]
+    position = target + np.array([0.0, 2.0, 6.0])
+    forward = (target - position) / np.linalg.norm(target - position)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return CameraPose(position, matrix_to_quat(np.stack([right, up, -forward], axis=1)), fov_deg)

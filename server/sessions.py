@@ -1,0 +1,129 @@
+"""The session table: the sessions one process holds, and the requests that reach them.
+
+Used the same way inside a worker process and inline in the front process (workers=0): the
+worker pool routes a request by session id and calls `handle_bytes`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from camdirector.server import wire
+from camdirector.server.errors import DirectorError, internal, invalid, not_found
+from camdirector.server.recording import RecordingWriter
+from camdirector.server.session import Session
+from camdirector.server.settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+
+
+@dataclass
+class FrameMetrics:
+    """Timings of one answered frame, for the front's Prometheus histograms."""
+
+    compute_ms: float
+    stage_ms: dict[str, float]
+    stale: bool
+
+
+class SessionTable:
+    def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter):
+        self.settings = settings
+        self.clock = clock
+        self.sessions: dict[str, Session] = {}
+        self.recorders: dict[str, RecordingWriter] = {}
+
+    def _get(self, session_id: str) -> Session:
+        session = self.sessions.get(session_id)
+        if session is None:
+            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
+        return session
+
+    def create(self, session_id: str, req: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        scene = wire.scene_from_request(req, self.settings)
+        self.sessions[session_id] = Session(session_id, scene, clock=self.clock)
+        response = pb.CreateSessionResponse(session_id=session_id)
+        if req.record or self.settings.record_all:
+            path = self.settings.recordings_dir / f"{session_id}.cdrec"
+            recorder = RecordingWriter(path)
+            recorder.write(pb.RecordEntry(create=req))
+            self.recorders[session_id] = recorder
+            response.recording_path = str(path)
+        return response
+
+    def frame(self, msg: pb.FrameUpdate) -> pb.CameraUpdate:
+        return self._frame(msg)[0]
+
+    def _frame(self, msg: pb.FrameUpdate) -> tuple[pb.CameraUpdate, FrameMetrics]:
+        t0 = self.clock()
+        session = self._get(msg.session_id)
+        if session.is_stale(msg.frame):
+            last = session.last_state
+            reply = wire.camera_update_msg(
+                last, compute_ms=(self.clock() - t0) * 1e3, stale=True,
+                message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
+            reply.frame, reply.time_s = msg.frame, msg.time_s
+        else:
+            update = wire.frame_from_msg(msg, session.movable_ids, session.static_ids)
+            state = session.frame(update)
+            reply = wire.camera_update_msg(state, compute_ms=0.0)
+            reply.compute_ms = (self.clock() - t0) * 1e3
+        recorder = self.recorders.get(msg.session_id)
+        if recorder is not None:
+            recorder.write(pb.RecordEntry(frame=msg))
+            recorder.write(pb.RecordEntry(camera=reply))
+        return reply, FrameMetrics(reply.compute_ms, dict(reply.diagnostics.stage_ms), reply.stale)
+
+    def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+        session = self._get(msg.session_id)
+        session.set_style(wire.style_from_msg(msg.style, session.lens))
+        recorder = self.recorders.get(msg.session_id)
+        if recorder is not None:
+            recorder.write(pb.RecordEntry(style=msg))
+        return pb.UpdateStyleResponse()
+
+    def close(self, session_id: str) -> pb.CloseSessionResponse:
+        session = self._get(session_id)
+        self.drop(session_id)
+        return pb.CloseSessionResponse(frames=session.frames_answered)
+
+    def drop(self, session_id: str) -> None:
+        """Forgets a session if present (closing, or reclaiming an abandoned one)."""
+        self.sessions.pop(session_id, None)
+        recorder = self.recorders.pop(session_id, None)
+        if recorder is not None:
+            recorder.close()
+
+    def handle_bytes(self, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
+        """One request as the transports carry it: serialized in, serialized out.
+
+        Raises DirectorError for anything the client must hear about; an unexpected exception
+        becomes INTERNAL and leaves the other sessions untouched.
+        """
+        try:
+            if op == "frame":
+                reply, metrics = self._frame(_parse(pb.FrameUpdate, payload))
+                return reply.SerializeToString(), metrics
+            if op == "create":
+                return self.create(session_id, _parse(pb.CreateSessionRequest, payload)).SerializeToString(), None
+            if op == "style":
+                return self.update_style(_parse(pb.UpdateStyleRequest, payload)).SerializeToString(), None
+            if op == "close":
+                return self.close(session_id).SerializeToString(), None
+            if op == "drop":
+                self.drop(session_id)
+                return b"", None
+            raise invalid(f"unknown operation {op!r}")
+        except DirectorError:
+            raise
+        except Exception as exc:  # a bug must not take the worker (and its other sessions) down
+            if op == "create":
+                self.drop(session_id)
+            raise internal(exc) from exc
+
+
+def _parse(message_type, payload: bytes):
+    try:
+        return message_type.FromString(payload)
+    except Exception:
+        raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}") from None

@@ -1,0 +1,55 @@
+"""The director's style: one typed object, defaults with unit and limit, validated once.
+
+Mirrors `camdirector.v1.Style`; `server/wire.py` converts and validates at the edge.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+
+class VisibilityMode(enum.IntEnum):
+    """Same numbers as camdirector.v1.VisibilityMode."""
+
+    UNSPECIFIED = 0
+    ANTICIPATION = 1
+    NO_ANTICIPATION = 2
+    RAYCAST = 3
+    REACTIVE = 4
+    FRAMING_ONLY = 5
+
+
+# Modes the rig runs today; the others answer UNIMPLEMENTED until the visibility work lands.
+IMPLEMENTED_MODES = frozenset({VisibilityMode.UNSPECIFIED, VisibilityMode.FRAMING_ONLY})
+
+
+@dataclass(frozen=True)
+class Style:
+    screen_a: tuple[float, float] = (-1.0 / 3.0, 0.0)  # normalised screen point of A, each in [-1, 1]
+    screen_b: tuple[float, float] = (1.0 / 3.0, 0.0)   # of B (or the gaze-room point); != screen_a
+    visibility: VisibilityMode = VisibilityMode.FRAMING_ONLY
+    gaze_room_m: float = 2.5            # one target: lead point distance ahead, m. [0.05, 1000]
+    preferred_theta_ratio: float = 0.35  # place on the arc, 0 at A .. 1 at B. [0.02, 0.98]
+    preferred_phi_deg: float = 70.0     # 0 above the A-B axis, 90 level beside it, deg. [0, 180]
+    response_time_s: float = 0.5        # time constant of the damped return to the preferred place, s. [0.02, 60]
+    max_speed_m_s: float = 8.0          # camera speed limit on the torus, m/s. (0, 1000]
+    max_accel_m_s2: float = 12.0        # camera acceleration limit on the torus, m/s^2. (0, 10000]
+
+    def __post_init__(self):
+        for name, point in (("screen_a", self.screen_a), ("screen_b", self.screen_b)):
+            if not all(math.isfinite(c) and -1.0 <= c <= 1.0 for c in point):
+                raise ValueError(f"style.{name} must have x and y in [-1, 1], got {point}")
+        if math.dist(self.screen_a, self.screen_b) < 1e-3:
+            raise ValueError("style.screen_a and style.screen_b must differ")
+        limits = [
+            ("gaze_room_m", self.gaze_room_m, 0.05, 1000.0),
+            ("preferred_theta_ratio", self.preferred_theta_ratio, 0.02, 0.98),
+            ("preferred_phi_deg", self.preferred_phi_deg, 0.0, 180.0),
+            ("response_time_s", self.response_time_s, 0.02, 60.0),
+            ("max_speed_m_s", self.max_speed_m_s, 1e-6, 1000.0),
+            ("max_accel_m_s2", self.max_accel_m_s2, 1e-6, 10000.0),
+        ]
+        for name, value, low, high in limits:
+            if not (math.isfinite(value) and low <= value <= high):
+                raise ValueError(f"style.{name} must be in [{low:g}, {high:g}], got {value}")
