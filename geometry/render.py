@@ -1,0 +1,309 @@
+"""Offscreen colour rendering of rigid triangle meshes through EGL (moderngl), for videos.
+
+`moderngl.create_standalone_context(backend='egl')` needs no X display: it runs on Mesa's llvmpipe
+on machines without a GPU and on the GPU's driver where there is one.
+
+Camera convention as in `camdirector.geometry.camera`: the camera looks down its local -Z with +Y
+up, the pose's rotation is camera-to-world, and the lens gives the vertical field of view and the
+aspect. Images come back (h, w, 3) uint8 with the top row first.
+
+Per-frame cost is uniforms and draw calls only: vertex data is uploaded once by `add_mesh`, and
+`set_transform` only stores a matrix that `render` sends as a uniform.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.geometry.transforms import quat_to_matrix
+
+# Pale blue-grey: grey columns and the orange avatar stand out against it. Fog fades distance to
+# this same colour, which softens the far edge of the ground slab against the sky.
+SKY_RGB = (0.72, 0.80, 0.88)
+# Direction *towards* the light, world frame: high and from one side so that two faces of a box
+# seen from a typical camera get different shades and shapes read as solids, not silhouettes.
+LIGHT_DIR_WORLD = (0.45, 0.80, 0.30)
+
+_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_model;
+uniform mat3 u_normal_matrix;
+uniform mat4 u_view_proj;
+in vec3 in_position;
+in vec3 in_normal;
+out vec3 v_normal_world;
+out vec3 v_position_world;
+void main() {
+    vec4 p_world = u_model * vec4(in_position, 1.0);
+    v_position_world = p_world.xyz;
+    v_normal_world = u_normal_matrix * in_normal;
+    gl_Position = u_view_proj * p_world;
+}
+"""
+
+# Lambert from a key light plus a weak fill, with a hemisphere ambient term (sky above, ground
+# bounce below) so faces turned away from the light keep some shape; an optional world-space
+# checker so ground motion is visible in video;
+# distance fog so the horizon blends into the sky.
+_FRAGMENT_SHADER = """
+#version 330
+uniform vec3 u_color;
+uniform vec3 u_light_dir_world;
+uniform vec3 u_sky_rgb;
+uniform vec3 u_camera_world;
+uniform float u_checker_m;
+uniform float u_fog_start_m;
+uniform float u_fog_end_m;
+in vec3 v_normal_world;
+in vec3 v_position_world;
+out vec4 f_color;
+void main() {
+    vec3 n = normalize(v_normal_world);
+    float key = max(dot(n, u_light_dir_world), 0.0);
+    // A weak fill from the opposite side, as if bounced, keeps faces away from the key light
+    // from going near-black (columns seen against the light read as flat dark bars otherwise).
+    vec3 fill_dir = normalize(vec3(-u_light_dir_world.x, 0.4, -u_light_dir_world.z));
+    float fill = max(dot(n, fill_dir), 0.0);
+    float hemi = 0.5 + 0.5 * n.y;
+    vec3 color = u_color;
+    if (u_checker_m > 0.0) {
+        vec2 cell = floor(v_position_world.xz / u_checker_m);
+        color *= (mod(cell.x + cell.y, 2.0) < 1.0) ? 1.0 : 0.86;
+    }
+    vec3 lit = color * (0.5 * key + 0.2 * fill + mix(0.30, 0.45, hemi));
+    float dist = length(v_position_world - u_camera_world);
+    float fog = clamp((dist - u_fog_start_m) / (u_fog_end_m - u_fog_start_m), 0.0, 1.0);
+    f_color = vec4(mix(lit, u_sky_rgb, fog), 1.0);
+}
+"""
+
+
+def perspective_matrix(lens: Lens, near_m: float, far_m: float) -> np.ndarray:
+    """(4, 4) float64 OpenGL clip-from-camera matrix for the lens (vertical fov, aspect)."""
+    if not 0.0 < near_m < far_m:
+        raise ValueError(f"need 0 < near_m < far_m, got near_m={near_m}, far_m={far_m}")
+    f = 1.0 / lens.tan_half_fov_y
+    m = np.zeros((4, 4))
+    m[0, 0] = f / lens.aspect
+    m[1, 1] = f
+    m[2, 2] = (far_m + near_m) / (near_m - far_m)
+    m[2, 3] = 2.0 * far_m * near_m / (near_m - far_m)
+    m[3, 2] = -1.0
+    return m
+
+
+def view_matrix(pose: CameraPose) -> np.ndarray:
+    """(4, 4) float64 camera-from-world matrix: the inverse of the pose's camera-to-world."""
+    r = quat_to_matrix(pose.rotation_xyzw)
+    m = np.eye(4)
+    m[:3, :3] = r.T
+    m[:3, 3] = -r.T @ np.asarray(pose.position_world, dtype=np.float64)
+    return m
+
+
+def _gl_matrix(m: np.ndarray) -> bytes:
+    # GLSL reads matrices column-major; numpy is row-major, so send the transpose.
+    return np.ascontiguousarray(m.T, dtype="f4").tobytes()
+
+
+@dataclass
+class _GpuMesh:
+    vbo: moderngl.Buffer
+    vao: moderngl.VertexArray
+    color_rgb: tuple[float, float, float]
+    checker_m: float
+    model_bytes: bytes
+    normal_bytes: bytes
+
+
+class OffscreenRenderer:
+    """Flat-shaded colour renderer of rigid meshes into an offscreen framebuffer.
+
+    width_px, height_px: image size in pixels, each in [1, 8192]. msaa_samples: multisampling,
+    0 = off (clamped to what the driver offers). 4 smooths edges and far checker moire but, on
+    llvmpipe (2 busy cores, the ~2k-triangle demo scene, median per frame) it about doubles the
+    cost at 640x360 (4-9 ms -> 8-16 ms) and triples it at 1280x720 (11-17 ms -> 33-75 ms); on a
+    GPU it is close to free. fog_start_m / fog_end_m: distance band in metres over which geometry
+    fades into the sky colour.
+
+    Use as a context manager or call `release()`: it owns a GL context.
+    """
+
+    def __init__(
+        self,
+        width_px: int,
+        height_px: int,
+        *,
+        msaa_samples: int = 0,
+        sky_rgb: tuple[float, float, float] = SKY_RGB,
+        light_dir_world: tuple[float, float, float] = LIGHT_DIR_WORLD,
+        fog_start_m: float = 20.0,
+        fog_end_m: float = 90.0,
+    ) -> None:
+        width_px, height_px = int(width_px), int(height_px)
+        if not (1 <= width_px <= 8192 and 1 <= height_px <= 8192):
+            raise ValueError(f"image size must be in [1, 8192] px, got {width_px}x{height_px}")
+        if not 0.0 <= fog_start_m < fog_end_m:
+            raise ValueError("need 0 <= fog_start_m < fog_end_m")
+        self.width_px = width_px
+        self.height_px = height_px
+        self.sky_rgb = tuple(float(c) for c in sky_rgb)
+        try:
+            self._ctx = moderngl.create_standalone_context(backend="egl")
+        except Exception as err:  # EGL missing or no usable driver: say which call failed
+            raise RuntimeError(f"OffscreenRenderer: no EGL GL context ({err})") from err
+        ctx = self._ctx
+        self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        light = np.asarray(light_dir_world, dtype=np.float64)
+        self._prog["u_light_dir_world"].value = tuple(light / np.linalg.norm(light))
+        self._prog["u_sky_rgb"].value = self.sky_rgb
+        self._prog["u_fog_start_m"].value = float(fog_start_m)
+        self._prog["u_fog_end_m"].value = float(fog_end_m)
+        # Uniform handles looked up once; dictionary lookups per draw call add up at 60 fps.
+        self._u_model = self._prog["u_model"]
+        self._u_normal = self._prog["u_normal_matrix"]
+        self._u_view_proj = self._prog["u_view_proj"]
+        self._u_color = self._prog["u_color"]
+        self._u_checker = self._prog["u_checker_m"]
+        self._u_camera = self._prog["u_camera_world"]
+
+        size = (width_px, height_px)
+        samples = min(int(msaa_samples), ctx.max_samples) if msaa_samples > 1 else 0
+        # A multisampled framebuffer cannot be read directly: draw into it, then resolve into a
+        # plain one. Without multisampling the two are the same framebuffer.
+        self._draw_fbo = ctx.framebuffer(
+            color_attachments=[ctx.renderbuffer(size, 4, samples=samples)],
+            depth_attachment=ctx.depth_renderbuffer(size, samples=samples),
+        )
+        self._resolve_fbo = self._draw_fbo
+        if samples:
+            self._resolve_fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)])
+        self._readback = bytearray(width_px * height_px * 3)
+        self._meshes: dict[str, _GpuMesh] = {}
+
+    # -- scene -------------------------------------------------------------------------------
+
+    def add_mesh(
+        self,
+        mesh_id: str,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        color_rgb: tuple[float, float, float],
+        *,
+        checker_m: float = 0.0,
+    ) -> None:
+        """Upload a mesh once; it starts at the identity transform.
+
+        vertices: (n, 3) float local coordinates, metres. faces: (m, 3) int indices into vertices,
+        counter-clockwise seen from outside (only the normal's sign depends on it; nothing is
+        culled). color_rgb: 3 floats in [0, 1]. checker_m: side of a world-space checker pattern
+        drawn on this mesh (0 = plain), e.g. 1-2 m on the ground so camera motion reads in video.
+        """
+        if mesh_id in self._meshes:
+            raise ValueError(f"mesh id {mesh_id!r} already added")
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+            raise ValueError("vertices must be (n, 3) with n > 0")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
+            raise ValueError("faces must be (m, 3) integer with m > 0")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError("faces index outside vertices")
+        if not np.all(np.isfinite(v)):
+            raise ValueError("vertices must be finite")
+        color = np.asarray(color_rgb, dtype=np.float64)
+        if color.shape != (3,) or np.any(color < 0.0) or np.any(color > 1.0):
+            raise ValueError("color_rgb must be 3 floats in [0, 1]")
+
+        # Flat shading: each triangle gets its own three vertices carrying the face normal, so the
+        # shader needs no derivatives and shared box corners do not smear light across edges.
+        tri = v[f]  # (m, 3, 3) corners
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (m, 3)
+        length = np.linalg.norm(normal, axis=1, keepdims=True)
+        normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0.0)
+        interleaved = np.empty((len(f), 3, 6), dtype="f4")  # (m, 3 corners, position + normal)
+        interleaved[:, :, :3] = tri
+        interleaved[:, :, 3:] = normal[:, None, :]
+        vbo = self._ctx.buffer(interleaved.tobytes())
+        vao = self._ctx.vertex_array(self._prog, [(vbo, "3f 3f", "in_position", "in_normal")])
+        self._meshes[mesh_id] = _GpuMesh(
+            vbo=vbo,
+            vao=vao,
+            color_rgb=tuple(float(c) for c in color),
+            checker_m=float(checker_m),
+            model_bytes=_gl_matrix(np.eye(4)),
+            normal_bytes=np.eye(3, dtype="f4").tobytes(),
+        )
+
+    def set_transform(self, mesh_id: str, matrix_local_to_world: np.ndarray) -> None:
+        """Place a mesh: matrix_local_to_world (4, 4) float, e.g. `RigidTransform.matrix()`."""
+        mesh = self._meshes.get(mesh_id)
+        if mesh is None:
+            raise KeyError(f"unknown mesh id {mesh_id!r}")
+        m = np.asarray(matrix_local_to_world, dtype=np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise ValueError("matrix_local_to_world must be a finite (4, 4) matrix")
+        if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+            raise ValueError("matrix_local_to_world is singular (zero scale?)")
+        mesh.model_bytes = _gl_matrix(m)
+        # Inverse transpose keeps normals perpendicular under non-uniform scale.
+        mesh.normal_bytes = _gl_matrix(np.linalg.inv(m[:3, :3]).T)
+
+    def mesh_ids(self) -> list[str]:
+        """Ids of the meshes added so far, in insertion order."""
+        return list(self._meshes)
+
+    # -- frames ------------------------------------------------------------------------------
+
+    def render(
+        self, pose: CameraPose, lens: Lens, near_m: float = 0.05, far_m: float = 500.0
+    ) -> np.ndarray:
+        """(h, w, 3) uint8 image, top row first, seen from pose through lens.
+
+        The projection uses lens.vertical_fov_deg and lens.aspect (as `project_to_screen` does);
+        pass a lens whose aspect equals width_px / height_px or the image is stretched.
+        """
+        if self._ctx is None:
+            raise ValueError("OffscreenRenderer was released")
+        view_proj = perspective_matrix(lens, near_m, far_m) @ view_matrix(pose)
+        self._draw_fbo.use()
+        self._ctx.enable(moderngl.DEPTH_TEST)
+        self._ctx.disable(moderngl.CULL_FACE)
+        self._draw_fbo.clear(*self.sky_rgb, 1.0, depth=1.0)
+        self._u_view_proj.write(_gl_matrix(view_proj))
+        self._u_camera.value = tuple(float(c) for c in pose.position_world)
+        for mesh in self._meshes.values():
+            self._u_model.write(mesh.model_bytes)
+            self._u_normal.write(mesh.normal_bytes)
+            self._u_color.value = mesh.color_rgb
+            self._u_checker.value = mesh.checker_m
+            mesh.vao.render(moderngl.TRIANGLES)
+        if self._draw_fbo is not self._resolve_fbo:
+            self._ctx.copy_framebuffer(self._resolve_fbo, self._draw_fbo)
+        self._resolve_fbo.read_into(self._readback, components=3, alignment=1)
+        image = np.frombuffer(self._readback, dtype=np.uint8)
+        image = image.reshape(self.height_px, self.width_px, 3)
+        # GL's first row is the bottom one; the copy also frees the caller from our reused buffer.
+        return image[::-1].copy()
+
+    # -- lifetime ----------------------------------------------------------------------------
+
+    def release(self) -> None:
+        """Free the GL objects and the context; the renderer is unusable afterwards."""
+        if self._ctx is None:
+            return
+        for mesh in self._meshes.values():
+            mesh.vao.release()
+            mesh.vbo.release()
+        self._meshes.clear()
+        self._ctx.release()
+        self._ctx = None
+
+    def __enter__(self) -> OffscreenRenderer:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()

@@ -1,0 +1,118 @@
+"""OffscreenRenderer (EGL, llvmpipe here) and VideoWriter on hand-built one-box scenes."""
+from __future__ import annotations
+
+import math
+
+import imageio_ffmpeg
+import numpy as np
+import pytest
+import trimesh
+
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.render import OffscreenRenderer
+from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
+from camdirector.geometry.video import VideoWriter
+
+WIDTH_PX, HEIGHT_PX = 160, 90
+LENS = Lens(vertical_fov_deg=50.0, aspect=WIDTH_PX / HEIGHT_PX)
+AT_ORIGIN = CameraPose(np.zeros(3), IDENTITY_QUAT.copy(), LENS.vertical_fov_deg)
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    with OffscreenRenderer(WIDTH_PX, HEIGHT_PX) as r:
+        r.add_mesh("box", box.vertices, box.faces, (1.0, 0.0, 0.0))
+        yield r
+
+
+def _box_mask(image: np.ndarray) -> np.ndarray:
+    """(h, w) bool: pixels of the pure red box, whatever their shading (the sky is pale blue)."""
+    rgb = image.astype(np.int32)
+    return (rgb[..., 0] > 50) & (rgb[..., 1] < rgb[..., 0] // 2) & (rgb[..., 2] < rgb[..., 0] // 2)
+
+
+def _render_box_at(renderer: OffscreenRenderer, position_world, pose: CameraPose = AT_ORIGIN):
+    renderer.set_transform("box", RigidTransform(position_world=np.asarray(position_world)).matrix())
+    return renderer.render(pose, LENS)
+
+
+def _centroid_px(mask: np.ndarray) -> np.ndarray:
+    rows, cols = np.nonzero(mask)
+    return np.array([cols.mean(), rows.mean()])
+
+
+def test_box_ahead_covers_the_centre_and_not_the_corners(renderer):
+    image = _render_box_at(renderer, (0.0, 0.0, -5.0))
+    assert image.shape == (HEIGHT_PX, WIDTH_PX, 3) and image.dtype == np.uint8
+    mask = _box_mask(image)
+    assert mask[HEIGHT_PX // 2, WIDTH_PX // 2]
+    assert not mask[[0, 0, -1, -1], [0, -1, 0, -1]].any()
+
+
+@pytest.mark.parametrize("position_world", [(1.5, 0.0, -5.0), (0.0, 1.2, -5.0), (-2.0, -1.0, -8.0)])
+def test_box_lands_where_project_to_screen_says(renderer, position_world):
+    mask = _box_mask(_render_box_at(renderer, position_world))
+    expected_xy = project_to_screen(AT_ORIGIN, LENS, np.array([position_world]))[0]
+    # Normalised screen (x right, y up) to pixels (column right, row down, top row first).
+    expected_px = np.array([(expected_xy[0] + 1) / 2 * WIDTH_PX, (1 - expected_xy[1]) / 2 * HEIGHT_PX])
+    # A box's silhouette centroid sits within a pixel or two of its projected centre here.
+    assert np.allclose(_centroid_px(mask), expected_px, atol=2.5)
+
+
+def test_box_to_the_right_moves_the_centroid_right(renderer):
+    centred = _centroid_px(_box_mask(_render_box_at(renderer, (0.0, 0.0, -5.0))))
+    right = _centroid_px(_box_mask(_render_box_at(renderer, (1.5, 0.0, -5.0))))
+    assert right[0] > centred[0] + 10 and abs(right[1] - centred[1]) < 1.0
+
+
+def test_box_above_the_axis_is_in_the_top_half(renderer):
+    rows, _ = np.nonzero(_box_mask(_render_box_at(renderer, (0.0, 1.5, -5.0))))
+    assert len(rows) and rows.max() < HEIGHT_PX // 2
+
+
+def test_box_behind_the_camera_is_not_drawn(renderer):
+    assert not _box_mask(_render_box_at(renderer, (0.0, 0.0, 5.0))).any()
+
+
+def test_rotation_is_camera_to_world(renderer):
+    # A turn of +90 degrees about +Y points the camera's -Z along world -X.
+    turned = CameraPose(
+        np.zeros(3), np.array([0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)]), 50.0
+    )
+    mask = _box_mask(_render_box_at(renderer, (-5.0, 0.0, 0.0), turned))
+    assert mask[HEIGHT_PX // 2, WIDTH_PX // 2]
+    assert not _box_mask(_render_box_at(renderer, (0.0, 0.0, -5.0), turned)).any()
+
+
+def test_bad_meshes_and_ids_are_refused(renderer):
+    with pytest.raises(ValueError):
+        renderer.add_mesh("flat", np.zeros((4, 2)), np.array([[0, 1, 2]]), (0.5, 0.5, 0.5))
+    with pytest.raises(ValueError):
+        renderer.add_mesh("oob", np.zeros((3, 3)), np.array([[0, 1, 3]]), (0.5, 0.5, 0.5))
+    with pytest.raises(ValueError):
+        renderer.add_mesh("box", np.eye(3), np.array([[0, 1, 2]]), (0.5, 0.5, 0.5))
+    with pytest.raises(KeyError):
+        renderer.set_transform("missing", np.eye(4))
+
+
+def test_video_writer_writes_a_readable_mp4(tmp_path):
+    path = tmp_path / "clip.mp4"
+    frame_count = 12
+    with VideoWriter(path, fps=24, size_wh=(64, 48)) as video:
+        for i in range(frame_count):
+            frame = np.zeros((48, 64, 3), dtype=np.uint8)
+            frame[:, : 5 * (i + 1)] = (230, 90, 30)  # a bar that grows, so frames differ
+            video.write(frame)
+    frames, secs = imageio_ffmpeg.count_frames_and_secs(str(path))
+    assert frames == frame_count
+    assert secs == pytest.approx(frame_count / 24, abs=0.05)
+
+
+def test_video_writer_refuses_odd_sizes_and_wrong_frames(tmp_path):
+    with pytest.raises(ValueError):
+        VideoWriter(tmp_path / "odd.mp4", fps=24, size_wh=(63, 48))
+    with VideoWriter(tmp_path / "wrong.mp4", fps=24, size_wh=(64, 48)) as video:
+        with pytest.raises(ValueError):
+            video.write(np.zeros((64, 48, 3), dtype=np.uint8))
+        video.write(np.zeros((48, 64, 3), dtype=np.uint8))
