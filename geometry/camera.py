@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 
 
 @dataclass(frozen=True)
@@ -49,3 +49,30 @@ def project_to_screen(pose: CameraPose, lens: Lens, points_world: np.ndarray) ->
     out = np.stack([x, y], axis=1)
     out[depth <= 0.0] = np.nan
     return out
+
+
+def level_look_rotation(camera_world: np.ndarray, point_world: np.ndarray, screen_xy, lens: Lens) -> np.ndarray:
+    """Camera-to-world quaternion (4,) xyzw with no roll (camera x axis horizontal, +Y up) that
+    shows point_world at normalised screen_xy (2,).
+
+    Written as yaw about +Y after pitch about x, R = Ry(yaw) Rx(pitch): the pitch brings the
+    camera-space ray of screen_xy to the world ray's elevation (yaw keeps elevations), then the yaw
+    turns it onto the world ray. Of the two pitches, the one nearer level is taken. When the point
+    is too steep for the screen position (near the zenith) the pitch saturates and the point lands
+    off its screen position rather than the camera rolling.
+    """
+    d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
+    d /= np.linalg.norm(d)
+    a = np.asarray(point_world, dtype=np.float64) - camera_world
+    a /= np.linalg.norm(a)
+    rho = math.hypot(d[1], d[2])
+    delta = math.atan2(d[2], d[1])
+    base = math.acos(max(-1.0, min(1.0, a[1] / rho)))
+    pitch = min((base - delta, -base - delta), key=lambda b: abs(math.remainder(b, math.tau)))
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    z_pitched = d[1] * sp + d[2] * cp
+    yaw = math.atan2(a[0], a[2]) - math.atan2(d[0], z_pitched)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    return matrix_to_quat(ry @ rx)

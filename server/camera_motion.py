@@ -1,6 +1,7 @@
 """MOTION stage: where on the torus the camera goes this frame (the FRAMING_ONLY rig).
 
-The camera always sits on the current torus, so the composition is exact every frame. Its place
+The camera always sits on the current torus, so the composition is exact every frame (with one
+target, A is exact and the horizon level; the gaze-room point lands near screen_b). Its place
 (theta, phi) has inertia: the previous camera position is projected onto the new torus (the
 camera stays where it was as far as the new composition allows), then a critically damped spring
 pulls it toward the style's preferred (theta, phi). The spring's acceleration and the resulting
@@ -15,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.camera import Lens
-from camdirector.geometry.toric import Torus, compose_pose, tangent_frame, theta_max, torus_angles
+from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
+from camdirector.geometry.toric import Torus, compose_pose, tangent_frame, theta_max, torus_angles, torus_position
 from camdirector.geometry.transforms import quat_rotate
 from camdirector.server.pipeline import FrameState
 from camdirector.server.style import Style
@@ -80,7 +81,14 @@ class ToricMotion:
             self.theta, self.phi = torus_angles(torus, self.position_world)
             self._integrate(torus, goal_theta, goal_phi, lo, hi, state.dt_s)
         state.theta, state.phi = self.theta, self.phi
-        state.pose = compose_pose(torus, self.theta, self.phi, self.style.screen_a, self.style.screen_b, self.lens)
+        if state.b_is_gaze_point:
+            # B only makes lead room: A is placed exactly and the horizon kept level, where the
+            # full composition would roll the camera whenever it is not square to A-B.
+            position = torus_position(torus, self.theta, self.phi)
+            rotation = level_look_rotation(position, torus.a_world, self.style.screen_a, self.lens)
+            state.pose = CameraPose(position, rotation, self.lens.vertical_fov_deg)
+        else:
+            state.pose = compose_pose(torus, self.theta, self.phi, self.style.screen_a, self.style.screen_b, self.lens)
         self.position_world = state.pose.position_world
 
     def _integrate(self, torus: Torus, goal_theta: float, goal_phi: float, lo: float, hi: float, dt_s: float) -> None:

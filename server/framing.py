@@ -62,8 +62,10 @@ class Framing:
             if np.linalg.norm(b - a) < self.settings.min_ab_distance_m:
                 state.flags.append("targets_coincide")
                 b = self._gaze_point(a, state.dt_s)
+                state.b_is_gaze_point = True
         else:
             b = self._gaze_point(a, state.dt_s)
+            state.b_is_gaze_point = True
         state.a_world, state.b_world = a, b
         try:
             state.torus = make_torus(a, b, self.alpha, UP_WORLD)

@@ -36,6 +36,7 @@ class FrameState:
     aim_points_world: list[np.ndarray] = field(default_factory=list)  # (3,) per target
     a_world: np.ndarray | None = None            # (3,) framed point A
     b_world: np.ndarray | None = None            # (3,) framed point B
+    b_is_gaze_point: bool = False                # B is the one target's gaze-room point, not a target
     torus: Torus | None = None
     theta: float = 0.0                           # rad
     phi: float = 0.0                             # rad

@@ -1,0 +1,383 @@
+"""The asyncio client: grpc.aio for ``grpc://host:port``, zmq.asyncio for ``tcp://host:port``.
+
+    async with connect_async("tcp://127.0.0.1:5555") as client:
+        async with client.create_session(targets=[...]) as session:
+            update = await session.frame(1, 0.016, packed=pack_states(ids, positions, rotations))
+
+Same methods as the sync client (:mod:`camdirector_client.client`), awaited. Create and use an
+:class:`AsyncClient` inside one running event loop. Over ZeroMQ each request borrows a DEALER
+socket from a small pool (one request outstanding per socket), so concurrent tasks do not queue
+behind one another.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterable, AsyncIterator, Generator, Iterable, Mapping, Sequence
+from types import TracebackType
+from typing import Any, Protocol
+
+import grpc
+import grpc.aio
+import zmq
+import zmq.asyncio
+
+from camdirector.v1 import director_pb2 as pb
+from camdirector.v1 import director_pb2_grpc
+from camdirector_client import wire
+from camdirector_client.errors import DirectorError
+
+__all__ = ["AsyncClient", "AsyncSession", "connect_async"]
+
+_IDLE_SOCKETS = 8  # ZeroMQ sockets a client keeps open for reuse
+_FRAME_METHOD = "/camdirector.v1.Director/Frame"
+
+FrameUpdates = Iterable[pb.FrameUpdate] | AsyncIterable[pb.FrameUpdate]
+
+
+class _AsyncTransport(Protocol):
+    async def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse: ...
+    async def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate: ...
+    async def frame_encoded(self, update: bytes) -> pb.CameraUpdate: ...
+    def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]: ...
+    async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse: ...
+    async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse: ...
+    async def close(self) -> None: ...
+
+
+class _AioGrpcTransport:
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one."""
+
+    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]]) -> None:
+        self._channel = grpc.aio.insecure_channel(target, options=options)
+        self._stub = director_pb2_grpc.DirectorStub(self._channel)
+        # Frame again, taking a FrameUpdate already serialized (wire.encode_frame_update).
+        self._frame_encoded = self._channel.unary_unary(
+            _FRAME_METHOD, response_deserializer=pb.CameraUpdate.FromString, _registered_method=True
+        )
+        self._timeout_s = timeout_s
+
+    async def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        try:
+            return await self._stub.CreateSession(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    async def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+        try:
+            return await self._stub.Frame(update, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    async def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
+        try:
+            return await self._frame_encoded(update, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    async def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]:
+        pump = _AsyncRequestPump(updates)
+        call = self._stub.StreamFrames(pump.iterate())
+        try:
+            async for update in call:
+                yield update
+        except grpc.RpcError as error:
+            if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
+                raise pump.error from None
+            raise DirectorError.from_rpc_error(error) from None
+        except asyncio.CancelledError:
+            if pump.error is not None:  # grpc.aio cancels the call when the request iterator fails
+                raise pump.error from None
+            raise
+        finally:
+            call.cancel()
+        if pump.error is not None:
+            raise pump.error
+
+    async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+        try:
+            return await self._stub.UpdateStyle(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
+        try:
+            return await self._stub.CloseSession(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    async def close(self) -> None:
+        self._stub = self._frame_encoded = wire.ClosedStub()
+        await self._channel.close()
+
+
+class _AsyncRequestPump:
+    """Iterates the caller's updates for grpc.aio and keeps what they raised, if anything."""
+
+    def __init__(self, updates: AsyncIterable[pb.FrameUpdate]) -> None:
+        self._updates = updates
+        self.error: BaseException | None = None
+
+    async def iterate(self) -> AsyncIterator[pb.FrameUpdate]:
+        try:
+            async for update in self._updates:
+                yield update
+        except Exception as error:
+            self.error = error
+            raise
+
+
+class _AioZmqTransport:
+    """Request/reply over zmq.asyncio DEALER sockets: one request outstanding per socket, LINGER 0.
+
+    A socket that timed out (or whose task was cancelled) while waiting is closed, never reused,
+    so a late reply can not be taken for the answer to a later request.
+    """
+
+    def __init__(self, endpoint: str, timeout_s: float, context: zmq.asyncio.Context | None) -> None:
+        self._endpoint = endpoint
+        self._timeout_s = timeout_s
+        self._timeout_ms = max(1, round(timeout_s * 1000.0))
+        self._context = context if context is not None else zmq.asyncio.Context.instance()
+        self._idle: list[zmq.asyncio.Socket] = [self._open()]
+        self._closed = False
+
+    def _open(self) -> zmq.asyncio.Socket:
+        sock = self._context.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        # zmq.asyncio honours these: a wait past them raises zmq.Again.
+        sock.setsockopt(zmq.RCVTIMEO, self._timeout_ms)
+        sock.setsockopt(zmq.SNDTIMEO, self._timeout_ms)
+        sock.connect(self._endpoint)
+        return sock
+
+    async def _request(self, rpc: bytes, payload: bytes) -> bytes:
+        if self._closed:
+            raise DirectorError(grpc.StatusCode.CANCELLED, "the client is closed")
+        sock = self._idle.pop() if self._idle else self._open()
+        try:
+            await sock.send_multipart((rpc, payload))
+            reply = await sock.recv_multipart()
+        except zmq.Again:
+            sock.close(linger=0)
+            if not self._closed:  # a fresh socket, already connecting, for the next call
+                self._idle.append(self._open())
+            raise DirectorError(
+                grpc.StatusCode.DEADLINE_EXCEEDED,
+                f"no reply to {rpc.decode()} from {self._endpoint} within {self._timeout_s:g} s",
+            ) from None
+        except BaseException:
+            sock.close(linger=0)
+            raise
+        if self._closed or len(self._idle) >= _IDLE_SOCKETS:
+            sock.close(linger=0)
+        else:
+            self._idle.append(sock)
+        return wire.zmq_reply_payload(reply)
+
+    async def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        reply = await self._request(wire.RPC_CREATE_SESSION, request.SerializeToString())
+        return pb.CreateSessionResponse.FromString(reply)
+
+    async def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+        return pb.CameraUpdate.FromString(await self._request(wire.RPC_FRAME, update.SerializeToString()))
+
+    async def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
+        return pb.CameraUpdate.FromString(await self._request(wire.RPC_FRAME, update))
+
+    async def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]:
+        async for update in updates:
+            yield await self.frame(update)
+
+    async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+        reply = await self._request(wire.RPC_UPDATE_STYLE, request.SerializeToString())
+        return pb.UpdateStyleResponse.FromString(reply)
+
+    async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
+        reply = await self._request(wire.RPC_CLOSE_SESSION, request.SerializeToString())
+        return pb.CloseSessionResponse.FromString(reply)
+
+    async def close(self) -> None:
+        self._closed = True
+        idle, self._idle = self._idle, []
+        for sock in idle:
+            sock.close(linger=0)
+
+
+class AsyncSession:
+    """One director session; closes itself at the end of an ``async with`` block.
+
+    Attributes
+    ----------
+    id : str
+        The session id the server chose.
+    recording_path : str
+        Where the server records the session; empty unless ``record=True`` and it records.
+    """
+
+    __slots__ = ("_closed_frames", "_transport", "id", "recording_path")
+
+    def __init__(self, transport: _AsyncTransport, response: pb.CreateSessionResponse) -> None:
+        self._transport = transport
+        self.id: str = response.session_id
+        self.recording_path: str = response.recording_path
+        self._closed_frames: int | None = None
+
+    def __repr__(self) -> str:
+        return f"AsyncSession(id={self.id!r}, closed={self._closed_frames is not None})"
+
+    def frame_update(
+        self,
+        frame: int,
+        time_s: float,
+        *,
+        states: wire.States | None = None,
+        packed: wire.PackedStates | None = None,
+    ) -> pb.FrameUpdate:
+        """A ``FrameUpdate`` for this session, e.g. to feed :meth:`stream`."""
+        return wire.frame_update(self.id, frame, time_s, states, packed)
+
+    async def frame(
+        self,
+        frame: int,
+        time_s: float,
+        *,
+        states: wire.States | None = None,
+        packed: wire.PackedStates | None = None,
+    ) -> pb.CameraUpdate:
+        """Sends one frame and waits for its camera; see :meth:`camdirector_client.Session.frame`."""
+        update = wire.encode_frame_update(self.id, frame, time_s, states, packed)
+        return await self._transport.frame_encoded(update)
+
+    async def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+        """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""
+        if not update.session_id:
+            update.session_id = self.id
+        return await self._transport.frame(update)
+
+    def stream(self, frame_updates: FrameUpdates) -> AsyncIterator[pb.CameraUpdate]:
+        """One ``CameraUpdate`` per update, in order: ``async for update in session.stream(...)``.
+
+        ``frame_updates`` may be a sync or an async iterable. Over gRPC this is one StreamFrames
+        call; over ZeroMQ, one Frame request per update. Updates with an empty session_id get this
+        session's. Leaving the loop early cancels the stream (close the iterator with ``aclose()``).
+        """
+        return self._transport.stream(wire.with_session_id_async(frame_updates, self.id))
+
+    async def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:
+        """Replaces the whole style from the next frame on (unset fields take their defaults)."""
+        request = pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style))
+        await self._transport.update_style(request)
+
+    async def close(self) -> int:
+        """Closes the session on the server; answers how many frames it answered. Idempotent."""
+        if self._closed_frames is None:
+            response = await self._transport.close_session(pb.CloseSessionRequest(session_id=self.id))
+            self._closed_frames = response.frames
+        return self._closed_frames
+
+    async def __aenter__(self) -> AsyncSession:
+        return self
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if exc_type is None:
+            await self.close()
+            return
+        try:  # best effort: do not hide the error that ended the block
+            await self.close()
+        except DirectorError:
+            pass
+
+
+class _SessionOpening:
+    """What :meth:`AsyncClient.create_session` returns: await it for the session, or use it in
+    ``async with`` to have the session closed at the end of the block."""
+
+    __slots__ = ("_opening", "_session")
+
+    def __init__(self, opening: Any) -> None:
+        self._opening = opening
+        self._session: AsyncSession | None = None
+
+    def __await__(self) -> Generator[Any, None, AsyncSession]:
+        return self._opening.__await__()
+
+    async def __aenter__(self) -> AsyncSession:
+        self._session = await self._opening
+        return self._session
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        assert self._session is not None
+        await self._session.__aexit__(exc_type, exc, tb)
+
+
+class AsyncClient:
+    """A connection to a director server; see :func:`connect_async`."""
+
+    def __init__(self, transport: _AsyncTransport, url: str) -> None:
+        self._transport = transport
+        self.url = url
+
+    def __repr__(self) -> str:
+        return f"AsyncClient({self.url!r})"
+
+    def create_session(
+        self,
+        request: pb.CreateSessionRequest | None = None,
+        *,
+        objects: Iterable[pb.SceneObject] | None = None,
+        targets: Iterable[pb.Target] | None = None,
+        lens: pb.Lens | None = None,
+        style: pb.Style | Mapping[str, Any] | None = None,
+        seed: int = 0,
+        record: bool = False,
+    ) -> _SessionOpening:
+        """Opens a session: ``session = await client.create_session(...)`` or
+        ``async with client.create_session(...) as session``. Arguments as in the sync client.
+        """
+        msg = wire.create_session_request(
+            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record
+        )
+        return _SessionOpening(self._open_session(msg))
+
+    async def _open_session(self, request: pb.CreateSessionRequest) -> AsyncSession:
+        return AsyncSession(self._transport, await self._transport.create_session(request))
+
+    async def close(self) -> None:
+        """Closes the channel or sockets. Sessions stay open on the server until their timeout."""
+        await self._transport.close()
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        await self.close()
+
+
+def connect_async(
+    url: str,
+    timeout_s: float = wire.DEFAULT_TIMEOUT_S,
+    *,
+    max_message_bytes: int = wire.DEFAULT_MAX_MESSAGE_BYTES,
+    grpc_options: Sequence[tuple[str, Any]] | None = None,
+    zmq_context: zmq.asyncio.Context | None = None,
+) -> AsyncClient:
+    """An :class:`AsyncClient` for ``grpc://host:port`` or ``tcp://host:port``; call it inside a
+    running event loop. Arguments as in :func:`camdirector_client.connect`; ``zmq_context``
+    defaults to ``zmq.asyncio.Context.instance()``.
+    """
+    endpoint = wire.parse_url(url)
+    timeout_s = wire.check_timeout(timeout_s)
+    transport: _AsyncTransport
+    if endpoint.transport == "grpc":
+        options = wire.grpc_channel_options(max_message_bytes, grpc_options)
+        transport = _AioGrpcTransport(endpoint.address, timeout_s, options)
+    else:
+        transport = _AioZmqTransport(endpoint.address, timeout_s, zmq_context)
+    return AsyncClient(transport, url)

@@ -1,0 +1,369 @@
+"""The synchronous client, over gRPC (``grpc://host:port``) or ZeroMQ (``tcp://host:port``).
+
+    with connect("grpc://127.0.0.1:50051") as client:
+        with client.create_session(targets=[...], style=...) as session:
+            update = session.frame(1, 0.016, packed=pack_states(ids, positions, rotations))
+
+A :class:`Client` is safe to share between threads. Over gRPC it holds one channel; over ZeroMQ
+it holds a small pool of DEALER sockets, each with at most one request outstanding, so
+concurrent calls from several threads each get a socket of their own.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from types import TracebackType
+from typing import Any, Protocol
+
+import grpc
+import zmq
+
+from camdirector.v1 import director_pb2 as pb
+from camdirector.v1 import director_pb2_grpc
+from camdirector_client import wire
+from camdirector_client.errors import DirectorError
+
+__all__ = ["Client", "Session", "connect"]
+
+_IDLE_SOCKETS = 8  # ZeroMQ sockets a client keeps open for reuse
+_FRAME_METHOD = "/camdirector.v1.Director/Frame"
+
+
+class _Transport(Protocol):
+    def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse: ...
+    def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate: ...
+    def frame_encoded(self, update: bytes) -> pb.CameraUpdate: ...
+    def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]: ...
+    def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse: ...
+    def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse: ...
+    def close(self) -> None: ...
+
+
+class _GrpcTransport:
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one."""
+
+    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]]) -> None:
+        self._channel = grpc.insecure_channel(target, options=options)
+        self._stub = director_pb2_grpc.DirectorStub(self._channel)
+        # Frame again, taking a FrameUpdate already serialized (wire.encode_frame_update).
+        self._frame_encoded = self._channel.unary_unary(
+            _FRAME_METHOD, response_deserializer=pb.CameraUpdate.FromString, _registered_method=True
+        )
+        self._timeout_s = timeout_s
+
+    def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        try:
+            return self._stub.CreateSession(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+        try:
+            return self._stub.Frame(update, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
+        try:
+            return self._frame_encoded(update, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
+        pump = _RequestPump(updates)
+        call = self._stub.StreamFrames(iter(pump))
+        try:
+            yield from call
+        except grpc.RpcError as error:
+            if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
+                raise pump.error from None
+            raise DirectorError.from_rpc_error(error) from None
+        finally:
+            call.cancel()
+        if pump.error is not None:
+            raise pump.error
+
+    def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+        try:
+            return self._stub.UpdateStyle(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
+        try:
+            return self._stub.CloseSession(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    def close(self) -> None:
+        self._stub = self._frame_encoded = wire.ClosedStub()
+        self._channel.close()
+
+
+class _RequestPump:
+    """Iterates the caller's updates on grpc's thread and keeps what they raised, if anything."""
+
+    def __init__(self, updates: Iterable[pb.FrameUpdate]) -> None:
+        self._updates = updates
+        self.error: BaseException | None = None
+
+    def __iter__(self) -> Iterator[pb.FrameUpdate]:
+        try:
+            yield from self._updates
+        except Exception as error:
+            self.error = error
+            raise
+
+
+class _ZmqTransport:
+    """Request/reply over DEALER sockets: one request outstanding per socket, LINGER 0.
+
+    A socket that timed out (or was interrupted) while waiting is closed, never reused, so a late
+    reply can not be taken for the answer to a later request.
+    """
+
+    def __init__(self, endpoint: str, timeout_s: float, context: zmq.Context | None) -> None:
+        self._endpoint = endpoint
+        self._timeout_s = timeout_s
+        self._timeout_ms = max(1, round(timeout_s * 1000.0))
+        self._context = context if context is not None else zmq.Context.instance()
+        self._idle: list[zmq.Socket] = [self._open()]
+        self._closed = False  # list.pop and list.append are atomic: the pool needs no lock
+
+    def _open(self) -> zmq.Socket:
+        sock = self._context.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.RCVTIMEO, self._timeout_ms)
+        sock.setsockopt(zmq.SNDTIMEO, self._timeout_ms)
+        sock.connect(self._endpoint)
+        return sock
+
+    def _request(self, rpc: bytes, payload: bytes) -> bytes:
+        if self._closed:
+            raise DirectorError(grpc.StatusCode.CANCELLED, "the client is closed")
+        try:
+            sock = self._idle.pop()
+        except IndexError:
+            sock = self._open()
+        try:
+            sock.send(rpc, zmq.SNDMORE)
+            sock.send(payload)
+            reply = sock.recv_multipart()
+        except zmq.Again:
+            sock.close(linger=0)
+            if not self._closed:  # a fresh socket, already connecting, for the next call
+                self._idle.append(self._open())
+            raise DirectorError(
+                grpc.StatusCode.DEADLINE_EXCEEDED,
+                f"no reply to {rpc.decode()} from {self._endpoint} within {self._timeout_s:g} s",
+            ) from None
+        except BaseException:
+            sock.close(linger=0)
+            raise
+        if self._closed or len(self._idle) >= _IDLE_SOCKETS:
+            sock.close(linger=0)
+        else:
+            self._idle.append(sock)
+        return wire.zmq_reply_payload(reply)
+
+    def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        reply = self._request(wire.RPC_CREATE_SESSION, request.SerializeToString())
+        return pb.CreateSessionResponse.FromString(reply)
+
+    def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+        return pb.CameraUpdate.FromString(self._request(wire.RPC_FRAME, update.SerializeToString()))
+
+    def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
+        return pb.CameraUpdate.FromString(self._request(wire.RPC_FRAME, update))
+
+    def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
+        for update in updates:
+            yield self.frame(update)
+
+    def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+        reply = self._request(wire.RPC_UPDATE_STYLE, request.SerializeToString())
+        return pb.UpdateStyleResponse.FromString(reply)
+
+    def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
+        reply = self._request(wire.RPC_CLOSE_SESSION, request.SerializeToString())
+        return pb.CloseSessionResponse.FromString(reply)
+
+    def close(self) -> None:
+        self._closed = True
+        idle, self._idle = self._idle, []
+        for sock in idle:
+            sock.close(linger=0)
+
+
+class Session:
+    """One director session; closes itself at the end of a ``with`` block.
+
+    Attributes
+    ----------
+    id : str
+        The session id the server chose.
+    recording_path : str
+        Where the server records the session; empty unless ``record=True`` and it records.
+    """
+
+    __slots__ = ("_closed_frames", "_transport", "id", "recording_path")
+
+    def __init__(self, transport: _Transport, response: pb.CreateSessionResponse) -> None:
+        self._transport = transport
+        self.id: str = response.session_id
+        self.recording_path: str = response.recording_path
+        self._closed_frames: int | None = None
+
+    def __repr__(self) -> str:
+        return f"Session(id={self.id!r}, closed={self._closed_frames is not None})"
+
+    def frame_update(
+        self,
+        frame: int,
+        time_s: float,
+        *,
+        states: wire.States | None = None,
+        packed: wire.PackedStates | None = None,
+    ) -> pb.FrameUpdate:
+        """A ``FrameUpdate`` for this session, e.g. to feed :meth:`stream`."""
+        return wire.frame_update(self.id, frame, time_s, states, packed)
+
+    def frame(
+        self,
+        frame: int,
+        time_s: float,
+        *,
+        states: wire.States | None = None,
+        packed: wire.PackedStates | None = None,
+    ) -> pb.CameraUpdate:
+        """Sends one frame and waits for its camera (the unary ``Frame`` RPC).
+
+        Parameters
+        ----------
+        frame : int
+            Frame number, strictly increasing (an older one is answered ``stale``).
+        time_s : float
+            Game time of the frame, seconds, non-decreasing.
+        states : iterable of ObjectState, or mapping of id to Transform, optional
+            What moved this frame.
+        packed : (ids, transforms), optional
+            The bulk form of ``states``, as :func:`~camdirector_client.convert.pack_states` builds it.
+        """
+        return self._transport.frame_encoded(wire.encode_frame_update(self.id, frame, time_s, states, packed))
+
+    def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+        """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""
+        if not update.session_id:
+            update.session_id = self.id
+        return self._transport.frame(update)
+
+    def stream(self, frame_updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
+        """One ``CameraUpdate`` per update, in order, as they come.
+
+        Over gRPC this is one StreamFrames call (the updates are read on grpc's thread as the
+        stream has room); over ZeroMQ, one Frame request per update. Updates with an empty
+        session_id get this session's. Stopping the iteration early cancels the stream.
+        """
+        return self._transport.stream(wire.with_session_id(frame_updates, self.id))
+
+    def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:
+        """Replaces the whole style from the next frame on (unset fields take their defaults)."""
+        self._transport.update_style(pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style)))
+
+    def close(self) -> int:
+        """Closes the session on the server; answers how many frames it answered. Idempotent."""
+        if self._closed_frames is None:
+            response = self._transport.close_session(pb.CloseSessionRequest(session_id=self.id))
+            self._closed_frames = response.frames
+        return self._closed_frames
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if exc_type is None:
+            self.close()
+            return
+        try:  # best effort: do not hide the error that ended the block
+            self.close()
+        except DirectorError:
+            pass
+
+
+class Client:
+    """A connection to a director server; see :func:`connect`."""
+
+    def __init__(self, transport: _Transport, url: str) -> None:
+        self._transport = transport
+        self.url = url
+
+    def __repr__(self) -> str:
+        return f"Client({self.url!r})"
+
+    def create_session(
+        self,
+        request: pb.CreateSessionRequest | None = None,
+        *,
+        objects: Iterable[pb.SceneObject] | None = None,
+        targets: Iterable[pb.Target] | None = None,
+        lens: pb.Lens | None = None,
+        style: pb.Style | Mapping[str, Any] | None = None,
+        seed: int = 0,
+        record: bool = False,
+    ) -> Session:
+        """Opens a session from a ``CreateSessionRequest`` or from its fields as keywords."""
+        msg = wire.create_session_request(
+            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record
+        )
+        return Session(self._transport, self._transport.create_session(msg))
+
+    def close(self) -> None:
+        """Closes the channel or sockets. Sessions stay open on the server until their timeout."""
+        self._transport.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def connect(
+    url: str,
+    timeout_s: float = wire.DEFAULT_TIMEOUT_S,
+    *,
+    max_message_bytes: int = wire.DEFAULT_MAX_MESSAGE_BYTES,
+    grpc_options: Sequence[tuple[str, Any]] | None = None,
+    zmq_context: zmq.Context | None = None,
+) -> Client:
+    """A :class:`Client` for ``grpc://host:port`` (gRPC) or ``tcp://host:port`` (ZeroMQ).
+
+    Parameters
+    ----------
+    url : str
+        Server address; the scheme picks the transport.
+    timeout_s : float
+        Seconds a unary call waits for its reply before DirectorError(DEADLINE_EXCEEDED).
+    max_message_bytes : int
+        gRPC send and receive limit, bytes.
+    grpc_options : sequence of (str, value), optional
+        More gRPC channel arguments; they override the ones above.
+    zmq_context : zmq.Context, optional
+        Context for the ZeroMQ sockets; default the process-wide ``zmq.Context.instance()``.
+
+    Connecting is lazy: an unreachable server shows at the first call (UNAVAILABLE over gRPC,
+    DEADLINE_EXCEEDED over ZeroMQ).
+    """
+    endpoint = wire.parse_url(url)
+    timeout_s = wire.check_timeout(timeout_s)
+    transport: _Transport
+    if endpoint.transport == "grpc":
+        options = wire.grpc_channel_options(max_message_bytes, grpc_options)
+        transport = _GrpcTransport(endpoint.address, timeout_s, options)
+    else:
+        transport = _ZmqTransport(endpoint.address, timeout_s, zmq_context)
+    return Client(transport, url)

@@ -1,0 +1,1 @@
+"""Evaluation of the director: scenarios, measurement independent of the rig, the papers comparisons."""

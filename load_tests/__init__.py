@@ -1,0 +1,1 @@
+"""Load, soak and fault tests, and benchmarks that print JSON."""

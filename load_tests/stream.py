@@ -1,0 +1,209 @@
+"""Streaming benchmark: N concurrent sessions at a fixed frame rate against a server it starts.
+
+    python -m load_tests.stream --transport grpc|zmq --sessions N --rate 60 --seconds S --json FILE
+
+Each session streams the demo scene (about 2,100 triangles, an avatar and 3-6 moving obstacles,
+packed states) paced by wall-clock time, one frame in flight per session, as a game loop does.
+Measured: frames sent and received, dropped frames (sent, never answered), late frames (answered
+after the next was due), round trip p50/p99 at the client, and the server's own compute_ms p50/p99.
+The baseline, measured in the same run against the same server process, is the transport alone:
+a gRPC health check (served by the front process) or a ZeroMQ request the front answers at once
+with an error; `rtt_ratio_vs_baseline` divides our round trip by it.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import grpc
+import numpy as np
+import zmq
+import zmq.asyncio
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+from camdirector.geometry.camera import Lens
+from camdirector.server.demo.client import _frame_update, session_request, start_server
+from camdirector.server.demo.scene import build_demo_scene
+from camdirector.v1 import director_pb2 as pb
+from camdirector.v1 import director_pb2_grpc as pbg
+
+
+def _percentiles(values: list[float]) -> dict:
+    if not values:
+        return {"p50": None, "p99": None, "max": None}
+    a = np.asarray(values)
+    return {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+
+def _frames(scene, n_frames: int, rate_hz: float) -> list[bytes]:
+    """Serialized FrameUpdates without session id (added per session by concatenation)."""
+    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
+    out = []
+    for i in range(n_frames):
+        transforms = scene.transforms_at(i / rate_hz)
+        update = _frame_update(i + 1, i / rate_hz, ids, np.stack([transforms[k].position_world for k in ids]),
+                               np.stack([transforms[k].rotation_xyzw for k in ids]))
+        out.append(update.SerializeToString())
+    return out
+
+
+def _with_session(session_id: str, frame_bytes: bytes) -> bytes:
+    # field 1 (session_id) prepended: protobuf parsers accept fields in any order
+    sid = session_id.encode()
+    return b"\x0a" + bytes([len(sid)]) + sid + frame_bytes
+
+
+class GrpcDriver:
+    def __init__(self, address: str):
+        self.channel = grpc.aio.insecure_channel(address, options=[("grpc.max_send_message_length", 64 << 20)])
+        self.create = self.channel.unary_unary("/camdirector.v1.Director/CreateSession",
+                                               request_serializer=pb.CreateSessionRequest.SerializeToString,
+                                               response_deserializer=pb.CreateSessionResponse.FromString)
+        self.stream = self.channel.stream_stream("/camdirector.v1.Director/StreamFrames")  # bytes in, bytes out
+        self.health = health_pb2_grpc.HealthStub(self.channel)
+
+    async def open_session(self, request) -> str:
+        return (await self.create(request)).session_id
+
+    async def run_session(self, session_id: str, frames: list[bytes], period_s: float, start: float, record):
+        call = self.stream()
+        for i, payload in enumerate(frames):
+            await _sleep_until(start + i * period_s)
+            t0 = time.perf_counter()
+            await call.write(_with_session(session_id, payload))
+            reply = await call.read()
+            record(i, t0, time.perf_counter(), pb.CameraUpdate.FromString(reply))
+        await call.done_writing()
+
+    async def baseline(self) -> float:
+        t0 = time.perf_counter()
+        await self.health.Check(health_pb2.HealthCheckRequest())
+        return time.perf_counter() - t0
+
+    async def close(self):
+        await self.channel.close()
+
+
+class ZmqDriver:
+    def __init__(self, address: str):
+        self.address = address
+        self.ctx = zmq.asyncio.Context()
+        self.control = self._socket()
+
+    def _socket(self):
+        sock = self.ctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.connect(self.address)
+        return sock
+
+    async def _call(self, sock, rpc: bytes, payload: bytes) -> tuple[bytes, bytes]:
+        await sock.send_multipart([rpc, payload])
+        return tuple(await sock.recv_multipart())
+
+    async def open_session(self, request) -> str:
+        code, body = await self._call(self.control, b"CreateSession", request.SerializeToString())
+        if code != b"0":
+            raise RuntimeError(body.decode())
+        return pb.CreateSessionResponse.FromString(body).session_id
+
+    async def run_session(self, session_id, frames, period_s, start, record):
+        sock = self._socket()
+        for i, payload in enumerate(frames):
+            await _sleep_until(start + i * period_s)
+            t0 = time.perf_counter()
+            code, body = await self._call(sock, b"Frame", _with_session(session_id, payload))
+            if code != b"0":
+                raise RuntimeError(body.decode())
+            record(i, t0, time.perf_counter(), pb.CameraUpdate.FromString(body))
+        sock.close()
+
+    async def baseline(self) -> float:
+        t0 = time.perf_counter()
+        await self._call(self.control, b"Ping", b"")  # answered at once by the front (UNIMPLEMENTED)
+        return time.perf_counter() - t0
+
+    async def close(self):
+        self.control.close()
+        self.ctx.term()
+
+
+async def _sleep_until(deadline: float) -> None:
+    delay = deadline - time.perf_counter()
+    if delay > 0:
+        await asyncio.sleep(delay)
+
+
+async def run(transport: str, address: str, sessions: int, rate_hz: float, seconds: float) -> dict:
+    scene = build_demo_scene(seed=7, duration_s=max(seconds, 1.0))
+    lens = Lens()
+    n_frames = int(round(seconds * rate_hz))
+    frames = _frames(scene, n_frames, rate_hz)
+    driver = GrpcDriver(address) if transport == "grpc" else ZmqDriver(address)
+    session_ids = [await driver.open_session(session_request(scene, lens)) for _ in range(sessions)]
+    baseline_s = [await driver.baseline() for _ in range(20)]  # warm-up
+    baseline_s = [await driver.baseline() for _ in range(500)]
+    period = 1.0 / rate_hz
+    rtt_ms, compute_ms, received, late, stale = [], [], [0] * sessions, [0], [0]
+
+    def recorder(k: int):
+        def record(i, t_sent, t_recv, update: pb.CameraUpdate):
+            rtt_ms.append((t_recv - t_sent) * 1e3)
+            compute_ms.append(update.compute_ms)
+            received[k] += 1
+            late[0] += (t_recv - t_sent) > period
+            stale[0] += update.stale
+        return record
+
+    start = time.perf_counter() + 0.1
+    # sessions start staggered over one frame period, as independent game clients would
+    results = await asyncio.gather(*(driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
+                                     for k, sid in enumerate(session_ids)), return_exceptions=True)
+    wall_s = time.perf_counter() - start
+    errors = [repr(r) for r in results if isinstance(r, BaseException)]
+    await driver.close()
+    sent = sessions * n_frames
+    rtt = _percentiles(rtt_ms)
+    base = _percentiles([b * 1e3 for b in baseline_s])
+    return {
+        "transport": transport, "sessions": sessions, "rate_hz": rate_hz, "seconds": seconds,
+        "wall_s": round(wall_s, 3), "frames_sent": sent, "frames_received": sum(received),
+        "dropped_frames": sent - sum(received), "late_frames": late[0], "stale_frames": stale[0],
+        "rtt_ms": rtt, "compute_ms": _percentiles(compute_ms), "baseline_rtt_ms": base,
+        "rtt_ratio_vs_baseline": {"p50": rtt["p50"] / base["p50"] if rtt["p50"] else None,
+                                  "p99": rtt["p99"] / base["p99"] if rtt["p99"] else None},
+        "errors": errors, "cpus": os.cpu_count(),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--transport", choices=("grpc", "zmq"), default="grpc")
+    parser.add_argument("--sessions", type=int, default=1)
+    parser.add_argument("--rate", type=float, default=60.0, help="frames per second per session")
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--workers", type=int, default=None, help="server worker processes (default: cores)")
+    parser.add_argument("--json", type=Path, help="also write the result here")
+    args = parser.parse_args(argv)
+    proc, ready = start_server(workers=args.workers if args.workers is not None else (os.cpu_count() or 1))
+    try:
+        address = ready["grpc"] if args.transport == "grpc" else ready["zmq"]
+        result = asyncio.run(run(args.transport, address, args.sessions, args.rate, args.seconds))
+        result["server_workers"] = ready["workers"]
+    finally:
+        proc.terminate()
+        proc.wait(15)
+    text = json.dumps(result, indent=2)
+    print(text)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(text)
+    return 0 if result["dropped_frames"] == 0 and not result["errors"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
