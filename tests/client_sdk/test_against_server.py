@@ -1,0 +1,54 @@
+"""The SDK against a real server process, sync and async, over gRPC and ZeroMQ."""
+from __future__ import annotations
+
+import asyncio
+
+import grpc
+import numpy as np
+import pytest
+
+import camdirector_client as cd
+from tests.server.wire_client import two_target_request
+
+
+@pytest.fixture(params=["grpc", "zmq"])
+def url(request, server):
+    return server.url(request.param)
+
+
+def _packed_walk(n: int):
+    for i in range(1, n + 1):
+        t = i / 60
+        yield i, t, cd.pack_states(["a", "cart"], np.array([[np.sin(t), 0.9, t], [-2 + t, 0.5, 2.0]]),
+                                   np.array([[0, 0, 0, 1.0], [0, 0, 0, 1.0]]))
+
+
+def test_sync_session_frames_stream_style_close(url):
+    with cd.connect(url) as client:
+        with client.create_session(two_target_request(seed=4)) as session:
+            updates = [session.frame(i, t, packed=p) for i, t, p in _packed_walk(30)]
+            assert [u.frame for u in updates] == list(range(1, 31))
+            streamed = list(session.stream(session.frame_update(i + 30, t + 0.5, packed=p)
+                                           for i, t, p in _packed_walk(30)))
+            assert [u.frame for u in streamed] == list(range(31, 61))
+            pose = cd.pose_from_msg(streamed[-1].pose)
+            assert pose.matrix().shape == (4, 4) and abs(np.linalg.det(pose.matrix()[:3, :3]) - 1) < 1e-9
+            session.update_style({"screen_a": {"x": -0.5}, "screen_b": {"x": 0.5}})
+            assert session.frame(61, 1.1).cut
+        assert session.close() == 61
+        with pytest.raises(cd.DirectorError) as err:
+            session.frame(62, 1.2)
+        assert err.value.code == grpc.StatusCode.NOT_FOUND
+
+
+def test_async_session(url):
+    async def main():
+        async with cd.connect_async(url) as client:
+            async with client.create_session(two_target_request(seed=4)) as session:
+                updates = [await session.frame(i, t, packed=p) for i, t, p in _packed_walk(20)]
+                with pytest.raises(cd.DirectorError) as err:
+                    await session.frame(21, 0.4, states=[cd.pb.ObjectState(id="ghost")])
+                assert err.value.code == grpc.StatusCode.NOT_FOUND and "ghost" in err.value.message
+                return updates
+    updates = asyncio.run(main())
+    assert [u.frame for u in updates] == list(range(1, 21)) and updates[0].cut
