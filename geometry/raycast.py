@@ -32,11 +32,11 @@ class RayScene:
         self._dynamic: dict[str, tuple[rtcore_scene.EmbreeScene, np.ndarray]] = {}
 
     def add_dynamic(self, object_id: str, mesh_local: TriMesh, transform: RigidTransform) -> None:
-        self._dynamic[object_id] = (_embree_scene([mesh_local]), np.linalg.inv(transform.matrix()))
+        self._dynamic[object_id] = (_embree_scene([mesh_local]), transform.inverse_matrix())
 
     def set_transform(self, object_id: str, transform: RigidTransform) -> None:
         scene, _ = self._dynamic[object_id]
-        self._dynamic[object_id] = (scene, np.linalg.inv(transform.matrix()))
+        self._dynamic[object_id] = (scene, transform.inverse_matrix())
 
     def occluded(self, origins_world: np.ndarray, targets_world: np.ndarray) -> np.ndarray:
         """Whether the segment from each origin to its target crosses any geometry.

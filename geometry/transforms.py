@@ -20,7 +20,15 @@ def quat_normalize(q_xyzw: np.ndarray) -> np.ndarray:
 
 def quat_to_matrix(q_xyzw: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion: (..., 4) -> (..., 3, 3) float64."""
-    x, y, z, w = np.moveaxis(np.asarray(q_xyzw, dtype=np.float64), -1, 0)
+    q = np.asarray(q_xyzw, dtype=np.float64)
+    if q.ndim == 1:  # the per-frame case: scalar arithmetic is several times cheaper than ufuncs
+        x, y, z, w = q.tolist()
+        return np.array([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ])
+    x, y, z, w = np.moveaxis(q, -1, 0)
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
@@ -79,6 +87,13 @@ class RigidTransform:
         m = np.eye(4)
         m[:3, :3] = quat_to_matrix(self.rotation_xyzw) * self.scale[None, :]
         m[:3, 3] = self.position_world
+        return m
+
+    def inverse_matrix(self) -> np.ndarray:
+        """(4, 4) float64 world-to-local matrix, without a general inverse: (R S)^-1 = S^-1 R^T."""
+        m = np.eye(4)
+        m[:3, :3] = quat_to_matrix(self.rotation_xyzw).T / self.scale[:, None]
+        m[:3, 3] = -m[:3, :3] @ self.position_world
         return m
 
     def apply(self, points_local: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ class MotionSettings:
     max_substeps: int = 30             # at most this many per frame; the rest of a long gap is dropped. [1, 1000]
     theta_margin_rad: float = 0.02     # keep theta this far inside its open range, rad. (0, 0.5]
     side_hysteresis: float = 0.2       # the upright side changes only when the other is better by this (up-vector dot). [0, 2]
+    side_recheck_axis_dot: float = 0.02  # re-choose the side when the A-B axis elevation (dot with up) moves this much. [0, 1]
 
 
 class ToricMotion:
@@ -45,16 +46,24 @@ class ToricMotion:
         self.rate = np.zeros(2)          # (dtheta/dt, dphi/dt), rad/s
         self.position_world: np.ndarray | None = None
         self.side = 0.0                  # +1 or -1: which half of the torus is upright
+        self._side_key: float | None = None  # axis elevation (A-B . up) the side was chosen at
 
     def set_style(self, style: Style) -> None:
         self.style = style
+        self._side_key = None
 
     def _upright_side(self, torus: Torus, theta: float) -> float:
         """+1 or -1: the side (sign of phi) where the composed camera's up is nearest world up.
 
         One side of the torus sees A and B in the asked left/right order with the camera upright;
-        the other side would need the camera rolled over.
+        the other side would need the camera rolled over. Uprightness does not change when the
+        whole configuration turns about world up, so the choice only depends on the style and on
+        the elevation of the A-B axis: it is re-evaluated when that elevation changes.
         """
+        key = float(torus.axis_world @ UP_WORLD)
+        if self._side_key is not None and abs(key - self._side_key) < self.settings.side_recheck_axis_dot:
+            return self.side
+        self._side_key = key
         phi = math.radians(self.style.preferred_phi_deg)
         ups = []
         for sign in (1.0, -1.0):

@@ -88,18 +88,16 @@ def transform_from_msg(msg: pb.Transform, what: str) -> RigidTransform:
     return RigidTransform(position, rotation, scale)
 
 
-def transform_from_packed(values: np.ndarray, what: str) -> RigidTransform:
-    """values: (10,) px, py, pz, qx, qy, qz, qw, sx, sy, sz."""
-    if not np.all(np.isfinite(values)):
-        raise invalid(f"{what} has a NaN or infinite value")
-    q = values[3:7]
-    norm = float(np.linalg.norm(q))
-    if norm < 1e-6:
-        raise invalid(f"{what} rotation is a zero-length quaternion")
-    scale = values[7:10]
-    if np.any(np.abs(scale) < 1e-9):
-        raise invalid(f"{what} scale has a zero component")
-    return RigidTransform(values[0:3].copy(), q / norm, scale.copy())
+def transforms_from_packed(values: np.ndarray, ids) -> list[RigidTransform]:
+    """values: (n, 10) rows px, py, pz, qx, qy, qz, qw, sx, sy, sz; validated all at once."""
+    bad = ~np.isfinite(values).all(axis=1)
+    norms = np.linalg.norm(values[:, 3:7], axis=1)
+    for row, message in ((bad, "has a NaN or infinite value"), (norms < 1e-6, "rotation is a zero-length quaternion"),
+                         ((np.abs(values[:, 7:10]) < 1e-9).any(axis=1), "scale has a zero component")):
+        if row.any():
+            raise invalid(f"packed state {ids[int(np.argmax(row))]!r} {message}")
+    rotations = values[:, 3:7] / norms[:, None]
+    return [RigidTransform(v[0:3].copy(), q, v[7:10].copy()) for v, q in zip(values, rotations)]
 
 
 def mesh_from_msg(msg: pb.Mesh, what: str) -> TriMesh:
@@ -223,10 +221,9 @@ def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str]) -> 
         values = np.asarray(msg.packed_transforms, dtype=np.float64)
         if values.size != PACKED_STRIDE * len(msg.packed_ids):
             raise invalid(f"packed_transforms holds {values.size} values; {PACKED_STRIDE} per packed id expected")
-        values = values.reshape(-1, PACKED_STRIDE)
-        for object_id, row in zip(msg.packed_ids, values):
+        for object_id in msg.packed_ids:
             check(object_id)
-            states.append((object_id, transform_from_packed(row, f"packed state {object_id!r}")))
+        states.extend(zip(msg.packed_ids, transforms_from_packed(values.reshape(-1, PACKED_STRIDE), msg.packed_ids)))
     return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states)
 
 
