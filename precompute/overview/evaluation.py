@@ -1,0 +1,101 @@
+"""Evaluation as in the paper's Figures 9 and 10.
+
+Figure 10 compares E, E_external and V of a path with those of the best static camera, each
+"normalize[d] [...] with the best static camera energy term for each scene so that [...] lower
+values indicate better viewpoint selections". E and E_external are energies (negative, lower is
+better); V is a quality (higher is better), so we report its energy form -sum_t V. Each normalised
+value is value / |static value|: the static camera scores -1 on all three (when its values are
+negative, as they are here), and a method that does better scores below -1.
+
+Figure 9 plots Q(p_t) per frame after each split-and-optimise iteration, with the shot segments
+below; `plot_quality` draws it with matplotlib's Agg backend.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from camdirector.precompute.overview.baselines import greedy_path, static_path
+from camdirector.precompute.overview.energy import PathEnergy, path_energy
+from camdirector.precompute.overview.pipeline import OverviewResult
+
+
+@dataclass(frozen=True)
+class MethodScore:
+    """Raw E, E_external and -sum V of one path, and the same divided by |static camera's|."""
+
+    energy: PathEnergy
+    e: float
+    e_external: float
+    neg_v: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"E": self.e, "E_external": self.e_external, "V": self.neg_v,
+                "E_raw": self.energy.total, "E_external_raw": self.energy.external,
+                "V_raw": self.energy.v_sum}
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Figure 10 for one clip: ours, the best static camera and the smoothed greedy path."""
+
+    ours: MethodScore
+    static: MethodScore
+    greedy: MethodScore
+
+    def as_dict(self) -> dict[str, dict[str, float]]:
+        return {"ours": self.ours.as_dict(), "static": self.static.as_dict(),
+                "greedy": self.greedy.as_dict()}
+
+
+def _score(energy: PathEnergy, static: PathEnergy) -> MethodScore:
+    return MethodScore(energy=energy,
+                       e=energy.total / abs(static.total),
+                       e_external=energy.external / abs(static.external),
+                       neg_v=-energy.v_sum / abs(static.v_sum))
+
+
+def compare_with_baselines(result: OverviewResult) -> Comparison:
+    """Score our path and both baselines with the same energy, at the analysis rate."""
+    a = result.analysis
+    sal = a.saliency.pose
+    n = a.track.frame_count
+    one_shot = np.array([[0, n - 1]])
+    static = path_energy(static_path(a.space, sal), one_shot, a.track, a.space, sal, a.weights)
+    greedy = path_energy(greedy_path(a.track, a.space, result.settings), one_shot,
+                         a.track, a.space, sal, a.weights)
+    return Comparison(ours=_score(result.energy, static), static=_score(static, static),
+                      greedy=_score(greedy, static))
+
+
+def plot_quality(result: OverviewResult, path: str | Path, title: str = "") -> Path:
+    """Figure 9: Q(p_t) after each iteration, shot segments below; writes a PNG, returns path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plan = result.analysis.plan
+    t_s = result.analysis_frames * result.frame_time_s
+    fig, (ax, bar) = plt.subplots(2, 1, figsize=(10, 4.5), sharex=True,
+                                  gridspec_kw={"height_ratios": [4, 1]})
+    blues = plt.cm.Blues(np.linspace(0.35, 1.0, len(plan.quality_history)))
+    for k, q in enumerate(plan.quality_history):
+        ax.plot(t_s, q, color=blues[k], lw=1.0, label=f"iteration {k} ({len(plan.shots_history[k])} shots)")
+    ax.plot(t_s, result.analysis.saliency.pose, color="orange", lw=0.8, alpha=0.7, label="S_p")
+    ax.set_ylabel("Q(p_t)")
+    ax.set_ylim(0.0, 1.05)
+    ax.legend(loc="lower left", fontsize=7)
+    ax.set_title(title or "quality per frame and shots")
+    for k, (a, b) in enumerate(plan.shots):
+        bar.axvspan(t_s[a], t_s[b], color=plt.cm.tab10(k % 10), alpha=0.8)
+        bar.text(0.5 * (t_s[a] + t_s[b]), 0.5, str(k), ha="center", va="center", fontsize=8)
+    bar.set_yticks([])
+    bar.set_xlabel("time (s)")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out

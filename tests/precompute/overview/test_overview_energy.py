@@ -1,0 +1,53 @@
+"""Path energy terms (energy.py) and the annealer's hard constraints (annealing.py)."""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from camdirector.precompute.overview.annealing import SidePrior
+from camdirector.precompute.overview.energy import EnergyWeights, internal_terms
+
+W = EnergyWeights(c1=10, c2=10, c3=5, c4=5, c5=2, max_speed_m_per_s=0.3,
+                  max_angular_speed_rad_per_s=np.radians(20.0), friction_speed_m_per_s=0.09,
+                  dt_s=1.0 / 15.0)
+
+
+def test_static_camera_earns_the_full_friction_reward():
+    n = 30
+    path = np.tile([3.0, 1.5, 0.0], (n, 1))
+    look_at = np.tile([0.0, 1.0, 0.0], (n, 1))
+    np.testing.assert_allclose(internal_terms(path, look_at, W), -W.c5)
+
+
+def test_speed_term_is_zero_under_the_limit_and_quartic_above():
+    n = 10
+    look_at = np.zeros((n, 3))
+    t = np.arange(n)[:, None]
+    slow = np.array([5.0, 0, 0]) + t * np.array([0, 0, 0.5 * W.max_speed_m_per_s * W.dt_s])
+    fast = np.array([5.0, 0, 0]) + t * np.array([0, 0, 2.0 * W.max_speed_m_per_s * W.dt_s])
+    # constant velocity: no acceleration; above friction speed: no friction reward
+    slow_terms = internal_terms(slow, look_at, W)
+    fast_terms = internal_terms(fast, look_at, W)
+    assert np.all(slow_terms < 1.0)
+    # 2x the limit adds c2 * 2^4 = 160 per frame on top of small angular terms
+    assert np.all(fast_terms - W.c2 * 2.0 ** 4 > -1.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-5, 5), min_size=3, max_size=3))
+def test_internal_energy_is_translation_invariant(shift):
+    rng = np.random.default_rng(3)
+    path = np.cumsum(rng.normal(scale=0.01, size=(20, 3)), axis=0) + [4.0, 1.0, 0.0]
+    look_at = rng.normal(scale=0.1, size=(20, 3))
+    np.testing.assert_allclose(internal_terms(path + shift, look_at + shift, W),
+                               internal_terms(path, look_at, W), atol=1e-9)
+
+
+def test_side_prior_sides():
+    prior = SidePrior(frame=0, point_xz=np.zeros(2), direction_xz=np.array([0.0, 1.0]), side=1)
+    # moving along +Z (xz direction (0, 1)); cross(d, rel) = d_x rel_z - d_z rel_x > 0 for x < 0
+    assert prior.holds(np.array([-1.0, 0.0, 0.0]))
+    assert not prior.holds(np.array([1.0, 0.0, 0.0]))
+    np.testing.assert_array_equal(prior.holds_for_nodes(np.array([[-1.0, 0, 0], [1.0, 0, 0]])),
+                                  [True, False])
