@@ -15,6 +15,7 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.transforms import RigidTransform
 
 _NO_HIT = -1
+_EMBREE_MISS = 1e30  # embreex reports a miss as tfar = 1e37
 
 
 def _embree_scene(meshes: list[TriMesh]) -> rtcore_scene.EmbreeScene:
@@ -62,3 +63,24 @@ class RayScene:
             hit[rest] = scene.run(o.astype(np.float32), d.astype(np.float32),
                                   dists=tmax[rest].copy(), query="OCCLUDED") != _NO_HIT
         return hit
+
+    def first_hit(self, origins_world: np.ndarray, directions_world: np.ndarray) -> np.ndarray:
+        """Ray parameter of the nearest hit along each ray, in units of the direction's length.
+
+        origins_world (n, 3) or (3,), directions_world (n, 3) float64. Returns (n,) float64, inf
+        where nothing is hit.
+        """
+        directions = np.atleast_2d(directions_world)
+        origins = np.broadcast_to(origins_world, directions.shape)
+        best = np.full(len(directions), np.inf)
+        scenes = [(self._static, None)] if self._static is not None else []
+        scenes += list(self._dynamic.values())
+        for scene, world_to_local in scenes:
+            o, d = origins, directions
+            if world_to_local is not None:
+                o = origins @ world_to_local[:3, :3].T + world_to_local[:3, 3]
+                d = directions @ world_to_local[:3, :3].T
+            t = scene.run(o.astype(np.float32), d.astype(np.float32), query="DISTANCE").astype(np.float64)
+            t[t >= _EMBREE_MISS] = np.inf
+            best = np.minimum(best, t)
+        return best

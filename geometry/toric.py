@@ -199,6 +199,20 @@ def torus_angles(torus: Torus, position_world) -> tuple[float, float]:
     return min(max(theta, THETA_MARGIN_RAD), hi - THETA_MARGIN_RAD), phi
 
 
+def torus_angles_many(torus: Torus, positions_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """torus_angles for (n, 3) points at once: (theta (n,), phi (n,)) radians, same rules."""
+    local = (np.asarray(positions_world, dtype=np.float64) - torus.mid_world) @ torus.basis.T
+    x, y_ref, y_side = local[:, 0], local[:, 1], local[:, 2]
+    phi = np.arctan2(y_side, y_ref)
+    phi[phi == -math.pi] = math.pi
+    radial = np.hypot(y_ref, y_side)
+    theta = (np.arctan2(-x, torus.center_offset_m - radial) - torus.alpha) % math.tau
+    hi = theta_max(torus.alpha)
+    outside = theta > hi
+    theta[outside] = np.where(theta[outside] - hi < math.tau - theta[outside], hi, 0.0)
+    return np.clip(theta, THETA_MARGIN_RAD, hi - THETA_MARGIN_RAD), phi
+
+
 def tangent_frame(torus: Torus, theta: float, phi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(d pos/d theta, d pos/d phi, outward unit normal) at (theta, phi), each (3,) world.
 

@@ -74,30 +74,27 @@ class ToricMotion:
             self.side = best
         return self.side
 
+    def preferred_place(self, torus: Torus) -> tuple[float, float, float, float]:
+        """(theta, phi, theta_lo, theta_hi) radians: the style's preferred place on the upright side."""
+        lo = self.settings.theta_margin_rad
+        hi = theta_max(torus.alpha) - self.settings.theta_margin_rad
+        goal_theta = lo + self.style.preferred_theta_ratio * (hi - lo)
+        return goal_theta, self._upright_side(torus, goal_theta) * math.radians(self.style.preferred_phi_deg), lo, hi
+
     def run(self, state: FrameState) -> None:
         torus = state.torus
         if torus is None:  # degenerate framing: hold the last pose
             state.flags.append("pose_held")
             state.theta, state.phi = self.theta or 0.0, self.phi
             return
-        lo = self.settings.theta_margin_rad
-        hi = theta_max(torus.alpha) - self.settings.theta_margin_rad
-        goal_theta = lo + self.style.preferred_theta_ratio * (hi - lo)
-        goal_phi = self._upright_side(torus, goal_theta) * math.radians(self.style.preferred_phi_deg)
+        goal_theta, goal_phi, lo, hi = self.preferred_place(torus)
         if self.theta is None or self.position_world is None:
             self.theta, self.phi = goal_theta, goal_phi
         else:
             self.theta, self.phi = torus_angles(torus, self.position_world)
             self._integrate(torus, goal_theta, goal_phi, lo, hi, state.dt_s)
         state.theta, state.phi = self.theta, self.phi
-        if state.b_is_gaze_point:
-            # B only makes lead room: A is placed exactly and the horizon kept level, where the
-            # full composition would roll the camera whenever it is not square to A-B.
-            position = torus_position(torus, self.theta, self.phi)
-            rotation = level_look_rotation(position, torus.a_world, self.style.screen_a, self.lens)
-            state.pose = CameraPose(position, rotation, self.lens.vertical_fov_deg)
-        else:
-            state.pose = compose_pose(torus, self.theta, self.phi, self.style.screen_a, self.style.screen_b, self.lens)
+        state.pose = pose_on_torus(torus, self.theta, self.phi, self.style, self.lens, state.b_is_gaze_point)
         self.position_world = state.pose.position_world
 
     def _integrate(self, torus: Torus, goal_theta: float, goal_phi: float, lo: float, hi: float, dt_s: float) -> None:
@@ -123,3 +120,13 @@ class ToricMotion:
 
 def _limit_scale(norm: float, limit: float) -> float:
     return limit / norm if norm > limit else 1.0
+
+
+def pose_on_torus(torus: Torus, theta: float, phi: float, style: Style, lens: Lens, level: bool) -> CameraPose:
+    """The camera at (theta, phi) radians composing A and B. With `level` (B is only a gaze-room
+    point), A is placed exactly and the horizon kept level, where the full composition would roll
+    the camera whenever it is not square to A-B."""
+    if not level:
+        return compose_pose(torus, theta, phi, style.screen_a, style.screen_b, lens)
+    position = torus_position(torus, theta, phi)
+    return CameraPose(position, level_look_rotation(position, torus.a_world, style.screen_a, lens), lens.vertical_fov_deg)

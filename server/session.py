@@ -6,6 +6,7 @@ target) and flags it in the diagnostics.
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Callable
 
@@ -15,10 +16,13 @@ from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
-from camdirector.server.camera_motion import ToricMotion
+from camdirector.geometry.toric import torus_angles
+from camdirector.server.camera_motion import ToricMotion, pose_on_torus
+from camdirector.server.occlusion_search import OcclusionSearch, RaycastRisk, SearchSettings
+from camdirector.server.reactive import Deoccluder
 from camdirector.server.framing import Framing
 from camdirector.server.pipeline import FrameState, Stage
-from camdirector.server.style import Style
+from camdirector.server.style import SEARCH_MODES, Style, VisibilityMode
 from camdirector.server.visibility import VisibilityEstimate
 from camdirector.server.wire import FrameInput, SceneSpec
 
@@ -42,6 +46,9 @@ class Session:
         self.framing = Framing(self.lens, self.style, scene.targets[0].transform.rotation_xyzw)
         self.motion = ToricMotion(self.style, self.lens)
         self.visibility = VisibilityEstimate(self.ray_scene, [t.mesh for t in scene.targets], self.rng)
+        self.search = OcclusionSearch(SearchSettings(), self.rng)
+        self.deoccluder = Deoccluder(self.ray_scene)
+        self._searching = False  # whether the search particle holds the camera's place
         self.last_state: FrameState | None = None
         self.frames_answered = 0
         self.shot_id = 0
@@ -77,13 +84,13 @@ class Session:
         t1 = self.clock()
         self.framing.run(state)  # Stage.FRAMING
         t2 = self.clock()
-        self.motion.run(state)  # Stage.MOTION
+        self._move(state)  # Stage.MOTION
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
         t3 = self.clock()
         self.visibility.run(state, self.target_transforms)  # Stage.VISIBILITY
         t4 = self.clock()
-        state.cut = last is None or self._style_cut
+        state.cut = state.cut or last is None or self._style_cut
         self._style_cut = False
         if state.cut:
             self.shot_id += 1
@@ -97,6 +104,43 @@ class Session:
         self.last_state = state
         self.frames_answered += 1
         return state
+
+
+    def _move(self, state: FrameState) -> None:
+        """MOTION: the rig of the style's visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE:
+        that plus reactive.py; RAYCAST and the map modes: occlusion_search.py)."""
+        mode = self.style.visibility
+        if mode not in SEARCH_MODES or state.torus is None:
+            if self._searching:  # hand the camera's place back to the toric rig
+                self.motion.theta, self.motion.position_world = self.search.theta, self.last_state.pose.position_world
+                self._searching = False
+            self.motion.run(state)
+            if mode == VisibilityMode.REACTIVE and state.pose is not None:
+                state.pose, pulled = self.deoccluder.run(state.pose, state.a_world, state.dt_s)
+                if pulled:
+                    state.flags.append("pulled_in")
+            return
+        torus = state.torus
+        if not self._searching:
+            if self.motion.position_world is None:
+                theta, phi, _, _ = self.motion.preferred_place(torus)
+            else:
+                theta, phi = torus_angles(torus, self.motion.position_world)
+            self.search.start(theta, phi, state.time_s)
+            self._searching = True
+        points = self.visibility.points_world(self.target_transforms)
+
+        def occluded(cameras_world: np.ndarray) -> np.ndarray:
+            return self.visibility.occluded_fraction(cameras_world, points)
+
+        risk = RaycastRisk(torus, occluded)
+        side = math.copysign(1.0, self.motion.preferred_place(torus)[1])  # upright half for cuts
+        result = self.search.step(torus, state.dt_s, state.time_s, risk, occluded, side,
+                                  self.style.max_speed_m_s, self.style.max_accel_m_s2)
+        state.theta, state.phi, state.cut = result.theta, result.phi, result.cut
+        state.flags.append(f"search_{result.strategy}")
+        state.pose = pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, state.b_is_gaze_point)
+        self.motion.position_world = state.pose.position_world
 
 
 def _to_world(mesh: TriMesh, transform: RigidTransform) -> TriMesh:

@@ -21,7 +21,10 @@ class VisibilityMode(enum.IntEnum):
 
 
 # Modes the rig runs today; the others answer UNIMPLEMENTED until the visibility work lands.
-IMPLEMENTED_MODES = frozenset({VisibilityMode.UNSPECIFIED, VisibilityMode.FRAMING_ONLY})
+IMPLEMENTED_MODES = frozenset({VisibilityMode.UNSPECIFIED, VisibilityMode.FRAMING_ONLY, VisibilityMode.RAYCAST,
+                               VisibilityMode.REACTIVE})
+# Modes whose camera moves by the paper's search (occlusion_search.py) rather than the toric spring.
+SEARCH_MODES = frozenset({VisibilityMode.ANTICIPATION, VisibilityMode.NO_ANTICIPATION, VisibilityMode.RAYCAST})
 
 
 @dataclass(frozen=True)

@@ -38,10 +38,18 @@ class VisibilityEstimate:
         self.ray_scene = ray_scene
         self.samples_local = [sample_surface(m, settings.samples_per_target, rng) for m in target_meshes]
 
+    def points_world(self, target_transforms) -> np.ndarray:
+        """(k, 3) the sample points carried by the targets' current RigidTransforms (target order)."""
+        return np.concatenate([t.apply(s) for t, s in zip(target_transforms, self.samples_local)])
+
+    def occluded_fraction(self, cameras_world: np.ndarray, points_world: np.ndarray) -> np.ndarray:
+        """(n,) share of the points hidden from each of (n, 3) camera places, by ray casting."""
+        n, k = len(cameras_world), len(points_world)
+        hidden = self.ray_scene.occluded(np.repeat(cameras_world, k, axis=0), np.tile(points_world, (n, 1)))
+        return hidden.reshape(n, k).mean(axis=1)
+
     def run(self, state: FrameState, target_transforms) -> None:
-        """target_transforms: the targets' current RigidTransforms, in target order."""
         if state.pose is None:
             return
-        points = np.concatenate([t.apply(s) for t, s in zip(target_transforms, self.samples_local)])
-        hidden = self.ray_scene.occluded(state.pose.position_world, points)
-        state.visibility = float(1.0 - hidden.mean())
+        points = self.points_world(target_transforms)
+        state.visibility = float(1.0 - self.occluded_fraction(state.pose.position_world[None], points)[0])

@@ -155,9 +155,9 @@ def style_from_msg(msg: pb.Style, lens: Lens) -> Style:
     except ValueError:
         raise invalid(f"style.visibility {msg.visibility} is not a VisibilityMode") from None
     if mode not in IMPLEMENTED_MODES:
-        raise unimplemented(f"style.visibility {mode.name} is not implemented yet; use FRAMING_ONLY")
+        raise unimplemented(f"style.visibility {mode.name} is not implemented yet; use FRAMING_ONLY, RAYCAST or REACTIVE")
     try:
-        style = Style(visibility=VisibilityMode.FRAMING_ONLY, **values)
+        style = Style(visibility=VisibilityMode.FRAMING_ONLY if mode == VisibilityMode.UNSPECIFIED else mode, **values)
     except ValueError as exc:
         raise invalid(str(exc)) from None
     if composition_angle(style.screen_a, style.screen_b, lens) < MIN_ALPHA_RAD:

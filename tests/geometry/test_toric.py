@@ -368,3 +368,15 @@ def test_torus_arrays_are_read_only():
         torus.a_world[0] = 5.0
     with pytest.raises(ValueError):
         torus.side_world[0] = 5.0
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(st.integers(0, 2**32 - 1))
+def test_torus_angles_many_matches_the_scalar_form(seed):
+    from camdirector.geometry.toric import torus_angles_many
+    rng = np.random.default_rng(seed)
+    torus = make_torus(rng.normal(size=3), rng.normal(size=3) + [3.0, 0.0, 0.0], rng.uniform(0.2, 2.5))
+    points = rng.normal(size=(40, 3)) * 4.0
+    theta, phi = torus_angles_many(torus, points)
+    for point, t, p in zip(points, theta, phi):
+        assert (t, p) == pytest.approx(torus_angles(torus, point), abs=1e-12)

@@ -124,7 +124,7 @@ def test_closed_session_is_gone(raw):
     assert err.value.code == grpc.StatusCode.NOT_FOUND and session_id in err.value.message
 
 
-@pytest.mark.parametrize("mode", [pb.ANTICIPATION, pb.NO_ANTICIPATION, pb.RAYCAST, pb.REACTIVE])
+@pytest.mark.parametrize("mode", [pb.ANTICIPATION, pb.NO_ANTICIPATION])
 def test_visibility_modes_not_built_yet_answer_unimplemented(raw, mode):
     with pytest.raises(RpcFailed) as err:
         raw.call("CreateSession", two_target_request(style=pb.Style(visibility=mode)))
