@@ -14,7 +14,8 @@ and p(v) = p + v dt (1 - c/m dt) where it would coast to:
   3. cut D_C: ray casts from candidate places over the whole torus to the target sample points
      (no prediction), pruned by the 30-degree rule; a less occluded one is cut to, velocity reset;
   4. otherwise coast: p_next = p(v).
-Then v_next = (p_next - p) / dt (1 - c/m dt). The risk the local searches read is a `RiskField`:
+Then v_next = (p_next - p) / dt (1 - c/m dt) (kept undamped as the realised velocity, the damping
+applied when it is used, so the limits below compare against the motion that really happened). The risk the local searches read is a `RiskField`:
 the A-map (ANTICIPATION), the averaged S-maps (NO_ANTICIPATION) or ray casts (RAYCAST).
 
 Beyond the paper, stated here because they change behaviour: the style's speed and acceleration
@@ -119,9 +120,10 @@ class OcclusionSearch:
         t_theta, t_phi, normal = tangent_frame(torus, self.theta, self.phi)
         e1 = t_theta / np.linalg.norm(t_theta)
         e2 = np.cross(normal, e1)
-        v_t = self.velocity_world - (self.velocity_world @ normal) * normal
+        v_real = self.velocity_world - (self.velocity_world @ normal) * normal  # last frame's motion
         decay = max(0.0, 1.0 - s.damping_per_s * dt_s)
-        coast = p + v_t * dt_s * decay
+        v_t = v_real * decay  # the paper's damped velocity v_i
+        coast = p + v_t * dt_s
         theta_c, phi_c = torus_angles_many(torus, coast[None])
         risk_coast = float(risk.risk(theta_c, phi_c)[0])
 
@@ -150,19 +152,19 @@ class OcclusionSearch:
                     self.shot_start_s = time_s
                     return SearchResult(self.theta, self.phi, cut=True, strategy="cut", risk=occluded)
 
-        # physical limits of the style on the camera's own motion
+        # physical limits of the style on the camera's own motion, braking by damping included
         velocity = (target - p) / dt_s
-        accel = (velocity - v_t) / dt_s
+        accel = (velocity - v_real) / dt_s
         a = float(np.linalg.norm(accel))
         if a > max_accel_m_s2:
-            velocity = v_t + accel * (max_accel_m_s2 / a)
+            velocity = v_real + accel * (max_accel_m_s2 / a * dt_s)
         speed = float(np.linalg.norm(velocity))
         if speed > max_speed_m_s:
             velocity *= max_speed_m_s / speed
         theta_n, phi_n = torus_angles_many(torus, (p + velocity * dt_s)[None])
         self.theta, self.phi = float(theta_n[0]), float(phi_n[0])
         p_next = torus_position(torus, self.theta, self.phi)
-        self.velocity_world = (p_next - p) / dt_s * decay
+        self.velocity_world = (p_next - p) / dt_s
         return SearchResult(self.theta, self.phi, cut=False, strategy=strategy, risk=chosen_risk)
 
     def _cut(self, torus: Torus, coast: np.ndarray, cut_occlusion, side: float):

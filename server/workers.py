@@ -1,11 +1,18 @@
 """Worker processes that hold sessions, so capacity grows with cores.
 
-The front process (transports, routing) talks to each worker over a ZeroMQ DEALER pair on an
-ipc:// socket: request [request id, op, session id, payload], reply [request id, status code
-(ASCII decimal, 0 = OK), body (reply bytes or error message), pickled FrameMetrics or empty].
+The front process talks to each worker over one socket pair (`multiprocessing.Pipe`): a message is
+multiprocessing's framing, a 4-byte big-endian length then the bytes, of a pickled tuple; requests
+are (request id, op, session id, payload), replies (request id, status code, body, FrameMetrics or
+None) with body the serialized reply, or the error message when the code is not 0. The front end
+of the pair is an asyncio stream, so a large scene never blocks the event loop; the worker reads
+it blocking. A plain socket pair costs one wake-up per direction, where a ZeroMQ pair costs three
+(its I/O threads on both sides): about 150 us against 370 us per round trip after 16 ms idle on
+this kind of VM.
+
 Workers are started with the "spawn" method: forking a process that already runs gRPC is unsafe.
-A worker that dies is restarted; its sessions are lost and their requests answer NOT_FOUND.
-With `workers=0` the same SessionTable runs inline in the front process.
+A worker that dies is restarted; its sessions are lost and callers are told so. A worker whose
+front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
+the front process.
 """
 from __future__ import annotations
 
@@ -15,12 +22,11 @@ import logging
 import multiprocessing
 import os
 import pickle
-import tempfile
+import socket
+import struct
 from typing import Callable
 
 import grpc
-import zmq
-import zmq.asyncio
 
 from camdirector.server.errors import DirectorError
 from camdirector.server.sessions import FrameMetrics, SessionTable
@@ -28,45 +34,38 @@ from camdirector.server.settings import ServerSettings
 
 log = logging.getLogger("camdirector.workers")
 
+_CODES = {code.value[0]: code for code in grpc.StatusCode}
+_LENGTH = struct.Struct("!i")   # multiprocessing.Connection framing
+_LONG_LENGTH = struct.Struct("!Q")  # after a length of -1, for messages over 2 GiB
 
-def _worker_main(endpoint: str, settings: ServerSettings) -> None:
+
+def _worker_main(conn, settings: ServerSettings) -> None:
     """Entry point of a worker process: answer requests until told to stop or the front goes."""
     table = SessionTable(settings)
-    ctx = zmq.Context()
-    sock = ctx.socket(zmq.DEALER)
-    sock.setsockopt(zmq.LINGER, 0)
-    sock.bind(endpoint)
-    parent = os.getppid()
-    poller = zmq.Poller()
-    poller.register(sock, zmq.POLLIN)
     while True:
-        if not poller.poll(1000):
-            if os.getppid() != parent:  # the front died: do not linger as an orphan
-                return
-            continue
-        request_id, op, session_id, payload = sock.recv_multipart(copy=True)
-        if op in (b"stop", b"ping"):
-            sock.send_multipart([request_id, b"0", b"", b""])
-            if op == b"stop":
+        try:
+            request_id, op, session_id, payload = pickle.loads(conn.recv_bytes())
+        except EOFError:  # the front died: do not linger as an orphan
+            return
+        if op in ("stop", "ping"):
+            conn.send_bytes(pickle.dumps((request_id, 0, b"", None)))
+            if op == "stop":
                 return
             continue
         try:
-            body, metrics = table.handle_bytes(op.decode(), session_id.decode(), payload)
-            sock.send_multipart([request_id, b"0", body, pickle.dumps(metrics) if metrics else b""])
+            body, metrics = table.handle_bytes(op, session_id, payload)
+            reply = (request_id, 0, body, metrics)
         except DirectorError as exc:
-            sock.send_multipart([request_id, str(exc.code.value[0]).encode(), exc.message.encode(), b""])
-
-
-_CODES = {code.value[0]: code for code in grpc.StatusCode}
+            reply = (request_id, exc.code.value[0], exc.message.encode(), None)
+        conn.send_bytes(pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL))
 
 
 class _Worker:
-    def __init__(self, index: int, endpoint: str):
+    def __init__(self, index: int):
         self.index = index
-        self.endpoint = endpoint
         self.process: multiprocessing.process.BaseProcess | None = None
-        self.socket: zmq.asyncio.Socket | None = None
-        self.reader: asyncio.Task | None = None
+        self.writer: asyncio.StreamWriter | None = None
+        self.reader_task: asyncio.Task | None = None
 
 
 class WorkerPool:
@@ -77,10 +76,8 @@ class WorkerPool:
         self.size = settings.workers
         self.on_worker_lost = on_worker_lost
         self._inline = SessionTable(settings) if self.size == 0 else None
-        self._ctx = zmq.asyncio.Context.instance()
-        self._dir = tempfile.mkdtemp(prefix="camdirector-")
-        self._workers = [_Worker(i, f"ipc://{self._dir}/worker-{i}.sock") for i in range(self.size)]
-        self._pending: dict[bytes, asyncio.Future] = {}
+        self._workers = [_Worker(i) for i in range(self.size)]
+        self._pending: dict[int, asyncio.Future] = {}
         self._ids = itertools.count()
         self._monitor: asyncio.Task | None = None
         self._mp = multiprocessing.get_context("spawn")
@@ -92,32 +89,38 @@ class WorkerPool:
 
     async def start(self) -> None:
         for worker in self._workers:
-            self._spawn(worker)
+            await self._spawn(worker)
         if self._workers:
-            # a request sent before the worker has bound waits in ZeroMQ's queue; ping to be sure
             await asyncio.gather(*(self._call_worker(w, "ping", "", b"", timeout_s=120.0) for w in self._workers))
             self._monitor = asyncio.create_task(self._watch())
 
-    def _spawn(self, worker: _Worker) -> None:
-        worker.process = self._mp.Process(target=_worker_main, args=(worker.endpoint, self.settings),
+    async def _spawn(self, worker: _Worker) -> None:
+        front_end, worker_end = self._mp.Pipe(duplex=True)
+        worker.process = self._mp.Process(target=_worker_main, args=(worker_end, self.settings),
                                           name=f"camdirector-worker-{worker.index}", daemon=True)
         worker.process.start()
-        worker.socket = self._ctx.socket(zmq.DEALER)
-        worker.socket.setsockopt(zmq.LINGER, 0)
-        worker.socket.connect(worker.endpoint)
-        worker.reader = asyncio.create_task(self._read(worker))
+        worker_end.close()
+        sock = socket.socket(fileno=os.dup(front_end.fileno()))
+        front_end.close()
+        reader, worker.writer = await asyncio.open_unix_connection(sock=sock, limit=2 ** 20)
+        worker.reader_task = asyncio.create_task(self._read(reader))
 
-    async def _read(self, worker: _Worker) -> None:
-        sock = worker.socket
-        while True:
-            request_id, code, body, metrics = await sock.recv_multipart()
-            future = self._pending.pop(request_id, None)
-            if future is None or future.done():
-                continue
-            if code == b"0":
-                future.set_result((body, pickle.loads(metrics) if metrics else None))
-            else:
-                future.set_exception(DirectorError(_CODES.get(int(code), grpc.StatusCode.UNKNOWN), body.decode()))
+    async def _read(self, reader: asyncio.StreamReader) -> None:
+        try:
+            while True:
+                (length,) = _LENGTH.unpack(await reader.readexactly(_LENGTH.size))
+                if length == -1:
+                    (length,) = _LONG_LENGTH.unpack(await reader.readexactly(_LONG_LENGTH.size))
+                request_id, code, body, metrics = pickle.loads(await reader.readexactly(length))
+                future = self._pending.pop(request_id, None)
+                if future is None or future.done():
+                    continue
+                if code == 0:
+                    future.set_result((body, metrics))
+                else:
+                    future.set_exception(DirectorError(_CODES.get(code, grpc.StatusCode.UNKNOWN), body.decode()))
+        except (asyncio.IncompleteReadError, ConnectionError):
+            return  # the worker went away; _watch restarts it and fails what was pending
 
     async def _watch(self) -> None:
         """Restarts a worker that died; its sessions are gone and callers are told so."""
@@ -127,8 +130,8 @@ class WorkerPool:
                 if worker.process.is_alive():
                     continue
                 log.error("worker %d died (exit code %s); restarting it", worker.index, worker.process.exitcode)
-                worker.reader.cancel()
-                worker.socket.close()
+                worker.reader_task.cancel()
+                worker.writer.close()
                 for request_id, future in list(self._pending.items()):
                     if getattr(future, "worker_index", None) == worker.index and not future.done():
                         future.set_exception(DirectorError(grpc.StatusCode.UNAVAILABLE,
@@ -136,18 +139,22 @@ class WorkerPool:
                         self._pending.pop(request_id, None)
                 if self.on_worker_lost is not None:
                     self.on_worker_lost(worker.index)
-                self._spawn(worker)
+                await self._spawn(worker)
 
     async def _call_worker(self, worker: _Worker, op: str, session_id: str, payload: bytes,
                            timeout_s: float | None = None):
-        request_id = next(self._ids).to_bytes(8, "little")
+        request_id = next(self._ids)
         future = asyncio.get_running_loop().create_future()
         future.worker_index = worker.index
         self._pending[request_id] = future
-        await worker.socket.send_multipart([request_id, op.encode(), session_id.encode(), payload])
-        if timeout_s is None:
-            return await future
+        data = pickle.dumps((request_id, op, session_id, payload), protocol=pickle.HIGHEST_PROTOCOL)
+        header = _LENGTH.pack(len(data)) if len(data) < 2 ** 31 - 1 else _LENGTH.pack(-1) + _LONG_LENGTH.pack(len(data))
+        worker.writer.write(header)
+        worker.writer.write(data)
+        await worker.writer.drain()  # backpressure on large payloads, immediate otherwise
         try:
+            if timeout_s is None:
+                return await future
             return await asyncio.wait_for(future, timeout_s)
         finally:
             self._pending.pop(request_id, None)
@@ -164,16 +171,10 @@ class WorkerPool:
         for worker in self._workers:
             try:
                 await self._call_worker(worker, "stop", "", b"", timeout_s=2.0)
-            except (asyncio.TimeoutError, DirectorError):
+            except (asyncio.TimeoutError, DirectorError, ConnectionError):
                 pass
-            worker.reader.cancel()
-            worker.socket.close()
+            worker.reader_task.cancel()
+            worker.writer.close()
             worker.process.join(timeout=2.0)
             if worker.process.is_alive():
                 worker.process.kill()
-        try:
-            for name in os.listdir(self._dir):
-                os.unlink(os.path.join(self._dir, name))
-            os.rmdir(self._dir)
-        except OSError:
-            pass

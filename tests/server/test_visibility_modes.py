@@ -104,10 +104,13 @@ def test_cuts_obey_the_30_degree_rule_and_motion_stays_within_the_limits_between
         before, after = focus - cams[i - 1], focus - cams[i]
         angle = math.degrees(math.acos(np.clip(before @ after / np.linalg.norm(before) / np.linalg.norm(after), -1, 1)))
         assert angle >= 30.0 - 1e-6, f"cut at frame {i} turns the view by only {angle:.1f} deg"
-    speed = np.linalg.norm(np.diff(cams, axis=0), axis=1) * 60
+    velocity = np.diff(cams, axis=0) * 60  # velocity[i - 1]: from frame i - 1 to i
     cut_set = set(cuts)
-    moving = [s for i, s in enumerate(speed, start=1) if i not in cut_set]
-    assert max(moving) <= 8.0 + 1e-6  # the style's default speed limit (targets are still)
+    moving = [i for i in range(1, len(cams)) if i not in cut_set]
+    assert max(np.linalg.norm(velocity[i - 1]) for i in moving) <= 8.0 + 1e-6  # default speed limit
+    steady = [i for i in moving if i + 1 in moving]
+    accel = [np.linalg.norm(velocity[i] - velocity[i - 1]) * 60 for i in steady]
+    assert max(accel) <= 12.0 + 1e-3  # default acceleration limit (targets are still: no torus motion)
 
 
 @pytest.mark.parametrize("mode", [pb.REACTIVE, pb.RAYCAST])
