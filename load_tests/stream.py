@@ -31,10 +31,10 @@ import zmq.asyncio
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from camdirector.geometry.camera import Lens
-from camdirector.server.demo.client import _frame_update, session_request, start_server
+from camdirector.server.demo.client import _frame_update, session_request
+from camdirector.server.process import ServerProcess
 from camdirector.server.demo.scene import build_demo_scene
 from camdirector.v1 import director_pb2 as pb
-from camdirector.v1 import director_pb2_grpc as pbg
 
 
 def _percentiles(values: list[float]) -> dict:
@@ -194,14 +194,11 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=None, help="server worker processes (default: cores)")
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
-    proc, ready = start_server(workers=args.workers if args.workers is not None else (os.cpu_count() or 1))
-    try:
-        address = ready["grpc"] if args.transport == "grpc" else ready["zmq"]
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    with ServerProcess("--workers", str(workers), "--max-sessions", str(max(64, args.sessions))) as server:
+        address = server.grpc if args.transport == "grpc" else server.zmq
         result = asyncio.run(run(args.transport, address, args.sessions, args.rate, args.seconds))
-        result["server_workers"] = ready["workers"]
-    finally:
-        proc.terminate()
-        proc.wait(15)
+        result["server_workers"] = server.ready["workers"]
     text = json.dumps(result, indent=2)
     print(text)
     if args.json:

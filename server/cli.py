@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+from camdirector.evaluation.cli import add_parsers as add_eval_parsers
 from camdirector.server.settings import ServerSettings
 
 
@@ -30,6 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="camdirector", description="Automated cinematographer service")
     sub = parser.add_subparsers(dest="command", required=True)
     _serve_parser(sub)
+    add_eval_parsers(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
     p = sub.add_parser("demo", help="server plus demo client on a built-in scene; writes a video")
@@ -55,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         print(json.dumps(report.as_dict()))
         return 0 if report.ok else 1
+    if args.command == "eval":
+        return args.handler(args)
     if args.command == "demo":
         from camdirector.server.demo.client import run_demo
         return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport)

@@ -8,7 +8,6 @@ view of the paths to `demo-topdown.png`, and writes `demo-summary.json`.
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -18,19 +17,10 @@ import numpy as np
 import camdirector_client as cd
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.server.demo.scene import DemoScene, build_demo_scene
+from camdirector.server.process import ServerProcess
 
 FPS = 60
 VIDEO_SIZE = (960, 540)  # llvmpipe renders this in ~10 ms a frame; even sizes for yuv420p
-
-
-def start_server(workers: int = 1) -> tuple[subprocess.Popen, dict]:
-    cmd = [sys.executable, "-m", "camdirector.server.cli", "serve", "--grpc", "127.0.0.1:0",
-           "--zmq", "tcp://127.0.0.1:*", "--http", "127.0.0.1:0", "--workers", str(workers)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    line = proc.stdout.readline()
-    if not line:
-        raise RuntimeError("the server did not start")
-    return proc, json.loads(line)
 
 
 def session_request(scene: DemoScene, lens: Lens) -> cd.pb.CreateSessionRequest:
@@ -125,14 +115,9 @@ def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", rend
     lens = Lens(vertical_fov_deg=50.0, aspect=VIDEO_SIZE[0] / VIDEO_SIZE[1])
     print(f"camdirector demo: {seconds:.0f} s of a walk among columns and moving obstacles at {FPS} Hz")
     scene = build_demo_scene(seed=7, duration_s=seconds)
-    proc, ready = start_server()
-    try:
-        url = f"grpc://{ready['grpc']}" if transport == "grpc" else ready["zmq"]
-        print(f"  server ready: gRPC {ready['grpc']}, ZeroMQ {ready['zmq']}, HTTP {ready['http']}")
-        result = stream_demo(url, scene, lens, seconds)
-    finally:
-        proc.terminate()
-        proc.wait(15)
+    with ServerProcess("--workers", "1") as server:
+        print(f"  server ready: gRPC {server.grpc}, ZeroMQ {server.zmq}, HTTP {server.http}")
+        result = stream_demo(server.url(transport), scene, lens, seconds)
     updates = result["updates"]
     poses = [_pose(u) for u in updates]
     aims = np.stack([scene.aim_point_world(i / FPS) for i in range(len(updates))])

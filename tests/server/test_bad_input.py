@@ -7,12 +7,10 @@ import struct
 import time
 
 import grpc
-import numpy as np
 import pytest
 
 from camdirector.v1 import director_pb2 as pb
-from tests.server.wire_client import (GrpcRaw, RpcFailed, ZmqRaw, box_object, capsule_target, two_target_request,
-                                      walk)
+from tests.server.wire_client import GrpcRaw, RpcFailed, ZmqRaw, two_target_request, walk
 
 
 @pytest.fixture

@@ -1,0 +1,68 @@
+"""A `camdirector serve` child process on free loopback ports, for the demo, benchmarks,
+evaluation and tests: started, waited for (its one JSON ready line names the bound addresses),
+and stopped."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+
+class ServerProcess:
+    """Pass transports=("grpc",) to turn the others off; extra `args` go to `camdirector serve`.
+    The server's log goes to a file in a temporary folder (a pipe could fill and stall it)."""
+
+    def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None):
+        self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
+        self.log_path = Path(self._dir.name) / "server.log"
+        self._log = open(self.log_path, "w+")
+        bind = {"grpc": "127.0.0.1:0", "zmq": "tcp://127.0.0.1:*", "http": "127.0.0.1:0"}
+        cmd = [sys.executable, "-m", "camdirector.server.cli", "serve"]
+        for name, address in bind.items():
+            cmd += [f"--{name}", address if name in transports else ""]
+        if "--data-dir" not in args:
+            cmd += ["--data-dir", self._dir.name]
+        self.proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=self._log, text=True,
+                                     env={**os.environ, **(env or {})})
+        line = self.proc.stdout.readline()
+        if not line:
+            self.proc.wait(15)
+            raise RuntimeError(f"the server did not start: {self.log_tail()}")
+        self.ready: dict = json.loads(line)
+        self.grpc: str | None = self.ready.get("grpc")
+        self.zmq: str | None = self.ready.get("zmq")
+        self.http: str | None = self.ready.get("http")
+
+    def url(self, transport: str) -> str:
+        """The SDK's URL for "grpc" or "zmq"."""
+        return f"grpc://{self.grpc}" if transport == "grpc" else self.zmq
+
+    def log_tail(self, chars: int = 4000) -> str:
+        self._log.flush()
+        return self.log_path.read_text()[-chars:]
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> int:
+        """Stops the server (SIGTERM, then SIGKILL after 15 s); returns its exit code."""
+        if self.alive():
+            self.proc.terminate()
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.proc.stdout.close()
+        self._log.close()
+        self._dir.cleanup()
+        return self.proc.returncode
+
+    def __enter__(self) -> "ServerProcess":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
