@@ -21,8 +21,11 @@ the A-map (ANTICIPATION), the averaged S-maps (NO_ANTICIPATION) or ray casts (RA
 Beyond the paper, stated here because they change behaviour: the style's speed and acceleration
 limits clamp every non-cut step (so motion stays physically plausible whatever the risk field
 does); cut candidates stay on the upright side of the torus and away from top and bottom views;
-and a shot lasts at least `min_shot_s` before the next cut, so a flickering occluder cannot make
-a flurry of cuts.
+a shot lasts at least `min_shot_s` before the next cut, so a flickering occluder cannot make a
+flurry of cuts; and when the camera has been mostly occluded (ray casts to the samples) for
+`stuck_s`, the cut search runs first: a risk field can keep offering marginally better places
+inside an occluder's shadow (we saw the A-map do so under a wide, slow wall), and the local
+searches would never give up.
 """
 from __future__ import annotations
 
@@ -52,7 +55,9 @@ class SearchSettings:
     cut_samples: int = 64            # cut candidates over the torus. [1, 100000]
     min_cut_angle_deg: float = 30.0  # the 30-degree rule: a cut turns the view at least this much, deg. [0, 180]
     min_shot_s: float = 1.0          # no cut before a shot is this long (not in the paper), s. [0, 600]
-    improvement: float = 1e-3        # a place is less occluded only when better by this much. [0, 1]
+    improvement: float = 0.005        # a place is less occluded only when better by this much (above the maps' noise). [0, 1]
+    stuck_occluded: float = 0.5      # ray-cast occluded share of the samples that counts as "stuck" (not in the paper). [0, 1]
+    stuck_s: float = 0.25            # stuck this long: try the cut before any local move (not in the paper), s. [0, 60]
     cut_phi_margin_deg: float = 20.0  # cut candidates keep this far from top (phi 0) and bottom (phi 180) views, deg. [0, 89]
 
     def __post_init__(self):
@@ -89,11 +94,13 @@ class OcclusionSearch:
         self.phi = 0.0
         self.velocity_world = np.zeros(3)
         self.shot_start_s = 0.0
+        self._occluded_since_s: float | None = None
 
     def start(self, theta: float, phi: float, time_s: float) -> SearchResult:
         self.theta, self.phi = theta, phi
         self.velocity_world = np.zeros(3)
         self.shot_start_s = time_s
+        self._occluded_since_s = None
         return SearchResult(theta, phi, cut=True, strategy="start", risk=0.0)
 
     def _sector(self, p: np.ndarray, e1: np.ndarray, e2: np.ndarray, v_t: np.ndarray, dt_s: float) -> tuple[np.ndarray, float]:
@@ -127,6 +134,17 @@ class OcclusionSearch:
         theta_c, phi_c = torus_angles_many(torus, coast[None])
         risk_coast = float(risk.risk(theta_c, phi_c)[0])
 
+        occluded_now = float(cut_occlusion(p[None])[0])
+        if occluded_now < s.stuck_occluded:
+            self._occluded_since_s = None
+        elif self._occluded_since_s is None:
+            self._occluded_since_s = time_s
+        can_cut = time_s - self.shot_start_s >= s.min_shot_s
+        if can_cut and self._occluded_since_s is not None and time_s - self._occluded_since_s >= s.stuck_s:
+            result = self._cut_to(torus, coast, cut_occlusion, side, time_s)
+            if result is not None:
+                return result
+
         target, strategy, chosen_risk = coast, "coast", risk_coast
         single, f_l = self._sector(p, e1, e2, v_t, dt_s)
         th, ph = torus_angles_many(torus, single)
@@ -144,13 +162,10 @@ class OcclusionSearch:
                 reach = float(np.linalg.norm(toward))
                 target = coast + toward * min(1.0, 0.5 * f_l / reach) if reach > 0 else coast
                 strategy, chosen_risk = "look_ahead", float(risks[best])
-            elif time_s - self.shot_start_s >= s.min_shot_s:
-                cut = self._cut(torus, coast, cut_occlusion, side)
-                if cut is not None:
-                    self.theta, self.phi, occluded = cut
-                    self.velocity_world = np.zeros(3)
-                    self.shot_start_s = time_s
-                    return SearchResult(self.theta, self.phi, cut=True, strategy="cut", risk=occluded)
+            elif can_cut:
+                result = self._cut_to(torus, coast, cut_occlusion, side, time_s)
+                if result is not None:
+                    return result
 
         # physical limits of the style on the camera's own motion, braking by damping included
         velocity = (target - p) / dt_s
@@ -166,6 +181,17 @@ class OcclusionSearch:
         p_next = torus_position(torus, self.theta, self.phi)
         self.velocity_world = (p_next - p) / dt_s
         return SearchResult(self.theta, self.phi, cut=False, strategy=strategy, risk=chosen_risk)
+
+    def _cut_to(self, torus: Torus, coast: np.ndarray, cut_occlusion, side: float, time_s: float):
+        """Teleports to a cut place when there is one (velocity reset, a new shot)."""
+        cut = self._cut(torus, coast, cut_occlusion, side)
+        if cut is None:
+            return None
+        self.theta, self.phi, occluded = cut
+        self.velocity_world = np.zeros(3)
+        self.shot_start_s = time_s
+        self._occluded_since_s = None
+        return SearchResult(self.theta, self.phi, cut=True, strategy="cut", risk=occluded)
 
     def _cut(self, torus: Torus, coast: np.ndarray, cut_occlusion, side: float):
         """(theta, phi, occluded fraction) of a less occluded place obeying the 30-degree rule, or None."""

@@ -3,7 +3,11 @@
 Stage order (one module each):
   INGEST      session.py        apply the frame's transforms to targets and the ray scene
   FRAMING     framing.py        framed points A and B (gaze room for one target), the torus
-  MOTION      camera_motion.py  where on the torus the camera goes, damped and speed-limited
+  PROJECTION  occlusion_maps.py S-maps and V-maps of the target samples (map modes, on schedule)
+  AMAP        anticipation.py   the occlusion anticipation map (map modes, on schedule)
+  MOTION      camera_motion.py  FRAMING_ONLY: damped return to the preferred place;
+              reactive.py       REACTIVE: that, pulled in front of occluders;
+              occlusion_search.py  RAYCAST and map modes: the paper's search and cuts
   VISIBILITY  visibility.py     the rig's own estimate of how much of the targets is visible
   OUTPUT      wire.py           the CameraUpdate
 """
@@ -21,9 +25,11 @@ from camdirector.geometry.toric import Torus
 class Stage(enum.IntEnum):
     INGEST = 0
     FRAMING = 1
-    MOTION = 2
-    VISIBILITY = 3
-    OUTPUT = 4
+    PROJECTION = 2
+    AMAP = 3
+    MOTION = 4
+    VISIBILITY = 5
+    OUTPUT = 6
 
 
 @dataclass

@@ -18,11 +18,13 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
 from camdirector.geometry.toric import torus_angles
 from camdirector.server.camera_motion import ToricMotion, pose_on_torus
+from camdirector.server.occlusion_maps import OcclusionMaps
 from camdirector.server.occlusion_search import OcclusionSearch, RaycastRisk, SearchSettings
 from camdirector.server.reactive import Deoccluder
 from camdirector.server.framing import Framing
 from camdirector.server.pipeline import FrameState, Stage
-from camdirector.server.style import SEARCH_MODES, Style, VisibilityMode
+from camdirector.server.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
+from camdirector.server.target_sampling import TargetSampler
 from camdirector.server.visibility import VisibilityEstimate
 from camdirector.server.wire import FrameInput, SceneSpec
 
@@ -39,13 +41,16 @@ class Session:
         self.target_transforms = [t.transform for t in scene.targets]
         self.static_ids = {o.id for o in scene.objects if not o.dynamic}
         self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
-        self.ray_scene = RayScene([_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic])
-        for o in scene.objects:
-            if o.dynamic:
-                self.ray_scene.add_dynamic(o.id, o.mesh, o.transform)
+        self.static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
+        self.ray_scene = RayScene(self.static_meshes_world)
+        self.dynamic = {o.id: (o.mesh, o.transform) for o in scene.objects if o.dynamic}  # latest transforms
+        for object_id, (mesh, transform) in self.dynamic.items():
+            self.ray_scene.add_dynamic(object_id, mesh, transform)
         self.framing = Framing(self.lens, self.style, scene.targets[0].transform.rotation_xyzw)
         self.motion = ToricMotion(self.style, self.lens)
         self.visibility = VisibilityEstimate(self.ray_scene, [t.mesh for t in scene.targets], self.rng)
+        self.sampler = TargetSampler([t.mesh for t in scene.targets], self.rng)  # the paper's 2r points
+        self.maps: OcclusionMaps | None = None  # built the first time a map mode runs
         self.search = OcclusionSearch(SearchSettings(), self.rng)
         self.deoccluder = Deoccluder(self.ray_scene)
         self._searching = False  # whether the search particle holds the camera's place
@@ -61,6 +66,8 @@ class Session:
         self.style = style
         self.framing.set_style(style)
         self.motion.set_style(style)
+        if self.maps is not None:
+            self.maps.set_style(style)
 
     def is_stale(self, frame: int) -> bool:
         return self.last_state is not None and frame <= self.last_state.frame
@@ -77,14 +84,17 @@ class Session:
             index = self.target_index.get(object_id)
             if index is None:
                 self.ray_scene.set_transform(object_id, transform)
+                self.dynamic[object_id] = (self.dynamic[object_id][0], transform)
             else:
                 self.target_transforms[index] = transform
         state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0]
                                   for tf, t in zip(self.target_transforms, self.targets)]
         t1 = self.clock()
         self.framing.run(state)  # Stage.FRAMING
+        if self.maps is not None:
+            self.maps.ingest(update.states, update.time_s)
         t2 = self.clock()
-        self._move(state)  # Stage.MOTION
+        self._move(state)  # Stage.PROJECTION, Stage.AMAP, Stage.MOTION
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
         t3 = self.clock()
@@ -95,12 +105,13 @@ class Session:
         if state.cut:
             self.shot_id += 1
         state.shot_id = self.shot_id
-        state.stage_ms = {
+        map_ms = sum(state.stage_ms.values())  # projection and A-map, filled by _move
+        state.stage_ms.update({
             Stage.INGEST.name.lower(): (t1 - t0) * 1e3,
             Stage.FRAMING.name.lower(): (t2 - t1) * 1e3,
-            Stage.MOTION.name.lower(): (t3 - t2) * 1e3,
+            Stage.MOTION.name.lower(): (t3 - t2) * 1e3 - map_ms,
             Stage.VISIBILITY.name.lower(): (t4 - t3) * 1e3,
-        }
+        })
         self.last_state = state
         self.frames_answered += 1
         return state
@@ -128,17 +139,26 @@ class Session:
                 theta, phi = torus_angles(torus, self.motion.position_world)
             self.search.start(theta, phi, state.time_s)
             self._searching = True
-        points = self.visibility.points_world(self.target_transforms)
+        points = self.sampler.points_world(self.target_transforms)
 
         def occluded(cameras_world: np.ndarray) -> np.ndarray:
             return self.visibility.occluded_fraction(cameras_world, points)
 
-        risk = RaycastRisk(torus, occluded)
+        if mode in MAP_MODES:
+            if self.maps is None:
+                self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
+            state.stage_ms.update(self.maps.update(torus, self.search.theta, self.search.phi, state.time_s,
+                                                   self.target_transforms, [t.id for t in self.targets]))
+            risk = self.maps
+        else:
+            risk = RaycastRisk(torus, occluded)
         side = math.copysign(1.0, self.motion.preferred_place(torus)[1])  # upright half for cuts
         result = self.search.step(torus, state.dt_s, state.time_s, risk, occluded, side,
                                   self.style.max_speed_m_s, self.style.max_accel_m_s2)
         state.theta, state.phi, state.cut = result.theta, result.phi, result.cut
         state.flags.append(f"search_{result.strategy}")
+        if result.cut and self.maps is not None:
+            self.maps.invalidate()
         state.pose = pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, state.b_is_gaze_point)
         self.motion.position_world = state.pose.position_world
 

@@ -8,6 +8,8 @@ import enum
 import math
 from dataclasses import dataclass
 
+from camdirector.server.anticipation import MaskKind
+
 
 class VisibilityMode(enum.IntEnum):
     """Same numbers as camdirector.v1.VisibilityMode."""
@@ -20,11 +22,18 @@ class VisibilityMode(enum.IntEnum):
     FRAMING_ONLY = 5
 
 
-# Modes the rig runs today; the others answer UNIMPLEMENTED until the visibility work lands.
-IMPLEMENTED_MODES = frozenset({VisibilityMode.UNSPECIFIED, VisibilityMode.FRAMING_ONLY, VisibilityMode.RAYCAST,
-                               VisibilityMode.REACTIVE})
+class MapBackendChoice(enum.IntEnum):
+    """Same numbers as camdirector.v1.MapBackend."""
+
+    AUTO = 0
+    GL = 1
+    EMBREE = 2
+
+
 # Modes whose camera moves by the paper's search (occlusion_search.py) rather than the toric spring.
 SEARCH_MODES = frozenset({VisibilityMode.ANTICIPATION, VisibilityMode.NO_ANTICIPATION, VisibilityMode.RAYCAST})
+# Modes that read the occlusion maps (occlusion_maps.py).
+MAP_MODES = frozenset({VisibilityMode.ANTICIPATION, VisibilityMode.NO_ANTICIPATION})
 
 
 @dataclass(frozen=True)
@@ -38,6 +47,9 @@ class Style:
     response_time_s: float = 0.5        # time constant of the damped return to the preferred place, s. [0.02, 60]
     max_speed_m_s: float = 8.0          # camera speed limit on the torus, m/s. (0, 1000]
     max_accel_m_s2: float = 12.0        # camera acceleration limit on the torus, m/s^2. (0, 10000]
+    mask: MaskKind = MaskKind.EMPTY     # viewpoints the map modes avoid (the paper's Figure 10)
+    map_resolution: int = 64            # occlusion map texels per side. [16, 512]
+    map_backend: MapBackendChoice = MapBackendChoice.AUTO  # how the maps are computed
 
     def __post_init__(self):
         for name, point in (("screen_a", self.screen_a), ("screen_b", self.screen_b)):
@@ -53,6 +65,8 @@ class Style:
             ("max_speed_m_s", self.max_speed_m_s, 1e-6, 1000.0),
             ("max_accel_m_s2", self.max_accel_m_s2, 1e-6, 10000.0),
         ]
+        if not 16 <= self.map_resolution <= 512:
+            raise ValueError(f"style.map_resolution must be in [16, 512], got {self.map_resolution}")
         for name, value, low, high in limits:
             if not (math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"style.{name} must be in [{low:g}, {high:g}], got {value}")

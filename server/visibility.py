@@ -13,6 +13,7 @@ import numpy as np
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.server.pipeline import FrameState
+from camdirector.server.target_sampling import SurfaceSampler
 
 
 @dataclass(frozen=True)
@@ -20,23 +21,11 @@ class VisibilitySettings:
     samples_per_target: int = 16  # surface points tested per target and frame. [1, 4096]
 
 
-def sample_surface(mesh: TriMesh, count: int, rng: np.random.Generator) -> np.ndarray:
-    """(count, 3) float64 points uniformly distributed over the mesh's area, local frame."""
-    tri = mesh.vertices[mesh.faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    face = rng.choice(len(area), size=count, p=area / area.sum())
-    u, v = rng.random(count), rng.random(count)
-    flip = u + v > 1.0  # fold the square onto the triangle
-    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
-    t = tri[face]
-    return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
-
-
 class VisibilityEstimate:
     def __init__(self, ray_scene: RayScene, target_meshes: list[TriMesh], rng: np.random.Generator,
                  settings: VisibilitySettings = VisibilitySettings()):
         self.ray_scene = ray_scene
-        self.samples_local = [sample_surface(m, settings.samples_per_target, rng) for m in target_meshes]
+        self.samples_local = [SurfaceSampler(m).sample(settings.samples_per_target, rng) for m in target_meshes]
 
     def points_world(self, target_transforms) -> np.ndarray:
         """(k, 3) the sample points carried by the targets' current RigidTransforms (target order)."""

@@ -15,12 +15,16 @@ from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import MeshError, TriMesh
 from camdirector.geometry.toric import composition_angle
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
-from camdirector.server.errors import exhausted, invalid, not_found, precondition, unimplemented
+from camdirector.server.anticipation import MaskKind
+from camdirector.server.errors import exhausted, invalid, not_found, precondition
 from camdirector.server.pipeline import FrameState
 from camdirector.server.settings import ServerSettings
-from camdirector.server.style import IMPLEMENTED_MODES, Style, VisibilityMode
+from camdirector.server.style import MapBackendChoice, Style, VisibilityMode
 from camdirector.v1 import director_pb2 as pb
 
+_MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
+          pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
+          pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
 MIN_ALPHA_RAD = math.radians(0.5)  # screen points closer than this angle give no usable torus
 PACKED_STRIDE = 10                 # doubles per object in FrameUpdate.packed_transforms
 
@@ -154,8 +158,13 @@ def style_from_msg(msg: pb.Style, lens: Lens) -> Style:
         mode = VisibilityMode(msg.visibility)
     except ValueError:
         raise invalid(f"style.visibility {msg.visibility} is not a VisibilityMode") from None
-    if mode not in IMPLEMENTED_MODES:
-        raise unimplemented(f"style.visibility {mode.name} is not implemented yet; use FRAMING_ONLY, RAYCAST or REACTIVE")
+    try:
+        values["mask"] = _MASKS[msg.mask]
+        values["map_backend"] = MapBackendChoice(msg.map_backend)
+    except (KeyError, ValueError):
+        raise invalid(f"style.mask {msg.mask} or style.map_backend {msg.map_backend} is not known") from None
+    if msg.map_resolution:
+        values["map_resolution"] = msg.map_resolution
     try:
         style = Style(visibility=VisibilityMode.FRAMING_ONLY if mode == VisibilityMode.UNSPECIFIED else mode, **values)
     except ValueError as exc:

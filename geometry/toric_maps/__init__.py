@@ -34,24 +34,38 @@ __all__ = [
 # GL_RENDERER substrings of software rasterizers: GL runs on the CPU there and competes with Embree.
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "lavapipe", "software rasterizer")
 
-# Above this many scene triangles, on a software GL renderer, ray casting is faster. Measured by
-# `python -m load_tests.maps_bench` on the 2-core CPU machine (see choose_backend).
-GL_MAX_TRIANGLES_ON_CPU = 2000
+# Above this many scene triangles (at 64 x 64 maps), on a software GL renderer, ray casting is the
+# faster backend. Measured by `python -m load_tests.maps_bench` on the 2-core CPU machine: see
+# choose_backend for the numbers.
+GL_MAX_TRIANGLES_ON_CPU = 10_000
 
 
-def choose_backend(triangle_count: int, renderer_string: str | None) -> str:
+def choose_backend(triangle_count: int, renderer_string: str | None, resolution: int = 64) -> str:
     """"gl" or "embree": the faster backend for a scene of ``triangle_count`` triangles.
 
     renderer_string: GL_RENDERER of the EGL context (probe_gl_renderer()), None when EGL is
-    unavailable. Rule (DESIGN.md, and our measurement on the 2-core CPU machine, see
-    load_tests/maps_bench.py): no GL -> embree; a hardware GPU -> gl; a software rasterizer ->
-    gl up to GL_MAX_TRIANGLES_ON_CPU triangles, embree above.
+    unavailable. resolution: map texels per side. Rule:
+
+    - no EGL -> embree;
+    - a hardware GPU -> gl (DESIGN.md: rasterization is nearly free there);
+    - a software rasterizer (llvmpipe) -> gl up to GL_MAX_TRIANGLES_ON_CPU * (resolution / 64)^2
+      triangles, embree above. llvmpipe's cost grows with triangles (about 0.12 ms per 1,000 for an
+      amortized 2-map update), Embree's with rays and hardly with triangles (about 2 ms per 2 maps
+      at 64 x 64 from 800 to 56,000 triangles), hence the crossover grows with the ray count.
+
+    Measured on the 2-core CPU machine (load_tests/maps_bench.py, forest scene with 30 moving
+    trees, three runs, other work on the machine): at 64 x 64 the 2-map update (every 0.1 s)
+    crosses over between 8,700 and 15,500 triangles (last run: 1.95 vs 2.07 ms at 8,736, 2.27 vs
+    2.03 ms at 10,976), a full 10-map refresh (first update, after a cut) between 5,400 and 11,000;
+    at 128 x 128 between 56,000 and 110,000 (2 maps) and 29,000 and 56,000 (10 maps), where the
+    rule says 40,000. The constant weighs the 2-map update, which is what runs in steady state.
     """
     if not renderer_string:
         return "embree"
     renderer = renderer_string.lower()
     if any(name in renderer for name in SOFTWARE_RENDERERS):
-        return "gl" if triangle_count <= GL_MAX_TRIANGLES_ON_CPU else "embree"
+        limit = GL_MAX_TRIANGLES_ON_CPU * (max(int(resolution), 1) / 64.0) ** 2
+        return "gl" if triangle_count <= limit else "embree"
     return "gl"
 
 

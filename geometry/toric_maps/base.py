@@ -48,7 +48,7 @@ class WindowSettings:
     half_view_angle_deg: float = 30.0    # half-side of the window seen from the A-B midpoint, deg. [1, 75]
     min_half_extent_m: float = 0.25      # lower clamp of the window's half-side on the torus, m. (0, 1000]
     max_half_extent_m: float = 50.0      # upper clamp, m. [min_half_extent_m, 10000]
-    lattice_tolerance: float = 0.15      # keep the previous window's texel size while the ideal one is within this ratio of it. [0, 1]
+    lattice_tolerance: float = 0.15      # keep the previous texel size while the ideal is within this ratio. [0, 1]
 
     def __post_init__(self):
         checks = [
@@ -225,14 +225,12 @@ class MapWindow:
 def _linear_taps(coord: np.ndarray, n: int):
     """Indices (2, m), weights (m,) and validity (m,) for linear interpolation at float coords."""
     ok = (coord >= -0.5 - 1e-6) & (coord <= n - 0.5 + 1e-6)
-    c = np.clip(coord, 0.0, n - 1.0)
-    lo = np.floor(c).astype(np.intp)
-    lo = np.minimum(lo, n - 1)
+    # Whole-texel shifts arrive as x.9999999 or x.0000001: snap them so they copy exactly.
+    nearest = np.rint(coord)
+    c = np.clip(np.where(np.abs(coord - nearest) < 1e-6, nearest, coord), 0.0, n - 1.0)
+    lo = np.minimum(np.floor(c).astype(np.intp), n - 1)
     hi = np.minimum(lo + 1, n - 1)
-    w = c - lo
-    # Whole-texel shifts arrive as x.9999999 or x.0000001: snap so they copy exactly.
-    w = np.where(np.abs(w) < 1e-6, 0.0, np.where(np.abs(w - 1.0) < 1e-6, 1.0, w))
-    return (lo, hi), w, ok
+    return (lo, hi), c - lo, ok
 
 
 # -- the occluder scene ------------------------------------------------------------------------
@@ -256,12 +254,8 @@ class DynamicOccluder:
         if self.bound_center_local is None:
             lo, hi = self.mesh_local.vertices.min(axis=0), self.mesh_local.vertices.max(axis=0)
             self.bound_center_local = 0.5 * (lo + hi)
-            self.bound_radius_local = float(np.linalg.norm(self.mesh_local.vertices - self.bound_center_local, axis=1).max())
-
-    def bounding_sphere_world(self) -> tuple[np.ndarray, float]:
-        """(centre (3,), radius) in world metres, enclosing the posed mesh."""
-        center = self.transform.apply(self.bound_center_local[None, :])[0]
-        return center, self.bound_radius_local * float(np.max(np.abs(self.transform.scale)))
+            spread = np.linalg.norm(self.mesh_local.vertices - self.bound_center_local, axis=1)
+            self.bound_radius_local = float(spread.max())
 
     def point_velocity(self, points_world: np.ndarray) -> np.ndarray:
         """(n, 3) world velocity, m/s, of the object's points (n, 3) world."""
@@ -386,7 +380,8 @@ def check_compute_args(window: MapWindow, sample_points_world, exclude_ids, prev
     if points.ndim == 1 and points.shape == (3,):
         points = points[None, :]
     if points.ndim != 2 or points.shape[1] != 3 or not 1 <= len(points) <= max_samples:
-        raise ValueError(f"sample_points_world must be (k, 3) with 1 <= k <= {max_samples}, got {np.shape(sample_points_world)}")
+        raise ValueError(f"sample_points_world must be (k, 3) with 1 <= k <= {max_samples}, "
+                         f"got {np.shape(sample_points_world)}")
     if not np.all(np.isfinite(points)):
         raise ValueError("sample_points_world must be finite")
     excluded = [None] * len(points) if exclude_ids is None else list(exclude_ids)

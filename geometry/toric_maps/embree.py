@@ -5,13 +5,24 @@ by deferred projection. For each sample point s and each texel, one segment from
 torus point P: the S-map is whether it hits anything, the V-map the first hit's rigid velocity
 v + w x (p - c) minus the torus point's velocity, in Toric angular rates.
 
-All k * res * res rays go in one call per Embree scene. Static meshes share one scene built once
-(embreex copies a mesh at about 1 us per triangle and cannot move vertices, DESIGN.md); each moving
-object keeps a scene in its local frame and a query transforms the rays into it (o' = M^-1 o,
-d' = M^-1 d: the ray parameter t names the same point in both frames), after a bounding-sphere test
-that keeps only the rays passing near the object.
+All k * res^2 rays go in one call per Embree scene and query kind. Occlusion is asked first for
+every ray and first hits only for the rays that hit (first hits cost about three times more). The
+static meshes share one scene built when the geometry changes (embreex copies a mesh at about
+0.5-1 us per triangle and cannot move vertices, DESIGN.md). Moving objects, whose poses change
+every frame, are handled in one of two ways (EmbreeMapSettings.rebuild_triangles_per_ray):
+
+- few moving triangles (the usual case): world-space scenes of them are rebuilt per call, one
+  Embree geometry per object, so a hit's geomID names the object;
+- many: each object keeps a scene in its local frame and the rays that pass near its bounding
+  sphere are transformed into it (o' = M^-1 o, d' = M^-1 d: the ray parameter names the same point
+  in both frames), one query per object.
+
+A sample point ignores its own target (section 4.1, "without the object o"): an object that some
+sample ignores gets a world-space scene of its own, cast only with the other samples' rays.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from embreex import rtcore_scene
@@ -19,6 +30,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.toric import Torus
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.geometry.toric_maps.base import (
     NOT_OCCLUDED_DEPTH,
     SAMPLE_CLEARANCE_M,
@@ -28,7 +40,6 @@ from camdirector.geometry.toric_maps.base import (
     ShadowVelocityMaps,
     check_compute_args,
     texture_velocity,
-    torus_point_velocity,
     torus_points,
     torus_tangents,
 )
@@ -36,13 +47,32 @@ from camdirector.geometry.toric_maps.base import (
 _NO_HIT = -1  # embreex's answer for a ray that hits nothing
 
 
-def _embree_scene(meshes: list[TriMesh]) -> rtcore_scene.EmbreeScene:
+@dataclass(frozen=True)
+class EmbreeMapSettings:
+    # Moving objects are rebuilt into world-space scenes when they have at most this many triangles
+    # per ray of the call, else cast one by one in their local frames. Rebuilding costs about
+    # 0.4 ms per 1,000 triangles per call here, the local casts about 1 ms per 2 samples at 64 x 64
+    # whatever the triangle count (2-core CPU, 30 moving cylinders): rebuilding wins at 10 samples
+    # with 2,000 moving triangles (6.6 vs 8.8 ms), loses at 2 samples (3.2 vs 2.6 ms).
+    rebuild_triangles_per_ray: float = 0.125   # [0, 1000]
+
+    def __post_init__(self):
+        if not 0.0 <= self.rebuild_triangles_per_ray <= 1000.0:
+            raise ValueError("EmbreeMapSettings: rebuild_triangles_per_ray must be in [0, 1000]")
+
+
+def _embree_scene(meshes: list[tuple[np.ndarray, np.ndarray]]) -> rtcore_scene.EmbreeScene:
+    """One Embree geometry per (vertices (n, 3), faces (m, 3)), geomID = list index."""
     scene = rtcore_scene.EmbreeScene()
-    vertices = np.concatenate([m.vertices for m in meshes]).astype(np.float32)
-    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
-    faces = np.concatenate([m.faces + o for m, o in zip(meshes, offsets)]).astype(np.int32)
-    TriangleMesh(scene, vertices, faces)
+    for vertices, faces in meshes:
+        TriangleMesh(scene, np.ascontiguousarray(vertices, dtype=np.float32), np.ascontiguousarray(faces, dtype=np.int32))
     return scene
+
+
+def _merged(meshes: list[TriMesh]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """All meshes as one geometry (fewer Embree objects; static hits need no id)."""
+    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+    return [(np.concatenate([m.vertices for m in meshes]), np.concatenate([m.faces + o for m, o in zip(meshes, offsets)]))]
 
 
 class EmbreeMapBackend:
@@ -50,110 +80,156 @@ class EmbreeMapBackend:
 
     name = "embree"
 
-    def __init__(self, scene: OccluderScene):
+    def __init__(self, scene: OccluderScene, settings: EmbreeMapSettings = EmbreeMapSettings()):
         self.scene = scene
+        self.settings = settings
         self._version = -1
         self._static: rtcore_scene.EmbreeScene | None = None
-        self._dynamic: dict[str, rtcore_scene.EmbreeScene] = {}
+        self._local: dict[str, rtcore_scene.EmbreeScene] = {}
 
     def _sync(self) -> None:
         if self._version == self.scene.geometry_version:
             return
         static = list(self.scene.static_meshes_world)
-        self._static = _embree_scene(static) if static else None
-        # Scenes of objects that are still there are kept: their local meshes do not change.
-        self._dynamic = {oid: self._dynamic.get(oid) or _embree_scene([obj.mesh_local])
-                         for oid, obj in self.scene.dynamic.items()}
+        self._static = _embree_scene(_merged(static)) if static else None
+        self._local = {}  # per-object local scenes, built on demand
         self._version = self.scene.geometry_version
 
     def compute(self, torus: Torus, window: MapWindow, sample_points_world, *, exclude_ids=None,
                 previous_torus: Torus | None = None, dt_s: float = 0.0) -> ShadowVelocityMaps:
-        """See base.MapBackend.compute. Cost: one Embree query of k * res^2 rays for the static
-        scene, plus one per moving object for the rays that pass near it."""
+        """See base.MapBackend.compute."""
         points, excluded = check_compute_args(window, sample_points_world, exclude_ids, previous_torus, dt_s)
         self._sync()
         k, n = len(points), window.resolution
-        torus_world = torus_points(torus, window).reshape(1, -1, 3)                  # (1, m, 3), m = res^2
-        m = torus_world.shape[1]
-        rel = torus_world - points[:, None, :]                                       # (k, m, 3): P - s
-        length = np.sqrt(np.einsum("kmc,kmc->km", rel, rel))                         # (k, m)
+        torus_world = torus_points(torus, window).reshape(-1, 3)                     # (m, 3), m = res^2
+        m = len(torus_world)
+        rel = (torus_world[None, :, :] - points[:, None, :]).reshape(-1, 3)           # (k m, 3): P - s
+        length = np.sqrt(np.einsum("ij,ij->i", rel, rel))                            # (k m,)
         # Rays start SAMPLE_CLEARANCE_M from s (embreex has no tnear) and end just short of P.
-        t_start = np.minimum(SAMPLE_CLEARANCE_M / np.maximum(length, 1e-12), 0.5)
-        start = (points[:, None, :] + rel * t_start[..., None]).astype(np.float32).reshape(-1, 3)
-        dirs = rel.astype(np.float32).reshape(-1, 3)
-        t_limit = ((1.0 - SEGMENT_END_MARGIN) - t_start).astype(np.float32).ravel()  # ray parameter from `start`
+        t_start = np.minimum(SAMPLE_CLEARANCE_M / np.maximum(length, 1e-12), 0.5).astype(np.float32)
+        dirs = rel.astype(np.float32)
+        start = np.repeat(points.astype(np.float32), m, axis=0)
+        start += dirs * t_start[:, None]
+        t_limit = np.float32(1.0 - SEGMENT_END_MARGIN) - t_start                      # ray parameter from `start`
         t_best = t_limit.copy()
         hit_object = np.full(k * m, -1, dtype=np.int32)                              # -1: static or none
         if self._static is not None:
-            # Occlusion for every ray, then first hits only where something was hit: the cheap
-            # query does most of the work (first hits cost about 3x more per ray here).
             hit = np.flatnonzero(self._static.run(start, dirs, dists=t_limit.copy(), query="OCCLUDED") != _NO_HIT)
             if len(hit):
                 t_best[hit] = self._static.run(start[hit], dirs[hit], dists=t_limit[hit].copy(), query="DISTANCE")
-        self._cast_dynamic(points, rel, length, t_start, start, dirs, excluded, t_best, hit_object)
-
-        occluded = t_best < t_limit
-        t_total = t_start.ravel() + t_best.astype(np.float64)
-        velocity_world = np.zeros((k * m, 3))
         objects = list(self.scene.dynamic.values())
-        for index in np.unique(hit_object[occluded & (hit_object >= 0)]):
-            rays = np.flatnonzero(occluded & (hit_object == index))
-            hit_world = points[rays // m] + rel.reshape(-1, 3)[rays] * t_total[rays, None]
-            velocity_world[rays] = objects[index].point_velocity(hit_world)
-        relative = velocity_world.reshape(k, n, n, 3) - torus_point_velocity(torus, window, previous_torus, dt_s)
+        if objects:
+            ids = list(self.scene.dynamic)
+            own = np.array([ids.index(e) if e in self.scene.dynamic else -1 for e in excluded], dtype=np.int32)
+            moving_triangles = sum(o.mesh_local.triangle_count for o in objects)
+            if moving_triangles <= self.settings.rebuild_triangles_per_ray * k * m:
+                self._cast_world(objects, own, start, dirs, t_best, hit_object, m)
+            else:
+                self._cast_local(objects, points, rel.reshape(k, m, 3), length.reshape(k, m), t_start, start, dirs,
+                                 own, t_best, hit_object)
+
+        # Velocities only where occluded: the first hit's rigid motion minus the torus point's.
+        hits = np.flatnonzero(t_best < t_limit)
+        t_total = t_start[hits] + t_best[hits].astype(np.float64)
+        texel = hits % m
+        velocity_world = np.zeros((len(hits), 3))
+        for index in np.unique(hit_object[hits]):
+            if index >= 0:
+                mine = np.flatnonzero(hit_object[hits] == index)
+                hit_world = points[hits[mine] // m] + rel[hits[mine]] * t_total[mine, None]
+                velocity_world[mine] = objects[index].point_velocity(hit_world)
+        if previous_torus is not None:
+            moved = (torus_world - torus_points(previous_torus, window).reshape(-1, 3)) / dt_s
+            velocity_world -= moved[texel]
         d_theta, d_phi = torus_tangents(torus, window)
-        shadow = occluded.reshape(k, n, n)
-        velocity = texture_velocity(relative, d_theta, d_phi) * shadow[..., None]
-        depth = np.where(occluded, t_total * length.ravel(), NOT_OCCLUDED_DEPTH).reshape(k, n, n)
-        return ShadowVelocityMaps(window=window, shadow=shadow.astype(np.float32),
-                                  velocity_rad_s=velocity.astype(np.float32), depth_m=depth.astype(np.float32))
+        shadow = np.zeros(k * m, dtype=np.float32)
+        shadow[hits] = 1.0
+        velocity = np.zeros((k * m, 2), dtype=np.float32)
+        velocity[hits] = texture_velocity(velocity_world, d_theta.reshape(-1, 3)[texel], d_phi.reshape(-1, 3)[texel])
+        depth = np.full(k * m, NOT_OCCLUDED_DEPTH, dtype=np.float32)
+        depth[hits] = t_total * length[hits]
+        return ShadowVelocityMaps(window=window, shadow=shadow.reshape(k, n, n),
+                                  velocity_rad_s=velocity.reshape(k, n, n, 2), depth_m=depth.reshape(k, n, n))
 
-    def _cast_dynamic(self, points, rel, length, t_start, start, dirs, excluded, t_best, hit_object) -> None:
-        """First hits on the moving objects, updating t_best and hit_object in place.
+    def _cast_world(self, objects, own, start, dirs, t_best, hit_object, m) -> None:
+        """First hits on the moving objects, posed in world-space scenes built for this call.
 
-        Culling, cheapest first: a (object, sample) pair is skipped when the object's bounding
-        sphere lies outside the cone of the sample's rays or beyond the torus; for the pairs left,
-        only the rays whose line passes within the sphere are cast, transformed into the object's
-        frame.
+        Objects no sample ignores share one scene; each object some sample ignores (its own target)
+        gets a scene of its own, cast only with the rays of the other samples.
         """
-        if not self.scene.dynamic:
-            return
+        ignored = sorted({int(i) for i in own if i >= 0})
+        shared = [i for i in range(len(objects)) if i not in ignored]
+        groups = [(shared, np.arange(len(own)))] if shared else []
+        groups += [([i], np.flatnonzero(own != i)) for i in ignored]
+        for members, samples in groups:
+            if len(samples) == 0:
+                continue
+            scene = _embree_scene([(objects[i].transform.apply(objects[i].mesh_local.vertices),
+                                    objects[i].mesh_local.faces) for i in members])
+            rays = (samples[:, None] * m + np.arange(m)[None, :]).ravel() if len(samples) < len(own) else None
+            s, d, t = (start, dirs, t_best) if rays is None else (start[rays], dirs[rays], t_best[rays])
+            hit = np.flatnonzero(scene.run(s, d, dists=t.copy(), query="OCCLUDED") != _NO_HIT)
+            if len(hit) == 0:
+                continue
+            found = scene.run(s[hit], d[hit], dists=t[hit].copy(), output=True)
+            first = found["geomID"] != _NO_HIT
+            index = hit[first] if rays is None else rays[hit[first]]
+            t_best[index] = found["tfar"][first]
+            hit_object[index] = np.asarray(members, dtype=np.int32)[found["geomID"][first]]
+
+    def _cast_local(self, objects, points, rel, length, t_start, start, dirs, own, t_best, hit_object) -> None:
+        """First hits on the moving objects, one local-frame scene each, for the rays that pass near.
+
+        Culling, cheapest first, for all (object, sample) pairs at once: a pair is skipped when the
+        object's bounding sphere lies outside the cone of the sample's rays or beyond the torus;
+        for the pairs left, only the rays whose line passes within the sphere are cast.
+        """
         k, m = length.shape
         unit = rel / np.maximum(length, 1e-12)[..., None]                          # (k, m, 3)
         axis = unit.sum(axis=1)
         axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)      # (k, 3)
-        cos_half = np.einsum("kmc,kc->km", unit, axis).min(axis=1)                  # (k,) cone half-angle cosine
-        half = np.arccos(np.clip(cos_half, -1.0, 1.0))
+        half = np.arccos(np.clip(np.einsum("kmc,kc->km", unit, axis).min(axis=1), -1.0, 1.0))
         reach = length.max(axis=1)                                                  # (k,) farthest torus point
-        for index, (object_id, obj) in enumerate(self.scene.dynamic.items()):
-            center, radius = obj.bounding_sphere_world()
-            to_center = center - points                                             # (k, 3)
-            dist = np.linalg.norm(to_center, axis=1)
-            off_axis = np.arccos(np.clip(np.einsum("kc,kc->k", to_center, axis) / np.maximum(dist, 1e-12), -1.0, 1.0))
-            spread = np.arcsin(np.clip(radius / np.maximum(dist, 1e-12), 0.0, 1.0))
-            candidates = (dist <= radius) | ((off_axis <= half + spread) & (dist - radius <= reach))
-            rays = []
-            for sample in np.flatnonzero(candidates):
-                if excluded[sample] == object_id:  # the sample's own target does not hide it (section 4.1)
-                    continue
-                along = unit[sample] @ to_center[sample]                             # (m,)
-                miss2 = dist[sample] ** 2 - along * along
-                limit = (t_start[sample] + t_best[sample * m:(sample + 1) * m]) * length[sample]
-                near = (miss2 <= radius * radius) & (along >= -radius) & (along <= limit + radius)
-                rays.append(np.flatnonzero(near) + sample * m)
-            rays = np.concatenate(rays) if rays else np.empty(0, dtype=np.intp)
+        rotation = quat_to_matrix(np.stack([o.transform.rotation_xyzw for o in objects]))    # (N, 3, 3)
+        scale = np.stack([o.transform.scale for o in objects])                               # (N, 3)
+        position = np.stack([o.transform.position_world for o in objects])                   # (N, 3)
+        centers = np.einsum("nij,nj->ni", rotation, np.stack([o.bound_center_local for o in objects]) * scale) + position
+        radii = np.array([o.bound_radius_local for o in objects]) * np.abs(scale).max(axis=1)
+        to_center = centers[:, None, :] - points[None, :, :]                        # (N, k, 3)
+        dist = np.linalg.norm(to_center, axis=2)
+        off_axis = np.arccos(np.clip(np.einsum("nkc,kc->nk", to_center, axis) / np.maximum(dist, 1e-12), -1.0, 1.0))
+        spread = np.arcsin(np.clip(radii[:, None] / np.maximum(dist, 1e-12), 0.0, 1.0))
+        candidates = (dist <= radii[:, None]) | ((off_axis <= half + spread) & (dist - radii[:, None] <= reach))
+        candidates &= own[None, :] != np.arange(len(objects))[:, None]
+        object_ids = list(self.scene.dynamic)
+        for index in np.flatnonzero(candidates.any(axis=1)):
+            chosen = []
+            for sample in np.flatnonzero(candidates[index]):
+                along = unit[sample] @ to_center[index, sample]                      # (m,)
+                miss2 = dist[index, sample] ** 2 - along * along
+                rays = slice(sample * m, (sample + 1) * m)
+                limit = (t_start[rays] + t_best[rays]) * length[sample]
+                r2 = radii[index] ** 2
+                near = (miss2 <= r2) & (along >= -radii[index]) & (along <= limit + radii[index])
+                chosen.append(np.flatnonzero(near) + sample * m)
+            rays = np.concatenate(chosen)
             if len(rays) == 0:
                 continue
-            world_to_local = np.linalg.inv(obj.transform.matrix())
-            o = start[rays].astype(np.float64) @ world_to_local[:3, :3].T + world_to_local[:3, 3]
-            d = dirs[rays].astype(np.float64) @ world_to_local[:3, :3].T
-            t = self._dynamic[object_id].run(o.astype(np.float32), d.astype(np.float32),
-                                             dists=t_best[rays].copy(), query="DISTANCE")
+            object_id = object_ids[index]
+            local = self._local.get(object_id)
+            if local is None:
+                mesh = objects[index].mesh_local
+                local = self._local[object_id] = _embree_scene([(mesh.vertices, mesh.faces)])
+            # world -> local: p_local = S^-1 R^T (p - t); the same linear map takes directions.
+            to_local = rotation[index].T / scale[index][:, None]
+            o = (start[rays].astype(np.float64) - position[index]) @ to_local.T
+            d = dirs[rays].astype(np.float64) @ to_local.T
+            t = local.run(o.astype(np.float32), d.astype(np.float32), dists=t_best[rays].copy(), query="DISTANCE")
             closer = t < t_best[rays]
             t_best[rays[closer]] = t[closer]
             hit_object[rays[closer]] = index
 
     def close(self) -> None:
         self._static = None
-        self._dynamic = {}
+        self._local = {}
         self._version = -1

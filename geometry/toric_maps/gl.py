@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from camdirector.geometry.toric import Torus
+from camdirector.geometry.toric import Torus, torus_position
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.geometry.toric_maps.base import (
     NOT_OCCLUDED_DEPTH,
     SAMPLE_CLEARANCE_M,
@@ -41,7 +42,6 @@ from camdirector.geometry.toric_maps.base import (
     OccluderScene,
     ShadowVelocityMaps,
     check_compute_args,
-    torus_points,
 )
 
 MAX_SAMPLES = 32                 # sample points per call: size of the shaders' uniform arrays
@@ -230,8 +230,7 @@ class GLMapBackend:
         self._scene_buffers: list[moderngl.Buffer] = []
         self._objects_tex: moderngl.Texture | None = None
         self._object_index: dict[str, int] = {}
-        self._targets_key = None
-        self._targets = None
+        self._targets: dict[tuple[int, int, int], tuple] = {}   # atlases by (samples, resolution, tile px)
 
     # -- resources -----------------------------------------------------------------------------
 
@@ -270,23 +269,30 @@ class GLMapBackend:
         self._version = self.scene.geometry_version
 
     def _write_objects(self) -> None:
-        data = np.zeros((len(self.scene.dynamic) + 1, 5, 4), dtype="f4")
+        objects = list(self.scene.dynamic.values())
+        data = np.zeros((len(objects) + 1, 5, 4), dtype="f4")
         data[0, :3, :4] = np.eye(4)[:3]
-        for index, obj in enumerate(self.scene.dynamic.values(), start=1):
-            data[index, :3, :4] = obj.transform.matrix()[:3]
-            data[index, 3, :3] = obj.linear_velocity_m_s
-            data[index, 4, :3] = obj.angular_velocity_rad_s
+        if objects:
+            # Batched RigidTransform.matrix(): rotation times scale, translation in the last column.
+            rotation = quat_to_matrix(np.stack([o.transform.rotation_xyzw for o in objects]))
+            scale = np.stack([o.transform.scale for o in objects])
+            data[1:, :3, :3] = rotation * scale[:, None, :]
+            data[1:, :3, 3] = np.stack([o.transform.position_world for o in objects])
+            data[1:, 3, :3] = np.stack([o.linear_velocity_m_s for o in objects])
+            data[1:, 4, :3] = np.stack([o.angular_velocity_rad_s for o in objects])
         self._objects_tex.write(data.tobytes())
 
     def _target_for(self, count: int, resolution: int):
-        """Atlases for count samples at this resolution, reused while the shape stays the same."""
+        """Atlases for count samples at this resolution, kept for reuse (a few shapes at most)."""
         shadow_px = int(min(max(round(self.settings.shadow_map_scale * resolution), 16), self.settings.max_shadow_map_px))
         cols = math.ceil(math.sqrt(count))
         rows = math.ceil(count / cols)
         key = (count, resolution, shadow_px)
-        if self._targets_key == key:
-            return self._targets
-        self._release_targets()
+        cached = self._targets.get(key)
+        if cached is not None:
+            return cached
+        if len(self._targets) >= 4:  # the schedule alternates between few shapes (2 maps, all maps)
+            self._release_targets(next(iter(self._targets)))
         ctx = self._ctx
         occ_size = (cols * shadow_px, rows * shadow_px)
         out_size = (cols * resolution, rows * resolution)
@@ -299,17 +305,16 @@ class GLMapBackend:
         out_tex = ctx.texture(out_size, 4, dtype="f4")
         out_fbo = ctx.framebuffer(color_attachments=[out_tex])
         readback = np.empty((out_size[1], out_size[0], 4), dtype="f4")
-        self._targets = (cols, rows, shadow_px, occ_tex, occ_fbo, out_tex, out_fbo, readback)
-        self._targets_key = key
-        return self._targets
+        self._targets[key] = (cols, rows, shadow_px, occ_tex, occ_fbo, out_tex, out_fbo, readback)
+        return self._targets[key]
 
-    def _release_targets(self) -> None:
-        if self._targets is not None:
-            _, _, _, occ_tex, occ_fbo, out_tex, out_fbo, _ = self._targets
+    def _release_targets(self, key=None) -> None:
+        """Free one atlas set (by key) or all of them."""
+        for k in [key] if key is not None else list(self._targets):
+            _, _, _, occ_tex, occ_fbo, out_tex, out_fbo, _ = self._targets.pop(k)
             depth = occ_fbo.depth_attachment
             for obj in (occ_fbo, depth, occ_tex, out_fbo, out_tex):
                 obj.release()
-        self._targets, self._targets_key = None, None
 
     # -- frusta --------------------------------------------------------------------------------
 
@@ -325,7 +330,7 @@ class GLMapBackend:
         inner = np.linspace(0, n - 1, 9).round().astype(int)
         ii = np.concatenate([edge, edge, np.zeros(n, int), np.full(n, n - 1), np.repeat(inner, 9)])
         jj = np.concatenate([np.zeros(n, int), np.full(n, n - 1), edge, edge, np.tile(inner, 9)])
-        patch = torus_points(torus, window)[ii, jj]                                 # (q, 3)
+        patch = torus_position(torus, window.theta_centers_rad[ii], window.phi_centers_rad[jj])  # (q, 3)
         rel = patch[None, :, :] - points[:, None, :]                                # (k, q, 3)
         dist = np.linalg.norm(rel, axis=2)
         unit = rel / np.maximum(dist, 1e-12)[..., None]

@@ -127,7 +127,9 @@ def test_screen_points_and_lens_out_of_range(raw, canary):
     for style, message in [(pb.Style(screen_a=pb.ScreenPoint(x=1.5)), "screen_a"),
                            (pb.Style(screen_a=pb.ScreenPoint(x=0.1), screen_b=pb.ScreenPoint(x=0.1)), "differ"),
                            (pb.Style(gaze_room_m=-1), "gaze_room_m"),
-                           (pb.Style(visibility=42), "not a VisibilityMode")]:
+                           (pb.Style(visibility=42), "not a VisibilityMode"),
+                           (pb.Style(map_resolution=8), "map_resolution"),
+                           (pb.Style(mask=9), "style.mask")]:
         expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", two_target_request(style=style),
                contains=message)
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession",

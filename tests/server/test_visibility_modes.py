@@ -148,3 +148,32 @@ def test_the_cut_search_never_picks_a_place_within_30_degrees():
                                if len(places) > 1 else np.ones(1))
     theta, phi, occluded = search._cut(torus, here, far_band, side=1.0)
     assert occluded == 0.0 and 40.0 < angle_deg(torus_position(torus, theta, phi)[None])[0] < 60.0
+
+
+def test_anticipation_moves_before_the_occluder_arrives_and_raycast_only_after():
+    """A wall slides toward the line of sight at 1.5 m/s: the A-map predicts it, the ray caster
+    only sees it once it hides samples (the paper's key claim, section 4.2)."""
+    focus = np.array([1.5, 1.5, 0.5])
+    camera = _default_camera()
+    line = (camera - focus) / np.linalg.norm(camera - focus)
+    across = np.cross(line, [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    middle = focus + 0.6 * (camera - focus)
+    turn = pb.Quat(y=math.sin(math.atan2(line[0], line[2]) / 2), w=math.cos(math.atan2(line[0], line[2]) / 2))
+
+    def slide(t):
+        p = middle + across * (6.0 - 1.5 * t)
+        return [pb.ObjectState(id="w", transform=pb.Transform(position=pb.Vec3(x=p[0], y=p[1], z=p[2]),
+                                                              rotation=turn))]
+
+    first = {}
+    for mode in (pb.RAYCAST, pb.ANTICIPATION):
+        wall = box_object("w", tuple(middle + across * 6.0), (1.5, 4.0, 0.2), dynamic=True)
+        wall.transform.rotation.CopyFrom(turn)
+        updates = _frames(_session(mode, [wall], TARGETS), 300, states=slide)
+        occluded = [i for i, u in enumerate(updates) if u.visibility < 1.0]
+        moved = [i for i, u in enumerate(updates)
+                 if {"search_single_frame", "search_look_ahead", "search_cut"} & set(u.diagnostics.flags)]
+        first[mode] = (occluded[0] if occluded else len(updates), moved[0])
+    assert first[pb.RAYCAST][1] >= first[pb.RAYCAST][0]          # reacts once occluded
+    assert first[pb.ANTICIPATION][1] < first[pb.ANTICIPATION][0] - 5  # moves well before

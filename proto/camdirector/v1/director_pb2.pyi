@@ -15,12 +15,32 @@ class VisibilityMode(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     RAYCAST: _ClassVar[VisibilityMode]
     REACTIVE: _ClassVar[VisibilityMode]
     FRAMING_ONLY: _ClassVar[VisibilityMode]
+
+class StyleMask(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    STYLE_MASK_EMPTY: _ClassVar[StyleMask]
+    STYLE_MASK_SOFT_BEHIND: _ClassVar[StyleMask]
+    STYLE_MASK_HARD_BEHIND: _ClassVar[StyleMask]
+    STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: _ClassVar[StyleMask]
+
+class MapBackend(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    MAP_BACKEND_AUTO: _ClassVar[MapBackend]
+    MAP_BACKEND_GL: _ClassVar[MapBackend]
+    MAP_BACKEND_EMBREE: _ClassVar[MapBackend]
 VISIBILITY_MODE_UNSPECIFIED: VisibilityMode
 ANTICIPATION: VisibilityMode
 NO_ANTICIPATION: VisibilityMode
 RAYCAST: VisibilityMode
 REACTIVE: VisibilityMode
 FRAMING_ONLY: VisibilityMode
+STYLE_MASK_EMPTY: StyleMask
+STYLE_MASK_SOFT_BEHIND: StyleMask
+STYLE_MASK_HARD_BEHIND: StyleMask
+STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: StyleMask
+MAP_BACKEND_AUTO: MapBackend
+MAP_BACKEND_GL: MapBackend
+MAP_BACKEND_EMBREE: MapBackend
 
 class Vec3(_message.Message):
     __slots__ = ("x", "y", "z")
@@ -151,7 +171,7 @@ class ScreenPoint(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ...) -> None: ...
 
 class Style(_message.Message):
-    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2")
+    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend")
     SCREEN_A_FIELD_NUMBER: _ClassVar[int]
     SCREEN_B_FIELD_NUMBER: _ClassVar[int]
     VISIBILITY_FIELD_NUMBER: _ClassVar[int]
@@ -161,6 +181,9 @@ class Style(_message.Message):
     RESPONSE_TIME_S_FIELD_NUMBER: _ClassVar[int]
     MAX_SPEED_M_S_FIELD_NUMBER: _ClassVar[int]
     MAX_ACCEL_M_S2_FIELD_NUMBER: _ClassVar[int]
+    MASK_FIELD_NUMBER: _ClassVar[int]
+    MAP_RESOLUTION_FIELD_NUMBER: _ClassVar[int]
+    MAP_BACKEND_FIELD_NUMBER: _ClassVar[int]
     screen_a: ScreenPoint
     screen_b: ScreenPoint
     visibility: VisibilityMode
@@ -170,7 +193,10 @@ class Style(_message.Message):
     response_time_s: float
     max_speed_m_s: float
     max_accel_m_s2: float
-    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ...) -> None: ...
+    mask: StyleMask
+    map_resolution: int
+    map_backend: MapBackend
+    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
     __slots__ = ("objects", "targets", "lens", "style", "seed", "record")
