@@ -1,7 +1,7 @@
 """`camdirector eval`: one scenario with one visibility mode, or the paper's comparison suite.
 
     camdirector eval --scenario FILE [--visibility MODE] [--json OUT] [--plot OUT.png] [--server ADDR]
-                     [--duration S]
+                     [--duration S] [--map-resolution N] [--map-backend AUTO|GL|EMBREE]
         prints the run's summary as one JSON object; --json writes it with the per-frame series.
         Exit status: 0 ok, 1 the run failed, 2 bad arguments or scenario, 3 the server does not
         implement the mode (UNIMPLEMENTED).
@@ -44,6 +44,10 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--server", help="gRPC HOST:PORT of a running server (default: start one)")
     p.add_argument("--duration", type=float, help="simulated seconds to run (default: each scenario's own)")
     p.add_argument("--no-plots", action="store_true", help="--suite: write no figures")
+    p.add_argument("--map-resolution", type=int, default=0,
+                   help="--scenario: occlusion map texels per side for the map modes (default: the server's, 64)")
+    p.add_argument("--map-backend", choices=("AUTO", "GL", "EMBREE"), default="AUTO",
+                   help="--scenario: how the map modes compute their maps (default AUTO)")
     p.set_defaults(handler=run_eval)
 
 
@@ -85,7 +89,8 @@ def run_eval(args: argparse.Namespace) -> int:
     except (ScenarioError, ValueError) as exc:
         print(f"camdirector eval: {exc}", file=sys.stderr)
         return 2
-    result = run_scenario(scenario, mode, server=args.server, duration_s=args.duration)
+    result = run_scenario(scenario, mode, server=args.server, duration_s=args.duration,
+                          map_resolution=args.map_resolution, map_backend=args.map_backend)
     if args.json:
         write_json(result, args.json)
     if args.plot:

@@ -68,13 +68,18 @@ def _mode_name(mode: int | str) -> str:
 
 
 def run_on_channel(channel: grpc.Channel, scenario: Scenario, mode: int | str, *,
-                   duration_s: float | None = None, meter: VisibilityMeter | None = None) -> RunResult:
-    """Runs the scenario (up to duration_s of simulated time) in a new session on `channel`."""
+                   duration_s: float | None = None, meter: VisibilityMeter | None = None,
+                   map_resolution: int = 0, map_backend: str = "AUTO") -> RunResult:
+    """Runs the scenario (up to duration_s of simulated time) in a new session on `channel`.
+    map_resolution (texels per side, 0: the server's default) and map_backend ("AUTO", "GL",
+    "EMBREE") override the scenario's style for the map modes."""
     name = _mode_name(mode)
     stub = pbg.DirectorStub(channel)
     timeline = scenario.timeline(duration_s)
     result = RunResult(scenario, name, "error", duration_s=float(timeline.time_s[-1]), timeline=timeline)
     request = scenario.create_session_request(name, timeline=timeline)
+    request.style.map_resolution = map_resolution
+    request.style.map_backend = pb.MapBackend.Value(f"MAP_BACKEND_{map_backend.upper()}")
     try:
         session_id = stub.CreateSession(request, timeout=RPC_TIMEOUT_S).session_id
     except grpc.RpcError as exc:
@@ -109,14 +114,15 @@ def open_channel(address: str) -> grpc.Channel:
 
 
 def run_scenario(scenario: Scenario, mode: int | str = "FRAMING_ONLY", *, server: str | None = None,
-                 duration_s: float | None = None) -> RunResult:
+                 duration_s: float | None = None, **overrides) -> RunResult:
     """Runs one scenario with one visibility mode on the server at `server` (gRPC HOST:PORT), or on
-    a server subprocess started for this run when `server` is None."""
+    a server subprocess started for this run when `server` is None. overrides: run_on_channel's
+    map_resolution and map_backend."""
     if server is None:
         with ServerProcess("--workers", "0", transports=("grpc",)) as proc:
-            return run_scenario(scenario, mode, server=proc.grpc, duration_s=duration_s)
+            return run_scenario(scenario, mode, server=proc.grpc, duration_s=duration_s, **overrides)
     with open_channel(server) as channel:
-        result = run_on_channel(channel, scenario, mode, duration_s=duration_s)
+        result = run_on_channel(channel, scenario, mode, duration_s=duration_s, **overrides)
     result.server = server
     return result
 

@@ -50,7 +50,9 @@ class Session:
         self.motion = ToricMotion(self.style, self.lens)
         self.visibility = VisibilityEstimate(self.ray_scene, [t.mesh for t in scene.targets], self.rng)
         self.sampler = TargetSampler([t.mesh for t in scene.targets], self.rng)  # the paper's 2r points
-        self.maps: OcclusionMaps | None = None  # built the first time a map mode runs
+        self.maps: OcclusionMaps | None = None  # built when a map mode is first asked for
+        if self.style.visibility in MAP_MODES:  # now, so the first frame does not pay for it
+            self._build_maps()
         self.search = OcclusionSearch(SearchSettings(), self.rng)
         self.deoccluder = Deoccluder(self.ray_scene)
         self._searching = False  # whether the search particle holds the camera's place
@@ -68,6 +70,11 @@ class Session:
         self.motion.set_style(style)
         if self.maps is not None:
             self.maps.set_style(style)
+        elif style.visibility in MAP_MODES:
+            self._build_maps()
+
+    def _build_maps(self) -> None:
+        self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 
     def is_stale(self, frame: int) -> bool:
         return self.last_state is not None and frame <= self.last_state.frame
@@ -145,8 +152,6 @@ class Session:
             return self.visibility.occluded_fraction(cameras_world, points)
 
         if mode in MAP_MODES:
-            if self.maps is None:
-                self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
             state.stage_ms.update(self.maps.update(torus, self.search.theta, self.search.phi, state.time_s,
                                                    self.target_transforms, [t.id for t in self.targets]))
             risk = self.maps
