@@ -7,12 +7,14 @@ import logging
 import signal
 import socket
 import sys
+from pathlib import Path
 
 import uvicorn
 
 from camdirector.server.grpc_transport import start_grpc
 from camdirector.server.http_api import build_app
 from camdirector.server.metrics import Metrics
+from camdirector.server.overview_routes import install_overview_jobs
 from camdirector.server.session_router import SessionRouter
 from camdirector.server.settings import ServerSettings
 from camdirector.server.zmq_transport import ZmqTransport
@@ -25,6 +27,7 @@ def _bind_http(address: str) -> socket.socket:
     sock = socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host.strip("[]"), int(port)))
+    sock.listen(2048)  # before the ready line: connections queue until uvicorn accepts them
     return sock
 
 
@@ -39,7 +42,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
     router = SessionRouter(settings, metrics)
     await router.start()
     bound: dict[str, str] = {}
-    grpc_server = zmq_transport = http_server = http_task = None
+    grpc_server = zmq_transport = http_server = http_task = jobs = None
     try:
         if settings.grpc_addr:
             grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr)
@@ -50,7 +53,10 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
         if settings.http_addr:
             sock = _bind_http(settings.http_addr)
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
-            config = uvicorn.Config(build_app(router, bound), log_level="warning", lifespan="off")
+            app = build_app(router, bound)
+            jobs = install_overview_jobs(app, Path(settings.data_dir), settings.job_settings())
+            jobs.start()  # queued and interrupted jobs from before a restart run again
+            config = uvicorn.Config(app, log_level="warning", lifespan="off")
             http_server = uvicorn.Server(config)
             http_server.install_signal_handlers = lambda: None  # ours above
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
@@ -61,6 +67,8 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
         if http_server is not None:
             http_server.should_exit = True
             await http_task
+        if jobs is not None:
+            jobs.close()  # running jobs go back to the queue
         if grpc_server is not None:
             await grpc_server.stop(grace=1.0)
         if zmq_transport is not None:

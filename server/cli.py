@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 
 from camdirector.evaluation.cli import add_parsers as add_eval_parsers
+from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
+from camdirector.server.overview_cli import add_parsers as add_overview_parsers
 from camdirector.server.settings import ServerSettings
 
 
@@ -25,6 +27,9 @@ def _serve_parser(sub) -> None:
     p.add_argument("--data-dir", dest="data_dir", help="recordings and artifacts")
     p.add_argument("--record-all", dest="record_all", action="store_const", const=True,
                    help="record every session")
+    p.add_argument("--max-concurrent-jobs", dest="max_concurrent_jobs", type=int)
+    p.add_argument("--max-queued-jobs", dest="max_queued_jobs", type=int)
+    p.add_argument("--max-upload-bytes", dest="max_upload_bytes", type=int)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     _serve_parser(sub)
     add_eval_parsers(sub)
+    add_overview_parsers(sub)
+    add_track_parsers(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
     p = sub.add_parser("demo", help="server plus demo client on a built-in scene; writes a video")
@@ -57,12 +64,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         print(json.dumps(report.as_dict()))
         return 0 if report.ok else 1
-    if args.command == "eval":
-        return args.handler(args)
     if args.command == "demo":
         from camdirector.server.demo.client import run_demo
         return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport)
-    return 2
+    return args.handler(args)  # eval, overview, eval-overview, level, eval-graph
 
 
 if __name__ == "__main__":

@@ -32,6 +32,9 @@ class ServerSettings:
     reap_interval_s: float = 1.0             # how often idle sessions are looked for, s. [0.01, 60]
     data_dir: str = field(default_factory=_default_data_dir)  # recordings and later artifacts
     record_all: bool = False                 # record every session, not only those that ask
+    max_concurrent_jobs: int = 1             # offline jobs (motion overviews) running at once. [1, 64]
+    max_queued_jobs: int = 16                # offline jobs waiting; more answer HTTP 429. [0, 100000]
+    max_upload_bytes: int = 64 * 1024 * 1024  # largest job upload, bytes (HTTP 413 above). [1 KiB, 4 GiB]
 
     def __post_init__(self):
         checks = [
@@ -48,6 +51,11 @@ class ServerSettings:
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+
+    def job_settings(self):
+        from camdirector.server.jobs import JobSettings  # validated there
+        return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
+                           max_upload_bytes=self.max_upload_bytes)
 
     @property
     def recordings_dir(self) -> Path:

@@ -1,0 +1,278 @@
+"""Runtime graph director (Section 5): per frame, a camera position, look-at point and cut flag
+for one actor on a precomputed level.
+
+Each frame (Section 5's loop):
+1. direct visibility of the actor from the current camera (rays to points up the actor through
+   the caller's RayScene, dynamic occluders included) and the framing check feed the cutting
+   strategy (cutting.py); styles without cuts skip it;
+2. on a cut, a new target is searched among all POIs near the actor without the edge filter,
+   scored by shot size, direct and indirect visibility and the two continuity sub-scores, and
+   only cuts that keep the 30-degree rule and the line of action are taken (continuity.py); if
+   none qualifies the cut waits for a later frame. Without a cut the target moves by the target
+   moving strategy (target_search.py): POIs strongly connected to the current target, four
+   weighted sub-scores, then a local descent along the POI's edge in steps of
+   `descent_step_m`. No POI at all is a reason to cut;
+3. the camera jumps to the target on a cut, else follows it by the force model
+   (camera_motion.py); static cameras stay on their node and only pan.
+
+Styles (Section 6.1), switchable between frames by `set_style`: the shot size (medium, long,
+extreme long: the actor's on-screen height) and the movement (dynamic without cuts, dynamic with
+cuts, static cameras with cuts). The candidate radius is the larger of `candidate_radius_m` and
+1.5 times the style's optimal distance, so an extreme long shot finds tracks far enough away.
+
+Scores are averages weighted by the settings' weights; to keep a frame cheap only the
+`_SCORED_POIS` POIs best on the two sub-scores that need no ray or search (shot size, indirect
+visibility) get the direct-visibility rays and the A* distance.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.tracks.artifact import LevelArtifact
+from camdirector.precompute.tracks.camera_motion import move_camera
+from camdirector.precompute.tracks.continuity import (UP, action_direction, cut_angle_deg, keeps_line_of_action,
+                                                      line_of_action_score, screen_motion, thirty_degree_score)
+from camdirector.precompute.tracks.cutting import CutClock, CutReason, draw_shot_duration_s
+from camdirector.precompute.tracks.graph import RuntimeGraph
+from camdirector.precompute.tracks.settings import DirectorSettings
+from camdirector.precompute.tracks.target_search import (IndirectVisibility, Pois, candidate_pois, direct_visibility,
+                                                         graph_distance, optimal_distance_m, shot_size_score)
+
+_SCORED_POIS = 48
+
+
+class ShotSize(Enum):
+    MEDIUM = "medium"
+    LONG = "long"
+    EXTREME_LONG = "extreme_long"
+
+
+class Movement(Enum):
+    DYNAMIC_NO_CUTS = "dynamic_no_cuts"
+    DYNAMIC_WITH_CUTS = "dynamic_with_cuts"
+    STATIC = "static"
+
+
+@dataclass(frozen=True)
+class DirectorStyle:
+    shot_size: ShotSize = ShotSize.LONG
+    movement: Movement = Movement.DYNAMIC_WITH_CUTS
+
+
+@dataclass(frozen=True)
+class TrackShot:
+    """One frame's camera: position_world and look_at_world (3,) metres; cut: this frame starts a
+    new shot; shot_id: counts shots from 0; visible_fraction: share of the actor's sample points
+    seen from position_world; cut_reason: why the shot started (None inside a shot); timings_ms:
+    'cut_check', 'target_update', 'camera_update'."""
+
+    position_world: np.ndarray
+    look_at_world: np.ndarray
+    cut: bool
+    shot_id: int
+    visible_fraction: float
+    cut_reason: CutReason | None
+    timings_ms: dict[str, float]
+
+
+class GraphDirector:
+    """Follows one actor on a level's camera navigation graph (module docstring)."""
+
+    def __init__(self, artifact: LevelArtifact, settings: DirectorSettings, rng: np.random.Generator,
+                 style: DirectorStyle = DirectorStyle()):
+        self.graph = RuntimeGraph(artifact.nodes_world, artifact.edges)
+        centroids = artifact.refined_vertices[artifact.refined_faces].mean(axis=1) if len(artifact.refined_faces) \
+            else np.empty((0, 3))
+        self._indirect = IndirectVisibility(centroids, artifact.visibility)
+        self._actor_height_m = artifact.agent_height_m
+        self._settings = settings
+        self._rng = rng
+        self._style = style
+        self._fractions = np.asarray(settings.actor_sample_fractions, dtype=np.float64)
+        self._target: tuple[int, int, float] | None = None
+        self._camera: np.ndarray | None = None
+        self._velocity = np.zeros(3)
+        self._clock: CutClock | None = None
+        self._shot_id = -1
+        self._last_time_s: float | None = None
+        self._last_actor: np.ndarray | None = None
+        self._actor_velocity = np.zeros(3)
+
+    @property
+    def style(self) -> DirectorStyle:
+        return self._style
+
+    def set_style(self, style: DirectorStyle) -> None:
+        """Takes effect from the next frame; the current shot goes on."""
+        self._style = style
+
+    def _screen_fraction(self) -> float:
+        s = self._settings
+        return {ShotSize.MEDIUM: s.medium_shot_screen_fraction, ShotSize.LONG: s.long_shot_screen_fraction,
+                ShotSize.EXTREME_LONG: s.extreme_long_shot_screen_fraction}[self._style.shot_size]
+
+    def optimal_distance_m(self) -> float:
+        return optimal_distance_m(self._actor_height_m, self._screen_fraction(), self._settings.vertical_fov_deg)
+
+    def step(self, time_s: float, actor_position_world, actor_forward, ray_scene: RayScene) -> TrackShot:
+        """One frame. actor_position_world (3,): the actor's feet, metres; actor_forward (3,): its
+        facing (any length); ray_scene: the level and its dynamic occluders, current transforms.
+        Frames must come in time order; a repeated or older time moves nothing."""
+        s = self._settings
+        clock0 = time.perf_counter()
+        actor = np.asarray(actor_position_world, dtype=np.float64).reshape(3)
+        forward = np.asarray(actor_forward, dtype=np.float64).reshape(3)
+        dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
+        if self._last_actor is not None and dt > 0.0:
+            self._actor_velocity = (actor - self._last_actor) / dt
+        self._last_time_s = time_s if self._last_time_s is None else max(self._last_time_s, time_s)
+        self._last_actor = actor
+        actor_points = actor + np.outer(self._fractions * self._actor_height_m, UP)
+        look_at = actor + s.look_at_fraction * self._actor_height_m * UP
+        distance = self.optimal_distance_m()
+        movement = self._style.movement
+
+        reason: CutReason | None = None
+        if self._camera is None:
+            reason = CutReason.FIRST_SHOT
+        elif movement != Movement.DYNAMIC_NO_CUTS:
+            seen = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
+            d = float(np.linalg.norm(self._camera - look_at))
+            self._clock.observe(time_s, seen < s.occluded_below_fraction,
+                                abs(np.log(max(d, 1e-6) / distance)) > s.framing_violation_log)
+            reason = self._clock.reason(time_s, s)
+        clock1 = time.perf_counter()
+
+        cut = False
+        indirect = None
+        if reason is None and movement != Movement.STATIC:
+            indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
+            moved = self._move_target(actor, look_at, actor_points, distance, indirect, ray_scene)
+            if not moved and movement == Movement.DYNAMIC_WITH_CUTS:
+                reason = CutReason.NO_TARGET
+        if reason is not None:
+            if indirect is None:
+                indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
+            cut = self._cut(actor, look_at, actor_points, forward, distance, indirect, ray_scene,
+                            first=reason == CutReason.FIRST_SHOT)
+            if cut:
+                self._shot_id += 1
+                self._clock = CutClock(time_s, draw_shot_duration_s(self._rng, s))
+        clock2 = time.perf_counter()
+
+        target = self._target_position()
+        if cut:
+            self._camera, self._velocity = target.copy(), np.zeros(3)
+        elif movement != Movement.STATIC and self._camera is not None:
+            self._camera, self._velocity = move_camera(self._camera, self._velocity, target, look_at, dt, s)
+        visible = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
+        clock3 = time.perf_counter()
+        return TrackShot(position_world=self._camera.copy(), look_at_world=look_at, cut=cut, shot_id=self._shot_id,
+                         visible_fraction=visible, cut_reason=reason if cut else None,
+                         timings_ms={"cut_check": 1e3 * (clock1 - clock0), "target_update": 1e3 * (clock2 - clock1),
+                                     "camera_update": 1e3 * (clock3 - clock2)})
+
+    # --- target search -------------------------------------------------------------------------
+
+    def _target_position(self) -> np.ndarray:
+        a, b, t = self._target
+        return self.graph.nodes_world[a] + t * (self.graph.nodes_world[b] - self.graph.nodes_world[a])
+
+    def _radius(self, distance: float) -> float:
+        return max(self._settings.candidate_radius_m, 1.5 * distance)
+
+    def _cheap_scores(self, pois: Pois, look_at: np.ndarray, distance: float, indirect: np.ndarray):
+        s = self._settings
+        size = shot_size_score(pois.position_world, look_at, distance, s.shot_size_tolerance_log)
+        ind = (1.0 - pois.t) * indirect[pois.node_a] + pois.t * indirect[pois.node_b]
+        return size, ind
+
+    def _move_target(self, actor, look_at, actor_points, distance, indirect, scene) -> bool:
+        """Target moving strategy; False when no POI is reachable from the current target."""
+        s = self._settings
+        pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only=False)
+        current = self._target
+        cur_pos = self._target_position()
+        pois = Pois(np.append(pois.node_a, current[0]), np.append(pois.node_b, current[1]),
+                    np.append(pois.t, current[2]), np.vstack([pois.position_world, cur_pos]))
+        size, ind = self._cheap_scores(pois, look_at, distance, indirect)
+        partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind
+        keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
+        pois, size, ind = pois.take(keep), size[keep], ind[keep]
+        dist = graph_distance(self.graph, current, pois, s.max_graph_distance_m)
+        reach = np.isfinite(dist)
+        if not reach.any():
+            return False
+        pois, size, ind, dist = pois.take(reach), size[reach], ind[reach], dist[reach]
+        direct = direct_visibility(pois.position_world, actor_points, scene)
+        total = (s.weight_shot_size * size + s.weight_direct_visibility * direct + s.weight_indirect_visibility * ind
+                 + s.weight_distance * np.clip(1.0 - dist / s.max_graph_distance_m, 0.0, 1.0))
+        total /= s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility + s.weight_distance
+        best = int(np.argmax(total))
+        self._target = self._descend(pois.take([best]), float(total[best]), float(dist[best]), look_at,
+                                     actor_points, distance, indirect, scene)
+        return True
+
+    def _descend(self, poi: Pois, score: float, dist: float, look_at, actor_points, distance, indirect, scene):
+        """Local descent of the (negated) score along the POI's edge in fixed steps."""
+        s = self._settings
+        a, b, t = int(poi.node_a[0]), int(poi.node_b[0]), float(poi.t[0])
+        length = float(np.linalg.norm(self.graph.nodes_world[b] - self.graph.nodes_world[a]))
+        weights = s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility + s.weight_distance
+        if a == b or length < 1e-9:
+            return a, b, t
+        step = s.descent_step_m / length
+        for _ in range(s.descent_max_steps):
+            ts = np.clip(np.array([t - step, t + step]), 0.0, 1.0)
+            ts = ts[np.abs(ts - t) > 1e-12]
+            if not len(ts):
+                break
+            pos = self.graph.nodes_world[a] + ts[:, None] * (self.graph.nodes_world[b] - self.graph.nodes_world[a])
+            cand = Pois(np.full(len(ts), a), np.full(len(ts), b), ts, pos)
+            size, ind = self._cheap_scores(cand, look_at, distance, indirect)
+            direct = direct_visibility(pos, actor_points, scene)
+            moved = dist + np.abs(ts - t) * length
+            total = (s.weight_shot_size * size + s.weight_direct_visibility * direct
+                     + s.weight_indirect_visibility * ind
+                     + s.weight_distance * np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)) / weights
+            k = int(np.argmax(total))
+            if total[k] <= score:
+                break
+            score, dist, t = float(total[k]), float(moved[k]), float(ts[k])
+        return a, b, t
+
+    def _cut(self, actor, look_at, actor_points, forward, distance, indirect, scene, first: bool) -> bool:
+        """Continuity search (Section 5.3); False when no POI keeps the rules (or none exists)."""
+        s = self._settings
+        nodes_only = self._style.movement == Movement.STATIC
+        pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only)
+        if not len(pois):
+            return False
+        size, ind = self._cheap_scores(pois, look_at, distance, indirect)
+        weights = s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility
+        extra = np.zeros(len(pois))
+        if not first:
+            angle = cut_angle_deg(self._camera, pois.position_world, look_at)
+            direction = action_direction(self._actor_velocity, forward, s.min_actor_speed_m_per_s)
+            before = screen_motion(self._camera[None], look_at, direction)[0]
+            after = screen_motion(pois.position_world, look_at, direction)
+            ok = (angle >= s.min_cut_angle_deg) & keeps_line_of_action(before, after)
+            if not ok.any():
+                return False
+            pois, size, ind, angle, after = pois.take(ok), size[ok], ind[ok], angle[ok], after[ok]
+            extra = (s.weight_thirty_degree * thirty_degree_score(angle, s.min_cut_angle_deg)
+                     + s.weight_line_of_action * line_of_action_score(before, after))
+            weights += s.weight_thirty_degree + s.weight_line_of_action
+        partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind + extra
+        keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
+        pois, partial = pois.take(keep), partial[keep]
+        direct = direct_visibility(pois.position_world, actor_points, scene)
+        total = (partial + s.weight_direct_visibility * direct) / weights
+        best = int(np.argmax(total))
+        self._target = (int(pois.node_a[best]), int(pois.node_b[best]), float(pois.t[best]))
+        return True

@@ -1,0 +1,108 @@
+"""Camera tracks of a level: the paper's precompute stages in order (Section 4, Figure 2a), one
+module each, each timed.
+
+    Stage.RAY_SCENE    geometry/raycast.py     Embree scene of the level (built once)
+    Stage.NAVMESH      navmesh.py              the given navmesh, or one derived from the level
+    Stage.SKELETON     skeleton.py             straight skeletons of the navmesh's floor layers
+    Stage.SAMPLING     sampling.py             ray-cast camera samples orthogonal to the skeleton
+    Stage.CLUSTERING   ransac.py               sequential RANSAC lines -> camera tracks
+    Stage.FILTERING    filters.py              the four filters
+    Stage.GRAPH        graph.py                the camera navigation graph
+    Stage.REMESHING    visibility_table.py     navmesh refined to a maximum triangle area
+    Stage.VISIBILITY   visibility_table.py     the dual node/triangle visibility table
+
+Order (our deviation, documented): the paper estimates visibility before it builds the graph;
+we build the graph first so the table is kept for the graph's final nodes (edge splitting adds
+nodes the tracks did not have).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from enum import Enum
+
+import numpy as np
+
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.tracks.artifact import LevelArtifact
+from camdirector.precompute.tracks.filters import filter_tracks
+from camdirector.precompute.tracks.graph import build_graph
+from camdirector.precompute.tracks.navmesh import derive_navmesh
+from camdirector.precompute.tracks.ransac import cluster_tracks
+from camdirector.precompute.tracks.sampling import sample_cameras
+from camdirector.precompute.tracks.settings import TrackSettings
+from camdirector.precompute.tracks.skeleton import extract_skeleton
+from camdirector.precompute.tracks.visibility_table import build_visibility_table, remesh
+
+
+class Stage(Enum):
+    """Pipeline order; values are the keys of `LevelArtifact.timings_ms`."""
+
+    RAY_SCENE = "ray_scene"
+    NAVMESH = "navmesh"
+    SKELETON = "skeleton"
+    SAMPLING = "raycast_sampling"
+    CLUSTERING = "clustering"
+    FILTERING = "filtering"
+    GRAPH = "graph"
+    REMESHING = "remeshing"
+    VISIBILITY = "visibility"
+
+
+_PROGRESS_AFTER = {Stage.RAY_SCENE: 0.02, Stage.NAVMESH: 0.1, Stage.SKELETON: 0.25, Stage.SAMPLING: 0.27,
+                   Stage.CLUSTERING: 0.45, Stage.FILTERING: 0.5, Stage.GRAPH: 0.55, Stage.REMESHING: 0.6,
+                   Stage.VISIBILITY: 1.0}
+
+
+def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Generator, *,
+                     navmesh: TriMesh | None = None, m_per_unit: float = 1.0,
+                     progress: Callable[[float], None] | None = None) -> LevelArtifact:
+    """Camera navigation graph and dual visibility table of a level.
+
+    mesh: the level in metres, world frame, +Y up (level.load_level_mesh applies the scale);
+    navmesh: its navigation mesh in the same frame, or None to derive one (navmesh.py);
+    m_per_unit: recorded in the artifact; progress: called with the fraction done (0..1] after
+    each stage. Raises MeshError when no walkable surface is found.
+    """
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def done(stage: Stage) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage.value] = (now - clock) * 1e3
+        clock = now
+        if progress is not None:
+            progress(_PROGRESS_AFTER[stage])
+
+    scene = RayScene([mesh])
+    done(Stage.RAY_SCENE)
+    nav = navmesh if navmesh is not None else derive_navmesh(mesh, scene, settings)
+    done(Stage.NAVMESH)
+    skeleton = extract_skeleton(nav, settings)
+    done(Stage.SKELETON)
+    samples = sample_cameras(skeleton, scene, settings)
+    done(Stage.SAMPLING)
+    clustered = cluster_tracks(samples.position_world, samples.group, settings, rng)
+    done(Stage.CLUSTERING)
+    tracks = filter_tracks(clustered, samples.position_world, scene, settings, rng)
+    done(Stage.FILTERING)
+    graph = build_graph(tracks, scene, settings)
+    done(Stage.GRAPH)
+    refined = remesh(nav, skeleton, settings)
+    done(Stage.REMESHING)
+    table = build_visibility_table(graph.nodes_world, refined, scene, settings, rng)
+    done(Stage.VISIBILITY)
+    counts = {"level_triangles": mesh.triangle_count, "navmesh_triangles": nav.triangle_count,
+              "skeleton_layers": skeleton.layer_count, "skeleton_segments": len(skeleton.segments_world),
+              "camera_samples": len(samples), "clustered_tracks": len(clustered), "tracks": len(tracks),
+              "nodes": len(graph.nodes_world), "edges": len(graph.edges), "link_edges": int(graph.edge_is_link.sum()),
+              "refined_triangles": refined.triangle_count, "visibility_pairs": int(len(table.node_triangles))}
+    return LevelArtifact(
+        level_vertices=mesh.vertices, level_faces=mesh.faces, navmesh_vertices=nav.vertices,
+        navmesh_faces=nav.faces.astype(np.int32), skeleton_segments=skeleton.segments_world,
+        track_start=tracks.start_world, track_end=tracks.end_world, nodes_world=graph.nodes_world,
+        edges=graph.edges.astype(np.int64), edge_is_link=graph.edge_is_link, refined_vertices=refined.vertices,
+        refined_faces=refined.faces, visibility=table, m_per_unit=m_per_unit, settings=settings,
+        timings_ms=timings, counts=counts)

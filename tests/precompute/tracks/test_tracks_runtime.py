@@ -1,0 +1,129 @@
+"""Artifact and registry persistence, continuity rules, shot durations and the director on tiny levels."""
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.tracks.artifact import ArtifactVersionError, load_artifact, save_artifact
+from camdirector.precompute.tracks.continuity import (cut_angle_deg, keeps_line_of_action, screen_motion)
+from camdirector.precompute.tracks.cutting import draw_shot_duration_s
+from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement, ShotSize
+from camdirector.precompute.tracks.pipeline import precompute_level
+from camdirector.precompute.tracks.registry import LevelRegistry
+from camdirector.precompute.tracks.settings import DirectorSettings, TrackSettings
+
+from .tiny_levels import corridor
+
+UP = np.array([0.0, 1.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def corridor_artifact():
+    return precompute_level(corridor(), TrackSettings(), np.random.default_rng(0))
+
+
+def test_artifact_round_trip_and_version_refusal(tmp_path, corridor_artifact):
+    path = tmp_path / "c.npz"
+    save_artifact(corridor_artifact, path)
+    back = load_artifact(path)
+    np.testing.assert_array_equal(back.nodes_world, corridor_artifact.nodes_world)
+    np.testing.assert_array_equal(back.visibility.triangle_nodes, corridor_artifact.visibility.triangle_nodes)
+    assert back.settings == corridor_artifact.settings and back.timings_ms == corridor_artifact.timings_ms
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    header = json.loads(np.load(path)["header"].tobytes())
+    header["format_version"] = 99
+    np.save(tmp_path / "h.npy", np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+    members["header.npy"] = (tmp_path / "h.npy").read_bytes()
+    with zipfile.ZipFile(tmp_path / "old.npz", "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    with pytest.raises(ArtifactVersionError, match="version 99, this build reads version 1"):
+        load_artifact(tmp_path / "old.npz")
+
+
+def test_registry_survives_a_reopen_and_deletes(tmp_path):
+    level = tmp_path / "corridor.obj"
+    mesh = corridor()
+    level.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
+                     + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    first = LevelRegistry(tmp_path / "data")
+    record = first.add_level("corridor", level, scale=1.0)
+    assert record.counts["nodes"] > 0
+    again = LevelRegistry(tmp_path / "data")
+    assert [r.name for r in again.list()] == ["corridor"]
+    assert len(again.load("corridor").nodes_world) == record.counts["nodes"]
+    first.add_level("corridor", level, scale=1.0)  # replaced: one file left
+    assert len(list((tmp_path / "data" / "levels").glob("*.npz"))) == 1
+    assert again.delete("corridor") and again.list() == [] and not again.delete("corridor")
+    with pytest.raises(ValueError):
+        again.add_level("../bad", level)
+
+
+def test_continuity_rules_on_constructed_cuts():
+    actor = np.zeros(3)
+    before_cam = np.array([0.0, 0.0, 5.0])
+    cams = np.array([[1.0, 0, 5.0], [5.0, 0, 0.0], [-5.0, 0, 0.0], [0.0, 0, -5.0]])
+    angle = cut_angle_deg(before_cam, cams, actor)
+    assert angle[0] < 30 and np.allclose(angle[1:], [90, 90, 180])
+    motion = np.array([1.0, 0, 0])  # along +x: the line of action is the x axis
+    before = screen_motion(before_cam[None], actor, motion)[0]
+    same_side = keeps_line_of_action(before, screen_motion(np.array([[3.0, 0, 4.0], [-3.0, 0, 4.0]]), actor, motion))
+    other_side = keeps_line_of_action(before, screen_motion(np.array([[3.0, 0, -4.0], [0.0, 0, -5.0]]), actor, motion))
+    assert same_side.all() and not other_side.any()
+
+
+def test_shot_durations_are_log_normal():
+    settings = DirectorSettings(min_shot_s=0.0)
+    rng = np.random.default_rng(0)
+    logs = np.log([draw_shot_duration_s(rng, settings) for _ in range(2000)])
+    assert stats.kstest(logs, "norm", args=(np.log(settings.shot_duration_median_s), settings.shot_duration_sigma)).pvalue > 0.01
+
+
+def _walk_corridor(director, scene, speed=1.4, seconds=20.0, fps=30.0):
+    shots = []
+    for k in range(int(seconds * fps)):
+        t = k / fps
+        x = 2.0 + (speed * t) % 26.0
+        shots.append(director.step(t, np.array([x, 0.0, 2.0]), np.array([1.0, 0, 0]), scene))
+    return shots
+
+
+@pytest.mark.parametrize("movement", list(Movement))
+def test_director_keeps_the_actor_visible_and_cuts_by_the_rules(corridor_artifact, movement):
+    scene = RayScene([corridor()])
+    settings = DirectorSettings(shot_duration_median_s=1.5)
+    director = GraphDirector(corridor_artifact, settings, np.random.default_rng(1),
+                             DirectorStyle(ShotSize.LONG, movement))
+    shots = _walk_corridor(director, scene)
+    visible = np.mean([s.visible_fraction >= 0.5 for s in shots])
+    assert visible >= 0.9
+    cuts = [i for i, s in enumerate(shots) if s.cut]
+    assert cuts[0] == 0
+    if movement == Movement.DYNAMIC_NO_CUTS:
+        assert cuts == [0]
+    else:
+        assert len(cuts) >= 3, "20 s of 1.5 s median shots must cut"
+    for i in cuts[1:]:
+        prev, new = shots[i - 1], shots[i]
+        actor = new.look_at_world
+        assert cut_angle_deg(prev.position_world, new.position_world[None], actor)[0] >= settings.min_cut_angle_deg
+        before = screen_motion(prev.position_world[None], actor, np.array([1.0, 0, 0]))[0]
+        assert keeps_line_of_action(before, screen_motion(new.position_world[None], actor, np.array([1.0, 0, 0])))[0]
+    if movement == Movement.STATIC:
+        moving = [i for i in range(1, len(shots)) if not shots[i].cut
+                  and not np.allclose(shots[i].position_world, shots[i - 1].position_world)]
+        assert moving == []
+    assert all(s.shot_id == sum(1 for c in cuts if c <= i) - 1 for i, s in enumerate(shots))
+
+
+def test_style_switches_live(corridor_artifact):
+    director = GraphDirector(corridor_artifact, DirectorSettings(), np.random.default_rng(0))
+    near = director.optimal_distance_m()
+    director.set_style(DirectorStyle(ShotSize.EXTREME_LONG, Movement.STATIC))
+    assert director.optimal_distance_m() > 2.5 * near and director.style.movement == Movement.STATIC
