@@ -45,6 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=Path("out"))
     p.add_argument("--seconds", type=float, default=20.0)
     p.add_argument("--transport", choices=("grpc", "zmq"), default="grpc")
+    p.add_argument("--visibility", default="ANTICIPATION",
+                   choices=("ANTICIPATION", "NO_ANTICIPATION", "RAYCAST", "REACTIVE", "FRAMING_ONLY"))
     args = parser.parse_args(argv)
 
     if args.command == "serve":
@@ -66,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if report.ok else 1
     if args.command == "demo":
         from camdirector.server.demo.client import run_demo
-        return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport)
+        return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport, visibility=args.visibility)
     return args.handler(args)  # eval, overview, eval-overview, level, eval-graph
 
 

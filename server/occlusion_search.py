@@ -58,6 +58,7 @@ class SearchSettings:
     improvement: float = 0.005        # a place is less occluded only when better by this much (above the maps' noise). [0, 1]
     stuck_occluded: float = 0.5      # ray-cast occluded share of the samples that counts as "stuck" (not in the paper). [0, 1]
     stuck_s: float = 0.25            # stuck this long: try the cut before any local move (not in the paper), s. [0, 60]
+    theta_margin_ratio: float = 0.2   # the camera keeps this share of theta's range from either end (not in the paper). [0, 0.45]
     cut_phi_margin_deg: float = 20.0  # cut candidates keep this far from top (phi 0) and bottom (phi 180) views, deg. [0, 89]
 
     def __post_init__(self):
@@ -147,15 +148,16 @@ class OcclusionSearch:
 
         target, strategy, chosen_risk = coast, "coast", risk_coast
         single, f_l = self._sector(p, e1, e2, v_t, dt_s)
+        lo, hi = self._theta_range(torus)
         th, ph = torus_angles_many(torus, single)
-        risks = risk.risk(th, ph)
+        risks = np.where((th < lo) | (th > hi), np.inf, risk.risk(th, ph))
         best = int(np.argmin(risks))
         if risks[best] < risk_coast - s.improvement:
             target, strategy, chosen_risk = single[best], "single_frame", float(risks[best])
         else:
             ahead, _ = self._sector(p, e1, e2, v_t, s.look_ahead_frames * dt_s)
             th, ph = torus_angles_many(torus, ahead)
-            risks = risk.risk(th, ph)
+            risks = np.where((th < lo) | (th > hi), np.inf, risk.risk(th, ph))
             best = int(np.argmin(risks))
             if risks[best] < risk_coast - s.improvement:
                 toward = ahead[best] - coast
@@ -177,10 +179,15 @@ class OcclusionSearch:
         if speed > max_speed_m_s:
             velocity *= max_speed_m_s / speed
         theta_n, phi_n = torus_angles_many(torus, (p + velocity * dt_s)[None])
-        self.theta, self.phi = float(theta_n[0]), float(phi_n[0])
+        self.theta, self.phi = min(max(float(theta_n[0]), lo), hi), float(phi_n[0])
         p_next = torus_position(torus, self.theta, self.phi)
         self.velocity_world = (p_next - p) / dt_s
         return SearchResult(self.theta, self.phi, cut=False, strategy=strategy, risk=chosen_risk)
+
+    def _theta_range(self, torus: Torus) -> tuple[float, float]:
+        """Allowed theta, radians: the arc's ends put the camera on top of A or B."""
+        top = theta_max(torus.alpha)
+        return self.settings.theta_margin_ratio * top, (1.0 - self.settings.theta_margin_ratio) * top
 
     def _cut_to(self, torus: Torus, coast: np.ndarray, cut_occlusion, side: float, time_s: float):
         """Teleports to a cut place when there is one (velocity reset, a new shot)."""
@@ -200,8 +207,7 @@ class OcclusionSearch:
         if current <= s.improvement:
             return None
         margin = math.radians(s.cut_phi_margin_deg)
-        hi = theta_max(torus.alpha)
-        theta = self.rng.uniform(0.02 * hi, 0.98 * hi, s.cut_samples)
+        theta = self.rng.uniform(*self._theta_range(torus), s.cut_samples)
         phi = side * self.rng.uniform(margin, math.pi - margin, s.cut_samples)
         places = torus_position(torus, theta, phi)
         focus = 0.5 * (torus.a_world + torus.b_world)

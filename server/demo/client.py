@@ -23,7 +23,7 @@ FPS = 60
 VIDEO_SIZE = (960, 540)  # llvmpipe renders this in ~10 ms a frame; even sizes for yuv420p
 
 
-def session_request(scene: DemoScene, lens: Lens) -> cd.pb.CreateSessionRequest:
+def session_request(scene: DemoScene, lens: Lens, visibility: int = cd.pb.FRAMING_ONLY) -> cd.pb.CreateSessionRequest:
     objects = [cd.pb.SceneObject(id=o.id, mesh=cd.mesh_from_arrays(o.vertices, o.faces), dynamic=o.dynamic,
                                  transform=cd.transform_msg(o.transform.position_world, o.transform.rotation_xyzw))
                for o in [*scene.static_objects, *scene.dynamic_objects]]
@@ -33,7 +33,7 @@ def session_request(scene: DemoScene, lens: Lens) -> cd.pb.CreateSessionRequest:
                           aim_offset=cd.vec3(scene.avatar_aim_offset))
     return cd.pb.CreateSessionRequest(objects=objects, targets=[target], seed=scene.seed,
                                       lens=cd.pb.Lens(vertical_fov_deg=lens.vertical_fov_deg, aspect=lens.aspect),
-                                      style=cd.pb.Style(visibility=cd.pb.FRAMING_ONLY))
+                                      style=cd.pb.Style(visibility=visibility))
 
 
 def _paced_frames(scene: DemoScene, n_frames: int, sent_at: list[float]):
@@ -67,12 +67,12 @@ def _progress(i: int, n: int, rtt_ms: list[float], compute_ms: list[float], visi
     sys.stderr.flush()
 
 
-def stream_demo(url: str, scene: DemoScene, lens: Lens, seconds: float) -> dict:
+def stream_demo(url: str, scene: DemoScene, lens: Lens, seconds: float, visibility: int) -> dict:
     """Streams the scene through one session; returns the poses and the timings."""
     n_frames = int(round(seconds * FPS))
     sent_at: list[float] = []
     updates, rtt_ms = [], []
-    with cd.connect(url) as client, client.create_session(session_request(scene, lens)) as session:
+    with cd.connect(url) as client, client.create_session(session_request(scene, lens, visibility)) as session:
         for update in session.stream(_paced_frames(scene, n_frames, sent_at)):
             rtt_ms.append((time.perf_counter() - sent_at[len(updates)]) * 1e3)
             updates.append(update)
@@ -110,14 +110,15 @@ def render_video(scene: DemoScene, lens: Lens, poses: list[CameraPose], out_mp4:
     return float(np.median(costs))
 
 
-def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", render: bool = True) -> int:
+def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", render: bool = True,
+             visibility: str = "ANTICIPATION") -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     lens = Lens(vertical_fov_deg=50.0, aspect=VIDEO_SIZE[0] / VIDEO_SIZE[1])
-    print(f"camdirector demo: {seconds:.0f} s of a walk among columns and moving obstacles at {FPS} Hz")
+    print(f"camdirector demo: {seconds:.0f} s of a walk among columns and moving obstacles at {FPS} Hz, {visibility}")
     scene = build_demo_scene(seed=7, duration_s=seconds)
     with ServerProcess("--workers", "1") as server:
         print(f"  server ready: gRPC {server.grpc}, ZeroMQ {server.zmq}, HTTP {server.http}")
-        result = stream_demo(server.url(transport), scene, lens, seconds)
+        result = stream_demo(server.url(transport), scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility))
     updates = result["updates"]
     poses = [_pose(u) for u in updates]
     aims = np.stack([scene.aim_point_world(i / FPS) for i in range(len(updates))])
@@ -128,6 +129,7 @@ def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", rend
     compute = np.array([u.compute_ms for u in updates])
     summary = {
         "transport": transport,
+        "visibility_mode": visibility,
         "frames_sent": result["frames_sent"],
         "frames_received": len(updates),
         "dropped_frames": result["frames_sent"] - len(updates),
