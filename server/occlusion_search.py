@@ -20,7 +20,8 @@ the A-map (ANTICIPATION), the averaged S-maps (NO_ANTICIPATION) or ray casts (RA
 
 Beyond the paper, stated here because they change behaviour: the style's speed and acceleration
 limits clamp every non-cut step (so motion stays physically plausible whatever the risk field
-does); cut candidates stay on the upright side of the torus and away from top and bottom views;
+does); cut candidates stay on the upright side of the torus; the camera keeps away from top and bottom
+views (view_phi_margin_deg);
 a shot lasts at least `min_shot_s` before the next cut, so a flickering occluder cannot make a
 flurry of cuts; and when the camera has been mostly occluded (ray casts to the samples) for
 `stuck_s`, the cut search runs first: a risk field can keep offering marginally better places
@@ -59,7 +60,7 @@ class SearchSettings:
     stuck_occluded: float = 0.5      # ray-cast occluded share of the samples that counts as "stuck" (not in the paper). [0, 1]
     stuck_s: float = 0.25            # stuck this long: try the cut before any local move (not in the paper), s. [0, 60]
     theta_margin_ratio: float = 0.2   # the camera keeps this share of theta's range from either end (not in the paper). [0, 0.45]
-    cut_phi_margin_deg: float = 20.0  # cut candidates keep this far from top (phi 0) and bottom (phi 180) views, deg. [0, 89]
+    view_phi_margin_deg: float = 25.0  # the camera keeps this far from top (phi 0) and bottom (phi 180) views (not in the paper), deg. [0, 89]
 
     def __post_init__(self):
         if not (1 <= self.samples <= 10000 and 1 <= self.cut_samples <= 100000 and self.look_ahead_frames >= 2):
@@ -150,14 +151,14 @@ class OcclusionSearch:
         single, f_l = self._sector(p, e1, e2, v_t, dt_s)
         lo, hi = self._theta_range(torus)
         th, ph = torus_angles_many(torus, single)
-        risks = np.where((th < lo) | (th > hi), np.inf, risk.risk(th, ph))
+        risks = np.where(self._outside(th, ph, lo, hi), np.inf, risk.risk(th, ph))
         best = int(np.argmin(risks))
         if risks[best] < risk_coast - s.improvement:
             target, strategy, chosen_risk = single[best], "single_frame", float(risks[best])
         else:
             ahead, _ = self._sector(p, e1, e2, v_t, s.look_ahead_frames * dt_s)
             th, ph = torus_angles_many(torus, ahead)
-            risks = np.where((th < lo) | (th > hi), np.inf, risk.risk(th, ph))
+            risks = np.where(self._outside(th, ph, lo, hi), np.inf, risk.risk(th, ph))
             best = int(np.argmin(risks))
             if risks[best] < risk_coast - s.improvement:
                 toward = ahead[best] - coast
@@ -179,10 +180,17 @@ class OcclusionSearch:
         if speed > max_speed_m_s:
             velocity *= max_speed_m_s / speed
         theta_n, phi_n = torus_angles_many(torus, (p + velocity * dt_s)[None])
-        self.theta, self.phi = min(max(float(theta_n[0]), lo), hi), float(phi_n[0])
+        margin = math.radians(s.view_phi_margin_deg)
+        phi_n = math.copysign(min(max(abs(float(phi_n[0])), margin), math.pi - margin), float(phi_n[0]))
+        self.theta, self.phi = min(max(float(theta_n[0]), lo), hi), phi_n
         p_next = torus_position(torus, self.theta, self.phi)
         self.velocity_world = (p_next - p) / dt_s
         return SearchResult(self.theta, self.phi, cut=False, strategy=strategy, risk=chosen_risk)
+
+    def _outside(self, theta: np.ndarray, phi: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        """Places the camera may not go: the arc's ends, and top and bottom views."""
+        margin = math.radians(self.settings.view_phi_margin_deg)
+        return (theta < lo) | (theta > hi) | (np.abs(phi) < margin) | (np.abs(phi) > math.pi - margin)
 
     def _theta_range(self, torus: Torus) -> tuple[float, float]:
         """Allowed theta, radians: the arc's ends put the camera on top of A or B."""
@@ -206,7 +214,7 @@ class OcclusionSearch:
         current = float(cut_occlusion(coast[None])[0])
         if current <= s.improvement:
             return None
-        margin = math.radians(s.cut_phi_margin_deg)
+        margin = math.radians(s.view_phi_margin_deg)
         theta = self.rng.uniform(*self._theta_range(torus), s.cut_samples)
         phi = side * self.rng.uniform(margin, math.pi - margin, s.cut_samples)
         places = torus_position(torus, theta, phi)
