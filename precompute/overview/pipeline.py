@@ -16,13 +16,13 @@ containment and the bounding-volume checks hold at every clip frame (framing.py)
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
+from camdirector.precompute.stage_clock import StageClock
 from camdirector.precompute.overview.body_parts import BodyPartMap, map_body_parts
 from camdirector.precompute.overview.bvh import MotionClip
 from camdirector.precompute.overview.character_track import (CharacterTrack, sample_frames,
@@ -106,16 +106,9 @@ def plan_overview(clip: MotionClip, settings: OverviewSettings, rng: np.random.G
     renderer: an existing LimbVisibilityRenderer to reuse (one is made and released otherwise).
     Raises ValueError when the skeleton cannot be mapped or no camera position frames the body.
     """
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def done(stage: Stage) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage.value] = (now - clock) * 1e3
-        clock = now
-        if progress is not None:
-            progress(_PROGRESS_AFTER[stage])
+    stage_clock = StageClock(progress, _PROGRESS_AFTER)
+    done = stage_clock.done
+    timings = stage_clock.timings_ms
 
     parts = map_body_parts(clip)
     analysis_frames = sample_frames(clip.frame_count, clip.frame_time_s, settings.analysis_rate_hz)

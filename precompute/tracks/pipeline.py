@@ -17,12 +17,12 @@ nodes the tracks did not have).
 """
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from enum import Enum
 
 import numpy as np
 
+from camdirector.precompute.stage_clock import StageClock
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
@@ -65,16 +65,9 @@ def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Gene
     m_per_unit: recorded in the artifact; progress: called with the fraction done (0..1] after
     each stage. Raises MeshError when no walkable surface is found.
     """
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def done(stage: Stage) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage.value] = (now - clock) * 1e3
-        clock = now
-        if progress is not None:
-            progress(_PROGRESS_AFTER[stage])
+    stage_clock = StageClock(progress, _PROGRESS_AFTER)
+    done = stage_clock.done
+    timings = stage_clock.timings_ms
 
     scene = RayScene([mesh])
     done(Stage.RAY_SCENE)
