@@ -204,38 +204,10 @@ class _AioZmqTransport:
             sock.close(linger=0)
 
 
-class AsyncSession:
-    """One director session; closes itself at the end of an ``async with`` block.
+class AsyncSession(wire.SessionBase):
+    """One director session; closes itself at the end of an ``async with`` block (see wire.SessionBase)."""
 
-    Attributes
-    ----------
-    id : str
-        The session id the server chose.
-    recording_path : str
-        Where the server records the session; empty unless ``record=True`` and it records.
-    """
-
-    __slots__ = ("_closed_frames", "_transport", "id", "recording_path")
-
-    def __init__(self, transport: _AsyncTransport, response: pb.CreateSessionResponse) -> None:
-        self._transport = transport
-        self.id: str = response.session_id
-        self.recording_path: str = response.recording_path
-        self._closed_frames: int | None = None
-
-    def __repr__(self) -> str:
-        return f"AsyncSession(id={self.id!r}, closed={self._closed_frames is not None})"
-
-    def frame_update(
-        self,
-        frame: int,
-        time_s: float,
-        *,
-        states: wire.States | None = None,
-        packed: wire.PackedStates | None = None,
-    ) -> pb.FrameUpdate:
-        """A ``FrameUpdate`` for this session, e.g. to feed :meth:`stream`."""
-        return wire.frame_update(self.id, frame, time_s, states, packed)
+    __slots__ = ()
 
     async def frame(
         self,

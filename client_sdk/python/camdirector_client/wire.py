@@ -245,3 +245,37 @@ class ClosedStub:
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         raise DirectorError(grpc.StatusCode.CANCELLED, "the client is closed")
+
+
+class SessionBase:
+    """What the sync and async sessions share: the id, the recording path and message building.
+
+    Attributes
+    ----------
+    id : str
+        The session id the server chose.
+    recording_path : str
+        Where the server records the session; empty unless ``record=True`` and it records.
+    """
+
+    __slots__ = ("_closed_frames", "_transport", "id", "recording_path")
+
+    def __init__(self, transport, response: pb.CreateSessionResponse) -> None:
+        self._transport = transport
+        self.id: str = response.session_id
+        self.recording_path: str = response.recording_path
+        self._closed_frames: int | None = None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(id={self.id!r}, closed={self._closed_frames is not None})"
+
+    def frame_update(
+        self,
+        frame: int,
+        time_s: float,
+        *,
+        states: States | None = None,
+        packed: PackedStates | None = None,
+    ) -> pb.FrameUpdate:
+        """A ``FrameUpdate`` for this session, e.g. to feed ``stream``."""
+        return frame_update(self.id, frame, time_s, states, packed)
