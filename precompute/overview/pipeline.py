@@ -22,7 +22,6 @@ from enum import Enum
 
 import numpy as np
 
-from camdirector.precompute.stage_clock import StageClock
 from camdirector.precompute.overview.body_parts import BodyPartMap, map_body_parts
 from camdirector.precompute.overview.bvh import MotionClip
 from camdirector.precompute.overview.character_track import (CharacterTrack, sample_frames,
@@ -35,6 +34,7 @@ from camdirector.precompute.overview.potential import PotentialSpace, build_pote
 from camdirector.precompute.overview.saliency import Saliency, compute_saliency
 from camdirector.precompute.overview.settings import OverviewSettings
 from camdirector.precompute.overview.shots import ShotPlan, plan_shots
+from camdirector.precompute.stage_clock import StageClock
 
 
 class Stage(Enum):

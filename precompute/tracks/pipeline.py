@@ -22,7 +22,6 @@ from enum import Enum
 
 import numpy as np
 
-from camdirector.precompute.stage_clock import StageClock
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
@@ -34,6 +33,7 @@ from camdirector.precompute.tracks.sampling import sample_cameras
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import extract_skeleton
 from camdirector.precompute.tracks.visibility_table import build_visibility_table, remesh
+from camdirector.precompute.stage_clock import StageClock
 
 
 class Stage(Enum):
