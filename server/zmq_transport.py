@@ -11,11 +11,10 @@ import asyncio
 import logging
 import time
 
-import grpc
 import zmq
 import zmq.asyncio
 
-from camdirector.server.errors import DirectorError
+from camdirector.server.errors import DirectorError, exhausted, internal, invalid, unimplemented
 from camdirector.server.session_router import SessionRouter, session_id_of
 from camdirector.v1 import director_pb2 as pb
 
@@ -68,23 +67,21 @@ class ZmqTransport:
         rpc = body[0] if body else b""
         try:
             if len(body) != 2:
-                raise DirectorError(grpc.StatusCode.INVALID_ARGUMENT,
-                                    f"expected 2 frames (RPC name, payload), got {len(body)}")
+                raise invalid(f"expected 2 frames (RPC name, payload), got {len(body)}")
             name, payload = body
             handler = self._handlers.get(name)
             if handler is None:
-                raise DirectorError(grpc.StatusCode.UNIMPLEMENTED,
-                                    f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, CloseSession")
+                raise unimplemented(f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, CloseSession")
             if len(payload) > self.router.settings.max_message_bytes:
-                raise DirectorError(grpc.StatusCode.RESOURCE_EXHAUSTED,
-                                    f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
+                raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
             reply = [b"0", await handler(payload)]
         except DirectorError as exc:
             self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
             reply = [str(exc.code.value[0]).encode(), exc.message.encode()]
         except Exception as exc:  # never let one request end the loop
             log.exception("zmq request")
-            reply = [str(grpc.StatusCode.INTERNAL.value[0]).encode(), f"internal error: {exc}".encode()]
+            error = internal(exc)
+            reply = [str(error.code.value[0]).encode(), error.message.encode()]
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set
         self.metrics.request.labels(TRANSPORT, label).observe(time.perf_counter() - t0)
         try:
