@@ -10,6 +10,14 @@ Stage order (one module each):
               occlusion_search.py  RAYCAST and map modes: the paper's search and cuts
   VISIBILITY  visibility.py     the rig's own estimate of how much of the targets is visible
   OUTPUT      wire.py           the CameraUpdate
+
+With `style.rig = TRACKS` (tracks_rig.py, the graph director of the camera-tracks paper) a
+frame is INGEST, then MOTION and VISIBILITY by the director in its own order (Section 5):
+  cut_check      direct visibility of the actor and the framing check feed the cutting strategy
+  target_update  a cut's continuity search, or the target moving strategy on the tracks
+  camera_update  the camera jumps on a cut or follows the target by the force model; the
+                 actor's visibility from the new position
+then OUTPUT; these three names are its `stage_ms` keys (no FRAMING, PROJECTION or AMAP).
 """
 from __future__ import annotations
 

@@ -25,6 +25,7 @@ from camdirector.server.framing import Framing
 from camdirector.server.pipeline import FrameState, Stage
 from camdirector.server.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
 from camdirector.server.target_sampling import TargetSampler
+from camdirector.server.tracks_rig import TracksRig
 from camdirector.server.visibility import VisibilityEstimate
 from camdirector.server.wire import FrameInput, SceneSpec
 
@@ -42,7 +43,8 @@ class Session:
         self.static_ids = {o.id for o in scene.objects if not o.dynamic}
         self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
         self.static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
-        self.ray_scene = RayScene(self.static_meshes_world)
+        level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
+        self.ray_scene = RayScene(self.static_meshes_world + level_meshes)
         self.dynamic = {o.id: (o.mesh, o.transform) for o in scene.objects if o.dynamic}  # latest transforms
         for object_id, (mesh, transform) in self.dynamic.items():
             self.ray_scene.add_dynamic(object_id, mesh, transform)
@@ -56,13 +58,20 @@ class Session:
         self.search = OcclusionSearch(SearchSettings(), self.rng)
         self.deoccluder = Deoccluder(self.ray_scene)
         self._searching = False  # whether the search particle holds the camera's place
+        # The TRACKS rig replaces framing, motion and visibility (tracks_rig.py); None for TORIC.
+        self.tracks = TracksRig(scene.level, self.lens, self.style, self.rng, clock) if scene.level is not None else None
         self.last_state: FrameState | None = None
         self.frames_answered = 0
         self.shot_id = 0
         self._style_cut = False
 
     def set_style(self, style: Style) -> None:
-        """From the next frame on. A changed composition cannot be reached smoothly: it is a cut."""
+        """From the next frame on. A changed composition cannot be reached smoothly: it is a cut.
+        The rig itself never changes (wire.py refuses it)."""
+        if self.tracks is not None:  # TRACKS reads only shot size and movement
+            self.style = style
+            self.tracks.set_style(style)
+            return
         if (style.screen_a, style.screen_b) != (self.style.screen_a, self.style.screen_b):
             self._style_cut = True
         self.style = style
@@ -97,6 +106,24 @@ class Session:
         state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0]
                                   for tf, t in zip(self.target_transforms, self.targets)]
         t1 = self.clock()
+        if self.tracks is not None:  # Stage.MOTION and Stage.VISIBILITY of the TRACKS rig
+            self.tracks.run(state, self.target_transforms[0], self.ray_scene, None if last is None else last.pose)
+        else:
+            self._toric_stages(state, update)
+        state.stage_ms[Stage.INGEST.name.lower()] = (t1 - t0) * 1e3
+        state.cut = state.cut or last is None or self._style_cut
+        self._style_cut = False
+        if state.cut:
+            self.shot_id += 1
+        state.shot_id = self.shot_id
+        self.last_state = state
+        self.frames_answered += 1
+        return state
+
+    def _toric_stages(self, state: FrameState, update: FrameInput) -> None:
+        """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY of the TORIC rig, timed into state."""
+        last = self.last_state
+        t1 = self.clock()
         self.framing.run(state)  # Stage.FRAMING
         if self.maps is not None:
             self.maps.ingest(update.states, update.time_s)
@@ -107,21 +134,12 @@ class Session:
         t3 = self.clock()
         self.visibility.run(state, self.target_transforms)  # Stage.VISIBILITY
         t4 = self.clock()
-        state.cut = state.cut or last is None or self._style_cut
-        self._style_cut = False
-        if state.cut:
-            self.shot_id += 1
-        state.shot_id = self.shot_id
         map_ms = sum(state.stage_ms.values())  # projection and A-map, filled by _move
         state.stage_ms.update({
-            Stage.INGEST.name.lower(): (t1 - t0) * 1e3,
             Stage.FRAMING.name.lower(): (t2 - t1) * 1e3,
             Stage.MOTION.name.lower(): (t3 - t2) * 1e3 - map_ms,
             Stage.VISIBILITY.name.lower(): (t4 - t3) * 1e3,
         })
-        self.last_state = state
-        self.frames_answered += 1
-        return state
 
 
     def _move(self, state: FrameState) -> None:

@@ -14,6 +14,7 @@ from camdirector.server.errors import DirectorError, internal, invalid, not_foun
 from camdirector.server.recording import RecordingWriter
 from camdirector.server.session import Session
 from camdirector.server.settings import ServerSettings
+from camdirector.server.tracks_rig import LevelCache
 from camdirector.v1 import director_pb2 as pb
 
 
@@ -32,6 +33,7 @@ class SessionTable:
         self.clock = clock
         self.sessions: dict[str, Session] = {}
         self.recorders: dict[str, RecordingWriter] = {}
+        self.levels = LevelCache(settings.data_dir)  # the TRACKS rig's levels, loaded once per process
 
     def _get(self, session_id: str) -> Session:
         session = self.sessions.get(session_id)
@@ -40,7 +42,7 @@ class SessionTable:
         return session
 
     def create(self, session_id: str, req: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
-        scene = wire.scene_from_request(req, self.settings)
+        scene = wire.scene_from_request(req, self.settings, self.levels)
         self.sessions[session_id] = Session(session_id, scene, clock=self.clock)
         response = pb.CreateSessionResponse(session_id=session_id)
         if req.record or self.settings.record_all:
@@ -76,7 +78,7 @@ class SessionTable:
 
     def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
         session = self._get(msg.session_id)
-        session.set_style(wire.style_from_msg(msg.style, session.lens))
+        session.set_style(wire.style_from_msg(msg.style, session.lens, session.style))
         recorder = self.recorders.get(msg.session_id)
         if recorder is not None:
             recorder.write(pb.RecordEntry(style=msg))

@@ -1,6 +1,10 @@
 """The director's style: one typed object, defaults with unit and limit, validated once.
 
-Mirrors `camdirector.v1.Style`; `server/wire.py` converts and validates at the edge.
+Mirrors `camdirector.v1.Style`; `server/wire.py` converts and validates at the edge. `rig` picks
+the camera rig: TORIC (the framing rig, every field but the last two) or TRACKS (camera tracks on
+a precomputed level, tracks_rig.py), which reads only `shot_size` and `movement` (the directorial
+styles of the topology-aware camera tracks paper, Section 6.1) and handles occlusion by its own
+cutting strategy, so a TORIC visibility mode is refused with it.
 """
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ import enum
 import math
 from dataclasses import dataclass
 
+from camdirector.precompute.tracks.director import Movement, ShotSize
 from camdirector.server.anticipation import MaskKind
 
 
@@ -30,6 +35,13 @@ class MapBackendChoice(enum.IntEnum):
     EMBREE = 2
 
 
+class Rig(enum.IntEnum):
+    """Same numbers as camdirector.v1.Rig (UNSPECIFIED is TORIC and never stored)."""
+
+    TORIC = 1
+    TRACKS = 2
+
+
 # Modes whose camera moves by the paper's search (occlusion_search.py) rather than the toric spring.
 SEARCH_MODES = frozenset({VisibilityMode.ANTICIPATION, VisibilityMode.NO_ANTICIPATION, VisibilityMode.RAYCAST})
 # Modes that read the occlusion maps (occlusion_maps.py).
@@ -50,8 +62,18 @@ class Style:
     mask: MaskKind = MaskKind.EMPTY     # viewpoints the map modes avoid (the paper's Figure 10)
     map_resolution: int = 64            # occlusion map texels per side. [16, 512]
     map_backend: MapBackendChoice = MapBackendChoice.AUTO  # how the maps are computed
+    rig: Rig = Rig.TORIC                # the camera rig
+    shot_size: ShotSize = ShotSize.LONG  # TRACKS: the actor's size on screen
+    movement: Movement = Movement.DYNAMIC_WITH_CUTS  # TRACKS: how the camera may move and cut
 
     def __post_init__(self):
+        for name, value, kind in (("rig", self.rig, Rig), ("shot_size", self.shot_size, ShotSize),
+                                  ("movement", self.movement, Movement)):
+            if not isinstance(value, kind):
+                raise ValueError(f"style.{name} must be a {kind.__name__}, got {value!r}")
+        if self.rig == Rig.TRACKS and self.visibility != VisibilityMode.FRAMING_ONLY:
+            raise ValueError(f"style.visibility {self.visibility.name} is a mode of the TORIC rig; the TRACKS rig "
+                             "cuts away from occlusion itself: leave style.visibility unset")
         for name, point in (("screen_a", self.screen_a), ("screen_b", self.screen_b)):
             if not all(math.isfinite(c) and -1.0 <= c <= 1.0 for c in point):
                 raise ValueError(f"style.{name} must have x and y in [-1, 1], got {point}")

@@ -1,7 +1,13 @@
 """The transport edge: camdirector.v1 messages in, the pipeline's own types out, and back.
 
 Everything that arrives from a client is validated here and refused with a DirectorError that
-names the field; past this module the pipeline sees only dataclasses and numpy arrays.
+names the field; past this module the pipeline sees only dataclasses and numpy arrays. A session
+with `style.rig = RIG_TRACKS` needs exactly one target and a `level_id` the server's level
+registry holds (loaded here, through the worker's LevelCache, so a session never starts without
+its level); `level_id` without that rig, and the TRACKS style fields under the TORIC rig, are
+refused rather than ignored. The rig cannot change during a session (UpdateStyle): TORIC to
+TRACKS would need a level the session was not created with, and TRACKS to TORIC a second framing
+setup for a scene built around one actor; a new session does either.
 """
 from __future__ import annotations
 
@@ -19,12 +25,18 @@ from camdirector.server.anticipation import MaskKind
 from camdirector.server.errors import exhausted, invalid, not_found, precondition
 from camdirector.server.pipeline import FrameState
 from camdirector.server.settings import ServerSettings
-from camdirector.server.style import MapBackendChoice, Style, VisibilityMode
+from camdirector.server.style import MapBackendChoice, Movement, Rig, ShotSize, Style, VisibilityMode
+from camdirector.server.tracks_rig import LevelCache, LoadedLevel
 from camdirector.v1 import director_pb2 as pb
 
 _MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
           pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
           pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
+_RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC, pb.RIG_TORIC: Rig.TORIC, pb.RIG_TRACKS: Rig.TRACKS}
+_SHOT_SIZES = {pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG, pb.SHOT_SIZE_MEDIUM: ShotSize.MEDIUM,
+               pb.SHOT_SIZE_LONG: ShotSize.LONG, pb.SHOT_SIZE_EXTREME_LONG: ShotSize.EXTREME_LONG}
+_MOVEMENTS = {pb.MOVEMENT_UNSPECIFIED: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_DYNAMIC_NO_CUTS: Movement.DYNAMIC_NO_CUTS,
+              pb.MOVEMENT_DYNAMIC_WITH_CUTS: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_STATIC: Movement.STATIC}
 MIN_ALPHA_RAD = math.radians(0.5)  # screen points closer than this angle give no usable torus
 PACKED_STRIDE = 10                 # doubles per object in FrameUpdate.packed_transforms
 
@@ -54,6 +66,7 @@ class SceneSpec:
     lens: Lens
     style: Style
     seed: int
+    level: LoadedLevel | None = None  # the TRACKS rig's level
 
 
 @dataclass
@@ -144,7 +157,8 @@ def lens_from_msg(msg: pb.Lens) -> Lens:
     return Lens(vertical_fov_deg=fov, aspect=aspect)
 
 
-def style_from_msg(msg: pb.Style, lens: Lens) -> Style:
+def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> Style:
+    """The style of a CreateSession, or of an UpdateStyle to a session whose style is `current`."""
     values = {}
     for name in ("screen_a", "screen_b"):
         if msg.HasField(name):
@@ -165,6 +179,18 @@ def style_from_msg(msg: pb.Style, lens: Lens) -> Style:
         raise invalid(f"style.mask {msg.mask} or style.map_backend {msg.map_backend} is not known") from None
     if msg.map_resolution:
         values["map_resolution"] = msg.map_resolution
+    for name, table in (("rig", _RIGS), ("shot_size", _SHOT_SIZES), ("movement", _MOVEMENTS)):
+        number = getattr(msg, name)
+        if number not in table:
+            raise invalid(f"style.{name} {number} is not a known {name}")
+        values[name] = table[number]
+    if values["rig"] == Rig.TORIC and (msg.shot_size or msg.movement):
+        raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
+                      "(with a level_id) or leave them unset")
+    if current is not None and values["rig"] != current.rig:
+        raise precondition(f"style.rig cannot change during a session ({current.rig.name} -> {values['rig'].name}): "
+                           "create a new session with that rig (an UpdateStyle replaces the whole style, so a "
+                           "TRACKS session repeats rig = RIG_TRACKS)")
     try:
         style = Style(visibility=VisibilityMode.FRAMING_ONLY if mode == VisibilityMode.UNSPECIFIED else mode, **values)
     except ValueError as exc:
@@ -182,7 +208,9 @@ def _check_id(object_id: str, what: str, seen: set[str]) -> None:
     seen.add(object_id)
 
 
-def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings) -> SceneSpec:
+def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
+                       levels: LevelCache | None = None) -> SceneSpec:
+    """levels: where a TRACKS session's level is looked up (default: the registry in settings.data_dir)."""
     if not 1 <= len(req.targets) <= 2:
         raise invalid(f"a session frames one or two targets, got {len(req.targets)}")
     if len(req.objects) > settings.max_objects:
@@ -208,7 +236,18 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings) -
         targets.append(TargetSpec(target.id, mesh, transform_from_msg(target.transform, f"{what}.transform"),
                                   _vec3(target.aim_offset, f"{what}.aim_offset")))
     lens = lens_from_msg(req.lens)
-    return SceneSpec(objects, targets, lens, style_from_msg(req.style, lens), int(req.seed))
+    style = style_from_msg(req.style, lens)
+    level = None
+    if style.rig == Rig.TRACKS:
+        if len(targets) != 1:
+            raise invalid(f"the TRACKS rig follows exactly one target (the actor), got {len(targets)}")
+        if not req.level_id:
+            raise invalid("style.rig RIG_TRACKS needs level_id: the name of a level in the server's level registry")
+        level = (levels if levels is not None else LevelCache(settings.data_dir)).get(req.level_id)
+    elif req.level_id:
+        raise invalid(f"level_id {req.level_id!r} is for the TRACKS rig: set style.rig = RIG_TRACKS or leave "
+                      "level_id empty")
+    return SceneSpec(objects, targets, lens, style, int(req.seed), level)
 
 
 def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str]) -> FrameInput:

@@ -119,10 +119,11 @@ class GraphDirector:
     def optimal_distance_m(self) -> float:
         return optimal_distance_m(self._actor_height_m, self._screen_fraction(), self._settings.vertical_fov_deg)
 
-    def step(self, time_s: float, actor_position_world, actor_forward, ray_scene: RayScene) -> TrackShot:
+    def step(self, time_s: float, actor_position_world, actor_forward, ray_scene: RayScene) -> TrackShot | None:
         """One frame. actor_position_world (3,): the actor's feet, metres; actor_forward (3,): its
         facing (any length); ray_scene: the level and its dynamic occluders, current transforms.
-        Frames must come in time order; a repeated or older time moves nothing."""
+        Frames must come in time order; a repeated or older time moves nothing. None until a first
+        shot is found (no track near the actor yet); the next frame tries again."""
         s = self._settings
         clock0 = time.perf_counter()
         actor = np.asarray(actor_position_world, dtype=np.float64).reshape(3)
@@ -164,6 +165,8 @@ class GraphDirector:
                 self._shot_id += 1
                 self._clock = CutClock(time_s, draw_shot_duration_s(self._rng, s))
         clock2 = time.perf_counter()
+        if self._target is None:  # no track near the actor for a first shot yet: no camera to give
+            return None
 
         target = self._target_position()
         if cut:

@@ -28,6 +28,26 @@ class MapBackend(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     MAP_BACKEND_AUTO: _ClassVar[MapBackend]
     MAP_BACKEND_GL: _ClassVar[MapBackend]
     MAP_BACKEND_EMBREE: _ClassVar[MapBackend]
+
+class Rig(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    RIG_UNSPECIFIED: _ClassVar[Rig]
+    RIG_TORIC: _ClassVar[Rig]
+    RIG_TRACKS: _ClassVar[Rig]
+
+class ShotSize(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    SHOT_SIZE_UNSPECIFIED: _ClassVar[ShotSize]
+    SHOT_SIZE_MEDIUM: _ClassVar[ShotSize]
+    SHOT_SIZE_LONG: _ClassVar[ShotSize]
+    SHOT_SIZE_EXTREME_LONG: _ClassVar[ShotSize]
+
+class Movement(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    MOVEMENT_UNSPECIFIED: _ClassVar[Movement]
+    MOVEMENT_DYNAMIC_NO_CUTS: _ClassVar[Movement]
+    MOVEMENT_DYNAMIC_WITH_CUTS: _ClassVar[Movement]
+    MOVEMENT_STATIC: _ClassVar[Movement]
 VISIBILITY_MODE_UNSPECIFIED: VisibilityMode
 ANTICIPATION: VisibilityMode
 NO_ANTICIPATION: VisibilityMode
@@ -41,6 +61,17 @@ STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: StyleMask
 MAP_BACKEND_AUTO: MapBackend
 MAP_BACKEND_GL: MapBackend
 MAP_BACKEND_EMBREE: MapBackend
+RIG_UNSPECIFIED: Rig
+RIG_TORIC: Rig
+RIG_TRACKS: Rig
+SHOT_SIZE_UNSPECIFIED: ShotSize
+SHOT_SIZE_MEDIUM: ShotSize
+SHOT_SIZE_LONG: ShotSize
+SHOT_SIZE_EXTREME_LONG: ShotSize
+MOVEMENT_UNSPECIFIED: Movement
+MOVEMENT_DYNAMIC_NO_CUTS: Movement
+MOVEMENT_DYNAMIC_WITH_CUTS: Movement
+MOVEMENT_STATIC: Movement
 
 class Vec3(_message.Message):
     __slots__ = ("x", "y", "z")
@@ -171,7 +202,7 @@ class ScreenPoint(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ...) -> None: ...
 
 class Style(_message.Message):
-    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend")
+    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend", "rig", "shot_size", "movement")
     SCREEN_A_FIELD_NUMBER: _ClassVar[int]
     SCREEN_B_FIELD_NUMBER: _ClassVar[int]
     VISIBILITY_FIELD_NUMBER: _ClassVar[int]
@@ -184,6 +215,9 @@ class Style(_message.Message):
     MASK_FIELD_NUMBER: _ClassVar[int]
     MAP_RESOLUTION_FIELD_NUMBER: _ClassVar[int]
     MAP_BACKEND_FIELD_NUMBER: _ClassVar[int]
+    RIG_FIELD_NUMBER: _ClassVar[int]
+    SHOT_SIZE_FIELD_NUMBER: _ClassVar[int]
+    MOVEMENT_FIELD_NUMBER: _ClassVar[int]
     screen_a: ScreenPoint
     screen_b: ScreenPoint
     visibility: VisibilityMode
@@ -196,23 +230,28 @@ class Style(_message.Message):
     mask: StyleMask
     map_resolution: int
     map_backend: MapBackend
-    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ...) -> None: ...
+    rig: Rig
+    shot_size: ShotSize
+    movement: Movement
+    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
-    __slots__ = ("objects", "targets", "lens", "style", "seed", "record")
+    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id")
     OBJECTS_FIELD_NUMBER: _ClassVar[int]
     TARGETS_FIELD_NUMBER: _ClassVar[int]
     LENS_FIELD_NUMBER: _ClassVar[int]
     STYLE_FIELD_NUMBER: _ClassVar[int]
     SEED_FIELD_NUMBER: _ClassVar[int]
     RECORD_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_ID_FIELD_NUMBER: _ClassVar[int]
     objects: _containers.RepeatedCompositeFieldContainer[SceneObject]
     targets: _containers.RepeatedCompositeFieldContainer[Target]
     lens: Lens
     style: Style
     seed: int
     record: bool
-    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ...) -> None: ...
+    level_id: str
+    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ...) -> None: ...
 
 class CreateSessionResponse(_message.Message):
     __slots__ = ("session_id", "recording_path")

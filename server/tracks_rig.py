@@ -1,0 +1,143 @@
+"""The TRACKS rig of a session: the runtime graph director (topology-aware camera tracks, Section
+5) following target 0 on a precomputed level, and the worker's cache of loaded levels.
+
+Per frame (`TracksRig.run`, the MOTION and VISIBILITY stages of pipeline.py for this rig): the
+actor is target 0, its feet at its transform's position (the local origin the primitives stand
+on), its facing the transform's local +Z (the convention of docs/protocol.md), which the
+director uses for the line of action only while the actor stands still (it takes the velocity
+from successive positions otherwise). Direct visibility rays go through the session's RayScene:
+the level's geometry plus the session's own static and dynamic objects at their current
+transforms. The pose is the director's camera position looking at its look-at point with no
+roll (+Y up; `geometry.camera.level_look_rotation` at the screen centre) and the lens's field of
+view; `cut` and `visibility` are the director's (its shot count is the session's `shot_id`); the
+cut reason is flagged `tracks_cut_<reason>` and the director's three stage timings go to
+`stage_ms` as `cut_check`, `target_update` and `camera_update`. The director's settings are its
+defaults (precompute/tracks/settings.py) with the session lens's vertical field of view, so shot
+sizes mean the same on the client's screen. Until a first shot is found (the actor is away from
+every track) the camera waits behind and above the actor, flagged `tracks_no_track_near_actor`,
+with visibility 0.
+
+Levels are loaded only through `LevelRegistry.load` and cached per worker process by name and
+artifact file (every version of a level has its own file), so a level re-added under the same
+name is picked up by the next session while running sessions keep theirs. Loading nav_test (1,848
+nodes) reads its 15 MB artifact in about 15 ms; building the director and the level's Embree scene
+take about 10 ms more per session; the cache leaves only those per-session costs in the worker
+that also answers other sessions' frames.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform, quat_rotate
+from camdirector.precompute.tracks.artifact import ArtifactVersionError, LevelArtifact
+from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector
+from camdirector.precompute.tracks.registry import LevelRegistry
+from camdirector.precompute.tracks.settings import DirectorSettings
+from camdirector.server.errors import not_found, precondition
+from camdirector.server.pipeline import FrameState
+from camdirector.server.style import Style
+
+_LOCAL_FORWARD = np.array([0.0, 0.0, 1.0])
+_WAIT_OFFSET_M = np.array([0.0, 2.0, 0.0])  # the waiting camera: this far up, and 6 m behind the actor
+
+
+@dataclass(frozen=True)
+class LoadedLevel:
+    """A level as sessions use it: the artifact and its geometry as one world-frame mesh."""
+
+    name: str
+    artifact: LevelArtifact
+    mesh_world: TriMesh
+
+
+class LevelCache:
+    """The level registry at data_dir as one worker process sees it (module docstring)."""
+
+    def __init__(self, data_dir: str | Path):
+        self.data_dir = Path(data_dir)
+        self._registry: LevelRegistry | None = None  # opened by the first TRACKS session
+        self._levels: dict[str, tuple[str, LoadedLevel]] = {}  # name -> (artifact file, level)
+
+    def get(self, name: str) -> LoadedLevel:
+        """The current version of level `name`. Raises DirectorError: NOT_FOUND for a name the
+        registry does not hold, FAILED_PRECONDITION for an artifact of another format version."""
+        if self._registry is None:
+            self._registry = LevelRegistry(self.data_dir)
+        record = self._registry.get(name)
+        if record is None:
+            raise not_found(f"level_id {name!r} is not in this server's level registry ({self.data_dir}); "
+                            "add it with `camdirector level add` or POST /v1/levels")
+        cached = self._levels.get(name)
+        if cached is not None and cached[0] == record.artifact_path.name:
+            return cached[1]
+        try:
+            artifact = self._registry.load(name)
+        except KeyError:
+            raise not_found(f"level_id {name!r} was removed from the level registry") from None
+        except ArtifactVersionError as exc:
+            raise precondition(f"level_id {name!r}: {exc}") from None
+        level = LoadedLevel(name, artifact, TriMesh(artifact.level_vertices, artifact.level_faces))
+        self._levels[name] = (record.artifact_path.name, level)
+        return level
+
+
+def director_style(style: Style) -> DirectorStyle:
+    return DirectorStyle(shot_size=style.shot_size, movement=style.movement)
+
+
+class TracksRig:
+    """The graph director of one session (module docstring)."""
+
+    def __init__(self, level: LoadedLevel, lens: Lens, style: Style, rng: np.random.Generator,
+                 clock: Callable[[], float] = time.perf_counter):
+        self.level = level
+        self.lens = lens
+        self.clock = clock
+        self.settings = DirectorSettings(vertical_fov_deg=lens.vertical_fov_deg)
+        self.director = GraphDirector(level.artifact, self.settings, rng, director_style(style))
+
+    def set_style(self, style: Style) -> None:
+        """Shot size and movement from the next frame on; the current shot goes on (a changed shot
+        size cuts once its framing has been off for the cutting strategy's 200 ms)."""
+        self.director.set_style(director_style(style))
+
+    def run(self, state: FrameState, actor: RigidTransform, ray_scene: RayScene, last_pose: CameraPose | None) -> None:
+        """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags and stage_ms."""
+        forward = quat_rotate(actor.rotation_xyzw, _LOCAL_FORWARD)
+        t0 = self.clock()
+        shot = self.director.step(state.time_s, actor.position_world, forward, ray_scene)
+        if shot is None:
+            state.pose = self._waiting_pose(actor.position_world, forward)
+            state.visibility = 0.0
+            state.flags.append("tracks_no_track_near_actor")
+            state.stage_ms["target_update"] = (self.clock() - t0) * 1e3
+            return
+        state.cut = shot.cut
+        state.visibility = shot.visible_fraction
+        if shot.cut_reason is not None:
+            state.flags.append(f"tracks_cut_{shot.cut_reason.value}")
+        state.stage_ms.update(shot.timings_ms)
+        if np.linalg.norm(shot.look_at_world - shot.position_world) < 1e-6:  # on the look-at point: no direction
+            held = last_pose if last_pose is not None else self._waiting_pose(actor.position_world, forward)
+            rotation = held.rotation_xyzw
+            state.flags.append("tracks_camera_on_actor")
+        else:
+            rotation = level_look_rotation(shot.position_world, shot.look_at_world, (0.0, 0.0), self.lens)
+        state.pose = CameraPose(shot.position_world, rotation, self.lens.vertical_fov_deg)
+
+    def _waiting_pose(self, actor_world: np.ndarray, forward: np.ndarray) -> CameraPose:
+        flat = np.array([forward[0], 0.0, forward[2]])
+        norm = float(np.linalg.norm(flat))
+        flat = flat / norm if norm > 1e-9 else _LOCAL_FORWARD
+        look_at = actor_world + np.array([0.0, self.settings.look_at_fraction * self.level.artifact.agent_height_m, 0.0])
+        position = actor_world - 6.0 * flat + _WAIT_OFFSET_M
+        return CameraPose(position, level_look_rotation(position, look_at, (0.0, 0.0), self.lens),
+                          self.lens.vertical_fov_deg)
