@@ -13,6 +13,7 @@ import uvicorn
 
 from camdirector.server.grpc_transport import start_grpc
 from camdirector.server.http_api import build_app
+from camdirector.server.level_routes import install_level_routes
 from camdirector.server.metrics import Metrics
 from camdirector.server.overview_routes import install_overview_jobs
 from camdirector.server.session_router import SessionRouter
@@ -55,6 +56,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
             app = build_app(router, bound)
             jobs = install_overview_jobs(app, Path(settings.data_dir), settings.job_settings())
+            install_level_routes(app, jobs, Path(settings.data_dir), settings.job_settings())
             jobs.start()  # queued and interrupted jobs from before a restart run again
             config = uvicorn.Config(app, log_level="warning", lifespan="off")
             http_server = uvicorn.Server(config)

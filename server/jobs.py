@@ -26,8 +26,9 @@ Restart: a runner that starts finds queued jobs and runs them in submission orde
 with a reason once they have been started `max_attempts` times. A runner stopped cleanly puts its
 running jobs back in the queue without counting the attempt.
 
-Job kinds: `JobKind(name, function)` in a `JobRegistry`; the function runs in the job process as
-`function(params: dict, input_dir: Path, output_dir: Path, progress: Callable[[float], None])
+Job kinds: `JobKind(name, function)` in a `JobRegistry` (more are added to a runner by
+`JobRunner.add_kind` before it starts: one runner owns a folder); the function runs in the job
+process as `function(params: dict, input_dir: Path, output_dir: Path, progress: Callable[[float], None])
 -> dict[str, float]` (timings in milliseconds) and raises to fail the job (`JobError`'s message is
 shown as is; other exceptions as "<Type>: message"). It must be a module-level function (it is
 pickled by reference into the job process).
@@ -445,6 +446,15 @@ class JobRunner:
         self._lock_file = None
 
     # -- lifetime -----------------------------------------------------------------------------
+
+    def add_kind(self, kind: JobKind, preload: str | None = None) -> None:
+        """Register one more job kind (several route modules share the folder's one runner);
+        preload: its module, imported once by the forkserver instead of by every job. Before start()."""
+        if self._thread is not None:
+            raise RuntimeError("add job kinds before the runner starts")
+        self.registry.register(kind)
+        if preload is not None:
+            self._preload = (*self._preload, preload)
 
     def start(self) -> None:
         """Take the folder's runner lock, recover jobs from a previous run, start the thread.

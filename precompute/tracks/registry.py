@@ -34,6 +34,13 @@ _SCHEMA = """CREATE TABLE IF NOT EXISTS levels (
     agent_radius_m REAL NOT NULL, created_unix_s REAL NOT NULL, counts_json TEXT NOT NULL, timings_json TEXT NOT NULL)"""
 
 
+def check_level_name(name: str) -> None:
+    """Raises ValueError unless name is 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit."""
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise ValueError(f"level name {name!r}: use 1-64 letters, digits, '.', '_' or '-', starting with a letter "
+                         "or digit")
+
+
 def default_data_dir() -> Path:
     """$XDG_DATA_HOME/camdirector, else ~/.local/share/camdirector (the server's default too)."""
     base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
@@ -85,8 +92,7 @@ class LevelRegistry:
                   progress: Callable[[float], None] | None = None, seed: int = 0) -> LevelRecord:
         """Precompute a level file (OBJ/GLB, in units of `scale` metres) and index it under name,
         replacing a level of that name. Raises ValueError (MeshError) on a bad name or file."""
-        if not _NAME.match(name):
-            raise ValueError(f"level name {name!r}: use 1-64 letters, digits, '.', '_' or '-'")
+        check_level_name(name)
         settings = TrackSettings(agent_height_m=agent_height_m, agent_radius_m=agent_radius_m)
         mesh = load_level_mesh(Path(level_path), scale)
         navmesh = load_level_mesh(Path(navmesh_path), scale) if navmesh_path is not None else None

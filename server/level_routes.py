@@ -1,0 +1,235 @@
+"""REST routes of the level registry (issue 4), and the "level" job kind that precomputes a level.
+
+    POST /v1/levels              multipart: name, level (.obj/.glb), optional navmesh, scale,
+                                 agent_height, agent_radius, replace -> 202 {id, status, name}
+    GET  /v1/level-jobs/{id}     {id, status, progress, error?, timings, name}
+    GET  /v1/levels              {"levels": [level, ...]} by name
+    GET  /v1/levels/{name}       one level: scale, agent, counts, stage timings (ms)
+
+The upload is checked before a job is made, so a bad one answers 4xx and never becomes a job:
+the name (422; the registry's rule), the files' suffixes (400), that each parses into a mesh with
+at least one triangle of non-zero area after scaling (400), the sizes (413, each file and the
+whole body), the scale and agent (422, TrackSettings' limits). What only the precompute can tell
+(no walkable surface, no camera track) fails the job with the reason in `error`.
+
+Duplicate names: a name the registry holds, or one a queued or running level job is adding, is
+refused with 409 unless `replace=true`; then the new version replaces the old one when its job
+succeeds (sessions already on the old version keep it; new sessions get the new one). The job
+writes into the registry only when the precompute has succeeded (the artifact to a temporary file
+renamed into place, then the index row: LevelRegistry.add_level), so a failed or cancelled job
+leaves the registry as it was (a job process killed in the middle of that write can leave an
+artifact file no row points at, never a row without its file).
+
+The job runs in the runner's job process (jobs.py); the uploads stay in the job's `input/`.
+"""
+from __future__ import annotations
+
+import math
+import threading
+from pathlib import Path
+from typing import Annotated
+
+from fastapi import APIRouter, FastAPI, File, Form, HTTPException, UploadFile
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, Field
+
+from camdirector.geometry.meshes import MeshError, from_glb, from_obj
+from camdirector.precompute.tracks.level import LEVEL_SUFFIXES
+from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, check_level_name
+from camdirector.precompute.tracks.settings import TrackSettings
+from camdirector.server.jobs import JobError, JobKind, JobNotFound, JobRunner, JobSettings, JobState, QueueFull
+from camdirector.server.overview_routes import UploadLimit
+
+KIND = "level"
+LEVELS_PREFIX = "/v1/levels"
+JOBS_PREFIX = "/v1/level-jobs"
+# Multipart framing around the two files: boundaries, part headers and the small form fields.
+_FORM_OVERHEAD_BYTES = 64 * 1024
+
+
+# -- the job ------------------------------------------------------------------------------------
+
+def run_level_job(params: dict, input_dir: Path, output_dir: Path, progress) -> dict[str, float]:
+    """The "level" job kind (runs in a job process): precompute into the registry at
+    params["data_dir"]; returns the pipeline's stage timings (ms)."""
+    registry = LevelRegistry(params["data_dir"])
+    if not params["replace"] and registry.get(params["name"]) is not None:
+        raise JobError(f"level {params['name']!r} was added while this job waited; submit with replace=true "
+                       "to replace it")
+    navmesh = input_dir / params["navmesh_file"] if params.get("navmesh_file") else None
+    try:
+        record = registry.add_level(params["name"], input_dir / params["level_file"], navmesh,
+                                    scale=params["scale"], agent_height_m=params["agent_height_m"],
+                                    agent_radius_m=params["agent_radius_m"], progress=progress,
+                                    seed=params["seed"])
+    except ValueError as exc:  # MeshError included: no walkable surface, no tracks, ...
+        raise JobError(f"cannot precompute level {params['name']!r}: {exc}") from None
+    progress(1.0)
+    return dict(record.timings_ms)
+
+
+def level_job_kind() -> JobKind:
+    return JobKind(KIND, run_level_job)
+
+
+# -- the routes -----------------------------------------------------------------------------
+
+class LevelJobCreated(BaseModel):
+    id: str = Field(description="job id; poll GET /v1/level-jobs/{id}")
+    status: str = Field(description="queued")
+    name: str = Field(description="the level the job adds")
+
+
+class LevelJobStatus(BaseModel):
+    id: str
+    status: str = Field(description="queued | running | succeeded | failed | cancelled")
+    progress: float = Field(ge=0.0, le=1.0)
+    error: str | None = Field(default=None, description="why the job failed")
+    timings: dict[str, float] = Field(description="milliseconds per precompute stage and job phase (when finished)")
+    name: str = Field(description="the level the job adds")
+
+
+class LevelOut(BaseModel):
+    name: str
+    format_version: int = Field(description="artifact format version")
+    source_file: str = Field(description="file name of the level mesh it was built from")
+    m_per_unit: float = Field(description="the level file's scale, metres per unit")
+    agent_height_m: float
+    agent_radius_m: float
+    created_unix_s: float
+    counts: dict[str, int] = Field(description="sizes of the precompute's results (nodes, edges, tracks, ...)")
+    timings_ms: dict[str, float] = Field(description="milliseconds per precompute stage")
+
+
+class LevelList(BaseModel):
+    levels: list[LevelOut]
+
+
+def _level_json(record: LevelRecord) -> dict:
+    return {"name": record.name, "format_version": record.format_version,
+            "source_file": Path(record.source_path).name, "m_per_unit": record.m_per_unit,
+            "agent_height_m": record.agent_height_m, "agent_radius_m": record.agent_radius_m,
+            "created_unix_s": record.created_unix_s, "counts": record.counts,
+            "timings_ms": {k: round(v, 3) for k, v in record.timings_ms.items()}}
+
+
+def _mesh_file(upload: UploadFile, field: str, limit: int, scale: float) -> tuple[str, bytes]:
+    """(stored file name, bytes) of an uploaded level or navmesh; HTTPException when unusable."""
+    suffix = Path(upload.filename or "").suffix.lower()
+    if suffix not in LEVEL_SUFFIXES:
+        raise HTTPException(status_code=400, detail=(
+            f"{field}: file name {upload.filename!r} must end in {' or '.join(LEVEL_SUFFIXES)}"))
+    data = upload.file.read(limit + 1)
+    if len(data) > limit:
+        raise HTTPException(status_code=413, detail=f"{field}: upload larger than the limit of {limit} bytes")
+    if not data:
+        raise HTTPException(status_code=400, detail=f"{field}: empty upload")
+    if suffix == ".obj" and b"\0" in data[:65536]:
+        raise HTTPException(status_code=400, detail=f"{field}: not an OBJ file (it holds binary data)")
+    try:
+        mesh = from_obj(data) if suffix == ".obj" else from_glb(data)
+    except MeshError as exc:
+        raise HTTPException(status_code=400, detail=f"{field}: not a usable mesh: {exc}") from None
+    extent = (mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)) * scale
+    if (extent > 1e-3).sum() < 2:
+        raise HTTPException(status_code=400, detail=(
+            f"{field}: degenerate mesh: it spans {extent.round(4).tolist()} m, under 1 mm in two directions"))
+    return f"{field}{suffix}", data
+
+
+def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: Path) -> APIRouter:
+    """The /v1/levels and /v1/level-jobs routes over `runner` (which must have the "level" kind)."""
+    router = APIRouter(tags=["levels"])
+    registry = LevelRegistry(data_dir)
+    limit = job_settings.max_upload_bytes
+    submit_lock = threading.Lock()  # the duplicate check and the submit happen as one
+
+    def pending_names() -> set[str]:
+        jobs = runner.store.list(JobState.QUEUED) + runner.store.list(JobState.RUNNING)
+        return {j.params["name"] for j in jobs if j.kind == KIND}
+
+    @router.post(LEVELS_PREFIX, status_code=202, response_model=LevelJobCreated, responses={
+        400: {"description": "a file is not a usable .obj/.glb mesh (detail says why)"},
+        409: {"description": "the name is taken (registered or being added) and replace is false"},
+        413: {"description": "an upload is larger than the server's limit"},
+        422: {"description": "a bad name, or scale or agent out of range"},
+        429: {"description": "the job queue is full; retry later"}})
+    def add_level(
+        name: Annotated[str, Form(description="1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")],
+        level: Annotated[UploadFile, File(description="the level's geometry, .obj or .glb")],
+        navmesh: Annotated[UploadFile | None, File(description="its navigation mesh, .obj or .glb (derived from the walkable surfaces when absent)")] = None,
+        scale: Annotated[float, Form(gt=0, description="metres per file unit")] = 1.0,
+        agent_height: Annotated[float, Form(description="agent (and actor) height, m, [0.1, 100]")] = 2.0,
+        agent_radius: Annotated[float, Form(description="agent radius, m, [0, 50]")] = 0.6,
+        replace: Annotated[bool, Form(description="replace a level of that name when the job succeeds")] = False,
+        seed: Annotated[int, Form(ge=0, le=2**63 - 1, description="random seed of the precompute")] = 0,
+    ) -> JSONResponse:
+        """Submit a level for precompute (a job with progress). The files are checked now: a bad
+        upload answers 4xx with the reason and never becomes a job."""
+        try:
+            check_level_name(name)
+        except ValueError as exc:
+            raise HTTPException(status_code=422, detail=str(exc)) from None
+        if not all(math.isfinite(v) for v in (scale, agent_height, agent_radius)):
+            raise HTTPException(status_code=422, detail="scale, agent_height and agent_radius must be finite")
+        try:
+            TrackSettings(agent_height_m=agent_height, agent_radius_m=agent_radius)
+        except ValueError as exc:
+            raise HTTPException(status_code=422, detail=f"bad parameter: {exc}") from None
+        level_file, level_data = _mesh_file(level, "level", limit, scale)
+        files, navmesh_file = {level_file: level_data}, None
+        if navmesh is not None:
+            navmesh_file, navmesh_data = _mesh_file(navmesh, "navmesh", limit, scale)
+            files[navmesh_file] = navmesh_data
+        params = {"name": name, "level_file": level_file, "navmesh_file": navmesh_file, "scale": scale,
+                  "agent_height_m": agent_height, "agent_radius_m": agent_radius, "replace": replace,
+                  "seed": seed, "data_dir": str(registry.data_dir)}
+        with submit_lock:
+            if not replace and (registry.get(name) is not None or name in pending_names()):
+                raise HTTPException(status_code=409, detail=(
+                    f"level {name!r} exists or is being added; send replace=true to replace it"))
+            try:
+                job = runner.submit(KIND, params, files)
+            except QueueFull as exc:
+                raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
+                                    headers={"Retry-After": "10"}) from None
+        return JSONResponse({"id": job.id, "status": job.state.value, "name": name}, status_code=202,
+                            headers={"Location": f"{JOBS_PREFIX}/{job.id}"})
+
+    @router.get(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus,
+                responses={404: {"description": "no such level job"}})
+    def get_level_job(job_id: str) -> JSONResponse:
+        """State, progress 0..1, error and per-stage timings (ms) of a level job."""
+        try:
+            job = runner.get(job_id)
+        except JobNotFound:
+            job = None
+        if job is None or job.kind != KIND:
+            raise HTTPException(status_code=404, detail=f"no level job {job_id!r}")
+        return JSONResponse({**job.as_public(), "name": job.params["name"]})
+
+    @router.get(LEVELS_PREFIX, response_model=LevelList)
+    def list_levels() -> dict:
+        """The registered levels, by name."""
+        return {"levels": [_level_json(r) for r in registry.list()]}
+
+    @router.get(LEVELS_PREFIX + "/{name}", response_model=LevelOut,
+                responses={404: {"description": "no such level"}})
+    def get_level(name: str) -> dict:
+        """One registered level: scale, agent, counts and precompute stage timings."""
+        record = registry.get(name)
+        if record is None:
+            raise HTTPException(status_code=404, detail=f"no level named {name!r}")
+        return _level_json(record)
+
+    return router
+
+
+def install_level_routes(app: FastAPI, runner: JobRunner, data_dir: str | Path,
+                         settings: JobSettings = JobSettings()) -> None:
+    """Mount the level routes on `app` and the "level" kind on `runner` (the folder's one runner,
+    not yet started), with an upload limit of two files plus the form."""
+    runner.add_kind(level_job_kind(), preload="camdirector.server.level_routes")
+    app.include_router(build_level_router(runner, settings, Path(data_dir)))
+    app.add_middleware(UploadLimit, max_body_bytes=2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES,
+                       path_prefix=LEVELS_PREFIX)
