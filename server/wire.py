@@ -184,13 +184,13 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
         if number not in table:
             raise invalid(f"style.{name} {number} is not a known {name}")
         values[name] = table[number]
-    if values["rig"] == Rig.TORIC and (msg.shot_size or msg.movement):
-        raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
-                      "(with a level_id) or leave them unset")
     if current is not None and values["rig"] != current.rig:
         raise precondition(f"style.rig cannot change during a session ({current.rig.name} -> {values['rig'].name}): "
                            "create a new session with that rig (an UpdateStyle replaces the whole style, so a "
                            "TRACKS session repeats rig = RIG_TRACKS)")
+    if values["rig"] == Rig.TORIC and (msg.shot_size or msg.movement):
+        raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
+                      "(with a level_id) or leave them unset")
     try:
         style = Style(visibility=VisibilityMode.FRAMING_ONLY if mode == VisibilityMode.UNSPECIFIED else mode, **values)
     except ValueError as exc:
