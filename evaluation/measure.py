@@ -1,15 +1,31 @@
 """Measurement of a directed camera, independent of the rig that directed it.
 
-What the paper measures (section 6, "Comparisons are performed as a post-process"):
+What the paper measures (section 6, "Comparisons are performed as a post-process"), and what we
+add so that a rig that leaves the torus (REACTIVE) is measured on the same terms:
 
 - visibility, per frame: the fraction of target mesh vertices (every distinct vertex of every
-  target mesh, in the world frame at that frame) whose segment from the camera centre crosses no
-  scene object. Scene objects are every static and dynamic object of the scenario; targets do not
-  occlude themselves or each other (as in the server's own estimate). Pooled over the vertices of
-  all targets, so 1 is both targets fully visible and 0 both hidden. Ray casting with Embree
+  target mesh, in the world frame at that frame) that a viewer of the frame sees: the vertex is
+  inside the camera's view frustum (the frame at the scenario's lens: vertical field of view of
+  the pose, the lens's aspect, in front of the near plane `NEAR_PLANE_M`) and its segment from the
+  camera centre crosses no scene object. Pooled over the vertices of all targets, so 1 is both
+  targets fully visible and 0 both hidden.
+  The paper counts rays only ("1 ray per vertex on each target"): its three methods all stay on
+  the Toric surface, so the targets are always framed and the frustum test changes nothing for
+  them. REACTIVE pulls the camera toward A, where the ray test alone scores a close-up of a
+  shoulder as fully visible; the frustum test is what a viewer sees, rig-independent and the same
+  for every mode. The ray-only fraction is kept as `line_of_sight` (the paper's number).
+  A camera inside an object sees nothing: its rays start inside a closed mesh and hit its inner
+  faces (Embree culls no back faces).
+  Scene objects are every static and dynamic object of the scenario; targets do not occlude
+  themselves or each other (as in the server's own estimate). Ray casting with Embree
   (geometry.raycast.RayScene): the static objects in one scene built once; each dynamic object in
   its own scene, moved by its transform, and only queried when its bounding sphere comes within
   reach of a ray (a parked, not yet spawned object never is).
+- composition, per frame: how far each framed point lands from where the style puts it, in
+  normalised screen units (the frame is [-1, 1] on both axes): A's aim point from screen_a, and
+  with two targets B's aim point from screen_b (with one target B is the rig's gaze-room point,
+  which is not the scene's to measure). NaN where the point is behind the camera. And the camera's
+  distance to A's aim point, m: the shot size, which the toric rigs hold and REACTIVE shortens.
 - smoothness: camera speed |p[i] - p[i-1]| / (t[i] - t[i-1]) (m/s, at frame i >= 1) and the
   magnitude of the acceleration by central second differences,
   |v[i, i+1] - v[i-1, i]| / ((t[i+1] - t[i-1]) / 2) (m/s^2, at frames 1 .. n-2). An interval that
@@ -27,10 +43,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from camdirector.evaluation.scenario import Actor, Scenario, Timeline, transform_at
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.geometry.transforms import RigidTransform
+from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
+from camdirector.server.style import Style
 from camdirector.v1 import director_pb2 as pb
+
+# Vertices nearer the camera than this (along its view axis) are clipped, as a renderer clips at
+# its near plane: Cinemachine's default lens (LensSettings.Default, NearClipPlane = 0.1), m.
+NEAR_PLANE_M = 0.1
 
 
 @dataclass(eq=False)
@@ -85,11 +107,24 @@ def _bounding_sphere(mesh: TriMesh) -> tuple[np.ndarray, float]:
     return centre, float(np.linalg.norm(mesh.vertices - centre, axis=1).max())
 
 
+def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each point (n, 3) m lies in the view frustum of `pose`: at least
+    NEAR_PLANE_M in front of the camera along its view axis, and within the frame's edges
+    (|x| <= 1 and |y| <= 1 in normalised screen units) at the pose's vertical field of view and the
+    lens's aspect. lens.vertical_fov_deg is not used: the pose carries the field of view."""
+    frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
+    screen = project_to_screen(pose, frame_lens, points_world)                  # NaN behind the camera
+    z_camera = (np.atleast_2d(points_world) - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
+    with np.errstate(invalid="ignore"):
+        return (-z_camera >= NEAR_PLANE_M) & np.all(np.abs(screen) <= 1.0, axis=1)
+
+
 class VisibilityMeter:
     """Ray casts from a camera centre to every vertex of the targets, against the scenario's objects."""
 
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
+        self.lens = Lens(**scenario.lens)  # the server's defaults where the scenario gives none
         static = [a for a in scenario.objects if not a.dynamic]
         self.static = RayScene([TriMesh(RigidTransform(a.position, a.rotation, a.scale).apply(a.shape.mesh.vertices),
                                         a.shape.mesh.faces) for a in static])
@@ -105,13 +140,17 @@ class VisibilityMeter:
         self._sphere_radius_local = np.array([r for _, r in spheres])
         self.target_vertices_local = [np.unique(a.shape.mesh.vertices, axis=0) for a in scenario.targets]
 
-    def visible_fractions(self, camera_world: np.ndarray, timeline: Timeline, index: int) -> np.ndarray:
-        """(k,) fraction of each target's vertices seen from camera_world (3,) at timeline frame `index`."""
+    def visible_fractions(self, pose: CameraPose, timeline: Timeline, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per target (k,) at timeline frame `index`: the fraction of its vertices in the frame of
+        `pose` and unobstructed from its centre, and the fraction unobstructed (the paper's rays only)."""
         points = [transform_at(timeline, a, index).apply(v)
                   for a, v in zip(self.scenario.targets, self.target_vertices_local)]
-        counts = [len(p) for p in points]
-        hidden = self.hidden(camera_world, np.concatenate(points), timeline, index)
-        return np.array([1.0 - h.mean() for h in np.split(hidden, np.cumsum(counts)[:-1])])
+        counts = np.cumsum([len(p) for p in points])[:-1]
+        points_world = np.concatenate(points)
+        clear = ~self.hidden(pose.position_world, points_world, timeline, index)
+        seen = clear & in_frame(pose, self.lens, points_world)
+        return (np.array([s.mean() for s in np.split(seen, counts)]),
+                np.array([c.mean() for c in np.split(clear, counts)]))
 
     def hidden(self, camera_world: np.ndarray, points_world: np.ndarray, timeline: Timeline, index: int) -> np.ndarray:
         """(n,) bool: whether the segment from camera_world (3,) to each point (n, 3) is blocked."""
@@ -137,16 +176,53 @@ class VisibilityMeter:
         return hidden
 
 
+@dataclass(eq=False)
+class VisibilitySeries:
+    """Per-frame visibility of a track (n frames, k targets)."""
+
+    pooled: np.ndarray          # (n,) in frame and unobstructed, pooled over all target vertices
+    per_target: np.ndarray      # (n, k) the same per target
+    line_of_sight: np.ndarray   # (n,) unobstructed only, pooled (the paper's measure)
+
+
+def _poses(track: CameraTrack) -> list[CameraPose]:
+    return [CameraPose(p, q, float(f)) for p, q, f in zip(track.position, track.rotation, track.vertical_fov_deg)]
+
+
 def measure_visibility(scenario: Scenario, timeline: Timeline, track: CameraTrack,
-                       meter: VisibilityMeter | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Pooled visibility (n,) and per-target fractions (n, k) at every frame of the track."""
+                       meter: VisibilityMeter | None = None) -> VisibilitySeries:
+    """Visibility at every frame of the track (see the module docstring)."""
     meter = meter or VisibilityMeter(scenario)
     counts = np.array([len(v) for v in meter.target_vertices_local], dtype=np.float64)
     per_target = np.empty((len(track), len(scenario.targets)))
-    for i, (frame, camera) in enumerate(zip(track.frame, track.position)):
-        per_target[i] = meter.visible_fractions(camera, timeline, int(frame) - 1)
-    pooled = per_target @ counts / counts.sum() if len(track) else np.empty(0)
-    return pooled, per_target
+    clear = np.empty_like(per_target)
+    for i, (frame, pose) in enumerate(zip(track.frame, _poses(track))):
+        per_target[i], clear[i] = meter.visible_fractions(pose, timeline, int(frame) - 1)
+    pool = (lambda f: f @ counts / counts.sum()) if len(track) else (lambda f: np.empty(0))
+    return VisibilitySeries(pool(per_target), per_target, pool(clear))
+
+
+def measure_composition(scenario: Scenario, timeline: Timeline, track: CameraTrack) -> tuple[np.ndarray, np.ndarray]:
+    """(composition error (n,), distance to A (n,) m) at every frame of the track.
+
+    The error is the largest, over A (and B with two targets), of the distance in normalised
+    screen units between where the target's aim point lands and where the style puts it
+    (screen_a, screen_b; the server's defaults where the scenario's style gives none); NaN where
+    an aim point is behind the camera. The distance is from the camera centre to A's aim point."""
+    lens = Lens(**scenario.lens)
+    style = Style()
+    wanted = [scenario.style.get("screen_a", style.screen_a), scenario.style.get("screen_b", style.screen_b)]
+    index = track.frame.astype(np.int64) - 1
+    error = np.zeros(len(track))
+    distance = np.full(len(track), np.nan)
+    for k, (actor, screen) in enumerate(zip(scenario.targets, wanted)):
+        aims = np.array([transform_at(timeline, actor, int(i)).apply(actor.aim_offset[None, :])[0] for i in index])
+        landed = np.array([project_to_screen(pose, Lens(pose.vertical_fov_deg, lens.aspect), aim[None])[0]
+                           for pose, aim in zip(_poses(track), aims)])
+        error = np.maximum(error, np.linalg.norm(landed.reshape(-1, 2) - np.asarray(screen), axis=1))  # NaN stays NaN
+        if k == 0:
+            distance = np.linalg.norm(track.position - aims.reshape(-1, 3), axis=1)
+    return error, distance
 
 
 def camera_kinematics(time_s: np.ndarray, position: np.ndarray, cut: np.ndarray | None = None
@@ -188,8 +264,11 @@ class Measurement:
     """Per-frame series (n frames answered) and their summary."""
 
     track: CameraTrack
-    visibility: np.ndarray                    # (n,) pooled, [0, 1]
+    visibility: np.ndarray                    # (n,) pooled, in frame and unobstructed, [0, 1]
     visibility_per_target: dict[str, np.ndarray]  # target id -> (n,)
+    line_of_sight: np.ndarray                 # (n,) pooled, unobstructed only (the paper's rays), [0, 1]
+    composition_error: np.ndarray             # (n,) normalised screen units, see measure_composition
+    distance_to_a_m: np.ndarray               # (n,) m
     speed_m_s: np.ndarray                     # (n,)
     accel_m_s2: np.ndarray                    # (n,)
     target_position: dict[str, np.ndarray]    # target id -> (n, 3) m, at the answered frames
@@ -208,6 +287,9 @@ class Measurement:
             "simulated_s": float(track.time_s[-1] - track.time_s[0]) if len(track) else 0.0,
             "visibility": summarize(self.visibility),
             "visibility_per_target": {k: summarize(v) for k, v in self.visibility_per_target.items()},
+            "line_of_sight": summarize(self.line_of_sight),
+            "composition_error": summarize(self.composition_error),
+            "distance_to_a_m": summarize(self.distance_to_a_m),
             "speed_m_s": summarize(self.speed_m_s),
             "accel_m_s2": summarize(self.accel_m_s2),
             "cuts": self.cuts,
@@ -229,6 +311,9 @@ class Measurement:
             "time_s": _json_list(t.time_s),
             "visibility": _json_list(self.visibility),
             "visibility_per_target": {k: _json_list(v) for k, v in self.visibility_per_target.items()},
+            "line_of_sight": _json_list(self.line_of_sight),
+            "composition_error": _json_list(self.composition_error),
+            "distance_to_a_m": _json_list(self.distance_to_a_m),
             "rig_visibility": _json_list(t.rig_visibility),
             "speed_m_s": _json_list(self.speed_m_s),
             "accel_m_s2": _json_list(self.accel_m_s2),
@@ -262,13 +347,17 @@ def measure(scenario: Scenario, timeline: Timeline, track: CameraTrack,
     if len(track) and (track.frame.min() < 1 or track.frame.max() > len(timeline)):
         raise ValueError(f"track frames {track.frame.min()}..{track.frame.max()} are outside the timeline "
                          f"(1..{len(timeline)})")
-    pooled, per_target = measure_visibility(scenario, timeline, track, meter)
+    seen = measure_visibility(scenario, timeline, track, meter)
+    composition, distance = measure_composition(scenario, timeline, track)
     speed, accel = camera_kinematics(track.time_s, track.position, track.cut)
     index = track.frame - 1
     return Measurement(
         track=track,
-        visibility=pooled,
-        visibility_per_target={a.id: per_target[:, k] for k, a in enumerate(scenario.targets)},
+        visibility=seen.pooled,
+        visibility_per_target={a.id: seen.per_target[:, k] for k, a in enumerate(scenario.targets)},
+        line_of_sight=seen.line_of_sight,
+        composition_error=composition,
+        distance_to_a_m=distance,
         speed_m_s=speed,
         accel_m_s2=accel,
         target_position={a.id: timeline.position[a.id][index] for a in scenario.targets},

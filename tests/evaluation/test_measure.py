@@ -6,32 +6,33 @@ import math
 import numpy as np
 import pytest
 
-from camdirector.evaluation.measure import (CameraTrack, VisibilityMeter, camera_kinematics, measure,
-                                            measure_visibility, summarize)
+from camdirector.evaluation.measure import (NEAR_PLANE_M, CameraTrack, VisibilityMeter, camera_kinematics,
+                                            in_frame, measure, measure_visibility, summarize)
+from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.evaluation.scenario import FORMAT, parse_scenario
 from camdirector.v1 import director_pb2 as pb
 
 TARGET = {"id": "ball", "shape": {"sphere": {"radius": 0.5}}, "position": [0.0, 1.0, 0.0]}
 CAMERA = np.array([0.0, 1.0, -10.0])  # looking at the ball along +Z
+FACING_PLUS_Z = [0.0, 1.0, 0.0, 0.0]   # camera-to-world: half a turn about +Y, so the view (-Z) is +Z
 
 
-def scene(objects=(), targets=(TARGET,), duration_s=1.0, rate=10.0):
+def scene(objects=(), targets=(TARGET,), duration_s=1.0, rate=10.0, **extra):
     return parse_scenario({"format": FORMAT, "name": "probe", "duration_s": duration_s, "frame_rate_hz": rate,
-                           "targets": list(targets), "objects": list(objects)})
+                           "targets": list(targets), "objects": list(objects), **extra})
 
 
-def track(times, positions, cut=None) -> CameraTrack:
+def track(times, positions, cut=None, rotation=FACING_PLUS_Z) -> CameraTrack:
     n = len(times)
     return CameraTrack(frame=np.arange(1, n + 1), time_s=np.asarray(times, dtype=float),
-                       position=np.asarray(positions, dtype=float), rotation=np.tile([0, 0, 0, 1.0], (n, 1)),
+                       position=np.asarray(positions, dtype=float), rotation=np.tile(rotation, (n, 1)).astype(float),
                        vertical_fov_deg=np.full(n, 50.0), cut=np.zeros(n, bool) if cut is None else np.asarray(cut),
                        shot_id=np.ones(n, int), rig_visibility=np.ones(n), compute_ms=np.ones(n), stage_ms={})
 
 
 def visibility_from(camera, objects=(), targets=(TARGET,)) -> float:
     s = scene(objects, targets, duration_s=0.1)
-    pooled, _ = measure_visibility(s, s.timeline(), track([0.0], [camera]))
-    return float(pooled[0])
+    return float(measure_visibility(s, s.timeline(), track([0.0], [camera])).pooled[0])
 
 
 def box(object_id, size, position, **extra):
@@ -63,13 +64,56 @@ def test_visibility_pools_the_vertices_of_both_targets():
     aside = {"id": "aside", "shape": {"sphere": {"radius": 0.5}}, "position": [3.0, 1.0, 3.0]}
     wall_on_first = box("wall", [1.5, 1.5, 0.2], [0, 1, -1])  # hides the first ball only
     s = scene([wall_on_first], [TARGET, aside], duration_s=0.1)
-    pooled, per_target = measure_visibility(s, s.timeline(), track([0.0], [CAMERA]))
-    assert per_target[0].tolist() == [0.0, 1.0]
-    assert pooled[0] == pytest.approx(0.5)  # same mesh, same vertex count
+    seen = measure_visibility(s, s.timeline(), track([0.0], [CAMERA]))
+    assert seen.per_target[0].tolist() == [0.0, 1.0]
+    assert seen.pooled[0] == pytest.approx(0.5)  # same mesh, same vertex count
 
 
 def test_a_camera_inside_an_object_sees_nothing():
     assert visibility_from([0.0, 1.0, -5.0], [box("crate", [2, 2, 2], [0, 1, -5])]) == 0.0
+
+
+def test_the_frustum_test_on_hand_placed_points():
+    pose = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 90.0)  # looks down -Z, tan(half fov) = 1
+    lens = Lens(aspect=2.0)  # half-width 2 at depth 1
+    points = np.array([
+        [0.0, 0.0, -1.0],                  # centre of the frame
+        [1.9, 0.9, -1.0],                  # near the top right corner, inside
+        [2.1, 0.0, -1.0],                  # just right of the frame
+        [0.0, 1.1, -1.0],                  # just above it
+        [0.0, 0.0, 1.0],                   # behind the camera
+        [0.0, 0.0, -0.5 * NEAR_PLANE_M],   # in front, but nearer than the near plane
+    ])
+    assert in_frame(pose, lens, points).tolist() == [True, True, False, False, False, False]
+
+
+def test_a_target_out_of_frame_is_not_visible_though_nothing_hides_it():
+    s = scene(duration_s=0.1)
+    facing_away = measure_visibility(s, s.timeline(), track([0.0], [CAMERA], rotation=[0.0, 0.0, 0.0, 1.0]))
+    assert facing_away.pooled[0] == 0.0 and facing_away.line_of_sight[0] == 1.0
+    # turned by half the horizontal field of view (50 deg vertical, 16:9): the frame's edge runs
+    # through the ball's centre
+    yaw = math.pi + math.atan(math.tan(math.radians(25.0)) * 16 / 9)
+    half = measure_visibility(s, s.timeline(), track([0.0], [CAMERA], rotation=[0, math.sin(yaw / 2), 0, math.cos(yaw / 2)]))
+    assert 0.2 < half.pooled[0] < 0.8 and half.line_of_sight[0] == 1.0
+
+
+def test_a_close_up_crops_the_target():
+    tall = {"id": "pole", "shape": {"capsule": {"radius": 0.3, "height": 1.8}}, "position": [0.0, 1.0, 0.0]}
+    assert visibility_from(CAMERA, targets=[tall]) == 1.0
+    assert visibility_from([0.0, 1.0, -0.8], targets=[tall]) < 0.6  # half a metre from its surface
+
+
+def test_composition_error_and_distance():
+    s = scene(duration_s=0.1, style={"screen_a": [0.0, 0.0]})
+    m = measure(s, s.timeline(), track([0.0], [CAMERA]))
+    assert m.composition_error[0] == pytest.approx(0.0, abs=1e-9) and m.distance_to_a_m[0] == pytest.approx(10.0)
+    s = scene(duration_s=0.1)  # the default style puts A at (-1/3, 0)
+    m = measure(s, s.timeline(), track([0.0], [CAMERA]))
+    assert m.composition_error[0] == pytest.approx(1.0 / 3.0)
+    summary = m.summary()
+    assert summary["composition_error"]["median"] == pytest.approx(1.0 / 3.0)
+    assert summary["line_of_sight"]["median"] == 1.0 and summary["distance_to_a_m"]["median"] == pytest.approx(10.0)
 
 
 def test_dynamic_occluders_move_and_spawn():
@@ -78,11 +122,9 @@ def test_dynamic_occluders_move_and_spawn():
                motion={"position_keys": [[0.0, 10, 1, -5], [0.1, 0, 1, -5]]})
     late = box("late", [2, 2, 0.2], [0, 1, -3], dynamic=True, spawn_s=0.15)  # parked until 0.15 s
     s = scene([slab], duration_s=0.2)
-    pooled, _ = measure_visibility(s, s.timeline(), track([0.0, 0.1, 0.2], [CAMERA] * 3))
-    assert pooled.tolist() == [1.0, 0.0, 0.0]
+    assert measure_visibility(s, s.timeline(), track([0.0, 0.1, 0.2], [CAMERA] * 3)).pooled.tolist() == [1.0, 0.0, 0.0]
     s = scene([late], duration_s=0.2)
-    pooled, _ = measure_visibility(s, s.timeline(), track([0.0, 0.1, 0.2], [CAMERA] * 3))
-    assert pooled.tolist() == [1.0, 1.0, 0.0]
+    assert measure_visibility(s, s.timeline(), track([0.0, 0.1, 0.2], [CAMERA] * 3)).pooled.tolist() == [1.0, 1.0, 0.0]
 
 
 def test_a_moving_target_is_measured_where_it_is():
