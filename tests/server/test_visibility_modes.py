@@ -177,3 +177,89 @@ def test_anticipation_moves_before_the_occluder_arrives_and_raycast_only_after()
         first[mode] = (occluded[0] if occluded else len(updates), moved[0])
     assert first[pb.RAYCAST][1] >= first[pb.RAYCAST][0]          # reacts once occluded
     assert first[pb.ANTICIPATION][1] < first[pb.ANTICIPATION][0] - 5  # moves well before
+
+
+# -- REACTIVE: Cinemachine's Deoccluder, pull camera forward (server/reactive.py) ---------------
+
+def _deoccluder_scene(pieces):
+    """A RayScene of boxes (size, centre) that can move: each is a dynamic object "o<i>"."""
+    from camdirector.geometry import meshes
+    from camdirector.geometry.raycast import RayScene
+    from camdirector.geometry.transforms import RigidTransform
+
+    scene = RayScene([])
+    for i, (size, centre) in enumerate(pieces):
+        scene.add_dynamic(f"o{i}", meshes.box(size), RigidTransform(np.asarray(centre, dtype=float)))
+    return scene
+
+
+A_POINT = np.array([0.0, 1.5, 0.0])
+RIG_CAMERA = np.array([0.0, 1.5, -6.0])  # the rig wants the camera 6 m from A, along -Z
+LOOKING_AT_A = np.array([0.0, 1.0, 0.0, 0.0])  # half a turn about +Y: the view (-Z) points at A, A at the centre
+
+
+def test_reactive_defaults_are_cinemachines():
+    from camdirector.server.reactive import ReactiveSettings
+
+    s = ReactiveSettings()
+    # CinemachineDeoccluder: MinimumDistanceFromTarget 0.1, CameraRadius 0.1, Damping 0.2, DampingWhenOccluded 0
+    assert (s.minimum_distance_m, s.camera_radius_m, s.damping_s, s.damping_when_occluded_s) == (0.1, 0.1, 0.2, 0.0)
+
+
+def test_reactive_stops_a_camera_radius_in_front_of_the_obstacle_nearest_a():
+    from camdirector.server.reactive import Deoccluder
+
+    # two walls across the line, 2 m and 4 m from A: the one nearest A decides (its face at z = -1.95)
+    scene = _deoccluder_scene([((3.0, 3.0, 0.1), (0.0, 1.5, -2.0)), ((3.0, 3.0, 0.1), (0.0, 1.5, -4.0))])
+    c = Deoccluder(scene).clear_position(RIG_CAMERA, A_POINT)
+    assert np.allclose(c[:2], A_POINT[:2]) and c[2] == pytest.approx(-1.95 + 0.1, abs=1e-3)
+    assert np.allclose(Deoccluder(_deoccluder_scene([])).clear_position(RIG_CAMERA, A_POINT), RIG_CAMERA)
+
+
+def test_reactive_ignores_obstacles_within_the_minimum_distance_and_catches_near_misses():
+    from camdirector.server.reactive import Deoccluder, ReactiveSettings
+
+    hugging_a = _deoccluder_scene([((3.0, 3.0, 0.02), (0.0, 1.5, -0.05))])  # a slab 5 cm in front of A
+    assert np.allclose(Deoccluder(hugging_a).clear_position(RIG_CAMERA, A_POINT), RIG_CAMERA)
+    # a thin pole 7 cm beside the line: the ray misses it, the camera's sphere (radius 0.1) does not
+    pole = _deoccluder_scene([((0.04, 3.0, 0.04), (0.07, 1.5, -3.0))])
+    assert np.allclose(Deoccluder(pole, ReactiveSettings(camera_radius_m=0.0)).clear_position(RIG_CAMERA, A_POINT),
+                       RIG_CAMERA)
+    c = Deoccluder(pole).clear_position(RIG_CAMERA, A_POINT)
+    assert -3.0 < c[2] < -2.85
+
+
+def test_reactive_pulls_in_at_once_and_eases_back_with_cinemachines_damping():
+    from camdirector.geometry.transforms import RigidTransform
+    from camdirector.server.reactive import Deoccluder
+
+    scene = _deoccluder_scene([((3.0, 3.0, 0.1), (0.0, 1.5, -2.0))])
+    deoccluder = Deoccluder(scene)
+    rig = CameraPose(RIG_CAMERA, LOOKING_AT_A, 50.0)
+    dt = 1.0 / 60.0
+    pose, displaced = deoccluder.run(rig, A_POINT, 0.0, 0.0)
+    assert displaced and pose.position_world[2] == pytest.approx(-1.85, abs=1e-3)  # DampingWhenOccluded 0
+
+    def frame(k):
+        pose, displaced = deoccluder.run(rig, A_POINT, k * dt, dt)
+        # A stays where the rig framed it (the centre of the frame here) all the way
+        assert np.allclose(project_to_screen(pose, Lens(), A_POINT[None]), [[0.0, 0.0]], atol=1e-9)
+        return float(pose.position_world[2]), displaced
+
+    # the wall backs away from A by 0.1 m a frame: the correction shrinks, damped (Damping 0.2 s),
+    # so the camera lags behind the place it could have, on the safe side (nearer A)
+    z = [-1.85]
+    for k in range(1, 11):
+        scene.set_transform("o0", RigidTransform(np.array([0.0, 1.5, -2.0 - 0.1 * k])))
+        z.append(frame(k)[0])
+        assert z[-1] < z[-2] and z[-1] > -2.0 - 0.1 * k + 0.05 + 0.1
+    # then it is gone: back out to the rig's place, eased (the damping time itself decays), in a few frames
+    scene.set_transform("o0", RigidTransform(np.array([50.0, 1.5, -2.0])))
+    back = [frame(k) for k in range(11, 41)]
+    gap_before, gap_first = z[-1] - RIG_CAMERA[2], back[0][0] - RIG_CAMERA[2]
+    assert 0.2 * gap_before < gap_first < 0.9 * gap_before  # part of the way, not a jump
+    assert back[-1] == (-6.0, False)
+    # a pause in REACTIVE (another mode ran meanwhile): nothing to damp from, the correction is immediate
+    scene.set_transform("o0", RigidTransform(np.array([0.0, 1.5, -2.0])))
+    pose, _ = deoccluder.run(rig, A_POINT, 100.0, dt)
+    assert pose.position_world[2] == pytest.approx(-1.85, abs=1e-3)
