@@ -152,7 +152,7 @@ class Session:
                 self._searching = False
             self.motion.run(state)
             if mode == VisibilityMode.REACTIVE and state.pose is not None:
-                state.pose, pulled = self.deoccluder.run(state.pose, state.a_world, state.dt_s)
+                state.pose, pulled = self.deoccluder.run(state.pose, state.a_world, state.time_s, state.dt_s)
                 if pulled:
                     state.flags.append("pulled_in")
             return
