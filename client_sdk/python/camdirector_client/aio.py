@@ -307,12 +307,14 @@ class AsyncClient:
         style: pb.Style | Mapping[str, Any] | None = None,
         seed: int = 0,
         record: bool = False,
+        level_id: str = "",
     ) -> _SessionOpening:
         """Opens a session: ``session = await client.create_session(...)`` or
         ``async with client.create_session(...) as session``. Arguments as in the sync client.
         """
         msg = wire.create_session_request(
-            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record
+            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
+            level_id=level_id,
         )
         return _SessionOpening(self._open_session(msg))
 

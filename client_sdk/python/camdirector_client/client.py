@@ -284,10 +284,12 @@ class Client:
         style: pb.Style | Mapping[str, Any] | None = None,
         seed: int = 0,
         record: bool = False,
+        level_id: str = "",
     ) -> Session:
         """Opens a session from a ``CreateSessionRequest`` or from its fields as keywords."""
         msg = wire.create_session_request(
-            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record
+            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
+            level_id=level_id,
         )
         return Session(self._transport, self._transport.create_session(msg))
 

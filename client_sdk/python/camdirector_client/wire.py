@@ -106,13 +106,16 @@ def create_session_request(
     style: pb.Style | Mapping[str, Any] | None,
     seed: int,
     record: bool,
+    level_id: str = "",
 ) -> pb.CreateSessionRequest:
-    """``request`` as it is, or one built from the keywords; TypeError when given both."""
+    """``request`` as it is, or one built from the keywords; TypeError when given both.
+    ``level_id``: the level of a ``RIG_TRACKS`` session."""
     if request is not None:
-        if objects is not None or targets is not None or lens is not None or style is not None or seed or record:
+        if (objects is not None or targets is not None or lens is not None or style is not None or seed or record
+                or level_id):
             raise TypeError("pass either a CreateSessionRequest or keywords, not both")
         return request
-    msg = pb.CreateSessionRequest(seed=seed, record=record)
+    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id)
     if objects is not None:
         msg.objects.extend(objects)
     if targets is not None:
