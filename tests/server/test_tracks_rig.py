@@ -4,6 +4,10 @@ UpdateStyle changes the shot size live; every bad input is refused clearly while
 goes on; and on a real level (nav_test) the actor stays visible along a Recast route."""
 from __future__ import annotations
 
+import io
+import json
+import zipfile
+
 import grpc
 import numpy as np
 import pytest
@@ -11,7 +15,9 @@ import pytest
 from camdirector.geometry.meshes import TriMesh
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
+from camdirector.server.errors import DirectorError
 from camdirector.server.process import ServerProcess
+from camdirector.server.tracks_rig import LevelCache
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.server.test_bad_input import expect
@@ -166,3 +172,38 @@ def test_actor_visible_along_a_recast_route_on_nav_test(shared_data, tmp_path):
     check_directed(updates, route.position_world)
     visible = np.mean([u.visibility >= VISIBLE_FRACTION for u in updates])
     assert len(updates) > 300 and visible >= 0.9, visible
+
+
+def _rewrite_format_version(artifact_path, version: int) -> None:
+    """The artifact with its header's format_version replaced, as an older build would have written it."""
+    with zipfile.ZipFile(artifact_path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    header = json.loads(np.load(artifact_path)["header"].tobytes())
+    header["format_version"] = version
+    buffer = io.BytesIO()
+    np.save(buffer, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+    members["header.npy"] = buffer.getvalue()
+    with zipfile.ZipFile(artifact_path, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+
+
+def test_level_cache_loads_each_version_once(tmp_path):
+    level_file = tmp_path / "corridor.obj"
+    level_file.write_text(obj_text(corridor()))
+    registry = LevelRegistry(tmp_path)
+    registry.add_level("corridor", level_file)
+    cache = LevelCache(tmp_path)
+    first = cache.get("corridor")
+    assert cache.get("corridor") is first  # cached: not read again
+    registry.add_level("corridor", level_file, agent_height_m=1.8)  # a new version under the same name
+    second = cache.get("corridor")
+    assert second is not first and second.artifact.agent_height_m == 1.8 and first.artifact.agent_height_m == 2.0
+    with pytest.raises(DirectorError) as err:
+        cache.get("nothing")
+    assert err.value.code == grpc.StatusCode.NOT_FOUND and "'nothing'" in err.value.message
+    registry.add_level("old", level_file)
+    _rewrite_format_version(registry.get("old").artifact_path, 99)
+    with pytest.raises(DirectorError) as err:
+        LevelCache(tmp_path).get("old")
+    assert err.value.code == grpc.StatusCode.FAILED_PRECONDITION and "format version 99" in err.value.message
