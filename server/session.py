@@ -1,6 +1,7 @@
 """One director session: its scene, the latest transforms, and the camera rig's state.
 
-`Session.frame` runs the pipeline stages in the order pipeline.py writes down. The session never
+`Session.frame` runs the pipeline stages in the order pipeline.py writes down; a session created
+with the TRACKS rig runs tracks_rig.py after INGEST instead of the Toric stages. The session never
 raises inside the frame loop for a geometric difficulty: it degrades (holds the pose, frames one
 target) and flags it in the diagnostics.
 """
