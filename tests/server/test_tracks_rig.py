@@ -207,3 +207,18 @@ def test_level_cache_loads_each_version_once(tmp_path):
     with pytest.raises(DirectorError) as err:
         LevelCache(tmp_path).get("old")
     assert err.value.code == grpc.StatusCode.FAILED_PRECONDITION and "format version 99" in err.value.message
+
+
+def test_an_actor_away_from_every_track_waits_then_gets_its_first_shot(tracks_server):
+    raw = GrpcRaw(tracks_server.grpc)
+    far = np.array([500.0, 0.0, 500.0])
+    session_id = raw.call("CreateSession", tracks_request("corridor", far)).session_id
+    times, feet = corridor_walk(2.0)
+    feet = np.vstack([np.repeat(far[None], 10, axis=0), feet[10:]])  # away for 10 frames, then in the corridor
+    updates = raw.stream(actor_frames(session_id, times, feet))
+    raw.close()
+    check_directed(updates, feet)
+    assert all("tracks_no_track_near_actor" in u.diagnostics.flags and u.visibility == 0.0 for u in updates[:10])
+    assert updates[10].cut and "tracks_cut_first_shot" in updates[10].diagnostics.flags
+    assert not any("tracks_no_track_near_actor" in u.diagnostics.flags for u in updates[10:])
+    assert np.mean([u.visibility >= VISIBLE_FRACTION for u in updates[10:]]) >= 0.9
