@@ -41,6 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     add_track_parsers(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
+    p.add_argument("--data-dir", dest="data_dir", type=Path,
+                   help="where a TRACKS session's level is registered (default: the folder the recording is in)")
     p = sub.add_parser("demo", help="server plus demo client on a built-in scene; writes a video")
     p.add_argument("--out", type=Path, default=Path("out"))
     p.add_argument("--seconds", type=float, default=20.0)
@@ -60,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "replay":
         from camdirector.server.recording import replay
         try:
-            report = replay(args.file)
+            report = replay(args.file, data_dir=args.data_dir)
         except (OSError, ValueError) as exc:
             print(f"camdirector replay: {exc}", file=sys.stderr)
             return 2

@@ -98,12 +98,20 @@ def _comparable(update: pb.CameraUpdate) -> bytes:
                            stale=update.stale).SerializeToString(deterministic=True)
 
 
-def replay(path: Path, on_frame=None) -> ReplayReport:
-    """Runs a recording through a fresh in-process session and compares every answer."""
+def replay(path: Path, on_frame=None, data_dir: Path | None = None) -> ReplayReport:
+    """Runs a recording through a fresh in-process session and compares every answer.
+
+    data_dir: where the recording's TRACKS level is registered; by default the data directory the
+    recording lies in (`<data_dir>/recordings/<session>.cdrec`), else the server's default."""
     from camdirector.server.sessions import SessionTable
     from camdirector.server.settings import ServerSettings
 
-    table = SessionTable(ServerSettings(max_objects=1_000_000, max_triangles=100_000_000))
+    limits = dict(max_objects=1_000_000, max_triangles=100_000_000)
+    if data_dir is None and Path(path).resolve().parent.name == "recordings":
+        data_dir = Path(path).resolve().parent.parent
+    if data_dir is not None:
+        limits["data_dir"] = str(data_dir)
+    table = SessionTable(ServerSettings(**limits))
     session_id = "replay"
     report = ReplayReport(frames=0, identical=0, first_mismatch=None)
     replayed: pb.CameraUpdate | None = None

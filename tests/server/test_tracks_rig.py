@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from pathlib import Path
 
 import grpc
 import numpy as np
@@ -17,6 +18,7 @@ from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
 from camdirector.server.errors import DirectorError
 from camdirector.server.process import ServerProcess
+from camdirector.server.recording import replay
 from camdirector.server.tracks_rig import LevelCache
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
@@ -99,6 +101,19 @@ def test_static_cameras_only_pan_between_cuts(client):
         if not b.cut:
             assert (a.pose.position.x, a.pose.position.y, a.pose.position.z) == \
                    (b.pose.position.x, b.pose.position.y, b.pose.position.z)
+
+
+def test_a_tracks_recording_replays_bit_for_bit(tracks_server):
+    """The replay finds the level in the data directory the recording lies in."""
+    client = GrpcRaw(tracks_server.grpc)
+    response = client.call("CreateSession", tracks_request("corridor", START, record=True))
+    times, feet = corridor_walk(8.0)
+    updates = client.stream(actor_frames(response.session_id, times, feet))
+    assert sum(u.cut for u in updates) >= 1
+    client.call("CloseSession", pb.CloseSessionRequest(session_id=response.session_id))
+    client.close()
+    report = replay(Path(response.recording_path))
+    assert report.frames == len(times) and report.ok, report.as_dict()
 
 
 @pytest.fixture
