@@ -185,7 +185,8 @@ def plot_run(result: RunResult, path: Path | str) -> None:
     ax_vis, ax_speed, ax_top = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[1, 0]), fig.add_subplot(grid[:, 1])
     t = m.track.time_s
     cuts = t[1:][m.track.cut[1:]]
-    ax_vis.plot(t, m.visibility, lw=1.0, label="measured (all target vertices)")
+    ax_vis.plot(t, m.visibility, lw=1.0, label="measured: target vertices in frame and unobstructed")
+    ax_vis.plot(t, m.line_of_sight, lw=0.8, ls=":", label="unobstructed only (the paper's rays)")
     ax_vis.plot(t, m.track.rig_visibility, lw=0.8, ls="--", alpha=0.7, label="rig's own estimate")
     ax_vis.set_ylim(-0.05, 1.05)
     ax_vis.set_ylabel("visibility")
