@@ -7,7 +7,8 @@ PullCameraInFrontOfNearestObstacle, the damping in PostPipelineStageCallback), w
 documented defaults (ObstacleAvoidance.Default, MinimumDistanceFromTarget), each below:
 
 - One cast from the LookAt target (our A) toward the rig's camera, starting
-  minimum_distance_m from A, so obstacles nearer A than that are ignored; the first obstacle on
+  max(minimum_distance_m, camera_radius_m) from A, so obstacles nearer A than that are ignored
+  (Cinemachine starts its ray at the one and its sphere at the other); the first obstacle on
   the way is the one nearest A. With PullCameraForward and a camera radius the cast is a sphere
   cast of that radius, and the camera goes where the sphere first touches: in front of the
   obstacle, on the line to A.
@@ -40,7 +41,7 @@ import numpy as np
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.raycast import RayScene
-from camdirector.geometry.transforms import quat_to_matrix, matrix_to_quat
+from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 
 _EPSILON = 1e-4          # Cinemachine's UnityVectorExtensions.Epsilon
 _LOG_RESIDUAL = math.log(100.0)  # Cinemachine's Damper: a damping time reaches 99 % of the way
