@@ -19,8 +19,14 @@ coefficients keep their published meaning at any frame rate and skeleton size):
 * Friction. As printed, -c5 * floor(f)_{<1}^2 with f = |p_{t+1} - p_{t-1}| / (2 dt F_max) is 0 for
   a static camera and -c5 just below F_max: it would reward drifting at F_max, the opposite of
   "a friction term which counteracts forces and promotes static camera up to a certain force".
-  We use friction_t = -c5 * floor(1 - f^2)_{f<1}: -c5 for a static camera, rising to 0 at F_max
-  and 0 above, so a camera moves only when the gain in the other terms pays for leaving rest.
+  We use friction_t = c5 * min(f, 1)^2: 0 for a static camera (as printed), rising to c5 at F_max
+  and flat above, so a camera moves only when the gain in the other terms pays for leaving rest.
+  An earlier reading, -c5 * (1 - f^2) below F_max, behaves the same inside a shot (it differs by
+  the constant -c5 per frame) but made every internal term sum negative for a resting camera, so
+  a cut, which removes two terms, *raised* E_internal by 2 c5: the paper says the opposite,
+  "by splitting the shot into two different shots, we reduce the internal energy". With every
+  term >= 0, removing terms at a cut never raises E_internal. The constant also made E of a
+  static camera mostly friction (90% on the dance), which blurred Figure 10's E ratios.
 * Terms need both neighbours: a shot of n frames has n - 2 internal terms; there are no terms
   across a cut.
 """
@@ -71,31 +77,32 @@ class PathEnergy:
 
 
 def view_directions(path_m: np.ndarray, look_at_m: np.ndarray) -> np.ndarray:
-    """(n, 3) unit vectors from camera positions (n, 3) to look-at points (n, 3)."""
-    d = look_at_m - path_m
-    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    """(n, ..., 3) unit vectors from camera positions (n, ..., 3) to look-at points (n, 3)."""
+    d = look_at_m.reshape(look_at_m.shape[:1] + (1,) * (path_m.ndim - 2) + (3,)) - path_m
+    return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)
 
 
 def internal_terms(path_m: np.ndarray, look_at_m: np.ndarray, w: EnergyWeights) -> np.ndarray:
-    """(n - 2,) E_internal terms at the interior frames of one shot's path (n, 3)."""
+    """(n - 2, ...) E_internal terms at the interior frames of one shot's path (n, 3), or of
+    several paths at once (n, P, 3) sharing the look-at points (n, 3); each term is >= 0."""
     if len(path_m) < 3:
-        return np.zeros(0)
+        return np.zeros((0,) + path_m.shape[1:-1])
     u = view_directions(path_m, look_at_m)
     prev, cur, nxt = path_m[:-2], path_m[1:-1], path_m[2:]
-    acc = np.linalg.norm(prev - 2.0 * cur + nxt, axis=1) / (w.dt_s * w.max_speed_m_per_s)
-    span = np.linalg.norm(nxt - prev, axis=1) / (2.0 * w.dt_s)
+    acc = np.linalg.norm(prev - 2.0 * cur + nxt, axis=-1) / (w.dt_s * w.max_speed_m_per_s)
+    span = np.linalg.norm(nxt - prev, axis=-1) / (2.0 * w.dt_s)
     speed = span / w.max_speed_m_per_s
     u_prev, u_cur, u_next = u[:-2], u[1:-1], u[2:]
-    ang_acc = (np.linalg.norm(u_prev - 2.0 * u_cur + u_next, axis=1)
+    ang_acc = (np.linalg.norm(u_prev - 2.0 * u_cur + u_next, axis=-1)
                / (w.dt_s * w.max_angular_speed_rad_per_s))
-    ang = np.arccos(np.clip(np.einsum("ij,ij->i", u_prev, u_next), -1.0, 1.0))
+    ang = np.arccos(np.clip(np.einsum("...k,...k->...", u_prev, u_next), -1.0, 1.0))
     ang_speed = ang / (2.0 * w.dt_s * w.max_angular_speed_rad_per_s)
     friction = span / w.friction_speed_m_per_s
     return (w.c1 * acc ** 2
             + w.c2 * np.where(speed > 1.0, speed, 0.0) ** 4
             + w.c3 * ang_acc ** 2
             + w.c4 * np.where(ang_speed > 1.0, ang_speed, 0.0) ** 4
-            - w.c5 * np.where(friction < 1.0, 1.0 - friction ** 2, 0.0))
+            + w.c5 * np.minimum(friction, 1.0) ** 2)
 
 
 def path_energy(path_m: np.ndarray, shots: np.ndarray, track: CharacterTrack,

@@ -57,7 +57,8 @@ class OverviewSettings:
     max_angular_speed_deg_per_s: float = 20.0       # alpha_max, deg/s. (0, 3600]
     friction_speed_heights_per_s: float = 1.0 / 20.0  # F_max, heights/s. (0, 100]
     annealing_iterations_per_frame: float = 6.0     # proposals per analysis frame of a shot. [0.1, 1000]
-    initial_neighbourhood_heights: float = 1.5      # first neighbourhood size (L1), heights. (0, 50]
+    annealing_min_iterations: int = 3000            # proposals per shot at least, whatever its length. [1, 10^6]
+    initial_neighbourhood_heights: float = 3.5      # first neighbourhood size (L1), heights; the grid margin, so a rigid neighbour can cross it ("starts high"). (0, 50]
     final_neighbourhood_heights: float = 0.02       # discretisation threshold where annealing stops, heights. (0, initial)
     # --- shot splitting (shots.py, Section 4) ---
     split_quality: float = 0.70              # a shot whose saliency-weighted quality is below this is split. [0, 1]
@@ -108,6 +109,7 @@ class OverviewSettings:
             (0.0 < self.max_angular_speed_deg_per_s <= 3600.0, "max_angular_speed_deg_per_s must be in (0, 3600]"),
             (0.0 < self.friction_speed_heights_per_s <= 100.0, "friction_speed_heights_per_s must be in (0, 100]"),
             (0.1 <= self.annealing_iterations_per_frame <= 1000.0, "annealing_iterations_per_frame must be in [0.1, 1000]"),
+            (1 <= self.annealing_min_iterations <= 1_000_000, "annealing_min_iterations must be in [1, 10^6]"),
             (0.0 < self.initial_neighbourhood_heights <= 50.0, "initial_neighbourhood_heights must be in (0, 50]"),
             (0.0 < self.final_neighbourhood_heights < self.initial_neighbourhood_heights,
              "final_neighbourhood_heights must be in (0, initial_neighbourhood_heights)"),
