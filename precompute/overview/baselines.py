@@ -59,12 +59,17 @@ def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.
     values = space.values.reshape(n, -1)[:, ok].astype(np.float64)      # (T, K) V at the nodes
     external = -(pose_saliency @ values)
     v_sum = values.sum(axis=0)
-    internal = np.empty(len(ok))
+    # E = E_internal + E_external with E_internal >= 0: visiting nodes by increasing E_external,
+    # none after the first whose E_external alone reaches the lowest E found can do better.
+    total = np.full(len(ok), np.inf)
+    order = np.argsort(external, kind="stable")
     for first in range(0, len(ok), _NODES_PER_CHUNK):
-        chunk = nodes[ok[first:first + _NODES_PER_CHUNK]]
+        idx = order[first:first + _NODES_PER_CHUNK]
+        if external[idx[0]] >= total.min():
+            break
+        chunk = nodes[ok[idx]]
         paths = np.broadcast_to(chunk, (n,) + chunk.shape)
-        internal[first:first + len(chunk)] = internal_terms(paths, track.look_at_m, weights).sum(axis=0)
-    total = internal + external
+        total[idx] = internal_terms(paths, track.look_at_m, weights).sum(axis=0) + external[idx]
     i_e, i_x, i_v = int(np.argmin(total)), int(np.argmin(external)), int(np.argmax(v_sum))
     return BestStatic(e=float(total[i_e]), e_external=float(external[i_x]), v_sum=float(v_sum[i_v]),
                       e_position_m=nodes[ok[i_e]], e_external_position_m=nodes[ok[i_x]],
