@@ -287,6 +287,9 @@ class Measurement:
             "simulated_s": float(track.time_s[-1] - track.time_s[0]) if len(track) else 0.0,
             "visibility": summarize(self.visibility),
             "visibility_per_target": {k: summarize(v) for k, v in self.visibility_per_target.items()},
+            # share of frames where some target vertex is not seen: tells apart runs whose
+            # visibility is 1 in most frames (the median and quartiles then all read 1)
+            "occluded_share": float(np.mean(self.visibility < 1.0 - 1e-9)) if len(track) else None,
             "line_of_sight": summarize(self.line_of_sight),
             "composition_error": summarize(self.composition_error),
             "distance_to_a_m": summarize(self.distance_to_a_m),

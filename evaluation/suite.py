@@ -53,11 +53,12 @@ class SuiteResult:
         return {"runs": [r.as_dict(series=False) for r in self.results]}
 
     def table(self) -> str:
-        """Figures 12-13 as numbers: median [q1, q3] of visibility (and its mean, which tells runs
-        apart when most frames are fully visible), the mean of the paper's rays-only measure (los),
+        """Figures 12-13 as numbers: median [q1, q3] of visibility, its mean and the share of frames
+        not fully visible (occl), which tell runs apart when most frames are fully visible, the mean
+        of the paper's rays-only measure (los),
         the median composition error (comp, normalised screen units) and distance to A (m), speed
         and acceleration per run."""
-        head = (f"{'scene':<17} {'mode':<16} {'status':<6} {'visibility med [q1 q3]':<23} {'mean':>5} {'los':>5} "
+        head = (f"{'scene':<17} {'mode':<16} {'status':<6} {'visibility med [q1 q3]':<23} {'mean':>5} {'occl':>5} {'los':>5} "
                 f"{'comp':>5} {'distA':>5} {'speed m/s med [q1 q3]':<23} {'accel m/s2 med [q1 q3]':<24} {'cuts':>4} "
                 f"{'compute ms p50/p99':>19}")
         lines = [head, "-" * len(head)]
@@ -68,7 +69,7 @@ class SuiteResult:
                 continue
             s = r.measurement.summary()
             c = s["compute_ms"]
-            row += (f"{_quartiles(s['visibility']):<23} {_num(s['visibility']['mean']):>5} "
+            row += (f"{_quartiles(s['visibility']):<23} {_num(s['visibility']['mean']):>5} {_num(s['occluded_share']):>5} "
                     f"{_num(s['line_of_sight']['mean']):>5} {_num(s['composition_error']['median']):>5} "
                     f"{_num(s['distance_to_a_m']['median'], 1):>5} {_quartiles(s['speed_m_s']):<23} "
                     f"{_quartiles(s['accel_m_s2']):<24} {s['cuts']:>4} {_num(c['p50']):>9}/{_num(c['p99']):<9}")

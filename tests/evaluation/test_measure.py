@@ -116,6 +116,15 @@ def test_composition_error_and_distance():
     assert summary["line_of_sight"]["median"] == 1.0 and summary["distance_to_a_m"]["median"] == pytest.approx(10.0)
 
 
+def test_the_occluded_share_counts_frames_not_fully_visible():
+    # the ball walks behind a wall (1 m in front of its path, x from 4.5 to 7.5) in the last frames
+    walker = dict(TARGET, motion={"position_keys": [[0.0, 0, 1, 0], [1.0, 6, 1, 0]]})
+    s = scene([box("wall", [3, 4, 0.2], [6, 1, -1])], [walker], duration_s=1.0)
+    m = measure(s, s.timeline(), track(s.frame_times(), [CAMERA] * 11))
+    hidden = int(np.sum(m.visibility < 1.0))
+    assert 0 < hidden < 11 and m.summary()["occluded_share"] == pytest.approx(hidden / 11)
+
+
 def test_dynamic_occluders_move_and_spawn():
     # frame 1 (t=0): the slab is off to the side; frame 2 (t=0.1): between camera and ball
     slab = box("slab", [2, 2, 0.2], [10, 1, -5], dynamic=True,
