@@ -4,14 +4,16 @@
         writes DIR/result.json (the REST result schema), DIR/preview.mp4, DIR/contact-sheet.png;
         prints a one-line JSON summary (shots, metrics, timings in ms).
         Exit status: 0 ok, 2 bad arguments or a clip that cannot be read or planned.
-    camdirector eval-overview CLIP... [--skip-frames N ...] [--seed S] [--json OUT] [--plot DIR]
+    camdirector eval-overview CLIP... [--skip-frames N ...] [--seed S] [--param NAME=VALUE ...]
+                              [--json OUT] [--plot DIR]
         the paper's Figure 10 per clip: E, E_external and V (as -sum V) of our path, the static
         camera the annealing starts from (best on E_external) and the smoothed per-frame greedy
         path, each divided by |the best static camera's score on that attribute| (-1 = the best
         static camera, lower is better); the last columns say whether ours is strictly better
         than every static camera and than the greedy path on both E and E_external; --plot
-        writes DIR/<clip>.png, the Figure 9 quality per frame and shots. Prints a table.
-        Exit status: 0 ok, 2 bad input.
+        writes DIR/<clip>.png, the Figure 9 quality per frame and shots; --param sets one of
+        the paper's parameters the REST API accepts (e.g. split_quality=0.9), default: the
+        paper's. Prints a table. Exit status: 0 ok, 2 bad input.
 
 `add_parsers(subparsers)` registers both; each sets `handler` (call `args.handler(args)`).
 """
@@ -46,6 +48,8 @@ def add_parsers(subparsers) -> None:
                    help="leading frames to skip: one value for all clips or one per clip")
     p.add_argument("--scale", type=float, help="metres per file unit for every clip (default: inferred)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="one of the paper's parameters (the REST form fields), repeatable")
     p.add_argument("--json", type=Path, help="write the comparison here")
     p.add_argument("--plot", type=Path, help="folder for the Figure 9 plots, one PNG per clip")
     p.set_defaults(handler=run_eval_overview)
@@ -100,8 +104,22 @@ def run_eval_overview(args) -> int:
     from camdirector.precompute.overview.bvh import load_motion
     from camdirector.precompute.overview.evaluation import compare_with_baselines, plot_quality
     from camdirector.precompute.overview.pipeline import plan_overview
-    from camdirector.precompute.overview.settings import OverviewSettings
+    from camdirector.server.overview_routes import PAPER_PARAMETERS, settings_from_params
 
+    params = {}
+    for item in args.param:
+        name, sep, value = item.partition("=")
+        if not sep or name not in PAPER_PARAMETERS:
+            return _error("eval-overview", f"--param {item!r}: expected NAME=VALUE with NAME one of "
+                                           f"{', '.join(PAPER_PARAMETERS)}")
+        try:
+            params[name] = float(value)
+        except ValueError:
+            return _error("eval-overview", f"--param {item!r}: {value!r} is not a number")
+    try:
+        settings = settings_from_params(params)
+    except (TypeError, ValueError) as exc:
+        return _error("eval-overview", f"--param: {exc}")
     skips = args.skip_frames
     if len(skips) not in (1, len(args.clips)):
         return _error("eval-overview", "--skip-frames takes one value or one per clip")
@@ -112,7 +130,7 @@ def run_eval_overview(args) -> int:
     for path, skip in zip(args.clips, skips):
         try:
             clip = load_motion(path, scale_m_per_unit=args.scale, skip_frames=skip)
-            result = plan_overview(clip, OverviewSettings(), np.random.default_rng(args.seed))
+            result = plan_overview(clip, settings, np.random.default_rng(args.seed))
         except (OSError, ValueError) as exc:
             return _error("eval-overview", f"{path}: {exc}")
         cmp = compare_with_baselines(result)
