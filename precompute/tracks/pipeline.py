@@ -5,7 +5,7 @@ module each, each timed.
     Stage.NAVMESH      navmesh.py              the given navmesh, or one derived from the level
     Stage.SKELETON     skeleton.py             straight skeletons of the navmesh's floor layers
     Stage.SAMPLING     sampling.py             ray-cast camera samples orthogonal to the skeleton
-    Stage.CLUSTERING   ransac.py               sequential RANSAC lines -> camera tracks
+    Stage.CLUSTERING   ransac.py               sequential RANSAC lines -> camera tracks (+ static cameras)
     Stage.FILTERING    filters.py              the four filters
     Stage.GRAPH        graph.py                the camera navigation graph
     Stage.REMESHING    visibility_table.py     navmesh refined to a maximum triangle area
@@ -28,10 +28,10 @@ from camdirector.precompute.tracks.artifact import LevelArtifact
 from camdirector.precompute.tracks.filters import filter_tracks
 from camdirector.precompute.tracks.graph import build_graph
 from camdirector.precompute.tracks.navmesh import derive_navmesh
-from camdirector.precompute.tracks.ransac import cluster_tracks
+from camdirector.precompute.tracks.ransac import add_static_cameras, cluster_tracks
 from camdirector.precompute.tracks.sampling import sample_cameras
 from camdirector.precompute.tracks.settings import TrackSettings
-from camdirector.precompute.tracks.skeleton import extract_skeleton
+from camdirector.precompute.tracks.skeleton import extract_skeleton, segment_components
 from camdirector.precompute.tracks.visibility_table import build_visibility_table, remesh
 from camdirector.precompute.stage_clock import StageClock
 
@@ -78,6 +78,8 @@ def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Gene
     samples = sample_cameras(skeleton, scene, settings)
     done(Stage.SAMPLING)
     clustered = cluster_tracks(samples.position_world, samples.group, settings, rng)
+    clustered = add_static_cameras(clustered, samples.position_world, samples.origin_world,
+                                   segment_components(skeleton.segments_world)[samples.segment])
     done(Stage.CLUSTERING)
     tracks = filter_tracks(clustered, samples.position_world, scene, settings, rng)
     done(Stage.FILTERING)

@@ -30,6 +30,9 @@ class TrackSettings:
     # --- skeleton (skeleton.py, Section 4.1) ---
     layer_cell_m: float = 0.5                # grid cell that detects floors overlapping in projection, m. [0.05, 20]
     skeleton_simplify_m: float = 0.4         # navmesh outline simplification before the straight skeleton, m. [0, 10]
+    skeleton_min_hole_m2: float = 1.0        # outline holes smaller than this are filled (cracks, slivers, posts), m^2. [0, 1e4]
+    skeleton_prune_m: float = 1.5            # a dead-end branch is pruned unless it reaches this far past its junction's clearance, m. [0, 100]
+    skeleton_line_tolerance_m: float = 0.5   # skeleton chains are simplified (Douglas-Peucker) to this tolerance, m. [0, 10]
     # --- ray-cast sampling (sampling.py, Section 4.2) ---
     skeleton_spacing_m: float = 1.5          # distance between ray origins along the skeleton, m. [0.05, 50]
     eye_height_fraction: float = 0.9         # ray origins sit this far up the agent above the skeleton, fraction of agent height. [0, 2]
@@ -40,20 +43,19 @@ class TrackSettings:
     include_skeleton_points: bool = True     # the skeleton points themselves join the cloud (Figure 6)
     # --- sequential RANSAC (ransac.py, Section 4.3) ---
     ransac_threshold_m: float = 0.3          # consensus distance to the line (the paper's epsilon of CS), m. (0, 10]
-    ransac_hypotheses: int = 64              # line hypotheses per extracted line. [1, 10000]
-    ransac_window_m: float = 15.0            # each round draws and scores its lines among the points this close to a random seed, m. (0, 1e5]
-    ransac_score_subsample: int = 2048       # hypotheses are scored on at most this many window points, the winner on all. [16, 1e7]
+    ransac_hypotheses: int = 128             # line hypotheses per extracted line. [1, 10000]
+    ransac_score_subsample: int = 4096       # hypotheses are pre-scored on at most this many remaining points, the best 16 on all. [16, 1e7]
     ransac_pair_radius_m: float = 6.0        # the second point of a hypothesis is drawn within this of the first, m. (0, 1e4]
     ransac_min_inliers: int = 5              # sequential extraction stops when the best line has fewer inliers. [2, 1e6]
     ransac_max_lines: int = 4000             # at most this many lines (the paper's iteration count). [1, 1e6]
-    max_inlier_gap_m: float = 3.0            # a line's inliers are split into tracks where consecutive ones are further apart, m. (0, 1e4]
+    max_inlier_gap_m: float = 4.0            # a track's consensus set is its line's largest run of inliers with no gap over this, m. (0, 1e4]
     # --- filters (filters.py, Section 4.4) ---
     filter_sequence: tuple[int, ...] = (1, 2, 3, 4, 1, 3)  # filters applied in this order; #1 again after the #4 refit. each in {1, 2, 3, 4}
     collision_min_piece_m: float = 0.25      # filter #1 stops splitting colliding pieces below this length, m. (0, 100]
     min_support_points: int = 1              # filter #3 drops tracks with fewer supporting points. [1, 1e6]
     # --- camera navigation graph (graph.py, Section 4.6) ---
     intersection_tolerance_m: float = 0.3    # tracks passing closer than this intersect, m. [0, 10]
-    max_edge_length_m: float = 6.0           # edges are split until no longer than this (step ii), m. (0, 1e4]
+    max_edge_length_m: float = 10.0          # edges are split until no longer than this (step ii); under the director's 12 m candidate radius, so an edge passing the actor has a node near it, m. (0, 1e4]
     link_distance_m: float = 3.0             # nodes of different components closer than this and mutually visible are linked (step iii), m. [0, 1e4]
     # --- remeshing and dual visibility (visibility_table.py, Section 4.5) ---
     max_triangle_area_m2: float = 1.0        # navmesh triangles are split until no larger, m^2. (0, 1e6]
@@ -71,6 +73,9 @@ class TrackSettings:
             (0.0 <= self.min_region_area_m2 <= 1e6, "min_region_area_m2 must be in [0, 1e6]"),
             (0.05 <= self.layer_cell_m <= 20.0, "layer_cell_m must be in [0.05, 20]"),
             (0.0 <= self.skeleton_simplify_m <= 10.0, "skeleton_simplify_m must be in [0, 10]"),
+            (0.0 <= self.skeleton_min_hole_m2 <= 1e4, "skeleton_min_hole_m2 must be in [0, 1e4]"),
+            (0.0 <= self.skeleton_prune_m <= 100.0, "skeleton_prune_m must be in [0, 100]"),
+            (0.0 <= self.skeleton_line_tolerance_m <= 10.0, "skeleton_line_tolerance_m must be in [0, 10]"),
             (0.05 <= self.skeleton_spacing_m <= 50.0, "skeleton_spacing_m must be in [0.05, 50]"),
             (0.0 <= self.eye_height_fraction <= 2.0, "eye_height_fraction must be in [0, 2]"),
             (len(self.ray_elevations_deg) >= 1 and all(-90.0 <= e <= 90.0 for e in self.ray_elevations_deg),
@@ -80,7 +85,6 @@ class TrackSettings:
             (0.0 <= self.min_camera_distance_m <= 100.0, "min_camera_distance_m must be in [0, 100]"),
             (0.0 < self.ransac_threshold_m <= 10.0, "ransac_threshold_m must be in (0, 10]"),
             (1 <= self.ransac_hypotheses <= 10_000, "ransac_hypotheses must be in [1, 10000]"),
-            (0.0 < self.ransac_window_m <= 1e5, "ransac_window_m must be in (0, 1e5]"),
             (16 <= self.ransac_score_subsample <= 10_000_000, "ransac_score_subsample must be in [16, 1e7]"),
             (0.0 < self.ransac_pair_radius_m <= 1e4, "ransac_pair_radius_m must be in (0, 1e4]"),
             (2 <= self.ransac_min_inliers <= 1_000_000, "ransac_min_inliers must be in [2, 1e6]"),

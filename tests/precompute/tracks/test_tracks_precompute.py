@@ -3,11 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
+from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.filters import refit, remove_collisions, remove_empty, remove_hidden_points
+from camdirector.precompute.tracks.filters import (filter_tracks, refit, remove_collisions, remove_empty,
+                                                   remove_hidden_points)
 from camdirector.precompute.tracks.graph import build_graph, insert_tracks
 from camdirector.precompute.tracks.navmesh import derive_navmesh, triangle_areas
 from camdirector.precompute.tracks.pipeline import Stage, precompute_level
@@ -56,6 +59,54 @@ def test_corridor_gives_one_skeleton_line_and_tracks_parallel_to_it():
     assert np.all(np.abs(_directions(np.stack([tracks.start_world, tracks.end_world], 1)[long])[:, 0]) > 0.99)
 
 
+def test_corridor_gives_one_long_track_per_direction_not_many_short_ones():
+    level = corridor()
+    scene = RayScene([level])
+    skeleton = extract_skeleton(derive_navmesh(level, scene, SETTINGS), SETTINGS)
+    samples = sample_cameras(skeleton, scene, SETTINGS)
+    rng = np.random.default_rng(0)
+    tracks = filter_tracks(cluster_tracks(samples.position_world, samples.group, SETTINGS, rng),
+                           samples.position_world, scene, SETTINGS, rng)
+    groups = len(np.unique(samples.group))
+    assert len(tracks) <= groups, "at most one track per sampling direction and side"
+    assert np.all(tracks.length_m > 0.8 * skeleton.length_m), "each runs the corridor's length"
+    graph = build_graph(tracks, scene, SETTINGS)
+    pieces = int(np.ceil(tracks.length_m.max() / SETTINGS.max_edge_length_m))
+    assert len(graph.nodes_world) <= groups * (pieces + 1)
+
+
+def _corridor_with_niches(depth=1.5):
+    """The 30 x 4 corridor with three 2 m wide niches `depth` deep in its z = 0 wall."""
+    parts = [((0, -0.2, -depth - 0.1), (30, 0, 4)), ((0, 0, 4), (30, 3, 4.1))]
+    xs = [0, 6, 8, 14, 16, 22, 24, 30]
+    parts += [((a, 0, -0.1), (b, 3, 0)) for a, b in zip(xs[0::2], xs[1::2])]
+    for a, b in zip(xs[1::2], xs[2::2]):
+        parts += [((a, 0, -depth - 0.1), (b, 3, -depth)), ((a - 0.1, 0, -depth), (a, 3, 0)), ((b, 0, -depth), (b + 0.1, 3, 0))]
+    return boxes(*parts)
+
+
+def test_skeleton_prunes_spokes_into_wall_niches_but_keeps_the_corridor():
+    level = _corridor_with_niches(depth=1.0)
+    nav = derive_navmesh(level, RayScene([level]), SETTINGS)
+    skeleton = extract_skeleton(nav, SETTINGS)
+    length = np.linalg.norm(skeleton.segments_world[:, 1] - skeleton.segments_world[:, 0], axis=1)
+    assert length.max() > 0.8 * 30.0 and np.abs(_directions(skeleton.segments_world)[np.argmax(length), 0]) > 0.99
+    assert len(length) <= 3, "one line down the corridor, no branch into each niche"
+    unpruned = extract_skeleton(nav, TrackSettings(skeleton_prune_m=0.0, skeleton_line_tolerance_m=0.0))
+    assert len(unpruned.segments_world) > 3
+
+
+def test_skeleton_fills_sliver_holes():
+    room = shapely.Polygon([(0, 0), (20, 0), (20, 6), (0, 6)], [[(10, 2.95), (10.1, 2.95), (10.1, 3.05), (10, 3.05)]])
+    xz = np.asarray([np.asarray(t.exterior.coords)[:3] for t in shapely.constrained_delaunay_triangles(room).geoms])
+    vertices = np.insert(xz.reshape(-1, 2), 1, 0.0, axis=1)
+    nav = TriMesh(vertices, np.arange(len(vertices)).reshape(-1, 3).astype(np.int32))
+    skeleton = extract_skeleton(nav, SETTINGS)
+    assert len(skeleton.segments_world) == 1 and np.isclose(skeleton.length_m, 14.0, atol=0.1), "the room's centre line"
+    ringed = extract_skeleton(nav, TrackSettings(skeleton_min_hole_m2=0.0))
+    assert ringed.length_m > skeleton.length_m + 1.0, "kept, the 1 cm^2 hole rings the skeleton with a loop"
+
+
 def test_l_room_skeleton_has_both_arms():
     level = l_room()
     nav = derive_navmesh(level, RayScene([level]), SETTINGS)
@@ -86,6 +137,19 @@ def test_ransac_finds_two_synthetic_lines():
     assert np.all(tracks.point_track >= 0)
     assert set(tracks.point_track[:40]) != set(tracks.point_track[40:])
     assert np.allclose(sorted(tracks.length_m), [10, 10], atol=0.2)
+
+
+def test_ransac_takes_the_longest_track_first_and_does_not_bridge_gaps():
+    rng = np.random.default_rng(4)
+    along = np.stack([np.arange(0.0, 30.0, 1.5), np.zeros(20), np.zeros(20)], 1)           # a corridor's line
+    across = np.stack([np.full(5, 9.0), np.zeros(5), np.arange(-3.0, 4.5, 1.5)], 1)        # a short chord over it
+    far = np.stack([np.arange(50.0, 56.0, 1.5), np.zeros(4), np.zeros(4)], 1)              # collinear, 20 m further
+    pts = np.vstack([along, across, far]) + rng.normal(0, 0.02, (29, 3))
+    tracks = cluster_tracks(pts, np.zeros(len(pts), int), SETTINGS, np.random.default_rng(0))
+    longest = int(np.argmax(tracks.length_m))
+    assert np.isclose(tracks.length_m[longest], 28.5, atol=0.2), "the corridor's line is one track"
+    assert set(np.flatnonzero(tracks.point_track == longest)) >= set(range(20)) - {6}  # the chord crosses at x = 9
+    assert tracks.length_m.max() < 40.0, "no track bridges the 20 m gap to the far points"
 
 
 def test_filters_cut_collisions_drop_hidden_points_and_empty_tracks():

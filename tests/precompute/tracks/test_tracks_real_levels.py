@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from camdirector.precompute.tracks.compare import compare_with_prm
+from camdirector.precompute.tracks.compare import PRM_MAX_DENSITY_PER_M2, PRM_MAX_NODES, compare_with_prm
 from camdirector.precompute.tracks.level import load_level_mesh
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
@@ -31,6 +31,15 @@ def test_nav_test_precomputes_in_under_30_s(nav_test):
 
 
 @pytest.mark.shared_data
+def test_nav_test_tracks_are_long_not_many_short_ones(nav_test):
+    artifact, _, _ = nav_test
+    length = np.linalg.norm(artifact.track_end - artifact.track_start, axis=1)
+    assert np.median(length) > 5.0, "RANSAC lines run along the corridors"
+    skeleton_m = np.linalg.norm(artifact.skeleton_segments[:, 1] - artifact.skeleton_segments[:, 0], axis=1).sum()
+    assert len(length) < skeleton_m / 2.0, "a few tracks per metre of corridor, not one per sample"
+
+
+@pytest.mark.shared_data
 def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
     artifact, _, shared = nav_test
     queries = read_recast_queries(shared / "levels" / "recast" / "TestCases" / "nav_mesh_test.txt")
@@ -41,8 +50,19 @@ def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
     route = walk(polyline, 1.4, 30.0)
     result = compare_with_prm(artifact, route, np.random.default_rng(0), densities_per_m2=(0.1, 0.5),
                               plot_path=tmp_path / "top.png")
-    ours, prm_sparse, prm_dense = result["rows"]
-    assert ours["graph"] == "ours" and (tmp_path / "top.png").stat().st_size > 0
+    rows = {row["graph"]: row for row in result["rows"]}
+    ours, prm_sparse, prm_dense = rows["ours"], rows["prm_0.1"], rows["prm_0.5"]
+    assert (tmp_path / "top.png").stat().st_size > 0
+    verdict, tried = result["verdict"], result["coverage_search"]
+    reached = [t for t in tried if t["mean_coverage"] >= ours["coverage"]]
+    if verdict["prm_reached_our_coverage"]:
+        equal = rows["prm_equal_coverage"]
+        assert equal["mean_coverage"] >= ours["coverage"] and equal["density_per_m2"] == min(t["density_per_m2"] for t in reached)
+    else:
+        assert not reached and verdict["compared_with"] == tried[-1]
+        assert tried[-1]["mean_nodes"] > PRM_MAX_NODES or tried[-1]["density_per_m2"] > PRM_MAX_DENSITY_PER_M2 / 1.5
+    assert verdict["fewer_nodes"] == (ours["nodes"] < verdict["compared_with"]["mean_nodes"])
+    assert verdict["fewer_edges"] == (ours["edges"] < verdict["compared_with"]["mean_edges"])
     assert ours["visible_frames"] >= 0.9
     assert ours["target_update_ms_median"] < 2.0 * 3  # the 2 ms target is measured by eval-graph, not under test load
     assert prm_dense["nodes"] > prm_sparse["nodes"] and prm_dense["edges"] > prm_sparse["edges"]

@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.artifact import ArtifactVersionError, load_artifact, save_artifact
+from camdirector.precompute.tracks.artifact import FORMAT_VERSION, ArtifactVersionError, load_artifact, save_artifact
 from camdirector.precompute.tracks.continuity import (cut_angle_deg, keeps_line_of_action, screen_motion)
 from camdirector.precompute.tracks.cutting import draw_shot_duration_s
 from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement, ShotSize
@@ -43,7 +43,7 @@ def test_artifact_round_trip_and_version_refusal(tmp_path, corridor_artifact):
     with zipfile.ZipFile(tmp_path / "old.npz", "w") as z:
         for name, data in members.items():
             z.writestr(name, data)
-    with pytest.raises(ArtifactVersionError, match="version 99, this build reads version 1"):
+    with pytest.raises(ArtifactVersionError, match=f"version 99, this build reads version {FORMAT_VERSION}"):
         load_artifact(tmp_path / "old.npz")
 
 
