@@ -8,8 +8,9 @@ the uncertainty blur) and ANTICIPATION (A); REACTIVE (the usual game-engine de-o
 FRAMING_ONLY (no visibility at all) are the baselines of DESIGN.md. A mode the server answers
 UNIMPLEMENTED for is reported "unavailable" and the suite goes on.
 
-Figure 11 (map resolutions) needs a resolution setting on the wire, which the contract does not
-have; the stress scenes are run like the other scenes.
+Figure 11 (map resolutions) is one `camdirector eval --scenario F --visibility ANTICIPATION
+--map-resolution N` run per resolution (Style.map_resolution); the suite runs every scene, the
+stress scenes included, at the default 64x64.
 """
 from __future__ import annotations
 
