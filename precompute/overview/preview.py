@@ -102,18 +102,20 @@ def even_size(aspect: float, height_px: int) -> tuple[int, int]:
     return w, h
 
 
-def _bone_matrix(a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
-    """(4, 4) unit cylinder (radius 1, height 1 along +Y, centred) -> capsule body from a to b."""
+def _bone_matrices(a: np.ndarray, b: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """(B, 4, 4) unit cylinder (radius 1, height 1 along +Y, centred) -> capsule body from a (B, 3)
+    to b (B, 3) with radius (B,); bones of zero length get a zero axis (the caller skips them)."""
     axis = b - a
-    length = float(np.linalg.norm(axis))
-    y = axis / length
-    helper = np.array([1.0, 0.0, 0.0]) if abs(y[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    length = np.linalg.norm(axis, axis=1)
+    y = axis / np.maximum(length, 1e-12)[:, None]
+    helper = np.where((np.abs(y[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
     x = np.cross(y, helper)
-    x /= np.linalg.norm(x)
+    x /= np.maximum(np.linalg.norm(x, axis=1), 1e-12)[:, None]
     z = np.cross(x, y)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2] = x * radius, y * length, z * radius
-    m[:3, 3] = 0.5 * (a + b)
+    m = np.zeros((len(a), 4, 4))
+    m[:, :3, 0], m[:, :3, 1], m[:, :3, 2] = x * radius[:, None], axis, z * radius[:, None]
+    m[:, :3, 3] = 0.5 * (a + b)
+    m[:, 3, 3] = 1.0
     return m
 
 
@@ -164,9 +166,10 @@ class CharacterScene:
 
     def pose_character(self, frame: int) -> None:
         pts = self.clip.all_points_m[frame]
-        for i, (a, b) in enumerate(zip(self.parent, self.child)):
-            if np.linalg.norm(pts[b] - pts[a]) > 1e-6:
-                self.renderer.set_transform(f"bone{i}", _bone_matrix(pts[a], pts[b], self.radius[i]))
+        a, b = pts[self.parent], pts[self.child]
+        matrices = _bone_matrices(a, b, self.radius)
+        for i in np.flatnonzero(np.linalg.norm(b - a, axis=1) > 1e-6):
+            self.renderer.set_transform(f"bone{i}", matrices[i])
         for k, pt in enumerate(self.sphere_points):
             m = np.diag([self.sphere_radius[k]] * 3 + [1.0])
             m[:3, 3] = pts[pt]
