@@ -32,9 +32,9 @@ ALL = [pytest.param(n, marks=pytest.mark.shared_data) for n in SHORT + LONG]
 # each attribute by the best static camera on it; ours must be strictly lower on E and E_external.
 # Strict xfail: the day one of these passes the test fails, so the lists cannot go stale.
 _IN_PLACE = ("in place: a single shot's E is lowest at the static start (leaving rest costs up to "
-             "c5 per frame for a few hundredths of E_external per frame) and its quality Q = {q} "
-             "is above the paper's 70% split threshold, so no split is tried: ours equals the "
-             "best static camera")
+             "c5 = 2 per frame; even the per-frame best views would gain 0.01-0.15 of E_external "
+             "per frame) and its quality Q = {q} is above the paper's 70% split threshold, so no "
+             "split is tried: ours equals the best static camera")
 NOT_BEATING_BEST_STATIC = {
     "walk": "the best-view static camera pans past alpha_max as the walker passes; E's optimum "
             "stands back and gives up ~6% of E_external, and Q = 0.74 stays above the 70% split "
