@@ -38,7 +38,7 @@ from camdirector.precompute.tracks.level import LEVEL_SUFFIXES
 from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, check_level_name
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.server.jobs import JobError, JobKind, JobNotFound, JobRunner, JobSettings, JobState, QueueFull
-from camdirector.server.overview_routes import UploadLimit
+from camdirector.server.overview_routes import JobCreated, JobStatus, UploadLimit
 
 KIND = "level"
 LEVELS_PREFIX = "/v1/levels"
@@ -74,18 +74,15 @@ def level_job_kind() -> JobKind:
 
 # -- the routes -----------------------------------------------------------------------------
 
-class LevelJobCreated(BaseModel):
-    id: str = Field(description="job id; poll GET /v1/level-jobs/{id}")
-    status: str = Field(description="queued")
+class LevelJobCreated(JobCreated):
+    """Poll GET /v1/level-jobs/{id}."""
+
     name: str = Field(description="the level the job adds")
 
 
-class LevelJobStatus(BaseModel):
-    id: str
-    status: str = Field(description="queued | running | succeeded | failed | cancelled")
-    progress: float = Field(ge=0.0, le=1.0)
-    error: str | None = Field(default=None, description="why the job failed")
-    timings: dict[str, float] = Field(description="milliseconds per precompute stage and job phase (when finished)")
+class LevelJobStatus(JobStatus):
+    """timings: milliseconds per precompute stage and job phase."""
+
     name: str = Field(description="the level the job adds")
 
 

@@ -11,7 +11,8 @@ import pytest
 from camdirector.server.process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor, l_room
-from tests.server.tracks_sessions import actor_frames, check_directed, corridor_walk, obj_text, tracks_request
+from tests.server.tracks_sessions import (actor_frames, check_directed, corridor_walk, obj_text, tracks_canary,
+                                          tracks_request)
 from tests.server.wire_client import GrpcRaw
 
 UPLOAD_LIMIT = 16 * 1024
@@ -82,16 +83,8 @@ def test_a_level_added_over_rest_serves_a_session(level_server, corridor_level):
 @pytest.fixture
 def canary(level_server, corridor_level):
     """A TRACKS session on the REST-added level, streamed before and after each test."""
-    raw = GrpcRaw(level_server.grpc)
-    session_id = raw.call("CreateSession", tracks_request("corridor", START)).session_id
-    times, feet = corridor_walk(2.0)
-    before = raw.stream(actor_frames(session_id, times[:30], feet[:30]))
-    yield
-    after = raw.stream(actor_frames(session_id, times[30:], feet[30:], start_frame=31))
-    assert level_server.alive()
-    check_directed(before + after, feet)
-    raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
-    raw.close()
+    with tracks_canary(level_server, "corridor", START):
+        yield
 
 
 def artifact_files(srv) -> set[str]:

@@ -24,7 +24,8 @@ from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.server.test_bad_input import expect
 from tests.server.tracks_sessions import (VISIBLE_FRACTION, actor_frames, camera_distance_m, check_directed,
-                                          cli_add_level, corridor_walk, obj_text, tracks_request)
+                                          cli_add_level, corridor_walk, obj_text, tracks_canary,
+                                          tracks_request)
 from tests.server.wire_client import GrpcRaw, ZmqRaw, capsule_target, two_target_request, walk as toric_walk
 
 START = (2.0, 0.0, 2.0)  # the actor's feet in the corridor
@@ -119,17 +120,8 @@ def test_a_tracks_recording_replays_bit_for_bit(tracks_server):
 @pytest.fixture
 def canary(tracks_server):
     """A TRACKS session streamed before and after each bad-input test; it must not notice."""
-    raw = GrpcRaw(tracks_server.grpc)
-    session_id = raw.call("CreateSession", tracks_request("corridor", START)).session_id
-    times, feet = corridor_walk(2.0)
-    before = raw.stream(actor_frames(session_id, times[:30], feet[:30]))
-    yield
-    after = raw.stream(actor_frames(session_id, times[30:], feet[30:], start_frame=31))
-    assert tracks_server.alive()
-    check_directed(before + after, feet)
-    assert not any(u.stale for u in after)
-    raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
-    raw.close()
+    with tracks_canary(tracks_server, "corridor", START):
+        yield
 
 
 def test_bad_tracks_sessions_are_refused_clearly(client, canary):

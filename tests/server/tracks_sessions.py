@@ -2,6 +2,7 @@
 actor's frames, and where a pose puts the actor on screen."""
 from __future__ import annotations
 
+import contextlib
 import json
 import subprocess
 import sys
@@ -13,7 +14,7 @@ from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.v1 import director_pb2 as pb
-from tests.server.wire_client import capsule_target
+from tests.server.wire_client import GrpcRaw, capsule_target
 
 ROOT = Path(__file__).resolve().parents[2]
 AGENT_HEIGHT_M = 2.0       # the CLI's default; the director frames this far up the actor
@@ -90,3 +91,19 @@ def check_directed(updates: list[pb.CameraUpdate], feet_world) -> None:
     shots = [u.shot_id for u in updates]
     cuts = [u.cut for u in updates]
     assert all(b - a == int(c) for a, b, c in zip(shots, shots[1:], cuts[1:])), "shot_id must step on every cut"
+
+
+@contextlib.contextmanager
+def tracks_canary(server, level_id: str, start_world):
+    """A TRACKS session on level_id streamed before and after the body; it must not notice."""
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", tracks_request(level_id, start_world)).session_id
+    times, feet = corridor_walk(2.0)
+    before = raw.stream(actor_frames(session_id, times[:30], feet[:30]))
+    yield
+    after = raw.stream(actor_frames(session_id, times[30:], feet[30:], start_frame=31))
+    assert server.alive()
+    check_directed(before + after, feet)
+    assert not any(u.stale for u in after)
+    raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+    raw.close()
