@@ -22,7 +22,7 @@ import numpy as np
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.visibility_table import VisibilityTable
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 
 class ArtifactVersionError(ValueError):

@@ -7,13 +7,16 @@ module each, each timed.
     Stage.SAMPLING     sampling.py             ray-cast camera samples orthogonal to the skeleton
     Stage.CLUSTERING   ransac.py               sequential RANSAC lines -> camera tracks (+ static cameras)
     Stage.FILTERING    filters.py              the four filters
-    Stage.GRAPH        graph.py                the camera navigation graph
     Stage.REMESHING    visibility_table.py     navmesh refined to a maximum triangle area
+    Stage.REDUNDANCY   redundancy.py           tracks whose view others repeat are dropped (ours)
+    Stage.GRAPH        graph.py                the camera navigation graph
     Stage.VISIBILITY   visibility_table.py     the dual node/triangle visibility table
 
 Order (our deviation, documented): the paper estimates visibility before it builds the graph;
 we build the graph first so the table is kept for the graph's final nodes (edge splitting adds
-nodes the tracks did not have).
+nodes the tracks did not have). Between the filters and the graph, our redundancy stage (no
+counterpart in the paper) drops tracks whose view of the remeshed navmesh enough other tracks
+repeat, so it needs the remeshing first.
 """
 from __future__ import annotations
 
@@ -29,6 +32,7 @@ from camdirector.precompute.tracks.filters import filter_tracks
 from camdirector.precompute.tracks.graph import build_graph
 from camdirector.precompute.tracks.navmesh import derive_navmesh
 from camdirector.precompute.tracks.ransac import add_static_cameras, cluster_tracks
+from camdirector.precompute.tracks.redundancy import prune_redundant_tracks
 from camdirector.precompute.tracks.sampling import sample_cameras
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import extract_skeleton, segment_components
@@ -45,14 +49,15 @@ class Stage(Enum):
     SAMPLING = "raycast_sampling"
     CLUSTERING = "clustering"
     FILTERING = "filtering"
-    GRAPH = "graph"
     REMESHING = "remeshing"
+    REDUNDANCY = "redundancy"
+    GRAPH = "graph"
     VISIBILITY = "visibility"
 
 
 _PROGRESS_AFTER = {Stage.RAY_SCENE: 0.02, Stage.NAVMESH: 0.1, Stage.SKELETON: 0.25, Stage.SAMPLING: 0.27,
-                   Stage.CLUSTERING: 0.45, Stage.FILTERING: 0.5, Stage.GRAPH: 0.55, Stage.REMESHING: 0.6,
-                   Stage.VISIBILITY: 1.0}
+                   Stage.CLUSTERING: 0.45, Stage.FILTERING: 0.5, Stage.REMESHING: 0.55, Stage.REDUNDANCY: 0.65,
+                   Stage.GRAPH: 0.7, Stage.VISIBILITY: 1.0}
 
 
 def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Generator, *,
@@ -75,7 +80,7 @@ def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Gene
     done(Stage.NAVMESH)
     skeleton = extract_skeleton(nav, settings)
     done(Stage.SKELETON)
-    samples = sample_cameras(skeleton, scene, settings)
+    samples = sample_cameras(skeleton, scene, settings, nav)
     done(Stage.SAMPLING)
     clustered = cluster_tracks(samples.position_world, samples.group, settings, rng)
     clustered = add_static_cameras(clustered, samples.position_world, samples.origin_world,
@@ -83,15 +88,19 @@ def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Gene
     done(Stage.CLUSTERING)
     tracks = filter_tracks(clustered, samples.position_world, scene, settings, rng)
     done(Stage.FILTERING)
-    graph = build_graph(tracks, scene, settings)
-    done(Stage.GRAPH)
     refined = remesh(nav, skeleton, settings)
     done(Stage.REMESHING)
+    filtered_count = len(tracks)
+    tracks = prune_redundant_tracks(tracks, refined, scene, settings, rng)
+    done(Stage.REDUNDANCY)
+    graph = build_graph(tracks, scene, settings)
+    done(Stage.GRAPH)
     table = build_visibility_table(graph.nodes_world, refined, scene, settings, rng)
     done(Stage.VISIBILITY)
     counts = {"level_triangles": mesh.triangle_count, "navmesh_triangles": nav.triangle_count,
               "skeleton_layers": skeleton.layer_count, "skeleton_segments": len(skeleton.segments_world),
-              "camera_samples": len(samples), "clustered_tracks": len(clustered), "tracks": len(tracks),
+              "camera_samples": len(samples), "clustered_tracks": len(clustered), "filtered_tracks": filtered_count,
+              "tracks": len(tracks),
               "nodes": len(graph.nodes_world), "edges": len(graph.edges), "link_edges": int(graph.edge_is_link.sum()),
               "refined_triangles": refined.triangle_count, "visibility_pairs": int(len(table.node_triangles))}
     return LevelArtifact(

@@ -8,6 +8,15 @@ segment, on both sides, tilted up by each elevation (0 eye level, 30 high angle,
 before the hit; a ray that hits nothing places it at `d_max_m`. Samples closer than
 `min_camera_distance_m` to their origin are dropped (a wall right beside the skeleton). With
 `include_skeleton_points` the origins themselves join the cloud (Figure 6).
+
+Footprint (ours; the paper keeps every sample, Section 4.2): given the navmesh, samples farther
+than `footprint_margin_m` horizontally from it are dropped. On open terrain a ray leaving the
+level's edge hits nothing and places its camera at d_max off the edge, where RANSAC strings such
+samples into tracks beside the level that film it from outside. Test: the navmesh's edges are
+split to at most the margin, and a sample is kept when a vertex lies within the margin of it in
+(x, z): every sample over the navmesh is kept (a vertex is within margin / sqrt(3) of it), every
+sample farther than the margin from it is dropped. Height is not tested, so a sample above or
+below another floor counts as inside.
 """
 from __future__ import annotations
 
@@ -15,8 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scipy.spatial import cKDTree
+
+from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.navmesh import UP
+from camdirector.precompute.tracks.navmesh import UP, refine_triangles
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import Skeleton
 
@@ -61,8 +73,19 @@ def skeleton_origins(skeleton: Skeleton, spacing_m: float) -> tuple[np.ndarray, 
     return seg[index, 0] + frac[:, None] * delta[index], delta[index] / length[index, None], index
 
 
-def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings) -> CameraSamples:
-    """Camera samples of the module docstring; scene is the level (static geometry)."""
+def inside_footprint(points_world: np.ndarray, navmesh: TriMesh, margin_m: float) -> np.ndarray:
+    """(n,) bool: points (n, 3) within margin_m of the navmesh in (x, z) (module docstring)."""
+    if not len(points_world) or not navmesh.triangle_count:
+        return np.zeros(len(points_world), dtype=bool)
+    vertices, _ = refine_triangles(navmesh.vertices, navmesh.faces, max_edge_m=margin_m)
+    distance, _ = cKDTree(vertices[:, [0, 2]]).query(points_world[:, [0, 2]], distance_upper_bound=margin_m)
+    return np.isfinite(distance)
+
+
+def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings,
+                   navmesh: TriMesh | None = None) -> CameraSamples:
+    """Camera samples of the module docstring; scene is the level (static geometry); navmesh,
+    when given, bounds the samples to its footprint."""
     ground, tangent, segment = skeleton_origins(skeleton, settings.skeleton_spacing_m)
     origin = ground + settings.eye_height_fraction * settings.agent_height_m * UP
     side = np.cross(tangent, UP)
@@ -86,8 +109,11 @@ def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings)
     side_of = np.concatenate(sides)
     hit_t = scene.first_hit(origin[owner], ray)
     distance = np.where(np.isfinite(hit_t), np.minimum(hit_t - settings.epsilon_m, settings.d_max_m), settings.d_max_m)
+    position = origin[owner] + distance[:, None] * ray
     keep = distance >= max(settings.min_camera_distance_m, 1e-6)
-    position = origin[owner[keep]] + distance[keep, None] * ray[keep]
+    if navmesh is not None:
+        keep &= inside_footprint(position, navmesh, settings.footprint_margin_m)
+    position = position[keep]
     parts = [(position, origin[owner[keep]], ray[keep], kind[keep], side_of[keep], segment[owner[keep]])]
     if settings.include_skeleton_points:
         parts.append((origin, origin, np.zeros_like(origin), np.full(len(origin), SKELETON_DIRECTION),

@@ -41,6 +41,7 @@ class TrackSettings:
     d_max_m: float = 10.0                    # a ray that hits nothing places its camera this far out (the paper's d_max), m. (0, 1000]
     min_camera_distance_m: float = 1.0       # samples nearer than this to their skeleton origin are dropped, m. [0, 100]
     include_skeleton_points: bool = True     # the skeleton points themselves join the cloud (Figure 6)
+    footprint_margin_m: float = 3.0          # samples farther than this from the navmesh in (x, z) are dropped (ours), m. (0, 1e4]
     # --- sequential RANSAC (ransac.py, Section 4.3) ---
     ransac_threshold_m: float = 0.3          # consensus distance to the line (the paper's epsilon of CS), m. (0, 10]
     ransac_hypotheses: int = 128             # line hypotheses per extracted line. [1, 10000]
@@ -53,6 +54,9 @@ class TrackSettings:
     filter_sequence: tuple[int, ...] = (1, 2, 3, 4, 1, 3)  # filters applied in this order; #1 again after the #4 refit. each in {1, 2, 3, 4}
     collision_min_piece_m: float = 0.25      # filter #1 stops splitting colliding pieces below this length, m. (0, 100]
     min_support_points: int = 1              # filter #3 drops tracks with fewer supporting points. [1, 1e6]
+    # --- redundant tracks (redundancy.py, ours: the paper keeps every track) ---
+    redundancy_k: int = 2                    # a track is dropped when each triangle it sees is seen by this many other kept tracks; 0 keeps all. [0, 1000]
+    redundancy_range_m: float = 9.0          # triangles this close to a track point are seen near it; ~ an extreme long shot (8.6 m), m. (0, 1e4]
     # --- camera navigation graph (graph.py, Section 4.6) ---
     intersection_tolerance_m: float = 0.3    # tracks passing closer than this intersect, m. [0, 10]
     max_edge_length_m: float = 10.0          # edges are split until no longer than this (step ii); under the director's 12 m candidate radius, so an edge passing the actor has a node near it, m. (0, 1e4]
@@ -82,6 +86,7 @@ class TrackSettings:
              "ray_elevations_deg must hold at least one angle in [-90, 90]"),
             (0.0 <= self.epsilon_m <= 10.0, "epsilon_m must be in [0, 10]"),
             (0.0 < self.d_max_m <= 1000.0, "d_max_m must be in (0, 1000]"),
+            (0.0 < self.footprint_margin_m <= 1e4, "footprint_margin_m must be in (0, 1e4]"),
             (0.0 <= self.min_camera_distance_m <= 100.0, "min_camera_distance_m must be in [0, 100]"),
             (0.0 < self.ransac_threshold_m <= 10.0, "ransac_threshold_m must be in (0, 10]"),
             (1 <= self.ransac_hypotheses <= 10_000, "ransac_hypotheses must be in [1, 10000]"),
@@ -93,6 +98,8 @@ class TrackSettings:
             (all(f in (1, 2, 3, 4) for f in self.filter_sequence), "filter_sequence holds filter numbers 1 to 4"),
             (0.0 < self.collision_min_piece_m <= 100.0, "collision_min_piece_m must be in (0, 100]"),
             (1 <= self.min_support_points <= 1_000_000, "min_support_points must be in [1, 1e6]"),
+            (0 <= self.redundancy_k <= 1000, "redundancy_k must be in [0, 1000]"),
+            (0.0 < self.redundancy_range_m <= 1e4, "redundancy_range_m must be in (0, 1e4]"),
             (0.0 <= self.intersection_tolerance_m <= 10.0, "intersection_tolerance_m must be in [0, 10]"),
             (0.0 < self.max_edge_length_m <= 1e4, "max_edge_length_m must be in (0, 1e4]"),
             (0.0 <= self.link_distance_m <= 1e4, "link_distance_m must be in [0, 1e4]"),

@@ -34,3 +34,9 @@ def l_room() -> TriMesh:
 def two_floors() -> TriMesh:
     """A 20 x 8 ground floor and, 4 m above, a 20 x 4 gallery over half of it."""
     return boxes(((0, -0.2, 0), (20, 0, 8)), ((0, 3.8, 4), (20, 4, 8)))
+
+
+def two_open_floors() -> TriMesh:
+    """Two wall-less 20 x 8 and 6 x 6 slabs (top at y=0), 22 m apart along z: further than the
+    visibility range, so nothing above one sees the other."""
+    return boxes(((0, -0.2, 0), (20, 0, 8)), ((0, -0.2, 30), (6, 0, 36)))
