@@ -56,7 +56,7 @@ class TrackSettings:
     min_support_points: int = 1              # filter #3 drops tracks with fewer supporting points. [1, 1e6]
     # --- redundant tracks (redundancy.py, ours: the paper keeps every track) ---
     redundancy_k: int = 2                    # a track is dropped when each triangle it sees is seen by this many other kept tracks; 0 keeps all. [0, 1000]
-    redundancy_range_m: float = 9.0          # triangles this close to a track point are seen near it; ~ an extreme long shot (8.6 m), m. (0, 1e4]
+    redundancy_range_m: float = 5.0          # triangles this close to a track point are seen near it; inside the long shot's framing tolerance (5.4 m), m. (0, 1e4]
     # --- camera navigation graph (graph.py, Section 4.6) ---
     intersection_tolerance_m: float = 0.3    # tracks passing closer than this intersect, m. [0, 10]
     max_edge_length_m: float = 10.0          # edges are split until no longer than this (step ii); under the director's 12 m candidate radius, so an edge passing the actor has a node near it, m. (0, 1e4]

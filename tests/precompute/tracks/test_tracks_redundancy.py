@@ -14,7 +14,7 @@ from camdirector.precompute.tracks.visibility_table import build_visibility_tabl
 
 from .tiny_levels import two_open_floors
 
-SETTINGS = TrackSettings()
+SETTINGS = TrackSettings(redundancy_range_m=9.0)  # the big floor is 8 m wide: every track there sees all of it near
 EYE_M = 1.8
 
 
@@ -70,7 +70,7 @@ def test_pruning_keeps_what_the_tracks_saw():
 def test_redundancy_k_zero_keeps_every_track():
     scene, _, refined = _level()
     tracks = _tracks()
-    kept = prune_redundant_tracks(tracks, refined, scene, TrackSettings(redundancy_k=0), np.random.default_rng(0))
+    kept = prune_redundant_tracks(tracks, refined, scene, TrackSettings(redundancy_k=0, redundancy_range_m=9.0), np.random.default_rng(0))
     assert len(kept) == len(tracks)
 
 
