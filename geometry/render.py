@@ -240,17 +240,26 @@ class OffscreenRenderer:
 
     def set_transform(self, mesh_id: str, matrix_local_to_world: np.ndarray) -> None:
         """Place a mesh: matrix_local_to_world (4, 4) float, e.g. `RigidTransform.matrix()`."""
-        mesh = self._meshes.get(mesh_id)
-        if mesh is None:
-            raise KeyError(f"unknown mesh id {mesh_id!r}")
-        m = np.asarray(matrix_local_to_world, dtype=np.float64)
-        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-            raise ValueError("matrix_local_to_world must be a finite (4, 4) matrix")
-        if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        self.set_transforms([mesh_id], np.asarray(matrix_local_to_world, dtype=np.float64)[None])
+
+    def set_transforms(self, mesh_ids: list[str], matrices_local_to_world: np.ndarray) -> None:
+        """Place several meshes at once: matrices_local_to_world (k, 4, 4) float, one per id.
+        Checked and inverted in one numpy pass: an animated character sets dozens per frame."""
+        meshes = [self._meshes.get(mesh_id) for mesh_id in mesh_ids]
+        if None in meshes:
+            raise KeyError(f"unknown mesh id {mesh_ids[meshes.index(None)]!r}")
+        m = np.asarray(matrices_local_to_world, dtype=np.float64)
+        if m.shape != (len(meshes), 4, 4) or not np.all(np.isfinite(m)):
+            raise ValueError("matrix_local_to_world must be a finite (4, 4) matrix per mesh")
+        if np.any(np.abs(np.linalg.det(m[:, :3, :3])) < 1e-12):
             raise ValueError("matrix_local_to_world is singular (zero scale?)")
-        mesh.model_bytes = _gl_matrix(m)
-        # Inverse transpose keeps normals perpendicular under non-uniform scale.
-        mesh.normal_bytes = _gl_matrix(np.linalg.inv(m[:3, :3]).T)
+        # GLSL reads matrices column-major; numpy is row-major, so send the transposes.
+        model = np.ascontiguousarray(m.transpose(0, 2, 1), dtype="f4")
+        # Inverse transpose keeps normals perpendicular under non-uniform scale (sent transposed: the inverse).
+        normal = np.ascontiguousarray(np.linalg.inv(m[:, :3, :3]), dtype="f4")
+        for mesh, model_k, normal_k in zip(meshes, model, normal):
+            mesh.model_bytes = model_k.tobytes()
+            mesh.normal_bytes = normal_k.tobytes()
 
     def mesh_ids(self) -> list[str]:
         """Ids of the meshes added so far, in insertion order."""

@@ -13,6 +13,7 @@ faster than `max_fps` are shown every k-th frame (CMU's 120 fps at 30 fps).
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -151,10 +152,12 @@ class CharacterScene:
         self.renderer = OffscreenRenderer(width_px, height_px, fog_start_m=30.0, fog_end_m=120.0)
         cyl = meshes.cylinder(1.0, 1.0, sections=12)
         sph = meshes.sphere(1.0)
-        for i, p in enumerate(self.part):
-            self.renderer.add_mesh(f"bone{i}", cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)])
-        for k, p in enumerate(self.sphere_part):
-            self.renderer.add_mesh(f"joint{k}", sph.vertices, sph.faces, PART_RGB[BodyPart(p)])
+        self.bone_ids = np.array([f"bone{i}" for i in range(len(self.part))], dtype=object)
+        self.joint_ids = [f"joint{k}" for k in range(len(self.sphere_part))]
+        for mesh_id, p in zip(self.bone_ids, self.part):
+            self.renderer.add_mesh(mesh_id, cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)])
+        for mesh_id, p in zip(self.joint_ids, self.sphere_part):
+            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(p)])
         centre = body.reshape(-1, 3).mean(axis=0)
         extent = float(np.ptp(body[:, :, [0, 2]].reshape(-1, 2), axis=0).max()) + 40.0
         ground = meshes.box((extent, 0.02, extent))
@@ -168,12 +171,12 @@ class CharacterScene:
         pts = self.clip.all_points_m[frame]
         a, b = pts[self.parent], pts[self.child]
         matrices = _bone_matrices(a, b, self.radius)
-        for i in np.flatnonzero(np.linalg.norm(b - a, axis=1) > 1e-6):
-            self.renderer.set_transform(f"bone{i}", matrices[i])
-        for k, pt in enumerate(self.sphere_points):
-            m = np.diag([self.sphere_radius[k]] * 3 + [1.0])
-            m[:3, 3] = pts[pt]
-            self.renderer.set_transform(f"joint{k}", m)
+        placed = np.flatnonzero(np.linalg.norm(b - a, axis=1) > 1e-6)  # a zero-length bone keeps its last place
+        joints = self.sphere_radius[:, None, None] * np.eye(4)
+        joints[:, 3, 3] = 1.0
+        joints[:, :3, 3] = pts[self.sphere_points]
+        self.renderer.set_transforms(self.bone_ids[placed].tolist() + self.joint_ids,
+                                     np.concatenate([matrices[placed], joints]))
 
     def render(self, frame: int, camera: PreviewCamera) -> np.ndarray:
         """(h, w, 3) uint8 image of clip frame `frame` through `camera`."""
@@ -193,6 +196,7 @@ class CharacterScene:
         self.release()
 
 
+@functools.lru_cache(maxsize=8)
 def _font(size: int):
     try:
         return ImageFont.load_default(size=size)

@@ -96,6 +96,28 @@ def test_bad_meshes_and_ids_are_refused(renderer):
         renderer.set_transform("missing", np.eye(4))
 
 
+def test_batched_transforms_draw_what_single_ones_draw():
+    """set_transforms places each mesh exactly as set_transform does, scaled ones included."""
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    a = RigidTransform(position_world=np.array([-0.8, 0.0, -4.0])).matrix()
+    b = np.diag([0.5, 2.0, 1.0, 1.0])
+    b[:3, 3] = (0.9, 0.2, -5.0)
+    with OffscreenRenderer(WIDTH_PX, HEIGHT_PX) as one, OffscreenRenderer(WIDTH_PX, HEIGHT_PX) as many:
+        for r in (one, many):
+            r.add_mesh("a", box.vertices, box.faces, (1.0, 0.0, 0.0))
+            r.add_mesh("b", box.vertices, box.faces, (0.0, 0.0, 1.0))
+        one.set_transform("a", a)
+        one.set_transform("b", b)
+        many.set_transforms(["a", "b"], np.stack([a, b]))
+        assert np.array_equal(one.render(AT_ORIGIN, LENS), many.render(AT_ORIGIN, LENS))
+        with pytest.raises(KeyError):
+            many.set_transforms(["a", "missing"], np.stack([a, b]))
+        with pytest.raises(ValueError):
+            many.set_transforms(["a", "b"], np.stack([a, np.zeros((4, 4))]))
+        with pytest.raises(ValueError):
+            many.set_transforms(["a", "b"], a[None])
+
+
 def test_video_writer_writes_a_readable_mp4(tmp_path):
     path = tmp_path / "clip.mp4"
     frame_count = 12
