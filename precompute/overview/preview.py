@@ -155,14 +155,16 @@ class CharacterScene:
         self.bone_ids = np.array([f"bone{i}" for i in range(len(self.part))], dtype=object)
         self.joint_ids = [f"joint{k}" for k in range(len(self.sphere_part))]
         for mesh_id, p in zip(self.bone_ids, self.part):
-            self.renderer.add_mesh(mesh_id, cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)])
+            self.renderer.add_mesh(mesh_id, cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)],
+                                   closed=True)
         for mesh_id, p in zip(self.joint_ids, self.sphere_part):
-            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(p)])
+            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(p)],
+                                   closed=True)
         centre = body.reshape(-1, 3).mean(axis=0)
         extent = float(np.ptp(body[:, :, [0, 2]].reshape(-1, 2), axis=0).max()) + 40.0
         ground = meshes.box((extent, 0.02, extent))
         self.renderer.add_mesh("ground", ground.vertices, ground.faces, (0.78, 0.78, 0.74),
-                               checker_m=0.5)
+                               checker_m=0.5, closed=True)
         g = np.eye(4)
         g[:3, 3] = (centre[0], self.floor_y_m - 0.01, centre[2])
         self.renderer.set_transform("ground", g)
@@ -216,12 +218,19 @@ def mark_frame(image: np.ndarray, shot: int, shot_count: int, time_s: float, fla
         c = np.array(shot_rgb(shot), dtype=np.uint8)
         out[:border_px], out[-border_px:] = c, c
         out[:, :border_px], out[:, -border_px:] = c, c
-    pil = Image.fromarray(out)
-    draw = ImageDraw.Draw(pil)
-    size = max(10, out.shape[0] // 20)
+    font = _font(max(10, out.shape[0] // 20))
     text = f"shot {shot + 1}/{shot_count}  {time_s:5.2f} s"
-    draw.text((border_px + 4, border_px + 2), text, fill=(20, 20, 20), font=_font(size))
-    return np.asarray(pil)
+    x, y = border_px + 4, border_px + 2
+    # Only the label's box goes through PIL (a whole frame costs ~1 ms a frame in conversions);
+    # the text is drawn over the same pixels either way, so the result is the same.
+    left, top, right, bottom = (int(v) for v in font.getbbox(text))
+    x0, y0 = max(0, x + left - 1), max(0, y + top - 1)
+    x1, y1 = min(out.shape[1], x + right + 1), min(out.shape[0], y + bottom + 1)
+    if x1 > x0 and y1 > y0:
+        box = Image.fromarray(out[y0:y1, x0:x1])
+        ImageDraw.Draw(box).text((x - x0, y - y0), text, fill=(20, 20, 20), font=font)
+        out[y0:y1, x0:x1] = np.asarray(box)
+    return out
 
 
 def preview_frames(frame_count: int, frame_time_s: float, max_fps: float) -> tuple[np.ndarray, float]:
