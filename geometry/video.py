@@ -5,6 +5,7 @@ file is yuv420p (what browsers and most players decode), so width and height mus
 """
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import imageio_ffmpeg
@@ -81,3 +82,26 @@ class VideoWriter:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def concat_videos(parts: list[str | Path], path: str | Path) -> None:
+    """Join mp4 files written by `VideoWriter` with the same fps, size and settings into one mp4
+    at `path`, without re-encoding (ffmpeg's concat demuxer, stream copy). Raises RuntimeError
+    with ffmpeg's message when it fails."""
+    path = Path(path)
+    listing = path.with_name(f".{path.name}.parts.txt")
+    # The concat demuxer reads a list of files; single quotes in names are escaped as '\''.
+    listing.write_text("".join(
+        "file '{}'\n".format(str(Path(p).resolve()).replace("'", "'\\''")) for p in parts))
+    try:
+        done = subprocess.run(
+            # -xerror: without it a part that cannot be read is logged and skipped, exit 0.
+            [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-xerror", "-loglevel", "error", "-f", "concat",
+             "-safe", "0", "-i", str(listing), "-c", "copy", "-movflags", "+faststart", str(path)],
+            stdin=subprocess.DEVNULL, capture_output=True)
+    finally:
+        listing.unlink(missing_ok=True)
+    if done.returncode != 0:
+        path.unlink(missing_ok=True)
+        raise RuntimeError(f"joining {len(parts)} video parts failed: "
+                           f"{done.stderr.decode(errors='replace').strip()[-2000:]}")

@@ -8,13 +8,23 @@ border for `border_flash_s` at the start of every shot after the first, in that 
 and every frame carries a "shot k/S" label. The contact sheet is a grid with two tiles per shot
 (its first frame and its middle frame), each labelled with shot, frame and time.
 
-Cost (llvmpipe, 2 cores, 480x270): about 3-5 ms a frame to render and 2-4 ms to encode; clips
-faster than `max_fps` are shown every k-th frame (CMU's 120 fps at 30 fps).
+Cost (llvmpipe, 2 cores, 480x270): about 3-5 ms a frame to render (the character's capsules
+share two instanced draw calls) and ~3 ms of CPU to encode; with one process that keeps ~1.4
+cores busy, so the video is rendered by `processes` processes at once, each a part of the frame
+range, and joined without re-encoding. Clips faster than `max_fps` are shown every k-th frame
+(CMU's 120 fps at 30 fps).
 """
 from __future__ import annotations
 
+import ctypes
 import functools
 import math
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +35,7 @@ from PIL import Image, ImageDraw, ImageFont
 from camdirector.geometry import meshes
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.render import OffscreenRenderer
-from camdirector.geometry.video import VideoWriter
+from camdirector.geometry.video import VideoWriter, concat_videos
 from camdirector.precompute.overview.body_parts import BodyPart, BodyPartMap, rigid_bones
 from camdirector.precompute.overview.bvh import MotionClip
 
@@ -53,7 +63,14 @@ class PreviewSettings:
     max_fps: highest video rate; faster clips show every k-th frame, Hz. (0, 240]
     crf, preset: x264 quality and speed (geometry/video.py).
     border_flash_s: how long the shot-start border shows, s. [0, 10]; border_px: its width.
-    tile_height_px: contact-sheet tile height, pixels. [16, 1080]"""
+    tile_height_px: contact-sheet tile height, pixels. [16, 1080]
+    processes: processes rendering and encoding the video at once, each a consecutive part of the
+      frames, joined without re-encoding; 2 uses both cores of a 2-core machine (one process
+      keeps them ~70% busy: the Python loop and GL draws are serial). [1, 16]
+    min_frames_per_process: fewer frames than this per process and fewer processes are used: a
+      child takes ~1 s to start (imports, GL context), ~150-200 frames' worth. [1, 100000]
+    head_start_frames: frames this process renders beyond an equal share, while the children
+      start (each child keeps at least min_frames_per_process). [0, 100000]"""
 
     height_px: int = 270
     max_fps: float = 30.0
@@ -62,6 +79,9 @@ class PreviewSettings:
     border_flash_s: float = 0.4
     border_px: int = 6
     tile_height_px: int = 180
+    processes: int = 2
+    min_frames_per_process: int = 300
+    head_start_frames: int = 200
 
     def __post_init__(self):
         if not 16 <= self.height_px <= 2160:
@@ -72,6 +92,12 @@ class PreviewSettings:
             raise ValueError("border_flash_s must be in [0, 10]")
         if not 16 <= self.tile_height_px <= 1080:
             raise ValueError("tile_height_px must be in [16, 1080]")
+        if not 1 <= self.processes <= 16:
+            raise ValueError("processes must be in [1, 16]")
+        if not 1 <= self.min_frames_per_process <= 100_000:
+            raise ValueError("min_frames_per_process must be in [1, 100000]")
+        if not 0 <= self.head_start_frames <= 100_000:
+            raise ValueError("head_start_frames must be in [0, 100000]")
 
 
 @dataclass(frozen=True)
@@ -126,8 +152,9 @@ class CharacterScene:
     Use as a context manager or call `release()` (it owns a GL context)."""
 
     def __init__(self, clip: MotionClip, parts: BodyPartMap, width_px: int, height_px: int) -> None:
-        self.clip = clip
-        points = clip.all_points_m
+        self.clip, self.parts = clip, parts
+        # (F, J + E, 3): the clip concatenates joints and end sites anew on every access.
+        self.points_m = points = clip.all_points_m
         parent, child = rigid_bones(clip)
         lengths = np.linalg.norm(points[:, child] - points[:, parent], axis=2).mean(axis=0)
         keep = lengths > 1e-4
@@ -170,7 +197,7 @@ class CharacterScene:
         self.renderer.set_transform("ground", g)
 
     def pose_character(self, frame: int) -> None:
-        pts = self.clip.all_points_m[frame]
+        pts = self.points_m[frame]
         a, b = pts[self.parent], pts[self.child]
         matrices = _bone_matrices(a, b, self.radius)
         placed = np.flatnonzero(np.linalg.norm(b - a, axis=1) > 1e-6)  # a zero-length bone keeps its last place
@@ -239,21 +266,82 @@ def preview_frames(frame_count: int, frame_time_s: float, max_fps: float) -> tup
     return np.arange(0, frame_count, step), 1.0 / (frame_time_s * step)
 
 
+def _write_frames(scene: CharacterScene, camera: PreviewCamera, frames: np.ndarray,
+                  video: VideoWriter, settings: PreviewSettings) -> None:
+    """Render, mark and append the clip frames `frames` (k,) int to `video`."""
+    dt = scene.clip.frame_time_s
+    flash_frames = settings.border_flash_s / dt
+    for f in frames:
+        shot = camera.shot_of(int(f))
+        since_cut = f - camera.shots[shot, 0]
+        image = scene.render(int(f), camera)
+        video.write(mark_frame(image, shot, len(camera.shots), f * dt,
+                               shot > 0 and since_cut < flash_frames, settings.border_px))
+
+
 def render_video(scene: CharacterScene, camera: PreviewCamera, path: str | Path,
                  settings: PreviewSettings = PreviewSettings()) -> int:
-    """Write the preview mp4; returns the number of video frames."""
+    """Write the preview mp4; returns the number of video frames.
+
+    With `settings.processes` > 1 and enough frames, the frame range is cut into consecutive
+    parts: this process renders and encodes the first, one child process per other part does the
+    same with its own GL context and encoder, and the parts are joined without re-encoding."""
     clip = scene.clip
     frames, fps = preview_frames(clip.frame_count, clip.frame_time_s, settings.max_fps)
-    w, h = scene.renderer.width_px, scene.renderer.height_px
-    flash_frames = settings.border_flash_s / clip.frame_time_s
-    with VideoWriter(path, fps, (w, h), crf=settings.crf, preset=settings.preset) as video:
-        for f in frames:
-            shot = camera.shot_of(int(f))
-            since_cut = f - camera.shots[shot, 0]
-            image = scene.render(int(f), camera)
-            video.write(mark_frame(image, shot, len(camera.shots), f * clip.frame_time_s,
-                                   shot > 0 and since_cut < flash_frames, settings.border_px))
-        return video.frames_written
+    size = (scene.renderer.width_px, scene.renderer.height_px)
+    processes = min(settings.processes, len(frames) // settings.min_frames_per_process)
+    if processes <= 1:
+        with VideoWriter(path, fps, size, crf=settings.crf, preset=settings.preset) as video:
+            _write_frames(scene, camera, frames, video, settings)
+            return video.frames_written
+    # This process starts rendering at once, children ~1 s later: it takes that head start on
+    # top of an equal share.
+    head = min((len(frames) + (processes - 1) * settings.head_start_frames) // processes,
+               len(frames) - (processes - 1) * settings.min_frames_per_process)
+    chunks = [frames[:head], *np.array_split(frames[head:], processes - 1)]
+    path = Path(path)
+    with tempfile.TemporaryDirectory(prefix=".preview-", dir=path.parent) as tmp_dir:
+        tmp = Path(tmp_dir)
+        segments = [tmp / f"part{k}.mp4" for k in range(processes)]
+        children = []
+        try:
+            for k in range(1, processes):
+                job = tmp / f"part{k}.pickle"
+                job.write_bytes(pickle.dumps((os.getpid(), clip, scene.parts, camera, settings,
+                                              size, fps, chunks[k], segments[k])))
+                # stderr to a file, not a pipe: a chatty child can never block on a full pipe.
+                with open(tmp / f"part{k}.log", "wb") as log:
+                    children.append(subprocess.Popen([sys.executable, "-m", __name__, str(job)],
+                                                     stdin=subprocess.DEVNULL,
+                                                     stdout=subprocess.DEVNULL, stderr=log))
+            with VideoWriter(segments[0], fps, size, crf=settings.crf,
+                             preset=settings.preset) as video:
+                _write_frames(scene, camera, chunks[0], video, settings)
+            for k, child in enumerate(children, start=1):
+                if child.wait() != 0:
+                    tail = (tmp / f"part{k}.log").read_text(errors="replace").strip()[-2000:]
+                    raise RuntimeError(f"preview part {k} failed (exit {child.returncode}): {tail}")
+        finally:
+            for child in children:   # on error here or in a sibling: stop the rest
+                if child.poll() is None:
+                    child.kill()
+                    child.wait()
+        concat_videos(segments, path)
+    return len(frames)
+
+
+def _render_part(job_path: str) -> None:
+    """Child process of `render_video`: render and encode one part of the frame range."""
+    job = pickle.loads(Path(job_path).read_bytes())
+    parent_pid, clip, parts, camera, settings, size, fps, frames, out = job
+    # Die with the parent (a cancelled job's process is terminated without running its cleanup),
+    # as the job processes do with the server: Linux's PR_SET_PDEATHSIG.
+    ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)
+    if os.getppid() != parent_pid:   # it died before the line above
+        sys.exit(1)
+    with CharacterScene(clip, parts, *size) as scene, \
+            VideoWriter(out, fps, size, crf=settings.crf, preset=settings.preset) as video:
+        _write_frames(scene, camera, frames, video, settings)
 
 
 def contact_sheet_frames(shots: np.ndarray) -> list[tuple[int, str, int]]:
@@ -315,3 +403,7 @@ def render_preview(clip: MotionClip, parts: BodyPartMap, camera: PreviewCamera,
             render_contact_sheet(scene, camera, sheet_path, settings)
             timings["contact_sheet"] = (time.perf_counter() - t) * 1e3
     return timings
+
+
+if __name__ == "__main__":
+    _render_part(sys.argv[1])

@@ -11,7 +11,7 @@ import trimesh
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.render import OffscreenRenderer
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
-from camdirector.geometry.video import VideoWriter
+from camdirector.geometry.video import VideoWriter, concat_videos
 
 WIDTH_PX, HEIGHT_PX = 160, 90
 LENS = Lens(vertical_fov_deg=50.0, aspect=WIDTH_PX / HEIGHT_PX)
@@ -174,3 +174,24 @@ def test_video_writer_refuses_odd_sizes_and_wrong_frames(tmp_path):
         with pytest.raises(ValueError):
             video.write(np.zeros((64, 48, 3), dtype=np.uint8))
         video.write(np.zeros((48, 64, 3), dtype=np.uint8))
+
+
+def test_concat_videos_joins_parts_without_losing_frames(tmp_path):
+    parts = []
+    for k, count in enumerate((7, 5)):
+        parts.append(tmp_path / f"part{k}.mp4")
+        with VideoWriter(parts[-1], fps=24, size_wh=(64, 48)) as video:
+            for i in range(count):
+                video.write(np.full((48, 64, 3), 40 * k + 10 * i, dtype=np.uint8))
+    concat_videos(parts, tmp_path / "all.mp4")
+    frames, secs = imageio_ffmpeg.count_frames_and_secs(str(tmp_path / "all.mp4"))
+    assert frames == 12 and secs == pytest.approx(12 / 24, abs=0.05)
+    reader = imageio_ffmpeg.read_frames(str(tmp_path / "all.mp4"))
+    next(reader)
+    levels = [np.frombuffer(f, np.uint8).mean() for f in reader]
+    assert np.allclose(levels, [10 * i for i in range(7)] + [40 + 10 * i for i in range(5)], atol=3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["all.mp4", "part0.mp4", "part1.mp4"]
+    with pytest.raises(RuntimeError, match="2 video parts"):
+        concat_videos([parts[0], tmp_path / "missing.mp4"], tmp_path / "bad.mp4")
+    assert not (tmp_path / "bad.mp4").exists()
+
