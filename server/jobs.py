@@ -53,6 +53,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
+from camdirector.precompute.process_lifetime import die_with_parent
+
 log = logging.getLogger("camdirector.jobs")
 
 JobFunction = Callable[[dict, Path, Path, Callable[[float], None]], dict]
@@ -369,22 +371,12 @@ class JobStore:
 
 # -- the job process --------------------------------------------------------------------------
 
-def _set_parent_death_signal() -> None:
-    """Linux: SIGKILL this process when its parent dies, so a job does not outlive a killed server."""
-    with contextlib.suppress(Exception):
-        import ctypes
-        import signal
-
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG
-
-
 def _job_main(function: JobFunction, params: dict, input_dir: str, output_dir: str,
               conn: multiprocessing.connection.Connection) -> None:
     """Entry point of a job process: messages ("progress", f), then ("ok", timings) or
     ("error", message)."""
     conn.send(("started", time.time()))
-    _set_parent_death_signal()
+    die_with_parent()  # a job does not outlive a killed server
     last = [0.0, -1.0]
 
     def progress(fraction: float) -> None:

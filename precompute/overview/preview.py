@@ -16,12 +16,10 @@ range, and joined without re-encoding. Clips faster than `max_fps` are shown eve
 """
 from __future__ import annotations
 
-import ctypes
 import functools
 import math
 import os
 import pickle
-import signal
 import subprocess
 import sys
 import tempfile
@@ -38,6 +36,7 @@ from camdirector.geometry.render import OffscreenRenderer
 from camdirector.geometry.video import VideoWriter, concat_videos
 from camdirector.precompute.overview.body_parts import BodyPart, BodyPartMap, rigid_bones
 from camdirector.precompute.overview.bvh import MotionClip
+from camdirector.precompute.process_lifetime import die_with_parent
 
 PART_RGB = {
     BodyPart.HEAD: (0.96, 0.80, 0.35),
@@ -334,9 +333,8 @@ def _render_part(job_path: str) -> None:
     """Child process of `render_video`: render and encode one part of the frame range."""
     job = pickle.loads(Path(job_path).read_bytes())
     parent_pid, clip, parts, camera, settings, size, fps, frames, out = job
-    # Die with the parent (a cancelled job's process is terminated without running its cleanup),
-    # as the job processes do with the server: Linux's PR_SET_PDEATHSIG.
-    ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)
+    # A cancelled job's process is terminated without running its cleanup: die with it.
+    die_with_parent()
     if os.getppid() != parent_pid:   # it died before the line above
         sys.exit(1)
     with CharacterScene(clip, parts, *size) as scene, \

@@ -135,10 +135,15 @@ def _clean_edges(edges: np.ndarray) -> np.ndarray:
     return np.unique(edges, axis=0) if len(edges) else edges.reshape(0, 2)
 
 
+def edge_pieces(length_m: np.ndarray, max_length_m: float) -> np.ndarray:
+    """(E,) int: the equal pieces step (ii) cuts edges of length_m (E,) into, at least 1."""
+    return np.maximum(np.ceil(length_m / max_length_m).astype(np.int64), 1)
+
+
 def split_edges(nodes: np.ndarray, edges: np.ndarray, max_length_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Step (ii): every edge longer than max_length_m cut into equal pieces."""
     length = np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1)
-    pieces = np.maximum(np.ceil(length / max_length_m).astype(np.int64), 1)
+    pieces = edge_pieces(length, max_length_m)
     new_nodes, new_edges = [nodes], [edges[pieces == 1]]
     next_id = len(nodes)
     for (a, b), k in zip(edges[pieces > 1], pieces[pieces > 1]):

@@ -42,6 +42,7 @@ from scipy import sparse
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.tracks.graph import edge_pieces
 from camdirector.precompute.tracks.ransac import Tracks
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.visibility_table import build_visibility_table
@@ -52,7 +53,7 @@ def track_points(tracks: Tracks, max_edge_length_m: float) -> tuple[np.ndarray, 
     equal pieces no longer than max_edge_length_m; one point for a static camera), and the track
     (p,) int of each."""
     length = tracks.length_m
-    pieces = np.maximum(np.ceil(length / max_edge_length_m - 1e-9).astype(np.int64), 1)
+    pieces = edge_pieces(length, max_edge_length_m)
     count = np.where(length > 1e-9, pieces + 1, 1)
     owner = np.repeat(np.arange(len(tracks)), count)
     step = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
