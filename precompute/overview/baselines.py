@@ -20,13 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from camdirector.precompute.overview.annealing import best_static_position
+from camdirector.precompute.overview.annealing import (best_static_position, lowest_energy_static,
+                                                      static_external)
 from camdirector.precompute.overview.character_track import CharacterTrack
-from camdirector.precompute.overview.energy import EnergyWeights, internal_terms
+from camdirector.precompute.overview.energy import EnergyWeights
 from camdirector.precompute.overview.potential import PotentialSpace
 from camdirector.precompute.overview.settings import OverviewSettings
-
-_NODES_PER_CHUNK = 256   # static cameras whose E_internal is evaluated at once (memory: T x chunk x 3)
 
 
 @dataclass(frozen=True)
@@ -56,23 +55,12 @@ def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.
     n = track.frame_count
     nodes = space.positions()
     ok = np.flatnonzero(space.allowed.reshape(n, -1).all(axis=0))
-    values = space.values.reshape(n, -1)[:, ok].astype(np.float64)      # (T, K) V at the nodes
-    external = -(pose_saliency @ values)
-    v_sum = values.sum(axis=0)
-    # E = E_internal + E_external with E_internal >= 0: visiting nodes by increasing E_external,
-    # none after the first whose E_external alone reaches the lowest E found can do better.
-    total = np.full(len(ok), np.inf)
-    order = np.argsort(external, kind="stable")
-    for first in range(0, len(ok), _NODES_PER_CHUNK):
-        idx = order[first:first + _NODES_PER_CHUNK]
-        if external[idx[0]] >= total.min():
-            break
-        chunk = nodes[ok[idx]]
-        paths = np.broadcast_to(chunk, (n,) + chunk.shape)
-        total[idx] = internal_terms(paths, track.look_at_m, weights).sum(axis=0) + external[idx]
-    i_e, i_x, i_v = int(np.argmin(total)), int(np.argmin(external)), int(np.argmax(v_sum))
-    return BestStatic(e=float(total[i_e]), e_external=float(external[i_x]), v_sum=float(v_sum[i_v]),
-                      e_position_m=nodes[ok[i_e]], e_external_position_m=nodes[ok[i_x]],
+    external = static_external(space, pose_saliency, 0, n - 1, ok)
+    v_sum = space.values.reshape(n, -1)[:, ok].astype(np.float64).sum(axis=0)
+    e_position, e = lowest_energy_static(track, space, pose_saliency, weights, 0, n - 1)
+    i_x, i_v = int(np.argmin(external)), int(np.argmax(v_sum))
+    return BestStatic(e=e, e_external=float(external[i_x]), v_sum=float(v_sum[i_v]),
+                      e_position_m=e_position, e_external_position_m=nodes[ok[i_x]],
                       v_position_m=nodes[ok[i_v]])
 
 

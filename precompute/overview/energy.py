@@ -40,6 +40,8 @@ from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.potential import PotentialSpace
 from camdirector.precompute.overview.settings import OverviewSettings
 
+_TIE_RELATIVE = 1e-9   # relative difference below which two energies are a tie
+
 
 @dataclass(frozen=True)
 class EnergyWeights:
@@ -74,6 +76,13 @@ class PathEnergy:
     internal: float
     external: float
     v_sum: float
+
+
+def energy_below(value: float, reference: float) -> bool:
+    """value < reference by more than rounding (relative `_TIE_RELATIVE`): one path scored by two
+    summation orders, such as a static camera and an annealed path that kept it, differs by about
+    1e-13, which is a tie, not a gain."""
+    return value < reference - _TIE_RELATIVE * max(1.0, abs(reference))
 
 
 def view_directions(path_m: np.ndarray, look_at_m: np.ndarray) -> np.ndarray:

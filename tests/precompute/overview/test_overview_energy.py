@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from camdirector.precompute.overview.annealing import SidePrior
-from camdirector.precompute.overview.energy import EnergyWeights, internal_terms
+from camdirector.precompute.overview.energy import EnergyWeights, energy_below, internal_terms
 
 W = EnergyWeights(c1=10, c2=10, c3=5, c4=5, c5=2, max_speed_m_per_s=0.3,
                   max_angular_speed_rad_per_s=np.radians(20.0), friction_speed_m_per_s=0.09,
@@ -84,3 +84,10 @@ def test_side_prior_sides():
     assert not prior.holds(np.array([1.0, 0.0, 0.0]))
     np.testing.assert_array_equal(prior.holds_for_nodes(np.array([[-1.0, 0, 0], [1.0, 0, 0]])),
                                   [True, False])
+
+
+def test_energy_below_treats_rounding_as_a_tie():
+    assert not energy_below(-202.69100000000003, -202.691)
+    assert not energy_below(-202.691, -202.69100000000003)
+    assert energy_below(-202.7, -202.691)
+    assert not energy_below(0.0, 0.0) and energy_below(-1e-6, 0.0)

