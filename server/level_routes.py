@@ -3,8 +3,10 @@
     POST /v1/levels              multipart: name, level (.obj/.glb), optional navmesh, scale,
                                  agent_height, agent_radius, replace -> 202 {id, status, name}
     GET  /v1/level-jobs/{id}     {id, status, progress, error?, timings, name}
+    DELETE /v1/level-jobs/{id}   cancel a queued or running level job -> its status
     GET  /v1/levels              {"levels": [level, ...]} by name
     GET  /v1/levels/{name}       one level: scale, agent, counts, stage timings (ms)
+    DELETE /v1/levels/{name}     remove a level from the registry -> the level removed
 
 The upload is checked before a job is made, so a bad one answers 4xx and never becomes a job:
 the name (422; the registry's rule), the files' suffixes (400), that each parses into a mesh with
@@ -19,6 +21,11 @@ writes into the registry only when the precompute has succeeded (the artifact to
 renamed into place, then the index row: LevelRegistry.add_level), so a failed or cancelled job
 leaves the registry as it was (a job process killed in the middle of that write can leave an
 artifact file no row points at, never a row without its file).
+
+Removing a level (DELETE) takes its row and then its artifact file away: new sessions on it get
+NOT_FOUND, sessions already on it keep the copy they loaded. A level that a queued or running job
+is adding or replacing answers 409 (cancel the job first), so a removal is never undone by a job
+that finishes after it.
 
 The job runs in the runner's job process (jobs.py); the uploads stay in the job's `input/`.
 """
@@ -145,6 +152,15 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
         jobs = runner.store.list(JobState.QUEUED) + runner.store.list(JobState.RUNNING)
         return {j.params["name"] for j in jobs if j.kind == KIND}
 
+    def level_job_or_404(job_id: str):
+        try:
+            job = runner.get(job_id)
+        except JobNotFound:
+            job = None
+        if job is None or job.kind != KIND:
+            raise HTTPException(status_code=404, detail=f"no level job {job_id!r}")
+        return job
+
     @router.post(LEVELS_PREFIX, status_code=202, response_model=LevelJobCreated, responses={
         400: {"description": "a file is not a usable .obj/.glb mesh (detail says why)"},
         409: {"description": "the name is taken (registered or being added) and replace is false"},
@@ -197,13 +213,19 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
                 responses={404: {"description": "no such level job"}})
     def get_level_job(job_id: str) -> JSONResponse:
         """State, progress 0..1, error and per-stage timings (ms) of a level job."""
-        try:
-            job = runner.get(job_id)
-        except JobNotFound:
-            job = None
-        if job is None or job.kind != KIND:
-            raise HTTPException(status_code=404, detail=f"no level job {job_id!r}")
+        job = level_job_or_404(job_id)
         return JSONResponse({**job.as_public(), "name": job.params["name"]})
+
+    @router.delete(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus, responses={
+        404: {"description": "no such level job"},
+        409: {"description": "the job already succeeded or failed"}})
+    def cancel_level_job(job_id: str) -> JSONResponse:
+        """Cancel a queued or running level job (a running job's process is ended; the registry
+        is left as it was). Cancelling a cancelled job is a no-op; a finished job answers 409."""
+        job = level_job_or_404(job_id)
+        if job.state in (JobState.SUCCEEDED, JobState.FAILED):
+            raise HTTPException(status_code=409, detail=f"level job {job_id} already {job.state.value}")
+        return JSONResponse({**runner.cancel(job_id).as_public(), "name": job.params["name"]})
 
     @router.get(LEVELS_PREFIX, response_model=LevelList)
     def list_levels() -> dict:
@@ -217,6 +239,20 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
         record = registry.get(name)
         if record is None:
             raise HTTPException(status_code=404, detail=f"no level named {name!r}")
+        return _level_json(record)
+
+    @router.delete(LEVELS_PREFIX + "/{name}", response_model=LevelOut, responses={
+        404: {"description": "no such level"},
+        409: {"description": "a queued or running level job is adding or replacing it"}})
+    def delete_level(name: str) -> dict:
+        """Remove a level from the registry (module docstring); answers the level removed."""
+        with submit_lock:  # no job for this name can be submitted between the check and the delete
+            if name in pending_names():
+                raise HTTPException(status_code=409, detail=(
+                    f"a level job is adding {name!r}; cancel it (DELETE {JOBS_PREFIX}/ID) first"))
+            record = registry.get(name)
+            if record is None or not registry.delete(name):
+                raise HTTPException(status_code=404, detail=f"no level named {name!r}")
         return _level_json(record)
 
     return router

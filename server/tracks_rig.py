@@ -73,6 +73,7 @@ class LevelCache:
             self._registry = LevelRegistry(self.data_dir)
         record = self._registry.get(name)
         if record is None:
+            self._levels.pop(name, None)  # removed: sessions on it keep their own reference
             raise not_found(f"level_id {name!r} is not in this server's level registry ({self.data_dir}); "
                             "add it with `camdirector level add` or POST /v1/levels")
         cached = self._levels.get(name)

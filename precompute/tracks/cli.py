@@ -1,10 +1,12 @@
-"""`camdirector level add|list` and `camdirector eval-graph`.
+"""`camdirector level add|list|remove` and `camdirector eval-graph`.
 
     camdirector level add NAME LEVEL.(obj|glb) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
                           [--agent-height M] [--agent-radius M] [--data-dir DIR]
         precomputes the level into the registry; prints the record (JSON) with stage timings.
     camdirector level list [--data-dir DIR]
         prints one JSON object per level.
+    camdirector level remove NAME [--data-dir DIR]
+        removes a level from the registry (a running server's sessions on it keep their copy).
     camdirector eval-graph LEVEL [--data-dir DIR] [--json OUT] [--plot OUT.png] [--seed N]
         our graph against PRMs on a registered level along an actor route: the Recast test cases
         (TestCases/nav_mesh_test.txt beside the level file) where they exist, else an A* path on
@@ -36,6 +38,10 @@ def add_parsers(subparsers) -> None:
     p = sub.add_parser("list", help="list registered levels")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
     p.set_defaults(handler=run_level_list)
+    p = sub.add_parser("remove", help="remove a level from the registry")
+    p.add_argument("name")
+    p.add_argument("--data-dir", dest="data_dir", type=Path)
+    p.set_defaults(handler=run_level_remove)
     p = subparsers.add_parser("eval-graph", help="our camera graph against probabilistic roadmaps on a level")
     p.add_argument("level", help="registered level name")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
@@ -74,6 +80,15 @@ def run_level_list(args) -> int:
 
     for record in LevelRegistry(args.data_dir).list():
         print(json.dumps(_record_json(record)))
+    return 0
+
+
+def run_level_remove(args) -> int:
+    from camdirector.precompute.tracks.registry import LevelRegistry
+
+    if not LevelRegistry(args.data_dir).delete(args.name):
+        print(f"camdirector level remove: no level named {args.name!r}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -31,6 +31,13 @@ zdm2 1433 -> 696). A range of 9 m drops 3 to 4 times the nodes, but the director
 few cameras close enough to keep the shot and cuts about four times as often (nav_test 62 -> 235
 cuts on one route): not a trade a director would make.
 
+Where this stops: on undulating (open, rolling terrain) every one of the 217 tracks kept is
+*forced*: each is one of at most `redundancy_k` tracks that see some triangle near. A greedy
+weighted set multicover (most unmet demand per graph node first, then a reverse-delete pass),
+tried in place of the order above, kept the same 217, so no choice of tracks can go lower under
+this rule; only the rule (k, range) or the sampling can. That is why our graph there (497 nodes)
+stays above a PRM at equal coverage (about 315), whose coverage counts a triangle seen from 15 m.
+
 Connectivity: dropping a track can split a chain of tracks into components; the director
 follows edges only within a shot and cuts between components (graph distance is a sub-score,
 not a constraint), and the graph stage links components again where they come close (step iii).

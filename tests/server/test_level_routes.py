@@ -1,10 +1,12 @@
 """The level REST API on a real server: a level added over REST becomes a job that succeeds and a
 session on it works; every bad upload answers its 4xx with a reason and leaves the registry as it
-was, while a TRACKS session beside them keeps working."""
+was; a cancelled job writes nothing and a removed level serves no new session; all while a TRACKS
+session beside them keeps working."""
 from __future__ import annotations
 
 import time
 
+import grpc
 import httpx
 import pytest
 
@@ -13,6 +15,7 @@ from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor, l_room
 from tests.server.tracks_sessions import (actor_frames, check_directed, corridor_walk, obj_text, tracks_canary,
                                           tracks_request)
+from tests.server.test_bad_input import expect
 from tests.server.wire_client import GrpcRaw
 
 UPLOAD_LIMIT = 16 * 1024
@@ -145,4 +148,43 @@ def test_duplicate_names_need_replace(level_server, canary):
     session_id = raw.call("CreateSession", tracks_request("room", START)).session_id
     times, feet = corridor_walk(1.0, speed_m_s=1.0)  # x 2..3 along the L's first arm
     check_directed(raw.stream(actor_frames(session_id, times, feet)), feet)
+    raw.close()
+
+
+def test_cancelled_jobs_and_removed_levels(level_server, canary):
+    http = level_server.http_client
+    added = post_level(level_server, "gone", obj_text(l_room()).encode())
+    assert wait_job(level_server, added.json()["id"])[0]["status"] == "succeeded"
+    gone_file = level_server.http_client.get("/v1/levels/gone").json()
+    raw = GrpcRaw(level_server.grpc)
+    on_gone = raw.call("CreateSession", tracks_request("gone", START)).session_id
+    # one job runs at a time: the replace queues behind this one, so both answers below come
+    # while it is still pending
+    blocker = post_level(level_server, "blocker", obj_text(corridor()).encode())
+    replacing = post_level(level_server, "gone", obj_text(l_room()).encode(), replace="true")
+    assert blocker.status_code == replacing.status_code == 202
+    busy = http.delete("/v1/levels/gone")
+    assert busy.status_code == 409 and "cancel it" in busy.json()["detail"]
+    cancelled = http.delete(f"/v1/level-jobs/{replacing.json()['id']}")
+    assert cancelled.status_code == 200, cancelled.text
+    assert cancelled.json()["status"] == "cancelled" and cancelled.json()["name"] == "gone"
+    assert http.delete(f"/v1/level-jobs/{replacing.json()['id']}").json()["status"] == "cancelled"  # no-op
+    assert wait_job(level_server, blocker.json()["id"])[0]["status"] == "succeeded"
+    finished = http.delete(f"/v1/level-jobs/{blocker.json()['id']}")
+    assert finished.status_code == 409 and "already succeeded" in finished.json()["detail"]
+    assert http.delete("/v1/level-jobs/no-such-job").status_code == 404
+    # the cancelled replace wrote nothing: the level is the first version
+    assert http.get("/v1/levels/gone").json() == gone_file
+
+    before = artifact_files(level_server)
+    removed = http.delete("/v1/levels/gone")
+    assert removed.status_code == 200 and removed.json()["name"] == "gone"
+    assert http.get("/v1/levels/gone").status_code == 404
+    assert "gone" not in {level["name"] for level in http.get("/v1/levels").json()["levels"]}
+    assert len(before - artifact_files(level_server)) == 1 and not artifact_files(level_server) - before
+    assert http.delete("/v1/levels/gone").status_code == 404
+    expect(grpc.StatusCode.NOT_FOUND, raw.call, "CreateSession", tracks_request("gone", START),
+           contains="'gone' is not in this server's level registry")
+    times, feet = corridor_walk(1.0, speed_m_s=1.0)   # the session made before keeps its copy
+    check_directed(raw.stream(actor_frames(on_gone, times, feet)), feet)
     raw.close()

@@ -1,0 +1,28 @@
+"""`camdirector level add|list|remove` (precompute/tracks/cli.py) in child processes on one data directory."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from tests.precompute.tracks.tiny_levels import l_room
+from tests.server.tracks_sessions import ROOT, cli_add_level, obj_text
+
+
+def _level(data_dir, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "camdirector.server.cli", "level", *args, "--data-dir", str(data_dir)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+
+
+def test_add_list_remove(tmp_path):
+    level_file = tmp_path / "room.obj"
+    level_file.write_text(obj_text(l_room()))
+    record = cli_add_level(tmp_path / "data", "room", level_file)
+    assert record["name"] == "room" and record["counts"]["nodes"] > 0
+    listed = _level(tmp_path / "data", "list")
+    assert listed.returncode == 0 and [json.loads(line)["name"] for line in listed.stdout.splitlines()] == ["room"]
+    assert _level(tmp_path / "data", "remove", "room").returncode == 0
+    assert _level(tmp_path / "data", "list").stdout == ""
+    assert not list((tmp_path / "data" / "levels").glob("room.*.npz"))
+    again = _level(tmp_path / "data", "remove", "room")
+    assert again.returncode == 2 and "no level named 'room'" in again.stderr
