@@ -11,7 +11,8 @@ Stage order (one module each):
   VISIBILITY  visibility.py     the rig's own estimate of how much of the targets is visible
   OUTPUT      wire.py           the CameraUpdate
 
-With `style.rig = TRACKS` (tracks_rig.py, the graph director of the camera-tracks paper) a
+FRAMING to VISIBILITY are the TORIC rig's (toric_rig.py runs them in this order). With
+`style.rig = TRACKS` (tracks_rig.py, the graph director of the camera-tracks paper) a
 frame is INGEST, then MOTION and VISIBILITY by the director in its own order (Section 5):
   cut_check      direct visibility of the actor and the framing check feed the cutting strategy
   target_update  a cut's continuity search, or the target moving strategy on the tracks

@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -44,6 +44,9 @@ from camdirector.precompute.tracks.settings import DirectorSettings
 from camdirector.server.errors import not_found, precondition
 from camdirector.server.pipeline import FrameState
 from camdirector.server.style import Style
+
+if TYPE_CHECKING:  # wire.py imports this module for LevelCache
+    from camdirector.server.wire import FrameInput
 
 _LOCAL_FORWARD = np.array([0.0, 0.0, 1.0])
 _WAIT_OFFSET_M = np.array([0.0, 2.0, 0.0])  # the waiting camera: this far up, and 6 m behind the actor
@@ -97,10 +100,11 @@ def director_style(style: Style) -> DirectorStyle:
 class TracksRig:
     """The graph director of one session (module docstring)."""
 
-    def __init__(self, level: LoadedLevel, lens: Lens, style: Style, rng: np.random.Generator,
+    def __init__(self, level: LoadedLevel, lens: Lens, style: Style, ray_scene: RayScene, rng: np.random.Generator,
                  clock: Callable[[], float] = time.perf_counter):
         self.level = level
         self.lens = lens
+        self.ray_scene = ray_scene
         self.clock = clock
         self.settings = DirectorSettings(vertical_fov_deg=lens.vertical_fov_deg)
         self.director = GraphDirector(level.artifact, self.settings, rng, director_style(style))
@@ -110,11 +114,13 @@ class TracksRig:
         size cuts once its framing has been off for the cutting strategy's 200 ms)."""
         self.director.set_style(director_style(style))
 
-    def run(self, state: FrameState, actor: RigidTransform, ray_scene: RayScene, last_pose: CameraPose | None) -> None:
+    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
+            last: FrameState | None) -> None:
         """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags and stage_ms."""
+        actor, last_pose = target_transforms[0], None if last is None else last.pose
         forward = quat_rotate(actor.rotation_xyzw, _LOCAL_FORWARD)
         t0 = self.clock()
-        shot = self.director.step(state.time_s, actor.position_world, forward, ray_scene)
+        shot = self.director.step(state.time_s, actor.position_world, forward, self.ray_scene)
         if shot is None:
             state.pose = self._waiting_pose(actor.position_world, forward)
             state.visibility = 0.0
