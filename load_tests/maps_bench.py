@@ -14,7 +14,6 @@ constant of geometry.toric_maps.choose_backend. Prints JSON (and writes it to --
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -38,6 +37,7 @@ from camdirector.geometry.toric_maps import (
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.server.anticipation import AnticipationMap, AnticipationSettings, MaskKind, StyleMaskSettings
 from camdirector.server.target_sampling import TargetSampler, TargetSamplingSettings
+from load_tests.report import emit
 
 RESOLUTIONS = (64, 128, 256, 512)
 SAMPLES_PER_TARGET = 5
@@ -263,11 +263,7 @@ def main(argv=None) -> int:
         summary[name] = {"maps_ms": maps64, "a_map_ms": update64, "update_total_ms": round(maps64 + update64, 3),
                          "per_frame_average_ms_at_60fps": round((maps64 + update64) * updates_per_frame, 3)}
     result["amortized_update_64"] = summary
-    text = json.dumps(result, indent=2)
-    print(text)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+    emit(result, args.json)
     return 0
 
 

@@ -32,6 +32,7 @@ from camdirector.precompute.overview.bvh import load_motion
 from camdirector.precompute.overview.pipeline import plan_overview
 from camdirector.precompute.overview.settings import OverviewSettings
 from camdirector.server.process import ServerProcess
+from load_tests.report import SHARED_DATA_DIR, emit
 
 # name -> (path under mocap/, leading frames to skip: T-pose or rest pose, SOURCES.md section 2)
 CLIPS = {
@@ -112,7 +113,7 @@ def bench_clip(http: str, path: Path, skip: int, frames: int, reps: int) -> dict
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-dir", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "data")
+    parser.add_argument("--data-dir", type=Path, default=SHARED_DATA_DIR)
     parser.add_argument("--frames", type=int, default=1000, help="frames per clip (a shorter clip is taken whole)")
     parser.add_argument("--reps", type=int, default=3)
     parser.add_argument("--clips", nargs="+", choices=sorted(CLIPS), default=list(LONG_CLIPS),
@@ -129,11 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in args.clips:
             relative, skip = CLIPS[name]
             out["clips"][name] = bench_clip(server.http, mocap / relative, skip, args.frames, args.reps)
-    text = json.dumps(out, indent=1)
-    print(text)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+    emit(out, args.json)
     return 0
 
 

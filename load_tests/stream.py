@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import os
 import sys
 import time
@@ -35,6 +34,7 @@ from camdirector.server.demo.client import _frame_update, session_request
 from camdirector.server.process import ServerProcess
 from camdirector.server.demo.scene import build_demo_scene
 from camdirector.v1 import director_pb2 as pb
+from load_tests.report import emit
 
 
 def _percentiles(values: list[float]) -> dict:
@@ -199,11 +199,7 @@ def main(argv=None) -> int:
         address = server.grpc if args.transport == "grpc" else server.zmq
         result = asyncio.run(run(args.transport, address, args.sessions, args.rate, args.seconds))
         result["server_workers"] = server.ready["workers"]
-    text = json.dumps(result, indent=2)
-    print(text)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+    emit(result, args.json)
     return 0 if result["dropped_frames"] == 0 and not result["errors"] else 1
 
 

@@ -13,7 +13,6 @@ asserts nothing.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -24,6 +23,7 @@ import numpy as np
 from camdirector.precompute.tracks.cli import route_for
 from camdirector.precompute.tracks.compare import compare_with_prm
 from camdirector.precompute.tracks.registry import LevelRegistry
+from load_tests.report import SHARED_DATA_DIR, emit
 
 # name -> (path under levels/, metres per level unit: SOURCES.md; zdm2's player is ~15 units tall)
 LEVELS = {
@@ -73,7 +73,7 @@ def bench_level(registry: LevelRegistry, name: str, path: Path, scale: float, se
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-dir", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "data")
+    parser.add_argument("--data-dir", type=Path, default=SHARED_DATA_DIR)
     parser.add_argument("--levels", nargs="+", choices=sorted(LEVELS), default=list(LEVELS))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path)
@@ -89,11 +89,7 @@ def main(argv: list[str] | None = None) -> int:
             relative, scale = LEVELS[name]
             out["levels"][name] = bench_level(registry, name, folder / relative, scale, args.seed)
             print(f"tracks_bench: {name} done", file=sys.stderr)
-    text = json.dumps(out, indent=1)
-    print(text)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+    emit(out, args.json)
     return 0
 
 

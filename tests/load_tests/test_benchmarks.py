@@ -1,0 +1,39 @@
+"""The benchmarks run and report what their docstrings promise (tiny runs; they assert no timing)."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from load_tests import overview_bench, stream, tracks_bench
+
+
+def _run(main, tmp_path, *args) -> dict:
+    out = tmp_path / "out.json"
+    assert main([*args, "--json", str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+@pytest.mark.shared_data
+def test_overview_bench_reports_end_to_end_against_planning(shared_data, tmp_path):
+    result = _run(overview_bench.main, tmp_path, "--data-dir", str(shared_data), "--clips", "bandai_run_30fps",
+                  "--frames", "40", "--reps", "1")
+    clip = result["clips"]["bandai_run_30fps"]
+    assert clip["frames"] == 40 and clip["end_to_end_s"]["n"] == 1
+    assert clip["end_to_end_s"]["median"] > clip["planning_only_s"]["median"] > 0.0
+    assert {"preview_video", "annealing_and_shots", "job_process_total"} <= set(clip["job_stage_ms_median"])
+
+
+@pytest.mark.shared_data
+def test_tracks_bench_reports_a_level_against_the_prm(shared_data, tmp_path):
+    result = _run(tracks_bench.main, tmp_path, "--data-dir", str(shared_data), "--levels", "dungeon")
+    level = result["levels"]["dungeon"]
+    assert level["precompute_s"] > 0.0 and level["artifact_load_ms"] > 0.0
+    assert level["ours"]["nodes"] > 0 and level["prm_compared"]["mean_nodes"] > 0
+    assert level["fewer_nodes"] == (level["ours"]["nodes"] < level["prm_compared"]["mean_nodes"])
+    assert set(level["stage_ms"]) >= {"skeleton", "clustering", "graph", "visibility"}
+
+
+def test_stream_bench_reports_round_trips(tmp_path):
+    result = _run(stream.main, tmp_path, "--transport", "zmq", "--sessions", "1", "--seconds", "1")
+    assert result["dropped_frames"] == 0 and not result["errors"]
