@@ -1,9 +1,9 @@
 """One director session: its scene, the latest transforms, and the camera rig's state.
 
-`Session.frame` runs INGEST, then its rig for the stages after it, in the order pipeline.py writes
-down: toric_rig.py for the TORIC rig, tracks_rig.py for a session created with TRACKS. The session never
-raises inside the frame loop for a geometric difficulty: it degrades (holds the pose, frames one
-target) and flags it in the diagnostics.
+`Session.frame` runs INGEST, then its rig for the stages after it, in the order pipeline.py
+writes down: toric_rig.py for the TORIC rig, tracks_rig.py for a session created with TRACKS.
+The session never raises inside the frame loop for a geometric difficulty: it degrades (holds
+the pose, frames one target) and flags it in the diagnostics.
 """
 from __future__ import annotations
 
