@@ -45,7 +45,7 @@ from camdirector.precompute.tracks.level import LEVEL_SUFFIXES
 from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, check_level_name
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.server.jobs import JobError, JobKind, JobNotFound, JobRunner, JobSettings, JobState, QueueFull
-from camdirector.server.overview_routes import JobCreated, JobStatus, UploadLimit
+from camdirector.server.overview_routes import JobCreated, JobStatus, UploadLimit, cancel_job
 
 KIND = "level"
 LEVELS_PREFIX = "/v1/levels"
@@ -222,10 +222,9 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
     def cancel_level_job(job_id: str) -> JSONResponse:
         """Cancel a queued or running level job (a running job's process is ended; the registry
         is left as it was). Cancelling a cancelled job is a no-op; a finished job answers 409."""
-        job = level_job_or_404(job_id)
-        if job.state in (JobState.SUCCEEDED, JobState.FAILED):
-            raise HTTPException(status_code=409, detail=f"level job {job_id} already {job.state.value}")
-        return JSONResponse({**runner.cancel(job_id).as_public(), "name": job.params["name"]})
+        level_job_or_404(job_id)
+        job = cancel_job(runner, job_id, "level job")
+        return JSONResponse({**job.as_public(), "name": job.params["name"]})
 
     @router.get(LEVELS_PREFIX, response_model=LevelList)
     def list_levels() -> dict:

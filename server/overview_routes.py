@@ -195,6 +195,16 @@ def _status(job) -> JSONResponse:
     return JSONResponse(job.as_public())
 
 
+def cancel_job(runner: JobRunner, job_id: str, noun: str = "job"):
+    """DELETE of a job route: the job cancelled (a running job's process is ended), unchanged when
+    it was cancelled already; HTTPException 409 when it had succeeded or failed. Cancels first and
+    looks after, so a job that finishes meanwhile answers 409, not a 200 that did nothing."""
+    job = runner.cancel(job_id)
+    if job.state in (JobState.SUCCEEDED, JobState.FAILED):
+        raise HTTPException(status_code=409, detail=f"{noun} {job_id} already {job.state.value}")
+    return job
+
+
 def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRouter:
     """The /v1/overview-jobs routes over `runner` (which must have the "overview" kind)."""
     router = APIRouter(prefix="/v1/overview-jobs", tags=["overview jobs"])
@@ -293,10 +303,8 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
     def cancel_overview_job(job_id: str) -> JSONResponse:
         """Cancel a queued or running job (a running job's process is ended). Cancelling a
         cancelled job is a no-op; a finished job answers 409."""
-        job = job_or_404(job_id)
-        if job.state in (JobState.SUCCEEDED, JobState.FAILED):
-            raise HTTPException(status_code=409, detail=f"job {job_id} already {job.state.value}")
-        return _status(runner.cancel(job_id))
+        job_or_404(job_id)
+        return _status(cancel_job(runner, job_id))
 
     @router.get("/{job_id}/result", response_model=OverviewResultOut, responses={
         404: {"description": "no such job"}, 409: {"description": "the job has not succeeded"}})
