@@ -211,15 +211,18 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
     limit = job_settings.max_upload_bytes
 
     def job_or_404(job_id: str):
+        """The overview job job_id; 404 for an unknown id and for a job of another kind (the
+        runner and its store are shared with the level jobs)."""
         try:
-            return runner.get(job_id)
+            job = runner.get(job_id)
         except JobNotFound:
-            raise HTTPException(status_code=404, detail=f"no overview job {job_id!r}") from None
+            job = None
+        if job is None or job.kind != KIND:
+            raise HTTPException(status_code=404, detail=f"no overview job {job_id!r}")
+        return job
 
     def file_of(job_id: str, name: str, media_type: str) -> FileResponse:
         job = job_or_404(job_id)
-        if job.kind != KIND:
-            raise HTTPException(status_code=404, detail=f"no overview job {job_id!r}")
         if job.state is not JobState.SUCCEEDED:
             raise HTTPException(status_code=409, detail=(
                 f"job {job_id} is {job.state.value}: its result exists only once it succeeded"

@@ -173,6 +173,9 @@ def test_cancelled_jobs_and_removed_levels(level_server, canary):
     finished = http.delete(f"/v1/level-jobs/{blocker.json()['id']}")
     assert finished.status_code == 409 and "already succeeded" in finished.json()["detail"]
     assert http.delete("/v1/level-jobs/no-such-job").status_code == 404
+    # the overview routes share the job store but do not see level jobs
+    assert http.get(f"/v1/overview-jobs/{blocker.json()['id']}").status_code == 404
+    assert http.delete(f"/v1/overview-jobs/{blocker.json()['id']}").status_code == 404
     # the cancelled replace wrote nothing: the level is the first version
     assert http.get("/v1/levels/gone").json() == gone_file
 
