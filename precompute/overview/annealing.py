@@ -71,64 +71,58 @@ class SidePrior:
         return np.sign(cross) == self.side
 
 
-def _static_candidates(space: PotentialSpace, first: int, last: int,
-                       priors: tuple[SidePrior, ...]) -> np.ndarray:
-    """(K,) flat indices of the grid nodes allowed in every frame of [first, last] and meeting the
-    priors. Raises ValueError when there is none."""
-    ok = space.allowed[first:last + 1].reshape(last - first + 1, -1).all(axis=0)
-    nodes = space.positions()
-    for prior in priors:
-        ok &= prior.holds_for_nodes(nodes)
-    if not np.any(ok):
-        raise ValueError(f"no static camera position frames the character over frames "
-                         f"{first}..{last}: raise grid_margin_heights")
-    return np.flatnonzero(ok)
+@dataclass(frozen=True)
+class StaticCameras:
+    """The static cameras a shot over track frames [first, last] may use: the grid nodes allowed
+    in every one of its frames and meeting its priors. nodes (K,) int flat grid indices;
+    position_m (K, 3); external (K,) E_external = -sum_t S_p(t) V_t(p) of each as one shot."""
 
+    first: int
+    last: int
+    nodes: np.ndarray
+    position_m: np.ndarray
+    external: np.ndarray
 
-def static_external(space: PotentialSpace, pose_saliency: np.ndarray, first: int, last: int,
-                    candidates: np.ndarray) -> np.ndarray:
-    """(K,) E_external = -sum_t S_p(t) V_t(p) over frames [first, last] of a static camera at each
-    candidate node (flat indices)."""
-    values = space.values[first:last + 1].reshape(last - first + 1, -1)[:, candidates]
-    return -(pose_saliency[first:last + 1] @ values.astype(np.float64))
+    @classmethod
+    def of_shot(cls, space: PotentialSpace, pose_saliency: np.ndarray, first: int, last: int,
+                priors: tuple[SidePrior, ...] = ()) -> "StaticCameras":
+        """Raises ValueError when no node is allowed in every frame and meets the priors."""
+        ok = space.allowed[first:last + 1].reshape(last - first + 1, -1).all(axis=0)
+        positions = space.positions()
+        for prior in priors:
+            ok &= prior.holds_for_nodes(positions)
+        if not np.any(ok):
+            raise ValueError(f"no static camera position frames the character over frames "
+                             f"{first}..{last}: raise grid_margin_heights")
+        nodes = np.flatnonzero(ok)
+        values = space.values[first:last + 1].reshape(last - first + 1, -1)[:, nodes]
+        return cls(first=first, last=last, nodes=nodes, position_m=positions[nodes],
+                   external=-(pose_saliency[first:last + 1] @ values.astype(np.float64)))
 
+    def paper_start(self) -> np.ndarray:
+        """(3,) the node maximising sum_t S_p(t) V_t(p): the paper's start."""
+        return self.position_m[int(np.argmin(self.external))]
 
-def best_static_position(space: PotentialSpace, pose_saliency: np.ndarray, first: int, last: int,
-                         priors: tuple[SidePrior, ...] = ()) -> np.ndarray:
-    """(3,) the grid node maximising sum_t S_p(t) V_t(p) over frames [first, last] among nodes
-    allowed in all of them and meeting the priors (the paper's start). Raises ValueError when
-    there is none."""
-    candidates = _static_candidates(space, first, last, priors)
-    external = static_external(space, pose_saliency, first, last, candidates)
-    return space.positions()[candidates[int(np.argmin(external))]]
-
-
-def lowest_energy_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray,
-                         weights: EnergyWeights, first: int, last: int,
-                         priors: tuple[SidePrior, ...] = ()) -> tuple[np.ndarray, float]:
-    """The static camera with the lowest E over frames [first, last] as one shot, among nodes
-    allowed in all of them and meeting the priors: its (3,) position and E. Its E_internal is the
-    angular terms of a camera that only turns. Raises ValueError when there is none."""
-    candidates = _static_candidates(space, first, last, priors)
-    external = static_external(space, pose_saliency, first, last, candidates)
-    nodes = space.positions()
-    look_at = track.look_at_m[first:last + 1]
-    n = last - first + 1
-    # E_internal >= 0: visiting nodes by increasing E_external, none after the first whose
-    # E_external alone reaches the lowest E found can do better.
-    best_i, best_e = -1, np.inf
-    order = np.argsort(external, kind="stable")
-    for start in range(0, len(order), _STATIC_NODES_PER_CHUNK):
-        idx = order[start:start + _STATIC_NODES_PER_CHUNK]
-        if external[idx[0]] >= best_e:
-            break
-        chunk = nodes[candidates[idx]]
-        paths = np.broadcast_to(chunk, (n,) + chunk.shape)
-        total = internal_terms(paths, look_at, weights).sum(axis=0) + external[idx]
-        k = int(np.argmin(total))
-        if total[k] < best_e:
-            best_i, best_e = int(idx[k]), float(total[k])
-    return nodes[candidates[best_i]], best_e
+    def lowest_energy(self, track: CharacterTrack, weights: EnergyWeights) -> tuple[np.ndarray, float]:
+        """The (3,) position and E of the static camera with the lowest E over the shot. Its
+        E_internal is the angular terms of a camera that only turns."""
+        look_at = track.look_at_m[self.first:self.last + 1]
+        n = self.last - self.first + 1
+        # E_internal >= 0: visiting nodes by increasing E_external, none after the first whose
+        # E_external alone reaches the lowest E found can do better.
+        best_i, best_e = -1, np.inf
+        order = np.argsort(self.external, kind="stable")
+        for start in range(0, len(order), _STATIC_NODES_PER_CHUNK):
+            idx = order[start:start + _STATIC_NODES_PER_CHUNK]
+            if self.external[idx[0]] >= best_e:
+                break
+            chunk = self.position_m[idx]
+            paths = np.broadcast_to(chunk, (n,) + chunk.shape)
+            total = internal_terms(paths, look_at, weights).sum(axis=0) + self.external[idx]
+            k = int(np.argmin(total))
+            if total[k] < best_e:
+                best_i, best_e = int(idx[k]), float(total[k])
+        return self.position_m[best_i], best_e
 
 
 def anneal_shot(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray,
@@ -138,9 +132,9 @@ def anneal_shot(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.
     paper's start annealed, or, where that ends above the lowest-E static camera, the better of
     it and that camera annealed (module docstring)."""
     args = (track, space, pose_saliency, weights, settings, rng, first, last, priors)
-    path, energy = _anneal_from(best_static_position(space, pose_saliency, first, last, priors), *args)
-    low_start, low_energy = lowest_energy_static(track, space, pose_saliency, weights, first, last,
-                                                 priors)
+    statics = StaticCameras.of_shot(space, pose_saliency, first, last, priors)
+    path, energy = _anneal_from(statics.paper_start(), *args)
+    low_start, low_energy = statics.lowest_energy(track, weights)
     if energy_below(low_energy, energy):
         low_path, low_path_energy = _anneal_from(low_start, *args)
         if energy_below(low_path_energy, energy):

@@ -20,8 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from camdirector.precompute.overview.annealing import (best_static_position, lowest_energy_static,
-                                                      static_external)
+from camdirector.precompute.overview.annealing import StaticCameras
 from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.energy import EnergyWeights
 from camdirector.precompute.overview.potential import PotentialSpace
@@ -45,7 +44,7 @@ class BestStatic:
 def static_path(space: PotentialSpace, pose_saliency: np.ndarray) -> np.ndarray:
     """(T, 3) the static camera with the lowest E_external (the annealing's start) at every frame."""
     n = len(pose_saliency)
-    return np.tile(best_static_position(space, pose_saliency, 0, n - 1), (n, 1))
+    return np.tile(StaticCameras.of_shot(space, pose_saliency, 0, n - 1).paper_start(), (n, 1))
 
 
 def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray,
@@ -53,15 +52,13 @@ def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.
     """Each attribute's best static camera among nodes allowed in every frame (module docstring).
     Scores are those `energy.path_energy` gives the static path as one shot."""
     n = track.frame_count
-    nodes = space.positions()
-    ok = np.flatnonzero(space.allowed.reshape(n, -1).all(axis=0))
-    external = static_external(space, pose_saliency, 0, n - 1, ok)
-    v_sum = space.values.reshape(n, -1)[:, ok].astype(np.float64).sum(axis=0)
-    e_position, e = lowest_energy_static(track, space, pose_saliency, weights, 0, n - 1)
-    i_x, i_v = int(np.argmin(external)), int(np.argmax(v_sum))
-    return BestStatic(e=e, e_external=float(external[i_x]), v_sum=float(v_sum[i_v]),
-                      e_position_m=e_position, e_external_position_m=nodes[ok[i_x]],
-                      v_position_m=nodes[ok[i_v]])
+    statics = StaticCameras.of_shot(space, pose_saliency, 0, n - 1)
+    v_sum = space.values.reshape(n, -1)[:, statics.nodes].astype(np.float64).sum(axis=0)
+    e_position, e = statics.lowest_energy(track, weights)
+    i_x, i_v = int(np.argmin(statics.external)), int(np.argmax(v_sum))
+    return BestStatic(e=e, e_external=float(statics.external[i_x]), v_sum=float(v_sum[i_v]),
+                      e_position_m=e_position, e_external_position_m=statics.position_m[i_x],
+                      v_position_m=statics.position_m[i_v])
 
 
 def greedy_path(track: CharacterTrack, space: PotentialSpace, settings: OverviewSettings
