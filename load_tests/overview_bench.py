@@ -32,7 +32,7 @@ from camdirector.precompute.overview.bvh import load_motion
 from camdirector.precompute.overview.pipeline import plan_overview
 from camdirector.precompute.overview.settings import OverviewSettings
 from camdirector.server.process import ServerProcess
-from load_tests.report import SHARED_DATA_DIR, emit
+from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder
 
 # name -> (path under mocap/, leading frames to skip: T-pose or rest pose, SOURCES.md section 2)
 CLIPS = {
@@ -120,9 +120,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="default: the three clips longer than 1000 frames")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
-    mocap = args.data_dir / "mocap"
-    if not mocap.is_dir():
-        print(f"overview_bench: no mocap folder at {mocap} (pass --data-dir)", file=sys.stderr)
+    mocap = shared_subfolder(args.data_dir, "mocap", "overview_bench")
+    if mocap is None:
         return 2
     out = {"benchmark": "overview_end_to_end", "frames_per_clip": args.frames, "reps": args.reps, "clips": {}}
     with tempfile.TemporaryDirectory() as data_dir, \

@@ -23,7 +23,7 @@ import numpy as np
 from camdirector.precompute.tracks.cli import route_for
 from camdirector.precompute.tracks.compare import compare_with_prm
 from camdirector.precompute.tracks.registry import LevelRegistry
-from load_tests.report import SHARED_DATA_DIR, emit
+from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder
 
 # name -> (path under levels/, metres per level unit: SOURCES.md; zdm2's player is ~15 units tall)
 LEVELS = {
@@ -78,9 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
-    folder = args.data_dir / "levels"
-    if not folder.is_dir():
-        print(f"tracks_bench: no levels folder at {folder} (pass --data-dir)", file=sys.stderr)
+    folder = shared_subfolder(args.data_dir, "levels", "tracks_bench")
+    if folder is None:
         return 2
     out = {"benchmark": "tracks_levels", "seed": args.seed, "levels": {}}
     with tempfile.TemporaryDirectory() as registry_dir:

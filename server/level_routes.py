@@ -44,8 +44,8 @@ from camdirector.geometry.meshes import MeshError, from_glb, from_obj
 from camdirector.precompute.tracks.level import LEVEL_SUFFIXES
 from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, check_level_name
 from camdirector.precompute.tracks.settings import TrackSettings
-from camdirector.server.jobs import JobError, JobKind, JobNotFound, JobRunner, JobSettings, JobState, QueueFull
-from camdirector.server.overview_routes import JobCreated, JobStatus, UploadLimit, cancel_job
+from camdirector.server.jobs import JobError, JobKind, JobRunner, JobSettings, JobState, QueueFull
+from camdirector.server.overview_routes import JobCreated, JobStatus, UploadLimit, cancel_job, job_of_kind
 
 KIND = "level"
 LEVELS_PREFIX = "/v1/levels"
@@ -153,13 +153,7 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
         return {j.params["name"] for j in jobs if j.kind == KIND}
 
     def level_job_or_404(job_id: str):
-        try:
-            job = runner.get(job_id)
-        except JobNotFound:
-            job = None
-        if job is None or job.kind != KIND:
-            raise HTTPException(status_code=404, detail=f"no level job {job_id!r}")
-        return job
+        return job_of_kind(runner, job_id, KIND, "level job")
 
     @router.post(LEVELS_PREFIX, status_code=202, response_model=LevelJobCreated, responses={
         400: {"description": "a file is not a usable .obj/.glb mesh (detail says why)"},

@@ -195,6 +195,18 @@ def _status(job) -> JSONResponse:
     return JSONResponse(job.as_public())
 
 
+def job_of_kind(runner: JobRunner, job_id: str, kind: str, noun: str):
+    """The job job_id of `kind`; HTTPException 404 for an unknown id and for a job of another
+    kind (one runner and job store serve every kind of job route)."""
+    try:
+        job = runner.get(job_id)
+    except JobNotFound:
+        job = None
+    if job is None or job.kind != kind:
+        raise HTTPException(status_code=404, detail=f"no {noun} {job_id!r}")
+    return job
+
+
 def cancel_job(runner: JobRunner, job_id: str, noun: str = "job"):
     """DELETE of a job route: the job cancelled (a running job's process is ended), unchanged when
     it was cancelled already; HTTPException 409 when it had succeeded or failed. Cancels first and
@@ -211,15 +223,7 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
     limit = job_settings.max_upload_bytes
 
     def job_or_404(job_id: str):
-        """The overview job job_id; 404 for an unknown id and for a job of another kind (the
-        runner and its store are shared with the level jobs)."""
-        try:
-            job = runner.get(job_id)
-        except JobNotFound:
-            job = None
-        if job is None or job.kind != KIND:
-            raise HTTPException(status_code=404, detail=f"no overview job {job_id!r}")
-        return job
+        return job_of_kind(runner, job_id, KIND, "overview job")
 
     def file_of(job_id: str, name: str, media_type: str) -> FileResponse:
         job = job_or_404(job_id)
