@@ -57,12 +57,14 @@ _WELD_M = 1e-3       # medial axis segment ends closer than this are one vertex
 class Skeleton:
     """segments_world: (k, 2, 3) float64 metres, each a straight piece of the skeleton on the
     navmesh; layer: (k,) int the layer it lies in; triangle_layer: (m,) int layer of each navmesh
-    triangle; layer_count: number of layers."""
+    triangle; layer_count: number of layers; outlines: per layer, its shapely polygons in (x, z)
+    (`layer_outline`, which the remeshing reuses: they cost about 0.5 s on a level)."""
 
     segments_world: np.ndarray
     layer: np.ndarray
     triangle_layer: np.ndarray
     layer_count: int
+    outlines: tuple[list, ...]
 
     @property
     def length_m(self) -> float:
@@ -254,10 +256,12 @@ def extract_skeleton(navmesh: TriMesh, settings: TrackSettings) -> Skeleton:
     """Skeleton of a navigation mesh (metres, world frame): the module docstring's four steps."""
     triangle_layer, layer_count = split_layers(navmesh, settings)
     tri = navmesh.vertices[navmesh.faces]
+    outlines = tuple(layer_outline(tri[triangle_layer == layer][:, :, [0, 2]], settings.skeleton_simplify_m,
+                                   settings.skeleton_min_hole_m2) for layer in range(layer_count))
     segments, layers = [], []
     for layer in range(layer_count):
         own = tri[triangle_layer == layer]
-        for polygon in layer_outline(own[:, :, [0, 2]], settings.skeleton_simplify_m, settings.skeleton_min_hole_m2):
+        for polygon in outlines[layer]:
             seg2 = clean_axis(_medial_axis_2d(polygon), polygon, settings.skeleton_prune_m,
                               settings.skeleton_line_tolerance_m)
             if not len(seg2):
@@ -266,7 +270,7 @@ def extract_skeleton(navmesh: TriMesh, settings: TrackSettings) -> Skeleton:
             segments.append(np.stack([seg2[:, :, 0], height, seg2[:, :, 1]], axis=2))
             layers.append(np.full(len(seg2), layer))
     if not segments:
-        return Skeleton(np.empty((0, 2, 3)), np.empty(0, np.int64), triangle_layer, layer_count)
+        return Skeleton(np.empty((0, 2, 3)), np.empty(0, np.int64), triangle_layer, layer_count, outlines)
     seg = np.concatenate(segments)
     keep = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1) > 1e-6
-    return Skeleton(seg[keep], np.concatenate(layers)[keep], triangle_layer, layer_count)
+    return Skeleton(seg[keep], np.concatenate(layers)[keep], triangle_layer, layer_count, outlines)

@@ -30,7 +30,7 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.navmesh import UP, refine_triangles
 from camdirector.precompute.tracks.settings import TrackSettings
-from camdirector.precompute.tracks.skeleton import Skeleton, layer_height, layer_outline
+from camdirector.precompute.tracks.skeleton import Skeleton, layer_height
 
 _RAYS_PER_BATCH = 1 << 21
 
@@ -72,7 +72,7 @@ def remesh(navmesh: TriMesh, skeleton: Skeleton, settings: TrackSettings) -> Tri
     offset = 0
     for layer in range(skeleton.layer_count):
         own = tri[skeleton.triangle_layer == layer]
-        for polygon in layer_outline(own[:, :, [0, 2]], settings.skeleton_simplify_m, settings.skeleton_min_hole_m2):
+        for polygon in skeleton.outlines[layer]:
             cdt = shapely.constrained_delaunay_triangles(polygon)
             flat = np.asarray([np.asarray(t.exterior.coords)[:3] for t in cdt.geoms]).reshape(-1, 3, 2)
             if not len(flat):
