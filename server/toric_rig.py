@@ -41,8 +41,7 @@ class ToricRig:
                  dynamic: dict, rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter):
         self.lens = scene.lens
         self.style = scene.style
-        self.targets = scene.targets
-        self.target_transforms = [t.transform for t in scene.targets]
+        self.target_ids = [t.id for t in scene.targets]
         self.static_meshes_world = static_meshes_world
         self.dynamic = dynamic
         self.rng = rng
@@ -78,17 +77,16 @@ class ToricRig:
             last: FrameState | None) -> None:
         """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY, timed into state; a composition
         changed by set_style since the last frame makes this frame a cut."""
-        self.target_transforms = target_transforms
         t1 = self.clock()
         self.framing.run(state)  # Stage.FRAMING
         if self.maps is not None:
             self.maps.ingest(update.states, update.time_s)
         t2 = self.clock()
-        self._move(state, last)  # Stage.PROJECTION, Stage.AMAP, Stage.MOTION
+        self._move(state, target_transforms, last)  # Stage.PROJECTION, Stage.AMAP, Stage.MOTION
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
         t3 = self.clock()
-        self.visibility.run(state, self.target_transforms)  # Stage.VISIBILITY
+        self.visibility.run(state, target_transforms)  # Stage.VISIBILITY
         t4 = self.clock()
         map_ms = sum(state.stage_ms.values())  # projection and A-map, filled by _move
         state.stage_ms.update({
@@ -99,7 +97,8 @@ class ToricRig:
         state.cut = state.cut or self._style_cut
         self._style_cut = False
 
-    def _move(self, state: FrameState, last: FrameState | None) -> None:
+    def _move(self, state: FrameState, target_transforms: list[RigidTransform],
+              last: FrameState | None) -> None:
         """MOTION: the rig of the style's visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE:
         that plus reactive.py; RAYCAST and the map modes: occlusion_search.py)."""
         mode = self.style.visibility
@@ -121,14 +120,14 @@ class ToricRig:
                 theta, phi = torus_angles(torus, self.motion.position_world)
             self.search.start(theta, phi, state.time_s)
             self._searching = True
-        points = self.sampler.points_world(self.target_transforms)
+        points = self.sampler.points_world(target_transforms)
 
         def occluded(cameras_world: np.ndarray) -> np.ndarray:
             return self.visibility.occluded_fraction(cameras_world, points)
 
         if mode in MAP_MODES:
             state.stage_ms.update(self.maps.update(torus, self.search.theta, self.search.phi, state.time_s,
-                                                   self.target_transforms, [t.id for t in self.targets]))
+                                                   target_transforms, self.target_ids))
             risk = self.maps
         else:
             risk = RaycastRisk(torus, occluded)
