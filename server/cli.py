@@ -30,6 +30,8 @@ def _serve_parser(sub) -> None:
     p.add_argument("--max-concurrent-jobs", dest="max_concurrent_jobs", type=int)
     p.add_argument("--max-queued-jobs", dest="max_queued_jobs", type=int)
     p.add_argument("--max-upload-bytes", dest="max_upload_bytes", type=int)
+    p.add_argument("--job-retention-s", dest="job_retention_s", type=float,
+                   help="seconds a finished offline job's result is kept (0: forever)")
 
 
 def main(argv: list[str] | None = None) -> int:

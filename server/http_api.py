@@ -1,8 +1,12 @@
 """HTTP API (FastAPI): health, Prometheus metrics, and the REST routes of the service."""
 from __future__ import annotations
 
-from fastapi import FastAPI, Response
+from fastapi import FastAPI, Request, Response
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.responses import PlainTextResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
 
 from camdirector.server.session_router import SessionRouter
 
@@ -17,7 +21,19 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
         return {"status": "ok", "sessions": len(router.sessions), "workers": router.pool.size,
                 "transports": transports}
 
-    @app.get("/metrics")
+    @app.exception_handler(StarletteHTTPException)
+    async def allow_every_method(request: Request, exc: StarletteHTTPException) -> Response:
+        """A 405's Allow header names the methods of every documented route on the path:
+        Starlette's names only those of the first route that matched (GET /v1/levels beside POST)."""
+        if exc.status_code == 405:
+            allowed = sorted({method.upper() for template, operations in app.openapi()["paths"].items()
+                              if compile_path(template)[0].match(request.url.path)
+                              for method in operations})
+            if allowed:
+                exc = StarletteHTTPException(405, exc.detail, headers={"Allow": ", ".join(allowed)})
+        return await http_exception_handler(request, exc)
+
+    @app.get("/metrics", response_class=PlainTextResponse)
     def metrics() -> Response:
         """Prometheus text exposition."""
         return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)

@@ -26,6 +26,9 @@ Restart: a runner that starts finds queued jobs and runs them in submission orde
 with a reason once they have been started `max_attempts` times. A runner stopped cleanly puts its
 running jobs back in the queue without counting the attempt.
 
+Retention: a finished job (its row, inputs and results) is removed `job_retention_s` after it
+ended, checked at start and every minute, so a long-running server's data directory stays bounded.
+
 Job kinds: `JobKind(name, function)` in a `JobRegistry` (more are added to a runner by
 `JobRunner.add_kind` before it starts: one runner owns a folder); the function runs in the job
 process as `function(params: dict, input_dir: Path, output_dir: Path, progress: Callable[[float], None])
@@ -58,6 +61,7 @@ from camdirector.precompute.process_lifetime import die_with_parent
 log = logging.getLogger("camdirector.jobs")
 
 JobFunction = Callable[[dict, Path, Path, Callable[[float], None]], dict]
+_PURGE_INTERVAL_S = 60.0   # how often the runner looks for jobs past their retention
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,7 @@ class JobSettings:
     job_timeout_s: float = 600.0           # a running job is ended and failed after this, s. [1, 86400]
     cancel_grace_s: float = 2.0            # SIGTERM to SIGKILL of a cancelled job's process, s. [0, 60]
     job_blas_threads: int = 1              # BLAS/OpenMP threads per job process (0: library default). [0, 64]
+    job_retention_s: float = 7 * 86400.0   # a finished job's row and files are removed this long after it ended; 0 keeps every job, s. [0, 1e9]
 
     def __post_init__(self):
         checks = [
@@ -78,6 +83,7 @@ class JobSettings:
             (0 <= self.max_queued_jobs <= 100_000, "max_queued_jobs must be in [0, 100000]"),
             (1024 <= self.max_upload_bytes <= 4 << 30, "max_upload_bytes must be in [1 KiB, 4 GiB]"),
             (1 <= self.max_attempts <= 100, "max_attempts must be in [1, 100]"),
+            (0.0 <= self.job_retention_s <= 1e9, "job_retention_s must be in [0, 1e9]"),
             (1.0 <= self.job_timeout_s <= 86_400.0, "job_timeout_s must be in [1, 86400]"),
             (0.0 <= self.cancel_grace_s <= 60.0, "cancel_grace_s must be in [0, 60]"),
             (0 <= self.job_blas_threads <= 64, "job_blas_threads must be in [0, 64]"),
@@ -128,9 +134,11 @@ class Job:
     timings_ms: dict[str, float] = field(default_factory=dict)
 
     def as_public(self) -> dict:
-        """The REST view: id, status, progress, error (only when set), timings (ms)."""
+        """The REST view: id, status, progress, error (only when set), timings (ms), and the
+        Unix times it was submitted, started and ended (null until then)."""
         out = {"id": self.id, "status": self.state.value, "progress": round(self.progress, 4),
-               "timings": self.timings_ms}
+               "timings": self.timings_ms, "created_unix_s": self.created_s,
+               "started_unix_s": self.started_s, "finished_unix_s": self.finished_s}
         if self.error is not None:
             out["error"] = self.error
         return out
@@ -283,14 +291,22 @@ class JobStore:
             raise JobNotFound(job_id)
         return _row_to_job(row)
 
-    def list(self, state: JobState | None = None) -> list[Job]:
-        """Jobs in submission order, all or those in `state`."""
+    def list(self, state: JobState | None = None, *, kind: str | None = None,
+             limit: int | None = None, newest_first: bool = False) -> list[Job]:
+        """Jobs in submission order (newest first when asked), all or those in `state` and of
+        `kind`, at most `limit` of them."""
+        where = [(c, v) for c, v in (("state", state.value if state else None), ("kind", kind))
+                 if v is not None]
+        sql = f"SELECT {_COLUMNS} FROM jobs"
+        if where:
+            sql += " WHERE " + " AND ".join(f"{c} = ?" for c, _ in where)
+        sql += " ORDER BY seq" + (" DESC" if newest_first else "")
+        args = [v for _, v in where]
+        if limit is not None:
+            sql += " LIMIT ?"
+            args.append(int(limit))
         with self._lock:
-            if state is None:
-                rows = self._db.execute(f"SELECT {_COLUMNS} FROM jobs ORDER BY seq").fetchall()
-            else:
-                rows = self._db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE state = ? ORDER BY seq",
-                                        (state.value,)).fetchall()
+            rows = self._db.execute(sql, args).fetchall()
         return [_row_to_job(r) for r in rows]
 
     def count(self, state: JobState) -> int:
@@ -341,6 +357,19 @@ class JobStore:
         if not job.state.finished:
             self.finish(job_id, JobState.CANCELLED, error="cancelled by request", only_if=job.state)
         return self.get(job_id)
+
+    def purge_finished(self, ended_before_s: float) -> list[str]:
+        """Remove the jobs that ended (succeeded, failed or were cancelled) before this Unix time,
+        rows first, then their folders. Returns their ids."""
+        finished = [s.value for s in JobState if s.finished]
+        with self._tx() as db:
+            ids = [r[0] for r in db.execute(
+                f"SELECT id FROM jobs WHERE state IN ({','.join('?' * len(finished))}) "
+                "AND finished_s < ?", (*finished, ended_before_s)).fetchall()]
+            db.executemany("DELETE FROM jobs WHERE id = ?", [(i,) for i in ids])
+        for job_id in ids:
+            shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+        return ids
 
     def requeue(self, job_id: str, *, uncount_attempt: bool) -> None:
         with self._tx() as db:
@@ -424,8 +453,10 @@ class JobRunner:
     """
 
     def __init__(self, data_dir: str | Path, registry: JobRegistry,
-                 settings: JobSettings = JobSettings(), *, preload: tuple[str, ...] = ()) -> None:
+                 settings: JobSettings = JobSettings(), *, preload: tuple[str, ...] = (),
+                 clock: Callable[[], float] = time.time) -> None:
         self.settings = settings
+        self._clock = clock            # Unix seconds, for the retention of finished jobs
         self.registry = registry
         self.store = JobStore(Path(data_dir) / "jobs")
         self._mp = multiprocessing.get_context("forkserver")
@@ -468,6 +499,7 @@ class JobRunner:
         if requeued or failed:
             log.info("recovered jobs: %d requeued, %d failed after too many attempts",
                      len(requeued), len(failed))
+        self.purge_expired()
         self._stopping.clear()
         self._thread = threading.Thread(target=self._loop, name="job-runner", daemon=True)
         self._thread.start()
@@ -537,6 +569,17 @@ class JobRunner:
     def result_dir(self, job_id: str) -> Path:
         return self.store.result_dir(job_id)
 
+    def purge_expired(self) -> list[str]:
+        """Remove the jobs that ended more than `job_retention_s` ago (none when it is 0), so the
+        data directory does not grow without bound. The runner calls it at start and every
+        `_PURGE_INTERVAL_S`. Returns their ids."""
+        if self.settings.job_retention_s <= 0:
+            return []
+        purged = self.store.purge_finished(self._clock() - self.settings.job_retention_s)
+        if purged:
+            log.info("removed %d jobs that ended over %g s ago", len(purged), self.settings.job_retention_s)
+        return purged
+
     def wait(self, job_id: str, timeout_s: float = 60.0, poll_s: float = 0.05) -> Job:
         """Block until the job is finished (for tests and the CLI). Raises TimeoutError."""
         deadline = time.monotonic() + timeout_s
@@ -555,10 +598,14 @@ class JobRunner:
             self._wake_w.send_bytes(b"1")
 
     def _loop(self) -> None:
+        next_purge = time.monotonic() + _PURGE_INTERVAL_S
         try:
             while not self._stopping.is_set():
                 self._reap()
                 self._start_queued()
+                if time.monotonic() >= next_purge:
+                    self.purge_expired()
+                    next_purge = time.monotonic() + _PURGE_INTERVAL_S
                 waitables = [self._wake_r]
                 for r in self._running.values():
                     waitables += [r.conn, r.process.sentinel]

@@ -2,6 +2,7 @@
 
     POST /v1/levels              multipart: name, level (.obj/.glb), optional navmesh, scale,
                                  agent_height, agent_radius, replace -> 202 {id, status, name}
+    GET  /v1/level-jobs?status=&limit=   {"jobs": [...]} newest first
     GET  /v1/level-jobs/{id}     {id, status, progress, error?, timings, name}
     DELETE /v1/level-jobs/{id}   cancel a queued or running level job -> its status
     GET  /v1/levels              {"levels": [level, ...]} by name
@@ -36,7 +37,7 @@ import threading
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, FastAPI, File, Form, HTTPException, UploadFile
+from fastapi import APIRouter, FastAPI, File, Form, HTTPException, Query, UploadFile
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
@@ -45,7 +46,8 @@ from camdirector.precompute.tracks.level import LEVEL_SUFFIXES
 from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, check_level_name
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.server.jobs import JobError, JobKind, JobRunner, JobSettings, JobState, QueueFull
-from camdirector.server.overview_routes import JobCreated, JobStatus, UploadLimit, cancel_job, job_of_kind
+from camdirector.server.overview_routes import (MAX_LISTED_JOBS, JobCreated, JobStatus, UploadLimit, cancel_job,
+                                                job_of_kind, list_jobs)
 
 KIND = "level"
 LEVELS_PREFIX = "/v1/levels"
@@ -91,6 +93,10 @@ class LevelJobStatus(JobStatus):
     """timings: milliseconds per precompute stage and job phase."""
 
     name: str = Field(description="the level the job adds")
+
+
+class LevelJobList(BaseModel):
+    jobs: list[LevelJobStatus] = Field(description="newest first")
 
 
 class LevelOut(BaseModel):
@@ -149,8 +155,8 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
     submit_lock = threading.Lock()  # the duplicate check and the submit happen as one
 
     def pending_names() -> set[str]:
-        jobs = runner.store.list(JobState.QUEUED) + runner.store.list(JobState.RUNNING)
-        return {j.params["name"] for j in jobs if j.kind == KIND}
+        jobs = runner.store.list(JobState.QUEUED, kind=KIND) + runner.store.list(JobState.RUNNING, kind=KIND)
+        return {j.params["name"] for j in jobs}
 
     def level_job_or_404(job_id: str):
         return job_of_kind(runner, job_id, KIND, "level job")
@@ -202,6 +208,14 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
                                     headers={"Retry-After": "10"}) from None
         return JSONResponse({"id": job.id, "status": job.state.value, "name": name}, status_code=202,
                             headers={"Location": f"{JOBS_PREFIX}/{job.id}"})
+
+    @router.get(JOBS_PREFIX, response_model=LevelJobList)
+    def list_level_jobs(
+        status: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
+        limit: Annotated[int, Query(ge=1, le=MAX_LISTED_JOBS, description="at most this many")] = 100,
+    ) -> dict:
+        """The newest level jobs first, with the level each adds."""
+        return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {"name": p["name"]})}
 
     @router.get(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus,
                 responses={404: {"description": "no such level job"}})

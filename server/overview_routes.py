@@ -1,6 +1,7 @@
 """REST routes of the motion overview jobs (issue 5), and the "overview" job kind.
 
     POST   /v1/overview-jobs                    multipart: file (BVH) + optional form fields -> 202 {id, status}
+    GET    /v1/overview-jobs?status=&limit=     {"jobs": [...]} newest first
     GET    /v1/overview-jobs/{id}               {id, status, progress, error?, timings}
     DELETE /v1/overview-jobs/{id}               cancel (queued or running) -> {id, status, ...}
     GET    /v1/overview-jobs/{id}/result        the camera path JSON (`result_document`)
@@ -20,11 +21,12 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, FastAPI, File, Form, HTTPException, UploadFile
+from fastapi import APIRouter, FastAPI, File, Form, HTTPException, Query, UploadFile
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import BaseModel, Field
 
@@ -168,6 +170,18 @@ class JobStatus(BaseModel):
     progress: float = Field(ge=0.0, le=1.0)
     error: str | None = Field(default=None, description="why the job failed or was cancelled")
     timings: dict[str, float] = Field(description="milliseconds per stage (when finished)")
+    created_unix_s: float = Field(description="when it was submitted, Unix s")
+    started_unix_s: float | None = Field(default=None, description="when its last attempt started, Unix s")
+    finished_unix_s: float | None = Field(default=None, description="when it ended, Unix s")
+
+
+class OverviewJobOut(JobStatus):
+    file_name: str = Field(description="the uploaded clip's file name")
+    frames: int = Field(description="clip frames after skip_frames")
+
+
+class OverviewJobList(BaseModel):
+    jobs: list[OverviewJobOut] = Field(description="newest first")
 
 
 class FrameOut(BaseModel):
@@ -205,6 +219,17 @@ def job_of_kind(runner: JobRunner, job_id: str, kind: str, noun: str):
     if job is None or job.kind != kind:
         raise HTTPException(status_code=404, detail=f"no {noun} {job_id!r}")
     return job
+
+
+MAX_LISTED_JOBS = 1000
+
+
+def list_jobs(runner: JobRunner, kind: str, status: JobState | None, limit: int,
+              extra: Callable[[dict], dict]) -> list[dict]:
+    """GET of a job collection: the newest `limit` jobs of `kind` (in `status` when given), each
+    its public view with `extra(params)` added (finished jobs are kept `job_retention_s`)."""
+    return [{**j.as_public(), **extra(j.params)}
+            for j in runner.store.list(status, kind=kind, limit=limit, newest_first=True)]
 
 
 def cancel_job(runner: JobRunner, job_id: str, noun: str = "job"):
@@ -298,6 +323,15 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
                                 headers={"Retry-After": "10"}) from None
         return JSONResponse({"id": job.id, "status": job.state.value}, status_code=202,
                             headers={"Location": f"/v1/overview-jobs/{job.id}"})
+
+    @router.get("", response_model=OverviewJobList)
+    def list_overview_jobs(
+        status: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
+        limit: Annotated[int, Query(ge=1, le=MAX_LISTED_JOBS, description="at most this many")] = 100,
+    ) -> dict:
+        """The newest overview jobs first, with the clip's file name and frame count."""
+        return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {
+            "file_name": p.get("file_name", CLIP_FILE), "frames": int(p.get("frames", 0))})}
 
     @router.get("/{job_id}", response_model=JobStatus, responses={404: {"description": "no such job"}})
     def get_overview_job(job_id: str) -> JSONResponse:

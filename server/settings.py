@@ -35,6 +35,7 @@ class ServerSettings:
     max_concurrent_jobs: int = 1             # offline jobs (motion overviews) running at once. [1, 64]
     max_queued_jobs: int = 16                # offline jobs waiting; more answer HTTP 429. [0, 100000]
     max_upload_bytes: int = 64 * 1024 * 1024  # largest job upload, bytes (HTTP 413 above). [1 KiB, 4 GiB]
+    job_retention_s: float = 7 * 86400.0     # finished offline jobs are removed this long after they ended; 0 keeps them, s. [0, 1e9]
 
     def __post_init__(self):
         checks = [
@@ -55,7 +56,7 @@ class ServerSettings:
     def job_settings(self):
         from camdirector.server.jobs import JobSettings  # validated there
         return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
-                           max_upload_bytes=self.max_upload_bytes)
+                           max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s)
 
     @property
     def recordings_dir(self) -> Path:

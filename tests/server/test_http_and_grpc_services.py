@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import urllib.error
 import urllib.request
 
 import grpc
@@ -44,3 +45,20 @@ def test_grpc_health_and_reflection(server):
         replies = list(stub.ServerReflectionInfo(iter([reflection_pb2.ServerReflectionRequest(list_services="")])))
         names = {s.name for s in replies[0].list_services_response.service}
         assert "camdirector.v1.Director" in names and "grpc.health.v1.Health" in names
+
+
+def test_wrong_method_answers_405_naming_every_allowed_method(server):
+    """Starlette names only the first matching route's methods; a path served by two routes
+    (GET and POST /v1/levels, GET and DELETE of a job) must name both."""
+    for path, method, allowed in (("/v1/levels", "PUT", "GET, POST"),
+                                  ("/v1/overview-jobs/abc", "POST", "DELETE, GET"),
+                                  ("/healthz", "DELETE", "GET")):
+        request = urllib.request.Request(f"http://{server.http}{path}", method=method)
+        try:
+            urllib.request.urlopen(request, timeout=10)
+        except urllib.error.HTTPError as error:
+            assert error.code == 405 and error.headers["Allow"] == allowed, (path, error.headers["Allow"])
+        else:
+            raise AssertionError(f"{method} {path} was accepted")
+    with urllib.request.urlopen(f"http://{server.http}/metrics", timeout=10) as reply:
+        assert reply.headers["Content-Type"].startswith("text/plain")

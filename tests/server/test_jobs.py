@@ -93,7 +93,8 @@ def test_store_submit_claim_finish_and_files(tmp_path):
     done = store.get(a.id)
     assert done.progress == 1.0 and done.timings_ms == {"x": 2.0} and done.finished_s is not None
     assert done.as_public() == {"id": a.id, "status": "succeeded", "progress": 1.0,
-                                "timings": {"x": 2.0}}
+                                "timings": {"x": 2.0}, "created_unix_s": a.created_s,
+                                "started_unix_s": claimed.started_s, "finished_unix_s": done.finished_s}
     assert store.cancel(b.id).state is JobState.CANCELLED
     assert store.cancel(a.id).state is JobState.SUCCEEDED       # finished: unchanged
     with pytest.raises(JobNotFound):
@@ -129,11 +130,40 @@ def test_store_recover_requeues_then_fails_after_max_attempts(tmp_path):
     assert failed.state is JobState.FAILED and "interrupted" in failed.error and "2 time" in failed.error
 
 
+def test_store_lists_by_kind_and_state_newest_first(tmp_path):
+    store = JobStore(tmp_path / "jobs")
+    a = store.submit("echo", {}, {})
+    b = store.submit("wait", {}, {})
+    c = store.submit("echo", {}, {})
+    store.cancel(c.id)
+    assert [j.id for j in store.list(kind="echo")] == [a.id, c.id]
+    assert [j.id for j in store.list(kind="echo", newest_first=True)] == [c.id, a.id]
+    assert [j.id for j in store.list(JobState.QUEUED, kind="echo")] == [a.id]
+    assert [j.id for j in store.list(newest_first=True, limit=2)] == [c.id, b.id]
+    assert store.list(JobState.RUNNING, kind="wait") == []
+
+
+def test_store_purges_only_jobs_that_ended_before_the_cutoff(tmp_path):
+    store = JobStore(tmp_path / "jobs")
+    old, recent, queued = (store.submit("echo", {}, {"in.txt": b"x"}) for _ in range(3))
+    for job in (old, recent):
+        store.claim_next()
+        store.finish(job.id, JobState.SUCCEEDED)
+    cutoff = store.get(recent.id).finished_s            # strictly before: `recent` stays
+    assert store.purge_finished(cutoff) == [old.id]
+    assert [j.id for j in store.list()] == [recent.id, queued.id]
+    assert job_dirs(store) == {recent.id, queued.id}
+    assert sorted(store.purge_finished(cutoff + 3600.0)) == [recent.id]   # a queued job is never purged
+    assert [j.id for j in store.list()] == [queued.id]
+
+
 def test_settings_are_validated():
     with pytest.raises(ValueError, match="max_concurrent_jobs"):
         JobSettings(max_concurrent_jobs=0)
     with pytest.raises(ValueError, match="max_upload_bytes"):
         JobSettings(max_upload_bytes=10)
+    with pytest.raises(ValueError, match="job_retention_s"):
+        JobSettings(job_retention_s=-1.0)
 
 
 # -- runner -----------------------------------------------------------------------------------
@@ -149,6 +179,28 @@ def test_runner_runs_jobs_in_processes_and_renames_results(tmp_path):
         assert not [p for p in runner.store.root.iterdir() if p.name.startswith(".tmp-")]
         with pytest.raises(KeyError):
             runner.submit("no-such-kind", {}, {})
+
+
+def test_runner_removes_finished_jobs_after_their_retention(tmp_path):
+    """Time is passed in: the runner's clock is moved past the retention instead of waited for."""
+    now = [time.time()]
+    settings = JobSettings(job_retention_s=3600.0)
+    with JobRunner(tmp_path, KINDS, settings, clock=lambda: now[0]) as runner:
+        job = runner.submit("echo", {}, {"in.txt": b"hi"})
+        assert runner.wait(job.id, 30.0).state is JobState.SUCCEEDED
+        assert runner.purge_expired() == []                 # ended just now
+        now[0] += 3599.0
+        assert runner.purge_expired() == []
+        now[0] += 2.0
+        assert runner.purge_expired() == [job.id]
+        with pytest.raises(JobNotFound):
+            runner.get(job.id)
+        assert job.id not in job_dirs(runner.store)
+    kept = JobRunner(tmp_path / "kept", KINDS, JobSettings(job_retention_s=0.0), clock=lambda: now[0] + 1e9)
+    with kept:
+        job = kept.submit("echo", {}, {"in.txt": b"hi"})
+        kept.wait(job.id, 30.0)
+        assert kept.purge_expired() == [] and kept.get(job.id).state is JobState.SUCCEEDED
 
 
 @pytest.mark.parametrize("how, message", [

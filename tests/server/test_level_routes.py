@@ -173,7 +173,14 @@ def test_cancelled_jobs_and_removed_levels(level_server, canary):
     finished = http.delete(f"/v1/level-jobs/{blocker.json()['id']}")
     assert finished.status_code == 409 and "already succeeded" in finished.json()["detail"]
     assert http.delete("/v1/level-jobs/no-such-job").status_code == 404
+    listed = http.get("/v1/level-jobs").json()["jobs"]        # newest first, with the level's name
+    assert [(j["id"], j["name"], j["status"]) for j in listed[:2]] == [
+        (replacing.json()["id"], "gone", "cancelled"), (blocker.json()["id"], "blocker", "succeeded")]
+    assert [j["id"] for j in http.get("/v1/level-jobs", params={"status": "cancelled"}).json()["jobs"]] \
+        == [replacing.json()["id"]]
+    assert http.get("/v1/level-jobs", params={"status": "done"}).status_code == 422
     # the overview routes share the job store but do not see level jobs
+    assert http.get("/v1/overview-jobs").json()["jobs"] == []
     assert http.get(f"/v1/overview-jobs/{blocker.json()['id']}").status_code == 404
     assert http.delete(f"/v1/overview-jobs/{blocker.json()['id']}").status_code == 404
     # the cancelled replace wrote nothing: the level is the first version

@@ -104,6 +104,29 @@ def test_unknown_job_is_404_and_finished_job_cannot_be_cancelled(service, finish
     assert r.status_code == 409 and "already succeeded" in r.json()["detail"]
 
 
+def test_jobs_are_listed_newest_first_with_their_clip(service, finished_jobs):
+    client, _ = service
+    listed = client.get("/v1/overview-jobs").json()["jobs"]
+    ids = [j["id"] for j in listed]
+    first, second = finished_jobs["default"]["id"], finished_jobs["skip"]["id"]
+    assert ids.index(second) < ids.index(first)
+    row = next(j for j in listed if j["id"] == first)
+    assert row["status"] == "succeeded" and row["file_name"] == "run.bvh" and row["frames"] == 72
+    assert row["created_unix_s"] <= row["started_unix_s"] <= row["finished_unix_s"]
+    assert next(j for j in listed if j["id"] == second)["frames"] == 62    # after skip_frames
+    assert len(client.get("/v1/overview-jobs", params={"limit": 1}).json()["jobs"]) == 1
+    assert all(j["status"] == "succeeded" for j in
+               client.get("/v1/overview-jobs", params={"status": "succeeded"}).json()["jobs"])
+
+
+@pytest.mark.parametrize("query, field", [({"status": "done"}, "status"), ({"limit": "0"}, "limit"),
+                                          ({"limit": "1001"}, "limit"), ({"limit": "x"}, "limit")])
+def test_bad_list_queries_answer_422(service, query, field):
+    client, _ = service
+    r = client.get("/v1/overview-jobs", params=query)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", field]
+
+
 def _corrupt(data: bytes, kind: str) -> bytes:
     text = data.decode()
     if kind == "not_bvh":
@@ -197,7 +220,7 @@ def test_openapi_lists_the_routes(service):
     client, _ = service
     spec = client.get("/openapi.json").json()
     paths = spec["paths"]
-    assert set(paths["/v1/overview-jobs"]) == {"post"}
+    assert set(paths["/v1/overview-jobs"]) == {"get", "post"}
     assert set(paths["/v1/overview-jobs/{job_id}"]) == {"get", "delete"}
     for suffix in ("result", "preview.mp4", "contact-sheet.png"):
         assert "get" in paths[f"/v1/overview-jobs/{{job_id}}/{suffix}"]
