@@ -9,6 +9,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 
 from camdirector.server.session_router import SessionRouter
+from camdirector.server.session_routes import build_session_router
 
 
 def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
@@ -38,9 +39,5 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
         """Prometheus text exposition."""
         return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)
 
-    @app.get("/v1/sessions")
-    def sessions() -> dict:
-        """Open sessions: worker, frames answered, streams attached, idle time."""
-        return {"sessions": router.describe()}
-
+    app.include_router(build_session_router(router))
     return app

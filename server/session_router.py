@@ -4,6 +4,7 @@ when an abandoned one is reclaimed. Both transports call this one object.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import time
 import uuid
@@ -146,12 +147,24 @@ class SessionRouter:
         self.metrics.sessions.set(len(self.sessions))
         log.error("worker %d lost %d sessions", slot, len(lost))
 
+    async def timeline(self, session_id: str, last: int | None = None) -> dict:
+        """The session's summary (as `describe`), style and newest `last` frames (sessions.py);
+        NOT_FOUND for an unknown id. Not a request of the session's client: it does not keep
+        the session alive."""
+        entry = self._entry(session_id)
+        body, _ = await self.pool.call(entry.slot, "timeline", session_id,
+                                       b"" if last is None else str(int(last)).encode())
+        return {"session": self._describe(session_id, entry, self.clock()), **json.loads(body)}
+
     def describe(self) -> list[dict]:
         now = self.clock()
-        return [{"session_id": sid, "worker": e.slot, "frames": e.frames, "streams": e.streams,
-                 "idle_s": round(now - e.last_seen_s, 3), "age_s": round(now - e.created_s, 3),
-                 "transports": sorted(e.transport)}
-                for sid, e in self.sessions.items()]
+        return [self._describe(sid, e, now) for sid, e in self.sessions.items()]
+
+    @staticmethod
+    def _describe(session_id: str, e: SessionEntry, now: float) -> dict:
+        return {"session_id": session_id, "worker": e.slot, "frames": e.frames, "streams": e.streams,
+                "idle_s": round(now - e.last_seen_s, 3), "age_s": round(now - e.created_s, 3),
+                "transports": sorted(e.transport)}
 
 
 def session_id_of(message_type, payload: bytes) -> str:

@@ -5,15 +5,19 @@ worker pool routes a request by session id and calls `handle_bytes`.
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 from typing import Callable
+
+from google.protobuf import json_format
 
 from camdirector.server import wire
 from camdirector.server.errors import DirectorError, internal, invalid, not_found
 from camdirector.server.recording import RecordingWriter
 from camdirector.server.session import Session
 from camdirector.server.settings import ServerSettings
+from camdirector.server.timeline import Timeline
 from camdirector.server.tracks_rig import LevelCache
 from camdirector.v1 import director_pb2 as pb
 
@@ -33,6 +37,8 @@ class SessionTable:
         self.clock = clock
         self.sessions: dict[str, Session] = {}
         self.recorders: dict[str, RecordingWriter] = {}
+        self.timelines: dict[str, Timeline] = {}       # recent frames, for the dashboard
+        self.style_msgs: dict[str, pb.Style] = {}      # the style as the client last sent it
         self.levels = LevelCache(settings.data_dir)  # the TRACKS rig's levels, loaded once per process
 
     def _get(self, session_id: str) -> Session:
@@ -44,6 +50,8 @@ class SessionTable:
     def create(self, session_id: str, req: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
         scene = wire.scene_from_request(req, self.settings, self.levels)
         self.sessions[session_id] = Session(session_id, scene, clock=self.clock)
+        self.timelines[session_id] = Timeline()
+        self.style_msgs[session_id] = req.style
         response = pb.CreateSessionResponse(session_id=session_id)
         if req.record or self.settings.record_all:
             path = self.settings.recordings_dir / f"{session_id}.cdrec"
@@ -70,6 +78,7 @@ class SessionTable:
             state = session.frame(update)
             reply = wire.camera_update_msg(state, compute_ms=0.0)
             reply.compute_ms = (self.clock() - t0) * 1e3
+            self.timelines[msg.session_id].add(state, reply.compute_ms)
         recorder = self.recorders.get(msg.session_id)
         if recorder is not None:
             recorder.write(pb.RecordEntry(frame=msg))
@@ -79,10 +88,18 @@ class SessionTable:
     def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
         session = self._get(msg.session_id)
         session.set_style(wire.style_from_msg(msg.style, session.lens, session.style))
+        self.style_msgs[msg.session_id] = msg.style
         recorder = self.recorders.get(msg.session_id)
         if recorder is not None:
             recorder.write(pb.RecordEntry(style=msg))
         return pb.UpdateStyleResponse()
+
+    def timeline(self, session_id: str, last: int | None = None) -> dict:
+        """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it)
+        and its newest `last` answered frames (`timeline.py`), oldest first."""
+        self._get(session_id)
+        return {"style": json_format.MessageToDict(self.style_msgs[session_id]),
+                "frames": self.timelines[session_id].as_json(last)}
 
     def close(self, session_id: str) -> pb.CloseSessionResponse:
         session = self._get(session_id)
@@ -92,6 +109,8 @@ class SessionTable:
     def drop(self, session_id: str) -> None:
         """Forgets a session if present (closing, or reclaiming an abandoned one)."""
         self.sessions.pop(session_id, None)
+        self.timelines.pop(session_id, None)
+        self.style_msgs.pop(session_id, None)
         recorder = self.recorders.pop(session_id, None)
         if recorder is not None:
             recorder.close()
@@ -112,6 +131,9 @@ class SessionTable:
                 return self.update_style(_parse(pb.UpdateStyleRequest, payload)).SerializeToString(), None
             if op == "close":
                 return self.close(session_id).SerializeToString(), None
+            if op == "timeline":   # payload: the number of frames wanted, ASCII; empty for all
+                last = int(payload) if payload else None
+                return json.dumps(self.timeline(session_id, last)).encode(), None
             if op == "drop":
                 self.drop(session_id)
                 return b"", None
