@@ -19,6 +19,7 @@ run: $(STAMP)
 	$(BIN)/camdirector demo --out out
 
 test: $(STAMP)
+	bash scripts/system-deps.sh --browser
 	$(BIN)/python -m pytest
 
 # Regenerates the committed wire-contract code after an edit of proto/camdirector/v1/*.proto.

@@ -1,15 +1,21 @@
-"""HTTP API (FastAPI): health, Prometheus metrics, and the REST routes of the service."""
+"""HTTP API (FastAPI): health, Prometheus metrics, the REST routes of the service, and the
+director's dashboard (static files under /dashboard/ that read those routes)."""
 from __future__ import annotations
+
+from pathlib import Path
 
 from fastapi import FastAPI, Request, Response
 from fastapi.exception_handlers import http_exception_handler
-from fastapi.responses import PlainTextResponse
+from fastapi.responses import PlainTextResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 
 from camdirector.server.session_router import SessionRouter
 from camdirector.server.session_routes import build_session_router
+
+DASHBOARD_DIR = Path(__file__).with_name("dashboard")
 
 
 def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
@@ -40,4 +46,10 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
         return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)
 
     app.include_router(build_session_router(router))
+    # The director's dashboard: static files that read the routes above.
+    app.mount("/dashboard", StaticFiles(directory=DASHBOARD_DIR, html=True), name="dashboard")
+
+    @app.get("/", include_in_schema=False)
+    def root() -> RedirectResponse:
+        return RedirectResponse("/dashboard/")
     return app

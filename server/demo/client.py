@@ -118,6 +118,7 @@ def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", rend
     scene = build_demo_scene(seed=7, duration_s=seconds)
     with ServerProcess("--workers", "1") as server:
         print(f"  server ready: gRPC {server.grpc}, ZeroMQ {server.zmq}, HTTP {server.http}")
+        print(f"  watch it in the dashboard: http://{server.http}/dashboard/")
         result = stream_demo(server.url(transport), scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility))
     updates = result["updates"]
     poses = [_pose(u) for u in updates]

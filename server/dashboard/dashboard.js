@@ -1,0 +1,292 @@
+// The director's dashboard. Reads the REST API only: /healthz, /v1/sessions, /v1/sessions/{id},
+// PUT /v1/sessions/{id}/style, /v1/overview-jobs. Data is written with textContent, never as HTML.
+"use strict";
+
+const POLL_SESSIONS_MS = 1000;   // the session list and the jobs
+const POLL_SESSION_MS = 500;     // the selected session's frames
+const TOP_VIEW_MARGIN_M = 2.0;   // space around the trails in the top view, m
+
+let selected = null;             // the selected session id
+let styleSentBySession = {};     // session id -> the style the form was last filled from (JSON text)
+let currentStyle = {};           // the selected session's style, as the server reported it
+
+async function api(path, options = {}) {
+  const reply = await fetch(path, options);
+  const text = await reply.text();
+  const body = text ? JSON.parse(text) : {};
+  if (!reply.ok) {
+    const detail = Array.isArray(body.detail)
+      ? body.detail.map((d) => `${(d.loc || []).join(".")}: ${d.msg}`).join("; ")
+      : body.detail;
+    throw new Error(`${reply.status}: ${detail || reply.statusText}`);
+  }
+  return body;
+}
+
+function cell(row, text) {
+  const td = document.createElement("td");
+  td.textContent = text;
+  row.appendChild(td);
+  return td;
+}
+
+// -- sessions -------------------------------------------------------------------------------
+
+async function refreshSessions() {
+  const health = await api("/healthz");
+  document.getElementById("health").textContent =
+    `${health.status}: ${health.sessions} sessions, ${health.workers} workers`;
+  const { sessions } = await api("/v1/sessions");
+  const body = document.querySelector("#sessions tbody");
+  body.replaceChildren();
+  for (const s of sessions) {
+    const row = document.createElement("tr");
+    row.dataset.session = s.session_id;
+    row.classList.toggle("selected", s.session_id === selected);
+    cell(row, s.session_id.slice(0, 12));
+    cell(row, s.worker);
+    cell(row, s.frames);
+    cell(row, s.streams);
+    cell(row, s.idle_s.toFixed(1));
+    cell(row, s.transports.join(", "));
+    row.addEventListener("click", () => select(s.session_id));
+    body.appendChild(row);
+  }
+  document.getElementById("no-sessions").hidden = sessions.length > 0;
+  if (selected && !sessions.some((s) => s.session_id === selected)) {
+    document.getElementById("shot-summary").textContent = "the session has ended";
+  }
+}
+
+function select(sessionId) {
+  selected = sessionId;
+  document.getElementById("session-panel").hidden = false;
+  document.getElementById("session-id").textContent = sessionId;
+  document.getElementById("style-result").textContent = "";
+  for (const row of document.querySelectorAll("#sessions tbody tr")) {
+    row.classList.toggle("selected", row.dataset.session === sessionId);
+  }
+  refreshSession();
+}
+
+async function refreshSession() {
+  if (!selected) return;
+  let detail;
+  try {
+    detail = await api(`/v1/sessions/${encodeURIComponent(selected)}`);
+  } catch (error) {
+    return;  // closed or reclaimed: the list says so
+  }
+  drawTopView(detail.frames);
+  drawTimeline(detail.frames);
+  showWhy(detail.frames);
+  showStyle(detail.style);
+}
+
+function bounds(frames) {
+  const xs = [], zs = [];
+  for (const f of frames) {
+    xs.push(f.camera[0]); zs.push(f.camera[2]);
+    for (const t of f.targets) { xs.push(t[0]); zs.push(t[2]); }
+  }
+  return { x0: Math.min(...xs) - TOP_VIEW_MARGIN_M, x1: Math.max(...xs) + TOP_VIEW_MARGIN_M,
+           z0: Math.min(...zs) - TOP_VIEW_MARGIN_M, z1: Math.max(...zs) + TOP_VIEW_MARGIN_M };
+}
+
+function drawTopView(frames) {
+  const canvas = document.getElementById("topview");
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  if (!frames.length) return;
+  const b = bounds(frames);
+  const scale = Math.min(canvas.width / (b.x1 - b.x0), canvas.height / (b.z1 - b.z0));
+  const at = (p) => [(p[0] - b.x0) * scale, (p[2] - b.z0) * scale];
+  const trail = (points, colour) => {
+    g.strokeStyle = colour;
+    g.beginPath();
+    points.forEach((p, i) => (i ? g.lineTo(...at(p)) : g.moveTo(...at(p))));
+    g.stroke();
+  };
+  const targetCount = frames[frames.length - 1].targets.length;
+  for (let k = 0; k < targetCount; k++) {
+    trail(frames.filter((f) => f.targets.length > k).map((f) => f.targets[k]), "#e07b00");
+  }
+  g.fillStyle = "#e07b00";                       // where each target is now
+  for (const t of frames[frames.length - 1].targets) {
+    g.beginPath();
+    g.arc(...at(t), 4, 0, 2 * Math.PI);
+    g.fill();
+  }
+  trail(frames.map((f) => f.camera), "#2a62c9");
+  g.strokeStyle = "#c62828";
+  for (const f of frames.filter((f) => f.cut)) {
+    g.beginPath();
+    g.arc(...at(f.camera), 6, 0, 2 * Math.PI);
+    g.stroke();
+  }
+  const last = frames[frames.length - 1];
+  const [cx, cz] = at(last.camera);
+  g.strokeStyle = "#2a62c9";
+  g.lineWidth = 2;
+  g.beginPath();
+  g.moveTo(cx, cz);
+  g.lineTo(cx + last.forward[0] * 30, cz + last.forward[2] * 30);
+  g.stroke();
+  g.lineWidth = 1;
+}
+
+function drawTimeline(frames) {
+  const canvas = document.getElementById("timeline");
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  if (!frames.length) return;
+  const w = canvas.width / frames.length, shotBand = 40, visTop = 55, visHeight = 60;
+  frames.forEach((f, i) => {
+    g.fillStyle = f.shot_id % 2 ? "#9bb9e8" : "#c9d9f2";   // alternate shades, one per shot
+    g.fillRect(i * w, 0, Math.ceil(w), shotBand);
+    if (f.cut) {
+      g.fillStyle = "#c62828";
+      g.fillRect(i * w, 0, Math.max(2, w), shotBand);
+    }
+  });
+  g.strokeStyle = "#1b7f3b";
+  g.beginPath();
+  frames.forEach((f, i) => {
+    const y = visTop + (1 - f.visibility) * visHeight;
+    i ? g.lineTo(i * w, y) : g.moveTo(0, y);
+  });
+  g.stroke();
+  const shots = new Set(frames.map((f) => f.shot_id));
+  const cuts = frames.filter((f) => f.cut).length;
+  const visible = frames.reduce((s, f) => s + f.visibility, 0) / frames.length;
+  document.getElementById("shot-summary").textContent =
+    `frames ${frames[0].frame}–${frames[frames.length - 1].frame}: ${shots.size} shots, ` +
+    `${cuts} cuts, mean visibility ${visible.toFixed(2)}, shot ${frames[frames.length - 1].shot_id} now`;
+}
+
+function showWhy(frames) {
+  const list = document.getElementById("why");
+  list.replaceChildren();
+  if (!frames.length) return;
+  const last = frames[frames.length - 1];
+  const add = (text) => {
+    const li = document.createElement("li");
+    li.textContent = text;
+    list.appendChild(li);
+  };
+  add(`frame ${last.frame}: ${last.flags.length ? last.flags.join(", ") : "on its preferred path (no flag)"}`);
+  for (const f of frames.filter((f) => f.cut).reverse()) {
+    add(`cut at frame ${f.frame} to shot ${f.shot_id}: ${f.flags.length ? f.flags.join(", ") : "new shot"}`);
+  }
+}
+
+// -- style ----------------------------------------------------------------------------------
+
+function showStyle(style) {
+  currentStyle = style;
+  const text = JSON.stringify(style, null, 1);
+  document.getElementById("style-json").textContent = text;
+  if (styleSentBySession[selected] === text) return;   // do not overwrite what the user is editing
+  styleSentBySession[selected] = text;
+  const form = document.getElementById("style-form");
+  const tracks = style.rig === "RIG_TRACKS";
+  document.getElementById("toric-fields").disabled = tracks;
+  document.getElementById("tracks-fields").disabled = !tracks;
+  form.visibility.value = style.visibility && style.visibility !== "VISIBILITY_MODE_UNSPECIFIED"
+    ? style.visibility : "FRAMING_ONLY";
+  for (const name of ["preferredPhiDeg", "preferredThetaRatio", "responseTimeS", "maxSpeedMS"]) {
+    form[name].value = style[name] ?? "";
+  }
+  form.shotSize.value = style.shotSize || "SHOT_SIZE_LONG";
+  form.movement.value = style.movement || "MOVEMENT_DYNAMIC_WITH_CUTS";
+}
+
+async function applyStyle(event) {
+  event.preventDefault();
+  const form = event.target;
+  const style = { ...currentStyle };   // PUT replaces the whole style: start from the session's
+  if (style.rig === "RIG_TRACKS") {
+    style.shotSize = form.shotSize.value;
+    style.movement = form.movement.value;
+  } else {
+    style.visibility = form.visibility.value;
+    for (const name of ["preferredPhiDeg", "preferredThetaRatio", "responseTimeS", "maxSpeedMS"]) {
+      if (form[name].value === "") delete style[name];
+      else style[name] = Number(form[name].value);
+    }
+  }
+  const result = document.getElementById("style-result");
+  try {
+    await api(`/v1/sessions/${encodeURIComponent(selected)}/style`, {
+      method: "PUT", headers: { "Content-Type": "application/json" }, body: JSON.stringify(style),
+    });
+    result.className = "ok";
+    result.textContent = "applied";
+    delete styleSentBySession[selected];
+    refreshSession();
+  } catch (error) {
+    result.className = "error";
+    result.textContent = error.message;
+  }
+}
+
+// -- overview jobs --------------------------------------------------------------------------
+
+async function refreshJobs() {
+  const { jobs } = await api("/v1/overview-jobs?limit=50");
+  const body = document.querySelector("#jobs tbody");
+  body.replaceChildren();
+  for (const j of jobs) {
+    const row = document.createElement("tr");
+    row.dataset.job = j.id;
+    cell(row, j.id.slice(0, 12));
+    cell(row, j.file_name);
+    cell(row, j.frames);
+    cell(row, j.error ? `${j.status}: ${j.error}` : j.status).dataset.status = j.status;
+    cell(row, `${Math.round(j.progress * 100)}%`);
+    const result = cell(row, "");
+    if (j.status === "succeeded") {
+      const view = document.createElement("button");
+      view.textContent = "view";
+      view.addEventListener("click", () => showJob(j.id));
+      result.appendChild(view);
+    }
+    body.appendChild(row);
+  }
+}
+
+function showJob(jobId) {
+  document.getElementById("job-view").hidden = false;
+  document.getElementById("job-video").src = `/v1/overview-jobs/${jobId}/preview.mp4`;
+  document.getElementById("job-sheet").src = `/v1/overview-jobs/${jobId}/contact-sheet.png`;
+}
+
+async function submitOverview(event) {
+  event.preventDefault();
+  const result = document.getElementById("overview-result");
+  try {
+    const job = await api("/v1/overview-jobs", { method: "POST", body: new FormData(event.target) });
+    result.className = "ok";
+    result.textContent = `job ${job.id} ${job.status}`;
+    refreshJobs();
+  } catch (error) {
+    result.className = "error";
+    result.textContent = error.message;
+  }
+}
+
+// -- start ----------------------------------------------------------------------------------
+
+function every(ms, task) {
+  const run = () => task().catch((error) => {
+    document.getElementById("health").textContent = `unreachable: ${error.message}`;
+  });
+  run();
+  setInterval(run, ms);
+}
+
+document.getElementById("style-form").addEventListener("submit", applyStyle);
+document.getElementById("overview-form").addEventListener("submit", submitOverview);
+every(POLL_SESSIONS_MS, refreshSessions);
+every(POLL_SESSIONS_MS, refreshJobs);
+every(POLL_SESSION_MS, refreshSession);

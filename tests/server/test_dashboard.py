@@ -1,0 +1,118 @@
+"""The dashboard in a real browser (Debian's Chromium, driven by Playwright) against a real server:
+a director finds a streaming session, sees its frames, shots and why the camera moved, changes its
+style live (and the streaming client gets the new style on its next frame), sees a refused style's
+reason, and submits a motion overview job, then watches its preview and contact sheet.
+
+Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
+with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+from camdirector.v1 import director_pb2 as pb
+from tests.server.wire_client import GrpcRaw, two_target_request, walk
+
+playwright = pytest.importorskip("playwright.sync_api")
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+TIMEOUT_MS = 20_000
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if CHROMIUM is None:
+        if os.environ.get("CAMDIRECTOR_REQUIRE_BROWSER") == "1":
+            pytest.fail("Chromium is required (CAMDIRECTOR_REQUIRE_BROWSER=1): scripts/system-deps.sh installs it as root")
+        pytest.skip("no Chromium here: `make test` installs Debian's chromium when run as root")
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True)
+        yield browser
+        browser.close()
+
+
+@pytest.fixture
+def page(browser, server):
+    context = browser.new_context()
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(f"http://{server.http}/")                     # redirected to /dashboard/
+    yield page
+    context.close()
+    assert not errors, f"the page raised: {errors}"
+
+
+def canvas_has_drawing(page, selector: str) -> bool:
+    return page.eval_on_selector(selector, """c => {
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        for (let i = 3; i < d.length; i += 4) if (d[i] > 0) return true;
+        return false; }""")
+
+
+def test_watch_a_session_and_change_its_style_live(server, page):
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", two_target_request(seed=5, style=pb.Style(
+        visibility=pb.FRAMING_ONLY))).session_id
+    raw.stream(list(walk(session_id, 90)))
+    try:
+        assert page.url.endswith("/dashboard/")
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        playwright.expect(page.locator("#session-id")).to_have_text(session_id)
+        playwright.expect(page.locator("#shot-summary")).to_contain_text("frames 1–90: 1 shots, 1 cuts")
+        playwright.expect(page.locator("#why li").first).to_contain_text("frame 90")
+        playwright.expect(page.locator("#why li").last).to_contain_text("cut at frame 1 to shot")
+        assert canvas_has_drawing(page, "#topview") and canvas_has_drawing(page, "#timeline")
+        playwright.expect(page.locator("#style-json")).to_contain_text('"visibility": "FRAMING_ONLY"')
+
+        page.select_option('#style-form select[name="visibility"]', "RAYCAST")
+        page.fill('#style-form input[name="preferredPhiDeg"]', "50")
+        page.click("#style-form button[type=submit]")
+        playwright.expect(page.locator("#style-result")).to_have_text("applied")
+        after = raw.stream(list(walk(session_id, 10, start_frame=91)))
+        assert all(any(f.startswith("search_") for f in u.diagnostics.flags) for u in after)
+        playwright.expect(page.locator("#why li").first).to_contain_text("search_")
+        playwright.expect(page.locator("#style-json")).to_contain_text('"preferredPhiDeg": 50')
+
+        page.fill('#style-form input[name="preferredPhiDeg"]', "500")      # the form's own limit holds it back
+        page.click("#style-form button[type=submit]")
+        assert page.eval_on_selector('#style-form input[name="preferredPhiDeg"]', "i => !i.validity.valid")
+        page.fill('#style-form input[name="preferredPhiDeg"]', "50")
+        page.fill('#style-form input[name="maxSpeedMS"]', "0")              # the server refuses it
+        page.click("#style-form button[type=submit]")
+        playwright.expect(page.locator("#style-result")).to_contain_text("422")
+        playwright.expect(page.locator("#style-result")).to_contain_text("max_speed_m_s")
+        assert page.get_attribute("#style-result", "class") == "error"
+        more = raw.stream(list(walk(session_id, 3, start_frame=101)))     # the session goes on as it was
+        assert [u.frame for u in more] == [101, 102, 103] and all(
+            any(f.startswith("search_") for f in u.diagnostics.flags) for u in more)
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+    playwright.expect(page.locator("#shot-summary")).to_have_text("the session has ended")
+
+
+def test_submit_an_overview_job_and_watch_its_preview(server, page, shared_data, tmp_path):
+    page.set_input_files('#overview-form input[name="file"]',
+                         str(shared_data / "mocap/bandai_namco/dataset-1_run_active_001.bvh"))
+    page.click("#overview-form button[type=submit]")
+    playwright.expect(page.locator("#overview-result")).to_contain_text("queued")
+    job_id = page.text_content("#overview-result").split()[1]
+    row = page.locator(f'#jobs tbody tr[data-job="{job_id}"]')
+    playwright.expect(row.locator("td[data-status]")).to_have_text("succeeded", timeout=120_000)
+    playwright.expect(row).to_contain_text("dataset-1_run_active_001.bvh")
+    row.locator("button").click()
+    page.wait_for_function("document.querySelector('#job-sheet').naturalWidth > 0")
+    page.wait_for_function("document.querySelector('#job-video').readyState >= 1")  # metadata of the H.264 file
+    assert page.eval_on_selector("#job-video", "v => v.duration") == pytest.approx(72 / 30, abs=0.1)
+
+    bad = tmp_path / "notes.bvh"
+    bad.write_text("this is not a motion capture file\n")
+    page.set_input_files('#overview-form input[name="file"]', str(bad))
+    page.click("#overview-form button[type=submit]")
+    playwright.expect(page.locator("#overview-result")).to_contain_text("400")
+    assert page.get_attribute("#overview-result", "class") == "error"
