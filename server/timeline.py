@@ -21,14 +21,15 @@ TIMELINE_FRAMES = 600   # frames kept per session: 10 s at 60 Hz
 
 @dataclass(frozen=True)
 class TimelineFrame:
-    """One answered frame. camera_world, forward_world: (3,) metres and unit view direction;
-    targets_world: (3,) aim point per target; compute_ms: the server's time for the frame."""
+    """One answered frame, kept as computed (the JSON is made only when someone asks).
+    camera_world: (3,) metres; rotation_xyzw: (4,) camera-to-world; targets_world: (k, 3) aim
+    point per target; compute_ms: the server's time for the frame."""
 
     frame: int
     time_s: float
-    camera_world: tuple[float, float, float]
-    forward_world: tuple[float, float, float]
-    targets_world: tuple[tuple[float, float, float], ...]
+    camera_world: np.ndarray
+    rotation_xyzw: np.ndarray
+    targets_world: np.ndarray
     cut: bool
     shot_id: int
     visibility: float
@@ -36,14 +37,15 @@ class TimelineFrame:
     compute_ms: float
 
     def as_json(self) -> dict:
-        return {"frame": self.frame, "time_s": self.time_s, "camera": list(self.camera_world),
-                "forward": list(self.forward_world), "targets": [list(t) for t in self.targets_world],
-                "cut": self.cut, "shot_id": self.shot_id, "visibility": self.visibility,
-                "flags": list(self.flags), "compute_ms": self.compute_ms}
+        forward = -quat_to_matrix(self.rotation_xyzw)[:, 2]   # the camera looks down its local -Z
+        return {"frame": self.frame, "time_s": self.time_s, "camera": _rounded(self.camera_world),
+                "forward": _rounded(forward), "targets": [_rounded(t) for t in self.targets_world],
+                "cut": self.cut, "shot_id": self.shot_id, "visibility": round(self.visibility, 4),
+                "flags": list(self.flags), "compute_ms": round(self.compute_ms, 3)}
 
 
-def _point(v: np.ndarray) -> tuple[float, float, float]:
-    return tuple(round(float(c), 4) for c in v)
+def _rounded(v: np.ndarray) -> list[float]:
+    return [round(float(c), 4) for c in v]
 
 
 class Timeline:
@@ -53,13 +55,13 @@ class Timeline:
         self._frames: deque[TimelineFrame] = deque(maxlen=capacity)
 
     def add(self, state: FrameState, compute_ms: float) -> None:
+        """Costs a few microseconds a frame: copies, no conversion."""
         pose = state.pose
-        forward = -quat_to_matrix(pose.rotation_xyzw)[:, 2]   # the camera looks down its local -Z
         self._frames.append(TimelineFrame(
-            frame=int(state.frame), time_s=float(state.time_s), camera_world=_point(pose.position_world),
-            forward_world=_point(forward), targets_world=tuple(_point(p) for p in state.aim_points_world),
-            cut=bool(state.cut), shot_id=int(state.shot_id), visibility=round(float(state.visibility), 4),
-            flags=tuple(state.flags), compute_ms=round(float(compute_ms), 3)))
+            frame=int(state.frame), time_s=float(state.time_s), camera_world=pose.position_world.copy(),
+            rotation_xyzw=pose.rotation_xyzw.copy(), targets_world=np.array(state.aim_points_world),
+            cut=bool(state.cut), shot_id=int(state.shot_id), visibility=float(state.visibility),
+            flags=tuple(state.flags), compute_ms=float(compute_ms)))
 
     def as_json(self, last: int | None = None) -> list[dict]:
         """The newest `last` frames (all when None), oldest first."""
