@@ -156,6 +156,11 @@ class SessionRouter:
                                        b"" if last is None else str(int(last)).encode())
         return {"session": self._describe(session_id, entry, self.clock()), **json.loads(body)}
 
+    async def anticipation_png(self, session_id: str) -> bytes:
+        """The session's A-map as a PNG (sessions.py); NOT_FOUND, or FAILED_PRECONDITION without one."""
+        body, _ = await self.pool.call(self._entry(session_id).slot, "amap", session_id, b"")
+        return body
+
     def describe(self) -> list[dict]:
         now = self.clock()
         return [self._describe(sid, e, now) for sid, e in self.sessions.items()]

@@ -2,6 +2,7 @@
 
     GET /v1/sessions                      {"sessions": [summary, ...]}
     GET /v1/sessions/{id}?last=N          {"session": summary, "style": Style, "frames": [...]}
+    GET /v1/sessions/{id}/amap.png        the map modes' anticipation map around the camera now
     PUT /v1/sessions/{id}/style           body: a camdirector.v1.Style in protobuf's JSON mapping
                                           -> {"session_id", "style"}; as UpdateStyle on the wire
 
@@ -20,7 +21,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 import grpc
-from fastapi import APIRouter, Body, HTTPException, Query
+from fastapi import APIRouter, Body, HTTPException, Query, Response
 from google.protobuf import json_format
 from pydantic import BaseModel, Field
 
@@ -96,6 +97,18 @@ def build_session_router(router: SessionRouter) -> APIRouter:
             return await router.timeline(session_id, last)
         except DirectorError as exc:
             raise http_error(exc) from None
+
+    @routes.get("/{session_id}/amap.png", response_class=Response, responses={
+        200: {"content": {"image/png": {}}}, 404: {"description": "no such session"},
+        409: {"description": "the session's style builds no anticipation map"}})
+    async def get_anticipation_map(session_id: str) -> Response:
+        """The occlusion anticipation map around the camera now (map_view.py): rows theta,
+        columns phi, white visible to red occluded, the camera crossed in blue."""
+        try:
+            png = await router.anticipation_png(session_id)
+        except DirectorError as exc:
+            raise http_error(exc) from None
+        return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
 
     @routes.put("/{session_id}/style", response_model=StyleChanged, responses={
         400: {"description": "the body cannot be read as JSON"},

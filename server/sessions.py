@@ -13,7 +13,8 @@ from typing import Callable
 from google.protobuf import json_format
 
 from camdirector.server import wire
-from camdirector.server.errors import DirectorError, internal, invalid, not_found
+from camdirector.server.errors import DirectorError, internal, invalid, not_found, precondition
+from camdirector.server.map_view import anticipation_png
 from camdirector.server.recording import RecordingWriter
 from camdirector.server.session import Session
 from camdirector.server.settings import ServerSettings
@@ -101,6 +102,17 @@ class SessionTable:
         return {"style": json_format.MessageToDict(self.style_msgs[session_id]),
                 "frames": self.timelines[session_id].as_json(last)}
 
+    def anticipation_png(self, session_id: str) -> bytes:
+        """The session's A-map as a PNG (map_view.py); FAILED_PRECONDITION when it has none (not
+        a map mode, the tracks rig, or no frame since the maps were asked for)."""
+        session = self._get(session_id)
+        found = session.rig.anticipation_map(session.last_state)
+        if found is None:
+            raise precondition(f"session {session_id} has no anticipation map: its style's visibility is "
+                               f"{session.style.visibility.name} on the {session.style.rig.name} rig, and only "
+                               "ANTICIPATION and NO_ANTICIPATION build one (after their first frame)")
+        return anticipation_png(*found)
+
     def close(self, session_id: str) -> pb.CloseSessionResponse:
         session = self._get(session_id)
         self.drop(session_id)
@@ -134,6 +146,8 @@ class SessionTable:
             if op == "timeline":   # payload: the number of frames wanted, ASCII; empty for all
                 last = int(payload) if payload else None
                 return json.dumps(self.timeline(session_id, last)).encode(), None
+            if op == "amap":
+                return self.anticipation_png(session_id), None
             if op == "drop":
                 self.drop(session_id)
                 return b"", None

@@ -70,6 +70,16 @@ class ToricRig:
         elif style.visibility in MAP_MODES:
             self._build_maps()
 
+    def anticipation_map(self, state: FrameState | None) -> tuple[np.ndarray, tuple[float, float]] | None:
+        """The A-map (n, n), rows theta and columns phi, and the texel (i, j) of the camera of
+        `state`, the last answered frame; None unless the style is a map mode and the maps have
+        been computed once."""
+        if state is None or self.maps is None or self.style.visibility not in MAP_MODES \
+                or self.maps.amap.a_map is None:
+            return None
+        i, j = self.maps.amap.window.texel_coords(state.theta, state.phi)
+        return self.maps.amap.a_map, (float(i), float(j))
+
     def _build_maps(self) -> None:
         self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 

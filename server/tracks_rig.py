@@ -114,6 +114,10 @@ class TracksRig:
         size cuts once its framing has been off for the cutting strategy's 200 ms)."""
         self.director.set_style(director_style(style))
 
+    def anticipation_map(self, state: FrameState | None) -> None:
+        """None: the tracks rig has no occlusion maps (it cuts away from occlusion)."""
+        return None
+
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
         """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags and stage_ms."""

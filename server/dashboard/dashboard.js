@@ -6,6 +6,8 @@ const POLL_SESSIONS_MS = 1000;   // the session list and the jobs
 const POLL_SESSION_MS = 500;     // the selected session's frames
 const TOP_VIEW_MARGIN_M = 2.0;   // space around the trails in the top view, m
 
+const MAP_MODES = ["ANTICIPATION", "NO_ANTICIPATION"];   // the styles that build the map
+
 let selected = null;             // the selected session id
 let styleSentBySession = {};     // session id -> the style the form was last filled from (JSON text)
 let currentStyle = {};           // the selected session's style, as the server reported it
@@ -81,6 +83,16 @@ async function refreshSession() {
   drawTimeline(detail.frames);
   showWhy(detail.frames);
   showStyle(detail.style);
+  showAnticipationMap(detail.style, detail.frames);
+}
+
+function showAnticipationMap(style, frames) {
+  const mapMode = MAP_MODES.includes(style.visibility) && frames.length > 0;
+  document.getElementById("amap-figure").hidden = !mapMode;
+  if (mapMode) {   // the frame number makes each poll fetch the map anew
+    document.getElementById("amap").src = `/v1/sessions/${encodeURIComponent(selected)}/amap.png` +
+      `?frame=${frames[frames.length - 1].frame}`;
+  }
 }
 
 function bounds(frames) {

@@ -1,7 +1,7 @@
 """The dashboard in a real browser (Debian's Chromium, driven by Playwright) against a real server:
 a director finds a streaming session, sees its frames, shots and why the camera moved, changes its
 style live (and the streaming client gets the new style on its next frame), sees a refused style's
-reason, and submits a motion overview job, then watches its preview and contact sheet.
+reason and, in a map mode, the anticipation map, and submits a motion overview job, then watches its preview and contact sheet.
 
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
@@ -90,6 +90,15 @@ def test_watch_a_session_and_change_its_style_live(server, page):
         more = raw.stream(list(walk(session_id, 3, start_frame=101)))     # the session goes on as it was
         assert [u.frame for u in more] == [101, 102, 103] and all(
             any(f.startswith("search_") for f in u.diagnostics.flags) for u in more)
+
+        playwright.expect(page.locator("#amap-figure")).to_be_hidden()      # RAYCAST builds no map
+        page.fill('#style-form input[name="maxSpeedMS"]', "")
+        page.select_option('#style-form select[name="visibility"]', "ANTICIPATION")
+        page.click("#style-form button[type=submit]")
+        playwright.expect(page.locator("#style-result")).to_have_text("applied")
+        raw.stream(list(walk(session_id, 10, start_frame=104)))
+        playwright.expect(page.locator("#amap-figure")).to_be_visible()
+        page.wait_for_function("document.querySelector('#amap').naturalWidth === 256")  # 64 texels, 4 px each
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()

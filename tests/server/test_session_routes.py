@@ -3,9 +3,12 @@ shows its frames, cuts and flags; a style PUT over HTTP changes the streaming se
 UpdateStyle does; every kind of bad request answers its 4xx and the session keeps working."""
 from __future__ import annotations
 
+import io
+
 import httpx
 import numpy as np
 import pytest
+from PIL import Image
 
 from camdirector.server.timeline import TIMELINE_FRAMES
 from camdirector.v1 import director_pb2 as pb
@@ -86,3 +89,25 @@ def test_unknown_sessions_and_bad_queries(streamed):
         assert http.put(f"/v1/sessions/{session_id}/style", json=body).status_code == 422
     assert http.put(f"/v1/sessions/{session_id}/style", content=b"{not json",
                     headers={"content-type": "application/json"}).status_code == 422
+
+
+def test_the_anticipation_map_of_a_map_mode_session(server, streamed):
+    _, http, framing_only, _ = streamed
+    refused = http.get(f"/v1/sessions/{framing_only}/amap.png")
+    assert refused.status_code == 409 and "FRAMING_ONLY" in refused.json()["detail"]
+    assert http.get("/v1/sessions/nope/amap.png").status_code == 404
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", two_target_request(seed=4, style=pb.Style(
+        visibility=pb.ANTICIPATION, map_resolution=32))).session_id
+    try:
+        raw.stream(list(walk(session_id, 20)))
+        reply = http.get(f"/v1/sessions/{session_id}/amap.png")
+        assert reply.status_code == 200 and reply.headers["content-type"] == "image/png"
+        image = np.asarray(Image.open(io.BytesIO(reply.content)).convert("RGB"))
+        assert image.shape == (32 * 4, 32 * 4, 3)
+        assert (image == (30, 80, 220)).all(axis=-1).sum() >= 20          # the camera's cross is in the window
+        red = image[..., 1] < 128                                           # predicted occluded
+        assert red.any() and not red.all(), "the pillar and the cart occlude part of the window, not all"
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
