@@ -4,12 +4,13 @@ when an abandoned one is reclaimed. Both transports call this one object.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import time
 import uuid
 from dataclasses import dataclass, field
 from typing import Callable
+
+import orjson
 
 from camdirector.server.errors import DirectorError, exhausted, invalid, not_found
 from camdirector.server.metrics import Metrics
@@ -154,7 +155,7 @@ class SessionRouter:
         entry = self._entry(session_id)
         body, _ = await self.pool.call(entry.slot, "timeline", session_id,
                                        b"" if last is None else str(int(last)).encode())
-        return {"session": self._describe(session_id, entry, self.clock()), **json.loads(body)}
+        return {"session": self._describe(session_id, entry, self.clock()), **orjson.loads(body)}
 
     async def anticipation_png(self, session_id: str) -> bytes:
         """The session's A-map as a PNG (sessions.py); NOT_FOUND, or FAILED_PRECONDITION without one."""

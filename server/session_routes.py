@@ -21,6 +21,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 import grpc
+import orjson
 from fastapi import APIRouter, Body, HTTPException, Query, Response
 from google.protobuf import json_format
 from pydantic import BaseModel, Field
@@ -91,12 +92,15 @@ def build_session_router(router: SessionRouter) -> APIRouter:
     async def get_session(
         session_id: str,
         last: Annotated[int, Query(ge=1, le=TIMELINE_FRAMES, description="newest frames wanted")] = TIMELINE_FRAMES,
-    ) -> dict:
+    ) -> Response:
         """One session: summary, style, and its newest frames with why the camera moved."""
         try:
-            return await router.timeline(session_id, last)
+            detail = await router.timeline(session_id, last)
         except DirectorError as exc:
             raise http_error(exc) from None
+        # Sent as is: validating 600 frames against the model would hold the front's event loop,
+        # which routes every session's frames, for milliseconds.
+        return Response(orjson.dumps(detail), media_type="application/json")
 
     @routes.get("/{session_id}/amap.png", response_class=Response, responses={
         200: {"content": {"image/png": {}}}, 404: {"description": "no such session"},

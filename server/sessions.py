@@ -5,7 +5,6 @@ worker pool routes a request by session id and calls `handle_bytes`.
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -19,6 +18,7 @@ from camdirector.server.recording import RecordingWriter
 from camdirector.server.session import Session
 from camdirector.server.settings import ServerSettings
 from camdirector.server.timeline import Timeline
+from camdirector.server.timeline import dumps as timeline_dumps
 from camdirector.server.tracks_rig import LevelCache
 from camdirector.v1 import director_pb2 as pb
 
@@ -145,7 +145,7 @@ class SessionTable:
                 return self.close(session_id).SerializeToString(), None
             if op == "timeline":   # payload: the number of frames wanted, ASCII; empty for all
                 last = int(payload) if payload else None
-                return json.dumps(self.timeline(session_id, last)).encode(), None
+                return timeline_dumps(self.timeline(session_id, last)), None
             if op == "amap":
                 return self.anticipation_png(session_id), None
             if op == "drop":

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import numpy as np
+import orjson
 import pytest
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.server.pipeline import FrameState
-from camdirector.server.timeline import Timeline
+from camdirector.server.timeline import Timeline, dumps
 
 
 def state(frame: int, yaw_rad: float = 0.0, cut: bool = False) -> FrameState:
@@ -23,6 +24,7 @@ def test_keeps_the_newest_frames_oldest_first():
     for frame in range(1, 6):
         timeline.add(state(frame), compute_ms=0.25)
     assert [f["frame"] for f in timeline.as_json()] == [3, 4, 5]
+    assert Timeline().as_json() == []
     assert [f["frame"] for f in timeline.as_json(last=2)] == [4, 5]
 
 
@@ -32,7 +34,7 @@ def test_a_frame_as_json():
     timeline.add(s, compute_ms=0.125)
     s.flags.append("later")                       # the state is not kept by reference
     s.pose.position_world[0] = 99.0
-    (frame,) = timeline.as_json()
+    (frame,) = orjson.loads(dumps(timeline.as_json()))
     assert frame == {"frame": 12, "time_s": 0.2, "camera": [12.0, 1.5, -2.0],
                      "forward": pytest.approx([-1.0, 0.0, 0.0], abs=1e-4),   # -Z turned 90 deg about +Y
                      "targets": [[0.0, 1.0, 12.0]], "cut": True, "shot_id": 1, "visibility": 0.5,
