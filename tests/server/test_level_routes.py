@@ -80,6 +80,22 @@ def test_a_level_added_over_rest_serves_a_session(level_server, corridor_level):
     session_id = raw.call("CreateSession", tracks_request("corridor", START)).session_id
     times, feet = corridor_walk(3.0)
     check_directed(raw.stream(actor_frames(session_id, times, feet)), feet)
+    # the session over REST, as the dashboard sees and directs it
+    http = level_server.http_client
+    detail = http.get(f"/v1/sessions/{session_id}", params={"last": 10}).json()
+    assert detail["style"]["rig"] == "RIG_TRACKS" and len(detail["frames"]) == 10
+    assert len(detail["frames"][-1]["targets"]) == 1
+    refused = http.put(f"/v1/sessions/{session_id}/style", json={"shotSize": "SHOT_SIZE_MEDIUM"})
+    assert refused.status_code == 409 and "RIG_TRACKS" in refused.json()["detail"]   # the rig cannot change
+    assert http.get(f"/v1/sessions/{session_id}/amap.png").status_code == 409       # no maps on tracks
+    changed = http.put(f"/v1/sessions/{session_id}/style",
+                       json={"rig": "RIG_TRACKS", "shotSize": "SHOT_SIZE_MEDIUM"})
+    assert changed.status_code == 200, changed.text
+    more_times, more_feet = corridor_walk(1.0)
+    after = raw.stream(actor_frames(session_id, more_times + times[-1] + 1 / 30, more_feet,
+                                    start_frame=len(times) + 1))
+    assert len(after) == len(more_times) and not any(u.stale for u in after)
+    assert http.get(f"/v1/sessions/{session_id}").json()["style"]["shotSize"] == "SHOT_SIZE_MEDIUM"
     raw.close()
 
 
