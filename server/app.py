@@ -25,7 +25,11 @@ log = logging.getLogger("camdirector.serve")
 
 def _bind_http(address: str) -> socket.socket:
     host, _, port = address.rpartition(":")
-    sock = socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET)
+    # IPPROTO_TCP spelled out: asyncio turns Nagle off (TCP_NODELAY) on accepted connections only
+    # when the listening socket says it is TCP; with proto 0 every answer after the first on a
+    # kept-alive connection waited about 40 ms for the client's delayed ACK.
+    sock = socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET, socket.SOCK_STREAM,
+                         socket.IPPROTO_TCP)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host.strip("[]"), int(port)))
     sock.listen(2048)  # before the ready line: connections queue until uvicorn accepts them
