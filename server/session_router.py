@@ -148,13 +148,13 @@ class SessionRouter:
         self.metrics.sessions.set(len(self.sessions))
         log.error("worker %d lost %d sessions", slot, len(lost))
 
-    async def timeline(self, session_id: str, last: int | None = None) -> dict:
-        """The session's summary (as `describe`), style and newest `last` frames (sessions.py);
-        NOT_FOUND for an unknown id. Not a request of the session's client: it does not keep
-        the session alive."""
+    async def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
+        """The session's summary (as `describe`), style and newest `last` frames after
+        `after_frame` (sessions.py); NOT_FOUND for an unknown id. Not a request of the session's
+        client: it does not keep the session alive."""
         entry = self._entry(session_id)
         body, _ = await self.pool.call(entry.slot, "timeline", session_id,
-                                       b"" if last is None else str(int(last)).encode())
+                                       orjson.dumps({"last": last, "after_frame": after_frame}))
         return {"session": self._describe(session_id, entry, self.clock()), **orjson.loads(body)}
 
     async def anticipation_png(self, session_id: str) -> bytes:

@@ -1,7 +1,7 @@
 """REST routes of the live sessions, for the dashboard and operations tools.
 
     GET /v1/sessions                      {"sessions": [summary, ...]}
-    GET /v1/sessions/{id}?last=N          {"session": summary, "style": Style, "frames": [...]}
+    GET /v1/sessions/{id}?last=N&after_frame=F   {"session": summary, "style": Style, "frames": [...]}
     GET /v1/sessions/{id}/amap.png        the map modes' anticipation map around the camera now
     PUT /v1/sessions/{id}/style           body: a camdirector.v1.Style in protobuf's JSON mapping
                                           -> {"session_id", "style"}; as UpdateStyle on the wire
@@ -92,10 +92,12 @@ def build_session_router(router: SessionRouter) -> APIRouter:
     async def get_session(
         session_id: str,
         last: Annotated[int, Query(ge=1, le=TIMELINE_FRAMES, description="newest frames wanted")] = TIMELINE_FRAMES,
+        after_frame: Annotated[int | None, Query(ge=0, le=2**63 - 1, description=(
+            "only frames numbered above this (a live view asks for what it has not seen)"))] = None,
     ) -> Response:
         """One session: summary, style, and its newest frames with why the camera moved."""
         try:
-            detail = await router.timeline(session_id, last)
+            detail = await router.timeline(session_id, last, after_frame)
         except DirectorError as exc:
             raise http_error(exc) from None
         # Sent as is: validating 600 frames against the model would hold the front's event loop,

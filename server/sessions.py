@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+import orjson
 from google.protobuf import json_format
 
 from camdirector.server import wire
@@ -95,12 +96,12 @@ class SessionTable:
             recorder.write(pb.RecordEntry(style=msg))
         return pb.UpdateStyleResponse()
 
-    def timeline(self, session_id: str, last: int | None = None) -> dict:
+    def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
         """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it)
-        and its newest `last` answered frames (`timeline.py`), oldest first."""
+        and its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first."""
         self._get(session_id)
         return {"style": json_format.MessageToDict(self.style_msgs[session_id]),
-                "frames": self.timelines[session_id].as_json(last)}
+                "frames": self.timelines[session_id].as_json(last, after_frame)}
 
     def anticipation_png(self, session_id: str) -> bytes:
         """The session's A-map as a PNG (map_view.py); FAILED_PRECONDITION when it has none (not
@@ -143,9 +144,9 @@ class SessionTable:
                 return self.update_style(_parse(pb.UpdateStyleRequest, payload)).SerializeToString(), None
             if op == "close":
                 return self.close(session_id).SerializeToString(), None
-            if op == "timeline":   # payload: the number of frames wanted, ASCII; empty for all
-                last = int(payload) if payload else None
-                return timeline_dumps(self.timeline(session_id, last)), None
+            if op == "timeline":   # payload: JSON {"last": n | null, "after_frame": n | null}
+                query = orjson.loads(payload)
+                return timeline_dumps(self.timeline(session_id, query["last"], query["after_frame"])), None
             if op == "amap":
                 return self.anticipation_png(session_id), None
             if op == "drop":

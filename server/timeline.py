@@ -59,12 +59,19 @@ class Timeline:
             cut=bool(state.cut), shot_id=int(state.shot_id), visibility=float(state.visibility),
             flags=tuple(state.flags), compute_ms=float(compute_ms)))
 
-    def as_json(self, last: int | None = None) -> list[dict]:
-        """The newest `last` frames (all when None), oldest first, for `dumps`: frame, time_s,
+    def as_json(self, last: int | None = None, after_frame: int | None = None) -> list[dict]:
+        """The newest `last` frames (all when None) of those after frame number `after_frame`
+        (a live view asks only for what it has not seen), oldest first, for `dumps`: frame, time_s,
         camera, forward (unit), targets, cut, shot_id, visibility, flags, compute_ms; vectors are
         numpy rows rounded to 0.1 mm. Built in bulk, since the worker that answers this also
         answers its sessions' frames (600 frames: about 2 ms with `dumps`, 18 ms as plain dicts and json)."""
-        frames = list(self._frames)[-last:] if last else list(self._frames)
+        frames = list(self._frames)
+        if after_frame is not None:
+            first = len(frames)
+            while first > 0 and frames[first - 1].frame > after_frame:   # frame numbers only grow
+                first -= 1
+            frames = frames[first:]
+        frames = frames[-last:] if last else frames
         if not frames:
             return []
         camera = np.stack([f.camera_world for f in frames]).round(4)

@@ -8,9 +8,12 @@ const TOP_VIEW_MARGIN_M = 2.0;   // space around the trails in the top view, m
 
 const MAP_MODES = ["ANTICIPATION", "NO_ANTICIPATION"];   // the styles that build the map
 
+const TIMELINE_FRAMES = 600;     // frames shown, as many as the server keeps per session
+
 let selected = null;             // the selected session id
 let styleSentBySession = {};     // session id -> the style the form was last filled from (JSON text)
 let currentStyle = {};           // the selected session's style, as the server reported it
+let buffered = { session: null, frames: [] };   // the selected session's frames seen so far
 
 async function api(path, options = {}) {
   const reply = await fetch(path, options);
@@ -72,18 +75,24 @@ function select(sessionId) {
 }
 
 async function refreshSession() {
-  if (!selected) return;
+  const sessionId = selected;
+  if (!sessionId) return;
+  if (buffered.session !== sessionId) buffered = { session: sessionId, frames: [] };
+  const seen = buffered.frames.length ? buffered.frames[buffered.frames.length - 1].frame : null;
   let detail;
-  try {
-    detail = await api(`/v1/sessions/${encodeURIComponent(selected)}`);
+  try {   // only the frames not seen yet: a few dozen a poll instead of 600
+    detail = await api(`/v1/sessions/${encodeURIComponent(sessionId)}` + (seen === null ? "" : `?after_frame=${seen}`));
   } catch (error) {
     return;  // closed or reclaimed: the list says so
   }
-  drawTopView(detail.frames);
-  drawTimeline(detail.frames);
-  showWhy(detail.frames);
+  if (buffered.session !== sessionId) return;   // another session was picked meanwhile
+  buffered.frames = buffered.frames.concat(detail.frames).slice(-TIMELINE_FRAMES);
+  const frames = buffered.frames;
+  drawTopView(frames);
+  drawTimeline(frames);
+  showWhy(frames);
   showStyle(detail.style);
-  showAnticipationMap(detail.style, detail.frames);
+  showAnticipationMap(detail.style, frames);
 }
 
 function showAnticipationMap(style, frames) {

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from load_tests import overview_bench, stream, tracks_bench
+from load_tests import dashboard_bench, overview_bench, stream, tracks_bench
 
 
 def _run(main, tmp_path, *args) -> dict:
@@ -37,3 +37,9 @@ def test_tracks_bench_reports_a_level_against_the_prm(shared_data, tmp_path):
 def test_stream_bench_reports_round_trips(tmp_path):
     result = _run(stream.main, tmp_path, "--transport", "zmq", "--sessions", "1", "--seconds", "1")
     assert result["dropped_frames"] == 0 and not result["errors"]
+
+
+def test_dashboard_bench_reports_watched_against_alone(tmp_path):
+    result = _run(dashboard_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1")
+    assert result["alone"]["dropped_frames"] == result["watched"]["dropped_frames"] == 0
+    assert result["watched"]["detail_requests"] >= 1 and set(result["rtt_ratio_watched_vs_alone"]) == {"p50", "p99"}

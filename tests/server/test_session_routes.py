@@ -44,6 +44,9 @@ def test_a_session_shows_its_frames_and_style(streamed):
     assert frames[0]["cut"]                           # the first frame opens the first shot
     assert [f["frame"] for f in http.get(f"/v1/sessions/{session_id}", params={"last": 5}).json()["frames"]] \
         == list(range(16, 21))
+    newer = http.get(f"/v1/sessions/{session_id}", params={"after_frame": 17}).json()["frames"]
+    assert [f["frame"] for f in newer] == [18, 19, 20]                 # what a live view has not seen
+    assert http.get(f"/v1/sessions/{session_id}", params={"after_frame": 20}).json()["frames"] == []
     listed = http.get("/v1/sessions").json()["sessions"]
     assert session_id in {s["session_id"] for s in listed}
 
@@ -83,8 +86,9 @@ def test_unknown_sessions_and_bad_queries(streamed):
     _, http, session_id, _ = streamed
     for reply in (http.get("/v1/sessions/nope"), http.put("/v1/sessions/nope/style", json={})):
         assert reply.status_code == 404 and "unknown session id 'nope'" in reply.json()["detail"]
-    for last in (0, TIMELINE_FRAMES + 1, "x"):
-        assert http.get(f"/v1/sessions/{session_id}", params={"last": last}).status_code == 422
+    for query in ({"last": 0}, {"last": TIMELINE_FRAMES + 1}, {"last": "x"}, {"after_frame": -1},
+                  {"after_frame": "x"}, {"after_frame": 2**63}):
+        assert http.get(f"/v1/sessions/{session_id}", params=query).status_code == 422, query
     for body in ([1, 2], "style", None):
         assert http.put(f"/v1/sessions/{session_id}/style", json=body).status_code == 422
     assert http.put(f"/v1/sessions/{session_id}/style", content=b"{not json",

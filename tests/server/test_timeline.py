@@ -26,6 +26,9 @@ def test_keeps_the_newest_frames_oldest_first():
     assert [f["frame"] for f in timeline.as_json()] == [3, 4, 5]
     assert Timeline().as_json() == []
     assert [f["frame"] for f in timeline.as_json(last=2)] == [4, 5]
+    assert [f["frame"] for f in timeline.as_json(after_frame=3)] == [4, 5]
+    assert [f["frame"] for f in timeline.as_json(last=1, after_frame=3)] == [5]
+    assert timeline.as_json(after_frame=5) == [] and len(timeline.as_json(after_frame=0)) == 3
 
 
 def test_a_frame_as_json():
