@@ -52,4 +52,5 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
     @app.get("/", include_in_schema=False)
     def root() -> RedirectResponse:
         return RedirectResponse("/dashboard/")
+
     return app

@@ -83,8 +83,9 @@ def build_session_router(router: SessionRouter) -> APIRouter:
     routes = APIRouter(prefix="/v1/sessions", tags=["sessions"])
 
     @routes.get("", response_model=SessionList)
-    def list_sessions() -> dict:
+    async def list_sessions() -> dict:
         """Open sessions: worker, frames answered, streams attached, idle time."""
+        # async: run on the event loop that adds and removes sessions, not beside it in a thread
         return {"sessions": router.describe()}
 
     @routes.get("/{session_id}", response_model=SessionDetail,
