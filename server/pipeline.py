@@ -60,4 +60,5 @@ class FrameState:
     shot_id: int = 0
     visibility: float = 1.0                      # [0, 1]
     flags: list[str] = field(default_factory=list)  # degraded-mode notes for diagnostics
+    scores: dict[str, float] = field(default_factory=dict)  # TRACKS: the chosen target's sub-scores, [0, 1]
     stage_ms: dict[str, float] = field(default_factory=dict)

@@ -60,6 +60,7 @@ class TimelineFrameOut(BaseModel):
     shot_id: int
     visibility: float = Field(ge=0.0, le=1.0)
     flags: list[str] = Field(description="why the camera moved or degraded (search_cut, pulled_in, ...)")
+    scores: dict[str, float] = Field(description="TRACKS: sub-scores in [0, 1] of the target chosen, and their total")
     compute_ms: float
 
 

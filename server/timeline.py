@@ -1,6 +1,6 @@
 """A session's recent frames, for the dashboard: where the camera and the targets were, cuts and
 shots, visibility, and why the camera moved (the frame's flags: `search_cut`, `pulled_in`,
-`tracks_cut_occlusion`, ...).
+`tracks_cut_occlusion`, ...; the TRACKS rig's scores of the target it chose).
 
 A bounded ring of plain values kept by the session table beside each session (in the worker that
 holds it) and fed by the frame it has just answered; `GET /v1/sessions/{id}` reads it through the
@@ -23,7 +23,8 @@ TIMELINE_FRAMES = 600   # frames kept per session: 10 s at 60 Hz
 class TimelineFrame:
     """One answered frame, kept as computed (the JSON is made only when someone asks).
     camera_world: (3,) metres; rotation_xyzw: (4,) camera-to-world; targets_world: (k, 3) aim
-    point per target; compute_ms: the server's time for the frame."""
+    point per target; scores: the rig's own scoring of its choice (FrameState.scores, not copied:
+    a new dict every frame); compute_ms: the server's time for the frame."""
 
     frame: int
     time_s: float
@@ -34,6 +35,7 @@ class TimelineFrame:
     shot_id: int
     visibility: float
     flags: tuple[str, ...]
+    scores: dict[str, float]
     compute_ms: float
 
 
@@ -57,12 +59,12 @@ class Timeline:
             frame=int(state.frame), time_s=float(state.time_s), camera_world=pose.position_world.copy(),
             rotation_xyzw=pose.rotation_xyzw.copy(), targets_world=np.array(state.aim_points_world),
             cut=bool(state.cut), shot_id=int(state.shot_id), visibility=float(state.visibility),
-            flags=tuple(state.flags), compute_ms=float(compute_ms)))
+            flags=tuple(state.flags), scores=state.scores, compute_ms=float(compute_ms)))
 
     def as_json(self, last: int | None = None, after_frame: int | None = None) -> list[dict]:
         """The newest `last` frames (all when None) of those after frame number `after_frame`
         (a live view asks only for what it has not seen), oldest first, for `dumps`: frame, time_s,
-        camera, forward (unit), targets, cut, shot_id, visibility, flags, compute_ms; vectors are
+        camera, forward (unit), targets, cut, shot_id, visibility, flags, scores, compute_ms; vectors are
         numpy rows rounded to 0.1 mm. Built in bulk, since the worker that answers this also
         answers its sessions' frames (600 frames: about 2 ms with `dumps`, 18 ms as plain dicts and json)."""
         frames = list(self._frames)
@@ -79,7 +81,7 @@ class Timeline:
         targets = np.stack([f.targets_world for f in frames]).round(4)   # a session's targets are fixed
         return [{"frame": f.frame, "time_s": f.time_s, "camera": c, "forward": d, "targets": t,
                  "cut": f.cut, "shot_id": f.shot_id, "visibility": round(f.visibility, 4),
-                 "flags": f.flags, "compute_ms": round(f.compute_ms, 3)}
+                 "flags": f.flags, "scores": f.scores, "compute_ms": round(f.compute_ms, 3)}
                 for f, c, d, t in zip(frames, camera, forward, targets)]
 
 

@@ -120,7 +120,7 @@ class TracksRig:
 
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
-        """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags and stage_ms."""
+        """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags, scores and stage_ms."""
         actor, last_pose = target_transforms[0], None if last is None else last.pose
         forward = quat_rotate(actor.rotation_xyzw, _LOCAL_FORWARD)
         t0 = self.clock()
@@ -133,6 +133,7 @@ class TracksRig:
             return
         state.cut = shot.cut
         state.visibility = shot.visible_fraction
+        state.scores = shot.scores
         if shot.cut_reason is not None:
             state.flags.append(f"tracks_cut_{shot.cut_reason.value}")
         state.stage_ms.update(shot.timings_ms)

@@ -27,7 +27,7 @@ visibility) get the direct-visibility rays and the A* distance.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -69,7 +69,10 @@ class TrackShot:
     """One frame's camera: position_world and look_at_world (3,) metres; cut: this frame starts a
     new shot; shot_id: counts shots from 0; visible_fraction: share of the actor's sample points
     seen from position_world; cut_reason: why the shot started (None inside a shot); timings_ms:
-    'cut_check', 'target_update', 'camera_update'."""
+    'cut_check', 'target_update', 'camera_update'; scores: the sub-scores in [0, 1] of the target
+    chosen this frame and their weighted 'total' (the target moving strategy's shot_size,
+    direct_visibility, indirect_visibility and graph_distance; on a cut, the continuity search's,
+    with thirty_degree and line_of_action after the first shot); empty when no target was chosen."""
 
     position_world: np.ndarray
     look_at_world: np.ndarray
@@ -78,6 +81,12 @@ class TrackShot:
     visible_fraction: float
     cut_reason: CutReason | None
     timings_ms: dict[str, float]
+    scores: dict[str, float] = field(default_factory=dict)
+
+
+def _scored(index: int, **scores: np.ndarray) -> dict[str, float]:
+    """Each sub-score array's value for the candidate at `index`, rounded for reports."""
+    return {name: round(float(values[index]), 4) for name, values in scores.items()}
 
 
 class GraphDirector:
@@ -102,6 +111,7 @@ class GraphDirector:
         self._last_time_s: float | None = None
         self._last_actor: np.ndarray | None = None
         self._actor_velocity = np.zeros(3)
+        self._scores: dict[str, float] = {}   # of the target chosen in the current step
 
     @property
     def style(self) -> DirectorStyle:
@@ -151,6 +161,7 @@ class GraphDirector:
 
         cut = False
         indirect = None
+        self._scores = {}
         if reason is None and movement != Movement.STATIC:
             indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
             moved = self._move_target(actor, look_at, actor_points, distance, indirect, ray_scene)
@@ -178,7 +189,8 @@ class GraphDirector:
         return TrackShot(position_world=self._camera.copy(), look_at_world=look_at, cut=cut, shot_id=self._shot_id,
                          visible_fraction=visible, cut_reason=reason if cut else None,
                          timings_ms={"cut_check": 1e3 * (clock1 - clock0), "target_update": 1e3 * (clock2 - clock1),
-                                     "camera_update": 1e3 * (clock3 - clock2)})
+                                     "camera_update": 1e3 * (clock3 - clock2)},
+                         scores=self._scores)
 
     # --- target search -------------------------------------------------------------------------
 
@@ -213,10 +225,13 @@ class GraphDirector:
             return False
         pois, size, ind, dist = pois.take(reach), size[reach], ind[reach], dist[reach]
         direct = direct_visibility(pois.position_world, actor_points, scene)
+        near = np.clip(1.0 - dist / s.max_graph_distance_m, 0.0, 1.0)
         total = (s.weight_shot_size * size + s.weight_direct_visibility * direct + s.weight_indirect_visibility * ind
-                 + s.weight_distance * np.clip(1.0 - dist / s.max_graph_distance_m, 0.0, 1.0))
+                 + s.weight_distance * near)
         total /= s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility + s.weight_distance
         best = int(np.argmax(total))
+        self._scores = _scored(best, shot_size=size, direct_visibility=direct, indirect_visibility=ind,
+                               graph_distance=near, total=total)
         self._target = self._descend(pois.take([best]), float(total[best]), float(dist[best]), look_at,
                                      actor_points, distance, indirect, scene)
         return True
@@ -240,13 +255,16 @@ class GraphDirector:
             size, ind = self._cheap_scores(cand, look_at, distance, indirect)
             direct = direct_visibility(pos, actor_points, scene)
             moved = dist + np.abs(ts - t) * length
+            near = np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)
             total = (s.weight_shot_size * size + s.weight_direct_visibility * direct
                      + s.weight_indirect_visibility * ind
-                     + s.weight_distance * np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)) / weights
+                     + s.weight_distance * near) / weights
             k = int(np.argmax(total))
             if total[k] <= score:
                 break
             score, dist, t = float(total[k]), float(moved[k]), float(ts[k])
+            self._scores = _scored(k, shot_size=size, direct_visibility=direct, indirect_visibility=ind,
+                                   graph_distance=near, total=total)
         return a, b, t
 
     def _cut(self, actor, look_at, actor_points, forward, distance, indirect, scene, first: bool) -> bool:
@@ -268,8 +286,9 @@ class GraphDirector:
             if not ok.any():
                 return False
             pois, size, ind, angle, after = pois.take(ok), size[ok], ind[ok], angle[ok], after[ok]
-            extra = (s.weight_thirty_degree * thirty_degree_score(angle, s.min_cut_angle_deg)
-                     + s.weight_line_of_action * line_of_action_score(before, after))
+            thirty = thirty_degree_score(angle, s.min_cut_angle_deg)
+            line = line_of_action_score(before, after)
+            extra = s.weight_thirty_degree * thirty + s.weight_line_of_action * line
             weights += s.weight_thirty_degree + s.weight_line_of_action
         partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind + extra
         keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
@@ -278,4 +297,7 @@ class GraphDirector:
         total = (partial + s.weight_direct_visibility * direct) / weights
         best = int(np.argmax(total))
         self._target = (int(pois.node_a[best]), int(pois.node_b[best]), float(pois.t[best]))
+        continuity = {} if first else {"thirty_degree": thirty[keep], "line_of_action": line[keep]}
+        self._scores = _scored(best, shot_size=size[keep], direct_visibility=direct,
+                               indirect_visibility=ind[keep], **continuity, total=total)
         return True

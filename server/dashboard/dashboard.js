@@ -195,10 +195,19 @@ function showWhy(frames) {
     li.textContent = text;
     list.appendChild(li);
   };
-  add(`frame ${last.frame}: ${last.flags.length ? last.flags.join(", ") : "on its preferred path (no flag)"}`);
+  add(`frame ${last.frame}: ${last.flags.length ? last.flags.join(", ") : "on its preferred path (no flag)"}` +
+      scored(last.scores));
   for (const f of frames.filter((f) => f.cut).reverse()) {
-    add(`cut at frame ${f.frame} to shot ${f.shot_id}: ${f.flags.length ? f.flags.join(", ") : "new shot"}`);
+    add(`cut at frame ${f.frame} to shot ${f.shot_id}: ${f.flags.length ? f.flags.join(", ") : "new shot"}` +
+        scored(f.scores));
   }
+}
+
+function scored(scores) {   // the TRACKS rig's sub-scores of the target it chose, and their total
+  const names = Object.keys(scores || {}).filter((k) => k !== "total");
+  if (!names.length) return "";
+  const parts = names.map((k) => `${k.replaceAll("_", " ")} ${scores[k].toFixed(2)}`);
+  return `; target scored ${parts.join(", ")}: total ${scores.total.toFixed(2)}`;
 }
 
 // -- style ----------------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 """The dashboard in a real browser (Debian's Chromium, driven by Playwright) against a real server:
 a director finds a streaming session, sees its frames, shots and why the camera moved, changes its
 style live (and the streaming client gets the new style on its next frame), sees a refused style's
-reason and, in a map mode, the anticipation map, and submits a motion overview job, then watches its preview and contact sheet.
+reason and, in a map mode, the anticipation map; on the tracks rig, the scores of the targets it
+chose; and submits a motion overview job, then watches its preview and contact sheet.
 
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
@@ -10,10 +11,14 @@ from __future__ import annotations
 
 import os
 import shutil
+import time
 
+import httpx
 import pytest
 
 from camdirector.v1 import director_pb2 as pb
+from tests.precompute.tracks.tiny_levels import corridor
+from tests.server.tracks_sessions import actor_frames, corridor_walk, obj_text, tracks_request
 from tests.server.wire_client import GrpcRaw, two_target_request, walk
 
 playwright = pytest.importorskip("playwright.sync_api")
@@ -125,3 +130,32 @@ def test_submit_an_overview_job_and_watch_its_preview(server, page, shared_data,
     page.click("#overview-form button[type=submit]")
     playwright.expect(page.locator("#overview-result")).to_contain_text("400")
     assert page.get_attribute("#overview-result", "class") == "error"
+
+
+def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
+    http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
+    added = http.post("/v1/levels", data={"name": "dashboard-corridor"},
+                      files={"level": ("corridor.obj", obj_text(corridor()).encode())})
+    assert added.status_code == 202, added.text
+    deadline = time.monotonic() + 60.0
+    while http.get(f"/v1/level-jobs/{added.json()['id']}").json()["status"] != "succeeded":
+        assert time.monotonic() < deadline, "the level job did not succeed"
+        time.sleep(0.1)
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", tracks_request("dashboard-corridor", (2.0, 0.0, 2.0))).session_id
+    times, feet = corridor_walk(3.0)
+    raw.stream(actor_frames(session_id, times, feet))
+    try:
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        playwright.expect(page.locator("#why li").last).to_contain_text("tracks_cut_first_shot; target scored shot size")
+        playwright.expect(page.locator("#why li").first).to_contain_text("graph distance")
+        assert page.eval_on_selector("#toric-fields", "f => f.disabled")
+        page.select_option('#style-form select[name="shotSize"]', "SHOT_SIZE_MEDIUM")
+        page.click("#style-form button[type=submit]")
+        playwright.expect(page.locator("#style-result")).to_have_text("applied")
+        playwright.expect(page.locator("#style-json")).to_contain_text('"shotSize": "SHOT_SIZE_MEDIUM"')
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+        http.delete("/v1/levels/dashboard-corridor")
+        http.close()

@@ -85,6 +85,13 @@ def test_a_level_added_over_rest_serves_a_session(level_server, corridor_level):
     detail = http.get(f"/v1/sessions/{session_id}", params={"last": 10}).json()
     assert detail["style"]["rig"] == "RIG_TRACKS" and len(detail["frames"]) == 10
     assert len(detail["frames"][-1]["targets"]) == 1
+    first = http.get(f"/v1/sessions/{session_id}", params={"after_frame": 0, "last": 600}).json()["frames"][0]
+    assert first["cut"] and set(first["scores"]) == {"shot_size", "direct_visibility", "indirect_visibility",
+                                                      "total"}            # the first shot: no continuity terms
+    moving = [f["scores"] for f in detail["frames"] if f["scores"] and not f["cut"]]
+    assert moving and all(set(m) == {"shot_size", "direct_visibility", "indirect_visibility", "graph_distance",
+                                     "total"} for m in moving)
+    assert all(0.0 <= v <= 1.0 for m in moving for v in m.values())
     refused = http.put(f"/v1/sessions/{session_id}/style", json={"shotSize": "SHOT_SIZE_MEDIUM"})
     assert refused.status_code == 409 and "RIG_TRACKS" in refused.json()["detail"]   # the rig cannot change
     assert http.get(f"/v1/sessions/{session_id}/amap.png").status_code == 409       # no maps on tracks

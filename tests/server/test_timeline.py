@@ -41,4 +41,4 @@ def test_a_frame_as_json():
     assert frame == {"frame": 12, "time_s": 0.2, "camera": [12.0, 1.5, -2.0],
                      "forward": pytest.approx([-1.0, 0.0, 0.0], abs=1e-4),   # -Z turned 90 deg about +Y
                      "targets": [[0.0, 1.0, 12.0]], "cut": True, "shot_id": 1, "visibility": 0.5,
-                     "flags": ["search_coast"], "compute_ms": 0.125}
+                     "flags": ["search_coast"], "scores": {}, "compute_ms": 0.125}

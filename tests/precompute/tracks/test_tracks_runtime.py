@@ -127,3 +127,27 @@ def test_style_switches_live(corridor_artifact):
     near = director.optimal_distance_m()
     director.set_style(DirectorStyle(ShotSize.EXTREME_LONG, Movement.STATIC))
     assert director.optimal_distance_m() > 2.5 * near and director.style.movement == Movement.STATIC
+
+
+def test_each_frame_reports_the_scores_of_the_target_it_chose(corridor_artifact):
+    """Moves carry the target moving strategy's four sub-scores, cuts after the first the two
+    continuity ones too, and each total is their weighted mean (Section 5.2-5.3)."""
+    s = DirectorSettings(shot_duration_median_s=1.5)
+    director = GraphDirector(corridor_artifact, s, np.random.default_rng(1))
+    shots = _walk_corridor(director, RayScene([corridor()]))
+    move_keys = {"shot_size", "direct_visibility", "indirect_visibility", "graph_distance", "total"}
+    weights = {"shot_size": s.weight_shot_size, "direct_visibility": s.weight_direct_visibility,
+               "indirect_visibility": s.weight_indirect_visibility, "graph_distance": s.weight_distance,
+               "thirty_degree": s.weight_thirty_degree, "line_of_action": s.weight_line_of_action}
+    assert set(shots[0].scores) == {"shot_size", "direct_visibility", "indirect_visibility", "total"}
+    later_cuts = [shot.scores for shot in shots[1:] if shot.cut]
+    moves = [shot.scores for shot in shots if not shot.cut and shot.scores]
+    assert later_cuts and moves
+    assert all(set(c) == {"shot_size", "direct_visibility", "indirect_visibility", "thirty_degree",
+                          "line_of_action", "total"} for c in later_cuts)
+    assert all(set(m) == move_keys for m in moves)
+    for scores in [shots[0].scores, *later_cuts, *moves]:
+        parts = {k: v for k, v in scores.items() if k != "total"}
+        assert all(0.0 <= v <= 1.0 for v in parts.values())
+        mean = sum(weights[k] * v for k, v in parts.items()) / sum(weights[k] for k in parts)
+        assert scores["total"] == pytest.approx(mean, abs=1e-3)
