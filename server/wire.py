@@ -297,5 +297,6 @@ def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False,
         d.alpha = state.torus.alpha
     d.stage_ms.update(state.stage_ms)
     d.flags.extend(state.flags)
+    d.scores.update(state.scores)
     return out
 

@@ -65,6 +65,8 @@ def test_a_session_follows_the_actor_with_cuts(client):
     assert "tracks_cut_first_shot" in flags and any(f.startswith("tracks_cut_") and f != "tracks_cut_first_shot"
                                                       for f in flags)
     assert {"ingest", "cut_check", "target_update", "camera_update"} <= set(updates[-1].diagnostics.stage_ms)
+    assert set(updates[0].diagnostics.scores) == {"shot_size", "direct_visibility", "indirect_visibility", "total"}
+    assert any("graph_distance" in u.diagnostics.scores for u in updates if not u.cut)   # moves on the wire too
     assert client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id)).frames == len(times)
 
 

@@ -296,8 +296,15 @@ class CameraPose(_message.Message):
     def __init__(self, position: _Optional[_Union[Vec3, _Mapping]] = ..., rotation: _Optional[_Union[Quat, _Mapping]] = ..., vertical_fov_deg: _Optional[float] = ...) -> None: ...
 
 class Diagnostics(_message.Message):
-    __slots__ = ("theta", "phi", "alpha", "stage_ms", "flags")
+    __slots__ = ("theta", "phi", "alpha", "stage_ms", "flags", "scores")
     class StageMsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    class ScoresEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
         VALUE_FIELD_NUMBER: _ClassVar[int]
@@ -309,12 +316,14 @@ class Diagnostics(_message.Message):
     ALPHA_FIELD_NUMBER: _ClassVar[int]
     STAGE_MS_FIELD_NUMBER: _ClassVar[int]
     FLAGS_FIELD_NUMBER: _ClassVar[int]
+    SCORES_FIELD_NUMBER: _ClassVar[int]
     theta: float
     phi: float
     alpha: float
     stage_ms: _containers.ScalarMap[str, float]
     flags: _containers.RepeatedScalarFieldContainer[str]
-    def __init__(self, theta: _Optional[float] = ..., phi: _Optional[float] = ..., alpha: _Optional[float] = ..., stage_ms: _Optional[_Mapping[str, float]] = ..., flags: _Optional[_Iterable[str]] = ...) -> None: ...
+    scores: _containers.ScalarMap[str, float]
+    def __init__(self, theta: _Optional[float] = ..., phi: _Optional[float] = ..., alpha: _Optional[float] = ..., stage_ms: _Optional[_Mapping[str, float]] = ..., flags: _Optional[_Iterable[str]] = ..., scores: _Optional[_Mapping[str, float]] = ...) -> None: ...
 
 class CameraUpdate(_message.Message):
     __slots__ = ("frame", "time_s", "pose", "cut", "shot_id", "visibility", "compute_ms", "stale", "message", "diagnostics")
