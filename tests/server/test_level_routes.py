@@ -11,7 +11,6 @@ import httpx
 import pytest
 
 from camdirector.server.process import ServerProcess
-from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor, l_room
 from tests.server.tracks_sessions import (actor_frames, check_directed, corridor_walk, obj_text, tracks_canary,
                                           tracks_request)
