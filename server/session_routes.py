@@ -33,7 +33,8 @@ from camdirector.v1 import director_pb2 as pb
 
 _HTTP_STATUS = {grpc.StatusCode.INVALID_ARGUMENT: 422, grpc.StatusCode.NOT_FOUND: 404,
                 grpc.StatusCode.FAILED_PRECONDITION: 409, grpc.StatusCode.RESOURCE_EXHAUSTED: 429,
-                grpc.StatusCode.UNIMPLEMENTED: 501}
+                grpc.StatusCode.UNIMPLEMENTED: 501, grpc.StatusCode.UNAVAILABLE: 503}
+_WORKER_LOST = {"description": "the worker holding the session died while answering; the session is gone"}
 
 
 class SessionSummary(BaseModel):
@@ -76,7 +77,7 @@ class StyleChanged(BaseModel):
 
 
 def http_error(exc: DirectorError) -> HTTPException:
-    """A wire error as an HTTP error with the same message."""
+    """A wire error as an HTTP error with the same message (500 for INTERNAL and anything unlisted)."""
     return HTTPException(status_code=_HTTP_STATUS.get(exc.code, 500), detail=exc.message)
 
 
@@ -90,7 +91,7 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         return {"sessions": router.describe()}
 
     @routes.get("/{session_id}", response_model=SessionDetail,
-                responses={404: {"description": "no such session"}})
+                responses={404: {"description": "no such session"}, 503: _WORKER_LOST})
     async def get_session(
         session_id: str,
         last: Annotated[int, Query(ge=1, le=TIMELINE_FRAMES, description="newest frames wanted")] = TIMELINE_FRAMES,
@@ -108,7 +109,7 @@ def build_session_router(router: SessionRouter) -> APIRouter:
 
     @routes.get("/{session_id}/amap.png", response_class=Response, responses={
         200: {"content": {"image/png": {}}}, 404: {"description": "no such session"},
-        409: {"description": "the session's style builds no anticipation map"}})
+        409: {"description": "the session's style builds no anticipation map"}, 503: _WORKER_LOST})
     async def get_anticipation_map(session_id: str) -> Response:
         """The occlusion anticipation map around the camera now (map_view.py): rows theta,
         columns phi, white visible to red occluded, the camera crossed in blue."""
@@ -122,7 +123,7 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         400: {"description": "the body cannot be read as JSON"},
         404: {"description": "no such session"},
         409: {"description": "the session's rig cannot take this style"},
-        422: {"description": "not a Style, or a value out of range"}})
+        422: {"description": "not a Style, or a value out of range"}, 503: _WORKER_LOST})
     async def put_style(
         session_id: str,
         style: Annotated[dict[str, Any], Body(description="camdirector.v1.Style, protobuf JSON (e.g. "

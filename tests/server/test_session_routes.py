@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import io
 
+import grpc
 import httpx
 import numpy as np
 import pytest
 from PIL import Image
 
+from camdirector.server.errors import DirectorError
+from camdirector.server.session_routes import http_error
 from camdirector.server.timeline import TIMELINE_FRAMES
 from camdirector.v1 import director_pb2 as pb
 from tests.server.wire_client import GrpcRaw, two_target_request, walk
@@ -115,3 +118,11 @@ def test_the_anticipation_map_of_a_map_mode_session(server, streamed):
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
+
+
+@pytest.mark.parametrize("code, status", [(grpc.StatusCode.INVALID_ARGUMENT, 422), (grpc.StatusCode.NOT_FOUND, 404),
+                                          (grpc.StatusCode.FAILED_PRECONDITION, 409),
+                                          (grpc.StatusCode.UNAVAILABLE, 503), (grpc.StatusCode.INTERNAL, 500)])
+def test_wire_errors_keep_their_message_as_http_errors(code, status):
+    error = http_error(DirectorError(code, "what went wrong"))
+    assert (error.status_code, error.detail) == (status, "what went wrong")
