@@ -6,7 +6,7 @@ worker pool routes a request by session id and calls `handle_bytes`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import orjson
@@ -33,33 +33,38 @@ class FrameMetrics:
     stale: bool
 
 
+@dataclass
+class HeldSession:
+    """What the table keeps for one session: the pipeline's Session and, at the edge, the style
+    as the client last sent it, the recent frames for the dashboard, the recorder if recording."""
+
+    session: Session
+    style_msg: pb.Style
+    timeline: Timeline = field(default_factory=Timeline)
+    recorder: RecordingWriter | None = None
+
+
 class SessionTable:
     def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter):
         self.settings = settings
         self.clock = clock
-        self.sessions: dict[str, Session] = {}
-        self.recorders: dict[str, RecordingWriter] = {}
-        self.timelines: dict[str, Timeline] = {}       # recent frames, for the dashboard
-        self.style_msgs: dict[str, pb.Style] = {}      # the style as the client last sent it
+        self.held: dict[str, HeldSession] = {}
         self.levels = LevelCache(settings.data_dir)  # the TRACKS rig's levels, loaded once per process
 
-    def _get(self, session_id: str) -> Session:
-        session = self.sessions.get(session_id)
-        if session is None:
+    def _get(self, session_id: str) -> HeldSession:
+        held = self.held.get(session_id)
+        if held is None:
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
-        return session
+        return held
 
     def create(self, session_id: str, req: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
         scene = wire.scene_from_request(req, self.settings, self.levels)
-        self.sessions[session_id] = Session(session_id, scene, clock=self.clock)
-        self.timelines[session_id] = Timeline()
-        self.style_msgs[session_id] = req.style
+        held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
         response = pb.CreateSessionResponse(session_id=session_id)
         if req.record or self.settings.record_all:
             path = self.settings.recordings_dir / f"{session_id}.cdrec"
-            recorder = RecordingWriter(path)
-            recorder.write(pb.RecordEntry(create=req))
-            self.recorders[session_id] = recorder
+            held.recorder = RecordingWriter(path)
+            held.recorder.write(pb.RecordEntry(create=req))
             response.recording_path = str(path)
         return response
 
@@ -68,7 +73,8 @@ class SessionTable:
 
     def _frame(self, msg: pb.FrameUpdate) -> tuple[pb.CameraUpdate, FrameMetrics]:
         t0 = self.clock()
-        session = self._get(msg.session_id)
+        held = self._get(msg.session_id)
+        session = held.session
         if session.is_stale(msg.frame):
             last = session.last_state
             reply = wire.camera_update_msg(
@@ -80,33 +86,31 @@ class SessionTable:
             state = session.frame(update)
             reply = wire.camera_update_msg(state, compute_ms=0.0)
             reply.compute_ms = (self.clock() - t0) * 1e3
-            self.timelines[msg.session_id].add(state, reply.compute_ms)
-        recorder = self.recorders.get(msg.session_id)
-        if recorder is not None:
-            recorder.write(pb.RecordEntry(frame=msg))
-            recorder.write(pb.RecordEntry(camera=reply))
+            held.timeline.add(state, reply.compute_ms)
+        if held.recorder is not None:
+            held.recorder.write(pb.RecordEntry(frame=msg))
+            held.recorder.write(pb.RecordEntry(camera=reply))
         return reply, FrameMetrics(reply.compute_ms, dict(reply.diagnostics.stage_ms), reply.stale)
 
     def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
-        session = self._get(msg.session_id)
-        session.set_style(wire.style_from_msg(msg.style, session.lens, session.style))
-        self.style_msgs[msg.session_id] = msg.style
-        recorder = self.recorders.get(msg.session_id)
-        if recorder is not None:
-            recorder.write(pb.RecordEntry(style=msg))
+        held = self._get(msg.session_id)
+        held.session.set_style(wire.style_from_msg(msg.style, held.session.lens, held.session.style))
+        held.style_msg = msg.style
+        if held.recorder is not None:
+            held.recorder.write(pb.RecordEntry(style=msg))
         return pb.UpdateStyleResponse()
 
     def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
         """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it)
         and its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first."""
-        self._get(session_id)
-        return {"style": json_format.MessageToDict(self.style_msgs[session_id]),
-                "frames": self.timelines[session_id].as_json(last, after_frame)}
+        held = self._get(session_id)
+        return {"style": json_format.MessageToDict(held.style_msg),
+                "frames": held.timeline.as_json(last, after_frame)}
 
     def anticipation_png(self, session_id: str) -> bytes:
         """The session's A-map as a PNG (map_view.py); FAILED_PRECONDITION when it has none (not
         a map mode, the tracks rig, or no frame since the maps were asked for)."""
-        session = self._get(session_id)
+        session = self._get(session_id).session
         found = session.rig.anticipation_map(session.last_state)
         if found is None:
             raise precondition(f"session {session_id} has no anticipation map: its style's visibility is "
@@ -115,18 +119,15 @@ class SessionTable:
         return anticipation_png(*found)
 
     def close(self, session_id: str) -> pb.CloseSessionResponse:
-        session = self._get(session_id)
+        session = self._get(session_id).session
         self.drop(session_id)
         return pb.CloseSessionResponse(frames=session.frames_answered)
 
     def drop(self, session_id: str) -> None:
         """Forgets a session if present (closing, or reclaiming an abandoned one)."""
-        self.sessions.pop(session_id, None)
-        self.timelines.pop(session_id, None)
-        self.style_msgs.pop(session_id, None)
-        recorder = self.recorders.pop(session_id, None)
-        if recorder is not None:
-            recorder.close()
+        held = self.held.pop(session_id, None)
+        if held is not None and held.recorder is not None:
+            held.recorder.close()
 
     def handle_bytes(self, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
         """One request as the transports carry it: serialized in, serialized out.
