@@ -24,7 +24,7 @@ import httpx
 
 from camdirector.server.process import ServerProcess
 from load_tests import stream
-from load_tests.report import emit
+from load_tests.report import emit, percentiles
 
 
 def _watch(http: str, hz: float, stop, out) -> None:
@@ -62,7 +62,7 @@ def _watched_run(server: ServerProcess, sessions: int, rate_hz: float, seconds: 
     latencies_ms, frames_seen = receive.recv()
     watcher.join(30)
     result["detail_requests"] = len(latencies_ms)
-    result["detail_ms"] = stream._percentiles(latencies_ms)
+    result["detail_ms"] = percentiles(latencies_ms)
     result["detail_frames_median"] = float(sorted(frames_seen)[len(frames_seen) // 2]) if frames_seen else None
     return result
 

@@ -37,17 +37,12 @@ from camdirector.geometry.toric_maps import (
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.server.anticipation import AnticipationMap, AnticipationSettings, MaskKind, StyleMaskSettings
 from camdirector.server.target_sampling import TargetSampler, TargetSamplingSettings
-from load_tests.report import emit
+from load_tests.report import emit, summary
 
 RESOLUTIONS = (64, 128, 256, 512)
 SAMPLES_PER_TARGET = 5
 TARGET_SPEED_M_S = 1.5
 FRAME_S = 1.0 / 60.0
-
-
-def _stats(seconds: list[float]) -> dict:
-    ms = np.asarray(seconds) * 1e3
-    return {"median": round(float(np.median(ms)), 3), "p99": round(float(np.percentile(ms, 99)), 3), "n": len(ms)}
 
 
 class Forest:
@@ -115,7 +110,7 @@ def _time_maps(backend, forest: Forest, resolution: int, count: int, reps: int, 
                         previous_torus=forest.previous_torus, dt_s=FRAME_S)
         if rep:  # the first call builds scenes and atlases
             times.append(time.perf_counter() - t0)
-    return _stats(times)
+    return summary(times, 1e3)
 
 
 def _reps(resolution: int, quick: bool) -> int:
@@ -192,7 +187,7 @@ def bench_anticipation(quick: bool) -> dict:
                 predict.append(amap.last_refresh_ms["predict"] / 1e3)
                 occluded.append(float(maps.shadow.mean()))
         backend.close()
-        out[str(resolution)] = {"update_ms": _stats(times), "predict_2_maps_ms": _stats(predict),
+        out[str(resolution)] = {"update_ms": summary(times, 1e3), "predict_2_maps_ms": summary(predict, 1e3),
                                 "occluded_share": round(float(np.mean(occluded)), 4)}
     return out
 

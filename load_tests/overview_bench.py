@@ -32,7 +32,7 @@ from camdirector.precompute.overview.bvh import load_motion
 from camdirector.precompute.overview.pipeline import plan_overview
 from camdirector.precompute.overview.settings import OverviewSettings
 from camdirector.server.process import ServerProcess
-from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder
+from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder, summary
 
 # name -> (path under mocap/, leading frames to skip: T-pose or rest pose, SOURCES.md section 2)
 CLIPS = {
@@ -78,11 +78,6 @@ def _wait(http: str, job_id: str) -> dict:
     raise TimeoutError(f"job {job_id} still {status['status']} after {JOB_TIMEOUT_S} s")
 
 
-def _stats_s(seconds: list[float]) -> dict:
-    s = np.asarray(seconds)
-    return {"median": round(float(np.median(s)), 3), "p99": round(float(np.percentile(s, 99)), 3), "n": len(s)}
-
-
 def bench_clip(http: str, path: Path, skip: int, frames: int, reps: int) -> dict:
     clip_bytes = cut_bvh(path.read_text(), skip, frames)
     end_to_end, stages = [], []
@@ -103,7 +98,7 @@ def bench_clip(http: str, path: Path, skip: int, frames: int, reps: int) -> dict
         plan_overview(clip, OverviewSettings(), np.random.default_rng(rep))
         planning.append(time.perf_counter() - start)
     keys = sorted({k for s in stages for k in s})
-    e2e, plan = _stats_s(end_to_end), _stats_s(planning)
+    e2e, plan = summary(end_to_end), summary(planning)
     return {"frames": clip.frame_count, "fps": round(1.0 / clip.frame_time_s, 3),
             "end_to_end_s": e2e, "first_s": round(end_to_end[0], 3), "planning_only_s": plan,
             "ratio_end_to_end_vs_planning": round(e2e["median"] / plan["median"], 3),

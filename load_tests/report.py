@@ -1,9 +1,12 @@
-"""What every benchmark here does with its result, and where they find the shared data by default."""
+"""What every benchmark here does with its result (summaries, printing), and where they find the
+shared data by default."""
 from __future__ import annotations
 
 import json
 import sys
 from pathlib import Path
+
+import numpy as np
 
 # ../shared/data beside the repository (never copied into it)
 SHARED_DATA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -25,3 +28,17 @@ def shared_subfolder(data_dir: Path, name: str, program: str) -> Path | None:
         print(f"{program}: no {name} folder at {folder} (pass --data-dir)", file=sys.stderr)
         return None
     return folder
+
+
+def summary(values, scale: float = 1.0) -> dict:
+    """median and p99 of values * scale, rounded to 3 decimals, and n: a timing's usual report."""
+    a = np.asarray(values, dtype=np.float64) * scale
+    return {"median": round(float(np.median(a)), 3), "p99": round(float(np.percentile(a, 99)), 3), "n": len(a)}
+
+
+def percentiles(values) -> dict:
+    """p50, p99 and max of values (all None when there are none): the streaming benchmarks' report."""
+    if not len(values):
+        return {"p50": None, "p99": None, "max": None}
+    a = np.asarray(values, dtype=np.float64)
+    return {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}

@@ -34,14 +34,7 @@ from camdirector.server.demo.client import _frame_update, session_request
 from camdirector.server.process import ServerProcess
 from camdirector.server.demo.scene import build_demo_scene
 from camdirector.v1 import director_pb2 as pb
-from load_tests.report import emit
-
-
-def _percentiles(values: list[float]) -> dict:
-    if not values:
-        return {"p50": None, "p99": None, "max": None}
-    a = np.asarray(values)
-    return {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+from load_tests.report import emit, percentiles
 
 
 def _frames(scene, n_frames: int, rate_hz: float) -> list[bytes]:
@@ -172,13 +165,13 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
     errors = [repr(r) for r in results if isinstance(r, BaseException)]
     await driver.close()
     sent = sessions * n_frames
-    rtt = _percentiles(rtt_ms)
-    base = _percentiles([b * 1e3 for b in baseline_s])
+    rtt = percentiles(rtt_ms)
+    base = percentiles([b * 1e3 for b in baseline_s])
     return {
         "transport": transport, "sessions": sessions, "rate_hz": rate_hz, "seconds": seconds,
         "wall_s": round(wall_s, 3), "frames_sent": sent, "frames_received": sum(received),
         "dropped_frames": sent - sum(received), "late_frames": late[0], "stale_frames": stale[0],
-        "rtt_ms": rtt, "compute_ms": _percentiles(compute_ms), "baseline_rtt_ms": base,
+        "rtt_ms": rtt, "compute_ms": percentiles(compute_ms), "baseline_rtt_ms": base,
         "rtt_ratio_vs_baseline": {"p50": rtt["p50"] / base["p50"] if rtt["p50"] else None,
                                   "p99": rtt["p99"] / base["p99"] if rtt["p99"] else None},
         "errors": errors, "cpus": os.cpu_count(),
