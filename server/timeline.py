@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import orjson
 
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.server.pipeline import FrameState
 
 TIMELINE_FRAMES = 600   # frames kept per session: 10 s at 60 Hz
@@ -37,13 +38,6 @@ class TimelineFrame:
     flags: tuple[str, ...]
     scores: dict[str, float]
     compute_ms: float
-
-
-def view_directions(rotation_xyzw: np.ndarray) -> np.ndarray:
-    """(n, 3) unit view directions of cameras (n, 4) xyzw camera-to-world: their local -Z in the
-    world, minus the third column of the rotation matrix."""
-    x, y, z, w = rotation_xyzw.T
-    return -np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], axis=1)
 
 
 class Timeline:
@@ -77,7 +71,8 @@ class Timeline:
         if not frames:
             return []
         camera = np.stack([f.camera_world for f in frames]).round(4)
-        forward = view_directions(np.stack([f.rotation_xyzw for f in frames])).round(4)
+        forward = -quat_to_matrix(np.stack([f.rotation_xyzw for f in frames]))[:, :, 2]   # the camera's -Z
+        forward = forward.round(4)
         targets = np.stack([f.targets_world for f in frames]).round(4)   # a session's targets are fixed
         return [{"frame": f.frame, "time_s": f.time_s, "camera": c, "forward": d, "targets": t,
                  "cut": f.cut, "shot_id": f.shot_id, "visibility": round(f.visibility, 4),
