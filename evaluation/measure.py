@@ -47,7 +47,7 @@ from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
-from camdirector.server.style import Style
+from camdirector.server.pipeline.style import Style
 from camdirector.v1 import director_pb2 as pb
 
 # Vertices nearer the camera than this (along its view axis) are clipped, as a renderer clips at
@@ -73,7 +73,7 @@ class CameraTrack:
     stale: int = 0                  # stale replies dropped
 
     @classmethod
-    def from_updates(cls, updates: list[pb.CameraUpdate]) -> "CameraTrack":
+    def from_updates(cls, updates: list[pb.CameraUpdate]) -> CameraTrack:
         fresh = [u for u in updates if not u.stale]
         stages = sorted({k for u in fresh for k in u.diagnostics.stage_ms})
         flags: dict[str, int] = {}

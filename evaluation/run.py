@@ -148,6 +148,7 @@ def pyplot_agg():
 def draw_top_view(ax, scenario: Scenario) -> None:
     """Static geometry seen from above: the walls (near-vertical triangles) as thin grey strokes."""
     from matplotlib.collections import LineCollection
+
     from camdirector.geometry.transforms import RigidTransform
     segments = []
     for a in scenario.objects:

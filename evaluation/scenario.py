@@ -92,9 +92,10 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -126,7 +127,7 @@ class ScenarioError(ValueError):
 class _Fields:
     """The keys of one JSON object; `done()` refuses the keys nobody asked for."""
 
-    def __init__(self, value: Any, where: str, ctx: "_Ctx"):
+    def __init__(self, value: Any, where: str, ctx: _Ctx):
         if not isinstance(value, dict):
             raise ctx.error(where or "(top level)", f"must be an object, got {_kind(value)}")
         self.value, self.where, self.ctx = value, where, ctx

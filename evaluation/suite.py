@@ -17,18 +17,17 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from camdirector.evaluation.cli import MODES  # the paper's R, W, A, then the baselines
 from camdirector.evaluation.measure import VisibilityMeter
-from camdirector.evaluation.run import (RunResult, open_channel, plot_run, pyplot_agg, run_on_channel,
-                                        write_json)
+from camdirector.evaluation.run import RunResult, open_channel, plot_run, pyplot_agg, run_on_channel, write_json
 from camdirector.evaluation.scenario import Scenario, load_scenario, shipped_scenarios
-from camdirector.server.pipeline import Stage
+from camdirector.server.pipeline.stages import Stage
 from camdirector.server.process import ServerProcess
 
 PAPER_SCENES = ("stress_medium", "stress_large", "columns_gate", "forest", "forest_corridor")

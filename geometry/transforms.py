@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 IDENTITY_QUAT = np.array([0.0, 0.0, 0.0, 1.0])
+UP_WORLD = np.array([0.0, 1.0, 0.0])  # +Y up: the wire contract's world (docs/protocol.md)
+UP_WORLD.setflags(write=False)
 
 
 def quat_normalize(q_xyzw: np.ndarray) -> np.ndarray:

@@ -29,10 +29,10 @@ import zmq
 import zmq.asyncio
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
+from camdirector.demo.client import _frame_update, session_request
+from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
-from camdirector.server.demo.client import _frame_update, session_request
 from camdirector.server.process import ServerProcess
-from camdirector.server.demo.scene import build_demo_scene
 from camdirector.v1 import director_pb2 as pb
 from load_tests.report import emit, percentiles
 

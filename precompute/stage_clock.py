@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import enum
 import time
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 
 class StageClock:

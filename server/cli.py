@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 
 from camdirector.evaluation.cli import add_parsers as add_eval_parsers
+from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
-from camdirector.server.overview_cli import add_parsers as add_overview_parsers
 from camdirector.server.settings import ServerSettings
 
 
@@ -59,10 +59,10 @@ def main(argv: list[str] | None = None) -> int:
             settings = ServerSettings.from_env(**overrides)
         except ValueError as exc:
             parser.error(str(exc))
-        from camdirector.server.app import run
+        from camdirector.server.front.app import run
         return run(settings)
     if args.command == "replay":
-        from camdirector.server.recording import replay
+        from camdirector.server.sessions.recording import replay
         try:
             report = replay(args.file, data_dir=args.data_dir)
         except (OSError, ValueError) as exc:
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(report.as_dict()))
         return 0 if report.ok else 1
     if args.command == "demo":
-        from camdirector.server.demo.client import run_demo
+        from camdirector.demo.client import run_demo
         return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport, visibility=args.visibility)
     return args.handler(args)  # eval, overview, eval-overview, level, eval-graph
 

@@ -56,6 +56,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
+from camdirector.precompute.jobs import JobError
 from camdirector.precompute.process_lifetime import die_with_parent
 
 log = logging.getLogger("camdirector.jobs")
@@ -111,10 +112,6 @@ class QueueFull(Exception):
 
 class JobNotFound(KeyError):
     """No job with this id."""
-
-
-class JobError(Exception):
-    """Raised by a job function to fail its job with exactly this message."""
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,7 @@ class ServerProcess:
         self._dir.cleanup()
         return self.proc.returncode
 
-    def __enter__(self) -> "ServerProcess":
+    def __enter__(self) -> ServerProcess:
         return self
 
     def __exit__(self, *exc) -> None:

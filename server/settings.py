@@ -63,7 +63,7 @@ class ServerSettings:
         return Path(self.data_dir) / "recordings"
 
     @classmethod
-    def from_env(cls, environ=None, **overrides) -> "ServerSettings":
+    def from_env(cls, environ=None, **overrides) -> ServerSettings:
         """Settings from CAMDIRECTOR_* variables, then `overrides` (flags; None means not given)."""
         environ = os.environ if environ is None else environ
         values = {}

@@ -5,7 +5,7 @@ OccluderScene, ShadowVelocityMaps, the MapBackend protocol); ``gl`` computes the
 paper's deferred projection through EGL (moderngl), ``embree`` by ray casting (embreex). Tests hold
 the two against each other (tests/geometry/toric_maps/test_backends.py).
 
-Typical use, once per map update (server/anticipation.py consumes the result)::
+Typical use, once per map update (server/pipeline/toric/anticipation.py consumes the result)::
 
     scene = OccluderScene(static_meshes_world)            # plus add_dynamic(...) per moving object
     backend = make_backend(choose_backend(scene.triangle_count, probe_gl_renderer()), scene)

@@ -5,7 +5,7 @@ angles (theta, phi) linearly), 4.1 (deferred projection from sample points on th
 (target shadow map, S-map), 4.1.2 (occluder velocity map, V-map). Angles and frames are those of
 geometry/toric.py: theta along the arc from A, phi about the A-B axis, 0 above it.
 
-Array conventions, shared by every backend and by server/anticipation.py:
+Array conventions, shared by every backend and by server/pipeline/toric/anticipation.py:
 
 - A map over a window is indexed ``[i, j]`` with ``i`` the theta texel and ``j`` the phi texel; the
   texel centre of ``[i, j]`` is ``(window.theta_centers_rad[i], window.phi_centers_rad[j])``.
@@ -17,8 +17,9 @@ Array conventions, shared by every backend and by server/anticipation.py:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol, Sequence, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -157,7 +158,7 @@ class MapWindow:
 
     @classmethod
     def around(cls, torus: Torus, theta_rad: float, phi_rad: float,
-               settings: WindowSettings = WindowSettings(), lattice: "MapWindow | None" = None) -> "MapWindow":
+               settings: WindowSettings = WindowSettings(), lattice: MapWindow | None = None) -> MapWindow:
         """The window centred on the camera at (theta_rad, phi_rad) on ``torus``.
 
         Sizing rule: the window is a square of side 2 h metres on the torus at the camera, with
@@ -170,7 +171,7 @@ class MapWindow:
         lattice: the previous window. While the ideal texel size stays within
         settings.lattice_tolerance of the lattice's, the lattice's texel size is kept and the new
         window is shifted by whole texels, so maps computed on older windows line up texel for
-        texel (server/anticipation.py aggregates them without resampling blur).
+        texel (server/pipeline/toric/anticipation.py aggregates them without resampling blur).
         """
         n = settings.resolution
         camera = torus_position(torus, float(theta_rad), float(phi_rad))
@@ -198,7 +199,7 @@ class MapWindow:
 
     # -- resampling ----------------------------------------------------------------------------
 
-    def resample(self, values: np.ndarray, destination: "MapWindow") -> tuple[np.ndarray, np.ndarray]:
+    def resample(self, values: np.ndarray, destination: MapWindow) -> tuple[np.ndarray, np.ndarray]:
         """Bilinear resampling of maps on this window onto ``destination``.
 
         values: (..., res, res) on this window. Returns (values (..., res_d, res_d) float32, covered

@@ -30,7 +30,6 @@ from embreex.mesh_construction import TriangleMesh
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.toric import Torus
-from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.geometry.toric_maps.base import (
     NOT_OCCLUDED_DEPTH,
     SAMPLE_CLEARANCE_M,
@@ -43,6 +42,7 @@ from camdirector.geometry.toric_maps.base import (
     torus_points,
     torus_tangents,
 )
+from camdirector.geometry.transforms import quat_to_matrix
 
 _NO_HIT = -1  # embreex's answer for a ray that hits nothing
 

@@ -33,7 +33,6 @@ import moderngl
 import numpy as np
 
 from camdirector.geometry.toric import Torus, torus_position
-from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.geometry.toric_maps.base import (
     NOT_OCCLUDED_DEPTH,
     SAMPLE_CLEARANCE_M,
@@ -43,6 +42,7 @@ from camdirector.geometry.toric_maps.base import (
     ShadowVelocityMaps,
     check_compute_args,
 )
+from camdirector.geometry.transforms import quat_to_matrix
 
 MAX_SAMPLES = 32                 # sample points per call: size of the shaders' uniform arrays
 _GL_CLIP_DISTANCE0 = 0x3000
@@ -448,7 +448,7 @@ class GLMapBackend:
         self._ctx.release()
         self._ctx = None
 
-    def __enter__(self) -> "GLMapBackend":
+    def __enter__(self) -> GLMapBackend:
         return self
 
     def __exit__(self, *exc_info: object) -> None:

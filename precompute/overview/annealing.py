@@ -85,7 +85,7 @@ class StaticCameras:
 
     @classmethod
     def of_shot(cls, space: PotentialSpace, pose_saliency: np.ndarray, first: int, last: int,
-                priors: tuple[SidePrior, ...] = ()) -> "StaticCameras":
+                priors: tuple[SidePrior, ...] = ()) -> StaticCameras:
         """Raises ValueError when no node is allowed in every frame and meets the priors."""
         ok = space.allowed[first:last + 1].reshape(last - first + 1, -1).all(axis=0)
         positions = space.positions()

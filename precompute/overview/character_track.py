@@ -10,11 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from camdirector.geometry.transforms import UP_WORLD
 from camdirector.precompute.overview.body_parts import BodyPartMap
 from camdirector.precompute.overview.bvh import MotionClip
 from camdirector.precompute.overview.settings import OverviewSettings
 
-UP = np.array([0.0, 1.0, 0.0])
 _FACING_SMOOTHING_S = 0.2    # Gaussian sigma on the hips' lateral axis before taking the front, s
 _VELOCITY_SMOOTHING_S = 0.25  # Gaussian sigma on the root path before differentiating, s
 
@@ -80,7 +80,7 @@ def track_character(clip: MotionClip, parts: BodyPartMap, settings: OverviewSett
     radius = np.linalg.norm(points - look_at[:, None], axis=2).max(axis=1) + thickest
     lateral = joints[:, parts.left_hip] - joints[:, parts.right_hip]
     lateral = gaussian_filter1d(lateral, _FACING_SMOOTHING_S / dt_s, axis=0, mode="nearest")
-    forward = np.cross(lateral, UP)
+    forward = np.cross(lateral, UP_WORLD)
     forward[:, 1] = 0.0
     forward /= np.maximum(np.linalg.norm(forward, axis=1, keepdims=True), 1e-9)
     pelvis = 0.5 * (joints[:, parts.left_hip] + joints[:, parts.right_hip])

@@ -59,7 +59,7 @@ class EnergyWeights:
     dt_s: float
 
     @classmethod
-    def for_track(cls, track: CharacterTrack, settings: OverviewSettings) -> "EnergyWeights":
+    def for_track(cls, track: CharacterTrack, settings: OverviewSettings) -> EnergyWeights:
         h = track.height_m
         return cls(c1=settings.c1, c2=settings.c2, c3=settings.c3, c4=settings.c4, c5=settings.c5,
                    max_speed_m_per_s=settings.max_speed_heights_per_s * h,

@@ -29,8 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.precompute.overview.baselines import (BestStatic, best_static, greedy_path,
-                                                       static_path)
+from camdirector.precompute.overview.baselines import BestStatic, best_static, greedy_path, static_path
 from camdirector.precompute.overview.energy import PathEnergy, energy_below, path_energy
 from camdirector.precompute.overview.pipeline import OverviewResult
 

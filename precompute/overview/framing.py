@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.transforms import matrix_to_quat
-from camdirector.precompute.overview.character_track import UP, CharacterTrack
+from camdirector.geometry.transforms import UP_WORLD, matrix_to_quat
+from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.settings import OverviewSettings
 
 
@@ -44,7 +44,7 @@ def camera_rotations(position_m: np.ndarray, look_at_m: np.ndarray) -> np.ndarra
     """(F, 3, 3) camera-to-world rotations looking from positions at look-at points, +Y up."""
     back = position_m - look_at_m
     back /= np.maximum(np.linalg.norm(back, axis=1, keepdims=True), 1e-12)
-    right = np.cross(UP, back)
+    right = np.cross(UP_WORLD, back)
     right /= np.maximum(np.linalg.norm(right, axis=1, keepdims=True), 1e-12)
     up = np.cross(back, right)
     return np.stack([right, up, back], axis=2)       # columns: camera x, y, z in world
@@ -87,6 +87,6 @@ def frame_clip(track_full: CharacterTrack, path_m: np.ndarray, shots: np.ndarray
     for start, end in clip_shots:
         fov[start:end + 1] = 2.0 * math.degrees(math.atan(float(tan_need[start:end + 1].max())))
     quats = np.array([matrix_to_quat(r) for r in rotations])
-    return Framing(position_m=position, look_at_m=look_at, up=np.tile(UP, (n, 1)),
+    return Framing(position_m=position, look_at_m=look_at, up=np.tile(UP_WORLD, (n, 1)),
                    rotation_xyzw=quats, vertical_fov_deg=fov, shot_index=shot_index,
                    shots=np.array(clip_shots, dtype=np.int64))

@@ -33,9 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from camdirector.geometry.transforms import UP_WORLD
 from camdirector.precompute.overview.body_parts import PART_COUNT, BodyPartMap, rigid_bones
 from camdirector.precompute.overview.bvh import MotionClip
-from camdirector.precompute.overview.character_track import UP, CharacterTrack
+from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.settings import OverviewSettings
 
 _ATLAS_MAX_PX = 2048          # atlas side, pixels (llvmpipe handles 2048^2 in one pass)
@@ -149,7 +150,7 @@ class LimbVisibilityRenderer:
                                           depth_attachment=self._depth_rb)
         self._side = side
 
-    def __enter__(self) -> "LimbVisibilityRenderer":
+    def __enter__(self) -> LimbVisibilityRenderer:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -195,7 +196,7 @@ def render_limb_visibility(clip: MotionClip, parts: BodyPartMap, track: Characte
     azimuths = np.linspace(0.0, 2.0 * np.pi, settings.limb_view_azimuths, endpoint=False)
     elevations = np.radians(np.asarray(settings.limb_view_elevations_deg, dtype=np.float64))
     dirs = view_directions(azimuths, elevations).reshape(-1, 3)            # (V, 3) back axis
-    right = np.cross(UP, dirs)
+    right = np.cross(UP_WORLD, dirs)
     right /= np.linalg.norm(right, axis=1, keepdims=True)
     cam_up = np.cross(dirs, right)
     view = np.stack([right, cam_up, dirs], axis=1)                         # (V, 3, 3) rows
@@ -206,7 +207,7 @@ def render_limb_visibility(clip: MotionClip, parts: BodyPartMap, track: Characte
     axis = b - a
     length = np.linalg.norm(axis, axis=2, keepdims=True)
     u = axis / np.maximum(length, 1e-9)
-    helper = np.where(np.abs(u[..., 1:2]) < 0.9, UP, np.array([1.0, 0.0, 0.0]))
+    helper = np.where(np.abs(u[..., 1:2]) < 0.9, UP_WORLD, np.array([1.0, 0.0, 0.0]))
     v = np.cross(u, helper)
     v /= np.linalg.norm(v, axis=2, keepdims=True)
     w = np.cross(u, v)

@@ -24,12 +24,10 @@ import numpy as np
 
 from camdirector.precompute.overview.body_parts import BodyPartMap, map_body_parts
 from camdirector.precompute.overview.bvh import MotionClip
-from camdirector.precompute.overview.character_track import (CharacterTrack, sample_frames,
-                                                              track_character)
+from camdirector.precompute.overview.character_track import CharacterTrack, sample_frames, track_character
 from camdirector.precompute.overview.energy import EnergyWeights, PathEnergy, path_energy
 from camdirector.precompute.overview.framing import Framing, frame_clip
-from camdirector.precompute.overview.limb_visibility import (LimbVisibilityRenderer,
-                                                             render_limb_visibility)
+from camdirector.precompute.overview.limb_visibility import LimbVisibilityRenderer, render_limb_visibility
 from camdirector.precompute.overview.potential import PotentialSpace, build_potential_space
 from camdirector.precompute.overview.saliency import Saliency, compute_saliency
 from camdirector.precompute.overview.settings import OverviewSettings

@@ -111,7 +111,7 @@ class PreviewCamera:
     aspect: float
 
     @classmethod
-    def from_result(cls, result) -> "PreviewCamera":
+    def from_result(cls, result) -> PreviewCamera:
         """From a pipeline.OverviewResult."""
         return cls(position_m=result.camera_position_m, rotation_xyzw=result.rotation_xyzw,
                    vertical_fov_deg=result.vertical_fov_deg, shots=result.shots,
@@ -217,7 +217,7 @@ class CharacterScene:
     def release(self) -> None:
         self.renderer.release()
 
-    def __enter__(self) -> "CharacterScene":
+    def __enter__(self) -> CharacterScene:
         return self
 
     def __exit__(self, *exc) -> None:

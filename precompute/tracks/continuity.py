@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-UP = np.array([0.0, 1.0, 0.0])
+from camdirector.geometry.transforms import UP_WORLD
 
 
 def cut_angle_deg(previous_camera_world: np.ndarray, cameras_world: np.ndarray, actor_world: np.ndarray) -> np.ndarray:
@@ -45,7 +45,7 @@ def screen_motion(cameras_world: np.ndarray, actor_world: np.ndarray, direction_
     (k, 3) looking at actor_world (3,)."""
     forward = actor_world - np.atleast_2d(cameras_world)
     forward /= np.maximum(np.linalg.norm(forward, axis=1, keepdims=True), 1e-12)
-    right = np.cross(forward, UP)
+    right = np.cross(forward, UP_WORLD)
     norm = np.linalg.norm(right, axis=1, keepdims=True)
     right = np.where(norm > 1e-9, right / np.maximum(norm, 1e-12), np.array([1.0, 0.0, 0.0]))
     up = np.cross(right, forward)

@@ -35,13 +35,27 @@ import numpy as np
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
 from camdirector.precompute.tracks.camera_motion import move_camera
-from camdirector.precompute.tracks.continuity import (UP, action_direction, cut_angle_deg, keeps_line_of_action,
-                                                      line_of_action_score, screen_motion, thirty_degree_score)
+from camdirector.precompute.tracks.continuity import (
+    UP_WORLD,
+    action_direction,
+    cut_angle_deg,
+    keeps_line_of_action,
+    line_of_action_score,
+    screen_motion,
+    thirty_degree_score,
+)
 from camdirector.precompute.tracks.cutting import CutClock, CutReason, draw_shot_duration_s
 from camdirector.precompute.tracks.graph import RuntimeGraph
 from camdirector.precompute.tracks.settings import DirectorSettings
-from camdirector.precompute.tracks.target_search import (IndirectVisibility, Pois, candidate_pois, direct_visibility,
-                                                         graph_distance, optimal_distance_m, shot_size_score)
+from camdirector.precompute.tracks.target_search import (
+    IndirectVisibility,
+    Pois,
+    candidate_pois,
+    direct_visibility,
+    graph_distance,
+    optimal_distance_m,
+    shot_size_score,
+)
 
 _SCORED_POIS = 48
 
@@ -143,8 +157,8 @@ class GraphDirector:
             self._actor_velocity = (actor - self._last_actor) / dt
         self._last_time_s = time_s if self._last_time_s is None else max(self._last_time_s, time_s)
         self._last_actor = actor
-        actor_points = actor + np.outer(self._fractions * self._actor_height_m, UP)
-        look_at = actor + s.look_at_fraction * self._actor_height_m * UP
+        actor_points = actor + np.outer(self._fractions * self._actor_height_m, UP_WORLD)
+        look_at = actor + s.look_at_fraction * self._actor_height_m * UP_WORLD
         distance = self.optimal_distance_m()
         movement = self._style.movement
 

@@ -29,9 +29,9 @@ from scipy.spatial import cKDTree
 
 from camdirector.geometry.meshes import MeshError, TriMesh
 from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import UP_WORLD
 from camdirector.precompute.tracks.settings import TrackSettings
 
-UP = np.array([0.0, 1.0, 0.0])
 _WELD_M = 1e-4           # vertices closer than this are one vertex
 _SURFACE_LIFT_M = 0.05   # clearance rays start this far above the surface
 _EROSION_RAYS = 8
@@ -118,14 +118,14 @@ def _lattice_centroids(triangles: np.ndarray, n: int) -> np.ndarray:
 
 def _room_for_agent(points: np.ndarray, scene: RayScene, settings: TrackSettings) -> np.ndarray:
     """(k,) bool: head clearance and agent radius free around walkable points (k, 3) (steps 3, 4)."""
-    lifted = points + _SURFACE_LIFT_M * UP
-    ok = ~scene.occluded(lifted, lifted + (settings.agent_height_m - _SURFACE_LIFT_M) * UP)
+    lifted = points + _SURFACE_LIFT_M * UP_WORLD
+    ok = ~scene.occluded(lifted, lifted + (settings.agent_height_m - _SURFACE_LIFT_M) * UP_WORLD)
     if settings.agent_radius_m > 0.0 and ok.any():
         probe_height = min(settings.agent_max_climb_m + _SURFACE_LIFT_M, 0.9 * settings.agent_height_m)
         angles = np.arange(_EROSION_RAYS) * (2.0 * np.pi / _EROSION_RAYS)
         ring = settings.agent_radius_m * np.stack([np.cos(angles), np.zeros_like(angles), np.sin(angles)], axis=1)
         idx = np.flatnonzero(ok)
-        origins = np.repeat(points[idx] + probe_height * UP, _EROSION_RAYS, axis=0)
+        origins = np.repeat(points[idx] + probe_height * UP_WORLD, _EROSION_RAYS, axis=0)
         blocked = scene.occluded(origins, origins + np.tile(ring, (len(idx), 1))).reshape(-1, _EROSION_RAYS)
         ok[idx[blocked.any(axis=1)]] = False
     return ok

@@ -27,6 +27,7 @@ import numpy as np
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.stage_clock import StageClock
 from camdirector.precompute.tracks.artifact import LevelArtifact
 from camdirector.precompute.tracks.filters import filter_tracks
 from camdirector.precompute.tracks.graph import build_graph
@@ -37,7 +38,6 @@ from camdirector.precompute.tracks.sampling import sample_cameras
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import extract_skeleton, segment_components
 from camdirector.precompute.tracks.visibility_table import build_visibility_table, remesh
-from camdirector.precompute.stage_clock import StageClock
 
 
 class Stage(Enum):

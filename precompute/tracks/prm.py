@@ -15,8 +15,9 @@ from scipy.spatial import cKDTree
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import UP_WORLD
 from camdirector.precompute.tracks.graph import CameraGraph
-from camdirector.precompute.tracks.navmesh import UP, triangle_areas
+from camdirector.precompute.tracks.navmesh import triangle_areas
 from camdirector.precompute.tracks.settings import TrackSettings
 
 
@@ -28,7 +29,7 @@ def _draw(navmesh: TriMesh, count: int, settings: TrackSettings, rng: np.random.
     floor = (1 - r1)[:, None] * t[:, 0] + (r1 * (1 - r2))[:, None] * t[:, 1] + (r1 * r2)[:, None] * t[:, 2]
     low = 0.9 * settings.agent_height_m
     height = low + rng.random(count) * max(settings.d_max_m - low, 0.0)
-    return floor, floor + height[:, None] * UP
+    return floor, floor + height[:, None] * UP_WORLD
 
 
 def build_prm(navmesh: TriMesh, scene: RayScene, settings: TrackSettings, density_per_m2: float,
@@ -36,11 +37,11 @@ def build_prm(navmesh: TriMesh, scene: RayScene, settings: TrackSettings, densit
     """PRM of the module docstring."""
     count = max(1, int(round(density_per_m2 * triangle_areas(navmesh.vertices, navmesh.faces).sum())))
     floor, node = _draw(navmesh, count, settings, rng)
-    blocked = scene.occluded(floor + 0.05 * UP, node)
+    blocked = scene.occluded(floor + 0.05 * UP_WORLD, node)
     if blocked.any():
         floor2, node2 = _draw(navmesh, int(blocked.sum()), settings, rng)
         node[blocked] = node2
-        blocked[blocked] = scene.occluded(floor2 + 0.05 * UP, node2)
+        blocked[blocked] = scene.occluded(floor2 + 0.05 * UP_WORLD, node2)
     node = node[~blocked]
     pairs = cKDTree(node).query_pairs(link_distance_m, output_type="ndarray") if len(node) > 1 \
         else np.empty((0, 2), np.int64)

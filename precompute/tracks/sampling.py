@@ -23,12 +23,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from scipy.spatial import cKDTree
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.navmesh import UP, refine_triangles
+from camdirector.geometry.transforms import UP_WORLD
+from camdirector.precompute.tracks.navmesh import refine_triangles
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import Skeleton
 
@@ -87,8 +87,8 @@ def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings,
     """Camera samples of the module docstring; scene is the level (static geometry); navmesh,
     when given, bounds the samples to its footprint."""
     ground, tangent, segment = skeleton_origins(skeleton, settings.skeleton_spacing_m)
-    origin = ground + settings.eye_height_fraction * settings.agent_height_m * UP
-    side = np.cross(tangent, UP)
+    origin = ground + settings.eye_height_fraction * settings.agent_height_m * UP_WORLD
+    side = np.cross(tangent, UP_WORLD)
     side_norm = np.linalg.norm(side, axis=1, keepdims=True)
     flat = side_norm[:, 0] < 1e-6  # a vertical skeleton piece: any horizontal normal
     side = np.where(flat[:, None], np.array([1.0, 0.0, 0.0]), side / np.maximum(side_norm, 1e-12))
@@ -96,7 +96,7 @@ def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings,
     for k, elevation in enumerate(np.radians(settings.ray_elevations_deg)):
         signs = (1.0,) if np.isclose(abs(elevation), np.pi / 2) else (1.0, -1.0)
         for sign in signs:
-            rays.append(np.cos(elevation) * sign * side + np.sin(elevation) * UP)
+            rays.append(np.cos(elevation) * sign * side + np.sin(elevation) * UP_WORLD)
             kinds.append(np.full(len(origin), k))
             sides.append(np.full(len(origin), 0 if len(signs) == 1 else int(sign)))
             owners.append(np.arange(len(origin)))

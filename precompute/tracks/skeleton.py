@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+from pysfcgal.geometry import Polygon as SfcgalPolygon
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
-from pysfcgal.geometry import Polygon as SfcgalPolygon
 from shapely.geometry.polygon import orient
 
 from camdirector.geometry.meshes import TriMesh

@@ -46,7 +46,7 @@ class Pois:
     def __len__(self) -> int:
         return len(self.t)
 
-    def take(self, index) -> "Pois":
+    def take(self, index) -> Pois:
         return Pois(self.node_a[index], self.node_b[index], self.t[index], self.position_world[index])
 
 

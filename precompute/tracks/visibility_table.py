@@ -28,7 +28,8 @@ from scipy.spatial import cKDTree
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.navmesh import UP, refine_triangles
+from camdirector.geometry.transforms import UP_WORLD
+from camdirector.precompute.tracks.navmesh import refine_triangles
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import Skeleton, layer_height
 
@@ -98,7 +99,7 @@ def build_visibility_table(nodes_world: np.ndarray, refined: TriMesh, scene: Ray
     """Monte Carlo dual visibility table of nodes (N, 3) against refined triangles (module docstring)."""
     triangles = refined.vertices[refined.faces]
     centroid = triangles.mean(axis=1)
-    lift = settings.visibility_target_height_fraction * settings.agent_height_m * UP
+    lift = settings.visibility_target_height_fraction * settings.agent_height_m * UP_WORLD
     corner = (triangles[:, 0] + lift).astype(np.float32)
     edge1 = (triangles[:, 1] - triangles[:, 0]).astype(np.float32)
     edge2 = (triangles[:, 2] - triangles[:, 0]).astype(np.float32)

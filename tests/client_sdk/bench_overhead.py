@@ -28,9 +28,9 @@ import zmq
 import zmq.asyncio
 
 import camdirector_client as cd
-from camdirector_client import wire
 from camdirector.v1 import director_pb2 as pb
 from camdirector.v1 import director_pb2_grpc
+from camdirector_client import wire
 
 
 def free_port() -> int:

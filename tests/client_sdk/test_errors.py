@@ -14,7 +14,7 @@ from camdirector_client.errors import status_code_from_value
 @pytest.mark.parametrize("code", list(grpc.StatusCode))
 def test_zmq_status_codes_map_by_value(code):
     assert status_code_from_value(code.value[0]) is code
-    error = DirectorError.from_zmq_reply(str(code.value[0]).encode(), "why".encode())
+    error = DirectorError.from_zmq_reply(str(code.value[0]).encode(), b"why")
     assert (error.code, error.message) == (code, "why")
 
 

@@ -6,10 +6,18 @@ import math
 import numpy as np
 import pytest
 
-from camdirector.evaluation.measure import (NEAR_PLANE_M, CameraTrack, VisibilityMeter, camera_kinematics,
-                                            in_frame, measure, measure_visibility, summarize)
-from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.evaluation.measure import (
+    NEAR_PLANE_M,
+    CameraTrack,
+    VisibilityMeter,
+    camera_kinematics,
+    in_frame,
+    measure,
+    measure_visibility,
+    summarize,
+)
 from camdirector.evaluation.scenario import FORMAT, parse_scenario
+from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.v1 import director_pb2 as pb
 
 TARGET = {"id": "ball", "shape": {"sphere": {"radius": 0.5}}, "position": [0.0, 1.0, 0.0]}

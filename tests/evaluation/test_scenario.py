@@ -10,8 +10,15 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from camdirector.evaluation.scenario import (FORMAT, PARK_OFFSET_M, BounceMotion, KeyframedMotion, ScenarioError,
-                                             load_scenario, parse_scenario)
+from camdirector.evaluation.scenario import (
+    FORMAT,
+    PARK_OFFSET_M,
+    BounceMotion,
+    KeyframedMotion,
+    ScenarioError,
+    load_scenario,
+    parse_scenario,
+)
 from camdirector.v1 import director_pb2 as pb
 
 

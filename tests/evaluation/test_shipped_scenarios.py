@@ -5,8 +5,8 @@ import pytest
 
 from camdirector.evaluation.scenario import load_scenario, shipped_scenarios
 from camdirector.evaluation.suite import PAPER_SCENES, suite_scenarios
+from camdirector.server.sessions.codec import frame_from_msg, scene_from_request
 from camdirector.server.settings import ServerSettings
-from camdirector.server.wire import frame_from_msg, scene_from_request
 from camdirector.v1 import director_pb2 as pb
 
 SHIPPED = shipped_scenarios()

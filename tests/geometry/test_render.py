@@ -134,7 +134,7 @@ def test_instanced_meshes_draw_what_separate_meshes_draw():
     images = []
     for instanced, closed in ((True, False), (False, False), (True, True)):
         with OffscreenRenderer(WIDTH_PX, HEIGHT_PX) as r:
-            for k, (mesh_id, color) in enumerate(zip(ids, colors)):
+            for _k, (mesh_id, color) in enumerate(zip(ids, colors)):
                 faces = box.faces if instanced else box.faces[rng.permutation(len(box.faces))]
                 r.add_mesh(mesh_id, box.vertices, faces, color, closed=closed,
                            checker_m=0.5 if mesh_id == "ground" else 0.0)

@@ -189,7 +189,7 @@ def test_client_disconnect_mid_stream_then_resume(server, canary):
     client = GrpcRaw(server.grpc)
     session_id = client.call("CreateSession", two_target_request(seed=9)).session_id
     call = client.stub.StreamFrames(iter(list(walk(session_id, 50))))
-    for i, update in enumerate(call):
+    for i, _update in enumerate(call):
         if i == 9:
             call.cancel()  # the client goes away mid-stream
             break

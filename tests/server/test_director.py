@@ -7,6 +7,7 @@ import math
 import grpc
 import numpy as np
 import pytest
+
 from camdirector.v1 import director_pb2 as pb
 from tests.server.wire_client import RpcFailed, capsule_target, two_target_request, walk
 

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from camdirector.server.jobs import (JobError, JobKind, JobNotFound, JobRegistry, JobRunner,
-                                     JobSettings, JobState, JobStore, QueueFull)
+from camdirector.precompute.jobs import JobError
+from camdirector.server.jobs import JobKind, JobNotFound, JobRegistry, JobRunner, JobSettings, JobState, JobStore, QueueFull
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -34,6 +34,7 @@ class Rig(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     RIG_UNSPECIFIED: _ClassVar[Rig]
     RIG_TORIC: _ClassVar[Rig]
     RIG_TRACKS: _ClassVar[Rig]
+    RIG_MATCH: _ClassVar[Rig]
 
 class ShotSize(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     __slots__ = ()
@@ -48,6 +49,28 @@ class Movement(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     MOVEMENT_DYNAMIC_NO_CUTS: _ClassVar[Movement]
     MOVEMENT_DYNAMIC_WITH_CUTS: _ClassVar[Movement]
     MOVEMENT_STATIC: _ClassVar[Movement]
+
+class MatchDirector(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    MATCH_DIRECTOR_UNSPECIFIED: _ClassVar[MatchDirector]
+    MATCH_DIRECTOR_PLANNED: _ClassVar[MatchDirector]
+    MATCH_DIRECTOR_HLTV: _ClassVar[MatchDirector]
+
+class EventKind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    EVENT_KIND_UNSPECIFIED: _ClassVar[EventKind]
+    EVENT_KILL: _ClassVar[EventKind]
+    EVENT_DAMAGE: _ClassVar[EventKind]
+    EVENT_OBJECTIVE: _ClassVar[EventKind]
+    EVENT_CUSTOM: _ClassVar[EventKind]
+
+class ShotKind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    SHOT_KIND_UNSPECIFIED: _ClassVar[ShotKind]
+    SHOT_DUEL: _ClassVar[ShotKind]
+    SHOT_FOLLOW: _ClassVar[ShotKind]
+    SHOT_GROUP: _ClassVar[ShotKind]
+    SHOT_OVERVIEW: _ClassVar[ShotKind]
 VISIBILITY_MODE_UNSPECIFIED: VisibilityMode
 ANTICIPATION: VisibilityMode
 NO_ANTICIPATION: VisibilityMode
@@ -64,6 +87,7 @@ MAP_BACKEND_EMBREE: MapBackend
 RIG_UNSPECIFIED: Rig
 RIG_TORIC: Rig
 RIG_TRACKS: Rig
+RIG_MATCH: Rig
 SHOT_SIZE_UNSPECIFIED: ShotSize
 SHOT_SIZE_MEDIUM: ShotSize
 SHOT_SIZE_LONG: ShotSize
@@ -72,6 +96,19 @@ MOVEMENT_UNSPECIFIED: Movement
 MOVEMENT_DYNAMIC_NO_CUTS: Movement
 MOVEMENT_DYNAMIC_WITH_CUTS: Movement
 MOVEMENT_STATIC: Movement
+MATCH_DIRECTOR_UNSPECIFIED: MatchDirector
+MATCH_DIRECTOR_PLANNED: MatchDirector
+MATCH_DIRECTOR_HLTV: MatchDirector
+EVENT_KIND_UNSPECIFIED: EventKind
+EVENT_KILL: EventKind
+EVENT_DAMAGE: EventKind
+EVENT_OBJECTIVE: EventKind
+EVENT_CUSTOM: EventKind
+SHOT_KIND_UNSPECIFIED: ShotKind
+SHOT_DUEL: ShotKind
+SHOT_FOLLOW: ShotKind
+SHOT_GROUP: ShotKind
+SHOT_OVERVIEW: ShotKind
 
 class Vec3(_message.Message):
     __slots__ = ("x", "y", "z")
@@ -174,16 +211,18 @@ class SceneObject(_message.Message):
     def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., dynamic: _Optional[bool] = ...) -> None: ...
 
 class Target(_message.Message):
-    __slots__ = ("id", "mesh", "transform", "aim_offset")
+    __slots__ = ("id", "mesh", "transform", "aim_offset", "team")
     ID_FIELD_NUMBER: _ClassVar[int]
     MESH_FIELD_NUMBER: _ClassVar[int]
     TRANSFORM_FIELD_NUMBER: _ClassVar[int]
     AIM_OFFSET_FIELD_NUMBER: _ClassVar[int]
+    TEAM_FIELD_NUMBER: _ClassVar[int]
     id: str
     mesh: Mesh
     transform: Transform
     aim_offset: Vec3
-    def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., aim_offset: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+    team: int
+    def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., aim_offset: _Optional[_Union[Vec3, _Mapping]] = ..., team: _Optional[int] = ...) -> None: ...
 
 class Lens(_message.Message):
     __slots__ = ("vertical_fov_deg", "aspect")
@@ -202,7 +241,7 @@ class ScreenPoint(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ...) -> None: ...
 
 class Style(_message.Message):
-    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend", "rig", "shot_size", "movement")
+    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend", "rig", "shot_size", "movement", "match_director", "min_shot_s", "max_shot_s")
     SCREEN_A_FIELD_NUMBER: _ClassVar[int]
     SCREEN_B_FIELD_NUMBER: _ClassVar[int]
     VISIBILITY_FIELD_NUMBER: _ClassVar[int]
@@ -218,6 +257,9 @@ class Style(_message.Message):
     RIG_FIELD_NUMBER: _ClassVar[int]
     SHOT_SIZE_FIELD_NUMBER: _ClassVar[int]
     MOVEMENT_FIELD_NUMBER: _ClassVar[int]
+    MATCH_DIRECTOR_FIELD_NUMBER: _ClassVar[int]
+    MIN_SHOT_S_FIELD_NUMBER: _ClassVar[int]
+    MAX_SHOT_S_FIELD_NUMBER: _ClassVar[int]
     screen_a: ScreenPoint
     screen_b: ScreenPoint
     visibility: VisibilityMode
@@ -233,10 +275,13 @@ class Style(_message.Message):
     rig: Rig
     shot_size: ShotSize
     movement: Movement
-    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ...) -> None: ...
+    match_director: MatchDirector
+    min_shot_s: float
+    max_shot_s: float
+    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ..., match_director: _Optional[_Union[MatchDirector, str]] = ..., min_shot_s: _Optional[float] = ..., max_shot_s: _Optional[float] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
-    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id")
+    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id", "delay_s")
     OBJECTS_FIELD_NUMBER: _ClassVar[int]
     TARGETS_FIELD_NUMBER: _ClassVar[int]
     LENS_FIELD_NUMBER: _ClassVar[int]
@@ -244,6 +289,7 @@ class CreateSessionRequest(_message.Message):
     SEED_FIELD_NUMBER: _ClassVar[int]
     RECORD_FIELD_NUMBER: _ClassVar[int]
     LEVEL_ID_FIELD_NUMBER: _ClassVar[int]
+    DELAY_S_FIELD_NUMBER: _ClassVar[int]
     objects: _containers.RepeatedCompositeFieldContainer[SceneObject]
     targets: _containers.RepeatedCompositeFieldContainer[Target]
     lens: Lens
@@ -251,7 +297,8 @@ class CreateSessionRequest(_message.Message):
     seed: int
     record: bool
     level_id: str
-    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ...) -> None: ...
+    delay_s: float
+    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ..., delay_s: _Optional[float] = ...) -> None: ...
 
 class CreateSessionResponse(_message.Message):
     __slots__ = ("session_id", "recording_path")
@@ -270,20 +317,60 @@ class ObjectState(_message.Message):
     def __init__(self, id: _Optional[str] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ...) -> None: ...
 
 class FrameUpdate(_message.Message):
-    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms")
+    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms", "events")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_S_FIELD_NUMBER: _ClassVar[int]
     STATES_FIELD_NUMBER: _ClassVar[int]
     PACKED_IDS_FIELD_NUMBER: _ClassVar[int]
     PACKED_TRANSFORMS_FIELD_NUMBER: _ClassVar[int]
+    EVENTS_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     frame: int
     time_s: float
     states: _containers.RepeatedCompositeFieldContainer[ObjectState]
     packed_ids: _containers.RepeatedScalarFieldContainer[str]
     packed_transforms: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ...) -> None: ...
+    events: _containers.RepeatedCompositeFieldContainer[GameEvent]
+    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ..., events: _Optional[_Iterable[_Union[GameEvent, _Mapping]]] = ...) -> None: ...
+
+class GameEvent(_message.Message):
+    __slots__ = ("kind", "actor_id", "other_actor_id", "priority", "time_s", "label", "position")
+    KIND_FIELD_NUMBER: _ClassVar[int]
+    ACTOR_ID_FIELD_NUMBER: _ClassVar[int]
+    OTHER_ACTOR_ID_FIELD_NUMBER: _ClassVar[int]
+    PRIORITY_FIELD_NUMBER: _ClassVar[int]
+    TIME_S_FIELD_NUMBER: _ClassVar[int]
+    LABEL_FIELD_NUMBER: _ClassVar[int]
+    POSITION_FIELD_NUMBER: _ClassVar[int]
+    kind: EventKind
+    actor_id: str
+    other_actor_id: str
+    priority: int
+    time_s: float
+    label: str
+    position: Vec3
+    def __init__(self, kind: _Optional[_Union[EventKind, str]] = ..., actor_id: _Optional[str] = ..., other_actor_id: _Optional[str] = ..., priority: _Optional[int] = ..., time_s: _Optional[float] = ..., label: _Optional[str] = ..., position: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+
+class ShotInfo(_message.Message):
+    __slots__ = ("subject_ids", "kind", "reason")
+    SUBJECT_IDS_FIELD_NUMBER: _ClassVar[int]
+    KIND_FIELD_NUMBER: _ClassVar[int]
+    REASON_FIELD_NUMBER: _ClassVar[int]
+    subject_ids: _containers.RepeatedScalarFieldContainer[str]
+    kind: ShotKind
+    reason: str
+    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ...) -> None: ...
+
+class CandidateShot(_message.Message):
+    __slots__ = ("pose", "shot", "score")
+    POSE_FIELD_NUMBER: _ClassVar[int]
+    SHOT_FIELD_NUMBER: _ClassVar[int]
+    SCORE_FIELD_NUMBER: _ClassVar[int]
+    pose: CameraPose
+    shot: ShotInfo
+    score: float
+    def __init__(self, pose: _Optional[_Union[CameraPose, _Mapping]] = ..., shot: _Optional[_Union[ShotInfo, _Mapping]] = ..., score: _Optional[float] = ...) -> None: ...
 
 class CameraPose(_message.Message):
     __slots__ = ("position", "rotation", "vertical_fov_deg")
@@ -326,7 +413,7 @@ class Diagnostics(_message.Message):
     def __init__(self, theta: _Optional[float] = ..., phi: _Optional[float] = ..., alpha: _Optional[float] = ..., stage_ms: _Optional[_Mapping[str, float]] = ..., flags: _Optional[_Iterable[str]] = ..., scores: _Optional[_Mapping[str, float]] = ...) -> None: ...
 
 class CameraUpdate(_message.Message):
-    __slots__ = ("frame", "time_s", "pose", "cut", "shot_id", "visibility", "compute_ms", "stale", "message", "diagnostics")
+    __slots__ = ("frame", "time_s", "pose", "cut", "shot_id", "visibility", "compute_ms", "stale", "message", "diagnostics", "shot", "candidates", "buffering")
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_S_FIELD_NUMBER: _ClassVar[int]
     POSE_FIELD_NUMBER: _ClassVar[int]
@@ -337,6 +424,9 @@ class CameraUpdate(_message.Message):
     STALE_FIELD_NUMBER: _ClassVar[int]
     MESSAGE_FIELD_NUMBER: _ClassVar[int]
     DIAGNOSTICS_FIELD_NUMBER: _ClassVar[int]
+    SHOT_FIELD_NUMBER: _ClassVar[int]
+    CANDIDATES_FIELD_NUMBER: _ClassVar[int]
+    BUFFERING_FIELD_NUMBER: _ClassVar[int]
     frame: int
     time_s: float
     pose: CameraPose
@@ -347,7 +437,10 @@ class CameraUpdate(_message.Message):
     stale: bool
     message: str
     diagnostics: Diagnostics
-    def __init__(self, frame: _Optional[int] = ..., time_s: _Optional[float] = ..., pose: _Optional[_Union[CameraPose, _Mapping]] = ..., cut: _Optional[bool] = ..., shot_id: _Optional[int] = ..., visibility: _Optional[float] = ..., compute_ms: _Optional[float] = ..., stale: _Optional[bool] = ..., message: _Optional[str] = ..., diagnostics: _Optional[_Union[Diagnostics, _Mapping]] = ...) -> None: ...
+    shot: ShotInfo
+    candidates: _containers.RepeatedCompositeFieldContainer[CandidateShot]
+    buffering: bool
+    def __init__(self, frame: _Optional[int] = ..., time_s: _Optional[float] = ..., pose: _Optional[_Union[CameraPose, _Mapping]] = ..., cut: _Optional[bool] = ..., shot_id: _Optional[int] = ..., visibility: _Optional[float] = ..., compute_ms: _Optional[float] = ..., stale: _Optional[bool] = ..., message: _Optional[str] = ..., diagnostics: _Optional[_Union[Diagnostics, _Mapping]] = ..., shot: _Optional[_Union[ShotInfo, _Mapping]] = ..., candidates: _Optional[_Iterable[_Union[CandidateShot, _Mapping]]] = ..., buffering: _Optional[bool] = ...) -> None: ...
 
 class UpdateStyleRequest(_message.Message):
     __slots__ = ("session_id", "style")
@@ -360,6 +453,24 @@ class UpdateStyleRequest(_message.Message):
 class UpdateStyleResponse(_message.Message):
     __slots__ = ()
     def __init__(self) -> None: ...
+
+class TakeShotRequest(_message.Message):
+    __slots__ = ("session_id", "subject_ids", "kind", "release")
+    SESSION_ID_FIELD_NUMBER: _ClassVar[int]
+    SUBJECT_IDS_FIELD_NUMBER: _ClassVar[int]
+    KIND_FIELD_NUMBER: _ClassVar[int]
+    RELEASE_FIELD_NUMBER: _ClassVar[int]
+    session_id: str
+    subject_ids: _containers.RepeatedScalarFieldContainer[str]
+    kind: ShotKind
+    release: bool
+    def __init__(self, session_id: _Optional[str] = ..., subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., release: _Optional[bool] = ...) -> None: ...
+
+class TakeShotResponse(_message.Message):
+    __slots__ = ("shot",)
+    SHOT_FIELD_NUMBER: _ClassVar[int]
+    shot: ShotInfo
+    def __init__(self, shot: _Optional[_Union[ShotInfo, _Mapping]] = ...) -> None: ...
 
 class CloseSessionRequest(_message.Message):
     __slots__ = ("session_id",)
@@ -374,13 +485,15 @@ class CloseSessionResponse(_message.Message):
     def __init__(self, frames: _Optional[int] = ...) -> None: ...
 
 class RecordEntry(_message.Message):
-    __slots__ = ("create", "frame", "style", "camera")
+    __slots__ = ("create", "frame", "style", "camera", "take")
     CREATE_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     STYLE_FIELD_NUMBER: _ClassVar[int]
     CAMERA_FIELD_NUMBER: _ClassVar[int]
+    TAKE_FIELD_NUMBER: _ClassVar[int]
     create: CreateSessionRequest
     frame: FrameUpdate
     style: UpdateStyleRequest
     camera: CameraUpdate
-    def __init__(self, create: _Optional[_Union[CreateSessionRequest, _Mapping]] = ..., frame: _Optional[_Union[FrameUpdate, _Mapping]] = ..., style: _Optional[_Union[UpdateStyleRequest, _Mapping]] = ..., camera: _Optional[_Union[CameraUpdate, _Mapping]] = ...) -> None: ...
+    take: TakeShotRequest
+    def __init__(self, create: _Optional[_Union[CreateSessionRequest, _Mapping]] = ..., frame: _Optional[_Union[FrameUpdate, _Mapping]] = ..., style: _Optional[_Union[UpdateStyleRequest, _Mapping]] = ..., camera: _Optional[_Union[CameraUpdate, _Mapping]] = ..., take: _Optional[_Union[TakeShotRequest, _Mapping]] = ...) -> None: ...

@@ -60,6 +60,11 @@ class DirectorStub:
                 request_serializer=camdirector_dot_v1_dot_director__pb2.FrameUpdate.SerializeToString,
                 response_deserializer=camdirector_dot_v1_dot_director__pb2.CameraUpdate.FromString,
                 _registered_method=True)
+        self.TakeShot = channel.unary_unary(
+                '/camdirector.v1.Director/TakeShot',
+                request_serializer=camdirector_dot_v1_dot_director__pb2.TakeShotRequest.SerializeToString,
+                response_deserializer=camdirector_dot_v1_dot_director__pb2.TakeShotResponse.FromString,
+                _registered_method=True)
 
 
 class DirectorServicer:
@@ -102,6 +107,13 @@ class DirectorServicer:
         context.set_details('Method not implemented!')
         raise NotImplementedError('Method not implemented!')
 
+    def TakeShot(self, request, context):
+        """A human director's choice in a RIG_MATCH session: held until released (docs/protocol.md).
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
 
 def add_DirectorServicer_to_server(servicer, server):
     rpc_method_handlers = {
@@ -129,6 +141,11 @@ def add_DirectorServicer_to_server(servicer, server):
                     servicer.Frame,
                     request_deserializer=camdirector_dot_v1_dot_director__pb2.FrameUpdate.FromString,
                     response_serializer=camdirector_dot_v1_dot_director__pb2.CameraUpdate.SerializeToString,
+            ),
+            'TakeShot': grpc.unary_unary_rpc_method_handler(
+                    servicer.TakeShot,
+                    request_deserializer=camdirector_dot_v1_dot_director__pb2.TakeShotRequest.FromString,
+                    response_serializer=camdirector_dot_v1_dot_director__pb2.TakeShotResponse.SerializeToString,
             ),
     }
     generic_handler = grpc.method_handlers_generic_handler(
@@ -267,6 +284,33 @@ class Director:
             '/camdirector.v1.Director/Frame',
             camdirector_dot_v1_dot_director__pb2.FrameUpdate.SerializeToString,
             camdirector_dot_v1_dot_director__pb2.CameraUpdate.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def TakeShot(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/camdirector.v1.Director/TakeShot',
+            camdirector_dot_v1_dot_director__pb2.TakeShotRequest.SerializeToString,
+            camdirector_dot_v1_dot_director__pb2.TakeShotResponse.FromString,
             options,
             channel_credentials,
             insecure,

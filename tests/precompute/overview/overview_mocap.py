@@ -20,7 +20,7 @@ CLIPS = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def load_clip(shared_data: Path, name: str) -> MotionClip:
     path, skip = CLIPS[name]
     return load_motion(shared_data / "mocap" / path, skip_frames=skip)

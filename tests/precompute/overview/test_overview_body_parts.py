@@ -5,9 +5,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-from .overview_mocap import CLIPS, load_clip
 
 from camdirector.precompute.overview.body_parts import BodyPart, map_body_parts
+
+from .overview_mocap import CLIPS, load_clip
 
 EXPECTED = {  # one joint name per part per skeleton family
     "walk": {"Head": BodyPart.HEAD, "Chest": BodyPart.TORSO, "Hand_L": BodyPart.LEFT_ARM,

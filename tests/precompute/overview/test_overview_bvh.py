@@ -8,9 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from camdirector.precompute.overview.bvh import (CM_PER_UNIT_M, CMU_UNIT_M, METRE_UNIT_M,
-                                                 forward_kinematics, infer_scale_m_per_unit,
-                                                 parse_bvh)
+from camdirector.precompute.overview.bvh import (
+    CM_PER_UNIT_M,
+    CMU_UNIT_M,
+    METRE_UNIT_M,
+    forward_kinematics,
+    infer_scale_m_per_unit,
+    parse_bvh,
+)
 
 TWO_JOINT = """HIERARCHY
 ROOT Base

@@ -54,7 +54,7 @@ NOT_BEATING_GREEDY = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def planned(shared_data, name):
     clip = load_clip(shared_data, name)
     result = plan_overview(clip, OverviewSettings(), np.random.default_rng(7))
@@ -191,7 +191,7 @@ def test_splitting_keeps_the_line_of_movement_side(shared_data, tmp_path):
     r = plan_overview(clip, settings, np.random.default_rng(1))
     plan = r.analysis.plan
     assert len(plan.quality_history) == len(plan.shots_history)
-    for (a, b), (c, d) in zip(plan.shots[:-1], plan.shots[1:]):
+    for (a, b), (c, _d) in zip(plan.shots[:-1], plan.shots[1:]):
         assert c == b + 1
         assert (b - a + 1) * r.analysis.track.dt_s >= settings.min_shot_s - 1e-9
     png = plot_quality(r, tmp_path / "q.png", "kick")

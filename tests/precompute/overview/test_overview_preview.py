@@ -11,10 +11,18 @@ import pytest
 from PIL import Image
 
 from camdirector.precompute.overview.pipeline import plan_overview
-from camdirector.precompute.overview.preview import (PART_RGB, CharacterScene, PreviewCamera,
-                                                     PreviewSettings, contact_sheet_frames,
-                                                     even_size, mark_frame, preview_frames,
-                                                     render_preview, shot_rgb)
+from camdirector.precompute.overview.preview import (
+    PART_RGB,
+    CharacterScene,
+    PreviewCamera,
+    PreviewSettings,
+    contact_sheet_frames,
+    even_size,
+    mark_frame,
+    preview_frames,
+    render_preview,
+    shot_rgb,
+)
 from camdirector.precompute.overview.settings import OverviewSettings
 
 from .overview_mocap import load_clip
@@ -42,7 +50,7 @@ def test_shot_marking_draws_a_border_only_when_flashing():
     assert (plain != image).any()            # the label is drawn
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _planned(shared_data):
     clip = load_clip(shared_data, "run")
     return clip, plan_overview(clip, OverviewSettings(), np.random.default_rng(0))

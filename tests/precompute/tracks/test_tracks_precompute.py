@@ -9,8 +9,7 @@ from scipy.sparse.csgraph import connected_components
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.filters import (filter_tracks, refit, remove_collisions, remove_empty,
-                                                   remove_hidden_points)
+from camdirector.precompute.tracks.filters import filter_tracks, refit, remove_collisions, remove_empty, remove_hidden_points
 from camdirector.precompute.tracks.graph import build_graph, insert_tracks
 from camdirector.precompute.tracks.navmesh import derive_navmesh, triangle_areas
 from camdirector.precompute.tracks.pipeline import Stage, precompute_level

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from camdirector.geometry.meshes import TriMesh
 from camdirector.precompute.tracks.compare import PRM_MAX_DENSITY_PER_M2, PRM_MAX_NODES, compare_with_prm
 from camdirector.precompute.tracks.level import load_level_mesh
 from camdirector.precompute.tracks.pipeline import Stage, precompute_level
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
 from camdirector.precompute.tracks.settings import TrackSettings
-from camdirector.geometry.meshes import TriMesh
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from scipy import stats
 
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, ArtifactVersionError, load_artifact, save_artifact
-from camdirector.precompute.tracks.continuity import (cut_angle_deg, keeps_line_of_action, screen_motion)
+from camdirector.precompute.tracks.continuity import cut_angle_deg, keeps_line_of_action, screen_motion
 from camdirector.precompute.tracks.cutting import draw_shot_duration_s
 from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement, ShotSize
 from camdirector.precompute.tracks.pipeline import precompute_level
@@ -18,8 +18,6 @@ from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.settings import DirectorSettings, TrackSettings
 
 from .tiny_levels import corridor
-
-UP = np.array([0.0, 1.0, 0.0])
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,184 @@
+"""The front process's view of the sessions: which worker holds each, which are streaming, and
+when an abandoned one is reclaimed. Both transports call this one object.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import orjson
+
+from camdirector.server.errors import DirectorError, exhausted, invalid, not_found
+from camdirector.server.front.metrics import Metrics
+from camdirector.server.front.worker_pool import WorkerPool
+from camdirector.server.settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+
+log = logging.getLogger("camdirector.sessions")
+
+
+@dataclass
+class SessionEntry:
+    slot: int
+    created_s: float
+    last_seen_s: float
+    streams: int = 0
+    frames: int = 0
+    transport: set[str] = field(default_factory=set)
+
+
+class SessionRouter:
+    def __init__(self, settings: ServerSettings, metrics: Metrics, clock: Callable[[], float] = time.monotonic):
+        self.settings = settings
+        self.metrics = metrics
+        self.clock = clock
+        self.pool = WorkerPool(settings, on_worker_lost=self._worker_lost)
+        self.sessions: dict[str, SessionEntry] = {}
+        self._reserved = 0  # creations in flight, counted against max_sessions
+        self._reaper: asyncio.Task | None = None
+
+    async def start(self) -> None:
+        await self.pool.start()
+        self._reaper = asyncio.create_task(self._reap_forever())
+
+    async def stop(self) -> None:
+        if self._reaper is not None:
+            self._reaper.cancel()
+        await self.pool.stop()
+
+    def _entry(self, session_id: str) -> SessionEntry:
+        entry = self.sessions.get(session_id)
+        if entry is None:
+            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
+        return entry
+
+    def _least_loaded_slot(self) -> int:
+        load = [0] * self.pool.slots
+        for entry in self.sessions.values():
+            load[entry.slot] += 1
+        return min(range(len(load)), key=load.__getitem__)
+
+    async def create(self, payload: bytes, transport: str) -> bytes:
+        if len(self.sessions) + self._reserved >= self.settings.max_sessions:
+            raise exhausted(f"the server holds its maximum of {self.settings.max_sessions} sessions")
+        session_id = uuid.uuid4().hex
+        slot = self._least_loaded_slot()
+        self._reserved += 1
+        try:
+            body, _ = await self.pool.call(slot, "create", session_id, payload)
+        finally:
+            self._reserved -= 1
+        now = self.clock()
+        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport})
+        self.metrics.sessions.set(len(self.sessions))
+        self.metrics.sessions_created.inc()
+        return body
+
+    async def frame(self, payload: bytes, session_id: str, transport: str) -> bytes:
+        entry = self._entry(session_id)
+        entry.last_seen_s = self.clock()
+        body, frame_metrics = await self.pool.call(entry.slot, "frame", session_id, payload)
+        entry.frames += 1
+        self.metrics.frames.labels(transport).inc()
+        if frame_metrics is not None:
+            if frame_metrics.stale:
+                self.metrics.stale_frames.inc()
+            self.metrics.frame_compute.observe(frame_metrics.compute_ms * 1e-3)
+            for stage, ms in frame_metrics.stage_ms.items():
+                self.metrics.stage.labels(stage).observe(ms * 1e-3)
+        return body
+
+    async def update_style(self, payload: bytes) -> bytes:
+        session_id = session_id_of(pb.UpdateStyleRequest, payload)
+        entry = self._entry(session_id)
+        entry.last_seen_s = self.clock()
+        body, _ = await self.pool.call(entry.slot, "style", session_id, payload)
+        return body
+
+    async def close(self, payload: bytes) -> bytes:
+        session_id = session_id_of(pb.CloseSessionRequest, payload)
+        entry = self._entry(session_id)
+        body, _ = await self.pool.call(entry.slot, "close", session_id, payload)
+        self.sessions.pop(session_id, None)
+        self.metrics.sessions.set(len(self.sessions))
+        return body
+
+    def stream_opened(self, session_id: str) -> None:
+        self._entry(session_id).streams += 1
+
+    def stream_closed(self, session_id: str) -> None:
+        entry = self.sessions.get(session_id)
+        if entry is not None:
+            entry.streams -= 1
+            entry.last_seen_s = self.clock()
+
+    async def reap_once(self) -> list[str]:
+        """Reclaims sessions with no stream and no request for `session_resume_s`."""
+        now = self.clock()
+        idle = [sid for sid, e in self.sessions.items()
+                if e.streams == 0 and now - e.last_seen_s > self.settings.session_resume_s]
+        for session_id in idle:
+            entry = self.sessions.pop(session_id)
+            try:
+                await self.pool.call(entry.slot, "drop", session_id, b"")
+            except DirectorError as exc:
+                log.warning("dropping session %s: %s", session_id, exc.message)
+            self.metrics.sessions_reclaimed.inc()
+            log.info("reclaimed idle session %s after %.1f s", session_id, now - entry.last_seen_s)
+        self.metrics.sessions.set(len(self.sessions))
+        return idle
+
+    async def _reap_forever(self) -> None:
+        while True:
+            await asyncio.sleep(self.settings.reap_interval_s)
+            try:
+                await self.reap_once()
+            except Exception:  # the reaper must outlive any one bad session
+                log.exception("session reaper")
+
+    def _worker_lost(self, slot: int) -> None:
+        lost = [sid for sid, e in self.sessions.items() if e.slot == slot]
+        for session_id in lost:
+            del self.sessions[session_id]
+            self.metrics.sessions_reclaimed.inc()
+        self.metrics.sessions.set(len(self.sessions))
+        log.error("worker %d lost %d sessions", slot, len(lost))
+
+    async def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
+        """The session's summary (as `describe`), style and newest `last` frames after
+        `after_frame` (sessions.py); NOT_FOUND for an unknown id. Not a request of the session's
+        client: it does not keep the session alive."""
+        entry = self._entry(session_id)
+        body, _ = await self.pool.call(entry.slot, "timeline", session_id,
+                                       orjson.dumps({"last": last, "after_frame": after_frame}))
+        return {"session": self._describe(session_id, entry, self.clock()), **orjson.loads(body)}
+
+    async def anticipation_png(self, session_id: str) -> bytes:
+        """The session's A-map as a PNG (sessions.py); NOT_FOUND, or FAILED_PRECONDITION without one."""
+        body, _ = await self.pool.call(self._entry(session_id).slot, "amap", session_id, b"")
+        return body
+
+    def describe(self) -> list[dict]:
+        now = self.clock()
+        return [self._describe(sid, e, now) for sid, e in self.sessions.items()]
+
+    @staticmethod
+    def _describe(session_id: str, e: SessionEntry, now: float) -> dict:
+        return {"session_id": session_id, "worker": e.slot, "frames": e.frames, "streams": e.streams,
+                "idle_s": round(now - e.last_seen_s, 3), "age_s": round(now - e.created_s, 3),
+                "transports": sorted(e.transport)}
+
+
+def session_id_of(message_type, payload: bytes) -> str:
+    """The session_id field of a serialized request; INVALID_ARGUMENT when it cannot be read."""
+    try:
+        session_id = message_type.FromString(payload).session_id
+    except Exception:
+        raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}") from None
+    if not session_id:
+        raise invalid("session_id is empty")
+    return session_id

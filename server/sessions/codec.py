@@ -1,0 +1,264 @@
+"""The transport edge: camdirector.v1 messages in, the pipeline's own types out, and back.
+
+Everything that arrives from a client is validated here and refused with a DirectorError that
+names the field; past this module the pipeline sees only dataclasses and numpy arrays. A session
+with `style.rig = RIG_TRACKS` needs exactly one target and a `level_id` the server's level
+registry holds (loaded here, through the worker's LevelCache, so a session never starts without
+its level); `level_id` without that rig, and the TRACKS style fields under the TORIC rig, are
+refused rather than ignored. The rig cannot change during a session (UpdateStyle): TORIC to
+TRACKS would need a level the session was not created with, and TRACKS to TORIC a second framing
+setup for a scene built around one actor; a new session does either.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from camdirector.geometry import meshes
+from camdirector.geometry.camera import Lens
+from camdirector.geometry.meshes import MeshError, TriMesh
+from camdirector.geometry.toric import composition_angle
+from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
+from camdirector.server.errors import exhausted, invalid, not_found, precondition
+from camdirector.server.pipeline.inputs import FrameInput, ObjectSpec, SceneSpec, TargetSpec
+from camdirector.server.pipeline.stages import FrameState
+from camdirector.server.pipeline.style import MapBackendChoice, Movement, Rig, ShotSize, Style, VisibilityMode
+from camdirector.server.pipeline.toric.anticipation import MaskKind
+from camdirector.server.sessions.levels import LevelCache
+from camdirector.server.settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+
+_MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
+          pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
+          pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
+_RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC, pb.RIG_TORIC: Rig.TORIC, pb.RIG_TRACKS: Rig.TRACKS}
+_SHOT_SIZES = {pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG, pb.SHOT_SIZE_MEDIUM: ShotSize.MEDIUM,
+               pb.SHOT_SIZE_LONG: ShotSize.LONG, pb.SHOT_SIZE_EXTREME_LONG: ShotSize.EXTREME_LONG}
+_MOVEMENTS = {pb.MOVEMENT_UNSPECIFIED: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_DYNAMIC_NO_CUTS: Movement.DYNAMIC_NO_CUTS,
+              pb.MOVEMENT_DYNAMIC_WITH_CUTS: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_STATIC: Movement.STATIC}
+MIN_ALPHA_RAD = math.radians(0.5)  # screen points closer than this angle give no usable torus
+PACKED_STRIDE = 10                 # doubles per object in FrameUpdate.packed_transforms
+
+
+def _vec3(msg: pb.Vec3, what: str) -> np.ndarray:
+    v = np.array([msg.x, msg.y, msg.z])
+    if not np.all(np.isfinite(v)):
+        raise invalid(f"{what} has a NaN or infinite component")
+    return v
+
+
+def transform_from_msg(msg: pb.Transform, what: str) -> RigidTransform:
+    position = _vec3(msg.position, f"{what}.position")
+    rotation = IDENTITY_QUAT.copy()
+    if msg.HasField("rotation"):
+        q = np.array([msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w])
+        if not np.all(np.isfinite(q)):
+            raise invalid(f"{what}.rotation has a NaN or infinite component")
+        norm = float(np.linalg.norm(q))
+        if norm < 1e-6:
+            raise invalid(f"{what}.rotation is a zero-length quaternion")
+        rotation = q / norm
+    scale = np.ones(3)
+    if msg.HasField("scale"):
+        scale = _vec3(msg.scale, f"{what}.scale")
+        if np.any(np.abs(scale) < 1e-9):
+            raise invalid(f"{what}.scale has a zero component")
+    return RigidTransform(position, rotation, scale)
+
+
+def transforms_from_packed(values: np.ndarray, ids) -> list[RigidTransform]:
+    """values: (n, 10) rows px, py, pz, qx, qy, qz, qw, sx, sy, sz; validated all at once."""
+    bad = ~np.isfinite(values).all(axis=1)
+    norms = np.linalg.norm(values[:, 3:7], axis=1)
+    for row, message in ((bad, "has a NaN or infinite value"), (norms < 1e-6, "rotation is a zero-length quaternion"),
+                         ((np.abs(values[:, 7:10]) < 1e-9).any(axis=1), "scale has a zero component")):
+        if row.any():
+            raise invalid(f"packed state {ids[int(np.argmax(row))]!r} {message}")
+    rotations = values[:, 3:7] / norms[:, None]
+    return [RigidTransform(v[0:3].copy(), q, v[7:10].copy()) for v, q in zip(values, rotations)]
+
+
+def mesh_from_msg(msg: pb.Mesh, what: str) -> TriMesh:
+    kind = msg.WhichOneof("source")
+    try:
+        if kind == "triangles":
+            return meshes.from_arrays(np.asarray(msg.triangles.vertices, dtype=np.float32),
+                                      np.asarray(msg.triangles.indices, dtype=np.uint32))
+        if kind == "glb":
+            return meshes.from_glb(msg.glb)
+        if kind == "obj":
+            return meshes.from_obj(msg.obj)
+        if kind == "primitive":
+            return _primitive(msg.primitive)
+    except MeshError as exc:
+        raise invalid(f"{what}: {exc}") from None
+    raise invalid(f"{what} is empty: set one of glb, obj, triangles, primitive")
+
+
+def _primitive(msg: pb.Primitive) -> TriMesh:
+    shape = msg.WhichOneof("shape")
+    if shape == "box":
+        return meshes.box([msg.box.size.x, msg.box.size.y, msg.box.size.z])
+    if shape == "sphere":
+        return meshes.sphere(msg.sphere.radius)
+    if shape == "cylinder":
+        return meshes.cylinder(msg.cylinder.radius, msg.cylinder.height)
+    if shape == "capsule":
+        return meshes.capsule(msg.capsule.radius, msg.capsule.height)
+    raise MeshError("primitive has no shape")
+
+
+def lens_from_msg(msg: pb.Lens) -> Lens:
+    fov = msg.vertical_fov_deg or Lens.vertical_fov_deg
+    aspect = msg.aspect or Lens.aspect
+    if not (math.isfinite(fov) and 1.0 < fov < 170.0):
+        raise invalid(f"lens.vertical_fov_deg must be in (1, 170), got {fov}")
+    if not (math.isfinite(aspect) and 0.1 <= aspect <= 10.0):
+        raise invalid(f"lens.aspect must be in [0.1, 10], got {aspect}")
+    return Lens(vertical_fov_deg=fov, aspect=aspect)
+
+
+def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> Style:
+    """The style of a CreateSession, or of an UpdateStyle to a session whose style is `current`."""
+    values = {}
+    for name in ("screen_a", "screen_b"):
+        if msg.HasField(name):
+            point = getattr(msg, name)
+            values[name] = (point.x, point.y)
+    for name in ("gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg",
+                 "response_time_s", "max_speed_m_s", "max_accel_m_s2"):
+        if msg.HasField(name):
+            values[name] = getattr(msg, name)
+    try:
+        mode = VisibilityMode(msg.visibility)
+    except ValueError:
+        raise invalid(f"style.visibility {msg.visibility} is not a VisibilityMode") from None
+    try:
+        values["mask"] = _MASKS[msg.mask]
+        values["map_backend"] = MapBackendChoice(msg.map_backend)
+    except (KeyError, ValueError):
+        raise invalid(f"style.mask {msg.mask} or style.map_backend {msg.map_backend} is not known") from None
+    if msg.map_resolution:
+        values["map_resolution"] = msg.map_resolution
+    for name, table in (("rig", _RIGS), ("shot_size", _SHOT_SIZES), ("movement", _MOVEMENTS)):
+        number = getattr(msg, name)
+        if number not in table:
+            raise invalid(f"style.{name} {number} is not a known {name}")
+        values[name] = table[number]
+    if current is not None and values["rig"] != current.rig:
+        raise precondition(f"style.rig cannot change during a session ({current.rig.name} -> {values['rig'].name}): "
+                           "create a new session with that rig (an UpdateStyle replaces the whole style, so a "
+                           "TRACKS session repeats rig = RIG_TRACKS)")
+    if values["rig"] == Rig.TORIC and (msg.shot_size or msg.movement):
+        raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
+                      "(with a level_id) or leave them unset")
+    try:
+        style = Style(visibility=VisibilityMode.FRAMING_ONLY if mode == VisibilityMode.UNSPECIFIED else mode, **values)
+    except ValueError as exc:
+        raise invalid(str(exc)) from None
+    if composition_angle(style.screen_a, style.screen_b, lens) < MIN_ALPHA_RAD:
+        raise invalid("style.screen_a and style.screen_b are too close for this lens (under 0.5 deg apart)")
+    return style
+
+
+def _check_id(object_id: str, what: str, seen: set[str]) -> None:
+    if not object_id:
+        raise invalid(f"{what}.id is empty")
+    if object_id in seen:
+        raise invalid(f"{what}.id {object_id!r} is used twice")
+    seen.add(object_id)
+
+
+def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
+                       levels: LevelCache | None = None) -> SceneSpec:
+    """levels: where a TRACKS session's level is looked up (default: the registry in settings.data_dir)."""
+    if not 1 <= len(req.targets) <= 2:
+        raise invalid(f"a session frames one or two targets, got {len(req.targets)}")
+    if len(req.objects) > settings.max_objects:
+        raise exhausted(f"{len(req.objects)} scene objects exceed the limit of {settings.max_objects}")
+    seen: set[str] = set()
+    triangles = 0
+    objects, targets = [], []
+    for i, obj in enumerate(req.objects):
+        what = f"objects[{i}]"
+        _check_id(obj.id, what, seen)
+        mesh = mesh_from_msg(obj.mesh, f"{what}.mesh")
+        triangles += mesh.triangle_count
+        if triangles > settings.max_triangles:
+            raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
+        objects.append(ObjectSpec(obj.id, mesh, transform_from_msg(obj.transform, f"{what}.transform"), obj.dynamic))
+    for i, target in enumerate(req.targets):
+        what = f"targets[{i}]"
+        _check_id(target.id, what, seen)
+        mesh = mesh_from_msg(target.mesh, f"{what}.mesh")
+        triangles += mesh.triangle_count
+        if triangles > settings.max_triangles:
+            raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
+        targets.append(TargetSpec(target.id, mesh, transform_from_msg(target.transform, f"{what}.transform"),
+                                  _vec3(target.aim_offset, f"{what}.aim_offset")))
+    lens = lens_from_msg(req.lens)
+    style = style_from_msg(req.style, lens)
+    level = None
+    if style.rig == Rig.TRACKS:
+        if len(targets) != 1:
+            raise invalid(f"the TRACKS rig follows exactly one target (the actor), got {len(targets)}")
+        if not req.level_id:
+            raise invalid("style.rig RIG_TRACKS needs level_id: the name of a level in the server's level registry")
+        level = (levels if levels is not None else LevelCache(settings.data_dir)).get(req.level_id)
+    elif req.level_id:
+        raise invalid(f"level_id {req.level_id!r} is for the TRACKS rig: set style.rig = RIG_TRACKS or leave "
+                      "level_id empty")
+    return SceneSpec(objects, targets, lens, style, int(req.seed), level)
+
+
+def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str]) -> FrameInput:
+    """`movable`: ids of targets and dynamic objects; `static`: ids of static objects."""
+    if not math.isfinite(msg.time_s):
+        raise invalid("frame time_s is NaN or infinite")
+    states: list[tuple[str, RigidTransform]] = []
+
+    def check(object_id: str) -> None:
+        if object_id not in movable:
+            if object_id in static:
+                raise precondition(f"object {object_id!r} is static; create it with dynamic=true to move it")
+            raise not_found(f"unknown object id {object_id!r} in frame {msg.frame}")
+
+    for state in msg.states:
+        check(state.id)
+        states.append((state.id, transform_from_msg(state.transform, f"state {state.id!r} transform")))
+    if msg.packed_ids or msg.packed_transforms:
+        values = np.asarray(msg.packed_transforms, dtype=np.float64)
+        if values.size != PACKED_STRIDE * len(msg.packed_ids):
+            raise invalid(f"packed_transforms holds {values.size} values; {PACKED_STRIDE} per packed id expected")
+        for object_id in msg.packed_ids:
+            check(object_id)
+        states.extend(zip(msg.packed_ids, transforms_from_packed(values.reshape(-1, PACKED_STRIDE), msg.packed_ids)))
+    return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states)
+
+
+def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False, message: str = "") -> pb.CameraUpdate:
+    pose = state.pose
+    p, q = pose.position_world, pose.rotation_xyzw
+    out = pb.CameraUpdate(
+        frame=state.frame,
+        time_s=state.time_s,
+        pose=pb.CameraPose(position=pb.Vec3(x=p[0], y=p[1], z=p[2]),
+                           rotation=pb.Quat(x=q[0], y=q[1], z=q[2], w=q[3]),
+                           vertical_fov_deg=pose.vertical_fov_deg),
+        cut=state.cut,
+        shot_id=state.shot_id,
+        visibility=state.visibility,
+        compute_ms=compute_ms,
+        stale=stale,
+        message=message,
+    )
+    d = out.diagnostics
+    d.theta, d.phi = state.theta, state.phi
+    if state.torus is not None:
+        d.alpha = state.torus.alpha
+    d.stage_ms.update(state.stage_ms)
+    d.flags.extend(state.flags)
+    d.scores.update(state.scores)
+    return out
+

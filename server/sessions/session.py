@@ -1,0 +1,89 @@
+"""One director session: its scene, the latest transforms, and the camera rig's state.
+
+`Session.frame` runs INGEST, then its rig for the stages after it, in the order pipeline.py
+writes down: toric_rig.py for the TORIC rig, tracks_rig.py for a session created with TRACKS.
+The session never raises inside the frame loop for a geometric difficulty: it degrades (holds
+the pose, frames one target) and flags it in the diagnostics.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.server.pipeline.stages import FrameState, Stage
+from camdirector.server.pipeline.style import Style
+from camdirector.server.pipeline.toric.rig import ToricRig
+from camdirector.server.pipeline.tracks.rig import TracksRig
+from camdirector.server.pipeline.inputs import FrameInput, SceneSpec
+
+
+class Session:
+    def __init__(self, session_id: str, scene: SceneSpec, clock: Callable[[], float] = time.perf_counter):
+        self.id = session_id
+        self.clock = clock
+        self.rng = np.random.default_rng(scene.seed)
+        self.lens = scene.lens
+        self.style = scene.style
+        self.targets = scene.targets
+        self.target_index = {t.id: i for i, t in enumerate(scene.targets)}
+        self.target_transforms = [t.transform for t in scene.targets]
+        self.static_ids = {o.id for o in scene.objects if not o.dynamic}
+        self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
+        static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
+        level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
+        self.ray_scene = RayScene(static_meshes_world + level_meshes)
+        self.dynamic = {o.id: (o.mesh, o.transform) for o in scene.objects if o.dynamic}  # latest transforms
+        for object_id, (mesh, transform) in self.dynamic.items():
+            self.ray_scene.add_dynamic(object_id, mesh, transform)
+        # The stages after INGEST: one rig for the session's life (wire.py refuses a change of rig).
+        self.rig: ToricRig | TracksRig = (
+            TracksRig(scene.level, scene.lens, self.style, self.ray_scene, self.rng, clock) if scene.level is not None
+            else ToricRig(scene, self.ray_scene, static_meshes_world, self.dynamic, self.rng, clock))
+        self.last_state: FrameState | None = None
+        self.frames_answered = 0
+        self.shot_id = 0
+
+    def set_style(self, style: Style) -> None:
+        """From the next frame on (the rig's set_style says what a change does)."""
+        self.style = style
+        self.rig.set_style(style)
+
+    def is_stale(self, frame: int) -> bool:
+        return self.last_state is not None and frame <= self.last_state.frame
+
+    def frame(self, update: FrameInput) -> FrameState:
+        """Runs one frame. The caller has checked that update.frame is newer than the last."""
+        last = self.last_state
+        dt_s = 0.0 if last is None else max(0.0, update.time_s - last.time_s)
+        state = FrameState(frame=update.frame, time_s=update.time_s, dt_s=dt_s)
+        if last is not None and update.time_s < last.time_s:
+            state.flags.append("time_went_back")
+        t0 = self.clock()
+        for object_id, transform in update.states:  # Stage.INGEST
+            index = self.target_index.get(object_id)
+            if index is None:
+                self.ray_scene.set_transform(object_id, transform)
+                self.dynamic[object_id] = (self.dynamic[object_id][0], transform)
+            else:
+                self.target_transforms[index] = transform
+        state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0]
+                                  for tf, t in zip(self.target_transforms, self.targets)]
+        t1 = self.clock()
+        self.rig.run(state, update, self.target_transforms, last)  # FRAMING .. VISIBILITY
+        state.stage_ms[Stage.INGEST.name.lower()] = (t1 - t0) * 1e3
+        state.cut = state.cut or last is None
+        if state.cut:
+            self.shot_id += 1
+        state.shot_id = self.shot_id
+        self.last_state = state
+        self.frames_answered += 1
+        return state
+
+
+def _to_world(mesh: TriMesh, transform: RigidTransform) -> TriMesh:
+    return TriMesh(transform.apply(mesh.vertices), mesh.faces)

@@ -1,0 +1,169 @@
+"""The session table: the sessions one process holds, and the requests that reach them.
+
+Used the same way inside a worker process and inline in the front process (workers=0): the
+worker pool routes a request by session id and calls `handle_bytes`.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import orjson
+from google.protobuf import json_format
+
+from camdirector.server.errors import DirectorError, internal, invalid, not_found, precondition
+from camdirector.server.sessions import codec
+from camdirector.server.sessions.levels import LevelCache
+from camdirector.server.sessions.map_view import anticipation_png
+from camdirector.server.sessions.recording import RecordingWriter
+from camdirector.server.sessions.session import Session
+from camdirector.server.sessions.timeline import Timeline
+from camdirector.server.sessions.timeline import dumps as timeline_dumps
+from camdirector.server.settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+
+
+@dataclass
+class FrameMetrics:
+    """Timings of one answered frame, for the front's Prometheus histograms."""
+
+    compute_ms: float
+    stage_ms: dict[str, float]
+    stale: bool
+
+
+@dataclass
+class HeldSession:
+    """What the table keeps for one session: the pipeline's Session and, at the edge, the style
+    as the client last sent it, the recent frames for the dashboard, the recorder if recording."""
+
+    session: Session
+    style_msg: pb.Style
+    timeline: Timeline = field(default_factory=Timeline)
+    recorder: RecordingWriter | None = None
+
+
+class SessionTable:
+    def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter):
+        self.settings = settings
+        self.clock = clock
+        self.held: dict[str, HeldSession] = {}
+        self.levels = LevelCache(settings.data_dir)  # the TRACKS rig's levels, loaded once per process
+
+    def _get(self, session_id: str) -> HeldSession:
+        held = self.held.get(session_id)
+        if held is None:
+            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
+        return held
+
+    def create(self, session_id: str, req: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        scene = codec.scene_from_request(req, self.settings, self.levels)
+        held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
+        response = pb.CreateSessionResponse(session_id=session_id)
+        if req.record or self.settings.record_all:
+            path = self.settings.recordings_dir / f"{session_id}.cdrec"
+            held.recorder = RecordingWriter(path)
+            held.recorder.write(pb.RecordEntry(create=req))
+            response.recording_path = str(path)
+        return response
+
+    def frame(self, msg: pb.FrameUpdate) -> pb.CameraUpdate:
+        return self._frame(msg)[0]
+
+    def _frame(self, msg: pb.FrameUpdate) -> tuple[pb.CameraUpdate, FrameMetrics]:
+        t0 = self.clock()
+        held = self._get(msg.session_id)
+        session = held.session
+        if session.is_stale(msg.frame):
+            last = session.last_state
+            reply = codec.camera_update_msg(
+                last, compute_ms=(self.clock() - t0) * 1e3, stale=True,
+                message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
+            reply.frame, reply.time_s = msg.frame, msg.time_s
+        else:
+            update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids)
+            state = session.frame(update)
+            reply = codec.camera_update_msg(state, compute_ms=0.0)
+            reply.compute_ms = (self.clock() - t0) * 1e3
+            held.timeline.add(state, reply.compute_ms)
+        if held.recorder is not None:
+            held.recorder.write(pb.RecordEntry(frame=msg))
+            held.recorder.write(pb.RecordEntry(camera=reply))
+        return reply, FrameMetrics(reply.compute_ms, dict(reply.diagnostics.stage_ms), reply.stale)
+
+    def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+        held = self._get(msg.session_id)
+        held.session.set_style(codec.style_from_msg(msg.style, held.session.lens, held.session.style))
+        held.style_msg = msg.style
+        if held.recorder is not None:
+            held.recorder.write(pb.RecordEntry(style=msg))
+        return pb.UpdateStyleResponse()
+
+    def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
+        """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it)
+        and its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first."""
+        held = self._get(session_id)
+        return {"style": json_format.MessageToDict(held.style_msg),
+                "frames": held.timeline.as_json(last, after_frame)}
+
+    def anticipation_png(self, session_id: str) -> bytes:
+        """The session's A-map as a PNG (map_view.py); FAILED_PRECONDITION when it has none (not
+        a map mode, the tracks rig, or no frame since the maps were asked for)."""
+        session = self._get(session_id).session
+        found = session.rig.anticipation_map(session.last_state)
+        if found is None:
+            raise precondition(f"session {session_id} has no anticipation map: its style's visibility is "
+                               f"{session.style.visibility.name} on the {session.style.rig.name} rig, and only "
+                               "ANTICIPATION and NO_ANTICIPATION build one (after their first frame)")
+        return anticipation_png(*found)
+
+    def close(self, session_id: str) -> pb.CloseSessionResponse:
+        session = self._get(session_id).session
+        self.drop(session_id)
+        return pb.CloseSessionResponse(frames=session.frames_answered)
+
+    def drop(self, session_id: str) -> None:
+        """Forgets a session if present (closing, or reclaiming an abandoned one)."""
+        held = self.held.pop(session_id, None)
+        if held is not None and held.recorder is not None:
+            held.recorder.close()
+
+    def handle_bytes(self, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
+        """One request as the transports carry it: serialized in, serialized out.
+
+        Raises DirectorError for anything the client must hear about; an unexpected exception
+        becomes INTERNAL and leaves the other sessions untouched.
+        """
+        try:
+            if op == "frame":
+                reply, metrics = self._frame(_parse(pb.FrameUpdate, payload))
+                return reply.SerializeToString(), metrics
+            if op == "create":
+                return self.create(session_id, _parse(pb.CreateSessionRequest, payload)).SerializeToString(), None
+            if op == "style":
+                return self.update_style(_parse(pb.UpdateStyleRequest, payload)).SerializeToString(), None
+            if op == "close":
+                return self.close(session_id).SerializeToString(), None
+            if op == "timeline":   # payload: JSON {"last": n | null, "after_frame": n | null}
+                query = orjson.loads(payload)
+                return timeline_dumps(self.timeline(session_id, query["last"], query["after_frame"])), None
+            if op == "amap":
+                return self.anticipation_png(session_id), None
+            if op == "drop":
+                self.drop(session_id)
+                return b"", None
+            raise invalid(f"unknown operation {op!r}")
+        except DirectorError:
+            raise
+        except Exception as exc:  # a bug must not take the worker (and its other sessions) down
+            if op == "create":
+                self.drop(session_id)
+            raise internal(exc) from exc
+
+
+def _parse(message_type, payload: bytes):
+    try:
+        return message_type.FromString(payload)
+    except Exception:
+        raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}") from None
