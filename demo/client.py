@@ -50,10 +50,11 @@ def _paced_frames(scene: DemoScene, n_frames: int, sent_at: list[float]):
         positions = np.stack([transforms[k].position_world for k in ids])
         rotations = np.stack([transforms[k].rotation_xyzw for k in ids])
         sent_at.append(time.perf_counter())
-        yield _frame_update(i + 1, t, ids, positions, rotations)
+        yield frame_update(i + 1, t, ids, positions, rotations)
 
 
-def _frame_update(frame: int, time_s: float, ids, positions, rotations) -> cd.pb.FrameUpdate:
+def frame_update(frame: int, time_s: float, ids, positions, rotations) -> cd.pb.FrameUpdate:
+    """One demo frame: ids (n,), positions (n, 3) metres, rotations (n, 4) xyzw as packed states."""
     packed_ids, packed_values = cd.pack_states(ids, positions, rotations)
     return cd.pb.FrameUpdate(frame=frame, time_s=time_s, packed_ids=packed_ids, packed_transforms=packed_values)
 

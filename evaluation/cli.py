@@ -22,13 +22,15 @@ import json
 import sys
 from pathlib import Path
 
+from camdirector.evaluation.match.sim_cli import add_parser as add_match_sim_parser
+
 # Kept light at import (camdirector's own CLI imports this module to register the subcommand):
 # the evaluation modules, with numpy, scipy and matplotlib behind them, load when eval runs.
 MODES = ("RAYCAST", "NO_ANTICIPATION", "ANTICIPATION", "REACTIVE", "FRAMING_ONLY")  # the suite's, in its order
 
 
 def add_parsers(subparsers) -> None:
-    """Registers `eval` on an argparse subparsers object; args.handler(args) runs it."""
+    """Registers `eval` and `match-sim` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
         "eval", help="replay scenarios through a real session and measure visibility and smoothness",
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -49,6 +51,7 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--map-backend", choices=("AUTO", "GL", "EMBREE"), default="AUTO",
                    help="--scenario: how the map modes compute their maps (default AUTO)")
     p.set_defaults(handler=run_eval)
+    add_match_sim_parser(subparsers)
 
 
 def _modes(text: str | None) -> list[str]:

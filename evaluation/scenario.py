@@ -68,7 +68,8 @@ Generators (procedural, deterministic from their seed; default seed: scenario se
         default [1, 1]); random_yaw (default true); min_spacing_m between item centres
         (default 0); clear_of_targets_m: gap kept between an item's footprint (its first part,
         e.g. the trunk under a crown) and every target's path centre line over the whole
-        duration (default 0); exclude: list of regions where no item centre lands; seed. Ids: prefix + 3-digit index (+ "." + part index with several parts).
+        duration (default 0); exclude: list of regions where no item centre lands; seed.
+        Ids: prefix + 3-digit index (+ "." + part index with several parts).
     {"kind": "spawn", ...}    dynamic objects entering over time, moving in straight lines in
         random horizontal directions and bouncing off the region's sides (the stress test):
         id_prefix, count, batch (objects per spawn event, default 1), start_s, end_s (spawn

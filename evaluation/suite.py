@@ -178,7 +178,7 @@ def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
         ax.set_title(title, fontsize=9)
     ax_vis_box.set_ylim(-0.05, 1.05)
     unavailable = [r.mode for r in results if r.status == "unavailable"]
-    title = f"{measured[0].scenario.name}: " + ", ".join(f"{l} = {r.mode}" for r, l in zip(measured, labels))
+    title = f"{measured[0].scenario.name}: " + ", ".join(f"{label} = {r.mode}" for r, label in zip(measured, labels))
     if unavailable:
         title += f"   (unavailable: {', '.join(unavailable)})"
     fig.suptitle(title, fontsize=10)

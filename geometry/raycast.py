@@ -7,12 +7,14 @@ parameter t means the same point in both frames) instead of rebuilding anything 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from camdirector.geometry.meshes import TriMesh
-from camdirector.geometry.transforms import RigidTransform
+from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
 
 _NO_HIT = -1
 _EMBREE_MISS = 1e30  # embreex reports a miss as tfar = 1e37
@@ -26,18 +28,107 @@ def _embree_scene(meshes: list[TriMesh]) -> rtcore_scene.EmbreeScene:
 
 
 class RayScene:
-    """Static meshes (world frame, built once) plus dynamic rigid objects (local frame + transform)."""
+    """Static meshes (world frame, built once) plus dynamic rigid objects (local frame + transform).
+
+    Moving an object only stores its transform; nothing is rebuilt. A query casts every ray
+    against the static scene, then against the moving objects with rays moved into each object's
+    frame (module docstring), all objects in one Embree call:
+
+    - every object's local mesh lies within `reach` of its local origin, so a sphere of radius
+      reach * (largest scale) about its world position bounds it; one vectorized segment-to-centre
+      test over all (object, ray) pairs keeps those that pass within it;
+    - the kept pairs' rays, moved into their object's frame, are clipped to the local sphere
+      |x| <= reach (exact in that frame, whatever the scale);
+    - one Embree scene holds every object's local mesh, object i shifted by its own offset on a
+      grid whose spacing exceeds two reaches: a clipped ray shifted by the same offset can meet only
+      its own object's copy. So 100 moving objects cost one call, not 100.
+
+    Positions, radii and world-to-local matrices are made from the stored transforms once per
+    change of pose, on the first query after it; the shared local scene once per object added.
+    """
 
     def __init__(self, static_meshes_world: list[TriMesh]):
         self._static = _embree_scene(static_meshes_world) if static_meshes_world else None
-        self._dynamic: dict[str, tuple[rtcore_scene.EmbreeScene, np.ndarray]] = {}
+        self._index: dict[str, int] = {}                  # object id -> row
+        self._meshes_local: list[TriMesh] = []
+        self._reach_local: list[float] = []               # per object: farthest vertex from the local origin
+        self._transforms: list[RigidTransform] = []
+        self._local: tuple[rtcore_scene.EmbreeScene, np.ndarray, np.ndarray] | None = None  # scene, offsets (m, 3), reach (m,)
+        self._poses: tuple[np.ndarray, ...] | None = None  # centres (m, 3), radii (m,), world-to-local (m, 3, 3) and (m, 3)
 
     def add_dynamic(self, object_id: str, mesh_local: TriMesh, transform: RigidTransform) -> None:
-        self._dynamic[object_id] = (_embree_scene([mesh_local]), transform.inverse_matrix())
+        if object_id in self._index:
+            raise ValueError(f"dynamic object {object_id!r} already added")
+        self._index[object_id] = len(self._transforms)
+        self._meshes_local.append(mesh_local)
+        squared = np.einsum("ij,ij->i", mesh_local.vertices, mesh_local.vertices)
+        self._reach_local.append(float(np.sqrt(squared.max())) * (1.0 + 1e-6) + 1e-6)
+        self._transforms.append(transform)
+        self._local = self._poses = None
 
     def set_transform(self, object_id: str, transform: RigidTransform) -> None:
-        scene, _ = self._dynamic[object_id]
-        self._dynamic[object_id] = (scene, transform.inverse_matrix())
+        self._transforms[self._index[object_id]] = transform
+        self._poses = None
+
+    def _local_scene(self) -> tuple[rtcore_scene.EmbreeScene, np.ndarray, np.ndarray]:
+        """The shared scene of local meshes, their offsets (m, 3) on a cubic grid and reaches (m,)."""
+        if self._local is None:
+            reach = np.array(self._reach_local)
+            side = math.ceil(len(reach) ** (1.0 / 3.0) - 1e-9)
+            spacing = 2.0 * float(reach.max()) * 1.25
+            k = np.arange(len(reach))
+            offsets = spacing * np.stack([k % side, (k // side) % side, k // (side * side)], axis=1).astype(np.float64)
+            scene = _embree_scene([TriMesh(m.vertices + o, m.faces) for m, o in zip(self._meshes_local, offsets)])
+            self._local = scene, offsets, reach
+        return self._local
+
+    def _pose_arrays(self) -> tuple[np.ndarray, ...]:
+        if self._poses is None:
+            transforms = self._transforms
+            positions = np.array([tf.position_world for tf in transforms])                 # (m, 3)
+            scales = np.array([tf.scale for tf in transforms])                             # (m, 3)
+            # world -> local: x' = S^-1 R^T (x - p)
+            linear = quat_to_matrix(np.array([tf.rotation_xyzw for tf in transforms])).transpose(0, 2, 1) / scales[:, :, None]
+            self._poses = (positions, np.array(self._reach_local) * np.abs(scales).max(axis=1), linear,
+                           -np.einsum("mij,mj->mi", linear, positions))
+        return self._poses
+
+    def _cast_dynamic(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray, query: str):
+        """Rays o + t d, 0 <= t <= t_max, (n, 3), (n, 3), (n,), against every moving object.
+        Returns (ray index (p,), ray parameter of the hit (p,) float64) of the hits; a ray may appear
+        once per object it hits. query: "OCCLUDED" (the parameter is then that of the segment's
+        entry into the object's sphere, a lower bound) or "DISTANCE"."""
+        none = np.zeros(0, dtype=np.int64), np.zeros(0)
+        if not self._transforms or not len(origins):
+            return none
+        centres, radii, linear, translation = self._pose_arrays()
+        rel = centres[:, None, :] - origins[None, :, :]                                 # (m, n, 3)
+        dd = np.maximum(np.einsum("nk,nk->n", directions, directions), 1e-300)          # (n,)
+        t = np.clip(np.einsum("mnk,nk->mn", rel, directions) / dd, 0.0, t_max[None, :])
+        closest = rel - t[:, :, None] * directions[None, :, :]
+        obj, ray = np.nonzero(np.einsum("mnk,mnk->mn", closest, closest) <= (radii * radii)[:, None])
+        if not len(ray):
+            return none
+        scene, offsets, reach = self._local_scene()
+        o = np.einsum("pij,pj->pi", linear[obj], origins[ray]) + translation[obj]        # (p, 3) local
+        d = np.einsum("pij,pj->pi", linear[obj], directions[ray])
+        a = np.maximum(np.einsum("pk,pk->p", d, d), 1e-300)                                 # |o + t d| = reach
+        half_b = np.einsum("pk,pk->p", o, d)
+        disc = half_b * half_b - a * (np.einsum("pk,pk->p", o, o) - reach[obj] ** 2)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        t_in = np.maximum((-half_b - root) / a, 0.0)
+        t_out = np.minimum((-half_b + root) / a, t_max[ray])
+        keep = (disc > 0.0) & (t_out > t_in)
+        obj, ray, o, d, t_in, t_out = obj[keep], ray[keep], o[keep], d[keep], t_in[keep], t_out[keep]
+        start = (o + t_in[:, None] * d + offsets[obj]).astype(np.float32)
+        dists = (t_out - t_in).astype(np.float32)
+        if query == "OCCLUDED":
+            hit = scene.run(start, d.astype(np.float32), dists=dists, query=query) != _NO_HIT
+            return ray[hit], t_in[hit]
+        # A clipped ray that misses keeps tfar = its dists: the geometry id says whether it hit.
+        answer = scene.run(start, d.astype(np.float32), dists=dists, output=1)
+        hit = answer["geomID"] != _NO_HIT
+        return ray[hit], t_in[hit] + answer["tfar"][hit].astype(np.float64)
 
     def occluded(self, origins_world: np.ndarray, targets_world: np.ndarray) -> np.ndarray:
         """Whether the segment from each origin to its target crosses any geometry.
@@ -54,14 +145,8 @@ class RayScene:
         if self._static is not None:
             hit |= self._static.run(origins.astype(np.float32), directions.astype(np.float32),
                                     dists=tmax.copy(), query="OCCLUDED") != _NO_HIT
-        for scene, world_to_local in self._dynamic.values():
-            rest = ~hit
-            if not rest.any():
-                break
-            o = origins[rest] @ world_to_local[:3, :3].T + world_to_local[:3, 3]
-            d = directions[rest] @ world_to_local[:3, :3].T
-            hit[rest] = scene.run(o.astype(np.float32), d.astype(np.float32),
-                                  dists=tmax[rest].copy(), query="OCCLUDED") != _NO_HIT
+        rest = np.flatnonzero(~hit)
+        hit[rest[self._cast_dynamic(origins[rest], directions[rest], tmax[rest].astype(np.float64), "OCCLUDED")[0]]] = True
         return hit
 
     def first_hit(self, origins_world: np.ndarray, directions_world: np.ndarray) -> np.ndarray:
@@ -73,14 +158,10 @@ class RayScene:
         directions = np.atleast_2d(directions_world)
         origins = np.broadcast_to(origins_world, directions.shape)
         best = np.full(len(directions), np.inf)
-        scenes = [(self._static, None)] if self._static is not None else []
-        scenes += list(self._dynamic.values())
-        for scene, world_to_local in scenes:
-            o, d = origins, directions
-            if world_to_local is not None:
-                o = origins @ world_to_local[:3, :3].T + world_to_local[:3, 3]
-                d = directions @ world_to_local[:3, :3].T
-            t = scene.run(o.astype(np.float32), d.astype(np.float32), query="DISTANCE").astype(np.float64)
-            t[t >= _EMBREE_MISS] = np.inf
-            best = np.minimum(best, t)
+        if self._static is not None:
+            best = self._static.run(origins.astype(np.float32), directions.astype(np.float32),
+                                    query="DISTANCE").astype(np.float64)
+            best[best >= _EMBREE_MISS] = np.inf
+        ray, t = self._cast_dynamic(origins, directions, np.minimum(best, 1e12), "DISTANCE")
+        np.minimum.at(best, ray, t)
         return best

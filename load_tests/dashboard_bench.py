@@ -5,10 +5,10 @@
 Two runs of `load_tests.stream` against one server it starts (demo scene, paced game loops, gRPC):
 first the sessions alone, which is the baseline, then the same again while a dashboard client
 reads `GET /v1/sessions` and every session's `GET /v1/sessions/{id}` `--watch-hz` times a second,
-as the dashboard does: all 600 frames the first time, then `after_frame` the last one it has. Reports both runs' frame round trip p50/p99 and
-their ratio, and the latency of the detail requests. The dashboard client runs in a process of
-its own on the same machine (as a browser would), so the ratio includes its CPU as well as the
-server's.
+as the dashboard does: all 600 frames the first time, then `after_frame` the last one it has.
+Reports both runs' frame round trip p50/p99 and their ratio, and the latency of the detail
+requests. The dashboard client runs in a process of its own on the same machine (as a browser
+would), so the ratio includes its CPU as well as the server's.
 """
 from __future__ import annotations
 

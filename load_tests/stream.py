@@ -29,7 +29,7 @@ import zmq
 import zmq.asyncio
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from camdirector.demo.client import _frame_update, session_request
+from camdirector.demo.client import frame_update, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.server.process import ServerProcess
@@ -43,7 +43,7 @@ def _frames(scene, n_frames: int, rate_hz: float) -> list[bytes]:
     out = []
     for i in range(n_frames):
         transforms = scene.transforms_at(i / rate_hz)
-        update = _frame_update(i + 1, i / rate_hz, ids, np.stack([transforms[k].position_world for k in ids]),
+        update = frame_update(i + 1, i / rate_hz, ids, np.stack([transforms[k].position_world for k in ids]),
                                np.stack([transforms[k].rotation_xyzw for k in ids]))
         out.append(update.SerializeToString())
     return out

@@ -1,4 +1,5 @@
-"""Per-stage wall time of an offline pipeline, with a progress callback after each stage."""
+"""Per-stage wall time by laps: of an offline pipeline (with a progress callback after each stage),
+and of one director frame (on the session's injected clock, into `FrameState.stage_ms`)."""
 from __future__ import annotations
 
 import enum
@@ -7,18 +8,30 @@ from collections.abc import Callable, Mapping
 
 
 class StageClock:
-    """`done(stage)` records the time since the previous stage (or since construction) in
-    `timings_ms[stage.value]` and reports `progress_after[stage]` (a fraction of the run)."""
+    """`done(stage)` adds the time since the previous `done` (or since construction) to
+    `timings_ms[stage.value]`, in ms, and reports `progress_after[stage]` (a fraction of the run)
+    when a progress callback is given.
 
-    def __init__(self, progress: Callable[[float], None] | None, progress_after: Mapping[enum.Enum, float]):
-        self.timings_ms: dict[str, float] = {}
+    A stage that another interrupts (a frame's MOTION around its map stages) is lapped once per
+    piece and sums them; the code between two laps belongs to the second. clock: seconds, any
+    origin (the session's injected clock in the frame loop). timings_ms: the dict to fill (a
+    frame's `stage_ms`), a new one when None.
+    """
+
+    def __init__(self, progress: Callable[[float], None] | None = None,
+                 progress_after: Mapping[enum.Enum, float] | None = None, *,
+                 clock: Callable[[], float] = time.perf_counter, timings_ms: dict[str, float] | None = None):
+        if progress is not None and progress_after is None:
+            raise ValueError("StageClock: a progress callback needs progress_after")
+        self.timings_ms: dict[str, float] = {} if timings_ms is None else timings_ms
         self._progress = progress
         self._progress_after = progress_after
-        self._clock = time.perf_counter()
+        self._now = clock
+        self._last_s = clock()
 
     def done(self, stage: enum.Enum) -> None:
-        now = time.perf_counter()
-        self.timings_ms[stage.value] = (now - self._clock) * 1e3
-        self._clock = now
+        now_s = self._now()
+        self.timings_ms[stage.value] = self.timings_ms.get(stage.value, 0.0) + (now_s - self._last_s) * 1e3
+        self._last_s = now_s
         if self._progress is not None:
             self._progress(self._progress_after[stage])

@@ -40,6 +40,10 @@ def unimplemented(message: str) -> DirectorError:
     return DirectorError(grpc.StatusCode.UNIMPLEMENTED, message)
 
 
+def unavailable(message: str) -> DirectorError:
+    return DirectorError(grpc.StatusCode.UNAVAILABLE, message)
+
+
 def internal(exc: Exception) -> DirectorError:
     """An unexpected failure while handling one request, reported without losing the server."""
     return DirectorError(grpc.StatusCode.INTERNAL, f"internal error: {type(exc).__name__}: {exc}")

@@ -76,7 +76,7 @@ class JobSettings:
     job_timeout_s: float = 600.0           # a running job is ended and failed after this, s. [1, 86400]
     cancel_grace_s: float = 2.0            # SIGTERM to SIGKILL of a cancelled job's process, s. [0, 60]
     job_blas_threads: int = 1              # BLAS/OpenMP threads per job process (0: library default). [0, 64]
-    job_retention_s: float = 7 * 86400.0   # a finished job's row and files are removed this long after it ended; 0 keeps every job, s. [0, 1e9]
+    job_retention_s: float = 7 * 86400.0   # a finished job's row and files go this long after it ended (0 keeps all), s. [0, 1e9]
 
     def __post_init__(self):
         checks = [

@@ -322,10 +322,25 @@ class OccluderScene:
     def set_motion(self, object_id: str, transform: RigidTransform,
                    linear_velocity_m_s=(0.0, 0.0, 0.0), angular_velocity_rad_s=(0.0, 0.0, 0.0)) -> None:
         """New pose and velocity (world frame; the caller estimates it from successive poses)."""
-        obj = self._dynamic[object_id]
-        obj.transform = transform
-        obj.linear_velocity_m_s = _vector3(linear_velocity_m_s, "linear_velocity_m_s")
-        obj.angular_velocity_rad_s = _vector3(angular_velocity_rad_s, "angular_velocity_rad_s")
+        self.set_motions([object_id], [transform], _vector3(linear_velocity_m_s, "linear_velocity_m_s")[None],
+                         _vector3(angular_velocity_rad_s, "angular_velocity_rad_s")[None])
+
+    def set_motions(self, object_ids: Sequence[str], transforms: Sequence[RigidTransform],
+                    linear_velocities_m_s: np.ndarray, angular_velocities_rad_s: np.ndarray) -> None:
+        """set_motion for m objects at once, velocities (m, 3) world, checked in one pass: a map
+        build moves every object of a scene that has a hundred of them."""
+        m = len(object_ids)
+        linear = np.asarray(linear_velocities_m_s, dtype=np.float64)
+        angular = np.asarray(angular_velocities_rad_s, dtype=np.float64)
+        for name, v in (("linear_velocities_m_s", linear), ("angular_velocities_rad_s", angular)):
+            if v.shape != (m, 3) or not np.isfinite(v).all():
+                raise ValueError(f"{name} must be ({m}, 3) finite numbers, got shape {v.shape}")
+        if len(transforms) != m:
+            raise ValueError(f"set_motions: {m} ids but {len(transforms)} transforms")
+        dynamic = self._dynamic
+        for object_id, transform, v, w in zip(object_ids, transforms, linear, angular):
+            obj = dynamic[object_id]
+            obj.transform, obj.linear_velocity_m_s, obj.angular_velocity_rad_s = transform, v, w
 
 
 # -- results and the backend interface ---------------------------------------------------------

@@ -155,7 +155,7 @@ def _anneal_from(start_m: np.ndarray, track: CharacterTrack, space: PotentialSpa
     if n < 2:
         return path, -float(np.dot(sal, space.sample(frames, path)))
     v_now = space.sample(frames, path)
-    step_limit = weights.max_speed_m_per_s * weights.dt_s * _SPEED_SLACK
+    step_limit = weights.max_speed_m_s * weights.dt_s * _SPEED_SLACK
     local_priors = [(p.frame - first, p) for p in priors if first <= p.frame <= last]
     h = track.height_m
     r0, r1 = settings.initial_neighbourhood_heights * h, settings.final_neighbourhood_heights * h

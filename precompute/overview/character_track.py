@@ -29,7 +29,7 @@ class CharacterTrack:
     box, smoothed in time (the camera looks here); radius_m: (T,) distance from look_at_m to the
     farthest point plus the thickest body radius (a sphere holding the whole body);
     box_min_m, box_max_m: (T, 3) bounding box of the points grown by the thickest body radius;
-    forward: (T, 3) unit horizontal front of the character; velocity_m_per_s: (T, 3) horizontal
+    forward: (T, 3) unit horizontal front of the character; velocity_m_s: (T, 3) horizontal
     velocity of the pelvis; pelvis_m: (T, 3) midpoint of the two legs' first joints (the BVH root
     is not always the pelvis: Bandai's ``joint_Root`` stays at the origin); height_m: standing
     height; floor_y_m: lowest point of the clip.
@@ -44,7 +44,7 @@ class CharacterTrack:
     box_min_m: np.ndarray
     box_max_m: np.ndarray
     forward: np.ndarray
-    velocity_m_per_s: np.ndarray
+    velocity_m_s: np.ndarray
     pelvis_m: np.ndarray
     height_m: float
     floor_y_m: float
@@ -91,5 +91,5 @@ def track_character(clip: MotionClip, parts: BodyPartMap, settings: OverviewSett
     return CharacterTrack(
         frame_indices=np.asarray(frame_indices, dtype=np.int64), dt_s=dt_s, joints_m=joints,
         points_m=points, look_at_m=look_at, radius_m=radius, box_min_m=lo - thickest,
-        box_max_m=hi + thickest, forward=forward, velocity_m_per_s=velocity, pelvis_m=pelvis,
+        box_max_m=hi + thickest, forward=forward, velocity_m_s=velocity, pelvis_m=pelvis,
         height_m=height, floor_y_m=float(clip.all_points_m[:, :, 1].min()))

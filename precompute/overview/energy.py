@@ -45,26 +45,26 @@ _TIE_RELATIVE = 1e-9   # relative difference below which two energies are a tie
 
 @dataclass(frozen=True)
 class EnergyWeights:
-    """The constants of E for one clip: c1..c5; limits in SI: max_speed_m_per_s (S_max),
-    max_angular_speed_rad_per_s (alpha_max), friction_speed_m_per_s (F_max); dt_s per frame."""
+    """The constants of E for one clip: c1..c5; limits in SI: max_speed_m_s (S_max),
+    max_angular_speed_rad_s (alpha_max), friction_speed_m_s (F_max); dt_s per frame."""
 
     c1: float
     c2: float
     c3: float
     c4: float
     c5: float
-    max_speed_m_per_s: float
-    max_angular_speed_rad_per_s: float
-    friction_speed_m_per_s: float
+    max_speed_m_s: float
+    max_angular_speed_rad_s: float
+    friction_speed_m_s: float
     dt_s: float
 
     @classmethod
     def for_track(cls, track: CharacterTrack, settings: OverviewSettings) -> EnergyWeights:
         h = track.height_m
         return cls(c1=settings.c1, c2=settings.c2, c3=settings.c3, c4=settings.c4, c5=settings.c5,
-                   max_speed_m_per_s=settings.max_speed_heights_per_s * h,
-                   max_angular_speed_rad_per_s=np.radians(settings.max_angular_speed_deg_per_s),
-                   friction_speed_m_per_s=settings.friction_speed_heights_per_s * h,
+                   max_speed_m_s=settings.max_speed_heights_s * h,
+                   max_angular_speed_rad_s=np.radians(settings.max_angular_speed_deg_s),
+                   friction_speed_m_s=settings.friction_speed_heights_s * h,
                    dt_s=track.dt_s)
 
 
@@ -98,15 +98,15 @@ def internal_terms(path_m: np.ndarray, look_at_m: np.ndarray, w: EnergyWeights) 
         return np.zeros((0,) + path_m.shape[1:-1])
     u = view_directions(path_m, look_at_m)
     prev, cur, nxt = path_m[:-2], path_m[1:-1], path_m[2:]
-    acc = np.linalg.norm(prev - 2.0 * cur + nxt, axis=-1) / (w.dt_s * w.max_speed_m_per_s)
+    acc = np.linalg.norm(prev - 2.0 * cur + nxt, axis=-1) / (w.dt_s * w.max_speed_m_s)
     span = np.linalg.norm(nxt - prev, axis=-1) / (2.0 * w.dt_s)
-    speed = span / w.max_speed_m_per_s
+    speed = span / w.max_speed_m_s
     u_prev, u_cur, u_next = u[:-2], u[1:-1], u[2:]
     ang_acc = (np.linalg.norm(u_prev - 2.0 * u_cur + u_next, axis=-1)
-               / (w.dt_s * w.max_angular_speed_rad_per_s))
+               / (w.dt_s * w.max_angular_speed_rad_s))
     ang = np.arccos(np.clip(np.einsum("...k,...k->...", u_prev, u_next), -1.0, 1.0))
-    ang_speed = ang / (2.0 * w.dt_s * w.max_angular_speed_rad_per_s)
-    friction = span / w.friction_speed_m_per_s
+    ang_speed = ang / (2.0 * w.dt_s * w.max_angular_speed_rad_s)
+    friction = span / w.friction_speed_m_s
     return (w.c1 * acc ** 2
             + w.c2 * np.where(speed > 1.0, speed, 0.0) ** 4
             + w.c3 * ang_acc ** 2

@@ -23,8 +23,8 @@ PREVIEW_MP4 = "preview.mp4"
 CONTACT_SHEET_PNG = "contact-sheet.png"
 
 # OverviewSettings fields a client may set (the paper's parameters, and the frame's aspect).
-PAPER_PARAMETERS = ("c1", "c2", "c3", "c4", "c5", "max_speed_heights_per_s",
-                    "max_angular_speed_deg_per_s", "friction_speed_heights_per_s",
+PAPER_PARAMETERS = ("c1", "c2", "c3", "c4", "c5", "max_speed_heights_s",
+                    "max_angular_speed_deg_s", "friction_speed_heights_s",
                     "split_quality", "split_max_saliency", "min_shot_s",
                     "max_shots_per_1000_frames", "analysis_rate_hz")
 
@@ -60,7 +60,7 @@ def result_document(result: OverviewResult, *, skip_frames: int = 0,
             "quality_mean": float(np.mean(q)),
             "quality_saliency_weighted": float(np.dot(sal, q) / max(float(sal.sum()), 1e-12)),
             "shot_count": int(len(result.shots)), "character_height_m": result.character_height_m,
-            "max_speed_m_per_s": result.max_speed_m_per_s, "skip_frames": int(skip_frames),
+            "max_speed_m_s": result.max_speed_m_s, "skip_frames": int(skip_frames),
             "analysis_frames": int(len(result.analysis_frames))}
     base.update(metrics or {})
     return {"fps": 1.0 / result.frame_time_s, "frames": frames,

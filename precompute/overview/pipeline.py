@@ -71,7 +71,7 @@ class OverviewResult:
     camera-to-world (looks down -Z), vertical_fov_deg (F,), shot_index (F,) int;
     shots (S, 2) int [first, last] clip frames; energy: E, E_internal, E_external and sum V of
     the path at the analysis rate (Section 4); quality: (T,) Q(p_t) at the analysis frames;
-    analysis_frames (T,) int; frame_time_s: the clip's; character_height_m; max_speed_m_per_s
+    analysis_frames (T,) int; frame_time_s: the clip's; character_height_m; max_speed_m_s
     (S_max); timings_ms: per `Stage` value, milliseconds; settings: those used; analysis: the
     stages' intermediate results.
     """
@@ -88,7 +88,7 @@ class OverviewResult:
     analysis_frames: np.ndarray
     frame_time_s: float
     character_height_m: float
-    max_speed_m_per_s: float
+    max_speed_m_s: float
     timings_ms: dict[str, float]
     settings: OverviewSettings
     analysis: OverviewAnalysis
@@ -138,6 +138,6 @@ def plan_overview(clip: MotionClip, settings: OverviewSettings, rng: np.random.G
         energy=path_energy(plan.path_m, plan.shots, track, space, saliency.pose, weights),
         quality=plan.quality_history[-1], analysis_frames=analysis_frames,
         frame_time_s=clip.frame_time_s, character_height_m=track.height_m,
-        max_speed_m_per_s=weights.max_speed_m_per_s, timings_ms=timings, settings=settings,
+        max_speed_m_s=weights.max_speed_m_s, timings_ms=timings, settings=settings,
         analysis=OverviewAnalysis(parts=parts, track=track, saliency=saliency, space=space,
                                   weights=weights, plan=plan))

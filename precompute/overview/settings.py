@@ -24,7 +24,7 @@ class OverviewSettings:
     # --- viewpoint quality (viewpoint_quality.py, Section 3) ---
     three_quarter_angle_deg: float = 45.0    # preferred horizontal angle between the character's front and the camera, deg. [0, 180]
     three_quarter_width_deg: float = 45.0    # Gaussian width of that preference, deg. (0, 180]
-    moving_speed_heights_per_s: float = 0.25  # character speed at which the perpendicular-to-motion descriptor has full weight, heights/s. (0, 10]
+    moving_speed_heights_s: float = 0.25     # character speed at which the perpendicular-to-motion descriptor has full weight, heights/s. (0, 10]
     preferred_distance_heights: float = 2.0  # camera distance the distance descriptor prefers, heights. (0, 20]
     distance_tolerance_log: float = 0.35     # Gaussian width of the distance descriptor in log(distance ratio). (0, 5]
     wide_max_eigen_ratio: float = 0.5        # lambda3/lambda2 at and above which the widest aspect is not considered. (0, 1]
@@ -53,9 +53,9 @@ class OverviewSettings:
     c3: float = 5.0                          # angular acceleration weight. [0, 1e6]
     c4: float = 5.0                          # angular speed-limit weight. [0, 1e6]
     c5: float = 2.0                          # friction weight. [0, 1e6]
-    max_speed_heights_per_s: float = 1.0 / 6.0      # S_max, heights/s. (0, 100]
-    max_angular_speed_deg_per_s: float = 20.0       # alpha_max, deg/s. (0, 3600]
-    friction_speed_heights_per_s: float = 1.0 / 20.0  # F_max, heights/s. (0, 100]
+    max_speed_heights_s: float = 1.0 / 6.0          # S_max, heights/s. (0, 100]
+    max_angular_speed_deg_s: float = 20.0           # alpha_max, deg/s. (0, 3600]
+    friction_speed_heights_s: float = 1.0 / 20.0    # F_max, heights/s. (0, 100]
     annealing_iterations_per_frame: float = 6.0     # proposals per analysis frame of a shot. [0.1, 1000]
     annealing_min_iterations: int = 3000            # proposals per shot at least, whatever its length. [1, 10^6]
     initial_neighbourhood_heights: float = 3.5      # first neighbourhood size (L1), heights; the grid margin, so a rigid neighbour can cross it ("starts high"). (0, 50]
@@ -80,7 +80,7 @@ class OverviewSettings:
             (1.0 < self.limb_contrast_ratio <= 100.0, "limb_contrast_ratio must be in (1, 100]"),
             (0.0 <= self.three_quarter_angle_deg <= 180.0, "three_quarter_angle_deg must be in [0, 180]"),
             (0.0 < self.three_quarter_width_deg <= 180.0, "three_quarter_width_deg must be in (0, 180]"),
-            (0.0 < self.moving_speed_heights_per_s <= 10.0, "moving_speed_heights_per_s must be in (0, 10]"),
+            (0.0 < self.moving_speed_heights_s <= 10.0, "moving_speed_heights_s must be in (0, 10]"),
             (0.0 < self.preferred_distance_heights <= 20.0, "preferred_distance_heights must be in (0, 20]"),
             (0.0 < self.distance_tolerance_log <= 5.0, "distance_tolerance_log must be in (0, 5]"),
             (0.0 < self.wide_max_eigen_ratio <= 1.0, "wide_max_eigen_ratio must be in (0, 1]"),
@@ -105,9 +105,9 @@ class OverviewSettings:
             (0.0 <= self.look_at_smoothing_s <= 5.0, "look_at_smoothing_s must be in [0, 5]"),
             (all(0.0 <= c <= 1e6 for c in (self.c1, self.c2, self.c3, self.c4, self.c5)),
              "c1..c5 must be in [0, 1e6]"),
-            (0.0 < self.max_speed_heights_per_s <= 100.0, "max_speed_heights_per_s must be in (0, 100]"),
-            (0.0 < self.max_angular_speed_deg_per_s <= 3600.0, "max_angular_speed_deg_per_s must be in (0, 3600]"),
-            (0.0 < self.friction_speed_heights_per_s <= 100.0, "friction_speed_heights_per_s must be in (0, 100]"),
+            (0.0 < self.max_speed_heights_s <= 100.0, "max_speed_heights_s must be in (0, 100]"),
+            (0.0 < self.max_angular_speed_deg_s <= 3600.0, "max_angular_speed_deg_s must be in (0, 3600]"),
+            (0.0 < self.friction_speed_heights_s <= 100.0, "friction_speed_heights_s must be in (0, 100]"),
             (0.1 <= self.annealing_iterations_per_frame <= 1000.0, "annealing_iterations_per_frame must be in [0.1, 1000]"),
             (1 <= self.annealing_min_iterations <= 1_000_000, "annealing_min_iterations must be in [1, 10^6]"),
             (0.0 < self.initial_neighbourhood_heights <= 50.0, "initial_neighbourhood_heights must be in (0, 50]"),

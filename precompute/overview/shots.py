@@ -19,7 +19,7 @@ Our reading of the ambiguous parts:
 * The cut falls between t_split and t_split + 1: the first shot ends at t_split, the second starts
   at t_split + 1, and the side prior holds at both of those frames. Priors found earlier stay.
 * The line of movement is the horizontal line through the look-at point at t_split along the
-  character's velocity; when the character moves slower than `moving_speed_heights_per_s` / 2 it
+  character's velocity; when the character moves slower than `moving_speed_heights_s` / 2 it
   has no line of movement of its own and we use its facing direction (the line of action).
 * "better viewpoint quality": the larger saliency-weighted quality over the two new shots.
 """
@@ -69,9 +69,9 @@ def _shot_energy(path_m: np.ndarray, track: CharacterTrack, space: PotentialSpac
 
 def _line_of_movement(track: CharacterTrack, t: int, settings: OverviewSettings
                       ) -> tuple[np.ndarray, np.ndarray]:
-    velocity = track.velocity_m_per_s[t, [0, 2]]
+    velocity = track.velocity_m_s[t, [0, 2]]
     speed = float(np.linalg.norm(velocity))
-    if speed >= 0.5 * settings.moving_speed_heights_per_s * track.height_m:
+    if speed >= 0.5 * settings.moving_speed_heights_s * track.height_m:
         direction = velocity / speed
     else:
         direction = track.forward[t, [0, 2]]

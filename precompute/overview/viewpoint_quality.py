@@ -10,7 +10,7 @@ limitations", so the forms below are ours, each in [0, 1]):
   back 0.0001);
 * perpendicular to motion: w * (1 - |cos theta|), theta the horizontal angle between the
   character's velocity and the direction to the camera, w = min(1, speed /
-  `moving_speed_heights_per_s`) so that a character standing still has no motion direction;
+  `moving_speed_heights_s`) so that a character standing still has no motion direction;
 * distance: exp(-ln(d / d*)^2 / (2 sigma^2)) with d* = `preferred_distance_heights` and
   sigma = `distance_tolerance_log`;
 * occlusion by static scene objects, only when a scene is given: the fraction of the character's
@@ -53,9 +53,9 @@ def three_quarter_view(track: CharacterTrack, frames: np.ndarray, positions_m: n
 def perpendicular_to_motion(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
                             settings: OverviewSettings) -> np.ndarray:
     """(len(frames), P) descriptor in [0, 1]: 1 when the camera looks across the motion."""
-    velocity = track.velocity_m_per_s[frames][:, [0, 2]]
+    velocity = track.velocity_m_s[frames][:, [0, 2]]
     speed = np.linalg.norm(velocity, axis=1)
-    weight = np.minimum(1.0, speed / (settings.moving_speed_heights_per_s * track.height_m))
+    weight = np.minimum(1.0, speed / (settings.moving_speed_heights_s * track.height_m))
     direction = velocity / np.maximum(speed, 1e-9)[:, None]
     to_cam = positions_m[None, :, [0, 2]] - track.look_at_m[frames][:, None, [0, 2]]
     to_cam /= np.maximum(np.linalg.norm(to_cam, axis=2, keepdims=True), 1e-9)

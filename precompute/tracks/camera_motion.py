@@ -1,8 +1,8 @@
 """Force-based camera motion between cuts (Section 5.4).
 
 Mass 1; a spring pulls the camera to the target on the tracks (`attraction_per_s2` per metre),
-the actor pushes it away inside `repulsion_radius_m` (up to `repulsion_per_s2` at contact,
-linearly less to zero at the radius), and speed is capped at `max_speed_m_per_s`. The paper sets
+the actor pushes it away inside `repulsion_radius_m` (up to `repulsion_m_s2` at contact,
+linearly less to zero at the radius), and speed is capped at `max_speed_m_s`. The paper sets
 the mass to 1 "to avoid overshooting"; with a spring alone a unit mass still oscillates, so we add
 the damping of a `damping_ratio`-damped spring (1: critical, the fastest approach without
 overshoot), as Cinemachine's damped spring does. Integration: semi-implicit Euler in substeps of
@@ -17,25 +17,25 @@ import numpy as np
 from camdirector.precompute.tracks.settings import DirectorSettings
 
 
-def move_camera(position_world: np.ndarray, velocity_m_per_s: np.ndarray, target_world: np.ndarray,
+def move_camera(position_world: np.ndarray, velocity_m_s: np.ndarray, target_world: np.ndarray,
                 actor_world: np.ndarray, dt_s: float, settings: DirectorSettings) -> tuple[np.ndarray, np.ndarray]:
     """(position (3,), velocity (3,)) after dt_s seconds; actor_world (3,) is the repelling point."""
     if dt_s <= 0.0:
-        return position_world, velocity_m_per_s
+        return position_world, velocity_m_s
     steps = max(1, math.ceil(dt_s / settings.max_substep_s))
     h = dt_s / steps
     k = settings.attraction_per_s2
     c = 2.0 * settings.damping_ratio * math.sqrt(k)
-    p, v = position_world.astype(np.float64).copy(), velocity_m_per_s.astype(np.float64).copy()
+    p, v = position_world.astype(np.float64).copy(), velocity_m_s.astype(np.float64).copy()
     for _ in range(steps):
         a = k * (target_world - p) - c * v
         away = p - actor_world
         r = float(np.linalg.norm(away))
         if settings.repulsion_radius_m > 0.0 and 1e-9 < r < settings.repulsion_radius_m:
-            a += settings.repulsion_per_s2 * (1.0 - r / settings.repulsion_radius_m) * away / r
+            a += settings.repulsion_m_s2 * (1.0 - r / settings.repulsion_radius_m) * away / r
         v += h * a
         speed = float(np.linalg.norm(v))
-        if speed > settings.max_speed_m_per_s:
-            v *= settings.max_speed_m_per_s / speed
+        if speed > settings.max_speed_m_s:
+            v *= settings.max_speed_m_s / speed
         p += h * v
     return p, v

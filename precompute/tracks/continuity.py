@@ -9,7 +9,7 @@ direction across the cut. We project the actor's motion direction into each came
 the cosine of the angle between the two projections; the rule holds when the horizontal screen
 components do not have opposite signs, which is the camera staying on its side of the line
 through the actor along its motion (a camera on the line itself sees the actor come or go
-straight and may cut to either side). Below `min_actor_speed_m_per_s` the actor's facing stands
+straight and may cut to either side). Below `min_actor_speed_m_s` the actor's facing stands
 in for its motion.
 
 The director treats both rules as hard constraints (a cut that breaks one is not taken) and uses
@@ -30,11 +30,11 @@ def cut_angle_deg(previous_camera_world: np.ndarray, cameras_world: np.ndarray, 
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-def action_direction(velocity_world: np.ndarray, forward_world: np.ndarray, min_speed_m_per_s: float) -> np.ndarray:
+def action_direction(velocity_world: np.ndarray, forward_world: np.ndarray, min_speed_m_s: float) -> np.ndarray:
     """Unit horizontal direction of the line of action (3,): the motion, or the facing when slow
     (zero vector when neither has a horizontal part)."""
     v = np.array([velocity_world[0], 0.0, velocity_world[2]])
-    if np.linalg.norm(v) < max(min_speed_m_per_s, 1e-9):
+    if np.linalg.norm(v) < max(min_speed_m_s, 1e-9):
         v = np.array([forward_world[0], 0.0, forward_world[2]])
     norm = np.linalg.norm(v)
     return v / norm if norm > 1e-9 else np.zeros(3)

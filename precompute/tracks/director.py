@@ -27,12 +27,14 @@ visibility) get the direct-visibility rays and the A* distance.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
 
 from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.stage_clock import StageClock
 from camdirector.precompute.tracks.artifact import LevelArtifact
 from camdirector.precompute.tracks.camera_motion import move_camera
 from camdirector.precompute.tracks.continuity import (
@@ -103,11 +105,20 @@ def _scored(index: int, **scores: np.ndarray) -> dict[str, float]:
     return {name: round(float(values[index]), 4) for name, values in scores.items()}
 
 
+class DirectorStage(Enum):
+    """The director's steps of one frame in order (Section 5); values are their timing keys."""
+
+    CUT_CHECK = "cut_check"          # direct visibility and framing feed the cutting strategy
+    TARGET_UPDATE = "target_update"  # a cut's continuity search, or the target moving strategy
+    CAMERA_UPDATE = "camera_update"  # the camera jumps or follows; the actor's visibility from there
+
+
 class GraphDirector:
-    """Follows one actor on a level's camera navigation graph (module docstring)."""
+    """Follows one actor on a level's camera navigation graph (module docstring). clock: seconds,
+    any origin, for the step's timings (the session's injected clock in the server)."""
 
     def __init__(self, artifact: LevelArtifact, settings: DirectorSettings, rng: np.random.Generator,
-                 style: DirectorStyle = DirectorStyle()):
+                 style: DirectorStyle = DirectorStyle(), clock: Callable[[], float] = time.perf_counter):
         self.graph = RuntimeGraph(artifact.nodes_world, artifact.edges)
         centroids = artifact.refined_vertices[artifact.refined_faces].mean(axis=1) if len(artifact.refined_faces) \
             else np.empty((0, 3))
@@ -115,6 +126,7 @@ class GraphDirector:
         self._actor_height_m = artifact.agent_height_m
         self._settings = settings
         self._rng = rng
+        self._now = clock
         self._style = style
         self._fractions = np.asarray(settings.actor_sample_fractions, dtype=np.float64)
         self._target: tuple[int, int, float] | None = None
@@ -149,7 +161,7 @@ class GraphDirector:
         Frames must come in time order; a repeated or older time moves nothing. None until a first
         shot is found (no track near the actor yet); the next frame tries again."""
         s = self._settings
-        clock0 = time.perf_counter()
+        stages = StageClock(clock=self._now)
         actor = np.asarray(actor_position_world, dtype=np.float64).reshape(3)
         forward = np.asarray(actor_forward, dtype=np.float64).reshape(3)
         dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
@@ -171,7 +183,7 @@ class GraphDirector:
             self._clock.observe(time_s, seen < s.occluded_below_fraction,
                                 abs(np.log(max(d, 1e-6) / distance)) > s.framing_violation_log)
             reason = self._clock.reason(time_s, s)
-        clock1 = time.perf_counter()
+        stages.done(DirectorStage.CUT_CHECK)
 
         cut = False
         indirect = None
@@ -189,7 +201,7 @@ class GraphDirector:
             if cut:
                 self._shot_id += 1
                 self._clock = CutClock(time_s, draw_shot_duration_s(self._rng, s))
-        clock2 = time.perf_counter()
+        stages.done(DirectorStage.TARGET_UPDATE)
         if self._target is None:  # no track near the actor for a first shot yet: no camera to give
             return None
 
@@ -199,11 +211,10 @@ class GraphDirector:
         elif movement != Movement.STATIC and self._camera is not None:
             self._camera, self._velocity = move_camera(self._camera, self._velocity, target, look_at, dt, s)
         visible = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
-        clock3 = time.perf_counter()
+        stages.done(DirectorStage.CAMERA_UPDATE)
         return TrackShot(position_world=self._camera.copy(), look_at_world=look_at, cut=cut, shot_id=self._shot_id,
                          visible_fraction=visible, cut_reason=reason if cut else None,
-                         timings_ms={"cut_check": 1e3 * (clock1 - clock0), "target_update": 1e3 * (clock2 - clock1),
-                                     "camera_update": 1e3 * (clock3 - clock2)},
+                         timings_ms=stages.timings_ms,
                          scores=self._scores)
 
     # --- target search -------------------------------------------------------------------------
@@ -293,7 +304,7 @@ class GraphDirector:
         extra = np.zeros(len(pois))
         if not first:
             angle = cut_angle_deg(self._camera, pois.position_world, look_at)
-            direction = action_direction(self._actor_velocity, forward, s.min_actor_speed_m_per_s)
+            direction = action_direction(self._actor_velocity, forward, s.min_actor_speed_m_s)
             before = screen_motion(self._camera[None], look_at, direction)[0]
             after = screen_motion(pois.position_world, look_at, direction)
             ok = (angle >= s.min_cut_angle_deg) & keeps_line_of_action(before, after)

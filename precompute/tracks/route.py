@@ -88,7 +88,7 @@ class NavmeshPaths:
         return best
 
 
-def walk(polyline_world: np.ndarray, speed_m_per_s: float, frame_rate_hz: float) -> ActorRoute:
+def walk(polyline_world: np.ndarray, speed_m_s: float, frame_rate_hz: float) -> ActorRoute:
     """The actor walking a polyline (p, 3) at a constant speed, one sample per frame."""
     seg = np.diff(polyline_world, axis=0)
     length = np.linalg.norm(seg, axis=1)
@@ -96,8 +96,8 @@ def walk(polyline_world: np.ndarray, speed_m_per_s: float, frame_rate_hz: float)
     points = np.vstack([polyline_world[:1], polyline_world[1:][keep]])
     cumulative = np.concatenate([[0.0], np.cumsum(length[keep])])
     total = cumulative[-1]
-    times = np.arange(0.0, total / speed_m_per_s + 1e-9, 1.0 / frame_rate_hz)
-    travelled = np.minimum(times * speed_m_per_s, total)
+    times = np.arange(0.0, total / speed_m_s + 1e-9, 1.0 / frame_rate_hz)
+    travelled = np.minimum(times * speed_m_s, total)
     position = np.stack([np.interp(travelled, cumulative, points[:, k]) for k in range(3)], axis=1)
     heading = np.diff(position, axis=0, append=position[-1:] + (position[-1:] - position[-2:-1] if len(position) > 1
                                                                  else np.array([[0.0, 0.0, 1.0]])))

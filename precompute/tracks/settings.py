@@ -144,13 +144,13 @@ class DirectorSettings:
     min_cut_angle_deg: float = 30.0          # the 30-degree rule, deg. [0, 180]
     weight_thirty_degree: float = 1.0        # cut-specific sub-score weights. each in [0, 100]
     weight_line_of_action: float = 1.0
-    min_actor_speed_m_per_s: float = 0.2     # below this the line of action follows the actor's facing, m/s. [0, 100]
+    min_actor_speed_m_s: float = 0.2         # below this the line of action follows the actor's facing, m/s. [0, 100]
     # --- camera motion (camera_motion.py, Section 5.4) ---
     attraction_per_s2: float = 6.0           # spring constant towards the target (mass 1), 1/s^2. (0, 1e4]
     damping_ratio: float = 1.0               # 1 = critical damping: no overshoot. [0, 10]
     repulsion_radius_m: float = 1.0          # the actor pushes the camera away inside this distance, m. [0, 100]
-    repulsion_per_s2: float = 20.0           # repulsion acceleration at zero distance, m/s^2. [0, 1e4]
-    max_speed_m_per_s: float = 6.0           # camera speed limit, m/s. (0, 1000]
+    repulsion_m_s2: float = 20.0             # repulsion acceleration at zero distance, m/s^2. [0, 1e4]
+    max_speed_m_s: float = 6.0               # camera speed limit, m/s. (0, 1000]
     max_substep_s: float = 1.0 / 60.0        # the force integration takes steps no longer than this, s. (0, 1]
 
     def __post_init__(self):
@@ -180,11 +180,11 @@ class DirectorSettings:
             (0.0 <= self.framing_cut_s <= 60.0, "framing_cut_s must be in [0, 60]"),
             (0.0 < self.occluded_below_fraction <= 1.0, "occluded_below_fraction must be in (0, 1]"),
             (0.0 <= self.min_cut_angle_deg <= 180.0, "min_cut_angle_deg must be in [0, 180]"),
-            (0.0 <= self.min_actor_speed_m_per_s <= 100.0, "min_actor_speed_m_per_s must be in [0, 100]"),
+            (0.0 <= self.min_actor_speed_m_s <= 100.0, "min_actor_speed_m_s must be in [0, 100]"),
             (0.0 < self.attraction_per_s2 <= 1e4, "attraction_per_s2 must be in (0, 1e4]"),
             (0.0 <= self.damping_ratio <= 10.0, "damping_ratio must be in [0, 10]"),
             (0.0 <= self.repulsion_radius_m <= 100.0, "repulsion_radius_m must be in [0, 100]"),
-            (0.0 <= self.repulsion_per_s2 <= 1e4, "repulsion_per_s2 must be in [0, 1e4]"),
-            (0.0 < self.max_speed_m_per_s <= 1000.0, "max_speed_m_per_s must be in (0, 1000]"),
+            (0.0 <= self.repulsion_m_s2 <= 1e4, "repulsion_m_s2 must be in [0, 1e4]"),
+            (0.0 < self.max_speed_m_s <= 1000.0, "max_speed_m_s must be in (0, 1000]"),
             (0.0 < self.max_substep_s <= 1.0, "max_substep_s must be in (0, 1]"),
         ])

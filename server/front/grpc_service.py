@@ -6,16 +6,18 @@ A bad frame ends its stream with a status; the session itself stays and a new st
 """
 from __future__ import annotations
 
+import logging
 import time
 
 import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from camdirector.server.errors import DirectorError
+from camdirector.server.errors import DirectorError, internal
 from camdirector.server.front.router import SessionRouter, session_id_of
 from camdirector.v1 import director_pb2 as pb
 
+log = logging.getLogger("camdirector.grpc")
 SERVICE = "camdirector.v1.Director"
 TRANSPORT = "grpc"
 
@@ -32,14 +34,25 @@ class DirectorGrpc:
         except DirectorError as exc:
             self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
             await context.abort(exc.code, exc.message)
+        except Exception as exc:  # a bug: INTERNAL, as on ZeroMQ, never grpc's UNKNOWN
+            await self._abort_internal(rpc, exc, context)
         finally:
             self.metrics.request.labels(TRANSPORT, rpc).observe(time.perf_counter() - t0)
+
+    async def _abort_internal(self, what: str, exc: Exception, context: grpc.aio.ServicerContext) -> None:
+        log.error("%s failed", what, exc_info=exc)
+        error = internal(exc)
+        self.metrics.errors.labels(TRANSPORT, error.code.name).inc()
+        await context.abort(error.code, error.message)
 
     async def create_session(self, payload, context):
         return await self._unary("CreateSession", lambda p: self.router.create(p, TRANSPORT), payload, context)
 
     async def update_style(self, payload, context):
         return await self._unary("UpdateStyle", self.router.update_style, payload, context)
+
+    async def take_shot(self, payload, context):
+        return await self._unary("TakeShot", self.router.take_shot, payload, context)
 
     async def close_session(self, payload, context):
         return await self._unary("CloseSession", self.router.close, payload, context)
@@ -67,6 +80,8 @@ class DirectorGrpc:
         except DirectorError as exc:
             self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
             await context.abort(exc.code, exc.message)
+        except Exception as exc:
+            await self._abort_internal(f"StreamFrames of session {session_id!r}", exc, context)
         finally:
             if session_id is not None:
                 self.router.stream_closed(session_id)
@@ -76,6 +91,7 @@ class DirectorGrpc:
         return grpc.method_handlers_generic_handler(SERVICE, {
             "CreateSession": unary(self.create_session),
             "UpdateStyle": unary(self.update_style),
+            "TakeShot": unary(self.take_shot),
             "CloseSession": unary(self.close_session),
             "Frame": unary(self.frame),
             "StreamFrames": grpc.stream_stream_rpc_method_handler(self.stream_frames),

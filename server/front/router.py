@@ -7,18 +7,21 @@ import asyncio
 import logging
 import time
 import uuid
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import orjson
 
-from camdirector.server.errors import DirectorError, exhausted, invalid, not_found
+from camdirector.server.errors import DirectorError, exhausted, invalid, not_found, unavailable
 from camdirector.server.front.metrics import Metrics
 from camdirector.server.front.worker_pool import WorkerPool
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 
 log = logging.getLogger("camdirector.sessions")
+
+LOST_IDS_KEPT = 10_000  # ids of sessions lost with their worker, remembered to say so (oldest forgotten first)
 
 
 @dataclass
@@ -38,6 +41,7 @@ class SessionRouter:
         self.clock = clock
         self.pool = WorkerPool(settings, on_worker_lost=self._worker_lost)
         self.sessions: dict[str, SessionEntry] = {}
+        self._lost: OrderedDict[str, int] = OrderedDict()  # session id -> the worker slot that died with it
         self._reserved = 0  # creations in flight, counted against max_sessions
         self._reaper: asyncio.Task | None = None
 
@@ -53,6 +57,9 @@ class SessionRouter:
     def _entry(self, session_id: str) -> SessionEntry:
         entry = self.sessions.get(session_id)
         if entry is None:
+            if session_id in self._lost:
+                raise unavailable(f"session {session_id!r} was lost: the worker process holding it (worker "
+                                  f"{self._lost[session_id]}) died; create a new session")
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return entry
 
@@ -92,12 +99,21 @@ class SessionRouter:
                 self.metrics.stage.labels(stage).observe(ms * 1e-3)
         return body
 
-    async def update_style(self, payload: bytes) -> bytes:
-        session_id = session_id_of(pb.UpdateStyleRequest, payload)
+    async def _session_request(self, message_type, op: str, payload: bytes) -> bytes:
+        """A serialized request of the session it names (a client's: it keeps the session alive)
+        to that session's worker; the serialized answer back."""
+        session_id = session_id_of(message_type, payload)
         entry = self._entry(session_id)
         entry.last_seen_s = self.clock()
-        body, _ = await self.pool.call(entry.slot, "style", session_id, payload)
+        body, _ = await self.pool.call(entry.slot, op, session_id, payload)
         return body
+
+    async def update_style(self, payload: bytes) -> bytes:
+        return await self._session_request(pb.UpdateStyleRequest, "style", payload)
+
+    async def take_shot(self, payload: bytes) -> bytes:
+        """A serialized TakeShotRequest in, a serialized TakeShotResponse out (a MATCH session's take)."""
+        return await self._session_request(pb.TakeShotRequest, "take", payload)
 
     async def close(self, payload: bytes) -> bytes:
         session_id = session_id_of(pb.CloseSessionRequest, payload)
@@ -144,7 +160,10 @@ class SessionRouter:
         lost = [sid for sid, e in self.sessions.items() if e.slot == slot]
         for session_id in lost:
             del self.sessions[session_id]
+            self._lost[session_id] = slot
             self.metrics.sessions_reclaimed.inc()
+        while len(self._lost) > LOST_IDS_KEPT:
+            self._lost.popitem(last=False)
         self.metrics.sessions.set(len(self.sessions))
         log.error("worker %d lost %d sessions", slot, len(lost))
 
@@ -173,12 +192,54 @@ class SessionRouter:
                 "transports": sorted(e.transport)}
 
 
+def _varint(payload: bytes, at: int) -> tuple[int, int]:
+    """The varint at payload[at:] and the index after it; IndexError past the end."""
+    value = shift = 0
+    while True:
+        byte = payload[at]
+        at += 1
+        value |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            return value, at
+        shift += 7
+        if shift > 63:
+            raise ValueError("varint longer than 10 bytes")
+
+
 def session_id_of(message_type, payload: bytes) -> str:
-    """The session_id field of a serialized request; INVALID_ARGUMENT when it cannot be read."""
+    """The session_id (field 1, a string, in every request that names a session) of a serialized
+    request, read from the protobuf wire format without parsing the rest: the front routes by it
+    and the worker parses the message once. Fields before it are skipped by their wire type; the
+    first occurrence counts (the worker refuses a message whose parsed session_id differs, so
+    this never routes one session's frame to another). INVALID_ARGUMENT when it cannot be read."""
+    at, end = 0, len(payload)
     try:
-        session_id = message_type.FromString(payload).session_id
-    except Exception:
-        raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}") from None
-    if not session_id:
-        raise invalid("session_id is empty")
-    return session_id
+        while at < end:
+            key, at = _varint(payload, at)
+            field_number, wire_type = key >> 3, key & 7
+            if wire_type == 0:
+                _, at = _varint(payload, at)
+            elif wire_type == 1:
+                at += 8
+            elif wire_type == 5:
+                at += 4
+            elif wire_type == 2:
+                length, at = _varint(payload, at)
+                if field_number == 1:
+                    if at + length > end:
+                        break
+                    session_id = payload[at:at + length].decode("utf-8")
+                    if not session_id:
+                        raise invalid("session_id is empty")
+                    return session_id
+                at += length
+            else:
+                break
+            if field_number == 0:
+                break
+    except (IndexError, ValueError):
+        pass
+    else:
+        if at == end:
+            raise invalid("session_id is empty")
+    raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}")

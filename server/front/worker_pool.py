@@ -146,6 +146,8 @@ class WorkerPool:
         return await self._call_worker(self._workers[slot], op, session_id, payload)
 
     async def stop(self) -> None:
+        if self._inline is not None:
+            self._inline.close_all()
         if self._monitor is not None:
             self._monitor.cancel()
         for worker in self._workers:

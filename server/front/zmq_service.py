@@ -40,6 +40,7 @@ class ZmqTransport:
             b"CreateSession": lambda p: self.router.create(p, TRANSPORT),
             b"Frame": lambda p: self.router.frame(p, session_id_of(pb.FrameUpdate, p), TRANSPORT),
             b"UpdateStyle": self.router.update_style,
+            b"TakeShot": self.router.take_shot,
             b"CloseSession": self.router.close,
         }
 
@@ -71,7 +72,8 @@ class ZmqTransport:
             name, payload = body
             handler = self._handlers.get(name)
             if handler is None:
-                raise unimplemented(f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, CloseSession")
+                raise unimplemented(f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, "
+                                    "TakeShot, CloseSession")
             if len(payload) > self.router.settings.max_message_bytes:
                 raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
             reply = [b"0", await handler(payload)]
@@ -79,7 +81,7 @@ class ZmqTransport:
             self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
             reply = [str(exc.code.value[0]).encode(), exc.message.encode()]
         except Exception as exc:  # never let one request end the loop
-            log.exception("zmq request")
+            log.exception("zmq request %r failed", rpc[:64])  # the traceback stays in the server's log
             error = internal(exc)
             reply = [str(error.code.value[0]).encode(), error.message.encode()]
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set

@@ -2,7 +2,7 @@
 
 Mirrors `camdirector.v1.Style`; `server/sessions/codec.py` converts and validates at the edge. `rig` picks
 the camera rig: TORIC (the framing rig, every field but the last two) or TRACKS (camera tracks on
-a precomputed level, tracks_rig.py), which reads only `shot_size` and `movement` (the directorial
+a precomputed level, tracks/rig.py), which reads only `shot_size` and `movement` (the directorial
 styles of the topology-aware camera tracks paper, Section 6.1) and handles occlusion by its own
 cutting strategy, so a TORIC visibility mode is refused with it.
 """
@@ -40,6 +40,14 @@ class Rig(enum.IntEnum):
 
     TORIC = 1
     TRACKS = 2
+    MATCH = 3
+
+
+class MatchDirectorKind(enum.IntEnum):
+    """Which director a MATCH session runs: ours (match/plan.py) or the HLTV baseline (match/hltv.py)."""
+
+    PLANNED = 1
+    HLTV = 2
 
 
 # Modes whose camera moves by the paper's search (occlusion_search.py) rather than the toric spring.
@@ -65,12 +73,19 @@ class Style:
     rig: Rig = Rig.TORIC                # the camera rig
     shot_size: ShotSize = ShotSize.LONG  # TRACKS: the actor's size on screen
     movement: Movement = Movement.DYNAMIC_WITH_CUTS  # TRACKS: how the camera may move and cut
+    match_director: MatchDirectorKind = MatchDirectorKind.PLANNED  # MATCH: which director picks the shots
+    min_shot_s: float = 2.0             # MATCH: shortest shot, except after a take, s. [0.5, 30]
+    max_shot_s: float = 8.0             # MATCH: longest shot the director makes without an event, s. [min_shot_s, 120]
 
     def __post_init__(self):
         for name, value, kind in (("rig", self.rig, Rig), ("shot_size", self.shot_size, ShotSize),
-                                  ("movement", self.movement, Movement)):
+                                  ("movement", self.movement, Movement),
+                                  ("match_director", self.match_director, MatchDirectorKind)):
             if not isinstance(value, kind):
                 raise ValueError(f"style.{name} must be a {kind.__name__}, got {value!r}")
+        if self.rig == Rig.MATCH and self.visibility != VisibilityMode.FRAMING_ONLY:
+            raise ValueError(f"style.visibility {self.visibility.name} is a mode of the TORIC rig; the MATCH rig "
+                             "chooses its camera places by ray casts itself: leave style.visibility unset")
         if self.rig == Rig.TRACKS and self.visibility != VisibilityMode.FRAMING_ONLY:
             raise ValueError(f"style.visibility {self.visibility.name} is a mode of the TORIC rig; the TRACKS rig "
                              "cuts away from occlusion itself: leave style.visibility unset")
@@ -86,6 +101,8 @@ class Style:
             ("response_time_s", self.response_time_s, 0.02, 60.0),
             ("max_speed_m_s", self.max_speed_m_s, 1e-6, 1000.0),
             ("max_accel_m_s2", self.max_accel_m_s2, 1e-6, 10000.0),
+            ("min_shot_s", self.min_shot_s, 0.5, 30.0),
+            ("max_shot_s", self.max_shot_s, self.min_shot_s, 120.0),
         ]
         if not 16 <= self.map_resolution <= 512:
             raise ValueError(f"style.map_resolution must be in [16, 512], got {self.map_resolution}")

@@ -8,6 +8,12 @@ its level); `level_id` without that rig, and the TRACKS style fields under the T
 refused rather than ignored. The rig cannot change during a session (UpdateStyle): TORIC to
 TRACKS would need a level the session was not created with, and TRACKS to TORIC a second framing
 setup for a scene built around one actor; a new session does either.
+
+A MATCH session (`RIG_MATCH`) has 2 to 64 targets, the players, each with its `team`; its
+`level_id` is optional; `delay_s` in [0, 300] is the broadcast delay (refused for the other rigs,
+as are `events` and the MATCH style fields). A frame's events name players of the session
+(a kill both its attacker and its victim), have a priority in [0, 15] (0: the kind's default) and a
+time no later than the frame's time plus the delay (0: the frame's time).
 """
 from __future__ import annotations
 
@@ -16,14 +22,14 @@ import math
 import numpy as np
 
 from camdirector.geometry import meshes
-from camdirector.geometry.camera import Lens
+from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.meshes import MeshError, TriMesh
 from camdirector.geometry.toric import composition_angle
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
 from camdirector.server.errors import exhausted, invalid, not_found, precondition
-from camdirector.server.pipeline.inputs import FrameInput, ObjectSpec, SceneSpec, TargetSpec
-from camdirector.server.pipeline.stages import FrameState
-from camdirector.server.pipeline.style import MapBackendChoice, Movement, Rig, ShotSize, Style, VisibilityMode
+from camdirector.server.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, SceneSpec, TargetSpec
+from camdirector.server.pipeline.stages import FrameState, ShotChoice, ShotKind
+from camdirector.server.pipeline.style import MapBackendChoice, MatchDirectorKind, Movement, Rig, ShotSize, Style, VisibilityMode
 from camdirector.server.pipeline.toric.anticipation import MaskKind
 from camdirector.server.sessions.levels import LevelCache
 from camdirector.server.settings import ServerSettings
@@ -32,7 +38,12 @@ from camdirector.v1 import director_pb2 as pb
 _MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
           pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
           pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
-_RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC, pb.RIG_TORIC: Rig.TORIC, pb.RIG_TRACKS: Rig.TRACKS}
+_RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC, pb.RIG_TORIC: Rig.TORIC, pb.RIG_TRACKS: Rig.TRACKS, pb.RIG_MATCH: Rig.MATCH}
+_MATCH_DIRECTORS = {pb.MATCH_DIRECTOR_UNSPECIFIED: MatchDirectorKind.PLANNED,
+                    pb.MATCH_DIRECTOR_PLANNED: MatchDirectorKind.PLANNED, pb.MATCH_DIRECTOR_HLTV: MatchDirectorKind.HLTV}
+MAX_PLAYERS = 64        # players of a MATCH session (the wire contract)
+MAX_DELAY_S = 300.0     # broadcast delay of a MATCH session, s (the wire contract)
+MAX_PRIORITY = 15       # a game event's priority (HLTV's scale)
 _SHOT_SIZES = {pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG, pb.SHOT_SIZE_MEDIUM: ShotSize.MEDIUM,
                pb.SHOT_SIZE_LONG: ShotSize.LONG, pb.SHOT_SIZE_EXTREME_LONG: ShotSize.EXTREME_LONG}
 _MOVEMENTS = {pb.MOVEMENT_UNSPECIFIED: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_DYNAMIC_NO_CUTS: Movement.DYNAMIC_NO_CUTS,
@@ -141,7 +152,8 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
         raise invalid(f"style.mask {msg.mask} or style.map_backend {msg.map_backend} is not known") from None
     if msg.map_resolution:
         values["map_resolution"] = msg.map_resolution
-    for name, table in (("rig", _RIGS), ("shot_size", _SHOT_SIZES), ("movement", _MOVEMENTS)):
+    for name, table in (("rig", _RIGS), ("shot_size", _SHOT_SIZES), ("movement", _MOVEMENTS),
+                        ("match_director", _MATCH_DIRECTORS)):
         number = getattr(msg, name)
         if number not in table:
             raise invalid(f"style.{name} {number} is not a known {name}")
@@ -150,9 +162,15 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
         raise precondition(f"style.rig cannot change during a session ({current.rig.name} -> {values['rig'].name}): "
                            "create a new session with that rig (an UpdateStyle replaces the whole style, so a "
                            "TRACKS session repeats rig = RIG_TRACKS)")
-    if values["rig"] == Rig.TORIC and (msg.shot_size or msg.movement):
+    if values["rig"] != Rig.TRACKS and (msg.shot_size or msg.movement):
         raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
                       "(with a level_id) or leave them unset")
+    match_fields = [name for name in ("min_shot_s", "max_shot_s") if msg.HasField(name)]
+    if values["rig"] != Rig.MATCH and (msg.match_director or match_fields):
+        raise invalid("style.match_director, style.min_shot_s and style.max_shot_s direct the MATCH rig; set "
+                      "style.rig = RIG_MATCH or leave them unset")
+    for name in match_fields:
+        values[name] = getattr(msg, name)
     try:
         style = Style(visibility=VisibilityMode.FRAMING_ONLY if mode == VisibilityMode.UNSPECIFIED else mode, **values)
     except ValueError as exc:
@@ -172,9 +190,17 @@ def _check_id(object_id: str, what: str, seen: set[str]) -> None:
 
 def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
                        levels: LevelCache | None = None) -> SceneSpec:
-    """levels: where a TRACKS session's level is looked up (default: the registry in settings.data_dir)."""
-    if not 1 <= len(req.targets) <= 2:
+    """levels: where a TRACKS or MATCH session's level is looked up (default: the registry in settings.data_dir)."""
+    match = req.style.rig == pb.RIG_MATCH
+    if match and not 2 <= len(req.targets) <= MAX_PLAYERS:
+        raise invalid(f"a RIG_MATCH session has 2 to {MAX_PLAYERS} players as targets, got {len(req.targets)}")
+    if not match and not 1 <= len(req.targets) <= 2:
         raise invalid(f"a session frames one or two targets, got {len(req.targets)}")
+    if not match and (req.delay_s or any(t.team for t in req.targets)):
+        raise invalid("delay_s and targets[].team are for a RIG_MATCH session; set style.rig = RIG_MATCH or leave "
+                      "them unset")
+    if not (math.isfinite(req.delay_s) and 0.0 <= req.delay_s <= MAX_DELAY_S):
+        raise invalid(f"delay_s must be in [0, {MAX_DELAY_S:g}] s, got {req.delay_s}")
     if len(req.objects) > settings.max_objects:
         raise exhausted(f"{len(req.objects)} scene objects exceed the limit of {settings.max_objects}")
     seen: set[str] = set()
@@ -196,7 +222,7 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
         if triangles > settings.max_triangles:
             raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
         targets.append(TargetSpec(target.id, mesh, transform_from_msg(target.transform, f"{what}.transform"),
-                                  _vec3(target.aim_offset, f"{what}.aim_offset")))
+                                  _vec3(target.aim_offset, f"{what}.aim_offset"), team=int(target.team)))
     lens = lens_from_msg(req.lens)
     style = style_from_msg(req.style, lens)
     level = None
@@ -206,14 +232,72 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
         if not req.level_id:
             raise invalid("style.rig RIG_TRACKS needs level_id: the name of a level in the server's level registry")
         level = (levels if levels is not None else LevelCache(settings.data_dir)).get(req.level_id)
+    elif style.rig == Rig.MATCH and req.level_id:
+        level = (levels if levels is not None else LevelCache(settings.data_dir)).get(req.level_id)
     elif req.level_id:
-        raise invalid(f"level_id {req.level_id!r} is for the TRACKS rig: set style.rig = RIG_TRACKS or leave "
-                      "level_id empty")
-    return SceneSpec(objects, targets, lens, style, int(req.seed), level)
+        raise invalid(f"level_id {req.level_id!r} is for the TRACKS and MATCH rigs: set style.rig = RIG_TRACKS or "
+                      "leave level_id empty")
+    return SceneSpec(objects, targets, lens, style, int(req.seed), level, delay_s=float(req.delay_s))
 
 
-def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str]) -> FrameInput:
-    """`movable`: ids of targets and dynamic objects; `static`: ids of static objects."""
+def events_from_msg(msg: pb.FrameUpdate, players: frozenset[str] | None, delay_s: float) -> list[GameEvent]:
+    """The frame's events, checked (module docstring); `players`: the MATCH session's player ids,
+    None for a session of another rig, which takes no events."""
+    if not msg.events:
+        return []
+    if players is None:
+        raise invalid("events are for a RIG_MATCH session")
+    events = []
+    for i, event in enumerate(msg.events):
+        what = f"events[{i}]"
+        try:
+            kind = EventKind(event.kind)
+        except ValueError:
+            raise invalid(f"{what}.kind {event.kind} is not an EventKind") from None
+        if kind == EventKind.UNSPECIFIED:
+            raise invalid(f"{what}.kind is unset")
+        if event.priority > MAX_PRIORITY:
+            raise invalid(f"{what}.priority must be in [0, {MAX_PRIORITY}], got {event.priority}")
+        for name in ("actor_id", "other_actor_id"):
+            player = getattr(event, name)
+            if player and player not in players:
+                raise not_found(f"{what}.{name} {player!r} is not a player of this session")
+        if kind == EventKind.KILL and not (event.actor_id and event.other_actor_id):
+            raise invalid(f"{what}: a kill names its attacker (actor_id) and its victim (other_actor_id)")
+        time_s = event.time_s or msg.time_s
+        if not math.isfinite(time_s):
+            raise invalid(f"{what}.time_s is NaN or infinite")
+        if time_s > msg.time_s + delay_s + 1e-9:
+            raise invalid(f"{what}.time_s {time_s} is later than the frame's time {msg.time_s} plus the delay "
+                          f"{delay_s} s")
+        position = _vec3(event.position, f"{what}.position") if event.HasField("position") else None
+        events.append(GameEvent(kind, event.actor_id, event.other_actor_id, int(event.priority), float(time_s),
+                                event.label, position))
+    return events
+
+
+def take_from_msg(msg: pb.TakeShotRequest, players: frozenset[str]) -> tuple[list[str], ShotKind | None, bool]:
+    """A TakeShotRequest as MatchRig.take's arguments: NOT_FOUND for a player the session does not
+    have, INVALID_ARGUMENT for an unknown kind or a take without subjects."""
+    if msg.release:
+        return [], None, True
+    try:
+        kind = None if msg.kind == pb.SHOT_KIND_UNSPECIFIED else ShotKind(msg.kind)
+    except ValueError:
+        raise invalid(f"kind {msg.kind} is not a ShotKind") from None
+    if not msg.subject_ids and kind != ShotKind.OVERVIEW:
+        raise invalid("a TakeShot names its subject_ids (none only for SHOT_OVERVIEW), or sets release to give "
+                      "the program back")
+    for player in msg.subject_ids:
+        if player not in players:
+            raise not_found(f"subject_ids: {player!r} is not a player of this session")
+    return list(msg.subject_ids), kind, False
+
+
+def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
+                   players: frozenset[str] | None = None, delay_s: float = 0.0) -> FrameInput:
+    """`movable`: ids of targets and dynamic objects; `static`: ids of static objects; `players`
+    and `delay_s`: a MATCH session's (events_from_msg)."""
     if not math.isfinite(msg.time_s):
         raise invalid("frame time_s is NaN or infinite")
     states: list[tuple[str, RigidTransform]] = []
@@ -234,18 +318,27 @@ def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str]) -> 
         for object_id in msg.packed_ids:
             check(object_id)
         states.extend(zip(msg.packed_ids, transforms_from_packed(values.reshape(-1, PACKED_STRIDE), msg.packed_ids)))
-    return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states)
+    return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states,
+                      events_from_msg(msg, players, delay_s))
+
+
+def pose_msg(pose: CameraPose) -> pb.CameraPose:
+    p, q = pose.position_world, pose.rotation_xyzw
+    return pb.CameraPose(position=pb.Vec3(x=p[0], y=p[1], z=p[2]), rotation=pb.Quat(x=q[0], y=q[1], z=q[2], w=q[3]),
+                         vertical_fov_deg=pose.vertical_fov_deg)
+
+
+def shot_msg(shot: ShotChoice) -> pb.ShotInfo:
+    return pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason)
 
 
 def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False, message: str = "") -> pb.CameraUpdate:
-    pose = state.pose
-    p, q = pose.position_world, pose.rotation_xyzw
+    """The reply to a frame; a MATCH session's while its delay fills (`state.buffering`) has no pose."""
     out = pb.CameraUpdate(
         frame=state.frame,
         time_s=state.time_s,
-        pose=pb.CameraPose(position=pb.Vec3(x=p[0], y=p[1], z=p[2]),
-                           rotation=pb.Quat(x=q[0], y=q[1], z=q[2], w=q[3]),
-                           vertical_fov_deg=pose.vertical_fov_deg),
+        pose=None if state.pose is None else pose_msg(state.pose),
+        buffering=state.buffering,
         cut=state.cut,
         shot_id=state.shot_id,
         visibility=state.visibility,
@@ -260,5 +353,9 @@ def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False,
     d.stage_ms.update(state.stage_ms)
     d.flags.extend(state.flags)
     d.scores.update(state.scores)
+    if state.shot is not None:
+        out.shot.CopyFrom(shot_msg(state.shot))
+    for candidate in state.candidates:
+        out.candidates.add(pose=pose_msg(candidate.pose), shot=shot_msg(candidate.shot), score=candidate.score)
     return out
 

@@ -16,6 +16,9 @@ from typing import BinaryIO
 from camdirector.v1 import director_pb2 as pb
 
 MAGIC = b"CDREC\x00v1"
+# RecordEntry's keys for its `frame` (2) and `camera` (4) fields, length-delimited (wire type 2).
+_FRAME_TAG = bytes([2 << 3 | 2])
+_CAMERA_TAG = bytes([4 << 3 | 2])
 
 
 def _varint(n: int) -> bytes:
@@ -42,7 +45,15 @@ class RecordingWriter:
         self._pending = 0
 
     def write(self, entry: pb.RecordEntry) -> None:
-        data = entry.SerializeToString()
+        self._append(entry.SerializeToString())
+
+    def write_frame_and_camera(self, frame_bytes: bytes, camera_bytes: bytes) -> None:
+        """A frame and its answer as they crossed the wire, serialized once: each is the one
+        length-delimited field of its RecordEntry (`frame` = 2, `camera` = 4), written as such."""
+        self._append(_FRAME_TAG + _varint(len(frame_bytes)) + frame_bytes)
+        self._append(_CAMERA_TAG + _varint(len(camera_bytes)) + camera_bytes)
+
+    def _append(self, data: bytes) -> None:
         self._file.write(_varint(len(data)))
         self._file.write(data)
         self._pending += 1
@@ -95,8 +106,8 @@ class ReplayReport:
 def _comparable(update: pb.CameraUpdate) -> bytes:
     """The part of a CameraUpdate that must replay bit for bit (not timings, not diagnostics)."""
     return pb.CameraUpdate(frame=update.frame, time_s=update.time_s, pose=update.pose, cut=update.cut,
-                           shot_id=update.shot_id, visibility=update.visibility,
-                           stale=update.stale).SerializeToString(deterministic=True)
+                           shot_id=update.shot_id, visibility=update.visibility, stale=update.stale,
+                           shot=update.shot, buffering=update.buffering).SerializeToString(deterministic=True)
 
 
 def replay(path: Path, on_frame=None, data_dir: Path | None = None) -> ReplayReport:
@@ -127,6 +138,11 @@ def replay(path: Path, on_frame=None, data_dir: Path | None = None) -> ReplayRep
             replayed = table.frame(frame)
         elif kind == "style":
             table.update_style(pb.UpdateStyleRequest(session_id=session_id, style=entry.style.style))
+        elif kind == "take":
+            take = pb.TakeShotRequest()
+            take.CopyFrom(entry.take)
+            take.session_id = session_id
+            table.take_shot(take)
         elif kind == "camera":
             report.frames += 1
             if replayed is not None and _comparable(replayed) == _comparable(entry.camera):

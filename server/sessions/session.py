@@ -1,9 +1,11 @@
 """One director session: its scene, the latest transforms, and the camera rig's state.
 
-`Session.frame` runs INGEST, then its rig for the stages after it, in the order pipeline.py
-writes down: toric_rig.py for the TORIC rig, tracks_rig.py for a session created with TRACKS.
-The session never raises inside the frame loop for a geometric difficulty: it degrades (holds
-the pose, frames one target) and flags it in the diagnostics.
+`Session.frame` runs INGEST, then its rig for the stages after it, in the order
+server/pipeline/stages.py writes down: pipeline/toric/rig.py for the TORIC rig,
+pipeline/tracks/rig.py for a session created with TRACKS. The session never raises inside the
+frame loop for a geometric difficulty: it degrades (holds the pose, frames one target) and flags
+it in the diagnostics. `Session.close` releases what the rig holds outside Python's memory (the
+occlusion maps' GL objects or Embree scenes); whoever ends a session calls it.
 """
 from __future__ import annotations
 
@@ -15,11 +17,13 @@ import numpy as np
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
+from camdirector.precompute.stage_clock import StageClock
+from camdirector.server.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.server.pipeline.match.rig import MatchRig
 from camdirector.server.pipeline.stages import FrameState, Stage
-from camdirector.server.pipeline.style import Style
+from camdirector.server.pipeline.style import Rig, Style
 from camdirector.server.pipeline.toric.rig import ToricRig
 from camdirector.server.pipeline.tracks.rig import TracksRig
-from camdirector.server.pipeline.inputs import FrameInput, SceneSpec
 
 
 class Session:
@@ -34,17 +38,24 @@ class Session:
         self.target_transforms = [t.transform for t in scene.targets]
         self.static_ids = {o.id for o in scene.objects if not o.dynamic}
         self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
+        # MATCH: the players that events may name, and the broadcast delay events may run ahead by.
+        self.players = frozenset(self.target_index) if self.style.rig == Rig.MATCH else None
+        self.delay_s = scene.delay_s
         static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
         level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
         self.ray_scene = RayScene(static_meshes_world + level_meshes)
         self.dynamic = {o.id: (o.mesh, o.transform) for o in scene.objects if o.dynamic}  # latest transforms
         for object_id, (mesh, transform) in self.dynamic.items():
             self.ray_scene.add_dynamic(object_id, mesh, transform)
-        # The stages after INGEST: one rig for the session's life (wire.py refuses a change of rig).
-        self.rig: ToricRig | TracksRig = (
-            TracksRig(scene.level, scene.lens, self.style, self.ray_scene, self.rng, clock) if scene.level is not None
+        # The stages after INGEST: one rig for the session's life (sessions/codec.py refuses a change of rig).
+        self.rig: ToricRig | TracksRig | MatchRig = (
+            MatchRig(scene, self.ray_scene, self.rng, clock) if self.style.rig == Rig.MATCH
+            else TracksRig(scene.level, scene.lens, self.style, self.ray_scene, self.rng, clock) if scene.level is not None
             else ToricRig(scene, self.ray_scene, static_meshes_world, self.dynamic, self.rng, clock))
         self.last_state: FrameState | None = None
+        # The newest frame received, (frame, time_s): a MATCH session with a delay answers for an
+        # earlier moment, so staleness and dt_s go by what arrived, not by what was answered.
+        self.last_input: tuple[int, float] | None = None
         self.frames_answered = 0
         self.shot_id = 0
 
@@ -53,18 +64,25 @@ class Session:
         self.style = style
         self.rig.set_style(style)
 
+    def close(self) -> None:
+        """Releases the rig's resources (GL objects, Embree scenes); idempotent. The session
+        answers no frame afterwards."""
+        self.rig.close()
+
     def is_stale(self, frame: int) -> bool:
-        return self.last_state is not None and frame <= self.last_state.frame
+        return self.last_input is not None and frame <= self.last_input[0]
 
     def frame(self, update: FrameInput) -> FrameState:
         """Runs one frame. The caller has checked that update.frame is newer than the last."""
         last = self.last_state
-        dt_s = 0.0 if last is None else max(0.0, update.time_s - last.time_s)
+        last_time_s = None if self.last_input is None else self.last_input[1]
+        dt_s = 0.0 if last_time_s is None else max(0.0, update.time_s - last_time_s)
         state = FrameState(frame=update.frame, time_s=update.time_s, dt_s=dt_s)
-        if last is not None and update.time_s < last.time_s:
+        if last_time_s is not None and update.time_s < last_time_s:
             state.flags.append("time_went_back")
-        t0 = self.clock()
-        for object_id, transform in update.states:  # Stage.INGEST
+        self.last_input = (update.frame, update.time_s)
+        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
+        for object_id, transform in update.states:
             index = self.target_index.get(object_id)
             if index is None:
                 self.ray_scene.set_transform(object_id, transform)
@@ -73,10 +91,10 @@ class Session:
                 self.target_transforms[index] = transform
         state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0]
                                   for tf, t in zip(self.target_transforms, self.targets)]
-        t1 = self.clock()
-        self.rig.run(state, update, self.target_transforms, last)  # FRAMING .. VISIBILITY
-        state.stage_ms[Stage.INGEST.name.lower()] = (t1 - t0) * 1e3
-        state.cut = state.cut or last is None
+        stages.done(Stage.INGEST)
+        self.rig.run(state, update, self.target_transforms, last)  # the stages after INGEST, timed by the rig
+        # The first pose is a cut (a MATCH session answers without a pose while its delay fills).
+        state.cut = state.pose is not None and (state.cut or last is None or last.pose is None)
         if state.cut:
             self.shot_id += 1
         state.shot_id = self.shot_id

@@ -5,6 +5,7 @@ worker pool routes a request by session id and calls `handle_bytes`.
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from camdirector.server.sessions.timeline import dumps as timeline_dumps
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 
+log = logging.getLogger("camdirector.sessions")
 
 @dataclass
 class FrameMetrics:
@@ -69,9 +71,11 @@ class SessionTable:
         return response
 
     def frame(self, msg: pb.FrameUpdate) -> pb.CameraUpdate:
-        return self._frame(msg)[0]
+        return pb.CameraUpdate.FromString(self._frame(msg, msg.SerializeToString())[0])
 
-    def _frame(self, msg: pb.FrameUpdate) -> tuple[pb.CameraUpdate, FrameMetrics]:
+    def _frame(self, msg: pb.FrameUpdate, payload: bytes) -> tuple[bytes, FrameMetrics]:
+        """The serialized reply to `msg` (whose bytes as received are `payload`) and its metrics,
+        taken from the frame's state rather than read back out of the reply."""
         t0 = self.clock()
         held = self._get(msg.session_id)
         session = held.session
@@ -81,16 +85,18 @@ class SessionTable:
                 last, compute_ms=(self.clock() - t0) * 1e3, stale=True,
                 message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
             reply.frame, reply.time_s = msg.frame, msg.time_s
+            stage_ms = {}
         else:
-            update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids)
+            update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids, session.players, session.delay_s)
             state = session.frame(update)
             reply = codec.camera_update_msg(state, compute_ms=0.0)
             reply.compute_ms = (self.clock() - t0) * 1e3
             held.timeline.add(state, reply.compute_ms)
+            stage_ms = state.stage_ms
+        body = reply.SerializeToString()
         if held.recorder is not None:
-            held.recorder.write(pb.RecordEntry(frame=msg))
-            held.recorder.write(pb.RecordEntry(camera=reply))
-        return reply, FrameMetrics(reply.compute_ms, dict(reply.diagnostics.stage_ms), reply.stale)
+            held.recorder.write_frame_and_camera(payload, body)
+        return body, FrameMetrics(reply.compute_ms, stage_ms, reply.stale)
 
     def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
         held = self._get(msg.session_id)
@@ -99,6 +105,21 @@ class SessionTable:
         if held.recorder is not None:
             held.recorder.write(pb.RecordEntry(style=msg))
         return pb.UpdateStyleResponse()
+
+    def take_shot(self, msg: pb.TakeShotRequest) -> pb.TakeShotResponse:
+        """A human director's shot in a MATCH session, held until released (MatchRig.take)."""
+        held = self._get(msg.session_id)
+        session = held.session
+        if session.players is None:
+            raise precondition(f"TakeShot is for a RIG_MATCH session; session {msg.session_id} runs the "
+                               f"{session.style.rig.name} rig")
+        try:
+            shot = session.rig.take(*codec.take_from_msg(msg, session.players))
+        except ValueError as exc:  # a player named twice, a kind that does not fit the count
+            raise invalid(str(exc)) from None
+        if held.recorder is not None:
+            held.recorder.write(pb.RecordEntry(take=msg))
+        return pb.TakeShotResponse() if shot is None else pb.TakeShotResponse(shot=codec.shot_msg(shot))
 
     def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
         """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it)
@@ -124,10 +145,21 @@ class SessionTable:
         return pb.CloseSessionResponse(frames=session.frames_answered)
 
     def drop(self, session_id: str) -> None:
-        """Forgets a session if present (closing, or reclaiming an abandoned one)."""
+        """Ends a session if present, releasing what it holds (its occlusion maps' GL objects or
+        Embree scenes, its recording file): on close, on reclaiming an abandoned one, on a failed create."""
         held = self.held.pop(session_id, None)
-        if held is not None and held.recorder is not None:
-            held.recorder.close()
+        if held is None:
+            return
+        try:
+            held.session.close()
+        finally:  # the recording is closed even when releasing the rig failed
+            if held.recorder is not None:
+                held.recorder.close()
+
+    def close_all(self) -> None:
+        """Ends every session (the worker is stopping)."""
+        for session_id in list(self.held):
+            self.drop(session_id)
 
     def handle_bytes(self, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
         """One request as the transports carry it: serialized in, serialized out.
@@ -137,14 +169,15 @@ class SessionTable:
         """
         try:
             if op == "frame":
-                reply, metrics = self._frame(_parse(pb.FrameUpdate, payload))
-                return reply.SerializeToString(), metrics
+                return self._frame(_parse(pb.FrameUpdate, payload, session_id), payload)
             if op == "create":
                 return self.create(session_id, _parse(pb.CreateSessionRequest, payload)).SerializeToString(), None
             if op == "style":
-                return self.update_style(_parse(pb.UpdateStyleRequest, payload)).SerializeToString(), None
+                return self.update_style(_parse(pb.UpdateStyleRequest, payload, session_id)).SerializeToString(), None
             if op == "close":
                 return self.close(session_id).SerializeToString(), None
+            if op == "take":
+                return self.take_shot(_parse(pb.TakeShotRequest, payload, session_id)).SerializeToString(), None
             if op == "timeline":   # payload: JSON {"last": n | null, "after_frame": n | null}
                 query = orjson.loads(payload)
                 return timeline_dumps(self.timeline(session_id, query["last"], query["after_frame"])), None
@@ -157,13 +190,19 @@ class SessionTable:
         except DirectorError:
             raise
         except Exception as exc:  # a bug must not take the worker (and its other sessions) down
+            log.exception("session %s: %s failed", session_id, op)  # the traceback stays in the server's log
             if op == "create":
                 self.drop(session_id)
             raise internal(exc) from exc
 
 
-def _parse(message_type, payload: bytes):
+def _parse(message_type, payload: bytes, routed_session_id: str | None = None):
+    """The request, parsed once; with `routed_session_id` (what the front routed by, reading only
+    field 1) INVALID_ARGUMENT when the parsed session_id differs (the field given twice)."""
     try:
-        return message_type.FromString(payload)
+        msg = message_type.FromString(payload)
     except Exception:
         raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}") from None
+    if routed_session_id is not None and msg.session_id != routed_session_id:
+        raise invalid(f"session_id is given more than once ({routed_session_id!r}, then {msg.session_id!r})")
+    return msg

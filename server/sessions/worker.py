@@ -16,8 +16,11 @@ def worker_main(conn, settings: ServerSettings) -> None:
         try:
             request_id, op, session_id, payload = pickle.loads(conn.recv_bytes())
         except EOFError:  # the front died: do not linger as an orphan
+            table.close_all()
             return
         if op in ("stop", "ping"):
+            if op == "stop":  # release the sessions' GL contexts and recording files before saying so
+                table.close_all()
             conn.send_bytes(pickle.dumps((request_id, 0, b"", None)))
             if op == "stop":
                 return

@@ -52,3 +52,31 @@ def test_async_session(url):
                 return updates
     updates = asyncio.run(main())
     assert [u.frame for u in updates] == list(range(1, 21)) and updates[0].cut
+
+
+def test_match_session_take_shot_sync_and_async(url):
+    from tests.server.test_match_sessions import frames, match_request
+
+    request = match_request(delay_s=0.0)
+    with cd.connect(url) as client:
+        kwargs = dict(targets=request.targets, style=request.style, delay_s=0.5, seed=3)
+        with client.create_session(**kwargs) as session:
+            list(session.stream(frames("", 30)))
+            shot = session.take_shot(["a0"])
+            assert list(shot.subject_ids) == ["a0"] and shot.kind == cd.pb.SHOT_FOLLOW
+            replies = list(session.stream(frames("", 30, start=30)))
+            assert list(replies[-1].shot.subject_ids) == ["a0"]
+            assert not session.take_shot(release=True).subject_ids
+            with pytest.raises(cd.DirectorError) as err:
+                session.take_shot(["nobody"])
+            assert err.value.code == grpc.StatusCode.NOT_FOUND
+
+    async def run_async():
+        async with cd.connect_async(url) as client:
+            async with client.create_session(**kwargs) as session:
+                for update in frames("", 20):
+                    await session.send(update)
+                shot = await session.take_shot(["a0", "b0"], cd.pb.SHOT_GROUP)
+                assert shot.kind == cd.pb.SHOT_GROUP
+
+    asyncio.run(run_async())

@@ -104,4 +104,5 @@ def test_encode_frame_update_parses_as_frame_update(frame, time_s, ids, data):
     encoded = wire.encode_frame_update("s1", frame, time_s, states, (ids, doubles))
     expected = wire.frame_update("s1", frame, time_s, states, (ids, doubles))
     assert pb.FrameUpdate.FromString(encoded) == expected
-    assert wire.encode_frame_update("s1", frame, time_s, states) == wire.frame_update("s1", frame, time_s, states).SerializeToString()
+    unpacked = wire.frame_update("s1", frame, time_s, states).SerializeToString()
+    assert wire.encode_frame_update("s1", frame, time_s, states) == unpacked

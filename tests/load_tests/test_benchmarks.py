@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from load_tests import dashboard_bench, overview_bench, stream, tracks_bench
+from load_tests import dashboard_bench, movers_bench, overview_bench, soak, stream, tracks_bench
 
 
 def _run(main, tmp_path, *args) -> dict:
@@ -43,3 +43,23 @@ def test_dashboard_bench_reports_watched_against_alone(tmp_path):
     result = _run(dashboard_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1")
     assert result["alone"]["dropped_frames"] == result["watched"]["dropped_frames"] == 0
     assert result["watched"]["detail_requests"] >= 1 and set(result["rtt_ratio_watched_vs_alone"]) == {"p50", "p99"}
+
+
+def test_soak_reports_memory_and_descriptors_over_every_kind_of_session(tmp_path):
+    result = _run(soak.main, tmp_path, "--minutes", "0.05", "--warmup-s", "2", "--sample-s", "0.5",
+                  "--workers", "1", "--frames", "5")
+    assert result["error_count"] == 0 and not result["worker_restarted"]
+    assert set(result["sessions"]) == {c.name for c in soak.combinations()} and min(result["sessions"].values()) >= 1
+    assert result["samples"] >= 3 and len(result["workers"]) == 1 and result["rss_slope_mb_per_min"] is not None
+    assert result["workers"][0]["open_fds"]["start"] > 0 and result["front"]["rss_mb"]["end"] > 0
+
+
+def test_movers_bench_reports_every_mode_and_count_against_none(tmp_path):
+    result = _run(movers_bench.main, tmp_path, "--frames", "20", "--warmup", "5", "--movers", "0,3")
+    cases = {(c["mode"], c["movers"]): c for c in result["cases"]}
+    assert set(cases) == {(m, n) for m in movers_bench.MODES for n in (0, 3)}
+    assert all(c["compute_ms"]["n"] == 20 and "ingest" in c["stage_ms_median"] for c in cases.values())
+    assert "projection" in cases[("ANTICIPATION", 3)]["stage_ms_median"]
+    assert set(result["median_ratio_to_0_movers"]) == set(movers_bench.MODES)
+    assert set(result["floor_stale_frame_ms"]) == {"median", "p99", "n"}
+

@@ -222,11 +222,12 @@ def test_abandoned_session_is_reclaimed_after_the_resume_window(server_factory):
 
 
 def test_a_dead_worker_is_replaced(server_factory):
-    """A worker killed by the OS loses its sessions (NOT_FOUND); new sessions work again."""
+    """A worker killed by the OS loses its sessions, which then answer UNAVAILABLE saying so, over
+    both transports; new sessions work again."""
     import os
     import signal
     srv = server_factory("--workers", "1")
-    client = GrpcRaw(srv.grpc)
+    client, zmq_client = GrpcRaw(srv.grpc), ZmqRaw(srv.zmq)
     session_id = client.call("CreateSession", two_target_request()).session_id
     children = [int(p) for p in open(f"/proc/{srv.proc.pid}/task/{srv.proc.pid}/children").read().split()]
     workers = [pid for pid in children if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read()]
@@ -237,12 +238,39 @@ def test_a_dead_worker_is_replaced(server_factory):
         try:
             client.call("Frame", list(walk(session_id, 1))[0])
         except RpcFailed as exc:
-            if exc.code == grpc.StatusCode.NOT_FOUND:
+            assert exc.code == grpc.StatusCode.UNAVAILABLE, exc  # never "unknown session id"
+            if "worker process holding it" in exc.message:
                 break
         time.sleep(0.2)
     else:
         pytest.fail("the killed worker's session still answers")
+    expect(grpc.StatusCode.UNAVAILABLE, zmq_client.call, "Frame", list(walk(session_id, 1, start_frame=2))[0],
+           contains="died")
+    expect(grpc.StatusCode.UNAVAILABLE, client.call, "CloseSession", pb.CloseSessionRequest(session_id=session_id),
+           contains="died")
+    expect(grpc.StatusCode.NOT_FOUND, client.call, "Frame", list(walk("never-made", 1))[0], contains="unknown")
     fresh = client.call("CreateSession", two_target_request()).session_id
     assert client.stream(list(walk(fresh, 5)))[-1].frame == 5
     assert srv.alive()
     client.close()
+    zmq_client.close()
+
+
+def test_session_id_given_twice_is_refused(server, canary):
+    """The front routes by the first session_id it reads; a message whose parsed session_id (the
+    last one) differs is refused, never run on another session. Raw bytes over both transports."""
+    client = GrpcRaw(server.grpc)
+    first = client.call("CreateSession", two_target_request(seed=2)).session_id
+    second = client.call("CreateSession", two_target_request(seed=3)).session_id
+    frame = list(walk(first, 1))[0].SerializeToString() + pb.FrameUpdate(session_id=second).SerializeToString()
+    raw_frame = client.channel.unary_unary("/camdirector.v1.Director/Frame")  # bytes in, bytes out
+    with pytest.raises(grpc.RpcError) as err:
+        raw_frame(frame, timeout=30)
+    assert err.value.code() == grpc.StatusCode.INVALID_ARGUMENT and "more than once" in err.value.details()
+    zmq_client = ZmqRaw(server.zmq)
+    code, body = zmq_client.send_raw([b"Frame", frame])
+    assert code == b"3" and b"more than once" in body, (code, body)
+    for session_id in (first, second):  # neither was advanced
+        assert client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id)).frames == 0
+    client.close()
+    zmq_client.close()

@@ -13,6 +13,7 @@ REPLY_TYPES = {
     "Frame": pb.CameraUpdate,
     "UpdateStyle": pb.UpdateStyleResponse,
     "CloseSession": pb.CloseSessionResponse,
+    "TakeShot": pb.TakeShotResponse,
 }
 
 
@@ -81,7 +82,8 @@ def capsule_target(target_id="hero", position=(0.0, 0.9, 0.0), aim=(0.0, 0.6, 0.
 
 def box_object(object_id, position, size=(1.0, 3.0, 1.0), dynamic=False) -> pb.SceneObject:
     return pb.SceneObject(id=object_id, dynamic=dynamic,
-                          mesh=pb.Mesh(primitive=pb.Primitive(box=pb.Primitive.Box(size=pb.Vec3(x=size[0], y=size[1], z=size[2])))),
+                          mesh=pb.Mesh(primitive=pb.Primitive(
+                              box=pb.Primitive.Box(size=pb.Vec3(x=size[0], y=size[1], z=size[2])))),
                           transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2])))
 
 

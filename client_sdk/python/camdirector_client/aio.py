@@ -41,6 +41,7 @@ class _AsyncTransport(Protocol):
     async def frame_encoded(self, update: bytes) -> pb.CameraUpdate: ...
     def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]: ...
     async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse: ...
+    async def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse: ...
     async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse: ...
     async def close(self) -> None: ...
 
@@ -97,6 +98,12 @@ class _AioGrpcTransport:
     async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
         try:
             return await self._stub.UpdateStyle(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    async def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
+        try:
+            return await self._stub.TakeShot(request, timeout=self._timeout_s)
         except grpc.RpcError as error:
             raise DirectorError.from_rpc_error(error) from None
 
@@ -193,6 +200,9 @@ class _AioZmqTransport:
         reply = await self._request(wire.RPC_UPDATE_STYLE, request.SerializeToString())
         return pb.UpdateStyleResponse.FromString(reply)
 
+    async def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
+        return pb.TakeShotResponse.FromString(await self._request(wire.RPC_TAKE_SHOT, request.SerializeToString()))
+
     async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
         reply = await self._request(wire.RPC_CLOSE_SESSION, request.SerializeToString())
         return pb.CloseSessionResponse.FromString(reply)
@@ -240,6 +250,12 @@ class AsyncSession(wire.SessionBase):
         """Replaces the whole style from the next frame on (unset fields take their defaults)."""
         request = pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style))
         await self._transport.update_style(request)
+
+    async def take_shot(self, subject_ids: Iterable[str] = (), kind: int = 0, *, release: bool = False) -> pb.ShotInfo:
+        """A human director's shot in a ``RIG_MATCH`` session: ``subject_ids`` (players) as ``kind``
+        (a ``pb.ShotKind``; 0: a duel for two, a follow for one, a group for more), held until a call
+        with ``release=True``. Answers the shot now held (empty after a release)."""
+        return (await self._transport.take_shot(wire.take_shot_request(self.id, subject_ids, kind, release))).shot
 
     async def close(self) -> int:
         """Closes the session on the server; answers how many frames it answered. Idempotent."""
@@ -308,13 +324,14 @@ class AsyncClient:
         seed: int = 0,
         record: bool = False,
         level_id: str = "",
+        delay_s: float = 0.0,
     ) -> _SessionOpening:
         """Opens a session: ``session = await client.create_session(...)`` or
         ``async with client.create_session(...) as session``. Arguments as in the sync client.
         """
         msg = wire.create_session_request(
             request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
-            level_id=level_id,
+            level_id=level_id, delay_s=delay_s,
         )
         return _SessionOpening(self._open_session(msg))
 

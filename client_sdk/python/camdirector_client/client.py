@@ -36,6 +36,7 @@ class _Transport(Protocol):
     def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]: ...
     def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse: ...
     def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse: ...
+    def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse: ...
     def close(self) -> None: ...
 
 
@@ -92,6 +93,12 @@ class _GrpcTransport:
     def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
         try:
             return self._stub.CloseSession(request, timeout=self._timeout_s)
+        except grpc.RpcError as error:
+            raise DirectorError.from_rpc_error(error) from None
+
+    def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
+        try:
+            return self._stub.TakeShot(request, timeout=self._timeout_s)
         except grpc.RpcError as error:
             raise DirectorError.from_rpc_error(error) from None
 
@@ -188,6 +195,9 @@ class _ZmqTransport:
         reply = self._request(wire.RPC_CLOSE_SESSION, request.SerializeToString())
         return pb.CloseSessionResponse.FromString(reply)
 
+    def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
+        return pb.TakeShotResponse.FromString(self._request(wire.RPC_TAKE_SHOT, request.SerializeToString()))
+
     def close(self) -> None:
         self._closed = True
         idle, self._idle = self._idle, []
@@ -242,6 +252,12 @@ class Session(wire.SessionBase):
         """Replaces the whole style from the next frame on (unset fields take their defaults)."""
         self._transport.update_style(pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style)))
 
+    def take_shot(self, subject_ids: Iterable[str] = (), kind: int = 0, *, release: bool = False) -> pb.ShotInfo:
+        """A human director's shot in a ``RIG_MATCH`` session: ``subject_ids`` (players) as ``kind``
+        (a ``pb.ShotKind``; 0: a duel for two, a follow for one, a group for more), held until a call
+        with ``release=True``. Answers the shot now held (empty after a release)."""
+        return self._transport.take_shot(wire.take_shot_request(self.id, subject_ids, kind, release)).shot
+
     def close(self) -> int:
         """Closes the session on the server; answers how many frames it answered. Idempotent."""
         if self._closed_frames is None:
@@ -285,11 +301,12 @@ class Client:
         seed: int = 0,
         record: bool = False,
         level_id: str = "",
+        delay_s: float = 0.0,
     ) -> Session:
         """Opens a session from a ``CreateSessionRequest`` or from its fields as keywords."""
         msg = wire.create_session_request(
             request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
-            level_id=level_id,
+            level_id=level_id, delay_s=delay_s,
         )
         return Session(self._transport, self._transport.create_session(msg))
 

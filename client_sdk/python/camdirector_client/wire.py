@@ -47,6 +47,7 @@ RPC_CREATE_SESSION = b"CreateSession"
 RPC_FRAME = b"Frame"
 RPC_UPDATE_STYLE = b"UpdateStyle"
 RPC_CLOSE_SESSION = b"CloseSession"
+RPC_TAKE_SHOT = b"TakeShot"
 ZMQ_OK = b"0"
 
 States = Iterable[pb.ObjectState] | Mapping[str, pb.Transform]
@@ -107,15 +108,17 @@ def create_session_request(
     seed: int,
     record: bool,
     level_id: str = "",
+    delay_s: float = 0.0,
 ) -> pb.CreateSessionRequest:
     """``request`` as it is, or one built from the keywords; TypeError when given both.
-    ``level_id``: the level of a ``RIG_TRACKS`` session."""
+    ``level_id``: the level of a ``RIG_TRACKS`` or ``RIG_MATCH`` session; ``delay_s``: a
+    ``RIG_MATCH`` session's broadcast delay, seconds."""
     if request is not None:
         if (objects is not None or targets is not None or lens is not None or style is not None or seed or record
-                or level_id):
+                or level_id or delay_s):
             raise TypeError("pass either a CreateSessionRequest or keywords, not both")
         return request
-    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id)
+    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id, delay_s=delay_s)
     if objects is not None:
         msg.objects.extend(objects)
     if targets is not None:
@@ -125,6 +128,12 @@ def create_session_request(
     if style is not None:
         msg.style.CopyFrom(style_msg(style))
     return msg
+
+
+def take_shot_request(session_id: str, subject_ids: Iterable[str], kind: int, release: bool) -> pb.TakeShotRequest:
+    """A ``TakeShotRequest``: hold ``subject_ids`` as ``kind`` (a ``pb.ShotKind``; 0: by their
+    count), or give the program back to the director with ``release``."""
+    return pb.TakeShotRequest(session_id=session_id, subject_ids=list(subject_ids), kind=kind, release=release)
 
 
 def style_msg(style: pb.Style | Mapping[str, Any]) -> pb.Style:

@@ -1,5 +1,6 @@
 // The director's dashboard. Reads the REST API only: /healthz, /v1/sessions, /v1/sessions/{id},
-// PUT /v1/sessions/{id}/style, /v1/overview-jobs. Data is written with textContent, never as HTML.
+// PUT /v1/sessions/{id}/style, POST /v1/sessions/{id}/take (a MATCH session's take and release),
+// /v1/overview-jobs. Data is written with textContent, never as HTML.
 "use strict";
 
 const POLL_SESSIONS_MS = 1000;   // the session list and the jobs
@@ -9,11 +10,14 @@ const TOP_VIEW_MARGIN_M = 2.0;   // space around the trails in the top view, m
 const MAP_MODES = ["ANTICIPATION", "NO_ANTICIPATION"];   // the styles that build the map
 
 const TIMELINE_FRAMES = 600;     // frames shown, as many as the server keeps per session
+const EVENT_LOG_SIZE = 50;       // game events listed for a MATCH session, newest first
+const TEAM_COLOURS = ["#e07b00", "#8e24aa", "#2e7d32", "#795548"];   // by team number, cycling
 
 let selected = null;             // the selected session id
 let styleSentBySession = {};     // session id -> the style the form was last filled from (JSON text)
 let currentStyle = {};           // the selected session's style, as the server reported it
-let buffered = { session: null, frames: [] };   // the selected session's frames seen so far
+let buffered = { session: null, frames: [], events: [] };   // the selected session's frames and game events seen
+let candidatesShown = "";        // the candidates the table shows (JSON), redrawn only when they change
 
 async function api(path, options = {}) {
   const reply = await fetch(path, options);
@@ -77,8 +81,11 @@ function select(sessionId) {
 async function refreshSession() {
   const sessionId = selected;
   if (!sessionId) return;
-  if (buffered.session !== sessionId) buffered = { session: sessionId, frames: [] };
-  const seen = buffered.frames.length ? buffered.frames[buffered.frames.length - 1].frame : null;
+  if (buffered.session !== sessionId) buffered = { session: sessionId, frames: [], events: [] };
+  const newest = buffered.frames[buffered.frames.length - 1];
+  // A MATCH session's program frames replace its buffering ones and are numbered from the game's
+  // first moment: while buffering, ask for everything.
+  const seen = newest && !newest.buffering ? newest.frame : null;
   let detail;
   try {   // only the frames not seen yet: a few dozen a poll instead of 600
     detail = await api(`/v1/sessions/${encodeURIComponent(sessionId)}` + (seen === null ? "" : `?after_frame=${seen}`));
@@ -86,11 +93,19 @@ async function refreshSession() {
     return;  // closed or reclaimed: the list says so
   }
   if (buffered.session !== sessionId) return;   // another session was picked meanwhile
-  buffered.frames = buffered.frames.concat(detail.frames).slice(-TIMELINE_FRAMES);
+  const fresh = detail.frames.flatMap((f) => f.events || []);
+  if (seen === null) {
+    buffered.frames = detail.frames;
+    buffered.events = fresh;
+  } else {
+    buffered.frames = buffered.frames.concat(detail.frames).slice(-TIMELINE_FRAMES);
+    buffered.events = buffered.events.concat(fresh).slice(-EVENT_LOG_SIZE);
+  }
   const frames = buffered.frames;
   drawTopView(frames);
   drawTimeline(frames);
   showWhy(frames);
+  showMatch(frames, buffered.events);
   showStyle(detail.style);
   showAnticipationMap(detail.style, frames);
 }
@@ -106,10 +121,12 @@ function showAnticipationMap(style, frames) {
 
 function bounds(frames) {
   const xs = [], zs = [];
+  const add = (p) => { xs.push(p[0]); zs.push(p[2]); };
   for (const f of frames) {
-    xs.push(f.camera[0]); zs.push(f.camera[2]);
-    for (const t of f.targets) { xs.push(t[0]); zs.push(t[2]); }
+    if (f.camera) add(f.camera);   // none while a MATCH session buffers
+    f.targets.forEach(add);
   }
+  for (const c of frames[frames.length - 1].candidates || []) add(c.camera);
   return { x0: Math.min(...xs) - TOP_VIEW_MARGIN_M, x1: Math.max(...xs) + TOP_VIEW_MARGIN_M,
            z0: Math.min(...zs) - TOP_VIEW_MARGIN_M, z1: Math.max(...zs) + TOP_VIEW_MARGIN_M };
 }
@@ -128,32 +145,55 @@ function drawTopView(frames) {
     points.forEach((p, i) => (i ? g.lineTo(...at(p)) : g.moveTo(...at(p))));
     g.stroke();
   };
-  const targetCount = frames[frames.length - 1].targets.length;
-  for (let k = 0; k < targetCount; k++) {
-    trail(frames.filter((f) => f.targets.length > k).map((f) => f.targets[k]), "#e07b00");
+  const last = frames[frames.length - 1];
+  const colour = (k) => (last.teams ? TEAM_COLOURS[last.teams[k] % TEAM_COLOURS.length] : "#e07b00");
+  for (let k = 0; k < last.targets.length; k++) {
+    trail(frames.filter((f) => f.targets.length > k).map((f) => f.targets[k]), colour(k));
   }
-  g.fillStyle = "#e07b00";                       // where each target is now
-  for (const t of frames[frames.length - 1].targets) {
+  last.targets.forEach((t, k) => {               // where each target is now
+    g.fillStyle = colour(k);
     g.beginPath();
     g.arc(...at(t), 4, 0, 2 * Math.PI);
     g.fill();
-  }
-  trail(frames.map((f) => f.camera), "#2a62c9");
+  });
+  if (last.players) drawMatchMarks(g, at, last);
+  const posed = frames.filter((f) => f.camera);
+  if (!posed.length) return;
+  trail(posed.map((f) => f.camera), "#2a62c9");
   g.strokeStyle = "#c62828";
   for (const f of frames.filter((f) => f.cut)) {
     g.beginPath();
     g.arc(...at(f.camera), 6, 0, 2 * Math.PI);
     g.stroke();
   }
-  const last = frames[frames.length - 1];
-  const [cx, cz] = at(last.camera);
+  const camera = posed[posed.length - 1];
+  const [cx, cz] = at(camera.camera);
   g.strokeStyle = "#2a62c9";
   g.lineWidth = 2;
   g.beginPath();
   g.moveTo(cx, cz);
-  g.lineTo(cx + last.forward[0] * 30, cz + last.forward[2] * 30);
+  g.lineTo(cx + camera.forward[0] * 30, cz + camera.forward[2] * 30);
   g.stroke();
   g.lineWidth = 1;
+}
+
+function drawMatchMarks(g, at, last) {   // the program's subjects ringed, the candidates' cameras
+  g.strokeStyle = "#222";
+  for (const id of last.shot ? last.shot.subject_ids : []) {
+    const k = last.players.indexOf(id);
+    g.beginPath();
+    g.arc(...at(last.targets[k]), 8, 0, 2 * Math.PI);
+    g.stroke();
+  }
+  g.strokeStyle = g.fillStyle = "#888";
+  for (const c of last.candidates) {
+    const [x, z] = at(c.camera);
+    g.fillRect(x - 3, z - 3, 6, 6);
+    g.beginPath();
+    g.moveTo(x, z);
+    g.lineTo(x + c.forward[0] * 15, z + c.forward[2] * 15);
+    g.stroke();
+  }
 }
 
 function drawTimeline(frames) {
@@ -198,16 +238,89 @@ function showWhy(frames) {
   add(`frame ${last.frame}: ${last.flags.length ? last.flags.join(", ") : "on its preferred path (no flag)"}` +
       scored(last.scores));
   for (const f of frames.filter((f) => f.cut).reverse()) {
-    add(`cut at frame ${f.frame} to shot ${f.shot_id}: ${f.flags.length ? f.flags.join(", ") : "new shot"}` +
+    const why = [f.shot ? f.shot.reason : null, ...f.flags].filter(Boolean);
+    add(`cut at frame ${f.frame} to shot ${f.shot_id}: ${why.length ? why.join(", ") : "new shot"}` +
         scored(f.scores));
   }
 }
 
-function scored(scores) {   // the TRACKS rig's sub-scores of the target it chose, and their total
+function scored(scores) {   // TRACKS: the sub-scores of the target it chose and their total; MATCH: the shot's
   const names = Object.keys(scores || {}).filter((k) => k !== "total");
   if (!names.length) return "";
   const parts = names.map((k) => `${k.replaceAll("_", " ")} ${scores[k].toFixed(2)}`);
-  return `; target scored ${parts.join(", ")}: total ${scores.total.toFixed(2)}`;
+  return "total" in scores ? `; target scored ${parts.join(", ")}: total ${scores.total.toFixed(2)}`
+    : `; scored ${parts.join(", ")}`;
+}
+
+// -- match ----------------------------------------------------------------------------------
+
+function describeShot(shot) {
+  const who = shot.subject_ids.length ? shot.subject_ids.join(", ") : "the map";
+  return `${shot.kind.replace("SHOT_", "")} ${who}`;
+}
+
+function showMatch(frames, events) {
+  const last = frames[frames.length - 1];
+  const match = Boolean(last && last.players);
+  document.getElementById("match-view").hidden = !match;
+  document.getElementById("match-caption").hidden = !match;
+  if (!match) return;
+  const program = document.getElementById("program-shot");
+  // The match rig starts the reason of a human's shot, and of its fallback, with "take".
+  const held = Boolean(last.shot && last.shot.reason.startsWith("take"));
+  program.textContent = last.buffering || !last.shot ? "buffering: the broadcast delay is filling, no camera yet"
+    : `${describeShot(last.shot)} (${held ? "held" : "the director's"}): ${last.shot.reason}`;
+  program.classList.toggle("held", held);
+  document.getElementById("release").hidden = !held;
+  const cut = last.planned_cut;
+  document.getElementById("planned-cut").textContent = cut
+    ? `in ${(cut.time_s - last.time_s).toFixed(1)} s (at ${cut.time_s.toFixed(1)} s) to ${describeShot(cut.shot)}: ` +
+      cut.shot.reason
+    : held ? "none while a take is held" : "none: the director decides as the game goes (a delay shows what it plans)";
+  showCandidates(last.candidates);
+  const log = document.getElementById("event-log");
+  log.replaceChildren(...events.slice().reverse().map((e) => {
+    const li = document.createElement("li");
+    const who = e.other_actor_id ? `${e.actor_id} → ${e.other_actor_id}` : e.actor_id;
+    li.textContent = `${e.time_s.toFixed(2)} s ${e.kind.replace("EVENT_", "").toLowerCase()} ${who}` +
+      (e.label ? `: ${e.label}` : "");
+    return li;
+  }));
+}
+
+function showCandidates(candidates) {
+  const key = JSON.stringify(candidates.map((c) => [c.shot, c.score]));
+  if (key === candidatesShown) return;   // a button does not move under the pointer between polls
+  candidatesShown = key;
+  const body = document.querySelector("#candidates tbody");
+  body.replaceChildren();
+  for (const c of candidates) {
+    const row = document.createElement("tr");
+    row.dataset.subjects = c.shot.subject_ids.join(",");
+    cell(row, c.shot.kind.replace("SHOT_", ""));
+    cell(row, c.shot.subject_ids.join(", "));
+    cell(row, c.shot.reason);
+    cell(row, c.score.toFixed(2));
+    const button = document.createElement("button");
+    button.textContent = "take";
+    button.addEventListener("click", () => take({ subject_ids: c.shot.subject_ids, kind: c.shot.kind }));
+    cell(row, "").appendChild(button);
+    body.appendChild(row);
+  }
+}
+
+async function take(body) {
+  const result = document.getElementById("take-result");
+  try {
+    const reply = await api(`/v1/sessions/${encodeURIComponent(selected)}/take`, {
+      method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body),
+    });
+    result.className = "ok";
+    result.textContent = reply.shot ? `taken: ${describeShot(reply.shot)}, held until released` : "released";
+  } catch (error) {
+    result.className = "error";
+    result.textContent = error.message;
+  }
 }
 
 // -- style ----------------------------------------------------------------------------------
@@ -316,6 +429,7 @@ function every(ms, task) {
 }
 
 document.getElementById("style-form").addEventListener("submit", applyStyle);
+document.getElementById("release").addEventListener("click", () => take({ release: true }));
 document.getElementById("overview-form").addEventListener("submit", submitOverview);
 every(POLL_SESSIONS_MS, refreshSessions);
 every(POLL_SESSIONS_MS, refreshJobs);

@@ -153,7 +153,8 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
     def add_level(
         name: Annotated[str, Form(description="1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")],
         level: Annotated[UploadFile, File(description="the level's geometry, .obj or .glb")],
-        navmesh: Annotated[UploadFile | None, File(description="its navigation mesh, .obj or .glb (derived from the walkable surfaces when absent)")] = None,
+        navmesh: Annotated[UploadFile | None, File(
+            description="its navigation mesh, .obj or .glb (derived from the walkable surfaces when absent)")] = None,
         scale: Annotated[float, Form(gt=0, description="metres per file unit")] = 1.0,
         agent_height: Annotated[float, Form(description="agent (and actor) height, m, [0.1, 100]")] = 2.0,
         agent_radius: Annotated[float, Form(description="agent radius, m, [0, 50]")] = 0.6,

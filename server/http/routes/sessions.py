@@ -5,16 +5,25 @@
     GET /v1/sessions/{id}/amap.png        the map modes' anticipation map around the camera now
     PUT /v1/sessions/{id}/style           body: a camdirector.v1.Style in protobuf's JSON mapping
                                           -> {"session_id", "style"}; as UpdateStyle on the wire
+    POST /v1/sessions/{id}/take           body: a camdirector.v1.TakeShotRequest in protobuf's JSON
+                                          mapping without session_id ({"subject_ids": [..],
+                                          "kind": "SHOT_DUEL", "release": false}) -> {"session_id",
+                                          "shot": the shot held, null after a release}; as TakeShot
 
 A summary is the router's (worker, frames, streams, idle and age in s, transports); frames are the
 session's timeline (`timeline.py`): camera position and view direction, target aim points, cut,
-shot id, visibility, the flags that say why the camera moved, compute time. A style sent here
+shot id, visibility, the flags that say why the camera moved, compute time; a MATCH session's
+also the program's shot, the candidate shots, the players and their teams, the game events and the
+planned next cut (while its broadcast delay fills, frames without a camera). A style sent here
 replaces the session's whole style, exactly as `UpdateStyle` does (and is recorded the same way),
-so the client streaming the session sees the change on its next frame.
+so the client streaming the session sees the change on its next frame. A take (a MATCH session's,
+the dashboard's take button) holds a human's shot from the program's next frame until released.
 
 Errors as on the wire, with the same messages: an unknown session 404, a style the rig refuses 422
 (INVALID_ARGUMENT) or 409 (FAILED_PRECONDITION), a body that is not a Style 422, one that
-is not JSON at all 400.
+is not JSON at all 400; a take naming an unknown player 404, for a session of another rig 409, a
+body that is not a TakeShotRequest (or names a session) or a kind that does not fit its players 422;
+a worker lost while answering 503.
 """
 from __future__ import annotations
 
@@ -51,18 +60,54 @@ class SessionList(BaseModel):
     sessions: list[SessionSummary]
 
 
+class ShotOut(BaseModel):
+    subject_ids: list[str] = Field(description="players shown")
+    kind: str = Field(description="camdirector.v1.ShotKind name (SHOT_DUEL, SHOT_FOLLOW, SHOT_GROUP, SHOT_OVERVIEW)")
+    reason: str
+
+
+class CandidateOut(BaseModel):
+    shot: ShotOut
+    score: float = Field(ge=0.0, description="the director's interest, comparable within one frame")
+    camera: list[float] = Field(description="its camera position, m")
+    forward: list[float] = Field(description="its unit view direction")
+
+
+class GameEventOut(BaseModel):
+    time_s: float = Field(description="game time, s")
+    kind: str = Field(description="camdirector.v1.EventKind name (EVENT_KILL, ...)")
+    actor_id: str = Field(description="for a kill, the attacker")
+    other_actor_id: str = Field(description="for a kill, the victim")
+    priority: int = Field(ge=0, le=15, description="as sent; 0: the kind's default")
+    label: str
+
+
+class PlannedCutOut(BaseModel):
+    time_s: float = Field(description="program time of the cut, s")
+    shot: ShotOut
+
+
 class TimelineFrameOut(BaseModel):
     frame: int
     time_s: float
-    camera: list[float] = Field(description="camera position, m")
-    forward: list[float] = Field(description="unit view direction")
-    targets: list[list[float]] = Field(description="aim point of each target, m")
+    camera: list[float] | None = Field(description="camera position, m; null while a MATCH session buffers")
+    forward: list[float] | None = Field(description="unit view direction; null while a MATCH session buffers")
+    targets: list[list[float]] = Field(description="aim point of each target (MATCH: each player), m")
     cut: bool
     shot_id: int
     visibility: float = Field(ge=0.0, le=1.0)
     flags: list[str] = Field(description="why the camera moved or degraded (search_cut, pulled_in, ...)")
-    scores: dict[str, float] = Field(description="TRACKS: sub-scores in [0, 1] of the target chosen, and their total")
+    scores: dict[str, float] = Field(description="TRACKS: sub-scores in [0, 1] of the target chosen, and their "
+                                                 "total; MATCH: the shot's")
     compute_ms: float
+    # MATCH sessions only (timeline.py): the program, what the director could cut to, and what it plans
+    buffering: bool | None = Field(None, description="the broadcast delay is still filling: no camera")
+    shot: ShotOut | None = Field(None, description="the program's shot")
+    candidates: list[CandidateOut] | None = Field(None, description="the best other shots now")
+    players: list[str] | None = Field(None, description="player ids in target order")
+    teams: list[int] | None = Field(None, description="each player's team, in target order")
+    events: list[GameEventOut] | None = Field(None, description="game events at this program moment")
+    planned_cut: PlannedCutOut | None = Field(None, description="the director's next planned cut, if any")
 
 
 class SessionDetail(BaseModel):
@@ -74,6 +119,11 @@ class SessionDetail(BaseModel):
 class StyleChanged(BaseModel):
     session_id: str
     style: dict[str, Any]
+
+
+class ShotTaken(BaseModel):
+    session_id: str
+    shot: ShotOut | None = Field(description="the shot now held until released; null after a release")
 
 
 def http_error(exc: DirectorError) -> HTTPException:
@@ -139,5 +189,33 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         except DirectorError as exc:
             raise http_error(exc) from None
         return {"session_id": session_id, "style": json_format.MessageToDict(msg)}
+
+    @routes.post("/{session_id}/take", response_model=ShotTaken, responses={
+        400: {"description": "the body cannot be read as JSON"},
+        404: {"description": "no such session, or a subject that is not one of its players"},
+        409: {"description": "not a MATCH session"},
+        422: {"description": "not a TakeShotRequest, or a kind that does not fit the subjects"}, 503: _WORKER_LOST})
+    async def take_shot(
+        session_id: str,
+        take: Annotated[dict[str, Any], Body(description="camdirector.v1.TakeShotRequest without session_id, "
+                                                          'protobuf JSON (e.g. {"subject_ids": ["p1", "p6"], '
+                                                          '"kind": "SHOT_DUEL"} or {"release": true})')],
+    ) -> dict:
+        """Hold a human's shot on a MATCH session's program until released, as TakeShot does."""
+        if {"session_id", "sessionId"} & take.keys():
+            raise HTTPException(status_code=422, detail="the session is the path's: leave session_id out of the body")
+        try:
+            msg = json_format.ParseDict(take, pb.TakeShotRequest())
+        except json_format.ParseError as exc:
+            raise HTTPException(status_code=422, detail=f"not a camdirector.v1.TakeShotRequest: {exc}") from None
+        msg.session_id = session_id
+        try:
+            reply = pb.TakeShotResponse.FromString(await router.take_shot(msg.SerializeToString()))
+        except DirectorError as exc:
+            raise http_error(exc) from None
+        shot = (json_format.MessageToDict(reply.shot, preserving_proto_field_name=True,
+                                          always_print_fields_with_no_presence=True)
+                if reply.HasField("shot") else None)
+        return {"session_id": session_id, "shot": shot}
 
     return routes

@@ -3,14 +3,16 @@ of the paper's 2r target sample points, refreshed on its amortized schedule, and
 anticipation map the search reads (occlusion-anticipation-toric-space.md, sections 4, 4.2, 6).
 
 Built lazily, the first time a session enters a map mode: it keeps its own occluder scene (the
-backends hold their own acceleration data), fed each frame with the moved objects and their
-velocities, estimated here by finite differences of successive transforms (an object a frame
-does not mention has not moved: velocity zero).
+backends hold their own acceleration data). Each frame only records the moved objects' poses
+(`ingest`: a dictionary write per object); the frames that build maps (the amortized schedule,
+one in several) move the scene's objects and give them velocities, by finite differences of
+each object's last two poses (an object the latest frame does not mention has not moved:
+velocity zero), all objects at once. So many moving objects cost the frames between map builds
+nearly nothing.
 """
 from __future__ import annotations
 
 import functools
-import time
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -20,6 +22,8 @@ from camdirector.geometry.toric import Torus
 from camdirector.geometry.toric_maps import OccluderScene, choose_backend, make_backend, probe_gl_renderer
 from camdirector.geometry.toric_maps.base import MapWindow, WindowSettings
 from camdirector.geometry.transforms import RigidTransform
+from camdirector.precompute.stage_clock import StageClock
+from camdirector.server.pipeline.stages import Stage
 from camdirector.server.pipeline.style import MapBackendChoice, Style, VisibilityMode
 from camdirector.server.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, KernelBank, StyleMaskSettings
 from camdirector.server.pipeline.toric.target_sampling import TargetSampler
@@ -41,8 +45,10 @@ class OcclusionMaps:
         self.scene = OccluderScene(static_meshes_world)
         for object_id, (mesh, transform) in dynamic.items():
             self.scene.add_dynamic(object_id, mesh, transform)
-        self._last_pose = {object_id: (transform, None) for object_id, (_, transform) in dynamic.items()}
-        self._moving: set[str] = set()
+        # object id -> (latest transform, its time, the transform before, its time); times None until moved
+        self._poses: dict[str, tuple] = {object_id: (transform, None, None, None)
+                                         for object_id, (_, transform) in dynamic.items()}
+        self._time_s: float | None = None  # of the latest frame ingested
         self.sampler = sampler
         self.rng = rng
         self._backend_key = None
@@ -76,34 +82,38 @@ class OcclusionMaps:
         return self._backend_key
 
     def ingest(self, moved: list[tuple[str, RigidTransform]], time_s: float) -> None:
-        """Poses and finite-difference velocities of the dynamic objects for this frame."""
-        seen = set()
+        """Records this frame's poses of the moved dynamic objects (targets are skipped)."""
+        poses = self._poses
         for object_id, transform in moved:
-            if object_id not in self._last_pose:
-                continue  # a target
-            seen.add(object_id)
-            previous, at_s = self._last_pose[object_id]
-            linear = angular = np.zeros(3)
-            if at_s is not None and time_s > at_s:
-                dt = time_s - at_s
-                linear = (transform.position_world - previous.position_world) / dt
-                turn = Rotation.from_quat(transform.rotation_xyzw) * Rotation.from_quat(previous.rotation_xyzw).inv()
-                angular = turn.as_rotvec() / dt
-            self.scene.set_motion(object_id, transform, linear, angular)
-            self._last_pose[object_id] = (transform, time_s)
-        for object_id in self._moving - seen:  # not mentioned: it stopped
-            self.scene.set_motion(object_id, self._last_pose[object_id][0])
-            self._last_pose[object_id] = (self._last_pose[object_id][0], time_s)
-        self._moving = seen
+            entry = poses.get(object_id)
+            if entry is not None:
+                poses[object_id] = (transform, time_s, entry[0], entry[1])
+        self._time_s = time_s
+
+    def _move_scene(self) -> None:
+        """Every dynamic object at its latest pose with its velocity (module docstring), in the
+        occluder scene, in one call, before a map build."""
+        ids, entries = list(self._poses), list(self._poses.values())
+        linear, angular = np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
+        moving = [k for k, (_, at_s, before, before_s) in enumerate(entries)
+                  if at_s == self._time_s and before_s is not None and at_s > before_s]
+        if moving:
+            now, before = [entries[k][0] for k in moving], [entries[k][2] for k in moving]
+            dt = np.array([entries[k][1] - entries[k][3] for k in moving])[:, None]
+            turn = Rotation.from_quat([tf.rotation_xyzw for tf in now]) * \
+                Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
+            linear[moving] = (np.array([tf.position_world for tf in now])
+                              - np.array([tf.position_world for tf in before])) / dt
+            angular[moving] = turn.as_rotvec() / dt
+        self.scene.set_motions(ids, [entry[0] for entry in entries], linear, angular)
 
     def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms,
-               target_ids: list[str]) -> dict[str, float]:
-        """Refreshes the maps due at time_s (2 of the 2r per update, one update every W / r s).
-        Returns stage times in ms ({} when nothing was due)."""
+               target_ids: list[str], stages: StageClock) -> None:
+        """Refreshes the maps due at time_s (2 of the 2r per update, one update every W / r s),
+        lapping PROJECTION and AMAP on `stages` (neither when nothing was due)."""
         amap = self.amap
-        timings: dict[str, float] = {}
         if amap.due(time_s):
-            t0 = time.perf_counter()
+            self._move_scene()
             slots = amap.next_slots()
             self.sampler.redraw(slots, self.rng)
             window = MapWindow.around(torus, theta, phi, amap.settings.window, lattice=amap.window)
@@ -112,11 +122,10 @@ class OcclusionMaps:
                                         exclude_ids=[target_ids[self.sampler.target_of(s)] for s in slots],
                                         previous_torus=previous_torus if dt_s > 0 else None,
                                         dt_s=max(dt_s, 0.0))
-            t1 = time.perf_counter()
+            stages.done(Stage.PROJECTION)
             amap.refresh(time_s, slots, maps, torus)
-            timings = {"projection": (t1 - t0) * 1e3, "amap": (time.perf_counter() - t1) * 1e3}
+            stages.done(Stage.AMAP)
         self._previous = (torus, time_s)
-        return timings
 
     def invalidate(self) -> None:
         """After a cut: the old window is elsewhere."""
@@ -127,5 +136,7 @@ class OcclusionMaps:
         return self.amap.lookup(theta, phi, outside=1.0)
 
     def close(self) -> None:
+        """Releases the backend (its GL objects, or its Embree scenes); idempotent."""
         if self.backend is not None:
             self.backend.close()
+            self.backend = None

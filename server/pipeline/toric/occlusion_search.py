@@ -15,8 +15,9 @@ and p(v) = p + v dt (1 - c/m dt) where it would coast to:
      (no prediction), pruned by the 30-degree rule; a less occluded one is cut to, velocity reset;
   4. otherwise coast: p_next = p(v).
 Then v_next = (p_next - p) / dt (1 - c/m dt) (kept undamped as the realised velocity, the damping
-applied when it is used, so the limits below compare against the motion that really happened). The risk the local searches read is a `RiskField`:
-the A-map (ANTICIPATION), the averaged S-maps (NO_ANTICIPATION) or ray casts (RAYCAST).
+applied when it is used, so the limits below compare against the motion that really happened).
+The risk the local searches read is a `RiskField`: the A-map (ANTICIPATION), the averaged S-maps
+(NO_ANTICIPATION) or ray casts (RAYCAST).
 
 Beyond the paper, stated here because they change behaviour: the style's speed and acceleration
 limits clamp every non-cut step (so motion stays physically plausible whatever the risk field
@@ -61,7 +62,7 @@ class SearchSettings:
     stuck_occluded: float = 0.5      # ray-cast occluded share of the samples that counts as "stuck" (not in the paper). [0, 1]
     stuck_s: float = 0.25            # stuck this long: try the cut before any local move (not in the paper), s. [0, 60]
     theta_margin_ratio: float = 0.2   # the camera keeps this share of theta's range from either end (not in the paper). [0, 0.45]
-    view_phi_margin_deg: float = 25.0  # the camera keeps this far from top (phi 0) and bottom (phi 180) views (not in the paper), deg. [0, 89]
+    view_phi_margin_deg: float = 25.0  # margin kept from top (phi 0) and bottom (phi 180) views (not in the paper), deg. [0, 89]
 
     def __post_init__(self):
         if not (1 <= self.samples <= 10000 and 1 <= self.cut_samples <= 100000 and self.look_ahead_frames >= 2):

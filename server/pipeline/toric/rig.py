@@ -1,12 +1,13 @@
 """The TORIC rig of a session: framing on the Toric manifold and the camera's motion on it, with
-the visibility mode of the session's style (pipeline.py: FRAMING, PROJECTION, AMAP, MOTION and
-VISIBILITY; the TRACKS rig, tracks_rig.py, replaces all five).
+the visibility mode of the session's style (server/pipeline/stages.py: FRAMING, PROJECTION, AMAP,
+MOTION and VISIBILITY; the TRACKS rig, pipeline/tracks/rig.py, replaces all five).
 
 Per frame `ToricRig.run` frames the targets (framing.py), moves the camera by the style's
 visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE: that plus reactive.py; RAYCAST and the
 map modes: occlusion_search.py, the map modes with occlusion_maps.py) and estimates the targets'
 visibility (visibility.py). The occlusion maps are built when a map mode is first asked for, at
-creation when the style starts in one, so the first frame does not pay for them.
+creation when the style starts in one, so the first frame does not pay for them; `close()`
+releases their backend (its GL objects, or Embree scenes) when the session ends.
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.toric import torus_angles
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
+from camdirector.precompute.stage_clock import StageClock
+from camdirector.server.pipeline.inputs import FrameInput, SceneSpec
 from camdirector.server.pipeline.stages import FrameState, Stage
 from camdirector.server.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
 from camdirector.server.pipeline.toric.camera_motion import ToricMotion, pose_on_torus
@@ -30,7 +33,6 @@ from camdirector.server.pipeline.toric.occlusion_search import OcclusionSearch, 
 from camdirector.server.pipeline.toric.reactive import Deoccluder
 from camdirector.server.pipeline.toric.target_sampling import TargetSampler
 from camdirector.server.pipeline.toric.visibility import VisibilityEstimate
-from camdirector.server.pipeline.inputs import FrameInput, SceneSpec
 
 
 class ToricRig:
@@ -50,13 +52,13 @@ class ToricRig:
         self.motion = ToricMotion(self.style, self.lens)
         self.visibility = VisibilityEstimate(ray_scene, [t.mesh for t in scene.targets], rng)
         self.sampler = TargetSampler([t.mesh for t in scene.targets], rng)  # the paper's 2r points
-        self.maps: OcclusionMaps | None = None
-        if self.style.visibility in MAP_MODES:
-            self._build_maps()
         self.search = OcclusionSearch(SearchSettings(), rng)
         self.deoccluder = Deoccluder(ray_scene)
         self._searching = False  # whether the search particle holds the camera's place
         self._style_cut = False
+        self.maps: OcclusionMaps | None = None
+        if self.style.visibility in MAP_MODES:  # last: nothing after it can fail and leave its GL objects behind
+            self._build_maps()
 
     def set_style(self, style: Style) -> None:
         """From the next frame on. A changed composition cannot be reached smoothly: it is a cut."""
@@ -83,34 +85,35 @@ class ToricRig:
     def _build_maps(self) -> None:
         self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 
+    def close(self) -> None:
+        """Releases the occlusion maps' backend; idempotent."""
+        if self.maps is not None:
+            self.maps.close()
+            self.maps = None
+
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
-        """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY, timed into state; a composition
-        changed by set_style since the last frame makes this frame a cut."""
-        t1 = self.clock()
-        self.framing.run(state)  # Stage.FRAMING
+        """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY, timed into state.stage_ms; a
+        composition changed by set_style since the last frame makes this frame a cut."""
+        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
+        self.framing.run(state)
         if self.maps is not None:
             self.maps.ingest(update.states, update.time_s)
-        t2 = self.clock()
-        self._move(state, target_transforms, last)  # Stage.PROJECTION, Stage.AMAP, Stage.MOTION
+        stages.done(Stage.FRAMING)
+        self._move(state, target_transforms, last, stages)
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
-        t3 = self.clock()
-        self.visibility.run(state, target_transforms)  # Stage.VISIBILITY
-        t4 = self.clock()
-        map_ms = sum(state.stage_ms.values())  # projection and A-map, filled by _move
-        state.stage_ms.update({
-            Stage.FRAMING.name.lower(): (t2 - t1) * 1e3,
-            Stage.MOTION.name.lower(): (t3 - t2) * 1e3 - map_ms,
-            Stage.VISIBILITY.name.lower(): (t4 - t3) * 1e3,
-        })
+        stages.done(Stage.MOTION)
+        self.visibility.run(state, target_transforms)
+        stages.done(Stage.VISIBILITY)
         state.cut = state.cut or self._style_cut
         self._style_cut = False
 
     def _move(self, state: FrameState, target_transforms: list[RigidTransform],
-              last: FrameState | None) -> None:
+              last: FrameState | None, stages: StageClock) -> None:
         """MOTION: the rig of the style's visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE:
-        that plus reactive.py; RAYCAST and the map modes: occlusion_search.py)."""
+        that plus reactive.py; RAYCAST and the map modes: occlusion_search.py), with PROJECTION and
+        AMAP lapped on `stages` in the map modes when the maps are due."""
         mode = self.style.visibility
         if mode not in SEARCH_MODES or state.torus is None:
             if self._searching:  # hand the camera's place back to the toric rig
@@ -136,8 +139,9 @@ class ToricRig:
             return self.visibility.occluded_fraction(cameras_world, points)
 
         if mode in MAP_MODES:
-            state.stage_ms.update(self.maps.update(torus, self.search.theta, self.search.phi, state.time_s,
-                                                   target_transforms, self.target_ids))
+            stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
+            self.maps.update(torus, self.search.theta, self.search.phi, state.time_s, target_transforms,
+                             self.target_ids, stages)
             risk = self.maps
         else:
             risk = RaycastRisk(torus, occluded)

@@ -1,21 +1,21 @@
 """The TRACKS rig of a session: the runtime graph director (topology-aware camera tracks, Section
 5) following target 0 on a precomputed level.
 
-Per frame (`TracksRig.run`, the MOTION and VISIBILITY stages of pipeline.py for this rig): the
-actor is target 0, its feet at its transform's position (the local origin the primitives stand
-on), its facing the transform's local +Z (the convention of docs/protocol.md), which the
-director uses for the line of action only while the actor stands still (it takes the velocity
-from successive positions otherwise). Direct visibility rays go through the session's RayScene:
-the level's geometry plus the session's own static and dynamic objects at their current
-transforms. The pose is the director's camera position looking at its look-at point with no
-roll (+Y up; `geometry.camera.level_look_rotation` at the screen centre) and the lens's field of
-view; `cut` and `visibility` are the director's (its shot count is the session's `shot_id`); the
-cut reason is flagged `tracks_cut_<reason>` and the director's three stage timings go to
-`stage_ms` as `cut_check`, `target_update` and `camera_update`. The director's settings are its
-defaults (precompute/tracks/settings.py) with the session lens's vertical field of view, so shot
-sizes mean the same on the client's screen. Until a first shot is found (the actor is away from
-every track) the camera waits behind and above the actor, flagged `tracks_no_track_near_actor`,
-with visibility 0.
+Per frame (`TracksRig.run`, the MOTION and VISIBILITY stages of server/pipeline/stages.py for this
+rig): the actor is target 0, its feet at its transform's position (the local origin the primitives
+stand on), its facing the transform's local +Z (the convention of docs/protocol.md), which the
+director uses for the line of action only while the actor stands still (it takes the velocity from
+successive positions otherwise). Direct visibility rays go through the session's RayScene: the
+level's geometry plus the session's own static and dynamic objects at their current transforms. The
+pose is the director's camera position looking at its look-at point with no roll (+Y up;
+`geometry.camera.level_look_rotation` at the screen centre) and the lens's field of view; `cut` and
+`visibility` are the director's (its shot count is the session's `shot_id`); the cut reason is
+flagged `tracks_cut_<reason>` and the director's three stage timings go to `stage_ms` as
+`cut_check`, `target_update` and `camera_update` (`TracksStage`; a step that finds no shot is all
+`target_update`). The director's settings are its defaults (precompute/tracks/settings.py) with the
+session lens's vertical field of view, so shot sizes mean the same on the client's screen. Until a
+first shot is found (the actor is away from every track) the camera waits behind and above the
+actor, flagged `tracks_no_track_near_actor`, with visibility 0.
 """
 from __future__ import annotations
 
@@ -27,10 +27,11 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, quat_rotate
+from camdirector.precompute.stage_clock import StageClock
 from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector
 from camdirector.precompute.tracks.settings import DirectorSettings
 from camdirector.server.pipeline.inputs import FrameInput, LoadedLevel
-from camdirector.server.pipeline.stages import FrameState
+from camdirector.server.pipeline.stages import FrameState, TracksStage
 from camdirector.server.pipeline.style import Style
 
 _LOCAL_FORWARD = np.array([0.0, 0.0, 1.0])
@@ -51,12 +52,15 @@ class TracksRig:
         self.ray_scene = ray_scene
         self.clock = clock
         self.settings = DirectorSettings(vertical_fov_deg=lens.vertical_fov_deg)
-        self.director = GraphDirector(level.artifact, self.settings, rng, director_style(style))
+        self.director = GraphDirector(level.artifact, self.settings, rng, director_style(style), clock)
 
     def set_style(self, style: Style) -> None:
         """Shot size and movement from the next frame on; the current shot goes on (a changed shot
         size cuts once its framing has been off for the cutting strategy's 200 ms)."""
         self.director.set_style(director_style(style))
+
+    def close(self) -> None:
+        """Nothing to release: the level is the worker's (its LevelCache), the ray scene the session's."""
 
     def anticipation_map(self, state: FrameState | None) -> None:
         """None: the tracks rig has no occlusion maps (it cuts away from occlusion)."""
@@ -67,13 +71,13 @@ class TracksRig:
         """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags, scores and stage_ms."""
         actor, last_pose = target_transforms[0], None if last is None else last.pose
         forward = quat_rotate(actor.rotation_xyzw, _LOCAL_FORWARD)
-        t0 = self.clock()
+        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
         shot = self.director.step(state.time_s, actor.position_world, forward, self.ray_scene)
         if shot is None:
+            stages.done(TracksStage.TARGET_UPDATE)
             state.pose = self._waiting_pose(actor.position_world, forward)
             state.visibility = 0.0
             state.flags.append("tracks_no_track_near_actor")
-            state.stage_ms["target_update"] = (self.clock() - t0) * 1e3
             return
         state.cut = shot.cut
         state.visibility = shot.visible_fraction

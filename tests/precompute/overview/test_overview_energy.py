@@ -8,8 +8,8 @@ from hypothesis import strategies as st
 from camdirector.precompute.overview.annealing import SidePrior
 from camdirector.precompute.overview.energy import EnergyWeights, energy_below, internal_terms
 
-W = EnergyWeights(c1=10, c2=10, c3=5, c4=5, c5=2, max_speed_m_per_s=0.3,
-                  max_angular_speed_rad_per_s=np.radians(20.0), friction_speed_m_per_s=0.09,
+W = EnergyWeights(c1=10, c2=10, c3=5, c4=5, c5=2, max_speed_m_s=0.3,
+                  max_angular_speed_rad_s=np.radians(20.0), friction_speed_m_s=0.09,
                   dt_s=1.0 / 15.0)
 
 
@@ -24,7 +24,7 @@ def test_friction_rises_to_c5_at_the_friction_speed_and_stays():
     n = 5
     look_at = np.tile([0.0, 0.0, 100.0], (n, 1))    # far ahead: no angular terms to speak of
     t = np.arange(n)[:, None]
-    step = W.friction_speed_m_per_s * W.dt_s
+    step = W.friction_speed_m_s * W.dt_s
     for fraction, expected in ((0.5, 0.25 * W.c5), (1.0, W.c5), (2.0, W.c5)):
         path = t * np.array([0.0, 0.0, fraction * step])
         np.testing.assert_allclose(internal_terms(path, look_at, W), expected, rtol=1e-3)
@@ -57,8 +57,8 @@ def test_speed_term_is_zero_under_the_limit_and_quartic_above():
     n = 10
     look_at = np.zeros((n, 3))
     t = np.arange(n)[:, None]
-    slow = np.array([5.0, 0, 0]) + t * np.array([0, 0, 0.5 * W.max_speed_m_per_s * W.dt_s])
-    fast = np.array([5.0, 0, 0]) + t * np.array([0, 0, 2.0 * W.max_speed_m_per_s * W.dt_s])
+    slow = np.array([5.0, 0, 0]) + t * np.array([0, 0, 0.5 * W.max_speed_m_s * W.dt_s])
+    fast = np.array([5.0, 0, 0]) + t * np.array([0, 0, 2.0 * W.max_speed_m_s * W.dt_s])
     # constant velocity: no acceleration; above the friction speed: friction is c5
     slow_terms = internal_terms(slow, look_at, W)
     fast_terms = internal_terms(fast, look_at, W)

@@ -87,8 +87,8 @@ def test_speed_limit_between_cuts(shared_data, name):
     clip, r = planned(shared_data, name)
     speed = np.linalg.norm(np.diff(r.camera_position_m, axis=0), axis=1) / clip.frame_time_s
     same_shot = r.shot_index[1:] == r.shot_index[:-1]
-    assert speed[same_shot].max(initial=0.0) <= r.max_speed_m_per_s * (1 + 1e-9)
-    assert r.max_speed_m_per_s == pytest.approx(r.character_height_m / 6.0)
+    assert speed[same_shot].max(initial=0.0) <= r.max_speed_m_s * (1 + 1e-9)
+    assert r.max_speed_m_s == pytest.approx(r.character_height_m / 6.0)
 
 
 @pytest.mark.parametrize("name", ALL)

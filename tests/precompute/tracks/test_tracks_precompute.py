@@ -203,7 +203,8 @@ def test_visibility_table_agrees_with_direct_ray_casts():
     assert triangle_areas(refined.vertices, refined.faces).max() <= SETTINGS.max_triangle_area_m2 + 1e-9
     nodes = np.array([[5.0, 2.0, 10.0], [15.0, 2.0, 10.0]])
     table = build_visibility_table(nodes, refined, scene, SETTINGS, np.random.default_rng(0))
-    centroid = refined.vertices[refined.faces].mean(axis=1) + SETTINGS.visibility_target_height_fraction * 2.0 * np.array([0, 1, 0])
+    lift = SETTINGS.visibility_target_height_fraction * 2.0 * np.array([0, 1, 0])
+    centroid = refined.vertices[refined.faces].mean(axis=1) + lift
     for node in range(2):
         row = slice(table.node_indptr[node], table.node_indptr[node + 1])
         seen = set(table.node_triangles[row].tolist())

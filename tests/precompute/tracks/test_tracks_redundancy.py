@@ -70,7 +70,8 @@ def test_pruning_keeps_what_the_tracks_saw():
 def test_redundancy_k_zero_keeps_every_track():
     scene, _, refined = _level()
     tracks = _tracks()
-    kept = prune_redundant_tracks(tracks, refined, scene, TrackSettings(redundancy_k=0, redundancy_range_m=9.0), np.random.default_rng(0))
+    settings = TrackSettings(redundancy_k=0, redundancy_range_m=9.0)
+    kept = prune_redundant_tracks(tracks, refined, scene, settings, np.random.default_rng(0))
     assert len(kept) == len(tracks)
 
 

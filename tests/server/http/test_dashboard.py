@@ -2,7 +2,10 @@
 a director finds a streaming session, sees its frames, shots and why the camera moved, changes its
 style live (and the streaming client gets the new style on its next frame), sees a refused style's
 reason and, in a map mode, the anticipation map; on the tracks rig, the scores of the targets it
-chose; and submits a motion overview job, then watches its preview and contact sheet.
+chose; in a match, the candidates, a take held until released (the streaming client gets it),
+the fallback's reason when the held player dies, the event log and, with a delay, the cut the
+director plans, which the program then makes; and submits a motion overview job, then watches
+its preview and contact sheet.
 
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
@@ -18,6 +21,8 @@ import pytest
 
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
+from tests.server.test_match_sessions import PLAYERS, RATE_HZ, match_request
+from tests.server.test_match_sessions import frames as match_frames
 from tests.server.tracks_sessions import actor_frames, corridor_walk, obj_text, tracks_request
 from tests.server.wire_client import GrpcRaw, two_target_request, walk
 
@@ -159,3 +164,70 @@ def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
         raw.close()
         http.delete("/v1/levels/dashboard-corridor")
         http.close()
+
+
+def test_a_director_takes_a_candidate_holds_it_and_sees_the_fallback(server, page):
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", match_request(delay_s=1.0)).session_id
+    raw.stream(list(match_frames(session_id, 90)))
+    try:
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        playwright.expect(page.locator("#match-view")).to_be_visible()
+        playwright.expect(page.locator("#program-shot")).to_contain_text("(the director's)")
+        playwright.expect(page.locator("#release")).to_be_hidden()
+        candidate = page.locator("#candidates tbody tr").first
+        subjects = candidate.get_attribute("data-subjects").split(",")
+        assert set(subjects) <= set(PLAYERS)
+        assert canvas_has_drawing(page, "#topview")
+
+        candidate.locator("button").click()
+        playwright.expect(page.locator("#take-result")).to_contain_text("held until released")
+        held = raw.stream(list(match_frames(session_id, 60, start=90)))
+        assert all(list(u.shot.subject_ids) == subjects for u in held)
+        playwright.expect(page.locator("#program-shot")).to_contain_text("(held): take: a human's choice")
+        playwright.expect(page.locator("#planned-cut")).to_have_text("none while a take is held")
+        playwright.expect(page.locator("#release")).to_be_visible()
+
+        victim = subjects[0]
+        attacker = next(p for p in PLAYERS if p[0] != victim[0])         # an opponent kills the held player
+        died = raw.stream(list(match_frames(session_id, 60, start=150, kill_at={160: (attacker, victim)})))
+        fallback = f"take fallback: held player {victim} died (killed by {attacker}); following {attacker}"
+        assert died[-1].shot.reason == fallback and list(died[-1].shot.subject_ids) == [attacker]
+        playwright.expect(page.locator("#program-shot")).to_contain_text(fallback)
+        playwright.expect(page.locator("#event-log li").first).to_contain_text(f"kill {attacker} → {victim}")
+
+        page.click("#release")
+        playwright.expect(page.locator("#take-result")).to_have_text("released")
+        after = raw.stream(list(match_frames(session_id, 30, start=210)))
+        assert not any(u.shot.reason.startswith("take") for u in after)  # the director has the program again
+        playwright.expect(page.locator("#release")).to_be_hidden()
+        playwright.expect(page.locator("#program-shot")).to_contain_text("(the director's)")
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+
+
+def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", match_request(delay_s=3.0)).session_id
+    try:
+        playwright.expect(page.locator(f'#sessions tbody tr[data-session="{session_id}"]')).to_be_visible()
+        raw.stream(list(match_frames(session_id, 30)))                   # less than the delay
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        playwright.expect(page.locator("#program-shot")).to_contain_text("buffering")
+        shown = set(raw.stream(list(match_frames(session_id, 120, start=30)))[-1].shot.subject_ids)
+        attacker, victim = next(pair for pair in (("a0", "b0"), ("a1", "b1")) if not set(pair) <= shown)
+        # The kill is streamed 5 frames before the newest: 2.83 s ahead of the program, which
+        # plans to cut lead_s (2.5 s) before it.
+        raw.stream(list(match_frames(session_id, 65, start=150, kill_at={210: (attacker, victim)})))
+        planned = page.locator("#planned-cut")
+        playwright.expect(planned).to_contain_text(f"to DUEL {attacker}, {victim}: planned kill in")
+        cut_s = float(planned.text_content().split("(at ")[1].split(" s)")[0])
+        program = raw.stream(list(match_frames(session_id, 60, start=215)))
+        first = next(u for u in program if u.shot.reason.startswith("planned kill"))
+        assert set(first.shot.subject_ids) == {attacker, victim} and first.cut
+        assert first.time_s == pytest.approx(cut_s, abs=0.15)            # as announced, within a planning tick
+        assert first.time_s <= 210 / RATE_HZ - 1.0                        # and not in the last second before it
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()

@@ -175,6 +175,10 @@ def test_bad_uploads_answer_4xx_and_leave_nothing(service, run_bvh, kind, status
     ({"scale": "0"}, 422, "scale"),
     ({"aspect": "9"}, 422, "aspect must be in [0.2, 5]"),
     ({"c1": "-1"}, 422, "c1..c5 must be in [0, 1e6]"),
+    # the speed limits' form fields carry the settings' unit suffixes (`_heights_s`, `_deg_s`)
+    ({"max_speed_heights_s": "0"}, 422, "max_speed_heights_s must be in (0, 100]"),
+    ({"max_angular_speed_deg_s": "4000"}, 422, "max_angular_speed_deg_s must be in (0, 3600]"),
+    ({"friction_speed_heights_s": "-1"}, 422, "friction_speed_heights_s must be in (0, 100]"),
     ({"split_quality": "nan"}, 422, "finite"),
 ])
 def test_bad_form_fields(service, run_bvh, fields, status, detail):

@@ -1,6 +1,8 @@
 """The /v1/sessions routes on a real server (two worker processes): a session streamed over gRPC
 shows its frames, cuts and flags; a style PUT over HTTP changes the streaming session as
-UpdateStyle does; every kind of bad request answers its 4xx and the session keeps working."""
+UpdateStyle does; a MATCH session shows its program, candidates and events, and a take POSTed over
+HTTP holds its program until released; every kind of bad request answers its 4xx and the session
+keeps working."""
 from __future__ import annotations
 
 import io
@@ -15,6 +17,8 @@ from camdirector.server.errors import DirectorError
 from camdirector.server.http.routes.sessions import http_error
 from camdirector.server.sessions.timeline import TIMELINE_FRAMES
 from camdirector.v1 import director_pb2 as pb
+from tests.server.test_match_sessions import PLAYERS, match_request
+from tests.server.test_match_sessions import frames as match_frames
 from tests.server.wire_client import GrpcRaw, two_target_request, walk
 
 
@@ -126,3 +130,82 @@ def test_the_anticipation_map_of_a_map_mode_session(server, streamed):
 def test_wire_errors_keep_their_message_as_http_errors(code, status):
     error = http_error(DirectorError(code, "what went wrong"))
     assert (error.status_code, error.detail) == (status, "what went wrong")
+
+
+@pytest.fixture
+def match(server):
+    """A MATCH session of four players with a 1 s delay, 90 frames streamed (a kill at frame 60)."""
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", match_request(delay_s=1.0)).session_id
+    replies = raw.stream(list(match_frames(session_id, 90, kill_at={59: ("a0", "b0")})))
+    with httpx.Client(base_url=f"http://{server.http}", timeout=30.0) as http:
+        yield raw, http, session_id, replies
+    raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+    raw.close()
+
+
+def test_a_match_session_shows_its_program_candidates_and_events(match):
+    _, http, session_id, replies = match
+    frames = http.get(f"/v1/sessions/{session_id}").json()["frames"]
+    answered = [u for u in replies if not u.buffering]
+    assert [f["frame"] for f in frames] == [u.frame for u in answered]     # the buffering frames gave way
+    for frame, reply in zip(frames, answered):
+        assert frame["buffering"] is False and frame["players"] == list(PLAYERS) and frame["teams"] == [0, 0, 1, 1]
+        assert frame["shot"] == {"subject_ids": list(reply.shot.subject_ids),
+                                 "kind": pb.ShotKind.Name(reply.shot.kind), "reason": reply.shot.reason}
+        assert [c["shot"]["subject_ids"] for c in frame["candidates"]] == \
+            [list(c.shot.subject_ids) for c in reply.candidates]
+        for candidate, sent in zip(frame["candidates"], reply.candidates):
+            p = sent.pose.position
+            assert candidate["camera"] == pytest.approx([p.x, p.y, p.z], abs=1e-4)
+            assert candidate["score"] == pytest.approx(sent.score, abs=1e-4)
+    kills = [(f["frame"], e) for f in frames for e in f["events"]]
+    assert [(frame, e["kind"], e["actor_id"], e["other_actor_id"]) for frame, e in kills] == \
+        [(60, "EVENT_KILL", "a0", "b0")]                                 # at the program's moment of the kill
+
+
+def test_a_take_over_rest_holds_the_program_until_released(match):
+    raw, http, session_id, _ = match
+    taken = http.post(f"/v1/sessions/{session_id}/take", json={"subject_ids": ["a1", "b1"], "kind": "SHOT_DUEL"})
+    assert taken.status_code == 200, taken.text
+    assert taken.json() == {"session_id": session_id, "shot": {
+        "subject_ids": ["a1", "b1"], "kind": "SHOT_DUEL", "reason": "take: a human's choice, held until released"}}
+    held = raw.stream(list(match_frames(session_id, 60, start=90)))
+    assert all(list(u.shot.subject_ids) == ["a1", "b1"] for u in held)
+    assert http.get(f"/v1/sessions/{session_id}", params={"last": 1}).json()["frames"][0]["shot"]["subject_ids"] \
+        == ["a1", "b1"]
+    released = http.post(f"/v1/sessions/{session_id}/take", json={"release": True})
+    assert released.status_code == 200 and released.json() == {"session_id": session_id, "shot": None}
+    after = raw.stream(list(match_frames(session_id, 10, start=150)))
+    assert not any(u.shot.reason.startswith("take") for u in after)
+
+
+@pytest.mark.parametrize("body, status, detail", [
+    ({"subject_ids": ["zz"]}, 404, "'zz' is not a player"),
+    ({"subject_ids": ["a0", "a0"]}, 422, "twice"),
+    ({"subject_ids": ["a0"], "kind": "SHOT_DUEL"}, 422, "cannot show 1"),
+    ({"subject_ids": ["a0"], "kind": "SHOT_CLOSEUP"}, 422, "not a camdirector.v1.TakeShotRequest"),
+    ({"subjectIds": "a0"}, 422, "not a camdirector.v1.TakeShotRequest"),
+    ({"release": "yes"}, 422, "not a camdirector.v1.TakeShotRequest"),
+    ({"who": "a0"}, 422, "not a camdirector.v1.TakeShotRequest"),
+    ({}, 422, "names its subject_ids"),
+    ({"sessionId": "other", "subject_ids": ["a0"]}, 422, "the session is the path's"),
+    ([["a0"]], 422, "dict"),
+])
+def test_bad_takes_answer_4xx_and_the_match_streams_on(match, body, status, detail):
+    raw, http, session_id, _ = match
+    reply = http.post(f"/v1/sessions/{session_id}/take", json=body)
+    assert reply.status_code == status and detail in str(reply.json()["detail"]), reply.text
+    after = raw.stream(list(match_frames(session_id, 3, start=90)))
+    assert [u.frame for u in after] == [61, 62, 63] and not any(u.stale or u.shot.reason.startswith("take")
+                                                                 for u in after)
+
+
+def test_a_take_for_an_unknown_session_or_another_rig(streamed):
+    _, http, toric_session, _ = streamed
+    unknown = http.post("/v1/sessions/nope/take", json={"subject_ids": ["a"]})
+    assert unknown.status_code == 404 and "unknown session id 'nope'" in unknown.json()["detail"]
+    refused = http.post(f"/v1/sessions/{toric_session}/take", json={"subject_ids": ["a"]})
+    assert refused.status_code == 409 and "RIG_MATCH" in refused.json()["detail"]
+    assert http.post(f"/v1/sessions/{toric_session}/take", content=b"{not json",
+                     headers={"content-type": "application/json"}).status_code == 422

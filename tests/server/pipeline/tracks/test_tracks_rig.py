@@ -17,8 +17,8 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
 from camdirector.server.errors import DirectorError
-from camdirector.server.sessions.levels import LevelCache
 from camdirector.server.process import ServerProcess
+from camdirector.server.sessions.levels import LevelCache
 from camdirector.server.sessions.recording import replay
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
@@ -145,7 +145,7 @@ def test_bad_tracks_sessions_are_refused_clearly(client, canary):
     expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", two,
            contains="exactly one target (the actor), got 2")
     expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", two_target_request(level_id="corridor"),
-           contains="level_id 'corridor' is for the TRACKS rig")
+           contains="level_id 'corridor' is for the TRACKS and MATCH rigs")
     sized = two_target_request(style=pb.Style(shot_size=pb.SHOT_SIZE_MEDIUM))
     expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", sized, contains="style.shot_size")
     raycast = tracks_request("corridor", START)

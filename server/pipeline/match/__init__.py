@@ -1,0 +1,2 @@
+"""The MATCH rig: a director that chooses whom to show among many players from game events, using
+the broadcast delay (issue 12). rig.py ties the stages together; settings.py holds the tuning."""

@@ -1,0 +1,41 @@
+"""RayScene's dynamic objects, culled by bounding spheres, answer exactly as the same geometry
+built in the world frame as static meshes (no culling)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from camdirector.geometry.meshes import TriMesh, box, capsule
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform
+
+
+def _random_transform(rng: np.random.Generator) -> RigidTransform:
+    q = rng.normal(size=4)
+    return RigidTransform(rng.uniform(-6, 6, 3), q / np.linalg.norm(q), rng.uniform(0.5, 2.0, 3))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_culled_dynamic_objects_match_world_frame_geometry(seed):
+    rng = np.random.default_rng(seed)
+    meshes = [box(rng.uniform(0.3, 2.0, 3)) if k % 2 else capsule(0.4, 1.8) for k in range(30)]
+    # Off-centre local frames too: the bounding sphere must follow the mesh, not the origin.
+    meshes = [TriMesh(m.vertices + rng.uniform(-1, 1, 3), m.faces) for m in meshes]
+    floor = box((30.0, 0.1, 30.0))
+    scene = RayScene([floor])
+    start = [_random_transform(rng) for _ in meshes]
+    for k, (mesh, tf) in enumerate(zip(meshes, start)):
+        scene.add_dynamic(f"o{k}", mesh, tf)
+    for _ in range(3):  # move everything, then ask again
+        moved = [_random_transform(rng) for _ in meshes]
+        for k, tf in enumerate(moved):
+            scene.set_transform(f"o{k}", tf)
+        reference = RayScene([floor] + [TriMesh(tf.apply(m.vertices), m.faces) for m, tf in zip(meshes, moved)])
+        origins = rng.uniform(-9, 9, (400, 3))
+        targets = rng.uniform(-9, 9, (400, 3))
+        occluded = scene.occluded(origins, targets)
+        assert 0 < occluded.sum() < len(occluded)  # the case tests something
+        np.testing.assert_array_equal(occluded, reference.occluded(origins, targets))
+        directions = targets - origins
+        np.testing.assert_allclose(scene.first_hit(origins, directions), reference.first_hit(origins, directions),
+                                   rtol=1e-5, atol=1e-5)
