@@ -9,14 +9,17 @@ FRAMING_ONLY, a session runs in this process through the worker's own SessionTab
 frame goes from the serialized FrameUpdate to the serialized CameraUpdate exactly as in a worker,
 and `compute_ms` is the figure a client reads in its CameraUpdate. Reported: median and p99 of
 `compute_ms` and the median of each stage (`stage_ms`), per mode and mover count, the ratio of
-100 movers to 0 per mode, and a floor from the same run: a stale frame (the table's shortest
-path: parse, look up, answer the last pose).
+each count to 0 per mode, and a floor from the same run: the wall-clock time of a stale frame
+through the same table (its shortest path: parse, look up, answer the last pose, serialize),
+measured after every case, with each case's median over it. Poses are a function of the frame
+number and the seed alone, so a run is reproducible frame for frame.
 """
 from __future__ import annotations
 
 import argparse
 import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -96,12 +99,18 @@ def run_case(table: SessionTable, mode_name: str, movers: int, frames: int, warm
             compute.append(reply.compute_ms)
             for name, ms in reply.diagnostics.stage_ms.items():
                 stages.setdefault(name, []).append(ms)
-    stale = [pb.CameraUpdate.FromString(table.handle_bytes("frame", session_id, frame_bytes(session_id, 1, movers))[0])
-             .compute_ms for _ in range(200)]
+    maps = table.held[session_id].session.rig.maps
+    stale_payload, stale = frame_bytes(session_id, 1, movers), []
+    for _ in range(200):
+        t0 = time.perf_counter()
+        table.handle_bytes("frame", session_id, stale_payload)
+        stale.append((time.perf_counter() - t0) * 1e3)
     table.drop(session_id)
-    return {"mode": mode_name, "movers": movers, "compute_ms": summary(compute),
+    return {"mode": mode_name, "movers": movers, "map_backend": maps.backend_name if maps is not None else None,
+            "compute_ms": summary(compute),
             "stage_ms_median": {name: round(float(np.median(v)), 4) for name, v in sorted(stages.items())},
-            "stale_frame_ms": summary(stale)}
+            "stale_frame_wall_ms": summary(stale),
+            "median_over_floor": round(float(np.median(compute) / max(np.median(stale), 1e-9)), 2)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,14 +128,14 @@ def main(argv: list[str] | None = None) -> int:
     table = SessionTable(ServerSettings(max_objects=10_000))
     cases = [run_case(table, mode, n, args.frames, args.warmup) for mode in MODES for n in counts]
     table.close_all()
-    floor = summary([c["stale_frame_ms"]["median"] for c in cases])
+    floor = summary([c["stale_frame_wall_ms"]["median"] for c in cases])
     ratios = {}
     for mode in MODES:
         by_count = {c["movers"]: c["compute_ms"]["median"] for c in cases if c["mode"] == mode}
         if 0 in by_count:
             ratios[mode] = {f"{n}_over_0": round(ms / max(by_count[0], 1e-9), 3) for n, ms in by_count.items() if n}
     emit({"benchmark": "movers_bench", "frames_per_case": args.frames, "rate_hz": RATE_HZ,
-          "static_triangles": 2 + 160 * 12, "floor_stale_frame_ms": floor, "cases": cases,
+          "static_triangles": 2 + 160 * 12, "in_process": True, "floor_stale_frame_wall_ms": floor, "cases": cases,
           "median_ratio_to_0_movers": ratios}, args.json)
     return 0
 

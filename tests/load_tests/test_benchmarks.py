@@ -61,5 +61,5 @@ def test_movers_bench_reports_every_mode_and_count_against_none(tmp_path):
     assert all(c["compute_ms"]["n"] == 20 and "ingest" in c["stage_ms_median"] for c in cases.values())
     assert "projection" in cases[("ANTICIPATION", 3)]["stage_ms_median"]
     assert set(result["median_ratio_to_0_movers"]) == set(movers_bench.MODES)
-    assert set(result["floor_stale_frame_ms"]) == {"median", "p99", "n"}
+    assert result["floor_stale_frame_wall_ms"]["median"] > 0 and all(c["median_over_floor"] > 0 for c in cases.values())
 

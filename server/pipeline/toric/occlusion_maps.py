@@ -4,11 +4,11 @@ anticipation map the search reads (occlusion-anticipation-toric-space.md, sectio
 
 Built lazily, the first time a session enters a map mode: it keeps its own occluder scene (the
 backends hold their own acceleration data). Each frame only records the moved objects' poses
-(`ingest`: a dictionary write per object); the frames that build maps (the amortized schedule,
-one in several) move the scene's objects and give them velocities, by finite differences of
-each object's last two poses (an object the latest frame does not mention has not moved:
-velocity zero), all objects at once. So many moving objects cost the frames between map builds
-nearly nothing.
+(`ingest`: two dictionary operations in C, whatever the number of objects); the frames that
+build maps (the amortized schedule, one in several) move the scene's objects, all at once, and
+give them velocities by finite differences between the latest frame and the one before it (an
+object the latest frame does not mention has not moved: velocity zero). So many moving objects
+cost the frames between map builds nearly nothing.
 """
 from __future__ import annotations
 
@@ -45,10 +45,12 @@ class OcclusionMaps:
         self.scene = OccluderScene(static_meshes_world)
         for object_id, (mesh, transform) in dynamic.items():
             self.scene.add_dynamic(object_id, mesh, transform)
-        # object id -> (latest transform, its time, the transform before, its time); times None until moved
-        self._poses: dict[str, tuple] = {object_id: (transform, None, None, None)
-                                         for object_id, (_, transform) in dynamic.items()}
-        self._time_s: float | None = None  # of the latest frame ingested
+        # Every object's pose as of the latest frame and as of the frame before (targets too: ignored),
+        # the latest frame's moved (id, transform) pairs, and the two frames' times (None: none yet).
+        self._latest: dict[str, RigidTransform] = {object_id: tf for object_id, (_, tf) in dynamic.items()}
+        self._before: dict[str, RigidTransform] = dict(self._latest)
+        self._moved: list[tuple[str, RigidTransform]] = []
+        self._times_s: tuple[float | None, float | None] = (None, None)
         self.sampler = sampler
         self.rng = rng
         self._backend_key = None
@@ -82,30 +84,30 @@ class OcclusionMaps:
         return self._backend_key
 
     def ingest(self, moved: list[tuple[str, RigidTransform]], time_s: float) -> None:
-        """Records this frame's poses of the moved dynamic objects (targets are skipped)."""
-        poses = self._poses
-        for object_id, transform in moved:
-            entry = poses.get(object_id)
-            if entry is not None:
-                poses[object_id] = (transform, time_s, entry[0], entry[1])
-        self._time_s = time_s
+        """Records this frame's poses of the moved objects (module docstring)."""
+        self._before = self._latest.copy()
+        self._latest.update(moved)
+        self._moved = moved
+        self._times_s = (time_s, self._times_s[0])
 
     def _move_scene(self) -> None:
         """Every dynamic object at its latest pose with its velocity (module docstring), in the
         occluder scene, in one call, before a map build."""
-        ids, entries = list(self._poses), list(self._poses.values())
+        ids = list(self.scene.dynamic)
         linear, angular = np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
-        moving = [k for k, (_, at_s, before, before_s) in enumerate(entries)
-                  if at_s == self._time_s and before_s is not None and at_s > before_s]
-        if moving:
-            now, before = [entries[k][0] for k in moving], [entries[k][2] for k in moving]
-            dt = np.array([entries[k][1] - entries[k][3] for k in moving])[:, None]
+        now_s, before_s = self._times_s
+        moving = [object_id for object_id, _ in self._moved if object_id in self.scene.dynamic]
+        if moving and before_s is not None and now_s > before_s:
+            row = {object_id: k for k, object_id in enumerate(ids)}
+            rows = [row[object_id] for object_id in moving]
+            now = [self._latest[object_id] for object_id in moving]
+            before = [self._before[object_id] for object_id in moving]
             turn = Rotation.from_quat([tf.rotation_xyzw for tf in now]) * \
                 Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
-            linear[moving] = (np.array([tf.position_world for tf in now])
-                              - np.array([tf.position_world for tf in before])) / dt
-            angular[moving] = turn.as_rotvec() / dt
-        self.scene.set_motions(ids, [entry[0] for entry in entries], linear, angular)
+            linear[rows] = (np.array([tf.position_world for tf in now])
+                            - np.array([tf.position_world for tf in before])) / (now_s - before_s)
+            angular[rows] = turn.as_rotvec() / (now_s - before_s)
+        self.scene.set_motions(ids, [self._latest[object_id] for object_id in ids], linear, angular)
 
     def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms,
                target_ids: list[str], stages: StageClock) -> None:

@@ -1,0 +1,83 @@
+"""OcclusionMaps moves its occluder scene only on the frames that build maps, with velocities by
+finite differences between the latest frame and the one before it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from camdirector.geometry.camera import Lens
+from camdirector.geometry.meshes import box, capsule
+from camdirector.geometry.toric import composition_angle, make_torus
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.precompute.stage_clock import StageClock
+from camdirector.server.pipeline.style import MapBackendChoice, Style, VisibilityMode
+from camdirector.server.pipeline.toric.occlusion_maps import OcclusionMaps
+from camdirector.server.pipeline.toric.target_sampling import TargetSampler
+
+DT_S = 1.0 / 60.0
+ALPHA = composition_angle((-1.0 / 3.0, 0.0), (1.0 / 3.0, 0.0), Lens())
+
+
+def _pose(x: float, yaw_rad: float = 0.0) -> RigidTransform:
+    return RigidTransform(np.array([x, 1.0, 2.0]), Rotation.from_euler("y", yaw_rad).as_quat())
+
+
+@pytest.fixture
+def maps():
+    rng = np.random.default_rng(0)
+    dynamic = {name: (box((0.5, 0.5, 0.5)), _pose(0.0)) for name in ("spinner", "slider", "still", "stopper")}
+    made = OcclusionMaps([box((20.0, 0.1, 20.0))], dynamic, TargetSampler([capsule(0.3, 1.8)], rng),
+                         Style(visibility=VisibilityMode.ANTICIPATION, map_resolution=16,
+                               map_backend=MapBackendChoice.EMBREE), rng)
+    yield made
+    made.close()
+
+
+def _update(maps: OcclusionMaps, time_s: float) -> dict[str, float]:
+    actor = RigidTransform(np.array([0.0, 0.9, 0.0]))
+    torus = make_torus(actor.position_world, actor.position_world + [2.5, 0.0, 0.0], ALPHA)
+    timings: dict[str, float] = {}
+    maps.update(torus, 1.8, 1.2, time_s, [actor], ["actor"], StageClock(timings_ms=timings))
+    return timings
+
+
+def test_scene_moves_on_map_builds_only_with_the_last_step_as_velocity(maps):
+    assert "projection" in _update(maps, 0.0)  # the first update builds every map
+    for frame in range(1, 4):
+        time_s = frame * DT_S
+        moved = [("slider", _pose(0.6 * frame)), ("spinner", _pose(0.0, 0.3 * frame)), ("actor", _pose(9.0))]
+        if frame < 3:
+            moved.append(("stopper", _pose(0.2 * frame)))  # stops after frame 2
+        maps.ingest(moved, time_s)
+        built = "projection" in _update(maps, time_s)
+        slider = maps.scene.dynamic["slider"]
+        # between builds the scene keeps the poses of the last build
+        assert built or slider.transform.position_world[0] == 0.0
+    built = False
+    while not built:  # on to the next build, nothing moving
+        time_s += DT_S
+        maps.ingest([], time_s)
+        built = "projection" in _update(maps, time_s)
+    scene = maps.scene.dynamic
+    np.testing.assert_allclose(scene["slider"].transform.position_world, [1.8, 1.0, 2.0])
+    np.testing.assert_allclose(scene["stopper"].transform.position_world, [0.4, 1.0, 2.0])
+    assert not any(o.linear_velocity_m_s.any() or o.angular_velocity_rad_s.any() for o in scene.values())
+
+
+def test_velocity_of_the_latest_step_reaches_the_scene(maps):
+    _update(maps, 0.0)
+    time_s, frame, built = 0.0, 0, False
+    while not built:
+        frame += 1
+        time_s = frame * DT_S
+        maps.ingest([("slider", _pose(0.6 * frame)), ("spinner", _pose(0.0, 0.3 * frame))]
+                    + ([("stopper", _pose(0.2 * frame))] if frame == 1 else []), time_s)
+        built = "projection" in _update(maps, time_s)
+    assert frame > 1  # maps are built one frame in several
+    scene = maps.scene.dynamic
+    np.testing.assert_allclose(scene["slider"].transform.position_world, [0.6 * frame, 1.0, 2.0])
+    np.testing.assert_allclose(scene["slider"].linear_velocity_m_s, [0.6 / DT_S, 0.0, 0.0], rtol=1e-9)
+    np.testing.assert_allclose(scene["spinner"].angular_velocity_rad_s, [0.0, 0.3 / DT_S, 0.0], rtol=1e-9)
+    np.testing.assert_allclose(scene["stopper"].transform.position_world, [0.2, 1.0, 2.0])
+    assert not scene["stopper"].linear_velocity_m_s.any() and not scene["still"].linear_velocity_m_s.any()
