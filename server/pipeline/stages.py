@@ -20,6 +20,9 @@ its own `stage_ms` keys (`TracksStage`; no FRAMING, PROJECTION or AMAP):
   target_update  a cut's continuity search, or the target moving strategy on the tracks
   camera_update  the camera jumps on a cut or follows the target by the force model; the
                  actor's visibility from the new position
+With `style.rig = MATCH` (pipeline/match/rig.py, the casting director) a frame is INGEST, then
+`MatchStage`: BUFFER (the delay buffer; while it fills, no pose), PLAN (on planning ticks), CAMERA,
+VISIBILITY.
 Each stage is lapped by one `precompute.stage_clock.StageClock` on the session's injected clock.
 Building the reply (sessions/codec.py) is no stage: it happens after `stage_ms` has been read
 into the reply, so it is counted only in the frame's `compute_ms`, which the session table
@@ -47,6 +50,15 @@ class Stage(enum.Enum):
     AMAP = "amap"
     MOTION = "motion"
     VISIBILITY = "visibility"
+
+
+class MatchStage(enum.Enum):
+    """The MATCH rig's stages after INGEST in order (pipeline/match/rig.py); values are their `stage_ms` keys."""
+
+    BUFFER = "buffer"          # the delay buffer takes the frame and gives the program moment
+    PLAN = "plan"              # a planning tick: takes, the director's cut decision, candidates
+    CAMERA = "camera"          # the program camera's motion and pose, the candidates' poses
+    VISIBILITY = "visibility"  # the framed subjects' visibility by ray casts
 
 
 class ShotKind(enum.IntEnum):

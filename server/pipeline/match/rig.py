@@ -31,6 +31,7 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
+from camdirector.precompute.stage_clock import StageClock
 from camdirector.server.pipeline.inputs import FrameInput, SceneSpec
 from camdirector.server.pipeline.match.grammar import Grammar
 from camdirector.server.pipeline.match.hltv import HltvDirector
@@ -39,7 +40,7 @@ from camdirector.server.pipeline.match.plan import PlannedDirector, Shot, ShotBu
 from camdirector.server.pipeline.match.settings import MatchSettings
 from camdirector.server.pipeline.match.shots import ToricCamera, best_place, place_grid
 from camdirector.server.pipeline.match.visibility import SubjectVisibility
-from camdirector.server.pipeline.stages import Candidate, FrameState, PlannedCut, ShotChoice, ShotKind
+from camdirector.server.pipeline.stages import Candidate, FrameState, MatchStage, PlannedCut, ShotChoice, ShotKind
 from camdirector.server.pipeline.style import MatchDirectorKind, Style
 
 REPLACE_LOOKAHEAD_S = 1.0  # an occluded place is replaced by the best one over now and this far ahead, s
@@ -164,13 +165,12 @@ class MatchRig:
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
         """BUFFER, PLAN, CAMERA and VISIBILITY (module docstring), timed into state."""
-        t0 = self.clock()
+        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
         state.players = self.roster
         if not self.buffer.push(update.frame, update.time_s, target_transforms, state.aim_points_world, update.events):
             state.flags.append("match_stale_frame")
         moment = self.buffer.program_moment(update.time_s - self.delay_s)
-        t1 = self.clock()
-        state.stage_ms["buffer"] = (t1 - t0) * 1e3
+        stages.done(MatchStage.BUFFER)
         if moment is None:
             state.buffering, state.pose, state.visibility = True, None, 0.0
             state.flags.append("buffering")
@@ -186,7 +186,7 @@ class MatchRig:
             self._take_pending = False
             if new is not None:
                 self.shot, cut = new, True
-        t2 = self.clock()
+        stages.done(MatchStage.PLAN)
         self.shot.camera.advance(moment, 0.0 if cut else state.dt_s, self.style.response_time_s)
         pose = self.shot.camera.pose(moment)
         if pose is None:
@@ -204,7 +204,7 @@ class MatchRig:
         state.candidates = [Candidate(camera.pose(moment) if camera is not None else pose, choice, score)
                             for choice, camera, score in self._candidates]
         state.candidates = [c for c in state.candidates if c.pose is not None]
-        t3 = self.clock()
+        stages.done(MatchStage.CAMERA)
         subjects = self.shot.subjects
         state.visibility = float(self.visibility.visible_share(pose.position_world, moment, subjects).mean()) \
             if subjects else 1.0
@@ -212,8 +212,7 @@ class MatchRig:
         state.events, state.planned_cut = moment.events, self.planned_cut(moment.time_s)
         state.scores = dict(self.shot.scores, visibility=state.visibility,
                             shot_length_s=moment.time_s - self.shot.start_s)
-        t4 = self.clock()
-        state.stage_ms.update(plan=(t2 - t1) * 1e3, camera=(t3 - t2) * 1e3, visibility=(t4 - t3) * 1e3)
+        stages.done(MatchStage.VISIBILITY)
 
     def _plan(self, moment: Moment, flags: list[str]) -> Shot | None:
         """The cut decision of this tick (take, else the director), the re-placement of an
