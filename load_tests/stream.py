@@ -9,7 +9,8 @@ answered (`--seconds` of frames at a nominal 60 Hz), which measures the service'
 the wake-up cost an idle machine adds between paced frames (on this kind of VM a cross-process
 round trip after 16 ms idle costs about 10x one made while busy).
 Measured: frames sent and received, dropped frames (sent, never answered), late frames (answered
-after the next was due), round trip p50/p99 at the client, and the server's own compute_ms p50/p99.
+after the next was due), round trip p50/p99 at the client, the server's own compute_ms p50/p99, and
+this load generator's own CPU while streaming (seconds, and as a fraction of one core).
 The baseline, measured in the same run against the same server process, is the transport alone:
 a gRPC health check (served by the front process) or a ZeroMQ request the front answers at once
 with an error; `rtt_ratio_vs_baseline` divides our round trip by it.
@@ -135,14 +136,18 @@ async def _sleep_until(deadline: float) -> None:
         await asyncio.sleep(delay)
 
 
-async def run(transport: str, address: str, sessions: int, rate_hz: float, seconds: float) -> dict:
+async def run(transport: str, address: str, sessions: int, rate_hz: float, seconds: float,
+              visibility: int = pb.FRAMING_ONLY, warmup_frames: int = 0) -> dict:
+    """warmup_frames: each session's first frames, answered and counted as received but left out of
+    the round trips, compute times, late and stale counts (a session's first frame sets up what
+    it keeps: about 30 ms in the map modes)."""
     scene = build_demo_scene(seed=7, duration_s=max(seconds, 1.0))
     lens = Lens()
     nominal_hz = rate_hz or 60.0
     n_frames = int(round(seconds * nominal_hz))
     frames = _frames(scene, n_frames, nominal_hz)
     driver = GrpcDriver(address) if transport == "grpc" else ZmqDriver(address)
-    session_ids = [await driver.open_session(session_request(scene, lens)) for _ in range(sessions)]
+    session_ids = [await driver.open_session(session_request(scene, lens, visibility)) for _ in range(sessions)]
     baseline_s = [await driver.baseline() for _ in range(20)]  # warm-up
     baseline_s = [await driver.baseline() for _ in range(500)]
     period = 1.0 / rate_hz if rate_hz else 0.0
@@ -150,18 +155,22 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
 
     def recorder(k: int):
         def record(i, t_sent, t_recv, update: pb.CameraUpdate):
+            received[k] += 1
+            if i < warmup_frames:
+                return
             rtt_ms.append((t_recv - t_sent) * 1e3)
             compute_ms.append(update.compute_ms)
-            received[k] += 1
             late[0] += bool(period) and (t_recv - t_sent) > period
             stale[0] += update.stale
         return record
 
     start = time.perf_counter() + 0.1
+    cpu_start_s = time.process_time()
     # sessions start staggered over one frame period, as independent game clients would
     results = await asyncio.gather(*(driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
                                      for k, sid in enumerate(session_ids)), return_exceptions=True)
     wall_s = time.perf_counter() - start
+    client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
     errors = [repr(r) for r in results if isinstance(r, BaseException)]
     await driver.close()
     sent = sessions * n_frames
@@ -170,11 +179,13 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
     return {
         "transport": transport, "sessions": sessions, "rate_hz": rate_hz, "seconds": seconds,
         "wall_s": round(wall_s, 3), "frames_sent": sent, "frames_received": sum(received),
+        "warmup_frames_per_session": warmup_frames,
         "dropped_frames": sent - sum(received), "late_frames": late[0], "stale_frames": stale[0],
         "rtt_ms": rtt, "compute_ms": percentiles(compute_ms), "baseline_rtt_ms": base,
         "rtt_ratio_vs_baseline": {"p50": rtt["p50"] / base["p50"] if rtt["p50"] else None,
                                   "p99": rtt["p99"] / base["p99"] if rtt["p99"] else None},
         "errors": errors, "cpus": os.cpu_count(),
+        "client_cpu_s": round(client_cpu_s, 3), "client_cpu_fraction_of_core": round(client_cpu_s / wall_s, 3),
     }
 
 

@@ -1,6 +1,8 @@
 """The one error type the edges (servicers, ZeroMQ handler, routes) turn into a status."""
 from __future__ import annotations
 
+import logging
+
 import grpc
 
 
@@ -15,9 +17,6 @@ class DirectorError(Exception):
         super().__init__(message)
         self.code = code
         self.message = message
-
-    def __reduce__(self):  # crosses process boundaries (worker -> front) by pickling
-        return (DirectorError, (self.code, self.message))
 
 
 def invalid(message: str) -> DirectorError:
@@ -44,6 +43,13 @@ def unavailable(message: str) -> DirectorError:
     return DirectorError(grpc.StatusCode.UNAVAILABLE, message)
 
 
-def internal(exc: Exception) -> DirectorError:
-    """An unexpected failure while handling one request, reported without losing the server."""
-    return DirectorError(grpc.StatusCode.INTERNAL, f"internal error: {type(exc).__name__}: {exc}")
+def internal(exc: Exception, what: str, session_id: str | None, logger: logging.Logger) -> DirectorError:
+    """An unexpected failure while handling one request (a bug, a full disk), answered the same
+    way wherever it is caught (a worker's session table, the gRPC and ZeroMQ transports): INTERNAL
+    with a short message naming the exception's type, the request and the session; the traceback
+    goes to the server's log with the session id, never to the client. `what`: the request
+    ("Frame", "CreateSession"); `session_id`: the session it names, None when it names none."""
+    where = f"session {session_id}" if session_id else "no session"
+    logger.error("%s of %s failed", what, where, exc_info=exc)
+    return DirectorError(grpc.StatusCode.INTERNAL, f"internal error ({type(exc).__name__}) in {what} of {where}; "
+                                                   "the server's log has the details")

@@ -15,12 +15,13 @@ class ServerProcess:
     """Pass transports=("grpc",) to turn the others off; extra `args` go to `camdirector serve`.
     The server's log goes to a file in a temporary folder (a pipe could fill and stall it)."""
 
-    def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None):
+    def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None,
+                 python: str = sys.executable):
         self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
         self.log_path = Path(self._dir.name) / "server.log"
         self._log = open(self.log_path, "w+")
         bind = {"grpc": "127.0.0.1:0", "zmq": "tcp://127.0.0.1:*", "http": "127.0.0.1:0"}
-        cmd = [sys.executable, "-m", "camdirector.server.cli", "serve"]
+        cmd = [python, "-m", "camdirector.server.cli", "serve"]  # another checkout's venv runs its own server
         for name, address in bind.items():
             cmd += [f"--{name}", address if name in transports else ""]
         if "--data-dir" not in args:

@@ -14,7 +14,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from camdirector.server.errors import DirectorError, internal
-from camdirector.server.front.router import SessionRouter, session_id_of
+from camdirector.server.front.router import SessionRouter, named_session, session_id_of
 from camdirector.v1 import director_pb2 as pb
 
 log = logging.getLogger("camdirector.grpc")
@@ -32,17 +32,17 @@ class DirectorGrpc:
         try:
             return await call(payload)
         except DirectorError as exc:
-            self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
+            self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
             await context.abort(exc.code, exc.message)
         except Exception as exc:  # a bug: INTERNAL, as on ZeroMQ, never grpc's UNKNOWN
-            await self._abort_internal(rpc, exc, context)
+            await self._abort_internal(rpc, exc, named_session(rpc, payload), context)
         finally:
-            self.metrics.request.labels(TRANSPORT, rpc).observe(time.perf_counter() - t0)
+            self.metrics.labelled(self.metrics.request, TRANSPORT, rpc).observe(time.perf_counter() - t0)
 
-    async def _abort_internal(self, what: str, exc: Exception, context: grpc.aio.ServicerContext) -> None:
-        log.error("%s failed", what, exc_info=exc)
-        error = internal(exc)
-        self.metrics.errors.labels(TRANSPORT, error.code.name).inc()
+    async def _abort_internal(self, rpc: str, exc: Exception, session_id: str | None,
+                              context: grpc.aio.ServicerContext) -> None:
+        error = internal(exc, rpc, session_id, log)
+        self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
         await context.abort(error.code, error.message)
 
     async def create_session(self, payload, context):
@@ -75,13 +75,13 @@ class DirectorGrpc:
                     raise DirectorError(grpc.StatusCode.INVALID_ARGUMENT,
                                         f"a stream carries one session: got {frame_session!r} on the stream of {session_id!r}")
                 reply = await self.router.frame(payload, session_id, TRANSPORT)
-                self.metrics.request.labels(TRANSPORT, "StreamFrames").observe(time.perf_counter() - t0)
+                self.metrics.labelled(self.metrics.request, TRANSPORT, "StreamFrames").observe(time.perf_counter() - t0)
                 yield reply
         except DirectorError as exc:
-            self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
+            self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
             await context.abort(exc.code, exc.message)
         except Exception as exc:
-            await self._abort_internal(f"StreamFrames of session {session_id!r}", exc, context)
+            await self._abort_internal("StreamFrames", exc, session_id, context)
         finally:
             if session_id is not None:
                 self.router.stream_closed(session_id)

@@ -90,13 +90,7 @@ class SessionRouter:
         entry.last_seen_s = self.clock()
         body, frame_metrics = await self.pool.call(entry.slot, "frame", session_id, payload)
         entry.frames += 1
-        self.metrics.frames.labels(transport).inc()
-        if frame_metrics is not None:
-            if frame_metrics.stale:
-                self.metrics.stale_frames.inc()
-            self.metrics.frame_compute.observe(frame_metrics.compute_ms * 1e-3)
-            for stage, ms in frame_metrics.stage_ms.items():
-                self.metrics.stage.labels(stage).observe(ms * 1e-3)
+        self.metrics.frame_answered(transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale)
         return body
 
     async def _session_request(self, message_type, op: str, payload: bytes) -> bytes:
@@ -204,6 +198,17 @@ def _varint(payload: bytes, at: int) -> tuple[int, int]:
         shift += 7
         if shift > 63:
             raise ValueError("varint longer than 10 bytes")
+
+
+def named_session(rpc: str, payload: bytes) -> str | None:
+    """The session a request names, for the log of one that failed: its field 1 when readable;
+    None for CreateSession (whose field 1 is the scene) or an unreadable payload."""
+    if rpc == "CreateSession":
+        return None
+    try:
+        return session_id_of(pb.FrameUpdate, payload)  # the type only names what was expected in its errors
+    except DirectorError:
+        return None
 
 
 def session_id_of(message_type, payload: bytes) -> str:

@@ -1,13 +1,12 @@
 """Worker processes that hold sessions, so capacity grows with cores.
 
-The front process talks to each worker over one socket pair (`multiprocessing.Pipe`): a message is
-multiprocessing's framing, a 4-byte big-endian length then the bytes, of a pickled tuple; requests
-are (request id, op, session id, payload), replies (request id, status code, body, FrameMetrics or
-None) with body the serialized reply, or the error message when the code is not 0. The front end
-of the pair is an asyncio stream, so a large scene never blocks the event loop; the worker reads
-it blocking. A plain socket pair costs one wake-up per direction, where a ZeroMQ pair costs three
-(its I/O threads on both sides): about 150 us against 370 us per round trip after 16 ms idle on
-this kind of VM.
+The front process talks to each worker over one socket pair (`multiprocessing.Pipe`), in the
+binary framing of server/sessions/worker.py: a struct header, then the raw bytes (the session id
+and the client's serialized request; the serialized reply and a frame's metrics as packed
+numbers). The front end of the pair is an asyncio stream, so a large scene never blocks the event
+loop; the worker reads it blocking. A plain socket pair costs one wake-up per direction, where a
+ZeroMQ pair costs three (its I/O threads on both sides): about 150 us against 370 us per round
+trip after 16 ms idle on this kind of VM.
 
 Workers are started with the "spawn" method: forking a process that already runs gRPC is unsafe.
 A worker that dies is restarted; its sessions are lost and callers are told so. A worker whose
@@ -21,23 +20,26 @@ import itertools
 import logging
 import multiprocessing
 import os
-import pickle
 import socket
-import struct
 from collections.abc import Callable
 
 import grpc
 
 from camdirector.server.errors import DirectorError
 from camdirector.server.sessions.table import FrameMetrics, SessionTable
-from camdirector.server.sessions.worker import worker_main
+from camdirector.server.sessions.worker import (
+    REPLY,
+    REQUEST_ID_MODULUS,
+    decode_reply_tail,
+    encode_request,
+    tail_length,
+    worker_main,
+)
 from camdirector.server.settings import ServerSettings
 
 log = logging.getLogger("camdirector.workers")
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
-_LENGTH = struct.Struct("!i")   # multiprocessing.Connection framing
-_LONG_LENGTH = struct.Struct("!Q")  # after a length of -1, for messages over 2 GiB
 
 
 class _Worker:
@@ -88,10 +90,9 @@ class WorkerPool:
     async def _read(self, reader: asyncio.StreamReader) -> None:
         try:
             while True:
-                (length,) = _LENGTH.unpack(await reader.readexactly(_LENGTH.size))
-                if length == -1:
-                    (length,) = _LONG_LENGTH.unpack(await reader.readexactly(_LONG_LENGTH.size))
-                request_id, code, body, metrics = pickle.loads(await reader.readexactly(length))
+                header = REPLY.unpack(await reader.readexactly(REPLY.size))
+                body, metrics = decode_reply_tail(header, await reader.readexactly(tail_length(header)))
+                request_id, code = header[0], header[1]
                 future = self._pending.pop(request_id, None)
                 if future is None or future.done():
                     continue
@@ -123,16 +124,18 @@ class WorkerPool:
 
     async def _call_worker(self, worker: _Worker, op: str, session_id: str, payload: bytes,
                            timeout_s: float | None = None):
-        request_id = next(self._ids)
+        if worker.writer.is_closing():  # died, and _watch is starting its successor
+            raise DirectorError(grpc.StatusCode.UNAVAILABLE, f"worker {worker.index} died and is restarting")
+        request_id = next(self._ids) % REQUEST_ID_MODULUS
         future = asyncio.get_running_loop().create_future()
         future.worker_index = worker.index
         self._pending[request_id] = future
-        data = pickle.dumps((request_id, op, session_id, payload), protocol=pickle.HIGHEST_PROTOCOL)
-        header = _LENGTH.pack(len(data)) if len(data) < 2 ** 31 - 1 else _LENGTH.pack(-1) + _LONG_LENGTH.pack(len(data))
-        worker.writer.write(header)
-        worker.writer.write(data)
-        await worker.writer.drain()  # backpressure on large payloads, immediate otherwise
         try:
+            worker.writer.writelines(encode_request(request_id, op, session_id, payload))
+            try:
+                await worker.writer.drain()  # backpressure on large payloads, immediate otherwise
+            except ConnectionError:  # it died before _watch noticed
+                raise DirectorError(grpc.StatusCode.UNAVAILABLE, "the worker holding this session died") from None
             if timeout_s is None:
                 return await future
             return await asyncio.wait_for(future, timeout_s)

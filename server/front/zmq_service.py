@@ -15,7 +15,7 @@ import zmq
 import zmq.asyncio
 
 from camdirector.server.errors import DirectorError, exhausted, internal, invalid, unimplemented
-from camdirector.server.front.router import SessionRouter, session_id_of
+from camdirector.server.front.router import SessionRouter, named_session, session_id_of
 from camdirector.v1 import director_pb2 as pb
 
 log = logging.getLogger("camdirector.zmq")
@@ -78,14 +78,15 @@ class ZmqTransport:
                 raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
             reply = [b"0", await handler(payload)]
         except DirectorError as exc:
-            self.metrics.errors.labels(TRANSPORT, exc.code.name).inc()
+            self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
             reply = [str(exc.code.value[0]).encode(), exc.message.encode()]
-        except Exception as exc:  # never let one request end the loop
-            log.exception("zmq request %r failed", rpc[:64])  # the traceback stays in the server's log
-            error = internal(exc)
+        except Exception as exc:  # never let one request end the loop; INTERNAL, as over gRPC
+            name = rpc[:64].decode(errors="replace")
+            error = internal(exc, name, named_session(name, body[1]) if len(body) == 2 else None, log)
+            self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
             reply = [str(error.code.value[0]).encode(), error.message.encode()]
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set
-        self.metrics.request.labels(TRANSPORT, label).observe(time.perf_counter() - t0)
+        self.metrics.labelled(self.metrics.request, TRANSPORT, label).observe(time.perf_counter() - t0)
         try:
             await self.socket.send_multipart(envelope + reply)
         except zmq.ZMQError as exc:  # the peer went away

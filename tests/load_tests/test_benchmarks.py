@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from load_tests import dashboard_bench, movers_bench, overview_bench, soak, stream, tracks_bench
+from load_tests import capacity, dashboard_bench, movers_bench, overview_bench, soak, stream, tracks_bench
 
 
 def _run(main, tmp_path, *args) -> dict:
@@ -37,6 +37,28 @@ def test_tracks_bench_reports_a_level_against_the_prm(shared_data, tmp_path):
 def test_stream_bench_reports_round_trips(tmp_path):
     result = _run(stream.main, tmp_path, "--transport", "zmq", "--sessions", "1", "--seconds", "1")
     assert result["dropped_frames"] == 0 and not result["errors"]
+
+
+def test_capacity_reports_the_last_count_that_held_with_its_floor_and_load_generator(tmp_path):
+    result = _run(capacity.main, tmp_path, "--modes", "FRAMING_ONLY", "--transports", "zmq", "--max-sessions", "2",
+                  "--seconds", "0.5", "--warmup-frames", "2", "--settle-s", "0", "--workers", "1")
+    (case,) = result["cases"]
+    assert (case["mode"], case["transport"], case["server_workers"]) == ("FRAMING_ONLY", "zmq", 1)
+    assert result["counts_tried_up_to"] == [1, 2] and result["server"]["checkout"]
+    passed = [s["sessions"] for s in case["steps"] if s["passed"]]
+    assert case["capacity_sessions"] == result["capacity_sessions"]["FRAMING_ONLY"]["zmq"] == max(passed, default=0)
+    for step in case["steps"]:  # each verdict is the rule applied to the step's own numbers
+        assert step["passed"] == (step["rtt_ms"]["p99"] <= 10.0 and step["late_frames"] == step["dropped_frames"] == 0
+                                  and not step["errors"])
+        assert step["floor_rtt_ms"]["p50"] > 0 and step["client_cpu_fraction_of_core"] > 0
+        assert step["frames_sent"] == step["sessions"] * 30
+
+
+@pytest.mark.parametrize("max_sessions, counts", [
+    (1, [1]), (2, [1, 2]), (20, [1, 2, 4, 8, 16, 20]), (40, [1, 2, 4, 8, 16, 24, 32, 40]),
+])
+def test_capacity_tries_counts_doubling_then_by_eight(max_sessions, counts):
+    assert capacity.session_counts(max_sessions) == counts
 
 
 def test_dashboard_bench_reports_watched_against_alone(tmp_path):

@@ -3,6 +3,7 @@ the server keeps running and a healthy session beside the bad ones keeps its exa
 from __future__ import annotations
 
 import math
+import re
 import struct
 import time
 
@@ -251,6 +252,33 @@ def test_a_dead_worker_is_replaced(server_factory):
     expect(grpc.StatusCode.NOT_FOUND, client.call, "Frame", list(walk("never-made", 1))[0], contains="unknown")
     fresh = client.call("CreateSession", two_target_request()).session_id
     assert client.stream(list(walk(fresh, 5)))[-1].frame == 5
+    assert srv.alive()
+    client.close()
+    zmq_client.close()
+
+
+def test_an_unexpected_failure_is_internal_on_both_transports(server_factory, tmp_path):
+    """A failure the server did not foresee (a real one: its recordings folder cannot be made, a
+    file has its name) answers INTERNAL with a short message naming the session, over gRPC and
+    ZeroMQ alike (gRPC alone would say UNKNOWN); the session id and the traceback are in the
+    server's log, no half-made session is left, and the server keeps serving."""
+    data_dir = tmp_path / "data"
+    data_dir.mkdir()
+    (data_dir / "recordings").write_text("a file where the recordings folder should be")
+    srv = server_factory("--workers", "1", "--data-dir", str(data_dir))
+    client, zmq_client = GrpcRaw(srv.grpc), ZmqRaw(srv.zmq)
+    request = two_target_request()
+    request.record = True
+    for transport in (client, zmq_client):
+        message = expect(grpc.StatusCode.INTERNAL, transport.call, "CreateSession", request,
+                         contains="internal error (FileExistsError) in create of session").message
+        assert "Traceback" not in message and str(data_dir) not in message  # details stay in the log
+        session_id = re.search(r"of session (\w+)", message).group(1)
+        log = srv.log_tail(1_000_000)
+        assert f"create of session {session_id} failed" in log and "Traceback" in log, log[-2000:]
+    fresh = client.call("CreateSession", two_target_request()).session_id
+    assert client.stream(list(walk(fresh, 3)))[-1].frame == 3
+    assert zmq_client.call("CloseSession", pb.CloseSessionRequest(session_id=fresh)).frames == 3
     assert srv.alive()
     client.close()
     zmq_client.close()

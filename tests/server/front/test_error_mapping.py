@@ -8,10 +8,14 @@ import logging
 
 import grpc
 import pytest
+import zmq
 
 from camdirector.server.errors import DirectorError
 from camdirector.server.front.grpc_service import DirectorGrpc
-from camdirector.server.front.router import session_id_of
+from camdirector.server.front.metrics import Metrics
+from camdirector.server.front.router import SessionRouter, session_id_of
+from camdirector.server.front.zmq_service import ZmqTransport
+from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 
 
@@ -30,19 +34,11 @@ class _Context:
         raise _Aborted()
 
 
-class _Labels:
-    def labels(self, *names):
-        return self
-
-    def inc(self):
-        pass
-
-    def observe(self, value):
-        pass
-
-
 class _Router:
-    metrics = type("Metrics", (), {"errors": _Labels(), "request": _Labels()})()
+    """What DirectorGrpc reads from a SessionRouter besides the calls a test passes in."""
+
+    def __init__(self):
+        self.metrics = Metrics()
 
 
 def test_an_unexpected_exception_is_internal_over_grpc_and_logged(caplog):
@@ -54,8 +50,40 @@ def test_an_unexpected_exception_is_internal_over_grpc_and_logged(caplog):
     with caplog.at_level(logging.ERROR, logger="camdirector.grpc"), pytest.raises(_Aborted):
         asyncio.run(service._unary("UpdateStyle", broken, b"", context))
     code, details = context.status
-    assert code == grpc.StatusCode.INTERNAL and "KeyError" in details
-    assert "UpdateStyle failed" in caplog.text and "a bug" in caplog.text
+    assert code == grpc.StatusCode.INTERNAL and "KeyError" in details and "a bug" not in details
+    assert "UpdateStyle of no session failed" in caplog.text and "a bug" in caplog.text  # the traceback
+
+
+def test_an_unexpected_exception_is_internal_over_zeromq_and_logged_with_its_session(caplog, tmp_path):
+    """The same mapping on the ZeroMQ socket: a real ROUTER socket and DEALER client, a real
+    router (sessions inline) whose Frame handler is broken."""
+    async def exchange() -> list[bytes]:
+        router = SessionRouter(ServerSettings(workers=0, data_dir=str(tmp_path)), Metrics())
+        transport = ZmqTransport(router, "tcp://127.0.0.1:*")
+
+        async def broken(payload):
+            raise KeyError("a bug")
+
+        transport._handlers[b"Frame"] = broken
+        transport.start()
+        client = transport.ctx.socket(zmq.DEALER)
+        client.setsockopt(zmq.LINGER, 0)
+        client.connect(transport.address)
+        try:
+            await client.send_multipart([b"Frame", pb.FrameUpdate(session_id="s-9", frame=1).SerializeToString()])
+            reply = await asyncio.wait_for(client.recv_multipart(), 10.0)
+        finally:
+            client.close()
+            await transport.stop()
+        assert router.metrics.registry.get_sample_value("camdirector_errors_total",
+                                                        {"transport": "zmq", "code": "INTERNAL"}) == 1.0
+        return reply
+
+    with caplog.at_level(logging.ERROR, logger="camdirector.zmq"):
+        code, message = asyncio.run(exchange())
+    assert code == str(grpc.StatusCode.INTERNAL.value[0]).encode()
+    assert b"KeyError" in message and b"session s-9" in message and b"a bug" not in message
+    assert "Frame of session s-9 failed" in caplog.text and "a bug" in caplog.text
 
 
 def test_a_director_error_keeps_its_status_over_grpc():

@@ -1,0 +1,163 @@
+"""Capacity benchmark: the most sessions at 60 Hz one server on this machine holds with a round trip
+p99 <= 10 ms and no late frame, for FRAMING_ONLY and ANTICIPATION on the demo scene, over gRPC
+and ZeroMQ.
+
+    python -m load_tests.capacity --json FILE [--seconds S] [--max-sessions N] [--modes A,B]
+        [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--server-python PATH]
+
+For each mode and transport a fresh server is started (an idle session is reclaimed one second
+after its stream ends, so one step's sessions do not weigh on the next), and session counts are
+tried upward (1, 2, 4, 8, 16, then every 8 up to --max-sessions), each a short paced run of
+load_tests.stream: one frame in flight per session at --rate Hz of wall-clock time, the sessions
+staggered over one period as independent game clients would be. A step passes when its round
+trip p99 is at most --p99-ms, no frame is late (answered after the next was due), none is dropped
+and no stream failed; each session's first --warmup-frames frames are answered but not judged
+(its first frame sets up what the session keeps: about 30 ms in ANTICIPATION, late by itself).
+A step that fails is run once more (a few seconds on a shared machine can hit one stall); the
+search stops at a step that fails twice, and the capacity is the last count that passed (0 when
+even one session did not).
+Reported per case and step: round trip p50/p99 at the client, late and dropped frames, the
+server's compute_ms, the health-check floor measured in the same step against the same server
+(a gRPC health check, or a ZeroMQ request the front refuses at once), and this load generator's
+own CPU while streaming (on a 2-core machine the generator shares the cores with the server).
+`--server-python` runs the server of another checkout with that checkout's interpreter (e.g. the
+venv of a `git worktree` of an older commit) while this checkout drives it, so the same command
+measures both; the JSON names the server's checkout and commit.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from camdirector.server.process import ServerProcess
+from camdirector.v1 import director_pb2 as pb
+from load_tests import stream
+from load_tests.report import emit
+
+MODES = ("FRAMING_ONLY", "ANTICIPATION")
+TRANSPORTS = ("grpc", "zmq")
+DOUBLING_UP_TO = 16  # session counts double up to here, then grow by this step's half (8)
+
+
+def session_counts(max_sessions: int) -> list[int]:
+    """The counts tried, in order: 1, 2, 4, 8, 16, 24, 32, ... up to max_sessions (included)."""
+    counts, n = [], 1
+    while n <= max_sessions:
+        counts.append(n)
+        n = n * 2 if n < DOUBLING_UP_TO else n + DOUBLING_UP_TO // 2
+    if counts and counts[-1] != max_sessions:
+        counts.append(max_sessions)
+    return counts
+
+
+def step_passes(result: dict, p99_limit_ms: float) -> bool:
+    """A stream.run result meets the target: p99 round trip <= the limit, nothing late, dropped or failed."""
+    p99 = result["rtt_ms"]["p99"]
+    return (p99 is not None and p99 <= p99_limit_ms and result["late_frames"] == 0
+            and result["dropped_frames"] == 0 and not result["errors"])
+
+
+def _step_summary(result: dict, passed: bool) -> dict:
+    def rounded(d: dict) -> dict:
+        return {k: None if v is None else round(v, 3) for k, v in d.items()}
+
+    return {"sessions": result["sessions"], "passed": passed, "rtt_ms": rounded(result["rtt_ms"]),
+            "late_frames": result["late_frames"], "dropped_frames": result["dropped_frames"],
+            "frames_sent": result["frames_sent"], "compute_ms": rounded(result["compute_ms"]),
+            "floor_rtt_ms": rounded(result["baseline_rtt_ms"]),
+            "client_cpu_fraction_of_core": result["client_cpu_fraction_of_core"], "errors": result["errors"][:3]}
+
+
+def _server_checkout(python: str) -> dict:
+    """Where the server's code comes from: the checkout `python` imports camdirector from, and its commit."""
+    code = "import os, camdirector.server as s; print(os.path.dirname(os.path.dirname(s.__file__)))"
+    found = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    commit = subprocess.run(["git", "-C", found, "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
+    return {"python": python, "checkout": found, "commit": commit or None}
+
+
+def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
+    """One mode over one transport: a fresh server, counts tried upward until one fails twice."""
+    steps, capacity, workers = [], 0, None
+    with ServerProcess("--workers", str(args.workers), "--max-sessions", str(max(counts) * 2),
+                       "--session-resume-s", "1", python=args.server_python) as server:
+        workers = server.ready.get("workers")
+        address = server.grpc if transport == "grpc" else server.zmq
+        for n in counts:
+            passed = False
+            for _ in range(2):
+                result = asyncio.run(stream.run(transport, address, n, args.rate, args.seconds,
+                                                visibility=pb.VisibilityMode.Value(mode),
+                                                warmup_frames=args.warmup_frames))
+                passed = step_passes(result, args.p99_ms)
+                steps.append(_step_summary(result, passed))
+                time.sleep(args.settle_s)  # the step's sessions are reclaimed before the next starts
+                if passed:
+                    break
+            if not passed:
+                break
+            capacity = n
+        if not server.alive():
+            raise RuntimeError(f"the server died during {mode} over {transport}: {server.log_tail()}")
+    at_capacity = [s for s in steps if s["sessions"] == capacity and s["passed"]]
+    return {"mode": mode, "transport": transport, "capacity_sessions": capacity, "server_workers": workers,
+            "floor_rtt_ms_at_capacity": at_capacity[-1]["floor_rtt_ms"] if at_capacity else None,
+            "client_cpu_fraction_of_core_at_capacity":
+                at_capacity[-1]["client_cpu_fraction_of_core"] if at_capacity else None,
+            "steps": steps}
+
+
+def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in allowed]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{what} must be among {', '.join(allowed)}; got {text!r}")
+    return names
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="length of one step, s")
+    parser.add_argument("--rate", type=float, default=60.0, help="frames per second per session, Hz")
+    parser.add_argument("--max-sessions", type=int, default=64, help="the largest count tried")
+    parser.add_argument("--p99-ms", type=float, default=10.0, help="round trip p99 a step must not exceed, ms")
+    parser.add_argument("--warmup-frames", type=int, default=10,
+                        help="each session's first frames, answered but not judged (set-up: ~30 ms in the map modes)")
+    parser.add_argument("--modes", default=",".join(MODES), help="visibility modes, comma-separated")
+    parser.add_argument("--transports", default=",".join(TRANSPORTS), help="grpc, zmq or both, comma-separated")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="server worker processes")
+    parser.add_argument("--settle-s", type=float, default=1.5,
+                        help="pause after a step while its sessions are reclaimed, s")
+    parser.add_argument("--server-python", default=sys.executable,
+                        help="the interpreter that runs the server (another checkout's venv measures that checkout)")
+    parser.add_argument("--json", type=Path, help="also write the result here")
+    args = parser.parse_args(argv)
+    try:
+        modes = _names(args.modes, MODES, "--modes")
+        transports = _names(args.transports, TRANSPORTS, "--transports")
+    except argparse.ArgumentTypeError as exc:
+        parser.error(str(exc))
+    if args.max_sessions < 1 or args.seconds <= 0 or args.rate <= 0:
+        parser.error("--max-sessions, --seconds and --rate must be positive")
+    counts = session_counts(args.max_sessions)
+    t0 = time.perf_counter()
+    cases = [measure_case(mode, transport, counts, args) for mode in modes for transport in transports]
+    result = {
+        "p99_limit_ms": args.p99_ms, "rate_hz": args.rate, "seconds_per_step": args.seconds,
+        "warmup_frames_per_session": args.warmup_frames,
+        "counts_tried_up_to": counts, "cpus": os.cpu_count(), "server": _server_checkout(args.server_python),
+        "capacity_sessions": {mode: {c["transport"]: c["capacity_sessions"] for c in cases if c["mode"] == mode}
+                              for mode in modes},
+        "wall_s": round(time.perf_counter() - t0, 1), "cases": cases,
+    }
+    emit(result, args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
