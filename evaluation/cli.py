@@ -22,6 +22,7 @@ import json
 import sys
 from pathlib import Path
 
+from camdirector.evaluation.match.eval_cli import add_parser as add_eval_match_parser
 from camdirector.evaluation.match.sim_cli import add_parser as add_match_sim_parser
 
 # Kept light at import (camdirector's own CLI imports this module to register the subcommand):
@@ -30,7 +31,7 @@ MODES = ("RAYCAST", "NO_ANTICIPATION", "ANTICIPATION", "REACTIVE", "FRAMING_ONLY
 
 
 def add_parsers(subparsers) -> None:
-    """Registers `eval` and `match-sim` on an argparse subparsers object; args.handler(args) runs it."""
+    """Registers `eval`, `match-sim` and `eval-match` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
         "eval", help="replay scenarios through a real session and measure visibility and smoothness",
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -52,6 +53,7 @@ def add_parsers(subparsers) -> None:
                    help="--scenario: how the map modes compute their maps (default AUTO)")
     p.set_defaults(handler=run_eval)
     add_match_sim_parser(subparsers)
+    add_eval_match_parser(subparsers)
 
 
 def _modes(text: str | None) -> list[str]:

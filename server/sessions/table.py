@@ -190,10 +190,9 @@ class SessionTable:
         except DirectorError:
             raise
         except Exception as exc:  # a bug must not take the worker (and its other sessions) down
-            log.exception("session %s: %s failed", session_id, op)  # the traceback stays in the server's log
             if op == "create":
                 self.drop(session_id)
-            raise internal(exc) from exc
+            raise internal(exc, op, session_id, log) from exc
 
 
 def _parse(message_type, payload: bytes, routed_session_id: str | None = None):

@@ -7,15 +7,24 @@ victim). A beat is shown by cutting `lead_s` before it (never earlier than `max_
 the last `min_lead_s`), held `event_hold_s` after it, and no shot under the style's `min_shot_s`.
 An event whose players the previous beat's shot already shows extends that beat; one that cannot
 get its own cut (too close after the previous) joins the previous beat as a GROUP when the players
-fit in `max_group`, else it is left out (flagged). Only the first beat acts now; the plan is made
-again at every planning tick, so a late event changes it.
+fit in `max_group` and some place of the GROUP camera sees them all (`min_visible`) at the
+events' moments (on open ground two nearby fights share a shot; in corridors a GROUP of players
+far apart puts the camera so far back that walls hide them all; the answer is cached per group
+and events, so the re-plan at every tick does not cast again); else it takes the previous beat's
+place when it has the higher priority (a kill over an objective) and that beat's cut is still to
+come, else it is left out (flagged). Only the first beat acts now; the plan is
+made again at every planning tick, so a late event changes it. The camera of a planned shot is
+placed for the moments of its events (shots.py), and, with less weight, `PRE_EVENT_S` before
+the first: the event is what must be seen.
 
 Between beats the director may cut at its discretion, once the shot is `min_shot_s` old, when no
 planned cut is nearer than `min_shot_s` (the new shot would be too short), and only when the shot
 is `max_shot_s` old, or shows a subject dead for `dead_hold_s`, or a situation is better than the
-shot's by `switch_margin`. Situations (interest.py): a DUEL per fighting pair, a FOLLOW per
-fighting player, a GROUP per cluster of fighters, and an OVERVIEW when nothing fights; with a
-delay, fights are anticipated by reading the next 2 s of the buffer.
+shot's by `switch_margin` and the shot is `settle_s` old (hysteresis: without a delay, interest
+flickers as players turn, and a cut at every flicker makes 2-s shots). Situations (interest.py):
+a DUEL per fighting pair, a FOLLOW per fighting player, a GROUP per cluster of fighters, and an
+OVERVIEW when nothing fights; with a delay, fights are anticipated by reading the next 2 s of the
+buffer.
 
 The shot's camera comes from shots.py with the grammar of grammar.py: the line of action of a
 pair is kept, and a cut that shares subjects with the previous shot must turn 30 degrees.
@@ -23,6 +32,7 @@ pair is kept, and a cut that shares subjects with the previous shot must turn 30
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +54,8 @@ FOLLOW_SHARE = 0.5                           # one fighter alone is worth this s
 GROUP_SHARE = 0.6                            # a group: this share of its best fight, plus GROUP_EXTRA per extra player
 GROUP_EXTRA = 0.1
 MIN_SWITCH_GAIN = 0.05                       # and a better situation must gain at least this much
+PRE_EVENT_S = 0.5                            # a planned shot's camera is also scored this long before its event, s
+PRE_EVENT_WEIGHT = 0.25                      # with this weight against 1 for each event's own moment
 
 
 @dataclass
@@ -56,7 +68,7 @@ class Shot:
     camera: ToricCamera | StaticCamera
     start_s: float
     hold_until_s: float = -math.inf
-    cover_s: float = -math.inf  # the time of the event it is planned to show (its camera is placed for it)
+    cover_times_s: list[float] = field(default_factory=list)  # the events it is planned to show (its camera is placed for them)
     scores: dict[str, float] = field(default_factory=dict)
     held: bool = False  # a human's take
 
@@ -82,6 +94,11 @@ class Beat:
     priority: int
     reason: str
     cut_s: float | None = None  # None: the current shot already shows it
+    times_s: list[float] = field(default_factory=list)  # every event it shows, s
+
+    def add(self, event_s: float, priority: int) -> None:
+        self.times_s.append(event_s)
+        self.last_time_s, self.priority = event_s, max(self.priority, priority)
 
 
 class ShotBuilder:
@@ -121,12 +138,29 @@ class ShotBuilder:
         return [(ToricCamera(kind, a, b, self.style, self.lens, self.default_place()), grid)
                 for a, b in (orders[:1] if default else orders)]
 
+    def _best(self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
+              weights: list[float] | None, allowed: Callable[[np.ndarray], np.ndarray] | None,
+              ) -> tuple[ToricCamera, Place, float]:
+        """The camera (of those cameras() offers at the moment) and place that best see the
+        subjects over cover, and its score (-1: the grammar refuses every place)."""
+        best: tuple[ToricCamera, Place, float] | None = None
+        for camera, places in self.cameras(kind, subjects, moment, default=False):
+            place, score = best_place(camera, places, cover, subjects, self.visibility, allowed, moment, weights)
+            if best is None or score > best[2]:
+                best = (camera, place, score)
+        return best
+
+    def place_score(self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
+                    weights: list[float] | None) -> float:
+        """How well the best place of a Toric shot from the moment on sees the subjects over cover, [0, 1]."""
+        return self._best(kind, subjects, moment, cover, weights, None)[2]
+
     def build(self, choice: ShotChoice, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
               previous: Shot | None, previous_pose: CameraPose | None, start_s: float,
-              ) -> tuple[Shot | None, float]:
-        """A shot showing `subjects` from `moment` on, placed for the moments in `cover`,
-        respecting the 30-degree rule against the previous shot at `moment`; and its place's
-        score. None (and -1) when no place respects the rule."""
+              weights: list[float] | None = None) -> tuple[Shot | None, float]:
+        """A shot showing `subjects` from `moment` on, placed for the moments in `cover` (with
+        `weights`, default equal), respecting the 30-degree rule against the previous shot at
+        `moment`; and its place's score. None (and -1) when no place respects the rule."""
         if choice.kind == ShotKind.OVERVIEW:
             alive = tuple(int(i) for i in np.flatnonzero(moment.alive)) or subjects
             pose, seen = overview_pose(moment, subjects or alive, self.lens, self.visibility,
@@ -138,12 +172,7 @@ class ShotBuilder:
         def allowed(positions: np.ndarray) -> np.ndarray:
             return self.grammar.allows_cut(previous_world, moment.aims_world[list(shared)], positions)
 
-        best: tuple[ToricCamera, Place, float] | None = None
-        for camera, places in self.cameras(choice.kind, subjects, moment, default=False):
-            place, score = best_place(camera, places, cover, subjects, self.visibility, allowed, moment)
-            if best is None or score > best[2]:
-                best = (camera, place, score)
-        camera, place, score = best
+        camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, allowed)
         if score < 0.0:
             return None, -1.0
         camera.place = camera.goal = place
@@ -163,6 +192,7 @@ class PlannedDirector:
         self.delay_s = delay_s
         self.dead_since: dict[int, float] = {}
         self.plan: list[Beat] = []  # the beats of the last decision (read for the dashboard, MatchRig.planned_cut)
+        self._group_seen: dict[tuple[tuple[int, ...], tuple[float, ...]], bool] = {}  # _group_sees' answers
 
     @property
     def style(self) -> Style:
@@ -233,28 +263,58 @@ class PlannedDirector:
             what = (f"{event.kind.name.lower()} in {event.time_s - now:.1f} s: "
                     f"{' -> '.join(self.players[i] for i in subjects)}")
             if beats and set(subjects) <= set(beats[-1].subjects):
-                beats[-1].last_time_s, beats[-1].priority = event.time_s, max(beats[-1].priority, priority)
+                beats[-1].add(event.time_s, priority)
                 continue
-            beat = Beat(kind, subjects, event.time_s, event.time_s, priority, what)
+            beat = Beat(kind, subjects, event.time_s, event.time_s, priority, what, times_s=[event.time_s])
             if not beats and set(subjects) <= shows:  # the current shot shows it: no cut
                 beats.append(beat)
                 continue
-            previous_start = start if not beats or beats[-1].cut_s is None else beats[-1].cut_s
-            free = now if not beats else beats[-1].last_time_s + s.event_hold_s
-            beat.cut_s = self._cut_time(beat.time_s, previous_start, free, now)
-            if beat.cut_s is None:  # no cut of its own: join the previous beat, or leave it out
-                union = tuple(dict.fromkeys((*beats[-1].subjects, *subjects))) if beats else ()
-                if not beats or len(union) > s.max_group:
-                    dropped += 1
-                    continue
-                last = beats[-1]
+            beat.cut_s = self._beat_cut(beat, beats[-1] if beats else None, start, now)
+            if beat.cut_s is not None:
+                beats.append(beat)
+                continue
+            # no cut of its own: join the previous beat, take its place, or be left out
+            last = beats[-1] if beats else None
+            union = () if last is None else tuple(dict.fromkeys((*last.subjects, *subjects)))
+            if last is not None and len(union) <= s.max_group \
+                    and self._group_sees(union, [*last.times_s, event.time_s], buffer, now):
                 last.subjects, last.kind, last.reason = union, ShotKind.GROUP, last.reason + "; and " + what
-                last.last_time_s, last.priority = event.time_s, max(last.priority, priority)
+                last.add(event.time_s, priority)
                 if last.cut_s is None and not set(union) <= shows:  # the current shot no longer shows it all
                     last.cut_s = self._cut_time(last.time_s, start, now, now)
                 continue
-            beats.append(beat)
+            if last is not None and priority > last.priority and last.cut_s is not None:
+                beat.cut_s = self._beat_cut(beat, beats[-2] if len(beats) > 1 else None, start, now)
+                if beat.cut_s is not None:
+                    dropped += len(last.times_s)
+                    beats[-1] = beat
+                    continue
+            dropped += 1
         return beats, dropped
+
+    def _beat_cut(self, beat: Beat, previous: Beat | None, start_s: float, now_s: float) -> float | None:
+        """The cut time of a beat after the previous planned one (None: after the current shot
+        that started at start_s)."""
+        previous_start = start_s if previous is None or previous.cut_s is None else previous.cut_s
+        free = now_s if previous is None else previous.last_time_s + self.settings.event_hold_s
+        return self._cut_time(beat.time_s, previous_start, free, now_s)
+
+    def _group_sees(self, subjects: tuple[int, ...], times_s: list[float], buffer: MomentBuffer, now_s: float) -> bool:
+        """Whether a GROUP camera has a place that sees every subject (min_visible) at the events'
+        moments, cached per subjects and times (module docstring)."""
+        key = (subjects, tuple(times_s))
+        if key not in self._group_seen:
+            cover, weights = self.event_cover(buffer, now_s, times_s)
+            score = self.builder.place_score(ShotKind.GROUP, subjects, buffer.at(times_s[0]), cover, weights)
+            self._group_seen[key] = score >= self.settings.min_visible
+        return self._group_seen[key]
+
+    @staticmethod
+    def event_cover(buffer: MomentBuffer, now_s: float, times_s: list[float]) -> tuple[list[Moment], list[float]]:
+        """The moments a shot planned for events at times_s is placed for, with their weights:
+        PRE_EVENT_S before the first (not before now) and each event's own."""
+        cover = [buffer.at(max(now_s, times_s[0] - PRE_EVENT_S))] + [buffer.at(t) for t in times_s]
+        return cover, [PRE_EVENT_WEIGHT] + [1.0] * len(times_s)
 
     def _cut_time(self, event_s: float, previous_start_s: float, free_s: float, now_s: float) -> float | None:
         """When to cut for an event at event_s: lead_s before it, not before the previous shot is
@@ -276,6 +336,7 @@ class PlannedDirector:
                 self.dead_since.pop(i, None)
             else:
                 self.dead_since.setdefault(i, now)
+        self._group_seen = {k: v for k, v in self._group_seen.items() if k[1][0] >= now}  # past events: never asked again
         beats, dropped = self.beats(moment, buffer, current)
         self.plan = beats
         if dropped:
@@ -283,13 +344,13 @@ class PlannedDirector:
         first = beats[0] if beats else None
         if first is not None and first.cut_s is None:
             current.hold_until_s = max(current.hold_until_s, first.last_time_s + s.event_hold_s)
-            current.cover_s = max(current.cover_s, first.time_s)
+            current.cover_times_s = sorted(set(current.cover_times_s) | set(first.times_s))
         elif first is not None and first.cut_s <= now + 1e-9:
             choice = ShotChoice(tuple(self.players[i] for i in first.subjects), first.kind, "planned " + first.reason)
-            cover = [buffer.at(first.time_s - 0.5), buffer.at(first.time_s)]  # seen when it matters
-            shot, seen = self.builder.build(choice, first.subjects, moment, cover, current, current_pose, now)
+            cover, weights = self.event_cover(buffer, now, first.times_s)
+            shot, seen = self.builder.build(choice, first.subjects, moment, cover, current, current_pose, now, weights)
             if shot is not None:
-                shot.hold_until_s, shot.cover_s = first.last_time_s + s.event_hold_s, first.time_s
+                shot.hold_until_s, shot.cover_times_s = first.last_time_s + s.event_hold_s, list(first.times_s)
                 shot.scores = {"priority": float(first.priority), "lead_s": first.time_s - now, "place_visibility": seen}
                 return shot
             flags.append("plan_no_place_for_grammar")
@@ -310,7 +371,8 @@ class PlannedDirector:
         for option in options:
             if current is not None and set(option.subjects) == current_set and option.kind == current_kind:
                 continue
-            better = option.score > current_score * (1.0 + s.switch_margin) + MIN_SWITCH_GAIN
+            better = (option.score > current_score * (1.0 + s.switch_margin) + MIN_SWITCH_GAIN
+                      and length_s >= s.settle_s)
             if not (current is None or length_s >= style.max_shot_s or dead_too_long or better):
                 return None
             why = ("max shot length" if current is not None and length_s >= style.max_shot_s

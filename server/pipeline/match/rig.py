@@ -230,17 +230,26 @@ class MatchRig:
         return new
 
     def _replace(self, moment: Moment, flags: list[str]) -> None:
-        """Ours: a Toric camera whose subjects are under min_visible glides to the best place on its side."""
+        """Ours: a Toric camera whose goal place sees its subjects under min_visible glides to the
+        best place on its side. With planned events still ahead in the buffer the place is judged
+        at their moments (plan.py's event cover: being hidden now matters less than at the kill);
+        otherwise now and REPLACE_LOOKAHEAD_S ahead."""
         camera = None if self.shot is None else self.shot.camera
-        if not isinstance(camera, ToricCamera) or self._last_pose is None:
+        if not isinstance(camera, ToricCamera):
             return
-        seen = self.visibility.visible_share(self._last_pose.position_world, moment, self.shot.subjects).min()
+        now = moment.time_s
+        upcoming = [t for t in self.shot.cover_times_s if now <= t <= self.buffer.horizon_s]
+        if upcoming:
+            cover, weights = PlannedDirector.event_cover(self.buffer, now, upcoming)
+        else:
+            ahead = now + REPLACE_LOOKAHEAD_S
+            cover, weights = [moment] + ([self.buffer.at(ahead)] if ahead <= self.buffer.horizon_s else []), None
+        subjects = self.shot.subjects
+        _, seen = best_place(camera, [camera.goal], cover, subjects, self.visibility, weights=weights)
         if seen >= self.settings.min_visible:
             return
-        ahead = max(moment.time_s + REPLACE_LOOKAHEAD_S, self.shot.cover_s)  # a planned event's moment first
-        cover = [moment] + ([self.buffer.at(ahead)] if ahead <= self.buffer.horizon_s else [])
         side = None if camera.b_index is None else camera.side
-        place, score = best_place(camera, place_grid(side), cover, self.shot.subjects, self.visibility)
+        place, score = best_place(camera, place_grid(side), cover, subjects, self.visibility, weights=weights)
         if score > seen:
             camera.goal = place
             flags.append("replaced_for_visibility")
