@@ -77,6 +77,7 @@ class ShotChoice:
     subject_ids: tuple[str, ...]
     kind: ShotKind
     reason: str
+    held: bool = False  # a human's take (or its fallback), kept until released
 
 
 @dataclass(frozen=True)

@@ -330,7 +330,7 @@ def pose_msg(pose: CameraPose) -> pb.CameraPose:
 
 
 def shot_msg(shot: ShotChoice) -> pb.ShotInfo:
-    return pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason)
+    return pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason, held=shot.held)
 
 
 def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False, message: str = "") -> pb.CameraUpdate:

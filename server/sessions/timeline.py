@@ -124,12 +124,12 @@ _EVENT_KINDS = {kind: f"EVENT_{kind.name}" for kind in EventKind}
 
 
 def _shot_json(shot: ShotChoice) -> dict:
-    return {"subject_ids": shot.subject_ids, "kind": _SHOT_KINDS[shot.kind], "reason": shot.reason}
+    return {"subject_ids": shot.subject_ids, "kind": _SHOT_KINDS[shot.kind], "reason": shot.reason, "held": shot.held}
 
 
 def _match_json(frames: list[TimelineFrame], rows: list[dict]) -> None:
     """Adds the MATCH fields to each row (kinds named as in camdirector.v1: SHOT_DUEL, EVENT_KILL):
-    shot {subject_ids, kind, reason} or null; candidates [{shot, score, camera, forward}] (as the
+    shot {subject_ids, kind, reason, held} or null; candidates [{shot, score, camera, forward}] (as the
     wire's CandidateShot); players (ids) and teams in target order; events [{time_s, kind,
     actor_id, other_actor_id, priority, label}]; planned_cut {time_s, shot} or null."""
     candidates = [c for f in frames for c in f.candidates]

@@ -353,14 +353,16 @@ class GameEvent(_message.Message):
     def __init__(self, kind: _Optional[_Union[EventKind, str]] = ..., actor_id: _Optional[str] = ..., other_actor_id: _Optional[str] = ..., priority: _Optional[int] = ..., time_s: _Optional[float] = ..., label: _Optional[str] = ..., position: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
 
 class ShotInfo(_message.Message):
-    __slots__ = ("subject_ids", "kind", "reason")
+    __slots__ = ("subject_ids", "kind", "reason", "held")
     SUBJECT_IDS_FIELD_NUMBER: _ClassVar[int]
     KIND_FIELD_NUMBER: _ClassVar[int]
     REASON_FIELD_NUMBER: _ClassVar[int]
+    HELD_FIELD_NUMBER: _ClassVar[int]
     subject_ids: _containers.RepeatedScalarFieldContainer[str]
     kind: ShotKind
     reason: str
-    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ...) -> None: ...
+    held: bool
+    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ..., held: _Optional[bool] = ...) -> None: ...
 
 class CandidateShot(_message.Message):
     __slots__ = ("pose", "shot", "score")

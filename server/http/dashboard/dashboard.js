@@ -267,7 +267,7 @@ function showMatch(frames, events) {
   if (!match) return;
   const program = document.getElementById("program-shot");
   // The match rig starts the reason of a human's shot, and of its fallback, with "take".
-  const held = Boolean(last.shot && last.shot.reason.startsWith("take"));
+  const held = Boolean(last.shot && last.shot.held);
   program.textContent = last.buffering || !last.shot ? "buffering: the broadcast delay is filling, no camera yet"
     : `${describeShot(last.shot)} (${held ? "held" : "the director's"}): ${last.shot.reason}`;
   program.classList.toggle("held", held);

@@ -64,6 +64,7 @@ class ShotOut(BaseModel):
     subject_ids: list[str] = Field(description="players shown")
     kind: str = Field(description="camdirector.v1.ShotKind name (SHOT_DUEL, SHOT_FOLLOW, SHOT_GROUP, SHOT_OVERVIEW)")
     reason: str
+    held: bool = Field(False, description="a human's take (or its fallback), kept until released")
 
 
 class CandidateOut(BaseModel):

@@ -5,11 +5,15 @@ arrived, so the moments in between are the known future the director plans over 
 "Delay semantics"). Each moment keeps the players' transforms, aim points, feet and horizontal
 facing as arrays in target order.
 
-Who is alive: a player is dead from the time of a KILL event naming it as victim until its
-transform jumps farther than `respawn_jump_m` between two consecutive frames (a respawn is a
-teleport to a spawn point; a body that lies still or is dragged a little stays dead). Events are
-applied to the first moment whose time reaches theirs; an event announced late (its time before
-the newest moment) is applied to the newest moment, the earliest the director can know it.
+Who is alive: a player is dead from the time of a KILL event naming it as victim until it
+respawns. A respawn is a teleport: between two frames its feet move at least `respawn_min_jump_m`
+and faster than `respawn_speed_m_s`, however near the spawn point is to where it fell (a jump
+threshold in metres alone missed spawns 2 m away and kept those players dead for the rest of the
+match). A player respawned at the very spot it fell shows no teleport; once it stands
+`respawn_walk_m` from there across the ground it has walked away, which a body does not. A body
+that lies still, falls or is dragged a little stays dead. Events are applied to the first moment
+whose time reaches theirs; an event announced late (its time before the newest moment) is applied
+to the newest moment, the earliest the director can know it.
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ import numpy as np
 
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.server.pipeline.inputs import EventKind, GameEvent
+from camdirector.server.pipeline.match.settings import MatchSettings
 
 
 @dataclass
@@ -47,13 +52,17 @@ def horizontal_forward(rotations_xyzw: np.ndarray) -> np.ndarray:
     return forward / norm[:, None]
 
 
+TIME_EPSILON_S = 1e-6  # frame times this close are the same instant (floating-point rounding of t - D), s
+
+
 class MomentBuffer:
     """The moments from the program's moment to the newest frame, and the match's events."""
 
-    def __init__(self, player_ids: list[str], respawn_jump_m: float):
+    def __init__(self, player_ids: list[str], settings: MatchSettings):
         self.player_ids = player_ids
         self.index = {p: i for i, p in enumerate(player_ids)}
-        self.respawn_jump_m = respawn_jump_m
+        self.settings = settings
+        self._fell_world = np.full((len(player_ids), 3), np.nan)  # (n, 3) feet at each dead player's death
         self.moments: list[Moment] = []
         self.times: list[float] = []
         self.events: list[GameEvent] = []       # every event, in time order (the planner reads ahead)
@@ -74,9 +83,13 @@ class MomentBuffer:
             return False
         feet = np.array([t.position_world for t in transforms], dtype=np.float64)
         alive = np.ones(len(transforms), dtype=bool) if last is None else last.alive.copy()
-        if last is not None:
-            jumped = np.linalg.norm(feet - last.feet_world, axis=1) > self.respawn_jump_m
-            alive |= jumped
+        if last is not None and not alive.all():
+            s = self.settings
+            step_m = np.linalg.norm(feet - last.feet_world, axis=1)
+            teleported = (step_m >= s.respawn_min_jump_m) & (step_m > s.respawn_speed_m_s * (time_s - last.time_s))
+            # across the ground: a body that falls off a ledge has not walked
+            walked_away = np.linalg.norm((feet - self._fell_world)[:, [0, 2]], axis=1) >= s.respawn_walk_m  # NaN: False
+            alive |= teleported | walked_away
         for event in sorted(events, key=lambda e: e.time_s):
             position = bisect.bisect_right(self._event_times, event.time_s)
             self._event_times.insert(position, event.time_s)
@@ -86,7 +99,9 @@ class MomentBuffer:
         self._pending = [e for e in self._pending if e.time_s > time_s]
         for event in due:
             if event.kind == EventKind.KILL and event.other_actor_id in self.index:
-                alive[self.index[event.other_actor_id]] = False
+                victim = self.index[event.other_actor_id]
+                self._fell_world[victim] = feet[victim]
+                alive[victim] = False
                 if event.actor_id in self.index and event.actor_id != event.other_actor_id:
                     self.killed_by[event.other_actor_id] = event.actor_id
         rotations = np.array([t.rotation_xyzw for t in transforms], dtype=np.float64)
@@ -96,11 +111,19 @@ class MomentBuffer:
         return True
 
     def program_moment(self, time_s: float) -> Moment | None:
-        """The newest moment at or before time_s (the program's moment), dropping older ones;
-        None while no moment is that old (the delay is still filling)."""
+        """The moment nearest time_s (the program's moment, frame time minus the delay), dropping
+        older ones; None while no moment is that old (the delay is still filling).
+
+        Nearest, not newest at or before: t - D computed in floating point lands a hair before the
+        frame it names about half the time, and "at or before" then showed the previous moment
+        again and skipped one later (5-12% of moments repeated at delays of 10 and 30 s)."""
         i = bisect.bisect_right(self.times, time_s, lo=self._start) - 1
-        if i < self._start:
-            return None
+        if i < self._start:  # before the oldest moment: only a rounding hair before counts
+            if self._start >= len(self.times) or self.times[self._start] - time_s > TIME_EPSILON_S:
+                return None
+            i = self._start
+        elif i + 1 < len(self.times) and self.times[i + 1] - time_s < time_s - self.times[i]:
+            i += 1
         self._start = i
         if self._start > 4096:  # compact now and then, not every frame
             del self.moments[:self._start], self.times[:self._start]

@@ -162,8 +162,9 @@ class ShotBuilder:
         `weights`, default equal), respecting the 30-degree rule against the previous shot at
         `moment`; and its place's score. None (and -1) when no place respects the rule."""
         if choice.kind == ShotKind.OVERVIEW:
-            alive = tuple(int(i) for i in np.flatnonzero(moment.alive)) or subjects
-            pose, seen = overview_pose(moment, subjects or alive, self.lens, self.visibility,
+            # everybody when nobody is named and nobody alive (all dead between rounds): a view of the map, not an error
+            shown = subjects or tuple(int(i) for i in np.flatnonzero(moment.alive)) or tuple(range(len(moment.alive)))
+            pose, seen = overview_pose(moment, shown, self.lens, self.visibility,
                                        self.settings.overview_height_m, self.extra_overview_cameras)
             return Shot(choice, subjects, StaticCamera(pose), start_s), seen
         shared = () if previous is None else tuple(set(previous.subjects) & set(subjects))

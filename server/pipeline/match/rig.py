@@ -22,6 +22,7 @@ who killed it, else the nearest fight to where it died, else an overview; `shot.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -57,7 +58,7 @@ class MatchRig:
         self.roster = tuple((t.id, t.team) for t in scene.targets)  # FrameState.players, shared by every frame
         self.lens, self.style, self.delay_s = scene.lens, scene.style, scene.delay_s
         self.ray_scene, self.rng, self.clock, self.settings = ray_scene, rng, clock, settings
-        self.buffer = MomentBuffer(self.players, settings.respawn_jump_m)
+        self.buffer = MomentBuffer(self.players, settings)
         self.visibility = SubjectVisibility(ray_scene, [t.mesh for t in scene.targets], settings.samples_per_player, rng)
         self.level_nodes = (scene.level.artifact.nodes_world if scene.level is not None
                             else np.zeros((0, 3)))
@@ -91,7 +92,7 @@ class MatchRig:
 
     def close(self) -> None:
         """Drops the buffered moments."""
-        self.buffer = MomentBuffer(self.players, self.settings.respawn_jump_m)
+        self.buffer = MomentBuffer(self.players, self.settings)
 
     def planned_cut(self, now_s: float) -> PlannedCut | None:
         """The next cut our director planned at its last tick that is still ahead of now_s; None
@@ -124,7 +125,8 @@ class MatchRig:
                 ShotKind.OVERVIEW: True}[ShotKind(kind)]
         if not fits:
             raise ValueError(f"take: a {ShotKind(kind).name} shot cannot show {n} players")
-        self.held = ShotChoice(tuple(subject_ids), ShotKind(kind), "take: a human's choice, held until released")
+        self.held = ShotChoice(tuple(subject_ids), ShotKind(kind), "take: a human's choice, held until released",
+                               held=True)
         self._take_pending = True
         return self.held
 
@@ -137,7 +139,7 @@ class MatchRig:
         choice = self.held
         if dead:
             choice, subjects = self._fallback(moment, dead[0])
-            self.held = choice
+            choice = self.held = dataclasses.replace(choice, held=True)
             flags.append("take_fallback")
         shot, _ = self.builder.build(choice, subjects, moment, [moment], self.shot, None, moment.time_s)
         shot.held = True

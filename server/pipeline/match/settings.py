@@ -60,7 +60,10 @@ class MatchSettings:
     max_group: int = 4                   # most players in one shot. [2, 64]
     event_hold_s: float = 1.0            # a shown event stays on screen this long after it, s. [0, 10]
     dead_hold_s: float = 1.5             # after that long on a dead subject the director cuts away, s. [0, 10]
-    respawn_jump_m: float = 3.0          # a dead player's transform jumping this far in one frame is a respawn, m. (0, 1000]
+    respawn_speed_m_s: float = 30.0      # a dead player's feet moving faster than this between two frames teleported: a respawn
+                                         # (runners 5-8 m/s, a body falling 45 m reaches 30 m/s), m/s. (0, 10000]
+    respawn_min_jump_m: float = 0.5      # and at least this far (rounding and interpolation stay under it), m. (0, 1000]
+    respawn_walk_m: float = 5.0          # a dead player this far from where it fell has walked away: respawned in place, m. (0, 1000]
     engage_range_m: float = 25.0         # opponents farther apart do not fight, m. (0, 1000]
     facing_cos: float = 0.5              # a player faces another within acos(0.5) = 60 deg of its forward. [-1, 1]
     recent_event_s: float = 3.0          # a damage event makes its pair a fight for this long, s. [0, 30]
@@ -79,7 +82,8 @@ class MatchSettings:
     hltv: HltvSettings = field(default_factory=HltvSettings)
 
     def __post_init__(self):
-        _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_jump_m", "engage_range_m",
+        _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
+                                      "respawn_walk_m", "engage_range_m",
                                       "group_radius_m", "overview_height_m"))
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
             raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")

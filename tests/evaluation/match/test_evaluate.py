@@ -101,9 +101,6 @@ def test_bad_arguments_and_unknown_level_exit_2(registry_and_match, tmp_path):
     assert not (tmp_path / "x.json").exists()
 
 
-@pytest.mark.xfail(strict=True, reason="server bug: two respawns here move under MatchSettings.respawn_jump_m (3 m; "
-                   "p04 1.9 m, p05 2.3 m), so the session keeps them dead, and shots.overview_pose raises on no "
-                   "living subject (ValueError: INTERNAL, the stream ends)")
 def test_a_match_whose_players_respawn_near_where_they_fell_streams_through(registry):
     arena_match(registry, 3)
     done = eval_match(registry, "--delay", "2", "--json", str(registry / "r3.json"), seed=3)

@@ -152,7 +152,8 @@ def test_a_match_session_shows_its_program_candidates_and_events(match):
     for frame, reply in zip(frames, answered):
         assert frame["buffering"] is False and frame["players"] == list(PLAYERS) and frame["teams"] == [0, 0, 1, 1]
         assert frame["shot"] == {"subject_ids": list(reply.shot.subject_ids),
-                                 "kind": pb.ShotKind.Name(reply.shot.kind), "reason": reply.shot.reason}
+                                 "kind": pb.ShotKind.Name(reply.shot.kind), "reason": reply.shot.reason,
+                                 "held": reply.shot.held}
         assert [c["shot"]["subject_ids"] for c in frame["candidates"]] == \
             [list(c.shot.subject_ids) for c in reply.candidates]
         for candidate, sent in zip(frame["candidates"], reply.candidates):
@@ -169,15 +170,16 @@ def test_a_take_over_rest_holds_the_program_until_released(match):
     taken = http.post(f"/v1/sessions/{session_id}/take", json={"subject_ids": ["a1", "b1"], "kind": "SHOT_DUEL"})
     assert taken.status_code == 200, taken.text
     assert taken.json() == {"session_id": session_id, "shot": {
-        "subject_ids": ["a1", "b1"], "kind": "SHOT_DUEL", "reason": "take: a human's choice, held until released"}}
+        "subject_ids": ["a1", "b1"], "kind": "SHOT_DUEL", "reason": "take: a human's choice, held until released",
+        "held": True}}
     held = raw.stream(list(match_frames(session_id, 60, start=90)))
-    assert all(list(u.shot.subject_ids) == ["a1", "b1"] for u in held)
+    assert all(list(u.shot.subject_ids) == ["a1", "b1"] and u.shot.held for u in held)
     assert http.get(f"/v1/sessions/{session_id}", params={"last": 1}).json()["frames"][0]["shot"]["subject_ids"] \
         == ["a1", "b1"]
     released = http.post(f"/v1/sessions/{session_id}/take", json={"release": True})
     assert released.status_code == 200 and released.json() == {"session_id": session_id, "shot": None}
     after = raw.stream(list(match_frames(session_id, 10, start=150)))
-    assert not any(u.shot.reason.startswith("take") for u in after)
+    assert not any(u.shot.held for u in after)
 
 
 @pytest.mark.parametrize("body, status, detail", [
@@ -197,7 +199,7 @@ def test_bad_takes_answer_4xx_and_the_match_streams_on(match, body, status, deta
     reply = http.post(f"/v1/sessions/{session_id}/take", json=body)
     assert reply.status_code == status and detail in str(reply.json()["detail"]), reply.text
     after = raw.stream(list(match_frames(session_id, 3, start=90)))
-    assert [u.frame for u in after] == [61, 62, 63] and not any(u.stale or u.shot.reason.startswith("take")
+    assert [u.frame for u in after] == [61, 62, 63] and not any(u.stale or u.shot.held
                                                                  for u in after)
 
 

@@ -71,13 +71,14 @@ def test_a_match_frame_as_json():
     (frame,) = orjson.loads(dumps(timeline.as_json()))
     assert frame["targets"] == [[0.0, 1.5, 0.0], [4.0, 1.5, 0.0]]
     assert frame["players"] == ["a0", "b0"] and frame["teams"] == [0, 1] and frame["buffering"] is False
-    assert frame["shot"] == {"subject_ids": ["a0", "b0"], "kind": "SHOT_DUEL", "reason": "fight: a0 vs b0"}
-    assert frame["candidates"] == [{"shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0"},
+    assert frame["shot"] == {"subject_ids": ["a0", "b0"], "kind": "SHOT_DUEL", "reason": "fight: a0 vs b0", "held": False}
+    assert frame["candidates"] == [{"shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0",
+                                             "held": False},
                                     "score": 0.4123, "camera": [2.0, 3.0, -5.0], "forward": [-0.0, -0.0, -1.0]}]
     assert frame["events"] == [{"time_s": 0.5, "kind": "EVENT_KILL", "actor_id": "a0", "other_actor_id": "b0",
                                 "priority": 0, "label": "headshot"}]
     assert frame["planned_cut"] == {"time_s": 2.75, "shot": {"subject_ids": ["a0"], "kind": "SHOT_FOLLOW",
-                                                             "reason": "planned objective in 2.2 s: a0"}}
+                                                             "reason": "planned objective in 2.2 s: a0", "held": False}}
 
 
 def test_candidates_keep_to_their_frames():

@@ -50,7 +50,7 @@ def test_a_corridor_hiding_the_styles_place_still_gets_a_place_that_sees_both_at
     transforms = [RigidTransform(np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 0.0, 1.0])) for z in (0.0, 8.0)]
     rng = np.random.default_rng(11)
     # the style's own place is hidden (so the test can fail): both orders of the pair
-    buffer = MomentBuffer(["a", "b"], 3.0)
+    buffer = MomentBuffer(["a", "b"], MatchSettings())
     aims = [t.apply(np.array([[0.0, 1.6, 0.0]]))[0] for t in transforms]
     buffer.push(0, KILL_S, transforms, aims, [])
     style = match.style

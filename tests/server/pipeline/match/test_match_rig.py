@@ -106,7 +106,7 @@ def test_take_is_held_past_max_shot_until_released():
     choice = session.rig.take(["a2"], None, release=False)
     assert choice.kind == ShotKind.FOLLOW
     held = [session.frame(u) for u in list(match.frames(20.0))[31:]]
-    assert all(s.shot.subject_ids == ("a2",) and s.shot.reason.startswith("take") for s in held)
+    assert all(s.shot.subject_ids == ("a2",) and s.shot.held and s.shot.reason.startswith("take") for s in held)
     assert sum(s.cut for s in held) == 1
     session.rig.take([], None, release=True)
     after = [session.frame(u) for u in list(match.frames(25.0))[601:]]
@@ -119,7 +119,7 @@ def test_take_falls_back_to_the_attacker_when_the_held_player_dies():
     session.rig.take(["b2"], ShotKind.FOLLOW, release=False)
     states = [session.frame(u) for u in list(match.frames(6.0))[31:]]
     after = [s for s in states if s.time_s > 3.0 + 0.2]
-    assert all(s.shot.subject_ids == ("a2",) for s in after)
+    assert all(s.shot.subject_ids == ("a2",) and s.shot.held for s in after)
     assert "b2 died (killed by a2)" in after[0].shot.reason and "take fallback" in after[0].shot.reason
 
 
