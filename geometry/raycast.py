@@ -36,10 +36,11 @@ class RayScene:
     frame (module docstring), all objects in one Embree call:
 
     - every object's local mesh lies within `reach` of its local origin, so a sphere of radius
-      reach * (largest scale) about its world position bounds it; one vectorized segment-to-centre
-      test over all (object, ray) pairs keeps those that pass within it;
-    - the kept pairs' rays, moved into their object's frame, are clipped to the local sphere
-      |x| <= reach (exact in that frame, whatever the scale);
+      reach * (largest scale) about its world position bounds it; objects whose sphere misses the
+      box around all the segments are dropped;
+    - every remaining (object, ray) pair's ray, moved into the object's frame, is clipped to the
+      local sphere |x| <= reach (exact in that frame, whatever the scale); pairs with nothing left
+      are dropped, so the clip is also the per-pair cull;
     - one Embree scene holds every object's local mesh, object i shifted by its own offset on a
       grid whose spacing exceeds two reaches: a clipped ray shifted by the same offset can meet only
       its own object's copy. So 100 moving objects cost one call, not 100.
@@ -105,34 +106,31 @@ class RayScene:
         if not len(origins):
             return none
         centres, radii, linear, translation = self._pose_arrays()
-        # Objects whose sphere meets the box around all the segments, then (object, ray) pairs.
+        # Objects whose sphere meets the box around all the segments.
         ends = origins + directions * t_max[:, None]
         gap = np.maximum(np.maximum(np.minimum(origins, ends).min(axis=0) - centres,
                                     centres - np.maximum(origins, ends).max(axis=0)), 0.0)  # (m, 3)
         candidates = np.flatnonzero(np.einsum("mk,mk->m", gap, gap) <= radii * radii)
         if not len(candidates):
             return none
-        rel = centres[candidates][:, None, :] - origins[None, :, :]                     # (c, n, 3)
-        dd = np.maximum(np.einsum("nk,nk->n", directions, directions), 1e-300)          # (n,)
-        t = np.clip(np.einsum("cnk,nk->cn", rel, directions) / dd, 0.0, t_max[None, :])
-        closest = rel - t[:, :, None] * directions[None, :, :]
-        near, ray = np.nonzero(np.einsum("cnk,cnk->cn", closest, closest) <= (radii[candidates] ** 2)[:, None])
-        if not len(ray):
-            return none
-        obj = candidates[near]
-        o = np.einsum("pij,pj->pi", linear[obj], origins[ray]) + translation[obj]        # (p, 3) local
-        d = np.einsum("pij,pj->pi", linear[obj], directions[ray])
+        # Every (candidate, ray) pair in the candidate's frame, clipped to its local sphere
+        # |o + t d| <= reach: the clip is the per-pair cull (no world-space test before it).
         scene, offsets, reach = self._local_scene()
-        a = np.maximum(np.einsum("pk,pk->p", d, d), 1e-300)                                 # |o + t d| = reach
-        half_b = np.einsum("pk,pk->p", o, d)
-        disc = half_b * half_b - a * (np.einsum("pk,pk->p", o, o) - reach[obj] ** 2)
+        a_local = linear[candidates]
+        o = np.einsum("cij,nj->cni", a_local, origins) + translation[candidates][:, None, :]  # (c, n, 3)
+        d = np.einsum("cij,nj->cni", a_local, directions)
+        a = np.maximum(np.einsum("cnk,cnk->cn", d, d), 1e-300)
+        half_b = np.einsum("cnk,cnk->cn", o, d)
+        disc = half_b * half_b - a * (np.einsum("cnk,cnk->cn", o, o) - (reach[candidates] ** 2)[:, None])
         root = np.sqrt(np.maximum(disc, 0.0))
         t_in = np.maximum((-half_b - root) / a, 0.0)
-        t_out = np.minimum((-half_b + root) / a, t_max[ray])
-        keep = (disc > 0.0) & (t_out > t_in)
-        obj, ray, o, d, t_in, t_out = obj[keep], ray[keep], o[keep], d[keep], t_in[keep], t_out[keep]
-        start = (o + t_in[:, None] * d + offsets[obj]).astype(np.float32)
-        dists = (t_out - t_in).astype(np.float32)
+        t_out = np.minimum((-half_b + root) / a, t_max[None, :])
+        near, ray = np.nonzero((disc > 0.0) & (t_out > t_in))
+        if not len(ray):
+            return none
+        d, t_in = d[near, ray], t_in[near, ray]
+        start = (o[near, ray] + t_in[:, None] * d + offsets[candidates[near]]).astype(np.float32)
+        dists = (t_out[near, ray] - t_in).astype(np.float32)
         if query == "OCCLUDED":
             hit = scene.run(start, d.astype(np.float32), dists=dists, query=query) != _NO_HIT
             return ray[hit], t_in[hit]
