@@ -12,8 +12,9 @@ events' moments (on open ground two nearby fights share a shot; in corridors a G
 far apart puts the camera so far back that walls hide them all; the answer is cached per group
 and events, so the re-plan at every tick does not cast again); else it takes the previous beat's
 place when it has the higher priority (a kill over an objective) and that beat's cut is still to
-come, else it is left out (flagged). Only the first beat acts now; the plan is
-made again at every planning tick, so a late event changes it. The camera of a planned shot is
+come (or the current shot shows it: its hold gives way), else it is left out (flagged). The
+current shot holds only its events that are past or within `min_lead_s`. Only the first beat acts
+now; the plan is made again at every planning tick, so a late event changes it. The camera of a planned shot is
 placed for the moments of its events (shots.py), and, with less weight, `PRE_EVENT_S` before
 the first: the event is what must be seen.
 
@@ -252,6 +253,12 @@ class PlannedDirector:
         now = moment.time_s
         horizon = min(buffer.horizon_s, now + s.lookahead_s)
         start = current.start_s if current is not None else -math.inf
+        # The current shot's events that are past or within min_lead_s stay on screen their hold (a
+        # cut at the very moment of a kill it was placed for lost that kill: the re-plan no longer
+        # sees it ahead). Its later events hold nothing here: they are beats like any other, in
+        # time order, so an earlier kill elsewhere still gets its cut.
+        shown_soon = [t for t in (current.cover_times_s if current is not None else ()) if t <= now + s.min_lead_s]
+        free = max(now, max(shown_soon) + s.event_hold_s) if shown_soon else now
         shows = set(current.subjects) if current is not None and current.choice.kind != ShotKind.OVERVIEW else set()
         beats: list[Beat] = []
         dropped = 0
@@ -270,7 +277,7 @@ class PlannedDirector:
             if not beats and set(subjects) <= shows:  # the current shot shows it: no cut
                 beats.append(beat)
                 continue
-            beat.cut_s = self._beat_cut(beat, beats[-1] if beats else None, start, now)
+            beat.cut_s = self._beat_cut(beat, beats[-1] if beats else None, start, free, now)
             if beat.cut_s is not None:
                 beats.append(beat)
                 continue
@@ -282,10 +289,13 @@ class PlannedDirector:
                 last.subjects, last.kind, last.reason = union, ShotKind.GROUP, last.reason + "; and " + what
                 last.add(event.time_s, priority)
                 if last.cut_s is None and not set(union) <= shows:  # the current shot no longer shows it all
-                    last.cut_s = self._cut_time(last.time_s, start, now, now)
+                    last.cut_s = self._cut_time(last.time_s, start, free, now)
                 continue
-            if last is not None and priority > last.priority and last.cut_s is not None:
-                beat.cut_s = self._beat_cut(beat, beats[-2] if len(beats) > 1 else None, start, now)
+            if last is not None and priority > last.priority:
+                if last.cut_s is not None:
+                    beat.cut_s = self._beat_cut(beat, beats[-2] if len(beats) > 1 else None, start, free, now)
+                else:  # the current shot shows the lesser event (the first beat): its hold gives way
+                    beat.cut_s = self._cut_time(beat.time_s, start, now, now)
                 if beat.cut_s is not None:
                     dropped += len(last.times_s)
                     beats[-1] = beat
@@ -293,11 +303,12 @@ class PlannedDirector:
             dropped += 1
         return beats, dropped
 
-    def _beat_cut(self, beat: Beat, previous: Beat | None, start_s: float, now_s: float) -> float | None:
+    def _beat_cut(self, beat: Beat, previous: Beat | None, start_s: float, free_s: float,
+                  now_s: float) -> float | None:
         """The cut time of a beat after the previous planned one (None: after the current shot
-        that started at start_s)."""
+        that started at start_s and holds its events until free_s)."""
         previous_start = start_s if previous is None or previous.cut_s is None else previous.cut_s
-        free = now_s if previous is None else previous.last_time_s + self.settings.event_hold_s
+        free = free_s if previous is None else previous.last_time_s + self.settings.event_hold_s
         return self._cut_time(beat.time_s, previous_start, free, now_s)
 
     def _group_sees(self, subjects: tuple[int, ...], times_s: list[float], buffer: MomentBuffer, now_s: float) -> bool:
