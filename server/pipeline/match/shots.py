@@ -8,7 +8,9 @@ paper, section 3): the camera stays on the torus of the two framed points every 
   horizon level (the level's camera tracks are not used: the Toric rig serves every level);
 - GROUP frames the two players of the group farthest apart, at screen points 1.5 times wider than
   the style's, so the others, between them, are in frame too.
-OVERVIEW is a static camera high above the players' bounding box looking at its centre.
+OVERVIEW is a static camera high above the players' bounding box looking at its centre, or at
+a node of the level's graph, whichever sees the worst-seen player best by the same measure as
+the places below.
 
 The place is chosen by ray casting the subjects' sample points from a grid of places, at the cut
 and at the moments the shot must cover (with a delay these are buffered future moments: the
@@ -177,26 +179,36 @@ def place_grid(side: float | None) -> list[Place]:
             for p in PLACE_PHI_RAD]
 
 
+def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...],
+                poses: list[CameraPose], lens: Lens) -> np.ndarray:
+    """(m, len(subjects)) the share of each subject's sample points that each of m poses sees at
+    the moment: unoccluded and inside the frame, and not from under the subjects' ground."""
+    positions = np.array([p.position_world for p in poses])
+    seen = visibility.seen_points(positions, moment, subjects)           # (m, s, k)
+    ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
+    seen[positions[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
+    points = visibility.points_world(moment, subjects)                  # (s * k, 3)
+    for row, pose in enumerate(poses):  # a point out of the frame is not seen
+        xy = project_to_screen(pose, lens, points)
+        seen[row] &= (np.abs(xy) <= 1.0).all(axis=1).reshape(seen.shape[1:])
+    return seen.mean(axis=2)
+
+
 def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], subjects: tuple[int, ...],
                visibility: SubjectVisibility, allowed: Callable[[np.ndarray], np.ndarray] | None = None,
                cut_moment: Moment | None = None, weights: list[float] | None = None) -> tuple[Place, float]:
-    """The place of `places` whose worst-seen subject is best seen, a mean over `moments` with
-    `weights` (default equal), and that score in [0, 1]. allowed: (m, 3) positions at cut_moment
-    -> (m,) bool (the cut's grammar); places it refuses score -1. Ties go to the earlier place."""
+    """The place of `places` whose worst-seen subject is best seen (framed_seen), a mean over
+    `moments` with `weights` (default equal), and that score in [0, 1]. allowed: (m, 3) positions
+    at cut_moment -> (m,) bool (the cut's grammar); places it refuses score -1. Ties go to the
+    earlier place."""
     weights = [1.0] * len(moments) if weights is None else weights
     score = np.zeros(len(places))
     for moment, weight in zip(moments, weights):
         positions = camera.positions(moment, places)
         if positions is None:
             continue
-        seen = visibility.seen_points(positions, moment, subjects)           # (m, s, k)
-        ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
-        seen[positions[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
-        points = visibility.points_world(moment, subjects)                  # (s * k, 3)
-        for row, (position, place) in enumerate(zip(positions, places)):  # a point out of the frame is not seen
-            xy = project_to_screen(camera.pose_from(moment, position, place.width), camera.lens, points)
-            seen[row] &= (np.abs(xy) <= 1.0).all(axis=1).reshape(seen.shape[1:])
-        score += weight * seen.mean(axis=2).min(axis=1)
+        poses = [camera.pose_from(moment, position, place.width) for position, place in zip(positions, places)]
+        score += weight * framed_seen(visibility, moment, subjects, poses, camera.lens).min(axis=1)
     score /= max(sum(weights), 1e-9)
     if allowed is not None:
         first = camera.positions(cut_moment, places)
@@ -206,13 +218,15 @@ def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], 
     return places[best], float(score[best])
 
 
-def overview_pose(moment: Moment, subjects: tuple[int, ...], lens: Lens, visibility: SubjectVisibility,
-                  top_height_m: float, extra_cameras_world: np.ndarray) -> tuple[CameraPose, float]:
-    """A high view of the subjects' bounding box, looking at its centre, and the share of subjects
-    whose aim point it sees. Tries OVERVIEW_AZIMUTHS directions at each height up to top_height_m,
-    and the (k, 3) extra camera places (the level's graph nodes, when there is a level) within
-    twice the box's viewing distance."""
-    aims = moment.aims_world[list(subjects)]
+def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[int, ...], lens: Lens,
+                  visibility: SubjectVisibility, top_height_m: float,
+                  extra_cameras_world: np.ndarray) -> tuple[CameraPose, float]:
+    """A high view of the subjects' bounding box over `moments`, looking at its centre, and its
+    worst-seen subject's share (framed_seen, a mean over the moments with `weights`). Tries
+    OVERVIEW_AZIMUTHS directions at each height up to top_height_m, and the (k, 3) extra camera
+    places (the level's graph nodes, when there is a level) within twice the box's viewing
+    distance; the best worst-seen subject wins, then the best mean."""
+    aims = np.concatenate([m.aims_world[list(subjects)] for m in moments])
     centre = aims.mean(axis=0)
     radius_m = float(np.max(np.linalg.norm((aims - centre)[:, [0, 2]], axis=1))) + 2.0
     distance_m = radius_m / lens.tan_half_fov_y
@@ -226,9 +240,9 @@ def overview_pose(moment: Moment, subjects: tuple[int, ...], lens: Lens, visibil
     if len(extra_cameras_world):
         near = np.linalg.norm(extra_cameras_world - centre, axis=1) <= 2.0 * max(distance_m, top_height_m)
         cameras = np.concatenate([cameras, extra_cameras_world[near]])
-    targets = np.repeat(aims[None], len(cameras), axis=0).reshape(-1, 3)
-    hidden = visibility.ray_scene.occluded(np.repeat(cameras, len(aims), axis=0), targets)
-    seen = 1.0 - hidden.reshape(len(cameras), len(aims)).mean(axis=1)
-    best = int(np.argmax(seen))
-    rotation = level_look_rotation(cameras[best], centre, (0.0, 0.0), lens)
-    return CameraPose(cameras[best], rotation, lens.vertical_fov_deg), float(seen[best])
+    poses = [CameraPose(c, level_look_rotation(c, centre, (0.0, 0.0), lens), lens.vertical_fov_deg) for c in cameras]
+    seen = sum(w * framed_seen(visibility, m, subjects, poses, lens) for m, w in zip(moments, weights))
+    seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
+    worst = seen.min(axis=1)
+    best = int(np.lexsort((-seen.mean(axis=1), -worst))[0])
+    return poses[best], float(worst[best])

@@ -16,7 +16,19 @@ from camdirector.server.pipeline.match.settings import MatchSettings
 from camdirector.server.pipeline.match.shots import Place, ToricCamera
 from camdirector.server.pipeline.stages import ShotKind
 from camdirector.server.pipeline.toric.target_sampling import SurfaceSampler
-from tests.server.pipeline.match.scenes import LENS, Match, at_time, facing, kill, melee, player_mesh, run_session, shots
+from tests.server.pipeline.match.scenes import (
+    LENS,
+    BareRig,
+    Match,
+    at_time,
+    facing,
+    kill,
+    melee,
+    player_mesh,
+    run_session,
+    shots,
+    yaw_quat,
+)
 
 KILL_S = 25.0
 
@@ -91,3 +103,27 @@ def test_without_a_delay_a_cut_for_a_better_situation_waits_for_settle_s():
     assert better, "the melee has discretionary cuts"
     settle_s = MatchSettings().settle_s
     assert all(start - previous >= settle_s - 1e-6 for previous, start in better)
+
+
+def two_corridors(t: float):
+    """a1 and b1 duel in one corridor, a2 and b2 in another 12 m east."""
+    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 6))), "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
+            "a2": ((12.0, 0.0), facing((12, 0), (12, 6))), "b2": ((12.0, 6.0), facing((12, 6), (12, 0)))}
+
+
+def test_two_kills_too_close_for_two_cuts_share_a_high_wide_shot_when_no_group_framing_sees_them():
+    # 5 m walls 3 m apart: every Toric GROUP place sees into one corridor at most; a camera 30 m
+    # above the pair of corridors looks down into both
+    walls = [block((x, 2.5, 3.0), (0.2, 5.0, 40.0)) for x in (-1.5, 1.5, 10.5, 13.5)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2}, two_corridors,
+                  [kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 0.5)], delay_s=10.0, walls=walls)
+    states = BareRig(match, MatchSettings(overview_height_m=30.0)).run(KILL_S + 10.0 + 2.0)
+    rng = np.random.default_rng(5)
+    for time_s, pair in ((KILL_S, ("a1", "b1")), (KILL_S + 0.5, ("a2", "b2"))):
+        state = at_time(states, time_s)
+        assert state.shot.kind == ShotKind.OVERVIEW and "planned kill" in state.shot.reason
+        places = two_corridors(time_s)
+        for player in pair:
+            transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
+                                       yaw_quat(places[player][1]))
+            assert seen_share(state.pose, walls, transform, rng) >= 0.5, (time_s, player)
