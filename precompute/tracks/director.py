@@ -47,6 +47,7 @@ from camdirector.precompute.tracks.continuity import (
     thirty_degree_score,
 )
 from camdirector.precompute.tracks.cutting import CutClock, CutReason, draw_shot_duration_s
+from camdirector.precompute.tracks.framing import ShotSize
 from camdirector.precompute.tracks.graph import RuntimeGraph
 from camdirector.precompute.tracks.settings import DirectorSettings
 from camdirector.precompute.tracks.target_search import (
@@ -60,12 +61,6 @@ from camdirector.precompute.tracks.target_search import (
 )
 
 _SCORED_POIS = 48
-
-
-class ShotSize(Enum):
-    MEDIUM = "medium"
-    LONG = "long"
-    EXTREME_LONG = "extreme_long"
 
 
 class Movement(Enum):

@@ -12,7 +12,8 @@ import enum
 import math
 from dataclasses import dataclass
 
-from camdirector.precompute.tracks.director import Movement, ShotSize
+from camdirector.precompute.tracks.director import Movement
+from camdirector.precompute.tracks.framing import ShotSize
 from camdirector.server.pipeline.toric.anticipation import MaskKind
 
 

@@ -12,7 +12,8 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, ArtifactVersionError, load_artifact, save_artifact
 from camdirector.precompute.tracks.continuity import cut_angle_deg, keeps_line_of_action, screen_motion
 from camdirector.precompute.tracks.cutting import draw_shot_duration_s
-from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement, ShotSize
+from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement
+from camdirector.precompute.tracks.framing import ShotSize
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.settings import DirectorSettings, TrackSettings
