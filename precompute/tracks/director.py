@@ -142,13 +142,13 @@ class GraphDirector:
         """Takes effect from the next frame; the current shot goes on."""
         self._style = style
 
-    def _screen_fraction(self) -> float:
+    def screen_fraction(self) -> float:
         s = self._settings
         return {ShotSize.MEDIUM: s.medium_shot_screen_fraction, ShotSize.LONG: s.long_shot_screen_fraction,
                 ShotSize.EXTREME_LONG: s.extreme_long_shot_screen_fraction}[self._style.shot_size]
 
     def optimal_distance_m(self) -> float:
-        return optimal_distance_m(self._actor_height_m, self._screen_fraction(), self._settings.vertical_fov_deg)
+        return optimal_distance_m(self._actor_height_m, self.screen_fraction(), self._settings.vertical_fov_deg)
 
     def step(self, time_s: float, actor_position_world, actor_forward, ray_scene: RayScene) -> TrackShot | None:
         """One frame. actor_position_world (3,): the actor's feet, metres; actor_forward (3,): its

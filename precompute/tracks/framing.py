@@ -11,6 +11,11 @@ from __future__ import annotations
 
 from enum import Enum
 
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.transforms import UP_WORLD
+
 
 class ShotSize(Enum):
     MEDIUM = "medium"
@@ -20,3 +25,24 @@ class ShotSize(Enum):
 
 # (low, high) fractions of the actor's height, from its feet, that the shot size keeps in frame
 FRAMED_EXTENT = {ShotSize.MEDIUM: (0.5, 1.0), ShotSize.LONG: (0.0, 1.0), ShotSize.EXTREME_LONG: (0.0, 1.0)}
+
+
+def framed_ends_world(feet_world: np.ndarray, height_m: float, shot_size: ShotSize) -> np.ndarray:
+    """(2, 3) the bottom and top of the shot size's framed extent on the actor's vertical axis, m.
+    feet_world (3,): the actor's feet."""
+    low, high = FRAMED_EXTENT[shot_size]
+    return np.asarray(feet_world, dtype=np.float64) + np.outer([low * height_m, high * height_m], UP_WORLD)
+
+
+def framing_error(pose: CameraPose, lens: Lens, feet_world: np.ndarray, height_m: float, shot_size: ShotSize,
+                  screen_fraction: float) -> float:
+    """How far the framed extent's ends land from where the shot size puts them, in normalised
+    screen units (the frame is [-1, 1]; the Toric rig's framing error is in the same units): the
+    ends belong centred at (0, -h) and (0, h), h = screen_fraction * (high - low), the half of the
+    extent's share of the frame height; the larger of the two ends' largest axis error. NaN when
+    an end is behind the camera."""
+    low, high = FRAMED_EXTENT[shot_size]
+    half = screen_fraction * (high - low)
+    screen = project_to_screen(pose, lens, framed_ends_world(feet_world, height_m, shot_size))  # (2, 2)
+    error = np.abs(screen - np.array([[0.0, -half], [0.0, half]])).max()
+    return float(error)

@@ -31,6 +31,7 @@ measures around the whole frame.
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -115,6 +116,7 @@ class FrameState:
     cut: bool = False
     shot_id: int = 0
     visibility: float = 1.0                      # [0, 1]
+    framing_error: float = math.nan              # framed points from where the style puts them, screen units (NaN: none)
     flags: list[str] = field(default_factory=list)  # degraded-mode notes for diagnostics
     scores: dict[str, float] = field(default_factory=dict)  # TRACKS: the chosen target's sub-scores, [0, 1]
     stage_ms: dict[str, float] = field(default_factory=dict)

@@ -29,6 +29,7 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, quat_rotate
 from camdirector.precompute.stage_clock import StageClock
 from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector
+from camdirector.precompute.tracks.framing import framing_error
 from camdirector.precompute.tracks.settings import DirectorSettings
 from camdirector.server.pipeline.inputs import FrameInput, LoadedLevel
 from camdirector.server.pipeline.stages import FrameState, TracksStage
@@ -92,6 +93,8 @@ class TracksRig:
         else:
             rotation = level_look_rotation(shot.position_world, shot.look_at_world, (0.0, 0.0), self.lens)
         state.pose = CameraPose(shot.position_world, rotation, self.lens.vertical_fov_deg)
+        state.framing_error = framing_error(state.pose, self.lens, actor.position_world, self.level.artifact.agent_height_m,
+                                            self.director.style.shot_size, self.director.screen_fraction())
 
     def _waiting_pose(self, actor_world: np.ndarray, forward: np.ndarray) -> CameraPose:
         flat = np.array([forward[0], 0.0, forward[2]])
