@@ -15,7 +15,10 @@ of them all when one of its cameras (above them, or a node of the level's graph)
 nav_test at a 10 s delay, kill coverage 0.81 -> 0.86); the answers are cached per group and
 events, so the re-plan at every tick does not cast again; else it takes the previous beat's
 place when it has the higher priority (a kill over an objective) and that beat's cut is still to
-come (or the current shot shows it: its hold gives way), else it is left out (flagged). The
+come (or the current shot shows it: its hold gives way), else it is left out (flagged). A beat that could
+have its own cut joins the previous one the same way when that cut would end the previous shot
+short of `preferred_shot_s` (at a 10 s delay on zdm2, kills 2.7 s apart made the median shot 2.7 s; with
+the joins it is 3.7 s, kill coverage 0.89 -> 0.87). The
 current shot holds only its events that are past or within `min_lead_s`. Only the first beat acts
 now; the plan is made again at every planning tick, so a late event changes it. The camera of a planned shot is
 placed for the moments of its events (shots.py), and, with less weight, `PRE_EVENT_S` before
@@ -285,21 +288,16 @@ class PlannedDirector:
             if not beats and set(subjects) <= shows:  # the current shot shows it: no cut
                 beats.append(beat)
                 continue
-            beat.cut_s = self._beat_cut(beat, beats[-1] if beats else None, start, free, now)
+            last = beats[-1] if beats else None
+            beat.cut_s = self._beat_cut(beat, last, start, free, now)
             if beat.cut_s is not None:
-                beats.append(beat)
+                # a cut that would end the shot before it short of preferred_shot_s: one shot of both, when one sees them all
+                before_s = start if last is None or last.cut_s is None else last.cut_s
+                if not (beat.cut_s - before_s < s.preferred_shot_s and self._join(last, beat, buffer, now, start, free, shows)):
+                    beats.append(beat)
                 continue
             # no cut of its own: join the previous beat, take its place, or be left out
-            last = beats[-1] if beats else None
-            union = () if last is None else tuple(dict.fromkeys((*last.subjects, *subjects)))
-            joint = None if last is None or len(union) > s.max_group else next(
-                (k for k in (ShotKind.GROUP, ShotKind.OVERVIEW)
-                 if self._shot_sees(k, union, [*last.times_s, event.time_s], buffer, now)), None)
-            if joint is not None:
-                last.subjects, last.kind, last.reason = union, joint, last.reason + "; and " + what
-                last.add(event.time_s, priority)
-                if last.cut_s is None and not set(union) <= shows:  # the current shot no longer shows it all
-                    last.cut_s = self._cut_time(last.time_s, start, free, now)
+            if self._join(last, beat, buffer, now, start, free, shows):
                 continue
             if last is not None and priority > last.priority:
                 if last.cut_s is not None:
@@ -312,6 +310,25 @@ class PlannedDirector:
                     continue
             dropped += 1
         return beats, dropped
+
+    def _join(self, last: Beat | None, beat: Beat, buffer: MomentBuffer, now_s: float, start_s: float, free_s: float,
+              shows: set[int]) -> bool:
+        """Makes the previous beat show the new one's event too, as a GROUP or else an OVERVIEW of
+        all their players, when they fit in max_group and one such shot sees them all at the
+        events' moments (_shot_sees); whether it did."""
+        if last is None:
+            return False
+        union = tuple(dict.fromkeys((*last.subjects, *beat.subjects)))
+        times_s = [*last.times_s, beat.time_s]
+        joint = None if len(union) > self.settings.max_group else next(
+            (k for k in (ShotKind.GROUP, ShotKind.OVERVIEW) if self._shot_sees(k, union, times_s, buffer, now_s)), None)
+        if joint is None:
+            return False
+        last.subjects, last.kind, last.reason = union, joint, last.reason + "; and " + beat.reason
+        last.add(beat.time_s, beat.priority)
+        if last.cut_s is None and not set(union) <= shows:  # the current shot no longer shows it all
+            last.cut_s = self._cut_time(last.time_s, start_s, free_s, now_s)
+        return True
 
     def _beat_cut(self, beat: Beat, previous: Beat | None, start_s: float, free_s: float,
                   now_s: float) -> float | None:

@@ -58,6 +58,8 @@ class MatchSettings:
     lookahead_s: float = 12.0            # the planner reads the buffered future this far, s. (0, 300]
     beat_min_priority: int = 5           # events of this priority or more get a planned shot (kills, objectives). [1, 15]
     max_group: int = 4                   # most players in one shot. [2, 64]
+    preferred_shot_s: float = 3.0        # a planned cut that would end the shot before it sooner than this is not made when one
+                                         # GROUP or OVERVIEW shows both beats (kills 2.7 s apart made 2.7-s shots), s. [0, 60]
     event_hold_s: float = 0.2            # a shown event stays on screen this long before a planned cut to the next
                                          # (eval-match: at 1.0 s, the next kill elsewhere lost its lead; nav_test
                                          # coverage 0.80 at 0.2 s, 0.76 at 0.5 s), s. [0, 10]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from camdirector.geometry.camera import project_to_screen
 from camdirector.geometry.meshes import TriMesh, box
@@ -127,3 +128,34 @@ def test_two_kills_too_close_for_two_cuts_share_a_high_wide_shot_when_no_group_f
             transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
                                        yaw_quat(places[player][1]))
             assert seen_share(state.pose, walls, transform, rng) >= 0.5, (time_s, player)
+
+
+def two_duels_side_by_side(t: float):
+    """a1 and b1 duel on open ground, a2 and b2 6 m east of them; e1 and f1 duel 60 m away."""
+    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 6))), "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
+            "a2": ((6.0, 0.0), facing((6, 0), (6, 6))), "b2": ((6.0, 6.0), facing((6, 6), (6, 0))),
+            "e1": ((60.0, 0.0), facing((60, 0), (60, 6))), "f1": ((60.0, 6.0), facing((60, 6), (60, 0)))}
+
+
+@pytest.mark.parametrize("preferred_shot_s", [0.0, 3.0])
+def test_kills_too_close_for_a_preferred_shot_each_share_one_shot_when_it_sees_them_all(preferred_shot_s):
+    # the program is on e1 and f1 for their kill at 21 s; the kills at 25 and 27.5 s each get a
+    # DUEL, the first 2.7 s long, unless one GROUP of the four sees both kills
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 2.5)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_side_by_side, kills, delay_s=10.0)
+    states = [s for s in BareRig(match, MatchSettings(preferred_shot_s=preferred_shot_s)).run(KILL_S + 10.0 + 4.0)
+              if not s.buffering]
+    between = [s for s in states if KILL_S < s.time_s <= KILL_S + 2.5]
+    first, second = at_time(states, KILL_S), at_time(states, KILL_S + 2.5)
+    if preferred_shot_s == 0.0:
+        assert any(s.cut for s in between) and first.shot.kind == second.shot.kind == ShotKind.DUEL
+        return
+    assert not any(s.cut for s in between) and first.shot.kind == ShotKind.GROUP
+    assert set(first.shot.subject_ids) == {"a1", "b1", "a2", "b2"}
+    rng = np.random.default_rng(2)
+    for time_s, state in ((KILL_S, first), (KILL_S + 2.5, second)):
+        places = two_duels_side_by_side(time_s)
+        for player in ("a1", "b1", "a2", "b2"):
+            (x, z), yaw = places[player]
+            transform = RigidTransform(np.array([x, 0.0, z]), yaw_quat(yaw))
+            assert seen_share(state.pose, [], transform, rng) >= 0.5, (time_s, player)
