@@ -1,6 +1,6 @@
 """A session's recent frames, for the dashboard: where the camera and the targets were, cuts and
-shots, visibility, and why the camera moved (the frame's flags: `search_cut`, `pulled_in`,
-`tracks_cut_occlusion`, ...; the TRACKS rig's scores of the target it chose).
+shots, visibility, the framing error, and why the camera moved (the frame's flags: `search_cut`,
+`pulled_in`, `tracks_cut_occlusion`, ...; the TRACKS rig's scores of the target it chose).
 
 A bounded ring of plain values kept by the session table beside each session (in the worker that
 holds it) and fed by the frame it has just answered; `GET /v1/sessions/{id}` reads it through the
@@ -15,6 +15,7 @@ at the game's first moment), so frame numbers still only grow within the ring.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -33,9 +34,11 @@ class TimelineFrame:
     """One answered frame, kept as computed (the JSON is made only when someone asks).
     camera_world: (3,) metres, None while buffering; rotation_xyzw: (4,) camera-to-world, None
     while buffering; targets_world: (k, 3) aim point per target; scores: the rig's own scoring of
-    its choice (FrameState.scores, not copied: a new dict every frame); compute_ms: the server's
-    time for the frame. MATCH only (the FrameState's, not copied: the rig makes them anew each
-    frame or shares constant ones): shot, candidates, players, events, planned_cut, buffering."""
+    its choice (FrameState.scores, not copied: a new dict every frame); framing_error: the
+    framed points from where the style puts them, normalised screen units (NaN: not measured);
+    compute_ms: the server's time for the frame. MATCH only (the FrameState's, not copied: the
+    rig makes them anew each frame or shares constant ones): shot, candidates, players, events,
+    planned_cut, buffering."""
 
     frame: int
     time_s: float
@@ -45,6 +48,7 @@ class TimelineFrame:
     cut: bool
     shot_id: int
     visibility: float
+    framing_error: float
     flags: tuple[str, ...]
     scores: dict[str, float]
     compute_ms: float
@@ -75,19 +79,20 @@ class Timeline:
             camera_world=None if pose is None else pose.position_world.copy(),
             rotation_xyzw=None if pose is None else pose.rotation_xyzw.copy(),
             targets_world=np.array(state.aim_points_world), cut=bool(state.cut), shot_id=int(state.shot_id),
-            visibility=float(state.visibility), flags=tuple(state.flags), scores=state.scores,
-            compute_ms=float(compute_ms), match=match, buffering=bool(state.buffering), shot=state.shot,
-            candidates=state.candidates, players=state.players, events=state.events,
+            visibility=float(state.visibility), framing_error=state.framing_error, flags=tuple(state.flags),
+            scores=state.scores, compute_ms=float(compute_ms), match=match, buffering=bool(state.buffering),
+            shot=state.shot, candidates=state.candidates, players=state.players, events=state.events,
             planned_cut=state.planned_cut))
 
     def as_json(self, last: int | None = None, after_frame: int | None = None) -> list[dict]:
         """The newest `last` frames (all when None) of those after frame number `after_frame`
         (a live view asks only for what it has not seen), oldest first, for `dumps`: frame, time_s,
-        camera, forward (unit; both null while buffering), targets, cut, shot_id, visibility, flags,
-        scores, compute_ms, and for MATCH (`_match_json`): buffering, shot, candidates, players,
-        teams, events, planned_cut; vectors are numpy rows rounded to 0.1 mm. Built in bulk, since
-        the worker that answers this also answers its sessions' frames (600 frames: about 2 ms with
-        `dumps`, 18 ms as plain dicts and json)."""
+        camera, forward (unit; both null while buffering), targets, cut, shot_id, visibility,
+        framing_error (null when not measured), flags, scores, compute_ms, and for MATCH
+        (`_match_json`): buffering, shot, candidates, players, teams, events, planned_cut; vectors
+        are numpy rows rounded to 0.1 mm. Built in bulk, since the worker that answers this also
+        answers its sessions' frames (600 frames: about 2 ms with `dumps`, 18 ms as plain dicts and
+        json)."""
         frames = list(self._frames)
         if after_frame is not None:
             first = len(frames)
@@ -105,6 +110,7 @@ class Timeline:
                  "camera": None if f.camera_world is None else next(camera),
                  "forward": None if f.camera_world is None else next(forward), "targets": t,
                  "cut": f.cut, "shot_id": f.shot_id, "visibility": round(f.visibility, 4),
+                 "framing_error": None if math.isnan(f.framing_error) else round(f.framing_error, 4),
                  "flags": f.flags, "scores": f.scores, "compute_ms": round(f.compute_ms, 3)}
                 for f, t in zip(frames, targets)]
         if frames[-1].match:

@@ -13,6 +13,16 @@ const TIMELINE_FRAMES = 600;     // frames shown, as many as the server keeps pe
 const EVENT_LOG_SIZE = 50;       // game events listed for a MATCH session, newest first
 const TEAM_COLOURS = ["#e07b00", "#8e24aa", "#2e7d32", "#795548"];   // by team number, cycling
 
+// The framing error (docs/protocol.md): how far the framed points land from where the style puts
+// them, normalised screen units (the frame is [-1, 1]; null where the rig does not measure it).
+// Above FRAMING_LOST the framing has failed: a point is a quarter of the frame's height from its
+// place. That puts a long or medium tracks shot's framed ends (placed at y -0.8 and 0.8) 0.3 out
+// of the frame, and a Toric target (at x -1/3 or 1/3 by default) drifting outward at x 0.83, by
+// the frame's side edge.
+const FRAMING_LOST = 0.5;
+const FRAMING_STRIP_MAX = 1.0;   // the strip's framing band spans 0 to a frame's half-height; above is clipped
+const FRAMING_COLOUR = "#e040fb";   // its line in the strip and the top view's marks: no other mark's colour
+
 let selected = null;             // the selected session id
 let styleSentBySession = {};     // session id -> the style the form was last filled from (JSON text)
 let currentStyle = {};           // the selected session's style, as the server reported it
@@ -166,6 +176,18 @@ function drawTopView(frames) {
     g.arc(...at(f.camera), 6, 0, 2 * Math.PI);
     g.stroke();
   }
+  g.strokeStyle = FRAMING_COLOUR;   // where along the trail the framing was lost: a cross on the camera
+  g.lineWidth = 2;
+  for (const f of posed.filter((f) => f.framing_error > FRAMING_LOST)) {
+    const [x, z] = at(f.camera);
+    g.beginPath();
+    g.moveTo(x - 4, z - 4);
+    g.lineTo(x + 4, z + 4);
+    g.moveTo(x - 4, z + 4);
+    g.lineTo(x + 4, z - 4);
+    g.stroke();
+  }
+  g.lineWidth = 1;
   const camera = posed[posed.length - 1];
   const [cx, cz] = at(camera.camera);
   g.strokeStyle = "#2a62c9";
@@ -201,7 +223,7 @@ function drawTimeline(frames) {
   const g = canvas.getContext("2d");
   g.clearRect(0, 0, canvas.width, canvas.height);
   if (!frames.length) return;
-  const w = canvas.width / frames.length, shotBand = 40, visTop = 55, visHeight = 60;
+  const w = canvas.width / frames.length, shotBand = 40, visTop = 55, visHeight = 60, errTop = 125, errHeight = 40;
   frames.forEach((f, i) => {
     g.fillStyle = f.shot_id % 2 ? "#9bb9e8" : "#c9d9f2";   // alternate shades, one per shot
     g.fillRect(i * w, 0, Math.ceil(w), shotBand);
@@ -217,12 +239,47 @@ function drawTimeline(frames) {
     i ? g.lineTo(i * w, y) : g.moveTo(0, y);
   });
   g.stroke();
+  drawFramingBand(g, frames, w, errTop, errHeight);
   const shots = new Set(frames.map((f) => f.shot_id));
   const cuts = frames.filter((f) => f.cut).length;
   const visible = frames.reduce((s, f) => s + f.visibility, 0) / frames.length;
   document.getElementById("shot-summary").textContent =
     `frames ${frames[0].frame}–${frames[frames.length - 1].frame}: ${shots.size} shots, ` +
-    `${cuts} cuts, mean visibility ${visible.toFixed(2)}, shot ${frames[frames.length - 1].shot_id} now`;
+    `${cuts} cuts, mean visibility ${visible.toFixed(2)}, shot ${frames[frames.length - 1].shot_id} now` +
+    framingSummary(frames);
+}
+
+function drawFramingBand(g, frames, w, top, height) {   // the framing error, 0 at the band's bottom
+  const y = (error) => top + height * (1 - Math.min(error, FRAMING_STRIP_MAX) / FRAMING_STRIP_MAX);
+  g.strokeStyle = "#bbb";
+  g.setLineDash([4, 4]);
+  g.beginPath();
+  g.moveTo(0, y(FRAMING_LOST));
+  g.lineTo(g.canvas.width, y(FRAMING_LOST));
+  g.stroke();
+  g.setLineDash([]);
+  g.strokeStyle = FRAMING_COLOUR;
+  g.beginPath();
+  let drawing = false;   // a frame with no framing error breaks the line
+  frames.forEach((f, i) => {
+    if (f.framing_error === null) {
+      drawing = false;
+      return;
+    }
+    drawing ? g.lineTo(i * w, y(f.framing_error)) : g.moveTo(i * w, y(f.framing_error));
+    drawing = true;
+  });
+  g.stroke();
+}
+
+function framingSummary(frames) {   // the newest framing error, the largest shown and the frames it was lost in
+  const measured = frames.filter((f) => f.framing_error !== null);
+  if (!measured.length) return "";   // a rig that does not measure it
+  const newest = frames[frames.length - 1].framing_error;
+  const most = Math.max(...measured.map((f) => f.framing_error));
+  const lost = measured.filter((f) => f.framing_error > FRAMING_LOST).length;
+  return `; framing error ${newest === null ? "not measured" : newest.toFixed(2)} now, ` +
+    `at most ${most.toFixed(2)}, lost (above ${FRAMING_LOST}) in ${lost} frames`;
 }
 
 function showWhy(frames) {
@@ -428,6 +485,7 @@ function every(ms, task) {
   setInterval(run, ms);
 }
 
+for (const threshold of document.querySelectorAll(".framing-lost")) threshold.textContent = FRAMING_LOST;
 document.getElementById("style-form").addEventListener("submit", applyStyle);
 document.getElementById("release").addEventListener("click", () => take({ release: true }));
 document.getElementById("overview-form").addEventListener("submit", submitOverview);

@@ -12,12 +12,13 @@
 
 A summary is the router's (worker, frames, streams, idle and age in s, transports); frames are the
 session's timeline (`timeline.py`): camera position and view direction, target aim points, cut,
-shot id, visibility, the flags that say why the camera moved, compute time; a MATCH session's
-also the program's shot, the candidate shots, the players and their teams, the game events and the
-planned next cut (while its broadcast delay fills, frames without a camera). A style sent here
-replaces the session's whole style, exactly as `UpdateStyle` does (and is recorded the same way),
-so the client streaming the session sees the change on its next frame. A take (a MATCH session's,
-the dashboard's take button) holds a human's shot from the program's next frame until released.
+shot id, visibility, framing error, the flags that say why the camera moved, compute time; a
+MATCH session's also the program's shot, the candidate shots, the players and their teams, the
+game events and the planned next cut (while its broadcast delay fills, frames without a camera).
+A style sent here replaces the session's whole style, exactly as `UpdateStyle` does (and is
+recorded the same way), so the client streaming the session sees the change on its next frame. A
+take (a MATCH session's, the dashboard's take button) holds a human's shot from the program's next
+frame until released.
 
 Errors as on the wire, with the same messages: an unknown session 404, a style the rig refuses 422
 (INVALID_ARGUMENT) or 409 (FAILED_PRECONDITION), a body that is not a Style 422, one that
@@ -97,6 +98,10 @@ class TimelineFrameOut(BaseModel):
     cut: bool
     shot_id: int
     visibility: float = Field(ge=0.0, le=1.0)
+    framing_error: float | None = Field(description=(
+        "how far the framed points land from where the style puts them, normalised screen units (the frame is "
+        "[-1, 1], so above 1 they may be out of it); null when the rig does not measure it (MATCH) or a point "
+        "is behind the camera"))
     flags: list[str] = Field(description="why the camera moved or degraded (search_cut, pulled_in, ...)")
     scores: dict[str, float] = Field(description="TRACKS: sub-scores in [0, 1] of the target chosen, and their "
                                                  "total; MATCH: the shot's")

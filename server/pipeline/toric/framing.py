@@ -5,6 +5,9 @@ Two targets: A and B are their aim points. One target: B is the gaze-room point,
 target"), so the composition leaves space in front of the character. The heading follows the
 target's horizontal velocity with a time constant; below a walking-pace threshold it keeps its
 last value; before any motion it is the target's facing (its local +Z, the glTF forward axis).
+
+`Framing.error` measures, once the frame's pose is final (the rig calls it in VISIBILITY), how far
+the framed points land from the style's screen points: the frame's `framing_error`.
 """
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.camera import Lens
+from camdirector.geometry.camera import Lens, project_to_screen
 from camdirector.geometry.toric import DegenerateTorus, composition_angle, make_torus
 from camdirector.geometry.transforms import UP_WORLD, quat_rotate
 from camdirector.server.pipeline.stages import FrameState
@@ -42,6 +45,8 @@ class Framing:
     def set_style(self, style: Style) -> None:
         self.style = style
         self.alpha = composition_angle(style.screen_a, style.screen_b, self.lens)
+        self._screen_a = np.array([style.screen_a])                     # (1, 2): `error`'s goals, made once
+        self._screen_ab = np.array([style.screen_a, style.screen_b])    # (2, 2)
 
     def _gaze_point(self, aim_world: np.ndarray, dt_s: float) -> np.ndarray:
         if self._last_aim is not None and dt_s > 0.0:
@@ -70,3 +75,16 @@ class Framing:
         except DegenerateTorus:
             state.flags.append("degenerate_torus")
             state.torus = None
+
+    def error(self, state: FrameState) -> float:
+        """How far the framed points land from the style's screen points in state.pose (the frame's
+        final pose), in normalised screen units (the frame is [-1, 1] on both axes; the TRACKS
+        rig's framing error is in the same units): the larger of the points' largest-axis errors.
+        A always counts, B only when it is the second target: the gaze-room point is no subject,
+        and the level camera of one target (camera_motion.pose_on_torus) puts only A exactly.
+        NaN when a point is behind the camera."""
+        if state.b_is_gaze_point:
+            points, goals = state.a_world, self._screen_a
+        else:
+            points, goals = np.array((state.a_world, state.b_world)), self._screen_ab
+        return float(np.abs(project_to_screen(state.pose, self.lens, points) - goals).max())

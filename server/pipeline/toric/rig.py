@@ -4,10 +4,12 @@ MOTION and VISIBILITY; the TRACKS rig, pipeline/tracks/rig.py, replaces all five
 
 Per frame `ToricRig.run` frames the targets (framing.py), moves the camera by the style's
 visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE: that plus reactive.py; RAYCAST and the
-map modes: occlusion_search.py, the map modes with occlusion_maps.py) and estimates the targets'
-visibility (visibility.py). The occlusion maps are built when a map mode is first asked for, at
-creation when the style starts in one, so the first frame does not pay for them; `close()`
-releases their backend (its GL objects, or Embree scenes) when the session ends.
+map modes: occlusion_search.py, the map modes with occlusion_maps.py), then, from the final pose,
+estimates the targets' visibility (visibility.py) and measures the framing error (framing.py:
+`Framing.error`; in VISIBILITY, the other measure of what the frame shows). The occlusion maps are
+built when a map mode is first asked for, at creation when the style starts in one, so the first
+frame does not pay for them; `close()` releases their backend (its GL objects, or Embree scenes)
+when the session ends.
 """
 from __future__ import annotations
 
@@ -105,6 +107,7 @@ class ToricRig:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
         stages.done(Stage.MOTION)
         self.visibility.run(state, target_transforms)
+        state.framing_error = self.framing.error(state)
         stages.done(Stage.VISIBILITY)
         state.cut = state.cut or self._style_cut
         self._style_cut = False

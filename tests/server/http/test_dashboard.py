@@ -1,11 +1,11 @@
-"""The dashboard in a real browser (Debian's Chromium, driven by Playwright) against a real server:
-a director finds a streaming session, sees its frames, shots and why the camera moved, changes its
-style live (and the streaming client gets the new style on its next frame), sees a refused style's
-reason and, in a map mode, the anticipation map; on the tracks rig, the scores of the targets it
-chose; in a match, the candidates, a take held until released (the streaming client gets it),
-the fallback's reason when the held player dies, the event log and, with a delay, the cut the
-director plans, which the program then makes; and submits a motion overview job, then watches
-its preview and contact sheet.
+"""The dashboard in a real browser (Debian's Chromium, driven by Playwright) against a real server: a
+director finds a streaming session, sees its frames, shots and why the camera moved, where along the
+camera's trail its framing was lost and by how much, changes its style live (and the streaming
+client gets the new style on its next frame), sees a refused style's reason and, in a map mode, the
+anticipation map; on the tracks rig, the scores of the targets it chose; in a match, the candidates,
+a take held until released (the streaming client gets it), the fallback's reason when the held
+player dies, the event log and, with a delay, the cut the director plans, which the program then
+makes; and submits a motion overview job, then watches its preview and contact sheet.
 
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
@@ -13,10 +13,12 @@ with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import time
 
 import httpx
+import numpy as np
 import pytest
 
 from camdirector.v1 import director_pb2 as pb
@@ -24,7 +26,7 @@ from tests.precompute.tracks.tiny_levels import corridor
 from tests.server.test_match_sessions import PLAYERS, RATE_HZ, match_request
 from tests.server.test_match_sessions import frames as match_frames
 from tests.server.tracks_sessions import actor_frames, corridor_walk, obj_text, tracks_request
-from tests.server.wire_client import GrpcRaw, two_target_request, walk
+from tests.server.wire_client import GrpcRaw, box_object, two_target_request, walk
 
 playwright = pytest.importorskip("playwright.sync_api")
 
@@ -115,6 +117,72 @@ def test_watch_a_session_and_change_its_style_live(server, page):
     playwright.expect(page.locator("#shot-summary")).to_have_text("the session has ended")
 
 
+FRAMING_RGB = (0xE0, 0x40, 0xFB)   # dashboard.js FRAMING_COLOUR: the strip's framing line and the top view's marks
+
+
+def framing_pixels(page, selector: str) -> tuple[int, int | None]:
+    """How many pixels of a canvas are drawn in the framing colour, and the topmost row holding one
+    (None when none is)."""
+    return tuple(page.eval_on_selector(selector, """(c, [r, g, b]) => {
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let count = 0, top = null;
+        for (let i = 0; i < d.length; i += 4) {
+            if (Math.abs(d[i] - r) + Math.abs(d[i + 1] - g) + Math.abs(d[i + 2] - b) < 24 && d[i + 3] > 0) {
+                count += 1;
+                if (top === null) top = Math.floor(i / 4 / c.width);
+            }
+        }
+        return [count, top]; }""", list(FRAMING_RGB)))
+
+
+def test_a_director_sees_where_the_framing_was_lost(server, page):
+    """A REACTIVE session, its two targets standing still: a wall slides onto the line from A to the
+    camera, 30 % of the way from A; the rig pulls the camera in front of it, A stays on its point and
+    B leaves the frame (framing error 0.93, against 0 before)."""
+    wall_size = (2.5, 2.5, 0.1)
+    parked = (100.0, 1.5, 100.0)
+    request = two_target_request(seed=6, style=pb.Style(visibility=pb.REACTIVE))
+    del request.objects[:]                                                 # no pillar or cart: only the wall
+    request.objects.append(box_object("wall", parked, wall_size, dynamic=True))
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", request).session_id
+
+    def wall_at(first: int, n: int, position, yaw_rad: float = 0.0) -> list[pb.FrameUpdate]:
+        return [pb.FrameUpdate(session_id=session_id, frame=i, time_s=i / 60.0, states=[pb.ObjectState(
+            id="wall", transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2]),
+                                              rotation=pb.Quat(y=np.sin(yaw_rad / 2), w=np.cos(yaw_rad / 2))))])
+                for i in range(first, first + n)]
+
+    try:
+        clear = raw.stream(wall_at(1, 40, parked))
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        summary = page.locator("#shot-summary")
+        playwright.expect(summary).to_contain_text("frames 1–40")
+        playwright.expect(summary).to_contain_text("framing error 0.00 now, at most 0.00, lost (above 0.5) in 0 frames")
+        assert framing_pixels(page, "#topview")[0] == 0                 # nothing lost: no mark
+        clear_line = framing_pixels(page, "#timeline")
+        assert clear_line[0] > 0                                         # the error's line, along the band's floor
+
+        p = clear[-1].pose.position
+        a_world, camera_world = np.array([0.0, 1.5, 0.0]), np.array([p.x, p.y, p.z])
+        spot = a_world + 0.3 * (camera_world - a_world)
+        to_camera = camera_world - a_world
+        yaw_rad = np.arctan2(to_camera[0], to_camera[2])                    # the wall square to the line
+        blocked = raw.stream(wall_at(41, 40, spot, yaw_rad))
+        assert all("pulled_in" in u.diagnostics.flags for u in blocked)
+        frames = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", timeout=30.0).json()["frames"]
+        lost = [f["framing_error"] for f in frames if f["framing_error"] > 0.5]
+        assert len(lost) == 40 and min(lost) > 0.8                        # B is out of the frame
+        playwright.expect(summary).to_contain_text("frames 1–80")
+        playwright.expect(summary).to_contain_text(
+            f"framing error {frames[-1]['framing_error']:.2f} now, at most {max(lost):.2f}, lost (above 0.5) in 40 frames")
+        assert framing_pixels(page, "#topview")[0] > 0                   # the pulled-in camera places are marked
+        assert framing_pixels(page, "#timeline")[1] < clear_line[1]      # the error's line rose off the floor
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+
+
 def test_submit_an_overview_job_and_watch_its_preview(server, page, shared_data, tmp_path):
     page.set_input_files('#overview-form input[name="file"]',
                          str(shared_data / "mocap/bandai_namco/dataset-1_run_active_001.bvh"))
@@ -154,6 +222,9 @@ def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
         page.click(f'#sessions tbody tr[data-session="{session_id}"]')
         playwright.expect(page.locator("#why li").last).to_contain_text("tracks_cut_first_shot; target scored shot size")
         playwright.expect(page.locator("#why li").first).to_contain_text("graph distance")
+        playwright.expect(page.locator("#shot-summary")).to_contain_text(     # the tracks rig's framing error
+            re.compile(r"framing error \d+\.\d\d now, at most \d+\.\d\d"))
+        assert framing_pixels(page, "#timeline")[0] > 0
         assert page.eval_on_selector("#toric-fields", "f => f.disabled")
         page.select_option('#style-form select[name="shotSize"]', "SHOT_SIZE_MEDIUM")
         page.click("#style-form button[type=submit]")

@@ -4,6 +4,7 @@ was; a cancelled job writes nothing and a removed level serves no new session; a
 session beside them keeps working."""
 from __future__ import annotations
 
+import math
 import time
 
 import grpc
@@ -83,6 +84,7 @@ def test_a_level_added_over_rest_serves_a_session(level_server, corridor_level):
     detail = http.get(f"/v1/sessions/{session_id}", params={"last": 10}).json()
     assert detail["style"]["rig"] == "RIG_TRACKS" and len(detail["frames"]) == 10
     assert len(detail["frames"][-1]["targets"]) == 1
+    assert all(math.isfinite(f["framing_error"]) and f["framing_error"] >= 0.0 for f in detail["frames"])
     first = http.get(f"/v1/sessions/{session_id}", params={"after_frame": 0, "last": 600}).json()["frames"][0]
     assert first["cut"] and set(first["scores"]) == {"shot_size", "direct_visibility", "indirect_visibility",
                                                       "total"}            # the first shot: no continuity terms

@@ -48,6 +48,7 @@ def test_a_session_shows_its_frames_and_style(streamed):
         assert frame["flags"] == list(reply.diagnostics.flags)
         assert np.linalg.norm(frame["forward"]) == pytest.approx(1.0, abs=1e-3)
         assert len(frame["targets"]) == 2
+        assert frame["framing_error"] == pytest.approx(0.0, abs=1e-4)   # FRAMING_ONLY composes both exactly
     assert frames[0]["cut"]                           # the first frame opens the first shot
     assert [f["frame"] for f in http.get(f"/v1/sessions/{session_id}", params={"last": 5}).json()["frames"]] \
         == list(range(16, 21))
@@ -151,6 +152,7 @@ def test_a_match_session_shows_its_program_candidates_and_events(match):
     assert [f["frame"] for f in frames] == [u.frame for u in answered]     # the buffering frames gave way
     for frame, reply in zip(frames, answered):
         assert frame["buffering"] is False and frame["players"] == list(PLAYERS) and frame["teams"] == [0, 0, 1, 1]
+        assert frame["framing_error"] is None                            # the MATCH rig does not measure it
         assert frame["shot"] == {"subject_ids": list(reply.shot.subject_ids),
                                  "kind": pb.ShotKind.Name(reply.shot.kind), "reason": reply.shot.reason,
                                  "held": reply.shot.held}

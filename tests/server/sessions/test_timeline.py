@@ -1,5 +1,6 @@
 """The session timeline (server/sessions/timeline.py): bounded, oldest first, and its JSON read off the
-frame; a MATCH frame's shot, candidates, players, events and planned cut; buffering frames."""
+frame (the framing error null where not measured); a MATCH frame's shot, candidates, players, events
+and planned cut; buffering frames."""
 from __future__ import annotations
 
 import numpy as np
@@ -36,6 +37,7 @@ def test_keeps_the_newest_frames_oldest_first():
 def test_a_frame_as_json():
     timeline = Timeline()
     s = state(12, yaw_rad=np.pi / 2, cut=True)
+    s.framing_error = 0.123456
     timeline.add(s, compute_ms=0.125)
     s.flags.append("later")                       # the state is not kept by reference
     s.pose.position_world[0] = 99.0
@@ -43,7 +45,19 @@ def test_a_frame_as_json():
     assert frame == {"frame": 12, "time_s": 0.2, "camera": [12.0, 1.5, -2.0],
                      "forward": pytest.approx([-1.0, 0.0, 0.0], abs=1e-4),   # -Z turned 90 deg about +Y
                      "targets": [[0.0, 1.0, 12.0]], "cut": True, "shot_id": 1, "visibility": 0.5,
-                     "flags": ["search_coast"], "scores": {}, "compute_ms": 0.125}
+                     "framing_error": 0.1235, "flags": ["search_coast"], "scores": {}, "compute_ms": 0.125}
+
+
+def test_a_frame_with_no_framing_error_shows_null():
+    """A rig that does not measure it (MATCH) or a framed point behind the camera leave it NaN."""
+    timeline = Timeline()
+    for frame, error_screen in ((1, 0.0), (2, float("nan")), (3, 2.5)):
+        s = state(frame)
+        s.framing_error = error_screen
+        timeline.add(s, compute_ms=0.1)
+    rows = timeline.as_json()
+    assert [r["framing_error"] for r in rows] == [0.0, None, 2.5]
+    assert [r["framing_error"] for r in orjson.loads(dumps(rows))] == [0.0, None, 2.5]
 
 
 ROSTER = (("a0", 0), ("b0", 1))
@@ -71,6 +85,7 @@ def test_a_match_frame_as_json():
     (frame,) = orjson.loads(dumps(timeline.as_json()))
     assert frame["targets"] == [[0.0, 1.5, 0.0], [4.0, 1.5, 0.0]]
     assert frame["players"] == ["a0", "b0"] and frame["teams"] == [0, 1] and frame["buffering"] is False
+    assert frame["framing_error"] is None                 # the MATCH rig does not measure it
     assert frame["shot"] == {"subject_ids": ["a0", "b0"], "kind": "SHOT_DUEL", "reason": "fight: a0 vs b0", "held": False}
     assert frame["candidates"] == [{"shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0",
                                              "held": False},
