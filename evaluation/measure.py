@@ -5,10 +5,10 @@ add so that a rig that leaves the torus (REACTIVE) is measured on the same terms
 
 - visibility, per frame: the fraction of target mesh vertices (every distinct vertex of every
   target mesh, in the world frame at that frame) that a viewer of the frame sees: the vertex is
-  inside the camera's view frustum (the frame at the scenario's lens: vertical field of view of
-  the pose, the lens's aspect, in front of the near plane `NEAR_PLANE_M`) and its segment from the
-  camera centre crosses no scene object. Pooled over the vertices of all targets, so 1 is both
-  targets fully visible and 0 both hidden.
+  inside the camera's view frustum (geometry.camera.in_frame: the frame at the scenario's lens,
+  vertical field of view of the pose, the lens's aspect, in front of the near plane
+  `NEAR_PLANE_M`) and its segment from the camera centre crosses no scene object. Pooled over the
+  vertices of all targets, so 1 is both targets fully visible and 0 both hidden.
   The paper counts rays only ("1 ray per vertex on each target"): its three methods all stay on
   the Toric surface, so the targets are always framed and the frustum test changes nothing for
   them. REACTIVE pulls the camera toward A, where the ray test alone scores a close-up of a
@@ -43,16 +43,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from camdirector.evaluation.scenario import Actor, Scenario, Timeline, transform_at
-from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.camera import CameraPose, Lens, in_frame, project_to_screen
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
+from camdirector.geometry.transforms import RigidTransform
 from camdirector.server.pipeline.style import Style
 from camdirector.v1 import director_pb2 as pb
-
-# Vertices nearer the camera than this (along its view axis) are clipped, as a renderer clips at
-# its near plane: Cinemachine's default lens (LensSettings.Default, NearClipPlane = 0.1), m.
-NEAR_PLANE_M = 0.1
 
 
 @dataclass(eq=False)
@@ -105,18 +101,6 @@ def _bounding_sphere(mesh: TriMesh) -> tuple[np.ndarray, float]:
     """Centre (3,) of the local bounding box and the radius (m) that holds every vertex."""
     centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
     return centre, float(np.linalg.norm(mesh.vertices - centre, axis=1).max())
-
-
-def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarray:
-    """(n,) bool: whether each point (n, 3) m lies in the view frustum of `pose`: at least
-    NEAR_PLANE_M in front of the camera along its view axis, and within the frame's edges
-    (|x| <= 1 and |y| <= 1 in normalised screen units) at the pose's vertical field of view and the
-    lens's aspect. lens.vertical_fov_deg is not used: the pose carries the field of view."""
-    frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
-    screen = project_to_screen(pose, frame_lens, points_world)                  # NaN behind the camera
-    z_camera = (np.atleast_2d(points_world) - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
-    with np.errstate(invalid="ignore"):
-        return (-z_camera >= NEAR_PLANE_M) & np.all(np.abs(screen) <= 1.0, axis=1)
 
 
 class VisibilityMeter:

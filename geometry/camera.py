@@ -1,4 +1,5 @@
-"""Camera types: lens, pose, and the projection of world points to normalised screen space.
+"""Camera types: lens, pose, the projection of world points to normalised screen space, and
+whether they lie in the frame.
 
 Camera convention (glTF, as on the wire): the camera looks down its local -Z with +Y up; screen
 x is right, y is up, both in [-1, 1] at the frame's edges.
@@ -11,6 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
+
+# Points nearer the camera than this (along its view axis) are clipped, as a renderer clips at its
+# near plane: Cinemachine's default lens (LensSettings.Default, NearClipPlane = 0.1), m.
+NEAR_PLANE_M = 0.1
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,18 @@ def project_to_screen(pose: CameraPose, lens: Lens, points_world: np.ndarray) ->
     out = np.stack([x, y], axis=1)
     out[depth <= 0.0] = np.nan
     return out
+
+
+def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each point (n, 3) m lies in the view frustum of `pose`: at least
+    NEAR_PLANE_M in front of the camera along its view axis, and within the frame's edges
+    (|x| <= 1 and |y| <= 1 in normalised screen units) at the pose's vertical field of view and the
+    lens's aspect. lens.vertical_fov_deg is not used: the pose carries the field of view."""
+    frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
+    screen = project_to_screen(pose, frame_lens, points_world)                  # NaN behind the camera
+    z_camera = (np.atleast_2d(points_world) - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
+    with np.errstate(invalid="ignore"):
+        return (-z_camera >= NEAR_PLANE_M) & np.all(np.abs(screen) <= 1.0, axis=1)
 
 
 def level_look_rotation(camera_world: np.ndarray, point_world: np.ndarray, screen_xy, lens: Lens) -> np.ndarray:

@@ -6,7 +6,7 @@ players' bodies as the match file has them, never from what the director says it
 
 - shown fraction, per program moment and player: the share of the player's body sample points
   (`SAMPLES_PER_PLAYER` points drawn uniformly over its capsule's surface, fixed for the run) that
-  lie in the camera's frame (evaluation/measure.py's `in_frame`: in front of the near plane, inside
+  lie in the camera's frame (geometry/camera.py's `in_frame`: in front of the near plane, inside
   the frame's edges at the pose's field of view and the lens's aspect) and whose segment from the
   camera centre crosses no level geometry (Embree ray casts, geometry.raycast.RayScene). Players do
   not occlude each other, as in evaluation/measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
@@ -31,8 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from camdirector.evaluation.match.match_file import MatchPlayer, MatchRecording
-from camdirector.evaluation.measure import in_frame
-from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.geometry.camera import CameraPose, Lens, in_frame
 from camdirector.geometry.meshes import TriMesh, capsule
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix

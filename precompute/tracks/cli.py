@@ -10,7 +10,9 @@
     camdirector eval-graph LEVEL [--data-dir DIR] [--json OUT] [--plot OUT.png] [--seed N]
         our graph against PRMs on a registered level along an actor route: the Recast test cases
         (TestCases/nav_mesh_test.txt beside the level file) where they exist, else an A* path on
-        the navmesh; prints the table as JSON.
+        the navmesh; prints the table as JSON. Each graph's row counts the frames that show the
+        actor (`visible`: inside the frame and unoccluded) apart from those with a clear line of
+        sight to it (`line_of_sight`), by precompute/tracks/measure.py.
 Exit status: 0 ok, 1 failed, 2 bad arguments or input.
 
 `add_parsers(subparsers)` registers both on the `camdirector` parser; each sets `handler`.
@@ -97,7 +99,7 @@ def route_for(artifact, record, rng):
     import numpy as np
 
     from camdirector.geometry.meshes import TriMesh
-    from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
+    from camdirector.precompute.tracks.route import FRAME_RATE_HZ, WALK_SPEED_M_S, NavmeshPaths, read_recast_queries, walk
 
     paths = NavmeshPaths(TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces), artifact.settings)
     cases = Path(record.source_path).parent / "TestCases" / "nav_mesh_test.txt"
@@ -109,7 +111,7 @@ def route_for(artifact, record, rng):
             polyline = np.vstack(legs)
     if polyline is None:
         polyline = paths.random_path(rng, 60.0)
-    return walk(polyline, 1.4, 30.0)
+    return walk(polyline, WALK_SPEED_M_S, FRAME_RATE_HZ)
 
 
 def run_eval_graph(args) -> int:

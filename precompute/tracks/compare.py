@@ -3,10 +3,11 @@
 For our graph and for PRMs (link distance `PRM_LINK_DISTANCE_M`): nodes, edges, coverage (the
 share of the remeshed navmesh's area seen by at least one node, by the dual visibility table,
 within the table's range: the same table builder, range and rays for both), and a run of the
-same `GraphDirector` (long shot, dynamic with cuts) along one actor route: per-frame
-target-update time (cut check + target search) and camera-update time, in ms, and the actor's
-visibility (the share of frames where at least half the actor's sample points are seen from the
-camera).
+same `GraphDirector` (long shot, dynamic with cuts) along one actor route, measured by
+precompute/tracks/measure.py: per-frame target-update time (cut check + target search) and
+camera-update time, in ms, the share of frames that show the actor (`visible`: inside the frame
+and unoccluded), the share with a clear line of sight to it (`line_of_sight`: rays only), the
+share with the whole body inside the frame, cuts and the framing error.
 
 The PRM "at equal coverage" is searched for, not read off a grid: the sparsest density whose
 coverage, averaged over `PRM_SEEDS` random roadmaps, is at least ours (densities grow by
@@ -19,7 +20,7 @@ the densest one tried, which falls short, is the bound we must beat. Every densi
 listed (`coverage_search`): near full coverage the last fraction of a percent costs a PRM
 many nodes, and the list shows how much the verdict rests on it. Rows at the reference
 densities `PRM_DENSITIES_PER_M2` show the trend. The verdict also names, for information, the
-sparsest reference PRM that keeps the actor visible along the route at least as often as ours:
+sparsest reference PRM that shows the actor along the route (`visible`) at least as often as ours:
 the paper's sense of a PRM dense enough "for a correct result".
 """
 from __future__ import annotations
@@ -33,11 +34,10 @@ import numpy as np
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
-from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector
+from camdirector.precompute.tracks.measure import measure_route
 from camdirector.precompute.tracks.navmesh import triangle_areas
 from camdirector.precompute.tracks.prm import build_prm
 from camdirector.precompute.tracks.route import ActorRoute
-from camdirector.precompute.tracks.settings import DirectorSettings
 from camdirector.precompute.tracks.topview import save_panels
 from camdirector.precompute.tracks.visibility_table import build_visibility_table
 
@@ -47,7 +47,6 @@ PRM_SEEDS = 3
 PRM_MIN_DENSITY_PER_M2 = 0.002
 PRM_MAX_DENSITY_PER_M2 = 2.0
 PRM_MAX_NODES = 4000
-VISIBLE_FRACTION = 0.5
 _LADDER = 1.5
 _BISECTIONS = 4
 
@@ -104,27 +103,6 @@ def prm_at_coverage(artifact: LevelArtifact, navmesh: TriMesh, refined: TriMesh,
     return found
 
 
-def run_route(artifact: LevelArtifact, route: ActorRoute, scene: RayScene, settings: DirectorSettings,
-              rng: np.random.Generator, style: DirectorStyle = DirectorStyle()) -> dict:
-    """Director along the route: timings (ms), visibility, cuts, and the camera path (F, 3)."""
-    director = GraphDirector(artifact, settings, rng, style)
-    target_ms, camera_ms, visible, cuts, path = [], [], [], 0, []
-    for t, p, f in zip(route.time_s, route.position_world, route.forward_world):
-        shot = director.step(float(t), p, f, scene)
-        target_ms.append(shot.timings_ms["cut_check"] + shot.timings_ms["target_update"])
-        camera_ms.append(shot.timings_ms["camera_update"])
-        visible.append(shot.visible_fraction)
-        cuts += shot.cut
-        path.append(shot.position_world)
-    target_ms, camera_ms, visible = np.array(target_ms), np.array(camera_ms), np.array(visible)
-    return {"frames": len(visible), "target_update_ms_median": float(np.median(target_ms)),
-            "target_update_ms_mean": float(target_ms.mean()), "target_update_ms_std": float(target_ms.std()),
-            "camera_update_ms_median": float(np.median(camera_ms)), "camera_update_ms_mean": float(camera_ms.mean()),
-            "camera_update_ms_std": float(camera_ms.std()),
-            "visible_frames": float((visible >= VISIBLE_FRACTION).mean()), "cuts": int(cuts),
-            "camera_path": np.asarray(path)}
-
-
 def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.Generator,
                      densities_per_m2: tuple[float, ...] = PRM_DENSITIES_PER_M2,
                      plot_path: Path | None = None) -> dict:
@@ -133,16 +111,15 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
     scene = RayScene([level])
     navmesh = TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces)
     refined = TriMesh(artifact.refined_vertices, artifact.refined_faces)
-    settings = DirectorSettings()
     rows = []
-    ours = run_route(artifact, route, scene, settings, np.random.default_rng(rng.integers(1 << 32)))
+    ours = measure_route(artifact, route, scene, np.random.default_rng(rng.integers(1 << 32)))
     rows.append({"graph": "ours", "nodes": len(artifact.nodes_world), "edges": len(artifact.edges),
                  "coverage": coverage(artifact), "build_s": sum(artifact.timings_ms.values()) / 1e3,
                  **{k: v for k, v in ours.items() if k != "camera_path"}})
     paths = {"ours": (artifact, ours["camera_path"])}
 
     def prm_row(name: str, density: float, prms: list[LevelArtifact], build_s: float) -> dict:
-        run = run_route(prms[0], route, scene, settings, np.random.default_rng(rng.integers(1 << 32)))
+        run = measure_route(prms[0], route, scene, np.random.default_rng(rng.integers(1 << 32)))
         paths[name] = (prms[0], run["camera_path"])
         return {"graph": name, "density_per_m2": density, "nodes": len(prms[0].nodes_world),
                 "edges": len(prms[0].edges), "coverage": coverage(prms[0]),
@@ -163,7 +140,7 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
         equal = prm_row("prm_equal_coverage", searched[0], searched[1], time.perf_counter() - clock)
         rows.append(equal)
     visible_as_often = next((r for r in rows[1:len(densities_per_m2) + 1]
-                             if r["visible_frames"] >= rows[0]["visible_frames"]), None)
+                             if r["visible"] >= rows[0]["visible"]), None)
     # where no PRM reached our coverage, the densest one tried bounds the one that would from below
     bound = {k: equal[k] for k in ("density_per_m2", "mean_coverage", "mean_nodes", "mean_edges")} if equal \
         else (trials[-1] if trials else None)

@@ -4,21 +4,32 @@ for one actor on a precomputed level.
 Each frame (Section 5's loop):
 1. direct visibility of the actor from the current camera (rays to points up the actor through
    the caller's RayScene, dynamic occluders included) and the framing check feed the cutting
-   strategy (cutting.py); styles without cuts skip it;
+   strategy (cutting.py); styles without cuts skip it. The framing holds at a place within
+   `framing_violation_log` of the optimal distance from which the shot size's framed extent
+   fits in the frame (framing.py), and it is violated when neither the camera nor the target it
+   is moving to holds it (a camera still gliding to a good target is not cut away from);
 2. on a cut, a new target is searched among all POIs near the actor without the edge filter,
    scored by shot size, direct and indirect visibility and the two continuity sub-scores, and
-   only cuts that keep the 30-degree rule and the line of action are taken (continuity.py); if
-   none qualifies the cut waits for a later frame. Without a cut the target moves by the target
+   only cuts that keep the 30-degree rule and the line of action are taken (continuity.py), and
+   a cut for framing only to a POI that holds the framing; if none qualifies the cut waits for a
+   later frame (before, a framing cut to another bad framing cut again a second later: 83-118
+   cuts a minute in medium shots). Without a cut the target moves by the target
    moving strategy (target_search.py): POIs strongly connected to the current target, four
    weighted sub-scores, then a local descent along the POI's edge in steps of
    `descent_step_m`. No POI at all is a reason to cut;
 3. the camera jumps to the target on a cut, else follows it by the force model
-   (camera_motion.py); static cameras stay on their node and only pan.
+   (camera_motion.py, with the target's velocity); static cameras stay on their node and only
+   pan. The camera aims at the shot size's framed extent, centred (framing.py's `aim_point`):
+   the look-at point it returns is that aim, not the fixed point up the actor the scores use.
 
 Styles (Section 6.1), switchable between frames by `set_style`: the shot size (medium, long,
 extreme long: the actor's on-screen height) and the movement (dynamic without cuts, dynamic with
 cuts, static cameras with cuts). The candidate radius is the larger of `candidate_radius_m` and
 1.5 times the style's optimal distance, so an extreme long shot finds tracks far enough away.
+
+The shot-size sub-score is the paper's Gaussian in the log distance ratio, times a factor that
+falls from 1 to 0 as the framed extent's fit ratio (framing.py, with `frame_margin`) goes past 1
+by `fit_softness`: a place too close to frame the shot size scores as a wrong shot size.
 
 Scores are averages weighted by the settings' weights; to keep a frame cheap only the
 `_SCORED_POIS` POIs best on the two sub-scores that need no ray or search (shot size, indirect
@@ -47,7 +58,7 @@ from camdirector.precompute.tracks.continuity import (
     thirty_degree_score,
 )
 from camdirector.precompute.tracks.cutting import CutClock, CutReason, draw_shot_duration_s
-from camdirector.precompute.tracks.framing import ShotSize
+from camdirector.precompute.tracks.framing import FRAMED_EXTENT, ShotSize, aim_point, fit_ratio, framed_ends_world
 from camdirector.precompute.tracks.graph import RuntimeGraph
 from camdirector.precompute.tracks.settings import DirectorSettings
 from camdirector.precompute.tracks.target_search import (
@@ -77,7 +88,8 @@ class DirectorStyle:
 
 @dataclass(frozen=True)
 class TrackShot:
-    """One frame's camera: position_world and look_at_world (3,) metres; cut: this frame starts a
+    """One frame's camera: position_world and look_at_world (3,) metres (look_at_world: the point
+    to put at the screen centre, which centres the shot size's framed extent); cut: this frame starts a
     new shot; shot_id: counts shots from 0; visible_fraction: share of the actor's sample points
     seen from position_world; cut_reason: why the shot started (None inside a shot); timings_ms:
     'cut_check', 'target_update', 'camera_update'; scores: the sub-scores in [0, 1] of the target
@@ -119,6 +131,7 @@ class GraphDirector:
             else np.empty((0, 3))
         self._indirect = IndirectVisibility(centroids, artifact.visibility)
         self._actor_height_m = artifact.agent_height_m
+        self._actor_radius_m = settings.actor_radius_fraction * artifact.agent_height_m
         self._settings = settings
         self._rng = rng
         self._now = clock
@@ -127,6 +140,7 @@ class GraphDirector:
         self._target: tuple[int, int, float] | None = None
         self._camera: np.ndarray | None = None
         self._velocity = np.zeros(3)
+        self._last_target: np.ndarray | None = None  # (3,) the target of the last frame, for its velocity
         self._clock: CutClock | None = None
         self._shot_id = -1
         self._last_time_s: float | None = None
@@ -147,6 +161,16 @@ class GraphDirector:
         return {ShotSize.MEDIUM: s.medium_shot_screen_fraction, ShotSize.LONG: s.long_shot_screen_fraction,
                 ShotSize.EXTREME_LONG: s.extreme_long_shot_screen_fraction}[self._style.shot_size]
 
+    def repulsion_radius_m(self) -> float:
+        """How near the actor pushes the moving camera away, m: the settings' radius, or farther,
+        the distance under which the shot size's framed extent, centred, no longer fits with the
+        frame margin (its span over twice the margin's tangent, plus the actor's girth): a medium
+        camera kept 1 m away stood too close for the waist-up to fit."""
+        s = self._settings
+        low, high = FRAMED_EXTENT[self._style.shot_size]
+        near = (high - low) * self._actor_height_m / (2.0 * (1.0 - s.frame_margin) * np.tan(np.radians(s.vertical_fov_deg) / 2.0))
+        return max(s.repulsion_radius_m, near + self._actor_radius_m)
+
     def optimal_distance_m(self) -> float:
         return optimal_distance_m(self._actor_height_m, self.screen_fraction(), self._settings.vertical_fov_deg)
 
@@ -166,6 +190,7 @@ class GraphDirector:
         self._last_actor = actor
         actor_points = actor + np.outer(self._fractions * self._actor_height_m, UP_WORLD)
         look_at = actor + s.look_at_fraction * self._actor_height_m * UP_WORLD
+        ends = framed_ends_world(actor, self._actor_height_m, self._style.shot_size)
         distance = self.optimal_distance_m()
         movement = self._style.movement
 
@@ -174,9 +199,9 @@ class GraphDirector:
             reason = CutReason.FIRST_SHOT
         elif movement != Movement.DYNAMIC_NO_CUTS:
             seen = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
-            d = float(np.linalg.norm(self._camera - look_at))
-            self._clock.observe(time_s, seen < s.occluded_below_fraction,
-                                abs(np.log(max(d, 1e-6) / distance)) > s.framing_violation_log)
+            # violated when neither the camera nor the target it is on its way to frames the actor
+            framed = self._frames(np.stack([self._camera, self._target_position()]), look_at, ends, distance)
+            self._clock.observe(time_s, seen < s.occluded_below_fraction, not framed.any())
             reason = self._clock.reason(time_s, s)
         stages.done(DirectorStage.CUT_CHECK)
 
@@ -185,14 +210,13 @@ class GraphDirector:
         self._scores = {}
         if reason is None and movement != Movement.STATIC:
             indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
-            moved = self._move_target(actor, look_at, actor_points, distance, indirect, ray_scene)
+            moved = self._move_target(actor, look_at, ends, actor_points, distance, indirect, ray_scene)
             if not moved and movement == Movement.DYNAMIC_WITH_CUTS:
                 reason = CutReason.NO_TARGET
         if reason is not None:
             if indirect is None:
                 indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
-            cut = self._cut(actor, look_at, actor_points, forward, distance, indirect, ray_scene,
-                            first=reason == CutReason.FIRST_SHOT)
+            cut = self._cut(actor, look_at, ends, actor_points, forward, distance, indirect, ray_scene, reason)
             if cut:
                 self._shot_id += 1
                 self._clock = CutClock(time_s, draw_shot_duration_s(self._rng, s))
@@ -201,13 +225,24 @@ class GraphDirector:
             return None
 
         target = self._target_position()
+        if cut or self._last_target is None or dt <= 0.0:
+            target_velocity = np.zeros(3)
+        else:  # a target that jumps to another edge is not a speed to match: capped as the camera's
+            target_velocity = (target - self._last_target) / dt
+            speed = float(np.linalg.norm(target_velocity))
+            if speed > s.max_speed_m_s:
+                target_velocity *= s.max_speed_m_s / speed
+        self._last_target = target
         if cut:
             self._camera, self._velocity = target.copy(), np.zeros(3)
         elif movement != Movement.STATIC and self._camera is not None:
-            self._camera, self._velocity = move_camera(self._camera, self._velocity, target, look_at, dt, s)
+            self._camera, self._velocity = move_camera(self._camera, self._velocity, target, target_velocity, look_at,
+                                                       dt, s, self.repulsion_radius_m())
         visible = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
         stages.done(DirectorStage.CAMERA_UPDATE)
-        return TrackShot(position_world=self._camera.copy(), look_at_world=look_at, cut=cut, shot_id=self._shot_id,
+        aim = aim_point(self._camera, ends, self._actor_radius_m)
+        return TrackShot(position_world=self._camera.copy(), look_at_world=aim, cut=cut,
+                         shot_id=self._shot_id,
                          visible_fraction=visible, cut_reason=reason if cut else None,
                          timings_ms=stages.timings_ms,
                          scores=self._scores)
@@ -221,13 +256,25 @@ class GraphDirector:
     def _radius(self, distance: float) -> float:
         return max(self._settings.candidate_radius_m, 1.5 * distance)
 
-    def _cheap_scores(self, pois: Pois, look_at: np.ndarray, distance: float, indirect: np.ndarray):
+    def _frames(self, positions_world: np.ndarray, look_at: np.ndarray, ends: np.ndarray, distance: float) -> np.ndarray:
+        """(k,) bool for positions (k, 3): within the framing tolerance of the optimal distance
+        (Section 5.1's framing check) and the framed extent fits in the frame (framing.py)."""
         s = self._settings
-        size = shot_size_score(pois.position_world, look_at, distance, s.shot_size_tolerance_log)
+        d = np.maximum(np.linalg.norm(positions_world - look_at, axis=1), 1e-6)
+        fits = fit_ratio(positions_world, ends, self._actor_radius_m, s.vertical_fov_deg, 0.0) <= 1.0
+        return (np.abs(np.log(d / distance)) <= s.framing_violation_log) & fits
+
+    def _cheap_scores(self, pois: Pois, look_at: np.ndarray, ends: np.ndarray, distance: float, indirect: np.ndarray):
+        """Shot size (the distance's Gaussian, down to 0 where the framed extent cannot fit:
+        framing.py) and indirect visibility, (k,) each."""
+        s = self._settings
+        fit = fit_ratio(pois.position_world, ends, self._actor_radius_m, s.vertical_fov_deg, s.frame_margin)
+        size = shot_size_score(pois.position_world, look_at, distance, s.shot_size_tolerance_log) \
+            * np.clip(1.0 - (fit - 1.0) / s.fit_softness, 0.0, 1.0)
         ind = (1.0 - pois.t) * indirect[pois.node_a] + pois.t * indirect[pois.node_b]
         return size, ind
 
-    def _move_target(self, actor, look_at, actor_points, distance, indirect, scene) -> bool:
+    def _move_target(self, actor, look_at, ends, actor_points, distance, indirect, scene) -> bool:
         """Target moving strategy; False when no POI is reachable from the current target."""
         s = self._settings
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only=False)
@@ -235,7 +282,7 @@ class GraphDirector:
         cur_pos = self._target_position()
         pois = Pois(np.append(pois.node_a, current[0]), np.append(pois.node_b, current[1]),
                     np.append(pois.t, current[2]), np.vstack([pois.position_world, cur_pos]))
-        size, ind = self._cheap_scores(pois, look_at, distance, indirect)
+        size, ind = self._cheap_scores(pois, look_at, ends, distance, indirect)
         partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind
         keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
         pois, size, ind = pois.take(keep), size[keep], ind[keep]
@@ -252,11 +299,11 @@ class GraphDirector:
         best = int(np.argmax(total))
         self._scores = _scored(best, shot_size=size, direct_visibility=direct, indirect_visibility=ind,
                                graph_distance=near, total=total)
-        self._target = self._descend(pois.take([best]), float(total[best]), float(dist[best]), look_at,
+        self._target = self._descend(pois.take([best]), float(total[best]), float(dist[best]), look_at, ends,
                                      actor_points, distance, indirect, scene)
         return True
 
-    def _descend(self, poi: Pois, score: float, dist: float, look_at, actor_points, distance, indirect, scene):
+    def _descend(self, poi: Pois, score: float, dist: float, look_at, ends, actor_points, distance, indirect, scene):
         """Local descent of the (negated) score along the POI's edge in fixed steps."""
         s = self._settings
         a, b, t = int(poi.node_a[0]), int(poi.node_b[0]), float(poi.t[0])
@@ -272,7 +319,7 @@ class GraphDirector:
                 break
             pos = self.graph.nodes_world[a] + ts[:, None] * (self.graph.nodes_world[b] - self.graph.nodes_world[a])
             cand = Pois(np.full(len(ts), a), np.full(len(ts), b), ts, pos)
-            size, ind = self._cheap_scores(cand, look_at, distance, indirect)
+            size, ind = self._cheap_scores(cand, look_at, ends, distance, indirect)
             direct = direct_visibility(pos, actor_points, scene)
             moved = dist + np.abs(ts - t) * length
             near = np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)
@@ -287,14 +334,19 @@ class GraphDirector:
                                    graph_distance=near, total=total)
         return a, b, t
 
-    def _cut(self, actor, look_at, actor_points, forward, distance, indirect, scene, first: bool) -> bool:
-        """Continuity search (Section 5.3); False when no POI keeps the rules (or none exists)."""
+    def _cut(self, actor, look_at, ends, actor_points, forward, distance, indirect, scene, reason: CutReason) -> bool:
+        """Continuity search (Section 5.3); False when no POI keeps the rules (or none exists).
+        A cut for framing goes only to a POI that frames the actor: a cut to another framing
+        that fails is a jump for nothing, and it would cut again at the next chance."""
         s = self._settings
+        first = reason == CutReason.FIRST_SHOT
         nodes_only = self._style.movement == Movement.STATIC
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only)
+        if reason == CutReason.FRAMING and len(pois):
+            pois = pois.take(self._frames(pois.position_world, look_at, ends, distance))
         if not len(pois):
             return False
-        size, ind = self._cheap_scores(pois, look_at, distance, indirect)
+        size, ind = self._cheap_scores(pois, look_at, ends, distance, indirect)
         weights = s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility
         extra = np.zeros(len(pois))
         if not first:

@@ -6,6 +6,17 @@ tall, so from the waist up, half the body, fills 0.8 of the frame), long 0.8 ("t
 fills most of the frame"), extreme long 0.25 (the actor small in the set). What a shot size must
 keep inside the frame is its framed extent, a span up the actor from its feet, in fractions of its
 height: the whole body (0 to 1) for long and extreme long, the waist up (0.5 to 1) for medium.
+
+The paper orients the camera "in the direction of the actor" (Section 5.4) and sizes the shot by
+distance alone (5.2: the optimal distance from the field of view and the expected on-screen
+height), which holds for a camera level with the actor's centre. Tracks sit at eye height and
+close to the actor in corridors, and a camera that looks down at a fixed point up the actor puts
+its feet under the frame. So the camera aims at the extent: with no roll, a point straight ahead
+in yaw at pitch p lands at screen y = tan(p - c) / tan(fov / 2) for a camera pitched c, and the
+pitch halfway between the pitches to the extent's two ends centres it (`aim_point`). Centred, the
+extent fits when half its angular span is within the half field of view less `frame_margin`
+(`fit_ratio` <= 1): nearer than that no aim shows it, and the director treats the place as a
+framing violation and scores it down (director.py).
 """
 from __future__ import annotations
 
@@ -46,3 +57,37 @@ def framing_error(pose: CameraPose, lens: Lens, feet_world: np.ndarray, height_m
     screen = project_to_screen(pose, lens, framed_ends_world(feet_world, height_m, shot_size))  # (2, 2)
     error = np.abs(screen - np.array([[0.0, -half], [0.0, half]])).max()
     return float(error)
+
+
+def _pitches(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per camera (m, 3): the lowest pitch to the extent's bottom and the highest to its top,
+    rad, over the actor's girth (its axis distance less and plus radius_m: the near side of the
+    feet is lower on screen than the axis), and the horizontal distance to its axis, m."""
+    cameras = np.atleast_2d(cameras_world)
+    offset = ends_world[0] - cameras
+    horizontal = np.hypot(offset[:, 0], offset[:, 2])
+    near = np.maximum(horizontal - radius_m, 1e-6)[:, None]
+    far = (horizontal + radius_m)[:, None]
+    rise = ends_world[:, 1][None, :] - cameras[:, 1:2]                 # (m, 2): up to the bottom and the top
+    low = np.minimum(np.arctan2(rise, near), np.arctan2(rise, far))
+    high = np.maximum(np.arctan2(rise, near), np.arctan2(rise, far))
+    return low[:, 0], high[:, 1], horizontal
+
+
+def aim_point(camera_world: np.ndarray, ends_world: np.ndarray, radius_m: float) -> np.ndarray:
+    """(3,) the point on the actor's axis to put at the screen centre so that the framed extent
+    (ends_world (2, 3): bottom, top; an actor radius_m wide) is centred vertically (module docstring)."""
+    bottom, top, horizontal = _pitches(camera_world, ends_world, radius_m)
+    height = float(camera_world[1] + max(horizontal[0], 1e-6) * np.tan(0.5 * (bottom[0] + top[0])))
+    return np.array([ends_world[0, 0], height, ends_world[0, 2]])
+
+
+def fit_ratio(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float, vertical_fov_deg: float,
+              frame_margin: float) -> np.ndarray:
+    """(m,) for cameras (m, 3): tan of half the framed extent's angular span (an actor radius_m
+    wide) over the most a centred extent may have, (1 - frame_margin) tan(fov / 2); above 1 it
+    cannot be framed."""
+    bottom, top, _ = _pitches(cameras_world, ends_world, radius_m)
+    half_span = np.minimum(0.5 * (top - bottom), 0.5 * np.pi - 1e-6)
+    return np.tan(half_span) / ((1.0 - frame_margin) * np.tan(np.radians(vertical_fov_deg) / 2.0))

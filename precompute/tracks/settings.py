@@ -117,12 +117,15 @@ class DirectorSettings:
     vertical_fov_deg: float = 50.0           # the lens the shot sizes are computed for, deg. (1, 170)
     actor_sample_fractions: tuple[float, ...] = (0.15, 0.5, 0.9)  # points up the actor tested for direct visibility, fraction of its height. each in [0, 1]
     look_at_fraction: float = 0.6            # the camera looks at this point up the actor, fraction of its height. [0, 1]
+    actor_radius_fraction: float = 0.15      # the actor's half-width that framing keeps in frame, fraction of its height (shoulders). [0, 1]
     # --- shot sizes: actor height on screen / frame height (Section 6.1) ---
     medium_shot_screen_fraction: float = 1.6     # waist up fills the frame. (0, 10]
     long_shot_screen_fraction: float = 0.8       # the whole body fills most of the frame. (0, 10]
     extreme_long_shot_screen_fraction: float = 0.25  # the actor is small in the set. (0, 10]
     shot_size_tolerance_log: float = 0.4     # Gaussian width of the shot-size sub-score in ln(distance ratio). (0, 5]
     framing_violation_log: float = 0.7       # framing is violated when |ln(distance / optimal)| exceeds this. (0, 5]
+    frame_margin: float = 0.1                # the framed extent's ends stay this far inside the frame's edges (framing.py), normalised screen units. [0, 0.9]
+    fit_softness: float = 0.2                # the shot-size sub-score falls to 0 as the extent's fit ratio goes from 1 to 1 + this. (0, 10]
     # --- target moving strategy (target_search.py, Section 5.2) ---
     candidate_radius_m: float = 12.0         # candidate edges touch a node at most this far from the actor, m. (0, 1e4]
     max_graph_distance_m: float = 25.0       # A* gives up beyond this; the distance sub-score is 0 there, m. (0, 1e5]
@@ -148,7 +151,7 @@ class DirectorSettings:
     # --- camera motion (camera_motion.py, Section 5.4) ---
     attraction_per_s2: float = 6.0           # spring constant towards the target (mass 1), 1/s^2. (0, 1e4]
     damping_ratio: float = 1.0               # 1 = critical damping: no overshoot. [0, 10]
-    repulsion_radius_m: float = 1.0          # the actor pushes the camera away inside this distance, m. [0, 100]
+    repulsion_radius_m: float = 1.0          # the actor pushes the camera away inside at least this distance (director.py), m. [0, 100]
     repulsion_m_s2: float = 20.0             # repulsion acceleration at zero distance, m/s^2. [0, 1e4]
     max_speed_m_s: float = 6.0               # camera speed limit, m/s. (0, 1000]
     max_substep_s: float = 1.0 / 60.0        # the force integration takes steps no longer than this, s. (0, 1]
@@ -161,11 +164,14 @@ class DirectorSettings:
             (len(self.actor_sample_fractions) >= 1 and all(0.0 <= f <= 1.0 for f in self.actor_sample_fractions),
              "actor_sample_fractions must hold at least one fraction in [0, 1]"),
             (0.0 <= self.look_at_fraction <= 1.0, "look_at_fraction must be in [0, 1]"),
+            (0.0 <= self.actor_radius_fraction <= 1.0, "actor_radius_fraction must be in [0, 1]"),
             (all(0.0 < f <= 10.0 for f in (self.medium_shot_screen_fraction, self.long_shot_screen_fraction,
                                           self.extreme_long_shot_screen_fraction)),
              "shot screen fractions must be in (0, 10]"),
             (0.0 < self.shot_size_tolerance_log <= 5.0, "shot_size_tolerance_log must be in (0, 5]"),
             (0.0 < self.framing_violation_log <= 5.0, "framing_violation_log must be in (0, 5]"),
+            (0.0 <= self.frame_margin <= 0.9, "frame_margin must be in [0, 0.9]"),
+            (0.0 < self.fit_softness <= 10.0, "fit_softness must be in (0, 10]"),
             (0.0 < self.candidate_radius_m <= 1e4, "candidate_radius_m must be in (0, 1e4]"),
             (0.0 < self.max_graph_distance_m <= 1e5, "max_graph_distance_m must be in (0, 1e5]"),
             (0.0 < self.surroundings_radius_m <= 100.0, "surroundings_radius_m must be in (0, 100]"),

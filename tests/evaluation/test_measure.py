@@ -7,17 +7,14 @@ import numpy as np
 import pytest
 
 from camdirector.evaluation.measure import (
-    NEAR_PLANE_M,
     CameraTrack,
     VisibilityMeter,
     camera_kinematics,
-    in_frame,
     measure,
     measure_visibility,
     summarize,
 )
 from camdirector.evaluation.scenario import FORMAT, parse_scenario
-from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.v1 import director_pb2 as pb
 
 TARGET = {"id": "ball", "shape": {"sphere": {"radius": 0.5}}, "position": [0.0, 1.0, 0.0]}
@@ -79,20 +76,6 @@ def test_visibility_pools_the_vertices_of_both_targets():
 
 def test_a_camera_inside_an_object_sees_nothing():
     assert visibility_from([0.0, 1.0, -5.0], [box("crate", [2, 2, 2], [0, 1, -5])]) == 0.0
-
-
-def test_the_frustum_test_on_hand_placed_points():
-    pose = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 90.0)  # looks down -Z, tan(half fov) = 1
-    lens = Lens(aspect=2.0)  # half-width 2 at depth 1
-    points = np.array([
-        [0.0, 0.0, -1.0],                  # centre of the frame
-        [1.9, 0.9, -1.0],                  # near the top right corner, inside
-        [2.1, 0.0, -1.0],                  # just right of the frame
-        [0.0, 1.1, -1.0],                  # just above it
-        [0.0, 0.0, 1.0],                   # behind the camera
-        [0.0, 0.0, -0.5 * NEAR_PLANE_M],   # in front, but nearer than the near plane
-    ])
-    assert in_frame(pose, lens, points).tolist() == [True, True, False, False, False, False]
 
 
 def test_a_target_out_of_frame_is_not_visible_though_nothing_hides_it():

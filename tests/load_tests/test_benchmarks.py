@@ -32,6 +32,15 @@ def test_tracks_bench_reports_a_level_against_the_prm(shared_data, tmp_path):
     assert level["ours"]["nodes"] > 0 and level["prm_compared"]["mean_nodes"] > 0
     assert level["fewer_nodes"] == (level["ours"]["nodes"] < level["prm_compared"]["mean_nodes"])
     assert set(level["stage_ms"]) >= {"skeleton", "clustering", "graph", "visibility"}
+    assert level["ours"]["line_of_sight"] >= level["ours"]["visible"], "a frame that shows the actor has it in sight"
+    routes = level["routes"]
+    assert set(routes) == {"default", "tightest", "open"}
+    assert routes["tightest"]["half_width_m"] < routes["open"]["half_width_m"]
+    for route in routes.values():
+        assert set(route["shot_sizes"]) == {"medium", "long", "extreme_long"} and route["length_m"] > 0.0
+        for run in route["shot_sizes"].values():
+            assert run["frames"] > 0 and 0.0 <= run["visible"] <= run["line_of_sight"] <= 1.0
+            assert 0.0 <= run["framed_in_frame"] <= 1.0 and run["cuts_per_min"] >= 0.0
 
 
 def test_stream_bench_reports_round_trips(tmp_path):

@@ -19,7 +19,6 @@ from tests.server.wire_client import GrpcRaw, capsule_target
 ROOT = Path(__file__).resolve().parents[2]
 AGENT_HEIGHT_M = 2.0       # the CLI's default; the director frames this far up the actor
 LOOK_AT_FRACTION = 0.6     # DirectorSettings.look_at_fraction
-VISIBLE_FRACTION = 0.5     # an actor counts as visible in a frame at this visibility (as in compare.py)
 
 
 def obj_text(mesh: TriMesh) -> str:
@@ -72,20 +71,19 @@ def look_at_world(feet_world) -> np.ndarray:
     return np.asarray(feet_world, dtype=np.float64) + [0.0, LOOK_AT_FRACTION * AGENT_HEIGHT_M, 0.0]
 
 
-def screen_of_actor(update: pb.CameraUpdate, feet_world) -> np.ndarray:
-    """(2,) normalised screen position of the director's look-at point on the actor."""
-    return project_to_screen(pose_of(update), Lens(), look_at_world(feet_world)[None])[0]
-
-
 def camera_distance_m(update: pb.CameraUpdate, feet_world) -> float:
     return float(np.linalg.norm(pose_of(update).position_world - look_at_world(feet_world)))
 
 
 def check_directed(updates: list[pb.CameraUpdate], feet_world) -> None:
-    """Every pose looks at the actor with no roll; shot_id counts the cuts; the first frame cuts."""
+    """Every pose looks at the actor (its axis at the screen's vertical centre line, its feet
+    below the centre and its head above: the director centres the framed extent) with no roll;
+    shot_id counts the cuts; the first frame cuts."""
     assert updates[0].cut
     for update, feet in zip(updates, feet_world):
-        assert np.allclose(screen_of_actor(update, feet), 0.0, atol=1e-6), update.frame
+        feet_head = np.asarray(feet, dtype=np.float64) + np.outer([0.0, AGENT_HEIGHT_M], [0.0, 1.0, 0.0])
+        screen = project_to_screen(pose_of(update), Lens(), feet_head)
+        assert np.allclose(screen[:, 0], 0.0, atol=1e-6) and screen[0, 1] < 0.0 < screen[1, 1], update.frame
         right_world = quat_to_matrix(pose_of(update).rotation_xyzw)[:, 0]
         assert abs(right_world[1]) < 1e-6, "the camera rolls"
     shots = [u.shot_id for u in updates]

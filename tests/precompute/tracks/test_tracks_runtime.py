@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from camdirector.geometry.camera import Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, ArtifactVersionError, load_artifact, save_artifact
 from camdirector.precompute.tracks.continuity import cut_angle_deg, keeps_line_of_action, screen_motion
 from camdirector.precompute.tracks.cutting import draw_shot_duration_s
 from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement
 from camdirector.precompute.tracks.framing import ShotSize
+from camdirector.precompute.tracks.measure import ActorBody, frame_view, shot_pose, visible_share
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.settings import DirectorSettings, TrackSettings
@@ -84,13 +86,13 @@ def test_shot_durations_are_log_normal():
     assert stats.kstest(logs, "norm", args=(np.log(settings.shot_duration_median_s), settings.shot_duration_sigma)).pvalue > 0.01
 
 
-def _walk_corridor(director, scene, speed=1.4, seconds=20.0, fps=30.0):
-    shots = []
-    for k in range(int(seconds * fps)):
-        t = k / fps
-        x = 2.0 + (speed * t) % 26.0
-        shots.append(director.step(t, np.array([x, 0.0, 2.0]), np.array([1.0, 0, 0]), scene))
-    return shots
+def _corridor_feet(speed=1.4, seconds=20.0, fps=30.0) -> list[tuple[float, np.ndarray]]:
+    """(time s, feet (3,) m) of an actor walking down the corridor, again and again."""
+    return [(k / fps, np.array([2.0 + (speed * k / fps) % 26.0, 0.0, 2.0])) for k in range(int(seconds * fps))]
+
+
+def _walk_corridor(director, scene):
+    return [director.step(t, feet, np.array([1.0, 0, 0]), scene) for t, feet in _corridor_feet()]
 
 
 @pytest.mark.parametrize("movement", list(Movement))
@@ -100,8 +102,10 @@ def test_director_keeps_the_actor_visible_and_cuts_by_the_rules(corridor_artifac
     director = GraphDirector(corridor_artifact, settings, np.random.default_rng(1),
                              DirectorStyle(ShotSize.LONG, movement))
     shots = _walk_corridor(director, scene)
-    visible = np.mean([s.visible_fraction >= 0.5 for s in shots])
-    assert visible >= 0.9
+    lens, body = Lens(vertical_fov_deg=settings.vertical_fov_deg), ActorBody.of_height(corridor_artifact.agent_height_m)
+    views = [frame_view(shot_pose(s.position_world, s.look_at_world, lens), lens, feet, body, ShotSize.LONG, scene)
+             for s, (_, feet) in zip(shots, _corridor_feet())]
+    assert visible_share(views) >= 0.9, "the actor inside the frame and unoccluded (precompute/tracks/measure.py)"
     cuts = [i for i, s in enumerate(shots) if s.cut]
     assert cuts[0] == 0
     if movement == Movement.DYNAMIC_NO_CUTS:

@@ -40,3 +40,17 @@ def two_open_floors() -> TriMesh:
     """Two wall-less 20 x 8 and 6 x 6 slabs (top at y=0), 22 m apart along z: further than the
     visibility range, so nothing above one sees the other."""
     return boxes(((0, -0.2, 0), (20, 0, 8)), ((0, -0.2, 30), (6, 0, 36)))
+
+
+def two_rooms(wall=0.02) -> TriMesh:
+    """Two 12 x 12 rooms (x in 0..12 and 20..32, z in 0..12) joined by a corridor 8 m long and 2.4 m
+    wide (x in 12..20, z in 4.8..7.2), 3 m walls `wall` thick all round: the tops of 2 cm walls are
+    too small a region to walk on, though they meet."""
+    floors = [((0, -0.2, 0), (12, 0, 12)), ((12, -0.2, 4.8), (20, 0, 7.2)), ((20, -0.2, 0), (32, 0, 12))]
+    walls = [((-wall, 0, 0), (0, 3, 12)), ((32, 0, 0), (32 + wall, 3, 12)),                      # the far ends
+             ((12, 0, 4.8 - wall), (20, 3, 4.8)), ((12, 0, 7.2), (20, 3, 7.2 + wall))]        # the corridor's sides
+    for x0 in (0.0, 20.0):  # each room's long sides
+        walls += [((x0, 0, -wall), (x0 + 12, 3, 0)), ((x0, 0, 12), (x0 + 12, 3, 12 + wall))]
+    for x in (12.0, 20.0 - wall):  # the walls between the rooms and the corridor, either side of its door
+        walls += [((x, 0, 0), (x + wall, 3, 4.8)), ((x, 0, 7.2), (x + wall, 3, 12))]
+    return boxes(*floors, *walls)

@@ -1,7 +1,9 @@
 """The TRACKS rig through real server processes: a level added by the CLI into a data directory is
 used by a server started on it; sessions over gRPC and ZeroMQ follow an actor on it with cuts;
 UpdateStyle changes the shot size live; every bad input is refused clearly while a canary session
-goes on; and on a real level (nav_test) the actor stays visible along a Recast route."""
+goes on; and on a real level (nav_test) the actor stays visible along a Recast route. Visible means
+what the returned poses show: the actor inside the frame and unoccluded
+(precompute/tracks/measure.py), not the server's own estimate."""
 from __future__ import annotations
 
 import io
@@ -13,7 +15,11 @@ import grpc
 import numpy as np
 import pytest
 
+from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.tracks.framing import ShotSize
+from camdirector.precompute.tracks.measure import ActorBody, frame_view, visible_share
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
 from camdirector.server.errors import DirectorError
@@ -24,13 +30,14 @@ from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.server.test_bad_input import expect
 from tests.server.tracks_sessions import (
-    VISIBLE_FRACTION,
+    AGENT_HEIGHT_M,
     actor_frames,
     camera_distance_m,
     check_directed,
     cli_add_level,
     corridor_walk,
     obj_text,
+    pose_of,
     tracks_canary,
     tracks_request,
 )
@@ -38,6 +45,14 @@ from tests.server.wire_client import GrpcRaw, ZmqRaw, capsule_target, two_target
 from tests.server.wire_client import walk as toric_walk
 
 START = (2.0, 0.0, 2.0)  # the actor's feet in the corridor
+
+
+def shown_share(updates: list[pb.CameraUpdate], feet_world, level: TriMesh, height_m: float = AGENT_HEIGHT_M) -> float:
+    """Share of the frames whose pose shows the actor (a long shot's, at the server's default lens)
+    standing on feet_world (F, 3) in the level: precompute/tracks/measure.py."""
+    lens, body, scene = Lens(), ActorBody.of_height(height_m), RayScene([level])
+    return visible_share([frame_view(pose_of(u), lens, feet, body, ShotSize.LONG, scene)
+                          for u, feet in zip(updates, feet_world)])
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +84,7 @@ def test_a_session_follows_the_actor_with_cuts(client):
     cuts = sum(u.cut for u in updates)
     assert cuts >= 3, "20 s of shots drawn around a 4 s median must cut"
     assert updates[-1].shot_id == updates[0].shot_id + cuts - 1
-    assert np.mean([u.visibility >= VISIBLE_FRACTION for u in updates]) >= 0.9
+    assert shown_share(updates, feet, corridor()) >= 0.9
     flags = [f for u in updates for f in u.diagnostics.flags]
     assert "tracks_cut_first_shot" in flags and any(f.startswith("tracks_cut_") and f != "tracks_cut_first_shot"
                                                       for f in flags)
@@ -188,7 +203,8 @@ def test_actor_visible_along_a_recast_route_on_nav_test(shared_data, tmp_path):
         updates = raw.stream(actor_frames(session_id, route.time_s, route.position_world))
         raw.close()
     check_directed(updates, route.position_world)
-    visible = np.mean([u.visibility >= VISIBLE_FRACTION for u in updates])
+    visible = shown_share(updates, route.position_world, TriMesh(artifact.level_vertices, artifact.level_faces),
+                          artifact.agent_height_m)
     assert len(updates) > 300 and visible >= 0.9, visible
 
 
@@ -239,4 +255,4 @@ def test_an_actor_away_from_every_track_waits_then_gets_its_first_shot(tracks_se
     assert all("tracks_no_track_near_actor" in u.diagnostics.flags and u.visibility == 0.0 for u in updates[:10])
     assert updates[10].cut and "tracks_cut_first_shot" in updates[10].diagnostics.flags
     assert not any("tracks_no_track_near_actor" in u.diagnostics.flags for u in updates[10:])
-    assert np.mean([u.visibility >= VISIBLE_FRACTION for u in updates[10:]]) >= 0.9
+    assert shown_share(updates[10:], feet[10:], corridor()) >= 0.9
