@@ -11,9 +11,12 @@ Each frame (Section 5's loop):
 2. on a cut, a new target is searched among all POIs near the actor without the edge filter,
    scored by shot size, direct and indirect visibility and the two continuity sub-scores, and
    only cuts that keep the 30-degree rule and the line of action are taken (continuity.py), and
-   a cut for framing only to a POI that holds the framing; if none qualifies the cut waits for a
-   later frame (before, a framing cut to another bad framing cut again a second later: 83-118
-   cuts a minute in medium shots). Without a cut the target moves by the target
+   only to a POI that sees the actor (direct visibility at least `occluded_below_fraction`), a
+   cut for framing only to one that holds the framing; if none qualifies the cut waits for a
+   later frame (a cut to a place as bad cut again a second later: 83-118 cuts a minute in medium
+   shots, and framing cuts into walls). Direct visibility, here and in the moving strategy, is
+   the worse of what a place sees of the actor now and `visibility_lookahead_s` ahead on its
+   velocity: a place the actor is about to walk out of sight of is not chosen. Without a cut the target moves by the target
    moving strategy (target_search.py): POIs strongly connected to the current target, four
    weighted sub-scores, then a local descent along the POI's edge in steps of
    `descent_step_m`. No POI at all is a reason to cut;
@@ -193,6 +196,11 @@ class GraphDirector:
         ends = framed_ends_world(actor, self._actor_height_m, self._style.shot_size)
         distance = self.optimal_distance_m()
         movement = self._style.movement
+        # places are scored on what they see of the actor now and where it walks to in visibility_lookahead_s;
+        # faster than the camera may move is a teleport (a respawn, a first frame far away), not a walk
+        walk = np.array([self._actor_velocity[0], 0.0, self._actor_velocity[2]])
+        ahead = walk * s.visibility_lookahead_s if np.linalg.norm(walk) <= s.max_speed_m_s else np.zeros(3)
+        scored_points = np.stack([actor_points, actor_points + ahead])
 
         reason: CutReason | None = None
         if self._camera is None:
@@ -210,13 +218,13 @@ class GraphDirector:
         self._scores = {}
         if reason is None and movement != Movement.STATIC:
             indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
-            moved = self._move_target(actor, look_at, ends, actor_points, distance, indirect, ray_scene)
+            moved = self._move_target(actor, look_at, ends, scored_points, distance, indirect, ray_scene)
             if not moved and movement == Movement.DYNAMIC_WITH_CUTS:
                 reason = CutReason.NO_TARGET
         if reason is not None:
             if indirect is None:
                 indirect = self._indirect.per_node(actor, s.surroundings_radius_m)
-            cut = self._cut(actor, look_at, ends, actor_points, forward, distance, indirect, ray_scene, reason)
+            cut = self._cut(actor, look_at, ends, scored_points, forward, distance, indirect, ray_scene, reason)
             if cut:
                 self._shot_id += 1
                 self._clock = CutClock(time_s, draw_shot_duration_s(self._rng, s))
@@ -256,13 +264,26 @@ class GraphDirector:
     def _radius(self, distance: float) -> float:
         return max(self._settings.candidate_radius_m, 1.5 * distance)
 
+    @staticmethod
+    def _direct(positions_world: np.ndarray, scored_points: np.ndarray, scene: RayScene) -> np.ndarray:
+        """(k,) direct visibility of positions (k, 3): the worse of the fractions of the actor's
+        points seen now and ahead, scored_points (2, p, 3)."""
+        k, p = len(positions_world), scored_points.shape[1]
+        if not k:
+            return np.empty(0)
+        hidden = scene.occluded(np.repeat(positions_world, 2 * p, axis=0), np.tile(scored_points.reshape(-1, 3), (k, 1)))
+        return (1.0 - hidden.reshape(k, 2, p).mean(axis=2)).min(axis=1)
+
     def _frames(self, positions_world: np.ndarray, look_at: np.ndarray, ends: np.ndarray, distance: float) -> np.ndarray:
         """(k,) bool for positions (k, 3): within the framing tolerance of the optimal distance
         (Section 5.1's framing check) and the framed extent fits in the frame (framing.py)."""
         s = self._settings
         d = np.maximum(np.linalg.norm(positions_world - look_at, axis=1), 1e-6)
-        fits = fit_ratio(positions_world, ends, self._actor_radius_m, s.vertical_fov_deg, 0.0) <= 1.0
-        return (np.abs(np.log(d / distance)) <= s.framing_violation_log) & fits
+        return (np.abs(np.log(d / distance)) <= s.framing_violation_log) & self._fits(positions_world, ends)
+
+    def _fits(self, positions_world: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """(k,) bool for positions (k, 3): the framed extent fits in the frame (framing.py, no margin)."""
+        return fit_ratio(positions_world, ends, self._actor_radius_m, self._settings.vertical_fov_deg, 0.0) <= 1.0
 
     def _cheap_scores(self, pois: Pois, look_at: np.ndarray, ends: np.ndarray, distance: float, indirect: np.ndarray):
         """Shot size (the distance's Gaussian, down to 0 where the framed extent cannot fit:
@@ -291,7 +312,7 @@ class GraphDirector:
         if not reach.any():
             return False
         pois, size, ind, dist = pois.take(reach), size[reach], ind[reach], dist[reach]
-        direct = direct_visibility(pois.position_world, actor_points, scene)
+        direct = self._direct(pois.position_world, actor_points, scene)
         near = np.clip(1.0 - dist / s.max_graph_distance_m, 0.0, 1.0)
         total = (s.weight_shot_size * size + s.weight_direct_visibility * direct + s.weight_indirect_visibility * ind
                  + s.weight_distance * near)
@@ -320,7 +341,7 @@ class GraphDirector:
             pos = self.graph.nodes_world[a] + ts[:, None] * (self.graph.nodes_world[b] - self.graph.nodes_world[a])
             cand = Pois(np.full(len(ts), a), np.full(len(ts), b), ts, pos)
             size, ind = self._cheap_scores(cand, look_at, ends, distance, indirect)
-            direct = direct_visibility(pos, actor_points, scene)
+            direct = self._direct(pos, actor_points, scene)
             moved = dist + np.abs(ts - t) * length
             near = np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)
             total = (s.weight_shot_size * size + s.weight_direct_visibility * direct
@@ -365,8 +386,13 @@ class GraphDirector:
         partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind + extra
         keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
         pois, partial = pois.take(keep), partial[keep]
-        direct = direct_visibility(pois.position_world, actor_points, scene)
+        direct = self._direct(pois.position_world, actor_points, scene)
         total = (partial + s.weight_direct_visibility * direct) / weights
+        if not first:  # a cut to a place that does not see the actor is a cut for nothing: it waits
+            seen = direct >= s.occluded_below_fraction
+            if not seen.any():
+                return False
+            total = np.where(seen, total, -np.inf)
         best = int(np.argmax(total))
         self._target = (int(pois.node_a[best]), int(pois.node_b[best]), float(pois.t[best]))
         continuity = {} if first else {"thirty_degree": thirty[keep], "line_of_action": line[keep]}

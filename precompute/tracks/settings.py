@@ -119,7 +119,8 @@ class DirectorSettings:
     look_at_fraction: float = 0.6            # the camera looks at this point up the actor, fraction of its height. [0, 1]
     actor_radius_fraction: float = 0.15      # the actor's half-width that framing keeps in frame, fraction of its height (shoulders). [0, 1]
     # --- shot sizes: actor height on screen / frame height (Section 6.1) ---
-    medium_shot_screen_fraction: float = 1.6     # waist up fills the frame. (0, 10]
+    medium_shot_screen_fraction: float = 1.4     # waist up (half the body) fills 0.7 of the frame: at 1.6 the waist-up, with the
+                                                 # body's girth nearer the camera, left the frame at the optimal distance. (0, 10]
     long_shot_screen_fraction: float = 0.8       # the whole body fills most of the frame. (0, 10]
     extreme_long_shot_screen_fraction: float = 0.25  # the actor is small in the set. (0, 10]
     shot_size_tolerance_log: float = 0.4     # Gaussian width of the shot-size sub-score in ln(distance ratio). (0, 5]
@@ -129,6 +130,7 @@ class DirectorSettings:
     # --- target moving strategy (target_search.py, Section 5.2) ---
     candidate_radius_m: float = 12.0         # candidate edges touch a node at most this far from the actor, m. (0, 1e4]
     max_graph_distance_m: float = 25.0       # A* gives up beyond this; the distance sub-score is 0 there, m. (0, 1e5]
+    visibility_lookahead_s: float = 1.0     # places are scored on the actor now and this far ahead on its velocity (the worse), s. [0, 10]
     surroundings_radius_m: float = 3.0       # navmesh triangles this close to the actor make its surroundings (indirect visibility), m. (0, 100]
     descent_step_m: float = 0.25             # local descent moves along edges by this, m. (0, 100]
     descent_max_steps: int = 8               # local descent stops after this many moves. [0, 1000]
@@ -174,6 +176,7 @@ class DirectorSettings:
             (0.0 < self.fit_softness <= 10.0, "fit_softness must be in (0, 10]"),
             (0.0 < self.candidate_radius_m <= 1e4, "candidate_radius_m must be in (0, 1e4]"),
             (0.0 < self.max_graph_distance_m <= 1e5, "max_graph_distance_m must be in (0, 1e5]"),
+            (0.0 <= self.visibility_lookahead_s <= 10.0, "visibility_lookahead_s must be in [0, 10]"),
             (0.0 < self.surroundings_radius_m <= 100.0, "surroundings_radius_m must be in (0, 100]"),
             (0.0 < self.descent_step_m <= 100.0, "descent_step_m must be in (0, 100]"),
             (0 <= self.descent_max_steps <= 1000, "descent_max_steps must be in [0, 1000]"),
