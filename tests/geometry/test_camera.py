@@ -1,9 +1,13 @@
-"""The frame of a camera (geometry/camera.py): which points lie inside it."""
+"""The frame of a camera (geometry/camera.py): which points lie inside it, and where a few points
+project (the scalar path) against many (the array path)."""
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
-from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens, in_frame
+from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens, in_frame, project_to_screen
+from camdirector.geometry.transforms import quat_to_matrix
 
 
 def test_the_frustum_test_on_hand_placed_points():
@@ -28,3 +32,17 @@ def test_the_pose_carries_the_field_of_view():
     wide = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 90.0)
     assert not in_frame(narrow, Lens(vertical_fov_deg=90.0), point)[0]
     assert in_frame(wide, Lens(vertical_fov_deg=50.0), point)[0]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(lambda q: np.linalg.norm(q) > 0.1),
+       st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3),
+       st.lists(st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3), min_size=1, max_size=4))
+def test_a_few_points_project_in_scalars_as_many_do_in_arrays(q, camera, points):
+    pose = CameraPose(np.array(camera), np.array(q) / np.linalg.norm(q), 50.0)
+    few = np.array(points, dtype=np.float64)
+    depth_m = (few - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
+    assume(np.all(np.abs(depth_m) > 1e-6))   # on the camera's plane the two summation orders round apart
+    many = np.vstack([few] * 5)   # past the few-point path: the array one
+    np.testing.assert_allclose(project_to_screen(pose, Lens(), few), project_to_screen(pose, Lens(), many)[:len(few)],
+                               rtol=1e-9, atol=1e-9)
