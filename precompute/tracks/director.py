@@ -21,9 +21,10 @@ Each frame (Section 5's loop):
    weighted sub-scores, then a local descent along the POI's edge in steps of
    `descent_step_m`. No POI at all is a reason to cut;
 3. the camera jumps to the target on a cut, else follows it by the force model
-   (camera_motion.py, with the target's velocity); static cameras stay on their node and only
-   pan. The camera aims at the shot size's framed extent, centred (framing.py's `aim_point`):
-   the look-at point it returns is that aim, not the fixed point up the actor the scores use.
+   (camera_motion.py, with the target's velocity, never nearer than its shot size fits: it goes
+   round the actor); static cameras stay on their node and only pan. The camera aims at the
+   shot size's framed extent, centred (framing.py's `aim_point`): the look-at point it returns
+   is that aim, not the fixed point up the actor the scores use.
 
 Styles (Section 6.1), switchable between frames by `set_style`: the shot size (medium, long,
 extreme long: the actor's on-screen height) and the movement (dynamic without cuts, dynamic with
@@ -164,15 +165,20 @@ class GraphDirector:
         return {ShotSize.MEDIUM: s.medium_shot_screen_fraction, ShotSize.LONG: s.long_shot_screen_fraction,
                 ShotSize.EXTREME_LONG: s.extreme_long_shot_screen_fraction}[self._style.shot_size]
 
+    def nearest_m(self, frame_margin: float) -> float:
+        """The distance under which the shot size's framed extent, centred, no longer fits with
+        frame_margin (normalised screen units): its span over twice the margin's tangent, plus the
+        actor's girth, m."""
+        low, high = FRAMED_EXTENT[self._style.shot_size]
+        tangent = (1.0 - frame_margin) * np.tan(np.radians(self._settings.vertical_fov_deg) / 2.0)
+        return (high - low) * self._actor_height_m / (2.0 * tangent) + self._actor_radius_m
+
     def repulsion_radius_m(self) -> float:
         """How near the actor pushes the moving camera away, m: the settings' radius, or farther,
-        the distance under which the shot size's framed extent, centred, no longer fits with the
-        frame margin (its span over twice the margin's tangent, plus the actor's girth): a medium
-        camera kept 1 m away stood too close for the waist-up to fit."""
-        s = self._settings
-        low, high = FRAMED_EXTENT[self._style.shot_size]
-        near = (high - low) * self._actor_height_m / (2.0 * (1.0 - s.frame_margin) * np.tan(np.radians(s.vertical_fov_deg) / 2.0))
-        return max(s.repulsion_radius_m, near + self._actor_radius_m)
+        where the shot size no longer fits with the frame margin (a medium camera kept 1 m away
+        stood too close for the waist-up to fit); the camera never comes nearer than where it
+        fits with none (camera_motion.py)."""
+        return max(self._settings.repulsion_radius_m, self.nearest_m(self._settings.frame_margin))
 
     def optimal_distance_m(self) -> float:
         return optimal_distance_m(self._actor_height_m, self.screen_fraction(), self._settings.vertical_fov_deg)
@@ -245,7 +251,7 @@ class GraphDirector:
             self._camera, self._velocity = target.copy(), np.zeros(3)
         elif movement != Movement.STATIC and self._camera is not None:
             self._camera, self._velocity = move_camera(self._camera, self._velocity, target, target_velocity, look_at,
-                                                       dt, s, self.repulsion_radius_m())
+                                                       dt, s, self.repulsion_radius_m(), self.nearest_m(0.0))
         visible = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
         stages.done(DirectorStage.CAMERA_UPDATE)
         aim = aim_point(self._camera, ends, self._actor_radius_m)

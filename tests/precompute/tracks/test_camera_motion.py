@@ -38,3 +38,14 @@ def test_the_actor_pushes_the_camera_out_to_the_radius_it_is_given():
         for _ in range(300):   # the target sits on the actor: only the repulsion keeps the camera off
             camera, velocity = move_camera(camera, velocity, actor, np.zeros(3), actor, 1.0 / 30.0, SETTINGS, radius_m)
         assert 0.3 * radius_m < np.linalg.norm(camera) < radius_m
+
+
+def test_a_camera_bound_across_the_actor_goes_round_it_no_nearer_than_it_is_told():
+    actor, target = np.zeros(3), np.array([-3.0, 0.0, 0.05])   # straight through the actor from +x
+    position, velocity, nearest = np.array([3.0, 0.0, 0.0]), np.zeros(3), []
+    for _ in range(300):
+        position, velocity = move_camera(position, velocity, target, np.zeros(3), actor, 1.0 / 30.0, SETTINGS,
+                                         SETTINGS.repulsion_radius_m, 2.0)
+        nearest.append(np.linalg.norm(position - actor))
+    assert min(nearest) >= 2.0 - 1e-9      # without the bound it passes 4 cm from the actor
+    assert np.linalg.norm(position - target) < 1e-3   # and it got round to the other side
