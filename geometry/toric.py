@@ -271,6 +271,24 @@ def look_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens
     return matrix_to_quat(world @ camera.T)
 
 
+def look_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
+    """(m, 3, 3) camera-to-world rotation matrices of `look_rotation` for m cameras (m, 3) at once
+    (a shot's place search tries hundreds); rows of NaN where a camera is at A or B or in line
+    with both."""
+    cameras = np.atleast_2d(np.asarray(cameras_world, dtype=np.float64))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_a = np.asarray(a_world, dtype=np.float64) - cameras
+        to_a /= np.linalg.norm(to_a, axis=1, keepdims=True)
+        to_b = np.asarray(b_world, dtype=np.float64) - cameras
+        to_b /= np.linalg.norm(to_b, axis=1, keepdims=True)
+        other = to_b - np.einsum("ij,ij->i", to_a, to_b)[:, None] * to_a   # Gram-Schmidt, as _frame
+        length = np.linalg.norm(other, axis=1, keepdims=True)
+        other = np.where(length < 1e-12, np.nan, other / length)
+    world = np.stack([to_a, other, np.cross(to_a, other)], axis=2)        # columns, as _frame
+    camera = _frame(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
+    return world @ camera.T
+
+
 def compose_pose(torus: Torus, theta: float, phi: float, screen_a, screen_b, lens: Lens) -> CameraPose:
     """Pose at (theta, phi) radians that frames torus.a_world at screen_a (2,) and torus.b_world at
     screen_b (2,); torus must be built with alpha = composition_angle(screen_a, screen_b, lens)."""

@@ -15,6 +15,7 @@ from camdirector.geometry.toric import (
     Torus,
     compose_pose,
     composition_angle,
+    look_matrices,
     look_rotation,
     make_torus,
     tangent_frame,
@@ -380,3 +381,21 @@ def test_torus_angles_many_matches_the_scalar_form(seed):
     theta, phi = torus_angles_many(torus, points)
     for point, t, p in zip(points, theta, phi):
         assert (t, p) == pytest.approx(torus_angles(torus, point), abs=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3), min_size=1, max_size=20))
+def test_look_matrices_are_look_rotation_for_many_cameras_at_once(cameras):
+    a, b = np.array([0.0, 1.6, 0.0]), np.array([3.0, 1.6, 2.0])
+    lens = Lens()
+    cameras = np.array(cameras)
+    assume(np.all(np.linalg.norm(np.cross(cameras - a, cameras - b), axis=1) > 1e-3))   # not in line with A and B
+    many = look_matrices(cameras, a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens)
+    for camera, matrix in zip(cameras, many):
+        one = quat_to_matrix(look_rotation(camera, a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens))
+        np.testing.assert_allclose(matrix, one, atol=1e-9)
+
+
+def test_look_matrices_are_nan_for_a_camera_at_a_framed_point():
+    a, b = np.array([0.0, 1.6, 0.0]), np.array([3.0, 1.6, 2.0])
+    assert np.isnan(look_matrices(a[None], a, b, (-1 / 3, 0.0), (1 / 3, 0.0), Lens())).all()

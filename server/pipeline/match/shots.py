@@ -33,17 +33,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation, project_to_screen
+from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
 from camdirector.geometry.toric import (
     DegenerateTorus,
     Torus,
     composition_angle,
+    look_matrices,
     look_rotation,
     make_torus,
     theta_max,
     torus_position,
 )
-from camdirector.geometry.transforms import UP_WORLD
+from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
 from camdirector.server.pipeline.match.moments import Moment
 from camdirector.server.pipeline.match.visibility import SubjectVisibility
 from camdirector.server.pipeline.stages import ShotKind
@@ -141,6 +142,21 @@ class ToricCamera:
             norm = np.linalg.norm(blend)
             self.heading = blend / norm if norm > 1e-6 else forward
 
+    def rotations(self, moment: Moment, positions_world: np.ndarray, places: list[Place]) -> np.ndarray:
+        """(m, 3, 3) camera-to-world rotations of pose_from at m positions (m, 3) of their places'
+        widths, at once for a pair (geometry.toric.look_matrices); NaN where degenerate."""
+        if self.b_index is None:
+            return quat_to_matrix(np.stack([self.pose_from(moment, p, place.width).rotation_xyzw
+                                            for p, place in zip(positions_world, places)]))
+        a, b = self.points(moment)
+        widths = np.array([p.width for p in places])
+        out = np.empty((len(places), 3, 3))
+        for width in dict.fromkeys(widths.tolist()):
+            rows = np.flatnonzero(widths == width)
+            screen_a, screen_b, _ = self.composition(width)
+            out[rows] = look_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
+        return out
+
     def pose(self, moment: Moment) -> CameraPose | None:
         positions = self.positions(moment, [self.place])
         return None if positions is None else self.pose_from(moment, positions[0], self.place.width)
@@ -180,17 +196,23 @@ def place_grid(side: float | None) -> list[Place]:
 
 
 def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...],
-                poses: list[CameraPose], lens: Lens) -> np.ndarray:
-    """(m, len(subjects)) the share of each subject's sample points that each of m poses sees at
-    the moment: unoccluded and inside the frame, and not from under the subjects' ground."""
-    positions = np.array([p.position_world for p in poses])
-    seen = visibility.seen_points(positions, moment, subjects)           # (m, s, k)
+                positions_world: np.ndarray, rotations: np.ndarray, lens: Lens) -> np.ndarray:
+    """(m, len(subjects)) the share of each subject's sample points that each of m cameras,
+    positions (m, 3) and camera-to-world rotation matrices (m, 3, 3), sees at the moment:
+    unoccluded and inside the frame, and not from under the subjects' ground. A camera whose
+    rotation is NaN (a degenerate framing) sees nothing."""
+    seen = visibility.seen_points(positions_world, moment, subjects)     # (m, s, k)
     ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
-    seen[positions[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
+    seen[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
     points = visibility.points_world(moment, subjects)                  # (s * k, 3)
-    for row, pose in enumerate(poses):  # a point out of the frame is not seen
-        xy = project_to_screen(pose, lens, points)
-        seen[row] &= (np.abs(xy) <= 1.0).all(axis=1).reshape(seen.shape[1:])
+    # every camera at once (project_to_screen's arithmetic): world -> camera is R^T (p - c)
+    in_camera = np.einsum("mnj,mjk->mnk", points[None, :, :] - positions_world[:, None, :], rotations)
+    depth = -in_camera[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = in_camera[..., 0] / (depth * lens.tan_half_fov_x)
+        y = in_camera[..., 1] / (depth * lens.tan_half_fov_y)
+        inside = (depth > 0.0) & (np.abs(x) <= 1.0) & (np.abs(y) <= 1.0)   # NaN compares False
+    seen &= inside.reshape(seen.shape)
     return seen.mean(axis=2)
 
 
@@ -207,8 +229,8 @@ def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], 
         positions = camera.positions(moment, places)
         if positions is None:
             continue
-        poses = [camera.pose_from(moment, position, place.width) for position, place in zip(positions, places)]
-        score += weight * framed_seen(visibility, moment, subjects, poses, camera.lens).min(axis=1)
+        rotations = camera.rotations(moment, positions, places)
+        score += weight * framed_seen(visibility, moment, subjects, positions, rotations, camera.lens).min(axis=1)
     score /= max(sum(weights), 1e-9)
     if allowed is not None:
         first = camera.positions(cut_moment, places)
@@ -241,7 +263,8 @@ def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[i
         near = np.linalg.norm(extra_cameras_world - centre, axis=1) <= 2.0 * max(distance_m, top_height_m)
         cameras = np.concatenate([cameras, extra_cameras_world[near]])
     poses = [CameraPose(c, level_look_rotation(c, centre, (0.0, 0.0), lens), lens.vertical_fov_deg) for c in cameras]
-    seen = sum(w * framed_seen(visibility, m, subjects, poses, lens) for m, w in zip(moments, weights))
+    rotations = quat_to_matrix(np.stack([p.rotation_xyzw for p in poses]))
+    seen = sum(w * framed_seen(visibility, m, subjects, cameras, rotations, lens) for m, w in zip(moments, weights))
     seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
     worst = seen.min(axis=1)
     best = int(np.lexsort((-seen.mean(axis=1), -worst))[0])
