@@ -7,7 +7,9 @@ same `GraphDirector` (long shot, dynamic with cuts) along one actor route, measu
 precompute/tracks/measure.py: per-frame target-update time (cut check + target search) and
 camera-update time, in ms, the share of frames that show the actor (`visible`: inside the frame
 and unoccluded), the share with a clear line of sight to it (`line_of_sight`: rays only), the
-share with the whole body inside the frame, cuts and the framing error.
+share with the whole body inside the frame, cuts and the framing error. Our graph is also run in
+every shot size (`ours_by_shot_size`: visible, line of sight, the share with the shot size's
+framed extent inside the frame, cuts a minute).
 
 The PRM "at equal coverage" is searched for, not read off a grid: the sparsest density whose
 coverage, averaged over `PRM_SEEDS` random roadmaps, is at least ours (densities grow by
@@ -34,6 +36,8 @@ import numpy as np
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
+from camdirector.precompute.tracks.director import DirectorStyle, Movement
+from camdirector.precompute.tracks.framing import ShotSize
 from camdirector.precompute.tracks.measure import measure_route
 from camdirector.precompute.tracks.navmesh import triangle_areas
 from camdirector.precompute.tracks.prm import build_prm
@@ -117,6 +121,11 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
                  "coverage": coverage(artifact), "build_s": sum(artifact.timings_ms.values()) / 1e3,
                  **{k: v for k, v in ours.items() if k != "camera_path"}})
     paths = {"ours": (artifact, ours["camera_path"])}
+    by_size = {}  # our graph in every shot size (dynamic with cuts), the rows above being the long shot
+    for size in ShotSize:
+        run = measure_route(artifact, route, scene, np.random.default_rng(rng.integers(1 << 32)),
+                            DirectorStyle(size, Movement.DYNAMIC_WITH_CUTS))
+        by_size[size.value] = {k: run[k] for k in ("visible", "line_of_sight", "framed_in_frame", "cuts_per_min")}
 
     def prm_row(name: str, density: float, prms: list[LevelArtifact], build_s: float) -> dict:
         run = measure_route(prms[0], route, scene, np.random.default_rng(rng.integers(1 << 32)))
@@ -157,6 +166,7 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
                  title=f"{name}: {len(paths[name][0].nodes_world)} nodes, {len(paths[name][0].edges)} edges",
                  skeleton_segments=artifact.skeleton_segments if name == "ours" else None,
                  route_world=route.position_world, camera_world=paths[name][1]) for name in shown])
-    return {"rows": rows, "verdict": verdict, "coverage_search": sorted(trials, key=lambda t: t["density_per_m2"]),
+    return {"rows": rows, "ours_by_shot_size": by_size, "verdict": verdict,
+            "coverage_search": sorted(trials, key=lambda t: t["density_per_m2"]),
             "route_frames": len(route.time_s),
             "route_length_m": float(np.linalg.norm(np.diff(route.position_world, axis=0), axis=1).sum())}

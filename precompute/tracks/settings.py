@@ -144,6 +144,8 @@ class DirectorSettings:
     min_shot_s: float = 1.0                  # no cut for any reason before a shot is this old, s. [0, 60]
     occlusion_cut_s: float = 0.2             # occlusion longer than this triggers a cut (paper: 200 ms), s. [0, 60]
     framing_cut_s: float = 0.2               # framing violated longer than this triggers a cut (paper: 200 ms), s. [0, 60]
+    framing_cut_margin: float = 0.5          # cuts go first to places within this share of framing_violation_log
+                                             # (one at its edge is violated again a moment later), fraction. (0, 1]
     occluded_below_fraction: float = 0.5     # the actor counts as occluded when fewer of its points are visible, fraction. (0, 1]
     # --- continuity rules (continuity.py, Section 5.3) ---
     min_cut_angle_deg: float = 30.0          # the 30-degree rule, deg. [0, 180]
@@ -187,6 +189,7 @@ class DirectorSettings:
             (0.0 <= self.min_shot_s <= 60.0, "min_shot_s must be in [0, 60]"),
             (0.0 <= self.occlusion_cut_s <= 60.0, "occlusion_cut_s must be in [0, 60]"),
             (0.0 <= self.framing_cut_s <= 60.0, "framing_cut_s must be in [0, 60]"),
+            (0.0 < self.framing_cut_margin <= 1.0, "framing_cut_margin must be in (0, 1]"),
             (0.0 < self.occluded_below_fraction <= 1.0, "occluded_below_fraction must be in (0, 1]"),
             (0.0 <= self.min_cut_angle_deg <= 180.0, "min_cut_angle_deg must be in [0, 180]"),
             (0.0 <= self.min_actor_speed_m_s <= 100.0, "min_actor_speed_m_s must be in [0, 100]"),

@@ -66,3 +66,7 @@ def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
     assert ours["target_update_ms_median"] > 0.0
     assert prm_dense["nodes"] > prm_sparse["nodes"] and prm_dense["edges"] > prm_sparse["edges"]
     assert 0.0 < ours["coverage"] <= 1.0
+    # every shot size keeps its framed extent in the frame (the whole body; the waist up in medium)
+    assert set(result["ours_by_shot_size"]) == {"medium", "long", "extreme_long"}
+    for size, measured in result["ours_by_shot_size"].items():
+        assert measured["framed_in_frame"] >= 0.95 and measured["visible"] >= 0.9, (size, measured)

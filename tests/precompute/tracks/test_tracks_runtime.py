@@ -12,9 +12,9 @@ from camdirector.geometry.camera import Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, ArtifactVersionError, load_artifact, save_artifact
 from camdirector.precompute.tracks.continuity import cut_angle_deg, keeps_line_of_action, screen_motion
-from camdirector.precompute.tracks.cutting import draw_shot_duration_s
+from camdirector.precompute.tracks.cutting import CutReason, draw_shot_duration_s
 from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement
-from camdirector.precompute.tracks.framing import ShotSize
+from camdirector.precompute.tracks.framing import ShotSize, fit_ratio, framed_ends_world
 from camdirector.precompute.tracks.measure import ActorBody, frame_view, shot_pose, visible_share
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.registry import LevelRegistry
@@ -154,3 +154,29 @@ def test_each_frame_reports_the_scores_of_the_target_it_chose(corridor_artifact)
         assert all(0.0 <= v <= 1.0 for v in parts.values())
         mean = sum(weights[k] * v for k, v in parts.items()) / sum(weights[k] for k in parts)
         assert scores["total"] == pytest.approx(mean, abs=1e-3)
+
+
+@pytest.mark.parametrize("size", list(ShotSize))
+def test_cuts_that_can_wait_go_only_to_places_that_frame_solidly(corridor_artifact, size):
+    """A cut for shot duration or framing lands where the shot size holds with room to spare
+    (`framing_cut_margin` of the framing tolerance) and its framed extent fits (a static camera
+    that crops the actor may also cut to where the extent merely fits); a cut to a place at the
+    tolerance's edge, or to one too near, was violated again a moment later and cut again."""
+    s = DirectorSettings(shot_duration_median_s=1.5)
+    director = GraphDirector(corridor_artifact, s, np.random.default_rng(1), DirectorStyle(size, Movement.DYNAMIC_WITH_CUTS))
+    shots = _walk_corridor(director, RayScene([corridor()]))
+    height, radius = corridor_artifact.agent_height_m, s.actor_radius_fraction * corridor_artifact.agent_height_m
+    feet = [f for _, f in _corridor_feet()]
+
+    def fits(camera, k):
+        return fit_ratio(camera[None], framed_ends_world(feet[k], height, size), radius, s.vertical_fov_deg, 0.0)[0] <= 1.0
+
+    waited = [k for k in range(1, len(shots))
+              if shots[k].cut and shots[k].cut_reason in (CutReason.SHOT_DURATION, CutReason.FRAMING)]
+    assert len(waited) >= 3, "20 s of 1.5 s median shots must cut"
+    for k in waited:
+        camera = shots[k].position_world
+        look_at = feet[k] + np.array([0.0, s.look_at_fraction * height, 0.0])
+        log_ratio = abs(np.log(np.linalg.norm(camera - look_at) / director.optimal_distance_m()))
+        assert fits(camera, k), shots[k].cut_reason
+        assert log_ratio <= s.framing_violation_log * s.framing_cut_margin + 1e-9, shots[k].cut_reason
