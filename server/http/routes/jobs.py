@@ -2,10 +2,11 @@
 a job of one kind, and the upload limit (one runner and job store serve every kind)."""
 from __future__ import annotations
 
+import inspect
 import json
 from collections.abc import Callable
 
-from fastapi import HTTPException
+from fastapi import HTTPException, Request
 from pydantic import BaseModel, Field
 
 from camdirector.server.jobs import JobNotFound, JobRunner, JobState
@@ -37,6 +38,17 @@ def job_of_kind(runner: JobRunner, job_id: str, kind: str, noun: str):
     if job is None or job.kind != kind:
         raise HTTPException(status_code=404, detail=f"no {noun} {job_id!r}")
     return job
+
+
+async def known_form_fields(request: Request) -> None:
+    """A dependency of a job's multipart POST: 422 naming any form field that the route's endpoint
+    does not take (a misspelt parameter would otherwise be dropped silently and the job run with
+    the default). The form is parsed once: Starlette keeps it for the endpoint's own fields."""
+    known = set(inspect.signature(request.scope["endpoint"]).parameters)
+    unknown = sorted(set((await request.form()).keys()) - known)
+    if unknown:
+        raise HTTPException(status_code=422, detail=f"unknown form field(s) {', '.join(unknown)}; "
+                                                    f"this route takes {', '.join(sorted(known))}")
 
 
 MAX_LISTED_JOBS = 1000

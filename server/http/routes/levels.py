@@ -37,7 +37,7 @@ import threading
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, FastAPI, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Query, UploadFile
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
@@ -54,6 +54,7 @@ from camdirector.server.http.routes.jobs import (
     UploadLimit,
     cancel_job,
     job_of_kind,
+    known_form_fields,
     list_jobs,
 )
 from camdirector.server.jobs import JobKind, JobRunner, JobSettings, JobState, QueueFull
@@ -144,7 +145,8 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
     def level_job_or_404(job_id: str):
         return job_of_kind(runner, job_id, KIND, "level job")
 
-    @router.post(LEVELS_PREFIX, status_code=202, response_model=LevelJobCreated, responses={
+    @router.post(LEVELS_PREFIX, status_code=202, dependencies=[Depends(known_form_fields)], response_model=LevelJobCreated,
+                 responses={
         400: {"description": "a file is not a usable .obj/.glb mesh (detail says why)"},
         409: {"description": "the name is taken (registered or being added) and replace is false"},
         413: {"description": "an upload is larger than the server's limit"},

@@ -22,7 +22,7 @@ import os
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, FastAPI, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Query, UploadFile
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import BaseModel, Field
 
@@ -44,6 +44,7 @@ from camdirector.server.http.routes.jobs import (
     UploadLimit,
     cancel_job,
     job_of_kind,
+    known_form_fields,
     list_jobs,
 )
 from camdirector.server.jobs import JobKind, JobRegistry, JobRunner, JobSettings, JobState, QueueFull
@@ -103,7 +104,7 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
             raise HTTPException(status_code=404, detail=f"job {job_id} has no {name}")
         return FileResponse(path, media_type=media_type)
 
-    @router.post("", status_code=202, response_model=JobCreated, responses={
+    @router.post("", status_code=202, dependencies=[Depends(known_form_fields)], response_model=JobCreated, responses={
         400: {"description": "the upload is not a usable BVH clip (detail says why)"},
         413: {"description": "the upload is larger than the server's limit"},
         422: {"description": "a form field is out of range"},

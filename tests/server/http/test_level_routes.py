@@ -135,6 +135,7 @@ def test_bad_uploads_answer_4xx_and_write_nothing(level_server, canary):
         (dict(name="huge", content=b"# " + b"x" * (UPLOAD_LIMIT + 10) + b"\n" + good), 413, "larger than the limit"),
         (dict(name="noscale", content=good, scale=0), 422, ""),
         (dict(name="giant", content=good, agent_height=500), 422, "agent_height_m must be in [0.1, 100]"),
+        (dict(name="typo", content=good, agent_heigth=1.8), 422, "unknown form field(s) agent_heigth"),
         (dict(name="corridor", content=good), 409, "level 'corridor' exists"),
     ]
     for kwargs, status, detail in cases:

@@ -180,6 +180,9 @@ def test_bad_uploads_answer_4xx_and_leave_nothing(service, run_bvh, kind, status
     ({"max_angular_speed_deg_s": "4000"}, 422, "max_angular_speed_deg_s must be in (0, 3600]"),
     ({"friction_speed_heights_s": "-1"}, 422, "friction_speed_heights_s must be in (0, 100]"),
     ({"split_quality": "nan"}, 422, "finite"),
+    # a misspelt parameter is refused, not dropped (the job would run with the default)
+    ({"min_shot": "3"}, 422, "unknown form field(s) min_shot; this route takes"),
+    ({"c6": "1", "seeds": "2"}, 422, "unknown form field(s) c6, seeds"),
 ])
 def test_bad_form_fields(service, run_bvh, fields, status, detail):
     client, runner = service
