@@ -18,8 +18,11 @@ search stops at a step that fails twice, and the capacity is the last count that
 even one session did not).
 Reported per case and step: round trip p50/p99 at the client, late and dropped frames, the
 server's compute_ms, the health-check floor measured in the same step against the same server
-(a gRPC health check, or a ZeroMQ request the front refuses at once), and this load generator's
-own CPU while streaming (on a 2-core machine the generator shares the cores with the server).
+(a gRPC health check, or a ZeroMQ request the front refuses at once), this load generator's
+own CPU while streaming (on a 2-core machine the generator shares the cores with the server),
+and `cpu_us_per_frame`: the CPU microseconds per answered frame of the server's front process,
+of its workers together (from /proc; the step's session creations included) and of this load
+generator, which say where a frame's CPU goes when the cores run out.
 `--server-python` runs the server of another checkout with that checkout's interpreter (e.g. the
 venv of a `git worktree` of an older commit) while this checkout drives it, so the same command
 measures both; the JSON names the server's checkout and commit.
@@ -81,6 +84,34 @@ def _server_checkout(python: str) -> dict:
     return {"python": python, "checkout": found, "commit": commit or None}
 
 
+def _cpu_s(pid: int) -> float:
+    """CPU seconds so far of one process's live threads, from their /proc schedstat (in ns:
+    /proc/PID/stat counts in 10 ms ticks, too coarse for a short step)."""
+    total_ns = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            total_ns += int((task / "schedstat").read_text().split()[0])
+        except FileNotFoundError:  # a thread that ended meanwhile
+            pass
+    return total_ns / 1e9
+
+
+def server_cpu_s(front_pid: int) -> dict[str, float] | None:
+    """CPU seconds so far of the server's front process and of its worker processes (its
+    children, summed); None where /proc cannot tell (not Linux, or a process just ended)."""
+    try:
+        children = [int(p) for p in Path(f"/proc/{front_pid}/task/{front_pid}/children").read_text().split()]
+        return {"front": _cpu_s(front_pid), "workers": sum(_cpu_s(c) for c in children)}
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _cpu_us_per_frame(before: dict | None, after: dict | None, frames: int) -> dict | None:
+    if before is None or after is None or not frames:
+        return None
+    return {k: round((after[k] - before[k]) / frames * 1e6, 1) for k in before}
+
+
 def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
     """One mode over one transport: a fresh server, counts tried upward until one fails twice."""
     steps, capacity, workers = [], 0, None
@@ -91,11 +122,14 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
         for n in counts:
             passed = False
             for _ in range(2):
+                cpu_before = server_cpu_s(server.proc.pid)
                 result = asyncio.run(stream.run(transport, address, n, args.rate, args.seconds,
                                                 visibility=pb.VisibilityMode.Value(mode),
                                                 warmup_frames=args.warmup_frames))
                 passed = step_passes(result, args.p99_ms)
-                steps.append(_step_summary(result, passed))
+                steps.append({**_step_summary(result, passed), "cpu_us_per_frame": {
+                    **(_cpu_us_per_frame(cpu_before, server_cpu_s(server.proc.pid), result["frames_received"]) or {}),
+                    "load_generator": round(result["client_cpu_s"] / max(result["frames_received"], 1) * 1e6, 1)}})
                 time.sleep(args.settle_s)  # the step's sessions are reclaimed before the next starts
                 if passed:
                     break

@@ -61,6 +61,8 @@ def test_capacity_reports_the_last_count_that_held_with_its_floor_and_load_gener
                                   and not step["errors"])
         assert step["floor_rtt_ms"]["p50"] > 0 and step["client_cpu_fraction_of_core"] > 0
         assert step["frames_sent"] == step["sessions"] * 30
+        # where a frame's CPU goes: the front and the one worker both worked, and so did the generator
+        assert min(step["cpu_us_per_frame"][k] for k in ("front", "workers", "load_generator")) > 0
 
 
 @pytest.mark.parametrize("max_sessions, counts", [
