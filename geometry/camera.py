@@ -83,6 +83,21 @@ def _project_few(pose: CameraPose, lens: Lens, points: np.ndarray) -> np.ndarray
     return np.array(out, dtype=np.float64).reshape(len(points), 2)
 
 
+def project_from_cameras(positions_world: np.ndarray, rotations: np.ndarray, lens: Lens,
+                         points_world: np.ndarray) -> np.ndarray:
+    """project_to_screen for m cameras at once: (m, n, 2) normalised screen positions of world
+    points (n, 3) from cameras at positions_world (m, 3) with camera-to-world rotation matrices
+    (m, 3, 3); NaN for points behind a camera (and for a camera whose rotation is NaN)."""
+    offsets = np.atleast_2d(points_world)[None, :, :] - positions_world[:, None, :]
+    p_cam = np.einsum("mnj,mjk->mnk", offsets, rotations)        # world -> camera: R^T p, per camera
+    depth = -p_cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.stack([p_cam[..., 0] / (depth * lens.tan_half_fov_x), p_cam[..., 1] / (depth * lens.tan_half_fov_y)],
+                       axis=-1)
+    out[~(depth > 0.0)] = np.nan
+    return out
+
+
 def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarray:
     """(n,) bool: whether each point (n, 3) m lies in the view frustum of `pose`: at least
     NEAR_PLANE_M in front of the camera along its view axis, and within the frame's edges

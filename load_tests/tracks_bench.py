@@ -33,9 +33,7 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.cli import route_for
 from camdirector.precompute.tracks.compare import compare_with_prm
-from camdirector.precompute.tracks.director import DirectorStyle, Movement
-from camdirector.precompute.tracks.framing import ShotSize
-from camdirector.precompute.tracks.measure import measure_route
+from camdirector.precompute.tracks.measure import measure_shot_sizes
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.precompute.tracks.route import ActorRoute, NavmeshPaths, corridor_and_open_routes, there_and_back
 from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder
@@ -76,11 +74,8 @@ def bench_routes(artifact, record, seed: int) -> dict:
                                                                "half_width_m": round(place.half_width_m, 2)})
     out = {}
     for name, (route, about) in routes.items():
-        sizes = {}
-        for size in ShotSize:
-            run = measure_route(artifact, route, scene, np.random.default_rng(seed),
-                                DirectorStyle(size, Movement.DYNAMIC_WITH_CUTS))
-            sizes[size.value] = {k: _rounded(run[k]) for k in _MEASURED_KEYS}
+        runs = measure_shot_sizes(artifact, route, scene, lambda: np.random.default_rng(seed))
+        sizes = {size: {k: _rounded(run[k]) for k in _MEASURED_KEYS} for size, run in runs.items()}
         out[name] = {**about, "length_m": _route_length_m(route), "shot_sizes": sizes}
     return out
 

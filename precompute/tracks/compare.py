@@ -36,9 +36,7 @@ import numpy as np
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
-from camdirector.precompute.tracks.director import DirectorStyle, Movement
-from camdirector.precompute.tracks.framing import ShotSize
-from camdirector.precompute.tracks.measure import measure_route
+from camdirector.precompute.tracks.measure import measure_route, measure_shot_sizes
 from camdirector.precompute.tracks.navmesh import triangle_areas
 from camdirector.precompute.tracks.prm import build_prm
 from camdirector.precompute.tracks.route import ActorRoute
@@ -121,11 +119,10 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
                  "coverage": coverage(artifact), "build_s": sum(artifact.timings_ms.values()) / 1e3,
                  **{k: v for k, v in ours.items() if k != "camera_path"}})
     paths = {"ours": (artifact, ours["camera_path"])}
-    by_size = {}  # our graph in every shot size (dynamic with cuts), the rows above being the long shot
-    for size in ShotSize:
-        run = measure_route(artifact, route, scene, np.random.default_rng(rng.integers(1 << 32)),
-                            DirectorStyle(size, Movement.DYNAMIC_WITH_CUTS))
-        by_size[size.value] = {k: run[k] for k in ("visible", "line_of_sight", "framed_in_frame", "cuts_per_min")}
+    # our graph in every shot size (dynamic with cuts), the rows above being the long shot
+    by_size = {size: {k: run[k] for k in ("visible", "line_of_sight", "framed_in_frame", "cuts_per_min")}
+               for size, run in measure_shot_sizes(artifact, route, scene,
+                                                   lambda: np.random.default_rng(rng.integers(1 << 32))).items()}
 
     def prm_row(name: str, density: float, prms: list[LevelArtifact], build_s: float) -> dict:
         run = measure_route(prms[0], route, scene, np.random.default_rng(rng.integers(1 << 32)))

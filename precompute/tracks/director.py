@@ -276,17 +276,6 @@ class GraphDirector:
     def _radius(self, distance: float) -> float:
         return max(self._settings.candidate_radius_m, 1.5 * distance)
 
-    @staticmethod
-    def _direct(positions_world: np.ndarray, scored_points: np.ndarray, scene: RayScene) -> np.ndarray:
-        """(k,) direct visibility of positions (k, 3): the worst of the fractions of the actor's
-        points seen at each of the m moments of scored_points (m, p, 3) (now and ahead; a cut adds
-        midway)."""
-        k, (m, p) = len(positions_world), scored_points.shape[:2]
-        if not k:
-            return np.empty(0)
-        hidden = scene.occluded(np.repeat(positions_world, m * p, axis=0), np.tile(scored_points.reshape(-1, 3), (k, 1)))
-        return (1.0 - hidden.reshape(k, m, p).mean(axis=2)).min(axis=1)
-
     def _frames(self, positions_world: np.ndarray, look_at: np.ndarray, ends: np.ndarray, distance: float,
                 tolerance_log: float | None = None) -> np.ndarray:
         """(k,) bool for positions (k, 3): within `tolerance_log` (default: the framing tolerance,
@@ -310,7 +299,7 @@ class GraphDirector:
         ind = (1.0 - pois.t) * indirect[pois.node_a] + pois.t * indirect[pois.node_b]
         return size, ind
 
-    def _move_target(self, actor, look_at, ends, actor_points, distance, indirect, scene) -> bool:
+    def _move_target(self, actor, look_at, ends, scored_points, distance, indirect, scene) -> bool:
         """Target moving strategy; False when no POI is reachable from the current target."""
         s = self._settings
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only=False)
@@ -327,7 +316,7 @@ class GraphDirector:
         if not reach.any():
             return False
         pois, size, ind, dist = pois.take(reach), size[reach], ind[reach], dist[reach]
-        direct = self._direct(pois.position_world, actor_points, scene)
+        direct = direct_visibility(pois.position_world, scored_points, scene).min(axis=1)  # the worse of now and ahead
         near = np.clip(1.0 - dist / s.max_graph_distance_m, 0.0, 1.0)
         total = (s.weight_shot_size * size + s.weight_direct_visibility * direct + s.weight_indirect_visibility * ind
                  + s.weight_distance * near)
@@ -336,10 +325,10 @@ class GraphDirector:
         self._scores = _scored(best, shot_size=size, direct_visibility=direct, indirect_visibility=ind,
                                graph_distance=near, total=total)
         self._target = self._descend(pois.take([best]), float(total[best]), float(dist[best]), look_at, ends,
-                                     actor_points, distance, indirect, scene)
+                                     scored_points, distance, indirect, scene)
         return True
 
-    def _descend(self, poi: Pois, score: float, dist: float, look_at, ends, actor_points, distance, indirect, scene):
+    def _descend(self, poi: Pois, score: float, dist: float, look_at, ends, scored_points, distance, indirect, scene):
         """Local descent of the (negated) score along the POI's edge in fixed steps."""
         s = self._settings
         a, b, t = int(poi.node_a[0]), int(poi.node_b[0]), float(poi.t[0])
@@ -356,7 +345,7 @@ class GraphDirector:
             pos = self.graph.nodes_world[a] + ts[:, None] * (self.graph.nodes_world[b] - self.graph.nodes_world[a])
             cand = Pois(np.full(len(ts), a), np.full(len(ts), b), ts, pos)
             size, ind = self._cheap_scores(cand, look_at, ends, distance, indirect)
-            direct = self._direct(pos, actor_points, scene)
+            direct = direct_visibility(pos, scored_points, scene).min(axis=1)
             moved = dist + np.abs(ts - t) * length
             near = np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)
             total = (s.weight_shot_size * size + s.weight_direct_visibility * direct
@@ -370,7 +359,7 @@ class GraphDirector:
                                    graph_distance=near, total=total)
         return a, b, t
 
-    def _cut(self, actor, look_at, ends, actor_points, forward, distance, indirect, scene, reason: CutReason) -> bool:
+    def _cut(self, actor, look_at, ends, scored_points, forward, distance, indirect, scene, reason: CutReason) -> bool:
         """Continuity search (Section 5.3); False when no POI keeps the rules (or none exists).
         The POIs are tried in tiers, the first that holds a cut wins:
         1. those that frame the actor solidly: within `framing_cut_margin` of the framing
@@ -390,8 +379,8 @@ class GraphDirector:
         nodes_only = self._style.movement == Movement.STATIC
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only)
         if first:
-            return self._cut_to(pois, look_at, ends, actor_points, forward, distance, indirect, scene, first)
-        shift = actor_points[1, 0] - actor_points[0, 0]
+            return self._cut_to(pois, look_at, ends, scored_points, forward, distance, indirect, scene, first)
+        shift = scored_points[1, 0] - scored_points[0, 0]   # where the actor walks in visibility_lookahead_s
         solid = self._frames(pois.position_world, look_at, ends, distance, s.framing_violation_log * s.framing_cut_margin) \
             & self._frames(pois.position_world, look_at + shift, ends + shift, distance)
         tiers = [solid]
@@ -400,10 +389,10 @@ class GraphDirector:
             tiers.append(fits & ~solid)
         if reason in _MUST_LEAVE:
             tiers.append(~solid)
-        return any(self._cut_to(pois.take(tier), look_at, ends, actor_points, forward, distance, indirect, scene, first)
+        return any(self._cut_to(pois.take(tier), look_at, ends, scored_points, forward, distance, indirect, scene, first)
                    for tier in tiers)
 
-    def _cut_to(self, pois: Pois, look_at, ends, actor_points, forward, distance, indirect, scene, first: bool) -> bool:
+    def _cut_to(self, pois: Pois, look_at, ends, scored_points, forward, distance, indirect, scene, first: bool) -> bool:
         """The best of `pois` by the cut's scores, made the target; False when none keeps the
         continuity rules or, after the first shot, none sees the actor now, midway and ahead (a
         cut to a place that does not see the actor is a cut for nothing: it waits)."""
@@ -429,11 +418,13 @@ class GraphDirector:
         partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind + extra
         keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
         pois, partial = pois.take(keep), partial[keep]
-        direct = self._direct(pois.position_world, actor_points, scene)
+        # now and ahead score the place; a cut also needs the actor seen midway: one batch of rays
+        moments = scored_points if first else np.concatenate([scored_points, scored_points.mean(axis=0)[None]])
+        per_moment = direct_visibility(pois.position_world, moments, scene)
+        direct = per_moment[:, :len(scored_points)].min(axis=1)
         total = (partial + s.weight_direct_visibility * direct) / weights
         if not first:
-            midway = self._direct(pois.position_world, actor_points.mean(axis=0)[None], scene)
-            seen = np.minimum(direct, midway) >= s.occluded_below_fraction
+            seen = per_moment.min(axis=1) >= s.occluded_below_fraction
             if not seen.any():
                 return False
             total = np.where(seen, total, -np.inf)

@@ -55,8 +55,7 @@ def framing_error(pose: CameraPose, lens: Lens, feet_world: np.ndarray, height_m
     low, high = FRAMED_EXTENT[shot_size]
     half = screen_fraction * (high - low)
     screen = project_to_screen(pose, lens, framed_ends_world(feet_world, height_m, shot_size))  # (2, 2)
-    error = np.abs(screen - np.array([[0.0, -half], [0.0, half]])).max()
-    return float(error)
+    return float(np.abs(screen - np.array([[0.0, -half], [0.0, half]])).max())
 
 
 def _pitches(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float
@@ -70,9 +69,8 @@ def _pitches(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float
     near = np.maximum(horizontal - radius_m, 1e-6)[:, None]
     far = (horizontal + radius_m)[:, None]
     rise = ends_world[:, 1][None, :] - cameras[:, 1:2]                 # (m, 2): up to the bottom and the top
-    low = np.minimum(np.arctan2(rise, near), np.arctan2(rise, far))
-    high = np.maximum(np.arctan2(rise, near), np.arctan2(rise, far))
-    return low[:, 0], high[:, 1], horizontal
+    from_near, from_far = np.arctan2(rise, near), np.arctan2(rise, far)
+    return np.minimum(from_near, from_far)[:, 0], np.maximum(from_near, from_far)[:, 1], horizontal
 
 
 def aim_point(camera_world: np.ndarray, ends_world: np.ndarray, radius_m: float) -> np.ndarray:

@@ -31,6 +31,7 @@ The same measure as the Toric evaluation (evaluation/measure.py), on the tracks 
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,7 +40,7 @@ from camdirector.geometry.camera import CameraPose, Lens, in_frame, level_look_r
 from camdirector.geometry.meshes import capsule
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.artifact import LevelArtifact
-from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector
+from camdirector.precompute.tracks.director import DirectorStyle, GraphDirector, Movement
 from camdirector.precompute.tracks.framing import FRAMED_EXTENT, ShotSize, framing_error
 from camdirector.precompute.tracks.route import ActorRoute
 from camdirector.precompute.tracks.settings import DirectorSettings
@@ -141,3 +142,15 @@ def measure_route(artifact: LevelArtifact, route: ActorRoute, scene: RayScene, r
             "camera_update_ms_mean": timing(camera_ms, np.mean), "camera_update_ms_std": timing(camera_ms, np.std),
             "framing_error_median": float(np.median(errors)),
             "camera_path": np.asarray(path, dtype=np.float64).reshape(-1, 3)}
+
+
+def measure_shot_sizes(artifact: LevelArtifact, route: ActorRoute, scene: RayScene,
+                       new_rng: Callable[[], np.random.Generator], lens: Lens = Lens()) -> dict[str, dict]:
+    """`measure_route` of the director (dynamic with cuts) in every shot size along one route,
+    by ShotSize value, each run with a generator from new_rng (called once per shot size, in
+    ShotSize order); the runs' camera paths are left out."""
+    out = {}
+    for size in ShotSize:
+        run = measure_route(artifact, route, scene, new_rng(), DirectorStyle(size, Movement.DYNAMIC_WITH_CUTS), lens)
+        out[size.value] = {k: v for k, v in run.items() if k != "camera_path"}
+    return out

@@ -95,12 +95,15 @@ def shot_size_score(positions_world: np.ndarray, look_at_world: np.ndarray, dist
 
 
 def direct_visibility(positions_world: np.ndarray, actor_points_world: np.ndarray, scene: RayScene) -> np.ndarray:
-    """(k,) fraction of the actor's points (p, 3) each position (k, 3) sees."""
-    k, p = len(positions_world), len(actor_points_world)
+    """(k, ...) fraction of the actor's points each position (k, 3) sees: actor_points_world
+    (..., p, 3), the points at one moment (p, 3) -> (k,), or at m moments (m, p, 3) -> (k, m),
+    all in one batch of rays."""
+    points = np.asarray(actor_points_world)
+    k, n = len(positions_world), points.size // 3
     if not k:
-        return np.empty(0)
-    hidden = scene.occluded(np.repeat(positions_world, p, axis=0), np.tile(actor_points_world, (k, 1)))
-    return 1.0 - hidden.reshape(k, p).mean(axis=1)
+        return np.empty((0, *points.shape[:-2]))
+    hidden = scene.occluded(np.repeat(positions_world, n, axis=0), np.tile(points.reshape(-1, 3), (k, 1)))
+    return 1.0 - hidden.reshape(k, *points.shape[:-1]).mean(axis=-1)
 
 
 class IndirectVisibility:

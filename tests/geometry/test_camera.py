@@ -1,12 +1,12 @@
 """The frame of a camera (geometry/camera.py): which points lie inside it, and where a few points
-project (the scalar path) against many (the array path)."""
+project (the scalar path) against many (the array path) and from many cameras at once."""
 from __future__ import annotations
 
 import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens, in_frame, project_to_screen
+from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens, in_frame, project_from_cameras, project_to_screen
 from camdirector.geometry.transforms import quat_to_matrix
 
 
@@ -46,3 +46,19 @@ def test_a_few_points_project_in_scalars_as_many_do_in_arrays(q, camera, points)
     many = np.vstack([few] * 5)   # past the few-point path: the array one
     np.testing.assert_allclose(project_to_screen(pose, Lens(), few), project_to_screen(pose, Lens(), many)[:len(few)],
                                rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(lambda q: np.linalg.norm(q) > 0.1),
+                          st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3)), min_size=1, max_size=4),
+       st.lists(st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3), min_size=5, max_size=8))
+def test_many_cameras_project_as_each_one_does(cameras, points):
+    poses = [CameraPose(np.array(c), np.array(q) / np.linalg.norm(q), 50.0) for q, c in cameras]
+    world = np.array(points, dtype=np.float64)
+    for pose in poses:
+        depth_m = (world - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
+        assume(np.all(np.abs(depth_m) > 1e-6))   # on the camera's plane the two summation orders round apart
+    at_once = project_from_cameras(np.stack([p.position_world for p in poses]),
+                                   quat_to_matrix(np.stack([p.rotation_xyzw for p in poses])), Lens(), world)
+    for pose, screen in zip(poses, at_once):
+        np.testing.assert_allclose(screen, project_to_screen(pose, Lens(), world), rtol=1e-9, atol=1e-9)

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
+from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation, project_from_cameras
 from camdirector.geometry.toric import (
     DegenerateTorus,
     Torus,
@@ -204,14 +204,9 @@ def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[i
     seen = visibility.seen_points(positions_world, moment, subjects)     # (m, s, k)
     ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
     seen[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
-    points = visibility.points_world(moment, subjects)                  # (s * k, 3)
-    # every camera at once (project_to_screen's arithmetic): world -> camera is R^T (p - c)
-    in_camera = np.einsum("mnj,mjk->mnk", points[None, :, :] - positions_world[:, None, :], rotations)
-    depth = -in_camera[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = in_camera[..., 0] / (depth * lens.tan_half_fov_x)
-        y = in_camera[..., 1] / (depth * lens.tan_half_fov_y)
-        inside = (depth > 0.0) & (np.abs(x) <= 1.0) & (np.abs(y) <= 1.0)   # NaN compares False
+    screen = project_from_cameras(positions_world, rotations, lens, visibility.points_world(moment, subjects))
+    with np.errstate(invalid="ignore"):
+        inside = (np.abs(screen) <= 1.0).all(axis=2)                   # NaN (behind, degenerate) compares False
     seen &= inside.reshape(seen.shape)
     return seen.mean(axis=2)
 
