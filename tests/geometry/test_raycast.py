@@ -1,5 +1,5 @@
-"""RayScene's dynamic objects, culled by bounding spheres, answer exactly as the same geometry
-built in the world frame as static meshes (no culling)."""
+"""RayScene's dynamic objects, culled by bounding spheres in one shared scene or cast one by one
+(a few of them), answer exactly as the same geometry built in the world frame as static meshes."""
 from __future__ import annotations
 
 import numpy as np
@@ -16,13 +16,15 @@ def _random_transform(rng: np.random.Generator) -> RigidTransform:
 
 
 @pytest.mark.parametrize("seed", range(5))
-def test_culled_dynamic_objects_match_world_frame_geometry(seed):
+@pytest.mark.parametrize("count, solo_max_objects", [(30, 4), (30, 30), (3, 4), (3, 0)],
+                         ids=["many-shared", "many-one-by-one", "few-one-by-one", "few-shared"])
+def test_culled_dynamic_objects_match_world_frame_geometry(seed, count, solo_max_objects):
     rng = np.random.default_rng(seed)
-    meshes = [box(rng.uniform(0.3, 2.0, 3)) if k % 2 else capsule(0.4, 1.8) for k in range(30)]
+    meshes = [box(rng.uniform(0.3, 2.0, 3)) if k % 2 else capsule(0.4, 1.8) for k in range(count)]
     # Off-centre local frames too: the bounding sphere must follow the mesh, not the origin.
     meshes = [TriMesh(m.vertices + rng.uniform(-1, 1, 3), m.faces) for m in meshes]
     floor = box((30.0, 0.1, 30.0))
-    scene = RayScene([floor])
+    scene = RayScene([floor], solo_max_objects=solo_max_objects)
     start = [_random_transform(rng) for _ in meshes]
     for k, (mesh, tf) in enumerate(zip(meshes, start)):
         scene.add_dynamic(f"o{k}", mesh, tf)
