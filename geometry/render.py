@@ -106,6 +106,22 @@ def perspective_matrix(lens: Lens, near_m: float, far_m: float) -> np.ndarray:
     return m
 
 
+def top_down_matrix(x_range_m: tuple[float, float], z_range_m: tuple[float, float],
+                    y_range_m: tuple[float, float]) -> np.ndarray:
+    """(4, 4) float64 clip-from-world matrix of an orthographic view straight down: world x across
+    the image left to right over x_range_m, world z down it top to bottom over z_range_m (as the
+    dashboard's top view draws them), depth from the top of y_range_m (near) to its bottom (far)."""
+    (x0, x1), (z0, z1), (y0, y1) = x_range_m, z_range_m, y_range_m
+    if not (x1 > x0 and z1 > z0 and y1 > y0):
+        raise ValueError("top_down_matrix: each range must be (low, high) with high > low")
+    m = np.zeros((4, 4))
+    m[0, 0], m[0, 3] = 2.0 / (x1 - x0), -(x1 + x0) / (x1 - x0)
+    m[1, 2], m[1, 3] = -2.0 / (z1 - z0), (z1 + z0) / (z1 - z0)   # z0 at the top row (clip y = 1)
+    m[2, 1], m[2, 3] = -2.0 / (y1 - y0), (y1 + y0) / (y1 - y0)   # the highest point nearest
+    m[3, 3] = 1.0
+    return m
+
+
 def view_matrix(pose: CameraPose) -> np.ndarray:
     """(4, 4) float64 camera-from-world matrix: the inverse of the pose's camera-to-world."""
     r = quat_to_matrix(pose.rotation_xyzw)
@@ -147,9 +163,12 @@ class OffscreenRenderer:
     llvmpipe (2 busy cores, the ~2k-triangle demo scene, median per frame) it about doubles the
     cost at 640x360 (4-9 ms -> 8-16 ms) and triples it at 1280x720 (11-17 ms -> 33-75 ms); on a
     GPU it is close to free. fog_start_m / fog_end_m: distance band in metres over which geometry
-    fades into the sky colour.
+    fades into the sky colour. context: a moderngl context to draw in, shared with other
+    renderers of the same thread (each keeps its own framebuffer, buffers and program, and makes
+    the context current around its own calls); None creates one for this renderer alone.
 
-    Use as a context manager or call `release()`: it owns a GL context.
+    Use as a context manager or call `release()`: it owns its GL objects, and its context when it
+    created it.
     """
 
     def __init__(
@@ -162,6 +181,7 @@ class OffscreenRenderer:
         light_dir_world: tuple[float, float, float] = LIGHT_DIR_WORLD,
         fog_start_m: float = 20.0,
         fog_end_m: float = 90.0,
+        context: moderngl.Context | None = None,
     ) -> None:
         width_px, height_px = int(width_px), int(height_px)
         if not (1 <= width_px <= 8192 and 1 <= height_px <= 8192):
@@ -171,10 +191,18 @@ class OffscreenRenderer:
         self.width_px = width_px
         self.height_px = height_px
         self.sky_rgb = tuple(float(c) for c in sky_rgb)
-        try:
-            self._ctx = moderngl.create_standalone_context(backend="egl")
-        except Exception as err:  # EGL missing or no usable driver: say which call failed
-            raise RuntimeError(f"OffscreenRenderer: no EGL GL context ({err})") from err
+        self._owns_context = context is None
+        if context is None:
+            try:
+                context = moderngl.create_standalone_context(backend="egl")
+            except Exception as err:  # EGL missing or no usable driver: say which call failed
+                raise RuntimeError(f"OffscreenRenderer: no EGL GL context ({err})") from err
+        self._ctx = ctx = context
+        with ctx:
+            self._setup(width_px, height_px, msaa_samples, light_dir_world, fog_start_m, fog_end_m)
+
+    def _setup(self, width_px, height_px, msaa_samples, light_dir_world, fog_start_m, fog_end_m) -> None:
+        """The program, framebuffers and tables (the context is current)."""
         ctx = self._ctx
         self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
         light = np.asarray(light_dir_world, dtype=np.float64)
@@ -253,7 +281,13 @@ class OffscreenRenderer:
         interleaved[:, :, :3] = tri
         interleaved[:, :, 3:] = normal[:, None, :]
         key = (interleaved.tobytes(), bool(closed))
+        with self._ctx:
+            self._add_instance(mesh_id, key, color, checker_m)
+
+    def _add_instance(self, mesh_id: str, key: tuple[bytes, bool], color: np.ndarray, checker_m: float) -> None:
+        """One row of the instance table for geometry `key`, whose buffers are made on first use."""
         geometry = self._geometries.get(key)
+        closed = key[1]
         if geometry is None:
             vbo = self._ctx.buffer(key[0])
             instance_buffer = self._ctx.buffer(reserve=_INSTANCE_FLOATS * 4)
@@ -261,7 +295,7 @@ class OffscreenRenderer:
                 (vbo, "3f 3f", "in_position", "in_normal"),
                 (instance_buffer, _INSTANCE_FORMAT, *_INSTANCE_ATTRIBUTES),
             ])
-            geometry = self._geometries[key] = _Geometry(vbo, instance_buffer, vao, bool(closed), [])
+            geometry = self._geometries[key] = _Geometry(vbo, instance_buffer, vao, closed, [])
         row = np.zeros(_INSTANCE_FLOATS, dtype="f4")
         row[_MODEL] = np.eye(4).ravel()
         row[_NORMAL] = np.eye(3).ravel()
@@ -269,7 +303,7 @@ class OffscreenRenderer:
         row[_CHECKER] = checker_m
         self._rows[mesh_id] = len(self._instances)
         self._instances = np.vstack([self._instances, row[None]])
-        self._closed = np.append(self._closed, bool(closed))
+        self._closed = np.append(self._closed, closed)
         geometry.rows.append(self._rows[mesh_id])
         geometry.instance_buffer.orphan(len(geometry.rows) * _INSTANCE_FLOATS * 4)
 
@@ -317,14 +351,22 @@ class OffscreenRenderer:
         The projection uses lens.vertical_fov_deg and lens.aspect (as `project_to_screen` does);
         pass a lens whose aspect equals width_px / height_px or the image is stretched.
         """
+        return self.render_view(perspective_matrix(lens, near_m, far_m) @ view_matrix(pose), pose.position_world)
+
+    def render_view(self, view_proj: np.ndarray, eye_world) -> np.ndarray:
+        """(h, w, 3) uint8 image, top row first, through any clip-from-world matrix (4, 4) (e.g.
+        `top_down_matrix`); eye_world (3,) m is where the fog measures distance from."""
         if self._ctx is None:
             raise ValueError("OffscreenRenderer was released")
-        view_proj = perspective_matrix(lens, near_m, far_m) @ view_matrix(pose)
+        with self._ctx:
+            return self._draw(np.asarray(view_proj, dtype=np.float64), eye_world)
+
+    def _draw(self, view_proj: np.ndarray, eye_world) -> np.ndarray:
         self._draw_fbo.use()
         self._ctx.enable(moderngl.DEPTH_TEST)
         self._draw_fbo.clear(*self.sky_rgb, 1.0, depth=1.0)
         self._u_view_proj.write(_gl_matrix(view_proj))
-        self._u_camera.value = tuple(float(c) for c in pose.position_world)
+        self._u_camera.value = tuple(float(c) for c in eye_world)
         for geometry in self._geometries.values():
             if geometry.closed:
                 self._ctx.enable(moderngl.CULL_FACE)
@@ -343,15 +385,25 @@ class OffscreenRenderer:
     # -- lifetime ----------------------------------------------------------------------------
 
     def release(self) -> None:
-        """Free the GL objects and the context; the renderer is unusable afterwards."""
+        """Free the GL objects, and the context when the renderer made it; the renderer is unusable
+        afterwards."""
         if self._ctx is None:
             return
-        for geometry in self._geometries.values():
-            geometry.vao.release()
-            geometry.vbo.release()
-            geometry.instance_buffer.release()
+        with self._ctx:
+            for geometry in self._geometries.values():
+                geometry.vao.release()
+                geometry.vbo.release()
+                geometry.instance_buffer.release()
+            framebuffers = {self._draw_fbo, self._resolve_fbo}
+            for fbo in framebuffers:
+                for attachment in [*fbo.color_attachments, fbo.depth_attachment]:
+                    if attachment is not None:
+                        attachment.release()
+                fbo.release()
+            self._prog.release()
         self._geometries.clear()
-        self._ctx.release()
+        if self._owns_context:
+            self._ctx.release()
         self._ctx = None
 
     def __enter__(self) -> OffscreenRenderer:

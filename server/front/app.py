@@ -62,7 +62,8 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             jobs = install_overview_jobs(app, Path(settings.data_dir), settings.job_settings())
             install_level_routes(app, jobs, Path(settings.data_dir), settings.job_settings())
             jobs.start()  # queued and interrupted jobs from before a restart run again
-            config = uvicorn.Config(app, log_level="warning", lifespan="off")
+            # A live view left open past shutdown is cut after this long (the hub ends its own first).
+            config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3)
             http_server = uvicorn.Server(config)
             http_server.install_signal_handlers = lambda: None  # ours above
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
@@ -71,6 +72,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
     finally:
         log.info("stopping")
         if http_server is not None:
+            app.state.views.close()
             http_server.should_exit = True
             await http_task
         if jobs is not None:

@@ -26,6 +26,11 @@ class Metrics:
                                        buckets=_SECONDS_BUCKETS, registry=r)
         self.stage = Histogram("camdirector_stage_seconds", "Time per pipeline stage per frame", ["stage"],
                                buckets=_SECONDS_BUCKETS, registry=r)
+        self.view_requests = Counter("camdirector_view_requests", "Monitor pictures asked for, by shot "
+                                     "(live-stream ticks included)", ["shot"], registry=r)
+        self.view_renders = Counter("camdirector_view_renders",
+                                    "Monitor pictures rendered (asks answered from a shared render are not)", registry=r)
+        self.view_streams = Gauge("camdirector_view_streams", "Live monitor streams open", registry=r)
         self.request = Histogram("camdirector_request_seconds", "Front-process time per request, routing included",
                                  ["transport", "rpc"], buckets=_SECONDS_BUCKETS, registry=r)
 

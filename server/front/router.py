@@ -175,6 +175,16 @@ class SessionRouter:
         body, _ = await self.pool.call(self._entry(session_id).slot, "amap", session_id, b"")
         return body
 
+    async def view(self, session_id: str, query_json: bytes, timeout_s: float) -> bytes:
+        """A monitor's picture of the session (sessions/views.py), its serialized view
+        (sessions/monitor.py); NOT_FOUND for an unknown id, UNAVAILABLE when it takes more than
+        timeout_s. Not a request of the session's client: it does not keep the session alive."""
+        try:
+            body, _ = await self.pool.call(self._entry(session_id).slot, "view", session_id, query_json, timeout_s)
+        except TimeoutError:
+            raise unavailable(f"the view of session {session_id} took more than {timeout_s:g} s") from None
+        return body
+
     def describe(self) -> list[dict]:
         now = self.clock()
         return [self._describe(sid, e, now) for sid, e in self.sessions.items()]

@@ -142,11 +142,31 @@ class WorkerPool:
         finally:
             self._pending.pop(request_id, None)
 
-    async def call(self, slot: int, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
-        """Runs one request on the session table of `slot`. Raises DirectorError."""
+    async def call(self, slot: int, op: str, session_id: str, payload: bytes,
+                   timeout_s: float | None = None) -> tuple[bytes, FrameMetrics | None]:
+        """Runs one request on the session table of `slot`. Raises DirectorError (TimeoutError
+        past timeout_s, when given)."""
         if self._inline is not None:
+            if op == "view":
+                return await asyncio.wait_for(self._inline_view(session_id, payload), timeout_s)
             return self._inline.handle_bytes(op, session_id, payload)
-        return await self._call_worker(self._workers[slot], op, session_id, payload)
+        return await self._call_worker(self._workers[slot], op, session_id, payload, timeout_s)
+
+    async def _inline_view(self, session_id: str, payload: bytes) -> tuple[bytes, None]:
+        """A view of an inline session: the table answers from the render process's thread."""
+        loop = asyncio.get_running_loop()
+        future = loop.create_future()
+
+        def settle(status: int, body: bytes) -> None:
+            if future.done():
+                return
+            if status == 0:
+                future.set_result((body, None))
+            else:
+                future.set_exception(DirectorError(_CODES.get(status, grpc.StatusCode.UNKNOWN), body.decode()))
+
+        self._inline.view(session_id, payload, lambda status, body: loop.call_soon_threadsafe(settle, status, body))
+        return await future
 
     async def stop(self) -> None:
         if self._inline is not None:

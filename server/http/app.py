@@ -13,14 +13,19 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 
 from camdirector.server.front.router import SessionRouter
+from camdirector.server.front.views import ViewHub
 from camdirector.server.http.routes.sessions import build_session_router
+from camdirector.server.http.routes.views import build_view_router
 
 DASHBOARD_DIR = Path(__file__).with_name("dashboard")
 
 
 def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
+    """The app; `app.state.views` is its ViewHub, which the server closes before stopping (its
+    live streams would hold the HTTP server open)."""
     app = FastAPI(title="camdirector", version="0.1.0",
-                  description="Automated cinematographer: health, metrics, sessions, and offline jobs.")
+                  description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.")
+    app.state.views = ViewHub(router, router.metrics)
 
     @app.get("/healthz")
     def healthz() -> dict:
@@ -46,6 +51,7 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
         return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)
 
     app.include_router(build_session_router(router))
+    app.include_router(build_view_router(app.state.views))
     # The director's dashboard: static files that read the routes above.
     app.mount("/dashboard", StaticFiles(directory=DASHBOARD_DIR, html=True), name="dashboard")
 

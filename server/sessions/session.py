@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
@@ -24,6 +26,19 @@ from camdirector.server.pipeline.stages import FrameState, Stage
 from camdirector.server.pipeline.style import Rig, Style
 from camdirector.server.pipeline.toric.rig import ToricRig
 from camdirector.server.pipeline.tracks.rig import TracksRig
+
+
+@dataclass(frozen=True)
+class CutRecord:
+    """The session's last cut, for the monitors' before and after pictures: the two poses and the
+    scene as it was at the cut (the moving objects' and targets' transforms, the same for both)."""
+
+    frame_before: int
+    pose_before: CameraPose
+    frame: int
+    pose_after: CameraPose
+    dynamic: dict[str, tuple[TriMesh, RigidTransform]]
+    target_transforms: list[RigidTransform]
 
 
 class Session:
@@ -42,6 +57,8 @@ class Session:
         self.players = frozenset(self.target_index) if self.style.rig == Rig.MATCH else None
         self.delay_s = scene.delay_s
         static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
+        self.static_meshes_world = static_meshes_world   # and the level's, what the monitors draw (sessions/views.py)
+        self.level_mesh_world = scene.level.mesh_world if scene.level is not None else None
         level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
         self.ray_scene = RayScene(static_meshes_world + level_meshes)
         self.dynamic = {o.id: (o.mesh, o.transform) for o in scene.objects if o.dynamic}  # latest transforms
@@ -58,6 +75,7 @@ class Session:
         self.last_input: tuple[int, float] | None = None
         self.frames_answered = 0
         self.shot_id = 0
+        self.last_cut: CutRecord | None = None
 
     def set_style(self, style: Style) -> None:
         """From the next frame on (the rig's set_style says what a change does)."""
@@ -68,6 +86,12 @@ class Session:
         """Releases the rig's resources (GL objects, Embree scenes); idempotent. The session
         answers no frame afterwards."""
         self.rig.close()
+
+    def view_target_transforms(self) -> list[RigidTransform]:
+        """The targets where the camera sees them: a MATCH session's at the program's moment (the
+        broadcast delay behind the game), others' as of the latest frame."""
+        program = self.rig.program_transforms if self.players is not None else None
+        return program if program is not None else self.target_transforms
 
     def is_stale(self, frame: int) -> bool:
         return self.last_input is not None and frame <= self.last_input[0]
@@ -97,6 +121,9 @@ class Session:
         state.cut = state.pose is not None and (state.cut or last is None or last.pose is None)
         if state.cut:
             self.shot_id += 1
+            if last is not None and last.pose is not None:  # a few references, on the frames that cut
+                self.last_cut = CutRecord(last.frame, last.pose, state.frame, state.pose, dict(self.dynamic),
+                                          list(self.view_target_transforms()))
         state.shot_id = self.shot_id
         self.last_state = state
         self.frames_answered += 1

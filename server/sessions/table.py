@@ -17,10 +17,12 @@ from camdirector.server.errors import DirectorError, internal, invalid, not_foun
 from camdirector.server.sessions import codec
 from camdirector.server.sessions.levels import LevelCache
 from camdirector.server.sessions.map_view import anticipation_png
+from camdirector.server.sessions.monitor import Monitor, Reply
 from camdirector.server.sessions.recording import RecordingWriter
 from camdirector.server.sessions.session import Session
 from camdirector.server.sessions.timeline import Timeline
 from camdirector.server.sessions.timeline import dumps as timeline_dumps
+from camdirector.server.sessions.views import ViewQuery, render_job, scene_geometry
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 
@@ -52,6 +54,7 @@ class SessionTable:
         self.clock = clock
         self.held: dict[str, HeldSession] = {}
         self.levels = LevelCache(settings.data_dir)  # the TRACKS rig's levels, loaded once per process
+        self.monitor: Monitor | None = None          # the render process of the sessions' views, started on the first
 
     def _get(self, session_id: str) -> HeldSession:
         held = self.held.get(session_id)
@@ -139,6 +142,17 @@ class SessionTable:
                                "ANTICIPATION and NO_ANTICIPATION build one (after their first frame)")
         return anticipation_png(*found)
 
+    def view(self, session_id: str, payload: bytes, reply: Reply) -> None:
+        """A monitor's picture of the session (views.py; payload: a ViewQuery's JSON), rendered
+        in the render process (monitor.py) and answered later through `reply(status, body)`, from
+        another thread. Only the snapshot is taken here, between two frames. Raises DirectorError
+        at once for an unknown session or a query that is not one."""
+        session = self._get(session_id).session
+        job = render_job(session, ViewQuery.from_json(payload))
+        if self.monitor is None:
+            self.monitor = Monitor()
+        self.monitor.submit(job, lambda: scene_geometry(session), reply)
+
     def close(self, session_id: str) -> pb.CloseSessionResponse:
         session = self._get(session_id).session
         self.drop(session_id)
@@ -150,6 +164,8 @@ class SessionTable:
         held = self.held.pop(session_id, None)
         if held is None:
             return
+        if self.monitor is not None:
+            self.monitor.forget(session_id)
         try:
             held.session.close()
         finally:  # the recording is closed even when releasing the rig failed
@@ -157,9 +173,11 @@ class SessionTable:
                 held.recorder.close()
 
     def close_all(self) -> None:
-        """Ends every session (the worker is stopping)."""
+        """Ends every session and the render process (the worker is stopping)."""
         for session_id in list(self.held):
             self.drop(session_id)
+        if self.monitor is not None:
+            self.monitor.close()
 
     def handle_bytes(self, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
         """One request as the transports carry it: serialized in, serialized out.

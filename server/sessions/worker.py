@@ -10,7 +10,9 @@ client's serialized request exactly as the front received it (the front read onl
   (ASCII, comma-separated, in the frame's stage order), their times (one float64 each, ms), the
   body: the serialized reply, or the UTF-8 error message when the status is not 0.
 A frame's metrics thus travel as a few packed numbers beside its reply, taken from the frame's
-state in the worker (never read back out of the reply). Lengths are 64-bit, so a scene of more
+state in the worker (never read back out of the reply). Replies may come out of order: a `view`
+(a monitor's picture) is answered from the render process's reader thread (sessions/monitor.py)
+while the loop goes on with other requests, so every write to the socket takes one lock. Lengths are 64-bit, so a scene of more
 than 2 GiB needs no escape (multiprocessing's framing switched to a second, 8-byte length there).
 A FRAMING_ONLY frame and its reply carry 136 bytes of framing (headers, session id, stage names
 and times) where the pickled tuples took about 275, and building and reading both cost 3.3 us against
@@ -22,6 +24,7 @@ from __future__ import annotations
 import os
 import socket
 import struct
+import threading
 from typing import BinaryIO
 
 from camdirector.server.errors import DirectorError
@@ -32,7 +35,7 @@ from camdirector.server.settings import ServerSettings
 REQUEST = struct.Struct("!IBHQ")
 # request id, status (u8), flags (u8), compute_ms (f64), stages (u8), stage names bytes (u16), body bytes (u64)
 REPLY = struct.Struct("!IBBdBHQ")
-OPS = ("ping", "stop", "create", "frame", "style", "close", "take", "timeline", "amap", "drop")
+OPS = ("ping", "stop", "create", "frame", "style", "close", "take", "timeline", "amap", "drop", "view")
 OP_CODES = {name: code for code, name in enumerate(OPS)}
 HAS_METRICS, STALE = 1, 2
 READ_BUFFER_BYTES = 1 << 16  # the worker's read buffer: a frame request (~1 KB) arrives in one read
@@ -103,6 +106,12 @@ def worker_main(conn, settings: ServerSettings) -> None:
     conn.close()
     reader = sock.makefile("rb", buffering=READ_BUFFER_BYTES)
     table = SessionTable(settings)
+    sending = threading.Lock()   # views are answered from the render process's reader thread
+
+    def send(data: bytes) -> None:
+        with sending:
+            sock.sendall(data)
+
     while True:
         try:
             request_id, op, session_id, payload = read_request(reader)
@@ -112,13 +121,20 @@ def worker_main(conn, settings: ServerSettings) -> None:
         if op in ("stop", "ping"):
             if op == "stop":  # release the sessions' GL contexts and recording files before saying so
                 table.close_all()
-            sock.sendall(encode_reply(request_id, 0, b"", None))
+            send(encode_reply(request_id, 0, b"", None))
             if op == "stop":
                 return
+            continue
+        if op == "view":  # answered later, off this loop (sessions/monitor.py)
+            try:
+                table.view(session_id, payload,
+                           lambda status, body, rid=request_id: send(encode_reply(rid, status, body, None)))
+            except DirectorError as exc:
+                send(encode_reply(request_id, exc.code.value[0], exc.message.encode(), None))
             continue
         try:
             body, metrics = table.handle_bytes(op, session_id, payload)
             reply = encode_reply(request_id, 0, body, metrics)
         except DirectorError as exc:
             reply = encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
-        sock.sendall(reply)
+        send(reply)

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
-from camdirector.geometry.render import OffscreenRenderer
+from camdirector.geometry.render import OffscreenRenderer, top_down_matrix
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
 from camdirector.geometry.video import VideoWriter, concat_videos
 
@@ -152,6 +152,44 @@ def test_instanced_meshes_draw_what_separate_meshes_draw():
     # pixels: a pixel centre exactly on a silhouette edge can fall to the back face under the
     # fill rule (the edge runs the other way round it).
     assert (images[0] != images[2]).any(axis=2).sum() <= 4
+
+
+def test_top_down_view_puts_x_across_and_z_down():
+    """A box at world (x, z) lands at column (x - x0) / (x1 - x0) and row (z - z0) / (z1 - z0) of
+    the orthographic top view, as the dashboard's top view draws x right and z down."""
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    view = top_down_matrix((-10.0, 10.0), (-5.0, 5.0), (-1.0, 3.0))
+    with OffscreenRenderer(200, 100, fog_start_m=1e6, fog_end_m=2e6) as r:
+        r.add_mesh("box", box.vertices, box.faces, (1.0, 0.0, 0.0))
+        for x, z in [(6.0, -3.0), (-4.0, 2.0), (0.0, 0.0)]:
+            r.set_transform("box", RigidTransform(position_world=np.array([x, 0.5, z])).matrix())
+            mask = _box_mask(r.render_view(view, (0.0, 100.0, 0.0)))
+            np.testing.assert_allclose(_centroid_px(mask), [(x + 10.0) / 20.0 * 200 - 0.5, (z + 5.0) / 10.0 * 100 - 0.5],
+                                       atol=1.0)
+            assert 80 <= mask.sum() <= 120  # a 1 m square at 10 px per metre
+    with pytest.raises(ValueError):
+        top_down_matrix((1.0, 1.0), (0.0, 1.0), (0.0, 1.0))
+
+
+def test_renderers_sharing_a_context_keep_their_own_scenes():
+    """Two renderers on one GL context (the monitors' render process keeps several) each draw
+    only their own meshes, whatever the order of their calls."""
+    import moderngl
+
+    ctx = moderngl.create_standalone_context(backend="egl")
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    a = OffscreenRenderer(WIDTH_PX, HEIGHT_PX, context=ctx)
+    b = OffscreenRenderer(WIDTH_PX, HEIGHT_PX, context=ctx)
+    a.add_mesh("box", box.vertices, box.faces, (1.0, 0.0, 0.0))
+    b.add_mesh("box", box.vertices, box.faces, (1.0, 0.0, 0.0))
+    a.set_transform("box", RigidTransform(position_world=np.array([-1.0, 0.0, -4.0])).matrix())
+    b.set_transform("box", RigidTransform(position_world=np.array([1.0, 0.0, -4.0])).matrix())
+    left, right = a.render(AT_ORIGIN, LENS), b.render(AT_ORIGIN, LENS)
+    assert _centroid_px(_box_mask(left))[0] < WIDTH_PX / 2 < _centroid_px(_box_mask(right))[0]
+    a.release()
+    np.testing.assert_array_equal(b.render(AT_ORIGIN, LENS), right)  # the shared context outlives a
+    b.release()
+    ctx.release()
 
 
 def test_video_writer_writes_a_readable_mp4(tmp_path):

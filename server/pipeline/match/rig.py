@@ -73,6 +73,7 @@ class MatchRig:
         self._last_time_s: float | None = None
         self._last_pose: CameraPose | None = None
         self._candidates: list[tuple[ShotChoice, ToricCamera | None, float]] = []
+        self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
 
     def _director(self, kind: MatchDirectorKind) -> PlannedDirector | HltvDirector:
         if kind == MatchDirectorKind.HLTV:
@@ -173,6 +174,7 @@ class MatchRig:
             state.flags.append("match_stale_frame")
         moment = self.buffer.program_moment(update.time_s - self.delay_s)
         stages.done(MatchStage.BUFFER)
+        self.program_transforms = None if moment is None else moment.transforms
         if moment is None:
             state.buffering, state.pose, state.visibility = True, None, 0.0
             state.flags.append("buffering")
