@@ -11,8 +11,8 @@ from camdirector.server.sessions.table import SessionTable
 from camdirector.server.sessions.views import TARGET_RGB, TEAM_RGB, ViewQuery, render_job, rigid_matrices, scene_geometry
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-from tests.server.test_match_sessions import match_request
 from tests.server.test_match_sessions import frames as match_frames
+from tests.server.test_match_sessions import match_request
 from tests.server.wire_client import two_target_request, walk
 
 
