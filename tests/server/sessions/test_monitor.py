@@ -19,9 +19,12 @@ from camdirector.server.sessions.monitor import RENDERERS_KEPT, TOP_VIEW_MARGIN_
 from camdirector.server.sessions.table import SessionTable
 from camdirector.server.sessions.views import ViewQuery, render_job, scene_geometry
 from camdirector.server.settings import ServerSettings
+from load_tests.soak import sample_process
 from tests.server.wire_client import two_target_request, walk
 
 REPLY_TIMEOUT_S = 60.0
+VIEWED_SESSIONS = 60
+MAX_RENDER_PROCESS_GROWTH_MB = 30.0
 
 
 @pytest.fixture
@@ -164,3 +167,29 @@ def test_a_painter_keeps_few_renderers_and_forgets_a_session_whole(table):
         assert not painter._renderers and not painter._geometry and not painter._top
     finally:
         painter.close()
+
+
+def test_sessions_viewed_and_closed_leave_the_render_process_where_it_started(table):
+    """Sessions created, streamed, viewed (program and top view) and closed one after another:
+    the render process's memory grows by less than MAX_RENDER_PROCESS_GROWTH_MB and its open
+    descriptors come back to where they were (each session's renderers, their GL objects and
+    meshes, go with it). The first session is a warm-up: the GL driver loads once."""
+    def one_session(k: int) -> None:
+        session_id = f"s{k}"
+        table.create(session_id, two_target_request(seed=k))
+        stream(table, session_id, 3)
+        view(table, session_id).wait()
+        view(table, session_id, ViewQuery(shot="top")).wait()
+        table.close(session_id)
+
+    one_session(0)
+    pid = table.monitor.pid
+    before = sample_process(pid)
+    for k in range(1, VIEWED_SESSIONS + 1):
+        one_session(k)
+    table.create("last", two_target_request(seed=1))
+    view(table, "last", ViewQuery(shot="top")).wait()   # answered after every forget before it
+    after = sample_process(pid)
+    assert table.monitor.pid == pid, "one render process served them all"
+    assert after.rss_mb - before.rss_mb < MAX_RENDER_PROCESS_GROWTH_MB, (before, after)
+    assert after.open_fds == before.open_fds, (before, after)
