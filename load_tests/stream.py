@@ -19,9 +19,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
 import sys
 import time
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
 from pathlib import Path
 
 import grpc
@@ -137,10 +140,14 @@ async def _sleep_until(deadline: float) -> None:
 
 
 async def run(transport: str, address: str, sessions: int, rate_hz: float, seconds: float,
-              visibility: int = pb.FRAMING_ONLY, warmup_frames: int = 0) -> dict:
+              visibility: int = pb.FRAMING_ONLY, warmup_frames: int = 0,
+              alongside: Callable[[list[str]], AbstractAsyncContextManager] | None = None) -> dict:
     """warmup_frames: each session's first frames, answered and counted as received but left out of
     the round trips, compute times, late and stale counts (a session's first frame sets up what
-    it keeps: about 30 ms in the map modes)."""
+    it keeps: about 30 ms in the map modes).
+    alongside: called with the session ids once they are open; the context it returns is entered
+    before the baseline and the streams and left when they end, so both are measured with it
+    running (load_tests.monitors_bench: a live monitor on each session)."""
     scene = build_demo_scene(seed=7, duration_s=max(seconds, 1.0))
     lens = Lens()
     nominal_hz = rate_hz or 60.0
@@ -148,8 +155,6 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
     frames = _frames(scene, n_frames, nominal_hz)
     driver = GrpcDriver(address) if transport == "grpc" else ZmqDriver(address)
     session_ids = [await driver.open_session(session_request(scene, lens, visibility)) for _ in range(sessions)]
-    baseline_s = [await driver.baseline() for _ in range(20)]  # warm-up
-    baseline_s = [await driver.baseline() for _ in range(500)]
     period = 1.0 / rate_hz if rate_hz else 0.0
     rtt_ms, compute_ms, received, late, stale = [], [], [0] * sessions, [0], [0]
 
@@ -164,13 +169,16 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
             stale[0] += update.stale
         return record
 
-    start = time.perf_counter() + 0.1
-    cpu_start_s = time.process_time()
-    # sessions start staggered over one frame period, as independent game clients would
-    results = await asyncio.gather(*(driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
-                                     for k, sid in enumerate(session_ids)), return_exceptions=True)
-    wall_s = time.perf_counter() - start
-    client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
+    async with alongside(session_ids) if alongside is not None else contextlib.nullcontext():
+        baseline_s = [await driver.baseline() for _ in range(20)]  # warm-up
+        baseline_s = [await driver.baseline() for _ in range(500)]
+        start = time.perf_counter() + 0.1
+        cpu_start_s = time.process_time()
+        # sessions start staggered over one frame period, as independent game clients would
+        results = await asyncio.gather(*(driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
+                                         for k, sid in enumerate(session_ids)), return_exceptions=True)
+        wall_s = time.perf_counter() - start
+        client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
     errors = [repr(r) for r in results if isinstance(r, BaseException)]
     await driver.close()
     sent = sessions * n_frames

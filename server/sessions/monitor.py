@@ -344,7 +344,10 @@ def main() -> int:
     """The render process: answers the worker until it closes stdin."""
     channel = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)   # whatever a library prints goes to stderr, never into the replies
-    os.nice(RENDER_NICENESS)
+    try:   # runs only on a core nothing else wants (its threads, llvmpipe's included, inherit it)
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):   # not Linux
+        os.nice(RENDER_NICENESS)
     inbox = sys.stdin.buffer
     painter = Painter()
     try:

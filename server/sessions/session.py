@@ -30,15 +30,17 @@ from camdirector.server.pipeline.tracks.rig import TracksRig
 
 @dataclass(frozen=True)
 class CutRecord:
-    """The session's last cut, for the monitors' before and after pictures: the two poses and the
-    scene as it was at the cut (the moving objects' and targets' transforms, the same for both)."""
+    """The session's last cut, for the monitors' before and after pictures: the two poses, the
+    targets in each of the two frames, and the moving objects as they were at the cut (for both:
+    keeping every object's frame before each frame would cost every frame what only a cut needs)."""
 
     frame_before: int
     pose_before: CameraPose
+    targets_before: list[RigidTransform]
     frame: int
     pose_after: CameraPose
+    targets_after: list[RigidTransform]
     dynamic: dict[str, tuple[TriMesh, RigidTransform]]
-    target_transforms: list[RigidTransform]
 
 
 class Session:
@@ -105,6 +107,7 @@ class Session:
         if last_time_s is not None and update.time_s < last_time_s:
             state.flags.append("time_went_back")
         self.last_input = (update.frame, update.time_s)
+        targets_before = list(self.view_target_transforms())   # a few references: the last cut's "before"
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
         for object_id, transform in update.states:
             index = self.target_index.get(object_id)
@@ -122,8 +125,8 @@ class Session:
         if state.cut:
             self.shot_id += 1
             if last is not None and last.pose is not None:  # a few references, on the frames that cut
-                self.last_cut = CutRecord(last.frame, last.pose, state.frame, state.pose, dict(self.dynamic),
-                                          list(self.view_target_transforms()))
+                self.last_cut = CutRecord(last.frame, last.pose, targets_before, state.frame, state.pose,
+                                          list(self.view_target_transforms()), dict(self.dynamic))
         state.shot_id = self.shot_id
         self.last_state = state
         self.frames_answered += 1

@@ -6,9 +6,9 @@ A view is one of:
 - `cut_before`, `cut_after`: the last frame before the session's last cut and the cut's own;
 - `top`: the world from straight above (static objects and the level), for the dashboard's top
   view: drawn once per session.
-Moving objects are drawn at their latest transforms (as of the cut for the cut views), targets
-at theirs (a MATCH session's players at the program's moment, which the broadcast delay puts
-behind the game).
+Moving objects are drawn at their latest transforms (as of the cut for both cut views), targets
+at theirs (in each of the cut's two frames for the cut views; a MATCH session's players at the
+program's moment, which the broadcast delay puts behind the game).
 
 A `RenderJob` is a snapshot taken on the worker's main thread between two frames: the pose and
 every moving object's transform copied into arrays (tens of microseconds for a hundred moving
@@ -182,9 +182,9 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
         if cut is None:
             placeholder = "no cut yet"
         else:
-            frame = cut.frame if query.shot == "cut_after" else cut.frame_before
-            pose = cut.pose_after if query.shot == "cut_after" else cut.pose_before
-            dynamic, targets = cut.dynamic, cut.target_transforms
+            after = query.shot == "cut_after"
+            frame, pose = (cut.frame, cut.pose_after) if after else (cut.frame_before, cut.pose_before)
+            dynamic, targets = cut.dynamic, cut.targets_after if after else cut.targets_before
     moving = [(f"object:{object_id}", transform) for object_id, (_, transform) in dynamic.items()]
     moving += [(f"target:{t.id}", transform) for t, transform in zip(session.targets, targets)]
     transforms = [transform for _, transform in moving]

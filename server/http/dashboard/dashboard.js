@@ -1,11 +1,19 @@
 // The director's dashboard. Reads the REST API only: /healthz, /v1/sessions, /v1/sessions/{id},
 // PUT /v1/sessions/{id}/style, POST /v1/sessions/{id}/take (a MATCH session's take and release),
-// /v1/overview-jobs. Data is written with textContent, never as HTML.
+// the monitors' /v1/sessions/{id}/view, view.mjpeg and topview.png, /v1/overview-jobs. Data is
+// written with textContent, never as HTML.
 "use strict";
 
 const POLL_SESSIONS_MS = 1000;   // the session list and the jobs
 const POLL_SESSION_MS = 500;     // the selected session's frames
 const TOP_VIEW_MARGIN_M = 2.0;   // space around the trails in the top view, m
+const TOP_VIEW_RETRY_MS = 5000;  // a top view picture that failed (a busy renderer) is asked again after this
+
+// The monitors. A browser keeps about six connections per host and a live MJPEG stream holds one
+// for as long as it runs: the program monitor alone streams, the others are single pictures.
+const MONITOR_WIDTH_PX = 320;    // the pictures' width (the server's default); the height follows the lens
+const PROGRAM_FPS = 4;           // the program monitor's live stream, pictures a second
+const CANDIDATE_REFRESH_MS = 1000;   // candidate pictures: about once a second, not on every poll
 
 const MAP_MODES = ["ANTICIPATION", "NO_ANTICIPATION"];   // the styles that build the map
 
@@ -27,7 +35,11 @@ let selected = null;             // the selected session id
 let styleSentBySession = {};     // session id -> the style the form was last filled from (JSON text)
 let currentStyle = {};           // the selected session's style, as the server reported it
 let buffered = { session: null, frames: [], events: [] };   // the selected session's frames and game events seen
-let candidatesShown = "";        // the candidates the table shows (JSON), redrawn only when they change
+let candidatesShown = "";        // the candidate shots the table shows (JSON), rebuilt only when they change
+let candidatesPictured = { frame: null, ms: 0 };   // the frame the candidate monitors last asked for, and when
+let cutShown = null;             // the cut the before/after monitors show: "<session> <newest cut frame seen>"
+let cutPictures = [];            // their object URLs, released when replaced
+let topViews = {};               // session id -> its top view: { image, world } once fetched, { failedMs } after a failure
 
 async function api(path, options = {}) {
   const reply = await fetch(path, options);
@@ -72,12 +84,16 @@ async function refreshSessions() {
     body.appendChild(row);
   }
   document.getElementById("no-sessions").hidden = sessions.length > 0;
+  for (const id of Object.keys(topViews)) {   // an ended session's top view is not needed again
+    if (!sessions.some((s) => s.session_id === id)) delete topViews[id];
+  }
   if (selected && !sessions.some((s) => s.session_id === selected)) {
     document.getElementById("shot-summary").textContent = "the session has ended";
   }
 }
 
 function select(sessionId) {
+  const changed = sessionId !== selected;
   selected = sessionId;
   document.getElementById("session-panel").hidden = false;
   document.getElementById("session-id").textContent = sessionId;
@@ -85,7 +101,99 @@ function select(sessionId) {
   for (const row of document.querySelectorAll("#sessions tbody tr")) {
     row.classList.toggle("selected", row.dataset.session === sessionId);
   }
+  if (changed) watch(sessionId);
   refreshSession();
+}
+
+// -- monitors -------------------------------------------------------------------------------
+
+function sessionPath(sessionId) {
+  return `/v1/sessions/${encodeURIComponent(sessionId)}`;
+}
+
+function watch(sessionId) {   // the monitors of a newly selected session: its live stream, the others emptied
+  const program = document.getElementById("program-view");
+  // Set only here, never on a poll: each new src would open another stream.
+  program.src = `${sessionPath(sessionId)}/view.mjpeg?fps=${PROGRAM_FPS}&width=${MONITOR_WIDTH_PX}`;
+  document.getElementById("program-view-status").textContent = "";
+  cutShown = null;
+  for (const id of ["cut-before", "cut-after"]) document.getElementById(id).removeAttribute("src");
+  document.getElementById("cut-caption").textContent = "No cut yet.";
+  candidatesShown = "";
+  candidatesPictured = { frame: null, ms: 0 };
+  document.querySelector("#candidates tbody").replaceChildren();
+}
+
+function programStopped() {   // the stream ended (the session did) or was refused (too many streams)
+  document.getElementById("program-view-status").textContent =
+    "The live view stopped: the session ended, or the server serves its maximum of live views.";
+}
+
+async function picture(url) {   // a monitor's picture as an object URL, with the headers saying what it shows
+  const reply = await fetch(url);
+  if (!reply.ok) throw new Error(`${reply.status}: ${reply.statusText}`);
+  return { url: URL.createObjectURL(await reply.blob()), frame: reply.headers.get("X-Camdirector-Frame"),
+           placeholder: reply.headers.get("X-Camdirector-Placeholder") };
+}
+
+// The last cut's before and after, asked for when a newer cut appears in the frames (and once per
+// session, for a cut older than the frames kept). Fetched rather than set as src: the headers say
+// which cut the server holds (the session's first pose is a cut with nothing before it).
+async function showLastCut(frames) {
+  const sessionId = selected;
+  const cuts = frames.filter((f) => f.cut && f.camera);
+  const newest = cuts.length ? cuts[cuts.length - 1].frame : "none";
+  const key = `${sessionId} ${newest}`;
+  if (key === cutShown) return;
+  cutShown = key;
+  // The cut's frame in the address: a new picture per cut, never a cached one.
+  const base = `${sessionPath(sessionId)}/view?width=${MONITOR_WIDTH_PX}&frame=${newest}&shot=`;
+  let before, after;
+  try {
+    [before, after] = await Promise.all([picture(base + "cut_before"), picture(base + "cut_after")]);
+  } catch (error) {
+    if (cutShown === key) cutShown = null;   // asked again on the next poll
+    return;
+  }
+  if (cutShown !== key) {   // another session was picked, or a newer cut asked for, meanwhile
+    URL.revokeObjectURL(before.url);
+    URL.revokeObjectURL(after.url);
+    return;
+  }
+  cutPictures.forEach((url) => URL.revokeObjectURL(url));
+  cutPictures = [before.url, after.url];
+  document.getElementById("cut-before").src = before.url;
+  document.getElementById("cut-after").src = after.url;
+  document.getElementById("cut-caption").textContent = cutCaption(before, after, frames);
+}
+
+function cutCaption(before, after, frames) {
+  if (after.placeholder) return `Nothing to show: ${after.placeholder}.`;
+  const cut = frames.find((f) => String(f.frame) === after.frame);
+  const why = cut ? [cut.shot ? cut.shot.reason : null, ...cut.flags].filter(Boolean) : [];
+  return `Cut at frame ${after.frame} (from frame ${before.frame})` +
+    (cut ? ` to shot ${cut.shot_id}: ${why.length ? why.join(", ") : "new shot"}.` : ".");
+}
+
+// The top view's world: fetched once per session (the server draws it once), then drawn under
+// the trails on every poll.
+async function loadTopView(sessionId) {
+  const kept = topViews[sessionId];
+  if (kept && !(kept.failedMs && Date.now() - kept.failedMs >= TOP_VIEW_RETRY_MS)) return;
+  topViews[sessionId] = { pending: true };
+  try {
+    const reply = await fetch(`${sessionPath(sessionId)}/topview.png`);
+    if (!reply.ok) throw new Error(`${reply.status}`);
+    const bounds = reply.headers.get("X-Camdirector-Bounds-M");
+    if (!bounds) {   // no static geometry: the picture is a card saying so, nothing to draw under the trails
+      topViews[sessionId] = { image: null, world: null };
+      return;
+    }
+    const [x0, z0, x1, z1] = bounds.split(",").map(Number);
+    topViews[sessionId] = { image: await createImageBitmap(await reply.blob()), world: { x0, z0, x1, z1 } };
+  } catch (error) {
+    topViews[sessionId] = { failedMs: Date.now() };
+  }
 }
 
 async function refreshSession() {
@@ -112,6 +220,8 @@ async function refreshSession() {
     buffered.events = buffered.events.concat(fresh).slice(-EVENT_LOG_SIZE);
   }
   const frames = buffered.frames;
+  loadTopView(sessionId);
+  showLastCut(frames);
   drawTopView(frames);
   drawTimeline(frames);
   showWhy(frames);
@@ -129,7 +239,7 @@ function showAnticipationMap(style, frames) {
   }
 }
 
-function bounds(frames) {
+function bounds(frames, world) {   // the trails' with a margin, and all of the world's picture (its own margin in it)
   const xs = [], zs = [];
   const add = (p) => { xs.push(p[0]); zs.push(p[2]); };
   for (const f of frames) {
@@ -137,8 +247,11 @@ function bounds(frames) {
     f.targets.forEach(add);
   }
   for (const c of frames[frames.length - 1].candidates || []) add(c.camera);
-  return { x0: Math.min(...xs) - TOP_VIEW_MARGIN_M, x1: Math.max(...xs) + TOP_VIEW_MARGIN_M,
-           z0: Math.min(...zs) - TOP_VIEW_MARGIN_M, z1: Math.max(...zs) + TOP_VIEW_MARGIN_M };
+  const b = { x0: Math.min(...xs) - TOP_VIEW_MARGIN_M, x1: Math.max(...xs) + TOP_VIEW_MARGIN_M,
+              z0: Math.min(...zs) - TOP_VIEW_MARGIN_M, z1: Math.max(...zs) + TOP_VIEW_MARGIN_M };
+  if (!world) return b;
+  return { x0: Math.min(b.x0, world.x0), x1: Math.max(b.x1, world.x1),
+           z0: Math.min(b.z0, world.z0), z1: Math.max(b.z1, world.z1) };
 }
 
 function drawTopView(frames) {
@@ -146,9 +259,15 @@ function drawTopView(frames) {
   const g = canvas.getContext("2d");
   g.clearRect(0, 0, canvas.width, canvas.height);
   if (!frames.length) return;
-  const b = bounds(frames);
+  const { image, world } = topViews[selected] || {};
+  const b = bounds(frames, world);
   const scale = Math.min(canvas.width / (b.x1 - b.x0), canvas.height / (b.z1 - b.z0));
   const at = (p) => [(p[0] - b.x0) * scale, (p[2] - b.z0) * scale];
+  // The mapping drawn with, for tests and tools: canvas px = (world m - x0 or z0) * scale.
+  canvas.dataset.bounds = JSON.stringify({ ...b, scale, world: world || null });
+  if (world) {   // the picture spans its world rectangle exactly, x right and z down as here
+    g.drawImage(image, ...at([world.x0, 0, world.z0]), (world.x1 - world.x0) * scale, (world.z1 - world.z0) * scale);
+  }
   const trail = (points, colour) => {
     g.strokeStyle = colour;
     g.beginPath();
@@ -334,7 +453,7 @@ function showMatch(frames, events) {
     ? `in ${(cut.time_s - last.time_s).toFixed(1)} s (at ${cut.time_s.toFixed(1)} s) to ${describeShot(cut.shot)}: ` +
       cut.shot.reason
     : held ? "none while a take is held" : "none: the director decides as the game goes (a delay shows what it plans)";
-  showCandidates(last.candidates);
+  showCandidates(last.candidates, last.frame);
   const log = document.getElementById("event-log");
   log.replaceChildren(...events.slice().reverse().map((e) => {
     const li = document.createElement("li");
@@ -345,25 +464,57 @@ function showMatch(frames, events) {
   }));
 }
 
-function showCandidates(candidates) {
-  const key = JSON.stringify(candidates.map((c) => [c.shot, c.score]));
-  if (key === candidatesShown) return;   // a button does not move under the pointer between polls
-  candidatesShown = key;
+// One monitor per candidate shot, its take button under it. The rows are rebuilt only when the
+// shots offered change, so that a button does not move under the pointer between polls; their
+// reasons and interest are rewritten in place, and their pictures asked anew about once a second.
+function showCandidates(candidates, frame) {
   const body = document.querySelector("#candidates tbody");
-  body.replaceChildren();
-  for (const c of candidates) {
-    const row = document.createElement("tr");
-    row.dataset.subjects = c.shot.subject_ids.join(",");
-    cell(row, c.shot.kind.replace("SHOT_", ""));
-    cell(row, c.shot.subject_ids.join(", "));
-    cell(row, c.shot.reason);
-    cell(row, c.score.toFixed(2));
-    const button = document.createElement("button");
-    button.textContent = "take";
-    button.addEventListener("click", () => take({ subject_ids: c.shot.subject_ids, kind: c.shot.kind }));
-    cell(row, "").appendChild(button);
-    body.appendChild(row);
+  const key = JSON.stringify(candidates.map((c) => [c.shot.kind, c.shot.subject_ids]));
+  if (key !== candidatesShown) {
+    candidatesShown = key;
+    const kept = new Map([...body.rows].map((row) => [row.dataset.key, row]));   // their pictures stay
+    body.replaceChildren(...candidates.map((c) => kept.get(candidateKey(c)) || candidateRow(c)));
+    candidatesPictured = { frame: null, ms: 0 };   // a new monitor gets its picture now
   }
+  candidates.forEach((c, i) => {
+    const row = body.rows[i];
+    row.querySelector(".candidate-why").textContent = c.shot.reason;
+    row.querySelector(".candidate-interest").textContent = `interest ${c.score.toFixed(2)}`;
+  });
+  const now = Date.now();
+  if (frame === candidatesPictured.frame || now - candidatesPictured.ms < CANDIDATE_REFRESH_MS) return;
+  candidatesPictured = { frame, ms: now };
+  for (const img of body.querySelectorAll("img")) {   // the frame in the address: a new picture, not the cached one
+    img.src = `${sessionPath(selected)}/view?shot=candidate&subjects=${encodeURIComponent(img.dataset.subjects)}` +
+      `&width=${MONITOR_WIDTH_PX}&frame=${frame}`;
+  }
+}
+
+function candidateKey(c) {
+  return `${c.shot.kind} ${c.shot.subject_ids.join(",")}`;
+}
+
+function candidateRow(c) {
+  const row = document.createElement("tr");
+  row.dataset.key = candidateKey(c);
+  row.dataset.subjects = c.shot.subject_ids.join(",");
+  const img = document.createElement("img");
+  img.className = "monitor";
+  img.alt = `what the candidate shot of ${c.shot.subject_ids.join(", ")} would show`;
+  img.dataset.testid = "candidate-view";
+  img.dataset.subjects = row.dataset.subjects;
+  const monitor = cell(row, "");
+  monitor.className = "candidate-monitor";
+  monitor.appendChild(img);
+  cell(row, c.shot.kind.replace("SHOT_", "")).className = "candidate-kind";
+  cell(row, c.shot.subject_ids.join(", "));
+  cell(row, "").className = "candidate-why";
+  cell(row, "").className = "candidate-interest";
+  const button = document.createElement("button");
+  button.textContent = "take";
+  button.addEventListener("click", () => take({ subject_ids: c.shot.subject_ids, kind: c.shot.kind }));
+  cell(row, "").appendChild(button);
+  return row;
 }
 
 async function take(body) {
@@ -489,6 +640,7 @@ for (const threshold of document.querySelectorAll(".framing-lost")) threshold.te
 document.getElementById("style-form").addEventListener("submit", applyStyle);
 document.getElementById("release").addEventListener("click", () => take({ release: true }));
 document.getElementById("overview-form").addEventListener("submit", submitOverview);
+document.getElementById("program-view").addEventListener("error", programStopped);
 every(POLL_SESSIONS_MS, refreshSessions);
 every(POLL_SESSIONS_MS, refreshJobs);
 every(POLL_SESSION_MS, refreshSession);

@@ -142,9 +142,27 @@ class MatchRig:
             choice, subjects = self._fallback(moment, dead[0])
             choice = self.held = dataclasses.replace(choice, held=True)
             flags.append("take_fallback")
+        else:
+            previewed = self._previewed(choice, moment)
+            if previewed is not None:
+                return previewed
         shot, _ = self.builder.build(choice, subjects, moment, [moment], self.shot, None, moment.time_s)
         shot.held = True
         return shot
+
+    def _previewed(self, choice: ShotChoice, moment: Moment) -> Shot | None:
+        """A take of a shot the candidates offer goes to air as its preview monitor showed it:
+        the candidate's own camera and place, not a new search (a human took what they saw; the
+        30-degree rule is theirs to judge). None when no candidate matches the take."""
+        for candidate, camera, _ in self._candidates:
+            if camera is None or candidate.kind != choice.kind or set(candidate.subject_ids) != set(choice.subject_ids):
+                continue
+            if choice.kind == ShotKind.DUEL:
+                self.builder.grammar.remember_duel(self.players[camera.a_index], self.players[camera.b_index])
+            shot = Shot(choice, tuple(self.index[s] for s in candidate.subject_ids), camera, moment.time_s)
+            shot.held = True
+            return shot
+        return None
 
     def _fallback(self, moment: Moment, dead: int) -> tuple[ShotChoice, tuple[int, ...]]:
         who = self.players[dead]

@@ -5,13 +5,18 @@ client gets the new style on its next frame), sees a refused style's reason and,
 anticipation map; on the tracks rig, the scores of the targets it chose; in a match, the candidates,
 a take held until released (the streaming client gets it), the fallback's reason when the held
 player dies, the event log and, with a delay, the cut the director plans, which the program then
-makes; and submits a motion overview job, then watches its preview and contact sheet.
+makes; and submits a motion overview job, then watches its preview and contact sheet. The
+monitors (issue 16): the program view live as the session streams, the target in its colour where
+the camera's pose puts it; in a match, a monitor per candidate, a take that turns the program view
+to it, and the last cut's before and after; the top view drawn over the world seen from above.
 
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
 """
 from __future__ import annotations
 
+import base64
+import io
 import os
 import re
 import shutil
@@ -20,12 +25,14 @@ import time
 import httpx
 import numpy as np
 import pytest
+from PIL import Image
 
+from camdirector.geometry.camera import Lens, project_to_screen
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.server.test_match_sessions import PLAYERS, RATE_HZ, match_request
 from tests.server.test_match_sessions import frames as match_frames
-from tests.server.tracks_sessions import actor_frames, corridor_walk, obj_text, tracks_request
+from tests.server.tracks_sessions import actor_frames, corridor_walk, obj_text, pose_of, tracks_request
 from tests.server.wire_client import GrpcRaw, box_object, two_target_request, walk
 
 playwright = pytest.importorskip("playwright.sync_api")
@@ -302,3 +309,264 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
+
+
+# -- the monitors (issue 16) ------------------------------------------------------------------
+
+MONITOR_SHAPE = (180, 320, 3)   # dashboard.js MONITOR_WIDTH_PX, at the default lens's 16:9
+SAME_PICTURE = 4.0              # mean absolute difference (0-255) under which two pictures show one frame: JPEG's own is ~1-2
+
+
+def shown_pixels(img) -> np.ndarray:
+    """(h, w, 3) uint8: the picture an <img> shows now (a locator), drawn into a canvas in the page (the
+    picture is the page's own origin's, so the canvas stays readable) and brought back losslessly;
+    waits for a first picture."""
+    deadline = time.monotonic() + TIMEOUT_MS / 1000
+    while (url := img.evaluate("""img => {
+            if (!img.naturalWidth) return null;
+            const c = document.createElement('canvas');
+            c.width = img.naturalWidth;
+            c.height = img.naturalHeight;
+            c.getContext('2d').drawImage(img, 0, 0);
+            return c.toDataURL('image/png'); }""")) is None:
+        assert time.monotonic() < deadline, "the monitor shows no picture"
+        time.sleep(0.1)
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"))
+
+
+def difference(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a.astype(np.int16) - b.astype(np.int16)).mean())
+
+
+def wait_for_picture(img, ok, what: str, timeout_s: float = 30.0) -> np.ndarray:
+    """The picture the <img> shows once ok(pixels) holds (a live stream changes it by itself)."""
+    deadline = time.monotonic() + timeout_s
+    while not ok(pixels := shown_pixels(img)):
+        assert time.monotonic() < deadline, what
+        time.sleep(0.2)
+    return pixels
+
+
+def served_view(http: httpx.Client, session_id: str, frame: int, **query) -> np.ndarray:
+    """The server's own picture of a view (PNG, lossless) once it shows `frame`."""
+    deadline = time.monotonic() + 30.0
+    while True:
+        reply = http.get(f"/v1/sessions/{session_id}/view", params={"format": "png", **query})
+        assert reply.status_code == 200, reply.text
+        if reply.headers.get("X-Camdirector-Frame") == str(frame):
+            assert "X-Camdirector-Placeholder" not in reply.headers
+            return np.asarray(Image.open(io.BytesIO(reply.content)).convert("RGB"))
+        assert time.monotonic() < deadline, f"the view never showed frame {frame}"
+        time.sleep(0.1)
+
+
+def pixel_at(pixels: np.ndarray, screen) -> np.ndarray:
+    """The median colour of the 3 x 3 pixels at a normalised screen point (x right, y up, [-1, 1])."""
+    h, w = pixels.shape[:2]
+    col, row = int((screen[0] + 1.0) / 2.0 * w), int((1.0 - screen[1]) / 2.0 * h)
+    assert 1 <= col < w - 1 and 1 <= row < h - 1, f"{screen} is off the picture"
+    return np.median(pixels[row - 1:row + 2, col - 1:col + 2].reshape(-1, 3), axis=0)
+
+
+def orange_like(rgb) -> bool:
+    """The targets' #e07b00 (team 0's too) as the light shades it: red, green about half of it, no blue."""
+    r, g, b = (float(v) for v in rgb)
+    return r >= 60 and 0.35 * r <= g <= 0.75 * r and b <= 0.2 * r
+
+
+def purple_like(rgb) -> bool:
+    """Team 1's #8e24aa as the light shades it: red and blue, green far under both."""
+    r, g, b = (float(v) for v in rgb)
+    return b >= 50 and 0.5 * b <= r <= 1.2 * b and g <= 0.5 * min(r, b)
+
+
+def position(update: pb.FrameUpdate, object_id: str) -> np.ndarray:
+    p = next(s.transform.position for s in update.states if s.id == object_id)
+    return np.array([p.x, p.y, p.z])
+
+
+def test_the_program_monitor_shows_the_camera_view_live(server, page):
+    """Two targets on a ground, target a walking: the program monitor's picture changes as the
+    session streams; once it stops, it is the server's picture of the last frame, with each target
+    in its orange where the last CameraUpdate's pose projects it, and no orange away from them."""
+    request = two_target_request(seed=5, style=pb.Style(visibility=pb.FRAMING_ONLY))
+    del request.objects[0]                                   # no pillar: FRAMING_ONLY would film it
+    request.objects.append(box_object("ground", (0.0, -0.05, 4.0), (24.0, 0.1, 24.0)))
+    raw = GrpcRaw(server.grpc)
+    http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
+    session_id = raw.call("CreateSession", request).session_id
+    raw.stream(list(walk(session_id, 60)))
+    try:
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        program = page.locator("#program-view")
+        playwright.expect(program).to_have_attribute(
+            "src", re.compile(rf"/v1/sessions/{session_id}/view\.mjpeg\?fps=4&width=320$"))
+        first = served_view(http, session_id, 60)
+        before = wait_for_picture(program, lambda p: difference(p, first) < SAME_PICTURE, "the monitor never showed frame 60")
+        assert before.shape == MONITOR_SHAPE
+        playwright.expect(page.locator("#cut-caption")).to_have_text(   # the first pose has nothing before it
+            "Nothing to show: no cut yet.")
+
+        streamed = list(walk(session_id, 60, start_frame=61))
+        updates = raw.stream(streamed)
+        last = served_view(http, session_id, 120)
+        assert difference(last, first) > 3 * SAME_PICTURE                  # a second on, another picture
+        shown = wait_for_picture(program, lambda p: difference(p, last) < SAME_PICTURE,
+                                 "the live monitor never showed frame 120")
+
+        update = updates[-1]
+        assert update.frame == 120
+        lens = Lens(vertical_fov_deg=update.pose.vertical_fov_deg, aspect=MONITOR_SHAPE[1] / MONITOR_SHAPE[0])
+        a, b = position(streamed[-1], "a"), np.array([3.0, 0.9, 1.0])       # b stands still
+        centres = np.array([a, a + [0.0, 0.6, 0.0], b, b + [0.0, 0.6, 0.0]])   # bodies and aim points
+        screen = project_to_screen(pose_of(update), lens, centres)
+        for point, at in zip(centres, screen):
+            assert orange_like(pixel_at(shown, at)), f"{point} at {at}: {pixel_at(shown, at)} is not the targets' orange"
+        corners = np.array([[-0.95, 0.95], [0.95, 0.95], [-0.95, -0.95], [0.95, -0.95]])
+        far = corners[np.argmax([np.linalg.norm(screen - c, axis=1).min() for c in corners])]
+        assert not orange_like(pixel_at(shown, far)), f"{far}: {pixel_at(shown, far)}"   # ground, sky or the cart
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+        http.close()
+
+
+def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(server, page):
+    """A match with a 1 s delay: each candidate listed has its monitor, with its players, reason and
+    interest; taking one puts the program on its players: the program monitor changes, and now shows
+    the taken player in its team's colour where the program's pose projects it, a picture nearer
+    the candidate's monitor than the program's before; the last cut's pair and caption follow."""
+    raw = GrpcRaw(server.grpc)
+    http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
+    session_id = raw.call("CreateSession", match_request(delay_s=1.0)).session_id
+    streamed = list(match_frames(session_id, 90))
+    raw.stream(streamed)
+    try:
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        playwright.expect(page.locator("#match-view")).to_be_visible()
+        frame = http.get(f"/v1/sessions/{session_id}").json()["frames"][-1]
+        listed = frame["candidates"]
+        assert len(listed) >= 2
+        rows = page.locator("#candidates tbody tr")
+        playwright.expect(rows).to_have_count(len(listed))
+        monitors = page.locator('#candidates [data-testid="candidate-view"]')
+        playwright.expect(monitors).to_have_count(len(listed))
+        page.wait_for_function("""() => [...document.querySelectorAll('#candidates img')].every(
+            i => i.complete && i.naturalWidth > 0)""")
+        for k, candidate in enumerate(listed):
+            row, subjects = rows.nth(k), ",".join(candidate["shot"]["subject_ids"])
+            assert row.get_attribute("data-subjects") == subjects
+            assert row.locator("img").get_attribute("data-subjects") == subjects
+            assert f"&frame={frame['frame']}" in row.locator("img").get_attribute("src")
+            for text in (candidate["shot"]["kind"].replace("SHOT_", ""), candidate["shot"]["reason"],
+                         f"interest {candidate['score']:.2f}"):
+                playwright.expect(row).to_contain_text(text)
+            assert row.locator("button").count() == 1
+
+        program = page.locator("#program-view")
+        served = served_view(http, session_id, frame["frame"])
+        before = wait_for_picture(program, lambda p: difference(p, served) < SAME_PICTURE, "the program monitor is stale")
+        # A player followed, not the other fight: a1 and b1 circle as a0 and b0 do, 8 m away, and
+        # a take films them from the program's own place, the same picture as now.
+        follow = next(k for k, c in enumerate(listed) if c["shot"]["kind"] == "SHOT_FOLLOW")
+        taken = listed[follow]["shot"]["subject_ids"]
+        candidate_monitor = rows.nth(follow).locator("img")
+        candidate = served_view(http, session_id, frame["frame"], shot="candidate", subjects=",".join(taken))
+        assert difference(shown_pixels(candidate_monitor), candidate) < SAME_PICTURE
+        assert difference(candidate, before) > 3 * SAME_PICTURE
+
+        rows.nth(follow).locator("button").click()
+        playwright.expect(page.locator("#take-result")).to_contain_text("held until released")
+        more = list(match_frames(session_id, 5, start=90))
+        updates = raw.stream(more)
+        assert all(list(u.shot.subject_ids) == taken for u in updates)
+        update = updates[-1]
+        frames = http.get(f"/v1/sessions/{session_id}").json()["frames"]
+        assert frames[-1]["frame"] == update.frame and frames[-1]["shot"]["subject_ids"] == taken
+        now = served_view(http, session_id, update.frame)
+        after = wait_for_picture(program, lambda p: difference(p, now) < SAME_PICTURE,
+                                 "the program monitor never showed the take")
+        assert difference(after, before) > 3 * SAME_PICTURE
+        assert difference(after, candidate) < difference(after, before)
+
+        player = taken[0]
+        moment = next(u for u in streamed + more if u.frame == update.frame)   # the program's moment
+        feet = position(moment, player)
+        lens = Lens(vertical_fov_deg=update.pose.vertical_fov_deg, aspect=MONITOR_SHAPE[1] / MONITOR_SHAPE[0])
+        team_colour = orange_like if player.startswith("a") else purple_like
+        for point in (feet, feet + [0.0, 0.6, 0.0]):
+            at = project_to_screen(pose_of(update), lens, point[None, :])[0]
+            assert team_colour(pixel_at(after, at)), f"{player} at {at}: {pixel_at(after, at)}"
+
+        cut = next(f for f in frames if f["cut"] and f["shot"]["subject_ids"] == taken)
+        playwright.expect(page.locator("#cut-caption")).to_have_text(
+            f"Cut at frame {cut['frame']} (from frame {cut['frame'] - 1}) to shot {cut['shot_id']}: "
+            "take: a human's choice, held until released.")
+        pair = {}
+        for shot, shown_frame in (("cut_before", cut["frame"] - 1), ("cut_after", cut["frame"])):
+            pair[shot] = served = served_view(http, session_id, shown_frame, shot=shot)
+            wait_for_picture(page.locator(f"#{shot.replace('_', '-')}"),
+                             lambda p, served=served: difference(p, served) < SAME_PICTURE,
+                             f"the {shot} monitor does not show frame {shown_frame}")
+        # The program's camera as it was (the players drawn as of the cut: a frame on, sessions/views.py).
+        assert difference(pair["cut_before"], before) < 2 * SAME_PICTURE
+        assert difference(pair["cut_after"], before) > 3 * SAME_PICTURE
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+        http.close()
+
+
+LEVEL_RGB_MIN = 60   # the level's beige (sessions/views.py LEVEL_RGB) lit from above: no channel darker
+
+
+def test_the_top_view_shows_the_level(server, page):
+    """A TRACKS session in a corridor: the top view draws the level seen from above under the
+    trails, mapped as the canvas says (data-bounds): a point on the floor far from the actor shows
+    the top view picture's own colour there, and the picture spans its world rectangle."""
+    http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
+    added = http.post("/v1/levels", data={"name": "dashboard-topview"},
+                      files={"level": ("corridor.obj", obj_text(corridor()).encode())})
+    assert added.status_code == 202, added.text
+    deadline = time.monotonic() + 60.0
+    while http.get(f"/v1/level-jobs/{added.json()['id']}").json()["status"] != "succeeded":
+        assert time.monotonic() < deadline, "the level job did not succeed"
+        time.sleep(0.1)
+    raw = GrpcRaw(server.grpc)
+    session_id = raw.call("CreateSession", tracks_request("dashboard-topview", (2.0, 0.0, 2.0))).session_id
+    times, feet = corridor_walk(2.0)
+    raw.stream(actor_frames(session_id, times, feet))
+    try:
+        reply = http.get(f"/v1/sessions/{session_id}/topview.png")
+        assert reply.status_code == 200
+        world = [float(v) for v in reply.headers["X-Camdirector-Bounds-M"].split(",")]
+        top = np.asarray(Image.open(io.BytesIO(reply.content)).convert("RGB"))
+        assert world[0] < 0.0 and world[2] > 30.0 and world[1] < 0.0 and world[3] > 4.0   # the corridor, 30 x 4 m
+
+        page.click(f'#sessions tbody tr[data-session="{session_id}"]')
+        page.wait_for_function("(JSON.parse(document.querySelector('#topview').dataset.bounds || '{}').world)")
+        drawn = page.eval_on_selector("#topview", "c => JSON.parse(c.dataset.bounds)")
+        assert [drawn["world"][k] for k in ("x0", "z0", "x1", "z1")] == pytest.approx(world)
+        assert drawn["x0"] <= world[0] and drawn["x1"] >= world[2] and drawn["z0"] <= world[1] and drawn["z1"] >= world[3]
+
+        def canvas_rgba(x_m: float, z_m: float) -> list[int]:
+            col, row = int((x_m - drawn["x0"]) * drawn["scale"]), int((z_m - drawn["z0"]) * drawn["scale"])
+            return page.eval_on_selector("#topview", "(c, [x, y]) => [...c.getContext('2d').getImageData(x, y, 1, 1).data]",
+                                         [col, row])
+
+        def picture_rgb(x_m: float, z_m: float) -> np.ndarray:
+            h, w = top.shape[:2]
+            return top[int((z_m - world[1]) / (world[3] - world[1]) * h), int((x_m - world[0]) / (world[2] - world[0]) * w)]
+
+        # Mid-squares of the floor's 2 m checker, far from the actor (x 2 to 5 m) and its camera.
+        for x_m, z_m in ((21.0, 1.0), (23.0, 1.0), (25.0, 3.0)):
+            rgba = canvas_rgba(x_m, z_m)
+            assert rgba[3] == 255 and min(rgba[:3]) >= LEVEL_RGB_MIN and max(rgba[:3]) < 250, (x_m, z_m, rgba)
+            assert np.abs(np.array(rgba[:3]) - picture_rgb(x_m, z_m)).max() <= 12, (x_m, z_m, rgba)
+        assert canvas_rgba(21.0, 1.0)[:3] != canvas_rgba(23.0, 1.0)[:3]   # the checker: neighbouring squares differ
+        playwright.expect(page.locator("figure", has=page.locator("#topview"))).to_contain_text("the world underneath")
+    finally:
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+        raw.close()
+        http.delete("/v1/levels/dashboard-topview")
+        http.close()

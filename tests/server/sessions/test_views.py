@@ -63,7 +63,7 @@ def test_no_pose_yet_a_missing_cut_and_a_candidate_outside_a_match_are_placehold
 
 def test_the_cut_views_show_the_two_poses_around_the_last_cut(table):
     session = table.held[_streamed(table, 10)].session
-    before_pose = session.last_state.pose
+    before_pose, walker_before = session.last_state.pose, session.target_transforms[0]
     assert session.last_cut is None   # the first pose is a cut from nothing: no before picture
     # A new composition cuts to it on the next frame (tests/server/test_director.py).
     table.update_style(pb.UpdateStyleRequest(session_id="s", style=pb.Style(
@@ -75,6 +75,12 @@ def test_the_cut_views_show_the_two_poses_around_the_last_cut(table):
     assert (before.frame, after.frame) == (cut.frame - 1, cut.frame)
     assert after.pose is cut.pose_after and before.pose is cut.pose_before is before_pose
     assert not np.allclose(before.pose.position_world, after.pose.position_world)
+    # the walking target where each frame had it; the sliding cart as of the cut in both
+    walker = before.moving_ids.index("target:a")
+    np.testing.assert_array_equal(before.positions_world[walker], walker_before.position_world)
+    np.testing.assert_array_equal(after.positions_world[walker], session.target_transforms[0].position_world)
+    assert not np.allclose(before.positions_world[walker], after.positions_world[walker])
+    np.testing.assert_array_equal(before.positions_world[0], after.positions_world[0])
 
 
 def test_a_match_candidate_view_is_the_candidates_camera_and_players_show_at_the_program_moment(table):

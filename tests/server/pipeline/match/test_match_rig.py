@@ -113,6 +113,23 @@ def test_take_is_held_past_max_shot_until_released():
     assert after[0].cut and after[0].shot.subject_ids != ("a2",)
 
 
+def test_taking_a_candidate_puts_its_previewed_camera_on_air():
+    """What the candidate's monitor showed is what the program cuts to: its camera and place, not
+    a new search (which for a1/b1 would film the fight from wherever the program stood)."""
+    match = Match(TEAMS, two_fronts, [], delay_s=0.0)
+    session, states = run_session(match, 1.0)
+    last = states[-1]
+    candidate = last.candidates[0]
+    session.rig.take(list(candidate.shot.subject_ids), candidate.shot.kind, release=False)
+    after = [session.frame(u) for u in list(match.frames(2.0))[31:]]
+    assert after[0].cut and set(after[0].shot.subject_ids) == set(candidate.shot.subject_ids) and after[0].shot.held
+    # one program frame later than the preview: the players moved a little, the place did not
+    assert np.linalg.norm(after[0].pose.position_world - candidate.pose.position_world) < 0.5
+    forward = [2.0 * np.array(q[:3]) for q in (after[0].pose.rotation_xyzw, candidate.pose.rotation_xyzw)]
+    assert np.linalg.norm(forward[0] - forward[1]) < 0.1
+    assert not any(s.cut for s in after[1:])
+
+
 def test_take_falls_back_to_the_attacker_when_the_held_player_dies():
     match = Match(TEAMS, two_fronts, [kill("a2", "b2", 3.0)], delay_s=0.0)
     session, _ = run_session(match, 1.0)
