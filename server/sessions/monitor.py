@@ -8,8 +8,9 @@ and talks to it over the process's stdin and stdout: length-prefixed pickles, bo
 this module. On the worker's side (`Monitor`), the main thread only takes the snapshot
 (views.render_job) and queues it; a writer thread sends it (and, once per session, the meshes),
 a reader thread takes the picture back and hands it to the caller's `reply`. The render process
-runs at a lower priority (nice RENDER_NICENESS) with llvmpipe on one thread, so that on a busy
-machine frames come first.
+runs under Linux's SCHED_IDLE policy (elsewhere at nice RENDER_NICENESS), with llvmpipe on one
+thread: it gets a core only when no frame wants it, so a busy machine starves the monitors, never
+the frames.
 
 In the render process (`Painter`): one EGL context; per session its meshes and one
 OffscreenRenderer per picture size (all sharing the context), the least recently used released
@@ -48,7 +49,7 @@ from camdirector.server.sessions.views import (
 
 log = logging.getLogger("camdirector.monitor")
 
-RENDER_NICENESS = 10        # added to the render process's niceness: frames first on a busy machine
+RENDER_NICENESS = 10        # where SCHED_IDLE is missing: added to the render process's niceness
 RENDERERS_KEPT = 8          # OffscreenRenderers kept per render process (sessions x picture sizes)
 JPEG_QUALITY = 80           # [1, 95]: 320x180 pictures of 5-15 KB
 TOP_VIEW_MARGIN_M = 1.0     # world kept around the static geometry in the top view, m
