@@ -80,17 +80,20 @@ def test_dashboard_bench_reports_watched_against_alone(tmp_path):
 
 
 def test_monitors_bench_reports_render_cost_and_watched_against_unwatched(tmp_path):
-    result = _run(monitors_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1", "--renders", "3")
-    assert result["unwatched"]["dropped_frames"] == result["watched"]["dropped_frames"] == 0
-    watched = result["watched"]
+    result = _run(monitors_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1", "--renders", "3",
+                  "--rounds", "1")
+    (round_,) = result["rounds"]
+    assert round_["unwatched"]["dropped_frames"] == round_["watched"]["dropped_frames"] == 0
+    watched = round_["watched"]
     assert watched["monitors"] == watched["server_view_streams"] == 1 and not watched["monitor_errors"]
     assert watched["monitor_parts_min"] >= 1 and watched["view_renders"] >= 1
     assert set(result["rtt_ratio_watched_vs_unwatched"]) == {"p50", "p99"}
-    assert result["unwatched"]["baseline_rtt_ms"]["p50"] > 0 and watched["baseline_rtt_ms"]["p50"] > 0
+    assert round_["unwatched"]["baseline_rtt_ms"]["p50"] > 0 and watched["baseline_rtt_ms"]["p50"] > 0
     render = result["render"]
     assert render["picture_px"] == [320, 180] and render["placeholders"] == 0
     assert render["frames_shown"] == render["render_ms"]["n"] == 3, "each ask is a render of its own frame"
     assert render["render_ms"]["median"] > 0 and render["image_bytes"]["median"] > 0
+
 
 def test_soak_reports_memory_and_descriptors_over_every_kind_of_session(tmp_path):
     result = _run(soak.main, tmp_path, "--minutes", "0.05", "--warmup-s", "2", "--sample-s", "0.5",
