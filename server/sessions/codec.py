@@ -14,10 +14,19 @@ A MATCH session (`RIG_MATCH`) has 2 to 64 targets, the players, each with its `t
 as are `events` and the MATCH style fields). A frame's events name players of the session
 (a kill both its attacker and its victim), have a priority in [0, 15] (0: the kind's default) and a
 time no later than the frame's time plus the delay (0: the frame's time).
+
+`pose_outputs` (at most 8) are checked here, before the scene: a known format, an address
+`udp://HOST:PORT` whose HOST is an IPv4 address or a name that resolves to one (once, here, within
+2 s; IPv6 is refused: OpenTrackIO 1.0.1 has none), a port in [1, 65535], a source number in the
+format's range and a sensor height in [1, 100] mm (0: 24). Sending is sessions/pose_out.py's.
 """
 from __future__ import annotations
 
+import ipaddress
 import math
+import socket
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 
 import numpy as np
 
@@ -32,6 +41,7 @@ from camdirector.server.pipeline.stages import FrameState, ShotChoice, ShotKind
 from camdirector.server.pipeline.style import MapBackendChoice, MatchDirectorKind, Movement, Rig, ShotSize, Style, VisibilityMode
 from camdirector.server.pipeline.toric.anticipation import MaskKind
 from camdirector.server.sessions.levels import LevelCache
+from camdirector.server.sessions.pose_out import PoseFormat, PoseOutputSpec
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 
@@ -48,6 +58,14 @@ _SHOT_SIZES = {pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG, pb.SHOT_SIZE_MEDIUM: Sho
                pb.SHOT_SIZE_LONG: ShotSize.LONG, pb.SHOT_SIZE_EXTREME_LONG: ShotSize.EXTREME_LONG}
 _MOVEMENTS = {pb.MOVEMENT_UNSPECIFIED: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_DYNAMIC_NO_CUTS: Movement.DYNAMIC_NO_CUTS,
               pb.MOVEMENT_DYNAMIC_WITH_CUTS: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_STATIC: Movement.STATIC}
+MAX_POSE_OUTPUTS = 8            # pose outputs of a session (the wire contract)
+DEFAULT_SENSOR_HEIGHT_MM = 24.0  # a pose output's sensor_height_mm when 0: a full-frame 35 mm still sensor
+SENSOR_HEIGHT_RANGE_MM = (1.0, 100.0)
+SOURCE_NUMBER_RANGES = {PoseFormat.OPENTRACKIO_JSON: (1, 200),  # OpenTrackIO: "Source Numbers above 200 are reserved"
+                        PoseFormat.OPENTRACKIO_CBOR: (1, 200),
+                        PoseFormat.FREED_D1: (1, 255)}          # FreeD: the camera id byte
+RESOLVE_TIMEOUT_S = 2.0          # a pose output's host name must resolve within this, s
+_resolver: ThreadPoolExecutor | None = None  # looks names up off the worker's thread, so a slow one cannot hold it
 MIN_ALPHA_RAD = math.radians(0.5)  # screen points closer than this angle give no usable torus
 PACKED_STRIDE = 10                 # doubles per object in FrameUpdate.packed_transforms
 
@@ -239,6 +257,80 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
         raise invalid(f"level_id {req.level_id!r} is for the TRACKS and MATCH rigs: set style.rig = RIG_TRACKS or "
                       "leave level_id empty")
     return SceneSpec(objects, targets, lens, style, int(req.seed), level, delay_s=float(req.delay_s))
+
+
+def _resolve_ipv4(host: str, what: str) -> str:
+    """host as an IPv4 address: an address as it is, a name looked up (INVALID_ARGUMENT when it
+    does not resolve to one within RESOLVE_TIMEOUT_S)."""
+    try:
+        return str(ipaddress.IPv4Address(host))
+    except ValueError:
+        pass
+    if ":" in host or not all(c.isalnum() or c in "-._" for c in host) or not host.isascii():
+        raise invalid(f"{what}: host {host!r} is neither an IPv4 address nor a host name (IPv6 is not supported: "
+                      "OpenTrackIO 1.0.1 runs over IPv4)")
+    global _resolver
+    if _resolver is None:
+        _resolver = ThreadPoolExecutor(max_workers=2, thread_name_prefix="pose-output-resolve")
+    lookup = _resolver.submit(socket.getaddrinfo, host, None, socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        return lookup.result(timeout=RESOLVE_TIMEOUT_S)[0][4][0]
+    except FutureTimeout:
+        raise invalid(f"{what}: host {host!r} did not resolve within {RESOLVE_TIMEOUT_S:g} s") from None
+    except (OSError, IndexError, UnicodeError):
+        raise invalid(f"{what}: host {host!r} does not resolve to an IPv4 address") from None
+
+
+def _udp_address(address: str, what: str) -> tuple[str, int]:
+    """(IPv4 address, port) of a `udp://HOST:PORT`."""
+    scheme, separator, rest = address.partition("://")
+    if not separator or scheme.lower() != "udp":
+        raise invalid(f"{what} {address!r} is not udp://HOST:PORT")
+    if rest.startswith("["):
+        raise invalid(f"{what} {address!r}: IPv6 is not supported (OpenTrackIO 1.0.1 runs over IPv4)")
+    if any(c in rest for c in "/?#@"):
+        raise invalid(f"{what} {address!r} has more than HOST:PORT after udp://")
+    host, colon, port_text = rest.rpartition(":")
+    if not colon:
+        raise invalid(f"{what} {address!r} has no port: write udp://HOST:PORT")
+    if not host:
+        raise invalid(f"{what} {address!r} has no host: write udp://HOST:PORT")
+    if not (port_text.isascii() and port_text.isdigit()):
+        raise invalid(f"{what} {address!r}: port {port_text!r} is not a number")
+    port = int(port_text)
+    if not 1 <= port <= 65535:
+        raise invalid(f"{what} {address!r}: port {port} is out of range [1, 65535]")
+    return _resolve_ipv4(host, what), port
+
+
+def pose_output_from_msg(msg: pb.PoseOutput, what: str) -> PoseOutputSpec:
+    try:
+        fmt = PoseFormat(msg.format)
+    except ValueError:
+        fmt = None
+    if fmt is None or fmt == PoseFormat.UNSPECIFIED:
+        problem = "is unset" if fmt is not None else f"{msg.format} is not a PoseFormat"
+        raise invalid(f"{what}.format {problem}: choose POSE_FORMAT_OPENTRACKIO_JSON, POSE_FORMAT_OPENTRACKIO_CBOR "
+                      "or POSE_FORMAT_FREED_D1")
+    low, high = SOURCE_NUMBER_RANGES[fmt]
+    source_number = msg.source_number or 1
+    if not low <= source_number <= high:
+        raise invalid(f"{what}.source_number must be in [{low}, {high}] for POSE_FORMAT_{fmt.name} (0 means 1), "
+                      f"got {msg.source_number}")
+    height = msg.sensor_height_mm or DEFAULT_SENSOR_HEIGHT_MM
+    low_mm, high_mm = SENSOR_HEIGHT_RANGE_MM
+    if not (math.isfinite(height) and low_mm <= height <= high_mm):
+        raise invalid(f"{what}.sensor_height_mm must be in [{low_mm:g}, {high_mm:g}] mm "
+                      f"(0 means {DEFAULT_SENSOR_HEIGHT_MM:g}), got {msg.sensor_height_mm}")
+    host, port = _udp_address(msg.address, f"{what}.address")
+    return PoseOutputSpec(fmt, msg.address, host, port, source_number, float(height))
+
+
+def pose_outputs_from_request(req: pb.CreateSessionRequest) -> list[PoseOutputSpec]:
+    """The session's pose outputs, checked (module docstring); empty when it asks for none."""
+    if len(req.pose_outputs) > MAX_POSE_OUTPUTS:
+        raise invalid(f"a session has at most {MAX_POSE_OUTPUTS} pose_outputs, got {len(req.pose_outputs)}")
+    return [pose_output_from_msg(output, f"pose_outputs[{i}]") for i, output in enumerate(req.pose_outputs)]
 
 
 def events_from_msg(msg: pb.FrameUpdate, players: frozenset[str] | None, delay_s: float) -> list[GameEvent]:

@@ -130,6 +130,9 @@ def replay(path: Path, on_frame=None, data_dir: Path | None = None) -> ReplayRep
     for entry in read_entries(path):
         kind = entry.WhichOneof("entry")
         if kind == "create":
+            # A replay answers the frames again, it does not broadcast them: no datagram goes to the
+            # recorded pose outputs' addresses (which need not even resolve on this machine).
+            entry.create.ClearField("pose_outputs")
             table.create(session_id, entry.create)
         elif kind == "frame":
             frame = pb.FrameUpdate()

@@ -18,6 +18,7 @@ from camdirector.server.sessions import codec
 from camdirector.server.sessions.levels import LevelCache
 from camdirector.server.sessions.map_view import anticipation_png
 from camdirector.server.sessions.monitor import Monitor, Reply
+from camdirector.server.sessions.pose_out import PoseSender
 from camdirector.server.sessions.recording import RecordingWriter
 from camdirector.server.sessions.session import Session
 from camdirector.server.sessions.timeline import Timeline
@@ -40,12 +41,14 @@ class FrameMetrics:
 @dataclass
 class HeldSession:
     """What the table keeps for one session: the pipeline's Session and, at the edge, the style
-    as the client last sent it, the recent frames for the dashboard, the recorder if recording."""
+    as the client last sent it, the recent frames for the dashboard, the recorder if recording,
+    the sender of its pose outputs if it asked for any."""
 
     session: Session
     style_msg: pb.Style
     timeline: Timeline = field(default_factory=Timeline)
     recorder: RecordingWriter | None = None
+    pose_sender: PoseSender | None = None
 
 
 class SessionTable:
@@ -63,8 +66,11 @@ class SessionTable:
         return held
 
     def create(self, session_id: str, req: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+        pose_outputs = codec.pose_outputs_from_request(req)  # cheap checks before the scene's meshes
         scene = codec.scene_from_request(req, self.settings, self.levels)
         held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
+        if pose_outputs:  # a failure from here on drops the session (handle_bytes)
+            held.pose_sender = PoseSender(session_id, pose_outputs, scene.lens.aspect)
         response = pb.CreateSessionResponse(session_id=session_id)
         if req.record or self.settings.record_all:
             path = self.settings.recordings_dir / f"{session_id}.cdrec"
@@ -89,6 +95,7 @@ class SessionTable:
                 message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
             reply.frame, reply.time_s = msg.frame, msg.time_s
             stage_ms = {}
+            state = None
         else:
             update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids, session.players, session.delay_s)
             state = session.frame(update)
@@ -99,6 +106,8 @@ class SessionTable:
         body = reply.SerializeToString()
         if held.recorder is not None:
             held.recorder.write_frame_and_camera(payload, body)
+        if held.pose_sender is not None and state is not None and state.pose is not None:
+            held.pose_sender.send(state.pose, state.time_s)  # microseconds; drops rather than fails (pose_out.py)
         return body, FrameMetrics(reply.compute_ms, stage_ms, reply.stale)
 
     def update_style(self, msg: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
@@ -125,11 +134,14 @@ class SessionTable:
         return pb.TakeShotResponse() if shot is None else pb.TakeShotResponse(shot=codec.shot_msg(shot))
 
     def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
-        """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it)
-        and its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first."""
+        """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it),
+        its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first, and
+        with pose outputs their counts (`pose_outputs`: format, address, sent, dropped, last_error)."""
         held = self._get(session_id)
-        return {"style": json_format.MessageToDict(held.style_msg),
-                "frames": held.timeline.as_json(last, after_frame)}
+        detail = {"style": json_format.MessageToDict(held.style_msg), "frames": held.timeline.as_json(last, after_frame)}
+        if held.pose_sender is not None:  # each output's datagrams sent and dropped (pose_out.py)
+            detail["pose_outputs"] = held.pose_sender.status()
+        return detail
 
     def anticipation_png(self, session_id: str) -> bytes:
         """The session's A-map as a PNG (map_view.py); FAILED_PRECONDITION when it has none (not
@@ -160,10 +172,13 @@ class SessionTable:
 
     def drop(self, session_id: str) -> None:
         """Ends a session if present, releasing what it holds (its occlusion maps' GL objects or
-        Embree scenes, its recording file): on close, on reclaiming an abandoned one, on a failed create."""
+        Embree scenes, its recording file, its pose outputs' socket): on close, on reclaiming an
+        abandoned one, on a failed create."""
         held = self.held.pop(session_id, None)
         if held is None:
             return
+        if held.pose_sender is not None:
+            held.pose_sender.close()
         if self.monitor is not None:
             self.monitor.forget(session_id)
         try:

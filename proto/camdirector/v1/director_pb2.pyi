@@ -56,6 +56,13 @@ class MatchDirector(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     MATCH_DIRECTOR_PLANNED: _ClassVar[MatchDirector]
     MATCH_DIRECTOR_HLTV: _ClassVar[MatchDirector]
 
+class PoseFormat(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    POSE_FORMAT_UNSPECIFIED: _ClassVar[PoseFormat]
+    POSE_FORMAT_OPENTRACKIO_JSON: _ClassVar[PoseFormat]
+    POSE_FORMAT_OPENTRACKIO_CBOR: _ClassVar[PoseFormat]
+    POSE_FORMAT_FREED_D1: _ClassVar[PoseFormat]
+
 class EventKind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     __slots__ = ()
     EVENT_KIND_UNSPECIFIED: _ClassVar[EventKind]
@@ -99,6 +106,10 @@ MOVEMENT_STATIC: Movement
 MATCH_DIRECTOR_UNSPECIFIED: MatchDirector
 MATCH_DIRECTOR_PLANNED: MatchDirector
 MATCH_DIRECTOR_HLTV: MatchDirector
+POSE_FORMAT_UNSPECIFIED: PoseFormat
+POSE_FORMAT_OPENTRACKIO_JSON: PoseFormat
+POSE_FORMAT_OPENTRACKIO_CBOR: PoseFormat
+POSE_FORMAT_FREED_D1: PoseFormat
 EVENT_KIND_UNSPECIFIED: EventKind
 EVENT_KILL: EventKind
 EVENT_DAMAGE: EventKind
@@ -281,7 +292,7 @@ class Style(_message.Message):
     def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ..., match_director: _Optional[_Union[MatchDirector, str]] = ..., min_shot_s: _Optional[float] = ..., max_shot_s: _Optional[float] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
-    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id", "delay_s")
+    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id", "delay_s", "pose_outputs")
     OBJECTS_FIELD_NUMBER: _ClassVar[int]
     TARGETS_FIELD_NUMBER: _ClassVar[int]
     LENS_FIELD_NUMBER: _ClassVar[int]
@@ -290,6 +301,7 @@ class CreateSessionRequest(_message.Message):
     RECORD_FIELD_NUMBER: _ClassVar[int]
     LEVEL_ID_FIELD_NUMBER: _ClassVar[int]
     DELAY_S_FIELD_NUMBER: _ClassVar[int]
+    POSE_OUTPUTS_FIELD_NUMBER: _ClassVar[int]
     objects: _containers.RepeatedCompositeFieldContainer[SceneObject]
     targets: _containers.RepeatedCompositeFieldContainer[Target]
     lens: Lens
@@ -298,7 +310,20 @@ class CreateSessionRequest(_message.Message):
     record: bool
     level_id: str
     delay_s: float
-    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ..., delay_s: _Optional[float] = ...) -> None: ...
+    pose_outputs: _containers.RepeatedCompositeFieldContainer[PoseOutput]
+    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ..., delay_s: _Optional[float] = ..., pose_outputs: _Optional[_Iterable[_Union[PoseOutput, _Mapping]]] = ...) -> None: ...
+
+class PoseOutput(_message.Message):
+    __slots__ = ("format", "address", "source_number", "sensor_height_mm")
+    FORMAT_FIELD_NUMBER: _ClassVar[int]
+    ADDRESS_FIELD_NUMBER: _ClassVar[int]
+    SOURCE_NUMBER_FIELD_NUMBER: _ClassVar[int]
+    SENSOR_HEIGHT_MM_FIELD_NUMBER: _ClassVar[int]
+    format: PoseFormat
+    address: str
+    source_number: int
+    sensor_height_mm: float
+    def __init__(self, format: _Optional[_Union[PoseFormat, str]] = ..., address: _Optional[str] = ..., source_number: _Optional[int] = ..., sensor_height_mm: _Optional[float] = ...) -> None: ...
 
 class CreateSessionResponse(_message.Message):
     __slots__ = ("session_id", "recording_path")

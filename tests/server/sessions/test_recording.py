@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -71,3 +72,36 @@ def test_replay_refuses_a_file_that_is_not_a_recording(tmp_path):
     out = subprocess.run([sys.executable, "-m", "camdirector.server.cli", "replay", str(bogus)],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "not a camdirector recording" in out.stderr
+
+
+def test_a_replay_sends_no_pose_output(server):
+    """A session recorded with a pose output replays bit for bit without sending one datagram to
+    the recorded address (a replay answers frames again, it does not broadcast them)."""
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(2.0)
+    request = two_target_request(seed=21, record=True)
+    request.pose_outputs.add(format=pb.POSE_FORMAT_FREED_D1, address=f"udp://127.0.0.1:{receiver.getsockname()[1]}")
+    client = GrpcRaw(server.grpc)
+    response = client.call("CreateSession", request)
+    client.stream(list(walk(response.session_id, 30)))
+    client.call("CloseSession", pb.CloseSessionRequest(session_id=response.session_id))
+    client.close()
+    live = 0
+    try:
+        while True:
+            receiver.recv(64)
+            live += 1
+    except TimeoutError:
+        pass
+    assert live == 30, "the live session sent one datagram a frame"
+    result = replay(Path(response.recording_path))
+    receiver.settimeout(1.0)
+    try:
+        receiver.recv(64)
+        raise AssertionError("the replay sent a pose output")
+    except TimeoutError:
+        pass
+    finally:
+        receiver.close()
+    assert result.ok and result.identical == 30
