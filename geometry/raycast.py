@@ -136,18 +136,19 @@ class RayScene:
         ends = origins + directions * t_max[:, None]
         gap = np.maximum(np.maximum(np.minimum(origins, ends).min(axis=0) - centres,
                                     centres - np.maximum(origins, ends).max(axis=0)), 0.0)  # (m, 3)
-        candidates = np.flatnonzero(np.einsum("mk,mk->m", gap, gap) <= radii * radii)
+        candidates = np.flatnonzero((gap * gap).sum(axis=1) <= radii * radii)
         if not len(candidates):
             return none
         # Every (candidate, ray) pair in the candidate's frame, clipped to its local sphere
         # |o + t d| <= reach: the clip is the per-pair cull (no world-space test before it).
         scene, offsets, reach = self._local_scene()
-        a_local = linear[candidates]
-        o = np.einsum("cij,nj->cni", a_local, origins) + translation[candidates][:, None, :]  # (c, n, 3)
-        d = np.einsum("cij,nj->cni", a_local, directions)
-        a = np.maximum(np.einsum("cnk,cnk->cn", d, d), 1e-300)
-        half_b = np.einsum("cnk,cnk->cn", o, d)
-        disc = half_b * half_b - a * (np.einsum("cnk,cnk->cn", o, o) - (reach[candidates] ** 2)[:, None])
+        # Products written as matmul and sums: einsum's set-up costs ~7 us a call at these sizes.
+        a_local_t = linear[candidates].transpose(0, 2, 1)
+        o = origins @ a_local_t + translation[candidates][:, None, :]  # (c, n, 3)
+        d = directions @ a_local_t
+        a = np.maximum((d * d).sum(axis=2), 1e-300)
+        half_b = (o * d).sum(axis=2)
+        disc = half_b * half_b - a * ((o * o).sum(axis=2) - (reach[candidates] ** 2)[:, None])
         root = np.sqrt(np.maximum(disc, 0.0))
         t_in = np.maximum((-half_b - root) / a, 0.0)
         t_out = np.minimum((-half_b + root) / a, t_max[None, :])
