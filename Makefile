@@ -19,7 +19,7 @@ run: $(STAMP)
 	$(BIN)/camdirector demo --out out
 
 test: $(STAMP)
-	bash scripts/system-deps.sh --browser
+	bash scripts/system-deps.sh --tests
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
 

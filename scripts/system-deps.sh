@@ -1,18 +1,33 @@
 #!/usr/bin/env bash
 # System libraries the project needs beyond PyPI: Mesa's EGL (offscreen OpenGL, llvmpipe on
 # machines without a GPU). Installs them with apt-get when missing and we are root.
-# `system-deps.sh --browser` (make test) also wants Debian's Chromium, which the dashboard's
-# browser tests drive; without root that one is only reported (those tests then skip, CI fails).
+# `system-deps.sh --tests` (make test) also wants what the tests drive: Debian's Chromium for the
+# dashboard's browser tests, and the C/C++ SDK's toolchain (client_sdk/cpp: CMake, g++, gRPC and
+# protobuf for C++; `--cpp` asks for that one alone); without root those are only reported
+# (their tests then skip, CI fails).
 set -euo pipefail
 need=()
 ldconfig -p | grep -q 'libEGL.so.1' || need+=(libegl1)
 ldconfig -p | grep -q 'libEGL_mesa.so.0' || need+=(libegl-mesa0 libgl1-mesa-dri libgbm1)
 ldconfig -p | grep -q 'libGL.so.1' || need+=(libgl1)
-if [ "${1:-}" = "--browser" ] && ! command -v chromium >/dev/null; then
+optional=()
+if [ "${1:-}" = "--tests" ] && ! command -v chromium >/dev/null; then
+  optional+=(chromium)
+fi
+if [ "${1:-}" = "--tests" ] || [ "${1:-}" = "--cpp" ]; then
+  command -v cmake >/dev/null || optional+=(cmake)
+  command -v g++ >/dev/null || optional+=(g++)
+  command -v pkg-config >/dev/null || optional+=(pkg-config)
+  command -v protoc >/dev/null || optional+=(protobuf-compiler)
+  command -v grpc_cpp_plugin >/dev/null || optional+=(protobuf-compiler-grpc)
+  { command -v pkg-config >/dev/null && pkg-config --exists protobuf; } || optional+=(libprotobuf-dev)
+  { command -v pkg-config >/dev/null && pkg-config --exists grpc++; } || optional+=(libgrpc++-dev)
+fi
+if [ ${#optional[@]} -gt 0 ]; then
   if [ "$(id -u)" -ne 0 ]; then
-    echo "no chromium: the dashboard's browser tests will skip (install Debian's chromium as root)" >&2
+    echo "missing for some tests: ${optional[*]} (the dashboard's browser tests or the C++ SDK's tests will skip; install them as root)" >&2
   else
-    need+=(chromium)
+    need+=("${optional[@]}")
   fi
 fi
 if [ ${#need[@]} -eq 0 ]; then exit 0; fi

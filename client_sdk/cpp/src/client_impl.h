@@ -1,0 +1,166 @@
+// The client behind the opaque cd_client handle: shared state, the frame queue, the stream
+// reactor and the I/O thread's loop. Internal to the library.
+//
+// Threads and what they touch (every field below `mu` is guarded by it):
+//   game thread   cd_frame_submit pushes into `ring`; cd_pose_poll / cd_event_poll copy out.
+//   I/O thread    io_loop(): pops the ring, writes frames on the stream, reopens streams,
+//                 recreates the session; the only thread that calls methods of the stream.
+//   gRPC threads  FrameStream's callbacks publish answers and stream ends, then notify.
+//   caller        the blocking cd_session_* calls, with their own ClientContext and deadline.
+// No critical section does I/O or allocates on the game thread's path.
+#ifndef CAMDIRECTOR_CLIENT_IMPL_H
+#define CAMDIRECTOR_CLIENT_IMPL_H
+
+#include <grpcpp/grpcpp.h>
+
+#include <array>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "camdirector/camdirector.h"
+#include "camdirector/v1/director.grpc.pb.h"
+
+namespace camdirector::sdk {
+
+namespace pb = ::camdirector::v1;
+using Clock = std::chrono::steady_clock;
+
+constexpr size_t kEventCapacity = 64;
+constexpr double kFirstBackoffS = 0.05;
+constexpr double kRecreateTimeoutS = 10.0;
+constexpr double kConnectWaitS = 0.25;  // longest the I/O thread waits for a connection at once
+constexpr int kPackedWidth = 10;  // px py pz qx qy qz qw sx sy sz (FrameUpdate.packed_transforms)
+
+// "HOST:PORT" (and the other forms camdirector.h lists) as a gRPC target; false and a reason
+// for an address that does not parse.
+bool parse_address(const char* address, std::string* target, std::string* error);
+
+// Plain structs to a CreateSessionRequest; false and a reason for what the SDK refuses itself.
+bool build_request(const cd_session_desc& desc, pb::CreateSessionRequest* out, std::string* error);
+void fill_style(const cd_style& style, pb::Style* out);
+
+// Slots of a request: its targets in order, then its dynamic objects in order.
+std::vector<std::string> slot_ids_of(const pb::CreateSessionRequest& request);
+
+double seconds_since_epoch(Clock::time_point t);
+// A gRPC deadline (gRPC takes system_clock time points) timeout_s from now.
+std::chrono::system_clock::time_point grpc_deadline(double timeout_s);
+void copy_cstr(char* dst, size_t size, const std::string& src);
+
+class FrameStream;
+
+// One frame waiting in the queue: its states live in Client::ring_states at a fixed place.
+struct QueuedFrame {
+  uint64_t frame = 0;
+  double time_s = 0.0;
+  uint32_t count = 0;
+};
+
+enum class Phase {
+  kIdle,      // no session
+  kStream,    // a session: keep a stream open on it (reopen at retry_at)
+  kRecreate,  // the session is unknown to the server: create it again at retry_at
+  kFailed,    // lost for good
+  kClosing,   // cd_session_close is tearing the stream down
+};
+
+}  // namespace camdirector::sdk
+
+struct cd_client {
+  using Phase = camdirector::sdk::Phase;
+  using Clock = camdirector::sdk::Clock;
+
+  cd_config config{};
+  std::string target;
+  std::shared_ptr<grpc::Channel> channel;
+  std::unique_ptr<camdirector::v1::Director::Stub> stub;
+  std::thread io_thread;
+
+  std::mutex mu;
+  std::condition_variable io_cv;      // wakes the I/O thread
+  std::condition_variable caller_cv;  // wakes blocking callers (flush, close)
+  bool stopping = false;
+  bool io_waiting = false;  // the I/O thread is blocked on io_cv (a submit must wake it)
+
+  // Session.
+  Phase phase = Phase::kIdle;
+  camdirector::v1::CreateSessionRequest request;  // kept to recreate the session
+  std::string session_id;
+  std::vector<std::string> slot_ids;
+  uint32_t generation = 0;
+  bool any_submitted = false;
+  uint64_t last_frame = 0;
+  double last_time_s = 0.0;
+
+  // Queue: a ring of `queue_capacity` frames, each with `max_states` states preallocated.
+  std::vector<camdirector::sdk::QueuedFrame> ring;
+  std::vector<cd_state> ring_states;
+  uint32_t ring_head = 0;
+  uint32_t ring_size = 0;
+  std::vector<cd_state> carry_states;  // a dropped frame's states, on their way to the next frame
+
+  // Stream (methods of `stream` are called by the I/O thread only, until it removes its hold).
+  camdirector::sdk::FrameStream* stream = nullptr;
+  bool stream_read_closed = false;
+  bool stream_hold_released = false;
+  bool stream_cancelled = false;
+  bool write_busy = false;
+  bool stream_done = false;           // OnDone ran; `stream` is gone
+  grpc::Status done_status;
+  bool stream_answered = false;       // the current stream has answered a frame
+  uint32_t in_flight = 0;
+  Clock::time_point progress_at{};    // last answer, or the write that started the wait
+  Clock::time_point retry_at{};
+  double backoff_s = camdirector::sdk::kFirstBackoffS;
+  bool outage = false;                // a stream broke and none has answered since
+  bool ever_streamed = false;
+  bool recreated_unanswered = false;  // recreated, and its stream has answered nothing yet
+  int unavailable_while_ready = 0;    // streams refused UNAVAILABLE over a working connection
+  grpc::ClientContext* io_call = nullptr;  // the I/O thread's CreateSession, to cancel it
+
+  // Results.
+  bool has_pose = false;
+  cd_pose latest{};
+  bool cut_pending = false;
+  std::array<cd_event, camdirector::sdk::kEventCapacity> events{};
+  uint32_t event_head = 0;
+  uint32_t event_count = 0;
+  cd_stats stats{};
+  int last_error_code = CD_OK;
+  std::string last_error;
+
+  // I/O thread only.
+  camdirector::sdk::QueuedFrame send_frame;
+  std::vector<cd_state> send_states;
+  std::string send_session_id;
+  std::vector<double> slot_transforms;  // the last transform sent per slot (kPackedWidth each)
+  std::vector<uint8_t> slot_known;
+  bool send_all_known = false;          // the next frame opens a recreated session
+
+  // io.cpp
+  void io_loop();
+  void open_stream_locked();
+  void handle_stream_done_locked();
+  void recreate(std::unique_lock<std::mutex>& lock);
+  void write_next(std::unique_lock<std::mutex>& lock);
+  void build_frame(camdirector::v1::FrameUpdate* msg);
+  void retry_later_locked();
+  // Called by FrameStream on gRPC's threads.
+  void on_answer(const camdirector::v1::CameraUpdate& update);
+  void on_read_closed();
+  void on_write_done();
+  void on_stream_done(const grpc::Status& status);
+
+  // client.cpp
+  void push_event_locked(int kind, int status, const std::string& message);
+  void set_error_locked(int code, const std::string& message);
+  void reset_session_locked();
+};
+
+#endif  // CAMDIRECTOR_CLIENT_IMPL_H

@@ -1,0 +1,441 @@
+// The I/O thread: one StreamFrames stream at a time on the session (gRPC's callback API), fed
+// from the frame queue with at most `max_in_flight` frames unanswered; reopens the stream after a
+// dropped connection (same session id) and creates the session again when the server no longer
+// knows it (a restart, or the resume window passed).
+//
+// Ownership of a stream: the I/O thread creates a FrameStream, keeps a hold on it (so gRPC cannot
+// finish it), and is the only thread that calls its methods. When the stream's read side closes
+// and no write is pending it removes the hold; gRPC then calls OnDone, which reports the status
+// and deletes the reactor. No method of a stream is called after its hold is removed.
+#include <algorithm>
+#include <cmath>
+
+#ifdef __linux__
+#include <pthread.h>
+#include <sched.h>
+#endif
+
+#include "client_impl.h"
+
+namespace camdirector::sdk {
+
+class FrameStream : public grpc::ClientBidiReactor<pb::FrameUpdate, pb::CameraUpdate> {
+ public:
+  explicit FrameStream(cd_client* client) : client_(client) {}
+
+  // Call without holding the client's mutex: gRPC may run callbacks on this thread.
+  void start(pb::Director::Stub* stub) {
+    context_.set_wait_for_ready(false);
+    stub->async()->StreamFrames(&context_, this);
+    AddHold();
+    StartRead(&reply_);
+    StartCall();
+  }
+
+  void cancel() { context_.TryCancel(); }
+
+  pb::FrameUpdate out;  // the frame being written (the I/O thread's, while write_busy)
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      client_->on_read_closed();
+      return;
+    }
+    client_->on_answer(reply_);
+    StartRead(&reply_);
+  }
+
+  void OnWriteDone(bool /*ok*/) override { client_->on_write_done(); }
+
+  void OnDone(const grpc::Status& status) override {
+    client_->on_stream_done(status);
+    delete this;
+  }
+
+ private:
+  cd_client* client_;
+  grpc::ClientContext context_;
+  pb::CameraUpdate reply_;
+};
+
+namespace {
+
+Clock::duration seconds(double s) {
+  return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+}
+
+// Statuses after which creating the session again may succeed later.
+bool retryable(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+    case grpc::StatusCode::CANCELLED:
+    case grpc::StatusCode::ABORTED:
+    case grpc::StatusCode::INTERNAL:
+    case grpc::StatusCode::UNKNOWN:
+      return true;
+    default:
+      return false;
+  }
+}
+
+// Statuses a server gives a bad frame; the session stays (docs/protocol.md, Errors).
+bool frame_refused(grpc::StatusCode code) {
+  return code == grpc::StatusCode::INVALID_ARGUMENT || code == grpc::StatusCode::FAILED_PRECONDITION ||
+         code == grpc::StatusCode::OUT_OF_RANGE || code == grpc::StatusCode::RESOURCE_EXHAUSTED;
+}
+
+}  // namespace
+
+}  // namespace camdirector::sdk
+
+using camdirector::sdk::Clock;
+using camdirector::sdk::frame_refused;
+using camdirector::sdk::FrameStream;
+using camdirector::sdk::grpc_deadline;
+using camdirector::sdk::kConnectWaitS;
+using camdirector::sdk::kPackedWidth;
+using camdirector::sdk::retryable;
+namespace pb = camdirector::v1;
+
+void cd_client::io_loop() {
+#ifdef __linux__
+  // SCHED_BATCH (no privilege needed): waking this thread never preempts the thread that woke
+  // it, so cd_frame_submit costs the game thread one futex wake, not a context switch.
+  sched_param param{};
+  (void)pthread_setschedparam(pthread_self(), SCHED_BATCH, &param);
+  (void)pthread_setname_np(pthread_self(), "camdirector-io");
+#endif
+  std::unique_lock<std::mutex> lock(mu);
+  for (;;) {
+    const Clock::time_point now = Clock::now();
+    if (stream != nullptr && stream_read_closed && !write_busy && !stream_hold_released) {
+      stream_hold_released = true;
+      FrameStream* s = stream;
+      lock.unlock();
+      s->RemoveHold();  // may run OnDone on this thread
+      lock.lock();
+      continue;
+    }
+    if (stream_done) {
+      handle_stream_done_locked();
+      continue;
+    }
+    if (stopping || phase == Phase::kClosing) {
+      if (stream != nullptr && !stream_cancelled && !stream_hold_released) {
+        stream_cancelled = true;
+        FrameStream* s = stream;
+        lock.unlock();
+        s->cancel();
+        lock.lock();
+        continue;
+      }
+      if (stream == nullptr) {
+        if (stopping) break;
+        caller_cv.notify_all();
+      }
+      io_waiting = true;
+      io_cv.wait(lock);
+      io_waiting = false;
+      continue;
+    }
+
+    Clock::time_point wake = now + (config.io_poll_interval_ms > 0 ? std::chrono::milliseconds(config.io_poll_interval_ms)
+                                                                  : std::chrono::milliseconds(1000));
+    if (phase == Phase::kStream) {
+      if (stream == nullptr) {
+        if (now >= retry_at) {
+          if (channel->GetState(false) != GRPC_CHANNEL_READY) {
+            // Wait for a connection before opening a stream, so that a retry against a server
+            // still down does not use up a queued frame. Bounded, to answer close/destroy.
+            lock.unlock();
+            const bool connected = channel->WaitForConnected(grpc_deadline(kConnectWaitS));
+            lock.lock();
+            if (!connected) {
+              retry_later_locked();
+              continue;
+            }
+            if (stopping || phase != Phase::kStream || stream != nullptr) continue;
+          }
+          open_stream_locked();
+          FrameStream* s = stream;
+          lock.unlock();
+          s->start(stub.get());
+          lock.lock();
+          continue;
+        }
+        wake = std::min(wake, retry_at);
+      } else if (!stream_read_closed && !stream_cancelled) {
+        if (!write_busy && ring_size > 0 && in_flight < config.max_in_flight) {
+          write_next(lock);
+          continue;
+        }
+        if (in_flight > 0) {
+          const Clock::time_point stall_at = progress_at + camdirector::sdk::seconds(config.stall_timeout_s);
+          if (now >= stall_at) {  // the server or the network stopped answering: start over
+            stream_cancelled = true;
+            FrameStream* s = stream;
+            lock.unlock();
+            s->cancel();
+            lock.lock();
+            continue;
+          }
+          wake = std::min(wake, stall_at);
+        }
+      }
+    } else if (phase == Phase::kRecreate) {
+      if (now >= retry_at) {
+        recreate(lock);
+        continue;
+      }
+      wake = std::min(wake, retry_at);
+    }
+    io_waiting = true;
+    io_cv.wait_until(lock, wake);
+    io_waiting = false;
+  }
+}
+
+void cd_client::open_stream_locked() {
+  stream = new FrameStream(this);
+  stream_read_closed = false;
+  stream_hold_released = false;
+  stream_cancelled = false;
+  write_busy = false;
+  stream_answered = false;
+  in_flight = 0;
+  stats.streams_opened += 1;
+}
+
+void cd_client::retry_later_locked() {
+  retry_at = Clock::now() + camdirector::sdk::seconds(backoff_s);
+  backoff_s = std::min(backoff_s * 2.0, config.reconnect_max_s);
+}
+
+void cd_client::handle_stream_done_locked() {
+  stream_done = false;
+  const grpc::StatusCode code = done_status.error_code();
+  const std::string message = done_status.error_message();
+  stats.frames_lost += in_flight;
+  in_flight = 0;
+  write_busy = false;
+  stats.last_stream_status = static_cast<int>(code);
+  caller_cv.notify_all();
+  if (stopping || phase != Phase::kStream) return;
+
+  const bool answered = stream_answered;
+  if (code == grpc::StatusCode::NOT_FOUND && !answered) {
+    // The first frame of this stream named a session the server does not know.
+    if (recreated_unanswered) {
+      phase = Phase::kFailed;
+      ring_size = 0;
+      push_event_locked(CD_EVENT_SESSION_FAILED, static_cast<int>(code),
+                        "the recreated session is unknown to the server too: " + message);
+      return;
+    }
+    phase = Phase::kRecreate;
+    retry_at = Clock::now();
+    if (!outage && ever_streamed) {
+      stats.disconnects += 1;
+      push_event_locked(CD_EVENT_DISCONNECTED, static_cast<int>(code), message);
+    }
+    outage = true;
+    return;
+  }
+  if (frame_refused(code) || code == grpc::StatusCode::NOT_FOUND) {
+    // A bad frame ended the stream (NOT_FOUND after answers: an unknown object id); the session
+    // stays: go on with the next frames.
+    push_event_locked(CD_EVENT_FRAME_REFUSED, static_cast<int>(code), message);
+    retry_at = Clock::now();
+    return;
+  }
+  if (code == grpc::StatusCode::UNAVAILABLE && !answered && channel->GetState(false) == GRPC_CHANNEL_READY) {
+    // UNAVAILABLE over a working connection: the server lost the session (its worker died).
+    // Once may be a race with the connection's own failure; twice in a row is the session.
+    if (++unavailable_while_ready >= 2) {
+      unavailable_while_ready = 0;
+      phase = Phase::kRecreate;
+      retry_at = Clock::now();
+      outage = true;
+      return;
+    }
+  } else if (answered) {
+    unavailable_while_ready = 0;
+  }
+  if (!outage && ever_streamed) {
+    stats.disconnects += 1;
+    push_event_locked(CD_EVENT_DISCONNECTED, static_cast<int>(code), message);
+  }
+  outage = outage || ever_streamed || code != grpc::StatusCode::OK;
+  if (answered) backoff_s = camdirector::sdk::kFirstBackoffS;
+  retry_later_locked();
+}
+
+void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
+  pb::CreateSessionRequest req = request;
+  const std::string old_id = session_id;
+  grpc::ClientContext context;
+  context.set_deadline(grpc_deadline(camdirector::sdk::kRecreateTimeoutS));
+  io_call = &context;
+  lock.unlock();
+  pb::CreateSessionResponse response;
+  const grpc::Status status = stub->CreateSession(&context, req, &response);
+  lock.lock();
+  io_call = nullptr;
+  if (stopping || phase != Phase::kRecreate) {
+    if (status.ok()) {  // closed meanwhile: do not leave the new session behind
+      lock.unlock();
+      grpc::ClientContext close_context;
+      close_context.set_deadline(grpc_deadline(1.0));
+      pb::CloseSessionRequest close;
+      close.set_session_id(response.session_id());
+      pb::CloseSessionResponse closed;
+      (void)stub->CloseSession(&close_context, close, &closed);
+      lock.lock();
+    }
+    return;
+  }
+  if (status.ok()) {
+    session_id = response.session_id();
+    generation += 1;
+    stats.generation = generation;
+    stats.recreations += 1;
+    phase = Phase::kStream;
+    retry_at = Clock::now();
+    recreated_unanswered = true;
+    send_all_known = true;
+    push_event_locked(CD_EVENT_RECREATED, CD_OK,
+                      "the server no longer knew session " + old_id + "; created it again as " + session_id);
+    return;
+  }
+  if (retryable(status.error_code())) {
+    retry_later_locked();
+    return;
+  }
+  phase = Phase::kFailed;
+  ring_size = 0;
+  push_event_locked(CD_EVENT_SESSION_FAILED, static_cast<int>(status.error_code()),
+                    "creating the session again was refused: " + status.error_message());
+  caller_cv.notify_all();
+}
+
+void cd_client::write_next(std::unique_lock<std::mutex>& lock) {
+  const camdirector::sdk::QueuedFrame& head = ring[ring_head];
+  send_frame = head;
+  std::copy_n(ring_states.begin() + static_cast<size_t>(ring_head) * config.max_states, head.count,
+              send_states.begin());
+  ring_head = (ring_head + 1) % config.queue_capacity;
+  ring_size -= 1;
+  write_busy = true;
+  in_flight += 1;
+  if (in_flight == 1) progress_at = Clock::now();
+  stats.frames_sent += 1;
+  send_session_id = session_id;
+  FrameStream* s = stream;
+  lock.unlock();
+  build_frame(&s->out);
+  s->StartWrite(&s->out);
+  lock.lock();
+}
+
+// The queued frame as a FrameUpdate with packed states. Reuses the message's storage, so a
+// steady stream allocates nothing here either. Zero rotation / scale mean identity / ones.
+void cd_client::build_frame(pb::FrameUpdate* msg) {
+  msg->Clear();
+  msg->set_session_id(send_session_id);
+  msg->set_frame(send_frame.frame);
+  msg->set_time_s(send_frame.time_s);
+  for (uint32_t i = 0; i < send_frame.count; ++i) {
+    const cd_state& st = send_states[i];
+    const cd_transform& t = st.transform;
+    const bool unit_rotation = t.rotation.x == 0.0 && t.rotation.y == 0.0 && t.rotation.z == 0.0 && t.rotation.w == 0.0;
+    const bool unit_scale = t.scale.x == 0.0 && t.scale.y == 0.0 && t.scale.z == 0.0;
+    double* packed = &slot_transforms[static_cast<size_t>(st.slot) * kPackedWidth];
+    packed[0] = t.position.x;
+    packed[1] = t.position.y;
+    packed[2] = t.position.z;
+    packed[3] = unit_rotation ? 0.0 : t.rotation.x;
+    packed[4] = unit_rotation ? 0.0 : t.rotation.y;
+    packed[5] = unit_rotation ? 0.0 : t.rotation.z;
+    packed[6] = unit_rotation ? 1.0 : t.rotation.w;
+    packed[7] = unit_scale ? 1.0 : t.scale.x;
+    packed[8] = unit_scale ? 1.0 : t.scale.y;
+    packed[9] = unit_scale ? 1.0 : t.scale.z;
+    slot_known[st.slot] = 2;  // 2: in this frame
+  }
+  for (size_t slot = 0; slot < slot_known.size(); ++slot) {
+    // A recreated session starts from the created transforms: resend every transform known.
+    if (slot_known[slot] == 2 || (send_all_known && slot_known[slot] == 1)) {
+      *msg->add_packed_ids() = slot_ids[slot];
+      const double* packed = &slot_transforms[slot * kPackedWidth];
+      for (int k = 0; k < kPackedWidth; ++k) msg->add_packed_transforms(packed[k]);
+      slot_known[slot] = 1;
+    }
+  }
+  send_all_known = false;
+}
+
+void cd_client::on_answer(const pb::CameraUpdate& update) {
+  cd_pose pose{};
+  pose.frame = update.frame();
+  pose.time_s = update.time_s();
+  pose.position = {update.pose().position().x(), update.pose().position().y(), update.pose().position().z()};
+  const pb::Quat& q = update.pose().rotation();
+  pose.rotation = {q.x(), q.y(), q.z(), q.w()};
+  pose.vertical_fov_deg = update.pose().vertical_fov_deg();
+  pose.cut = update.cut() ? 1 : 0;
+  pose.shot_id = update.shot_id();
+  pose.visibility = update.visibility();
+  pose.compute_ms = update.compute_ms();
+  pose.received_s = camdirector::sdk::seconds_since_epoch(Clock::now());
+
+  std::lock_guard<std::mutex> guard(mu);
+  stats.frames_answered += 1;
+  if (in_flight > 0) in_flight -= 1;
+  progress_at = Clock::now();
+  if (update.stale()) {
+    stats.frames_stale += 1;
+  } else if (!update.buffering() && update.has_pose()) {
+    pose.generation = generation;
+    latest = pose;
+    has_pose = true;
+    if (pose.cut) cut_pending = true;
+  }
+  if (!stream_answered) {
+    stream_answered = true;
+    if (outage && !recreated_unanswered) {
+      stats.resumes += 1;
+      push_event_locked(CD_EVENT_RESUMED, CD_OK, "resumed session " + session_id + " on a new stream");
+    } else if (!ever_streamed) {
+      push_event_locked(CD_EVENT_STREAMING, CD_OK, "streaming session " + session_id);
+    }
+    outage = false;
+    ever_streamed = true;
+    recreated_unanswered = false;
+    unavailable_while_ready = 0;
+    backoff_s = camdirector::sdk::kFirstBackoffS;
+  }
+  io_cv.notify_one();
+  caller_cv.notify_all();
+}
+
+void cd_client::on_read_closed() {
+  std::lock_guard<std::mutex> guard(mu);
+  stream_read_closed = true;
+  io_cv.notify_one();
+}
+
+void cd_client::on_write_done() {
+  std::lock_guard<std::mutex> guard(mu);
+  write_busy = false;
+  io_cv.notify_one();
+}
+
+void cd_client::on_stream_done(const grpc::Status& status) {
+  std::lock_guard<std::mutex> guard(mu);
+  stream = nullptr;
+  stream_done = true;
+  done_status = status;
+  io_cv.notify_one();
+}

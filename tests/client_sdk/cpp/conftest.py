@@ -1,0 +1,163 @@
+"""Fixtures for the C/C++ SDK's tests: its CMake build (once per test session, incremental in
+client_sdk/cpp/build/), a runner for its programs, and a TCP proxy that can cut connections."""
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+import socket
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+SDK_DIR = ROOT / "client_sdk" / "cpp"
+BUILD_DIR = SDK_DIR / "build"
+BUILD_TIMEOUT_S = 1200  # a clean build on two busy cores: the generated wire code is most of it
+PROGRAMS = ("engine_loop", "convert_check", "sdk_check", "c_api_check")
+
+
+def _missing_toolchain() -> str | None:
+    """What is missing to build the SDK, or None."""
+    for tool in ("cmake", "c++", "protoc", "grpc_cpp_plugin", "pkg-config"):
+        if shutil.which(tool) is None:
+            return f"no {tool}"
+    for package in ("grpc++", "protobuf"):
+        if subprocess.run(["pkg-config", "--exists", package]).returncode != 0:
+            return f"no pkg-config package {package}"
+    return None
+
+
+def _required() -> bool:
+    """CI (.ci/run sets CAMDIRECTOR_REQUIRE_CPP_SDK=1) must build and run these tests."""
+    return os.environ.get("CAMDIRECTOR_REQUIRE_CPP_SDK") == "1"
+
+
+@pytest.fixture(scope="session")
+def sdk_bin() -> Path:
+    """The build folder holding engine_loop, convert_check and sdk_check, built with CMake.
+
+    Skipped with the reason when the toolchain is missing (scripts/system-deps.sh installs it as
+    root), a failure under CI. Concurrent test runs in one checkout take turns (a file lock)."""
+    missing = _missing_toolchain()
+    if missing is not None:
+        reason = f"the C++ SDK cannot be built here ({missing}): scripts/system-deps.sh installs the toolchain"
+        if _required():
+            pytest.fail(reason + " (required: CAMDIRECTOR_REQUIRE_CPP_SDK=1)")
+        pytest.skip(reason)
+    BUILD_DIR.mkdir(exist_ok=True)
+    with open(BUILD_DIR / ".build-lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        for cmd in (["cmake", "-S", str(SDK_DIR), "-B", str(BUILD_DIR), "-DCMAKE_BUILD_TYPE=Release"],
+                    ["cmake", "--build", str(BUILD_DIR), "--parallel", str(os.cpu_count() or 2)]):
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=BUILD_TIMEOUT_S)
+            if done.returncode != 0:
+                pytest.fail(f"{' '.join(cmd)} failed:\n{done.stdout[-4000:]}\n{done.stderr[-4000:]}")
+    for program in PROGRAMS:
+        assert (BUILD_DIR / program).is_file(), f"the build made no {program}"
+    return BUILD_DIR
+
+
+def run_json(binary: Path, *args: str, timeout_s: float = 60.0, stdin: str | None = None) -> dict:
+    """Runs one of the SDK's programs; its last stdout line, parsed as JSON."""
+    done = subprocess.run([str(binary), *args], input=stdin, capture_output=True, text=True, timeout=timeout_s)
+    assert done.returncode == 0, f"{binary.name} {' '.join(args)} exited {done.returncode}:\n{done.stdout}\n{done.stderr}"
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class CuttableProxy:
+    """A TCP forwarder on loopback to `upstream` ("HOST:PORT") whose connections the test can cut,
+    as a network drop would; `cut(refuse_s)` also refuses new connections for a while."""
+
+    def __init__(self, upstream: str):
+        host, _, port = upstream.rpartition(":")
+        self.upstream = (host, int(port))
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.address = f"127.0.0.1:{self.listener.getsockname()[1]}"
+        self._lock = threading.Lock()
+        self._sockets: set[socket.socket] = set()
+        self._refuse_until = 0.0
+        self._closed = False
+        self.accepted = 0
+        threading.Thread(target=self._accept_forever, daemon=True).start()
+
+    def _accept_forever(self) -> None:
+        while True:
+            try:
+                client, _ = self.listener.accept()
+            except OSError:
+                return
+            if self._closed or time.monotonic() < self._refuse_until:
+                client.close()
+                continue
+            try:
+                server = socket.create_connection(self.upstream, timeout=5)
+            except OSError:
+                client.close()
+                continue
+            server.settimeout(None)
+            with self._lock:
+                self._sockets.update((client, server))
+                self.accepted += 1
+            threading.Thread(target=self._pump, args=(client, server), daemon=True).start()
+            threading.Thread(target=self._pump, args=(server, client), daemon=True).start()
+
+    def _pump(self, source: socket.socket, sink: socket.socket) -> None:
+        try:
+            while data := source.recv(65536):
+                sink.sendall(data)
+        except OSError:
+            pass
+        finally:
+            self._drop(source, sink)
+
+    def _drop(self, *sockets: socket.socket) -> None:
+        with self._lock:
+            for s in sockets:
+                self._sockets.discard(s)
+        for s in sockets:
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            s.close()
+
+    def cut(self, refuse_s: float = 0.0) -> None:
+        """Closes every connection now and refuses new ones for `refuse_s` seconds."""
+        self._refuse_until = time.monotonic() + refuse_s
+        with self._lock:
+            sockets = list(self._sockets)
+        self._drop(*sockets)
+
+    def close(self) -> None:
+        self._closed = True
+        try:
+            self.listener.shutdown(socket.SHUT_RDWR)  # wakes the accepting thread
+        except OSError:
+            pass
+        self.listener.close()
+        self.cut()
+
+
+@pytest.fixture
+def proxy_to():
+    """proxy_to("HOST:PORT") -> a CuttableProxy, closed after the test."""
+    proxies: list[CuttableProxy] = []
+
+    def start(upstream: str) -> CuttableProxy:
+        proxies.append(CuttableProxy(upstream))
+        return proxies[-1]
+
+    yield start
+    for p in proxies:
+        p.close()

@@ -1,0 +1,112 @@
+"""The C/C++ SDK's I/O thread recovering in the background while a 60 Hz loop streams: a dropped
+connection resumes the same session; a session that expired meanwhile, or a server that was
+killed and restarted, gets the session created again (new id, reported as an event)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import threading
+import time
+
+import pytest
+
+from tests.client_sdk.cpp.conftest import free_port
+
+READY_TIMEOUT_S = 30.0
+
+
+class StreamRun:
+    """`sdk_check stream ADDRESS --until EVENT` in the background: waits for its ready line, then
+    for its report."""
+
+    def __init__(self, binary, address: str, until: str, timeout_s: float = 40.0):
+        self.proc = subprocess.Popen([str(binary), "stream", address, "--until", until, "--timeout", str(timeout_s)],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self._ready = threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            if '"ready"' in line:
+                self._ready.set()
+        self._ready.set()
+
+    def wait_ready(self) -> dict:
+        assert self._ready.wait(READY_TIMEOUT_S), "sdk_check never started streaming"
+        assert self.lines and '"ready"' in self.lines[0], f"no ready line: {self.lines} {self.proc.stderr.read()}"
+        return json.loads(self.lines[0])
+
+    def report(self, timeout_s: float = 90.0) -> dict:
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            pytest.fail(f"sdk_check stream did not finish: {self.lines}")
+        assert self.proc.returncode == 0, self.proc.stderr.read()
+        return json.loads(self.lines[-1])
+
+
+def _kinds(report: dict) -> list[str]:
+    return [e["kind"] for e in report["events"]]
+
+
+def _assert_streamed_on(report: dict) -> None:
+    assert report["seen"], report
+    assert report["answered_after"] >= 60, report  # went on streaming after recovering
+    assert report["refused"] == 0  # submits never failed meanwhile: frames waited in the queue
+    assert report["game_thread_allocations"] == 0
+    assert report["close"] == "OK"
+
+
+def test_a_dropped_connection_resumes_the_same_session(sdk_bin, server, proxy_to):
+    proxy = proxy_to(server.grpc)
+    run = StreamRun(sdk_bin / "sdk_check", proxy.address, "resumed")
+    ready = run.wait_ready()
+    proxy.cut(refuse_s=0.3)
+    report = run.report()
+    _assert_streamed_on(report)
+    assert report["first_session_id"] == ready["session_id"] == report["last_session_id"]
+    assert _kinds(report)[:3] == ["STREAMING", "DISCONNECTED", "RESUMED"], report["events"]
+    assert report["stats"]["resumes"] >= 1 and report["stats"]["recreations"] == 0
+    assert report["last_pose_generation"] == 1
+    assert proxy.accepted >= 2  # a second connection carried the resumed stream
+
+
+def test_a_session_expired_while_disconnected_is_created_again(sdk_bin, server_factory, proxy_to):
+    srv = server_factory("--workers", "1", "--session-resume-s", "0.5")
+    proxy = proxy_to(srv.grpc)
+    run = StreamRun(sdk_bin / "sdk_check", proxy.address, "recreated")
+    ready = run.wait_ready()
+    proxy.cut(refuse_s=3.0)  # longer than the resume window plus the server's reap interval
+    report = run.report()
+    _assert_streamed_on(report)
+    assert report["last_session_id"] != ready["session_id"]
+    kinds = _kinds(report)
+    assert kinds[:2] == ["STREAMING", "DISCONNECTED"] and "RECREATED" in kinds, report["events"]
+    recreated = report["events"][kinds.index("RECREATED")]
+    assert recreated["session_id"] == report["last_session_id"] and recreated["generation"] == 2
+    assert ready["session_id"] in recreated["message"]
+    assert report["stats"]["recreations"] == 1 and report["last_pose_generation"] == 2
+
+
+def test_a_server_killed_and_restarted_mid_stream_gets_the_session_again(sdk_bin, server_factory):
+    port = free_port()
+    address = f"127.0.0.1:{port}"
+    first = server_factory("--workers", "1", "--grpc", address)
+    run = StreamRun(sdk_bin / "sdk_check", address, "recreated")
+    ready = run.wait_ready()
+    first.proc.kill()  # a crash: no goodbye to the stream
+    first.proc.wait(15)
+    time.sleep(0.5)  # the SDK notices and retries against nothing for a while
+    second = server_factory("--workers", "1", "--grpc", address)
+    assert second.grpc == address
+    report = run.report()
+    _assert_streamed_on(report)
+    assert report["last_session_id"] != ready["session_id"]
+    kinds = _kinds(report)
+    assert kinds[:2] == ["STREAMING", "DISCONNECTED"] and "RECREATED" in kinds, report["events"]
+    assert report["stats"]["recreations"] == 1 and report["stats"]["disconnects"] == 1
+    # Retries against the dead server waited for a connection instead of spending queued frames.
+    assert report["stats"]["frames_lost"] <= 4, report["stats"]
