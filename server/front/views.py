@@ -38,6 +38,7 @@ class View:
     media_type: str
     frame: int | None           # the session frame it shows; None for the top view or a placeholder
     placeholder: str | None     # why it is a placeholder, if it is one
+    note: str | None            # what its banner says (a world without geometry), if it has one
     render_ms: float            # in the render process
     bounds_m: list[float] | None  # the top view's world rectangle [x0, z0, x1, z1], m
     made_s: float               # when the hub got it, on its clock
@@ -71,8 +72,8 @@ class ViewHub:
         try:
             self.metrics.view_renders.inc()
             header, image = decode_view(await self.router.view(session_id, query.to_json(), RENDER_TIMEOUT_S))
-            view = View(image, header["media_type"], header["frame"], header["placeholder"], header["render_ms"],
-                        header["bounds_m"], self.clock())
+            view = View(image, header["media_type"], header["frame"], header["placeholder"], header["note"],
+                        header["render_ms"], header["bounds_m"], self.clock())
             self._views[key] = view
             self._views.move_to_end(key)
             while len(self._views) > MAX_ENTRIES:

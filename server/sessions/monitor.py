@@ -247,7 +247,7 @@ class Painter:
     def render(self, job: RenderJob) -> bytes:
         """The view's bytes (encode_view) for one job."""
         t0 = time.perf_counter()
-        header = {"frame": job.frame, "placeholder": job.placeholder, "bounds_m": None}
+        header = {"frame": job.frame, "placeholder": job.placeholder, "note": job.note, "bounds_m": None}
         if job.query.shot == "top":
             image, header["bounds_m"], header["placeholder"] = self._top_view(job.session_id)
             media_type = "image/png"
@@ -255,6 +255,8 @@ class Painter:
             fmt = job.query.image_format
             if job.placeholder is None:
                 pixels = self._camera_view(job)
+                if job.note is not None:
+                    pixels = banner(pixels, job.note)
             else:
                 pixels = placeholder_pixels(*job.size_px, job.placeholder)
             image, media_type = encode_image(pixels, fmt), f"image/{fmt}"
@@ -338,6 +340,19 @@ def placeholder_pixels(width: int, height: int, reason: str) -> np.ndarray:
     for line in lines:
         draw.text((6, y), line, fill=(225, 225, 225))
         y += 14
+    return np.asarray(card)
+
+
+def banner(pixels: np.ndarray, text: str) -> np.ndarray:
+    """(h, w, 3) uint8: the picture with `text` on a dark band across its top."""
+    from PIL import Image, ImageDraw
+
+    card = Image.fromarray(pixels, "RGB")
+    draw = ImageDraw.Draw(card)
+    lines = textwrap.wrap(text, width=max(int(card.width / 7), 8))
+    draw.rectangle((0, 0, card.width, 6 + 14 * len(lines)), fill=PLACEHOLDER_RGB)
+    for k, line in enumerate(lines):
+        draw.text((6, 3 + 14 * k), line, fill=(225, 225, 225))
     return np.asarray(card)
 
 

@@ -14,8 +14,10 @@ A `RenderJob` is a snapshot taken on the worker's main thread between two frames
 every moving object's transform copied into arrays (tens of microseconds for a hundred moving
 objects), so the render itself runs in another process while the session goes on. The meshes go
 to that process once per session (`scene_geometry`). A view that cannot be drawn (no pose yet,
-a delay still filling, no such candidate, no cut yet, a world with no geometry) is a placeholder
-image that says why, not an error: a monitor keeps its place on a director's wall.
+a delay still filling, no such candidate, no cut yet; a top view of a world with no geometry) is
+a placeholder image that says why, not an error: a monitor keeps its place on a director's wall.
+A camera view of a session whose scene has no world at all (no object, no level: only targets)
+is drawn, the targets against the sky, under a banner that says so (`note`).
 """
 from __future__ import annotations
 
@@ -35,7 +37,8 @@ MIN_SIDE_PX = 16
 MAX_WIDTH_PX = 1280      # a monitor is small: a larger picture is refused (the route answers 422)
 MAX_HEIGHT_PX = 720
 DEFAULT_WIDTH_PX = 320
-TOP_VIEW_LONG_SIDE_PX = 512  # the top view's longer side; the other follows the world's extent
+TOP_VIEW_LONG_SIDE_PX = 512
+NO_WORLD_NOTE = "no world geometry: the scene has no object and no level, only its targets"  # the top view's longer side; the other follows the world's extent
 
 # Colours, linear RGB in [0, 1]. Targets in the dashboard's orange, a MATCH player in its team's
 # colour (the dashboard's TEAM_COLOURS, in the same order), so a monitor matches the top view.
@@ -124,6 +127,7 @@ class RenderJob:
     rotations_xyzw: np.ndarray           # (k, 4) float64
     scales: np.ndarray                   # (k, 3) float64
     placeholder: str | None = None       # why there is no picture; None: draw it
+    note: str | None = None              # drawn as a banner over the picture (a world without geometry)
 
     @property
     def size_px(self) -> tuple[int, int]:
@@ -185,6 +189,9 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
             after = query.shot == "cut_after"
             frame, pose = (cut.frame, cut.pose_after) if after else (cut.frame_before, cut.pose_before)
             dynamic, targets = cut.dynamic, cut.targets_after if after else cut.targets_before
+    note = None
+    if pose is not None and not (session.static_meshes_world or session.level_mesh_world is not None or dynamic):
+        note = NO_WORLD_NOTE
     moving = [(f"object:{object_id}", transform) for object_id, (_, transform) in dynamic.items()]
     moving += [(f"target:{t.id}", transform) for t, transform in zip(session.targets, targets)]
     transforms = [transform for _, transform in moving]
@@ -193,7 +200,7 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
         moving_ids=tuple(part_id for part_id, _ in moving),
         positions_world=_stack([tf.position_world for tf in transforms], 3),
         rotations_xyzw=_stack([tf.rotation_xyzw for tf in transforms], 4),
-        scales=_stack([tf.scale for tf in transforms], 3), placeholder=placeholder)
+        scales=_stack([tf.scale for tf in transforms], 3), placeholder=placeholder, note=note)
 
 
 def _stack(rows: list[np.ndarray], width: int) -> np.ndarray:

@@ -63,6 +63,8 @@ def _headers(view: View) -> dict[str, str]:
         headers["X-Camdirector-Frame"] = str(view.frame)
     if view.placeholder is not None:
         headers["X-Camdirector-Placeholder"] = view.placeholder
+    if view.note is not None:
+        headers["X-Camdirector-Note"] = view.note
     if view.bounds_m is not None:
         headers["X-Camdirector-Bounds-M"] = ",".join(f"{v:.4f}" for v in view.bounds_m)
     return headers

@@ -12,6 +12,7 @@ import re
 import time
 
 import httpx
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -155,6 +156,16 @@ def test_placeholders_say_why_there_is_no_picture(server):
         top = http.get(f"/v1/sessions/{empty}/topview.png")
         assert top.status_code == 200 and "no world geometry" in top.headers["x-camdirector-placeholder"]
         assert "x-camdirector-bounds-m" not in top.headers
+        # its camera view: the targets against the sky, under a banner that says there is no world
+        raw.stream([pb.FrameUpdate(session_id=empty, frame=k, time_s=k / 60.0, states=[u.states[0]])
+                    for k, u in enumerate(walk(empty, 10), start=1)])   # the walker alone: no cart here
+        seen = http.get(f"/v1/sessions/{empty}/view", params={"format": "png"})
+        assert seen.headers["x-camdirector-note"].startswith("no world geometry")
+        assert "x-camdirector-placeholder" not in seen.headers and seen.headers["x-camdirector-frame"] == "10"
+        pixels = np.asarray(image_of(seen).convert("RGB")).astype(int)
+        assert np.all(pixels[1, :, :] < 80), "a dark banner across the top"
+        orange = (pixels[..., 0] > 90) & (pixels[..., 1] < 0.8 * pixels[..., 0]) & (pixels[..., 2] < 0.35 * pixels[..., 0])
+        assert orange[40:].sum() > 200, "the targets are drawn below it"
         for session_id in (fresh, match, empty):
             raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
     raw.close()
