@@ -37,8 +37,8 @@ MIN_SIDE_PX = 16
 MAX_WIDTH_PX = 1280      # a monitor is small: a larger picture is refused (the route answers 422)
 MAX_HEIGHT_PX = 720
 DEFAULT_WIDTH_PX = 320
-TOP_VIEW_LONG_SIDE_PX = 512
-NO_WORLD_NOTE = "no world geometry: the scene has no object and no level, only its targets"  # the top view's longer side; the other follows the world's extent
+TOP_VIEW_LONG_SIDE_PX = 512  # the top view's longer side; the other follows the world's extent
+NO_WORLD_NOTE = "no world geometry: the scene has no object and no level, only its targets"
 
 # Colours, linear RGB in [0, 1]. Targets in the dashboard's orange, a MATCH player in its team's
 # colour (the dashboard's TEAM_COLOURS, in the same order), so a monitor matches the top view.
