@@ -24,6 +24,12 @@ In the arc's half-plane, with origin the midpoint M of AB, x along AB and y away
 arc's circle has radius r = |AB| / (2 sin alpha) and centre (0, r cos alpha), and the camera is at
     x = -r sin(alpha + theta),    y = r (cos alpha - cos(alpha + theta)).
 This closed form equals the primer's law-of-sines construction and inverts with a single atan2.
+
+Orientation: `look_rotation` is the exact composition, A at sA and B at sB (the TORIC rig's),
+rolling the camera whenever that demands it (over a shoulder from above the A-B
+axis it rolls by tens of degrees: up to 85 in the MATCH rig's programs). `level_pair_rotation`
+(and `level_pair_matrices`) is the broadcast one: no roll, the bisector of the rays to A and B on
+the bisector of the screen points' rays, equal to look_rotation whenever that has no roll.
 """
 from __future__ import annotations
 
@@ -271,22 +277,80 @@ def look_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens
     return matrix_to_quat(world @ camera.T)
 
 
-def look_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
-    """(m, 3, 3) camera-to-world rotation matrices of `look_rotation` for m cameras (m, 3) at once
-    (a shot's place search tries hundreds); rows of NaN where a camera is at A or B or in line
-    with both."""
+def _bisector(u: tuple[float, float, float], v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """unit(u + v) of two unit directions; ZeroDivisionError when they are opposite."""
+    return _unit_tuple(u[0] + v[0], u[1] + v[1], u[2] + v[2])
+
+
+def level_pair_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
+    """Camera-to-world unit quaternion (4,) xyzw with no roll (camera x axis horizontal) that
+    frames A near screen_a and B near screen_b: broadcast framing keeps the horizon level.
+
+    camera_world, a_world, b_world: (3,) metres; screen_a, screen_b: (2,). The bisector of the view
+    rays to A and B, unit(unit(A - C) + unit(B - C)), is shown where the bisector of the screen
+    points' rays, unit(d(sA) + d(sB)), points, with yaw and pitch only (geometry.camera.
+    level_look_rotation's construction: R = Ry(yaw) Rx(pitch), the pitch nearer level of its two).
+    On the torus of composition_angle(screen_a, screen_b, lens) the two pairs of rays make the same
+    angle, so the exact composition (look_rotation) maps one bisector onto the other: this is
+    look_rotation turned about the bisector until the horizon is level. A and B stay symmetric
+    about their bisector's screen point, each off its screen point by the turn (the roll the exact
+    composition would need); when that roll is 0 this equals look_rotation. A pair nearly in line
+    with the view (over a shoulder from above) is shown one above the other; one that no longer
+    fits the frame is left to the caller's frame test (match shots.framed_seen).
+    ValueError if the camera is at A or B or between them on their line.
+    """
+    cx, cy, cz = np.asarray(camera_world, dtype=np.float64).tolist()
+    ax, ay, az = np.asarray(a_world, dtype=np.float64).tolist()
+    bx, by, bz = np.asarray(b_world, dtype=np.float64).tolist()
+    try:
+        to_a = _unit_tuple(ax - cx, ay - cy, az - cz)
+        to_b = _unit_tuple(bx - cx, by - cy, bz - cz)
+    except ZeroDivisionError:
+        raise ValueError("level_pair_rotation: the camera is at a framed point") from None
+    wx, wy, wz = to_a[0] + to_b[0], to_a[1] + to_b[1], to_a[2] + to_b[2]
+    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+    if length < 1e-12:
+        raise ValueError("level_pair_rotation: the camera is between the framed points")
+    wx, wy, wz = wx / length, wy / length, wz / length
+    dx, dy, dz = _bisector(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
+    rho = math.hypot(dy, dz)
+    delta = math.atan2(dz, dy)
+    base = math.acos(max(-1.0, min(1.0, wy / rho)))
+    pitch = min((base - delta, -base - delta), key=lambda p: abs(math.remainder(p, math.tau)))
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    yaw = math.atan2(wx, wz) - math.atan2(dx, dy * sp + dz * cp)
+    cw, sw = math.cos(yaw), math.sin(yaw)
+    return matrix_to_quat(np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp))))
+
+
+def level_pair_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
+    """(m, 3, 3) camera-to-world rotation matrices of `level_pair_rotation` for m cameras (m, 3)
+    at once (a shot's place search tries hundreds); rows of NaN where a camera is at A or B or
+    between them on their line."""
     cameras = np.atleast_2d(np.asarray(cameras_world, dtype=np.float64))
     with np.errstate(divide="ignore", invalid="ignore"):
         to_a = np.asarray(a_world, dtype=np.float64) - cameras
         to_a /= np.linalg.norm(to_a, axis=1, keepdims=True)
         to_b = np.asarray(b_world, dtype=np.float64) - cameras
         to_b /= np.linalg.norm(to_b, axis=1, keepdims=True)
-        other = to_b - np.einsum("ij,ij->i", to_a, to_b)[:, None] * to_a   # Gram-Schmidt, as _frame
-        length = np.linalg.norm(other, axis=1, keepdims=True)
-        other = np.where(length < 1e-12, np.nan, other / length)
-    world = np.stack([to_a, other, np.cross(to_a, other)], axis=2)        # columns, as _frame
-    camera = _frame(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
-    return world @ camera.T
+        w = to_a + to_b
+        length = np.linalg.norm(w, axis=1, keepdims=True)
+        w = np.where(length < 1e-12, np.nan, w / length)
+    dx, dy, dz = _bisector(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
+    rho = math.hypot(dy, dz)
+    delta = math.atan2(dz, dy)
+    base = np.arccos(np.clip(w[:, 1] / rho, -1.0, 1.0))                 # NaN stays NaN
+    up, down = base - delta, -base - delta
+    nearer = np.abs(np.remainder(up + math.pi, math.tau) - math.pi) <= np.abs(np.remainder(down + math.pi, math.tau) - math.pi)
+    pitch = np.where(nearer, up, down)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    yaw = np.arctan2(w[:, 0], w[:, 2]) - np.arctan2(dx, dy * sp + dz * cp)
+    cw, sw = np.cos(yaw), np.sin(yaw)
+    zero = np.zeros_like(cw)
+    out = np.stack([np.stack([cw, sw * sp, sw * cp], axis=1), np.stack([zero, cp, -sp], axis=1),
+                    np.stack([-sw, cw * sp, cw * cp], axis=1)], axis=1)
+    out[np.isnan(pitch)] = np.nan
+    return out
 
 
 def compose_pose(torus: Torus, theta: float, phi: float, screen_a, screen_b, lens: Lens) -> CameraPose:

@@ -8,14 +8,15 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from camdirector.geometry.camera import Lens, project_to_screen
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.toric import (
     THETA_MARGIN_RAD,
     DegenerateTorus,
     Torus,
     compose_pose,
     composition_angle,
-    look_matrices,
+    level_pair_matrices,
+    level_pair_rotation,
     look_rotation,
     make_torus,
     tangent_frame,
@@ -383,19 +384,102 @@ def test_torus_angles_many_matches_the_scalar_form(seed):
         assert (t, p) == pytest.approx(torus_angles(torus, point), abs=1e-12)
 
 
-@settings(max_examples=100, deadline=None)
-@given(st.lists(st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3), min_size=1, max_size=20))
-def test_look_matrices_are_look_rotation_for_many_cameras_at_once(cameras):
-    a, b = np.array([0.0, 1.6, 0.0]), np.array([3.0, 1.6, 2.0])
+# --- level pair framing (level_pair_rotation) ---------------------------------------------------
+
+level_screen = st.tuples(st.floats(-0.9, 0.9), st.floats(-0.5, 0.5))
+wide_lenses = st.builds(Lens, vertical_fov_deg=st.floats(20.0, 100.0), aspect=st.floats(1.0, 2.5))
+
+
+def level_rotation(yaw: float, pitch: float) -> np.ndarray:
+    """Ry(yaw) Rx(pitch): a camera-to-world rotation with no roll."""
+    cy, sy, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+    return np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]]) @ np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp],
+                                                                                  [0.0, sp, cp]])
+
+
+@FAST
+@given(point, point, point, screen, screen, lenses)
+def test_level_pair_rotation_never_rolls_and_matches_its_many_camera_form(camera, a, b, sa, sb, lens):
+    to_a, to_b = a - camera, b - camera
+    assume(np.linalg.norm(to_a) > 1e-3 and np.linalg.norm(to_b) > 1e-3)
+    assume(np.linalg.norm(to_a / np.linalg.norm(to_a) + to_b / np.linalg.norm(to_b)) > 1e-3)  # not between A and B
+    matrix = quat_to_matrix(level_pair_rotation(camera, a, b, sa, sb, lens))
+    np.testing.assert_allclose(matrix @ matrix.T, np.eye(3), atol=1e-9)
+    assert np.linalg.det(matrix) == pytest.approx(1.0)
+    assert abs(matrix[1, 0]) < 1e-9  # the camera's right axis is horizontal: no roll
+    many = level_pair_matrices(np.stack([camera, camera + 1.0]), a, b, sa, sb, lens)
+    np.testing.assert_allclose(many[0], matrix, atol=1e-9)
+    assert abs(many[1, 1, 0]) < 1e-12
+
+
+@FAST
+@given(point, phis, st.floats(-0.9, 0.9), level_screen, level_screen, lenses, st.floats(0.5, 30.0),
+       st.floats(0.5, 30.0))
+def test_level_pair_rotation_is_the_exact_composition_when_that_has_no_roll(camera, yaw, pitch, sa, sb, lens,
+                                                                            distance_a, distance_b):
+    truth = level_rotation(yaw, pitch)
+    a = camera + distance_a * truth @ view_direction(sa, lens)
+    b = camera + distance_b * truth @ view_direction(sb, lens)
+    assume(composition_angle(sa, sb, lens) > 0.01)
+    np.testing.assert_allclose(quat_to_matrix(look_rotation(camera, a, b, sa, sb, lens)), truth, atol=1e-7)
+    level = level_pair_rotation(camera, a, b, sa, sb, lens)
+    np.testing.assert_allclose(quat_to_matrix(level), truth, atol=1e-7)
+    pose = CameraPose(camera, level, lens.vertical_fov_deg)
+    np.testing.assert_allclose(project_to_screen(pose, lens, np.stack([a, b])), [sa, sb], atol=1e-6)
+
+
+@FAST
+@given(point, point, unit_interval, phis, st.floats(0.0, 0.9), st.floats(-0.9, 0.9), wide_lenses)
+def test_a_pair_composed_about_the_centre_stays_in_frame_at_every_place_of_its_torus(a, b, fraction, phi, sx, sy,
+                                                                                   lens):
+    # screen points symmetric about the centre whose rays fit inside the vertical field of view:
+    # the level camera shows them turned about the centre by the exact composition's roll, on the
+    # circle of angular radius alpha / 2 about the view axis, so both stay in the frame, equally
+    # far from their screen points, whatever the place (even where the exact composition is upside down)
+    sa, sb = (-sx, -sy), (sx, sy)
+    alpha = composition_angle(sa, sb, lens)
+    assume(0.05 <= alpha <= 0.999 * math.radians(lens.vertical_fov_deg))
+    assume(np.linalg.norm(b - a) > 0.1)
+    torus = make_torus(a, b, alpha)
+    camera = torus_position(torus, interior(torus, fraction), phi)
+    rotation = level_pair_rotation(camera, a, b, sa, sb, lens)
+    assert abs(quat_to_matrix(rotation)[1, 0]) < 1e-9
+    got = project_to_screen(CameraPose(camera, rotation, lens.vertical_fov_deg), lens, np.stack([a, b]))
+    assert np.all(np.abs(got) <= 1.0 + 1e-9)
+    matrix = quat_to_matrix(rotation)
+    error_a = angle_between(matrix @ view_direction(sa, lens), a - camera)
+    error_b = angle_between(matrix @ view_direction(sb, lens), b - camera)
+    assert error_a == pytest.approx(error_b, abs=1e-7)
+
+
+@FAST
+@given(unit_interval, st.floats(-1.0, 1.0), st.floats(2.0, 15.0), st.floats(-1.0, 1.0), phis)
+def test_a_level_pair_seen_from_beside_it_keeps_its_composition(fraction, heading, distance, rise, phi):
+    # beside a level pair (phi +-90 degrees, upright side), the exact composition has no roll,
+    # above it the level camera turns the pair about its bisector by less than a right angle:
+    # A stays left of B wherever the exact composition is upright
+    lens, sa, sb = Lens(), (-1 / 3, 0.0), (1 / 3, 0.0)
+    a = np.array([0.0, 1.2, 0.0])
+    b = a + np.array([distance * math.cos(heading), 0.0, distance * math.sin(heading)])
+    torus = make_torus(a, b, composition_angle(sa, sb, lens))
+    beside = torus_position(torus, interior(torus, fraction), math.pi / 2)
+    np.testing.assert_allclose(quat_to_matrix(level_pair_rotation(beside, a, b, sa, sb, lens)),
+                               quat_to_matrix(look_rotation(beside, a, b, sa, sb, lens)), atol=1e-9)
+    b = b + np.array([0.0, rise, 0.0])
+    torus = make_torus(a, b, composition_angle(sa, sb, lens))
+    upright = math.copysign(max(abs(phi), 0.05), phi) if abs(phi) < math.pi - 0.05 else math.copysign(math.pi - 0.05, phi)
+    camera = torus_position(torus, interior(torus, fraction), upright)
+    pose = CameraPose(camera, level_pair_rotation(camera, a, b, sa, sb, lens), lens.vertical_fov_deg)
+    x = project_to_screen(pose, lens, np.stack([a, b]))[:, 0]
+    assert (x[0] < x[1]) == (upright > 0.0)
+
+
+def test_level_pair_rotation_rejects_a_camera_at_a_framed_point_or_between_them():
     lens = Lens()
-    cameras = np.array(cameras)
-    assume(np.all(np.linalg.norm(np.cross(cameras - a, cameras - b), axis=1) > 1e-3))   # not in line with A and B
-    many = look_matrices(cameras, a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens)
-    for camera, matrix in zip(cameras, many):
-        one = quat_to_matrix(look_rotation(camera, a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens))
-        np.testing.assert_allclose(matrix, one, atol=1e-9)
-
-
-def test_look_matrices_are_nan_for_a_camera_at_a_framed_point():
-    a, b = np.array([0.0, 1.6, 0.0]), np.array([3.0, 1.6, 2.0])
-    assert np.isnan(look_matrices(a[None], a, b, (-1 / 3, 0.0), (1 / 3, 0.0), Lens())).all()
+    a, b = np.array([0.0, 1.6, 0.0]), np.array([4.0, 1.6, 0.0])
+    with pytest.raises(ValueError, match="framed point"):
+        level_pair_rotation(a, a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens)
+    with pytest.raises(ValueError, match="between"):
+        level_pair_rotation((a + b) / 2.0, a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens)
+    many = level_pair_matrices(np.stack([a, (a + b) / 2.0, [2.0, 4.0, 6.0]]), a, b, (-1 / 3, 0.0), (1 / 3, 0.0), lens)
+    assert np.isnan(many[:2]).all() and np.isfinite(many[2]).all()

@@ -34,13 +34,19 @@ OVERVIEW when nothing fights; with a delay, fights are anticipated by reading th
 buffer.
 
 The shot's camera comes from shots.py with the grammar of grammar.py: the line of action of a
-pair is kept, and a cut that shares subjects with the previous shot must turn 30 degrees.
+pair is kept, and a cut that shares subjects with the previous shot must turn 30 degrees. A DUEL
+or GROUP (not a human's take) whose best place sees its subjects under `min_visible` over the
+moments it must cover is shot as a level OVERVIEW of exactly those subjects when one of its
+cameras (above them, or a node of the level's graph), allowed by the 30-degree rule, sees them
+better; its reason says so ("wide: no level duel place sees both"). The level Toric pictures
+cannot show a pair far apart along a corridor, seen only from above it over a shoulder, one
+above the other (shots.py).
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -164,16 +170,19 @@ class ShotBuilder:
             return self._overview(subjects, cover, weights)[1]
         return self._best(kind, subjects, moment, cover, weights, None)[2]
 
-    def _overview(self, subjects: tuple[int, ...], cover: list[Moment], weights: list[float]) -> tuple[CameraPose, float]:
+    def _overview(self, subjects: tuple[int, ...], cover: list[Moment], weights: list[float],
+                  allowed: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[CameraPose, float]:
         return overview_pose(cover, weights, subjects, self.lens, self.visibility, self.settings.overview_height_m,
-                             self.extra_overview_cameras)
+                             self.extra_overview_cameras, allowed)
 
     def build(self, choice: ShotChoice, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
               previous: Shot | None, previous_pose: CameraPose | None, start_s: float,
               weights: list[float] | None = None) -> tuple[Shot | None, float]:
         """A shot showing `subjects` from `moment` on, placed for the moments in `cover` (with
         `weights`, default equal), respecting the 30-degree rule against the previous shot at
-        `moment`; and its place's score. None (and -1) when no place respects the rule."""
+        `moment`; and its place's score. None (and -1) when no place respects the rule. A DUEL or
+        GROUP whose best place scores under min_visible is a wide OVERVIEW of its subjects when
+        one sees them better (module docstring)."""
         if choice.kind == ShotKind.OVERVIEW:
             # everybody when nobody is named and nobody alive (all dead between rounds): a view of the map, not an error
             shown = subjects or tuple(int(i) for i in np.flatnonzero(moment.alive)) or tuple(range(len(moment.alive)))
@@ -186,6 +195,13 @@ class ShotBuilder:
             return self.grammar.allows_cut(previous_world, moment.aims_world[list(shared)], positions)
 
         camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, allowed)
+        if score < self.settings.min_visible and not choice.held:  # a wide view of them may see them better
+            pose, seen = self._overview(subjects, cover, [1.0] * len(cover) if weights is None else weights, allowed)
+            if seen > max(score, 0.0):
+                what = "both" if choice.kind == ShotKind.DUEL else "them all"
+                wide = replace(choice, kind=ShotKind.OVERVIEW,
+                               reason=f"{choice.reason}; wide: no level {choice.kind.name.lower()} place sees {what}")
+                return Shot(wide, subjects, StaticCamera(pose), start_s), seen
         if score < 0.0:
             return None, -1.0
         camera.place = camera.goal = place

@@ -10,7 +10,23 @@ paper, section 3): the camera stays on the torus of the two framed points every 
   the style's, so the others, between them, are in frame too.
 OVERVIEW is a static camera high above the players' bounding box looking at its centre, or at
 a node of the level's graph, whichever sees the worst-seen player best by the same measure as
-the places below.
+the places below; it is level too (geometry.camera.level_look_rotation). It also stands in for a
+DUEL or GROUP whose best place sees its subjects under `min_visible` when it sees them better
+(plan.py, ShotBuilder.build).
+
+Every camera keeps the horizon level, as broadcast casting does. DUEL and GROUP do not compose A
+and B exactly (geometry.toric.look_rotation rolls the camera whenever the composition demands
+it: over a shoulder from above the pair's axis, by up to 85 degrees; with it, at a 10 s delay on
+nav_test, dungeon and zdm2, the program was rolled by more than 20 degrees for 34%, 55% and 61% of
+its time) but turn that composition about the bisector of the rays to A and B until the horizon
+is level (geometry.toric.level_pair_rotation): A and B lie about the midpoint of their screen
+points, exactly on them wherever the exact composition has no roll, one above the other over a
+shoulder from above. The place search judges this level picture (`ToricCamera.rotations`), so a
+place whose level picture cannot hold both players fails the frame test: a pair 20-24 m apart
+along a corridor, seen only from above it, is shot wide instead (the OVERVIEW stand-in above).
+Measured with eval-match at a 10 s delay (5-minute 10-player matches, seed 0), rolled -> level
+with the stand-in: kill coverage nav_test 0.857 -> 0.893, dungeon 0.909 -> 0.875, zdm2 0.872 ->
+0.881; shot lengths, shots under 2 s and jump cuts unchanged; program roll 0.
 
 The place is chosen by ray casting the subjects' sample points from a grid of places, at the cut
 and at the moments the shot must cover (with a delay these are buffered future moments: the
@@ -38,8 +54,8 @@ from camdirector.geometry.toric import (
     DegenerateTorus,
     Torus,
     composition_angle,
-    look_matrices,
-    look_rotation,
+    level_pair_matrices,
+    level_pair_rotation,
     make_torus,
     theta_max,
     torus_position,
@@ -56,7 +72,9 @@ THETA_MARGIN = 0.04                                     # keep the camera off A 
 # Dense at the ends of the arc (over a shoulder, where a close camera sees past the walls) and
 # from nearly above to a little below the axis: a duel's line of action leaves one side of it,
 # and on dungeon and zdm2 the best place of that side at a kill sees both players for 0.89-0.98
-# of the kills with this grid, 0.68-0.82 with 10 ratios and 5 phis from 30 to 95 degrees.
+# of the kills with this grid, 0.68-0.82 with 10 ratios and 5 phis from 30 to 95 degrees (with
+# the rolled composition; level, the places nearly above still show a pair one above the other,
+# and more phis or a fourth width did not recover dungeon's four kills: module docstring).
 PLACE_RATIOS = np.array([0.01, 0.03, 0.06, 0.1, 0.15, 0.3, 0.5, 0.7, 0.85, 0.9, 0.94, 0.97, 0.99])
 PLACE_PHI_RAD = np.radians([5.0, 10.0, 20.0, 30.0, 45.0, 65.0, 80.0, 95.0, 110.0, 125.0])
 PLACE_WIDTHS = (1.0, 1.8, 2.6)
@@ -144,7 +162,8 @@ class ToricCamera:
 
     def rotations(self, moment: Moment, positions_world: np.ndarray, places: list[Place]) -> np.ndarray:
         """(m, 3, 3) camera-to-world rotations of pose_from at m positions (m, 3) of their places'
-        widths, at once for a pair (geometry.toric.look_matrices); NaN where degenerate."""
+        widths, at once for a pair (geometry.toric.level_pair_matrices), so that the place search
+        judges the level picture that is shown; NaN where degenerate."""
         if self.b_index is None:
             return quat_to_matrix(np.stack([self.pose_from(moment, p, place.width).rotation_xyzw
                                             for p, place in zip(positions_world, places)]))
@@ -154,7 +173,7 @@ class ToricCamera:
         for width in dict.fromkeys(widths.tolist()):
             rows = np.flatnonzero(widths == width)
             screen_a, screen_b, _ = self.composition(width)
-            out[rows] = look_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
+            out[rows] = level_pair_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
         return out
 
     def pose(self, moment: Moment) -> CameraPose | None:
@@ -162,14 +181,15 @@ class ToricCamera:
         return None if positions is None else self.pose_from(moment, positions[0], self.place.width)
 
     def pose_from(self, moment: Moment, position_world: np.ndarray, width: float) -> CameraPose:
-        """The camera at a point (3,) of the torus of a framing width composing A and B (FOLLOW: A
-        exact, horizon level)."""
+        """The camera at a point (3,) of the torus of a framing width, horizon level (module
+        docstring): DUEL and GROUP frame A and B about their screen points (geometry.toric.
+        level_pair_rotation), FOLLOW frames A exactly (geometry.camera.level_look_rotation)."""
         a, b = self.points(moment)
         screen_a, screen_b, _ = self.composition(width)
         if self.b_index is None:
             rotation = level_look_rotation(position_world, a, screen_a, self.lens)
         else:
-            rotation = look_rotation(position_world, a, b, screen_a, screen_b, self.lens)
+            rotation = level_pair_rotation(position_world, a, b, screen_a, screen_b, self.lens)
         return CameraPose(position_world, rotation, self.lens.vertical_fov_deg)
 
 
@@ -236,13 +256,15 @@ def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], 
 
 
 def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[int, ...], lens: Lens,
-                  visibility: SubjectVisibility, top_height_m: float,
-                  extra_cameras_world: np.ndarray) -> tuple[CameraPose, float]:
+                  visibility: SubjectVisibility, top_height_m: float, extra_cameras_world: np.ndarray,
+                  allowed: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[CameraPose, float]:
     """A high view of the subjects' bounding box over `moments`, looking at its centre, and its
     worst-seen subject's share (framed_seen, a mean over the moments with `weights`). Tries
     OVERVIEW_AZIMUTHS directions at each height up to top_height_m, and the (k, 3) extra camera
     places (the level's graph nodes, when there is a level) within twice the box's viewing
-    distance; the best worst-seen subject wins, then the best mean."""
+    distance; the best worst-seen subject wins, then the best mean. allowed: (m, 3) camera
+    centres -> (m,) bool (the cut's grammar); cameras it refuses score -1. The pose keeps the
+    horizon level (roll 0: geometry.camera.level_look_rotation), as every camera of the rig."""
     aims = np.concatenate([m.aims_world[list(subjects)] for m in moments])
     centre = aims.mean(axis=0)
     radius_m = float(np.max(np.linalg.norm((aims - centre)[:, [0, 2]], axis=1))) + 2.0
@@ -262,5 +284,7 @@ def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[i
     seen = sum(w * framed_seen(visibility, m, subjects, cameras, rotations, lens) for m, w in zip(moments, weights))
     seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
     worst = seen.min(axis=1)
+    if allowed is not None:
+        worst = np.where(allowed(cameras), worst, -1.0)
     best = int(np.lexsort((-seen.mean(axis=1), -worst))[0])
     return poses[best], float(worst[best])
