@@ -16,6 +16,8 @@ const PROGRAM_FPS = 4;           // the program monitor's live stream, pictures 
 const CANDIDATE_REFRESH_MS = 1000;   // candidate pictures: about once a second, not on every poll
 
 const MAP_MODES = ["ANTICIPATION", "NO_ANTICIPATION"];   // the styles that build the map
+const RIG_FIELDS = { RIG_TORIC: "toric-fields", RIG_TRACKS: "tracks-fields", RIG_MATCH: "match-fields" };
+const MATCH_NUMBERS = ["minShotS", "maxShotS"];          // a match's style numbers the form edits
 
 const TIMELINE_FRAMES = 600;     // frames shown, as many as the server keeps per session
 const EVENT_LOG_SIZE = 50;       // game events listed for a MATCH session, newest first
@@ -540,9 +542,11 @@ function showStyle(style) {
   if (styleSentBySession[selected] === text) return;   // do not overwrite what the user is editing
   styleSentBySession[selected] = text;
   const form = document.getElementById("style-form");
-  const tracks = style.rig === "RIG_TRACKS";
-  document.getElementById("toric-fields").disabled = tracks;
-  document.getElementById("tracks-fields").disabled = !tracks;
+  // Each rig's own fields: the others would be refused (or, for the Toric fields on a match, mean nothing).
+  const rig = RIG_FIELDS[style.rig] ? style.rig : "RIG_TORIC";
+  for (const [key, fieldset] of Object.entries(RIG_FIELDS)) {
+    document.getElementById(fieldset).hidden = document.getElementById(fieldset).disabled = key !== rig;
+  }
   form.visibility.value = style.visibility && style.visibility !== "VISIBILITY_MODE_UNSPECIFIED"
     ? style.visibility : "FRAMING_ONLY";
   for (const name of ["preferredPhiDeg", "preferredThetaRatio", "responseTimeS", "maxSpeedMS"]) {
@@ -550,6 +554,9 @@ function showStyle(style) {
   }
   form.shotSize.value = style.shotSize || "SHOT_SIZE_LONG";
   form.movement.value = style.movement || "MOVEMENT_DYNAMIC_WITH_CUTS";
+  form.matchDirector.value = style.matchDirector && style.matchDirector !== "MATCH_DIRECTOR_UNSPECIFIED"
+    ? style.matchDirector : "MATCH_DIRECTOR_PLANNED";
+  for (const name of MATCH_NUMBERS) form[name].value = style[name] ?? "";
 }
 
 async function applyStyle(event) {
@@ -559,6 +566,12 @@ async function applyStyle(event) {
   if (style.rig === "RIG_TRACKS") {
     style.shotSize = form.shotSize.value;
     style.movement = form.movement.value;
+  } else if (style.rig === "RIG_MATCH") {
+    style.matchDirector = form.matchDirector.value;
+    for (const name of MATCH_NUMBERS) {
+      if (form[name].value === "") delete style[name];
+      else style[name] = Number(form[name].value);
+    }
   } else {
     style.visibility = form.visibility.value;
     for (const name of ["preferredPhiDeg", "preferredThetaRatio", "responseTimeS", "maxSpeedMS"]) {

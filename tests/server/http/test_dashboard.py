@@ -233,6 +233,7 @@ def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
             re.compile(r"framing error \d+\.\d\d now, at most \d+\.\d\d"))
         assert framing_pixels(page, "#timeline")[0] > 0
         assert page.eval_on_selector("#toric-fields", "f => f.disabled")
+        playwright.expect(page.locator("#match-fields")).to_be_hidden()
         page.select_option('#style-form select[name="shotSize"]', "SHOT_SIZE_MEDIUM")
         page.click("#style-form button[type=submit]")
         playwright.expect(page.locator("#style-result")).to_have_text("applied")
@@ -280,6 +281,18 @@ def test_a_director_takes_a_candidate_holds_it_and_sees_the_fallback(server, pag
         assert not any(u.shot.held for u in after)  # the director has the program again
         playwright.expect(page.locator("#release")).to_be_hidden()
         playwright.expect(page.locator("#program-shot")).to_contain_text("(the director's)")
+
+        # A match's style form shows the match's own fields only, and applies them live.
+        playwright.expect(page.locator("#match-fields")).to_be_visible()
+        playwright.expect(page.locator("#toric-fields")).to_be_hidden()
+        playwright.expect(page.locator("#tracks-fields")).to_be_hidden()
+        page.select_option('#style-form select[name="matchDirector"]', "MATCH_DIRECTOR_HLTV")
+        page.fill('#style-form input[name="maxShotS"]', "6")
+        page.click('#style-form button[type="submit"]')
+        playwright.expect(page.locator("#style-result")).to_have_text("applied")
+        style = httpx.get(f"http://{server.http}/v1/sessions/{session_id}").json()["style"]
+        assert style["matchDirector"] == "MATCH_DIRECTOR_HLTV" and style["maxShotS"] == 6 and style["rig"] == "RIG_MATCH"
+        assert "visibility" not in style   # nothing of the Toric rig's was sent
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
