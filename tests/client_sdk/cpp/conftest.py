@@ -18,12 +18,12 @@ ROOT = Path(__file__).resolve().parents[3]
 SDK_DIR = ROOT / "client_sdk" / "cpp"
 BUILD_DIR = SDK_DIR / "build"
 BUILD_TIMEOUT_S = 1200  # a clean build on two busy cores: the generated wire code is most of it
-PROGRAMS = ("engine_loop", "convert_check", "sdk_check", "c_api_check")
+PROGRAMS = ("engine_loop", "convert_check", "sdk_check", "c_api_check", "unit_tests")
 
 
 def _missing_toolchain() -> str | None:
     """What is missing to build the SDK, or None."""
-    for tool in ("cmake", "c++", "protoc", "grpc_cpp_plugin", "pkg-config"):
+    for tool in ("cmake", "ctest", "c++", "protoc", "grpc_cpp_plugin", "pkg-config"):
         if shutil.which(tool) is None:
             return f"no {tool}"
     for package in ("grpc++", "protobuf"):

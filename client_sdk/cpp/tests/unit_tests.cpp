@@ -1,0 +1,108 @@
+// Unit tests of the SDK that need no server, run by ctest (tests/client_sdk/cpp/test_ctest.py runs
+// ctest from `make test`): the engines' conversions against the tables of docs/protocol.md (known
+// values and round trips), the fields of view, address parsing, and the game thread's refusals
+// without a session. Exits non-zero with the first failed check printed.
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+
+#include "camdirector/camdirector.h"
+
+namespace {
+
+int failures = 0;
+
+void check(bool ok, const char* what) {
+  if (!ok) {
+    std::fprintf(stderr, "FAILED: %s\n", what);
+    ++failures;
+  }
+}
+
+bool near(double a, double b, double tol = 1e-12) { return std::fabs(a - b) <= tol; }
+bool near3(cd_vec3 a, cd_vec3 b, double tol = 1e-12) {
+  return near(a.x, b.x, tol) && near(a.y, b.y, tol) && near(a.z, b.z, tol);
+}
+bool near4(cd_quat a, cd_quat b, double tol = 1e-12) {
+  return near(a.x, b.x, tol) && near(a.y, b.y, tol) && near(a.z, b.z, tol) && near(a.w, b.w, tol);
+}
+
+void known_values() {
+  // docs/protocol.md: Unity ours = (x, y, -z), q = (-x, -y, z, w); Unreal ours = (y, z, -x) / 100,
+  // q = (-qy, -qz, qx, qw), scale = (sy, sz, sx).
+  check(near3(cd_from_unity_position({1.0, 2.0, 3.0}), {1.0, 2.0, -3.0}), "Unity position");
+  check(near4(cd_from_unity_rotation({0.1, 0.2, 0.3, 0.9}), {-0.1, -0.2, 0.3, 0.9}), "Unity rotation");
+  check(near3(cd_from_unreal_position({100.0, 200.0, 300.0}), {2.0, 3.0, -1.0}), "Unreal position, cm to m");
+  check(near4(cd_from_unreal_rotation({0.1, 0.2, 0.3, 0.9}), {-0.2, -0.3, 0.1, 0.9}), "Unreal rotation");
+  check(near3(cd_from_unreal_scale({1.0, 2.0, 3.0}), {2.0, 3.0, 1.0}), "Unreal scale");
+  const double h = cd_horizontal_fov_deg(50.0, 16.0 / 9.0);
+  check(near(h, 2.0 * std::atan(std::tan(25.0 * M_PI / 180.0) * 16.0 / 9.0) * 180.0 / M_PI, 1e-9),
+        "horizontal field of view of 50 deg vertical at 16:9");
+  check(near(cd_vertical_fov_deg(h, 16.0 / 9.0), 50.0, 1e-9), "vertical field of view back");
+}
+
+void round_trips() {
+  std::srand(7);
+  auto r = [] { return 4.0 * std::rand() / RAND_MAX - 2.0; };
+  for (int i = 0; i < 200; ++i) {
+    const cd_vec3 p{r(), r(), r()};
+    cd_quat q{r(), r(), r(), r()};
+    const double n = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+    q = {q.x / n, q.y / n, q.z / n, q.w / n};
+    check(near3(cd_to_unity_position(cd_from_unity_position(p)), p), "Unity position round trip");
+    check(near4(cd_to_unity_rotation(cd_from_unity_rotation(q)), q), "Unity rotation round trip");
+    check(near3(cd_to_unreal_position(cd_from_unreal_position(p)), p, 1e-9), "Unreal position round trip");
+    check(near4(cd_to_unreal_rotation(cd_from_unreal_rotation(q)), q), "Unreal rotation round trip");
+    check(near3(cd_to_unreal_scale(cd_from_unreal_scale(p)), p), "Unreal scale round trip");
+  }
+  float tri[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+  uint32_t idx[3] = {0, 1, 2};
+  cd_from_unity_vertices(tri, 3);
+  check(tri[2] == -3.0f && tri[5] == -6.0f && tri[1] == 2.0f, "Unity vertices mirrored in z");
+  cd_flip_winding(idx, 3);
+  check(idx[0] == 0 && idx[1] == 2 && idx[2] == 1, "winding reversed");
+}
+
+void addresses() {
+  char reason[256];
+  check(cd_check_address("127.0.0.1:50051", reason, sizeof reason) == CD_OK, "host:port parses");
+  check(cd_check_address("localhost:1", nullptr, 0) == CD_OK, "a name parses");
+  const char* bad[] = {"", "no-port", "127.0.0.1:", "127.0.0.1:0", "127.0.0.1:70000", ":50051", "host:port"};
+  for (const char* address : bad) {
+    check(cd_check_address(address, reason, sizeof reason) == CD_INVALID_ARGUMENT, address);
+  }
+  cd_config config;
+  cd_config_init(&config);
+  config.address = "no-port";
+  cd_client* client = reinterpret_cast<cd_client*>(1);
+  check(cd_client_create(&config, &client) == CD_INVALID_ARGUMENT && client == nullptr,
+        "a client with an address that does not parse is refused, *out NULL");
+}
+
+void game_thread_without_a_session() {
+  cd_config config;
+  cd_config_init(&config);
+  config.address = "127.0.0.1:1";   // nothing listens: the client does not connect until a session opens
+  cd_client* client = nullptr;
+  check(cd_client_create(&config, &client) == CD_OK && client != nullptr, "a client starts without a server");
+  cd_state state{};
+  state.transform.rotation.w = 1.0;
+  check(cd_frame_submit(client, 1, 0.0, &state, 1) == CD_FAILED_PRECONDITION, "no session: submit refused");
+  cd_pose pose;
+  check(cd_pose_poll(client, &pose) == CD_NOT_FOUND, "no pose yet");
+  cd_event event;
+  check(cd_event_poll(client, &event) != CD_OK, "no event yet");
+  cd_client_destroy(client);
+}
+
+}  // namespace
+
+int main() {
+  known_values();
+  round_trips();
+  addresses();
+  game_thread_without_a_session();
+  if (failures == 0) std::puts("all unit tests passed");
+  return failures == 0 ? 0 : 1;
+}
