@@ -112,26 +112,49 @@ def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarr
 
 def level_look_rotation(camera_world: np.ndarray, point_world: np.ndarray, screen_xy, lens: Lens) -> np.ndarray:
     """Camera-to-world quaternion (4,) xyzw with no roll (camera x axis horizontal, +Y up) that
-    shows point_world at normalised screen_xy (2,).
-
-    Written as yaw about +Y after pitch about x, R = Ry(yaw) Rx(pitch): the pitch brings the
-    camera-space ray of screen_xy to the world ray's elevation (yaw keeps elevations), then the yaw
-    turns it onto the world ray. Of the two pitches, the one nearer level is taken. When the point
-    is too steep for the screen position (near the zenith) the pitch saturates and the point lands
-    off its screen position rather than the camera rolling.
-    """
+    shows point_world at normalised screen_xy (2,) (`level_rotation`)."""
     d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
-    d /= np.linalg.norm(d)
     a = np.asarray(point_world, dtype=np.float64) - camera_world
-    a /= np.linalg.norm(a)
-    rho = math.hypot(d[1], d[2])
-    delta = math.atan2(d[2], d[1])
-    base = math.acos(max(-1.0, min(1.0, a[1] / rho)))
-    pitch = min((base - delta, -base - delta), key=lambda b: abs(math.remainder(b, math.tau)))
+    return matrix_to_quat(level_rotation(a / np.linalg.norm(a), d / np.linalg.norm(d)))
+
+
+def level_rotation(world_dir, camera_dir) -> np.ndarray:
+    """(3, 3) `level_rotations` for one world direction (3,), in scalars: the per-frame case, where
+    numpy's per-call cost would triple it."""
+    wx, wy, wz = (float(c) for c in world_dir)
+    dx, dy, dz = (float(c) for c in camera_dir)
+    rho = math.hypot(dy, dz)
+    delta = math.atan2(dz, dy)
+    base = math.acos(max(-1.0, min(1.0, wy / rho)))
+    pitch = min((base - delta, -base - delta), key=lambda p: abs(math.remainder(p, math.tau)))
     cp, sp = math.cos(pitch), math.sin(pitch)
-    z_pitched = d[1] * sp + d[2] * cp
-    yaw = math.atan2(a[0], a[2]) - math.atan2(d[0], z_pitched)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
-    return matrix_to_quat(ry @ rx)
+    yaw = math.atan2(wx, wz) - math.atan2(dx, dy * sp + dz * cp)
+    cw, sw = math.cos(yaw), math.sin(yaw)
+    return np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp)))
+
+
+def level_rotations(world_dirs: np.ndarray, camera_dir) -> np.ndarray:
+    """(m, 3, 3) camera-to-world rotations with no roll that turn the unit camera-space direction
+    camera_dir (3,) onto each unit world direction of world_dirs (m, 3); rows of NaN stay NaN.
+
+    Written as yaw about +Y after pitch about x, R = Ry(yaw) Rx(pitch): the pitch brings camera_dir
+    to the world direction's elevation (yaw keeps elevations), then the yaw turns it onto the world
+    direction. Of the two pitches, the one nearer level is taken. When the direction is too steep
+    for camera_dir (near the zenith) the pitch saturates and it lands off camera_dir rather than
+    the camera rolling.
+    """
+    w = np.asarray(world_dirs, dtype=np.float64)
+    dx, dy, dz = (float(c) for c in camera_dir)
+    rho = math.hypot(dy, dz)
+    delta = math.atan2(dz, dy)
+    base = np.arccos(np.clip(w[:, 1] / rho, -1.0, 1.0))
+    up, down = base - delta, -base - delta
+    pitch = np.where(np.abs(np.remainder(up + math.pi, math.tau) - math.pi)
+                     <= np.abs(np.remainder(down + math.pi, math.tau) - math.pi), up, down)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    yaw = np.arctan2(w[:, 0], w[:, 2]) - np.arctan2(dx, dy * sp + dz * cp)
+    cw, sw = np.cos(yaw), np.sin(yaw)
+    out = np.stack([np.stack([cw, sw * sp, sw * cp], axis=1), np.stack([np.zeros_like(cw), cp, -sp], axis=1),
+                    np.stack([-sw, cw * sp, cw * cp], axis=1)], axis=1)
+    out[np.isnan(pitch)] = np.nan   # the constant zero of a NaN row too
+    return out

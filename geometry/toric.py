@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.geometry.camera import CameraPose, Lens, level_rotation, level_rotations
 from camdirector.geometry.transforms import matrix_to_quat
 
 MIN_AB_DISTANCE_M = 1e-6
@@ -256,6 +256,17 @@ def _frame(p: tuple[float, float, float], q: tuple[float, float, float]) -> np.n
     ))
 
 
+def _rays_to(camera_world, a_world, b_world, what: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Unit directions (3,) from the camera to A and to B; ValueError naming `what` if it is at one."""
+    cx, cy, cz = np.asarray(camera_world, dtype=np.float64).tolist()
+    ax, ay, az = np.asarray(a_world, dtype=np.float64).tolist()
+    bx, by, bz = np.asarray(b_world, dtype=np.float64).tolist()
+    try:
+        return _unit_tuple(ax - cx, ay - cy, az - cz), _unit_tuple(bx - cx, by - cy, bz - cz)
+    except ZeroDivisionError:
+        raise ValueError(f"{what}: the camera is at a framed point") from None
+
+
 def look_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
     """Camera-to-world unit quaternion (4,) xyzw, w >= 0, that shows A at screen_a and B at screen_b.
 
@@ -264,21 +275,15 @@ def look_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens
     on the torus of composition_angle(screen_a, screen_b, lens); otherwise A is exact and B lies in
     the right plane through the view axis. ValueError if the camera is at A or B or in line with both.
     """
-    cx, cy, cz = np.asarray(camera_world, dtype=np.float64).tolist()
-    ax, ay, az = np.asarray(a_world, dtype=np.float64).tolist()
-    bx, by, bz = np.asarray(b_world, dtype=np.float64).tolist()
-    try:
-        to_a = _unit_tuple(ax - cx, ay - cy, az - cz)
-        to_b = _unit_tuple(bx - cx, by - cy, bz - cz)
-    except ZeroDivisionError:
-        raise ValueError("look_rotation: the camera is at a framed point") from None
+    to_a, to_b = _rays_to(camera_world, a_world, b_world, "look_rotation")
     world = _frame(to_a, to_b)
     camera = _frame(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
     return matrix_to_quat(world @ camera.T)
 
 
-def _bisector(u: tuple[float, float, float], v: tuple[float, float, float]) -> tuple[float, float, float]:
-    """unit(u + v) of two unit directions; ZeroDivisionError when they are opposite."""
+def _screen_bisector(screen_a, screen_b, lens: Lens) -> tuple[float, float, float]:
+    """unit(d(sA) + d(sB)): the camera-space bisector of the screen points' rays."""
+    u, v = _view_dir(screen_a, lens), _view_dir(screen_b, lens)
     return _unit_tuple(u[0] + v[0], u[1] + v[1], u[2] + v[2])
 
 
@@ -289,38 +294,22 @@ def level_pair_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens
     camera_world, a_world, b_world: (3,) metres; screen_a, screen_b: (2,). The bisector of the view
     rays to A and B, unit(unit(A - C) + unit(B - C)), is shown where the bisector of the screen
     points' rays, unit(d(sA) + d(sB)), points, with yaw and pitch only (geometry.camera.
-    level_look_rotation's construction: R = Ry(yaw) Rx(pitch), the pitch nearer level of its two).
-    On the torus of composition_angle(screen_a, screen_b, lens) the two pairs of rays make the same
-    angle, so the exact composition (look_rotation) maps one bisector onto the other: this is
-    look_rotation turned about the bisector until the horizon is level. A and B stay symmetric
-    about their bisector's screen point, each off its screen point by the turn (the roll the exact
-    composition would need); when that roll is 0 this equals look_rotation. A pair nearly in line
-    with the view (over a shoulder from above) is shown one above the other; one that no longer
-    fits the frame is left to the caller's frame test (match shots.framed_seen).
-    ValueError if the camera is at A or B or between them on their line.
+    level_rotation). On the torus of composition_angle(screen_a, screen_b, lens) the two pairs
+    of rays make the same angle, so the exact composition (look_rotation) maps one bisector onto
+    the other: this is look_rotation turned about the bisector until the horizon is level. A and
+    B stay symmetric about their bisector's screen point, each off its screen point by the turn
+    (the roll the exact composition would need); when that roll is 0 this equals look_rotation.
+    A pair nearly in line with the view (over a shoulder from above) is shown one above the
+    other; one that no longer fits the frame is left to the caller's frame test (match
+    shots.framed_seen). ValueError if the camera is at A or B or between them on their line.
     """
-    cx, cy, cz = np.asarray(camera_world, dtype=np.float64).tolist()
-    ax, ay, az = np.asarray(a_world, dtype=np.float64).tolist()
-    bx, by, bz = np.asarray(b_world, dtype=np.float64).tolist()
-    try:
-        to_a = _unit_tuple(ax - cx, ay - cy, az - cz)
-        to_b = _unit_tuple(bx - cx, by - cy, bz - cz)
-    except ZeroDivisionError:
-        raise ValueError("level_pair_rotation: the camera is at a framed point") from None
+    to_a, to_b = _rays_to(camera_world, a_world, b_world, "level_pair_rotation")
     wx, wy, wz = to_a[0] + to_b[0], to_a[1] + to_b[1], to_a[2] + to_b[2]
     length = math.sqrt(wx * wx + wy * wy + wz * wz)
     if length < 1e-12:
         raise ValueError("level_pair_rotation: the camera is between the framed points")
-    wx, wy, wz = wx / length, wy / length, wz / length
-    dx, dy, dz = _bisector(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
-    rho = math.hypot(dy, dz)
-    delta = math.atan2(dz, dy)
-    base = math.acos(max(-1.0, min(1.0, wy / rho)))
-    pitch = min((base - delta, -base - delta), key=lambda p: abs(math.remainder(p, math.tau)))
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    yaw = math.atan2(wx, wz) - math.atan2(dx, dy * sp + dz * cp)
-    cw, sw = math.cos(yaw), math.sin(yaw)
-    return matrix_to_quat(np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp))))
+    return matrix_to_quat(level_rotation((wx / length, wy / length, wz / length),
+                                         _screen_bisector(screen_a, screen_b, lens)))
 
 
 def level_pair_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
@@ -336,21 +325,7 @@ def level_pair_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, s
         w = to_a + to_b
         length = np.linalg.norm(w, axis=1, keepdims=True)
         w = np.where(length < 1e-12, np.nan, w / length)
-    dx, dy, dz = _bisector(_view_dir(screen_a, lens), _view_dir(screen_b, lens))
-    rho = math.hypot(dy, dz)
-    delta = math.atan2(dz, dy)
-    base = np.arccos(np.clip(w[:, 1] / rho, -1.0, 1.0))                 # NaN stays NaN
-    up, down = base - delta, -base - delta
-    nearer = np.abs(np.remainder(up + math.pi, math.tau) - math.pi) <= np.abs(np.remainder(down + math.pi, math.tau) - math.pi)
-    pitch = np.where(nearer, up, down)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    yaw = np.arctan2(w[:, 0], w[:, 2]) - np.arctan2(dx, dy * sp + dz * cp)
-    cw, sw = np.cos(yaw), np.sin(yaw)
-    zero = np.zeros_like(cw)
-    out = np.stack([np.stack([cw, sw * sp, sw * cp], axis=1), np.stack([zero, cp, -sp], axis=1),
-                    np.stack([-sw, cw * sp, cw * cp], axis=1)], axis=1)
-    out[np.isnan(pitch)] = np.nan
-    return out
+        return level_rotations(w, _screen_bisector(screen_a, screen_b, lens))
 
 
 def compose_pose(torus: Torus, theta: float, phi: float, screen_a, screen_b, lens: Lens) -> CameraPose:

@@ -81,6 +81,19 @@ cd_status rpc_result(cd_client* client, const char* rpc, const grpc::Status& sta
               std::string(rpc) + " on " + client->target + ": " + status.error_message());
 }
 
+// The streaming session's id into a request that names it; FAILED_PRECONDITION (also the
+// client's last error) when no session streams.
+template <typename Request>
+cd_status name_streaming_session(cd_client* client, Request* request) {
+  std::lock_guard<std::mutex> guard(client->mu);
+  if (client->phase != Phase::kStream) {
+    client->set_error_locked(CD_FAILED_PRECONDITION, "no session is streaming on this client");
+    return CD_FAILED_PRECONDITION;
+  }
+  request->set_session_id(client->session_id);
+  return CD_OK;
+}
+
 cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double timeout_s) {
   {
     std::lock_guard<std::mutex> guard(client->mu);
@@ -335,14 +348,7 @@ cd_status cd_session_update_style(cd_client* client, const cd_style* style, doub
   if (style == nullptr) return fail(client, CD_INVALID_ARGUMENT, "style is NULL");
   try {
     pb::UpdateStyleRequest request;
-    {
-      std::lock_guard<std::mutex> guard(client->mu);
-      if (client->phase != Phase::kStream) {
-        client->set_error_locked(CD_FAILED_PRECONDITION, "no session is streaming on this client");
-        return CD_FAILED_PRECONDITION;
-      }
-      request.set_session_id(client->session_id);
-    }
+    if (const cd_status named = name_streaming_session(client, &request); named != CD_OK) return named;
     camdirector::sdk::fill_style(*style, request.mutable_style());
     grpc::ClientContext context;
     context.set_deadline(rpc_deadline_of(timeout_s));
@@ -363,14 +369,7 @@ cd_status cd_session_take_shot(cd_client* client, const char* const* subject_ids
   if (subject_count > 0 && subject_ids == nullptr) return fail(client, CD_INVALID_ARGUMENT, "subject_ids is NULL");
   try {
     pb::TakeShotRequest request;
-    {
-      std::lock_guard<std::mutex> guard(client->mu);
-      if (client->phase != Phase::kStream) {
-        client->set_error_locked(CD_FAILED_PRECONDITION, "no session is streaming on this client");
-        return CD_FAILED_PRECONDITION;
-      }
-      request.set_session_id(client->session_id);
-    }
+    if (const cd_status named = name_streaming_session(client, &request); named != CD_OK) return named;
     for (uint32_t i = 0; i < subject_count; ++i) {
       if (subject_ids[i] == nullptr) return fail(client, CD_INVALID_ARGUMENT, "a subject id is NULL");
       request.add_subject_ids(subject_ids[i]);

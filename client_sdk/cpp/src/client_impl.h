@@ -147,6 +147,7 @@ struct cd_client {
   void io_loop();
   void open_stream_locked();
   void handle_stream_done_locked();
+  void cancel_stream(std::unique_lock<std::mutex>& lock);
   void recreate(std::unique_lock<std::mutex>& lock);
   void write_next(std::unique_lock<std::mutex>& lock);
   void build_frame(camdirector::v1::FrameUpdate* msg);

@@ -124,11 +124,7 @@ void cd_client::io_loop() {
     }
     if (stopping || phase == Phase::kClosing) {
       if (stream != nullptr && !stream_cancelled && !stream_hold_released) {
-        stream_cancelled = true;
-        FrameStream* s = stream;
-        lock.unlock();
-        s->cancel();
-        lock.lock();
+        cancel_stream(lock);
         continue;
       }
       if (stream == nullptr) {
@@ -174,11 +170,7 @@ void cd_client::io_loop() {
         if (in_flight > 0) {
           const Clock::time_point stall_at = progress_at + camdirector::sdk::seconds(config.stall_timeout_s);
           if (now >= stall_at) {  // the server or the network stopped answering: start over
-            stream_cancelled = true;
-            FrameStream* s = stream;
-            lock.unlock();
-            s->cancel();
-            lock.lock();
+            cancel_stream(lock);
             continue;
           }
           wake = std::min(wake, stall_at);
@@ -211,6 +203,15 @@ void cd_client::open_stream_locked() {
 void cd_client::retry_later_locked() {
   retry_at = Clock::now() + camdirector::sdk::seconds(backoff_s);
   backoff_s = std::min(backoff_s * 2.0, config.reconnect_max_s);
+}
+
+void cd_client::cancel_stream(std::unique_lock<std::mutex>& lock) {
+  // Marked first, cancelled outside the lock: gRPC may call back into on_stream_done at once.
+  stream_cancelled = true;
+  FrameStream* s = stream;
+  lock.unlock();
+  s->cancel();
+  lock.lock();
 }
 
 void cd_client::handle_stream_done_locked() {

@@ -130,6 +130,24 @@ struct Scene {
   }
 };
 
+// Opens the scene's session; on failure prints {"error": ...} (the scenario then exits 1).
+bool open_or_say(cd_client* client, Scene& scene) {
+  if (cd_session_open(client, &scene.desc, 10.0) == CD_OK) return true;
+  std::printf("{\"error\": %s}\n", q(error_of(client)).c_str());
+  return false;
+}
+
+// Closes the session, adds its close status and the server's frame count to the JSON object
+// `out` (left open), prints it and destroys the client: how the scenarios that stream end.
+int close_and_print(cd_client* client, std::string out) {
+  uint64_t frames = 0;
+  const cd_status closed = cd_session_close(client, &frames, 10.0);
+  out += ", \"close\": " + q(cd_status_name(closed)) + ", \"server_frames\": " + u64(frames) + "}";
+  std::puts(out.c_str());
+  cd_client_destroy(client);
+  return 0;
+}
+
 void states_at(uint64_t frame, cd_state out[3]) {
   const double t = static_cast<double>(frame) / 60.0;
   std::memset(out, 0, sizeof(cd_state) * 3);
@@ -264,12 +282,7 @@ int scenario_nan(const char* address) {
          ", \"pose_frame\": " + u64(pose.frame) + ", \"pose_finite\": " +
          (std::isfinite(pose.position.x + pose.position.y + pose.position.z + pose.rotation.w) ? "true" : "false") +
          ", \"game_thread_allocations\": " + u64(allocations) + ", \"stats\": " + stats_json(client);
-  uint64_t frames = 0;
-  const cd_status closed = cd_session_close(client, &frames, 10.0);
-  out += ", \"close\": " + q(cd_status_name(closed)) + ", \"server_frames\": " + u64(frames) + "}";
-  std::puts(out.c_str());
-  cd_client_destroy(client);
-  return 0;
+  return close_and_print(client, out);
 }
 
 // A frame the server refuses (a scale of zero on one axis: the SDK passes it, the server's
@@ -277,10 +290,7 @@ int scenario_nan(const char* address) {
 int scenario_refused(const char* address) {
   Scene scene;
   cd_client* client = make_client(address);
-  if (cd_session_open(client, &scene.desc, 10.0) != CD_OK) {
-    std::printf("{\"error\": %s}\n", q(error_of(client)).c_str());
-    return 1;
-  }
+  if (!open_or_say(client, scene)) return 1;
   const std::string first_id = session_of(client);
   cd_state states[3];
   std::string out = "{\"submits\": [";
@@ -309,10 +319,7 @@ int scenario_refused(const char* address) {
 int scenario_flood(const char* address, uint64_t n) {
   Scene scene;
   cd_client* client = make_client(address, 4, 1);
-  if (cd_session_open(client, &scene.desc, 10.0) != CD_OK) {
-    std::printf("{\"error\": %s}\n", q(error_of(client)).c_str());
-    return 1;
-  }
+  if (!open_or_say(client, scene)) return 1;
   std::vector<double> call_us;
   call_us.reserve(n);
   cd_state states[3];
@@ -339,12 +346,7 @@ int scenario_flood(const char* address, uint64_t n) {
                     ", \"game_call_us_p50\": " + num(call_us[call_us.size() / 2]) + ", \"game_call_us_max\": " +
                     num(call_us.back()) + ", \"game_thread_allocations\": " + u64(allocations) +
                     ", \"stats\": " + stats_json(client);
-  uint64_t frames = 0;
-  const cd_status closed = cd_session_close(client, &frames, 10.0);
-  out += ", \"close\": " + q(cd_status_name(closed)) + ", \"server_frames\": " + u64(frames) + "}";
-  std::puts(out.c_str());
-  cd_client_destroy(client);
-  return 0;
+  return close_and_print(client, out);
 }
 
 // Screen position (x right, y up, [-1, 1]) of a world point seen by the pose, at aspect 16:9.
@@ -367,10 +369,7 @@ void project(const cd_pose& pose, const cd_vec3& p, double* sx, double* sy) {
 int scenario_sparse(const char* address) {
   Scene scene;
   cd_client* client = make_client(address, 2, 1, 200);
-  if (cd_session_open(client, &scene.desc, 10.0) != CD_OK) {
-    std::printf("{\"error\": %s}\n", q(error_of(client)).c_str());
-    return 1;
-  }
+  if (!open_or_say(client, scene)) return 1;
   const cd_vec3 b_moved = {4.5, 0.9, 3.0};
   cd_state states[3];
   uint64_t refused = 0;
@@ -430,10 +429,7 @@ int scenario_pose_output(const char* address, const char* udp_port) {
 int scenario_stream(const char* address, const std::string& until, uint64_t after, double timeout_s) {
   Scene scene;
   cd_client* client = make_client(address, 8, 2);
-  if (cd_session_open(client, &scene.desc, 10.0) != CD_OK) {
-    std::printf("{\"error\": %s}\n", q(error_of(client)).c_str());
-    return 1;
-  }
+  if (!open_or_say(client, scene)) return 1;
   const std::string first_id = session_of(client);
   const int wanted = until == "recreated" ? CD_EVENT_RECREATED : CD_EVENT_RESUMED;
   std::vector<cd_event> events;
@@ -495,12 +491,7 @@ int scenario_stream(const char* address, const std::string& until, uint64_t afte
            "}";
   }
   out += "], \"stats\": " + stats_json(client);
-  uint64_t frames = 0;
-  const cd_status closed = cd_session_close(client, &frames, 10.0);
-  out += ", \"close\": " + q(cd_status_name(closed)) + ", \"server_frames\": " + u64(frames) + "}";
-  std::puts(out.c_str());
-  cd_client_destroy(client);
-  return 0;
+  return close_and_print(client, out);
 }
 
 }  // namespace

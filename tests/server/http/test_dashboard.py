@@ -212,9 +212,10 @@ def test_submit_an_overview_job_and_watch_its_preview(server, page, shared_data,
     assert page.get_attribute("#overview-result", "class") == "error"
 
 
-def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
-    http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
-    added = http.post("/v1/levels", data={"name": "dashboard-corridor"},
+def corridor_session(server, http: httpx.Client, level_name: str, walk_s: float) -> tuple[GrpcRaw, str]:
+    """A corridor level added over REST, and a TRACKS session in it that streamed `walk_s` s of
+    the actor walking: (its gRPC client, its id)."""
+    added = http.post("/v1/levels", data={"name": level_name},
                       files={"level": ("corridor.obj", obj_text(corridor()).encode())})
     assert added.status_code == 202, added.text
     deadline = time.monotonic() + 60.0
@@ -222,9 +223,15 @@ def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
         assert time.monotonic() < deadline, "the level job did not succeed"
         time.sleep(0.1)
     raw = GrpcRaw(server.grpc)
-    session_id = raw.call("CreateSession", tracks_request("dashboard-corridor", (2.0, 0.0, 2.0))).session_id
-    times, feet = corridor_walk(3.0)
+    session_id = raw.call("CreateSession", tracks_request(level_name, (2.0, 0.0, 2.0))).session_id
+    times, feet = corridor_walk(walk_s)
     raw.stream(actor_frames(session_id, times, feet))
+    return raw, session_id
+
+
+def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
+    http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
+    raw, session_id = corridor_session(server, http, "dashboard-corridor", 3.0)
     try:
         page.click(f'#sessions tbody tr[data-session="{session_id}"]')
         playwright.expect(page.locator("#why li").last).to_contain_text("tracks_cut_first_shot; target scored shot size")
@@ -543,17 +550,7 @@ def test_the_top_view_shows_the_level(server, page):
     trails, mapped as the canvas says (data-bounds): a point on the floor far from the actor shows
     the top view picture's own colour there, and the picture spans its world rectangle."""
     http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
-    added = http.post("/v1/levels", data={"name": "dashboard-topview"},
-                      files={"level": ("corridor.obj", obj_text(corridor()).encode())})
-    assert added.status_code == 202, added.text
-    deadline = time.monotonic() + 60.0
-    while http.get(f"/v1/level-jobs/{added.json()['id']}").json()["status"] != "succeeded":
-        assert time.monotonic() < deadline, "the level job did not succeed"
-        time.sleep(0.1)
-    raw = GrpcRaw(server.grpc)
-    session_id = raw.call("CreateSession", tracks_request("dashboard-topview", (2.0, 0.0, 2.0))).session_id
-    times, feet = corridor_walk(2.0)
-    raw.stream(actor_frames(session_id, times, feet))
+    raw, session_id = corridor_session(server, http, "dashboard-topview", 2.0)
     try:
         reply = http.get(f"/v1/sessions/{session_id}/topview.png")
         assert reply.status_code == 200
