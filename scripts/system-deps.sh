@@ -4,7 +4,8 @@
 # `system-deps.sh --tests` (make test) also wants what the tests drive: Debian's Chromium for the
 # dashboard's browser tests, and the C/C++ SDK's toolchain (client_sdk/cpp: CMake, g++, gRPC and
 # protobuf for C++; `--cpp` asks for that one alone); without root those are only reported
-# (their tests then skip, CI fails).
+# (their tests then skip, CI fails). `--cluster` (also part of `--tests`) wants the engines a
+# cluster runs on (scripts/cluster.sh): redis-server, haproxy and postgresql.
 set -euo pipefail
 need=()
 ldconfig -p | grep -q 'libEGL.so.1' || need+=(libegl1)
@@ -22,6 +23,11 @@ if [ "${1:-}" = "--tests" ] || [ "${1:-}" = "--cpp" ]; then
   command -v grpc_cpp_plugin >/dev/null || optional+=(protobuf-compiler-grpc)
   { command -v pkg-config >/dev/null && pkg-config --exists protobuf; } || optional+=(libprotobuf-dev)
   { command -v pkg-config >/dev/null && pkg-config --exists grpc++; } || optional+=(libgrpc++-dev)
+fi
+if [ "${1:-}" = "--tests" ] || [ "${1:-}" = "--cluster" ]; then
+  command -v redis-server >/dev/null || optional+=(redis-server)
+  command -v haproxy >/dev/null || [ -x /usr/sbin/haproxy ] || optional+=(haproxy)
+  [ -x /usr/lib/postgresql/15/bin/initdb ] || optional+=(postgresql)
 fi
 if [ ${#optional[@]} -gt 0 ]; then
   if [ "$(id -u)" -ne 0 ]; then

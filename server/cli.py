@@ -32,6 +32,16 @@ def _serve_parser(sub) -> None:
     p.add_argument("--max-upload-bytes", dest="max_upload_bytes", type=int)
     p.add_argument("--job-retention-s", dest="job_retention_s", type=float,
                    help="seconds a finished offline job's result is kept (0: forever)")
+    p.add_argument("--job-store", dest="job_store",
+                   help="job records: empty for SQLite in the data directory, or postgresql://USER@HOST:PORT/DB")
+    p.add_argument("--job-queue", dest="job_queue",
+                   help="empty to run jobs in this process's runner, or redis://HOST:PORT/DB for the shared queue")
+    p.add_argument("--checkpoint-store", dest="checkpoint_store",
+                   help="session checkpoints: empty for a folder in the data directory, redis://HOST:PORT/DB "
+                        "to let any node restore any session, or off")
+    p.add_argument("--checkpoint-every-frames", dest="checkpoint_every_frames", type=int,
+                   help="frames between two snapshots of a session's state")
+    p.add_argument("--node-id", dest="node_id", help="this node's name (default: host name and pid)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,6 +37,17 @@ class ServerSettings:
     max_queued_jobs: int = 16                # offline jobs waiting; more answer HTTP 429. [0, 100000]
     max_upload_bytes: int = 64 * 1024 * 1024  # largest job upload, bytes (HTTP 413 above). [1 KiB, 4 GiB]
     job_retention_s: float = 7 * 86400.0     # finished offline jobs are removed this long after they ended; 0 keeps them, s. [0, 1e9]
+    # Where job records live: "" is SQLite in data_dir (one node); postgresql://... is shared by many nodes.
+    job_store: str = ""
+    # Where jobs wait to run: "" is this process's own runner (one node); redis://... is a queue that
+    # queue workers on any node take jobs from (`camdirector job-worker`).
+    job_queue: str = ""
+    # Session checkpoints (sessions/checkpoints.py): "" is a folder in data_dir (survives a worker's
+    # death and a restart of this node); redis://... lets any node restore any session; "off" keeps none.
+    checkpoint_store: str = ""
+    checkpoint_every_frames: int = 60        # a session's state is snapshotted every this many frames. [1, 100000]
+    checkpoint_keep_s: float = 600.0         # a checkpoint no node has written for this long is removed, s. [1, 1e7]
+    node_id: str = ""                        # this node's name in checkpoints' ownership ("": host name and pid)
 
     def __post_init__(self):
         checks = [
@@ -48,6 +60,14 @@ class ServerSettings:
             (0.01 <= self.reap_interval_s <= 60, "reap_interval_s must be in [0.01, 60]"),
             (not self.zmq_addr or self.zmq_addr.startswith(("tcp://", "ipc://")),
              "zmq_addr must start with tcp:// or ipc://"),
+            (self.checkpoint_store in ("", "off") or self.checkpoint_store.startswith("redis://"),
+             "checkpoint_store must be empty (a folder in data_dir), off, or a redis:// URL"),
+            (1 <= self.checkpoint_every_frames <= 100_000, "checkpoint_every_frames must be in [1, 100000]"),
+            (1 <= self.checkpoint_keep_s <= 1e7, "checkpoint_keep_s must be in [1, 1e7]"),
+            (not self.job_store or self.job_store.startswith(("postgresql://", "postgres://")),
+             "job_store must be empty (SQLite in data_dir) or a postgresql:// URL"),
+            (not self.job_queue or self.job_queue.startswith("redis://"),
+             "job_queue must be empty (this process's runner) or a redis:// URL"),
         ]
         for ok, message in checks:
             if not ok:
@@ -57,6 +77,10 @@ class ServerSettings:
         from camdirector.server.jobs import JobSettings  # validated there
         return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
                            max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s)
+
+    @property
+    def node_name(self) -> str:
+        return self.node_id or f"{socket.gethostname()}-{os.getpid()}"
 
     @property
     def recordings_dir(self) -> Path:

@@ -45,3 +45,43 @@ def server_factory():
     yield start
     for srv in started:
         srv.stop()
+
+
+def _service_or_skip(start):
+    """A Debian service started for the tests, or a skip with the reason where its package is
+    missing; a failure under CI (.ci/run sets CAMDIRECTOR_REQUIRE_CLUSTER=1)."""
+    from camdirector.server.deploy.services import ServiceError
+    try:
+        return start()
+    except ServiceError as exc:
+        if os.environ.get("CAMDIRECTOR_REQUIRE_CLUSTER") == "1":
+            pytest.fail(f"{exc} (CAMDIRECTOR_REQUIRE_CLUSTER=1)")
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="session")
+def redis_server(tmp_path_factory):
+    """One redis-server on a free loopback port for the whole run (deploy/services.py)."""
+    from camdirector.server.deploy.services import RedisServer
+    server = _service_or_skip(lambda: RedisServer(tmp_path_factory.mktemp("redis")).start())
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def redis_url(redis_server) -> str:
+    """The shared Redis, emptied for each test."""
+    import redis
+    client = redis.from_url(redis_server.url)
+    client.flushall()
+    client.close()
+    return redis_server.url
+
+
+@pytest.fixture(scope="session")
+def postgres_server(tmp_path_factory):
+    """One PostgreSQL cluster on a free loopback port for the whole run (deploy/services.py)."""
+    from camdirector.server.deploy.services import PostgresServer
+    server = _service_or_skip(lambda: PostgresServer(tmp_path_factory.mktemp("postgres")).start())
+    yield server
+    server.stop()

@@ -1,0 +1,143 @@
+"""Debian's Redis, PostgreSQL and HAProxy started as plain child processes on loopback ports, for
+the cluster (deploy/cluster.py) and the tests: each `start()`s, waits until it answers, gives its
+URL, and `stop()`s. Nothing is installed here (scripts/system-deps.sh --cluster does that); a
+missing binary is a `ServiceError` that says which package provides it.
+
+PostgreSQL refuses to run as root, so as root its data folder is given to Debian's `postgres`
+user and its commands run as that user (runuser)."""
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+POSTGRES_BIN = Path("/usr/lib/postgresql/15/bin")
+
+
+class ServiceError(RuntimeError):
+    """A service that cannot start (missing binary, port taken, bad configuration)."""
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (the caller binds it soon after)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def _binary(name: str, package: str, folder: Path | None = None) -> str:
+    path = str(folder / name) if folder is not None and (folder / name).exists() else shutil.which(name)
+    if path is None:
+        raise ServiceError(f"{name} is not installed (Debian package {package}; scripts/system-deps.sh --cluster)")
+    return path
+
+
+def _wait_port(port: int, proc: subprocess.Popen | None, timeout_s: float, what: str, log: Path) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise ServiceError(f"{what} exited with code {proc.returncode}: {_tail(log)}")
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise ServiceError(f"{what} did not listen on 127.0.0.1:{port} within {timeout_s:g} s: {_tail(log)}")
+
+
+def _tail(path: Path, chars: int = 2000) -> str:
+    try:
+        return path.read_text(errors="replace")[-chars:]
+    except OSError:
+        return "(no log)"
+
+
+class RedisServer:
+    """redis-server on 127.0.0.1:`port` (0: a free one), no persistence (checkpoints are
+    rewritten continually; a lost Redis loses only what sessions would restore from)."""
+
+    def __init__(self, folder: Path, port: int = 0):
+        self.folder = Path(folder)
+        self.port = port or free_port()
+        self.proc: subprocess.Popen | None = None
+
+    @property
+    def url(self) -> str:
+        return f"redis://127.0.0.1:{self.port}/0"
+
+    def start(self, timeout_s: float = 10.0) -> RedisServer:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        log = self.folder / "redis.log"
+        self.proc = subprocess.Popen(
+            [_binary("redis-server", "redis-server"), "--port", str(self.port), "--bind", "127.0.0.1",
+             "--dir", str(self.folder), "--save", "", "--appendonly", "no", "--protected-mode", "yes",
+             "--logfile", str(log)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        _wait_port(self.port, self.proc, timeout_s, "redis-server", log)
+        return self
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+class PostgresServer:
+    """A PostgreSQL cluster of its own in `folder`, on 127.0.0.1:`port` (0: a free one), with a
+    database and a user both named `camdirector` (trust authentication: loopback only). As root
+    the cluster's folder is a new one under the system's temporary folder instead, which the
+    `postgres` user can reach (a test's folder often is not: its parents are root's alone)."""
+
+    def __init__(self, folder: Path, port: int = 0):
+        self._as_postgres = os.geteuid() == 0
+        self.folder = Path(tempfile.mkdtemp(prefix="camdirector-pg-")) if self._as_postgres else Path(folder)
+        self.port = port or free_port()
+        self.data = self.folder / "pgdata"
+
+    @property
+    def url(self) -> str:
+        return f"postgresql://camdirector@127.0.0.1:{self.port}/camdirector"
+
+    def _run(self, *cmd: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess:
+        argv = (["runuser", "-u", "postgres", "--"] if self._as_postgres else []) + list(cmd)
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s)
+        if done.returncode != 0:
+            raise ServiceError(f"{Path(cmd[0]).name} failed: {(done.stderr or done.stdout)[-2000:]}")
+        return done
+
+    def start(self, timeout_s: float = 60.0) -> PostgresServer:
+        initdb = _binary("initdb", "postgresql", POSTGRES_BIN)
+        pg_ctl = _binary("pg_ctl", "postgresql", POSTGRES_BIN)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if self._as_postgres:
+            shutil.chown(self.folder, "postgres", "postgres")
+            os.chmod(self.folder, 0o700)
+        if not (self.data / "PG_VERSION").exists():
+            self._run(initdb, "-D", str(self.data), "-A", "trust", "-U", "camdirector", "--no-sync", "-E", "UTF8")
+        options = f"-p {self.port} -k {self.folder} -c listen_addresses=127.0.0.1 -c fsync=off"
+        self._run(pg_ctl, "-D", str(self.data), "-o", options, "-l", str(self.folder / "postgres.log"),
+                  "-w", "-t", str(int(timeout_s)), "start", timeout_s=timeout_s + 5)
+        createdb = _binary("createdb", "postgresql", POSTGRES_BIN)
+        done = subprocess.run((["runuser", "-u", "postgres", "--"] if self._as_postgres else [])
+                              + [createdb, "-h", "127.0.0.1", "-p", str(self.port), "-U", "camdirector", "camdirector"],
+                              capture_output=True, text=True, timeout=30)
+        if done.returncode != 0 and "already exists" not in done.stderr:
+            raise ServiceError(f"createdb failed: {done.stderr[-2000:]}")
+        return self
+
+    def stop(self) -> None:
+        if (self.data / "postmaster.pid").exists():
+            try:
+                self._run(_binary("pg_ctl", "postgresql", POSTGRES_BIN), "-D", str(self.data), "-m", "fast",
+                          "-w", "stop", timeout_s=30)
+            except ServiceError:
+                pass
+        if self._as_postgres:
+            shutil.rmtree(self.folder, ignore_errors=True)
