@@ -33,6 +33,15 @@ def _embree_scene(meshes: list[TriMesh]) -> rtcore_scene.EmbreeScene:
     return scene
 
 
+def _rebuilt(static_meshes_world: list[TriMesh], solo_max_objects: int,
+             objects: list[tuple[str, TriMesh, RigidTransform]]) -> RayScene:
+    """A RayScene unpickled (RayScene.__reduce__): built again from its meshes, objects in their order."""
+    scene = RayScene(static_meshes_world, solo_max_objects)
+    for object_id, mesh_local, transform in objects:
+        scene.add_dynamic(object_id, mesh_local, transform)
+    return scene
+
+
 class RayScene:
     """Static meshes (world frame, built once) plus dynamic rigid objects (local frame + transform).
 
@@ -56,9 +65,13 @@ class RayScene:
     With at most `solo_max_objects` moving objects, each is cast alone instead: every ray moved
     into its frame, against a scene of its mesh alone (no sphere, no offset), as many calls as
     objects. Both ways give the same answers (tests/geometry/test_raycast.py).
+
+    Pickles as its meshes and objects' transforms; unpickling builds its Embree scenes again (a
+    session's checkpoint, server/sessions/checkpoints.py): the same triangles answer the same.
     """
 
     def __init__(self, static_meshes_world: list[TriMesh], solo_max_objects: int = SOLO_MAX_OBJECTS):
+        self._static_meshes = list(static_meshes_world)
         self._static = _embree_scene(static_meshes_world) if static_meshes_world else None
         self._index: dict[str, int] = {}                  # object id -> row
         self._meshes_local: list[TriMesh] = []
@@ -69,6 +82,10 @@ class RayScene:
         self._solo_max = solo_max_objects
         # per object, cast one by one: its scene and world -> local matrix (None: moved since)
         self._solo: list[tuple[rtcore_scene.EmbreeScene, np.ndarray | None]] = []
+
+    def __reduce__(self):
+        objects = [(object_id, self._meshes_local[row], self._transforms[row]) for object_id, row in self._index.items()]
+        return _rebuilt, (self._static_meshes, self._solo_max, objects)
 
     def add_dynamic(self, object_id: str, mesh_local: TriMesh, transform: RigidTransform) -> None:
         if object_id in self._index:

@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print(f"movers_bench: --movers must be comma-separated integers, got {args.movers!r}", file=sys.stderr)
         return 2
-    table = SessionTable(ServerSettings(max_objects=10_000))
+    table = SessionTable(ServerSettings(max_objects=10_000, checkpoint_store="off"))
     cases = [run_case(table, mode, n, args.frames, args.warmup) for mode in MODES for n in counts]
     table.close_all()
     floor = summary([c["stale_frame_wall_ms"]["median"] for c in cases])

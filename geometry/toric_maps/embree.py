@@ -87,6 +87,10 @@ class EmbreeMapBackend:
         self._static: rtcore_scene.EmbreeScene | None = None
         self._local: dict[str, rtcore_scene.EmbreeScene] = {}
 
+    def __reduce__(self):
+        """Pickled as its scene and settings: the Embree scenes are built again on first use."""
+        return EmbreeMapBackend, (self.scene, self.settings)
+
     def _sync(self) -> None:
         if self._version == self.scene.geometry_version:
             return

@@ -252,6 +252,11 @@ class GLMapBackend:
         self._object_index: dict[str, int] = {}
         self._targets: dict[tuple[int, int, int], tuple] = {}   # atlases by (samples, resolution, tile px)
 
+    def __reduce__(self):
+        """Pickled as its scene and settings: unpickling makes its GL objects again, in the
+        unpickling thread's context (nothing drawn is kept between two computes)."""
+        return GLMapBackend, (self.scene, self.settings)
+
     # -- resources -----------------------------------------------------------------------------
 
     def _sync_scene(self) -> None:

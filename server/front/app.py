@@ -18,6 +18,7 @@ from camdirector.server.front.zmq_service import ZmqTransport
 from camdirector.server.http.app import build_app
 from camdirector.server.http.routes.levels import install_level_routes
 from camdirector.server.http.routes.overview import install_overview_jobs
+from camdirector.server.sessions.checkpoints import CheckpointError, open_store
 from camdirector.server.settings import ServerSettings
 
 log = logging.getLogger("camdirector.serve")
@@ -87,5 +88,12 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
 def run(settings: ServerSettings) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:  # a node whose checkpoints have nowhere to go refuses to start, rather than lose sessions later
+        store = open_store(settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s, check=True)
+    except CheckpointError as exc:
+        print(f"camdirector serve: {exc}", file=sys.stderr)
+        return 2
+    if store is not None:
+        store.close()
     asyncio.run(serve(settings))
     return 0

@@ -26,6 +26,12 @@ class Metrics:
                                        buckets=_SECONDS_BUCKETS, registry=r)
         self.stage = Histogram("camdirector_stage_seconds", "Time per pipeline stage per frame", ["stage"],
                                buckets=_SECONDS_BUCKETS, registry=r)
+        self.sessions_restored = Counter("camdirector_sessions_restored",
+                                         "Sessions rebuilt from their checkpoints (a worker or node lost, a restart)",
+                                         registry=r)
+        self.checkpoint_failures = Counter("camdirector_checkpoint_failures",
+                                           "Frames answered while their session's checkpoint could not be written "
+                                           "(the store down)", registry=r)
         self.view_requests = Counter("camdirector_view_requests", "Monitor pictures asked for, by shot "
                                      "(live-stream ticks included)", ["shot"], registry=r)
         self.view_renders = Counter("camdirector_view_renders",
@@ -44,12 +50,15 @@ class Metrics:
             child = self._children[key] = metric.labels(*values)
         return child
 
-    def frame_answered(self, transport: str, compute_ms: float, stage_ms: dict[str, float], stale: bool) -> None:
+    def frame_answered(self, transport: str, compute_ms: float, stage_ms: dict[str, float], stale: bool,
+                       checkpoint_failed: bool = False) -> None:
         """One frame answered over `transport`: its compute time and stage times, ms, as the worker
         measured them (FrameMetrics)."""
         self.labelled(self.frames, transport).inc()
         if stale:
             self.stale_frames.inc()
+        if checkpoint_failed:
+            self.checkpoint_failures.inc()
         self.frame_compute.observe(compute_ms * 1e-3)
         for stage, ms in stage_ms.items():
             self.labelled(self.stage, stage).observe(ms * 1e-3)

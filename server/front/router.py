@@ -1,5 +1,12 @@
 """The front process's view of the sessions: which worker holds each, which are streaming, and
 when an abandoned one is reclaimed. Both transports call this one object.
+
+With checkpoints (the default; sessions/checkpoints.py) no session is lost with its worker: the
+sessions of a worker that died are given at once to the least loaded of the others (the same one
+when there is no other, which is then awaited while it restarts), and their next request restores
+them there. A client's request for a session this node does not know (this node restarted, or the
+balancer sent the session here from a node that died) is given to a worker the same way, which
+restores it from the checkpoint store or answers NOT_FOUND.
 """
 from __future__ import annotations
 
@@ -32,6 +39,7 @@ class SessionEntry:
     streams: int = 0
     frames: int = 0
     transport: set[str] = field(default_factory=set)
+    restoring: bool = False   # given to a worker that has to restore it from its checkpoint first
 
 
 class SessionRouter:
@@ -40,6 +48,7 @@ class SessionRouter:
         self.metrics = metrics
         self.clock = clock
         self.pool = WorkerPool(settings, on_worker_lost=self._worker_lost)
+        self.checkpoints = settings.checkpoint_store != "off"
         self.sessions: dict[str, SessionEntry] = {}
         self._lost: OrderedDict[str, int] = OrderedDict()  # session id -> the worker slot that died with it
         self._reserved = 0  # creations in flight, counted against max_sessions
@@ -54,8 +63,15 @@ class SessionRouter:
             self._reaper.cancel()
         await self.pool.stop()
 
-    def _entry(self, session_id: str) -> SessionEntry:
+    def _entry(self, session_id: str, adopt: bool = False) -> SessionEntry:
+        """The session's entry. With `adopt` (a request of the session's client) and checkpoints,
+        an unknown session is given to the least loaded worker to restore (module docstring);
+        other requests (the dashboard's) never move a session here."""
         entry = self.sessions.get(session_id)
+        if entry is None and adopt and self.checkpoints:
+            now = self.clock()
+            entry = self.sessions[session_id] = SessionEntry(slot=self._least_loaded_slot(), created_s=now,
+                                                             last_seen_s=now, restoring=True)
         if entry is None:
             if session_id in self._lost:
                 raise unavailable(f"session {session_id!r} was lost: the worker process holding it (worker "
@@ -63,11 +79,27 @@ class SessionRouter:
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return entry
 
-    def _least_loaded_slot(self) -> int:
+    def _least_loaded_slot(self, exclude: int | None = None) -> int:
         load = [0] * self.pool.slots
         for entry in self.sessions.values():
             load[entry.slot] += 1
-        return min(range(len(load)), key=load.__getitem__)
+        slots = [slot for slot in range(len(load)) if slot != exclude] or list(range(len(load)))
+        return min(slots, key=load.__getitem__)
+
+    async def _call(self, entry: SessionEntry, op: str, session_id: str, payload: bytes, timeout_s: float | None = None):
+        """pool.call for a session's request; a restoring session is known here only once its
+        worker has restored it (NOT_FOUND there: it has no checkpoint, and is forgotten)."""
+        try:
+            result = await self.pool.call(entry.slot, op, session_id, payload, timeout_s)
+        except DirectorError as exc:
+            if entry.restoring and exc.code.name == "NOT_FOUND" and self.sessions.get(session_id) is entry:
+                del self.sessions[session_id]
+            raise
+        if entry.restoring:
+            entry.restoring = False
+            self.metrics.sessions_restored.inc()
+            self.metrics.sessions.set(len(self.sessions))
+        return result
 
     async def create(self, payload: bytes, transport: str) -> bytes:
         if len(self.sessions) + self._reserved >= self.settings.max_sessions:
@@ -86,20 +118,22 @@ class SessionRouter:
         return body
 
     async def frame(self, payload: bytes, session_id: str, transport: str) -> bytes:
-        entry = self._entry(session_id)
+        entry = self._entry(session_id, adopt=True)
         entry.last_seen_s = self.clock()
-        body, frame_metrics = await self.pool.call(entry.slot, "frame", session_id, payload)
+        body, frame_metrics = await self._call(entry, "frame", session_id, payload)
         entry.frames += 1
-        self.metrics.frame_answered(transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale)
+        entry.transport.add(transport)
+        self.metrics.frame_answered(transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale,
+                                    frame_metrics.checkpoint_failed)
         return body
 
     async def _session_request(self, message_type, op: str, payload: bytes) -> bytes:
         """A serialized request of the session it names (a client's: it keeps the session alive)
         to that session's worker; the serialized answer back."""
         session_id = session_id_of(message_type, payload)
-        entry = self._entry(session_id)
+        entry = self._entry(session_id, adopt=True)
         entry.last_seen_s = self.clock()
-        body, _ = await self.pool.call(entry.slot, op, session_id, payload)
+        body, _ = await self._call(entry, op, session_id, payload)
         return body
 
     async def update_style(self, payload: bytes) -> bytes:
@@ -111,14 +145,14 @@ class SessionRouter:
 
     async def close(self, payload: bytes) -> bytes:
         session_id = session_id_of(pb.CloseSessionRequest, payload)
-        entry = self._entry(session_id)
-        body, _ = await self.pool.call(entry.slot, "close", session_id, payload)
+        entry = self._entry(session_id, adopt=True)
+        body, _ = await self._call(entry, "close", session_id, payload)
         self.sessions.pop(session_id, None)
         self.metrics.sessions.set(len(self.sessions))
         return body
 
     def stream_opened(self, session_id: str) -> None:
-        self._entry(session_id).streams += 1
+        self._entry(session_id, adopt=True).streams += 1
 
     def stream_closed(self, session_id: str) -> None:
         entry = self.sessions.get(session_id)
@@ -152,6 +186,13 @@ class SessionRouter:
 
     def _worker_lost(self, slot: int) -> None:
         lost = [sid for sid, e in self.sessions.items() if e.slot == slot]
+        if self.checkpoints:  # each to the least loaded other worker, which restores it on its next request
+            for session_id in lost:
+                entry = self.sessions[session_id]
+                entry.slot, entry.restoring = self._least_loaded_slot(exclude=slot), True
+            log.error("worker %d died; its %d sessions are restored from their checkpoints on other workers",
+                      slot, len(lost))
+            return
         for session_id in lost:
             del self.sessions[session_id]
             self._lost[session_id] = slot

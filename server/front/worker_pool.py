@@ -9,8 +9,10 @@ ZeroMQ pair costs three (its I/O threads on both sides): about 150 us against 37
 trip after 16 ms idle on this kind of VM.
 
 Workers are started with the "spawn" method: forking a process that already runs gRPC is unsafe.
-A worker that dies is restarted; its sessions are lost and callers are told so. A worker whose
-front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
+A worker that dies is noticed at once (its end of the socket pair closes): its requests in flight
+fail with UNAVAILABLE, `on_worker_lost` is told (the router gives its sessions to other workers,
+which restore them from their checkpoints), and it is restarted; requests for it meanwhile wait
+for the new one. A worker whose front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
 the front process.
 """
 from __future__ import annotations
@@ -40,6 +42,7 @@ from camdirector.server.settings import ServerSettings
 log = logging.getLogger("camdirector.workers")
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
+WORKER_START_WAIT_S = 30.0  # a request for a restarting worker waits this long for it, s
 
 
 class _Worker:
@@ -48,6 +51,8 @@ class _Worker:
         self.process: multiprocessing.process.BaseProcess | None = None
         self.writer: asyncio.StreamWriter | None = None
         self.reader_task: asyncio.Task | None = None
+        self.ready = asyncio.Event()   # started and answering; cleared from its death to its successor's start
+        self.replacing: asyncio.Task | None = None
 
 
 class WorkerPool:
@@ -62,6 +67,7 @@ class WorkerPool:
         self._pending: dict[int, asyncio.Future] = {}
         self._ids = itertools.count()
         self._monitor: asyncio.Task | None = None
+        self._stopping = False
         self._mp = multiprocessing.get_context("spawn")
 
     @property
@@ -73,8 +79,13 @@ class WorkerPool:
         for worker in self._workers:
             await self._spawn(worker)
         if self._workers:
-            await asyncio.gather(*(self._call_worker(w, "ping", "", b"", timeout_s=120.0) for w in self._workers))
+            await asyncio.gather(*(self._ping(w) for w in self._workers))
             self._monitor = asyncio.create_task(self._watch())
+
+    async def _ping(self, worker: _Worker) -> None:
+        """Waits until a just started worker answers (its imports done), then lets requests in."""
+        await self._send(worker, "ping", "", b"", timeout_s=120.0)
+        worker.ready.set()
 
     async def _spawn(self, worker: _Worker) -> None:
         front_end, worker_end = self._mp.Pipe(duplex=True)
@@ -85,9 +96,9 @@ class WorkerPool:
         sock = socket.socket(fileno=os.dup(front_end.fileno()))
         front_end.close()
         reader, worker.writer = await asyncio.open_unix_connection(sock=sock, limit=2 ** 20)
-        worker.reader_task = asyncio.create_task(self._read(reader))
+        worker.reader_task = asyncio.create_task(self._read(worker, reader))
 
-    async def _read(self, reader: asyncio.StreamReader) -> None:
+    async def _read(self, worker: _Worker, reader: asyncio.StreamReader) -> None:
         try:
             while True:
                 header = REPLY.unpack(await reader.readexactly(REPLY.size))
@@ -101,30 +112,50 @@ class WorkerPool:
                 else:
                     future.set_exception(DirectorError(_CODES.get(code, grpc.StatusCode.UNKNOWN), body.decode()))
         except (asyncio.IncompleteReadError, ConnectionError):
-            return  # the worker went away; _watch restarts it and fails what was pending
+            if not self._stopping:  # the worker went away: at once, not at _watch's next look
+                self._lost(worker)
+
+    def _lost(self, worker: _Worker) -> None:
+        """A worker died: fail what it had in flight, tell the router, start its successor."""
+        if worker.replacing is not None and not worker.replacing.done():
+            return
+        log.error("worker %d died (exit code %s); restarting it", worker.index, worker.process.exitcode)
+        worker.ready.clear()
+        worker.writer.close()
+        for request_id, future in list(self._pending.items()):
+            if getattr(future, "worker_index", None) == worker.index and not future.done():
+                future.set_exception(DirectorError(grpc.StatusCode.UNAVAILABLE,
+                                                   "the worker holding this session died; retry: it is being restored"))
+                self._pending.pop(request_id, None)
+        if self.on_worker_lost is not None:
+            self.on_worker_lost(worker.index)
+        worker.replacing = asyncio.create_task(self._replace(worker))
+
+    async def _replace(self, worker: _Worker) -> None:
+        worker.process.kill()  # already dead, or its socket broke: either way it is done
+        await asyncio.get_running_loop().run_in_executor(None, worker.process.join)
+        await self._spawn(worker)
+        await self._ping(worker)
 
     async def _watch(self) -> None:
-        """Restarts a worker that died; its sessions are gone and callers are told so."""
+        """Notices a worker that died without its socket saying so (a backstop to _read)."""
         while True:
             await asyncio.sleep(0.5)
             for worker in self._workers:
-                if worker.process.is_alive():
-                    continue
-                log.error("worker %d died (exit code %s); restarting it", worker.index, worker.process.exitcode)
-                worker.reader_task.cancel()
-                worker.writer.close()
-                for request_id, future in list(self._pending.items()):
-                    if getattr(future, "worker_index", None) == worker.index and not future.done():
-                        future.set_exception(DirectorError(grpc.StatusCode.UNAVAILABLE,
-                                                           "the worker holding this session died"))
-                        self._pending.pop(request_id, None)
-                if self.on_worker_lost is not None:
-                    self.on_worker_lost(worker.index)
-                await self._spawn(worker)
+                if not worker.process.is_alive() and worker.ready.is_set():
+                    self._lost(worker)
 
     async def _call_worker(self, worker: _Worker, op: str, session_id: str, payload: bytes,
                            timeout_s: float | None = None):
-        if worker.writer.is_closing():  # died, and _watch is starting its successor
+        if not worker.ready.is_set():  # its successor is starting: wait for it rather than fail
+            try:
+                await asyncio.wait_for(worker.ready.wait(), WORKER_START_WAIT_S)
+            except TimeoutError:
+                raise DirectorError(grpc.StatusCode.UNAVAILABLE, f"worker {worker.index} is restarting") from None
+        return await self._send(worker, op, session_id, payload, timeout_s)
+
+    async def _send(self, worker: _Worker, op: str, session_id: str, payload: bytes, timeout_s: float | None = None):
+        if worker.writer.is_closing():  # died just now; _lost is starting its successor
             raise DirectorError(grpc.StatusCode.UNAVAILABLE, f"worker {worker.index} died and is restarting")
         request_id = next(self._ids) % REQUEST_ID_MODULUS
         future = asyncio.get_running_loop().create_future()
@@ -169,13 +200,16 @@ class WorkerPool:
         return await future
 
     async def stop(self) -> None:
+        self._stopping = True
         if self._inline is not None:
             self._inline.close_all()
         if self._monitor is not None:
             self._monitor.cancel()
         for worker in self._workers:
+            if worker.replacing is not None:
+                worker.replacing.cancel()
             try:
-                await self._call_worker(worker, "stop", "", b"", timeout_s=2.0)
+                await self._send(worker, "stop", "", b"", timeout_s=2.0)
             except (TimeoutError, DirectorError, ConnectionError):
                 pass
             worker.reader_task.cancel()

@@ -127,13 +127,17 @@ def opentrackio_transform(position_world: Sequence[float], rotation_xyzw: Sequen
     x, y, z, w = _floats(rotation_xyzw)
     # The entries of R (geometry.transforms.quat_to_matrix) that the decomposition reads.
     r02, r12, r22 = 2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)
-    r10, r11 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z)
+    r00, r01 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z)
+    r20, r21 = 2 * (x * z - w * y), 2 * (y * z + w * x)
     cos_tilt = math.hypot(r02, r22)
     tilt = math.atan2(-r12, cos_tilt)
     if cos_tilt > 1e-9:
-        pan, roll = math.atan2(r02, r22), math.atan2(-r10, r11)
+        pan = math.atan2(r02, r22)
+        # Roll from the rotation with pan taken out (entries of size about 1), not from r10 and r11,
+        # which shrink with cos(tilt): near straight up or down those lose the angle's precision.
+        sin_pan, cos_pan = math.sin(pan), math.cos(pan)
+        roll = math.atan2(cos_pan * r01 - sin_pan * r21, cos_pan * r00 - sin_pan * r20)
     else:  # straight up or down: pan and roll turn about the same axis; all of it is pan
-        r00, r20 = 1 - 2 * (y * y + z * z), 2 * (x * z - w * y)
         pan, roll = math.atan2(-r20, r00), 0.0
     return (px, -pz, py), (math.degrees(pan), math.degrees(tilt), math.degrees(roll))
 

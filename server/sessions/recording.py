@@ -34,13 +34,17 @@ def _varint(n: int) -> bytes:
 
 
 class RecordingWriter:
-    """Appends entries; flushes every `flush_every` entries so a crash loses little."""
+    """Appends entries; flushes every `flush_every` entries so a crash loses little. With
+    `append`, goes on with an existing recording (a session restored from its checkpoint)."""
 
-    def __init__(self, path: Path, flush_every: int = 60):
+    def __init__(self, path: Path, flush_every: int = 60, append: bool = False):
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
-        self._file: BinaryIO = open(path, "wb")
-        self._file.write(MAGIC)
+        if append and path.exists():
+            self._file: BinaryIO = open(path, "ab")
+        else:
+            self._file = open(path, "wb")
+            self._file.write(MAGIC)
         self._flush_every = flush_every
         self._pending = 0
 
@@ -118,7 +122,7 @@ def replay(path: Path, on_frame=None, data_dir: Path | None = None) -> ReplayRep
     from camdirector.server.sessions.table import SessionTable
     from camdirector.server.settings import ServerSettings
 
-    limits = dict(max_objects=1_000_000, max_triangles=100_000_000)
+    limits = dict(max_objects=1_000_000, max_triangles=100_000_000, checkpoint_store="off")  # a replay keeps no checkpoints
     if data_dir is None and Path(path).resolve().parent.name == "recordings":
         data_dir = Path(path).resolve().parent.parent
     if data_dir is not None:

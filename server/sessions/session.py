@@ -60,6 +60,7 @@ class Session:
         self.delay_s = scene.delay_s
         static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
         self.static_meshes_world = static_meshes_world   # and the level's, what the monitors draw (sessions/views.py)
+        self.level = scene.level
         self.level_mesh_world = scene.level.mesh_world if scene.level is not None else None
         level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
         self.ray_scene = RayScene(static_meshes_world + level_meshes)
@@ -78,6 +79,16 @@ class Session:
         self.frames_answered = 0
         self.shot_id = 0
         self.last_cut: CutRecord | None = None
+
+    def creation_objects(self) -> dict:
+        """What the session was built from and never changes, by a name that a session built from
+        the same creation request gives the same object: its meshes, its level, its clock. A
+        checkpoint refers to these by name instead of copying them (sessions/checkpoints.py)."""
+        objects = {"clock": self.clock, "level": self.level, "level_mesh": self.level_mesh_world}
+        objects.update({("static", i): mesh for i, mesh in enumerate(self.static_meshes_world)})
+        objects.update({("target", i): t.mesh for i, t in enumerate(self.targets)})
+        objects.update({("dynamic", object_id): mesh for object_id, (mesh, _) in self.dynamic.items()})
+        return {key: value for key, value in objects.items() if value is not None}
 
     def set_style(self, style: Style) -> None:
         """From the next frame on (the rig's set_style says what a change does)."""

@@ -6,7 +6,7 @@ client's serialized request exactly as the front received it (the front read onl
 - Request, front to worker: REQUEST (request id, op code, session id length, payload length), the
   session id (UTF-8), the payload.
 - Reply, worker to front: REPLY (request id, status: a gRPC status code, 0 for OK; flags:
-  HAS_METRICS, STALE; compute_ms; stage count; stage names length; body length), the stage names
+  HAS_METRICS, STALE, CHECKPOINT_FAILED; compute_ms; stage count; stage names length; body length), the stage names
   (ASCII, comma-separated, in the frame's stage order), their times (one float64 each, ms), the
   body: the serialized reply, or the UTF-8 error message when the status is not 0.
 A frame's metrics thus travel as a few packed numbers beside its reply, taken from the frame's
@@ -37,7 +37,7 @@ REQUEST = struct.Struct("!IBHQ")
 REPLY = struct.Struct("!IBBdBHQ")
 OPS = ("ping", "stop", "create", "frame", "style", "close", "take", "timeline", "amap", "drop", "view")
 OP_CODES = {name: code for code, name in enumerate(OPS)}
-HAS_METRICS, STALE = 1, 2
+HAS_METRICS, STALE, CHECKPOINT_FAILED = 1, 2, 4
 READ_BUFFER_BYTES = 1 << 16  # the worker's read buffer: a frame request (~1 KB) arrives in one read
 REQUEST_ID_MODULUS = 2 ** 32
 
@@ -53,7 +53,7 @@ def encode_reply(request_id: int, status: int, body: bytes, metrics: FrameMetric
         return REPLY.pack(request_id, status, 0, 0.0, 0, 0, len(body)) + body
     names = ",".join(metrics.stage_ms).encode("ascii")
     values = struct.pack(f"!{len(metrics.stage_ms)}d", *metrics.stage_ms.values())
-    flags = HAS_METRICS | (STALE if metrics.stale else 0)
+    flags = HAS_METRICS | (STALE if metrics.stale else 0) | (CHECKPOINT_FAILED if metrics.checkpoint_failed else 0)
     return REPLY.pack(request_id, status, flags, metrics.compute_ms, len(metrics.stage_ms), len(names),
                       len(body)) + names + values + body
 
@@ -73,7 +73,7 @@ def decode_reply_tail(header: tuple, tail: bytes) -> tuple[bytes, FrameMetrics |
         names = _stage_names[blob] = tuple(blob.decode("ascii").split(",")) if blob else ()
     values = struct.unpack_from(f"!{stages}d", tail, names_len)
     body = tail[names_len + 8 * stages:]
-    return body, FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE))
+    return body, FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE), bool(flags & CHECKPOINT_FAILED))
 
 
 def tail_length(header: tuple) -> int:

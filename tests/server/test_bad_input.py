@@ -222,12 +222,13 @@ def test_abandoned_session_is_reclaimed_after_the_resume_window(server_factory):
     client.close()
 
 
-def test_a_dead_worker_is_replaced(server_factory):
-    """A worker killed by the OS loses its sessions, which then answer UNAVAILABLE saying so, over
-    both transports; new sessions work again."""
+def test_without_checkpoints_a_dead_worker_is_replaced(server_factory):
+    """With checkpoints off, a worker killed by the OS loses its sessions, which then answer
+    UNAVAILABLE saying so, over both transports; new sessions work again (with checkpoints, the
+    default, they are restored: tests/server/test_failover.py)."""
     import os
     import signal
-    srv = server_factory("--workers", "1")
+    srv = server_factory("--workers", "1", "--checkpoint-store", "off")
     client, zmq_client = GrpcRaw(srv.grpc), ZmqRaw(srv.zmq)
     session_id = client.call("CreateSession", two_target_request()).session_id
     children = [int(p) for p in open(f"/proc/{srv.proc.pid}/task/{srv.proc.pid}/children").read().split()]

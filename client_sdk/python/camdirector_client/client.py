@@ -11,6 +11,9 @@ concurrent calls from several threads each get a socket of their own.
 
 from __future__ import annotations
 
+import threading
+import time
+from collections import deque
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Protocol
@@ -30,13 +33,16 @@ _FRAME_METHOD = "/camdirector.v1.Director/Frame"
 
 
 class _Transport(Protocol):
-    def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse: ...
-    def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate: ...
-    def frame_encoded(self, update: bytes) -> pb.CameraUpdate: ...
-    def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]: ...
-    def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse: ...
-    def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse: ...
-    def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse: ...
+    """Every call of a session carries its `route` key (wire.ROUTE_HEADER over gRPC; ZeroMQ
+    talks to one node and needs none)."""
+
+    def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse: ...
+    def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate: ...
+    def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate: ...
+    def stream(self, updates: Iterable[pb.FrameUpdate], route: str) -> Iterator[pb.CameraUpdate]: ...
+    def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse: ...
+    def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse: ...
+    def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse: ...
     def close(self) -> None: ...
 
 
@@ -52,27 +58,24 @@ class _GrpcTransport:
         )
         self._timeout_s = timeout_s
 
-    def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+    def _unary(self, method, request, route: str):
         try:
-            return self._stub.CreateSession(request, timeout=self._timeout_s)
+            return method(request, timeout=self._timeout_s, metadata=((wire.ROUTE_HEADER, route),))
         except grpc.RpcError as error:
             raise DirectorError.from_rpc_error(error) from None
 
-    def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
-        try:
-            return self._stub.Frame(update, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
+        return self._unary(self._stub.CreateSession, request, route)
 
-    def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
-        try:
-            return self._frame_encoded(update, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate:
+        return self._unary(self._stub.Frame, update, route)
 
-    def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
+    def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate:
+        return self._unary(self._frame_encoded, update, route)
+
+    def stream(self, updates: Iterable[pb.FrameUpdate], route: str) -> Iterator[pb.CameraUpdate]:
         pump = _RequestPump(updates)
-        call = self._stub.StreamFrames(iter(pump))
+        call = self._stub.StreamFrames(iter(pump), metadata=((wire.ROUTE_HEADER, route),))
         try:
             yield from call
         except grpc.RpcError as error:
@@ -84,23 +87,14 @@ class _GrpcTransport:
         if pump.error is not None:
             raise pump.error
 
-    def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
-        try:
-            return self._stub.UpdateStyle(request, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse:
+        return self._unary(self._stub.UpdateStyle, request, route)
 
-    def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
-        try:
-            return self._stub.CloseSession(request, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse:
+        return self._unary(self._stub.CloseSession, request, route)
 
-    def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
-        try:
-            return self._stub.TakeShot(request, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse:
+        return self._unary(self._stub.TakeShot, request, route)
 
     def close(self) -> None:
         self._stub = self._frame_encoded = wire.ClosedStub()
@@ -173,29 +167,29 @@ class _ZmqTransport:
             self._idle.append(sock)
         return wire.zmq_reply_payload(reply)
 
-    def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+    def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
         reply = self._request(wire.RPC_CREATE_SESSION, request.SerializeToString())
         return pb.CreateSessionResponse.FromString(reply)
 
-    def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+    def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate:
         return pb.CameraUpdate.FromString(self._request(wire.RPC_FRAME, update.SerializeToString()))
 
-    def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
+    def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate:
         return pb.CameraUpdate.FromString(self._request(wire.RPC_FRAME, update))
 
-    def stream(self, updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
+    def stream(self, updates: Iterable[pb.FrameUpdate], route: str) -> Iterator[pb.CameraUpdate]:
         for update in updates:
-            yield self.frame(update)
+            yield self.frame(update, route)
 
-    def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+    def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse:
         reply = self._request(wire.RPC_UPDATE_STYLE, request.SerializeToString())
         return pb.UpdateStyleResponse.FromString(reply)
 
-    def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
+    def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse:
         reply = self._request(wire.RPC_CLOSE_SESSION, request.SerializeToString())
         return pb.CloseSessionResponse.FromString(reply)
 
-    def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
+    def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse:
         return pb.TakeShotResponse.FromString(self._request(wire.RPC_TAKE_SHOT, request.SerializeToString()))
 
     def close(self) -> None:
@@ -205,10 +199,66 @@ class _ZmqTransport:
             sock.close(linger=0)
 
 
+class _Resumable:
+    """The caller's updates for a stream that may take several gRPC calls: a call that ended with
+    UNAVAILABLE is followed by one that sends its unanswered updates again, then goes on with the
+    caller's. The caller's iterator is read by one call at a time (a lock): an ended call that
+    was waiting in it for the next update hands that update to the next call."""
+
+    def __init__(self, updates: Iterable[pb.FrameUpdate]) -> None:
+        self._updates = iter(updates)
+        self._lock = threading.Lock()
+        self._handoff: deque[pb.FrameUpdate] = deque()
+        self._call = 0
+        self.unanswered: deque[pb.FrameUpdate] = deque()  # sent on the current call, oldest first
+
+    def requests(self) -> Iterator[pb.FrameUpdate]:
+        """A new call's requests."""
+        with self._lock:  # after the ended call's last read of the caller's iterator, if it was in one
+            self._call += 1
+            call, resend = self._call, list(self.unanswered)
+        yield from resend
+        while True:
+            with self._lock:
+                if self._handoff:
+                    update = self._handoff.popleft()
+                else:
+                    update = next(self._updates, None)
+                    if update is None:
+                        return
+                if call != self._call:
+                    self._handoff.appendleft(update)
+                    return
+                self.unanswered.append(update)
+            yield update
+
+
+def _retry_delays_s() -> Iterator[float]:
+    """Waits before the tries after an UNAVAILABLE: the server is restoring the session (its worker
+    or node was lost) or restarting; about 3 s in all."""
+    yield from (0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.5)
+
+
 class Session(wire.SessionBase):
-    """One director session; closes itself at the end of a ``with`` block (see wire.SessionBase)."""
+    """One director session; closes itself at the end of a ``with`` block (see wire.SessionBase).
+
+    A call answered UNAVAILABLE is tried again by itself, with the same session id (the server
+    restores the session from its checkpoint when its worker or node was lost); so is a stream,
+    from its first unanswered update. ``retries`` counts them."""
 
     __slots__ = ()
+
+    def _retrying(self, call, *args):
+        delays = _retry_delays_s()
+        while True:
+            try:
+                return call(*args, self.route)
+            except DirectorError as error:
+                delay = next(delays, None) if error.code == grpc.StatusCode.UNAVAILABLE else None
+                if delay is None:
+                    raise
+            self.retries += 1
+            time.sleep(delay)
 
     def frame(
         self,
@@ -231,37 +281,52 @@ class Session(wire.SessionBase):
         packed : (ids, transforms), optional
             The bulk form of ``states``, as :func:`~camdirector_client.convert.pack_states` builds it.
         """
-        return self._transport.frame_encoded(wire.encode_frame_update(self.id, frame, time_s, states, packed))
+        return self._retrying(self._transport.frame_encoded, wire.encode_frame_update(self.id, frame, time_s, states, packed))
 
     def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
         """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""
         if not update.session_id:
             update.session_id = self.id
-        return self._transport.frame(update)
+        return self._retrying(self._transport.frame, update)
 
     def stream(self, frame_updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
         """One ``CameraUpdate`` per update, in order, as they come.
 
         Over gRPC this is one StreamFrames call (the updates are read on grpc's thread as the
         stream has room); over ZeroMQ, one Frame request per update. Updates with an empty
-        session_id get this session's. Stopping the iteration early cancels the stream.
+        session_id get this session's. Stopping the iteration early cancels the stream. A stream
+        ended by UNAVAILABLE is opened again from its first unanswered update (class docstring).
         """
-        return self._transport.stream(wire.with_session_id(frame_updates, self.id))
+        feed = _Resumable(wire.with_session_id(frame_updates, self.id))
+        delays = _retry_delays_s()
+        while True:
+            try:
+                for reply in self._transport.stream(feed.requests(), self.route):
+                    feed.unanswered.popleft()
+                    delays = _retry_delays_s()  # answered again: a later loss gets every try anew
+                    yield reply
+                return
+            except DirectorError as error:
+                delay = next(delays, None) if error.code == grpc.StatusCode.UNAVAILABLE else None
+                if delay is None:
+                    raise
+            self.retries += 1
+            time.sleep(delay)
 
     def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:
         """Replaces the whole style from the next frame on (unset fields take their defaults)."""
-        self._transport.update_style(pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style)))
+        self._retrying(self._transport.update_style, pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style)))
 
     def take_shot(self, subject_ids: Iterable[str] = (), kind: int = 0, *, release: bool = False) -> pb.ShotInfo:
         """A human director's shot in a ``RIG_MATCH`` session: ``subject_ids`` (players) as ``kind``
         (a ``pb.ShotKind``; 0: a duel for two, a follow for one, a group for more), held until a call
         with ``release=True``. Answers the shot now held (empty after a release)."""
-        return self._transport.take_shot(wire.take_shot_request(self.id, subject_ids, kind, release)).shot
+        return self._retrying(self._transport.take_shot, wire.take_shot_request(self.id, subject_ids, kind, release)).shot
 
     def close(self) -> int:
         """Closes the session on the server; answers how many frames it answered. Idempotent."""
         if self._closed_frames is None:
-            response = self._transport.close_session(pb.CloseSessionRequest(session_id=self.id))
+            response = self._retrying(self._transport.close_session, pb.CloseSessionRequest(session_id=self.id))
             self._closed_frames = response.frames
         return self._closed_frames
 
@@ -308,7 +373,8 @@ class Client:
             request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
             level_id=level_id, delay_s=delay_s,
         )
-        return Session(self._transport, self._transport.create_session(msg))
+        route = wire.new_route_key()
+        return Session(self._transport, self._transport.create_session(msg, route), route)
 
     def close(self) -> None:
         """Closes the channel or sockets. Sessions stay open on the server until their timeout."""

@@ -8,6 +8,7 @@ serialized response, or a UTF-8 error message when the code is not 0.
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import AsyncIterable, AsyncIterator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -42,6 +43,16 @@ DEFAULT_TIMEOUT_S = 10.0
 
 DEFAULT_MAX_MESSAGE_BYTES = 64 * 1024 * 1024
 """gRPC send and receive limit, bytes: scenes with meshes exceed gRPC's default 4 MiB."""
+
+# gRPC metadata on every call of a session, CreateSession included: a balancer in front of many
+# nodes routes by a consistent hash of it (docs/scaling.md), so a session's calls meet one node.
+ROUTE_HEADER = "x-camdirector-route"
+
+
+def new_route_key() -> str:
+    """A session's ROUTE_HEADER value, picked by the client before the session exists."""
+    return uuid.uuid4().hex
+
 
 RPC_CREATE_SESSION = b"CreateSession"
 RPC_FRAME = b"Frame"
@@ -270,12 +281,14 @@ class SessionBase:
         Where the server records the session; empty unless ``record=True`` and it records.
     """
 
-    __slots__ = ("_closed_frames", "_transport", "id", "recording_path")
+    __slots__ = ("_closed_frames", "_transport", "id", "recording_path", "retries", "route")
 
-    def __init__(self, transport, response: pb.CreateSessionResponse) -> None:
+    def __init__(self, transport, response: pb.CreateSessionResponse, route: str = "") -> None:
         self._transport = transport
         self.id: str = response.session_id
         self.recording_path: str = response.recording_path
+        self.route = route        # the ROUTE_HEADER key of every call of this session (new_route_key)
+        self.retries = 0          # calls and streams tried again after UNAVAILABLE (the server restoring the session)
         self._closed_frames: int | None = None
 
     def __repr__(self) -> str:

@@ -51,6 +51,7 @@ Per-frame use (the session rig), with geometry.toric_maps and server.target_samp
 from __future__ import annotations
 
 import enum
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -217,6 +218,14 @@ def anticipation_reference(shadow: np.ndarray, velocity_rad_s: np.ndarray, windo
 
 # -- fast: the kernel bank ----------------------------------------------------------------------
 
+@functools.lru_cache(maxsize=8)
+def shared_bank(settings: AnticipationSettings) -> KernelBank:
+    """One warmed bank per process and settings (warming takes about 0.07 s), shared by sessions."""
+    bank = KernelBank(settings)
+    bank.warm()
+    return bank
+
+
 class KernelBank:
     """Normalised kernels per travel bin (snap_travel), built on first use.
 
@@ -231,6 +240,10 @@ class KernelBank:
         self.settings = settings
         self._tables: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._flat: dict[tuple[int, int], np.ndarray] = {}
+
+    def __reduce__(self):
+        """Pickled as its settings (2 MB of tables with the defaults, a function of them alone)."""
+        return shared_bank, (self.settings,)
 
     @property
     def max_radius(self) -> int:

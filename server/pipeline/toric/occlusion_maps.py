@@ -12,8 +12,6 @@ cost the frames between map builds nearly nothing.
 """
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -25,16 +23,8 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.precompute.stage_clock import StageClock
 from camdirector.server.pipeline.stages import Stage
 from camdirector.server.pipeline.style import MapBackendChoice, Style, VisibilityMode
-from camdirector.server.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, KernelBank, StyleMaskSettings
+from camdirector.server.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, StyleMaskSettings, shared_bank
 from camdirector.server.pipeline.toric.target_sampling import TargetSampler
-
-
-@functools.lru_cache(maxsize=8)
-def _kernel_bank(settings: AnticipationSettings) -> KernelBank:
-    """One warmed bank per worker process and settings (warming takes about 0.07 s)."""
-    bank = KernelBank(settings)
-    bank.warm()
-    return bank
 
 
 class OcclusionMaps:
@@ -68,7 +58,7 @@ class OcclusionMaps:
             window=WindowSettings(resolution=style.map_resolution))
         mask = StyleMaskSettings(kind=style.mask)
         if self.amap is None or self.amap.settings != settings:
-            self.amap = AnticipationMap(self.sampler.target_count, settings, mask, _kernel_bank(settings))
+            self.amap = AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
         else:
             self.amap.set_mask(mask)
         backend_name = {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or \

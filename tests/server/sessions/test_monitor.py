@@ -29,7 +29,7 @@ MAX_RENDER_PROCESS_GROWTH_MB = 30.0
 
 @pytest.fixture
 def table():
-    t = SessionTable(ServerSettings())
+    t = SessionTable(ServerSettings(checkpoint_store="off"))
     yield t
     t.close_all()
 

@@ -89,7 +89,7 @@ def test_every_way_a_session_ends_closes_its_map_backend(demo, backends, backend
 def test_a_create_that_fails_after_the_maps_were_built_closes_them(demo, backends, tmp_path):
     blocker = tmp_path / "not-a-folder"
     blocker.write_text("")  # the recordings folder cannot be made under a file
-    table = SessionTable(ServerSettings(data_dir=str(blocker)))
+    table = SessionTable(ServerSettings(data_dir=str(blocker), checkpoint_store="off"))
     with pytest.raises(DirectorError) as err:
         table.handle_bytes("create", "s", _request(demo, pb.MAP_BACKEND_GL, record=True).SerializeToString())
     assert err.value.code.name == "INTERNAL"

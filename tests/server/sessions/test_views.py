@@ -18,7 +18,7 @@ from tests.server.wire_client import two_target_request, walk
 
 @pytest.fixture
 def table():
-    t = SessionTable(ServerSettings())
+    t = SessionTable(ServerSettings(checkpoint_store="off"))
     yield t
     t.close_all()
 

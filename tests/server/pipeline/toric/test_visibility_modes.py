@@ -14,7 +14,7 @@ from tests.server.wire_client import box_object, capsule_target
 
 
 def _session(mode, objects, targets, seed=3):
-    table = SessionTable(ServerSettings(workers=0))
+    table = SessionTable(ServerSettings(workers=0, checkpoint_store="off"))
     table.create("s", pb.CreateSessionRequest(objects=objects, targets=targets, seed=seed,
                                               style=pb.Style(visibility=mode)))
     return table

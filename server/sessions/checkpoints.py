@@ -1,0 +1,381 @@
+"""Session checkpoints: what rebuilds a session exactly after the loss of its worker or its node.
+
+A checkpoint is the session's creation request, a snapshot of its state, and the inputs it took
+since that snapshot (frames, style changes, takes), each with its sequence number. Restoring
+builds the session again from its creation request, puts the snapshot's state in place, and runs
+the inputs since through the session table's own request handling, the code that replays
+recordings (recording.py). Sessions are deterministic (recordings replay bit for bit), so the
+restored session answers its next frame as the lost one would have.
+
+The snapshot is the pickled session (pipeline state, RNG, style, dashboard timeline). What the
+session was built from and never changes (meshes, the level, the clock: `Session.creation_objects`)
+is pickled by name and taken from the freshly built session on restore, so a snapshot holds state,
+not geometry; classes that hold native handles (Embree scenes, GL objects) pickle as what rebuilds
+them (geometry/raycast.py, geometry/toric_maps/). Each snapshot cuts the input log, so a session's
+checkpoint is bounded: one snapshot and at most `checkpoint_every_frames` inputs.
+
+An input is written before it is computed: an input answered is never missing from the
+checkpoint, and one whose worker died before answering is answered `stale` with the same pose on
+the client's retry. Writing first is also the fence between nodes: a write names its owner (node
+and process), a restore claims the checkpoint for its process, and a write by a process that is
+no longer the owner is refused, so a node that was bypassed (the balancer sent the session
+elsewhere, then back) restores the newer state instead of answering from its old copy.
+
+Two stores behind `CheckpointStore`, tested against each other (tests/server/sessions/test_checkpoints.py):
+- `DirectoryStore`, the embedded default: files under `<data_dir>/checkpoints/`, one folder per
+  session. The page cache keeps what a killed worker wrote; the node's restart finds them too.
+- `RedisStore`: Redis (`--checkpoint-store redis://...`), so any node can restore any session. Each
+  write is one script call (the owner checked and the entry added in one round trip); the keys of
+  one session share a hash tag, so they stay together on Redis Cluster.
+"""
+from __future__ import annotations
+
+import io
+import logging
+import os
+import pickle
+import shutil
+import struct
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+log = logging.getLogger("camdirector.checkpoints")
+
+OPS = ("frame", "style", "take")          # the inputs a checkpoint keeps, by code
+OP_CODES = {name: code for code, name in enumerate(OPS)}
+_ENTRY = struct.Struct("!QB")             # sequence number, op code; then the request's bytes
+_LENGTH = struct.Struct("!I")             # DirectoryStore's log: each entry's length first
+_SEQ = struct.Struct("!Q")                # DirectoryStore's snapshot file: its sequence number first
+
+
+class CheckpointError(RuntimeError):
+    """The store cannot be reached or written (Redis down, disk full)."""
+
+
+@dataclass
+class Checkpoint:
+    """One session's checkpoint as loaded: `entries` are (seq, op, request bytes) after `seq`."""
+
+    create: bytes                  # the serialized CreateSessionRequest
+    snapshot: bytes | None         # the pickled state (dumps_state), None before the first
+    seq: int                       # inputs the snapshot includes
+    entries: list[tuple[int, str, bytes]]
+
+
+def encode_entry(seq: int, op: str, payload: bytes) -> bytes:
+    return _ENTRY.pack(seq, OP_CODES[op]) + payload
+
+
+def decode_entry(data: bytes) -> tuple[int, str, bytes]:
+    seq, code = _ENTRY.unpack_from(data)
+    return seq, OPS[code], data[_ENTRY.size:]
+
+
+class CheckpointStore(Protocol):
+    """Where checkpoints live. Writes name their `owner` (node/pid); False means another owner
+    has claimed the session since (the caller's copy is stale). Errors: CheckpointError."""
+
+    def begin(self, session_id: str, owner: str, create: bytes) -> None:
+        """A new session: its creation request, no snapshot, an empty log; `owner` owns it."""
+
+    def append(self, session_id: str, owner: str, entry: bytes) -> bool:
+        """One input (encode_entry), if `owner` still owns the session."""
+
+    def snapshot(self, session_id: str, owner: str, seq: int, state: bytes, claim: bool = False) -> bool:
+        """Replaces the snapshot and empties the log, if `owner` owns the session; with `claim`,
+        makes `owner` the owner first (a restore)."""
+
+    def load(self, session_id: str) -> Checkpoint | None:
+        """The session's checkpoint, None when there is none."""
+
+    def delete(self, session_id: str, owner: str) -> None:
+        """Removes the checkpoint, if `owner` owns it (a session closed or reclaimed)."""
+
+    def forget(self, session_id: str) -> None:
+        """Lets go of what this process keeps open for the session (files); the checkpoint stays."""
+
+    def close(self) -> None: ...
+
+
+def open_store(url: str, data_dir: str | Path, keep_s: float, check: bool = False) -> CheckpointStore | None:
+    """The store a setting names: "" a DirectoryStore in data_dir, "redis://..." a RedisStore,
+    "off" none. With `check`, raises CheckpointError when Redis does not answer (a node refuses
+    to start); a worker's store connects on first use, so a worker started while Redis is down
+    still answers frames (SessionTable's failed-write path)."""
+    if url == "off":
+        return None
+    if url.startswith("redis://"):
+        return RedisStore(url, keep_s, check=check)
+    return DirectoryStore(Path(data_dir) / "checkpoints", keep_s)
+
+
+# -- the state: pickled, with creation objects by name ----------------------------------------------
+
+class _Pickler(pickle.Pickler):
+    def __init__(self, file, names: dict[int, object]):
+        super().__init__(file, protocol=5)
+        self._names = names
+
+    def persistent_id(self, obj):
+        return self._names.get(id(obj))
+
+
+class _Unpickler(pickle.Unpickler):
+    def __init__(self, file, objects: dict):
+        super().__init__(file)
+        self._objects = objects
+
+    def persistent_load(self, name):
+        if isinstance(name, list):  # a tuple name comes back as a list from pickle's persistent ids
+            name = tuple(name)
+        try:
+            return self._objects[name]
+        except KeyError:
+            raise pickle.UnpicklingError(f"the rebuilt session has no creation object {name!r}") from None
+
+
+def dumps_state(state, creation_objects: dict) -> bytes:
+    """`state` pickled, each of `creation_objects` (name -> object) by its name."""
+    buffer = io.BytesIO()
+    _Pickler(buffer, {id(obj): name for name, obj in creation_objects.items()}).dump(state)
+    return buffer.getvalue()
+
+
+def loads_state(data: bytes, creation_objects: dict):
+    """The state of dumps_state, with the names taken from `creation_objects` (a session
+    built from the same creation request)."""
+    return _Unpickler(io.BytesIO(data), creation_objects).load()
+
+
+# -- the embedded default: files --------------------------------------------------------------------
+
+class DirectoryStore:
+    """Under `root`, per session: `create` (the request), `snapshot` (sequence number, then the
+    state), `log` (length-prefixed entries, appended with one write each: a killed process's
+    whole writes are in the page cache, a torn last one is ignored) and `owner`.
+
+    A snapshot replaces the log with a new file (written aside, renamed into place); a process
+    whose open log file has been replaced that way (its link count is 0) no longer owns the
+    session. A checkpoint whose owner process is gone and whose files are older than `keep_s` is
+    removed when a store opens the folder."""
+
+    def __init__(self, root: Path, keep_s: float):
+        self.root = Path(root)
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CheckpointError(f"cannot create the checkpoint folder {self.root}: {exc}") from None
+        self._logs: dict[str, int] = {}   # session id -> the open log's descriptor
+        self._sweep(keep_s)
+
+    def _dir(self, session_id: str) -> Path:
+        return self.root / session_id
+
+    def _write_aside(self, path: Path, data: bytes) -> None:
+        aside = path.with_name(f".{path.name}.{os.getpid()}")
+        aside.write_bytes(data)
+        os.replace(aside, path)
+
+    def _new_log(self, session_id: str, owner: str) -> None:
+        folder = self._dir(session_id)
+        self._write_aside(folder / "owner", owner.encode())
+        self._write_aside(folder / "log", b"")
+        self.forget(session_id)
+        self._logs[session_id] = os.open(folder / "log", os.O_WRONLY | os.O_APPEND)
+
+    def _owns(self, session_id: str) -> bool:
+        fd = self._logs.get(session_id)
+        return fd is not None and os.fstat(fd).st_nlink > 0
+
+    def begin(self, session_id: str, owner: str, create: bytes) -> None:
+        try:
+            folder = self._dir(session_id)
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            (folder / "create").write_bytes(create)
+            self._new_log(session_id, owner)
+        except OSError as exc:
+            raise CheckpointError(f"cannot write the checkpoint of session {session_id}: {exc}") from None
+
+    def append(self, session_id: str, owner: str, entry: bytes) -> bool:
+        if not self._owns(session_id):
+            return False
+        try:
+            os.write(self._logs[session_id], _LENGTH.pack(len(entry)) + entry)
+        except OSError as exc:
+            raise CheckpointError(f"cannot append to the checkpoint of session {session_id}: {exc}") from None
+        return True
+
+    def snapshot(self, session_id: str, owner: str, seq: int, state: bytes, claim: bool = False) -> bool:
+        if not claim and not self._owns(session_id):
+            return False
+        try:
+            folder = self._dir(session_id)
+            self._write_aside(folder / "snapshot", _SEQ.pack(seq) + state)
+            self._new_log(session_id, owner)
+        except OSError as exc:
+            raise CheckpointError(f"cannot write the checkpoint of session {session_id}: {exc}") from None
+        return True
+
+    def load(self, session_id: str) -> Checkpoint | None:
+        folder = self._dir(session_id)
+        try:
+            create = (folder / "create").read_bytes()
+        except (FileNotFoundError, NotADirectoryError):
+            return None
+        except OSError as exc:
+            raise CheckpointError(f"cannot read the checkpoint of session {session_id}: {exc}") from None
+        try:
+            data = (folder / "snapshot").read_bytes()
+            seq, snapshot = _SEQ.unpack_from(data)[0], data[_SEQ.size:]
+        except FileNotFoundError:
+            seq, snapshot = 0, None
+        try:
+            entries = [e for e in map(decode_entry, _read_log((folder / "log").read_bytes())) if e[0] > seq]
+        except FileNotFoundError:
+            entries = []
+        return Checkpoint(create, snapshot, seq, entries)
+
+    def delete(self, session_id: str, owner: str) -> None:
+        if self._owns(session_id):
+            self.forget(session_id)
+            shutil.rmtree(self._dir(session_id), ignore_errors=True)
+
+    def forget(self, session_id: str) -> None:
+        fd = self._logs.pop(session_id, None)
+        if fd is not None:
+            os.close(fd)
+
+    def close(self) -> None:
+        for session_id in list(self._logs):
+            self.forget(session_id)
+
+    def _sweep(self, keep_s: float) -> None:
+        """Removes checkpoints no live process owns and none has written for keep_s."""
+        now = time.time()
+        for folder in self.root.iterdir():
+            try:
+                owner = (folder / "owner").read_text()
+                newest = max(p.stat().st_mtime for p in folder.iterdir())
+            except (OSError, ValueError):
+                newest, owner = 0.0, ""
+            if now - newest > keep_s and not _process_alive(owner):
+                shutil.rmtree(folder, ignore_errors=True)
+
+
+def _read_log(data: bytes) -> Iterator[bytes]:
+    at = 0
+    while at + _LENGTH.size <= len(data):
+        (length,) = _LENGTH.unpack_from(data, at)
+        if at + _LENGTH.size + length > len(data):
+            return  # the last write was torn
+        yield data[at + _LENGTH.size:at + _LENGTH.size + length]
+        at += _LENGTH.size + length
+
+
+def _process_alive(owner: str) -> bool:
+    """Whether an owner "node/pid" names a live process of this machine (False if unreadable)."""
+    try:
+        os.kill(int(owner.rsplit("/", 1)[1]), 0)
+    except (IndexError, ValueError, ProcessLookupError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+# -- many nodes: Redis ------------------------------------------------------------------------------
+
+# KEYS[1] the session's hash (create, owner, snapshot, seq), KEYS[2] its log (a list of entries).
+_APPEND = """
+if redis.call('HGET', KEYS[1], 'owner') ~= ARGV[1] then return 0 end
+redis.call('RPUSH', KEYS[2], ARGV[2])
+redis.call('PEXPIRE', KEYS[1], ARGV[3]); redis.call('PEXPIRE', KEYS[2], ARGV[3])
+return 1
+"""
+_SNAPSHOT = """
+if ARGV[5] ~= '1' and redis.call('HGET', KEYS[1], 'owner') ~= ARGV[1] then return 0 end
+if redis.call('EXISTS', KEYS[1]) == 0 then return 0 end
+redis.call('HSET', KEYS[1], 'owner', ARGV[1], 'snapshot', ARGV[2], 'seq', ARGV[3])
+redis.call('DEL', KEYS[2])
+redis.call('PEXPIRE', KEYS[1], ARGV[4])
+return 1
+"""
+_BEGIN = """
+redis.call('DEL', KEYS[1], KEYS[2])
+redis.call('HSET', KEYS[1], 'owner', ARGV[1], 'create', ARGV[2])
+redis.call('PEXPIRE', KEYS[1], ARGV[3])
+return 1
+"""
+_DELETE = """
+if redis.call('HGET', KEYS[1], 'owner') == ARGV[1] then redis.call('DEL', KEYS[1], KEYS[2]) end
+return 1
+"""
+
+
+class RedisStore:
+    """Checkpoints in Redis, under `camdirector:ck:{<session id>}:meta` and `...:log` (module
+    docstring). Keys expire `keep_s` after their session's last write. Calls time out after
+    `timeout_s`, so a Redis that hangs delays a frame by at most that."""
+
+    def __init__(self, url: str, keep_s: float, timeout_s: float = 0.5, check: bool = True):
+        import redis  # only a node given a redis:// URL needs the client
+
+        self._errors = (redis.RedisError, OSError)
+        self._client = redis.Redis.from_url(url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s)
+        self._keep_ms = str(int(keep_s * 1000))
+        if check:
+            try:
+                self._client.ping()
+            except self._errors as exc:
+                raise CheckpointError(f"the checkpoint store {url} does not answer: {exc}") from None
+        self._append = self._client.register_script(_APPEND)
+        self._snapshot = self._client.register_script(_SNAPSHOT)
+        self._begin = self._client.register_script(_BEGIN)
+        self._delete = self._client.register_script(_DELETE)
+        self.url = url
+
+    @staticmethod
+    def _keys(session_id: str) -> list[str]:
+        return [f"camdirector:ck:{{{session_id}}}:meta", f"camdirector:ck:{{{session_id}}}:log"]
+
+    def _call(self, what: str, session_id: str, script, args: list):
+        try:
+            return script(keys=self._keys(session_id), args=args)
+        except self._errors as exc:
+            raise CheckpointError(f"{what} of session {session_id}'s checkpoint in {self.url} failed: {exc}") from None
+
+    def begin(self, session_id: str, owner: str, create: bytes) -> None:
+        self._call("the start", session_id, self._begin, [owner, create, self._keep_ms])
+
+    def append(self, session_id: str, owner: str, entry: bytes) -> bool:
+        return self._call("an append", session_id, self._append, [owner, entry, self._keep_ms]) == 1
+
+    def snapshot(self, session_id: str, owner: str, seq: int, state: bytes, claim: bool = False) -> bool:
+        args = [owner, state, str(seq), self._keep_ms, "1" if claim else "0"]
+        return self._call("a snapshot", session_id, self._snapshot, args) == 1
+
+    def load(self, session_id: str) -> Checkpoint | None:
+        meta_key, log_key = self._keys(session_id)
+        try:
+            with self._client.pipeline(transaction=True) as pipe:
+                meta, log_entries = pipe.hgetall(meta_key).lrange(log_key, 0, -1).execute()
+        except self._errors as exc:
+            raise CheckpointError(f"reading session {session_id}'s checkpoint in {self.url} failed: {exc}") from None
+        if b"create" not in meta:
+            return None
+        seq = int(meta.get(b"seq", 0))
+        entries = [e for e in map(decode_entry, log_entries) if e[0] > seq]
+        return Checkpoint(meta[b"create"], meta.get(b"snapshot"), seq, entries)
+
+    def delete(self, session_id: str, owner: str) -> None:
+        self._call("the removal", session_id, self._delete, [owner])
+
+    def forget(self, session_id: str) -> None:
+        pass  # nothing held per session
+
+    def close(self) -> None:
+        self._client.close()
