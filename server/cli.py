@@ -44,10 +44,41 @@ def _serve_parser(sub) -> None:
     p.add_argument("--node-id", dest="node_id", help="this node's name (default: host name and pid)")
 
 
+def _job_worker_parser(sub) -> None:
+    p = sub.add_parser("job-worker", help="run offline jobs from the shared job queue (server/jobs/queue.py)")
+    p.add_argument("--job-queue", dest="job_queue", help="the queue, redis://HOST:PORT/DB (required)")
+    p.add_argument("--job-store", dest="job_store",
+                   help="job records: empty for SQLite in the data directory, or postgresql://USER@HOST:PORT/DB")
+    p.add_argument("--data-dir", dest="data_dir", help="the data directory every node mounts (uploads, results, levels)")
+    p.add_argument("--concurrency", type=int, help="jobs run at once by this worker (default: --max-concurrent-jobs's)")
+    p.add_argument("--heartbeat-timeout-s", dest="heartbeat_timeout_s", type=float,
+                   help="a worker silent this long is taken for dead and its jobs run again (same on every worker)")
+    p.set_defaults(handler=_job_worker)
+
+
+def _job_worker(args) -> int:
+    import dataclasses
+
+    from camdirector.server.jobs import run_job_worker
+    try:
+        settings = ServerSettings.from_env(data_dir=args.data_dir, job_store=args.job_store, job_queue=args.job_queue)
+        if not settings.job_queue:
+            raise ValueError("--job-queue redis://HOST:PORT/DB is required")
+        jobs = dataclasses.replace(settings.job_settings(),
+                                   **{k: v for k, v in (("max_concurrent_jobs", args.concurrency),
+                                                        ("worker_heartbeat_timeout_s", args.heartbeat_timeout_s))
+                                      if v is not None})
+    except ValueError as exc:
+        print(f"camdirector job-worker: {exc}", file=sys.stderr)
+        return 2
+    return run_job_worker(settings.data_dir, jobs)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="camdirector", description="Automated cinematographer service")
     sub = parser.add_subparsers(dest="command", required=True)
     _serve_parser(sub)
+    _job_worker_parser(sub)
     add_eval_parsers(sub)
     add_overview_parsers(sub)
     add_track_parsers(sub)

@@ -76,7 +76,8 @@ class ServerSettings:
     def job_settings(self):
         from camdirector.server.jobs import JobSettings  # validated there
         return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
-                           max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s)
+                           max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s,
+                           job_store=self.job_store, job_queue=self.job_queue)
 
     @property
     def node_name(self) -> str:

@@ -47,7 +47,7 @@ def server_factory():
         srv.stop()
 
 
-def _service_or_skip(start):
+def service_or_skip(start):
     """A Debian service started for the tests, or a skip with the reason where its package is
     missing; a failure under CI (.ci/run sets CAMDIRECTOR_REQUIRE_CLUSTER=1)."""
     from camdirector.server.deploy.services import ServiceError
@@ -63,7 +63,7 @@ def _service_or_skip(start):
 def redis_server(tmp_path_factory):
     """One redis-server on a free loopback port for the whole run (deploy/services.py)."""
     from camdirector.server.deploy.services import RedisServer
-    server = _service_or_skip(lambda: RedisServer(tmp_path_factory.mktemp("redis")).start())
+    server = service_or_skip(lambda: RedisServer(tmp_path_factory.mktemp("redis")).start())
     yield server
     server.stop()
 
@@ -82,6 +82,6 @@ def redis_url(redis_server) -> str:
 def postgres_server(tmp_path_factory):
     """One PostgreSQL cluster on a free loopback port for the whole run (deploy/services.py)."""
     from camdirector.server.deploy.services import PostgresServer
-    server = _service_or_skip(lambda: PostgresServer(tmp_path_factory.mktemp("postgres")).start())
+    server = service_or_skip(lambda: PostgresServer(tmp_path_factory.mktemp("postgres")).start())
     yield server
     server.stop()

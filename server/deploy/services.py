@@ -7,8 +7,10 @@ PostgreSQL refuses to run as root, so as root its data folder is given to Debian
 user and its commands run as that user (runuser)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
@@ -56,6 +58,64 @@ def _tail(path: Path, chars: int = 2000) -> str:
         return "(no log)"
 
 
+def is_running(pid: int, marker: str) -> bool:
+    """Whether `pid` runs (a zombie does not) a command line that holds `marker`: a pid that another
+    program took since is not ours to stop. A zombie that is this process's child is reaped."""
+    try:
+        os.waitpid(pid, os.WNOHANG)
+    except ChildProcessError:
+        pass  # not our child: init reaps it
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return False
+    return stat.rpartition(")")[2].split()[0] != "Z" and marker in cmdline
+
+
+def _wait_exit(processes: list[tuple[int, str]], seconds: float) -> list[tuple[int, str]]:
+    """Waits up to `seconds` for the processes to end; returns those still running."""
+    deadline = time.monotonic() + seconds
+    running = [(pid, marker) for pid, marker in processes if is_running(pid, marker)]
+    while running and time.monotonic() < deadline:
+        time.sleep(0.05)
+        running = [(pid, marker) for pid, marker in running if is_running(pid, marker)]
+    return running
+
+
+def stop_processes(processes: list[tuple[int, str]], timeout_s: float = 15.0, grace_s: float = 0.0) -> None:
+    """Stops each (pid, marker) that still runs with `marker` in its command line, all at once:
+    after grace_s for them to end by themselves, SIGTERM, then SIGKILL to those still running
+    after timeout_s. For processes started by another invocation (the cluster's `down`), which no
+    Popen object holds."""
+    running = _wait_exit(processes, grace_s)
+    for pid, _ in running:
+        with contextlib.suppress(ProcessLookupError):  # ended since it was looked at
+            os.kill(pid, signal.SIGTERM)
+    for pid, _ in _wait_exit(running, timeout_s):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    _wait_exit(running, 5.0)
+
+
+def descendants(pids: list[int]) -> list[int]:
+    """Every process below the given ones (children, their children, ...), from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rpartition(")")[2].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue  # ended meanwhile
+            children.setdefault(ppid, []).append(int(entry.name))
+    found, todo = [], [c for pid in pids for c in children.get(pid, [])]
+    while todo:
+        pid = todo.pop()
+        found.append(pid)
+        todo += children.get(pid, [])
+    return found
+
+
 class RedisServer:
     """redis-server on 127.0.0.1:`port` (0: a free one), no persistence (checkpoints are
     rewritten continually; a lost Redis loses only what sessions would restore from)."""
@@ -95,9 +155,12 @@ class PostgresServer:
     the cluster's folder is a new one under the system's temporary folder instead, which the
     `postgres` user can reach (a test's folder often is not: its parents are root's alone)."""
 
-    def __init__(self, folder: Path, port: int = 0):
+    def __init__(self, folder: Path, port: int = 0, *, existing: bool = False):
+        """existing: `folder` is the `.folder` of a cluster started before (by another process),
+        used as it is, to stop it."""
         self._as_postgres = os.geteuid() == 0
-        self.folder = Path(tempfile.mkdtemp(prefix="camdirector-pg-")) if self._as_postgres else Path(folder)
+        own_folder = self._as_postgres and not existing
+        self.folder = Path(tempfile.mkdtemp(prefix="camdirector-pg-")) if own_folder else Path(folder)
         self.port = port or free_port()
         self.data = self.folder / "pgdata"
 

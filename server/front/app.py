@@ -18,6 +18,7 @@ from camdirector.server.front.zmq_service import ZmqTransport
 from camdirector.server.http.app import build_app
 from camdirector.server.http.routes.levels import install_level_routes
 from camdirector.server.http.routes.overview import install_overview_jobs
+from camdirector.server.jobs import JobsUnavailable
 from camdirector.server.sessions.checkpoints import CheckpointError, open_store
 from camdirector.server.settings import ServerSettings
 
@@ -95,5 +96,9 @@ def run(settings: ServerSettings) -> int:
         return 2
     if store is not None:
         store.close()
-    asyncio.run(serve(settings))
+    try:
+        asyncio.run(serve(settings))
+    except JobsUnavailable as exc:  # the job store or queue is down at start
+        print(f"camdirector serve: {exc}", file=sys.stderr)
+        return 2
     return 0

@@ -1,15 +1,20 @@
-"""What every job resource's routes share: the status models, looking up, listing and cancelling
-a job of one kind, and the upload limit (one runner and job store serve every kind)."""
+"""What every job resource's routes share: the status models, submitting, looking up, listing and
+cancelling a job of one kind, the answer when the job store or queue is down, and the upload limit
+(one runner, or one queue client, and one job store serve every kind). The routes are the same in
+both modes (server/jobs/__init__.py): `Jobs` is either."""
 from __future__ import annotations
 
 import inspect
 import json
 from collections.abc import Callable
 
-from fastapi import HTTPException, Request
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
-from camdirector.server.jobs import JobNotFound, JobRunner, JobState
+from camdirector.server.jobs import Job, JobNotFound, JobRunner, JobState, JobsUnavailable, QueueClient, QueueFull
+
+Jobs = JobRunner | QueueClient
 
 
 class JobCreated(BaseModel):
@@ -28,7 +33,7 @@ class JobStatus(BaseModel):
     finished_unix_s: float | None = Field(default=None, description="when it ended, Unix s")
 
 
-def job_of_kind(runner: JobRunner, job_id: str, kind: str, noun: str):
+def job_of_kind(runner: Jobs, job_id: str, kind: str, noun: str):
     """The job job_id of `kind`; HTTPException 404 for an unknown id and for a job of another
     kind (one runner and job store serve every kind of job route)."""
     try:
@@ -51,10 +56,31 @@ async def known_form_fields(request: Request) -> None:
                                                     f"this route takes {', '.join(sorted(known))}")
 
 
+def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes]) -> Job:
+    """POST of a job route: the job queued; HTTPException 429 when the queue is full, 503 when
+    the job queue cannot take it (the job is failed then)."""
+    try:
+        return runner.submit(kind, params, files)
+    except QueueFull as exc:
+        raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
+                            headers={"Retry-After": "10"}) from None
+    except JobsUnavailable as exc:
+        raise HTTPException(status_code=503, detail=str(exc), headers={"Retry-After": "10"}) from None
+
+
+def answer_unavailable_jobs(app: FastAPI) -> None:
+    """Any route that finds the job store (PostgreSQL) or queue (Redis) down answers 503 with
+    the reason, not 500."""
+    async def unavailable(request: Request, exc: JobsUnavailable) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
+
+    app.add_exception_handler(JobsUnavailable, unavailable)
+
+
 MAX_LISTED_JOBS = 1000
 
 
-def list_jobs(runner: JobRunner, kind: str, status: JobState | None, limit: int,
+def list_jobs(runner: Jobs, kind: str, status: JobState | None, limit: int,
               extra: Callable[[dict], dict]) -> list[dict]:
     """GET of a job collection: the newest `limit` jobs of `kind` (in `status` when given), each
     its public view with `extra(params)` added (finished jobs are kept `job_retention_s`)."""
@@ -62,7 +88,7 @@ def list_jobs(runner: JobRunner, kind: str, status: JobState | None, limit: int,
             for j in runner.store.list(status, kind=kind, limit=limit, newest_first=True)]
 
 
-def cancel_job(runner: JobRunner, job_id: str, noun: str = "job"):
+def cancel_job(runner: Jobs, job_id: str, noun: str = "job"):
     """DELETE of a job route: the job cancelled (a running job's process is ended), unchanged when
     it was cancelled already; HTTPException 409 when it had succeeded or failed. Cancels first and
     looks after, so a job that finishes meanwhile answers 409, not a 200 that did nothing."""

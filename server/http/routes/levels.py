@@ -28,7 +28,8 @@ NOT_FOUND, sessions already on it keep the copy they loaded. A level that a queu
 is adding or replacing answers 409 (cancel the job first), so a removal is never undone by a job
 that finishes after it.
 
-The job runs in the runner's job process (jobs.py); the uploads stay in the job's `input/`.
+The job runs in a job process (server/jobs/: the local runner or a queue worker); the uploads stay in
+the job's `input/`.
 """
 from __future__ import annotations
 
@@ -50,14 +51,17 @@ from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.server.http.routes.jobs import (
     MAX_LISTED_JOBS,
     JobCreated,
+    Jobs,
     JobStatus,
     UploadLimit,
+    answer_unavailable_jobs,
     cancel_job,
     job_of_kind,
     known_form_fields,
     list_jobs,
+    submit_job,
 )
-from camdirector.server.jobs import JobKind, JobRunner, JobSettings, JobState, QueueFull
+from camdirector.server.jobs import JobKind, JobSettings, JobState
 
 LEVELS_PREFIX = "/v1/levels"
 JOBS_PREFIX = "/v1/level-jobs"
@@ -131,7 +135,7 @@ def _mesh_file(upload: UploadFile, field: str, limit: int, scale: float) -> tupl
     return f"{field}{suffix}", data
 
 
-def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: Path) -> APIRouter:
+def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) -> APIRouter:
     """The /v1/levels and /v1/level-jobs routes over `runner` (which must have the "level" kind)."""
     router = APIRouter(tags=["levels"])
     registry = LevelRegistry(data_dir)
@@ -151,7 +155,8 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
         409: {"description": "the name is taken (registered or being added) and replace is false"},
         413: {"description": "an upload is larger than the server's limit"},
         422: {"description": "a bad name, or scale or agent out of range"},
-        429: {"description": "the job queue is full; retry later"}})
+        429: {"description": "the job queue is full; retry later"},
+        503: {"description": "the job store or queue is unreachable; retry later"}})
     def add_level(
         name: Annotated[str, Form(description="1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")],
         level: Annotated[UploadFile, File(description="the level's geometry, .obj or .glb")],
@@ -187,11 +192,7 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
             if not replace and (registry.get(name) is not None or name in pending_names()):
                 raise HTTPException(status_code=409, detail=(
                     f"level {name!r} exists or is being added; send replace=true to replace it"))
-            try:
-                job = runner.submit(KIND, params, files)
-            except QueueFull as exc:
-                raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
-                                    headers={"Retry-After": "10"}) from None
+            job = submit_job(runner, KIND, params, files)
         return JSONResponse({"id": job.id, "status": job.state.value, "name": name}, status_code=202,
                             headers={"Location": f"{JOBS_PREFIX}/{job.id}"})
 
@@ -251,11 +252,12 @@ def build_level_router(runner: JobRunner, job_settings: JobSettings, data_dir: P
     return router
 
 
-def install_level_routes(app: FastAPI, runner: JobRunner, data_dir: str | Path,
+def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path,
                          settings: JobSettings = JobSettings()) -> None:
     """Mount the level routes on `app` and the "level" kind on `runner` (the folder's one runner,
     not yet started), with an upload limit of two files plus the form."""
     runner.add_kind(JobKind(KIND, level_job.run_level_job), preload="camdirector.precompute.tracks.job")
     app.include_router(build_level_router(runner, settings, Path(data_dir)))
+    answer_unavailable_jobs(app)
     app.add_middleware(UploadLimit, max_body_bytes=2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES,
                        path_prefix=LEVELS_PREFIX)

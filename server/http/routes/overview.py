@@ -40,14 +40,17 @@ from camdirector.precompute.overview.job import (
 from camdirector.server.http.routes.jobs import (
     MAX_LISTED_JOBS,
     JobCreated,
+    Jobs,
     JobStatus,
     UploadLimit,
+    answer_unavailable_jobs,
     cancel_job,
     job_of_kind,
     known_form_fields,
     list_jobs,
+    submit_job,
 )
-from camdirector.server.jobs import JobKind, JobRegistry, JobRunner, JobSettings, JobState, QueueFull
+from camdirector.server.jobs import JobKind, JobRegistry, JobSettings, JobState, open_jobs
 
 # -- the routes -----------------------------------------------------------------------------
 
@@ -85,7 +88,7 @@ def _status(job) -> JSONResponse:
     return JSONResponse(job.as_public())
 
 
-def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRouter:
+def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
     """The /v1/overview-jobs routes over `runner` (which must have the "overview" kind)."""
     router = APIRouter(prefix="/v1/overview-jobs", tags=["overview jobs"])
     limit = job_settings.max_upload_bytes
@@ -108,7 +111,8 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
         400: {"description": "the upload is not a usable BVH clip (detail says why)"},
         413: {"description": "the upload is larger than the server's limit"},
         422: {"description": "a form field is out of range"},
-        429: {"description": "the job queue is full; retry later"}})
+        429: {"description": "the job queue is full; retry later"},
+        503: {"description": "the job store or queue is unreachable; retry later"}})
     def create_overview_job(
         file: Annotated[UploadFile, File(description="BVH motion capture clip")],
         scale: Annotated[float | None, Form(gt=0, description="metres per file unit (default: inferred: cm, CMU or m)")] = None,
@@ -159,11 +163,7 @@ def build_overview_router(runner: JobRunner, job_settings: JobSettings) -> APIRo
             raise HTTPException(status_code=400, detail=str(exc)) from None
         params["frames"] = clip.frame_count
         params["file_name"] = os.path.basename(file.filename or CLIP_FILE)[:200]
-        try:
-            job = runner.submit(KIND, params, {CLIP_FILE: data})
-        except QueueFull as exc:
-            raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
-                                headers={"Retry-After": "10"}) from None
+        job = submit_job(runner, KIND, params, {CLIP_FILE: data})
         return JSONResponse({"id": job.id, "status": job.state.value}, status_code=202,
                             headers={"Location": f"/v1/overview-jobs/{job.id}"})
 
@@ -218,12 +218,15 @@ _FORM_OVERHEAD_BYTES = 64 * 1024
 
 
 def install_overview_jobs(app: FastAPI, data_dir: str | Path,
-                          settings: JobSettings = JobSettings()) -> JobRunner:
+                          settings: JobSettings = JobSettings()) -> Jobs:
     """Mount the overview routes and the upload limit on `app`; returns the (not yet started)
-    JobRunner over `<data_dir>/jobs`. Call `runner.start()` at startup and `runner.close()` at
-    shutdown (both blocking, fast: call them from the event loop's thread or a thread)."""
+    jobs over `<data_dir>/jobs`: a JobRunner, or a client of the job queue when
+    `settings.job_queue` is set (server/jobs/). Call `start()` at startup and `close()` at
+    shutdown (both blocking, fast: call them from the event loop's thread or a thread). Raises
+    JobsUnavailable when the job store or queue cannot be reached."""
     registry = JobRegistry((JobKind(KIND, overview_job.run_overview_job),))
-    runner = JobRunner(data_dir, registry, settings, preload=("camdirector.precompute.overview.job",))
+    runner = open_jobs(data_dir, registry, settings, preload=(overview_job.__name__,))
     app.include_router(build_overview_router(runner, settings))
+    answer_unavailable_jobs(app)
     app.add_middleware(UploadLimit, max_body_bytes=settings.max_upload_bytes + _FORM_OVERHEAD_BYTES)
     return runner

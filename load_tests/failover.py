@@ -1,0 +1,201 @@
+"""Sessions through the loss of a worker or a node (issue 15's benchmarks).
+
+    python -m load_tests.failover --nodes 3 --sessions 24 --rate 60 --seconds 40 --kill-after 15 --json F
+    python -m load_tests.failover --kill worker --sessions 16 --seconds 20 --kill-after 8
+
+`--kill node` (with --nodes N >= 2): a cluster (server/deploy/cluster.py: HAProxy, Redis, N nodes)
+on this machine; sessions are created and streamed through the balancer with the Python SDK
+(x-camdirector-route on every call), and the node holding the most sessions is SIGKILLed.
+`--kill worker`: one node with two workers; the worker holding the most sessions is SIGKILLed.
+
+Every session streams the demo scene (FRAMING_ONLY) at --rate Hz; an undisturbed session table
+(checkpoints off, in this process) answers the same inputs for comparison. Prints one JSON object:
+sessions lost (a stream that failed for good), frames not answered after the SDK's retries,
+recovery time p50/p99 over all sessions and over those whose stream the kill broke (last answer
+before the kill to the first after),
+the largest pose difference from the undisturbed answers at any frame (0.0: bit for bit), and the
+floor: a health check's round trip measured in the same run.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import grpc
+import numpy as np
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+import camdirector_client as cd
+from camdirector.demo.client import frame_update, session_request
+from camdirector.demo.scene import build_demo_scene
+from camdirector.geometry.camera import Lens
+from camdirector.server.sessions.table import SessionTable
+from camdirector.server.settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+
+
+def _updates(scene, n: int, rate_hz: float) -> list[pb.FrameUpdate]:
+    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
+    out = []
+    for i in range(n):
+        transforms = scene.transforms_at(i / rate_hz)
+        out.append(frame_update(i + 1, i / rate_hz, ids, np.stack([transforms[k].position_world for k in ids]),
+                                np.stack([transforms[k].rotation_xyzw for k in ids])))
+    return out
+
+
+def _undisturbed(create: pb.CreateSessionRequest, updates: list[pb.FrameUpdate]) -> list[pb.CameraPose]:
+    with tempfile.TemporaryDirectory() as folder:
+        table = SessionTable(ServerSettings(data_dir=folder, checkpoint_store="off", max_triangles=10**7))
+        table.handle_bytes("create", "ref", create.SerializeToString())
+        poses = []
+        for update in updates:
+            update = pb.FrameUpdate(session_id="ref", frame=update.frame, time_s=update.time_s,
+                                    packed_ids=update.packed_ids, packed_transforms=update.packed_transforms)
+            poses.append(pb.CameraUpdate.FromString(table.handle_bytes("frame", "ref", update.SerializeToString())[0]).pose)
+        return poses
+
+
+def _pose_difference(a: pb.CameraPose, b: pb.CameraPose) -> float:
+    pa = np.array([a.position.x, a.position.y, a.position.z, a.rotation.x, a.rotation.y, a.rotation.z, a.rotation.w])
+    pb_ = np.array([b.position.x, b.position.y, b.position.z, b.rotation.x, b.rotation.y, b.rotation.z, b.rotation.w])
+    return float(np.abs(pa - pb_).max())
+
+
+def _health_floor_ms(address: str, n: int = 50) -> float:
+    with grpc.insecure_channel(address) as channel:
+        stub = health_pb2_grpc.HealthStub(channel)
+        times = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            stub.Check(health_pb2.HealthCheckRequest())
+            times.append((time.perf_counter() - t0) * 1e3)
+    return float(np.median(times))
+
+
+def _stream(session, updates, rate_hz: float, start_s: float, out: dict) -> None:
+    def paced():
+        for i, update in enumerate(updates):
+            delay = start_s + i / rate_hz - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            update.session_id = session.id
+            yield update
+    answers, times = [], []
+    try:
+        for answer in session.stream(paced()):
+            answers.append(answer)
+            times.append(time.monotonic())
+    except cd.DirectorError as exc:
+        out["error"] = str(exc)
+    out.update(answers=answers, times=times)
+
+
+def _workers_by_load(node_pid: int) -> list[int]:
+    children = [int(p) for p in open(f"/proc/{node_pid}/task/{node_pid}/children").read().split()]
+    return [pid for pid in children if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read()]
+
+
+def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float) -> dict:
+    scene = build_demo_scene()
+    create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9), cd.pb.FRAMING_ONLY)
+    updates = _updates(scene, int(seconds * rate_hz), rate_hz)
+    expected = _undisturbed(create, updates)
+    folder = Path(tempfile.mkdtemp(prefix="camdirector-failover-"))
+    cluster = server = None
+    try:
+        if kill == "node":
+            from camdirector.server.deploy.cluster import Cluster
+            cluster = Cluster.up(nodes=nodes, folder=folder)
+            address = cluster.grpc
+        else:
+            from camdirector.server.process import ServerProcess
+            server = ServerProcess("--workers", "2", "--data-dir", str(folder), transports=("grpc", "http"))
+            address = server.grpc
+        floor_ms = _health_floor_ms(address)
+        client = cd.connect(f"grpc://{address}")
+        opened = [client.create_session(create) for _ in range(sessions)]
+        results = [{} for _ in opened]
+        start_s = time.perf_counter() + 0.5
+        threads = [threading.Thread(target=_stream, args=(s, [pb.FrameUpdate.FromString(u.SerializeToString())
+                                                             for u in updates], rate_hz, start_s, r))
+                   for s, r in zip(opened, results)]
+        for thread in threads:
+            thread.start()
+        time.sleep(max(0.0, start_s + kill_after_s - time.perf_counter()))
+        if kill == "node":
+            counts = [len(_node_sessions(node.http)) for node in cluster.nodes]
+            victim = max(range(len(counts)), key=counts.__getitem__)
+            held = counts[victim]
+            cluster.kill_node(victim)
+        else:
+            pids = _workers_by_load(server.proc.pid)
+            held = None
+            os.kill(pids[0], signal.SIGKILL)
+        killed_at = time.monotonic()
+        for thread in threads:
+            thread.join(seconds + 60)
+        lost = [r for r in results if "error" in r]
+        unanswered = sum(len(updates) - len(r["answers"]) for r in results)
+        recoveries, interrupted, worst = [], [], 0.0
+        for session, r in zip(opened, results):
+            before = [t for t in r["times"] if t <= killed_at]
+            after = [t for t in r["times"] if t > killed_at]
+            if before and after:
+                recoveries.append(after[0] - before[-1])
+                if session.retries:
+                    interrupted.append(after[0] - before[-1])
+            for answer in r["answers"]:
+                worst = max(worst, _pose_difference(answer.pose, expected[answer.frame - 1]))
+        client.close()
+        return {"kill": kill, "nodes": nodes if kill == "node" else 1, "sessions": sessions, "rate_hz": rate_hz,
+                "seconds": seconds, "kill_after_s": kill_after_s, "sessions_on_killed": held,
+                "sessions_lost": len(lost), "errors": [r["error"] for r in lost][:3],
+                "frames_not_answered": unanswered, "frames_expected": sessions * len(updates),
+                "retries": sum(s.retries for s in opened),
+                "recovery_s_p50": float(np.percentile(recoveries, 50)) if recoveries else None,
+                "recovery_s_p99": float(np.percentile(recoveries, 99)) if recoveries else None,
+                "recovery_s_max": max(recoveries) if recoveries else None,
+                # the same over the sessions whose stream the kill broke (the others only paused)
+                "interrupted_sessions": len(interrupted),
+                "interrupted_recovery_s_p50": float(np.percentile(interrupted, 50)) if interrupted else None,
+                "interrupted_recovery_s_p99": float(np.percentile(interrupted, 99)) if interrupted else None,
+                "max_pose_difference": worst, "floor_health_ms_p50": floor_ms}
+    finally:
+        if cluster is not None:
+            cluster.down()
+        if server is not None:
+            server.stop()
+
+
+def _node_sessions(http_address: str) -> list:
+    import httpx
+    return httpx.get(f"http://{http_address}/v1/sessions", timeout=5).json()["sessions"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--kill", choices=("node", "worker"), default="node")
+    parser.add_argument("--nodes", type=int, default=3)
+    parser.add_argument("--sessions", type=int, default=24)
+    parser.add_argument("--rate", type=float, default=60.0)
+    parser.add_argument("--seconds", type=float, default=40.0)
+    parser.add_argument("--kill-after", dest="kill_after", type=float, default=15.0)
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    report = run(args.kill, args.nodes, args.sessions, args.rate, args.seconds, args.kill_after)
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
