@@ -7,7 +7,8 @@ the inputs since through the session table's own request handling, the code that
 recordings (recording.py). Sessions are deterministic (recordings replay bit for bit), so the
 restored session answers its next frame as the lost one would have.
 
-The snapshot is the pickled session (pipeline state, RNG, style, dashboard timeline). What the
+The snapshot is the pickled session (pipeline state, RNG, style); the dashboard's timeline of
+recent frames is left out (diagnostics, up to a megabyte), so a restored session's starts anew. What the
 session was built from and never changes (meshes, the level, the clock: `Session.creation_objects`)
 is pickled by name and taken from the freshly built session on restore, so a snapshot holds state,
 not geometry; classes that hold native handles (Embree scenes, GL objects) pickle as what rebuilds

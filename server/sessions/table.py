@@ -136,7 +136,7 @@ class SessionTable:
             held = self.held[session_id]
             if checkpoint.snapshot is not None:
                 built = held.session
-                held.session, held.style_msg, held.timeline = loads_state(checkpoint.snapshot, built.creation_objects())
+                held.session, held.style_msg = loads_state(checkpoint.snapshot, built.creation_objects())
                 built.close()
             held.seq = held.snapshot_seq = checkpoint.seq
             for seq, op, payload in checkpoint.entries:  # as replay does (recording.py)
@@ -191,7 +191,8 @@ class SessionTable:
         write the checkpoint is begun again first (the store may have lost it: Redis restarted)."""
         session = held.session
         try:
-            state = dumps_state((session, held.style_msg, held.timeline), session.creation_objects())
+            # Not the dashboard's timeline: diagnostics, not state, up to 1 MB; a restored session's starts anew.
+            state = dumps_state((session, held.style_msg), session.creation_objects())
             if held.checkpoint_retry_s is not None:
                 self.store.begin(session.id, self.owner, held.create_payload)
             self.store.snapshot(session.id, self.owner, held.seq, state, claim=claim)

@@ -36,6 +36,12 @@ class SurfaceSampler:
         self._edge2 = tri[:, 2] - tri[:, 0]
         self._cdf = np.cumsum(area) / total
         self.area_m2 = total
+        self._mesh = mesh
+
+    def __reduce__(self):
+        """Pickled as its mesh (a session's checkpoint names the mesh instead of copying it): the
+        tables are a function of the mesh alone."""
+        return SurfaceSampler, (self._mesh,)
 
     def sample(self, count: int, rng: np.random.Generator) -> np.ndarray:
         """(count, 3) float64 points, local frame, uniform over the area."""

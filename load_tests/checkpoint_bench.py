@@ -1,0 +1,121 @@
+"""What checkpoints cost a frame, and what a restore costs (server/sessions/checkpoints.py).
+
+    python -m load_tests.checkpoint_bench [--frames 600] [--json F]
+
+One session table in this process answers the demo scene's frames (FRAMING_ONLY and
+ANTICIPATION) with checkpoints off (the baseline, measured in the same run), in a folder (the
+default), and in Redis (Debian's redis-server started on a free loopback port). Prints JSON: per
+mode and store, the frame's median and p99 (ms) and their ratio to the baseline, the snapshot's
+size (bytes), and the restore of the session by a second table after 1.5 snapshot periods
+(create, snapshot, inputs since: ms).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import camdirector_client as cd
+from camdirector.demo.client import frame_update, session_request
+from camdirector.demo.scene import build_demo_scene
+from camdirector.geometry.camera import Lens
+from camdirector.server.deploy.services import RedisServer
+from camdirector.server.sessions.checkpoints import dumps_state
+from camdirector.server.sessions.table import SessionTable
+from camdirector.server.settings import ServerSettings
+
+
+def _frames(scene, n: int) -> list[bytes]:
+    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
+    out = []
+    for i in range(n):
+        transforms = scene.transforms_at(i / 60)
+        update = frame_update(i + 1, i / 60, ids, np.stack([transforms[k].position_world for k in ids]),
+                              np.stack([transforms[k].rotation_xyzw for k in ids]))
+        update.session_id = "s"
+        out.append(update.SerializeToString())
+    return out
+
+
+def _measure(create: bytes, frames: list[bytes], store: str, every: int) -> dict:
+    with tempfile.TemporaryDirectory() as folder:
+        settings = ServerSettings(data_dir=folder, checkpoint_store=store, checkpoint_every_frames=every,
+                                  max_triangles=10**7)
+        table = SessionTable(settings)
+        table.handle_bytes("create", "s", create)
+        times_ms = []
+        for payload in frames:
+            t0 = time.perf_counter()
+            table.handle_bytes("frame", "s", payload)
+            times_ms.append((time.perf_counter() - t0) * 1e3)
+        out = {"frame_ms_p50": float(np.median(times_ms)), "frame_ms_p99": float(np.percentile(times_ms, 99))}
+        if store != "off":
+            held = table.held["s"]
+            out["snapshot_bytes"] = len(dumps_state((held.session, held.style_msg),
+                                                    held.session.creation_objects()))
+            # a second table (another worker) restores after 1.5 periods of inputs since a snapshot
+            extra = frames[-1]
+            for payload in _frames_after(frames, every + every // 2):
+                table.handle_bytes("frame", "s", payload)
+                extra = payload
+            other = SessionTable(settings)
+            other.owner = "bench/2"
+            t0 = time.perf_counter()
+            other.handle_bytes("frame", "s", _next_frame(extra))
+            out["restore_and_frame_ms"] = (time.perf_counter() - t0) * 1e3
+            other.close_all()
+        table.close_all()
+        return out
+
+
+def _frames_after(frames: list[bytes], n: int) -> list[bytes]:
+    from camdirector.v1 import director_pb2 as pb
+    last = pb.FrameUpdate.FromString(frames[-1])
+    out = []
+    for k in range(1, n + 1):
+        update = pb.FrameUpdate()
+        update.CopyFrom(last)
+        update.frame, update.time_s = last.frame + k, last.time_s + k / 60
+        out.append(update.SerializeToString())
+    return out
+
+
+def _next_frame(payload: bytes) -> bytes:
+    return _frames_after([payload], 1)[0]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=int, default=600)
+    parser.add_argument("--every", type=int, default=60, help="checkpoint_every_frames")
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    scene = build_demo_scene()
+    frames = _frames(scene, args.frames)
+    report = {"frames": args.frames, "checkpoint_every_frames": args.every, "modes": {}}
+    with tempfile.TemporaryDirectory() as folder:
+        redis = RedisServer(Path(folder)).start()
+        try:
+            for mode in ("FRAMING_ONLY", "ANTICIPATION"):
+                create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9),
+                                         getattr(cd.pb, mode)).SerializeToString()
+                rows = {name: _measure(create, frames, store, args.every)
+                        for name, store in (("off", "off"), ("folder", ""), ("redis", redis.url))}
+                for name in ("folder", "redis"):
+                    rows[name]["ratio_p50_vs_off"] = rows[name]["frame_ms_p50"] / rows["off"]["frame_ms_p50"]
+                report["modes"][mode] = rows
+        finally:
+            redis.stop()
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
