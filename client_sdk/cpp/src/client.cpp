@@ -7,6 +7,7 @@
 
 #include "client_impl.h"
 
+using camdirector::sdk::add_route;
 using camdirector::sdk::Clock;
 using camdirector::sdk::copy_cstr;
 using Phase = camdirector::sdk::Phase;
@@ -81,16 +82,17 @@ cd_status rpc_result(cd_client* client, const char* rpc, const grpc::Status& sta
               std::string(rpc) + " on " + client->target + ": " + status.error_message());
 }
 
-// The streaming session's id into a request that names it; FAILED_PRECONDITION (also the
-// client's last error) when no session streams.
+// The streaming session's id into a request that names it, and its route key onto the call's
+// context; FAILED_PRECONDITION (also the client's last error) when no session streams.
 template <typename Request>
-cd_status name_streaming_session(cd_client* client, Request* request) {
+cd_status name_streaming_session(cd_client* client, Request* request, grpc::ClientContext* context) {
   std::lock_guard<std::mutex> guard(client->mu);
   if (client->phase != Phase::kStream) {
     client->set_error_locked(CD_FAILED_PRECONDITION, "no session is streaming on this client");
     return CD_FAILED_PRECONDITION;
   }
   request->set_session_id(client->session_id);
+  add_route(context, client->route_key);
   return CD_OK;
 }
 
@@ -109,9 +111,11 @@ cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double 
                 std::to_string(slots.size()) + " targets and dynamic objects, over max_states (" +
                     std::to_string(client->config.max_states) + ")");
   }
+  std::string route_key = camdirector::sdk::new_route_key();  // this session's, from its creation on
   grpc::ClientContext context;
   context.set_deadline(rpc_deadline_of(timeout_s));
   context.set_wait_for_ready(client->config.wait_for_server != 0);
+  add_route(&context, route_key);
   pb::CreateSessionResponse response;
   const grpc::Status status = client->stub->CreateSession(&context, request, &response);
   if (status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED &&
@@ -129,6 +133,7 @@ cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double 
   }
   client->request = std::move(request);
   client->session_id = response.session_id();
+  client->route_key = std::move(route_key);
   client->slot_ids = slots;
   client->slot_transforms.assign(slots.size() * camdirector::sdk::kPackedWidth, 0.0);
   client->slot_known.assign(slots.size(), 0);
@@ -144,6 +149,7 @@ cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double 
   client->ever_streamed = false;
   client->recreated_unanswered = false;
   client->unavailable_while_ready = 0;
+  client->recreate_presumed = false;
   client->backoff_s = camdirector::sdk::kFirstBackoffS;
   client->retry_at = Clock::now();
   client->phase = Phase::kStream;
@@ -179,6 +185,7 @@ void cd_client::set_error_locked(int code, const std::string& message) {
 void cd_client::reset_session_locked() {
   phase = Phase::kIdle;
   session_id.clear();
+  route_key.clear();
   ring_head = 0;
   ring_size = 0;
   in_flight = 0;
@@ -289,10 +296,13 @@ cd_status cd_client_create(const cd_config* config, cd_client** out) {
 
 void cd_client_destroy(cd_client* client) {
   if (client == nullptr) return;
-  std::string open_id;
+  std::string open_id, route_key;
   {
     std::lock_guard<std::mutex> guard(client->mu);
-    if (client->phase == Phase::kStream || client->phase == Phase::kRecreate) open_id = client->session_id;
+    if (client->phase == Phase::kStream || client->phase == Phase::kRecreate) {
+      open_id = client->session_id;
+      route_key = client->route_key;
+    }
     client->stopping = true;
     if (client->io_call != nullptr) client->io_call->TryCancel();
     client->io_cv.notify_one();
@@ -301,6 +311,7 @@ void cd_client_destroy(cd_client* client) {
   if (!open_id.empty()) {  // best effort: the server would reclaim it after its resume window
     grpc::ClientContext context;
     context.set_deadline(rpc_deadline_of(kDestroyCloseTimeoutS));
+    add_route(&context, route_key);
     pb::CloseSessionRequest request;
     request.set_session_id(open_id);
     pb::CloseSessionResponse response;
@@ -348,9 +359,9 @@ cd_status cd_session_update_style(cd_client* client, const cd_style* style, doub
   if (style == nullptr) return fail(client, CD_INVALID_ARGUMENT, "style is NULL");
   try {
     pb::UpdateStyleRequest request;
-    if (const cd_status named = name_streaming_session(client, &request); named != CD_OK) return named;
-    camdirector::sdk::fill_style(*style, request.mutable_style());
     grpc::ClientContext context;
+    if (const cd_status named = name_streaming_session(client, &request, &context); named != CD_OK) return named;
+    camdirector::sdk::fill_style(*style, request.mutable_style());
     context.set_deadline(rpc_deadline_of(timeout_s));
     pb::UpdateStyleResponse response;
     const grpc::Status status = client->stub->UpdateStyle(&context, request, &response);
@@ -369,14 +380,14 @@ cd_status cd_session_take_shot(cd_client* client, const char* const* subject_ids
   if (subject_count > 0 && subject_ids == nullptr) return fail(client, CD_INVALID_ARGUMENT, "subject_ids is NULL");
   try {
     pb::TakeShotRequest request;
-    if (const cd_status named = name_streaming_session(client, &request); named != CD_OK) return named;
+    grpc::ClientContext context;
+    if (const cd_status named = name_streaming_session(client, &request, &context); named != CD_OK) return named;
     for (uint32_t i = 0; i < subject_count; ++i) {
       if (subject_ids[i] == nullptr) return fail(client, CD_INVALID_ARGUMENT, "a subject id is NULL");
       request.add_subject_ids(subject_ids[i]);
     }
     request.set_kind(static_cast<pb::ShotKind>(kind));
     request.set_release(release != 0);
-    grpc::ClientContext context;
     context.set_deadline(rpc_deadline_of(timeout_s));
     pb::TakeShotResponse response;
     const grpc::Status status = client->stub->TakeShot(&context, request, &response);
@@ -417,7 +428,7 @@ cd_status cd_session_flush(cd_client* client, double timeout_s) {
 cd_status cd_session_close(cd_client* client, uint64_t* frames_answered, double timeout_s) {
   if (client == nullptr) return CD_INVALID_ARGUMENT;
   const Clock::time_point deadline = deadline_of(timeout_s);
-  std::string id;
+  std::string id, route_key;
   bool failed = false;
   {
     std::unique_lock<std::mutex> lock(client->mu);
@@ -436,6 +447,7 @@ cd_status cd_session_close(cd_client* client, uint64_t* frames_answered, double 
       return CD_DEADLINE_EXCEEDED;
     }
     id = client->session_id;
+    route_key = client->route_key;
   }
   grpc::Status status;
   pb::CloseSessionResponse response;
@@ -443,6 +455,7 @@ cd_status cd_session_close(cd_client* client, uint64_t* frames_answered, double 
     grpc::ClientContext context;
     const double left_s = std::chrono::duration<double>(deadline - Clock::now()).count();
     context.set_deadline(camdirector::sdk::grpc_deadline(std::max(left_s, 0.1)));
+    add_route(&context, route_key);
     pb::CloseSessionRequest request;
     request.set_session_id(id);
     status = client->stub->CloseSession(&context, request, &response);

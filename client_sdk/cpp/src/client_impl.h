@@ -36,6 +36,19 @@ constexpr double kFirstBackoffS = 0.05;
 constexpr double kRecreateTimeoutS = 10.0;
 constexpr double kConnectWaitS = 0.25;  // longest the I/O thread waits for a connection at once
 constexpr int kPackedWidth = 10;  // px py pz qx qy qz qw sx sy sz (FrameUpdate.packed_transforms)
+// UNAVAILABLE over a working connection, with no answer, on every stream for this long (and at
+// least kLostAfterRefusals streams): the server lost the session (a worker died on a server
+// without checkpoints). Shorter runs are a server restoring it (camdirector.h, Reconnection).
+constexpr double kLostAfterS = 1.0;
+constexpr int kLostAfterRefusals = 3;
+
+// The metadata header of every call of a session (CreateSession included): a balancer in front
+// of several nodes routes all the calls that carry the same value to one node.
+constexpr char kRouteHeader[] = "x-camdirector-route";
+// A new session's route key: 32 lowercase hex characters, 128 bits from std::random_device.
+std::string new_route_key();
+// Puts the session's route key on a call's context (before the call starts).
+void add_route(grpc::ClientContext* context, const std::string& route_key);
 
 // "HOST:PORT" (and the other forms camdirector.h lists) as a gRPC target; false and a reason
 // for an address that does not parse.
@@ -92,6 +105,7 @@ struct cd_client {
   Phase phase = Phase::kIdle;
   camdirector::v1::CreateSessionRequest request;  // kept to recreate the session
   std::string session_id;
+  std::string route_key;  // kRouteHeader of every call of this session, recreations included
   std::vector<std::string> slot_ids;
   uint32_t generation = 0;
   bool any_submitted = false;
@@ -122,6 +136,8 @@ struct cd_client {
   bool ever_streamed = false;
   bool recreated_unanswered = false;  // recreated, and its stream has answered nothing yet
   int unavailable_while_ready = 0;    // streams refused UNAVAILABLE over a working connection
+  Clock::time_point unavailable_since{};  // the first of those refusals in a row
+  bool recreate_presumed = false;     // kRecreate from those refusals, not from NOT_FOUND
   grpc::ClientContext* io_call = nullptr;  // the I/O thread's CreateSession, to cancel it
 
   // Results.

@@ -1,7 +1,9 @@
 // The I/O thread: one StreamFrames stream at a time on the session (gRPC's callback API), fed
 // from the frame queue with at most `max_in_flight` frames unanswered; reopens the stream after a
-// dropped connection (same session id) and creates the session again when the server no longer
-// knows it (a restart, or the resume window passed).
+// dropped connection, a lost worker or a server restart (same session id: a server with
+// checkpoints restores it) and creates the session again when the server no longer has it
+// (NOT_FOUND, or a run of UNAVAILABLE: handle_stream_done_locked). Every call carries the
+// session's route key (add_route).
 //
 // Ownership of a stream: the I/O thread creates a FrameStream, keeps a hold on it (so gRPC cannot
 // finish it), and is the only thread that calls its methods. When the stream's read side closes
@@ -21,7 +23,9 @@ namespace camdirector::sdk {
 
 class FrameStream : public grpc::ClientBidiReactor<pb::FrameUpdate, pb::CameraUpdate> {
  public:
-  explicit FrameStream(cd_client* client) : client_(client) {}
+  FrameStream(cd_client* client, const std::string& route_key) : client_(client) {
+    add_route(&context_, route_key);
+  }
 
   // Call without holding the client's mutex: gRPC may run callbacks on this thread.
   void start(pb::Director::Stub* stub) {
@@ -90,6 +94,7 @@ bool frame_refused(grpc::StatusCode code) {
 
 }  // namespace camdirector::sdk
 
+using camdirector::sdk::add_route;
 using camdirector::sdk::Clock;
 using camdirector::sdk::frame_refused;
 using camdirector::sdk::FrameStream;
@@ -190,7 +195,7 @@ void cd_client::io_loop() {
 }
 
 void cd_client::open_stream_locked() {
-  stream = new FrameStream(this);
+  stream = new FrameStream(this, route_key);
   stream_read_closed = false;
   stream_hold_released = false;
   stream_cancelled = false;
@@ -236,6 +241,7 @@ void cd_client::handle_stream_done_locked() {
       return;
     }
     phase = Phase::kRecreate;
+    recreate_presumed = false;
     retry_at = Clock::now();
     if (!outage && ever_streamed) {
       stats.disconnects += 1;
@@ -252,17 +258,25 @@ void cd_client::handle_stream_done_locked() {
     return;
   }
   if (code == grpc::StatusCode::UNAVAILABLE && !answered && channel->GetState(false) == GRPC_CHANNEL_READY) {
-    // UNAVAILABLE over a working connection: the server lost the session (its worker died).
-    // Once may be a race with the connection's own failure; twice in a row is the session.
-    if (++unavailable_while_ready >= 2) {
+    // UNAVAILABLE over a working connection, before any answer. A server with checkpoints answers
+    // it once while it restores the session (its worker died; the next stream is held until the
+    // restore is done), a balancer while it has no healthy node, a server without checkpoints on
+    // every stream once the session's worker died. Only a run of refusals (kLostAfterS and
+    // kLostAfterRefusals) presumes the session lost; recreate() goes back to this session if the
+    // server refuses to create one too (then it was the server, not the session).
+    const Clock::time_point now = Clock::now();
+    if (unavailable_while_ready++ == 0) unavailable_since = now;
+    if (unavailable_while_ready >= camdirector::sdk::kLostAfterRefusals &&
+        now - unavailable_since >= camdirector::sdk::seconds(camdirector::sdk::kLostAfterS)) {
       unavailable_while_ready = 0;
       phase = Phase::kRecreate;
-      retry_at = Clock::now();
+      recreate_presumed = true;
+      retry_at = now;
       outage = true;
       return;
     }
-  } else if (answered) {
-    unavailable_while_ready = 0;
+  } else {
+    unavailable_while_ready = 0;  // a refusal of another kind, or one after answers, breaks the run
   }
   if (!outage && ever_streamed) {
     stats.disconnects += 1;
@@ -276,8 +290,10 @@ void cd_client::handle_stream_done_locked() {
 void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
   pb::CreateSessionRequest req = request;
   const std::string old_id = session_id;
+  const std::string route = route_key;  // the same key: the balancer's node for this session
   grpc::ClientContext context;
   context.set_deadline(grpc_deadline(camdirector::sdk::kRecreateTimeoutS));
+  add_route(&context, route);
   io_call = &context;
   lock.unlock();
   pb::CreateSessionResponse response;
@@ -289,6 +305,7 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
       lock.unlock();
       grpc::ClientContext close_context;
       close_context.set_deadline(grpc_deadline(1.0));
+      add_route(&close_context, route);
       pb::CloseSessionRequest close;
       close.set_session_id(response.session_id());
       pb::CloseSessionResponse closed;
@@ -298,6 +315,7 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
     return;
   }
   if (status.ok()) {
+    recreate_presumed = false;
     session_id = response.session_id();
     generation += 1;
     stats.generation = generation;
@@ -311,6 +329,13 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
     return;
   }
   if (retryable(status.error_code())) {
+    if (recreate_presumed) {
+      // The session was only presumed lost (UNAVAILABLE refusals), and the server refuses to
+      // create one too: it is the server or the balancer that is unavailable, not the session.
+      // Keep the session id: a server that comes back may restore it from its checkpoint.
+      phase = Phase::kStream;
+      recreate_presumed = false;
+    }
     retry_later_locked();
     return;
   }

@@ -1,9 +1,11 @@
-// Plain C structs to the wire's CreateSessionRequest and Style, and address parsing. Runs at
-// setup only (cd_client_create, cd_session_open, cd_session_update_style): it may allocate.
+// Plain C structs to the wire's CreateSessionRequest and Style, address parsing, and a session's
+// route key. Runs at setup only (cd_client_create, cd_session_open, cd_session_update_style, the
+// I/O thread's new streams): it may allocate.
 #include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <random>
 
 #include "client_impl.h"
 
@@ -248,6 +250,22 @@ double seconds_since_epoch(Clock::time_point t) {
 std::chrono::system_clock::time_point grpc_deadline(double timeout_s) {
   return std::chrono::system_clock::now() +
          std::chrono::duration_cast<std::chrono::system_clock::duration>(std::chrono::duration<double>(timeout_s));
+}
+
+std::string new_route_key() {
+  std::random_device source;  // getrandom(2) / /dev/urandom with libstdc++ and libc++ on Linux
+  static const char kHex[] = "0123456789abcdef";
+  std::string key;
+  key.reserve(32);
+  for (int word = 0; word < 4; ++word) {
+    uint32_t bits = source();
+    for (int i = 0; i < 8; ++i, bits >>= 4) key += kHex[bits & 0xF];
+  }
+  return key;
+}
+
+void add_route(grpc::ClientContext* context, const std::string& route_key) {
+  if (!route_key.empty()) context->AddMetadata(kRouteHeader, route_key);
 }
 
 void copy_cstr(char* dst, size_t size, const std::string& src) {

@@ -7,6 +7,10 @@
 //   sdk_check sparse HOST:PORT           a frame's update carried over a dropped frame
 //   sdk_check pose_output HOST:PORT UDP  a FreeD pose output to udp://127.0.0.1:UDP
 //   sdk_check flood HOST:PORT [N]        N frames, one every 0.1 ms (queue of 4, 1 in flight)
+//   sdk_check calls HOST:PORT            every kind of call of a session, for a test server that
+//       records their metadata: open, stream, UpdateStyle, TakeShot, stream on until the server
+//       forgets the session and it is recreated, close; then a second session that
+//       cd_client_destroy closes
 //   sdk_check stream HOST:PORT --until resumed|recreated [--after N] [--timeout S]
 //       a 60 Hz loop; prints {"ready": ...} once streaming, then keeps going until the event came
 //       and N more frames (default 60) were answered on the session after it, or S seconds
@@ -426,6 +430,67 @@ int scenario_pose_output(const char* address, const char* udp_port) {
   return 0;
 }
 
+// Submits a frame every 5 ms until pred() holds or timeout_s passes; false on the timeout.
+template <typename Pred>
+bool stream_until(cd_client* client, uint64_t* frame, double timeout_s, Pred pred) {
+  cd_state states[3];
+  const double start = now_s();
+  while (now_s() - start < timeout_s) {
+    ++*frame;
+    states_at(*frame, states);
+    cd_frame_submit(client, *frame, static_cast<double>(*frame) / 60.0, states, 3);
+    if (pred()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return false;
+}
+
+int scenario_calls(const char* address) {
+  Scene scene;
+  cd_client* client = make_client(address);
+  if (!open_or_say(client, scene)) return 1;
+  const std::string first_id = session_of(client);
+  uint64_t frame = 0;
+  auto answered = [client] {
+    cd_pose pose;
+    return cd_pose_poll(client, &pose) == CD_OK;
+  };
+  const bool streamed = stream_until(client, &frame, 10.0, answered);
+  cd_style style;
+  cd_style_init(&style);
+  style.gaze_room_m = 0.5;
+  const cd_status styled = cd_session_update_style(client, &style, 5.0);
+  const char* subjects[] = {"a"};
+  const cd_status shot = cd_session_take_shot(client, subjects, 1, 0, 0, nullptr, 5.0);
+  std::string events = "[";
+  bool recreated = false;
+  auto recreated_and_answered = [&] {
+    cd_event event;
+    while (cd_event_poll(client, &event) == CD_OK) {
+      events += std::string(events.size() > 1 ? ", " : "") + q(event_name(event.kind));
+      if (event.kind == CD_EVENT_RECREATED) recreated = true;
+    }
+    cd_pose pose;
+    return recreated && cd_pose_poll(client, &pose) == CD_OK && pose.generation == 2;
+  };
+  const bool answered_again = stream_until(client, &frame, 15.0, recreated_and_answered);
+  events += "]";
+  const std::string second_id = session_of(client);
+  const cd_status closed = cd_session_close(client, nullptr, 5.0);
+  Scene other;
+  const bool reopened = open_or_say(client, other);
+  const std::string other_id = session_of(client);
+  std::printf("{\"first_session_id\": %s, \"streamed\": %s, \"update_style\": %s, \"take_shot\": %s, "
+              "\"recreated_session_id\": %s, \"answered_after_recreation\": %s, \"events\": %s, \"close\": %s, "
+              "\"other_session_id\": %s}\n",
+              q(first_id).c_str(), streamed ? "true" : "false", q(cd_status_name(styled)).c_str(),
+              q(cd_status_name(shot)).c_str(), q(second_id).c_str(), answered_again ? "true" : "false",
+              events.c_str(), q(cd_status_name(closed)).c_str(), q(reopened ? other_id : "").c_str());
+  std::fflush(stdout);
+  cd_client_destroy(client);  // closes the other session (best effort)
+  return 0;
+}
+
 int scenario_stream(const char* address, const std::string& until, uint64_t after, double timeout_s) {
   Scene scene;
   cd_client* client = make_client(address, 8, 2);
@@ -498,7 +563,7 @@ int scenario_stream(const char* address, const std::string& until, uint64_t afte
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: sdk_check address|down|nan|refused|sparse|pose_output|flood|stream ADDRESS [options]\n");
+    std::fprintf(stderr, "usage: sdk_check address|down|nan|refused|sparse|pose_output|flood|calls|stream ADDRESS [options]\n");
     return 2;
   }
   const std::string scenario = argv[1];
@@ -509,6 +574,7 @@ int main(int argc, char** argv) {
   if (scenario == "sparse") return scenario_sparse(address);
   if (scenario == "refused") return scenario_refused(address);
   if (scenario == "pose_output" && argc > 3) return scenario_pose_output(address, argv[3]);
+  if (scenario == "calls") return scenario_calls(address);
   if (scenario == "flood") return scenario_flood(address, argc > 3 ? std::strtoull(argv[3], nullptr, 10) : 3000);
   if (scenario == "stream") {
     std::string until = "resumed";

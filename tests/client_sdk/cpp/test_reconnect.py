@@ -1,9 +1,14 @@
 """The C/C++ SDK's I/O thread recovering in the background while a 60 Hz loop streams: a dropped
-connection resumes the same session; a session that expired meanwhile, or a server that was
-killed and restarted, gets the session created again (new id, reported as an event)."""
+connection resumes the same session; so do a server restarted on the same data directory and a
+worker killed mid-stream, the server restoring the session from its checkpoint
+(server/sessions/checkpoints.py); a session that expired meanwhile, or one lost by a server
+without checkpoints (`--checkpoint-store off`: a restart, a dead worker), gets the session
+created again (new id, reported as an event)."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import threading
 import time
@@ -91,16 +96,79 @@ def test_a_session_expired_while_disconnected_is_created_again(sdk_bin, server_f
     assert report["stats"]["recreations"] == 1 and report["last_pose_generation"] == 2
 
 
-def test_a_server_killed_and_restarted_mid_stream_gets_the_session_again(sdk_bin, server_factory):
+def _assert_same_session(report: dict, ready: dict) -> None:
+    """The session went on under its first id, restored by the server, never created again."""
+    _assert_streamed_on(report)
+    assert report["first_session_id"] == ready["session_id"] == report["last_session_id"], report
+    kinds = _kinds(report)
+    assert kinds == ["STREAMING", "DISCONNECTED", "RESUMED"], report["events"]
+    stats = report["stats"]
+    assert stats["recreations"] == 0 and stats["disconnects"] == 1 and stats["resumes"] == 1, stats
+    assert report["last_pose_generation"] == 1
+    # The server's count of the session's frames includes those before the loss: the same session.
+    assert stats["frames_answered"] - stats["frames_stale"] <= report["server_frames"] <= stats["frames_sent"], report
+
+
+def test_a_server_restarted_mid_stream_restores_the_same_session(sdk_bin, server_factory, tmp_path):
+    address = f"127.0.0.1:{free_port()}"
+    data_dir = str(tmp_path / "data")  # the checkpoints' folder, kept across the restart
+    first = server_factory("--workers", "1", "--grpc", address, "--data-dir", data_dir)
+    run = StreamRun(sdk_bin / "sdk_check", address, "resumed")
+    ready = run.wait_ready()
+    first.proc.terminate()  # SIGTERM: the server stops (its streams end) and keeps the checkpoints
+    assert first.proc.wait(15) == 0
+    second = server_factory("--workers", "1", "--grpc", address, "--data-dir", data_dir)
+    assert second.grpc == address
+    report = run.report()
+    _assert_same_session(report, ready)
+    # Retries against the stopped server waited for a connection instead of spending queued frames.
+    assert report["stats"]["frames_lost"] <= 4 and report["stats"]["streams_opened"] == 2, report["stats"]
+
+
+def _worker_pids(srv) -> list[int]:
+    """The server's worker processes (multiprocessing's spawned children)."""
+    pid = srv.proc.pid
+    children = [int(p) for p in open(f"/proc/{pid}/task/{pid}/children").read().split()]
+    return [c for c in children if b"spawn_main" in open(f"/proc/{c}/cmdline", "rb").read()]
+
+
+def test_a_worker_killed_mid_stream_costs_one_disconnect_and_keeps_the_session(sdk_bin, server_factory):
+    # One worker: the session is on it, and its successor restores the session (with several, one
+    # of the others would; which one holds the session is not told outside the server).
+    srv = server_factory("--workers", "1")
+    run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "resumed")
+    ready = run.wait_ready()
+    os.kill(_worker_pids(srv)[0], signal.SIGKILL)
+    report = run.report()
+    _assert_same_session(report, ready)
+    # One UNAVAILABLE ended the first stream; the second, held while the session was restored, went on.
+    assert report["stats"]["streams_opened"] == 2 and report["stats"]["last_stream_status"] == "UNAVAILABLE"
+    assert report["events"][1]["status"] == "UNAVAILABLE", report["events"]
+
+
+def test_a_worker_killed_without_checkpoints_gets_the_session_created_again(sdk_bin, server_factory):
+    srv = server_factory("--workers", "1", "--checkpoint-store", "off")
+    run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "recreated")
+    ready = run.wait_ready()
+    os.kill(_worker_pids(srv)[0], signal.SIGKILL)
+    report = run.report()
+    _assert_streamed_on(report)
+    assert report["last_session_id"] != ready["session_id"]
+    kinds = _kinds(report)
+    assert kinds[:2] == ["STREAMING", "DISCONNECTED"] and "RECREATED" in kinds, report["events"]
+    assert report["stats"]["recreations"] == 1 and report["last_pose_generation"] == 2
+
+
+def test_a_server_killed_and_restarted_without_checkpoints_gets_the_session_again(sdk_bin, server_factory):
     port = free_port()
     address = f"127.0.0.1:{port}"
-    first = server_factory("--workers", "1", "--grpc", address)
+    first = server_factory("--workers", "1", "--grpc", address, "--checkpoint-store", "off")
     run = StreamRun(sdk_bin / "sdk_check", address, "recreated")
     ready = run.wait_ready()
     first.proc.kill()  # a crash: no goodbye to the stream
     first.proc.wait(15)
     time.sleep(0.5)  # the SDK notices and retries against nothing for a while
-    second = server_factory("--workers", "1", "--grpc", address)
+    second = server_factory("--workers", "1", "--grpc", address, "--checkpoint-store", "off")
     assert second.grpc == address
     report = run.report()
     _assert_streamed_on(report)

@@ -19,12 +19,26 @@
  *     cd_session_flush, cd_session_close and cd_client_destroy. Each waits for the server for at
  *     most its timeout_s (a value <= 0 means 10 s). Call them at load time, or from a worker thread.
  *
- * Reconnection. After a dropped connection the I/O thread opens a new stream on the same session
- * (the server keeps it for its resume window, 60 s by default): CD_EVENT_RESUMED. If the server
- * no longer knows the session (it restarted, or the window passed), the I/O thread creates it
- * again from the request it keeps (with the latest style), with a new id: CD_EVENT_RECREATED. A
- * recreated session starts over: the rig's state, a held TakeShot and the recording are not
- * carried over. Frames submitted meanwhile wait in the bounded queue, which drops the oldest.
+ * Reconnection. After a dropped connection, a stream ended UNAVAILABLE or a server that went away,
+ * the I/O thread opens a new stream on the same session id (the server keeps the session for its
+ * resume window, 60 s by default): CD_EVENT_DISCONNECTED, then CD_EVENT_RESUMED. A server with
+ * checkpoints (the default) restores the session on that stream, exactly as it was, when the
+ * worker process holding it died (the broken stream is the one UNAVAILABLE) or when the server
+ * was restarted on the same data directory: the session goes on under the same id. If the server
+ * no longer knows the session (NOT_FOUND: the window passed, or a server without checkpoints
+ * restarted), or answers UNAVAILABLE on every new stream for over a second over a working
+ * connection while it does create sessions (a server without checkpoints lost the session's
+ * worker), the I/O thread creates the session again from the request it keeps (with the latest
+ * style), with a new id: CD_EVENT_RECREATED. A recreated session starts over: the rig's state, a
+ * held TakeShot and the recording are not carried over. Frames submitted meanwhile wait in the
+ * bounded queue, which drops the oldest.
+ *
+ * Routing. Every gRPC call of a session carries the metadata header x-camdirector-route: a random
+ * key (32 lowercase hex characters, 128 bits from std::random_device) that cd_session_open picks
+ * and that CreateSession, every frame stream, UpdateStyle, TakeShot, CloseSession (cd_session_close
+ * and cd_client_destroy's) and a recreation all send. A balancer in front of several servers
+ * (docs/scaling.md) sends the calls with one key to one server by a consistent hash, and the
+ * session to another that restores it when that one is lost. Each cd_session_open picks a new key.
  */
 #ifndef CAMDIRECTOR_H
 #define CAMDIRECTOR_H
@@ -253,7 +267,8 @@ cd_status cd_session_flush(cd_client* client, double timeout_s);
  * frames_answered (may be NULL) gets the server's count. The client may open another session. */
 cd_status cd_session_close(cd_client* client, uint64_t* frames_answered, double timeout_s);
 
-/* NON-BLOCKING: the current session id (changes when the session is recreated), "" when none. */
+/* NON-BLOCKING: the current session id (changes only when the session is recreated, never when
+ * the server restores it), "" when none. */
 cd_status cd_session_id(cd_client* client, char* buf, size_t size);
 
 /* NON-BLOCKING: the slot of a target or dynamic object id, -1 if the session has none such. */
@@ -300,8 +315,8 @@ cd_status cd_pose_poll(cd_client* client, cd_pose* out);
 typedef enum cd_event_kind {
   CD_EVENT_STREAMING = 1,      /* the first answer of the session's first stream */
   CD_EVENT_DISCONNECTED = 2,   /* the stream broke (status, message); reconnecting */
-  CD_EVENT_RESUMED = 3,        /* a new stream answers on the same session id */
-  CD_EVENT_RECREATED = 4,      /* the server no longer knew the session: created again, new id */
+  CD_EVENT_RESUMED = 3,        /* a new stream answers on the same session id (restored or kept) */
+  CD_EVENT_RECREATED = 4,      /* the server lost the session: created again, new id */
   CD_EVENT_SESSION_FAILED = 5, /* recreating was refused for good (status); streaming stopped */
   CD_EVENT_FRAME_REFUSED = 6   /* the server refused a frame (status); the session goes on */
 } cd_event_kind;
