@@ -105,3 +105,13 @@ def test_a_session_goes_on_after_its_server_restarts_on_the_same_data(tmp_path):
     finally:
         client.close()
         second.stop()
+
+
+def test_a_node_whose_checkpoint_store_is_down_refuses_to_start(tmp_path):
+    import subprocess
+    import sys
+    port = free_port()  # nothing listens there
+    done = subprocess.run([sys.executable, "-m", "camdirector.server.cli", "serve", "--grpc", "127.0.0.1:0", "--zmq", "",
+                           "--http", "", "--data-dir", str(tmp_path), "--checkpoint-store", f"redis://127.0.0.1:{port}/0"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "checkpoint store" in done.stderr and str(port) in done.stderr, done.stderr

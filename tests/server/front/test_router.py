@@ -59,7 +59,8 @@ def test_a_frame_answered_is_counted_with_its_stage_times():
     metrics = Metrics()
     metrics.frame_answered("zmq", 0.5, {"ingest": 0.02, "motion": 0.13}, stale=False)
     metrics.frame_answered("zmq", 0.01, {}, stale=True)
-    metrics.frame_answered("grpc", 0.4, {"ingest": 0.03}, stale=False)
+    metrics.frame_answered("grpc", 0.4, {"ingest": 0.03}, stale=False, checkpoint_failed=True)
+    assert _sample(metrics, "camdirector_checkpoint_failures_total", {}) == 1.0  # the checkpoint store was down
     assert _sample(metrics, "camdirector_frames_total", {"transport": "zmq"}) == 2.0
     assert _sample(metrics, "camdirector_frames_total", {"transport": "grpc"}) == 1.0
     assert _sample(metrics, "camdirector_stale_frames_total", {}) == 1.0
