@@ -4,16 +4,20 @@
         async with client.create_session(targets=[...]) as session:
             update = await session.frame(1, 0.016, packed=pack_states(ids, positions, rotations))
 
-Same methods as the sync client (:mod:`camdirector_client.client`), awaited. Create and use an
-:class:`AsyncClient` inside one running event loop. Over ZeroMQ each request borrows a DEALER
-socket from a small pool (one request outstanding per socket), so concurrent tasks do not queue
-behind one another.
+Same methods as the sync client (:mod:`camdirector_client.client`), awaited, with the same
+behaviour when a node or worker is lost: every gRPC call of a session carries its route key
+(``wire.ROUTE_HEADER``), and a call or stream answered UNAVAILABLE or CANCELLED is tried again
+with the same session id (see :class:`AsyncSession`). Create and use an :class:`AsyncClient`
+inside one running event loop. Over ZeroMQ each request borrows a DEALER socket from a small pool
+(one request outstanding per socket), so concurrent tasks do not queue behind one another.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterable, AsyncIterator, Generator, Iterable, Mapping, Sequence
+import contextlib
+from collections import deque
+from collections.abc import AsyncIterable, AsyncIterator, Generator, Iterable, Iterator, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Protocol
 
@@ -36,13 +40,19 @@ FrameUpdates = Iterable[pb.FrameUpdate] | AsyncIterable[pb.FrameUpdate]
 
 
 class _AsyncTransport(Protocol):
-    async def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse: ...
-    async def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate: ...
-    async def frame_encoded(self, update: bytes) -> pb.CameraUpdate: ...
-    def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]: ...
-    async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse: ...
-    async def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse: ...
-    async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse: ...
+    """Every call of a session carries its `route` key (wire.ROUTE_HEADER over gRPC; ZeroMQ
+    talks to one node and needs none). ``closed``: after close(), whose CANCELLED answers are
+    not the balancer's reset and are not tried again."""
+
+    closed: bool
+
+    async def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse: ...
+    async def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate: ...
+    async def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate: ...
+    def stream(self, updates: AsyncIterable[pb.FrameUpdate], route: str) -> AsyncIterator[pb.CameraUpdate]: ...
+    async def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse: ...
+    async def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse: ...
+    async def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse: ...
     async def close(self) -> None: ...
 
 
@@ -57,35 +67,33 @@ class _AioGrpcTransport:
             _FRAME_METHOD, response_deserializer=pb.CameraUpdate.FromString, _registered_method=True
         )
         self._timeout_s = timeout_s
+        self.closed = False
 
-    async def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+    async def _unary(self, method, request, route: str):
         try:
-            return await self._stub.CreateSession(request, timeout=self._timeout_s)
+            return await method(request, timeout=self._timeout_s, metadata=((wire.ROUTE_HEADER, route),))
         except grpc.RpcError as error:
             raise DirectorError.from_rpc_error(error) from None
 
-    async def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
-        try:
-            return await self._stub.Frame(update, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    async def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
+        return await self._unary(self._stub.CreateSession, request, route)
 
-    async def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
-        try:
-            return await self._frame_encoded(update, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    async def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate:
+        return await self._unary(self._stub.Frame, update, route)
 
-    async def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]:
+    async def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate:
+        return await self._unary(self._frame_encoded, update, route)
+
+    async def stream(self, updates: AsyncIterable[pb.FrameUpdate], route: str) -> AsyncIterator[pb.CameraUpdate]:
         pump = _AsyncRequestPump(updates)
-        call = self._stub.StreamFrames(pump.iterate())
+        call = self._stub.StreamFrames(pump.iterate(), metadata=((wire.ROUTE_HEADER, route),))
         try:
             async for update in call:
                 yield update
         except grpc.RpcError as error:
             if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
                 raise pump.error from None
-            raise DirectorError.from_rpc_error(error) from None
+            raise _stream_error(error) from None
         except asyncio.CancelledError:
             if pump.error is not None:  # grpc.aio cancels the call when the request iterator fails
                 raise pump.error from None
@@ -95,27 +103,37 @@ class _AioGrpcTransport:
         if pump.error is not None:
             raise pump.error
 
-    async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
-        try:
-            return await self._stub.UpdateStyle(request, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    async def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse:
+        return await self._unary(self._stub.UpdateStyle, request, route)
 
-    async def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
-        try:
-            return await self._stub.TakeShot(request, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    async def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse:
+        return await self._unary(self._stub.TakeShot, request, route)
 
-    async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
-        try:
-            return await self._stub.CloseSession(request, timeout=self._timeout_s)
-        except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+    async def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse:
+        return await self._unary(self._stub.CloseSession, request, route)
 
     async def close(self) -> None:
+        self.closed = True
         self._stub = self._frame_encoded = wire.ClosedStub()
         await self._channel.close()
+
+
+_WRITE_FAILED = "Internal error from Core"  # grpc.aio's details when it could not write a request
+
+
+def _stream_error(error: grpc.RpcError) -> DirectorError:
+    """The error that ended a stream.
+
+    A request written just as the peer ends the call (a node restoring the session answers
+    UNAVAILABLE, a balancer resets the stream of a node that died) fails, and grpc.aio then sets
+    the call's status to INTERNAL "Internal error from Core" in place of the peer's (grpc.aio's
+    _call.py, ``_write``; about 3 breaks in 10 when the caller's updates come as fast as the
+    stream takes them, tests/client_sdk/test_aio_failover.py). All that is known then is
+    that the call ended under a write: it is reported UNAVAILABLE, so the stream is opened again
+    and the next call shows what the server has to say."""
+    if error.code() is grpc.StatusCode.INTERNAL and error.details() == _WRITE_FAILED:
+        return DirectorError(grpc.StatusCode.UNAVAILABLE, f"the stream ended as a request was written ({_WRITE_FAILED})")
+    return DirectorError.from_rpc_error(error)
 
 
 class _AsyncRequestPump:
@@ -147,7 +165,7 @@ class _AioZmqTransport:
         self._timeout_ms = max(1, round(timeout_s * 1000.0))
         self._context = context if context is not None else zmq.asyncio.Context.instance()
         self._idle: list[zmq.asyncio.Socket] = [self._open()]
-        self._closed = False
+        self.closed = False
 
     def _open(self) -> zmq.asyncio.Socket:
         sock = self._context.socket(zmq.DEALER)
@@ -159,7 +177,7 @@ class _AioZmqTransport:
         return sock
 
     async def _request(self, rpc: bytes, payload: bytes) -> bytes:
-        if self._closed:
+        if self.closed:
             raise DirectorError(grpc.StatusCode.CANCELLED, "the client is closed")
         sock = self._idle.pop() if self._idle else self._open()
         try:
@@ -167,7 +185,7 @@ class _AioZmqTransport:
             reply = await sock.recv_multipart()
         except zmq.Again:
             sock.close(linger=0)
-            if not self._closed:  # a fresh socket, already connecting, for the next call
+            if not self.closed:  # a fresh socket, already connecting, for the next call
                 self._idle.append(self._open())
             raise DirectorError(
                 grpc.StatusCode.DEADLINE_EXCEEDED,
@@ -176,48 +194,127 @@ class _AioZmqTransport:
         except BaseException:
             sock.close(linger=0)
             raise
-        if self._closed or len(self._idle) >= _IDLE_SOCKETS:
+        if self.closed or len(self._idle) >= _IDLE_SOCKETS:
             sock.close(linger=0)
         else:
             self._idle.append(sock)
         return wire.zmq_reply_payload(reply)
 
-    async def create_session(self, request: pb.CreateSessionRequest) -> pb.CreateSessionResponse:
+    async def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
         reply = await self._request(wire.RPC_CREATE_SESSION, request.SerializeToString())
         return pb.CreateSessionResponse.FromString(reply)
 
-    async def frame(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
+    async def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate:
         return pb.CameraUpdate.FromString(await self._request(wire.RPC_FRAME, update.SerializeToString()))
 
-    async def frame_encoded(self, update: bytes) -> pb.CameraUpdate:
+    async def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate:
         return pb.CameraUpdate.FromString(await self._request(wire.RPC_FRAME, update))
 
-    async def stream(self, updates: AsyncIterable[pb.FrameUpdate]) -> AsyncIterator[pb.CameraUpdate]:
+    async def stream(self, updates: AsyncIterable[pb.FrameUpdate], route: str) -> AsyncIterator[pb.CameraUpdate]:
         async for update in updates:
-            yield await self.frame(update)
+            yield await self.frame(update, route)
 
-    async def update_style(self, request: pb.UpdateStyleRequest) -> pb.UpdateStyleResponse:
+    async def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse:
         reply = await self._request(wire.RPC_UPDATE_STYLE, request.SerializeToString())
         return pb.UpdateStyleResponse.FromString(reply)
 
-    async def take_shot(self, request: pb.TakeShotRequest) -> pb.TakeShotResponse:
+    async def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse:
         return pb.TakeShotResponse.FromString(await self._request(wire.RPC_TAKE_SHOT, request.SerializeToString()))
 
-    async def close_session(self, request: pb.CloseSessionRequest) -> pb.CloseSessionResponse:
+    async def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse:
         reply = await self._request(wire.RPC_CLOSE_SESSION, request.SerializeToString())
         return pb.CloseSessionResponse.FromString(reply)
 
     async def close(self) -> None:
-        self._closed = True
+        self.closed = True
         idle, self._idle = self._idle, []
         for sock in idle:
             sock.close(linger=0)
 
 
+_END = object()  # what a pull answers when the caller's updates are over
+
+
+class _AsyncResumable:
+    """The caller's updates for a stream that may take several calls: a call that ended with a
+    RETRYABLE code is followed by one that sends its unanswered updates again, then goes on with
+    the caller's.
+
+    Each read of the caller's iterator is a task of its own (``_pull``), awaited through
+    ``asyncio.shield``, for two reasons. grpc.aio reads a call's requests on a task of its own
+    that outlives a failed call (it is not cancelled when the call is already over) and that is
+    cancelled when a call is: a read made on it directly could be broken off by that
+    cancellation, which would end the caller's generator, or a second read could start on the
+    next call while the first is still in ``__anext__`` ("already running"). With the read in its
+    own task, one read is under way at a time, whichever call waits on it, and the update it
+    brings goes to the call current when it comes (``_call``, a count of calls): an ended call
+    leaves it to the next one instead of losing it.
+    """
+
+    def __init__(self, updates: AsyncIterable[pb.FrameUpdate]) -> None:
+        self._updates = updates.__aiter__()
+        self._pull: asyncio.Future[Any] | None = None  # the read under way, or done and not yet taken
+        self._call = 0
+        self.unanswered: deque[pb.FrameUpdate] = deque()  # sent on the current call, oldest first
+
+    def requests(self) -> AsyncIterator[pb.FrameUpdate]:
+        """A new call's requests; from now on the calls before it take no more updates."""
+        self._call += 1
+        return self._requests(self._call, list(self.unanswered))
+
+    async def _requests(self, call: int, resend: list[pb.FrameUpdate]) -> AsyncIterator[pb.FrameUpdate]:
+        for update in resend:
+            yield update
+        while call == self._call:
+            if self._pull is None:
+                self._pull = asyncio.ensure_future(self._next_update())
+            update = await asyncio.shield(self._pull)  # a cancelled call leaves the read going
+            if update is _END or call != self._call:
+                return  # over; or this call ended meanwhile and the update is the next call's
+            self._pull = None
+            self.unanswered.append(update)
+            yield update
+
+    async def _next_update(self) -> Any:
+        try:
+            return await self._updates.__anext__()
+        except StopAsyncIteration:  # a future can not hold it
+            return _END
+
+    def close(self) -> None:
+        """The stream is over: a read still under way is cancelled (it would be nobody's)."""
+        if self._pull is not None and not self._pull.done():
+            self._pull.cancel()
+
+
 class AsyncSession(wire.SessionBase):
-    """One director session; closes itself at the end of an ``async with`` block (see wire.SessionBase)."""
+    """One director session; closes itself at the end of an ``async with`` block (see wire.SessionBase).
+
+    As in the sync client: a call answered UNAVAILABLE (or reset by a balancer: CANCELLED) is
+    tried again by itself after ``asyncio.sleep`` (wire.retry_delays_s), with the same session id,
+    since the server restores the session from its checkpoint when its worker or node was lost;
+    so is a stream, from its first unanswered update. ``retries`` counts them. CreateSession is
+    not tried again (a second session could be made), nor is a call of a closed client."""
 
     __slots__ = ()
+
+    def _retry_delay(self, error: DirectorError, delays: Iterator[float]) -> float | None:
+        """The wait before trying again after ``error``; None: give up (raise it)."""
+        if error.code not in wire.RETRYABLE or self._transport.closed:
+            return None
+        return next(delays, None)
+
+    async def _retrying(self, call, *args):
+        delays = wire.retry_delays_s()
+        while True:
+            try:
+                return await call(*args, self.route)
+            except DirectorError as error:
+                delay = self._retry_delay(error, delays)
+                if delay is None:
+                    raise
+            self.retries += 1
+            await asyncio.sleep(delay)
 
     async def frame(
         self,
@@ -229,38 +326,58 @@ class AsyncSession(wire.SessionBase):
     ) -> pb.CameraUpdate:
         """Sends one frame and waits for its camera; see :meth:`camdirector_client.Session.frame`."""
         update = wire.encode_frame_update(self.id, frame, time_s, states, packed)
-        return await self._transport.frame_encoded(update)
+        return await self._retrying(self._transport.frame_encoded, update)
 
     async def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
         """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""
         if not update.session_id:
             update.session_id = self.id
-        return await self._transport.frame(update)
+        return await self._retrying(self._transport.frame, update)
 
-    def stream(self, frame_updates: FrameUpdates) -> AsyncIterator[pb.CameraUpdate]:
+    async def stream(self, frame_updates: FrameUpdates) -> AsyncIterator[pb.CameraUpdate]:
         """One ``CameraUpdate`` per update, in order: ``async for update in session.stream(...)``.
 
         ``frame_updates`` may be a sync or an async iterable. Over gRPC this is one StreamFrames
         call; over ZeroMQ, one Frame request per update. Updates with an empty session_id get this
         session's. Leaving the loop early cancels the stream (close the iterator with ``aclose()``).
+        A stream ended by UNAVAILABLE or CANCELLED is opened again from its first unanswered update
+        (class docstring; _AsyncResumable).
         """
-        return self._transport.stream(wire.with_session_id_async(frame_updates, self.id))
+        feed = _AsyncResumable(wire.with_session_id_async(frame_updates, self.id))
+        delays = wire.retry_delays_s()
+        try:
+            while True:
+                try:
+                    async with contextlib.aclosing(self._transport.stream(feed.requests(), self.route)) as replies:
+                        async for reply in replies:
+                            feed.unanswered.popleft()
+                            delays = wire.retry_delays_s()  # answered again: a later loss gets every try anew
+                            yield reply
+                    return
+                except DirectorError as error:
+                    delay = self._retry_delay(error, delays)
+                    if delay is None:
+                        raise
+                self.retries += 1
+                await asyncio.sleep(delay)
+        finally:
+            feed.close()
 
     async def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:
         """Replaces the whole style from the next frame on (unset fields take their defaults)."""
         request = pb.UpdateStyleRequest(session_id=self.id, style=wire.style_msg(style))
-        await self._transport.update_style(request)
+        await self._retrying(self._transport.update_style, request)
 
     async def take_shot(self, subject_ids: Iterable[str] = (), kind: int = 0, *, release: bool = False) -> pb.ShotInfo:
         """A human director's shot in a ``RIG_MATCH`` session: ``subject_ids`` (players) as ``kind``
         (a ``pb.ShotKind``; 0: a duel for two, a follow for one, a group for more), held until a call
         with ``release=True``. Answers the shot now held (empty after a release)."""
-        return (await self._transport.take_shot(wire.take_shot_request(self.id, subject_ids, kind, release))).shot
+        return (await self._retrying(self._transport.take_shot, wire.take_shot_request(self.id, subject_ids, kind, release))).shot
 
     async def close(self) -> int:
         """Closes the session on the server; answers how many frames it answered. Idempotent."""
         if self._closed_frames is None:
-            response = await self._transport.close_session(pb.CloseSessionRequest(session_id=self.id))
+            response = await self._retrying(self._transport.close_session, pb.CloseSessionRequest(session_id=self.id))
             self._closed_frames = response.frames
         return self._closed_frames
 
@@ -336,7 +453,8 @@ class AsyncClient:
         return _SessionOpening(self._open_session(msg))
 
     async def _open_session(self, request: pb.CreateSessionRequest) -> AsyncSession:
-        return AsyncSession(self._transport, await self._transport.create_session(request))
+        route = wire.new_route_key()  # before the session exists: CreateSession carries it too
+        return AsyncSession(self._transport, await self._transport.create_session(request, route), route)
 
     async def close(self) -> None:
         """Closes the channel or sockets. Sessions stay open on the server until their timeout."""

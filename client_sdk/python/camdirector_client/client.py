@@ -43,6 +43,8 @@ class _Transport(Protocol):
     def update_style(self, request: pb.UpdateStyleRequest, route: str) -> pb.UpdateStyleResponse: ...
     def close_session(self, request: pb.CloseSessionRequest, route: str) -> pb.CloseSessionResponse: ...
     def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse: ...
+    @property
+    def closed(self) -> bool: ...
     def close(self) -> None: ...
 
 
@@ -95,6 +97,10 @@ class _GrpcTransport:
 
     def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse:
         return self._unary(self._stub.TakeShot, request, route)
+
+    @property
+    def closed(self) -> bool:
+        return isinstance(self._stub, wire.ClosedStub)
 
     def close(self) -> None:
         self._stub = self._frame_encoded = wire.ClosedStub()
@@ -192,6 +198,10 @@ class _ZmqTransport:
     def take_shot(self, request: pb.TakeShotRequest, route: str) -> pb.TakeShotResponse:
         return pb.TakeShotResponse.FromString(self._request(wire.RPC_TAKE_SHOT, request.SerializeToString()))
 
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def close(self) -> None:
         self._closed = True
         idle, self._idle = self._idle, []
@@ -233,28 +243,31 @@ class _Resumable:
             yield update
 
 
-def _retry_delays_s() -> Iterator[float]:
-    """Waits before the tries after an UNAVAILABLE: the server is restoring the session (its worker
-    or node was lost) or restarting; about 3 s in all."""
-    yield from (0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.5)
 
 
 class Session(wire.SessionBase):
     """One director session; closes itself at the end of a ``with`` block (see wire.SessionBase).
 
-    A call answered UNAVAILABLE is tried again by itself, with the same session id (the server
-    restores the session from its checkpoint when its worker or node was lost); so is a stream,
-    from its first unanswered update. ``retries`` counts them."""
+    A call answered UNAVAILABLE (or reset by a balancer: CANCELLED) is tried again by itself,
+    with the same session id (the server restores the session from its checkpoint when its worker
+    or node was lost); so is a stream, from its first unanswered update. ``retries`` counts them."""
 
     __slots__ = ()
 
+    def _retry_delay(self, error: DirectorError, delays: Iterator[float]) -> float | None:
+        """How long to wait before trying again after `error`; None to raise it (not retryable,
+        tries used up, or the client closed: its CANCELLED is its own)."""
+        if error.code not in wire.RETRYABLE or self._transport.closed:
+            return None
+        return next(delays, None)
+
     def _retrying(self, call, *args):
-        delays = _retry_delays_s()
+        delays = wire.retry_delays_s()
         while True:
             try:
                 return call(*args, self.route)
             except DirectorError as error:
-                delay = next(delays, None) if error.code == grpc.StatusCode.UNAVAILABLE else None
+                delay = self._retry_delay(error, delays)
                 if delay is None:
                     raise
             self.retries += 1
@@ -298,16 +311,16 @@ class Session(wire.SessionBase):
         ended by UNAVAILABLE is opened again from its first unanswered update (class docstring).
         """
         feed = _Resumable(wire.with_session_id(frame_updates, self.id))
-        delays = _retry_delays_s()
+        delays = wire.retry_delays_s()
         while True:
             try:
                 for reply in self._transport.stream(feed.requests(), self.route):
                     feed.unanswered.popleft()
-                    delays = _retry_delays_s()  # answered again: a later loss gets every try anew
+                    delays = wire.retry_delays_s()  # answered again: a later loss gets every try anew
                     yield reply
                 return
             except DirectorError as error:
-                delay = next(delays, None) if error.code == grpc.StatusCode.UNAVAILABLE else None
+                delay = self._retry_delay(error, delays)
                 if delay is None:
                     raise
             self.retries += 1

@@ -24,6 +24,7 @@ __all__ = [
     "DEFAULT_TIMEOUT_S",
     "Endpoint",
     "PackedStates",
+    "RETRYABLE",
     "States",
     "ClosedStub",
     "check_timeout",
@@ -32,6 +33,7 @@ __all__ = [
     "frame_update",
     "grpc_channel_options",
     "parse_url",
+    "retry_delays_s",
     "style_msg",
     "with_session_id",
     "with_session_id_async",
@@ -52,6 +54,19 @@ ROUTE_HEADER = "x-camdirector-route"
 def new_route_key() -> str:
     """A session's ROUTE_HEADER value, picked by the client before the session exists."""
     return uuid.uuid4().hex
+
+
+# What a session's call or stream is tried again after, by the sync and asyncio clients alike:
+# the server restoring the session (its worker was lost) answers UNAVAILABLE; a balancer whose
+# node died resets the call's HTTP/2 stream, which gRPC reports as CANCELLED (a client cancels a
+# call itself only when its caller has stopped reading it: nothing is left to retry then).
+RETRYABLE = (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED)
+
+
+def retry_delays_s() -> Iterator[float]:
+    """Waits before the tries after a RETRYABLE answer: the server is restoring the session (its
+    worker or node was lost) or restarting; about 3 s in all."""
+    yield from (0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.5)
 
 
 RPC_CREATE_SESSION = b"CreateSession"
