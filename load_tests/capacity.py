@@ -3,7 +3,7 @@ p99 <= 10 ms and no late frame, for FRAMING_ONLY and ANTICIPATION on the demo sc
 and ZeroMQ.
 
     python -m load_tests.capacity --json FILE [--seconds S] [--max-sessions N] [--modes A,B]
-        [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--server-python PATH]
+        [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--server-python PATH] [--server-arg ARG ...]
 
 For each mode and transport a fresh server is started (an idle session is reclaimed one second
 after its stream ends, so one step's sessions do not weigh on the next), and session counts are
@@ -116,7 +116,7 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
     """One mode over one transport: a fresh server, counts tried upward until one fails twice."""
     steps, capacity, workers = [], 0, None
     with ServerProcess("--workers", str(args.workers), "--max-sessions", str(max(counts) * 2),
-                       "--session-resume-s", "1", python=args.server_python) as server:
+                       "--session-resume-s", "1", *args.server_arg, python=args.server_python) as server:
         workers = server.ready.get("workers")
         address = server.grpc if transport == "grpc" else server.zmq
         for n in counts:
@@ -169,6 +169,9 @@ def main(argv=None) -> int:
                         help="pause after a step while its sessions are reclaimed, s")
     parser.add_argument("--server-python", default=sys.executable,
                         help="the interpreter that runs the server (another checkout's venv measures that checkout)")
+    parser.add_argument("--server-arg", action="append", default=[],
+                        help="one more argument of `camdirector serve` (repeat it), e.g. --server-arg=--checkpoint-store "
+                             "--server-arg=off to measure without checkpoints")
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     try:
@@ -185,6 +188,7 @@ def main(argv=None) -> int:
         "p99_limit_ms": args.p99_ms, "rate_hz": args.rate, "seconds_per_step": args.seconds,
         "warmup_frames_per_session": args.warmup_frames,
         "counts_tried_up_to": counts, "cpus": os.cpu_count(), "server": _server_checkout(args.server_python),
+        "server_args": args.server_arg,
         "capacity_sessions": {mode: {c["transport"]: c["capacity_sessions"] for c in cases if c["mode"] == mode}
                               for mode in modes},
         "wall_s": round(time.perf_counter() - t0, 1), "cases": cases,
