@@ -180,9 +180,11 @@ class DirectoryStore:
         aside.write_bytes(data)
         os.replace(aside, path)
 
-    def _new_log(self, session_id: str, owner: str) -> None:
+    def _new_log(self, session_id: str, owner: str | None) -> None:
+        """An empty log in place of the old one; `owner` written too when it changes (begin, claim)."""
         folder = self._dir(session_id)
-        self._write_aside(folder / "owner", owner.encode())
+        if owner is not None:
+            self._write_aside(folder / "owner", owner.encode())
         self._write_aside(folder / "log", b"")
         self.forget(session_id)
         self._logs[session_id] = os.open(folder / "log", os.O_WRONLY | os.O_APPEND)
@@ -216,7 +218,7 @@ class DirectoryStore:
         try:
             folder = self._dir(session_id)
             self._write_aside(folder / "snapshot", _SEQ.pack(seq) + state)
-            self._new_log(session_id, owner)
+            self._new_log(session_id, owner if claim else None)
         except OSError as exc:
             raise CheckpointError(f"cannot write the checkpoint of session {session_id}: {exc}") from None
         return True
