@@ -11,6 +11,9 @@
 //   game_thread_us_p50/99 time of one tick's SDK calls on the game thread, microseconds
 //   pose_latency_ms_p50/99 from submitting a frame to receiving its pose
 //   pose_delay_frames_p50 how many frames behind the tick the polled pose is
+//   session_id, last_session_id, recreations   the session at the start and at the end, and how
+//                         often it was created again (a server that lost it): after a restart of a
+//                         server with checkpoints, the same id and 0
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -200,6 +203,7 @@ int main(int argc, char** argv) {
   cd_pose last{};
   client.poll(&last);
   const cd_stats stats = client.stats();
+  const std::string last_session_id = client.session_id();  // the first one unless it was created again
   uint64_t closed_frames = 0;
   const camdirector::Status closed = client.close(&closed_frames, 10.0);
 
@@ -209,13 +213,14 @@ int main(int argc, char** argv) {
       "\"game_thread_us_p50\": %.3f, \"game_thread_us_p99\": %.3f, \"game_thread_us_max\": %.3f, "
       "\"pose_latency_ms_p50\": %.3f, \"pose_latency_ms_p99\": %.3f, \"pose_delay_frames_p50\": %.1f, "
       "\"cuts\": %d, \"events\": %d, \"reconnects\": %llu, \"flush\": \"%s\", \"close\": \"%s\", "
-      "\"server_frames\": %llu, \"session_id\": \"%s\"}\n",
+      "\"server_frames\": %llu, \"session_id\": \"%s\", \"last_session_id\": \"%s\", \"recreations\": %llu}\n",
       static_cast<unsigned long long>(stats.frames_submitted), static_cast<unsigned long long>(stats.frames_answered),
       static_cast<unsigned long long>(stats.frames_dropped), static_cast<unsigned long long>(stats.frames_lost),
       refused, latency_ms.size(), static_cast<unsigned long long>(last.frame), max_screen_error,
       percentile(tick_us, 0.5), percentile(tick_us, 0.99), percentile(tick_us, 1.0), percentile(latency_ms, 0.5),
       percentile(latency_ms, 0.99), percentile(delay_frames, 0.5), cuts, events,
       static_cast<unsigned long long>(stats.disconnects), flushed.name(), closed.name(),
-      static_cast<unsigned long long>(closed_frames), session_id.c_str());
+      static_cast<unsigned long long>(closed_frames), session_id.c_str(), last_session_id.c_str(),
+      static_cast<unsigned long long>(stats.recreations));
   return flushed.ok() && closed.ok() ? 0 : 1;
 }
