@@ -1,18 +1,22 @@
 """`camdirector level add|list|remove` and `camdirector eval-graph`.
 
     camdirector level add NAME LEVEL.(obj|glb) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
-                          [--agent-height M] [--agent-radius M] [--data-dir DIR]
+                          [--agent-height M] [--agent-radius M] [--data-dir DIR] [--records-url URL]
         precomputes the level into the registry; prints the record (JSON) with stage timings.
-    camdirector level list [--data-dir DIR]
+    camdirector level list [--data-dir DIR] [--records-url URL]
         prints one JSON object per level.
-    camdirector level remove NAME [--data-dir DIR]
+    camdirector level remove NAME [--data-dir DIR] [--records-url URL]
         removes a level from the registry (a running server's sessions on it keep their copy).
-    camdirector eval-graph LEVEL [--data-dir DIR] [--json OUT] [--plot OUT.png] [--seed N]
+    camdirector eval-graph LEVEL [--data-dir DIR] [--records-url URL] [--json OUT] [--plot OUT.png] [--seed N]
         our graph against PRMs on a registered level along an actor route: the Recast test cases
         (TestCases/nav_mesh_test.txt beside the level file) where they exist, else an A* path on
         the navmesh; prints the table as JSON. Each graph's row counts the frames that show the
         actor (`visible`: inside the frame and unoccluded) apart from those with a clear line of
         sight to it (`line_of_sight`), by precompute/tracks/measure.py.
+--records-url: where the registry's index lives, as `camdirector serve --job-store` says for the
+nodes: empty for SQLite in the data directory, or the postgresql:// URL a cluster's nodes share
+(with --data-dir the folder they share). Default: $CAMDIRECTOR_JOB_STORE, the variable `serve`
+reads, so a shell set up for the nodes sees their levels.
 Exit status: 0 ok, 1 failed, 2 bad arguments or input.
 
 `add_parsers(subparsers)` registers both on the `camdirector` parser; each sets `handler`.
@@ -20,8 +24,24 @@ Exit status: 0 ok, 1 failed, 2 bad arguments or input.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
+
+_RECORDS_URL_HELP = ("the registry's index: postgresql://... (a cluster's --job-store) or empty for SQLite in "
+                     "the data dir (default: $CAMDIRECTOR_JOB_STORE)")
+
+
+def _records_url_argument(parser) -> None:
+    parser.add_argument("--records-url", dest="records_url", default=None, help=_RECORDS_URL_HELP)
+
+
+def _registry(args):
+    """The registry that --data-dir and --records-url (else $CAMDIRECTOR_JOB_STORE) name."""
+    from camdirector.precompute.tracks.registry import LevelRegistry
+
+    url = args.records_url if args.records_url is not None else os.environ.get("CAMDIRECTOR_JOB_STORE", "")
+    return LevelRegistry(args.data_dir, url)
 
 
 def add_parsers(subparsers) -> None:
@@ -36,17 +56,21 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--agent-height", dest="agent_height", type=float, default=2.0, help="m (default 2.0)")
     p.add_argument("--agent-radius", dest="agent_radius", type=float, default=0.6, help="m (default 0.6)")
     p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder (default: per-user data dir)")
+    _records_url_argument(p)
     p.set_defaults(handler=run_level_add)
     p = sub.add_parser("list", help="list registered levels")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
+    _records_url_argument(p)
     p.set_defaults(handler=run_level_list)
     p = sub.add_parser("remove", help="remove a level from the registry")
     p.add_argument("name")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
+    _records_url_argument(p)
     p.set_defaults(handler=run_level_remove)
     p = subparsers.add_parser("eval-graph", help="our camera graph against probabilistic roadmaps on a level")
     p.add_argument("level", help="registered level name")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
+    _records_url_argument(p)
     p.add_argument("--json", type=Path, help="write the table here")
     p.add_argument("--plot", type=Path, help="top views of the graphs, route and camera paths (PNG)")
     p.add_argument("--seed", type=int, default=0)
@@ -61,15 +85,19 @@ def _record_json(record) -> dict:
 
 
 def run_level_add(args) -> int:
-    from camdirector.precompute.tracks.registry import LevelRegistry
+    from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     def progress(fraction: float) -> None:
         print(f"camdirector level add: {100 * fraction:.0f}%", file=sys.stderr)
 
     try:
-        record = LevelRegistry(args.data_dir).add_level(
-            args.name, args.level, args.navmesh, scale=args.scale, agent_height_m=args.agent_height,
-            agent_radius_m=args.agent_radius, progress=progress)
+        with _registry(args) as registry:
+            record = registry.add_level(
+                args.name, args.level, args.navmesh, scale=args.scale, agent_height_m=args.agent_height,
+                agent_radius_m=args.agent_radius, progress=progress)
+    except LevelsUnavailable as exc:
+        print(f"camdirector level add: {exc}", file=sys.stderr)
+        return 1
     except (OSError, ValueError) as exc:
         print(f"camdirector level add: {exc}", file=sys.stderr)
         return 2
@@ -78,17 +106,29 @@ def run_level_add(args) -> int:
 
 
 def run_level_list(args) -> int:
-    from camdirector.precompute.tracks.registry import LevelRegistry
+    from camdirector.precompute.tracks.registry import LevelsUnavailable
 
-    for record in LevelRegistry(args.data_dir).list():
+    try:
+        with _registry(args) as registry:
+            records = registry.list()
+    except (LevelsUnavailable, ValueError) as exc:
+        print(f"camdirector level list: {exc}", file=sys.stderr)
+        return 1 if isinstance(exc, LevelsUnavailable) else 2
+    for record in records:
         print(json.dumps(_record_json(record)))
     return 0
 
 
 def run_level_remove(args) -> int:
-    from camdirector.precompute.tracks.registry import LevelRegistry
+    from camdirector.precompute.tracks.registry import LevelsUnavailable
 
-    if not LevelRegistry(args.data_dir).delete(args.name):
+    try:
+        with _registry(args) as registry:
+            removed = registry.delete(args.name)
+    except (LevelsUnavailable, ValueError) as exc:
+        print(f"camdirector level remove: {exc}", file=sys.stderr)
+        return 1 if isinstance(exc, LevelsUnavailable) else 2
+    if not removed:
         print(f"camdirector level remove: no level named {args.name!r}", file=sys.stderr)
         return 2
     return 0
@@ -118,16 +158,20 @@ def run_eval_graph(args) -> int:
     import numpy as np
 
     from camdirector.precompute.tracks.compare import compare_with_prm
-    from camdirector.precompute.tracks.registry import LevelRegistry
+    from camdirector.precompute.tracks.registry import LevelsUnavailable
 
-    registry = LevelRegistry(args.data_dir)
     try:
-        artifact = registry.load(args.level)
+        with _registry(args) as registry:
+            artifact = registry.load(args.level)
+            record = registry.get(args.level)
+    except LevelsUnavailable as exc:
+        print(f"camdirector eval-graph: {exc}", file=sys.stderr)
+        return 1
     except (KeyError, ValueError) as exc:
         print(f"camdirector eval-graph: {exc}", file=sys.stderr)
         return 2
     rng = np.random.default_rng(args.seed)
-    route = route_for(artifact, registry.get(args.level), rng)
+    route = route_for(artifact, record, rng)
     result = compare_with_prm(artifact, route, rng, plot_path=args.plot)
     result = {"level": args.level, "stage_timings_ms": artifact.timings_ms, **result}
     text = json.dumps(result, indent=1)

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
+from camdirector.precompute.postgres import PostgresDatabase
+
 
 class JobState(str, Enum):
     QUEUED = "queued"
@@ -420,81 +422,29 @@ _POSTGRES_SCHEMA = (
 # Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
 # SQLite (any constant that no other user of the database takes; these are "camd" in ASCII).
 _WRITE_LOCK_KEY = 0x63616D64
-# Seconds to wait for PostgreSQL to answer a connection before calling it down.
-_CONNECT_TIMEOUT_S = 5
-
-
-class _PgConnection:
-    """A psycopg connection that speaks the stores' `?` placeholders."""
-
-    def __init__(self, conn) -> None:
-        self._conn = conn
-
-    def execute(self, sql: str, args=()):
-        return self._conn.execute(sql.replace("?", "%s"), tuple(args))
-
-
 class PostgresJobStore(JobStore):
-    """Records in the `jobs` table of the PostgreSQL database at `url` (created when missing);
-    files in `root` as for SQLite. One connection behind a lock, opened again after PostgreSQL
-    dropped it. Raises JobsUnavailable when the database cannot be reached."""
+    """Records in the `jobs` table of the PostgreSQL database at `url` (created when missing),
+    through precompute/postgres.py; files in `root` as for SQLite. Raises JobsUnavailable when the
+    database cannot be reached."""
 
     _NEXT_SEQ = "DEFAULT"
 
     def __init__(self, url: str, root: str | Path) -> None:
         super().__init__(root)
         self.url = url
-        self._lock = threading.Lock()
-        self._conn = None
+        self._db = PostgresDatabase(url, "job store", JobsUnavailable)
         with self._tx() as db:   # under the write lock: nodes starting together create it once
             for statement in _POSTGRES_SCHEMA:
                 db.execute(statement)
 
-    def _connection(self):
-        import psycopg
-
-        if self._conn is None or self._conn.closed or self._conn.broken:
-            self._conn = psycopg.connect(self.url, autocommit=True, connect_timeout=_CONNECT_TIMEOUT_S)
-        return self._conn
-
-    @contextlib.contextmanager
-    def _unavailable_as_error(self) -> Iterator[None]:
-        """psycopg's connection errors as JobsUnavailable with a one-line reason."""
-        import psycopg
-
-        try:
-            yield
-        except psycopg.OperationalError as exc:
-            lines = [line for line in str(exc).splitlines() if line.strip()]
-            reason = lines[-1].strip() if lines else type(exc).__name__
-            raise JobsUnavailable(f"job store {_redacted(self.url)} is unreachable: {reason}") from None
-
     def close(self) -> None:
-        with self._lock:
-            if self._conn is not None:
-                self._conn.close()
+        self._db.close()
 
-    @contextlib.contextmanager
-    def _tx(self) -> Iterator[_PgConnection]:
-        with self._lock, self._unavailable_as_error():
-            conn = self._connection()
-            with conn.transaction():
-                conn.execute("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK_KEY,))
-                yield _PgConnection(conn)
+    def _tx(self):
+        return self._db.transaction("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK_KEY,))
 
-    @contextlib.contextmanager
-    def _read(self) -> Iterator[_PgConnection]:
-        with self._lock, self._unavailable_as_error():
-            yield _PgConnection(self._connection())
-
-
-def _redacted(url: str) -> str:
-    """The URL without its password, for messages."""
-    scheme, sep, rest = url.partition("://")
-    userinfo, at, host = rest.rpartition("@")
-    if not at or ":" not in userinfo:
-        return url
-    return f"{scheme}{sep}{userinfo.split(':', 1)[0]}:***@{host}"
+    def _read(self):
+        return self._db.read()
 
 
 def open_store(url: str, root: str | Path) -> JobStore:

@@ -250,9 +250,9 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
             raise invalid(f"the TRACKS rig follows exactly one target (the actor), got {len(targets)}")
         if not req.level_id:
             raise invalid("style.rig RIG_TRACKS needs level_id: the name of a level in the server's level registry")
-        level = (levels if levels is not None else LevelCache(settings.data_dir)).get(req.level_id)
+        level = (levels if levels is not None else LevelCache(settings.data_dir, settings.job_store)).get(req.level_id)
     elif style.rig == Rig.MATCH and req.level_id:
-        level = (levels if levels is not None else LevelCache(settings.data_dir)).get(req.level_id)
+        level = (levels if levels is not None else LevelCache(settings.data_dir, settings.job_store)).get(req.level_id)
     elif req.level_id:
         raise invalid(f"level_id {req.level_id!r} is for the TRACKS and MATCH rigs: set style.rig = RIG_TRACKS or "
                       "leave level_id empty")

@@ -75,7 +75,7 @@ class SessionTable:
         self.settings = settings
         self.clock = clock
         self.held: dict[str, HeldSession] = {}
-        self.levels = LevelCache(settings.data_dir)  # the TRACKS rig's levels, loaded once per process
+        self.levels = LevelCache(settings.data_dir, settings.job_store)  # the TRACKS rig's levels, loaded once per process
         self.monitor: Monitor | None = None          # the render process of the sessions' views, started on the first
         self.store = store if store is not None else open_store(
             settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s)

@@ -29,7 +29,11 @@ is adding or replacing answers 409 (cancel the job first), so a removal is never
 that finishes after it.
 
 The job runs in a job process (server/jobs/: the local runner or a queue worker); the uploads stay in
-the job's `input/`.
+the job's `input/`. The registry's index lives where the job records do (`JobSettings.job_store`:
+SQLite in the data directory, or the PostgreSQL database the nodes share; the job's params carry
+that URL beside the data directory), so every node lists, fetches and serves the same levels; two
+nodes' jobs adding one name at once give one level and one failed job (the index's primary key),
+and PostgreSQL down answers 503.
 """
 from __future__ import annotations
 
@@ -38,7 +42,7 @@ import threading
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Query, Request, UploadFile
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
@@ -46,7 +50,7 @@ from camdirector.geometry.meshes import MeshError, from_glb, from_obj
 from camdirector.precompute.tracks import job as level_job
 from camdirector.precompute.tracks.job import KIND
 from camdirector.precompute.tracks.level import LEVEL_SUFFIXES
-from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, check_level_name
+from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, LevelsUnavailable, check_level_name
 from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.server.http.routes.jobs import (
     MAX_LISTED_JOBS,
@@ -138,7 +142,7 @@ def _mesh_file(upload: UploadFile, field: str, limit: int, scale: float) -> tupl
 def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) -> APIRouter:
     """The /v1/levels and /v1/level-jobs routes over `runner` (which must have the "level" kind)."""
     router = APIRouter(tags=["levels"])
-    registry = LevelRegistry(data_dir)
+    registry = LevelRegistry(data_dir, job_settings.job_store)
     limit = job_settings.max_upload_bytes
     submit_lock = threading.Lock()  # the duplicate check and the submit happen as one
 
@@ -187,7 +191,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
             files[navmesh_file] = navmesh_data
         params = {"name": name, "level_file": level_file, "navmesh_file": navmesh_file, "scale": scale,
                   "agent_height_m": agent_height, "agent_radius_m": agent_radius, "replace": replace,
-                  "seed": seed, "data_dir": str(registry.data_dir)}
+                  "seed": seed, "data_dir": str(registry.data_dir), "records_url": job_settings.job_store}
         with submit_lock:
             if not replace and (registry.get(name) is not None or name in pending_names()):
                 raise HTTPException(status_code=409, detail=(
@@ -259,5 +263,10 @@ def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path,
     runner.add_kind(JobKind(KIND, level_job.run_level_job), preload="camdirector.precompute.tracks.job")
     app.include_router(build_level_router(runner, settings, Path(data_dir)))
     answer_unavailable_jobs(app)
+
+    async def levels_unavailable(request: Request, exc: LevelsUnavailable) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
+
+    app.add_exception_handler(LevelsUnavailable, levels_unavailable)
     app.add_middleware(UploadLimit, max_body_bytes=2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES,
                        path_prefix=LEVELS_PREFIX)

@@ -1,26 +1,12 @@
-"""Fixtures of the job tests: a fresh PostgreSQL database per test, and the record store on both
-backends (SQLite and PostgreSQL: every store test runs on each)."""
+"""Fixtures of the job tests: the record store on both backends (SQLite and PostgreSQL, a fresh
+database per test: tests/conftest.py's postgres_url; every store test runs on each)."""
 from __future__ import annotations
 
-import uuid
 from pathlib import Path
 
 import pytest
 
 from camdirector.server.jobs import PostgresJobStore, SqliteJobStore
-
-
-@pytest.fixture
-def postgres_url(postgres_server) -> str:
-    """A new empty database on the shared PostgreSQL cluster, dropped after the test."""
-    import psycopg
-
-    name = f"jobs_{uuid.uuid4().hex[:12]}"
-    with psycopg.connect(postgres_server.url, autocommit=True) as admin:
-        admin.execute(f"CREATE DATABASE {name}")
-    yield postgres_server.url.rsplit("/", 1)[0] + "/" + name
-    with psycopg.connect(postgres_server.url, autocommit=True) as admin:
-        admin.execute(f"DROP DATABASE {name} WITH (FORCE)")
 
 
 @pytest.fixture(params=["sqlite", "postgres"])
