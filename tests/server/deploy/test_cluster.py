@@ -65,6 +65,38 @@ def test_rest_calls_with_the_route_key_reach_the_node_of_the_session(cluster, st
             assert reply.status == 200
 
 
+def test_a_level_added_through_one_node_directs_a_session_on_the_other(cluster):
+    """Job and level records in PostgreSQL, artifacts in the shared folder: the level job of one
+    node's REST API is seen by the other, which lists the level and directs a TRACKS session on it."""
+    import httpx
+
+    from tests.precompute.tracks.tiny_levels import corridor
+    from tests.server.tracks_sessions import actor_frames, check_directed, corridor_walk, obj_text, tracks_request
+
+    first, second = (f"http://{node.http}" for node in cluster.nodes[:2])
+    posted = httpx.post(f"{first}/v1/levels", data={"name": "corridor"},
+                        files={"level": ("level.obj", obj_text(corridor()))}, timeout=30)
+    assert posted.status_code == 202, posted.text
+    job = posted.json()["id"]
+    deadline = time.monotonic() + 120
+    while (status := httpx.get(f"{first}/v1/level-jobs/{job}", timeout=10).json()["status"]) not in \
+            ("succeeded", "failed", "cancelled") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert status == "succeeded"
+    assert httpx.get(f"{second}/v1/level-jobs/{job}", timeout=10).json()["status"] == "succeeded"
+    assert [level["name"] for level in httpx.get(f"{second}/v1/levels", timeout=10).json()["levels"]] == ["corridor"]
+    again = httpx.post(f"{second}/v1/levels", data={"name": "corridor"},
+                       files={"level": ("level.obj", obj_text(corridor()))}, timeout=30)
+    assert again.status_code == 409  # the name is taken on every node
+    raw = wc.GrpcRaw(cluster.nodes[1].grpc)
+    try:
+        times, feet = corridor_walk(2.0)
+        session_id = raw.call("CreateSession", tracks_request("corridor", feet[0])).session_id
+        check_directed(raw.stream(actor_frames(session_id, times, feet)), feet)
+    finally:
+        raw.close()
+
+
 def test_live_streams_go_on_while_a_node_joins(cluster, stub):
     keys = new_keys(4)
     sessions = [create(stub, key) for key in keys]
