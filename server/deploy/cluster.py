@@ -185,7 +185,7 @@ class Cluster:
         has_job_worker = subprocess.Popen([*_serve_command(), "job-worker", "--help"],
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         self._children.append(has_job_worker)
-        redis = RedisServer(self.folder / "redis").start()
+        redis = RedisServer(self.folder / "redis", persist=True).start()
         self._children.append(redis.proc)
         self.state.update(redis=redis.url, job_queue=redis.url.rpartition("/")[0] + "/1", redis_pid=redis.proc.pid)
         self._save()

@@ -117,12 +117,14 @@ def descendants(pids: list[int]) -> list[int]:
 
 
 class RedisServer:
-    """redis-server on 127.0.0.1:`port` (0: a free one), no persistence (checkpoints are
-    rewritten continually; a lost Redis loses only what sessions would restore from)."""
+    """redis-server on 127.0.0.1:`port` (0: a free one). Without `persist`, nothing is written
+    to disk (the tests'); with it, an append-only file fsynced every second, so a restarted Redis
+    still holds the job queue's messages (the cluster's: docs/jobs.md)."""
 
-    def __init__(self, folder: Path, port: int = 0):
+    def __init__(self, folder: Path, port: int = 0, persist: bool = False):
         self.folder = Path(folder)
         self.port = port or free_port()
+        self.persist = persist
         self.proc: subprocess.Popen | None = None
 
     @property
@@ -134,7 +136,7 @@ class RedisServer:
         log = self.folder / "redis.log"
         self.proc = subprocess.Popen(
             [_binary("redis-server", "redis-server"), "--port", str(self.port), "--bind", "127.0.0.1",
-             "--dir", str(self.folder), "--save", "", "--appendonly", "no", "--protected-mode", "yes",
+             "--dir", str(self.folder), "--save", "", "--appendonly", "yes" if self.persist else "no", "--protected-mode", "yes",
              "--logfile", str(log)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         _wait_port(self.port, self.proc, timeout_s, "redis-server", log)
         return self
