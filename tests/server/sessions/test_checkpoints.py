@@ -19,6 +19,7 @@ from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from tests.server.test_match_sessions import frames as match_frames
 from tests.server.test_match_sessions import match_request
+from tests.server.tracks_sessions import tracks_request
 from tests.server.wire_client import two_target_request, walk
 
 
@@ -102,13 +103,27 @@ def _match_requests(n: int) -> tuple[pb.CreateSessionRequest, list]:
     return match_request(0.5), requests
 
 
-@pytest.mark.parametrize("kind", ["FRAMING_ONLY", "REACTIVE", "RAYCAST", "ANTICIPATION", "MATCH"])
+def _tracks_requests(data_dir) -> tuple[pb.CreateSessionRequest, list]:
+    from tests.precompute.tracks.tiny_levels import corridor
+    from tests.server.tracks_sessions import actor_frames, cli_add_level, corridor_walk, obj_text
+
+    level_file = data_dir / "corridor.obj"
+    level_file.parent.mkdir(parents=True, exist_ok=True)
+    level_file.write_text(obj_text(corridor()))
+    cli_add_level(data_dir, "corridor", level_file)
+    times, feet = corridor_walk(4.0)
+    return tracks_request("corridor", feet[0]), [("frame", "s", f.SerializeToString()) for f in actor_frames("s", times, feet)]
+
+
+@pytest.mark.parametrize("kind", ["FRAMING_ONLY", "REACTIVE", "RAYCAST", "ANTICIPATION", "MATCH", "TRACKS"])
 def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, store_url, kind):
     """A table that checkpoints answers part of the inputs; a second table (another worker or
     node) is asked the rest: it restores the session (creation, snapshot, inputs since) and every
     answer equals the one of a table that ran all the inputs without checkpoints."""
-    create, requests = _match_requests(120) if kind == "MATCH" else _toric_requests(getattr(pb, kind), 100)
-    reference = SessionTable(ServerSettings(data_dir=str(tmp_path / "ref"), checkpoint_store="off"))
+    create, requests = (_match_requests(120) if kind == "MATCH" else _tracks_requests(tmp_path) if kind == "TRACKS"
+                        else _toric_requests(getattr(pb, kind), 100))
+    # the reference reads the same level registry (TRACKS) but keeps no checkpoints
+    reference = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
     reference.handle_bytes("create", "s", create.SerializeToString())
     expected = _answers(reference, requests)
 
