@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -38,25 +39,26 @@ def session_request(scene: DemoScene, lens: Lens, visibility: int = cd.pb.FRAMIN
 
 def _paced_frames(scene: DemoScene, n_frames: int, sent_at: list[float]):
     """FrameUpdates at 60 Hz of wall-clock time, as a game loop would send them."""
-    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
     start = time.perf_counter()
-    for i in range(n_frames):
-        due = start + i / FPS
-        delay = due - time.perf_counter()
+    for i, update in enumerate(frame_updates(scene, n_frames)):
+        delay = start + i / FPS - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
-        t = i / FPS
-        transforms = scene.transforms_at(t)
-        positions = np.stack([transforms[k].position_world for k in ids])
-        rotations = np.stack([transforms[k].rotation_xyzw for k in ids])
         sent_at.append(time.perf_counter())
-        yield frame_update(i + 1, t, ids, positions, rotations)
+        yield update
 
 
-def frame_update(frame: int, time_s: float, ids, positions, rotations) -> cd.pb.FrameUpdate:
-    """One demo frame: ids (n,), positions (n, 3) metres, rotations (n, 4) xyzw as packed states."""
-    packed_ids, packed_values = cd.pack_states(ids, positions, rotations)
-    return cd.pb.FrameUpdate(frame=frame, time_s=time_s, packed_ids=packed_ids, packed_transforms=packed_values)
+def frame_updates(scene: DemoScene, n_frames: int, rate_hz: float = FPS) -> Iterator[cd.pb.FrameUpdate]:
+    """The demo's frames 1 to n_frames at rate_hz of game time, without a session id: the avatar's
+    and the moving obstacles' transforms as packed states. Each is built when asked for (a paced
+    sender builds it when it is due); the benchmarks stream the same frames."""
+    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
+    for i in range(n_frames):
+        time_s = i / rate_hz
+        transforms = scene.transforms_at(time_s)
+        packed_ids, packed = cd.pack_states(ids, np.stack([transforms[k].position_world for k in ids]),
+                                            np.stack([transforms[k].rotation_xyzw for k in ids]))
+        yield cd.pb.FrameUpdate(frame=i + 1, time_s=time_s, packed_ids=packed_ids, packed_transforms=packed)
 
 
 def _progress(i: int, n: int, rtt_ms: list[float], compute_ms: list[float], visibility: list[float]) -> None:

@@ -12,7 +12,6 @@ size (bytes), and the restore of the session by a second table after 1.5 snapsho
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 import time
 from pathlib import Path
@@ -20,35 +19,35 @@ from pathlib import Path
 import numpy as np
 
 import camdirector_client as cd
-from camdirector.demo.client import frame_update, session_request
+from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.server.deploy.services import RedisServer
 from camdirector.server.sessions.checkpoints import dumps_state
 from camdirector.server.sessions.table import SessionTable
 from camdirector.server.settings import ServerSettings
+from load_tests.report import emit
 
 
 def _frames(scene, n: int) -> list[bytes]:
-    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
+    """The demo's first n frames for session "s", serialized."""
     out = []
-    for i in range(n):
-        transforms = scene.transforms_at(i / 60)
-        update = frame_update(i + 1, i / 60, ids, np.stack([transforms[k].position_world for k in ids]),
-                              np.stack([transforms[k].rotation_xyzw for k in ids]))
+    for update in frame_updates(scene, n):
         update.session_id = "s"
         out.append(update.SerializeToString())
     return out
 
 
-def _measure(create: bytes, frames: list[bytes], store: str, every: int) -> dict:
+def _measure(create: bytes, frames: list[bytes], timed: int, store: str, every: int) -> dict:
+    """The first `timed` frames timed; then, with checkpoints, 1.5 snapshot periods more and a
+    second table (another worker) restoring the session for the frame after them."""
     with tempfile.TemporaryDirectory() as folder:
         settings = ServerSettings(data_dir=folder, checkpoint_store=store, checkpoint_every_frames=every,
                                   max_triangles=10**7)
         table = SessionTable(settings)
         table.handle_bytes("create", "s", create)
         times_ms = []
-        for payload in frames:
+        for payload in frames[:timed]:
             t0 = time.perf_counter()
             table.handle_bytes("frame", "s", payload)
             times_ms.append((time.perf_counter() - t0) * 1e3)
@@ -57,35 +56,16 @@ def _measure(create: bytes, frames: list[bytes], store: str, every: int) -> dict
             held = table.held["s"]
             out["snapshot_bytes"] = len(dumps_state((held.session, held.style_msg),
                                                     held.session.creation_objects()))
-            # a second table (another worker) restores after 1.5 periods of inputs since a snapshot
-            extra = frames[-1]
-            for payload in _frames_after(frames, every + every // 2):
+            for payload in frames[timed:-1]:
                 table.handle_bytes("frame", "s", payload)
-                extra = payload
             other = SessionTable(settings)
             other.owner = "bench/2"
             t0 = time.perf_counter()
-            other.handle_bytes("frame", "s", _next_frame(extra))
+            other.handle_bytes("frame", "s", frames[-1])
             out["restore_and_frame_ms"] = (time.perf_counter() - t0) * 1e3
             other.close_all()
         table.close_all()
         return out
-
-
-def _frames_after(frames: list[bytes], n: int) -> list[bytes]:
-    from camdirector.v1 import director_pb2 as pb
-    last = pb.FrameUpdate.FromString(frames[-1])
-    out = []
-    for k in range(1, n + 1):
-        update = pb.FrameUpdate()
-        update.CopyFrom(last)
-        update.frame, update.time_s = last.frame + k, last.time_s + k / 60
-        out.append(update.SerializeToString())
-    return out
-
-
-def _next_frame(payload: bytes) -> bytes:
-    return _frames_after([payload], 1)[0]
 
 
 def main() -> None:
@@ -95,7 +75,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     scene = build_demo_scene()
-    frames = _frames(scene, args.frames)
+    frames = _frames(scene, args.frames + args.every + args.every // 2 + 1)
     report = {"frames": args.frames, "checkpoint_every_frames": args.every, "modes": {}}
     with tempfile.TemporaryDirectory() as folder:
         redis = RedisServer(Path(folder)).start()
@@ -103,18 +83,14 @@ def main() -> None:
             for mode in ("FRAMING_ONLY", "ANTICIPATION"):
                 create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9),
                                          getattr(cd.pb, mode)).SerializeToString()
-                rows = {name: _measure(create, frames, store, args.every)
+                rows = {name: _measure(create, frames, args.frames, store, args.every)
                         for name, store in (("off", "off"), ("folder", ""), ("redis", redis.url))}
                 for name in ("folder", "redis"):
                     rows[name]["ratio_p50_vs_off"] = rows[name]["frame_ms_p50"] / rows["off"]["frame_ms_p50"]
                 report["modes"][mode] = rows
         finally:
             redis.stop()
-    text = json.dumps(report, indent=2)
-    print(text)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+    emit(report, args.json)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ floor: a health check's round trip measured in the same run.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import tempfile
@@ -32,22 +31,13 @@ import numpy as np
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 import camdirector_client as cd
-from camdirector.demo.client import frame_update, session_request
+from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.server.sessions.table import SessionTable
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-
-
-def _updates(scene, n: int, rate_hz: float) -> list[pb.FrameUpdate]:
-    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
-    out = []
-    for i in range(n):
-        transforms = scene.transforms_at(i / rate_hz)
-        out.append(frame_update(i + 1, i / rate_hz, ids, np.stack([transforms[k].position_world for k in ids]),
-                                np.stack([transforms[k].rotation_xyzw for k in ids])))
-    return out
+from load_tests.report import emit
 
 
 def _undisturbed(create: pb.CreateSessionRequest, updates: list[pb.FrameUpdate]) -> list[pb.CameraPose]:
@@ -97,15 +87,10 @@ def _stream(session, updates, rate_hz: float, start_s: float, out: dict) -> None
     out.update(answers=answers, times=times)
 
 
-def _workers_by_load(node_pid: int) -> list[int]:
-    children = [int(p) for p in open(f"/proc/{node_pid}/task/{node_pid}/children").read().split()]
-    return [pid for pid in children if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read()]
-
-
 def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float) -> dict:
     scene = build_demo_scene()
     create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9), cd.pb.FRAMING_ONLY)
-    updates = _updates(scene, int(seconds * rate_hz), rate_hz)
+    updates = list(frame_updates(scene, int(seconds * rate_hz), rate_hz))
     expected = _undisturbed(create, updates)
     folder = Path(tempfile.mkdtemp(prefix="camdirector-failover-"))
     cluster = server = None
@@ -135,9 +120,8 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             held = counts[victim]
             cluster.kill_node(victim)
         else:
-            pids = _workers_by_load(server.proc.pid)
             held = None
-            os.kill(pids[0], signal.SIGKILL)
+            os.kill(server.worker_pids()[0], signal.SIGKILL)
         killed_at = time.monotonic()
         for thread in threads:
             thread.join(seconds + 60)
@@ -190,11 +174,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     report = run(args.kill, args.nodes, args.sessions, args.rate, args.seconds, args.kill_after)
-    text = json.dumps(report, indent=2)
-    print(text)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+    emit(report, args.json)
 
 
 if __name__ == "__main__":

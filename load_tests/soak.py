@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 
 import camdirector_client as cd
-from camdirector.demo.client import session_request
+from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.server.pipeline.style import MAP_MODES, MapBackendChoice, VisibilityMode
-from camdirector.server.process import ServerProcess
+from camdirector.server.process import ServerProcess, worker_pids
 from load_tests.report import emit
 
 
@@ -50,24 +50,6 @@ def sample_process(pid: int) -> ProcessSample:
     rss_kb = next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
                   if line.startswith("VmRSS:"))
     return ProcessSample(rss_mb=rss_kb / 1024.0, open_fds=len(os.listdir(f"/proc/{pid}/fd")))
-
-
-def worker_pids(server_pid: int) -> list[int]:
-    """The server's worker processes: its children started by multiprocessing's `spawn` (which
-    leaves out a resource tracker, were one running), sorted by pid."""
-    pids = []
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
-            cmdline = Path(f"/proc/{entry}/cmdline").read_bytes()
-        except OSError:  # gone meanwhile
-            continue
-        parent = int(stat.rsplit(")", 1)[1].split()[1])  # the name in parentheses may hold spaces
-        if parent == server_pid and b"spawn_main" in cmdline:
-            pids.append(int(entry))
-    return sorted(pids)
 
 
 @dataclass(frozen=True)
@@ -110,14 +92,8 @@ class Loop:
             request.style.map_backend = int(combo.map_backend)
             request.record = combo.record
             self.requests[combo] = request
-        ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
-        self.updates: list[bytes] = []  # serialized: the SDK writes the session id into the messages it streams
-        for i in range(frames):
-            transforms = scene.transforms_at(i / 60.0)
-            packed_ids, packed = cd.pack_states(ids, np.stack([transforms[k].position_world for k in ids]),
-                                                np.stack([transforms[k].rotation_xyzw for k in ids]))
-            self.updates.append(cd.pb.FrameUpdate(frame=i + 1, time_s=i / 60.0, packed_ids=packed_ids,
-                                                  packed_transforms=packed).SerializeToString())
+        # serialized: the SDK writes the session id into the messages it streams
+        self.updates = [update.SerializeToString() for update in frame_updates(scene, frames, 60.0)]
         self.urls = [server.url("grpc" if k % 2 == 0 else "zmq") for k in range(clients)]
         self.sessions = {combo.name: 0 for combo in self.requests}
         self.frames = 0

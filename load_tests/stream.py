@@ -28,12 +28,11 @@ from contextlib import AbstractAsyncContextManager
 from pathlib import Path
 
 import grpc
-import numpy as np
 import zmq
 import zmq.asyncio
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from camdirector.demo.client import frame_update, session_request
+from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.server.process import ServerProcess
@@ -43,14 +42,7 @@ from load_tests.report import emit, percentiles
 
 def _frames(scene, n_frames: int, rate_hz: float) -> list[bytes]:
     """Serialized FrameUpdates without session id (added per session by concatenation)."""
-    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
-    out = []
-    for i in range(n_frames):
-        transforms = scene.transforms_at(i / rate_hz)
-        update = frame_update(i + 1, i / rate_hz, ids, np.stack([transforms[k].position_world for k in ids]),
-                               np.stack([transforms[k].rotation_xyzw for k in ids]))
-        out.append(update.SerializeToString())
-    return out
+    return [update.SerializeToString() for update in frame_updates(scene, n_frames, rate_hz)]
 
 
 def _with_session(session_id: str, frame_bytes: bytes) -> bytes:

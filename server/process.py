@@ -11,6 +11,24 @@ import tempfile
 from pathlib import Path
 
 
+def worker_pids(server_pid: int) -> list[int]:
+    """The server's worker processes: its children started by multiprocessing's `spawn` (which
+    leaves out a resource tracker, were one running), sorted by pid."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            cmdline = Path(f"/proc/{entry}/cmdline").read_bytes()
+        except OSError:  # gone meanwhile
+            continue
+        parent = int(stat.rsplit(")", 1)[1].split()[1])  # the name in parentheses may hold spaces
+        if parent == server_pid and b"spawn_main" in cmdline:
+            pids.append(int(entry))
+    return sorted(pids)
+
+
 class ServerProcess:
     """Pass transports=("grpc",) to turn the others off; extra `args` go to `camdirector serve`.
     The server's log goes to a file in a temporary folder (a pipe could fill and stall it)."""
@@ -47,6 +65,10 @@ class ServerProcess:
 
     def alive(self) -> bool:
         return self.proc.poll() is None
+
+    def worker_pids(self) -> list[int]:
+        """Its worker processes' pids (worker_pids), sorted."""
+        return worker_pids(self.proc.pid)
 
     def stop(self) -> int:
         """Stops the server (SIGTERM, then SIGKILL after 15 s); returns its exit code."""

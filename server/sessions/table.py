@@ -107,11 +107,11 @@ class SessionTable:
             response.recording_path = str(held.recorder.path)
         if self.store is not None:
             held.create_payload = payload if payload is not None else req.SerializeToString()
-        if self.store is not None and not self._replaying:
-            try:
-                self.store.begin(session_id, self.owner, held.create_payload)
-            except CheckpointError as exc:
-                self._checkpoint_failed(held, exc)
+            if not self._replaying:
+                try:
+                    self.store.begin(session_id, self.owner, held.create_payload)
+                except CheckpointError as exc:
+                    self._checkpoint_failed(held, exc)
         return response
 
     def _recorder(self, session_id: str, append: bool = False) -> RecordingWriter:
@@ -202,12 +202,8 @@ class SessionTable:
         """Takes one deferred snapshot (the oldest due); answers whether more are waiting. A
         worker calls this between requests when none is waiting: a snapshot (0.5-1 ms) then
         delays no frame's answer."""
-        while self._due:
-            session_id, held = next(iter(self._due.items()))
-            del self._due[session_id]
-            if self.held.get(session_id) is held:  # not closed or taken over meanwhile
-                self._snapshot(held, claim=False)
-                break
+        if self._due:
+            self._snapshot(self._due.pop(next(iter(self._due))), claim=False)
         return bool(self._due)
 
     def _snapshot(self, held: HeldSession, claim: bool) -> None:
@@ -345,6 +341,7 @@ class SessionTable:
         abandoned one, on a failed create. Its checkpoint goes too, unless `keep_checkpoint` (the
         process is stopping, or another one has taken the session over)."""
         held = self.held.pop(session_id, None)
+        self._due.pop(session_id, None)   # a snapshot left for later goes with it
         if self.store is not None:
             try:
                 if keep_checkpoint:

@@ -26,7 +26,7 @@ import camdirector_client as cd
 from camdirector.v1 import director_pb2 as pb
 from camdirector.v1 import director_pb2_grpc as pb_grpc
 from camdirector_client import wire
-from tests.server.test_failover import _undisturbed, _workers
+from tests.server.test_failover import _undisturbed
 from tests.server.wire_client import two_target_request, walk
 
 KEY = re.compile(r"[0-9a-f]{32}")
@@ -230,7 +230,7 @@ def test_async_streams_survive_a_worker_sigkill(server_factory, tmp_path):
 
         async def kill():
             await running.wait()
-            os.kill(_workers(server)[0], signal.SIGKILL)
+            os.kill(server.worker_pids()[0], signal.SIGKILL)
 
         await asyncio.gather(kill(), *(drive(s) for s in sessions))
         closed = [await s.close() for s in sessions]

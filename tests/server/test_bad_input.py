@@ -231,9 +231,8 @@ def test_without_checkpoints_a_dead_worker_is_replaced(server_factory):
     srv = server_factory("--workers", "1", "--checkpoint-store", "off")
     client, zmq_client = GrpcRaw(srv.grpc), ZmqRaw(srv.zmq)
     session_id = client.call("CreateSession", two_target_request()).session_id
-    children = [int(p) for p in open(f"/proc/{srv.proc.pid}/task/{srv.proc.pid}/children").read().split()]
-    workers = [pid for pid in children if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read()]
-    assert workers, children
+    workers = srv.worker_pids()
+    assert workers
     os.kill(workers[0], signal.SIGKILL)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:

@@ -19,11 +19,6 @@ from tests.server.wire_client import two_target_request, walk
 FRAMES = 240  # 4 s at 60 Hz
 
 
-def _workers(server: ServerProcess) -> list[int]:
-    children = [int(p) for p in open(f"/proc/{server.proc.pid}/task/{server.proc.pid}/children").read().split()]
-    return [pid for pid in children if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read()]
-
-
 def _undisturbed(tmp_path, create: pb.CreateSessionRequest, updates: list[pb.FrameUpdate]) -> list[pb.CameraPose]:
     table = SessionTable(ServerSettings(data_dir=str(tmp_path / "ref"), checkpoint_store="off"))
     table.handle_bytes("create", "ref", create.SerializeToString())
@@ -66,7 +61,7 @@ def test_a_killed_worker_loses_none_of_16_streaming_sessions(server_factory, tmp
         thread.start()
     for event in started:
         assert event.wait(30)
-    victim = _workers(server)[0]
+    victim = server.worker_pids()[0]
     os.kill(victim, signal.SIGKILL)
     killed_at = time.monotonic()
     for thread in threads:
@@ -82,7 +77,7 @@ def test_a_killed_worker_loses_none_of_16_streaming_sessions(server_factory, tmp
         before = [t for t in times if t <= killed_at]
         gaps.append(after[0] - before[-1])
     print(f"recovery gaps s: max {max(gaps):.3f}, sessions retried {sum(s.retries for s in sessions)}")  # not asserted
-    assert victim not in _workers(server) and server.alive()
+    assert victim not in server.worker_pids() and server.alive()
     for session in sessions:
         assert session.close() == FRAMES
     client.close()

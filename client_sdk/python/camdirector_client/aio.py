@@ -17,7 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections import deque
-from collections.abc import AsyncIterable, AsyncIterator, Generator, Iterable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterable, AsyncIterator, Generator, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Protocol
 
@@ -297,12 +297,6 @@ class AsyncSession(wire.SessionBase):
     not tried again (a second session could be made), nor is a call of a closed client."""
 
     __slots__ = ()
-
-    def _retry_delay(self, error: DirectorError, delays: Iterator[float]) -> float | None:
-        """The wait before trying again after ``error``; None: give up (raise it)."""
-        if error.code not in wire.RETRYABLE or self._transport.closed:
-            return None
-        return next(delays, None)
 
     async def _retrying(self, call, *args):
         delays = wire.retry_delays_s()

@@ -254,13 +254,6 @@ class Session(wire.SessionBase):
 
     __slots__ = ()
 
-    def _retry_delay(self, error: DirectorError, delays: Iterator[float]) -> float | None:
-        """How long to wait before trying again after `error`; None to raise it (not retryable,
-        tries used up, or the client closed: its CANCELLED is its own)."""
-        if error.code not in wire.RETRYABLE or self._transport.closed:
-            return None
-        return next(delays, None)
-
     def _retrying(self, call, *args):
         delays = wire.retry_delays_s()
         while True:

@@ -125,20 +125,13 @@ def test_a_server_restarted_mid_stream_restores_the_same_session(sdk_bin, server
     assert report["stats"]["frames_lost"] <= 4 and report["stats"]["streams_opened"] == 2, report["stats"]
 
 
-def _worker_pids(srv) -> list[int]:
-    """The server's worker processes (multiprocessing's spawned children)."""
-    pid = srv.proc.pid
-    children = [int(p) for p in open(f"/proc/{pid}/task/{pid}/children").read().split()]
-    return [c for c in children if b"spawn_main" in open(f"/proc/{c}/cmdline", "rb").read()]
-
-
 def test_a_worker_killed_mid_stream_costs_one_disconnect_and_keeps_the_session(sdk_bin, server_factory):
     # One worker: the session is on it, and its successor restores the session (with several, one
     # of the others would; which one holds the session is not told outside the server).
     srv = server_factory("--workers", "1")
     run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "resumed")
     ready = run.wait_ready()
-    os.kill(_worker_pids(srv)[0], signal.SIGKILL)
+    os.kill(srv.worker_pids()[0], signal.SIGKILL)
     report = run.report()
     _assert_same_session(report, ready)
     # One UNAVAILABLE ended the first stream; the second, held while the session was restored, went on.
@@ -150,7 +143,7 @@ def test_a_worker_killed_without_checkpoints_gets_the_session_created_again(sdk_
     srv = server_factory("--workers", "1", "--checkpoint-store", "off")
     run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "recreated")
     ready = run.wait_ready()
-    os.kill(_worker_pids(srv)[0], signal.SIGKILL)
+    os.kill(srv.worker_pids()[0], signal.SIGKILL)
     report = run.report()
     _assert_streamed_on(report)
     assert report["last_session_id"] != ready["session_id"]

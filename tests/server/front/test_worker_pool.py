@@ -6,10 +6,9 @@ from __future__ import annotations
 import asyncio
 
 import grpc
-import numpy as np
 import pytest
 
-from camdirector.demo.client import frame_update, session_request
+from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.server.errors import DirectorError
@@ -22,10 +21,7 @@ SESSION_ID = "0123456789abcdef0123456789abcdef"
 
 
 def _first_frame(scene, session_id: str) -> bytes:
-    ids = [scene.avatar.id, *[o.id for o in scene.dynamic_objects]]
-    transforms = scene.transforms_at(0.0)
-    update = frame_update(1, 0.0, ids, np.stack([transforms[k].position_world for k in ids]),
-                          np.stack([transforms[k].rotation_xyzw for k in ids]))
+    update = next(frame_updates(scene, 1))
     update.session_id = session_id
     return update.SerializeToString()
 

@@ -12,11 +12,11 @@ from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.toric_maps import embree, gl
 from camdirector.server.errors import DirectorError
-from camdirector.server.process import ServerProcess
+from camdirector.server.process import ServerProcess, worker_pids
 from camdirector.server.sessions.table import SessionTable
 from camdirector.server.settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-from load_tests.soak import sample_process, worker_pids
+from load_tests.soak import sample_process
 
 SESSIONS = 200
 FRAMES = 5
