@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 
@@ -69,6 +71,16 @@ class ServerProcess:
     def worker_pids(self) -> list[int]:
         """Its worker processes' pids (worker_pids), sorted."""
         return worker_pids(self.proc.pid)
+
+    def kill_worker_mid_request(self, stopped_s: float = 0.1) -> int:
+        """SIGKILLs its first worker with requests in flight to it (stopped for `stopped_s` first,
+        so a streaming client's frames wait on it); returns the pid. A worker killed between two
+        frames costs its sessions no UNAVAILABLE at all: the next frame waits for its successor."""
+        pid = self.worker_pids()[0]
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(stopped_s)
+        os.kill(pid, signal.SIGKILL)
+        return pid
 
     def stop(self) -> int:
         """Stops the server (SIGTERM, then SIGKILL after 15 s); returns its exit code."""

@@ -13,9 +13,7 @@ server's worker under live streams over both transports.
 from __future__ import annotations
 
 import asyncio
-import os
 import re
-import signal
 import time
 
 import grpc
@@ -230,7 +228,7 @@ def test_async_streams_survive_a_worker_sigkill(server_factory, tmp_path):
 
         async def kill():
             await running.wait()
-            os.kill(server.worker_pids()[0], signal.SIGKILL)
+            server.kill_worker_mid_request()
 
         await asyncio.gather(kill(), *(drive(s) for s in sessions))
         closed = [await s.close() for s in sessions]

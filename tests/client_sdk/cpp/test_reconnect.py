@@ -7,8 +7,6 @@ created again (new id, reported as an event)."""
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import threading
 import time
@@ -131,7 +129,7 @@ def test_a_worker_killed_mid_stream_costs_one_disconnect_and_keeps_the_session(s
     srv = server_factory("--workers", "1")
     run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "resumed")
     ready = run.wait_ready()
-    os.kill(srv.worker_pids()[0], signal.SIGKILL)
+    srv.kill_worker_mid_request()
     report = run.report()
     _assert_same_session(report, ready)
     # One UNAVAILABLE ended the first stream; the second, held while the session was restored, went on.
@@ -143,7 +141,7 @@ def test_a_worker_killed_without_checkpoints_gets_the_session_created_again(sdk_
     srv = server_factory("--workers", "1", "--checkpoint-store", "off")
     run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "recreated")
     ready = run.wait_ready()
-    os.kill(srv.worker_pids()[0], signal.SIGKILL)
+    srv.kill_worker_mid_request()
     report = run.report()
     _assert_streamed_on(report)
     assert report["last_session_id"] != ready["session_id"]
