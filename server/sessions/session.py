@@ -95,6 +95,17 @@ class Session:
         self.style = style
         self.rig.set_style(style)
 
+    @property
+    def has_deferred_work(self) -> bool:
+        """Whether the rig left work for later (a TORIC rig's amortized map update,
+        pipeline/toric/occlusion_maps.py), which a later frame does when nobody did it before."""
+        return isinstance(self.rig, ToricRig) and self.rig.has_deferred_work
+
+    def do_deferred_work(self, whole: bool = True) -> bool:
+        """Does the rig's deferred work now, or without `whole` a part of it (a worker's idle
+        moment, or before a snapshot); what the session answers is the same either way."""
+        return isinstance(self.rig, ToricRig) and self.rig.do_deferred_work(whole)
+
     def close(self) -> None:
         """Releases the rig's resources (GL objects, Embree scenes); idempotent. The session
         answers no frame afterwards."""

@@ -81,10 +81,12 @@ class SessionTable:
             settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s)
         self.owner = f"{settings.node_name}/{os.getpid()}"  # this process, in checkpoints' ownership
         self._replaying = False   # restoring: the inputs since the snapshot are not written, sent or recorded again
-        # Snapshots due are left for snapshot_due (a worker's idle moments) rather than taken
+        # Snapshots due are left for idle_work (a worker's idle moments) rather than taken
         # before the frame's answer leaves; the worker loop sets this (inline tables snapshot at once).
         self.defer_snapshots = False
         self._due: dict[str, HeldSession] = {}
+        # Sessions whose rig left work for later (Session.has_deferred_work), for idle_work.
+        self._deferred: dict[str, HeldSession] = {}
 
     def _get(self, session_id: str) -> HeldSession:
         held = self.held.get(session_id)
@@ -182,7 +184,7 @@ class SessionTable:
 
     def _after_input(self, held: HeldSession) -> None:
         """A snapshot when one is due, or when a failed write is to be repaired: taken at once,
-        or with `defer_snapshots` left for snapshot_due (the worker's idle moments) unless the
+        or with `defer_snapshots` left for idle_work (the worker's idle moments) unless the
         log has grown to twice its period (a worker never idle still cuts it)."""
         if self._replaying or self.store is None:
             return
@@ -198,18 +200,27 @@ class SessionTable:
             self._due.pop(held.session.id, None)
             self._snapshot(held, claim=False)
 
-    def snapshot_due(self) -> bool:
-        """Takes one deferred snapshot (the oldest due); answers whether more are waiting. A
-        worker calls this between requests when none is waiting: a snapshot (0.5-1 ms) then
-        delays no frame's answer."""
-        if self._due:
+    def idle_work(self) -> bool:
+        """Does one piece of deferred work: a part of a session's deferred map update (its maps or
+        their A_s, about 1 ms each; Session.has_deferred_work), else the oldest snapshot due
+        (0.5-1 ms); answers whether more is waiting.
+        A worker calls this between requests when none is waiting, so that neither delays a
+        frame's answer. What a session answers does not depend on whether this ran."""
+        if self._deferred:
+            held = self._deferred.pop(next(iter(self._deferred)))
+            held.session.do_deferred_work(whole=False)
+            if held.session.has_deferred_work:   # its other part, after the others' waiting parts
+                self._deferred[held.session.id] = held
+        elif self._due:
             self._snapshot(self._due.pop(next(iter(self._due))), claim=False)
-        return bool(self._due)
+        return bool(self._deferred or self._due)
 
     def _snapshot(self, held: HeldSession, claim: bool) -> None:
         """A snapshot; with `claim` (a restore) this process takes the session over; after a failed
         write the checkpoint is begun again first (the store may have lost it: Redis restarted)."""
         session = held.session
+        session.do_deferred_work()   # a snapshot holds computed maps, not the means to compute them
+        self._deferred.pop(session.id, None)
         try:
             # Not the dashboard's timeline: diagnostics, not state, up to 1 MB; a restored session's starts anew.
             state = dumps_state((session, held.style_msg), session.creation_objects())
@@ -253,6 +264,8 @@ class SessionTable:
         else:
             update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids, session.players, session.delay_s)
             state = session.frame(update)
+            if session.has_deferred_work:
+                self._deferred[session.id] = held
             reply = codec.camera_update_msg(state, compute_ms=0.0)
             reply.compute_ms = (self.clock() - t0) * 1e3
             held.timeline.add(state, reply.compute_ms)
@@ -341,7 +354,8 @@ class SessionTable:
         abandoned one, on a failed create. Its checkpoint goes too, unless `keep_checkpoint` (the
         process is stopping, or another one has taken the session over)."""
         held = self.held.pop(session_id, None)
-        self._due.pop(session_id, None)   # a snapshot left for later goes with it
+        self._due.pop(session_id, None)   # a snapshot or deferred work left for later goes with it
+        self._deferred.pop(session_id, None)
         if self.store is not None:
             try:
                 if keep_checkpoint:

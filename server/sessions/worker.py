@@ -113,7 +113,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
     conn.close()
     reader = sock.makefile("rb", buffering=READ_BUFFER_BYTES)
     table = SessionTable(settings)
-    table.defer_snapshots = True  # taken below, when no request waits (SessionTable.snapshot_due)
+    table.defer_snapshots = True  # taken below, when no request waits (SessionTable.idle_work)
     sending = threading.Lock()   # views are answered from the render process's reader thread
 
     def send(data: bytes) -> None:
@@ -146,5 +146,5 @@ def worker_main(conn, settings: ServerSettings) -> None:
         except DirectorError as exc:
             reply = encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
         send(reply)
-        while _idle(sock) and table.snapshot_due():
+        while _idle(sock) and table.idle_work():
             pass

@@ -9,8 +9,25 @@ build maps (the amortized schedule, one in several) move the scene's objects, al
 give them velocities by finite differences between the latest frame and the one before it (an
 object the latest frame does not mention has not moved: velocity zero). So many moving objects
 cost the frames between map builds nearly nothing.
+
+An amortized update (2 of the 2r maps, every slot already holding one) is computed apart from
+the frame it is due on: that frame draws its sample points, moves the scene and schedules the next
+update; its maps and A_s are computed when the session's worker is idle (`do_deferred_work`,
+called by server/sessions/table.py's `idle_work`) or, at the latest, by the update that applies
+them, `AnticipationSettings.apply_after_frames` (1) frames later. Why: an update costs 2-4 ms, the
+frames between updates about 1 ms, and a worker's sessions created together update in the same
+period; computed inline, their updates queued the frames behind them (compute p99 6-7 ms, round
+trip p99 13 ms at 8 sessions on 2 cores, `load_tests.capacity`). Apart, the frame that draws an
+update answers as fast as the others, and the maps are computed while its worker waits for
+requests. The search reads each amortized update one frame (17 ms at 60 Hz) after it is due,
+inside the paper's 0.1 s update period and 0.5 s horizon (section 6), and always on that frame:
+what a session answers does not depend on when its worker was idle. (Later than one frame cost
+the demo scene's visibility: see the setting.) A refill (the first update, and the first after a
+cut) is computed and applied at once: the search has no A-map without it.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -18,13 +35,30 @@ from scipy.spatial.transform import Rotation
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.toric import Torus
 from camdirector.geometry.toric_maps import OccluderScene, choose_backend, make_backend, probe_gl_renderer
-from camdirector.geometry.toric_maps.base import MapWindow, WindowSettings
+from camdirector.geometry.toric_maps.base import MapWindow, ShadowVelocityMaps, WindowSettings
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.precompute.stage_clock import StageClock
 from camdirector.server.pipeline.stages import Stage
 from camdirector.server.pipeline.style import MapBackendChoice, Style, VisibilityMode
 from camdirector.server.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, StyleMaskSettings, shared_bank
 from camdirector.server.pipeline.toric.target_sampling import TargetSampler
+
+
+@dataclass
+class _DeferredUpdate:
+    """An amortized update drawn on the frame it was due on, not yet applied (module docstring)."""
+
+    time_s: float
+    slots: list[int]
+    torus: Torus
+    window: MapWindow
+    points_world: np.ndarray                 # (k, 3) float64: the slots' sample points, world metres
+    exclude_ids: list[str]                   # k: the target each point lies on
+    previous_torus: Torus | None
+    dt_s: float
+    frames_left: int                         # updates (one a frame) until it is applied
+    maps: ShadowVelocityMaps | None = None   # once computed, until A_s is
+    predicted: np.ndarray | None = None      # (k, res, res) float32 A_s, once computed
 
 
 class OcclusionMaps:
@@ -47,17 +81,21 @@ class OcclusionMaps:
         self.backend = None
         self.amap: AnticipationMap | None = None
         self._previous: tuple[Torus, float] | None = None
+        self._deferred: _DeferredUpdate | None = None
         self.set_style(style)
 
     def set_style(self, style: Style) -> None:
         """A new map resolution, anticipation switch or backend starts the maps afresh; a new mask
-        applies at once."""
+        applies at once. A deferred update is computed with the backend it was drawn for, and
+        dropped with the A-map when that starts afresh."""
+        self.do_deferred_work()
         settings = AnticipationSettings(
             samples_per_target=self.sampler.settings.samples_per_target,
             anticipate=style.visibility != VisibilityMode.NO_ANTICIPATION,
             window=WindowSettings(resolution=style.map_resolution))
         mask = StyleMaskSettings(kind=style.mask)
         if self.amap is None or self.amap.settings != settings:
+            self._deferred = None
             self.amap = AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
         else:
             self.amap.set_mask(mask)
@@ -101,26 +139,73 @@ class OcclusionMaps:
 
     def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms,
                target_ids: list[str], stages: StageClock) -> None:
-        """Refreshes the maps due at time_s (2 of the 2r per update, one update every W / r s),
-        lapping PROJECTION and AMAP on `stages` (neither when nothing was due)."""
+        """Applies a deferred update whose frame has come, then draws the update due at time_s
+        (2 of the 2r maps, one update every W / r s), computed and applied at once when it is a
+        refill, deferred otherwise (module docstring); laps PROJECTION and AMAP on `stages` for
+        the maps computed and applied in this call (neither when none were)."""
+        self._apply_deferred(stages)
         amap = self.amap
         if amap.due(time_s):
+            refill = not amap.filled
             self._move_scene()
             slots = amap.next_slots()
             self.sampler.redraw(slots, self.rng)
-            window = MapWindow.around(torus, theta, phi, amap.settings.window, lattice=amap.window)
+            amap.schedule(time_s, slots)
             previous_torus, dt_s = (self._previous[0], time_s - self._previous[1]) if self._previous else (None, 0.0)
-            maps = self.backend.compute(torus, window, self.sampler.points_world(target_transforms, slots),
-                                        exclude_ids=[target_ids[self.sampler.target_of(s)] for s in slots],
-                                        previous_torus=previous_torus if dt_s > 0 else None,
-                                        dt_s=max(dt_s, 0.0))
-            stages.done(Stage.PROJECTION)
-            amap.refresh(time_s, slots, maps, torus)
-            stages.done(Stage.AMAP)
+            self._deferred = _DeferredUpdate(
+                time_s, slots, torus, MapWindow.around(torus, theta, phi, amap.settings.window, lattice=amap.window),
+                self.sampler.points_world(target_transforms, slots),
+                [target_ids[self.sampler.target_of(s)] for s in slots],
+                previous_torus if dt_s > 0 else None, max(dt_s, 0.0),
+                frames_left=0 if refill else amap.settings.apply_after_frames)
+            self._apply_deferred(stages, count=False)
         self._previous = (torus, time_s)
 
+    @property
+    def has_deferred_work(self) -> bool:
+        """Whether a deferred update waits to be computed (or to be predicted from its maps)."""
+        return self._deferred is not None and self._deferred.predicted is None
+
+    def do_deferred_work(self, stages: StageClock | None = None, whole: bool = True) -> bool:
+        """Computes the deferred update's maps and A_s, without applying them (they reach the
+        search on their frame); laps PROJECTION and AMAP on `stages` when given. Without `whole`
+        only one of the two (the maps, else A_s: about 1 ms each), so that a worker's idle moment
+        delays a request that arrives meanwhile by less. Answers whether there was work to do."""
+        update = self._deferred
+        if update is None or update.predicted is not None:
+            return False
+        if update.maps is None:
+            update.maps = self.backend.compute(update.torus, update.window, update.points_world,
+                                               exclude_ids=update.exclude_ids, previous_torus=update.previous_torus,
+                                               dt_s=update.dt_s)
+            if stages is not None:
+                stages.done(Stage.PROJECTION)
+            if not whole:
+                return True
+        update.predicted = self.amap.predict(update.maps)
+        update.maps = None
+        if stages is not None:
+            stages.done(Stage.AMAP)
+        return True
+
+    def _apply_deferred(self, stages: StageClock, count: bool = True) -> None:
+        """One frame nearer for the deferred update (with `count`); on its frame, it is computed
+        if no idle moment did, and stored in the A-map."""
+        update = self._deferred
+        if update is None:
+            return
+        if count:
+            update.frames_left -= 1
+        if update.frames_left > 0:
+            return
+        self.do_deferred_work(stages)
+        self._deferred = None
+        self.amap.store(update.time_s, update.slots, update.predicted, update.window, update.torus)
+        stages.done(Stage.AMAP)
+
     def invalidate(self) -> None:
-        """After a cut: the old window is elsewhere."""
+        """After a cut: the old window is elsewhere (a deferred update of it is dropped)."""
+        self._deferred = None
         self.amap.invalidate()
 
     def risk(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
@@ -129,6 +214,7 @@ class OcclusionMaps:
 
     def close(self) -> None:
         """Releases the backend (its GL objects, or its Embree scenes); idempotent."""
+        self._deferred = None
         if self.backend is not None:
             self.backend.close()
             self.backend = None

@@ -87,6 +87,15 @@ class ToricRig:
     def _build_maps(self) -> None:
         self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 
+    def do_deferred_work(self, whole: bool = True) -> bool:
+        """Computes a deferred map update now, or without `whole` a part of it (occlusion_maps.py);
+        answers whether there was work to do."""
+        return self.maps is not None and self.maps.do_deferred_work(whole=whole)
+
+    @property
+    def has_deferred_work(self) -> bool:
+        return self.maps is not None and self.maps.has_deferred_work
+
     def close(self) -> None:
         """Releases the occlusion maps' backend; idempotent."""
         if self.maps is not None:

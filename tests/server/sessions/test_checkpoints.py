@@ -203,7 +203,7 @@ def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoi
         restarted.stop()
 
 
-def test_deferred_snapshots_wait_for_snapshot_due_but_never_past_twice_their_period(tmp_path):
+def test_deferred_snapshots_wait_for_idle_work_but_never_past_twice_their_period(tmp_path):
     table = _table(tmp_path, "", "n/1", every=10)
     table.defer_snapshots = True  # as a worker's table: snapshots in its idle moments
     table.handle_bytes("create", "s", two_target_request().SerializeToString())
@@ -212,7 +212,7 @@ def test_deferred_snapshots_wait_for_snapshot_due_but_never_past_twice_their_per
         table.handle_bytes("frame", "s", payload)
     store = DirectoryStore(tmp_path / "checkpoints", keep_s=60.0)
     assert store.load("s").snapshot is None and len(store.load("s").entries) == 12  # due, not yet taken
-    assert table.snapshot_due() is False                                           # taken now, none left
+    assert table.idle_work() is False                                           # taken now, none left
     assert (store.load("s").seq, len(store.load("s").entries)) == (12, 0)
     for payload in updates[12:]:  # never idle: at twice the period the snapshot is taken inline
         table.handle_bytes("frame", "s", payload)
