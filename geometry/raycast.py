@@ -63,8 +63,9 @@ class RayScene:
     change of pose, on the first query after it; the shared local scene once per object added.
 
     With at most `solo_max_objects` moving objects, each is cast alone instead: every ray moved
-    into its frame, against a scene of its mesh alone (no sphere, no offset), as many calls as
-    objects. Both ways give the same answers (tests/geometry/test_raycast.py).
+    into its frame, against a scene of its mesh alone (no offset), as many calls as objects whose
+    sphere meets the box around the segments (`occluded`; `first_hit`'s rays are unbounded). Both
+    ways give the same answers (tests/geometry/test_raycast.py).
 
     Pickles as its meshes and objects' transforms; unpickling builds its Embree scenes again (a
     session's checkpoint, server/sessions/checkpoints.py): the same triangles answer the same.
@@ -105,15 +106,29 @@ class RayScene:
         if self._solo:
             self._solo[row] = (self._solo[row][0], None)
 
-    def _each(self) -> list[tuple[rtcore_scene.EmbreeScene, np.ndarray]]:
+    def _each(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> list[tuple[rtcore_scene.EmbreeScene, np.ndarray]]:
         """Per object, for casting a few one by one (class docstring): its own scene and its
-        world-to-local matrix (4, 4), made on first use after a move."""
+        world-to-local matrix (4, 4), made on first use after a move. With `box`, (lo, hi) (3,)
+        world metres around every segment of a query, only the objects whose bounding sphere
+        meets it (in scalars: a few objects' numpy calls would cost more than they save)."""
         if not self._solo:
             self._solo = [(_embree_scene([mesh]), None) for mesh in self._meshes_local]
+        if box is not None:
+            (lo_x, lo_y, lo_z), (hi_x, hi_y, hi_z) = box[0].tolist(), box[1].tolist()
+        out = []
         for k, (scene, world_to_local) in enumerate(self._solo):
+            if box is not None:
+                transform = self._transforms[k]
+                x, y, z = transform.position_world.tolist()
+                gap_x, gap_y, gap_z = max(lo_x - x, x - hi_x, 0.0), max(lo_y - y, y - hi_y, 0.0), max(lo_z - z, z - hi_z, 0.0)
+                radius = self._reach_local[k] * max(abs(c) for c in transform.scale.tolist())
+                if gap_x * gap_x + gap_y * gap_y + gap_z * gap_z > radius * radius:
+                    continue
             if world_to_local is None:
-                self._solo[k] = (scene, self._transforms[k].inverse_matrix())
-        return self._solo
+                world_to_local = self._transforms[k].inverse_matrix()
+                self._solo[k] = (scene, world_to_local)
+            out.append((scene, world_to_local))
+        return out
 
     def _local_scene(self) -> tuple[rtcore_scene.EmbreeScene, np.ndarray, np.ndarray]:
         """The shared scene of local meshes, their offsets (m, 3) on a cubic grid and reaches (m,)."""
@@ -199,7 +214,8 @@ class RayScene:
             hit |= self._static.run(origins.astype(np.float32), directions.astype(np.float32),
                                     dists=tmax.copy(), query="OCCLUDED") != _NO_HIT
         if 0 < len(self._transforms) <= self._solo_max:
-            for scene, world_to_local in self._each():
+            box = np.minimum(origins, targets).min(axis=0), np.maximum(origins, targets).max(axis=0)
+            for scene, world_to_local in self._each(box):
                 rest = ~hit
                 if not rest.any():
                     break
