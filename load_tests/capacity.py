@@ -7,15 +7,17 @@ and ZeroMQ.
 
 For each mode and transport a fresh server is started (an idle session is reclaimed one second
 after its stream ends, so one step's sessions do not weigh on the next), and session counts are
-tried upward (1, 2, 4, 8, 16, then every 8 up to --max-sessions), each a short paced run of
+tried upward (1, 2, 4, 8, 16, then every 8 up to --max-sessions), then the gap between the
+last count that passed and the first that failed is halved until they are neighbours (16 passed
+and 24 failed: 20, then 18 or 22, ...), each count a short paced run of
 load_tests.stream: one frame in flight per session at --rate Hz of wall-clock time, the sessions
 staggered over one period as independent game clients would be. A step passes when its round
 trip p99 is at most --p99-ms, no frame is late (answered after the next was due), none is dropped
 and no stream failed; each session's first --warmup-frames frames are answered but not judged
 (its first frame sets up what the session keeps: about 30 ms in ANTICIPATION, late by itself).
-A step that fails is run once more (a few seconds on a shared machine can hit one stall); the
-search stops at a step that fails twice, and the capacity is the last count that passed (0 when
-even one session did not).
+A step that fails is run once more (a few seconds on a shared machine can hit one stall); a count
+fails when it fails twice, and the capacity is the largest count that passed (0 when even one
+session did not).
 Reported per case and step: round trip p50/p99 at the client, late and dropped frames, the
 server's compute_ms, the health-check floor measured in the same step against the same server
 (a gRPC health check, or a ZeroMQ request the front refuses at once), this load generator's
@@ -56,6 +58,24 @@ def session_counts(max_sessions: int) -> list[int]:
     if counts and counts[-1] != max_sessions:
         counts.append(max_sessions)
     return counts
+
+
+def largest_passing(counts: list[int], passes) -> int:
+    """The capacity search (module docstring): `counts` upward until `passes(n)` is False, then
+    bisection between the last count that passed and that one. 0 when the first fails."""
+    passed, failed = 0, None
+    for n in counts:
+        if not passes(n):
+            failed = n
+            break
+        passed = n
+    while failed is not None and failed - passed > 1:
+        middle = (passed + failed) // 2
+        if passes(middle):
+            passed = middle
+        else:
+            failed = middle
+    return passed
 
 
 def step_passes(result: dict, p99_limit_ms: float) -> bool:
@@ -114,13 +134,14 @@ def _cpu_us_per_frame(before: dict | None, after: dict | None, frames: int) -> d
 
 def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
     """One mode over one transport: a fresh server, counts tried upward until one fails twice."""
-    steps, capacity, workers = [], 0, None
+    steps, workers = [], None
     with ServerProcess("--workers", str(args.workers), "--max-sessions", str(max(counts) * 2),
                        "--session-resume-s", "1", *args.server_arg, python=args.server_python) as server:
         workers = server.ready.get("workers")
         address = server.grpc if transport == "grpc" else server.zmq
-        for n in counts:
-            passed = False
+
+        def step(n: int) -> bool:
+            """n sessions, run once more when they fail; whether they passed."""
             for _ in range(2):
                 cpu_before = server_cpu_s(server.proc.pid)
                 result = asyncio.run(stream.run(transport, address, n, args.rate, args.seconds,
@@ -132,10 +153,10 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
                     "load_generator": round(result["client_cpu_s"] / max(result["frames_received"], 1) * 1e6, 1)}})
                 time.sleep(args.settle_s)  # the step's sessions are reclaimed before the next starts
                 if passed:
-                    break
-            if not passed:
-                break
-            capacity = n
+                    return True
+            return False
+
+        capacity = largest_passing(counts, step)
         if not server.alive():
             raise RuntimeError(f"the server died during {mode} over {transport}: {server.log_tail()}")
     at_capacity = [s for s in steps if s["sessions"] == capacity and s["passed"]]

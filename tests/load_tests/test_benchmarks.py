@@ -74,6 +74,23 @@ def test_capacity_tries_counts_doubling_then_by_eight(max_sessions, counts):
     assert capacity.session_counts(max_sessions) == counts
 
 
+@pytest.mark.parametrize("holds, counts, tried, found", [
+    (0, [1, 2], [1], 0),
+    (2, [1, 2], [1, 2], 2),
+    (19, [1, 2, 4, 8, 16, 24], [1, 2, 4, 8, 16, 24, 20, 18, 19], 19),
+    (21, [1, 2, 4, 8, 16, 24], [1, 2, 4, 8, 16, 24, 20, 22, 21], 21),
+    (40, [1, 2, 4, 8, 16, 24, 32, 40], [1, 2, 4, 8, 16, 24, 32, 40], 40),
+])
+def test_capacity_halves_the_gap_after_the_first_count_that_fails(holds, counts, tried, found):
+    asked = []
+
+    def passes(n: int) -> bool:
+        asked.append(n)
+        return n <= holds
+
+    assert capacity.largest_passing(counts, passes) == found and asked == tried
+
+
 def test_dashboard_bench_reports_watched_against_alone(tmp_path):
     result = _run(dashboard_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1")
     assert result["alone"]["dropped_frames"] == result["watched"]["dropped_frames"] == 0
