@@ -87,6 +87,13 @@ def postgres_server(tmp_path_factory):
     server.stop()
 
 
+@pytest.fixture(params=["sqlite", "postgres"])
+def records_url(request) -> str:
+    """Where records go, each test run on both: "" (the embedded SQLite default) or a fresh
+    PostgreSQL database's URL (postgres_url)."""
+    return "" if request.param == "sqlite" else request.getfixturevalue("postgres_url")
+
+
 @pytest.fixture
 def postgres_url(postgres_server) -> str:
     """A new empty database on the shared PostgreSQL cluster, dropped after the test."""

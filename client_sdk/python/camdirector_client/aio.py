@@ -304,10 +304,7 @@ class AsyncSession(wire.SessionBase):
             try:
                 return await call(*args, self.route)
             except DirectorError as error:
-                delay = self._retry_delay(error, delays)
-                if delay is None:
-                    raise
-            self.retries += 1
+                delay = self._retry_after(error, delays)  # raises it when not to be tried again
             await asyncio.sleep(delay)
 
     async def frame(
@@ -349,10 +346,7 @@ class AsyncSession(wire.SessionBase):
                             yield reply
                     return
                 except DirectorError as error:
-                    delay = self._retry_delay(error, delays)
-                    if delay is None:
-                        raise
-                self.retries += 1
+                    delay = self._retry_after(error, delays)  # raises it when not to be tried again
                 await asyncio.sleep(delay)
         finally:
             feed.close()

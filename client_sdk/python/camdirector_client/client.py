@@ -260,10 +260,7 @@ class Session(wire.SessionBase):
             try:
                 return call(*args, self.route)
             except DirectorError as error:
-                delay = self._retry_delay(error, delays)
-                if delay is None:
-                    raise
-            self.retries += 1
+                delay = self._retry_after(error, delays)  # raises it when not to be tried again
             time.sleep(delay)
 
     def frame(
@@ -313,10 +310,7 @@ class Session(wire.SessionBase):
                     yield reply
                 return
             except DirectorError as error:
-                delay = self._retry_delay(error, delays)
-                if delay is None:
-                    raise
-            self.retries += 1
+                delay = self._retry_after(error, delays)  # raises it when not to be tried again
             time.sleep(delay)
 
     def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:

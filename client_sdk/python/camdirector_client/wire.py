@@ -309,12 +309,15 @@ class SessionBase:
     def __repr__(self) -> str:
         return f"{type(self).__name__}(id={self.id!r}, closed={self._closed_frames is not None})"
 
-    def _retry_delay(self, error: DirectorError, delays: Iterator[float]) -> float | None:
-        """How long to wait before trying again after `error` (from retry_delays_s); None to raise
-        it: not RETRYABLE, tries used up, or the client closed (its CANCELLED is its own)."""
-        if error.code not in RETRYABLE or self._transport.closed:
-            return None
-        return next(delays, None)
+    def _retry_after(self, error: DirectorError, delays: Iterator[float]) -> float:
+        """How long to wait before trying again after `error` (from retry_delays_s), the retry
+        counted; raises `error` instead when it is not RETRYABLE, the tries are used up, or the
+        client is closed (its CANCELLED is its own)."""
+        delay = None if error.code not in RETRYABLE or self._transport.closed else next(delays, None)
+        if delay is None:
+            raise error
+        self.retries += 1
+        return delay
 
     def frame_update(
         self,

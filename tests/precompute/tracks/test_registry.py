@@ -20,12 +20,6 @@ def obj_file(path, mesh):
     return path
 
 
-@pytest.fixture(params=["sqlite", "postgres"])
-def records_url(request) -> str:
-    """The index's backend: "" (SQLite) or a fresh PostgreSQL database's URL."""
-    return "" if request.param == "sqlite" else request.getfixturevalue("postgres_url")
-
-
 @pytest.fixture
 def open_registry(tmp_path, records_url):
     """Opens registries over one data folder and one index (as a cluster's nodes do), closed after."""

@@ -1,5 +1,5 @@
 """Fixtures of the job tests: the record store on both backends (SQLite and PostgreSQL, a fresh
-database per test: tests/conftest.py's postgres_url; every store test runs on each)."""
+database per test: tests/conftest.py's records_url; every store test runs on each)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,19 +9,13 @@ import pytest
 from camdirector.server.jobs import PostgresJobStore, SqliteJobStore
 
 
-@pytest.fixture(params=["sqlite", "postgres"])
-def backend(request) -> str:
-    """The record store's backend: "" (SQLite) or a fresh PostgreSQL database's URL."""
-    return "" if request.param == "sqlite" else request.getfixturevalue("postgres_url")
-
-
 @pytest.fixture
-def make_store(tmp_path, backend):
-    """Opens stores on `backend` over one folder (as nodes do), closed after the test."""
+def make_store(tmp_path, records_url):
+    """Opens stores on `records_url` (tests/conftest.py) over one folder (as nodes do), closed after the test."""
     opened = []
 
     def make(root: Path = tmp_path / "jobs"):
-        store = PostgresJobStore(backend, root) if backend else SqliteJobStore(root)
+        store = PostgresJobStore(records_url, root) if records_url else SqliteJobStore(root)
         opened.append(store)
         return store
 

@@ -161,7 +161,7 @@ def test_two_stores_on_one_folder_see_the_same_records(make_store):
     assert one.get(job.id).state is JobState.RUNNING
 
 
-def test_records_survive_a_restart(make_store, backend):
+def test_records_survive_a_restart(make_store, records_url):
     first = make_store()
     job = first.submit("echo", {"k": [1, 2]}, {"in.txt": b"x"})
     first.close()

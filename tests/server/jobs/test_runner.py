@@ -154,17 +154,17 @@ _CRASHING_FRONT = textwrap.dedent("""
 """)
 
 
-def test_restart_survival_with_a_job_running_and_a_job_queued(tmp_path, backend):
+def test_restart_survival_with_a_job_running_and_a_job_queued(tmp_path, records_url):
     """A front process with a runner is killed (SIGKILL) while job A runs and job B waits; its
     job process dies with it. A new runner on the same folder and records reruns A and runs B."""
     data_dir = tmp_path / "data"
-    store = open_store(backend, data_dir / "jobs")
+    store = open_store(records_url, data_dir / "jobs")
     a_params, b_params = wait_params(tmp_path, "a"), wait_params(tmp_path, "b")
     a = store.submit("wait", a_params, {})
     b = store.submit("wait", b_params, {})
     script = tmp_path / "front.py"
     script.write_text(_CRASHING_FRONT)
-    front = subprocess.Popen([sys.executable, str(script), str(data_dir), backend], cwd=ROOT,
+    front = subprocess.Popen([sys.executable, str(script), str(data_dir), records_url], cwd=ROOT,
                              stdout=subprocess.PIPE, text=True,
                              env={**os.environ, "PYTHONPATH": str(ROOT.parent) + os.pathsep + str(ROOT)})
     try:
@@ -178,7 +178,7 @@ def test_restart_survival_with_a_job_running_and_a_job_queued(tmp_path, backend)
     assert store.get(a.id).state is JobState.RUNNING               # as the crash left it
     Path(a_params["release"]).touch()
     Path(b_params["release"]).touch()
-    with JobRunner(data_dir, KINDS, JobSettings(job_store=backend)) as runner:
+    with JobRunner(data_dir, KINDS, JobSettings(job_store=records_url)) as runner:
         done_a, done_b = runner.wait(a.id, 30.0), runner.wait(b.id, 30.0)
     assert done_a.state is JobState.SUCCEEDED and done_a.attempts == 2     # rerun
     assert done_b.state is JobState.SUCCEEDED and done_b.attempts == 1
