@@ -39,7 +39,7 @@ import sys
 import time
 from pathlib import Path
 
-from camdirector.server.process import ServerProcess
+from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
 from load_tests import stream
 from load_tests.report import emit
@@ -98,8 +98,12 @@ def _step_summary(result: dict, passed: bool) -> dict:
 
 def _server_checkout(python: str) -> dict:
     """Where the server's code comes from: the checkout `python` imports camdirector from, and its commit."""
-    code = "import os, camdirector.server as s; print(os.path.dirname(os.path.dirname(s.__file__)))"
-    found = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    # camdirector.server: a checkout from before the src layout (measured against in the same run)
+    code = ("import os\ntry:\n    import camdirector.pipeline as s\nexcept ImportError:\n    import camdirector.server as s\n"
+            "print(os.path.dirname(s.__file__))")
+    package = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    found = subprocess.run(["git", "-C", package, "rev-parse", "--show-toplevel"], capture_output=True,
+                           text=True).stdout.strip() or package
     commit = subprocess.run(["git", "-C", found, "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     return {"python": python, "checkout": found, "commit": commit or None}
 

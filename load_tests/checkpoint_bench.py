@@ -1,4 +1,4 @@
-"""What checkpoints cost a frame, and what a restore costs (server/sessions/checkpoints.py).
+"""What checkpoints cost a frame, and what a restore costs (worker/checkpoints.py).
 
     python -m load_tests.checkpoint_bench [--frames 600] [--json F]
 
@@ -21,11 +21,11 @@ import numpy as np
 import camdirector_client as cd
 from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
+from camdirector.deploy.services import RedisServer
 from camdirector.geometry.camera import Lens
-from camdirector.server.deploy.services import RedisServer
-from camdirector.server.sessions.checkpoints import dumps_state
-from camdirector.server.sessions.table import SessionTable
-from camdirector.server.settings import ServerSettings
+from camdirector.server_settings import ServerSettings
+from camdirector.worker.checkpoints import dumps_state
+from camdirector.worker.table import SessionTable
 from load_tests.report import emit
 
 

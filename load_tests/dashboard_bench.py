@@ -22,7 +22,7 @@ from pathlib import Path
 
 import httpx
 
-from camdirector.server.process import ServerProcess
+from camdirector.deploy.server_process import ServerProcess
 from load_tests import stream
 from load_tests.report import emit, percentiles
 

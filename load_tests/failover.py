@@ -3,7 +3,7 @@
     python -m load_tests.failover --nodes 3 --sessions 24 --rate 60 --seconds 40 --kill-after 15 --json F
     python -m load_tests.failover --kill worker --sessions 16 --seconds 20 --kill-after 8
 
-`--kill node` (with --nodes N >= 2): a cluster (server/deploy/cluster.py: HAProxy, Redis, N nodes)
+`--kill node` (with --nodes N >= 2): a cluster (deploy/cluster.py: HAProxy, Redis, N nodes)
 on this machine; sessions are created and streamed through the balancer with the Python SDK
 (x-camdirector-route on every call), and the node holding the most sessions is SIGKILLed.
 `--kill worker`: one node with two workers; the worker holding the most sessions is SIGKILLed.
@@ -34,9 +34,9 @@ import camdirector_client as cd
 from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
-from camdirector.server.sessions.table import SessionTable
-from camdirector.server.settings import ServerSettings
+from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.table import SessionTable
 from load_tests.report import emit
 
 
@@ -96,11 +96,11 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
     cluster = server = None
     try:
         if kill == "node":
-            from camdirector.server.deploy.cluster import Cluster
+            from camdirector.deploy.cluster import Cluster
             cluster = Cluster.up(nodes=nodes, folder=folder)
             address = cluster.grpc
         else:
-            from camdirector.server.process import ServerProcess
+            from camdirector.deploy.server_process import ServerProcess
             server = ServerProcess("--workers", "2", "--data-dir", str(folder), transports=("grpc", "http"))
             address = server.grpc
         floor_ms = _health_floor_ms(address)

@@ -35,8 +35,8 @@ from camdirector.geometry.toric_maps import (
     probe_gl_renderer,
 )
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.server.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, MaskKind, StyleMaskSettings
-from camdirector.server.pipeline.toric.target_sampling import TargetSampler, TargetSamplingSettings
+from camdirector.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, MaskKind, StyleMaskSettings
+from camdirector.pipeline.toric.target_sampling import TargetSampler, TargetSamplingSettings
 from load_tests.report import emit, summary
 
 RESOLUTIONS = (64, 128, 256, 512)

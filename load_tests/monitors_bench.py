@@ -41,9 +41,9 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from camdirector.demo.client import session_request
 from camdirector.demo.scene import build_demo_scene
+from camdirector.deploy.server_process import ServerProcess
+from camdirector.front.http.routes.monitors import BOUNDARY
 from camdirector.geometry.camera import Lens
-from camdirector.server.http.routes.views import BOUNDARY
-from camdirector.server.process import ServerProcess
 from load_tests import stream
 from load_tests.report import emit, summary
 

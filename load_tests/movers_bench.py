@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.server.sessions.table import SessionTable
-from camdirector.server.settings import ServerSettings
+from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.table import SessionTable
 from load_tests.report import emit, summary
 
 RATE_HZ = 60.0

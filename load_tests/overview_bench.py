@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
+from camdirector.deploy.server_process import ServerProcess
 from camdirector.precompute.overview.bvh import load_motion
+from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.pipeline import plan_overview
-from camdirector.precompute.overview.settings import OverviewSettings
-from camdirector.server.process import ServerProcess
 from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder, summary
 
 # name -> (path under mocap/, leading frames to skip: T-pose or rest pose, SOURCES.md section 2)

@@ -31,9 +31,9 @@ import numpy as np
 import camdirector_client as cd
 from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
+from camdirector.deploy.server_process import ServerProcess, worker_pids
 from camdirector.geometry.camera import Lens
-from camdirector.server.pipeline.style import MAP_MODES, MapBackendChoice, VisibilityMode
-from camdirector.server.process import ServerProcess, worker_pids
+from camdirector.pipeline.style import MAP_MODES, MapBackendChoice, VisibilityMode
 from load_tests.report import emit
 
 

@@ -34,8 +34,8 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
+from camdirector.deploy.server_process import ServerProcess
 from camdirector.geometry.camera import Lens
-from camdirector.server.process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
 from load_tests.report import emit, percentiles
 

@@ -5,17 +5,17 @@
 The issue's targets: every shared level precomputes in under 30 s on this machine, and the
 per-frame target update takes under 2 ms median. Per level: `level add` into a temporary registry
 (wall time and the stage timings the artifact records), the artifact's load time, then
-`eval-graph`'s comparison (precompute/tracks/compare.py) along the same route `eval-graph` walks,
+`eval-graph`'s comparison (evaluation/tracks/compare.py) along the same route `eval-graph` walks,
 in the long shot: the baseline, measured in the same run, is the PRM at our coverage (or, where
 none reaches it, the densest one tried), and the ratios are ours against it (--no-prm leaves the
 comparison out: one level then runs in well under a minute).
 
 Then `routes`: our director (dynamic with cuts) in each shot size along three routes, measured
-frame by frame by precompute/tracks/measure.py (what the frame shows: `visible` inside the frame
+frame by frame by evaluation/tracks/measure.py (what the frame shows: `visible` inside the frame
 and unoccluded, `line_of_sight` rays only, `framed_in_frame` the shot size's framed extent all
 inside the frame; cuts after the first frame; target update ms; framing error): `default`, the
 route `eval-graph` walks, and `tightest` and `open`, about 20 m through the level's tightest
-corridor and its most open place, walked there and back (precompute/tracks/route.py says how
+corridor and its most open place, walked there and back (evaluation/tracks/route.py says how
 they are picked; `half_width_m` is half the narrowest width between walls there, `length_m` the
 distance walked). Prints JSON (and writes it to --json); asserts nothing.
 """
@@ -29,13 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
+from camdirector.evaluation.tracks.compare import compare_with_prm
+from camdirector.evaluation.tracks.measure import measure_shot_sizes
+from camdirector.evaluation.tracks.route import ActorRoute, NavmeshPaths, corridor_and_open_routes, there_and_back
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.cli import route_for
-from camdirector.precompute.tracks.compare import compare_with_prm
-from camdirector.precompute.tracks.measure import measure_shot_sizes
 from camdirector.precompute.tracks.registry import LevelRegistry
-from camdirector.precompute.tracks.route import ActorRoute, NavmeshPaths, corridor_and_open_routes, there_and_back
 from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder
 
 # name -> (path under levels/, metres per level unit: SOURCES.md; zdm2's player is ~15 units tall)

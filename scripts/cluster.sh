@@ -13,4 +13,4 @@ if [ ! -x "$root/.venv/bin/python" ]; then
   echo "cluster.sh: no virtual environment at $root/.venv (run make test or make run first)" >&2
   exit 1
 fi
-exec "$root/.venv/bin/python" -m camdirector.server.deploy.cluster "$@"
+exec "$root/.venv/bin/python" -m camdirector.deploy.cluster "$@"

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from camdirector.server.process import ServerProcess
+from camdirector.deploy.server_process import ServerProcess
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
@@ -50,7 +50,7 @@ def server_factory():
 def service_or_skip(start):
     """A Debian service started for the tests, or a skip with the reason where its package is
     missing; a failure under CI (.ci/run sets CAMDIRECTOR_REQUIRE_CLUSTER=1)."""
-    from camdirector.server.deploy.services import ServiceError
+    from camdirector.deploy.services import ServiceError
     try:
         return start()
     except ServiceError as exc:
@@ -62,7 +62,7 @@ def service_or_skip(start):
 @pytest.fixture(scope="session")
 def redis_server(tmp_path_factory):
     """One redis-server on a free loopback port for the whole run (deploy/services.py)."""
-    from camdirector.server.deploy.services import RedisServer
+    from camdirector.deploy.services import RedisServer
     server = service_or_skip(lambda: RedisServer(tmp_path_factory.mktemp("redis")).start())
     yield server
     server.stop()
@@ -81,7 +81,7 @@ def redis_url(redis_server) -> str:
 @pytest.fixture(scope="session")
 def postgres_server(tmp_path_factory):
     """One PostgreSQL cluster on a free loopback port for the whole run (deploy/services.py)."""
-    from camdirector.server.deploy.services import PostgresServer
+    from camdirector.deploy.services import PostgresServer
     server = service_or_skip(lambda: PostgresServer(tmp_path_factory.mktemp("postgres")).start())
     yield server
     server.stop()

@@ -1,7 +1,7 @@
 """The dependency rule of docs/architecture.md, checked: server -> precompute -> geometry, and the
-per-frame pipeline (camdirector.server.pipeline) knows nothing of the wire or the web.
+per-frame pipeline (camdirector.pipeline) knows nothing of the wire or the web.
 
-The pipeline check imports every module under camdirector.server.pipeline in a fresh interpreter,
+The pipeline check imports every module under camdirector.pipeline in a fresh interpreter,
 so that what the test suite has already imported cannot hide an import the pipeline makes (and the
 same for what a job process loads); the precompute and geometry checks read import statements
 (lazy ones inside functions included)."""
@@ -17,7 +17,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# What a module under camdirector.server.pipeline may not bring in, directly or through others.
+# What a module under camdirector.pipeline may not bring in, directly or through others.
 WIRE_AND_WEB = ("google.protobuf", "grpc", "fastapi", "camdirector.v1")
 # What a job process may not bring in: it runs a job body, never a transport.
 WEB_AND_GRPC = ("fastapi", "starlette", "uvicorn", "grpc")
@@ -49,21 +49,21 @@ def loaded_by(packages: tuple[str, ...], forbidden: tuple[str, ...]) -> dict:
 
 
 def test_the_pipeline_imports_no_protobuf_grpc_or_fastapi():
-    found = loaded_by(("camdirector.server.pipeline",), WIRE_AND_WEB)
-    assert "camdirector.server.pipeline.stages" in found["modules"]  # the walk saw the package
-    assert found["loaded"] == [], f"imported under camdirector.server.pipeline: {found['loaded']}"
+    found = loaded_by(("camdirector.pipeline",), WIRE_AND_WEB)
+    assert "camdirector.pipeline.stages" in found["modules"]  # the walk saw the package
+    assert found["loaded"] == [], f"imported under camdirector.pipeline: {found['loaded']}"
 
 
 def test_a_job_process_imports_no_web_framework_or_grpc():
     """What the job runner's forkserver preloads: the command's main module, the runner, the job bodies."""
-    found = loaded_by(("camdirector.server.cli", "camdirector.server.jobs", "camdirector.precompute.overview.job",
+    found = loaded_by(("camdirector.__main__", "camdirector.jobs", "camdirector.precompute.overview.job",
                        "camdirector.precompute.tracks.job"), WEB_AND_GRPC)
     assert found["loaded"] == [], f"a job process would import: {found['loaded']}"
 
 
 def test_the_check_sees_what_a_module_imports():
     """The fresh-interpreter check must report a forbidden import that does happen."""
-    assert "camdirector.v1.director_pb2" in loaded_by(("camdirector.server.sessions.codec",), WIRE_AND_WEB)["loaded"]
+    assert "camdirector.v1.director_pb2" in loaded_by(("camdirector.worker.codec",), WIRE_AND_WEB)["loaded"]
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -79,8 +79,8 @@ def imported_modules(path: Path) -> set[str]:
 
 
 @pytest.mark.parametrize("folder, forbidden", [
-    ("precompute", ("camdirector.server",)),
-    ("geometry", ("camdirector.server", "camdirector.precompute")),
+    ("precompute", ("camdirector",)),
+    ("geometry", ("camdirector", "camdirector.precompute")),
 ])
 def test_dependencies_point_one_way(folder, forbidden):
     files = sorted((ROOT / folder).rglob("*.py"))
@@ -93,5 +93,5 @@ def test_dependencies_point_one_way(folder, forbidden):
 def test_imported_modules_sees_lazy_and_from_imports(tmp_path):
     """The scan above must not miss an import inside a function (the CLIs import lazily)."""
     source = tmp_path / "m.py"
-    source.write_text("import os\n\ndef f():\n    from camdirector.server.front import router\n")
-    assert imported_modules(source) == {"os", "camdirector.server.front", "camdirector.server.front.router"}
+    source.write_text("import os\n\ndef f():\n    from camdirector.front import router\n")
+    assert imported_modules(source) == {"os", "camdirector.front", "camdirector.front.router"}

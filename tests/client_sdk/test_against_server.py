@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import camdirector_client as cd
-from tests.server.wire_client import two_target_request
+from tests.service.wire_client import two_target_request
 
 
 @pytest.fixture(params=["grpc", "zmq"])
@@ -55,7 +55,7 @@ def test_async_session(url):
 
 
 def test_match_session_take_shot_sync_and_async(url):
-    from tests.server.test_match_sessions import frames, match_request
+    from tests.service.test_match_sessions import frames, match_request
 
     request = match_request(delay_s=0.0)
     with cd.connect(url) as client:

@@ -24,8 +24,8 @@ import camdirector_client as cd
 from camdirector.v1 import director_pb2 as pb
 from camdirector.v1 import director_pb2_grpc as pb_grpc
 from camdirector_client import wire
-from tests.server.test_failover import _undisturbed
-from tests.server.wire_client import two_target_request, walk
+from tests.service.test_failover import _undisturbed
+from tests.service.wire_client import two_target_request, walk
 
 KEY = re.compile(r"[0-9a-f]{32}")
 

@@ -5,9 +5,9 @@ import pytest
 
 from camdirector.evaluation.scenario import load_scenario, shipped_scenarios
 from camdirector.evaluation.suite import PAPER_SCENES, suite_scenarios
-from camdirector.server.sessions.codec import frame_from_msg, scene_from_request
-from camdirector.server.settings import ServerSettings
+from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.codec import frame_from_msg, scene_from_request
 
 SHIPPED = shipped_scenarios()
 ON_SHARED_DATA = {name for name, path in SHIPPED.items() if "shared/data" in path.read_text()}

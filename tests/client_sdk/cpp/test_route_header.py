@@ -1,7 +1,7 @@
 """Against small Director servers of the tests' own, which show what a real one cannot on demand:
 
 - every gRPC call of a session carries its `x-camdirector-route` key, the header by which a
-  balancer sends all the calls of a session to one node (server/deploy/haproxy.py): CreateSession,
+  balancer sends all the calls of a session to one node (deploy/haproxy.py): CreateSession,
   the frame streams, UpdateStyle, TakeShot, the session created again after NOT_FOUND,
   CloseSession, and cd_client_destroy's close (the server records each call's metadata);
 - UNAVAILABLE on every call for a while over a working connection (a balancer with no healthy

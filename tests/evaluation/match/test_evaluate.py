@@ -13,7 +13,7 @@ from camdirector.evaluation.match.match_file import save_match
 from camdirector.evaluation.match.sim import simulate_match
 from camdirector.precompute.tracks.registry import LevelRegistry
 from tests.evaluation.match.test_sim import arena
-from tests.server.tracks_sessions import ROOT, cli_add_level, obj_text
+from tests.service.tracks_sessions import ROOT, cli_add_level, obj_text
 
 DIRECTOR_FIGURES = {"kill_coverage", "kills", "kills_covered", "lead_s", "shots", "cuts_per_min", "jump_cuts",
                     "framed_visibility", "compute_ms", "program_moments", "program_s", "buffering_replies"}
@@ -41,7 +41,7 @@ def registry_and_match(registry):
 
 
 def eval_match(folder, *args: str, seed: int = 1) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "camdirector.server.cli", "eval-match", str(folder / f"m{seed}.npz"),
+    return subprocess.run([sys.executable, "-m", "camdirector.__main__", "eval-match", str(folder / f"m{seed}.npz"),
                            "--data-dir", str(folder / "data"), *args], capture_output=True, text=True, cwd=ROOT,
                           timeout=300)
 
@@ -94,7 +94,7 @@ def test_bad_arguments_and_unknown_level_exit_2(registry_and_match, tmp_path):
     done = eval_match(folder, "--delay", "301", "--json", str(tmp_path / "x.json"))
     assert done.returncode == 2 and "--delay" in done.stderr
     other = tmp_path / "empty-registry"
-    done = subprocess.run([sys.executable, "-m", "camdirector.server.cli", "eval-match", str(folder / "m1.npz"),
+    done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "eval-match", str(folder / "m1.npz"),
                            "--delay", "0", "--json", str(tmp_path / "x.json"), "--data-dir", str(other)],
                           capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert done.returncode == 2 and "no level named 'arena'" in done.stderr

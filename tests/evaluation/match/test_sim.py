@@ -16,9 +16,9 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
 from camdirector.precompute.tracks.pipeline import precompute_level
-from camdirector.precompute.tracks.settings import TrackSettings
+from camdirector.precompute.tracks.track_settings import TrackSettings
 from tests.precompute.tracks.tiny_levels import boxes
-from tests.server.tracks_sessions import ROOT, cli_add_level
+from tests.service.tracks_sessions import ROOT, cli_add_level
 
 SECONDS = 60.0
 
@@ -175,7 +175,7 @@ def test_settings_and_arguments_are_checked_once(artifact):
 def test_cli_on_nav_test(shared_data, tmp_path):
     cli_add_level(tmp_path / "data", "nav_test", shared_data / "levels" / "recast" / "nav_test.obj")
     out = tmp_path / "m.npz"
-    done = subprocess.run([sys.executable, "-m", "camdirector.server.cli", "match-sim", "--level", "nav_test",
+    done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "match-sim", "--level", "nav_test",
                            "--players", "10", "--minutes", "1", "--seed", "1", "--out", str(out),
                            "--data-dir", str(tmp_path / "data")], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert done.returncode == 0, done.stderr
@@ -184,7 +184,7 @@ def test_cli_on_nav_test(shared_data, tmp_path):
     assert summary["frames"] == len(match.time_s) == 3600 and len(match.players) == 10
     assert [p.team for p in match.players].count(0) == 5
     assert summary["events"]["kill"] == sum(e.kind == "kill" for e in match.events) >= 5
-    unknown = subprocess.run([sys.executable, "-m", "camdirector.server.cli", "match-sim", "--level", "nope", "--out",
+    unknown = subprocess.run([sys.executable, "-m", "camdirector.__main__", "match-sim", "--level", "nope", "--out",
                               str(out), "--data-dir", str(tmp_path / "data")], capture_output=True, text=True,
                              cwd=ROOT, timeout=120)
     assert unknown.returncode == 2 and "no level named 'nope'" in unknown.stderr

@@ -8,7 +8,7 @@ from camdirector.precompute.overview.body_parts import BodyPart, map_body_parts
 from camdirector.precompute.overview.bvh import forward_kinematics, parse_bvh
 from camdirector.precompute.overview.character_track import track_character
 from camdirector.precompute.overview.limb_visibility import LimbVisibilityRenderer, render_limb_visibility
-from camdirector.precompute.overview.settings import OverviewSettings
+from camdirector.precompute.overview.overview_settings import OverviewSettings
 
 # A T-posed stick figure facing +Z, in metres: left arm along +X, right arm along -X.
 FIGURE = """HIERARCHY

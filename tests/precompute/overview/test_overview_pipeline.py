@@ -17,8 +17,8 @@ import pytest
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.precompute.overview.energy import energy_below, path_energy
 from camdirector.precompute.overview.evaluation import compare_with_baselines, plot_quality
+from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.pipeline import Stage, plan_overview
-from camdirector.precompute.overview.settings import OverviewSettings
 
 from .overview_mocap import load_clip
 

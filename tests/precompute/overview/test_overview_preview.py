@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.pipeline import plan_overview
 from camdirector.precompute.overview.preview import (
     PART_RGB,
@@ -23,7 +24,6 @@ from camdirector.precompute.overview.preview import (
     render_preview,
     shot_rgb,
 )
-from camdirector.precompute.overview.settings import OverviewSettings
 
 from .overview_mocap import load_clip
 

@@ -6,8 +6,8 @@ import pytest
 
 from camdirector.precompute.overview.body_parts import map_body_parts
 from camdirector.precompute.overview.character_track import sample_frames, track_character
+from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.saliency import classical_mds, compute_saliency, pairwise_distances, sammon_mapping
-from camdirector.precompute.overview.settings import OverviewSettings
 
 from .overview_mocap import load_clip
 

@@ -8,7 +8,7 @@ import socket
 
 import pytest
 
-from camdirector.precompute.jobs import JobError
+from camdirector.infra.job_errors import JobError
 from camdirector.precompute.tracks.job import run_level_job
 from camdirector.precompute.tracks.registry import LevelRegistry, LevelsUnavailable
 
@@ -95,13 +95,13 @@ def test_the_job_fails_when_another_node_took_the_name_while_it_ran(tmp_path, po
 
 
 def test_a_workers_level_cache_reads_the_shared_index(tmp_path, postgres_url):
-    """server/sessions/levels.py with the node's records URL: a level another node added is found;
+    """worker/level_cache.py with the node's records URL: a level another node added is found;
     PostgreSQL gone answers UNAVAILABLE (retryable), not an internal error."""
     import grpc
     import psycopg
 
-    from camdirector.server.errors import DirectorError
-    from camdirector.server.sessions.levels import LevelCache
+    from camdirector.errors import DirectorError
+    from camdirector.worker.level_cache import LevelCache
 
     level_file = obj_file(tmp_path / "corridor.obj", corridor())
     with LevelRegistry(tmp_path / "shared", postgres_url) as other_node:

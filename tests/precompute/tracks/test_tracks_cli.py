@@ -6,11 +6,11 @@ import subprocess
 import sys
 
 from tests.precompute.tracks.tiny_levels import l_room
-from tests.server.tracks_sessions import ROOT, cli_add_level, obj_text
+from tests.service.tracks_sessions import ROOT, cli_add_level, obj_text
 
 
 def _level(data_dir, *args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "camdirector.server.cli", "level", *args, "--data-dir", str(data_dir)],
+    return subprocess.run([sys.executable, "-m", "camdirector.__main__", "level", *args, "--data-dir", str(data_dir)],
                           capture_output=True, text=True, cwd=ROOT, timeout=120)
 
 

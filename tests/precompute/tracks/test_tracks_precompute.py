@@ -15,8 +15,8 @@ from camdirector.precompute.tracks.navmesh import derive_navmesh, triangle_areas
 from camdirector.precompute.tracks.pipeline import Stage, precompute_level
 from camdirector.precompute.tracks.ransac import Tracks, cluster_tracks
 from camdirector.precompute.tracks.sampling import sample_cameras
-from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import extract_skeleton
+from camdirector.precompute.tracks.track_settings import TrackSettings
 from camdirector.precompute.tracks.visibility_table import build_visibility_table, remesh
 
 from .tiny_levels import boxes, corridor, l_room, two_floors

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from camdirector.evaluation.tracks.compare import PRM_MAX_DENSITY_PER_M2, PRM_MAX_NODES, compare_with_prm
+from camdirector.evaluation.tracks.route import NavmeshPaths, read_recast_queries, walk
 from camdirector.geometry.meshes import TriMesh
-from camdirector.precompute.tracks.compare import PRM_MAX_DENSITY_PER_M2, PRM_MAX_NODES, compare_with_prm
-from camdirector.precompute.tracks.level import load_level_mesh
+from camdirector.precompute.tracks.level_mesh import load_level_mesh
 from camdirector.precompute.tracks.pipeline import Stage, precompute_level
-from camdirector.precompute.tracks.route import NavmeshPaths, read_recast_queries, walk
-from camdirector.precompute.tracks.settings import TrackSettings
+from camdirector.precompute.tracks.track_settings import TrackSettings
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,7 @@ def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
         assert tried[-1]["mean_nodes"] > PRM_MAX_NODES or tried[-1]["density_per_m2"] > PRM_MAX_DENSITY_PER_M2 / 1.5
     assert verdict["fewer_nodes"] == (ours["nodes"] < verdict["compared_with"]["mean_nodes"])
     assert verdict["fewer_edges"] == (ours["edges"] < verdict["compared_with"]["mean_edges"])
-    assert ours["visible"] >= 0.9, "the actor inside the frame and unoccluded (precompute/tracks/measure.py)"
+    assert ours["visible"] >= 0.9, "the actor inside the frame and unoccluded (evaluation/tracks/measure.py)"
     assert ours["line_of_sight"] >= ours["visible"], "a frame that shows the actor has it in sight"
     assert ours["target_update_ms_median"] > 0.0
     assert prm_dense["nodes"] > prm_sparse["nodes"] and prm_dense["edges"] > prm_sparse["edges"]

@@ -8,8 +8,8 @@ from camdirector.precompute.tracks.navmesh import derive_navmesh
 from camdirector.precompute.tracks.ransac import Tracks
 from camdirector.precompute.tracks.redundancy import prune_redundant_tracks, track_points
 from camdirector.precompute.tracks.sampling import inside_footprint
-from camdirector.precompute.tracks.settings import TrackSettings
 from camdirector.precompute.tracks.skeleton import extract_skeleton
+from camdirector.precompute.tracks.track_settings import TrackSettings
 from camdirector.precompute.tracks.visibility_table import build_visibility_table, remesh
 
 from .tiny_levels import two_open_floors

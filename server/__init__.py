@@ -1,1 +1,0 @@
-"""Realtime director service."""

@@ -1,0 +1,366 @@
+"""The multi-node topology on one machine, on loopback ports, from Debian's packages and the venv:
+Redis (session checkpoints, the job queue), PostgreSQL (job and level records), N nodes
+(`camdirector serve`, sharing one data folder), queue workers (`camdirector job-worker`) and HAProxy
+in front (deploy/haproxy.py). docs/scaling.md describes it.
+
+    python -m camdirector.deploy.cluster up --nodes N [--dir DIR]   (scripts/cluster.sh up ...)
+    python -m camdirector.deploy.cluster down [--dir DIR]
+    python -m camdirector.deploy.cluster add-node [--dir DIR]
+    python -m camdirector.deploy.cluster status [--dir DIR]
+
+`up` prints one JSON object (the balancer's `grpc` and `http`, `nodes`, `redis`, `postgres`, ...)
+and returns with everything running; the same object is kept in DIR/cluster.json, which `down`,
+`add-node` and `status` read. From Python, `Cluster.up(nodes, folder)` gives the same cluster with
+`kill_node`, `add_node` and `down` (the failover benchmark's handle).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from camdirector.deploy.haproxy import Backend, BalancerSettings, HAProxy
+from camdirector.deploy.services import (
+    PostgresServer,
+    RedisServer,
+    ServiceError,
+    _tail,
+    descendants,
+    is_running,
+    stop_processes,
+)
+
+DEFAULT_FOLDER = Path("/tmp/camdirector-cluster")
+STATE_FILE = "cluster.json"
+
+
+class ClusterError(RuntimeError):
+    """A cluster that cannot start or be found."""
+
+
+@dataclass(frozen=True)
+class ClusterSettings:
+    # Worker processes per node. On one machine every node shares its cores, so one each by
+    # default; on a machine of its own a node wants one per core (serve's default). [0, 256]
+    workers_per_node: int = 1
+    # `camdirector job-worker` processes taking jobs off the Redis queue (started only where that
+    # command exists). [0, 64]
+    queue_workers: int = 1
+    start_timeout_s: float = 60.0   # the longest one node may take to print its ready line, s. [1, 600]
+    healthy_timeout_s: float = 30.0  # the longest HAProxy may take to see every node healthy, s. [1, 600]
+    node_args: tuple[str, ...] = ()  # more `camdirector serve` flags for every node (e.g. --max-sessions 128)
+    balancer: BalancerSettings = field(default_factory=BalancerSettings)
+
+    def __post_init__(self):
+        checks = [
+            (0 <= self.workers_per_node <= 256, "workers_per_node must be in [0, 256]"),
+            (0 <= self.queue_workers <= 64, "queue_workers must be in [0, 64]"),
+            (1 <= self.start_timeout_s <= 600, "start_timeout_s must be in [1, 600]"),
+            (1 <= self.healthy_timeout_s <= 600, "healthy_timeout_s must be in [1, 600]"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ClusterSettings:
+        return cls(**{**d, "node_args": tuple(d["node_args"]), "balancer": BalancerSettings(**d["balancer"])})
+
+
+@dataclass(frozen=True)
+class NodeInfo:
+    node_id: str     # "node-K", its --node-id and its server name in HAProxy
+    server_id: int   # K: HAProxy's server id, which places the node on the hash ring
+    pid: int         # the node's `camdirector serve` (front) process
+    grpc: str        # HOST:PORT
+    http: str        # HOST:PORT
+    zmq: str         # tcp://HOST:PORT, for ZeroMQ clients, which connect to a node directly
+
+    @property
+    def backend(self) -> Backend:
+        return Backend(name=self.node_id, server_id=self.server_id, grpc=self.grpc, http=self.http)
+
+
+def _serve_command() -> list[str]:
+    return [sys.executable, "-m", "camdirector.__main__"]  # this venv's camdirector
+
+
+class Cluster:
+    """A running cluster, its state in `folder`/cluster.json. Make one with `up` or `attach`."""
+
+    def __init__(self, folder: Path, settings: ClusterSettings, state: dict):
+        self.folder = Path(folder)
+        self.settings = settings
+        self.state = state
+        # the processes this object started: held so that none is collected while it runs (Popen
+        # warns then), and reaped by `down`; a cluster attached to holds none
+        self._children: list[subprocess.Popen] = []
+        balancer = state.get("balancer")
+        self.haproxy: HAProxy | None = None
+        if balancer is not None:
+            self.haproxy = HAProxy(self.folder, dataclasses.replace(
+                settings.balancer, grpc_port=balancer["grpc_port"], http_port=balancer["http_port"]))
+            self.haproxy.pid = balancer["pid"]  # started by another process: known by its pid alone
+            self.haproxy.backends = [n.backend for n in self.nodes]
+
+    # What the cluster is -------------------------------------------------------------------------
+    @property
+    def nodes(self) -> list[NodeInfo]:
+        return [NodeInfo(**n) for n in self.state.get("nodes", [])]
+
+    @property
+    def grpc(self) -> str:
+        """The balancer's gRPC HOST:PORT."""
+        return self.state["grpc"]
+
+    @property
+    def http(self) -> str:
+        """The balancer's HTTP HOST:PORT (REST)."""
+        return self.state["http"]
+
+    @property
+    def redis(self) -> str:
+        return self.state["redis"]
+
+    @property
+    def postgres(self) -> str:
+        return self.state["postgres"]
+
+    @property
+    def data_dir(self) -> Path:
+        """The data folder every node and queue worker shares (uploads, artifacts, levels)."""
+        return self.folder / "data"
+
+    def as_dict(self) -> dict:
+        """What `up` prints: the state less its bookkeeping (pids of services, settings)."""
+        private = ("settings", "balancer", "redis_pid", "postgres_folder", "postgres_port")
+        return {k: v for k, v in self.state.items() if k not in private}
+
+    def _save(self) -> None:
+        tmp = self.folder / (STATE_FILE + ".tmp")
+        tmp.write_text(json.dumps(self.state, indent=1))
+        tmp.replace(self.folder / STATE_FILE)
+
+    # Starting and stopping -------------------------------------------------------------------------
+    @classmethod
+    def up(cls, nodes: int = 2, folder: Path = DEFAULT_FOLDER, settings: ClusterSettings = ClusterSettings()) -> Cluster:
+        """Starts Redis, PostgreSQL, `nodes` nodes, the queue workers and HAProxy; returns once
+        HAProxy has seen every node pass a health check. Whatever started is stopped again when
+        a part fails (ClusterError or ServiceError, with the failing part's log)."""
+        if not 1 <= nodes <= 256:
+            raise ValueError("nodes must be in [1, 256]")
+        folder = Path(folder).resolve()
+        if (folder / STATE_FILE).exists():
+            old = cls.attach(folder)
+            if old.running_pids():
+                raise ClusterError(f"a cluster already runs in {folder} (pids {old.running_pids()}): "
+                                   f"scripts/cluster.sh down --dir {folder}")
+            old.down()  # what is left of one that died: its PostgreSQL, its state file
+        folder.mkdir(parents=True, exist_ok=True)
+        started = time.monotonic()
+        cluster = cls(folder, settings, {"folder": str(folder), "nodes": [], "queue_workers": [], "notes": [],
+                                         "settings": settings.as_dict()})
+        try:
+            cluster._start(nodes)
+        except BaseException:
+            cluster.down()
+            raise
+        cluster.state["up_s"] = round(time.monotonic() - started, 2)
+        cluster._save()
+        return cluster
+
+    def _start(self, nodes: int) -> None:
+        # whether this checkout has `camdirector job-worker` (the Redis queue's worker), found meanwhile
+        has_job_worker = subprocess.Popen([*_serve_command(), "job-worker", "--help"],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self._children.append(has_job_worker)
+        redis = RedisServer(self.folder / "redis", persist=True).start()
+        self._children.append(redis.proc)
+        self.state.update(redis=redis.url, job_queue=redis.url.rpartition("/")[0] + "/1", redis_pid=redis.proc.pid)
+        self._save()
+        postgres = PostgresServer(self.folder / "postgres")
+        self.state.update(postgres=postgres.url, postgres_folder=str(postgres.folder), postgres_port=postgres.port)
+        self._save()
+        postgres.start()
+        has_queue_workers = has_job_worker.wait(60) == 0
+        if not has_queue_workers:
+            self.state["notes"].append("no queue workers: this checkout has no `camdirector job-worker`")
+        self.data_dir.mkdir(exist_ok=True)
+        for node in self._start_nodes(range(1, nodes + 1)):
+            self.state["nodes"].append(dataclasses.asdict(node))
+        self._save()
+        if has_queue_workers:
+            for k in range(1, self.settings.queue_workers + 1):
+                self.state["queue_workers"].append({"pid": self._start_queue_worker(k).pid})
+        self._save()
+        self.haproxy = HAProxy(self.folder, self.settings.balancer).start([n.backend for n in self.nodes])
+        self._children.append(self.haproxy.proc)
+        self.state.update(grpc=self.haproxy.grpc, http=self.haproxy.http, balancer={
+            "pid": self.haproxy.pid, "grpc_port": self.haproxy.grpc_port, "http_port": self.haproxy.http_port,
+            "config": str(self.haproxy.config_path), "socket": str(self.haproxy.socket_path)})
+        self._save()
+        self.haproxy.wait_until({n.node_id: "UP" for n in self.nodes}, self.settings.healthy_timeout_s)
+
+    def _start_nodes(self, numbers) -> list[NodeInfo]:
+        """Starts nodes node-K for K in numbers all at once; returns them once each is ready."""
+        launched = []
+        for k in numbers:
+            name = f"node-{k}"
+            out, log = self.folder / f"{name}.out", self.folder / f"{name}.log"
+            cmd = [*_serve_command(), "serve", "--grpc", "127.0.0.1:0", "--zmq", "tcp://127.0.0.1:*",
+                   "--http", "127.0.0.1:0", "--workers", str(self.settings.workers_per_node),
+                   "--node-id", name, "--data-dir", str(self.data_dir),
+                   "--checkpoint-store", self.state["redis"], "--job-store", self.state["postgres"],
+                   "--job-queue", self.state["job_queue"], *self.settings.node_args]
+            # stdout to a file, not a pipe: the node outlives this process, and a pipe would close
+            with open(out, "wb") as stdout, open(log, "ab") as stderr:
+                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr,
+                                        start_new_session=True)
+            self._children.append(proc)
+            launched.append((k, name, proc, out, log))
+        nodes = []
+        for k, name, proc, out, log in launched:
+            try:
+                ready = self._wait_ready(proc, out, log, name)
+            except ClusterError:
+                for _, _, other, _, _ in launched:
+                    other.kill()
+                    other.wait()
+                raise
+            nodes.append(NodeInfo(node_id=name, server_id=k, pid=proc.pid, grpc=ready["grpc"], http=ready["http"],
+                                  zmq=ready["zmq"]))
+        return nodes
+
+    def _wait_ready(self, proc: subprocess.Popen, out: Path, log: Path, name: str) -> dict:
+        deadline = time.monotonic() + self.settings.start_timeout_s
+        while time.monotonic() < deadline:
+            for line in out.read_text().splitlines():
+                if line.startswith("{") and json.loads(line).get("event") == "ready":
+                    return json.loads(line)
+            if proc.poll() is not None:
+                raise ClusterError(f"{name} exited with code {proc.returncode}: {_tail(log)}")
+            time.sleep(0.05)
+        raise ClusterError(f"{name} printed no ready line within {self.settings.start_timeout_s:g} s: {_tail(log)}")
+
+    def _start_queue_worker(self, k: int) -> subprocess.Popen:
+        with open(self.folder / f"queue-worker-{k}.log", "ab") as log:
+            proc = subprocess.Popen(
+                [*_serve_command(), "job-worker", "--job-queue", self.state["job_queue"],
+                 "--job-store", self.state["postgres"], "--data-dir", str(self.data_dir)],
+                stdin=subprocess.DEVNULL, stdout=log, stderr=log, start_new_session=True)
+        self._children.append(proc)
+        return proc
+
+    def _processes(self) -> list[tuple[int, str]]:
+        """(pid, marker) of every process of the cluster but PostgreSQL, the marker a part of its
+        command line that no other process has: the cluster's folder, or for redis-server (which
+        rewrites its command line to its address) that address."""
+        pids = [n["pid"] for n in self.state.get("nodes", [])] + [w["pid"] for w in self.state.get("queue_workers", [])]
+        if "balancer" in self.state:
+            pids.append(self.state["balancer"]["pid"])
+        processes = [(pid, str(self.folder)) for pid in pids]
+        if "redis_pid" in self.state:
+            processes.append((self.state["redis_pid"], f"redis-server {urlsplit(self.state['redis']).netloc}"))
+        return processes
+
+    def running_pids(self) -> list[int]:
+        return [pid for pid, marker in self._processes() if is_running(pid, marker)]
+
+    def down(self) -> None:
+        """Stops every process of the cluster (SIGTERM, SIGKILL after 15 s) and PostgreSQL, and
+        removes the state file; the logs stay in the folder. The nodes' own processes (workers,
+        job forkserver) end with their node; any still running 5 s after it are stopped too."""
+        processes = self._processes()
+        below = descendants([pid for pid, marker in processes if is_running(pid, marker)])
+        stop_processes(processes)
+        stop_processes([(pid, "") for pid in below], grace_s=5.0)
+        if "postgres_folder" in self.state:
+            PostgresServer(Path(self.state["postgres_folder"]), self.state["postgres_port"], existing=True).stop()
+        (self.folder / STATE_FILE).unlink(missing_ok=True)
+
+    @classmethod
+    def attach(cls, folder: Path = DEFAULT_FOLDER) -> Cluster:
+        """The cluster whose state is in folder/cluster.json (started by another process)."""
+        folder = Path(folder).resolve()
+        try:
+            state = json.loads((folder / STATE_FILE).read_text())
+        except FileNotFoundError:
+            raise ClusterError(f"no cluster in {folder} (no {STATE_FILE})") from None
+        return cls(folder, ClusterSettings.from_dict(state["settings"]), state)
+
+    # Changing it -----------------------------------------------------------------------------------
+    def kill_node(self, index: int, sig: int = signal.SIGKILL) -> int:
+        """Sends `sig` to node `index`'s serve process (0-based, in `nodes`' order); returns its
+        pid. The node stays in the balancer, whose health checks mark it down."""
+        pid = self.nodes[index].pid
+        os.kill(pid, sig)
+        try:
+            os.waitpid(pid, 0)  # our child when this process started the cluster
+        except ChildProcessError:
+            pass
+        return pid
+
+    def add_node(self) -> NodeInfo:
+        """Starts one more node and adds it to the running HAProxy (runtime API, no reload: every
+        open stream stays where it is); returns it once HAProxy has seen it healthy."""
+        (node,) = self._start_nodes([max(n.server_id for n in self.nodes) + 1])
+        self.state["nodes"].append(dataclasses.asdict(node))
+        self._save()
+        self.haproxy.add(node.backend)
+        self.haproxy.wait_until({node.node_id: "UP"}, self.settings.healthy_timeout_s)
+        return node
+
+    def __enter__(self) -> Cluster:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.down()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="cluster.sh", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    commands = {name: sub.add_parser(name, help=text) for name, text in (
+        ("up", "start the cluster and print its addresses as one JSON object"),
+        ("down", "stop everything the cluster in --dir runs"),
+        ("add-node", "start one more node and add it to the balancer; prints it as JSON"),
+        ("status", "the cluster's JSON and what HAProxy thinks of each node"))}
+    for p in commands.values():
+        p.add_argument("--dir", type=Path, default=DEFAULT_FOLDER, help=f"the cluster's folder (default {DEFAULT_FOLDER})")
+    commands["up"].add_argument("--nodes", type=int, default=2, help="nodes to start [1, 256]")
+    commands["up"].add_argument("--workers-per-node", type=int, default=ClusterSettings.workers_per_node,
+                                help="worker processes per node")
+    commands["up"].add_argument("--queue-workers", type=int, default=ClusterSettings.queue_workers,
+                                help="`camdirector job-worker` processes")
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "up":
+            settings = ClusterSettings(workers_per_node=args.workers_per_node, queue_workers=args.queue_workers)
+            print(json.dumps(Cluster.up(args.nodes, args.dir, settings).as_dict()), flush=True)
+        elif args.command == "down":
+            Cluster.attach(args.dir).down()
+        elif args.command == "add-node":
+            print(json.dumps(dataclasses.asdict(Cluster.attach(args.dir).add_node())), flush=True)
+        else:
+            cluster = Cluster.attach(args.dir)
+            print(json.dumps({**cluster.as_dict(), "running_pids": cluster.running_pids(),
+                              "balancer_sees": cluster.haproxy.server_states()}), flush=True)
+    except (ClusterError, ServiceError, ValueError) as exc:
+        print(f"cluster.sh {args.command}: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

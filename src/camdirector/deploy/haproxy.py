@@ -1,0 +1,312 @@
+"""Debian's HAProxy (2.6) in front of the nodes: its configuration, and a launcher like the services
+of deploy/services.py, with the runtime API that adds a node to the running balancer.
+
+One gRPC frontend (HTTP/2 without TLS, as gRPC clients speak it on loopback) sends every call that
+carries the `x-camdirector-route` header to one node by a consistent hash of that header, so all
+the calls of a session reach the node that holds it; calls without it go round robin. One HTTP
+frontend spreads the nodes' REST APIs the same way (a REST call about a session that carries the
+session's route header reaches the node that holds it; the rest go round robin: the job and level
+resources are the same on every node).
+
+Health checks call the gRPC health service (grpc.health.v1.Health/Check) every node serves on its
+gRPC port. HAProxy 2.6 cannot send that request as an HTTP check: a gRPC request body starts with
+a 5-byte header that always holds NUL bytes (a compressed flag and a 4-byte length), and
+`http-check send body`/`body-lf` are C strings that stop at the first NUL (checked: with
+`body-lf %[bin(0000000000)]` HAProxy sends an empty body and `content-length: 0`). So the check
+is a TCP check that speaks the HTTP/2 itself: `tcp-check send-binary` sends the connection
+preface, an empty SETTINGS frame, the HEADERS of a POST to /grpc.health.v1.Health/Check and one
+DATA frame holding the empty HealthCheckRequest, and `tcp-check expect binary` waits for the
+HealthCheckResponse{status: SERVING} message in the reply. NOT_SERVING, an unknown service, a
+refused connection or silence all fail it.
+"""
+from __future__ import annotations
+
+import csv
+import socket
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from camdirector.deploy.services import ServiceError, _binary, _tail, _wait_port, free_port, stop_processes
+
+ROUTE_HEADER = "x-camdirector-route"  # the metadata header the SDKs set on every call of a session
+GRPC_BACKEND, HTTP_BACKEND = "nodes_grpc", "nodes_http"
+UNIX_PATH_MAX = 107  # bytes in a unix socket's path, Linux's sun_path less the final NUL
+
+
+@dataclass(frozen=True)
+class BalancerSettings:
+    host: str = "127.0.0.1"                # where the frontends listen (loopback: nothing else reaches them)
+    grpc_port: int = 0                     # the gRPC frontend's port; 0 picks a free one
+    http_port: int = 0                     # the REST frontend's port; 0 picks a free one
+    check_interval_s: float = 1.0          # between two health checks of a node in a steady state, s. [0.05, 60]
+    check_fast_interval_s: float = 0.25    # between checks while a node is going up or down, s. [0.05, 60]
+    check_timeout_s: float = 1.0           # a check unanswered this long fails, s. [0.05, 60]
+    fall: int = 2                          # failed checks in a row that mark a node down. [1, 100]
+    rise: int = 2                          # passed checks in a row that mark it up again. [1, 100]
+    # Every node's weight. HAProxy puts 16 points per unit of weight on the hash ring: at weight 1
+    # (its default) the busiest node's share of the ring is 1.34x the mean at 10 nodes and 1.44x at
+    # 100; at 256 (4096 points) 1.02x and 1.03x (load_tests/ring_sim.py). [1, 256]
+    weight: int = 256
+    # The longest a client or node may stay silent on an open connection or stream before HAProxy
+    # closes it: a game paused longer than this reconnects (its session waits for it), s. [1, 86400]
+    idle_timeout_s: float = 600.0
+    connect_timeout_s: float = 1.0         # a loopback or LAN connect takes far less; more means the node is gone, s
+
+    def __post_init__(self):
+        checks = [
+            (0.05 <= self.check_interval_s <= 60, "check_interval_s must be in [0.05, 60]"),
+            (0.05 <= self.check_fast_interval_s <= 60, "check_fast_interval_s must be in [0.05, 60]"),
+            (0.05 <= self.check_timeout_s <= 60, "check_timeout_s must be in [0.05, 60]"),
+            (1 <= self.fall <= 100 and 1 <= self.rise <= 100, "fall and rise must be in [1, 100]"),
+            (1 <= self.weight <= 256, "weight must be in [1, 256] (HAProxy's range)"),
+            (1 <= self.idle_timeout_s <= 86_400, "idle_timeout_s must be in [1, 86400]"),
+            (0.05 <= self.connect_timeout_s <= 60, "connect_timeout_s must be in [0.05, 60]"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+
+@dataclass(frozen=True)
+class Backend:
+    """One node as the balancer sees it."""
+    name: str        # the server's name in both backends, e.g. "node-1"
+    server_id: int   # HAProxy's server id: a node's points on the hash ring are derived from it alone,
+                     # so the same id gives the same sessions on every balancer and after a restart
+    grpc: str        # the node's gRPC HOST:PORT
+    http: str        # the node's HTTP HOST:PORT
+
+
+def _h2_frame(kind: int, flags: int, stream: int, payload: bytes) -> bytes:
+    """One HTTP/2 frame (RFC 9113 section 4.1): 24-bit length, type, flags, 31-bit stream id."""
+    return len(payload).to_bytes(3, "big") + bytes([kind, flags]) + stream.to_bytes(4, "big") + payload
+
+
+def _hpack_literal(name_index: int, value: bytes) -> bytes:
+    """A header field 'literal without indexing' whose name is HPACK static table entry name_index
+    (< 15), its value a plain string shorter than 127 bytes (RFC 7541 sections 6.2.2 and 5.2)."""
+    return bytes([name_index, len(value)]) + value
+
+
+def grpc_health_check_request() -> bytes:
+    """The bytes of a whole gRPC call of grpc.health.v1.Health/Check for the server's overall
+    health (service ""), from the connection preface on, as `tcp-check send-binary` sends them."""
+    headers = (bytes([0x83, 0x86])                                         # :method POST, :scheme http
+               + _hpack_literal(4, b"/grpc.health.v1.Health/Check")         # :path
+               + _hpack_literal(1, b"localhost")                            # :authority
+               + bytes([0x0F, 0x10]) + bytes([16]) + b"application/grpc"    # content-type (static entry 31)
+               + bytes([0x00, 2]) + b"te" + bytes([8]) + b"trailers")       # te: trailers (a new name)
+    empty_request = bytes(5)  # not compressed, length 0: HealthCheckRequest{service: ""}
+    return (b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
+            + _h2_frame(0x4, 0x0, 0, b"")               # SETTINGS, all defaults
+            + _h2_frame(0x1, 0x4, 1, headers)           # HEADERS, END_HEADERS, stream 1
+            + _h2_frame(0x0, 0x1, 1, empty_request))    # DATA, END_STREAM
+
+
+# The reply's message: not compressed, length 2, HealthCheckResponse{status: SERVING (field 1 = 1)}.
+SERVING_REPLY = bytes([0, 0, 0, 0, 2, 0x08, 0x01])
+
+
+def _ms(seconds: float) -> str:
+    """A duration as HAProxy reads it: whole seconds as "600s", others in milliseconds."""
+    return f"{round(seconds)}s" if seconds == round(seconds) else f"{round(seconds * 1000)}ms"
+
+
+def _server_args(s: BalancerSettings) -> str:
+    """A node's health check and weight, the same in both backends."""
+    return (f"check inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
+            f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight}")
+
+
+def render_config(settings: BalancerSettings, backends: list[Backend], *, stats_socket: str,
+                  grpc_port: int, http_port: int, resolvers: str = "") -> str:
+    """haproxy.cfg for these nodes. `resolvers` ("" for none) is a `nameserver` line's address,
+    for node names that only a container network's DNS knows (docker/compose.cluster.yaml)."""
+    server = _server_args(settings)
+    if resolvers:
+        # a name that does not resolve yet (its container is starting) leaves that node down, not HAProxy
+        server += " resolvers dns init-addr last,libc,none"
+    lines = [
+        "# Written by camdirector.deploy.haproxy; see docs/scaling.md.",
+        "global",
+        f"    stats socket {stats_socket} mode 600 level admin",
+        # node up/down and abnormal requests only: a 60 Hz stream must not write a line per frame
+        "    log stderr format raw local0 notice",
+        "",
+    ]
+    if resolvers:
+        lines += ["resolvers dns", f"    nameserver dns {resolvers}", "    hold valid 10s", ""]
+    lines += [
+        "defaults",
+        "    mode http",
+        "    log global",
+        "    option httplog",
+        "    option dontlog-normal",
+        f"    timeout connect {_ms(settings.connect_timeout_s)}",
+        f"    timeout client {_ms(settings.idle_timeout_s)}",
+        f"    timeout server {_ms(settings.idle_timeout_s)}",
+        f"    timeout check {_ms(settings.check_timeout_s)}",
+        "    timeout http-request 10s",
+        # a node that died since its last check refuses the connection: try it once more, then
+        # another node (which restores the session from the checkpoint store)
+        "    retries 2",
+        "    option redispatch 1",
+        "",
+        "frontend grpc",
+        f"    bind {settings.host}:{grpc_port} proto h2",
+        f"    default_backend {GRPC_BACKEND}",
+        "",
+        f"backend {GRPC_BACKEND}",
+        f"    balance hdr({ROUTE_HEADER})",
+        "    hash-type consistent",
+        "    option tcp-check",
+        f"    tcp-check send-binary {grpc_health_check_request().hex()}",
+        f"    tcp-check expect binary {SERVING_REPLY.hex()}",
+        f"    default-server proto h2 {server}",
+        *(f"    server {b.name} {b.grpc} id {b.server_id}" for b in backends),
+        "",
+        "frontend http",
+        f"    bind {settings.host}:{http_port}",
+        f"    default_backend {HTTP_BACKEND}",
+        "",
+        f"backend {HTTP_BACKEND}",
+        f"    balance hdr({ROUTE_HEADER})",
+        "    hash-type consistent",
+        "    option httpchk GET /healthz",
+        "    http-check expect status 200",
+        f"    default-server {server}",
+        *(f"    server {b.name} {b.http} id {b.server_id}" for b in backends),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+class HAProxy:
+    """haproxy on `settings.host`, configured for `backends`, its runtime API on a unix socket in
+    `folder`. A child in a session of its own: it outlives the process that started it (the
+    cluster's `up` returns); `pid` is what stops it."""
+
+    def __init__(self, folder: Path, settings: BalancerSettings = BalancerSettings()):
+        self.folder = Path(folder)
+        self.settings = settings
+        self.grpc_port = settings.grpc_port or free_port()
+        self.http_port = settings.http_port or free_port()
+        self.config_path = self.folder / "haproxy.cfg"
+        self.socket_path = self.folder / "haproxy.sock"
+        self.log_path = self.folder / "haproxy.log"
+        self.backends: list[Backend] = []
+        self.pid: int | None = None
+        self.proc: subprocess.Popen | None = None  # None where another process started it
+        if len(str(self.socket_path).encode()) > UNIX_PATH_MAX:
+            raise ServiceError(f"the runtime API socket's path {self.socket_path} is longer than "
+                               f"{UNIX_PATH_MAX} bytes: use a shorter cluster folder")
+
+    @property
+    def grpc(self) -> str:
+        return f"{self.settings.host}:{self.grpc_port}"
+
+    @property
+    def http(self) -> str:
+        return f"{self.settings.host}:{self.http_port}"
+
+    def _write_config(self) -> None:
+        self.config_path.write_text(render_config(self.settings, self.backends, stats_socket=str(self.socket_path),
+                                                  grpc_port=self.grpc_port, http_port=self.http_port))
+
+    def start(self, backends: list[Backend], timeout_s: float = 10.0) -> HAProxy:
+        """Writes the configuration, checks it (`haproxy -c`) and starts HAProxy; returns once
+        both frontends listen (the nodes' health is `wait_healthy`'s)."""
+        binary = _binary("haproxy", "haproxy", Path("/usr/sbin"))
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.backends = list(backends)
+        self._write_config()
+        checked = subprocess.run([binary, "-c", "-q", "-f", str(self.config_path)], capture_output=True, text=True)
+        if checked.returncode != 0:
+            raise ServiceError(f"haproxy rejected {self.config_path}: {checked.stderr[-2000:]}")
+        with open(self.log_path, "ab") as log:
+            self.proc = subprocess.Popen([binary, "-f", str(self.config_path)], stdin=subprocess.DEVNULL,
+                                         stdout=log, stderr=log, start_new_session=True)
+        self.pid = self.proc.pid
+        _wait_port(self.grpc_port, self.proc, timeout_s, "haproxy", self.log_path)
+        _wait_port(self.http_port, self.proc, timeout_s, "haproxy", self.log_path)
+        return self
+
+    def command(self, line: str, timeout_s: float = 5.0) -> str:
+        """One runtime API command (management.txt section 9.3); returns HAProxy's answer."""
+        with socket.socket(socket.AF_UNIX) as sock:
+            sock.settimeout(timeout_s)
+            sock.connect(str(self.socket_path))
+            sock.sendall(line.encode() + b"\n")
+            chunks = []
+            while chunk := sock.recv(65536):  # HAProxy closes after one answer (non-interactive mode)
+                chunks.append(chunk)
+        return b"".join(chunks).decode(errors="replace")
+
+    def server_states(self) -> dict[str, dict[str, str]]:
+        """{backend: {server: status}}, status as `show stat` writes it: "UP", "DOWN", "UP 1/2"
+        (going down), "DOWN 1/2" (going up), "MAINT"; "UP" only once a check has passed."""
+        rows = csv.DictReader(self.command("show stat").lstrip("# ").splitlines())
+        states: dict[str, dict[str, str]] = {}
+        for row in rows:
+            if row["svname"] in ("FRONTEND", "BACKEND"):
+                continue
+            # a server starts UP before its first check; trust UP only after a passed check
+            passed = row["check_status"].lstrip("* ") == "L7OK"  # the gRPC or HTTP answer itself, not a connect
+            status = row["status"] if passed or row["status"] != "UP" else "UP (not checked yet)"
+            states.setdefault(row["pxname"], {})[row["svname"]] = status
+        return states
+
+    def wait_until(self, expected: dict[str, str], timeout_s: float = 30.0,
+                   backends: tuple[str, ...] = (GRPC_BACKEND, HTTP_BACKEND)) -> float:
+        """Waits until every named server has the given status ("UP" or "DOWN") in `backends`;
+        returns the seconds it took. ServiceError after timeout_s."""
+        start = time.monotonic()
+        while True:
+            states = self.server_states()
+            wrong = {(backend, name): states.get(backend, {}).get(name) for backend in backends
+                     for name, status in expected.items() if states.get(backend, {}).get(name) != status}
+            if not wrong:
+                return time.monotonic() - start
+            if time.monotonic() - start > timeout_s:
+                raise ServiceError(f"haproxy: after {timeout_s:g} s, servers not as expected {expected}: {wrong}; "
+                                   f"{_tail(self.log_path)}")
+            time.sleep(0.05)
+
+    def add(self, backend: Backend) -> None:
+        """Adds a node to the running HAProxy through its runtime API: no reload, every open
+        connection and stream stays where it is, and only the keys nearest to the new node's
+        points on the ring move to it. The configuration file is rewritten too, so a restart of
+        HAProxy keeps the node."""
+        if any(b.name == backend.name or b.server_id == backend.server_id for b in self.backends):
+            raise ServiceError(f"haproxy: a server named {backend.name} or with id {backend.server_id} exists")
+        # a dynamic server takes nothing from `default-server`: the same arguments, spelt out
+        common = f"id {backend.server_id} {_server_args(self.settings)}"
+        for name, address, extra in ((GRPC_BACKEND, backend.grpc, " proto h2"), (HTTP_BACKEND, backend.http, "")):
+            answer = self.command(f"add server {name}/{backend.name} {address} {common}{extra}")
+            if "New server registered" not in answer:
+                raise ServiceError(f"haproxy: add server {name}/{backend.name}: {answer.strip()}")
+            for verb in ("enable health", "enable server"):
+                self.command(f"{verb} {name}/{backend.name}")
+        self.backends.append(backend)
+        self._write_config()
+
+    def stop(self) -> None:
+        if self.pid is not None:
+            stop_processes([(self.pid, str(self.config_path))], timeout_s=5.0)
+
+
+def compose_config(nodes: int) -> str:
+    """haproxy.cfg for docker/compose.cluster.yaml: services node-1..node-N (gRPC on 50051, HTTP on
+    8080) found through Docker's DNS; the balancer on 50051 and 8080 of its container."""
+    backends = [Backend(f"node-{k}", k, f"node-{k}:50051", f"node-{k}:8080") for k in range(1, nodes + 1)]
+    return render_config(BalancerSettings(host="0.0.0.0"), backends, stats_socket="/tmp/haproxy.sock",
+                         grpc_port=50051, http_port=8080, resolvers="127.0.0.11:53")
+
+
+if __name__ == "__main__":
+    import argparse
+    parser = argparse.ArgumentParser(description="print the haproxy.cfg of docker/compose.cluster.yaml")
+    parser.add_argument("--compose-nodes", type=int, default=3, help="node services node-1..node-N")
+    print(compose_config(parser.parse_args().compose_nodes), end="")

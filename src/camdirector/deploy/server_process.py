@@ -1,0 +1,103 @@
+"""A `camdirector serve` child process on free loopback ports, for the demo, benchmarks,
+evaluation and tests: started, waited for (its one JSON ready line names the bound addresses),
+and stopped."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def worker_pids(server_pid: int) -> list[int]:
+    """The server's worker processes: its children started by multiprocessing's `spawn` (which
+    leaves out a resource tracker, were one running), sorted by pid."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            cmdline = Path(f"/proc/{entry}/cmdline").read_bytes()
+        except OSError:  # gone meanwhile
+            continue
+        parent = int(stat.rsplit(")", 1)[1].split()[1])  # the name in parentheses may hold spaces
+        if parent == server_pid and b"spawn_main" in cmdline:
+            pids.append(int(entry))
+    return sorted(pids)
+
+
+class ServerProcess:
+    """Pass transports=("grpc",) to turn the others off; extra `args` go to `camdirector serve`.
+    The server's log goes to a file in a temporary folder (a pipe could fill and stall it)."""
+
+    def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None,
+                 python: str = sys.executable):
+        self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
+        self.log_path = Path(self._dir.name) / "server.log"
+        self._log = open(self.log_path, "w+")
+        bind = {"grpc": "127.0.0.1:0", "zmq": "tcp://127.0.0.1:*", "http": "127.0.0.1:0"}
+        cmd = [python, "-m", "camdirector.__main__", "serve"]  # another checkout's venv runs its own server
+        for name, address in bind.items():
+            cmd += [f"--{name}", address if name in transports else ""]
+        if "--data-dir" not in args:
+            cmd += ["--data-dir", self._dir.name]
+        self.proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=self._log, text=True,
+                                     env={**os.environ, **(env or {})})
+        line = self.proc.stdout.readline()
+        if not line:
+            self.proc.wait(15)
+            raise RuntimeError(f"the server did not start: {self.log_tail()}")
+        self.ready: dict = json.loads(line)
+        self.grpc: str | None = self.ready.get("grpc")
+        self.zmq: str | None = self.ready.get("zmq")
+        self.http: str | None = self.ready.get("http")
+
+    def url(self, transport: str) -> str:
+        """The SDK's URL for "grpc" or "zmq"."""
+        return f"grpc://{self.grpc}" if transport == "grpc" else self.zmq
+
+    def log_tail(self, chars: int = 4000) -> str:
+        self._log.flush()
+        return self.log_path.read_text()[-chars:]
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def worker_pids(self) -> list[int]:
+        """Its worker processes' pids (worker_pids), sorted."""
+        return worker_pids(self.proc.pid)
+
+    def kill_worker_mid_request(self, stopped_s: float = 0.1) -> int:
+        """SIGKILLs its first worker with requests in flight to it (stopped for `stopped_s` first,
+        so a streaming client's frames wait on it); returns the pid. A worker killed between two
+        frames costs its sessions no UNAVAILABLE at all: the next frame waits for its successor."""
+        pid = self.worker_pids()[0]
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(stopped_s)
+        os.kill(pid, signal.SIGKILL)
+        return pid
+
+    def stop(self) -> int:
+        """Stops the server (SIGTERM, then SIGKILL after 15 s); returns its exit code."""
+        if self.alive():
+            self.proc.terminate()
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.proc.stdout.close()
+        self._log.close()
+        self._dir.cleanup()
+        return self.proc.returncode
+
+    def __enter__(self) -> ServerProcess:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

@@ -1,0 +1,100 @@
+"""`camdirector eval-match`: a match file through a real server, our director against HLTV's.
+
+    camdirector eval-match FILE --delay D --json OUT [--plot P.png] [--video V.mp4] [--video-seconds 20]
+                           [--data-dir DIR] [--rate-hz 30] [--minutes M] [--seed 0]
+        starts a server on the registry DIR (default: the per-user one) that holds the match's
+        level, streams the match (its first M minutes with --minutes) through a RIG_MATCH session
+        of each director with the broadcast delay D s, and a one-actor RIG_TRACKS session as the
+        cost reference (evaluation/match/evaluate.py); measures kill coverage, lead, shots, jump
+        cuts and visibility from the returned cameras (measure.py); prints the result as JSON and
+        writes it to OUT. --plot draws coverage, lead and shot lengths; --video renders our
+        director's program for its first S seconds (EGL; skipped with a message when unavailable).
+        Exit status: 0 ok, 1 the run failed, 2 bad arguments, match file or level.
+
+Kept light at import, as evaluation/cli.py: numpy, the client and the server load when it runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    """Registers `eval-match` on an argparse subparsers object; args.handler(args) runs it."""
+    p = subparsers.add_parser(
+        "eval-match", help="stream a match file through our match director and the HLTV baseline, and measure both",
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("file", type=Path, help="match file (camdirector match-sim --out)")
+    p.add_argument("--delay", type=float, required=True, help="broadcast delay, s, 0 to 300")
+    p.add_argument("--json", type=Path, required=True, help="write the result here")
+    p.add_argument("--plot", type=Path, help="draw coverage, lead and shot lengths here (PNG)")
+    p.add_argument("--video", type=Path, help="render our director's program here (MP4, 480x270)")
+    p.add_argument("--video-seconds", dest="video_seconds", type=float, default=20.0,
+                   help="seconds of program in the video (default 20)")
+    p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry holding the match's level "
+                   "(default: per-user data dir)")
+    p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0,
+                   help="frames per second sent, a divisor of the file's rate (default 30)")
+    p.add_argument("--minutes", type=float, help="only the match's first minutes (default: all of it)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sessions and the body sample points (default 0)")
+    p.set_defaults(handler=run_eval_match)
+
+
+def _progress(text: str) -> None:
+    print(f"eval-match: {text}", file=sys.stderr, flush=True)
+
+
+def run_eval_match(args: argparse.Namespace) -> int:
+    """Runs `camdirector eval-match` from parsed arguments; returns the exit status."""
+    import dataclasses
+
+    from camdirector.evaluation.match.evaluate import evaluate_match, plot_result
+    from camdirector.evaluation.match.match_file import load_match
+    from camdirector.evaluation.match.program_video import VideoUnavailable, render_program
+    from camdirector_client import DirectorError
+
+    try:
+        if not 0.0 <= args.delay <= 300.0:
+            raise ValueError("--delay must be in [0, 300] s")
+        if not args.rate_hz > 0 or not args.video_seconds > 0:
+            raise ValueError("--rate-hz and --video-seconds must be positive")
+        match = load_match(args.file)
+        if args.minutes is not None:
+            if not args.minutes > 0:
+                raise ValueError("--minutes must be positive")
+            keep = match.time_s <= match.time_s[0] + 60.0 * args.minutes
+            match = dataclasses.replace(
+                match, time_s=match.time_s[keep], positions_world=match.positions_world[keep],
+                rotations_xyzw=match.rotations_xyzw[keep], alive=match.alive[keep],
+                events=[e for e in match.events if e.time_s <= match.time_s[keep][-1]])
+        if args.rate_hz > match.rate_hz:
+            raise ValueError(f"--rate-hz {args.rate_hz:g} is above the file's {match.rate_hz:g} Hz")
+        result, runs = evaluate_match(match, args.delay, data_dir=args.data_dir, rate_hz=args.rate_hz,
+                                      seed=args.seed, progress=_progress)
+    except KeyError as exc:
+        print(f"camdirector eval-match: {exc.args[0]}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"camdirector eval-match: {exc}", file=sys.stderr)
+        return 2
+    except (RuntimeError, DirectorError) as exc:  # the server failed a session: the run has no result
+        print(f"camdirector eval-match: {exc}", file=sys.stderr)
+        return 1
+    result["match"]["file"] = str(args.file)
+    if args.plot:
+        plot_result(result, args.plot)
+    if args.video:
+        try:
+            _progress(f"rendering {args.video_seconds:g} s of program to {args.video}")
+            result["video"] = render_program(match, runs["PLANNED"].program, args.video, args.video_seconds,
+                                             data_dir=args.data_dir)
+        except VideoUnavailable as exc:
+            _progress(f"no video: {exc}")
+            result["video"] = {"skipped": str(exc)}
+    text = json.dumps(result, indent=1)  # as load_tests/report.py's emit writes it
+    print(text)
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(text)
+    return 0

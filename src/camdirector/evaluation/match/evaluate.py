@@ -1,0 +1,261 @@
+"""`camdirector eval-match`: a recorded match streamed through a real server, our director against
+the HLTV baseline, measured independently of both (issue 12, item 5; measure.py says how).
+
+One run: a `camdirector serve` child (deploy/server_process.py) on the registry that holds the match's
+level. Each director gets one RIG_MATCH session (the players as capsule targets standing on their
+feet with their team and a chest-high aim point, level_id = the match's level, delay_s = D) and one
+gRPC StreamFrames stream: the match subsampled to `rate_hz` (every k-th frame of the file, the
+events of the skipped frames riding on the next sent one, as a game sending at that rate would
+announce them), then D more seconds of the last frame so that the program reaches the match's
+end. Replies are aligned by their frame number (the program moment: frame = match row + 1);
+buffering and stale replies carry no program. The per-frame cost reference is a one-actor
+RIG_TRACKS session on the same level in the same server, following the match's first player for
+as many frames.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import camdirector_client as cd
+from camdirector.deploy.server_process import ServerProcess
+from camdirector.evaluation.match.match_file import EVENT_KINDS, MatchRecording
+from camdirector.evaluation.match.measure import (
+    BodySampler,
+    Program,
+    aim_offset,
+    cuts_per_minute,
+    framed_visibility,
+    jump_cuts,
+    kill_coverage,
+    measure_shown,
+    player_mesh,
+    shot_lengths_s,
+)
+from camdirector.geometry.camera import Lens
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.precompute.tracks.registry import LevelRegistry
+
+DIRECTORS = {"PLANNED": cd.pb.MATCH_DIRECTOR_PLANNED, "HLTV": cd.pb.MATCH_DIRECTOR_HLTV}  # ours first
+EVENT_KIND_MSG = dict(zip(EVENT_KINDS, (cd.pb.EVENT_KILL, cd.pb.EVENT_DAMAGE, cd.pb.EVENT_OBJECTIVE, cd.pb.EVENT_CUSTOM)))
+SHORT_SHOT_S = 2.0   # issue 12: no shot under 2 s (the film rules' default minimum)
+
+
+@dataclass(frozen=True)
+class Feed:
+    """What is sent: rows (k,) int64 match rows of the sent frames (the last repeated for the
+    delay's tail), frames (k,) int64 their frame numbers, times_s (k,) s their game times."""
+
+    rows: np.ndarray
+    frames: np.ndarray
+    times_s: np.ndarray
+
+    @classmethod
+    def of(cls, match: MatchRecording, rate_hz: float, delay_s: float) -> Feed:
+        step = max(1, round(match.rate_hz / rate_hz))
+        rows = np.arange(0, len(match.time_s), step, dtype=np.int64)
+        dt_s = step / match.rate_hz
+        tail = np.arange(1, math.ceil(delay_s / dt_s) + 2, dtype=np.int64)  # one more: the last moment is reached
+        frames = np.concatenate([rows + 1, rows[-1] + 1 + tail * step])
+        times_s = np.concatenate([match.time_s[rows], match.time_s[rows[-1]] + tail * dt_s])
+        return cls(np.concatenate([rows, np.full(len(tail), rows[-1])]), frames, times_s)
+
+    @property
+    def rate_hz(self) -> float:
+        return float(1.0 / np.median(np.diff(self.times_s))) if len(self.times_s) > 1 else float("nan")
+
+
+@dataclass(eq=False)
+class DirectorRun:
+    """One director's session: its program, compute_ms (m,) of the replies with a program, the
+    count of buffering replies and the stream's wall time, s."""
+
+    program: Program
+    compute_ms: np.ndarray
+    buffering: int
+    wall_s: float
+
+
+def player_targets(match: MatchRecording, player_ids: list[str] | None = None) -> list[cd.pb.Target]:
+    """The players (or those named) as targets at their first frame: capsule bodies on their feet."""
+    targets = []
+    for i, player in enumerate(match.players):
+        if player_ids is not None and player.id not in player_ids:
+            continue
+        body = player_mesh(player)
+        targets.append(cd.pb.Target(
+            id=player.id, team=player.team, mesh=cd.mesh_from_arrays(body.vertices, body.faces),
+            transform=cd.transform_msg(match.positions_world[0, i], match.rotations_xyzw[0, i]),
+            aim_offset=cd.vec3(aim_offset(player))))
+    return targets
+
+
+def _event_msg(event) -> cd.pb.GameEvent:
+    return cd.pb.GameEvent(kind=EVENT_KIND_MSG[event.kind], actor_id=event.actor_id, other_actor_id=event.other_actor_id,
+                           priority=event.priority, time_s=event.time_s, label=event.label,
+                           position=cd.vec3(event.position_world))
+
+
+def frame_updates(session: cd.Session, match: MatchRecording, feed: Feed, columns: list[int],
+                  events: bool) -> Iterator[cd.pb.FrameUpdate]:
+    """The feed's FrameUpdates for the players in `columns`, packed; with `events`, each match
+    event on the first sent frame at or after its own (events_per_frame)."""
+    per_frame = match.events_per_frame()
+    ids = [match.players[c].id for c in columns]
+    sent_through = -1
+    for row, frame, time_s in zip(feed.rows.tolist(), feed.frames.tolist(), feed.times_s.tolist()):
+        update = session.frame_update(frame, time_s, packed=cd.pack_states(
+            ids, match.positions_world[row, columns], match.rotations_xyzw[row, columns]))
+        if events:
+            for r in range(sent_through + 1, row + 1):
+                update.events.extend(_event_msg(e) for e in per_frame[r])
+        sent_through = max(sent_through, row)
+        yield update
+
+
+def stream_director(client: cd.Client, match: MatchRecording, feed: Feed, director: int, delay_s: float,
+                    seed: int) -> DirectorRun:
+    """Streams the match through one RIG_MATCH session of `director`; its program (module docstring)."""
+    columns = list(range(len(match.players)))
+    replies = []
+    start = time.perf_counter()
+    with client.create_session(targets=player_targets(match), level_id=match.level, delay_s=delay_s, seed=seed,
+                               style=cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director=director)) as session:
+        for u in session.stream(frame_updates(session, match, feed, columns, events=True)):
+            if u.buffering or u.stale:
+                replies.append((u.buffering, None))
+                continue
+            p, q = u.pose.position, u.pose.rotation
+            replies.append((False, (u.frame, u.time_s, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), u.pose.vertical_fov_deg,
+                                    u.cut, u.shot_id, tuple(u.shot.subject_ids), u.compute_ms)))
+    wall_s = time.perf_counter() - start
+    answered = [r for _, r in replies if r is not None and r[0] - 1 < len(match.time_s)]
+    answered = [r for i, r in enumerate(answered) if i == 0 or r[0] > answered[i - 1][0]]  # one row per moment
+    if not answered:
+        raise RuntimeError("the server answered no program frame (is the match shorter than the delay?)")
+    frame, time_s, position, rotation, fov, cut, shot_id, subjects, compute_ms = zip(*answered)
+    program = Program(index=np.array(frame, dtype=np.int64) - 1, time_s=np.array(time_s),
+                      position=np.array(position), rotation=np.array(rotation), vertical_fov_deg=np.array(fov),
+                      cut=np.array(cut, dtype=bool), shot_id=np.array(shot_id, dtype=np.int64), subjects=list(subjects))
+    return DirectorRun(program, np.array(compute_ms), sum(b for b, _ in replies), wall_s)
+
+
+def stream_tracks_reference(client: cd.Client, match: MatchRecording, feed: Feed) -> np.ndarray:
+    """compute_ms (k,) of a one-actor RIG_TRACKS session on the match's level following its first
+    player for the feed's frames: the per-frame cost reference of issue 12's "Done when"."""
+    with client.create_session(targets=player_targets(match, [match.players[0].id]), level_id=match.level, seed=1,
+                               style=cd.pb.Style(rig=cd.pb.RIG_TRACKS)) as session:
+        return np.array([u.compute_ms for u in session.stream(frame_updates(session, match, feed, [0], events=False))
+                         if not u.stale])
+
+
+def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens: Lens, level: RayScene) -> dict:
+    program = run.program
+    shown = measure_shown(program, bodies, lens, level)
+    coverage = kill_coverage(match, program, shown)
+    lengths = shot_lengths_s(program)
+    return {
+        "kill_coverage": round(coverage.coverage, 3),
+        "kills": coverage.kills,
+        "kills_covered": int(coverage.covered.sum()),
+        "lead_s": {**_spread(coverage.lead_s), "values": [round(v, 2) for v in coverage.lead_s.tolist()]},
+        "shots": {**_spread(lengths), "under_2s": int((lengths < SHORT_SHOT_S - 1e-6).sum()),
+                  "values": [round(v, 2) for v in lengths.tolist()]},
+        "cuts_per_min": round(cuts_per_minute(program), 2),
+        "jump_cuts": jump_cuts(program, bodies),
+        "framed_visibility": round(framed_visibility(program, shown, match.player_index()), 3),
+        "compute_ms": _timing(run.compute_ms),
+        "program_moments": len(program),
+        "program_s": round(float(program.time_s[-1] - program.time_s[0]), 2),
+        "buffering_replies": run.buffering,
+        "stream_wall_s": round(run.wall_s, 1),
+    }
+
+
+def _spread(values: np.ndarray) -> dict:
+    """count, median, mean, min and max of values (None where there are none), 2 decimals."""
+    if not len(values):
+        return {"count": 0, "median": None, "mean": None, "min": None, "max": None}
+    return {"count": len(values), "median": round(float(np.median(values)), 2),
+            "mean": round(float(np.mean(values)), 2), "min": round(float(values.min()), 2),
+            "max": round(float(values.max()), 2)}
+
+
+def _timing(compute_ms: np.ndarray) -> dict:
+    """median and p99, ms (3 decimals), and n: the benchmarks' timing summary (load_tests/report.py's
+    `summary`; load_tests is not part of the installed package, so the command cannot import it)."""
+    return {"median": round(float(np.median(compute_ms)), 3), "p99": round(float(np.percentile(compute_ms, 99)), 3),
+            "n": len(compute_ms)}
+
+
+def evaluate_match(match: MatchRecording, delay_s: float, *, data_dir: Path | None = None, rate_hz: float = 30.0,
+                   seed: int = 0, progress=None) -> tuple[dict, dict[str, DirectorRun]]:
+    """Runs both directors and the TRACKS reference through one server; the result (JSON-ready)
+    and each director's run (for the plot and the video). `progress(text)` hears each step."""
+    progress = progress or (lambda text: None)
+    registry = LevelRegistry(data_dir)
+    artifact = registry.load(match.level)  # KeyError names an unknown level
+    level = RayScene([TriMesh(artifact.level_vertices, artifact.level_faces)])
+    bodies = BodySampler(match, np.random.default_rng(seed))
+    lens = Lens()  # the server's default lens: the sessions send none
+    feed = Feed.of(match, rate_hz, delay_s)
+    runs: dict[str, DirectorRun] = {}
+    with ServerProcess("--data-dir", str(registry.data_dir), transports=("grpc",)) as server, \
+            cd.connect(server.url("grpc"), timeout_s=60.0) as client:
+        for name, director in DIRECTORS.items():
+            progress(f"streaming {len(feed.rows)} frames through {name}")
+            runs[name] = stream_director(client, match, feed, director, delay_s, seed)
+        progress(f"streaming {len(feed.rows)} frames through the TRACKS reference")
+        tracks_ms = stream_tracks_reference(client, match, feed)
+    figures = {}
+    for name, run in runs.items():
+        progress(f"measuring {name}")
+        figures[name] = _figures(match, run, bodies, lens, level)
+    tracks_median_ms = float(np.median(tracks_ms))
+    kills = sum(e.kind == "kill" for e in match.events)
+    result = {
+        "match": {"level": match.level, "seed": match.seed, "players": len(match.players), "kills": kills,
+                  "minutes": round(float(match.time_s[-1] - match.time_s[0]) / 60.0, 2)},
+        "delay_s": delay_s, "rate_hz": round(feed.rate_hz, 2), "frames_sent": len(feed.rows),
+        "directors": figures,
+        "coverage_gain_over_hltv": round(figures["PLANNED"]["kill_coverage"] - figures["HLTV"]["kill_coverage"], 3),
+        "tracks_reference": {"player": match.players[0].id, "compute_ms": _timing(tracks_ms)},
+        "compute_ratio_to_tracks": {name: round(f["compute_ms"]["median"] / tracks_median_ms, 2)
+                                    for name, f in figures.items()},
+    }
+    return result, runs
+
+
+def plot_result(result: dict, out_png: Path) -> None:
+    """Coverage and lead per director, and the shot-length histograms, in one PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(result["directors"])
+    figures = [result["directors"][n] for n in names]
+    fig, (ax_cov, ax_lead, ax_shots) = plt.subplots(1, 3, figsize=(14, 4))
+    ax_cov.bar(names, [f["kill_coverage"] for f in figures], color=["tab:blue", "tab:orange"])
+    ax_cov.set_ylim(0, 1)
+    ax_cov.set_ylabel("kill coverage")
+    ax_cov.set_title(f"{result['match']['level']}, delay {result['delay_s']:g} s, {result['match']['kills']} kills")
+    ax_lead.boxplot([f["lead_s"]["values"] or [np.nan] for f in figures], tick_labels=names)
+    ax_lead.set_ylabel("lead before a covered kill, s")
+    bins = np.arange(0.0, max([12.0] + [max(f["shots"]["values"] or [0]) + 1 for f in figures]), 0.5)
+    for name, f in zip(names, figures):
+        ax_shots.hist(f["shots"]["values"], bins=bins, alpha=0.6, label=f"{name} (median {f['shots']['median']} s)")
+    ax_shots.axvline(SHORT_SHOT_S, color="k", lw=0.8, ls="--")
+    ax_shots.set_xlabel("shot length, s")
+    ax_shots.set_ylabel("shots")
+    ax_shots.legend()
+    fig.tight_layout()
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png, dpi=100)
+    plt.close(fig)

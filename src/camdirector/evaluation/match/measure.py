@@ -1,0 +1,185 @@
+"""Measurement of a match program, independent of the director that chose it (issue 12, item 5).
+
+The program is what a RIG_MATCH session answered: one camera per program moment (the match frame
+its reply names). Everything here is measured from that camera against the level mesh and the
+players' bodies as the match file has them, never from what the director says it shows:
+
+- shown fraction, per program moment and player: the share of the player's body sample points
+  (`SAMPLES_PER_PLAYER` points drawn uniformly over its capsule's surface, fixed for the run) that
+  lie in the camera's frame (geometry/camera.py's `in_frame`: in front of the near plane, inside
+  the frame's edges at the pose's field of view and the lens's aspect) and whose segment from the
+  camera centre crosses no level geometry (Embree ray casts, geometry.raycast.RayScene). Players do
+  not occlude each other, as in evaluation/scenario_measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
+- kill coverage: the share of kills at whose moment (the first program moment at or after the
+  kill's frame) both the attacker and the victim are shown.
+- lead, per covered kill: how long the program had been on the same shot (no cut) with both shown
+  at every moment, up to the kill, s.
+- shots: a shot runs from a cut (or the first program moment) to the next cut. Its length is the
+  time between the two cuts; the last shot, cut short by the end of the match, is left out of the
+  lengths. Cuts per minute count the cuts after the first moment over the program's duration.
+- jump cuts: a cut between two views of the same non-empty subject set (`CameraUpdate.shot.
+  subject_ids`) whose directions from the two cameras to the subjects' centroid (their aim points
+  at the cut's moment) differ by less than `JUMP_CUT_DEG` (issue 12's film rule, measured: the
+  director's own grammar is not consulted). Overviews name no subjects and are never jump cuts.
+- visibility of the framed subjects: per program moment with subjects, the mean shown fraction of
+  the players it names; averaged over those moments.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from camdirector.evaluation.match.match_file import MatchPlayer, MatchRecording
+from camdirector.geometry.camera import CameraPose, Lens, in_frame
+from camdirector.geometry.meshes import TriMesh, capsule
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.toric.target_sampling import SurfaceSampler
+
+SAMPLES_PER_PLAYER = 32    # body sample points per player (issue 12 brief: 16-32)
+SHOWN_FRACTION = 0.5       # a player is shown with at least this share of its points seen (issue 12, item 5)
+JUMP_CUT_DEG = 30.0        # a cut between views of the same subjects closer than this is a jump cut (issue 12)
+AIM_HEIGHT_FRACTION = 0.6  # the aim point (chest) this far up a player: the simulator's chest_height_fraction
+
+
+def player_mesh(player: MatchPlayer) -> TriMesh:
+    """The player's body: a capsule of its height and radius standing on its origin (its feet,
+    the match file's position), so one transform places it as the match file says."""
+    body = capsule(player.radius_m, player.height_m)
+    return TriMesh(body.vertices + [0.0, 0.5 * player.height_m, 0.0], body.faces)
+
+
+def aim_offset(player: MatchPlayer) -> np.ndarray:
+    """(3,) m: the player's aim point (chest) in its local frame."""
+    return np.array([0.0, AIM_HEIGHT_FRACTION * player.height_m, 0.0])
+
+
+@dataclass(eq=False)
+class Program:
+    """The program of one director: n program moments in increasing frame order.
+
+    index: (n,) int64 match frame (row of the match file's arrays) of each moment; time_s (n,) s;
+    position (n, 3) m camera centre; rotation (n, 4) xyzw camera-to-world; vertical_fov_deg (n,);
+    cut (n,) bool; shot_id (n,) int64; subjects: n tuples of player ids (the reply's
+    shot.subject_ids).
+    """
+
+    index: np.ndarray
+    time_s: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+    vertical_fov_deg: np.ndarray
+    cut: np.ndarray
+    shot_id: np.ndarray
+    subjects: list[tuple[str, ...]]
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def pose(self, row: int) -> CameraPose:
+        return CameraPose(self.position[row], self.rotation[row], float(self.vertical_fov_deg[row]))
+
+
+class BodySampler:
+    """Fixed sample points on every player's body, carried to the world at any match frame."""
+
+    def __init__(self, match: MatchRecording, rng: np.random.Generator, count: int = SAMPLES_PER_PLAYER):
+        self.match = match
+        self.points_local = np.stack([SurfaceSampler(player_mesh(p)).sample(count, rng) for p in match.players])  # (P, S, 3)
+        self.aims_local = np.stack([aim_offset(p) for p in match.players])                                      # (P, 3)
+
+    def points_world(self, index: int) -> np.ndarray:
+        """(P, S, 3) m: every player's sample points at match frame `index`."""
+        rotation = quat_to_matrix(self.match.rotations_xyzw[index])                  # (P, 3, 3)
+        return np.einsum("pij,psj->psi", rotation, self.points_local) + self.match.positions_world[index][:, None, :]
+
+    def aims_world(self, index: int, players: list[int]) -> np.ndarray:
+        """(k, 3) m: the aim points of the players (columns) at match frame `index`."""
+        rotation = quat_to_matrix(self.match.rotations_xyzw[index, players])
+        return np.einsum("pij,pj->pi", rotation, self.aims_local[players]) + self.match.positions_world[index, players]
+
+
+def shown_fractions(pose: CameraPose, lens: Lens, points_world: np.ndarray, level: RayScene) -> np.ndarray:
+    """(P,) the share of each player's points (P, S, 3) m in the frame of `pose` and unoccluded by
+    the level. Only points in the frame are ray cast: most players are off screen most of the time."""
+    n_players, n_samples = points_world.shape[:2]
+    flat = points_world.reshape(-1, 3)
+    seen = in_frame(pose, lens, flat)
+    candidates = np.flatnonzero(seen)
+    if len(candidates):
+        seen[candidates] = ~level.occluded(pose.position_world, flat[candidates])
+    return seen.reshape(n_players, n_samples).mean(axis=1)
+
+
+def measure_shown(program: Program, bodies: BodySampler, lens: Lens, level: RayScene) -> np.ndarray:
+    """(n, P) shown fraction of every player at every program moment (module docstring)."""
+    return np.stack([shown_fractions(program.pose(r), lens, bodies.points_world(int(program.index[r])), level)
+                     for r in range(len(program))]).reshape(len(program), len(bodies.match.players))
+
+
+@dataclass(frozen=True)
+class KillCoverage:
+    """kills: kills whose moment the program reaches; covered (kills,) bool; lead_s: per covered kill, s."""
+
+    kills: int
+    covered: np.ndarray
+    lead_s: np.ndarray
+
+    @property
+    def coverage(self) -> float:
+        return float(self.covered.mean()) if self.kills else float("nan")
+
+
+def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray) -> KillCoverage:
+    """Coverage and lead of the match's kills (module docstring); shown (n, P) from measure_shown."""
+    column = match.player_index()
+    covered, leads = [], []
+    for event in match.events:
+        if event.kind != "kill":
+            continue
+        row = int(np.searchsorted(program.index, np.searchsorted(match.time_s, event.time_s), side="left"))
+        if row >= len(program):
+            continue  # after the program's last moment
+        pair = [column[event.actor_id], column[event.other_actor_id]]
+        both_shown = shown[:, pair].min(axis=1) >= SHOWN_FRACTION                    # (n,)
+        ok = bool(both_shown[row])
+        covered.append(ok)
+        if ok:
+            start = row
+            while start > 0 and program.shot_id[start - 1] == program.shot_id[row] and both_shown[start - 1]:
+                start -= 1
+            leads.append(float(program.time_s[row] - program.time_s[start]))
+    return KillCoverage(len(covered), np.array(covered, dtype=bool), np.array(leads, dtype=np.float64))
+
+
+def shot_lengths_s(program: Program) -> np.ndarray:
+    """(k,) s: the lengths of the complete shots (the last one, cut short by the match's end, left out)."""
+    starts = program.time_s[np.flatnonzero(program.cut | (np.arange(len(program)) == 0))]
+    return np.diff(starts)
+
+
+def cuts_per_minute(program: Program) -> float:
+    duration_s = float(program.time_s[-1] - program.time_s[0]) if len(program) else 0.0
+    return 60.0 * int(program.cut[1:].sum()) / duration_s if duration_s > 0 else float("nan")
+
+
+def jump_cuts(program: Program, bodies: BodySampler, threshold_deg: float = JUMP_CUT_DEG) -> int:
+    """Cuts between two views of the same subjects less than threshold_deg apart (module docstring)."""
+    column = bodies.match.player_index()
+    count = 0
+    for row in np.flatnonzero(program.cut[1:]) + 1:
+        before, after = program.subjects[row - 1], program.subjects[row]
+        if not after or set(before) != set(after):
+            continue
+        centroid = bodies.aims_world(int(program.index[row]), [column[p] for p in after]).mean(axis=0)
+        a, b = centroid - program.position[row - 1], centroid - program.position[row]
+        cosine = a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-12)
+        count += bool(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) < threshold_deg)
+    return count
+
+
+def framed_visibility(program: Program, shown: np.ndarray, column: dict[str, int]) -> float:
+    """Mean over the moments that name subjects of their subjects' mean shown fraction; NaN if none."""
+    values = [shown[r, [column[p] for p in subjects]].mean() for r, subjects in enumerate(program.subjects) if subjects]
+    return float(np.mean(values)) if values else float("nan")

@@ -1,0 +1,62 @@
+"""HTTP API (FastAPI): health, Prometheus metrics, the REST routes of the service, and the
+director's dashboard (static files under /dashboard/ that read those routes)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import FastAPI, Request, Response
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.responses import PlainTextResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
+
+from camdirector.front.http.routes.monitors import build_view_router
+from camdirector.front.http.routes.sessions import build_session_router
+from camdirector.front.router import SessionRouter
+from camdirector.front.view_hub import ViewHub
+
+DASHBOARD_DIR = Path(__file__).with_name("dashboard")
+
+
+def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
+    """The app; `app.state.views` is its ViewHub, which the server closes before stopping (its
+    live streams would hold the HTTP server open)."""
+    app = FastAPI(title="camdirector", version="0.1.0",
+                  description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.")
+    app.state.views = ViewHub(router, router.metrics)
+
+    @app.get("/healthz")
+    def healthz() -> dict:
+        """Liveness and a short status: open sessions, worker processes, bound transports."""
+        return {"status": "ok", "sessions": len(router.sessions), "workers": router.pool.size,
+                "transports": transports}
+
+    @app.exception_handler(StarletteHTTPException)
+    async def allow_every_method(request: Request, exc: StarletteHTTPException) -> Response:
+        """A 405's Allow header names the methods of every documented route on the path:
+        Starlette's names only those of the first route that matched (GET /v1/levels beside POST)."""
+        if exc.status_code == 405:
+            allowed = sorted({method.upper() for template, operations in app.openapi()["paths"].items()
+                              if compile_path(template)[0].match(request.url.path)
+                              for method in operations})
+            if allowed:
+                exc = StarletteHTTPException(405, exc.detail, headers={"Allow": ", ".join(allowed)})
+        return await http_exception_handler(request, exc)
+
+    @app.get("/metrics", response_class=PlainTextResponse)
+    def metrics() -> Response:
+        """Prometheus text exposition."""
+        return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)
+
+    app.include_router(build_session_router(router))
+    app.include_router(build_view_router(app.state.views))
+    # The director's dashboard: static files that read the routes above.
+    app.mount("/dashboard", StaticFiles(directory=DASHBOARD_DIR, html=True), name="dashboard")
+
+    @app.get("/", include_in_schema=False)
+    def root() -> RedirectResponse:
+        return RedirectResponse("/dashboard/")
+
+    return app

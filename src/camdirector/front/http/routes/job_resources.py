@@ -1,0 +1,150 @@
+"""What every job resource's routes share: the status models, submitting, looking up, listing and
+cancelling a job of one kind, the answer when the job store or queue is down, and the upload limit
+(one runner, or one queue client, and one job store serve every kind). The routes are the same in
+both modes (jobs/__init__.py): `Jobs` is either."""
+from __future__ import annotations
+
+import inspect
+import json
+from collections.abc import Callable
+
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, Field
+
+from camdirector.jobs import Job, JobNotFound, JobRunner, JobState, JobsUnavailable, QueueClient, QueueFull
+
+Jobs = JobRunner | QueueClient
+
+
+class JobCreated(BaseModel):
+    id: str = Field(description="job id")
+    status: str = Field(description="queued")
+
+
+class JobStatus(BaseModel):
+    id: str
+    status: str = Field(description="queued | running | succeeded | failed | cancelled")
+    progress: float = Field(ge=0.0, le=1.0)
+    error: str | None = Field(default=None, description="why the job failed or was cancelled")
+    timings: dict[str, float] = Field(description="milliseconds per stage (when finished)")
+    created_unix_s: float = Field(description="when it was submitted, Unix s")
+    started_unix_s: float | None = Field(default=None, description="when its last attempt started, Unix s")
+    finished_unix_s: float | None = Field(default=None, description="when it ended, Unix s")
+
+
+def job_of_kind(runner: Jobs, job_id: str, kind: str, noun: str):
+    """The job job_id of `kind`; HTTPException 404 for an unknown id and for a job of another
+    kind (one runner and job store serve every kind of job route)."""
+    try:
+        job = runner.get(job_id)
+    except JobNotFound:
+        job = None
+    if job is None or job.kind != kind:
+        raise HTTPException(status_code=404, detail=f"no {noun} {job_id!r}")
+    return job
+
+
+async def known_form_fields(request: Request) -> None:
+    """A dependency of a job's multipart POST: 422 naming any form field that the route's endpoint
+    does not take (a misspelt parameter would otherwise be dropped silently and the job run with
+    the default). The form is parsed once: Starlette keeps it for the endpoint's own fields."""
+    known = set(inspect.signature(request.scope["endpoint"]).parameters)
+    unknown = sorted(set((await request.form()).keys()) - known)
+    if unknown:
+        raise HTTPException(status_code=422, detail=f"unknown form field(s) {', '.join(unknown)}; "
+                                                    f"this route takes {', '.join(sorted(known))}")
+
+
+def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes]) -> Job:
+    """POST of a job route: the job queued; HTTPException 429 when the queue is full, 503 when
+    the job queue cannot take it (the job is failed then)."""
+    try:
+        return runner.submit(kind, params, files)
+    except QueueFull as exc:
+        raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
+                            headers={"Retry-After": "10"}) from None
+    except JobsUnavailable as exc:
+        raise HTTPException(status_code=503, detail=str(exc), headers={"Retry-After": "10"}) from None
+
+
+def answer_unavailable_jobs(app: FastAPI) -> None:
+    """Any route that finds the job store (PostgreSQL) or queue (Redis) down answers 503 with
+    the reason, not 500."""
+    async def unavailable(request: Request, exc: JobsUnavailable) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
+
+    app.add_exception_handler(JobsUnavailable, unavailable)
+
+
+MAX_LISTED_JOBS = 1000
+
+
+def list_jobs(runner: Jobs, kind: str, status: JobState | None, limit: int,
+              extra: Callable[[dict], dict]) -> list[dict]:
+    """GET of a job collection: the newest `limit` jobs of `kind` (in `status` when given), each
+    its public view with `extra(params)` added (finished jobs are kept `job_retention_s`)."""
+    return [{**j.as_public(), **extra(j.params)}
+            for j in runner.store.list(status, kind=kind, limit=limit, newest_first=True)]
+
+
+def cancel_job(runner: Jobs, job_id: str, noun: str = "job"):
+    """DELETE of a job route: the job cancelled (a running job's process is ended), unchanged when
+    it was cancelled already; HTTPException 409 when it had succeeded or failed. Cancels first and
+    looks after, so a job that finishes meanwhile answers 409, not a 200 that did nothing."""
+    job = runner.cancel(job_id)
+    if job.state in (JobState.SUCCEEDED, JobState.FAILED):
+        raise HTTPException(status_code=409, detail=f"{noun} {job_id} already {job.state.value}")
+    return job
+
+
+class UploadLimit:
+    """ASGI middleware: answers 413 to a POST under `path_prefix` whose body is larger than
+    `max_body_bytes`, from Content-Length before reading, or while streaming a chunked body, so
+    a huge upload is never spooled to disk."""
+
+    def __init__(self, app, max_body_bytes: int, path_prefix: str = "/v1/overview-jobs") -> None:
+        self.app = app
+        self.max_body_bytes = max_body_bytes
+        self.path_prefix = path_prefix
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http" or scope["method"] != "POST" or \
+                not scope["path"].startswith(self.path_prefix):
+            return await self.app(scope, receive, send)
+        for name, value in scope.get("headers", []):
+            if name == b"content-length":
+                try:
+                    too_big = int(value) > self.max_body_bytes
+                except ValueError:
+                    too_big = False
+                if too_big:
+                    return await self._reject(send)
+        seen = 0
+
+        async def limited_receive():
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.max_body_bytes:
+                    raise _TooLarge()
+            return message
+
+        try:
+            await self.app(scope, limited_receive, send)
+        except _TooLarge:
+            await self._reject(send)
+
+    async def _reject(self, send) -> None:
+        body = json.dumps({"detail": f"upload larger than the limit of {self.max_body_bytes} "
+                                     "bytes"}).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"),
+                                (b"content-length", str(len(body)).encode()),
+                                (b"connection", b"close")]})
+        await send({"type": "http.response.body", "body": body})
+
+
+class _TooLarge(Exception):
+    pass

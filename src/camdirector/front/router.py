@@ -1,0 +1,301 @@
+"""The front process's view of the sessions: which worker holds each, which are streaming, and
+when an abandoned one is reclaimed. Both transports call this one object.
+
+With checkpoints (the default; sessions/checkpoints.py) no session is lost with its worker: the
+sessions of a worker that died are given at once to the least loaded of the others (the same one
+when there is no other, which is then awaited while it restarts), and their next request restores
+them there. A client's request for a session this node does not know (this node restarted, or the
+balancer sent the session here from a node that died) is given to a worker the same way, which
+restores it from the checkpoint store or answers NOT_FOUND.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+import uuid
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import orjson
+
+from camdirector.errors import DirectorError, exhausted, invalid, not_found, unavailable
+from camdirector.front.metrics import Metrics
+from camdirector.front.worker_pool import WorkerPool
+from camdirector.server_settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+
+log = logging.getLogger("camdirector.sessions")
+
+LOST_IDS_KEPT = 10_000  # ids of sessions lost with their worker, remembered to say so (oldest forgotten first)
+
+
+@dataclass
+class SessionEntry:
+    slot: int
+    created_s: float
+    last_seen_s: float
+    streams: int = 0
+    frames: int = 0
+    transport: set[str] = field(default_factory=set)
+    restoring: bool = False   # given to a worker that has to restore it from its checkpoint first
+
+
+class SessionRouter:
+    def __init__(self, settings: ServerSettings, metrics: Metrics, clock: Callable[[], float] = time.monotonic):
+        self.settings = settings
+        self.metrics = metrics
+        self.clock = clock
+        self.pool = WorkerPool(settings, on_worker_lost=self._worker_lost)
+        self.checkpoints = settings.checkpoint_store != "off"
+        self.sessions: dict[str, SessionEntry] = {}
+        self._lost: OrderedDict[str, int] = OrderedDict()  # session id -> the worker slot that died with it
+        self._reserved = 0  # creations in flight, counted against max_sessions
+        self._reaper: asyncio.Task | None = None
+
+    async def start(self) -> None:
+        await self.pool.start()
+        self._reaper = asyncio.create_task(self._reap_forever())
+
+    async def stop(self) -> None:
+        if self._reaper is not None:
+            self._reaper.cancel()
+        await self.pool.stop()
+
+    def _entry(self, session_id: str, adopt: bool = False) -> SessionEntry:
+        """The session's entry. With `adopt` (a request of the session's client) and checkpoints,
+        an unknown session is given to the least loaded worker to restore (module docstring);
+        other requests (the dashboard's) never move a session here."""
+        entry = self.sessions.get(session_id)
+        if entry is None and adopt and self.checkpoints:
+            now = self.clock()
+            entry = self.sessions[session_id] = SessionEntry(slot=self._least_loaded_slot(), created_s=now,
+                                                             last_seen_s=now, restoring=True)
+        if entry is None:
+            if session_id in self._lost:
+                raise unavailable(f"session {session_id!r} was lost: the worker process holding it (worker "
+                                  f"{self._lost[session_id]}) died; create a new session")
+            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
+        return entry
+
+    def _least_loaded_slot(self, exclude: int | None = None) -> int:
+        load = [0] * self.pool.slots
+        for entry in self.sessions.values():
+            load[entry.slot] += 1
+        slots = [slot for slot in range(len(load)) if slot != exclude] or list(range(len(load)))
+        return min(slots, key=load.__getitem__)
+
+    async def _call(self, entry: SessionEntry, op: str, session_id: str, payload: bytes, timeout_s: float | None = None):
+        """pool.call for a session's request; a restoring session is known here only once its
+        worker has restored it (NOT_FOUND there: it has no checkpoint, and is forgotten)."""
+        try:
+            result = await self.pool.call(entry.slot, op, session_id, payload, timeout_s)
+        except DirectorError as exc:
+            if entry.restoring and exc.code.name == "NOT_FOUND" and self.sessions.get(session_id) is entry:
+                del self.sessions[session_id]
+            raise
+        if entry.restoring:
+            entry.restoring = False
+            self.metrics.sessions_restored.inc()
+            self.metrics.sessions.set(len(self.sessions))
+        return result
+
+    async def create(self, payload: bytes, transport: str) -> bytes:
+        if len(self.sessions) + self._reserved >= self.settings.max_sessions:
+            raise exhausted(f"the server holds its maximum of {self.settings.max_sessions} sessions")
+        session_id = uuid.uuid4().hex
+        slot = self._least_loaded_slot()
+        self._reserved += 1
+        try:
+            body, _ = await self.pool.call(slot, "create", session_id, payload)
+        finally:
+            self._reserved -= 1
+        now = self.clock()
+        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport})
+        self.metrics.sessions.set(len(self.sessions))
+        self.metrics.sessions_created.inc()
+        return body
+
+    async def frame(self, payload: bytes, session_id: str, transport: str) -> bytes:
+        entry = self._entry(session_id, adopt=True)
+        entry.last_seen_s = self.clock()
+        body, frame_metrics = await self._call(entry, "frame", session_id, payload)
+        entry.frames += 1
+        entry.transport.add(transport)
+        self.metrics.frame_answered(transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale,
+                                    frame_metrics.checkpoint_failed)
+        return body
+
+    async def _session_request(self, message_type, op: str, payload: bytes) -> bytes:
+        """A serialized request of the session it names (a client's: it keeps the session alive)
+        to that session's worker; the serialized answer back."""
+        session_id = session_id_of(message_type, payload)
+        entry = self._entry(session_id, adopt=True)
+        entry.last_seen_s = self.clock()
+        body, _ = await self._call(entry, op, session_id, payload)
+        return body
+
+    async def update_style(self, payload: bytes) -> bytes:
+        return await self._session_request(pb.UpdateStyleRequest, "style", payload)
+
+    async def take_shot(self, payload: bytes) -> bytes:
+        """A serialized TakeShotRequest in, a serialized TakeShotResponse out (a MATCH session's take)."""
+        return await self._session_request(pb.TakeShotRequest, "take", payload)
+
+    async def close(self, payload: bytes) -> bytes:
+        session_id = session_id_of(pb.CloseSessionRequest, payload)
+        entry = self._entry(session_id, adopt=True)
+        body, _ = await self._call(entry, "close", session_id, payload)
+        self.sessions.pop(session_id, None)
+        self.metrics.sessions.set(len(self.sessions))
+        return body
+
+    def stream_opened(self, session_id: str) -> None:
+        self._entry(session_id, adopt=True).streams += 1
+
+    def stream_closed(self, session_id: str) -> None:
+        entry = self.sessions.get(session_id)
+        if entry is not None:
+            entry.streams -= 1
+            entry.last_seen_s = self.clock()
+
+    async def reap_once(self) -> list[str]:
+        """Reclaims sessions with no stream and no request for `session_resume_s`."""
+        now = self.clock()
+        idle = [sid for sid, e in self.sessions.items()
+                if e.streams == 0 and now - e.last_seen_s > self.settings.session_resume_s]
+        for session_id in idle:
+            entry = self.sessions.pop(session_id)
+            try:
+                await self.pool.call(entry.slot, "drop", session_id, b"")
+            except DirectorError as exc:
+                log.warning("dropping session %s: %s", session_id, exc.message)
+            self.metrics.sessions_reclaimed.inc()
+            log.info("reclaimed idle session %s after %.1f s", session_id, now - entry.last_seen_s)
+        self.metrics.sessions.set(len(self.sessions))
+        return idle
+
+    async def _reap_forever(self) -> None:
+        while True:
+            await asyncio.sleep(self.settings.reap_interval_s)
+            try:
+                await self.reap_once()
+            except Exception:  # the reaper must outlive any one bad session
+                log.exception("session reaper")
+
+    def _worker_lost(self, slot: int) -> None:
+        lost = [sid for sid, e in self.sessions.items() if e.slot == slot]
+        if self.checkpoints:  # each to the least loaded other worker, which restores it on its next request
+            for session_id in lost:
+                entry = self.sessions[session_id]
+                entry.slot, entry.restoring = self._least_loaded_slot(exclude=slot), True
+            log.error("worker %d died; its %d sessions are restored from their checkpoints on other workers",
+                      slot, len(lost))
+            return
+        for session_id in lost:
+            del self.sessions[session_id]
+            self._lost[session_id] = slot
+            self.metrics.sessions_reclaimed.inc()
+        while len(self._lost) > LOST_IDS_KEPT:
+            self._lost.popitem(last=False)
+        self.metrics.sessions.set(len(self.sessions))
+        log.error("worker %d lost %d sessions", slot, len(lost))
+
+    async def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
+        """The session's summary (as `describe`), style and newest `last` frames after
+        `after_frame` (sessions.py); NOT_FOUND for an unknown id. Not a request of the session's
+        client: it does not keep the session alive."""
+        entry = self._entry(session_id)
+        body, _ = await self.pool.call(entry.slot, "timeline", session_id,
+                                       orjson.dumps({"last": last, "after_frame": after_frame}))
+        return {"session": self._describe(session_id, entry, self.clock()), **orjson.loads(body)}
+
+    async def anticipation_png(self, session_id: str) -> bytes:
+        """The session's A-map as a PNG (sessions.py); NOT_FOUND, or FAILED_PRECONDITION without one."""
+        body, _ = await self.pool.call(self._entry(session_id).slot, "amap", session_id, b"")
+        return body
+
+    async def view(self, session_id: str, query_json: bytes, timeout_s: float) -> bytes:
+        """A monitor's picture of the session (sessions/views.py), its serialized view
+        (sessions/monitor.py); NOT_FOUND for an unknown id, UNAVAILABLE when it takes more than
+        timeout_s. Not a request of the session's client: it does not keep the session alive."""
+        try:
+            body, _ = await self.pool.call(self._entry(session_id).slot, "view", session_id, query_json, timeout_s)
+        except TimeoutError:
+            raise unavailable(f"the view of session {session_id} took more than {timeout_s:g} s") from None
+        return body
+
+    def describe(self) -> list[dict]:
+        now = self.clock()
+        return [self._describe(sid, e, now) for sid, e in self.sessions.items()]
+
+    @staticmethod
+    def _describe(session_id: str, e: SessionEntry, now: float) -> dict:
+        return {"session_id": session_id, "worker": e.slot, "frames": e.frames, "streams": e.streams,
+                "idle_s": round(now - e.last_seen_s, 3), "age_s": round(now - e.created_s, 3),
+                "transports": sorted(e.transport)}
+
+
+def _varint(payload: bytes, at: int) -> tuple[int, int]:
+    """The varint at payload[at:] and the index after it; IndexError past the end."""
+    value = shift = 0
+    while True:
+        byte = payload[at]
+        at += 1
+        value |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            return value, at
+        shift += 7
+        if shift > 63:
+            raise ValueError("varint longer than 10 bytes")
+
+
+def named_session(rpc: str, payload: bytes) -> str | None:
+    """The session a request names, for the log of one that failed: its field 1 when readable;
+    None for CreateSession (whose field 1 is the scene) or an unreadable payload."""
+    if rpc == "CreateSession":
+        return None
+    try:
+        return session_id_of(pb.FrameUpdate, payload)  # the type only names what was expected in its errors
+    except DirectorError:
+        return None
+
+
+def session_id_of(message_type, payload: bytes) -> str:
+    """The session_id (field 1, a string, in every request that names a session) of a serialized
+    request, read from the protobuf wire format without parsing the rest: the front routes by it
+    and the worker parses the message once. Fields before it are skipped by their wire type; the
+    first occurrence counts (the worker refuses a message whose parsed session_id differs, so
+    this never routes one session's frame to another). INVALID_ARGUMENT when it cannot be read."""
+    at, end = 0, len(payload)
+    try:
+        while at < end:
+            key, at = _varint(payload, at)
+            field_number, wire_type = key >> 3, key & 7
+            if wire_type == 0:
+                _, at = _varint(payload, at)
+            elif wire_type == 1:
+                at += 8
+            elif wire_type == 5:
+                at += 4
+            elif wire_type == 2:
+                length, at = _varint(payload, at)
+                if field_number == 1:
+                    if at + length > end:
+                        break
+                    session_id = payload[at:at + length].decode("utf-8")
+                    if not session_id:
+                        raise invalid("session_id is empty")
+                    return session_id
+                at += length
+            else:
+                break
+            if field_number == 0:
+                break
+    except (IndexError, ValueError):
+        pass
+    else:
+        if at == end:
+            raise invalid("session_id is empty")
+    raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}")

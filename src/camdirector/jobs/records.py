@@ -1,0 +1,457 @@
+"""Job records: one interface (`JobStore`), two implementations checked by one test suite
+(tests/server/jobs/test_records.py runs every test on both).
+
+    SqliteJobStore     `<root>/jobs.sqlite3` (WAL journal): the embedded single-node default
+    PostgresJobStore   a `jobs` table in PostgreSQL (psycopg 3): records that several nodes share
+
+Both keep the job's files in `<root>/<id>/` (the data directory every node mounts, package
+docstring) and run every call as one short transaction that holds the store's write lock
+(SQLite's `BEGIN IMMEDIATE`; in PostgreSQL a transaction-scoped advisory lock), so a submit's
+queue-length check and insert, and a finish's compare-and-set and result rename, are atomic on
+every node alike. The SQL is written once, with `?` placeholders; the PostgreSQL connection
+rewrites them to psycopg's `%s` (none of the statements has a literal `?`).
+
+Attempts: `claim_next` (the local runner) and `claim` (a queue worker, by id) start an attempt by
+adding one to `attempts`; `finish` and `requeue` take the attempt they belong to and change
+nothing when the job has moved on since (cancelled, or claimed again by a worker that took over a
+redelivered job). That compare-and-set is what makes a job succeed once even when two workers ran
+it: only the latest attempt's outcome is recorded, and its result folder is renamed into place
+inside that same transaction.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import sqlite3
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+
+from camdirector.infra.postgres import PostgresDatabase
+
+
+class JobState(str, Enum):
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+    @property
+    def finished(self) -> bool:
+        return self in (JobState.SUCCEEDED, JobState.FAILED, JobState.CANCELLED)
+
+
+class QueueFull(Exception):
+    """The queue holds `max_queued_jobs` jobs already (HTTP 429)."""
+
+
+class JobNotFound(KeyError):
+    """No job with this id."""
+
+
+class JobsUnavailable(RuntimeError):
+    """The record store (PostgreSQL) or the queue (Redis) cannot be reached: a node refuses to
+    start, a submit answers HTTP 503. The message is one line that says which and why."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One record. Times are Unix seconds (None until reached); timings_ms: per stage."""
+
+    id: str
+    kind: str
+    params: dict
+    state: JobState
+    progress: float
+    error: str | None
+    attempts: int
+    created_s: float
+    started_s: float | None
+    finished_s: float | None
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    def as_public(self) -> dict:
+        """The REST view: id, status, progress, error (only when set), timings (ms), and the
+        Unix times it was submitted, started and ended (null until then)."""
+        out = {"id": self.id, "status": self.state.value, "progress": round(self.progress, 4),
+               "timings": self.timings_ms, "created_unix_s": self.created_s,
+               "started_unix_s": self.started_s, "finished_unix_s": self.finished_s}
+        if self.error is not None:
+            out["error"] = self.error
+        return out
+
+
+_COLUMNS = "id, kind, params, state, progress, error, attempts, created_s, started_s, finished_s, timings"
+
+
+def _row_to_job(row) -> Job:
+    return Job(id=row[0], kind=row[1], params=json.loads(row[2]), state=JobState(row[3]),
+               progress=float(row[4]), error=row[5], attempts=int(row[6]), created_s=row[7],
+               started_s=row[8], finished_s=row[9], timings_ms=json.loads(row[10]))
+
+
+def interrupted_error(attempts: int, max_attempts: int) -> str:
+    """The error of a job that was interrupted (its runner or worker died) too often."""
+    return (f"interrupted: the process running this job died, {attempts} time(s) (limit "
+            f"{max_attempts}); not retried")
+
+
+class JobStore:
+    """Records of jobs and their files in `<root>/<id>/`. Thread-safe. Subclasses give the
+    connection: `_tx()` (one transaction holding the write lock, yielding something with
+    `execute(sql, args) -> cursor`) and `_read()` (the same for one read)."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    # -- the connection (subclasses) ---------------------------------------------------------
+
+    _NEXT_SEQ: str   # SQL giving a new job's place in submission order
+
+    def _tx(self) -> contextlib.AbstractContextManager:
+        raise NotImplementedError
+
+    def _read(self) -> contextlib.AbstractContextManager:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    # -- paths --------------------------------------------------------------------------------
+
+    def job_dir(self, job_id: str) -> Path:
+        if not job_id or not all(c.isalnum() or c == "-" for c in job_id):
+            raise JobNotFound(job_id)
+        return self.root / job_id
+
+    def input_dir(self, job_id: str) -> Path:
+        return self.job_dir(job_id) / "input"
+
+    def result_dir(self, job_id: str) -> Path:
+        return self.job_dir(job_id) / "result"
+
+    def temp_dir(self) -> Path:
+        """A fresh empty `.tmp-*` folder on the store's file system (renames are atomic)."""
+        path = self.root / f".tmp-{uuid.uuid4().hex}"
+        path.mkdir()
+        return path
+
+    # -- records ------------------------------------------------------------------------------
+
+    def submit(self, kind: str, params: dict, files: dict[str, bytes], *,
+               max_queued: int | None = None) -> Job:
+        """A new queued job with `files` (name -> content) in its input folder. Raises QueueFull
+        when `max_queued` jobs are queued already; nothing is left behind on any failure."""
+        job_id = uuid.uuid4().hex
+        params_text = json.dumps(params, sort_keys=True)
+        tmp = self.temp_dir()
+        try:
+            (tmp / "input").mkdir()
+            for name, data in files.items():
+                if "/" in name or name.startswith("."):
+                    raise ValueError(f"bad input file name {name!r}")
+                (tmp / "input" / name).write_bytes(data)
+            with self._tx() as db:
+                if max_queued is not None:
+                    (queued,) = db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?",
+                                           (JobState.QUEUED.value,)).fetchone()
+                    if queued >= max_queued:
+                        raise QueueFull(f"{queued} jobs are queued already (limit {max_queued}); "
+                                        "retry later")
+                os.rename(tmp, self.root / job_id)
+                try:
+                    db.execute(f"INSERT INTO jobs ({_COLUMNS}, seq) "
+                               f"VALUES (?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
+                               (job_id, kind, params_text, JobState.QUEUED.value, 0.0, None, 0,
+                                time.time(), None, None, "{}"))
+                except BaseException:
+                    shutil.rmtree(self.root / job_id, ignore_errors=True)
+                    raise
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        return self.get(job_id)
+
+    def get(self, job_id: str) -> Job:
+        with self._read() as db:
+            row = db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        if row is None:
+            raise JobNotFound(job_id)
+        return _row_to_job(row)
+
+    def list(self, state: JobState | None = None, *, kind: str | None = None,
+             limit: int | None = None, newest_first: bool = False) -> list[Job]:
+        """Jobs in submission order (newest first when asked), all or those in `state` and of
+        `kind`, at most `limit` of them."""
+        where = [(c, v) for c, v in (("state", state.value if state else None), ("kind", kind))
+                 if v is not None]
+        sql = f"SELECT {_COLUMNS} FROM jobs"
+        if where:
+            sql += " WHERE " + " AND ".join(f"{c} = ?" for c, _ in where)
+        sql += " ORDER BY seq" + (" DESC" if newest_first else "")
+        args = [v for _, v in where]
+        if limit is not None:
+            sql += " LIMIT ?"
+            args.append(int(limit))
+        with self._read() as db:
+            rows = db.execute(sql, args).fetchall()
+        return [_row_to_job(r) for r in rows]
+
+    def count(self, state: JobState) -> int:
+        with self._read() as db:
+            return int(db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?",
+                                  (state.value,)).fetchone()[0])
+
+    def _start_attempt(self, db, job_id: str) -> None:
+        db.execute("UPDATE jobs SET state = ?, attempts = attempts + 1, started_s = ?, "
+                   "progress = 0, error = NULL WHERE id = ?",
+                   (JobState.RUNNING.value, time.time(), job_id))
+
+    def claim_next(self) -> Job | None:
+        """The oldest queued job, now `running` with one more attempt; None when none is queued."""
+        with self._tx() as db:
+            row = db.execute("SELECT id FROM jobs WHERE state = ? ORDER BY seq LIMIT 1",
+                             (JobState.QUEUED.value,)).fetchone()
+            if row is None:
+                return None
+            self._start_attempt(db, row[0])
+        return self.get(row[0])
+
+    def claim(self, job_id: str, max_attempts: int) -> Job | None:
+        """A queue worker's claim of the job its message names: a queued job, or a running one
+        whose message came again (the worker running it died, or is taken over), becomes
+        `running` with one more attempt. A running job started `max_attempts` times already is
+        failed instead. None when there is nothing to run (finished, cancelled, failed here, or
+        removed)."""
+        with self._tx() as db:
+            row = db.execute("SELECT state, attempts FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None or JobState(row[0]).finished:
+                return None
+            if row[0] == JobState.RUNNING.value and row[1] >= max_attempts:
+                db.execute("UPDATE jobs SET state = ?, error = ?, finished_s = ? WHERE id = ?",
+                           (JobState.FAILED.value, interrupted_error(row[1], max_attempts),
+                            time.time(), job_id))
+                return None
+            self._start_attempt(db, job_id)
+        return self.get(job_id)
+
+    def set_progress(self, job_id: str, progress: float, *, attempt: int | None = None) -> None:
+        sql = "UPDATE jobs SET progress = ? WHERE id = ? AND state = ?"
+        args = [min(max(float(progress), 0.0), 1.0), job_id, JobState.RUNNING.value]
+        if attempt is not None:
+            sql += " AND attempts = ?"
+            args.append(attempt)
+        with self._tx() as db:
+            db.execute(sql, args)
+
+    def finish(self, job_id: str, state: JobState, *, error: str | None = None,
+               timings_ms: dict[str, float] | None = None, only_if: JobState | None = None,
+               attempt: int | None = None, publish: Callable[[], None] | None = None) -> bool:
+        """Set a final state (and progress 1 on success). only_if: change nothing unless the job
+        is in that state now; attempt: nor unless this is its latest attempt. publish: called
+        inside the transaction once the record changed (the runner renames the result folder
+        into place there; if it raises, nothing changes). Returns whether the record changed."""
+        assert state.finished
+        sql = ("UPDATE jobs SET state = ?, error = ?, finished_s = ?, timings = ?, "
+               "progress = CASE WHEN ? THEN 1.0 ELSE progress END WHERE id = ?")
+        args = [state.value, error, time.time(), json.dumps(timings_ms or {}),
+                state is JobState.SUCCEEDED, job_id]
+        if timings_ms is None:
+            sql = sql.replace("timings = ?, ", "")
+            del args[3]
+        for column, value in (("state", only_if.value if only_if else None), ("attempts", attempt)):
+            if value is not None:
+                sql += f" AND {column} = ?"
+                args.append(value)
+        with self._tx() as db:
+            changed = db.execute(sql, args).rowcount > 0
+            if changed and publish is not None:
+                publish()
+        return changed
+
+    def cancel(self, job_id: str) -> Job:
+        """A queued or running job becomes cancelled (whoever runs it ends its process). A
+        finished job is returned unchanged. Raises JobNotFound."""
+        job = self.get(job_id)
+        if not job.state.finished:
+            self.finish(job_id, JobState.CANCELLED, error="cancelled by request", only_if=job.state)
+        return self.get(job_id)
+
+    def purge_finished(self, ended_before_s: float) -> list[str]:
+        """Remove the jobs that ended (succeeded, failed or were cancelled) before this Unix time,
+        records first, then their folders. Returns their ids."""
+        finished = [s.value for s in JobState if s.finished]
+        with self._tx() as db:
+            ids = [r[0] for r in db.execute(
+                f"SELECT id FROM jobs WHERE state IN ({','.join('?' * len(finished))}) "
+                "AND finished_s < ?", (*finished, ended_before_s)).fetchall()]
+            for job_id in ids:
+                db.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
+        for job_id in ids:
+            shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+        return ids
+
+    def requeue(self, job_id: str, *, uncount_attempt: bool, attempt: int | None = None) -> None:
+        """A running job (of this attempt, when given) goes back to `queued`."""
+        sql = ("UPDATE jobs SET state = ?, progress = 0, started_s = NULL, attempts = attempts - ? "
+               "WHERE id = ? AND state = ?")
+        args = [JobState.QUEUED.value, 1 if uncount_attempt else 0, job_id, JobState.RUNNING.value]
+        if attempt is not None:
+            sql += " AND attempts = ?"
+            args.append(attempt)
+        with self._tx() as db:
+            db.execute(sql, args)
+
+    def recover(self, max_attempts: int) -> tuple[list[str], list[str]]:
+        """After a restart of the one local runner: jobs found `running` are queued again, or
+        failed once they were started `max_attempts` times. Removes orphaned files. Returns
+        (requeued, failed) ids."""
+        requeued, failed = [], []
+        for job in self.list(JobState.RUNNING):
+            if job.attempts >= max_attempts:
+                self.finish(job.id, JobState.FAILED, only_if=JobState.RUNNING,
+                            error=interrupted_error(job.attempts, max_attempts))
+                failed.append(job.id)
+            else:
+                self.requeue(job.id, uncount_attempt=False)
+                requeued.append(job.id)
+        self.remove_orphans(older_than_s=0.0)
+        return requeued, failed
+
+    def remove_orphans(self, older_than_s: float) -> list[str]:
+        """Remove `.tmp-*` folders and folders without a record, untouched for `older_than_s`
+        (0 when no one else writes here: the local runner's start; queue workers wait longer
+        than a job may run, as other nodes submit and run jobs meanwhile). Returns their names."""
+        known = {j.id for j in self.list()}
+        cutoff = time.time() - older_than_s
+        removed = []
+        for path in self.root.iterdir():
+            if path.is_dir() and (path.name.startswith(".tmp-") or path.name not in known):
+                with contextlib.suppress(FileNotFoundError):
+                    if older_than_s > 0 and path.stat().st_mtime > cutoff:
+                        continue
+                shutil.rmtree(path, ignore_errors=True)
+                removed.append(path.name)
+        return removed
+
+
+# -- SQLite -------------------------------------------------------------------------------------
+
+_SQLITE_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY,
+    kind TEXT NOT NULL,
+    params TEXT NOT NULL,
+    state TEXT NOT NULL,
+    progress REAL NOT NULL DEFAULT 0,
+    error TEXT,
+    attempts INTEGER NOT NULL DEFAULT 0,
+    created_s REAL NOT NULL,
+    started_s REAL,
+    finished_s REAL,
+    timings TEXT NOT NULL DEFAULT '{}',
+    seq INTEGER NOT NULL
+);
+CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq);
+"""
+
+
+class SqliteJobStore(JobStore):
+    """Records in `<root>/jobs.sqlite3`: one connection behind a lock, every call one short
+    transaction (writes as BEGIN IMMEDIATE)."""
+
+    DB_NAME = "jobs.sqlite3"
+    _NEXT_SEQ = "(SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs)"
+
+    def __init__(self, root: str | Path) -> None:
+        super().__init__(root)
+        self._lock = threading.Lock()
+        self._db = sqlite3.connect(self.root / self.DB_NAME, timeout=30.0, isolation_level=None,
+                                   check_same_thread=False)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=NORMAL")
+        self._db.executescript(_SQLITE_SCHEMA)
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    @contextlib.contextmanager
+    def _tx(self) -> Iterator[sqlite3.Connection]:
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                yield self._db
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+            self._db.execute("COMMIT")
+
+    @contextlib.contextmanager
+    def _read(self) -> Iterator[sqlite3.Connection]:
+        with self._lock:
+            yield self._db
+
+
+# -- PostgreSQL ---------------------------------------------------------------------------------
+
+_POSTGRES_SCHEMA = (
+    """CREATE TABLE IF NOT EXISTS jobs (
+        id TEXT PRIMARY KEY,
+        kind TEXT NOT NULL,
+        params TEXT NOT NULL,
+        state TEXT NOT NULL,
+        progress DOUBLE PRECISION NOT NULL DEFAULT 0,
+        error TEXT,
+        attempts INTEGER NOT NULL DEFAULT 0,
+        created_s DOUBLE PRECISION NOT NULL,
+        started_s DOUBLE PRECISION,
+        finished_s DOUBLE PRECISION,
+        timings TEXT NOT NULL DEFAULT '{}',
+        seq BIGSERIAL NOT NULL
+    )""",
+    "CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq)",
+)
+# Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
+# SQLite (any constant that no other user of the database takes; these are "camd" in ASCII).
+_WRITE_LOCK_KEY = 0x63616D64
+class PostgresJobStore(JobStore):
+    """Records in the `jobs` table of the PostgreSQL database at `url` (created when missing),
+    through infra/postgres.py; files in `root` as for SQLite. Raises JobsUnavailable when the
+    database cannot be reached."""
+
+    _NEXT_SEQ = "DEFAULT"
+
+    def __init__(self, url: str, root: str | Path) -> None:
+        super().__init__(root)
+        self.url = url
+        self._db = PostgresDatabase(url, "job store", JobsUnavailable)
+        with self._tx() as db:   # under the write lock: nodes starting together create it once
+            for statement in _POSTGRES_SCHEMA:
+                db.execute(statement)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def _tx(self):
+        return self._db.transaction("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK_KEY,))
+
+    def _read(self):
+        return self._db.read()
+
+
+def open_store(url: str, root: str | Path) -> JobStore:
+    """The record store that `url` names: "" is SQLite in `root`, postgresql://... PostgreSQL.
+    Files are in `root` either way."""
+    if not url:
+        return SqliteJobStore(root)
+    if url.startswith(("postgresql://", "postgres://")):
+        return PostgresJobStore(url, root)
+    raise ValueError(f"job store {url!r}: expected empty (SQLite) or a postgresql:// URL")

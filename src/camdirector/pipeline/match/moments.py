@@ -1,0 +1,153 @@
+"""The buffered game moments of a match: every frame's players, who is alive, and the events.
+
+With a broadcast delay D the program shows the game moment t - D while frames up to t have
+arrived, so the moments in between are the known future the director plans over (issue 12,
+"Delay semantics"). Each moment keeps the players' transforms, aim points, feet and horizontal
+facing as arrays in target order.
+
+Who is alive: a player is dead from the time of a KILL event naming it as victim until it
+respawns. A respawn is a teleport: between two frames its feet move at least `respawn_min_jump_m`
+and faster than `respawn_speed_m_s`, however near the spawn point is to where it fell (a jump
+threshold in metres alone missed spawns 2 m away and kept those players dead for the rest of the
+match). A player respawned at the very spot it fell shows no teleport; once it stands
+`respawn_walk_m` from there across the ground it has walked away, which a body does not. A body
+that lies still, falls or is dragged a little stays dead. Events are applied to the first moment
+whose time reaches theirs; an event announced late (its time before the newest moment) is applied
+to the newest moment, the earliest the director can know it.
+"""
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.settings import MatchSettings
+
+
+@dataclass
+class Moment:
+    """One buffered frame. Arrays are in target order, n players."""
+
+    frame: int
+    time_s: float
+    transforms: list[RigidTransform]
+    aims_world: np.ndarray      # (n, 3) framed points (the target's aim offset), metres
+    feet_world: np.ndarray      # (n, 3) transform positions, metres
+    forward_world: np.ndarray   # (n, 3) horizontal unit facing (local +Z), metres/metre
+    alive: np.ndarray           # (n,) bool
+    events: list[GameEvent] = field(default_factory=list)  # applied at this moment
+
+
+def horizontal_forward(rotations_xyzw: np.ndarray) -> np.ndarray:
+    """(n, 3) unit horizontal local +Z of (n, 4) xyzw quaternions; +Z where the facing is vertical."""
+    x, y, z, w = rotations_xyzw.T
+    forward = np.stack([2.0 * (x * z + w * y), np.zeros_like(x), 1.0 - 2.0 * (x * x + y * y)], axis=1)
+    norm = np.linalg.norm(forward, axis=1)
+    flat = norm < 1e-6
+    forward[flat] = (0.0, 0.0, 1.0)
+    norm[flat] = 1.0
+    return forward / norm[:, None]
+
+
+TIME_EPSILON_S = 1e-6  # frame times this close are the same instant (floating-point rounding of t - D), s
+
+
+class MomentBuffer:
+    """The moments from the program's moment to the newest frame, and the match's events."""
+
+    def __init__(self, player_ids: list[str], settings: MatchSettings):
+        self.player_ids = player_ids
+        self.index = {p: i for i, p in enumerate(player_ids)}
+        self.settings = settings
+        self._fell_world = np.full((len(player_ids), 3), np.nan)  # (n, 3) feet at each dead player's death
+        self.moments: list[Moment] = []
+        self.times: list[float] = []
+        self.events: list[GameEvent] = []       # every event, in time order (the planner reads ahead)
+        self._event_times: list[float] = []
+        self._pending: list[GameEvent] = []     # announced before their time, not yet applied
+        self.killed_by: dict[str, str] = {}     # victim -> attacker of its last death
+        self._start = 0                         # moments before this index are gone
+
+    @property
+    def newest(self) -> Moment | None:
+        return self.moments[-1] if len(self.moments) > self._start else None
+
+    def push(self, frame: int, time_s: float, transforms: list[RigidTransform], aims_world: list[np.ndarray],
+             events: list[GameEvent]) -> bool:
+        """Adds the newest frame; False (nothing added) when it is not newer than the last one."""
+        last = self.newest
+        if last is not None and (frame <= last.frame or time_s < last.time_s):
+            return False
+        feet = np.array([t.position_world for t in transforms], dtype=np.float64)
+        alive = np.ones(len(transforms), dtype=bool) if last is None else last.alive.copy()
+        if last is not None and not alive.all():
+            s = self.settings
+            step_m = np.linalg.norm(feet - last.feet_world, axis=1)
+            teleported = (step_m >= s.respawn_min_jump_m) & (step_m > s.respawn_speed_m_s * (time_s - last.time_s))
+            # across the ground: a body that falls off a ledge has not walked
+            walked_away = np.linalg.norm((feet - self._fell_world)[:, [0, 2]], axis=1) >= s.respawn_walk_m  # NaN: False
+            alive |= teleported | walked_away
+        for event in sorted(events, key=lambda e: e.time_s):
+            position = bisect.bisect_right(self._event_times, event.time_s)
+            self._event_times.insert(position, event.time_s)
+            self.events.insert(position, event)
+            self._pending.append(event)
+        due = [e for e in self._pending if e.time_s <= time_s]
+        self._pending = [e for e in self._pending if e.time_s > time_s]
+        for event in due:
+            if event.kind == EventKind.KILL and event.other_actor_id in self.index:
+                victim = self.index[event.other_actor_id]
+                self._fell_world[victim] = feet[victim]
+                alive[victim] = False
+                if event.actor_id in self.index and event.actor_id != event.other_actor_id:
+                    self.killed_by[event.other_actor_id] = event.actor_id
+        rotations = np.array([t.rotation_xyzw for t in transforms], dtype=np.float64)
+        self.moments.append(Moment(frame, time_s, list(transforms), np.array(aims_world, dtype=np.float64),
+                                   feet, horizontal_forward(rotations), alive, due))
+        self.times.append(time_s)
+        return True
+
+    def program_moment(self, time_s: float) -> Moment | None:
+        """The moment nearest time_s (the program's moment, frame time minus the delay), dropping
+        older ones; None while no moment is that old (the delay is still filling).
+
+        Nearest, not newest at or before: t - D computed in floating point lands a hair before the
+        frame it names about half the time, and "at or before" then showed the previous moment
+        again and skipped one later (5-12% of moments repeated at delays of 10 and 30 s)."""
+        i = bisect.bisect_right(self.times, time_s, lo=self._start) - 1
+        if i < self._start:  # before the oldest moment: only a rounding hair before counts
+            if self._start >= len(self.times) or self.times[self._start] - time_s > TIME_EPSILON_S:
+                return None
+            i = self._start
+        elif i + 1 < len(self.times) and self.times[i + 1] - time_s < time_s - self.times[i]:
+            i += 1
+        self._start = i
+        if self._start > 4096:  # compact now and then, not every frame
+            del self.moments[:self._start], self.times[:self._start]
+            self._start = 0
+        return self.moments[self._start]
+
+    def at(self, time_s: float) -> Moment:
+        """The buffered moment nearest at or before time_s, clamped to the buffer's ends."""
+        i = bisect.bisect_right(self.times, time_s, lo=self._start) - 1
+        return self.moments[min(max(i, self._start), len(self.moments) - 1)]
+
+    @property
+    def horizon_s(self) -> float:
+        """Time of the newest moment (the end of the known future)."""
+        return self.times[-1]
+
+    def events_between(self, start_s: float, end_s: float) -> list[GameEvent]:
+        """Events with start_s < time_s <= end_s, in time order."""
+        lo = bisect.bisect_right(self._event_times, start_s)
+        hi = bisect.bisect_right(self._event_times, end_s)
+        return self.events[lo:hi]
+
+    def forget_events_before(self, time_s: float) -> None:
+        """Drops events older than time_s (the planner never looks back further)."""
+        n = bisect.bisect_left(self._event_times, time_s)
+        if n > 1024:
+            del self.events[:n], self._event_times[:n]

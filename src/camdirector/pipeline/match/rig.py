@@ -1,0 +1,292 @@
+"""The MATCH rig of a session: the program of a whole match, chosen among the players by
+events and interest, shown with the broadcast delay (issue 12).
+
+Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera`, `visibility`):
+1. buffer   the frame's players and events join the buffered moments (moments.py); the program's
+            moment is the newest one at or before `time_s - delay_s`. Until one exists the
+            answer is `buffering` with no pose. `state.frame`, `time_s`, `dt_s` and
+            `aim_points_world` become the program moment's (the input frame's number stays the
+            Session's business: Session.is_stale compares with the last answered state, whose
+            frame is now the program's, so a re-sent input frame is also refused here, by the
+            buffer, and flagged `match_stale_frame`).
+2. plan     at `plan_rate_hz` (and at once after a take), the director of the style decides
+            whether to cut: ours (plan.py) or the HLTV baseline (hltv.py); a human's take
+            (`take`) overrides both until released. Ours also re-places an occluded camera
+            within its shot (shots.py) and offers the best other situations as candidates.
+3. camera   every frame, the shot's camera at the program moment.
+4. visibility  the share of the framed subjects' sample points seen from the camera.
+Every cut's `shot.reason` says why, its sub-scores go to `scores`, and degraded choices to `flags`.
+
+A take whose held subject dies (at the program moment) falls back, still held: to the player
+who killed it, else the nearest fight to where it died, else an overview; `shot.reason` says so.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.match.grammar import Grammar
+from camdirector.pipeline.match.hltv import HltvDirector
+from camdirector.pipeline.match.moments import Moment, MomentBuffer
+from camdirector.pipeline.match.plan import PlannedDirector, Shot, ShotBuilder
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import ToricCamera, best_place, place_grid
+from camdirector.pipeline.match.visibility import SubjectVisibility
+from camdirector.pipeline.stages import Candidate, FrameState, MatchStage, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.style import MatchDirectorKind, Style
+
+REPLACE_LOOKAHEAD_S = 1.0  # an occluded place is replaced by the best one over now and this far ahead, s
+
+
+class MatchRig:
+    """The match director of one session (module docstring). Players are the scene's targets."""
+
+    def __init__(self, scene: SceneSpec, ray_scene: RayScene, rng: np.random.Generator,
+                 clock: Callable[[], float] = time.perf_counter, settings: MatchSettings = MatchSettings()):
+        self.players = [t.id for t in scene.targets]
+        self.index = {p: i for i, p in enumerate(self.players)}
+        self.teams = np.array([t.team for t in scene.targets])
+        self.roster = tuple((t.id, t.team) for t in scene.targets)  # FrameState.players, shared by every frame
+        self.lens, self.style, self.delay_s = scene.lens, scene.style, scene.delay_s
+        self.ray_scene, self.rng, self.clock, self.settings = ray_scene, rng, clock, settings
+        self.buffer = MomentBuffer(self.players, settings)
+        self.visibility = SubjectVisibility(ray_scene, [t.mesh for t in scene.targets], settings.samples_per_player, rng)
+        self.level_nodes = (scene.level.artifact.nodes_world if scene.level is not None
+                            else np.zeros((0, 3)))
+        self.builder = ShotBuilder(self.players, self.style, self.lens, settings, self.visibility,
+                                   Grammar(settings.jump_cut_deg), self.level_nodes)
+        self.planned = PlannedDirector(self.players, self.teams, settings, self.builder, self.delay_s)
+        self.director = self._director(self.style.match_director)
+        self.shot: Shot | None = None
+        self.held: ShotChoice | None = None
+        self._take_pending = False
+        self._next_plan_s = -math.inf
+        self._last_time_s: float | None = None
+        self._last_pose: CameraPose | None = None
+        self._candidates: list[tuple[ShotChoice, ToricCamera | None, float]] = []
+        self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
+
+    def _director(self, kind: MatchDirectorKind) -> PlannedDirector | HltvDirector:
+        if kind == MatchDirectorKind.HLTV:
+            return HltvDirector(self.players, self.settings, self.lens, self.ray_scene, self.rng, self.delay_s,
+                                self.level_nodes)
+        return self.planned
+
+    def set_style(self, style: Style) -> None:
+        """From the next frame on; the current shot goes on (a new director decides at its next tick)."""
+        if style.match_director != self.style.match_director:
+            self.director = self._director(style.match_director)
+        self.style = self.builder.style = style
+
+    def anticipation_map(self, state: FrameState | None) -> None:
+        """None: the match rig has no occlusion maps (it ray-casts its candidate places)."""
+        return None
+
+    def close(self) -> None:
+        """Drops the buffered moments."""
+        self.buffer = MomentBuffer(self.players, self.settings)
+
+    def planned_cut(self, now_s: float) -> PlannedCut | None:
+        """The next cut our director planned at its last tick that is still ahead of now_s; None
+        while a take is held, under the HLTV baseline, or with nothing planned (no delay: no known future)."""
+        if self.held is not None or self.director is not self.planned:
+            return None
+        beat = next((b for b in self.planned.plan if b.cut_s is not None and b.cut_s > now_s), None)
+        if beat is None:
+            return None
+        return PlannedCut(beat.cut_s, ShotChoice(tuple(self.players[i] for i in beat.subjects), beat.kind,
+                                                 "planned " + beat.reason))
+
+    # -- a human's choice -------------------------------------------------------------------
+    def take(self, subject_ids: list[str], kind: ShotKind | None, release: bool) -> ShotChoice | None:
+        """Holds a human's shot from the next frame until released; returns it (None on release).
+        kind None: FOLLOW for one player, DUEL for two, GROUP for more, OVERVIEW for none.
+        Raises ValueError for an unknown or repeated player or a kind that does not fit the count."""
+        if release:
+            self.held, self._take_pending = None, True
+            return None
+        unknown = [s for s in subject_ids if s not in self.index]
+        if unknown:
+            raise ValueError(f"take: unknown player {unknown[0]!r}; the players are {', '.join(self.players)}")
+        if len(set(subject_ids)) != len(subject_ids):
+            raise ValueError("take: a player is named twice")
+        n = len(subject_ids)
+        if kind is None:
+            kind = {0: ShotKind.OVERVIEW, 1: ShotKind.FOLLOW, 2: ShotKind.DUEL}.get(n, ShotKind.GROUP)
+        fits = {ShotKind.FOLLOW: n == 1, ShotKind.DUEL: n == 2, ShotKind.GROUP: 2 <= n <= self.settings.max_group,
+                ShotKind.OVERVIEW: True}[ShotKind(kind)]
+        if not fits:
+            raise ValueError(f"take: a {ShotKind(kind).name} shot cannot show {n} players")
+        self.held = ShotChoice(tuple(subject_ids), ShotKind(kind), "take: a human's choice, held until released",
+                               held=True)
+        self._take_pending = True
+        return self.held
+
+    def _held_shot(self, moment: Moment, flags: list[str]) -> Shot | None:
+        """The held take as a shot when it must be (re)built: just taken, or a held subject died."""
+        subjects = tuple(self.index[s] for s in self.held.subject_ids)
+        dead = [i for i in subjects if not moment.alive[i]]
+        if not dead and not self._take_pending and self.shot is not None and self.shot.held:
+            return None
+        choice = self.held
+        if dead:
+            choice, subjects = self._fallback(moment, dead[0])
+            choice = self.held = dataclasses.replace(choice, held=True)
+            flags.append("take_fallback")
+        else:
+            previewed = self._previewed(choice, moment)
+            if previewed is not None:
+                return previewed
+        shot, _ = self.builder.build(choice, subjects, moment, [moment], self.shot, None, moment.time_s)
+        shot.held = True
+        return shot
+
+    def _previewed(self, choice: ShotChoice, moment: Moment) -> Shot | None:
+        """A take of a shot the candidates offer goes to air as its preview monitor showed it:
+        the candidate's own camera and place, not a new search (a human took what they saw; the
+        30-degree rule is theirs to judge). None when no candidate matches the take."""
+        for candidate, camera, _ in self._candidates:
+            if camera is None or candidate.kind != choice.kind or set(candidate.subject_ids) != set(choice.subject_ids):
+                continue
+            if choice.kind == ShotKind.DUEL:
+                self.builder.grammar.remember_duel(self.players[camera.a_index], self.players[camera.b_index])
+            shot = Shot(choice, tuple(self.index[s] for s in candidate.subject_ids), camera, moment.time_s)
+            shot.held = True
+            return shot
+        return None
+
+    def _fallback(self, moment: Moment, dead: int) -> tuple[ShotChoice, tuple[int, ...]]:
+        who = self.players[dead]
+        killer = self.buffer.killed_by.get(who)
+        if killer is not None and moment.alive[self.index[killer]]:
+            return (ShotChoice((killer,), ShotKind.FOLLOW,
+                               f"take fallback: held player {who} died (killed by {killer}); following {killer}"),
+                    (self.index[killer],))
+        place = moment.feet_world[dead]
+        fights = [o for o in self.planned.options(moment, self.buffer) if o.kind == ShotKind.DUEL]
+        if fights:
+            nearest = min(fights, key=lambda o: float(np.linalg.norm(moment.feet_world[list(o.subjects)].mean(axis=0)
+                                                                      - place)))
+            names = tuple(self.players[i] for i in nearest.subjects)
+            return (ShotChoice(names, ShotKind.DUEL,
+                               f"take fallback: held player {who} died; the nearest fight, {names[0]} vs {names[1]}"),
+                    nearest.subjects)
+        return ShotChoice((), ShotKind.OVERVIEW, f"take fallback: held player {who} died; no fight, overview"), ()
+
+    # -- the frame --------------------------------------------------------------------------
+    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
+            last: FrameState | None) -> None:
+        """BUFFER, PLAN, CAMERA and VISIBILITY (module docstring), timed into state."""
+        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
+        state.players = self.roster
+        if not self.buffer.push(update.frame, update.time_s, target_transforms, state.aim_points_world, update.events):
+            state.flags.append("match_stale_frame")
+        moment = self.buffer.program_moment(update.time_s - self.delay_s)
+        stages.done(MatchStage.BUFFER)
+        self.program_transforms = None if moment is None else moment.transforms
+        if moment is None:
+            state.buffering, state.pose, state.visibility = True, None, 0.0
+            state.flags.append("buffering")
+            return
+        state.frame, state.time_s = moment.frame, moment.time_s
+        state.dt_s = 0.0 if self._last_time_s is None else max(0.0, moment.time_s - self._last_time_s)
+        state.aim_points_world = list(moment.aims_world)
+        self._last_time_s = moment.time_s
+        cut = False
+        if self._take_pending or self.shot is None or moment.time_s >= self._next_plan_s:
+            self._next_plan_s = moment.time_s + self.settings.plan_interval_s
+            new = self._plan(moment, state.flags)
+            self._take_pending = False
+            if new is not None:
+                self.shot, cut = new, True
+        stages.done(MatchStage.PLAN)
+        self.shot.camera.advance(moment, 0.0 if cut else state.dt_s, self.style.response_time_s)
+        pose = self.shot.camera.pose(moment)
+        if pose is None:
+            pose = self._last_pose
+            state.flags.append("pose_held")
+        if pose is None:  # a degenerate first shot: look from the overview
+            self.shot = self.builder.build(ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"), (),
+                                           moment, [moment], None, None, moment.time_s)[0]
+            pose = self.shot.camera.pose(moment)
+        state.pose, state.cut = pose, cut
+        self._last_pose = pose
+        if isinstance(self.shot.camera, ToricCamera):
+            state.a_world, state.b_world = self.shot.camera.points(moment)
+            state.b_is_gaze_point = self.shot.camera.b_index is None
+        state.candidates = [Candidate(camera.pose(moment) if camera is not None else pose, choice, score)
+                            for choice, camera, score in self._candidates]
+        state.candidates = [c for c in state.candidates if c.pose is not None]
+        stages.done(MatchStage.CAMERA)
+        subjects = self.shot.subjects
+        state.visibility = float(self.visibility.visible_share(pose.position_world, moment, subjects).mean()) \
+            if subjects else 1.0
+        state.shot = self.shot.choice
+        state.events, state.planned_cut = moment.events, self.planned_cut(moment.time_s)
+        state.scores = dict(self.shot.scores, visibility=state.visibility,
+                            shot_length_s=moment.time_s - self.shot.start_s)
+        stages.done(MatchStage.VISIBILITY)
+
+    def _plan(self, moment: Moment, flags: list[str]) -> Shot | None:
+        """The cut decision of this tick (take, else the director), the re-placement of an
+        occluded camera (ours) and the candidates; the new shot or None."""
+        if self.held is not None:
+            new = self._held_shot(moment, flags)
+        else:
+            new = self.director.decide(moment, self.buffer, None if self.shot is None or self.shot.held else self.shot,
+                                       self._last_pose, flags)
+            if new is None and self.shot is not None and self.shot.held:  # released: the director starts afresh
+                new = self.director.decide(moment, self.buffer, None, self._last_pose, flags)
+        if self.director is self.planned or self.held is not None:
+            self._replace(moment, flags)
+        self._candidates = self._candidate_shots(moment, new or self.shot)
+        return new
+
+    def _replace(self, moment: Moment, flags: list[str]) -> None:
+        """Ours: a Toric camera whose goal place sees its subjects under min_visible glides to the
+        best place on its side. With planned events still ahead in the buffer the place is judged
+        at their moments (plan.py's event cover: being hidden now matters less than at the kill);
+        otherwise now and REPLACE_LOOKAHEAD_S ahead."""
+        camera = None if self.shot is None else self.shot.camera
+        if not isinstance(camera, ToricCamera):
+            return
+        now = moment.time_s
+        upcoming = [t for t in self.shot.cover_times_s if now <= t <= self.buffer.horizon_s]
+        if upcoming:
+            cover, weights = PlannedDirector.event_cover(self.buffer, now, upcoming)
+        else:
+            ahead = now + REPLACE_LOOKAHEAD_S
+            cover, weights = [moment] + ([self.buffer.at(ahead)] if ahead <= self.buffer.horizon_s else []), None
+        subjects = self.shot.subjects
+        _, seen = best_place(camera, [camera.goal], cover, subjects, self.visibility, weights=weights)
+        if seen >= self.settings.min_visible:
+            return
+        side = None if camera.b_index is None else camera.side
+        place, score = best_place(camera, place_grid(side), cover, subjects, self.visibility, weights=weights)
+        if score > seen:
+            camera.goal = place
+            flags.append("replaced_for_visibility")
+
+    def _candidate_shots(self, moment: Moment, program: Shot | None) -> list[tuple[ShotChoice, ToricCamera | None, float]]:
+        """The best other situations, each with a Toric camera at the style's place (an OVERVIEW
+        candidate reuses the program pose until it is taken)."""
+        out = []
+        program_set = set(program.subjects) if program is not None else set()
+        for option in self.planned.options(moment, self.buffer):
+            if len(out) >= self.settings.candidates:
+                break
+            if set(option.subjects) == program_set or option.kind == ShotKind.OVERVIEW:
+                continue
+            camera = self.builder.cameras(option.kind, option.subjects, moment, default=True)[0][0]
+            out.append((ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, option.reason),
+                        camera, option.score))
+        return out

@@ -1,0 +1,116 @@
+"""The match director's settings: one typed object, each default with its unit and limit, validated once.
+
+The shot lengths that a caster styles (min and max shot) live in `Style` (style.py: `min_shot_s`,
+`max_shot_s`, defaults 2 s and 8 s, the issue's); everything here is the director's own tuning.
+`HltvSettings` holds the published rules of Valve's SourceTV director (hltvdirector.cpp and
+hltvcamera.cpp of the Source SDK 2013), converted once from Source units (inches) to metres.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+from camdirector.pipeline.inputs import EventKind
+
+INCH_M = 0.0254  # one Source unit: the SDK's player is 72 units tall (1.83 m)
+
+
+@dataclass(frozen=True)
+class HltvSettings:
+    rank_interval_s: float = 0.5         # players and fixed cameras are ranked this often, s. (0, 10]
+    min_shot_s: float = 4.0              # MIN_SHOT_LENGTH: shorter time to the next forced cut extends the shot, s. (0, 60]
+    max_shot_s: float = 8.0              # MAX_SHOT_LENGTH, s. [min_shot_s, 120]
+    default_shot_s: float = 6.0          # DEF_SHOT_LENGTH: a random shot's length, s. [min_shot_s, max_shot_s]
+    min_director_delay_s: float = 10.0   # HLTV_MIN_DIRECTOR_DELAY: below it no look-ahead, s. [0, 300]
+    event_window_s: float = 2.0          # the look-ahead is four windows of this length, s. (0, 10]
+    after_event_s: float = 2.0           # the next cut comes this long after a shown kill, s. [0, 10]
+    rank_range_m: float = 1024 * INCH_M  # players farther apart than this do not rank each other, m. (0, 1000]
+    kill_chase_distance_m: float = 96 * INCH_M    # the kill's chase camera behind its first target, m. (0, 100]
+    kill_chase_pitch_deg: float = -20.0  # Source pitch (positive looks down): -20 is the low, dramatic view, deg. [-89, 89]
+    kill_chase_yaw_deg: float = 30.0     # left or right of the line to the second target, at random, deg. [0, 180]
+    player_chase_distance_m: float = 112 * INCH_M  # the best player's chase camera, m. (0, 100]
+    player_chase_pitch_deg: float = 20.0  # deg. [-89, 89]
+    player_chase_yaw_deg: float = 20.0    # deg. [0, 180]
+    dead_pitch_deg: float = 15.0         # pitch offset when the first target is dead, deg. [-89, 89]
+    max_pitch_deg: float = 60.0          # the two-target chase camera's pitch clamp, deg. [0, 89]
+    wall_margin_m: float = 0.3           # the chase camera stops this short of a wall (the SDK's trace hull), m. [0, 5]
+    fixed_camera_share: float = 0.25     # with no event, a fixed camera this often, else a chase. [0, 1]
+    in_eye_kill_chance: float = 0.67     # a kill is shown first person this often (the SDK: > 0.33). [0, 1]
+    swap_chance_in_eye: float = 0.7      # first person: the attacker's eyes this often. [0, 1]
+    swap_chance_chase: float = 0.3       # chase: behind the attacker instead of the victim this often. [0, 1]
+
+    def __post_init__(self):
+        _check_positive_finite(self, ("rank_interval_s", "min_shot_s", "event_window_s", "rank_range_m",
+                                      "kill_chase_distance_m", "player_chase_distance_m"))
+        if not self.min_shot_s <= self.default_shot_s <= self.max_shot_s:
+            raise ValueError("HltvSettings: need min_shot_s <= default_shot_s <= max_shot_s")
+        for name in ("fixed_camera_share", "in_eye_kill_chance", "swap_chance_in_eye", "swap_chance_chase"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"HltvSettings: {name} must be in [0, 1]")
+
+
+@dataclass(frozen=True)
+class MatchSettings:
+    plan_rate_hz: float = 10.0           # the planner's rate; the program camera runs every frame, Hz. (0, 120]
+    lead_s: float = 2.5                  # preferred cut before a planned event, s. [min_lead_s, max_lead_s]
+    min_lead_s: float = 1.0              # no cut in the last second before a planned event, s. [0, 10]
+    max_lead_s: float = 4.0              # never cut for an event earlier than this before it, s. [min_lead_s, 30]
+    lookahead_s: float = 12.0            # the planner reads the buffered future this far, s. (0, 300]
+    beat_min_priority: int = 5           # events of this priority or more get a planned shot (kills, objectives). [1, 15]
+    max_group: int = 4                   # most players in one shot. [2, 64]
+    preferred_shot_s: float = 3.0        # a planned cut that would end the shot before it sooner than this is not made when one
+                                         # GROUP or OVERVIEW shows both beats (kills 2.7 s apart made 2.7-s shots), s. [0, 60]
+    event_hold_s: float = 0.2            # a shown event stays on screen this long before a planned cut to the next
+                                         # (eval-match: at 1.0 s, the next kill elsewhere lost its lead; nav_test
+                                         # coverage 0.80 at 0.2 s, 0.76 at 0.5 s), s. [0, 10]
+    dead_hold_s: float = 1.5             # after that long on a dead subject the director cuts away, s. [0, 10]
+    respawn_speed_m_s: float = 30.0      # a dead player's feet moving faster than this between two frames teleported: a respawn
+                                         # (runners 5-8 m/s, a body falling 45 m reaches 30 m/s), m/s. (0, 10000]
+    respawn_min_jump_m: float = 0.5      # and at least this far (rounding and interpolation stay under it), m. (0, 1000]
+    respawn_walk_m: float = 5.0          # a dead player this far from where it fell has walked away: respawned in place, m. (0, 1000]
+    engage_range_m: float = 25.0         # opponents farther apart do not fight, m. (0, 1000]
+    facing_cos: float = 0.5              # a player faces another within acos(0.5) = 60 deg of its forward. [-1, 1]
+    recent_event_s: float = 3.0          # a damage event makes its pair a fight for this long, s. [0, 30]
+    switch_margin: float = 0.5           # a discretionary cut needs a shot this much better (relative). [0, 10]
+    settle_s: float = 4.0                # and the shot this old (hysteresis; dead subjects and max shot cut sooner), s. [0, 120]
+    group_radius_m: float = 8.0          # players within this of their centroid make a GROUP, m. (0, 100]
+    overview_min_interest: float = 0.15  # below this best interest the director shows an OVERVIEW. [0, 100]
+    samples_per_player: int = 16         # surface points ray-cast per framed player (8 misjudged half-hidden players). [1, 256]
+    min_visible: float = 0.75            # a framed place under this visible share looks for a better one. [0, 1]
+    candidates: int = 3                  # preview shots offered beside the program. [0, 16]
+    jump_cut_deg: float = 30.0           # the 30-degree rule: a cut on a shared subject turns the view this much, deg. [0, 180]
+    overview_height_m: float = 12.0      # the bounding-box overview's height above the players, m. (0, 1000]
+    priorities: dict[EventKind, int] = field(default_factory=lambda: {
+        EventKind.UNSPECIFIED: 1, EventKind.KILL: 7, EventKind.DAMAGE: 3, EventKind.OBJECTIVE: 5,
+        EventKind.CUSTOM: 4})            # the kind's default priority (a death is 7 as in HLTV), [1, 15]
+    hltv: HltvSettings = field(default_factory=HltvSettings)
+
+    def __post_init__(self):
+        _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
+                                      "respawn_walk_m", "engage_range_m",
+                                      "group_radius_m", "overview_height_m"))
+        if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
+            raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")
+        if not 2 <= self.max_group <= 64 or not 1 <= self.samples_per_player <= 256 \
+                or not 1 <= self.beat_min_priority <= 15:
+            raise ValueError("MatchSettings: max_group in [2, 64], samples_per_player in [1, 256], "
+                             "beat_min_priority in [1, 15]")
+        if not -1.0 <= self.facing_cos <= 1.0 or not 0.0 <= self.min_visible <= 1.0:
+            raise ValueError("MatchSettings: facing_cos in [-1, 1], min_visible in [0, 1]")
+        if set(self.priorities) != set(EventKind) or not all(1 <= p <= 15 for p in self.priorities.values()):
+            raise ValueError("MatchSettings: one priority in [1, 15] per EventKind")
+
+    @property
+    def plan_interval_s(self) -> float:
+        return 1.0 / self.plan_rate_hz
+
+
+def _check_positive_finite(settings, positive: tuple[str, ...]) -> None:
+    """Every float field finite, >= 0 (pitches may be negative), and > 0 for the names in `positive`."""
+    for f in fields(settings):
+        value = getattr(settings, f.name)
+        if not isinstance(value, float):
+            continue
+        low_ok = value > 0.0 if f.name in positive else (value >= 0.0 or "pitch" in f.name)
+        if not (math.isfinite(value) and low_ok):
+            raise ValueError(f"{type(settings).__name__}: {f.name} out of range, got {value}")

@@ -1,0 +1,290 @@
+"""The camera of each shot kind, and where on its manifold a shot's camera is placed.
+
+DUEL, FOLLOW and GROUP use the Toric framing (toric-space-primer.md; the occlusion-anticipation
+paper, section 3): the camera stays on the torus of the two framed points every frame, at a place
+(theta as a ratio along the arc, phi about the A-B axis) chosen at the cut:
+- DUEL frames the two players, the screen-left one given by the line of action (grammar.py);
+- FOLLOW frames one player and a gaze-room point `gaze_room_m` ahead of its smoothed facing,
+  horizon level (the level's camera tracks are not used: the Toric rig serves every level);
+- GROUP frames the two players of the group farthest apart, at screen points 1.5 times wider than
+  the style's, so the others, between them, are in frame too.
+OVERVIEW is a static camera high above the players' bounding box looking at its centre, or at
+a node of the level's graph, whichever sees the worst-seen player best by the same measure as
+the places below; it is level too (geometry.camera.level_look_rotation). It also stands in for a
+DUEL or GROUP whose best place sees its subjects under `min_visible` when it sees them better
+(plan.py, ShotBuilder.build).
+
+Every camera keeps the horizon level, as broadcast casting does. DUEL and GROUP do not compose A
+and B exactly (geometry.toric.look_rotation rolls the camera whenever the composition demands
+it: over a shoulder from above the pair's axis, by up to 85 degrees; with it, at a 10 s delay on
+nav_test, dungeon and zdm2, the program was rolled by more than 20 degrees for 34%, 55% and 61% of
+its time) but turn that composition about the bisector of the rays to A and B until the horizon
+is level (geometry.toric.level_pair_rotation): A and B lie about the midpoint of their screen
+points, exactly on them wherever the exact composition has no roll, one above the other over a
+shoulder from above. The place search judges this level picture (`ToricCamera.rotations`), so a
+place whose level picture cannot hold both players fails the frame test: a pair 20-24 m apart
+along a corridor, seen only from above it, is shot wide instead (the OVERVIEW stand-in above).
+Measured with eval-match at a 10 s delay (5-minute 10-player matches, seed 0), rolled -> level
+with the stand-in: kill coverage nav_test 0.857 -> 0.893, dungeon 0.909 -> 0.875, zdm2 0.872 ->
+0.881; shot lengths, shots under 2 s and jump cuts unchanged; program roll 0.
+
+The place is chosen by ray casting the subjects' sample points from a grid of places, at the cut
+and at the moments the shot must cover (with a delay these are buffered future moments: the
+occlusion is anticipated by looking at it, section 5's look-ahead done with the real future),
+scoring each place by its worst-seen subject (a point counts when it is unoccluded and inside
+the frame), each moment with its weight (a planned event's own moment weighs most). A place is
+also a framing width: the style's screen points spread `width` times apart (clamped to the
+frame), which shrinks the torus, since a wider composition angle puts the camera closer to the
+players (primer, "the torus"); in corridors and rooms a close camera is the one under the
+walls, so the grid tries the style's composition first and two wider ones. While the shot runs,
+a place that falls under `min_visible` is replaced by the best one on the same side, and the
+camera glides there (and to its width) with the style's response time, so the composition never
+jumps inside a shot.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation, project_from_cameras
+from camdirector.geometry.toric import (
+    DegenerateTorus,
+    Torus,
+    composition_angle,
+    level_pair_matrices,
+    level_pair_rotation,
+    make_torus,
+    theta_max,
+    torus_position,
+)
+from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
+from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.visibility import SubjectVisibility
+from camdirector.pipeline.stages import ShotKind
+from camdirector.pipeline.style import Style
+
+THETA_MARGIN = 0.04                                     # keep the camera off A and B, ratio of the arc
+# The place grid along the arc (the ends are over a shoulder) and about the axis (0 above, 90 level
+# beside), and the framing widths (module docstring), the style's own first so that it wins ties.
+# Dense at the ends of the arc (over a shoulder, where a close camera sees past the walls) and
+# from nearly above to a little below the axis: a duel's line of action leaves one side of it,
+# and on dungeon and zdm2 the best place of that side at a kill sees both players for 0.89-0.98
+# of the kills with this grid, 0.68-0.82 with 10 ratios and 5 phis from 30 to 95 degrees (with
+# the rolled composition; level, the places nearly above still show a pair one above the other,
+# and more phis or a fourth width did not recover dungeon's four kills: module docstring).
+PLACE_RATIOS = np.array([0.01, 0.03, 0.06, 0.1, 0.15, 0.3, 0.5, 0.7, 0.85, 0.9, 0.94, 0.97, 0.99])
+PLACE_PHI_RAD = np.radians([5.0, 10.0, 20.0, 30.0, 45.0, 65.0, 80.0, 95.0, 110.0, 125.0])
+PLACE_WIDTHS = (1.0, 1.8, 2.6)
+MAX_SCREEN = 0.9                                        # a widened screen point stays this far inside the frame
+MIN_CAMERA_HEIGHT_M = 0.5  # a place lower than this above the lowest subject's feet is under the ground: never chosen
+HEADING_TIME_CONSTANT_S = 0.6                           # FOLLOW: smoothing of the facing, as framing.py
+GROUP_SCREEN_SCALE = 1.5                                # GROUP: screen points this much wider than the style's
+OVERVIEW_HEIGHTS_M = (4.0, 8.0)                         # overview heights tried below overview_height_m
+OVERVIEW_AZIMUTHS = 8
+
+
+@dataclass(frozen=True)
+class Place:
+    theta_ratio: float  # along the arc, 0 at A .. 1 at B, [0, 1]
+    phi_rad: float      # about the A-B axis, rad
+    width: float = 1.0  # the screen points this many times the style's apart (module docstring), [1, 10]
+
+
+class ToricCamera:
+    """DUEL, FOLLOW or GROUP: the camera on the torus of points A and B (module docstring).
+    a_index, b_index: players; b_index None frames A with gaze room."""
+
+    def __init__(self, kind: ShotKind, a_index: int, b_index: int | None, style: Style, lens: Lens, place: Place):
+        self.kind, self.a_index, self.b_index = kind, a_index, b_index
+        scale = GROUP_SCREEN_SCALE if kind == ShotKind.GROUP else 1.0
+        self.style_a = tuple(c * scale for c in style.screen_a)
+        self.style_b = tuple(c * scale for c in style.screen_b)
+        self.lens, self.gaze_room_m = lens, style.gaze_room_m
+        self.place = self.goal = place
+        self.heading: np.ndarray | None = None
+
+    def composition(self, width: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+        """The screen points of A and B (2,) each at a framing width, and their composition angle, rad."""
+        screen_a = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in self.style_a)
+        screen_b = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in self.style_b)
+        return screen_a, screen_b, composition_angle(screen_a, screen_b, self.lens)
+
+    @property
+    def side(self) -> float:
+        return math.copysign(1.0, self.place.phi_rad)
+
+    def points(self, moment: Moment) -> tuple[np.ndarray, np.ndarray]:
+        """The framed points A and B, (3,) each, at the moment."""
+        a = moment.aims_world[self.a_index]
+        if self.b_index is not None:
+            return a, moment.aims_world[self.b_index]
+        heading = moment.forward_world[self.a_index] if self.heading is None else self.heading
+        return a, a + self.gaze_room_m * heading
+
+    def torus(self, moment: Moment, width: float) -> Torus | None:
+        try:
+            return make_torus(*self.points(moment), self.composition(width)[2], UP_WORLD)
+        except DegenerateTorus:
+            return None
+
+    def positions(self, moment: Moment, places: list[Place]) -> np.ndarray | None:
+        """(len(places), 3) camera centres at the moment, None when the framing is degenerate."""
+        widths = np.array([p.width for p in places])
+        out = np.empty((len(places), 3))
+        for width in dict.fromkeys(widths.tolist()):  # one torus per framing width
+            torus = self.torus(moment, width)
+            if torus is None:
+                return None
+            rows = np.flatnonzero(widths == width)
+            arc = theta_max(torus.alpha)
+            theta = arc * THETA_MARGIN + arc * (1.0 - 2.0 * THETA_MARGIN) * np.array([places[r].theta_ratio
+                                                                                     for r in rows])
+            out[rows] = torus_position(torus, theta, np.array([places[r].phi_rad for r in rows]))
+        return out
+
+    def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
+        """Glides the place toward the goal and smooths the FOLLOW heading (time constants, s)."""
+        keep = math.exp(-dt_s / response_time_s) if dt_s > 0.0 else 1.0
+        dphi = math.remainder(self.goal.phi_rad - self.place.phi_rad, math.tau)
+        self.place = Place(self.goal.theta_ratio + keep * (self.place.theta_ratio - self.goal.theta_ratio),
+                           self.goal.phi_rad - keep * dphi,
+                           self.goal.width + keep * (self.place.width - self.goal.width))
+        forward = moment.forward_world[self.a_index]
+        if self.heading is None:
+            self.heading = forward
+        elif dt_s > 0.0:
+            blend = self.heading + (1.0 - math.exp(-dt_s / HEADING_TIME_CONSTANT_S)) * (forward - self.heading)
+            norm = np.linalg.norm(blend)
+            self.heading = blend / norm if norm > 1e-6 else forward
+
+    def rotations(self, moment: Moment, positions_world: np.ndarray, places: list[Place]) -> np.ndarray:
+        """(m, 3, 3) camera-to-world rotations of pose_from at m positions (m, 3) of their places'
+        widths, at once for a pair (geometry.toric.level_pair_matrices), so that the place search
+        judges the level picture that is shown; NaN where degenerate."""
+        if self.b_index is None:
+            return quat_to_matrix(np.stack([self.pose_from(moment, p, place.width).rotation_xyzw
+                                            for p, place in zip(positions_world, places)]))
+        a, b = self.points(moment)
+        widths = np.array([p.width for p in places])
+        out = np.empty((len(places), 3, 3))
+        for width in dict.fromkeys(widths.tolist()):
+            rows = np.flatnonzero(widths == width)
+            screen_a, screen_b, _ = self.composition(width)
+            out[rows] = level_pair_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
+        return out
+
+    def pose(self, moment: Moment) -> CameraPose | None:
+        positions = self.positions(moment, [self.place])
+        return None if positions is None else self.pose_from(moment, positions[0], self.place.width)
+
+    def pose_from(self, moment: Moment, position_world: np.ndarray, width: float) -> CameraPose:
+        """The camera at a point (3,) of the torus of a framing width, horizon level (module
+        docstring): DUEL and GROUP frame A and B about their screen points (geometry.toric.
+        level_pair_rotation), FOLLOW frames A exactly (geometry.camera.level_look_rotation)."""
+        a, b = self.points(moment)
+        screen_a, screen_b, _ = self.composition(width)
+        if self.b_index is None:
+            rotation = level_look_rotation(position_world, a, screen_a, self.lens)
+        else:
+            rotation = level_pair_rotation(position_world, a, b, screen_a, screen_b, self.lens)
+        return CameraPose(position_world, rotation, self.lens.vertical_fov_deg)
+
+
+class StaticCamera:
+    """OVERVIEW (and the HLTV baseline's fixed cameras): a pose that does not move during the shot."""
+
+    kind = ShotKind.OVERVIEW
+
+    def __init__(self, pose: CameraPose):
+        self.fixed_pose = pose
+
+    def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
+        """Nothing moves."""
+
+    def pose(self, moment: Moment) -> CameraPose:
+        return self.fixed_pose
+
+
+def place_grid(side: float | None) -> list[Place]:
+    """The places tried: every width, ratio and phi, on one side (sign of phi) or both when side is None."""
+    signs = (1.0, -1.0) if side is None else (side,)
+    return [Place(float(r), s * float(p), w) for w in PLACE_WIDTHS for s in signs for r in PLACE_RATIOS
+            for p in PLACE_PHI_RAD]
+
+
+def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...],
+                positions_world: np.ndarray, rotations: np.ndarray, lens: Lens) -> np.ndarray:
+    """(m, len(subjects)) the share of each subject's sample points that each of m cameras,
+    positions (m, 3) and camera-to-world rotation matrices (m, 3, 3), sees at the moment:
+    unoccluded and inside the frame, and not from under the subjects' ground. A camera whose
+    rotation is NaN (a degenerate framing) sees nothing."""
+    seen = visibility.seen_points(positions_world, moment, subjects)     # (m, s, k)
+    ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
+    seen[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
+    screen = project_from_cameras(positions_world, rotations, lens, visibility.points_world(moment, subjects))
+    with np.errstate(invalid="ignore"):
+        inside = (np.abs(screen) <= 1.0).all(axis=2)                   # NaN (behind, degenerate) compares False
+    seen &= inside.reshape(seen.shape)
+    return seen.mean(axis=2)
+
+
+def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], subjects: tuple[int, ...],
+               visibility: SubjectVisibility, allowed: Callable[[np.ndarray], np.ndarray] | None = None,
+               cut_moment: Moment | None = None, weights: list[float] | None = None) -> tuple[Place, float]:
+    """The place of `places` whose worst-seen subject is best seen (framed_seen), a mean over
+    `moments` with `weights` (default equal), and that score in [0, 1]. allowed: (m, 3) positions
+    at cut_moment -> (m,) bool (the cut's grammar); places it refuses score -1. Ties go to the
+    earlier place."""
+    weights = [1.0] * len(moments) if weights is None else weights
+    score = np.zeros(len(places))
+    for moment, weight in zip(moments, weights):
+        positions = camera.positions(moment, places)
+        if positions is None:
+            continue
+        rotations = camera.rotations(moment, positions, places)
+        score += weight * framed_seen(visibility, moment, subjects, positions, rotations, camera.lens).min(axis=1)
+    score /= max(sum(weights), 1e-9)
+    if allowed is not None:
+        first = camera.positions(cut_moment, places)
+        if first is not None:
+            score = np.where(allowed(first), score, -1.0)
+    best = int(np.argmax(score))
+    return places[best], float(score[best])
+
+
+def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[int, ...], lens: Lens,
+                  visibility: SubjectVisibility, top_height_m: float, extra_cameras_world: np.ndarray,
+                  allowed: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[CameraPose, float]:
+    """A high view of the subjects' bounding box over `moments`, looking at its centre, and its
+    worst-seen subject's share (framed_seen, a mean over the moments with `weights`). Tries
+    OVERVIEW_AZIMUTHS directions at each height up to top_height_m, and the (k, 3) extra camera
+    places (the level's graph nodes, when there is a level) within twice the box's viewing
+    distance; the best worst-seen subject wins, then the best mean. allowed: (m, 3) camera
+    centres -> (m,) bool (the cut's grammar); cameras it refuses score -1. The pose keeps the
+    horizon level (roll 0: geometry.camera.level_look_rotation), as every camera of the rig."""
+    aims = np.concatenate([m.aims_world[list(subjects)] for m in moments])
+    centre = aims.mean(axis=0)
+    radius_m = float(np.max(np.linalg.norm((aims - centre)[:, [0, 2]], axis=1))) + 2.0
+    distance_m = radius_m / lens.tan_half_fov_y
+    cameras = []
+    for height in (*OVERVIEW_HEIGHTS_M, top_height_m):
+        for k in range(OVERVIEW_AZIMUTHS):
+            azimuth = math.tau * k / OVERVIEW_AZIMUTHS
+            horizontal = max(distance_m * math.cos(math.atan2(height, distance_m)), 1.0)
+            cameras.append(centre + np.array([horizontal * math.sin(azimuth), height, horizontal * math.cos(azimuth)]))
+    cameras = np.array(cameras)
+    if len(extra_cameras_world):
+        near = np.linalg.norm(extra_cameras_world - centre, axis=1) <= 2.0 * max(distance_m, top_height_m)
+        cameras = np.concatenate([cameras, extra_cameras_world[near]])
+    poses = [CameraPose(c, level_look_rotation(c, centre, (0.0, 0.0), lens), lens.vertical_fov_deg) for c in cameras]
+    rotations = quat_to_matrix(np.stack([p.rotation_xyzw for p in poses]))
+    seen = sum(w * framed_seen(visibility, m, subjects, cameras, rotations, lens) for m, w in zip(moments, weights))
+    seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
+    worst = seen.min(axis=1)
+    if allowed is not None:
+        worst = np.where(allowed(cameras), worst, -1.0)
+    best = int(np.lexsort((-seen.mean(axis=1), -worst))[0])
+    return poses[best], float(worst[best])

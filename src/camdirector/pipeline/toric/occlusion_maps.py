@@ -1,0 +1,220 @@
+"""PROJECTION and AMAP stages of the ANTICIPATION and NO_ANTICIPATION modes: the S-maps and V-maps
+of the paper's 2r target sample points, refreshed on its amortized schedule, and the occlusion
+anticipation map the search reads (occlusion-anticipation-toric-space.md, sections 4, 4.2, 6).
+
+Built lazily, the first time a session enters a map mode: it keeps its own occluder scene (the
+backends hold their own acceleration data). Each frame only records the moved objects' poses
+(`ingest`: two dictionary operations in C, whatever the number of objects); the frames that
+build maps (the amortized schedule, one in several) move the scene's objects, all at once, and
+give them velocities by finite differences between the latest frame and the one before it (an
+object the latest frame does not mention has not moved: velocity zero). So many moving objects
+cost the frames between map builds nearly nothing.
+
+An amortized update (2 of the 2r maps, every slot already holding one) is computed apart from
+the frame it is due on: that frame draws its sample points, moves the scene and schedules the next
+update; its maps and A_s are computed when the session's worker is idle (`do_deferred_work`,
+called by worker/table.py's `idle_work`) or, at the latest, by the update that applies
+them, `AnticipationSettings.apply_after_frames` (1) frames later. Why: an update costs 2-4 ms, the
+frames between updates about 1 ms, and a worker's sessions created together update in the same
+period; computed inline, their updates queued the frames behind them (compute p99 6-7 ms, round
+trip p99 13 ms at 8 sessions on 2 cores, `load_tests.capacity`). Apart, the frame that draws an
+update answers as fast as the others, and the maps are computed while its worker waits for
+requests. The search reads each amortized update one frame (17 ms at 60 Hz) after it is due,
+inside the paper's 0.1 s update period and 0.5 s horizon (section 6), and always on that frame:
+what a session answers does not depend on when its worker was idle. (Later than one frame cost
+the demo scene's visibility: see the setting.) A refill (the first update, and the first after a
+cut) is computed and applied at once: the search has no A-map without it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.toric import Torus
+from camdirector.geometry.toric_maps import OccluderScene, choose_backend, make_backend, probe_gl_renderer
+from camdirector.geometry.toric_maps.base import MapWindow, ShadowVelocityMaps, WindowSettings
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.stages import Stage
+from camdirector.pipeline.style import MapBackendChoice, Style, VisibilityMode
+from camdirector.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, StyleMaskSettings, shared_bank
+from camdirector.pipeline.toric.target_sampling import TargetSampler
+
+
+@dataclass
+class _DeferredUpdate:
+    """An amortized update drawn on the frame it was due on, not yet applied (module docstring)."""
+
+    time_s: float
+    slots: list[int]
+    torus: Torus
+    window: MapWindow
+    points_world: np.ndarray                 # (k, 3) float64: the slots' sample points, world metres
+    exclude_ids: list[str]                   # k: the target each point lies on
+    previous_torus: Torus | None
+    dt_s: float
+    frames_left: int                         # updates (one a frame) until it is applied
+    maps: ShadowVelocityMaps | None = None   # once computed, until A_s is
+    predicted: np.ndarray | None = None      # (k, res, res) float32 A_s, once computed
+
+
+class OcclusionMaps:
+    """The map modes' state for one session: occluder scene, backend, sampler and A-map."""
+
+    def __init__(self, static_meshes_world: list[TriMesh], dynamic: dict[str, tuple[TriMesh, RigidTransform]],
+                 sampler: TargetSampler, style: Style, rng: np.random.Generator):
+        self.scene = OccluderScene(static_meshes_world)
+        for object_id, (mesh, transform) in dynamic.items():
+            self.scene.add_dynamic(object_id, mesh, transform)
+        # Every object's pose as of the latest frame and as of the frame before (targets too: ignored),
+        # the latest frame's moved (id, transform) pairs, and the two frames' times (None: none yet).
+        self._latest: dict[str, RigidTransform] = {object_id: tf for object_id, (_, tf) in dynamic.items()}
+        self._before: dict[str, RigidTransform] = dict(self._latest)
+        self._moved: list[tuple[str, RigidTransform]] = []
+        self._times_s: tuple[float | None, float | None] = (None, None)
+        self.sampler = sampler
+        self.rng = rng
+        self._backend_key = None
+        self.backend = None
+        self.amap: AnticipationMap | None = None
+        self._previous: tuple[Torus, float] | None = None
+        self._deferred: _DeferredUpdate | None = None
+        self.set_style(style)
+
+    def set_style(self, style: Style) -> None:
+        """A new map resolution, anticipation switch or backend starts the maps afresh; a new mask
+        applies at once. A deferred update is computed with the backend it was drawn for, and
+        dropped with the A-map when that starts afresh."""
+        self.do_deferred_work()
+        settings = AnticipationSettings(
+            samples_per_target=self.sampler.settings.samples_per_target,
+            anticipate=style.visibility != VisibilityMode.NO_ANTICIPATION,
+            window=WindowSettings(resolution=style.map_resolution))
+        mask = StyleMaskSettings(kind=style.mask)
+        if self.amap is None or self.amap.settings != settings:
+            self._deferred = None
+            self.amap = AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
+        else:
+            self.amap.set_mask(mask)
+        backend_name = {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or \
+            choose_backend(self.scene.triangle_count, probe_gl_renderer(), style.map_resolution)
+        if backend_name != self._backend_key:
+            if self.backend is not None:
+                self.backend.close()
+            self.backend = make_backend(backend_name, self.scene)
+            self._backend_key = backend_name
+
+    @property
+    def backend_name(self) -> str:
+        return self._backend_key
+
+    def ingest(self, moved: list[tuple[str, RigidTransform]], time_s: float) -> None:
+        """Records this frame's poses of the moved objects (module docstring)."""
+        self._before = self._latest.copy()
+        self._latest.update(moved)
+        self._moved = moved
+        self._times_s = (time_s, self._times_s[0])
+
+    def _move_scene(self) -> None:
+        """Every dynamic object at its latest pose with its velocity (module docstring), in the
+        occluder scene, in one call, before a map build."""
+        ids = list(self.scene.dynamic)
+        linear, angular = np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
+        now_s, before_s = self._times_s
+        moving = [object_id for object_id, _ in self._moved if object_id in self.scene.dynamic]
+        if moving and before_s is not None and now_s > before_s:
+            row = {object_id: k for k, object_id in enumerate(ids)}
+            rows = [row[object_id] for object_id in moving]
+            now = [self._latest[object_id] for object_id in moving]
+            before = [self._before[object_id] for object_id in moving]
+            turn = Rotation.from_quat([tf.rotation_xyzw for tf in now]) * \
+                Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
+            linear[rows] = (np.array([tf.position_world for tf in now])
+                            - np.array([tf.position_world for tf in before])) / (now_s - before_s)
+            angular[rows] = turn.as_rotvec() / (now_s - before_s)
+        self.scene.set_motions(ids, [self._latest[object_id] for object_id in ids], linear, angular)
+
+    def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms,
+               target_ids: list[str], stages: StageClock) -> None:
+        """Applies a deferred update whose frame has come, then draws the update due at time_s
+        (2 of the 2r maps, one update every W / r s), computed and applied at once when it is a
+        refill, deferred otherwise (module docstring); laps PROJECTION and AMAP on `stages` for
+        the maps computed and applied in this call (neither when none were)."""
+        self._apply_deferred(stages)
+        amap = self.amap
+        if amap.due(time_s):
+            refill = not amap.filled
+            self._move_scene()
+            slots = amap.next_slots()
+            self.sampler.redraw(slots, self.rng)
+            amap.schedule(time_s, slots)
+            previous_torus, dt_s = (self._previous[0], time_s - self._previous[1]) if self._previous else (None, 0.0)
+            self._deferred = _DeferredUpdate(
+                time_s, slots, torus, MapWindow.around(torus, theta, phi, amap.settings.window, lattice=amap.window),
+                self.sampler.points_world(target_transforms, slots),
+                [target_ids[self.sampler.target_of(s)] for s in slots],
+                previous_torus if dt_s > 0 else None, max(dt_s, 0.0),
+                frames_left=0 if refill else amap.settings.apply_after_frames)
+            self._apply_deferred(stages, count=False)
+        self._previous = (torus, time_s)
+
+    @property
+    def has_deferred_work(self) -> bool:
+        """Whether a deferred update waits to be computed (or to be predicted from its maps)."""
+        return self._deferred is not None and self._deferred.predicted is None
+
+    def do_deferred_work(self, stages: StageClock | None = None, whole: bool = True) -> bool:
+        """Computes the deferred update's maps and A_s, without applying them (they reach the
+        search on their frame); laps PROJECTION and AMAP on `stages` when given. Without `whole`
+        only one of the two (the maps, else A_s: about 1 ms each), so that a worker's idle moment
+        delays a request that arrives meanwhile by less. Answers whether there was work to do."""
+        update = self._deferred
+        if update is None or update.predicted is not None:
+            return False
+        if update.maps is None:
+            update.maps = self.backend.compute(update.torus, update.window, update.points_world,
+                                               exclude_ids=update.exclude_ids, previous_torus=update.previous_torus,
+                                               dt_s=update.dt_s)
+            if stages is not None:
+                stages.done(Stage.PROJECTION)
+            if not whole:
+                return True
+        update.predicted = self.amap.predict(update.maps)
+        update.maps = None
+        if stages is not None:
+            stages.done(Stage.AMAP)
+        return True
+
+    def _apply_deferred(self, stages: StageClock, count: bool = True) -> None:
+        """One frame nearer for the deferred update (with `count`); on its frame, it is computed
+        if no idle moment did, and stored in the A-map."""
+        update = self._deferred
+        if update is None:
+            return
+        if count:
+            update.frames_left -= 1
+        if update.frames_left > 0:
+            return
+        self.do_deferred_work(stages)
+        self._deferred = None
+        self.amap.store(update.time_s, update.slots, update.predicted, update.window, update.torus)
+        stages.done(Stage.AMAP)
+
+    def invalidate(self) -> None:
+        """After a cut: the old window is elsewhere (a deferred update of it is dropped)."""
+        self._deferred = None
+        self.amap.invalidate()
+
+    def risk(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+        """The A-map as the search's RiskField; places off the window read as occluded."""
+        return self.amap.lookup(theta, phi, outside=1.0)
+
+    def close(self) -> None:
+        """Releases the backend (its GL objects, or its Embree scenes); idempotent."""
+        self._deferred = None
+        if self.backend is not None:
+            self.backend.close()
+            self.backend = None

@@ -1,0 +1,179 @@
+"""The TORIC rig of a session: framing on the Toric manifold and the camera's motion on it, with
+the visibility mode of the session's style (pipeline/stages.py: FRAMING, PROJECTION, AMAP,
+MOTION and VISIBILITY; the TRACKS rig, pipeline/tracks/rig.py, replaces all five).
+
+Per frame `ToricRig.run` frames the targets (framing.py), moves the camera by the style's
+visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE: that plus reactive.py; RAYCAST and the
+map modes: occlusion_search.py, the map modes with occlusion_maps.py), then, from the final pose,
+estimates the targets' visibility (visibility.py) and measures the framing error (framing.py:
+`Framing.error`; in VISIBILITY, the other measure of what the frame shows). The occlusion maps are
+built when a map mode is first asked for, at creation when the style starts in one, so the first
+frame does not pay for them; `close()` releases their backend (its GL objects, or Embree scenes)
+when the session ends.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.toric import torus_angles
+from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
+from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.stages import FrameState, Stage
+from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
+from camdirector.pipeline.toric.camera_motion import ToricMotion, pose_on_torus
+from camdirector.pipeline.toric.framing import Framing
+from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
+from camdirector.pipeline.toric.occlusion_search import OcclusionSearch, RaycastRisk, SearchSettings
+from camdirector.pipeline.toric.reactive import Deoccluder
+from camdirector.pipeline.toric.target_sampling import TargetSampler
+from camdirector.pipeline.toric.visibility import VisibilityEstimate
+
+
+class ToricRig:
+    """The Toric camera of one session (module docstring). ray_scene, static_meshes_world and
+    dynamic (object id -> (mesh, latest transform)) are the session's, kept current by INGEST."""
+
+    def __init__(self, scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh],
+                 dynamic: dict, rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter):
+        self.lens = scene.lens
+        self.style = scene.style
+        self.target_ids = [t.id for t in scene.targets]
+        self.static_meshes_world = static_meshes_world
+        self.dynamic = dynamic
+        self.rng = rng
+        self.clock = clock
+        self.framing = Framing(self.lens, self.style, scene.targets[0].transform.rotation_xyzw)
+        self.motion = ToricMotion(self.style, self.lens)
+        self.visibility = VisibilityEstimate(ray_scene, [t.mesh for t in scene.targets], rng)
+        self.sampler = TargetSampler([t.mesh for t in scene.targets], rng)  # the paper's 2r points
+        self.search = OcclusionSearch(SearchSettings(), rng)
+        self.deoccluder = Deoccluder(ray_scene)
+        self._searching = False  # whether the search particle holds the camera's place
+        self._style_cut = False
+        self.maps: OcclusionMaps | None = None
+        if self.style.visibility in MAP_MODES:  # last: nothing after it can fail and leave its GL objects behind
+            self._build_maps()
+
+    def set_style(self, style: Style) -> None:
+        """From the next frame on. A changed composition cannot be reached smoothly: it is a cut."""
+        if (style.screen_a, style.screen_b) != (self.style.screen_a, self.style.screen_b):
+            self._style_cut = True
+        self.style = style
+        self.framing.set_style(style)
+        self.motion.set_style(style)
+        if self.maps is not None:
+            self.maps.set_style(style)
+        elif style.visibility in MAP_MODES:
+            self._build_maps()
+
+    def anticipation_map(self, state: FrameState | None) -> tuple[np.ndarray, tuple[float, float]] | None:
+        """The A-map (n, n), rows theta and columns phi, and the texel (i, j) of the camera of
+        `state`, the last answered frame; None unless the style is a map mode and the maps have
+        been computed once."""
+        if state is None or self.maps is None or self.style.visibility not in MAP_MODES \
+                or self.maps.amap.a_map is None:
+            return None
+        i, j = self.maps.amap.window.texel_coords(state.theta, state.phi)
+        return self.maps.amap.a_map, (float(i), float(j))
+
+    def _build_maps(self) -> None:
+        self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
+
+    def do_deferred_work(self, whole: bool = True) -> bool:
+        """Computes a deferred map update now, or without `whole` a part of it (occlusion_maps.py);
+        answers whether there was work to do."""
+        return self.maps is not None and self.maps.do_deferred_work(whole=whole)
+
+    @property
+    def has_deferred_work(self) -> bool:
+        return self.maps is not None and self.maps.has_deferred_work
+
+    def close(self) -> None:
+        """Releases the occlusion maps' backend; idempotent."""
+        if self.maps is not None:
+            self.maps.close()
+            self.maps = None
+
+    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
+            last: FrameState | None) -> None:
+        """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY, timed into state.stage_ms; a
+        composition changed by set_style since the last frame makes this frame a cut."""
+        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
+        self.framing.run(state)
+        if self.maps is not None:
+            self.maps.ingest(update.states, update.time_s)
+        stages.done(Stage.FRAMING)
+        self._move(state, target_transforms, last, stages)
+        if state.pose is None:
+            state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
+        stages.done(Stage.MOTION)
+        self.visibility.run(state, target_transforms)
+        state.framing_error = self.framing.error(state)
+        stages.done(Stage.VISIBILITY)
+        state.cut = state.cut or self._style_cut
+        self._style_cut = False
+
+    def _move(self, state: FrameState, target_transforms: list[RigidTransform],
+              last: FrameState | None, stages: StageClock) -> None:
+        """MOTION: the rig of the style's visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE:
+        that plus reactive.py; RAYCAST and the map modes: occlusion_search.py), with PROJECTION and
+        AMAP lapped on `stages` in the map modes when the maps are due."""
+        mode = self.style.visibility
+        if mode not in SEARCH_MODES or state.torus is None:
+            if self._searching:  # hand the camera's place back to the toric rig
+                self.motion.theta, self.motion.position_world = self.search.theta, last.pose.position_world
+                self._searching = False
+            self.motion.run(state)
+            if mode == VisibilityMode.REACTIVE and state.pose is not None:
+                state.pose, pulled = self.deoccluder.run(state.pose, state.a_world, state.time_s, state.dt_s)
+                if pulled:
+                    state.flags.append("pulled_in")
+            return
+        torus = state.torus
+        if not self._searching:
+            if self.motion.position_world is None:
+                theta, phi, _, _ = self.motion.preferred_place(torus)
+            else:
+                theta, phi = torus_angles(torus, self.motion.position_world)
+            self.search.start(theta, phi, state.time_s)
+            self._searching = True
+        points = self.sampler.points_world(target_transforms)
+
+        def occluded(cameras_world: np.ndarray) -> np.ndarray:
+            return self.visibility.occluded_fraction(cameras_world, points)
+
+        if mode in MAP_MODES:
+            stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
+            self.maps.update(torus, self.search.theta, self.search.phi, state.time_s, target_transforms,
+                             self.target_ids, stages)
+            risk = self.maps
+        else:
+            risk = RaycastRisk(torus, occluded)
+        side = math.copysign(1.0, self.motion.preferred_place(torus)[1])  # upright half for cuts
+        result = self.search.step(torus, state.dt_s, state.time_s, risk, occluded, side,
+                                  self.style.max_speed_m_s, self.style.max_accel_m_s2)
+        state.theta, state.phi, state.cut = result.theta, result.phi, result.cut
+        state.flags.append(f"search_{result.strategy}")
+        if result.cut and self.maps is not None:
+            self.maps.invalidate()
+        state.pose = pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, state.b_is_gaze_point)
+        self.motion.position_world = state.pose.position_world
+
+
+def _fallback_pose(state: FrameState, fov_deg: float) -> CameraPose:
+    """Only when the very first frame has no usable torus: behind and above A, looking at it."""
+    target = state.aim_points_world[0]
+    position = target + np.array([0.0, 2.0, 6.0])
+    forward = (target - position) / np.linalg.norm(target - position)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return CameraPose(position, matrix_to_quat(np.stack([right, up, -forward], axis=1)), fov_deg)

@@ -1,0 +1,117 @@
+"""Server settings: one typed object, defaults with unit and limit, validated once.
+
+Precedence: command-line flag > environment variable ``CAMDIRECTOR_<FIELD>`` (upper case) >
+default. ``ServerSettings.from_env()`` reads the environment; the CLI overlays its flags.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import socket
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+def _default_data_dir() -> str:
+    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
+    return os.path.join(base, "camdirector")
+
+
+@dataclass(frozen=True)
+class ServerSettings:
+    # Transport addresses; an empty string turns that transport off.
+    grpc_addr: str = "127.0.0.1:50051"       # HOST:PORT
+    zmq_addr: str = "tcp://127.0.0.1:5555"   # tcp://HOST:PORT
+    http_addr: str = "127.0.0.1:8080"        # HOST:PORT, /healthz, /metrics, REST
+    # Worker processes holding sessions; 0 runs sessions inside the front process. [0, 256]
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    max_sessions: int = 64                   # open sessions at once, all workers together. [1, 100000]
+    max_objects: int = 4096                  # scene objects per session. [1, 1e6]
+    max_triangles: int = 2_000_000           # triangles per session scene, all meshes. [1, 1e8]
+    max_message_bytes: int = 64 * 1024 * 1024  # largest request on any transport, bytes. [1 KiB, 1 GiB]
+    session_resume_s: float = 60.0           # an idle session without a stream is reclaimed after this, s. [0.1, 86400]
+    reap_interval_s: float = 1.0             # how often idle sessions are looked for, s. [0.01, 60]
+    data_dir: str = field(default_factory=_default_data_dir)  # recordings and later artifacts
+    record_all: bool = False                 # record every session, not only those that ask
+    max_concurrent_jobs: int = 1             # offline jobs (motion overviews) running at once. [1, 64]
+    max_queued_jobs: int = 16                # offline jobs waiting; more answer HTTP 429. [0, 100000]
+    max_upload_bytes: int = 64 * 1024 * 1024  # largest job upload, bytes (HTTP 413 above). [1 KiB, 4 GiB]
+    job_retention_s: float = 7 * 86400.0     # finished offline jobs are removed this long after they ended; 0 keeps them, s. [0, 1e9]
+    # Where job records live: "" is SQLite in data_dir (one node); postgresql://... is shared by many nodes.
+    job_store: str = ""
+    # Where jobs wait to run: "" is this process's own runner (one node); redis://... is a queue that
+    # queue workers on any node take jobs from (`camdirector job-worker`).
+    job_queue: str = ""
+    # Session checkpoints (sessions/checkpoints.py): "" is a folder in data_dir (survives a worker's
+    # death and a restart of this node); redis://... lets any node restore any session; "off" keeps none.
+    checkpoint_store: str = ""
+    checkpoint_every_frames: int = 60        # a session's state is snapshotted every this many frames. [1, 100000]
+    checkpoint_keep_s: float = 600.0         # a checkpoint no node has written for this long is removed, s. [1, 1e7]
+    node_id: str = ""                        # this node's name in checkpoints' ownership ("": host name and pid)
+
+    def __post_init__(self):
+        checks = [
+            (0 <= self.workers <= 256, "workers must be in [0, 256]"),
+            (1 <= self.max_sessions <= 100_000, "max_sessions must be in [1, 100000]"),
+            (1 <= self.max_objects <= 1_000_000, "max_objects must be in [1, 1000000]"),
+            (1 <= self.max_triangles <= 100_000_000, "max_triangles must be in [1, 1e8]"),
+            (1024 <= self.max_message_bytes <= 1 << 30, "max_message_bytes must be in [1 KiB, 1 GiB]"),
+            (0.1 <= self.session_resume_s <= 86_400, "session_resume_s must be in [0.1, 86400]"),
+            (0.01 <= self.reap_interval_s <= 60, "reap_interval_s must be in [0.01, 60]"),
+            (not self.zmq_addr or self.zmq_addr.startswith(("tcp://", "ipc://")),
+             "zmq_addr must start with tcp:// or ipc://"),
+            (self.checkpoint_store in ("", "off") or self.checkpoint_store.startswith("redis://"),
+             "checkpoint_store must be empty (a folder in data_dir), off, or a redis:// URL"),
+            (1 <= self.checkpoint_every_frames <= 100_000, "checkpoint_every_frames must be in [1, 100000]"),
+            (1 <= self.checkpoint_keep_s <= 1e7, "checkpoint_keep_s must be in [1, 1e7]"),
+            (not self.job_store or self.job_store.startswith(("postgresql://", "postgres://")),
+             "job_store must be empty (SQLite in data_dir) or a postgresql:// URL"),
+            (not self.job_queue or self.job_queue.startswith("redis://"),
+             "job_queue must be empty (this process's runner) or a redis:// URL"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    def job_settings(self):
+        from camdirector.jobs import JobSettings  # validated there
+        return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
+                           max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s,
+                           job_store=self.job_store, job_queue=self.job_queue)
+
+    @property
+    def node_name(self) -> str:
+        return self.node_id or f"{socket.gethostname()}-{os.getpid()}"
+
+    @property
+    def recordings_dir(self) -> Path:
+        return Path(self.data_dir) / "recordings"
+
+    @classmethod
+    def from_env(cls, environ=None, **overrides) -> ServerSettings:
+        """Settings from CAMDIRECTOR_* variables, then `overrides` (flags; None means not given)."""
+        environ = os.environ if environ is None else environ
+        values = {}
+        for f in dataclasses.fields(cls):
+            raw = environ.get(f"CAMDIRECTOR_{f.name.upper()}")
+            if raw is not None:
+                values[f.name] = _parse(f.type, raw, f.name)
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**values)
+
+
+def _parse(type_name: str, raw: str, name: str):
+    try:
+        if type_name == "int":
+            return int(raw)
+        if type_name == "float":
+            return float(raw)
+        if type_name == "bool":
+            if raw.lower() in ("1", "true", "yes", "on"):
+                return True
+            if raw.lower() in ("0", "false", "no", "off", ""):
+                return False
+            raise ValueError(raw)
+        return raw
+    except ValueError:
+        raise ValueError(f"CAMDIRECTOR_{name.upper()}: cannot read {raw!r} as {type_name}") from None

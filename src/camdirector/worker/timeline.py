@@ -1,0 +1,162 @@
+"""A session's recent frames, for the dashboard: where the camera and the targets were, cuts and
+shots, visibility, the framing error, and why the camera moved (the frame's flags: `search_cut`,
+`pulled_in`, `tracks_cut_occlusion`, ...; the TRACKS rig's scores of the target it chose).
+
+A bounded ring of plain values kept by the session table beside each session (in the worker that
+holds it) and fed by the frame it has just answered; `GET /v1/sessions/{id}` reads it through the
+worker's "timeline" operation. Stale frames are not added: they repeat the pose.
+
+A MATCH session's frames also carry the program's shot, the candidate shots (each with its camera),
+the players (ids and teams, in target order: `targets` are their aim points), the game events at
+the program moment (a viewer keeps its own event log from them) and the director's planned next
+cut. While its broadcast delay fills, a MATCH session answers `buffering` frames with no camera,
+numbered as the input frames; the program's first frame replaces them (its frame numbers restart
+at the game's first moment), so frame numbers still only grow within the ring.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import orjson
+
+from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.stages import Candidate, FrameState, PlannedCut, ShotChoice, ShotKind
+
+TIMELINE_FRAMES = 600   # frames kept per session: 10 s at 60 Hz
+
+
+@dataclass(frozen=True)
+class TimelineFrame:
+    """One answered frame, kept as computed (the JSON is made only when someone asks).
+    camera_world: (3,) metres, None while buffering; rotation_xyzw: (4,) camera-to-world, None
+    while buffering; targets_world: (k, 3) aim point per target; scores: the rig's own scoring of
+    its choice (FrameState.scores, not copied: a new dict every frame); framing_error: the
+    framed points from where the style puts them, normalised screen units (NaN: not measured);
+    compute_ms: the server's time for the frame. MATCH only (the FrameState's, not copied: the
+    rig makes them anew each frame or shares constant ones): shot, candidates, players, events,
+    planned_cut, buffering."""
+
+    frame: int
+    time_s: float
+    camera_world: np.ndarray
+    rotation_xyzw: np.ndarray
+    targets_world: np.ndarray
+    cut: bool
+    shot_id: int
+    visibility: float
+    framing_error: float
+    flags: tuple[str, ...]
+    scores: dict[str, float]
+    compute_ms: float
+    match: bool = False
+    buffering: bool = False
+    shot: ShotChoice | None = None
+    candidates: list[Candidate] = field(default_factory=list)
+    players: tuple[tuple[str, int], ...] = ()
+    events: list[GameEvent] = field(default_factory=list)
+    planned_cut: PlannedCut | None = None
+
+
+class Timeline:
+    """The last `capacity` answered frames of one session, oldest first."""
+
+    def __init__(self, capacity: int = TIMELINE_FRAMES) -> None:
+        self._frames: deque[TimelineFrame] = deque(maxlen=capacity)
+
+    def add(self, state: FrameState, compute_ms: float) -> None:
+        """Costs a few microseconds a frame: copies, no conversion. A MATCH program frame drops
+        the buffering frames before it (module docstring)."""
+        pose = state.pose
+        match = bool(state.players)
+        if match and not state.buffering and self._frames and self._frames[-1].buffering:
+            self._frames.clear()
+        self._frames.append(TimelineFrame(
+            frame=int(state.frame), time_s=float(state.time_s),
+            camera_world=None if pose is None else pose.position_world.copy(),
+            rotation_xyzw=None if pose is None else pose.rotation_xyzw.copy(),
+            targets_world=np.array(state.aim_points_world), cut=bool(state.cut), shot_id=int(state.shot_id),
+            visibility=float(state.visibility), framing_error=state.framing_error, flags=tuple(state.flags),
+            scores=state.scores, compute_ms=float(compute_ms), match=match, buffering=bool(state.buffering),
+            shot=state.shot, candidates=state.candidates, players=state.players, events=state.events,
+            planned_cut=state.planned_cut))
+
+    def as_json(self, last: int | None = None, after_frame: int | None = None) -> list[dict]:
+        """The newest `last` frames (all when None) of those after frame number `after_frame`
+        (a live view asks only for what it has not seen), oldest first, for `dumps`: frame, time_s,
+        camera, forward (unit; both null while buffering), targets, cut, shot_id, visibility,
+        framing_error (null when not measured), flags, scores, compute_ms, and for MATCH
+        (`_match_json`): buffering, shot, candidates, players, teams, events, planned_cut; vectors
+        are numpy rows rounded to 0.1 mm. Built in bulk, since the worker that answers this also
+        answers its sessions' frames (600 frames: about 2 ms with `dumps`, 18 ms as plain dicts and
+        json)."""
+        frames = list(self._frames)
+        if after_frame is not None:
+            first = len(frames)
+            while first > 0 and frames[first - 1].frame > after_frame:   # frame numbers only grow
+                first -= 1
+            frames = frames[first:]
+        frames = frames[-last:] if last else frames
+        if not frames:
+            return []
+        posed = [f for f in frames if f.camera_world is not None]
+        camera = iter(np.stack([f.camera_world for f in posed]).round(4) if posed else ())
+        forward = iter(_forward([f.rotation_xyzw for f in posed]))
+        targets = np.stack([f.targets_world for f in frames]).round(4)   # a session's targets are fixed
+        rows = [{"frame": f.frame, "time_s": f.time_s,
+                 "camera": None if f.camera_world is None else next(camera),
+                 "forward": None if f.camera_world is None else next(forward), "targets": t,
+                 "cut": f.cut, "shot_id": f.shot_id, "visibility": round(f.visibility, 4),
+                 "framing_error": None if math.isnan(f.framing_error) else round(f.framing_error, 4),
+                 "flags": f.flags, "scores": f.scores, "compute_ms": round(f.compute_ms, 3)}
+                for f, t in zip(frames, targets)]
+        if frames[-1].match:
+            _match_json(frames, rows)
+        return rows
+
+
+def _forward(rotations_xyzw: list[np.ndarray]) -> np.ndarray:
+    """(n, 3) unit view directions (the camera's -Z) of n (4,) camera-to-world quaternions, rounded."""
+    if not rotations_xyzw:
+        return np.zeros((0, 3))
+    return (-quat_to_matrix(np.stack(rotations_xyzw))[:, :, 2]).round(4)
+
+
+_SHOT_KINDS = {kind: f"SHOT_{kind.name}" for kind in ShotKind}     # as camdirector.v1 names them
+_EVENT_KINDS = {kind: f"EVENT_{kind.name}" for kind in EventKind}
+
+
+def _shot_json(shot: ShotChoice) -> dict:
+    return {"subject_ids": shot.subject_ids, "kind": _SHOT_KINDS[shot.kind], "reason": shot.reason, "held": shot.held}
+
+
+def _match_json(frames: list[TimelineFrame], rows: list[dict]) -> None:
+    """Adds the MATCH fields to each row (kinds named as in camdirector.v1: SHOT_DUEL, EVENT_KILL):
+    shot {subject_ids, kind, reason, held} or null; candidates [{shot, score, camera, forward}] (as the
+    wire's CandidateShot); players (ids) and teams in target order; events [{time_s, kind,
+    actor_id, other_actor_id, priority, label}]; planned_cut {time_s, shot} or null."""
+    candidates = [c for f in frames for c in f.candidates]
+    camera = iter(np.stack([c.pose.position_world for c in candidates]).round(4) if candidates else ())
+    forward = iter(_forward([c.pose.rotation_xyzw for c in candidates]))
+    roster, ids, teams = None, [], []
+    for f, row in zip(frames, rows):
+        if f.players is not roster:   # the rig shares one roster across frames: convert it once
+            roster, ids, teams = f.players, [p for p, _ in f.players], [team for _, team in f.players]
+        row.update(
+            buffering=f.buffering, shot=None if f.shot is None else _shot_json(f.shot),
+            candidates=[{"shot": _shot_json(c.shot), "score": round(c.score, 4), "camera": next(camera),
+                         "forward": next(forward)} for c in f.candidates],
+            players=ids, teams=teams,
+            events=[{"time_s": e.time_s, "kind": _EVENT_KINDS[e.kind], "actor_id": e.actor_id,
+                     "other_actor_id": e.other_actor_id, "priority": e.priority, "label": e.label}
+                    for e in f.events],
+            planned_cut=None if f.planned_cut is None else {"time_s": f.planned_cut.time_s,
+                                                           "shot": _shot_json(f.planned_cut.shot)})
+
+
+def dumps(value) -> bytes:
+    """JSON bytes of a value holding `Timeline.as_json` frames (numpy rows and all)."""
+    return orjson.dumps(value, option=orjson.OPT_SERIALIZE_NUMPY)

@@ -1,0 +1,75 @@
+"""HAProxy's health check speaks gRPC health checking (deploy/haproxy.py): a node is up only while
+grpc.health.v1.Health/Check answers SERVING; and a balancer with no healthy node answers gRPC
+calls with UNAVAILABLE at once."""
+from __future__ import annotations
+
+import time
+from concurrent import futures
+
+import grpc
+import pytest
+from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+
+from camdirector.deploy.haproxy import GRPC_BACKEND, Backend, BalancerSettings, HAProxy
+from camdirector.deploy.services import free_port
+from camdirector.v1 import director_pb2_grpc as pbg
+from tests.conftest import service_or_skip
+from tests.deploy.conftest import new_keys, route
+from tests.service import wire_client as wc
+
+
+@pytest.fixture
+def balancer(tmp_path):
+    """Starts HAProxy in front of the given backends; stops it after the test."""
+    started = []
+
+    def start(*backends: Backend) -> HAProxy:
+        proxy = service_or_skip(lambda: HAProxy(tmp_path).start(list(backends)))
+        started.append(proxy)
+        return proxy
+
+    yield start
+    for proxy in started:
+        proxy.stop()
+
+
+def test_a_node_is_up_only_while_its_grpc_health_service_answers_serving(balancer):
+    server = grpc.server(futures.ThreadPoolExecutor(2))
+    servicer = health.HealthServicer()
+    health_pb2_grpc.add_HealthServicer_to_server(servicer, server)
+    port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    try:
+        servicer.set("", health_pb2.HealthCheckResponse.SERVING)
+        proxy = balancer(Backend("node-1", 1, f"127.0.0.1:{port}", f"127.0.0.1:{free_port()}"))
+        proxy.wait_until({"node-1": "UP"}, timeout_s=10, backends=(GRPC_BACKEND,))
+        servicer.set("", health_pb2.HealthCheckResponse.NOT_SERVING)
+        # each failed check waits out its timeout (1 s) for a SERVING that does not come
+        assert proxy.wait_until({"node-1": "DOWN"}, timeout_s=10, backends=(GRPC_BACKEND,)) < 5
+        servicer.set("", health_pb2.HealthCheckResponse.SERVING)
+        assert proxy.wait_until({"node-1": "UP"}, timeout_s=10, backends=(GRPC_BACKEND,)) < 5
+    finally:
+        server.stop(0)
+
+
+def test_with_no_healthy_node_calls_fail_at_once_with_unavailable(balancer):
+    dead = [Backend(f"node-{k}", k, f"127.0.0.1:{free_port()}", f"127.0.0.1:{free_port()}") for k in (1, 2)]
+    proxy = balancer(*dead)
+    proxy.wait_until({b.name: "DOWN" for b in dead}, timeout_s=10)
+    channel = grpc.insecure_channel(proxy.grpc)
+    stub = pbg.DirectorStub(channel)
+    for metadata in (route(new_keys(1)[0]), ()):  # hashed, and round robin
+        start = time.monotonic()
+        with pytest.raises(grpc.RpcError) as failed:
+            stub.CreateSession(wc.two_target_request(), metadata=metadata, timeout=10)
+        assert failed.value.code() == grpc.StatusCode.UNAVAILABLE, failed.value
+        assert "503" in failed.value.details()  # HAProxy's answer, which gRPC maps to UNAVAILABLE
+        assert time.monotonic() - start < 1.0
+    channel.close()
+
+
+def test_balancer_settings_are_validated():
+    with pytest.raises(ValueError, match="weight"):
+        BalancerSettings(weight=0)
+    with pytest.raises(ValueError, match="fall and rise"):
+        BalancerSettings(fall=0)

@@ -1,0 +1,70 @@
+"""The session router's memory of sessions lost with their worker, and the front's metrics of a frame."""
+from __future__ import annotations
+
+import grpc
+import pytest
+
+from camdirector.errors import DirectorError
+from camdirector.front import router as router_module
+from camdirector.front.metrics import Metrics
+from camdirector.front.router import SessionEntry, SessionRouter
+from camdirector.server_settings import ServerSettings
+
+
+def _code_and_message(router: SessionRouter, session_id: str) -> tuple[grpc.StatusCode, str]:
+    with pytest.raises(DirectorError) as err:
+        router._entry(session_id)
+    return err.value.code, err.value.message
+
+
+def test_without_checkpoints_sessions_lost_with_their_worker_say_so_and_the_oldest_are_forgotten(tmp_path, monkeypatch):
+    monkeypatch.setattr(router_module, "LOST_IDS_KEPT", 3)
+    router = SessionRouter(ServerSettings(workers=0, data_dir=str(tmp_path), checkpoint_store="off"), Metrics())
+    for i in range(5):
+        router.sessions[f"lost-{i}"] = SessionEntry(slot=0, created_s=0.0, last_seen_s=0.0)
+    router._worker_lost(0)
+    assert router.sessions == {}
+    for i in (2, 3, 4):  # the newest LOST_IDS_KEPT
+        code, message = _code_and_message(router, f"lost-{i}")
+        assert code == grpc.StatusCode.UNAVAILABLE and "worker process holding it" in message and "died" in message
+    for session_id in ("lost-0", "lost-1", "never-made"):  # forgotten, or never known
+        code, message = _code_and_message(router, session_id)
+        assert code == grpc.StatusCode.NOT_FOUND and "unknown session id" in message
+
+
+def test_with_checkpoints_sessions_of_a_lost_worker_go_to_the_least_loaded_others_to_be_restored(tmp_path):
+    router = SessionRouter(ServerSettings(workers=3, data_dir=str(tmp_path)), Metrics())
+    for i in range(4):
+        router.sessions[f"lost-{i}"] = SessionEntry(slot=0, created_s=0.0, last_seen_s=0.0)
+    router.sessions["kept"] = SessionEntry(slot=1, created_s=0.0, last_seen_s=0.0)
+    router._worker_lost(0)
+    moved = [router.sessions[f"lost-{i}"] for i in range(4)]
+    assert all(e.restoring for e in moved) and not router.sessions["kept"].restoring
+    assert sorted(e.slot for e in moved) == [1, 1, 2, 2]  # five sessions on two workers: three and two
+
+
+def test_with_checkpoints_a_client_request_for_an_unknown_session_is_given_to_a_worker_to_restore(tmp_path):
+    router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics())
+    entry = router._entry("from-elsewhere", adopt=True)
+    assert entry.restoring and router.sessions["from-elsewhere"] is entry
+    code, message = _code_and_message(router, "never-asked-by-its-client")  # the dashboard's asks adopt nothing
+    assert code == grpc.StatusCode.NOT_FOUND and "never-asked-by-its-client" not in router.sessions
+
+
+def _sample(metrics: Metrics, name: str, labels: dict) -> float:
+    return metrics.registry.get_sample_value(name, labels)
+
+
+def test_a_frame_answered_is_counted_with_its_stage_times():
+    metrics = Metrics()
+    metrics.frame_answered("zmq", 0.5, {"ingest": 0.02, "motion": 0.13}, stale=False)
+    metrics.frame_answered("zmq", 0.01, {}, stale=True)
+    metrics.frame_answered("grpc", 0.4, {"ingest": 0.03}, stale=False, checkpoint_failed=True)
+    assert _sample(metrics, "camdirector_checkpoint_failures_total", {}) == 1.0  # the checkpoint store was down
+    assert _sample(metrics, "camdirector_frames_total", {"transport": "zmq"}) == 2.0
+    assert _sample(metrics, "camdirector_frames_total", {"transport": "grpc"}) == 1.0
+    assert _sample(metrics, "camdirector_stale_frames_total", {}) == 1.0
+    assert _sample(metrics, "camdirector_frame_compute_seconds_count", {}) == 3.0
+    assert _sample(metrics, "camdirector_stage_seconds_count", {"stage": "ingest"}) == 2.0
+    assert _sample(metrics, "camdirector_stage_seconds_sum", {"stage": "motion"}) == pytest.approx(0.13e-3)
+    assert metrics.labelled(metrics.stage, "ingest") is metrics.stage.labels("ingest")

@@ -1,0 +1,178 @@
+"""The record store (jobs/records.py), every test on SQLite and on PostgreSQL: records,
+files renamed into place, a full queue, recovery, retention, and the compare-and-set of attempts
+that lets a job succeed once when a redelivered message runs it twice."""
+from __future__ import annotations
+
+import pytest
+
+from camdirector.jobs import JobNotFound, JobState, JobsUnavailable, PostgresJobStore, QueueFull, SqliteJobStore
+
+
+def job_dirs(store) -> set[str]:
+    return {p.name for p in store.root.iterdir() if p.is_dir()}
+
+
+def test_submit_claim_finish_and_files(store):
+    a = store.submit("echo", {"x": 1}, {"in.txt": b"abc"})
+    b = store.submit("echo", {"x": 2}, {})
+    assert a.state is JobState.QUEUED and a.progress == 0.0 and a.attempts == 0
+    assert (store.input_dir(a.id) / "in.txt").read_bytes() == b"abc"
+    assert [j.id for j in store.list()] == [a.id, b.id]
+    claimed = store.claim_next()
+    assert claimed.id == a.id and claimed.state is JobState.RUNNING and claimed.attempts == 1
+    store.set_progress(a.id, 0.4)
+    assert store.get(a.id).progress == pytest.approx(0.4)
+    assert store.finish(a.id, JobState.SUCCEEDED, timings_ms={"x": 2.0})
+    done = store.get(a.id)
+    assert done.progress == 1.0 and done.timings_ms == {"x": 2.0} and done.finished_s is not None
+    assert done.as_public() == {"id": a.id, "status": "succeeded", "progress": 1.0,
+                                "timings": {"x": 2.0}, "created_unix_s": a.created_s,
+                                "started_unix_s": claimed.started_s, "finished_unix_s": done.finished_s}
+    assert store.cancel(b.id).state is JobState.CANCELLED
+    assert store.cancel(a.id).state is JobState.SUCCEEDED       # finished: unchanged
+    with pytest.raises(JobNotFound):
+        store.get("nope")
+    with pytest.raises(JobNotFound):
+        store.job_dir("../etc")
+
+
+def test_sqlite_keeps_a_wal_journal(tmp_path):
+    store = SqliteJobStore(tmp_path)
+    assert store._db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    store.close()
+
+
+def test_full_queue_and_bad_files_leave_nothing_behind(store):
+    store.submit("echo", {}, {"in.txt": b"1"}, max_queued=1)
+    before = job_dirs(store)
+    with pytest.raises(QueueFull):
+        store.submit("echo", {}, {"in.txt": b"2"}, max_queued=1)
+    with pytest.raises(ValueError):
+        store.submit("echo", {}, {"../evil": b"2"})
+    assert job_dirs(store) == before and len(store.list()) == 1
+
+
+def test_recover_requeues_then_fails_after_max_attempts(store):
+    job = store.submit("echo", {}, {})
+    (store.root / "orphan").mkdir()
+    (store.root / ".tmp-leftover").mkdir()
+    store.claim_next()                                     # attempt 1, then "the server died"
+    assert store.recover(max_attempts=2) == ([job.id], [])
+    assert store.get(job.id).state is JobState.QUEUED
+    assert job_dirs(store) == {job.id}                     # orphans removed
+    store.claim_next()                                     # attempt 2, died again
+    assert store.recover(max_attempts=2) == ([], [job.id])
+    failed = store.get(job.id)
+    assert failed.state is JobState.FAILED and "interrupted" in failed.error and "2 time" in failed.error
+
+
+def test_orphans_are_removed_only_once_old_enough(store):
+    (store.root / ".tmp-fresh").mkdir()
+    assert store.remove_orphans(older_than_s=3600.0) == []
+    assert store.remove_orphans(older_than_s=0.0) == [".tmp-fresh"]
+
+
+def test_lists_by_kind_and_state_newest_first(store):
+    a = store.submit("echo", {}, {})
+    b = store.submit("wait", {}, {})
+    c = store.submit("echo", {}, {})
+    store.cancel(c.id)
+    assert [j.id for j in store.list(kind="echo")] == [a.id, c.id]
+    assert [j.id for j in store.list(kind="echo", newest_first=True)] == [c.id, a.id]
+    assert [j.id for j in store.list(JobState.QUEUED, kind="echo")] == [a.id]
+    assert [j.id for j in store.list(newest_first=True, limit=2)] == [c.id, b.id]
+    assert store.list(JobState.RUNNING, kind="wait") == []
+    assert store.count(JobState.QUEUED) == 2
+
+
+def test_purges_only_jobs_that_ended_before_the_cutoff(store):
+    old, recent, queued = (store.submit("echo", {}, {"in.txt": b"x"}) for _ in range(3))
+    for job in (old, recent):
+        store.claim_next()
+        store.finish(job.id, JobState.SUCCEEDED)
+    cutoff = store.get(recent.id).finished_s            # strictly before: `recent` stays
+    assert store.purge_finished(cutoff) == [old.id]
+    assert [j.id for j in store.list()] == [recent.id, queued.id]
+    assert job_dirs(store) == {recent.id, queued.id}
+    assert sorted(store.purge_finished(cutoff + 3600.0)) == [recent.id]   # a queued job is never purged
+    assert [j.id for j in store.list()] == [queued.id]
+
+
+def test_a_redelivered_job_succeeds_once_with_the_latest_attempt(store):
+    """Worker 1 claims the job and is taken for dead; its message runs again on worker 2. Only
+    worker 2's outcome is recorded, and only its result is renamed into place."""
+    job = store.submit("echo", {}, {})
+    first = store.claim(job.id, max_attempts=3)
+    second = store.claim(job.id, max_attempts=3)             # the same message, delivered again
+    assert (first.attempts, second.attempts) == (1, 2) and second.state is JobState.RUNNING
+    published = []
+    assert not store.finish(job.id, JobState.SUCCEEDED, attempt=first.attempts, only_if=JobState.RUNNING,
+                            publish=lambda: published.append(1))
+    store.set_progress(job.id, 0.9, attempt=first.attempts)  # a stale attempt's progress is ignored
+    assert store.get(job.id).progress == 0.0 and published == []
+    assert store.finish(job.id, JobState.SUCCEEDED, attempt=second.attempts, only_if=JobState.RUNNING,
+                        publish=lambda: published.append(2))
+    assert published == [2] and store.get(job.id).state is JobState.SUCCEEDED
+    assert store.claim(job.id, max_attempts=3) is None       # a late duplicate runs nothing
+    assert not store.finish(job.id, JobState.FAILED, attempt=second.attempts, only_if=JobState.RUNNING)
+
+
+def test_claim_fails_a_job_interrupted_too_often_and_skips_cancelled_ones(store):
+    job = store.submit("echo", {}, {})
+    store.claim(job.id, max_attempts=1)
+    assert store.claim(job.id, max_attempts=1) is None        # its worker died once: limit 1
+    failed = store.get(job.id)
+    assert failed.state is JobState.FAILED and "interrupted" in failed.error
+    other = store.submit("echo", {}, {})
+    store.cancel(other.id)
+    assert store.claim(other.id, max_attempts=2) is None and store.get(other.id).attempts == 0
+    assert store.claim("0" * 32, max_attempts=2) is None      # purged meanwhile
+
+
+def test_a_failed_publish_changes_nothing(store):
+    job = store.submit("echo", {}, {})
+    store.claim_next()
+
+    def fail():
+        raise OSError("disk full")
+
+    with pytest.raises(OSError):
+        store.finish(job.id, JobState.SUCCEEDED, only_if=JobState.RUNNING, publish=fail)
+    assert store.get(job.id).state is JobState.RUNNING
+
+
+def test_requeue_is_compare_and_set_on_the_attempt(store):
+    job = store.submit("echo", {}, {})
+    store.claim(job.id, max_attempts=3)
+    store.claim(job.id, max_attempts=3)                       # taken over: attempt 2
+    store.requeue(job.id, uncount_attempt=True, attempt=1)    # the old attempt's stop: no effect
+    assert store.get(job.id).state is JobState.RUNNING
+    store.requeue(job.id, uncount_attempt=True, attempt=2)
+    again = store.get(job.id)
+    assert again.state is JobState.QUEUED and again.attempts == 1
+
+
+def test_two_stores_on_one_folder_see_the_same_records(make_store):
+    """Two nodes' stores (on SQLite: two connections to the one file)."""
+    one, two = make_store(), make_store()
+    job = one.submit("echo", {}, {"in.txt": b"x"})
+    assert two.get(job.id) == one.get(job.id)
+    assert two.claim(job.id, max_attempts=2).attempts == 1
+    assert one.get(job.id).state is JobState.RUNNING
+
+
+def test_records_survive_a_restart(make_store, records_url):
+    first = make_store()
+    job = first.submit("echo", {"k": [1, 2]}, {"in.txt": b"x"})
+    first.close()
+    again = make_store().get(job.id)
+    assert again.params == {"k": [1, 2]} and again.state is JobState.QUEUED
+
+
+def test_unreachable_postgres_is_one_clear_line(tmp_path):
+    from camdirector.deploy.services import free_port
+    url = f"postgresql://camdirector@127.0.0.1:{free_port()}/camdirector"
+    with pytest.raises(JobsUnavailable) as caught:
+        PostgresJobStore(url, tmp_path)
+    message = str(caught.value)
+    assert message.startswith(f"job store {url} is unreachable: ") and "\n" not in message

@@ -1,0 +1,161 @@
+"""Where our director puts the camera for a kill and which events it plans: a corridor that hides
+the style's place, an objective that gives way to a kill, and the hysteresis on discretionary cuts."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from camdirector.geometry.camera import project_to_screen
+from camdirector.geometry.meshes import TriMesh, box
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.moments import MomentBuffer
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import Place, ToricCamera
+from camdirector.pipeline.stages import ShotKind
+from camdirector.pipeline.toric.target_sampling import SurfaceSampler
+from tests.pipeline.match.scenes import (
+    LENS,
+    BareRig,
+    Match,
+    at_time,
+    facing,
+    kill,
+    melee,
+    player_mesh,
+    run_session,
+    shots,
+    yaw_quat,
+)
+
+KILL_S = 25.0
+
+
+def block(centre, size) -> TriMesh:
+    mesh = box(size)
+    return TriMesh(mesh.vertices + np.asarray(centre, dtype=float), mesh.faces)
+
+
+def duel(t: float):
+    """a and b face each other 8 m apart along +z."""
+    return {"a": ((0.0, 0.0), facing((0, 0), (0, 8))), "b": ((0.0, 8.0), facing((0, 8), (0, 0)))}
+
+
+def seen_share(pose, walls: list[TriMesh], transform: RigidTransform, rng: np.random.Generator) -> float:
+    """Share of 32 fresh surface points of a player inside the frame and not hidden by the walls
+    (the evaluation's measure, independent of the director's own samples)."""
+    points = transform.apply(SurfaceSampler(player_mesh()).sample(32, rng))
+    inside = np.all(np.abs(project_to_screen(pose, LENS, points)) <= 1.0, axis=1)
+    return float((inside & ~RayScene(walls).occluded(pose.position_world, points)).mean())
+
+
+def test_a_corridor_hiding_the_styles_place_still_gets_a_place_that_sees_both_at_the_kill():
+    # walls 3 m high along the duel, 1.5 m each side of it: the style's place (phi 70 deg, beside
+    # the pair on a torus about 10 m across) is outside the corridor; a place above or over a
+    # shoulder is not
+    walls = [block((x, 1.5, 4.0), (0.2, 3.0, 30.0)) for x in (-1.5, 1.5)]
+    match = Match({"a": 1, "b": 2}, duel, [kill("a", "b", KILL_S)], delay_s=10.0, walls=walls)
+    _, states = run_session(match, KILL_S + 10.0 + 2.0)
+    state = at_time(states, KILL_S)
+    transforms = [RigidTransform(np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 0.0, 1.0])) for z in (0.0, 8.0)]
+    rng = np.random.default_rng(11)
+    # the style's own place is hidden (so the test can fail): both orders of the pair
+    buffer = MomentBuffer(["a", "b"], MatchSettings())
+    aims = [t.apply(np.array([[0.0, 1.6, 0.0]]))[0] for t in transforms]
+    buffer.push(0, KILL_S, transforms, aims, [])
+    style = match.style
+    default = Place(style.preferred_theta_ratio, math.radians(style.preferred_phi_deg))
+    for a, b in ((0, 1), (1, 0)):
+        camera = ToricCamera(ShotKind.DUEL, a, b, style, LENS, default)
+        pose = camera.pose(buffer.newest)
+        assert min(seen_share(pose, walls, t, rng) for t in transforms) < 0.5
+    assert set(state.shot.subject_ids) == {"a", "b"}
+    assert min(seen_share(state.pose, walls, t, rng) for t in transforms) >= 0.5
+
+
+def four_corners(t: float):
+    """o1 stands on an objective at the west; a2 and b2 duel 60 m east, in a roofed corridor."""
+    return {"o1": ((-30.0, 0.0), 0.0), "o2": ((-30.0, 40.0), 0.0),
+            "a2": ((30.0, 0.0), facing((30, 0), (30, 8))), "b2": ((30.0, 8.0), facing((30, 8), (30, 0)))}
+
+
+def test_a_kill_too_close_after_an_objective_takes_its_place():
+    objective = GameEvent(EventKind.OBJECTIVE, "o1", "", 0, KILL_S - 0.8, "objective", None)
+    # the corridor hides a2 and b2 from any camera far enough back to frame o1 with them (a GROUP)
+    corridor = [block((x, 1.5, 4.0), (0.2, 3.0, 40.0)) for x in (28.5, 31.5)] + [block((30.0, 3.1, 4.0),
+                                                                                        (3.2, 0.2, 40.0))]
+    match = Match({"o1": 1, "o2": 2, "a2": 1, "b2": 2}, four_corners, [objective, kill("a2", "b2", KILL_S)],
+                  delay_s=10.0, walls=corridor)
+    _, states = run_session(match, KILL_S + 10.0 + 2.0)
+    state = at_time(states, KILL_S)
+    assert state.shot.kind == ShotKind.DUEL and set(state.shot.subject_ids) == {"a2", "b2"}
+    assert "planned kill" in state.shot.reason
+
+
+def test_without_a_delay_a_cut_for_a_better_situation_waits_for_settle_s():
+    match = melee(seed=3, duration_s=60.0, delay_s=0.0)
+    _, states = run_session(match, 60.0)
+    program = shots(states)
+    better = [(previous, start) for (previous, _, _), (start, _, s) in zip(program, program[1:])
+              if s.shot.reason.endswith("(better situation)")]
+    assert better, "the melee has discretionary cuts"
+    settle_s = MatchSettings().settle_s
+    assert all(start - previous >= settle_s - 1e-6 for previous, start in better)
+
+
+def two_corridors(t: float):
+    """a1 and b1 duel in one corridor, a2 and b2 in another 12 m east."""
+    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 6))), "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
+            "a2": ((12.0, 0.0), facing((12, 0), (12, 6))), "b2": ((12.0, 6.0), facing((12, 6), (12, 0)))}
+
+
+def test_two_kills_too_close_for_two_cuts_share_a_high_wide_shot_when_no_group_framing_sees_them():
+    # 5 m walls 3 m apart: every Toric GROUP place sees into one corridor at most; a camera 30 m
+    # above the pair of corridors looks down into both
+    walls = [block((x, 2.5, 3.0), (0.2, 5.0, 40.0)) for x in (-1.5, 1.5, 10.5, 13.5)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2}, two_corridors,
+                  [kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 0.5)], delay_s=10.0, walls=walls)
+    states = BareRig(match, MatchSettings(overview_height_m=30.0)).run(KILL_S + 10.0 + 2.0)
+    rng = np.random.default_rng(5)
+    for time_s, pair in ((KILL_S, ("a1", "b1")), (KILL_S + 0.5, ("a2", "b2"))):
+        state = at_time(states, time_s)
+        assert state.shot.kind == ShotKind.OVERVIEW and "planned kill" in state.shot.reason
+        places = two_corridors(time_s)
+        for player in pair:
+            transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
+                                       yaw_quat(places[player][1]))
+            assert seen_share(state.pose, walls, transform, rng) >= 0.5, (time_s, player)
+
+
+def two_duels_side_by_side(t: float):
+    """a1 and b1 duel on open ground, a2 and b2 6 m east of them; e1 and f1 duel 60 m away."""
+    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 6))), "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
+            "a2": ((6.0, 0.0), facing((6, 0), (6, 6))), "b2": ((6.0, 6.0), facing((6, 6), (6, 0))),
+            "e1": ((60.0, 0.0), facing((60, 0), (60, 6))), "f1": ((60.0, 6.0), facing((60, 6), (60, 0)))}
+
+
+@pytest.mark.parametrize("preferred_shot_s", [0.0, 3.0])
+def test_kills_too_close_for_a_preferred_shot_each_share_one_shot_when_it_sees_them_all(preferred_shot_s):
+    # the program is on e1 and f1 for their kill at 21 s; the kills at 25 and 27.5 s each get a
+    # DUEL, the first 2.7 s long, unless one GROUP of the four sees both kills
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 2.5)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_side_by_side, kills, delay_s=10.0)
+    states = [s for s in BareRig(match, MatchSettings(preferred_shot_s=preferred_shot_s)).run(KILL_S + 10.0 + 4.0)
+              if not s.buffering]
+    between = [s for s in states if KILL_S < s.time_s <= KILL_S + 2.5]
+    first, second = at_time(states, KILL_S), at_time(states, KILL_S + 2.5)
+    if preferred_shot_s == 0.0:
+        assert any(s.cut for s in between) and first.shot.kind == second.shot.kind == ShotKind.DUEL
+        return
+    assert not any(s.cut for s in between) and first.shot.kind == ShotKind.GROUP
+    assert set(first.shot.subject_ids) == {"a1", "b1", "a2", "b2"}
+    rng = np.random.default_rng(2)
+    for time_s, state in ((KILL_S, first), (KILL_S + 2.5, second)):
+        places = two_duels_side_by_side(time_s)
+        for player in ("a1", "b1", "a2", "b2"):
+            (x, z), yaw = places[player]
+            transform = RigidTransform(np.array([x, 0.0, z]), yaw_quat(yaw))
+            assert seen_share(state.pose, [], transform, rng) >= 0.5, (time_s, player)

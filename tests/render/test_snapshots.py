@@ -1,0 +1,130 @@
+"""What a monitor shows (render/snapshots.py): the snapshot taken of a session for each kind of
+view, the placeholders that say why there is no picture, and the queries refused."""
+from __future__ import annotations
+
+import grpc
+import numpy as np
+import pytest
+
+from camdirector.errors import DirectorError
+from camdirector.render.snapshots import TARGET_RGB, TEAM_RGB, ViewQuery, render_job, rigid_matrices, scene_geometry
+from camdirector.server_settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.table import SessionTable
+from tests.service.test_match_sessions import frames as match_frames
+from tests.service.test_match_sessions import match_request
+from tests.service.wire_client import two_target_request, walk
+
+
+@pytest.fixture
+def table():
+    t = SessionTable(ServerSettings(checkpoint_store="off"))
+    yield t
+    t.close_all()
+
+
+def _streamed(table: SessionTable, n: int, **request) -> str:
+    table.create("s", two_target_request(seed=2, **request))
+    for update in walk("s", n):
+        table.handle_bytes("frame", "s", update.SerializeToString())
+    return "s"
+
+
+def test_a_program_view_is_the_last_pose_with_every_moving_part_where_it_is_now(table):
+    session = table.held[_streamed(table, 20)].session
+    job = render_job(session, ViewQuery())
+    assert job.placeholder is None and job.frame == 20 and job.pose is session.last_state.pose
+    assert job.moving_ids == ("object:cart", "target:a", "target:b")
+    cart = session.dynamic["cart"][1]
+    np.testing.assert_array_equal(job.positions_world[0], cart.position_world)
+    np.testing.assert_allclose(rigid_matrices(job)[1], session.target_transforms[0].matrix(), atol=1e-12)
+    assert job.size_px == (320, 180) and job.lens.aspect == pytest.approx(16 / 9)
+    assert job.lens.vertical_fov_deg == session.last_state.pose.vertical_fov_deg
+
+
+def test_the_meshes_are_the_world_then_the_moving_parts_in_their_own_frames(table):
+    session = table.held[_streamed(table, 1)].session
+    parts = scene_geometry(session).parts
+    assert [p.part_id for p in parts] == ["static:0", "object:cart", "target:a", "target:b"]
+    assert [p.moving for p in parts] == [False, True, True, True]
+    np.testing.assert_allclose(parts[0].vertices.mean(axis=0), [1.5, 1.5, 4.0], atol=1e-6)  # the pillar, world frame
+    assert parts[2].rgb == TARGET_RGB and scene_geometry(session).has_world
+
+
+def test_no_pose_yet_a_missing_cut_and_a_candidate_outside_a_match_are_placeholders(table):
+    table.create("s", two_target_request(seed=2))
+    session = table.held["s"].session
+    assert render_job(session, ViewQuery()).placeholder == "no camera yet: no frame answered"
+    _ = [table.handle_bytes("frame", "s", u.SerializeToString()) for u in walk("s", 3)]
+    assert render_job(session, ViewQuery(shot="cut_after")).placeholder == "no cut yet"
+    candidate = render_job(session, ViewQuery(shot="candidate", subjects=("a",)))
+    assert candidate.placeholder == "candidate shots are a MATCH session's" and candidate.pose is None
+
+
+def test_the_cut_views_show_the_two_poses_around_the_last_cut(table):
+    session = table.held[_streamed(table, 10)].session
+    before_pose, walker_before = session.last_state.pose, session.target_transforms[0]
+    assert session.last_cut is None   # the first pose is a cut from nothing: no before picture
+    # A new composition cuts to it on the next frame (tests/server/test_director.py).
+    table.update_style(pb.UpdateStyleRequest(session_id="s", style=pb.Style(
+        screen_a=pb.ScreenPoint(x=-0.6, y=0.2), screen_b=pb.ScreenPoint(x=0.6, y=0.2))))
+    table.handle_bytes("frame", "s", next(walk("s", 1, start_frame=11)).SerializeToString())
+    cut = session.last_cut
+    assert cut is not None and cut.frame == 11 and session.last_state.cut
+    before, after = render_job(session, ViewQuery(shot="cut_before")), render_job(session, ViewQuery(shot="cut_after"))
+    assert (before.frame, after.frame) == (cut.frame - 1, cut.frame)
+    assert after.pose is cut.pose_after and before.pose is cut.pose_before is before_pose
+    assert not np.allclose(before.pose.position_world, after.pose.position_world)
+    # the walking target where each frame had it; the sliding cart as of the cut in both
+    walker = before.moving_ids.index("target:a")
+    np.testing.assert_array_equal(before.positions_world[walker], walker_before.position_world)
+    np.testing.assert_array_equal(after.positions_world[walker], session.target_transforms[0].position_world)
+    assert not np.allclose(before.positions_world[walker], after.positions_world[walker])
+    np.testing.assert_array_equal(before.positions_world[0], after.positions_world[0])
+
+
+def test_a_match_candidate_view_is_the_candidates_camera_and_players_show_at_the_program_moment(table):
+    table.create("m", match_request(delay_s=1.0))
+    session = table.held["m"].session
+    updates = list(match_frames("m", 20))
+    table.handle_bytes("frame", "m", updates[0].SerializeToString())
+    assert render_job(session, ViewQuery()).placeholder == "buffering: the broadcast delay is still filling, no camera yet"
+    for update in updates[1:] + list(match_frames("m", 40, start=20)):
+        table.handle_bytes("frame", "m", update.SerializeToString())
+    state = session.last_state
+    assert state.pose is not None and state.candidates, "the match offers candidates once it answers"
+    candidate = state.candidates[0]
+    job = render_job(session, ViewQuery(shot="candidate", subjects=tuple(reversed(candidate.shot.subject_ids))))
+    assert job.pose is candidate.pose and job.frame == state.frame
+    # Players are drawn where the program's moment has them, a second behind the newest frame.
+    program = session.rig.program_transforms
+    latest = session.target_transforms
+    rows = [job.moving_ids.index(f"target:{t.id}") for t in session.targets]
+    np.testing.assert_array_equal(job.positions_world[rows], [tf.position_world for tf in program])
+    assert not np.allclose(job.positions_world[rows], [tf.position_world for tf in latest])
+    gone = render_job(session, ViewQuery(shot="candidate", subjects=("a0", "nobody")))
+    assert gone.placeholder == "no candidate shot of a0, nobody now"
+    assert {p.rgb for p in scene_geometry(session).parts} == {TEAM_RGB[0], TEAM_RGB[1]}
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"shot": "sideways"}, "view shot must be one of"),
+    ({"width_px": 5000}, "view width must be in [16, 1280] px"),
+    ({"width_px": 8}, "view width must be in [16, 1280] px"),
+    ({"height_px": 721}, "view height must be in [16, 720] px"),
+    ({"image_format": "gif"}, "view format must be one of jpeg, png"),
+    ({"shot": "candidate"}, "a candidate view names the candidate's players"),
+])
+def test_queries_out_of_range_are_refused(fields, message):
+    with pytest.raises(DirectorError) as refused:
+        ViewQuery(**fields)
+    assert refused.value.code == grpc.StatusCode.INVALID_ARGUMENT and message in refused.value.message
+
+
+def test_a_query_survives_its_trip_to_the_worker_and_garbage_is_refused():
+    query = ViewQuery(shot="candidate", subjects=("p1", "p6"), width_px=640, height_px=200, image_format="png")
+    assert ViewQuery.from_json(query.to_json()) == query
+    for payload in (b"", b"[]", b'{"shot": "program"}', b"\xff"):
+        with pytest.raises(DirectorError) as refused:
+            ViewQuery.from_json(payload)
+        assert refused.value.code == grpc.StatusCode.INVALID_ARGUMENT

@@ -1,0 +1,219 @@
+"""Session checkpoints (worker/checkpoints.py): the two stores held to one contract, and
+sessions of every rig restored bit for bit by a session table that never saw them (a new worker,
+another node), with the failures a store can have."""
+from __future__ import annotations
+
+import pytest
+
+from camdirector.errors import DirectorError
+from camdirector.server_settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.checkpoints import (
+    CheckpointError,
+    DirectoryStore,
+    RedisStore,
+    decode_entry,
+    encode_entry,
+)
+from camdirector.worker.recording import _comparable
+from camdirector.worker.table import SessionTable
+from tests.service.test_match_sessions import frames as match_frames
+from tests.service.test_match_sessions import match_request
+from tests.service.tracks_sessions import tracks_request
+from tests.service.wire_client import two_target_request, walk
+
+
+@pytest.fixture(params=["directory", "redis"])
+def store_url(request, tmp_path):
+    """The checkpoint_store setting of each implementation ("" is the data folder's DirectoryStore)."""
+    return request.getfixturevalue("redis_url") if request.param == "redis" else ""
+
+
+def _table(tmp_path, store_url: str, owner: str, every: int = 20) -> SessionTable:
+    table = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url,
+                                        checkpoint_every_frames=every))
+    table.owner = owner  # one process plays several: each table its own owner
+    return table
+
+
+def _store(tmp_path, store_url: str):
+    return RedisStore(store_url, keep_s=60.0) if store_url else DirectoryStore(tmp_path / "checkpoints", keep_s=60.0)
+
+
+def test_both_stores_keep_the_same_checkpoint_and_refuse_a_stale_owner(tmp_path, store_url):
+    store = _store(tmp_path, store_url)
+    assert store.load("s") is None
+    store.begin("s", "node-a/1", b"create")
+    assert store.append("s", "node-a/1", encode_entry(1, "frame", b"f1"))
+    assert store.append("s", "node-a/1", encode_entry(2, "style", b"st"))
+    loaded = store.load("s")
+    assert (loaded.create, loaded.snapshot, loaded.seq) == (b"create", None, 0)
+    assert loaded.entries == [(1, "frame", b"f1"), (2, "style", b"st")]
+    assert store.snapshot("s", "node-a/1", 2, b"state")
+    assert store.append("s", "node-a/1", encode_entry(3, "take", b"t3"))
+    loaded = store.load("s")
+    assert (loaded.snapshot, loaded.seq, loaded.entries) == (b"state", 2, [(3, "take", b"t3")])
+    # Another process restores the session and claims it: the first one's writes are refused from then on.
+    other = _store(tmp_path, store_url)
+    assert other.snapshot("s", "node-b/2", 3, b"restored", claim=True)
+    assert not store.append("s", "node-a/1", encode_entry(4, "frame", b"late"))
+    assert not store.snapshot("s", "node-a/1", 4, b"late")
+    store.delete("s", "node-a/1")  # not its owner any more: nothing happens
+    assert other.load("s").snapshot == b"restored"
+    other.delete("s", "node-b/2")
+    assert other.load("s") is None
+
+
+def test_an_entry_keeps_its_number_kind_and_bytes():
+    assert decode_entry(encode_entry(2 ** 40, "take", b"\x00\xff")) == (2 ** 40, "take", b"\x00\xff")
+
+
+def test_a_torn_last_write_is_ignored(tmp_path):
+    store = DirectoryStore(tmp_path, keep_s=60.0)
+    store.begin("s", "n/1", b"c")
+    store.append("s", "n/1", encode_entry(1, "frame", b"whole"))
+    with open(tmp_path / "s" / "log", "ab") as log:
+        log.write(b"\x00\x00\x00\x40torn")  # a length of 64, then 4 bytes: the process died mid-write
+    assert store.load("s").entries == [(1, "frame", b"whole")]
+
+
+def _answers(table: SessionTable, requests: list[tuple[str, str, bytes]]) -> list[bytes]:
+    """The comparable part of each frame's answer (recording.py), in order."""
+    out = []
+    for op, session_id, payload in requests:
+        body, _ = table.handle_bytes(op, session_id, payload)
+        if op == "frame":
+            out.append(_comparable(pb.CameraUpdate.FromString(body)))
+    return out
+
+
+def _toric_requests(visibility: int, n: int) -> tuple[pb.CreateSessionRequest, list]:
+    requests = [("frame", "s", f.SerializeToString()) for f in walk("s", n)]
+    # a style change half way, so the restored style and the logged one both count
+    style = pb.UpdateStyleRequest(session_id="s", style=pb.Style(visibility=visibility, screen_a=pb.ScreenPoint(x=-0.2, y=0.0)))
+    requests.insert(n // 2, ("style", "s", style.SerializeToString()))
+    return two_target_request(style=pb.Style(visibility=visibility), seed=7), requests
+
+
+def _match_requests(n: int) -> tuple[pb.CreateSessionRequest, list]:
+    kills = {20: ("a0", "b0"), 55: ("b1", "a1")}
+    requests = [("frame", "s", f.SerializeToString()) for f in match_frames("s", n, kill_at=kills)]
+    take = pb.TakeShotRequest(session_id="s", subject_ids=["a1", "b1"])
+    requests.insert(40, ("take", "s", take.SerializeToString()))
+    return match_request(0.5), requests
+
+
+def _tracks_requests(data_dir) -> tuple[pb.CreateSessionRequest, list]:
+    from tests.precompute.tracks.tiny_levels import corridor
+    from tests.service.tracks_sessions import actor_frames, cli_add_level, corridor_walk, obj_text
+
+    level_file = data_dir / "corridor.obj"
+    level_file.parent.mkdir(parents=True, exist_ok=True)
+    level_file.write_text(obj_text(corridor()))
+    cli_add_level(data_dir, "corridor", level_file)
+    times, feet = corridor_walk(4.0)
+    return tracks_request("corridor", feet[0]), [("frame", "s", f.SerializeToString()) for f in actor_frames("s", times, feet)]
+
+
+@pytest.mark.parametrize("kind", ["FRAMING_ONLY", "REACTIVE", "RAYCAST", "ANTICIPATION", "MATCH", "TRACKS"])
+def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, store_url, kind):
+    """A table that checkpoints answers part of the inputs; a second table (another worker or
+    node) is asked the rest: it restores the session (creation, snapshot, inputs since) and every
+    answer equals the one of a table that ran all the inputs without checkpoints."""
+    create, requests = (_match_requests(120) if kind == "MATCH" else _tracks_requests(tmp_path) if kind == "TRACKS"
+                        else _toric_requests(getattr(pb, kind), 100))
+    # the reference reads the same level registry (TRACKS) but keeps no checkpoints
+    reference = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
+    reference.handle_bytes("create", "s", create.SerializeToString())
+    expected = _answers(reference, requests)
+
+    first = _table(tmp_path, store_url, "node-a/1")
+    first.handle_bytes("create", "s", create.SerializeToString())
+    cut = 67  # past three snapshots (every 20 inputs) and seven inputs into the log
+    answered = _answers(first, requests[:cut])
+    second = _table(tmp_path, store_url, "node-b/2")
+    answered += _answers(second, requests[cut:])
+    assert answered == expected
+    # the first table is now a stale copy: its next frame restores the newer state before answering
+    late = requests[-1][2]
+    frame = pb.FrameUpdate.FromString(late)
+    frame.frame += 1
+    frame.time_s += 1 / 60
+    body, _ = first.handle_bytes("frame", "s", frame.SerializeToString())
+    reference_body, _ = reference.handle_bytes("frame", "s", frame.SerializeToString())
+    assert _comparable(pb.CameraUpdate.FromString(body)) == _comparable(pb.CameraUpdate.FromString(reference_body))
+
+
+def test_a_checkpoint_that_does_not_restore_is_unavailable_and_the_others_restore(tmp_path):
+    first = _table(tmp_path, "", "n/1", every=5)
+    for session_id in ("bad", "good"):
+        first.handle_bytes("create", session_id, two_target_request().SerializeToString())
+        for update in walk(session_id, 12):
+            first.handle_bytes("frame", session_id, update.SerializeToString())
+    (tmp_path / "checkpoints" / "bad" / "snapshot").write_bytes(b"\x00" * 8 + b"not a pickle")
+    second = _table(tmp_path, "", "n/2")
+    nxt = {sid: list(walk(sid, 1, start_frame=13))[0].SerializeToString() for sid in ("bad", "good")}
+    with pytest.raises(DirectorError) as err:
+        second.handle_bytes("frame", "bad", nxt["bad"])
+    assert err.value.code.name == "UNAVAILABLE" and "could not be restored" in err.value.message
+    assert pb.CameraUpdate.FromString(second.handle_bytes("frame", "good", nxt["good"])[0]).frame == 13
+    with pytest.raises(DirectorError) as err:
+        second.handle_bytes("frame", "never-made", list(walk("never-made", 1))[0].SerializeToString())
+    assert err.value.code.name == "NOT_FOUND"
+
+
+def test_closing_removes_the_checkpoint_and_stopping_keeps_it(tmp_path, store_url):
+    table = _table(tmp_path, store_url, "n/1")
+    for session_id in ("closed", "kept"):
+        table.handle_bytes("create", session_id, two_target_request().SerializeToString())
+    table.handle_bytes("close", "closed", b"")
+    table.close_all()
+    store = _store(tmp_path, store_url)
+    assert store.load("closed") is None and store.load("kept") is not None
+
+
+def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoint_is_written_again(tmp_path):
+    from camdirector.deploy.services import RedisServer
+    redis_server = RedisServer(tmp_path / "redis").start()
+    table = _table(tmp_path, redis_server.url, "n/1", every=1000)
+    table.handle_bytes("create", "s", two_target_request().SerializeToString())
+    updates = [u.SerializeToString() for u in walk("s", 40)]
+    for payload in updates[:10]:
+        assert not table.handle_bytes("frame", "s", payload)[1].checkpoint_failed
+    redis_server.stop()
+    flagged = [table.handle_bytes("frame", "s", payload)[1].checkpoint_failed for payload in updates[10:20]]
+    assert all(flagged)  # answered, and the front's metric counts each
+    with pytest.raises(CheckpointError):
+        RedisStore(redis_server.url, keep_s=60.0)  # a node started now refuses to (front/app.py)
+    restarted = RedisServer(tmp_path / "redis", port=redis_server.port).start()
+    try:
+        table.held["s"].checkpoint_retry_s = 0.0  # do not wait out the retry interval
+        assert not table.handle_bytes("frame", "s", updates[20])[1].checkpoint_failed
+        for payload in updates[21:30]:
+            table.handle_bytes("frame", "s", payload)
+        # the checkpoint written again whole (Redis came back empty) restores the session exactly
+        other = _table(tmp_path, restarted.url, "n/2")
+        reference = SessionTable(ServerSettings(data_dir=str(tmp_path / "ref"), checkpoint_store="off"))
+        reference.handle_bytes("create", "s", two_target_request().SerializeToString())
+        for payload in updates[:30]:
+            reference.handle_bytes("frame", "s", payload)
+        assert _answers(other, [("frame", "s", p) for p in updates[30:]]) == \
+            _answers(reference, [("frame", "s", p) for p in updates[30:]])
+    finally:
+        restarted.stop()
+
+
+def test_deferred_snapshots_wait_for_idle_work_but_never_past_twice_their_period(tmp_path):
+    table = _table(tmp_path, "", "n/1", every=10)
+    table.defer_snapshots = True  # as a worker's table: snapshots in its idle moments
+    table.handle_bytes("create", "s", two_target_request().SerializeToString())
+    updates = [u.SerializeToString() for u in walk("s", 32)]
+    for payload in updates[:12]:
+        table.handle_bytes("frame", "s", payload)
+    store = DirectoryStore(tmp_path / "checkpoints", keep_s=60.0)
+    assert store.load("s").snapshot is None and len(store.load("s").entries) == 12  # due, not yet taken
+    assert table.idle_work() is False                                           # taken now, none left
+    assert (store.load("s").seq, len(store.load("s").entries)) == (12, 0)
+    for payload in updates[12:]:  # never idle: at twice the period the snapshot is taken inline
+        table.handle_bytes("frame", "s", payload)
+    assert store.load("s").seq == 12 + 2 * 10
