@@ -29,12 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
+from camdirector.evaluation.tracks.cli import route_for
 from camdirector.evaluation.tracks.compare import compare_with_prm
 from camdirector.evaluation.tracks.measure import measure_shot_sizes
 from camdirector.evaluation.tracks.route import ActorRoute, NavmeshPaths, corridor_and_open_routes, there_and_back
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.cli import route_for
 from camdirector.precompute.tracks.registry import LevelRegistry
 from load_tests.report import SHARED_DATA_DIR, emit, shared_subfolder
 

@@ -15,7 +15,8 @@ import pytest
 from PIL import Image
 
 from camdirector.geometry.camera import project_to_screen
-from camdirector.render.monitor import RENDERERS_KEPT, TOP_VIEW_MARGIN_M, Painter, decode_view
+from camdirector.render.main import RENDERERS_KEPT, TOP_VIEW_MARGIN_M, Painter
+from camdirector.render.monitor import decode_view
 from camdirector.render.snapshots import ViewQuery, render_job, scene_geometry
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.table import SessionTable

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from camdirector.evaluation.match.eval_cli import add_parser as add_eval_match_parser
 from camdirector.evaluation.match.sim_cli import add_parser as add_match_sim_parser
+from camdirector.evaluation.tracks.cli import add_parser as add_eval_graph_parser
 
 # Kept light at import (camdirector's own CLI imports this module to register the subcommand):
 # the evaluation modules, with numpy, scipy and matplotlib behind them, load when eval runs.
@@ -31,7 +32,8 @@ MODES = ("RAYCAST", "NO_ANTICIPATION", "ANTICIPATION", "REACTIVE", "FRAMING_ONLY
 
 
 def add_parsers(subparsers) -> None:
-    """Registers `eval`, `match-sim` and `eval-match` on an argparse subparsers object; args.handler(args) runs it."""
+    """Registers `eval`, `match-sim`, `eval-match` and `eval-graph` on an argparse subparsers object;
+    args.handler(args) runs it."""
     p = subparsers.add_parser(
         "eval", help="replay scenarios through a real session and measure visibility and smoothness",
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -54,6 +56,7 @@ def add_parsers(subparsers) -> None:
     p.set_defaults(handler=run_eval)
     add_match_sim_parser(subparsers)
     add_eval_match_parser(subparsers)
+    add_eval_graph_parser(subparsers)
 
 
 def _modes(text: str | None) -> list[str]:

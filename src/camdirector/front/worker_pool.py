@@ -1,7 +1,7 @@
 """Worker processes that hold sessions, so capacity grows with cores.
 
 The front process talks to each worker over one socket pair (`multiprocessing.Pipe`), in the
-binary framing of worker/main.py: a struct header, then the raw bytes (the session id
+binary framing of infra/channels.py: a struct header, then the raw bytes (the session id
 and the client's serialized request; the serialized reply and a frame's metrics as packed
 numbers). The front end of the pair is an asyncio stream, so a large scene never blocks the event
 loop; the worker reads it blocking. A plain socket pair costs one wake-up per direction, where a
@@ -28,16 +28,10 @@ from collections.abc import Callable
 import grpc
 
 from camdirector.errors import DirectorError
+from camdirector.infra.channels import REPLY, REQUEST_ID_MODULUS, FrameMetrics, decode_reply_tail, encode_request, tail_length
 from camdirector.server_settings import ServerSettings
-from camdirector.worker.main import (
-    REPLY,
-    REQUEST_ID_MODULUS,
-    decode_reply_tail,
-    encode_request,
-    tail_length,
-    worker_main,
-)
-from camdirector.worker.table import FrameMetrics, SessionTable
+from camdirector.worker.main import worker_main
+from camdirector.worker.table import SessionTable
 
 log = logging.getLogger("camdirector.workers")
 

@@ -1,103 +1,17 @@
-"""A worker process's main loop, and the framing of the socket pair between it and the front
-(front/worker_pool.py holds the front's end).
-
-Every message is a fixed struct header, then raw bytes; nothing is pickled, and the payload is the
-client's serialized request exactly as the front received it (the front read only its session id).
-- Request, front to worker: REQUEST (request id, op code, session id length, payload length), the
-  session id (UTF-8), the payload.
-- Reply, worker to front: REPLY (request id, status: a gRPC status code, 0 for OK; flags:
-  HAS_METRICS, STALE, CHECKPOINT_FAILED; compute_ms; stage count; stage names length; body length), the stage names
-  (ASCII, comma-separated, in the frame's stage order), their times (one float64 each, ms), the
-  body: the serialized reply, or the UTF-8 error message when the status is not 0.
-A frame's metrics thus travel as a few packed numbers beside its reply, taken from the frame's
-state in the worker (never read back out of the reply). Replies may come out of order: a `view`
-(a monitor's picture) is answered from the render process's reader thread (sessions/monitor.py)
-while the loop goes on with other requests, so every write to the socket takes one lock. Lengths are 64-bit, so a scene of more
-than 2 GiB needs no escape (multiprocessing's framing switched to a second, 8-byte length there).
-A FRAMING_ONLY frame and its reply carry 136 bytes of framing (headers, session id, stage names
-and times) where the pickled tuples took about 275, and building and reading both cost 3.3 us against
-4.2 us (measured in one process); a closed loop of `ping`s carrying 1.1 KB through a real
-WorkerPool and worker took 19-22 us a round trip (p50) against 27-34 us pickled.
+"""A worker process's main loop: answer the front's requests over the socket pair (framed by
+infra/channels.py) one at a time, and do the sessions' deferred work while none waits.
 """
 from __future__ import annotations
 
 import os
 import select
 import socket
-import struct
 import threading
-from typing import BinaryIO
 
 from camdirector.errors import DirectorError
+from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_request
 from camdirector.server_settings import ServerSettings
-from camdirector.worker.table import FrameMetrics, SessionTable
-
-# request id (u32, wraps), op (u8, index in OPS), session id bytes (u16), payload bytes (u64)
-REQUEST = struct.Struct("!IBHQ")
-# request id, status (u8), flags (u8), compute_ms (f64), stages (u8), stage names bytes (u16), body bytes (u64)
-REPLY = struct.Struct("!IBBdBHQ")
-OPS = ("ping", "stop", "create", "frame", "style", "close", "take", "timeline", "amap", "drop", "view")
-OP_CODES = {name: code for code, name in enumerate(OPS)}
-HAS_METRICS, STALE, CHECKPOINT_FAILED = 1, 2, 4
-READ_BUFFER_BYTES = 1 << 16  # the worker's read buffer: a frame request (~1 KB) arrives in one read
-REQUEST_ID_MODULUS = 2 ** 32
-
-
-def encode_request(request_id: int, op: str, session_id: str, payload: bytes) -> list[bytes]:
-    """The request's buffers in order (header, session id, payload), for a scatter write."""
-    sid = session_id.encode()
-    return [REQUEST.pack(request_id, OP_CODES[op], len(sid), len(payload)), sid, payload]
-
-
-def encode_reply(request_id: int, status: int, body: bytes, metrics: FrameMetrics | None) -> bytes:
-    if metrics is None:
-        return REPLY.pack(request_id, status, 0, 0.0, 0, 0, len(body)) + body
-    names = ",".join(metrics.stage_ms).encode("ascii")
-    values = struct.pack(f"!{len(metrics.stage_ms)}d", *metrics.stage_ms.values())
-    flags = HAS_METRICS | (STALE if metrics.stale else 0) | (CHECKPOINT_FAILED if metrics.checkpoint_failed else 0)
-    return REPLY.pack(request_id, status, flags, metrics.compute_ms, len(metrics.stage_ms), len(names),
-                      len(body)) + names + values + body
-
-
-_stage_names: dict[bytes, tuple[str, ...]] = {}  # a rig's stage names recur every frame: split once
-
-
-def decode_reply_tail(header: tuple, tail: bytes) -> tuple[bytes, FrameMetrics | None]:
-    """The body and metrics of a reply from its unpacked REPLY header and the bytes after it
-    (stage names, their times, the body)."""
-    _, _, flags, compute_ms, stages, names_len, _ = header
-    if not flags & HAS_METRICS:
-        return tail, None
-    blob = tail[:names_len]
-    names = _stage_names.get(blob)
-    if names is None:
-        names = _stage_names[blob] = tuple(blob.decode("ascii").split(",")) if blob else ()
-    values = struct.unpack_from(f"!{stages}d", tail, names_len)
-    body = tail[names_len + 8 * stages:]
-    return body, FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE), bool(flags & CHECKPOINT_FAILED))
-
-
-def tail_length(header: tuple) -> int:
-    """How many bytes follow a REPLY header."""
-    _, _, _, _, stages, names_len, body_len = header
-    return names_len + 8 * stages + body_len
-
-
-def _read_exactly(reader: BinaryIO, n: int) -> bytes:
-    data = reader.read(n)
-    if len(data) < n:
-        raise EOFError("the front closed the socket pair")
-    return data
-
-
-def read_request(reader: BinaryIO) -> tuple[int, str, str, bytes]:
-    """(request id, op, session id, payload) of the next request from a buffered reader of the
-    socket (one read system call takes in a whole frame request, header and all); EOFError when
-    the front has gone."""
-    request_id, op, sid_len, payload_len = REQUEST.unpack(_read_exactly(reader, REQUEST.size))
-    session_id = _read_exactly(reader, sid_len).decode()
-    # read apart from the session id, not sliced off a joint read: a multi-GiB scene is not copied
-    return request_id, OPS[op], session_id, _read_exactly(reader, payload_len)
+from camdirector.worker.table import SessionTable
 
 
 def _idle(sock: socket.socket) -> bool:

@@ -15,6 +15,7 @@ import orjson
 from google.protobuf import json_format
 
 from camdirector.errors import DirectorError, internal, invalid, not_found, precondition, unavailable
+from camdirector.infra.channels import FrameMetrics
 from camdirector.render.monitor import Monitor, Reply
 from camdirector.render.snapshots import ViewQuery, render_job, scene_geometry
 from camdirector.server_settings import ServerSettings
@@ -39,16 +40,6 @@ from camdirector.worker.timeline import dumps as timeline_dumps
 log = logging.getLogger("camdirector.sessions")
 
 CHECKPOINT_RETRY_S = 1.0  # a session whose checkpoint write failed tries again this often (a full snapshot), s
-
-
-@dataclass
-class FrameMetrics:
-    """Timings of one answered frame, for the front's Prometheus histograms."""
-
-    compute_ms: float
-    stage_ms: dict[str, float]
-    stale: bool
-    checkpoint_failed: bool = False   # its input could not be written to the checkpoint store
 
 
 @dataclass

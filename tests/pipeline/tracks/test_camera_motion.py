@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from camdirector.pipeline.tracks.camera_motion import move_camera
-from camdirector.precompute.tracks.track_settings import DirectorSettings
+from camdirector.pipeline.tracks.settings import DirectorSettings
 
 SETTINGS = DirectorSettings()
 FAR_ACTOR = np.array([0.0, 0.0, 100.0])   # out of every repulsion radius

@@ -41,9 +41,9 @@ from camdirector.geometry.camera import CameraPose, Lens, in_frame, level_look_r
 from camdirector.geometry.meshes import capsule
 from camdirector.geometry.raycast import RayScene
 from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector, Movement
+from camdirector.pipeline.tracks.settings import DirectorSettings
 from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, ShotSize, framing_error
 from camdirector.precompute.tracks.artifact import LevelArtifact
-from camdirector.precompute.tracks.track_settings import DirectorSettings
 
 ACTOR_RADIUS_FRACTION = 0.15   # the measured body's radius, fraction of its height (module docstring)
 VISIBLE_FRACTION = 0.5         # a frame counts as showing the actor when this share of its points is seen

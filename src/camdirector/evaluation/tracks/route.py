@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import UP_WORLD
-from camdirector.precompute.tracks.graph import adjacency_lists, astar_many
+from camdirector.pipeline.tracks.graph_search import adjacency_lists, astar_many
 from camdirector.precompute.tracks.navmesh import navmesh_components, triangle_adjacency
 from camdirector.precompute.tracks.track_settings import TrackSettings
 

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from camdirector.precompute.tracks.track_settings import DirectorSettings
+from camdirector.pipeline.tracks.settings import DirectorSettings
 
 
 def move_camera(position_world: np.ndarray, velocity_m_s: np.ndarray, target_world: np.ndarray,

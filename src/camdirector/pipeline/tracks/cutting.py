@@ -13,7 +13,7 @@ from enum import Enum
 
 import numpy as np
 
-from camdirector.precompute.tracks.track_settings import DirectorSettings
+from camdirector.pipeline.tracks.settings import DirectorSettings
 
 
 class CutReason(Enum):

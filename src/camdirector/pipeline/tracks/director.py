@@ -65,6 +65,8 @@ from camdirector.pipeline.tracks.continuity import (
     thirty_degree_score,
 )
 from camdirector.pipeline.tracks.cutting import CutClock, CutReason, draw_shot_duration_s
+from camdirector.pipeline.tracks.graph_search import RuntimeGraph
+from camdirector.pipeline.tracks.settings import DirectorSettings
 from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, ShotSize, aim_point, fit_ratio, framed_ends_world
 from camdirector.pipeline.tracks.target_search import (
     IndirectVisibility,
@@ -76,8 +78,6 @@ from camdirector.pipeline.tracks.target_search import (
     shot_size_score,
 )
 from camdirector.precompute.tracks.artifact import LevelArtifact
-from camdirector.precompute.tracks.graph import RuntimeGraph
-from camdirector.precompute.tracks.track_settings import DirectorSettings
 
 _SCORED_POIS = 48
 # cuts that cannot wait for a place that frames: the actor is hidden, or the camera has no track left

@@ -32,8 +32,8 @@ from camdirector.pipeline.inputs import FrameInput, LoadedLevel
 from camdirector.pipeline.stages import FrameState, TracksStage
 from camdirector.pipeline.style import Style
 from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector
+from camdirector.pipeline.tracks.settings import DirectorSettings
 from camdirector.pipeline.tracks.shot_sizes import framing_error
-from camdirector.precompute.tracks.track_settings import DirectorSettings
 
 _LOCAL_FORWARD = np.array([0.0, 0.0, 1.0])
 _WAIT_OFFSET_M = np.array([0.0, 2.0, 0.0])  # the waiting camera: this far up, and 6 m behind the actor

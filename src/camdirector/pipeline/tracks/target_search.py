@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from camdirector.geometry.raycast import RayScene
-from camdirector.precompute.tracks.graph import RuntimeGraph, csr_rows
+from camdirector.pipeline.tracks.graph_search import RuntimeGraph, csr_rows
 from camdirector.precompute.tracks.visibility_table import VisibilityTable
 
 

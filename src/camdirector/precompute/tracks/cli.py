@@ -1,4 +1,4 @@
-"""`camdirector level add|list|remove` and `camdirector eval-graph`.
+"""`camdirector level add|list|remove`.
 
     camdirector level add NAME LEVEL.(obj|glb) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
                           [--agent-height M] [--agent-radius M] [--data-dir DIR] [--records-url URL]
@@ -7,19 +7,13 @@
         prints one JSON object per level.
     camdirector level remove NAME [--data-dir DIR] [--records-url URL]
         removes a level from the registry (a running server's sessions on it keep their copy).
-    camdirector eval-graph LEVEL [--data-dir DIR] [--records-url URL] [--json OUT] [--plot OUT.png] [--seed N]
-        our graph against PRMs on a registered level along an actor route: the Recast test cases
-        (TestCases/nav_mesh_test.txt beside the level file) where they exist, else an A* path on
-        the navmesh; prints the table as JSON. Each graph's row counts the frames that show the
-        actor (`visible`: inside the frame and unoccluded) apart from those with a clear line of
-        sight to it (`line_of_sight`), by evaluation/tracks/measure.py.
 --records-url: where the registry's index lives, as `camdirector serve --job-store` says for the
 nodes: empty for SQLite in the data directory, or the postgresql:// URL a cluster's nodes share
 (with --data-dir the folder they share). Default: $CAMDIRECTOR_JOB_STORE, the variable `serve`
 reads, so a shell set up for the nodes sees their levels.
 Exit status: 0 ok, 1 failed, 2 bad arguments or input.
 
-`add_parsers(subparsers)` registers both on the `camdirector` parser; each sets `handler`.
+`add_parsers(subparsers)` registers `level` on the `camdirector` parser; each subcommand sets `handler`.
 """
 from __future__ import annotations
 
@@ -32,11 +26,11 @@ _RECORDS_URL_HELP = ("the registry's index: postgresql://... (a cluster's --job-
                      "the data dir (default: $CAMDIRECTOR_JOB_STORE)")
 
 
-def _records_url_argument(parser) -> None:
+def add_records_url_argument(parser) -> None:
     parser.add_argument("--records-url", dest="records_url", default=None, help=_RECORDS_URL_HELP)
 
 
-def _registry(args):
+def registry_from_args(args):
     """The registry that --data-dir and --records-url (else $CAMDIRECTOR_JOB_STORE) name."""
     from camdirector.precompute.tracks.registry import LevelRegistry
 
@@ -45,7 +39,7 @@ def _registry(args):
 
 
 def add_parsers(subparsers) -> None:
-    """Registers `level` and `eval-graph`; args.handler(args) runs the command."""
+    """Registers `level`; args.handler(args) runs the command."""
     level = subparsers.add_parser("level", help="precomputed levels for the TRACKS rig")
     sub = level.add_subparsers(dest="level_command", required=True)
     p = sub.add_parser("add", help="precompute a level into the registry")
@@ -56,25 +50,17 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--agent-height", dest="agent_height", type=float, default=2.0, help="m (default 2.0)")
     p.add_argument("--agent-radius", dest="agent_radius", type=float, default=0.6, help="m (default 0.6)")
     p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder (default: per-user data dir)")
-    _records_url_argument(p)
+    add_records_url_argument(p)
     p.set_defaults(handler=run_level_add)
     p = sub.add_parser("list", help="list registered levels")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
-    _records_url_argument(p)
+    add_records_url_argument(p)
     p.set_defaults(handler=run_level_list)
     p = sub.add_parser("remove", help="remove a level from the registry")
     p.add_argument("name")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
-    _records_url_argument(p)
+    add_records_url_argument(p)
     p.set_defaults(handler=run_level_remove)
-    p = subparsers.add_parser("eval-graph", help="our camera graph against probabilistic roadmaps on a level")
-    p.add_argument("level", help="registered level name")
-    p.add_argument("--data-dir", dest="data_dir", type=Path)
-    _records_url_argument(p)
-    p.add_argument("--json", type=Path, help="write the table here")
-    p.add_argument("--plot", type=Path, help="top views of the graphs, route and camera paths (PNG)")
-    p.add_argument("--seed", type=int, default=0)
-    p.set_defaults(handler=run_eval_graph)
 
 
 def _record_json(record) -> dict:
@@ -91,7 +77,7 @@ def run_level_add(args) -> int:
         print(f"camdirector level add: {100 * fraction:.0f}%", file=sys.stderr)
 
     try:
-        with _registry(args) as registry:
+        with registry_from_args(args) as registry:
             record = registry.add_level(
                 args.name, args.level, args.navmesh, scale=args.scale, agent_height_m=args.agent_height,
                 agent_radius_m=args.agent_radius, progress=progress)
@@ -109,7 +95,7 @@ def run_level_list(args) -> int:
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     try:
-        with _registry(args) as registry:
+        with registry_from_args(args) as registry:
             records = registry.list()
     except (LevelsUnavailable, ValueError) as exc:
         print(f"camdirector level list: {exc}", file=sys.stderr)
@@ -123,7 +109,7 @@ def run_level_remove(args) -> int:
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     try:
-        with _registry(args) as registry:
+        with registry_from_args(args) as registry:
             removed = registry.delete(args.name)
     except (LevelsUnavailable, ValueError) as exc:
         print(f"camdirector level remove: {exc}", file=sys.stderr)
@@ -131,51 +117,4 @@ def run_level_remove(args) -> int:
     if not removed:
         print(f"camdirector level remove: no level named {args.name!r}", file=sys.stderr)
         return 2
-    return 0
-
-
-def route_for(artifact, record, rng):
-    """The actor route: Recast test cases beside the level file where present, else an A* path."""
-    import numpy as np
-
-    from camdirector.evaluation.tracks.route import FRAME_RATE_HZ, WALK_SPEED_M_S, NavmeshPaths, read_recast_queries, walk
-    from camdirector.geometry.meshes import TriMesh
-
-    paths = NavmeshPaths(TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces), artifact.settings)
-    cases = Path(record.source_path).parent / "TestCases" / "nav_mesh_test.txt"
-    polyline = None
-    if cases.is_file() and cases.read_text().find(Path(record.source_path).name) >= 0:
-        legs = [paths.path(s * record.m_per_unit, e * record.m_per_unit) for s, e in read_recast_queries(cases)[:3]]
-        legs = [leg for leg in legs if leg is not None]
-        if legs:
-            polyline = np.vstack(legs)
-    if polyline is None:
-        polyline = paths.random_path(rng, 60.0)
-    return walk(polyline, WALK_SPEED_M_S, FRAME_RATE_HZ)
-
-
-def run_eval_graph(args) -> int:
-    import numpy as np
-
-    from camdirector.evaluation.tracks.compare import compare_with_prm
-    from camdirector.precompute.tracks.registry import LevelsUnavailable
-
-    try:
-        with _registry(args) as registry:
-            artifact = registry.load(args.level)
-            record = registry.get(args.level)
-    except LevelsUnavailable as exc:
-        print(f"camdirector eval-graph: {exc}", file=sys.stderr)
-        return 1
-    except (KeyError, ValueError) as exc:
-        print(f"camdirector eval-graph: {exc}", file=sys.stderr)
-        return 2
-    rng = np.random.default_rng(args.seed)
-    route = route_for(artifact, record, rng)
-    result = compare_with_prm(artifact, route, rng, plot_path=args.plot)
-    result = {"level": args.level, "stage_timings_ms": artifact.timings_ms, **result}
-    text = json.dumps(result, indent=1)
-    if args.json is not None:
-        args.json.write_text(text)
-    print(text)
     return 0

@@ -1,4 +1,4 @@
-"""The binary framing of the socket pair between the front and a worker (worker/main.py):
+"""The binary framing of the socket pair between the front and a worker (infra/channels.py):
 requests and replies come out as they went in, over a real socket pair, whatever their size."""
 from __future__ import annotations
 
@@ -8,18 +8,18 @@ import threading
 
 import pytest
 
-from camdirector.worker.main import (
+from camdirector.infra.channels import (
     OPS,
     REPLY,
     REQUEST,
     REQUEST_ID_MODULUS,
+    FrameMetrics,
     decode_reply_tail,
     encode_reply,
     encode_request,
     read_request,
     tail_length,
 )
-from camdirector.worker.table import FrameMetrics
 
 
 @pytest.mark.parametrize("op, session_id, payload", [
