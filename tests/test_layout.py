@@ -1,26 +1,45 @@
-"""The dependency rule of docs/architecture.md, checked: server -> precompute -> geometry, and the
-per-frame pipeline (camdirector.pipeline) knows nothing of the wire or the web.
+"""The layout rules of docs/architecture.md, checked.
 
-The pipeline check imports every module under camdirector.pipeline in a fresh interpreter,
-so that what the test suite has already imported cannot hide an import the pipeline makes (and the
-same for what a job process loads); the precompute and geometry checks read import statements
-(lazy ones inside functions included)."""
+- Dependencies point one way: the processes (front, worker, render, jobs) -> pipeline ->
+  precompute -> geometry, with infra/ below them all; the per-frame pipeline knows nothing of the
+  wire or the web; precompute imports nothing per-frame.
+- The service's Python lives under src/camdirector/ only; each process folder has the one module
+  that is its main loop.
+- Names say which one: no two modules share a name unless they sit in sibling folders (the same
+  idea in each: `rig.py` of every rig) or are an area's `cli.py`.
+- No code outside a rig's folder asks which rig it holds (`isinstance(..., ToricRig)`): it asks the
+  rig contract (pipeline/rig.py).
+
+The pipeline check imports every module under camdirector.pipeline in a fresh interpreter, so that
+what the test suite has already imported cannot hide an import the pipeline makes (and the same for
+what a job process loads); the other checks read import statements (lazy ones inside functions
+included)."""
 from __future__ import annotations
 
 import ast
 import json
 import subprocess
 import sys
+from collections import defaultdict
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "src" / "camdirector"
 
 # What a module under camdirector.pipeline may not bring in, directly or through others.
 WIRE_AND_WEB = ("google.protobuf", "grpc", "fastapi", "camdirector.v1")
 # What a job process may not bring in: it runs a job body, never a transport.
 WEB_AND_GRPC = ("fastapi", "starlette", "uvicorn", "grpc")
+# Each process's folder and the module that is its main loop.
+PROCESSES = ("front", "worker", "render", "jobs")
+# The top-level folders of the repository that may hold Python, and what they hold.
+PYTHON_FOLDERS = {"src": "the service", "proto": "the generated wire code", "client_sdk": "the SDKs",
+                  "tests": "tests", "load_tests": "benchmarks", "scripts": "scripts", "docs": "docs"}
+# A name that may repeat outside sibling folders: every area's subcommands of `camdirector`.
+AREA_ROLES = {"__init__.py", "cli.py"}
+RIG_CLASSES = {"ToricRig": "toric", "TracksRig": "tracks", "MatchRig": "match"}
 
 # argv: the packages whose modules to import (every module under each), "--", the forbidden names.
 _IMPORT_IN_FRESH_INTERPRETER = """
@@ -55,10 +74,18 @@ def test_the_pipeline_imports_no_protobuf_grpc_or_fastapi():
 
 
 def test_a_job_process_imports_no_web_framework_or_grpc():
-    """What the job runner's forkserver preloads: the command's main module, the runner, the job bodies."""
-    found = loaded_by(("camdirector.__main__", "camdirector.jobs", "camdirector.precompute.overview.job",
-                       "camdirector.precompute.tracks.job"), WEB_AND_GRPC)
+    """What the job executor's forkserver preloads: the command's main module, the job process's
+    entry, the job bodies of every kind the service offers."""
+    found = loaded_by(("camdirector.__main__", "camdirector.jobs", "camdirector.jobs.main",
+                       *_service_job_modules()), WEB_AND_GRPC)
     assert found["loaded"] == [], f"a job process would import: {found['loaded']}"
+
+
+def _service_job_modules() -> tuple[str, ...]:
+    from camdirector.jobs import service_kinds
+    modules = service_kinds().modules
+    assert modules, "the service offers no job kind"
+    return modules
 
 
 def test_the_check_sees_what_a_module_imports():
@@ -78,15 +105,25 @@ def imported_modules(path: Path) -> set[str]:
     return names
 
 
+def _under(name: str, packages: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in packages)
+
+
+def _camdirector(*folders: str) -> tuple[str, ...]:
+    return tuple(f"camdirector.{f}" for f in folders)
+
+
 @pytest.mark.parametrize("folder, forbidden", [
-    ("precompute", ("camdirector",)),
-    ("geometry", ("camdirector", "camdirector.precompute")),
+    ("infra", _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "demo", "deploy")),
+    ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "demo", "deploy")),
+    ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "demo", "deploy")),
+    ("pipeline", _camdirector(*PROCESSES, "evaluation", "demo", "deploy")),
 ])
 def test_dependencies_point_one_way(folder, forbidden):
-    files = sorted((ROOT / folder).rglob("*.py"))
-    assert files, f"no Python files under {folder}/"
+    files = sorted((PACKAGE / folder).rglob("*.py"))
+    assert files, f"no Python files under src/camdirector/{folder}/"
     bad = sorted(f"{path.relative_to(ROOT)}: {name}" for path in files for name in imported_modules(path)
-                 if name in forbidden or name.startswith(tuple(f + "." for f in forbidden)))
+                 if _under(name, forbidden))
     assert bad == []
 
 
@@ -95,3 +132,68 @@ def test_imported_modules_sees_lazy_and_from_imports(tmp_path):
     source = tmp_path / "m.py"
     source.write_text("import os\n\ndef f():\n    from camdirector.front import router\n")
     assert imported_modules(source) == {"os", "camdirector.front", "camdirector.front.router"}
+
+
+def test_the_service_is_one_package_under_src():
+    """No Python of the service outside src/camdirector/: a folder the wheel would not contain."""
+    tracked = subprocess.run(["git", "ls-files", "*.py"], cwd=ROOT, capture_output=True, text=True,
+                             check=True).stdout.split()
+    assert tracked, "git ls-files found no Python"
+    outside = sorted(f for f in tracked if f.split("/")[0] not in PYTHON_FOLDERS)
+    assert outside == []
+    assert not (PACKAGE / "__init__.py").exists(), "camdirector is a namespace shared with camdirector.v1 (proto/)"
+
+
+@pytest.mark.parametrize("process", PROCESSES)
+def test_each_process_has_its_main_loop_in_its_folder(process):
+    main = PACKAGE / process / "main.py"
+    assert main.is_file(), f"src/camdirector/{process}/main.py: the process's main loop"
+    assert main.read_text().startswith('"""'), "the main loop says what it runs in its docstring"
+
+
+def duplicate_names(paths: list[Path]) -> dict[str, list[str]]:
+    """Module names that repeat outside sibling folders (and outside AREA_ROLES): name -> folders."""
+    folders = defaultdict(list)
+    for path in paths:
+        folders[path.name].append(path.parent)
+    return {name: sorted(str(f) for f in where) for name, where in folders.items()
+            if len(where) > 1 and name not in AREA_ROLES and len({f.parent for f in where}) > 1}
+
+
+def test_no_two_modules_share_a_name_unless_siblings():
+    paths = [p.relative_to(PACKAGE) for p in PACKAGE.rglob("*.py")]
+    assert duplicate_names(paths) == {}
+
+
+def test_the_name_check_tells_siblings_from_strangers():
+    paths = [Path("pipeline/toric/rig.py"), Path("pipeline/tracks/rig.py"), Path("a/cli.py"), Path("b/c/cli.py"),
+             Path("worker/views.py"), Path("front/http/views.py")]
+    assert duplicate_names(paths) == {"views.py": ["front/http", "worker"]}
+
+
+def rig_sniffing(path: Path, folder_of_rig: dict[str, str]) -> list[str]:
+    """isinstance(..., <a rig class>) calls in `path` that are outside that rig's own folder."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "isinstance" \
+                and len(node.args) == 2:
+            classes = node.args[1].elts if isinstance(node.args[1], ast.Tuple) else [node.args[1]]
+            for cls in classes:
+                name = cls.id if isinstance(cls, ast.Name) else cls.attr if isinstance(cls, ast.Attribute) else None
+                if name in folder_of_rig and path.parent.name != folder_of_rig[name]:
+                    found.append(f"{path}:{node.lineno} isinstance(..., {name})")
+    return found
+
+
+def test_no_code_outside_a_rig_asks_which_rig_it_holds():
+    found = [hit for path in sorted(PACKAGE.rglob("*.py")) for hit in rig_sniffing(path, RIG_CLASSES)]
+    assert found == []
+
+
+def test_the_rig_check_sees_isinstance(tmp_path):
+    (tmp_path / "toric").mkdir()
+    outside, inside = tmp_path / "session.py", tmp_path / "toric" / "rig.py"
+    outside.write_text("def f(rig):\n    return isinstance(rig, (int, ToricRig))\n")
+    inside.write_text("def f(rig):\n    return isinstance(rig, ToricRig)\n")
+    assert rig_sniffing(outside, RIG_CLASSES) == [f"{outside}:2 isinstance(..., ToricRig)"]
+    assert rig_sniffing(inside, RIG_CLASSES) == []

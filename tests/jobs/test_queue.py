@@ -36,7 +36,7 @@ class WorkerThread:
     """A QueueWorker with the toy kinds, run in a thread of the test."""
 
     def __init__(self, data_dir: Path, settings: JobSettings):
-        self.worker = QueueWorker(data_dir, settings, kinds=tuple((k, __name__) for k in TOY_KINDS))
+        self.worker = QueueWorker(data_dir, settings, registry=JobRegistry(TOY_KINDS))
         ready = threading.Event()
         self.thread = threading.Thread(target=self.worker.run, args=(ready.set,), daemon=True)
         self.thread.start()

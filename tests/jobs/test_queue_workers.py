@@ -22,8 +22,9 @@ from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
 from camdirector.front.http.routes.levels import install_level_routes
-from camdirector.front.http.routes.overview import install_overview_jobs
-from camdirector.jobs import JobSettings, JobState
+from camdirector.front.http.routes.overview import install_overview_routes
+from camdirector.front.job_runner import open_jobs
+from camdirector.jobs import JobSettings, JobState, service_kinds
 from tests.jobs.toys import wait_until
 from tests.precompute.overview.overview_mocap import CLIPS
 from tests.precompute.tracks.tiny_levels import corridor
@@ -84,7 +85,8 @@ def cluster(tmp_path, redis_url, postgres_url):
     settings = JobSettings(job_queue=redis_url, job_store=postgres_url, max_upload_bytes=150_000,
                            worker_heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S)
     app = FastAPI()
-    jobs = install_overview_jobs(app, data_dir, settings)
+    jobs = open_jobs(data_dir, service_kinds(), settings)
+    install_overview_routes(app, jobs, settings)
     install_level_routes(app, jobs, data_dir, settings)
     jobs.start()
     workers: list[JobWorker] = []
@@ -127,7 +129,8 @@ def test_the_rest_api_is_the_same_in_both_modes(tmp_path, cluster, run_bvh):
     start_worker()
     local_app = FastAPI()
     local_settings = JobSettings(max_upload_bytes=150_000)
-    local_jobs = install_overview_jobs(local_app, tmp_path / "local", local_settings)
+    local_jobs = open_jobs(tmp_path / "local", service_kinds(), local_settings)
+    install_overview_routes(local_app, local_jobs, local_settings)
     install_level_routes(local_app, local_jobs, tmp_path / "local", local_settings)
     local_jobs.start()
     try:

@@ -14,11 +14,12 @@ import uvicorn
 from camdirector.front.grpc_service import start_grpc
 from camdirector.front.http.app import build_app
 from camdirector.front.http.routes.levels import install_level_routes
-from camdirector.front.http.routes.overview import install_overview_jobs
+from camdirector.front.http.routes.overview import install_overview_routes
+from camdirector.front.job_runner import open_jobs
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
 from camdirector.front.zmq_service import ZmqTransport
-from camdirector.jobs import JobsUnavailable
+from camdirector.jobs import JobsUnavailable, service_kinds
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.checkpoints import CheckpointError, open_store
 
@@ -61,7 +62,8 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             sock = _bind_http(settings.http_addr)
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
             app = build_app(router, bound)
-            jobs = install_overview_jobs(app, Path(settings.data_dir), settings.job_settings())
+            jobs = open_jobs(Path(settings.data_dir), service_kinds(), settings.job_settings())
+            install_overview_routes(app, jobs, settings.job_settings())
             install_level_routes(app, jobs, Path(settings.data_dir), settings.job_settings())
             jobs.start()  # queued and interrupted jobs from before a restart run again
             # A live view left open past shutdown is cut after this long (the hub ends its own first).

@@ -1,5 +1,5 @@
 """What a job body may rely on, so the computations it runs need nothing of the server: the
-exception that fails a job with a message of its own. The runner (jobs/runner.py) runs a body in
+exception that fails a job with a message of its own. The executor (jobs/executor.py) runs a body in
 a job process as `body(params, input_dir, output_dir, progress) -> timings_ms`."""
 
 

@@ -2,9 +2,14 @@
 
 Two modes, one REST API (front/http/routes/job_resources.py and the routes of each kind):
 
-    local (job_queue = "")       one node: the front's own JobRunner runs the jobs (runner.py)
-    queue (job_queue = redis://) many nodes: fronts record jobs and queue a message; queue
-                                 workers (`camdirector job-worker`) on any node run them (queue.py)
+    local (job_queue = "")       one node: the front's own JobRunner runs the jobs
+                                 (front/job_runner.py)
+    queue (job_queue = redis://) many nodes: fronts record jobs and queue a message (queue.py);
+                                 queue workers (`camdirector job-worker`, queue_worker.py) on any
+                                 node run them
+
+Either way a job runs in a job process (main.py) started and followed by the executor
+(executor.py); the kinds a job may be are listed once, in kinds.py.
 
 Records (records.py) are SQLite in the data directory by default, or PostgreSQL
 (`job_store = postgresql://...`), which the nodes of a cluster share. Files are under
@@ -24,7 +29,11 @@ its attempt succeeded.
 
 States: queued -> running -> succeeded | failed | cancelled (queued -> cancelled too).
 """
-from camdirector.jobs.queue import QueueClient, QueueWorker, open_jobs, run_job_worker
+from camdirector.jobs.executor import JobExecutor
+from camdirector.jobs.job_settings import JobSettings
+from camdirector.jobs.kinds import JobKind, JobRegistry, service_kinds
+from camdirector.jobs.queue import QueueClient
+from camdirector.jobs.queue_worker import QueueWorker, run_job_worker
 from camdirector.jobs.records import (
     Job,
     JobNotFound,
@@ -36,8 +45,7 @@ from camdirector.jobs.records import (
     SqliteJobStore,
     open_store,
 )
-from camdirector.jobs.runner import JobExecutor, JobKind, JobRegistry, JobRunner, JobSettings
 
-__all__ = ["Job", "JobExecutor", "JobKind", "JobNotFound", "JobRegistry", "JobRunner", "JobSettings",
-           "JobState", "JobStore", "JobsUnavailable", "PostgresJobStore", "QueueClient", "QueueFull",
-           "QueueWorker", "SqliteJobStore", "open_jobs", "open_store", "run_job_worker"]
+__all__ = ["Job", "JobExecutor", "JobKind", "JobNotFound", "JobRegistry", "JobSettings", "JobState", "JobStore",
+           "JobsUnavailable", "PostgresJobStore", "QueueClient", "QueueFull", "QueueWorker", "SqliteJobStore",
+           "open_store", "run_job_worker", "service_kinds"]

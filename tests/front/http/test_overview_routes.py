@@ -9,8 +9,9 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
-from camdirector.front.http.routes.overview import install_overview_jobs
-from camdirector.jobs import JobSettings
+from camdirector.front.http.routes.overview import install_overview_routes
+from camdirector.front.job_runner import open_jobs
+from camdirector.jobs import JobSettings, service_kinds
 from tests.precompute.overview.overview_mocap import CLIPS
 
 pytestmark = pytest.mark.shared_data
@@ -27,8 +28,9 @@ def run_bvh(shared_data) -> bytes:
 def service(tmp_path_factory):
     data_dir = tmp_path_factory.mktemp("overview-data")
     app = FastAPI()
-    runner = install_overview_jobs(app, data_dir, JobSettings(max_upload_bytes=LIMIT,
-                                                              max_concurrent_jobs=1))
+    settings = JobSettings(max_upload_bytes=LIMIT, max_concurrent_jobs=1)
+    runner = open_jobs(data_dir, service_kinds(), settings)
+    install_overview_routes(app, runner, settings)
     runner.start()
     with TestClient(app) as client:
         yield client, runner
@@ -206,7 +208,9 @@ def test_huge_uploads_answer_413(service, run_bvh, size):
 
 def test_queue_full_429_result_409_and_cancel(tmp_path, run_bvh):
     app = FastAPI()
-    runner = install_overview_jobs(app, tmp_path, JobSettings(max_queued_jobs=1))   # not started
+    settings = JobSettings(max_queued_jobs=1)
+    runner = open_jobs(tmp_path, service_kinds(), settings)   # not started
+    install_overview_routes(app, runner, settings)
     client = TestClient(app)
     first = client.post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)})
     assert first.status_code == 202

@@ -12,7 +12,8 @@ from fastapi import FastAPI, HTTPException, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
-from camdirector.jobs import Job, JobNotFound, JobRunner, JobState, JobsUnavailable, QueueClient, QueueFull
+from camdirector.front.job_runner import JobRunner
+from camdirector.jobs import Job, JobNotFound, JobState, JobsUnavailable, QueueClient, QueueFull
 
 Jobs = JobRunner | QueueClient
 

@@ -60,8 +60,7 @@ from camdirector.front.http.routes.job_resources import (
     submit_job,
 )
 from camdirector.geometry.meshes import MeshError, from_glb, from_obj
-from camdirector.jobs import JobKind, JobSettings, JobState
-from camdirector.precompute.tracks import job as level_job
+from camdirector.jobs import JobSettings, JobState
 from camdirector.precompute.tracks.job import KIND
 from camdirector.precompute.tracks.level_mesh import LEVEL_SUFFIXES
 from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, LevelsUnavailable, check_level_name
@@ -258,9 +257,8 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
 
 def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path,
                          settings: JobSettings = JobSettings()) -> None:
-    """Mount the level routes on `app` and the "level" kind on `runner` (the folder's one runner,
-    not yet started), with an upload limit of two files plus the form."""
-    runner.add_kind(JobKind(KIND, level_job.run_level_job), preload="camdirector.precompute.tracks.job")
+    """Mount the level routes on `app`, over the node's jobs (opened by front/main.py with the
+    service's job kinds), with an upload limit of two files plus the form."""
     app.include_router(build_level_router(runner, settings, Path(data_dir)))
     answer_unavailable_jobs(app)
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Query, UploadFile
@@ -39,8 +38,7 @@ from camdirector.front.http.routes.job_resources import (
     list_jobs,
     submit_job,
 )
-from camdirector.jobs import JobKind, JobRegistry, JobSettings, JobState, open_jobs
-from camdirector.precompute.overview import job as overview_job
+from camdirector.jobs import JobSettings, JobState
 from camdirector.precompute.overview.body_parts import map_body_parts
 from camdirector.precompute.overview.job import (
     CLIP_FILE,
@@ -217,16 +215,9 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
 _FORM_OVERHEAD_BYTES = 64 * 1024
 
 
-def install_overview_jobs(app: FastAPI, data_dir: str | Path,
-                          settings: JobSettings = JobSettings()) -> Jobs:
-    """Mount the overview routes and the upload limit on `app`; returns the (not yet started)
-    jobs over `<data_dir>/jobs`: a JobRunner, or a client of the job queue when
-    `settings.job_queue` is set (server/jobs/). Call `start()` at startup and `close()` at
-    shutdown (both blocking, fast: call them from the event loop's thread or a thread). Raises
-    JobsUnavailable when the job store or queue cannot be reached."""
-    registry = JobRegistry((JobKind(KIND, overview_job.run_overview_job),))
-    runner = open_jobs(data_dir, registry, settings, preload=(overview_job.__name__,))
+def install_overview_routes(app: FastAPI, runner: Jobs, settings: JobSettings = JobSettings()) -> None:
+    """Mount the overview routes and the upload limit on `app`, over the node's jobs (a JobRunner or
+    a client of the job queue, opened by front/main.py with the service's job kinds)."""
     app.include_router(build_overview_router(runner, settings))
     answer_unavailable_jobs(app)
     app.add_middleware(UploadLimit, max_body_bytes=settings.max_upload_bytes + _FORM_OVERHEAD_BYTES)
-    return runner

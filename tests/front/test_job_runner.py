@@ -1,4 +1,4 @@
-"""The local job runner (jobs/runner.py): real job processes, results renamed into place,
+"""The local job runner (front/job_runner.py): real job processes, results renamed into place,
 bounded concurrency, cancellation, a full queue, retention, and restart survival (a runner process
 killed with SIGKILL while one job runs and one is queued, then a new runner on the same folder, with
 its records in SQLite and in PostgreSQL)."""
@@ -14,7 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from camdirector.jobs import JobNotFound, JobRunner, JobSettings, JobState, QueueFull, open_store
+from camdirector.front.job_runner import JobRunner
+from camdirector.jobs import JobNotFound, JobSettings, JobState, QueueFull, open_store
 from tests.jobs.toys import KINDS, alive, started_pids, wait_params, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -143,7 +144,8 @@ def test_one_runner_per_folder(tmp_path):
 
 _CRASHING_FRONT = textwrap.dedent("""
     import sys, time
-    from camdirector.jobs import JobRunner, JobSettings
+    from camdirector.front.job_runner import JobRunner
+    from camdirector.jobs import JobSettings
     from tests.jobs.toys import KINDS
 
     if __name__ == "__main__":

@@ -1,0 +1,257 @@
+"""Running one claimed job: the executor that starts its process, follows it and records its
+outcome, and the retention of finished jobs; shared by the front's local runner
+(front/job_runner.py) and the queue workers (queue_worker.py).
+
+A job runs in its own process (multiprocessing "forkserver": forked from a small single-threaded
+server process, never from the front process that runs gRPC and asyncio, nor from a queue worker's
+threads), so no event loop or broker thread ever runs a job, and a cancelled or timed-out job is
+ended by terminating its process. `JobExecutor` starts the process (main.py), reads its progress
+from a pipe, checks the job's record (cancelled? taken over by another worker? too long?) and
+records the outcome of the attempt it started, by compare-and-set (records.py): the result folder
+is renamed into `<id>/result/` inside the transaction that marks the attempt succeeded.
+
+Retention: a finished job (its record, inputs and results) is removed `job_retention_s` after it
+ended, checked at start and every `PURGE_INTERVAL_S` (by the runner, or by every queue worker).
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing
+import multiprocessing.connection
+import os
+import shutil
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from camdirector.jobs.job_settings import JobSettings
+from camdirector.jobs.kinds import JobRegistry
+from camdirector.jobs.main import job_main
+from camdirector.jobs.records import Job, JobNotFound, JobState, JobStore
+
+log = logging.getLogger("camdirector.jobs")
+
+PURGE_INTERVAL_S = 60.0   # how often finished jobs past their retention are looked for
+POLL_S = 0.25            # a running job's record is checked at least this often (cancel, take-over), s
+
+
+def purge_expired(store: JobStore, settings: JobSettings, now_s: float) -> list[str]:
+    """Remove the jobs that ended more than `job_retention_s` before `now_s` (Unix s; none when
+    the retention is 0), so a long-running data directory stays bounded. Returns their ids."""
+    if settings.job_retention_s <= 0:
+        return []
+    purged = store.purge_finished(now_s - settings.job_retention_s)
+    if purged:
+        log.info("removed %d jobs that ended over %g s ago", len(purged), settings.job_retention_s)
+    return purged
+
+
+@dataclass
+class Attempt:
+    """One attempt of a claimed job in its process (job.attempts is the attempt's number)."""
+
+    job: Job
+    process: multiprocessing.process.BaseProcess
+    conn: multiprocessing.connection.Connection
+    work_dir: Path
+    started_monotonic: float
+    queued_ms: float
+    started_wall: float = 0.0
+    process_start_ms: float | None = None
+    outcome: tuple | None = None
+    terminating_since: float | None = None
+    stop_reason: str | None = None    # "cancelled", "superseded", "timeout"
+    next_check: float = 0.0           # time.monotonic() of the next look at the record
+
+    def waitables(self) -> list:
+        return [self.conn, self.process.sentinel]
+
+
+class JobExecutor:
+    """Runs claimed jobs in processes from a forkserver and records each attempt's outcome in
+    `store`. Thread-safe: `launch` and `step` of different attempts may run in different threads."""
+
+    def __init__(self, store: JobStore, registry: JobRegistry, settings: JobSettings) -> None:
+        self.store = store
+        self.registry = registry
+        self.settings = settings
+        self.preload = registry.modules   # imported once by the forkserver, not by every job
+        self._mp = multiprocessing.get_context("forkserver")
+
+    def start(self) -> None:
+        """Start the forkserver now (not in the first job's time), preloading the job modules,
+        with BLAS/OpenMP thread pools of `job_blas_threads` threads: the variables are set only
+        while it is started, so this process's own environment is unchanged."""
+        from multiprocessing import forkserver
+
+        if self.preload:
+            with contextlib.suppress(Exception):   # '__main__': imported once, not per job
+                self._mp.set_forkserver_preload(["__main__", *self.preload])
+        names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+        saved = {n: os.environ.get(n) for n in names}
+        try:
+            if self.settings.job_blas_threads > 0:
+                os.environ.update({n: str(self.settings.job_blas_threads) for n in names})
+            forkserver.ensure_running()
+        except Exception:
+            log.exception("cannot start the forkserver now; it starts with the first job")
+        finally:
+            for n, v in saved.items():
+                if v is None:
+                    os.environ.pop(n, None)
+                else:
+                    os.environ[n] = v
+
+    def launch(self, job: Job) -> Attempt | None:
+        """Start the process of a claimed job (state running, this attempt's number in
+        `job.attempts`). None when it could not start (the job is failed, with the reason)."""
+        try:
+            function = self.registry.get(job.kind).function
+        except KeyError as exc:
+            self.store.finish(job.id, JobState.FAILED, error=str(exc), attempt=job.attempts)
+            return None
+        work_dir = self.store.temp_dir()
+        parent_conn, child_conn = self._mp.Pipe(duplex=False)
+        process = self._mp.Process(
+            target=job_main, name=f"job-{job.id[:8]}", daemon=True,
+            args=(function, job.params, str(self.store.input_dir(job.id)), str(work_dir), child_conn))
+        started, started_wall = time.monotonic(), time.time()
+        try:
+            process.start()
+        except Exception as exc:   # e.g. no forkserver: fail this job, keep running others
+            log.exception("cannot start the process of job %s", job.id)
+            child_conn.close()
+            parent_conn.close()
+            shutil.rmtree(work_dir, ignore_errors=True)
+            self.store.finish(job.id, JobState.FAILED, only_if=JobState.RUNNING, attempt=job.attempts,
+                              error=f"cannot start a job process: {type(exc).__name__}: {exc}")
+            return None
+        child_conn.close()
+        return Attempt(job=job, process=process, conn=parent_conn, work_dir=work_dir,
+                       started_monotonic=started, started_wall=started_wall,
+                       queued_ms=max(0.0, ((job.started_s or time.time()) - job.created_s) * 1e3))
+
+    def step(self, a: Attempt) -> bool:
+        """Read the attempt's messages, end its process when the job was cancelled, taken over
+        or ran too long, and record the outcome once the process ended. True when it is over."""
+        self._read_messages(a)
+        now = time.monotonic()
+        if a.stop_reason is None and now >= a.next_check:
+            a.next_check = now + POLL_S
+            a.stop_reason = self._stop_reason(a, now)
+            if a.stop_reason is not None and a.process.is_alive():
+                a.process.terminate()
+                a.terminating_since = now
+        if a.process.is_alive():
+            if a.terminating_since is not None and now - a.terminating_since > self.settings.cancel_grace_s:
+                a.process.kill()
+            return False
+        a.process.join()
+        self._read_messages(a)
+        self._settle(a)
+        return True
+
+    def run(self, job: Job, stopping: threading.Event, hand_back: Callable[[], None]) -> None:
+        """Run a claimed job to its end in this thread (a queue worker's). When `stopping` is set
+        first, `hand_back()` (the job's message sent again), then the process is ended and the
+        record queued again, the attempt not counted."""
+        a = self.launch(job)
+        if a is None:
+            return
+        while not self.step(a):
+            if stopping.is_set():
+                self.end([a], before_requeue=hand_back)
+                return
+            multiprocessing.connection.wait(a.waitables(), timeout=POLL_S)
+
+    def end(self, attempts: list[Attempt], before_requeue: Callable[[], None] | None = None) -> None:
+        """Shutdown: end the attempts' processes (SIGTERM, SIGKILL after `cancel_grace_s`) and
+        queue their jobs again without counting the attempt (`before_requeue()` first)."""
+        for a in attempts:
+            if a.process.is_alive():
+                a.process.terminate()
+        deadline = time.monotonic() + self.settings.cancel_grace_s
+        for a in attempts:
+            a.process.join(max(0.0, deadline - time.monotonic()))
+            if a.process.is_alive():
+                a.process.kill()
+                a.process.join()
+            a.conn.close()
+            shutil.rmtree(a.work_dir, ignore_errors=True)
+            if before_requeue is not None:
+                before_requeue()
+            self.store.requeue(a.job.id, uncount_attempt=True, attempt=a.job.attempts)
+
+    def _stop_reason(self, a: Attempt, now: float) -> str | None:
+        try:
+            current = self.store.get(a.job.id)
+        except JobNotFound:
+            return "superseded"
+        if current.state is JobState.CANCELLED:
+            return "cancelled"
+        if current.state is not JobState.RUNNING or current.attempts != a.job.attempts:
+            return "superseded"   # another worker took over this job after a redelivery
+        if now - a.started_monotonic > self.settings.job_timeout_s:
+            return "timeout"
+        return None
+
+    def _read_messages(self, a: Attempt) -> None:
+        with contextlib.suppress(EOFError, OSError):
+            while a.conn.poll():
+                kind, value = a.conn.recv()
+                if kind == "progress":
+                    self.store.set_progress(a.job.id, value, attempt=a.job.attempts)
+                elif kind == "started":
+                    a.process_start_ms = max(0.0, (value - a.started_wall) * 1e3)
+                else:
+                    a.outcome = (kind, value)
+
+    def _settle(self, a: Attempt) -> None:
+        a.conn.close()
+        job_id, attempt = a.job.id, a.job.attempts
+        run_ms = (time.monotonic() - a.started_monotonic) * 1e3
+        try:
+            if a.stop_reason in ("cancelled", "superseded"):
+                return
+            if a.stop_reason == "timeout":
+                self.store.finish(job_id, JobState.FAILED, only_if=JobState.RUNNING, attempt=attempt,
+                                  error=f"timed out after {self.settings.job_timeout_s:g} s")
+                return
+            if a.outcome is not None and a.outcome[0] == "ok":
+                timings = dict(a.outcome[1])
+                timings["queued"] = a.queued_ms
+                timings["job_process_total"] = run_ms
+                if a.process_start_ms is not None:
+                    timings["job_process_start"] = a.process_start_ms
+                self._publish(a, timings)
+                return
+            if a.outcome is not None:
+                error = str(a.outcome[1])
+            else:
+                error = f"the job process exited with code {a.process.exitcode} without a result"
+            self.store.finish(job_id, JobState.FAILED, error=error, only_if=JobState.RUNNING,
+                              attempt=attempt, timings_ms={"job_process_total": run_ms, "queued": a.queued_ms})
+        finally:
+            shutil.rmtree(a.work_dir, ignore_errors=True)
+
+    def _publish(self, a: Attempt, timings: dict[str, float]) -> None:
+        """Succeed the attempt and rename its folder to `<id>/result/` in one transaction; an
+        attempt that was cancelled or taken over meanwhile changes nothing."""
+        result = self.store.result_dir(a.job.id)
+
+        def rename() -> None:
+            shutil.rmtree(result, ignore_errors=True)   # a folder left by a rolled-back attempt
+            os.rename(a.work_dir, result)
+
+        try:
+            self.store.finish(a.job.id, JobState.SUCCEEDED, timings_ms=timings, only_if=JobState.RUNNING,
+                              attempt=a.job.attempts, publish=rename)
+        except OSError as exc:   # the rename failed: the transaction was rolled back
+            self.store.finish(a.job.id, JobState.FAILED, only_if=JobState.RUNNING, attempt=a.job.attempts,
+                              error=f"cannot store the result: {exc}")
+
+
+# -- the local runner ---------------------------------------------------------------------------

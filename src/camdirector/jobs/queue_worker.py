@@ -1,0 +1,119 @@
+"""A queue worker process's main loop (`camdirector job-worker`): the jobs of the shared queue
+(queue.py's module docstring: redelivery, heartbeats, exactly-once), each run in a job process by
+the executor (executor.py), with the service's job kinds (kinds.py).
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import dramatiq
+import redis
+
+from camdirector.jobs.executor import PURGE_INTERVAL_S, JobExecutor, purge_expired
+from camdirector.jobs.job_settings import JobSettings
+from camdirector.jobs.kinds import JobRegistry, service_kinds
+from camdirector.jobs.queue import ACTOR_NAME, QUEUE_NAME, STORE_RETRIES, broker_for, redis_reason
+from camdirector.jobs.records import JobStore, JobsUnavailable, open_store
+
+log = logging.getLogger("camdirector.jobs")
+
+# Orphaned files (a folder without a record, an abandoned .tmp-*) are removed by queue workers only
+# once untouched this long past the job timeout: other nodes submit and run jobs meanwhile, s.
+_ORPHAN_GRACE_S = 3600.0
+
+
+class QueueWorker:
+    """`camdirector job-worker`'s body: Dramatiq worker threads (`max_concurrent_jobs`) that run
+    the jobs of the queue in job processes, a heartbeat thread, retention. Blocks in `run()`
+    until `stop()` (SIGTERM, SIGINT); running jobs go back to the queue, their attempt not counted."""
+
+    def __init__(self, data_dir: str | Path, settings: JobSettings,
+                 registry: JobRegistry | None = None, clock: Callable[[], float] = time.time) -> None:
+        self.settings = settings
+        self._clock = clock       # Unix seconds, for the retention of finished jobs
+        self.store: JobStore = open_store(settings.job_store, Path(data_dir) / "jobs")
+        try:
+            self._broker = broker_for(settings, worker=True)
+        except JobsUnavailable:
+            self.store.close()
+            raise
+        self._executor = JobExecutor(self.store, service_kinds() if registry is None else registry, settings)
+        self._actor = dramatiq.actor(self._run_message, broker=self._broker, actor_name=ACTOR_NAME,
+                                     queue_name=QUEUE_NAME,
+                                     retry_when=lambda retries, exc: isinstance(exc, JobsUnavailable)
+                                     and retries < STORE_RETRIES)
+        self._stopping = threading.Event()
+        self.worker_id = self._broker.broker_id
+
+    def run(self, ready: Callable[[], None] = lambda: None) -> None:
+        """Start the forkserver and the worker threads, call `ready`, beat until `stop()`."""
+        self._executor.start()
+        beat_s = self.settings.worker_heartbeat_timeout_s / 4
+        worker = dramatiq.Worker(self._broker, worker_threads=self.settings.max_concurrent_jobs,
+                                 worker_timeout=int(min(1.0, beat_s) * 1000))
+        # Dramatiq prefetches twice its threads by default; a message fetched is a job this worker
+        # holds (and loses when killed), so fetch only what runs (module docstring).
+        worker.queue_prefetch = self.settings.max_concurrent_jobs
+        worker.start()
+        log.info("queue worker %s: %d job(s) at a time from %s", self.worker_id,
+                 self.settings.max_concurrent_jobs, self.settings.job_queue)
+        ready()
+        next_purge = 0.0
+        try:
+            while not self._stopping.wait(beat_s):
+                self._beat()
+                if time.monotonic() >= next_purge:
+                    purge_expired(self.store, self.settings, self._clock())
+                    self.store.remove_orphans(self.settings.job_timeout_s + _ORPHAN_GRACE_S)
+                    next_purge = time.monotonic() + PURGE_INTERVAL_S
+        finally:
+            worker.stop(timeout=int((self.settings.cancel_grace_s + 10.0) * 1000))
+            self._broker.client.close()
+            self.store.close()
+
+    def stop(self) -> None:
+        self._stopping.set()
+
+    def _beat(self) -> None:
+        """Heartbeat and maintenance on the jobs queue (module docstring): a dead worker's jobs
+        come back even while every consumer of this worker is busy."""
+        try:
+            self._broker.do_qsize(QUEUE_NAME)
+        except redis.RedisError as exc:
+            log.warning("job queue %s: %s", self.settings.job_queue, redis_reason(exc))
+
+    def _run_message(self, job_id: str) -> None:
+        """One message: claim its job and run it here; when this worker stops first, the message
+        is sent again before the record goes back to queued, so neither is ever lost."""
+        job = self.store.claim(job_id, self.settings.max_attempts)
+        if job is None:
+            return
+        log.info("job %s (%s): attempt %d on worker %s", job.id, job.kind, job.attempts, self.worker_id)
+        self._executor.run(job, self._stopping, hand_back=lambda: self._actor.send(job_id))
+
+
+def run_job_worker(data_dir: str | Path, settings: JobSettings) -> int:
+    """`camdirector job-worker`: run a QueueWorker until SIGTERM or SIGINT. Prints one JSON line
+    when ready ({"event": "ready", "worker": id}); refuses to start (one line on stderr, exit 2)
+    when Redis or PostgreSQL cannot be reached."""
+    import json
+    import sys
+
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        worker = QueueWorker(data_dir, settings)
+    except JobsUnavailable as exc:
+        print(f"camdirector job-worker: {exc}", file=sys.stderr)
+        return 2
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: worker.stop())
+    with contextlib.suppress(KeyboardInterrupt):
+        worker.run(lambda: print(json.dumps({"event": "ready", "worker": worker.worker_id}), flush=True))
+    return 0
