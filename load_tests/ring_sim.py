@@ -5,7 +5,7 @@ many keys move when a node joins or leaves, and how unevenly keys spread, for 2 
         [--balance-factor 125] [--json FILE]
 
 The model is HAProxy's own algorithm (src/lb_chash.c, src/backend.c, src/hash.c of 2.x), checked
-against the running balancer by tests/server/deploy (the same keys land on the same nodes):
+against the running balancer by tests/deploy (the same keys land on the same nodes):
 - a server of weight w has w * 16 points on a 32-bit ring (BE_WEIGHT_SCALE = 16), point j at
   full_hash(server_id * 4096 + j) (SRV_EWGHT_RANGE = 256 * 16), full_hash being Bob Jenkins'
   32-bit integer avalanche times 3221225473; a server's points depend on its id and weight alone;

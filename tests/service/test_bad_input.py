@@ -225,7 +225,7 @@ def test_abandoned_session_is_reclaimed_after_the_resume_window(server_factory):
 def test_without_checkpoints_a_dead_worker_is_replaced(server_factory):
     """With checkpoints off, a worker killed by the OS loses its sessions, which then answer
     UNAVAILABLE saying so, over both transports; new sessions work again (with checkpoints, the
-    default, they are restored: tests/server/test_failover.py)."""
+    default, they are restored: tests/service/test_failover.py)."""
     import os
     import signal
     srv = server_factory("--workers", "1", "--checkpoint-store", "off")

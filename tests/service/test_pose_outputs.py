@@ -1,7 +1,7 @@
 """Pose outputs end to end (docs/protocol.md, "Pose outputs"): a real server with two workers sends
 every answered pose to UDP sockets this test binds on 127.0.0.1; SMPTE's reference receiver
 reassembles and decodes the OpenTrackIO datagrams and SMPTE's schema judges every sample; FreeD is
-read by the spec's decoder (tests/server/sessions/test_pose_out.py). Bad pose outputs are refused
+read by the spec's decoder (tests/worker/test_pose_out.py). Bad pose outputs are refused
 at CreateSession with INVALID_ARGUMENT, and a destination nobody listens on stalls nothing."""
 from __future__ import annotations
 

@@ -217,8 +217,8 @@ class SessionRouter:
         return body
 
     async def view(self, session_id: str, query_json: bytes, timeout_s: float) -> bytes:
-        """A monitor's picture of the session (sessions/views.py), its serialized view
-        (sessions/monitor.py); NOT_FOUND for an unknown id, UNAVAILABLE when it takes more than
+        """A monitor's picture of the session (render/snapshots.py), its serialized view
+        (render/monitor.py); NOT_FOUND for an unknown id, UNAVAILABLE when it takes more than
         timeout_s. Not a request of the session's client: it does not keep the session alive."""
         try:
             body, _ = await self.pool.call(self._entry(session_id).slot, "view", session_id, query_json, timeout_s)

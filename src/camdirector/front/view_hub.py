@@ -1,6 +1,6 @@
 """The monitors' pictures as the front serves them: one render however many viewers.
 
-A picture (sessions/views.py) is asked of the worker holding its session by (session, query).
+A picture (render/snapshots.py) is asked of the worker holding its session by (session, query).
 The hub keeps the newest picture of each and the render in flight: a viewer that asks while one
 is being made waits for it, and one that asks within `max_age_s` of the last gets that one. So
 many dashboards watching one session cost one render per period, not one per viewer. A live

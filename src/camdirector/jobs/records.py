@@ -1,5 +1,5 @@
 """Job records: one interface (`JobStore`), two implementations checked by one test suite
-(tests/server/jobs/test_records.py runs every test on both).
+(tests/jobs/test_records.py runs every test on both).
 
     SqliteJobStore     `<root>/jobs.sqlite3` (WAL journal): the embedded single-node default
     PostgresJobStore   a `jobs` table in PostgreSQL (psycopg 3): records that several nodes share

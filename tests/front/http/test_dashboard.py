@@ -533,7 +533,7 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
             wait_for_picture(page.locator(f"#{shot.replace('_', '-')}"),
                              lambda p, served=served: difference(p, served) < SAME_PICTURE,
                              f"the {shot} monitor does not show frame {shown_frame}")
-        # The program's camera as it was (the players drawn as of the cut: a frame on, sessions/views.py).
+        # The program's camera as it was (the players drawn as of the cut: a frame on, render/snapshots.py).
         assert difference(pair["cut_before"], before) < 2 * SAME_PICTURE
         assert difference(pair["cut_after"], before) > 2 * SAME_PICTURE
     finally:
@@ -542,7 +542,7 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         http.close()
 
 
-LEVEL_RGB_MIN = 60   # the level's beige (sessions/views.py LEVEL_RGB) lit from above: no channel darker
+LEVEL_RGB_MIN = 60   # the level's beige (render/snapshots.py LEVEL_RGB) lit from above: no channel darker
 
 
 def test_the_top_view_shows_the_level(server, page):

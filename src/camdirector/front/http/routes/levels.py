@@ -28,7 +28,7 @@ NOT_FOUND, sessions already on it keep the copy they loaded. A level that a queu
 is adding or replacing answers 409 (cancel the job first), so a removal is never undone by a job
 that finishes after it.
 
-The job runs in a job process (server/jobs/: the local runner or a queue worker); the uploads stay in
+The job runs in a job process (jobs/: the local runner or a queue worker); the uploads stay in
 the job's `input/`. The registry's index lives where the job records do (`JobSettings.job_store`:
 SQLite in the data directory, or the PostgreSQL database the nodes share; the job's params carry
 that URL beside the data directory), so every node lists, fetches and serves the same levels; two
