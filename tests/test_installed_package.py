@@ -1,0 +1,352 @@
+"""What users install, tested. scripts/install-dist.sh (docker/Dockerfile's install step) builds the
+wheels of proto/ and client_sdk/python/ and the main project's sdist with a wheel built from that
+sdist, and installs them, not editable, into a fresh venv; that venv's `camdirector`, imported from
+its own site-packages and run outside this checkout with PYTHONPATH cleared, then serves every rig
+over gRPC and ZeroMQ, adds a level over REST, runs an overview job, serves the dashboard with its
+assets and a monitor's picture, and finds its shipped scenarios. A module, a dependency or a data
+file that the distributions leave out fails here, never skips.
+
+The venv is made by the interpreter running the tests (the project's Python 3.11, requires-python),
+so no other interpreter need be on PATH; pip's cache is reused. Building and installing take about
+a minute with a warm cache (several the first time: every dependency is downloaded)."""
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import re
+import select
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+from PIL import Image
+
+from camdirector.v1 import director_pb2 as pb
+from tests.precompute.tracks.tiny_levels import corridor, l_room
+from tests.service.test_match_sessions import frames as match_frames
+from tests.service.test_match_sessions import match_request
+from tests.service.tracks_sessions import actor_frames, corridor_walk, obj_text, tracks_request
+from tests.service.wire_client import GrpcRaw, ZmqRaw, two_target_request, walk
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = "scripts/install-dist.sh"
+DOCKERFILE = ROOT / "docker" / "Dockerfile"
+FRAMES = 45
+TRACKS_START = (2.0, 0.0, 2.0)  # the actor's feet in tiny_levels.corridor()
+
+pytestmark = pytest.mark.timeout(900)  # the first build downloads every dependency into pip's cache
+
+
+def outside_env() -> dict[str, str]:
+    """This environment without what would let a child import from elsewhere than its own venv."""
+    return {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "PYTHONSTARTUP", "VIRTUAL_ENV")}
+
+
+@dataclass
+class Installed:
+    venv: Path
+    site_packages: Path
+    cwd: Path            # a folder outside the checkout, where every child runs
+
+    @property
+    def python(self) -> Path:
+        return self.venv / "bin" / "python"
+
+    def run(self, *args, timeout: float = 120) -> subprocess.CompletedProcess:
+        done = subprocess.run([str(a) for a in args], cwd=self.cwd, env=outside_env(), capture_output=True,
+                              text=True, timeout=timeout)
+        assert done.returncode == 0, f"{args} exited {done.returncode}:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+        return done
+
+    def python_json(self, code: str):
+        """Runs `code` in the venv's interpreter; what it printed last, as JSON."""
+        return json.loads(self.run(self.python, "-c", code).stdout.splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory) -> Installed:
+    root = tmp_path_factory.mktemp("installed")
+    assert not root.resolve().is_relative_to(ROOT), "the venv must live outside the checkout"
+    venv, cwd = root / "venv", root / "cwd"
+    cwd.mkdir()
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120, cwd=cwd)
+    # BUILD_PYTHON: this venv's `build` (the dev extra); the venv under test gets only what pip installs.
+    done = subprocess.run(["bash", str(ROOT / SCRIPT), str(venv / "bin" / "python"), str(root / "dist")],
+                          cwd=cwd, env={**outside_env(), "BUILD_PYTHON": sys.executable},
+                          capture_output=True, text=True, timeout=840)
+    assert done.returncode == 0, f"{SCRIPT} failed:\n{done.stdout[-5000:]}\n{done.stderr[-5000:]}"
+    dists = sorted(p.name for p in (root / "dist").iterdir())
+    kinds = [(re.sub(r"-\d.*", "", n), "sdist" if n.endswith(".tar.gz") else "wheel" if n.endswith(".whl") else n)
+             for n in dists]
+    assert kinds == [("camdirector", "wheel"), ("camdirector", "sdist"), ("camdirector_client", "wheel"),
+                     ("camdirector_proto", "wheel")], dists
+    site_packages = subprocess.run([str(venv / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                                   cwd=cwd, env=outside_env(), capture_output=True, text=True, check=True).stdout.strip()
+    return Installed(venv, Path(site_packages), cwd)
+
+
+# -- the installed distributions --------------------------------------------------------------
+
+def test_the_dockerfile_installs_with_the_same_script_and_copies_what_exists():
+    text = DOCKERFILE.read_text()
+    assert SCRIPT in text, f"docker/Dockerfile must install with {SCRIPT}, as this test does"
+    for line in re.findall(r"^COPY\s+(.+)$", text, re.MULTILINE):
+        words = [w for w in line.split() if not w.startswith("--")]
+        if "--from=" in line:
+            continue
+        for source in words[:-1]:
+            assert (ROOT / source).exists(), f"docker/Dockerfile copies {source}, which the checkout has not"
+
+
+def test_camdirector_is_imported_from_the_venv_not_the_checkout(installed):
+    found = installed.python_json("""
+import importlib.metadata as md, json
+import camdirector, camdirector.__main__, camdirector.pipeline, camdirector.v1.director_pb2, camdirector_client
+files = [m.__file__ for m in (camdirector.__main__, camdirector.pipeline, camdirector.v1.director_pb2, camdirector_client)]
+print(json.dumps({"files": files, "path": list(camdirector.__path__),
+                  "direct_url": {n: json.loads(md.distribution(n).read_text("direct_url.json") or "{}")
+                                 for n in ("camdirector", "camdirector-proto", "camdirector-client")}}))
+""")
+    for where in found["files"] + found["path"]:
+        assert Path(where).is_relative_to(installed.site_packages), f"{where} is not in the venv's site-packages"
+        assert not Path(where).resolve().is_relative_to(ROOT), where
+    for name, direct_url in found["direct_url"].items():
+        assert "archive_info" in direct_url and direct_url["url"].endswith(".whl"), f"{name}: {direct_url}"
+        assert not direct_url.get("dir_info", {}).get("editable"), f"{name} is an editable install"
+    assert (installed.venv / "bin" / "camdirector").is_file()
+
+
+def test_every_module_imports_with_the_declared_dependencies_only(installed):
+    """Every module under camdirector in the venv, imported: a module the wheel lacks, or a
+    dependency the code imports that pyproject.toml does not declare, fails here."""
+    found = installed.python_json("""
+import importlib, json, pkgutil
+import camdirector
+names, failed = [], {}
+def walk_error(name):
+    failed[name] = "cannot be walked"
+for m in pkgutil.walk_packages(camdirector.__path__, "camdirector.", onerror=walk_error):
+    names.append(m.name)
+    try:
+        importlib.import_module(m.name)
+    except BaseException as exc:
+        failed[m.name] = repr(exc)
+print(json.dumps({"names": names, "failed": failed}))
+""")
+    assert found["failed"] == {}
+    checkout = {".".join(p.relative_to(ROOT / "src").with_suffix("").parts).removesuffix(".__init__")
+                for p in (ROOT / "src" / "camdirector").rglob("*.py")}
+    missing = sorted(checkout - set(found["names"]) - {"camdirector"})
+    assert missing == [], f"modules of the checkout that the installed package lacks: {missing}"
+    assert "camdirector.v1.director_pb2_grpc" in found["names"]  # camdirector-proto shares the namespace
+
+
+def test_the_shipped_scenarios_are_package_data(installed):
+    found = installed.python_json("""
+import json
+from camdirector.evaluation.scenario import load_scenario, shipped_scenarios
+from camdirector.evaluation.suite import suite_scenarios
+print(json.dumps({"shipped": sorted(shipped_scenarios()), "paper": [load_scenario(p).name for p in suite_scenarios("paper")]}))
+""")
+    assert len(found["shipped"]) > 0 and found["paper"], found
+    assert set(found["paper"]) <= set(found["shipped"])
+    checkout = sorted(p.stem for p in (ROOT / "src" / "camdirector" / "evaluation" / "scenarios").glob("*.json"))
+    assert found["shipped"] == checkout
+    installed.run(installed.venv / "bin" / "camdirector", "eval", "--help")
+
+
+# -- the installed server ---------------------------------------------------------------------
+
+class InstalledServer:
+    """`<venv>/bin/camdirector serve` on free loopback ports (what ServerProcess does, but through the
+    console script and in a folder outside the checkout); its one JSON ready line names the addresses."""
+
+    def __init__(self, installed: Installed, data_dir: Path):
+        self.log_path = data_dir.parent / "server.log"
+        self._log = open(self.log_path, "w+")
+        self.proc = subprocess.Popen(
+            [str(installed.venv / "bin" / "camdirector"), "serve", "--grpc", "127.0.0.1:0", "--zmq", "tcp://127.0.0.1:*",
+             "--http", "127.0.0.1:0", "--workers", "1", "--data-dir", str(data_dir)],
+            stdout=subprocess.PIPE, stderr=self._log, text=True, cwd=installed.cwd, env=outside_env())
+        ready, _, _ = select.select([self.proc.stdout], [], [], 120)
+        line = self.proc.stdout.readline() if ready else ""
+        if not line:
+            self.proc.kill()
+            self.proc.wait()
+            raise AssertionError(f"the installed server did not start: {self.log_tail()}")
+        self.ready = json.loads(line)
+        self.grpc, self.zmq = self.ready["grpc"], self.ready["zmq"]
+        self.http = httpx.Client(base_url=f"http://{self.ready['http']}", timeout=30.0)
+
+    def log_tail(self, chars: int = 4000) -> str:
+        self._log.flush()
+        return self.log_path.read_text()[-chars:]
+
+    def stop(self) -> int:
+        self.http.close()
+        self.proc.terminate()
+        try:
+            self.proc.wait(30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.proc.stdout.close()
+        self._log.close()
+        return self.proc.returncode
+
+
+@pytest.fixture(scope="module")
+def server(installed, tmp_path_factory):
+    """The installed server, on a data directory where the installed CLI added the corridor level."""
+    data_dir = tmp_path_factory.mktemp("installed-server") / "data"
+    level_file = data_dir.parent / "corridor.obj"
+    level_file.write_text(obj_text(corridor()))
+    added = installed.run(installed.venv / "bin" / "camdirector", "level", "add", "corridor", level_file,
+                          "--data-dir", data_dir)
+    assert json.loads(added.stdout)["counts"]["nodes"] > 0
+    srv = InstalledServer(installed, data_dir)
+    yield srv
+    log = srv.log_tail()
+    assert srv.stop() == 0, f"the installed server did not exit cleanly:\n{log}"
+
+
+def wait_job(srv: InstalledServer, path: str, timeout_s: float = 120.0) -> dict:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        job = srv.http.get(path).json()
+        if job["status"] in ("succeeded", "failed", "cancelled"):
+            return job
+        time.sleep(0.1)
+    raise AssertionError(f"{path} did not finish in {timeout_s} s: {job}\n{srv.log_tail()}")
+
+
+def assert_posed(updates: list[pb.CameraUpdate], answered: int) -> None:
+    """`answered` frames with a finite pose, not all of them stale."""
+    posed = [u for u in updates if u.HasField("pose")]
+    assert len(posed) == answered, f"{len(posed)} of {len(updates)} frames have a pose"
+    for u in posed:
+        p, q = u.pose.position, u.pose.rotation
+        values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w, u.pose.vertical_fov_deg)
+        assert all(math.isfinite(v) for v in values) and u.pose.vertical_fov_deg > 0.0, u.pose
+    assert not all(u.stale for u in posed), "every frame was answered stale"
+
+
+@pytest.mark.parametrize("transport", ["grpc", "zmq"])
+@pytest.mark.parametrize("rig", ["toric", "match", "tracks"])
+def test_a_session_of_each_rig_over_each_transport(server, rig, transport):
+    raw = GrpcRaw(server.grpc) if transport == "grpc" else ZmqRaw(server.zmq)
+    try:
+        if rig == "toric":
+            session_id = raw.call("CreateSession", two_target_request(seed=1)).session_id
+            assert_posed(raw.stream(list(walk(session_id, FRAMES))), FRAMES)
+        elif rig == "match":
+            session_id = raw.call("CreateSession", match_request(delay_s=0.0)).session_id
+            assert_posed(raw.stream(list(match_frames(session_id, FRAMES))), FRAMES)
+        else:
+            session_id = raw.call("CreateSession", tracks_request("corridor", TRACKS_START)).session_id
+            times, feet = corridor_walk(FRAMES / 30.0)
+            assert_posed(raw.stream(actor_frames(session_id, times, feet)), FRAMES)
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+    finally:
+        raw.close()
+
+
+def test_a_level_added_over_rest_is_listed(server):
+    reply = server.http.post("/v1/levels", data={"name": "room"}, files={"level": ("room.obj", obj_text(l_room()).encode())})
+    assert reply.status_code == 202, reply.text
+    job = wait_job(server, f"/v1/level-jobs/{reply.json()['id']}")
+    assert job["status"] == "succeeded", job
+    assert [level["name"] for level in server.http.get("/v1/levels").json()["levels"]] == ["corridor", "room"]
+    raw = GrpcRaw(server.grpc)
+    try:
+        session_id = raw.call("CreateSession", tracks_request("room", TRACKS_START)).session_id
+        times = np.arange(20) / 30.0
+        feet = np.stack([2.0 + 1.4 * times, np.zeros_like(times), np.full_like(times, 2.0)], axis=1)
+        assert_posed(raw.stream(actor_frames(session_id, times, feet)), 20)
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+    finally:
+        raw.close()
+
+
+def walking_figure_bvh(frame_count: int = 60, fps: float = 30.0) -> bytes:
+    """A stick figure (hips, chest, head, arms, legs; metres, +Y up) walking along +Z, swinging its
+    arms and legs."""
+    hierarchy = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Chest { OFFSET 0 0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT Head { OFFSET 0 0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site { OFFSET 0 0.2 0 } }
+    JOINT LeftArm { OFFSET 0.15 0.2 0 CHANNELS 3 Zrotation Xrotation Yrotation
+      JOINT LeftHand { OFFSET 0 -0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
+        End Site { OFFSET 0 -0.3 0 } } }
+    JOINT RightArm { OFFSET -0.15 0.2 0 CHANNELS 3 Zrotation Xrotation Yrotation
+      JOINT RightHand { OFFSET 0 -0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
+        End Site { OFFSET 0 -0.3 0 } } } }
+  JOINT LeftUpLeg { OFFSET 0.1 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT LeftFoot { OFFSET 0 -0.85 0 CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site { OFFSET 0 -0.05 0.15 } } }
+  JOINT RightUpLeg { OFFSET -0.1 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT RightFoot { OFFSET 0 -0.85 0 CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site { OFFSET 0 -0.05 0.15 } } }
+}
+"""
+    rows = []
+    for i in range(frame_count):
+        t = i / fps
+        swing = 30.0 * math.sin(2.0 * math.pi * t)
+        joints = {"LeftArm": -swing, "RightArm": swing, "LeftUpLeg": swing, "RightUpLeg": -swing}
+        values = [0.0, 0.95, 1.2 * t, 0.0, 0.0, 0.0]
+        for name in ("Chest", "Head", "LeftArm", "LeftHand", "RightArm", "RightHand",
+                     "LeftUpLeg", "LeftFoot", "RightUpLeg", "RightFoot"):
+            values += [0.0, joints.get(name, 0.0), 0.0]  # Z, X, Y rotations: limbs swing about X
+        rows.append(" ".join(f"{v:.4f}" for v in values))
+    return (hierarchy + f"MOTION\nFrames: {frame_count}\nFrame Time: {1.0 / fps:.6f}\n" + "\n".join(rows) + "\n").encode()
+
+
+def test_an_overview_job_completes(server):
+    reply = server.http.post("/v1/overview-jobs", files={"file": ("walk.bvh", walking_figure_bvh())})
+    assert reply.status_code == 202, reply.text
+    job_id = reply.json()["id"]
+    job = wait_job(server, f"/v1/overview-jobs/{job_id}")
+    assert job["status"] == "succeeded", job
+    result = server.http.get(f"/v1/overview-jobs/{job_id}/result")
+    assert result.status_code == 200 and len(result.json()["frames"]) == 60
+    for name, media_type in (("preview.mp4", "video/mp4"), ("contact-sheet.png", "image/png")):
+        artifact = server.http.get(f"/v1/overview-jobs/{job_id}/{name}")
+        assert artifact.status_code == 200 and artifact.headers["content-type"] == media_type and len(artifact.content) > 1000
+
+
+def test_the_dashboard_and_its_assets_are_served(server):
+    page = server.http.get("/", follow_redirects=True)
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html"), page.text[:500]
+    assets = re.findall(r'(?:src|href)="([^":#]+\.(?:js|css))"', page.text)
+    assert {"dashboard.js", "dashboard.css"} <= set(assets), assets
+    for asset in assets:
+        reply = server.http.get(str(page.url.join(asset)))
+        assert reply.status_code == 200 and len(reply.content) > 100, (asset, reply.status_code)
+
+
+def test_a_monitor_picture_of_a_live_session(server):
+    raw = GrpcRaw(server.grpc)
+    try:
+        session_id = raw.call("CreateSession", two_target_request(seed=4)).session_id
+        raw.stream(list(walk(session_id, 20)))
+        view = server.http.get(f"/v1/sessions/{session_id}/view", timeout=60.0)
+        assert view.status_code == 200 and view.headers["content-type"] == "image/jpeg", view.text[:500]
+        assert "x-camdirector-placeholder" not in view.headers, view.headers["x-camdirector-placeholder"]
+        picture = Image.open(io.BytesIO(view.content))
+        assert picture.format == "JPEG" and len(view.content) > 2000
+        assert np.asarray(picture.convert("L")).std() > 1.0, "a blank picture"
+        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
+    finally:
+        raw.close()
