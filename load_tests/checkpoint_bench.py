@@ -1,4 +1,4 @@
-"""What checkpoints cost a frame, and what a restore costs (worker/checkpoints.py).
+"""What checkpoints cost a frame, and what a restore costs (worker/checkpointing.py).
 
     python -m load_tests.checkpoint_bench [--frames 600] [--json F]
 
@@ -24,7 +24,7 @@ from camdirector.demo.scene import build_demo_scene
 from camdirector.deploy.services import RedisServer
 from camdirector.geometry.camera import Lens
 from camdirector.server_settings import ServerSettings
-from camdirector.worker.checkpoints import dumps_state
+from camdirector.worker.checkpoint_stores import dumps_state
 from camdirector.worker.table import SessionTable
 from load_tests.report import emit
 
@@ -59,7 +59,7 @@ def _measure(create: bytes, frames: list[bytes], timed: int, store: str, every: 
             for payload in frames[timed:-1]:
                 table.handle_bytes("frame", "s", payload)
             other = SessionTable(settings)
-            other.owner = "bench/2"
+            other.checkpoints.owner = "bench/2"
             t0 = time.perf_counter()
             other.handle_bytes("frame", "s", frames[-1])
             out["restore_and_frame_ms"] = (time.perf_counter() - t0) * 1e3

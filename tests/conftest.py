@@ -21,6 +21,12 @@ def shared_data() -> Path:
         pytest.skip(f"{SHARED_DATA} is absent: third-party levels and clips are not in this clone")
     return SHARED_DATA
 
+@pytest.fixture(scope="session")
+def run_bvh(shared_data) -> bytes:
+    """The motion-capture clip of a run (../shared/data/mocap), as a client uploads it."""
+    from tests.precompute.overview.overview_mocap import CLIPS
+    return (shared_data / "mocap" / CLIPS["run"][0]).read_bytes()
+
 
 @pytest.fixture(scope="session")
 def server(tmp_path_factory):

@@ -16,7 +16,6 @@ import json
 import math
 import os
 import re
-import select
 import subprocess
 import sys
 import time
@@ -28,6 +27,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor, l_room
 from tests.service.test_match_sessions import frames as match_frames
@@ -164,44 +164,6 @@ print(json.dumps({"shipped": sorted(shipped_scenarios()), "paper": [load_scenari
 
 # -- the installed server ---------------------------------------------------------------------
 
-class InstalledServer:
-    """`<venv>/bin/camdirector serve` on free loopback ports (what ServerProcess does, but through the
-    console script and in a folder outside the checkout); its one JSON ready line names the addresses."""
-
-    def __init__(self, installed: Installed, data_dir: Path):
-        self.log_path = data_dir.parent / "server.log"
-        self._log = open(self.log_path, "w+")
-        self.proc = subprocess.Popen(
-            [str(installed.venv / "bin" / "camdirector"), "serve", "--grpc", "127.0.0.1:0", "--zmq", "tcp://127.0.0.1:*",
-             "--http", "127.0.0.1:0", "--workers", "1", "--data-dir", str(data_dir)],
-            stdout=subprocess.PIPE, stderr=self._log, text=True, cwd=installed.cwd, env=outside_env())
-        ready, _, _ = select.select([self.proc.stdout], [], [], 120)
-        line = self.proc.stdout.readline() if ready else ""
-        if not line:
-            self.proc.kill()
-            self.proc.wait()
-            raise AssertionError(f"the installed server did not start: {self.log_tail()}")
-        self.ready = json.loads(line)
-        self.grpc, self.zmq = self.ready["grpc"], self.ready["zmq"]
-        self.http = httpx.Client(base_url=f"http://{self.ready['http']}", timeout=30.0)
-
-    def log_tail(self, chars: int = 4000) -> str:
-        self._log.flush()
-        return self.log_path.read_text()[-chars:]
-
-    def stop(self) -> int:
-        self.http.close()
-        self.proc.terminate()
-        try:
-            self.proc.wait(30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        self.proc.stdout.close()
-        self._log.close()
-        return self.proc.returncode
-
-
 @pytest.fixture(scope="module")
 def server(installed, tmp_path_factory):
     """The installed server, on a data directory where the installed CLI added the corridor level."""
@@ -211,16 +173,20 @@ def server(installed, tmp_path_factory):
     added = installed.run(installed.venv / "bin" / "camdirector", "level", "add", "corridor", level_file,
                           "--data-dir", data_dir)
     assert json.loads(added.stdout)["counts"]["nodes"] > 0
-    srv = InstalledServer(installed, data_dir)
+    # through the console script, in a folder outside the checkout, with nothing pointing back into it
+    srv = ServerProcess("--workers", "1", "--data-dir", str(data_dir), command=[str(installed.venv / "bin" / "camdirector"),
+                        "serve"], base_env=outside_env(), cwd=installed.cwd)
+    srv.client = httpx.Client(base_url=f"http://{srv.http}", timeout=30.0)
     yield srv
+    srv.client.close()
     log = srv.log_tail()
     assert srv.stop() == 0, f"the installed server did not exit cleanly:\n{log}"
 
 
-def wait_job(srv: InstalledServer, path: str, timeout_s: float = 120.0) -> dict:
+def wait_job(srv: ServerProcess, path: str, timeout_s: float = 120.0) -> dict:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        job = srv.http.get(path).json()
+        job = srv.client.get(path).json()
         if job["status"] in ("succeeded", "failed", "cancelled"):
             return job
         time.sleep(0.1)
@@ -259,11 +225,11 @@ def test_a_session_of_each_rig_over_each_transport(server, rig, transport):
 
 
 def test_a_level_added_over_rest_is_listed(server):
-    reply = server.http.post("/v1/levels", data={"name": "room"}, files={"level": ("room.obj", obj_text(l_room()).encode())})
+    reply = server.client.post("/v1/levels", data={"name": "room"}, files={"level": ("room.obj", obj_text(l_room()).encode())})
     assert reply.status_code == 202, reply.text
     job = wait_job(server, f"/v1/level-jobs/{reply.json()['id']}")
     assert job["status"] == "succeeded", job
-    assert [level["name"] for level in server.http.get("/v1/levels").json()["levels"]] == ["corridor", "room"]
+    assert [level["name"] for level in server.client.get("/v1/levels").json()["levels"]] == ["corridor", "room"]
     raw = GrpcRaw(server.grpc)
     try:
         session_id = raw.call("CreateSession", tracks_request("room", TRACKS_START)).session_id
@@ -275,64 +241,27 @@ def test_a_level_added_over_rest_is_listed(server):
         raw.close()
 
 
-def walking_figure_bvh(frame_count: int = 60, fps: float = 30.0) -> bytes:
-    """A stick figure (hips, chest, head, arms, legs; metres, +Y up) walking along +Z, swinging its
-    arms and legs."""
-    hierarchy = """HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Chest { OFFSET 0 0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
-    JOINT Head { OFFSET 0 0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
-      End Site { OFFSET 0 0.2 0 } }
-    JOINT LeftArm { OFFSET 0.15 0.2 0 CHANNELS 3 Zrotation Xrotation Yrotation
-      JOINT LeftHand { OFFSET 0 -0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
-        End Site { OFFSET 0 -0.3 0 } } }
-    JOINT RightArm { OFFSET -0.15 0.2 0 CHANNELS 3 Zrotation Xrotation Yrotation
-      JOINT RightHand { OFFSET 0 -0.3 0 CHANNELS 3 Zrotation Xrotation Yrotation
-        End Site { OFFSET 0 -0.3 0 } } } }
-  JOINT LeftUpLeg { OFFSET 0.1 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
-    JOINT LeftFoot { OFFSET 0 -0.85 0 CHANNELS 3 Zrotation Xrotation Yrotation
-      End Site { OFFSET 0 -0.05 0.15 } } }
-  JOINT RightUpLeg { OFFSET -0.1 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
-    JOINT RightFoot { OFFSET 0 -0.85 0 CHANNELS 3 Zrotation Xrotation Yrotation
-      End Site { OFFSET 0 -0.05 0.15 } } }
-}
-"""
-    rows = []
-    for i in range(frame_count):
-        t = i / fps
-        swing = 30.0 * math.sin(2.0 * math.pi * t)
-        joints = {"LeftArm": -swing, "RightArm": swing, "LeftUpLeg": swing, "RightUpLeg": -swing}
-        values = [0.0, 0.95, 1.2 * t, 0.0, 0.0, 0.0]
-        for name in ("Chest", "Head", "LeftArm", "LeftHand", "RightArm", "RightHand",
-                     "LeftUpLeg", "LeftFoot", "RightUpLeg", "RightFoot"):
-            values += [0.0, joints.get(name, 0.0), 0.0]  # Z, X, Y rotations: limbs swing about X
-        rows.append(" ".join(f"{v:.4f}" for v in values))
-    return (hierarchy + f"MOTION\nFrames: {frame_count}\nFrame Time: {1.0 / fps:.6f}\n" + "\n".join(rows) + "\n").encode()
-
-
-def test_an_overview_job_completes(server):
-    reply = server.http.post("/v1/overview-jobs", files={"file": ("walk.bvh", walking_figure_bvh())})
+@pytest.mark.shared_data
+def test_an_overview_job_completes(server, run_bvh):
+    reply = server.client.post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)})
     assert reply.status_code == 202, reply.text
     job_id = reply.json()["id"]
     job = wait_job(server, f"/v1/overview-jobs/{job_id}")
     assert job["status"] == "succeeded", job
-    result = server.http.get(f"/v1/overview-jobs/{job_id}/result")
-    assert result.status_code == 200 and len(result.json()["frames"]) == 60
+    result = server.client.get(f"/v1/overview-jobs/{job_id}/result")
+    assert result.status_code == 200 and len(result.json()["frames"]) == job["frames"] > 0
     for name, media_type in (("preview.mp4", "video/mp4"), ("contact-sheet.png", "image/png")):
-        artifact = server.http.get(f"/v1/overview-jobs/{job_id}/{name}")
+        artifact = server.client.get(f"/v1/overview-jobs/{job_id}/{name}")
         assert artifact.status_code == 200 and artifact.headers["content-type"] == media_type and len(artifact.content) > 1000
 
 
 def test_the_dashboard_and_its_assets_are_served(server):
-    page = server.http.get("/", follow_redirects=True)
+    page = server.client.get("/", follow_redirects=True)
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html"), page.text[:500]
     assets = re.findall(r'(?:src|href)="([^":#]+\.(?:js|css))"', page.text)
     assert {"dashboard.js", "dashboard.css"} <= set(assets), assets
     for asset in assets:
-        reply = server.http.get(str(page.url.join(asset)))
+        reply = server.client.get(str(page.url.join(asset)))
         assert reply.status_code == 200 and len(reply.content) > 100, (asset, reply.status_code)
 
 
@@ -341,7 +270,7 @@ def test_a_monitor_picture_of_a_live_session(server):
     try:
         session_id = raw.call("CreateSession", two_target_request(seed=4)).session_id
         raw.stream(list(walk(session_id, 20)))
-        view = server.http.get(f"/v1/sessions/{session_id}/view", timeout=60.0)
+        view = server.client.get(f"/v1/sessions/{session_id}/view", timeout=60.0)
         assert view.status_code == 200 and view.headers["content-type"] == "image/jpeg", view.text[:500]
         assert "x-camdirector-placeholder" not in view.headers, view.headers["x-camdirector-placeholder"]
         picture = Image.open(io.BytesIO(view.content))

@@ -8,7 +8,7 @@
 - Names say which one: no two modules share a name unless they sit in sibling folders (the same
   idea in each: `rig.py` of every rig) or are an area's `cli.py`.
 - No code outside a rig's folder asks which rig it holds (`isinstance(..., ToricRig)`): it asks the
-  rig contract (pipeline/rig.py).
+  rig contract (pipeline/camera_rig.py).
 
 The pipeline check imports every module under camdirector.pipeline in a fresh interpreter, so that
 what the test suite has already imported cannot hide an import the pipeline makes (and the same for

@@ -42,7 +42,7 @@ class ServerSettings:
     # Where jobs wait to run: "" is this process's own runner (one node); redis://... is a queue that
     # queue workers on any node take jobs from (`camdirector job-worker`).
     job_queue: str = ""
-    # Session checkpoints (sessions/checkpoints.py): "" is a folder in data_dir (survives a worker's
+    # Session checkpoints (worker/checkpoint_stores.py): "" is a folder in data_dir (survives a worker's
     # death and a restart of this node); redis://... lets any node restore any session; "off" keeps none.
     checkpoint_store: str = ""
     checkpoint_every_frames: int = 60        # a session's state is snapshotted every this many frames. [1, 100000]

@@ -26,7 +26,6 @@ from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
 from camdirector.jobs import JobSettings, JobState, service_kinds
 from tests.jobs.toys import wait_until
-from tests.precompute.overview.overview_mocap import CLIPS
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service.tracks_sessions import obj_text
 
@@ -39,11 +38,6 @@ HEARTBEAT_TIMEOUT_S = 2.0
 # levels, edges up to 73), a reproducibility gap of the overview preview, not of the queue; the
 # preview is held to its frame count and size (decoded_preview).
 RESULT_FILES = ("result.json", "contact-sheet.png")
-
-
-@pytest.fixture(scope="module")
-def run_bvh(shared_data) -> bytes:
-    return (shared_data / "mocap" / CLIPS["run"][0]).read_bytes()
 
 
 class JobWorker:

@@ -65,7 +65,7 @@ def test_the_cut_views_show_the_two_poses_around_the_last_cut(table):
     session = table.held[_streamed(table, 10)].session
     before_pose, walker_before = session.last_state.pose, session.target_transforms[0]
     assert session.last_cut is None   # the first pose is a cut from nothing: no before picture
-    # A new composition cuts to it on the next frame (tests/server/test_director.py).
+    # A new composition cuts to it on the next frame (tests/service/test_director.py).
     table.update_style(pb.UpdateStyleRequest(session_id="s", style=pb.Style(
         screen_a=pb.ScreenPoint(x=-0.6, y=0.2), screen_b=pb.ScreenPoint(x=0.6, y=0.2))))
     table.handle_bytes("frame", "s", next(walk("s", 1, start_frame=11)).SerializeToString())
@@ -92,8 +92,8 @@ def test_a_match_candidate_view_is_the_candidates_camera_and_players_show_at_the
     for update in updates[1:] + list(match_frames("m", 40, start=20)):
         table.handle_bytes("frame", "m", update.SerializeToString())
     state = session.last_state
-    assert state.pose is not None and state.candidates, "the match offers candidates once it answers"
-    candidate = state.candidates[0]
+    assert state.pose is not None and state.match.candidates, "the match offers candidates once it answers"
+    candidate = state.match.candidates[0]
     job = render_job(session, ViewQuery(shot="candidate", subjects=tuple(reversed(candidate.shot.subject_ids))))
     assert job.pose is candidate.pose and job.frame == state.frame
     # Players are drawn where the program's moment has them, a second behind the newest frame.

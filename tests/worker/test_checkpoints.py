@@ -1,6 +1,6 @@
-"""Session checkpoints (worker/checkpoints.py): the two stores held to one contract, and
-sessions of every rig restored bit for bit by a session table that never saw them (a new worker,
-another node), with the failures a store can have."""
+"""Session checkpoints (worker/checkpoint_stores.py, worker/checkpointing.py): the two stores held
+to one contract, and sessions of every rig restored bit for bit by a session table that never saw
+them (a new worker, another node), with the failures a store can have."""
 from __future__ import annotations
 
 import pytest
@@ -8,7 +8,7 @@ import pytest
 from camdirector.errors import DirectorError
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-from camdirector.worker.checkpoints import (
+from camdirector.worker.checkpoint_stores import (
     CheckpointError,
     DirectoryStore,
     RedisStore,
@@ -32,7 +32,7 @@ def store_url(request, tmp_path):
 def _table(tmp_path, store_url: str, owner: str, every: int = 20) -> SessionTable:
     table = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url,
                                         checkpoint_every_frames=every))
-    table.owner = owner  # one process plays several: each table its own owner
+    table.checkpoints.owner = owner  # one process plays several: each table its own owner
     return table
 
 
@@ -184,10 +184,10 @@ def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoi
     flagged = [table.handle_bytes("frame", "s", payload)[1].checkpoint_failed for payload in updates[10:20]]
     assert all(flagged)  # answered, and the front's metric counts each
     with pytest.raises(CheckpointError):
-        RedisStore(redis_server.url, keep_s=60.0)  # a node started now refuses to (front/app.py)
+        RedisStore(redis_server.url, keep_s=60.0)  # a node started now refuses to (front/main.py)
     restarted = RedisServer(tmp_path / "redis", port=redis_server.port).start()
     try:
-        table.held["s"].checkpoint_retry_s = 0.0  # do not wait out the retry interval
+        table.held["s"].checkpoint.retry_s = 0.0  # do not wait out the retry interval
         assert not table.handle_bytes("frame", "s", updates[20])[1].checkpoint_failed
         for payload in updates[21:30]:
             table.handle_bytes("frame", "s", payload)

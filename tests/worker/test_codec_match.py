@@ -72,7 +72,7 @@ def test_events_become_domain_events_with_defaults():
     update = frame_from_msg(frame(pb.GameEvent(kind=pb.EVENT_KILL, actor_id="p0", other_actor_id="p1", label="ak"),
                                   pb.GameEvent(kind=pb.EVENT_OBJECTIVE, actor_id="p2", priority=9, time_s=4.5,
                                                position=pb.Vec3(x=1.0, y=0.0, z=2.0))),
-                            set(PLAYERS), set(), players=PLAYERS, delay_s=10.0)
+                            set(PLAYERS), set(), player_ids=PLAYERS, delay_s=10.0)
     kill, objective = update.events
     assert (kill.kind, kill.actor_id, kill.other_actor_id, kill.priority, kill.time_s, kill.label) == \
         (EventKind.KILL, "p0", "p1", 0, 5.0, "ak")
@@ -94,10 +94,10 @@ def test_events_become_domain_events_with_defaults():
      "position"),
 ])
 def test_each_kind_of_bad_event_is_refused(event, code, contains):
-    refused(code, frame_from_msg, frame(event), set(PLAYERS), set(), players=PLAYERS, delay_s=10.0, contains=contains)
+    refused(code, frame_from_msg, frame(event), set(PLAYERS), set(), player_ids=PLAYERS, delay_s=10.0, contains=contains)
 
 
 def test_an_event_up_to_the_delay_ahead_is_accepted():
     update = frame_from_msg(frame(pb.GameEvent(kind=pb.EVENT_CUSTOM, time_s=15.0)), set(PLAYERS), set(),
-                            players=PLAYERS, delay_s=10.0)
+                            player_ids=PLAYERS, delay_s=10.0)
     assert update.events[0].time_s == 15.0

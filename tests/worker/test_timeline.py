@@ -9,7 +9,8 @@ import pytest
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.inputs import EventKind, GameEvent
-from camdirector.pipeline.stages import Candidate, FrameState, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import Candidate, MatchFrame, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.state import FrameState
 from camdirector.worker.timeline import Timeline, dumps
 
 
@@ -66,7 +67,7 @@ ROSTER = (("a0", 0), ("b0", 1))
 def match_state(frame: int, buffering: bool = False) -> FrameState:
     """A MATCH frame of two players; while buffering, no pose (the rig's answer)."""
     s = state(frame)
-    s.players, s.buffering = ROSTER, buffering
+    s.match = MatchFrame(ROSTER, buffering)
     s.aim_points_world = [np.array([0.0, 1.5, 0.0]), np.array([4.0, 1.5, 0.0])]
     if buffering:
         s.pose = None
@@ -76,11 +77,11 @@ def match_state(frame: int, buffering: bool = False) -> FrameState:
 def test_a_match_frame_as_json():
     timeline = Timeline()
     s = match_state(30)
-    s.shot = ShotChoice(("a0", "b0"), ShotKind.DUEL, "fight: a0 vs b0")
+    s.match.shot = ShotChoice(("a0", "b0"), ShotKind.DUEL, "fight: a0 vs b0")
     preview = CameraPose(np.array([2.0, 3.0, -5.0]), np.array([0.0, 0.0, 0.0, 1.0]), 50.0)  # looking down -Z
-    s.candidates = [Candidate(preview, ShotChoice(("b0",), ShotKind.FOLLOW, "fighter: b0"), 0.41234)]
-    s.events = [GameEvent(EventKind.KILL, "a0", "b0", 0, 0.5, "headshot")]
-    s.planned_cut = PlannedCut(2.75, ShotChoice(("a0",), ShotKind.FOLLOW, "planned objective in 2.2 s: a0"))
+    s.match.candidates = [Candidate(preview, ShotChoice(("b0",), ShotKind.FOLLOW, "fighter: b0"), 0.41234)]
+    s.match.events = [GameEvent(EventKind.KILL, "a0", "b0", 0, 0.5, "headshot")]
+    s.match.planned_cut = PlannedCut(2.75, ShotChoice(("a0",), ShotKind.FOLLOW, "planned objective in 2.2 s: a0"))
     timeline.add(s, compute_ms=1.0)
     (frame,) = orjson.loads(dumps(timeline.as_json()))
     assert frame["targets"] == [[0.0, 1.5, 0.0], [4.0, 1.5, 0.0]]
@@ -100,8 +101,8 @@ def test_candidates_keep_to_their_frames():
     timeline = Timeline()
     for frame, count in ((1, 2), (2, 0), (3, 1)):
         s = match_state(frame)
-        s.shot = ShotChoice((), ShotKind.OVERVIEW, "overview")
-        s.candidates = [Candidate(CameraPose(np.array([float(frame), float(k), 0.0]), np.array([0.0, 0.0, 0.0, 1.0]),
+        s.match.shot = ShotChoice((), ShotKind.OVERVIEW, "overview")
+        s.match.candidates = [Candidate(CameraPose(np.array([float(frame), float(k), 0.0]), np.array([0.0, 0.0, 0.0, 1.0]),
                                              50.0), ShotChoice(("a0",), ShotKind.FOLLOW, "f"), 1.0)
                         for k in range(count)]
         timeline.add(s, compute_ms=1.0)
@@ -119,7 +120,7 @@ def test_buffering_frames_have_no_camera_and_give_way_to_the_program():
         [(f, True, None, None, None) for f in (1, 2, 3)]
     assert timeline.as_json(after_frame=2)[0]["frame"] == 3
     program = match_state(1)                      # the program's first moment: the game's frame 1
-    program.shot = ShotChoice((), ShotKind.OVERVIEW, "overview")
+    program.match.shot = ShotChoice((), ShotKind.OVERVIEW, "overview")
     timeline.add(program, compute_ms=0.5)
     timeline.add(match_state(2), compute_ms=0.5)
     rows = timeline.as_json()

@@ -33,21 +33,27 @@ def worker_pids(server_pid: int) -> list[int]:
 
 class ServerProcess:
     """Pass transports=("grpc",) to turn the others off; extra `args` go to `camdirector serve`.
-    The server's log goes to a file in a temporary folder (a pipe could fill and stall it)."""
+    The server's log goes to a file in a temporary folder (a pipe could fill and stall it).
+
+    python: the interpreter that runs `-m camdirector serve` (another checkout's venv runs its own
+    server); command: the whole command instead (an installed console script); base_env: the
+    environment to start from instead of this process's, `env` updating it; cwd: the folder it
+    runs in."""
 
     def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None,
-                 python: str = sys.executable):
+                 python: str = sys.executable, command: list[str] | None = None, base_env: dict | None = None,
+                 cwd: str | Path | None = None):
         self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
         self.log_path = Path(self._dir.name) / "server.log"
         self._log = open(self.log_path, "w+")
         bind = {"grpc": "127.0.0.1:0", "zmq": "tcp://127.0.0.1:*", "http": "127.0.0.1:0"}
-        cmd = [python, "-m", "camdirector.__main__", "serve"]  # another checkout's venv runs its own server
+        cmd = list(command) if command is not None else [python, "-m", "camdirector", "serve"]
         for name, address in bind.items():
             cmd += [f"--{name}", address if name in transports else ""]
         if "--data-dir" not in args:
             cmd += ["--data-dir", self._dir.name]
         self.proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=self._log, text=True,
-                                     env={**os.environ, **(env or {})})
+                                     env={**(os.environ if base_env is None else base_env), **(env or {})}, cwd=cwd)
         line = self.proc.stdout.readline()
         if not line:
             self.proc.wait(15)

@@ -21,7 +21,7 @@ from camdirector.front.router import SessionRouter
 from camdirector.front.zmq_service import ZmqTransport
 from camdirector.jobs import JobsUnavailable, service_kinds
 from camdirector.server_settings import ServerSettings
-from camdirector.worker.checkpoints import CheckpointError, open_store
+from camdirector.worker.checkpoint_stores import CheckpointError, open_store
 
 log = logging.getLogger("camdirector.serve")
 

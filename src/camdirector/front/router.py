@@ -1,7 +1,7 @@
 """The front process's view of the sessions: which worker holds each, which are streaming, and
 when an abandoned one is reclaimed. Both transports call this one object.
 
-With checkpoints (the default; sessions/checkpoints.py) no session is lost with its worker: the
+With checkpoints (the default; worker/checkpointing.py) no session is lost with its worker: the
 sessions of a worker that died are given at once to the least loaded of the others (the same one
 when there is no other, which is then awaited while it restarts), and their next request restores
 them there. A client's request for a session this node does not know (this node restarted, or the

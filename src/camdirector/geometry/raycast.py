@@ -68,7 +68,7 @@ class RayScene:
     ways give the same answers (tests/geometry/test_raycast.py).
 
     Pickles as its meshes and objects' transforms; unpickling builds its Embree scenes again (a
-    session's checkpoint, worker/checkpoints.py): the same triangles answer the same.
+    session's checkpoint, worker/checkpointing.py): the same triangles answer the same.
     """
 
     def __init__(self, static_meshes_world: list[TriMesh], solo_max_objects: int = SOLO_MAX_OBJECTS):

@@ -40,15 +40,16 @@ DEFAULT_WIDTH_PX = 320
 TOP_VIEW_LONG_SIDE_PX = 512  # the top view's longer side; the other follows the world's extent
 NO_WORLD_NOTE = "no world geometry: the scene has no object and no level, only its targets"
 
-# Colours, linear RGB in [0, 1]. Targets in the dashboard's orange, a MATCH player in its team's
-# colour (the dashboard's TEAM_COLOURS, in the same order), so a monitor matches the top view.
+# Colours, linear RGB in [0, 1]. A target in its team's colour (the dashboard's TEAM_COLOURS, in the
+# same order), so a monitor matches the top view: team 0, every target outside a MATCH session
+# (worker/codec.py refuses a team there), is the dashboard's target orange.
 STATIC_RGB = (0.60, 0.60, 0.62)
 LEVEL_RGB = (0.62, 0.60, 0.56)
 LEVEL_CHECKER_M = 2.0
 MOVING_RGB = (0.30, 0.45, 0.70)
 TARGET_RGB = (0xE0 / 255, 0x7B / 255, 0x00 / 255)
-TEAM_RGB = ((0xE0 / 255, 0x7B / 255, 0x00 / 255), (0x8E / 255, 0x24 / 255, 0xAA / 255),
-            (0x2E / 255, 0x7D / 255, 0x32 / 255), (0x79 / 255, 0x55 / 255, 0x48 / 255))
+TEAM_RGB = (TARGET_RGB, (0x8E / 255, 0x24 / 255, 0xAA / 255), (0x2E / 255, 0x7D / 255, 0x32 / 255),
+            (0x79 / 255, 0x55 / 255, 0x48 / 255))
 
 
 @dataclass(frozen=True)
@@ -153,11 +154,9 @@ def scene_geometry(session: Session) -> SceneGeometry:
         parts.append(MeshPart("level", _f32(mesh.vertices), _i32(mesh.faces), LEVEL_RGB, checker_m=LEVEL_CHECKER_M))
     for object_id, (mesh, _) in session.dynamic.items():
         parts.append(MeshPart(f"object:{object_id}", _f32(mesh.vertices), _i32(mesh.faces), MOVING_RGB, moving=True))
-    teams = session.players is not None
     for target in session.targets:
-        rgb = TEAM_RGB[target.team % len(TEAM_RGB)] if teams else TARGET_RGB
-        parts.append(MeshPart(f"target:{target.id}", _f32(target.mesh.vertices), _i32(target.mesh.faces), rgb,
-                              moving=True))
+        parts.append(MeshPart(f"target:{target.id}", _f32(target.mesh.vertices), _i32(target.mesh.faces),
+                              TEAM_RGB[target.team % len(TEAM_RGB)], moving=True))
     return SceneGeometry(tuple(parts))
 
 
@@ -166,20 +165,21 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
     dynamic, targets = session.dynamic, session.view_target_transforms()
     frame, pose, placeholder = None, None, None
     state = session.last_state
+    match = None if state is None else state.match   # the MATCH rig's part: the delay buffer, the candidates
     if query.shot == "top":
         pass
     elif state is None or state.pose is None:
         placeholder = ("buffering: the broadcast delay is still filling, no camera yet"
-                       if state is not None and state.buffering else "no camera yet: no frame answered")
+                       if match is not None and match.buffering else "no camera yet: no frame answered")
     elif query.shot == "program":
         frame, pose = state.frame, state.pose
     elif query.shot == "candidate":
         wanted = set(query.subjects)
-        found = [c for c in state.candidates if set(c.shot.subject_ids) == wanted]
+        found = [] if match is None else [c for c in match.candidates if set(c.shot.subject_ids) == wanted]
         if found:
             frame, pose = state.frame, found[0].pose
         else:
-            placeholder = (f"no candidate shot of {', '.join(query.subjects)} now" if session.players is not None
+            placeholder = (f"no candidate shot of {', '.join(query.subjects)} now" if match is not None
                            else "candidate shots are a MATCH session's")
     else:
         cut = session.last_cut

@@ -18,7 +18,7 @@ time no later than the frame's time plus the delay (0: the frame's time).
 `pose_outputs` (at most 8) are checked here, before the scene: a known format, an address
 `udp://HOST:PORT` whose HOST is an IPv4 address or a name that resolves to one (once, here, within
 2 s; IPv6 is refused: OpenTrackIO 1.0.1 has none), a port in [1, 65535], a source number in the
-format's range and a sensor height in [1, 100] mm (0: 24). Sending is sessions/pose_out.py's.
+format's range and a sensor height in [1, 100] mm (0: 24). Sending is worker/pose_out.py's.
 """
 from __future__ import annotations
 
@@ -37,7 +37,8 @@ from camdirector.geometry.meshes import MeshError, TriMesh
 from camdirector.geometry.toric import composition_angle
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
 from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, SceneSpec, TargetSpec
-from camdirector.pipeline.stages import FrameState, ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MapBackendChoice, MatchDirectorKind, Movement, Rig, ShotSize, Style, VisibilityMode
 from camdirector.pipeline.toric.anticipation import MaskKind
 from camdirector.server_settings import ServerSettings
@@ -333,12 +334,12 @@ def pose_outputs_from_request(req: pb.CreateSessionRequest) -> list[PoseOutputSp
     return [pose_output_from_msg(output, f"pose_outputs[{i}]") for i, output in enumerate(req.pose_outputs)]
 
 
-def events_from_msg(msg: pb.FrameUpdate, players: frozenset[str] | None, delay_s: float) -> list[GameEvent]:
-    """The frame's events, checked (module docstring); `players`: the MATCH session's player ids,
-    None for a session of another rig, which takes no events."""
+def events_from_msg(msg: pb.FrameUpdate, player_ids: frozenset[str] | None, delay_s: float) -> list[GameEvent]:
+    """The frame's events, checked (module docstring); `player_ids`: whom they may name (the rig's
+    `PlayerInputs`, pipeline/camera_rig.py), None for a session whose rig takes no game events."""
     if not msg.events:
         return []
-    if players is None:
+    if player_ids is None:
         raise invalid("events are for a RIG_MATCH session")
     events = []
     for i, event in enumerate(msg.events):
@@ -353,7 +354,7 @@ def events_from_msg(msg: pb.FrameUpdate, players: frozenset[str] | None, delay_s
             raise invalid(f"{what}.priority must be in [0, {MAX_PRIORITY}], got {event.priority}")
         for name in ("actor_id", "other_actor_id"):
             player = getattr(event, name)
-            if player and player not in players:
+            if player and player not in player_ids:
                 raise not_found(f"{what}.{name} {player!r} is not a player of this session")
         if kind == EventKind.KILL and not (event.actor_id and event.other_actor_id):
             raise invalid(f"{what}: a kill names its attacker (actor_id) and its victim (other_actor_id)")
@@ -369,9 +370,9 @@ def events_from_msg(msg: pb.FrameUpdate, players: frozenset[str] | None, delay_s
     return events
 
 
-def take_from_msg(msg: pb.TakeShotRequest, players: frozenset[str]) -> tuple[list[str], ShotKind | None, bool]:
-    """A TakeShotRequest as MatchRig.take's arguments: NOT_FOUND for a player the session does not
-    have, INVALID_ARGUMENT for an unknown kind or a take without subjects."""
+def take_from_msg(msg: pb.TakeShotRequest, player_ids: frozenset[str]) -> tuple[list[str], ShotKind | None, bool]:
+    """A TakeShotRequest as `PlayerInputs.take`'s arguments (pipeline/camera_rig.py): NOT_FOUND for
+    a player not in `player_ids`, INVALID_ARGUMENT for an unknown kind or a take without subjects."""
     if msg.release:
         return [], None, True
     try:
@@ -382,15 +383,15 @@ def take_from_msg(msg: pb.TakeShotRequest, players: frozenset[str]) -> tuple[lis
         raise invalid("a TakeShot names its subject_ids (none only for SHOT_OVERVIEW), or sets release to give "
                       "the program back")
     for player in msg.subject_ids:
-        if player not in players:
+        if player not in player_ids:
             raise not_found(f"subject_ids: {player!r} is not a player of this session")
     return list(msg.subject_ids), kind, False
 
 
 def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
-                   players: frozenset[str] | None = None, delay_s: float = 0.0) -> FrameInput:
-    """`movable`: ids of targets and dynamic objects; `static`: ids of static objects; `players`
-    and `delay_s`: a MATCH session's (events_from_msg)."""
+                   player_ids: frozenset[str] | None = None, delay_s: float = 0.0) -> FrameInput:
+    """`movable`: ids of targets and dynamic objects; `static`: ids of static objects; `player_ids`
+    and `delay_s`: whom the game events may name and how far ahead they may be (events_from_msg)."""
     if not math.isfinite(msg.time_s):
         raise invalid("frame time_s is NaN or infinite")
     states: list[tuple[str, RigidTransform]] = []
@@ -412,7 +413,7 @@ def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
             check(object_id)
         states.extend(zip(msg.packed_ids, transforms_from_packed(values.reshape(-1, PACKED_STRIDE), msg.packed_ids)))
     return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states,
-                      events_from_msg(msg, players, delay_s))
+                      events_from_msg(msg, player_ids, delay_s))
 
 
 def pose_msg(pose: CameraPose) -> pb.CameraPose:
@@ -426,12 +427,15 @@ def shot_msg(shot: ShotChoice) -> pb.ShotInfo:
 
 
 def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False, message: str = "") -> pb.CameraUpdate:
-    """The reply to a frame; a MATCH session's while its delay fills (`state.buffering`) has no pose."""
+    """The reply to a frame: the state's core, and what the wire carries of the rig's part (the
+    TORIC camera's place on its torus; the MATCH program's shot, candidates, and while its delay
+    fills `buffering`, with no pose)."""
+    match = state.match
     out = pb.CameraUpdate(
         frame=state.frame,
         time_s=state.time_s,
         pose=None if state.pose is None else pose_msg(state.pose),
-        buffering=state.buffering,
+        buffering=match is not None and match.buffering,
         cut=state.cut,
         shot_id=state.shot_id,
         visibility=state.visibility,
@@ -440,15 +444,18 @@ def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False,
         message=message,
     )
     d = out.diagnostics
-    d.theta, d.phi = state.theta, state.phi
-    if state.torus is not None:
-        d.alpha = state.torus.alpha
+    toric = state.toric
+    if toric is not None:
+        d.theta, d.phi = toric.theta, toric.phi
+        if toric.torus is not None:
+            d.alpha = toric.torus.alpha
     d.stage_ms.update(state.stage_ms)
     d.flags.extend(state.flags)
     d.scores.update(state.scores)
-    if state.shot is not None:
-        out.shot.CopyFrom(shot_msg(state.shot))
-    for candidate in state.candidates:
-        out.candidates.add(pose=pose_msg(candidate.pose), shot=shot_msg(candidate.shot), score=candidate.score)
+    if match is not None:
+        if match.shot is not None:
+            out.shot.CopyFrom(shot_msg(match.shot))
+        for candidate in match.candidates:
+            out.candidates.add(pose=pose_msg(candidate.pose), shot=shot_msg(candidate.shot), score=candidate.score)
     return out
 

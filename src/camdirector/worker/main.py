@@ -47,7 +47,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
             if op == "stop":
                 return
             continue
-        if op == "view":  # answered later, off this loop (sessions/monitor.py)
+        if op == "view":  # answered later, off this loop (render/monitor.py)
             try:
                 table.view(session_id, payload,
                            lambda status, body, rid=request_id: send(encode_reply(rid, status, body, None)))

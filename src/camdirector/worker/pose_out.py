@@ -2,7 +2,7 @@
 formats of virtual production (docs/protocol.md, "Pose outputs (OpenTrackIO, FreeD)").
 
 A session created with `pose_outputs` gets a `PoseSender` (one non-blocking UDP socket, opened at
-CreateSession and closed with the session). `SessionTable._frame` calls `PoseSender.send` after
+CreateSession and closed with the session). `SessionTable.frame_bytes` calls `PoseSender.send` after
 the reply is made, for each answered frame that is not stale and has a pose; the pipeline itself
 never sends anything. Sending never fails or slows a frame: `sendto` on an unconnected,
 non-blocking socket, so an ICMP "port unreachable" is never reported back (Linux reports it only
@@ -34,7 +34,7 @@ loopback port (a throwaway script, not a test: timings are never asserted): Free
 (the message 3.4, the axes 0.8, sendto about 1.5); OpenTrackIO JSON 13 us and CBOR 17.5 us (a
 fresh sampleId 2.0, the sample dict 1.2, orjson 0.4 or cbor2 4.0, the OTrk header with its
 Fletcher-16 3.8, the sample rate 0.5, sendto about 2); a sample that carries the static block
-(every 2 s) 0.5 to 2.5 us more. `SessionTable._frame` calls it after `compute_ms` is measured.
+(every 2 s) 0.5 to 2.5 us more. `SessionTable.frame_bytes` calls it after `compute_ms` is measured.
 """
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ class PoseFormat(enum.IntEnum):
 
 @dataclass(frozen=True)
 class PoseOutputSpec:
-    """One validated CreateSessionRequest.pose_outputs entry (sessions/codec.py)."""
+    """One validated CreateSessionRequest.pose_outputs entry (worker/codec.py)."""
 
     format: PoseFormat
     address: str            # as the client wrote it, udp://HOST:PORT

@@ -1,11 +1,12 @@
 """One director session: its scene, the latest transforms, and the camera rig's state.
 
 `Session.frame` runs INGEST, then its rig for the stages after it, in the order
-pipeline/stages.py writes down: pipeline/toric/rig.py for the TORIC rig,
-pipeline/tracks/rig.py for a session created with TRACKS. The session never raises inside the
-frame loop for a geometric difficulty: it degrades (holds the pose, frames one target) and flags
-it in the diagnostics. `Session.close` releases what the rig holds outside Python's memory (the
-occlusion maps' GL objects or Embree scenes); whoever ends a session calls it.
+pipeline/stages.py writes down. The rig is chosen once, at creation (`make_rig`), and asked only
+through the rig contract (`CameraRig`, pipeline/camera_rig.py), whichever it is. The session
+never raises inside the frame loop for a geometric difficulty: it degrades (holds the pose,
+frames one target) and flags it in the diagnostics. `Session.close` releases what the rig holds
+outside Python's memory (the occlusion maps' GL objects or Embree scenes); whoever ends a session
+calls it.
 """
 from __future__ import annotations
 
@@ -20,12 +21,11 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.camera_rig import CameraRig, make_rig
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
-from camdirector.pipeline.match.rig import MatchRig
-from camdirector.pipeline.stages import FrameState, Stage
-from camdirector.pipeline.style import Rig, Style
-from camdirector.pipeline.toric.rig import ToricRig
-from camdirector.pipeline.tracks.rig import TracksRig
+from camdirector.pipeline.stages import Stage
+from camdirector.pipeline.state import FrameState
+from camdirector.pipeline.style import Style
 
 
 @dataclass(frozen=True)
@@ -55,11 +55,9 @@ class Session:
         self.target_transforms = [t.transform for t in scene.targets]
         self.static_ids = {o.id for o in scene.objects if not o.dynamic}
         self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
-        # MATCH: the players that events may name, and the broadcast delay events may run ahead by.
-        self.players = frozenset(self.target_index) if self.style.rig == Rig.MATCH else None
-        self.delay_s = scene.delay_s
+        self.delay_s = scene.delay_s  # MATCH: the broadcast delay, which a game event's time may run ahead by
         static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
-        self.static_meshes_world = static_meshes_world   # and the level's, what the monitors draw (sessions/views.py)
+        self.static_meshes_world = static_meshes_world   # and the level's, what the monitors draw (render/snapshots.py)
         self.level = scene.level
         self.level_mesh_world = scene.level.mesh_world if scene.level is not None else None
         level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
@@ -67,11 +65,8 @@ class Session:
         self.dynamic = {o.id: (o.mesh, o.transform) for o in scene.objects if o.dynamic}  # latest transforms
         for object_id, (mesh, transform) in self.dynamic.items():
             self.ray_scene.add_dynamic(object_id, mesh, transform)
-        # The stages after INGEST: one rig for the session's life (sessions/codec.py refuses a change of rig).
-        self.rig: ToricRig | TracksRig | MatchRig = (
-            MatchRig(scene, self.ray_scene, self.rng, clock) if self.style.rig == Rig.MATCH
-            else TracksRig(scene.level, scene.lens, self.style, self.ray_scene, self.rng, clock) if scene.level is not None
-            else ToricRig(scene, self.ray_scene, static_meshes_world, self.dynamic, self.rng, clock))
+        # The stages after INGEST: one rig for the session's life (worker/codec.py refuses a change of rig).
+        self.rig: CameraRig = make_rig(scene, self.ray_scene, static_meshes_world, self.dynamic, self.rng, clock)
         self.last_state: FrameState | None = None
         # The newest frame received, (frame, time_s): a MATCH session with a delay answers for an
         # earlier moment, so staleness and dt_s go by what arrived, not by what was answered.
@@ -83,7 +78,7 @@ class Session:
     def creation_objects(self) -> dict:
         """What the session was built from and never changes, by a name that a session built from
         the same creation request gives the same object: its meshes, its level, its clock. A
-        checkpoint refers to these by name instead of copying them (sessions/checkpoints.py)."""
+        checkpoint refers to these by name instead of copying them (worker/checkpointing.py)."""
         objects = {"clock": self.clock, "level": self.level, "level_mesh": self.level_mesh_world}
         objects.update({("static", i): mesh for i, mesh in enumerate(self.static_meshes_world)})
         objects.update({("target", i): t.mesh for i, t in enumerate(self.targets)})
@@ -99,12 +94,12 @@ class Session:
     def has_deferred_work(self) -> bool:
         """Whether the rig left work for later (a TORIC rig's amortized map update,
         pipeline/toric/occlusion_maps.py), which a later frame does when nobody did it before."""
-        return isinstance(self.rig, ToricRig) and self.rig.has_deferred_work
+        return self.rig.has_deferred_work
 
     def do_deferred_work(self, whole: bool = True) -> bool:
         """Does the rig's deferred work now, or without `whole` a part of it (a worker's idle
         moment, or before a snapshot); what the session answers is the same either way."""
-        return isinstance(self.rig, ToricRig) and self.rig.do_deferred_work(whole)
+        return self.rig.do_deferred_work(whole)
 
     def close(self) -> None:
         """Releases the rig's resources (GL objects, Embree scenes); idempotent. The session
@@ -112,9 +107,9 @@ class Session:
         self.rig.close()
 
     def view_target_transforms(self) -> list[RigidTransform]:
-        """The targets where the camera sees them: a MATCH session's at the program's moment (the
-        broadcast delay behind the game), others' as of the latest frame."""
-        program = self.rig.program_transforms if self.players is not None else None
+        """The targets where the camera sees them: at the program's moment when the rig shows a
+        delayed program (MATCH: the broadcast delay behind the game), else as of the latest frame."""
+        program = self.rig.program_transforms
         return program if program is not None else self.target_transforms
 
     def is_stale(self, frame: int) -> bool:

@@ -6,25 +6,27 @@ A bounded ring of plain values kept by the session table beside each session (in
 holds it) and fed by the frame it has just answered; `GET /v1/sessions/{id}` reads it through the
 worker's "timeline" operation. Stale frames are not added: they repeat the pose.
 
-A MATCH session's frames also carry the program's shot, the candidate shots (each with its camera),
-the players (ids and teams, in target order: `targets` are their aim points), the game events at
-the program moment (a viewer keeps its own event log from them) and the director's planned next
-cut. While its broadcast delay fills, a MATCH session answers `buffering` frames with no camera,
-numbered as the input frames; the program's first frame replaces them (its frame numbers restart
-at the game's first moment), so frame numbers still only grow within the ring.
+A MATCH session's frames also carry its rig's part of the frame (`FrameState.match`): the
+program's shot, the candidate shots (each with its camera), the players (ids and teams, in target
+order: `targets` are their aim points), the game events at the program moment (a viewer keeps its
+own event log from them) and the director's planned next cut. While its broadcast delay fills, a
+MATCH session answers `buffering` frames with no camera, numbered as the input frames; the
+program's first frame replaces them (its frame numbers restart at the game's first moment), so
+frame numbers still only grow within the ring.
 """
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import orjson
 
 from camdirector.geometry.transforms import quat_to_matrix
-from camdirector.pipeline.inputs import EventKind, GameEvent
-from camdirector.pipeline.stages import Candidate, FrameState, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.inputs import EventKind
+from camdirector.pipeline.match.frame import MatchFrame, ShotChoice, ShotKind
+from camdirector.pipeline.state import FrameState
 
 TIMELINE_FRAMES = 600   # frames kept per session: 10 s at 60 Hz
 
@@ -36,9 +38,8 @@ class TimelineFrame:
     while buffering; targets_world: (k, 3) aim point per target; scores: the rig's own scoring of
     its choice (FrameState.scores, not copied: a new dict every frame); framing_error: the
     framed points from where the style puts them, normalised screen units (NaN: not measured);
-    compute_ms: the server's time for the frame. MATCH only (the FrameState's, not copied: the
-    rig makes them anew each frame or shares constant ones): shot, candidates, players, events,
-    planned_cut, buffering."""
+    compute_ms: the server's time for the frame; match: the MATCH rig's part of the frame
+    (`FrameState.match`, not copied: the rig makes it anew each frame), None for another rig."""
 
     frame: int
     time_s: float
@@ -52,13 +53,11 @@ class TimelineFrame:
     flags: tuple[str, ...]
     scores: dict[str, float]
     compute_ms: float
-    match: bool = False
-    buffering: bool = False
-    shot: ShotChoice | None = None
-    candidates: list[Candidate] = field(default_factory=list)
-    players: tuple[tuple[str, int], ...] = ()
-    events: list[GameEvent] = field(default_factory=list)
-    planned_cut: PlannedCut | None = None
+    match: MatchFrame | None = None
+
+    @property
+    def buffering(self) -> bool:
+        return self.match is not None and self.match.buffering
 
 
 class Timeline:
@@ -70,9 +69,8 @@ class Timeline:
     def add(self, state: FrameState, compute_ms: float) -> None:
         """Costs a few microseconds a frame: copies, no conversion. A MATCH program frame drops
         the buffering frames before it (module docstring)."""
-        pose = state.pose
-        match = bool(state.players)
-        if match and not state.buffering and self._frames and self._frames[-1].buffering:
+        pose, match = state.pose, state.match
+        if match is not None and not match.buffering and self._frames and self._frames[-1].buffering:
             self._frames.clear()
         self._frames.append(TimelineFrame(
             frame=int(state.frame), time_s=float(state.time_s),
@@ -80,9 +78,7 @@ class Timeline:
             rotation_xyzw=None if pose is None else pose.rotation_xyzw.copy(),
             targets_world=np.array(state.aim_points_world), cut=bool(state.cut), shot_id=int(state.shot_id),
             visibility=float(state.visibility), framing_error=state.framing_error, flags=tuple(state.flags),
-            scores=state.scores, compute_ms=float(compute_ms), match=match, buffering=bool(state.buffering),
-            shot=state.shot, candidates=state.candidates, players=state.players, events=state.events,
-            planned_cut=state.planned_cut))
+            scores=state.scores, compute_ms=float(compute_ms), match=match))
 
     def as_json(self, last: int | None = None, after_frame: int | None = None) -> list[dict]:
         """The newest `last` frames (all when None) of those after frame number `after_frame`
@@ -113,7 +109,7 @@ class Timeline:
                  "framing_error": None if math.isnan(f.framing_error) else round(f.framing_error, 4),
                  "flags": f.flags, "scores": f.scores, "compute_ms": round(f.compute_ms, 3)}
                 for f, t in zip(frames, targets)]
-        if frames[-1].match:
+        if frames[-1].match is not None:
             _match_json(frames, rows)
         return rows
 
@@ -138,23 +134,24 @@ def _match_json(frames: list[TimelineFrame], rows: list[dict]) -> None:
     shot {subject_ids, kind, reason, held} or null; candidates [{shot, score, camera, forward}] (as the
     wire's CandidateShot); players (ids) and teams in target order; events [{time_s, kind,
     actor_id, other_actor_id, priority, label}]; planned_cut {time_s, shot} or null."""
-    candidates = [c for f in frames for c in f.candidates]
+    parts = [f.match for f in frames]   # a session's rig is fixed: every frame has its part
+    candidates = [c for m in parts for c in m.candidates]
     camera = iter(np.stack([c.pose.position_world for c in candidates]).round(4) if candidates else ())
     forward = iter(_forward([c.pose.rotation_xyzw for c in candidates]))
     roster, ids, teams = None, [], []
-    for f, row in zip(frames, rows):
-        if f.players is not roster:   # the rig shares one roster across frames: convert it once
-            roster, ids, teams = f.players, [p for p, _ in f.players], [team for _, team in f.players]
+    for m, row in zip(parts, rows):
+        if m.players is not roster:   # the rig shares one roster across frames: convert it once
+            roster, ids, teams = m.players, [p for p, _ in m.players], [team for _, team in m.players]
         row.update(
-            buffering=f.buffering, shot=None if f.shot is None else _shot_json(f.shot),
+            buffering=m.buffering, shot=None if m.shot is None else _shot_json(m.shot),
             candidates=[{"shot": _shot_json(c.shot), "score": round(c.score, 4), "camera": next(camera),
-                         "forward": next(forward)} for c in f.candidates],
+                         "forward": next(forward)} for c in m.candidates],
             players=ids, teams=teams,
             events=[{"time_s": e.time_s, "kind": _EVENT_KINDS[e.kind], "actor_id": e.actor_id,
                      "other_actor_id": e.other_actor_id, "priority": e.priority, "label": e.label}
-                    for e in f.events],
-            planned_cut=None if f.planned_cut is None else {"time_s": f.planned_cut.time_s,
-                                                           "shot": _shot_json(f.planned_cut.shot)})
+                    for e in m.events],
+            planned_cut=None if m.planned_cut is None else {"time_s": m.planned_cut.time_s,
+                                                           "shot": _shot_json(m.planned_cut.shot)})
 
 
 def dumps(value) -> bytes:

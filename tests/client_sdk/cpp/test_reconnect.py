@@ -1,7 +1,7 @@
 """The C/C++ SDK's I/O thread recovering in the background while a 60 Hz loop streams: a dropped
 connection resumes the same session; so do a server restarted on the same data directory and a
 worker killed mid-stream, the server restoring the session from its checkpoint
-(worker/checkpoints.py); a session that expired meanwhile, or one lost by a server
+(worker/checkpointing.py); a session that expired meanwhile, or one lost by a server
 without checkpoints (`--checkpoint-store off`: a restart, a dead worker), gets the session
 created again (new id, reported as an event)."""
 from __future__ import annotations

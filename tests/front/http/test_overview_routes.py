@@ -12,16 +12,10 @@ from fastapi.testclient import TestClient
 from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
 from camdirector.jobs import JobSettings, service_kinds
-from tests.precompute.overview.overview_mocap import CLIPS
 
 pytestmark = pytest.mark.shared_data
 
 LIMIT = 150_000      # bytes: the run clip is 92 kB
-
-
-@pytest.fixture(scope="module")
-def run_bvh(shared_data) -> bytes:
-    return (shared_data / "mocap" / CLIPS["run"][0]).read_bytes()
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, SceneSpec, TargetSpec
 from camdirector.pipeline.match.rig import MatchRig
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.stages import FrameState
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Rig, Style
 from camdirector.worker.session import Session
 
@@ -107,7 +107,7 @@ class BareRig:
 
 def at_time(states: list[FrameState], time_s: float) -> FrameState:
     """The answered state whose program moment is nearest time_s."""
-    shown = [s for s in states if not s.buffering]
+    shown = [s for s in states if not s.match.buffering]
     return min(shown, key=lambda s: abs(s.time_s - time_s))
 
 
@@ -118,7 +118,7 @@ def on_screen(state: FrameState, points_world: np.ndarray) -> np.ndarray:
 
 def shots(states: list[FrameState]) -> list[tuple[float, float, FrameState]]:
     """(start_s, end_s, first state) of each shot of the program, in order (the last one open-ended)."""
-    shown = [s for s in states if not s.buffering]
+    shown = [s for s in states if not s.match.buffering]
     starts = [i for i, s in enumerate(shown) if s.cut or i == 0]
     out = []
     for a, b in zip(starts, starts[1:] + [len(shown)]):

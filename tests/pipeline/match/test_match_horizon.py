@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 
 from camdirector.geometry.camera import CameraPose, project_to_screen
 from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
+from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import PLACE_WIDTHS, Place, ToricCamera, place_grid
-from camdirector.pipeline.stages import ShotKind
 from camdirector.pipeline.style import Rig, Style
 from tests.pipeline.match.scenes import LENS, melee, run_session, yaw_quat
 
@@ -33,8 +33,8 @@ def moment_of(points_xz: list[tuple[float, float]], heights_m: list[float] | Non
 def test_every_program_pose_of_a_melee_has_a_level_horizon(delay_s):
     match = melee(seed=3, duration_s=40.0 + delay_s, delay_s=delay_s)
     _, states = run_session(match, 40.0 + delay_s)
-    shown = [s for s in states if not s.buffering]
-    kinds = {s.shot.kind for s in shown}
+    shown = [s for s in states if not s.match.buffering]
+    kinds = {s.match.shot.kind for s in shown}
     assert ShotKind.DUEL in kinds or ShotKind.GROUP in kinds  # the two-point cameras are on air
     rotations = quat_to_matrix(np.stack([s.pose.rotation_xyzw for s in shown]))
     assert np.abs(rotations[:, 1, 0]).max() < 1e-9   # the camera's right axis is horizontal

@@ -12,10 +12,10 @@ from camdirector.geometry.meshes import TriMesh, box
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, ToricCamera
-from camdirector.pipeline.stages import ShotKind
 from camdirector.pipeline.toric.target_sampling import SurfaceSampler
 from tests.pipeline.match.scenes import (
     LENS,
@@ -72,7 +72,7 @@ def test_a_corridor_hiding_the_styles_place_still_gets_a_place_that_sees_both_at
         camera = ToricCamera(ShotKind.DUEL, a, b, style, LENS, default)
         pose = camera.pose(buffer.newest)
         assert min(seen_share(pose, walls, t, rng) for t in transforms) < 0.5
-    assert set(state.shot.subject_ids) == {"a", "b"}
+    assert set(state.match.shot.subject_ids) == {"a", "b"}
     assert min(seen_share(state.pose, walls, t, rng) for t in transforms) >= 0.5
 
 
@@ -91,8 +91,8 @@ def test_a_kill_too_close_after_an_objective_takes_its_place():
                   delay_s=10.0, walls=corridor)
     _, states = run_session(match, KILL_S + 10.0 + 2.0)
     state = at_time(states, KILL_S)
-    assert state.shot.kind == ShotKind.DUEL and set(state.shot.subject_ids) == {"a2", "b2"}
-    assert "planned kill" in state.shot.reason
+    assert state.match.shot.kind == ShotKind.DUEL and set(state.match.shot.subject_ids) == {"a2", "b2"}
+    assert "planned kill" in state.match.shot.reason
 
 
 def test_without_a_delay_a_cut_for_a_better_situation_waits_for_settle_s():
@@ -100,7 +100,7 @@ def test_without_a_delay_a_cut_for_a_better_situation_waits_for_settle_s():
     _, states = run_session(match, 60.0)
     program = shots(states)
     better = [(previous, start) for (previous, _, _), (start, _, s) in zip(program, program[1:])
-              if s.shot.reason.endswith("(better situation)")]
+              if s.match.shot.reason.endswith("(better situation)")]
     assert better, "the melee has discretionary cuts"
     settle_s = MatchSettings().settle_s
     assert all(start - previous >= settle_s - 1e-6 for previous, start in better)
@@ -122,7 +122,7 @@ def test_two_kills_too_close_for_two_cuts_share_a_high_wide_shot_when_no_group_f
     rng = np.random.default_rng(5)
     for time_s, pair in ((KILL_S, ("a1", "b1")), (KILL_S + 0.5, ("a2", "b2"))):
         state = at_time(states, time_s)
-        assert state.shot.kind == ShotKind.OVERVIEW and "planned kill" in state.shot.reason
+        assert state.match.shot.kind == ShotKind.OVERVIEW and "planned kill" in state.match.shot.reason
         places = two_corridors(time_s)
         for player in pair:
             transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
@@ -144,14 +144,14 @@ def test_kills_too_close_for_a_preferred_shot_each_share_one_shot_when_it_sees_t
     kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 2.5)]
     match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_side_by_side, kills, delay_s=10.0)
     states = [s for s in BareRig(match, MatchSettings(preferred_shot_s=preferred_shot_s)).run(KILL_S + 10.0 + 4.0)
-              if not s.buffering]
+              if not s.match.buffering]
     between = [s for s in states if KILL_S < s.time_s <= KILL_S + 2.5]
     first, second = at_time(states, KILL_S), at_time(states, KILL_S + 2.5)
     if preferred_shot_s == 0.0:
-        assert any(s.cut for s in between) and first.shot.kind == second.shot.kind == ShotKind.DUEL
+        assert any(s.cut for s in between) and first.match.shot.kind == second.match.shot.kind == ShotKind.DUEL
         return
-    assert not any(s.cut for s in between) and first.shot.kind == ShotKind.GROUP
-    assert set(first.shot.subject_ids) == {"a1", "b1", "a2", "b2"}
+    assert not any(s.cut for s in between) and first.match.shot.kind == ShotKind.GROUP
+    assert set(first.match.shot.subject_ids) == {"a1", "b1", "a2", "b2"}
     rng = np.random.default_rng(2)
     for time_s, state in ((KILL_S, first), (KILL_S + 2.5, second)):
         places = two_duels_side_by_side(time_s)

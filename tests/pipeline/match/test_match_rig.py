@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import is_jump_cut
 from camdirector.pipeline.match.settings import HltvSettings, MatchSettings
-from camdirector.pipeline.stages import ShotKind
 from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
 from tests.pipeline.match.scenes import (
     EYE_M,
@@ -43,8 +43,8 @@ def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it():
     covering = [(start, s) for start, end, s in shots(states) if start <= KILL_S < end]
     assert len(covering) == 1
     start, first = covering[0]
-    assert first.shot.kind == ShotKind.DUEL and set(first.shot.subject_ids) == {"a2", "b2"}
-    assert "planned kill" in first.shot.reason
+    assert first.match.shot.kind == ShotKind.DUEL and set(first.match.shot.subject_ids) == {"a2", "b2"}
+    assert "planned kill" in first.match.shot.reason
     assert KILL_S - 4.0 <= start <= KILL_S - 1.0
     at_kill = at_time(states, KILL_S)
     xy = on_screen(at_kill, np.array(at_kill.aim_points_world)[[2, 3]])
@@ -54,9 +54,9 @@ def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it():
 def test_the_delay_buffers_then_answers_the_moment_delay_seconds_ago():
     match = Match(TEAMS, two_fronts, [], delay_s=2.0)
     _, states = run_session(match, 4.0)
-    waiting = [s for s in states if s.buffering]
+    waiting = [s for s in states if s.match.buffering]
     assert waiting and all(s.pose is None and s.time_s < 2.0 for s in waiting)
-    shown = [s for s in states if not s.buffering]
+    shown = [s for s in states if not s.match.buffering]
     assert shown[0].time_s == pytest.approx(0.0) and shown[-1].time_s == pytest.approx(2.0, abs=1e-6)
     assert shown[-1].frame == len(states) - 1 - 60 and all(s.pose is not None for s in shown)
 
@@ -69,19 +69,19 @@ def test_grammar_holds_over_a_melee(delay_s):
     program = shots(states)
     assert len(program) >= 6
     assert all(end - start >= Style().min_shot_s - 1e-6 for start, end, _ in program[:-1])
-    shown = [s for s in states if not s.buffering]
+    shown = [s for s in states if not s.match.buffering]
     left_of = {}
     for before, after in zip(shown, shown[1:]):
         if not after.cut:
             continue
-        subjects = [ids.index(p) for p in after.shot.subject_ids]
+        subjects = [ids.index(p) for p in after.match.shot.subject_ids]
         points = np.array(after.aim_points_world)[subjects] if subjects else np.zeros((0, 3))
-        assert not is_jump_cut(before.shot.subject_ids, before.pose.position_world, after.shot.subject_ids,
+        assert not is_jump_cut(before.match.shot.subject_ids, before.pose.position_world, after.match.shot.subject_ids,
                                after.pose.position_world, points, 30.0)
-        if after.shot.kind == ShotKind.DUEL:
+        if after.match.shot.kind == ShotKind.DUEL:
             x = on_screen(after, points)[:, 0]
-            left = after.shot.subject_ids[int(np.argmin(x))]
-            assert left_of.setdefault(frozenset(after.shot.subject_ids), left) == left, "line of action crossed"
+            left = after.match.shot.subject_ids[int(np.argmin(x))]
+            assert left_of.setdefault(frozenset(after.match.shot.subject_ids), left) == left, "line of action crossed"
 
 
 def test_kills_in_a_melee_are_framed_with_a_delay_and_not_all_without():
@@ -106,11 +106,12 @@ def test_take_is_held_past_max_shot_until_released():
     choice = session.rig.take(["a2"], None, release=False)
     assert choice.kind == ShotKind.FOLLOW
     held = [session.frame(u) for u in list(match.frames(20.0))[31:]]
-    assert all(s.shot.subject_ids == ("a2",) and s.shot.held and s.shot.reason.startswith("take") for s in held)
+    assert all(shot.subject_ids == ("a2",) and shot.held and shot.reason.startswith("take")
+               for shot in (s.match.shot for s in held))
     assert sum(s.cut for s in held) == 1
     session.rig.take([], None, release=True)
     after = [session.frame(u) for u in list(match.frames(25.0))[601:]]
-    assert after[0].cut and after[0].shot.subject_ids != ("a2",)
+    assert after[0].cut and after[0].match.shot.subject_ids != ("a2",)
 
 
 def test_taking_a_candidate_puts_its_previewed_camera_on_air():
@@ -119,10 +120,10 @@ def test_taking_a_candidate_puts_its_previewed_camera_on_air():
     match = Match(TEAMS, two_fronts, [], delay_s=0.0)
     session, states = run_session(match, 1.0)
     last = states[-1]
-    candidate = last.candidates[0]
+    candidate = last.match.candidates[0]
     session.rig.take(list(candidate.shot.subject_ids), candidate.shot.kind, release=False)
     after = [session.frame(u) for u in list(match.frames(2.0))[31:]]
-    assert after[0].cut and set(after[0].shot.subject_ids) == set(candidate.shot.subject_ids) and after[0].shot.held
+    assert after[0].cut and set(after[0].match.shot.subject_ids) == set(candidate.shot.subject_ids) and after[0].match.shot.held
     # one program frame later than the preview: the players moved a little, the place did not
     assert np.linalg.norm(after[0].pose.position_world - candidate.pose.position_world) < 0.5
     forward = [2.0 * np.array(q[:3]) for q in (after[0].pose.rotation_xyzw, candidate.pose.rotation_xyzw)]
@@ -136,8 +137,8 @@ def test_take_falls_back_to_the_attacker_when_the_held_player_dies():
     session.rig.take(["b2"], ShotKind.FOLLOW, release=False)
     states = [session.frame(u) for u in list(match.frames(6.0))[31:]]
     after = [s for s in states if s.time_s > 3.0 + 0.2]
-    assert all(s.shot.subject_ids == ("a2",) and s.shot.held for s in after)
-    assert "b2 died (killed by a2)" in after[0].shot.reason and "take fallback" in after[0].shot.reason
+    assert all(s.match.shot.subject_ids == ("a2",) and s.match.shot.held for s in after)
+    assert "b2 died (killed by a2)" in after[0].match.shot.reason and "take fallback" in after[0].match.shot.reason
 
 
 def test_take_refuses_an_unknown_player_and_a_kind_that_does_not_fit():
@@ -154,8 +155,8 @@ def test_hltv_shows_a_kill_as_a_chase_camera_behind_the_victim():
     match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0, style=style)
     states = BareRig(match, MatchSettings(hltv=hltv)).run(40.0)
     start = max(start for start, _, _ in shots(states) if start <= KILL_S)
-    s = at_time(states, KILL_S)
-    assert s.shot.kind == ShotKind.DUEL and s.shot.subject_ids == ("b2", "a2") and "chase behind b2" in s.shot.reason
+    shot = at_time(states, KILL_S).match.shot
+    assert shot.kind == ShotKind.DUEL and shot.subject_ids == ("b2", "a2") and "chase behind b2" in shot.reason
     assert KILL_S - 8.0 <= start <= KILL_S
     victim_eye, attacker_eye = np.array([40.0, EYE_M, 15.0]), np.array([40.0, EYE_M, 0.0])
     camera = at_time(states, KILL_S - 0.1).pose.position_world  # the victim still standing
@@ -171,7 +172,7 @@ def test_hltv_without_look_ahead_cuts_every_six_seconds_on_ranked_players():
     lengths = [end - start for start, end, _ in program[:-1]]
     tick_s = MatchSettings().plan_interval_s + 1.0 / RATE_HZ  # a cut waits for the next planning tick and frame
     assert lengths and all(0.0 <= length - HltvSettings().default_shot_s <= tick_s + 1e-9 for length in lengths)
-    assert all(s.shot.reason.startswith("hltv: ") for _, _, s in program)
+    assert all(s.match.shot.reason.startswith("hltv: ") for _, _, s in program)
 
 
 @pytest.mark.parametrize("kind", list(MatchDirectorKind))
@@ -183,7 +184,8 @@ def test_same_seed_same_program(kind):
         runs.append(run_session(match, 30.0)[1])
     poses = [np.array([s.pose.position_world for s in states if s.pose is not None]) for states in runs]
     assert np.array_equal(poses[0], poses[1])
-    assert [s.shot.reason for s in runs[0] if s.cut and s.shot] == [s.shot.reason for s in runs[1] if s.cut and s.shot]
+    reasons = [[s.match.shot.reason for s in states if s.cut and s.match.shot] for states in runs]
+    assert reasons[0] == reasons[1]
 
 
 def test_style_refuses_a_max_shot_under_the_min_shot():

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
+from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.stages import ShotKind
 from tests.pipeline.match.scenes import BareRig, Match, at_time, facing, kill, yaw_quat
 from tests.pipeline.match.test_match_places import block, seen_share
 
@@ -31,13 +31,13 @@ def test_a_duel_no_level_toric_place_sees_is_shown_wide_from_a_camera_that_sees_
     rig.rig.builder.extra_overview_cameras = np.array([NODE])
     states = rig.run(KILL_S + 10.0 + 2.0)
     state = at_time(states, KILL_S)
-    assert set(state.shot.subject_ids) == {"a", "b"}
+    assert set(state.match.shot.subject_ids) == {"a", "b"}
     rng = np.random.default_rng(5)
     places = tunnel_duel(KILL_S)
     for player in ("a", "b"):
         transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
                                    yaw_quat(places[player][1]))
         assert seen_share(state.pose, walls, transform, rng) >= 0.5, player
-    assert state.shot.kind == ShotKind.OVERVIEW and "wide: no level duel place sees both" in state.shot.reason
+    assert state.match.shot.kind == ShotKind.OVERVIEW and "wide: no level duel place sees both" in state.match.shot.reason
     right = quat_to_matrix(state.pose.rotation_xyzw[None])[0][:, 0]
     assert abs(right[1]) < 1e-9  # level: the camera's x axis is horizontal

@@ -36,12 +36,12 @@ from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import matrix_to_quat
 from camdirector.pipeline.inputs import EventKind
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.interest import event_priority
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.plan import Shot
 from camdirector.pipeline.match.settings import INCH_M, MatchSettings
 from camdirector.pipeline.match.shots import StaticCamera
-from camdirector.pipeline.stages import ShotChoice, ShotKind
 
 MAX_FIXED_CAMERAS = 64           # MAX_NUM_CAMERAS
 MIN_RANK_DISTANCE_M = 4 * INCH_M  # closer players do not rank each other

@@ -52,13 +52,13 @@ import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.interest import event_priority, fight_matrix, recent_event_boost
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, StaticCamera, ToricCamera, best_place, overview_pose, place_grid
 from camdirector.pipeline.match.visibility import SubjectVisibility
-from camdirector.pipeline.stages import ShotChoice, ShotKind
 from camdirector.pipeline.style import Style
 
 ANTICIPATION_STEPS_S = (0.5, 1.0, 1.5, 2.0)  # buffered future read for fights, s after the moment

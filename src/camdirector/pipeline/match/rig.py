@@ -19,6 +19,11 @@ Every cut's `shot.reason` says why, its sub-scores go to `scores`, and degraded 
 
 A take whose held subject dies (at the program moment) falls back, still held: to the player
 who killed it, else the nearest fight to where it died, else an overview; `shot.reason` says so.
+
+`MatchRig` implements `CameraRig` (pipeline/camera_rig.py) with, of what only some rigs do, its
+player inputs (game events and a human's takes: it is its own `PlayerInputs`) and the program's
+delayed target transforms; it has no occlusion maps and never defers work. Its part of a frame's
+state is `MatchFrame` (frame.py), made anew every frame.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.match.frame import Candidate, MatchFrame, PlannedCut, ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.hltv import HltvDirector
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
@@ -41,21 +47,26 @@ from camdirector.pipeline.match.plan import PlannedDirector, Shot, ShotBuilder
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import ToricCamera, best_place, place_grid
 from camdirector.pipeline.match.visibility import SubjectVisibility
-from camdirector.pipeline.stages import Candidate, FrameState, MatchStage, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.stages import MatchStage
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MatchDirectorKind, Style
 
 REPLACE_LOOKAHEAD_S = 1.0  # an occluded place is replaced by the best one over now and this far ahead, s
 
 
 class MatchRig:
-    """The match director of one session (module docstring). Players are the scene's targets."""
+    """The match director of one session; implements `CameraRig` (module docstring). Players are
+    the scene's targets."""
+
+    has_deferred_work = False  # CameraRig: it never leaves work for later
 
     def __init__(self, scene: SceneSpec, ray_scene: RayScene, rng: np.random.Generator,
                  clock: Callable[[], float] = time.perf_counter, settings: MatchSettings = MatchSettings()):
         self.players = [t.id for t in scene.targets]
+        self.player_ids = frozenset(self.players)  # PlayerInputs: whom events and takes may name
         self.index = {p: i for i, p in enumerate(self.players)}
         self.teams = np.array([t.team for t in scene.targets])
-        self.roster = tuple((t.id, t.team) for t in scene.targets)  # FrameState.players, shared by every frame
+        self.roster = tuple((t.id, t.team) for t in scene.targets)  # MatchFrame.players, shared by every frame
         self.lens, self.style, self.delay_s = scene.lens, scene.style, scene.delay_s
         self.ray_scene, self.rng, self.clock, self.settings = ray_scene, rng, clock, settings
         self.buffer = MomentBuffer(self.players, settings)
@@ -87,9 +98,18 @@ class MatchRig:
             self.director = self._director(style.match_director)
         self.style = self.builder.style = style
 
+    @property
+    def player_inputs(self) -> MatchRig:
+        """CameraRig: a frame's game events and a human's takes (`take`) name this rig's players."""
+        return self
+
     def anticipation_map(self, state: FrameState | None) -> None:
-        """None: the match rig has no occlusion maps (it ray-casts its candidate places)."""
+        """CameraRig: None, the match rig has no occlusion maps (it ray-casts its candidate places)."""
         return None
+
+    def do_deferred_work(self, whole: bool = True) -> bool:
+        """CameraRig: there is never any."""
+        return False
 
     def close(self) -> None:
         """Drops the buffered moments."""
@@ -185,16 +205,17 @@ class MatchRig:
     # -- the frame --------------------------------------------------------------------------
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
-        """BUFFER, PLAN, CAMERA and VISIBILITY (module docstring), timed into state."""
+        """BUFFER, PLAN, CAMERA and VISIBILITY (module docstring) into state and its part
+        `state.match`, timed into state.stage_ms."""
+        match = state.match = MatchFrame(self.roster)
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
-        state.players = self.roster
         if not self.buffer.push(update.frame, update.time_s, target_transforms, state.aim_points_world, update.events):
             state.flags.append("match_stale_frame")
         moment = self.buffer.program_moment(update.time_s - self.delay_s)
         stages.done(MatchStage.BUFFER)
         self.program_transforms = None if moment is None else moment.transforms
         if moment is None:
-            state.buffering, state.pose, state.visibility = True, None, 0.0
+            match.buffering, state.pose, state.visibility = True, None, 0.0
             state.flags.append("buffering")
             return
         state.frame, state.time_s = moment.frame, moment.time_s
@@ -220,18 +241,15 @@ class MatchRig:
             pose = self.shot.camera.pose(moment)
         state.pose, state.cut = pose, cut
         self._last_pose = pose
-        if isinstance(self.shot.camera, ToricCamera):
-            state.a_world, state.b_world = self.shot.camera.points(moment)
-            state.b_is_gaze_point = self.shot.camera.b_index is None
-        state.candidates = [Candidate(camera.pose(moment) if camera is not None else pose, choice, score)
+        match.candidates = [Candidate(camera.pose(moment) if camera is not None else pose, choice, score)
                             for choice, camera, score in self._candidates]
-        state.candidates = [c for c in state.candidates if c.pose is not None]
+        match.candidates = [c for c in match.candidates if c.pose is not None]
         stages.done(MatchStage.CAMERA)
         subjects = self.shot.subjects
         state.visibility = float(self.visibility.visible_share(pose.position_world, moment, subjects).mean()) \
             if subjects else 1.0
-        state.shot = self.shot.choice
-        state.events, state.planned_cut = moment.events, self.planned_cut(moment.time_s)
+        match.shot = self.shot.choice
+        match.events, match.planned_cut = moment.events, self.planned_cut(moment.time_s)
         state.scores = dict(self.shot.scores, visibility=state.visibility,
                             shot_length_s=moment.time_s - self.shot.start_s)
         stages.done(MatchStage.VISIBILITY)

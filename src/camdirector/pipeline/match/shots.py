@@ -61,9 +61,9 @@ from camdirector.geometry.toric import (
     torus_position,
 )
 from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
+from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.visibility import SubjectVisibility
-from camdirector.pipeline.stages import ShotKind
 from camdirector.pipeline.style import Style
 
 THETA_MARGIN = 0.04                                     # keep the camera off A and B, ratio of the arc

@@ -19,8 +19,9 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
 from camdirector.geometry.toric import Torus, compose_pose, tangent_frame, theta_max, torus_angles, torus_position
 from camdirector.geometry.transforms import UP_WORLD, quat_rotate
-from camdirector.pipeline.stages import FrameState
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
+from camdirector.pipeline.toric.frame import ToricFrame
 
 
 @dataclass(frozen=True)
@@ -79,11 +80,12 @@ class ToricMotion:
         goal_theta = lo + self.style.preferred_theta_ratio * (hi - lo)
         return goal_theta, self._upright_side(torus, goal_theta) * math.radians(self.style.preferred_phi_deg), lo, hi
 
-    def run(self, state: FrameState) -> None:
-        torus = state.torus
+    def run(self, state: FrameState, toric: ToricFrame) -> None:
+        """The camera's place on the frame's torus (`toric`, filled by FRAMING) and its pose."""
+        torus = toric.torus
         if torus is None:  # degenerate framing: hold the last pose
             state.flags.append("pose_held")
-            state.theta, state.phi = self.theta or 0.0, self.phi
+            toric.theta, toric.phi = self.theta or 0.0, self.phi
             return
         goal_theta, goal_phi, lo, hi = self.preferred_place(torus)
         if self.theta is None or self.position_world is None:
@@ -91,8 +93,8 @@ class ToricMotion:
         else:
             self.theta, self.phi = torus_angles(torus, self.position_world)
             self._integrate(torus, goal_theta, goal_phi, lo, hi, state.dt_s)
-        state.theta, state.phi = self.theta, self.phi
-        state.pose = pose_on_torus(torus, self.theta, self.phi, self.style, self.lens, state.b_is_gaze_point)
+        toric.theta, toric.phi = self.theta, self.phi
+        state.pose = pose_on_torus(torus, self.theta, self.phi, self.style, self.lens, toric.b_is_gaze_point)
         self.position_world = state.pose.position_world
 
     def _integrate(self, torus: Torus, goal_theta: float, goal_phi: float, lo: float, hi: float, dt_s: float) -> None:

@@ -7,7 +7,8 @@ target's horizontal velocity with a time constant; below a walking-pace threshol
 last value; before any motion it is the target's facing (its local +Z, the glTF forward axis).
 
 `Framing.error` measures, once the frame's pose is final (the rig calls it in VISIBILITY), how far
-the framed points land from the style's screen points: the frame's `framing_error`.
+the framed points land from the style's screen points: the frame's `framing_error`. The points and
+the torus are the rig's part of the frame's state (`ToricFrame`, frame.py).
 """
 from __future__ import annotations
 
@@ -16,11 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.camera import Lens, project_to_screen
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.toric import DegenerateTorus, composition_angle, make_torus
 from camdirector.geometry.transforms import UP_WORLD, quat_rotate
-from camdirector.pipeline.stages import FrameState
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
+from camdirector.pipeline.toric.frame import ToricFrame
 
 
 @dataclass(frozen=True)
@@ -31,7 +33,7 @@ class FramingSettings:
 
 
 class Framing:
-    """Keeps the one-target heading between frames and fills A, B and the torus of a FrameState."""
+    """Keeps the one-target heading between frames and fills A, B and the torus of a frame."""
 
     def __init__(self, lens: Lens, style: Style, initial_rotation_xyzw: np.ndarray,
                  settings: FramingSettings = FramingSettings()):
@@ -58,33 +60,35 @@ class Framing:
         g = self.style.gaze_room_m
         return aim_world + np.array([g * math.sin(self.heading_rad), 0.0, g * math.cos(self.heading_rad)])
 
-    def run(self, state: FrameState) -> None:
+    def run(self, state: FrameState, toric: ToricFrame) -> None:
+        """A, B and the torus of the frame's aim points into `toric` (the frame's part); what
+        degrades goes to state.flags."""
         a = state.aim_points_world[0]
         if len(state.aim_points_world) == 2:
             b = state.aim_points_world[1]
             if np.linalg.norm(b - a) < self.settings.min_ab_distance_m:
                 state.flags.append("targets_coincide")
                 b = self._gaze_point(a, state.dt_s)
-                state.b_is_gaze_point = True
+                toric.b_is_gaze_point = True
         else:
             b = self._gaze_point(a, state.dt_s)
-            state.b_is_gaze_point = True
-        state.a_world, state.b_world = a, b
+            toric.b_is_gaze_point = True
+        toric.a_world, toric.b_world = a, b
         try:
-            state.torus = make_torus(a, b, self.alpha, UP_WORLD)
+            toric.torus = make_torus(a, b, self.alpha, UP_WORLD)
         except DegenerateTorus:
             state.flags.append("degenerate_torus")
-            state.torus = None
+            toric.torus = None
 
-    def error(self, state: FrameState) -> float:
-        """How far the framed points land from the style's screen points in state.pose (the frame's
-        final pose), in normalised screen units (the frame is [-1, 1] on both axes; the TRACKS
+    def error(self, pose: CameraPose, toric: ToricFrame) -> float:
+        """How far the framed points of `toric` land from the style's screen points in `pose` (the
+        frame's final pose), in normalised screen units (the frame is [-1, 1] on both axes; the TRACKS
         rig's framing error is in the same units): the larger of the points' largest-axis errors.
         A always counts, B only when it is the second target: the gaze-room point is no subject,
         and the level camera of one target (camera_motion.pose_on_torus) puts only A exactly.
         NaN when a point is behind the camera."""
-        if state.b_is_gaze_point:
-            points, goals = state.a_world, self._screen_a
+        if toric.b_is_gaze_point:
+            points, goals = toric.a_world, self._screen_a
         else:
-            points, goals = np.array((state.a_world, state.b_world)), self._screen_ab
-        return float(np.abs(project_to_screen(state.pose, self.lens, points) - goals).max())
+            points, goals = np.array((toric.a_world, toric.b_world)), self._screen_ab
+        return float(np.abs(project_to_screen(pose, self.lens, points) - goals).max())

@@ -10,6 +10,10 @@ estimates the targets' visibility (visibility.py) and measures the framing error
 built when a map mode is first asked for, at creation when the style starts in one, so the first
 frame does not pay for them; `close()` releases their backend (its GL objects, or Embree scenes)
 when the session ends.
+
+`ToricRig` implements `CameraRig` (pipeline/camera_rig.py): of what only some rigs do, it draws
+the A-map (`anticipation_map`, in the map modes); it takes no player inputs and shows the targets
+as of the latest frame. Its part of a frame's state is `ToricFrame` (frame.py).
 """
 from __future__ import annotations
 
@@ -26,9 +30,11 @@ from camdirector.geometry.toric import torus_angles
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
-from camdirector.pipeline.stages import FrameState, Stage
+from camdirector.pipeline.stages import Stage
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
 from camdirector.pipeline.toric.camera_motion import ToricMotion, pose_on_torus
+from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.framing import Framing
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
 from camdirector.pipeline.toric.occlusion_search import OcclusionSearch, RaycastRisk, SearchSettings
@@ -38,8 +44,12 @@ from camdirector.pipeline.toric.visibility import VisibilityEstimate
 
 
 class ToricRig:
-    """The Toric camera of one session (module docstring). ray_scene, static_meshes_world and
-    dynamic (object id -> (mesh, latest transform)) are the session's, kept current by INGEST."""
+    """The Toric camera of one session; implements `CameraRig` (module docstring). ray_scene,
+    static_meshes_world and dynamic (object id -> (mesh, latest transform)) are the session's,
+    kept current by INGEST."""
+
+    program_transforms = None  # CameraRig: no delayed program, the targets as of the latest frame
+    player_inputs = None       # CameraRig: no game events, no takes
 
     def __init__(self, scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh],
                  dynamic: dict, rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter):
@@ -81,7 +91,7 @@ class ToricRig:
         if state is None or self.maps is None or self.style.visibility not in MAP_MODES \
                 or self.maps.amap.a_map is None:
             return None
-        i, j = self.maps.amap.window.texel_coords(state.theta, state.phi)
+        i, j = self.maps.amap.window.texel_coords(state.toric.theta, state.toric.phi)
         return self.maps.amap.a_map, (float(i), float(j))
 
     def _build_maps(self) -> None:
@@ -104,40 +114,42 @@ class ToricRig:
 
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
-        """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY, timed into state.stage_ms; a
-        composition changed by set_style since the last frame makes this frame a cut."""
+        """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY into state and its part `state.toric`,
+        timed into state.stage_ms; a composition changed by set_style since the last frame makes
+        this frame a cut."""
+        toric = state.toric = ToricFrame()
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
-        self.framing.run(state)
+        self.framing.run(state, toric)
         if self.maps is not None:
             self.maps.ingest(update.states, update.time_s)
         stages.done(Stage.FRAMING)
-        self._move(state, target_transforms, last, stages)
+        self._move(state, toric, target_transforms, last, stages)
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
         stages.done(Stage.MOTION)
         self.visibility.run(state, target_transforms)
-        state.framing_error = self.framing.error(state)
+        state.framing_error = self.framing.error(state.pose, toric)
         stages.done(Stage.VISIBILITY)
         state.cut = state.cut or self._style_cut
         self._style_cut = False
 
-    def _move(self, state: FrameState, target_transforms: list[RigidTransform],
+    def _move(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform],
               last: FrameState | None, stages: StageClock) -> None:
         """MOTION: the rig of the style's visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE:
         that plus reactive.py; RAYCAST and the map modes: occlusion_search.py), with PROJECTION and
         AMAP lapped on `stages` in the map modes when the maps are due."""
         mode = self.style.visibility
-        if mode not in SEARCH_MODES or state.torus is None:
+        if mode not in SEARCH_MODES or toric.torus is None:
             if self._searching:  # hand the camera's place back to the toric rig
                 self.motion.theta, self.motion.position_world = self.search.theta, last.pose.position_world
                 self._searching = False
-            self.motion.run(state)
+            self.motion.run(state, toric)
             if mode == VisibilityMode.REACTIVE and state.pose is not None:
-                state.pose, pulled = self.deoccluder.run(state.pose, state.a_world, state.time_s, state.dt_s)
+                state.pose, pulled = self.deoccluder.run(state.pose, toric.a_world, state.time_s, state.dt_s)
                 if pulled:
                     state.flags.append("pulled_in")
             return
-        torus = state.torus
+        torus = toric.torus
         if not self._searching:
             if self.motion.position_world is None:
                 theta, phi, _, _ = self.motion.preferred_place(torus)
@@ -160,11 +172,11 @@ class ToricRig:
         side = math.copysign(1.0, self.motion.preferred_place(torus)[1])  # upright half for cuts
         result = self.search.step(torus, state.dt_s, state.time_s, risk, occluded, side,
                                   self.style.max_speed_m_s, self.style.max_accel_m_s2)
-        state.theta, state.phi, state.cut = result.theta, result.phi, result.cut
+        toric.theta, toric.phi, state.cut = result.theta, result.phi, result.cut
         state.flags.append(f"search_{result.strategy}")
         if result.cut and self.maps is not None:
             self.maps.invalidate()
-        state.pose = pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, state.b_is_gaze_point)
+        state.pose = pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, toric.b_is_gaze_point)
         self.motion.position_world = state.pose.position_world
 
 

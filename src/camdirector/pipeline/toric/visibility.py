@@ -12,7 +12,7 @@ import numpy as np
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.pipeline.stages import FrameState
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.toric.target_sampling import SurfaceSampler
 
 

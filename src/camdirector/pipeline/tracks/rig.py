@@ -16,6 +16,10 @@ flagged `tracks_cut_<reason>` and the director's three stage timings go to `stag
 session lens's vertical field of view, so shot sizes mean the same on the client's screen. Until a
 first shot is found (the actor is away from every track) the camera waits behind and above the
 actor, flagged `tracks_no_track_near_actor`, with visibility 0.
+
+`TracksRig` implements `CameraRig` (pipeline/camera_rig.py) and none of what only some rigs do: no
+occlusion maps (it cuts away from occlusion), no deferred work, no player inputs, no delayed
+program. It has no part of its own in a frame's state: all it answers is the core (pipeline/state.py).
 """
 from __future__ import annotations
 
@@ -29,7 +33,8 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, quat_rotate
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, LoadedLevel
-from camdirector.pipeline.stages import FrameState, TracksStage
+from camdirector.pipeline.stages import TracksStage
+from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
 from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector
 from camdirector.pipeline.tracks.settings import DirectorSettings
@@ -44,7 +49,11 @@ def director_style(style: Style) -> DirectorStyle:
 
 
 class TracksRig:
-    """The graph director of one session (module docstring)."""
+    """The graph director of one session; implements `CameraRig` (module docstring)."""
+
+    has_deferred_work = False  # CameraRig: it never leaves work for later
+    program_transforms = None  # CameraRig: no delayed program, the targets as of the latest frame
+    player_inputs = None       # CameraRig: no game events, no takes
 
     def __init__(self, level: LoadedLevel, lens: Lens, style: Style, ray_scene: RayScene, rng: np.random.Generator,
                  clock: Callable[[], float] = time.perf_counter):
@@ -63,8 +72,12 @@ class TracksRig:
     def close(self) -> None:
         """Nothing to release: the level is the worker's (its LevelCache), the ray scene the session's."""
 
+    def do_deferred_work(self, whole: bool = True) -> bool:
+        """CameraRig: there is never any."""
+        return False
+
     def anticipation_map(self, state: FrameState | None) -> None:
-        """None: the tracks rig has no occlusion maps (it cuts away from occlusion)."""
+        """CameraRig: None, the tracks rig has no occlusion maps (it cuts away from occlusion)."""
         return None
 
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],

@@ -1,28 +1,20 @@
-"""Session checkpoints: what rebuilds a session exactly after the loss of its worker or its node.
+"""Session checkpoints as kept: their format and the stores that keep them. What writes them
+and restores a session from one (the checkpoint protocol) is checkpointing.py's.
 
 A checkpoint is the session's creation request, a snapshot of its state, and the inputs it took
-since that snapshot (frames, style changes, takes), each with its sequence number. Restoring
-builds the session again from its creation request, puts the snapshot's state in place, and runs
-the inputs since through the session table's own request handling, the code that replays
-recordings (recording.py). Sessions are deterministic (recordings replay bit for bit), so the
-restored session answers its next frame as the lost one would have.
+since that snapshot (frames, style changes, takes), each with its sequence number
+(`encode_entry`). The snapshot is the pickled session (pipeline state, RNG, style; `dumps_state`).
+What the session was built from and never changes (meshes, the level, the clock:
+`Session.creation_objects`) is pickled by name and taken from the freshly built session on restore
+(`loads_state`), so a snapshot holds state, not geometry; classes that hold native handles (Embree
+scenes, GL objects) pickle as what rebuilds them (geometry/raycast.py, geometry/toric_maps/). A
+snapshot replaces the input log, so a session's checkpoint is bounded.
 
-The snapshot is the pickled session (pipeline state, RNG, style); the dashboard's timeline of
-recent frames is left out (diagnostics, up to a megabyte), so a restored session's starts anew. What the
-session was built from and never changes (meshes, the level, the clock: `Session.creation_objects`)
-is pickled by name and taken from the freshly built session on restore, so a snapshot holds state,
-not geometry; classes that hold native handles (Embree scenes, GL objects) pickle as what rebuilds
-them (geometry/raycast.py, geometry/toric_maps/). Each snapshot cuts the input log, so a session's
-checkpoint is bounded: one snapshot and at most `checkpoint_every_frames` inputs.
+Every write names its owner (node and process); a store refuses a write by a process that is no
+longer the owner, and `snapshot(..., claim=True)` makes a restoring process the owner: the fence
+between nodes (checkpointing.py).
 
-An input is written before it is computed: an input answered is never missing from the
-checkpoint, and one whose worker died before answering is answered `stale` with the same pose on
-the client's retry. Writing first is also the fence between nodes: a write names its owner (node
-and process), a restore claims the checkpoint for its process, and a write by a process that is
-no longer the owner is refused, so a node that was bypassed (the balancer sent the session
-elsewhere, then back) restores the newer state instead of answering from its old copy.
-
-Two stores behind `CheckpointStore`, tested against each other (tests/server/sessions/test_checkpoints.py):
+Two stores behind `CheckpointStore`, tested against each other (tests/worker/test_checkpoints.py):
 - `DirectoryStore`, the embedded default: files under `<data_dir>/checkpoints/`, one folder per
   session. The page cache keeps what a killed worker wrote; the node's restart finds them too.
 - `RedisStore`: Redis (`--checkpoint-store redis://...`), so any node can restore any session. Each
@@ -105,7 +97,7 @@ def open_store(url: str, data_dir: str | Path, keep_s: float, check: bool = Fals
     """The store a setting names: "" a DirectoryStore in data_dir, "redis://..." a RedisStore,
     "off" none. With `check`, raises CheckpointError when Redis does not answer (a node refuses
     to start); a worker's store connects on first use, so a worker started while Redis is down
-    still answers frames (SessionTable's failed-write path)."""
+    still answers frames (checkpointing.py's failed-write path)."""
     if url == "off":
         return None
     if url.startswith("redis://"):

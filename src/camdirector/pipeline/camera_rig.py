@@ -1,0 +1,116 @@
+"""The rig contract: what the camera rig of a session does, and the one choice of rig.
+
+A rig runs the stages after INGEST (pipeline/stages.py) for one session, for the session's whole
+life. Three rigs implement `CameraRig`, structurally (each says so in its docstring): TORIC
+(pipeline/toric/rig.py), TRACKS (pipeline/tracks/rig.py) and MATCH (pipeline/match/rig.py);
+`make_rig` chooses among them, here and nowhere else.
+
+Every rig runs a frame, takes a style, is closed, and is asked for its deferred work (a rig that
+never defers says it has none). What only some rigs do is part of the contract too, declared as
+such, and every rig answers it:
+- a question has a "none" answer, which a rig without the capability always gives:
+  `anticipation_map` (TORIC in a map mode) and `program_transforms` (MATCH) answer None;
+- an input only some rigs take is a capability object, None on a rig that takes no such input:
+  `player_inputs` (MATCH: a frame's game events and a human director's takes, both naming its
+  players), so that the session table refuses such an input before it writes it anywhere.
+Code outside a rig's folder asks this contract, never which rig it holds (tests/test_layout.py);
+tests/pipeline/test_rig_contract.py holds every rig to it.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+import numpy as np
+
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.rig import MatchRig
+from camdirector.pipeline.state import FrameState
+from camdirector.pipeline.style import Rig, Style
+from camdirector.pipeline.toric.rig import ToricRig
+from camdirector.pipeline.tracks.rig import TracksRig
+
+
+class PlayerInputs(Protocol):
+    """What a rig that directs among a game's players takes besides their transforms (MATCH):
+    a frame's game events (`FrameInput.events`) and a human director's takes, both naming players."""
+
+    player_ids: frozenset[str]  # whom a game event or a take may name
+
+    def take(self, subject_ids: list[str], kind: ShotKind | None, release: bool) -> ShotChoice | None:
+        """Holds a human's shot of `subject_ids` from the next frame until released, and returns
+        it; None on `release`, which gives the program back to the director. kind None: the kind
+        that fits the number of subjects. Raises ValueError for a take that cannot be held (an
+        unknown or repeated player, a kind that does not fit the number)."""
+        ...
+
+
+class CameraRig(Protocol):
+    """The camera rig of one session (module docstring)."""
+
+    # -- What every rig does ------------------------------------------------------------------
+
+    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
+            last: FrameState | None) -> None:
+        """The stages after INGEST: sets the rig's part of `state` (pipeline/state.py) and fills
+        it and the core, timed into `state.stage_ms`. target_transforms: the targets' as of
+        `update`, in target order; last: the session's last answered state (None before the first)."""
+        ...
+
+    def set_style(self, style: Style) -> None:
+        """From the next frame on (each rig says what a change does: a cut, another director)."""
+        ...
+
+    def close(self) -> None:
+        """Releases what the rig holds outside Python's memory (the occlusion maps' GL objects or
+        Embree scenes); idempotent. The rig runs no frame afterwards."""
+        ...
+
+    @property
+    def has_deferred_work(self) -> bool:
+        """Whether the rig left work for later that a later frame does if nobody did it before
+        (TORIC's amortized map update); False on a rig that never defers."""
+        ...
+
+    def do_deferred_work(self, whole: bool = True) -> bool:
+        """Does the deferred work now, or without `whole` a part of it (a worker's idle moment, a
+        snapshot); answers whether there was any. What the rig answers never depends on whether,
+        when or in how many parts this ran."""
+        ...
+
+    # -- What only some rigs do: every rig answers, a rig without it as written here ---------
+
+    def anticipation_map(self, state: FrameState | None) -> tuple[np.ndarray, tuple[float, float]] | None:
+        """TORIC in a map mode: the occlusion anticipation map (n, n) float, A in [0, 1], rows
+        theta and columns phi, and the texel (i, j) of the camera of `state` (the last answered
+        frame). None: no A-map (a rig without occlusion maps, a TORIC style that is not a map
+        mode, or no maps computed yet)."""
+        ...
+
+    # MATCH: the targets at the program's moment, which the broadcast delay puts behind the game
+    # (what the camera shows). None: the camera shows the targets as of the latest frame (every
+    # other rig, and MATCH while its delay fills).
+    program_transforms: list[RigidTransform] | None
+
+    # MATCH: game events and a human's takes (`PlayerInputs`). None: the rig takes neither; a
+    # frame with events and a TakeShot are refused.
+    player_inputs: PlayerInputs | None
+
+
+def make_rig(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: dict,
+             rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter) -> CameraRig:
+    """The rig of a session created from `scene`, for its whole life (worker/codec.py refuses a
+    change of rig): MATCH when the style says so, TRACKS for a scene on a level (the codec gives
+    a level only to those two), else TORIC. ray_scene, static_meshes_world and dynamic (object id
+    -> (mesh, latest transform)) are the session's, which INGEST keeps current; rng its seeded
+    generator, clock what the stages are timed on."""
+    if scene.style.rig == Rig.MATCH:
+        return MatchRig(scene, ray_scene, rng, clock)
+    if scene.level is not None:
+        return TracksRig(scene.level, scene.lens, scene.style, ray_scene, rng, clock)
+    return ToricRig(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
