@@ -9,8 +9,8 @@
                                        world rectangle in the X-Camdirector-Bounds-M header
                                        ("x0,z0,x1,z1", m; x across, z down the image)
 
-Pictures are rendered in the worker's render process (render/monitor.py), never in the frame
-path, and shared among viewers (front/views.py). Headers: X-Camdirector-Frame (the session frame
+Pictures are rendered in the worker's render process (render/main.py), never in the frame
+path, and shared among viewers (front/view_hub.py). Headers: X-Camdirector-Frame (the session frame
 shown), X-Camdirector-Render-Ms, and X-Camdirector-Placeholder with the reason when the picture
 is a placeholder (no camera yet, a delay still filling, no such candidate, no cut yet, a world
 without geometry): still 200, so a monitor keeps its place.
