@@ -25,11 +25,6 @@ class JobKind:
     name: str
     function: JobFunction
 
-    @property
-    def module(self) -> str:
-        """The body's module: the forkserver imports it once, instead of every job process."""
-        return self.function.__module__
-
 
 class JobRegistry:
     """kind name -> job function."""
@@ -56,7 +51,7 @@ class JobRegistry:
     @property
     def modules(self) -> tuple[str, ...]:
         """The kinds' modules, in registration order without repeats (what the forkserver preloads)."""
-        return tuple(dict.fromkeys(k.module for k in self._kinds.values()))
+        return tuple(dict.fromkeys(k.function.__module__ for k in self._kinds.values()))
 
 
 def service_kinds() -> JobRegistry:

@@ -12,7 +12,7 @@ pose is the director's camera position looking at its look-at point with no roll
 `visibility` are the director's (its shot count is the session's `shot_id`); the cut reason is
 flagged `tracks_cut_<reason>` and the director's three stage timings go to `stage_ms` as
 `cut_check`, `target_update` and `camera_update` (`TracksStage`; a step that finds no shot is all
-`target_update`). The director's settings are its defaults (precompute/tracks/track_settings.py) with the
+`target_update`). The director's settings are its defaults (settings.py) with the
 session lens's vertical field of view, so shot sizes mean the same on the client's screen. Until a
 first shot is found (the actor is away from every track) the camera waits behind and above the
 actor, flagged `tracks_no_track_near_actor`, with visibility 0.
