@@ -113,3 +113,10 @@ def postgres_url(postgres_server) -> str:
     yield postgres_server.url.rsplit("/", 1)[0] + "/" + name
     with psycopg.connect(postgres_server.url, autocommit=True) as admin:
         admin.execute(f"DROP DATABASE {name} WITH (FORCE)")
+
+
+@pytest.fixture(scope="session")
+def tls_files(tmp_path_factory):
+    """A CA and a server certificate for 127.0.0.1 and localhost (tests/tls_files.py)."""
+    from tests.tls_files import make_tls_files
+    return make_tls_files(tmp_path_factory.mktemp("tls"))

@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+from camdirector.access.cli import add_parsers as add_key_parsers
 from camdirector.evaluation.cli import add_parsers as add_eval_parsers
 from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
@@ -42,6 +43,12 @@ def _serve_parser(sub) -> None:
     p.add_argument("--checkpoint-every-frames", dest="checkpoint_every_frames", type=int,
                    help="frames between two snapshots of a session's state")
     p.add_argument("--node-id", dest="node_id", help="this node's name (default: host name and pid)")
+    p.add_argument("--no-auth", dest="auth", action="store_const", const=False,
+                   help="let every caller in without a key (a machine of your own; docs/security.md)")
+    p.add_argument("--tls-cert", dest="tls_cert", help="PEM certificate chain: serve gRPC and HTTP over TLS")
+    p.add_argument("--tls-key", dest="tls_key", help="the certificate's PEM private key")
+    p.add_argument("--insecure", dest="insecure", action="store_const", const=True,
+                   help="allow plaintext on a non-loopback address (TLS ends at a proxy you trust)")
 
 
 def _job_worker_parser(sub) -> None:
@@ -82,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     add_eval_parsers(sub)
     add_overview_parsers(sub)
     add_track_parsers(sub)
+    add_key_parsers(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
     p.add_argument("--data-dir", dest="data_dir", type=Path,
@@ -114,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "demo":
         from camdirector.demo.client import run_demo
         return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport, visibility=args.visibility)
-    return args.handler(args)  # eval, overview, eval-overview, level, eval-graph
+    return args.handler(args)  # eval, overview, eval-overview, level, eval-graph, keys
 
 
 if __name__ == "__main__":

@@ -48,6 +48,11 @@ class ServerSettings:
     checkpoint_every_frames: int = 60        # a session's state is snapshotted every this many frames. [1, 100000]
     checkpoint_keep_s: float = 600.0         # a checkpoint no node has written for this long is removed, s. [1, 1e7]
     node_id: str = ""                        # this node's name in checkpoints' ownership ("": host name and pid)
+    # Access (access/, docs/security.md). Keys live in the records database: SQLite in data_dir, or job_store's PostgreSQL.
+    auth: bool = True                        # every call needs a key; False (--no-auth) lets anyone in
+    tls_cert: str = ""                       # PEM certificate chain: gRPC and HTTP over TLS ("" plaintext)
+    tls_key: str = ""                        # its PEM private key
+    insecure: bool = False                   # allow plaintext on a non-loopback address (behind a trusted proxy)
 
     def __post_init__(self):
         checks = [
@@ -68,6 +73,7 @@ class ServerSettings:
              "job_store must be empty (SQLite in data_dir) or a postgresql:// URL"),
             (not self.job_queue or self.job_queue.startswith("redis://"),
              "job_queue must be empty (this process's runner) or a redis:// URL"),
+            (bool(self.tls_cert) == bool(self.tls_key), "tls_cert and tls_key go together"),
         ]
         for ok, message in checks:
             if not ok:
@@ -78,6 +84,21 @@ class ServerSettings:
         return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
                            max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s,
                            job_store=self.job_store, job_queue=self.job_queue)
+
+    @property
+    def tls(self) -> bool:
+        return bool(self.tls_cert)
+
+    def plaintext_exposed(self) -> list[str]:
+        """The transports that would carry keys and scenes in clear beyond this machine: bound
+        to a non-loopback address without TLS (gRPC, HTTP) or without CURVE (ZeroMQ, which has
+        CURVE whenever authentication is on)."""
+        exposed = []
+        for name, address, encrypted in (("grpc", self.grpc_addr, self.tls), ("http", self.http_addr, self.tls),
+                                         ("zmq", self.zmq_addr.removeprefix("tcp://"), self.auth)):
+            if address and not encrypted and not address.startswith("ipc://") and not _loopback(address):
+                exposed.append(f"{name} on {address}")
+        return exposed
 
     @property
     def node_name(self) -> str:
@@ -98,6 +119,19 @@ class ServerSettings:
                 values[f.name] = _parse(f.type, raw, f.name)
         values.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**values)
+
+
+def _loopback(address: str) -> bool:
+    """Whether HOST:PORT names a loopback host (literally: a name is not resolved)."""
+    import ipaddress
+
+    host = address.rpartition(":")[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def _parse(type_name: str, raw: str, name: str):

@@ -10,6 +10,7 @@ import grpc
 import pytest
 import zmq
 
+from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError
 from camdirector.front.grpc_service import DirectorGrpc
 from camdirector.front.metrics import Metrics
@@ -24,10 +25,13 @@ class _Aborted(Exception):
 
 
 class _Context:
-    """Only what DirectorGrpc calls on a grpc.aio.ServicerContext: abort."""
+    """Only what DirectorGrpc calls on a grpc.aio.ServicerContext: abort, invocation_metadata."""
 
     def __init__(self):
         self.status = None
+
+    def invocation_metadata(self):
+        return ()
 
     async def abort(self, code, details):
         self.status = (code, details)
@@ -41,14 +45,20 @@ class _Router:
         self.metrics = Metrics()
 
 
-def test_an_unexpected_exception_is_internal_over_grpc_and_logged(caplog):
-    service, context = DirectorGrpc(_Router()), _Context()
+def _service(rpc: str, call) -> DirectorGrpc:
+    """A DirectorGrpc without authentication whose `rpc` is `call(payload, identity)`."""
+    service = DirectorGrpc(_Router(), Guard(None))
+    service.calls.by_rpc[rpc] = call
+    return service
 
-    async def broken(payload):
+
+def test_an_unexpected_exception_is_internal_over_grpc_and_logged(caplog):
+    async def broken(payload, identity):
         raise KeyError("a bug")
 
+    service, context = _service("UpdateStyle", broken), _Context()
     with caplog.at_level(logging.ERROR, logger="camdirector.grpc"), pytest.raises(_Aborted):
-        asyncio.run(service._unary("UpdateStyle", broken, b"", context))
+        asyncio.run(service._unary("UpdateStyle", b"", context))
     code, details = context.status
     assert code == grpc.StatusCode.INTERNAL and "KeyError" in details and "a bug" not in details
     assert "UpdateStyle of no session failed" in caplog.text and "a bug" in caplog.text  # the traceback
@@ -59,12 +69,12 @@ def test_an_unexpected_exception_is_internal_over_zeromq_and_logged_with_its_ses
     router (sessions inline) whose Frame handler is broken."""
     async def exchange() -> list[bytes]:
         router = SessionRouter(ServerSettings(workers=0, data_dir=str(tmp_path)), Metrics())
-        transport = ZmqTransport(router, "tcp://127.0.0.1:*")
+        transport = ZmqTransport(router, "tcp://127.0.0.1:*", router.guard)
 
-        async def broken(payload):
+        async def broken(payload, identity):
             raise KeyError("a bug")
 
-        transport._handlers[b"Frame"] = broken
+        transport._handlers[b"Frame"] = (transport._handlers[b"Frame"][0], broken)
         transport.start()
         client = transport.ctx.socket(zmq.DEALER)
         client.setsockopt(zmq.LINGER, 0)
@@ -87,13 +97,12 @@ def test_an_unexpected_exception_is_internal_over_zeromq_and_logged_with_its_ses
 
 
 def test_a_director_error_keeps_its_status_over_grpc():
-    service, context = DirectorGrpc(_Router()), _Context()
-
-    async def refused(payload):
+    async def refused(payload, identity):
         raise DirectorError(grpc.StatusCode.NOT_FOUND, "no such thing")
 
+    service, context = _service("Frame", refused), _Context()
     with pytest.raises(_Aborted):
-        asyncio.run(service._unary("Frame", refused, b"", context))
+        asyncio.run(service._unary("Frame", b"", context))
     assert context.status == (grpc.StatusCode.NOT_FOUND, "no such thing")
 
 

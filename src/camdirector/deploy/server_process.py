@@ -38,11 +38,15 @@ class ServerProcess:
     python: the interpreter that runs `-m camdirector serve` (another checkout's venv runs its own
     server); command: the whole command instead (an installed console script); base_env: the
     environment to start from instead of this process's, `env` updating it; cwd: the folder it
-    runs in."""
+    runs in.
+
+    auth: False starts it with `--no-auth` (tests and benchmarks about other things); True with
+    authentication on, `admin_key` then holding the admin key it made and `zmq_server_key` its
+    CURVE public key (docs/security.md)."""
 
     def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None,
                  python: str = sys.executable, command: list[str] | None = None, base_env: dict | None = None,
-                 cwd: str | Path | None = None):
+                 cwd: str | Path | None = None, auth: bool = False):
         self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
         self.log_path = Path(self._dir.name) / "server.log"
         self._log = open(self.log_path, "w+")
@@ -52,6 +56,8 @@ class ServerProcess:
             cmd += [f"--{name}", address if name in transports else ""]
         if "--data-dir" not in args:
             cmd += ["--data-dir", self._dir.name]
+        if not auth:
+            cmd.append("--no-auth")
         self.proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=self._log, text=True,
                                      env={**(os.environ if base_env is None else base_env), **(env or {})}, cwd=cwd)
         line = self.proc.stdout.readline()
@@ -62,10 +68,15 @@ class ServerProcess:
         self.grpc: str | None = self.ready.get("grpc")
         self.zmq: str | None = self.ready.get("zmq")
         self.http: str | None = self.ready.get("http")
+        self.zmq_server_key: str | None = self.ready.get("zmq_server_key")
+        key_file = self.ready.get("admin_key_file")
+        self.admin_key: str | None = Path(key_file).read_text().strip() if key_file else None
 
     def url(self, transport: str) -> str:
         """The SDK's URL for "grpc" or "zmq"."""
-        return f"grpc://{self.grpc}" if transport == "grpc" else self.zmq
+        if transport == "grpc":
+            return f"grpcs://{self.grpc}" if self.ready.get("tls") else f"grpc://{self.grpc}"
+        return self.zmq
 
     def log_tail(self, chars: int = 4000) -> str:
         self._log.flush()

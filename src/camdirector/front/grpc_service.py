@@ -2,6 +2,9 @@
 
 Handlers take and return serialized bytes: the front only reads the session id to route, and the
 worker that holds the session parses the rest, so nothing is parsed twice in full.
+Every call carries `authorization: Bearer KEY` metadata (access/guard.py): UNAUTHENTICATED without
+a valid key, PERMISSION_DENIED for a role without the verb, NOT_FOUND for another tenant's session.
+The health service stays open: balancers probe it without a key.
 A bad frame ends its stream with a status; the session itself stays and a new stream may resume it.
 """
 from __future__ import annotations
@@ -13,8 +16,10 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
+from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError, internal
 from camdirector.front.router import SessionRouter, named_session, session_id_of
+from camdirector.front.session_calls import RPCS, SessionCalls
 from camdirector.v1 import director_pb2 as pb
 
 log = logging.getLogger("camdirector.grpc")
@@ -22,15 +27,27 @@ SERVICE = "camdirector.v1.Director"
 TRANSPORT = "grpc"
 
 
+def _authorization(context: grpc.aio.ServicerContext) -> str | None:
+    for key, value in context.invocation_metadata() or ():
+        if key == "authorization":
+            return value
+    return None
+
+
 class DirectorGrpc:
-    def __init__(self, router: SessionRouter):
+    def __init__(self, router: SessionRouter, guard: Guard):
         self.router = router
+        self.guard = guard
+        self.calls = SessionCalls(router, guard, TRANSPORT)
         self.metrics = router.metrics
 
-    async def _unary(self, rpc: str, call, payload: bytes, context: grpc.aio.ServicerContext) -> bytes:
+    async def _unary(self, rpc: str, payload: bytes, context: grpc.aio.ServicerContext) -> bytes:
+        """The RPC's call (session_calls.py) for a caller whose key allows its verb."""
         t0 = time.perf_counter()
         try:
-            return await call(payload)
+            need = RPCS[rpc]
+            identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
+            return await self.calls.by_rpc[rpc](payload, identity)
         except DirectorError as exc:
             self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
             await context.abort(exc.code, exc.message)
@@ -45,36 +62,27 @@ class DirectorGrpc:
         self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
         await context.abort(error.code, error.message)
 
-    async def create_session(self, payload, context):
-        return await self._unary("CreateSession", lambda p: self.router.create(p, TRANSPORT), payload, context)
-
-    async def update_style(self, payload, context):
-        return await self._unary("UpdateStyle", self.router.update_style, payload, context)
-
-    async def take_shot(self, payload, context):
-        return await self._unary("TakeShot", self.router.take_shot, payload, context)
-
-    async def close_session(self, payload, context):
-        return await self._unary("CloseSession", self.router.close, payload, context)
-
-    async def frame(self, payload, context):
-        async def call(p):
-            return await self.router.frame(p, session_id_of(pb.FrameUpdate, p), TRANSPORT)
-        return await self._unary("Frame", call, payload, context)
+    def _unary_handler(self, rpc: str) -> grpc.RpcMethodHandler:
+        async def handle(payload: bytes, context: grpc.aio.ServicerContext) -> bytes:
+            return await self._unary(rpc, payload, context)
+        return grpc.unary_unary_rpc_method_handler(handle)  # bytes in, bytes out
 
     async def stream_frames(self, request_iterator, context: grpc.aio.ServicerContext):
         session_id = None
         try:
+            need = RPCS["StreamFrames"]
+            identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
             async for payload in request_iterator:
                 t0 = time.perf_counter()
+                self.guard.still_valid(identity)
                 frame_session = session_id_of(pb.FrameUpdate, payload)
                 if session_id is None:
-                    self.router.stream_opened(frame_session)
+                    self.router.stream_opened(frame_session, identity.tenant)
                     session_id = frame_session
                 elif frame_session != session_id:
                     raise DirectorError(grpc.StatusCode.INVALID_ARGUMENT,
                                         f"a stream carries one session: got {frame_session!r} on the stream of {session_id!r}")
-                reply = await self.router.frame(payload, session_id, TRANSPORT)
+                reply = await self.router.frame(payload, session_id, TRANSPORT, identity.tenant)
                 self.metrics.labelled(self.metrics.request, TRANSPORT, "StreamFrames").observe(time.perf_counter() - t0)
                 yield reply
         except DirectorError as exc:
@@ -87,32 +95,28 @@ class DirectorGrpc:
                 self.router.stream_closed(session_id)
 
     def handler(self) -> grpc.GenericRpcHandler:
-        unary = lambda fn: grpc.unary_unary_rpc_method_handler(fn)  # noqa: E731 (bytes in, bytes out)
-        return grpc.method_handlers_generic_handler(SERVICE, {
-            "CreateSession": unary(self.create_session),
-            "UpdateStyle": unary(self.update_style),
-            "TakeShot": unary(self.take_shot),
-            "CloseSession": unary(self.close_session),
-            "Frame": unary(self.frame),
-            "StreamFrames": grpc.stream_stream_rpc_method_handler(self.stream_frames),
-        })
+        handlers = {rpc: self._unary_handler(rpc) for rpc in RPCS if rpc != "StreamFrames"}
+        handlers["StreamFrames"] = grpc.stream_stream_rpc_method_handler(self.stream_frames)
+        return grpc.method_handlers_generic_handler(SERVICE, handlers)
 
 
-async def start_grpc(router: SessionRouter, address: str) -> tuple[grpc.aio.Server, str]:
-    """Starts the server; returns it and the bound HOST:PORT (port 0 picks a free one)."""
+async def start_grpc(router: SessionRouter, address: str, guard: Guard,
+                     tls: grpc.ServerCredentials | None = None) -> tuple[grpc.aio.Server, str]:
+    """Starts the server (over TLS with `tls`); returns it and the bound HOST:PORT (port 0 picks a
+    free one)."""
     limit = router.settings.max_message_bytes
     server = grpc.aio.server(options=[
         ("grpc.max_receive_message_length", limit),
         ("grpc.max_send_message_length", limit),
         ("grpc.so_reuseport", 0),
     ])
-    server.add_generic_rpc_handlers((DirectorGrpc(router).handler(),))
+    server.add_generic_rpc_handlers((DirectorGrpc(router, guard).handler(),))
     health_servicer = health.aio.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
     reflection.enable_server_reflection(
         (pb.DESCRIPTOR.services_by_name["Director"].full_name, health.SERVICE_NAME, reflection.SERVICE_NAME), server)
     host, _, _ = address.rpartition(":")
-    port = server.add_insecure_port(address)
+    port = server.add_secure_port(address, tls) if tls is not None else server.add_insecure_port(address)
     if port == 0:
         raise OSError(f"cannot bind gRPC to {address}")
     await server.start()

@@ -9,8 +9,11 @@ import socket
 import sys
 from pathlib import Path
 
+import grpc
 import uvicorn
 
+from camdirector.access.guard import Guard
+from camdirector.access.keys import AccessUnavailable, ensure_admin_key, open_access_store
 from camdirector.front.grpc_service import start_grpc
 from camdirector.front.http.app import build_app
 from camdirector.front.http.routes.levels import install_level_routes
@@ -18,7 +21,7 @@ from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
-from camdirector.front.zmq_service import ZmqTransport
+from camdirector.front.zmq_service import ZmqTransport, curve_server_keys
 from camdirector.jobs import JobsUnavailable, service_kinds
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.checkpoint_stores import CheckpointError, open_store
@@ -39,39 +42,69 @@ def _bind_http(address: str) -> socket.socket:
     return sock
 
 
+def open_guard(settings: ServerSettings) -> tuple[Guard, dict]:
+    """The node's guard over its records database, and what the ready line says of it: with
+    authentication on and no admin key anywhere, one is made and written to DIR/admin.key (its
+    path is logged and announced, never the key)."""
+    store = open_access_store(settings.job_store, settings.data_dir)
+    announce: dict = {"auth": settings.auth}
+    if settings.auth:
+        made = ensure_admin_key(store, settings.data_dir)
+        if made is not None:
+            log.warning("no key existed: an admin key was written to %s (mode 0600); make others with "
+                        "`camdirector keys create` or POST /v1/keys", made)
+            announce["admin_key_file"] = str(made)
+    return Guard(store, enabled=settings.auth), announce
+
+
+def _tls_credentials(settings: ServerSettings) -> grpc.ServerCredentials | None:
+    if not settings.tls:
+        return None
+    return grpc.ssl_server_credentials([(Path(settings.tls_key).read_bytes(), Path(settings.tls_cert).read_bytes())])
+
+
 async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> None:
     """Runs until `stop` is set or SIGINT/SIGTERM arrives. Prints one JSON line when ready:
-    {"event": "ready", "grpc": ..., "zmq": ..., "http": ...} with the bound addresses."""
+    {"event": "ready", "grpc": ..., "zmq": ..., "http": ..., "auth": bool} with the bound
+    addresses, and with authentication on the ZeroMQ server's CURVE public key ("zmq_server_key")
+    and, when one was made, "admin_key_file"."""
     stop = stop or asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     metrics = Metrics()
-    router = SessionRouter(settings, metrics)
+    guard, announce = open_guard(settings)
+    router = SessionRouter(settings, metrics, guard=guard)
     await router.start()
+    guard.start()
     bound: dict[str, str] = {}
     grpc_server = zmq_transport = http_server = http_task = jobs = None
     try:
         if settings.grpc_addr:
-            grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr)
+            grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr, guard, _tls_credentials(settings))
         if settings.zmq_addr:
-            zmq_transport = ZmqTransport(router, settings.zmq_addr)
+            curve = curve_server_keys(settings.data_dir) if settings.auth else None
+            zmq_transport = ZmqTransport(router, settings.zmq_addr, guard, curve)
             zmq_transport.start()
             bound["zmq"] = zmq_transport.address
+            if curve is not None:
+                announce["zmq_server_key"] = curve[0].decode()
         if settings.http_addr:
             sock = _bind_http(settings.http_addr)
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
-            app = build_app(router, bound)
+            app = build_app(router, bound, secure_cookie=settings.tls)
             jobs = open_jobs(Path(settings.data_dir), service_kinds(), settings.job_settings())
             install_overview_routes(app, jobs, settings.job_settings())
             install_level_routes(app, jobs, Path(settings.data_dir), settings.job_settings())
             jobs.start()  # queued and interrupted jobs from before a restart run again
             # A live view left open past shutdown is cut after this long (the hub ends its own first).
-            config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3)
+            tls = {"ssl_certfile": settings.tls_cert, "ssl_keyfile": settings.tls_key} if settings.tls else {}
+            config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3, **tls)
             http_server = uvicorn.Server(config)
             http_server.install_signal_handlers = lambda: None  # ours above
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
-        print(json.dumps({"event": "ready", **bound, "workers": settings.workers}), flush=True)
+        print(json.dumps({"event": "ready", **bound, "workers": settings.workers, "tls": settings.tls, **announce}),
+              flush=True)
         await stop.wait()
     finally:
         log.info("stopping")
@@ -86,11 +119,26 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
         if zmq_transport is not None:
             await zmq_transport.stop()
         await router.stop()
+        guard.stop()
+        if guard.store is not None:
+            guard.store.close()
 
 
 def run(settings: ServerSettings) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    exposed = settings.plaintext_exposed()
+    if exposed and not settings.insecure:  # as Redis's protected mode: never in clear by accident
+        print(f"camdirector serve: refusing to serve {', '.join(exposed)} without encryption: keys and scenes would "
+              "cross the network in clear. Give --tls-cert and --tls-key (ZeroMQ is encrypted whenever "
+              "authentication is on), bind to 127.0.0.1, or pass --insecure when TLS ends at a proxy you trust.",
+              file=sys.stderr)
+        return 2
+    if settings.tls:
+        for what in (settings.tls_cert, settings.tls_key):
+            if not Path(what).is_file():
+                print(f"camdirector serve: TLS file {what} cannot be read", file=sys.stderr)
+                return 2
     try:  # a node whose checkpoints have nowhere to go refuses to start, rather than lose sessions later
         store = open_store(settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s, check=True)
     except CheckpointError as exc:
@@ -100,7 +148,7 @@ def run(settings: ServerSettings) -> int:
         store.close()
     try:
         asyncio.run(serve(settings))
-    except JobsUnavailable as exc:  # the job store or queue is down at start
+    except (JobsUnavailable, AccessUnavailable) as exc:  # the records database or queue is down at start
         print(f"camdirector serve: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -7,6 +7,11 @@ when there is no other, which is then awaited while it restarts), and their next
 them there. A client's request for a session this node does not know (this node restarted, or the
 balancer sent the session here from a node that died) is given to a worker the same way, which
 restores it from the checkpoint store or answers NOT_FOUND.
+
+Every session belongs to a tenant (access/roles.py): the tenant of the key that created it. A
+request naming another tenant's session is answered NOT_FOUND with the words an unknown id gets.
+With authentication on, each session's tenant is also written to the records database, so a node
+that adopts the session after its first node died knows whose it is.
 """
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ from dataclasses import dataclass, field
 
 import orjson
 
+from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError, exhausted, invalid, not_found, unavailable
 from camdirector.front.metrics import Metrics
 from camdirector.front.worker_pool import WorkerPool
@@ -40,11 +46,14 @@ class SessionEntry:
     frames: int = 0
     transport: set[str] = field(default_factory=set)
     restoring: bool = False   # given to a worker that has to restore it from its checkpoint first
+    tenant: str = "default"   # the tenant of the key that created it
 
 
 class SessionRouter:
-    def __init__(self, settings: ServerSettings, metrics: Metrics, clock: Callable[[], float] = time.monotonic):
+    def __init__(self, settings: ServerSettings, metrics: Metrics, clock: Callable[[], float] = time.monotonic,
+                 guard: Guard | None = None):
         self.settings = settings
+        self.guard = guard or Guard(None)
         self.metrics = metrics
         self.clock = clock
         self.pool = WorkerPool(settings, on_worker_lost=self._worker_lost)
@@ -63,21 +72,33 @@ class SessionRouter:
             self._reaper.cancel()
         await self.pool.stop()
 
-    def _entry(self, session_id: str, adopt: bool = False) -> SessionEntry:
-        """The session's entry. With `adopt` (a request of the session's client) and checkpoints,
-        an unknown session is given to the least loaded worker to restore (module docstring);
-        other requests (the dashboard's) never move a session here."""
+    def _entry(self, session_id: str, tenant: str, adopt: bool = False) -> SessionEntry:
+        """The session's entry, when it is `tenant`'s. With `adopt` (a request of the session's
+        client) and checkpoints, an unknown session of the tenant is given to the least loaded
+        worker to restore (module docstring); other requests (the dashboard's) never move a
+        session here."""
         entry = self.sessions.get(session_id)
-        if entry is None and adopt and self.checkpoints:
+        if entry is None and adopt and self.checkpoints and self._owner(session_id) == tenant:
             now = self.clock()
             entry = self.sessions[session_id] = SessionEntry(slot=self._least_loaded_slot(), created_s=now,
-                                                             last_seen_s=now, restoring=True)
-        if entry is None:
-            if session_id in self._lost:
+                                                             last_seen_s=now, restoring=True, tenant=tenant)
+        if entry is None or entry.tenant != tenant:
+            if entry is None and session_id in self._lost:
                 raise unavailable(f"session {session_id!r} was lost: the worker process holding it (worker "
                                   f"{self._lost[session_id]}) died; create a new session")
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return entry
+
+    def _owner(self, session_id: str) -> str | None:
+        """The tenant of a session this node does not hold: from the records database with
+        authentication on (None: no such session), `default` without."""
+        if not self.guard.enabled:
+            return "default"
+        return self.guard.store.session_owner(session_id)
+
+    def _forget(self, session_id: str) -> None:
+        if self.guard.enabled:
+            self.guard.store.forget_session(session_id)
 
     def _least_loaded_slot(self, exclude: int | None = None) -> int:
         load = [0] * self.pool.slots
@@ -101,7 +122,7 @@ class SessionRouter:
             self.metrics.sessions.set(len(self.sessions))
         return result
 
-    async def create(self, payload: bytes, transport: str) -> bytes:
+    async def create(self, payload: bytes, transport: str, tenant: str = "default") -> bytes:
         if len(self.sessions) + self._reserved >= self.settings.max_sessions:
             raise exhausted(f"the server holds its maximum of {self.settings.max_sessions} sessions")
         session_id = uuid.uuid4().hex
@@ -111,14 +132,17 @@ class SessionRouter:
             body, _ = await self.pool.call(slot, "create", session_id, payload)
         finally:
             self._reserved -= 1
+        if self.guard.enabled:
+            self.guard.store.set_session_owner(session_id, tenant)
         now = self.clock()
-        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport})
+        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport},
+                                                 tenant=tenant)
         self.metrics.sessions.set(len(self.sessions))
         self.metrics.sessions_created.inc()
         return body
 
-    async def frame(self, payload: bytes, session_id: str, transport: str) -> bytes:
-        entry = self._entry(session_id, adopt=True)
+    async def frame(self, payload: bytes, session_id: str, transport: str, tenant: str = "default") -> bytes:
+        entry = self._entry(session_id, tenant, adopt=True)
         entry.last_seen_s = self.clock()
         body, frame_metrics = await self._call(entry, "frame", session_id, payload)
         entry.frames += 1
@@ -127,32 +151,33 @@ class SessionRouter:
                                     frame_metrics.checkpoint_failed)
         return body
 
-    async def _session_request(self, message_type, op: str, payload: bytes) -> bytes:
+    async def _session_request(self, message_type, op: str, payload: bytes, tenant: str) -> bytes:
         """A serialized request of the session it names (a client's: it keeps the session alive)
         to that session's worker; the serialized answer back."""
         session_id = session_id_of(message_type, payload)
-        entry = self._entry(session_id, adopt=True)
+        entry = self._entry(session_id, tenant, adopt=True)
         entry.last_seen_s = self.clock()
         body, _ = await self._call(entry, op, session_id, payload)
         return body
 
-    async def update_style(self, payload: bytes) -> bytes:
-        return await self._session_request(pb.UpdateStyleRequest, "style", payload)
+    async def update_style(self, payload: bytes, tenant: str = "default") -> bytes:
+        return await self._session_request(pb.UpdateStyleRequest, "style", payload, tenant)
 
-    async def take_shot(self, payload: bytes) -> bytes:
+    async def take_shot(self, payload: bytes, tenant: str = "default") -> bytes:
         """A serialized TakeShotRequest in, a serialized TakeShotResponse out (a MATCH session's take)."""
-        return await self._session_request(pb.TakeShotRequest, "take", payload)
+        return await self._session_request(pb.TakeShotRequest, "take", payload, tenant)
 
-    async def close(self, payload: bytes) -> bytes:
+    async def close(self, payload: bytes, tenant: str = "default") -> bytes:
         session_id = session_id_of(pb.CloseSessionRequest, payload)
-        entry = self._entry(session_id, adopt=True)
+        entry = self._entry(session_id, tenant, adopt=True)
         body, _ = await self._call(entry, "close", session_id, payload)
         self.sessions.pop(session_id, None)
+        self._forget(session_id)
         self.metrics.sessions.set(len(self.sessions))
         return body
 
-    def stream_opened(self, session_id: str) -> None:
-        self._entry(session_id, adopt=True).streams += 1
+    def stream_opened(self, session_id: str, tenant: str = "default") -> None:
+        self._entry(session_id, tenant, adopt=True).streams += 1
 
     def stream_closed(self, session_id: str) -> None:
         entry = self.sessions.get(session_id)
@@ -167,6 +192,7 @@ class SessionRouter:
                 if e.streams == 0 and now - e.last_seen_s > self.settings.session_resume_s]
         for session_id in idle:
             entry = self.sessions.pop(session_id)
+            self._forget(session_id)
             try:
                 await self.pool.call(entry.slot, "drop", session_id, b"")
             except DirectorError as exc:
@@ -202,33 +228,39 @@ class SessionRouter:
         self.metrics.sessions.set(len(self.sessions))
         log.error("worker %d lost %d sessions", slot, len(lost))
 
-    async def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
+    async def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None,
+                       tenant: str = "default") -> dict:
         """The session's summary (as `describe`), style and newest `last` frames after
         `after_frame` (sessions.py); NOT_FOUND for an unknown id. Not a request of the session's
         client: it does not keep the session alive."""
-        entry = self._entry(session_id)
+        entry = self._entry(session_id, tenant)
         body, _ = await self.pool.call(entry.slot, "timeline", session_id,
                                        orjson.dumps({"last": last, "after_frame": after_frame}))
         return {"session": self._describe(session_id, entry, self.clock()), **orjson.loads(body)}
 
-    async def anticipation_png(self, session_id: str) -> bytes:
+    async def anticipation_png(self, session_id: str, tenant: str = "default") -> bytes:
         """The session's A-map as a PNG (sessions.py); NOT_FOUND, or FAILED_PRECONDITION without one."""
-        body, _ = await self.pool.call(self._entry(session_id).slot, "amap", session_id, b"")
+        body, _ = await self.pool.call(self._entry(session_id, tenant).slot, "amap", session_id, b"")
         return body
 
-    async def view(self, session_id: str, query_json: bytes, timeout_s: float) -> bytes:
+    async def view(self, session_id: str, query_json: bytes, timeout_s: float, tenant: str = "default") -> bytes:
         """A monitor's picture of the session (render/snapshots.py), its serialized view
         (render/monitor.py); NOT_FOUND for an unknown id, UNAVAILABLE when it takes more than
         timeout_s. Not a request of the session's client: it does not keep the session alive."""
         try:
-            body, _ = await self.pool.call(self._entry(session_id).slot, "view", session_id, query_json, timeout_s)
+            body, _ = await self.pool.call(self._entry(session_id, tenant).slot, "view", session_id, query_json,
+                                           timeout_s)
         except TimeoutError:
             raise unavailable(f"the view of session {session_id} took more than {timeout_s:g} s") from None
         return body
 
-    def describe(self) -> list[dict]:
+    def check_owner(self, session_id: str, tenant: str) -> None:
+        """NOT_FOUND unless the session is here and `tenant`'s (a monitor's request, before its render)."""
+        self._entry(session_id, tenant)
+
+    def describe(self, tenant: str = "default") -> list[dict]:
         now = self.clock()
-        return [self._describe(sid, e, now) for sid, e in self.sessions.items()]
+        return [self._describe(sid, e, now) for sid, e in self.sessions.items() if e.tenant == tenant]
 
     @staticmethod
     def _describe(session_id: str, e: SessionEntry, now: float) -> dict:

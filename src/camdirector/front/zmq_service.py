@@ -1,34 +1,65 @@
 """ZeroMQ transport: a ROUTER socket speaking the two-frame envelope of docs/protocol.md.
 
-Request: [RPC name, serialized request]; reply: [status code as ASCII decimal, serialized reply or
-UTF-8 error message]. DEALER clients send exactly that; REQ clients add an empty delimiter frame,
+Request: [RPC name, serialized request, key]; reply: [status code as ASCII decimal, serialized
+reply or UTF-8 error message]. The key frame is `Bearer KEY`, checked as gRPC's metadata is
+(front/session_calls.py); a server without authentication (`--no-auth`) also takes the two-frame
+request without it. DEALER clients send exactly that; REQ clients add an empty delimiter frame,
 which is echoed back. Anything else on the socket gets an error reply (when it has an identity to
 answer) and never disturbs the loop.
+
+With authentication on the socket is a CURVE server (RFC 26): traffic is encrypted and clients
+must know the server's public key, `DIR/zmq/server.key` (made at the first start; the secret half
+beside it, mode 0600). Clients are not told apart by CURVE keys: the bearer key says who calls.
 """
 from __future__ import annotations
 
 import asyncio
 import logging
 import time
+from pathlib import Path
 
 import zmq
 import zmq.asyncio
+import zmq.auth
 
+from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError, exhausted, internal, invalid, unimplemented
-from camdirector.front.router import SessionRouter, named_session, session_id_of
-from camdirector.v1 import director_pb2 as pb
+from camdirector.front.router import SessionRouter, named_session
+from camdirector.front.session_calls import RPCS, SessionCalls
 
 log = logging.getLogger("camdirector.zmq")
 TRANSPORT = "zmq"
 
 
+CURVE_DIR = "zmq"  # in the data directory: server.key (public) and server.key_secret
+
+
+def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
+    """The server's CURVE (public, secret) keys, Z85, made on first use."""
+    folder = Path(data_dir) / CURVE_DIR
+    secret_file = folder / "server.key_secret"
+    if not secret_file.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        zmq.auth.create_certificates(folder, "server")
+        secret_file.chmod(0o600)
+    return zmq.auth.load_certificate(secret_file)
+
+
 class ZmqTransport:
-    def __init__(self, router: SessionRouter, address: str):
+    """`curve`: the server's (public, secret) keys, None for a plaintext socket (`--no-auth`)."""
+
+    def __init__(self, router: SessionRouter, address: str, guard: Guard,
+                 curve: tuple[bytes, bytes] | None = None):
         self.router = router
+        self.guard = guard
+        self.calls = SessionCalls(router, guard, TRANSPORT)
         self.metrics = router.metrics
         self.ctx = zmq.asyncio.Context.instance()
         self.socket = self.ctx.socket(zmq.ROUTER)
         self.socket.setsockopt(zmq.LINGER, 0)
+        if curve is not None:
+            self.socket.curve_server = True
+            self.socket.curve_publickey, self.socket.curve_secretkey = curve
         # ZeroMQ drops (and disconnects) anything far over the limit before we see it; between the
         # limit and this cap we answer RESOURCE_EXHAUSTED ourselves.
         self.socket.setsockopt(zmq.MAXMSGSIZE, 2 * router.settings.max_message_bytes)
@@ -36,13 +67,7 @@ class ZmqTransport:
         self.address = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         self._loop_task: asyncio.Task | None = None
         self._tasks: set[asyncio.Task] = set()
-        self._handlers = {
-            b"CreateSession": lambda p: self.router.create(p, TRANSPORT),
-            b"Frame": lambda p: self.router.frame(p, session_id_of(pb.FrameUpdate, p), TRANSPORT),
-            b"UpdateStyle": self.router.update_style,
-            b"TakeShot": self.router.take_shot,
-            b"CloseSession": self.router.close,
-        }
+        self._handlers = {name.encode(): (RPCS[name], call) for name, call in self.calls.by_rpc.items()}
 
     def start(self) -> None:
         self._loop_task = asyncio.create_task(self._serve())
@@ -62,27 +87,30 @@ class ZmqTransport:
     async def _handle(self, parts: list[bytes]) -> None:
         identity, body = parts[0], parts[1:]
         envelope = [identity]
-        if len(body) == 3 and body[0] == b"":  # REQ client
+        if len(body) in (3, 4) and body[0] == b"":  # REQ client
             envelope, body = [identity, b""], body[1:]
         t0 = time.perf_counter()
         rpc = body[0] if body else b""
         try:
-            if len(body) != 2:
-                raise invalid(f"expected 2 frames (RPC name, payload), got {len(body)}")
-            name, payload = body
+            if len(body) not in (2, 3):
+                raise invalid(f"expected 3 frames (RPC name, payload, key), got {len(body)}")
+            name, payload = body[:2]
+            authorization = body[2].decode("utf-8", errors="replace") if len(body) == 3 else None
             handler = self._handlers.get(name)
             if handler is None:
                 raise unimplemented(f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, "
                                     "TakeShot, CloseSession")
+            need, call = handler
+            identity = self.guard.authorize(authorization, need.verb, fresh=need.fresh)
             if len(payload) > self.router.settings.max_message_bytes:
                 raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
-            reply = [b"0", await handler(payload)]
+            reply = [b"0", await call(payload, identity)]
         except DirectorError as exc:
             self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
             reply = [str(exc.code.value[0]).encode(), exc.message.encode()]
         except Exception as exc:  # never let one request end the loop; INTERNAL, as over gRPC
             name = rpc[:64].decode(errors="replace")
-            error = internal(exc, name, named_session(name, body[1]) if len(body) == 2 else None, log)
+            error = internal(exc, name, named_session(name, body[1]) if len(body) in (2, 3) else None, log)
             self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
             reply = [str(error.code.value[0]).encode(), error.message.encode()]
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set

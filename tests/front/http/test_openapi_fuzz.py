@@ -1,6 +1,8 @@
 """Every REST route fuzzed from the server's own OpenAPI document (schemathesis) against a real
 `camdirector serve`: no answer is a 5xx, and every answer's status, content type, headers and body
 are ones the document declares, for valid and invalid requests alike, wrong methods included.
+The server runs with authentication on and the fuzzer sends its admin key; schemathesis' own
+authentication checks send requests without it and with a wrong one, which must answer 401.
 
 Left out: schemathesis' `positive_data_acceptance`, which sends the string "null" for optional
 multipart fields (multipart has no null) and integers just past a 2**63 - 1 bound after float
@@ -20,14 +22,14 @@ EXAMPLES = 25
 
 def test_rest_api_conforms_to_its_openapi_document(tmp_path):
     server = ServerProcess("--workers", "0", "--data-dir", str(tmp_path / "data"),
-                           "--max-upload-bytes", str(64 * 1024), transports=("http",))
+                           "--max-upload-bytes", str(64 * 1024), transports=("http",), auth=True)
     try:
         run = subprocess.run(
             [str(Path(sys.executable).with_name("schemathesis")), "run",
              f"http://{server.http}/openapi.json", "--checks", "all",
              "--exclude-checks", "positive_data_acceptance", "--phases", "examples,coverage,fuzzing",
              "--max-examples", str(EXAMPLES), "--seed", str(SEED), "--generation-database", "none",
-             "--request-timeout", "30", "--no-color"],
+             "--request-timeout", "30", "--no-color", "--header", f"Authorization: Bearer {server.admin_key}"],
             capture_output=True, text=True, timeout=600, cwd=tmp_path)
         assert server.alive(), server.log_tail()
     finally:

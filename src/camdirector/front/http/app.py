@@ -1,10 +1,15 @@
 """HTTP API (FastAPI): health, Prometheus metrics, the REST routes of the service, and the
-director's dashboard (static files under /dashboard/ that read those routes)."""
+director's dashboard (static files under /dashboard/ that read those routes).
+
+Every route but `/healthz` (balancers probe it) and the dashboard's static files asks for a key
+(auth.py); `/metrics` wants an admin's."""
 from __future__ import annotations
 
+import secrets
 from pathlib import Path
+from typing import Annotated
 
-from fastapi import FastAPI, Request, Response
+from fastapi import Depends, FastAPI, Request, Response
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.responses import PlainTextResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
@@ -12,6 +17,10 @@ from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 
+from camdirector.access.guard import Identity
+from camdirector.access.roles import Verb
+from camdirector.front.http.auth import CookieSigner, require
+from camdirector.front.http.routes.access import build_access_router
 from camdirector.front.http.routes.monitors import build_view_router
 from camdirector.front.http.routes.sessions import build_session_router
 from camdirector.front.router import SessionRouter
@@ -20,12 +29,16 @@ from camdirector.front.view_hub import ViewHub
 DASHBOARD_DIR = Path(__file__).with_name("dashboard")
 
 
-def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
+def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: bool = False) -> FastAPI:
     """The app; `app.state.views` is its ViewHub, which the server closes before stopping (its
-    live streams would hold the HTTP server open)."""
+    live streams would hold the HTTP server open). The router's guard checks every caller;
+    `secure_cookie`: the login cookie is sent over TLS only."""
     app = FastAPI(title="camdirector", version="0.1.0",
                   description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.")
     app.state.views = ViewHub(router, router.metrics)
+    app.state.guard = guard = router.guard
+    app.state.cookies = CookieSigner(guard.store.shared_secret("dashboard-cookie") if guard.enabled
+                                     else secrets.token_bytes(32))
 
     @app.get("/healthz")
     def healthz() -> dict:
@@ -46,10 +59,11 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
         return await http_exception_handler(request, exc)
 
     @app.get("/metrics", response_class=PlainTextResponse)
-    def metrics() -> Response:
+    def metrics(_: Annotated[Identity, Depends(require(Verb.METRICS_READ))]) -> Response:
         """Prometheus text exposition."""
         return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)
 
+    app.include_router(build_access_router(guard, secure_cookie))
     app.include_router(build_session_router(router))
     app.include_router(build_view_router(app.state.views))
     # The director's dashboard: static files that read the routes above.
@@ -59,4 +73,23 @@ def build_app(router: SessionRouter, transports: dict[str, str]) -> FastAPI:
     def root() -> RedirectResponse:
         return RedirectResponse("/dashboard/")
 
+    _document_key_answers(app)
     return app
+
+
+def _document_key_answers(app: FastAPI) -> None:
+    """Every operation that takes a key (its `security`, auth.py's scheme) documents the 401 and
+    403 it answers, routes installed later included (the document is built on first request)."""
+    build = app.openapi
+
+    def openapi() -> dict:
+        schema = build()  # FastAPI's cached document, made again when routes were added
+        for operations in schema["paths"].values():
+            for operation in operations.values():
+                if operation.get("security"):
+                    responses = operation.setdefault("responses", {})
+                    responses.setdefault("401", {"description": "no key, an unknown one or a revoked one"})
+                    responses.setdefault("403", {"description": "the key's role may not do this"})
+        return schema
+
+    app.openapi = openapi

@@ -29,10 +29,13 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Query, Response
+from fastapi import APIRouter, Depends, Query, Response
 from fastapi.responses import StreamingResponse
 
+from camdirector.access.guard import Identity
+from camdirector.access.roles import Verb
 from camdirector.errors import DirectorError
+from camdirector.front.http.auth import require
 from camdirector.front.http.routes.sessions import http_error
 from camdirector.front.view_hub import MAX_STREAM_FPS, View, ViewHub
 from camdirector.render.snapshots import (
@@ -81,32 +84,35 @@ def _query(shot: str, subjects: str, width: int, height: int | None, image_forma
 def build_view_router(hub: ViewHub) -> APIRouter:
     routes = APIRouter(prefix="/v1/sessions", tags=["monitors"])
 
-    async def picture(session_id: str, query: ViewQuery, max_age_s: float) -> View:
+    async def picture(session_id: str, query: ViewQuery, max_age_s: float, identity: Identity) -> View:
         try:
+            hub.router.check_owner(session_id, identity.tenant)
             return await hub.get(session_id, query, max_age_s)
         except DirectorError as exc:
             raise http_error(exc) from None
 
     @routes.get("/{session_id}/view", response_class=Response, responses={
         200: {"content": {"image/jpeg": {}, "image/png": {}}}, **_ERRORS})
-    async def get_view(session_id: str, shot: Shot = "program", subjects: Subjects = "",
+    async def get_view(session_id: str, identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
+                       shot: Shot = "program", subjects: Subjects = "",
                        width: Width = DEFAULT_WIDTH_PX, height: Height = None,
                        format: Literal["jpeg", "png"] = "jpeg") -> Response:  # noqa: A002 - the query's name
         """What the session's camera (or a candidate's, or the last cut's) sees, rendered now or
         shared with another viewer's render of the same picture made within a tenth of a second."""
-        view = await picture(session_id, _query(shot, subjects, width, height, format), 0.1)
+        view = await picture(session_id, _query(shot, subjects, width, height, format), 0.1, identity)
         return Response(view.image, media_type=view.media_type, headers=_headers(view))
 
     @routes.get("/{session_id}/view.mjpeg", response_class=StreamingResponse, responses={
         200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}": {}}},
         429: {"description": "too many live streams"}, **_ERRORS})
-    async def stream_view(session_id: str, shot: Shot = "program", subjects: Subjects = "",
+    async def stream_view(session_id: str, identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
+                          shot: Shot = "program", subjects: Subjects = "",
                           width: Width = DEFAULT_WIDTH_PX, height: Height = None,
                           fps: Annotated[float, Query(gt=0.0, le=MAX_STREAM_FPS, description="frames a second")]
                           = DEFAULT_FPS) -> StreamingResponse:
         """The view as a live MJPEG stream (module docstring), until the session ends."""
         query = _query(shot, subjects, width, height, "jpeg")
-        first = await picture(session_id, query, 0.5 / fps)   # a 404 before the stream starts
+        first = await picture(session_id, query, 0.5 / fps, identity)   # a 404 before the stream starts
         try:
             hub.check_stream_room()
         except DirectorError as exc:
@@ -124,9 +130,10 @@ def build_view_router(hub: ViewHub) -> APIRouter:
 
     @routes.get("/{session_id}/topview.png", response_class=Response, responses={
         200: {"content": {"image/png": {}}}, 404: _ERRORS[404], 503: _ERRORS[503]})
-    async def get_top_view(session_id: str) -> Response:
+    async def get_top_view(session_id: str,
+                           identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]) -> Response:
         """The session's static world (objects and level) from straight above, made once."""
-        view = await picture(session_id, ViewQuery(shot="top"), math.inf)
+        view = await picture(session_id, ViewQuery(shot="top"), math.inf, identity)
         headers = _headers(view)
         headers["Access-Control-Expose-Headers"] = "X-Camdirector-Bounds-M"
         return Response(view.image, media_type=view.media_type, headers=headers)

@@ -32,11 +32,14 @@ from typing import Annotated, Any
 
 import grpc
 import orjson
-from fastapi import APIRouter, Body, HTTPException, Query, Response
+from fastapi import APIRouter, Body, Depends, HTTPException, Query, Response
 from google.protobuf import json_format
 from pydantic import BaseModel, Field
 
+from camdirector.access.guard import Identity
+from camdirector.access.roles import Verb
 from camdirector.errors import DirectorError
+from camdirector.front.http.auth import require
 from camdirector.front.router import SessionRouter
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.timeline import TIMELINE_FRAMES
@@ -141,22 +144,23 @@ def build_session_router(router: SessionRouter) -> APIRouter:
     routes = APIRouter(prefix="/v1/sessions", tags=["sessions"])
 
     @routes.get("", response_model=SessionList)
-    async def list_sessions() -> dict:
-        """Open sessions: worker, frames answered, streams attached, idle time."""
+    async def list_sessions(identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]) -> dict:
+        """The tenant's open sessions: worker, frames answered, streams attached, idle time."""
         # async: run on the event loop that adds and removes sessions, not beside it in a thread
-        return {"sessions": router.describe()}
+        return {"sessions": router.describe(identity.tenant)}
 
     @routes.get("/{session_id}", response_model=SessionDetail,
                 responses={404: {"description": "no such session"}, 503: _WORKER_LOST})
     async def get_session(
         session_id: str,
+        identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
         last: Annotated[int, Query(ge=1, le=TIMELINE_FRAMES, description="newest frames wanted")] = TIMELINE_FRAMES,
         after_frame: Annotated[int | None, Query(ge=0, le=2**63 - 1, description=(
             "only frames numbered above this (a live view asks for what it has not seen)"))] = None,
     ) -> Response:
         """One session: summary, style, and its newest frames with why the camera moved."""
         try:
-            detail = await router.timeline(session_id, last, after_frame)
+            detail = await router.timeline(session_id, last, after_frame, identity.tenant)
         except DirectorError as exc:
             raise http_error(exc) from None
         # Sent as is: validating 600 frames against the model would hold the front's event loop,
@@ -166,11 +170,12 @@ def build_session_router(router: SessionRouter) -> APIRouter:
     @routes.get("/{session_id}/amap.png", response_class=Response, responses={
         200: {"content": {"image/png": {}}}, 404: {"description": "no such session"},
         409: {"description": "the session's style builds no anticipation map"}, 503: _WORKER_LOST})
-    async def get_anticipation_map(session_id: str) -> Response:
+    async def get_anticipation_map(session_id: str,
+                                   identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]) -> Response:
         """The occlusion anticipation map around the camera now (map_view.py): rows theta,
         columns phi, white visible to red occluded, the camera crossed in blue."""
         try:
-            png = await router.anticipation_png(session_id)
+            png = await router.anticipation_png(session_id, identity.tenant)
         except DirectorError as exc:
             raise http_error(exc) from None
         return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
@@ -182,6 +187,7 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         422: {"description": "not a Style, or a value out of range"}, 503: _WORKER_LOST})
     async def put_style(
         session_id: str,
+        identity: Annotated[Identity, Depends(require(Verb.SESSION_STYLE))],
         style: Annotated[dict[str, Any], Body(description="camdirector.v1.Style, protobuf JSON (e.g. "
                                                            '{"visibility": "RAYCAST", "preferredPhiDeg": 40})')],
     ) -> dict:
@@ -191,9 +197,11 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         except json_format.ParseError as exc:
             raise HTTPException(status_code=422, detail=f"not a camdirector.v1.Style: {exc}") from None
         try:
-            await router.update_style(pb.UpdateStyleRequest(session_id=session_id, style=msg).SerializeToString())
+            await router.update_style(pb.UpdateStyleRequest(session_id=session_id, style=msg).SerializeToString(),
+                                      identity.tenant)
         except DirectorError as exc:
             raise http_error(exc) from None
+        router.guard.audit(identity, "style", session_id, {"style": style, "via": "http"})
         return {"session_id": session_id, "style": json_format.MessageToDict(msg)}
 
     @routes.post("/{session_id}/take", response_model=ShotTaken, responses={
@@ -203,6 +211,7 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         422: {"description": "not a TakeShotRequest, or a kind that does not fit the subjects"}, 503: _WORKER_LOST})
     async def take_shot(
         session_id: str,
+        identity: Annotated[Identity, Depends(require(Verb.SESSION_TAKE))],
         take: Annotated[dict[str, Any], Body(description="camdirector.v1.TakeShotRequest without session_id, "
                                                           'protobuf JSON (e.g. {"subject_ids": ["p1", "p6"], '
                                                           '"kind": "SHOT_DUEL"} or {"release": true})')],
@@ -216,9 +225,12 @@ def build_session_router(router: SessionRouter) -> APIRouter:
             raise HTTPException(status_code=422, detail=f"not a camdirector.v1.TakeShotRequest: {exc}") from None
         msg.session_id = session_id
         try:
-            reply = pb.TakeShotResponse.FromString(await router.take_shot(msg.SerializeToString()))
+            reply = pb.TakeShotResponse.FromString(await router.take_shot(msg.SerializeToString(), identity.tenant))
         except DirectorError as exc:
             raise http_error(exc) from None
+        router.guard.audit(identity, "release" if msg.release else "take", session_id,
+                           {"via": "http"} if msg.release else
+                           {"via": "http", "subject_ids": list(msg.subject_ids), "kind": pb.ShotKind.Name(msg.kind)})
         shot = (json_format.MessageToDict(reply.shot, preserving_proto_field_name=True,
                                           always_print_fields_with_no_presence=True)
                 if reply.HasField("shot") else None)

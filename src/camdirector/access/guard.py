@@ -1,0 +1,168 @@
+"""Who is calling, and may they: the check every transport makes (gRPC metadata, the ZeroMQ
+envelope's key frame, HTTP's Authorization header or the dashboard's cookie).
+
+    identify(authorization, fresh)  -> Identity, or UNAUTHENTICATED (no key, unknown, revoked)
+    check(identity, verb)           -> PERMISSION_DENIED when the key's role lacks the verb
+
+A streaming frame asks with `fresh=False`: its key is checked against this node's cache (a dict
+lookup and a SHA-256 of the secret, about 2 us), which a background poll of the records database
+keeps current: a key revoked on any node stops streaming frames here within `poll_s`. Every
+other call (`fresh=True`) reads the key's row from the records database, so a revocation through
+any node holds at once for them.
+
+With authentication off (`--no-auth`) every caller is `OPEN`: tenant `default`, role `admin`.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import grpc
+
+from camdirector.access.keys import AccessStore, ApiKey, secret_matches, split_key
+from camdirector.access.roles import Verb, allows
+from camdirector.errors import DirectorError
+
+log = logging.getLogger("camdirector.access")
+
+REVOCATION_POLL_S = 0.25  # how often each node looks for keys revoked elsewhere, s
+CLOCK_SKEW_S = 30.0       # revocations are read this far back from the last poll (nodes' clocks differ)
+
+
+@dataclass(frozen=True)
+class Identity:
+    key_id: str | None   # None when authentication is off
+    role: str
+    tenant: str
+
+    def label(self) -> str:
+        return f"key {self.key_id}" if self.key_id else "no key (authentication off)"
+
+
+OPEN = Identity(None, "admin", "default")
+
+
+def unauthenticated(message: str) -> DirectorError:
+    return DirectorError(grpc.StatusCode.UNAUTHENTICATED, message)
+
+
+def denied(message: str) -> DirectorError:
+    return DirectorError(grpc.StatusCode.PERMISSION_DENIED, message)
+
+
+def bearer(authorization: str | None) -> str | None:
+    """The key of an `Authorization: Bearer KEY` value, None when there is none."""
+    if not authorization:
+        return None
+    scheme, _, token = authorization.strip().partition(" ")
+    return token.strip() if scheme.lower() == "bearer" and token.strip() else None
+
+
+class Guard:
+    """`store` None: authentication off. `clock`: wall time, s (revocation times are wall times)."""
+
+    def __init__(self, store: AccessStore | None, *, enabled: bool = True, poll_s: float = REVOCATION_POLL_S,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.store = store
+        self.enabled = enabled and store is not None
+        self.poll_s = poll_s
+        self.clock = clock
+        self._cache: dict[str, tuple[ApiKey, str]] = {}
+        self._polled_s = clock()
+        self._watcher: asyncio.Task | None = None
+
+    # -- identity
+    def identify(self, authorization: str | None, *, fresh: bool = True) -> Identity:
+        if not self.enabled:
+            return OPEN
+        token = bearer(authorization)
+        if token is None:
+            raise unauthenticated("no key: send 'authorization: Bearer KEY' (docs/security.md)")
+        parts = split_key(token)
+        if parts is None:
+            raise unauthenticated("the key is not a camdirector key (cdk_...)")
+        key_id, secret = parts
+        found = None if fresh else self._cache.get(key_id)
+        if found is None:
+            found = self.store.lookup(key_id)
+            if found is None:
+                raise unauthenticated("unknown key")
+            self._cache[key_id] = found
+        record, stored_hash = found
+        if not secret_matches(secret, stored_hash):
+            raise unauthenticated("unknown key")
+        if record.revoked:
+            raise unauthenticated(f"key {key_id} was revoked")
+        return Identity(key_id, record.role, record.tenant)
+
+    def identify_key_id(self, key_id: str) -> Identity:
+        """The identity of a key named by id alone, read fresh (a signed login cookie, whose
+        signature stands for the secret shown at login)."""
+        found = self.store.lookup(key_id)
+        if found is None or found[0].revoked:
+            raise unauthenticated("the key of this login was revoked: log in with another key")
+        self._cache[key_id] = found
+        return Identity(key_id, found[0].role, found[0].tenant)
+
+    def still_valid(self, identity: Identity) -> None:
+        """UNAUTHENTICATED when the identity's key was revoked since (a stream's later messages)."""
+        if identity.key_id is None:
+            return
+        found = self._cache.get(identity.key_id)
+        if found is not None and found[0].revoked:
+            raise unauthenticated(f"key {identity.key_id} was revoked")
+
+    @staticmethod
+    def check(identity: Identity, verb: Verb) -> None:
+        if not allows(identity.role, verb):
+            raise denied(f"a key of role {identity.role!r} may not {verb.value} (docs/security.md)")
+
+    def authorize(self, authorization: str | None, verb: Verb, *, fresh: bool = True) -> Identity:
+        identity = self.identify(authorization, fresh=fresh)
+        self.check(identity, verb)
+        return identity
+
+    # -- revocation
+    def forget(self, key_id: str) -> None:
+        """A key revoked through this node: its next use reads the records database."""
+        self._cache.pop(key_id, None)
+
+    def poll_revocations(self) -> list[str]:
+        """Marks keys revoked since the last poll (on any node) in the cache; their ids."""
+        now = self.clock()
+        revoked = self.store.revoked_since(self._polled_s - CLOCK_SKEW_S)
+        self._polled_s = now
+        hit = []
+        for key_id, _ in revoked:
+            if key_id in self._cache and not self._cache[key_id][0].revoked:
+                self._cache.pop(key_id)
+                found = self.store.lookup(key_id)
+                if found is not None:
+                    self._cache[key_id] = found
+                hit.append(key_id)
+        return hit
+
+    async def _watch(self) -> None:
+        while True:
+            await asyncio.sleep(self.poll_s)
+            try:
+                for key_id in await asyncio.to_thread(self.poll_revocations):
+                    log.info("key %s revoked: refused from now on", key_id)
+            except Exception as exc:  # the database away for a moment: keep the last known keys
+                log.warning("polling revoked keys: %s", exc)
+
+    def start(self) -> None:
+        if self.enabled:
+            self._watcher = asyncio.create_task(self._watch())
+
+    def stop(self) -> None:
+        if self._watcher is not None:
+            self._watcher.cancel()
+
+    # -- the audit trail (module docstring of keys.py)
+    def audit(self, identity: Identity, action: str, session_id: str | None = None, detail: dict | None = None) -> None:
+        if self.store is not None:
+            self.store.audit(identity.tenant, identity.key_id, action, session_id, detail)

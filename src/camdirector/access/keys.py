@@ -1,0 +1,305 @@
+"""API keys, the owners of sessions, and the audit trail: one interface (`AccessStore`), two
+implementations (tests/access/test_keys.py runs every test on both).
+
+    SqliteAccessStore     `<data_dir>/access.sqlite3` (WAL): the single node's records
+    PostgresAccessStore   tables in the cluster's records database (the nodes' `--job-store`), so
+                          every node knows every key, every session's tenant and one audit trail
+
+A key reads `cdk_<id>_<secret>`: the id (12 hex digits) names the row, the secret (32 random bytes,
+URL-safe base64) is stored only as its SHA-256. A salted slow hash (bcrypt, argon2) protects
+passwords people choose; a 256-bit random secret cannot be guessed from its hash, and a fast one
+keeps checking a streaming frame's key within its budget (docs/security.md).
+
+Revocation sets `revoked_s`; `revoked_since(t)` is what each node's guard polls (access/guard.py).
+"""
+from __future__ import annotations
+
+import base64
+import contextlib
+import hashlib
+import hmac
+import json
+import os
+import secrets
+import sqlite3
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from camdirector.access.roles import ROLES, check_tenant
+from camdirector.infra.postgres import PostgresDatabase
+
+KEY_PREFIX = "cdk_"
+ADMIN_KEY_FILE = "admin.key"
+
+
+class AccessUnavailable(RuntimeError):
+    """The records database holding the keys cannot be reached."""
+
+
+class KeyNotFound(KeyError):
+    pass
+
+
+@dataclass(frozen=True)
+class ApiKey:
+    """One key's record (never its secret). Times are seconds since the epoch."""
+
+    key_id: str
+    name: str
+    role: str
+    tenant: str
+    created_s: float
+    revoked_s: float | None = None
+
+    @property
+    def revoked(self) -> bool:
+        return self.revoked_s is not None
+
+    def as_public(self) -> dict:
+        return {"id": self.key_id, "name": self.name, "role": self.role, "tenant": self.tenant,
+                "created_s": self.created_s, "revoked_s": self.revoked_s}
+
+
+def split_key(token: str) -> tuple[str, str] | None:
+    """(id, secret) of a key's text, None when it is not shaped like one."""
+    if not token.startswith(KEY_PREFIX):
+        return None
+    key_id, sep, secret = token[len(KEY_PREFIX):].partition("_")
+    if not sep or len(key_id) != 12 or not secret or len(secret) > 128:
+        return None
+    return key_id, secret
+
+
+def secret_hash(secret: str) -> str:
+    return hashlib.sha256(secret.encode()).hexdigest()
+
+
+def secret_matches(secret: str, stored_hash: str) -> bool:
+    return hmac.compare_digest(secret_hash(secret), stored_hash)
+
+
+_COLUMNS = "id, name, role, tenant, created_s, revoked_s"
+
+_SQLITE_SCHEMA = """
+CREATE TABLE IF NOT EXISTS api_keys (
+    id TEXT PRIMARY KEY, name TEXT NOT NULL, role TEXT NOT NULL, tenant TEXT NOT NULL,
+    secret_sha256 TEXT NOT NULL, created_s REAL NOT NULL, revoked_s REAL
+);
+CREATE TABLE IF NOT EXISTS session_owners (
+    session_id TEXT PRIMARY KEY, tenant TEXT NOT NULL, created_s REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS audit (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT, at_s REAL NOT NULL, tenant TEXT NOT NULL, key_id TEXT,
+    action TEXT NOT NULL, session_id TEXT, detail TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS audit_tenant_seq ON audit (tenant, seq);
+CREATE TABLE IF NOT EXISTS access_secrets (name TEXT PRIMARY KEY, value TEXT NOT NULL);
+"""
+
+_POSTGRES_SCHEMA = (
+    """CREATE TABLE IF NOT EXISTS api_keys (
+        id TEXT PRIMARY KEY, name TEXT NOT NULL, role TEXT NOT NULL, tenant TEXT NOT NULL,
+        secret_sha256 TEXT NOT NULL, created_s DOUBLE PRECISION NOT NULL, revoked_s DOUBLE PRECISION)""",
+    """CREATE TABLE IF NOT EXISTS session_owners (
+        session_id TEXT PRIMARY KEY, tenant TEXT NOT NULL, created_s DOUBLE PRECISION NOT NULL)""",
+    """CREATE TABLE IF NOT EXISTS audit (
+        seq BIGSERIAL PRIMARY KEY, at_s DOUBLE PRECISION NOT NULL, tenant TEXT NOT NULL, key_id TEXT,
+        action TEXT NOT NULL, session_id TEXT, detail TEXT NOT NULL)""",
+    "CREATE INDEX IF NOT EXISTS audit_tenant_seq ON audit (tenant, seq)",
+    "CREATE TABLE IF NOT EXISTS access_secrets (name TEXT PRIMARY KEY, value TEXT NOT NULL)",
+)
+_WRITE_LOCK_KEY = 0x63616D6B  # "camk": the access tables' advisory write lock (records.py has "camd")
+
+
+def _key(row) -> ApiKey:
+    return ApiKey(*row)
+
+
+class AccessStore:
+    """Keys, session owners, audit. Thread-safe; every call one short transaction. Subclasses
+    give `_tx()`, `_read()` and `close()` as jobs/records.py's stores do."""
+
+    where: str
+
+    def _tx(self) -> contextlib.AbstractContextManager:
+        raise NotImplementedError
+
+    def _read(self) -> contextlib.AbstractContextManager:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    # -- keys
+    def create_key(self, role: str, tenant: str = "default", name: str = "") -> tuple[ApiKey, str]:
+        """A new key: its record and its text (shown once, never stored)."""
+        if role not in ROLES:
+            raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
+        check_tenant(tenant)
+        if len(name) > 200:
+            raise ValueError("a key's name is at most 200 characters")
+        key_id, secret = secrets.token_hex(6), base64.urlsafe_b64encode(secrets.token_bytes(32)).decode().rstrip("=")
+        record = ApiKey(key_id, name, role, tenant, time.time())
+        with self._tx() as db:
+            db.execute("INSERT INTO api_keys (id, name, role, tenant, secret_sha256, created_s) VALUES (?, ?, ?, ?, ?, ?)",
+                       (key_id, name, role, tenant, secret_hash(secret), record.created_s))
+        return record, f"{KEY_PREFIX}{key_id}_{secret}"
+
+    def lookup(self, key_id: str) -> tuple[ApiKey, str] | None:
+        """The key's record and stored secret hash, None for an unknown id."""
+        with self._read() as db:
+            row = db.execute(f"SELECT {_COLUMNS}, secret_sha256 FROM api_keys WHERE id = ?", (key_id,)).fetchone()
+        return (_key(row[:6]), row[6]) if row is not None else None
+
+    def list_keys(self, tenant: str | None = None) -> list[ApiKey]:
+        with self._read() as db:
+            if tenant is None:
+                rows = db.execute(f"SELECT {_COLUMNS} FROM api_keys ORDER BY created_s, id").fetchall()
+            else:
+                rows = db.execute(f"SELECT {_COLUMNS} FROM api_keys WHERE tenant = ? ORDER BY created_s, id",
+                                  (tenant,)).fetchall()
+        return [_key(r) for r in rows]
+
+    def revoke(self, key_id: str, tenant: str | None = None) -> ApiKey:
+        """Revokes the key (again is a no-op); KeyNotFound for an unknown id or, with `tenant`,
+        another tenant's key."""
+        with self._tx() as db:
+            row = db.execute(f"SELECT {_COLUMNS} FROM api_keys WHERE id = ?", (key_id,)).fetchone()
+            if row is None or (tenant is not None and row[3] != tenant):
+                raise KeyNotFound(key_id)
+            if row[5] is None:
+                db.execute("UPDATE api_keys SET revoked_s = ? WHERE id = ?", (time.time(), key_id))
+            row = db.execute(f"SELECT {_COLUMNS} FROM api_keys WHERE id = ?", (key_id,)).fetchone()
+        return _key(row)
+
+    def revoked_since(self, since_s: float) -> list[tuple[str, float]]:
+        """(id, revoked_s) of keys revoked at or after `since_s`."""
+        with self._read() as db:
+            return [tuple(r) for r in db.execute("SELECT id, revoked_s FROM api_keys WHERE revoked_s >= ?",
+                                                 (since_s,)).fetchall()]
+
+    def has_active_admin(self) -> bool:
+        with self._read() as db:
+            return db.execute("SELECT 1 FROM api_keys WHERE role = 'admin' AND revoked_s IS NULL LIMIT 1"
+                              ).fetchone() is not None
+
+    # -- session owners
+    def set_session_owner(self, session_id: str, tenant: str) -> None:
+        with self._tx() as db:
+            db.execute("DELETE FROM session_owners WHERE session_id = ?", (session_id,))
+            db.execute("INSERT INTO session_owners (session_id, tenant, created_s) VALUES (?, ?, ?)",
+                       (session_id, tenant, time.time()))
+
+    def session_owner(self, session_id: str) -> str | None:
+        with self._read() as db:
+            row = db.execute("SELECT tenant FROM session_owners WHERE session_id = ?", (session_id,)).fetchone()
+        return row[0] if row is not None else None
+
+    def forget_session(self, session_id: str) -> None:
+        with self._tx() as db:
+            db.execute("DELETE FROM session_owners WHERE session_id = ?", (session_id,))
+
+    # -- audit
+    def audit(self, tenant: str, key_id: str | None, action: str, session_id: str | None = None,
+              detail: dict | None = None) -> None:
+        with self._tx() as db:
+            db.execute("INSERT INTO audit (at_s, tenant, key_id, action, session_id, detail) VALUES (?, ?, ?, ?, ?, ?)",
+                       (time.time(), tenant, key_id, action, session_id, json.dumps(detail or {}, sort_keys=True)))
+
+    def audit_trail(self, tenant: str, after_seq: int = 0, limit: int = 500) -> list[dict]:
+        with self._read() as db:
+            rows = db.execute("SELECT seq, at_s, key_id, action, session_id, detail FROM audit "
+                              "WHERE tenant = ? AND seq > ? ORDER BY seq LIMIT ?", (tenant, after_seq, limit)).fetchall()
+        return [{"seq": r[0], "at_s": r[1], "key_id": r[2], "action": r[3], "session_id": r[4],
+                 "detail": json.loads(r[5])} for r in rows]
+
+    # -- secrets the nodes share (the dashboard's cookie signing key)
+    def shared_secret(self, name: str) -> bytes:
+        """The named random secret, made by the first node that asks."""
+        with self._tx() as db:
+            row = db.execute("SELECT value FROM access_secrets WHERE name = ?", (name,)).fetchone()
+            if row is None:
+                value = secrets.token_hex(32)
+                db.execute("INSERT INTO access_secrets (name, value) VALUES (?, ?)", (name, value))
+                return bytes.fromhex(value)
+        return bytes.fromhex(row[0])
+
+
+class SqliteAccessStore(AccessStore):
+    DB_NAME = "access.sqlite3"
+
+    def __init__(self, data_dir: str | Path) -> None:
+        root = Path(data_dir)
+        root.mkdir(parents=True, exist_ok=True)
+        self.where = str(root / self.DB_NAME)
+        self._lock = threading.Lock()
+        self._db = sqlite3.connect(self.where, timeout=30.0, isolation_level=None, check_same_thread=False)
+        os.chmod(self.where, 0o600)  # key hashes and the cookie secret: the node's user only
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=NORMAL")
+        self._db.executescript(_SQLITE_SCHEMA)
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    @contextlib.contextmanager
+    def _tx(self) -> Iterator[sqlite3.Connection]:
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                yield self._db
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+            self._db.execute("COMMIT")
+
+    @contextlib.contextmanager
+    def _read(self) -> Iterator[sqlite3.Connection]:
+        with self._lock:
+            yield self._db
+
+
+class PostgresAccessStore(AccessStore):
+    def __init__(self, url: str) -> None:
+        self._db = PostgresDatabase(url, "access store", AccessUnavailable)
+        self.where = "PostgreSQL"
+        with self._tx() as db:
+            for statement in _POSTGRES_SCHEMA:
+                db.execute(statement)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def _tx(self):
+        return self._db.transaction("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK_KEY,))
+
+    def _read(self):
+        return self._db.read()
+
+
+def open_access_store(records_url: str, data_dir: str | Path) -> AccessStore:
+    """The store `records_url` names (the nodes' `--job-store`): "" is SQLite in `data_dir`."""
+    if not records_url:
+        return SqliteAccessStore(data_dir)
+    if records_url.startswith(("postgresql://", "postgres://")):
+        return PostgresAccessStore(records_url)
+    raise ValueError(f"records database {records_url!r}: expected empty (SQLite) or a postgresql:// URL")
+
+
+def ensure_admin_key(store: AccessStore, data_dir: str | Path) -> Path | None:
+    """With no active admin key anywhere, makes one and writes it to DIR/admin.key (mode 0600);
+    returns that path, None when an admin key existed already."""
+    if store.has_active_admin():
+        return None
+    _, text = store.create_key("admin", "default", "first admin (made at start)")
+    path = Path(data_dir) / ADMIN_KEY_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(text + "\n")
+    os.chmod(path, 0o600)  # an older file keeps its mode through O_TRUNC
+    return path

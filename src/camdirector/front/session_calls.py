@@ -1,0 +1,79 @@
+"""The Director service's calls for one authenticated caller, the same over gRPC and ZeroMQ: which
+verb each RPC needs (access/roles.py), the caller's tenant passed to the router, and the audit
+trail of style changes, takes and releases.
+
+    RPC            verb             key checked against
+    CreateSession  session.create   the records database
+    Frame          session.stream   this node's cache (access/guard.py)
+    StreamFrames   session.stream   this node's cache, on every message
+    UpdateStyle    session.style    the records database
+    TakeShot       session.take     the records database
+    CloseSession   session.close    the records database
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from google.protobuf import json_format
+
+from camdirector.access.guard import Guard, Identity
+from camdirector.access.roles import Verb
+from camdirector.front.router import SessionRouter, session_id_of
+from camdirector.v1 import director_pb2 as pb
+
+
+@dataclass(frozen=True)
+class Rpc:
+    verb: Verb
+    fresh: bool   # read the key from the records database (False: this node's cache)
+
+
+RPCS = {
+    "CreateSession": Rpc(Verb.SESSION_CREATE, True),
+    "Frame": Rpc(Verb.SESSION_STREAM, False),
+    "StreamFrames": Rpc(Verb.SESSION_STREAM, False),
+    "UpdateStyle": Rpc(Verb.SESSION_STYLE, True),
+    "TakeShot": Rpc(Verb.SESSION_TAKE, True),
+    "CloseSession": Rpc(Verb.SESSION_CLOSE, True),
+}
+
+
+def _as_dict(message) -> dict:
+    return json_format.MessageToDict(message, preserving_proto_field_name=True)
+
+
+class SessionCalls:
+    """Each method takes the serialized request and the caller, and returns the serialized answer."""
+
+    def __init__(self, router: SessionRouter, guard: Guard, transport: str) -> None:
+        self.router = router
+        self.guard = guard
+        self.transport = transport
+        self.by_rpc = {"CreateSession": self.create, "Frame": self.frame, "UpdateStyle": self.update_style,
+                       "TakeShot": self.take_shot, "CloseSession": self.close}
+
+    async def create(self, payload: bytes, identity: Identity) -> bytes:
+        return await self.router.create(payload, self.transport, identity.tenant)
+
+    async def frame(self, payload: bytes, identity: Identity) -> bytes:
+        return await self.router.frame(payload, session_id_of(pb.FrameUpdate, payload), self.transport,
+                                       identity.tenant)
+
+    async def update_style(self, payload: bytes, identity: Identity) -> bytes:
+        reply = await self.router.update_style(payload, identity.tenant)
+        request = pb.UpdateStyleRequest.FromString(payload)  # the worker took it: it parses
+        self.guard.audit(identity, "style", request.session_id, {"style": _as_dict(request.style),
+                                                                 "via": self.transport})
+        return reply
+
+    async def take_shot(self, payload: bytes, identity: Identity) -> bytes:
+        reply = await self.router.take_shot(payload, identity.tenant)
+        request = pb.TakeShotRequest.FromString(payload)
+        detail = {"via": self.transport}
+        if not request.release:
+            detail.update(subject_ids=list(request.subject_ids), kind=pb.ShotKind.Name(request.kind))
+        self.guard.audit(identity, "release" if request.release else "take", request.session_id, detail)
+        return reply
+
+    async def close(self, payload: bytes, identity: Identity) -> bytes:
+        return await self.router.close(payload, identity.tenant)
