@@ -53,6 +53,11 @@ class ServerSettings:
     tls_cert: str = ""                       # PEM certificate chain: gRPC and HTTP over TLS ("" plaintext)
     tls_key: str = ""                        # its PEM private key
     insecure: bool = False                   # allow plaintext on a non-loopback address (behind a trusted proxy)
+    # Each tenant's share (every tenant the same); beyond it RESOURCE_EXHAUSTED / HTTP 429 with a message.
+    tenant_max_sessions: int = 64            # sessions a tenant has open on this node. [1, 100000]
+    tenant_max_fps: float = 240.0            # frames a second into one session, over any 1 s. [1, 10000]
+    tenant_max_upload_bytes: int = 4 * 1024 ** 3  # bytes of uploads a tenant's jobs hold at once (inputs kept with jobs). [1 KiB, 1 TiB]
+    tenant_max_queued_jobs: int = 16         # jobs a tenant has queued or running at once. [1, 100000]
 
     def __post_init__(self):
         checks = [
@@ -74,6 +79,10 @@ class ServerSettings:
             (not self.job_queue or self.job_queue.startswith("redis://"),
              "job_queue must be empty (this process's runner) or a redis:// URL"),
             (bool(self.tls_cert) == bool(self.tls_key), "tls_cert and tls_key go together"),
+            (1 <= self.tenant_max_sessions <= 100_000, "tenant_max_sessions must be in [1, 100000]"),
+            (1 <= self.tenant_max_fps <= 10_000, "tenant_max_fps must be in [1, 10000]"),
+            (1024 <= self.tenant_max_upload_bytes <= 1 << 40, "tenant_max_upload_bytes must be in [1 KiB, 1 TiB]"),
+            (1 <= self.tenant_max_queued_jobs <= 100_000, "tenant_max_queued_jobs must be in [1, 100000]"),
         ]
         for ok, message in checks:
             if not ok:
