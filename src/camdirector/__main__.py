@@ -49,6 +49,13 @@ def _serve_parser(sub) -> None:
     p.add_argument("--tls-key", dest="tls_key", help="the certificate's PEM private key")
     p.add_argument("--insecure", dest="insecure", action="store_const", const=True,
                    help="allow plaintext on a non-loopback address (TLS ends at a proxy you trust)")
+    p.add_argument("--tenant-max-sessions", dest="tenant_max_sessions", type=int,
+                   help="sessions one tenant may have open on this node")
+    p.add_argument("--tenant-max-fps", dest="tenant_max_fps", type=float, help="frames a second into one session")
+    p.add_argument("--tenant-max-upload-bytes", dest="tenant_max_upload_bytes", type=int,
+                   help="bytes of uploads one tenant's jobs may hold at once")
+    p.add_argument("--tenant-max-queued-jobs", dest="tenant_max_queued_jobs", type=int,
+                   help="jobs one tenant may have queued or running at once")
 
 
 def _job_worker_parser(sub) -> None:

@@ -24,19 +24,27 @@ class RpcFailed(Exception):
 
 
 class GrpcRaw:
-    def __init__(self, address: str):
-        self.channel = grpc.insecure_channel(address, options=[("grpc.max_send_message_length", 256 << 20)])
+    """`key`: sent as `authorization: Bearer KEY` metadata; `ca_file`: TLS trusting that CA."""
+
+    def __init__(self, address: str, key: str | None = None, ca_file=None):
+        options = [("grpc.max_send_message_length", 256 << 20)]
+        if ca_file is not None:
+            credentials = grpc.ssl_channel_credentials(open(ca_file, "rb").read())
+            self.channel = grpc.secure_channel(address, credentials, options=options)
+        else:
+            self.channel = grpc.insecure_channel(address, options=options)
         self.stub = pbg.DirectorStub(self.channel)
+        self.metadata = [("authorization", f"Bearer {key}")] if key else None
 
     def call(self, rpc: str, request):
         try:
-            return getattr(self.stub, rpc)(request, timeout=30)
+            return getattr(self.stub, rpc)(request, timeout=30, metadata=self.metadata)
         except grpc.RpcError as exc:
             raise RpcFailed(exc.code(), exc.details()) from None
 
     def stream(self, frames):
         try:
-            return list(self.stub.StreamFrames(iter(frames), timeout=60))
+            return list(self.stub.StreamFrames(iter(frames), timeout=60, metadata=self.metadata))
         except grpc.RpcError as exc:
             raise RpcFailed(exc.code(), exc.details()) from None
 
@@ -45,11 +53,17 @@ class GrpcRaw:
 
 
 class ZmqRaw:
-    def __init__(self, address: str):
+    """`key`: sent as the request's third frame; `server_key`: the server's CURVE public key."""
+
+    def __init__(self, address: str, key: str | None = None, server_key: str | None = None):
         self.ctx = zmq.Context.instance()
         self.sock = self.ctx.socket(zmq.DEALER)
         self.sock.setsockopt(zmq.LINGER, 0)
         self.sock.setsockopt(zmq.RCVTIMEO, 30000)
+        if server_key is not None:
+            self.sock.curve_serverkey = server_key.encode()
+            self.sock.curve_publickey, self.sock.curve_secretkey = zmq.curve_keypair()
+        self.key_frame = [f"Bearer {key}".encode()] if key else []
         self.sock.connect(address)
 
     def send_raw(self, frames: list[bytes]) -> list[bytes]:
@@ -57,7 +71,7 @@ class ZmqRaw:
         return self.sock.recv_multipart()
 
     def call(self, rpc: str, request):
-        code, body = self.send_raw([rpc.encode(), request.SerializeToString()])
+        code, body = self.send_raw([rpc.encode(), request.SerializeToString(), *self.key_frame])
         if code != b"0":
             raise RpcFailed(grpc.StatusCode[_name(int(code))], body.decode())
         return REPLY_TYPES[rpc].FromString(body)

@@ -126,9 +126,15 @@ class Guard:
         return identity
 
     # -- revocation
-    def forget(self, key_id: str) -> None:
-        """A key revoked through this node: its next use reads the records database."""
-        self._cache.pop(key_id, None)
+    def refresh(self, key_id: str) -> None:
+        """A key revoked through this node: its cached record read again, so that streams using
+        it end at their next message."""
+        if key_id in self._cache:
+            found = self.store.lookup(key_id)
+            if found is None:
+                self._cache.pop(key_id)
+            else:
+                self._cache[key_id] = found
 
     def poll_revocations(self) -> list[str]:
         """Marks keys revoked since the last poll (on any node) in the cache; their ids."""
@@ -138,10 +144,7 @@ class Guard:
         hit = []
         for key_id, _ in revoked:
             if key_id in self._cache and not self._cache[key_id][0].revoked:
-                self._cache.pop(key_id)
-                found = self.store.lookup(key_id)
-                if found is not None:
-                    self._cache[key_id] = found
+                self.refresh(key_id)
                 hit.append(key_id)
         return hit
 

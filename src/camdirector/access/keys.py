@@ -118,6 +118,19 @@ def _key(row) -> ApiKey:
     return ApiKey(*row)
 
 
+def _insert_key(db, role: str, tenant: str, name: str) -> tuple[ApiKey, str]:
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
+    check_tenant(tenant)
+    if len(name) > 200:
+        raise ValueError("a key's name is at most 200 characters")
+    key_id, secret = secrets.token_hex(6), base64.urlsafe_b64encode(secrets.token_bytes(32)).decode().rstrip("=")
+    record = ApiKey(key_id, name, role, tenant, time.time())
+    db.execute("INSERT INTO api_keys (id, name, role, tenant, secret_sha256, created_s) VALUES (?, ?, ?, ?, ?, ?)",
+               (key_id, name, role, tenant, secret_hash(secret), record.created_s))
+    return record, f"{KEY_PREFIX}{key_id}_{secret}"
+
+
 class AccessStore:
     """Keys, session owners, audit. Thread-safe; every call one short transaction. Subclasses
     give `_tx()`, `_read()` and `close()` as jobs/records.py's stores do."""
@@ -136,17 +149,16 @@ class AccessStore:
     # -- keys
     def create_key(self, role: str, tenant: str = "default", name: str = "") -> tuple[ApiKey, str]:
         """A new key: its record and its text (shown once, never stored)."""
-        if role not in ROLES:
-            raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
-        check_tenant(tenant)
-        if len(name) > 200:
-            raise ValueError("a key's name is at most 200 characters")
-        key_id, secret = secrets.token_hex(6), base64.urlsafe_b64encode(secrets.token_bytes(32)).decode().rstrip("=")
-        record = ApiKey(key_id, name, role, tenant, time.time())
         with self._tx() as db:
-            db.execute("INSERT INTO api_keys (id, name, role, tenant, secret_sha256, created_s) VALUES (?, ?, ?, ?, ?, ?)",
-                       (key_id, name, role, tenant, secret_hash(secret), record.created_s))
-        return record, f"{KEY_PREFIX}{key_id}_{secret}"
+            return _insert_key(db, role, tenant, name)
+
+    def create_first_admin(self) -> str | None:
+        """An admin key of tenant `default` when no active admin key exists (its text), else None;
+        one transaction, so nodes starting together make one."""
+        with self._tx() as db:
+            if db.execute("SELECT 1 FROM api_keys WHERE role = 'admin' AND revoked_s IS NULL LIMIT 1").fetchone():
+                return None
+            return _insert_key(db, "admin", "default", "first admin (made at start)")[1]
 
     def lookup(self, key_id: str) -> tuple[ApiKey, str] | None:
         """The key's record and stored secret hash, None for an unknown id."""
@@ -180,11 +192,6 @@ class AccessStore:
         with self._read() as db:
             return [tuple(r) for r in db.execute("SELECT id, revoked_s FROM api_keys WHERE revoked_s >= ?",
                                                  (since_s,)).fetchall()]
-
-    def has_active_admin(self) -> bool:
-        with self._read() as db:
-            return db.execute("SELECT 1 FROM api_keys WHERE role = 'admin' AND revoked_s IS NULL LIMIT 1"
-                              ).fetchone() is not None
 
     # -- session owners
     def set_session_owner(self, session_id: str, tenant: str) -> None:
@@ -293,9 +300,9 @@ def open_access_store(records_url: str, data_dir: str | Path) -> AccessStore:
 def ensure_admin_key(store: AccessStore, data_dir: str | Path) -> Path | None:
     """With no active admin key anywhere, makes one and writes it to DIR/admin.key (mode 0600);
     returns that path, None when an admin key existed already."""
-    if store.has_active_admin():
+    text = store.create_first_admin()
+    if text is None:
         return None
-    _, text = store.create_key("admin", "default", "first admin (made at start)")
     path = Path(data_dir) / ADMIN_KEY_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)

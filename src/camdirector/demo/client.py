@@ -70,12 +70,14 @@ def _progress(i: int, n: int, rtt_ms: list[float], compute_ms: list[float], visi
     sys.stderr.flush()
 
 
-def stream_demo(url: str, scene: DemoScene, lens: Lens, seconds: float, visibility: int) -> dict:
-    """Streams the scene through one session; returns the poses and the timings."""
+def stream_demo(url: str, scene: DemoScene, lens: Lens, seconds: float, visibility: int,
+                key: str | None = None, zmq_server_key: str | None = None) -> dict:
+    """Streams the scene through one session (with `key`, and over ZeroMQ the server's CURVE
+    `zmq_server_key`, when the server checks keys); returns the poses and the timings."""
     n_frames = int(round(seconds * FPS))
     sent_at: list[float] = []
     updates, rtt_ms = [], []
-    with cd.connect(url) as client, client.create_session(session_request(scene, lens, visibility)) as session:
+    with cd.connect(url, key=key, zmq_server_key=zmq_server_key) as client, client.create_session(session_request(scene, lens, visibility)) as session:
         for update in session.stream(_paced_frames(scene, n_frames, sent_at)):
             rtt_ms.append((time.perf_counter() - sent_at[len(updates)]) * 1e3)
             updates.append(update)
@@ -119,10 +121,12 @@ def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", rend
     lens = Lens(vertical_fov_deg=50.0, aspect=VIDEO_SIZE[0] / VIDEO_SIZE[1])
     print(f"camdirector demo: {seconds:.0f} s of a walk among columns and moving obstacles at {FPS} Hz, {visibility}")
     scene = build_demo_scene(seed=7, duration_s=seconds)
-    with ServerProcess("--workers", "1") as server:
+    with ServerProcess("--workers", "1", auth=True) as server:  # as users run it: keys on (docs/security.md)
         print(f"  server ready: gRPC {server.grpc}, ZeroMQ {server.zmq}, HTTP {server.http}")
-        print(f"  watch it in the dashboard: http://{server.http}/dashboard/")
-        result = stream_demo(server.url(transport), scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility))
+        print(f"  watch it in the dashboard: http://{server.http}/dashboard/ (log in with the key in "
+              f"{server.ready['admin_key_file']})")
+        result = stream_demo(server.url(transport), scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility),
+                             key=server.admin_key, zmq_server_key=server.zmq_server_key)
     updates = result["updates"]
     poses = [_pose(u) for u in updates]
     aims = np.stack([scene.aim_point_world(i / FPS) for i in range(len(updates))])

@@ -128,7 +128,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
             record = guard.store.revoke(key_id, identity.tenant)
         except KeyNotFound:
             raise HTTPException(404, f"no key {key_id!r}") from None
-        guard.forget(key_id)
+        guard.refresh(key_id)
         guard.audit(identity, "key.revoke", None, {"key_id": key_id})
         return record.as_public()
 
