@@ -106,6 +106,9 @@ def test_zeromq_is_curve_encrypted_and_a_client_without_the_servers_key_gets_not
         assert len(server.zmq_server_key) == 40   # Z85 of 32 bytes
         curve = wc.ZmqRaw(server.zmq, key=server.admin_key, server_key=server.zmq_server_key)
         assert curve.call("CreateSession", wc.two_target_request()).session_id
+        for junk in (b"", b"Bearer", b"Bearer cdk_x", b"\xff\xfe", b"Basic " + server.admin_key.encode()):
+            code, message = curve.send_raw([b"CreateSession", wc.two_target_request().SerializeToString(), junk])
+            assert code == b"16", (junk, message)
         curve.close()
         plain = wc.ZmqRaw(server.zmq, key=server.admin_key)
         plain.sock.setsockopt(zmq.RCVTIMEO, 1500)

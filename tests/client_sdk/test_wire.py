@@ -19,11 +19,12 @@ from camdirector_client import wire
     [
         ("grpc://127.0.0.1:50051", "grpc", "127.0.0.1:50051"),
         ("grpc://[::1]:50051", "grpc", "[::1]:50051"),
+        ("grpcs://director.example:443", "grpc", "director.example:443"),
         ("tcp://localhost:5555", "zmq", "tcp://localhost:5555"),
     ],
 )
 def test_parse_url(url, transport, address):
-    assert wire.parse_url(url) == wire.Endpoint(transport, address)
+    assert wire.parse_url(url) == wire.Endpoint(transport, address, tls=url.startswith("grpcs://"))
 
 
 @pytest.mark.parametrize("url", ["127.0.0.1:50051", "http://h:1", "grpc://", "tcp://host", ""])

@@ -4,6 +4,8 @@ from __future__ import annotations
 import grpc
 import pytest
 
+from camdirector.access.guard import Guard
+from camdirector.access.keys import SqliteAccessStore
 from camdirector.errors import DirectorError
 from camdirector.front import router as router_module
 from camdirector.front.metrics import Metrics
@@ -13,7 +15,7 @@ from camdirector.server_settings import ServerSettings
 
 def _code_and_message(router: SessionRouter, session_id: str) -> tuple[grpc.StatusCode, str]:
     with pytest.raises(DirectorError) as err:
-        router._entry(session_id)
+        router._entry(session_id, "default")
     return err.value.code, err.value.message
 
 
@@ -45,10 +47,36 @@ def test_with_checkpoints_sessions_of_a_lost_worker_go_to_the_least_loaded_other
 
 def test_with_checkpoints_a_client_request_for_an_unknown_session_is_given_to_a_worker_to_restore(tmp_path):
     router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics())
-    entry = router._entry("from-elsewhere", adopt=True)
+    entry = router._entry("from-elsewhere", "default", adopt=True)
     assert entry.restoring and router.sessions["from-elsewhere"] is entry
     code, message = _code_and_message(router, "never-asked-by-its-client")  # the dashboard's asks adopt nothing
     assert code == grpc.StatusCode.NOT_FOUND and "never-asked-by-its-client" not in router.sessions
+
+
+def test_another_tenants_session_is_answered_as_one_that_does_not_exist(tmp_path):
+    router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics())
+    router.sessions["s-alpha"] = SessionEntry(slot=0, created_s=0.0, last_seen_s=0.0, tenant="alpha")
+    assert router._entry("s-alpha", "alpha").tenant == "alpha"
+    with pytest.raises(DirectorError) as theirs:
+        router._entry("s-alpha", "beta")
+    with pytest.raises(DirectorError) as missing:
+        router._entry("s-other", "beta")
+    assert theirs.value.code == missing.value.code == grpc.StatusCode.NOT_FOUND
+    assert theirs.value.message.replace("s-alpha", "ID") == missing.value.message.replace("s-other", "ID")
+    assert [s["session_id"] for s in router.describe("alpha")] == ["s-alpha"] and router.describe("beta") == []
+
+
+def test_with_keys_a_node_adopts_only_a_session_the_records_say_is_the_callers(tmp_path):
+    store = SqliteAccessStore(tmp_path)
+    store.set_session_owner("s-alpha", "alpha")   # written by the node that created it
+    router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics(), guard=Guard(store))
+    with pytest.raises(DirectorError) as refused:
+        router._entry("s-alpha", "beta", adopt=True)
+    assert refused.value.code == grpc.StatusCode.NOT_FOUND and "s-alpha" not in router.sessions
+    assert router._entry("s-alpha", "alpha", adopt=True).restoring
+    with pytest.raises(DirectorError):
+        router._entry("s-unknown", "alpha", adopt=True)   # no owner on record: nobody's
+    store.close()
 
 
 def _sample(metrics: Metrics, name: str, labels: dict) -> float:

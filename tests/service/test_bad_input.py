@@ -162,7 +162,7 @@ def test_more_sessions_than_allowed(server_factory):
 def test_garbage_on_the_zeromq_socket(server, canary):
     client = ZmqRaw(server.zmq)
     code, message = client.send_raw([b"Frame"])
-    assert code == b"3" and b"expected 2 frames" in message
+    assert code == b"3" and b"expected 3 frames (RPC name, payload, key)" in message
     code, message = client.send_raw([b"Frame", b"x", b"y", b"z"])
     assert code == b"3"
     code, message = client.send_raw([b"Explode", b""])

@@ -1,4 +1,9 @@
-// A 60 Hz game loop on the camdirector SDK: `engine_loop HOST:PORT [FRAMES]`.
+// A 60 Hz game loop on the camdirector SDK: `engine_loop ADDRESS [FRAMES] [--ca-file PEM]`.
+//
+// ADDRESS is HOST:PORT (plaintext) or grpcs://HOST:PORT (TLS, the server's certificate checked
+// against the CA of --ca-file, else the system's roots). The API key comes from the environment
+// variable CAMDIRECTOR_KEY (the SDK's default when cd_config.key is NULL), never the command line,
+// where other users of the machine could read it.
 //
 // At load time (blocking calls, with deadlines) it creates a two-target session; then each tick
 // the game thread does only non-blocking work: submit this frame's transforms, poll the newest
@@ -19,6 +24,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 #include <thread>
 #include <vector>
@@ -88,15 +94,24 @@ cd_mesh box(double sx, double sy, double sz) {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: engine_loop HOST:PORT [FRAMES]\n");
+    std::fprintf(stderr, "usage: engine_loop ADDRESS [FRAMES] [--ca-file PEM]\n");
     return 2;
   }
-  const int frames = argc > 2 ? std::atoi(argv[2]) : 600;
+  int frames = 600;
+  const char* ca_file = nullptr;
+  for (int i = 2; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--ca-file") == 0 && i + 1 < argc) {
+      ca_file = argv[++i];
+    } else {
+      frames = std::atoi(argv[i]);
+    }
+  }
 
   // --- setup: may allocate and block ----------------------------------------------------------
   cd_config config;
   cd_config_init(&config);
   config.address = argv[1];
+  config.ca_file = ca_file;  // grpcs:// only; config.key stays NULL: CAMDIRECTOR_KEY
   config.queue_capacity = 32;  // this check wants every frame answered, even on a busy machine
   config.max_in_flight = 4;
   camdirector::Status status;

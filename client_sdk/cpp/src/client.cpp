@@ -2,12 +2,14 @@
 // the game thread's non-blocking submit / poll functions (no allocation, short critical sections).
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <new>
 
 #include "client_impl.h"
 
-using camdirector::sdk::add_route;
 using camdirector::sdk::Clock;
 using camdirector::sdk::copy_cstr;
 using Phase = camdirector::sdk::Phase;
@@ -79,7 +81,8 @@ cd_status fail(cd_client* client, cd_status code, const std::string& message) {
 cd_status rpc_result(cd_client* client, const char* rpc, const grpc::Status& status) {
   if (status.ok()) return CD_OK;
   return fail(client, to_status(status.error_code()),
-              std::string(rpc) + " on " + client->target + ": " + status.error_message());
+              std::string(rpc) + " on " + client->target + ": " +
+                  camdirector::sdk::explain_failure(status, client->tls));
 }
 
 // The streaming session's id into a request that names it, and its route key onto the call's
@@ -92,8 +95,69 @@ cd_status name_streaming_session(cd_client* client, Request* request, grpc::Clie
     return CD_FAILED_PRECONDITION;
   }
   request->set_session_id(client->session_id);
-  add_route(context, client->route_key);
+  client->add_call_metadata(context, client->route_key);
   return CD_OK;
+}
+
+// What cd_client_create makes of a config: the defaults filled in, the address parsed, the key
+// and the CA file read.
+struct Setup {
+  cd_config config{};
+  std::string target;
+  bool tls = false;
+  std::string authorization;  // "Bearer KEY", "" without a key
+  std::string ca_pem;         // the CA file's certificates, "" for the system's roots
+};
+
+// The Setup of a config; false and the reason (never the key) for one cd_client_create refuses.
+bool setup_of(const cd_config& in, Setup* out, std::string* error) {
+  cd_config& c = out->config;
+  cd_config_init(&c);
+  if (in.queue_capacity) c.queue_capacity = in.queue_capacity;
+  if (in.max_states) c.max_states = in.max_states;
+  if (in.max_in_flight) c.max_in_flight = in.max_in_flight;
+  if (in.stall_timeout_s > 0.0) c.stall_timeout_s = in.stall_timeout_s;
+  if (in.reconnect_max_s > 0.0) c.reconnect_max_s = in.reconnect_max_s;
+  if (in.max_message_bytes) c.max_message_bytes = in.max_message_bytes;
+  c.io_poll_interval_ms = std::min<uint32_t>(in.io_poll_interval_ms, 1000);
+  c.wait_for_server = in.wait_for_server;
+  if (!camdirector::sdk::parse_address(in.address, &out->target, &out->tls, error)) return false;
+  if (c.queue_capacity > kMaxQueueCapacity || c.max_states > kMaxStates ||
+      static_cast<uint64_t>(c.queue_capacity) * c.max_states > (1u << 22) || !std::isfinite(c.stall_timeout_s) ||
+      !std::isfinite(c.reconnect_max_s)) {
+    *error = "queue_capacity or max_states over 65536 (or their product over 4194304), or a timeout not finite";
+    return false;
+  }
+  const bool given = in.key != nullptr && *in.key != '\0';
+  const char* key = given ? in.key : std::getenv(camdirector::sdk::kKeyEnv);
+  if (key != nullptr && *key != '\0') {
+    for (const char* k = key; *k != '\0'; ++k) {
+      if (*k < '!' || *k > '~') {  // what a header value may hold, no space; a byte over 0x7f is negative
+        *error = std::string(given ? "key" : "the CAMDIRECTOR_KEY environment variable") +
+                 " holds a space or a character a header cannot carry (the key is not shown)";
+        return false;
+      }
+    }
+    out->authorization = std::string("Bearer ") + key;
+  }
+  if (in.ca_file != nullptr && *in.ca_file != '\0') {
+    const std::string quoted = std::string("'") + in.ca_file + "'";
+    if (!out->tls) {
+      *error = "ca_file is for grpcs:// addresses (gRPC over TLS); " + std::string(in.address) + " is plaintext";
+      return false;
+    }
+    std::ifstream file(in.ca_file, std::ios::binary);
+    if (!file) {
+      *error = "ca_file " + quoted + " cannot be read";
+      return false;
+    }
+    out->ca_pem.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
+    if (out->ca_pem.find("-----BEGIN CERTIFICATE-----") == std::string::npos) {
+      *error = "ca_file " + quoted + " holds no PEM certificate";
+      return false;
+    }
+  }
+  return true;
 }
 
 cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double timeout_s) {
@@ -115,7 +179,7 @@ cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double 
   grpc::ClientContext context;
   context.set_deadline(rpc_deadline_of(timeout_s));
   context.set_wait_for_ready(client->config.wait_for_server != 0);
-  add_route(&context, route_key);
+  client->add_call_metadata(&context, route_key);
   pb::CreateSessionResponse response;
   const grpc::Status status = client->stub->CreateSession(&context, request, &response);
   if (status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED &&
@@ -238,8 +302,17 @@ void cd_session_desc_init(cd_session_desc* desc) {
 
 cd_status cd_check_address(const char* address, char* buf, size_t size) {
   std::string target, error;
-  const bool ok = camdirector::sdk::parse_address(address, &target, &error);
+  bool tls = false;
+  const bool ok = camdirector::sdk::parse_address(address, &target, &tls, &error);
   copy_cstr(buf, size, error);
+  return ok ? CD_OK : CD_INVALID_ARGUMENT;
+}
+
+cd_status cd_check_config(const cd_config* config, char* buf, size_t size) {
+  std::string error = "config is NULL";
+  Setup setup;
+  const bool ok = config != nullptr && setup_of(*config, &setup, &error);
+  copy_cstr(buf, size, ok ? std::string() : error);
   return ok ? CD_OK : CD_INVALID_ARGUMENT;
 }
 
@@ -247,29 +320,16 @@ cd_status cd_client_create(const cd_config* config, cd_client** out) {
   if (out == nullptr) return CD_INVALID_ARGUMENT;
   *out = nullptr;
   if (config == nullptr) return CD_INVALID_ARGUMENT;
-  cd_config c;
-  cd_config_init(&c);
-  c.address = config->address;
-  if (config->queue_capacity) c.queue_capacity = config->queue_capacity;
-  if (config->max_states) c.max_states = config->max_states;
-  if (config->max_in_flight) c.max_in_flight = config->max_in_flight;
-  if (config->stall_timeout_s > 0.0) c.stall_timeout_s = config->stall_timeout_s;
-  if (config->reconnect_max_s > 0.0) c.reconnect_max_s = config->reconnect_max_s;
-  if (config->max_message_bytes) c.max_message_bytes = config->max_message_bytes;
-  c.io_poll_interval_ms = std::min<uint32_t>(config->io_poll_interval_ms, 1000);
-  c.wait_for_server = config->wait_for_server;
-  std::string target, error;
-  if (!camdirector::sdk::parse_address(c.address, &target, &error)) return CD_INVALID_ARGUMENT;
-  if (c.queue_capacity > kMaxQueueCapacity || c.max_states > kMaxStates ||
-      static_cast<uint64_t>(c.queue_capacity) * c.max_states > (1u << 22) || !std::isfinite(c.stall_timeout_s) ||
-      !std::isfinite(c.reconnect_max_s)) {
-    return CD_INVALID_ARGUMENT;
-  }
   try {
+    Setup setup;
+    std::string error;
+    if (!setup_of(*config, &setup, &error)) return CD_INVALID_ARGUMENT;
+    const cd_config& c = setup.config;  // its strings are NULL: the caller owns them
     auto client = std::make_unique<cd_client>();
     client->config = c;
-    client->config.address = nullptr;  // not kept: the caller owns the string
-    client->target = target;
+    client->target = setup.target;
+    client->tls = setup.tls;
+    client->authorization = std::move(setup.authorization);
     grpc::ChannelArguments args;
     args.SetMaxReceiveMessageSize(static_cast<int>(std::min<uint32_t>(c.max_message_bytes, INT32_MAX)));
     args.SetMaxSendMessageSize(static_cast<int>(std::min<uint32_t>(c.max_message_bytes, INT32_MAX)));
@@ -278,7 +338,13 @@ cd_status cd_client_create(const cd_config* config, cd_client** out) {
     args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, std::max(100, static_cast<int>(c.reconnect_max_s * 1000.0)));
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // this client's connection is its own
     args.SetInt(GRPC_ARG_ENABLE_RETRIES, 0);              // the SDK decides what to retry
-    client->channel = grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+    std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+    if (setup.tls) {
+      grpc::SslCredentialsOptions ssl;
+      ssl.pem_root_certs = setup.ca_pem;  // empty: gRPC's default roots (the system's)
+      credentials = grpc::SslCredentials(ssl);
+    }
+    client->channel = grpc::CreateCustomChannel(setup.target, credentials, args);
     client->stub = pb::Director::NewStub(client->channel);
     client->ring.resize(c.queue_capacity);
     client->ring_states.resize(static_cast<size_t>(c.queue_capacity) * c.max_states);
@@ -311,7 +377,7 @@ void cd_client_destroy(cd_client* client) {
   if (!open_id.empty()) {  // best effort: the server would reclaim it after its resume window
     grpc::ClientContext context;
     context.set_deadline(rpc_deadline_of(kDestroyCloseTimeoutS));
-    add_route(&context, route_key);
+    client->add_call_metadata(&context, route_key);
     pb::CloseSessionRequest request;
     request.set_session_id(open_id);
     pb::CloseSessionResponse response;
@@ -455,7 +521,7 @@ cd_status cd_session_close(cd_client* client, uint64_t* frames_answered, double 
     grpc::ClientContext context;
     const double left_s = std::chrono::duration<double>(deadline - Clock::now()).count();
     context.set_deadline(camdirector::sdk::grpc_deadline(std::max(left_s, 0.1)));
-    add_route(&context, route_key);
+    client->add_call_metadata(&context, route_key);
     pb::CloseSessionRequest request;
     request.set_session_id(id);
     status = client->stub->CloseSession(&context, request, &response);

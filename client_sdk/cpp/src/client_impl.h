@@ -47,12 +47,18 @@ constexpr int kLostAfterRefusals = 3;
 constexpr char kRouteHeader[] = "x-camdirector-route";
 // A new session's route key: 32 lowercase hex characters, 128 bits from std::random_device.
 std::string new_route_key();
-// Puts the session's route key on a call's context (before the call starts).
-void add_route(grpc::ClientContext* context, const std::string& route_key);
+// The metadata of the client's key on every call ("Bearer KEY"), and where a key comes from when
+// cd_config.key is none.
+constexpr char kAuthorizationHeader[] = "authorization";
+constexpr char kKeyEnv[] = "CAMDIRECTOR_KEY";
 
-// "HOST:PORT" (and the other forms camdirector.h lists) as a gRPC target; false and a reason
-// for an address that does not parse.
-bool parse_address(const char* address, std::string* target, std::string* error);
+// "HOST:PORT" (and the other forms camdirector.h lists) as a gRPC target, and whether it is
+// served over TLS (grpcs://); false and a reason for an address that does not parse.
+bool parse_address(const char* address, std::string* target, bool* tls, std::string* error);
+
+// A blocking call's failure message: gRPC's, with a word on what to check when no connection
+// could be made at all (TLS on one side only, a CA the client does not trust).
+std::string explain_failure(const grpc::Status& status, bool tls);
 
 // Plain structs to a CreateSessionRequest; false and a reason for what the SDK refuses itself.
 bool build_request(const cd_session_desc& desc, pb::CreateSessionRequest* out, std::string* error);
@@ -89,8 +95,10 @@ struct cd_client {
   using Phase = camdirector::sdk::Phase;
   using Clock = camdirector::sdk::Clock;
 
-  cd_config config{};
+  cd_config config{};  // its strings are not kept (the caller owns them): address, key, ca_file NULL
   std::string target;
+  bool tls = false;
+  std::string authorization;  // "Bearer KEY", "" without a key; set at creation, then only read
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<camdirector::v1::Director::Stub> stub;
   std::thread io_thread;
@@ -173,6 +181,10 @@ struct cd_client {
   void on_read_closed();
   void on_write_done();
   void on_stream_done(const grpc::Status& status);
+
+  // request.cpp: puts the session's route key and the client's key on a call's context (before
+  // the call starts); every call of a session gets both.
+  void add_call_metadata(grpc::ClientContext* context, const std::string& route_key) const;
 
   // client.cpp
   void push_event_locked(int kind, int status, const std::string& message);

@@ -2,8 +2,9 @@
 // from the frame queue with at most `max_in_flight` frames unanswered; reopens the stream after a
 // dropped connection, a lost worker or a server restart (same session id: a server with
 // checkpoints restores it) and creates the session again when the server no longer has it
-// (NOT_FOUND, or a run of UNAVAILABLE: handle_stream_done_locked). Every call carries the
-// session's route key (add_route).
+// (NOT_FOUND, or a run of UNAVAILABLE: handle_stream_done_locked), and gives the session up when
+// the server refuses the client's key. Every call carries the session's route key and the
+// client's key (add_call_metadata).
 //
 // Ownership of a stream: the I/O thread creates a FrameStream, keeps a hold on it (so gRPC cannot
 // finish it), and is the only thread that calls its methods. When the stream's read side closes
@@ -24,7 +25,7 @@ namespace camdirector::sdk {
 class FrameStream : public grpc::ClientBidiReactor<pb::FrameUpdate, pb::CameraUpdate> {
  public:
   FrameStream(cd_client* client, const std::string& route_key) : client_(client) {
-    add_route(&context_, route_key);
+    client->add_call_metadata(&context_, route_key);
   }
 
   // Call without holding the client's mutex: gRPC may run callbacks on this thread.
@@ -94,7 +95,6 @@ bool frame_refused(grpc::StatusCode code) {
 
 }  // namespace camdirector::sdk
 
-using camdirector::sdk::add_route;
 using camdirector::sdk::Clock;
 using camdirector::sdk::frame_refused;
 using camdirector::sdk::FrameStream;
@@ -231,6 +231,15 @@ void cd_client::handle_stream_done_locked() {
   if (stopping || phase != Phase::kStream) return;
 
   const bool answered = stream_answered;
+  if (code == grpc::StatusCode::UNAUTHENTICATED || code == grpc::StatusCode::PERMISSION_DENIED) {
+    // The key was refused (revoked since the session opened, or a role that may not stream):
+    // another stream, or a recreation, would be refused the same.
+    phase = Phase::kFailed;
+    ring_size = 0;
+    push_event_locked(CD_EVENT_SESSION_FAILED, static_cast<int>(code),
+                      "the server refused this client's key: " + message);
+    return;
+  }
   if (code == grpc::StatusCode::NOT_FOUND && !answered) {
     // The first frame of this stream named a session the server does not know.
     if (recreated_unanswered) {
@@ -293,7 +302,7 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
   const std::string route = route_key;  // the same key: the balancer's node for this session
   grpc::ClientContext context;
   context.set_deadline(grpc_deadline(camdirector::sdk::kRecreateTimeoutS));
-  add_route(&context, route);
+  add_call_metadata(&context, route);
   io_call = &context;
   lock.unlock();
   pb::CreateSessionResponse response;
@@ -305,7 +314,7 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
       lock.unlock();
       grpc::ClientContext close_context;
       close_context.set_deadline(grpc_deadline(1.0));
-      add_route(&close_context, route);
+      add_call_metadata(&close_context, route);
       pb::CloseSessionRequest close;
       close.set_session_id(response.session_id());
       pb::CloseSessionResponse closed;

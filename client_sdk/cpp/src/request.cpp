@@ -1,6 +1,6 @@
-// Plain C structs to the wire's CreateSessionRequest and Style, address parsing, and a session's
-// route key. Runs at setup only (cd_client_create, cd_session_open, cd_session_update_style, the
-// I/O thread's new streams): it may allocate.
+// Plain C structs to the wire's CreateSessionRequest and Style, address parsing, a session's
+// route key and the metadata of its calls, failure messages. Runs at setup only (cd_client_create,
+// the blocking calls, the I/O thread's new streams): it may allocate.
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -76,7 +76,7 @@ bool set_mesh(const cd_mesh& m, pb::Mesh* out, const std::string& what, std::str
 
 }  // namespace
 
-bool parse_address(const char* address, std::string* target, std::string* error) {
+bool parse_address(const char* address, std::string* target, bool* tls, std::string* error) {
   if (address == nullptr || *address == '\0') {
     *error = "address is empty: expected HOST:PORT";
     return false;
@@ -89,6 +89,7 @@ bool parse_address(const char* address, std::string* target, std::string* error)
       return false;
     }
   }
+  *tls = false;
   if (a.rfind("unix:", 0) == 0) {
     if (a.size() == 5) {
       *error = "address " + quoted + " names no socket path";
@@ -99,8 +100,10 @@ bool parse_address(const char* address, std::string* target, std::string* error)
   }
   const size_t scheme = a.find("://");
   if (scheme != std::string::npos) {
-    if (a.compare(0, scheme, "grpc") != 0) {
-      *error = "address " + quoted + ": only grpc:// (or no scheme) is supported; this SDK speaks gRPC, not ZeroMQ";
+    *tls = a.compare(0, scheme, "grpcs") == 0;
+    if (!*tls && a.compare(0, scheme, "grpc") != 0) {
+      *error = "address " + quoted +
+               ": only grpc:// (or no scheme) and grpcs:// (TLS) are supported; this SDK speaks gRPC, not ZeroMQ";
       return false;
     }
     a = a.substr(scheme + 3);
@@ -264,8 +267,26 @@ std::string new_route_key() {
   return key;
 }
 
-void add_route(grpc::ClientContext* context, const std::string& route_key) {
-  if (!route_key.empty()) context->AddMetadata(kRouteHeader, route_key);
+std::string explain_failure(const grpc::Status& status, bool tls) {
+  const std::string& message = status.error_message();
+  // Only a connection gRPC could not make gets a hint: the server's own answers, and a server
+  // that is down ("Connection refused"), say what happened.
+  if (status.error_code() != grpc::StatusCode::UNAVAILABLE || message.rfind("failed to connect", 0) != 0 ||
+      message.find("Connection refused") != std::string::npos) {
+    return message;
+  }
+  std::string said = message;  // lower case, '_' as ' ': "CERTIFICATE_VERIFY_FAILED" (BoringSSL)
+  for (char& c : said) c = c == '_' ? ' ' : static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const char* hint = nullptr;
+  if (!tls) {
+    hint = "the server closed the connection: if it serves TLS, connect with grpcs://";
+  } else if (said.find("certificate verify failed") != std::string::npos) {  // OpenSSL 3's words
+    hint = "the server's certificate is not signed by an authority this client trusts: set ca_file to the PEM "
+           "of the CA that signed it";
+  } else if (said.find("handshake") != std::string::npos) {
+    hint = "the TLS handshake failed: does the server serve TLS (--tls-cert)? grpc:// is plaintext";
+  }
+  return hint == nullptr ? message : message + " (" + hint + ")";
 }
 
 void copy_cstr(char* dst, size_t size, const std::string& src) {
@@ -276,3 +297,8 @@ void copy_cstr(char* dst, size_t size, const std::string& src) {
 }
 
 }  // namespace camdirector::sdk
+
+void cd_client::add_call_metadata(grpc::ClientContext* context, const std::string& route_key) const {
+  if (!route_key.empty()) context->AddMetadata(camdirector::sdk::kRouteHeader, route_key);
+  if (!authorization.empty()) context->AddMetadata(camdirector::sdk::kAuthorizationHeader, authorization);
+}

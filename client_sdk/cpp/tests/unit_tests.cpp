@@ -1,10 +1,11 @@
 // Unit tests of the SDK that need no server, run by ctest (tests/client_sdk/cpp/test_ctest.py runs
 // ctest from `make test`): the engines' conversions against the tables of docs/protocol.md (known
-// values and round trips), the fields of view, address parsing, and the game thread's refusals
-// without a session. Exits non-zero with the first failed check printed.
+// values and round trips), the fields of view, address parsing, the key and TLS options, and the
+// game thread's refusals without a session. Exits non-zero with the first failed check printed.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 
 #include "camdirector/camdirector.h"
@@ -80,6 +81,32 @@ void addresses() {
         "a client with an address that does not parse is refused, *out NULL");
 }
 
+// Keys and TLS options, checked before any connection: cd_check_config says why, never the key.
+void keys_and_tls_options() {
+  char reason[256];
+  cd_config config;
+  cd_config_init(&config);
+  config.address = "grpcs://localhost:443";
+  check(cd_check_config(&config, reason, sizeof reason) == CD_OK, "grpcs:// parses (the system's roots)");
+  config.key = "cdk_0123456789ab_secret with a space";
+  check(cd_check_config(&config, reason, sizeof reason) == CD_INVALID_ARGUMENT, "a key with a space is refused");
+  check(std::strstr(reason, "key") != nullptr && std::strstr(reason, "secret") == nullptr,
+        "the reason names the key, not its text");
+  cd_client* client = nullptr;
+  check(cd_client_create(&config, &client) == CD_INVALID_ARGUMENT && client == nullptr, "create refuses it too");
+  config.key = "cdk_0123456789ab_secret";
+  config.ca_file = "/nonexistent/ca.pem";
+  check(cd_check_config(&config, reason, sizeof reason) == CD_INVALID_ARGUMENT &&
+            std::strstr(reason, "/nonexistent/ca.pem") != nullptr,
+        "a ca_file that cannot be read is refused, named");
+  config.address = "127.0.0.1:50051";
+  config.ca_file = "ca.pem";
+  check(cd_check_config(&config, reason, sizeof reason) == CD_INVALID_ARGUMENT &&
+            std::strstr(reason, "grpcs://") != nullptr,
+        "a ca_file for a plaintext address is refused");
+  check(cd_check_config(nullptr, reason, sizeof reason) == CD_INVALID_ARGUMENT, "a NULL config is refused");
+}
+
 void game_thread_without_a_session() {
   cd_config config;
   cd_config_init(&config);
@@ -102,6 +129,7 @@ int main() {
   known_values();
   round_trips();
   addresses();
+  keys_and_tls_options();
   game_thread_without_a_session();
   if (failures == 0) std::puts("all unit tests passed");
   return failures == 0 ? 0 : 1;

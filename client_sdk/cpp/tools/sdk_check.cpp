@@ -11,10 +11,11 @@
 //       records their metadata: open, stream, UpdateStyle, TakeShot, stream on until the server
 //       forgets the session and it is recreated, close; then a second session that
 //       cd_client_destroy closes
-//   sdk_check stream HOST:PORT --until resumed|recreated [--after N] [--timeout S]
+//   sdk_check stream ADDRESS --until resumed|recreated|failed [--after N] [--timeout S] [--ca-file PEM]
 //       a 60 Hz loop; prints {"ready": ...} once streaming, then keeps going until the event came
 //       and N more frames (default 60) were answered on the session after it, or S seconds
-//       (default 40) passed; the test breaks the connection or restarts the server meanwhile.
+//       (default 40) passed; the test breaks the connection, restarts the server or revokes the
+//       key (CAMDIRECTOR_KEY, the SDK's default) meanwhile.
 //
 // Every scenario counts the heap allocations of the game-thread calls (alloc_counter.h).
 #include <algorithm>
@@ -164,10 +165,11 @@ void states_at(uint64_t frame, cd_state out[3]) {
 }
 
 cd_client* make_client(const char* address, uint32_t queue_capacity = 0, uint32_t in_flight = 0,
-                       uint32_t io_poll_interval_ms = 0) {
+                       uint32_t io_poll_interval_ms = 0, const char* ca_file = nullptr) {
   cd_config config;
   cd_config_init(&config);
   config.address = address;
+  config.ca_file = ca_file;
   if (queue_capacity) config.queue_capacity = queue_capacity;
   if (in_flight) config.max_in_flight = in_flight;
   config.io_poll_interval_ms = io_poll_interval_ms;
@@ -491,12 +493,15 @@ int scenario_calls(const char* address) {
   return 0;
 }
 
-int scenario_stream(const char* address, const std::string& until, uint64_t after, double timeout_s) {
+int scenario_stream(const char* address, const std::string& until, uint64_t after, double timeout_s,
+                    const char* ca_file) {
   Scene scene;
-  cd_client* client = make_client(address, 8, 2);
+  cd_client* client = make_client(address, 8, 2, 0, ca_file);
   if (!open_or_say(client, scene)) return 1;
   const std::string first_id = session_of(client);
-  const int wanted = until == "recreated" ? CD_EVENT_RECREATED : CD_EVENT_RESUMED;
+  const int wanted = until == "recreated" ? CD_EVENT_RECREATED
+                     : until == "failed"  ? CD_EVENT_SESSION_FAILED
+                                          : CD_EVENT_RESUMED;
   std::vector<cd_event> events;
   events.reserve(64);
   std::vector<double> tick_us;
@@ -580,13 +585,15 @@ int main(int argc, char** argv) {
     std::string until = "resumed";
     uint64_t after = 60;
     double timeout_s = 40.0;
+    const char* ca_file = nullptr;
     for (int i = 3; i + 1 < argc; i += 2) {
       const std::string flag = argv[i];
       if (flag == "--until") until = argv[i + 1];
       if (flag == "--after") after = std::strtoull(argv[i + 1], nullptr, 10);
       if (flag == "--timeout") timeout_s = std::atof(argv[i + 1]);
+      if (flag == "--ca-file") ca_file = argv[i + 1];
     }
-    return scenario_stream(address, until, after, timeout_s);
+    return scenario_stream(address, until, after, timeout_s, ca_file);
   }
   std::fprintf(stderr, "sdk_check: unknown scenario %s\n", scenario.c_str());
   return 2;

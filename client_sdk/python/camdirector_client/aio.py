@@ -1,21 +1,24 @@
-"""The asyncio client: grpc.aio for ``grpc://host:port``, zmq.asyncio for ``tcp://host:port``.
+"""The asyncio client: grpc.aio for ``grpc://host:port`` (``grpcs://`` over TLS), zmq.asyncio for
+``tcp://host:port``.
 
-    async with connect_async("tcp://127.0.0.1:5555") as client:
+    async with connect_async("tcp://127.0.0.1:5555", key=KEY, zmq_server_key=SERVER_KEY) as client:
         async with client.create_session(targets=[...]) as session:
             update = await session.frame(1, 0.016, packed=pack_states(ids, positions, rotations))
 
 Same methods as the sync client (:mod:`camdirector_client.client`), awaited, with the same
 behaviour when a node or worker is lost: every gRPC call of a session carries its route key
-(``wire.ROUTE_HEADER``), and a call or stream answered UNAVAILABLE or CANCELLED is tried again
-with the same session id (see :class:`AsyncSession`). Create and use an :class:`AsyncClient`
-inside one running event loop. Over ZeroMQ each request borrows a DEALER socket from a small pool
-(one request outstanding per socket), so concurrent tasks do not queue behind one another.
+(``wire.ROUTE_HEADER``) and the client's key, and a call or stream answered UNAVAILABLE or
+CANCELLED is tried again with the same session id (see :class:`AsyncSession`). Create and use
+an :class:`AsyncClient` inside one running event loop. Over ZeroMQ each request borrows a DEALER
+socket from a small pool (one request outstanding per socket), so concurrent tasks do not queue
+behind one another.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 from collections import deque
 from collections.abc import AsyncIterable, AsyncIterator, Generator, Iterable, Mapping, Sequence
 from types import TracebackType
@@ -57,10 +60,15 @@ class _AsyncTransport(Protocol):
 
 
 class _AioGrpcTransport:
-    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one."""
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. Every call carries
+    the session's route key and the client's key (``wire.Security.grpc_metadata``)."""
 
-    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]]) -> None:
-        self._channel = grpc.aio.insecure_channel(target, options=options)
+    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]], security: wire.Security) -> None:
+        if security.credentials is None:
+            self._channel = grpc.aio.insecure_channel(target, options=options)
+        else:
+            self._channel = grpc.aio.secure_channel(target, security.credentials, options=options)
+        self._security = security
         self._stub = director_pb2_grpc.DirectorStub(self._channel)
         # Frame again, taking a FrameUpdate already serialized (wire.encode_frame_update).
         self._frame_encoded = self._channel.unary_unary(
@@ -71,9 +79,9 @@ class _AioGrpcTransport:
 
     async def _unary(self, method, request, route: str):
         try:
-            return await method(request, timeout=self._timeout_s, metadata=((wire.ROUTE_HEADER, route),))
+            return await method(request, timeout=self._timeout_s, metadata=self._security.grpc_metadata(route))
         except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+            raise self._security.grpc_error(error) from None
 
     async def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
         return await self._unary(self._stub.CreateSession, request, route)
@@ -86,14 +94,14 @@ class _AioGrpcTransport:
 
     async def stream(self, updates: AsyncIterable[pb.FrameUpdate], route: str) -> AsyncIterator[pb.CameraUpdate]:
         pump = _AsyncRequestPump(updates)
-        call = self._stub.StreamFrames(pump.iterate(), metadata=((wire.ROUTE_HEADER, route),))
+        call = self._stub.StreamFrames(pump.iterate(), metadata=self._security.grpc_metadata(route))
         try:
             async for update in call:
                 yield update
         except grpc.RpcError as error:
             if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
                 raise pump.error from None
-            raise _stream_error(error) from None
+            raise _stream_error(error, self._security) from None
         except asyncio.CancelledError:
             if pump.error is not None:  # grpc.aio cancels the call when the request iterator fails
                 raise pump.error from None
@@ -121,7 +129,7 @@ class _AioGrpcTransport:
 _WRITE_FAILED = "Internal error from Core"  # grpc.aio's details when it could not write a request
 
 
-def _stream_error(error: grpc.RpcError) -> DirectorError:
+def _stream_error(error: grpc.RpcError, security: wire.Security) -> DirectorError:
     """The error that ended a stream.
 
     A request written just as the peer ends the call (a node restoring the session answers
@@ -133,7 +141,7 @@ def _stream_error(error: grpc.RpcError) -> DirectorError:
     and the next call shows what the server has to say."""
     if error.code() is grpc.StatusCode.INTERNAL and error.details() == _WRITE_FAILED:
         return DirectorError(grpc.StatusCode.UNAVAILABLE, f"the stream ended as a request was written ({_WRITE_FAILED})")
-    return DirectorError.from_rpc_error(error)
+    return security.grpc_error(error)
 
 
 class _AsyncRequestPump:
@@ -159,38 +167,32 @@ class _AioZmqTransport:
     so a late reply can not be taken for the answer to a later request.
     """
 
-    def __init__(self, endpoint: str, timeout_s: float, context: zmq.asyncio.Context | None) -> None:
+    def __init__(
+        self, endpoint: str, timeout_s: float, context: zmq.asyncio.Context | None, security: wire.Security
+    ) -> None:
         self._endpoint = endpoint
         self._timeout_s = timeout_s
         self._timeout_ms = max(1, round(timeout_s * 1000.0))
         self._context = context if context is not None else zmq.asyncio.Context.instance()
+        self._security = security
         self._idle: list[zmq.asyncio.Socket] = [self._open()]
         self.closed = False
 
     def _open(self) -> zmq.asyncio.Socket:
-        sock = self._context.socket(zmq.DEALER)
-        sock.setsockopt(zmq.LINGER, 0)
-        # zmq.asyncio honours these: a wait past them raises zmq.Again.
-        sock.setsockopt(zmq.RCVTIMEO, self._timeout_ms)
-        sock.setsockopt(zmq.SNDTIMEO, self._timeout_ms)
-        sock.connect(self._endpoint)
-        return sock
+        return wire.open_dealer(self._context, self._endpoint, self._timeout_ms, self._security.curve)
 
     async def _request(self, rpc: bytes, payload: bytes) -> bytes:
         if self.closed:
             raise DirectorError(grpc.StatusCode.CANCELLED, "the client is closed")
         sock = self._idle.pop() if self._idle else self._open()
         try:
-            await sock.send_multipart((rpc, payload))
+            await sock.send_multipart(self._security.zmq_request(rpc, payload))
             reply = await sock.recv_multipart()
         except zmq.Again:
             sock.close(linger=0)
             if not self.closed:  # a fresh socket, already connecting, for the next call
                 self._idle.append(self._open())
-            raise DirectorError(
-                grpc.StatusCode.DEADLINE_EXCEEDED,
-                f"no reply to {rpc.decode()} from {self._endpoint} within {self._timeout_s:g} s",
-            ) from None
+            raise wire.zmq_no_reply(rpc, self._endpoint, self._timeout_s, self._security.curve is not None) from None
         except BaseException:
             sock.close(linger=0)
             raise
@@ -294,7 +296,8 @@ class AsyncSession(wire.SessionBase):
     tried again by itself after ``asyncio.sleep`` (wire.retry_delays_s), with the same session id,
     since the server restores the session from its checkpoint when its worker or node was lost;
     so is a stream, from its first unanswered update. ``retries`` counts them. CreateSession is
-    not tried again (a second session could be made), nor is a call of a closed client."""
+    not tried again (a second session could be made), nor is a call of a closed client, nor one
+    whose key was refused (UNAUTHENTICATED, PERMISSION_DENIED)."""
 
     __slots__ = ()
 
@@ -461,20 +464,25 @@ def connect_async(
     url: str,
     timeout_s: float = wire.DEFAULT_TIMEOUT_S,
     *,
+    key: str | None = None,
+    ca_file: str | os.PathLike[str] | None = None,
+    zmq_server_key: str | bytes | os.PathLike[str] | None = None,
     max_message_bytes: int = wire.DEFAULT_MAX_MESSAGE_BYTES,
     grpc_options: Sequence[tuple[str, Any]] | None = None,
     zmq_context: zmq.asyncio.Context | None = None,
 ) -> AsyncClient:
-    """An :class:`AsyncClient` for ``grpc://host:port`` or ``tcp://host:port``; call it inside a
-    running event loop. Arguments as in :func:`camdirector_client.connect`; ``zmq_context``
-    defaults to ``zmq.asyncio.Context.instance()``.
+    """An :class:`AsyncClient` for ``grpc://host:port``, ``grpcs://host:port`` or
+    ``tcp://host:port``; call it inside a running event loop. Arguments as in
+    :func:`camdirector_client.connect` (``key`` defaults to the ``CAMDIRECTOR_KEY`` environment
+    variable); ``zmq_context`` defaults to ``zmq.asyncio.Context.instance()``.
     """
     endpoint = wire.parse_url(url)
     timeout_s = wire.check_timeout(timeout_s)
+    security = wire.security(endpoint, key, ca_file, zmq_server_key)
     transport: _AsyncTransport
     if endpoint.transport == "grpc":
         options = wire.grpc_channel_options(max_message_bytes, grpc_options)
-        transport = _AioGrpcTransport(endpoint.address, timeout_s, options)
+        transport = _AioGrpcTransport(endpoint.address, timeout_s, options, security)
     else:
-        transport = _AioZmqTransport(endpoint.address, timeout_s, zmq_context)
+        transport = _AioZmqTransport(endpoint.address, timeout_s, zmq_context, security)
     return AsyncClient(transport, url)

@@ -1,6 +1,7 @@
-"""The synchronous client, over gRPC (``grpc://host:port``) or ZeroMQ (``tcp://host:port``).
+"""The synchronous client, over gRPC (``grpc://host:port``, ``grpcs://host:port`` over TLS) or
+ZeroMQ (``tcp://host:port``).
 
-    with connect("grpc://127.0.0.1:50051") as client:
+    with connect("grpc://127.0.0.1:50051", key=KEY) as client:
         with client.create_session(targets=[...], style=...) as session:
             update = session.frame(1, 0.016, packed=pack_states(ids, positions, rotations))
 
@@ -11,6 +12,7 @@ concurrent calls from several threads each get a socket of their own.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections import deque
@@ -49,10 +51,15 @@ class _Transport(Protocol):
 
 
 class _GrpcTransport:
-    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one."""
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. Every call carries
+    the session's route key and the client's key (``wire.Security.grpc_metadata``)."""
 
-    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]]) -> None:
-        self._channel = grpc.insecure_channel(target, options=options)
+    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]], security: wire.Security) -> None:
+        if security.credentials is None:
+            self._channel = grpc.insecure_channel(target, options=options)
+        else:
+            self._channel = grpc.secure_channel(target, security.credentials, options=options)
+        self._security = security
         self._stub = director_pb2_grpc.DirectorStub(self._channel)
         # Frame again, taking a FrameUpdate already serialized (wire.encode_frame_update).
         self._frame_encoded = self._channel.unary_unary(
@@ -62,9 +69,9 @@ class _GrpcTransport:
 
     def _unary(self, method, request, route: str):
         try:
-            return method(request, timeout=self._timeout_s, metadata=((wire.ROUTE_HEADER, route),))
+            return method(request, timeout=self._timeout_s, metadata=self._security.grpc_metadata(route))
         except grpc.RpcError as error:
-            raise DirectorError.from_rpc_error(error) from None
+            raise self._security.grpc_error(error) from None
 
     def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
         return self._unary(self._stub.CreateSession, request, route)
@@ -77,13 +84,13 @@ class _GrpcTransport:
 
     def stream(self, updates: Iterable[pb.FrameUpdate], route: str) -> Iterator[pb.CameraUpdate]:
         pump = _RequestPump(updates)
-        call = self._stub.StreamFrames(iter(pump), metadata=((wire.ROUTE_HEADER, route),))
+        call = self._stub.StreamFrames(iter(pump), metadata=self._security.grpc_metadata(route))
         try:
             yield from call
         except grpc.RpcError as error:
             if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
                 raise pump.error from None
-            raise DirectorError.from_rpc_error(error) from None
+            raise self._security.grpc_error(error) from None
         finally:
             call.cancel()
         if pump.error is not None:
@@ -129,21 +136,17 @@ class _ZmqTransport:
     reply can not be taken for the answer to a later request.
     """
 
-    def __init__(self, endpoint: str, timeout_s: float, context: zmq.Context | None) -> None:
+    def __init__(self, endpoint: str, timeout_s: float, context: zmq.Context | None, security: wire.Security) -> None:
         self._endpoint = endpoint
         self._timeout_s = timeout_s
         self._timeout_ms = max(1, round(timeout_s * 1000.0))
         self._context = context if context is not None else zmq.Context.instance()
+        self._security = security
         self._idle: list[zmq.Socket] = [self._open()]
         self._closed = False  # list.pop and list.append are atomic: the pool needs no lock
 
     def _open(self) -> zmq.Socket:
-        sock = self._context.socket(zmq.DEALER)
-        sock.setsockopt(zmq.LINGER, 0)
-        sock.setsockopt(zmq.RCVTIMEO, self._timeout_ms)
-        sock.setsockopt(zmq.SNDTIMEO, self._timeout_ms)
-        sock.connect(self._endpoint)
-        return sock
+        return wire.open_dealer(self._context, self._endpoint, self._timeout_ms, self._security.curve)
 
     def _request(self, rpc: bytes, payload: bytes) -> bytes:
         if self._closed:
@@ -153,17 +156,13 @@ class _ZmqTransport:
         except IndexError:
             sock = self._open()
         try:
-            sock.send(rpc, zmq.SNDMORE)
-            sock.send(payload)
+            sock.send_multipart(self._security.zmq_request(rpc, payload))
             reply = sock.recv_multipart()
         except zmq.Again:
             sock.close(linger=0)
             if not self._closed:  # a fresh socket, already connecting, for the next call
                 self._idle.append(self._open())
-            raise DirectorError(
-                grpc.StatusCode.DEADLINE_EXCEEDED,
-                f"no reply to {rpc.decode()} from {self._endpoint} within {self._timeout_s:g} s",
-            ) from None
+            raise wire.zmq_no_reply(rpc, self._endpoint, self._timeout_s, self._security.curve is not None) from None
         except BaseException:
             sock.close(linger=0)
             raise
@@ -250,7 +249,9 @@ class Session(wire.SessionBase):
 
     A call answered UNAVAILABLE (or reset by a balancer: CANCELLED) is tried again by itself,
     with the same session id (the server restores the session from its checkpoint when its worker
-    or node was lost); so is a stream, from its first unanswered update. ``retries`` counts them."""
+    or node was lost); so is a stream, from its first unanswered update. ``retries`` counts them.
+    A refused key (UNAUTHENTICATED: none, unknown or revoked; PERMISSION_DENIED: its role lacks
+    the call) is raised at once: trying again would be refused the same."""
 
     __slots__ = ()
 
@@ -393,11 +394,15 @@ def connect(
     url: str,
     timeout_s: float = wire.DEFAULT_TIMEOUT_S,
     *,
+    key: str | None = None,
+    ca_file: str | os.PathLike[str] | None = None,
+    zmq_server_key: str | bytes | os.PathLike[str] | None = None,
     max_message_bytes: int = wire.DEFAULT_MAX_MESSAGE_BYTES,
     grpc_options: Sequence[tuple[str, Any]] | None = None,
     zmq_context: zmq.Context | None = None,
 ) -> Client:
-    """A :class:`Client` for ``grpc://host:port`` (gRPC) or ``tcp://host:port`` (ZeroMQ).
+    """A :class:`Client` for ``grpc://host:port`` (gRPC), ``grpcs://host:port`` (gRPC over TLS)
+    or ``tcp://host:port`` (ZeroMQ).
 
     Parameters
     ----------
@@ -405,6 +410,18 @@ def connect(
         Server address; the scheme picks the transport.
     timeout_s : float
         Seconds a unary call waits for its reply before DirectorError(DEADLINE_EXCEEDED).
+    key : str, optional
+        The API key (``camdirector keys create``), sent with every call: gRPC metadata
+        ``authorization: Bearer KEY``, or the ZeroMQ request's third frame. Default: the
+        ``CAMDIRECTOR_KEY`` environment variable, else none. Never logged nor shown in a repr.
+    ca_file : path, optional
+        ``grpcs://`` only: PEM certificates of the authorities to trust for the server's
+        certificate (a studio's own CA); default the system's roots.
+    zmq_server_key : str, bytes or path, optional
+        ``tcp://`` only: the server's CURVE public key (40 characters of Z85 text, its ready line's
+        ``zmq_server_key``) or the path of its ``DIR/zmq/server.key`` file. Given, the sockets are
+        CURVE clients (encrypted, with a key pair made for this client); a server with
+        authentication on answers no other.
     max_message_bytes : int
         gRPC send and receive limit, bytes.
     grpc_options : sequence of (str, value), optional
@@ -413,14 +430,15 @@ def connect(
         Context for the ZeroMQ sockets; default the process-wide ``zmq.Context.instance()``.
 
     Connecting is lazy: an unreachable server shows at the first call (UNAVAILABLE over gRPC,
-    DEADLINE_EXCEEDED over ZeroMQ).
+    DEADLINE_EXCEEDED over ZeroMQ), and so does a refused key (UNAUTHENTICATED, PERMISSION_DENIED).
     """
     endpoint = wire.parse_url(url)
     timeout_s = wire.check_timeout(timeout_s)
+    security = wire.security(endpoint, key, ca_file, zmq_server_key)
     transport: _Transport
     if endpoint.transport == "grpc":
         options = wire.grpc_channel_options(max_message_bytes, grpc_options)
-        transport = _GrpcTransport(endpoint.address, timeout_s, options)
+        transport = _GrpcTransport(endpoint.address, timeout_s, options, security)
     else:
-        transport = _ZmqTransport(endpoint.address, timeout_s, zmq_context)
+        transport = _ZmqTransport(endpoint.address, timeout_s, zmq_context, security)
     return Client(transport, url)

@@ -1,20 +1,28 @@
-"""What the sync and asyncio clients share: endpoint URLs, the ZeroMQ envelope, request builders.
+"""What the sync and asyncio clients share: endpoint URLs, keys and TLS, the ZeroMQ envelope,
+request builders.
 
-ZeroMQ envelope (DEALER side, no delimiter frame): a request is two frames, the RPC name
-(``b"CreateSession"``, ``b"Frame"``, ``b"UpdateStyle"``, ``b"CloseSession"``) and the serialized
-request; the reply is two frames, the gRPC status code in ASCII decimal (``b"0"`` = OK) and the
-serialized response, or a UTF-8 error message when the code is not 0.
+ZeroMQ envelope (DEALER side, no delimiter frame): a request is the RPC name (``b"CreateSession"``,
+``b"Frame"``, ``b"UpdateStyle"``, ``b"TakeShot"``, ``b"CloseSession"``), the serialized request
+and, when the client has a key, a third frame ``b"Bearer KEY"``; the reply is two frames, the gRPC
+status code in ASCII decimal (``b"0"`` = OK) and the serialized response, or a UTF-8 error message
+when the code is not 0. Over gRPC the key is the ``authorization: Bearer KEY`` metadata of every
+call (docs/security.md).
 """
 
 from __future__ import annotations
 
+import os
 import uuid
 from collections.abc import AsyncIterable, AsyncIterator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import grpc
 import numpy as np
+import zmq
+import zmq.auth
+from zmq.utils import z85
 
 from camdirector.v1 import director_pb2 as pb
 from camdirector_client.errors import DirectorError
@@ -23,8 +31,10 @@ __all__ = [
     "DEFAULT_MAX_MESSAGE_BYTES",
     "DEFAULT_TIMEOUT_S",
     "Endpoint",
+    "KEY_ENV",
     "PackedStates",
     "RETRYABLE",
+    "Security",
     "States",
     "ClosedStub",
     "check_timeout",
@@ -32,11 +42,14 @@ __all__ = [
     "encode_frame_update",
     "frame_update",
     "grpc_channel_options",
+    "open_dealer",
     "parse_url",
     "retry_delays_s",
+    "security",
     "style_msg",
     "with_session_id",
     "with_session_id_async",
+    "zmq_no_reply",
     "zmq_reply_payload",
 ]
 
@@ -86,22 +99,168 @@ them: n ids and n * 10 doubles (an ndarray, (n, 10) or flat, or a sequence of fl
 
 @dataclass(frozen=True, slots=True)
 class Endpoint:
-    """Where a client connects. ``address`` is a gRPC target ("host:port") or a ZeroMQ endpoint."""
+    """Where a client connects. ``address`` is a gRPC target ("host:port") or a ZeroMQ endpoint;
+    ``tls``: gRPC over TLS (``grpcs://``)."""
 
     transport: Literal["grpc", "zmq"]
     address: str
+    tls: bool = False
 
 
 def parse_url(url: str) -> Endpoint:
-    """``grpc://host:port`` (gRPC) or ``tcp://host:port`` (ZeroMQ); ValueError otherwise."""
+    """``grpc://host:port`` (gRPC), ``grpcs://host:port`` (gRPC over TLS) or ``tcp://host:port``
+    (ZeroMQ); ValueError otherwise."""
     scheme, sep, rest = url.partition("://")
     if not sep or not rest or ":" not in rest:
-        raise ValueError(f"expected grpc://host:port or tcp://host:port, got {url!r}")
-    if scheme == "grpc":
-        return Endpoint("grpc", rest)
+        raise ValueError(f"expected grpc://host:port, grpcs://host:port or tcp://host:port, got {url!r}")
+    if scheme in ("grpc", "grpcs"):
+        return Endpoint("grpc", rest, tls=scheme == "grpcs")
     if scheme == "tcp":
         return Endpoint("zmq", url)
-    raise ValueError(f"unknown scheme {scheme!r} in {url!r}: use grpc:// (gRPC) or tcp:// (ZeroMQ)")
+    raise ValueError(
+        f"unknown scheme {scheme!r} in {url!r}: use grpc:// (gRPC), grpcs:// (gRPC over TLS) or tcp:// (ZeroMQ)"
+    )
+
+
+KEY_ENV = "CAMDIRECTOR_KEY"
+"""The environment variable a client takes its key from when ``connect`` is given none."""
+
+_CURVE_KEY_CHARS = 40  # a CURVE public key in Z85 text
+
+
+class Security:
+    """What a client proves and whom it trusts: the key (``authorization``, "Bearer KEY"), the
+    roots a ``grpcs://`` channel checks the server's certificate against, and the ZeroMQ CURVE
+    keys (the server's public key, this client's ephemeral pair).
+
+    The key is a secret: this object's repr, and every message the SDK writes, leave it out."""
+
+    __slots__ = ("_grpc_auth", "_zmq_frames", "credentials", "curve")
+
+    def __init__(
+        self,
+        authorization: str | None,
+        credentials: grpc.ChannelCredentials | None,
+        curve: tuple[bytes, bytes, bytes] | None,
+    ) -> None:
+        self._grpc_auth: tuple[tuple[str, str], ...] = (("authorization", authorization),) if authorization else ()
+        self._zmq_frames: tuple[bytes, ...] = (authorization.encode(),) if authorization else ()
+        self.credentials = credentials  # None: a plaintext channel
+        self.curve = curve              # (server public, client public, client secret), Z85; None: no CURVE
+
+    def __repr__(self) -> str:
+        return (f"Security(key={'set' if self._grpc_auth else 'none'}, tls={self.credentials is not None}, "
+                f"curve={self.curve is not None})")
+
+    def grpc_metadata(self, route: str) -> tuple[tuple[str, str], ...]:
+        """The metadata of a session's gRPC call: its route key (ROUTE_HEADER) and the key."""
+        return ((ROUTE_HEADER, route), *self._grpc_auth)
+
+    def zmq_request(self, rpc: bytes, payload: bytes) -> tuple[bytes, ...]:
+        """A ZeroMQ request's frames: the RPC name, the payload and the key frame if any."""
+        return (rpc, payload, *self._zmq_frames)
+
+    def grpc_error(self, error: grpc.RpcError) -> DirectorError:
+        """A failed gRPC call as a DirectorError, with a word on what to check when no connection
+        could be made: gRPC's own details name a closed socket or a failed handshake, not the
+        likely cause, TLS on one side only or a CA the client does not trust."""
+        wrapped = DirectorError.from_rpc_error(error)
+        hint = _connection_hint(wrapped, tls=self.credentials is not None)
+        return wrapped if hint is None else DirectorError(wrapped.code, f"{wrapped.message} ({hint})")
+
+
+def _connection_hint(error: DirectorError, *, tls: bool) -> str | None:
+    if error.code is not grpc.StatusCode.UNAVAILABLE or not error.message.startswith("failed to connect"):
+        return None  # the server's own answer, or a call cut short: it says what happened
+    if "Connection refused" in error.message:
+        return None
+    said = error.message.lower().replace("_", " ")  # BoringSSL: CERTIFICATE_VERIFY_FAILED; OpenSSL 3: in words
+    if not tls:
+        return "the server closed the connection: if it serves TLS, connect with grpcs://"
+    if "certificate verify failed" in said:
+        return ("the server's certificate is not signed by an authority this client trusts: "
+                "give ca_file, the PEM of the CA that signed it")
+    if "handshake" in said:
+        return "the TLS handshake failed: does the server serve TLS (--tls-cert)? grpc:// is plaintext"
+    return None
+
+
+def security(
+    endpoint: Endpoint,
+    key: str | None,
+    ca_file: str | os.PathLike[str] | None,
+    zmq_server_key: str | bytes | os.PathLike[str] | None,
+) -> Security:
+    """The :class:`Security` of ``connect(url, key=..., ca_file=..., zmq_server_key=...)``.
+
+    ``key`` None: the ``CAMDIRECTOR_KEY`` environment variable, if set and not empty. ValueError
+    for an option that does not fit the URL's transport (a CA file for plaintext gRPC or ZeroMQ, a
+    CURVE key for gRPC) and for a key a header can not carry."""
+    source = "key"
+    if key is None:
+        key, source = os.environ.get(KEY_ENV) or None, f"the {KEY_ENV} environment variable"
+    if key is not None:
+        if not isinstance(key, str):
+            raise TypeError(f"key must be a str, got {type(key).__name__}")
+        if not key or not all("!" <= c <= "~" for c in key):  # what a header value may hold, no space
+            raise ValueError(f"{source} must be non-empty printable ASCII without spaces (the key is not shown)")
+    if ca_file is not None and not endpoint.tls:
+        instead = "ZeroMQ is encrypted with CURVE: give zmq_server_key" if endpoint.transport == "zmq" else "use grpcs://"
+        raise ValueError(f"ca_file is for grpcs:// URLs (gRPC over TLS); {instead}")
+    if zmq_server_key is not None and endpoint.transport != "zmq":
+        raise ValueError("zmq_server_key is for tcp:// URLs (ZeroMQ); gRPC is encrypted with TLS: use grpcs://")
+    credentials = None
+    if endpoint.tls:
+        roots = None if ca_file is None else Path(ca_file).read_bytes()  # None: the system's roots
+        credentials = grpc.ssl_channel_credentials(root_certificates=roots)
+    curve = None
+    if zmq_server_key is not None:
+        if not zmq.has("curve"):
+            raise RuntimeError("this libzmq was built without CURVE: it can not encrypt ZeroMQ (zmq_server_key)")
+        curve = (_curve_server_key(zmq_server_key), *zmq.curve_keypair())
+    return Security(f"Bearer {key}" if key is not None else None, credentials, curve)
+
+
+def _curve_server_key(value: str | bytes | os.PathLike[str]) -> bytes:
+    """The server's CURVE public key, Z85: ``value`` itself (40 characters), or read from the
+    certificate file it names (the server's ``DIR/zmq/server.key``)."""
+    if isinstance(value, (str, bytes)) and len(value) == _CURVE_KEY_CHARS and not os.path.exists(value):
+        text = value.encode("ascii", errors="replace") if isinstance(value, str) else value
+        try:
+            z85.decode(text)
+        except (KeyError, ValueError):  # KeyError: a character outside Z85's alphabet
+            raise ValueError("zmq_server_key is 40 characters long but not Z85 text") from None
+        return text
+    if not os.path.isfile(value):
+        raise ValueError(f"zmq_server_key must be the server's CURVE public key (40 characters of Z85 text) or "
+                         f"the path of its server.key file; {os.fsdecode(value)!r} is neither")
+    public, _secret = zmq.auth.load_certificate(value)
+    return public
+
+
+def open_dealer(context: zmq.Context, endpoint: str, timeout_ms: int, curve: tuple[bytes, bytes, bytes] | None):
+    """A DEALER socket of ``context`` (sync or asyncio), LINGER 0, with send and receive timeouts
+    of ``timeout_ms`` (zmq.asyncio honours them too: a wait past them raises zmq.Again), a CURVE
+    client of the server when ``curve`` is given, connecting to ``endpoint``."""
+    sock = context.socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 0)
+    sock.setsockopt(zmq.RCVTIMEO, timeout_ms)
+    sock.setsockopt(zmq.SNDTIMEO, timeout_ms)
+    if curve is not None:
+        sock.curve_serverkey, sock.curve_publickey, sock.curve_secretkey = curve
+    sock.connect(endpoint)
+    return sock
+
+
+def zmq_no_reply(rpc: bytes, endpoint: str, timeout_s: float, curve: bool) -> DirectorError:
+    """DEADLINE_EXCEEDED for a ZeroMQ request left unanswered. A CURVE server drops a client that
+    does not know its key (or a plaintext one) without a word, so the message says what to check."""
+    hint = ("is zmq_server_key the server's public key?" if curve else
+            "a server with authentication on answers only clients given its CURVE key (zmq_server_key)")
+    return DirectorError(
+        grpc.StatusCode.DEADLINE_EXCEEDED,
+        f"no reply to {rpc.decode()} from {endpoint} within {timeout_s:g} s ({hint})",
+    )
 
 
 def grpc_channel_options(

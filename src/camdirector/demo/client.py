@@ -77,7 +77,8 @@ def stream_demo(url: str, scene: DemoScene, lens: Lens, seconds: float, visibili
     n_frames = int(round(seconds * FPS))
     sent_at: list[float] = []
     updates, rtt_ms = [], []
-    with cd.connect(url, key=key, zmq_server_key=zmq_server_key) as client, client.create_session(session_request(scene, lens, visibility)) as session:
+    request = session_request(scene, lens, visibility)
+    with cd.connect(url, key=key, zmq_server_key=zmq_server_key) as client, client.create_session(request) as session:
         for update in session.stream(_paced_frames(scene, n_frames, sent_at)):
             rtt_ms.append((time.perf_counter() - sent_at[len(updates)]) * 1e3)
             updates.append(update)

@@ -49,14 +49,16 @@ class ViewHub:
         self.router = router
         self.metrics = metrics
         self.clock = clock
-        self._views: OrderedDict[tuple[str, ViewQuery], View] = OrderedDict()
-        self._rendering: dict[tuple[str, ViewQuery], asyncio.Future] = {}
+        # Keyed by the asking tenant too: a picture kept for one tenant is never another's answer.
+        self._views: OrderedDict[tuple[str, str, ViewQuery], View] = OrderedDict()
+        self._rendering: dict[tuple[str, str, ViewQuery], asyncio.Future] = {}
         self.streams = 0
         self._closing = asyncio.Event()
 
-    async def get(self, session_id: str, query: ViewQuery, max_age_s: float) -> View:
-        """The picture, at most max_age_s old (math.inf: any kept one). Raises DirectorError."""
-        key = (session_id, query)
+    async def get(self, session_id: str, query: ViewQuery, max_age_s: float, tenant: str = "default") -> View:
+        """The picture, at most max_age_s old (math.inf: any kept one), of `tenant`'s session.
+        Raises DirectorError (NOT_FOUND for another tenant's session, as for a missing one)."""
+        key = (tenant, session_id, query)
         self.metrics.labelled(self.metrics.view_requests, query.shot).inc()
         kept = self._views.get(key)
         if kept is not None and self.clock() - kept.made_s <= max_age_s:
@@ -67,11 +69,11 @@ class ViewHub:
             pending = self._rendering[key] = asyncio.ensure_future(self._render(key))
         return await asyncio.shield(pending)
 
-    async def _render(self, key: tuple[str, ViewQuery]) -> View:
-        session_id, query = key
+    async def _render(self, key: tuple[str, str, ViewQuery]) -> View:
+        tenant, session_id, query = key
         try:
             self.metrics.view_renders.inc()
-            header, image = decode_view(await self.router.view(session_id, query.to_json(), RENDER_TIMEOUT_S))
+            header, image = decode_view(await self.router.view(session_id, query.to_json(), RENDER_TIMEOUT_S, tenant))
             view = View(image, header["media_type"], header["frame"], header["placeholder"], header["note"],
                         header["render_ms"], header["bounds_m"], self.clock())
             self._views[key] = view
@@ -90,7 +92,8 @@ class ViewHub:
         if self.streams >= MAX_STREAMS:
             raise exhausted(f"the server serves its maximum of {MAX_STREAMS} live views")
 
-    async def stream(self, session_id: str, query: ViewQuery, fps: float, first: View) -> AsyncIterator[View]:
+    async def stream(self, session_id: str, query: ViewQuery, fps: float, first: View,
+                     tenant: str = "default") -> AsyncIterator[View]:
         """A live view at `fps`: `first`, then each new picture (the same one again after
         KEEPALIVE_S without change), until the session ends, the hub closes or the viewer goes
         away (the caller stops iterating, or is cancelled). Counted in `streams` while it runs."""
@@ -109,7 +112,7 @@ class ViewHub:
                 except TimeoutError:
                     pass
                 try:
-                    fresh = await self.get(session_id, query, period_s / 2)
+                    fresh = await self.get(session_id, query, period_s / 2, tenant)
                 except DirectorError:
                     return   # the session ended (or its worker): the stream ends with it
                 if fresh.frame != view.frame or fresh.placeholder != view.placeholder or \

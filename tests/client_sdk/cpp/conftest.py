@@ -1,5 +1,6 @@
 """Fixtures for the C/C++ SDK's tests: its CMake build (once per test session, incremental in
-client_sdk/cpp/build/), a runner for its programs, and a TCP proxy that can cut connections."""
+client_sdk/cpp/build/), a runner for its programs, `sdk_check stream` in the background, and a TCP
+proxy that can cut connections."""
 from __future__ import annotations
 
 import fcntl
@@ -62,11 +63,52 @@ def sdk_bin() -> Path:
     return BUILD_DIR
 
 
-def run_json(binary: Path, *args: str, timeout_s: float = 60.0, stdin: str | None = None) -> dict:
-    """Runs one of the SDK's programs; its last stdout line, parsed as JSON."""
-    done = subprocess.run([str(binary), *args], input=stdin, capture_output=True, text=True, timeout=timeout_s)
+def run_json(binary: Path, *args: str, timeout_s: float = 60.0, stdin: str | None = None,
+             env: dict | None = None) -> dict:
+    """Runs one of the SDK's programs (with `env` over this process's environment); its last
+    stdout line, parsed as JSON."""
+    done = subprocess.run([str(binary), *args], input=stdin, capture_output=True, text=True, timeout=timeout_s,
+                          env={**os.environ, **(env or {})})
     assert done.returncode == 0, f"{binary.name} {' '.join(args)} exited {done.returncode}:\n{done.stdout}\n{done.stderr}"
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+READY_TIMEOUT_S = 30.0
+
+
+class StreamRun:
+    """`sdk_check stream ADDRESS --until EVENT [OPTIONS]` in the background (with `env` over this
+    process's environment): waits for its ready line, then for its report."""
+
+    def __init__(self, binary, address: str, until: str, timeout_s: float = 40.0, *options: str,
+                 env: dict | None = None):
+        self.proc = subprocess.Popen([str(binary), "stream", address, "--until", until, "--timeout", str(timeout_s),
+                                      *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env={**os.environ, **(env or {})})
+        self.lines: list[str] = []
+        self._ready = threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            if '"ready"' in line:
+                self._ready.set()
+        self._ready.set()
+
+    def wait_ready(self) -> dict:
+        assert self._ready.wait(READY_TIMEOUT_S), "sdk_check never started streaming"
+        assert self.lines and '"ready"' in self.lines[0], f"no ready line: {self.lines} {self.proc.stderr.read()}"
+        return json.loads(self.lines[0])
+
+    def report(self, timeout_s: float = 90.0) -> dict:
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            pytest.fail(f"sdk_check stream did not finish: {self.lines}")
+        assert self.proc.returncode == 0, self.proc.stderr.read()
+        return json.loads(self.lines[-1])
 
 
 def free_port() -> int:

@@ -6,49 +6,9 @@ without checkpoints (`--checkpoint-store off`: a restart, a dead worker), gets t
 created again (new id, reported as an event)."""
 from __future__ import annotations
 
-import json
-import subprocess
-import threading
 import time
 
-import pytest
-
-from tests.client_sdk.cpp.conftest import free_port
-
-READY_TIMEOUT_S = 30.0
-
-
-class StreamRun:
-    """`sdk_check stream ADDRESS --until EVENT` in the background: waits for its ready line, then
-    for its report."""
-
-    def __init__(self, binary, address: str, until: str, timeout_s: float = 40.0):
-        self.proc = subprocess.Popen([str(binary), "stream", address, "--until", until, "--timeout", str(timeout_s)],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        self.lines: list[str] = []
-        self._ready = threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            self.lines.append(line)
-            if '"ready"' in line:
-                self._ready.set()
-        self._ready.set()
-
-    def wait_ready(self) -> dict:
-        assert self._ready.wait(READY_TIMEOUT_S), "sdk_check never started streaming"
-        assert self.lines and '"ready"' in self.lines[0], f"no ready line: {self.lines} {self.proc.stderr.read()}"
-        return json.loads(self.lines[0])
-
-    def report(self, timeout_s: float = 90.0) -> dict:
-        try:
-            self.proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            pytest.fail(f"sdk_check stream did not finish: {self.lines}")
-        assert self.proc.returncode == 0, self.proc.stderr.read()
-        return json.loads(self.lines[-1])
+from tests.client_sdk.cpp.conftest import StreamRun, free_port
 
 
 def _kinds(report: dict) -> list[str]:

@@ -39,6 +39,17 @@
  * and cd_client_destroy's) and a recreation all send. A balancer in front of several servers
  * (docs/scaling.md) sends the calls with one key to one server by a consistent hash, and the
  * session to another that restores it when that one is lost. Each cd_session_open picks a new key.
+ *
+ * Keys and TLS (docs/security.md). A server with authentication on (the default) wants an API key
+ * (`camdirector keys create --role engine`) on every call: cd_config.key, else the CAMDIRECTOR_KEY
+ * environment variable, goes as the metadata "authorization: Bearer KEY" on every call of the
+ * client, the frame streams included. Without a valid key the server answers CD_UNAUTHENTICATED;
+ * with a key whose role may not make the call, CD_PERMISSION_DENIED. A key refused while a
+ * session streams (revoked meanwhile) ends the session: CD_EVENT_SESSION_FAILED with that status,
+ * never a reconnection (another stream would be refused the same). The SDK copies the key and
+ * never prints it nor puts it in a message. An address "grpcs://HOST:PORT" connects over TLS,
+ * checking the server's certificate against cd_config.ca_file (a studio's own CA) or else the
+ * system's roots; "grpc://" and no scheme are plaintext, for loopback or a trusted network.
  */
 #ifndef CAMDIRECTOR_H
 #define CAMDIRECTOR_H
@@ -60,7 +71,7 @@ typedef enum cd_status {
   CD_DEADLINE_EXCEEDED = 4,    /* a blocking call's timeout_s passed */
   CD_NOT_FOUND = 5,            /* unknown session or id (from the server), no pose yet (poll) */
   CD_ALREADY_EXISTS = 6,
-  CD_PERMISSION_DENIED = 7,
+  CD_PERMISSION_DENIED = 7,    /* the key's role may not make this call */
   CD_RESOURCE_EXHAUSTED = 8,   /* too many states in one frame, or the server's limits */
   CD_FAILED_PRECONDITION = 9,  /* no session open, or one already open */
   CD_ABORTED = 10,
@@ -69,7 +80,7 @@ typedef enum cd_status {
   CD_INTERNAL = 13,
   CD_UNAVAILABLE = 14,         /* the server is down, refuses connections, or lost the session */
   CD_DATA_LOSS = 15,
-  CD_UNAUTHENTICATED = 16
+  CD_UNAUTHENTICATED = 16      /* no key, an unknown one or a revoked one */
 } cd_status;
 
 /* "OK", "INVALID_ARGUMENT", ... (a static string; never NULL). */
@@ -97,9 +108,11 @@ typedef struct cd_transform {
 
 typedef struct cd_client cd_client; /* opaque */
 
-/* Zero means the default for every field; cd_config_init fills in the defaults. */
+/* Zero means the default for every field; cd_config_init fills in the defaults. The strings are
+ * read by cd_client_create only (the caller may free them on return). */
 typedef struct cd_config {
-  const char* address;      /* "HOST:PORT", "[IPv6]:PORT", "grpc://HOST:PORT" or "unix:/path" */
+  const char* address;      /* "HOST:PORT", "[IPv6]:PORT", "grpc://HOST:PORT", "unix:/path" (plaintext),
+                               or "grpcs://HOST:PORT" (TLS) */
   uint32_t queue_capacity;  /* frames waiting to be sent; when full the oldest is dropped. 8 */
   uint32_t max_states;      /* object states per frame. 64 */
   uint32_t max_in_flight;   /* frames sent and not yet answered; more wait in the queue. 2 */
@@ -111,6 +124,10 @@ typedef struct cd_config {
   uint32_t io_poll_interval_ms; /* 0: cd_frame_submit wakes the I/O thread (one futex wake, a few
                                    microseconds); N > 0: it never does, the I/O thread looks at the
                                    queue every N ms instead (adds up to N ms to the pose's delay). 0 */
+  const char* key;          /* the API key, sent with every call (Keys and TLS, above); NULL or "":
+                               the CAMDIRECTOR_KEY environment variable, else no key */
+  const char* ca_file;      /* grpcs:// only: a PEM file of the certificate authorities to trust
+                               for the server's certificate; NULL or "": the system's roots */
 } cd_config;
 
 void cd_config_init(cd_config* config);
@@ -119,8 +136,15 @@ void cd_config_init(cd_config* config);
  * reason copied into buf (may be NULL). */
 cd_status cd_check_address(const char* address, char* buf, size_t size);
 
-/* Parses the address and starts the I/O thread; does not connect yet and does not block.
- * CD_INVALID_ARGUMENT for an address that does not parse (*out is then NULL). */
+/* Whether cd_client_create takes the config: CD_OK, or CD_INVALID_ARGUMENT with the reason copied
+ * into buf (may be NULL): an address that does not parse, a key with a space or a character a
+ * header cannot carry (the reason never shows the key), a ca_file without grpcs:// or that cannot
+ * be read or holds no PEM certificate, a queue or timeout out of range. */
+cd_status cd_check_config(const cd_config* config, char* buf, size_t size);
+
+/* Parses the address, reads the key and the CA file, and starts the I/O thread; does not connect
+ * yet and does not block. CD_INVALID_ARGUMENT for a config cd_check_config refuses (*out is then
+ * NULL). */
 cd_status cd_client_create(const cd_config* config, cd_client** out);
 
 /* BLOCKING (up to about 1 s): closes the open session if any (best effort), stops the I/O thread
@@ -317,7 +341,7 @@ typedef enum cd_event_kind {
   CD_EVENT_DISCONNECTED = 2,   /* the stream broke (status, message); reconnecting */
   CD_EVENT_RESUMED = 3,        /* a new stream answers on the same session id (restored or kept) */
   CD_EVENT_RECREATED = 4,      /* the server lost the session: created again, new id */
-  CD_EVENT_SESSION_FAILED = 5, /* recreating was refused for good (status); streaming stopped */
+  CD_EVENT_SESSION_FAILED = 5, /* recreating was refused for good, or the key was (status); streaming stopped */
   CD_EVENT_FRAME_REFUSED = 6   /* the server refused a frame (status); the session goes on */
 } cd_event_kind;
 

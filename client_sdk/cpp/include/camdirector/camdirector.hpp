@@ -24,17 +24,19 @@ struct Status {
 
 class Client {
  public:
-  // Parses the address and starts the I/O thread (no network yet). On failure the client is
-  // empty (valid() is false) and `status` says why.
+  // Parses the address, reads the key and the CA file (config.key, config.ca_file: camdirector.h,
+  // Keys and TLS) and starts the I/O thread (no network yet). On failure the client is empty
+  // (valid() is false) and `status` says why.
   explicit Client(const cd_config& config, Status* status = nullptr) {
     char reason[256];
-    cd_status code = cd_check_address(config.address, reason, sizeof reason);
+    cd_status code = cd_check_config(&config, reason, sizeof reason);
     if (code == CD_OK) {
       code = cd_client_create(&config, &client_);
       if (code != CD_OK) std::snprintf(reason, sizeof reason, "cd_client_create: %s", cd_status_name(code));
     }
     if (status != nullptr) *status = Status{code, code == CD_OK ? std::string() : std::string(reason)};
   }
+  // The defaults, with the key of the CAMDIRECTOR_KEY environment variable if any.
   explicit Client(const std::string& address, Status* status = nullptr)
       : Client(config_for(address), status) {}
 

@@ -1,7 +1,14 @@
 // The director's dashboard. Reads the REST API only: /healthz, /v1/sessions, /v1/sessions/{id},
 // PUT /v1/sessions/{id}/style, POST /v1/sessions/{id}/take (a MATCH session's take and release),
-// the monitors' /v1/sessions/{id}/view, view.mjpeg and topview.png, /v1/overview-jobs. Data is
-// written with textContent, never as HTML.
+// the monitors' /v1/sessions/{id}/view, view.mjpeg and topview.png, /v1/overview-jobs; and who
+// the caller is, /v1/whoami, /v1/login and /v1/logout (docs/security.md). Data is written with
+// textContent, never as HTML.
+//
+// With authentication on, the page is shown a key once, in the login form: /v1/login answers with
+// the login cookie (HttpOnly: no script here reads it), and the key itself is kept nowhere, not in
+// storage, the address or the form. Every request then goes with the cookie; one that changes
+// anything carries the CSRF token the login gave. Without authentication (`--no-auth`) /v1/whoami
+// answers at once and no form is shown.
 "use strict";
 
 const POLL_SESSIONS_MS = 1000;   // the session list and the jobs
@@ -43,17 +50,50 @@ let cutShown = null;             // the cut the before/after monitors show: "<se
 let cutPictures = [];            // their object URLs, released when replaced
 let topViews = {};               // session id -> its top view: { image, world } once fetched, { failedMs } after a failure
 
-async function api(path, options = {}) {
-  const reply = await fetch(path, options);
+// The caller, as /v1/whoami or /v1/login describe it: { key_id, role, tenant, csrf_token }
+// (key_id and csrf_token null without authentication); null while nobody is logged in.
+let caller = null;
+
+// The verbs the dashboard's controls use and what each control does. Whether the caller's key
+// has a verb comes from /v1/whoami (its role's verbs, access/roles.py); only to switch a control
+// off beforehand and say why: the server decides, and a refusal shows where the control's result does.
+const CONTROLS = {
+  "session.take": "take and release shots",
+  "session.style": "change a session's style",
+  "job.submit": "submit overview jobs",
+};
+const SAFE_METHODS = ["GET", "HEAD", "OPTIONS"];   // the methods the server asks no CSRF token of (front/http/auth.py)
+
+class ApiError extends Error {   // the server answered, not with 2xx: its status, and its own words in detail
+  constructor(status, detail) {
+    super(`${status}: ${detail}`);
+    this.status = status;
+    this.detail = detail;
+  }
+}
+
+// Every request of the page. The login cookie goes with it (same origin); a request that changes
+// anything carries the CSRF token; a 401 (the key revoked, the login expired) brings the login form
+// back with the server's reason.
+async function send(path, options = {}) {
+  const headers = new Headers(options.headers);
+  if (!SAFE_METHODS.includes((options.method || "GET").toUpperCase()) && caller && caller.csrf_token) {
+    headers.set("X-CSRF-Token", caller.csrf_token);
+  }
+  const reply = await fetch(path, { ...options, headers, credentials: "same-origin" });
+  if (reply.ok) return reply;
   const text = await reply.text();
   const body = text ? JSON.parse(text) : {};
-  if (!reply.ok) {
-    const detail = Array.isArray(body.detail)
-      ? body.detail.map((d) => `${(d.loc || []).join(".")}: ${d.msg}`).join("; ")
-      : body.detail;
-    throw new Error(`${reply.status}: ${detail || reply.statusText}`);
-  }
-  return body;
+  const detail = Array.isArray(body.detail)
+    ? body.detail.map((d) => `${(d.loc || []).join(".")}: ${d.msg}`).join("; ")
+    : body.detail || reply.statusText;
+  if (reply.status === 401) showLogin(detail);
+  throw new ApiError(reply.status, detail);
+}
+
+async function api(path, options = {}) {
+  const text = await (await send(path, options)).text();
+  return text ? JSON.parse(text) : {};
 }
 
 function cell(row, text) {
@@ -67,9 +107,12 @@ function cell(row, text) {
 
 async function refreshSessions() {
   const health = await api("/healthz");
-  document.getElementById("health").textContent =
-    `${health.status}: ${health.sessions} sessions, ${health.workers} workers`;
+  const who = caller;
   const { sessions } = await api("/v1/sessions");
+  if (caller !== who) return;   // logged out meanwhile: the list was the last key's
+  // The tenant's sessions (the list's), not /healthz's count of the whole node's.
+  document.getElementById("health").textContent =
+    `${health.status}: ${sessions.length} sessions of tenant ${caller.tenant}, ${health.workers} workers`;
   const body = document.querySelector("#sessions tbody");
   body.replaceChildren();
   for (const s of sessions) {
@@ -132,8 +175,7 @@ function programStopped() {   // the stream ended (the session did) or was refus
 }
 
 async function picture(url) {   // a monitor's picture as an object URL, with the headers saying what it shows
-  const reply = await fetch(url);
-  if (!reply.ok) throw new Error(`${reply.status}: ${reply.statusText}`);
+  const reply = await send(url);
   return { url: URL.createObjectURL(await reply.blob()), frame: reply.headers.get("X-Camdirector-Frame"),
            placeholder: reply.headers.get("X-Camdirector-Placeholder") };
 }
@@ -184,8 +226,7 @@ async function loadTopView(sessionId) {
   if (kept && !(kept.failedMs && Date.now() - kept.failedMs >= TOP_VIEW_RETRY_MS)) return;
   topViews[sessionId] = { pending: true };
   try {
-    const reply = await fetch(`${sessionPath(sessionId)}/topview.png`);
-    if (!reply.ok) throw new Error(`${reply.status}`);
+    const reply = await send(`${sessionPath(sessionId)}/topview.png`);
     const bounds = reply.headers.get("X-Camdirector-Bounds-M");
     if (!bounds) {   // no static geometry: the picture is a card saying so, nothing to draw under the trails
       topViews[sessionId] = { image: null, world: null };
@@ -514,6 +555,7 @@ function candidateRow(c) {
   cell(row, "").className = "candidate-interest";
   const button = document.createElement("button");
   button.textContent = "take";
+  gate(button, "session.take");
   button.addEventListener("click", () => take({ subject_ids: c.shot.subject_ids, kind: c.shot.kind }));
   cell(row, "").appendChild(button);
   return row;
@@ -597,7 +639,9 @@ async function applyStyle(event) {
 // -- overview jobs --------------------------------------------------------------------------
 
 async function refreshJobs() {
+  const who = caller;
   const { jobs } = await api("/v1/overview-jobs?limit=50");
+  if (caller !== who) return;   // logged out meanwhile: the list was the last key's
   const body = document.querySelector("#jobs tbody");
   body.replaceChildren();
   for (const j of jobs) {
@@ -639,14 +683,115 @@ async function submitOverview(event) {
   }
 }
 
+// -- who is logged in -----------------------------------------------------------------------
+
+function may(verb) {
+  return caller.verbs.includes(verb);
+}
+
+function gate(button, verb) {   // a control the caller's role may not use: off, saying why as the server would
+  button.disabled = !may(verb);
+  button.title = may(verb) ? "" : `a key of role '${caller.role}' may not ${verb} (docs/security.md)`;
+}
+
+function applyRole() {
+  gate(document.getElementById("release"), "session.take");
+  gate(document.querySelector('#style-form button[type="submit"]'), "session.style");
+  gate(document.querySelector('#overview-form button[type="submit"]'), "job.submit");
+  const refused = Object.keys(CONTROLS).filter((verb) => !may(verb));
+  const note = document.getElementById("role-note");
+  note.hidden = refused.length === 0;
+  note.textContent = `A key of role '${caller.role}' may not ${refused.map((verb) => CONTROLS[verb]).join(", ")}: ` +
+    "those buttons are off (docs/security.md).";
+}
+
+function loggedIn(who) {
+  caller = who;
+  document.getElementById("login-panel").hidden = true;
+  document.getElementById("login-result").textContent = "";
+  document.getElementById("dashboard").hidden = false;
+  document.getElementById("who").textContent = who.key_id === null
+    ? "authentication off: every caller is an admin of tenant default"
+    : `${who.role} of tenant ${who.tenant} (key ${who.key_id})`;
+  document.getElementById("logout").hidden = who.key_id === null;
+  applyRole();
+  polls.forEach((poll) => poll());
+}
+
+// What the page showed of the last key's sessions and jobs: the next key may be another tenant's.
+function forget() {
+  selected = null;
+  styleSentBySession = {};
+  buffered = { session: null, frames: [], events: [] };
+  topViews = {};
+  candidatesShown = "";
+  document.getElementById("session-panel").hidden = true;
+  document.getElementById("program-view").removeAttribute("src");   // ends its live stream
+  document.getElementById("take-result").textContent = "";
+  document.getElementById("job-view").hidden = true;
+  for (const id of ["sessions", "candidates", "jobs"]) document.querySelector(`#${id} tbody`).replaceChildren();
+}
+
+function showLogin(message, className = "error") {
+  caller = null;
+  forget();
+  document.getElementById("dashboard").hidden = true;
+  document.getElementById("health").textContent = "not logged in";
+  document.getElementById("who").textContent = "";
+  document.getElementById("logout").hidden = true;
+  document.getElementById("login-panel").hidden = false;
+  const result = document.getElementById("login-result");
+  result.className = className;
+  result.textContent = message;
+  document.querySelector('#login-form input[name="key"]').focus();
+}
+
+async function logIn(event) {
+  event.preventDefault();
+  const input = event.target.key;
+  const key = input.value;
+  input.value = "";   // the key is not kept, not even in the form: the cookie stands for it
+  try {
+    loggedIn(await api("/v1/login", {
+      method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ key }),
+    }));
+  } catch (error) {
+    showLogin(error instanceof ApiError ? error.detail : `unreachable: ${error.message}`);
+  }
+}
+
+async function logOut() {
+  try {
+    await api("/v1/logout", { method: "POST" });
+    showLogin("Logged out.", "ok");
+  } catch (error) {
+    showTrouble(error);
+  }
+}
+
+async function identify() {   // who the login cookie makes the caller, or the open server's admin
+  try {
+    loggedIn(await api("/v1/whoami"));
+  } catch (error) {
+    showTrouble(error);
+    if (!(error instanceof ApiError && error.status === 401)) setTimeout(identify, POLL_SESSIONS_MS);
+  }
+}
+
+function showTrouble(error) {   // in the header: the server's refusal, or that it could not be reached
+  if (error instanceof ApiError && error.status === 401) return;   // the login form says why
+  document.getElementById("health").textContent =
+    error instanceof ApiError ? error.message : `unreachable: ${error.message}`;
+}
+
 // -- start ----------------------------------------------------------------------------------
 
-function every(ms, task) {
-  const run = () => task().catch((error) => {
-    document.getElementById("health").textContent = `unreachable: ${error.message}`;
-  });
-  run();
+function every(ms, task) {   // a poll, run while someone is logged in; returned to be run at once after a login
+  const run = () => {
+    if (caller) task().catch(showTrouble);
+  };
   setInterval(run, ms);
+  return run;
 }
 
 for (const threshold of document.querySelectorAll(".framing-lost")) threshold.textContent = FRAMING_LOST;
@@ -654,6 +799,11 @@ document.getElementById("style-form").addEventListener("submit", applyStyle);
 document.getElementById("release").addEventListener("click", () => take({ release: true }));
 document.getElementById("overview-form").addEventListener("submit", submitOverview);
 document.getElementById("program-view").addEventListener("error", programStopped);
-every(POLL_SESSIONS_MS, refreshSessions);
-every(POLL_SESSIONS_MS, refreshJobs);
-every(POLL_SESSION_MS, refreshSession);
+document.getElementById("login-form").addEventListener("submit", logIn);
+document.getElementById("logout").addEventListener("click", logOut);
+const polls = [
+  every(POLL_SESSIONS_MS, refreshSessions),
+  every(POLL_SESSIONS_MS, refreshJobs),
+  every(POLL_SESSION_MS, refreshSession),
+];
+identify();

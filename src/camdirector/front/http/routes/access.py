@@ -17,7 +17,7 @@ from pydantic import BaseModel, Field
 
 from camdirector.access.guard import Guard, Identity
 from camdirector.access.keys import KeyNotFound
-from camdirector.access.roles import ROLES, Verb
+from camdirector.access.roles import ROLE_VERBS, ROLES, Verb
 from camdirector.errors import DirectorError
 from camdirector.front.http.auth import COOKIE, COOKIE_TTL_S, identify, require
 
@@ -29,6 +29,7 @@ class Caller(BaseModel):
     key_id: str | None = Field(description="null when the server runs without authentication")
     role: str
     tenant: str
+    verbs: list[str] = Field(description="what the key's role may do (docs/security.md)")
     csrf_token: str | None = Field(None, description="send as X-CSRF-Token with the login cookie's changes")
 
 
@@ -73,7 +74,8 @@ class AuditTrail(BaseModel):
 
 def _caller(request: Request, identity: Identity, cookie: str | None) -> dict:
     token = request.app.state.cookies.csrf_token(cookie) if cookie else None
-    return {"key_id": identity.key_id, "role": identity.role, "tenant": identity.tenant, "csrf_token": token}
+    return {"key_id": identity.key_id, "role": identity.role, "tenant": identity.tenant,
+            "verbs": sorted(verb.value for verb in ROLE_VERBS[identity.role]), "csrf_token": token}
 
 
 def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:

@@ -86,8 +86,7 @@ def build_view_router(hub: ViewHub) -> APIRouter:
 
     async def picture(session_id: str, query: ViewQuery, max_age_s: float, identity: Identity) -> View:
         try:
-            hub.router.check_owner(session_id, identity.tenant)
-            return await hub.get(session_id, query, max_age_s)
+            return await hub.get(session_id, query, max_age_s, identity.tenant)
         except DirectorError as exc:
             raise http_error(exc) from None
 
@@ -119,7 +118,7 @@ def build_view_router(hub: ViewHub) -> APIRouter:
             raise http_error(exc) from None
 
         async def parts():
-            async for view in hub.stream(session_id, query, fps, first):
+            async for view in hub.stream(session_id, query, fps, first, identity.tenant):
                 head = (f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(view.image)}\r\n"
                         + "".join(f"{k}: {v}\r\n" for k, v in _headers(view).items() if k.startswith("X-"))
                         + "\r\n")
