@@ -117,6 +117,6 @@ def postgres_url(postgres_server) -> str:
 
 @pytest.fixture(scope="session")
 def tls_files(tmp_path_factory):
-    """A CA and a server certificate for 127.0.0.1 and localhost (tests/tls_files.py)."""
-    from tests.tls_files import make_tls_files
+    """A CA and a server certificate for 127.0.0.1 and localhost (camdirector.deploy.tls)."""
+    from camdirector.deploy.tls import make_tls_files
     return make_tls_files(tmp_path_factory.mktemp("tls"))

@@ -53,9 +53,10 @@ class ServerSettings:
     tls_cert: str = ""                       # PEM certificate chain: gRPC and HTTP over TLS ("" plaintext)
     tls_key: str = ""                        # its PEM private key
     insecure: bool = False                   # allow plaintext on a non-loopback address (behind a trusted proxy)
-    # Each tenant's share (every tenant the same); beyond it RESOURCE_EXHAUSTED / HTTP 429 with a message.
+    # Each tenant's share, with authentication on (every tenant the same); beyond it RESOURCE_EXHAUSTED /
+    # HTTP 429 with a message.
     tenant_max_sessions: int = 64            # sessions a tenant has open on this node. [1, 100000]
-    tenant_max_fps: float = 240.0            # frames a second into one session, over any 1 s. [1, 10000]
+    tenant_max_fps: float = 240.0            # frames a second into one session (a bucket of 1 s of frames). [1, 10000]
     tenant_max_upload_bytes: int = 4 * 1024 ** 3  # bytes of uploads a tenant's jobs hold at once (inputs kept with jobs). [1 KiB, 1 TiB]
     tenant_max_queued_jobs: int = 16         # jobs a tenant has queued or running at once. [1, 100000]
 
@@ -90,9 +91,11 @@ class ServerSettings:
 
     def job_settings(self):
         from camdirector.jobs import JobSettings  # validated there
+        shares = dict(tenant_max_queued_jobs=self.tenant_max_queued_jobs,
+                      tenant_max_upload_bytes=self.tenant_max_upload_bytes) if self.auth else {}
         return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
                            max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s,
-                           job_store=self.job_store, job_queue=self.job_queue)
+                           job_store=self.job_store, job_queue=self.job_queue, **shares)
 
     @property
     def tls(self) -> bool:

@@ -1,5 +1,6 @@
 """The binary framing of the socket pair between the front and a worker (infra/channels.py):
-requests and replies come out as they went in, over a real socket pair, whatever their size."""
+requests and replies come out as they went in, over a real socket pair, whatever their size; a
+create request carries its session's tenant."""
 from __future__ import annotations
 
 import asyncio
@@ -14,12 +15,15 @@ from camdirector.infra.channels import (
     REQUEST,
     REQUEST_ID_MODULUS,
     FrameMetrics,
+    decode_create,
     decode_reply_tail,
+    encode_create,
     encode_reply,
     encode_request,
     read_request,
     tail_length,
 )
+from camdirector.v1 import director_pb2 as pb
 
 
 @pytest.mark.parametrize("op, session_id, payload", [
@@ -93,3 +97,12 @@ def test_a_multi_gib_payload_length_survives_the_header():
     # multiprocessing's framing needed an escape past 2 GiB; the REQUEST header holds 64 bits
     header = encode_request(3, "create", "s", _Sized(5 << 30))[0]
     assert REQUEST.unpack(header) == (3, OPS.index("create"), 1, 5 << 30)
+
+
+def test_a_create_payload_carries_the_tenant_and_reads_one_from_before_tenants():
+    request = pb.CreateSessionRequest(level_id="arena", seed=7).SerializeToString()
+    tenant, body = decode_create(encode_create("a" * 63, request))
+    assert tenant == "a" * 63 and bytes(body) == request
+    assert pb.CreateSessionRequest.FromString(body).level_id == "arena"
+    assert decode_create(encode_create("acme", b"")) == ("acme", b"")
+    assert decode_create(request) == ("default", request)   # a checkpoint written before tenants

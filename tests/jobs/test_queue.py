@@ -164,6 +164,6 @@ def test_serve_refuses_to_start_when_a_service_is_down(tmp_path, redis_url, post
     done = subprocess.run([*CAMDIRECTOR, "serve", "--grpc", "", "--zmq", "", "--http", "127.0.0.1:0", "--workers", "0",
                            "--data-dir", str(tmp_path), "--job-queue", queue, "--job-store", store],
                           capture_output=True, text=True, timeout=60)
-    what = "job queue" if down == "redis" else "job store"
+    what = "job queue" if down == "redis" else "records database (keys)"  # the first to reach PostgreSQL
     assert done.returncode != 0 and done.stdout == "", done.stdout
     assert done.stderr.splitlines()[-1].startswith(f"camdirector serve: {what} {dead} is unreachable: "), done.stderr

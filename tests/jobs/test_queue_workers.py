@@ -21,6 +21,7 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
+from camdirector.access.guard import Guard
 from camdirector.front.http.routes.levels import install_level_routes
 from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
@@ -79,6 +80,7 @@ def cluster(tmp_path, redis_url, postgres_url):
     settings = JobSettings(job_queue=redis_url, job_store=postgres_url, max_upload_bytes=150_000,
                            worker_heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S)
     app = FastAPI()
+    app.state.guard = Guard(None)   # authentication off, as a `--no-auth` node's app
     jobs = open_jobs(data_dir, service_kinds(), settings)
     install_overview_routes(app, jobs, settings)
     install_level_routes(app, jobs, data_dir, settings)
@@ -122,6 +124,7 @@ def test_the_rest_api_is_the_same_in_both_modes(tmp_path, cluster, run_bvh):
     queued_client, queue_jobs, start_worker = cluster
     start_worker()
     local_app = FastAPI()
+    local_app.state.guard = Guard(None)
     local_settings = JobSettings(max_upload_bytes=150_000)
     local_jobs = open_jobs(tmp_path / "local", service_kinds(), local_settings)
     install_overview_routes(local_app, local_jobs, local_settings)

@@ -1,11 +1,24 @@
 """The record store (jobs/records.py), every test on SQLite and on PostgreSQL: records,
-files renamed into place, a full queue, recovery, retention, and the compare-and-set of attempts
-that lets a job succeed once when a redelivered message runs it twice."""
+files renamed into place, a full queue, recovery, retention, the compare-and-set of attempts
+that lets a job succeed once when a redelivered message runs it twice, tenants and their shares,
+and a table from before tenants gaining them."""
 from __future__ import annotations
+
+import contextlib
+import sqlite3
+import time
 
 import pytest
 
-from camdirector.jobs import JobNotFound, JobState, JobsUnavailable, PostgresJobStore, QueueFull, SqliteJobStore
+from camdirector.jobs import (
+    JobNotFound,
+    JobState,
+    JobsUnavailable,
+    PostgresJobStore,
+    QueueFull,
+    SqliteJobStore,
+    TenantLimitReached,
+)
 
 
 def job_dirs(store) -> set[str]:
@@ -176,3 +189,68 @@ def test_unreachable_postgres_is_one_clear_line(tmp_path):
         PostgresJobStore(url, tmp_path)
     message = str(caught.value)
     assert message.startswith(f"job store {url} is unreachable: ") and "\n" not in message
+
+
+def test_jobs_are_their_tenants(store):
+    a = store.submit("echo", {}, {}, tenant="acme")
+    b = store.submit("echo", {}, {})
+    assert (store.get(a.id).tenant, store.get(b.id).tenant) == ("acme", "default")
+    assert [j.id for j in store.list(tenant="acme")] == [a.id]
+    assert [j.id for j in store.list(JobState.QUEUED, kind="echo", tenant="default")] == [b.id]
+    assert store.list(tenant="beta") == [] and len(store.list()) == 2
+
+
+def test_a_tenants_share_of_jobs_and_of_stored_inputs(store):
+    share = dict(tenant_max_queued_jobs=2, tenant_max_upload_bytes=10)
+
+    def submit(tenant: str, size: int):
+        return store.submit("echo", {}, {"in.txt": b"x" * size}, tenant=tenant, **share)
+
+    first, second = submit("acme", 3), submit("acme", 3)
+    store.claim_next()                                       # running counts as much as queued
+    before = job_dirs(store)
+    with pytest.raises(TenantLimitReached, match="tenant 'acme' has 2 jobs queued or running"):
+        submit("acme", 1)
+    assert job_dirs(store) == before and len(store.list()) == 2    # refused: nothing left behind
+    assert submit("beta", 10).tenant == "beta"              # another tenant's share is its own
+    store.finish(first.id, JobState.SUCCEEDED)
+    third = submit("acme", 4)                               # a place again: 10 bytes kept, the limit
+    store.cancel(third.id)
+    store.cancel(second.id)
+    with pytest.raises(TenantLimitReached, match=r"keep 10 bytes of uploads; 1 more would pass its limit of 10"):
+        submit("acme", 1)                                   # finished jobs keep their inputs until purged
+    store.purge_finished(time.time() + 1)
+    assert submit("acme", 10).tenant == "acme"
+
+
+# The jobs table as the first release made it: no tenant, no input sizes.
+_OLD_SQLITE_TABLE = """CREATE TABLE jobs (id TEXT PRIMARY KEY, kind TEXT NOT NULL, params TEXT NOT NULL,
+    state TEXT NOT NULL, progress REAL NOT NULL DEFAULT 0, error TEXT, attempts INTEGER NOT NULL DEFAULT 0,
+    created_s REAL NOT NULL, started_s REAL, finished_s REAL, timings TEXT NOT NULL DEFAULT '{}', seq INTEGER NOT NULL)"""
+_OLD_POSTGRES_TABLE = """CREATE TABLE jobs (id TEXT PRIMARY KEY, kind TEXT NOT NULL, params TEXT NOT NULL,
+    state TEXT NOT NULL, progress DOUBLE PRECISION NOT NULL DEFAULT 0, error TEXT, attempts INTEGER NOT NULL DEFAULT 0,
+    created_s DOUBLE PRECISION NOT NULL, started_s DOUBLE PRECISION, finished_s DOUBLE PRECISION,
+    timings TEXT NOT NULL DEFAULT '{}', seq BIGSERIAL NOT NULL)"""
+_OLD_ROW = ("INSERT INTO jobs (id, kind, params, state, created_s, seq) VALUES ('0ld', 'echo', '{}', 'queued', 1.0, 1)")
+
+
+def test_a_table_from_before_tenants_gains_them(make_store, records_url, tmp_path):
+    """A data directory or database of the first release: its jobs are tenant `default`'s, with
+    inputs counted as 0 bytes, and new jobs go in beside them."""
+    if records_url:
+        import psycopg
+        with psycopg.connect(records_url, autocommit=True) as db:
+            db.execute(_OLD_POSTGRES_TABLE)
+            db.execute(_OLD_ROW)
+    else:
+        (tmp_path / "jobs").mkdir()
+        with contextlib.closing(sqlite3.connect(tmp_path / "jobs" / SqliteJobStore.DB_NAME)) as db:
+            db.execute(_OLD_SQLITE_TABLE)
+            db.execute(_OLD_ROW)
+            db.commit()
+    store = make_store()
+    old = store.get("0ld")
+    assert old.tenant == "default" and old.state is JobState.QUEUED
+    new = store.submit("echo", {}, {"in.txt": b"abc"}, tenant="acme", tenant_max_upload_bytes=3)
+    assert [j.id for j in store.list()] == ["0ld", new.id] and store.list(tenant="acme") == [store.get(new.id)]
+    assert make_store().get("0ld") == old                   # opened again: migrated once

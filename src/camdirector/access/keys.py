@@ -272,7 +272,7 @@ class SqliteAccessStore(AccessStore):
 
 class PostgresAccessStore(AccessStore):
     def __init__(self, url: str) -> None:
-        self._db = PostgresDatabase(url, "access store", AccessUnavailable)
+        self._db = PostgresDatabase(url, "records database (keys)", AccessUnavailable)
         self.where = "PostgreSQL"
         with self._tx() as db:
             for statement in _POSTGRES_SCHEMA:

@@ -106,10 +106,11 @@ class JobRunner:
 
     # -- API ----------------------------------------------------------------------------------
 
-    def submit(self, kind: str, params: dict, files: dict[str, bytes]) -> Job:
-        """Queue a job. Raises KeyError for an unknown kind, QueueFull when the queue is full."""
+    def submit(self, kind: str, params: dict, files: dict[str, bytes], tenant: str = "default") -> Job:
+        """Queue a job of `tenant`. Raises KeyError for an unknown kind, QueueFull when the queue
+        is full, TenantLimitReached beyond the tenant's share (JobSettings)."""
         self.registry.get(kind)
-        job = self.store.submit(kind, params, files, max_queued=self.settings.max_queued_jobs)
+        job = self.store.submit(kind, params, files, tenant=tenant, **self.settings.submit_limits())
         self._wake()
         return job
 

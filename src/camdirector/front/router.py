@@ -29,6 +29,7 @@ from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError, exhausted, invalid, not_found, unavailable
 from camdirector.front.metrics import Metrics
 from camdirector.front.worker_pool import WorkerPool
+from camdirector.infra.channels import encode_create
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 
@@ -47,6 +48,8 @@ class SessionEntry:
     transport: set[str] = field(default_factory=set)
     restoring: bool = False   # given to a worker that has to restore it from its checkpoint first
     tenant: str = "default"   # the tenant of the key that created it
+    frame_tokens: float = 0.0  # frames it may still send at once (the tenant's rate limit, _admit_frame)
+    tokens_at_s: float = 0.0
 
 
 class SessionRouter:
@@ -61,6 +64,7 @@ class SessionRouter:
         self.sessions: dict[str, SessionEntry] = {}
         self._lost: OrderedDict[str, int] = OrderedDict()  # session id -> the worker slot that died with it
         self._reserved = 0  # creations in flight, counted against max_sessions
+        self._reserved_by: dict[str, int] = {}  # the same by tenant, against tenant_max_sessions
         self._reaper: asyncio.Task | None = None
 
     async def start(self) -> None:
@@ -125,13 +129,20 @@ class SessionRouter:
     async def create(self, payload: bytes, transport: str, tenant: str = "default") -> bytes:
         if len(self.sessions) + self._reserved >= self.settings.max_sessions:
             raise exhausted(f"the server holds its maximum of {self.settings.max_sessions} sessions")
+        if self.guard.enabled:  # tenants' shares: with keys only (without, everyone is one tenant)
+            held = sum(e.tenant == tenant for e in self.sessions.values()) + self._reserved_by.get(tenant, 0)
+            if held >= self.settings.tenant_max_sessions:
+                raise exhausted(f"tenant {tenant!r} has its maximum of {self.settings.tenant_max_sessions} sessions "
+                                "open on this node; close one first")
         session_id = uuid.uuid4().hex
         slot = self._least_loaded_slot()
         self._reserved += 1
+        self._reserved_by[tenant] = self._reserved_by.get(tenant, 0) + 1
         try:
-            body, _ = await self.pool.call(slot, "create", session_id, payload)
+            body, _ = await self.pool.call(slot, "create", session_id, encode_create(tenant, payload))
         finally:
             self._reserved -= 1
+            self._reserved_by[tenant] -= 1
         if self.guard.enabled:
             self.guard.store.set_session_owner(session_id, tenant)
         now = self.clock()
@@ -143,6 +154,8 @@ class SessionRouter:
 
     async def frame(self, payload: bytes, session_id: str, transport: str, tenant: str = "default") -> bytes:
         entry = self._entry(session_id, tenant, adopt=True)
+        if self.guard.enabled:
+            self._admit_frame(entry, session_id)
         entry.last_seen_s = self.clock()
         body, frame_metrics = await self._call(entry, "frame", session_id, payload)
         entry.frames += 1
@@ -150,6 +163,18 @@ class SessionRouter:
         self.metrics.frame_answered(transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale,
                                     frame_metrics.checkpoint_failed)
         return body
+
+    def _admit_frame(self, entry: SessionEntry, session_id: str) -> None:
+        """The tenant's frame rate per session as a token bucket holding one second's frames:
+        RESOURCE_EXHAUSTED (the frame is not answered, the session goes on) when it is empty."""
+        rate = self.settings.tenant_max_fps
+        now = self.clock()
+        entry.frame_tokens = min(rate, entry.frame_tokens + (now - entry.tokens_at_s) * rate) \
+            if entry.tokens_at_s else rate
+        entry.tokens_at_s = now
+        if entry.frame_tokens < 1.0:
+            raise exhausted(f"session {session_id} sends more than {rate:g} frames a second, its tenant's limit")
+        entry.frame_tokens -= 1.0
 
     async def _session_request(self, message_type, op: str, payload: bytes, tenant: str) -> bytes:
         """A serialized request of the session it names (a client's: it keeps the session alive)
@@ -253,10 +278,6 @@ class SessionRouter:
         except TimeoutError:
             raise unavailable(f"the view of session {session_id} took more than {timeout_s:g} s") from None
         return body
-
-    def check_owner(self, session_id: str, tenant: str) -> None:
-        """NOT_FOUND unless the session is here and `tenant`'s (a monitor's request, before its render)."""
-        self._entry(session_id, tenant)
 
     def describe(self, tenant: str = "default") -> list[dict]:
         now = self.clock()

@@ -5,6 +5,12 @@ every message is a fixed struct header, then raw bytes; nothing is pickled, and 
 client's serialized request exactly as the front received it (the front read only its session id).
 - Request, front to worker: REQUEST (request id, op code, session id length, payload length), the
   session id (UTF-8), the payload.
+- A `create` request's payload is the session's tenant around the client's CreateSessionRequest
+  (`encode_create`): a zero byte, the tenant's length (u8), the tenant (ASCII), the request's bytes.
+  A session's checkpoint keeps this payload, so a session restored on another worker or node
+  still finds its tenant's levels. No serialized protobuf message begins with a zero byte (field
+  number 0 does not exist), so a payload that is only a request (a checkpoint written before
+  tenants) reads as tenant `default`.
 - Reply, worker to front: REPLY (request id, status: a gRPC status code, 0 for OK; flags:
   HAS_METRICS, STALE, CHECKPOINT_FAILED; compute_ms; stage count; stage names length; body length), the stage names
   (ASCII, comma-separated, in the frame's stage order), their times (one float64 each, ms), the
@@ -108,6 +114,26 @@ def read_request(reader: BinaryIO) -> tuple[int, str, str, bytes]:
     # read apart from the session id, not sliced off a joint read: a multi-GiB scene is not copied
     return request_id, OPS[op], session_id, read_exactly(reader, payload_len)
 
+
+CREATE_TENANT = struct.Struct("!BB")  # 0 (no protobuf message begins so), tenant bytes (u8)
+
+
+def encode_create(tenant: str, request: bytes) -> bytes:
+    """A `create` op's payload: `tenant` (access/roles.py: at most 63 ASCII characters) and the
+    client's serialized CreateSessionRequest (module docstring)."""
+    name = tenant.encode("ascii")
+    return CREATE_TENANT.pack(0, len(name)) + name + request
+
+
+def decode_create(payload: bytes) -> tuple[str, bytes | memoryview]:
+    """(tenant, serialized CreateSessionRequest) of a `create` op's payload; a bare request (one
+    from before tenants) is tenant `default`'s. The request is a view into `payload`: a scene of
+    gigabytes is not copied."""
+    if not payload.startswith(b"\0"):
+        return "default", payload
+    _, length = CREATE_TENANT.unpack_from(payload)
+    start = CREATE_TENANT.size
+    return payload[start:start + length].decode("ascii"), memoryview(payload)[start + length:]
 
 
 # -- a worker and its render process ----------------------------------------------------------

@@ -43,9 +43,10 @@ from camdirector.jobs.records import (
     PostgresJobStore,
     QueueFull,
     SqliteJobStore,
+    TenantLimitReached,
     open_store,
 )
 
 __all__ = ["Job", "JobExecutor", "JobKind", "JobNotFound", "JobRegistry", "JobSettings", "JobState", "JobStore",
            "JobsUnavailable", "PostgresJobStore", "QueueClient", "QueueFull", "QueueWorker", "SqliteJobStore",
-           "open_store", "run_job_worker", "service_kinds"]
+           "TenantLimitReached", "open_store", "run_job_worker", "service_kinds"]

@@ -23,6 +23,10 @@ class JobSettings:
     # A queue worker silent this long is taken for dead and its jobs are run again elsewhere; it beats
     # every quarter of this. Every worker must use the same value, s. [1, 3600]
     worker_heartbeat_timeout_s: float = 30.0
+    # Each tenant's share (records.py; HTTP 429 beyond it). None: no share, as without keys, where
+    # everyone is one tenant (ServerSettings.job_settings sets them with authentication on).
+    tenant_max_queued_jobs: int | None = None    # jobs a tenant has queued or running. [1, 100000]
+    tenant_max_upload_bytes: int | None = None   # bytes of inputs a tenant's jobs keep. [1 KiB, 1 TiB]
 
     def __post_init__(self):
         checks = [
@@ -39,7 +43,16 @@ class JobSettings:
             (not self.job_queue or self.job_queue.startswith("redis://"),
              "job_queue must be empty (this process's runner) or a redis:// URL"),
             (1.0 <= self.worker_heartbeat_timeout_s <= 3600.0, "worker_heartbeat_timeout_s must be in [1, 3600]"),
+            (self.tenant_max_queued_jobs is None or 1 <= self.tenant_max_queued_jobs <= 100_000,
+             "tenant_max_queued_jobs must be in [1, 100000]"),
+            (self.tenant_max_upload_bytes is None or 1024 <= self.tenant_max_upload_bytes <= 1 << 40,
+             "tenant_max_upload_bytes must be in [1 KiB, 1 TiB]"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+
+    def submit_limits(self) -> dict:
+        """JobStore.submit's limits (keyword arguments): the queue's, and each tenant's share."""
+        return {"max_queued": self.max_queued_jobs, "tenant_max_queued_jobs": self.tenant_max_queued_jobs,
+                "tenant_max_upload_bytes": self.tenant_max_upload_bytes}

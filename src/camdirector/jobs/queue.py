@@ -106,12 +106,13 @@ class QueueClient:
         self._broker.client.close()
         self.store.close()
 
-    def submit(self, kind: str, params: dict, files: dict[str, bytes]) -> Job:
-        """Record a job and queue its message. Raises KeyError for an unknown kind, QueueFull
-        when `max_queued_jobs` jobs are queued on the whole cluster, JobsUnavailable when Redis
-        does not take the message (the job is failed then)."""
+    def submit(self, kind: str, params: dict, files: dict[str, bytes], tenant: str = "default") -> Job:
+        """Record a job of `tenant` and queue its message. Raises KeyError for an unknown kind,
+        QueueFull when `max_queued_jobs` jobs are queued on the whole cluster, TenantLimitReached
+        beyond the tenant's share (JobSettings), JobsUnavailable when Redis does not take the
+        message (the job is failed then)."""
         self.registry.get(kind)
-        job = self.store.submit(kind, params, files, max_queued=self.settings.max_queued_jobs)
+        job = self.store.submit(kind, params, files, tenant=tenant, **self.settings.submit_limits())
         try:
             self._actor.send(job.id)
         except redis.RedisError as exc:

@@ -17,6 +17,16 @@ nothing when the job has moved on since (cancelled, or claimed again by a worker
 redelivered job). That compare-and-set is what makes a job succeed once even when two workers ran
 it: only the latest attempt's outcome is recorded, and its result folder is renamed into place
 inside that same transaction.
+
+Tenants: every job belongs to the tenant of the key that submitted it (access/roles.py; `default`
+without keys). `list` filters by tenant, and the REST routes answer another tenant's job as an
+unknown one. A submit can be held to the tenant's share in the same transaction as the node-wide
+queue check (TenantLimitReached): jobs queued or running, and bytes of inputs its jobs keep (the
+`input_bytes` column; inputs stay until the job is purged).
+
+Columns added after the first release (`_ADDED_COLUMNS`) are added to a table that lacks them
+when a store opens it, so a data directory or database from before keeps its jobs (as tenant
+`default`, their inputs counted as 0 bytes).
 """
 from __future__ import annotations
 
@@ -52,6 +62,11 @@ class QueueFull(Exception):
     """The queue holds `max_queued_jobs` jobs already (HTTP 429)."""
 
 
+class TenantLimitReached(Exception):
+    """The submitting tenant holds its share of jobs or of stored inputs already (HTTP 429);
+    the message says which and what to do."""
+
+
 class JobNotFound(KeyError):
     """No job with this id."""
 
@@ -76,6 +91,7 @@ class Job:
     started_s: float | None
     finished_s: float | None
     timings_ms: dict[str, float] = field(default_factory=dict)
+    tenant: str = "default"
 
     def as_public(self) -> dict:
         """The REST view: id, status, progress, error (only when set), timings (ms), and the
@@ -88,13 +104,18 @@ class Job:
         return out
 
 
-_COLUMNS = "id, kind, params, state, progress, error, attempts, created_s, started_s, finished_s, timings"
+_COLUMNS = "id, kind, params, state, progress, error, attempts, created_s, started_s, finished_s, timings, tenant"
+# Columns added since the first release: (name, SQL type and default, with {int} SQLite's INTEGER
+# or PostgreSQL's BIGINT); each store adds those its table lacks (module docstring).
+_ADDED_COLUMNS = (("tenant", "TEXT NOT NULL DEFAULT 'default'"),
+                  ("input_bytes", "{int} NOT NULL DEFAULT 0"))   # bytes of the job's input files
+_UNFINISHED = (JobState.QUEUED.value, JobState.RUNNING.value)
 
 
 def _row_to_job(row) -> Job:
     return Job(id=row[0], kind=row[1], params=json.loads(row[2]), state=JobState(row[3]),
                progress=float(row[4]), error=row[5], attempts=int(row[6]), created_s=row[7],
-               started_s=row[8], finished_s=row[9], timings_ms=json.loads(row[10]))
+               started_s=row[8], finished_s=row[9], timings_ms=json.loads(row[10]), tenant=row[11])
 
 
 def interrupted_error(attempts: int, max_attempts: int) -> str:
@@ -147,11 +168,16 @@ class JobStore:
     # -- records ------------------------------------------------------------------------------
 
     def submit(self, kind: str, params: dict, files: dict[str, bytes], *,
-               max_queued: int | None = None) -> Job:
-        """A new queued job with `files` (name -> content) in its input folder. Raises QueueFull
-        when `max_queued` jobs are queued already; nothing is left behind on any failure."""
+               max_queued: int | None = None, tenant: str = "default",
+               tenant_max_queued_jobs: int | None = None, tenant_max_upload_bytes: int | None = None) -> Job:
+        """A new queued job of `tenant` with `files` (name -> content) in its input folder.
+        Raises QueueFull when `max_queued` jobs are queued already (all tenants), and
+        TenantLimitReached when the tenant has `tenant_max_queued_jobs` jobs queued or running,
+        or its jobs' inputs and these would pass `tenant_max_upload_bytes` (None: no such limit).
+        Nothing is left behind on any failure."""
         job_id = uuid.uuid4().hex
         params_text = json.dumps(params, sort_keys=True)
+        input_bytes = sum(len(data) for data in files.values())
         tmp = self.temp_dir()
         try:
             (tmp / "input").mkdir()
@@ -166,18 +192,41 @@ class JobStore:
                     if queued >= max_queued:
                         raise QueueFull(f"{queued} jobs are queued already (limit {max_queued}); "
                                         "retry later")
+                self._check_tenant_share(db, tenant, input_bytes, tenant_max_queued_jobs,
+                                         tenant_max_upload_bytes)
                 os.rename(tmp, self.root / job_id)
                 try:
-                    db.execute(f"INSERT INTO jobs ({_COLUMNS}, seq) "
-                               f"VALUES (?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
+                    db.execute(f"INSERT INTO jobs ({_COLUMNS}, input_bytes, seq) "
+                               f"VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
                                (job_id, kind, params_text, JobState.QUEUED.value, 0.0, None, 0,
-                                time.time(), None, None, "{}"))
+                                time.time(), None, None, "{}", tenant, input_bytes))
                 except BaseException:
                     shutil.rmtree(self.root / job_id, ignore_errors=True)
                     raise
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         return self.get(job_id)
+
+    @staticmethod
+    def _check_tenant_share(db, tenant: str, input_bytes: int, max_jobs: int | None,
+                            max_bytes: int | None) -> None:
+        """TenantLimitReached when a new job of `input_bytes` would take `tenant` past its share
+        (submit's transaction, so two nodes' submits cannot both take the last place)."""
+        if max_jobs is not None:
+            (jobs,) = db.execute("SELECT COUNT(*) FROM jobs WHERE tenant = ? AND state IN (?, ?)",
+                                 (tenant, *_UNFINISHED)).fetchone()
+            if jobs >= max_jobs:
+                raise TenantLimitReached(
+                    f"tenant {tenant!r} has {jobs} jobs queued or running, its limit; retry when one "
+                    "has finished")
+        if max_bytes is not None:
+            (held,) = db.execute("SELECT COALESCE(SUM(input_bytes), 0) FROM jobs WHERE tenant = ?",
+                                 (tenant,)).fetchone()
+            if int(held) + input_bytes > max_bytes:
+                raise TenantLimitReached(
+                    f"tenant {tenant!r}'s jobs keep {int(held)} bytes of uploads; {input_bytes} more would "
+                    f"pass its limit of {max_bytes} bytes (a finished job's files are removed when its "
+                    "retention ends)")
 
     def get(self, job_id: str) -> Job:
         with self._read() as db:
@@ -186,12 +235,12 @@ class JobStore:
             raise JobNotFound(job_id)
         return _row_to_job(row)
 
-    def list(self, state: JobState | None = None, *, kind: str | None = None,
+    def list(self, state: JobState | None = None, *, kind: str | None = None, tenant: str | None = None,
              limit: int | None = None, newest_first: bool = False) -> list[Job]:
-        """Jobs in submission order (newest first when asked), all or those in `state` and of
-        `kind`, at most `limit` of them."""
-        where = [(c, v) for c, v in (("state", state.value if state else None), ("kind", kind))
-                 if v is not None]
+        """Jobs in submission order (newest first when asked), all or those in `state`, of
+        `kind` and of `tenant`, at most `limit` of them."""
+        where = [(c, v) for c, v in (("state", state.value if state else None), ("kind", kind),
+                                     ("tenant", tenant)) if v is not None]
         sql = f"SELECT {_COLUMNS} FROM jobs"
         if where:
             sql += " WHERE " + " AND ".join(f"{c} = ?" for c, _ in where)
@@ -361,6 +410,7 @@ CREATE TABLE IF NOT EXISTS jobs (
 );
 CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq);
 """
+_TENANT_INDEX = "CREATE INDEX IF NOT EXISTS jobs_tenant_state ON jobs (tenant, state)"  # after the migration
 
 
 class SqliteJobStore(JobStore):
@@ -378,6 +428,12 @@ class SqliteJobStore(JobStore):
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(_SQLITE_SCHEMA)
+        with self._tx() as db:
+            present = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
+            for name, sql_type in _ADDED_COLUMNS:
+                if name not in present:
+                    db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {sql_type.format(int='INTEGER')}")
+            db.execute(_TENANT_INDEX)
 
     def close(self) -> None:
         with self._lock:
@@ -418,6 +474,9 @@ _POSTGRES_SCHEMA = (
         seq BIGSERIAL NOT NULL
     )""",
     "CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq)",
+    *(f"ALTER TABLE jobs ADD COLUMN IF NOT EXISTS {name} {sql_type.format(int='BIGINT')}"
+      for name, sql_type in _ADDED_COLUMNS),
+    _TENANT_INDEX,
 )
 # Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
 # SQLite (any constant that no other user of the database takes; these are "camd" in ASCII).

@@ -16,7 +16,8 @@ computed maps, not the means to compute them: the session's deferred work is don
 dashboard's timeline of recent frames is left out (diagnostics, up to a megabyte), so a restored
 session's starts anew.
 
-Restoring builds the session again from its creation request, puts the snapshot's state in place,
+Restoring builds the session again from its creation request (with its tenant, whose levels it
+finds again: the create op's payload is kept whole, infra/channels.py), puts the snapshot's state in place,
 and runs the inputs since through the session table's own request handling (`handle_bytes`, the
 code that replays recordings, recording.py), writing, sending and recording nothing again.
 Sessions are deterministic (recordings replay bit for bit), so the restored session answers its
@@ -36,6 +37,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from camdirector.errors import DirectorError, not_found, unavailable
+from camdirector.infra.channels import decode_create, encode_create
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.checkpoint_stores import (
@@ -59,7 +61,7 @@ CHECKPOINT_RETRY_S = 1.0  # a session whose checkpoint write failed tries again 
 class SessionCheckpoint:
     """What the protocol keeps beside one held session."""
 
-    create_payload: bytes = b""      # the creation request as received: a checkpoint lost with its store is begun again
+    create_payload: bytes = b""      # the create op's payload (tenant, request): a checkpoint lost with its store begins again
     seq: int = 0                     # inputs taken (frames not stale, styles, takes): the checkpoint's numbering
     snapshot_seq: int = 0            # the input the last snapshot includes
     retry_s: float | None = None     # a failed write: when to try again (clock), else None
@@ -90,12 +92,13 @@ class Checkpointing:
     def enabled(self) -> bool:
         return self.store is not None
 
-    def begin(self, held: HeldSession, req: pb.CreateSessionRequest, payload: bytes | None) -> None:
-        """A session created: its checkpoint begins with the creation request (`payload`: its bytes
-        as received, when at hand). A restored session's is kept as it is."""
+    def begin(self, held: HeldSession, req: pb.CreateSessionRequest, payload: bytes | None, tenant: str) -> None:
+        """A session created: its checkpoint begins with the create op's payload, the session's
+        tenant and its request (`payload`: those bytes as received, when at hand). A restored
+        session's is kept as it is."""
         if self.store is None:
             return
-        held.checkpoint.create_payload = payload if payload is not None else req.SerializeToString()
+        held.checkpoint.create_payload = payload if payload is not None else encode_create(tenant, req.SerializeToString())
         if not self.replaying:
             try:
                 self.store.begin(held.session.id, self.owner, held.checkpoint.create_payload)
@@ -166,8 +169,9 @@ class Checkpointing:
         t0 = self.clock()
         self.replaying = True
         try:
-            req = pb.CreateSessionRequest.FromString(checkpoint.create)
-            self.table.create(session_id, req, checkpoint.create)
+            tenant, request = decode_create(checkpoint.create)
+            req = pb.CreateSessionRequest.FromString(request)
+            self.table.create(session_id, req, checkpoint.create, tenant)
             held = self.table.held[session_id]
             if checkpoint.snapshot is not None:
                 built = held.session

@@ -3,7 +3,7 @@
 Everything that arrives from a client is validated here and refused with a DirectorError that
 names the field; past this module the pipeline sees only dataclasses and numpy arrays. A session
 with `style.rig = RIG_TRACKS` needs exactly one target and a `level_id` the server's level
-registry holds (loaded here, through the worker's LevelCache, so a session never starts without
+registry holds for the session's tenant (loaded here, through the worker's LevelCache, so a session never starts without
 its level); `level_id` without that rig, and the TRACKS style fields under the TORIC rig, are
 refused rather than ignored. The rig cannot change during a session (UpdateStyle): TORIC to
 TRACKS would need a level the session was not created with, and TRACKS to TORIC a second framing
@@ -41,6 +41,7 @@ from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MapBackendChoice, MatchDirectorKind, Movement, Rig, ShotSize, Style, VisibilityMode
 from camdirector.pipeline.toric.anticipation import MaskKind
+from camdirector.precompute.tracks.registry import DEFAULT_TENANT
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.level_cache import LevelCache
@@ -209,8 +210,9 @@ def _check_id(object_id: str, what: str, seen: set[str]) -> None:
 
 
 def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
-                       levels: LevelCache | None = None) -> SceneSpec:
-    """levels: where a TRACKS or MATCH session's level is looked up (default: the registry in settings.data_dir)."""
+                       levels: LevelCache | None = None, tenant: str = DEFAULT_TENANT) -> SceneSpec:
+    """levels: where a TRACKS or MATCH session's level is looked up (default: the registry in
+    settings.data_dir); tenant: whose levels (the session's: the tenant of the key that created it)."""
     match = req.style.rig == pb.RIG_MATCH
     if match and not 2 <= len(req.targets) <= MAX_PLAYERS:
         raise invalid(f"a RIG_MATCH session has 2 to {MAX_PLAYERS} players as targets, got {len(req.targets)}")
@@ -251,12 +253,12 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
             raise invalid(f"the TRACKS rig follows exactly one target (the actor), got {len(targets)}")
         if not req.level_id:
             raise invalid("style.rig RIG_TRACKS needs level_id: the name of a level in the server's level registry")
-        level = (levels if levels is not None else LevelCache(settings.data_dir, settings.job_store)).get(req.level_id)
-    elif style.rig == Rig.MATCH and req.level_id:
-        level = (levels if levels is not None else LevelCache(settings.data_dir, settings.job_store)).get(req.level_id)
-    elif req.level_id:
+    elif req.level_id and style.rig != Rig.MATCH:
         raise invalid(f"level_id {req.level_id!r} is for the TRACKS and MATCH rigs: set style.rig = RIG_TRACKS or "
                       "leave level_id empty")
+    if req.level_id:
+        levels = levels if levels is not None else LevelCache(settings.data_dir, settings.job_store)
+        level = levels.get(req.level_id, tenant)
     return SceneSpec(objects, targets, lens, style, int(req.seed), level, delay_s=float(req.delay_s))
 
 

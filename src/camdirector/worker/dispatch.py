@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import orjson
 
 from camdirector.errors import DirectorError, internal, invalid
-from camdirector.infra.channels import FrameMetrics
+from camdirector.infra.channels import FrameMetrics, decode_create
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.timeline import dumps as timeline_dumps
 
@@ -34,8 +34,10 @@ def handle_bytes(table: SessionTable, op: str, session_id: str, payload: bytes) 
     try:
         if op == "frame":
             return table.frame_bytes(parse(pb.FrameUpdate, payload, session_id), payload)
-        if op == "create":
-            return table.create(session_id, parse(pb.CreateSessionRequest, payload), payload).SerializeToString(), None
+        if op == "create":   # payload: the session's tenant and the request (infra/channels.py)
+            tenant, request = decode_create(payload)
+            return table.create(session_id, parse(pb.CreateSessionRequest, request), payload,
+                                tenant).SerializeToString(), None
         if op == "style":
             return table.update_style(parse(pb.UpdateStyleRequest, payload, session_id), payload).SerializeToString(), None
         if op == "close":

@@ -17,6 +17,7 @@ from google.protobuf import json_format
 
 from camdirector.errors import invalid, precondition
 from camdirector.infra.channels import FrameMetrics
+from camdirector.precompute.tracks.registry import DEFAULT_TENANT
 from camdirector.render.monitor import Monitor, Reply
 from camdirector.render.snapshots import ViewQuery, render_job, scene_geometry
 from camdirector.server_settings import ServerSettings
@@ -82,10 +83,12 @@ class SessionTable:
             held = self.checkpoints.restore(session_id)
         return held
 
-    def create(self, session_id: str, req: pb.CreateSessionRequest, payload: bytes | None = None) -> pb.CreateSessionResponse:
-        """payload: the request's bytes as received (the checkpoint keeps them), when at hand."""
+    def create(self, session_id: str, req: pb.CreateSessionRequest, payload: bytes | None = None,
+               tenant: str = DEFAULT_TENANT) -> pb.CreateSessionResponse:
+        """payload: the create op's bytes as received, the tenant's and the request's (the checkpoint
+        keeps them), when at hand; tenant: the session's, whose levels it may use."""
         pose_outputs = codec.pose_outputs_from_request(req)  # cheap checks before the scene's meshes
-        scene = codec.scene_from_request(req, self.settings, self.levels)
+        scene = codec.scene_from_request(req, self.settings, self.levels, tenant)
         held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
         if pose_outputs:  # a failure from here on drops the session (dispatch.py)
             held.pose_sender = PoseSender(session_id, pose_outputs, scene.lens.aspect)
@@ -96,7 +99,7 @@ class SessionTable:
             if not replaying:   # a restored session's recording goes on where the lost process left it
                 held.recorder.write(pb.RecordEntry(create=req))
             response.recording_path = str(held.recorder.path)
-        self.checkpoints.begin(held, req, payload)
+        self.checkpoints.begin(held, req, payload, tenant)
         return response
 
     def _recorder(self, session_id: str, append: bool = False) -> RecordingWriter:

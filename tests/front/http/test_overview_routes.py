@@ -9,6 +9,7 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
+from camdirector.access.guard import Guard
 from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
 from camdirector.jobs import JobSettings, service_kinds
@@ -22,6 +23,7 @@ LIMIT = 150_000      # bytes: the run clip is 92 kB
 def service(tmp_path_factory):
     data_dir = tmp_path_factory.mktemp("overview-data")
     app = FastAPI()
+    app.state.guard = Guard(None)   # authentication off, as a `--no-auth` node's app
     settings = JobSettings(max_upload_bytes=LIMIT, max_concurrent_jobs=1)
     runner = open_jobs(data_dir, service_kinds(), settings)
     install_overview_routes(app, runner, settings)
@@ -202,6 +204,7 @@ def test_huge_uploads_answer_413(service, run_bvh, size):
 
 def test_queue_full_429_result_409_and_cancel(tmp_path, run_bvh):
     app = FastAPI()
+    app.state.guard = Guard(None)   # authentication off, as a `--no-auth` node's app
     settings = JobSettings(max_queued_jobs=1)
     runner = open_jobs(tmp_path, service_kinds(), settings)   # not started
     install_overview_routes(app, runner, settings)

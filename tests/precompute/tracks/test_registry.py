@@ -123,3 +123,28 @@ def test_two_registries_replacing_at_once_leave_one_file(open_registry, levels):
     for t in threads:
         t.join(60)
     assert artifact_files(nodes[0]) == [nodes[1].get("arena").artifact_path.name]
+
+
+def test_each_tenant_has_its_own_names(open_registry, levels):
+    """Two tenants' "arena" side by side; tenant `default` keeps plain names and files at the top
+    of the levels folder, another tenant's are in its own folder; no tenant reads, loads or
+    removes another's, not even by writing its qualified name."""
+    registry = open_registry()
+    ours = registry.add_level("arena", levels["corridor"])
+    theirs = registry.add_level("arena", levels["room"], tenant="acme")
+    assert (ours.name, ours.tenant, theirs.name, theirs.tenant) == ("arena", "default", "arena", "acme")
+    assert ours.artifact_path.parent == registry.levels_dir and ours.artifact_path.name.startswith("arena.")
+    assert theirs.artifact_path.parent == registry.levels_dir / "acme"
+    again = open_registry()
+    assert again.get("arena", "acme") == theirs and again.get("arena") == ours
+    assert [r.source_path for r in again.list("acme")] == [str(levels["room"].resolve())]
+    assert [r.tenant for r in again.list()] == ["default"] and again.list("beta") == []
+    assert again.get("arena", "beta") is None and again.get("acme/arena") is None
+    assert not again.delete("arena", "beta") and not again.delete("acme/arena")
+    with pytest.raises(KeyError):
+        again.load("arena", "beta")
+    assert len(again.load("arena", "acme").nodes_world) == theirs.counts["nodes"]
+    with pytest.raises(ValueError):
+        again.add_level("arena", levels["room"], tenant="Not A Tenant")
+    assert again.delete("arena", "acme") and again.get("arena", "acme") is None and again.get("arena") == ours
+    assert not theirs.artifact_path.exists() and ours.artifact_path.exists()

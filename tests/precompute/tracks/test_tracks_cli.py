@@ -26,3 +26,20 @@ def test_add_list_remove(tmp_path):
     assert not list((tmp_path / "data" / "levels").glob("room.*.npz"))
     again = _level(tmp_path / "data", "remove", "room")
     assert again.returncode == 2 and "no level named 'room'" in again.stderr
+
+
+def test_a_tenants_levels(tmp_path):
+    """--tenant: a level of its own namespace, beside the `default` one of the same name."""
+    level_file = tmp_path / "room.obj"
+    level_file.write_text(obj_text(l_room()))
+    data = tmp_path / "data"
+    added = _level(data, "add", "room", str(level_file), "--tenant", "acme")
+    assert added.returncode == 0, added.stderr
+    assert json.loads(added.stdout)["tenant"] == "acme"
+    assert _level(data, "list").stdout == ""
+    listed = _level(data, "list", "--tenant", "acme")
+    assert [(r["name"], r["tenant"]) for r in map(json.loads, listed.stdout.splitlines())] == [("room", "acme")]
+    assert _level(data, "remove", "room").returncode == 2           # not `default`'s
+    assert _level(data, "remove", "room", "--tenant", "acme").returncode == 0
+    bad = _level(data, "list", "--tenant", "ACME!")
+    assert bad.returncode == 2 and "tenant 'ACME!'" in bad.stderr

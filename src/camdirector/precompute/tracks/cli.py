@@ -1,12 +1,14 @@
 """`camdirector level add|list|remove`.
 
     camdirector level add NAME LEVEL.(obj|glb) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
-                          [--agent-height M] [--agent-radius M] [--data-dir DIR] [--records-url URL]
+                          [--agent-height M] [--agent-radius M] [--tenant T] [--data-dir DIR] [--records-url URL]
         precomputes the level into the registry; prints the record (JSON) with stage timings.
-    camdirector level list [--data-dir DIR] [--records-url URL]
+    camdirector level list [--tenant T] [--data-dir DIR] [--records-url URL]
         prints one JSON object per level.
-    camdirector level remove NAME [--data-dir DIR] [--records-url URL]
+    camdirector level remove NAME [--tenant T] [--data-dir DIR] [--records-url URL]
         removes a level from the registry (a running server's sessions on it keep their copy).
+--tenant: whose level (registry.py: each tenant has its own names; the tenant of the keys whose
+sessions use it). Default `default`, the tenant of a server without keys and of its first admin key.
 --records-url: where the registry's index lives, as `camdirector serve --job-store` says for the
 nodes: empty for SQLite in the data directory, or the postgresql:// URL a cluster's nodes share
 (with --data-dir the folder they share). Default: $CAMDIRECTOR_JOB_STORE, the variable `serve`
@@ -30,6 +32,11 @@ def add_records_url_argument(parser) -> None:
     parser.add_argument("--records-url", dest="records_url", default=None, help=_RECORDS_URL_HELP)
 
 
+def _add_tenant_argument(parser) -> None:
+    parser.add_argument("--tenant", default="default",
+                        help="whose level: the tenant of the keys whose sessions use it (default: default)")
+
+
 def registry_from_args(args):
     """The registry that --data-dir and --records-url (else $CAMDIRECTOR_JOB_STORE) name."""
     from camdirector.precompute.tracks.registry import LevelRegistry
@@ -51,22 +58,25 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--agent-radius", dest="agent_radius", type=float, default=0.6, help="m (default 0.6)")
     p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder (default: per-user data dir)")
     add_records_url_argument(p)
+    _add_tenant_argument(p)
     p.set_defaults(handler=run_level_add)
     p = sub.add_parser("list", help="list registered levels")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
     add_records_url_argument(p)
+    _add_tenant_argument(p)
     p.set_defaults(handler=run_level_list)
     p = sub.add_parser("remove", help="remove a level from the registry")
     p.add_argument("name")
     p.add_argument("--data-dir", dest="data_dir", type=Path)
     add_records_url_argument(p)
+    _add_tenant_argument(p)
     p.set_defaults(handler=run_level_remove)
 
 
 def _record_json(record) -> dict:
-    return {"name": record.name, "artifact": str(record.artifact_path), "format_version": record.format_version,
-            "source": record.source_path, "navmesh": record.navmesh_path, "m_per_unit": record.m_per_unit,
-            "agent_height_m": record.agent_height_m, "agent_radius_m": record.agent_radius_m,
+    return {"name": record.name, "tenant": record.tenant, "artifact": str(record.artifact_path),
+            "format_version": record.format_version, "source": record.source_path, "navmesh": record.navmesh_path,
+            "m_per_unit": record.m_per_unit, "agent_height_m": record.agent_height_m, "agent_radius_m": record.agent_radius_m,
             "counts": record.counts, "timings_ms": {k: round(v, 1) for k, v in record.timings_ms.items()}}
 
 
@@ -80,7 +90,7 @@ def run_level_add(args) -> int:
         with registry_from_args(args) as registry:
             record = registry.add_level(
                 args.name, args.level, args.navmesh, scale=args.scale, agent_height_m=args.agent_height,
-                agent_radius_m=args.agent_radius, progress=progress)
+                agent_radius_m=args.agent_radius, progress=progress, tenant=args.tenant)
     except LevelsUnavailable as exc:
         print(f"camdirector level add: {exc}", file=sys.stderr)
         return 1
@@ -92,11 +102,13 @@ def run_level_add(args) -> int:
 
 
 def run_level_list(args) -> int:
+    from camdirector.access.roles import check_tenant
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     try:
         with registry_from_args(args) as registry:
-            records = registry.list()
+            check_tenant(args.tenant)  # a bad one is an error, not an empty list
+            records = registry.list(args.tenant)
     except (LevelsUnavailable, ValueError) as exc:
         print(f"camdirector level list: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, LevelsUnavailable) else 2
@@ -106,11 +118,13 @@ def run_level_list(args) -> int:
 
 
 def run_level_remove(args) -> int:
+    from camdirector.access.roles import check_tenant
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     try:
         with registry_from_args(args) as registry:
-            removed = registry.delete(args.name)
+            check_tenant(args.tenant)
+            removed = registry.delete(args.name, args.tenant)
     except (LevelsUnavailable, ValueError) as exc:
         print(f"camdirector level remove: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, LevelsUnavailable) else 2

@@ -21,6 +21,17 @@ ROW EXCLUSIVE MODE`, which readers do not wait on), so the old file a replace re
 the row named. Adding a name that is taken without `replace` is refused by the index's primary
 key, in the database, so two nodes adding one name at once give one level and one LevelExists.
 Names are 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit.
+
+Tenants (access/roles.py): each tenant has its own namespace, so two tenants can each have an
+"arena". Tenant `default` keeps plain names, `<name>` in the index and `<name>.<hex>.npz` in the
+levels folder, exactly as before tenants: existing data directories and `camdirector level add
+NAME FILE` are unchanged. Another tenant's level is `<tenant>/<name>` in the index and its
+artifacts lie in `<tenant>/` under the levels folder. The separator '/' can be in neither a level
+name nor a tenant, so a qualified name reads back one way and no name of one tenant is another's;
+a name is checked before it is qualified, so "acme/arena" asked for by tenant `default` is no
+level at all. This keeps one table with its one primary key (a name per tenant is unique by the
+same constraint, with no migration of an existing index), where a tenant column would have
+meant rebuilding the SQLite table to widen its primary key.
 """
 from __future__ import annotations
 
@@ -37,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from camdirector.access.roles import check_tenant
 from camdirector.infra.postgres import PostgresDatabase, is_unique_violation, redacted
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, LevelArtifact, load_artifact, save_artifact
 from camdirector.precompute.tracks.level_mesh import load_level_mesh
@@ -44,6 +56,8 @@ from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.track_settings import TrackSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
+DEFAULT_TENANT = "default"
+_TENANT_SEPARATOR = "/"  # in neither a level name nor a tenant (module docstring)
 _COLUMNS = ("name, artifact_file, format_version, source_path, navmesh_path, m_per_unit, agent_height_m, "
             "agent_radius_m, created_unix_s, counts_json, timings_json")
 # {real}: SQLite's REAL is 8 bytes, PostgreSQL's is 4 (DOUBLE PRECISION there).
@@ -59,6 +73,19 @@ def check_level_name(name: str) -> None:
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise ValueError(f"level name {name!r}: use 1-64 letters, digits, '.', '_' or '-', starting with a letter "
                          "or digit")
+
+
+def qualified_name(name: str, tenant: str) -> str:
+    """The index's name of `tenant`'s level `name` (module docstring); ValueError for a bad name or tenant."""
+    check_level_name(name)
+    check_tenant(tenant)
+    return name if tenant == DEFAULT_TENANT else f"{tenant}{_TENANT_SEPARATOR}{name}"
+
+
+def _split_qualified(qualified: str) -> tuple[str, str]:
+    """(tenant, name) of an index name."""
+    tenant, _, name = qualified.rpartition(_TENANT_SEPARATOR)
+    return tenant or DEFAULT_TENANT, name
 
 
 def default_data_dir() -> Path:
@@ -77,9 +104,10 @@ class LevelsUnavailable(RuntimeError):
 
 @dataclass(frozen=True)
 class LevelRecord:
-    """One registry row; artifact_path is absolute."""
+    """One registry row; artifact_path is absolute; name is the tenant's (unqualified)."""
 
     name: str
+    tenant: str
     artifact_path: Path
     format_version: int
     source_path: str
@@ -137,7 +165,7 @@ class LevelIndex:
                 return old[0] if old is not None else None
         except Exception as exc:
             if self._is_duplicate(exc):
-                raise LevelExists(f"level {row[0]!r} exists") from None
+                raise LevelExists(f"level {_split_qualified(row[0])[1]!r} exists") from None
             raise
 
     def delete(self, name: str) -> str | None:
@@ -258,7 +286,8 @@ class LevelRegistry:
         self.close()
 
     def _record(self, row) -> LevelRecord:
-        return LevelRecord(name=row[0], artifact_path=self.levels_dir / row[1], format_version=row[2],
+        tenant, name = _split_qualified(row[0])
+        return LevelRecord(name=name, tenant=tenant, artifact_path=self.levels_dir / row[1], format_version=row[2],
                            source_path=row[3], navmesh_path=row[4], m_per_unit=row[5], agent_height_m=row[6],
                            agent_radius_m=row[7], created_unix_s=row[8], counts=json.loads(row[9]),
                            timings_ms=json.loads(row[10]))
@@ -266,20 +295,21 @@ class LevelRegistry:
     def add_level(self, name: str, level_path: Path, navmesh_path: Path | None = None, *, scale: float = 1.0,
                   agent_height_m: float = 2.0, agent_radius_m: float = 0.6,
                   progress: Callable[[float], None] | None = None, seed: int = 0,
-                  replace: bool = True) -> LevelRecord:
-        """Precompute a level file (OBJ/GLB, in units of `scale` metres) and index it under name,
-        replacing a level of that name (unless `replace` is false: then LevelExists when the name
-        is taken by the time the precompute is done; nothing is left behind). Raises ValueError
-        (MeshError) on a bad name or file."""
-        check_level_name(name)
+                  replace: bool = True, tenant: str = DEFAULT_TENANT) -> LevelRecord:
+        """Precompute a level file (OBJ/GLB, in units of `scale` metres) and index it under name
+        in `tenant`'s namespace, replacing a level of that name (unless `replace` is false: then
+        LevelExists when the name is taken by the time the precompute is done; nothing is left
+        behind). Raises ValueError (MeshError) on a bad name, tenant or file."""
+        qualified = qualified_name(name, tenant)
         settings = TrackSettings(agent_height_m=agent_height_m, agent_radius_m=agent_radius_m)
         mesh = load_level_mesh(Path(level_path), scale)
         navmesh = load_level_mesh(Path(navmesh_path), scale) if navmesh_path is not None else None
         artifact = precompute_level(mesh, settings, np.random.default_rng(seed), navmesh=navmesh, m_per_unit=scale,
                                     progress=progress)
-        file_name = f"{name}.{secrets.token_hex(6)}.npz"
+        file_name = f"{qualified}.{secrets.token_hex(6)}.npz"  # in the tenant's folder unless `default`
+        (self.levels_dir / file_name).parent.mkdir(exist_ok=True)
         save_artifact(artifact, self.levels_dir / file_name)
-        row = (name, file_name, FORMAT_VERSION, str(Path(level_path).resolve()),
+        row = (qualified, file_name, FORMAT_VERSION, str(Path(level_path).resolve()),
                str(Path(navmesh_path).resolve()) if navmesh_path is not None else None, scale,
                agent_height_m, agent_radius_m, time.time(), json.dumps(artifact.counts),
                json.dumps(artifact.timings_ms))
@@ -290,19 +320,25 @@ class LevelRegistry:
             raise
         if old is not None and old != file_name:
             (self.levels_dir / old).unlink(missing_ok=True)
-        return self.get(name)
+        return self.get(name, tenant)
 
-    def get(self, name: str) -> LevelRecord | None:
-        row = self.index.get(name)
+    def get(self, name: str, tenant: str = DEFAULT_TENANT) -> LevelRecord | None:
+        """`tenant`'s level `name`; None when it has none (a malformed name or tenant included)."""
+        try:
+            qualified = qualified_name(name, tenant)
+        except ValueError:
+            return None
+        row = self.index.get(qualified)
         return self._record(row) if row else None
 
-    def list(self) -> list[LevelRecord]:
-        return [self._record(r) for r in self.index.list()]
+    def list(self, tenant: str = DEFAULT_TENANT) -> list[LevelRecord]:
+        """`tenant`'s levels, by name."""
+        return [record for record in map(self._record, self.index.list()) if record.tenant == tenant]
 
-    def load(self, name: str) -> LevelArtifact:
+    def load(self, name: str, tenant: str = DEFAULT_TENANT) -> LevelArtifact:
         """The level's artifact; KeyError when unknown, ArtifactVersionError when of another format."""
         for _ in range(3):
-            record = self.get(name)
+            record = self.get(name, tenant)
             if record is None:
                 raise KeyError(f"no level named {name!r}")
             try:
@@ -312,9 +348,13 @@ class LevelRegistry:
                     raise
         raise KeyError(f"level {name!r} keeps changing under the reader")
 
-    def delete(self, name: str) -> bool:
-        """Remove a level; False when there was none."""
-        file_name = self.index.delete(name)
+    def delete(self, name: str, tenant: str = DEFAULT_TENANT) -> bool:
+        """Remove `tenant`'s level `name`; False when there was none."""
+        try:
+            qualified = qualified_name(name, tenant)
+        except ValueError:
+            return False
+        file_name = self.index.delete(qualified)
         if file_name is None:
             return False
         (self.levels_dir / file_name).unlink(missing_ok=True)

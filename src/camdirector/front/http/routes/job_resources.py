@@ -1,10 +1,13 @@
 """What every job resource's routes share: the status models, submitting, looking up, listing and
 cancelling a job of one kind, the answer when the job store or queue is down, and the upload limit
 (one runner, or one queue client, and one job store serve every kind). The routes are the same in
-both modes (jobs/__init__.py): `Jobs` is either."""
+both modes (jobs/__init__.py): `Jobs` is either.
+
+Every job belongs to the tenant of the key that submitted it: a route's caller sees, cancels and
+fetches only its tenant's jobs, and another tenant's job answers 404 with the words an unknown id
+gets (access/roles.py)."""
 from __future__ import annotations
 
-import inspect
 import json
 from collections.abc import Callable
 
@@ -13,7 +16,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
 from camdirector.front.job_runner import JobRunner
-from camdirector.jobs import Job, JobNotFound, JobState, JobsUnavailable, QueueClient, QueueFull
+from camdirector.jobs import Job, JobNotFound, JobState, JobsUnavailable, QueueClient, QueueFull, TenantLimitReached
 
 Jobs = JobRunner | QueueClient
 
@@ -34,14 +37,15 @@ class JobStatus(BaseModel):
     finished_unix_s: float | None = Field(default=None, description="when it ended, Unix s")
 
 
-def job_of_kind(runner: Jobs, job_id: str, kind: str, noun: str):
-    """The job job_id of `kind`; HTTPException 404 for an unknown id and for a job of another
-    kind (one runner and job store serve every kind of job route)."""
+def job_of_kind(runner: Jobs, job_id: str, kind: str, noun: str, tenant: str):
+    """The job job_id of `kind` and `tenant`; HTTPException 404 for an unknown id, for a job of
+    another kind (one runner and job store serve every kind of job route) and for another
+    tenant's job."""
     try:
         job = runner.get(job_id)
     except JobNotFound:
         job = None
-    if job is None or job.kind != kind:
+    if job is None or job.kind != kind or job.tenant != tenant:
         raise HTTPException(status_code=404, detail=f"no {noun} {job_id!r}")
     return job
 
@@ -49,22 +53,27 @@ def job_of_kind(runner: Jobs, job_id: str, kind: str, noun: str):
 async def known_form_fields(request: Request) -> None:
     """A dependency of a job's multipart POST: 422 naming any form field that the route's endpoint
     does not take (a misspelt parameter would otherwise be dropped silently and the job run with
-    the default). The form is parsed once: Starlette keeps it for the endpoint's own fields."""
-    known = set(inspect.signature(request.scope["endpoint"]).parameters)
+    the default). The form is parsed once: Starlette keeps it for the endpoint's own fields. The
+    fields are the endpoint's body parameters, as FastAPI read them (not its dependencies: the
+    caller's identity is no form field)."""
+    known = {field.alias for field in request.scope["route"].dependant.body_params}
     unknown = sorted(set((await request.form()).keys()) - known)
     if unknown:
         raise HTTPException(status_code=422, detail=f"unknown form field(s) {', '.join(unknown)}; "
                                                     f"this route takes {', '.join(sorted(known))}")
 
 
-def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes]) -> Job:
-    """POST of a job route: the job queued; HTTPException 429 when the queue is full, 503 when
-    the job queue cannot take it (the job is failed then)."""
+def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], tenant: str) -> Job:
+    """POST of a job route: the job queued, `tenant`'s; HTTPException 429 when the queue is full
+    or the tenant holds its share of jobs or uploads (JobSettings), 503 when the job queue cannot
+    take it (the job is failed then)."""
     try:
-        return runner.submit(kind, params, files)
+        return runner.submit(kind, params, files, tenant)
     except QueueFull as exc:
         raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
                             headers={"Retry-After": "10"}) from None
+    except TenantLimitReached as exc:
+        raise HTTPException(status_code=429, detail=str(exc), headers={"Retry-After": "10"}) from None
     except JobsUnavailable as exc:
         raise HTTPException(status_code=503, detail=str(exc), headers={"Retry-After": "10"}) from None
 
@@ -82,11 +91,12 @@ MAX_LISTED_JOBS = 1000
 
 
 def list_jobs(runner: Jobs, kind: str, status: JobState | None, limit: int,
-              extra: Callable[[dict], dict]) -> list[dict]:
-    """GET of a job collection: the newest `limit` jobs of `kind` (in `status` when given), each
-    its public view with `extra(params)` added (finished jobs are kept `job_retention_s`)."""
+              extra: Callable[[dict], dict], tenant: str) -> list[dict]:
+    """GET of a job collection: the newest `limit` jobs of `kind` and `tenant` (in `status` when
+    given), each its public view with `extra(params)` added (finished jobs are kept
+    `job_retention_s`)."""
     return [{**j.as_public(), **extra(j.params)}
-            for j in runner.store.list(status, kind=kind, limit=limit, newest_first=True)]
+            for j in runner.store.list(status, kind=kind, tenant=tenant, limit=limit, newest_first=True)]
 
 
 def cancel_job(runner: Jobs, job_id: str, noun: str = "job"):

@@ -34,6 +34,13 @@ SQLite in the data directory, or the PostgreSQL database the nodes share; the jo
 that URL beside the data directory), so every node lists, fetches and serves the same levels; two
 nodes' jobs adding one name at once give one level and one failed job (the index's primary key),
 and PostgreSQL down answers 503.
+
+Tenants: levels and level jobs are the tenant's of the key that added them (the registry keeps a
+namespace per tenant, registry.py): each tenant has its own "arena", another tenant's level or job
+answers 404 as an unknown one, and a TRACKS session finds only its own tenant's levels. Reading
+(GET) needs the verb level.read; adding, deleting and cancelling a level job level.write (admin).
+A level added (when its job is submitted) and a level deleted go into the tenant's audit trail
+(GET /v1/audit).
 """
 from __future__ import annotations
 
@@ -46,6 +53,9 @@ from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Quer
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
+from camdirector.access.guard import Identity
+from camdirector.access.roles import Verb
+from camdirector.front.http.auth import require
 from camdirector.front.http.routes.job_resources import (
     MAX_LISTED_JOBS,
     JobCreated,
@@ -145,12 +155,14 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
     limit = job_settings.max_upload_bytes
     submit_lock = threading.Lock()  # the duplicate check and the submit happen as one
 
-    def pending_names() -> set[str]:
-        jobs = runner.store.list(JobState.QUEUED, kind=KIND) + runner.store.list(JobState.RUNNING, kind=KIND)
+    def pending_names(tenant: str) -> set[str]:
+        """The names the tenant's queued and running level jobs are adding."""
+        jobs = [job for state in (JobState.QUEUED, JobState.RUNNING)
+                for job in runner.store.list(state, kind=KIND, tenant=tenant)]
         return {j.params["name"] for j in jobs}
 
-    def level_job_or_404(job_id: str):
-        return job_of_kind(runner, job_id, KIND, "level job")
+    def level_job_or_404(job_id: str, identity: Identity):
+        return job_of_kind(runner, job_id, KIND, "level job", identity.tenant)
 
     @router.post(LEVELS_PREFIX, status_code=202, dependencies=[Depends(known_form_fields)], response_model=LevelJobCreated,
                  responses={
@@ -158,9 +170,11 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         409: {"description": "the name is taken (registered or being added) and replace is false"},
         413: {"description": "an upload is larger than the server's limit"},
         422: {"description": "a bad name, or scale or agent out of range"},
-        429: {"description": "the job queue is full; retry later"},
+        429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
         503: {"description": "the job store or queue is unreachable; retry later"}})
     def add_level(
+        request: Request,
+        identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))],
         name: Annotated[str, Form(description="1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")],
         level: Annotated[UploadFile, File(description="the level's geometry, .obj or .glb")],
         navmesh: Annotated[UploadFile | None, File(
@@ -190,50 +204,57 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
             files[navmesh_file] = navmesh_data
         params = {"name": name, "level_file": level_file, "navmesh_file": navmesh_file, "scale": scale,
                   "agent_height_m": agent_height, "agent_radius_m": agent_radius, "replace": replace,
-                  "seed": seed, "data_dir": str(registry.data_dir), "records_url": job_settings.job_store}
+                  "seed": seed, "data_dir": str(registry.data_dir), "records_url": job_settings.job_store,
+                  "tenant": identity.tenant}
         with submit_lock:
-            if not replace and (registry.get(name) is not None or name in pending_names()):
+            if not replace and (registry.get(name, identity.tenant) is not None
+                                or name in pending_names(identity.tenant)):
                 raise HTTPException(status_code=409, detail=(
                     f"level {name!r} exists or is being added; send replace=true to replace it"))
-            job = submit_job(runner, KIND, params, files)
+            job = submit_job(runner, KIND, params, files, identity.tenant)
+        request.app.state.guard.audit(identity, "level.add", None, {
+            "name": name, "replace": replace, "job_id": job.id,
+            "stage": "job submitted: the level is registered when the job succeeds"})
         return JSONResponse({"id": job.id, "status": job.state.value, "name": name}, status_code=202,
                             headers={"Location": f"{JOBS_PREFIX}/{job.id}"})
 
     @router.get(JOBS_PREFIX, response_model=LevelJobList)
     def list_level_jobs(
+        identity: Annotated[Identity, Depends(require(Verb.LEVEL_READ))],
         status: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
         limit: Annotated[int, Query(ge=1, le=MAX_LISTED_JOBS, description="at most this many")] = 100,
     ) -> dict:
-        """The newest level jobs first, with the level each adds."""
-        return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {"name": p["name"]})}
+        """The newest level jobs of the caller's tenant first, with the level each adds."""
+        return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {"name": p["name"]}, identity.tenant)}
 
     @router.get(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus,
                 responses={404: {"description": "no such level job"}})
-    def get_level_job(job_id: str) -> JSONResponse:
+    def get_level_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_READ))]) -> JSONResponse:
         """State, progress 0..1, error and per-stage timings (ms) of a level job."""
-        job = level_job_or_404(job_id)
+        job = level_job_or_404(job_id, identity)
         return JSONResponse({**job.as_public(), "name": job.params["name"]})
 
     @router.delete(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus, responses={
         404: {"description": "no such level job"},
         409: {"description": "the job already succeeded or failed"}})
-    def cancel_level_job(job_id: str) -> JSONResponse:
+    def cancel_level_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))]
+                         ) -> JSONResponse:
         """Cancel a queued or running level job (a running job's process is ended; the registry
         is left as it was). Cancelling a cancelled job is a no-op; a finished job answers 409."""
-        level_job_or_404(job_id)
+        level_job_or_404(job_id, identity)
         job = cancel_job(runner, job_id, "level job")
         return JSONResponse({**job.as_public(), "name": job.params["name"]})
 
     @router.get(LEVELS_PREFIX, response_model=LevelList)
-    def list_levels() -> dict:
-        """The registered levels, by name."""
-        return {"levels": [_level_json(r) for r in registry.list()]}
+    def list_levels(identity: Annotated[Identity, Depends(require(Verb.LEVEL_READ))]) -> dict:
+        """The caller's tenant's registered levels, by name."""
+        return {"levels": [_level_json(r) for r in registry.list(identity.tenant)]}
 
     @router.get(LEVELS_PREFIX + "/{name}", response_model=LevelOut,
                 responses={404: {"description": "no such level"}})
-    def get_level(name: str) -> dict:
+    def get_level(name: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_READ))]) -> dict:
         """One registered level: scale, agent, counts and precompute stage timings."""
-        record = registry.get(name)
+        record = registry.get(name, identity.tenant)
         if record is None:
             raise HTTPException(status_code=404, detail=f"no level named {name!r}")
         return _level_json(record)
@@ -241,15 +262,17 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
     @router.delete(LEVELS_PREFIX + "/{name}", response_model=LevelOut, responses={
         404: {"description": "no such level"},
         409: {"description": "a queued or running level job is adding or replacing it"}})
-    def delete_level(name: str) -> dict:
+    def delete_level(name: str, request: Request,
+                     identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))]) -> dict:
         """Remove a level from the registry (module docstring); answers the level removed."""
         with submit_lock:  # no job for this name can be submitted between the check and the delete
-            if name in pending_names():
+            if name in pending_names(identity.tenant):
                 raise HTTPException(status_code=409, detail=(
                     f"a level job is adding {name!r}; cancel it (DELETE {JOBS_PREFIX}/ID) first"))
-            record = registry.get(name)
-            if record is None or not registry.delete(name):
+            record = registry.get(name, identity.tenant)
+            if record is None or not registry.delete(name, identity.tenant):
                 raise HTTPException(status_code=404, detail=f"no level named {name!r}")
+        request.app.state.guard.audit(identity, "level.delete", None, {"name": name})
         return _level_json(record)
 
     return router

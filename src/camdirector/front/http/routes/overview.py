@@ -13,6 +13,11 @@ before a job is made, so a bad upload answers 4xx and never becomes a job. Job f
 is `input/clip.bvh`, the parameters are the job's JSON; the job writes `result.json`,
 `preview.mp4` and `contact-sheet.png`, renamed into `result/` by the runner when it succeeded.
 
+Keys (front/http/auth.py): submitting needs the verb job.submit, reading (the list, a job, its
+result, preview and contact sheet) job.read, cancelling job.cancel. A job is its tenant's
+(job_resources.py): another tenant's answers 404 as an unknown one, and a tenant past its share of
+jobs or uploads is answered 429.
+
 Conventions as on the wire: right-handed, +Y up, metres, in the clip's world frame.
 """
 from __future__ import annotations
@@ -25,6 +30,9 @@ from fastapi import APIRouter, Depends, FastAPI, File, Form, HTTPException, Quer
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import BaseModel, Field
 
+from camdirector.access.guard import Identity
+from camdirector.access.roles import Verb
+from camdirector.front.http.auth import require
 from camdirector.front.http.routes.job_resources import (
     MAX_LISTED_JOBS,
     JobCreated,
@@ -91,11 +99,11 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
     router = APIRouter(prefix="/v1/overview-jobs", tags=["overview jobs"])
     limit = job_settings.max_upload_bytes
 
-    def job_or_404(job_id: str):
-        return job_of_kind(runner, job_id, KIND, "overview job")
+    def job_or_404(job_id: str, identity: Identity):
+        return job_of_kind(runner, job_id, KIND, "overview job", identity.tenant)
 
-    def file_of(job_id: str, name: str, media_type: str) -> FileResponse:
-        job = job_or_404(job_id)
+    def file_of(job_id: str, identity: Identity, name: str, media_type: str) -> FileResponse:
+        job = job_or_404(job_id, identity)
         if job.state is not JobState.SUCCEEDED:
             raise HTTPException(status_code=409, detail=(
                 f"job {job_id} is {job.state.value}: its result exists only once it succeeded"
@@ -109,9 +117,10 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
         400: {"description": "the upload is not a usable BVH clip (detail says why)"},
         413: {"description": "the upload is larger than the server's limit"},
         422: {"description": "a form field is out of range"},
-        429: {"description": "the job queue is full; retry later"},
+        429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
         503: {"description": "the job store or queue is unreachable; retry later"}})
     def create_overview_job(
+        identity: Annotated[Identity, Depends(require(Verb.JOB_SUBMIT))],
         file: Annotated[UploadFile, File(description="BVH motion capture clip")],
         scale: Annotated[float | None, Form(gt=0, description="metres per file unit (default: inferred: cm, CMU or m)")] = None,
         skip_frames: Annotated[int, Form(ge=0, description="leading frames to ignore (T-pose)")] = 0,
@@ -161,52 +170,57 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
             raise HTTPException(status_code=400, detail=str(exc)) from None
         params["frames"] = clip.frame_count
         params["file_name"] = os.path.basename(file.filename or CLIP_FILE)[:200]
-        job = submit_job(runner, KIND, params, {CLIP_FILE: data})
+        job = submit_job(runner, KIND, params, {CLIP_FILE: data}, identity.tenant)
         return JSONResponse({"id": job.id, "status": job.state.value}, status_code=202,
                             headers={"Location": f"/v1/overview-jobs/{job.id}"})
 
     @router.get("", response_model=OverviewJobList)
     def list_overview_jobs(
+        identity: Annotated[Identity, Depends(require(Verb.JOB_READ))],
         status: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
         limit: Annotated[int, Query(ge=1, le=MAX_LISTED_JOBS, description="at most this many")] = 100,
     ) -> dict:
-        """The newest overview jobs first, with the clip's file name and frame count."""
+        """The newest overview jobs of the caller's tenant first, with the clip's file name and frame count."""
         return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {
-            "file_name": p.get("file_name", CLIP_FILE), "frames": int(p.get("frames", 0))})}
+            "file_name": p.get("file_name", CLIP_FILE), "frames": int(p.get("frames", 0))}, identity.tenant)}
 
     @router.get("/{job_id}", response_model=JobStatus, responses={404: {"description": "no such job"}})
-    def get_overview_job(job_id: str) -> JSONResponse:
+    def get_overview_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]) -> JSONResponse:
         """State, progress 0..1, error and per-stage timings (ms) of a job."""
-        return _status(job_or_404(job_id))
+        return _status(job_or_404(job_id, identity))
 
     @router.delete("/{job_id}", response_model=JobStatus, responses={
         404: {"description": "no such job"},
         409: {"description": "the job already succeeded or failed"}})
-    def cancel_overview_job(job_id: str) -> JSONResponse:
+    def cancel_overview_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_CANCEL))]
+                            ) -> JSONResponse:
         """Cancel a queued or running job (a running job's process is ended). Cancelling a
         cancelled job is a no-op; a finished job answers 409."""
-        job_or_404(job_id)
+        job_or_404(job_id, identity)
         return _status(cancel_job(runner, job_id))
 
     @router.get("/{job_id}/result", response_model=OverviewResultOut, responses={
         404: {"description": "no such job"}, 409: {"description": "the job has not succeeded"}})
-    def get_overview_result(job_id: str) -> FileResponse:
+    def get_overview_result(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]
+                            ) -> FileResponse:
         """The camera path: one entry per clip frame after skip_frames (metres, +Y up)."""
-        return file_of(job_id, RESULT_JSON, "application/json")
+        return file_of(job_id, identity, RESULT_JSON, "application/json")
 
     @router.get("/{job_id}/preview.mp4", response_class=FileResponse, responses={
         200: {"content": {"video/mp4": {}}}, 404: {"description": "no such job"},
         409: {"description": "the job has not succeeded"}})
-    def get_overview_preview(job_id: str) -> FileResponse:
+    def get_overview_preview(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]
+                             ) -> FileResponse:
         """The clip rendered through the camera path (capsule character, shot starts flashed)."""
-        return file_of(job_id, PREVIEW_MP4, "video/mp4")
+        return file_of(job_id, identity, PREVIEW_MP4, "video/mp4")
 
     @router.get("/{job_id}/contact-sheet.png", response_class=FileResponse, responses={
         200: {"content": {"image/png": {}}}, 404: {"description": "no such job"},
         409: {"description": "the job has not succeeded"}})
-    def get_overview_contact_sheet(job_id: str) -> FileResponse:
+    def get_overview_contact_sheet(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]
+                                   ) -> FileResponse:
         """Start and middle frame of every shot, labelled."""
-        return file_of(job_id, CONTACT_SHEET_PNG, "image/png")
+        return file_of(job_id, identity, CONTACT_SHEET_PNG, "image/png")
 
     return router
 
