@@ -19,6 +19,7 @@ import grpc
 import httpx
 import pytest
 from grpc_health.v1 import health_pb2, health_pb2_grpc
+from grpc_reflection.v1alpha.proto_reflection_descriptor_database import ProtoReflectionDescriptorDatabase
 
 from camdirector.access.roles import ROLE_VERBS, Verb, allows
 from camdirector.deploy.server_process import ServerProcess
@@ -68,7 +69,8 @@ def test_every_door_of_the_server_is_in_the_page(world):
     openapi = httpx.get(f"{world.http}/openapi.json").json()
     served = {("HTTP", f"{method.upper()} {path}") for path, ops in openapi["paths"].items() for method in ops}
     served |= {("gRPC", m.name) for m in pb.DESCRIPTOR.services_by_name["Director"].methods}
-    served |= {("gRPC", "grpc.health.v1.Health/Check"), ("HTTP", "GET /dashboard/")}
+    served |= {("gRPC", "grpc.health.v1.Health/Check"), ("gRPC", "grpc.reflection.v1alpha.ServerReflection"),
+               ("HTTP", "GET /dashboard/")}
     served |= {("ZeroMQ", name) for name in RPCS if name != "StreamFrames"}
     assert listed == served
 
@@ -175,10 +177,14 @@ def _rpc(world: World, door: Door, key: str, target: str) -> tuple[str, str]:
         "TakeShot": lambda: pb.TakeShotRequest(session_id=target, release=True),
         "CloseSession": lambda: pb.CloseSessionRequest(session_id=target),
     }
-    if door.transport == "gRPC" and door.name == "grpc.health.v1.Health/Check":
+    if door.name == "grpc.health.v1.Health/Check":
         with grpc.insecure_channel(world.server.grpc) as channel:
             reply = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=10)
         return ("OK" if reply.status == health_pb2.HealthCheckResponse.SERVING else "NOT_SERVING"), ""
+    if door.name == "grpc.reflection.v1alpha.ServerReflection":
+        with grpc.insecure_channel(world.server.grpc) as channel:
+            services = ProtoReflectionDescriptorDatabase(channel).get_services()
+        return ("OK" if "camdirector.v1.Director" in services else "NO_DIRECTOR"), ""
     client = (wc.GrpcRaw(world.server.grpc, key=key or None) if door.transport == "gRPC"
               else wc.ZmqRaw(world.server.zmq, key=key or None, server_key=world.server.zmq_server_key))
     try:
