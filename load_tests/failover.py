@@ -4,9 +4,11 @@
     python -m load_tests.failover --kill worker --sessions 16 --seconds 20 --kill-after 8
 
 `--kill node` (with --nodes N >= 2): a cluster (deploy/cluster.py: HAProxy, Redis, N nodes)
-on this machine; sessions are created and streamed through the balancer with the Python SDK
-(x-camdirector-route on every call), and the node holding the most sessions is SIGKILLed.
-`--kill worker`: one node with two workers; the worker holding the most sessions is SIGKILLed.
+on this machine, as it is deployed (TLS on every hop, keys checked); sessions are created and
+streamed through the balancer with the Python SDK (grpcs://, an engine key and x-camdirector-route
+on every call), and the node holding the most sessions is SIGKILLed.
+`--kill worker`: one node with two workers (loopback, no TLS, no keys: `ServerProcess`'s default
+for measurements about something else); the worker holding the most sessions is SIGKILLed.
 
 Every session streams the demo scene (FRAMING_ONLY) at --rate Hz; an undisturbed session table
 (checkpoints off, in this process) answers the same inputs for comparison. Prints one JSON object:
@@ -14,19 +16,22 @@ sessions lost (a stream that failed for good), frames not answered after the SDK
 recovery time p50/p99 over all sessions and over those whose stream the kill broke (last answer
 before the kill to the first after),
 the largest pose difference from the undisturbed answers at any frame (0.0: bit for bit), and the
-floor: a health check's round trip measured in the same run.
+floor: a health check's round trip over the same path (TLS to the balancer for a node) measured in
+the same run.
 """
 from __future__ import annotations
 
 import argparse
 import os
 import signal
+import ssl
 import tempfile
 import threading
 import time
 from pathlib import Path
 
 import grpc
+import httpx
 import numpy as np
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
@@ -58,8 +63,11 @@ def _pose_difference(a: pb.CameraPose, b: pb.CameraPose) -> float:
     return float(np.abs(pa - pb_).max())
 
 
-def _health_floor_ms(address: str, n: int = 50) -> float:
-    with grpc.insecure_channel(address) as channel:
+def _health_floor_ms(address: str, ca_file: Path | None, n: int = 50) -> float:
+    """The median round trip of a health check to `address`, over TLS trusting `ca_file` if given."""
+    channel = (grpc.insecure_channel(address) if ca_file is None
+               else grpc.secure_channel(address, grpc.ssl_channel_credentials(ca_file.read_bytes())))
+    with channel:
         stub = health_pb2_grpc.HealthStub(channel)
         times = []
         for _ in range(n):
@@ -98,13 +106,15 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
         if kill == "node":
             from camdirector.deploy.cluster import Cluster
             cluster = Cluster.up(nodes=nodes, folder=folder)
-            address = cluster.grpc
+            floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
+            engine = _admin_call(cluster, "POST", f"https://{cluster.http}/v1/keys",
+                                 json={"role": "engine", "name": "load_tests.failover"})["key"]
+            client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file)
         else:
             from camdirector.deploy.server_process import ServerProcess
             server = ServerProcess("--workers", "2", "--data-dir", str(folder), transports=("grpc", "http"))
-            address = server.grpc
-        floor_ms = _health_floor_ms(address)
-        client = cd.connect(f"grpc://{address}")
+            floor_ms = _health_floor_ms(server.grpc, None)
+            client = cd.connect(server.url("grpc"))
         opened = [client.create_session(create) for _ in range(sessions)]
         results = [{} for _ in opened]
         start_s = time.perf_counter() + 0.5
@@ -115,7 +125,8 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             thread.start()
         time.sleep(max(0.0, start_s + kill_after_s - time.perf_counter()))
         if kill == "node":
-            counts = [len(_node_sessions(node.http)) for node in cluster.nodes]
+            counts = [len(_admin_call(cluster, "GET", f"https://{node.http}/v1/sessions")["sessions"])
+                      for node in cluster.nodes]
             victim = max(range(len(counts)), key=counts.__getitem__)
             held = counts[victim]
             cluster.kill_node(victim)
@@ -158,9 +169,12 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             server.stop()
 
 
-def _node_sessions(http_address: str) -> list:
-    import httpx
-    return httpx.get(f"http://{http_address}/v1/sessions", timeout=5).json()["sessions"]
+def _admin_call(cluster, method: str, url: str, **kwargs) -> dict:
+    """A REST call to the cluster (the balancer or a node) with its admin key, over TLS."""
+    answer = httpx.request(method, url, headers={"Authorization": f"Bearer {cluster.admin_key}"}, timeout=10,
+                           verify=ssl.create_default_context(cafile=str(cluster.ca_file)), **kwargs)
+    answer.raise_for_status()
+    return answer.json()
 
 
 def main() -> None:

@@ -1,10 +1,11 @@
-"""HAProxy's health check speaks gRPC health checking (deploy/haproxy.py): a node is up only while
-grpc.health.v1.Health/Check answers SERVING; and a balancer with no healthy node answers gRPC
-calls with UNAVAILABLE at once."""
+"""HAProxy's health check speaks gRPC health checking over TLS (deploy/haproxy.py): a node is up
+only while grpc.health.v1.Health/Check answers SERVING, and only with a certificate of the CA; and
+a balancer with no healthy node answers gRPC calls with UNAVAILABLE at once."""
 from __future__ import annotations
 
 import time
 from concurrent import futures
+from pathlib import Path
 
 import grpc
 import pytest
@@ -19,12 +20,12 @@ from tests.service import wire_client as wc
 
 
 @pytest.fixture
-def balancer(tmp_path):
+def balancer(tmp_path, tls_files):
     """Starts HAProxy in front of the given backends; stops it after the test."""
     started = []
 
     def start(*backends: Backend) -> HAProxy:
-        proxy = service_or_skip(lambda: HAProxy(tmp_path).start(list(backends)))
+        proxy = service_or_skip(lambda: HAProxy(tmp_path, tls_files).start(list(backends)))
         started.append(proxy)
         return proxy
 
@@ -33,12 +34,18 @@ def balancer(tmp_path):
         proxy.stop()
 
 
-def test_a_node_is_up_only_while_its_grpc_health_service_answers_serving(balancer):
+def _health_server(certificate: Path, key: Path) -> tuple[grpc.Server, health.HealthServicer, int]:
+    """A gRPC server of the health service alone, over TLS with this certificate; its port."""
     server = grpc.server(futures.ThreadPoolExecutor(2))
     servicer = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(servicer, server)
-    port = server.add_insecure_port("127.0.0.1:0")
+    port = server.add_secure_port("127.0.0.1:0", grpc.ssl_server_credentials([(key.read_bytes(), certificate.read_bytes())]))
     server.start()
+    return server, servicer, port
+
+
+def test_a_node_is_up_only_while_its_grpc_health_service_answers_serving(balancer, tls_files):
+    server, servicer, port = _health_server(tls_files.cert, tls_files.key)
     try:
         servicer.set("", health_pb2.HealthCheckResponse.SERVING)
         proxy = balancer(Backend("node-1", 1, f"127.0.0.1:{port}", f"127.0.0.1:{free_port()}"))
@@ -52,11 +59,28 @@ def test_a_node_is_up_only_while_its_grpc_health_service_answers_serving(balance
         server.stop(0)
 
 
-def test_with_no_healthy_node_calls_fail_at_once_with_unavailable(balancer):
+def test_a_node_whose_certificate_is_not_of_the_ca_gets_nothing(balancer, tmp_path):
+    """A node that answers SERVING but shows a certificate of another CA (an impostor on its
+    address) fails its checks: HAProxy sends it no call."""
+    from camdirector.deploy.tls import make_tls_files
+
+    other = make_tls_files(tmp_path / "other-ca")
+    server, servicer, port = _health_server(other.cert, other.key)
+    try:
+        servicer.set("", health_pb2.HealthCheckResponse.SERVING)
+        proxy = balancer(Backend("node-1", 1, f"127.0.0.1:{port}", f"127.0.0.1:{free_port()}"))
+        proxy.wait_until({"node-1": "DOWN"}, timeout_s=10, backends=(GRPC_BACKEND,))
+        (row,) = [r for r in proxy.command("show stat").splitlines() if r.startswith(f"{GRPC_BACKEND},node-1,")]
+        assert "L6RSP" in row  # the TLS handshake failed: the check never reached the health service
+    finally:
+        server.stop(0)
+
+
+def test_with_no_healthy_node_calls_fail_at_once_with_unavailable(balancer, tls_files):
     dead = [Backend(f"node-{k}", k, f"127.0.0.1:{free_port()}", f"127.0.0.1:{free_port()}") for k in (1, 2)]
     proxy = balancer(*dead)
     proxy.wait_until({b.name: "DOWN" for b in dead}, timeout_s=10)
-    channel = grpc.insecure_channel(proxy.grpc)
+    channel = grpc.secure_channel(proxy.grpc, grpc.ssl_channel_credentials(tls_files.ca_cert.read_bytes()))
     stub = pbg.DirectorStub(channel)
     for metadata in (route(new_keys(1)[0]), ()):  # hashed, and round robin
         start = time.monotonic()

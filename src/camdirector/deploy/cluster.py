@@ -1,15 +1,24 @@
 """The multi-node topology on one machine, on loopback ports, from Debian's packages and the venv:
-Redis (session checkpoints, the job queue), PostgreSQL (job and level records), N nodes
-(`camdirector serve`, sharing one data folder), queue workers (`camdirector job-worker`) and HAProxy
-in front (deploy/haproxy.py). docs/scaling.md describes it.
+Redis (session checkpoints, the job queue), PostgreSQL (job and level records, and the API keys),
+N nodes (`camdirector serve`, sharing one data folder), queue workers (`camdirector job-worker`)
+and HAProxy in front (deploy/haproxy.py). docs/scaling.md describes it.
+
+It runs as a cluster should be deployed: every node checks keys (docs/security.md), and every
+hop is TLS. `up` makes a CA and a certificate for 127.0.0.1 and localhost in DIR/tls
+(deploy/tls.py), which the balancer and every node present; clients connect to the balancer with
+grpcs:// and https:// trusting DIR/tls/ca.pem (`ca_file`). The nodes share the keys through
+PostgreSQL: node-1 starts alone and, finding no key, makes the admin key (DIR/data/admin.key,
+`admin_key_file`) and the ZeroMQ CURVE key pair in the data folder; the others start once it is
+ready, and find both (nodes started together would each make their own).
 
     python -m camdirector.deploy.cluster up --nodes N [--dir DIR]   (scripts/cluster.sh up ...)
     python -m camdirector.deploy.cluster down [--dir DIR]
     python -m camdirector.deploy.cluster add-node [--dir DIR]
     python -m camdirector.deploy.cluster status [--dir DIR]
 
-`up` prints one JSON object (the balancer's `grpc` and `http`, `nodes`, `redis`, `postgres`, ...)
-and returns with everything running; the same object is kept in DIR/cluster.json, which `down`,
+`up` prints one JSON object (the balancer's `grpc` and `http`, `nodes`, `redis`, `postgres`,
+`ca_file`, `admin_key_file` (a path: the key itself is never printed), `zmq_server_key`, ...) and
+returns with everything running; the same object is kept in DIR/cluster.json, which `down`,
 `add-node` and `status` read. From Python, `Cluster.up(nodes, folder)` gives the same cluster with
 `kill_node`, `add_node` and `down` (the failover benchmark's handle).
 """
@@ -27,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from camdirector.access.keys import ADMIN_KEY_FILE
 from camdirector.deploy.haproxy import Backend, BalancerSettings, HAProxy
 from camdirector.deploy.services import (
     PostgresServer,
@@ -37,6 +47,7 @@ from camdirector.deploy.services import (
     is_running,
     stop_processes,
 )
+from camdirector.deploy.tls import TlsFiles, make_tls_files
 
 DEFAULT_FOLDER = Path("/tmp/camdirector-cluster")
 STATE_FILE = "cluster.json"
@@ -109,7 +120,7 @@ class Cluster:
         balancer = state.get("balancer")
         self.haproxy: HAProxy | None = None
         if balancer is not None:
-            self.haproxy = HAProxy(self.folder, dataclasses.replace(
+            self.haproxy = HAProxy(self.folder, self.tls, dataclasses.replace(
                 settings.balancer, grpc_port=balancer["grpc_port"], http_port=balancer["http_port"]))
             self.haproxy.pid = balancer["pid"]  # started by another process: known by its pid alone
             self.haproxy.backends = [n.backend for n in self.nodes]
@@ -142,9 +153,29 @@ class Cluster:
         """The data folder every node and queue worker shares (uploads, artifacts, levels)."""
         return self.folder / "data"
 
+    @property
+    def tls(self) -> TlsFiles:
+        """The CA, and the certificate the balancer and every node present."""
+        return TlsFiles(*(Path(p) for p in self.state["tls"]))
+
+    @property
+    def ca_file(self) -> Path:
+        """What a client trusts to reach the balancer or a node."""
+        return self.tls.ca_cert
+
+    @property
+    def admin_key(self) -> str:
+        """The admin key of tenant `default`, read from its file (mode 0600)."""
+        return Path(self.state["admin_key_file"]).read_text().strip()
+
+    @property
+    def zmq_server_key(self) -> str:
+        """The nodes' CURVE public key (Z85), which a ZeroMQ client needs (`zmq_server_key`)."""
+        return self.state["zmq_server_key"]
+
     def as_dict(self) -> dict:
-        """What `up` prints: the state less its bookkeeping (pids of services, settings)."""
-        private = ("settings", "balancer", "redis_pid", "postgres_folder", "postgres_port")
+        """What `up` prints: the state less its bookkeeping (pids of services, settings, the TLS files)."""
+        private = ("settings", "balancer", "redis_pid", "postgres_folder", "postgres_port", "tls")
         return {k: v for k, v in self.state.items() if k not in private}
 
     def _save(self) -> None:
@@ -193,18 +224,22 @@ class Cluster:
         self.state.update(postgres=postgres.url, postgres_folder=str(postgres.folder), postgres_port=postgres.port)
         self._save()
         postgres.start()
+        tls = make_tls_files(self.folder / "tls")
+        self.state.update(tls=[str(p) for p in dataclasses.astuple(tls)], ca_file=str(tls.ca_cert))
         has_queue_workers = has_job_worker.wait(60) == 0
         if not has_queue_workers:
             self.state["notes"].append("no queue workers: this checkout has no `camdirector job-worker`")
         self.data_dir.mkdir(exist_ok=True)
-        for node in self._start_nodes(range(1, nodes + 1)):
-            self.state["nodes"].append(dataclasses.asdict(node))
+        # node-1 first: it makes the admin key and the CURVE key pair (the module docstring)
+        for numbers in ([1], range(2, nodes + 1)):
+            for node in self._start_nodes(numbers):
+                self.state["nodes"].append(dataclasses.asdict(node))
         self._save()
         if has_queue_workers:
             for k in range(1, self.settings.queue_workers + 1):
                 self.state["queue_workers"].append({"pid": self._start_queue_worker(k).pid})
         self._save()
-        self.haproxy = HAProxy(self.folder, self.settings.balancer).start([n.backend for n in self.nodes])
+        self.haproxy = HAProxy(self.folder, tls, self.settings.balancer).start([n.backend for n in self.nodes])
         self._children.append(self.haproxy.proc)
         self.state.update(grpc=self.haproxy.grpc, http=self.haproxy.http, balancer={
             "pid": self.haproxy.pid, "grpc_port": self.haproxy.grpc_port, "http_port": self.haproxy.http_port,
@@ -221,6 +256,7 @@ class Cluster:
             cmd = [*_serve_command(), "serve", "--grpc", "127.0.0.1:0", "--zmq", "tcp://127.0.0.1:*",
                    "--http", "127.0.0.1:0", "--workers", str(self.settings.workers_per_node),
                    "--node-id", name, "--data-dir", str(self.data_dir),
+                   "--tls-cert", str(self.tls.cert), "--tls-key", str(self.tls.key),
                    "--checkpoint-store", self.state["redis"], "--job-store", self.state["postgres"],
                    "--job-queue", self.state["job_queue"], *self.settings.node_args]
             # stdout to a file, not a pipe: the node outlives this process, and a pipe would close
@@ -233,6 +269,7 @@ class Cluster:
         for k, name, proc, out, log in launched:
             try:
                 ready = self._wait_ready(proc, out, log, name)
+                self._check_access(name, ready)
             except ClusterError:
                 for _, _, other, _, _ in launched:
                     other.kill()
@@ -241,6 +278,24 @@ class Cluster:
             nodes.append(NodeInfo(node_id=name, server_id=k, pid=proc.pid, grpc=ready["grpc"], http=ready["http"],
                                   zmq=ready["zmq"]))
         return nodes
+
+    def _check_access(self, name: str, ready: dict) -> None:
+        """Notes the admin key's file and the CURVE key the first node announces; ClusterError
+        when a node serves without TLS or keys, or with another CURVE key than its peers (ZeroMQ
+        clients of the cluster know one)."""
+        if not (ready.get("tls") and ready.get("auth")):
+            raise ClusterError(f"{name} serves without TLS or without keys: {ready}")
+        self.state.setdefault("zmq_server_key", ready["zmq_server_key"])
+        if ready["zmq_server_key"] != self.state["zmq_server_key"]:
+            raise ClusterError(f"{name} announces the CURVE key {ready['zmq_server_key']}, its peers "
+                               f"{self.state['zmq_server_key']}: their shared data folder's zmq/ was made twice")
+        key_file = ready.get("admin_key_file", self.state.get("admin_key_file"))
+        if key_file is None:  # a folder used before: PostgreSQL kept its keys, the data folder the file
+            key_file = str(self.data_dir / ADMIN_KEY_FILE)
+            if not Path(key_file).is_file():
+                raise ClusterError(f"the keys in {self.state['postgres']} include an admin key, but {key_file} "
+                                   f"is gone: scripts/cluster.sh down, then remove {self.folder}")
+        self.state["admin_key_file"] = key_file
 
     def _wait_ready(self, proc: subprocess.Popen, out: Path, log: Path, name: str) -> dict:
         deadline = time.monotonic() + self.settings.start_timeout_s

@@ -1,12 +1,22 @@
 """Debian's HAProxy (2.6) in front of the nodes: its configuration, and a launcher like the services
 of deploy/services.py, with the runtime API that adds a node to the running balancer.
 
-One gRPC frontend (HTTP/2 without TLS, as gRPC clients speak it on loopback) sends every call that
-carries the `x-camdirector-route` header to one node by a consistent hash of that header, so all
-the calls of a session reach the node that holds it; calls without it go round robin. One HTTP
-frontend spreads the nodes' REST APIs the same way (a REST call about a session that carries the
-session's route header reaches the node that holds it; the rest go round robin: the job and level
-resources are the same on every node).
+One gRPC frontend (HTTP/2 over TLS) sends every call that carries the `x-camdirector-route`
+header to one node by a consistent hash of that header, so all the calls of a session reach the
+node that holds it; calls without it go round robin. One HTTPS frontend spreads the nodes' REST
+APIs the same way (a REST call about a session that carries the session's route header reaches the
+node that holds it; the rest go round robin: the job and level resources are the same on every
+node).
+
+TLS ends at HAProxy, which encrypts again to each node (`ssl verify required ca-file`: a node
+must show a certificate of the cluster's CA for `BalancerSettings.node_tls_name`, or it gets no
+traffic and fails its checks). Passing TLS through (TCP mode) would hide the HTTP/2 streams from
+HAProxy: it could route only whole connections, and one gRPC connection carries the calls of many
+sessions (an SDK client opens one channel for all its sessions), each of which must reach its own
+node by its route header. So HAProxy reads the headers in the clear, in its own memory only; on
+the wire every hop is encrypted. Keys pass through untouched: HAProxy forwards the
+`authorization` header and checks nothing, and every node checks every call against the keys
+the nodes share in PostgreSQL (access/).
 
 Health checks call the gRPC health service (grpc.health.v1.Health/Check) every node serves on its
 gRPC port. HAProxy 2.6 cannot send that request as an HTTP check: a gRPC request body starts with
@@ -29,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from camdirector.deploy.services import ServiceError, _binary, _tail, _wait_port, free_port, stop_processes
+from camdirector.deploy.tls import TlsFiles, files_in
 
 ROUTE_HEADER = "x-camdirector-route"  # the metadata header the SDKs set on every call of a session
 GRPC_BACKEND, HTTP_BACKEND = "nodes_grpc", "nodes_http"
@@ -53,6 +64,9 @@ class BalancerSettings:
     # closes it: a game paused longer than this reconnects (its session waits for it), s. [1, 86400]
     idle_timeout_s: float = 600.0
     connect_timeout_s: float = 1.0         # a loopback or LAN connect takes far less; more means the node is gone, s
+    # The name every node's certificate holds, which HAProxy checks (verifyhost); deploy/tls.py's
+    # certificates hold "localhost" and 127.0.0.1, and HAProxy checks a name only.
+    node_tls_name: str = "localhost"
 
     def __post_init__(self):
         checks = [
@@ -92,8 +106,9 @@ def _hpack_literal(name_index: int, value: bytes) -> bytes:
 
 def grpc_health_check_request() -> bytes:
     """The bytes of a whole gRPC call of grpc.health.v1.Health/Check for the server's overall
-    health (service ""), from the connection preface on, as `tcp-check send-binary` sends them."""
-    headers = (bytes([0x83, 0x86])                                         # :method POST, :scheme http
+    health (service ""), from the connection preface on, as `tcp-check send-binary` sends them
+    (over the TLS connection that `check-ssl` opens)."""
+    headers = (bytes([0x83, 0x87])                                         # :method POST, :scheme https
                + _hpack_literal(4, b"/grpc.health.v1.Health/Check")         # :path
                + _hpack_literal(1, b"localhost")                            # :authority
                + bytes([0x0F, 0x10]) + bytes([16]) + b"application/grpc"    # content-type (static entry 31)
@@ -114,26 +129,33 @@ def _ms(seconds: float) -> str:
     return f"{round(seconds)}s" if seconds == round(seconds) else f"{round(seconds * 1000)}ms"
 
 
-def _server_args(s: BalancerSettings) -> str:
-    """A node's health check and weight, the same in both backends."""
-    return (f"check inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
+def _server_args(s: BalancerSettings, tls: TlsFiles, grpc: bool) -> str:
+    """A node's TLS, health check and weight: the traffic and the checks over TLS to a node that
+    proves itself with the CA's certificate, gRPC's (`grpc`) as HTTP/2."""
+    args = (f"ssl verify required ca-file {tls.ca_cert} verifyhost {s.node_tls_name} "
+            f"check check-ssl inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
             f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight}")
+    return args + " proto h2 alpn h2 check-alpn h2" if grpc else args
 
 
-def render_config(settings: BalancerSettings, backends: list[Backend], *, stats_socket: str,
-                  grpc_port: int, http_port: int, resolvers: str = "") -> str:
-    """haproxy.cfg for these nodes. `resolvers` ("" for none) is a `nameserver` line's address,
-    for node names that only a container network's DNS knows (docker/compose.cluster.yaml)."""
-    server = _server_args(settings)
+def render_config(settings: BalancerSettings, backends: list[Backend], *, tls: TlsFiles, stats_socket: str,
+                  grpc_port: int, http_port: int, resolvers: str = "", user: str = "") -> str:
+    """haproxy.cfg for these nodes, its frontends presenting `tls.bundle`, the nodes checked against
+    `tls.ca_cert`. `resolvers` ("" for none) is a `nameserver` line's address, for node names that
+    only a container network's DNS knows (docker/compose.cluster.yaml); `user` ("" to stay who
+    started it) the user HAProxy becomes once it has read its files."""
+    grpc_server, http_server = _server_args(settings, tls, grpc=True), _server_args(settings, tls, grpc=False)
     if resolvers:
         # a name that does not resolve yet (its container is starting) leaves that node down, not HAProxy
-        server += " resolvers dns init-addr last,libc,none"
+        dns = " resolvers dns init-addr last,libc,none"
+        grpc_server, http_server = grpc_server + dns, http_server + dns
     lines = [
         "# Written by camdirector.deploy.haproxy; see docs/scaling.md.",
         "global",
         f"    stats socket {stats_socket} mode 600 level admin",
         # node up/down and abnormal requests only: a 60 Hz stream must not write a line per frame
         "    log stderr format raw local0 notice",
+        *([f"    user {user}", f"    group {user}"] if user else []),
         "",
     ]
     if resolvers:
@@ -155,7 +177,7 @@ def render_config(settings: BalancerSettings, backends: list[Backend], *, stats_
         "    option redispatch 1",
         "",
         "frontend grpc",
-        f"    bind {settings.host}:{grpc_port} proto h2",
+        f"    bind {settings.host}:{grpc_port} ssl crt {tls.bundle} alpn h2",
         f"    default_backend {GRPC_BACKEND}",
         "",
         f"backend {GRPC_BACKEND}",
@@ -164,11 +186,11 @@ def render_config(settings: BalancerSettings, backends: list[Backend], *, stats_
         "    option tcp-check",
         f"    tcp-check send-binary {grpc_health_check_request().hex()}",
         f"    tcp-check expect binary {SERVING_REPLY.hex()}",
-        f"    default-server proto h2 {server}",
+        f"    default-server {grpc_server}",
         *(f"    server {b.name} {b.grpc} id {b.server_id}" for b in backends),
         "",
         "frontend http",
-        f"    bind {settings.host}:{http_port}",
+        f"    bind {settings.host}:{http_port} ssl crt {tls.bundle}",
         f"    default_backend {HTTP_BACKEND}",
         "",
         f"backend {HTTP_BACKEND}",
@@ -176,7 +198,7 @@ def render_config(settings: BalancerSettings, backends: list[Backend], *, stats_
         "    hash-type consistent",
         "    option httpchk GET /healthz",
         "    http-check expect status 200",
-        f"    default-server {server}",
+        f"    default-server {http_server}",
         *(f"    server {b.name} {b.http} id {b.server_id}" for b in backends),
         "",
     ]
@@ -185,11 +207,12 @@ def render_config(settings: BalancerSettings, backends: list[Backend], *, stats_
 
 class HAProxy:
     """haproxy on `settings.host`, configured for `backends`, its runtime API on a unix socket in
-    `folder`. A child in a session of its own: it outlives the process that started it (the
-    cluster's `up` returns); `pid` is what stops it."""
+    `folder`, TLS with `tls` (the module docstring). A child in a session of its own: it outlives
+    the process that started it (the cluster's `up` returns); `pid` is what stops it."""
 
-    def __init__(self, folder: Path, settings: BalancerSettings = BalancerSettings()):
+    def __init__(self, folder: Path, tls: TlsFiles, settings: BalancerSettings = BalancerSettings()):
         self.folder = Path(folder)
+        self.tls = tls
         self.settings = settings
         self.grpc_port = settings.grpc_port or free_port()
         self.http_port = settings.http_port or free_port()
@@ -212,7 +235,8 @@ class HAProxy:
         return f"{self.settings.host}:{self.http_port}"
 
     def _write_config(self) -> None:
-        self.config_path.write_text(render_config(self.settings, self.backends, stats_socket=str(self.socket_path),
+        self.config_path.write_text(render_config(self.settings, self.backends, tls=self.tls,
+                                                  stats_socket=str(self.socket_path),
                                                   grpc_port=self.grpc_port, http_port=self.http_port))
 
     def start(self, backends: list[Backend], timeout_s: float = 10.0) -> HAProxy:
@@ -282,9 +306,9 @@ class HAProxy:
         if any(b.name == backend.name or b.server_id == backend.server_id for b in self.backends):
             raise ServiceError(f"haproxy: a server named {backend.name} or with id {backend.server_id} exists")
         # a dynamic server takes nothing from `default-server`: the same arguments, spelt out
-        common = f"id {backend.server_id} {_server_args(self.settings)}"
-        for name, address, extra in ((GRPC_BACKEND, backend.grpc, " proto h2"), (HTTP_BACKEND, backend.http, "")):
-            answer = self.command(f"add server {name}/{backend.name} {address} {common}{extra}")
+        for name, address, grpc in ((GRPC_BACKEND, backend.grpc, True), (HTTP_BACKEND, backend.http, False)):
+            answer = self.command(f"add server {name}/{backend.name} {address} id {backend.server_id} "
+                                  f"{_server_args(self.settings, self.tls, grpc)}")
             if "New server registered" not in answer:
                 raise ServiceError(f"haproxy: add server {name}/{backend.name}: {answer.strip()}")
             for verb in ("enable health", "enable server"):
@@ -297,12 +321,19 @@ class HAProxy:
             stop_processes([(self.pid, str(self.config_path))], timeout_s=5.0)
 
 
+# Where docker/compose.cluster.yaml mounts the files of `python -m camdirector.deploy.tls docker/tls`.
+COMPOSE_TLS_DIR = Path("/etc/camdirector/tls")
+
+
 def compose_config(nodes: int) -> str:
     """haproxy.cfg for docker/compose.cluster.yaml: services node-1..node-N (gRPC on 50051, HTTP on
-    8080) found through Docker's DNS; the balancer on 50051 and 8080 of its container."""
+    8080) found through Docker's DNS; the balancer on 50051 and 8080 of its container. HAProxy
+    starts as root there to read the bundle (its key is its owner's alone, mode 0600), then
+    becomes the image's `haproxy` user."""
     backends = [Backend(f"node-{k}", k, f"node-{k}:50051", f"node-{k}:8080") for k in range(1, nodes + 1)]
-    return render_config(BalancerSettings(host="0.0.0.0"), backends, stats_socket="/tmp/haproxy.sock",
-                         grpc_port=50051, http_port=8080, resolvers="127.0.0.11:53")
+    return render_config(BalancerSettings(host="0.0.0.0"), backends, tls=files_in(COMPOSE_TLS_DIR),
+                         stats_socket="/tmp/haproxy.sock",
+                         grpc_port=50051, http_port=8080, resolvers="127.0.0.11:53", user="haproxy")
 
 
 if __name__ == "__main__":

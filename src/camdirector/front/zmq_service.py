@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import tempfile
 import time
 from pathlib import Path
 
@@ -35,13 +37,21 @@ CURVE_DIR = "zmq"  # in the data directory: server.key (public) and server.key_s
 
 
 def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
-    """The server's CURVE (public, secret) keys, Z85, made on first use."""
+    """The server's CURVE (public, secret) keys, Z85, made on first use. Nodes sharing one data
+    directory and starting together agree: the pair is made aside and its secret file (which
+    holds both halves) linked into place only if none is there yet, so the first one wins."""
     folder = Path(data_dir) / CURVE_DIR
     secret_file = folder / "server.key_secret"
     if not secret_file.exists():
         folder.mkdir(parents=True, exist_ok=True)
-        zmq.auth.create_certificates(folder, "server")
-        secret_file.chmod(0o600)
+        with tempfile.TemporaryDirectory(dir=folder) as aside:
+            public, secret = zmq.auth.create_certificates(aside, "server")
+            os.chmod(secret, 0o600)
+            try:
+                os.link(secret, secret_file)   # atomic, and refuses to replace another node's
+                os.replace(public, folder / "server.key")
+            except FileExistsError:
+                pass
     return zmq.auth.load_certificate(secret_file)
 
 
