@@ -21,6 +21,7 @@ from camdirector.access.roles import ROLE_VERBS, ROLES, Verb
 from camdirector.errors import DirectorError
 from camdirector.front.http.auth import COOKIE, COOKIE_TTL_S, identify, require
 
+_NOT_JSON = {"description": "the body cannot be read as JSON"}
 Role = Literal["engine", "director", "viewer", "admin"]
 assert set(Role.__args__) == set(ROLES)  # noqa: S101 - the literal mirrors roles.py's table
 
@@ -81,7 +82,7 @@ def _caller(request: Request, identity: Identity, cookie: str | None) -> dict:
 def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     routes = APIRouter(prefix="/v1", tags=["access"])
 
-    @routes.post("/login", response_model=Caller, responses={401: {"description": "not a valid key"}})
+    @routes.post("/login", response_model=Caller, responses={400: _NOT_JSON, 401: {"description": "not a valid key"}})
     def login(request: Request, response: Response, body: Login) -> dict:
         """Checks a key and keeps it as the dashboard's login cookie (module docstring of auth.py).
         A JSON body only: a page of another site cannot send one without the browser asking first."""
@@ -115,7 +116,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
         """The tenant's keys, revoked ones too (never a key itself)."""
         return {"keys": [k.as_public() for k in guard.store.list_keys(identity.tenant)]}
 
-    @routes.post("/keys", status_code=201, response_model=KeyCreated)
+    @routes.post("/keys", status_code=201, response_model=KeyCreated, responses={400: _NOT_JSON})
     def create_key(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))],
                    body: Annotated[NewKey, Body()]) -> dict:
         """A new key of the caller's tenant."""
