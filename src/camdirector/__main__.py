@@ -11,6 +11,7 @@ from camdirector.evaluation.cli import add_parsers as add_eval_parsers
 from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
 from camdirector.server_settings import ServerSettings
+from camdirector.version import PROTOCOL, VERSION
 
 
 def _serve_parser(sub) -> None:
@@ -90,6 +91,7 @@ def _job_worker(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="camdirector", description="Automated cinematographer service")
+    parser.add_argument("--version", action="version", version=f"camdirector {VERSION} (protocol {PROTOCOL})")
     sub = parser.add_subparsers(dest="command", required=True)
     _serve_parser(sub)
     _job_worker_parser(sub)

@@ -33,6 +33,9 @@ class _Context:
     def invocation_metadata(self):
         return ()
 
+    async def send_initial_metadata(self, metadata):
+        pass
+
     async def abort(self, code, details):
         self.status = (code, details)
         raise _Aborted()

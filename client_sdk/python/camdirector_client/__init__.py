@@ -7,8 +7,11 @@
             update = session.frame(1, 1 / 60, packed=cd.pack_states(ids, positions, rotations))
             pose = cd.pose_from_msg(update.pose)
 
-``pb`` is the wire contract's generated module (``camdirector.v1.director_pb2``).
+``pb`` is the wire contract's generated module (``camdirector.v1.director_pb2``); ``__version__``
+this SDK's release, the same as the server's it was released with (a server says its own in
+``/healthz`` and in every gRPC call's initial metadata, ``camdirector-version``).
 """
+from importlib.metadata import version as _version
 
 from camdirector.v1 import director_pb2 as pb
 from camdirector_client.aio import AsyncClient, AsyncSession, connect_async
@@ -40,6 +43,8 @@ from camdirector_client.convert import (
     vec3,
 )
 from camdirector_client.errors import DirectorError
+
+__version__ = _version("camdirector-client")
 
 __all__ = [
     "AsyncClient",

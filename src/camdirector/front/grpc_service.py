@@ -5,6 +5,8 @@ worker that holds the session parses the rest, so nothing is parsed twice in ful
 Every call carries `authorization: Bearer KEY` metadata (access/guard.py): UNAUTHENTICATED without
 a valid key, PERMISSION_DENIED for a role without the verb, NOT_FOUND for another tenant's session.
 The health service stays open: balancers probe it without a key.
+Every Director call's initial metadata says which server answers: `camdirector-version` (the
+release) and `camdirector-protocol` (version.py), which the SDKs compare with their own.
 A bad frame ends its stream with a status; the session itself stays and a new stream may resume it.
 """
 from __future__ import annotations
@@ -21,9 +23,11 @@ from camdirector.errors import DirectorError, internal
 from camdirector.front.router import SessionRouter, named_session, session_id_of
 from camdirector.front.session_calls import RPCS, SessionCalls
 from camdirector.v1 import director_pb2 as pb
+from camdirector.version import PROTOCOL, VERSION
 
 log = logging.getLogger("camdirector.grpc")
 SERVICE = "camdirector.v1.Director"
+SERVER_METADATA = (("camdirector-version", VERSION), ("camdirector-protocol", str(PROTOCOL)))
 TRANSPORT = "grpc"
 
 
@@ -45,6 +49,7 @@ class DirectorGrpc:
         """The RPC's call (session_calls.py) for a caller whose key allows its verb."""
         t0 = time.perf_counter()
         try:
+            await context.send_initial_metadata(SERVER_METADATA)
             need = RPCS[rpc]
             identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
             return await self.calls.by_rpc[rpc](payload, identity)
@@ -70,6 +75,7 @@ class DirectorGrpc:
     async def stream_frames(self, request_iterator, context: grpc.aio.ServicerContext):
         session_id = None
         try:
+            await context.send_initial_metadata(SERVER_METADATA)
             need = RPCS["StreamFrames"]
             identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
             async for payload in request_iterator:

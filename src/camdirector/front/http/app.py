@@ -25,6 +25,7 @@ from camdirector.front.http.routes.monitors import build_view_router
 from camdirector.front.http.routes.sessions import build_session_router
 from camdirector.front.router import SessionRouter
 from camdirector.front.view_hub import ViewHub
+from camdirector.version import PROTOCOL, VERSION
 
 DASHBOARD_DIR = Path(__file__).with_name("dashboard")
 
@@ -33,7 +34,7 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
     """The app; `app.state.views` is its ViewHub, which the server closes before stopping (its
     live streams would hold the HTTP server open). The router's guard checks every caller;
     `secure_cookie`: the login cookie is sent over TLS only."""
-    app = FastAPI(title="camdirector", version="0.1.0",
+    app = FastAPI(title="camdirector", version=VERSION,
                   description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.")
     app.state.views = ViewHub(router, router.metrics)
     app.state.guard = guard = router.guard
@@ -42,9 +43,10 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
 
     @app.get("/healthz")
     def healthz() -> dict:
-        """Liveness and a short status: open sessions, worker processes, bound transports."""
-        return {"status": "ok", "sessions": len(router.sessions), "workers": router.pool.size,
-                "transports": transports}
+        """Liveness and a short status: version and protocol, open sessions, worker processes, bound
+        transports (a cluster upgraded node by node shows which node runs what)."""
+        return {"status": "ok", "version": VERSION, "protocol": PROTOCOL, "sessions": len(router.sessions),
+                "workers": router.pool.size, "transports": transports}
 
     @app.exception_handler(StarletteHTTPException)
     async def allow_every_method(request: Request, exc: StarletteHTTPException) -> Response:
