@@ -10,6 +10,7 @@ from pathlib import Path
 
 import grpc
 import httpx
+import pytest
 
 import camdirector_client
 from camdirector.deploy.server_process import ServerProcess
@@ -40,3 +41,19 @@ def test_a_server_says_its_version_everywhere():
             metadata = dict(future.initial_metadata())   # sent even when the call is refused
             assert future.exception().code() == grpc.StatusCode.INVALID_ARGUMENT   # an empty scene
         assert metadata["camdirector-version"] == VERSION and metadata["camdirector-protocol"] == str(PROTOCOL)
+
+
+def test_a_client_newer_than_its_server_is_told_so(monkeypatch):
+    with ServerProcess("--workers", "0", transports=("grpc",)) as server:
+        stub = pbg.DirectorStub(grpc.insecure_channel(server.grpc))
+        for sent, code, words in ((str(PROTOCOL + 1), grpc.StatusCode.FAILED_PRECONDITION, "upgrade the server"),
+                                  ("two", grpc.StatusCode.INVALID_ARGUMENT, "not a whole number")):
+            future = stub.CreateSession.future(pb.CreateSessionRequest(), timeout=10,
+                                               metadata=[("camdirector-protocol", sent)])
+            assert future.exception().code() == code and words in future.exception().details()
+        monkeypatch.setattr(camdirector_client.wire, "PROTOCOL", PROTOCOL + 1)   # an SDK from a later release
+        with camdirector_client.connect(f"grpc://{server.grpc}") as client, \
+                pytest.raises(camdirector_client.DirectorError) as refused:
+            client.create_session(targets=[], objects=[])
+        assert refused.value.code == grpc.StatusCode.FAILED_PRECONDITION
+        assert f"protocol {PROTOCOL + 1}" in refused.value.message and "upgrade the server" in refused.value.message

@@ -62,6 +62,11 @@ DEFAULT_MAX_MESSAGE_BYTES = 64 * 1024 * 1024
 # gRPC metadata on every call of a session, CreateSession included: a balancer in front of many
 # nodes routes by a consistent hash of it (docs/scaling.md), so a session's calls meet one node.
 ROUTE_HEADER = "x-camdirector-route"
+# The wire contract's revision this SDK speaks, sent on every gRPC call: a server that speaks an
+# older one refuses CreateSession with FAILED_PRECONDITION and says which (its own revision is in
+# its initial metadata, camdirector-protocol, and in /healthz).
+PROTOCOL_HEADER = "camdirector-protocol"
+PROTOCOL = 1
 
 
 def new_route_key() -> str:
@@ -153,8 +158,9 @@ class Security:
                 f"curve={self.curve is not None})")
 
     def grpc_metadata(self, route: str) -> tuple[tuple[str, str], ...]:
-        """The metadata of a session's gRPC call: its route key (ROUTE_HEADER) and the key."""
-        return ((ROUTE_HEADER, route), *self._grpc_auth)
+        """The metadata of a session's gRPC call: its route key (ROUTE_HEADER), the protocol this
+        SDK speaks and the key."""
+        return ((ROUTE_HEADER, route), (PROTOCOL_HEADER, str(PROTOCOL)), *self._grpc_auth)
 
     def zmq_request(self, rpc: bytes, payload: bytes) -> tuple[bytes, ...]:
         """A ZeroMQ request's frames: the RPC name, the payload and the key frame if any."""

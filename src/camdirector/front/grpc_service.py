@@ -19,7 +19,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from camdirector.access.guard import Guard
-from camdirector.errors import DirectorError, internal
+from camdirector.errors import DirectorError, internal, invalid, precondition
 from camdirector.front.router import SessionRouter, named_session, session_id_of
 from camdirector.front.session_calls import RPCS, SessionCalls
 from camdirector.v1 import director_pb2 as pb
@@ -31,11 +31,27 @@ SERVER_METADATA = (("camdirector-version", VERSION), ("camdirector-protocol", st
 TRANSPORT = "grpc"
 
 
-def _authorization(context: grpc.aio.ServicerContext) -> str | None:
+def _metadata(context: grpc.aio.ServicerContext, name: str) -> str | None:
     for key, value in context.invocation_metadata() or ():
-        if key == "authorization":
+        if key == name:
             return value
     return None
+
+
+def _authorization(context: grpc.aio.ServicerContext) -> str | None:
+    return _metadata(context, "authorization")
+
+
+def check_client_protocol(sent: str | None) -> None:
+    """FAILED_PRECONDITION for a client newer than this server (`camdirector-protocol` metadata;
+    none: a client from before the header, protocol 1)."""
+    if sent is None:
+        return
+    if not sent.isdigit():
+        raise invalid(f"camdirector-protocol metadata {sent[:20]!r} is not a whole number")
+    if int(sent) > PROTOCOL:
+        raise precondition(f"this client speaks camdirector protocol {int(sent)}, this server (camdirector {VERSION}) "
+                           f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}")
 
 
 class DirectorGrpc:
@@ -52,6 +68,8 @@ class DirectorGrpc:
             await context.send_initial_metadata(SERVER_METADATA)
             need = RPCS[rpc]
             identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
+            if rpc == "CreateSession":
+                check_client_protocol(_metadata(context, "camdirector-protocol"))
             return await self.calls.by_rpc[rpc](payload, identity)
         except DirectorError as exc:
             self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
