@@ -24,6 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_every_distribution_has_the_one_version():
     versions = {path: tomllib.loads((ROOT / path).read_text())["project"]["version"]
                 for path in ("pyproject.toml", "proto/pyproject.toml", "client_sdk/python/pyproject.toml")}
+    cmake = re.search(r"project\(camdirector_sdk VERSION ([0-9.]+)", (ROOT / "client_sdk/cpp/CMakeLists.txt").read_text())
+    versions["client_sdk/cpp/CMakeLists.txt"] = cmake.group(1)   # and cd_version() (tests/client_sdk/cpp/test_install.py)
     assert set(versions.values()) == {VERSION}, versions
     assert camdirector_client.__version__ == VERSION
     changelog = (ROOT / "CHANGELOG.md").read_text()

@@ -263,6 +263,8 @@ void cd_client::reset_session_locked() {
 
 extern "C" {
 
+const char* cd_version(void) { return CAMDIRECTOR_VERSION; }
+
 const char* cd_status_name(int status) {
   if (status >= 0 && status < static_cast<int>(sizeof kStatusNames / sizeof kStatusNames[0])) {
     return kStatusNames[status];

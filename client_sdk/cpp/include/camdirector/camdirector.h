@@ -132,6 +132,10 @@ typedef struct cd_config {
 
 void cd_config_init(cd_config* config);
 
+/* This SDK's release, e.g. "0.2.0": the same as the server's it was released with (a server says
+ * its own in /healthz and in every call's initial metadata, camdirector-version). */
+const char* cd_version(void);
+
 /* Whether an address parses (see cd_config.address): CD_OK, or CD_INVALID_ARGUMENT with the
  * reason copied into buf (may be NULL). */
 cd_status cd_check_address(const char* address, char* buf, size_t size);
