@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 DEPS := pyproject.toml proto/pyproject.toml client_sdk/python/pyproject.toml scripts/system-deps.sh
 
-.PHONY: run test proto bench clean
+.PHONY: run test proto bench dist clean
 
 $(STAMP): $(DEPS)
 	bash scripts/system-deps.sh
@@ -32,5 +32,11 @@ bench: $(STAMP)
 	$(BIN)/python -m load_tests.stream --transport grpc --sessions 1 --seconds 10 --json out/bench-grpc-1.json
 	$(BIN)/python -m load_tests.stream --transport zmq --sessions 1 --seconds 10 --json out/bench-zmq-1.json
 
+# The release artifacts, named with the version: wheels and sdists, the C/C++ SDK's install tree
+# (scripts/dist.sh; tests/test_dist.py checks what it makes).
+dist: $(STAMP)
+	rm -rf dist
+	PYTHON=$(BIN)/python bash scripts/dist.sh dist
+
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out dist

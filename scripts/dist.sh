@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# scripts/dist.sh OUT_DIR (make dist): the release artifacts of this checkout, each named with the
+# project's one version (CHANGELOG.md):
+#   camdirector-V.tar.gz, camdirector-V-py3-none-any.whl                 the server
+#   camdirector_proto-V.tar.gz, camdirector_proto-V-py3-none-any.whl     the wire code
+#   camdirector_client-V.tar.gz, camdirector_client-V-py3-none-any.whl   the Python SDK
+#   camdirector-cpp-sdk-V-linux-ARCH.tar.gz                              the C/C++ SDK's install tree
+#   SHA256SUMS
+# Each wheel is built from its sdist (python -m build), so a file an sdist leaves out fails here.
+# Sources are staged in a temporary folder first, as scripts/install-dist.sh does, so nothing of the
+# checkout's editable install leaks in. PYTHON (default .venv/bin/python) must have `build`.
+set -euo pipefail
+[ $# -eq 1 ] || { echo "usage: $0 OUT_DIR" >&2; exit 2; }
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+PYTHON=${PYTHON:-$ROOT/.venv/bin/python}
+mkdir -p "$1"
+OUT=$(cd "$1" && pwd)
+[ -z "$(ls -A "$OUT")" ] || { echo "$0: $OUT is not empty" >&2; exit 2; }
+VERSION=$("$PYTHON" -c "import tomllib; print(tomllib.load(open('$ROOT/pyproject.toml', 'rb'))['project']['version'])")
+
+STAGE=$(mktemp -d)
+trap 'rm -rf "$STAGE"' EXIT
+tar -C "$ROOT" --exclude='*.egg-info' --exclude=__pycache__ --exclude=build \
+    -cf - pyproject.toml README.md CHANGELOG.md src proto client_sdk | tar -C "$STAGE" -xf -
+for project in "$STAGE/proto" "$STAGE/client_sdk/python" "$STAGE"; do
+  "$PYTHON" -m build --outdir "$OUT" "$project"
+done
+
+# The C/C++ SDK: configured, built and installed into a prefix that becomes the archive's root.
+cmake -S "$STAGE/client_sdk/cpp" -B "$STAGE/cpp-build" -DCAMDIRECTOR_PROTO_DIR="$STAGE/proto" \
+      -DCAMDIRECTOR_BUILD_TOOLS=OFF -DCAMDIRECTOR_BUILD_SHARED=ON -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$STAGE/cpp-build" -j "$(nproc)" >/dev/null
+SDK="camdirector-cpp-sdk-$VERSION-linux-$(uname -m)"
+cmake --install "$STAGE/cpp-build" --prefix "$STAGE/$SDK" >/dev/null
+tar -C "$STAGE" -czf "$OUT/$SDK.tar.gz" "$SDK"
+
+(cd "$OUT" && sha256sum -- * > SHA256SUMS)
+ls -1 "$OUT"
