@@ -5,7 +5,9 @@
 # dashboard's browser tests, and the C/C++ SDK's toolchain (client_sdk/cpp: CMake, g++, gRPC and
 # protobuf for C++; `--cpp` asks for that one alone); without root those are only reported
 # (their tests then skip, CI fails). `--cluster` (also part of `--tests`) wants the engines a
-# cluster runs on (scripts/cluster.sh): redis-server, haproxy and postgresql.
+# cluster runs on (scripts/cluster.sh): redis-server, haproxy and postgresql. `--tests` also wants
+# what builds and runs the service image (tests/deploy/test_image.py, deploy/image.py): podman,
+# runc and debootstrap.
 set -euo pipefail
 need=()
 ldconfig -p | grep -q 'libEGL.so.1' || need+=(libegl1)
@@ -29,9 +31,14 @@ if [ "${1:-}" = "--tests" ] || [ "${1:-}" = "--cluster" ]; then
   command -v haproxy >/dev/null || [ -x /usr/sbin/haproxy ] || optional+=(haproxy)
   [ -x /usr/lib/postgresql/15/bin/initdb ] || optional+=(postgresql)
 fi
+if [ "${1:-}" = "--tests" ]; then
+  command -v podman >/dev/null || optional+=(podman)
+  [ -x /usr/sbin/runc ] || optional+=(runc)
+  command -v debootstrap >/dev/null || [ -x /usr/sbin/debootstrap ] || optional+=(debootstrap)
+fi
 if [ ${#optional[@]} -gt 0 ]; then
   if [ "$(id -u)" -ne 0 ]; then
-    echo "missing for some tests: ${optional[*]} (the dashboard's browser tests or the C++ SDK's tests will skip; install them as root)" >&2
+    echo "missing for some tests: ${optional[*]} (the dashboard's browser tests, the C++ SDK's or the image's tests will skip; install them as root)" >&2
   else
     need+=("${optional[@]}")
   fi

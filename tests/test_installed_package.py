@@ -11,35 +11,25 @@ so no other interpreter need be on PATH; pip's cache is reused. Building and ins
 a minute with a warm cache (several the first time: every dependency is downloaded)."""
 from __future__ import annotations
 
-import io
 import json
-import math
 import os
 import re
 import subprocess
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
-import numpy as np
 import pytest
-from PIL import Image
 
 from camdirector.deploy.server_process import ServerProcess
-from camdirector.v1 import director_pb2 as pb
+from tests import served_checks as checks
 from tests.precompute.tracks.tiny_levels import corridor, l_room
-from tests.service.test_match_sessions import frames as match_frames
-from tests.service.test_match_sessions import match_request
-from tests.service.tracks_sessions import actor_frames, corridor_walk, obj_text, tracks_request
-from tests.service.wire_client import GrpcRaw, ZmqRaw, two_target_request, walk
+from tests.service.tracks_sessions import obj_text
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = "scripts/install-dist.sh"
 DOCKERFILE = ROOT / "docker" / "Dockerfile"
-FRAMES = 45
-TRACKS_START = (2.0, 0.0, 2.0)  # the actor's feet in tiny_levels.corridor()
 
 pytestmark = pytest.mark.timeout(900)  # the first build downloads every dependency into pip's cache
 
@@ -183,76 +173,25 @@ def server(installed, tmp_path_factory):
     assert srv.stop() == 0, f"the installed server did not exit cleanly:\n{log}"
 
 
-def wait_job(srv: ServerProcess, path: str, timeout_s: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        job = srv.client.get(path).json()
-        if job["status"] in ("succeeded", "failed", "cancelled"):
-            return job
-        time.sleep(0.1)
-    raise AssertionError(f"{path} did not finish in {timeout_s} s: {job}\n{srv.log_tail()}")
-
-
-def assert_posed(updates: list[pb.CameraUpdate], answered: int) -> None:
-    """`answered` frames with a finite pose, not all of them stale."""
-    posed = [u for u in updates if u.HasField("pose")]
-    assert len(posed) == answered, f"{len(posed)} of {len(updates)} frames have a pose"
-    for u in posed:
-        p, q = u.pose.position, u.pose.rotation
-        values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w, u.pose.vertical_fov_deg)
-        assert all(math.isfinite(v) for v in values) and u.pose.vertical_fov_deg > 0.0, u.pose
-    assert not all(u.stale for u in posed), "every frame was answered stale"
+def served(srv: ServerProcess) -> checks.Served:
+    return checks.Served(srv.grpc, srv.zmq, srv.client, srv.log_tail)
 
 
 @pytest.mark.parametrize("transport", ["grpc", "zmq"])
 @pytest.mark.parametrize("rig", ["toric", "match", "tracks"])
 def test_a_session_of_each_rig_over_each_transport(server, rig, transport):
-    raw = GrpcRaw(server.grpc) if transport == "grpc" else ZmqRaw(server.zmq)
-    try:
-        if rig == "toric":
-            session_id = raw.call("CreateSession", two_target_request(seed=1)).session_id
-            assert_posed(raw.stream(list(walk(session_id, FRAMES))), FRAMES)
-        elif rig == "match":
-            session_id = raw.call("CreateSession", match_request(delay_s=0.0)).session_id
-            assert_posed(raw.stream(list(match_frames(session_id, FRAMES))), FRAMES)
-        else:
-            session_id = raw.call("CreateSession", tracks_request("corridor", TRACKS_START)).session_id
-            times, feet = corridor_walk(FRAMES / 30.0)
-            assert_posed(raw.stream(actor_frames(session_id, times, feet)), FRAMES)
-        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
-    finally:
-        raw.close()
+    checks.session_of_rig(served(server), rig, transport)
 
 
 def test_a_level_added_over_rest_is_listed(server):
-    reply = server.client.post("/v1/levels", data={"name": "room"}, files={"level": ("room.obj", obj_text(l_room()).encode())})
-    assert reply.status_code == 202, reply.text
-    job = wait_job(server, f"/v1/level-jobs/{reply.json()['id']}")
-    assert job["status"] == "succeeded", job
+    checks.add_level_over_rest(served(server), "room", l_room())
     assert [level["name"] for level in server.client.get("/v1/levels").json()["levels"]] == ["corridor", "room"]
-    raw = GrpcRaw(server.grpc)
-    try:
-        session_id = raw.call("CreateSession", tracks_request("room", TRACKS_START)).session_id
-        times = np.arange(20) / 30.0
-        feet = np.stack([2.0 + 1.4 * times, np.zeros_like(times), np.full_like(times, 2.0)], axis=1)
-        assert_posed(raw.stream(actor_frames(session_id, times, feet)), 20)
-        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
-    finally:
-        raw.close()
+    checks.tracks_session_on(served(server), "room")
 
 
 @pytest.mark.shared_data
 def test_an_overview_job_completes(server, run_bvh):
-    reply = server.client.post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)})
-    assert reply.status_code == 202, reply.text
-    job_id = reply.json()["id"]
-    job = wait_job(server, f"/v1/overview-jobs/{job_id}")
-    assert job["status"] == "succeeded", job
-    result = server.client.get(f"/v1/overview-jobs/{job_id}/result")
-    assert result.status_code == 200 and len(result.json()["frames"]) > 0
-    for name, media_type in (("preview.mp4", "video/mp4"), ("contact-sheet.png", "image/png")):
-        artifact = server.client.get(f"/v1/overview-jobs/{job_id}/{name}")
-        assert artifact.status_code == 200 and artifact.headers["content-type"] == media_type and len(artifact.content) > 1000
+    checks.assert_overview_done(served(server), checks.post_overview_job(served(server), run_bvh))
 
 
 def test_the_dashboard_and_its_assets_are_served(server):
@@ -266,16 +205,4 @@ def test_the_dashboard_and_its_assets_are_served(server):
 
 
 def test_a_monitor_picture_of_a_live_session(server):
-    raw = GrpcRaw(server.grpc)
-    try:
-        session_id = raw.call("CreateSession", two_target_request(seed=4)).session_id
-        raw.stream(list(walk(session_id, 20)))
-        view = server.client.get(f"/v1/sessions/{session_id}/view", timeout=60.0)
-        assert view.status_code == 200 and view.headers["content-type"] == "image/jpeg", view.text[:500]
-        assert "x-camdirector-placeholder" not in view.headers, view.headers["x-camdirector-placeholder"]
-        picture = Image.open(io.BytesIO(view.content))
-        assert picture.format == "JPEG" and len(view.content) > 2000
-        assert np.asarray(picture.convert("L")).std() > 1.0, "a blank picture"
-        raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
-    finally:
-        raw.close()
+    checks.monitor_picture(served(server))
