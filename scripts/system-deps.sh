@@ -7,7 +7,7 @@
 # (their tests then skip, CI fails). `--cluster` (also part of `--tests`) wants the engines a
 # cluster runs on (scripts/cluster.sh): redis-server, haproxy and postgresql. `--tests` also wants
 # what builds and runs the service image (tests/deploy/test_image.py, deploy/image.py): podman,
-# runc and debootstrap.
+# runc and debootstrap; and Node with npm for the TypeScript SDK.
 set -euo pipefail
 need=()
 ldconfig -p | grep -q 'libEGL.so.1' || need+=(libegl1)
@@ -32,6 +32,9 @@ if [ "${1:-}" = "--tests" ] || [ "${1:-}" = "--cluster" ]; then
   [ -x /usr/lib/postgresql/15/bin/initdb ] || optional+=(postgresql)
 fi
 if [ "${1:-}" = "--tests" ]; then
+  # The TypeScript SDK's tests want Node 20+: these machines carry it (NodeSource's nodejs); where
+  # none is installed, Debian's nodejs and npm are tried (bookworm's is 18: its test says so and fails).
+  command -v node >/dev/null || optional+=(nodejs npm)
   command -v podman >/dev/null || optional+=(podman)
   [ -x /usr/sbin/runc ] || optional+=(runc)
   command -v debootstrap >/dev/null || [ -x /usr/sbin/debootstrap ] || optional+=(debootstrap)
