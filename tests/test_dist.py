@@ -4,7 +4,6 @@ SDK's install tree with its CMake package and pkg-config file, and a C library t
 version."""
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import platform
 import subprocess
@@ -59,6 +58,9 @@ def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(d
                  "lib/cmake/camdirector/camdirectorConfig.cmake", "lib/pkgconfig/camdirector.pc"):
         assert (prefix / part).is_file(), part
     assert f"Version: {VERSION}" in (prefix / "lib/pkgconfig/camdirector.pc").read_text()
-    library = ctypes.CDLL(str(prefix / "lib/libcamdirector_c.so"))
-    library.cd_version.restype = ctypes.c_char_p
-    assert library.cd_version().decode() == VERSION
+    # Loaded in a fresh interpreter: the library carries the system's gRPC and protobuf, which must
+    # not meet the copies this test process has loaded (that aborts the process).
+    said = subprocess.run([sys.executable, "-c", "import ctypes, sys; lib = ctypes.CDLL(sys.argv[1]); "
+                           "lib.cd_version.restype = ctypes.c_char_p; print(lib.cd_version().decode())",
+                           str(prefix / "lib/libcamdirector_c.so")], capture_output=True, text=True, check=True)
+    assert said.stdout.strip() == VERSION
