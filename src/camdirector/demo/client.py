@@ -127,7 +127,8 @@ def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", rend
         print(f"  watch it in the dashboard: http://{server.http}/dashboard/ (log in with the key in "
               f"{server.ready['admin_key_file']})")
         result = stream_demo(server.url(transport), scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility),
-                             key=server.admin_key, zmq_server_key=server.zmq_server_key)
+                             key=server.admin_key,
+                             zmq_server_key=server.zmq_server_key if transport == "zmq" else None)
     updates = result["updates"]
     poses = [_pose(u) for u in updates]
     aims = np.stack([scene.aim_point_world(i / FPS) for i in range(len(updates))])
