@@ -51,7 +51,8 @@ def test_submit_claim_finish_and_files(store):
 
 def test_sqlite_keeps_a_wal_journal(tmp_path):
     store = SqliteJobStore(tmp_path)
-    assert store._db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    with store._read() as db:
+        assert db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     store.close()
 
 

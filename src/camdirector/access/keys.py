@@ -21,15 +21,13 @@ import hmac
 import json
 import os
 import secrets
-import sqlite3
-import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 from camdirector.access.roles import ROLES, check_tenant
 from camdirector.infra.postgres import PostgresDatabase
+from camdirector.infra.sqlite import SqliteDatabase
 
 KEY_PREFIX = "cdk_"
 ADMIN_KEY_FILE = "admin.key"
@@ -242,32 +240,17 @@ class SqliteAccessStore(AccessStore):
         root = Path(data_dir)
         root.mkdir(parents=True, exist_ok=True)
         self.where = str(root / self.DB_NAME)
-        self._lock = threading.Lock()
-        self._db = sqlite3.connect(self.where, timeout=30.0, isolation_level=None, check_same_thread=False)
+        self._db = SqliteDatabase(self.where, _SQLITE_SCHEMA)
         os.chmod(self.where, 0o600)  # key hashes and the cookie secret: the node's user only
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")
-        self._db.executescript(_SQLITE_SCHEMA)
 
     def close(self) -> None:
-        with self._lock:
-            self._db.close()
+        self._db.close()
 
-    @contextlib.contextmanager
-    def _tx(self) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
-                yield self._db
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
-            self._db.execute("COMMIT")
+    def _tx(self):
+        return self._db.transaction()
 
-    @contextlib.contextmanager
-    def _read(self) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            yield self._db
+    def _read(self):
+        return self._db.read()
 
 
 class PostgresAccessStore(AccessStore):

@@ -34,16 +34,15 @@ import contextlib
 import json
 import os
 import shutil
-import sqlite3
-import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
 from camdirector.infra.postgres import PostgresDatabase
+from camdirector.infra.sqlite import SqliteDatabase
 
 
 class JobState(str, Enum):
@@ -414,20 +413,15 @@ _TENANT_INDEX = "CREATE INDEX IF NOT EXISTS jobs_tenant_state ON jobs (tenant, s
 
 
 class SqliteJobStore(JobStore):
-    """Records in `<root>/jobs.sqlite3`: one connection behind a lock, every call one short
-    transaction (writes as BEGIN IMMEDIATE)."""
+    """Records in `<root>/jobs.sqlite3` through infra/sqlite.py: one connection behind a lock,
+    every call one short transaction (writes as BEGIN IMMEDIATE)."""
 
     DB_NAME = "jobs.sqlite3"
     _NEXT_SEQ = "(SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs)"
 
     def __init__(self, root: str | Path) -> None:
         super().__init__(root)
-        self._lock = threading.Lock()
-        self._db = sqlite3.connect(self.root / self.DB_NAME, timeout=30.0, isolation_level=None,
-                                   check_same_thread=False)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")
-        self._db.executescript(_SQLITE_SCHEMA)
+        self._db = SqliteDatabase(self.root / self.DB_NAME, _SQLITE_SCHEMA)
         with self._tx() as db:
             present = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
             for name, sql_type in _ADDED_COLUMNS:
@@ -436,24 +430,13 @@ class SqliteJobStore(JobStore):
             db.execute(_TENANT_INDEX)
 
     def close(self) -> None:
-        with self._lock:
-            self._db.close()
+        self._db.close()
 
-    @contextlib.contextmanager
-    def _tx(self) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
-                yield self._db
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
-            self._db.execute("COMMIT")
+    def _tx(self):
+        return self._db.transaction()
 
-    @contextlib.contextmanager
-    def _read(self) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            yield self._db
+    def _read(self):
+        return self._db.read()
 
 
 # -- PostgreSQL ---------------------------------------------------------------------------------
