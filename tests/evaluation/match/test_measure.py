@@ -2,6 +2,8 @@
 that sees both duelists covers the kill, a wall between does not; jump cuts either side of 30 deg."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -10,11 +12,15 @@ from camdirector.evaluation.match.measure import (
     BodySampler,
     Program,
     cuts_per_minute,
+    EYE_HEIGHT_FRACTION,
     framed_visibility,
+    in_eyes_of,
     jump_cuts,
     kill_coverage,
     measure_shown,
+    program_visibility,
     shot_lengths_s,
+    shown_heights,
 )
 from camdirector.geometry.camera import Lens, level_look_rotation
 from camdirector.geometry.raycast import RayScene
@@ -131,3 +137,69 @@ def test_samples_are_on_each_body_and_move_with_it(match):
     horizontal = np.linalg.norm(points[:, :, [0, 2]] - match.positions_world[0][:, None, [0, 2]], axis=2)
     assert horizontal.max() <= 0.3 + 1e-6 and points[..., 1].min() >= -1e-6 and points[..., 1].max() <= 1.8 + 1e-6
     np.testing.assert_allclose(bodies.aims_world(0, [1]), [match.positions_world[0, 1] + CHEST])
+
+
+def first_person_of_a(match: MatchRecording) -> Program:
+    """In a's eyes (feet + EYE_HEIGHT_FRACTION of its height) looking at b, naming a as the subject."""
+    n = len(match.time_s)
+    eye = match.positions_world[0, 0] + [0.0, EYE_HEIGHT_FRACTION * 1.8, 0.0]
+    return program_of(match, np.tile(eye, (n, 1)), np.tile(match.positions_world[0, 1] + CHEST, (n, 1)),
+                      subjects=("a",))
+
+
+def test_the_attackers_eyes_seeing_the_victim_cover_the_kill_first_person_only(match):
+    program = first_person_of_a(match)
+    bodies = BodySampler(match, np.random.default_rng(0))
+    shown = measure_shown(program, bodies, Lens(), floor())
+    eyes = in_eyes_of(match, program)
+    assert eyes.tolist() == [0] * FRAMES and shown[:, 1].min() >= 0.5
+    assert kill_coverage(match, program, shown).covered.tolist() == [False]   # a's body is not in the picture
+    assert kill_coverage(match, program, shown, eyes).covered.tolist() == [True]
+    # In the victim's eyes instead, the attacker's eyes rule does not apply.
+    swapped = duel()
+    swapped.events[0] = dataclasses.replace(swapped.events[0], actor_id="b", other_actor_id="a")
+    assert kill_coverage(swapped, program, shown, eyes).covered.tolist() == [False]
+
+
+def test_a_camera_half_a_metre_off_the_eye_is_in_nobodys_eyes(match):
+    program = first_person_of_a(match)
+    program.position = program.position + [0.0, 0.0, 0.51]
+    assert in_eyes_of(match, program).tolist() == [-1] * FRAMES
+
+
+def test_program_visibility_counts_every_moment_and_the_eyes_as_seen(match):
+    program = side_view(match)
+    program.subjects = [("a", "b")] * 20 + [()] * (FRAMES - 20)
+    wall = ((3.0, 0.0, -3.0), (5.0, 3.0, -2.8))  # hides b only
+    shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor(wall))
+    no_eyes = np.full(FRAMES, -1)
+    expected = np.concatenate([shown[:20].mean(axis=1), shown[20:].max(axis=1)]).mean()
+    assert program_visibility(program, shown, match.player_index(), no_eyes) == pytest.approx(expected)
+    eyes = np.full(FRAMES, 1)  # were the camera in b's eyes, b would count as seen
+    assert program_visibility(program, shown, match.player_index(), eyes) > expected
+
+
+def test_shown_height_is_the_bodys_share_of_the_frame_and_halves_at_twice_the_distance(match):
+    bodies = BodySampler(match, np.random.default_rng(0))
+    heights = []
+    for distance_m in (8.0, 16.0):
+        program = side_view(match, distance_m)
+        shown = measure_shown(program, bodies, Lens(), floor())
+        h = shown_heights(program, bodies, Lens(), shown, np.full(FRAMES, -1))
+        assert len(h) == 2 * FRAMES
+        heights.append(float(np.median(h)))
+    # 1.8 m at about 8 m with a 50 deg vertical field: 1.8 / (2 * 8 * tan 25 deg) = 0.24 of the frame
+    assert heights[0] == pytest.approx(1.8 / (2 * np.hypot(8.0, 2.0) * np.tan(np.radians(25.0))), rel=0.15)
+    assert heights[1] == pytest.approx(heights[0] / 2.0, rel=0.15)
+    # the player in whose eyes the camera is does not count
+    program = first_person_of_a(match)
+    shown = measure_shown(program, bodies, Lens(), floor())
+    assert len(shown_heights(program, bodies, Lens(), shown, in_eyes_of(match, program))) == FRAMES  # b only
+
+
+def test_the_program_digest_changes_with_one_pose(match):
+    program = side_view(match)
+    same = side_view(match)
+    assert program.digest() == same.digest()
+    same.position[7, 0] += 1e-9
+    assert program.digest() != same.digest()

@@ -11,7 +11,13 @@ players' bodies as the match file has them, never from what the director says it
   camera centre crosses no level geometry (Embree ray casts, geometry.raycast.RayScene). Players do
   not occlude each other, as in evaluation/scenario_measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
 - kill coverage: the share of kills at whose moment (the first program moment at or after the
-  kill's frame) both the attacker and the victim are shown.
+  kill's frame) both the attacker and the victim are shown. Kill coverage *first person* also
+  counts a kill whose moment the program shows from the attacker's eyes (the camera within
+  `EYE_TOLERANCE_M` of its eye point, `EYE_HEIGHT_FRACTION` of its height above its feet: what a
+  QuakeWorld spectator tracking the attacker sees) with the victim shown.
+- in the eyes of: the player whose eye point the camera is at (within EYE_TOLERANCE_M), if any.
+  A first-person program shows that player's view, not its body: the measures below count the
+  player as shown at those moments.
 - lead, per covered kill: how long the program had been on the same shot (no cut) with both shown
   at every moment, up to the kill, s.
 - shots: a shot runs from a cut (or the first program moment) to the next cut. Its length is the
@@ -23,15 +29,22 @@ players' bodies as the match file has them, never from what the director says it
   director's own grammar is not consulted). Overviews name no subjects and are never jump cuts.
 - visibility of the framed subjects: per program moment with subjects, the mean shown fraction of
   the players it names; averaged over those moments.
+- program visibility: the same over *every* program moment, a moment that names nobody counting
+  the shown fraction of its best-shown player (an overview of nobody counts 0), the player in
+  whose eyes the camera is counting 1.
+- shown height: per program moment and shown player (not the one in whose eyes the camera is),
+  the height on screen of its body's sample points, as a share of the frame's height; the median
+  over all of them says whether players are large enough to read.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from camdirector.evaluation.match.match_file import MatchPlayer, MatchRecording
-from camdirector.geometry.camera import CameraPose, Lens, in_frame
+from camdirector.geometry.camera import CameraPose, Lens, in_frame, project_to_screen
 from camdirector.geometry.meshes import TriMesh, capsule
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
@@ -41,6 +54,8 @@ SAMPLES_PER_PLAYER = 32    # body sample points per player (issue 12 brief: 16-3
 SHOWN_FRACTION = 0.5       # a player is shown with at least this share of its points seen (issue 12, item 5)
 JUMP_CUT_DEG = 30.0        # a cut between views of the same subjects closer than this is a jump cut (issue 12)
 AIM_HEIGHT_FRACTION = 0.6  # the aim point (chest) this far up a player: the simulator's chest_height_fraction
+EYE_HEIGHT_FRACTION = 46.0 / 56.0  # a Quake player's eye (origin + 22 units) over its 56-unit height
+EYE_TOLERANCE_M = 0.5      # a camera this near a player's eye point looks through its eyes, m
 
 
 def player_mesh(player: MatchPlayer) -> TriMesh:
@@ -79,6 +94,15 @@ class Program:
 
     def pose(self, row: int) -> CameraPose:
         return CameraPose(self.position[row], self.rotation[row], float(self.vertical_fov_deg[row]))
+
+    def digest(self) -> str:
+        """SHA-256 (hex) of every moment's frame, pose, cut and subjects: two runs gave the same
+        program, pose for pose, exactly when their digests are equal."""
+        h = hashlib.sha256()
+        for array in (self.index, self.position, self.rotation, self.vertical_fov_deg, self.cut, self.shot_id):
+            h.update(np.ascontiguousarray(array).tobytes())
+        h.update("\n".join(",".join(s) for s in self.subjects).encode("utf-8"))
+        return h.hexdigest()
 
 
 class BodySampler:
@@ -131,18 +155,34 @@ class KillCoverage:
         return float(self.covered.mean()) if self.kills else float("nan")
 
 
-def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray) -> KillCoverage:
-    """Coverage and lead of the match's kills (module docstring); shown (n, P) from measure_shown."""
+def in_eyes_of(match: MatchRecording, program: Program) -> np.ndarray:
+    """(n,) int64: the column of the player in whose eyes the camera is at each program moment
+    (module docstring), -1 where none."""
+    heights = np.array([p.height_m for p in match.players])
+    eyes = match.positions_world[program.index].copy()                          # (n, P, 3) feet
+    eyes[..., 1] += EYE_HEIGHT_FRACTION * heights
+    distance = np.linalg.norm(eyes - program.position[:, None, :], axis=2)       # (n, P)
+    nearest = distance.argmin(axis=1)
+    return np.where(distance[np.arange(len(program)), nearest] <= EYE_TOLERANCE_M, nearest, -1)
+
+
+def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray,
+                  eyes_of: np.ndarray | None = None) -> KillCoverage:
+    """Coverage and lead of the match's kills (module docstring); shown (n, P) from measure_shown.
+    With eyes_of (n,) from in_eyes_of, a moment in the attacker's eyes that shows the victim
+    covers the kill too (kill coverage first person)."""
     column = match.player_index()
     covered, leads = [], []
     for event in match.events:
-        if event.kind != "kill":
-            continue
+        if event.kind != "kill" or event.actor_id == event.other_actor_id:
+            continue  # a suicide or a death by the world has no attacker to show
         row = int(np.searchsorted(program.index, np.searchsorted(match.time_s, event.time_s), side="left"))
         if row >= len(program):
             continue  # after the program's last moment
         pair = [column[event.actor_id], column[event.other_actor_id]]
         both_shown = shown[:, pair].min(axis=1) >= SHOWN_FRACTION                    # (n,)
+        if eyes_of is not None:
+            both_shown |= (eyes_of == pair[0]) & (shown[:, pair[1]] >= SHOWN_FRACTION)
         ok = bool(both_shown[row])
         covered.append(ok)
         if ok:
@@ -183,3 +223,32 @@ def framed_visibility(program: Program, shown: np.ndarray, column: dict[str, int
     """Mean over the moments that name subjects of their subjects' mean shown fraction; NaN if none."""
     values = [shown[r, [column[p] for p in subjects]].mean() for r, subjects in enumerate(program.subjects) if subjects]
     return float(np.mean(values)) if values else float("nan")
+
+
+def program_visibility(program: Program, shown: np.ndarray, column: dict[str, int], eyes_of: np.ndarray) -> float:
+    """Mean over every program moment of its program visibility (module docstring); NaN without moments."""
+    values = []
+    for r, subjects in enumerate(program.subjects):
+        row = shown[r].copy()
+        if eyes_of[r] >= 0:
+            row[eyes_of[r]] = 1.0
+        values.append(row[[column[p] for p in subjects]].mean() if subjects else row.max(initial=0.0))
+    return float(np.mean(values)) if values else float("nan")
+
+
+def shown_heights(program: Program, bodies: BodySampler, lens: Lens, shown: np.ndarray,
+                  eyes_of: np.ndarray) -> np.ndarray:
+    """(m,) the on-screen heights, share of the frame's height, of every shown player at every
+    program moment but the one in whose eyes the camera is (module docstring)."""
+    heights = []
+    for r in range(len(program)):
+        players = [p for p in np.flatnonzero(shown[r] >= SHOWN_FRACTION) if p != eyes_of[r]]
+        if not players:
+            continue
+        pose = program.pose(r)
+        points = bodies.points_world(int(program.index[r]))[players]                       # (k, S, 3)
+        frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
+        screen_y = np.clip(project_to_screen(pose, frame_lens, points.reshape(-1, 3))[:, 1], -1.0, 1.0)
+        screen_y = screen_y.reshape(len(players), -1)
+        heights.extend((np.nanmax(screen_y, axis=1) - np.nanmin(screen_y, axis=1)) / 2.0)  # [-1, 1] is the frame
+    return np.array(heights, dtype=np.float64)
