@@ -1,6 +1,6 @@
 """`camdirector level add|list|remove`.
 
-    camdirector level add NAME LEVEL.(obj|glb) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
+    camdirector level add NAME LEVEL.(obj|glb|bsp) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
                           [--agent-height M] [--agent-radius M] [--tenant T] [--data-dir DIR] [--records-url URL]
         precomputes the level into the registry; prints the record (JSON) with stage timings.
     camdirector level list [--tenant T] [--data-dir DIR] [--records-url URL]
@@ -51,9 +51,10 @@ def add_parsers(subparsers) -> None:
     sub = level.add_subparsers(dest="level_command", required=True)
     p = sub.add_parser("add", help="precompute a level into the registry")
     p.add_argument("name")
-    p.add_argument("level", type=Path, help="level mesh, .obj or .glb")
+    p.add_argument("level", type=Path, help="level mesh, .obj or .glb, or a Quake .bsp map (read in metres)")
     p.add_argument("--navmesh", type=Path, help="navigation mesh (.obj or .glb); derived when absent")
-    p.add_argument("--scale", type=float, default=1.0, help="metres per level unit (default 1)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="metres per level unit (default 1; a .bsp is read in metres already, so it multiplies those)")
     p.add_argument("--agent-height", dest="agent_height", type=float, default=2.0, help="m (default 2.0)")
     p.add_argument("--agent-radius", dest="agent_radius", type=float, default=0.6, help="m (default 0.6)")
     p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder (default: per-user data dir)")

@@ -1,6 +1,6 @@
 """REST routes of the level registry (issue 4), and the "level" job kind that precomputes a level.
 
-    POST /v1/levels              multipart: name, level (.obj/.glb), optional navmesh, scale,
+    POST /v1/levels              multipart: name, level (.obj/.glb/.bsp), optional navmesh, scale,
                                  agent_height, agent_radius, replace -> 202 {id, status, name}
     GET  /v1/level-jobs?status=&limit=   {"jobs": [...]} newest first
     GET  /v1/level-jobs/{id}     {id, status, progress, error?, timings, name}
@@ -69,10 +69,10 @@ from camdirector.front.http.routes.job_resources import (
     list_jobs,
     submit_job,
 )
-from camdirector.geometry.meshes import MeshError, from_glb, from_obj
+from camdirector.geometry.meshes import MeshError
 from camdirector.jobs import JobSettings, JobState
 from camdirector.precompute.tracks.job import KIND
-from camdirector.precompute.tracks.level_mesh import LEVEL_SUFFIXES
+from camdirector.precompute.tracks.level_mesh import LEVEL_SUFFIXES, decode_level_mesh
 from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry, LevelsUnavailable, check_level_name
 from camdirector.precompute.tracks.track_settings import TrackSettings
 
@@ -138,7 +138,7 @@ def _mesh_file(upload: UploadFile, field: str, limit: int, scale: float) -> tupl
     if suffix == ".obj" and b"\0" in data[:65536]:
         raise HTTPException(status_code=400, detail=f"{field}: not an OBJ file (it holds binary data)")
     try:
-        mesh = from_obj(data) if suffix == ".obj" else from_glb(data)
+        mesh = decode_level_mesh(data, suffix)
     except MeshError as exc:
         raise HTTPException(status_code=400, detail=f"{field}: not a usable mesh: {exc}") from None
     extent = (mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)) * scale
@@ -166,7 +166,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
 
     @router.post(LEVELS_PREFIX, status_code=202, dependencies=[Depends(known_form_fields)], response_model=LevelJobCreated,
                  responses={
-        400: {"description": "a file is not a usable .obj/.glb mesh (detail says why)"},
+        400: {"description": "a file is not a usable .obj/.glb mesh or .bsp map (detail says why)"},
         409: {"description": "the name is taken (registered or being added) and replace is false"},
         413: {"description": "an upload is larger than the server's limit"},
         422: {"description": "a bad name, or scale or agent out of range"},
@@ -176,7 +176,8 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         request: Request,
         identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))],
         name: Annotated[str, Form(description="1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")],
-        level: Annotated[UploadFile, File(description="the level's geometry, .obj or .glb")],
+        level: Annotated[UploadFile, File(description=(
+            "the level's geometry, .obj, .glb or a Quake .bsp map (decoded in metres: leave scale at 1)"))],
         navmesh: Annotated[UploadFile | None, File(
             description="its navigation mesh, .obj or .glb (derived from the walkable surfaces when absent)")] = None,
         scale: Annotated[float, Form(gt=0, description="metres per file unit")] = 1.0,
