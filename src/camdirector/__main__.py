@@ -8,6 +8,8 @@ from pathlib import Path
 
 from camdirector.access.cli import add_parsers as add_key_parsers
 from camdirector.evaluation.cli import add_parsers as add_eval_parsers
+from camdirector.matches.import_cli import add_parser as add_import_match_parser
+from camdirector.matches.play_cli import add_parser as add_play_match_parser
 from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
 from camdirector.server_settings import ServerSettings
@@ -99,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     add_overview_parsers(sub)
     add_track_parsers(sub)
     add_key_parsers(sub)
+    add_play_match_parser(sub)
+    add_import_match_parser(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
     p.add_argument("--data-dir", dest="data_dir", type=Path,

@@ -317,9 +317,10 @@ class AsyncSession(wire.SessionBase):
         *,
         states: wire.States | None = None,
         packed: wire.PackedStates | None = None,
+        player_stats: Iterable[wire.PlayerStatsLike] | None = None,
     ) -> pb.CameraUpdate:
         """Sends one frame and waits for its camera; see :meth:`camdirector_client.Session.frame`."""
-        update = wire.encode_frame_update(self.id, frame, time_s, states, packed)
+        update = wire.encode_frame_update(self.id, frame, time_s, states, packed, player_stats)
         return await self._retrying(self._transport.frame_encoded, update)
 
     async def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:

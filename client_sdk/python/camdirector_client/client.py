@@ -271,6 +271,7 @@ class Session(wire.SessionBase):
         *,
         states: wire.States | None = None,
         packed: wire.PackedStates | None = None,
+        player_stats: Iterable[wire.PlayerStatsLike] | None = None,
     ) -> pb.CameraUpdate:
         """Sends one frame and waits for its camera (the unary ``Frame`` RPC).
 
@@ -284,8 +285,13 @@ class Session(wire.SessionBase):
             What moved this frame.
         packed : (ids, transforms), optional
             The bulk form of ``states``, as :func:`~camdirector_client.convert.pack_states` builds it.
+        player_stats : iterable of PlayerStats, or of mappings of its fields, optional
+            ``RIG_MATCH``: the players whose scoreboard values (``health``, ``armor``, ``items``,
+            ``frags``) changed since the last frame; a player's last values sent hold.
+            ``MATCH_DIRECTOR_AUTOTRACK`` ranks players by them.
         """
-        return self._retrying(self._transport.frame_encoded, wire.encode_frame_update(self.id, frame, time_s, states, packed))
+        update = wire.encode_frame_update(self.id, frame, time_s, states, packed, player_stats)
+        return self._retrying(self._transport.frame_encoded, update)
 
     def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
         """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""

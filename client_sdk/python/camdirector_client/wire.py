@@ -33,6 +33,7 @@ __all__ = [
     "Endpoint",
     "KEY_ENV",
     "PackedStates",
+    "PlayerStatsLike",
     "RETRYABLE",
     "Security",
     "States",
@@ -100,6 +101,10 @@ States = Iterable[pb.ObjectState] | Mapping[str, pb.Transform]
 PackedStates = tuple[Sequence[str], Any]
 """``(packed_ids, packed_transforms)`` as :func:`camdirector_client.convert.pack_states` returns
 them: n ids and n * 10 doubles (an ndarray, (n, 10) or flat, or a sequence of floats)."""
+
+PlayerStatsLike = pb.PlayerStats | Mapping[str, Any]
+"""A ``RIG_MATCH`` player's scoreboard values: a ``PlayerStats`` message, or a mapping of its
+fields (``id``, ``health``, ``armor``, ``items``, ``frags``; the ones left out are 0)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -338,9 +343,11 @@ def frame_update(
     time_s: float,
     states: States | None = None,
     packed: PackedStates | None = None,
+    player_stats: Iterable[PlayerStatsLike] | None = None,
 ) -> pb.FrameUpdate:
-    """One ``FrameUpdate``; ``states`` and ``packed`` may both be given."""
-    msg = _frame_update_head(session_id, frame, time_s, states)
+    """One ``FrameUpdate``; ``states`` and ``packed`` may both be given; ``player_stats``: the
+    ``RIG_MATCH`` players whose scoreboard values changed since the last frame."""
+    msg = _frame_update_head(session_id, frame, time_s, states, player_stats)
     if packed is not None:
         ids, transforms = packed
         msg.packed_ids.extend(ids)
@@ -354,6 +361,7 @@ def encode_frame_update(
     time_s: float,
     states: States | None = None,
     packed: PackedStates | None = None,
+    player_stats: Iterable[PlayerStatsLike] | None = None,
 ) -> bytes:
     """``frame_update(...).SerializeToString()``, cheaper: the packed transforms are copied as
     raw little-endian doubles (protobuf's packed encoding) instead of going through Python floats.
@@ -361,7 +369,7 @@ def encode_frame_update(
     Protobuf parsers merge fields in any order and concatenate the chunks of a packed repeated
     field, so the serialized head followed by field 6 parses as the one message.
     """
-    msg = _frame_update_head(session_id, frame, time_s, states)
+    msg = _frame_update_head(session_id, frame, time_s, states, player_stats)
     if packed is None:
         return msg.SerializeToString()
     ids, transforms = packed
@@ -385,8 +393,11 @@ def _varint(value: int) -> bytes:
     return bytes(out)
 
 
-def _frame_update_head(session_id: str, frame: int, time_s: float, states: States | None) -> pb.FrameUpdate:
+def _frame_update_head(session_id: str, frame: int, time_s: float, states: States | None,
+                       player_stats: Iterable[PlayerStatsLike] | None = None) -> pb.FrameUpdate:
     msg = pb.FrameUpdate(session_id=session_id, frame=frame, time_s=time_s)
+    if player_stats is not None:
+        msg.player_stats.extend(s if isinstance(s, pb.PlayerStats) else pb.PlayerStats(**s) for s in player_stats)
     if states is not None:
         if isinstance(states, Mapping):
             add = msg.states.add
@@ -491,6 +502,8 @@ class SessionBase:
         *,
         states: States | None = None,
         packed: PackedStates | None = None,
+        player_stats: Iterable[PlayerStatsLike] | None = None,
     ) -> pb.FrameUpdate:
-        """A ``FrameUpdate`` for this session, e.g. to feed ``stream``."""
-        return frame_update(self.id, frame, time_s, states, packed)
+        """A ``FrameUpdate`` for this session, e.g. to feed ``stream``; ``player_stats``: see
+        :meth:`camdirector_client.Session.frame`."""
+        return frame_update(self.id, frame, time_s, states, packed, player_stats)

@@ -55,6 +55,7 @@ class MatchDirector(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     MATCH_DIRECTOR_UNSPECIFIED: _ClassVar[MatchDirector]
     MATCH_DIRECTOR_PLANNED: _ClassVar[MatchDirector]
     MATCH_DIRECTOR_HLTV: _ClassVar[MatchDirector]
+    MATCH_DIRECTOR_AUTOTRACK: _ClassVar[MatchDirector]
 
 class PoseFormat(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     __slots__ = ()
@@ -106,6 +107,7 @@ MOVEMENT_STATIC: Movement
 MATCH_DIRECTOR_UNSPECIFIED: MatchDirector
 MATCH_DIRECTOR_PLANNED: MatchDirector
 MATCH_DIRECTOR_HLTV: MatchDirector
+MATCH_DIRECTOR_AUTOTRACK: MatchDirector
 POSE_FORMAT_UNSPECIFIED: PoseFormat
 POSE_FORMAT_OPENTRACKIO_JSON: PoseFormat
 POSE_FORMAT_OPENTRACKIO_CBOR: PoseFormat
@@ -342,7 +344,7 @@ class ObjectState(_message.Message):
     def __init__(self, id: _Optional[str] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ...) -> None: ...
 
 class FrameUpdate(_message.Message):
-    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms", "events")
+    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms", "events", "player_stats")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_S_FIELD_NUMBER: _ClassVar[int]
@@ -350,6 +352,7 @@ class FrameUpdate(_message.Message):
     PACKED_IDS_FIELD_NUMBER: _ClassVar[int]
     PACKED_TRANSFORMS_FIELD_NUMBER: _ClassVar[int]
     EVENTS_FIELD_NUMBER: _ClassVar[int]
+    PLAYER_STATS_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     frame: int
     time_s: float
@@ -357,7 +360,22 @@ class FrameUpdate(_message.Message):
     packed_ids: _containers.RepeatedScalarFieldContainer[str]
     packed_transforms: _containers.RepeatedScalarFieldContainer[float]
     events: _containers.RepeatedCompositeFieldContainer[GameEvent]
-    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ..., events: _Optional[_Iterable[_Union[GameEvent, _Mapping]]] = ...) -> None: ...
+    player_stats: _containers.RepeatedCompositeFieldContainer[PlayerStats]
+    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ..., events: _Optional[_Iterable[_Union[GameEvent, _Mapping]]] = ..., player_stats: _Optional[_Iterable[_Union[PlayerStats, _Mapping]]] = ...) -> None: ...
+
+class PlayerStats(_message.Message):
+    __slots__ = ("id", "health", "armor", "items", "frags")
+    ID_FIELD_NUMBER: _ClassVar[int]
+    HEALTH_FIELD_NUMBER: _ClassVar[int]
+    ARMOR_FIELD_NUMBER: _ClassVar[int]
+    ITEMS_FIELD_NUMBER: _ClassVar[int]
+    FRAGS_FIELD_NUMBER: _ClassVar[int]
+    id: str
+    health: int
+    armor: int
+    items: int
+    frags: int
+    def __init__(self, id: _Optional[str] = ..., health: _Optional[int] = ..., armor: _Optional[int] = ..., items: _Optional[int] = ..., frags: _Optional[int] = ...) -> None: ...
 
 class GameEvent(_message.Message):
     __slots__ = ("kind", "actor_id", "other_actor_id", "priority", "time_s", "label", "position")

@@ -62,6 +62,7 @@ class FrameInput:
     time_s: float
     states: list[tuple[str, RigidTransform]]
     events: list[GameEvent] = field(default_factory=list)  # MATCH: the game's events since the last frame
+    player_stats: list[PlayerStats] = field(default_factory=list)  # MATCH: the players whose stats changed
 
 
 class EventKind(enum.IntEnum):
@@ -86,3 +87,14 @@ class GameEvent:
     time_s: float            # game time, s (the codec fills the frame's time for 0)
     label: str
     position_world: np.ndarray | None = None  # (3,) metres, where it happened, if the game says
+
+
+@dataclass(frozen=True)
+class PlayerStats:
+    """One player's scoreboard values in a MATCH session, as the game last sent them."""
+
+    id: str
+    health: int
+    armor: int   # armor points
+    items: int   # the game's own item bitmask (QuakeWorld: its IT_* bits; match/autotrack.py reads them)
+    frags: int

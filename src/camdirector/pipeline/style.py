@@ -45,10 +45,12 @@ class Rig(enum.IntEnum):
 
 
 class MatchDirectorKind(enum.IntEnum):
-    """Which director a MATCH session runs: ours (match/plan.py) or the HLTV baseline (match/hltv.py)."""
+    """Which director a MATCH session runs: ours (match/plan.py), the HLTV baseline (match/hltv.py)
+    or QuakeWorld's autotrack baseline (match/autotrack.py)."""
 
     PLANNED = 1
     HLTV = 2
+    AUTOTRACK = 3
 
 
 # Modes whose camera moves by the paper's search (occlusion_search.py) rather than the toric spring.

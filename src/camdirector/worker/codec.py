@@ -13,7 +13,8 @@ A MATCH session (`RIG_MATCH`) has 2 to 64 targets, the players, each with its `t
 `level_id` is optional; `delay_s` in [0, 300] is the broadcast delay (refused for the other rigs,
 as are `events` and the MATCH style fields). A frame's events name players of the session
 (a kill both its attacker and its victim), have a priority in [0, 15] (0: the kind's default) and a
-time no later than the frame's time plus the delay (0: the frame's time).
+time no later than the frame's time plus the delay (0: the frame's time). A frame's `player_stats`
+(MATCH only, like events) each name a player of the session, none twice.
 
 `pose_outputs` (at most 8) are checked here, before the scene: a known format, an address
 `udp://HOST:PORT` whose HOST is an IPv4 address or a name that resolves to one (once, here, within
@@ -36,7 +37,7 @@ from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.meshes import MeshError, TriMesh
 from camdirector.geometry.toric import composition_angle
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
-from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, SceneSpec, TargetSpec
+from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, PlayerStats, SceneSpec, TargetSpec
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MapBackendChoice, MatchDirectorKind, Movement, Rig, ShotSize, Style, VisibilityMode
@@ -52,7 +53,8 @@ _MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKi
           pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
 _RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC, pb.RIG_TORIC: Rig.TORIC, pb.RIG_TRACKS: Rig.TRACKS, pb.RIG_MATCH: Rig.MATCH}
 _MATCH_DIRECTORS = {pb.MATCH_DIRECTOR_UNSPECIFIED: MatchDirectorKind.PLANNED,
-                    pb.MATCH_DIRECTOR_PLANNED: MatchDirectorKind.PLANNED, pb.MATCH_DIRECTOR_HLTV: MatchDirectorKind.HLTV}
+                    pb.MATCH_DIRECTOR_PLANNED: MatchDirectorKind.PLANNED, pb.MATCH_DIRECTOR_HLTV: MatchDirectorKind.HLTV,
+                    pb.MATCH_DIRECTOR_AUTOTRACK: MatchDirectorKind.AUTOTRACK}
 MAX_PLAYERS = 64        # players of a MATCH session (the wire contract)
 MAX_DELAY_S = 300.0     # broadcast delay of a MATCH session, s (the wire contract)
 MAX_PRIORITY = 15       # a game event's priority (HLTV's scale)
@@ -372,6 +374,24 @@ def events_from_msg(msg: pb.FrameUpdate, player_ids: frozenset[str] | None, dela
     return events
 
 
+def player_stats_from_msg(msg: pb.FrameUpdate, player_ids: frozenset[str] | None) -> list[PlayerStats]:
+    """The frame's player stats, checked (module docstring): INVALID_ARGUMENT for a session whose
+    rig takes no game input (`player_ids` None), a player the session does not have, or one named twice."""
+    if not msg.player_stats:
+        return []
+    if player_ids is None:
+        raise invalid("player_stats are for a RIG_MATCH session")
+    out, seen = [], set()
+    for i, stats in enumerate(msg.player_stats):
+        if stats.id not in player_ids:
+            raise invalid(f"player_stats[{i}].id {stats.id!r} is not a player of this session")
+        if stats.id in seen:
+            raise invalid(f"player_stats[{i}].id {stats.id!r} is sent twice in one frame")
+        seen.add(stats.id)
+        out.append(PlayerStats(stats.id, int(stats.health), int(stats.armor), int(stats.items), int(stats.frags)))
+    return out
+
+
 def take_from_msg(msg: pb.TakeShotRequest, player_ids: frozenset[str]) -> tuple[list[str], ShotKind | None, bool]:
     """A TakeShotRequest as `PlayerInputs.take`'s arguments (pipeline/camera_rig.py): NOT_FOUND for
     a player not in `player_ids`, INVALID_ARGUMENT for an unknown kind or a take without subjects."""
@@ -393,7 +413,8 @@ def take_from_msg(msg: pb.TakeShotRequest, player_ids: frozenset[str]) -> tuple[
 def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
                    player_ids: frozenset[str] | None = None, delay_s: float = 0.0) -> FrameInput:
     """`movable`: ids of targets and dynamic objects; `static`: ids of static objects; `player_ids`
-    and `delay_s`: whom the game events may name and how far ahead they may be (events_from_msg)."""
+    and `delay_s`: whom the game events and player stats may name and how far ahead events may be
+    (events_from_msg, player_stats_from_msg)."""
     if not math.isfinite(msg.time_s):
         raise invalid("frame time_s is NaN or infinite")
     states: list[tuple[str, RigidTransform]] = []
@@ -415,7 +436,7 @@ def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
             check(object_id)
         states.extend(zip(msg.packed_ids, transforms_from_packed(values.reshape(-1, PACKED_STRIDE), msg.packed_ids)))
     return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states,
-                      events_from_msg(msg, player_ids, delay_s))
+                      events_from_msg(msg, player_ids, delay_s), player_stats_from_msg(msg, player_ids))
 
 
 def pose_msg(pose: CameraPose) -> pb.CameraPose:

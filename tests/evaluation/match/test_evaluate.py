@@ -15,8 +15,10 @@ from camdirector.precompute.tracks.registry import LevelRegistry
 from tests.evaluation.match.test_sim import arena
 from tests.service.tracks_sessions import ROOT, cli_add_level, obj_text
 
-DIRECTOR_FIGURES = {"kill_coverage", "kills", "kills_covered", "lead_s", "shots", "cuts_per_min", "jump_cuts",
-                    "framed_visibility", "compute_ms", "program_moments", "program_s", "buffering_replies"}
+DIRECTOR_FIGURES = {"kill_coverage", "kill_coverage_first_person", "kills", "kills_covered", "lead_s", "shots",
+                    "cuts_per_min", "jump_cuts", "framed_visibility", "program_visibility", "first_person_share",
+                    "shown_height", "long_shots_missing_kills", "program_sha256", "compute_ms", "program_moments",
+                    "program_s", "buffering_replies"}
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +59,13 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
     assert result["match"]["level"] == "arena" and result["match"]["kills"] == kills
     assert result["delay_s"] == 2.0 and result["rate_hz"] == pytest.approx(30.0)
     assert result["frames_sent"] == 20 * 30 + 61  # the match at 30 Hz, then 2 s and one frame more of its end
-    assert set(result["directors"]) == {"PLANNED", "HLTV"}
+    assert set(result["directors"]) == {"PLANNED", "HLTV", "AUTOTRACK"}
+    ceilings = result["ceilings"]
+    assert ceilings["kills"] == kills and 0.0 <= ceilings["greedy_2s_kill_coverage"] <= ceilings["reference_kill_coverage"]
+    # the autotrack looks through its living player's eyes (from a corpse's, 8 units up, the measure
+    # sees no eyes); the others never do
+    assert result["directors"]["AUTOTRACK"]["first_person_share"] > 0.5
+    assert result["directors"]["PLANNED"]["first_person_share"] == 0.0
     for name, figures in result["directors"].items():
         assert DIRECTOR_FIGURES <= set(figures), name
         assert figures["kills"] == kills and 0.0 <= figures["kill_coverage"] <= 1.0
@@ -66,7 +74,9 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
         assert figures["program_s"] == pytest.approx(20.0, abs=0.05), "the program reaches the match's end"
         assert figures["shots"]["count"] == len(figures["shots"]["values"]) >= 1
         assert figures["jump_cuts"] >= 0 and figures["cuts_per_min"] > 0
-        assert 0.0 < figures["framed_visibility"] <= 1.0
+        assert 0.0 < figures["framed_visibility"] <= 1.0 and 0.0 < figures["program_visibility"] <= 1.0
+        assert figures["kill_coverage"] <= figures["kill_coverage_first_person"]
+        assert 0.0 < figures["shown_height"]["median"] <= 1.0 and len(figures["program_sha256"]) == 64
         assert figures["compute_ms"]["median"] > 0 and figures["compute_ms"]["n"] == figures["program_moments"]
     assert result["tracks_reference"]["compute_ms"]["n"] == result["frames_sent"]
     for name, ratio in result["compute_ratio_to_tracks"].items():
@@ -105,3 +115,20 @@ def test_a_match_whose_players_respawn_near_where_they_fell_streams_through(regi
     arena_match(registry, 3)
     done = eval_match(registry, "--delay", "2", "--json", str(registry / "r3.json"), seed=3)
     assert done.returncode == 0, done.stderr
+
+
+def test_two_runs_from_scratch_give_the_same_program_pose_for_pose(registry_and_match, tmp_path):
+    """Issue 29: the level added anew, a new server: every director's program digest is the same."""
+    folder, _ = registry_and_match
+    digests = []
+    for run in range(2):
+        data = tmp_path / f"data{run}"
+        cli_add_level(data, "arena", folder / "arena.obj")
+        done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "eval-match", str(folder / "m1.npz"),
+                               "--data-dir", str(data), "--delay", "2", "--minutes", "0.2",
+                               "--json", str(tmp_path / f"d{run}.json")], capture_output=True, text=True, cwd=ROOT,
+                              timeout=300)
+        assert done.returncode == 0, done.stderr
+        result = json.loads(done.stdout)
+        digests.append({name: f["program_sha256"] for name, f in result["directors"].items()})
+    assert digests[0] == digests[1]

@@ -1,5 +1,7 @@
 """`camdirector eval-match`: a recorded match streamed through a real server, our director against
-the HLTV baseline, measured independently of both (issue 12, item 5; measure.py says how).
+the baselines a caster knows (Valve's HLTV, QuakeWorld's autotrack), measured independently of
+them all (issue 12, item 5; issue 29, items 4-5; measure.py says how), beside the ceilings of
+ceilings.py (the per-kill reference cameras and the greedy bound for 2-s shots).
 
 One run: a `camdirector serve` child (deploy/server_process.py) on the registry that holds the match's
 level. Each director gets one RIG_MATCH session (the players as capsule targets standing on their
@@ -14,9 +16,7 @@ as many frames.
 """
 from __future__ import annotations
 
-import math
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,51 +24,35 @@ import numpy as np
 
 import camdirector_client as cd
 from camdirector.deploy.server_process import ServerProcess
-from camdirector.evaluation.match.match_file import EVENT_KINDS, MatchRecording
+from camdirector.evaluation.match.ceilings import match_ceilings
+from camdirector.evaluation.match.match_file import MatchRecording
 from camdirector.evaluation.match.measure import (
     BodySampler,
     Program,
-    aim_offset,
     cuts_per_minute,
     framed_visibility,
+    in_eyes_of,
     jump_cuts,
     kill_coverage,
     measure_shown,
-    player_mesh,
+    program_visibility,
     shot_lengths_s,
+    shown_heights,
+)
+from camdirector.evaluation.match.session_feed import (
+    DIRECTORS,
+    Feed,
+    frame_updates,
+    match_session_fields,
+    player_targets,
 )
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.precompute.tracks.registry import LevelRegistry
 
-DIRECTORS = {"PLANNED": cd.pb.MATCH_DIRECTOR_PLANNED, "HLTV": cd.pb.MATCH_DIRECTOR_HLTV}  # ours first
-EVENT_KIND_MSG = dict(zip(EVENT_KINDS, (cd.pb.EVENT_KILL, cd.pb.EVENT_DAMAGE, cd.pb.EVENT_OBJECTIVE, cd.pb.EVENT_CUSTOM)))
 SHORT_SHOT_S = 2.0   # issue 12: no shot under 2 s (the film rules' default minimum)
-
-
-@dataclass(frozen=True)
-class Feed:
-    """What is sent: rows (k,) int64 match rows of the sent frames (the last repeated for the
-    delay's tail), frames (k,) int64 their frame numbers, times_s (k,) s their game times."""
-
-    rows: np.ndarray
-    frames: np.ndarray
-    times_s: np.ndarray
-
-    @classmethod
-    def of(cls, match: MatchRecording, rate_hz: float, delay_s: float) -> Feed:
-        step = max(1, round(match.rate_hz / rate_hz))
-        rows = np.arange(0, len(match.time_s), step, dtype=np.int64)
-        dt_s = step / match.rate_hz
-        tail = np.arange(1, math.ceil(delay_s / dt_s) + 2, dtype=np.int64)  # one more: the last moment is reached
-        frames = np.concatenate([rows + 1, rows[-1] + 1 + tail * step])
-        times_s = np.concatenate([match.time_s[rows], match.time_s[rows[-1]] + tail * dt_s])
-        return cls(np.concatenate([rows, np.full(len(tail), rows[-1])]), frames, times_s)
-
-    @property
-    def rate_hz(self) -> float:
-        return float(1.0 / np.median(np.diff(self.times_s))) if len(self.times_s) > 1 else float("nan")
+LONG_SHOT_S = 20.0   # issue 29: no shot over 20 s while a kill happens outside it
 
 
 @dataclass(eq=False)
@@ -82,51 +66,13 @@ class DirectorRun:
     wall_s: float
 
 
-def player_targets(match: MatchRecording, player_ids: list[str] | None = None) -> list[cd.pb.Target]:
-    """The players (or those named) as targets at their first frame: capsule bodies on their feet."""
-    targets = []
-    for i, player in enumerate(match.players):
-        if player_ids is not None and player.id not in player_ids:
-            continue
-        body = player_mesh(player)
-        targets.append(cd.pb.Target(
-            id=player.id, team=player.team, mesh=cd.mesh_from_arrays(body.vertices, body.faces),
-            transform=cd.transform_msg(match.positions_world[0, i], match.rotations_xyzw[0, i]),
-            aim_offset=cd.vec3(aim_offset(player))))
-    return targets
-
-
-def _event_msg(event) -> cd.pb.GameEvent:
-    return cd.pb.GameEvent(kind=EVENT_KIND_MSG[event.kind], actor_id=event.actor_id, other_actor_id=event.other_actor_id,
-                           priority=event.priority, time_s=event.time_s, label=event.label,
-                           position=cd.vec3(event.position_world))
-
-
-def frame_updates(session: cd.Session, match: MatchRecording, feed: Feed, columns: list[int],
-                  events: bool) -> Iterator[cd.pb.FrameUpdate]:
-    """The feed's FrameUpdates for the players in `columns`, packed; with `events`, each match
-    event on the first sent frame at or after its own (events_per_frame)."""
-    per_frame = match.events_per_frame()
-    ids = [match.players[c].id for c in columns]
-    sent_through = -1
-    for row, frame, time_s in zip(feed.rows.tolist(), feed.frames.tolist(), feed.times_s.tolist()):
-        update = session.frame_update(frame, time_s, packed=cd.pack_states(
-            ids, match.positions_world[row, columns], match.rotations_xyzw[row, columns]))
-        if events:
-            for r in range(sent_through + 1, row + 1):
-                update.events.extend(_event_msg(e) for e in per_frame[r])
-        sent_through = max(sent_through, row)
-        yield update
-
-
 def stream_director(client: cd.Client, match: MatchRecording, feed: Feed, director: int, delay_s: float,
                     seed: int) -> DirectorRun:
     """Streams the match through one RIG_MATCH session of `director`; its program (module docstring)."""
     columns = list(range(len(match.players)))
     replies = []
     start = time.perf_counter()
-    with client.create_session(targets=player_targets(match), level_id=match.level, delay_s=delay_s, seed=seed,
-                               style=cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director=director)) as session:
+    with client.create_session(**match_session_fields(match, director, delay_s, seed)) as session:
         for u in session.stream(frame_updates(session, match, feed, columns, events=True)):
             if u.buffering or u.stale:
                 replies.append((u.buffering, None))
@@ -158,10 +104,15 @@ def stream_tracks_reference(client: cd.Client, match: MatchRecording, feed: Feed
 def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens: Lens, level: RayScene) -> dict:
     program = run.program
     shown = measure_shown(program, bodies, lens, level)
+    eyes = in_eyes_of(match, program)
     coverage = kill_coverage(match, program, shown)
+    first_person = kill_coverage(match, program, shown, eyes)
     lengths = shot_lengths_s(program)
+    heights = shown_heights(program, bodies, lens, shown, eyes)
+    column = match.player_index()
     return {
         "kill_coverage": round(coverage.coverage, 3),
+        "kill_coverage_first_person": round(first_person.coverage, 3),
         "kills": coverage.kills,
         "kills_covered": int(coverage.covered.sum()),
         "lead_s": {**_spread(coverage.lead_s), "values": [round(v, 2) for v in coverage.lead_s.tolist()]},
@@ -169,13 +120,34 @@ def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens:
                   "values": [round(v, 2) for v in lengths.tolist()]},
         "cuts_per_min": round(cuts_per_minute(program), 2),
         "jump_cuts": jump_cuts(program, bodies),
-        "framed_visibility": round(framed_visibility(program, shown, match.player_index()), 3),
+        "framed_visibility": round(framed_visibility(program, shown, column), 3),
+        "program_visibility": round(program_visibility(program, shown, column, eyes), 3),
+        "first_person_share": round(float((eyes >= 0).mean()), 3),
+        "shown_height": {"median": round(float(np.median(heights)), 3) if len(heights) else None,
+                         "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None},
+        "long_shots_missing_kills": _long_shots_missing_kills(match, program, coverage),
+        "program_sha256": program.digest(),
         "compute_ms": _timing(run.compute_ms),
         "program_moments": len(program),
         "program_s": round(float(program.time_s[-1] - program.time_s[0]), 2),
         "buffering_replies": run.buffering,
         "stream_wall_s": round(run.wall_s, 1),
     }
+
+
+def _long_shots_missing_kills(match: MatchRecording, program: Program, coverage) -> int:
+    """Shots over LONG_SHOT_S during which a kill happened that the shot did not cover (issue 29:
+    no shot over 20 s while a kill happens outside it)."""
+    starts = np.flatnonzero(program.cut | (np.arange(len(program)) == 0))
+    ends = np.append(starts[1:], len(program))
+    kill_rows = np.searchsorted(program.index, np.searchsorted(match.time_s, [
+        e.time_s for e in match.events if e.kind == "kill" and e.actor_id != e.other_actor_id]), side="left")
+    missed_rows = kill_rows[:len(coverage.covered)][~coverage.covered]
+    count = 0
+    for start, end in zip(starts, ends):
+        if program.time_s[end - 1] - program.time_s[start] > LONG_SHOT_S:
+            count += bool(np.any((missed_rows >= start) & (missed_rows < end)))
+    return count
 
 
 def _spread(values: np.ndarray) -> dict:
@@ -217,6 +189,8 @@ def evaluate_match(match: MatchRecording, delay_s: float, *, data_dir: Path | No
     for name, run in runs.items():
         progress(f"measuring {name}")
         figures[name] = _figures(match, run, bodies, lens, level)
+    progress("measuring the ceilings")
+    ceilings = match_ceilings(match, bodies, lens, level, SHORT_SHOT_S)
     tracks_median_ms = float(np.median(tracks_ms))
     kills = sum(e.kind == "kill" for e in match.events)
     result = {
@@ -224,7 +198,10 @@ def evaluate_match(match: MatchRecording, delay_s: float, *, data_dir: Path | No
                   "minutes": round(float(match.time_s[-1] - match.time_s[0]) / 60.0, 2)},
         "delay_s": delay_s, "rate_hz": round(feed.rate_hz, 2), "frames_sent": len(feed.rows),
         "directors": figures,
+        "ceilings": ceilings.as_json(),
         "coverage_gain_over_hltv": round(figures["PLANNED"]["kill_coverage"] - figures["HLTV"]["kill_coverage"], 3),
+        "coverage_gain_over_autotrack": round(figures["PLANNED"]["kill_coverage"]
+                                              - figures["AUTOTRACK"]["kill_coverage_first_person"], 3),
         "tracks_reference": {"player": match.players[0].id, "compute_ms": _timing(tracks_ms)},
         "compute_ratio_to_tracks": {name: round(f["compute_ms"]["median"] / tracks_median_ms, 2)
                                     for name, f in figures.items()},
@@ -242,7 +219,7 @@ def plot_result(result: dict, out_png: Path) -> None:
     names = list(result["directors"])
     figures = [result["directors"][n] for n in names]
     fig, (ax_cov, ax_lead, ax_shots) = plt.subplots(1, 3, figsize=(14, 4))
-    ax_cov.bar(names, [f["kill_coverage"] for f in figures], color=["tab:blue", "tab:orange"])
+    ax_cov.bar(names, [f["kill_coverage"] for f in figures], color=["tab:blue", "tab:orange", "tab:green"][:len(names)])
     ax_cov.set_ylim(0, 1)
     ax_cov.set_ylabel("kill coverage")
     ax_cov.set_title(f"{result['match']['level']}, delay {result['delay_s']:g} s, {result['match']['kills']} kills")

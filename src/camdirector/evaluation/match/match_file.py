@@ -1,10 +1,13 @@
 """A recorded match: every player's transform per frame and the game events, in one .npz file.
 
 The file is one compressed NumPy .npz archive. The member `metadata` holds UTF-8 JSON:
-`format_version`, `level`, `seed`, `rate_hz`, `players` (id, team, height_m, radius_m) and
+`format_version`, `level`, `seed`, `rate_hz`, `players` (id, team, height_m, radius_m, name) and
 `events` (one object per MatchEvent, in time order). The other members are the arrays of
 `MatchRecording`: `time_s` (F,) float64, `positions_world` (F, P, 3) float64, `rotations_xyzw`
-(F, P, 4) float64 and `alive` (F, P) bool. Conventions are the wire contract's
+(F, P, 4) float64, `alive` (F, P) bool and, when the source recorded them, `stats` (F, P, 4) int32
+with the columns STAT_COLUMNS (a real match's health, armor, item bits and frags per frame).
+`name` and `stats` came later without a new format version: a file without them loads with ""
+and None. Conventions are the wire contract's
 (docs/protocol.md): metres, seconds, +Y up; a player's position is its feet, its rotation turns
 its local +Z onto its facing with local +Y up. `load` checks every shape and refuses anything
 else with ValueError, so a reader never works on a half-valid match.
@@ -20,16 +23,19 @@ import numpy as np
 
 FORMAT_VERSION = 1
 EVENT_KINDS = ("kill", "damage", "objective", "custom")  # the wire contract's EventKind, in its order
+STAT_COLUMNS = ("health", "armor", "items", "frags")     # MatchRecording.stats's last axis
 
 
 @dataclass(frozen=True)
 class MatchPlayer:
-    """One player: id ("p00", ...), team (0 or 1), height_m and radius_m of its body."""
+    """One player: id ("p00", ...), team (an index >= 0; players of one team share it), height_m
+    and radius_m of its body, name (what the game called it; "" for simulated bots)."""
 
     id: str
     team: int
     height_m: float
     radius_m: float
+    name: str = ""
 
 
 @dataclass(frozen=True)
@@ -61,7 +67,8 @@ class MatchRecording:
     """A match (module docstring): F frames of P players and the events.
 
     time_s (F,) float64 increasing; positions_world (F, P, 3) float64 feet, metres;
-    rotations_xyzw (F, P, 4) float64 unit facing; alive (F, P) bool; events in time order.
+    rotations_xyzw (F, P, 4) float64 unit facing; alive (F, P) bool; events in time order;
+    stats (F, P, 4) int32 per STAT_COLUMNS, or None where the source has none.
     """
 
     level: str
@@ -73,6 +80,7 @@ class MatchRecording:
     rotations_xyzw: np.ndarray
     alive: np.ndarray
     events: list[MatchEvent]
+    stats: np.ndarray | None = None
 
     def __post_init__(self):
         validate(self)
@@ -101,7 +109,8 @@ def validate(match: MatchRecording) -> None:
         (bool(np.all(np.isfinite(match.time_s))) and bool(np.all(np.diff(match.time_s) > 0)),
          "time_s must be finite and strictly increasing"),
         (n_players >= 1 and len({p.id for p in match.players}) == n_players, "players must have distinct ids"),
-        (all(p.team in (0, 1) for p in match.players), "a player's team must be 0 or 1"),
+        (all(isinstance(p.team, int) and p.team >= 0 for p in match.players),
+         "a player's team must be an int >= 0"),
         (match.positions_world.dtype == np.float64 and match.positions_world.shape == (n_frames, n_players, 3),
          f"positions_world must be (F, P, 3) = ({n_frames}, {n_players}, 3) float64"),
         (match.rotations_xyzw.dtype == np.float64 and match.rotations_xyzw.shape == (n_frames, n_players, 4),
@@ -109,6 +118,9 @@ def validate(match: MatchRecording) -> None:
         (match.alive.dtype == bool and match.alive.shape == (n_frames, n_players),
          f"alive must be (F, P) = ({n_frames}, {n_players}) bool"),
         (match.rate_hz > 0, "rate_hz must be positive"),
+        (match.stats is None or (match.stats.dtype == np.int32
+                                 and match.stats.shape == (n_frames, n_players, len(STAT_COLUMNS))),
+         f"stats must be None or (F, P, {len(STAT_COLUMNS)}) = ({n_frames}, {n_players}, {len(STAT_COLUMNS)}) int32"),
     ]
     for ok, message in checks:
         if not ok:
@@ -132,10 +144,11 @@ def save_match(match: MatchRecording, path: Path) -> None:
     metadata = {"format_version": FORMAT_VERSION, "level": match.level, "seed": match.seed, "rate_hz": match.rate_hz,
                 "players": [dataclasses.asdict(p) for p in match.players],
                 "events": [e.as_json() for e in match.events]}
+    optional = {} if match.stats is None else {"stats": match.stats}
     with open(path, "wb") as f:
         np.savez_compressed(f, metadata=np.frombuffer(json.dumps(metadata).encode("utf-8"), dtype=np.uint8),
                             time_s=match.time_s, positions_world=match.positions_world,
-                            rotations_xyzw=match.rotations_xyzw, alive=match.alive)
+                            rotations_xyzw=match.rotations_xyzw, alive=match.alive, **optional)
 
 
 def load_match(path: Path) -> MatchRecording:
@@ -150,12 +163,14 @@ def load_match(path: Path) -> MatchRecording:
             raise ValueError(f"{path}: not a match file (missing {sorted(missing)})")
         meta = json.loads(data["metadata"].tobytes().decode("utf-8"))
         arrays = {name: data[name] for name in ("time_s", "positions_world", "rotations_xyzw", "alive")}
+        if "stats" in data.files:
+            arrays["stats"] = data["stats"]
     if meta.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{path}: match file format version {meta.get('format_version')}, this build reads "
                          f"version {FORMAT_VERSION}")
     try:
         players = [MatchPlayer(id=str(p["id"]), team=int(p["team"]), height_m=float(p["height_m"]),
-                               radius_m=float(p["radius_m"])) for p in meta["players"]]
+                               radius_m=float(p["radius_m"]), name=str(p.get("name", ""))) for p in meta["players"]]
         events = [MatchEvent(kind=str(e["kind"]), actor_id=str(e["actor_id"]), other_actor_id=str(e["other_actor_id"]),
                              priority=int(e["priority"]), time_s=float(e["time_s"]), label=str(e["label"]),
                              position_world=np.asarray(e["position_world"], dtype=np.float64))

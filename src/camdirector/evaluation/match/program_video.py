@@ -23,7 +23,8 @@ from camdirector.precompute.tracks.registry import LevelRegistry
 VIDEO_SIZE_PX = (480, 270)            # width, height; even for yuv420p
 INSET_SIZE_PX = (160, 90)             # the top view in the corner, same aspect
 INSET_FOG_M = (1.0e4, 2.0e4)          # the top view is far above the level: fog pushed out of the way, m
-TEAM_RGB = ((0.85, 0.25, 0.2), (0.2, 0.4, 0.9))
+# Two teams' colours first; a free-for-all's players (a team each) cycle through the rest.
+TEAM_RGB = ((0.85, 0.25, 0.2), (0.2, 0.4, 0.9), (0.2, 0.7, 0.3), (0.9, 0.7, 0.1), (0.6, 0.3, 0.8), (0.1, 0.7, 0.8))
 LEVEL_RGB = (0.62, 0.6, 0.56)
 HIDDEN_OFFSET_M = np.array([0.0, -1.0e4, 0.0])  # where a dead player's capsule is put: out of every view
 
@@ -69,7 +70,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
     rows = np.flatnonzero(program.time_s <= program.time_s[0] + seconds)
     fps = float(1.0 / np.median(np.diff(program.time_s))) if len(program) > 1 else 30.0
     top = top_view_pose(artifact.level_vertices, lens)
-    team_rgb8 = (255 * np.array(TEAM_RGB)).astype(np.uint8)[[p.team for p in match.players]]
+    team_rgb8 = (255 * np.array(TEAM_RGB)).astype(np.uint8)[[p.team % len(TEAM_RGB) for p in match.players]]
     ids = [p.id for p in match.players]
     costs = []
     try:
@@ -86,7 +87,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
         renderer.add_mesh("level", artifact.level_vertices, artifact.level_faces, LEVEL_RGB, checker_m=1.0)
         for player in match.players:
             body = player_mesh(player)
-            renderer.add_mesh(player.id, body.vertices, body.faces, TEAM_RGB[player.team], closed=True)
+            renderer.add_mesh(player.id, body.vertices, body.faces, TEAM_RGB[player.team % len(TEAM_RGB)], closed=True)
         for row in rows:
             start = time.perf_counter()
             index = int(program.index[row])

@@ -68,7 +68,9 @@ def _angles(direction: np.ndarray) -> tuple[float, float]:
             -math.degrees(math.atan2(direction[1], math.hypot(direction[0], direction[2]))))
 
 
-def _look(position: np.ndarray, direction: np.ndarray, fov_deg: float) -> CameraPose:
+def look_along(position: np.ndarray, direction: np.ndarray, fov_deg: float) -> CameraPose:
+    """The level camera (no roll) at position (3,) m looking along direction (3,); also the
+    first-person view of autotrack.py."""
     forward = direction / np.linalg.norm(direction)
     right = np.cross(forward, [0.0, 1.0, 0.0])
     right /= max(np.linalg.norm(right), 1e-9)
@@ -105,7 +107,7 @@ class ChaseCamera:
     def pose(self, moment: Moment) -> CameraPose:
         eye1 = self._eye(moment, self.target1)
         if self.params.in_eye:
-            return _look(eye1, moment.forward_world[self.target1], self.lens.vertical_fov_deg)
+            return look_along(eye1, moment.forward_world[self.target1], self.lens.vertical_fov_deg)
         eye2 = None if self.target2 is None else self._eye(moment, self.target2)
         if eye2 is not None and np.linalg.norm(eye2 - eye1) > 1e-6:
             yaw, pitch = _angles(eye2 - eye1)
@@ -124,7 +126,7 @@ class ChaseCamera:
         if eye2 is not None:
             yaw_look = _angles((eye1 + eye2) / 2.0 - camera)[0]
             pitch_look = max(-self.hltv.max_pitch_deg, min(self.hltv.max_pitch_deg, pitch_look))
-        return _look(camera, _direction(yaw_look, pitch_look), self.lens.vertical_fov_deg)
+        return look_along(camera, _direction(yaw_look, pitch_look), self.lens.vertical_fov_deg)
 
 
 class HltvDirector:
@@ -304,7 +306,7 @@ class HltvDirector:
         position = self.fixed_cameras[best]
         if np.linalg.norm(look_at - position) < 1e-6:
             look_at = position + np.array([0.0, 0.0, 1.0])
-        pose = _look(position, look_at - position, self.lens.vertical_fov_deg)
+        pose = look_along(position, look_at - position, self.lens.vertical_fov_deg)
         subjects = (int(target[best]),) if target[best] >= 0 else ()
         shot = self._shot(StaticCamera(pose), subjects, ShotKind.OVERVIEW, reason, moment.time_s)
         shot.scores = {"rank": float(total[best])}

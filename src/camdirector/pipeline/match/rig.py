@@ -10,8 +10,10 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             frame is now the program's, so a re-sent input frame is also refused here, by the
             buffer, and flagged `match_stale_frame`).
 2. plan     at `plan_rate_hz` (and at once after a take), the director of the style decides
-            whether to cut: ours (plan.py) or the HLTV baseline (hltv.py); a human's take
-            (`take`) overrides both until released. Ours also re-places an occluded camera
+            whether to cut: ours (plan.py), the HLTV baseline (hltv.py) or ezQuake's autotrack
+            (autotrack.py: it ranks by the players' stats, `player_stats`, each player's latest
+            sent with a frame up to the program moment); a human's take (`take`) overrides them
+            until released. Ours also re-places an occluded camera
             within its shot (shots.py) and offers the best other situations as candidates.
 3. camera   every frame, the shot's camera at the program moment.
 4. visibility  the share of the framed subjects' sample points seen from the camera.
@@ -30,7 +32,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -38,7 +41,8 @@ from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
-from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.inputs import FrameInput, PlayerStats, SceneSpec
+from camdirector.pipeline.match.autotrack import AutotrackDirector
 from camdirector.pipeline.match.frame import Candidate, MatchFrame, PlannedCut, ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.hltv import HltvDirector
@@ -76,6 +80,10 @@ class MatchRig:
         self.builder = ShotBuilder(self.players, self.style, self.lens, settings, self.visibility,
                                    Grammar(settings.jump_cut_deg), self.level_nodes)
         self.planned = PlannedDirector(self.players, self.teams, settings, self.builder, self.delay_s)
+        self._stats: dict[str, PlayerStats] = {}  # each player's latest stats sent up to the program moment
+        self._stats_ahead: deque[tuple[float, list[PlayerStats]]] = deque()  # (frame time s, stats) not yet on air
+        # the directors' view, read only by its type (a mappingproxy would not pickle into the checkpoint)
+        self.player_stats: Mapping[str, PlayerStats] = self._stats
         self.director = self._director(self.style.match_director)
         self.shot: Shot | None = None
         self.held: ShotChoice | None = None
@@ -86,11 +94,18 @@ class MatchRig:
         self._candidates: list[tuple[ShotChoice, ToricCamera | None, float]] = []
         self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
 
-    def _director(self, kind: MatchDirectorKind) -> PlannedDirector | HltvDirector:
+    def _director(self, kind: MatchDirectorKind) -> PlannedDirector | HltvDirector | AutotrackDirector:
         if kind == MatchDirectorKind.HLTV:
             return HltvDirector(self.players, self.settings, self.lens, self.ray_scene, self.rng, self.delay_s,
                                 self.level_nodes)
+        if kind == MatchDirectorKind.AUTOTRACK:
+            return AutotrackDirector(self.players, self.teams, self.lens, self.player_stats)
         return self.planned
+
+    def _stats_to(self, time_s: float) -> None:
+        """The stats sent with the frames up to the program moment (time_s) join the directors' view."""
+        while self._stats_ahead and self._stats_ahead[0][0] <= time_s:
+            self._stats.update((stats.id, stats) for stats in self._stats_ahead.popleft()[1])
 
     def set_style(self, style: Style) -> None:
         """From the next frame on; the current shot goes on (a new director decides at its next tick)."""
@@ -211,7 +226,11 @@ class MatchRig:
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
         if not self.buffer.push(update.frame, update.time_s, target_transforms, state.aim_points_world, update.events):
             state.flags.append("match_stale_frame")
+        elif update.player_stats:
+            self._stats_ahead.append((update.time_s, update.player_stats))
         moment = self.buffer.program_moment(update.time_s - self.delay_s)
+        if moment is not None:
+            self._stats_to(moment.time_s)
         stages.done(MatchStage.BUFFER)
         self.program_transforms = None if moment is None else moment.transforms
         if moment is None:

@@ -1,0 +1,119 @@
+"""`camdirector play-match`: a recorded match streamed live into a server, to rehearse with the dashboard.
+
+    camdirector play-match MATCH --server URL [--speed 1.0] [--delay-s 10] [--rate-hz 30]
+                           [--director PLANNED|HLTV] [--key KEY] [--ca-file CA]
+                           [--session-id-file PATH] [--loop]
+        opens a RIG_MATCH session for the match's players on its level (the server must hold the
+        level: camdirector level add) with the broadcast delay, and streams the match over one
+        gRPC StreamFrames stream in real time, --speed times as fast (matches/playback.py); with
+        --loop it plays the match again and again until Ctrl-C. Prints JSON lines: first the
+        session id (open it in the dashboard; --session-id-file writes it there too), then one
+        line per cut, then the summary: frames sent, answered, cuts, late frames (sent more than a
+        frame period after due). Ctrl-C ends the stream and closes the session. The key defaults
+        to the CAMDIRECTOR_KEY environment variable.
+        Exit status: 0 played to the end, 1 the stream failed, 2 bad arguments, match file,
+        server, level or key, 130 stopped by Ctrl-C.
+
+Kept light at import, as evaluation/cli.py: numpy and the client load when the command runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+DIRECTOR_NAMES = ("PLANNED", "HLTV", "AUTOTRACK")  # session_feed.DIRECTORS' keys, not imported here to keep it light
+
+
+def add_parser(subparsers) -> None:
+    """Registers `play-match` on an argparse subparsers object; args.handler(args) runs it."""
+    p = subparsers.add_parser(
+        "play-match", help="stream a recorded match live into a server, to rehearse with the dashboard",
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("file", type=Path, metavar="MATCH", help="match file (camdirector match-sim --out)")
+    p.add_argument("--server", required=True, help="the server, grpc://HOST:PORT or grpcs://HOST:PORT")
+    p.add_argument("--speed", type=float, default=1.0, help="playback speed, times real time (default 1)")
+    p.add_argument("--delay-s", dest="delay_s", type=float, default=10.0,
+                   help="broadcast delay, s, 0 to 300 (default 10)")
+    p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0,
+                   help="frames per second sent, a divisor of the file's rate (default 30)")
+    p.add_argument("--director", choices=DIRECTOR_NAMES, default="PLANNED", help="who directs (default PLANNED)")
+    p.add_argument("--key", help="API key (default: the CAMDIRECTOR_KEY environment variable)")
+    p.add_argument("--ca-file", dest="ca_file", type=Path, help="grpcs:// only: PEM authorities to trust")
+    p.add_argument("--session-id-file", dest="session_id_file", type=Path, help="write the session id here too")
+    p.add_argument("--loop", action="store_true", help="play the match again and again until Ctrl-C")
+    p.set_defaults(handler=run_play_match)
+
+
+def _fail(message: str) -> int:
+    print(f"camdirector play-match: {' '.join(str(message).split())}", file=sys.stderr)
+    return 2
+
+
+def _print(line: dict) -> None:
+    print(json.dumps(line), flush=True)
+
+
+def _refusal(server: str, error) -> str:
+    """One line for a DirectorError met while opening the session."""
+    name = error.code.name
+    if name in ("UNAVAILABLE", "DEADLINE_EXCEEDED"):
+        return f"cannot reach the server at {server}: {error}"
+    if name in ("UNAUTHENTICATED", "PERMISSION_DENIED"):
+        return f"the server at {server} refused the key: {error}"
+    return f"the server at {server} refused the session: {error}"
+
+
+def run_play_match(args: argparse.Namespace) -> int:
+    """Runs `camdirector play-match` from parsed arguments; returns the exit status."""
+    import camdirector_client as cd
+    from camdirector.evaluation.match.match_file import load_match
+    from camdirector.evaluation.match.session_feed import DIRECTORS
+    from camdirector.matches.playback import lap_feeds, play_match
+
+    try:
+        if not args.server.startswith(("grpc://", "grpcs://")):
+            raise ValueError(f"--server {args.server!r}: give grpc://HOST:PORT or grpcs://HOST:PORT")
+        if not args.speed > 0 or not args.rate_hz > 0:
+            raise ValueError("--speed and --rate-hz must be positive")
+        if not 0.0 <= args.delay_s <= 300.0:
+            raise ValueError("--delay-s must be in [0, 300] s")
+        match = load_match(args.file)
+        if args.rate_hz > match.rate_hz:
+            raise ValueError(f"--rate-hz {args.rate_hz:g} is above the file's {match.rate_hz:g} Hz")
+        client = cd.connect(args.server, key=args.key, ca_file=args.ca_file)
+    except (OSError, ValueError) as exc:
+        return _fail(str(exc))
+
+    lap = next(lap_feeds(match, args.rate_hz, args.delay_s, args.loop))
+    opened = []
+
+    def on_session(session_id: str) -> None:
+        opened.append(session_id)
+        _print({"session_id": session_id, "level": match.level, "players": len(match.players),
+                "director": args.director, "frames_per_lap": len(lap.rows), "rate_hz": round(lap.rate_hz, 2),
+                "speed": args.speed, "delay_s": args.delay_s, "loop": args.loop})
+        if args.session_id_file is not None:
+            part = args.session_id_file.with_name(args.session_id_file.name + ".part")
+            part.write_text(session_id + "\n")
+            os.replace(part, args.session_id_file)  # a reader never sees half an id
+
+    try:
+        with client:
+            result = play_match(client, match, director=DIRECTORS[args.director], delay_s=args.delay_s,
+                                rate_hz=args.rate_hz, speed=args.speed, loop=args.loop, on_session=on_session,
+                                on_cut=lambda line: _print({"cut": line}))
+    except cd.DirectorError as exc:
+        if not opened:
+            return _fail(_refusal(args.server, exc))
+        print(f"camdirector play-match: the stream of session {opened[0]} failed: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # the session-id file could not be written
+        return _fail(str(exc))
+    except KeyboardInterrupt:  # before the stream began, or while closing
+        print("camdirector play-match: interrupted", file=sys.stderr)
+        return 130
+    _print({"summary": result.summary()})
+    return 130 if result.interrupted else 0
