@@ -1,40 +1,47 @@
 /**
- * The client: sessions over gRPC (`grpc://host:port`, `grpcs://host:port` over TLS) with
- * @grpc/grpc-js, the Python SDK's behaviour (client_sdk/python/camdirector_client/client.py):
+ * The client: sessions over gRPC (`grpc://host:port`, `grpcs://host:port` over TLS; transport.ts)
+ * or ZeroMQ (`tcp://host:port`; zmq_transport.ts), the Python SDK's behaviour
+ * (client_sdk/python/camdirector_client/client.py):
  *
- * - every call of a session carries its route key (`x-camdirector-route`, picked before
- *   CreateSession and sent with it too), the protocol header and the key (`authorization`);
+ * - every gRPC call of a session carries its route key (`x-camdirector-route`, picked before
+ *   CreateSession and sent with it too), the protocol header and the key (`authorization`); a
+ *   ZeroMQ request carries the key in its third frame;
  * - a call answered UNAVAILABLE or CANCELLED (a server restoring the session after its worker or
  *   node was lost; a balancer resetting the stream of a node that died) is tried again with the
  *   same session id, after 20 ms ... 1.5 s; a stream is opened again from its first unanswered
  *   update; UNAUTHENTICATED and PERMISSION_DENIED are never tried again;
- * - unary calls have a deadline (timeoutMs); StreamFrames has none;
+ * - unary calls have a deadline (timeoutMs); StreamFrames has none; over ZeroMQ a stream is one
+ *   Frame request per update, each with the deadline;
  * - the key is never logged, shown by util.inspect nor put in an error message.
  */
-import { readFileSync } from "node:fs";
 import { inspect } from "node:util";
-import * as grpc from "@grpc/grpc-js";
-import { create, fromBinary, toBinary, type DescMessage, type MessageInitShape, type MessageShape } from "@bufbuild/protobuf";
+import type * as grpc from "@grpc/grpc-js";
+import { create, toBinary, type DescMessage, type MessageInitShape, type MessageShape } from "@bufbuild/protobuf";
 import {
   CameraUpdateSchema, CloseSessionRequestSchema, CloseSessionResponseSchema, CreateSessionRequestSchema,
   CreateSessionResponseSchema, FrameUpdateSchema, StyleSchema, TakeShotRequestSchema, TakeShotResponseSchema,
   UpdateStyleRequestSchema, UpdateStyleResponseSchema,
-  type CameraUpdate, type CreateSessionRequest, type FrameUpdate, type ShotInfo, type ShotKind, type Style,
+  type CameraUpdate, type FrameUpdate, type ShotInfo, type ShotKind, type Style,
 } from "./gen/camdirector/v1/director_pb.js";
 import { DirectorError, statusName } from "./errors.js";
+import { GrpcTransport, type Transport } from "./transport.js";
 import {
-  DEFAULT_MAX_MESSAGE_BYTES, DEFAULT_TIMEOUT_MS, EncodedFrame, PROTOCOL, PROTOCOL_HEADER, RETRYABLE, RETRY_DELAYS_MS,
-  ROUTE_HEADER, encodeFrameUpdate, frameUpdate, newRouteKey, parseUrl, resolveKey, sleep, type FrameOptions,
+  DEFAULT_MAX_MESSAGE_BYTES, DEFAULT_TIMEOUT_MS, EncodedFrame, RETRYABLE, RETRY_DELAYS_MS,
+  encodeFrameUpdate, frameUpdate, newRouteKey, parseUrl, resolveKey, sleep, type FrameOptions,
 } from "./wire.js";
-
-const SERVICE = "/camdirector.v1.Director/";
+import { ZmqTransport, curveServerKey } from "./zmq_transport.js";
 
 export interface ConnectOptions {
-  /** The API key, sent as `authorization: Bearer KEY` on every call. Default: CAMDIRECTOR_KEY, else none. */
+  /** The API key: `authorization: Bearer KEY` on every gRPC call, the third frame of every ZeroMQ
+   * request. Default: CAMDIRECTOR_KEY, else none. */
   key?: string;
   /** grpcs:// only: PEM file of the authorities to trust for the server's certificate; default the system's roots. */
   caFile?: string;
-  /** Milliseconds a unary call waits for its reply before DEADLINE_EXCEEDED (default 10 000). */
+  /** tcp:// only: the server's CURVE public key (40 characters of Z85 text, its ready line's
+   * `zmq_server_key`) or the path of its `DIR/zmq/server.key`. Given, the sockets are CURVE clients
+   * (encrypted, with a key pair made for this client); a server with authentication on needs it. */
+  zmqServerKey?: string;
+  /** Milliseconds a unary call (over ZeroMQ: any request) waits for its reply before DEADLINE_EXCEEDED (default 10 000). */
   timeoutMs?: number;
   /** gRPC send and receive limit, bytes (default 64 MiB). */
   maxMessageBytes?: number;
@@ -58,102 +65,19 @@ function encode<D extends DescMessage>(schema: D, init: Init<D>): Uint8Array {
   }
 }
 
-const identity = (bytes: Uint8Array) => Buffer.from(bytes.buffer, bytes.byteOffset, bytes.byteLength);
-
-/** gRPC through grpc-js, bytes in; messages out. Every call carries the session's route key. */
-class Transport {
-  readonly #client: grpc.Client;
-  readonly #auth: string | undefined; // "Bearer KEY": kept out of inspect, errors and logs
-  readonly #timeoutMs: number;
-  readonly #tls: boolean;
-  closed = false;
-
-  constructor(address: string, tls: boolean, key: string | undefined, caFile: string | undefined, timeoutMs: number,
-              options: grpc.ChannelOptions) {
-    let credentials: grpc.ChannelCredentials;
-    if (tls) {
-      let roots: Buffer | null = null;
-      if (caFile !== undefined) {
-        try { roots = readFileSync(caFile); } catch (error) {
-          throw new DirectorError("INVALID_ARGUMENT", `caFile ${JSON.stringify(caFile)} can not be read: ${(error as Error).message}`);
-        }
-      }
-      credentials = grpc.credentials.createSsl(roots);
-    } else {
-      credentials = grpc.credentials.createInsecure();
-    }
-    this.#client = new grpc.Client(address, credentials, options);
-    this.#auth = key === undefined ? undefined : `Bearer ${key}`;
-    this.#timeoutMs = timeoutMs;
-    this.#tls = tls;
+/** `update` serialized, its empty sessionId given `sessionId`'s; DirectorError(INVALID_ARGUMENT)
+ * when it is not a FrameUpdate. */
+function encodeInput(update: StreamInput, sessionId: string): EncodedFrame {
+  if (update instanceof EncodedFrame) return update;
+  let msg: FrameUpdate;
+  try {
+    msg = (update as FrameUpdate).$typeName === "camdirector.v1.FrameUpdate"
+      ? (update as FrameUpdate) : create(FrameUpdateSchema, update as MessageInitShape<typeof FrameUpdateSchema>);
+  } catch (error) {
+    throw new DirectorError("INVALID_ARGUMENT", `not a valid camdirector.v1.FrameUpdate: ${(error as Error).message}`);
   }
-
-  #metadata = new Map<string, grpc.Metadata>(); // by route: built once per session
-
-  metadata(route: string): grpc.Metadata {
-    const cached = this.#metadata.get(route);
-    if (cached !== undefined) return cached;
-    const md = new grpc.Metadata();
-    md.set(ROUTE_HEADER, route);
-    md.set(PROTOCOL_HEADER, String(PROTOCOL));
-    if (this.#auth !== undefined) md.set("authorization", this.#auth);
-    if (this.#metadata.size > 4096) this.#metadata.clear();
-    this.#metadata.set(route, md);
-    return md;
-  }
-
-  error(error: unknown): DirectorError {
-    if (error instanceof DirectorError) return error;
-    const e = error as grpc.ServiceError;
-    if (typeof e?.code !== "number") return new DirectorError("UNKNOWN", String((error as Error)?.message ?? error));
-    const message = e.details || e.message;
-    const hint = connectionHint(e.code, message, this.#tls);
-    return new DirectorError(e.code, hint ? `${message} (${hint})` : message);
-  }
-
-  unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, route: string): Promise<MessageShape<D>> {
-    if (this.closed) return Promise.reject(new DirectorError("CANCELLED", "the client is closed"));
-    return new Promise((resolve, reject) => {
-      this.#client.makeUnaryRequest(
-        SERVICE + method, identity, (bytes: Buffer) => fromBinary(response, bytes), request, this.metadata(route),
-        { deadline: Date.now() + this.#timeoutMs },
-        (error, value) => (error ? reject(this.error(error)) : resolve(value as MessageShape<D>)),
-      );
-    });
-  }
-
-  stream(route: string): grpc.ClientDuplexStream<Uint8Array, CameraUpdate> {
-    if (this.closed) throw new DirectorError("CANCELLED", "the client is closed");
-    return this.#client.makeBidiStreamRequest(
-      SERVICE + "StreamFrames", identity, (bytes: Buffer) => fromBinary(CameraUpdateSchema, bytes), this.metadata(route), {},
-    );
-  }
-
-  close(): void {
-    this.closed = true;
-    this.#client.close();
-  }
-
-  [inspect.custom](): string {
-    return `Transport(key=${this.#auth === undefined ? "none" : "set"}, tls=${this.#tls})`;
-  }
-}
-
-/** A word on what to check when no connection could be made (TLS on one side only, an untrusted CA). */
-function connectionHint(code: number, message: string, tls: boolean): string | undefined {
-  if (code !== grpc.status.UNAVAILABLE) return undefined;
-  const said = message.toLowerCase().replace(/_/g, " ");
-  if (said.includes("connection refused") || said.includes("econnrefused")) return undefined;
-  if (tls && (said.includes("certificate") || said.includes("self-signed") || said.includes("self signed"))) {
-    return "the server's certificate is not signed by an authority this client trusts: give caFile, the PEM of the CA that signed it";
-  }
-  if (tls && (said.includes("handshake") || said.includes("wrong version number") || said.includes("ssl"))) {
-    return "the TLS handshake failed: does the server serve TLS (--tls-cert)? grpc:// is plaintext";
-  }
-  if (!tls && (said.includes("protocol error") || said.includes("connection dropped") || said.includes("closed"))) {
-    return "the server closed the connection: if it serves TLS, connect with grpcs://";
-  }
-  return undefined;
+  if (!msg.sessionId) msg.sessionId = sessionId;
+  return new EncodedFrame(encode(FrameUpdateSchema, msg), msg.frame);
 }
 
 /** The caller's updates for a stream that may take several gRPC calls (the Python SDK's
@@ -193,7 +117,7 @@ class Resumable {
     try {
       const result = await this.#source.next();
       if (result.done) this.done = true;
-      else this.#queue.push(this.encode(result.value));
+      else this.#queue.push(encodeInput(result.value, this.sessionId));
     } catch (error) {
       this.error = error;
       this.failed = true;
@@ -204,19 +128,6 @@ class Resumable {
   answered(): void {
     this.#queue.shift();
     this.#base++;
-  }
-
-  encode(update: StreamInput): EncodedFrame {
-    if (update instanceof EncodedFrame) return update;
-    let msg: FrameUpdate;
-    try {
-      msg = (update as FrameUpdate).$typeName === "camdirector.v1.FrameUpdate"
-        ? (update as FrameUpdate) : create(FrameUpdateSchema, update as MessageInitShape<typeof FrameUpdateSchema>);
-    } catch (error) {
-      throw new DirectorError("INVALID_ARGUMENT", `not a valid camdirector.v1.FrameUpdate: ${(error as Error).message}`);
-    }
-    if (!msg.sessionId) msg.sessionId = this.sessionId;
-    return new EncodedFrame(encode(FrameUpdateSchema, msg), msg.frame);
   }
 
   /** The stream is over: the caller's iterator is told (not waited for: it may be in a read). */
@@ -278,13 +189,13 @@ export class Session {
   /** Sends a prebuilt FrameUpdate (its sessionId filled in when empty), or an EncodedFrame. */
   send(update: StreamInput): Promise<CameraUpdate> {
     let bytes: Uint8Array;
-    try { bytes = new Resumable([], this.id).encode(update).bytes; } catch (error) { return Promise.reject(error); }
+    try { bytes = encodeInput(update, this.id).bytes; } catch (error) { return Promise.reject(error); }
     return this.#retrying("Frame", bytes, CameraUpdateSchema);
   }
 
   /**
-   * One CameraUpdate per update, in order, as they come: one StreamFrames call, updates written as
-   * the stream has room. `updates` may be sync or async. Leaving the loop early (break, return)
+   * One CameraUpdate per update, in order, as they come: over gRPC one StreamFrames call, updates
+   * written as the stream has room; over ZeroMQ one Frame request per update. `updates` may be sync or async. Leaving the loop early (break, return)
    * cancels the call. A call ended by UNAVAILABLE or CANCELLED is opened again with its unanswered
    * updates first.
    */
@@ -292,6 +203,16 @@ export class Session {
     const feed = new Resumable(updates, this.id);
     const tries = { n: 0 };
     try {
+      while (!this.transport.streams) { // ZeroMQ: one Frame request per update, each tried again as `frame`
+        const encoded = await feed.get(feed.first);
+        if (encoded === undefined) {
+          if (feed.failed) throw feed.error;
+          return;
+        }
+        const reply = await this.#retrying("Frame", encoded.bytes, CameraUpdateSchema);
+        feed.answered();
+        yield reply;
+      }
       for (;;) {
         const call = this.transport.stream(this.route);
         let over = false; // this call ended: its writer stops
@@ -409,9 +330,10 @@ export class Client {
 }
 
 /**
- * A Client for `grpc://host:port` or `grpcs://host:port` (TLS). Connecting is lazy: an unreachable
- * server shows at the first call (UNAVAILABLE), and so does a refused key (UNAUTHENTICATED,
- * PERMISSION_DENIED). Bad options throw DirectorError(INVALID_ARGUMENT).
+ * A Client for `grpc://host:port`, `grpcs://host:port` (TLS) or `tcp://host:port` (ZeroMQ).
+ * Connecting is lazy: an unreachable server shows at the first call (UNAVAILABLE over gRPC,
+ * DEADLINE_EXCEEDED over ZeroMQ), and so does a refused key (UNAUTHENTICATED, PERMISSION_DENIED).
+ * Bad options throw DirectorError(INVALID_ARGUMENT).
  */
 export function connect(url: string, options: ConnectOptions = {}): Client {
   const endpoint = parseUrl(url);
@@ -419,16 +341,27 @@ export function connect(url: string, options: ConnectOptions = {}): Client {
   if (!(timeoutMs > 0)) throw new DirectorError("INVALID_ARGUMENT", `timeoutMs must be > 0, got ${timeoutMs}`);
   const key = resolveKey(options.key);
   if (options.caFile !== undefined && !endpoint.tls) {
-    throw new DirectorError("INVALID_ARGUMENT", "caFile is for grpcs:// URLs (gRPC over TLS); use grpcs://");
+    const instead = endpoint.transport === "zmq" ? "ZeroMQ is encrypted with CURVE: give zmqServerKey" : "use grpcs://";
+    throw new DirectorError("INVALID_ARGUMENT", `caFile is for grpcs:// URLs (gRPC over TLS); ${instead}`);
+  }
+  if (options.zmqServerKey !== undefined && endpoint.transport !== "zmq") {
+    throw new DirectorError("INVALID_ARGUMENT", "zmqServerKey is for tcp:// URLs (ZeroMQ); gRPC is encrypted with TLS: use grpcs://");
+  }
+  if (endpoint.transport === "zmq") {
+    const serverKey = options.zmqServerKey === undefined ? undefined : curveServerKey(options.zmqServerKey);
+    return new Client(new ZmqTransport(endpoint.address, key, serverKey, timeoutMs), url);
   }
   const maxBytes = options.maxMessageBytes ?? DEFAULT_MAX_MESSAGE_BYTES;
   if (!(maxBytes > 0)) throw new DirectorError("INVALID_ARGUMENT", `maxMessageBytes must be > 0, got ${maxBytes}`);
   const channelOptions: grpc.ChannelOptions = {
     "grpc.max_send_message_length": maxBytes,
     "grpc.max_receive_message_length": maxBytes,
+    // channelz (grpc-js's call tracing for its admin service) is on by default and costs every
+    // call some bookkeeping; this SDK serves no channelz
+    "grpc.enable_channelz": 0,
     ...options.channelOptions,
   };
-  return new Client(new Transport(endpoint.address, endpoint.tls, key, options.caFile, timeoutMs, channelOptions), url);
+  return new Client(new GrpcTransport(endpoint.address, endpoint.tls, key, options.caFile, timeoutMs, channelOptions), url);
 }
 
 export { statusName };

@@ -1,5 +1,5 @@
 /**
- * What the transport shares: endpoint URLs, the session and protocol headers, the retry policy,
+ * What the transports share: endpoint URLs, the session and protocol headers, the retry policy,
  * and the FrameUpdate encoder with packed transforms copied as raw little-endian doubles.
  */
 import { randomBytes } from "node:crypto";
@@ -40,21 +40,23 @@ export function newRouteKey(): string {
 }
 
 export interface Endpoint {
-  /** "host:port", as gRPC dials it. */
+  transport: "grpc" | "zmq";
+  /** "host:port", as gRPC dials it; the whole tcp:// URL for ZeroMQ. */
   address: string;
   tls: boolean;
 }
 
-/** `grpc://host:port` or `grpcs://host:port` (TLS); DirectorError(INVALID_ARGUMENT) otherwise. */
+/** `grpc://host:port`, `grpcs://host:port` (gRPC over TLS) or `tcp://host:port` (ZeroMQ);
+ * DirectorError(INVALID_ARGUMENT) otherwise. */
 export function parseUrl(url: string): Endpoint {
   const match = /^([a-z]+):\/\/(.+:\d+)$/.exec(url);
   if (!match) {
-    throw new DirectorError("INVALID_ARGUMENT", `expected grpc://host:port or grpcs://host:port, got ${JSON.stringify(url)}`);
+    throw new DirectorError("INVALID_ARGUMENT", `expected grpc://host:port, grpcs://host:port or tcp://host:port, got ${JSON.stringify(url)}`);
   }
   const [, scheme, address] = match;
-  if (scheme === "grpc" || scheme === "grpcs") return { address: address!, tls: scheme === "grpcs" };
-  const hint = scheme === "tcp" ? " (ZeroMQ is not in this SDK yet: use the server's gRPC address)" : "";
-  throw new DirectorError("INVALID_ARGUMENT", `unknown scheme ${JSON.stringify(scheme)} in ${JSON.stringify(url)}: use grpc:// or grpcs://${hint}`);
+  if (scheme === "grpc" || scheme === "grpcs") return { transport: "grpc", address: address!, tls: scheme === "grpcs" };
+  if (scheme === "tcp") return { transport: "zmq", address: url, tls: false };
+  throw new DirectorError("INVALID_ARGUMENT", `unknown scheme ${JSON.stringify(scheme)} in ${JSON.stringify(url)}: use grpc:// (gRPC), grpcs:// (gRPC over TLS) or tcp:// (ZeroMQ)`);
 }
 
 /** The key as given, else CAMDIRECTOR_KEY, else none; checked without ever showing it. */

@@ -87,10 +87,15 @@ test("a match session's bad takes", async () => {
 });
 
 test("URLs, options, deadlines, unreachable servers and closed clients", async () => {
-  for (const url of ["http://127.0.0.1:1", "127.0.0.1:50051", "tcp://127.0.0.1:5555", "grpc://nohost"]) {
+  for (const url of ["http://127.0.0.1:1", "127.0.0.1:50051", "udp://127.0.0.1:5555", "grpc://nohost", "tcp://nohost"]) {
     assert.throws(() => connect(url), (e) => e instanceof DirectorError && e.code === "INVALID_ARGUMENT", url);
   }
   assert.throws(() => connect(URL_, { caFile: "/etc/hosts" }), (e) => e.code === "INVALID_ARGUMENT" && /grpcs/.test(e.message));
+  assert.throws(() => connect(URL_, { zmqServerKey: "x".repeat(40) }), (e) => e.code === "INVALID_ARGUMENT" && /tcp:\/\//.test(e.message));
+  assert.throws(() => connect("tcp://127.0.0.1:5555", { caFile: "/etc/hosts" }), (e) => e.code === "INVALID_ARGUMENT" && /zmqServerKey/.test(e.message));
+  for (const zmqServerKey of ["too short", "~".repeat(40), "/etc/hosts"]) {
+    assert.throws(() => connect("tcp://127.0.0.1:5555", { zmqServerKey }), (e) => e.code === "INVALID_ARGUMENT", zmqServerKey);
+  }
   assert.throws(() => connect(URL_, { timeoutMs: 0 }), (e) => e.code === "INVALID_ARGUMENT");
   assert.throws(() => connect(URL_, { key: "has space" }), (e) => e.code === "INVALID_ARGUMENT" && !e.message.includes("has space"));
   // nothing listens: UNAVAILABLE at the first call (CreateSession is never tried again)

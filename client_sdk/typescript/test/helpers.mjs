@@ -8,6 +8,9 @@ export const env = (name) => {
   return value;
 };
 
+/** connect()'s options from CAMDIRECTOR_TEST_CONNECT (JSON), when set: a key, a CURVE server key. */
+export const connectOptions = () => JSON.parse(process.env.CAMDIRECTOR_TEST_CONNECT || "{}");
+
 export const readData = () => JSON.parse(readFileSync(env("CAMDIRECTOR_TEST_DATA"), "utf8"));
 
 export const createRequest = (b64) => fromBinary(pb.CreateSessionRequestSchema, Buffer.from(b64, "base64"));

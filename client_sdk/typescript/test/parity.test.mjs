@@ -1,9 +1,10 @@
 // The TypeScript SDK's replies equal the Python SDK's bit for bit for the same session inputs
-// (assert.deepStrictEqual compares numbers with Object.is: every double, -0 included).
+// (assert.deepStrictEqual compares numbers with Object.is: every double, -0 included), over the
+// transport of CAMDIRECTOR_TEST_URL (gRPC, or ZeroMQ with CURVE and a key) as the Python side used.
 import assert from "node:assert/strict";
 import { test } from "node:test";
 import { connect, encodeFrameUpdate } from "../dist/index.js";
-import { collect, createRequest, env, frameFromJson, readData, replyJson } from "./helpers.mjs";
+import { collect, connectOptions, createRequest, env, frameFromJson, readData, replyJson } from "./helpers.mjs";
 
 const data = readData();
 
@@ -17,7 +18,7 @@ test("an encoded FrameUpdate with packed transforms equals the Python SDK's byte
 
 test("toric rig, packed transforms, unary then streamed, then a style change", async () => {
   const { toric } = data;
-  const client = connect(env("CAMDIRECTOR_TEST_URL"));
+  const client = connect(env("CAMDIRECTOR_TEST_URL"), connectOptions());
   try {
     const session = await client.createSession(createRequest(toric.create));
     const replies = [];
@@ -39,7 +40,7 @@ test("toric rig, packed transforms, unary then streamed, then a style change", a
 
 test("RIG_MATCH: events, a take held then released, shots and candidates", async () => {
   const { match } = data;
-  const client = connect(env("CAMDIRECTOR_TEST_URL"));
+  const client = connect(env("CAMDIRECTOR_TEST_URL"), connectOptions());
   try {
     const session = await client.createSession(createRequest(match.create));
     const replies = await collect(session.stream(async function* () { for (const f of match.parts[0]) yield frameFromJson(f); }()));
