@@ -5,7 +5,17 @@ import json
 
 import pytest
 
-from load_tests import capacity, dashboard_bench, monitors_bench, movers_bench, overview_bench, soak, stream, tracks_bench
+from load_tests import (
+    capacity,
+    dashboard_bench,
+    monitors_bench,
+    movers_bench,
+    overview_bench,
+    real_matches,
+    soak,
+    stream,
+    tracks_bench,
+)
 
 
 def _run(main, tmp_path, *args) -> dict:
@@ -132,3 +142,16 @@ def test_movers_bench_reports_every_mode_and_count_against_none(tmp_path):
     assert set(result["median_ratio_to_0_movers"]) == set(movers_bench.MODES)
     assert result["floor_stale_frame_wall_ms"]["median"] > 0 and all(c["median_over_floor"] > 0 for c in cases.values())
 
+
+
+def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_program_twice(tmp_path):
+    """A real duel's first 24 s (its first kill at 20 s), run twice from scratch (the level added anew, a new server):
+    issue 29's "two runs of the same match give the same program, pose for pose"."""
+    result = _run(real_matches.main, tmp_path, "--only", "duel_bravado", "--minutes", "0.4", "--twice",
+                  "--markdown", str(tmp_path / "table.md"))
+    duel = result["matches"]["duel_bravado"]
+    assert set(duel["directors"]) == {"PLANNED", "HLTV", "AUTOTRACK"} and duel["match"]["players"] == 2
+    assert duel["same_program_twice"] == {"PLANNED": True, "HLTV": True, "AUTOTRACK": True}
+    assert duel["ceilings"]["kills"] >= 1
+    table = (tmp_path / "table.md").read_text().splitlines()
+    assert len(table) == 2 + 4 and table[2].startswith("| duel_bravado | PLANNED |")

@@ -9,10 +9,10 @@ import pytest
 
 from camdirector.evaluation.match.match_file import MatchEvent, MatchPlayer, MatchRecording
 from camdirector.evaluation.match.measure import (
+    EYE_HEIGHT_FRACTION,
     BodySampler,
     Program,
     cuts_per_minute,
-    EYE_HEIGHT_FRACTION,
     framed_visibility,
     in_eyes_of,
     jump_cuts,

@@ -48,8 +48,6 @@ def _progress(text: str) -> None:
 
 def run_eval_match(args: argparse.Namespace) -> int:
     """Runs `camdirector eval-match` from parsed arguments; returns the exit status."""
-    import dataclasses
-
     from camdirector.evaluation.match.evaluate import evaluate_match, plot_result
     from camdirector.evaluation.match.match_file import load_match
     from camdirector.evaluation.match.program_video import VideoUnavailable, render_program
@@ -64,11 +62,7 @@ def run_eval_match(args: argparse.Namespace) -> int:
         if args.minutes is not None:
             if not args.minutes > 0:
                 raise ValueError("--minutes must be positive")
-            keep = match.time_s <= match.time_s[0] + 60.0 * args.minutes
-            match = dataclasses.replace(
-                match, time_s=match.time_s[keep], positions_world=match.positions_world[keep],
-                rotations_xyzw=match.rotations_xyzw[keep], alive=match.alive[keep],
-                events=[e for e in match.events if e.time_s <= match.time_s[keep][-1]])
+            match = match.until(match.time_s[0] + 60.0 * args.minutes)
         if args.rate_hz > match.rate_hz:
             raise ValueError(f"--rate-hz {args.rate_hz:g} is above the file's {match.rate_hz:g} Hz")
         result, runs = evaluate_match(match, args.delay, data_dir=args.data_dir, rate_hz=args.rate_hz,

@@ -85,6 +85,17 @@ class MatchRecording:
     def __post_init__(self):
         validate(self)
 
+    def until(self, end_s: float) -> MatchRecording:
+        """The match's frames and events up to game time end_s (at least its first frame), every
+        per-frame array cut alike."""
+        keep = self.time_s <= max(end_s, self.time_s[0])
+        last_s = self.time_s[keep][-1]
+        return dataclasses.replace(
+            self, time_s=self.time_s[keep], positions_world=self.positions_world[keep],
+            rotations_xyzw=self.rotations_xyzw[keep], alive=self.alive[keep],
+            stats=None if self.stats is None else self.stats[keep],
+            events=[e for e in self.events if e.time_s <= last_s])
+
     def player_index(self) -> dict[str, int]:
         """player id -> column in the per-player arrays."""
         return {p.id: i for i, p in enumerate(self.players)}

@@ -1,0 +1,120 @@
+"""The match directors on real matches (issue 29, "Done when"): every development QuakeWorld demo that
+has its map, imported (`import-match`), its map added as a level with the Quake player's size, and
+`eval-match` run on it: our director, HLTV's and the autotrack, the ceilings, with a delay.
+
+    python -m load_tests.real_matches [--minutes 3] [--delay 10] [--rate-hz 30] [--twice]
+                                      [--only 4on4_dm2,...] [--json out/rm.json] [--markdown out/rm.md]
+
+--twice runs each match a second time from scratch (the level added anew in another folder, a new
+server) and reports whether every director's program digest is the same. The two held-out matches
+of the issue are not in this list and must never be: they judge the director.
+Prints the JSON result; --markdown writes the per-match, per-director table of docs/casting.md.
+"""
+from __future__ import annotations
+
+import argparse
+import gzip
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from load_tests.report import emit
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMOS = ROOT / "tests" / "data" / "real_matches"
+MAPS = ROOT / "tests" / "data" / "real_maps"
+# name -> (demo, map); the 1on1 on tron is left out: no copy of its map was found (real_maps/SOURCES.md)
+MATCHES = {
+    "4on4_dm2": ("4on4_s_vs_pol_dm2_20241118-2135.mvd.gz", "dm2.bsp.gz"),
+    "2on2_frobodm2": ("2on2_sf_vs_red_frobodm2_220104-0915.mvd.gz", "frobodm2.bsp.gz"),
+    "duel_bravado": ("duel_holy_vs_dago_bravado_20240426-1659.mvd.gz", "bravado.bsp.gz"),
+    "wipeout_q3dm6qw": ("wipeout_red_vs_blue_q3dm6qw_20240406-2028.mvd.gz", "q3dm6qw.bsp.gz"),
+}
+COLUMNS = (("kill coverage", lambda f: f["kill_coverage"]),
+           ("first person", lambda f: f["kill_coverage_first_person"]),
+           ("program vis.", lambda f: f["program_visibility"]),
+           ("height", lambda f: f["shown_height"]["median"]),
+           ("shots <2 s", lambda f: f["shots"]["under_2s"]),
+           ("shot median s", lambda f: f["shots"]["median"]),
+           ("shot max s", lambda f: f["shots"]["max"]),
+           (">20 s missing a kill", lambda f: f["long_shots_missing_kills"]),
+           ("cuts/min", lambda f: f["cuts_per_min"]),
+           ("compute p50/p99 ms", lambda f: f"{f['compute_ms']['median']:.2f} / {f['compute_ms']['p99']:.1f}"))
+
+
+def prepare(name: str, folder: Path, minutes: float | None):
+    """The match, imported, with its map added as a level in folder; cut to its first minutes."""
+    from camdirector.geometry import quake_frame
+    from camdirector.matches.quakeworld_mvd import import_mvd
+    from camdirector.precompute.tracks.registry import LevelRegistry
+
+    demo, bsp = MATCHES[name]
+    level = bsp.split(".")[0]
+    map_path = folder / f"{level}.bsp"
+    map_path.write_bytes(gzip.decompress((MAPS / bsp).read_bytes()))
+    with LevelRegistry(folder / "data") as registry:
+        registry.add_level(level, map_path, agent_height_m=quake_frame.PLAYER_HEIGHT_M,
+                           agent_radius_m=quake_frame.PLAYER_RADIUS_M)
+    match = import_mvd(gzip.decompress((DEMOS / demo).read_bytes()), level=level, name=demo)
+    return match if minutes is None else match.until(match.time_s[0] + 60.0 * minutes)
+
+
+def run_match(name: str, args) -> dict:
+    from camdirector.evaluation.match.evaluate import evaluate_match
+
+    runs = []
+    for _ in range(2 if args.twice else 1):
+        with tempfile.TemporaryDirectory(prefix=f"real-{name}-") as tmp:
+            t0 = time.perf_counter()
+            match = prepare(name, Path(tmp), args.minutes)
+            result, _ = evaluate_match(match, args.delay, data_dir=Path(tmp) / "data", rate_hz=args.rate_hz, seed=0,
+                                       progress=lambda text: print(f"{name}: {text}", file=sys.stderr, flush=True))
+            result["wall_s"] = round(time.perf_counter() - t0, 1)
+            runs.append(result)
+    out = runs[0]
+    if args.twice:
+        out["same_program_twice"] = {d: runs[0]["directors"][d]["program_sha256"] == runs[1]["directors"][d]["program_sha256"]
+                                     for d in out["directors"]}
+    return out
+
+
+def markdown(results: dict) -> str:
+    """One row per match and director: the figures of COLUMNS, the ceilings beside each match."""
+    lines = ["| match | director | " + " | ".join(c for c, _ in COLUMNS) + " |",
+             "|---|---|" + "---|" * len(COLUMNS)]
+    for name, result in results.items():
+        c = result["ceilings"]
+        for director, figures in result["directors"].items():
+            cells = [str(get(figures)) for _, get in COLUMNS]
+            lines.append(f"| {name} | {director} | " + " | ".join(cells) + " |")
+        lines.append(f"| {name} | ceilings | reference {c['reference_kill_coverage']}, greedy 2-s "
+                     f"{c['greedy_2s_kill_coverage']} ({c['kills']} kills) |" + " |" * (len(COLUMNS) - 1))
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--minutes", type=float, default=None, help="each match's first minutes (default: all)")
+    parser.add_argument("--delay", type=float, default=10.0, help="broadcast delay, s (default 10)")
+    parser.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0, help="frames a second sent (default 30)")
+    parser.add_argument("--twice", action="store_true", help="run each match twice from scratch, compare programs")
+    parser.add_argument("--only", default="", help="comma-separated match names (default: all of MATCHES)")
+    parser.add_argument("--json", type=Path)
+    parser.add_argument("--markdown", type=Path)
+    args = parser.parse_args(argv)
+    names = [n for n in args.only.split(",") if n] or list(MATCHES)
+    unknown = [n for n in names if n not in MATCHES]
+    if unknown:
+        print(f"real_matches: unknown match {unknown}; known: {sorted(MATCHES)}", file=sys.stderr)
+        return 2
+    results = {name: run_match(name, args) for name in names}
+    emit({"delay_s": args.delay, "rate_hz": args.rate_hz, "minutes": args.minutes, "matches": results}, args.json)
+    if args.markdown is not None:
+        args.markdown.parent.mkdir(parents=True, exist_ok=True)
+        args.markdown.write_text(markdown(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
