@@ -1,7 +1,9 @@
 """Interest: how much each player and each pair of opponents is worth showing at a moment.
 
-A fight is two living opponents within `engage_range_m` of each other, at least one facing the
-other (within acos(facing_cos) of its forward). Its score in [0, 1] is the proximity (1 at contact,
+A fight is two living opponents within `engage_range_m` of each other who can see each other (the
+segment between their aim points crosses no level geometry: through a wall or a floor is no fight,
+however near; on real maps of several storeys most near pairs are on another floor), at least one
+facing the other (within acos(facing_cos) of its forward). Its score in [0, 1] is the proximity (1 at contact,
 0 at the range) times the mean of the two facings (each 0 when looking away by more than the
 facing cone, 1 when looking straight at the other). This is the HLTV director's player ranking
 idea (opponents near and facing, hltvdirector.cpp AnalyzePlayers) restricted to opponents and
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from camdirector.geometry.raycast import RayScene
 from camdirector.pipeline.inputs import GameEvent
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
@@ -24,8 +27,10 @@ def event_priority(event: GameEvent, settings: MatchSettings) -> int:
     return event.priority if event.priority > 0 else settings.priorities[event.kind]
 
 
-def fight_matrix(moment: Moment, teams: np.ndarray, settings: MatchSettings) -> np.ndarray:
-    """(n, n) symmetric fight scores in [0, 1] of a moment (module docstring); teams (n,) int."""
+def fight_matrix(moment: Moment, teams: np.ndarray, settings: MatchSettings,
+                 ray_scene: RayScene | None = None) -> np.ndarray:
+    """(n, n) symmetric fight scores in [0, 1] of a moment (module docstring); teams (n,) int.
+    Without a ray scene every pair is in sight (a session without a level)."""
     delta = moment.feet_world[None, :, :] - moment.feet_world[:, None, :]   # (n, n, 3): i -> j
     delta[..., 1] = 0.0
     distance = np.linalg.norm(delta, axis=2)
@@ -34,8 +39,21 @@ def fight_matrix(moment: Moment, teams: np.ndarray, settings: MatchSettings) -> 
     cos_facing = np.einsum("ik,ijk->ij", moment.forward_world, toward)       # (n, n): i's forward . unit(i -> j)
     facing = np.clip((cos_facing - settings.facing_cos) / max(1.0 - settings.facing_cos, 1e-6), 0.0, 1.0)
     proximity = np.clip(1.0 - distance / settings.engage_range_m, 0.0, 1.0)
-    opponents = (teams[:, None] != teams[None, :]) & moment.alive[:, None] & moment.alive[None, :]
+    opponents = (teams[:, None] != teams[None, :]) & moment.alive[:, None] & moment.alive[None, :] & (proximity > 0.0)
+    if ray_scene is not None:
+        opponents &= in_sight(moment, opponents, ray_scene)
     return np.where(opponents, proximity * 0.5 * (facing + facing.T), 0.0)
+
+
+def in_sight(moment: Moment, pairs: np.ndarray, ray_scene: RayScene) -> np.ndarray:
+    """(n, n) symmetric bool: whether the aim points of each pair marked in pairs (n, n) bool see
+    each other (one ray per unordered pair); False for the unmarked."""
+    ii, jj = np.nonzero(np.triu(pairs, 1))
+    seen = np.zeros(pairs.shape, dtype=bool)
+    if len(ii):
+        clear = ~ray_scene.occluded(moment.aims_world[ii], moment.aims_world[jj])
+        seen[ii[clear], jj[clear]] = True
+    return seen | seen.T
 
 
 def recent_event_boost(events: list[GameEvent], index: dict[str, int], now_s: float, n: int,

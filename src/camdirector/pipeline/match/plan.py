@@ -66,6 +66,7 @@ ANTICIPATION_DISCOUNT = 0.9                  # a future fight counts this much o
 FOLLOW_SHARE = 0.5                           # one fighter alone is worth this share of its best fight
 GROUP_SHARE = 0.6                            # a group: this share of its best fight, plus GROUP_EXTRA per extra player
 GROUP_EXTRA = 0.1
+ROAM_BONUS = 0.1                             # a player in no fight: the overview's score plus this times its nearness
 MIN_SWITCH_GAIN = 0.05                       # and a better situation must gain at least this much
 PRE_EVENT_S = 0.5                            # a planned shot's camera is also scored this long before its event, s
 PRE_EVENT_WEIGHT = 0.25                      # with this weight against 1 for each event's own moment
@@ -232,11 +233,13 @@ class PlannedDirector:
         """Every situation worth showing at the moment, best first (module docstring)."""
         s = self.settings
         now = moment.time_s
-        fights = fight_matrix(moment, self.teams, s)
+        ray_scene = self.builder.visibility.ray_scene
+        fights = fight_matrix(moment, self.teams, s, ray_scene)
         for step_s in ANTICIPATION_STEPS_S:
             if now + step_s > buffer.horizon_s:
                 break
-            ahead = fight_matrix(buffer.at(now + step_s), self.teams, s) * moment.alive[:, None] * moment.alive[None, :]
+            ahead = fight_matrix(buffer.at(now + step_s), self.teams, s, ray_scene) \
+                * moment.alive[:, None] * moment.alive[None, :]
             fights = np.maximum(fights, ANTICIPATION_DISCOUNT * ahead)
         interest = fights + recent_event_boost(buffer.events_between(now - s.recent_event_s, now), self.index, now,
                                                len(self.players), s) * moment.alive[:, None] * moment.alive[None, :]
@@ -249,6 +252,7 @@ class PlannedDirector:
         for i in np.flatnonzero(best_fight > 0.0).tolist():
             options.append(Option(ShotKind.FOLLOW, (i,), FOLLOW_SHARE * float(best_fight[i]),
                                   f"fighter: {self.players[i]}"))
+        options += self._roaming(moment, best_fight)
         fighters = np.flatnonzero(best_fight > 0.0)
         if len(fighters) >= 3:
             feet = moment.feet_world[fighters]
@@ -263,6 +267,21 @@ class PlannedDirector:
         options.append(Option(ShotKind.OVERVIEW, (), s.overview_min_interest, "overview: no fight worth a closer shot"))
         options.sort(key=lambda o: -o.score)
         return options
+
+    def _roaming(self, moment: Moment, best_fight: np.ndarray) -> list[Option]:
+        """FOLLOW options of the living players in no fight, nearest an opponent first: on a real
+        map most players most of the time see nobody (corridors, other floors), and one of them
+        running toward the enemy shows more than an OVERVIEW, which in a closed level shows walls.
+        Each scores just above the overview, more the nearer its nearest living opponent."""
+        s = self.settings
+        alive = moment.alive
+        distance = np.linalg.norm(moment.feet_world[None, :, :] - moment.feet_world[:, None, :], axis=2)
+        opponents = (self.teams[:, None] != self.teams[None, :]) & alive[:, None] & alive[None, :]
+        nearest = np.where(opponents, distance, np.inf).min(axis=1)
+        proximity = np.clip(1.0 - nearest / s.engage_range_m, 0.0, 1.0)
+        return [Option(ShotKind.FOLLOW, (i,), s.overview_min_interest + ROAM_BONUS * float(proximity[i]),
+                       f"on the move: {self.players[i]}, an opponent {nearest[i]:.0f} m away")
+                for i in np.flatnonzero(alive & (best_fight <= 0.0) & (proximity > 0.0)).tolist()]
 
     # -- planned beats ----------------------------------------------------------------------
     def _event_shot(self, event: GameEvent) -> tuple[ShotKind, tuple[int, ...]] | None:

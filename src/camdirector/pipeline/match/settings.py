@@ -80,6 +80,12 @@ class MatchSettings:
     candidates: int = 3                  # preview shots offered beside the program. [0, 16]
     jump_cut_deg: float = 30.0           # the 30-degree rule: a cut on a shared subject turns the view this much, deg. [0, 180]
     overview_height_m: float = 12.0      # the bounding-box overview's height above the players, m. (0, 1000]
+    pull_below: float = 0.5              # a camera that sees less than this share of its first subject's points (the rest
+                                         # behind walls) comes in front of the wall; on the line to the aim point alone, a
+                                         # ledge hiding the chest pulled in cameras that saw most of the body. [0, 1]
+    pull_margin_m: float = 0.3           # and stops this far short of the wall (HLTV's wall margin), m. [0, 5]
+    pull_regrow_m_s: float = 2.0         # and goes back out toward its place this fast (real players run 10 m/s past
+                                         # corners; HLTV's 0.8 m/s held cameras pulled in for seconds), m/s. (0, 100]
     priorities: dict[EventKind, int] = field(default_factory=lambda: {
         EventKind.UNSPECIFIED: 1, EventKind.KILL: 7, EventKind.DAMAGE: 3, EventKind.OBJECTIVE: 5,
         EventKind.CUSTOM: 4})            # the kind's default priority (a death is 7 as in HLTV), [1, 15]
@@ -88,15 +94,15 @@ class MatchSettings:
     def __post_init__(self):
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
                                       "respawn_walk_m", "engage_range_m",
-                                      "group_radius_m", "overview_height_m"))
+                                      "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
             raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")
         if not 2 <= self.max_group <= 64 or not 1 <= self.samples_per_player <= 256 \
                 or not 1 <= self.beat_min_priority <= 15:
             raise ValueError("MatchSettings: max_group in [2, 64], samples_per_player in [1, 256], "
                              "beat_min_priority in [1, 15]")
-        if not -1.0 <= self.facing_cos <= 1.0 or not 0.0 <= self.min_visible <= 1.0:
-            raise ValueError("MatchSettings: facing_cos in [-1, 1], min_visible in [0, 1]")
+        if not -1.0 <= self.facing_cos <= 1.0 or not 0.0 <= self.min_visible <= 1.0 or not 0.0 <= self.pull_below <= 1.0:
+            raise ValueError("MatchSettings: facing_cos in [-1, 1], min_visible and pull_below in [0, 1]")
         if set(self.priorities) != set(EventKind) or not all(1 <= p <= 15 for p in self.priorities.values()):
             raise ValueError("MatchSettings: one priority in [1, 15] per EventKind")
 

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation, project_from_cameras
+from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.toric import (
     DegenerateTorus,
     Torus,
@@ -105,6 +106,7 @@ class ToricCamera:
         self.lens, self.gaze_room_m = lens, style.gaze_room_m
         self.place = self.goal = place
         self.heading: np.ndarray | None = None
+        self.reach_m: float | None = None  # pulled in front of a wall: how far from A it may stand now (None: free)
 
     def composition(self, width: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
         """The screen points of A and B (2,) each at a framing width, and their composition angle, rad."""
@@ -191,6 +193,35 @@ class ToricCamera:
         else:
             rotation = level_pair_rotation(position_world, a, b, screen_a, screen_b, self.lens)
         return CameraPose(position_world, rotation, self.lens.vertical_fov_deg)
+
+
+    def pulled_in(self, moment: Moment, pose: CameraPose, hidden: bool, ray_scene: RayScene, dt_s: float,
+                  margin_m: float, regrow_m_s: float) -> tuple[CameraPose, bool]:
+        """The pose kept in front of the walls between it and A (the first subject's aim point), and
+        whether it was pulled in: a degrade for the moments the place search did not foresee (a
+        player running past a corner at 10 m/s carries its torus through a wall between two plan
+        ticks). hidden: whether the place's view of A is mostly blocked (the caller's ray casts to
+        A's body): only then does the camera come in, along the line from A to the place, to
+        margin_m short of the first wall, as HLTV's chase camera does; it goes back out at
+        regrow_m_s (it never jumps out, so a wall flickering in and out of the line does not make
+        the picture jump). The rotation is pose_from's at the new point, so the framing of A and B
+        is kept as well as it can be."""
+        if not hidden and self.reach_m is None:
+            return pose, False
+        a, _ = self.points(moment)
+        offset = pose.position_world - a
+        full_m = float(np.linalg.norm(offset))
+        if full_m < 1e-6:
+            return pose, False
+        direction = offset / full_m
+        allowed_m = full_m if self.reach_m is None else self.reach_m + dt_s * regrow_m_s
+        if hidden:
+            allowed_m = min(allowed_m, float(ray_scene.first_hit(a, direction[None, :])[0]) - margin_m)
+        if allowed_m >= full_m:
+            self.reach_m = None
+            return pose, False
+        self.reach_m = max(allowed_m, 0.0)
+        return self.pose_from(moment, a + max(self.reach_m, 0.05) * direction, self.place.width), True
 
 
 class StaticCamera:
