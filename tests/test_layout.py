@@ -114,10 +114,10 @@ def _camdirector(*folders: str) -> tuple[str, ...]:
 
 
 @pytest.mark.parametrize("folder, forbidden", [
-    ("infra", _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "demo", "deploy")),
-    ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "demo", "deploy")),
-    ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "demo", "deploy")),
-    ("pipeline", _camdirector(*PROCESSES, "evaluation", "demo", "deploy")),
+    ("infra", _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "matches", "demo", "deploy")),
+    ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "matches", "demo", "deploy")),
+    ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "matches", "demo", "deploy")),
+    ("pipeline", _camdirector(*PROCESSES, "evaluation", "matches", "demo", "deploy")),
 ])
 def test_dependencies_point_one_way(folder, forbidden):
     files = sorted((PACKAGE / folder).rglob("*.py"))

@@ -296,10 +296,10 @@ class LevelRegistry:
                   agent_height_m: float = 2.0, agent_radius_m: float = 0.6,
                   progress: Callable[[float], None] | None = None, seed: int = 0,
                   replace: bool = True, tenant: str = DEFAULT_TENANT) -> LevelRecord:
-        """Precompute a level file (OBJ/GLB, in units of `scale` metres) and index it under name
-        in `tenant`'s namespace, replacing a level of that name (unless `replace` is false: then
-        LevelExists when the name is taken by the time the precompute is done; nothing is left
-        behind). Raises ValueError (MeshError) on a bad name, tenant or file."""
+        """Precompute a level file (OBJ/GLB in units of `scale` metres, or a Quake BSP, already in
+        metres, times `scale`) and index it under name in `tenant`'s namespace, replacing a level
+        of that name (unless `replace` is false: then LevelExists when the name is taken by the
+        time the precompute is done; nothing is left behind). Raises ValueError (MeshError) on a bad name, tenant or file."""
         qualified = qualified_name(name, tenant)
         settings = TrackSettings(agent_height_m=agent_height_m, agent_radius_m=agent_radius_m)
         mesh = load_level_mesh(Path(level_path), scale)
