@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import grpc
 import numpy as np
 import pytest
 
 import camdirector_client as cd
+from camdirector.version import PROTOCOL
+from camdirector.worker.recording import read_entries
 from tests.service.wire_client import two_target_request
 
 
@@ -80,3 +83,57 @@ def test_match_session_take_shot_sync_and_async(url):
                 assert shot.kind == cd.pb.SHOT_GROUP
 
     asyncio.run(run_async())
+
+
+def _said_protocol(session) -> int:
+    """The client_protocol the server received: its recording's CreateSessionRequest (the session closed)."""
+    return next(read_entries(Path(session.recording_path))).create.client_protocol
+
+
+def test_sync_and_async_sessions_say_the_protocol(url):
+    request = two_target_request(seed=4, record=True)   # client_protocol 0: the SDK says its own
+    with cd.connect(url) as client:
+        with client.create_session(request) as from_request:
+            pass
+        with client.create_session(targets=request.targets, objects=request.objects, record=True) as from_keywords:
+            pass
+    assert _said_protocol(from_request) == _said_protocol(from_keywords) == PROTOCOL
+
+    async def run_async():
+        async with cd.connect_async(url) as client:
+            async with client.create_session(two_target_request(record=True)) as session:
+                return session
+    assert _said_protocol(asyncio.run(run_async())) == PROTOCOL
+
+
+def _refused_as_newer(error: cd.DirectorError) -> bool:
+    return (error.code == grpc.StatusCode.FAILED_PRECONDITION and f"protocol {PROTOCOL + 1}," in error.message
+            and f"protocol {PROTOCOL}:" in error.message and "upgrade the server" in error.message)
+
+
+def test_a_request_claiming_a_newer_protocol_is_refused_and_the_client_goes_on(url):
+    newer = two_target_request(client_protocol=PROTOCOL + 1)   # said by the caller: the SDK keeps it
+    with cd.connect(url) as client:
+        with pytest.raises(cd.DirectorError) as refused:
+            client.create_session(newer)
+        assert _refused_as_newer(refused.value), refused.value
+        with client.create_session(two_target_request()) as session:
+            assert session.frame(1, 1 / 60).frame == 1
+
+    async def run_async():
+        async with cd.connect_async(url) as client:
+            with pytest.raises(cd.DirectorError) as refused:
+                await client.create_session(newer)
+            async with client.create_session(two_target_request()) as session:
+                return refused.value, (await session.frame(1, 1 / 60)).frame
+    error, answered = asyncio.run(run_async())
+    assert _refused_as_newer(error) and answered == 1, error
+
+
+def test_an_sdk_of_a_newer_protocol_is_told_so(url, monkeypatch):
+    """The SDK's own PROTOCOL raised in-process, as in a later release: over ZeroMQ, with no
+    metadata, the request's client_protocol alone tells the server."""
+    monkeypatch.setattr(cd.wire, "PROTOCOL", PROTOCOL + 1)
+    with cd.connect(url) as client, pytest.raises(cd.DirectorError) as refused:
+        client.create_session(two_target_request())
+    assert _refused_as_newer(refused.value), refused.value

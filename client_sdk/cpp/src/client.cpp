@@ -169,6 +169,7 @@ cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double 
       return CD_FAILED_PRECONDITION;
     }
   }
+  if (request.client_protocol() == 0) request.set_client_protocol(CD_PROTOCOL);  // kept for recreations too
   const std::vector<std::string> slots = camdirector::sdk::slot_ids_of(request);
   if (slots.size() > client->config.max_states) {
     return fail(client, CD_INVALID_ARGUMENT,
@@ -264,6 +265,8 @@ void cd_client::reset_session_locked() {
 extern "C" {
 
 const char* cd_version(void) { return CAMDIRECTOR_VERSION; }
+
+uint32_t cd_protocol(void) { return CD_PROTOCOL; }
 
 const char* cd_status_name(int status) {
   if (status >= 0 && status < static_cast<int>(sizeof kStatusNames / sizeof kStatusNames[0])) {

@@ -47,6 +47,9 @@ constexpr int kLostAfterRefusals = 3;
 constexpr char kRouteHeader[] = "x-camdirector-route";
 // A new session's route key: 32 lowercase hex characters, 128 bits from std::random_device.
 std::string new_route_key();
+// The metadata of the protocol this SDK speaks (CD_PROTOCOL) on every call; a server that speaks
+// an older one refuses CreateSession.
+constexpr char kProtocolHeader[] = "camdirector-protocol";
 // The metadata of the client's key on every call ("Bearer KEY"), and where a key comes from when
 // cd_config.key is none.
 constexpr char kAuthorizationHeader[] = "authorization";
@@ -182,8 +185,8 @@ struct cd_client {
   void on_write_done();
   void on_stream_done(const grpc::Status& status);
 
-  // request.cpp: puts the session's route key and the client's key on a call's context (before
-  // the call starts); every call of a session gets both.
+  // request.cpp: puts the session's route key, the protocol and the client's key on a call's
+  // context (before the call starts); every call of a session gets them.
   void add_call_metadata(grpc::ClientContext* context, const std::string& route_key) const;
 
   // client.cpp

@@ -300,5 +300,6 @@ void copy_cstr(char* dst, size_t size, const std::string& src) {
 
 void cd_client::add_call_metadata(grpc::ClientContext* context, const std::string& route_key) const {
   if (!route_key.empty()) context->AddMetadata(camdirector::sdk::kRouteHeader, route_key);
+  context->AddMetadata(camdirector::sdk::kProtocolHeader, std::to_string(CD_PROTOCOL));
   if (!authorization.empty()) context->AddMetadata(camdirector::sdk::kAuthorizationHeader, authorization);
 }

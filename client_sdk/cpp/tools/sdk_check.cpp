@@ -11,6 +11,9 @@
 //       records their metadata: open, stream, UpdateStyle, TakeShot, stream on until the server
 //       forgets the session and it is recreated, close; then a second session that
 //       cd_client_destroy closes
+//   sdk_check protocol HOST:PORT         a recorded session (the test reads the protocol it said
+//       from the server's recording), then a request claiming cd_protocol() + 1 (refused), then
+//       another session on the same client
 //   sdk_check stream ADDRESS --until resumed|recreated|failed [--after N] [--timeout S] [--ca-file PEM]
 //       a 60 Hz loop; prints {"ready": ...} once streaming, then keeps going until the event came
 //       and N more frames (default 60) were answered on the session after it, or S seconds
@@ -493,6 +496,28 @@ int scenario_calls(const char* address) {
   return 0;
 }
 
+int scenario_protocol(const char* address) {
+  Scene scene;
+  scene.desc.record = 1;
+  cd_client* client = make_client(address);
+  if (!open_or_say(client, scene)) return 1;
+  const std::string recorded_id = session_of(client);
+  const cd_status closed = cd_session_close(client, nullptr, 5.0);
+  // A CreateSessionRequest of nothing but client_protocol (field 10, a one-byte varint while the
+  // protocol is under 127): the server refuses it for the protocol before it looks at the scene.
+  const uint32_t newer = cd_protocol() + 1;
+  const unsigned char claim[] = {10 << 3, static_cast<unsigned char>(newer)};
+  const cd_status refused = cd_session_open_serialized(client, claim, sizeof claim, 5.0);
+  const std::string refused_error = error_of(client);
+  Scene again;
+  const bool reopened = open_or_say(client, again);
+  std::string out = "{\"protocol\": " + std::to_string(cd_protocol()) + ", \"header_protocol\": " +
+                    std::to_string(CD_PROTOCOL) + ", \"recorded_session_id\": " + q(recorded_id) +
+                    ", \"recorded_close\": " + q(cd_status_name(closed)) + ", \"newer\": " + q(cd_status_name(refused)) +
+                    ", \"newer_error\": " + q(refused_error) + ", \"reopened\": " + (reopened ? "true" : "false");
+  return close_and_print(client, out);
+}
+
 int scenario_stream(const char* address, const std::string& until, uint64_t after, double timeout_s,
                     const char* ca_file) {
   Scene scene;
@@ -580,6 +605,7 @@ int main(int argc, char** argv) {
   if (scenario == "refused") return scenario_refused(address);
   if (scenario == "pose_output" && argc > 3) return scenario_pose_output(address, argv[3]);
   if (scenario == "calls") return scenario_calls(address);
+  if (scenario == "protocol") return scenario_protocol(address);
   if (scenario == "flood") return scenario_flood(address, argc > 3 ? std::strtoull(argv[3], nullptr, 10) : 3000);
   if (scenario == "stream") {
     std::string until = "resumed";

@@ -63,9 +63,10 @@ DEFAULT_MAX_MESSAGE_BYTES = 64 * 1024 * 1024
 # gRPC metadata on every call of a session, CreateSession included: a balancer in front of many
 # nodes routes by a consistent hash of it (docs/scaling.md), so a session's calls meet one node.
 ROUTE_HEADER = "x-camdirector-route"
-# The wire contract's revision this SDK speaks, sent on every gRPC call: a server that speaks an
-# older one refuses CreateSession with FAILED_PRECONDITION and says which (its own revision is in
-# its initial metadata, camdirector-protocol, and in /healthz).
+# The wire contract's revision this SDK speaks, sent on every gRPC call and, on every transport,
+# as CreateSessionRequest.client_protocol: a server that speaks an older one refuses CreateSession
+# with FAILED_PRECONDITION and says which (its own revision is in its initial metadata,
+# camdirector-protocol, and in /healthz).
 PROTOCOL_HEADER = "camdirector-protocol"
 PROTOCOL = 1
 
@@ -306,15 +307,20 @@ def create_session_request(
     level_id: str = "",
     delay_s: float = 0.0,
 ) -> pb.CreateSessionRequest:
-    """``request`` as it is, or one built from the keywords; TypeError when given both.
-    ``level_id``: the level of a ``RIG_TRACKS`` or ``RIG_MATCH`` session; ``delay_s``: a
-    ``RIG_MATCH`` session's broadcast delay, seconds."""
+    """``request``, or one built from the keywords; TypeError when given both. Its
+    ``client_protocol`` says this SDK's PROTOCOL where it was 0 (not said): set on the caller's
+    message, which is not copied (a scene of meshes is large). ``level_id``: the level of a
+    ``RIG_TRACKS`` or ``RIG_MATCH`` session; ``delay_s``: a ``RIG_MATCH`` session's broadcast
+    delay, seconds."""
     if request is not None:
         if (objects is not None or targets is not None or lens is not None or style is not None or seed or record
                 or level_id or delay_s):
             raise TypeError("pass either a CreateSessionRequest or keywords, not both")
+        if not request.client_protocol:
+            request.client_protocol = PROTOCOL
         return request
-    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id, delay_s=delay_s)
+    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id, delay_s=delay_s,
+                                  client_protocol=PROTOCOL)
     if objects is not None:
         msg.objects.extend(objects)
     if targets is not None:

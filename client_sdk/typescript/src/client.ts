@@ -6,6 +6,8 @@
  * - every gRPC call of a session carries its route key (`x-camdirector-route`, picked before
  *   CreateSession and sent with it too), the protocol header and the key (`authorization`); a
  *   ZeroMQ request carries the key in its third frame;
+ * - CreateSession says the protocol this SDK speaks (`clientProtocol`, where the request says
+ *   none) on both transports: a server that speaks an older one refuses it FAILED_PRECONDITION;
  * - a call answered UNAVAILABLE or CANCELLED (a server restoring the session after its worker or
  *   node was lost; a balancer resetting the stream of a node that died) is tried again with the
  *   same session id, after 20 ms ... 1.5 s; a stream is opened again from its first unanswered
@@ -26,7 +28,7 @@ import {
 import { DirectorError, statusName } from "./errors.js";
 import { GrpcTransport, type Transport } from "./transport.js";
 import {
-  DEFAULT_MAX_MESSAGE_BYTES, DEFAULT_TIMEOUT_MS, EncodedFrame, RETRYABLE, RETRY_DELAYS_MS,
+  DEFAULT_MAX_MESSAGE_BYTES, DEFAULT_TIMEOUT_MS, EncodedFrame, PROTOCOL, RETRYABLE, RETRY_DELAYS_MS,
   encodeFrameUpdate, frameUpdate, newRouteKey, parseUrl, resolveKey, sleep, type FrameOptions,
 } from "./wire.js";
 import { ZmqTransport, curveServerKey } from "./zmq_transport.js";
@@ -307,9 +309,12 @@ export class Client {
   }
 
   /** Opens a session from a CreateSessionRequest (or its init shape). CreateSession is not tried
-   * again (a second session could be made); it carries the new session's route key. */
+   * again (a second session could be made); it carries the new session's route key, and says
+   * PROTOCOL in `clientProtocol` where the request leaves it 0 (on a shallow copy: the caller's
+   * request is not changed). */
   async createSession(request: Init<typeof CreateSessionRequestSchema>): Promise<Session> {
-    const bytes = encode(CreateSessionRequestSchema, request);
+    const said = request.clientProtocol ? request : { ...request, clientProtocol: PROTOCOL };
+    const bytes = encode(CreateSessionRequestSchema, said);
     const route = newRouteKey();
     const response = await this.#transport.unary("CreateSession", bytes, CreateSessionResponseSchema, route);
     return new Session(this.#transport, response.sessionId, response.recordingPath, route);

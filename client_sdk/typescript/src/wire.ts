@@ -14,7 +14,8 @@ export const DEFAULT_MAX_MESSAGE_BYTES = 64 * 1024 * 1024;
 /** gRPC metadata on every call of a session, CreateSession included: a balancer routes a session's
  * calls to one node by a consistent hash of it (docs/scaling.md). */
 export const ROUTE_HEADER = "x-camdirector-route";
-/** The wire contract's revision this SDK speaks, sent on every call. */
+/** The wire contract's revision this SDK speaks: sent on every gRPC call (PROTOCOL_HEADER) and, on
+ * every transport, in CreateSessionRequest.clientProtocol. */
 export const PROTOCOL_HEADER = "camdirector-protocol";
 export const PROTOCOL = 1;
 /** The environment variable the key comes from when `connect` is given none. */

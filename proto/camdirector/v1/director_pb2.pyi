@@ -294,7 +294,7 @@ class Style(_message.Message):
     def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ..., match_director: _Optional[_Union[MatchDirector, str]] = ..., min_shot_s: _Optional[float] = ..., max_shot_s: _Optional[float] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
-    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id", "delay_s", "pose_outputs")
+    __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id", "delay_s", "pose_outputs", "client_protocol")
     OBJECTS_FIELD_NUMBER: _ClassVar[int]
     TARGETS_FIELD_NUMBER: _ClassVar[int]
     LENS_FIELD_NUMBER: _ClassVar[int]
@@ -304,6 +304,7 @@ class CreateSessionRequest(_message.Message):
     LEVEL_ID_FIELD_NUMBER: _ClassVar[int]
     DELAY_S_FIELD_NUMBER: _ClassVar[int]
     POSE_OUTPUTS_FIELD_NUMBER: _ClassVar[int]
+    CLIENT_PROTOCOL_FIELD_NUMBER: _ClassVar[int]
     objects: _containers.RepeatedCompositeFieldContainer[SceneObject]
     targets: _containers.RepeatedCompositeFieldContainer[Target]
     lens: Lens
@@ -313,7 +314,8 @@ class CreateSessionRequest(_message.Message):
     level_id: str
     delay_s: float
     pose_outputs: _containers.RepeatedCompositeFieldContainer[PoseOutput]
-    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ..., delay_s: _Optional[float] = ..., pose_outputs: _Optional[_Iterable[_Union[PoseOutput, _Mapping]]] = ...) -> None: ...
+    client_protocol: int
+    def __init__(self, objects: _Optional[_Iterable[_Union[SceneObject, _Mapping]]] = ..., targets: _Optional[_Iterable[_Union[Target, _Mapping]]] = ..., lens: _Optional[_Union[Lens, _Mapping]] = ..., style: _Optional[_Union[Style, _Mapping]] = ..., seed: _Optional[int] = ..., record: _Optional[bool] = ..., level_id: _Optional[str] = ..., delay_s: _Optional[float] = ..., pose_outputs: _Optional[_Iterable[_Union[PoseOutput, _Mapping]]] = ..., client_protocol: _Optional[int] = ...) -> None: ...
 
 class PoseOutput(_message.Message):
     __slots__ = ("format", "address", "source_number", "sensor_height_mm")

@@ -19,9 +19,9 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from camdirector.access.guard import Guard
-from camdirector.errors import DirectorError, internal, invalid, precondition
+from camdirector.errors import DirectorError, internal, invalid
 from camdirector.front.router import SessionRouter, named_session, session_id_of
-from camdirector.front.session_calls import RPCS, SessionCalls
+from camdirector.front.session_calls import RPCS, SessionCalls, check_client_protocol
 from camdirector.v1 import director_pb2 as pb
 from camdirector.version import PROTOCOL, VERSION
 
@@ -42,16 +42,15 @@ def _authorization(context: grpc.aio.ServicerContext) -> str | None:
     return _metadata(context, "authorization")
 
 
-def check_client_protocol(sent: str | None) -> None:
-    """FAILED_PRECONDITION for a client newer than this server (`camdirector-protocol` metadata;
-    none: a client from before the header, protocol 1)."""
+def check_protocol_metadata(sent: str | None) -> None:
+    """FAILED_PRECONDITION for a client newer than this server by its `camdirector-protocol`
+    metadata (none: a client from before the header); its request's client_protocol is checked
+    the same on every transport (session_calls.py)."""
     if sent is None:
         return
-    if not sent.isdigit():
+    if not (sent.isascii() and sent.isdigit()):
         raise invalid(f"camdirector-protocol metadata {sent[:20]!r} is not a whole number")
-    if int(sent) > PROTOCOL:
-        raise precondition(f"this client speaks camdirector protocol {int(sent)}, this server (camdirector {VERSION}) "
-                           f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}")
+    check_client_protocol(int(sent))
 
 
 class DirectorGrpc:
@@ -69,7 +68,7 @@ class DirectorGrpc:
             need = RPCS[rpc]
             identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
             if rpc == "CreateSession":
-                check_client_protocol(_metadata(context, "camdirector-protocol"))
+                check_protocol_metadata(_metadata(context, "camdirector-protocol"))
             return await self.calls.by_rpc[rpc](payload, identity)
         except DirectorError as exc:
             self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()

@@ -20,7 +20,7 @@ import logging
 import time
 import uuid
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import orjson
@@ -290,7 +290,7 @@ class SessionRouter:
                 "transports": sorted(e.transport)}
 
 
-def _varint(payload: bytes, at: int) -> tuple[int, int]:
+def varint_at(payload: bytes, at: int) -> tuple[int, int]:
     """The varint at payload[at:] and the index after it; IndexError past the end."""
     value = shift = 0
     while True:
@@ -315,40 +315,50 @@ def named_session(rpc: str, payload: bytes) -> str | None:
         return None
 
 
+def wire_fields(payload: bytes) -> Iterator[tuple[int, int, int, int]]:
+    """Each top-level field of a serialized message as (field number, wire type, start, end), in
+    order, read from the protobuf wire format without parsing the rest: payload[start:end] is a
+    varint's bytes, a length-delimited field's contents or a fixed field's 8 or 4 bytes.
+    ValueError at the first bytes that are not a field (truncated, field number 0, a group)."""
+    at, end = 0, len(payload)
+    while at < end:
+        try:
+            key, at = varint_at(payload, at)
+            field_number, wire_type = key >> 3, key & 7
+            if wire_type == 0:
+                _, after = varint_at(payload, at)
+            elif wire_type == 1:
+                after = at + 8
+            elif wire_type == 5:
+                after = at + 4
+            elif wire_type == 2:
+                length, at = varint_at(payload, at)
+                after = at + length
+            else:
+                raise ValueError(f"wire type {wire_type}")
+        except IndexError:
+            raise ValueError("a field cut short") from None
+        if field_number == 0 or after > end:
+            raise ValueError("not a field")
+        yield field_number, wire_type, at, after
+        at = after
+
+
 def session_id_of(message_type, payload: bytes) -> str:
     """The session_id (field 1, a string, in every request that names a session) of a serialized
     request, read from the protobuf wire format without parsing the rest: the front routes by it
     and the worker parses the message once. Fields before it are skipped by their wire type; the
     first occurrence counts (the worker refuses a message whose parsed session_id differs, so
     this never routes one session's frame to another). INVALID_ARGUMENT when it cannot be read."""
-    at, end = 0, len(payload)
     try:
-        while at < end:
-            key, at = _varint(payload, at)
-            field_number, wire_type = key >> 3, key & 7
-            if wire_type == 0:
-                _, at = _varint(payload, at)
-            elif wire_type == 1:
-                at += 8
-            elif wire_type == 5:
-                at += 4
-            elif wire_type == 2:
-                length, at = _varint(payload, at)
-                if field_number == 1:
-                    if at + length > end:
-                        break
-                    session_id = payload[at:at + length].decode("utf-8")
-                    if not session_id:
-                        raise invalid("session_id is empty")
-                    return session_id
-                at += length
-            else:
+        for field_number, wire_type, start, end in wire_fields(payload):
+            if field_number == 1 and wire_type == 2:
+                session_id = payload[start:end].decode("utf-8")
                 break
-            if field_number == 0:
-                break
-    except (IndexError, ValueError):
-        pass
-    else:
-        if at == end:
-            raise invalid("session_id is empty")
-    raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}")
+        else:
+            session_id = ""
+    except ValueError:  # not a field, or not UTF-8
+        raise invalid(f"payload is not a serialized {message_type.DESCRIPTOR.full_name}") from None
+    if not session_id:
+        raise invalid("session_id is empty")
+    return session_id

@@ -9,6 +9,9 @@ trail of style changes, takes and releases.
     UpdateStyle    session.style    the records database
     TakeShot       session.take     the records database
     CloseSession   session.close    the records database
+
+CreateSession is refused FAILED_PRECONDITION, on every transport, when its client_protocol says
+the client speaks a newer protocol than this server (version.py; docs/protocol.md, "Versions").
 """
 from __future__ import annotations
 
@@ -18,8 +21,10 @@ from google.protobuf import json_format
 
 from camdirector.access.guard import Guard, Identity
 from camdirector.access.roles import Verb
-from camdirector.front.router import SessionRouter, session_id_of
+from camdirector.errors import precondition
+from camdirector.front.router import SessionRouter, session_id_of, varint_at, wire_fields
 from camdirector.v1 import director_pb2 as pb
+from camdirector.version import PROTOCOL, VERSION
 
 
 @dataclass(frozen=True)
@@ -38,6 +43,31 @@ RPCS = {
 }
 
 
+_CLIENT_PROTOCOL_FIELD = pb.CreateSessionRequest.DESCRIPTOR.fields_by_name["client_protocol"].number
+
+
+def check_client_protocol(protocol: int) -> None:
+    """FAILED_PRECONDITION for a client that speaks a newer protocol than this server's PROTOCOL,
+    said in CreateSessionRequest.client_protocol or gRPC's `camdirector-protocol` metadata."""
+    if protocol > PROTOCOL:
+        raise precondition(f"this client speaks camdirector protocol {protocol}, this server (camdirector {VERSION}) "
+                           f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}")
+
+
+def client_protocol_of(payload: bytes) -> int:
+    """CreateSessionRequest.client_protocol of a serialized request, read from the wire format
+    without parsing the scene (router.wire_fields); the last occurrence counts, as when protobuf
+    parses it. 0 (not said) when absent, or when the payload is unreadable: the worker refuses that."""
+    protocol = 0
+    try:
+        for field_number, wire_type, start, _ in wire_fields(payload):
+            if field_number == _CLIENT_PROTOCOL_FIELD and wire_type == 0:
+                protocol = varint_at(payload, start)[0] & 0xFFFFFFFF   # uint32: protobuf keeps the low 32 bits
+    except ValueError:
+        return 0
+    return protocol
+
+
 def _as_dict(message) -> dict:
     return json_format.MessageToDict(message, preserving_proto_field_name=True)
 
@@ -53,6 +83,7 @@ class SessionCalls:
                        "TakeShot": self.take_shot, "CloseSession": self.close}
 
     async def create(self, payload: bytes, identity: Identity) -> bytes:
+        check_client_protocol(client_protocol_of(payload))
         return await self.router.create(payload, self.transport, identity.tenant)
 
     async def frame(self, payload: bytes, identity: Identity) -> bytes:

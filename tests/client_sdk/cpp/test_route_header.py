@@ -3,7 +3,8 @@
 - every gRPC call of a session carries its `x-camdirector-route` key, the header by which a
   balancer sends all the calls of a session to one node (deploy/haproxy.py): CreateSession,
   the frame streams, UpdateStyle, TakeShot, the session created again after NOT_FOUND,
-  CloseSession, and cd_client_destroy's close (the server records each call's metadata);
+  CloseSession, and cd_client_destroy's close (the server records each call's metadata); each
+  carries the protocol the SDK speaks, `camdirector-protocol`, too;
 - UNAVAILABLE on every call for a while over a working connection (a balancer with no healthy
   node, a node restoring its sessions) does not make the SDK give the session up: it goes on with
   the same id once the server answers again."""
@@ -19,9 +20,11 @@ import pytest
 
 from camdirector.v1 import director_pb2 as pb
 from camdirector.v1 import director_pb2_grpc as pb_grpc
+from camdirector.version import PROTOCOL
 from tests.client_sdk.cpp.conftest import run_json
 
 ROUTE_HEADER = "x-camdirector-route"
+PROTOCOL_HEADER = "camdirector-protocol"
 KEY = re.compile(r"[0-9a-f]{32}")
 
 
@@ -35,11 +38,13 @@ class RecordingDirector(pb_grpc.DirectorServicer):
         self.calls: list[tuple[str, str, str | None]] = []
         self.created = 0
         self.forgotten: set[str] = set()
+        self.protocols: set[str | None] = set()   # every call's PROTOCOL_HEADER
 
     def _record(self, method: str, session_id: str, context) -> None:
         metadata = dict(context.invocation_metadata())
         with self.lock:
             self.calls.append((method, session_id, metadata.get(ROUTE_HEADER)))
+            self.protocols.add(metadata.get(PROTOCOL_HEADER))
 
     def CreateSession(self, request, context):
         with self.lock:
@@ -167,6 +172,7 @@ def test_every_call_of_a_session_carries_the_same_route_key(sdk_bin, recording_s
     assert len(keys) == 1, calls  # one key for the session, kept when it was created again
     key = keys.pop()
     assert key is not None and KEY.fullmatch(key), key
+    assert director.protocols == {str(PROTOCOL)}, director.protocols
 
     other = [c for c in calls if c[1] == "session-3"]
     assert [c[0] for c in other][0] == "CreateSession" and other[-1][0] == "CloseSession", calls  # destroy's

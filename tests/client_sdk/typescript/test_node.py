@@ -16,7 +16,10 @@ answers passed by environment and JSON files.
 - a worker SIGKILLed under live TypeScript streams: every frame answered once, in order, as an
   undisturbed run; the same for a cluster node SIGKILLed under streams through its balancer
   (HAProxy, TLS, an engine key; skipped without Debian's cluster packages, failed under CI);
-- the HTTP game-state bridge example driven by posted states.
+- the HTTP game-state bridge example driven by posted states;
+- the protocol: CreateSession says PROTOCOL (read back from the server's recording of the session)
+  over gRPC and ZeroMQ, and a request claiming a newer one is FAILED_PRECONDITION with the
+  server's words, after which the client opens another session.
 
 Without node or npm the module is skipped with the reason; under CI (.ci/run sets
 CAMDIRECTOR_REQUIRE_NODE=1) that is a failure.
@@ -38,6 +41,7 @@ import pytest
 import camdirector_client as cd
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
+from camdirector.version import PROTOCOL
 from camdirector_client import wire
 from tests.service.test_match_sessions import frames as match_frames
 from tests.service.test_match_sessions import match_request
@@ -211,6 +215,29 @@ def test_zeromq_curve_and_keys(zmq_server, monkeypatch):
     node_test("zmq_curve", CAMDIRECTOR_TEST_URL=zmq_server.url("zmq"), CAMDIRECTOR_TEST_ADMIN_KEY=zmq_server.admin_key,
               CAMDIRECTOR_TEST_VIEWER_KEY=zmq_server.viewer_key, CAMDIRECTOR_TEST_ZMQ_SERVER_KEY=zmq_server.zmq_server_key,
               CAMDIRECTOR_TEST_ZMQ_SERVER_KEY_FILE=str(zmq_server.key_file))
+
+
+def _said_protocol(url: str, tmp_path: Path, **connect_options) -> int:
+    """test/protocol.test.mjs against `url`; the client_protocol its recorded session's
+    CreateSessionRequest reached the server with (the recording's first entry)."""
+    from camdirector.worker.recording import read_entries
+    out = tmp_path / "protocol.json"
+    node_test("protocol", CAMDIRECTOR_TEST_URL=url, CAMDIRECTOR_TEST_OUT=str(out),
+              CAMDIRECTOR_TEST_CONNECT=json.dumps(connect_options))
+    said = json.loads(out.read_text())
+    assert said["protocol"] == PROTOCOL, "the SDK's PROTOCOL (src/wire.ts) is the server's"
+    return next(read_entries(Path(said["recordingPath"]))).create.client_protocol
+
+
+def test_create_session_says_the_protocol_over_grpc(server, tmp_path):
+    assert _said_protocol(server.url("grpc"), tmp_path) == PROTOCOL
+
+
+def test_create_session_says_the_protocol_over_zeromq(zmq_server, tmp_path, monkeypatch):
+    monkeypatch.delenv(wire.KEY_ENV, raising=False)
+    said = _said_protocol(zmq_server.url("zmq"), tmp_path, key=zmq_server.admin_key,
+                          zmqServerKey=zmq_server.zmq_server_key)
+    assert said == PROTOCOL
 
 
 def test_conversions_equal_the_python_sdks(built, tmp_path):

@@ -136,6 +136,14 @@ void cd_config_init(cd_config* config);
  * its own in /healthz and in every call's initial metadata, camdirector-version). */
 const char* cd_version(void);
 
+/* The wire contract's revision this SDK speaks (docs/protocol.md, "Versions"): CreateSession says
+ * it in CreateSessionRequest.client_protocol (where a request given to cd_session_open_serialized
+ * leaves that 0) and every call carries it as the metadata camdirector-protocol. A server that
+ * speaks an older protocol refuses cd_session_open with CD_FAILED_PRECONDITION, its message
+ * (cd_last_error) naming both. CD_PROTOCOL is this header's, cd_protocol() the library's. */
+#define CD_PROTOCOL 1
+uint32_t cd_protocol(void);
+
 /* Whether an address parses (see cd_config.address): CD_OK, or CD_INVALID_ARGUMENT with the
  * reason copied into buf (may be NULL). */
 cd_status cd_check_address(const char* address, char* buf, size_t size);
