@@ -1,7 +1,10 @@
-"""Fixtures shared by the whole suite: a real `camdirector serve` process, and the shared data."""
+"""Fixtures shared by the whole suite: a real `camdirector serve` process, the shared data, and
+the release artifacts (`make dist`)."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -120,3 +123,18 @@ def tls_files(tmp_path_factory):
     """A CA and a server certificate for 127.0.0.1 and localhost (camdirector.deploy.tls)."""
     from camdirector.deploy.tls import make_tls_files
     return make_tls_files(tmp_path_factory.mktemp("tls"))
+
+
+@pytest.fixture(scope="session")
+def release_dist(tmp_path_factory) -> Path:
+    """`make dist`'s artifacts of this checkout (scripts/dist.sh: every wheel built from its sdist),
+    built once per run into a folder outside the checkout: tests/test_dist.py checks them and
+    tests/test_installed_package.py installs these same wheels. `python -m build` runs under this
+    interpreter (the dev extra's `build`) with a bare PATH, so nothing of the caller's environment
+    and nothing but the wheels reaches an environment they are installed into."""
+    out = tmp_path_factory.mktemp("dist")
+    assert not out.resolve().is_relative_to(ROOT), "the distributions must be built outside the checkout"
+    done = subprocess.run(["bash", str(ROOT / "scripts" / "dist.sh"), str(out)], capture_output=True, text=True,
+                          env={"PATH": "/usr/bin:/bin", "PYTHON": sys.executable})
+    assert done.returncode == 0, f"scripts/dist.sh failed:\n{done.stdout[-5000:]}\n{done.stderr[-5000:]}"
+    return out

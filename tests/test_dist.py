@@ -1,7 +1,8 @@
 """`make dist` (scripts/dist.sh): every release artifact named with the one version, checksummed,
 and holding what its users take from it: the wheels' metadata, the sdists' sources, the C/C++
 SDK's install tree with its CMake package and pkg-config file, and a C library that says its
-version."""
+version. The artifacts are tests/conftest.py's release_dist, built once per run: the wheels that
+tests/test_installed_package.py installs are these."""
 from __future__ import annotations
 
 import hashlib
@@ -10,48 +11,35 @@ import subprocess
 import sys
 import tarfile
 import zipfile
-from pathlib import Path
-
-import pytest
 
 from camdirector.version import VERSION
 
-ROOT = Path(__file__).resolve().parents[1]
 
-
-@pytest.fixture(scope="module")
-def dist(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("dist")
-    subprocess.run(["bash", str(ROOT / "scripts" / "dist.sh"), str(out)], check=True, capture_output=True,
-                   env={"PATH": "/usr/bin:/bin", "PYTHON": sys.executable})
-    return out
-
-
-def test_every_artifact_is_named_with_the_version_and_checksummed(dist):
+def test_every_artifact_is_named_with_the_version_and_checksummed(release_dist):
     sdk = f"camdirector-cpp-sdk-{VERSION}-linux-{platform.machine()}.tar.gz"
     expected = {f"{name}-{VERSION}{suffix}" for name in ("camdirector", "camdirector_proto", "camdirector_client")
                 for suffix in (".tar.gz", "-py3-none-any.whl")} | {sdk, "SHA256SUMS"}
-    assert {p.name for p in dist.iterdir()} == expected
-    sums = dict(reversed(line.split("  ", 1)) for line in (dist / "SHA256SUMS").read_text().splitlines())
+    assert {p.name for p in release_dist.iterdir()} == expected
+    sums = dict(reversed(line.split("  ", 1)) for line in (release_dist / "SHA256SUMS").read_text().splitlines())
     assert set(sums) == expected - {"SHA256SUMS"}
     for name, digest in sums.items():
-        assert hashlib.sha256((dist / name).read_bytes()).hexdigest() == digest, name
+        assert hashlib.sha256((release_dist / name).read_bytes()).hexdigest() == digest, name
 
 
-def test_the_wheels_and_sdists_hold_their_sources_at_the_version(dist):
+def test_the_wheels_and_sdists_hold_their_sources_at_the_version(release_dist):
     for name in ("camdirector", "camdirector_proto", "camdirector_client"):
-        with zipfile.ZipFile(dist / f"{name}-{VERSION}-py3-none-any.whl") as wheel:
+        with zipfile.ZipFile(release_dist / f"{name}-{VERSION}-py3-none-any.whl") as wheel:
             metadata = wheel.read(f"{name}-{VERSION}.dist-info/METADATA").decode()
         assert f"\nVersion: {VERSION}\n" in metadata
-    with tarfile.open(dist / f"camdirector-{VERSION}.tar.gz") as sdist:
+    with tarfile.open(release_dist / f"camdirector-{VERSION}.tar.gz") as sdist:
         names = sdist.getnames()
     assert f"camdirector-{VERSION}/src/camdirector/access/guard.py" in names
     assert not [n for n in names if "__pycache__" in n]   # staged sources, not the checkout's leftovers
 
 
-def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(dist, tmp_path):
+def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(release_dist, tmp_path):
     sdk = f"camdirector-cpp-sdk-{VERSION}-linux-{platform.machine()}"
-    with tarfile.open(dist / f"{sdk}.tar.gz") as archive:
+    with tarfile.open(release_dist / f"{sdk}.tar.gz") as archive:
         archive.extractall(tmp_path, filter="data")
     prefix = tmp_path / sdk
     for part in ("include/camdirector/camdirector.h", "include/camdirector/camdirector.hpp", "lib/libcamdirector.a",

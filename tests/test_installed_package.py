@@ -1,14 +1,16 @@
-"""What users install, tested. scripts/install-dist.sh (docker/Dockerfile's install step) builds the
-wheels of proto/ and client_sdk/python/ and the main project's sdist with a wheel built from that
-sdist, and installs them, not editable, into a fresh venv; that venv's `camdirector`, imported from
-its own site-packages and run outside this checkout with PYTHONPATH cleared, then serves every rig
-over gRPC and ZeroMQ, adds a level over REST, runs an overview job, serves the dashboard with its
-assets and a monitor's picture, and finds its shipped scenarios. A module, a dependency or a data
-file that the distributions leave out fails here, never skips.
+"""What users install, tested. The wheels of the main project, proto/ and client_sdk/python/, each
+built from its sdist by `make dist` (tests/conftest.py's release_dist: built once per run, the same
+files tests/test_dist.py checks), are installed, not editable, into a fresh venv by
+scripts/install-dist.sh --prebuilt: the install step of docker/Dockerfile's script, which there
+builds the same way first (tests/deploy/test_image.py builds that image). That venv's
+`camdirector`, imported from its own site-packages and run outside this checkout with PYTHONPATH
+cleared, then serves every rig over gRPC and ZeroMQ, adds a level over REST, runs an overview job,
+serves the dashboard with its assets and a monitor's picture, and finds its shipped scenarios. A
+module, a dependency or a data file that the distributions leave out fails here, never skips.
 
 The venv is made by the interpreter running the tests (the project's Python 3.11, requires-python),
-so no other interpreter need be on PATH; pip's cache is reused. Building and installing take about
-a minute with a warm cache (several the first time: every dependency is downloaded)."""
+so no other interpreter need be on PATH; pip's cache is reused. Installing takes about half a minute
+with a warm cache (several the first time: every dependency is downloaded), after the build."""
 from __future__ import annotations
 
 import json
@@ -23,6 +25,7 @@ import httpx
 import pytest
 
 from camdirector.deploy.server_process import ServerProcess
+from camdirector.version import VERSION
 from tests import served_checks as checks
 from tests.precompute.tracks.tiny_levels import corridor, l_room
 from tests.service.tracks_sessions import obj_text
@@ -44,6 +47,7 @@ class Installed:
     venv: Path
     site_packages: Path
     cwd: Path            # a folder outside the checkout, where every child runs
+    dist: Path           # the wheels it was installed from
 
     @property
     def python(self) -> Path:
@@ -61,25 +65,20 @@ class Installed:
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory) -> Installed:
+def installed(tmp_path_factory, release_dist) -> Installed:
     root = tmp_path_factory.mktemp("installed")
     assert not root.resolve().is_relative_to(ROOT), "the venv must live outside the checkout"
     venv, cwd = root / "venv", root / "cwd"
     cwd.mkdir()
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120, cwd=cwd)
-    # BUILD_PYTHON: this venv's `build` (the dev extra); the venv under test gets only what pip installs.
-    done = subprocess.run(["bash", str(ROOT / SCRIPT), str(venv / "bin" / "python"), str(root / "dist")],
-                          cwd=cwd, env={**outside_env(), "BUILD_PYTHON": sys.executable},
-                          capture_output=True, text=True, timeout=840)
+    # Nothing is built here: release_dist built the wheels with the `build` of the interpreter running
+    # the tests (the dev extra), so the venv under test gets only what pip installs.
+    done = subprocess.run(["bash", str(ROOT / SCRIPT), "--prebuilt", str(venv / "bin" / "python"), str(release_dist)],
+                          cwd=cwd, env=outside_env(), capture_output=True, text=True, timeout=840)
     assert done.returncode == 0, f"{SCRIPT} failed:\n{done.stdout[-5000:]}\n{done.stderr[-5000:]}"
-    dists = sorted(p.name for p in (root / "dist").iterdir())
-    kinds = [(re.sub(r"-\d.*", "", n), "sdist" if n.endswith(".tar.gz") else "wheel" if n.endswith(".whl") else n)
-             for n in dists]
-    assert kinds == [("camdirector", "wheel"), ("camdirector", "sdist"), ("camdirector_client", "wheel"),
-                     ("camdirector_proto", "wheel")], dists
     site_packages = subprocess.run([str(venv / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
                                    cwd=cwd, env=outside_env(), capture_output=True, text=True, check=True).stdout.strip()
-    return Installed(venv, Path(site_packages), cwd)
+    return Installed(venv, Path(site_packages), cwd, release_dist)
 
 
 # -- the installed distributions --------------------------------------------------------------
@@ -108,7 +107,8 @@ print(json.dumps({"files": files, "path": list(camdirector.__path__),
         assert Path(where).is_relative_to(installed.site_packages), f"{where} is not in the venv's site-packages"
         assert not Path(where).resolve().is_relative_to(ROOT), where
     for name, direct_url in found["direct_url"].items():
-        assert "archive_info" in direct_url and direct_url["url"].endswith(".whl"), f"{name}: {direct_url}"
+        wheel = installed.dist / f"{name.replace('-', '_')}-{VERSION}-py3-none-any.whl"  # built from its sdist
+        assert "archive_info" in direct_url and direct_url["url"] == wheel.as_uri(), f"{name}: {direct_url}"
         assert not direct_url.get("dir_info", {}).get("editable"), f"{name} is an editable install"
     assert (installed.venv / "bin" / "camdirector").is_file()
 
