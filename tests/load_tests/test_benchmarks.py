@@ -147,7 +147,7 @@ def test_movers_bench_reports_every_mode_and_count_against_none(tmp_path):
 def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_program_twice(tmp_path):
     """A real duel's first 24 s (its first kill at 20 s), run twice from scratch (the level added anew, a new server):
     issue 29's "two runs of the same match give the same program, pose for pose"."""
-    result = _run(real_matches.main, tmp_path, "--only", "duel_bravado", "--minutes", "0.4", "--twice",
+    result = _run(real_matches.main, tmp_path, "--only", "duel_bravado", "--minutes", "0.4", "--rate-hz", "15", "--twice",
                   "--markdown", str(tmp_path / "table.md"))
     duel = result["matches"]["duel_bravado"]
     assert set(duel["directors"]) == {"PLANNED", "HLTV", "AUTOTRACK"} and duel["match"]["players"] == 2
