@@ -1,4 +1,5 @@
 // What the node tests share: the data the Python side wrote, and replies in the Python side's form.
+import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
 import { create, fromBinary, pb } from "../dist/index.js";
 
@@ -63,4 +64,18 @@ export function twoTargets(extra = {}) {
     ],
     ...extra,
   });
+}
+
+/** Closes the sessions, then checks that each was answered every frame of data once, in order, with
+ * the poses of the undisturbed run (data.expected), and closed having answered them all. */
+export async function assertUndisturbed(sessions, answers, data) {
+  const closed = [];
+  for (const s of sessions) closed.push(await s.close());
+  const n = data.frames.length;
+  for (const [k, s] of sessions.entries()) {
+    assert.deepEqual(answers[k].map((u) => Number(u.frame)), Array.from({ length: n }, (_, i) => i + 1), s.id);
+    assert.deepStrictEqual(answers[k].map(replyJson).map((r) => r.pose), data.expected.map((r) => r.pose), s.id);
+  }
+  assert.deepEqual(closed, sessions.map(() => BigInt(n)));
+  return n;
 }

@@ -218,6 +218,15 @@ def _info_pairs(raw: bytes) -> dict[str, bytes]:
     return {parts[i].decode("latin-1"): parts[i + 1] for i in range(0, len(parts) - 1, 2)}
 
 
+# Messages whose body is a fixed number of bytes, skipped whole: type -> (name in errors, bytes).
+FIXED_BODIES = {
+    1: ("_nop", 0), 7: ("_nq_time", 4), 16: ("_stopsound", 2), 24: ("_byte", 1), 27: ("_nop", 0),
+    28: ("_nop", 0), 32: ("_byte", 1), 33: ("_nop", 0), 34: ("_nop", 0), 35: ("_nop", 0),
+    36: ("_byte_short", 3), 37: ("_updateentertime", 5), 39: ("_short", 2), 44: ("_byte", 1), 49: ("_float", 4),
+    50: ("_float", 4), 53: ("_byte_byte", 2), 83: ("_qizmovoice", 34),
+}
+
+
 class _Reader:
     """The state of one pass over a demo (module docstring)."""
 
@@ -242,17 +251,14 @@ class _Reader:
         self.print_buffer = b""
         self.deaths: list[MvdDeath] = []
         self.handlers = {
-            1: self._nop, 2: self._disconnect, 3: self._updatestat, 6: self._sound, 7: self._nq_time,
-            8: self._print, 9: self._stufftext, 10: self._setangle, 11: self._serverdata, 12: self._lightstyle,
-            14: self._updatefrags, 16: self._stopsound, 19: self._damage, 20: self._spawnstatic,
-            21: self._delta_from_short, 22: self._spawnbaseline, 23: self._temp_entity, 24: self._byte,
-            26: self._string, 27: self._nop, 28: self._nop, 29: self._spawnstaticsound, 30: self._intermission,
-            31: self._string, 32: self._byte, 33: self._nop, 34: self._nop, 35: self._nop,
-            36: self._byte_short, 37: self._updateentertime, 38: self._updatestatlong, 39: self._short,
-            40: self._updateuserinfo, 41: self._download, 42: self._playerinfo, 43: self._nails, 44: self._byte,
-            45: self._modellist, 46: self._soundlist, 47: self._packetentities, 48: self._deltapacketentities,
-            49: self._float, 50: self._float, 51: self._setinfo, 52: self._serverinfo, 53: self._byte_byte,
-            54: self._nails2, 60: self._modellistshort, 66: self._delta_from_short, 83: self._qizmovoice,
+            2: self._disconnect, 3: self._updatestat, 6: self._sound, 8: self._print,
+            9: self._stufftext, 10: self._setangle, 11: self._serverdata, 12: self._lightstyle,
+            14: self._updatefrags, 19: self._damage, 20: self._spawnstatic, 21: self._delta_from_short,
+            22: self._spawnbaseline, 23: self._temp_entity, 26: self._string, 29: self._spawnstaticsound,
+            30: self._intermission, 31: self._string, 38: self._updatestatlong, 40: self._updateuserinfo,
+            41: self._download, 42: self._playerinfo, 43: self._nails, 45: self._modellist,
+            46: self._soundlist, 47: self._packetentities, 48: self._deltapacketentities, 51: self._setinfo,
+            52: self._serverinfo, 54: self._nails2, 60: self._modellistshort, 66: self._delta_from_short,
         }
 
     # ---------------------------------------------------------------- blocks
@@ -305,6 +311,11 @@ class _Reader:
             at = cur.pos
             cmd = data[at]
             cur.pos = at + 1
+            body = FIXED_BODIES.get(cmd)
+            if body is not None:
+                cur.what = "svc" + body[0]
+                cur.skip(body[1])
+                continue
             handler = handlers.get(cmd)
             if handler is None:
                 raise MvdError(at, f"unknown message type {cmd}")
@@ -313,29 +324,8 @@ class _Reader:
 
     # ---------------------------------------------------------------- small messages
 
-    def _nop(self) -> None:
-        pass
-
-    def _byte(self) -> None:
-        self.cur.skip(1)
-
-    def _short(self) -> None:
-        self.cur.skip(2)
-
-    def _float(self) -> None:
-        self.cur.skip(4)
-
-    def _byte_byte(self) -> None:
-        self.cur.skip(2)
-
-    def _byte_short(self) -> None:
-        self.cur.skip(3)
-
     def _string(self) -> None:
         self.cur.string()
-
-    def _nq_time(self) -> None:
-        self.cur.skip(4)
 
     def _disconnect(self) -> None:
         if self.cur.pos < self.cur.end:  # mvdsv ends a demo with svc_disconnect "EndOfDemo"
@@ -344,15 +334,6 @@ class _Reader:
     def _lightstyle(self) -> None:
         self.cur.skip(1)
         self.cur.string()
-
-    def _stopsound(self) -> None:
-        self.cur.skip(2)
-
-    def _updateentertime(self) -> None:
-        self.cur.skip(5)
-
-    def _qizmovoice(self) -> None:
-        self.cur.skip(34)
 
     def _sound(self) -> None:
         cur = self.cur

@@ -42,6 +42,7 @@ ranks by frags counted from kill events (+1 for killing another player, -1 for a
 from __future__ import annotations
 
 import math
+import operator
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -120,23 +121,18 @@ class RankExpression:
         return self._tokens[self._next] if self._next < len(self._tokens) else None
 
     def _sum(self) -> Callable[[Mapping[str, float]], float]:
-        left = self._product()
-        while self._peek() in (("o", "+"), ("o", "-")):
-            operator = self._tokens[self._next][1]
-            self._next += 1
-            right = self._product()
-            left = (lambda a, b: lambda v: a(v) + b(v))(left, right) if operator == "+" else \
-                (lambda a, b: lambda v: a(v) - b(v))(left, right)
-        return left
+        return self._chain(self._product, {"+": operator.add, "-": operator.sub})
 
     def _product(self) -> Callable[[Mapping[str, float]], float]:
-        left = self._unary()
-        while self._peek() in (("o", "*"), ("o", "/")):
-            operator = self._tokens[self._next][1]
+        return self._chain(self._unary, {"*": operator.mul, "/": operator.truediv})
+
+    def _chain(self, operand: Callable[[], Callable[[Mapping[str, float]], float]],
+               operators: dict[str, Callable[[float, float], float]]) -> Callable[[Mapping[str, float]], float]:
+        """operand (op operand)*, left to right, for one precedence level's operators."""
+        left = operand()
+        while (token := self._peek()) is not None and token[0] == "o" and token[1] in operators:
             self._next += 1
-            right = self._unary()
-            left = (lambda a, b: lambda v: a(v) * b(v))(left, right) if operator == "*" else \
-                (lambda a, b: lambda v: a(v) / b(v))(left, right)
+            left = (lambda a, b, f: lambda v: f(a(v), b(v)))(left, operand(), operators[token[1]])
         return left
 
     def _unary(self) -> Callable[[Mapping[str, float]], float]:
