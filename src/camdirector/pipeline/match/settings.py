@@ -33,17 +33,33 @@ class HltvSettings:
     player_chase_yaw_deg: float = 20.0    # deg. [0, 180]
     dead_pitch_deg: float = 15.0         # pitch offset when the first target is dead, deg. [-89, 89]
     max_pitch_deg: float = 60.0          # the two-target chase camera's pitch clamp, deg. [0, 89]
-    wall_margin_m: float = 0.3           # the chase camera stops this short of a wall (the SDK's trace hull), m. [0, 5]
+    wall_hull_half_m: float = 6 * INCH_M  # the chase camera's wall trace sweeps a box this half wide (hltvcamera.cpp
+                                         # WALL_OFFSET, C_HLTVCamera::CalcChaseCamView's UTIL_TraceHull), m. [0, 1]
+    angle_inertia_per_s: float = 3.0     # a turning view closes this share of its gap a second (m_flInertia, 3 unless
+                                         # hltv_chase sets it; C_HLTVCamera::SmoothCameraAngle), 1/s. (0, 1000]
     fixed_camera_share: float = 0.25     # with no event, a fixed camera this often, else a chase. [0, 1]
     in_eye_kill_chance: float = 0.67     # a kill is shown first person this often (the SDK: > 0.33). [0, 1]
     swap_chance_in_eye: float = 0.7      # first person: the attacker's eyes this often. [0, 1]
     swap_chance_chase: float = 0.3       # chase: behind the attacker instead of the victim this often. [0, 1]
+    priorities: dict[EventKind, int] = field(default_factory=lambda: {
+        EventKind.KILL: 7, EventKind.DAMAGE: 5, EventKind.OBJECTIVE: 6})
+                                         # the only kinds the director hears (CHLTVDirector::SetHLTVServer listens for
+                                         # player_death, player_hurt, round_start and round_end), each with the priority
+                                         # the SDK fires it with: player_death 7 (multiplay_gamerules.cpp:887,
+                                         # CMultiplayRules::DeathNotice), player_hurt 5 (player.cpp:1647,
+                                         # CBasePlayer::OnTakeDamage_Alive), round_start 6 (hl2mp_gamerules.cpp:1056,
+                                         # CHL2MPRules::RestartGame), [1, 15]
 
     def __post_init__(self):
         _check_positive_finite(self, ("rank_interval_s", "min_shot_s", "event_window_s", "rank_range_m",
-                                      "kill_chase_distance_m", "player_chase_distance_m"))
+                                      "kill_chase_distance_m", "player_chase_distance_m", "angle_inertia_per_s"))
         if not self.min_shot_s <= self.default_shot_s <= self.max_shot_s:
             raise ValueError("HltvSettings: need min_shot_s <= default_shot_s <= max_shot_s")
+        if self.wall_hull_half_m > 1.0 or self.angle_inertia_per_s > 1000.0:
+            raise ValueError("HltvSettings: need wall_hull_half_m in [0, 1] m and angle_inertia_per_s in (0, 1000] /s, "
+                             f"got {self.wall_hull_half_m} and {self.angle_inertia_per_s}")
+        if not set(self.priorities) <= set(EventKind) or not all(1 <= p <= 15 for p in self.priorities.values()):
+            raise ValueError("HltvSettings: priorities maps EventKinds to priorities in [1, 15]")
         for name in ("fixed_camera_share", "in_eye_kill_chance", "swap_chance_in_eye", "swap_chance_chase"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"HltvSettings: {name} must be in [0, 1]")
