@@ -160,6 +160,8 @@ def test_match_takes_player_inputs_and_shows_a_delayed_program():
     program = session.rig.program_transforms
     assert len(program) == len(TEAMS) and session.view_target_transforms() is program
     assert session.rig.anticipation_map(session.last_state) is None
-    assert not session.rig.has_deferred_work and session.rig.do_deferred_work() is False
+    assert session.rig.has_deferred_work   # the plan drawn at the last tick (held take: the fallback's check)
+    assert session.rig.do_deferred_work() is True and not session.rig.has_deferred_work
+    assert session.rig.do_deferred_work() is False
     assert inputs.take([], None, release=True) is None
     session.close()

@@ -74,7 +74,7 @@ class CameraRig(Protocol):
     @property
     def has_deferred_work(self) -> bool:
         """Whether the rig left work for later that a later frame does if nobody did it before
-        (TORIC's amortized map update); False on a rig that never defers."""
+        (TORIC's amortized map update, MATCH's drawn plan); False on a rig that never defers."""
         ...
 
     def do_deferred_work(self, whole: bool = True) -> bool:

@@ -93,7 +93,8 @@ class Session:
     @property
     def has_deferred_work(self) -> bool:
         """Whether the rig left work for later (a TORIC rig's amortized map update,
-        pipeline/toric/occlusion_maps.py), which a later frame does when nobody did it before."""
+        pipeline/toric/occlusion_maps.py; a MATCH rig's drawn plan, pipeline/match/rig.py), which a
+        later frame does when nobody did it before."""
         return self.rig.has_deferred_work
 
     def do_deferred_work(self, whole: bool = True) -> bool:

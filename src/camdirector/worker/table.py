@@ -251,7 +251,8 @@ class SessionTable:
 
     def idle_work(self) -> bool:
         """Does one piece of deferred work: a part of a session's deferred map update (its maps or
-        their A_s, about 1 ms each; Session.has_deferred_work), else the oldest snapshot due
+        their A_s, about 1 ms each) or of its drawn match plan (2 ms; Session.has_deferred_work),
+        else the oldest snapshot due
         (0.5-1 ms; checkpointing.py); answers whether more is waiting.
         A worker calls this between requests when none is waiting, so that neither delays a
         frame's answer. What a session answers does not depend on whether this ran."""

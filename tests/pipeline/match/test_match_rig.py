@@ -12,6 +12,7 @@ from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import is_jump_cut
 from camdirector.pipeline.match.settings import HltvSettings, MatchSettings
 from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
+from camdirector.worker.session import Session
 from tests.pipeline.match.scenes import (
     EYE_M,
     RATE_HZ,
@@ -191,3 +192,61 @@ def test_same_seed_same_program(kind):
 def test_style_refuses_a_max_shot_under_the_min_shot():
     with pytest.raises(ValueError, match="max_shot_s"):
         Style(rig=Rig.MATCH, min_shot_s=5.0, max_shot_s=4.0)
+
+
+def _program_with_idle_work(idle: str) -> tuple[list[np.ndarray], int, tuple[int, int]]:
+    """The melee's poses through a Session whose clock ticks 1 ms a read, with the worker's idle
+    moments after each frame: none, a seeded-random number of slices, or the whole drawn plan;
+    and how many frames left a drawn plan, and in "slices" how many slices left it unfinished and
+    how many plans idle moments finished."""
+    ticks = iter(range(10**9))
+    session = Session("s", melee(seed=3, duration_s=40.0, delay_s=10.0).scene(), clock=lambda: next(ticks) * 1e-3)
+    rng = np.random.default_rng(11)
+    poses, drawn, partial, finished = [], 0, 0, 0
+    for update in melee(seed=3, duration_s=40.0, delay_s=10.0).frames(40.0):
+        state = session.frame(update)
+        if state.pose is not None:
+            poses.append(np.concatenate([state.pose.position_world, state.pose.rotation_xyzw]))
+        drawn += session.has_deferred_work
+        if idle == "whole":
+            session.do_deferred_work()
+        elif idle == "slices":
+            for _ in range(int(rng.integers(0, 4))):
+                if session.do_deferred_work(whole=False):
+                    partial += session.has_deferred_work
+                    finished += not session.has_deferred_work
+    return poses, drawn, (partial, finished)
+
+
+def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_computed():
+    """The plan drawn at a tick is computed in the worker's idle moments and applied at the next
+    tick (rig.py): the poses are the same whether no idle moment came (each tick finishes it),
+    some slices ran, or each plan was computed whole at once."""
+    none, drawn, _ = _program_with_idle_work("none")
+    sliced, _, (partial, finished) = _program_with_idle_work("slices")
+    whole, _, _ = _program_with_idle_work("whole")
+    assert drawn > 50                  # ours defers: a plan was waiting after many frames
+    assert partial > 0 and finished > 0  # slices of 2 ms (a clock ticking 1 ms a read) left some unfinished
+    assert np.array_equal(np.array(none), np.array(sliced))
+    assert np.array_equal(np.array(none), np.array(whole))
+
+
+def test_a_take_finishes_the_drawn_plan_before_it_changes_what_the_plan_reads():
+    """A take arriving while a plan is drawn finishes it first (a style change too): the plan never
+    sees a take or style that came after the tick it was drawn on."""
+    match = melee(seed=3, duration_s=20.0, delay_s=10.0)
+    session = Session("s", match.scene())
+    for update in match.frames(15.0):
+        session.frame(update)
+        if session.has_deferred_work:
+            break
+    assert session.has_deferred_work
+    session.rig.take(["a0"], None, release=False)
+    assert not session.has_deferred_work
+    for update in match.frames(16.0):
+        if update.frame > session.last_input[0]:
+            session.frame(update)
+            if session.has_deferred_work:
+                break
+    session.rig.set_style(Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV))
+    assert not session.has_deferred_work

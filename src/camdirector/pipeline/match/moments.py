@@ -18,6 +18,7 @@ to the newest moment, the earliest the director can know it.
 from __future__ import annotations
 
 import bisect
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -109,6 +110,17 @@ class MomentBuffer:
                                    feet, horizontal_forward(rotations), alive, due))
         self.times.append(time_s)
         return True
+
+    def view(self) -> MomentBuffer:
+        """What the buffer holds now, as a buffer that later frames leave as it is, for a plan
+        drawn now and computed in slices later (rig.py): the lists and the killers copied from
+        the program's moment on, the moments themselves shared (a moment never changes once
+        pushed). Read it only (at, horizon_s, events_between, killed_by)."""
+        view = copy.copy(self)
+        view.moments, view.times, view._start = self.moments[self._start:], self.times[self._start:], 0
+        view.events, view._event_times = list(self.events), list(self._event_times)
+        view.killed_by, view._pending = dict(self.killed_by), []
+        return view
 
     def program_moment(self, time_s: float) -> Moment | None:
         """The moment nearest time_s (the program's moment, frame time minus the delay), dropping

@@ -15,22 +15,39 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             sent with a frame up to the program moment); a human's take (`take`) overrides them
             until released. Ours also re-places an occluded camera
             within its shot (shots.py) and offers the best other situations as candidates.
+            Ours is off the frame path (below): each tick applies the plan drawn at the tick
+            before and draws the next.
 3. camera   every frame, the shot's camera at the program moment; a Toric camera from whose place
             walls hide most of its first subject comes in front of the wall (shots.py `pulled_in`,
             flagged `pulled_in_front_of_wall`).
 4. visibility  the share of the framed subjects' sample points seen from the camera.
 Every cut's `shot.reason` says why, its sub-scores go to `scores`, and degraded choices to `flags`.
 
+Our plan is drawn at a tick for the buffered moment of the next, `plan_interval_s` later, and
+applied then (the moment it was made for; made for the tick that drew it, one kill in 14 of the
+real duel's first 3 minutes went unshown, 0.786 -> 0.714 kill coverage): drawn, it holds
+what it reads (the buffer's view, a copy of the shot's camera, the last pose), and the session's
+worker computes it in slices of `PLAN_SLICE_S` in its idle moments (infra/slices.py; the pause
+points are the place searches' ray casts, shots.py `framed_seen`); the tick that applies it
+finishes whatever idle moments left. On 90 s of the 4on4 on dm2 a plan costs 17 ms on average and
+up to 250 ms, against 3 ms for the rest of a frame: computed in the frame, one frame in four
+waited for it. Played live into a server (load_tests/match_live.py, the 4on4's first minute), the
+server's compute p99 went from 69 to 10 ms at 30 Hz and from 28 to 4.5 ms at 60 Hz. Applied one tick late, the program does not depend on when or in how many slices it
+was computed, only on its inputs: a take or a style change, which would change what a drawn plan
+reads, finishes it first. The first shot and a take's are planned at once; the baselines (cheap)
+and a session with dynamic objects (whose ray scene every frame moves) plan in the frame, as before.
+
 A take whose held subject dies (at the program moment) falls back, still held: to the player
 who killed it, else the nearest fight to where it died, else an overview; `shot.reason` says so.
 
 `MatchRig` implements `CameraRig` (pipeline/camera_rig.py) with, of what only some rigs do, its
 player inputs (game events and a human's takes: it is its own `PlayerInputs`) and the program's
-delayed target transforms; it has no occlusion maps and never defers work. Its part of a frame's
+delayed target transforms; it has no occlusion maps; its deferred work is the drawn plan. Its part of a frame's
 state is `MatchFrame` (frame.py), made anew every frame.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -42,6 +59,7 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
+from camdirector.infra.slices import SlicedRun
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, PlayerStats, SceneSpec
 from camdirector.pipeline.match.autotrack import AutotrackDirector
@@ -49,22 +67,47 @@ from camdirector.pipeline.match.frame import Candidate, MatchFrame, PlannedCut, 
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.hltv import HltvDirector
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
-from camdirector.pipeline.match.plan import PlannedDirector, Shot, ShotBuilder
+from camdirector.pipeline.match.plan import Beat, PlannedDirector, Shot, ShotBuilder
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.match.shots import ToricCamera, best_place, framed_seen, place_grid
+from camdirector.pipeline.match.shots import Place, ToricCamera, best_place, framed_seen, place_grid
 from camdirector.pipeline.match.visibility import SubjectVisibility
 from camdirector.pipeline.stages import MatchStage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MatchDirectorKind, Style
 
 REPLACE_LOOKAHEAD_S = 1.0  # an occluded place is replaced by the best one over now and this far ahead, s
+PLAN_SLICE_S = 0.002       # a drawn plan is computed this long per idle moment of the worker, s
+
+
+@dataclasses.dataclass
+class PlanResult:
+    """What one planning tick decided, applied to the program at once or at the next tick."""
+
+    shot: Shot | None                  # the cut, None: the current shot goes on
+    goal: Place | None                 # the current Toric camera's new goal (re-placed for visibility)
+    held: ShotChoice | None            # the take held from now on (a fallback when its subject died)
+    candidates: list[tuple[ShotChoice, ToricCamera | None, float]]
+    beats: list[Beat]                  # our director's plan (MatchRig.planned_cut)
+    flags: list[str]
+
+
+@dataclasses.dataclass
+class DrawnPlan:
+    """A plan drawn at a tick with what it reads, computed in slices until the next (module docstring)."""
+
+    current: Shot
+    run: SlicedRun[PlanResult] | None  # None once finished (a snapshot pickles the rig)
+    result: PlanResult | None = None
+
+    def finish(self) -> PlanResult:
+        if self.run is not None:
+            self.result, self.run = self.run.finish(), None
+        return self.result
 
 
 class MatchRig:
     """The match director of one session; implements `CameraRig` (module docstring). Players are
     the scene's targets."""
-
-    has_deferred_work = False  # CameraRig: it never leaves work for later
 
     def __init__(self, scene: SceneSpec, ray_scene: RayScene, rng: np.random.Generator,
                  clock: Callable[[], float] = time.perf_counter, settings: MatchSettings = MatchSettings()):
@@ -90,6 +133,10 @@ class MatchRig:
         self.shot: Shot | None = None
         self.held: ShotChoice | None = None
         self._take_pending = False
+        self._drawn: DrawnPlan | None = None
+        self._beats: list[Beat] = []  # our director's plan as of the last applied tick
+        # a session whose objects move every frame plans in the frame (its ray scene is the frame's)
+        self._defer_plans = not any(o.dynamic for o in scene.objects)
         self._next_plan_s = -math.inf
         self._last_time_s: float | None = None
         self._last_pose: CameraPose | None = None
@@ -111,6 +158,7 @@ class MatchRig:
 
     def set_style(self, style: Style) -> None:
         """From the next frame on; the current shot goes on (a new director decides at its next tick)."""
+        self._finish_drawn()  # the drawn plan reads the style
         if style.match_director != self.style.match_director:
             self.director = self._director(style.match_director)
         self.style = self.builder.style = style
@@ -124,9 +172,25 @@ class MatchRig:
         """CameraRig: None, the match rig has no occlusion maps (it ray-casts its candidate places)."""
         return None
 
+    @property
+    def has_deferred_work(self) -> bool:
+        """CameraRig: whether a drawn plan waits to be computed."""
+        return self._drawn is not None and self._drawn.run is not None
+
     def do_deferred_work(self, whole: bool = True) -> bool:
-        """CameraRig: there is never any."""
-        return False
+        """CameraRig: computes the drawn plan, whole or for PLAN_SLICE_S; whether there was any."""
+        drawn = self._drawn
+        if drawn is None or drawn.run is None:
+            return False
+        if whole:
+            drawn.finish()
+        elif drawn.run.step(PLAN_SLICE_S):
+            drawn.finish()
+        return True
+
+    def _finish_drawn(self) -> None:
+        if self._drawn is not None:
+            self._drawn.finish()
 
     def close(self) -> None:
         """Drops the buffered moments."""
@@ -137,7 +201,7 @@ class MatchRig:
         while a take is held, under the HLTV baseline, or with nothing planned (no delay: no known future)."""
         if self.held is not None or self.director is not self.planned:
             return None
-        beat = next((b for b in self.planned.plan if b.cut_s is not None and b.cut_s > now_s), None)
+        beat = next((b for b in self._beats if b.cut_s is not None and b.cut_s > now_s), None)
         if beat is None:
             return None
         return PlannedCut(beat.cut_s, ShotChoice(tuple(self.players[i] for i in beat.subjects), beat.kind,
@@ -148,6 +212,7 @@ class MatchRig:
         """Holds a human's shot from the next frame until released; returns it (None on release).
         kind None: FOLLOW for one player, DUEL for two, GROUP for more, OVERVIEW for none.
         Raises ValueError for an unknown or repeated player or a kind that does not fit the count."""
+        self._finish_drawn()  # the drawn plan reads the take
         if release:
             self.held, self._take_pending = None, True
             return None
@@ -168,24 +233,27 @@ class MatchRig:
         self._take_pending = True
         return self.held
 
-    def _held_shot(self, moment: Moment, flags: list[str]) -> Shot | None:
-        """The held take as a shot when it must be (re)built: just taken, or a held subject died."""
-        subjects = tuple(self.index[s] for s in self.held.subject_ids)
+    def _held_shot(self, moment: Moment, buffer: MomentBuffer, current: Shot | None,
+                   flags: list[str]) -> tuple[Shot | None, ShotChoice]:
+        """The held take as a shot when it must be (re)built: just taken, or a held subject died;
+        and the take held from now on (the fallback's, when one died)."""
+        held = self.held
+        subjects = tuple(self.index[s] for s in held.subject_ids)
         dead = [i for i in subjects if not moment.alive[i]]
-        if not dead and not self._take_pending and self.shot is not None and self.shot.held:
-            return None
-        choice = self.held
+        if not dead and not self._take_pending and current is not None and current.held:
+            return None, held
         if dead:
-            choice, subjects = self._fallback(moment, dead[0])
-            choice = self.held = dataclasses.replace(choice, held=True)
+            choice, subjects = self._fallback(moment, buffer, dead[0])
+            choice = held = dataclasses.replace(choice, held=True)
             flags.append("take_fallback")
         else:
+            choice = held
             previewed = self._previewed(choice, moment)
             if previewed is not None:
-                return previewed
-        shot, _ = self.builder.build(choice, subjects, moment, [moment], self.shot, None, moment.time_s)
+                return previewed, held
+        shot, _ = self.builder.build(choice, subjects, moment, [moment], current, None, moment.time_s)
         shot.held = True
-        return shot
+        return shot, held
 
     def _previewed(self, choice: ShotChoice, moment: Moment) -> Shot | None:
         """A take of a shot the candidates offer goes to air as its preview monitor showed it:
@@ -201,15 +269,15 @@ class MatchRig:
             return shot
         return None
 
-    def _fallback(self, moment: Moment, dead: int) -> tuple[ShotChoice, tuple[int, ...]]:
+    def _fallback(self, moment: Moment, buffer: MomentBuffer, dead: int) -> tuple[ShotChoice, tuple[int, ...]]:
         who = self.players[dead]
-        killer = self.buffer.killed_by.get(who)
+        killer = buffer.killed_by.get(who)
         if killer is not None and moment.alive[self.index[killer]]:
             return (ShotChoice((killer,), ShotKind.FOLLOW,
                                f"take fallback: held player {who} died (killed by {killer}); following {killer}"),
                     (self.index[killer],))
         place = moment.feet_world[dead]
-        fights = [o for o in self.planned.options(moment, self.buffer) if o.kind == ShotKind.DUEL]
+        fights = [o for o in self.planned.options(moment, buffer) if o.kind == ShotKind.DUEL]
         if fights:
             nearest = min(fights, key=lambda o: float(np.linalg.norm(moment.feet_world[list(o.subjects)].mean(axis=0)
                                                                       - place)))
@@ -246,10 +314,7 @@ class MatchRig:
         cut = False
         if self._take_pending or self.shot is None or moment.time_s >= self._next_plan_s:
             self._next_plan_s = moment.time_s + self.settings.plan_interval_s
-            new = self._plan(moment, state.flags)
-            self._take_pending = False
-            if new is not None:
-                self.shot, cut = new, True
+            cut = self._tick(moment, state.flags)
         stages.done(MatchStage.PLAN)
         self.shot.camera.advance(moment, 0.0 if cut else state.dt_s, self.style.response_time_s)
         pose = self.shot.camera.pose(moment)
@@ -300,52 +365,89 @@ class MatchRig:
         camera.reach_m = None
         return pose, False
 
-    def _plan(self, moment: Moment, flags: list[str]) -> Shot | None:
-        """The cut decision of this tick (take, else the director), the re-placement of an
-        occluded camera (ours) and the candidates; the new shot or None."""
-        if self.held is not None:
-            new = self._held_shot(moment, flags)
-        else:
-            new = self.director.decide(moment, self.buffer, None if self.shot is None or self.shot.held else self.shot,
-                                       self._last_pose, flags)
-            if new is None and self.shot is not None and self.shot.held:  # released: the director starts afresh
-                new = self.director.decide(moment, self.buffer, None, self._last_pose, flags)
-        if self.director is self.planned or self.held is not None:
-            self._replace(moment, flags)
-        self._candidates = self._candidate_shots(moment, new or self.shot)
-        return new
+    def _tick(self, moment: Moment, flags: list[str]) -> bool:
+        """A planning tick (module docstring): the drawn plan applied and the next drawn, or a
+        plan made and applied at once; whether it cut."""
+        drawn, self._drawn = self._drawn, None
+        if self._take_pending or self.shot is None or not (self._defer_plans and self.director is self.planned):
+            if drawn is not None:
+                drawn.finish()  # a take overrides it; finished, so that it never depends on the moment of the take
+            result = self._plan(moment, self.buffer, self.shot, None, self._last_pose)
+            self._take_pending = False
+            return self._apply(result, moment, flags)
+        cut = drawn is not None and self._apply(drawn.finish(), moment, flags, drawn.current)
+        # planned for the moment it goes on air, the next tick's (buffered: the delay's future)
+        on_air = self.buffer.at(moment.time_s + self.settings.plan_interval_s)
+        current, camera, buffer, last_pose = self.shot, copy.copy(self.shot.camera), self.buffer.view(), self._last_pose
+        self._drawn = DrawnPlan(current, SlicedRun(lambda: self._plan(on_air, buffer, current, camera, last_pose),
+                                                   self.clock))
+        return cut
 
-    def _replace(self, moment: Moment, flags: list[str]) -> None:
+    def _apply(self, result: PlanResult, moment: Moment, flags: list[str], drawn_on: Shot | None = None) -> bool:
+        """A tick's decisions onto the program (drawn_on: the shot the plan was drawn on, whose
+        camera gets the new goal); whether it cut."""
+        flags.extend(result.flags)
+        self.held, self._candidates, self._beats = result.held, result.candidates, result.beats
+        if result.shot is not None:
+            result.shot.start_s = moment.time_s  # on air from now: the shot's length counts from here
+            self.shot = result.shot
+            return True
+        if result.goal is not None and self.shot is (drawn_on or self.shot):
+            self.shot.camera.goal = result.goal
+        return False
+
+    def _plan(self, moment: Moment, buffer: MomentBuffer, current: Shot | None, camera: ToricCamera | None,
+              last_pose: CameraPose | None) -> PlanResult:
+        """The cut decision of a tick (take, else the director), the re-placement of an occluded
+        camera (ours) and the candidates, from the moment, a buffer, the current shot, a copy of
+        its camera (None: the shot's own) and the last pose."""
+        flags: list[str] = []
+        held = self.held
+        if held is not None:
+            new, held = self._held_shot(moment, buffer, current, flags)
+        else:
+            new = self.director.decide(moment, buffer, None if current is None or current.held else current,
+                                       last_pose, flags)
+            if new is None and current is not None and current.held:  # released: the director starts afresh
+                new = self.director.decide(moment, buffer, None, last_pose, flags)
+        goal = None
+        if new is None and current is not None and (self.director is self.planned or held is not None):
+            goal = self._replaced_goal(moment, buffer, current, camera or current.camera, flags)
+        beats = list(self.planned.plan) if self.director is self.planned else []
+        return PlanResult(new, goal, held, self._candidate_shots(moment, buffer, new or current), beats, flags)
+
+    def _replaced_goal(self, moment: Moment, buffer: MomentBuffer, shot: Shot, camera, flags: list[str]) -> Place | None:
         """Ours: a Toric camera whose goal place sees its subjects under min_visible glides to the
-        best place on its side. With planned events still ahead in the buffer the place is judged
-        at their moments (plan.py's event cover: being hidden now matters less than at the kill);
-        otherwise now and REPLACE_LOOKAHEAD_S ahead."""
-        camera = None if self.shot is None else self.shot.camera
+        best place on its side (the new goal, None to keep it). With planned events still ahead in
+        the buffer the place is judged at their moments (plan.py's event cover: being hidden now
+        matters less than at the kill); otherwise now and REPLACE_LOOKAHEAD_S ahead."""
         if not isinstance(camera, ToricCamera):
-            return
+            return None
         now = moment.time_s
-        upcoming = [t for t in self.shot.cover_times_s if now <= t <= self.buffer.horizon_s]
+        upcoming = [t for t in shot.cover_times_s if now <= t <= buffer.horizon_s]
         if upcoming:
-            cover, weights = PlannedDirector.event_cover(self.buffer, now, upcoming)
+            cover, weights = PlannedDirector.event_cover(buffer, now, upcoming)
         else:
             ahead = now + REPLACE_LOOKAHEAD_S
-            cover, weights = [moment] + ([self.buffer.at(ahead)] if ahead <= self.buffer.horizon_s else []), None
-        subjects = self.shot.subjects
+            cover, weights = [moment] + ([buffer.at(ahead)] if ahead <= buffer.horizon_s else []), None
+        subjects = shot.subjects
         _, seen = best_place(camera, [camera.goal], cover, subjects, self.visibility, weights=weights)
         if seen >= self.settings.min_visible:
-            return
+            return None
         side = None if camera.b_index is None else camera.side
         place, score = best_place(camera, place_grid(side), cover, subjects, self.visibility, weights=weights)
-        if score > seen:
-            camera.goal = place
-            flags.append("replaced_for_visibility")
+        if score <= seen:
+            return None
+        flags.append("replaced_for_visibility")
+        return place
 
-    def _candidate_shots(self, moment: Moment, program: Shot | None) -> list[tuple[ShotChoice, ToricCamera | None, float]]:
+    def _candidate_shots(self, moment: Moment, buffer: MomentBuffer,
+                         program: Shot | None) -> list[tuple[ShotChoice, ToricCamera | None, float]]:
         """The best other situations, each with a Toric camera at the style's place (an OVERVIEW
         candidate reuses the program pose until it is taken)."""
         out = []
         program_set = set(program.subjects) if program is not None else set()
-        for option in self.planned.options(moment, self.buffer):
+        for option in self.planned.options(moment, buffer):
             if len(out) >= self.settings.candidates:
                 break
             if set(option.subjects) == program_set or option.kind == ShotKind.OVERVIEW:

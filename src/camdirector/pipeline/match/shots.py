@@ -62,6 +62,7 @@ from camdirector.geometry.toric import (
     torus_position,
 )
 from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
+from camdirector.infra.slices import pause
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.visibility import SubjectVisibility
@@ -251,7 +252,9 @@ def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[i
     """(m, len(subjects)) the share of each subject's sample points that each of m cameras,
     positions (m, 3) and camera-to-world rotation matrices (m, 3, 3), sees at the moment:
     unoccluded and inside the frame, and not from under the subjects' ground. A camera whose
-    rotation is NaN (a degenerate framing) sees nothing."""
+    rotation is NaN (a degenerate framing) sees nothing. A pause point of a plan computed in
+    slices (infra/slices.py): one batch of ray casts, 0.2-20 ms."""
+    pause()
     seen = visibility.seen_points(positions_world, moment, subjects)     # (m, s, k)
     ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
     seen[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
