@@ -1,10 +1,11 @@
 """A frame's round trip through the TypeScript SDK (client_sdk/typescript) against the Python
 SDK's, over gRPC, into one server in the same run (issue 28 bounds the ratio at 1.3).
 
-    python -m load_tests.ts_sdk_bench --frames 500 --rounds 3 --json FILE
+    python -m load_tests.ts_sdk_bench --frames 500 --rounds 4 --json FILE
 
-Each round runs the Python SDK, then the TypeScript SDK (`node bench/frame_rtt.mjs`, started
-outside the timing), each on a new session of the same scene (two capsules) with the same packed
+Each round runs both SDKs, the Python SDK first in even rounds and the TypeScript SDK
+(`node bench/frame_rtt.mjs`, started outside the timing) first in odd ones, so that a load on the
+machine that drifts during the run weighs on both alike; each on a new session of the same scene (two capsules) with the same packed
 transforms: unary `Frame` calls one after another, then one `StreamFrames` call with one update in
 flight (the next update is built when the last reply came). A round trip is timed at the caller,
 building the update included. Reported per SDK and mode: median and p99 (ms) over all rounds;
@@ -85,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=500, help="timed frames per mode and round")
     parser.add_argument("--warmup", type=int, default=50, help="untimed frames first, per mode and round")
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=4, help="rounds; an even number runs each SDK first as often")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
     if not (PACKAGE / "dist" / "index.js").is_file():
@@ -94,8 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     runs = {"python": {"unary": [], "stream": []}, "typescript": {"unary": [], "stream": []}}
     with ServerProcess("--workers", "1", transports=("grpc",)) as server:
         url = server.url("grpc")
-        for _ in range(args.rounds):
-            for sdk, run in (("python", python_round), ("typescript", ts_round)):
+        order = (("python", python_round), ("typescript", ts_round))
+        for r in range(args.rounds):
+            for sdk, run in order if r % 2 == 0 else order[::-1]:
                 for mode, values in run(url, args.frames, args.warmup).items():
                     runs[sdk][mode].extend(values)
     result: dict = {"benchmark": "ts_sdk_bench", "transport": "grpc", "frames_per_round": args.frames,

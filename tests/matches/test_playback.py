@@ -80,6 +80,8 @@ def test_a_match_played_fast_has_every_frame_answered_and_its_cuts_printed(regis
     # The session's shot changes: the first cut opens the program at the match's first moment, and
     # the next ones go to other shots.
     assert summary["cuts"] == len(cuts) >= 3
+    compute = summary["compute_ms"]   # the server's time per program frame, as it reported it
+    assert 0.0 < compute["median"] <= compute["p99"] <= compute["max"]
     assert cuts[0]["frame"] == 1 and cuts[0]["time_s"] == 0.0
     assert [c["frame"] for c in cuts] == sorted({c["frame"] for c in cuts})
     assert [c["shot_id"] for c in cuts] == sorted({c["shot_id"] for c in cuts})

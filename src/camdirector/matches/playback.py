@@ -18,6 +18,8 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
+import numpy as np
+
 import camdirector_client as cd
 from camdirector.evaluation.match.match_file import MatchRecording
 from camdirector.evaluation.match.session_feed import Feed, frame_updates, match_session_fields
@@ -42,17 +44,23 @@ class PlaybackCounts:
 
 @dataclass
 class PlaybackResult:
-    """How a playback ended: its counts, wall_s (s, from opening the session to closing it) and
-    whether Ctrl-C stopped it."""
+    """How a playback ended: its counts, wall_s (s, from opening the session to closing it),
+    whether Ctrl-C stopped it, and the server's compute_ms of each program frame (whether the
+    director kept up with the game: a frame it answers late is late on air)."""
 
     counts: PlaybackCounts = field(default_factory=PlaybackCounts)
     wall_s: float = 0.0
     interrupted: bool = False
+    compute_ms: list[float] = field(default_factory=list)
 
     def summary(self) -> dict:
         c = self.counts
+        compute = np.array(self.compute_ms) if self.compute_ms else np.zeros(1)
         return {"frames_sent": c.sent, "answered": c.answered, "program_frames": c.program, "cuts": c.cuts,
                 "late_frames": c.late, "laps": c.laps, "wall_s": round(self.wall_s, 2),
+                "compute_ms": {"median": round(float(np.median(compute)), 3),
+                               "p99": round(float(np.percentile(compute, 99)), 3),
+                               "max": round(float(compute.max()), 3)},
                 "interrupted": self.interrupted}
 
 
@@ -122,6 +130,7 @@ def play_match(client: cd.Client, match: MatchRecording, *, director: int, delay
                 if reply.buffering or reply.stale:
                     continue
                 result.counts.program += 1
+                result.compute_ms.append(reply.compute_ms)
                 if reply.cut:
                     result.counts.cuts += 1
                     on_cut(cut_line(reply))
