@@ -5,12 +5,12 @@ SDK's, over gRPC, into one server in the same run (issue 28 bounds the ratio at 
 
 Each round runs both SDKs, the Python SDK first in even rounds and the TypeScript SDK
 (`node bench/frame_rtt.mjs`, started outside the timing) first in odd ones, so that a load on the
-machine that drifts during the run weighs on both alike; each on a new session of the same scene (two capsules) with the same packed
-transforms: unary `Frame` calls one after another, then one `StreamFrames` call with one update in
-flight (the next update is built when the last reply came). A round trip is timed at the caller,
-building the update included. Reported per SDK and mode: median and p99 (ms) over all rounds;
-`ratio` = TypeScript median / Python median. Needs `npm ci && npm run build` in
-client_sdk/typescript first.
+machine that drifts during the run weighs on both alike; each on a new session of the same scene
+(two capsules) with the same packed transforms: unary `Frame` calls one after another, then one
+`StreamFrames` call with one update in flight (the next update is built when the last reply
+came). A round trip is timed at the caller, building the update included. Reported per SDK and
+mode: median and p99 (ms) over all rounds; `ratio` = TypeScript median / Python median. Needs
+`npm ci && npm run build` in client_sdk/typescript first.
 """
 from __future__ import annotations
 

@@ -32,8 +32,9 @@ points are the place searches' ray casts, shots.py `framed_seen`); the tick that
 finishes whatever idle moments left. On 90 s of the 4on4 on dm2 a plan costs 17 ms on average and
 up to 250 ms, against 3 ms for the rest of a frame: computed in the frame, one frame in four
 waited for it. Played live into a server (load_tests/match_live.py, the 4on4's first minute), the
-server's compute p99 went from 69 to 10 ms at 30 Hz and from 28 to 4.5 ms at 60 Hz. Applied one tick late, the program does not depend on when or in how many slices it
-was computed, only on its inputs: a take or a style change, which would change what a drawn plan
+server's compute p99 went from 69 to 10 ms at 30 Hz and from 28 to 4.5 ms at 60 Hz. Applied one
+tick late, the program does not depend on when or in how many slices it was computed, only on its
+inputs: a take or a style change, which would change what a drawn plan
 reads, finishes it first. The first shot and a take's are planned at once; the baselines (cheap)
 and a session with dynamic objects (whose ray scene every frame moves) plan in the frame, as before.
 
