@@ -315,13 +315,14 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
         playwright.expect(page.locator("#program-shot")).to_contain_text("buffering")
         shown = set(raw.stream(list(match_frames(session_id, 120, start=30)))[-1].shot.subject_ids)
         attacker, victim = next(pair for pair in (("a0", "b0"), ("a1", "b1")) if not set(pair) <= shown)
-        # The kill is streamed 5 frames before the newest: 2.83 s ahead of the program, which
-        # plans to cut lead_s (2.5 s) before it.
-        raw.stream(list(match_frames(session_id, 65, start=150, kill_at={210: (attacker, victim)})))
+        # The kill is streamed 9 frames before the newest: 2.73 s ahead of the program, which
+        # plans to cut lead_s (2.5 s) before it. The plan that sees it is drawn at the next
+        # planning tick and applied at the one after (pipeline/match/rig.py), within 8 frames.
+        raw.stream(list(match_frames(session_id, 69, start=150, kill_at={210: (attacker, victim)})))
         planned = page.locator("#planned-cut")
         playwright.expect(planned).to_contain_text(f"to DUEL {attacker}, {victim}: planned kill in")
         cut_s = float(planned.text_content().split("(at ")[1].split(" s)")[0])
-        program = raw.stream(list(match_frames(session_id, 60, start=215)))
+        program = raw.stream(list(match_frames(session_id, 60, start=219)))
         first = next(u for u in program if u.shot.reason.startswith("planned kill"))
         assert set(first.shot.subject_ids) == {attacker, victim} and first.cut
         assert first.time_s == pytest.approx(cut_s, abs=0.15)            # as announced, within a planning tick
