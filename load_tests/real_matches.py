@@ -1,9 +1,11 @@
 """The match directors on real matches (issue 29, "Done when"): every development QuakeWorld demo that
 has its map, imported (`import-match`), its map added as a level with the Quake player's size, and
-`eval-match` run on it: our director, HLTV's and the autotrack, the ceilings, with a delay.
+`eval-match` run on it: our director, HLTV's and the autotrack, the ceilings, with a delay; and
+the same on a `match-sim` bot match of each shared level (../shared/data/levels: 10 players, seed
+1, as long as --minutes, default 3), named sim_<level>.
 
     python -m load_tests.real_matches [--minutes 3] [--delay 10] [--rate-hz 30] [--twice]
-                                      [--only 4on4_dm2,...] [--json out/rm.json] [--markdown out/rm.md]
+                                      [--only 4on4_dm2,sim_zdm2,...] [--json out/rm.json] [--markdown out/rm.md]
 
 --twice runs each match a second time from scratch (the level added anew in another folder, a new
 server) and reports whether every director's program digest is the same. The two held-out matches
@@ -31,6 +33,15 @@ MATCHES = {
     "duel_bravado": ("duel_holy_vs_dago_bravado_20240426-1659.mvd.gz", "bravado.bsp.gz"),
     "wipeout_q3dm6qw": ("wipeout_red_vs_blue_q3dm6qw_20240406-2028.mvd.gz", "q3dm6qw.bsp.gz"),
 }
+SHARED_LEVELS = ROOT.parent / "shared" / "data" / "levels"
+# name -> level file under ../shared/data/levels: a bot match is simulated on each (match-sim)
+SIM_MATCHES = {
+    "sim_nav_test": "recast/nav_test.obj",
+    "sim_dungeon": "recast/dungeon.obj",
+    "sim_undulating": "recast/undulating.obj",
+    "sim_zdm2": "sauerbraten/zdm2.obj",
+}
+SIM_PLAYERS, SIM_SEED = 10, 1
 COLUMNS = (("kill coverage", lambda f: f["kill_coverage"]),
            ("first person", lambda f: f["kill_coverage_first_person"]),
            ("program vis.", lambda f: f["program_visibility"]),
@@ -44,11 +55,23 @@ COLUMNS = (("kill coverage", lambda f: f["kill_coverage"]),
 
 
 def prepare(name: str, folder: Path, minutes: float | None):
-    """The match, imported, with its map added as a level in folder; cut to its first minutes."""
+    """The match, imported, with its map added as a level in folder; cut to its first minutes.
+    A sim_ match: its shared level added, a bot match of `minutes` (default 3) simulated on it."""
     from camdirector.geometry import quake_frame
     from camdirector.matches.quakeworld_mvd import import_mvd
     from camdirector.precompute.tracks.registry import LevelRegistry
 
+    if name in SIM_MATCHES:
+        import numpy as np
+
+        from camdirector.evaluation.match.sim import simulate_match
+
+        level = name.removeprefix("sim_")
+        with LevelRegistry(folder / "data") as registry:
+            registry.add_level(level, SHARED_LEVELS / SIM_MATCHES[name])
+            artifact = registry.load(level)
+        return simulate_match(artifact, level, SIM_PLAYERS, 60.0 * (minutes or 3.0), np.random.default_rng(SIM_SEED),
+                              SIM_SEED)
     demo, bsp = MATCHES[name]
     level = bsp.split(".")[0]
     map_path = folder / f"{level}.bsp"
@@ -103,10 +126,14 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path)
     parser.add_argument("--markdown", type=Path)
     args = parser.parse_args(argv)
-    names = [n for n in args.only.split(",") if n] or list(MATCHES)
-    unknown = [n for n in names if n not in MATCHES]
+    known = [*MATCHES, *SIM_MATCHES]
+    names = [n for n in args.only.split(",") if n] or known
+    unknown = [n for n in names if n not in known]
     if unknown:
-        print(f"real_matches: unknown match {unknown}; known: {sorted(MATCHES)}", file=sys.stderr)
+        print(f"real_matches: unknown match {unknown}; known: {known}", file=sys.stderr)
+        return 2
+    if any(n in SIM_MATCHES for n in names) and not SHARED_LEVELS.is_dir():
+        print(f"real_matches: the shared levels are not at {SHARED_LEVELS}", file=sys.stderr)
         return 2
     results = {name: run_match(name, args) for name in names}
     emit({"delay_s": args.delay, "rate_hz": args.rate_hz, "minutes": args.minutes, "matches": results}, args.json)
