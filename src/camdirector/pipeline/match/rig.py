@@ -393,7 +393,7 @@ class MatchRig:
             result.shot.start_s = moment.time_s  # on air from now: the shot's length counts from here
             self.shot = result.shot
             return True
-        if result.goal is not None and self.shot is (drawn_on or self.shot):
+        if result.goal is not None and (drawn_on is None or self.shot is drawn_on):
             self.shot.camera.goal = result.goal
         return False
 
