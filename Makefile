@@ -32,8 +32,8 @@ bench: $(STAMP)
 	$(BIN)/python -m load_tests.stream --transport grpc --sessions 1 --seconds 10 --json out/bench-grpc-1.json
 	$(BIN)/python -m load_tests.stream --transport zmq --sessions 1 --seconds 10 --json out/bench-zmq-1.json
 
-# The release artifacts, named with the version: wheels and sdists, the C/C++ SDK's install tree
-# (scripts/dist.sh; tests/test_dist.py checks what it makes).
+# The release artifacts, named with the version: wheels and sdists, the C/C++ SDK's install tree,
+# the service image (scripts/dist.sh; tests/test_dist.py checks what it makes).
 dist: $(STAMP)
 	rm -rf dist
 	PYTHON=$(BIN)/python bash scripts/dist.sh dist

@@ -2,11 +2,16 @@
 
     python -m load_tests.failover --nodes 3 --sessions 24 --rate 60 --seconds 40 --kill-after 15 --json F
     python -m load_tests.failover --kill worker --sessions 16 --seconds 20 --kill-after 8
+    python -m load_tests.failover --kill node-container --sessions 12 --seconds 40 --kill-after 15
 
 `--kill node` (with --nodes N >= 2): a cluster (deploy/cluster.py: HAProxy, Redis, N nodes)
 on this machine, as it is deployed (TLS on every hop, keys checked); sessions are created and
 streamed through the balancer with the Python SDK (grpcs://, an engine key and x-camdirector-route
 on every call), and the node holding the most sessions is SIGKILLed.
+`--kill node-container`: the same through docker/compose.cluster.yaml in containers
+(deploy/compose.py: podman-compose, the service image, HAProxy, Redis, PostgreSQL and the queue
+worker each in its own container; the node container holding the most sessions is `podman
+kill`ed). Needs root, podman, runc and podman-compose (scripts/system-deps.sh --tests).
 `--kill worker`: one node with two workers (loopback, no TLS, no keys: `ServerProcess`'s default
 for measurements about something else); the worker holding the most sessions is SIGKILLed.
 
@@ -15,7 +20,8 @@ Every session streams the demo scene (FRAMING_ONLY) at --rate Hz; an undisturbed
 sessions lost (a stream that failed for good), frames not answered after the SDK's retries,
 recovery time p50/p99 over all sessions and over those whose stream the kill broke (last answer
 before the kill to the first after),
-the largest pose difference from the undisturbed answers at any frame (0.0: bit for bit), and the
+the largest pose difference from the undisturbed answers at any frame (0.0: bit for bit), overall
+and per session, and the
 floor: a health check's round trip over the same path (TLS to the balancer for a node) measured in
 the same run.
 """
@@ -25,6 +31,7 @@ import argparse
 import os
 import signal
 import ssl
+import sys
 import tempfile
 import threading
 import time
@@ -95,7 +102,10 @@ def _stream(session, updates, rate_hz: float, start_s: float, out: dict) -> None
     out.update(answers=answers, times=times)
 
 
-def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float) -> dict:
+def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float,
+        compose_cluster=None) -> dict:
+    """The benchmark (the module docstring). `compose_cluster`: a `ComposeCluster` already up for
+    `--kill node-container`, used and left up (a test's); by default one is brought up and down."""
     scene = build_demo_scene()
     create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9), cd.pb.FRAMING_ONLY)
     updates = list(frame_updates(scene, int(seconds * rate_hz), rate_hz))
@@ -103,7 +113,19 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
     folder = Path(tempfile.mkdtemp(prefix="camdirector-failover-"))
     cluster = server = None
     try:
-        if kill == "node":
+        if kill == "node-container":
+            from camdirector.deploy.compose import ComposeCluster
+            cluster = compose_cluster or ComposeCluster.up(Path(__file__).resolve().parents[1], folder,
+                                                           project="camdirector-failover",
+                                                           log=lambda line: print(line, file=sys.stderr))
+            floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
+            engine = _admin_call(cluster, "POST", f"https://{cluster.http}/v1/keys",
+                                 json={"role": "engine", "name": "load_tests.failover"})["key"]
+            # a create here sometimes waits 10, 20 or 30 s (nothing logged by HAProxy or the nodes;
+            # podman's DNS, which fails lookups while a container starts on the network, is the
+            # suspect): the calls get 60 s, and the slowest create is reported
+            client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file, timeout_s=60.0)
+        elif kill == "node":
             from camdirector.deploy.cluster import Cluster
             cluster = Cluster.up(nodes=nodes, folder=folder)
             floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
@@ -115,7 +137,15 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             server = ServerProcess("--workers", "2", "--data-dir", str(folder), transports=("grpc", "http"))
             floor_ms = _health_floor_ms(server.grpc, None)
             client = cd.connect(server.url("grpc"))
-        opened = [client.create_session(create) for _ in range(sessions)]
+        opened, create_s = [], []
+        for _ in range(sessions):
+            started = time.monotonic()
+            opened.append(client.create_session(create))
+            create_s.append(time.monotonic() - started)
+        if kill == "node-container":
+            # asked before the streams start (sessions stay where they are created until a node dies):
+            # each ask runs a program in a container, seconds on a loaded machine
+            counts = {node: len(cluster.sessions_on(node) & {s.id for s in opened}) for node in cluster.nodes}
         results = [{} for _ in opened]
         start_s = time.perf_counter() + 0.5
         threads = [threading.Thread(target=_stream, args=(s, [pb.FrameUpdate.FromString(u.SerializeToString())
@@ -124,21 +154,35 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
         for thread in threads:
             thread.start()
         time.sleep(max(0.0, start_s + kill_after_s - time.perf_counter()))
-        if kill == "node":
+        if kill == "node-container":
+            victim = max(counts, key=counts.__getitem__)
+            held = counts[victim]
+            killed_at = time.monotonic()
+            cluster.kill(victim)
+        elif kill == "node":
             counts = [len(_admin_call(cluster, "GET", f"https://{node.http}/v1/sessions")["sessions"])
                       for node in cluster.nodes]
             victim = max(range(len(counts)), key=counts.__getitem__)
             held = counts[victim]
+            killed_at = time.monotonic()
             cluster.kill_node(victim)
         else:
             held = None
+            killed_at = time.monotonic()
             os.kill(server.worker_pids()[0], signal.SIGKILL)
-        killed_at = time.monotonic()
         for thread in threads:
             thread.join(seconds + 60)
+        rejoined_s = None
+        if kill == "node-container":
+            # started again, as its host's operator would: HAProxy finds it by name and sends its keys back
+            restarted = time.monotonic()
+            cluster.start(victim)
+            cluster.wait_healthy(victim, 120)
+            cluster.wait_balanced(timeout_s=60)
+            rejoined_s = time.monotonic() - restarted
         lost = [r for r in results if "error" in r]
         unanswered = sum(len(updates) - len(r["answers"]) for r in results)
-        recoveries, interrupted, worst = [], [], 0.0
+        recoveries, interrupted, worst_each, first_differing, answered_at_kill = [], [], [], [], []
         for session, r in zip(opened, results):
             before = [t for t in r["times"] if t <= killed_at]
             after = [t for t in r["times"] if t > killed_at]
@@ -146,10 +190,13 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
                 recoveries.append(after[0] - before[-1])
                 if session.retries:
                     interrupted.append(after[0] - before[-1])
-            for answer in r["answers"]:
-                worst = max(worst, _pose_difference(answer.pose, expected[answer.frame - 1]))
+            differences = [_pose_difference(answer.pose, expected[answer.frame - 1]) for answer in r["answers"]]
+            worst_each.append(max(differences, default=0.0))
+            # where a session first differs, beside the last frame it had answered before the kill
+            first_differing.append(next((a.frame for a, d in zip(r["answers"], differences) if d > 0.0), None))
+            answered_at_kill.append(len(before))
         client.close()
-        return {"kill": kill, "nodes": nodes if kill == "node" else 1, "sessions": sessions, "rate_hz": rate_hz,
+        return {"kill": kill, "nodes": len(cluster.nodes) if cluster is not None else 1, "sessions": sessions, "rate_hz": rate_hz,
                 "seconds": seconds, "kill_after_s": kill_after_s, "sessions_on_killed": held,
                 "sessions_lost": len(lost), "errors": [r["error"] for r in lost][:3],
                 "frames_not_answered": unanswered, "frames_expected": sessions * len(updates),
@@ -161,10 +208,19 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
                 "interrupted_sessions": len(interrupted),
                 "interrupted_recovery_s_p50": float(np.percentile(interrupted, 50)) if interrupted else None,
                 "interrupted_recovery_s_p99": float(np.percentile(interrupted, 99)) if interrupted else None,
-                "max_pose_difference": worst, "floor_health_ms_p50": floor_ms}
+                "max_pose_difference": max(worst_each),
+                "max_pose_difference_per_session": worst_each,
+                "first_differing_frame_per_session": first_differing,
+                "frames_answered_at_kill_per_session": answered_at_kill,
+                "retries_per_session": [s.retries for s in opened],
+                "sessions_per_node_before_kill": counts if kill != "worker" else None,
+                "killed_container_rejoined_s": rejoined_s,
+                "create_s_max": max(create_s), "floor_health_ms_p50": floor_ms}
     finally:
-        if cluster is not None:
+        if cluster is not None and cluster is not compose_cluster:
             cluster.down()
+        elif compose_cluster is not None:
+            folder.rmdir()  # the given cluster has its own folder
         if server is not None:
             server.stop()
 
@@ -179,7 +235,7 @@ def _admin_call(cluster, method: str, url: str, **kwargs) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--kill", choices=("node", "worker"), default="node")
+    parser.add_argument("--kill", choices=("node", "node-container", "worker"), default="node")
     parser.add_argument("--nodes", type=int, default=3)
     parser.add_argument("--sessions", type=int, default=24)
     parser.add_argument("--rate", type=float, default=60.0)

@@ -5,6 +5,7 @@
 #   camdirector_proto-V.tar.gz, camdirector_proto-V-py3-none-any.whl     the wire code
 #   camdirector_client-V.tar.gz, camdirector_client-V-py3-none-any.whl   the Python SDK
 #   camdirector-cpp-sdk-V-linux-ARCH.tar.gz                              the C/C++ SDK's install tree
+#   camdirector-image-V-linux-ARCH.tar                                   the service image (docker load -i)
 #   SHA256SUMS
 # Each wheel is built from its sdist (python -m build), so a file an sdist leaves out fails here.
 # Sources are staged in a temporary folder first, as scripts/install-dist.sh does, so nothing of the
@@ -33,6 +34,15 @@ cmake --build "$STAGE/cpp-build" -j "$(nproc)" >/dev/null
 SDK="camdirector-cpp-sdk-$VERSION-linux-$(uname -m)"
 cmake --install "$STAGE/cpp-build" --prefix "$STAGE/$SDK" >/dev/null
 tar -C "$STAGE" -czf "$OUT/$SDK.tar.gz" "$SDK"
+
+# The service image (docker/Dockerfile) built with podman as root (deploy/image.py: on the local
+# debootstrap bookworm, or on IMAGE_BASE, e.g. python:3.11-slim-bookworm where a registry is
+# reachable) and saved as a docker archive. NO_IMAGE=1 leaves it out (a machine without podman).
+if [ "${NO_IMAGE:-}" != 1 ]; then
+  TAG=$("$PYTHON" -m camdirector.deploy.image build --root "$ROOT" ${IMAGE_BASE:+--base "$IMAGE_BASE"} \
+        | "$PYTHON" -c "import json, sys; print(json.load(sys.stdin)['image'])")
+  "$PYTHON" -m camdirector.deploy.image save "$TAG" "$OUT/camdirector-image-$VERSION-linux-$(uname -m).tar" >/dev/null
+fi
 
 (cd "$OUT" && sha256sum -- * > SHA256SUMS)
 ls -1 "$OUT"

@@ -3,6 +3,7 @@
 #   scripts/podman-image.sh base     makes the local bookworm base once (debootstrap + podman import)
 #   scripts/podman-image.sh build    builds docker/Dockerfile on it as localhost/camdirector:VERSION
 #   scripts/podman-image.sh build --base python:3.11-slim-bookworm   on the public base instead
+#   scripts/podman-image.sh save TAG FILE   the image as a docker archive (scripts/dist.sh does this)
 # Needs the venv (`make test` or `make run` makes it), root, and podman, runc and debootstrap
 # (scripts/system-deps.sh --tests). The code is src/camdirector/deploy/image.py, which the tests use.
 set -euo pipefail

@@ -7,7 +7,8 @@
 # (their tests then skip, CI fails). `--cluster` (also part of `--tests`) wants the engines a
 # cluster runs on (scripts/cluster.sh): redis-server, haproxy and postgresql. `--tests` also wants
 # what builds and runs the service image (tests/deploy/test_image.py, deploy/image.py): podman,
-# runc and debootstrap; and Node with npm for the TypeScript SDK.
+# runc and debootstrap, and podman-compose for the cluster in containers (deploy/compose.py); and
+# Node with npm for the TypeScript SDK.
 set -euo pipefail
 need=()
 ldconfig -p | grep -q 'libEGL.so.1' || need+=(libegl1)
@@ -38,6 +39,7 @@ if [ "${1:-}" = "--tests" ]; then
   command -v podman >/dev/null || optional+=(podman)
   [ -x /usr/sbin/runc ] || optional+=(runc)
   command -v debootstrap >/dev/null || [ -x /usr/sbin/debootstrap ] || optional+=(debootstrap)
+  command -v podman-compose >/dev/null || optional+=(podman-compose)
 fi
 if [ ${#optional[@]} -gt 0 ]; then
   if [ "$(id -u)" -ne 0 ]; then

@@ -1,29 +1,52 @@
 """`make dist` (scripts/dist.sh): every release artifact named with the one version, checksummed,
 and holding what its users take from it: the wheels' metadata, the sdists' sources, the C/C++
-SDK's install tree with its CMake package and pkg-config file, and a C library that says its
-version. The artifacts are tests/conftest.py's release_dist, built once per run: the wheels that
+SDK's install tree with its CMake package and pkg-config file, a C library that says its
+version, and the service image as a docker archive (where podman runs). The artifacts are
+tests/conftest.py's release_dist, built once per run: the wheels that
 tests/test_installed_package.py installs are these."""
 from __future__ import annotations
 
 import hashlib
+import json
+import os
 import platform
 import subprocess
 import sys
 import tarfile
 import zipfile
 
+import pytest
+
 from camdirector.version import VERSION
+from tests.conftest import why_no_image
+
+IMAGE = f"camdirector-image-{VERSION}-linux-{platform.machine()}.tar"
+
+
+def image_or_skip() -> None:
+    """The image archive is made only where podman runs (tests/conftest.py's release_dist)."""
+    why = why_no_image()
+    if why is not None:
+        if os.environ.get("CAMDIRECTOR_REQUIRE_PODMAN") == "1":
+            pytest.fail(f"{why} (CAMDIRECTOR_REQUIRE_PODMAN=1)")
+        pytest.skip(f"make dist left the image out: {why}")
 
 
 def test_every_artifact_is_named_with_the_version_and_checksummed(release_dist):
     sdk = f"camdirector-cpp-sdk-{VERSION}-linux-{platform.machine()}.tar.gz"
     expected = {f"{name}-{VERSION}{suffix}" for name in ("camdirector", "camdirector_proto", "camdirector_client")
                 for suffix in (".tar.gz", "-py3-none-any.whl")} | {sdk, "SHA256SUMS"}
+    if why_no_image() is None:
+        expected.add(IMAGE)
     assert {p.name for p in release_dist.iterdir()} == expected
     sums = dict(reversed(line.split("  ", 1)) for line in (release_dist / "SHA256SUMS").read_text().splitlines())
     assert set(sums) == expected - {"SHA256SUMS"}
     for name, digest in sums.items():
-        assert hashlib.sha256((release_dist / name).read_bytes()).hexdigest() == digest, name
+        sha = hashlib.sha256()
+        with open(release_dist / name, "rb") as artifact:  # the image is a gigabyte: read in pieces
+            while chunk := artifact.read(1 << 22):
+                sha.update(chunk)
+        assert sha.hexdigest() == digest, name
 
 
 def test_the_wheels_and_sdists_hold_their_sources_at_the_version(release_dist):
@@ -52,3 +75,17 @@ def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(r
                            "lib.cd_version.restype = ctypes.c_char_p; print(lib.cd_version().decode())",
                            str(prefix / "lib/libcamdirector_c.so")], capture_output=True, text=True, check=True)
     assert said.stdout.strip() == VERSION
+
+
+def test_the_image_archive_holds_the_labelled_unprivileged_image(release_dist):
+    """What `docker load -i` reads: one image tagged with the version, its config labelled with it
+    and running as the service's user, every layer it lists present."""
+    image_or_skip()
+    with tarfile.open(release_dist / IMAGE) as archive:
+        (manifest,) = json.load(archive.extractfile("manifest.json"))
+        assert manifest["RepoTags"] == [f"localhost/camdirector:{VERSION}"]
+        config = json.load(archive.extractfile(manifest["Config"]))
+        names = set(archive.getnames())
+    assert config["config"]["Labels"]["org.opencontainers.image.version"] == VERSION
+    assert config["config"]["User"] == "camdirector"
+    assert set(manifest["Layers"]) <= names and len(manifest["Layers"]) == len(config["rootfs"]["diff_ids"])

@@ -1,7 +1,8 @@
-"""docker/compose.cluster.yaml: no container engine runs on the test machines, so its syntax and
-content are checked instead: the services, one data volume shared by every node and worker, one
-node id each, TLS files for every node and the balancer, and an haproxy.cfg that is what
-deploy/haproxy.py writes for those nodes and that HAProxy accepts."""
+"""docker/compose.cluster.yaml's content, checked without running it (test_compose_cluster.py runs
+it): the services, one data volume shared by every node and worker, one node id each, TLS files
+for every node and the balancer, the public images by default, and the haproxy.cfg it mounts
+(docker/haproxy.cluster.cfg), which is what deploy/haproxy.py writes for those nodes and what
+HAProxy accepts."""
 from __future__ import annotations
 
 import re
@@ -15,7 +16,9 @@ import yaml
 from camdirector.deploy.haproxy import COMPOSE_TLS_DIR, compose_config
 from camdirector.deploy.tls import files_in
 
-COMPOSE = Path(__file__).resolve().parents[2] / "docker" / "compose.cluster.yaml"
+DOCKER = Path(__file__).resolve().parents[2] / "docker"
+COMPOSE = DOCKER / "compose.cluster.yaml"
+TLS_MOUNT = f"${{CAMDIRECTOR_TLS_DIR:-./tls}}:{COMPOSE_TLS_DIR}:ro"
 
 
 @pytest.fixture(scope="module")
@@ -45,14 +48,31 @@ def test_the_services_and_what_each_node_is_told(compose):
     assert all(s["depends_on"] == {"node-1": {"condition": "service_healthy"}}
                for name, s in nodes(compose).items() if name != "node-1")
     mounting_tls = [s for name, s in compose["services"].items() if name in nodes(compose) or name == "haproxy"]
-    assert all(f"./tls:{COMPOSE_TLS_DIR}:ro" in s["volumes"] for s in mounting_tls)
+    assert all(TLS_MOUNT in s["volumes"] for s in mounting_tls)
     sharing = [s for name, s in compose["services"].items() if name in nodes(compose) or name == "job-worker"]
     assert all("camdirector-data:/var/lib/camdirector" in s["volumes"] for s in sharing)
     assert set(compose["volumes"]) == {"camdirector-data", "postgres-data"}
 
 
+def test_users_get_the_public_images_and_the_documented_ports_by_default(compose):
+    """The variables deploy/compose.py sets (local stand-ins, free ports) default to what a user
+    with a registry runs."""
+    images = {name: s["image"] for name, s in compose["services"].items()}
+    assert images["redis"] == "${CAMDIRECTOR_REDIS_IMAGE:-redis:7-bookworm}"
+    assert images["postgres"] == "${CAMDIRECTOR_POSTGRES_IMAGE:-postgres:15-bookworm}"
+    assert images["haproxy"] == "${CAMDIRECTOR_HAPROXY_IMAGE:-haproxy:2.6}"
+    assert {images[name] for name in nodes(compose)} | {images["job-worker"]} == {"${CAMDIRECTOR_IMAGE:-camdirector:latest}"}
+    assert compose["services"]["haproxy"]["ports"] == ["${CAMDIRECTOR_GRPC_PORT:-50051}:50051",
+                                                       "${CAMDIRECTOR_HTTP_PORT:-8080}:8080"]
+    # each stand-in is a target of docker/stand-ins/Dockerfile
+    targets = re.findall(r"^FROM \S+ AS (\w+)$", (DOCKER / "stand-ins" / "Dockerfile").read_text(), re.MULTILINE)
+    assert sorted(targets) == ["haproxy", "postgres", "redis"]
+
+
 def test_the_haproxy_config_is_what_haproxy_py_writes_and_haproxy_accepts(compose, tmp_path, tls_files):
-    content = compose["configs"]["haproxy_cfg"]["content"]
+    assert "configs" not in compose  # podman-compose 1.0.3 has no inline configs: the file is mounted
+    assert "./haproxy.cluster.cfg:/usr/local/etc/haproxy/haproxy.cfg:ro" in compose["services"]["haproxy"]["volumes"]
+    content = (DOCKER / "haproxy.cluster.cfg").read_text()
     assert content == compose_config(len(nodes(compose)))
     if shutil.which("haproxy") is None and not Path("/usr/sbin/haproxy").exists():
         pytest.skip("haproxy is not installed (Debian package haproxy)")

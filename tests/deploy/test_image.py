@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import ssl
 import time
 import uuid
@@ -29,11 +28,13 @@ import zmq.auth
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from camdirector.deploy import image as podman_image
+from camdirector.deploy.compose import require_podman_compose
 from camdirector.deploy.services import ServiceError, free_port
 from camdirector.deploy.tls import make_tls_files
 from camdirector.v1 import director_pb2 as pb
 from camdirector.version import VERSION
 from tests import served_checks as checks
+from tests.conftest import why_no_image
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service.test_failover import _undisturbed as undisturbed
 from tests.service.wire_client import two_target_request, walk
@@ -52,18 +53,19 @@ def test_the_dockerfile_labels_the_project_version_by_default():
     assert 'org.opencontainers.image.version="${VERSION}"' in text
 
 
-def podman_or_skip() -> None:
-    """A skip with the reason where this machine cannot build and run the image; under CI a failure."""
-    try:
-        podman_image.require_podman()
-        if shutil.which("debootstrap") is None and not Path("/usr/sbin/debootstrap").exists():
-            raise ServiceError("debootstrap is not installed (Debian package debootstrap; scripts/system-deps.sh --tests)")
-        if os.geteuid() != 0:
-            raise ServiceError("the image tests run podman and debootstrap as root; these tests do not run as root")
-    except ServiceError as exc:
+def podman_or_skip(compose: bool = False) -> None:
+    """A skip with the reason where this machine cannot build and run the image (and, with
+    `compose`, run docker/compose.cluster.yaml); under CI a failure."""
+    why = why_no_image()
+    if why is None and compose:
+        try:
+            require_podman_compose()
+        except ServiceError as exc:
+            why = str(exc)
+    if why is not None:
         if os.environ.get("CAMDIRECTOR_REQUIRE_PODMAN") == "1":
-            pytest.fail(f"{exc} (CAMDIRECTOR_REQUIRE_PODMAN=1)")
-        pytest.skip(str(exc))
+            pytest.fail(f"{why} (CAMDIRECTOR_REQUIRE_PODMAN=1)")
+        pytest.skip(why)
 
 
 @pytest.fixture(scope="module")

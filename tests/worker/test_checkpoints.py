@@ -217,3 +217,22 @@ def test_deferred_snapshots_wait_for_idle_work_but_never_past_twice_their_period
     for payload in updates[12:]:  # never idle: at twice the period the snapshot is taken inline
         table.handle_bytes("frame", "s", payload)
     assert store.load("s").seq == 12 + 2 * 10
+
+
+def test_an_input_a_bypassed_table_computes_after_restoring_is_in_the_checkpoint(tmp_path, store_url):
+    """Sessions move back and forth while a balancer's view of the nodes settles: A answers, B
+    takes the session over, A is asked again (its write is refused: it restores B's newer state and
+    computes the input), then C takes it over. C's answers are the undisturbed ones only if the
+    input A computed after restoring is in the checkpoint too."""
+    create, requests = _toric_requests(pb.FRAMING_ONLY, 100)
+    reference = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
+    reference.handle_bytes("create", "s", create.SerializeToString())
+    expected = _answers(reference, requests)
+
+    a = _table(tmp_path, store_url, "node-a/1")
+    a.handle_bytes("create", "s", create.SerializeToString())
+    answered = _answers(a, requests[:30])
+    answered += _answers(_table(tmp_path, store_url, "node-b/2"), requests[30:45])
+    answered += _answers(a, requests[45:50])   # bypassed, then asked again
+    answered += _answers(_table(tmp_path, store_url, "node-c/3"), requests[50:])
+    assert answered == expected

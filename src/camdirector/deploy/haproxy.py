@@ -139,10 +139,11 @@ def _server_args(s: BalancerSettings, tls: TlsFiles, grpc: bool) -> str:
 
 
 def render_config(settings: BalancerSettings, backends: list[Backend], *, tls: TlsFiles, stats_socket: str,
-                  grpc_port: int, http_port: int, resolvers: str = "", user: str = "") -> str:
+                  grpc_port: int, http_port: int, resolvers: bool = False, user: str = "") -> str:
     """haproxy.cfg for these nodes, its frontends presenting `tls.bundle`, the nodes checked against
-    `tls.ca_cert`. `resolvers` ("" for none) is a `nameserver` line's address, for node names that
-    only a container network's DNS knows (docker/compose.cluster.yaml); `user` ("" to stay who
+    `tls.ca_cert`. `resolvers`: node names are found again while it runs, through the nameservers of
+    its /etc/resolv.conf: names that only a container network's DNS knows, and whose address
+    changes when a container starts again (docker/compose.cluster.yaml); `user` ("" to stay who
     started it) the user HAProxy becomes once it has read its files."""
     grpc_server, http_server = _server_args(settings, tls, grpc=True), _server_args(settings, tls, grpc=False)
     if resolvers:
@@ -159,7 +160,8 @@ def render_config(settings: BalancerSettings, backends: list[Backend], *, tls: T
         "",
     ]
     if resolvers:
-        lines += ["resolvers dns", f"    nameserver dns {resolvers}", "    hold valid 10s", ""]
+        # Docker's resolv.conf names its DNS at 127.0.0.11, podman's the network's gateway: the file works on both
+        lines += ["resolvers dns", "    parse-resolv-conf", "    hold valid 10s", ""]
     lines += [
         "defaults",
         "    mode http",
@@ -205,7 +207,60 @@ def render_config(settings: BalancerSettings, backends: list[Backend], *, tls: T
     return "\n".join(lines)
 
 
-class HAProxy:
+class RuntimeApi:
+    """A running HAProxy's runtime API on the unix socket `socket_path` (management.txt section 9.3):
+    the one this module starts, or one in a container (deploy/compose.py)."""
+
+    def __init__(self, socket_path: Path):
+        self.socket_path = Path(socket_path)
+
+    def failure_context(self) -> str:
+        """What an error about this HAProxy adds (its log's tail, where there is one)."""
+        return ""
+
+    def command(self, line: str, timeout_s: float = 5.0) -> str:
+        """One runtime API command; returns HAProxy's answer."""
+        with socket.socket(socket.AF_UNIX) as sock:
+            sock.settimeout(timeout_s)
+            sock.connect(str(self.socket_path))
+            sock.sendall(line.encode() + b"\n")
+            chunks = []
+            while chunk := sock.recv(65536):  # HAProxy closes after one answer (non-interactive mode)
+                chunks.append(chunk)
+        return b"".join(chunks).decode(errors="replace")
+
+    def server_states(self) -> dict[str, dict[str, str]]:
+        """{backend: {server: status}}, status as `show stat` writes it: "UP", "DOWN", "UP 1/2"
+        (going down), "DOWN 1/2" (going up), "MAINT"; "UP" only once a check has passed."""
+        rows = csv.DictReader(self.command("show stat").lstrip("# ").splitlines())
+        states: dict[str, dict[str, str]] = {}
+        for row in rows:
+            if row["svname"] in ("FRONTEND", "BACKEND"):
+                continue
+            # a server starts UP before its first check; trust UP only after a passed check
+            passed = row["check_status"].lstrip("* ") == "L7OK"  # the gRPC or HTTP answer itself, not a connect
+            status = row["status"] if passed or row["status"] != "UP" else "UP (not checked yet)"
+            states.setdefault(row["pxname"], {})[row["svname"]] = status
+        return states
+
+    def wait_until(self, expected: dict[str, str], timeout_s: float = 30.0,
+                   backends: tuple[str, ...] = (GRPC_BACKEND, HTTP_BACKEND)) -> float:
+        """Waits until every named server has the given status ("UP" or "DOWN") in `backends`;
+        returns the seconds it took. ServiceError after timeout_s."""
+        start = time.monotonic()
+        while True:
+            states = self.server_states()
+            wrong = {(backend, name): states.get(backend, {}).get(name) for backend in backends
+                     for name, status in expected.items() if states.get(backend, {}).get(name) != status}
+            if not wrong:
+                return time.monotonic() - start
+            if time.monotonic() - start > timeout_s:
+                raise ServiceError(f"haproxy: after {timeout_s:g} s, servers not as expected {expected}: {wrong}; "
+                                   f"{self.failure_context()}")
+            time.sleep(0.05)
+
+
+class HAProxy(RuntimeApi):
     """haproxy on `settings.host`, configured for `backends`, its runtime API on a unix socket in
     `folder`, TLS with `tls` (the module docstring). A child in a session of its own: it outlives
     the process that started it (the cluster's `up` returns); `pid` is what stops it."""
@@ -216,8 +271,8 @@ class HAProxy:
         self.settings = settings
         self.grpc_port = settings.grpc_port or free_port()
         self.http_port = settings.http_port or free_port()
+        super().__init__(self.folder / "haproxy.sock")
         self.config_path = self.folder / "haproxy.cfg"
-        self.socket_path = self.folder / "haproxy.sock"
         self.log_path = self.folder / "haproxy.log"
         self.backends: list[Backend] = []
         self.pid: int | None = None
@@ -257,46 +312,8 @@ class HAProxy:
         _wait_port(self.http_port, self.proc, timeout_s, "haproxy", self.log_path)
         return self
 
-    def command(self, line: str, timeout_s: float = 5.0) -> str:
-        """One runtime API command (management.txt section 9.3); returns HAProxy's answer."""
-        with socket.socket(socket.AF_UNIX) as sock:
-            sock.settimeout(timeout_s)
-            sock.connect(str(self.socket_path))
-            sock.sendall(line.encode() + b"\n")
-            chunks = []
-            while chunk := sock.recv(65536):  # HAProxy closes after one answer (non-interactive mode)
-                chunks.append(chunk)
-        return b"".join(chunks).decode(errors="replace")
-
-    def server_states(self) -> dict[str, dict[str, str]]:
-        """{backend: {server: status}}, status as `show stat` writes it: "UP", "DOWN", "UP 1/2"
-        (going down), "DOWN 1/2" (going up), "MAINT"; "UP" only once a check has passed."""
-        rows = csv.DictReader(self.command("show stat").lstrip("# ").splitlines())
-        states: dict[str, dict[str, str]] = {}
-        for row in rows:
-            if row["svname"] in ("FRONTEND", "BACKEND"):
-                continue
-            # a server starts UP before its first check; trust UP only after a passed check
-            passed = row["check_status"].lstrip("* ") == "L7OK"  # the gRPC or HTTP answer itself, not a connect
-            status = row["status"] if passed or row["status"] != "UP" else "UP (not checked yet)"
-            states.setdefault(row["pxname"], {})[row["svname"]] = status
-        return states
-
-    def wait_until(self, expected: dict[str, str], timeout_s: float = 30.0,
-                   backends: tuple[str, ...] = (GRPC_BACKEND, HTTP_BACKEND)) -> float:
-        """Waits until every named server has the given status ("UP" or "DOWN") in `backends`;
-        returns the seconds it took. ServiceError after timeout_s."""
-        start = time.monotonic()
-        while True:
-            states = self.server_states()
-            wrong = {(backend, name): states.get(backend, {}).get(name) for backend in backends
-                     for name, status in expected.items() if states.get(backend, {}).get(name) != status}
-            if not wrong:
-                return time.monotonic() - start
-            if time.monotonic() - start > timeout_s:
-                raise ServiceError(f"haproxy: after {timeout_s:g} s, servers not as expected {expected}: {wrong}; "
-                                   f"{_tail(self.log_path)}")
-            time.sleep(0.05)
+    def failure_context(self) -> str:
+        return _tail(self.log_path)
 
     def add(self, backend: Backend) -> None:
         """Adds a node to the running HAProxy through its runtime API: no reload, every open
@@ -327,17 +344,17 @@ COMPOSE_TLS_DIR = Path("/etc/camdirector/tls")
 
 def compose_config(nodes: int) -> str:
     """haproxy.cfg for docker/compose.cluster.yaml: services node-1..node-N (gRPC on 50051, HTTP on
-    8080) found through Docker's DNS; the balancer on 50051 and 8080 of its container. HAProxy
+    8080) found through the container network's DNS; the balancer on 50051 and 8080 of its container. HAProxy
     starts as root there to read the bundle (its key is its owner's alone, mode 0600), then
     becomes the image's `haproxy` user."""
     backends = [Backend(f"node-{k}", k, f"node-{k}:50051", f"node-{k}:8080") for k in range(1, nodes + 1)]
     return render_config(BalancerSettings(host="0.0.0.0"), backends, tls=files_in(COMPOSE_TLS_DIR),
                          stats_socket="/tmp/haproxy.sock",
-                         grpc_port=50051, http_port=8080, resolvers="127.0.0.11:53", user="haproxy")
+                         grpc_port=50051, http_port=8080, resolvers=True, user="haproxy")
 
 
 if __name__ == "__main__":
     import argparse
-    parser = argparse.ArgumentParser(description="print the haproxy.cfg of docker/compose.cluster.yaml")
+    parser = argparse.ArgumentParser(description="print docker/haproxy.cluster.cfg, docker/compose.cluster.yaml's haproxy.cfg")
     parser.add_argument("--compose-nodes", type=int, default=3, help="node services node-1..node-N")
     print(compose_config(parser.parse_args().compose_nodes), end="")

@@ -224,6 +224,13 @@ class Container:
         podman("volume", "rm", "-f", self.volume, check=False)
 
 
+def save_image(tag: str, path: Path) -> Path:
+    """`tag` saved as a docker archive at `path` (what `docker load -i` and `podman load -i` read;
+    uncompressed: gzip it where its size matters more than a minute)."""
+    podman("save", "--format", "docker-archive", "-o", str(path), tag, timeout_s=900)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="podman-image.sh", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -232,12 +239,20 @@ def main(argv: list[str] | None = None) -> int:
     build.add_argument("--root", type=Path, default=Path.cwd(), help="the checkout (default: here)")
     build.add_argument("--base", help=f"the base image (default: the local base; users: {PUBLIC_BASE})")
     build.add_argument("--tag")
+    save = sub.add_parser("save", help="save an image as a docker archive (docker load -i / podman load -i)")
+    save.add_argument("tag")
+    save.add_argument("file", type=Path)
     args = parser.parse_args(argv)
+    def log(line: str) -> None:  # progress on stderr: stdout is the answer, one line of JSON
+        print(line, file=sys.stderr)
     try:
         if args.command == "base":
-            print(local_base())
+            print(local_base(log=log))
+        elif args.command == "save":
+            print(json.dumps({"image": args.tag, "file": str(save_image(args.tag, args.file)),
+                              "size_bytes": args.file.stat().st_size}))
         else:
-            tag = build_image(args.root, args.base, args.tag)
+            tag = build_image(args.root, args.base, args.tag, log=log)
             print(json.dumps({"image": tag, "version": image_label(tag), "size_bytes": image_size(tag)}))
     except ServiceError as exc:
         print(f"podman-image: {exc}", file=sys.stderr)

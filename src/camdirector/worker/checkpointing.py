@@ -123,7 +123,9 @@ class Checkpointing:
             return held
         log.info("session %s was taken over by another process; restoring its newer state", session_id)
         self.table.drop(session_id, keep_checkpoint=True)
-        return self.restore(session_id)
+        # the restore claims the checkpoint: this input is then written as this process's, or a
+        # later restore elsewhere would lack an input this process computed
+        return self.write_input(session_id, self.restore(session_id), op, payload)
 
     def after_input(self, held: HeldSession) -> None:
         """A snapshot when one is due, or when a failed write is to be repaired: taken at once,
