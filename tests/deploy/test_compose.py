@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from camdirector.deploy.compose import ComposeCluster
 from camdirector.deploy.haproxy import COMPOSE_TLS_DIR, compose_config
 from camdirector.deploy.tls import files_in
 
@@ -52,6 +53,11 @@ def test_the_services_and_what_each_node_is_told(compose):
     sharing = [s for name, s in compose["services"].items() if name in nodes(compose) or name == "job-worker"]
     assert all("camdirector-data:/var/lib/camdirector" in s["volumes"] for s in sharing)
     assert set(compose["volumes"]) == {"camdirector-data", "postgres-data"}
+
+
+def test_deploy_compose_finds_the_same_node_services(compose, tmp_path):
+    """deploy/compose.py reads the node services without a YAML parser (the installed package has none)."""
+    assert ComposeCluster(COMPOSE.parents[1], tmp_path, "p", {}).nodes == sorted(nodes(compose)) == ["node-1", "node-2", "node-3"]
 
 
 def test_users_get_the_public_images_and_the_documented_ports_by_default(compose):

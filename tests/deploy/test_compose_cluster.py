@@ -53,7 +53,7 @@ def test_an_overview_job_is_run_by_the_queue_worker_container(cluster, run_bvh):
 
 
 def test_a_killed_node_container_loses_no_session(cluster):
-    report = failover.run("node-container", nodes=3, sessions=12, rate_hz=30.0, seconds=10.0, kill_after_s=4.0,
+    report = failover.run("node-container", nodes=3, sessions=12, rate_hz=30.0, seconds=8.0, kill_after_s=3.0,
                           compose_cluster=cluster)
     assert report["sessions_on_killed"] > 0, report
     assert report["sessions_lost"] == 0 and report["frames_not_answered"] == 0, report

@@ -37,14 +37,14 @@ def test_overview_bench_reports_end_to_end_against_planning(shared_data, tmp_pat
 
 
 @pytest.mark.shared_data
-def test_tracks_bench_reports_a_level_against_the_prm(shared_data, tmp_path):
-    result = _run(tracks_bench.main, tmp_path, "--data-dir", str(shared_data), "--levels", "dungeon")
+def test_tracks_bench_reports_a_level_and_its_routes(shared_data, tmp_path):
+    # --no-prm: the comparison with PRMs (compare_with_prm, 35 s of the 60) is tested on its own in
+    # tests/precompute/tracks/test_tracks_real_levels.py; this checks the benchmark's report
+    result = _run(tracks_bench.main, tmp_path, "--data-dir", str(shared_data), "--levels", "dungeon", "--no-prm")
     level = result["levels"]["dungeon"]
     assert level["precompute_s"] > 0.0 and level["artifact_load_ms"] > 0.0
-    assert level["ours"]["nodes"] > 0 and level["prm_compared"]["mean_nodes"] > 0
-    assert level["fewer_nodes"] == (level["ours"]["nodes"] < level["prm_compared"]["mean_nodes"])
+    assert level["nodes"] > 0 and level["edges"] > 0 and "prm_compared" not in level
     assert set(level["stage_ms"]) >= {"skeleton", "clustering", "graph", "visibility"}
-    assert level["ours"]["line_of_sight"] >= level["ours"]["visible"], "a frame that shows the actor has it in sight"
     routes = level["routes"]
     assert set(routes) == {"default", "tightest", "open"}
     assert routes["tightest"]["half_width_m"] < routes["open"]["half_width_m"]
