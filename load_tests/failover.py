@@ -113,25 +113,23 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
     folder = Path(tempfile.mkdtemp(prefix="camdirector-failover-"))
     cluster = server = None
     try:
-        if kill == "node-container":
-            from camdirector.deploy.compose import ComposeCluster
-            cluster = compose_cluster or ComposeCluster.up(Path(__file__).resolve().parents[1], folder,
-                                                           project="camdirector-failover",
-                                                           log=lambda line: print(line, file=sys.stderr))
+        if kill in ("node", "node-container"):
+            if kill == "node-container":
+                from camdirector.deploy.compose import ComposeCluster
+                cluster = compose_cluster or ComposeCluster.up(Path(__file__).resolve().parents[1], folder,
+                                                               project="camdirector-failover",
+                                                               log=lambda line: print(line, file=sys.stderr))
+            else:
+                from camdirector.deploy.cluster import Cluster
+                cluster = Cluster.up(nodes=nodes, folder=folder)
             floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
             engine = _admin_call(cluster, "POST", f"https://{cluster.http}/v1/keys",
                                  json={"role": "engine", "name": "load_tests.failover"})["key"]
-            # a create here sometimes waits 10, 20 or 30 s (nothing logged by HAProxy or the nodes;
-            # podman's DNS, which fails lookups while a container starts on the network, is the
-            # suspect): the calls get 60 s, and the slowest create is reported
-            client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file, timeout_s=60.0)
-        elif kill == "node":
-            from camdirector.deploy.cluster import Cluster
-            cluster = Cluster.up(nodes=nodes, folder=folder)
-            floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
-            engine = _admin_call(cluster, "POST", f"https://{cluster.http}/v1/keys",
-                                 json={"role": "engine", "name": "load_tests.failover"})["key"]
-            client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file)
+            # in containers a create sometimes waits 10, 20 or 30 s (nothing logged by HAProxy or the
+            # nodes; podman's DNS, which fails lookups while a container starts on the network, is
+            # the suspect): the calls get 60 s there, and the slowest create is reported
+            client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file,
+                                timeout_s=60.0 if kill == "node-container" else cd.wire.DEFAULT_TIMEOUT_S)
         else:
             from camdirector.deploy.server_process import ServerProcess
             server = ServerProcess("--workers", "2", "--data-dir", str(folder), transports=("grpc", "http"))

@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import resource
 import shutil
 import subprocess
 import time
@@ -32,7 +31,14 @@ from functools import cached_property
 from pathlib import Path
 
 from camdirector.deploy.haproxy import RuntimeApi
-from camdirector.deploy.image import BASE_REVISION, build_image, local_base, podman, require_podman
+from camdirector.deploy.image import (
+    BASE_REVISION,
+    build_image,
+    container_ulimits,
+    local_base,
+    podman,
+    require_podman,
+)
 from camdirector.deploy.services import ServiceError, free_port
 from camdirector.deploy.tls import make_tls_files
 
@@ -67,10 +73,8 @@ def build_stand_ins(root: Path, base: str | None = None, log=print) -> dict[str,
 
 def _containers_conf(path: Path) -> Path:
     """podman's settings for every command podman-compose runs (the module docstring)."""
-    nofile = resource.getrlimit(resource.RLIMIT_NOFILE)
-    nproc = [min(limit, 32768) if limit >= 0 else 32768 for limit in resource.getrlimit(resource.RLIMIT_NPROC)]
     path.write_text("[containers]\n"
-                    f'default_ulimits = ["nofile={nofile[0]}:{nofile[1]}", "nproc={nproc[0]}:{nproc[1]}"]\n'
+                    f"default_ulimits = {json.dumps(container_ulimits())}\n"
                     "[engine]\n"
                     'runtime = "runc"\n'
                     'cgroup_manager = "cgroupfs"\n')

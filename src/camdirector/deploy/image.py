@@ -161,6 +161,16 @@ def image_size(tag: str) -> int:
     return int(inspect(tag)["Size"])
 
 
+def container_ulimits() -> list[str]:
+    """The --ulimit values a container gets here. podman's defaults for open files and processes
+    (1048576) are above what these machines allow (runc then fails: "error setting rlimit type 7"):
+    this process's open files, and 32768 processes at most (the process limit the host reports is
+    refused too)."""
+    nofile = resource.getrlimit(resource.RLIMIT_NOFILE)
+    nproc = [min(limit, 32768) if limit >= 0 else 32768 for limit in resource.getrlimit(resource.RLIMIT_NPROC)]
+    return [f"nofile={nofile[0]}:{nofile[1]}", f"nproc={nproc[0]}:{nproc[1]}"]
+
+
 class Container:
     """One container of the image on the host's network, `name` unique on this machine; its
     data directory the named volume `volume`. start() / kill() / start() again keep the volume."""
@@ -174,15 +184,10 @@ class Container:
     def start(self) -> Container:
         """Creates and starts it the first time, starts it again after a kill."""
         if not self.created:
-            # --ulimit: podman's default limits of open files and processes (1048576) are above what
-            # these machines allow (runc then fails: "error setting rlimit type 7"): this process's
-            # open files, and 32768 processes at most (the process limit the host reports is refused
-            # too). --health-interval disable: no timer (podman's are systemd's, absent here);
+            # --health-interval disable: no timer (podman's are systemd's, absent here);
             # `podman healthcheck run` (health()) still runs the image's check.
-            nofile = resource.getrlimit(resource.RLIMIT_NOFILE)
-            nproc = [min(limit, 32768) if limit >= 0 else 32768 for limit in resource.getrlimit(resource.RLIMIT_NPROC)]
             run = ["run", "-d", "--name", self.name, "--network", "host",
-                   "--ulimit", f"nofile={nofile[0]}:{nofile[1]}", "--ulimit", f"nproc={nproc[0]}:{nproc[1]}",
+                   *(arg for limit in container_ulimits() for arg in ("--ulimit", limit)),
                    "--health-interval", "disable", "-v", f"{self.volume}:/var/lib/camdirector"]
             for mount in self.mounts:
                 run += ["-v", mount]
