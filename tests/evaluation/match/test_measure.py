@@ -203,3 +203,14 @@ def test_the_program_digest_changes_with_one_pose(match):
     assert program.digest() == same.digest()
     same.position[7, 0] += 1e-9
     assert program.digest() != same.digest()
+
+
+def test_the_subjects_height_counts_only_the_players_the_shot_names(match):
+    bodies = BodySampler(match, np.random.default_rng(0))
+    program = side_view(match)
+    program.subjects = [("a",)] * FRAMES
+    shown = measure_shown(program, bodies, Lens(), floor())
+    every = shown_heights(program, bodies, Lens(), shown, np.full(FRAMES, -1))
+    named = shown_heights(program, bodies, Lens(), shown, np.full(FRAMES, -1), subjects_only=True)
+    assert len(every) == 2 * FRAMES and len(named) == FRAMES
+    assert np.allclose(named, every[0::2])  # per moment a's height, then b's

@@ -137,25 +137,61 @@ def two_duels_side_by_side(t: float):
             "e1": ((60.0, 0.0), facing((60, 0), (60, 6))), "f1": ((60.0, 6.0), facing((60, 6), (60, 0)))}
 
 
+def test_a_kill_soon_after_another_gets_a_later_cut_so_that_the_shot_before_lasts_preferred_shot_s():
+    # the program is on e1 and f1 for their kill at 21 s; the kill at 25 s gets its DUEL at 22.5 s
+    # (lead_s); the one at 27.5 s would get its own at 25 s, 2.5 s later: it comes at 25.5 s instead
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 2.5)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_side_by_side, kills, delay_s=10.0)
+    settings = MatchSettings()
+    states = [s for s in BareRig(match, settings).run(KILL_S + 10.0 + 4.0) if not s.match.buffering]
+    cuts = [s.time_s for s in states if s.cut and KILL_S - 4.0 < s.time_s <= KILL_S + 2.5]
+    assert len(cuts) == 2 and cuts[1] - cuts[0] >= settings.preferred_shot_s - 1e-6
+    assert KILL_S + 2.5 - cuts[1] >= settings.min_lead_s - 1e-6
+    for time_s, pair in ((KILL_S, {"a1", "b1"}), (KILL_S + 2.5, {"a2", "b2"})):
+        state = at_time(states, time_s)
+        assert state.match.shot.kind == ShotKind.DUEL and set(state.match.shot.subject_ids) == pair
+
+
 @pytest.mark.parametrize("preferred_shot_s", [0.0, 3.0])
 def test_kills_too_close_for_a_preferred_shot_each_share_one_shot_when_it_sees_them_all(preferred_shot_s):
-    # the program is on e1 and f1 for their kill at 21 s; the kills at 25 and 27.5 s each get a
-    # DUEL, the first 2.7 s long, unless one GROUP of the four sees both kills
-    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 2.5)]
+    # the program is on e1 and f1 for their kill at 21 s; the kills at 25 and 25.8 s each get a
+    # DUEL (the second 2.7 s after the first: no later cut leaves min_lead_s), unless one GROUP of
+    # the four sees both kills
+    second_s = KILL_S + 0.8
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)]
     match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_side_by_side, kills, delay_s=10.0)
     states = [s for s in BareRig(match, MatchSettings(preferred_shot_s=preferred_shot_s)).run(KILL_S + 10.0 + 4.0)
               if not s.match.buffering]
-    between = [s for s in states if KILL_S < s.time_s <= KILL_S + 2.5]
-    first, second = at_time(states, KILL_S), at_time(states, KILL_S + 2.5)
+    between = [s for s in states if KILL_S - 2.0 < s.time_s <= second_s]
+    first, second = at_time(states, KILL_S), at_time(states, second_s)
     if preferred_shot_s == 0.0:
         assert any(s.cut for s in between) and first.match.shot.kind == second.match.shot.kind == ShotKind.DUEL
         return
-    assert not any(s.cut for s in between) and first.match.shot.kind == ShotKind.GROUP
+    assert first.match.shot.kind == ShotKind.GROUP and not any(s.cut for s in states if first.time_s < s.time_s <= second_s)
     assert set(first.match.shot.subject_ids) == {"a1", "b1", "a2", "b2"}
     rng = np.random.default_rng(2)
-    for time_s, state in ((KILL_S, first), (KILL_S + 2.5, second)):
+    for time_s, state in ((KILL_S, first), (second_s, second)):
         places = two_duels_side_by_side(time_s)
         for player in ("a1", "b1", "a2", "b2"):
             (x, z), yaw = places[player]
             transform = RigidTransform(np.array([x, 0.0, z]), yaw_quat(yaw))
             assert seen_share(state.pose, [], transform, rng) >= 0.5, (time_s, player)
+
+
+def test_a_planned_shot_is_placed_for_the_frame_that_shows_the_kill_too():
+    """The kill is on screen at the first frame at or after its time; buffer.at gives the one at
+    or before, so the cover holds the frame after it as well (a place seeing both a frame early
+    was often at a wall's edge)."""
+    from camdirector.pipeline.match.plan import POST_EVENT_S, PRE_EVENT_S, PlannedDirector
+
+    buffer = MomentBuffer(["a", "b"], MatchSettings())
+    for k in range(0, 30 * 40):
+        t = k / 30.0
+        places = duel(t)
+        buffer.push(k, t, [RigidTransform(np.array([x, 0.0, z]), yaw_quat(yaw)) for (x, z), yaw in places.values()],
+                    [np.array([x, 1.6, z]) for (x, z), _ in places.values()], [])
+    kill_s = 25.01  # between the frames at 25.0 and 25.0333
+    cover, weights = PlannedDirector.event_cover(buffer, 20.0, [kill_s])
+    times = [m.time_s for m in cover]
+    assert times[0] == pytest.approx(kill_s - PRE_EVENT_S, abs=1 / 30.0) and weights[0] < 1.0
+    assert times[1] <= kill_s < times[2] <= kill_s + POST_EVENT_S and weights[1:] == [1.0, 1.0]

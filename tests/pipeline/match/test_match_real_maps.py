@@ -52,6 +52,18 @@ def test_players_apart_behind_walls_are_followed_on_the_move_not_shown_in_an_ove
     assert all("on the move" in s.match.shot.reason for s in states[1:])
 
 
+def test_players_beyond_fighting_range_are_followed_nearest_an_opponent_first():
+    """No fight anywhere (a duel's players 60-90 m apart): a player, not an overview of nobody;
+    the one nearer an opponent first."""
+    def script(t: float):
+        return {"a": ((0.0, 0.0), 0.0), "b": ((0.0, 60.0), 0.0), "c": ((0.0, -30.0), 0.0)}
+    match = Match({"a": 1, "b": 2, "c": 1}, script, style=Style(rig=Rig.MATCH))
+    _, states = run_session(match, 3.0)
+    assert {s.match.shot.kind for s in states} == {ShotKind.FOLLOW}
+    assert states[0].match.shot.subject_ids in (("a",), ("b",))  # 60 m from an opponent; c is 90 m from b
+    assert all("on the move" in s.match.shot.reason for s in states)
+
+
 def pulled_camera(wall_z: float) -> tuple[ToricCamera, Moment, RayScene]:
     """A FOLLOW camera on a, a wall wall_z m behind a (across the line from a to the camera)."""
     moment = moment_of({"a": (0.0, 0.0), "b": (0.0, 30.0)}, {"a": (0.0, 30.0), "b": (0.0, 0.0)})

@@ -39,17 +39,44 @@ def two_fronts(t: float):
 
 
 def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it():
+    """The cut comes 1-4 s before the kill, on the killer alone (the pair only around the kill:
+    shots.py PairWindow); at the kill the shot is the DUEL of both, both on screen."""
     match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0)
     _, states = run_session(match, 40.0)
     covering = [(start, s) for start, end, s in shots(states) if start <= KILL_S < end]
     assert len(covering) == 1
     start, first = covering[0]
-    assert first.match.shot.kind == ShotKind.DUEL and set(first.match.shot.subject_ids) == {"a2", "b2"}
-    assert "planned kill" in first.match.shot.reason
+    assert first.match.shot.kind == ShotKind.FOLLOW and first.match.shot.subject_ids == ("a2",)
+    assert "planned kill" in first.match.shot.reason and "a2 alone" in first.match.shot.reason
     assert KILL_S - 4.0 <= start <= KILL_S - 1.0
     at_kill = at_time(states, KILL_S)
+    assert at_kill.match.shot.kind == ShotKind.DUEL and set(at_kill.match.shot.subject_ids) == {"a2", "b2"}
     xy = on_screen(at_kill, np.array(at_kill.aim_points_world)[[2, 3]])
     assert np.all(np.abs(xy) <= 1.0)
+
+
+def test_a_planned_duel_frames_the_pair_only_around_its_kill_and_reframes_without_a_jump():
+    """Before the pair's window (pair_before_s plus the easing) and after it, the program names the
+    killer alone and frames it; between, both; the camera moves from one framing to the other
+    within the shot, never by more than a cut's jump between two frames."""
+    settings = MatchSettings()
+    match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0)
+    _, states = run_session(match, 40.0)
+    start, end, _ = next((a, b, s) for a, b, s in shots(states) if a <= KILL_S < b)
+    shot = [s for s in states if not s.match.buffering and start <= s.time_s < end]
+    opens, closes = KILL_S - settings.pair_before_s, KILL_S + settings.pair_after_s
+    for state in shot:
+        names = state.match.shot.subject_ids
+        if opens <= state.time_s <= closes:
+            assert set(names) == {"a2", "b2"}
+        elif state.time_s < opens - 0.5 * settings.reframe_s or state.time_s > closes + 0.5 * settings.reframe_s:
+            assert names == ("a2",)
+            assert np.all(np.abs(on_screen(state, state.aim_points_world[2])) <= 1.0)
+    alone = [s for s in shot if s.match.shot.subject_ids == ("a2",)]
+    assert alone and any(s.time_s < opens for s in alone) and any(s.time_s > closes for s in alone)
+    steps_m = [np.linalg.norm(b.pose.position_world - a.pose.position_world) for a, b in zip(shot, shot[1:])]
+    # a2 stands still: 15 m from b2, the pair's torus is ~8 m across; one frame of the 0.5-s easing moves ~1 m
+    assert max(steps_m) < 2.0
 
 
 def test_the_delay_buffers_then_answers_the_moment_delay_seconds_ago():

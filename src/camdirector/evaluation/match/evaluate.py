@@ -109,6 +109,7 @@ def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens:
     first_person = kill_coverage(match, program, shown, eyes)
     lengths = shot_lengths_s(program)
     heights = shown_heights(program, bodies, lens, shown, eyes)
+    subject_heights = shown_heights(program, bodies, lens, shown, eyes, subjects_only=True)
     column = match.player_index()
     return {
         "kill_coverage": round(coverage.coverage, 3),
@@ -124,7 +125,8 @@ def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens:
         "program_visibility": round(program_visibility(program, shown, column, eyes), 3),
         "first_person_share": round(float((eyes >= 0).mean()), 3),
         "shown_height": {"median": round(float(np.median(heights)), 3) if len(heights) else None,
-                         "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None},
+                         "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None,
+                         "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None},
         "long_shots_missing_kills": _long_shots_missing_kills(match, program, coverage),
         "program_sha256": program.digest(),
         "compute_ms": _timing(run.compute_ms),

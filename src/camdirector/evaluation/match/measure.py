@@ -34,7 +34,8 @@ players' bodies as the match file has them, never from what the director says it
   whose eyes the camera is counting 1.
 - shown height: per program moment and shown player (not the one in whose eyes the camera is),
   the height on screen of its body's sample points, as a share of the frame's height; the median
-  over all of them says whether players are large enough to read.
+  over all of them says whether players are large enough to read; the same over the players the
+  shot names says whether its subjects are.
 """
 from __future__ import annotations
 
@@ -237,12 +238,17 @@ def program_visibility(program: Program, shown: np.ndarray, column: dict[str, in
 
 
 def shown_heights(program: Program, bodies: BodySampler, lens: Lens, shown: np.ndarray,
-                  eyes_of: np.ndarray) -> np.ndarray:
+                  eyes_of: np.ndarray, subjects_only: bool = False) -> np.ndarray:
     """(m,) the on-screen heights, share of the frame's height, of every shown player at every
-    program moment but the one in whose eyes the camera is (module docstring)."""
+    program moment but the one in whose eyes the camera is (module docstring); subjects_only:
+    of the players the moment's shot names alone (on open levels the players shown in the
+    background, far off, outnumber the shot's own)."""
+    column = bodies.match.player_index()
     heights = []
     for r in range(len(program)):
-        players = [p for p in np.flatnonzero(shown[r] >= SHOWN_FRACTION) if p != eyes_of[r]]
+        named = {column[p] for p in program.subjects[r]}
+        players = [p for p in np.flatnonzero(shown[r] >= SHOWN_FRACTION)
+                   if p != eyes_of[r] and (not subjects_only or p in named)]
         if not players:
             continue
         pose = program.pose(r)

@@ -86,6 +86,7 @@ class PlanResult:
 
     shot: Shot | None                  # the cut, None: the current shot goes on
     goal: Place | None                 # the current Toric camera's new goal (re-placed for visibility)
+    pair_place: Place | None           # its pair window's new place (re-placed for visibility)
     held: ShotChoice | None            # the take held from now on (a fallback when its subject died)
     candidates: list[tuple[ShotChoice, ToricCamera | None, float]]
     beats: list[Beat]                  # our director's plan (MatchRig.planned_cut)
@@ -336,10 +337,12 @@ class MatchRig:
                             for choice, camera, score in self._candidates]
         match.candidates = [c for c in match.candidates if c.pose is not None]
         stages.done(MatchStage.CAMERA)
-        subjects = self.shot.subjects
+        subjects = self.shot.framed(moment.time_s)
         state.visibility = float(self.visibility.visible_share(pose.position_world, moment, subjects).mean()) \
             if subjects else 1.0
-        match.shot = self.shot.choice
+        match.shot = self.shot.choice if subjects == self.shot.subjects else dataclasses.replace(
+            self.shot.choice, subject_ids=tuple(self.players[i] for i in subjects), kind=ShotKind.FOLLOW,
+            reason=f"{self.shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills")
         match.events, match.planned_cut = moment.events, self.planned_cut(moment.time_s)
         state.scores = dict(self.shot.scores, visibility=state.visibility,
                             shot_length_s=moment.time_s - self.shot.start_s)
@@ -351,8 +354,8 @@ class MatchRig:
         seen share, framed_seen): close to A, a pair far apart may no longer fit. On 90 s of the
         4on4 on dm2 this kept program visibility 0.58 and kill coverage 0.60 (0.38 and 0.53 with no
         pull; 0.52 and 0.63 judging by the worst-seen subject; 0.56 and 0.57 pulling always)."""
-        camera, s, subjects = self.shot.camera, self.settings, self.shot.subjects
-        hidden = self.visibility.visible_share(pose.position_world, moment, (camera.a_index,))[0, 0] < s.pull_below
+        camera, s, subjects = self.shot.camera, self.settings, self.shot.framed(moment.time_s)
+        hidden = self.visibility.visible_share(pose.position_world, moment, (camera.anchor_index,))[0, 0] < s.pull_below
         reach_before = camera.reach_m
         pulled, moved = camera.pulled_in(moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m,
                                          s.pull_regrow_m_s)
@@ -393,8 +396,13 @@ class MatchRig:
             result.shot.start_s = moment.time_s  # on air from now: the shot's length counts from here
             self.shot = result.shot
             return True
-        if result.goal is not None and (drawn_on is None or self.shot is drawn_on):
-            self.shot.camera.goal = result.goal
+        if drawn_on is None or self.shot is drawn_on:
+            if result.goal is not None:
+                self.shot.camera.goal = result.goal
+            camera = self.shot.camera
+            if isinstance(camera, ToricCamera) and camera.pair is not None:  # the plan may have held it for more events
+                camera.pair = dataclasses.replace(camera.pair, times_s=tuple(self.shot.cover_times_s),
+                                                  place=result.pair_place or camera.pair.place)
         return False
 
     def _plan(self, moment: Moment, buffer: MomentBuffer, current: Shot | None, camera: ToricCamera | None,
@@ -411,36 +419,56 @@ class MatchRig:
                                        last_pose, flags)
             if new is None and current is not None and current.held:  # released: the director starts afresh
                 new = self.director.decide(moment, buffer, None, last_pose, flags)
-        goal = None
+        goal = pair_place = None
         if new is None and current is not None and (self.director is self.planned or held is not None):
-            goal = self._replaced_goal(moment, buffer, current, camera or current.camera, flags)
+            goal, pair_place = self._replaced_places(moment, buffer, current, camera or current.camera, flags)
         beats = list(self.planned.plan) if self.director is self.planned else []
-        return PlanResult(new, goal, held, self._candidate_shots(moment, buffer, new or current), beats, flags)
+        return PlanResult(new, goal, pair_place, held, self._candidate_shots(moment, buffer, new or current), beats,
+                          flags)
 
-    def _replaced_goal(self, moment: Moment, buffer: MomentBuffer, shot: Shot, camera, flags: list[str]) -> Place | None:
+    def _replaced_places(self, moment: Moment, buffer: MomentBuffer, shot: Shot, camera,
+                         flags: list[str]) -> tuple[Place | None, Place | None]:
         """Ours: a Toric camera whose goal place sees its subjects under min_visible glides to the
-        best place on its side (the new goal, None to keep it). With planned events still ahead in
+        best place on its side: the new goal, None to keep it. With planned events still ahead in
         the buffer the place is judged at their moments (plan.py's event cover: being hidden now
-        matters less than at the kill); otherwise now and REPLACE_LOOKAHEAD_S ahead."""
+        matters less than at the kill); otherwise now and REPLACE_LOOKAHEAD_S ahead. A camera
+        whose pair window holds the pair's place (shots.py `ToricCamera.split`): its own place,
+        the killer's, is judged for the killer alone, from all the grid, at those of now and
+        REPLACE_LOOKAHEAD_S ahead where it frames the killer alone; the pair's place at the
+        upcoming events while the picture is not yet on it, and replaced at once (it is not on
+        screen): the second place returned, None to keep it."""
         if not isinstance(camera, ToricCamera):
-            return None
+            return None, None
         now = moment.time_s
         upcoming = [t for t in shot.cover_times_s if now <= t <= buffer.horizon_s]
-        if upcoming:
+        ahead = now + REPLACE_LOOKAHEAD_S
+        soon = [moment] + ([buffer.at(ahead)] if ahead <= buffer.horizon_s else [])
+        if not camera.split:
+            side = None if camera.b_index is None else camera.side
+            cover, weights = PlannedDirector.event_cover(buffer, now, upcoming) if upcoming else (soon, None)
+            return self._better_place(camera, camera.goal, place_grid(side), cover, weights, shot.subjects, flags), None
+        pair, pair_place = camera.pair, None
+        if upcoming and pair.weight(now) <= 0.0:
             cover, weights = PlannedDirector.event_cover(buffer, now, upcoming)
-        else:
-            ahead = now + REPLACE_LOOKAHEAD_S
-            cover, weights = [moment] + ([buffer.at(ahead)] if ahead <= buffer.horizon_s else []), None
-        subjects = shot.subjects
-        _, seen = best_place(camera, [camera.goal], cover, subjects, self.visibility, weights=weights)
+            side = math.copysign(1.0, pair.place.phi_rad)
+            pair_place = self._better_place(camera, pair.place, place_grid(side), cover, weights, shot.subjects, flags)
+        alone = [m for m in soon if pair.weight(m.time_s) <= 0.0]
+        goal = self._better_place(camera, camera.goal, place_grid(None), alone, None, (pair.keep_index,), flags) \
+            if alone else None
+        return goal, pair_place
+
+    def _better_place(self, camera: ToricCamera, place: Place, grid: list[Place], cover: list[Moment],
+                      weights: list[float] | None, subjects: tuple[int, ...], flags: list[str]) -> Place | None:
+        """The best place of grid for the subjects over cover when `place` sees them under
+        min_visible and it sees them better (flagged replaced_for_visibility); else None."""
+        _, seen = best_place(camera, [place], cover, subjects, self.visibility, weights=weights)
         if seen >= self.settings.min_visible:
             return None
-        side = None if camera.b_index is None else camera.side
-        place, score = best_place(camera, place_grid(side), cover, subjects, self.visibility, weights=weights)
+        better, score = best_place(camera, grid, cover, subjects, self.visibility, weights=weights)
         if score <= seen:
             return None
         flags.append("replaced_for_visibility")
-        return place
+        return better
 
     def _candidate_shots(self, moment: Moment, buffer: MomentBuffer,
                          program: Shot | None) -> list[tuple[ShotChoice, ToricCamera | None, float]]:

@@ -69,16 +69,25 @@ class HltvSettings:
 class MatchSettings:
     plan_rate_hz: float = 10.0           # the planner's rate; the program camera runs every frame, Hz. (0, 120]
     lead_s: float = 2.5                  # preferred cut before a planned event, s. [min_lead_s, max_lead_s]
-    min_lead_s: float = 1.0              # no cut in the last second before a planned event, s. [0, 10]
+    min_lead_s: float = 0.5              # no cut in the last half second before a planned event (the pair window
+                                         # opens then; at 1.0 s the real 4on4's kills under 1.5 s apart lost theirs:
+                                         # kill coverage 0.534 -> 0.575), s. [0, 10]
     max_lead_s: float = 4.0              # never cut for an event earlier than this before it, s. [min_lead_s, 30]
     lookahead_s: float = 12.0            # the planner reads the buffered future this far, s. (0, 300]
     beat_min_priority: int = 5           # events of this priority or more get a planned shot (kills, objectives). [1, 15]
     max_group: int = 4                   # most players in one shot. [2, 64]
     preferred_shot_s: float = 3.0        # a planned cut that would end the shot before it sooner than this is not made when one
                                          # GROUP or OVERVIEW shows both beats (kills 2.7 s apart made 2.7-s shots), s. [0, 60]
+    max_held_shot_s: float = 16.0        # a shot that shows the players of the next event is held for it only this long from
+                                         # its cut; later, the event gets a cut of its own (the real duel's pair is in every
+                                         # kill: one shot held 26 s, a kill in it unseen), s. (0, 600]
     event_hold_s: float = 0.2            # a shown event stays on screen this long before a planned cut to the next
                                          # (eval-match: at 1.0 s, the next kill elsewhere lost its lead; nav_test
                                          # coverage 0.80 at 0.2 s, 0.76 at 0.5 s), s. [0, 10]
+    pair_before_s: float = 0.5          # a planned DUEL frames its pair from this long before each of its events (before, the
+                                         # killer alone: shots.py PairWindow), s. [0, 30]
+    pair_after_s: float = 0.25           # to this long after it, s. [0, 30]
+    reframe_s: float = 0.5               # easing between the pair and the killer alone, s. (0, 10]
     dead_hold_s: float = 1.5             # after that long on a dead subject the director cuts away, s. [0, 10]
     respawn_speed_m_s: float = 30.0      # a dead player's feet moving faster than this between two frames teleported: a respawn
                                          # (runners 5-8 m/s, a body falling 45 m reaches 30 m/s), m/s. (0, 10000]
@@ -109,7 +118,7 @@ class MatchSettings:
 
     def __post_init__(self):
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
-                                      "respawn_walk_m", "engage_range_m",
+                                      "respawn_walk_m", "engage_range_m", "reframe_s", "max_held_shot_s",
                                       "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
             raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")
@@ -119,6 +128,10 @@ class MatchSettings:
                              "beat_min_priority in [1, 15]")
         if not -1.0 <= self.facing_cos <= 1.0 or not 0.0 <= self.min_visible <= 1.0 or not 0.0 <= self.pull_below <= 1.0:
             raise ValueError("MatchSettings: facing_cos in [-1, 1], min_visible and pull_below in [0, 1]")
+        if self.max_held_shot_s > 600.0:
+            raise ValueError("MatchSettings: max_held_shot_s in (0, 600] s")
+        if self.pair_before_s > 30.0 or self.pair_after_s > 30.0 or self.reframe_s > 10.0:
+            raise ValueError("MatchSettings: pair_before_s and pair_after_s in [0, 30] s, reframe_s in (0, 10] s")
         if set(self.priorities) != set(EventKind) or not all(1 <= p <= 15 for p in self.priorities.values()):
             raise ValueError("MatchSettings: one priority in [1, 15] per EventKind")
 

@@ -8,6 +8,11 @@ paper, section 3): the camera stays on the torus of the two framed points every 
   horizon level (the level's camera tracks are not used: the Toric rig serves every level);
 - GROUP frames the two players of the group farthest apart, at screen points 1.5 times wider than
   the style's, so the others, between them, are in frame too.
+A planned DUEL (a kill the delay lets the director see coming) frames its pair only around its
+events (`PairWindow`): before, the victim is mostly still behind walls, and after, dead; there
+the same camera frames the killer alone as a FOLLOW does, the second framed point swung from the
+victim to the killer's gaze-room point (`swung_point`), and the shot names the killer alone.
+
 OVERVIEW is a static camera high above the players' bounding box looking at its centre, or at
 a node of the level's graph, whichever sees the worst-seen player best by the same measure as
 the places below; it is level too (geometry.camera.level_look_rotation). It also stands in for a
@@ -89,6 +94,47 @@ OVERVIEW_AZIMUTHS = 8
 
 
 @dataclass(frozen=True)
+class PairWindow:
+    """When a planned DUEL frames its pair: from `before_s` before each event it shows to `after_s`
+    after it, fully, easing in and out over `ramp_s`; elsewhere it frames `keep_index` (the killer)
+    alone, with gaze room where it looks. A reframe within the shot, not a cut: on the real 4on4
+    the pair of a planned kill was seen 0.40-0.45 of its time more than a second before the kill
+    (the victim still behind walls) and 0.32-0.53 after it (the victim dead or respawned across
+    the map), against 0.77 in the half second before it."""
+
+    keep_index: int
+    times_s: tuple[float, ...]
+    before_s: float
+    after_s: float
+    ramp_s: float
+    place: Place | None = None  # the pair's place, when the camera's own place is the kept player's (None: one for both)
+
+    def weight(self, time_s: float) -> float:
+        """How much of the pair is framed at time_s, s: 1 the pair, 0 the kept player alone, [0, 1]."""
+        weight = 0.0
+        for event_s in self.times_s:
+            outside_s = max(event_s - self.before_s - time_s, time_s - event_s - self.after_s)
+            if outside_s <= 0.0:
+                return 1.0
+            weight = max(weight, 1.0 - outside_s / self.ramp_s)
+        return weight
+
+
+def swung_point(origin: np.ndarray, from_offset: np.ndarray, to_offset: np.ndarray, weight: float) -> np.ndarray:
+    """origin plus an offset (3,) that turns from from_offset to to_offset as weight goes 0 -> 1:
+    the yaw the shorter way round, the pitch linearly and the length geometrically, so that the
+    framed point never passes through origin (a straight blend of a point ahead and a player behind
+    would, and the torus through it would shrink to nothing)."""
+    lengths = [max(float(np.linalg.norm(o)), 1e-6) for o in (from_offset, to_offset)]
+    yaws = [math.atan2(o[0], o[2]) for o in (from_offset, to_offset)]
+    pitches = [math.asin(max(-1.0, min(1.0, o[1] / n))) for o, n in zip((from_offset, to_offset), lengths)]
+    yaw = yaws[0] + weight * math.remainder(yaws[1] - yaws[0], math.tau)
+    pitch = pitches[0] + weight * (pitches[1] - pitches[0])
+    length = lengths[0] ** (1.0 - weight) * lengths[1] ** weight
+    return origin + length * np.array([math.cos(pitch) * math.sin(yaw), math.sin(pitch), math.cos(pitch) * math.cos(yaw)])
+
+
+@dataclass(frozen=True)
 class Place:
     theta_ratio: float  # along the arc, 0 at A .. 1 at B, [0, 1]
     phi_rad: float      # about the A-B axis, rad
@@ -106,8 +152,20 @@ class ToricCamera:
         self.style_b = tuple(c * scale for c in style.screen_b)
         self.lens, self.gaze_room_m = lens, style.gaze_room_m
         self.place = self.goal = place
-        self.heading: np.ndarray | None = None
+        self.heading: np.ndarray | None = None  # the anchor's smoothed facing (FOLLOW, and a pair framing one)
         self.reach_m: float | None = None  # pulled in front of a wall: how far from A it may stand now (None: free)
+        self.pair: PairWindow | None = None  # a planned DUEL: when it frames the pair (None: always)
+
+    @property
+    def anchor_index(self) -> int:
+        """The player the camera stays on whatever it frames: the pair window's kept one, else A."""
+        return self.a_index if self.pair is None else self.pair.keep_index
+
+    def framed(self, time_s: float) -> tuple[int, ...] | None:
+        """The players the picture frames at time_s, s, when the pair window frames one alone; None: all of them."""
+        if self.pair is None or self.pair.weight(time_s) >= 0.5:
+            return None
+        return (self.pair.keep_index,)
 
     def composition(self, width: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
         """The screen points of A and B (2,) each at a framing width, and their composition angle, rad."""
@@ -122,10 +180,18 @@ class ToricCamera:
     def points(self, moment: Moment) -> tuple[np.ndarray, np.ndarray]:
         """The framed points A and B, (3,) each, at the moment."""
         a = moment.aims_world[self.a_index]
-        if self.b_index is not None:
-            return a, moment.aims_world[self.b_index]
-        heading = moment.forward_world[self.a_index] if self.heading is None else self.heading
-        return a, a + self.gaze_room_m * heading
+        if self.b_index is None:
+            return a, a + self.gaze_room_m * self._heading(moment)
+        b = moment.aims_world[self.b_index]
+        weight = 1.0 if self.pair is None else self.pair.weight(moment.time_s)
+        if weight >= 1.0:
+            return a, b
+        kept, dropped = (a, b) if self.pair.keep_index == self.a_index else (b, a)
+        point = swung_point(kept, self.gaze_room_m * self._heading(moment), dropped - kept, weight)
+        return (a, point) if self.pair.keep_index == self.a_index else (point, b)
+
+    def _heading(self, moment: Moment) -> np.ndarray:
+        return moment.forward_world[self.anchor_index] if self.heading is None else self.heading
 
     def torus(self, moment: Moment, width: float) -> Torus | None:
         try:
@@ -155,7 +221,7 @@ class ToricCamera:
         self.place = Place(self.goal.theta_ratio + keep * (self.place.theta_ratio - self.goal.theta_ratio),
                            self.goal.phi_rad - keep * dphi,
                            self.goal.width + keep * (self.place.width - self.goal.width))
-        forward = moment.forward_world[self.a_index]
+        forward = moment.forward_world[self.anchor_index]
         if self.heading is None:
             self.heading = forward
         elif dt_s > 0.0:
@@ -180,8 +246,27 @@ class ToricCamera:
         return out
 
     def pose(self, moment: Moment) -> CameraPose | None:
-        positions = self.positions(moment, [self.place])
-        return None if positions is None else self.pose_from(moment, positions[0], self.place.width)
+        place = self.place_at(moment.time_s)
+        positions = self.positions(moment, [place])
+        return None if positions is None else self.pose_from(moment, positions[0], place.width)
+
+    def place_at(self, time_s: float) -> Place:
+        """The place the picture is taken from at time_s, s: the camera's own, or, where its pair
+        window has a place of its own, that one around the pair's events, eased between the two
+        as the framing is."""
+        pair_place = None if self.pair is None else self.pair.place
+        weight = 0.0 if pair_place is None else self.pair.weight(time_s)
+        if weight <= 0.0:
+            return self.place
+        own = self.place
+        return Place(own.theta_ratio + weight * (pair_place.theta_ratio - own.theta_ratio),
+                     own.phi_rad + weight * math.remainder(pair_place.phi_rad - own.phi_rad, math.tau),
+                     own.width + weight * (pair_place.width - own.width))
+
+    @property
+    def split(self) -> bool:
+        """Whether the camera's own place is its kept player's and the pair window holds the pair's."""
+        return self.pair is not None and self.pair.place is not None
 
     def pose_from(self, moment: Moment, position_world: np.ndarray, width: float) -> CameraPose:
         """The camera at a point (3,) of the torus of a framing width, horizon level (module
@@ -198,7 +283,8 @@ class ToricCamera:
 
     def pulled_in(self, moment: Moment, pose: CameraPose, hidden: bool, ray_scene: RayScene, dt_s: float,
                   margin_m: float, regrow_m_s: float) -> tuple[CameraPose, bool]:
-        """The pose kept in front of the walls between it and A (the first subject's aim point), and
+        """The pose kept in front of the walls between it and the anchor's aim point (A, or the
+        player a pair window keeps), and
         whether it was pulled in: a degrade for the moments the place search did not foresee (a
         player running past a corner at 10 m/s carries its torus through a wall between two plan
         ticks). hidden: whether the place's view of A is mostly blocked (the caller's ray casts to
@@ -209,12 +295,16 @@ class ToricCamera:
         is kept as well as it can be."""
         if not hidden and self.reach_m is None:
             return pose, False
-        a, _ = self.points(moment)
+        a = moment.aims_world[self.anchor_index]
         offset = pose.position_world - a
         full_m = float(np.linalg.norm(offset))
         if full_m < 1e-6:
             return pose, False
         direction = offset / full_m
+        if self.pair is not None and self.pair.weight(moment.time_s) > 0.0:
+            # onto the pair's place, chosen to see both at the kill: out as fast as the reframe moves (at
+            # 2 m/s a camera pulled in while the killer was alone was still at its shoulder at the kill)
+            regrow_m_s = max(regrow_m_s, full_m / self.pair.ramp_s)
         allowed_m = full_m if self.reach_m is None else self.reach_m + dt_s * regrow_m_s
         if hidden:
             allowed_m = min(allowed_m, float(ray_scene.first_hit(a, direction[None, :])[0]) - margin_m)
@@ -222,7 +312,7 @@ class ToricCamera:
             self.reach_m = None
             return pose, False
         self.reach_m = max(allowed_m, 0.0)
-        return self.pose_from(moment, a + max(self.reach_m, 0.05) * direction, self.place.width), True
+        return self.pose_from(moment, a + max(self.reach_m, 0.05) * direction, self.place_at(moment.time_s).width), True
 
 
 class StaticCamera:
@@ -269,7 +359,8 @@ def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], 
                visibility: SubjectVisibility, allowed: Callable[[np.ndarray], np.ndarray] | None = None,
                cut_moment: Moment | None = None, weights: list[float] | None = None) -> tuple[Place, float]:
     """The place of `places` whose worst-seen subject is best seen (framed_seen), a mean over
-    `moments` with `weights` (default equal), and that score in [0, 1]. allowed: (m, 3) positions
+    `moments` with `weights` (default equal), and that score in [0, 1]; at a moment where the
+    camera's pair window frames its kept player alone, that player is the subject. allowed: (m, 3) positions
     at cut_moment -> (m,) bool (the cut's grammar); places it refuses score -1. Ties go to the
     earlier place."""
     weights = [1.0] * len(moments) if weights is None else weights
@@ -279,7 +370,8 @@ def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], 
         if positions is None:
             continue
         rotations = camera.rotations(moment, positions, places)
-        score += weight * framed_seen(visibility, moment, subjects, positions, rotations, camera.lens).min(axis=1)
+        framed = camera.framed(moment.time_s) or subjects  # a pair window's kept player alone, outside its events
+        score += weight * framed_seen(visibility, moment, framed, positions, rotations, camera.lens).min(axis=1)
     score /= max(sum(weights), 1e-9)
     if allowed is not None:
         first = camera.positions(cut_moment, places)
