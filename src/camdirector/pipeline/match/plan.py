@@ -76,6 +76,7 @@ GROUP_SHARE = 0.6                            # a group: this share of its best f
 GROUP_EXTRA = 0.1
 OPTION_COVER_S = (1.0, 2.0, 3.0)             # a discretionary shot is placed for now and these times ahead (as far
                                              # as the buffer reaches: a shot lasts 2 s at least, 4 s before it may be bettered), s
+MAX_UNSEEN_FIGHTS = 2                        # fights a decision tries and passes over as unseen before it takes a player
 ROAM_FLOOR = 0.01                            # a player in no fight: the overview's score plus this,
 ROAM_BONUS = 0.1                             # plus this times its nearness to an opponent
 MIN_SWITCH_GAIN = 0.05                       # and a better situation must gain at least this much
@@ -510,6 +511,7 @@ class PlannedDirector:
                              0.0)
         dead_too_long = current is not None and any(
             now - self.dead_since.get(i, math.inf) >= s.dead_hold_s for i in current.subjects)
+        skipped = 0
         for option in options:
             if current is not None and set(option.subjects) == current_set and option.kind == current_kind:
                 continue
@@ -521,12 +523,15 @@ class PlannedDirector:
                    else "subject dead" if dead_too_long else "better situation")
             choice = ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind,
                                 f"{option.reason} ({why})")
+            if len(option.subjects) > 1 and skipped >= MAX_UNSEEN_FIGHTS:
+                continue  # a plan's cost stays bounded: each try is a place search
             cover = [moment] + [buffer.at(now + ahead_s) for ahead_s in OPTION_COVER_S if now + ahead_s <= buffer.horizon_s]
             shot, seen = self.builder.build(choice, option.subjects, moment, cover, current, current_pose, now)
             if shot is not None and seen < s.min_visible and len(option.subjects) > 1:
                 # a fight no place sees (no kill to wait for): one of its players, a later option, shows more
                 # (on the real 4on4, such DUELs were 7% of the program, their players shown 0.54)
                 flags.append("fight_unseen_skipped")
+                skipped += 1
                 continue
             if shot is not None:
                 shot.scores = {"interest": option.score, "current_interest": current_score, "place_visibility": seen}
