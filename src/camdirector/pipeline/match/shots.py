@@ -140,6 +140,12 @@ class Place:
     phi_rad: float      # about the A-B axis, rad
     width: float = 1.0  # the screen points this many times the style's apart (module docstring), [1, 10]
 
+    def eased(self, goal: Place, keep: float) -> Place:
+        """The place `keep` of the way back from goal to this one ([0, 1]: 0 is the goal), phi the shorter way round."""
+        return Place(goal.theta_ratio + keep * (self.theta_ratio - goal.theta_ratio),
+                     goal.phi_rad - keep * math.remainder(goal.phi_rad - self.phi_rad, math.tau),
+                     goal.width + keep * (self.width - goal.width))
+
 
 class ToricCamera:
     """DUEL, FOLLOW or GROUP: the camera on the torus of points A and B (module docstring).
@@ -217,10 +223,7 @@ class ToricCamera:
     def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
         """Glides the place toward the goal and smooths the FOLLOW heading (time constants, s)."""
         keep = math.exp(-dt_s / response_time_s) if dt_s > 0.0 else 1.0
-        dphi = math.remainder(self.goal.phi_rad - self.place.phi_rad, math.tau)
-        self.place = Place(self.goal.theta_ratio + keep * (self.place.theta_ratio - self.goal.theta_ratio),
-                           self.goal.phi_rad - keep * dphi,
-                           self.goal.width + keep * (self.place.width - self.goal.width))
+        self.place = self.place.eased(self.goal, keep)
         forward = moment.forward_world[self.anchor_index]
         if self.heading is None:
             self.heading = forward
@@ -258,10 +261,7 @@ class ToricCamera:
         weight = 0.0 if pair_place is None else self.pair.weight(time_s)
         if weight <= 0.0:
             return self.place
-        own = self.place
-        return Place(own.theta_ratio + weight * (pair_place.theta_ratio - own.theta_ratio),
-                     own.phi_rad + weight * math.remainder(pair_place.phi_rad - own.phi_rad, math.tau),
-                     own.width + weight * (pair_place.width - own.width))
+        return self.place.eased(pair_place, 1.0 - weight)
 
     @property
     def split(self) -> bool:
