@@ -89,7 +89,7 @@ def project_from_cameras(positions_world: np.ndarray, rotations: np.ndarray, len
     points (n, 3) from cameras at positions_world (m, 3) with camera-to-world rotation matrices
     (m, 3, 3); NaN for points behind a camera (and for a camera whose rotation is NaN)."""
     offsets = np.atleast_2d(points_world)[None, :, :] - positions_world[:, None, :]
-    p_cam = np.einsum("mnj,mjk->mnk", offsets, rotations)        # world -> camera: R^T p, per camera
+    p_cam = offsets @ rotations                                  # world -> camera: R^T p, per camera
     depth = -p_cam[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         out = np.stack([p_cam[..., 0] / (depth * lens.tan_half_fov_x), p_cam[..., 1] / (depth * lens.tan_half_fov_y)],
@@ -116,6 +116,16 @@ def level_look_rotation(camera_world: np.ndarray, point_world: np.ndarray, scree
     d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
     a = np.asarray(point_world, dtype=np.float64) - camera_world
     return matrix_to_quat(level_rotation(a / np.linalg.norm(a), d / np.linalg.norm(d)))
+
+
+def level_look_matrices(cameras_world: np.ndarray, point_world, screen_xy, lens: Lens) -> np.ndarray:
+    """(m, 3, 3) camera-to-world rotation matrices of `level_look_rotation` for m cameras (m, 3) at
+    once (a place search tries hundreds); rows of NaN for a camera at the point."""
+    d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.asarray(point_world, dtype=np.float64) - np.atleast_2d(cameras_world)
+        a /= np.linalg.norm(a, axis=1, keepdims=True)
+    return level_rotations(a, d / np.linalg.norm(d))
 
 
 def level_rotation(world_dir, camera_dir) -> np.ndarray:

@@ -7,8 +7,12 @@ would hold the GIL against the frames it is meant to stay out of the way of, in 
 interpreter's choosing; a greenlet runs only when resumed, so a frame never waits for it, and
 what it computes cannot depend on how it was sliced (its inputs are fixed when it is drawn).
 
-`pause()` is called inside long loops (shots.py `framed_seen`, one batch of ray casts). Outside a
-sliced run, or inside one whose slice is not spent, it does nothing but read the clock.
+`pause(work)` is called inside long loops (shots.py `framed_seen`, one batch of ray casts) with the
+work the loop's next step will do, in the owner's units (there: camera-point pairs). Outside a
+sliced run, or inside one whose slice is not spent, it does nothing but read the clock and count
+the work. Besides slices of time, a run can be taken up to an amount of work (`run_until`): where
+it stops then depends on its inputs alone, never on the machine's speed, so an owner may decide
+from it when a result is used (pipeline/match/rig.py applies a plan at the tick its work allows).
 """
 from __future__ import annotations
 
@@ -23,18 +27,25 @@ T = TypeVar("T")
 
 
 class _Slice(greenlet.greenlet):
-    """The greenlet of one SlicedRun, carrying its deadline for `pause`."""
+    """The greenlet of one SlicedRun, carrying its deadlines for `pause`: a clock time and an
+    amount of work, and the work done so far."""
 
     deadline_s = math.inf
+    work_limit = math.inf
+    work_done = 0.0
     clock: Callable[[], float] = staticmethod(time.perf_counter)
 
 
-def pause() -> None:
-    """Hands control back to whoever resumed the current sliced run once its slice is spent; a
-    no-op elsewhere."""
+def pause(work: float = 0.0) -> None:
+    """Hands control back to whoever resumed the current sliced run once its slice is spent or
+    the next step's `work` would take it past its work limit (until resumed with room for it),
+    then counts that work; a no-op elsewhere."""
     current = greenlet.getcurrent()
-    if isinstance(current, _Slice) and current.clock() >= current.deadline_s:
+    if not isinstance(current, _Slice):
+        return
+    while current.work_done + work > current.work_limit or current.clock() >= current.deadline_s:
         current.parent.switch()
+    current.work_done += work
 
 
 class SlicedRun(Generic[T]):
@@ -55,20 +66,33 @@ class SlicedRun(Generic[T]):
         self.result = work()
         self.done = True
 
+    @property
+    def work(self) -> float:
+        """The work counted so far (all of it once done), in the units of `pause`'s calls."""
+        return self._greenlet.work_done
+
     def step(self, budget_s: float) -> bool:
         """Runs about budget_s more (until the first pause point past it); whether it is done."""
         if not self.done:
-            self._resume(self._greenlet.clock() + budget_s)
+            self._resume(self._greenlet.clock() + budget_s, math.inf)
         return self.done
+
+    def run_until(self, work: float) -> bool:
+        """Runs it until its end or a step that would take its work past `work`; whether it
+        ended within that work. The answer depends on the work alone, not on time or on the
+        slices run before (which may have run past `work`)."""
+        if not self.done and self.work < work:
+            self._resume(math.inf, work)
+        return self.done and self.work <= work
 
     def finish(self) -> T:
         """Runs it to its end; the result."""
         if not self.done:
-            self._resume(math.inf)
+            self._resume(math.inf, math.inf)
         return self.result
 
-    def _resume(self, deadline_s: float) -> None:
-        self._greenlet.deadline_s = deadline_s
+    def _resume(self, deadline_s: float, work_limit: float) -> None:
+        self._greenlet.deadline_s, self._greenlet.work_limit = deadline_s, work_limit
         self._greenlet.parent = greenlet.getcurrent()  # pause() comes back here, whoever resumes it
         try:
             self._greenlet.switch()

@@ -8,8 +8,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from camdirector.infra.slices import SlicedRun, pause
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import is_jump_cut
+from camdirector.pipeline.match.rig import DrawnPlan
 from camdirector.pipeline.match.settings import HltvSettings, MatchSettings
 from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
 from camdirector.worker.session import Session
@@ -221,17 +223,21 @@ def test_style_refuses_a_max_shot_under_the_min_shot():
         Style(rig=Rig.MATCH, min_shot_s=5.0, max_shot_s=4.0)
 
 
-def _program_with_idle_work(idle: str) -> tuple[list[np.ndarray], int, tuple[int, int]]:
+def _program_with_idle_work(idle: str, work_per_tick: float | None = None) -> tuple[list[np.ndarray], int, tuple[int, int], int]:
     """The melee's poses through a Session whose clock ticks 1 ms a read, with the worker's idle
     moments after each frame: none, a seeded-random number of slices, or the whole drawn plan;
-    and how many frames left a drawn plan, and in "slices" how many slices left it unfinished and
-    how many plans idle moments finished."""
+    and how many frames left a drawn plan, in "slices" how many slices left it unfinished and
+    how many plans idle moments finished, and how many ticks found their plan late (work_per_tick:
+    the rig's plan_work_per_tick, default MatchSettings')."""
     ticks = iter(range(10**9))
     session = Session("s", melee(seed=3, duration_s=40.0, delay_s=10.0).scene(), clock=lambda: next(ticks) * 1e-3)
+    if work_per_tick is not None:  # a Session takes the default settings; the rig reads this one field at its ticks
+        session.rig.settings = dataclasses.replace(session.rig.settings, plan_work_per_tick=work_per_tick)
     rng = np.random.default_rng(11)
-    poses, drawn, partial, finished = [], 0, 0, 0
+    poses, drawn, partial, finished, late = [], 0, 0, 0, 0
     for update in melee(seed=3, duration_s=40.0, delay_s=10.0).frames(40.0):
         state = session.frame(update)
+        late += "plan_late" in state.flags
         if state.pose is not None:
             poses.append(np.concatenate([state.pose.position_world, state.pose.rotation_xyzw]))
         drawn += session.has_deferred_work
@@ -242,20 +248,45 @@ def _program_with_idle_work(idle: str) -> tuple[list[np.ndarray], int, tuple[int
                 if session.do_deferred_work(whole=False):
                     partial += session.has_deferred_work
                     finished += not session.has_deferred_work
-    return poses, drawn, (partial, finished)
+    return poses, drawn, (partial, finished), late
 
 
-def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_computed():
-    """The plan drawn at a tick is computed in the worker's idle moments and applied at the next
-    tick (rig.py): the poses are the same whether no idle moment came (each tick finishes it),
-    some slices ran, or each plan was computed whole at once."""
-    none, drawn, _ = _program_with_idle_work("none")
-    sliced, _, (partial, finished) = _program_with_idle_work("slices")
-    whole, _, _ = _program_with_idle_work("whole")
+@pytest.mark.parametrize("work_per_tick", [None, 2e3])
+def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_computed(work_per_tick):
+    """The plan drawn at a tick is computed in the worker's idle moments and applied at the first
+    tick its work allows (rig.py): the poses are the same whether no idle moment came (each tick
+    computes it up to its work), some slices ran, or each plan was computed whole at once; also
+    when most plans need more than one tick's work (2e3 camera-point pairs)."""
+    none, drawn, _, late = _program_with_idle_work("none", work_per_tick)
+    sliced, _, (partial, finished), late_sliced = _program_with_idle_work("slices", work_per_tick)
+    whole, _, _, late_whole = _program_with_idle_work("whole", work_per_tick)
     assert drawn > 50                  # ours defers: a plan was waiting after many frames
     assert partial > 0 and finished > 0  # slices of 2 ms (a clock ticking 1 ms a read) left some unfinished
+    if work_per_tick is not None:
+        assert late > 20               # many plans were applied at a later tick
+    assert late == late_sliced == late_whole
     assert np.array_equal(np.array(none), np.array(sliced))
     assert np.array_equal(np.array(none), np.array(whole))
+
+
+def _plan_of_work(*steps: float) -> SlicedRun:
+    """A stand-in plan: pauses with each step's work, then returns its total."""
+    def work() -> float:
+        for step in steps:
+            pause(step)
+        return sum(steps)
+    return SlicedRun(work)
+
+
+def test_a_drawn_plan_is_applied_at_the_first_tick_its_work_allows_whether_or_not_idle_moments_computed_it():
+    """plan_work_per_tick per tick since it was drawn: 2.5 ticks' work is applied at the third tick,
+    computed then by the ticks themselves or beforehand, whole, by idle moments."""
+    for computed_beforehand in (False, True):
+        drawn = DrawnPlan(current=None, run=_plan_of_work(100.0, 100.0, 50.0))
+        if computed_beforehand:
+            drawn.finish()
+        assert [drawn.due(100.0) for _ in range(4)] == [False, False, True, True]
+        assert drawn.result == 250.0 and drawn.work == 250.0
 
 
 def test_a_take_finishes_the_drawn_plan_before_it_changes_what_the_plan_reads():

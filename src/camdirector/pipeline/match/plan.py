@@ -279,6 +279,9 @@ class PlannedDirector:
         self.dead_since: dict[int, float] = {}
         self.plan: list[Beat] = []  # the beats of the last decision (read for the dashboard, MatchRig.planned_cut)
         self._seen: dict[tuple[ShotKind, tuple[int, ...], tuple[float, ...]], bool] = {}  # _shot_sees' answers
+        # the last options() answer, keyed by its moment's time and the buffer's horizon, s (a plan asks
+        # twice: decide and the rig's candidates)
+        self._options: tuple[tuple[float, float], list[Option]] | None = None
 
     @property
     def style(self) -> Style:
@@ -287,6 +290,12 @@ class PlannedDirector:
     # -- situations -------------------------------------------------------------------------
     def options(self, moment: Moment, buffer: MomentBuffer) -> list[Option]:
         """Every situation worth showing at the moment, best first (module docstring)."""
+        key = (moment.time_s, buffer.horizon_s)
+        if self._options is None or self._options[0] != key:
+            self._options = key, self._options_at(moment, buffer)
+        return self._options[1]
+
+    def _options_at(self, moment: Moment, buffer: MomentBuffer) -> list[Option]:
         s = self.settings
         now = moment.time_s
         ray_scene = self.builder.visibility.ray_scene

@@ -28,15 +28,20 @@ applied then (the moment it was made for; made for the tick that drew it, one ki
 real duel's first 3 minutes went unshown, 0.786 -> 0.714 kill coverage): drawn, it holds
 what it reads (the buffer's view, a copy of the shot's camera, the last pose), and the session's
 worker computes it in slices of `PLAN_SLICE_S` in its idle moments (infra/slices.py; the pause
-points are the place searches' ray casts, shots.py `framed_seen`); the tick that applies it
-finishes whatever idle moments left. On 90 s of the 4on4 on dm2 a plan costs 17 ms on average and
-up to 250 ms, against 3 ms for the rest of a frame: computed in the frame, one frame in four
-waited for it. Played live into a server (load_tests/match_live.py, the 4on4's first minute), the
-server's compute p99 went from 69 to 10 ms at 30 Hz and from 28 to 4.5 ms at 60 Hz. Applied one
-tick late, the program does not depend on when or in how many slices it was computed, only on its
-inputs: a take or a style change, which would change what a drawn plan
-reads, finishes it first. The first shot and a take's are planned at once; the baselines (cheap)
-and a session with dynamic objects (whose ray scene every frame moves) plan in the frame, as before.
+points are the place searches' ray casts, shots.py `framed_seen`). A plan is applied at the first
+tick by which it needed at most `plan_work_per_tick` of work per tick since it was drawn (its work
+counted in camera-point pairs, the same on any machine); until then no other plan is drawn (flag
+`plan_late`), and each tick computes it up to that much, whatever the idle moments left. On the
+4on4's first minute on dm2 a plan costs 9 ms on average and up to 140 ms (3.7 ms per 1e4 pairs),
+against 3 ms for the rest of a frame; 3% of plans need more than one tick's 1e5 pairs, mostly the
+searches of a new kill's joint shot (`_join`). Computed whole in the frame that applies it (the
+rule before), the server's compute p99 was 25 ms at 30 Hz and 8.9 ms at 60 Hz (load_tests/
+match_live.py); applied by its work, 8.1 and 5.7 ms, the autotrack's frames' own (11.3 and 5.7
+ms in the same run). Applied by its work, the program does not depend on when, in how many slices or on
+how fast a machine it was computed, only on its inputs: a take or a style change, which would
+change what a drawn plan reads, finishes it first. The first shot and a take's are planned at
+once; the baselines (cheap) and a session with dynamic objects (whose ray scene every frame moves)
+plan in the frame, as before.
 
 A take whose held subject dies (at the program moment) falls back, still held: to the player
 who killed it, else the nearest fight to where it died, else an overview; `shot.reason` says so.
@@ -95,16 +100,29 @@ class PlanResult:
 
 @dataclasses.dataclass
 class DrawnPlan:
-    """A plan drawn at a tick with what it reads, computed in slices until the next (module docstring)."""
+    """A plan drawn at a tick with what it reads, computed in slices until the tick that applies
+    it (module docstring)."""
 
     current: Shot
     run: SlicedRun[PlanResult] | None  # None once finished (a snapshot pickles the rig)
     result: PlanResult | None = None
+    work: float = 0.0                  # its whole work once finished, camera-point pairs (infra/slices.py)
+    ticks: int = 0                     # the ticks since it was drawn
 
     def finish(self) -> PlanResult:
         if self.run is not None:
-            self.result, self.run = self.run.finish(), None
+            self.result, self.work, self.run = self.run.finish(), self.run.work, None
         return self.result
+
+    def due(self, work_per_tick: float) -> bool:
+        """At a tick: whether it is applied now, i.e. whether its whole work is at most
+        work_per_tick per tick since it was drawn. Computes it up to that much (what the idle
+        moments left); the answer depends on its work alone, not on time."""
+        self.ticks += 1
+        allowed = self.ticks * work_per_tick
+        if self.run is not None and self.run.run_until(allowed):
+            self.finish()
+        return self.run is None and self.work <= allowed
 
 
 class MatchRig:
@@ -379,7 +397,11 @@ class MatchRig:
             result = self._plan(moment, self.buffer, self.shot, None, self._last_pose)
             self._take_pending = False
             return self._apply(result, moment, flags)
-        cut = drawn is not None and self._apply(drawn.finish(), moment, flags, drawn.current)
+        if drawn is not None and not drawn.due(self.settings.plan_work_per_tick):
+            self._drawn = drawn  # a long plan: applied at a later tick, none drawn meanwhile
+            flags.append("plan_late")
+            return False
+        cut = drawn is not None and self._apply(drawn.result, moment, flags, drawn.current)
         # planned for the moment it goes on air, the next tick's (buffered: the delay's future)
         on_air = self.buffer.at(moment.time_s + self.settings.plan_interval_s)
         current, camera, buffer, last_pose = self.shot, copy.copy(self.shot.camera), self.buffer.view(), self._last_pose
@@ -392,6 +414,9 @@ class MatchRig:
         camera gets the new goal); whether it cut."""
         flags.extend(result.flags)
         self.held, self._candidates, self._beats = result.held, result.candidates, result.beats
+        if result.shot is not None and drawn_on is not None and self._jump_cut(result.shot, moment):
+            flags.append("cut_refused_jump")  # the next plan, drawn now, judges it from the picture now on air
+            return False
         if result.shot is not None:
             result.shot.start_s = moment.time_s  # on air from now: the shot's length counts from here
             self.shot = result.shot
@@ -404,6 +429,17 @@ class MatchRig:
                 camera.pair = dataclasses.replace(camera.pair, times_s=tuple(self.shot.cover_times_s),
                                                   place=result.pair_place or camera.pair.place)
         return False
+
+    def _jump_cut(self, shot: Shot, moment: Moment) -> bool:
+        """Whether cutting to the shot now breaks the 30-degree rule against the pose on air: a
+        drawn plan judged it against the pose of the tick that drew it (or earlier, applied late),
+        and the camera has moved since (the real wipeout and 4on4 each had one such jump cut)."""
+        shared = sorted(set(self.shot.framed(moment.time_s)) & set(shot.framed(moment.time_s)))
+        pose = shot.camera.pose(moment)
+        if not shared or pose is None or self._last_pose is None:
+            return False
+        return not self.builder.grammar.allows_cut(self._last_pose.position_world, moment.aims_world[shared],
+                                                   pose.position_world)[0]
 
     def _plan(self, moment: Moment, buffer: MomentBuffer, current: Shot | None, camera: ToricCamera | None,
               last_pose: CameraPose | None) -> PlanResult:

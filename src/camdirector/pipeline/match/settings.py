@@ -68,6 +68,9 @@ class HltvSettings:
 @dataclass(frozen=True)
 class MatchSettings:
     plan_rate_hz: float = 10.0           # the planner's rate; the program camera runs every frame, Hz. (0, 120]
+    plan_work_per_tick: float = 1.0e5    # a drawn plan is applied at the first tick by which it needed at most this much
+                                         # work per tick since it was drawn (rig.py; about 30 ms here; the idle moments of a
+                                         # tick at 30 Hz compute three times that), camera-point pairs. [1e3, 1e9]
     lead_s: float = 2.5                  # preferred cut before a planned event, s. [min_lead_s, max_lead_s]
     min_lead_s: float = 0.5              # no cut in the last half second before a planned event (the pair window
                                          # opens then; at 1.0 s the real 4on4's kills under 1.5 s apart lost theirs:
@@ -128,6 +131,8 @@ class MatchSettings:
                              "beat_min_priority in [1, 15]")
         if not -1.0 <= self.facing_cos <= 1.0 or not 0.0 <= self.min_visible <= 1.0 or not 0.0 <= self.pull_below <= 1.0:
             raise ValueError("MatchSettings: facing_cos in [-1, 1], min_visible and pull_below in [0, 1]")
+        if not 1e3 <= self.plan_work_per_tick <= 1e9:
+            raise ValueError(f"MatchSettings: plan_work_per_tick in [1e3, 1e9] camera-point pairs, got {self.plan_work_per_tick}")
         if self.max_held_shot_s > 600.0:
             raise ValueError("MatchSettings: max_held_shot_s in (0, 600] s")
         if self.pair_before_s > 30.0 or self.pair_after_s > 30.0 or self.reframe_s > 10.0:

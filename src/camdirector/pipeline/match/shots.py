@@ -48,13 +48,14 @@ jumps inside a shot.
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation, project_from_cameras
+from camdirector.geometry.camera import CameraPose, Lens, level_look_matrices, level_look_rotation, project_from_cameras
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.toric import (
     DegenerateTorus,
@@ -66,7 +67,7 @@ from camdirector.geometry.toric import (
     theta_max,
     torus_position,
 )
-from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
+from camdirector.geometry.transforms import UP_WORLD
 from camdirector.infra.slices import pause
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import Moment
@@ -147,6 +148,15 @@ class Place:
                      goal.width + keep * (self.width - goal.width))
 
 
+@functools.lru_cache(maxsize=256)
+def _composition(style_a: tuple[float, ...], style_b: tuple[float, ...], lens: Lens,
+                 width: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+    """ToricCamera.composition, made once per style, lens and width (a place search asks thousands of times)."""
+    screen_a = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in style_a)
+    screen_b = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in style_b)
+    return screen_a, screen_b, composition_angle(screen_a, screen_b, lens)
+
+
 class ToricCamera:
     """DUEL, FOLLOW or GROUP: the camera on the torus of points A and B (module docstring).
     a_index, b_index: players; b_index None frames A with gaze room."""
@@ -175,9 +185,7 @@ class ToricCamera:
 
     def composition(self, width: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
         """The screen points of A and B (2,) each at a framing width, and their composition angle, rad."""
-        screen_a = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in self.style_a)
-        screen_b = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in self.style_b)
-        return screen_a, screen_b, composition_angle(screen_a, screen_b, self.lens)
+        return _composition(self.style_a, self.style_b, self.lens, width)
 
     @property
     def side(self) -> float:
@@ -235,17 +243,15 @@ class ToricCamera:
     def rotations(self, moment: Moment, positions_world: np.ndarray, places: list[Place]) -> np.ndarray:
         """(m, 3, 3) camera-to-world rotations of pose_from at m positions (m, 3) of their places'
         widths, at once for a pair (geometry.toric.level_pair_matrices), so that the place search
-        judges the level picture that is shown; NaN where degenerate."""
-        if self.b_index is None:
-            return quat_to_matrix(np.stack([self.pose_from(moment, p, place.width).rotation_xyzw
-                                            for p, place in zip(positions_world, places)]))
+        judges the level picture that is shown (FOLLOW: geometry.camera.level_look_matrices); NaN where degenerate."""
         a, b = self.points(moment)
         widths = np.array([p.width for p in places])
         out = np.empty((len(places), 3, 3))
         for width in dict.fromkeys(widths.tolist()):
             rows = np.flatnonzero(widths == width)
             screen_a, screen_b, _ = self.composition(width)
-            out[rows] = level_pair_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
+            out[rows] = level_look_matrices(positions_world[rows], a, screen_a, self.lens) if self.b_index is None \
+                else level_pair_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
         return out
 
     def pose(self, moment: Moment) -> CameraPose | None:
@@ -330,11 +336,13 @@ class StaticCamera:
         return self.fixed_pose
 
 
-def place_grid(side: float | None) -> list[Place]:
-    """The places tried: every width, ratio and phi, on one side (sign of phi) or both when side is None."""
+@functools.cache
+def place_grid(side: float | None) -> tuple[Place, ...]:
+    """The places tried: every width, ratio and phi, on one side (sign of phi) or both when side is None.
+    Made once per side (a plan asks for it at every search; made anew, it was a tenth of a plan's cost)."""
     signs = (1.0, -1.0) if side is None else (side,)
-    return [Place(float(r), s * float(p), w) for w in PLACE_WIDTHS for s in signs for r in PLACE_RATIOS
-            for p in PLACE_PHI_RAD]
+    return tuple(Place(float(r), s * float(p), w) for w in PLACE_WIDTHS for s in signs for r in PLACE_RATIOS
+                 for p in PLACE_PHI_RAD)
 
 
 def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...],
@@ -343,16 +351,15 @@ def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[i
     positions (m, 3) and camera-to-world rotation matrices (m, 3, 3), sees at the moment:
     unoccluded and inside the frame, and not from under the subjects' ground. A camera whose
     rotation is NaN (a degenerate framing) sees nothing. A pause point of a plan computed in
-    slices (infra/slices.py): one batch of ray casts, 0.2-20 ms."""
-    pause()
-    seen = visibility.seen_points(positions_world, moment, subjects)     # (m, s, k)
-    ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
-    seen[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
+    slices (infra/slices.py): one batch of ray casts, 0.2-20 ms, whose work is its m * len(subjects)
+    * k camera-point pairs. Only the points inside a frame are ray-cast."""
+    pause(len(positions_world) * len(subjects) * visibility.k)
     screen = project_from_cameras(positions_world, rotations, lens, visibility.points_world(moment, subjects))
     with np.errstate(invalid="ignore"):
-        inside = (np.abs(screen) <= 1.0).all(axis=2)                   # NaN (behind, degenerate) compares False
-    seen &= inside.reshape(seen.shape)
-    return seen.mean(axis=2)
+        asked = (np.abs(screen) <= 1.0).all(axis=2)                    # (m, s * k); NaN (behind, degenerate) is False
+    ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
+    asked[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
+    return visibility.seen_points(positions_world, moment, subjects, asked).mean(axis=2)
 
 
 def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], subjects: tuple[int, ...],
@@ -405,12 +412,12 @@ def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[i
     if len(extra_cameras_world):
         near = np.linalg.norm(extra_cameras_world - centre, axis=1) <= 2.0 * max(distance_m, top_height_m)
         cameras = np.concatenate([cameras, extra_cameras_world[near]])
-    poses = [CameraPose(c, level_look_rotation(c, centre, (0.0, 0.0), lens), lens.vertical_fov_deg) for c in cameras]
-    rotations = quat_to_matrix(np.stack([p.rotation_xyzw for p in poses]))
+    rotations = level_look_matrices(cameras, centre, (0.0, 0.0), lens)
     seen = sum(w * framed_seen(visibility, m, subjects, cameras, rotations, lens) for m, w in zip(moments, weights))
     seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
     worst = seen.min(axis=1)
     if allowed is not None:
         worst = np.where(allowed(cameras), worst, -1.0)
     best = int(np.lexsort((-seen.mean(axis=1), -worst))[0])
-    return poses[best], float(worst[best])
+    pose = CameraPose(cameras[best], level_look_rotation(cameras[best], centre, (0.0, 0.0), lens), lens.vertical_fov_deg)
+    return pose, float(worst[best])

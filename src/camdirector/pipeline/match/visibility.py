@@ -26,15 +26,23 @@ class SubjectVisibility:
         """(len(subjects) * k, 3) the subjects' sample points at the moment, subject after subject."""
         return np.concatenate([moment.transforms[i].apply(self.samples_local[i]) for i in subjects])
 
-    def seen_points(self, cameras_world: np.ndarray, moment: Moment, subjects: tuple[int, ...]) -> np.ndarray:
-        """(m, len(subjects), k) bool: which sample points each of (m, 3) camera places sees."""
+    def seen_points(self, cameras_world: np.ndarray, moment: Moment, subjects: tuple[int, ...],
+                    asked: np.ndarray | None = None) -> np.ndarray:
+        """(m, len(subjects), k) bool: which sample points each of (m, 3) camera places sees.
+        asked: (m, len(subjects) * k) bool, the camera-point pairs to ray-cast (default all);
+        the others are False (a place search asks only for the points inside each frame)."""
         cameras = np.atleast_2d(cameras_world)
         if not subjects:
             return np.ones((len(cameras), 0, self.k), dtype=bool)
         points = self.points_world(moment, subjects)
         m, p = len(cameras), len(points)
-        hidden = self.ray_scene.occluded(np.repeat(cameras, p, axis=0), np.tile(points, (m, 1)))
-        return ~hidden.reshape(m, len(subjects), self.k)
+        if asked is None:
+            hidden = self.ray_scene.occluded(np.repeat(cameras, p, axis=0), np.tile(points, (m, 1)))
+            return ~hidden.reshape(m, len(subjects), self.k)
+        rows, cols = np.nonzero(asked)
+        seen = np.zeros((m, p), dtype=bool)
+        seen[rows, cols] = ~self.ray_scene.occluded(cameras[rows], points[cols])
+        return seen.reshape(m, len(subjects), self.k)
 
     def visible_share(self, cameras_world: np.ndarray, moment: Moment, subjects: tuple[int, ...]) -> np.ndarray:
         """(m, len(subjects)) share of each subject's points seen from each of (m, 3) camera places."""
