@@ -6,7 +6,16 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens, in_frame, project_from_cameras, project_to_screen
+from camdirector.geometry.camera import (
+    NEAR_PLANE_M,
+    CameraPose,
+    Lens,
+    in_frame,
+    level_look_matrices,
+    level_look_rotation,
+    project_from_cameras,
+    project_to_screen,
+)
 from camdirector.geometry.transforms import quat_to_matrix
 
 
@@ -62,3 +71,17 @@ def test_many_cameras_project_as_each_one_does(cameras, points):
                                    quat_to_matrix(np.stack([p.rotation_xyzw for p in poses])), Lens(), world)
     for pose, screen in zip(poses, at_once):
         np.testing.assert_allclose(screen, project_to_screen(pose, Lens(), world), rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3), min_size=1, max_size=6),
+       st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3),
+       st.tuples(st.floats(-0.9, 0.9), st.floats(-0.9, 0.9)))
+def test_many_level_look_rotations_at_once_are_each_ones(cameras, point, screen_xy):
+    """level_look_matrices (a place search's batch) is level_look_rotation camera by camera."""
+    cameras_world, point_world = np.array(cameras, dtype=np.float64), np.array(point, dtype=np.float64)
+    assume(np.all(np.linalg.norm(cameras_world - point_world, axis=1) > 1e-3))
+    at_once = level_look_matrices(cameras_world, point_world, screen_xy, Lens())
+    for camera, rotation in zip(cameras_world, at_once):
+        np.testing.assert_allclose(rotation, quat_to_matrix(level_look_rotation(camera, point_world, screen_xy, Lens())),
+                                   atol=1e-9)

@@ -4,18 +4,19 @@ level pair."""
 from __future__ import annotations
 
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from camdirector.geometry.camera import CameraPose, project_to_screen
+from camdirector.geometry.camera import CameraPose, project_from_cameras, project_to_screen
 from camdirector.geometry.transforms import RigidTransform, quat_to_matrix
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.match.shots import PLACE_WIDTHS, Place, ToricCamera, place_grid
+from camdirector.pipeline.match.shots import MIN_CAMERA_HEIGHT_M, PLACE_WIDTHS, Place, ToricCamera, framed_seen, place_grid
 from camdirector.pipeline.style import Rig, Style
 from tests.pipeline.match.scenes import LENS, melee, run_session, yaw_quat
 
@@ -41,10 +42,11 @@ def test_every_program_pose_of_a_melee_has_a_level_horizon(delay_s):
     assert rotations[:, 1, 1].min() > 0.0            # and its up axis points up
 
 
-@pytest.mark.parametrize("kind", [ShotKind.DUEL, ShotKind.GROUP])
+@pytest.mark.parametrize("kind", [ShotKind.DUEL, ShotKind.GROUP, ShotKind.FOLLOW])
 def test_the_place_search_judges_the_picture_that_is_shown(kind):
     moment = moment_of([(0.0, 0.0), (6.0, 3.0)], [0.0, 0.8])
-    camera = ToricCamera(kind, 0, 1, Style(rig=Rig.MATCH), LENS, Place(0.5, math.radians(70.0)))
+    camera = ToricCamera(kind, 0, None if kind == ShotKind.FOLLOW else 1, Style(rig=Rig.MATCH), LENS,
+                         Place(0.5, math.radians(70.0)))
     places = place_grid(1.0)
     positions = camera.positions(moment, places)
     many = camera.rotations(moment, positions, places)
@@ -72,3 +74,30 @@ def test_at_the_styles_composition_every_place_frames_a_level_pair(distance_m, h
         screen = project_to_screen(CameraPose(position, pose.rotation_xyzw, LENS.vertical_fov_deg), LENS, aims)
         assert np.all(np.abs(screen) <= 1.0), place
         assert screen[0, 0] < screen[1, 0], place  # A stays screen-left: the line of action holds
+
+
+def test_the_search_ray_casts_only_the_points_inside_each_frame_and_judges_as_casting_all_would():
+    """framed_seen: a sample point is seen when it is inside the frame, not from under the
+    subjects' ground, and unoccluded; casting only the points inside the frames gives the same
+    shares as casting every one and keeping the inside ones (a melee on its walled field)."""
+    session, _ = run_session(melee(seed=3, duration_s=20.0, delay_s=0.0), 15.0)
+    rig = session.rig
+    moment = rig.buffer.newest
+    camera = ToricCamera(ShotKind.DUEL, 0, 5, Style(rig=Rig.MATCH), LENS, Place(0.5, math.radians(70.0)))
+    places = place_grid(None)
+    positions = camera.positions(moment, places)
+    rotations = camera.rotations(moment, positions, places)
+    subjects = (0, 5)
+    scene = rig.visibility.ray_scene
+    with mock.patch.object(scene, "occluded", wraps=scene.occluded) as cast:
+        judged = framed_seen(rig.visibility, moment, subjects, positions, rotations, LENS)
+    rays = sum(len(c.args[1]) for c in cast.call_args_list)
+    every = rig.visibility.seen_points(positions, moment, subjects)                      # (m, 2, k)
+    screen = project_from_cameras(positions, rotations, LENS, rig.visibility.points_world(moment, subjects))
+    with np.errstate(invalid="ignore"):
+        inside = (np.abs(screen) <= 1.0).all(axis=2).reshape(every.shape)
+    above = positions[:, 1] >= moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
+    expected = (every & inside & above[:, None, None]).mean(axis=2)
+    assert 0.0 < expected.mean() < 1.0 and (~every).any()  # some points are hidden by walls, some outside
+    np.testing.assert_array_equal(judged, expected)
+    assert rays == int((inside & above[:, None, None]).sum()) < inside.size

@@ -3,16 +3,20 @@ buffering, film grammar (min shot, no jump cut, line of action), takes and their
 HLTV baseline's chase on a kill, and determinism by seed."""
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import numpy as np
 import pytest
 
+from camdirector.geometry.camera import CameraPose
 from camdirector.infra.slices import SlicedRun, pause
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import is_jump_cut
-from camdirector.pipeline.match.rig import DrawnPlan
+from camdirector.pipeline.match.plan import Shot
+from camdirector.pipeline.match.rig import DrawnPlan, PlanResult
 from camdirector.pipeline.match.settings import HltvSettings, MatchSettings
+from camdirector.pipeline.match.shots import StaticCamera, ToricCamera
 from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
 from camdirector.worker.session import Session
 from tests.pipeline.match.scenes import (
@@ -308,3 +312,38 @@ def test_a_take_finishes_the_drawn_plan_before_it_changes_what_the_plan_reads():
                 break
     session.rig.set_style(Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV))
     assert not session.has_deferred_work
+
+
+def test_a_drawn_cut_that_breaks_the_30_degree_rule_against_the_pose_on_air_is_refused():
+    """A plan judged the 30-degree rule against the pose of the tick that drew it; the camera
+    moves on until the tick that applies it, which judges the cut again against the pose on air:
+    a cut to the same view of the same players is refused (flagged), one from the opposite side
+    goes on air."""
+    match = melee(seed=3, duration_s=30.0, delay_s=10.0)
+    session = Session("s", match.scene())
+    for update in match.frames(30.0):
+        state = session.frame(update)
+        rig = session.rig
+        if state.pose is not None and isinstance(rig.shot.camera, ToricCamera) and not state.cut:
+            break
+    moment = rig.buffer.at(state.time_s)
+    on_air = rig.shot
+    framed = on_air.framed(moment.time_s)
+    same = Shot(on_air.choice, on_air.subjects, copy.deepcopy(on_air.camera), moment.time_s)
+    centre = moment.aims_world[list(framed)].mean(axis=0)
+    behind = StaticCamera(CameraPose(2.0 * centre - state.pose.position_world, state.pose.rotation_xyzw, 50.0))
+    opposite = Shot(on_air.choice, on_air.subjects, behind, moment.time_s)
+
+    def result(shot: Shot) -> PlanResult:
+        return PlanResult(shot, None, None, None, [], [], [])
+
+    flags: list[str] = []
+    assert not rig._apply(result(same), moment, flags, drawn_on=on_air)
+    assert flags == ["cut_refused_jump"] and rig.shot is on_air
+    assert rig._apply(result(opposite), moment, flags, drawn_on=on_air)
+    assert rig.shot is opposite and flags == ["cut_refused_jump"]
+
+
+def test_plan_work_per_tick_is_validated():
+    with pytest.raises(ValueError, match="plan_work_per_tick"):
+        MatchSettings(plan_work_per_tick=10.0)
