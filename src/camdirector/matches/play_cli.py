@@ -9,8 +9,9 @@
         --loop it plays the match again and again until Ctrl-C. Prints JSON lines: first the
         session id (open it in the dashboard; --session-id-file writes it there too), then one
         line per cut, then the summary: frames sent, answered, cuts, late frames (sent more than a
-        frame period after due). Ctrl-C ends the stream and closes the session. The key defaults
-        to the CAMDIRECTOR_KEY environment variable.
+        frame period after due). Ctrl-C (SIGINT) stops sending: the server answers what was sent,
+        the stream ends and the session is closed; a second Ctrl-C stops at once. The key
+        defaults to the CAMDIRECTOR_KEY environment variable.
         Exit status: 0 played to the end, 1 the stream failed, 2 bad arguments, match file,
         server, level or key, 130 stopped by Ctrl-C.
 
@@ -21,7 +22,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 DIRECTOR_NAMES = ("PLANNED", "HLTV", "AUTOTRACK")  # session_feed.DIRECTORS' keys, not imported here to keep it light
@@ -100,11 +103,22 @@ def run_play_match(args: argparse.Namespace) -> int:
             part.write_text(session_id + "\n")
             os.replace(part, args.session_id_file)  # a reader never sees half an id
 
+    stop = threading.Event()
+
+    def on_sigint(signum, frame) -> None:
+        """The first Ctrl-C ends the updates (the stream then ends cleanly); a KeyboardInterrupt
+        raised inside grpc's calls could leave its channel unable to close (grpc/grpc#19973),
+        and `play-match --loop` once hung there for over a minute. A second one stops at once."""
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_sigint)
     try:
         with client:
             result = play_match(client, match, director=DIRECTORS[args.director], delay_s=args.delay_s,
                                 rate_hz=args.rate_hz, speed=args.speed, loop=args.loop, on_session=on_session,
-                                on_cut=lambda line: _print({"cut": line}))
+                                on_cut=lambda line: _print({"cut": line}), stop=stop)
     except cd.DirectorError as exc:
         if not opened:
             return _fail(_refusal(args.server, exc))

@@ -110,14 +110,18 @@ def cut_line(reply: cd.pb.CameraUpdate) -> dict:
 def play_match(client: cd.Client, match: MatchRecording, *, director: int, delay_s: float, rate_hz: float = 30.0,
                speed: float = 1.0, loop: bool = False, seed: int = 0, clock: Callable[[], float] = time.monotonic,
                on_session: Callable[[str], None] = lambda session_id: None,
-               on_cut: Callable[[dict], None] = lambda line: None) -> PlaybackResult:
+               on_cut: Callable[[dict], None] = lambda line: None,
+               stop: threading.Event | None = None) -> PlaybackResult:
     """Plays the match into a new RIG_MATCH session of `director` (a MatchDirector value) with the
     broadcast delay delay_s, s (module docstring), then closes the session. `on_session` hears the
-    session id as soon as it is open, `on_cut` each cut (cut_line). Ctrl-C (KeyboardInterrupt while
-    streaming) ends the stream and closes the session; the result says so. DirectorError: the
-    server refused the session or the stream failed."""
+    session id as soon as it is open, `on_cut` each cut (cut_line). `stop`, once set (by another
+    thread or a signal handler, as play-match's Ctrl-C), ends the updates: the server answers
+    those sent, the stream ends and the session is closed; the result says it was interrupted. A
+    KeyboardInterrupt while streaming does the same, less cleanly (raised inside grpc's calls, it
+    can leave its channel unable to close: grpc/grpc#19973). DirectorError: the server refused
+    the session or the stream failed."""
     result = PlaybackResult()
-    stop = threading.Event()
+    stop = threading.Event() if stop is None else stop
     start_s = clock()
     with client.create_session(**match_session_fields(match, director, delay_s, seed)) as session:
         on_session(session.id)
@@ -134,6 +138,7 @@ def play_match(client: cd.Client, match: MatchRecording, *, director: int, delay
                 if reply.cut:
                     result.counts.cuts += 1
                     on_cut(cut_line(reply))
+            result.interrupted = stop.is_set()
         except KeyboardInterrupt:
             result.interrupted = True
         finally:
