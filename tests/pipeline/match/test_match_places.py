@@ -195,3 +195,29 @@ def test_a_planned_shot_is_placed_for_the_frame_that_shows_the_kill_too():
     times = [m.time_s for m in cover]
     assert times[0] == pytest.approx(kill_s - PRE_EVENT_S, abs=1 / 30.0) and weights[0] < 1.0
     assert times[1] <= kill_s < times[2] <= kill_s + POST_EVENT_S and weights[1:] == [1.0, 1.0]
+
+
+def two_duels_far_apart(t: float):
+    """two_duels_side_by_side with a2 and b2 20 m east of a1 and b1 instead of 6 m."""
+    places = two_duels_side_by_side(t)
+    places.update({"a2": ((20.0, 0.0), facing((20, 0), (20, 6))), "b2": ((20.0, 6.0), facing((20, 6), (20, 0)))})
+    return places
+
+
+@pytest.mark.parametrize("join_spread_max_m", [15.0, 1000.0])
+def test_kills_of_players_far_apart_never_share_a_shot_that_would_show_them_small(join_spread_max_m):
+    # the kills at 25 and 25.3 s are too close for two cuts (no later cut leaves min_lead_s); their
+    # players span 21 m: one shot of all four frames them small, so by default the second kill is
+    # left out rather than joined (on the open nav_test such joins showed players at 0.03-0.07 of the
+    # frame); without the limit they share one shot
+    second_s = KILL_S + 0.3
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_far_apart, kills, delay_s=10.0)
+    states = [s for s in BareRig(match, MatchSettings(join_spread_max_m=join_spread_max_m)).run(KILL_S + 10.0 + 4.0)
+              if not s.match.buffering]
+    shown = at_time(states, KILL_S).match.shot
+    if join_spread_max_m < 21.0:
+        assert shown.kind in (ShotKind.DUEL, ShotKind.FOLLOW) and set(shown.subject_ids) <= {"a1", "b1"}
+        assert any("plan_events_left_out" in f for s in states for f in s.flags)
+    else:
+        assert shown.kind in (ShotKind.GROUP, ShotKind.OVERVIEW) and set(shown.subject_ids) == {"a1", "b1", "a2", "b2"}

@@ -79,6 +79,9 @@ class MatchSettings:
     lookahead_s: float = 12.0            # the planner reads the buffered future this far, s. (0, 300]
     beat_min_priority: int = 5           # events of this priority or more get a planned shot (kills, objectives). [1, 15]
     max_group: int = 4                   # most players in one shot. [2, 64]
+    join_spread_max_m: float = 15.0      # events join one shot only when their players stand this close: a GROUP 15 m wide
+                                         # frames them at about 0.17 of the frame's height; on the open nav_test, joins of
+                                         # players 24 m apart showed them at 0.03-0.07 (median height 0.066), m. (0, 1000]
     preferred_shot_s: float = 3.0        # a planned cut that would end the shot before it sooner than this is not made when one
                                          # GROUP or OVERVIEW shows both beats (kills 2.7 s apart made 2.7-s shots), s. [0, 60]
     max_held_shot_s: float = 16.0        # a shot that shows the players of the next event is held for it only this long from
@@ -121,7 +124,7 @@ class MatchSettings:
 
     def __post_init__(self):
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
-                                      "respawn_walk_m", "engage_range_m", "reframe_s", "max_held_shot_s",
+                                      "respawn_walk_m", "engage_range_m", "join_spread_max_m", "reframe_s", "max_held_shot_s",
                                       "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
             raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")
