@@ -152,16 +152,21 @@ def test_a_kill_soon_after_another_gets_a_later_cut_so_that_the_shot_before_last
         assert state.match.shot.kind == ShotKind.DUEL and set(state.match.shot.subject_ids) == pair
 
 
+def _kills_after_one_elsewhere(places, second_s: float, settings: MatchSettings) -> list:
+    """The program (past buffering) of e1's kill of f1 at KILL_S - 4 s, then a1's of b1 at KILL_S
+    and a2's of b2 at second_s, the players standing at `places`."""
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)]
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, places, kills, delay_s=10.0)
+    return [s for s in BareRig(match, settings).run(KILL_S + 10.0 + 4.0) if not s.match.buffering]
+
+
 @pytest.mark.parametrize("preferred_shot_s", [0.0, 3.0])
 def test_kills_too_close_for_a_preferred_shot_each_share_one_shot_when_it_sees_them_all(preferred_shot_s):
     # the program is on e1 and f1 for their kill at 21 s; the kills at 25 and 25.8 s each get a
     # DUEL (the second 2.7 s after the first: no later cut leaves min_lead_s), unless one GROUP of
     # the four sees both kills
     second_s = KILL_S + 0.8
-    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)]
-    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_side_by_side, kills, delay_s=10.0)
-    states = [s for s in BareRig(match, MatchSettings(preferred_shot_s=preferred_shot_s)).run(KILL_S + 10.0 + 4.0)
-              if not s.match.buffering]
+    states = _kills_after_one_elsewhere(two_duels_side_by_side, second_s, MatchSettings(preferred_shot_s=preferred_shot_s))
     between = [s for s in states if KILL_S - 2.0 < s.time_s <= second_s]
     first, second = at_time(states, KILL_S), at_time(states, second_s)
     if preferred_shot_s == 0.0:
@@ -210,11 +215,7 @@ def test_kills_of_players_far_apart_never_share_a_shot_that_would_show_them_smal
     # players span 21 m: one shot of all four frames them small, so by default the second kill is
     # left out rather than joined (on the open nav_test such joins showed players at 0.03-0.07 of the
     # frame); without the limit they share one shot
-    second_s = KILL_S + 0.3
-    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)]
-    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, two_duels_far_apart, kills, delay_s=10.0)
-    states = [s for s in BareRig(match, MatchSettings(join_spread_max_m=join_spread_max_m)).run(KILL_S + 10.0 + 4.0)
-              if not s.match.buffering]
+    states = _kills_after_one_elsewhere(two_duels_far_apart, KILL_S + 0.3, MatchSettings(join_spread_max_m=join_spread_max_m))
     shown = at_time(states, KILL_S).match.shot
     if join_spread_max_m < 21.0:
         assert shown.kind in (ShotKind.DUEL, ShotKind.FOLLOW) and set(shown.subject_ids) <= {"a1", "b1"}
