@@ -49,6 +49,24 @@ def test_submit_claim_finish_and_files(store):
         store.job_dir("../etc")
 
 
+def test_submit_answers_the_job_as_created_though_a_runner_claims_it_at_once(store, monkeypatch):
+    """A runner woken by the commit may claim the job before the submitter reads it back: the
+    POST's answer is still the job as created (a dashboard CI run read `running`)."""
+    tx = store._tx
+
+    @contextlib.contextmanager
+    def tx_then_claim():
+        with tx() as db:
+            yield db
+        monkeypatch.setattr(store, "_tx", tx)      # one claim, as by a runner, right after the commit
+        store.claim_next()
+
+    monkeypatch.setattr(store, "_tx", tx_then_claim)
+    job = store.submit("echo", {"x": 1}, {})
+    assert job.state is JobState.QUEUED and job.attempts == 0 and job.params == {"x": 1}
+    assert store.get(job.id).state is JobState.RUNNING
+
+
 def test_sqlite_keeps_a_wal_journal(tmp_path):
     store = SqliteJobStore(tmp_path)
     with store._read() as db:

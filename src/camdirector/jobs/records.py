@@ -169,7 +169,8 @@ class JobStore:
     def submit(self, kind: str, params: dict, files: dict[str, bytes], *,
                max_queued: int | None = None, tenant: str = "default",
                tenant_max_queued_jobs: int | None = None, tenant_max_upload_bytes: int | None = None) -> Job:
-        """A new queued job of `tenant` with `files` (name -> content) in its input folder.
+        """A new queued job of `tenant` with `files` (name -> content) in its input folder, as
+        created (state queued, whatever a runner did since).
         Raises QueueFull when `max_queued` jobs are queued already (all tenants), and
         TenantLimitReached when the tenant has `tenant_max_queued_jobs` jobs queued or running,
         or its jobs' inputs and these would pass `tenant_max_upload_bytes` (None: no such limit).
@@ -199,12 +200,15 @@ class JobStore:
                                f"VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
                                (job_id, kind, params_text, JobState.QUEUED.value, 0.0, None, 0,
                                 time.time(), None, None, "{}", tenant, input_bytes))
+                    # read in the same transaction: the job as created, before a runner claims it
+                    created = _row_to_job(db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?",
+                                                     (job_id,)).fetchone())
                 except BaseException:
                     shutil.rmtree(self.root / job_id, ignore_errors=True)
                     raise
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        return self.get(job_id)
+        return created
 
     @staticmethod
     def _check_tenant_share(db, tenant: str, input_bytes: int, max_jobs: int | None,
