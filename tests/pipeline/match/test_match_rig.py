@@ -227,50 +227,63 @@ def test_style_refuses_a_max_shot_under_the_min_shot():
         Style(rig=Rig.MATCH, min_shot_s=5.0, max_shot_s=4.0)
 
 
-def _program_with_idle_work(idle: str, work_per_tick: float | None = None) -> tuple[list[np.ndarray], int, tuple[int, int], int]:
-    """The melee's poses through a Session whose clock ticks 1 ms a read, with the worker's idle
-    moments after each frame: none, a seeded-random number of slices, or the whole drawn plan;
-    and how many frames left a drawn plan, in "slices" how many slices left it unfinished and
-    how many plans idle moments finished, and how many ticks found their plan late (work_per_tick:
-    the rig's plan_work_per_tick, default MatchSettings')."""
+def _program_with_idle_work(idle: str, work_per_tick: float | None = None) -> tuple[list[tuple], int, tuple[int, int], int, int]:
+    """The melee's program through a Session whose clock ticks 1 ms a read, with the worker's idle
+    moments after each frame: none, a seeded-random number of slices, or all the deferred work.
+    Returns each shown frame's pose (7,), visibility, flags and candidates' poses; how many frames
+    left a drawn plan; in "slices" how many slices left it unfinished and how many plans idle
+    moments finished; how many ticks found their plan late (work_per_tick: the rig's
+    plan_work_per_tick, default MatchSettings'); and how many frames took their camera's step
+    as worked out ahead."""
     ticks = iter(range(10**9))
     session = Session("s", melee(seed=3, duration_s=40.0, delay_s=10.0).scene(), clock=lambda: next(ticks) * 1e-3)
+    rig = session.rig
     if work_per_tick is not None:  # a Session takes the default settings; the rig reads this one field at its ticks
-        session.rig.settings = dataclasses.replace(session.rig.settings, plan_work_per_tick=work_per_tick)
+        rig.settings = dataclasses.replace(rig.settings, plan_work_per_tick=work_per_tick)
+    worked_out = []
+    holds = rig._ahead_holds
+    rig._ahead_holds = lambda *args: worked_out.append(holds(*args)) or worked_out[-1]
     rng = np.random.default_rng(11)
-    poses, drawn, partial, finished, late = [], 0, 0, 0, 0
+    program, drawn, partial, finished, late = [], 0, 0, 0, 0
     for update in melee(seed=3, duration_s=40.0, delay_s=10.0).frames(40.0):
         state = session.frame(update)
         late += "plan_late" in state.flags
         if state.pose is not None:
-            poses.append(np.concatenate([state.pose.position_world, state.pose.rotation_xyzw]))
-        drawn += session.has_deferred_work
+            program.append((np.concatenate([state.pose.position_world, state.pose.rotation_xyzw]), state.visibility,
+                            tuple(state.flags), [(c.shot, c.pose.position_world.tolist(), c.pose.rotation_xyzw.tolist())
+                                                 for c in state.match.candidates]))
+        drawn += rig.plan_waiting
         if idle == "whole":
             session.do_deferred_work()
         elif idle == "slices":
             for _ in range(int(rng.integers(0, 4))):
                 if session.do_deferred_work(whole=False):
-                    partial += session.has_deferred_work
-                    finished += not session.has_deferred_work
-    return poses, drawn, (partial, finished), late
+                    partial += rig.plan_waiting
+                    finished += not rig.plan_waiting
+    return program, drawn, (partial, finished), late, sum(worked_out)
 
 
 @pytest.mark.parametrize("work_per_tick", [None, 2e3])
 def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_computed(work_per_tick):
     """The plan drawn at a tick is computed in the worker's idle moments and applied at the first
-    tick its work allows (rig.py): the poses are the same whether no idle moment came (each tick
-    computes it up to its work), some slices ran, or each plan was computed whole at once; also
-    when most plans need more than one tick's work (2e3 camera-point pairs)."""
-    none, drawn, _, late = _program_with_idle_work("none", work_per_tick)
-    sliced, _, (partial, finished), late_sliced = _program_with_idle_work("slices", work_per_tick)
-    whole, _, _, late_whole = _program_with_idle_work("whole", work_per_tick)
+    tick its work allows (rig.py): the program (poses, visibility, flags, candidates) is the same
+    whether no idle moment came (each tick computes it up to its work), some slices ran, or all
+    the deferred work was done at once; also when most plans need more than one tick's work (2e3
+    camera-point pairs). So with the camera's steps worked out ahead in the idle moments, which
+    most frames took."""
+    none, drawn, _, late, ahead_none = _program_with_idle_work("none", work_per_tick)
+    sliced, _, (partial, finished), late_sliced, ahead_sliced = _program_with_idle_work("slices", work_per_tick)
+    whole, _, _, late_whole, ahead_whole = _program_with_idle_work("whole", work_per_tick)
     assert drawn > 50                  # ours defers: a plan was waiting after many frames
     assert partial > 0 and finished > 0  # slices of 2 ms (a clock ticking 1 ms a read) left some unfinished
     if work_per_tick is not None:
         assert late > 20               # many plans were applied at a later tick
     assert late == late_sliced == late_whole
-    assert np.array_equal(np.array(none), np.array(sliced))
-    assert np.array_equal(np.array(none), np.array(whole))
+    assert ahead_none == 0 and ahead_sliced > 100 and ahead_whole > len(whole) / 2
+    for other in (sliced, whole):
+        assert len(none) == len(other)
+        for a, b in zip(none, other):
+            assert np.array_equal(a[0], b[0]) and a[1:] == b[1:]
 
 
 def _plan_of_work(*steps: float) -> SlicedRun:
@@ -300,18 +313,18 @@ def test_a_take_finishes_the_drawn_plan_before_it_changes_what_the_plan_reads():
     session = Session("s", match.scene())
     for update in match.frames(15.0):
         session.frame(update)
-        if session.has_deferred_work:
+        if session.rig.plan_waiting:
             break
-    assert session.has_deferred_work
+    assert session.rig.plan_waiting
     session.rig.take(["a0"], None, release=False)
-    assert not session.has_deferred_work
+    assert not session.rig.plan_waiting
     for update in match.frames(16.0):
         if update.frame > session.last_input[0]:
             session.frame(update)
-            if session.has_deferred_work:
+            if session.rig.plan_waiting:
                 break
     session.rig.set_style(Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV))
-    assert not session.has_deferred_work
+    assert not session.rig.plan_waiting
 
 
 def test_a_drawn_cut_that_breaks_the_30_degree_rule_against_the_pose_on_air_is_refused():

@@ -36,12 +36,26 @@ counted in camera-point pairs, the same on any machine); until then no other pla
 against 3 ms for the rest of a frame; 3% of plans need more than one tick's 1e5 pairs, mostly the
 searches of a new kill's joint shot (`_join`). Computed whole in the frame that applies it (the
 rule before), the server's compute p99 was 25 ms at 30 Hz and 8.9 ms at 60 Hz (load_tests/
-match_live.py); applied by its work, 8.1 and 5.7 ms, the autotrack's frames' own (11.3 and 5.7
-ms in the same run). Applied by its work, the program does not depend on when, in how many slices or on
+match_live.py); applied by its work, 8.1 and 5.7 ms; with the camera's steps worked out ahead
+(below) and snapshots that no longer grow with the match (moments.py), 3.1 ms at both rates.
+Applied by its work, the program does not depend on when, in how many slices or on
 how fast a machine it was computed, only on its inputs: a take or a style change, which would
 change what a drawn plan reads, finishes it first. The first shot and a take's are planned at
 once; the baselines (cheap) and a session with dynamic objects (whose ray scene every frame moves)
 plan in the frame, as before.
+
+Ahead: with a delay, the next frame's program moment is most likely the next buffered one,
+known already. After a frame the rig works out, in the worker's idle moments (its deferred work,
+before the drawn plan's slices), that moment's CAMERA and VISIBILITY from a copy of the shot's
+camera, and the candidates' poses (those of the drawn plan too, once computed: the tick that
+applies it shows them). The frame takes them when they are its own: the same moment and time
+step, the same shot, style and pose shown before, and the camera's attributes the same objects
+(cameras change only by assigning them, so a tick's new goal or pair window, or a cut, shows);
+otherwise it computes them as before. What a frame answers does not depend on whether they were
+worked out ahead (tests/pipeline/match/test_match_rig.py). A session with dynamic objects does
+not look ahead. On the 4on4's first 40 s at 30 Hz, paced, in process, a frame's median went
+2.5 -> 1.0 ms and its p99 4.3 -> 2.8 ms; of the frames that tick, 1.2 ms (those that apply a plan
+that changes the camera compute their step).
 
 A take whose held subject dies (at the program moment) falls back, still held: to the player
 who killed it, else the nearest fight to where it died, else an overview; `shot.reason` says so.
@@ -125,6 +139,33 @@ class DrawnPlan:
         return self.run is None and self.work <= allowed
 
 
+@dataclasses.dataclass
+class CameraStep:
+    """The CAMERA and VISIBILITY stages of a frame with no cut (module docstring, "Ahead"): what
+    they made of the shot's camera and what the frame shows."""
+
+    moment: Moment
+    dt_s: float
+    shot: Shot                    # the shot, and its camera, it is a step of
+    camera: object
+    camera_before: dict           # the camera's attributes it stepped from (compared by identity)
+    camera_after: dict            # and those it left
+    last_pose: CameraPose | None  # the pose shown before, held when the camera has none
+    style: Style
+    pose: CameraPose
+    flags: list[str]
+    visibility: float             # mean share of the framed subjects seen
+
+
+@dataclasses.dataclass
+class CandidatePoses:
+    """The candidates' cameras' poses at a moment (None: the program's, an OVERVIEW candidate's)."""
+
+    moment: Moment
+    candidates: list[tuple[ShotChoice, ToricCamera | None, float]]   # the list they are of (by identity)
+    poses: list[CameraPose | None]
+
+
 class MatchRig:
     """The match director of one session; implements `CameraRig` (module docstring). Players are
     the scene's targets."""
@@ -161,6 +202,9 @@ class MatchRig:
         self._last_time_s: float | None = None
         self._last_pose: CameraPose | None = None
         self._candidates: list[tuple[ShotChoice, ToricCamera | None, float]] = []
+        self._ahead_for: Moment | None = None    # the next frame's likely moment, not yet worked out ahead
+        self._ahead: CameraStep | None = None     # the camera's step to it, worked out ahead
+        self._ahead_candidates: list[CandidatePoses] = []  # the candidates' poses at it
         self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
 
     def _director(self, kind: MatchDirectorKind) -> PlannedDirector | HltvDirector | AutotrackDirector:
@@ -194,11 +238,23 @@ class MatchRig:
 
     @property
     def has_deferred_work(self) -> bool:
-        """CameraRig: whether a drawn plan waits to be computed."""
+        """CameraRig: whether the next frame's camera is to be worked out ahead, or a drawn plan
+        waits to be computed."""
+        return self._ahead_for is not None or self.plan_waiting
+
+    @property
+    def plan_waiting(self) -> bool:
+        """Whether a drawn plan waits to be computed (a part of has_deferred_work)."""
         return self._drawn is not None and self._drawn.run is not None
 
     def do_deferred_work(self, whole: bool = True) -> bool:
-        """CameraRig: computes the drawn plan, whole or for PLAN_SLICE_S; whether there was any."""
+        """CameraRig: works the next frame's camera out ahead (first: it is due soonest), else
+        computes the drawn plan, whole or for PLAN_SLICE_S; whether there was any."""
+        if self._ahead_for is not None:
+            self._work_ahead(self._ahead_for)
+            self._ahead_for = None
+            if not whole:
+                return True
         drawn = self._drawn
         if drawn is None or drawn.run is None:
             return False
@@ -336,28 +392,30 @@ class MatchRig:
             self._next_plan_s = moment.time_s + self.settings.plan_interval_s
             cut = self._tick(moment, state.flags)
         stages.done(MatchStage.PLAN)
-        self.shot.camera.advance(moment, 0.0 if cut else state.dt_s, self.style.response_time_s)
-        pose = self.shot.camera.pose(moment)
-        if pose is not None and isinstance(self.shot.camera, ToricCamera):
-            pose, pulled = self._pulled_in(moment, pose, 0.0 if cut else state.dt_s)
-            if pulled:
-                state.flags.append("pulled_in_front_of_wall")
-        if pose is None:
-            pose = self._last_pose
-            state.flags.append("pose_held")
-        if pose is None:  # a degenerate first shot: look from the overview
-            self.shot = self.builder.build(ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"), (),
-                                           moment, [moment], None, None, moment.time_s)[0]
-            pose = self.shot.camera.pose(moment)
+        dt_s = 0.0 if cut else state.dt_s
+        ahead, self._ahead = self._ahead, None
+        camera = self.shot.camera
+        worked_out = ahead is not None and self._ahead_holds(ahead, moment, dt_s, camera)
+        if worked_out:
+            vars(camera).update(ahead.camera_after)
+            step = ahead
+        else:
+            step = self._camera_step(moment, dt_s, camera)
+            if step is None:  # a degenerate first shot: look from the overview
+                self.shot = self.builder.build(ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"), (),
+                                               moment, [moment], None, None, moment.time_s)[0]
+                step = self._camera_step(moment, dt_s, self.shot.camera)
+        pose = step.pose
+        state.flags.extend(step.flags)
         state.pose, state.cut = pose, cut
-        self._last_pose = pose
-        match.candidates = [Candidate(camera.pose(moment) if camera is not None else pose, choice, score)
-                            for choice, camera, score in self._candidates]
-        match.candidates = [c for c in match.candidates if c.pose is not None]
+        match.candidates = self._candidate_views(moment, pose)
+        self._last_pose, self._ahead_candidates = pose, []
         stages.done(MatchStage.CAMERA)
+        state.visibility = step.visibility if worked_out else self._visibility(moment, pose)
+        # the next frame's moment is most likely the next buffered one: its camera is worked out
+        # in the worker's idle moments (a session whose ray scene moves every frame cannot)
+        self._ahead_for = self.buffer.following(moment) if self._defer_plans else None
         subjects = self.shot.framed(moment.time_s)
-        state.visibility = float(self.visibility.visible_share(pose.position_world, moment, subjects).mean()) \
-            if subjects else 1.0
         match.shot = self.shot.choice if subjects == self.shot.subjects else dataclasses.replace(
             self.shot.choice, subject_ids=tuple(self.players[i] for i in subjects), kind=ShotKind.FOLLOW,
             reason=f"{self.shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills")
@@ -366,13 +424,88 @@ class MatchRig:
                             shot_length_s=moment.time_s - self.shot.start_s)
         stages.done(MatchStage.VISIBILITY)
 
-    def _pulled_in(self, moment: Moment, pose: CameraPose, dt_s: float) -> tuple[CameraPose, bool]:
+    # -- the camera's step, in the frame or ahead of it -------------------------------------
+    def _camera_step(self, moment: Moment, dt_s: float, camera) -> CameraStep | None:
+        """CAMERA (module docstring) of the shot by `camera` (its own, or a copy ahead) stepped
+        dt_s to the moment; the visibility is left for VISIBILITY. None when it has no pose and
+        none was shown before (a degenerate first shot)."""
+        before = dict(vars(camera))
+        camera.advance(moment, dt_s, self.style.response_time_s)
+        flags: list[str] = []
+        pose = camera.pose(moment)
+        if pose is not None and isinstance(camera, ToricCamera):
+            pose, pulled = self._pulled_in(moment, pose, dt_s, camera)
+            if pulled:
+                flags.append("pulled_in_front_of_wall")
+        if pose is None:
+            if self._last_pose is None:
+                return None
+            pose = self._last_pose
+            flags.append("pose_held")
+        return CameraStep(moment, dt_s, self.shot, camera, before, dict(vars(camera)), self._last_pose, self.style,
+                          pose, flags, 0.0)
+
+    def _visibility(self, moment: Moment, pose: CameraPose) -> float:
+        """VISIBILITY: the mean share of the shot's framed subjects seen from the pose (1 for none)."""
+        subjects = self.shot.framed(moment.time_s)
+        return float(self.visibility.visible_share(pose.position_world, moment, subjects).mean()) if subjects else 1.0
+
+    def _ahead_holds(self, ahead: CameraStep, moment: Moment, dt_s: float, camera) -> bool:
+        """Whether the step worked out ahead is this frame's: the same moment, time step, style
+        and pose before, from the camera exactly as it is (every camera changes by assigning its
+        attributes, so identity tells any change: a tick's new goal or pair window, a cut)."""
+        return (ahead.moment is moment and ahead.dt_s == dt_s and ahead.shot is self.shot and ahead.camera is camera
+                and ahead.style is self.style
+                and ahead.last_pose is self._last_pose and vars(camera).keys() == ahead.camera_before.keys()
+                and all(vars(camera)[k] is v for k, v in ahead.camera_before.items()))
+
+    def _work_ahead(self, moment: Moment) -> None:
+        """Works out, ahead of the frame, what the frame whose moment is `moment` computes the
+        same way when no tick changes the shot (module docstring, "Ahead"): the camera's step
+        from a copy of it, and the candidates' poses, those of the drawn plan too once it is
+        computed (a tick that applies it shows them)."""
+        if self.shot is None or self._last_time_s is None:
+            return
+        camera = self.shot.camera
+        ahead = copy.copy(camera)
+        step = self._camera_step(moment, max(0.0, moment.time_s - self._last_time_s), ahead)
+        if step is not None:
+            step.camera, step.camera_before = camera, dict(vars(camera))  # the camera's own, not the copy
+            step.visibility = self._visibility(moment, step.pose)
+            self._ahead = step
+        lists = [self._candidates]
+        drawn = self._drawn
+        if drawn is not None and drawn.run is None and drawn.result is not None:
+            lists.append(drawn.result.candidates)
+        self._ahead_candidates = [CandidatePoses(moment, c, [None if cam is None or cam is camera else cam.pose(moment)
+                                                             for _, cam, _ in c]) for c in lists]
+
+    def _candidate_views(self, moment: Moment, pose: CameraPose) -> list[Candidate]:
+        """The frame's candidates: each camera's pose at the moment (worked out ahead, or now; an
+        OVERVIEW candidate's is the program's)."""
+        camera = self.shot.camera
+        ahead = next((a for a in self._ahead_candidates if a.moment is moment and a.candidates is self._candidates),
+                     None)
+        poses = ahead.poses if ahead is not None else [None] * len(self._candidates)
+        views = []
+        for (choice, cam, score), known in zip(self._candidates, poses):
+            if cam is None:
+                shown = pose
+            elif known is not None and cam is not camera:
+                shown = known
+            else:
+                shown = cam.pose(moment)
+            if shown is not None:
+                views.append(Candidate(shown, choice, score))
+        return views
+
+    def _pulled_in(self, moment: Moment, pose: CameraPose, dt_s: float, camera: ToricCamera) -> tuple[CameraPose, bool]:
         """The Toric shot's pose pulled in front of a wall (shots.py `pulled_in`) when walls hide
         most of its first subject, kept only if it frames the shot's subjects better (their mean
         seen share, framed_seen): close to A, a pair far apart may no longer fit. On 90 s of the
         4on4 on dm2 this kept program visibility 0.58 and kill coverage 0.60 (0.38 and 0.53 with no
         pull; 0.52 and 0.63 judging by the worst-seen subject; 0.56 and 0.57 pulling always)."""
-        camera, s, subjects = self.shot.camera, self.settings, self.shot.framed(moment.time_s)
+        s, subjects = self.settings, self.shot.framed(moment.time_s)
         hidden = self.visibility.visible_share(pose.position_world, moment, (camera.anchor_index,))[0, 0] < s.pull_below
         reach_before = camera.reach_m
         pulled, moved = camera.pulled_in(moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m,
@@ -422,12 +555,15 @@ class MatchRig:
             self.shot = result.shot
             return True
         if drawn_on is None or self.shot is drawn_on:
-            if result.goal is not None:
-                self.shot.camera.goal = result.goal
             camera = self.shot.camera
+            # assigned only when changed: the camera's step worked out ahead holds while its attributes do
+            if result.goal is not None and result.goal != camera.goal:
+                camera.goal = result.goal
             if isinstance(camera, ToricCamera) and camera.pair is not None:  # the plan may have held it for more events
-                camera.pair = dataclasses.replace(camera.pair, times_s=tuple(self.shot.cover_times_s),
-                                                  place=result.pair_place or camera.pair.place)
+                pair = dataclasses.replace(camera.pair, times_s=tuple(self.shot.cover_times_s),
+                                           place=result.pair_place or camera.pair.place)
+                if pair != camera.pair:
+                    camera.pair = pair
         return False
 
     def _jump_cut(self, shot: Shot, moment: Moment) -> bool:
