@@ -141,8 +141,8 @@ class DrawnPlan:
 
 @dataclasses.dataclass
 class CameraStep:
-    """The CAMERA and VISIBILITY stages of a frame with no cut (module docstring, "Ahead"): what
-    they made of the shot's camera and what the frame shows."""
+    """The CAMERA and VISIBILITY stages of a frame with no cut, worked out ahead (module docstring,
+    "Ahead"): what they made of the shot's camera, and what the frame shows."""
 
     moment: Moment
     dt_s: float
@@ -159,7 +159,7 @@ class CameraStep:
 
 @dataclasses.dataclass
 class CandidatePoses:
-    """The candidates' cameras' poses at a moment (None: the program's, an OVERVIEW candidate's)."""
+    """The candidates' cameras' poses at a moment (None: an OVERVIEW candidate's, the program's)."""
 
     moment: Moment
     candidates: list[tuple[ShotChoice, ToricCamera | None, float]]   # the list they are of (by identity)
@@ -398,20 +398,20 @@ class MatchRig:
         worked_out = ahead is not None and self._ahead_holds(ahead, moment, dt_s, camera)
         if worked_out:
             vars(camera).update(ahead.camera_after)
-            step = ahead
+            pose, flags = ahead.pose, ahead.flags
         else:
-            step = self._camera_step(moment, dt_s, camera)
-            if step is None:  # a degenerate first shot: look from the overview
+            stepped = self._camera_step(moment, dt_s, camera)
+            if stepped is None:  # a degenerate first shot: look from the overview
                 self.shot = self.builder.build(ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"), (),
                                                moment, [moment], None, None, moment.time_s)[0]
-                step = self._camera_step(moment, dt_s, self.shot.camera)
-        pose = step.pose
-        state.flags.extend(step.flags)
+                stepped = self._camera_step(moment, dt_s, self.shot.camera)
+            pose, flags = stepped
+        state.flags.extend(flags)
         state.pose, state.cut = pose, cut
         match.candidates = self._candidate_views(moment, pose)
         self._last_pose, self._ahead_candidates = pose, []
         stages.done(MatchStage.CAMERA)
-        state.visibility = step.visibility if worked_out else self._visibility(moment, pose)
+        state.visibility = ahead.visibility if worked_out else self._visibility(moment, pose)
         # the next frame's moment is most likely the next buffered one: its camera is worked out
         # in the worker's idle moments (a session whose ray scene moves every frame cannot)
         self._ahead_for = self.buffer.following(moment) if self._defer_plans else None
@@ -425,11 +425,10 @@ class MatchRig:
         stages.done(MatchStage.VISIBILITY)
 
     # -- the camera's step, in the frame or ahead of it -------------------------------------
-    def _camera_step(self, moment: Moment, dt_s: float, camera) -> CameraStep | None:
+    def _camera_step(self, moment: Moment, dt_s: float, camera) -> tuple[CameraPose, list[str]] | None:
         """CAMERA (module docstring) of the shot by `camera` (its own, or a copy ahead) stepped
-        dt_s to the moment; the visibility is left for VISIBILITY. None when it has no pose and
-        none was shown before (a degenerate first shot)."""
-        before = dict(vars(camera))
+        dt_s to the moment: the pose and its flags. None when it has no pose and none was shown
+        before (a degenerate first shot)."""
         camera.advance(moment, dt_s, self.style.response_time_s)
         flags: list[str] = []
         pose = camera.pose(moment)
@@ -442,8 +441,7 @@ class MatchRig:
                 return None
             pose = self._last_pose
             flags.append("pose_held")
-        return CameraStep(moment, dt_s, self.shot, camera, before, dict(vars(camera)), self._last_pose, self.style,
-                          pose, flags, 0.0)
+        return pose, flags
 
     def _visibility(self, moment: Moment, pose: CameraPose) -> float:
         """VISIBILITY: the mean share of the shot's framed subjects seen from the pose (1 for none)."""
@@ -466,19 +464,19 @@ class MatchRig:
         computed (a tick that applies it shows them)."""
         if self.shot is None or self._last_time_s is None:
             return
-        camera = self.shot.camera
+        camera, dt_s = self.shot.camera, max(0.0, moment.time_s - self._last_time_s)
         ahead = copy.copy(camera)
-        step = self._camera_step(moment, max(0.0, moment.time_s - self._last_time_s), ahead)
-        if step is not None:
-            step.camera, step.camera_before = camera, dict(vars(camera))  # the camera's own, not the copy
-            step.visibility = self._visibility(moment, step.pose)
-            self._ahead = step
+        stepped = self._camera_step(moment, dt_s, ahead)
+        if stepped is not None:
+            pose, flags = stepped
+            self._ahead = CameraStep(moment, dt_s, self.shot, camera, dict(vars(camera)), dict(vars(ahead)),
+                                     self._last_pose, self.style, pose, flags, self._visibility(moment, pose))
         lists = [self._candidates]
         drawn = self._drawn
         if drawn is not None and drawn.run is None and drawn.result is not None:
             lists.append(drawn.result.candidates)
-        self._ahead_candidates = [CandidatePoses(moment, c, [None if cam is None or cam is camera else cam.pose(moment)
-                                                             for _, cam, _ in c]) for c in lists]
+        self._ahead_candidates = [CandidatePoses(moment, c, [None if cam is None else cam.pose(moment) for _, cam, _ in c])
+                                  for c in lists]
 
     def _candidate_views(self, moment: Moment, pose: CameraPose) -> list[Candidate]:
         """The frame's candidates: each camera's pose at the moment (worked out ahead, or now; an
