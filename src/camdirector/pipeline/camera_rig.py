@@ -3,7 +3,8 @@
 A rig runs the stages after INGEST (pipeline/stages.py) for one session, for the session's whole
 life. Three rigs implement `CameraRig`, structurally (each says so in its docstring): TORIC
 (pipeline/toric/rig.py), TRACKS (pipeline/tracks/rig.py) and MATCH (pipeline/match/rig.py);
-`make_rig` chooses among them, here and nowhere else.
+`make_rig` (pipeline/rigs.py) chooses among them, there and nowhere else, so that this contract
+knows none of its implementations.
 
 Every rig runs a frame, takes a style, is closed, and is asked for its deferred work (a rig that
 never defers says it has none). What only some rigs do is part of the contract too, declared as
@@ -18,22 +19,15 @@ tests/pipeline/test_rig_contract.py holds every rig to it.
 """
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
 
-from camdirector.geometry.meshes import TriMesh
-from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.inputs import FrameInput
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
-from camdirector.pipeline.match.rig import MatchRig
 from camdirector.pipeline.state import FrameState
-from camdirector.pipeline.style import Rig, Style
-from camdirector.pipeline.toric.rig import ToricRig
-from camdirector.pipeline.tracks.rig import TracksRig
+from camdirector.pipeline.style import Style
 
 
 class PlayerInputs(Protocol):
@@ -100,17 +94,3 @@ class CameraRig(Protocol):
     # MATCH: game events and a human's takes (`PlayerInputs`). None: the rig takes neither; a
     # frame with events and a TakeShot are refused.
     player_inputs: PlayerInputs | None
-
-
-def make_rig(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: dict,
-             rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter) -> CameraRig:
-    """The rig of a session created from `scene`, for its whole life (worker/codec.py refuses a
-    change of rig): MATCH when the style says so, TRACKS for a scene on a level (the codec gives
-    a level only to those two), else TORIC. ray_scene, static_meshes_world and dynamic (object id
-    -> (mesh, latest transform)) are the session's, which INGEST keeps current; rng its seeded
-    generator, clock what the stages are timed on."""
-    if scene.style.rig == Rig.MATCH:
-        return MatchRig(scene, ray_scene, rng, clock)
-    if scene.level is not None:
-        return TracksRig(scene.level, scene.lens, scene.style, ray_scene, rng, clock)
-    return ToricRig(scene, ray_scene, static_meshes_world, dynamic, rng, clock)

@@ -21,8 +21,9 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
-from camdirector.pipeline.camera_rig import CameraRig, make_rig
+from camdirector.pipeline.camera_rig import CameraRig
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.rigs import make_rig
 from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
