@@ -1,5 +1,6 @@
 # make run: set up .venv and run the demo (server + demo client, writes out/demo.mp4).
-# make test: set up .venv, lint (ruff, configured in pyproject.toml) and run the test suite.
+# make test: set up .venv, run scripts/check (ruff's lint and format check, mypy, the layout rules;
+# configured in pyproject.toml) and the test suite.
 PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
@@ -20,7 +21,7 @@ run: $(STAMP)
 
 test: $(STAMP)
 	bash scripts/system-deps.sh --tests
-	$(BIN)/ruff check .
+	BIN=$(BIN) bash scripts/check
 	$(BIN)/python -m pytest
 
 # Regenerates the committed wire-contract code after an edit of proto/camdirector/v1/*.proto.
