@@ -25,6 +25,7 @@ from camdirector.deploy.services import RedisServer
 from camdirector.geometry.camera import Lens
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.checkpoint_stores import dumps_state
+from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.table import SessionTable
 from load_tests.report import emit
 
@@ -45,11 +46,12 @@ def _measure(create: bytes, frames: list[bytes], timed: int, store: str, every: 
         settings = ServerSettings(data_dir=folder, checkpoint_store=store, checkpoint_every_frames=every,
                                   max_triangles=10**7)
         table = SessionTable(settings)
-        table.handle_bytes("create", "s", create)
+        requests = Dispatcher(table)
+        requests.handle_bytes("create", "s", create)
         times_ms = []
         for payload in frames[:timed]:
             t0 = time.perf_counter()
-            table.handle_bytes("frame", "s", payload)
+            requests.handle_bytes("frame", "s", payload)
             times_ms.append((time.perf_counter() - t0) * 1e3)
         out = {"frame_ms_p50": float(np.median(times_ms)), "frame_ms_p99": float(np.percentile(times_ms, 99))}
         if store != "off":
@@ -57,11 +59,11 @@ def _measure(create: bytes, frames: list[bytes], timed: int, store: str, every: 
             out["snapshot_bytes"] = len(dumps_state((held.session, held.style_msg),
                                                     held.session.creation_objects()))
             for payload in frames[timed:-1]:
-                table.handle_bytes("frame", "s", payload)
+                requests.handle_bytes("frame", "s", payload)
             other = SessionTable(settings)
             other.checkpoints.owner = "bench/2"
             t0 = time.perf_counter()
-            other.handle_bytes("frame", "s", frames[-1])
+            Dispatcher(other).handle_bytes("frame", "s", frames[-1])
             out["restore_and_frame_ms"] = (time.perf_counter() - t0) * 1e3
             other.close_all()
         table.close_all()

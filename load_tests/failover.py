@@ -55,12 +55,12 @@ from load_tests.report import emit
 def _undisturbed(create: pb.CreateSessionRequest, updates: list[pb.FrameUpdate]) -> list[pb.CameraPose]:
     with tempfile.TemporaryDirectory() as folder:
         table = SessionTable(ServerSettings(data_dir=folder, checkpoint_store="off", max_triangles=10**7))
-        table.handle_bytes("create", "ref", create.SerializeToString())
+        table.create("ref", create)
         poses = []
         for update in updates:
             update = pb.FrameUpdate(session_id="ref", frame=update.frame, time_s=update.time_s,
                                     packed_ids=update.packed_ids, packed_transforms=update.packed_transforms)
-            poses.append(pb.CameraUpdate.FromString(table.handle_bytes("frame", "ref", update.SerializeToString())[0]).pose)
+            poses.append(table.frame(update).pose)
         return poses
 
 

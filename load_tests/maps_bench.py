@@ -35,7 +35,10 @@ from camdirector.geometry.toric_maps import (
     probe_gl_renderer,
 )
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, MaskKind, StyleMaskSettings
+from camdirector.pipeline.style import MaskKind
+from camdirector.pipeline.toric.anticipation_map import AnticipationMap
+from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
+from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 from camdirector.pipeline.toric.target_sampling import TargetSampler, TargetSamplingSettings
 from load_tests.report import emit, summary
 

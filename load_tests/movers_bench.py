@@ -26,6 +26,7 @@ import numpy as np
 
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.table import SessionTable
 from load_tests.report import emit, summary
 
@@ -92,9 +93,10 @@ def frame_bytes(session_id: str, frame: int, movers: int, seed: int = 0) -> byte
 def run_case(table: SessionTable, mode_name: str, movers: int, frames: int, warmup: int) -> dict:
     session_id = f"{mode_name}-{movers}"
     table.create(session_id, scene_request(movers, MODES[mode_name]))
+    requests = Dispatcher(table)   # frames as a worker answers them: bytes in, bytes out
     compute, stages = [], {}
     for k in range(1, warmup + frames + 1):
-        reply = pb.CameraUpdate.FromString(table.handle_bytes("frame", session_id, frame_bytes(session_id, k, movers))[0])
+        reply = pb.CameraUpdate.FromString(requests.handle_bytes("frame", session_id, frame_bytes(session_id, k, movers))[0])
         if k > warmup:
             compute.append(reply.compute_ms)
             for name, ms in reply.diagnostics.stage_ms.items():
@@ -103,7 +105,7 @@ def run_case(table: SessionTable, mode_name: str, movers: int, frames: int, warm
     stale_payload, stale = frame_bytes(session_id, 1, movers), []
     for _ in range(200):
         t0 = time.perf_counter()
-        table.handle_bytes("frame", session_id, stale_payload)
+        requests.handle_bytes("frame", session_id, stale_payload)
         stale.append((time.perf_counter() - t0) * 1e3)
     table.drop(session_id)
     return {"mode": mode_name, "movers": movers, "map_backend": maps.backend_name if maps is not None else None,

@@ -141,8 +141,8 @@ print(json.dumps({"names": names, "failed": failed}))
 def test_the_shipped_scenarios_are_package_data(installed):
     found = installed.python_json("""
 import json
-from camdirector.evaluation.scenario import load_scenario, shipped_scenarios
-from camdirector.evaluation.suite import suite_scenarios
+from camdirector.evaluation.scenario_file import load_scenario, shipped_scenarios
+from camdirector.evaluation.toric.suite import suite_scenarios
 print(json.dumps({"shipped": sorted(shipped_scenarios()), "paper": [load_scenario(p).name for p in suite_scenarios("paper")]}))
 """)
     assert len(found["shipped"]) > 0 and found["paper"], found

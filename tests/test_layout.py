@@ -9,6 +9,9 @@
   idea in each: `rig.py` of every rig) or are an area's `cli.py`.
 - No code outside a rig's folder asks which rig it holds (`isinstance(..., ToricRig)`): it asks the
   rig contract (pipeline/camera_rig.py).
+- No import cycle among the modules of src/camdirector/, and no process folder imports another
+  process's but a parent its child's handle (front -> worker, front -> jobs, worker -> render);
+  server_settings.py, which every process reads, imports nothing of camdirector but infra/.
 
 The pipeline check imports every module under camdirector.pipeline in a fresh interpreter, so that
 what the test suite has already imported cannot hide an import the pipeline makes (and the same for
@@ -34,6 +37,8 @@ WIRE_AND_WEB = ("google.protobuf", "grpc", "fastapi", "camdirector.v1")
 WEB_AND_GRPC = ("fastapi", "starlette", "uvicorn", "grpc")
 # Each process's folder and the module that is its main loop.
 PROCESSES = ("front", "worker", "render", "jobs")
+# The one way a process folder may import another's: the parent holds its child's handle.
+PARENT_TO_CHILD = {("front", "worker"), ("front", "jobs"), ("worker", "render")}
 # The top-level folders of the repository that may hold Python, and what they hold.
 PYTHON_FOLDERS = {"src": "the service", "proto": "the generated wire code", "client_sdk": "the SDKs",
                   "tests": "tests", "load_tests": "benchmarks", "scripts": "scripts", "docs": "docs"}
@@ -113,11 +118,14 @@ def _camdirector(*folders: str) -> tuple[str, ...]:
     return tuple(f"camdirector.{f}" for f in folders)
 
 
+# access/ (who may do what) sits beside the processes: the areas below them name tenants through
+# infra/tenants.py, never through the roles.
 @pytest.mark.parametrize("folder, forbidden", [
-    ("infra", _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "matches", "demo", "deploy")),
-    ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "matches", "demo", "deploy")),
-    ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "matches", "demo", "deploy")),
-    ("pipeline", _camdirector(*PROCESSES, "evaluation", "matches", "demo", "deploy")),
+    ("infra", _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "matches", "demo", "deploy",
+                           "access")),
+    ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "matches", "demo", "deploy", "access")),
+    ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "matches", "demo", "deploy", "access")),
+    ("pipeline", _camdirector(*PROCESSES, "evaluation", "matches", "demo", "deploy", "access")),
 ])
 def test_dependencies_point_one_way(folder, forbidden):
     files = sorted((PACKAGE / folder).rglob("*.py"))
@@ -197,3 +205,130 @@ def test_the_rig_check_sees_isinstance(tmp_path):
     inside.write_text("def f(rig):\n    return isinstance(rig, ToricRig)\n")
     assert rig_sniffing(outside, RIG_CLASSES) == [f"{outside}:2 isinstance(..., ToricRig)"]
     assert rig_sniffing(inside, RIG_CLASSES) == []
+
+
+def module_graph(root: Path, package: str) -> dict[str, set[str]]:
+    """Each module of `package` (the folder root/package) -> the modules of `package` its import
+    statements name: lazy ones inside functions included, relative ones resolved, and `from p
+    import n` naming p.n where that is a module (else p, whose __init__ defines n)."""
+    paths = {}
+    for path in (root / package).rglob("*.py"):
+        parts = path.relative_to(root).with_suffix("").parts
+        paths[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+
+    def nearest(name: str) -> str | None:
+        while name and name not in paths:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {}
+    for module, path in paths.items():
+        here = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        named = set()
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Import):
+                named.update(nearest(alias.name) for alias in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    above = here.split(".")[:len(here.split(".")) - (node.level - 1)]
+                    base = ".".join(above + ([node.module] if node.module else []))
+                named.update(f"{base}.{alias.name}" if f"{base}.{alias.name}" in paths else nearest(base)
+                             for alias in node.names)
+        graph[module] = {name for name in named if name is not None and name != module}
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The modules that import one another round a circle: each strongly connected component of
+    more than one module (Tarjan's algorithm), sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for other in sorted(graph.get(module, ())):
+            if other not in index:
+                visit(other)
+                low[module] = min(low[module], low[other])
+            elif other in stack:
+                low[module] = min(low[module], index[other])
+        if low[module] == index[module]:
+            component = []
+            while not component or component[-1] != module:
+                component.append(stack.pop())
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return sorted(cycles)
+
+
+def process_crossings(graph: dict[str, set[str]]) -> list[str]:
+    """Imports from one process folder into another's other than PARENT_TO_CHILD."""
+    def process(module: str) -> str | None:
+        parts = module.split(".")
+        return parts[1] if len(parts) > 1 and parts[1] in PROCESSES else None
+
+    return sorted(f"{module} -> {other}" for module, others in graph.items() for other in others
+                  if process(module) and process(other) and process(module) != process(other)
+                  and (process(module), process(other)) not in PARENT_TO_CHILD)
+
+
+def test_no_import_cycle():
+    graph = module_graph(ROOT / "src", "camdirector")
+    assert "camdirector.infra.channels" in graph["camdirector.worker.main"]  # the scan saw the tree
+    assert import_cycles(graph) == []
+
+
+def test_the_server_settings_are_a_leaf():
+    """Every process reads ServerSettings: it imports nothing of camdirector but infra/."""
+    imports = module_graph(ROOT / "src", "camdirector")["camdirector.server_settings"]
+    assert sorted(name for name in imports if not _under(name, ("camdirector.infra",))) == []
+
+
+def test_no_process_imports_another_but_its_child():
+    assert process_crossings(module_graph(ROOT / "src", "camdirector")) == []
+
+
+def _tree(root: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    return root
+
+
+def test_the_cycle_check_sees_a_lazy_relative_circle(tmp_path):
+    tree = _tree(tmp_path, {"pkg/__init__.py": "", "pkg/a.py": "from pkg import b\n",
+                            "pkg/b.py": "import os\n\ndef f():\n    from . import c\n",
+                            "pkg/c.py": "from .sub.d import VALUE\n",
+                            "pkg/sub/__init__.py": "", "pkg/sub/d.py": "from ..a import NAME\n"})
+    graph = module_graph(tree, "pkg")
+    assert graph["pkg.a"] == {"pkg.b"} and graph["pkg.b"] == {"pkg.c"} and graph["pkg.sub.d"] == {"pkg.a"}
+    assert import_cycles(graph) == [["pkg.a", "pkg.b", "pkg.c", "pkg.sub.d"]]
+
+
+def test_the_cycle_check_passes_a_package_that_gathers_its_modules(tmp_path):
+    """`from pkg import b` names the module b, not pkg's __init__ (which imports a): no circle."""
+    tree = _tree(tmp_path, {"pkg/__init__.py": "from pkg.a import A\nfrom pkg.b import B\n",
+                            "pkg/a.py": "from pkg import b\nA = 1\n", "pkg/b.py": "import pkg.c\nB = 2\n",
+                            "pkg/c.py": "import json\n"})
+    graph = module_graph(tree, "pkg")
+    assert graph["pkg"] == {"pkg.a", "pkg.b"} and graph["pkg.a"] == {"pkg.b"}
+    assert import_cycles(graph) == []
+
+
+def test_the_process_check_allows_only_parent_to_child(tmp_path):
+    tree = _tree(tmp_path, {"pkg/front/main.py": "from pkg.worker import main\nfrom pkg.jobs import queue\n",
+                            "pkg/worker/main.py": "from pkg.render import monitor\nfrom pkg.infra import channels\n",
+                            "pkg/render/monitor.py": "def f():\n    from pkg.worker import main\n",
+                            "pkg/jobs/queue.py": "", "pkg/infra/channels.py": ""})
+    graph = module_graph(tree, "pkg")
+    assert process_crossings(graph) == ["pkg.render.monitor -> pkg.worker.main"]
+    (tree / "pkg/render/monitor.py").write_text("")
+    assert process_crossings(module_graph(tree, "pkg")) == []

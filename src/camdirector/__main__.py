@@ -16,7 +16,7 @@ from camdirector.server_settings import ServerSettings
 from camdirector.version import PROTOCOL, VERSION
 
 
-def _serve_parser(sub) -> None:
+def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("serve", help="run the director service")
     p.add_argument("--grpc", dest="grpc_addr", help="gRPC HOST:PORT ('' turns it off; port 0 picks one)")
     p.add_argument("--zmq", dest="zmq_addr", help="ZeroMQ tcp://HOST:PORT ('' turns it off; port * picks one)")
@@ -59,9 +59,12 @@ def _serve_parser(sub) -> None:
                    help="bytes of uploads one tenant's jobs may hold at once")
     p.add_argument("--tenant-max-queued-jobs", dest="tenant_max_queued_jobs", type=int,
                    help="jobs one tenant may have queued or running at once")
+    p.add_argument("--plugin", dest="plugins", action="append", metavar="MODULE",
+                   help="a Python module to import at start, in the front and every worker (a studio's own match "
+                        "director registers itself); repeatable")
 
 
-def _job_worker_parser(sub) -> None:
+def _job_worker_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("job-worker", help="run offline jobs from the shared job queue (jobs/queue.py)")
     p.add_argument("--job-queue", dest="job_queue", help="the queue, redis://HOST:PORT/DB (required)")
     p.add_argument("--job-store", dest="job_store",
@@ -73,15 +76,15 @@ def _job_worker_parser(sub) -> None:
     p.set_defaults(handler=_job_worker)
 
 
-def _job_worker(args) -> int:
+def _job_worker(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from camdirector.jobs import run_job_worker
+    from camdirector.jobs import JobSettings, run_job_worker
     try:
         settings = ServerSettings.from_env(data_dir=args.data_dir, job_store=args.job_store, job_queue=args.job_queue)
         if not settings.job_queue:
             raise ValueError("--job-queue redis://HOST:PORT/DB is required")
-        jobs = dataclasses.replace(settings.job_settings(),
+        jobs = dataclasses.replace(JobSettings.for_server(settings),
                                    **{k: v for k, v in (("max_concurrent_jobs", args.concurrency),
                                                         ("worker_heartbeat_timeout_s", args.heartbeat_timeout_s))
                                       if v is not None})
@@ -117,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.command == "serve":
         overrides = {k: v for k, v in vars(args).items() if k != "command"}
+        overrides["plugins"] = tuple(args.plugins) if args.plugins else None
         try:
             settings = ServerSettings.from_env(**overrides)
         except ValueError as exc:
@@ -124,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         from camdirector.front.main import run
         return run(settings)
     if args.command == "replay":
-        from camdirector.worker.recording import replay
+        from camdirector.worker.replay import replay
         try:
             report = replay(args.file, data_dir=args.data_dir)
         except (OSError, ValueError) as exc:

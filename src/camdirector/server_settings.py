@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import socket
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,6 +60,9 @@ class ServerSettings:
     tenant_max_fps: float = 240.0            # frames a second into one session (a bucket of 1 s of frames). [1, 10000]
     tenant_max_upload_bytes: int = 4 * 1024 ** 3  # bytes of uploads a tenant's jobs hold at once (inputs kept with jobs). [1 KiB, 1 TiB]
     tenant_max_queued_jobs: int = 16         # jobs a tenant has queued or running at once. [1, 100000]
+    # Python modules imported at start by the front and every worker (infra/plugins.py): a studio's own
+    # match director registers itself (pipeline/match/director_registry.py). Comma-separated in the environment.
+    plugins: tuple[str, ...] = ()
 
     def __post_init__(self):
         checks = [
@@ -84,18 +88,12 @@ class ServerSettings:
             (1 <= self.tenant_max_fps <= 10_000, "tenant_max_fps must be in [1, 10000]"),
             (1024 <= self.tenant_max_upload_bytes <= 1 << 40, "tenant_max_upload_bytes must be in [1 KiB, 1 TiB]"),
             (1 <= self.tenant_max_queued_jobs <= 100_000, "tenant_max_queued_jobs must be in [1, 100000]"),
+            (all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", m) for m in self.plugins),
+             "plugins must be Python module names (a.b.c)"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
-
-    def job_settings(self):
-        from camdirector.jobs import JobSettings  # validated there
-        shares = dict(tenant_max_queued_jobs=self.tenant_max_queued_jobs,
-                      tenant_max_upload_bytes=self.tenant_max_upload_bytes) if self.auth else {}
-        return JobSettings(max_concurrent_jobs=self.max_concurrent_jobs, max_queued_jobs=self.max_queued_jobs,
-                           max_upload_bytes=self.max_upload_bytes, job_retention_s=self.job_retention_s,
-                           job_store=self.job_store, job_queue=self.job_queue, **shares)
 
     @property
     def tls(self) -> bool:
@@ -128,7 +126,7 @@ class ServerSettings:
         for f in dataclasses.fields(cls):
             raw = environ.get(f"CAMDIRECTOR_{f.name.upper()}")
             if raw is not None:
-                values[f.name] = _parse(f.type, raw, f.name)
+                values[f.name] = _parse(str(f.type), raw, f.name)  # a str: annotations are postponed
         values.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**values)
 
@@ -152,6 +150,8 @@ def _parse(type_name: str, raw: str, name: str):
             return int(raw)
         if type_name == "float":
             return float(raw)
+        if type_name == "tuple[str, ...]":
+            return tuple(part.strip() for part in raw.split(",") if part.strip())
         if type_name == "bool":
             if raw.lower() in ("1", "true", "yes", "on"):
                 return True

@@ -10,15 +10,10 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from camdirector.evaluation.scenario import (
-    FORMAT,
-    PARK_OFFSET_M,
-    BounceMotion,
-    KeyframedMotion,
-    ScenarioError,
-    load_scenario,
-    parse_scenario,
-)
+from camdirector.evaluation.scenario import PARK_OFFSET_M
+from camdirector.evaluation.scenario_file import ScenarioError, load_scenario, parse_scenario
+from camdirector.evaluation.scenario_motion import BounceMotion, KeyframedMotion
+from camdirector.evaluation.scenario_schema import FORMAT
 from camdirector.v1 import director_pb2 as pb
 
 
@@ -163,6 +158,11 @@ INVALID = {
                                                "region": {"x": [0, 10], "z": [0, 10]},
                                                "parts": [{"shape": {"sphere": {"radius": 0.1}}}]}]),
                         "generators[0]: placed only"),
+    "misspelt generator key": (_set(["generators"], [{"kind": "spawn", "id_prefix": "c", "count": 1, "speed_m_s": [1, 2],
+                                                      "region": {"x": [0, 5], "z": [0, 5]}, "spedd": 1,
+                                                      "shape": {"sphere": {"radius": 0.1}}}]),
+                               "generators[0]: unknown key 'spedd'; expected one of batch, clear_of_targets_m"),
+    "string seed": (_set(["seed"], "7"), "seed: must be an integer, got '7'"),
     "inverted region": (_set(["generators"], [{"kind": "spawn", "id_prefix": "c", "count": 1, "speed_m_s": [1, 2],
                                                "region": {"x": [5, 0], "z": [0, 10]},
                                                "shape": {"sphere": {"radius": 0.1}}}]),

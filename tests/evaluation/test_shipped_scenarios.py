@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from camdirector.evaluation.scenario import load_scenario, shipped_scenarios
-from camdirector.evaluation.suite import PAPER_SCENES, suite_scenarios
+from camdirector.evaluation.scenario_file import load_scenario, shipped_scenarios
+from camdirector.evaluation.toric.suite import PAPER_SCENES, suite_scenarios
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.codec import frame_from_msg, scene_from_request

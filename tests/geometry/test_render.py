@@ -9,6 +9,7 @@ import pytest
 import trimesh
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.gl_context import egl_context
 from camdirector.geometry.render import OffscreenRenderer, top_down_matrix
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
 from camdirector.geometry.video import VideoWriter, concat_videos
@@ -174,9 +175,7 @@ def test_top_down_view_puts_x_across_and_z_down():
 def test_renderers_sharing_a_context_keep_their_own_scenes():
     """Two renderers on one GL context (the monitors' render process keeps several) each draw
     only their own meshes, whatever the order of their calls."""
-    import moderngl
-
-    ctx = moderngl.create_standalone_context(backend="egl")
+    ctx = egl_context()
     box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     a = OffscreenRenderer(WIDTH_PX, HEIGHT_PX, context=ctx)
     b = OffscreenRenderer(WIDTH_PX, HEIGHT_PX, context=ctx)

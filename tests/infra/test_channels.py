@@ -1,6 +1,7 @@
 """The binary framing of the socket pair between the front and a worker (infra/channels.py):
 requests and replies come out as they went in, over a real socket pair, whatever their size; a
-create request carries its session's tenant."""
+create request carries its session's tenant. A monitor's view query and its answer cross as they
+were, and a query out of range is refused."""
 from __future__ import annotations
 
 import asyncio
@@ -15,11 +16,14 @@ from camdirector.infra.channels import (
     REQUEST,
     REQUEST_ID_MODULUS,
     FrameMetrics,
+    ViewQuery,
     decode_create,
     decode_reply_tail,
+    decode_view,
     encode_create,
     encode_reply,
     encode_request,
+    encode_view,
     read_request,
     tail_length,
 )
@@ -106,3 +110,32 @@ def test_a_create_payload_carries_the_tenant_and_reads_one_from_before_tenants()
     assert pb.CreateSessionRequest.FromString(body).level_id == "arena"
     assert decode_create(encode_create("acme", b"")) == ("acme", b"")
     assert decode_create(request) == ("default", request)   # a checkpoint written before tenants
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"shot": "sideways"}, "view shot must be one of"),
+    ({"width_px": 5000}, "view width must be in [16, 1280] px"),
+    ({"width_px": 8}, "view width must be in [16, 1280] px"),
+    ({"height_px": 721}, "view height must be in [16, 720] px"),
+    ({"image_format": "gif"}, "view format must be one of jpeg, png"),
+    ({"shot": "candidate"}, "a candidate view names the candidate's players"),
+])
+def test_view_queries_out_of_range_are_refused(fields, message):
+    with pytest.raises(ValueError) as refused:
+        ViewQuery(**fields)
+    assert message in str(refused.value)
+
+
+def test_a_view_query_survives_its_trip_to_the_worker_and_garbage_is_refused():
+    query = ViewQuery(shot="candidate", subjects=("p1", "p6"), width_px=640, height_px=200, image_format="png")
+    assert ViewQuery.from_json(query.to_json()) == query
+    for payload in (b"", b"[]", b'{"shot": "program"}', b"\xff"):
+        with pytest.raises(ValueError, match="not a view query"):
+            ViewQuery.from_json(payload)
+    with pytest.raises(ValueError, match="view shot must be one of"):   # well formed, out of range: its own reason
+        ViewQuery.from_json(ViewQuery().to_json().replace(b"program", b"sideways"))
+
+
+def test_a_view_comes_back_as_its_header_and_image():
+    header = {"frame": 12, "placeholder": None, "render_ms": 3.5, "media_type": "image/png", "bounds": [0.0, 1.0]}
+    assert decode_view(encode_view(header, b"\x89PNG...")) == (header, b"\x89PNG...")

@@ -150,8 +150,8 @@ def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_pro
     result = _run(real_matches.main, tmp_path, "--only", "duel_bravado", "--minutes", "0.4", "--rate-hz", "15", "--twice",
                   "--markdown", str(tmp_path / "table.md"))
     duel = result["matches"]["duel_bravado"]
-    assert set(duel["directors"]) == {"PLANNED", "HLTV", "AUTOTRACK"} and duel["match"]["players"] == 2
-    assert duel["same_program_twice"] == {"PLANNED": True, "HLTV": True, "AUTOTRACK": True}
+    assert set(duel["directors"]) == {"planned", "hltv", "autotrack"} and duel["match"]["players"] == 2
+    assert duel["same_program_twice"] == {"planned": True, "hltv": True, "autotrack": True}
     assert duel["ceilings"]["kills"] >= 1
     table = (tmp_path / "table.md").read_text().splitlines()
     assert len(table) == 2 + 4 and table[2].startswith("| duel_bravado | PLANNED |")

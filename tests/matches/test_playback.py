@@ -147,7 +147,7 @@ def test_a_match_with_stats_sends_every_players_values_then_their_changes(regist
     match = dataclasses.replace(match, stats=stats)
     full = [(p.id, 100, 0, 0, 0) for p in match.players]
     with cd.connect(arena_server.url("grpc")) as client, \
-            client.create_session(**match_session_fields(match, cd.pb.MATCH_DIRECTOR_PLANNED, 1.0, 0)) as session:
+            client.create_session(**match_session_fields(match, "planned", 1.0, 0)) as session:
         for rate_hz, expected in ((RATE_HZ, {0: full, 100: [("p00", 100, 0, 0, 1)], 200: [("p01", 40, 0, 0, 0)],
                                              301: [("p02", 100, 0, 2**31 + 32, 0)]}),
                                   (10.0, {0: full, 102: [("p00", 100, 0, 0, 1)], 201: [("p01", 40, 0, 0, 0)],

@@ -1,8 +1,9 @@
 """The rig contract (pipeline/camera_rig.py): every rig provides every member of `CameraRig` with
-the contract's parameters, `make_rig` gives a scene the rig it says, and what only some rigs do
-answers as declared, on tiny scenes run through real sessions: two capsules (TORIC), an actor in
-the corridor level (TRACKS, tests/precompute/tracks/tiny_levels.py), two fronts of four players
-(MATCH, tests/pipeline/match/scenes.py)."""
+the contract's parameters, a rig that does not override what only some rigs do gets `RigBase`'s
+answers, the registry (pipeline/rigs.py) has one entry per rig and `make_rig` chooses through it,
+and what only some rigs do answers as declared, on tiny scenes run through real sessions: two
+capsules (TORIC), an actor in the corridor level (TRACKS, tests/precompute/tracks/tiny_levels.py),
+two fronts of four players (MATCH, tests/pipeline/match/scenes.py)."""
 from __future__ import annotations
 
 import inspect
@@ -10,27 +11,29 @@ import inspect
 import numpy as np
 import pytest
 
+from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import capsule
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.pipeline.camera_rig import CameraRig, PlayerInputs
+from camdirector.pipeline import rigs
+from camdirector.pipeline.camera_rig import CameraRig, PlayerInputs, RigBase
 from camdirector.pipeline.inputs import FrameInput, LoadedLevel, SceneSpec, TargetSpec
 from camdirector.pipeline.match.frame import MatchFrame, ShotKind
 from camdirector.pipeline.match.rig import MatchRig
+from camdirector.pipeline.session import Session
 from camdirector.pipeline.style import Rig, Style, VisibilityMode
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.rig import ToricRig
 from camdirector.pipeline.tracks.rig import TracksRig
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.track_settings import TrackSettings
-from camdirector.worker.session import Session
 from tests.pipeline.match.scenes import LENS, RATE_HZ, Match, facing
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service.tracks_sessions import corridor_walk
 
-RIGS = (ToricRig, TracksRig, MatchRig)
+RIGS = (ToricRig, TracksRig, MatchRig)   # the classes the registry's entries make, in its order
 METHODS = ("run", "set_style", "close", "do_deferred_work", "anticipation_map")
-PROPERTIES = ("has_deferred_work",)
-ATTRIBUTES = ("program_transforms", "player_inputs")   # data: looked for on built rigs
+PROPERTIES = ("has_deferred_work", "program_transforms", "player_inputs")   # looked for on built rigs
+OPTIONAL_METHODS = ("do_deferred_work", "anticipation_map")                 # RigBase answers them
 
 
 def members(protocol: type) -> set[str]:
@@ -43,7 +46,7 @@ def parameters(function) -> list[tuple]:
 
 
 def test_the_checks_below_cover_the_whole_contract():
-    assert members(CameraRig) == {*METHODS, *PROPERTIES, *ATTRIBUTES}
+    assert members(CameraRig) == {*METHODS, *PROPERTIES}
     assert members(PlayerInputs) == {"player_ids", "take"}
 
 
@@ -58,6 +61,51 @@ def test_every_rig_says_it_implements_the_contract_and_whether_it_has_deferred_w
     assert "implements `CameraRig`" in rig_class.__doc__
     member = inspect.getattr_static(rig_class, "has_deferred_work")
     assert isinstance(member, property) or member is False
+
+
+class StillRig(RigBase):
+    """A toy rig that implements `CameraRig` and overrides nothing optional: it holds one pose."""
+
+    def __init__(self, scene: SceneSpec) -> None:
+        self.lens = scene.lens
+
+    def run(self, state, update, target_transforms, last) -> None:
+        state.pose = CameraPose(np.array([0.0, 2.0, 6.0]), np.array([0.0, 0.0, 0.0, 1.0]), self.lens.vertical_fov_deg)
+
+    def set_style(self, style: Style) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("name", OPTIONAL_METHODS)
+def test_the_base_answers_with_the_contracts_parameters(name):
+    assert parameters(getattr(RigBase, name)) == parameters(getattr(CameraRig, name))
+
+
+def test_a_rig_that_does_not_override_gets_the_defaults_and_one_entry_makes_it_a_sessions_rig(monkeypatch):
+    entry = rigs.RigEntry(Rig.TORIC, "still", lambda scene, *session_parts: StillRig(scene), "holds one pose")
+    monkeypatch.setattr(rigs, "_BY_RIG", {Rig.TORIC: entry})
+    scene = SceneSpec([], [_target("a", (0.0, 0.9, 0.0))], LENS, Style(), seed=3)
+    session = Session("s", scene)
+    assert isinstance(session.rig, StillRig)
+    state = session.frame(FrameInput("s", 1, 1 / 60.0, [("a", RigidTransform(np.array([0.0, 0.9, -0.02])))]))
+    assert state.pose is not None and state.toric is None and state.match is None
+    assert session.rig.anticipation_map(session.last_state) is None
+    assert not session.rig.has_deferred_work and session.rig.do_deferred_work() is False
+    assert session.rig.do_deferred_work(whole=False) is False
+    assert session.rig.program_transforms is None and session.rig.player_inputs is None
+    assert session.view_target_transforms() is session.target_transforms
+    session.close()
+
+
+def test_the_registry_has_one_entry_per_rig():
+    assert [entry.rig for entry in rigs.RIGS] == list(Rig)
+    assert len({entry.name for entry in rigs.RIGS}) == len(rigs.RIGS)
+    for entry, rig_class in zip(rigs.RIGS, RIGS):
+        assert entry.name == entry.rig.name.lower() and rig_class.__name__.lower() == f"{entry.name}rig"
+        assert entry.description and "\n" not in entry.description
 
 
 # -- the tiny scenes, each run through a real Session (INGEST, then the rig make_rig chose) --------

@@ -15,9 +15,9 @@ import pytest
 from PIL import Image
 
 from camdirector.geometry.camera import project_to_screen
+from camdirector.infra.channels import ViewQuery, decode_view
 from camdirector.render.main import RENDERERS_KEPT, TOP_VIEW_MARGIN_M, Painter
-from camdirector.render.monitor import decode_view
-from camdirector.render.snapshots import ViewQuery, render_job, scene_geometry
+from camdirector.render.snapshots import render_job, scene_geometry
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.table import SessionTable
 from load_tests.soak import sample_process
@@ -55,13 +55,13 @@ class Answer:
 
 def view(table: SessionTable, session_id: str, query: ViewQuery = ViewQuery()) -> Answer:
     answer = Answer()
-    table.view(session_id, query.to_json(), answer)
+    table.view(session_id, query, answer)
     return answer
 
 
 def stream(table: SessionTable, session_id: str, n: int, start: int = 1) -> None:
     for update in walk(session_id, n, start_frame=start):
-        table.handle_bytes("frame", session_id, update.SerializeToString())
+        table.frame(update)
 
 
 def orange(pixel) -> bool:
@@ -97,7 +97,7 @@ def test_asking_for_a_view_never_waits_for_the_render(table):
     os.kill(pid, signal.SIGSTOP)
     try:
         answer = Answer()
-        asked = threading.Thread(target=table.view, args=("s", ViewQuery().to_json(), answer))
+        asked = threading.Thread(target=table.view, args=("s", ViewQuery(), answer))
         asked.start()
         asked.join(timeout=10.0)
         assert not asked.is_alive(), "asking for a view waited for the stopped render process"

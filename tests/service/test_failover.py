@@ -21,11 +21,11 @@ FRAMES = 240  # 4 s at 60 Hz
 
 def _undisturbed(tmp_path, create: pb.CreateSessionRequest, updates: list[pb.FrameUpdate]) -> list[pb.CameraPose]:
     table = SessionTable(ServerSettings(data_dir=str(tmp_path / "ref"), checkpoint_store="off"))
-    table.handle_bytes("create", "ref", create.SerializeToString())
+    table.create("ref", create)
     poses = []
     for update in updates:
         update = pb.FrameUpdate(session_id="ref", frame=update.frame, time_s=update.time_s, states=update.states)
-        poses.append(pb.CameraUpdate.FromString(table.handle_bytes("frame", "ref", update.SerializeToString())[0]).pose)
+        poses.append(table.frame(update).pose)
     return poses
 
 

@@ -10,7 +10,7 @@ import grpc
 import pytest
 
 from camdirector.v1 import director_pb2 as pb
-from camdirector.worker.recording import replay
+from camdirector.worker.replay import replay
 from tests.service.test_bad_input import canary, expect  # noqa: F401  (canary is a fixture)
 from tests.service.wire_client import capsule_target
 

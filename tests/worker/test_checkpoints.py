@@ -15,7 +15,8 @@ from camdirector.worker.checkpoint_stores import (
     decode_entry,
     encode_entry,
 )
-from camdirector.worker.recording import _comparable
+from camdirector.worker.dispatch import Dispatcher
+from camdirector.worker.replay import _comparable
 from camdirector.worker.table import SessionTable
 from tests.service.test_match_sessions import frames as match_frames
 from tests.service.test_match_sessions import match_request
@@ -29,11 +30,17 @@ def store_url(request, tmp_path):
     return request.getfixturevalue("redis_url") if request.param == "redis" else ""
 
 
-def _table(tmp_path, store_url: str, owner: str, every: int = 20) -> SessionTable:
+def _requests(tmp_path, store_url: str, owner: str, every: int = 20, defer_snapshots: bool = False) -> Dispatcher:
+    """A session table that checkpoints, with the requests' dispatch a worker puts above it."""
     table = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url,
-                                        checkpoint_every_frames=every))
+                                        checkpoint_every_frames=every), defer_snapshots=defer_snapshots)
     table.checkpoints.owner = owner  # one process plays several: each table its own owner
-    return table
+    return Dispatcher(table)
+
+
+def _reference(data_dir) -> Dispatcher:
+    """A session table that keeps no checkpoints."""
+    return Dispatcher(SessionTable(ServerSettings(data_dir=str(data_dir), checkpoint_store="off")))
 
 
 def _store(tmp_path, store_url: str):
@@ -77,11 +84,11 @@ def test_a_torn_last_write_is_ignored(tmp_path):
     assert store.load("s").entries == [(1, "frame", b"whole")]
 
 
-def _answers(table: SessionTable, requests: list[tuple[str, str, bytes]]) -> list[bytes]:
+def _answers(dispatcher: Dispatcher, requests: list[tuple[str, str, bytes]]) -> list[bytes]:
     """The comparable part of each frame's answer (recording.py), in order."""
     out = []
     for op, session_id, payload in requests:
-        body, _ = table.handle_bytes(op, session_id, payload)
+        body, _ = dispatcher.handle_bytes(op, session_id, payload)
         if op == "frame":
             out.append(_comparable(pb.CameraUpdate.FromString(body)))
     return out
@@ -123,15 +130,15 @@ def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, s
     create, requests = (_match_requests(120) if kind == "MATCH" else _tracks_requests(tmp_path) if kind == "TRACKS"
                         else _toric_requests(getattr(pb, kind), 100))
     # the reference reads the same level registry (TRACKS) but keeps no checkpoints
-    reference = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
+    reference = _reference(tmp_path)
     reference.handle_bytes("create", "s", create.SerializeToString())
     expected = _answers(reference, requests)
 
-    first = _table(tmp_path, store_url, "node-a/1")
+    first = _requests(tmp_path, store_url, "node-a/1")
     first.handle_bytes("create", "s", create.SerializeToString())
     cut = 67  # past three snapshots (every 20 inputs) and seven inputs into the log
     answered = _answers(first, requests[:cut])
-    second = _table(tmp_path, store_url, "node-b/2")
+    second = _requests(tmp_path, store_url, "node-b/2")
     answered += _answers(second, requests[cut:])
     assert answered == expected
     # the first table is now a stale copy: its next frame restores the newer state before answering
@@ -145,13 +152,13 @@ def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, s
 
 
 def test_a_checkpoint_that_does_not_restore_is_unavailable_and_the_others_restore(tmp_path):
-    first = _table(tmp_path, "", "n/1", every=5)
+    first = _requests(tmp_path, "", "n/1", every=5)
     for session_id in ("bad", "good"):
         first.handle_bytes("create", session_id, two_target_request().SerializeToString())
         for update in walk(session_id, 12):
             first.handle_bytes("frame", session_id, update.SerializeToString())
     (tmp_path / "checkpoints" / "bad" / "snapshot").write_bytes(b"\x00" * 8 + b"not a pickle")
-    second = _table(tmp_path, "", "n/2")
+    second = _requests(tmp_path, "", "n/2")
     nxt = {sid: list(walk(sid, 1, start_frame=13))[0].SerializeToString() for sid in ("bad", "good")}
     with pytest.raises(DirectorError) as err:
         second.handle_bytes("frame", "bad", nxt["bad"])
@@ -163,11 +170,11 @@ def test_a_checkpoint_that_does_not_restore_is_unavailable_and_the_others_restor
 
 
 def test_closing_removes_the_checkpoint_and_stopping_keeps_it(tmp_path, store_url):
-    table = _table(tmp_path, store_url, "n/1")
+    requests = _requests(tmp_path, store_url, "n/1")
     for session_id in ("closed", "kept"):
-        table.handle_bytes("create", session_id, two_target_request().SerializeToString())
-    table.handle_bytes("close", "closed", b"")
-    table.close_all()
+        requests.handle_bytes("create", session_id, two_target_request().SerializeToString())
+    requests.handle_bytes("close", "closed", b"")
+    requests.table.close_all()
     store = _store(tmp_path, store_url)
     assert store.load("closed") is None and store.load("kept") is not None
 
@@ -175,25 +182,25 @@ def test_closing_removes_the_checkpoint_and_stopping_keeps_it(tmp_path, store_ur
 def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoint_is_written_again(tmp_path):
     from camdirector.deploy.services import RedisServer
     redis_server = RedisServer(tmp_path / "redis").start()
-    table = _table(tmp_path, redis_server.url, "n/1", every=1000)
-    table.handle_bytes("create", "s", two_target_request().SerializeToString())
+    requests = _requests(tmp_path, redis_server.url, "n/1", every=1000)
+    requests.handle_bytes("create", "s", two_target_request().SerializeToString())
     updates = [u.SerializeToString() for u in walk("s", 40)]
     for payload in updates[:10]:
-        assert not table.handle_bytes("frame", "s", payload)[1].checkpoint_failed
+        assert not requests.handle_bytes("frame", "s", payload)[1].checkpoint_failed
     redis_server.stop()
-    flagged = [table.handle_bytes("frame", "s", payload)[1].checkpoint_failed for payload in updates[10:20]]
+    flagged = [requests.handle_bytes("frame", "s", payload)[1].checkpoint_failed for payload in updates[10:20]]
     assert all(flagged)  # answered, and the front's metric counts each
     with pytest.raises(CheckpointError):
         RedisStore(redis_server.url, keep_s=60.0)  # a node started now refuses to (front/main.py)
     restarted = RedisServer(tmp_path / "redis", port=redis_server.port).start()
     try:
-        table.held["s"].checkpoint.retry_s = 0.0  # do not wait out the retry interval
-        assert not table.handle_bytes("frame", "s", updates[20])[1].checkpoint_failed
+        requests.table.held["s"].checkpoint.retry_s = 0.0  # do not wait out the retry interval
+        assert not requests.handle_bytes("frame", "s", updates[20])[1].checkpoint_failed
         for payload in updates[21:30]:
-            table.handle_bytes("frame", "s", payload)
+            requests.handle_bytes("frame", "s", payload)
         # the checkpoint written again whole (Redis came back empty) restores the session exactly
-        other = _table(tmp_path, restarted.url, "n/2")
-        reference = SessionTable(ServerSettings(data_dir=str(tmp_path / "ref"), checkpoint_store="off"))
+        other = _requests(tmp_path, restarted.url, "n/2")
+        reference = _reference(tmp_path / "ref")
         reference.handle_bytes("create", "s", two_target_request().SerializeToString())
         for payload in updates[:30]:
             reference.handle_bytes("frame", "s", payload)
@@ -204,18 +211,17 @@ def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoi
 
 
 def test_deferred_snapshots_wait_for_idle_work_but_never_past_twice_their_period(tmp_path):
-    table = _table(tmp_path, "", "n/1", every=10)
-    table.defer_snapshots = True  # as a worker's table: snapshots in its idle moments
-    table.handle_bytes("create", "s", two_target_request().SerializeToString())
+    requests = _requests(tmp_path, "", "n/1", every=10, defer_snapshots=True)  # as a worker's: snapshots in its idle moments
+    requests.handle_bytes("create", "s", two_target_request().SerializeToString())
     updates = [u.SerializeToString() for u in walk("s", 32)]
     for payload in updates[:12]:
-        table.handle_bytes("frame", "s", payload)
+        requests.handle_bytes("frame", "s", payload)
     store = DirectoryStore(tmp_path / "checkpoints", keep_s=60.0)
     assert store.load("s").snapshot is None and len(store.load("s").entries) == 12  # due, not yet taken
-    assert table.idle_work() is False                                           # taken now, none left
+    assert requests.table.idle_work() is False                                  # taken now, none left
     assert (store.load("s").seq, len(store.load("s").entries)) == (12, 0)
     for payload in updates[12:]:  # never idle: at twice the period the snapshot is taken inline
-        table.handle_bytes("frame", "s", payload)
+        requests.handle_bytes("frame", "s", payload)
     assert store.load("s").seq == 12 + 2 * 10
 
 
@@ -225,14 +231,14 @@ def test_an_input_a_bypassed_table_computes_after_restoring_is_in_the_checkpoint
     computes the input), then C takes it over. C's answers are the undisturbed ones only if the
     input A computed after restoring is in the checkpoint too."""
     create, requests = _toric_requests(pb.FRAMING_ONLY, 100)
-    reference = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
+    reference = _reference(tmp_path)
     reference.handle_bytes("create", "s", create.SerializeToString())
     expected = _answers(reference, requests)
 
-    a = _table(tmp_path, store_url, "node-a/1")
+    a = _requests(tmp_path, store_url, "node-a/1")
     a.handle_bytes("create", "s", create.SerializeToString())
     answered = _answers(a, requests[:30])
-    answered += _answers(_table(tmp_path, store_url, "node-b/2"), requests[30:45])
+    answered += _answers(_requests(tmp_path, store_url, "node-b/2"), requests[30:45])
     answered += _answers(a, requests[45:50])   # bypassed, then asked again
-    answered += _answers(_table(tmp_path, store_url, "node-c/3"), requests[50:])
+    answered += _answers(_requests(tmp_path, store_url, "node-c/3"), requests[50:])
     assert answered == expected

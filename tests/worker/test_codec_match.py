@@ -6,10 +6,10 @@ import pytest
 
 from camdirector.errors import DirectorError
 from camdirector.pipeline.inputs import EventKind
-from camdirector.pipeline.style import MatchDirectorKind, Rig
+from camdirector.pipeline.style import Rig
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-from camdirector.worker.codec import MAX_PLAYERS, frame_from_msg, scene_from_request, style_from_msg
+from camdirector.worker.codec import MAX_PLAYERS, frame_from_msg, scene_from_request, shown_style, style_from_msg
 from tests.service.wire_client import capsule_target
 
 SETTINGS = ServerSettings()
@@ -39,10 +39,32 @@ def test_a_match_scene_keeps_players_teams_delay_and_director():
     scene = scene_from_request(match_request(4, delay_s=30.0, match_director=pb.MATCH_DIRECTOR_HLTV,
                                              min_shot_s=3.0), SETTINGS)
     assert scene.style.rig == Rig.MATCH
-    assert scene.style.match_director == MatchDirectorKind.HLTV
+    assert scene.style.match_director == "hltv"
     assert scene.style.min_shot_s == 3.0 and scene.style.max_shot_s == 8.0
     assert [t.team for t in scene.targets] == [0, 1, 0, 1]
     assert scene.delay_s == 30.0 and scene.level is None
+
+
+def test_the_director_name_wins_over_the_enum_and_an_unknown_one_is_refused_with_the_registered_names():
+    lens = scene_from_request(match_request(), SETTINGS).lens
+    named = pb.Style(rig=pb.RIG_MATCH, match_director=pb.MATCH_DIRECTOR_HLTV, match_director_name="autotrack")
+    assert style_from_msg(named, lens).match_director == "autotrack"
+    assert style_from_msg(pb.Style(rig=pb.RIG_MATCH), lens).match_director == "planned"
+    refused(grpc.StatusCode.INVALID_ARGUMENT, style_from_msg, pb.Style(rig=pb.RIG_MATCH, match_director_name="nobody"),
+            lens, contains="'nobody' is not a registered match director; the registered ones are planned, hltv, "
+                           "autotrack")
+    refused(grpc.StatusCode.INVALID_ARGUMENT, style_from_msg, pb.Style(rig=pb.RIG_MATCH, match_director=99), lens,
+            contains="not a known match_director")
+
+
+def test_the_style_shown_back_carries_the_resolved_director_name():
+    lens = scene_from_request(match_request(), SETTINGS).lens
+    sent = pb.Style(rig=pb.RIG_MATCH, match_director=pb.MATCH_DIRECTOR_HLTV)
+    shown = shown_style(sent, style_from_msg(sent, lens))
+    assert shown.match_director_name == "hltv" and shown.match_director == pb.MATCH_DIRECTOR_HLTV
+    assert not sent.match_director_name  # the request itself is left as it came
+    toric = pb.Style()
+    assert shown_style(toric, style_from_msg(toric, lens)) is toric
 
 
 def test_player_counts_and_delay_out_of_range_are_refused():
@@ -60,9 +82,10 @@ def test_player_counts_and_delay_out_of_range_are_refused():
 def test_match_fields_outside_a_match_session_are_refused():
     toric = pb.CreateSessionRequest(targets=[capsule_target()], delay_s=5.0)
     refused(grpc.StatusCode.INVALID_ARGUMENT, scene_from_request, toric, SETTINGS, contains="RIG_MATCH")
-    refused(grpc.StatusCode.INVALID_ARGUMENT, style_from_msg, pb.Style(min_shot_s=3.0),
-            scene_from_request(pb.CreateSessionRequest(targets=[capsule_target()]), SETTINGS).lens,
-            contains="MATCH rig")
+    for style in (pb.Style(min_shot_s=3.0), pb.Style(match_director_name="hltv")):
+        refused(grpc.StatusCode.INVALID_ARGUMENT, style_from_msg, style,
+                scene_from_request(pb.CreateSessionRequest(targets=[capsule_target()]), SETTINGS).lens,
+                contains="MATCH rig")
     refused(grpc.StatusCode.INVALID_ARGUMENT, frame_from_msg,
             frame(pb.GameEvent(kind=pb.EVENT_KILL, actor_id="hero", other_actor_id="hero")), {"hero"}, set(),
             contains="RIG_MATCH")

@@ -4,7 +4,6 @@ from __future__ import annotations
 import grpc
 
 from camdirector.pipeline.inputs import PlayerStats
-from camdirector.pipeline.style import MatchDirectorKind
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.codec import frame_from_msg, scene_from_request
 from tests.worker.test_codec_match import PLAYERS, SETTINGS, match_request, refused
@@ -37,4 +36,4 @@ def test_stats_outside_a_match_session_are_refused():
 
 def test_the_autotrack_director_is_chosen_by_style():
     scene = scene_from_request(match_request(4, delay_s=0.0, match_director=pb.MATCH_DIRECTOR_AUTOTRACK), SETTINGS)
-    assert scene.style.match_director == MatchDirectorKind.AUTOTRACK
+    assert scene.style.match_director == "autotrack"

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-from camdirector.worker.recording import _comparable
+from camdirector.worker.dispatch import Dispatcher
+from camdirector.worker.replay import _comparable
 from camdirector.worker.table import SessionTable
 from tests.service.wire_client import two_target_request, walk
 
@@ -12,14 +13,15 @@ def _run(tmp_path, idle: bool) -> tuple[list, int]:
     """The comparable answers of an ANTICIPATION session over 90 frames and a style change, and how
     many deferred map updates idle_work did (with `idle`, after every request, as a worker does)."""
     table = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
-    table.handle_bytes("create", "s", two_target_request(style=pb.Style(visibility=pb.ANTICIPATION), seed=3)
-                       .SerializeToString())
-    requests = [("frame", f.SerializeToString()) for f in walk("s", 90)]
+    requests = Dispatcher(table)
+    requests.handle_bytes("create", "s", two_target_request(style=pb.Style(visibility=pb.ANTICIPATION), seed=3)
+                         .SerializeToString())
+    inputs = [("frame", f.SerializeToString()) for f in walk("s", 90)]
     style = pb.UpdateStyleRequest(session_id="s", style=pb.Style(visibility=pb.ANTICIPATION, mask=pb.STYLE_MASK_SOFT_BEHIND))
-    requests.insert(45, ("style", style.SerializeToString()))
+    inputs.insert(45, ("style", style.SerializeToString()))
     answers, done = [], 0
-    for op, payload in requests:
-        body, _ = table.handle_bytes(op, "s", payload)
+    for op, payload in inputs:
+        body, _ = requests.handle_bytes(op, "s", payload)
         if op == "frame":
             answers.append(_comparable(pb.CameraUpdate.FromString(body)))
         while idle and table.held["s"].session.has_deferred_work:

@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from camdirector.v1 import director_pb2 as pb
-from camdirector.worker.recording import MAGIC, read_entries, replay
+from camdirector.worker.recording import MAGIC, read_entries
+from camdirector.worker.replay import replay
 from tests.service.wire_client import GrpcRaw, two_target_request, walk
 
 

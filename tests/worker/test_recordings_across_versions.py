@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from camdirector.worker.recording import read_entries, replay
+from camdirector.worker.recording import read_entries
+from camdirector.worker.replay import replay
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service.tracks_sessions import cli_add_level, obj_text
 

@@ -15,6 +15,7 @@ from camdirector.geometry.camera import Lens
 from camdirector.geometry.toric_maps import embree, gl
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.table import SessionTable
 from load_tests.soak import sample_process
 
@@ -64,23 +65,24 @@ def backends(monkeypatch):
     return counts
 
 
-def _frame(table: SessionTable, session_id: str, frame, time_s, packed) -> pb.CameraUpdate:
+def _frame(requests: Dispatcher, session_id: str, frame, time_s, packed) -> pb.CameraUpdate:
     ids, values = packed
     msg = pb.FrameUpdate(session_id=session_id, frame=frame, time_s=time_s, packed_ids=ids, packed_transforms=values)
-    return pb.CameraUpdate.FromString(table.handle_bytes("frame", session_id, msg.SerializeToString())[0])
+    return pb.CameraUpdate.FromString(requests.handle_bytes("frame", session_id, msg.SerializeToString())[0])
 
 
 @pytest.mark.parametrize("backend", [pb.MAP_BACKEND_GL, pb.MAP_BACKEND_EMBREE])
 def test_every_way_a_session_ends_closes_its_map_backend(demo, backends, backend, tmp_path):
     table = SessionTable(ServerSettings(data_dir=str(tmp_path)))
+    requests = Dispatcher(table)
     create = _request(demo, backend).SerializeToString()
     for session_id in ("closed", "reclaimed", "stopping-1", "stopping-2"):
-        table.handle_bytes("create", session_id, create)
+        requests.handle_bytes("create", session_id, create)
         for frame in demo[1]:
-            _frame(table, session_id, *frame)
+            _frame(requests, session_id, *frame)
     assert backends == {"made": 4, "closed": 0}
-    table.handle_bytes("close", "closed", b"")           # CloseSession
-    table.handle_bytes("drop", "reclaimed", b"")         # the front's reaper, an idle session
+    requests.handle_bytes("close", "closed", b"")        # CloseSession
+    requests.handle_bytes("drop", "reclaimed", b"")      # the front's reaper, an idle session
     assert backends == {"made": 4, "closed": 2}
     table.close_all()                                    # the worker stops
     assert backends == {"made": 4, "closed": 4} and not table.held
@@ -91,17 +93,18 @@ def test_a_create_that_fails_after_the_maps_were_built_closes_them(demo, backend
     blocker.write_text("")  # the recordings folder cannot be made under a file
     table = SessionTable(ServerSettings(data_dir=str(blocker), checkpoint_store="off"))
     with pytest.raises(DirectorError) as err:
-        table.handle_bytes("create", "s", _request(demo, pb.MAP_BACKEND_GL, record=True).SerializeToString())
+        Dispatcher(table).handle_bytes("create", "s", _request(demo, pb.MAP_BACKEND_GL, record=True).SerializeToString())
     assert err.value.code.name == "INTERNAL"
     assert backends == {"made": 1, "closed": 1} and not table.held
 
 
 def test_recording_file_is_closed_with_its_session(demo, tmp_path):
     table = SessionTable(ServerSettings(data_dir=str(tmp_path)))
+    requests = Dispatcher(table)
     reply = pb.CreateSessionResponse.FromString(
-        table.handle_bytes("create", "rec", _request(demo, pb.MAP_BACKEND_EMBREE, record=True).SerializeToString())[0])
+        requests.handle_bytes("create", "rec", _request(demo, pb.MAP_BACKEND_EMBREE, record=True).SerializeToString())[0])
     recorder = table.held["rec"].recorder
-    _frame(table, "rec", *demo[1][0])
+    _frame(requests, "rec", *demo[1][0])
     table.close_all()
     assert recorder._file.closed and reply.recording_path
 

@@ -254,7 +254,7 @@ class ScreenPoint(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ...) -> None: ...
 
 class Style(_message.Message):
-    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend", "rig", "shot_size", "movement", "match_director", "min_shot_s", "max_shot_s")
+    __slots__ = ("screen_a", "screen_b", "visibility", "gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s", "max_speed_m_s", "max_accel_m_s2", "mask", "map_resolution", "map_backend", "rig", "shot_size", "movement", "match_director", "min_shot_s", "max_shot_s", "match_director_name")
     SCREEN_A_FIELD_NUMBER: _ClassVar[int]
     SCREEN_B_FIELD_NUMBER: _ClassVar[int]
     VISIBILITY_FIELD_NUMBER: _ClassVar[int]
@@ -273,6 +273,7 @@ class Style(_message.Message):
     MATCH_DIRECTOR_FIELD_NUMBER: _ClassVar[int]
     MIN_SHOT_S_FIELD_NUMBER: _ClassVar[int]
     MAX_SHOT_S_FIELD_NUMBER: _ClassVar[int]
+    MATCH_DIRECTOR_NAME_FIELD_NUMBER: _ClassVar[int]
     screen_a: ScreenPoint
     screen_b: ScreenPoint
     visibility: VisibilityMode
@@ -291,7 +292,8 @@ class Style(_message.Message):
     match_director: MatchDirector
     min_shot_s: float
     max_shot_s: float
-    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ..., match_director: _Optional[_Union[MatchDirector, str]] = ..., min_shot_s: _Optional[float] = ..., max_shot_s: _Optional[float] = ...) -> None: ...
+    match_director_name: str
+    def __init__(self, screen_a: _Optional[_Union[ScreenPoint, _Mapping]] = ..., screen_b: _Optional[_Union[ScreenPoint, _Mapping]] = ..., visibility: _Optional[_Union[VisibilityMode, str]] = ..., gaze_room_m: _Optional[float] = ..., preferred_theta_ratio: _Optional[float] = ..., preferred_phi_deg: _Optional[float] = ..., response_time_s: _Optional[float] = ..., max_speed_m_s: _Optional[float] = ..., max_accel_m_s2: _Optional[float] = ..., mask: _Optional[_Union[StyleMask, str]] = ..., map_resolution: _Optional[int] = ..., map_backend: _Optional[_Union[MapBackend, str]] = ..., rig: _Optional[_Union[Rig, str]] = ..., shot_size: _Optional[_Union[ShotSize, str]] = ..., movement: _Optional[_Union[Movement, str]] = ..., match_director: _Optional[_Union[MatchDirector, str]] = ..., min_shot_s: _Optional[float] = ..., max_shot_s: _Optional[float] = ..., match_director_name: _Optional[str] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
     __slots__ = ("objects", "targets", "lens", "style", "seed", "record", "level_id", "delay_s", "pose_outputs", "client_protocol")

@@ -4,6 +4,7 @@ data directory, so the command may make keys of any tenant; over HTTP an admin m
 own tenant's (`/v1/keys`)."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -12,11 +13,9 @@ from camdirector.access.roles import ROLES
 from camdirector.server_settings import ServerSettings
 
 
-def add_parsers(sub) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     keys = sub.add_parser("keys", help="create, list and revoke API keys (docs/security.md)")
     verbs = keys.add_subparsers(dest="keys_command", required=True)
-    common = {"--data-dir": dict(dest="data_dir", help="the server's data directory (its access.sqlite3)"),
-              "--job-store": dict(dest="job_store", help="the cluster's records database, postgresql://...")}
     p = verbs.add_parser("create", help="make a key and print it alone on one line (shown this once)")
     p.add_argument("--role", required=True, choices=ROLES)
     p.add_argument("--tenant", default="default")
@@ -26,12 +25,12 @@ def add_parsers(sub) -> None:
     p3 = verbs.add_parser("revoke", help="refuse a key from now on, on every node")
     p3.add_argument("key_id", help="the id `keys list` shows (or the whole key)")
     for parser in (p, p2, p3):
-        for flag, kwargs in common.items():
-            parser.add_argument(flag, **kwargs)
+        parser.add_argument("--data-dir", dest="data_dir", help="the server's data directory (its access.sqlite3)")
+        parser.add_argument("--job-store", dest="job_store", help="the cluster's records database, postgresql://...")
         parser.set_defaults(handler=_run)
 
 
-def _run(args) -> int:
+def _run(args: argparse.Namespace) -> int:
     try:
         settings = ServerSettings.from_env(data_dir=args.data_dir, job_store=args.job_store)
         store = open_access_store(settings.job_store, settings.data_dir)

@@ -19,6 +19,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import grpc
 
@@ -72,7 +73,12 @@ class Guard:
         self.clock = clock
         self._cache: dict[str, tuple[ApiKey, str]] = {}
         self._polled_s = clock()
-        self._watcher: asyncio.Task | None = None
+        self._watcher: asyncio.Task[None] | None = None
+
+    def key_store(self) -> AccessStore:
+        """The key store, for the calls made with authentication on (`enabled` implies a store)."""
+        assert self.store is not None, "authentication is off: there is no key store"
+        return self.store
 
     # -- identity
     def identify(self, authorization: str | None, *, fresh: bool = True) -> Identity:
@@ -87,7 +93,7 @@ class Guard:
         key_id, secret = parts
         found = None if fresh else self._cache.get(key_id)
         if found is None:
-            found = self.store.lookup(key_id)
+            found = self.key_store().lookup(key_id)
             if found is None:
                 raise unauthenticated("unknown key")
             self._cache[key_id] = found
@@ -101,7 +107,7 @@ class Guard:
     def identify_key_id(self, key_id: str) -> Identity:
         """The identity of a key named by id alone, read fresh (a signed login cookie, whose
         signature stands for the secret shown at login)."""
-        found = self.store.lookup(key_id)
+        found = self.key_store().lookup(key_id)
         if found is None or found[0].revoked:
             raise unauthenticated("the key of this login was revoked: log in with another key")
         self._cache[key_id] = found
@@ -130,7 +136,7 @@ class Guard:
         """A key revoked through this node: its cached record read again, so that streams using
         it end at their next message."""
         if key_id in self._cache:
-            found = self.store.lookup(key_id)
+            found = self.key_store().lookup(key_id)
             if found is None:
                 self._cache.pop(key_id)
             else:
@@ -139,7 +145,7 @@ class Guard:
     def poll_revocations(self) -> list[str]:
         """Marks keys revoked since the last poll (on any node) in the cache; their ids."""
         now = self.clock()
-        revoked = self.store.revoked_since(self._polled_s - CLOCK_SKEW_S)
+        revoked = self.key_store().revoked_since(self._polled_s - CLOCK_SKEW_S)
         self._polled_s = now
         hit = []
         for key_id, _ in revoked:
@@ -166,6 +172,7 @@ class Guard:
             self._watcher.cancel()
 
     # -- the audit trail (module docstring of keys.py)
-    def audit(self, identity: Identity, action: str, session_id: str | None = None, detail: dict | None = None) -> None:
+    def audit(self, identity: Identity, action: str, session_id: str | None = None,
+              detail: dict[str, Any] | None = None) -> None:
         if self.store is not None:
             self.store.audit(identity.tenant, identity.key_id, action, session_id, detail)

@@ -22,12 +22,15 @@ import json
 import os
 import secrets
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from camdirector.access.roles import ROLES, check_tenant
-from camdirector.infra.postgres import PostgresDatabase
-from camdirector.infra.sqlite import SqliteDatabase
+from camdirector.access.roles import ROLES
+from camdirector.infra.postgres import PostgresStore, advisory_lock
+from camdirector.infra.sqlite import SqliteStore
+from camdirector.infra.tenants import DEFAULT_TENANT, check_tenant
 
 KEY_PREFIX = "cdk_"
 ADMIN_KEY_FILE = "admin.key"
@@ -56,7 +59,7 @@ class ApiKey:
     def revoked(self) -> bool:
         return self.revoked_s is not None
 
-    def as_public(self) -> dict:
+    def as_public(self) -> dict[str, Any]:
         return {"id": self.key_id, "name": self.name, "role": self.role, "tenant": self.tenant,
                 "created_s": self.created_s, "revoked_s": self.revoked_s}
 
@@ -112,11 +115,11 @@ _POSTGRES_SCHEMA = (
 _WRITE_LOCK_KEY = 0x63616D6B  # "camk": the access tables' advisory write lock (records.py has "camd")
 
 
-def _key(row) -> ApiKey:
+def _key(row: Sequence[Any]) -> ApiKey:
     return ApiKey(*row)
 
 
-def _insert_key(db, role: str, tenant: str, name: str) -> tuple[ApiKey, str]:
+def _insert_key(db: Any, role: str, tenant: str, name: str) -> tuple[ApiKey, str]:
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
     check_tenant(tenant)
@@ -131,21 +134,22 @@ def _insert_key(db, role: str, tenant: str, name: str) -> tuple[ApiKey, str]:
 
 class AccessStore:
     """Keys, session owners, audit. Thread-safe; every call one short transaction. Subclasses
-    give `_tx()`, `_read()` and `close()` as jobs/records.py's stores do."""
+    give `_tx()`, `_read()` and `close()` through their first base, infra's SqliteStore or
+    PostgresStore, as jobs/records.py's stores do."""
 
     where: str
 
-    def _tx(self) -> contextlib.AbstractContextManager:
+    def _tx(self) -> contextlib.AbstractContextManager[Any]:
         raise NotImplementedError
 
-    def _read(self) -> contextlib.AbstractContextManager:
+    def _read(self) -> contextlib.AbstractContextManager[Any]:
         raise NotImplementedError
 
     def close(self) -> None:
         raise NotImplementedError
 
     # -- keys
-    def create_key(self, role: str, tenant: str = "default", name: str = "") -> tuple[ApiKey, str]:
+    def create_key(self, role: str, tenant: str = DEFAULT_TENANT, name: str = "") -> tuple[ApiKey, str]:
         """A new key: its record and its text (shown once, never stored)."""
         with self._tx() as db:
             return _insert_key(db, role, tenant, name)
@@ -156,7 +160,7 @@ class AccessStore:
         with self._tx() as db:
             if db.execute("SELECT 1 FROM api_keys WHERE role = 'admin' AND revoked_s IS NULL LIMIT 1").fetchone():
                 return None
-            return _insert_key(db, "admin", "default", "first admin (made at start)")[1]
+            return _insert_key(db, "admin", DEFAULT_TENANT, "first admin (made at start)")[1]
 
     def lookup(self, key_id: str) -> tuple[ApiKey, str] | None:
         """The key's record and stored secret hash, None for an unknown id."""
@@ -209,12 +213,12 @@ class AccessStore:
 
     # -- audit
     def audit(self, tenant: str, key_id: str | None, action: str, session_id: str | None = None,
-              detail: dict | None = None) -> None:
+              detail: dict[str, Any] | None = None) -> None:
         with self._tx() as db:
             db.execute("INSERT INTO audit (at_s, tenant, key_id, action, session_id, detail) VALUES (?, ?, ?, ?, ?, ?)",
                        (time.time(), tenant, key_id, action, session_id, json.dumps(detail or {}, sort_keys=True)))
 
-    def audit_trail(self, tenant: str, after_seq: int = 0, limit: int = 500) -> list[dict]:
+    def audit_trail(self, tenant: str, after_seq: int = 0, limit: int = 500) -> list[dict[str, Any]]:
         with self._read() as db:
             rows = db.execute("SELECT seq, at_s, key_id, action, session_id, detail FROM audit "
                               "WHERE tenant = ? AND seq > ? ORDER BY seq LIMIT ?", (tenant, after_seq, limit)).fetchall()
@@ -233,42 +237,27 @@ class AccessStore:
         return bytes.fromhex(row[0])
 
 
-class SqliteAccessStore(AccessStore):
+class SqliteAccessStore(SqliteStore, AccessStore):
+    """The tables in `<data_dir>/access.sqlite3`, through infra/sqlite.py's SqliteStore."""
+
     DB_NAME = "access.sqlite3"
 
     def __init__(self, data_dir: str | Path) -> None:
         root = Path(data_dir)
         root.mkdir(parents=True, exist_ok=True)
         self.where = str(root / self.DB_NAME)
-        self._db = SqliteDatabase(self.where, _SQLITE_SCHEMA)
+        SqliteStore.__init__(self, self.where, _SQLITE_SCHEMA)
         os.chmod(self.where, 0o600)  # key hashes and the cookie secret: the node's user only
 
-    def close(self) -> None:
-        self._db.close()
 
-    def _tx(self):
-        return self._db.transaction()
+class PostgresAccessStore(PostgresStore, AccessStore):
+    """The tables in the PostgreSQL database at `url` (created when missing), through
+    infra/postgres.py's PostgresStore. Raises AccessUnavailable when it cannot be reached."""
 
-    def _read(self):
-        return self._db.read()
-
-
-class PostgresAccessStore(AccessStore):
     def __init__(self, url: str) -> None:
-        self._db = PostgresDatabase(url, "records database (keys)", AccessUnavailable)
         self.where = "PostgreSQL"
-        with self._tx() as db:
-            for statement in _POSTGRES_SCHEMA:
-                db.execute(statement)
-
-    def close(self) -> None:
-        self._db.close()
-
-    def _tx(self):
-        return self._db.transaction("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK_KEY,))
-
-    def _read(self):
-        return self._db.read()
+        PostgresStore.__init__(self, url, "records database (keys)", AccessUnavailable, _POSTGRES_SCHEMA,
+                               write_lock=advisory_lock(_WRITE_LOCK_KEY))
 
 
 def open_access_store(records_url: str, data_dir: str | Path) -> AccessStore:

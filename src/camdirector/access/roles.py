@@ -1,12 +1,12 @@
 """Roles and the verbs each may use: the one table every transport asks (docs/security.md shows
 it, and tests/access/test_every_door.py checks each route and RPC against that page).
 
-A key has one role and one tenant. Sessions, levels and jobs belong to the tenant of the key that
-made them; a key sees nothing of another tenant's (answered as if it did not exist).
+A key has one role and one tenant (a name that infra/tenants.py checks). Sessions, levels and
+jobs belong to the tenant of the key that made them; a key sees nothing of another tenant's
+(answered as if it did not exist).
 """
 from __future__ import annotations
 
-import re
 from enum import Enum
 
 
@@ -16,7 +16,7 @@ class Verb(str, Enum):
     SESSION_STYLE = "session.style"     # UpdateStyle, PUT /v1/sessions/{id}/style
     SESSION_CLOSE = "session.close"     # CloseSession
     SESSION_TAKE = "session.take"       # TakeShot (take and release), POST /v1/sessions/{id}/take
-    SESSION_READ = "session.read"       # list, timeline, A-map, monitors, top view
+    SESSION_READ = "session.read"       # list, timeline, A-map, monitors, top view, the match directors
     LEVEL_READ = "level.read"           # list and read levels and their jobs
     LEVEL_WRITE = "level.write"         # add, replace, delete levels; cancel their jobs
     JOB_SUBMIT = "job.submit"           # submit an overview job
@@ -35,16 +35,6 @@ ROLE_VERBS: dict[str, frozenset[Verb]] = {
     "admin": frozenset(Verb),
 }
 ROLES = tuple(ROLE_VERBS)
-
-_TENANT = re.compile(r"[a-z0-9][a-z0-9_-]{0,62}")
-
-
-def check_tenant(tenant: str) -> None:
-    """ValueError unless `tenant` is 1-63 of a-z, 0-9, '_' and '-' (it names levels' folders)."""
-    if not _TENANT.fullmatch(tenant):
-        raise ValueError(f"tenant {tenant!r}: expected 1-63 characters of a-z, 0-9, '_' and '-', "
-                         "starting with a letter or digit")
-
 
 def allows(role: str, verb: Verb) -> bool:
     return verb in ROLE_VERBS.get(role, ())

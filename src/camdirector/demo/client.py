@@ -76,7 +76,8 @@ def stream_demo(url: str, scene: DemoScene, lens: Lens, seconds: float, visibili
     `zmq_server_key`, when the server checks keys); returns the poses and the timings."""
     n_frames = int(round(seconds * FPS))
     sent_at: list[float] = []
-    updates, rtt_ms = [], []
+    updates: list[cd.pb.CameraUpdate] = []
+    rtt_ms: list[float] = []
     request = session_request(scene, lens, visibility)
     with cd.connect(url, key=key, zmq_server_key=zmq_server_key) as client, client.create_session(request) as session:
         for update in session.stream(_paced_frames(scene, n_frames, sent_at)):
@@ -126,7 +127,9 @@ def run_demo(out_dir: Path, seconds: float = 20.0, transport: str = "grpc", rend
         print(f"  server ready: gRPC {server.grpc}, ZeroMQ {server.zmq}, HTTP {server.http}")
         print(f"  watch it in the dashboard: http://{server.http}/dashboard/ (log in with the key in "
               f"{server.ready['admin_key_file']})")
-        result = stream_demo(server.url(transport), scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility),
+        url = server.url(transport)
+        assert url is not None  # the server runs every transport
+        result = stream_demo(url, scene, lens, seconds, cd.pb.VisibilityMode.Value(visibility),
                              key=server.admin_key,
                              zmq_server_key=server.zmq_server_key if transport == "zmq" else None)
     updates = result["updates"]

@@ -508,4 +508,5 @@ def _avatar_mesh() -> trimesh.Trimesh:
     nose = trimesh.creation.box(extents=(0.05, 0.05, 0.06))
     nose.apply_translation((0.0, 1.66, 0.14))
     parts += [torso, neck, head, nose]
-    return trimesh.util.concatenate(parts)
+    # trimesh annotates concatenate as returning any Geometry; of Trimesh parts it makes one Trimesh
+    return trimesh.util.concatenate(parts)  # type: ignore[return-value]

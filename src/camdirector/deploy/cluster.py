@@ -217,6 +217,7 @@ class Cluster:
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         self._children.append(has_job_worker)
         redis = RedisServer(self.folder / "redis", persist=True).start()
+        assert redis.proc is not None  # start() launched it
         self._children.append(redis.proc)
         self.state.update(redis=redis.url, job_queue=redis.url.rpartition("/")[0] + "/1", redis_pid=redis.proc.pid)
         self._save()
@@ -239,13 +240,14 @@ class Cluster:
             for k in range(1, self.settings.queue_workers + 1):
                 self.state["queue_workers"].append({"pid": self._start_queue_worker(k).pid})
         self._save()
-        self.haproxy = HAProxy(self.folder, tls, self.settings.balancer).start([n.backend for n in self.nodes])
-        self._children.append(self.haproxy.proc)
-        self.state.update(grpc=self.haproxy.grpc, http=self.haproxy.http, balancer={
-            "pid": self.haproxy.pid, "grpc_port": self.haproxy.grpc_port, "http_port": self.haproxy.http_port,
-            "config": str(self.haproxy.config_path), "socket": str(self.haproxy.socket_path)})
+        self.haproxy = haproxy = HAProxy(self.folder, tls, self.settings.balancer).start([n.backend for n in self.nodes])
+        assert haproxy.proc is not None  # start() launched it
+        self._children.append(haproxy.proc)
+        self.state.update(grpc=haproxy.grpc, http=haproxy.http, balancer={
+            "pid": haproxy.pid, "grpc_port": haproxy.grpc_port, "http_port": haproxy.http_port,
+            "config": str(haproxy.config_path), "socket": str(haproxy.socket_path)})
         self._save()
-        self.haproxy.wait_until({n.node_id: "UP" for n in self.nodes}, self.settings.healthy_timeout_s)
+        haproxy.wait_until({n.node_id: "UP" for n in self.nodes}, self.settings.healthy_timeout_s)
 
     def _start_nodes(self, numbers) -> list[NodeInfo]:
         """Starts nodes node-K for K in numbers all at once; returns them once each is ready."""
@@ -372,9 +374,16 @@ class Cluster:
         (node,) = self._start_nodes([max(n.server_id for n in self.nodes) + 1])
         self.state["nodes"].append(dataclasses.asdict(node))
         self._save()
-        self.haproxy.add(node.backend)
-        self.haproxy.wait_until({node.node_id: "UP"}, self.settings.healthy_timeout_s)
+        balancer = self.balancer()
+        balancer.add(node.backend)
+        balancer.wait_until({node.node_id: "UP"}, self.settings.healthy_timeout_s)
         return node
+
+    def balancer(self) -> HAProxy:
+        """The cluster's HAProxy; ClusterError for a cluster that never got as far as starting it."""
+        if self.haproxy is None:
+            raise ClusterError(f"the cluster in {self.folder} has no balancer (it did not come up)")
+        return self.haproxy
 
     def __enter__(self) -> Cluster:
         return self
@@ -410,7 +419,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             cluster = Cluster.attach(args.dir)
             print(json.dumps({**cluster.as_dict(), "running_pids": cluster.running_pids(),
-                              "balancer_sees": cluster.haproxy.server_states()}), flush=True)
+                              "balancer_sees": cluster.balancer().server_states()}), flush=True)
     except (ClusterError, ServiceError, ValueError) as exc:
         print(f"cluster.sh {args.command}: {exc}", file=sys.stderr)
         return 1

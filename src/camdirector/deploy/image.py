@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from camdirector.deploy.services import ServiceError
@@ -107,13 +108,15 @@ def local_base(name: str = LOCAL_BASE, log=print) -> str:
                 if item.is_file():
                     item.unlink()
         tar = subprocess.Popen(["tar", "-C", str(rootfs), "-c", "."], stdout=subprocess.PIPE)
+        archive = tar.stdout
+        assert archive is not None  # stdout=PIPE
         try:
             podman("import", "--change", "CMD [\"/bin/bash\"]",
                    "--change", "ENV PIP_CERT=/etc/ssl/certs/ca-certificates.crt",
                    "--change", f"LABEL camdirector.base-revision={BASE_REVISION}",
-                   "-", name, stdin=tar.stdout, timeout_s=600)
+                   "-", name, stdin=archive, timeout_s=600)
         finally:
-            tar.stdout.close()
+            archive.close()
             tar.wait()
     log(f"made {name} in {time.monotonic() - started:.0f} s")
     return name
@@ -175,8 +178,8 @@ class Container:
     """One container of the image on the host's network, `name` unique on this machine; its
     data directory the named volume `volume`. start() / kill() / start() again keep the volume."""
 
-    def __init__(self, image: str, name: str, volume: str, args: list[str] = (), env: dict[str, str] | None = None,
-                 mounts: list[str] = ()):
+    def __init__(self, image: str, name: str, volume: str, args: Sequence[str] = (), env: dict[str, str] | None = None,
+                 mounts: Sequence[str] = ()):
         self.image, self.name, self.volume = image, name, volume
         self.args, self.env, self.mounts = list(args), dict(env or {}), list(mounts)
         self.created = False

@@ -10,7 +10,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Collection, Mapping
 from pathlib import Path
+from typing import Any
 
 
 def worker_pids(server_pid: int) -> list[int]:
@@ -44,9 +46,9 @@ class ServerProcess:
     authentication on, `admin_key` then holding the admin key it made and `zmq_server_key` its
     CURVE public key (docs/security.md)."""
 
-    def __init__(self, *args: str, transports=("grpc", "zmq", "http"), env: dict | None = None,
-                 python: str = sys.executable, command: list[str] | None = None, base_env: dict | None = None,
-                 cwd: str | Path | None = None, auth: bool = False):
+    def __init__(self, *args: str, transports: Collection[str] = ("grpc", "zmq", "http"),
+                 env: Mapping[str, str] | None = None, python: str = sys.executable, command: list[str] | None = None,
+                 base_env: Mapping[str, str] | None = None, cwd: str | Path | None = None, auth: bool = False):
         self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
         self.log_path = Path(self._dir.name) / "server.log"
         self._log = open(self.log_path, "w+")
@@ -60,11 +62,14 @@ class ServerProcess:
             cmd.append("--no-auth")
         self.proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=self._log, text=True,
                                      env={**(os.environ if base_env is None else base_env), **(env or {})}, cwd=cwd)
-        line = self.proc.stdout.readline()
+        stdout = self.proc.stdout
+        assert stdout is not None  # stdout=PIPE
+        self._stdout = stdout
+        line = stdout.readline()
         if not line:
             self.proc.wait(15)
             raise RuntimeError(f"the server did not start: {self.log_tail()}")
-        self.ready: dict = json.loads(line)
+        self.ready: dict[str, Any] = json.loads(line)  # the server's JSON ready line
         self.grpc: str | None = self.ready.get("grpc")
         self.zmq: str | None = self.ready.get("zmq")
         self.http: str | None = self.ready.get("http")
@@ -72,8 +77,8 @@ class ServerProcess:
         key_file = self.ready.get("admin_key_file")
         self.admin_key: str | None = Path(key_file).read_text().strip() if key_file else None
 
-    def url(self, transport: str) -> str:
-        """The SDK's URL for "grpc" or "zmq"."""
+    def url(self, transport: str) -> str | None:
+        """The SDK's URL for "grpc" or "zmq"; None for ZeroMQ when the server was started without it."""
         if transport == "grpc":
             return f"grpcs://{self.grpc}" if self.ready.get("tls") else f"grpc://{self.grpc}"
         return self.zmq
@@ -108,7 +113,7 @@ class ServerProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        self.proc.stdout.close()
+        self._stdout.close()
         self._log.close()
         self._dir.cleanup()
         return self.proc.returncode
@@ -116,5 +121,5 @@ class ServerProcess:
     def __enter__(self) -> ServerProcess:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()

@@ -60,7 +60,8 @@ class DirectorGrpc:
         self.calls = SessionCalls(router, guard, TRANSPORT)
         self.metrics = router.metrics
 
-    async def _unary(self, rpc: str, payload: bytes, context: grpc.aio.ServicerContext) -> bytes:
+    # grpc annotates ServicerContext.abort as returning, but it always raises: no return after it
+    async def _unary(self, rpc: str, payload: bytes, context: grpc.aio.ServicerContext) -> bytes:  # type: ignore[return]
         """The RPC's call (session_calls.py) for a caller whose key allows its verb."""
         t0 = time.perf_counter()
         try:

@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TextIO
 
 from camdirector.jobs.executor import POLL_S, PURGE_INTERVAL_S, Attempt, JobExecutor, purge_expired
 from camdirector.jobs.job_settings import JobSettings
@@ -54,7 +55,7 @@ class JobRunner:
         self._wake_lock = threading.Lock()
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
-        self._lock_file = None
+        self._lock_file: TextIO | None = None
 
     # -- lifetime -----------------------------------------------------------------------------
 
@@ -63,11 +64,11 @@ class JobRunner:
         Raises RuntimeError when another runner holds the folder."""
         if self._thread is not None:
             raise RuntimeError("JobRunner already started")
-        self._lock_file = open(self.store.root / "runner.lock", "w")
+        self._lock_file = lock_file = open(self.store.root / "runner.lock", "w")
         try:
-            fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
-            self._lock_file.close()
+            lock_file.close()
             self._lock_file = None
             raise RuntimeError(f"another job runner uses {self.store.root}") from None
         self._executor.start()

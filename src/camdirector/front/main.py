@@ -22,7 +22,8 @@ from camdirector.front.job_runner import open_jobs
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
 from camdirector.front.zmq_service import ZmqTransport, curve_server_keys
-from camdirector.jobs import JobsUnavailable, service_kinds
+from camdirector.infra.plugins import import_plugins
+from camdirector.jobs import JobSettings, JobsUnavailable, service_kinds
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.checkpoint_stores import CheckpointError, open_store
 
@@ -93,15 +94,16 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             sock = _bind_http(settings.http_addr)
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
             app = build_app(router, bound, secure_cookie=settings.tls)
-            jobs = open_jobs(Path(settings.data_dir), service_kinds(), settings.job_settings())
-            install_overview_routes(app, jobs, settings.job_settings())
-            install_level_routes(app, jobs, Path(settings.data_dir), settings.job_settings())
+            job_settings = JobSettings.for_server(settings)
+            jobs = open_jobs(Path(settings.data_dir), service_kinds(), job_settings)
+            install_overview_routes(app, jobs, job_settings)
+            install_level_routes(app, jobs, Path(settings.data_dir), job_settings)
             jobs.start()  # queued and interrupted jobs from before a restart run again
             # A live view left open past shutdown is cut after this long (the hub ends its own first).
-            tls = {"ssl_certfile": settings.tls_cert, "ssl_keyfile": settings.tls_key} if settings.tls else {}
-            config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3, **tls)
+            config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3,
+                                    ssl_certfile=settings.tls_cert if settings.tls else None,
+                                    ssl_keyfile=settings.tls_key if settings.tls else None)
             http_server = uvicorn.Server(config)
-            http_server.install_signal_handlers = lambda: None  # ours above
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
         print(json.dumps({"event": "ready", **bound, "workers": settings.workers, "tls": settings.tls, **announce}),
               flush=True)
@@ -111,6 +113,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
         if http_server is not None:
             app.state.views.close()
             http_server.should_exit = True
+            assert http_task is not None  # started with http_server
             await http_task
         if jobs is not None:
             jobs.close()  # running jobs go back to the queue
@@ -139,6 +142,11 @@ def run(settings: ServerSettings) -> int:
             if not Path(what).is_file():
                 print(f"camdirector serve: TLS file {what} cannot be read", file=sys.stderr)
                 return 2
+    try:  # the plugins register themselves in the front; every worker imports them again (worker/main.py)
+        import_plugins(settings.plugins)
+    except ValueError as exc:
+        print(f"camdirector serve: {exc}", file=sys.stderr)
+        return 2
     try:  # a node whose checkpoints have nowhere to go refuses to start, rather than lose sessions later
         store = open_store(settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s, check=True)
     except CheckpointError as exc:

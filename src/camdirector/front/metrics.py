@@ -8,7 +8,7 @@ _SECONDS_BUCKETS = (5e-5, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 
 
 
 class Metrics:
-    def __init__(self):
+    def __init__(self) -> None:
         self._children: dict[tuple, object] = {}
         self.registry = CollectorRegistry()
         r = self.registry

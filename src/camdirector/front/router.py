@@ -98,11 +98,11 @@ class SessionRouter:
         authentication on (None: no such session), `default` without."""
         if not self.guard.enabled:
             return "default"
-        return self.guard.store.session_owner(session_id)
+        return self.guard.key_store().session_owner(session_id)
 
     def _forget(self, session_id: str) -> None:
         if self.guard.enabled:
-            self.guard.store.forget_session(session_id)
+            self.guard.key_store().forget_session(session_id)
 
     def _least_loaded_slot(self, exclude: int | None = None) -> int:
         load = [0] * self.pool.slots
@@ -144,7 +144,7 @@ class SessionRouter:
             self._reserved -= 1
             self._reserved_by[tenant] -= 1
         if self.guard.enabled:
-            self.guard.store.set_session_owner(session_id, tenant)
+            self.guard.key_store().set_session_owner(session_id, tenant)
         now = self.clock()
         self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport},
                                                  tenant=tenant)

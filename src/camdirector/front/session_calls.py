@@ -16,6 +16,7 @@ the client speaks a newer protocol than this server (version.py; docs/protocol.m
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from google.protobuf import json_format
 
@@ -100,7 +101,7 @@ class SessionCalls:
     async def take_shot(self, payload: bytes, identity: Identity) -> bytes:
         reply = await self.router.take_shot(payload, identity.tenant)
         request = pb.TakeShotRequest.FromString(payload)
-        detail = {"via": self.transport}
+        detail: dict[str, Any] = {"via": self.transport}  # JSON, into the audit trail
         if not request.release:
             detail.update(subject_ids=list(request.subject_ids), kind=pb.ShotKind.Name(request.kind))
         self.guard.audit(identity, "release" if request.release else "take", request.session_id, detail)

@@ -20,8 +20,7 @@ from dataclasses import dataclass
 from camdirector.errors import DirectorError, exhausted
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
-from camdirector.render.monitor import decode_view
-from camdirector.render.snapshots import ViewQuery
+from camdirector.infra.channels import ViewQuery, decode_view
 
 MAX_ENTRIES = 256        # pictures kept (a few per watched session)
 RENDER_TIMEOUT_S = 10.0  # a render taking longer answers UNAVAILABLE (503)

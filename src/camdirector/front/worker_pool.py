@@ -30,6 +30,7 @@ import grpc
 from camdirector.errors import DirectorError
 from camdirector.infra.channels import REPLY, REQUEST_ID_MODULUS, FrameMetrics, decode_reply_tail, encode_request, tail_length
 from camdirector.server_settings import ServerSettings
+from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.main import worker_main
 from camdirector.worker.table import SessionTable
 
@@ -42,11 +43,12 @@ WORKER_START_WAIT_S = 30.0  # a request for a restarting worker waits this long 
 class _Worker:
     def __init__(self, index: int):
         self.index = index
-        self.process: multiprocessing.process.BaseProcess | None = None
-        self.writer: asyncio.StreamWriter | None = None
-        self.reader_task: asyncio.Task | None = None
+        # its process and socket, set by WorkerPool._spawn before any use (and again for each successor)
+        self.process: multiprocessing.process.BaseProcess
+        self.writer: asyncio.StreamWriter
+        self.reader_task: asyncio.Task[None]
         self.ready = asyncio.Event()   # started and answering; cleared from its death to its successor's start
-        self.replacing: asyncio.Task | None = None
+        self.replacing: asyncio.Task[None] | None = None
 
 
 class WorkerPool:
@@ -56,11 +58,12 @@ class WorkerPool:
         self.settings = settings
         self.size = settings.workers
         self.on_worker_lost = on_worker_lost
-        self._inline = SessionTable(settings) if self.size == 0 else None
+        self._inline = Dispatcher(SessionTable(settings)) if self.size == 0 else None
         self._workers = [_Worker(i) for i in range(self.size)]
-        self._pending: dict[int, asyncio.Future] = {}
+        # request id -> (its reply's future, the index of the worker it was sent to)
+        self._pending: dict[int, tuple[asyncio.Future[tuple[bytes, FrameMetrics | None]], int]] = {}
         self._ids = itertools.count()
-        self._monitor: asyncio.Task | None = None
+        self._monitor: asyncio.Task[None] | None = None
         self._stopping = False
         self._mp = multiprocessing.get_context("spawn")
 
@@ -98,9 +101,10 @@ class WorkerPool:
                 header = REPLY.unpack(await reader.readexactly(REPLY.size))
                 body, metrics = decode_reply_tail(header, await reader.readexactly(tail_length(header)))
                 request_id, code = header[0], header[1]
-                future = self._pending.pop(request_id, None)
-                if future is None or future.done():
+                pending = self._pending.pop(request_id, None)
+                if pending is None or pending[0].done():
                     continue
+                future = pending[0]
                 if code == 0:
                     future.set_result((body, metrics))
                 else:
@@ -116,8 +120,8 @@ class WorkerPool:
         log.error("worker %d died (exit code %s); restarting it", worker.index, worker.process.exitcode)
         worker.ready.clear()
         worker.writer.close()
-        for request_id, future in list(self._pending.items()):
-            if getattr(future, "worker_index", None) == worker.index and not future.done():
+        for request_id, (future, worker_index) in list(self._pending.items()):
+            if worker_index == worker.index and not future.done():
                 future.set_exception(DirectorError(grpc.StatusCode.UNAVAILABLE,
                                                    "the worker holding this session died; retry: it is being restored"))
                 self._pending.pop(request_id, None)
@@ -152,9 +156,8 @@ class WorkerPool:
         if worker.writer.is_closing():  # died just now; _lost is starting its successor
             raise DirectorError(grpc.StatusCode.UNAVAILABLE, f"worker {worker.index} died and is restarting")
         request_id = next(self._ids) % REQUEST_ID_MODULUS
-        future = asyncio.get_running_loop().create_future()
-        future.worker_index = worker.index
-        self._pending[request_id] = future
+        future: asyncio.Future[tuple[bytes, FrameMetrics | None]] = asyncio.get_running_loop().create_future()
+        self._pending[request_id] = (future, worker.index)
         try:
             worker.writer.writelines(encode_request(request_id, op, session_id, payload))
             try:
@@ -173,11 +176,11 @@ class WorkerPool:
         past timeout_s, when given)."""
         if self._inline is not None:
             if op == "view":
-                return await asyncio.wait_for(self._inline_view(session_id, payload), timeout_s)
+                return await asyncio.wait_for(self._inline_view(self._inline, session_id, payload), timeout_s)
             return self._inline.handle_bytes(op, session_id, payload)
         return await self._call_worker(self._workers[slot], op, session_id, payload, timeout_s)
 
-    async def _inline_view(self, session_id: str, payload: bytes) -> tuple[bytes, None]:
+    async def _inline_view(self, inline: Dispatcher, session_id: str, payload: bytes) -> tuple[bytes, None]:
         """A view of an inline session: the table answers from the render process's thread."""
         loop = asyncio.get_running_loop()
         future = loop.create_future()
@@ -190,13 +193,16 @@ class WorkerPool:
             else:
                 future.set_exception(DirectorError(_CODES.get(status, grpc.StatusCode.UNKNOWN), body.decode()))
 
-        self._inline.view(session_id, payload, lambda status, body: loop.call_soon_threadsafe(settle, status, body))
+        def reply(status: int, body: bytes) -> None:  # from the render thread
+            loop.call_soon_threadsafe(settle, status, body)
+
+        inline.view(session_id, payload, reply)
         return await future
 
     async def stop(self) -> None:
         self._stopping = True
         if self._inline is not None:
-            self._inline.close_all()
+            self._inline.table.close_all()
         if self._monitor is not None:
             self._monitor.cancel()
         for worker in self._workers:

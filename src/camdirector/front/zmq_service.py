@@ -52,7 +52,9 @@ def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
                 os.replace(public, folder / "server.key")
             except FileExistsError:
                 pass
-    return zmq.auth.load_certificate(secret_file)
+    public_key, secret_key = zmq.auth.load_certificate(secret_file)
+    assert secret_key is not None  # the secret file holds both halves
+    return public_key, secret_key
 
 
 class ZmqTransport:
@@ -111,16 +113,16 @@ class ZmqTransport:
                 raise unimplemented(f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, "
                                     "TakeShot, CloseSession")
             need, call = handler
-            identity = self.guard.authorize(authorization, need.verb, fresh=need.fresh)
+            caller = self.guard.authorize(authorization, need.verb, fresh=need.fresh)
             if len(payload) > self.router.settings.max_message_bytes:
                 raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
-            reply = [b"0", await call(payload, identity)]
+            reply = [b"0", await call(payload, caller)]
         except DirectorError as exc:
             self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
             reply = [str(exc.code.value[0]).encode(), exc.message.encode()]
         except Exception as exc:  # never let one request end the loop; INTERNAL, as over gRPC
-            name = rpc[:64].decode(errors="replace")
-            error = internal(exc, name, named_session(name, body[1]) if len(body) in (2, 3) else None, log)
+            rpc_name = rpc[:64].decode(errors="replace")
+            error = internal(exc, rpc_name, named_session(rpc_name, body[1]) if len(body) in (2, 3) else None, log)
             self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
             reply = [str(error.code.value[0]).encode(), error.message.encode()]
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set

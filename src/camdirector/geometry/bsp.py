@@ -26,9 +26,12 @@ and the byte offset in the file.
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.meshes import MeshError, TriMesh, from_arrays
 from camdirector.geometry.quake_frame import points_to_world
@@ -50,8 +53,8 @@ _SKIPPED_WORDS = ("trigger", "clip")
 @dataclass(frozen=True)
 class _Format:
     name: str
-    face: np.dtype   # dface_t: planenum, side, firstedge, numedges, texinfo, styles[4], lightofs
-    edge: np.dtype   # dedge_t: two vertex numbers
+    face: np.dtype[np.void]   # dface_t: planenum, side, firstedge, numedges, texinfo, styles[4], lightofs
+    edge: np.dtype[np.void]   # dedge_t: two vertex numbers
 
 
 _FACE29 = np.dtype([("planenum", "<i2"), ("side", "<i2"), ("firstedge", "<i4"), ("numedges", "<i2"),
@@ -88,7 +91,10 @@ def _lump(data: bytes, name: str, record_bytes: int = 1) -> tuple[int, memoryvie
     return offset, memoryview(data)[offset:offset + length]
 
 
-def _records(data: bytes, name: str, dtype: np.dtype) -> tuple[int, np.ndarray]:
+_Scalar = TypeVar("_Scalar", bound=np.generic)
+
+
+def _records(data: bytes, name: str, dtype: np.dtype[_Scalar]) -> tuple[int, npt.NDArray[_Scalar]]:
     offset, raw = _lump(data, name, dtype.itemsize)
     return offset, np.frombuffer(raw, dtype=dtype)
 
@@ -119,7 +125,7 @@ def _texture_names(data: bytes) -> list[str]:
     return names
 
 
-def _kept_texinfo(data: bytes) -> np.ndarray:
+def _kept_texinfo(data: bytes) -> npt.NDArray[np.bool_]:
     """(n_texinfo,) bool: the texinfo's texture is level geometry (module docstring)."""
     names = _texture_names(data)
     skipped = np.array([n.startswith(_SKIPPED_PREFIXES) or any(w in n for w in _SKIPPED_WORDS) for n in names],
@@ -131,10 +137,11 @@ def _kept_texinfo(data: bytes) -> np.ndarray:
     if len(bad):
         raise _fault("texinfo", offset + int(bad[0]) * TEXINFO_BYTES,
                      f"texinfo {bad[0]}: texture {miptex[bad[0]]} out of range ({len(names)} textures)")
-    return ~skipped[miptex]
+    kept: npt.NDArray[np.bool_] = ~skipped[miptex]
+    return kept
 
 
-def _world_faces(data: bytes, fmt: _Format) -> tuple[int, int, np.ndarray]:
+def _world_faces(data: bytes, fmt: _Format) -> tuple[int, int, npt.NDArray[np.void]]:
     """(faces lump offset, index of the first, records) of model 0's faces."""
     offset, models = _lump(data, "models", MODEL_BYTES)
     if len(models) == 0:
@@ -159,7 +166,7 @@ def from_bsp(data: bytes) -> TriMesh:
     faces_at, first, faces = _world_faces(data, fmt)
     face_index = first + np.arange(len(faces))  # in the faces lump, for messages
 
-    def face_fault(bad: np.ndarray, what: str) -> MeshError:
+    def face_fault(bad: npt.NDArray[np.bool_], what: str) -> MeshError:
         i = int(face_index[np.flatnonzero(bad)[0]])
         return _fault("faces", faces_at + i * fmt.face.itemsize, f"face {i}: {what}")
 
@@ -188,17 +195,17 @@ def from_bsp(data: bytes) -> TriMesh:
     corner_surfedge = first_edge[corner_face] + np.arange(len(corner_face)) - start[corner_face]
     signed = surfedges[corner_surfedge].astype(np.int64)
     edges_at, edges = _records(data, "edges", fmt.edge)
-    bad = np.flatnonzero(np.abs(signed) >= len(edges))
-    if len(bad):
-        raise _fault("surfedges", surfedges_at + 4 * int(corner_surfedge[bad[0]]),
-                     f"surfedge {corner_surfedge[bad[0]]}: edge {signed[bad[0]]} out of range ({len(edges)} edges)")
+    bad_at = np.flatnonzero(np.abs(signed) >= len(edges))
+    if len(bad_at):
+        raise _fault("surfedges", surfedges_at + 4 * int(corner_surfedge[bad_at[0]]),
+                     f"surfedge {corner_surfedge[bad_at[0]]}: edge {signed[bad_at[0]]} out of range ({len(edges)} edges)")
     edge = np.abs(signed)
     corner_vertex = np.where(signed >= 0, edges[edge, 0], edges[edge, 1]).astype(np.int64)
     _, points = _records(data, "vertexes", np.dtype(("<f4", 3)))
-    bad = np.flatnonzero(corner_vertex >= len(points))
-    if len(bad):
-        raise _fault("edges", edges_at + int(edge[bad[0]]) * fmt.edge.itemsize,
-                     f"edge {edge[bad[0]]}: vertex {corner_vertex[bad[0]]} out of range ({len(points)} vertexes)")
+    bad_at = np.flatnonzero(corner_vertex >= len(points))
+    if len(bad_at):
+        raise _fault("edges", edges_at + int(edge[bad_at[0]]) * fmt.edge.itemsize,
+                     f"edge {edge[bad_at[0]]}: vertex {corner_vertex[bad_at[0]]} out of range ({len(points)} vertexes)")
     # Fan (c0, c_k+1, c_k) for k = 1..n-2: reversed, so counter-clockwise from the front.
     fans = n_edges - 2
     tri_face = np.repeat(np.arange(len(faces)), fans)
@@ -209,7 +216,7 @@ def from_bsp(data: bytes) -> TriMesh:
     return from_arrays(points_to_world(points[used]), compact.reshape(-1, 3))
 
 
-def _entity_tokens(text: bytes, offset: int):
+def _entity_tokens(text: bytes, offset: int) -> Iterator[tuple[int, str | None, str | None]]:
     """(byte index, word or None, brace or None) of each token of the entity text that starts at
     file byte `offset`: braces, quoted strings (no escapes, as QW/client/common.c COM_Parse) and
     bare words; // comments are skipped."""
@@ -264,6 +271,7 @@ def bsp_entities(data: bytes) -> list[dict[str, str]]:
         elif key is None:
             key = word
         else:
+            assert word is not None  # _entity_tokens yields a brace or a word, and this token is no brace
             current[key], key = word, None
     if current is not None:
         raise _fault("entities", offset, f"entity without its closing '}}' at byte {offset + len(text)}")

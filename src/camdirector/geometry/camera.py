@@ -7,9 +7,11 @@ x is right, y is up, both in [-1, 1] at the frame's edges.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 
@@ -38,15 +40,15 @@ class Lens:
 class CameraPose:
     """position_world: (3,) metres; rotation_xyzw: (4,) unit quaternion camera-to-world."""
 
-    position_world: np.ndarray
-    rotation_xyzw: np.ndarray
+    position_world: npt.NDArray[np.float64]
+    rotation_xyzw: npt.NDArray[np.float64]
     vertical_fov_deg: float
 
 
 _FEW_POINTS = 4  # up to this many points (a frame's targets) scalar arithmetic beats numpy's per-call overhead
 
 
-def project_to_screen(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarray:
+def project_to_screen(pose: CameraPose, lens: Lens, points_world: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Normalised screen positions (n, 2) of world points (n, 3); NaN for points behind the camera."""
     points = np.atleast_2d(points_world)
     if len(points) <= _FEW_POINTS:  # the per-frame case (a rig's framing error): 2 us instead of 13
@@ -62,7 +64,7 @@ def project_to_screen(pose: CameraPose, lens: Lens, points_world: np.ndarray) ->
     return out
 
 
-def _project_few(pose: CameraPose, lens: Lens, points: np.ndarray) -> np.ndarray:
+def _project_few(pose: CameraPose, lens: Lens, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """project_to_screen for a few points (n, 3), in scalars: the camera's axes are the columns of
     the rotation (quat_to_matrix), a point's camera coordinates its offset dotted with them."""
     x, y, z, w = pose.rotation_xyzw.tolist()
@@ -83,8 +85,8 @@ def _project_few(pose: CameraPose, lens: Lens, points: np.ndarray) -> np.ndarray
     return np.array(out, dtype=np.float64).reshape(len(points), 2)
 
 
-def project_from_cameras(positions_world: np.ndarray, rotations: np.ndarray, lens: Lens,
-                         points_world: np.ndarray) -> np.ndarray:
+def project_from_cameras(positions_world: npt.NDArray[np.float64], rotations: npt.NDArray[np.float64], lens: Lens,
+                         points_world: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """project_to_screen for m cameras at once: (m, n, 2) normalised screen positions of world
     points (n, 3) from cameras at positions_world (m, 3) with camera-to-world rotation matrices
     (m, 3, 3); NaN for points behind a camera (and for a camera whose rotation is NaN)."""
@@ -98,7 +100,7 @@ def project_from_cameras(positions_world: np.ndarray, rotations: np.ndarray, len
     return out
 
 
-def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarray:
+def in_frame(pose: CameraPose, lens: Lens, points_world: npt.ArrayLike) -> npt.NDArray[np.bool_]:
     """(n,) bool: whether each point (n, 3) m lies in the view frustum of `pose`: at least
     NEAR_PLANE_M in front of the camera along its view axis, and within the frame's edges
     (|x| <= 1 and |y| <= 1 in normalised screen units) at the pose's vertical field of view and the
@@ -107,10 +109,12 @@ def in_frame(pose: CameraPose, lens: Lens, points_world: np.ndarray) -> np.ndarr
     screen = project_to_screen(pose, frame_lens, points_world)                  # NaN behind the camera
     z_camera = (np.atleast_2d(points_world) - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
     with np.errstate(invalid="ignore"):
-        return (-z_camera >= NEAR_PLANE_M) & np.all(np.abs(screen) <= 1.0, axis=1)
+        inside: npt.NDArray[np.bool_] = (-z_camera >= NEAR_PLANE_M) & np.all(np.abs(screen) <= 1.0, axis=1)
+    return inside
 
 
-def level_look_rotation(camera_world: np.ndarray, point_world: np.ndarray, screen_xy, lens: Lens) -> np.ndarray:
+def level_look_rotation(camera_world: npt.NDArray[np.float64], point_world: npt.ArrayLike, screen_xy: Sequence[float],
+                        lens: Lens) -> npt.NDArray[np.float64]:
     """Camera-to-world quaternion (4,) xyzw with no roll (camera x axis horizontal, +Y up) that
     shows point_world at normalised screen_xy (2,) (`level_rotation`)."""
     d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
@@ -118,7 +122,8 @@ def level_look_rotation(camera_world: np.ndarray, point_world: np.ndarray, scree
     return matrix_to_quat(level_rotation(a / np.linalg.norm(a), d / np.linalg.norm(d)))
 
 
-def level_look_matrices(cameras_world: np.ndarray, point_world, screen_xy, lens: Lens) -> np.ndarray:
+def level_look_matrices(cameras_world: npt.ArrayLike, point_world: npt.ArrayLike, screen_xy: Sequence[float],
+                        lens: Lens) -> npt.NDArray[np.float64]:
     """(m, 3, 3) camera-to-world rotation matrices of `level_look_rotation` for m cameras (m, 3) at
     once (a place search tries hundreds); rows of NaN for a camera at the point."""
     d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
@@ -128,7 +133,7 @@ def level_look_matrices(cameras_world: np.ndarray, point_world, screen_xy, lens:
     return level_rotations(a, d / np.linalg.norm(d))
 
 
-def level_rotation(world_dir, camera_dir) -> np.ndarray:
+def level_rotation(world_dir: Iterable[float], camera_dir: Iterable[float]) -> npt.NDArray[np.float64]:
     """(3, 3) `level_rotations` for one world direction (3,), in scalars: the per-frame case, where
     numpy's per-call cost would triple it."""
     wx, wy, wz = (float(c) for c in world_dir)
@@ -143,7 +148,7 @@ def level_rotation(world_dir, camera_dir) -> np.ndarray:
     return np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp)))
 
 
-def level_rotations(world_dirs: np.ndarray, camera_dir) -> np.ndarray:
+def level_rotations(world_dirs: npt.ArrayLike, camera_dir: Iterable[float]) -> npt.NDArray[np.float64]:
     """(m, 3, 3) camera-to-world rotations with no roll that turn the unit camera-space direction
     camera_dir (3,) onto each unit world direction of world_dirs (m, 3); rows of NaN stay NaN.
 

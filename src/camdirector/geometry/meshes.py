@@ -6,9 +6,11 @@ message fit for a client.
 from __future__ import annotations
 
 import io
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import trimesh
 
 # Triangles with a smaller area are dropped: they hide nothing and upset ray casting.
@@ -23,15 +25,15 @@ class MeshError(ValueError):
 class TriMesh:
     """vertices: (n, 3) float64 metres, local frame; faces: (m, 3) int32 indices into vertices."""
 
-    vertices: np.ndarray
-    faces: np.ndarray
+    vertices: npt.NDArray[np.float64]
+    faces: npt.NDArray[np.int32]
 
     @property
     def triangle_count(self) -> int:
         return int(self.faces.shape[0])
 
 
-def from_arrays(vertices, faces) -> TriMesh:
+def from_arrays(vertices: npt.ArrayLike, faces: npt.ArrayLike) -> TriMesh:
     """Validated mesh from flat or shaped arrays: vertices (3n,) or (n, 3), faces (3m,) or (m, 3).
 
     Non-finite coordinates, out-of-range indices and meshes without one proper triangle are
@@ -91,11 +93,13 @@ def _positive(**values: float) -> None:
             raise MeshError(f"primitive {name} must be a positive finite number, got {value}")
 
 
-# trimesh builds cylinders and capsules along +Z; our primitives stand along +Y.
-_Z_TO_Y = trimesh.transformations.rotation_matrix(-np.pi / 2.0, [1.0, 0.0, 0.0])
+# trimesh builds cylinders and capsules along +Z; our primitives stand along +Y. (trimesh leaves
+# rotation_matrix unannotated: the name below says what it takes and returns.)
+_rotation_matrix: Callable[[float, list[float]], npt.NDArray[np.float64]] = trimesh.transformations.rotation_matrix
+_Z_TO_Y = _rotation_matrix(-np.pi / 2.0, [1.0, 0.0, 0.0])
 
 
-def box(size_xyz) -> TriMesh:
+def box(size_xyz: Iterable[float]) -> TriMesh:
     """Axis-aligned box of full extents size_xyz (3,) metres, centred on the origin."""
     sx, sy, sz = (float(s) for s in size_xyz)
     _positive(size_x=sx, size_y=sy, size_z=sz)

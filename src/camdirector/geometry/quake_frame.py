@@ -11,6 +11,7 @@ Axes: (x, y, z)_quake -> (x, z, -y)_world, a proper rotation (determinant +1), s
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 M_PER_UNIT = 1.0 / 32.0          # 56 units = 1.75 m (module docstring)
 PLAYER_HEIGHT_UNITS = 56.0        # hull mins z -24 to maxs z +32
@@ -20,20 +21,20 @@ PLAYER_HEIGHT_M = PLAYER_HEIGHT_UNITS * M_PER_UNIT
 PLAYER_RADIUS_M = PLAYER_RADIUS_UNITS * M_PER_UNIT
 
 
-def points_to_world(points_units: np.ndarray) -> np.ndarray:
+def points_to_world(points_units: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Quake points (..., 3) in units, Z up -> world points (..., 3) float64 in metres, Y up."""
     p = np.asarray(points_units, dtype=np.float64)
     return np.stack([p[..., 0], p[..., 2], -p[..., 1]], axis=-1) * M_PER_UNIT
 
 
-def feet_world(origins_units: np.ndarray) -> np.ndarray:
+def feet_world(origins_units: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """A player's feet in the world (..., 3) metres from its Quake origins (..., 3) units."""
     o = np.asarray(origins_units, dtype=np.float64).copy()
     o[..., 2] -= ORIGIN_ABOVE_FEET_UNITS
     return points_to_world(o)
 
 
-def view_rotation(pitch_deg: np.ndarray, yaw_deg: np.ndarray) -> np.ndarray:
+def view_rotation(pitch_deg: npt.ArrayLike, yaw_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Unit quaternions (..., 4) xyzw turning local +Z onto Quake's view direction, local +Y up.
 
     Quake's forward is (cos p cos y, cos p sin y, -sin p) for pitch p (positive looks down) and

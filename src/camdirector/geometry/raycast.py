@@ -10,8 +10,10 @@ and how a few are cast one by one).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
+import numpy.typing as npt
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
@@ -24,6 +26,10 @@ _EMBREE_MISS = 1e30  # embreex reports a miss as tfar = 1e37
 # small numpy calls per object cost less than the shared scene's fixed ones (the demo's 3 moving
 # obstacles: 35 us a query less, 13% of a FRAMING_ONLY frame).
 SOLO_MAX_OBJECTS = 4
+
+
+# RayScene._pose_arrays: bounding sphere centres (m, 3) and radii (m,), world -> local A (m, 3, 3) and b (m, 3).
+_PoseArrays = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
 
 
 def _embree_scene(meshes: list[TriMesh]) -> rtcore_scene.EmbreeScene:
@@ -78,13 +84,14 @@ class RayScene:
         self._meshes_local: list[TriMesh] = []
         self._reach_local: list[float] = []               # per object: farthest vertex from the local origin
         self._transforms: list[RigidTransform] = []
-        self._local: tuple[rtcore_scene.EmbreeScene, np.ndarray, np.ndarray] | None = None  # scene, offsets (m, 3), reach (m,)
-        self._poses: tuple[np.ndarray, ...] | None = None  # _pose_arrays(); None: moved since
+        # scene, offsets (m, 3), reach (m,)
+        self._local: tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+        self._poses: _PoseArrays | None = None  # _pose_arrays(); None: moved since
         self._solo_max = solo_max_objects
         # per object, cast one by one: its scene and world -> local matrix (None: moved since)
-        self._solo: list[tuple[rtcore_scene.EmbreeScene, np.ndarray | None]] = []
+        self._solo: list[tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64] | None]] = []
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[Callable[..., RayScene], tuple[list[TriMesh], int, list[tuple[str, TriMesh, RigidTransform]]]]:
         objects = [(object_id, self._meshes_local[row], self._transforms[row]) for object_id, row in self._index.items()]
         return _rebuilt, (self._static_meshes, self._solo_max, objects)
 
@@ -106,7 +113,8 @@ class RayScene:
         if self._solo:
             self._solo[row] = (self._solo[row][0], None)
 
-    def _each(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> list[tuple[rtcore_scene.EmbreeScene, np.ndarray]]:
+    def _each(self, box: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+              ) -> list[tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64]]]:
         """Per object, for casting a few one by one (class docstring): its own scene and its
         world-to-local matrix (4, 4), made on first use after a move. With `box`, (lo, hi) (3,)
         world metres around every segment of a query, only the objects whose bounding sphere
@@ -130,7 +138,7 @@ class RayScene:
             out.append((scene, world_to_local))
         return out
 
-    def _local_scene(self) -> tuple[rtcore_scene.EmbreeScene, np.ndarray, np.ndarray]:
+    def _local_scene(self) -> tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """The shared scene of local meshes, their offsets (m, 3) on a cubic grid and reaches (m,)."""
         if self._local is None:
             reach = np.array(self._reach_local)
@@ -142,7 +150,7 @@ class RayScene:
             self._local = scene, offsets, reach
         return self._local
 
-    def _pose_arrays(self) -> tuple[np.ndarray, ...]:
+    def _pose_arrays(self) -> _PoseArrays:
         """Bounding spheres, world centres (m, 3) and radii (m,), and world -> local x' = A x + b,
         A (m, 3, 3) = S^-1 R^T, b (m, 3) = -A p, made for all objects at once after a move (one
         vectorized pass costs less than one per object, or one per query, from ten objects on)."""
@@ -155,7 +163,8 @@ class RayScene:
                            -np.einsum("mij,mj->mi", linear, positions))
         return self._poses
 
-    def _cast_dynamic(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray, query: str):
+    def _cast_dynamic(self, origins: npt.NDArray[np.float64], directions: npt.NDArray[np.float64], t_max: npt.NDArray[np.float64],
+                      query: str) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float64]]:
         """Rays o + t d, 0 <= t <= t_max, (n, 3), (n, 3), (n,), against every moving object.
         Returns (ray index (p,), ray parameter of the hit (p,) float64) of the hits; a ray may appear
         once per object it hits. query: "OCCLUDED" (the parameter is then that of the segment's
@@ -198,7 +207,7 @@ class RayScene:
         hit = answer["geomID"] != _NO_HIT
         return ray[hit], t_in[hit] + answer["tfar"][hit].astype(np.float64)
 
-    def occluded(self, origins_world: np.ndarray, targets_world: np.ndarray) -> np.ndarray:
+    def occluded(self, origins_world: npt.ArrayLike, targets_world: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """Whether the segment from each origin to its target crosses any geometry.
 
         origins_world, targets_world: (n, 3) float64 metres (an origin may be (3,), broadcast).
@@ -228,7 +237,7 @@ class RayScene:
             hit[rest[self._cast_dynamic(origins[rest], directions[rest], tmax[rest].astype(np.float64), "OCCLUDED")[0]]] = True
         return hit
 
-    def first_hit(self, origins_world: np.ndarray, directions_world: np.ndarray) -> np.ndarray:
+    def first_hit(self, origins_world: npt.ArrayLike, directions_world: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Ray parameter of the nearest hit along each ray, in units of the direction's length.
 
         origins_world (n, 3) or (3,), directions_world (n, 3) float64. Returns (n,) float64, inf

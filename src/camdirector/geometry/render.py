@@ -16,12 +16,15 @@ drawn as two instanced calls instead of 40 single ones renders 2-3x faster.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.geometry.gl_context import egl_context, uniform
 from camdirector.geometry.transforms import quat_to_matrix
 
 # Pale blue-grey: grey columns and the orange avatar stand out against it. Fog fades distance to
@@ -92,7 +95,7 @@ void main() {
 """
 
 
-def perspective_matrix(lens: Lens, near_m: float, far_m: float) -> np.ndarray:
+def perspective_matrix(lens: Lens, near_m: float, far_m: float) -> npt.NDArray[np.float64]:
     """(4, 4) float64 OpenGL clip-from-camera matrix for the lens (vertical fov, aspect)."""
     if not 0.0 < near_m < far_m:
         raise ValueError(f"need 0 < near_m < far_m, got near_m={near_m}, far_m={far_m}")
@@ -107,7 +110,7 @@ def perspective_matrix(lens: Lens, near_m: float, far_m: float) -> np.ndarray:
 
 
 def top_down_matrix(x_range_m: tuple[float, float], z_range_m: tuple[float, float],
-                    y_range_m: tuple[float, float]) -> np.ndarray:
+                    y_range_m: tuple[float, float]) -> npt.NDArray[np.float64]:
     """(4, 4) float64 clip-from-world matrix of an orthographic view straight down: world x across
     the image left to right over x_range_m, world z down it top to bottom over z_range_m (as the
     dashboard's top view draws them), depth from the top of y_range_m (near) to its bottom (far)."""
@@ -122,7 +125,7 @@ def top_down_matrix(x_range_m: tuple[float, float], z_range_m: tuple[float, floa
     return m
 
 
-def view_matrix(pose: CameraPose) -> np.ndarray:
+def view_matrix(pose: CameraPose) -> npt.NDArray[np.float64]:
     """(4, 4) float64 camera-from-world matrix: the inverse of the pose's camera-to-world."""
     r = quat_to_matrix(pose.rotation_xyzw)
     m = np.eye(4)
@@ -131,7 +134,7 @@ def view_matrix(pose: CameraPose) -> np.ndarray:
     return m
 
 
-def _gl_matrix(m: np.ndarray) -> bytes:
+def _gl_matrix(m: npt.NDArray[np.float64]) -> bytes:
     # GLSL reads matrices column-major; numpy is row-major, so send the transpose.
     return np.ascontiguousarray(m.T, dtype="f4").tobytes()
 
@@ -190,28 +193,30 @@ class OffscreenRenderer:
             raise ValueError("need 0 <= fog_start_m < fog_end_m")
         self.width_px = width_px
         self.height_px = height_px
-        self.sky_rgb = tuple(float(c) for c in sky_rgb)
+        red, green, blue = sky_rgb
+        self.sky_rgb = (float(red), float(green), float(blue))
         self._owns_context = context is None
         if context is None:
             try:
-                context = moderngl.create_standalone_context(backend="egl")
+                context = egl_context()
             except Exception as err:  # EGL missing or no usable driver: say which call failed
                 raise RuntimeError(f"OffscreenRenderer: no EGL GL context ({err})") from err
-        self._ctx = ctx = context
+        self._ctx: moderngl.Context | None = context
+        ctx = context
         with ctx:
-            self._setup(width_px, height_px, msaa_samples, light_dir_world, fog_start_m, fog_end_m)
+            self._setup(ctx, width_px, height_px, msaa_samples, light_dir_world, fog_start_m, fog_end_m)
 
-    def _setup(self, width_px, height_px, msaa_samples, light_dir_world, fog_start_m, fog_end_m) -> None:
-        """The program, framebuffers and tables (the context is current)."""
-        ctx = self._ctx
+    def _setup(self, ctx: moderngl.Context, width_px: int, height_px: int, msaa_samples: int,
+               light_dir_world: tuple[float, float, float], fog_start_m: float, fog_end_m: float) -> None:
+        """The program, framebuffers and tables (the context `ctx` is current)."""
         self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
         light = np.asarray(light_dir_world, dtype=np.float64)
-        self._prog["u_light_dir_world"].value = tuple(light / np.linalg.norm(light))
-        self._prog["u_sky_rgb"].value = self.sky_rgb
-        self._prog["u_fog_start_m"].value = float(fog_start_m)
-        self._prog["u_fog_end_m"].value = float(fog_end_m)
-        self._u_view_proj = self._prog["u_view_proj"]
-        self._u_camera = self._prog["u_camera_world"]
+        uniform(self._prog, "u_light_dir_world").value = tuple(light / np.linalg.norm(light))
+        uniform(self._prog, "u_sky_rgb").value = self.sky_rgb
+        uniform(self._prog, "u_fog_start_m").value = float(fog_start_m)
+        uniform(self._prog, "u_fog_end_m").value = float(fog_end_m)
+        self._u_view_proj = uniform(self._prog, "u_view_proj")
+        self._u_camera = uniform(self._prog, "u_camera_world")
 
         size = (width_px, height_px)
         samples = min(int(msaa_samples), ctx.max_samples) if msaa_samples > 1 else 0
@@ -237,8 +242,8 @@ class OffscreenRenderer:
     def add_mesh(
         self,
         mesh_id: str,
-        vertices: np.ndarray,
-        faces: np.ndarray,
+        vertices: npt.ArrayLike,
+        faces: npt.ArrayLike,
         color_rgb: tuple[float, float, float],
         *,
         checker_m: float = 0.0,
@@ -281,17 +286,18 @@ class OffscreenRenderer:
         interleaved[:, :, :3] = tri
         interleaved[:, :, 3:] = normal[:, None, :]
         key = (interleaved.tobytes(), bool(closed))
-        with self._ctx:
+        with self._live_context():
             self._add_instance(mesh_id, key, color, checker_m)
 
-    def _add_instance(self, mesh_id: str, key: tuple[bytes, bool], color: np.ndarray, checker_m: float) -> None:
+    def _add_instance(self, mesh_id: str, key: tuple[bytes, bool], color: npt.NDArray[np.float64], checker_m: float) -> None:
         """One row of the instance table for geometry `key`, whose buffers are made on first use."""
         geometry = self._geometries.get(key)
         closed = key[1]
         if geometry is None:
-            vbo = self._ctx.buffer(key[0])
-            instance_buffer = self._ctx.buffer(reserve=_INSTANCE_FLOATS * 4)
-            vao = self._ctx.vertex_array(self._prog, [
+            ctx = self._live_context()
+            vbo = ctx.buffer(key[0])
+            instance_buffer = ctx.buffer(reserve=_INSTANCE_FLOATS * 4)
+            vao = ctx.vertex_array(self._prog, [
                 (vbo, "3f 3f", "in_position", "in_normal"),
                 (instance_buffer, _INSTANCE_FORMAT, *_INSTANCE_ATTRIBUTES),
             ])
@@ -307,16 +313,17 @@ class OffscreenRenderer:
         geometry.rows.append(self._rows[mesh_id])
         geometry.instance_buffer.orphan(len(geometry.rows) * _INSTANCE_FLOATS * 4)
 
-    def set_transform(self, mesh_id: str, matrix_local_to_world: np.ndarray) -> None:
+    def set_transform(self, mesh_id: str, matrix_local_to_world: npt.ArrayLike) -> None:
         """Place a mesh: matrix_local_to_world (4, 4) float, e.g. `RigidTransform.matrix()`."""
         self.set_transforms([mesh_id], np.asarray(matrix_local_to_world, dtype=np.float64)[None])
 
-    def set_transforms(self, mesh_ids: list[str], matrices_local_to_world: np.ndarray) -> None:
+    def set_transforms(self, mesh_ids: list[str], matrices_local_to_world: npt.ArrayLike) -> None:
         """Place several meshes at once: matrices_local_to_world (k, 4, 4) float, one per id.
         Checked and inverted in one numpy pass: an animated character sets dozens per frame."""
-        rows = [self._rows.get(mesh_id) for mesh_id in mesh_ids]
-        if None in rows:
-            raise KeyError(f"unknown mesh id {mesh_ids[rows.index(None)]!r}")
+        try:
+            rows = [self._rows[mesh_id] for mesh_id in mesh_ids]
+        except KeyError as err:
+            raise KeyError(f"unknown mesh id {err.args[0]!r}") from None
         m = np.asarray(matrices_local_to_world, dtype=np.float64)
         if m.shape != (len(rows), 4, 4) or not np.all(np.isfinite(m)):
             raise ValueError("matrix_local_to_world must be a finite (4, 4) matrix per mesh")
@@ -345,7 +352,7 @@ class OffscreenRenderer:
 
     def render(
         self, pose: CameraPose, lens: Lens, near_m: float = 0.05, far_m: float = 500.0
-    ) -> np.ndarray:
+    ) -> npt.NDArray[np.uint8]:
         """(h, w, 3) uint8 image, top row first, seen from pose through lens.
 
         The projection uses lens.vertical_fov_deg and lens.aspect (as `project_to_screen` does);
@@ -353,29 +360,35 @@ class OffscreenRenderer:
         """
         return self.render_view(perspective_matrix(lens, near_m, far_m) @ view_matrix(pose), pose.position_world)
 
-    def render_view(self, view_proj: np.ndarray, eye_world) -> np.ndarray:
+    def render_view(self, view_proj: npt.ArrayLike, eye_world: Iterable[float]) -> npt.NDArray[np.uint8]:
         """(h, w, 3) uint8 image, top row first, through any clip-from-world matrix (4, 4) (e.g.
         `top_down_matrix`); eye_world (3,) m is where the fog measures distance from."""
+        ctx = self._live_context()
+        with ctx:
+            return self._draw(ctx, np.asarray(view_proj, dtype=np.float64), eye_world)
+
+    def _live_context(self) -> moderngl.Context:
+        """The renderer's context; ValueError once the renderer is released."""
         if self._ctx is None:
             raise ValueError("OffscreenRenderer was released")
-        with self._ctx:
-            return self._draw(np.asarray(view_proj, dtype=np.float64), eye_world)
+        return self._ctx
 
-    def _draw(self, view_proj: np.ndarray, eye_world) -> np.ndarray:
+    def _draw(self, ctx: moderngl.Context, view_proj: npt.NDArray[np.float64],
+              eye_world: Iterable[float]) -> npt.NDArray[np.uint8]:
         self._draw_fbo.use()
-        self._ctx.enable(moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.DEPTH_TEST)
         self._draw_fbo.clear(*self.sky_rgb, 1.0, depth=1.0)
         self._u_view_proj.write(_gl_matrix(view_proj))
         self._u_camera.value = tuple(float(c) for c in eye_world)
         for geometry in self._geometries.values():
             if geometry.closed:
-                self._ctx.enable(moderngl.CULL_FACE)
+                ctx.enable(moderngl.CULL_FACE)
             else:
-                self._ctx.disable(moderngl.CULL_FACE)
+                ctx.disable(moderngl.CULL_FACE)
             geometry.instance_buffer.write(self._instances[geometry.rows].tobytes())
             geometry.vao.render(moderngl.TRIANGLES, instances=len(geometry.rows))
         if self._draw_fbo is not self._resolve_fbo:
-            self._ctx.copy_framebuffer(self._resolve_fbo, self._draw_fbo)
+            ctx.copy_framebuffer(self._resolve_fbo, self._draw_fbo)
         self._resolve_fbo.read_into(self._readback, components=3, alignment=1)
         image = np.frombuffer(self._readback, dtype=np.uint8)
         image = image.reshape(self.height_px, self.width_px, 3)

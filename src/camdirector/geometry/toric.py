@@ -34,9 +34,11 @@ the bisector of the screen points' rays, equal to look_rotation whenever that ha
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose, Lens, level_rotation, level_rotations
 from camdirector.geometry.transforms import matrix_to_quat
@@ -61,32 +63,32 @@ class Torus:
     Arrays are read-only.
     """
 
-    a_world: np.ndarray
-    b_world: np.ndarray
+    a_world: npt.NDArray[np.float64]
+    b_world: npt.NDArray[np.float64]
     alpha: float
-    axis_world: np.ndarray
-    ref_world: np.ndarray
-    side_world: np.ndarray
+    axis_world: npt.NDArray[np.float64]
+    ref_world: npt.NDArray[np.float64]
+    side_world: npt.NDArray[np.float64]
     length_ab_m: float
     arc_radius_m: float
-    mid_world: np.ndarray = field(repr=False)      # (3,) midpoint of AB, the origin of the closed form
-    basis: np.ndarray = field(repr=False)          # (3, 3) rows axis, ref, side: local -> world by @ basis
+    mid_world: npt.NDArray[np.float64] = field(repr=False)      # (3,) midpoint of AB, the origin of the closed form
+    basis: npt.NDArray[np.float64] = field(repr=False)          # (3, 3) rows axis, ref, side: local -> world by @ basis
     center_offset_m: float = field(repr=False)     # r cos(alpha): distance of the arc's centre off the axis
 
 
-def _read_only(v: np.ndarray) -> np.ndarray:
+def _read_only(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     v.setflags(write=False)
     return v
 
 
-def _floats3(v, name: str) -> list[float]:
+def _floats3(v: npt.ArrayLike, name: str) -> list[float]:
     out = np.asarray(v, dtype=np.float64).reshape(-1)
     if out.shape != (3,):
         raise ValueError(f"{name} must have shape (3,), got {np.shape(v)}")
     return out.tolist()
 
 
-def _cross(u, v) -> tuple[float, float, float]:
+def _cross(u: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
     return u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]
 
 
@@ -95,7 +97,8 @@ def _unit_tuple(x: float, y: float, z: float) -> tuple[float, float, float]:
     return x / n, y / n, z / n
 
 
-def make_torus(a_world, b_world, alpha: float, up_world=(0.0, 1.0, 0.0)) -> Torus:
+def make_torus(a_world: npt.ArrayLike, b_world: npt.ArrayLike, alpha: float,
+               up_world: npt.ArrayLike = (0.0, 1.0, 0.0)) -> Torus:
     """Torus of the camera centres C with angle(A - C, B - C) = alpha.
 
     a_world, b_world, up_world: (3,) metres (up: any length). alpha: radians.
@@ -145,16 +148,16 @@ def theta_max(alpha: float) -> float:
     return 2.0 * (math.pi - alpha)
 
 
-def _view_dir(screen_xy, lens: Lens) -> tuple[float, float, float]:
+def _view_dir(screen_xy: Sequence[float], lens: Lens) -> tuple[float, float, float]:
     return _unit_tuple(float(screen_xy[0]) * lens.tan_half_fov_x, float(screen_xy[1]) * lens.tan_half_fov_y, -1.0)
 
 
-def view_direction(screen_xy, lens: Lens) -> np.ndarray:
+def view_direction(screen_xy: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
     """Unit camera-space direction (3,) through the normalised screen point screen_xy (2,)."""
     return np.array(_view_dir(screen_xy, lens))
 
 
-def composition_angle(screen_a, screen_b, lens: Lens) -> float:
+def composition_angle(screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> float:
     """alpha: angle in radians between the view rays through screen_a (2,) and screen_b (2,)."""
     ax, ay, az = _view_dir(screen_a, lens)
     bx, by, bz = _view_dir(screen_b, lens)
@@ -163,7 +166,8 @@ def composition_angle(screen_a, screen_b, lens: Lens) -> float:
     return math.atan2(cross, ax * bx + ay * by + az * bz)
 
 
-def torus_position(torus: Torus, theta, phi) -> np.ndarray:
+def torus_position(torus: Torus, theta: float | npt.NDArray[np.float64],
+                   phi: float | npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Camera centre, metres, at (theta, phi) radians.
 
     Scalars give (3,); arrays broadcast together, shape (...,) -> (..., 3). A theta outside its open
@@ -173,17 +177,18 @@ def torus_position(torus: Torus, theta, phi) -> np.ndarray:
     if np.ndim(theta) == 0 and np.ndim(phi) == 0:
         # Per-frame path: math on floats is an order of magnitude cheaper than ufuncs on 0-d arrays.
         t = torus.alpha + float(theta)
+        phi_rad = float(phi)
         radial = torus.center_offset_m - r * math.cos(t)
-        local = np.array((-r * math.sin(t), radial * math.cos(phi), radial * math.sin(phi)))
+        local: npt.NDArray[np.float64] = np.array((-r * math.sin(t), radial * math.cos(phi_rad), radial * math.sin(phi_rad)))
     else:
-        t = torus.alpha + np.asarray(theta, dtype=np.float64)
-        phi = np.asarray(phi, dtype=np.float64)
-        radial = torus.center_offset_m - r * np.cos(t)
-        local = np.stack(np.broadcast_arrays(-r * np.sin(t), radial * np.cos(phi), radial * np.sin(phi)), axis=-1)
+        ts = torus.alpha + np.asarray(theta, dtype=np.float64)
+        phis = np.asarray(phi, dtype=np.float64)
+        radials = torus.center_offset_m - r * np.cos(ts)
+        local = np.stack(np.broadcast_arrays(-r * np.sin(ts), radials * np.cos(phis), radials * np.sin(phis)), axis=-1)
     return local @ torus.basis + torus.mid_world
 
 
-def torus_angles(torus: Torus, position_world) -> tuple[float, float]:
+def torus_angles(torus: Torus, position_world: npt.ArrayLike) -> tuple[float, float]:
     """(theta, phi) radians of the torus point for position_world (3,) metres.
 
     A point off the torus is first brought onto it: phi is kept from the point's half-plane about
@@ -205,7 +210,7 @@ def torus_angles(torus: Torus, position_world) -> tuple[float, float]:
     return min(max(theta, THETA_MARGIN_RAD), hi - THETA_MARGIN_RAD), phi
 
 
-def torus_angles_many(torus: Torus, positions_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def torus_angles_many(torus: Torus, positions_world: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """torus_angles for (n, 3) points at once: (theta (n,), phi (n,)) radians, same rules."""
     local = (np.asarray(positions_world, dtype=np.float64) - torus.mid_world) @ torus.basis.T
     x, y_ref, y_side = local[:, 0], local[:, 1], local[:, 2]
@@ -219,7 +224,8 @@ def torus_angles_many(torus: Torus, positions_world: np.ndarray) -> tuple[np.nda
     return np.clip(theta, THETA_MARGIN_RAD, hi - THETA_MARGIN_RAD), phi
 
 
-def tangent_frame(torus: Torus, theta: float, phi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def tangent_frame(torus: Torus, theta: float,
+                  phi: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(d pos/d theta, d pos/d phi, outward unit normal) at (theta, phi), each (3,) world.
 
     The derivatives are metres per radian: |d/d theta| = arc_radius_m, |d/d phi| = the camera's
@@ -240,7 +246,7 @@ def tangent_frame(torus: Torus, theta: float, phi: float) -> tuple[np.ndarray, n
     return d_theta, d_phi, normal
 
 
-def _frame(p: tuple[float, float, float], q: tuple[float, float, float]) -> np.ndarray:
+def _frame(p: tuple[float, float, float], q: tuple[float, float, float]) -> npt.NDArray[np.float64]:
     """(3, 3) orthonormal matrix with columns p, q Gram-Schmidt against p, p x q (p, q unit)."""
     px, py, pz = p
     k = px * q[0] + py * q[1] + pz * q[2]
@@ -256,7 +262,8 @@ def _frame(p: tuple[float, float, float], q: tuple[float, float, float]) -> np.n
     ))
 
 
-def _rays_to(camera_world, a_world, b_world, what: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def _rays_to(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
+             what: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Unit directions (3,) from the camera to A and to B; ValueError naming `what` if it is at one."""
     cx, cy, cz = np.asarray(camera_world, dtype=np.float64).tolist()
     ax, ay, az = np.asarray(a_world, dtype=np.float64).tolist()
@@ -267,7 +274,8 @@ def _rays_to(camera_world, a_world, b_world, what: str) -> tuple[tuple[float, ..
         raise ValueError(f"{what}: the camera is at a framed point") from None
 
 
-def look_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
+def look_rotation(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
+                  screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
     """Camera-to-world unit quaternion (4,) xyzw, w >= 0, that shows A at screen_a and B at screen_b.
 
     camera_world, a_world, b_world: (3,) metres; screen_a, screen_b: (2,). R = W D^T (primer step 4),
@@ -281,13 +289,14 @@ def look_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens
     return matrix_to_quat(world @ camera.T)
 
 
-def _screen_bisector(screen_a, screen_b, lens: Lens) -> tuple[float, float, float]:
+def _screen_bisector(screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> tuple[float, float, float]:
     """unit(d(sA) + d(sB)): the camera-space bisector of the screen points' rays."""
     u, v = _view_dir(screen_a, lens), _view_dir(screen_b, lens)
     return _unit_tuple(u[0] + v[0], u[1] + v[1], u[2] + v[2])
 
 
-def level_pair_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
+def level_pair_rotation(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
+                        screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
     """Camera-to-world unit quaternion (4,) xyzw with no roll (camera x axis horizontal) that
     frames A near screen_a and B near screen_b: broadcast framing keeps the horizon level.
 
@@ -312,7 +321,8 @@ def level_pair_rotation(camera_world, a_world, b_world, screen_a, screen_b, lens
                                          _screen_bisector(screen_a, screen_b, lens)))
 
 
-def level_pair_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, screen_b, lens: Lens) -> np.ndarray:
+def level_pair_matrices(cameras_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
+                        screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
     """(m, 3, 3) camera-to-world rotation matrices of `level_pair_rotation` for m cameras (m, 3)
     at once (a shot's place search tries hundreds); rows of NaN where a camera is at A or B or
     between them on their line."""
@@ -328,7 +338,8 @@ def level_pair_matrices(cameras_world: np.ndarray, a_world, b_world, screen_a, s
         return level_rotations(w, _screen_bisector(screen_a, screen_b, lens))
 
 
-def compose_pose(torus: Torus, theta: float, phi: float, screen_a, screen_b, lens: Lens) -> CameraPose:
+def compose_pose(torus: Torus, theta: float, phi: float, screen_a: Sequence[float], screen_b: Sequence[float],
+                 lens: Lens) -> CameraPose:
     """Pose at (theta, phi) radians that frames torus.a_world at screen_a (2,) and torus.b_world at
     screen_b (2,); torus must be built with alpha = composition_angle(screen_a, screen_b, lens)."""
     position = torus_position(torus, theta, phi)

@@ -7,20 +7,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 IDENTITY_QUAT = np.array([0.0, 0.0, 0.0, 1.0])
 UP_WORLD = np.array([0.0, 1.0, 0.0])  # +Y up: the wire contract's world (docs/protocol.md)
 UP_WORLD.setflags(write=False)
 
 
-def quat_normalize(q_xyzw: np.ndarray) -> np.ndarray:
+def quat_normalize(q_xyzw: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Unit quaternion with w >= 0 (one of the two that name each rotation), shape kept."""
-    q = np.asarray(q_xyzw, dtype=np.float64)
+    q: npt.NDArray[np.float64] = np.asarray(q_xyzw, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[..., 3:4] < 0.0, -q, q)
 
 
-def quat_to_matrix(q_xyzw: np.ndarray) -> np.ndarray:
+def quat_to_matrix(q_xyzw: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotation matrix of a unit quaternion: (..., 4) -> (..., 3, 3) float64."""
     q = np.asarray(q_xyzw, dtype=np.float64)
     if q.ndim == 1:  # the per-frame case: scalar arithmetic is several times cheaper than ufuncs
@@ -45,7 +46,7 @@ def quat_to_matrix(q_xyzw: np.ndarray) -> np.ndarray:
     return m.reshape(m.shape[:-1] + (3, 3))
 
 
-def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+def matrix_to_quat(m: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Unit quaternion (x, y, z, w), w >= 0, of a rotation matrix (3, 3).
 
     Shepperd's method: branch on the largest diagonal term so no square root of a small number
@@ -68,7 +69,7 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     return quat_normalize(np.array(q))
 
 
-def quat_rotate(q_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
+def quat_rotate(q_xyzw: npt.ArrayLike, v: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotate vectors v (..., 3) by the unit quaternion q (4,)."""
     return np.asarray(v, dtype=np.float64) @ quat_to_matrix(q_xyzw).T
 
@@ -80,25 +81,25 @@ class RigidTransform:
     position_world: (3,) float64 metres; rotation_xyzw: (4,) unit quaternion; scale: (3,).
     """
 
-    position_world: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    rotation_xyzw: np.ndarray = field(default_factory=lambda: IDENTITY_QUAT.copy())
-    scale: np.ndarray = field(default_factory=lambda: np.ones(3))
+    position_world: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    rotation_xyzw: npt.NDArray[np.float64] = field(default_factory=lambda: IDENTITY_QUAT.copy())
+    scale: npt.NDArray[np.float64] = field(default_factory=lambda: np.ones(3))
 
-    def matrix(self) -> np.ndarray:
+    def matrix(self) -> npt.NDArray[np.float64]:
         """(4, 4) float64 local-to-world matrix."""
         m = np.eye(4)
         m[:3, :3] = quat_to_matrix(self.rotation_xyzw) * self.scale[None, :]
         m[:3, 3] = self.position_world
         return m
 
-    def inverse_matrix(self) -> np.ndarray:
+    def inverse_matrix(self) -> npt.NDArray[np.float64]:
         """(4, 4) float64 world-to-local matrix, without a general inverse: (R S)^-1 = S^-1 R^T."""
         m = np.eye(4)
         m[:3, :3] = quat_to_matrix(self.rotation_xyzw).T / self.scale[:, None]
         m[:3, 3] = -m[:3, :3] @ self.position_world
         return m
 
-    def apply(self, points_local: np.ndarray) -> np.ndarray:
+    def apply(self, points_local: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """(n, 3) local points -> (n, 3) world points."""
         r = quat_to_matrix(self.rotation_xyzw)
         return (np.asarray(points_local) * self.scale) @ r.T + self.position_world

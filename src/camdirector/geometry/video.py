@@ -6,10 +6,12 @@ file is yuv420p (what browsers and most players decode), so width and height mus
 from __future__ import annotations
 
 import subprocess
+from collections.abc import Sequence
 from pathlib import Path
 
 import imageio_ffmpeg
 import numpy as np
+import numpy.typing as npt
 
 
 class VideoWriter:
@@ -57,7 +59,7 @@ class VideoWriter:
         )
         self._writer.send(None)  # starts ffmpeg
 
-    def write(self, frame_hwc: np.ndarray) -> None:
+    def write(self, frame_hwc: npt.NDArray[np.uint8]) -> None:
         """Append one frame: (h, w, 3) uint8 RGB, top row first, h and w as in size_wh."""
         if self._writer is None:
             raise ValueError("VideoWriter is closed")
@@ -84,7 +86,7 @@ class VideoWriter:
         self.close()
 
 
-def concat_videos(parts: list[str | Path], path: str | Path) -> None:
+def concat_videos(parts: Sequence[str | Path], path: str | Path) -> None:
     """Join mp4 files written by `VideoWriter` with the same fps, size and settings into one mp4
     at `path`, without re-encoding (ffmpeg's concat demuxer, stream copy). Raises RuntimeError
     with ffmpeg's message when it fails."""

@@ -28,13 +28,22 @@ WorkerPool and worker took 19-22 us a round trip (p50) against 27-34 us pickled.
 A worker and its render process (render/monitor.py the worker's end, render/main.py the render
 process's): length-prefixed pickles over the process's stdin and stdout (`write_message`,
 `read_message`); both ends are camdirector's own code over a private pipe.
+
+A monitor's view (the `view` op; the front's end is front/view_hub.py, the worker's
+worker/dispatch.py, the picture's maker render/main.py): the request's payload is a `ViewQuery`'s
+JSON (`ViewQuery.to_json`, `ViewQuery.from_json`); each reply body is a view (`encode_view`): a
+4-byte length, a JSON header (the frame shown, the placeholder's reason if any, the render time,
+the media type, and the top view's world bounds), then the image. A query that is not one raises
+ValueError, which each end answers as its own refusal (INVALID_ARGUMENT, HTTP 422).
 """
 from __future__ import annotations
 
 import pickle
 import struct
 from dataclasses import dataclass
-from typing import BinaryIO
+from typing import IO, Any
+
+import orjson
 
 
 @dataclass
@@ -74,10 +83,12 @@ def encode_reply(request_id: int, status: int, body: bytes, metrics: FrameMetric
                       len(body)) + names + values + body
 
 
+ReplyHeader = tuple[int, int, int, float, int, int, int]   # REPLY unpacked
+
 _stage_names: dict[bytes, tuple[str, ...]] = {}  # a rig's stage names recur every frame: split once
 
 
-def decode_reply_tail(header: tuple, tail: bytes) -> tuple[bytes, FrameMetrics | None]:
+def decode_reply_tail(header: ReplyHeader, tail: bytes) -> tuple[bytes, FrameMetrics | None]:
     """The body and metrics of a reply from its unpacked REPLY header and the bytes after it
     (stage names, their times, the body)."""
     _, _, flags, compute_ms, stages, names_len, _ = header
@@ -92,20 +103,20 @@ def decode_reply_tail(header: tuple, tail: bytes) -> tuple[bytes, FrameMetrics |
     return body, FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE), bool(flags & CHECKPOINT_FAILED))
 
 
-def tail_length(header: tuple) -> int:
+def tail_length(header: ReplyHeader) -> int:
     """How many bytes follow a REPLY header."""
     _, _, _, _, stages, names_len, body_len = header
     return names_len + 8 * stages + body_len
 
 
-def read_exactly(reader: BinaryIO, n: int) -> bytes:
+def read_exactly(reader: IO[bytes], n: int) -> bytes:
     data = reader.read(n)
     if len(data) < n:
         raise EOFError("the front closed the socket pair")
     return data
 
 
-def read_request(reader: BinaryIO) -> tuple[int, str, str, bytes]:
+def read_request(reader: IO[bytes]) -> tuple[int, str, str, bytes]:
     """(request id, op, session id, payload) of the next request from a buffered reader of the
     socket (one read system call takes in a whole frame request, header and all); EOFError when
     the front has gone."""
@@ -141,15 +152,16 @@ def decode_create(payload: bytes) -> tuple[str, bytes | memoryview]:
 _MESSAGE_LENGTH = struct.Struct("!Q")
 
 
-def write_message(stream: BinaryIO, message) -> None:
+def write_message(stream: IO[bytes], message: object) -> None:
     """One length-prefixed pickle, flushed."""
     data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
     stream.write(_MESSAGE_LENGTH.pack(len(data)) + data)
     stream.flush()
 
 
-def read_message(stream: BinaryIO):
-    """The next message, or None at end of file (or a message cut short by it)."""
+def read_message(stream: IO[bytes]) -> Any:
+    """The next message, or None at end of file (or a message cut short by it). Any: whatever the
+    other end wrote (both ends are camdirector's, and each knows what its peer sends)."""
     head = stream.read(_MESSAGE_LENGTH.size)
     if len(head) < _MESSAGE_LENGTH.size:
         return None
@@ -158,3 +170,68 @@ def read_message(stream: BinaryIO):
     if len(data) < length:
         return None
     return pickle.loads(data)  # noqa: S301 - both ends are camdirector's, over a private pipe
+
+
+# -- a monitor's view ---------------------------------------------------------------------------
+
+SHOTS = ("program", "candidate", "cut_before", "cut_after", "top")
+FORMATS = ("jpeg", "png")
+MIN_SIDE_PX = 16
+MAX_WIDTH_PX = 1280      # a monitor is small: a larger picture is refused (the route answers 422)
+MAX_HEIGHT_PX = 720
+DEFAULT_WIDTH_PX = 320
+_VIEW_HEADER = struct.Struct("!I")
+
+
+@dataclass(frozen=True)
+class ViewQuery:
+    """A view asked for: which picture (render/snapshots.py says what each shows), its size and
+    its image format. ValueError for one that is not allowed."""
+
+    shot: str = "program"
+    subjects: tuple[str, ...] = ()        # candidate: its players, in any order
+    width_px: int = DEFAULT_WIDTH_PX      # [MIN_SIDE_PX, MAX_WIDTH_PX]; the top view ignores it
+    height_px: int | None = None          # None: width / the lens's aspect; [MIN_SIDE_PX, MAX_HEIGHT_PX]
+    image_format: str = "jpeg"            # FORMATS; the top view is always PNG
+
+    def __post_init__(self) -> None:
+        if self.shot not in SHOTS:
+            raise ValueError(f"view shot must be one of {', '.join(SHOTS)}, got {self.shot!r}")
+        if self.image_format not in FORMATS:
+            raise ValueError(f"view format must be one of {', '.join(FORMATS)}, got {self.image_format!r}")
+        if not MIN_SIDE_PX <= self.width_px <= MAX_WIDTH_PX:
+            raise ValueError(f"view width must be in [{MIN_SIDE_PX}, {MAX_WIDTH_PX}] px, got {self.width_px}")
+        if self.height_px is not None and not MIN_SIDE_PX <= self.height_px <= MAX_HEIGHT_PX:
+            raise ValueError(f"view height must be in [{MIN_SIDE_PX}, {MAX_HEIGHT_PX}] px, got {self.height_px}")
+        if self.shot == "candidate" and not self.subjects:
+            raise ValueError("a candidate view names the candidate's players (subjects)")
+
+    def to_json(self) -> bytes:
+        return orjson.dumps({"shot": self.shot, "subjects": list(self.subjects), "width_px": self.width_px,
+                             "height_px": self.height_px, "image_format": self.image_format})
+
+    @classmethod
+    def from_json(cls, payload: bytes) -> ViewQuery:
+        try:
+            fields = orjson.loads(payload)
+            shot, subjects = str(fields["shot"]), tuple(str(s) for s in fields["subjects"])
+            width_px = int(fields["width_px"])
+            height_px = None if fields["height_px"] is None else int(fields["height_px"])
+            image_format = str(fields["image_format"])
+        except (orjson.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"not a view query: {exc}") from None
+        return cls(shot=shot, subjects=subjects, width_px=width_px, height_px=height_px, image_format=image_format)
+
+
+def encode_view(header: dict[str, Any], image: bytes) -> bytes:
+    """A view's bytes (module docstring)."""
+    meta = orjson.dumps(header)
+    return _VIEW_HEADER.pack(len(meta)) + meta + image
+
+
+def decode_view(body: bytes) -> tuple[dict[str, Any], bytes]:
+    """(header, image) of a view's bytes (module docstring)."""
+    (length,) = _VIEW_HEADER.unpack_from(body)
+    start = _VIEW_HEADER.size
+    header: dict[str, Any] = orjson.loads(body[start:start + length])
+    return header, body[start + length:]

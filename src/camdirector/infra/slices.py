@@ -2,7 +2,7 @@
 resumes for a few milliseconds at a time (a worker's idle moments, worker/table.py `idle_work`)
 and that hands control back at its pause points once its slice is spent.
 
-Why greenlets and not a thread: a thread computing a match session's plan (pipeline/match/rig.py)
+Why greenlets and not a thread: a thread computing a match session's plan (pipeline/match/drawn_plan.py)
 would hold the GIL against the frames it is meant to stay out of the way of, in slices of the
 interpreter's choosing; a greenlet runs only when resumed, so a frame never waits for it, and
 what it computes cannot depend on how it was sliced (its inputs are fixed when it is drawn).
@@ -12,21 +12,21 @@ work the loop's next step will do, in the owner's units (there: camera-point pai
 sliced run, or inside one whose slice is not spent, it does nothing but read the clock and count
 the work. Besides slices of time, a run can be taken up to an amount of work (`run_until`): where
 it stops then depends on its inputs alone, never on the machine's speed, so an owner may decide
-from it when a result is used (pipeline/match/rig.py applies a plan at the tick its work allows).
+from it when a result is used (pipeline/match/drawn_plan.py: a plan is applied at the tick its work allows).
 """
 from __future__ import annotations
 
 import math
 import time
 from collections.abc import Callable
-from typing import Generic, TypeVar
+from typing import Generic, TypeVar, cast
 
 import greenlet
 
 T = TypeVar("T")
 
 
-class _Slice(greenlet.greenlet):
+class _Slice(greenlet.greenlet):  # type: ignore[misc]  # greenlet ships no type information
     """The greenlet of one SlicedRun, carrying its deadlines for `pause`: a clock time and an
     amount of work, and the work done so far."""
 
@@ -63,6 +63,7 @@ class SlicedRun(Generic[T]):
 
     def _main(self) -> None:
         work, self._work = self._work, None
+        assert work is not None  # the greenlet runs _main once, and only SlicedRun.__init__ sets _work
         self.result = work()
         self.done = True
 
@@ -89,7 +90,7 @@ class SlicedRun(Generic[T]):
         """Runs it to its end; the result."""
         if not self.done:
             self._resume(math.inf, math.inf)
-        return self.result
+        return cast(T, self.result)  # done: work() returned it (a failed run raised above instead)
 
     def _resume(self, deadline_s: float, work_limit: float) -> None:
         self._greenlet.deadline_s, self._greenlet.work_limit = deadline_s, work_limit

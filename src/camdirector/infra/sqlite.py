@@ -1,7 +1,8 @@
 """One SQLite connection for a node's own records (job records, jobs/records.py; keys, session
 owners and the audit, access/keys.py): WAL journal, one statement at a time behind a lock, each
 write one `BEGIN IMMEDIATE` transaction, so a check and the write it guards are atomic across the
-node's processes. The SQLite twin of postgres.PostgresDatabase."""
+node's processes. The SQLite twin of postgres.PostgresDatabase, and `SqliteStore` the twin of
+postgres.PostgresStore."""
 from __future__ import annotations
 
 import contextlib
@@ -38,3 +39,22 @@ class SqliteDatabase:
     def close(self) -> None:
         with self._lock:
             self._db.close()
+
+
+class SqliteStore:
+    """The SQLite side of a store of records (jobs/records.py's SqliteJobStore, access/keys.py's
+    SqliteAccessStore): the database at `path`, `schema` run when it opens; every write (`_tx()`)
+    one BEGIN IMMEDIATE transaction, a read (`_read()`) one statement's turn at the connection.
+    Named first among a store's bases, as postgres.PostgresStore."""
+
+    def __init__(self, path: str | Path, schema: str) -> None:
+        self._db = SqliteDatabase(path, schema)
+
+    def _tx(self) -> contextlib.AbstractContextManager[sqlite3.Connection]:
+        return self._db.transaction()
+
+    def _read(self) -> contextlib.AbstractContextManager[sqlite3.Connection]:
+        return self._db.read()
+
+    def close(self) -> None:
+        self._db.close()

@@ -34,4 +34,5 @@ class StageClock:
         self.timings_ms[stage.value] = self.timings_ms.get(stage.value, 0.0) + (now_s - self._last_s) * 1e3
         self._last_s = now_s
         if self._progress is not None:
+            assert self._progress_after is not None  # __init__ refuses a progress callback without it
             self._progress(self._progress_after[stage])

@@ -154,7 +154,7 @@ class JobExecutor:
         self._settle(a)
         return True
 
-    def run(self, job: Job, stopping: threading.Event, hand_back: Callable[[], None]) -> None:
+    def run(self, job: Job, stopping: threading.Event, hand_back: Callable[[], object]) -> None:
         """Run a claimed job to its end in this thread (a queue worker's). When `stopping` is set
         first, `hand_back()` (the job's message sent again), then the process is ended and the
         record queued again, the attempt not counted."""
@@ -167,7 +167,7 @@ class JobExecutor:
                 return
             multiprocessing.connection.wait(a.waitables(), timeout=POLL_S)
 
-    def end(self, attempts: list[Attempt], before_requeue: Callable[[], None] | None = None) -> None:
+    def end(self, attempts: list[Attempt], before_requeue: Callable[[], object] | None = None) -> None:
         """Shutdown: end the attempts' processes (SIGTERM, SIGKILL after `cancel_grace_s`) and
         queue their jobs again without counting the attempt (`before_requeue()` first)."""
         for a in attempts:

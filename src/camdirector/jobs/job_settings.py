@@ -3,10 +3,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from camdirector.server_settings import ServerSettings
+
 
 @dataclass(frozen=True)
 class JobSettings:
-    """Limits of the offline jobs (one per process; wired into ServerSettings)."""
+    """Limits of the offline jobs (one per process; a server's come from its ServerSettings: for_server)."""
 
     max_concurrent_jobs: int = 1           # job processes running at once, per runner or queue worker. [1, 64]
     max_queued_jobs: int = 16              # jobs waiting to run; a submit beyond this is refused (HTTP 429). [0, 100000]
@@ -24,7 +26,7 @@ class JobSettings:
     # every quarter of this. Every worker must use the same value, s. [1, 3600]
     worker_heartbeat_timeout_s: float = 30.0
     # Each tenant's share (records.py; HTTP 429 beyond it). None: no share, as without keys, where
-    # everyone is one tenant (ServerSettings.job_settings sets them with authentication on).
+    # everyone is one tenant (for_server sets them with authentication on).
     tenant_max_queued_jobs: int | None = None    # jobs a tenant has queued or running. [1, 100000]
     tenant_max_upload_bytes: int | None = None   # bytes of inputs a tenant's jobs keep. [1 KiB, 1 TiB]
 
@@ -51,6 +53,15 @@ class JobSettings:
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+
+    @classmethod
+    def for_server(cls, settings: ServerSettings) -> JobSettings:
+        """The jobs' settings of a server's (validated here, not in ServerSettings, which knows no jobs)."""
+        shares = dict(tenant_max_queued_jobs=settings.tenant_max_queued_jobs,
+                      tenant_max_upload_bytes=settings.tenant_max_upload_bytes) if settings.auth else {}
+        return cls(max_concurrent_jobs=settings.max_concurrent_jobs, max_queued_jobs=settings.max_queued_jobs,
+                   max_upload_bytes=settings.max_upload_bytes, job_retention_s=settings.job_retention_s,
+                   job_store=settings.job_store, job_queue=settings.job_queue, **shares)
 
     def submit_limits(self) -> dict:
         """JobStore.submit's limits (keyword arguments): the queue's, and each tenant's share."""

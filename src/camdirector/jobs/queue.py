@@ -96,8 +96,8 @@ class QueueClient:
         except JobsUnavailable:
             self.store.close()
             raise
-        self._actor = dramatiq.actor(_unbound_job_message, broker=self._broker, actor_name=ACTOR_NAME,
-                                     queue_name=QUEUE_NAME)
+        self._actor = dramatiq.actor(broker=self._broker, actor_name=ACTOR_NAME,
+                                     queue_name=QUEUE_NAME)(_unbound_job_message)
 
     def start(self) -> None:
         """Nothing runs here: the constructor has checked Redis and PostgreSQL."""

@@ -44,10 +44,9 @@ class QueueWorker:
             self.store.close()
             raise
         self._executor = JobExecutor(self.store, service_kinds() if registry is None else registry, settings)
-        self._actor = dramatiq.actor(self._run_message, broker=self._broker, actor_name=ACTOR_NAME,
-                                     queue_name=QUEUE_NAME,
+        self._actor = dramatiq.actor(broker=self._broker, actor_name=ACTOR_NAME, queue_name=QUEUE_NAME,
                                      retry_when=lambda retries, exc: isinstance(exc, JobsUnavailable)
-                                     and retries < STORE_RETRIES)
+                                     and retries < STORE_RETRIES)(self._run_message)
         self._stopping = threading.Event()
         self.worker_id = self._broker.broker_id
 

@@ -30,6 +30,7 @@ when a store opens it, so a data directory or database from before keeps its job
 """
 from __future__ import annotations
 
+import builtins
 import contextlib
 import json
 import os
@@ -41,8 +42,9 @@ from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
-from camdirector.infra.postgres import PostgresDatabase
-from camdirector.infra.sqlite import SqliteDatabase
+from camdirector.infra.postgres import PostgresStore, advisory_lock
+from camdirector.infra.sqlite import SqliteStore
+from camdirector.infra.tenants import DEFAULT_TENANT
 
 
 class JobState(str, Enum):
@@ -90,7 +92,7 @@ class Job:
     started_s: float | None
     finished_s: float | None
     timings_ms: dict[str, float] = field(default_factory=dict)
-    tenant: str = "default"
+    tenant: str = DEFAULT_TENANT
 
     def as_public(self) -> dict:
         """The REST view: id, status, progress, error (only when set), timings (ms), and the
@@ -125,8 +127,9 @@ def interrupted_error(attempts: int, max_attempts: int) -> str:
 
 class JobStore:
     """Records of jobs and their files in `<root>/<id>/`. Thread-safe. Subclasses give the
-    connection: `_tx()` (one transaction holding the write lock, yielding something with
-    `execute(sql, args) -> cursor`) and `_read()` (the same for one read)."""
+    connection through their first base, infra's SqliteStore or PostgresStore: `_tx()` (one
+    transaction holding the write lock, yielding something with `execute(sql, args) -> cursor`)
+    and `_read()` (the same for one read)."""
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
@@ -167,7 +170,7 @@ class JobStore:
     # -- records ------------------------------------------------------------------------------
 
     def submit(self, kind: str, params: dict, files: dict[str, bytes], *,
-               max_queued: int | None = None, tenant: str = "default",
+               max_queued: int | None = None, tenant: str = DEFAULT_TENANT,
                tenant_max_queued_jobs: int | None = None, tenant_max_upload_bytes: int | None = None) -> Job:
         """A new queued job of `tenant` with `files` (name -> content) in its input folder, as
         created (state queued, whatever a runner did since).
@@ -248,7 +251,7 @@ class JobStore:
         if where:
             sql += " WHERE " + " AND ".join(f"{c} = ?" for c, _ in where)
         sql += " ORDER BY seq" + (" DESC" if newest_first else "")
-        args = [v for _, v in where]
+        args: builtins.list[str | int] = [v for _, v in where]
         if limit is not None:
             sql += " LIMIT ?"
             args.append(int(limit))
@@ -336,7 +339,7 @@ class JobStore:
             self.finish(job_id, JobState.CANCELLED, error="cancelled by request", only_if=job.state)
         return self.get(job_id)
 
-    def purge_finished(self, ended_before_s: float) -> list[str]:
+    def purge_finished(self, ended_before_s: float) -> builtins.list[str]:  # builtins: list is a method here
         """Remove the jobs that ended (succeeded, failed or were cancelled) before this Unix time,
         records first, then their folders. Returns their ids."""
         finished = [s.value for s in JobState if s.finished]
@@ -361,7 +364,7 @@ class JobStore:
         with self._tx() as db:
             db.execute(sql, args)
 
-    def recover(self, max_attempts: int) -> tuple[list[str], list[str]]:
+    def recover(self, max_attempts: int) -> tuple[builtins.list[str], builtins.list[str]]:
         """After a restart of the one local runner: jobs found `running` are queued again, or
         failed once they were started `max_attempts` times. Removes orphaned files. Returns
         (requeued, failed) ids."""
@@ -377,7 +380,7 @@ class JobStore:
         self.remove_orphans(older_than_s=0.0)
         return requeued, failed
 
-    def remove_orphans(self, older_than_s: float) -> list[str]:
+    def remove_orphans(self, older_than_s: float) -> builtins.list[str]:
         """Remove `.tmp-*` folders and folders without a record, untouched for `older_than_s`
         (0 when no one else writes here: the local runner's start; queue workers wait longer
         than a job may run, as other nodes submit and run jobs meanwhile). Returns their names."""
@@ -416,31 +419,22 @@ CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq);
 _TENANT_INDEX = "CREATE INDEX IF NOT EXISTS jobs_tenant_state ON jobs (tenant, state)"  # after the migration
 
 
-class SqliteJobStore(JobStore):
-    """Records in `<root>/jobs.sqlite3` through infra/sqlite.py: one connection behind a lock,
-    every call one short transaction (writes as BEGIN IMMEDIATE)."""
+class SqliteJobStore(SqliteStore, JobStore):
+    """Records in `<root>/jobs.sqlite3` through infra/sqlite.py's SqliteStore: one connection
+    behind a lock, every call one short transaction (writes as BEGIN IMMEDIATE)."""
 
     DB_NAME = "jobs.sqlite3"
     _NEXT_SEQ = "(SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs)"
 
     def __init__(self, root: str | Path) -> None:
-        super().__init__(root)
-        self._db = SqliteDatabase(self.root / self.DB_NAME, _SQLITE_SCHEMA)
+        JobStore.__init__(self, root)
+        SqliteStore.__init__(self, self.root / self.DB_NAME, _SQLITE_SCHEMA)
         with self._tx() as db:
             present = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
             for name, sql_type in _ADDED_COLUMNS:
                 if name not in present:
                     db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {sql_type.format(int='INTEGER')}")
             db.execute(_TENANT_INDEX)
-
-    def close(self) -> None:
-        self._db.close()
-
-    def _tx(self):
-        return self._db.transaction()
-
-    def _read(self):
-        return self._db.read()
 
 
 # -- PostgreSQL ---------------------------------------------------------------------------------
@@ -468,29 +462,17 @@ _POSTGRES_SCHEMA = (
 # Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
 # SQLite (any constant that no other user of the database takes; these are "camd" in ASCII).
 _WRITE_LOCK_KEY = 0x63616D64
-class PostgresJobStore(JobStore):
+class PostgresJobStore(PostgresStore, JobStore):
     """Records in the `jobs` table of the PostgreSQL database at `url` (created when missing),
-    through infra/postgres.py; files in `root` as for SQLite. Raises JobsUnavailable when the
-    database cannot be reached."""
+    through infra/postgres.py's PostgresStore; files in `root` as for SQLite. Raises
+    JobsUnavailable when the database cannot be reached."""
 
     _NEXT_SEQ = "DEFAULT"
 
     def __init__(self, url: str, root: str | Path) -> None:
-        super().__init__(root)
-        self.url = url
-        self._db = PostgresDatabase(url, "job store", JobsUnavailable)
-        with self._tx() as db:   # under the write lock: nodes starting together create it once
-            for statement in _POSTGRES_SCHEMA:
-                db.execute(statement)
-
-    def close(self) -> None:
-        self._db.close()
-
-    def _tx(self):
-        return self._db.transaction("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK_KEY,))
-
-    def _read(self):
-        return self._db.read()
+        JobStore.__init__(self, root)
+        PostgresStore.__init__(self, url, "job store", JobsUnavailable, _POSTGRES_SCHEMA,
+                               write_lock=advisory_lock(_WRITE_LOCK_KEY))
 
 
 def open_store(url: str, root: str | Path) -> JobStore:

@@ -191,6 +191,13 @@ def import_cs2_demo(path: Path, *, level: str | None = None, rate_hz: float = 64
         raise Cs2DemoError(path, str(exc)) from None
 
 
+def load_cs2_demo_file(path: Path, *, level: str | None, rate_hz: float) -> MatchRecording:
+    """import-match's load function (matches/importers.py): the demo's frames at CS2's own tick
+    rate, TICK_RATE_HZ, whatever `rate_hz` (import-match's --rate-hz, whose default is the MVD's
+    60 Hz grid) asks."""
+    return import_cs2_demo(path, level=level)
+
+
 def _text(value) -> str:
     """A table cell as text, "" where demoparser2 left it empty (None, NaN, pandas' NA)."""
     text = "" if value is None else str(value).strip()
@@ -313,6 +320,13 @@ def _key_at(columns: Mapping[str, np.ndarray], side: str, i: int) -> str | None:
     return _player_key(None if steamid is None else steamid[i], None if name is None else name[i])
 
 
+def _player_at(by_key: Mapping[str, MatchPlayer], columns: Mapping[str, np.ndarray], side: str,
+               i: int) -> MatchPlayer | None:
+    """The player on an event's `side` at row i (_key_at), None where it has none or is no player."""
+    key = _key_at(columns, side, i)
+    return None if key is None else by_key.get(key)
+
+
 def _kill_events(deaths: Mapping[str, np.ndarray], by_key: dict[str, MatchPlayer], time_s: np.ndarray,
                  positions: np.ndarray) -> list[MatchEvent]:
     """player_death's rows as kill events (module docstring); by_key: player key -> player, in
@@ -320,10 +334,10 @@ def _kill_events(deaths: Mapping[str, np.ndarray], by_key: dict[str, MatchPlayer
     column_of = {player.id: i for i, player in enumerate(by_key.values())}
     events = []
     for i in range(len(deaths.get("tick", []))):
-        victim = by_key.get(_key_at(deaths, "user", i))
+        victim = _player_at(by_key, deaths, "user", i)
         if victim is None:      # a death of no one on a team (cannot happen in a normal match)
             continue
-        attacker = by_key.get(_key_at(deaths, "attacker", i))
+        attacker = _player_at(by_key, deaths, "attacker", i)
         weapon = str(deaths["weapon"][i]) if "weapon" in deaths else ""
         if attacker is None:
             label, attacker = f"world:{weapon}", victim
@@ -353,7 +367,7 @@ def _bomb_events(bombs: Mapping[str, Mapping[str, np.ndarray]], by_key: dict[str
     events, planter, bomb_at = [], None, None
     for tick, name, i in rows:
         columns = bombs[name]
-        player = by_key.get(_key_at(columns, "user", i))
+        player = _player_at(by_key, columns, "user", i)
         feet = _event_feet(columns, "user", i)
         if name == "bomb_planted":
             planter, bomb_at = player, feet

@@ -3,7 +3,8 @@
     camdirector import-match DEMO [--map MAP.bsp | --level NAME] --out MATCH.npz [--rate-hz 60]
                              [--data-dir DIR]
         DEMO: a QuakeWorld MVD (.mvd, or .mvd.gz) read by matches/quakeworld_mvd.py, or a
-        Counter-Strike 2 demo (.dem) read by matches/cs2_demo.py. --level NAME names the level the
+        Counter-Strike 2 demo (.dem) read by matches/cs2_demo.py: the importer is picked by the
+        file's name from matches/importers.py's registry. --level NAME names the level the
         match records (default: the demo's map, "dm2"); --map MAP also adds the map to the level
         registry under its file's stem, as `camdirector level add STEM MAP` does (with the Quake
         player's height and radius as the agent's), and records that name. Writes the match
@@ -17,18 +18,19 @@ Kept light at import, as evaluation/match/sim_cli.py: numpy and the readers load
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import sys
 from pathlib import Path
+
+from camdirector.matches.importers import IMPORTERS, importer_for, readable_suffixes
 
 
 def add_parser(subparsers) -> None:
     """Registers `import-match` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "import-match", help="import a real game's demo (QuakeWorld .mvd/.mvd.gz, CS2 .dem) as a match file",
+        "import-match", help=f"import a real game's demo ({_games()}) as a match file",
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("demo", type=Path, help="the demo file: .mvd, .mvd.gz or .dem")
+    p.add_argument("demo", type=Path, help=f"the demo file: {readable_suffixes()}")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--map", type=Path, help="the demo's map (.bsp): added to the level registry under its stem")
     where.add_argument("--level", help="the level name to record (default: the demo's map)")
@@ -45,11 +47,11 @@ def run_import_match(args: argparse.Namespace) -> int:
 
     try:
         level = args.level or (_add_map(args.map, args.data_dir) if args.map else None)
-        match = _read_demo(args.demo, level, args.rate_hz)
+        match = importer_for(args.demo).read(args.demo, level=level, rate_hz=args.rate_hz)
     except LevelsUnavailable as exc:
         print(f"camdirector import-match: {exc}", file=sys.stderr)
         return 1
-    except (OSError, EOFError, ValueError, gzip.BadGzipFile) as exc:
+    except (OSError, EOFError, ValueError) as exc:  # gzip.BadGzipFile is an OSError
         print(f"camdirector import-match: {args.demo}: {exc}", file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -60,19 +62,9 @@ def run_import_match(args: argparse.Namespace) -> int:
     return 0
 
 
-def _read_demo(path: Path, level: str | None, rate_hz: float):
-    """The match in a demo file, by its suffix (module docstring)."""
-    name = path.name.lower()
-    if name.endswith(".dem"):
-        from camdirector.matches.cs2_demo import import_cs2_demo
-        return import_cs2_demo(path, level=level)
-    if name.endswith((".mvd", ".mvd.gz")):
-        from camdirector.matches.quakeworld_mvd import import_mvd
-        data = path.read_bytes()
-        if name.endswith(".gz"):
-            data = gzip.decompress(data)
-        return import_mvd(data, level=level, rate_hz=rate_hz, name=path.name)
-    raise ValueError("not a demo this command reads (.mvd, .mvd.gz or .dem)")
+def _games() -> str:
+    """What the importers read, for the help: "QuakeWorld .mvd/.mvd.gz, CS2 .dem"."""
+    return ", ".join(f"{importer.name} {'/'.join(importer.suffixes)}" for importer in IMPORTERS)
 
 
 def _add_map(map_path: Path, data_dir: Path | None) -> str:

@@ -184,16 +184,16 @@ class _Cursor:
     def ulong(self) -> int:
         return _U32.unpack_from(self.data, self.need(4))[0]
 
-    def float(self) -> float:
+    def float32(self) -> float:
         return _F32.unpack_from(self.data, self.need(4))[0]
 
     def coord(self) -> float:
         if self.coord_size == 4:
-            return self.float()
+            return self.float32()
         return self.short() / 8.0
 
     def entity_coord(self) -> float:
-        return self.float() if self.entity_float else self.coord()
+        return self.float32() if self.entity_float else self.coord()
 
     def angle(self) -> None:
         self.skip(2 if self.coord_size == 4 else 1)
@@ -606,9 +606,9 @@ class _Reader:
                                  jump=rows[:, 7] > 0, dead=rows[:, 8] > 0)
         stats = {}
         for s in slots:
-            rows = [(0.0, 0, 0, 0, 0)] + self.stat_changes.get(s, [])
-            stats[s] = MvdStats(time_s=np.array([r[0] for r in rows], dtype=np.float64),
-                                values=np.array([r[1:] for r in rows], dtype=np.int64))
+            changes = [(0.0, 0, 0, 0, 0)] + self.stat_changes.get(s, [])
+            stats[s] = MvdStats(time_s=np.array([r[0] for r in changes], dtype=np.float64),
+                                values=np.array([r[1:] for r in changes], dtype=np.int64))
         deaths = [d for d in self.deaths if d.killer in tracks or d.victim in tracks]
         try:
             teamplay = int(self.serverinfo.get("teamplay", b"0") or 0)

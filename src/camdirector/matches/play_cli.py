@@ -1,7 +1,7 @@
 """`camdirector play-match`: a recorded match streamed live into a server, to rehearse with the dashboard.
 
     camdirector play-match MATCH --server URL [--speed 1.0] [--delay-s 10] [--rate-hz 30]
-                           [--director PLANNED|HLTV] [--key KEY] [--ca-file CA]
+                           [--director NAME] [--key KEY] [--ca-file CA]
                            [--session-id-file PATH] [--loop]
         opens a RIG_MATCH session for the match's players on its level (the server must hold the
         level: camdirector level add) with the broadcast delay, and streams the match over one
@@ -27,8 +27,6 @@ import sys
 import threading
 from pathlib import Path
 
-DIRECTOR_NAMES = ("PLANNED", "HLTV", "AUTOTRACK")  # session_feed.DIRECTORS' keys, not imported here to keep it light
-
 
 def add_parser(subparsers) -> None:
     """Registers `play-match` on an argparse subparsers object; args.handler(args) runs it."""
@@ -42,7 +40,8 @@ def add_parser(subparsers) -> None:
                    help="broadcast delay, s, 0 to 300 (default 10)")
     p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0,
                    help="frames per second sent, a divisor of the file's rate (default 30)")
-    p.add_argument("--director", choices=DIRECTOR_NAMES, default="PLANNED", help="who directs (default PLANNED)")
+    p.add_argument("--director", default="planned", metavar="NAME",
+                   help="who directs: a match director the server has (GET /v1/match-directors; default planned)")
     p.add_argument("--key", help="API key (default: the CAMDIRECTOR_KEY environment variable)")
     p.add_argument("--ca-file", dest="ca_file", type=Path, help="grpcs:// only: PEM authorities to trust")
     p.add_argument("--session-id-file", dest="session_id_file", type=Path, help="write the session id here too")
@@ -73,7 +72,6 @@ def run_play_match(args: argparse.Namespace) -> int:
     """Runs `camdirector play-match` from parsed arguments; returns the exit status."""
     import camdirector_client as cd
     from camdirector.evaluation.match.match_file import load_match
-    from camdirector.evaluation.match.session_feed import DIRECTORS
     from camdirector.matches.playback import lap_feeds, play_match
 
     try:
@@ -116,7 +114,7 @@ def run_play_match(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_sigint)
     try:
         with client:
-            result = play_match(client, match, director=DIRECTORS[args.director], delay_s=args.delay_s,
+            result = play_match(client, match, director=args.director, delay_s=args.delay_s,
                                 rate_hz=args.rate_hz, speed=args.speed, loop=args.loop, on_session=on_session,
                                 on_cut=lambda line: _print({"cut": line}), stop=stop)
     except cd.DirectorError as exc:

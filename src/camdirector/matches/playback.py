@@ -107,12 +107,12 @@ def cut_line(reply: cd.pb.CameraUpdate) -> dict:
             "reason": shot.reason, "held": shot.held}
 
 
-def play_match(client: cd.Client, match: MatchRecording, *, director: int, delay_s: float, rate_hz: float = 30.0,
+def play_match(client: cd.Client, match: MatchRecording, *, director: str, delay_s: float, rate_hz: float = 30.0,
                speed: float = 1.0, loop: bool = False, seed: int = 0, clock: Callable[[], float] = time.monotonic,
                on_session: Callable[[str], None] = lambda session_id: None,
                on_cut: Callable[[dict], None] = lambda line: None,
                stop: threading.Event | None = None) -> PlaybackResult:
-    """Plays the match into a new RIG_MATCH session of `director` (a MatchDirector value) with the
+    """Plays the match into a new RIG_MATCH session of `director` (a registered name) with the
     broadcast delay delay_s, s (module docstring), then closes the session. `on_session` hears the
     session id as soon as it is open, `on_cut` each cut (cut_line). `stop`, once set (by another
     thread or a signal handler, as play-match's Ctrl-C), ends the updates: the server answers

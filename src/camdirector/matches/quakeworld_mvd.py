@@ -24,8 +24,10 @@ grid at rate_hz from the demo's first player sample to its end:
 """
 from __future__ import annotations
 
+import gzip
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -33,7 +35,7 @@ from camdirector.evaluation.match.match_file import MatchEvent, MatchPlayer, Mat
 from camdirector.geometry import quake_frame
 from camdirector.matches.mvd_wire import MvdDemo, MvdError, MvdTrack, parse_mvd
 
-__all__ = ["MvdError", "MvdImport", "import_mvd", "match_from_mvd", "parse_mvd"]
+__all__ = ["MvdError", "MvdImport", "import_mvd", "load_mvd_file", "match_from_mvd", "parse_mvd"]
 
 STEP_SPEED_UNITS_S = 2000.0 * math.sqrt(3.0)   # sv_maxvelocity per axis, any direction
 MIN_STEP_DT_S = 0.001                          # two samples closer than this compare as this far apart
@@ -54,6 +56,15 @@ def import_mvd(data: bytes, *, level: str | None = None, rate_hz: float = 60.0, 
     """The match an MVD recorded (module docstring). level: the match file's level (default the
     demo's map, "dm2", else name, the demo's own name). MvdError (a ValueError) on a bad file."""
     return match_from_mvd(parse_mvd(data), level=level, rate_hz=rate_hz, name=name).match
+
+
+def load_mvd_file(path: Path, *, level: str | None, rate_hz: float) -> MatchRecording:
+    """The match in an .mvd file, or an .mvd.gz one (gunzipped): import-match's load function
+    (matches/importers.py); the demo's own name is its file's."""
+    data = path.read_bytes()
+    if path.name.lower().endswith(".gz"):
+        data = gzip.decompress(data)
+    return import_mvd(data, level=level, rate_hz=rate_hz, name=path.name)
 
 
 def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 60.0, name: str = "") -> MvdImport:

@@ -6,12 +6,17 @@ import enum
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.style import Style
 from camdirector.precompute.tracks.artifact import LevelArtifact
+
+# A session's dynamic objects as INGEST keeps them: object id -> (mesh in its local frame, latest
+# transform); the rigs that ray-cast or map the scene read them (pipeline/rigs.py `make_rig`).
+DynamicObjects = dict[str, tuple[TriMesh, RigidTransform]]
 
 
 @dataclass(frozen=True)
@@ -36,7 +41,7 @@ class TargetSpec:
     id: str
     mesh: TriMesh          # local frame
     transform: RigidTransform
-    aim_offset_local: np.ndarray  # (3,)
+    aim_offset_local: npt.NDArray[np.float64]  # (3,)
     team: int = 0          # MATCH: the player's team; players of different teams are opponents
 
 
@@ -86,7 +91,7 @@ class GameEvent:
     priority: int            # [0, 15]; 0 = the kind's default (match/settings.py)
     time_s: float            # game time, s (the codec fills the frame's time for 0)
     label: str
-    position_world: np.ndarray | None = None  # (3,) metres, where it happened, if the game says
+    position_world: npt.NDArray[np.float64] | None = None  # (3,) metres, where it happened, if the game says
 
 
 @dataclass(frozen=True)

@@ -1,31 +1,80 @@
-"""The one choice of rig: which implementation of the rig contract (pipeline/camera_rig.py) a session
-created from a scene gets, for its whole life."""
+"""The rigs there are, as data, and the one choice of rig: which implementation of the rig
+contract (pipeline/camera_rig.py) a session created from a scene gets, for its whole life.
+
+`RIGS` holds one `RigEntry` per rig: its `Rig` value (pipeline/style.py, the wire's numbers), its
+name, how it is made from a session's scene, and a line saying what it is. `make_rig` chooses
+through it and nothing else does; code that lists the rigs (the codec's table of the wire's
+values) reads it. A new rig is its folder and one entry here (docs/architecture.md, "where a change goes").
+"""
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.pipeline.camera_rig import CameraRig
-from camdirector.pipeline.inputs import SceneSpec
+from camdirector.pipeline.inputs import DynamicObjects, SceneSpec
 from camdirector.pipeline.match.rig import MatchRig
 from camdirector.pipeline.style import Rig
 from camdirector.pipeline.toric.rig import ToricRig
 from camdirector.pipeline.tracks.rig import TracksRig
 
 
-def make_rig(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: dict,
+class MakeRig(Protocol):
+    """Makes a session's rig from its scene and what the session keeps (`make_rig`'s arguments)."""
+
+    def __call__(self, scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh],
+                 dynamic: DynamicObjects, rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig: ...
+
+
+@dataclass(frozen=True)
+class RigEntry:
+    """One rig: `make` makes it for a session whose `style.rig` is `rig`."""
+
+    rig: Rig
+    name: str          # lower case, as the rig's folder under pipeline/
+    make: MakeRig
+    description: str   # one line: what the rig does
+
+
+def _make_toric(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
+                rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig:
+    return ToricRig(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
+
+
+def _make_tracks(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
+                 rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig:
+    if scene.level is None:  # worker/codec.py gives every TRACKS scene its level
+        raise ValueError("the TRACKS rig needs the scene's level")
+    return TracksRig(scene.level, scene.lens, scene.style, ray_scene, rng, clock)
+
+
+def _make_match(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
+                rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig:
+    return MatchRig(scene, ray_scene, rng, clock)
+
+
+RIGS: tuple[RigEntry, ...] = (
+    RigEntry(Rig.TORIC, "toric", _make_toric,
+             "frames one or two targets on the Toric manifold, moving by the style's visibility mode"),
+    RigEntry(Rig.TRACKS, "tracks", _make_tracks,
+             "follows one actor on a precomputed level's camera tracks, cutting by the graph director"),
+    RigEntry(Rig.MATCH, "match", _make_match,
+             "directs a match among its players behind a broadcast delay, by the style's match director"),
+)
+_BY_RIG = {entry.rig: entry for entry in RIGS}
+
+
+def make_rig(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
              rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter) -> CameraRig:
     """The rig of a session created from `scene`, for its whole life (worker/codec.py refuses a
-    change of rig): MATCH when the style says so, TRACKS for a scene on a level (the codec gives
-    a level only to those two), else TORIC. ray_scene, static_meshes_world and dynamic (object id
-    -> (mesh, latest transform)) are the session's, which INGEST keeps current; rng its seeded
-    generator, clock what the stages are timed on."""
-    if scene.style.rig == Rig.MATCH:
-        return MatchRig(scene, ray_scene, rng, clock)
-    if scene.level is not None:
-        return TracksRig(scene.level, scene.lens, scene.style, ray_scene, rng, clock)
-    return ToricRig(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
+    change of rig): the entry of `scene.style.rig` makes it (the codec gives a level to a TRACKS
+    scene always, to a MATCH scene optionally, to no other). ray_scene, static_meshes_world and
+    dynamic are the session's, which INGEST keeps current; rng its seeded generator, clock what
+    the stages are timed on."""
+    return _BY_RIG[scene.style.rig].make(scene, ray_scene, static_meshes_world, dynamic, rng, clock)

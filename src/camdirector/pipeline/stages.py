@@ -1,12 +1,12 @@
 """The per-frame director pipeline: the order of its stages, written down here and nowhere else.
 
 Stage order (one module each; `Stage` values are the `stage_ms` keys on the wire):
-  INGEST      worker/session.py         apply the frame's transforms to targets and the ray scene
+  INGEST      pipeline/session.py       apply the frame's transforms to targets and the ray scene
   FRAMING     pipeline/toric/framing.py  framed points A and B (gaze room for one target), the
                                          torus; the occlusion maps take in the moved objects
   PROJECTION  pipeline/toric/occlusion_maps.py  S-maps and V-maps of the target samples (map
                                          modes, on schedule)
-  AMAP        pipeline/toric/anticipation.py  the occlusion anticipation map (map modes, on schedule)
+  AMAP        pipeline/toric/anticipation_map.py  the occlusion anticipation map (map modes, on schedule)
   MOTION      pipeline/toric/camera_motion.py  FRAMING_ONLY: damped return to the preferred place;
               pipeline/toric/reactive.py       REACTIVE: that, pulled in front of occluders;
               pipeline/toric/occlusion_search.py  RAYCAST and map modes: the paper's search and cuts
@@ -35,8 +35,6 @@ from __future__ import annotations
 
 import enum
 
-from camdirector.pipeline.tracks.director import DirectorStage as TracksStage  # noqa: F401  (its stage_ms keys)
-
 
 class Stage(enum.Enum):
     """The TORIC pipeline's stages in order; values are their `stage_ms` keys."""
@@ -47,6 +45,15 @@ class Stage(enum.Enum):
     AMAP = "amap"
     MOTION = "motion"
     VISIBILITY = "visibility"
+
+
+class TracksStage(enum.Enum):
+    """The TRACKS rig's stages after INGEST in order: the graph director's steps of one frame
+    (pipeline/tracks/director.py, the camera-tracks paper's Section 5); values are their `stage_ms` keys."""
+
+    CUT_CHECK = "cut_check"          # direct visibility and framing feed the cutting strategy
+    TARGET_UPDATE = "target_update"  # a cut's continuity search, or the target moving strategy
+    CAMERA_UPDATE = "camera_update"  # the camera jumps or follows; the actor's visibility from there
 
 
 class MatchStage(enum.Enum):

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.match.frame import MatchFrame
@@ -27,7 +28,7 @@ class FrameState:
     frame: int
     time_s: float
     dt_s: float                                  # since the previous answered frame, s (0 on the first)
-    aim_points_world: list[np.ndarray] = field(default_factory=list)  # (3,) per target
+    aim_points_world: list[npt.NDArray[np.float64]] = field(default_factory=list)  # (3,) per target
     pose: CameraPose | None = None               # None: no camera yet (MATCH while its delay fills)
     cut: bool = False
     shot_id: int = 0

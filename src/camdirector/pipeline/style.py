@@ -12,10 +12,6 @@ import enum
 import math
 from dataclasses import dataclass
 
-from camdirector.pipeline.toric.anticipation import MaskKind
-from camdirector.pipeline.tracks.director import Movement
-from camdirector.pipeline.tracks.shot_sizes import ShotSize
-
 
 class VisibilityMode(enum.IntEnum):
     """Same numbers as camdirector.v1.VisibilityMode."""
@@ -36,21 +32,39 @@ class MapBackendChoice(enum.IntEnum):
     EMBREE = 2
 
 
+class MaskKind(enum.Enum):
+    """Viewpoints the TORIC map modes avoid: the occlusion-anticipation paper's Figure 10 masks
+    (Section 5.2), computed by pipeline/toric/style_masks.py."""
+
+    EMPTY = "empty"                                  # (a) no preference
+    SOFT_BEHIND = "soft_behind"                      # (b) flexible exclusion behind the targets, a gradient
+    HARD_BEHIND = "hard_behind"                      # (c) hard exclusion behind the targets
+    AVOID_BEHIND_TOP_BOTTOM = "avoid_behind_top_bottom"  # (d) smooth: behind, top views and bottom views
+
+
+class ShotSize(enum.Enum):
+    """TRACKS: the actor's size on screen (the camera-tracks paper, Section 6.1); what each keeps in
+    frame is pipeline/tracks/shot_sizes.py's."""
+
+    MEDIUM = "medium"
+    LONG = "long"
+    EXTREME_LONG = "extreme_long"
+
+
+class Movement(enum.Enum):
+    """TRACKS: how the camera may move and cut (the camera-tracks paper, Section 6.1)."""
+
+    DYNAMIC_NO_CUTS = "dynamic_no_cuts"
+    DYNAMIC_WITH_CUTS = "dynamic_with_cuts"
+    STATIC = "static"
+
+
 class Rig(enum.IntEnum):
     """Same numbers as camdirector.v1.Rig (UNSPECIFIED is TORIC and never stored)."""
 
     TORIC = 1
     TRACKS = 2
     MATCH = 3
-
-
-class MatchDirectorKind(enum.IntEnum):
-    """Which director a MATCH session runs: ours (match/plan.py), the HLTV baseline (match/hltv.py)
-    or QuakeWorld's autotrack baseline (match/autotrack.py)."""
-
-    PLANNED = 1
-    HLTV = 2
-    AUTOTRACK = 3
 
 
 # Modes whose camera moves by the paper's search (occlusion_search.py) rather than the toric spring.
@@ -76,14 +90,13 @@ class Style:
     rig: Rig = Rig.TORIC                # the camera rig
     shot_size: ShotSize = ShotSize.LONG  # TRACKS: the actor's size on screen
     movement: Movement = Movement.DYNAMIC_WITH_CUTS  # TRACKS: how the camera may move and cut
-    match_director: MatchDirectorKind = MatchDirectorKind.PLANNED  # MATCH: which director picks the shots
+    match_director: str = "planned"     # MATCH: which director picks the shots, a name of match/director_registry.py
     min_shot_s: float = 2.0             # MATCH: shortest shot, except after a take, s. [0.5, 30]
     max_shot_s: float = 8.0             # MATCH: longest shot the director makes without an event, s. [min_shot_s, 120]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, value, kind in (("rig", self.rig, Rig), ("shot_size", self.shot_size, ShotSize),
-                                  ("movement", self.movement, Movement),
-                                  ("match_director", self.match_director, MatchDirectorKind)):
+                                  ("movement", self.movement, Movement), ("match_director", self.match_director, str)):
             if not isinstance(value, kind):
                 raise ValueError(f"style.{name} must be a {kind.__name__}, got {value!r}")
         if self.rig == Rig.MATCH and self.visibility != VisibilityMode.FRAMING_ONLY:
@@ -109,6 +122,6 @@ class Style:
         ]
         if not 16 <= self.map_resolution <= 512:
             raise ValueError(f"style.map_resolution must be in [16, 512], got {self.map_resolution}")
-        for name, value, low, high in limits:
-            if not (math.isfinite(value) and low <= value <= high):
-                raise ValueError(f"style.{name} must be in [{low:g}, {high:g}], got {value}")
+        for limited, number, low, high in limits:
+            if not (math.isfinite(number) and low <= number <= high):
+                raise ValueError(f"style.{limited} must be in [{low:g}, {high:g}], got {number}")

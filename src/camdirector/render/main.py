@@ -17,12 +17,18 @@ import sys
 import textwrap
 import time
 from collections import OrderedDict
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from camdirector.infra.channels import read_message, write_message
-from camdirector.render.monitor import OK, UNAVAILABLE, encode_view
+from camdirector.infra.channels import encode_view, read_message, write_message
+from camdirector.render.monitor import OK, UNAVAILABLE
 from camdirector.render.snapshots import TOP_VIEW_LONG_SIDE_PX, RenderJob, SceneGeometry, rigid_matrices
+
+if TYPE_CHECKING:  # imported where it is used: only the render process loads GL
+    import moderngl
+
+    from camdirector.geometry.render import OffscreenRenderer
 
 log = logging.getLogger("camdirector.render")
 
@@ -36,10 +42,10 @@ PLACEHOLDER_RGB = (58, 60, 66)
 class Painter:
     """The render process's state (module docstring)."""
 
-    def __init__(self):
-        self._ctx = None
+    def __init__(self) -> None:
+        self._ctx: moderngl.Context | None = None
         self._geometry: dict[str, SceneGeometry] = {}
-        self._renderers: OrderedDict[tuple[str, int, int], object] = OrderedDict()
+        self._renderers: OrderedDict[tuple[str, int, int], OffscreenRenderer] = OrderedDict()
         self._top: dict[str, tuple[bytes, list[float] | None, str | None]] = {}
 
     def add_session(self, session_id: str, geometry: SceneGeometry) -> None:
@@ -61,7 +67,8 @@ class Painter:
     def render(self, job: RenderJob) -> bytes:
         """The view's bytes (encode_view) for one job."""
         t0 = time.perf_counter()
-        header = {"frame": job.frame, "placeholder": job.placeholder, "note": job.note, "bounds_m": None}
+        header: dict[str, object] = {"frame": job.frame, "placeholder": job.placeholder, "note": job.note,
+                                     "bounds_m": None}
         if job.query.shot == "top":
             image, header["bounds_m"], header["placeholder"] = self._top_view(job.session_id)
             media_type = "image/png"
@@ -77,11 +84,11 @@ class Painter:
         header.update(media_type=media_type, render_ms=round((time.perf_counter() - t0) * 1e3, 3))
         return encode_view(header, image)
 
-    def _context(self):
+    def _context(self) -> moderngl.Context:
         if self._ctx is None:
-            import moderngl  # only the render process loads GL
+            from camdirector.geometry.gl_context import egl_context  # only the render process loads GL
 
-            self._ctx = moderngl.create_standalone_context(backend="egl")
+            self._ctx = egl_context()
         return self._ctx
 
     def _camera_view(self, job: RenderJob) -> np.ndarray:
@@ -100,6 +107,7 @@ class Painter:
         self._renderers.move_to_end(key)
         if job.moving_ids:
             renderer.set_transforms(list(job.moving_ids), rigid_matrices(job))
+        assert job.pose is not None   # a job without a pose has a placeholder instead (snapshots.py)
         return renderer.render(job.pose, job.lens)
 
     def _top_view(self, session_id: str) -> tuple[bytes, list[float] | None, str | None]:

@@ -8,23 +8,18 @@ and talks to it over the process's stdin and stdout (infra/channels.py: length-p
 On the worker's side (`Monitor`), the main thread only takes the snapshot
 (snapshots.render_job) and queues it; a writer thread sends it (and, once per session, the meshes),
 a reader thread takes the picture back and hands it to the caller's `reply`.
-
-Each reply body is a view (`encode_view`): a 4-byte length, a JSON header (the frame shown, the
-placeholder's reason if any, the render time, the media type, and the top view's world bounds),
-then the image.
+Each reply body is a view, framed by infra/channels.py (`encode_view`).
 """
 from __future__ import annotations
 
 import logging
 import os
 import queue
-import struct
 import subprocess
 import sys
 import threading
 from collections.abc import Callable
-
-import orjson
+from typing import Any
 
 from camdirector.infra.channels import read_message, write_message
 from camdirector.render.snapshots import RenderJob, SceneGeometry
@@ -32,24 +27,6 @@ from camdirector.render.snapshots import RenderJob, SceneGeometry
 log = logging.getLogger("camdirector.monitor")
 
 OK, UNAVAILABLE = 0, 14     # gRPC status codes, as the worker's replies carry them
-_VIEW_HEADER = struct.Struct("!I")
-
-
-# -- the view's bytes -------------------------------------------------------------------------
-
-def encode_view(header: dict, image: bytes) -> bytes:
-    meta = orjson.dumps(header)
-    return _VIEW_HEADER.pack(len(meta)) + meta + image
-
-
-def decode_view(body: bytes) -> tuple[dict, bytes]:
-    """(header, image) of a view's bytes (module docstring)."""
-    (length,) = _VIEW_HEADER.unpack_from(body)
-    start = _VIEW_HEADER.size
-    return orjson.loads(body[start:start + length]), body[start + length:]
-
-
-# -- the worker's side ------------------------------------------------------------------------
 
 Reply = Callable[[int, bytes], None]   # (status, body): status OK with a view, else an error message
 
@@ -61,8 +38,8 @@ class Monitor:
     def __init__(self, python: str = sys.executable):
         self.python = python
         self._lock = threading.Lock()
-        self._proc: subprocess.Popen | None = None     # set by the writer thread once started
-        self._outbox: queue.SimpleQueue | None = None  # None: no process (not yet, or it died)
+        self._proc: subprocess.Popen[bytes] | None = None     # set by the writer thread once started
+        self._outbox: queue.SimpleQueue[tuple[Any, ...]] | None = None  # None: no process (not yet, or it died)
         self._sent: set[str] = set()                # sessions whose meshes the process holds
         self._waiting: dict[int, Reply] = {}        # job number -> its reply
         self._numbers = iter(range(1, 1 << 62))
@@ -90,7 +67,8 @@ class Monitor:
         with self._lock:
             if session_id in self._sent:
                 self._sent.discard(session_id)
-                self._outbox.put(("forget", session_id))
+                if self._outbox is not None:   # else the process died, and the meshes with it
+                    self._outbox.put(("forget", session_id))
 
     @property
     def pid(self) -> int | None:
@@ -109,12 +87,13 @@ class Monitor:
         if not done.wait(timeout=10.0):
             log.error("the view renderer did not stop")
 
-    def _send_forever(self, outbox: queue.SimpleQueue) -> None:
+    def _send_forever(self, outbox: queue.SimpleQueue[tuple[Any, ...]]) -> None:
         """The writer thread of one render process: starts it, then sends what is queued."""
         env = dict(os.environ)
         env.setdefault("LP_NUM_THREADS", "1")   # llvmpipe's rasterizer threads: one is plenty at monitor sizes
         proc = subprocess.Popen([self.python, "-m", "camdirector.render.main"],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        assert proc.stdin is not None and proc.stdout is not None   # both asked for as pipes
         self._proc = proc
         reader = threading.Thread(target=self._receive_forever, args=(proc, outbox), name="monitor-reader",
                                   daemon=True)
@@ -147,8 +126,10 @@ class Monitor:
         if closing is not None:
             closing.set()
 
-    def _receive_forever(self, proc: subprocess.Popen, outbox: queue.SimpleQueue) -> None:
-        while (message := read_message(proc.stdout)) is not None:
+    def _receive_forever(self, proc: subprocess.Popen[bytes], outbox: queue.SimpleQueue[tuple[Any, ...]]) -> None:
+        stdout = proc.stdout
+        assert stdout is not None   # a pipe (_send_forever)
+        while (message := read_message(stdout)) is not None:
             number, status, body = message
             with self._lock:
                 reply = self._waiting.pop(number, None)

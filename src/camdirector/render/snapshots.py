@@ -1,6 +1,6 @@
 """What a session's monitors show (issue 16), described for the render process (monitor.py).
 
-A view is one of:
+A view (`ViewQuery`, infra/channels.py: what crosses from the front to the worker) is one of:
 - `program`: what the session's camera sees now (its last answered pose, lens and aspect);
 - `candidate`: in a MATCH session, the camera of the candidate shot of the given players;
 - `cut_before`, `cut_after`: the last frame before the session's last cut and the cut's own;
@@ -24,19 +24,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import orjson
 
-from camdirector.errors import invalid
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.transforms import quat_to_matrix
-from camdirector.worker.session import Session
+from camdirector.infra.channels import MAX_HEIGHT_PX, MIN_SIDE_PX, ViewQuery
+from camdirector.pipeline.session import Session
 
-SHOTS = ("program", "candidate", "cut_before", "cut_after", "top")
-FORMATS = ("jpeg", "png")
-MIN_SIDE_PX = 16
-MAX_WIDTH_PX = 1280      # a monitor is small: a larger picture is refused (the route answers 422)
-MAX_HEIGHT_PX = 720
-DEFAULT_WIDTH_PX = 320
 TOP_VIEW_LONG_SIDE_PX = 512  # the top view's longer side; the other follows the world's extent
 NO_WORLD_NOTE = "no world geometry: the scene has no object and no level, only its targets"
 
@@ -50,44 +43,6 @@ MOVING_RGB = (0.30, 0.45, 0.70)
 TARGET_RGB = (0xE0 / 255, 0x7B / 255, 0x00 / 255)
 TEAM_RGB = (TARGET_RGB, (0x8E / 255, 0x24 / 255, 0xAA / 255), (0x2E / 255, 0x7D / 255, 0x32 / 255),
             (0x79 / 255, 0x55 / 255, 0x48 / 255))
-
-
-@dataclass(frozen=True)
-class ViewQuery:
-    """A view asked for: which picture, its size and its image format."""
-
-    shot: str = "program"
-    subjects: tuple[str, ...] = ()        # candidate: its players, in any order
-    width_px: int = DEFAULT_WIDTH_PX      # [MIN_SIDE_PX, MAX_WIDTH_PX]; the top view ignores it
-    height_px: int | None = None          # None: width / the lens's aspect; [MIN_SIDE_PX, MAX_HEIGHT_PX]
-    image_format: str = "jpeg"            # FORMATS; the top view is always PNG
-
-    def __post_init__(self):
-        if self.shot not in SHOTS:
-            raise invalid(f"view shot must be one of {', '.join(SHOTS)}, got {self.shot!r}")
-        if self.image_format not in FORMATS:
-            raise invalid(f"view format must be one of {', '.join(FORMATS)}, got {self.image_format!r}")
-        if not MIN_SIDE_PX <= self.width_px <= MAX_WIDTH_PX:
-            raise invalid(f"view width must be in [{MIN_SIDE_PX}, {MAX_WIDTH_PX}] px, got {self.width_px}")
-        if self.height_px is not None and not MIN_SIDE_PX <= self.height_px <= MAX_HEIGHT_PX:
-            raise invalid(f"view height must be in [{MIN_SIDE_PX}, {MAX_HEIGHT_PX}] px, got {self.height_px}")
-        if self.shot == "candidate" and not self.subjects:
-            raise invalid("a candidate view names the candidate's players (subjects)")
-
-    def to_json(self) -> bytes:
-        return orjson.dumps({"shot": self.shot, "subjects": list(self.subjects), "width_px": self.width_px,
-                             "height_px": self.height_px, "image_format": self.image_format})
-
-    @classmethod
-    def from_json(cls, payload: bytes) -> ViewQuery:
-        try:
-            fields = orjson.loads(payload)
-            return cls(shot=str(fields["shot"]), subjects=tuple(str(s) for s in fields["subjects"]),
-                       width_px=int(fields["width_px"]),
-                       height_px=None if fields["height_px"] is None else int(fields["height_px"]),
-                       image_format=str(fields["image_format"]))
-        except (orjson.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-            raise invalid(f"not a view query: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -141,6 +96,7 @@ class RenderJob:
     def lens(self) -> Lens:
         """The pose's field of view at the picture's own aspect (the session's unless both sides were given)."""
         width, height = self.size_px
+        assert self.pose is not None   # only a camera view's picture has a lens
         return Lens(vertical_fov_deg=self.pose.vertical_fov_deg, aspect=width / height)
 
 

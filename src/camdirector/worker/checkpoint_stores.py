@@ -357,7 +357,9 @@ class RedisStore:
         meta_key, log_key = self._keys(session_id)
         try:
             with self._client.pipeline(transaction=True) as pipe:
-                meta, log_entries = pipe.hgetall(meta_key).lrange(log_key, 0, -1).execute()
+                pipe.hgetall(meta_key)
+                pipe.lrange(log_key, 0, -1)
+                meta, log_entries = pipe.execute()
         except self._errors as exc:
             raise CheckpointError(f"reading session {session_id}'s checkpoint in {self.url} failed: {exc}") from None
         if b"create" not in meta:

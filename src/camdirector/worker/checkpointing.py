@@ -18,10 +18,12 @@ session's starts anew.
 
 Restoring builds the session again from its creation request (with its tenant, whose levels it
 finds again: the create op's payload is kept whole, infra/channels.py), puts the snapshot's state in place,
-and runs the inputs since through the session table's own request handling (`handle_bytes`, the
-code that replays recordings, recording.py), writing, sending and recording nothing again.
-Sessions are deterministic (recordings replay bit for bit), so the restored session answers its
-next frame as the lost one would have.
+and runs the inputs since through the same computations as the first time, writing, sending and
+recording nothing again. This module only loads what to rebuild (`Checkpointing.load`: the
+creation payload, the snapshot, the inputs since); the rebuild is driven from above it
+(worker/dispatch.py, which parses the inputs as it parses requests, and worker/table.py's
+`restore` and `replay`). Sessions are deterministic (recordings replay bit for bit), so the
+restored session answers its next frame as the lost one would have.
 
 A write that fails (Redis down, a full disk) fails no frame: the session goes on, each answer's
 metrics say so (`FrameMetrics.checkpoint_failed`), and once the store answers again (tried every
@@ -34,23 +36,20 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-from camdirector.errors import DirectorError, not_found, unavailable
-from camdirector.infra.channels import decode_create, encode_create
+from camdirector.errors import unavailable
+from camdirector.infra.channels import encode_create
+from camdirector.pipeline.session import CreationName
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.checkpoint_stores import (
+    Checkpoint,
     CheckpointError,
     CheckpointStore,
     dumps_state,
     encode_entry,
-    loads_state,
     open_store,
 )
-
-if TYPE_CHECKING:  # the table holds this protocol, which restores sessions through the table
-    from camdirector.worker.table import HeldSession, SessionTable
 
 log = logging.getLogger("camdirector.sessions")
 
@@ -71,138 +70,105 @@ class SessionCheckpoint:
         return self.retry_s is not None
 
 
-class Checkpointing:
-    """The checkpoint protocol of one session table (module docstring); without a store (the
-    setting `checkpoint_store = "off"`) it keeps nothing and restores nothing."""
+class TakenOver(Exception):
+    """The store refused an input: another process has taken the session over since (module
+    docstring), so this process's copy is behind and is to be restored before the input is computed."""
 
-    def __init__(self, table: SessionTable, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter,
+
+class Checkpointing:
+    """The checkpoint protocol of one session table (module docstring): the stores' reads and
+    writes, and when a snapshot is due. Without a store (the setting `checkpoint_store = "off"`)
+    it keeps nothing and loads nothing."""
+
+    def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter,
                  store: CheckpointStore | None = None):
         """store: where sessions are checkpointed; by default the one settings.checkpoint_store names."""
-        self.table = table
         self.every_frames = settings.checkpoint_every_frames
         self.clock = clock
         self.store = store if store is not None else open_store(
             settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s)
         self.owner = f"{settings.node_name}/{os.getpid()}"  # this process, in checkpoints' ownership
-        self.replaying = False   # restoring: the inputs since the snapshot are not written, sent or recorded again
-        self.defer_snapshots = False  # snapshots due wait for idle time (module docstring)
-        self._due: dict[str, HeldSession] = {}
 
     @property
     def enabled(self) -> bool:
         return self.store is not None
 
-    def begin(self, held: HeldSession, req: pb.CreateSessionRequest, payload: bytes | None, tenant: str) -> None:
+    def begin(self, session_id: str, checkpoint: SessionCheckpoint, req: pb.CreateSessionRequest,
+              payload: bytes | None, tenant: str) -> None:
         """A session created: its checkpoint begins with the create op's payload, the session's
-        tenant and its request (`payload`: those bytes as received, when at hand). A restored
-        session's is kept as it is."""
+        tenant and its request (`payload`: those bytes as received, when at hand)."""
         if self.store is None:
             return
-        held.checkpoint.create_payload = payload if payload is not None else encode_create(tenant, req.SerializeToString())
-        if not self.replaying:
-            try:
-                self.store.begin(held.session.id, self.owner, held.checkpoint.create_payload)
-            except CheckpointError as exc:
-                self._failed(held, exc)
+        checkpoint.create_payload = payload if payload is not None else encode_create(tenant, req.SerializeToString())
+        try:
+            self.store.begin(session_id, self.owner, checkpoint.create_payload)
+        except CheckpointError as exc:
+            self._failed(session_id, checkpoint, exc)
 
-    def write_input(self, session_id: str, held: HeldSession, op: str, payload: bytes) -> HeldSession:
-        """Writes one input before it is computed. Answers the session to compute it on: `held`,
-        or the newer state restored when another process has taken the session over."""
-        if self.replaying or self.store is None:
-            return held
-        checkpoint = held.checkpoint
+    def write_input(self, session_id: str, checkpoint: SessionCheckpoint, op: str, payload: bytes) -> None:
+        """Writes one input before it is computed. Raises TakenOver when another process has
+        taken the session over: the input is then computed on the newer state, restored."""
+        if self.store is None:
+            return
         checkpoint.seq += 1
         if checkpoint.failed:
-            return held   # the snapshot after this input repairs the checkpoint (after_input)
+            return   # the snapshot after this input repairs the checkpoint (snapshot_due)
         try:
             owned = self.store.append(session_id, self.owner, encode_entry(checkpoint.seq, op, payload))
         except CheckpointError as exc:
-            self._failed(held, exc)
-            return held
-        if owned:
-            return held
-        log.info("session %s was taken over by another process; restoring its newer state", session_id)
-        self.table.drop(session_id, keep_checkpoint=True)
-        # the restore claims the checkpoint: this input is then written as this process's, or a
-        # later restore elsewhere would lack an input this process computed
-        return self.write_input(session_id, self.restore(session_id), op, payload)
-
-    def after_input(self, held: HeldSession) -> None:
-        """A snapshot when one is due, or when a failed write is to be repaired: taken at once,
-        or with `defer_snapshots` left for idle time unless the log has grown to twice its period."""
-        if self.replaying or self.store is None:
+            self._failed(session_id, checkpoint, exc)
             return
-        checkpoint = held.checkpoint
-        if checkpoint.failed:
-            due = self.clock() >= checkpoint.retry_s
-        else:
-            due = checkpoint.seq - checkpoint.snapshot_seq >= self.every_frames
-        if not due:
-            return
-        if self.defer_snapshots and checkpoint.seq - checkpoint.snapshot_seq < 2 * self.every_frames:
-            self._due[held.session.id] = held
-        else:
-            self._due.pop(held.session.id, None)
-            self._snapshot(held, claim=False)
+        if not owned:
+            raise TakenOver(session_id)
 
-    @property
-    def snapshots_due(self) -> bool:
-        """Whether a snapshot waits for idle time."""
-        return bool(self._due)
-
-    def take_due_snapshot(self) -> None:
-        """The oldest snapshot left for idle time, if one is (0.5-1 ms)."""
-        if self._due:
-            self._snapshot(self._due.pop(next(iter(self._due))), claim=False)
-
-    def restore(self, session_id: str) -> HeldSession:
-        """The session rebuilt from its checkpoint (module docstring), now held by the table and
-        owned by this process. NOT_FOUND without one; UNAVAILABLE when the store cannot be read or
-        the checkpoint does not restore (the session's other requests will try again; other
-        sessions are untouched)."""
+    def snapshot_due(self, checkpoint: SessionCheckpoint) -> bool:
+        """Whether an input just computed calls for a snapshot: every `every_frames` inputs, or
+        once a failed write is to be repaired (its retry time has come)."""
         if self.store is None:
-            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
+            return False
+        if checkpoint.retry_s is not None:
+            return self.clock() >= checkpoint.retry_s
+        return checkpoint.seq - checkpoint.snapshot_seq >= self.every_frames
+
+    def may_wait(self, checkpoint: SessionCheckpoint) -> bool:
+        """Whether a snapshot due may wait for idle time: not once the log has grown to twice its
+        period (a worker never idle still cuts it)."""
+        return checkpoint.seq - checkpoint.snapshot_seq < 2 * self.every_frames
+
+    def snapshot(self, session_id: str, checkpoint: SessionCheckpoint, state: object,
+                 creation_objects: dict[CreationName, object], claim: bool) -> None:
+        """Writes `state` (the session and its style as sent; its deferred work done: a snapshot
+        holds computed maps, not the means to compute them) in place of the log; with `claim` (a
+        restore) this process takes the session over. After a failed write the checkpoint is
+        begun again first (the store may have lost it: Redis restarted)."""
+        if self.store is None:
+            return
         try:
-            checkpoint = self.store.load(session_id)
+            data = dumps_state(state, creation_objects)
+            if checkpoint.failed:
+                self.store.begin(session_id, self.owner, checkpoint.create_payload)
+            self.store.snapshot(session_id, self.owner, checkpoint.seq, data, claim=claim)
+        except CheckpointError as exc:
+            self._failed(session_id, checkpoint, exc)
+            return
+        if checkpoint.failed:
+            log.warning("session %s: checkpoint written again after a failure", session_id)
+        checkpoint.snapshot_seq, checkpoint.retry_s = checkpoint.seq, None
+
+    def load(self, session_id: str) -> Checkpoint | None:
+        """What rebuilds the session (module docstring), or None when none is kept (or no store).
+        UNAVAILABLE when the store cannot be read (the session's other requests will try again)."""
+        if self.store is None:
+            return None
+        try:
+            return self.store.load(session_id)
         except CheckpointError as exc:
             raise unavailable(f"session {session_id} cannot be restored now: {exc}") from None
-        if checkpoint is None:
-            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
-        t0 = self.clock()
-        self.replaying = True
-        try:
-            tenant, request = decode_create(checkpoint.create)
-            req = pb.CreateSessionRequest.FromString(request)
-            self.table.create(session_id, req, checkpoint.create, tenant)
-            held = self.table.held[session_id]
-            if checkpoint.snapshot is not None:
-                built = held.session
-                held.session, held.style_msg = loads_state(checkpoint.snapshot, built.creation_objects())
-                built.close()
-            held.checkpoint.seq = held.checkpoint.snapshot_seq = checkpoint.seq
-            for seq, op, payload in checkpoint.entries:  # as replay does (recording.py)
-                try:
-                    self.table.handle_bytes(op, session_id, payload)
-                except DirectorError:
-                    pass  # refused again, as it was the first time
-                held.checkpoint.seq = seq
-        except Exception as exc:
-            self.table.drop(session_id, keep_checkpoint=True)
-            log.exception("session %s: restoring its checkpoint failed", session_id)
-            raise unavailable(f"session {session_id} could not be restored from its checkpoint: "
-                              f"{type(exc).__name__}: {exc}") from None
-        finally:
-            self.replaying = False
-        self._snapshot(held, claim=True)
-        log.info("session %s restored from its checkpoint (%d inputs after the snapshot) in %.1f ms",
-                 session_id, len(checkpoint.entries), (self.clock() - t0) * 1e3)
-        return held
 
     def end(self, session_id: str, keep_checkpoint: bool) -> None:
-        """A session the table no longer holds: no snapshot of it waits any more, and its
-        checkpoint is deleted, or with `keep_checkpoint` only let go of (the process is stopping,
-        or another one has taken the session over)."""
-        self._due.pop(session_id, None)
+        """A session the table no longer holds: its checkpoint is deleted, or with
+        `keep_checkpoint` only let go of (the process is stopping, or another one has taken the
+        session over)."""
         if self.store is None:
             return
         try:
@@ -217,27 +183,9 @@ class Checkpointing:
         if self.store is not None:
             self.store.close()
 
-    def _snapshot(self, held: HeldSession, claim: bool) -> None:
-        """A snapshot; with `claim` (a restore) this process takes the session over; after a failed
-        write the checkpoint is begun again first (the store may have lost it: Redis restarted)."""
-        session, checkpoint = held.session, held.checkpoint
-        self.table.finish_deferred_work(held)   # a snapshot holds computed maps, not the means to compute them
-        try:
-            # Not the dashboard's timeline: diagnostics, not state, up to 1 MB; a restored session's starts anew.
-            state = dumps_state((session, held.style_msg), session.creation_objects())
-            if checkpoint.failed:
-                self.store.begin(session.id, self.owner, checkpoint.create_payload)
-            self.store.snapshot(session.id, self.owner, checkpoint.seq, state, claim=claim)
-        except CheckpointError as exc:
-            self._failed(held, exc)
-            return
-        if checkpoint.failed:
-            log.warning("session %s: checkpoint written again after a failure", session.id)
-        checkpoint.snapshot_seq, checkpoint.retry_s = checkpoint.seq, None
-
-    def _failed(self, held: HeldSession, exc: CheckpointError) -> None:
+    def _failed(self, session_id: str, checkpoint: SessionCheckpoint, exc: CheckpointError) -> None:
         """The session goes on; its checkpoint is written whole again once the store answers."""
-        if not held.checkpoint.failed:
+        if not checkpoint.failed:
             log.error("session %s: %s; frames are still answered, the checkpoint is written again when the "
-                      "store answers (tried every %.0f s)", held.session.id, exc, CHECKPOINT_RETRY_S)
-        held.checkpoint.retry_s = self.clock() + CHECKPOINT_RETRY_S
+                      "store answers (tried every %.0f s)", session_id, exc, CHECKPOINT_RETRY_S)
+        checkpoint.retry_s = self.clock() + CHECKPOINT_RETRY_S

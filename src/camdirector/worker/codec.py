@@ -14,7 +14,10 @@ A MATCH session (`RIG_MATCH`) has 2 to 64 targets, the players, each with its `t
 as are `events` and the MATCH style fields). A frame's events name players of the session
 (a kill both its attacker and its victim), have a priority in [0, 15] (0: the kind's default) and a
 time no later than the frame's time plus the delay (0: the frame's time). A frame's `player_stats`
-(MATCH only, like events) each name a player of the session, none twice.
+(MATCH only, like events) each name a player of the session, none twice. A MATCH style's
+director is a name of the director registry (pipeline/match/director_registry.py):
+`match_director_name` when set, else the built-in of the `match_director` enum (unset: "planned");
+an unknown name is refused, listing the registered ones, and `shown_style` shows the resolved name back.
 
 `pose_outputs` (at most 8) are checked here, before the scene: a known format, an address
 `udp://HOST:PORT` whose HOST is an IPv4 address or a name that resolves to one (once, here, within
@@ -28,6 +31,7 @@ import math
 import socket
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
+from typing import Any
 
 import numpy as np
 
@@ -37,12 +41,21 @@ from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.meshes import MeshError, TriMesh
 from camdirector.geometry.toric import composition_angle
 from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
+from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, PlayerStats, SceneSpec, TargetSpec
+from camdirector.pipeline.match.director_registry import DEFAULT_DIRECTOR, director_by_wire, director_entry
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.rigs import RIGS
 from camdirector.pipeline.state import FrameState
-from camdirector.pipeline.style import MapBackendChoice, MatchDirectorKind, Movement, Rig, ShotSize, Style, VisibilityMode
-from camdirector.pipeline.toric.anticipation import MaskKind
-from camdirector.precompute.tracks.registry import DEFAULT_TENANT
+from camdirector.pipeline.style import (
+    MapBackendChoice,
+    MaskKind,
+    Movement,
+    Rig,
+    ShotSize,
+    Style,
+    VisibilityMode,
+)
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.level_cache import LevelCache
@@ -51,10 +64,7 @@ from camdirector.worker.pose_out import PoseFormat, PoseOutputSpec
 _MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
           pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
           pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
-_RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC, pb.RIG_TORIC: Rig.TORIC, pb.RIG_TRACKS: Rig.TRACKS, pb.RIG_MATCH: Rig.MATCH}
-_MATCH_DIRECTORS = {pb.MATCH_DIRECTOR_UNSPECIFIED: MatchDirectorKind.PLANNED,
-                    pb.MATCH_DIRECTOR_PLANNED: MatchDirectorKind.PLANNED, pb.MATCH_DIRECTOR_HLTV: MatchDirectorKind.HLTV,
-                    pb.MATCH_DIRECTOR_AUTOTRACK: MatchDirectorKind.AUTOTRACK}
+_RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC} | {entry.rig.value: entry.rig for entry in RIGS}  # Rig has the wire's numbers
 MAX_PLAYERS = 64        # players of a MATCH session (the wire contract)
 MAX_DELAY_S = 300.0     # broadcast delay of a MATCH session, s (the wire contract)
 MAX_PRIORITY = 15       # a game event's priority (HLTV's scale)
@@ -155,7 +165,7 @@ def lens_from_msg(msg: pb.Lens) -> Lens:
 
 def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> Style:
     """The style of a CreateSession, or of an UpdateStyle to a session whose style is `current`."""
-    values = {}
+    values: dict[str, Any] = {}   # Style's fields by name, each of its own type
     for name in ("screen_a", "screen_b"):
         if msg.HasField(name):
             point = getattr(msg, name)
@@ -175,8 +185,7 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
         raise invalid(f"style.mask {msg.mask} or style.map_backend {msg.map_backend} is not known") from None
     if msg.map_resolution:
         values["map_resolution"] = msg.map_resolution
-    for name, table in (("rig", _RIGS), ("shot_size", _SHOT_SIZES), ("movement", _MOVEMENTS),
-                        ("match_director", _MATCH_DIRECTORS)):
+    for name, table in (("rig", _RIGS), ("shot_size", _SHOT_SIZES), ("movement", _MOVEMENTS)):
         number = getattr(msg, name)
         if number not in table:
             raise invalid(f"style.{name} {number} is not a known {name}")
@@ -189,9 +198,11 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
         raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
                       "(with a level_id) or leave them unset")
     match_fields = [name for name in ("min_shot_s", "max_shot_s") if msg.HasField(name)]
-    if values["rig"] != Rig.MATCH and (msg.match_director or match_fields):
-        raise invalid("style.match_director, style.min_shot_s and style.max_shot_s direct the MATCH rig; set "
-                      "style.rig = RIG_MATCH or leave them unset")
+    if values["rig"] != Rig.MATCH and (msg.match_director or msg.match_director_name or match_fields):
+        raise invalid("style.match_director, style.match_director_name, style.min_shot_s and style.max_shot_s "
+                      "direct the MATCH rig; set style.rig = RIG_MATCH or leave them unset")
+    if values["rig"] == Rig.MATCH:
+        values["match_director"] = _match_director(msg)
     for name in match_fields:
         values[name] = getattr(msg, name)
     try:
@@ -201,6 +212,34 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
     if composition_angle(style.screen_a, style.screen_b, lens) < MIN_ALPHA_RAD:
         raise invalid("style.screen_a and style.screen_b are too close for this lens (under 0.5 deg apart)")
     return style
+
+
+def _match_director(msg: pb.Style) -> str:
+    """The registry name of the style's director (pipeline/match/director_registry.py): its
+    `match_director_name` when set, else the built-in of its `match_director` enum value."""
+    if msg.match_director_name:
+        try:
+            return director_entry(msg.match_director_name).name
+        except KeyError as exc:
+            raise invalid(f"style.match_director_name: {exc.args[0]}") from None
+    if msg.match_director == pb.MATCH_DIRECTOR_UNSPECIFIED:
+        return DEFAULT_DIRECTOR
+    entry = director_by_wire(pb.MatchDirector.Name(msg.match_director)) \
+        if msg.match_director in pb.MatchDirector.values() else None
+    if entry is None:
+        raise invalid(f"style.match_director {msg.match_director} is not a known match_director")
+    return entry.name
+
+
+def shown_style(msg: pb.Style, style: Style) -> pb.Style:
+    """The style as a session shows it back (GET /v1/sessions/{id}): as the client sent it, with
+    a MATCH style's director by the registry name it resolved to."""
+    if style.rig != Rig.MATCH:
+        return msg
+    shown = pb.Style()
+    shown.CopyFrom(msg)
+    shown.match_director_name = style.match_director
+    return shown
 
 
 def _check_id(object_id: str, what: str, seen: set[str]) -> None:
@@ -279,7 +318,7 @@ def _resolve_ipv4(host: str, what: str) -> str:
         _resolver = ThreadPoolExecutor(max_workers=2, thread_name_prefix="pose-output-resolve")
     lookup = _resolver.submit(socket.getaddrinfo, host, None, socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        return lookup.result(timeout=RESOLVE_TIMEOUT_S)[0][4][0]
+        return str(lookup.result(timeout=RESOLVE_TIMEOUT_S)[0][4][0])   # AF_INET: (address, port)
     except FutureTimeout:
         raise invalid(f"{what}: host {host!r} did not resolve within {RESOLVE_TIMEOUT_S:g} s") from None
     except (OSError, IndexError, UnicodeError):

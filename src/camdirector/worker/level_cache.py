@@ -14,9 +14,10 @@ from pathlib import Path
 
 from camdirector.errors import not_found, precondition, unavailable
 from camdirector.geometry.meshes import TriMesh
+from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.inputs import LoadedLevel
 from camdirector.precompute.tracks.artifact import ArtifactVersionError
-from camdirector.precompute.tracks.registry import DEFAULT_TENANT, LevelRegistry, LevelsUnavailable
+from camdirector.precompute.tracks.registry import LevelRegistry, LevelsUnavailable
 
 
 class LevelCache:

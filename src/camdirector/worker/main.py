@@ -1,8 +1,11 @@
 """A worker process's main loop: answer the front's requests over the socket pair (framed by
-infra/channels.py) one at a time, and do the sessions' deferred work while none waits.
+infra/channels.py) one at a time (dispatch.py, over the process's session table, table.py), and do
+the sessions' deferred work while none waits.
 """
 from __future__ import annotations
 
+import functools
+import io
 import os
 import select
 import socket
@@ -10,7 +13,9 @@ import threading
 
 from camdirector.errors import DirectorError
 from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_request
+from camdirector.infra.plugins import import_plugins
 from camdirector.server_settings import ServerSettings
+from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.table import SessionTable
 
 
@@ -23,16 +28,20 @@ def _idle(sock: socket.socket) -> bool:
 def worker_main(conn, settings: ServerSettings) -> None:
     """Entry point of a worker process: answer requests until told to stop or the front goes.
     `conn` is the worker's end of a multiprocessing socket pair, read and written as a plain socket."""
+    import_plugins(settings.plugins)  # spawned: the front's imports are not inherited
     sock = socket.socket(fileno=os.dup(conn.fileno()))
     conn.close()
-    reader = sock.makefile("rb", buffering=READ_BUFFER_BYTES)
-    table = SessionTable(settings)
-    table.defer_snapshots = True  # taken below, when no request waits (SessionTable.idle_work)
+    reader = io.BufferedReader(socket.SocketIO(sock, "rb"), READ_BUFFER_BYTES)  # sock.makefile("rb", ...)
+    table = SessionTable(settings, defer_snapshots=True)  # snapshots taken below, when no request waits (idle_work)
+    requests = Dispatcher(table)
     sending = threading.Lock()   # views are answered from the render process's reader thread
 
     def send(data: bytes) -> None:
         with sending:
             sock.sendall(data)
+
+    def send_view(request_id: int, status: int, body: bytes) -> None:
+        send(encode_reply(request_id, status, body, None))
 
     while True:
         try:
@@ -49,13 +58,12 @@ def worker_main(conn, settings: ServerSettings) -> None:
             continue
         if op == "view":  # answered later, off this loop (render/monitor.py)
             try:
-                table.view(session_id, payload,
-                           lambda status, body, rid=request_id: send(encode_reply(rid, status, body, None)))
+                requests.view(session_id, payload, functools.partial(send_view, request_id))
             except DirectorError as exc:
                 send(encode_reply(request_id, exc.code.value[0], exc.message.encode(), None))
             continue
         try:
-            body, metrics = table.handle_bytes(op, session_id, payload)
+            body, metrics = requests.handle_bytes(op, session_id, payload)
             reply = encode_reply(request_id, 0, body, metrics)
         except DirectorError as exc:
             reply = encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)

@@ -52,6 +52,7 @@ from fractions import Fraction
 
 import cbor2
 import numpy as np
+import numpy.typing as npt
 import orjson
 
 from camdirector.geometry.camera import CameraPose
@@ -118,8 +119,10 @@ FREED_POSITION_SCALE = 64.0   # 1/64 mm per unit (17.6 fixed point)
 FREED_ZOOM_SCALE = 100.0      # zoom: the focal length in 1/100 mm
 _I24_MIN, _I24_MAX, _U24_MAX = -(1 << 23), (1 << 23) - 1, (1 << 24) - 1
 
+Floats = Sequence[float] | npt.NDArray[np.float64]   # a pose's vectors as our geometry holds them, or plain numbers
 
-def opentrackio_transform(position_world: Sequence[float], rotation_xyzw: Sequence[float]
+
+def opentrackio_transform(position_world: Floats, rotation_xyzw: Floats
                           ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Our camera pose as OpenTrackIO's stage transform: ((x, y, z) metres, (pan, tilt, roll)
     degrees), the conversion of the module docstring. rotation_xyzw: camera-to-world, unit."""
@@ -142,7 +145,7 @@ def opentrackio_transform(position_world: Sequence[float], rotation_xyzw: Sequen
     return (px, -pz, py), (math.degrees(pan), math.degrees(tilt), math.degrees(roll))
 
 
-def _floats(values: Sequence[float]) -> list[float]:
+def _floats(values: Floats) -> list[float]:
     return values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
 
 

@@ -1,4 +1,4 @@
-"""Session recordings: a length-delimited stream of camdirector.v1.RecordEntry, and replay.
+"""Session recordings: a length-delimited stream of camdirector.v1.RecordEntry (replay.py runs one again).
 
 File layout: the 8-byte magic ``CDREC\\x00v1``, then entries, each a base-128 varint byte length
 followed by one serialized RecordEntry (the same framing as protobuf's writeDelimitedTo). The
@@ -9,7 +9,6 @@ A file cut short by a crash reads up to its last whole entry.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
@@ -90,73 +89,3 @@ def read_entries(path: Path) -> Iterator[pb.RecordEntry]:
             return  # cut inside an entry
         yield pb.RecordEntry.FromString(data[pos:pos + length])
         pos += length
-
-
-@dataclass
-class ReplayReport:
-    frames: int          # CameraUpdates recorded
-    identical: int       # replayed poses equal to the recorded ones bit for bit
-    first_mismatch: int | None  # frame number of the first difference
-
-    @property
-    def ok(self) -> bool:
-        return self.frames == self.identical
-
-    def as_dict(self) -> dict:
-        return {"frames": self.frames, "identical": self.identical,
-                "first_mismatch": self.first_mismatch, "ok": self.ok}
-
-
-def _comparable(update: pb.CameraUpdate) -> bytes:
-    """The part of a CameraUpdate that must replay bit for bit (not timings, not diagnostics)."""
-    return pb.CameraUpdate(frame=update.frame, time_s=update.time_s, pose=update.pose, cut=update.cut,
-                           shot_id=update.shot_id, visibility=update.visibility, stale=update.stale,
-                           shot=update.shot, buffering=update.buffering).SerializeToString(deterministic=True)
-
-
-def replay(path: Path, on_frame=None, data_dir: Path | None = None) -> ReplayReport:
-    """Runs a recording through a fresh in-process session and compares every answer.
-
-    data_dir: where the recording's TRACKS level is registered; by default the data directory the
-    recording lies in (`<data_dir>/recordings/<session>.cdrec`), else the server's default."""
-    from camdirector.server_settings import ServerSettings
-    from camdirector.worker.table import SessionTable
-
-    limits = dict(max_objects=1_000_000, max_triangles=100_000_000, checkpoint_store="off")  # a replay keeps no checkpoints
-    if data_dir is None and Path(path).resolve().parent.name == "recordings":
-        data_dir = Path(path).resolve().parent.parent
-    if data_dir is not None:
-        limits["data_dir"] = str(data_dir)
-    table = SessionTable(ServerSettings(**limits))
-    session_id = "replay"
-    report = ReplayReport(frames=0, identical=0, first_mismatch=None)
-    replayed: pb.CameraUpdate | None = None
-    for entry in read_entries(path):
-        kind = entry.WhichOneof("entry")
-        if kind == "create":
-            # A replay answers the frames again, it does not broadcast them: no datagram goes to the
-            # recorded pose outputs' addresses (which need not even resolve on this machine).
-            entry.create.ClearField("pose_outputs")
-            table.create(session_id, entry.create)
-        elif kind == "frame":
-            frame = pb.FrameUpdate()
-            frame.CopyFrom(entry.frame)
-            frame.session_id = session_id
-            replayed = table.frame(frame)
-        elif kind == "style":
-            table.update_style(pb.UpdateStyleRequest(session_id=session_id, style=entry.style.style))
-        elif kind == "take":
-            take = pb.TakeShotRequest()
-            take.CopyFrom(entry.take)
-            take.session_id = session_id
-            table.take_shot(take)
-        elif kind == "camera":
-            report.frames += 1
-            if replayed is not None and _comparable(replayed) == _comparable(entry.camera):
-                report.identical += 1
-            elif report.first_mismatch is None:
-                report.first_mismatch = entry.camera.frame
-            if on_frame is not None:
-                on_frame(entry.camera, replayed)
-            replayed = None
-    return report

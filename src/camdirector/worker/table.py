@@ -1,11 +1,13 @@
-"""The session table: the sessions one process holds (hosting them), and the requests that reach them.
+"""The session table: the sessions one process holds (hosting them), and the typed requests that reach them.
 
-Used the same way inside a worker process and inline in the front process (workers=0): the
-worker pool routes a request by session id and calls `handle_bytes`, which parses it and calls the
-table's typed method for it (dispatch.py). The table creates, runs, restyles, shows and ends its
-sessions, with what it keeps beside each (`HeldSession`); their checkpoints are the checkpoint
-protocol's (checkpointing.py), which the table tells of every input and of every session it ends,
-and which restores, through the table, a session it does not hold.
+Used the same way inside a worker process and inline in the front process (workers=0), below the
+requests' parsing (dispatch.py, which calls this table's typed methods and knows how to rebuild a
+session it does not hold). The table creates, runs, restyles, shows and ends its sessions, with
+what it keeps beside each (`HeldSession`). Each input is written to the session's checkpoint
+(checkpointing.py) before it is computed (`TakenOver` when the store says another process has the
+session now: dispatch.py restores the newer state and asks again), and a snapshot taken when one
+is due (at once, or with `defer_snapshots` in `idle_work`). A session it does not hold is
+NOT_FOUND here: rebuilding one is `restore` and `replay`, driven from dispatch.py.
 """
 from __future__ import annotations
 
@@ -15,21 +17,24 @@ from dataclasses import dataclass, field
 
 from google.protobuf import json_format
 
-from camdirector.errors import invalid, precondition
-from camdirector.infra.channels import FrameMetrics
-from camdirector.precompute.tracks.registry import DEFAULT_TENANT
+from camdirector.errors import invalid, not_found, precondition
+from camdirector.infra.channels import FrameMetrics, ViewQuery
+from camdirector.infra.tenants import DEFAULT_TENANT
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.session import Session
+from camdirector.pipeline.state import FrameState
+from camdirector.pipeline.style import Style
 from camdirector.render.monitor import Monitor, Reply
-from camdirector.render.snapshots import ViewQuery, render_job, scene_geometry
+from camdirector.render.snapshots import render_job, scene_geometry
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
-from camdirector.worker import codec, dispatch
-from camdirector.worker.checkpoint_stores import CheckpointStore
+from camdirector.worker import codec
+from camdirector.worker.checkpoint_stores import Checkpoint, CheckpointStore, loads_state
 from camdirector.worker.checkpointing import Checkpointing, SessionCheckpoint
 from camdirector.worker.level_cache import LevelCache
 from camdirector.worker.map_view import anticipation_png
 from camdirector.worker.pose_out import PoseSender
 from camdirector.worker.recording import RecordingWriter
-from camdirector.worker.session import Session
 from camdirector.worker.timeline import Timeline
 
 
@@ -51,56 +56,82 @@ class SessionTable:
     """The sessions one process holds (module docstring)."""
 
     def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter,
-                 store: CheckpointStore | None = None):
-        """store: where sessions are checkpointed; by default the one settings.checkpoint_store names."""
+                 store: CheckpointStore | None = None, defer_snapshots: bool = False):
+        """store: where sessions are checkpointed; by default the one settings.checkpoint_store names.
+        defer_snapshots: snapshots due are left for idle_work (a worker's idle moments) rather than
+        taken before the frame's answer leaves (a worker's table; inline tables snapshot at once)."""
         self.settings = settings
         self.clock = clock
         self.held: dict[str, HeldSession] = {}
         self.levels = LevelCache(settings.data_dir, settings.job_store)  # the TRACKS rig's levels, loaded once per process
         self.monitor: Monitor | None = None          # the render process of the sessions' views, started on the first
-        self.checkpoints = Checkpointing(self, settings, clock, store)
-        # Sessions whose rig left work for later (Session.has_deferred_work), for idle_work.
+        self.checkpoints = Checkpointing(settings, clock, store)
+        self.defer_snapshots = defer_snapshots
+        # Sessions whose rig left work for later (Session.has_deferred_work), then those whose
+        # snapshot waits for idle time: idle_work's two queues, in that order.
         self._deferred: dict[str, HeldSession] = {}
+        self._snapshots_due: dict[str, HeldSession] = {}
 
-    @property
-    def defer_snapshots(self) -> bool:
-        """Whether snapshots due are left for idle_work (a worker's idle moments) rather than taken
-        before the frame's answer leaves; the worker loop sets it (inline tables snapshot at once)."""
-        return self.checkpoints.defer_snapshots
-
-    @defer_snapshots.setter
-    def defer_snapshots(self, value: bool) -> None:
-        self.checkpoints.defer_snapshots = value
-
-    def handle_bytes(self, op: str, session_id: str, payload: bytes) -> tuple[bytes, FrameMetrics | None]:
-        """One request as the transports carry it: serialized in, serialized out (dispatch.py).
-        Raises DirectorError for anything the client must hear about."""
-        return dispatch.handle_bytes(self, op, session_id, payload)
-
-    def _get(self, session_id: str) -> HeldSession:
+    def get(self, session_id: str) -> HeldSession:
+        """The held session; NOT_FOUND when this table does not hold it (dispatch.py restores a
+        checkpointed one first)."""
         held = self.held.get(session_id)
         if held is None:
-            held = self.checkpoints.restore(session_id)
+            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return held
 
     def create(self, session_id: str, req: pb.CreateSessionRequest, payload: bytes | None = None,
                tenant: str = DEFAULT_TENANT) -> pb.CreateSessionResponse:
         """payload: the create op's bytes as received, the tenant's and the request's (the checkpoint
         keeps them), when at hand; tenant: the session's, whose levels it may use."""
+        held = self._build(session_id, req, tenant)
+        response = pb.CreateSessionResponse(session_id=session_id)
+        if req.record or self.settings.record_all:
+            held.recorder = self._recorder(session_id)
+            held.recorder.write(pb.RecordEntry(create=req))
+            response.recording_path = str(held.recorder.path)
+        self.checkpoints.begin(session_id, held.checkpoint, req, payload, tenant)
+        return response
+
+    def restore(self, session_id: str, checkpoint: Checkpoint, req: pb.CreateSessionRequest, tenant: str) -> None:
+        """A session rebuilt from its checkpoint (checkpointing.py), as of its snapshot: built from
+        its creation request (`req`, `tenant`: the checkpoint's), the snapshot's state put in
+        place, its numbering that of the checkpoint's last input. Its recording goes on where the
+        lost process left it; the inputs since the snapshot follow through `replay`."""
+        held = self._build(session_id, req, tenant)
+        if req.record or self.settings.record_all:
+            held.recorder = self._recorder(session_id, append=True)
+        held.checkpoint.create_payload = checkpoint.create
+        if checkpoint.snapshot is not None:
+            built = held.session
+            held.session, held.style_msg = loads_state(checkpoint.snapshot, built.creation_objects())
+            built.close()
+        held.checkpoint.snapshot_seq = checkpoint.seq
+        held.checkpoint.seq = checkpoint.entries[-1][0] if checkpoint.entries else checkpoint.seq
+
+    def replay(self, msg: pb.FrameUpdate | pb.UpdateStyleRequest | pb.TakeShotRequest) -> None:
+        """An input of a session's checkpoint, computed again on the session being restored as it
+        was the first time; written, recorded and sent nowhere (that was done). Raises what the
+        input raised then (a refused one is refused again)."""
+        held = self.get(msg.session_id)
+        if isinstance(msg, pb.FrameUpdate):
+            self._frame(held, msg, self.clock())
+        elif isinstance(msg, pb.UpdateStyleRequest):
+            self._set_style(held, msg, self._checked_style(held, msg))
+        else:
+            self._take(held, self._checked_take(held, msg))
+
+    def claim(self, session_id: str) -> None:
+        """A restored session made this process's: a snapshot that claims its checkpoint."""
+        self._snapshot(self.get(session_id), claim=True)
+
+    def _build(self, session_id: str, req: pb.CreateSessionRequest, tenant: str) -> HeldSession:
         pose_outputs = codec.pose_outputs_from_request(req)  # cheap checks before the scene's meshes
         scene = codec.scene_from_request(req, self.settings, self.levels, tenant)
         held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
         if pose_outputs:  # a failure from here on drops the session (dispatch.py)
             held.pose_sender = PoseSender(session_id, pose_outputs, scene.lens.aspect)
-        response = pb.CreateSessionResponse(session_id=session_id)
-        replaying = self.checkpoints.replaying
-        if req.record or self.settings.record_all:
-            held.recorder = self._recorder(session_id, append=replaying)
-            if not replaying:   # a restored session's recording goes on where the lost process left it
-                held.recorder.write(pb.RecordEntry(create=req))
-            response.recording_path = str(held.recorder.path)
-        self.checkpoints.begin(held, req, payload, tenant)
-        return response
+        return held
 
     def _recorder(self, session_id: str, append: bool = False) -> RecordingWriter:
         # With checkpoints every entry is written at once: a worker killed after answering a frame
@@ -115,79 +146,98 @@ class SessionTable:
         """The serialized reply to `msg` (whose bytes as received are `payload`) and its metrics,
         taken from the frame's state rather than read back out of the reply."""
         t0 = self.clock()
-        held = self._get(msg.session_id)
-        session = held.session
-        if not session.is_stale(msg.frame):
-            held = self.checkpoints.write_input(msg.session_id, held, "frame", payload)
-            session = held.session
-        if session.is_stale(msg.frame):
-            last = session.last_state
-            reply = codec.camera_update_msg(
-                last, compute_ms=(self.clock() - t0) * 1e3, stale=True,
-                message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
-            reply.frame, reply.time_s = msg.frame, msg.time_s
-            stage_ms = {}
-            state = None
-        else:
-            inputs = session.rig.player_inputs   # whom the frame's game events may name, if the rig takes any
-            update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids,
-                                          None if inputs is None else inputs.player_ids, session.delay_s)
-            state = session.frame(update)
-            if session.has_deferred_work:
-                self._deferred[session.id] = held
-            reply = codec.camera_update_msg(state, compute_ms=0.0)
-            reply.compute_ms = (self.clock() - t0) * 1e3
-            held.timeline.add(state, reply.compute_ms)
-            stage_ms = state.stage_ms
+        held = self.get(msg.session_id)
+        if not held.session.is_stale(msg.frame):
+            self.checkpoints.write_input(msg.session_id, held.checkpoint, "frame", payload)
+        reply, state = self._frame(held, msg, t0)
         body = reply.SerializeToString()
-        if self.checkpoints.replaying:
-            return body, FrameMetrics(reply.compute_ms, stage_ms, reply.stale)
         if state is not None:
-            self.checkpoints.after_input(held)
+            self._after_input(held)
         if held.recorder is not None:
             held.recorder.write_frame_and_camera(payload, body)
         if held.pose_sender is not None and state is not None and state.pose is not None:
             held.pose_sender.send(state.pose, state.time_s)  # microseconds; drops rather than fails (pose_out.py)
+        stage_ms = {} if state is None else state.stage_ms
         return body, FrameMetrics(reply.compute_ms, stage_ms, reply.stale, checkpoint_failed=held.checkpoint.failed)
 
+    def _frame(self, held: HeldSession, msg: pb.FrameUpdate, t0: float) -> tuple[pb.CameraUpdate, FrameState | None]:
+        """The frame's reply, and its state when it was computed (None: stale, the last pose repeated)."""
+        session = held.session
+        if session.is_stale(msg.frame):
+            last = session.last_state
+            assert last is not None   # a frame is stale only after one was answered
+            reply = codec.camera_update_msg(
+                last, compute_ms=(self.clock() - t0) * 1e3, stale=True,
+                message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
+            reply.frame, reply.time_s = msg.frame, msg.time_s
+            return reply, None
+        inputs = session.rig.player_inputs   # whom the frame's game events may name, if the rig takes any
+        update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids,
+                                      None if inputs is None else inputs.player_ids, session.delay_s)
+        state = session.frame(update)
+        if session.has_deferred_work:
+            self._deferred[session.id] = held
+        reply = codec.camera_update_msg(state, compute_ms=0.0)
+        reply.compute_ms = (self.clock() - t0) * 1e3
+        held.timeline.add(state, reply.compute_ms)
+        return reply, state
+
     def update_style(self, msg: pb.UpdateStyleRequest, payload: bytes | None = None) -> pb.UpdateStyleResponse:
-        held = self._get(msg.session_id)
-        style = codec.style_from_msg(msg.style, held.session.lens, held.session.style)  # refused before it is kept
-        held = self.checkpoints.write_input(msg.session_id, held, "style",
-                                            payload if payload is not None else msg.SerializeToString())
-        held.session.set_style(style)
-        held.style_msg = msg.style
-        self.checkpoints.after_input(held)
-        if held.recorder is not None and not self.checkpoints.replaying:
+        held = self.get(msg.session_id)
+        style = self._checked_style(held, msg)   # refused before it is kept
+        self.checkpoints.write_input(msg.session_id, held.checkpoint, "style",
+                                     payload if payload is not None else msg.SerializeToString())
+        self._set_style(held, msg, style)
+        self._after_input(held)
+        if held.recorder is not None:
             held.recorder.write(pb.RecordEntry(style=msg))
         return pb.UpdateStyleResponse()
+
+    @staticmethod
+    def _checked_style(held: HeldSession, msg: pb.UpdateStyleRequest) -> Style:
+        return codec.style_from_msg(msg.style, held.session.lens, held.session.style)
+
+    @staticmethod
+    def _set_style(held: HeldSession, msg: pb.UpdateStyleRequest, style: Style) -> None:
+        held.session.set_style(style)
+        held.style_msg = msg.style
 
     def take_shot(self, msg: pb.TakeShotRequest, payload: bytes | None = None) -> pb.TakeShotResponse:
         """A human director's shot, held until released, in a session whose rig takes one
         (`PlayerInputs.take`, pipeline/camera_rig.py: MATCH)."""
-        held = self._get(msg.session_id)
+        held = self.get(msg.session_id)
+        take = self._checked_take(held, msg)
+        self.checkpoints.write_input(msg.session_id, held.checkpoint, "take",
+                                     payload if payload is not None else msg.SerializeToString())
+        shot = self._take(held, take)
+        self._after_input(held)
+        if held.recorder is not None:
+            held.recorder.write(pb.RecordEntry(take=msg))
+        return pb.TakeShotResponse() if shot is None else pb.TakeShotResponse(shot=codec.shot_msg(shot))
+
+    @staticmethod
+    def _checked_take(held: HeldSession, msg: pb.TakeShotRequest) -> tuple[list[str], ShotKind | None, bool]:
         session = held.session
         inputs = session.rig.player_inputs
         if inputs is None:
             raise precondition(f"TakeShot is for a RIG_MATCH session; session {msg.session_id} runs the "
                                f"{session.style.rig.name} rig")
-        take = codec.take_from_msg(msg, inputs.player_ids)
-        held = self.checkpoints.write_input(msg.session_id, held, "take",
-                                            payload if payload is not None else msg.SerializeToString())
+        return codec.take_from_msg(msg, inputs.player_ids)
+
+    @staticmethod
+    def _take(held: HeldSession, take: tuple[list[str], ShotKind | None, bool]) -> ShotChoice | None:
+        inputs = held.session.rig.player_inputs
+        assert inputs is not None   # _checked_take refused the take otherwise
         try:
-            shot = held.session.rig.player_inputs.take(*take)
+            return inputs.take(*take)
         except ValueError as exc:  # a player named twice, a kind that does not fit the count
             raise invalid(str(exc)) from None
-        self.checkpoints.after_input(held)
-        if held.recorder is not None and not self.checkpoints.replaying:
-            held.recorder.write(pb.RecordEntry(take=msg))
-        return pb.TakeShotResponse() if shot is None else pb.TakeShotResponse(shot=codec.shot_msg(shot))
-
     def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
-        """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it),
+        """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it, a
+        MATCH style's director by the name it resolved to: codec.shown_style),
         its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first, and
         with pose outputs their counts (`pose_outputs`: format, address, sent, dropped, last_error)."""
-        held = self._get(session_id)
+        held = self.get(session_id)
         detail = {"style": json_format.MessageToDict(held.style_msg), "frames": held.timeline.as_json(last, after_frame)}
         if held.pose_sender is not None:  # each output's datagrams sent and dropped (pose_out.py)
             detail["pose_outputs"] = held.pose_sender.status()
@@ -196,7 +246,7 @@ class SessionTable:
     def anticipation_png(self, session_id: str) -> bytes:
         """The session's A-map as a PNG (map_view.py); FAILED_PRECONDITION when it has none (not
         a map mode, the tracks rig, or no frame since the maps were asked for)."""
-        session = self._get(session_id).session
+        session = self.get(session_id).session
         found = session.rig.anticipation_map(session.last_state)
         if found is None:
             raise precondition(f"session {session_id} has no anticipation map: its style's visibility is "
@@ -204,19 +254,19 @@ class SessionTable:
                                "ANTICIPATION and NO_ANTICIPATION build one (after their first frame)")
         return anticipation_png(*found)
 
-    def view(self, session_id: str, payload: bytes, reply: Reply) -> None:
-        """A monitor's picture of the session (render/snapshots.py; payload: a ViewQuery's JSON),
-        rendered in the render process (render/monitor.py) and answered later through `reply(status, body)`, from
-        another thread. Only the snapshot is taken here, between two frames. Raises DirectorError
-        at once for an unknown session or a query that is not one."""
-        session = self._get(session_id).session
-        job = render_job(session, ViewQuery.from_json(payload))
+    def view(self, session_id: str, query: ViewQuery, reply: Reply) -> None:
+        """A monitor's picture of the session (render/snapshots.py), rendered in the render process
+        (render/monitor.py) and answered later through `reply(status, body)`, from another thread.
+        Only the snapshot is taken here, between two frames. Raises DirectorError at once for an
+        unknown session."""
+        session = self.get(session_id).session
+        job = render_job(session, query)
         if self.monitor is None:
             self.monitor = Monitor()
         self.monitor.submit(job, lambda: scene_geometry(session), reply)
 
     def close(self, session_id: str) -> pb.CloseSessionResponse:
-        session = self._get(session_id).session
+        session = self.get(session_id).session
         self.drop(session_id)
         return pb.CloseSessionResponse(frames=session.frames_answered)
 
@@ -227,6 +277,7 @@ class SessionTable:
         process is stopping, or another one has taken the session over)."""
         held = self.held.pop(session_id, None)
         self._deferred.pop(session_id, None)   # deferred work or a snapshot left for later goes with it
+        self._snapshots_due.pop(session_id, None)
         self.checkpoints.end(session_id, keep_checkpoint)
         if held is None:
             return
@@ -261,11 +312,26 @@ class SessionTable:
             held.session.do_deferred_work(whole=False)
             if held.session.has_deferred_work:   # its other part, after the others' waiting parts
                 self._deferred[held.session.id] = held
-        else:
-            self.checkpoints.take_due_snapshot()
-        return bool(self._deferred) or self.checkpoints.snapshots_due
+        elif self._snapshots_due:
+            self._snapshot(self._snapshots_due.pop(next(iter(self._snapshots_due))))
+        return bool(self._deferred) or bool(self._snapshots_due)
 
-    def finish_deferred_work(self, held: HeldSession) -> None:
-        """The session's deferred work, done whole now (before a snapshot)."""
-        held.session.do_deferred_work()
-        self._deferred.pop(held.session.id, None)
+    def _after_input(self, held: HeldSession) -> None:
+        """A snapshot when one is due (checkpointing.py): taken at once, or with `defer_snapshots`
+        left for idle_work while it may wait."""
+        checkpoint = held.checkpoint
+        if not self.checkpoints.snapshot_due(checkpoint):
+            return
+        if self.defer_snapshots and self.checkpoints.may_wait(checkpoint):
+            self._snapshots_due[held.session.id] = held
+        else:
+            self._snapshots_due.pop(held.session.id, None)
+            self._snapshot(held)
+
+    def _snapshot(self, held: HeldSession, claim: bool = False) -> None:
+        session = held.session
+        session.do_deferred_work()   # a snapshot holds computed maps, not the means to compute them
+        self._deferred.pop(session.id, None)
+        # Not the dashboard's timeline: diagnostics, not state, up to 1 MB; a restored session's starts anew.
+        self.checkpoints.snapshot(session.id, held.checkpoint, (session, held.style_msg), session.creation_objects(),
+                                  claim)

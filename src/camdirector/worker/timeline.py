@@ -43,8 +43,8 @@ class TimelineFrame:
 
     frame: int
     time_s: float
-    camera_world: np.ndarray
-    rotation_xyzw: np.ndarray
+    camera_world: np.ndarray | None
+    rotation_xyzw: np.ndarray | None
     targets_world: np.ndarray
     cut: bool
     shot_id: int
@@ -98,9 +98,10 @@ class Timeline:
         frames = frames[-last:] if last else frames
         if not frames:
             return []
-        posed = [f for f in frames if f.camera_world is not None]
-        camera = iter(np.stack([f.camera_world for f in posed]).round(4) if posed else ())
-        forward = iter(_forward([f.rotation_xyzw for f in posed]))
+        cameras = [f.camera_world for f in frames if f.camera_world is not None]   # both None while buffering
+        rotations = [f.rotation_xyzw for f in frames if f.rotation_xyzw is not None]
+        camera = iter(np.stack(cameras).round(4) if cameras else ())
+        forward = iter(_forward(rotations))
         targets = np.stack([f.targets_world for f in frames]).round(4)   # a session's targets are fixed
         rows = [{"frame": f.frame, "time_s": f.time_s,
                  "camera": None if f.camera_world is None else next(camera),
@@ -109,8 +110,9 @@ class Timeline:
                  "framing_error": None if math.isnan(f.framing_error) else round(f.framing_error, 4),
                  "flags": f.flags, "scores": f.scores, "compute_ms": round(f.compute_ms, 3)}
                 for f, t in zip(frames, targets)]
-        if frames[-1].match is not None:
-            _match_json(frames, rows)
+        parts = [f.match for f in frames if f.match is not None]
+        if parts:   # a session's rig is fixed: every frame has its MATCH part, or none has
+            _match_json(parts, rows)
         return rows
 
 
@@ -129,12 +131,11 @@ def _shot_json(shot: ShotChoice) -> dict:
     return {"subject_ids": shot.subject_ids, "kind": _SHOT_KINDS[shot.kind], "reason": shot.reason, "held": shot.held}
 
 
-def _match_json(frames: list[TimelineFrame], rows: list[dict]) -> None:
+def _match_json(parts: list[MatchFrame], rows: list[dict]) -> None:
     """Adds the MATCH fields to each row (kinds named as in camdirector.v1: SHOT_DUEL, EVENT_KILL):
     shot {subject_ids, kind, reason, held} or null; candidates [{shot, score, camera, forward}] (as the
     wire's CandidateShot); players (ids) and teams in target order; events [{time_s, kind,
     actor_id, other_actor_id, priority, label}]; planned_cut {time_s, shot} or null."""
-    parts = [f.match for f in frames]   # a session's rig is fixed: every frame has its part
     candidates = [c for m in parts for c in m.candidates]
     camera = iter(np.stack([c.pose.position_world for c in candidates]).round(4) if candidates else ())
     forward = iter(_forward([c.pose.rotation_xyzw for c in candidates]))

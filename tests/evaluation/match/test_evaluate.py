@@ -59,13 +59,13 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
     assert result["match"]["level"] == "arena" and result["match"]["kills"] == kills
     assert result["delay_s"] == 2.0 and result["rate_hz"] == pytest.approx(30.0)
     assert result["frames_sent"] == 20 * 30 + 61  # the match at 30 Hz, then 2 s and one frame more of its end
-    assert set(result["directors"]) == {"PLANNED", "HLTV", "AUTOTRACK"}
+    assert set(result["directors"]) == {"planned", "hltv", "autotrack"}
     ceilings = result["ceilings"]
     assert ceilings["kills"] == kills and 0.0 <= ceilings["greedy_2s_kill_coverage"] <= ceilings["reference_kill_coverage"]
     # the autotrack looks through its living player's eyes (from a corpse's, 8 units up, the measure
     # sees no eyes); the others never do
-    assert result["directors"]["AUTOTRACK"]["first_person_share"] > 0.5
-    assert result["directors"]["PLANNED"]["first_person_share"] == 0.0
+    assert result["directors"]["autotrack"]["first_person_share"] > 0.5
+    assert result["directors"]["planned"]["first_person_share"] == 0.0
     for name, figures in result["directors"].items():
         assert DIRECTOR_FIGURES <= set(figures), name
         assert figures["kills"] == kills and 0.0 <= figures["kill_coverage"] <= 1.0
@@ -83,7 +83,7 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
         expected = result["directors"][name]["compute_ms"]["median"] / result["tracks_reference"]["compute_ms"]["median"]
         assert ratio == pytest.approx(expected, abs=0.01)
     assert result["coverage_gain_over_hltv"] == pytest.approx(
-        result["directors"]["PLANNED"]["kill_coverage"] - result["directors"]["HLTV"]["kill_coverage"], abs=1e-3)
+        result["directors"]["planned"]["kill_coverage"] - result["directors"]["hltv"]["kill_coverage"], abs=1e-3)
     assert (folder / "r.png").stat().st_size > 10_000
 
 

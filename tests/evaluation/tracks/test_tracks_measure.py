@@ -10,7 +10,7 @@ from camdirector.evaluation.tracks.route import NavmeshPaths, corridor_and_open_
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.pipeline.tracks.shot_sizes import ShotSize
+from camdirector.pipeline.style import ShotSize
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.track_settings import TrackSettings
 from tests.precompute.tracks.tiny_levels import boxes, two_rooms

@@ -4,11 +4,12 @@ camera's trail its framing was lost and by how much, changes its style live (and
 client gets the new style on its next frame), sees a refused style's reason and, in a map mode, the
 anticipation map; on the tracks rig, the scores of the targets it chose; in a match, the candidates,
 a take held until released (the streaming client gets it), the fallback's reason when the held
-player dies, the event log and, with a delay, the cut the director plans, which the program then
-makes; and submits a motion overview job, then watches its preview and contact sheet. The
-monitors (issue 16): the program view live as the session streams, the target in its colour where
-the camera's pose puts it; in a match, a monitor per candidate, a take that turns the program view
-to it, and the last cut's before and after; the top view drawn over the world seen from above.
+player dies, the directors offered as the server's registry lists them, the event log and, with a
+delay, the cut the director plans, which the program then makes; and submits a motion overview
+job, then watches its preview and contact sheet. The monitors (issue 16): the program view live as
+the session streams, the target in its colour where the camera's pose puts it; in a match, a
+monitor per candidate, a take that turns the program view to it, and the last cut's before and
+after; the top view drawn over the world seen from above.
 
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
@@ -124,7 +125,7 @@ def test_watch_a_session_and_change_its_style_live(server, page):
     playwright.expect(page.locator("#shot-summary")).to_have_text("the session has ended")
 
 
-FRAMING_RGB = (0xE0, 0x40, 0xFB)   # dashboard.js FRAMING_COLOUR: the strip's framing line and the top view's marks
+FRAMING_RGB = (0xE0, 0x40, 0xFB)   # framing.js FRAMING_COLOUR (the dashboard): the strip's framing line and the top view's marks
 
 
 def framing_pixels(page, selector: str) -> tuple[int, int | None]:
@@ -293,13 +294,24 @@ def test_a_director_takes_a_candidate_holds_it_and_sees_the_fallback(server, pag
         playwright.expect(page.locator("#match-fields")).to_be_visible()
         playwright.expect(page.locator("#toric-fields")).to_be_hidden()
         playwright.expect(page.locator("#tracks-fields")).to_be_hidden()
-        page.select_option('#style-form select[name="matchDirector"]', "MATCH_DIRECTOR_HLTV")
+        # The director's options are the server's registry, by name; a style naming none shows the default.
+        director = page.locator('#style-form select[name="matchDirectorName"]')
+        directors = httpx.get(f"http://{server.http}/v1/match-directors").json()["directors"]
+        assert director.evaluate("s => [...s.options].map((o) => [o.value, o.text])") == [
+            [d["name"], d["label"]] for d in directors]
+        playwright.expect(director).to_have_value("planned")
+        page.select_option('#style-form select[name="matchDirectorName"]', "hltv")
         page.fill('#style-form input[name="maxShotS"]', "6")
         page.click('#style-form button[type="submit"]')
         playwright.expect(page.locator("#style-result")).to_have_text("applied")
         style = httpx.get(f"http://{server.http}/v1/sessions/{session_id}").json()["style"]
-        assert style["matchDirector"] == "MATCH_DIRECTOR_HLTV" and style["maxShotS"] == 6 and style["rig"] == "RIG_MATCH"
+        assert style["matchDirectorName"] == "hltv" and style["maxShotS"] == 6 and style["rig"] == "RIG_MATCH"
         assert "visibility" not in style   # nothing of the Toric rig's was sent
+        # A style that names its director by the wire's enum only shows the director of that enum.
+        httpx.put(f"http://{server.http}/v1/sessions/{session_id}/style",
+                  json={"rig": "RIG_MATCH", "matchDirector": "MATCH_DIRECTOR_AUTOTRACK"}).raise_for_status()
+        playwright.expect(director).to_have_value(
+            next(d["name"] for d in directors if d["wire"] == "MATCH_DIRECTOR_AUTOTRACK"))
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
@@ -335,7 +347,7 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
 
 # -- the monitors (issue 16) ------------------------------------------------------------------
 
-MONITOR_SHAPE = (180, 320, 3)   # dashboard.js MONITOR_WIDTH_PX, at the default lens's 16:9
+MONITOR_SHAPE = (180, 320, 3)   # monitors.js MONITOR_WIDTH_PX (the dashboard), at the default lens's 16:9
 SAME_PICTURE = 4.0              # mean absolute difference (0-255) under which two pictures show one frame: JPEG's own is ~1-2
 
 

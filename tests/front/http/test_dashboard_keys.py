@@ -203,7 +203,8 @@ def test_a_viewers_take_is_refused_in_the_browser_with_the_servers_message(keyed
     session_id = engine.call("CreateSession", match_request(delay_s=1.0)).session_id
     engine.stream(list(match_frames(session_id, 90)))
     try:
-        assert set(page.evaluate("Object.keys(CONTROLS)")) <= {verb.value for verb in Verb}
+        controls = page.evaluate("async () => Object.keys((await import('/dashboard/roles.js')).CONTROLS)")
+        assert set(controls) <= {verb.value for verb in Verb}
 
         log_in(page, keys[f"viewer {TENANT_A}"])
         expect(page.locator("#who")).to_contain_text(f"viewer of tenant {TENANT_A}")

@@ -15,9 +15,9 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, SceneSpec, TargetSpec
 from camdirector.pipeline.match.rig import MatchRig
 from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.session import Session
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Rig, Style
-from camdirector.worker.session import Session
 
 EYE_M = 1.6
 RATE_HZ = 30.0

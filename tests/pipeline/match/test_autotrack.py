@@ -30,12 +30,12 @@ from camdirector.pipeline.match.autotrack import (
 )
 from camdirector.pipeline.match.moments import MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
-from camdirector.worker.session import Session
+from camdirector.pipeline.session import Session
+from camdirector.pipeline.style import Rig, Style
 from tests.pipeline.match.scenes import LENS, Match, kill, run_session
 
 START = IT_AXE | IT_SHOTGUN   # what a QuakeWorld player respawns with
-AUTOTRACK = Style(rig=Rig.MATCH, match_director=MatchDirectorKind.AUTOTRACK)
+AUTOTRACK = Style(rig=Rig.MATCH, match_director="autotrack")
 
 
 def stats(player: str, items: int = START, armor: int = 0, frags: int = 0, health: int = 100) -> PlayerStats:

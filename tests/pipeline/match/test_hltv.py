@@ -17,10 +17,10 @@ from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.hltv import ChaseCamera, ChaseParams, FixedCamera, HltvDirector, smooth_angles
 from camdirector.pipeline.match.moments import Moment, horizontal_forward
 from camdirector.pipeline.match.settings import INCH_M, HltvSettings, MatchSettings
-from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
+from camdirector.pipeline.style import Rig, Style
 from tests.pipeline.match.scenes import EYE_M, BareRig, Match, at_time, facing, kill, shots
 
-HLTV = Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV)
+HLTV = Style(rig=Rig.MATCH, match_director="hltv")
 TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
 EVENT_S = 20.0
 

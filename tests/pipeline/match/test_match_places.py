@@ -187,7 +187,7 @@ def test_a_planned_shot_is_placed_for_the_frame_that_shows_the_kill_too():
     """The kill is on screen at the first frame at or after its time; buffer.at gives the one at
     or before, so the cover holds the frame after it as well (a place seeing both a frame early
     was often at a wall's edge)."""
-    from camdirector.pipeline.match.plan import POST_EVENT_S, PRE_EVENT_S, PlannedDirector
+    from camdirector.pipeline.match.planned import POST_EVENT_S, PRE_EVENT_S, PlannedDirector
 
     buffer = MomentBuffer(["a", "b"], MatchSettings())
     for k in range(0, 30 * 40):

@@ -11,14 +11,16 @@ import pytest
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.infra.slices import SlicedRun, pause
+from camdirector.pipeline.match.camera_ahead import CameraStep
+from camdirector.pipeline.match.director_registry import registered
+from camdirector.pipeline.match.drawn_plan import DrawnPlan, PlanResult
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import is_jump_cut
-from camdirector.pipeline.match.plan import Shot
-from camdirector.pipeline.match.rig import DrawnPlan, PlanResult
+from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import HltvSettings, MatchSettings
 from camdirector.pipeline.match.shots import StaticCamera, ToricCamera
-from camdirector.pipeline.style import MatchDirectorKind, Rig, Style
-from camdirector.worker.session import Session
+from camdirector.pipeline.session import Session
+from camdirector.pipeline.style import Rig, Style
 from tests.pipeline.match.scenes import (
     EYE_M,
     RATE_HZ,
@@ -185,7 +187,7 @@ def test_take_refuses_an_unknown_player_and_a_kind_that_does_not_fit():
 
 def test_hltv_shows_a_kill_as_a_chase_camera_behind_the_victim():
     hltv = HltvSettings(in_eye_kill_chance=0.0, swap_chance_chase=0.0)
-    style = Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV)
+    style = Style(rig=Rig.MATCH, match_director="hltv")
     match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0, style=style)
     states = BareRig(match, MatchSettings(hltv=hltv)).run(40.0)
     start = max(start for start, _, _ in shots(states) if start <= KILL_S)
@@ -200,7 +202,7 @@ def test_hltv_shows_a_kill_as_a_chase_camera_behind_the_victim():
 
 
 def test_hltv_without_look_ahead_cuts_every_six_seconds_on_ranked_players():
-    style = Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV)
+    style = Style(rig=Rig.MATCH, match_director="hltv")
     match = dataclasses.replace(melee(seed=4, duration_s=40.0, delay_s=0.0), style=style)
     program = shots(run_session(match, 40.0)[1])
     lengths = [end - start for start, end, _ in program[:-1]]
@@ -209,7 +211,7 @@ def test_hltv_without_look_ahead_cuts_every_six_seconds_on_ranked_players():
     assert all(s.match.shot.reason.startswith("hltv: ") for _, _, s in program)
 
 
-@pytest.mark.parametrize("kind", list(MatchDirectorKind))
+@pytest.mark.parametrize("kind", [entry.name for entry in registered()])
 def test_same_seed_same_program(kind):
     style = Style(rig=Rig.MATCH, match_director=kind)
     runs = []
@@ -240,9 +242,20 @@ def _program_with_idle_work(idle: str, work_per_tick: float | None = None) -> tu
     rig = session.rig
     if work_per_tick is not None:  # a Session takes the default settings; the rig reads this one field at its ticks
         rig.settings = dataclasses.replace(rig.settings, plan_work_per_tick=work_per_tick)
-    worked_out = []
-    holds = rig._ahead_holds
-    rig._ahead_holds = lambda *args: worked_out.append(holds(*args)) or worked_out[-1]
+    worked_out: list[bool] = []
+    holds = CameraStep.holds
+
+    def counted(step: CameraStep, *args) -> bool:
+        worked_out.append(holds(step, *args))
+        return worked_out[-1]
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(CameraStep, "holds", counted)
+        return _program_of(session, idle, worked_out)
+
+
+def _program_of(session: Session, idle: str, worked_out: list[bool]) -> tuple[list[tuple], int, tuple[int, int], int, int]:
+    rig = session.rig
     rng = np.random.default_rng(11)
     program, drawn, partial, finished, late = [], 0, 0, 0, 0
     for update in melee(seed=3, duration_s=40.0, delay_s=10.0).frames(40.0):
@@ -323,7 +336,7 @@ def test_a_take_finishes_the_drawn_plan_before_it_changes_what_the_plan_reads():
             session.frame(update)
             if session.rig.plan_waiting:
                 break
-    session.rig.set_style(Style(rig=Rig.MATCH, match_director=MatchDirectorKind.HLTV))
+    session.rig.set_style(Style(rig=Rig.MATCH, match_director="hltv"))
     assert not session.rig.plan_waiting
 
 

@@ -1,5 +1,5 @@
 """A kill no level Toric place can show: the DUEL gives way to a wide, level view of the pair
-from a camera that sees them both (shots.py, ShotBuilder.build)."""
+from a camera that sees them both (shot_builder.py, ShotBuilder.build)."""
 from __future__ import annotations
 
 import numpy as np

@@ -11,11 +11,12 @@ from scipy import stats
 from camdirector.evaluation.tracks.measure import ActorBody, frame_view, shot_pose, visible_share
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.raycast import RayScene
+from camdirector.pipeline.style import Movement, ShotSize
 from camdirector.pipeline.tracks.continuity import cut_angle_deg, keeps_line_of_action, screen_motion
 from camdirector.pipeline.tracks.cutting import CutReason, draw_shot_duration_s
-from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector, Movement
+from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector
 from camdirector.pipeline.tracks.settings import DirectorSettings
-from camdirector.pipeline.tracks.shot_sizes import ShotSize, fit_ratio, framed_ends_world
+from camdirector.pipeline.tracks.shot_sizes import fit_ratio, framed_ends_world
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, ArtifactVersionError, load_artifact, save_artifact
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.registry import LevelRegistry

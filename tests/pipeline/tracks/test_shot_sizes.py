@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation, project_to_screen
+from camdirector.pipeline.style import ShotSize
 from camdirector.pipeline.tracks.shot_sizes import (
     FRAMED_EXTENT,
-    ShotSize,
     aim_point,
     fit_ratio,
     framed_ends_world,

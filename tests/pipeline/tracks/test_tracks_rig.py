@@ -22,11 +22,11 @@ from camdirector.evaluation.tracks.route import NavmeshPaths, read_recast_querie
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.pipeline.tracks.shot_sizes import ShotSize
+from camdirector.pipeline.style import ShotSize
 from camdirector.precompute.tracks.registry import LevelRegistry
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.level_cache import LevelCache
-from camdirector.worker.recording import replay
+from camdirector.worker.replay import replay
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service.test_bad_input import expect
 from tests.service.tracks_sessions import (

@@ -1,15 +1,19 @@
-"""`camdirector eval-match`: a match file through a real server, our director against HLTV's.
+"""`camdirector eval-match`: a match file through a real server, our director against the baselines.
 
-    camdirector eval-match FILE --delay D --json OUT [--plot P.png] [--video V.mp4] [--video-seconds 20]
+    camdirector eval-match FILE --delay D --json OUT [--director NAME]... [--plugin MODULE]...
+                           [--plot P.png] [--video V.mp4] [--video-seconds 20]
                            [--data-dir DIR] [--rate-hz 30] [--minutes M] [--seed 0]
         starts a server on the registry DIR (default: the per-user one) that holds the match's
-        level, streams the match (its first M minutes with --minutes) through a RIG_MATCH session
-        of each director with the broadcast delay D s, and a one-actor RIG_TRACKS session as the
-        cost reference (evaluation/match/evaluate.py); measures kill coverage, lead, shots, jump
-        cuts and visibility from the returned cameras (measure.py); prints the result as JSON and
-        writes it to OUT. --plot draws coverage, lead and shot lengths; --video renders our
-        director's program for its first S seconds (EGL; skipped with a message when unavailable).
-        Exit status: 0 ok, 1 the run failed, 2 bad arguments, match file or level.
+        level, with the plugins (camdirector serve --plugin), streams the match (its first M
+        minutes with --minutes) through a RIG_MATCH session of each director named (default:
+        every registered one, pipeline/match/director_registry.py, the plugins' too) with the
+        broadcast delay D s, and a one-actor RIG_TRACKS session as the cost reference
+        (evaluation/match/evaluate.py); measures kill coverage, lead, shots, jump cuts and
+        visibility from the returned cameras (measure.py); prints the result as JSON and writes
+        it to OUT. --plot draws coverage, lead and shot lengths; --video renders our director's
+        program (the first director's without ours) for its first S seconds (EGL; skipped with a
+        message when unavailable).
+        Exit status: 0 ok, 1 the run failed, 2 bad arguments, match file, level, director or plugin.
 
 Kept light at import, as evaluation/cli.py: numpy, the client and the server load when it runs.
 """
@@ -24,11 +28,16 @@ from pathlib import Path
 def add_parser(subparsers) -> None:
     """Registers `eval-match` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "eval-match", help="stream a match file through our match director and the HLTV baseline, and measure both",
+        "eval-match", help="stream a match file through our match director and the baselines, and measure them",
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", type=Path, help="match file (camdirector match-sim --out)")
     p.add_argument("--delay", type=float, required=True, help="broadcast delay, s, 0 to 300")
     p.add_argument("--json", type=Path, required=True, help="write the result here")
+    p.add_argument("--director", dest="directors", action="append", metavar="NAME",
+                   help="a registered match director to run (repeatable; default: every registered one)")
+    p.add_argument("--plugin", dest="plugins", action="append", default=[], metavar="MODULE",
+                   help="a Python module to import here and in the server first (a director that registers "
+                        "itself; repeatable)")
     p.add_argument("--plot", type=Path, help="draw coverage, lead and shot lengths here (PNG)")
     p.add_argument("--video", type=Path, help="render our director's program here (MP4, 480x270)")
     p.add_argument("--video-seconds", dest="video_seconds", type=float, default=20.0,
@@ -65,8 +74,9 @@ def run_eval_match(args: argparse.Namespace) -> int:
             match = match.until(match.time_s[0] + 60.0 * args.minutes)
         if args.rate_hz > match.rate_hz:
             raise ValueError(f"--rate-hz {args.rate_hz:g} is above the file's {match.rate_hz:g} Hz")
-        result, runs = evaluate_match(match, args.delay, data_dir=args.data_dir, rate_hz=args.rate_hz,
-                                      seed=args.seed, progress=_progress)
+        result, runs = evaluate_match(match, args.delay, directors=args.directors, plugins=args.plugins,
+                                      data_dir=args.data_dir, rate_hz=args.rate_hz, seed=args.seed,
+                                      progress=_progress)
     except KeyError as exc:
         print(f"camdirector eval-match: {exc.args[0]}", file=sys.stderr)
         return 2
@@ -82,7 +92,8 @@ def run_eval_match(args: argparse.Namespace) -> int:
     if args.video:
         try:
             _progress(f"rendering {args.video_seconds:g} s of program to {args.video}")
-            result["video"] = render_program(match, runs["PLANNED"].program, args.video, args.video_seconds,
+            shown = runs["planned"] if "planned" in runs else next(iter(runs.values()))
+            result["video"] = render_program(match, shown.program, args.video, args.video_seconds,
                                              data_dir=args.data_dir)
         except VideoUnavailable as exc:
             _progress(f"no video: {exc}")

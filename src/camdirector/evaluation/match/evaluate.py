@@ -17,8 +17,10 @@ as many frames.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,7 +42,6 @@ from camdirector.evaluation.match.measure import (
     shown_heights,
 )
 from camdirector.evaluation.match.session_feed import (
-    DIRECTORS,
     Feed,
     frame_updates,
     match_session_fields,
@@ -49,6 +50,8 @@ from camdirector.evaluation.match.session_feed import (
 from camdirector.geometry.camera import Lens
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
+from camdirector.infra.plugins import import_plugins
+from camdirector.pipeline.match.director_registry import director_entry, registered
 from camdirector.precompute.tracks.registry import LevelRegistry
 
 SHORT_SHOT_S = 2.0   # issue 12: no shot under 2 s (the film rules' default minimum)
@@ -66,11 +69,12 @@ class DirectorRun:
     wall_s: float
 
 
-def stream_director(client: cd.Client, match: MatchRecording, feed: Feed, director: int, delay_s: float,
+def stream_director(client: cd.Client, match: MatchRecording, feed: Feed, director: str, delay_s: float,
                     seed: int) -> DirectorRun:
-    """Streams the match through one RIG_MATCH session of `director`; its program (module docstring)."""
+    """Streams the match through one RIG_MATCH session of `director` (a registered name); its
+    program (module docstring)."""
     columns = list(range(len(match.players)))
-    replies = []
+    replies: list[tuple[bool, tuple[Any, ...] | None]] = []
     start = time.perf_counter()
     with client.create_session(**match_session_fields(match, director, delay_s, seed)) as session:
         for u in session.stream(frame_updates(session, match, feed, columns, events=True)):
@@ -168,11 +172,16 @@ def _timing(compute_ms: np.ndarray) -> dict:
             "n": len(compute_ms)}
 
 
-def evaluate_match(match: MatchRecording, delay_s: float, *, data_dir: Path | None = None, rate_hz: float = 30.0,
+def evaluate_match(match: MatchRecording, delay_s: float, *, directors: Sequence[str] | None = None,
+                   plugins: Sequence[str] = (), data_dir: Path | None = None, rate_hz: float = 30.0,
                    seed: int = 0, progress=None) -> tuple[dict, dict[str, DirectorRun]]:
-    """Runs both directors and the TRACKS reference through one server; the result (JSON-ready)
-    and each director's run (for the plot and the video). `progress(text)` hears each step."""
+    """Runs the directors (registered names, default every one registered once the plugins are
+    imported, in the registry's order) and the TRACKS reference through one server started with
+    the plugins; the result (JSON-ready) and each director's run (for the plot and the video).
+    `progress(text)` hears each step. KeyError names a director the registry does not hold."""
     progress = progress or (lambda text: None)
+    import_plugins(plugins)
+    names = [e.name for e in registered()] if directors is None else [director_entry(n).name for n in directors]
     registry = LevelRegistry(data_dir)
     artifact = registry.load(match.level)  # KeyError names an unknown level
     level = RayScene([TriMesh(artifact.level_vertices, artifact.level_faces)])
@@ -180,11 +189,12 @@ def evaluate_match(match: MatchRecording, delay_s: float, *, data_dir: Path | No
     lens = Lens()  # the server's default lens: the sessions send none
     feed = Feed.of(match, rate_hz, delay_s)
     runs: dict[str, DirectorRun] = {}
-    with ServerProcess("--data-dir", str(registry.data_dir), transports=("grpc",)) as server, \
+    plugin_flags = [flag for name in plugins for flag in ("--plugin", name)]
+    with ServerProcess("--data-dir", str(registry.data_dir), *plugin_flags, transports=("grpc",)) as server, \
             cd.connect(server.url("grpc"), timeout_s=60.0) as client:
-        for name, director in DIRECTORS.items():
+        for name in names:
             progress(f"streaming {len(feed.rows)} frames through {name}")
-            runs[name] = stream_director(client, match, feed, director, delay_s, seed)
+            runs[name] = stream_director(client, match, feed, name, delay_s, seed)
         progress(f"streaming {len(feed.rows)} frames through the TRACKS reference")
         tracks_ms = stream_tracks_reference(client, match, feed)
     figures = {}
@@ -201,13 +211,16 @@ def evaluate_match(match: MatchRecording, delay_s: float, *, data_dir: Path | No
         "delay_s": delay_s, "rate_hz": round(feed.rate_hz, 2), "frames_sent": len(feed.rows),
         "directors": figures,
         "ceilings": ceilings.as_json(),
-        "coverage_gain_over_hltv": round(figures["PLANNED"]["kill_coverage"] - figures["HLTV"]["kill_coverage"], 3),
-        "coverage_gain_over_autotrack": round(figures["PLANNED"]["kill_coverage"]
-                                              - figures["AUTOTRACK"]["kill_coverage_first_person"], 3),
         "tracks_reference": {"player": match.players[0].id, "compute_ms": _timing(tracks_ms)},
         "compute_ratio_to_tracks": {name: round(f["compute_ms"]["median"] / tracks_median_ms, 2)
                                     for name, f in figures.items()},
     }
+    if "planned" in figures and "hltv" in figures:
+        result["coverage_gain_over_hltv"] = round(figures["planned"]["kill_coverage"]
+                                                  - figures["hltv"]["kill_coverage"], 3)
+    if "planned" in figures and "autotrack" in figures:
+        result["coverage_gain_over_autotrack"] = round(figures["planned"]["kill_coverage"]
+                                                       - figures["autotrack"]["kill_coverage_first_person"], 3)
     return result, runs
 
 

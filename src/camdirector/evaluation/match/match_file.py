@@ -18,6 +18,7 @@ import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -155,7 +156,7 @@ def save_match(match: MatchRecording, path: Path) -> None:
     metadata = {"format_version": FORMAT_VERSION, "level": match.level, "seed": match.seed, "rate_hz": match.rate_hz,
                 "players": [dataclasses.asdict(p) for p in match.players],
                 "events": [e.as_json() for e in match.events]}
-    optional = {} if match.stats is None else {"stats": match.stats}
+    optional: dict[str, Any] = {} if match.stats is None else {"stats": match.stats}
     with open(path, "wb") as f:
         np.savez_compressed(f, metadata=np.frombuffer(json.dumps(metadata).encode("utf-8"), dtype=np.uint8),
                             time_s=match.time_s, positions_world=match.positions_world,

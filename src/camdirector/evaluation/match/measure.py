@@ -9,7 +9,7 @@ players' bodies as the match file has them, never from what the director says it
   lie in the camera's frame (geometry/camera.py's `in_frame`: in front of the near plane, inside
   the frame's edges at the pose's field of view and the lens's aspect) and whose segment from the
   camera centre crosses no level geometry (Embree ray casts, geometry.raycast.RayScene). Players do
-  not occlude each other, as in evaluation/scenario_measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
+  not occlude each other, as in evaluation/toric/measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
 - kill coverage: the share of kills at whose moment (the first program moment at or after the
   kill's frame) both the attacker and the victim are shown. Kill coverage *first person* also
   counts a kill whose moment the program shows from the attacker's eyes (the camera within

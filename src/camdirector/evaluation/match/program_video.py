@@ -98,7 +98,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
             inset = top_image.copy()
             _dots(inset, top, lens, np.concatenate([match.positions_world[index][alive], program.position[row][None]]),
                   np.concatenate([team_rgb8[alive], np.full((1, 3), 255, dtype=np.uint8)]))
-            frame = renderer.render(program.pose(row), lens)
+            frame = renderer.render(program.pose(int(row)), lens)
             frame[:inset.shape[0], width - inset.shape[1]:] = inset
             video.write(frame)
             costs.append((time.perf_counter() - start) * 1e3)

@@ -21,9 +21,6 @@ import camdirector_client as cd
 from camdirector.evaluation.match.match_file import EVENT_KINDS, STAT_COLUMNS, MatchEvent, MatchRecording
 from camdirector.evaluation.match.measure import aim_offset, player_mesh
 
-# ours first, then the baselines: Valve's HLTV and QuakeWorld's autotrack (ezQuake mvd_autotrack)
-DIRECTORS = {"PLANNED": cd.pb.MATCH_DIRECTOR_PLANNED, "HLTV": cd.pb.MATCH_DIRECTOR_HLTV,
-             "AUTOTRACK": cd.pb.MATCH_DIRECTOR_AUTOTRACK}
 EVENT_KIND_MSG = dict(zip(EVENT_KINDS, (cd.pb.EVENT_KILL, cd.pb.EVENT_DAMAGE, cd.pb.EVENT_OBJECTIVE, cd.pb.EVENT_CUSTOM)))
 
 
@@ -65,11 +62,12 @@ def player_targets(match: MatchRecording, player_ids: list[str] | None = None) -
     return targets
 
 
-def match_session_fields(match: MatchRecording, director: int, delay_s: float, seed: int) -> dict:
+def match_session_fields(match: MatchRecording, director: str, delay_s: float, seed: int) -> dict:
     """The CreateSessionRequest fields of the match's RIG_MATCH session directed by `director`
-    (a MatchDirector value), as keywords of `Client.create_session`."""
+    (a registered name, pipeline/match/director_registry.py; the server refuses one it does not
+    hold), as keywords of `Client.create_session`."""
     return {"targets": player_targets(match), "level_id": match.level, "delay_s": delay_s, "seed": seed,
-            "style": cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director=director)}
+            "style": cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director_name=director)}
 
 
 def event_msg(event: MatchEvent) -> cd.pb.GameEvent:
@@ -82,6 +80,7 @@ def event_msg(event: MatchEvent) -> cd.pb.GameEvent:
 def player_stats(match: MatchRecording, row: int, columns: list[int], since_row: int | None) -> list[cd.pb.PlayerStats]:
     """The scoreboard values (match.stats, STAT_COLUMNS) at `row` of the players in `columns` whose
     values differ from those at `since_row`; every one of them when since_row is None."""
+    assert match.stats is not None  # asked only of a match that recorded them
     values = match.stats[row, columns].astype(np.int64)
     values[:, STAT_COLUMNS.index("items")] &= 0xFFFFFFFF  # a bitmask kept in int32: the wire's uint32
     changed = np.ones(len(columns), dtype=bool) if since_row is None else \

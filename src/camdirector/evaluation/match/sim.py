@@ -256,8 +256,8 @@ class NavGround:
             chain.append(int(predecessor[chain[-1]]))
         if chain[-1] != goal_triangle:  # cannot happen within one connected region; stay put
             return np.asarray(start_world, dtype=np.float64)[None]
-        chain = np.asarray(chain)
-        here, there = self.faces[chain[:-1]], self.faces[chain[1:]]  # (n, 3) welded vertex ids
+        path = np.asarray(chain)
+        here, there = self.faces[path[:-1]], self.faces[path[1:]]  # (n, 3) welded vertex ids
         shared = (here[:, :, None] == there[:, None, :]).any(axis=2)  # (n, 3)
         count = shared.sum(axis=1)
         portal = (self.vertices[here] * shared[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
@@ -266,10 +266,10 @@ class NavGround:
             d = np.linalg.norm(self.vertices[here[steps]][:, :, None] - self.vertices[there[steps]][:, None], axis=3)
             i, j = np.unravel_index(d.reshape(len(steps), 9).argmin(axis=1), (3, 3))
             portal[steps] = 0.5 * (self.vertices[here[steps, i]] + self.vertices[there[steps, j]])
-        points = np.empty((2 * len(chain) - 1, 3))  # start, portal, centroid, ..., portal, goal
+        points = np.empty((2 * len(path) - 1, 3))  # start, portal, centroid, ..., portal, goal
         points[0], points[-1] = start_world, goal_world
         points[1::2] = portal
-        points[2:-1:2] = self.centroids[chain[1:-1]]
+        points[2:-1:2] = self.centroids[path[1:-1]]
         return self._pull(points)
 
     def _pull(self, points: np.ndarray) -> np.ndarray:
@@ -407,7 +407,7 @@ class _Match:
         speed = s.run_speed_m_s * np.maximum(left, s.turning_speed_fraction)
         self.seg_at[moving] += speed[moving] * dt_s
         for i in np.flatnonzero(moving & (self.seg_at >= self.seg_len)):
-            self._next_segment(i)
+            self._next_segment(int(i))
         moving = self.moving & self.alive
         if moving.any():
             f = (self.seg_at[moving] / self.seg_len[moving])[:, None]
@@ -454,7 +454,7 @@ class _Match:
                 current = int(np.argmin(np.where(sees[i], distance[i], np.inf))) if sees[i].any() else -1
             self.target[i] = current
             if current >= 0 and self.moving[i]:
-                self._stop(i)
+                self._stop(int(i))
         self._shoot(t_s, los)
         for i in np.flatnonzero(self.alive & (self.target < 0)):
             self._choose_goal(int(i), t_s)

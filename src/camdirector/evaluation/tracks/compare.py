@@ -96,6 +96,7 @@ def prm_at_coverage(artifact: LevelArtifact, navmesh: TriMesh, refined: TriMesh,
     if found is None:
         return None
     for _ in range(_BISECTIONS if low is not None else 0):
+        assert low is not None  # the range above is empty without it
         middle = float(np.sqrt(low * found[0]))
         reached, prms = trial(middle)
         if reached >= target:

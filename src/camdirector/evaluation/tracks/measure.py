@@ -1,7 +1,7 @@
 """What the TRACKS rig's frames show of its actor: the frame-aware measure of every tracks
 evaluation (`camdirector eval-graph`, `load_tests.tracks_bench`, the TRACKS tests).
 
-The same measure as the Toric evaluation (evaluation/scenario_measure.py), on the tracks rig's own frames:
+The same measure as the Toric evaluation (evaluation/toric/measure.py), on the tracks rig's own frames:
 
 - the actor's body is a capsule `ACTOR_RADIUS_FRACTION` of its height in radius and its height
   tall, standing on its feet (the route's position); its distinct vertices are the sample points,
@@ -40,9 +40,10 @@ from camdirector.evaluation.tracks.route import ActorRoute
 from camdirector.geometry.camera import CameraPose, Lens, in_frame, level_look_rotation
 from camdirector.geometry.meshes import capsule
 from camdirector.geometry.raycast import RayScene
-from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector, Movement
+from camdirector.pipeline.style import Movement, ShotSize
+from camdirector.pipeline.tracks.director import DirectorStyle, GraphDirector
 from camdirector.pipeline.tracks.settings import DirectorSettings
-from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, ShotSize, framing_error
+from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, framing_error
 from camdirector.precompute.tracks.artifact import LevelArtifact
 
 ACTOR_RADIUS_FRACTION = 0.15   # the measured body's radius, fraction of its height (module docstring)
@@ -111,22 +112,27 @@ def measure_route(artifact: LevelArtifact, route: ActorRoute, scene: RayScene, r
     settings = DirectorSettings(vertical_fov_deg=lens.vertical_fov_deg)
     director = GraphDirector(artifact, settings, rng, style)
     body = ActorBody.of_height(artifact.agent_height_m)
-    target_ms, camera_ms, views, errors, path, cuts = [], [], [], [], [], 0
+    target_list_ms: list[float] = []
+    camera_list_ms: list[float] = []
+    views: list[FrameView] = []
+    errors: list[float] = []
+    path: list[np.ndarray] = []
+    cuts = 0
     for i, (t, feet, forward) in enumerate(zip(route.time_s, route.position_world, route.forward_world)):
         shot = director.step(float(t), feet, forward, scene)
         if shot is None:
             views.append(FrameView(0.0, 0.0, False))
             errors.append(np.inf)
             continue
-        target_ms.append(shot.timings_ms["cut_check"] + shot.timings_ms["target_update"])
-        camera_ms.append(shot.timings_ms["camera_update"])
+        target_list_ms.append(shot.timings_ms["cut_check"] + shot.timings_ms["target_update"])
+        camera_list_ms.append(shot.timings_ms["camera_update"])
         cuts += bool(shot.cut and i > 0)
         pose = shot_pose(shot.position_world, shot.look_at_world, lens)
         views.append(frame_view(pose, lens, feet, body, style.shot_size, scene))
         error = framing_error(pose, lens, feet, body.height_m, style.shot_size, director.screen_fraction())
         errors.append(error if np.isfinite(error) else np.inf)   # an end behind the camera: the worst framing
         path.append(shot.position_world)
-    target_ms, camera_ms = np.asarray(target_ms), np.asarray(camera_ms)
+    target_ms, camera_ms = np.asarray(target_list_ms), np.asarray(camera_list_ms)
     minutes = float(route.time_s[-1] - route.time_s[0]) / 60.0 if len(route.time_s) > 1 else 0.0
 
     def timing(values: np.ndarray, statistic) -> float | None:

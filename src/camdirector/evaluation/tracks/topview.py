@@ -17,7 +17,7 @@ def draw_graph_panel(ax, navmesh_vertices: np.ndarray, navmesh_faces: np.ndarray
     ax.add_collection(PolyCollection(navmesh_vertices[navmesh_faces][:, :, [0, 2]], facecolor="#cfe8f3",
                                      edgecolor="none"))
     if skeleton_segments is not None and len(skeleton_segments):
-        ax.add_collection(LineCollection(skeleton_segments[:, :, [0, 2]], colors="#d62728", linewidths=0.5))
+        ax.add_collection(LineCollection(list(skeleton_segments[:, :, [0, 2]]), colors="#d62728", linewidths=0.5))
     if len(edges):
         ax.add_collection(LineCollection(nodes_world[edges][:, :, [0, 2]], colors="#333333", linewidths=0.4))
     ax.plot(nodes_world[:, 0], nodes_world[:, 2], ".", color="#1f3b73", markersize=1.5)

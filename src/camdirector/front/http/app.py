@@ -21,6 +21,7 @@ from camdirector.access.guard import Identity
 from camdirector.access.roles import Verb
 from camdirector.front.http.auth import CookieSigner, require
 from camdirector.front.http.routes.access import build_access_router
+from camdirector.front.http.routes.directors import build_director_router
 from camdirector.front.http.routes.monitors import build_view_router
 from camdirector.front.http.routes.sessions import build_session_router
 from camdirector.front.router import SessionRouter
@@ -38,7 +39,7 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
                   description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.")
     app.state.views = ViewHub(router, router.metrics)
     app.state.guard = guard = router.guard
-    app.state.cookies = CookieSigner(guard.store.shared_secret("dashboard-cookie") if guard.enabled
+    app.state.cookies = CookieSigner(guard.key_store().shared_secret("dashboard-cookie") if guard.enabled
                                      else secrets.token_bytes(32))
 
     @app.get("/healthz")
@@ -67,6 +68,7 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
 
     app.include_router(build_access_router(guard, secure_cookie))
     app.include_router(build_session_router(router))
+    app.include_router(build_director_router())
     app.include_router(build_view_router(app.state.views))
     # The director's dashboard: static files that read the routes above.
     app.mount("/dashboard", StaticFiles(directory=DASHBOARD_DIR, html=True), name="dashboard")
@@ -94,4 +96,4 @@ def _document_key_answers(app: FastAPI) -> None:
                     responses.setdefault("403", {"description": "the key's role may not do this"})
         return schema
 
-    app.openapi = openapi
+    app.openapi = openapi  # type: ignore[method-assign]  # FastAPI's documented way to extend its schema

@@ -5,7 +5,7 @@ OccluderScene, ShadowVelocityMaps, the MapBackend protocol); ``gl`` computes the
 paper's deferred projection through EGL (moderngl), ``embree`` by ray casting (embreex). Tests hold
 the two against each other (tests/geometry/toric_maps/test_backends.py).
 
-Typical use, once per map update (pipeline/toric/anticipation.py consumes the result)::
+Typical use, once per map update (pipeline/toric/anticipation_map.py consumes the result)::
 
     scene = OccluderScene(static_meshes_world)            # plus add_dynamic(...) per moving object
     backend = make_backend(choose_backend(scene.triangle_count, probe_gl_renderer()), scene)
@@ -16,6 +16,7 @@ Typical use, once per map update (pipeline/toric/anticipation.py consumes the re
 from __future__ import annotations
 
 import functools
+from typing import TYPE_CHECKING, Unpack
 
 from camdirector.geometry.toric_maps.base import (
     DynamicOccluder,
@@ -25,6 +26,9 @@ from camdirector.geometry.toric_maps.base import (
     ShadowVelocityMaps,
     WindowSettings,
 )
+
+if TYPE_CHECKING:  # gl imports moderngl, which only the "gl" backend needs
+    from camdirector.geometry.toric_maps.gl import GLMapSettingsArgs
 
 __all__ = [
     "DynamicOccluder", "MapBackend", "MapWindow", "OccluderScene", "ShadowVelocityMaps", "WindowSettings",
@@ -73,9 +77,9 @@ def choose_backend(triangle_count: int, renderer_string: str | None, resolution:
 def probe_gl_renderer() -> str | None:
     """GL_RENDERER of an EGL context (created and released once per process), or None without EGL."""
     try:
-        import moderngl
+        from camdirector.geometry.gl_context import egl_context
 
-        ctx = moderngl.create_standalone_context(backend="egl")
+        ctx = egl_context()
     except Exception:  # no EGL, no driver: the caller falls back to ray casting
         return None
     try:
@@ -84,7 +88,7 @@ def probe_gl_renderer() -> str | None:
         ctx.release()
 
 
-def make_backend(name: str, scene: OccluderScene, **settings) -> MapBackend:
+def make_backend(name: str, scene: OccluderScene, **settings: Unpack[GLMapSettingsArgs]) -> MapBackend:
     """A backend by name ("gl" or "embree") over ``scene``; keyword settings go to GLMapSettings."""
     if name == "embree":
         from camdirector.geometry.toric_maps.embree import EmbreeMapBackend

@@ -5,7 +5,7 @@ angles (theta, phi) linearly), 4.1 (deferred projection from sample points on th
 (target shadow map, S-map), 4.1.2 (occluder velocity map, V-map). Angles and frames are those of
 geometry/toric.py: theta along the arc from A, phi about the A-B axis, 0 above it.
 
-Array conventions, shared by every backend and by pipeline/toric/anticipation.py:
+Array conventions, shared by every backend and by pipeline/toric/occlusion_prediction.py:
 
 - A map over a window is indexed ``[i, j]`` with ``i`` the theta texel and ``j`` the phi texel; the
   texel centre of ``[i, j]`` is ``(window.theta_centers_rad[i], window.phi_centers_rad[j])``.
@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.toric import Torus, torus_position
@@ -51,7 +52,7 @@ class WindowSettings:
     max_half_extent_m: float = 50.0      # upper clamp, m. [min_half_extent_m, 10000]
     lattice_tolerance: float = 0.15      # keep the previous texel size while the ideal is within this ratio. [0, 1]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (8 <= self.resolution <= 1024, "resolution must be in [8, 1024]"),
             (1.0 <= self.half_view_angle_deg <= 75.0, "half_view_angle_deg must be in [1, 75]"),
@@ -79,9 +80,10 @@ class MapWindow:
     theta_step_rad: float
     phi_step_rad: float
     resolution: int = 64
-    _centers: tuple = field(default=None, init=False, repr=False, compare=False)
+    # (theta_centers_rad, phi_centers_rad), made by __post_init__
+    _centers: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (isinstance(self.resolution, (int, np.integer)) and 1 <= self.resolution <= 4096):
             raise ValueError(f"MapWindow: resolution must be an int in [1, 4096], got {self.resolution!r}")
         values = (self.theta_min_rad, self.phi_min_rad, self.theta_step_rad, self.phi_step_rad)
@@ -101,12 +103,12 @@ class MapWindow:
     # -- geometry of the texture ---------------------------------------------------------------
 
     @property
-    def theta_centers_rad(self) -> np.ndarray:
+    def theta_centers_rad(self) -> npt.NDArray[np.float64]:
         """(res,) theta of each texel row's centre, radians (read-only)."""
         return self._centers[0]
 
     @property
-    def phi_centers_rad(self) -> np.ndarray:
+    def phi_centers_rad(self) -> npt.NDArray[np.float64]:
         """(res,) phi of each texel column's centre, radians, unwrapped (read-only)."""
         return self._centers[1]
 
@@ -123,7 +125,8 @@ class MapWindow:
         """(theta, phi) of the window's centre, radians."""
         return (self.theta_min_rad + 0.5 * self.theta_span_rad, self.phi_min_rad + 0.5 * self.phi_span_rad)
 
-    def texel_coords(self, theta_rad, phi_rad) -> tuple[np.ndarray, np.ndarray]:
+    def texel_coords(self, theta_rad: npt.ArrayLike, phi_rad: npt.ArrayLike
+                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Float texel coordinates (i, j) of angles; integers are texel centres.
 
         theta_rad, phi_rad: broadcastable arrays or scalars, radians. phi is wrapped into the turn
@@ -137,20 +140,20 @@ class MapWindow:
         j = (d_phi + 0.5 * self.phi_span_rad) / self.phi_step_rad - 0.5
         return i, j
 
-    def angles(self, i, j) -> tuple[np.ndarray, np.ndarray]:
+    def angles(self, i: npt.ArrayLike, j: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """(theta, phi) radians of float texel coordinates (i, j); the inverse of texel_coords."""
         theta = self.theta_min_rad + (np.asarray(i, dtype=np.float64) + 0.5) * self.theta_step_rad
         phi = self.phi_min_rad + (np.asarray(j, dtype=np.float64) + 0.5) * self.phi_step_rad
         return theta, phi
 
-    def contains(self, theta_rad, phi_rad) -> np.ndarray:
+    def contains(self, theta_rad: npt.ArrayLike, phi_rad: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """Whether angles fall inside the window's rectangle (bool, broadcast shape)."""
         i, j = self.texel_coords(theta_rad, phi_rad)
         half = 0.5
         n = self.resolution
         return (i >= -half) & (i <= n - half) & (j >= -half) & (j <= n - half)
 
-    def grid(self) -> tuple[np.ndarray, np.ndarray]:
+    def grid(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """(theta, phi) of every texel centre, each (res, res), indexed [i, j]."""
         return np.meshgrid(self.theta_centers_rad, self.phi_centers_rad, indexing="ij")
 
@@ -171,7 +174,7 @@ class MapWindow:
         lattice: the previous window. While the ideal texel size stays within
         settings.lattice_tolerance of the lattice's, the lattice's texel size is kept and the new
         window is shifted by whole texels, so maps computed on older windows line up texel for
-        texel (pipeline/toric/anticipation.py aggregates them without resampling blur).
+        texel (pipeline/toric/anticipation_map.py aggregates them without resampling blur).
         """
         n = settings.resolution
         camera = torus_position(torus, float(theta_rad), float(phi_rad))
@@ -199,7 +202,7 @@ class MapWindow:
 
     # -- resampling ----------------------------------------------------------------------------
 
-    def resample(self, values: np.ndarray, destination: MapWindow) -> tuple[np.ndarray, np.ndarray]:
+    def resample(self, values: npt.ArrayLike, destination: MapWindow) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
         """Bilinear resampling of maps on this window onto ``destination``.
 
         values: (..., res, res) on this window. Returns (values (..., res_d, res_d) float32, covered
@@ -223,7 +226,8 @@ class MapWindow:
         return out, covered
 
 
-def _linear_taps(coord: np.ndarray, n: int):
+def _linear_taps(coord: npt.NDArray[np.float64], n: int
+                 ) -> tuple[tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """Indices (2, m), weights (m,) and validity (m,) for linear interpolation at float coords."""
     ok = (coord >= -0.5 - 1e-6) & (coord <= n - 0.5 + 1e-6)
     # Whole-texel shifts arrive as x.9999999 or x.0000001: snap them so they copy exactly.
@@ -246,25 +250,24 @@ class DynamicOccluder:
 
     mesh_local: TriMesh
     transform: RigidTransform
-    linear_velocity_m_s: np.ndarray          # (3,) world, m/s
-    angular_velocity_rad_s: np.ndarray       # (3,) world, rad/s
-    bound_center_local: np.ndarray = field(repr=False, default=None)   # (3,) centre of the local bounding sphere
-    bound_radius_local: float = field(repr=False, default=0.0)          # its radius, local units
+    linear_velocity_m_s: npt.NDArray[np.float64]          # (3,) world, m/s
+    angular_velocity_rad_s: npt.NDArray[np.float64]       # (3,) world, rad/s
+    bound_center_local: npt.NDArray[np.float64] = field(init=False, repr=False)   # (3,) centre of the local bounding sphere
+    bound_radius_local: float = field(init=False, repr=False)          # its radius, local units
 
-    def __post_init__(self):
-        if self.bound_center_local is None:
-            lo, hi = self.mesh_local.vertices.min(axis=0), self.mesh_local.vertices.max(axis=0)
-            self.bound_center_local = 0.5 * (lo + hi)
-            spread = np.linalg.norm(self.mesh_local.vertices - self.bound_center_local, axis=1)
-            self.bound_radius_local = float(spread.max())
+    def __post_init__(self) -> None:
+        lo, hi = self.mesh_local.vertices.min(axis=0), self.mesh_local.vertices.max(axis=0)
+        self.bound_center_local = 0.5 * (lo + hi)
+        spread = np.linalg.norm(self.mesh_local.vertices - self.bound_center_local, axis=1)
+        self.bound_radius_local = float(spread.max())
 
-    def point_velocity(self, points_world: np.ndarray) -> np.ndarray:
+    def point_velocity(self, points_world: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """(n, 3) world velocity, m/s, of the object's points (n, 3) world."""
         arm = np.asarray(points_world, dtype=np.float64) - self.transform.position_world
         return self.linear_velocity_m_s + np.cross(self.angular_velocity_rad_s, arm)
 
 
-def _vector3(value, name: str) -> np.ndarray:
+def _vector3(value: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
     v = np.asarray(value, dtype=np.float64).reshape(-1)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
@@ -307,7 +310,8 @@ class OccluderScene:
         self.geometry_version += 1
 
     def add_dynamic(self, object_id: str, mesh_local: TriMesh, transform: RigidTransform,
-                    linear_velocity_m_s=(0.0, 0.0, 0.0), angular_velocity_rad_s=(0.0, 0.0, 0.0)) -> None:
+                    linear_velocity_m_s: npt.ArrayLike = (0.0, 0.0, 0.0),
+                    angular_velocity_rad_s: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
         if object_id in self._dynamic:
             raise ValueError(f"dynamic object {object_id!r} already added")
         self._dynamic[object_id] = DynamicOccluder(
@@ -320,13 +324,14 @@ class OccluderScene:
         self.geometry_version += 1
 
     def set_motion(self, object_id: str, transform: RigidTransform,
-                   linear_velocity_m_s=(0.0, 0.0, 0.0), angular_velocity_rad_s=(0.0, 0.0, 0.0)) -> None:
+                   linear_velocity_m_s: npt.ArrayLike = (0.0, 0.0, 0.0),
+                   angular_velocity_rad_s: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
         """New pose and velocity (world frame; the caller estimates it from successive poses)."""
         self.set_motions([object_id], [transform], _vector3(linear_velocity_m_s, "linear_velocity_m_s")[None],
                          _vector3(angular_velocity_rad_s, "angular_velocity_rad_s")[None])
 
     def set_motions(self, object_ids: Sequence[str], transforms: Sequence[RigidTransform],
-                    linear_velocities_m_s: np.ndarray, angular_velocities_rad_s: np.ndarray) -> None:
+                    linear_velocities_m_s: npt.ArrayLike, angular_velocities_rad_s: npt.ArrayLike) -> None:
         """set_motion for m objects at once, velocities (m, 3) world, checked in one pass: a map
         build moves every object of a scene that has a hundred of them."""
         m = len(object_ids)
@@ -357,9 +362,9 @@ class ShadowVelocityMaps:
     """
 
     window: MapWindow
-    shadow: np.ndarray
-    velocity_rad_s: np.ndarray
-    depth_m: np.ndarray
+    shadow: npt.NDArray[np.float32]
+    velocity_rad_s: npt.NDArray[np.float32]
+    depth_m: npt.NDArray[np.float32]
 
     @property
     def count(self) -> int:
@@ -372,7 +377,7 @@ class MapBackend(Protocol):
 
     name: str
 
-    def compute(self, torus: Torus, window: MapWindow, sample_points_world: np.ndarray, *,
+    def compute(self, torus: Torus, window: MapWindow, sample_points_world: npt.ArrayLike, *,
                 exclude_ids: Sequence[str | None] | None = None, previous_torus: Torus | None = None,
                 dt_s: float = 0.0) -> ShadowVelocityMaps:
         """Maps of k sample points (k, 3) world metres over ``window`` of ``torus``.
@@ -389,8 +394,9 @@ class MapBackend(Protocol):
         ...
 
 
-def check_compute_args(window: MapWindow, sample_points_world, exclude_ids, previous_torus, dt_s,
-                       max_samples: int = 64) -> tuple[np.ndarray, list[str | None]]:
+def check_compute_args(window: MapWindow, sample_points_world: npt.ArrayLike, exclude_ids: Sequence[str | None] | None,
+                       previous_torus: Torus | None, dt_s: float,
+                       max_samples: int = 64) -> tuple[npt.NDArray[np.float64], list[str | None]]:
     """Validated (k, 3) float64 sample points and a k-list of excluded ids; ValueError otherwise."""
     points = np.asarray(sample_points_world, dtype=np.float64)
     if points.ndim == 1 and points.shape == (3,):
@@ -400,7 +406,7 @@ def check_compute_args(window: MapWindow, sample_points_world, exclude_ids, prev
                          f"got {np.shape(sample_points_world)}")
     if not np.all(np.isfinite(points)):
         raise ValueError("sample_points_world must be finite")
-    excluded = [None] * len(points) if exclude_ids is None else list(exclude_ids)
+    excluded: list[str | None] = [None] * len(points) if exclude_ids is None else list(exclude_ids)
     if len(excluded) != len(points):
         raise ValueError("exclude_ids must have one entry per sample point")
     if previous_torus is not None and not (math.isfinite(dt_s) and dt_s > 0.0):
@@ -408,12 +414,12 @@ def check_compute_args(window: MapWindow, sample_points_world, exclude_ids, prev
     return points, excluded
 
 
-def torus_points(torus: Torus, window: MapWindow) -> np.ndarray:
+def torus_points(torus: Torus, window: MapWindow) -> npt.NDArray[np.float64]:
     """(res, res, 3) world positions, metres, of the texel centres of ``window`` on ``torus``."""
     return torus_position(torus, window.theta_centers_rad[:, None], window.phi_centers_rad[None, :])
 
 
-def torus_point_velocity(torus: Torus, window: MapWindow, previous_torus: Torus | None, dt_s: float) -> np.ndarray:
+def torus_point_velocity(torus: Torus, window: MapWindow, previous_torus: Torus | None, dt_s: float) -> npt.NDArray[np.float64]:
     """(res, res, 3) m/s: d/dt of the torus point at each texel's fixed (theta, phi), by finite difference."""
     now = torus_points(torus, window)
     if previous_torus is None:
@@ -421,7 +427,7 @@ def torus_point_velocity(torus: Torus, window: MapWindow, previous_torus: Torus 
     return (now - torus_points(previous_torus, window)) / dt_s
 
 
-def torus_tangents(torus: Torus, window: MapWindow) -> tuple[np.ndarray, np.ndarray]:
+def torus_tangents(torus: Torus, window: MapWindow) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(d pos / d theta, d pos / d phi), each (res, res, 3), metres per radian, at the texel centres.
 
     The vectorised form of geometry.toric.tangent_frame (the T and B of the paper's TBN; the two are
@@ -439,7 +445,8 @@ def torus_tangents(torus: Torus, window: MapWindow) -> tuple[np.ndarray, np.ndar
     return d_theta, d_phi
 
 
-def texture_velocity(velocity_world: np.ndarray, d_theta: np.ndarray, d_phi: np.ndarray) -> np.ndarray:
+def texture_velocity(velocity_world: npt.NDArray[np.float64], d_theta: npt.NDArray[np.float64],
+                     d_phi: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """World velocities (..., 3) m/s -> Toric angular rates (..., 2) rad/s.
 
     TBN^t v keeps the tangent-plane part (section 4.1.2); dividing each component by the length of

@@ -29,11 +29,15 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TypedDict
 
 import moderngl
 import numpy as np
+import numpy.typing as npt
 
+from camdirector.geometry.gl_context import egl_context, uniform
 from camdirector.geometry.toric import Torus, torus_position
 from camdirector.geometry.toric_maps.base import (
     NOT_OCCLUDED_DEPTH,
@@ -62,14 +66,23 @@ def _thread_context() -> moderngl.Context:
     per backend costs 8.5 ms to make and, even released (with or without malloc_trim), leaves
     about 0.05 MB behind in the driver every time (12-16 MB per 300, not levelling off); a shared
     one costs 0.1 ms and stops growing after its first use (4 MB)."""
-    ctx = getattr(_THREAD, "ctx", None)
+    ctx: moderngl.Context | None = getattr(_THREAD, "ctx", None)
     if ctx is None:
         try:
-            ctx = moderngl.create_standalone_context(backend="egl")
+            ctx = egl_context()
         except Exception as err:  # EGL missing or no usable driver: say which call failed
             raise RuntimeError(f"GLMapBackend: no EGL GL context ({err})") from err
         _THREAD.ctx = ctx
     return ctx
+
+
+class GLMapSettingsArgs(TypedDict, total=False):
+    """GLMapSettings' fields as keyword arguments (toric_maps.make_backend passes them on)."""
+
+    shadow_map_scale: float
+    max_shadow_map_px: int
+    frustum_margin: float
+    max_half_angle_deg: float
 
 
 @dataclass(frozen=True)
@@ -79,7 +92,7 @@ class GLMapSettings:
     frustum_margin: float = 0.02       # widening of each fitted frustum, fraction of its extent. [0, 0.5]
     max_half_angle_deg: float = 80.0   # widest frustum half-angle; texels seen beyond it read "not occluded", deg. [10, 85]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (0.5 <= self.shadow_map_scale <= 8.0, "shadow_map_scale must be in [0.5, 8]"),
             (16 <= self.max_shadow_map_px <= 8192, "max_shadow_map_px must be in [16, 8192]"),
@@ -210,17 +223,23 @@ void main() {{
 """
 
 
-def _mat4_bytes(matrices: np.ndarray, length: int) -> bytes:
+def _mat4_bytes(matrices: npt.NDArray[np.float64], length: int) -> bytes:
     """(n, 4, 4) row-major -> GLSL mat4[length] (column-major), zero padded."""
     out = np.zeros((length, 4, 4), dtype="f4")
     out[: len(matrices)] = np.transpose(matrices, (0, 2, 1))
     return out.tobytes()
 
 
-def _vec3_bytes(vectors: np.ndarray, length: int) -> bytes:
+def _vec3_bytes(vectors: npt.NDArray[np.float64], length: int) -> bytes:
     out = np.zeros((length, 3), dtype="f4")
     out[: len(vectors)] = vectors
     return out.tobytes()
+
+
+# One atlas set (GLMapBackend._target_for): tile columns and rows, occluder tile side px, the
+# occluder texture and framebuffer, the output texture and framebuffer, and the readback array.
+_Atlases = tuple[int, int, int, moderngl.Texture, moderngl.Framebuffer, moderngl.Texture, moderngl.Framebuffer,
+                 npt.NDArray[np.float32]]
 
 
 class GLMapBackend:
@@ -234,35 +253,34 @@ class GLMapBackend:
     def __init__(self, scene: OccluderScene, settings: GLMapSettings = GLMapSettings()):
         self.scene = scene
         self.settings = settings
-        self._ctx = _thread_context()
-        ctx = self._ctx
+        ctx = _thread_context()
+        self._ctx: moderngl.Context | None = ctx
         self.renderer = str(ctx.info.get("GL_RENDERER", ""))
         with ctx:
             self._occ_prog = ctx.program(vertex_shader=_OCCLUDER_VS, fragment_shader=_OCCLUDER_FS)
             self._toric_prog = ctx.program(vertex_shader=_TORIC_VS, fragment_shader=_TORIC_FS)
-            self._occ_prog["u_objects"].value = 1
-            self._toric_prog["u_occ"].value = 0
+            uniform(self._occ_prog, "u_objects").value = 1
+            uniform(self._toric_prog, "u_occ").value = 0
             quad = np.array([-1, -1, 1, -1, -1, 1, -1, 1, 1, -1, 1, 1], dtype="f4")
             self._quad_vbo = ctx.buffer(quad.tobytes())
             self._quad_vao = ctx.vertex_array(self._toric_prog, [(self._quad_vbo, "2f", "in_ndc")])
         self._version = -1
-        self._scene_vao = None
+        self._scene_vao: moderngl.VertexArray | None = None
         self._scene_buffers: list[moderngl.Buffer] = []
         self._objects_tex: moderngl.Texture | None = None
         self._object_index: dict[str, int] = {}
-        self._targets: dict[tuple[int, int, int], tuple] = {}   # atlases by (samples, resolution, tile px)
+        self._targets: dict[tuple[int, int, int], _Atlases] = {}   # atlases by (samples, resolution, tile px)
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type[GLMapBackend], tuple[OccluderScene, GLMapSettings]]:
         """Pickled as its scene and settings: unpickling makes its GL objects again, in the
         unpickling thread's context (nothing drawn is kept between two computes)."""
         return GLMapBackend, (self.scene, self.settings)
 
     # -- resources -----------------------------------------------------------------------------
 
-    def _sync_scene(self) -> None:
+    def _sync_scene(self, ctx: moderngl.Context) -> None:
         if self._version == self.scene.geometry_version:
             return
-        ctx = self._ctx
         if self._scene_vao is not None:
             self._scene_vao.release()
         for buf in self._scene_buffers:
@@ -293,7 +311,7 @@ class GLMapBackend:
         self._objects_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._version = self.scene.geometry_version
 
-    def _write_objects(self) -> None:
+    def _write_objects(self, objects_tex: moderngl.Texture) -> None:
         objects = list(self.scene.dynamic.values())
         data = np.zeros((len(objects) + 1, 5, 4), dtype="f4")
         data[0, :3, :4] = np.eye(4)[:3]
@@ -305,9 +323,9 @@ class GLMapBackend:
             data[1:, :3, 3] = np.stack([o.transform.position_world for o in objects])
             data[1:, 3, :3] = np.stack([o.linear_velocity_m_s for o in objects])
             data[1:, 4, :3] = np.stack([o.angular_velocity_rad_s for o in objects])
-        self._objects_tex.write(data.tobytes())
+        objects_tex.write(data.tobytes())
 
-    def _target_for(self, count: int, resolution: int):
+    def _target_for(self, ctx: moderngl.Context, count: int, resolution: int) -> _Atlases:
         """Atlases for count samples at this resolution, kept for reuse (a few shapes at most)."""
         shadow_px = int(min(max(round(self.settings.shadow_map_scale * resolution), 16), self.settings.max_shadow_map_px))
         cols = math.ceil(math.sqrt(count))
@@ -318,7 +336,6 @@ class GLMapBackend:
             return cached
         if len(self._targets) >= 4:  # the schedule alternates between few shapes (2 maps, all maps)
             self._release_targets(next(iter(self._targets)))
-        ctx = self._ctx
         occ_size = (cols * shadow_px, rows * shadow_px)
         out_size = (cols * resolution, rows * resolution)
         limit = int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192))
@@ -333,7 +350,7 @@ class GLMapBackend:
         self._targets[key] = (cols, rows, shadow_px, occ_tex, occ_fbo, out_tex, out_fbo, readback)
         return self._targets[key]
 
-    def _release_targets(self, key=None) -> None:
+    def _release_targets(self, key: tuple[int, int, int] | None = None) -> None:
         """Free one atlas set (by key) or all of them."""
         for k in [key] if key is not None else list(self._targets):
             _, _, _, occ_tex, occ_fbo, out_tex, out_fbo, _ = self._targets.pop(k)
@@ -343,7 +360,8 @@ class GLMapBackend:
 
     # -- frusta --------------------------------------------------------------------------------
 
-    def _frusta(self, torus: Torus, window: MapWindow, points: np.ndarray, shadow_px: int):
+    def _frusta(self, torus: Torus, window: MapWindow, points: npt.NDArray[np.float64],
+                shadow_px: int) -> tuple[npt.NDArray[np.float64], float]:
         """Per sample: clip-from-(world - eye) matrices (k, 4, 4) and the common far distance, m.
 
         Each frustum is the tightest off-axis one around the directions from s to the window's
@@ -394,17 +412,19 @@ class GLMapBackend:
 
     # -- the maps ------------------------------------------------------------------------------
 
-    def compute(self, torus: Torus, window: MapWindow, sample_points_world, *, exclude_ids=None,
-                previous_torus: Torus | None = None, dt_s: float = 0.0) -> ShadowVelocityMaps:
+    def compute(self, torus: Torus, window: MapWindow, sample_points_world: npt.ArrayLike, *,
+                exclude_ids: Sequence[str | None] | None = None, previous_torus: Torus | None = None,
+                dt_s: float = 0.0) -> ShadowVelocityMaps:
         """See base.MapBackend.compute; at most MAX_SAMPLES sample points per call."""
-        if self._ctx is None:
+        ctx = self._ctx
+        if ctx is None:
             raise ValueError("GLMapBackend was closed")
         points, excluded = check_compute_args(window, sample_points_world, exclude_ids, previous_torus, dt_s,
                                               max_samples=MAX_SAMPLES)
         k, n = len(points), window.resolution
-        with self._ctx as ctx:
-            self._sync_scene()
-            cols, rows, shadow_px, occ_tex, occ_fbo, out_tex, out_fbo, readback = self._target_for(k, n)
+        with ctx:
+            self._sync_scene(ctx)
+            cols, rows, shadow_px, occ_tex, occ_fbo, out_tex, out_fbo, readback = self._target_for(ctx, k, n)
             view_proj, far = self._frusta(torus, window, points, shadow_px)
             vp_bytes = _mat4_bytes(view_proj, MAX_SAMPLES)
 
@@ -416,16 +436,18 @@ class GLMapBackend:
                 ctx.enable_direct(_GL_CLIP_DISTANCE0 + plane)
             occ_fbo.clear(_NO_OCCLUDER_DISTANCE, 0.0, 0.0, 0.0, depth=1.0)
             if self._scene_vao is not None:
-                self._write_objects()
-                self._objects_tex.use(location=1)
+                objects_tex = self._objects_tex
+                assert objects_tex is not None  # _sync_scene made it along with the scene's vertex array
+                self._write_objects(objects_tex)
+                objects_tex.use(location=1)
                 prog = self._occ_prog
-                prog["u_view_proj"].write(vp_bytes)
-                prog["u_eye"].write(_vec3_bytes(points, MAX_SAMPLES))
+                uniform(prog, "u_view_proj").write(vp_bytes)
+                uniform(prog, "u_eye").write(_vec3_bytes(points, MAX_SAMPLES))
                 exclude = np.full(MAX_SAMPLES, -1, dtype="i4")
                 exclude[:k] = [self._object_index.get(oid, -1) if oid is not None else -1 for oid in excluded]
-                prog["u_exclude"].write(exclude.tobytes())
-                prog["u_tiles"].value = (cols, rows)
-                prog["u_inv_far"].value = 1.0 / far
+                uniform(prog, "u_exclude").write(exclude.tobytes())
+                uniform(prog, "u_tiles").value = (cols, rows)
+                uniform(prog, "u_inv_far").value = 1.0 / far
                 self._scene_vao.render(moderngl.TRIANGLES, instances=k)
             for plane in range(4):
                 ctx.disable_direct(_GL_CLIP_DISTANCE0 + plane)
@@ -436,20 +458,21 @@ class GLMapBackend:
             occ_tex.use(location=0)
             prog = self._toric_prog
             prev = previous_torus if previous_torus is not None else torus
-            prog["u_res"].value = n
-            prog["u_shadow_px"].value = shadow_px
-            prog["u_count"].value = k
-            prog["u_tiles"].value = (cols, rows)
-            prog["u_window"].value = (window.theta_min_rad, window.phi_min_rad, window.theta_step_rad, window.phi_step_rad)
-            prog["u_torus"].value = (torus.alpha, torus.arc_radius_m, torus.center_offset_m)
-            prog["u_basis"].write(np.asarray(torus.basis, dtype="f4").tobytes())
-            prog["u_prev_torus"].value = (prev.alpha, prev.arc_radius_m, prev.center_offset_m)
-            prog["u_prev_basis"].write(np.asarray(prev.basis, dtype="f4").tobytes())
-            prog["u_mid_shift"].value = tuple(float(c) for c in torus.mid_world - prev.mid_world)
-            prog["u_inv_dt"].value = 1.0 / dt_s if previous_torus is not None else 0.0
-            prog["u_keep"].value = 1.0 - SEGMENT_END_MARGIN
-            prog["u_view_proj"].write(vp_bytes)
-            prog["u_mid_from_eye"].write(_vec3_bytes(torus.mid_world[None, :] - points, MAX_SAMPLES))
+            uniform(prog, "u_res").value = n
+            uniform(prog, "u_shadow_px").value = shadow_px
+            uniform(prog, "u_count").value = k
+            uniform(prog, "u_tiles").value = (cols, rows)
+            uniform(prog, "u_window").value = (window.theta_min_rad, window.phi_min_rad, window.theta_step_rad,
+                                                window.phi_step_rad)
+            uniform(prog, "u_torus").value = (torus.alpha, torus.arc_radius_m, torus.center_offset_m)
+            uniform(prog, "u_basis").write(np.asarray(torus.basis, dtype="f4").tobytes())
+            uniform(prog, "u_prev_torus").value = (prev.alpha, prev.arc_radius_m, prev.center_offset_m)
+            uniform(prog, "u_prev_basis").write(np.asarray(prev.basis, dtype="f4").tobytes())
+            uniform(prog, "u_mid_shift").value = tuple(float(c) for c in torus.mid_world - prev.mid_world)
+            uniform(prog, "u_inv_dt").value = 1.0 / dt_s if previous_torus is not None else 0.0
+            uniform(prog, "u_keep").value = 1.0 - SEGMENT_END_MARGIN
+            uniform(prog, "u_view_proj").write(vp_bytes)
+            uniform(prog, "u_mid_from_eye").write(_vec3_bytes(torus.mid_world[None, :] - points, MAX_SAMPLES))
             self._quad_vao.render(moderngl.TRIANGLES)
             out_fbo.read_into(readback, components=4, dtype="f4")
 

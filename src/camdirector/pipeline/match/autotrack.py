@@ -27,8 +27,8 @@ src/cl_view.c; settings with their cvar names and defaults in `AutotrackSettings
   the tracked player's origin and view angles): the player's first-person view, the eye
   DEFAULT_VIEWHEIGHT (22 units) above its origin, 16 below it for a corpse (cl_view.c
   V_CalcRefdef), looking along the player's rotation (local +Z: pitch and yaw for imported
-  demos), through the level camera of hltv.py (`look_along`; the corpse's 80-degree roll is left
-  out: the MATCH rig keeps the horizon level). A cut is instant, as the client's `track`.
+  demos), through the level camera of look_along.py (as HLTV's views; the corpse's 80-degree
+  roll is left out: the MATCH rig keeps the horizon level). A cut is instant, as the client's `track`.
   Players' transforms are their feet (the wire's contract): the origin is 24 units above them
   (geometry/quake_frame.py), so the eye stands 46 units (1.44 m) above the feet of any game.
 - It reads no future: it needs no broadcast delay (with one it runs at the program moment as
@@ -53,10 +53,11 @@ from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.quake_frame import M_PER_UNIT, ORIGIN_ABOVE_FEET_UNITS
 from camdirector.geometry.transforms import quat_rotate
 from camdirector.pipeline.inputs import EventKind, PlayerStats
+from camdirector.pipeline.match.director_contract import DirectorBase
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
-from camdirector.pipeline.match.hltv import look_along
+from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
-from camdirector.pipeline.match.plan import Shot
+from camdirector.pipeline.match.program_shot import Shot
 
 # QuakeWorld's item bits (ezQuake src/common.h, IT_*)
 IT_SHOTGUN, IT_SUPER_SHOTGUN, IT_NAILGUN, IT_SUPER_NAILGUN = 1, 2, 4, 8
@@ -108,7 +109,7 @@ class RankExpression:
         if self._next != len(self._tokens):
             raise ValueError(f"{what}: unexpected {self._tokens[self._next][1]!r} in {self.text!r}")
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type[RankExpression], tuple[str, str]]:
         """Pickled as its text (a session's checkpoint): the parsed closures do not pickle."""
         return RankExpression, (self.text, self.what)
 
@@ -177,7 +178,7 @@ class AutotrackSettings:
     tp_weapon_order: str = "78654321"     # %W: the best weapon is the first held in this order, digits 1-8
     update_interval_s: float = 0.5        # MVD_AutoTrack's hard-coded 0.5 s between updates, s. (0, 10]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.mvd_autotrack not in (1, 2):
             raise ValueError(f"AutotrackSettings: mvd_autotrack must be 1 or 2, got {self.mvd_autotrack}")
         for mode in ("1on1", "2on2", "4on4", "custom"):
@@ -239,7 +240,7 @@ class FirstPersonCamera:
         return look_along(eye, forward, self.lens.vertical_fov_deg)
 
 
-class AutotrackDirector:
+class AutotrackDirector(DirectorBase):
     """ezQuake's mvd_autotrack (module docstring) over the rig's players (target order), their
     teams (n,) and the read-only view of their latest stats by id."""
 
@@ -272,7 +273,8 @@ class AutotrackDirector:
         """(n,) bool: the players MVD_LockTeamIgnore keeps."""
         if tracked is None or not (self.settings.mvd_autotrack_lockteam and self.teamplay):
             return np.ones(len(self.players), dtype=bool)
-        return self.teams == self.teams[tracked]
+        same_team: np.ndarray = self.teams == self.teams[tracked]
+        return same_team
 
     def switch_moment(self, tracked: int, eligible: np.ndarray) -> str | None:
         """MVD_SwitchMoment: why to re-rank now, or None."""
@@ -326,7 +328,7 @@ class AutotrackDirector:
         self.next_rank_s = now + self.settings.update_interval_s
         eligible = self._eligible(self.tracked)
         if has_stats:
-            why = "start" if must_track else self.switch_moment(self.tracked, eligible)
+            why = "start" if must_track or self.tracked is None else self.switch_moment(self.tracked, eligible)
             if why is None:
                 return None
             values = self.values(flags)

@@ -19,7 +19,8 @@ def view_turn_deg(camera_a_world: np.ndarray, camera_b_world: np.ndarray, point_
     u = camera_a_world - point_world
     v = np.atleast_2d(camera_b_world) - point_world
     cos = (v @ u) / np.maximum(np.linalg.norm(v, axis=1) * np.linalg.norm(u), 1e-9)
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    angle_deg: np.ndarray = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return angle_deg
 
 
 class Grammar:

@@ -59,11 +59,13 @@ import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
-from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.director_contract import DirectorBase
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
-from camdirector.pipeline.match.plan import Shot
+from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import INCH_M, HltvSettings, MatchSettings
 
 MAX_FIXED_CAMERAS = 64           # MAX_NUM_CAMERAS
@@ -83,7 +85,8 @@ BOX_CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))  # (8, 3)
 
 def weighted_angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """((u.v + 1) / 2)^2 for unit vectors (..., 3): 1 when parallel, 0 when opposite."""
-    return ((np.sum(u * v, axis=-1) + 1.0) / 2.0) ** 2
+    weight: np.ndarray = ((np.sum(u * v, axis=-1) + 1.0) / 2.0) ** 2
+    return weight
 
 
 def _direction(yaw_deg: float, pitch_deg: float) -> np.ndarray:
@@ -106,16 +109,6 @@ def smooth_angles(angles: tuple[float, float], goal: tuple[float, float], dt_s: 
     step = min(max(dt_s * inertia_per_s, MIN_SMOOTHING), 1.0)
     yaw_gap = (goal[0] - angles[0] + 180.0) % 360.0 - 180.0
     return angles[0] + step * yaw_gap, angles[1] + step * (goal[1] - angles[1])
-
-
-def look_along(position: np.ndarray, direction: np.ndarray, fov_deg: float) -> CameraPose:
-    """The level camera (no roll) at position (3,) m looking along direction (3,); also the
-    first-person view of autotrack.py."""
-    forward = direction / np.linalg.norm(direction)
-    right = np.cross(forward, [0.0, 1.0, 0.0])
-    right /= max(np.linalg.norm(right), 1e-9)
-    up = np.cross(right, forward)
-    return CameraPose(position, matrix_to_quat(np.stack([right, up, -forward], axis=1)), fov_deg)
 
 
 def eye_forward(moment: Moment) -> np.ndarray:
@@ -142,14 +135,15 @@ def box_entry(origins: np.ndarray, deltas: np.ndarray, low: np.ndarray, high: np
         t_low, t_high = (low - origins) / deltas, (high - origins) / deltas
     near = np.where(parallel, np.where(inside_slab, -np.inf, np.inf), np.minimum(t_low, t_high)).max(axis=-1)
     far = np.where(parallel, np.where(inside_slab, np.inf, -np.inf), np.maximum(t_low, t_high)).min(axis=-1)
-    return np.where((near <= far) & (far >= 0.0), np.maximum(near, 0.0), np.inf)
+    entry: np.ndarray = np.where((near <= far) & (far >= 0.0), np.maximum(near, 0.0), np.inf)
+    return entry
 
 
 def _eye(moment: Moment, i: int) -> np.ndarray:
     """A player's eye point (3,) m: its aim point, or its feet plus VEC_DEAD_VIEWHEIGHT when dead."""
-    if moment.alive[i]:
-        return moment.aims_world[i]
-    return moment.feet_world[i] + np.array([0.0, DEAD_VIEW_HEIGHT_M, 0.0])
+    eye: np.ndarray = moment.aims_world[i] if moment.alive[i] else \
+        moment.feet_world[i] + np.array([0.0, DEAD_VIEW_HEIGHT_M, 0.0])
+    return eye
 
 
 @dataclass
@@ -180,6 +174,7 @@ class ChaseCamera:
     def pose(self, moment: Moment) -> CameraPose:
         if self._pose is None or self._time_s != moment.time_s:
             self.advance(moment, 0.0, 0.0)
+        assert self._pose is not None  # advanced to the moment
         return self._pose
 
     def _frame(self, moment: Moment, dt_s: float) -> CameraPose:
@@ -262,7 +257,7 @@ class FixedCamera:
         return look_along(self.position, _direction(*self.angles), self.lens.vertical_fov_deg)
 
 
-class HltvDirector:
+class HltvDirector(DirectorBase):
     """The HLTV baseline (module docstring)."""
 
     def __init__(self, players: list[str], settings: MatchSettings, lens: Lens, ray_scene: RayScene,
@@ -295,7 +290,8 @@ class HltvDirector:
         clear = ~self.ray_scene.occluded(starts, ends)
         low, high = player_hulls(moment.feet_world)
         entry = box_entry(starts[:, None], (ends - starts)[:, None], low[None], high[None])   # (m, n)
-        return clear & ~((entry < 1.0) & moment.alive[None, :] & ~passable).any(axis=1)
+        seen: np.ndarray = clear & ~((entry < 1.0) & moment.alive[None, :] & ~passable).any(axis=1)
+        return seen
 
     def rank_players(self, moment: Moment) -> tuple[np.ndarray, np.ndarray]:
         """(n,) rank and (n,) index of the best-facing other player (-1: none) of one 0.5-s rank
@@ -390,7 +386,8 @@ class HltvDirector:
 
     def _best_event(self, now_s: float, buffer: MomentBuffer) -> GameEvent | None:
         """FindBestGameEvent: the best of four 2-s windows by the SDK's cut rules, or None."""
-        best, best_priority = [None] * 4, [0] * 4
+        best: list[GameEvent | None] = [None] * 4
+        best_priority = [0] * 4
         for w in range(4):
             till = now_s + self.hltv.event_window_s * (w + 1)
             if till > self.next_shot_s:
@@ -468,10 +465,11 @@ class HltvDirector:
         """StartBestFixedCameraShot: the best of the shot's 0.5-s camera ranks (_best_ranked);
         unforced and its sum 0 (no camera sees anyone), the best player instead."""
         cameras = self.fixed_cameras
+        assert cameras is not None  # placed at the first decision
         ranks = []
         for t in self._rank_times(moment.time_s, buffer):
             rank, closest = self.rank_cameras(buffer.at(t), cameras)
-            ranks.append((rank, closest, np.ones(len(cameras), dtype=bool)))
+            ranks.append((rank, closest, np.ones(len(cameras), dtype=np.bool_)))
         best, best_rank, target = self._best_ranked(ranks)
         if not force and best_rank == 0.0:
             return self._player_shot(moment, buffer)
@@ -482,5 +480,5 @@ class HltvDirector:
         shot.scores = {"rank": best_rank}
         return shot
 
-    def _shot(self, camera, subjects: tuple[int, ...], kind: ShotKind, reason: str, now_s: float) -> Shot:
+    def _shot(self, camera: ShotCamera, subjects: tuple[int, ...], kind: ShotKind, reason: str, now_s: float) -> Shot:
         return Shot(ShotChoice(tuple(self.players[i] for i in subjects), kind, reason), subjects, camera, now_s)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import bisect
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,7 +42,7 @@ class Moment:
     alive: np.ndarray           # (n,) bool
     events: list[GameEvent] = field(default_factory=list)  # applied at this moment
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[Callable[..., Moment], tuple[object, ...]]:
         """Pickled as three arrays: a session's snapshot holds every buffered moment (hundreds),
         and as 29 numpy arrays each (8 players) 700 KB took 60-190 ms to pickle."""
         transforms = np.array([np.concatenate([t.position_world, t.rotation_xyzw, t.scale]) for t in self.transforms],
@@ -66,7 +67,8 @@ def horizontal_forward(rotations_xyzw: np.ndarray) -> np.ndarray:
     flat = norm < 1e-6
     forward[flat] = (0.0, 0.0, 1.0)
     norm[flat] = 1.0
-    return forward / norm[:, None]
+    unit: np.ndarray = forward / norm[:, None]
+    return unit
 
 
 COMPACT_AFTER = 32      # moments gone (before the program's) that the buffer drops at once

@@ -50,7 +50,7 @@ class HltvSettings:
                                          # CBasePlayer::OnTakeDamage_Alive), round_start 6 (hl2mp_gamerules.cpp:1056,
                                          # CHL2MPRules::RestartGame), [1, 15]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _check_positive_finite(self, ("rank_interval_s", "min_shot_s", "event_window_s", "rank_range_m",
                                       "kill_chase_distance_m", "player_chase_distance_m", "angle_inertia_per_s"))
         if not self.min_shot_s <= self.default_shot_s <= self.max_shot_s:
@@ -122,7 +122,7 @@ class MatchSettings:
         EventKind.CUSTOM: 4})            # the kind's default priority (a death is 7 as in HLTV), [1, 15]
     hltv: HltvSettings = field(default_factory=HltvSettings)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
                                       "respawn_walk_m", "engage_range_m", "join_spread_max_m", "reframe_s", "max_held_shot_s",
                                       "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
@@ -148,7 +148,7 @@ class MatchSettings:
         return 1.0 / self.plan_rate_hz
 
 
-def _check_positive_finite(settings, positive: tuple[str, ...]) -> None:
+def _check_positive_finite(settings: MatchSettings | HltvSettings, positive: tuple[str, ...]) -> None:
     """Every float field finite, >= 0 (pitches may be negative), and > 0 for the names in `positive`."""
     for f in fields(settings):
         value = getattr(settings, f.name)

@@ -17,7 +17,7 @@ OVERVIEW is a static camera high above the players' bounding box looking at its 
 a node of the level's graph, whichever sees the worst-seen player best by the same measure as
 the places below; it is level too (geometry.camera.level_look_rotation). It also stands in for a
 DUEL or GROUP whose best place sees its subjects under `min_visible` when it sees them better
-(plan.py, ShotBuilder.build).
+(shot_builder.py, ShotBuilder.build).
 
 Every camera keeps the horizon level, as broadcast casting does. DUEL and GROUP do not compose A
 and B exactly (geometry.toric.look_rotation rolls the camera whenever the composition demands
@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,7 +132,9 @@ def swung_point(origin: np.ndarray, from_offset: np.ndarray, to_offset: np.ndarr
     yaw = yaws[0] + weight * math.remainder(yaws[1] - yaws[0], math.tau)
     pitch = pitches[0] + weight * (pitches[1] - pitches[0])
     length = lengths[0] ** (1.0 - weight) * lengths[1] ** weight
-    return origin + length * np.array([math.cos(pitch) * math.sin(yaw), math.sin(pitch), math.cos(pitch) * math.cos(yaw)])
+    point: np.ndarray = origin + length * np.array([math.cos(pitch) * math.sin(yaw), math.sin(pitch),
+                                                    math.cos(pitch) * math.cos(yaw)])
+    return point
 
 
 @dataclass(frozen=True)
@@ -197,7 +199,9 @@ class ToricCamera:
         if self.b_index is None:
             return a, a + self.gaze_room_m * self._heading(moment)
         b = moment.aims_world[self.b_index]
-        weight = 1.0 if self.pair is None else self.pair.weight(moment.time_s)
+        if self.pair is None:
+            return a, b
+        weight = self.pair.weight(moment.time_s)
         if weight >= 1.0:
             return a, b
         kept, dropped = (a, b) if self.pair.keep_index == self.a_index else (b, a)
@@ -213,7 +217,7 @@ class ToricCamera:
         except DegenerateTorus:
             return None
 
-    def positions(self, moment: Moment, places: list[Place]) -> np.ndarray | None:
+    def positions(self, moment: Moment, places: Sequence[Place]) -> np.ndarray | None:
         """(len(places), 3) camera centres at the moment, None when the framing is degenerate."""
         widths = np.array([p.width for p in places])
         out = np.empty((len(places), 3))
@@ -224,8 +228,8 @@ class ToricCamera:
             rows = np.flatnonzero(widths == width)
             arc = theta_max(torus.alpha)
             theta = arc * THETA_MARGIN + arc * (1.0 - 2.0 * THETA_MARGIN) * np.array([places[r].theta_ratio
-                                                                                     for r in rows])
-            out[rows] = torus_position(torus, theta, np.array([places[r].phi_rad for r in rows]))
+                                                                                     for r in rows.tolist()])
+            out[rows] = torus_position(torus, theta, np.array([places[r].phi_rad for r in rows.tolist()]))
         return out
 
     def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
@@ -240,7 +244,7 @@ class ToricCamera:
             norm = np.linalg.norm(blend)
             self.heading = blend / norm if norm > 1e-6 else forward
 
-    def rotations(self, moment: Moment, positions_world: np.ndarray, places: list[Place]) -> np.ndarray:
+    def rotations(self, moment: Moment, positions_world: np.ndarray, places: Sequence[Place]) -> np.ndarray:
         """(m, 3, 3) camera-to-world rotations of pose_from at m positions (m, 3) of their places'
         widths, at once for a pair (geometry.toric.level_pair_matrices), so that the place search
         judges the level picture that is shown (FOLLOW: geometry.camera.level_look_matrices); NaN where degenerate."""
@@ -263,11 +267,12 @@ class ToricCamera:
         """The place the picture is taken from at time_s, s: the camera's own, or, where its pair
         window has a place of its own, that one around the pair's events, eased between the two
         as the framing is."""
-        pair_place = None if self.pair is None else self.pair.place
-        weight = 0.0 if pair_place is None else self.pair.weight(time_s)
+        if self.pair is None or self.pair.place is None:
+            return self.place
+        weight = self.pair.weight(time_s)
         if weight <= 0.0:
             return self.place
-        return self.place.eased(pair_place, 1.0 - weight)
+        return self.place.eased(self.pair.place, 1.0 - weight)
 
     @property
     def split(self) -> bool:
@@ -356,13 +361,14 @@ def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[i
     pause(len(positions_world) * len(subjects) * visibility.k)
     screen = project_from_cameras(positions_world, rotations, lens, visibility.points_world(moment, subjects))
     with np.errstate(invalid="ignore"):
-        asked = (np.abs(screen) <= 1.0).all(axis=2)                    # (m, s * k); NaN (behind, degenerate) is False
+        asked = np.asarray((np.abs(screen) <= 1.0).all(axis=2))        # (m, s * k); NaN (behind, degenerate) is False
     ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
     asked[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
-    return visibility.seen_points(positions_world, moment, subjects, asked).mean(axis=2)
+    share: np.ndarray = visibility.seen_points(positions_world, moment, subjects, asked).mean(axis=2)
+    return share
 
 
-def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], subjects: tuple[int, ...],
+def best_place(camera: ToricCamera, places: Sequence[Place], moments: list[Moment], subjects: tuple[int, ...],
                visibility: SubjectVisibility, allowed: Callable[[np.ndarray], np.ndarray] | None = None,
                cut_moment: Moment | None = None, weights: list[float] | None = None) -> tuple[Place, float]:
     """The place of `places` whose worst-seen subject is best seen (framed_seen), a mean over
@@ -381,6 +387,7 @@ def best_place(camera: ToricCamera, places: list[Place], moments: list[Moment], 
         score += weight * framed_seen(visibility, moment, framed, positions, rotations, camera.lens).min(axis=1)
     score /= max(sum(weights), 1e-9)
     if allowed is not None:
+        assert cut_moment is not None  # the grammar judges the cut's moment
         first = camera.positions(cut_moment, places)
         if first is not None:
             score = np.where(allowed(first), score, -1.0)
@@ -402,18 +409,20 @@ def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[i
     centre = aims.mean(axis=0)
     radius_m = float(np.max(np.linalg.norm((aims - centre)[:, [0, 2]], axis=1))) + 2.0
     distance_m = radius_m / lens.tan_half_fov_y
-    cameras = []
+    above = []
     for height in (*OVERVIEW_HEIGHTS_M, top_height_m):
         for k in range(OVERVIEW_AZIMUTHS):
             azimuth = math.tau * k / OVERVIEW_AZIMUTHS
             horizontal = max(distance_m * math.cos(math.atan2(height, distance_m)), 1.0)
-            cameras.append(centre + np.array([horizontal * math.sin(azimuth), height, horizontal * math.cos(azimuth)]))
-    cameras = np.array(cameras)
+            above.append(centre + np.array([horizontal * math.sin(azimuth), height, horizontal * math.cos(azimuth)]))
+    cameras = np.array(above)
     if len(extra_cameras_world):
         near = np.linalg.norm(extra_cameras_world - centre, axis=1) <= 2.0 * max(distance_m, top_height_m)
         cameras = np.concatenate([cameras, extra_cameras_world[near]])
     rotations = level_look_matrices(cameras, centre, (0.0, 0.0), lens)
-    seen = sum(w * framed_seen(visibility, m, subjects, cameras, rotations, lens) for m, w in zip(moments, weights))
+    seen = np.zeros((len(cameras), len(subjects)))
+    for m, w in zip(moments, weights):
+        seen = seen + w * framed_seen(visibility, m, subjects, cameras, rotations, lens)
     seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
     worst = seen.min(axis=1)
     if allowed is not None:

@@ -46,4 +46,5 @@ class SubjectVisibility:
 
     def visible_share(self, cameras_world: np.ndarray, moment: Moment, subjects: tuple[int, ...]) -> np.ndarray:
         """(m, len(subjects)) share of each subject's points seen from each of (m, 3) camera places."""
-        return self.seen_points(cameras_world, moment, subjects).mean(axis=2)
+        share: np.ndarray = self.seen_points(cameras_world, moment, subjects).mean(axis=2)
+        return share

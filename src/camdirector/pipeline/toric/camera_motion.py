@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
 from camdirector.geometry.toric import Torus, compose_pose, tangent_frame, theta_max, torus_angles, torus_position
@@ -43,7 +44,7 @@ class ToricMotion:
         self.theta: float | None = None  # None until the first torus
         self.phi = 0.0
         self.rate = np.zeros(2)          # (dtheta/dt, dphi/dt), rad/s
-        self.position_world: np.ndarray | None = None
+        self.position_world: npt.NDArray[np.float64] | None = None
         self.side = 0.0                  # +1 or -1: which half of the torus is upright
         self._side_key: float | None = None  # axis elevation (A-B . up) the side was chosen at
 
@@ -103,14 +104,15 @@ class ToricMotion:
         steps = min(self.settings.max_substeps, max(1, math.ceil(dt_s / self.settings.max_substep_s)))
         h = min(dt_s / steps, self.settings.max_substep_s)
         omega = 1.0 / self.style.response_time_s
+        assert self.theta is not None  # run() places the camera before it integrates
         for _ in range(steps):
             t_theta, t_phi, _ = tangent_frame(torus, self.theta, self.phi)
             jacobian = np.stack([t_theta, t_phi], axis=1)  # (3, 2): world metres per radian
             error = np.array([goal_theta - self.theta, math.remainder(goal_phi - self.phi, math.tau)])
             accel = omega * omega * error - 2.0 * omega * self.rate
-            accel *= _limit_scale(np.linalg.norm(jacobian @ accel), self.style.max_accel_m_s2)
+            accel *= _limit_scale(float(np.linalg.norm(jacobian @ accel)), self.style.max_accel_m_s2)
             self.rate = self.rate + h * accel
-            self.rate *= _limit_scale(np.linalg.norm(jacobian @ self.rate), self.style.max_speed_m_s)
+            self.rate *= _limit_scale(float(np.linalg.norm(jacobian @ self.rate)), self.style.max_speed_m_s)
             self.theta += h * self.rate[0]
             self.phi = math.remainder(self.phi + h * self.rate[1], math.tau)
             if not lo <= self.theta <= hi:

@@ -10,14 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.toric import Torus
 
 
 @dataclass
 class ToricFrame:
-    a_world: np.ndarray | None = None   # (3,) framed point A, m
-    b_world: np.ndarray | None = None   # (3,) framed point B, m
+    a_world: npt.NDArray[np.float64] | None = None   # (3,) framed point A, m
+    b_world: npt.NDArray[np.float64] | None = None   # (3,) framed point B, m
     b_is_gaze_point: bool = False       # B is the one target's gaze-room point, not a target
     torus: Torus | None = None          # None: the framing is degenerate (the pose is held)
     theta: float = 0.0                  # the camera's place on the torus, rad

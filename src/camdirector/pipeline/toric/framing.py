@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.toric import DegenerateTorus, composition_angle, make_torus
@@ -35,14 +36,14 @@ class FramingSettings:
 class Framing:
     """Keeps the one-target heading between frames and fills A, B and the torus of a frame."""
 
-    def __init__(self, lens: Lens, style: Style, initial_rotation_xyzw: np.ndarray,
+    def __init__(self, lens: Lens, style: Style, initial_rotation_xyzw: npt.NDArray[np.float64],
                  settings: FramingSettings = FramingSettings()):
         self.settings = settings
         self.lens = lens
         self.set_style(style)
         forward = quat_rotate(initial_rotation_xyzw, np.array([0.0, 0.0, 1.0]))
         self.heading_rad = math.atan2(forward[0], forward[2]) if math.hypot(forward[0], forward[2]) > 1e-6 else 0.0
-        self._last_aim: np.ndarray | None = None
+        self._last_aim: npt.NDArray[np.float64] | None = None
 
     def set_style(self, style: Style) -> None:
         self.style = style
@@ -50,7 +51,7 @@ class Framing:
         self._screen_a = np.array([style.screen_a])                     # (1, 2): `error`'s goals, made once
         self._screen_ab = np.array([style.screen_a, style.screen_b])    # (2, 2)
 
-    def _gaze_point(self, aim_world: np.ndarray, dt_s: float) -> np.ndarray:
+    def _gaze_point(self, aim_world: npt.NDArray[np.float64], dt_s: float) -> npt.NDArray[np.float64]:
         if self._last_aim is not None and dt_s > 0.0:
             vx, vz = (aim_world[0] - self._last_aim[0]) / dt_s, (aim_world[2] - self._last_aim[2]) / dt_s
             if math.hypot(vx, vz) > self.settings.heading_min_speed_m_s:
@@ -58,7 +59,9 @@ class Framing:
                 self.heading_rad += error * (1.0 - math.exp(-dt_s / self.settings.heading_time_constant_s))
         self._last_aim = aim_world
         g = self.style.gaze_room_m
-        return aim_world + np.array([g * math.sin(self.heading_rad), 0.0, g * math.cos(self.heading_rad)])
+        gaze_point: npt.NDArray[np.float64] = aim_world + np.array([g * math.sin(self.heading_rad), 0.0,
+                                                                     g * math.cos(self.heading_rad)])
+        return gaze_point
 
     def run(self, state: FrameState, toric: ToricFrame) -> None:
         """A, B and the torus of the frame's aim points into `toric` (the frame's part); what
@@ -87,6 +90,7 @@ class Framing:
         A always counts, B only when it is the second target: the gaze-room point is no subject,
         and the level camera of one target (camera_motion.pose_on_torus) puts only A exactly.
         NaN when a point is behind the camera."""
+        assert toric.a_world is not None and toric.b_world is not None  # FRAMING placed them
         if toric.b_is_gaze_point:
             points, goals = toric.a_world, self._screen_a
         else:

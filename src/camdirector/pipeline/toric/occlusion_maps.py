@@ -14,15 +14,14 @@ An amortized update (2 of the 2r maps, every slot already holding one) is comput
 the frame it is due on: that frame draws its sample points, moves the scene and schedules the next
 update; its maps and A_s are computed when the session's worker is idle (`do_deferred_work`,
 called by worker/table.py's `idle_work`) or, at the latest, by the update that applies
-them, `AnticipationSettings.apply_after_frames` (1) frames later. Why: an update costs 2-4 ms, the
-frames between updates about 1 ms, and a worker's sessions created together update in the same
-period; computed inline, their updates queued the frames behind them (compute p99 6-7 ms, round
-trip p99 13 ms at 8 sessions on 2 cores, `load_tests.capacity`). Apart, the frame that draws an
+them, `AnticipationSettings.apply_after_frames` (1) frames later. Why: an update costs a few
+frames' worth of computing, and a worker's sessions created together update in the same period;
+computed inline, their updates queued the frames behind them. Apart, the frame that draws an
 update answers as fast as the others, and the maps are computed while its worker waits for
-requests. The search reads each amortized update one frame (17 ms at 60 Hz) after it is due,
-inside the paper's 0.1 s update period and 0.5 s horizon (section 6), and always on that frame:
-what a session answers does not depend on when its worker was idle. (Later than one frame cost
-the demo scene's visibility: see the setting.) A refill (the first update, and the first after a
+requests (the figures: docs/toric.md). The search reads each amortized update one frame after it
+is due, inside the paper's 0.1 s update period and 0.5 s horizon (section 6), and always on that
+frame: what a session answers does not depend on when its worker was idle. (Later than one frame
+cost the demo scene's visibility: docs/toric.md.) A refill (the first update, and the first after a
 cut) is computed and applied at once: the search has no A-map without it.
 """
 from __future__ import annotations
@@ -30,17 +29,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.toric import Torus
 from camdirector.geometry.toric_maps import OccluderScene, choose_backend, make_backend, probe_gl_renderer
-from camdirector.geometry.toric_maps.base import MapWindow, ShadowVelocityMaps, WindowSettings
+from camdirector.geometry.toric_maps.base import MapBackend, MapWindow, ShadowVelocityMaps, WindowSettings
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.inputs import DynamicObjects
 from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.style import MapBackendChoice, Style, VisibilityMode
-from camdirector.pipeline.toric.anticipation import AnticipationMap, AnticipationSettings, StyleMaskSettings, shared_bank
+from camdirector.pipeline.toric.anticipation_map import AnticipationMap
+from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
+from camdirector.pipeline.toric.occlusion_prediction import shared_bank
+from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 from camdirector.pipeline.toric.target_sampling import TargetSampler
 
 
@@ -52,20 +56,20 @@ class _DeferredUpdate:
     slots: list[int]
     torus: Torus
     window: MapWindow
-    points_world: np.ndarray                 # (k, 3) float64: the slots' sample points, world metres
+    points_world: npt.NDArray[np.float64]    # (k, 3): the slots' sample points, world metres
     exclude_ids: list[str]                   # k: the target each point lies on
     previous_torus: Torus | None
     dt_s: float
     frames_left: int                         # updates (one a frame) until it is applied
     maps: ShadowVelocityMaps | None = None   # once computed, until A_s is
-    predicted: np.ndarray | None = None      # (k, res, res) float32 A_s, once computed
+    predicted: npt.NDArray[np.float32] | None = None  # (k, res, res) A_s, once computed
 
 
 class OcclusionMaps:
     """The map modes' state for one session: occluder scene, backend, sampler and A-map."""
 
-    def __init__(self, static_meshes_world: list[TriMesh], dynamic: dict[str, tuple[TriMesh, RigidTransform]],
-                 sampler: TargetSampler, style: Style, rng: np.random.Generator):
+    def __init__(self, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
+                 sampler: TargetSampler, style: Style, rng: np.random.Generator) -> None:
         self.scene = OccluderScene(static_meshes_world)
         for object_id, (mesh, transform) in dynamic.items():
             self.scene.add_dynamic(object_id, mesh, transform)
@@ -77,30 +81,37 @@ class OcclusionMaps:
         self._times_s: tuple[float | None, float | None] = (None, None)
         self.sampler = sampler
         self.rng = rng
-        self._backend_key = None
-        self.backend = None
-        self.amap: AnticipationMap | None = None
         self._previous: tuple[Torus, float] | None = None
         self._deferred: _DeferredUpdate | None = None
-        self.set_style(style)
+        settings = self._settings(style)
+        self.amap = AnticipationMap(self.sampler.target_count, settings, StyleMaskSettings(kind=style.mask),
+                                    shared_bank(settings))
+        self._backend_key = self._backend_of(style)
+        self.backend: MapBackend | None = make_backend(self._backend_key, self.scene)  # None once closed
+
+    def _settings(self, style: Style) -> AnticipationSettings:
+        return AnticipationSettings(
+            samples_per_target=self.sampler.settings.samples_per_target,
+            anticipate=style.visibility != VisibilityMode.NO_ANTICIPATION,
+            window=WindowSettings(resolution=style.map_resolution))
+
+    def _backend_of(self, style: Style) -> str:
+        return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or \
+            choose_backend(self.scene.triangle_count, probe_gl_renderer(), style.map_resolution)
 
     def set_style(self, style: Style) -> None:
         """A new map resolution, anticipation switch or backend starts the maps afresh; a new mask
         applies at once. A deferred update is computed with the backend it was drawn for, and
         dropped with the A-map when that starts afresh."""
         self.do_deferred_work()
-        settings = AnticipationSettings(
-            samples_per_target=self.sampler.settings.samples_per_target,
-            anticipate=style.visibility != VisibilityMode.NO_ANTICIPATION,
-            window=WindowSettings(resolution=style.map_resolution))
+        settings = self._settings(style)
         mask = StyleMaskSettings(kind=style.mask)
-        if self.amap is None or self.amap.settings != settings:
+        if self.amap.settings != settings:
             self._deferred = None
             self.amap = AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
         else:
             self.amap.set_mask(mask)
-        backend_name = {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or \
-            choose_backend(self.scene.triangle_count, probe_gl_renderer(), style.map_resolution)
+        backend_name = self._backend_of(style)
         if backend_name != self._backend_key:
             if self.backend is not None:
                 self.backend.close()
@@ -125,7 +136,7 @@ class OcclusionMaps:
         linear, angular = np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
         now_s, before_s = self._times_s
         moving = [object_id for object_id, _ in self._moved if object_id in self.scene.dynamic]
-        if moving and before_s is not None and now_s > before_s:
+        if moving and now_s is not None and before_s is not None and now_s > before_s:
             row = {object_id: k for k, object_id in enumerate(ids)}
             rows = [row[object_id] for object_id in moving]
             now = [self._latest[object_id] for object_id in moving]
@@ -137,7 +148,7 @@ class OcclusionMaps:
             angular[rows] = turn.as_rotvec() / (now_s - before_s)
         self.scene.set_motions(ids, [self._latest[object_id] for object_id in ids], linear, angular)
 
-    def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms,
+    def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms: list[RigidTransform],
                target_ids: list[str], stages: StageClock) -> None:
         """Applies a deferred update whose frame has come, then draws the update due at time_s
         (2 of the 2r maps, one update every W / r s), computed and applied at once when it is a
@@ -169,12 +180,13 @@ class OcclusionMaps:
     def do_deferred_work(self, stages: StageClock | None = None, whole: bool = True) -> bool:
         """Computes the deferred update's maps and A_s, without applying them (they reach the
         search on their frame); laps PROJECTION and AMAP on `stages` when given. Without `whole`
-        only one of the two (the maps, else A_s: about 1 ms each), so that a worker's idle moment
+        only one of the two (the maps, else A_s), so that a worker's idle moment
         delays a request that arrives meanwhile by less. Answers whether there was work to do."""
         update = self._deferred
         if update is None or update.predicted is not None:
             return False
         if update.maps is None:
+            assert self.backend is not None  # closing drops the deferred update with the backend
             update.maps = self.backend.compute(update.torus, update.window, update.points_world,
                                                exclude_ids=update.exclude_ids, previous_torus=update.previous_torus,
                                                dt_s=update.dt_s)
@@ -200,6 +212,7 @@ class OcclusionMaps:
             return
         self.do_deferred_work(stages)
         self._deferred = None
+        assert update.predicted is not None  # do_deferred_work computed it, whole
         self.amap.store(update.time_s, update.slots, update.predicted, update.window, update.torus)
         stages.done(Stage.AMAP)
 
@@ -208,7 +221,7 @@ class OcclusionMaps:
         self._deferred = None
         self.amap.invalidate()
 
-    def risk(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    def risk(self, theta: npt.ArrayLike, phi: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """The A-map as the search's RiskField; places off the window read as occluded."""
         return self.amap.lookup(theta, phi, outside=1.0)
 

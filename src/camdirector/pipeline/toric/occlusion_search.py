@@ -37,12 +37,16 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.toric import Torus, tangent_frame, theta_max, torus_angles_many, torus_position
 
+# Occluded fraction (n,) of the target sample points from each camera place (n, 3), by ray casts.
+Occlusion = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+
 
 class RiskField(Protocol):
-    def risk(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    def risk(self, theta: npt.NDArray[np.float64], phi: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """(n,) occlusion risk in [0, 1] at torus places (n,) theta, (n,) phi radians."""
 
 
@@ -64,7 +68,7 @@ class SearchSettings:
     theta_margin_ratio: float = 0.2   # the camera keeps this share of theta's range from either end (not in the paper). [0, 0.45]
     view_phi_margin_deg: float = 25.0  # margin kept from top (phi 0) and bottom (phi 180) views (not in the paper), deg. [0, 89]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (1 <= self.samples <= 10000 and 1 <= self.cut_samples <= 100000 and self.look_ahead_frames >= 2):
             raise ValueError("search sample counts out of range")
         if not (0 < self.chi_deg <= 360 and self.rho_m > 0 and 0 <= self.damping_per_s <= 30):
@@ -91,7 +95,7 @@ def _spans(settings: SearchSettings, speed_m_s: float, dt_s: float) -> tuple[flo
 class OcclusionSearch:
     """The camera particle of one session: place (theta, phi) and tangent velocity (3,) m/s."""
 
-    def __init__(self, settings: SearchSettings, rng: np.random.Generator):
+    def __init__(self, settings: SearchSettings, rng: np.random.Generator) -> None:
         self.settings = settings
         self.rng = rng
         self.theta: float | None = None
@@ -107,7 +111,8 @@ class OcclusionSearch:
         self._occluded_since_s = None
         return SearchResult(theta, phi, cut=True, strategy="start", risk=0.0)
 
-    def _sector(self, p: np.ndarray, e1: np.ndarray, e2: np.ndarray, v_t: np.ndarray, dt_s: float) -> tuple[np.ndarray, float]:
+    def _sector(self, p: npt.NDArray[np.float64], e1: npt.NDArray[np.float64], e2: npt.NDArray[np.float64],
+                v_t: npt.NDArray[np.float64], dt_s: float) -> tuple[npt.NDArray[np.float64], float]:
         """(samples (n, 3) world on the tangent plane, f_l) of the area reachable in dt_s."""
         speed = float(np.linalg.norm(v_t))
         f_r, f_l = _spans(self.settings, speed, dt_s)
@@ -120,11 +125,12 @@ class OcclusionSearch:
         return p + offsets, f_l
 
     def step(self, torus: Torus, dt_s: float, time_s: float, risk: RiskField,
-             cut_occlusion: Callable[[np.ndarray], np.ndarray], side: float,
+             cut_occlusion: Occlusion, side: float,
              max_speed_m_s: float, max_accel_m_s2: float) -> SearchResult:
         """One frame of section 5. `cut_occlusion(positions (n, 3)) -> (n,)` occluded fraction by
         ray casts; `side` (+1 / -1) is the upright half of the torus for cut candidates."""
         s = self.settings
+        assert self.theta is not None  # start() places the particle before its first step
         p = torus_position(torus, self.theta, self.phi)
         if dt_s <= 0.0:
             return SearchResult(self.theta, self.phi, cut=False, strategy="coast", risk=float("nan"))
@@ -183,23 +189,26 @@ class OcclusionSearch:
             velocity *= max_speed_m_s / speed
         theta_n, phi_n = torus_angles_many(torus, (p + velocity * dt_s)[None])
         margin = math.radians(s.view_phi_margin_deg)
-        phi_n = math.copysign(min(max(abs(float(phi_n[0])), margin), math.pi - margin), float(phi_n[0]))
-        self.theta, self.phi = min(max(float(theta_n[0]), lo), hi), phi_n
+        phi_next = math.copysign(min(max(abs(float(phi_n[0])), margin), math.pi - margin), float(phi_n[0]))
+        self.theta, self.phi = min(max(float(theta_n[0]), lo), hi), phi_next
         p_next = torus_position(torus, self.theta, self.phi)
         self.velocity_world = (p_next - p) / dt_s
         return SearchResult(self.theta, self.phi, cut=False, strategy=strategy, risk=chosen_risk)
 
-    def _outside(self, theta: np.ndarray, phi: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    def _outside(self, theta: npt.NDArray[np.float64], phi: npt.NDArray[np.float64], lo: float,
+                 hi: float) -> npt.NDArray[np.bool_]:
         """Places the camera may not go: the arc's ends, and top and bottom views."""
         margin = math.radians(self.settings.view_phi_margin_deg)
-        return (theta < lo) | (theta > hi) | (np.abs(phi) < margin) | (np.abs(phi) > math.pi - margin)
+        outside: npt.NDArray[np.bool_] = (theta < lo) | (theta > hi) | (np.abs(phi) < margin) | (np.abs(phi) > math.pi - margin)
+        return outside
 
     def _theta_range(self, torus: Torus) -> tuple[float, float]:
         """Allowed theta, radians: the arc's ends put the camera on top of A or B."""
         top = theta_max(torus.alpha)
         return self.settings.theta_margin_ratio * top, (1.0 - self.settings.theta_margin_ratio) * top
 
-    def _cut_to(self, torus: Torus, coast: np.ndarray, cut_occlusion, side: float, time_s: float):
+    def _cut_to(self, torus: Torus, coast: npt.NDArray[np.float64], cut_occlusion: Occlusion, side: float,
+                time_s: float) -> SearchResult | None:
         """Teleports to a cut place when there is one (velocity reset, a new shot)."""
         cut = self._cut(torus, coast, cut_occlusion, side)
         if cut is None:
@@ -210,7 +219,8 @@ class OcclusionSearch:
         self._occluded_since_s = None
         return SearchResult(self.theta, self.phi, cut=True, strategy="cut", risk=occluded)
 
-    def _cut(self, torus: Torus, coast: np.ndarray, cut_occlusion, side: float):
+    def _cut(self, torus: Torus, coast: npt.NDArray[np.float64], cut_occlusion: Occlusion,
+             side: float) -> tuple[float, float, float] | None:
         """(theta, phi, occluded fraction) of a less occluded place obeying the 30-degree rule, or None."""
         s = self.settings
         current = float(cut_occlusion(coast[None])[0])
@@ -239,9 +249,9 @@ class RaycastRisk:
     """The paper's R baseline as a RiskField: no maps, rays from each candidate place to the
     target sample points at search time (fraction occluded)."""
 
-    def __init__(self, torus: Torus, occluded_fraction: Callable[[np.ndarray], np.ndarray]):
+    def __init__(self, torus: Torus, occluded_fraction: Occlusion) -> None:
         self.torus = torus
         self.occluded_fraction = occluded_fraction
 
-    def risk(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    def risk(self, theta: npt.NDArray[np.float64], phi: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         return self.occluded_fraction(torus_position(self.torus, theta, phi))

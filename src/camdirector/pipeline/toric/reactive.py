@@ -36,8 +36,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.raycast import RayScene
@@ -46,6 +48,7 @@ from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 _EPSILON = 1e-4          # Cinemachine's UnityVectorExtensions.Epsilon
 _LOG_RESIDUAL = math.log(100.0)  # Cinemachine's Damper: a damping time reaches 99 % of the way
 _RING_RAYS = 8           # rays per ring of the sampled sphere cast
+_Amount = TypeVar("_Amount", float, npt.NDArray[np.float64])  # what `damp` damps: a time, or a displacement
 
 
 @dataclass(frozen=True)
@@ -58,13 +61,13 @@ class ReactiveSettings:
     damping_s: float = 0.2             # time to go 99 % of the way back out once clear (Damping), s. [0, 10]
     damping_when_occluded_s: float = 0.0  # time to go 99 % of the way in when occluded (DampingWhenOccluded), s. [0, 10]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (0.01 <= self.minimum_distance_m <= 100.0 and 0.0 <= self.camera_radius_m <= 10.0
                 and 0.0 <= self.damping_s <= 10.0 and 0.0 <= self.damping_when_occluded_s <= 10.0):
             raise ValueError(f"ReactiveSettings out of range: {self}")
 
 
-def damp(amount: np.ndarray | float, damp_time_s: float, dt_s: float):
+def damp(amount: _Amount, damp_time_s: float, dt_s: float) -> _Amount:
     """The part of `amount` applied over dt_s with a damping time (Cinemachine's Damper.Damp):
     all of it when damp_time_s is ~0, none of it when dt_s is ~0."""
     if damp_time_s < _EPSILON:
@@ -74,7 +77,7 @@ def damp(amount: np.ndarray | float, damp_time_s: float, dt_s: float):
     return amount * (1.0 - math.exp(-_LOG_RESIDUAL / damp_time_s * dt_s))
 
 
-def _ring_offsets(direction: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+def _ring_offsets(direction: npt.NDArray[np.float64], radius_m: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(offsets (m, 3) perpendicular to direction, depth (m,)) of the sampled sphere cast: the
     axis, and rings at radius and radius / sqrt 2; depth is how far the sphere's front reaches
     ahead of its centre at that offset, sqrt(r^2 - offset^2)."""
@@ -92,15 +95,15 @@ def _ring_offsets(direction: np.ndarray, radius_m: float) -> tuple[np.ndarray, n
 class Deoccluder:
     """Cinemachine's Deoccluder state for one session: the last correction and damping time."""
 
-    def __init__(self, ray_scene: RayScene, settings: ReactiveSettings = ReactiveSettings()):
+    def __init__(self, ray_scene: RayScene, settings: ReactiveSettings = ReactiveSettings()) -> None:
         self.ray_scene = ray_scene
         self.settings = settings
-        self._offset_from_a: np.ndarray | None = None  # last camera position - A, m (PreviousCameraOffset)
+        self._offset_from_a: npt.NDArray[np.float64] | None = None  # last camera position - A, m (PreviousCameraOffset)
         self._displacement = np.zeros(3)               # last correction, m (PreviousDisplacement)
         self._damp_time_s = 0.0                        # last damping time, s (PreviousDampTime)
         self._time_s: float | None = None              # when it last ran, s
 
-    def clear_position(self, camera_world: np.ndarray, a_world: np.ndarray) -> np.ndarray:
+    def clear_position(self, camera_world: npt.NDArray[np.float64], a_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Where pull-forward puts a camera wanted at camera_world (3,) looking at a_world (3,):
         camera_world itself when the line to A is clear, else just in front of the obstacle
         nearest A (PullCameraInFrontOfNearestObstacle)."""
@@ -128,7 +131,7 @@ class Deoccluder:
         along = float(np.min(t[hit] * length - depth[hit]))  # sphere centre at first contact, from start
         return a_world + direction * (start + max(along, 0.0))
 
-    def run(self, proposed: CameraPose, a_world: np.ndarray, time_s: float, dt_s: float) -> tuple[CameraPose, bool]:
+    def run(self, proposed: CameraPose, a_world: npt.NDArray[np.float64], time_s: float, dt_s: float) -> tuple[CameraPose, bool]:
         """(pose, displaced): the rig's proposed pose at time_s, dt_s after the session's previous
         frame, corrected to keep the line to A clear and damped as Cinemachine damps it.
         displaced: the camera is not where the rig put it. When it did not run on the previous
@@ -145,6 +148,7 @@ class Deoccluder:
             damp_time = s.damping_when_occluded_s if growing else s.damping_s
             if displacement @ displacement < _EPSILON:  # ease the damping time itself out
                 damp_time = self._damp_time_s - damp(self._damp_time_s, damp_time, dt_s)
+            assert self._offset_from_a is not None  # set by the run on the previous frame
             previous = a_world + self._offset_from_a - wanted
             displacement = previous + damp(displacement - previous, damp_time, dt_s)
         camera = wanted + displacement
@@ -158,7 +162,8 @@ class Deoccluder:
                           proposed.vertical_fov_deg), True
 
 
-def _turn_toward(rotation_xyzw: np.ndarray, from_offset: np.ndarray, to_offset: np.ndarray) -> np.ndarray:
+def _turn_toward(rotation_xyzw: npt.NDArray[np.float64], from_offset: npt.NDArray[np.float64],
+                 to_offset: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """The camera rotation turned by the least rotation taking A's direction seen from a camera at
     A + from_offset to the direction seen from A + to_offset: A keeps its place on screen."""
     a = -from_offset / np.linalg.norm(from_offset)

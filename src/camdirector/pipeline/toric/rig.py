@@ -12,8 +12,9 @@ frame does not pay for them; `close()` releases their backend (its GL objects, o
 when the session ends.
 
 `ToricRig` implements `CameraRig` (pipeline/camera_rig.py): of what only some rigs do, it draws
-the A-map (`anticipation_map`, in the map modes); it takes no player inputs and shows the targets
-as of the latest frame. Its part of a frame's state is `ToricFrame` (frame.py).
+the A-map (`anticipation_map`, in the map modes) and defers its amortized map updates
+(`do_deferred_work`); for the rest (no player inputs, the targets as of the latest frame) it
+answers as `RigBase` does. Its part of a frame's state is `ToricFrame` (frame.py).
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import TriMesh
@@ -29,7 +31,8 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.toric import torus_angles
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
 from camdirector.infra.stage_clock import StageClock
-from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.camera_rig import AnticipationView, RigBase
+from camdirector.pipeline.inputs import DynamicObjects, FrameInput, SceneSpec
 from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
@@ -37,22 +40,20 @@ from camdirector.pipeline.toric.camera_motion import ToricMotion, pose_on_torus
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.framing import Framing
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
-from camdirector.pipeline.toric.occlusion_search import OcclusionSearch, RaycastRisk, SearchSettings
+from camdirector.pipeline.toric.occlusion_search import OcclusionSearch, RaycastRisk, RiskField, SearchSettings
 from camdirector.pipeline.toric.reactive import Deoccluder
 from camdirector.pipeline.toric.target_sampling import TargetSampler
 from camdirector.pipeline.toric.visibility import VisibilityEstimate
 
 
-class ToricRig:
+class ToricRig(RigBase):
     """The Toric camera of one session; implements `CameraRig` (module docstring). ray_scene,
     static_meshes_world and dynamic (object id -> (mesh, latest transform)) are the session's,
     kept current by INGEST."""
 
-    program_transforms = None  # CameraRig: no delayed program, the targets as of the latest frame
-    player_inputs = None       # CameraRig: no game events, no takes
-
     def __init__(self, scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh],
-                 dynamic: dict, rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter):
+                 dynamic: DynamicObjects, rng: np.random.Generator,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
         self.lens = scene.lens
         self.style = scene.style
         self.target_ids = [t.id for t in scene.targets]
@@ -84,15 +85,17 @@ class ToricRig:
         elif style.visibility in MAP_MODES:
             self._build_maps()
 
-    def anticipation_map(self, state: FrameState | None) -> tuple[np.ndarray, tuple[float, float]] | None:
+    def anticipation_map(self, state: FrameState | None) -> AnticipationView | None:
         """The A-map (n, n), rows theta and columns phi, and the texel (i, j) of the camera of
         `state`, the last answered frame; None unless the style is a map mode and the maps have
         been computed once."""
-        if state is None or self.maps is None or self.style.visibility not in MAP_MODES \
-                or self.maps.amap.a_map is None:
+        if state is None or state.toric is None or self.maps is None or self.style.visibility not in MAP_MODES:
             return None
-        i, j = self.maps.amap.window.texel_coords(state.toric.theta, state.toric.phi)
-        return self.maps.amap.a_map, (float(i), float(j))
+        amap = self.maps.amap
+        if amap.a_map is None or amap.window is None:  # set together, by the first update
+            return None
+        i, j = amap.window.texel_coords(state.toric.theta, state.toric.phi)
+        return amap.a_map, (float(i), float(j))
 
     def _build_maps(self) -> None:
         self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
@@ -126,6 +129,7 @@ class ToricRig:
         self._move(state, toric, target_transforms, last, stages)
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
+        assert state.pose is not None  # this rig answers a pose on every frame
         stages.done(Stage.MOTION)
         self.visibility.run(state, target_transforms)
         state.framing_error = self.framing.error(state.pose, toric)
@@ -141,10 +145,12 @@ class ToricRig:
         mode = self.style.visibility
         if mode not in SEARCH_MODES or toric.torus is None:
             if self._searching:  # hand the camera's place back to the toric rig
+                assert last is not None and last.pose is not None  # the search ran on an earlier frame
                 self.motion.theta, self.motion.position_world = self.search.theta, last.pose.position_world
                 self._searching = False
             self.motion.run(state, toric)
             if mode == VisibilityMode.REACTIVE and state.pose is not None:
+                assert toric.a_world is not None  # FRAMING placed it
                 state.pose, pulled = self.deoccluder.run(state.pose, toric.a_world, state.time_s, state.dt_s)
                 if pulled:
                     state.flags.append("pulled_in")
@@ -159,11 +165,14 @@ class ToricRig:
             self._searching = True
         points = self.sampler.points_world(target_transforms)
 
-        def occluded(cameras_world: np.ndarray) -> np.ndarray:
+        def occluded(cameras_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
             return self.visibility.occluded_fraction(cameras_world, points)
 
+        risk: RiskField
         if mode in MAP_MODES:
             stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
+            assert self.maps is not None  # built when the style entered a map mode
+            assert self.search.theta is not None  # the search started above
             self.maps.update(torus, self.search.theta, self.search.phi, state.time_s, target_transforms,
                              self.target_ids, stages)
             risk = self.maps

@@ -8,7 +8,7 @@ whole surface instead of watching the same r points for the whole session, and t
 A-map are always r independent draws per target.
 
 Points are uniform over each mesh's area, drawn in the target's local frame and carried by its
-current transform. Slots are numbered slot = target * r + sample, as in pipeline/toric/anticipation.py.
+current transform. Slots are numbered slot = target * r + sample, as in pipeline/toric/anticipation_map.py.
 (pipeline/toric/visibility.py keeps its own fixed per-session points for the rig's visibility estimate.)
 """
 from __future__ import annotations
@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.transforms import RigidTransform
@@ -25,7 +26,7 @@ from camdirector.geometry.transforms import RigidTransform
 class SurfaceSampler:
     """Uniform points on one mesh's surface: the area table is built once, a draw is O(log faces)."""
 
-    def __init__(self, mesh: TriMesh):
+    def __init__(self, mesh: TriMesh) -> None:
         tri = mesh.vertices[mesh.faces]                                              # (m, 3, 3)
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
         total = float(area.sum())
@@ -38,25 +39,26 @@ class SurfaceSampler:
         self.area_m2 = total
         self._mesh = mesh
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type[SurfaceSampler], tuple[TriMesh]]:
         """Pickled as its mesh (a session's checkpoint names the mesh instead of copying it): the
         tables are a function of the mesh alone."""
         return SurfaceSampler, (self._mesh,)
 
-    def sample(self, count: int, rng: np.random.Generator) -> np.ndarray:
+    def sample(self, count: int, rng: np.random.Generator) -> npt.NDArray[np.float64]:
         """(count, 3) float64 points, local frame, uniform over the area."""
         face = np.minimum(np.searchsorted(self._cdf, rng.random(count), side="right"), len(self._cdf) - 1)
         u, v = rng.random(count), rng.random(count)
         fold = u + v > 1.0  # reflect the unit square's upper half onto the triangle
         u[fold], v[fold] = 1.0 - u[fold], 1.0 - v[fold]
-        return self._corner[face] + u[:, None] * self._edge1[face] + v[:, None] * self._edge2[face]
+        points: npt.NDArray[np.float64] = self._corner[face] + u[:, None] * self._edge1[face] + v[:, None] * self._edge2[face]
+        return points
 
 
 @dataclass(frozen=True)
 class TargetSamplingSettings:
     samples_per_target: int = 5   # r (the paper's Table 2); keep equal to AnticipationSettings.samples_per_target. [1, 64]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not 1 <= self.samples_per_target <= 64:
             raise ValueError("TargetSamplingSettings: samples_per_target must be in [1, 64]")
 
@@ -65,7 +67,7 @@ class TargetSampler:
     """r sample points per target (one or two targets), each re-drawn when its map is refreshed."""
 
     def __init__(self, target_meshes: Sequence[TriMesh], rng: np.random.Generator,
-                 settings: TargetSamplingSettings = TargetSamplingSettings()):
+                 settings: TargetSamplingSettings = TargetSamplingSettings()) -> None:
         if len(target_meshes) not in (1, 2):
             raise ValueError("TargetSampler: one or two target meshes")
         self.settings = settings
@@ -92,7 +94,8 @@ class TargetSampler:
         for slot in slots:
             self.points_local[slot] = self._samplers[self.target_of(int(slot))].sample(1, rng)[0]
 
-    def points_world(self, target_transforms: Sequence[RigidTransform], slots: Sequence[int] | None = None) -> np.ndarray:
+    def points_world(self, target_transforms: Sequence[RigidTransform],
+                     slots: Sequence[int] | None = None) -> npt.NDArray[np.float64]:
         """(len(slots), 3) world metres: the slots' points (all slots if None) under the targets' transforms."""
         if len(target_transforms) != self.target_count:
             raise ValueError("points_world: one transform per target")

@@ -18,19 +18,23 @@ the two sub-scores to rank the cuts that keep them.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.transforms import UP_WORLD
 
 
-def cut_angle_deg(previous_camera_world: np.ndarray, cameras_world: np.ndarray, actor_world: np.ndarray) -> np.ndarray:
+def cut_angle_deg(previous_camera_world: npt.NDArray[np.float64], cameras_world: npt.NDArray[np.float64],
+                  actor_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """(k,) angle at actor_world (3,) between the previous camera (3,) and each camera (k, 3), deg."""
     a = previous_camera_world - actor_world
     b = np.atleast_2d(cameras_world) - actor_world
     cos = (b @ a) / np.maximum(np.linalg.norm(b, axis=1) * np.linalg.norm(a), 1e-12)
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    angle_deg: npt.NDArray[np.float64] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return angle_deg
 
 
-def action_direction(velocity_world: np.ndarray, forward_world: np.ndarray, min_speed_m_s: float) -> np.ndarray:
+def action_direction(velocity_world: npt.NDArray[np.float64], forward_world: npt.NDArray[np.float64],
+                     min_speed_m_s: float) -> npt.NDArray[np.float64]:
     """Unit horizontal direction of the line of action (3,): the motion, or the facing when slow
     (zero vector when neither has a horizontal part)."""
     v = np.array([velocity_world[0], 0.0, velocity_world[2]])
@@ -40,7 +44,8 @@ def action_direction(velocity_world: np.ndarray, forward_world: np.ndarray, min_
     return v / norm if norm > 1e-9 else np.zeros(3)
 
 
-def screen_motion(cameras_world: np.ndarray, actor_world: np.ndarray, direction_world: np.ndarray) -> np.ndarray:
+def screen_motion(cameras_world: npt.NDArray[np.float64], actor_world: npt.NDArray[np.float64],
+                  direction_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """(k, 2) the motion direction (3,) as seen on screen (right, up) from each level camera
     (k, 3) looking at actor_world (3,)."""
     forward = actor_world - np.atleast_2d(cameras_world)
@@ -49,23 +54,27 @@ def screen_motion(cameras_world: np.ndarray, actor_world: np.ndarray, direction_
     norm = np.linalg.norm(right, axis=1, keepdims=True)
     right = np.where(norm > 1e-9, right / np.maximum(norm, 1e-12), np.array([1.0, 0.0, 0.0]))
     up = np.cross(right, forward)
-    return np.stack([right @ direction_world, up @ direction_world], axis=1)
+    motion: npt.NDArray[np.float64] = np.stack([right @ direction_world, up @ direction_world], axis=1)
+    return motion
 
 
-def thirty_degree_score(angle_deg: np.ndarray, min_angle_deg: float) -> np.ndarray:
+def thirty_degree_score(angle_deg: npt.NDArray[np.float64], min_angle_deg: float) -> npt.NDArray[np.float64]:
     """(k,) in [0, 1]: 1 - cos of the cut angle, relative to that of the minimum angle, capped at 1."""
     denominator = max(1.0 - np.cos(np.radians(min_angle_deg)), 1e-9)
-    return np.clip((1.0 - np.cos(np.radians(angle_deg))) / denominator, 0.0, 1.0)
+    score: npt.NDArray[np.float64] = np.clip((1.0 - np.cos(np.radians(angle_deg))) / denominator, 0.0, 1.0)
+    return score
 
 
-def line_of_action_score(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+def line_of_action_score(before: npt.NDArray[np.float64], after: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """(k,) in [0, 1]: (1 + cos of the angle between the screen motions (2,) before and (k, 2) after) / 2."""
     nb = np.linalg.norm(before)
     na = np.linalg.norm(after, axis=1)
     cos = (after @ before) / np.maximum(na * nb, 1e-12)
-    return np.where((na > 1e-9) & (nb > 1e-9), 0.5 * (1.0 + cos), 1.0)
+    score: npt.NDArray[np.float64] = np.where((na > 1e-9) & (nb > 1e-9), 0.5 * (1.0 + cos), 1.0)
+    return score
 
 
-def keeps_line_of_action(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+def keeps_line_of_action(before: npt.NDArray[np.float64], after: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
     """(k,) bool: the horizontal screen motion does not change sign (module docstring)."""
-    return before[0] * after[:, 0] >= -1e-9
+    keeps: npt.NDArray[np.bool_] = before[0] * after[:, 0] >= -1e-9
+    return keeps

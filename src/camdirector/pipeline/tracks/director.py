@@ -48,15 +48,17 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import Enum
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.transforms import UP_WORLD
 from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.stages import TracksStage
+from camdirector.pipeline.style import Movement, ShotSize
 from camdirector.pipeline.tracks.camera_motion import move_camera
 from camdirector.pipeline.tracks.continuity import (
-    UP_WORLD,
     action_direction,
     cut_angle_deg,
     keeps_line_of_action,
@@ -67,7 +69,7 @@ from camdirector.pipeline.tracks.continuity import (
 from camdirector.pipeline.tracks.cutting import CutClock, CutReason, draw_shot_duration_s
 from camdirector.pipeline.tracks.graph_search import RuntimeGraph
 from camdirector.pipeline.tracks.settings import DirectorSettings
-from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, ShotSize, aim_point, fit_ratio, framed_ends_world
+from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, aim_point, fit_ratio, framed_ends_world
 from camdirector.pipeline.tracks.target_search import (
     IndirectVisibility,
     Pois,
@@ -79,15 +81,10 @@ from camdirector.pipeline.tracks.target_search import (
 )
 from camdirector.precompute.tracks.artifact import LevelArtifact
 
+_Floats = npt.NDArray[np.float64]  # points (3,) and (k, 3), scores (k,) and (N,)
 _SCORED_POIS = 48
 # cuts that cannot wait for a place that frames: the actor is hidden, or the camera has no track left
 _MUST_LEAVE = (CutReason.OCCLUSION, CutReason.NO_TARGET)
-
-
-class Movement(Enum):
-    DYNAMIC_NO_CUTS = "dynamic_no_cuts"
-    DYNAMIC_WITH_CUTS = "dynamic_with_cuts"
-    STATIC = "static"
 
 
 @dataclass(frozen=True)
@@ -107,8 +104,8 @@ class TrackShot:
     direct_visibility, indirect_visibility and graph_distance; on a cut, the continuity search's,
     with thirty_degree and line_of_action after the first shot); empty when no target was chosen."""
 
-    position_world: np.ndarray
-    look_at_world: np.ndarray
+    position_world: _Floats
+    look_at_world: _Floats
     cut: bool
     shot_id: int
     visible_fraction: float
@@ -117,17 +114,9 @@ class TrackShot:
     scores: dict[str, float] = field(default_factory=dict)
 
 
-def _scored(index: int, **scores: np.ndarray) -> dict[str, float]:
+def _scored(index: int, **scores: _Floats) -> dict[str, float]:
     """Each sub-score array's value for the candidate at `index`, rounded for reports."""
     return {name: round(float(values[index]), 4) for name, values in scores.items()}
-
-
-class DirectorStage(Enum):
-    """The director's steps of one frame in order (Section 5); values are their timing keys."""
-
-    CUT_CHECK = "cut_check"          # direct visibility and framing feed the cutting strategy
-    TARGET_UPDATE = "target_update"  # a cut's continuity search, or the target moving strategy
-    CAMERA_UPDATE = "camera_update"  # the camera jumps or follows; the actor's visibility from there
 
 
 class GraphDirector:
@@ -135,7 +124,7 @@ class GraphDirector:
     any origin, for the step's timings (the session's injected clock in the server)."""
 
     def __init__(self, artifact: LevelArtifact, settings: DirectorSettings, rng: np.random.Generator,
-                 style: DirectorStyle = DirectorStyle(), clock: Callable[[], float] = time.perf_counter):
+                 style: DirectorStyle = DirectorStyle(), clock: Callable[[], float] = time.perf_counter) -> None:
         self.graph = RuntimeGraph(artifact.nodes_world, artifact.edges)
         centroids = artifact.refined_vertices[artifact.refined_faces].mean(axis=1) if len(artifact.refined_faces) \
             else np.empty((0, 3))
@@ -148,13 +137,13 @@ class GraphDirector:
         self._style = style
         self._fractions = np.asarray(settings.actor_sample_fractions, dtype=np.float64)
         self._target: tuple[int, int, float] | None = None
-        self._camera: np.ndarray | None = None
+        self._camera: _Floats | None = None
         self._velocity = np.zeros(3)
-        self._last_target: np.ndarray | None = None  # (3,) the target of the last frame, for its velocity
+        self._last_target: _Floats | None = None  # (3,) the target of the last frame, for its velocity
         self._clock: CutClock | None = None
         self._shot_id = -1
         self._last_time_s: float | None = None
-        self._last_actor: np.ndarray | None = None
+        self._last_actor: _Floats | None = None
         self._actor_velocity = np.zeros(3)
         self._scores: dict[str, float] = {}   # of the target chosen in the current step
 
@@ -177,7 +166,7 @@ class GraphDirector:
         actor's girth, m."""
         low, high = FRAMED_EXTENT[self._style.shot_size]
         tangent = (1.0 - frame_margin) * np.tan(np.radians(self._settings.vertical_fov_deg) / 2.0)
-        return (high - low) * self._actor_height_m / (2.0 * tangent) + self._actor_radius_m
+        return float((high - low) * self._actor_height_m / (2.0 * tangent) + self._actor_radius_m)
 
     def repulsion_radius_m(self) -> float:
         """How near the actor pushes the moving camera away, m: the settings' radius, or farther,
@@ -189,7 +178,8 @@ class GraphDirector:
     def optimal_distance_m(self) -> float:
         return optimal_distance_m(self._actor_height_m, self.screen_fraction(), self._settings.vertical_fov_deg)
 
-    def step(self, time_s: float, actor_position_world, actor_forward, ray_scene: RayScene) -> TrackShot | None:
+    def step(self, time_s: float, actor_position_world: npt.ArrayLike, actor_forward: npt.ArrayLike,
+             ray_scene: RayScene) -> TrackShot | None:
         """One frame. actor_position_world (3,): the actor's feet, metres; actor_forward (3,): its
         facing (any length); ray_scene: the level and its dynamic occluders, current transforms.
         Frames must come in time order; a repeated or older time moves nothing. None until a first
@@ -221,9 +211,11 @@ class GraphDirector:
             seen = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
             # violated when neither the camera nor the target it is on its way to frames the actor
             framed = self._frames(np.stack([self._camera, self._target_position()]), look_at, ends, distance)
-            self._clock.observe(time_s, seen < s.occluded_below_fraction, not framed.any())
-            reason = self._clock.reason(time_s, s)
-        stages.done(DirectorStage.CUT_CHECK)
+            clock = self._clock
+            assert clock is not None  # started by the cut that placed the camera
+            clock.observe(time_s, seen < s.occluded_below_fraction, not framed.any())
+            reason = clock.reason(time_s, s)
+        stages.done(TracksStage.CUT_CHECK)
 
         cut = False
         indirect = None
@@ -240,7 +232,7 @@ class GraphDirector:
             if cut:
                 self._shot_id += 1
                 self._clock = CutClock(time_s, draw_shot_duration_s(self._rng, s))
-        stages.done(DirectorStage.TARGET_UPDATE)
+        stages.done(TracksStage.TARGET_UPDATE)
         if self._target is None:  # no track near the actor for a first shot yet: no camera to give
             return None
 
@@ -258,10 +250,12 @@ class GraphDirector:
         elif movement != Movement.STATIC and self._camera is not None:
             self._camera, self._velocity = move_camera(self._camera, self._velocity, target, target_velocity, look_at,
                                                        dt, s, self.repulsion_radius_m(), self.nearest_m(0.0))
-        visible = float(direct_visibility(self._camera[None], actor_points, ray_scene)[0])
-        stages.done(DirectorStage.CAMERA_UPDATE)
-        aim = aim_point(self._camera, ends, self._actor_radius_m)
-        return TrackShot(position_world=self._camera.copy(), look_at_world=aim, cut=cut,
+        camera = self._camera
+        assert camera is not None  # a target comes with a camera: the cut that chose the first one placed it
+        visible = float(direct_visibility(camera[None], actor_points, ray_scene)[0])
+        stages.done(TracksStage.CAMERA_UPDATE)
+        aim = aim_point(camera, ends, self._actor_radius_m)
+        return TrackShot(position_world=camera.copy(), look_at_world=aim, cut=cut,
                          shot_id=self._shot_id,
                          visible_fraction=visible, cut_reason=reason if cut else None,
                          timings_ms=stages.timings_ms,
@@ -269,27 +263,32 @@ class GraphDirector:
 
     # --- target search -------------------------------------------------------------------------
 
-    def _target_position(self) -> np.ndarray:
+    def _target_position(self) -> npt.NDArray[np.float64]:
+        assert self._target is not None  # asked only once a first shot has a target
         a, b, t = self._target
-        return self.graph.nodes_world[a] + t * (self.graph.nodes_world[b] - self.graph.nodes_world[a])
+        position: npt.NDArray[np.float64] = self.graph.nodes_world[a] + t * (self.graph.nodes_world[b]
+                                                                             - self.graph.nodes_world[a])
+        return position
 
     def _radius(self, distance: float) -> float:
         return max(self._settings.candidate_radius_m, 1.5 * distance)
 
-    def _frames(self, positions_world: np.ndarray, look_at: np.ndarray, ends: np.ndarray, distance: float,
-                tolerance_log: float | None = None) -> np.ndarray:
+    def _frames(self, positions_world: _Floats, look_at: _Floats, ends: _Floats, distance: float,
+                tolerance_log: float | None = None) -> npt.NDArray[np.bool_]:
         """(k,) bool for positions (k, 3): within `tolerance_log` (default: the framing tolerance,
         Section 5.1's framing check) of the optimal distance, in log ratio, and the framed extent
         fits in the frame (framing.py)."""
         tolerance = self._settings.framing_violation_log if tolerance_log is None else tolerance_log
         d = np.maximum(np.linalg.norm(positions_world - look_at, axis=1), 1e-6)
-        return (np.abs(np.log(d / distance)) <= tolerance) & self._fits(positions_world, ends)
+        frames: npt.NDArray[np.bool_] = (np.abs(np.log(d / distance)) <= tolerance) & self._fits(positions_world, ends)
+        return frames
 
-    def _fits(self, positions_world: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    def _fits(self, positions_world: _Floats, ends: _Floats) -> npt.NDArray[np.bool_]:
         """(k,) bool for positions (k, 3): the framed extent fits in the frame (framing.py, no margin)."""
         return fit_ratio(positions_world, ends, self._actor_radius_m, self._settings.vertical_fov_deg, 0.0) <= 1.0
 
-    def _cheap_scores(self, pois: Pois, look_at: np.ndarray, ends: np.ndarray, distance: float, indirect: np.ndarray):
+    def _cheap_scores(self, pois: Pois, look_at: npt.NDArray[np.float64], ends: npt.NDArray[np.float64], distance: float,
+                      indirect: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Shot size (the distance's Gaussian, down to 0 where the framed extent cannot fit:
         framing.py) and indirect visibility, (k,) each."""
         s = self._settings
@@ -299,11 +298,13 @@ class GraphDirector:
         ind = (1.0 - pois.t) * indirect[pois.node_a] + pois.t * indirect[pois.node_b]
         return size, ind
 
-    def _move_target(self, actor, look_at, ends, scored_points, distance, indirect, scene) -> bool:
+    def _move_target(self, actor: _Floats, look_at: _Floats, ends: _Floats, scored_points: _Floats,
+                     distance: float, indirect: _Floats, scene: RayScene) -> bool:
         """Target moving strategy; False when no POI is reachable from the current target."""
         s = self._settings
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only=False)
         current = self._target
+        assert current is not None  # the target moves only once a first shot has one
         cur_pos = self._target_position()
         pois = Pois(np.append(pois.node_a, current[0]), np.append(pois.node_b, current[1]),
                     np.append(pois.t, current[2]), np.vstack([pois.position_world, cur_pos]))
@@ -328,7 +329,9 @@ class GraphDirector:
                                      scored_points, distance, indirect, scene)
         return True
 
-    def _descend(self, poi: Pois, score: float, dist: float, look_at, ends, scored_points, distance, indirect, scene):
+    def _descend(self, poi: Pois, score: float, dist: float, look_at: _Floats, ends: _Floats,
+                 scored_points: _Floats, distance: float, indirect: _Floats,
+                 scene: RayScene) -> tuple[int, int, float]:
         """Local descent of the (negated) score along the POI's edge in fixed steps."""
         s = self._settings
         a, b, t = int(poi.node_a[0]), int(poi.node_b[0]), float(poi.t[0])
@@ -359,7 +362,8 @@ class GraphDirector:
                                    graph_distance=near, total=total)
         return a, b, t
 
-    def _cut(self, actor, look_at, ends, scored_points, forward, distance, indirect, scene, reason: CutReason) -> bool:
+    def _cut(self, actor: _Floats, look_at: _Floats, ends: _Floats, scored_points: _Floats,
+             forward: _Floats, distance: float, indirect: _Floats, scene: RayScene, reason: CutReason) -> bool:
         """Continuity search (Section 5.3); False when no POI keeps the rules (or none exists).
         The POIs are tried in tiers, the first that holds a cut wins:
         1. those that frame the actor solidly: within `framing_cut_margin` of the framing
@@ -384,6 +388,7 @@ class GraphDirector:
         solid = self._frames(pois.position_world, look_at, ends, distance, s.framing_violation_log * s.framing_cut_margin) \
             & self._frames(pois.position_world, look_at + shift, ends + shift, distance)
         tiers = [solid]
+        assert self._camera is not None  # every cut but the first leaves a camera
         if nodes_only and not self._fits(self._camera[None], ends)[0]:  # cropping: a shot too wide is better
             fits = self._fits(pois.position_world, ends) & self._fits(pois.position_world, ends + shift)
             tiers.append(fits & ~solid)
@@ -392,7 +397,8 @@ class GraphDirector:
         return any(self._cut_to(pois.take(tier), look_at, ends, scored_points, forward, distance, indirect, scene, first)
                    for tier in tiers)
 
-    def _cut_to(self, pois: Pois, look_at, ends, scored_points, forward, distance, indirect, scene, first: bool) -> bool:
+    def _cut_to(self, pois: Pois, look_at: _Floats, ends: _Floats, scored_points: _Floats,
+                forward: _Floats, distance: float, indirect: _Floats, scene: RayScene, first: bool) -> bool:
         """The best of `pois` by the cut's scores, made the target; False when none keeps the
         continuity rules or, after the first shot, none sees the actor now, midway and ahead (a
         cut to a place that does not see the actor is a cut for nothing: it waits)."""
@@ -403,6 +409,7 @@ class GraphDirector:
         weights = s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility
         extra = np.zeros(len(pois))
         if not first:
+            assert self._camera is not None  # every cut but the first leaves a camera
             angle = cut_angle_deg(self._camera, pois.position_world, look_at)
             direction = action_direction(self._actor_velocity, forward, s.min_actor_speed_m_s)
             before = screen_motion(self._camera[None], look_at, direction)[0]

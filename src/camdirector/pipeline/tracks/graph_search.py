@@ -8,22 +8,27 @@ built offline (precompute/tracks/graph.py).
 from __future__ import annotations
 
 import heapq
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 
-def csr_rows(indptr: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def csr_rows(indptr: npt.NDArray[np.integer[Any]], rows: npt.ArrayLike) -> npt.NDArray[np.int64]:
     """Positions (k,) into a CSR matrix's index/data arrays of all entries of the given rows."""
-    rows = np.asarray(rows, dtype=np.int64)
-    lengths = indptr[rows + 1] - indptr[rows]
+    row_ids = np.asarray(rows, dtype=np.int64)
+    lengths = indptr[row_ids + 1] - indptr[row_ids]
     total = int(lengths.sum())
     if not total:
         return np.empty(0, np.int64)
-    return np.repeat(indptr[rows], lengths) + (np.arange(total) - np.repeat(np.cumsum(lengths) - lengths, lengths))
+    positions: npt.NDArray[np.int64] = (np.repeat(indptr[row_ids], lengths)
+                                        + (np.arange(total) - np.repeat(np.cumsum(lengths) - lengths, lengths)))
+    return positions
 
 
-def adjacency_lists(indptr: np.ndarray, neighbours: np.ndarray, weights: np.ndarray) -> list[list[tuple[int, float]]]:
+def adjacency_lists(indptr: npt.NDArray[np.integer[Any]], neighbours: npt.NDArray[np.integer[Any]],
+                    weights: npt.NDArray[np.float64]) -> list[list[tuple[int, float]]]:
     """CSR adjacency as Python lists of (neighbour, weight), what `astar_many` walks."""
     pairs = list(zip(neighbours.tolist(), weights.tolist()))
     bounds = indptr.tolist()
@@ -55,7 +60,7 @@ def astar_many(adjacency: list[list[tuple[int, float]]], positions: list[list[fl
         dx = x0 - x if x < x0 else (x - x1 if x > x1 else 0.0)
         dy = y0 - y if y < y0 else (y - y1 if y > y1 else 0.0)
         dz = z0 - z if z < z0 else (z - z1 if z > z1 else 0.0)
-        return (dx * dx + dy * dy + dz * dz) ** 0.5
+        return float((dx * dx + dy * dy + dz * dz) ** 0.5)
 
     best = dict(sources)
     heap = [(cost + h(n), cost, n) for n, cost in sources.items()]
@@ -88,7 +93,7 @@ class RuntimeGraph:
     nodes_world (N, 3); edges (E, 2) int.
     """
 
-    def __init__(self, nodes_world: np.ndarray, edges: np.ndarray):
+    def __init__(self, nodes_world: npt.NDArray[np.float64], edges: npt.NDArray[np.integer[Any]]) -> None:
         self.nodes_world = np.asarray(nodes_world, dtype=np.float64)
         self.edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
         self.edge_length_m = np.linalg.norm(self.nodes_world[self.edges[:, 1]] - self.nodes_world[self.edges[:, 0]],
@@ -107,7 +112,8 @@ class RuntimeGraph:
         self._adjacency = adjacency_lists(self.indptr, self.neighbours, self.weights)
         self._positions = self.nodes_world.tolist()
 
-    def edges_near(self, point_world: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    def edges_near(self, point_world: npt.NDArray[np.float64],
+                   radius_m: float) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
         """Edges touching a node within radius_m of point (3,), and the isolated nodes there:
         ((e,) int edge ids, (i,) int node ids)."""
         near = np.asarray(self.tree.query_ball_point(point_world, radius_m), dtype=np.int64)

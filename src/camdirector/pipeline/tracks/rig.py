@@ -17,9 +17,10 @@ session lens's vertical field of view, so shot sizes mean the same on the client
 first shot is found (the actor is away from every track) the camera waits behind and above the
 actor, flagged `tracks_no_track_near_actor`, with visibility 0.
 
-`TracksRig` implements `CameraRig` (pipeline/camera_rig.py) and none of what only some rigs do: no
-occlusion maps (it cuts away from occlusion), no deferred work, no player inputs, no delayed
-program. It has no part of its own in a frame's state: all it answers is the core (pipeline/state.py).
+`TracksRig` implements `CameraRig` (pipeline/camera_rig.py) and none of what only some rigs do, so
+it answers all of that as `RigBase` does: no occlusion maps (it cuts away from occlusion), no
+deferred work, no player inputs, no delayed program. It has no part of its own in a frame's
+state: all it answers is the core (pipeline/state.py).
 """
 from __future__ import annotations
 
@@ -27,11 +28,13 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform, quat_rotate
 from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.camera_rig import RigBase
 from camdirector.pipeline.inputs import FrameInput, LoadedLevel
 from camdirector.pipeline.stages import TracksStage
 from camdirector.pipeline.state import FrameState
@@ -48,12 +51,8 @@ def director_style(style: Style) -> DirectorStyle:
     return DirectorStyle(shot_size=style.shot_size, movement=style.movement)
 
 
-class TracksRig:
+class TracksRig(RigBase):
     """The graph director of one session; implements `CameraRig` (module docstring)."""
-
-    has_deferred_work = False  # CameraRig: it never leaves work for later
-    program_transforms = None  # CameraRig: no delayed program, the targets as of the latest frame
-    player_inputs = None       # CameraRig: no game events, no takes
 
     def __init__(self, level: LoadedLevel, lens: Lens, style: Style, ray_scene: RayScene, rng: np.random.Generator,
                  clock: Callable[[], float] = time.perf_counter):
@@ -71,14 +70,6 @@ class TracksRig:
 
     def close(self) -> None:
         """Nothing to release: the level is the worker's (its LevelCache), the ray scene the session's."""
-
-    def do_deferred_work(self, whole: bool = True) -> bool:
-        """CameraRig: there is never any."""
-        return False
-
-    def anticipation_map(self, state: FrameState | None) -> None:
-        """CameraRig: None, the tracks rig has no occlusion maps (it cuts away from occlusion)."""
-        return None
 
     def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
             last: FrameState | None) -> None:
@@ -109,7 +100,7 @@ class TracksRig:
         state.framing_error = framing_error(state.pose, self.lens, actor.position_world, self.level.artifact.agent_height_m,
                                             self.director.style.shot_size, self.director.screen_fraction())
 
-    def _waiting_pose(self, actor_world: np.ndarray, forward: np.ndarray) -> CameraPose:
+    def _waiting_pose(self, actor_world: npt.NDArray[np.float64], forward: npt.NDArray[np.float64]) -> CameraPose:
         flat = np.array([forward[0], 0.0, forward[2]])
         norm = float(np.linalg.norm(flat))
         flat = flat / norm if norm > 1e-9 else _LOCAL_FORWARD

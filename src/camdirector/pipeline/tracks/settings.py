@@ -62,7 +62,7 @@ class DirectorSettings:
     max_speed_m_s: float = 6.0               # camera speed limit, m/s. (0, 1000]
     max_substep_s: float = 1.0 / 60.0        # the force integration takes steps no longer than this, s. (0, 1]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         weights = (self.weight_shot_size, self.weight_direct_visibility, self.weight_indirect_visibility,
                    self.weight_distance, self.weight_thirty_degree, self.weight_line_of_action)
         check([

@@ -20,32 +20,25 @@ framing violation and scores it down (director.py).
 """
 from __future__ import annotations
 
-from enum import Enum
-
 import numpy as np
+import numpy.typing as npt
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.transforms import UP_WORLD
-
-
-class ShotSize(Enum):
-    MEDIUM = "medium"
-    LONG = "long"
-    EXTREME_LONG = "extreme_long"
-
+from camdirector.pipeline.style import ShotSize
 
 # (low, high) fractions of the actor's height, from its feet, that the shot size keeps in frame
 FRAMED_EXTENT = {ShotSize.MEDIUM: (0.5, 1.0), ShotSize.LONG: (0.0, 1.0), ShotSize.EXTREME_LONG: (0.0, 1.0)}
 
 
-def framed_ends_world(feet_world: np.ndarray, height_m: float, shot_size: ShotSize) -> np.ndarray:
+def framed_ends_world(feet_world: npt.NDArray[np.float64], height_m: float, shot_size: ShotSize) -> npt.NDArray[np.float64]:
     """(2, 3) the bottom and top of the shot size's framed extent on the actor's vertical axis, m.
     feet_world (3,): the actor's feet."""
     low, high = FRAMED_EXTENT[shot_size]
     return np.asarray(feet_world, dtype=np.float64) + np.outer([low * height_m, high * height_m], UP_WORLD)
 
 
-def framing_error(pose: CameraPose, lens: Lens, feet_world: np.ndarray, height_m: float, shot_size: ShotSize,
+def framing_error(pose: CameraPose, lens: Lens, feet_world: npt.NDArray[np.float64], height_m: float, shot_size: ShotSize,
                   screen_fraction: float) -> float:
     """How far the framed extent's ends land from where the shot size puts them, in normalised
     screen units (the frame is [-1, 1]; the Toric rig's framing error is in the same units): the
@@ -58,8 +51,8 @@ def framing_error(pose: CameraPose, lens: Lens, feet_world: np.ndarray, height_m
     return float(np.abs(screen - np.array([[0.0, -half], [0.0, half]])).max())
 
 
-def _pitches(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _pitches(cameras_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64], radius_m: float
+             ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Per camera (m, 3): the lowest pitch to the extent's bottom and the highest to its top,
     rad, over the actor's girth (its axis distance less and plus radius_m: the near side of the
     feet is lower on screen than the axis), and the horizontal distance to its axis, m."""
@@ -73,7 +66,8 @@ def _pitches(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float
     return np.minimum(from_near, from_far)[:, 0], np.maximum(from_near, from_far)[:, 1], horizontal
 
 
-def aim_point(camera_world: np.ndarray, ends_world: np.ndarray, radius_m: float) -> np.ndarray:
+def aim_point(camera_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64],
+              radius_m: float) -> npt.NDArray[np.float64]:
     """(3,) the point on the actor's axis to put at the screen centre so that the framed extent
     (ends_world (2, 3): bottom, top; an actor radius_m wide) is centred vertically (module docstring)."""
     bottom, top, horizontal = _pitches(camera_world, ends_world, radius_m)
@@ -81,11 +75,13 @@ def aim_point(camera_world: np.ndarray, ends_world: np.ndarray, radius_m: float)
     return np.array([ends_world[0, 0], height, ends_world[0, 2]])
 
 
-def fit_ratio(cameras_world: np.ndarray, ends_world: np.ndarray, radius_m: float, vertical_fov_deg: float,
-              frame_margin: float) -> np.ndarray:
+def fit_ratio(cameras_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64], radius_m: float,
+              vertical_fov_deg: float,
+              frame_margin: float) -> npt.NDArray[np.float64]:
     """(m,) for cameras (m, 3): tan of half the framed extent's angular span (an actor radius_m
     wide) over the most a centred extent may have, (1 - frame_margin) tan(fov / 2); above 1 it
     cannot be framed."""
     bottom, top, _ = _pitches(cameras_world, ends_world, radius_m)
     half_span = np.minimum(0.5 * (top - bottom), 0.5 * np.pi - 1e-6)
-    return np.tan(half_span) / ((1.0 - frame_margin) * np.tan(np.radians(vertical_fov_deg) / 2.0))
+    ratio: npt.NDArray[np.float64] = np.tan(half_span) / ((1.0 - frame_margin) * np.tan(np.radians(vertical_fov_deg) / 2.0))
+    return ratio

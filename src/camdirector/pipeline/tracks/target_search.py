@@ -24,8 +24,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from camdirector.geometry.raycast import RayScene
@@ -38,15 +40,15 @@ class Pois:
     """Points on the graph: node_a, node_b (k,) int, t (k,) fraction from a to b (a == b: a
     node), position_world (k, 3)."""
 
-    node_a: np.ndarray
-    node_b: np.ndarray
-    t: np.ndarray
-    position_world: np.ndarray
+    node_a: npt.NDArray[np.integer[Any]]
+    node_b: npt.NDArray[np.integer[Any]]
+    t: npt.NDArray[np.float64]
+    position_world: npt.NDArray[np.float64]
 
     def __len__(self) -> int:
         return len(self.t)
 
-    def take(self, index) -> Pois:
+    def take(self, index: npt.NDArray[np.intp] | npt.NDArray[np.bool_] | list[int]) -> Pois:
         return Pois(self.node_a[index], self.node_b[index], self.t[index], self.position_world[index])
 
 
@@ -55,7 +57,8 @@ def optimal_distance_m(actor_height_m: float, screen_fraction: float, vertical_f
     return actor_height_m / (screen_fraction * 2.0 * math.tan(math.radians(vertical_fov_deg) / 2.0))
 
 
-def candidate_pois(graph: RuntimeGraph, actor_world: np.ndarray, look_at_world: np.ndarray, distance_m: float,
+def candidate_pois(graph: RuntimeGraph, actor_world: npt.NDArray[np.float64], look_at_world: npt.NDArray[np.float64],
+                   distance_m: float,
                    radius_m: float, nodes_only: bool) -> Pois:
     """POIs near the actor (module docstring); nodes_only: the nodes of those edges instead (static cameras)."""
     edge_ids, isolated = graph.edges_near(actor_world, radius_m)
@@ -87,14 +90,16 @@ def candidate_pois(graph: RuntimeGraph, actor_world: np.ndarray, look_at_world: 
     return Pois(na, nb, t, position)
 
 
-def shot_size_score(positions_world: np.ndarray, look_at_world: np.ndarray, distance_m: float,
-                    tolerance_log: float) -> np.ndarray:
+def shot_size_score(positions_world: npt.NDArray[np.float64], look_at_world: npt.NDArray[np.float64], distance_m: float,
+                    tolerance_log: float) -> npt.NDArray[np.float64]:
     """(k,) Gaussian in ln(distance / optimal distance)."""
     d = np.maximum(np.linalg.norm(positions_world - look_at_world, axis=1), 1e-6)
-    return np.exp(-0.5 * (np.log(d / distance_m) / tolerance_log) ** 2)
+    score: npt.NDArray[np.float64] = np.exp(-0.5 * (np.log(d / distance_m) / tolerance_log) ** 2)
+    return score
 
 
-def direct_visibility(positions_world: np.ndarray, actor_points_world: np.ndarray, scene: RayScene) -> np.ndarray:
+def direct_visibility(positions_world: npt.NDArray[np.float64], actor_points_world: npt.NDArray[np.float64],
+                      scene: RayScene) -> npt.NDArray[np.float64]:
     """(k, ...) fraction of the actor's points each position (k, 3) sees: actor_points_world
     (..., p, 3), the points at one moment (p, 3) -> (k,), or at m moments (m, p, 3) -> (k, m),
     all in one batch of rays."""
@@ -103,7 +108,8 @@ def direct_visibility(positions_world: np.ndarray, actor_points_world: np.ndarra
     if not k:
         return np.empty((0, *points.shape[:-2]))
     hidden = scene.occluded(np.repeat(positions_world, n, axis=0), np.tile(points.reshape(-1, 3), (k, 1)))
-    return 1.0 - hidden.reshape(k, *points.shape[:-1]).mean(axis=-1)
+    seen: npt.NDArray[np.float64] = 1.0 - hidden.reshape(k, *points.shape[:-1]).mean(axis=-1)
+    return seen
 
 
 class IndirectVisibility:
@@ -112,23 +118,26 @@ class IndirectVisibility:
     refined_centroids_world (T, 3); table: the artifact's VisibilityTable.
     """
 
-    def __init__(self, refined_centroids_world: np.ndarray, table: VisibilityTable):
+    def __init__(self, refined_centroids_world: npt.NDArray[np.float64], table: VisibilityTable):
         self._tree = cKDTree(refined_centroids_world) if len(refined_centroids_world) else None
         self._table = table
 
-    def per_node(self, actor_world: np.ndarray, radius_m: float) -> np.ndarray:
+    def per_node(self, actor_world: npt.NDArray[np.float64], radius_m: float) -> npt.NDArray[np.float64]:
         """(N,) fraction in [0, 1] of the triangles within radius_m of the actor that each node sees
         (weighted by the degree of visibility); all ones when no triangle is that near."""
         n = self._table.node_count
-        near = np.asarray(self._tree.query_ball_point(actor_world, radius_m), dtype=np.int64) if self._tree else []
+        if not self._tree:
+            return np.ones(n)
+        near = np.asarray(self._tree.query_ball_point(actor_world, radius_m), dtype=np.int64)
         if not len(near):
             return np.ones(n)
         idx = csr_rows(self._table.triangle_indptr, near)
         seen = np.bincount(self._table.triangle_nodes[idx], weights=self._table.triangle_degree[idx], minlength=n)
-        return seen / (255.0 * len(near))
+        share: npt.NDArray[np.float64] = seen / (255.0 * len(near))
+        return share
 
 
-def graph_distance(graph: RuntimeGraph, current: tuple[int, int, float], pois: Pois, max_cost: float) -> np.ndarray:
+def graph_distance(graph: RuntimeGraph, current: tuple[int, int, float], pois: Pois, max_cost: float) -> npt.NDArray[np.float64]:
     """(k,) A* distance along the graph from the current target (a, b, t) to each POI, metres (inf
     beyond max_cost or unreachable)."""
     a0, b0, t0 = current
@@ -138,7 +147,7 @@ def graph_distance(graph: RuntimeGraph, current: tuple[int, int, float], pois: P
     inf = float("inf")
     da = np.array([dist.get(n, inf) for n in pois.node_a.tolist()])
     db = np.array([dist.get(n, inf) for n in pois.node_b.tolist()])
-    out = np.minimum(da + pois.t * length, db + (1.0 - pois.t) * length)
+    out: npt.NDArray[np.float64] = np.minimum(da + pois.t * length, db + (1.0 - pois.t) * length)
     same = ((pois.node_a == a0) & (pois.node_b == b0)) if a0 != b0 else np.zeros(len(pois), bool)
     start_len = float(np.linalg.norm(graph.nodes_world[b0] - graph.nodes_world[a0]))
     out[same] = np.minimum(out[same], np.abs(pois.t[same] - t0) * start_len)

@@ -171,7 +171,7 @@ def _anneal_from(start_m: np.ndarray, track: CharacterTrack, space: PotentialSpa
             lo, hi = 0, n - 1
             bump = np.ones(n)
         else:
-            min_half = max(1.0, np.linalg.norm(displacement) * math.pi / (2.0 * step_limit))
+            min_half = max(1.0, float(np.linalg.norm(displacement)) * math.pi / (2.0 * step_limit))
             max_half = max(min_half, float(n))
             half = math.exp(rng.uniform(math.log(min_half), math.log(max_half)))
             centre = rng.integers(0, n)

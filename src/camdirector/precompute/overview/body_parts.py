@@ -56,7 +56,8 @@ class BodyPartMap:
     right_hip: int
     body_points: np.ndarray
 
-    def joints_of(self, part: BodyPart) -> np.ndarray:
+    def joints_of(self, part: int) -> np.ndarray:
+        """Indices of the joints of `part` (a BodyPart, or its number)."""
         return np.flatnonzero(self.part_of_joint == part)
 
 

@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 
-def add_parsers(subparsers) -> None:
+def add_parsers(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Registers `overview` and `eval-overview`; args.handler(args) runs them."""
     p = subparsers.add_parser("overview", help="plan a multi-shot overview camera for a BVH clip",
                               description=__doc__.split("\n\n")[0],
@@ -60,7 +60,7 @@ def _error(command: str, message: str) -> int:
     return 2
 
 
-def run_overview(args) -> int:
+def run_overview(args: argparse.Namespace) -> int:
     import numpy as np
 
     from camdirector.precompute.overview.job import (
@@ -101,7 +101,7 @@ def run_overview(args) -> int:
     return 0
 
 
-def run_eval_overview(args) -> int:
+def run_eval_overview(args: argparse.Namespace) -> int:
     import numpy as np
 
     from camdirector.precompute.overview.bvh import load_motion

@@ -134,15 +134,15 @@ class LimbVisibilityRenderer:
     Owns a moderngl EGL context; call `release()` when done (or use it as a context manager)."""
 
     def __init__(self, tile_px: int):
-        import moderngl  # deferred: only this stage needs OpenGL
+        from camdirector.geometry.gl_context import egl_context, uniform  # deferred: only this stage needs OpenGL
 
         self.tile_px = int(tile_px)
         self.tiles_per_side = max(1, _ATLAS_MAX_PX // self.tile_px)
         side = self.tiles_per_side * self.tile_px
-        self._ctx = moderngl.create_standalone_context(backend="egl")
+        self._ctx = egl_context()
         self._program = self._ctx.program(vertex_shader=_VERTEX_SHADER,
                                           fragment_shader=_FRAGMENT_SHADER)
-        self._program["tiles"].value = (float(self.tiles_per_side), float(self.tiles_per_side))
+        uniform(self._program, "tiles").value = (float(self.tiles_per_side), float(self.tiles_per_side))
         self._sphere = self._ctx.buffer(_unit_sphere().tobytes())
         self._colour_rb = self._ctx.renderbuffer((side, side), components=1, dtype="f1")
         self._depth_rb = self._ctx.depth_renderbuffer((side, side))
@@ -239,9 +239,8 @@ def render_limb_visibility(clip: MotionClip, parts: BodyPartMap, track: Characte
         ], axis=2).reshape(-1, 15)
         counts = renderer.count_pixels(inst, len(ids))
         pixels[ids] = counts[:, 1:PART_COUNT + 1]
-    pixels = pixels.reshape(n_frames, len(elevations), len(azimuths), PART_COUNT)
-    pixels = pixels.transpose(0, 3, 1, 2)
-    best = pixels.max(axis=(2, 3), keepdims=True)
-    normalised = np.where(best > 0, pixels / np.maximum(best, 1.0), 0.0)
-    return LimbVisibility(row_of_frame=row_of_frame, pixels=pixels, normalised=normalised,
+    per_view = pixels.reshape(n_frames, len(elevations), len(azimuths), PART_COUNT).transpose(0, 3, 1, 2)
+    best = per_view.max(axis=(2, 3), keepdims=True)
+    normalised = np.where(best > 0, per_view / np.maximum(best, 1.0), 0.0)
+    return LimbVisibility(row_of_frame=row_of_frame, pixels=per_view, normalised=normalised,
                           azimuths_rad=azimuths, elevations_rad=elevations)

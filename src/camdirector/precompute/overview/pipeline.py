@@ -46,7 +46,7 @@ class Stage(Enum):
     FRAMING = "framing"
 
 
-_PROGRESS_AFTER = {Stage.TRACK: 0.02, Stage.SALIENCY: 0.2, Stage.LIMBS: 0.45,
+_PROGRESS_AFTER: dict[Enum, float] = {Stage.TRACK: 0.02, Stage.SALIENCY: 0.2, Stage.LIMBS: 0.45,
                    Stage.POTENTIAL: 0.6, Stage.SHOTS: 0.97, Stage.FRAMING: 1.0}
 
 
@@ -115,12 +115,12 @@ def plan_overview(clip: MotionClip, settings: OverviewSettings, rng: np.random.G
     saliency = compute_saliency(track, parts, settings)
     done(Stage.SALIENCY)
     own_renderer = renderer is None
-    renderer = LimbVisibilityRenderer(settings.limb_tile_px) if own_renderer else renderer
+    limb_renderer = LimbVisibilityRenderer(settings.limb_tile_px) if renderer is None else renderer
     try:
-        limbs = render_limb_visibility(clip, parts, track, saliency.pose, settings, renderer)
+        limbs = render_limb_visibility(clip, parts, track, saliency.pose, settings, limb_renderer)
     finally:
         if own_renderer:
-            renderer.release()
+            limb_renderer.release()
     done(Stage.LIMBS)
     space = build_potential_space(track, parts, saliency, limbs, settings, scene)
     done(Stage.POTENTIAL)

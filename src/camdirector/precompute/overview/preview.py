@@ -184,7 +184,7 @@ class CharacterScene:
             self.renderer.add_mesh(mesh_id, cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)],
                                    closed=True)
         for mesh_id, p in zip(self.joint_ids, self.sphere_part):
-            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(p)],
+            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(int(p))],
                                    closed=True)
         centre = body.reshape(-1, 3).mean(axis=0)
         extent = float(np.ptp(body[:, :, [0, 2]].reshape(-1, 2), axis=0).max()) + 40.0
@@ -369,7 +369,7 @@ def render_contact_sheet(scene: CharacterScene, camera: PreviewCamera, path: str
     for i, (shot, which, frame) in enumerate(tiles):
         image = Image.fromarray(scene.render(frame, camera))
         if image.size != (tw, th):
-            image = image.resize((tw, th), Image.BILINEAR)
+            image = image.resize((tw, th), Image.Resampling.BILINEAR)
         x = pad + (i % cols) * (tw + pad)
         y = pad + (i // cols) * (th + label_h + pad)
         sheet.paste(image, (x, y))

@@ -16,6 +16,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -129,6 +130,7 @@ def load_artifact(path: Path) -> LevelArtifact:
         header = _checked_header(data, path)
         arrays = {name: data[name] for name in _ARRAYS}
         table = VisibilityTable(**{name: data[f"visibility_{name}"] for name in _TABLE})
-    settings = TrackSettings(**{k: tuple(v) if isinstance(v, list) else v for k, v in header["settings"].items()})
+    fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in header["settings"].items()}  # JSON
+    settings = TrackSettings(**fields)
     return LevelArtifact(**arrays, visibility=table, m_per_unit=float(header["m_per_unit"]), settings=settings,
                          timings_ms=dict(header["timings_ms"]), counts=dict(header["counts"]))

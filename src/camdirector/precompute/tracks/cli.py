@@ -19,25 +19,30 @@ Exit status: 0 ok, 1 failed, 2 bad arguments or input.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the registry is imported where a command needs it
+    from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry
 
 _RECORDS_URL_HELP = ("the registry's index: postgresql://... (a cluster's --job-store) or empty for SQLite in "
                      "the data dir (default: $CAMDIRECTOR_JOB_STORE)")
 
 
-def add_records_url_argument(parser) -> None:
+def add_records_url_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--records-url", dest="records_url", default=None, help=_RECORDS_URL_HELP)
 
 
-def _add_tenant_argument(parser) -> None:
+def _add_tenant_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tenant", default="default",
                         help="whose level: the tenant of the keys whose sessions use it (default: default)")
 
 
-def registry_from_args(args):
+def registry_from_args(args: argparse.Namespace) -> LevelRegistry:
     """The registry that --data-dir and --records-url (else $CAMDIRECTOR_JOB_STORE) name."""
     from camdirector.precompute.tracks.registry import LevelRegistry
 
@@ -45,7 +50,7 @@ def registry_from_args(args):
     return LevelRegistry(args.data_dir, url)
 
 
-def add_parsers(subparsers) -> None:
+def add_parsers(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Registers `level`; args.handler(args) runs the command."""
     level = subparsers.add_parser("level", help="precomputed levels for the TRACKS rig")
     sub = level.add_subparsers(dest="level_command", required=True)
@@ -74,14 +79,14 @@ def add_parsers(subparsers) -> None:
     p.set_defaults(handler=run_level_remove)
 
 
-def _record_json(record) -> dict:
+def _record_json(record: LevelRecord) -> dict[str, Any]:
     return {"name": record.name, "tenant": record.tenant, "artifact": str(record.artifact_path),
             "format_version": record.format_version, "source": record.source_path, "navmesh": record.navmesh_path,
             "m_per_unit": record.m_per_unit, "agent_height_m": record.agent_height_m, "agent_radius_m": record.agent_radius_m,
             "counts": record.counts, "timings_ms": {k: round(v, 1) for k, v in record.timings_ms.items()}}
 
 
-def run_level_add(args) -> int:
+def run_level_add(args: argparse.Namespace) -> int:
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     def progress(fraction: float) -> None:
@@ -102,8 +107,8 @@ def run_level_add(args) -> int:
     return 0
 
 
-def run_level_list(args) -> int:
-    from camdirector.access.roles import check_tenant
+def run_level_list(args: argparse.Namespace) -> int:
+    from camdirector.infra.tenants import check_tenant
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     try:
@@ -118,8 +123,8 @@ def run_level_list(args) -> int:
     return 0
 
 
-def run_level_remove(args) -> int:
-    from camdirector.access.roles import check_tenant
+def run_level_remove(args: argparse.Namespace) -> int:
+    from camdirector.infra.tenants import check_tenant
     from camdirector.precompute.tracks.registry import LevelsUnavailable
 
     try:

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -100,19 +101,20 @@ def insert_tracks(tracks: Tracks, settings: TrackSettings) -> tuple[np.ndarray, 
             params[b].append(tb)
             joins.append((a, sa, b, tb))
     node_of: dict[tuple[int, float], int] = {}
-    positions, edges = [], []
+    node_positions: list[npt.NDArray[np.float64]] = []
+    edges: list[tuple[int, int]] = []
     for k, ts in enumerate(params):
         if np.allclose(start[k], end[k]):  # a static camera: one node for every parameter
-            node_of.update({(k, value): len(positions) for value in ts})
-            positions.append(start[k])
+            node_of.update({(k, value): len(node_positions) for value in ts})
+            node_positions.append(start[k])
             continue
         chain = []
         for value in sorted(set(ts)):
-            node_of[(k, value)] = len(positions)
-            positions.append(start[k] + value * (end[k] - start[k]))
+            node_of[(k, value)] = len(node_positions)
+            node_positions.append(start[k] + value * (end[k] - start[k]))
             chain.append(node_of[(k, value)])
         edges.extend(zip(chain[:-1], chain[1:]))
-    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    positions = np.asarray(node_positions, dtype=np.float64).reshape(-1, 3)
     parent = np.arange(len(positions))
     for a, sa, b, tb in joins:
         ra, rb = _find(parent, node_of[(a, sa)]), _find(parent, node_of[(b, tb)])

@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from camdirector.infra.job_errors import JobError
-from camdirector.precompute.tracks.registry import DEFAULT_TENANT, LevelExists, LevelRegistry
+from camdirector.infra.tenants import DEFAULT_TENANT
+from camdirector.precompute.tracks.registry import LevelExists, LevelRegistry
 
 KIND = "level"
 

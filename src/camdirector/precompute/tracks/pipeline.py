@@ -55,7 +55,7 @@ class Stage(Enum):
     VISIBILITY = "visibility"
 
 
-_PROGRESS_AFTER = {Stage.RAY_SCENE: 0.02, Stage.NAVMESH: 0.1, Stage.SKELETON: 0.25, Stage.SAMPLING: 0.27,
+_PROGRESS_AFTER: dict[Enum, float] = {Stage.RAY_SCENE: 0.02, Stage.NAVMESH: 0.1, Stage.SKELETON: 0.25, Stage.SAMPLING: 0.27,
                    Stage.CLUSTERING: 0.45, Stage.FILTERING: 0.5, Stage.REMESHING: 0.55, Stage.REDUNDANCY: 0.65,
                    Stage.GRAPH: 0.7, Stage.VISIBILITY: 1.0}
 

@@ -42,6 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from camdirector.precompute.tracks.track_settings import TrackSettings
@@ -217,7 +218,8 @@ def _sequential_ransac(points: np.ndarray, max_lines: int, settings: TrackSettin
                        rng: np.random.Generator) -> Tracks:
     n = len(points)
     point_track = np.full(n, -1, dtype=np.int64)
-    starts, ends = [], []
+    starts: list[npt.NDArray[np.float64]] = []
+    ends: list[npt.NDArray[np.float64]] = []
     alive = np.ones(n, dtype=bool)
     neighbours = neighbour_table(points, settings.ransac_pair_radius_m)
     while len(starts) < max_lines and alive.sum() >= settings.ransac_min_inliers:

@@ -22,7 +22,7 @@ the row named. Adding a name that is taken without `replace` is refused by the i
 key, in the database, so two nodes adding one name at once give one level and one LevelExists.
 Names are 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit.
 
-Tenants (access/roles.py): each tenant has its own namespace, so two tenants can each have an
+Tenants (infra/tenants.py): each tenant has its own namespace, so two tenants can each have an
 "arena". Tenant `default` keeps plain names, `<name>` in the index and `<name>.<hex>.npz` in the
 levels folder, exactly as before tenants: existing data directories and `camdirector level add
 NAME FILE` are unchanged. Another tenant's level is `<tenant>/<name>` in the index and its
@@ -48,15 +48,14 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.access.roles import check_tenant
-from camdirector.infra.postgres import PostgresDatabase, is_unique_violation, redacted
+from camdirector.infra.postgres import PostgresStore, advisory_lock, is_unique_violation, redacted
+from camdirector.infra.tenants import DEFAULT_TENANT, check_tenant
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, LevelArtifact, load_artifact, save_artifact
 from camdirector.precompute.tracks.level_mesh import load_level_mesh
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.track_settings import TrackSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
-DEFAULT_TENANT = "default"
 _TENANT_SEPARATOR = "/"  # in neither a level name nor a tenant (module docstring)
 _COLUMNS = ("name, artifact_file, format_version, source_path, navmesh_path, m_per_unit, agent_height_m, "
             "agent_radius_m, created_unix_s, counts_json, timings_json")
@@ -222,28 +221,20 @@ class SqliteLevelIndex(LevelIndex):
 _SCHEMA_LOCK_KEY = 0x63616D4C
 
 
-class PostgresLevelIndex(LevelIndex):
+class PostgresLevelIndex(PostgresStore, LevelIndex):
     """Rows in the `levels` table of the PostgreSQL database at `url` (created when missing),
-    through infra/postgres.py. Raises LevelsUnavailable when the database cannot be reached."""
+    through infra/postgres.py's PostgresStore; a write locks the table (readers do not wait on
+    it), so the table is created under an advisory lock of its own. Raises LevelsUnavailable
+    when the database cannot be reached."""
 
     def __init__(self, url: str) -> None:
-        self.url = url
         self.where = f"{redacted(url)} (table levels)"
-        self._db = PostgresDatabase(url, "level index", LevelsUnavailable)
-        with self._db.transaction("SELECT pg_advisory_xact_lock(%s)", (_SCHEMA_LOCK_KEY,)) as db:
-            db.execute(_SCHEMA.format(real="DOUBLE PRECISION"))
-
-    def _tx(self):
-        return self._db.transaction("LOCK TABLE levels IN SHARE ROW EXCLUSIVE MODE")
-
-    def _read(self):
-        return self._db.read()
+        PostgresStore.__init__(self, url, "level index", LevelsUnavailable, [_SCHEMA.format(real="DOUBLE PRECISION")],
+                               write_lock="LOCK TABLE levels IN SHARE ROW EXCLUSIVE MODE",
+                               schema_lock=advisory_lock(_SCHEMA_LOCK_KEY))
 
     def _is_duplicate(self, exc: Exception) -> bool:
         return is_unique_violation(exc)
-
-    def close(self) -> None:
-        self._db.close()
 
 
 def open_level_index(records_url: str, levels_dir: Path) -> LevelIndex:
@@ -320,7 +311,8 @@ class LevelRegistry:
             raise
         if old is not None and old != file_name:
             (self.levels_dir / old).unlink(missing_ok=True)
-        return self.get(name, tenant)
+        record = self.get(name, tenant)  # as the index holds it (SQLite's REAL makes an int scale a float)
+        return record if record is not None else self._record(row)  # None: another writer deleted it since
 
     def get(self, name: str, tenant: str = DEFAULT_TENANT) -> LevelRecord | None:
         """`tenant`'s level `name`; None when it has none (a malformed name or tenant included)."""

@@ -38,6 +38,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import shapely
 from pysfcgal.geometry import Polygon as SfcgalPolygon
 from scipy import sparse
@@ -172,7 +173,8 @@ def _chains(segments: np.ndarray) -> tuple[np.ndarray, list[list[int]]]:
             if (start, nxt) in used:
                 continue
             chain, prev, cur = [start], start, nxt
-            used.add((start, nxt)), used.add((nxt, start))
+            used.add((start, nxt))
+            used.add((nxt, start))
             while True:
                 chain.append(cur)
                 if len(adjacency[cur]) != 2 or cur == start:
@@ -180,7 +182,8 @@ def _chains(segments: np.ndarray) -> tuple[np.ndarray, list[list[int]]]:
                 step = adjacency[cur][0] if adjacency[cur][1] == prev else adjacency[cur][1]
                 if (cur, step) in used:
                     break
-                used.add((cur, step)), used.add((step, cur))
+                used.add((cur, step))
+                used.add((step, cur))
                 prev, cur = cur, step
             chains.append(chain)
     return vertices, chains
@@ -208,7 +211,7 @@ def clean_axis(segments: np.ndarray, polygon, prune_m: float, tolerance_m: float
             clearance = float(shapely.distance(shapely.Point(vertices[junction]), boundary))
             if length < clearance + prune_m:
                 spokes_at.setdefault(junction, []).append((length, k))
-        drop = set()
+        drop: set[int] = set()
         for junction, spokes in spokes_at.items():
             spokes.sort()
             if len(spokes) == degree[junction]:
@@ -220,7 +223,7 @@ def clean_axis(segments: np.ndarray, polygon, prune_m: float, tolerance_m: float
                                for i in range(len(c) - 1)], dtype=np.float64).reshape(-1, 2, 2)
         if not len(segments):
             return segments
-    out = []
+    out: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = []
     for chain in chains:
         line = shapely.LineString(vertices[chain]).simplify(tolerance_m, preserve_topology=False) \
             if tolerance_m > 0.0 else shapely.LineString(vertices[chain])
@@ -235,7 +238,7 @@ def _medial_axis_2d(polygon) -> np.ndarray:
     axis = sfc.approximate_medial_axis()
     if axis is None:
         return np.empty((0, 2, 2))
-    segments = []
+    segments: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = []
     for line in axis.to_coordinates():
         pts = np.asarray(line, dtype=np.float64)[:, :2]
         segments.extend(zip(pts[:-1], pts[1:]))

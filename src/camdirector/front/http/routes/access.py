@@ -10,7 +10,7 @@
 """
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
 from pydantic import BaseModel, Field
@@ -23,7 +23,7 @@ from camdirector.front.http.auth import COOKIE, COOKIE_TTL_S, identify, require
 
 _NOT_JSON = {"description": "the body cannot be read as JSON"}
 Role = Literal["engine", "director", "viewer", "admin"]
-assert set(Role.__args__) == set(ROLES)  # noqa: S101 - the literal mirrors roles.py's table
+assert set(get_args(Role)) == set(ROLES)  # noqa: S101 - the literal mirrors roles.py's table
 
 
 class Caller(BaseModel):
@@ -114,13 +114,13 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     @routes.get("/keys", response_model=KeyList)
     def list_keys(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))]) -> dict:
         """The tenant's keys, revoked ones too (never a key itself)."""
-        return {"keys": [k.as_public() for k in guard.store.list_keys(identity.tenant)]}
+        return {"keys": [k.as_public() for k in guard.key_store().list_keys(identity.tenant)]}
 
     @routes.post("/keys", status_code=201, response_model=KeyCreated, responses={400: _NOT_JSON})
     def create_key(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))],
                    body: Annotated[NewKey, Body()]) -> dict:
         """A new key of the caller's tenant."""
-        record, text = guard.store.create_key(body.role, identity.tenant, body.name)
+        record, text = guard.key_store().create_key(body.role, identity.tenant, body.name)
         guard.audit(identity, "key.create", None, {"key_id": record.key_id, "role": body.role, "name": body.name})
         return {**record.as_public(), "key": text}
 
@@ -128,7 +128,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     def revoke_key(key_id: str, identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))]) -> dict:
         """Revokes one of the tenant's keys: refused from now on by every node."""
         try:
-            record = guard.store.revoke(key_id, identity.tenant)
+            record = guard.key_store().revoke(key_id, identity.tenant)
         except KeyNotFound:
             raise HTTPException(404, f"no key {key_id!r}") from None
         guard.refresh(key_id)

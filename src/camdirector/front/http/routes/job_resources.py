@@ -81,7 +81,7 @@ def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], t
 def answer_unavailable_jobs(app: FastAPI) -> None:
     """Any route that finds the job store (PostgreSQL) or queue (Redis) down answers 503 with
     the reason, not 500."""
-    async def unavailable(request: Request, exc: JobsUnavailable) -> JSONResponse:
+    async def unavailable(request: Request, exc: Exception) -> JSONResponse:  # exc: JobsUnavailable
         return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
 
     app.add_exception_handler(JobsUnavailable, unavailable)

@@ -286,7 +286,7 @@ def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path,
     app.include_router(build_level_router(runner, settings, Path(data_dir)))
     answer_unavailable_jobs(app)
 
-    async def levels_unavailable(request: Request, exc: LevelsUnavailable) -> JSONResponse:
+    async def levels_unavailable(request: Request, exc: Exception) -> JSONResponse:  # exc: LevelsUnavailable
         return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
 
     app.add_exception_handler(LevelsUnavailable, levels_unavailable)

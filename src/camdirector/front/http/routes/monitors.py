@@ -27,28 +27,22 @@ worker lost, 503.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Query, Response
 from fastapi.responses import StreamingResponse
 
 from camdirector.access.guard import Identity
 from camdirector.access.roles import Verb
-from camdirector.errors import DirectorError
+from camdirector.errors import DirectorError, invalid
 from camdirector.front.http.auth import require
 from camdirector.front.http.routes.sessions import http_error
 from camdirector.front.view_hub import MAX_STREAM_FPS, View, ViewHub
-from camdirector.render.snapshots import (
-    DEFAULT_WIDTH_PX,
-    MAX_HEIGHT_PX,
-    MAX_WIDTH_PX,
-    MIN_SIDE_PX,
-    ViewQuery,
-)
+from camdirector.infra.channels import DEFAULT_WIDTH_PX, MAX_HEIGHT_PX, MAX_WIDTH_PX, MIN_SIDE_PX, ViewQuery
 
 BOUNDARY = "camdirector-view"
 DEFAULT_FPS = 4.0
-_ERRORS = {404: {"description": "no such session (or it closed)"},
+_ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "no such session (or it closed)"},
            422: {"description": "a size over its limit, or an unknown shot"},
            503: {"description": "the render failed or timed out, or the worker holding the session died"}}
 
@@ -77,8 +71,8 @@ def _query(shot: str, subjects: str, width: int, height: int | None, image_forma
     try:
         return ViewQuery(shot=shot, subjects=tuple(s for s in subjects.split(",") if s), width_px=width,
                          height_px=height, image_format=image_format)
-    except DirectorError as exc:
-        raise http_error(exc) from None
+    except ValueError as exc:
+        raise http_error(invalid(str(exc))) from None
 
 
 def build_view_router(hub: ViewHub) -> APIRouter:

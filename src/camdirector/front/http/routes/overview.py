@@ -148,7 +148,7 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
                 f"upload larger than the limit of {limit} bytes"))
         if not data:
             raise HTTPException(status_code=400, detail="empty upload: expected a BVH file")
-        params = {"scale": scale, "skip_frames": skip_frames, "aspect": aspect, "seed": seed,
+        params: dict[str, float | str | None] = {"scale": scale, "skip_frames": skip_frames, "aspect": aspect, "seed": seed,
                   "c1": c1, "c2": c2, "c3": c3, "c4": c4, "c5": c5,
                   "max_speed_heights_s": max_speed_heights_s,
                   "max_angular_speed_deg_s": max_angular_speed_deg_s,

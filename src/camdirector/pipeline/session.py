@@ -28,6 +28,10 @@ from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
 
+# A creation object's name (Session.creation_objects): "clock", "level", "level_mesh", or a kind
+# ("static", "target", "dynamic") with the object's index or id.
+CreationName = str | tuple[str, int | str]
+
 
 @dataclass(frozen=True)
 class CutRecord:
@@ -76,11 +80,12 @@ class Session:
         self.shot_id = 0
         self.last_cut: CutRecord | None = None
 
-    def creation_objects(self) -> dict:
+    def creation_objects(self) -> dict[CreationName, object]:
         """What the session was built from and never changes, by a name that a session built from
         the same creation request gives the same object: its meshes, its level, its clock. A
         checkpoint refers to these by name instead of copying them (worker/checkpointing.py)."""
-        objects = {"clock": self.clock, "level": self.level, "level_mesh": self.level_mesh_world}
+        objects: dict[CreationName, object] = {"clock": self.clock, "level": self.level,
+                                               "level_mesh": self.level_mesh_world}
         objects.update({("static", i): mesh for i, mesh in enumerate(self.static_meshes_world)})
         objects.update({("target", i): t.mesh for i, t in enumerate(self.targets)})
         objects.update({("dynamic", object_id): mesh for object_id, (mesh, _) in self.dynamic.items()})
@@ -143,7 +148,7 @@ class Session:
         state.cut = state.pose is not None and (state.cut or last is None or last.pose is None)
         if state.cut:
             self.shot_id += 1
-            if last is not None and last.pose is not None:  # a few references, on the frames that cut
+            if last is not None and last.pose is not None and state.pose is not None:  # a few references, on the frames that cut
                 self.last_cut = CutRecord(last.frame, last.pose, targets_before, state.frame, state.pose,
                                           list(self.view_target_transforms()), dict(self.dynamic))
         state.shot_id = self.shot_id

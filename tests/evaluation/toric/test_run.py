@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from camdirector.evaluation import cli
-from camdirector.evaluation.run import open_channel, run_on_channel
-from camdirector.evaluation.scenario import load_scenario, shipped_scenarios
-from camdirector.evaluation.suite import run_suite
+from camdirector.evaluation.scenario_file import load_scenario, shipped_scenarios
+from camdirector.evaluation.toric.cli import run_eval
+from camdirector.evaluation.toric.run import open_channel, run_on_channel
+from camdirector.evaluation.toric.suite import run_suite
 
 SHIPPED = shipped_scenarios()
 
@@ -69,7 +70,7 @@ def test_cli_registers_eval_and_refuses_bad_input(tmp_path, capsys):
     parser = argparse.ArgumentParser(prog="camdirector")
     cli.add_parsers(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["eval", "--suite", "paper", "--out", str(tmp_path)])
-    assert args.handler is cli.run_eval and args.suite == "paper"
+    assert args.handler is run_eval and args.suite == "paper"
     with pytest.raises(SystemExit):
         parser.parse_args(["eval", "--suite", "paper", "--scenario", "x.json"])  # one or the other
     assert cli.main(["eval", "--scenario", str(tmp_path / "absent.json")]) == 2

@@ -21,7 +21,7 @@ import numpy as np
 
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.evaluation.scenario import PARK_OFFSET_M, Scenario, Timeline, visibility_mode
-from camdirector.evaluation.scenario_measure import CameraTrack, Measurement, VisibilityMeter, measure
+from camdirector.evaluation.toric.measure import CameraTrack, Measurement, VisibilityMeter, measure
 from camdirector.v1 import director_pb2 as pb
 from camdirector.v1 import director_pb2_grpc as pbg
 
@@ -161,7 +161,7 @@ def draw_top_view(ax, scenario: Scenario) -> None:
         for i, j in ((0, 1), (1, 2), (2, 0)):
             segments.append(np.stack([tri[upright][:, i][:, [0, 2]], tri[upright][:, j][:, [0, 2]]], axis=1))
     if segments:
-        ax.add_collection(LineCollection(np.concatenate(segments), colors="0.6", linewidths=0.4))
+        ax.add_collection(LineCollection(list(np.concatenate(segments)), colors="0.6", linewidths=0.4))
 
 
 def draw_dynamic_paths(ax, scenario: Scenario, timeline: Timeline) -> None:

@@ -17,20 +17,26 @@ from __future__ import annotations
 import json
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from camdirector.deploy.server_process import ServerProcess
-from camdirector.evaluation.cli import MODES  # the paper's R, W, A, then the baselines
-from camdirector.evaluation.run import RunResult, open_channel, plot_run, pyplot_agg, run_on_channel, write_json
-from camdirector.evaluation.scenario import Scenario, load_scenario, shipped_scenarios
-from camdirector.evaluation.scenario_measure import VisibilityMeter
+from camdirector.evaluation.scenario import Scenario
+from camdirector.evaluation.scenario_file import load_scenario, shipped_scenarios
+from camdirector.evaluation.toric.measure import VisibilityMeter
+from camdirector.evaluation.toric.run import RunResult, open_channel, plot_run, pyplot_agg, run_on_channel, write_json
 from camdirector.pipeline.stages import Stage
+from camdirector.pipeline.style import VisibilityMode
 
 PAPER_SCENES = ("stress_medium", "stress_large", "columns_gate", "forest", "forest_corridor")
+PAPER_METHODS = (VisibilityMode.RAYCAST, VisibilityMode.NO_ANTICIPATION, VisibilityMode.ANTICIPATION)  # R, W, A
+# Every mode the style knows, so a new one is measured without a list to keep: the paper's methods
+# in its order, then the others (the baselines) in the enum's.
+MODES = tuple(m.name for m in (*PAPER_METHODS, *(m for m in VisibilityMode
+                                                 if m not in PAPER_METHODS and m is not VisibilityMode.UNSPECIFIED)))
 MODE_LABELS = {"RAYCAST": "R", "NO_ANTICIPATION": "W", "ANTICIPATION": "A", "REACTIVE": "reactive",
                "FRAMING_ONLY": "framing"}
 
@@ -80,14 +86,14 @@ class SuiteResult:
 
     def stage_table(self) -> str:
         """Table 3 analogue: median server time per pipeline stage, ms."""
-        measured = [r for r in self.results if r.measurement is not None]
+        measured = [(r, r.measurement) for r in self.results if r.measurement is not None]
         pipeline = [s.name.lower() for s in Stage]
-        stages = sorted({k for r in measured for k in r.measurement.track.stage_ms},
+        stages = sorted({k for _, m in measured for k in m.track.stage_ms},
                         key=lambda k: (pipeline.index(k) if k in pipeline else len(pipeline), k))
         head = f"{'scene':<17} {'mode':<16} " + " ".join(f"{k:>12}" for k in stages) + f" {'compute':>9}"
         lines = [head, "-" * len(head)]
-        for r in measured:
-            s = r.measurement.summary()
+        for r, m in measured:
+            s = m.summary()
             cells = " ".join(f"{_num(s['stage_ms_median'].get(k), 3):>12}" for k in stages)
             lines.append(f"{r.scenario.name:<17} {r.mode:<16} {cells} {_num(s['compute_ms']['p50'], 3):>9}")
         return "\n".join(lines)
@@ -101,7 +107,7 @@ def _quartiles(s: dict) -> str:
     return f"{_num(s['median'])} [{_num(s['q1'])} {_num(s['q3'])}]"
 
 
-def run_suite(scenarios: list[Path | Scenario], modes: tuple[str, ...] | list[str] = MODES, *,
+def run_suite(scenarios: Sequence[Path | Scenario], modes: tuple[str, ...] | list[str] = MODES, *,
               out_dir: Path | str | None = None, server: str | None = None, duration_s: float | None = None,
               plots: bool = True, progress: Callable[[str], None] | None = None) -> SuiteResult:
     """Runs every mode on every scenario (one session each, in turn) on the server at `server`, or
@@ -151,7 +157,7 @@ def _progress_line(r: RunResult) -> str:
 def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
     """Figures 12 and 13 for one scene: visibility and speed along time per mode, and box plots
     (median, quartiles, outliers) of visibility, speed and acceleration per mode."""
-    measured = [r for r in results if r.measurement is not None]
+    measured = [(r, r.measurement) for r in results if r.measurement is not None]
     if not measured:
         return
     plt = pyplot_agg()
@@ -160,9 +166,8 @@ def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
     ax_vis_t, ax_vis_box = fig.add_subplot(grid[0, :3]), fig.add_subplot(grid[0, 3])
     ax_speed_t, ax_speed_box, ax_accel_box = (fig.add_subplot(grid[1, :2]), fig.add_subplot(grid[1, 2]),
                                               fig.add_subplot(grid[1, 3]))
-    labels = [MODE_LABELS.get(r.mode, r.mode) for r in measured]
-    for r, label in zip(measured, labels):
-        m = r.measurement
+    labels = [MODE_LABELS.get(r.mode, r.mode) for r, _ in measured]
+    for (_, m), label in zip(measured, labels):
         ax_vis_t.plot(m.track.time_s, m.visibility, lw=0.9, label=label)
         ax_speed_t.plot(m.track.time_s, m.speed_m_s, lw=0.9, label=label)
     ax_vis_t.set_ylabel("visibility")
@@ -173,12 +178,12 @@ def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
     red = {"color": "r"}
     for ax, series, title in ((ax_vis_box, "visibility", "visibility"), (ax_speed_box, "speed_m_s", "speed, m/s"),
                               (ax_accel_box, "accel_m_s2", "acceleration, m/s^2")):
-        ax.boxplot([_finite(getattr(r.measurement, series)) for r in measured], tick_labels=labels,
+        ax.boxplot([_finite(getattr(m, series)) for _, m in measured], tick_labels=labels,
                    medianprops=red, flierprops={"marker": "+", "markeredgecolor": "r", "markersize": 3})
         ax.set_title(title, fontsize=9)
     ax_vis_box.set_ylim(-0.05, 1.05)
     unavailable = [r.mode for r in results if r.status == "unavailable"]
-    title = f"{measured[0].scenario.name}: " + ", ".join(f"{label} = {r.mode}" for r, label in zip(measured, labels))
+    title = f"{measured[0][0].scenario.name}: " + ", ".join(f"{label} = {r.mode}" for (r, _), label in zip(measured, labels))
     if unavailable:
         title += f"   (unavailable: {', '.join(unavailable)})"
     fig.suptitle(title, fontsize=10)

@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from camdirector.evaluation.scenario import FORMAT, parse_scenario
-from camdirector.evaluation.scenario_measure import (
+from camdirector.evaluation.scenario_file import parse_scenario
+from camdirector.evaluation.scenario_schema import FORMAT
+from camdirector.evaluation.toric.measure import (
     CameraTrack,
     VisibilityMeter,
     camera_kinematics,

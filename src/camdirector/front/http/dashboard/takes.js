@@ -1,0 +1,23 @@
+// A human's take in a match: POST /v1/sessions/{id}/take puts a shot on the program, held until
+// released (docs/protocol.md); the result shows by the release button.
+import { api, sessionPath } from "./api.js";
+import { state } from "./state.js";
+
+export function describeShot(shot) {
+  const who = shot.subject_ids.length ? shot.subject_ids.join(", ") : "the map";
+  return `${shot.kind.replace("SHOT_", "")} ${who}`;
+}
+
+export async function take(body) {   // { subject_ids, kind } to take a shot, { release: true } to release it
+  const result = document.getElementById("take-result");
+  try {
+    const reply = await api(`${sessionPath(state.selected)}/take`, {
+      method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body),
+    });
+    result.className = "ok";
+    result.textContent = reply.shot ? `taken: ${describeShot(reply.shot)}, held until released` : "released";
+  } catch (error) {
+    result.className = "error";
+    result.textContent = error.message;
+  }
+}

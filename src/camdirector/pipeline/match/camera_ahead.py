@@ -1,0 +1,101 @@
+"""The camera worked out ahead: with a delay, the next frame's program moment is most likely the
+next buffered one, known already. After a frame the rig works out, in the worker's idle moments
+(its deferred work, before the drawn plan's slices), that moment's CAMERA and VISIBILITY from a
+copy of the shot's camera (program_camera.py), and the candidates' poses (those of the drawn plan
+too, once computed: the tick that applies it shows them). The frame takes them when they are its
+own: the same moment and time step, the same shot, style and pose shown before, and the camera's
+attributes the same objects (cameras change only by assigning them, program_shot.py, so a tick's
+new goal or pair window, or a cut, shows); otherwise it computes them as before. What a frame
+answers does not depend on whether they were worked out ahead
+(tests/pipeline/match/test_match_rig.py). A session with dynamic objects does not look ahead.
+What it saved the frames: docs/casting.md.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.pipeline.match.frame import Candidate
+from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.program_camera import ProgramCamera
+from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
+from camdirector.pipeline.style import Style
+
+
+@dataclass
+class CameraStep:
+    """The CAMERA and VISIBILITY stages of a frame with no cut, worked out ahead (module
+    docstring): what they made of the shot's camera, and what the frame shows."""
+
+    moment: Moment
+    dt_s: float
+    shot: Shot                      # the shot, and its camera, it is a step of
+    camera: ShotCamera
+    camera_before: dict[str, Any]   # the camera's attributes it stepped from (compared by identity)
+    camera_after: dict[str, Any]    # and those it left
+    last_pose: CameraPose | None    # the pose shown before, held when the camera has none
+    style: Style
+    pose: CameraPose
+    flags: list[str]
+    visibility: float               # mean share of the framed subjects seen
+
+    def holds(self, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None) -> bool:
+        """Whether it is this frame's step: the same moment, time step, style and pose before,
+        from the shot's camera exactly as it is (every camera changes by assigning its
+        attributes, so identity tells any change: a tick's new goal or pair window, a cut)."""
+        camera = shot.camera
+        return (self.moment is moment and self.dt_s == dt_s and self.shot is shot and self.camera is camera
+                and self.style is style
+                and self.last_pose is last_pose and vars(camera).keys() == self.camera_before.keys()
+                and all(vars(camera)[k] is v for k, v in self.camera_before.items()))
+
+
+@dataclass
+class CandidatePoses:
+    """The candidates' cameras' poses at a moment (None: an OVERVIEW candidate's, the program's)."""
+
+    moment: Moment
+    candidates: list[CandidateShot]   # the list they are of (by identity)
+    poses: list[CameraPose | None]
+
+
+def step_ahead(program_camera: ProgramCamera, moment: Moment, dt_s: float, shot: Shot, style: Style,
+               last_pose: CameraPose | None) -> CameraStep | None:
+    """The shot's camera's step to the moment, from a copy of it; None when it has no pose and
+    none was shown before."""
+    camera = shot.camera
+    ahead = copy.copy(camera)
+    stepped = program_camera.step(moment, dt_s, ahead, shot, style.response_time_s, last_pose)
+    if stepped is None:
+        return None
+    pose, flags = stepped
+    return CameraStep(moment, dt_s, shot, camera, dict(vars(camera)), dict(vars(ahead)), last_pose, style, pose,
+                      flags, program_camera.visibility(moment, pose, shot))
+
+
+def candidate_poses(moment: Moment, lists: list[list[CandidateShot]]) -> list[CandidatePoses]:
+    """Each list's candidates' poses at the moment."""
+    return [CandidatePoses(moment, c, [None if cam is None else cam.pose(moment) for _, cam, _ in c])
+            for c in lists]
+
+
+def candidate_views(moment: Moment, pose: CameraPose, candidates: list[CandidateShot],
+                    ahead: list[CandidatePoses], program: ShotCamera) -> list[Candidate]:
+    """The frame's candidates: each camera's pose at the moment (worked out ahead, or now; an
+    OVERVIEW candidate's is the program's pose)."""
+    known_poses = next((a for a in ahead if a.moment is moment and a.candidates is candidates), None)
+    poses = known_poses.poses if known_poses is not None else [None] * len(candidates)
+    views = []
+    for (choice, cam, score), known in zip(candidates, poses):
+        shown: CameraPose | None
+        if cam is None:
+            shown = pose
+        elif known is not None and cam is not program:
+            shown = known
+        else:
+            shown = cam.pose(moment)
+        if shown is not None:
+            views.append(Candidate(shown, choice, score))
+    return views
