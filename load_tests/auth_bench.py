@@ -11,6 +11,7 @@ transport alone costs); `overhead_ratio` = auth p50 / no-auth p50 - 1, the figur
 bounds at 0.05. Also the guard's own check timed in this process (us per frame's check, cached
 key: a SHA-256 and two dict lookups), which says how much of any difference is the check itself.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,9 +41,11 @@ class Streamer:
     def __init__(self, address: str, key: str | None):
         self.channel = grpc.aio.insecure_channel(address, options=[("grpc.max_send_message_length", 64 << 20)])
         self.metadata = (("authorization", f"Bearer {key}"),) if key else None
-        self.create = self.channel.unary_unary("/camdirector.v1.Director/CreateSession",
-                                               request_serializer=pb.CreateSessionRequest.SerializeToString,
-                                               response_deserializer=pb.CreateSessionResponse.FromString)
+        self.create = self.channel.unary_unary(
+            "/camdirector.v1.Director/CreateSession",
+            request_serializer=pb.CreateSessionRequest.SerializeToString,
+            response_deserializer=pb.CreateSessionResponse.FromString,
+        )
         self.stream = self.channel.stream_stream("/camdirector.v1.Director/StreamFrames")
         self.health = health_pb2_grpc.HealthStub(self.channel)
         self.session_id = ""
@@ -94,7 +97,7 @@ async def measure(servers: dict[str, ServerProcess], frames_per_round: int, roun
         await streamer.open(request)
     rtts = {name: [] for name in servers}
     floors = {name: [] for name in servers}
-    for r in range(rounds + 1):   # round 0 warms both up and is not counted
+    for r in range(rounds + 1):  # round 0 warms both up and is not counted
         for name, streamer in streamers.items():
             frames = list(frame_updates(scene, frames_per_round, 60.0))
             got = await streamer.round(frames[:frames_per_round])
@@ -116,11 +119,17 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
-    with ServerProcess("--workers", "1", "--tenant-max-fps", "10000", transports=("grpc",), auth=True) as auth, \
-            ServerProcess("--workers", "1", transports=("grpc",)) as open_server:
+    with (
+        ServerProcess("--workers", "1", "--tenant-max-fps", "10000", transports=("grpc",), auth=True) as auth,
+        ServerProcess("--workers", "1", transports=("grpc",)) as open_server,
+    ):
         result = asyncio.run(measure({"auth": auth, "no_auth": open_server}, args.frames, args.rounds))
-    result.update(guard_check_us=round(guard_check_us(), 3), frames_per_round=args.frames, rounds=args.rounds,
-                  transport="grpc StreamFrames, closed loop, one session per server")
+    result.update(
+        guard_check_us=round(guard_check_us(), 3),
+        frames_per_round=args.frames,
+        rounds=args.rounds,
+        transport="grpc StreamFrames, closed loop, one session per server",
+    )
     emit(result, args.json)
     return 0
 

@@ -29,6 +29,7 @@ generator, which say where a frame's CPU goes when the cores run out.
 venv of a `git worktree` of an older commit) while this checkout drives it, so the same command
 measures both; the JSON names the server's checkout and commit.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -81,29 +82,45 @@ def largest_passing(counts: list[int], passes) -> int:
 def step_passes(result: dict, p99_limit_ms: float) -> bool:
     """A stream.run result meets the target: p99 round trip <= the limit, nothing late, dropped or failed."""
     p99 = result["rtt_ms"]["p99"]
-    return (p99 is not None and p99 <= p99_limit_ms and result["late_frames"] == 0
-            and result["dropped_frames"] == 0 and not result["errors"])
+    return (
+        p99 is not None
+        and p99 <= p99_limit_ms
+        and result["late_frames"] == 0
+        and result["dropped_frames"] == 0
+        and not result["errors"]
+    )
 
 
 def _step_summary(result: dict, passed: bool) -> dict:
     def rounded(d: dict) -> dict:
         return {k: None if v is None else round(v, 3) for k, v in d.items()}
 
-    return {"sessions": result["sessions"], "passed": passed, "rtt_ms": rounded(result["rtt_ms"]),
-            "late_frames": result["late_frames"], "dropped_frames": result["dropped_frames"],
-            "frames_sent": result["frames_sent"], "compute_ms": rounded(result["compute_ms"]),
-            "floor_rtt_ms": rounded(result["baseline_rtt_ms"]),
-            "client_cpu_fraction_of_core": result["client_cpu_fraction_of_core"], "errors": result["errors"][:3]}
+    return {
+        "sessions": result["sessions"],
+        "passed": passed,
+        "rtt_ms": rounded(result["rtt_ms"]),
+        "late_frames": result["late_frames"],
+        "dropped_frames": result["dropped_frames"],
+        "frames_sent": result["frames_sent"],
+        "compute_ms": rounded(result["compute_ms"]),
+        "floor_rtt_ms": rounded(result["baseline_rtt_ms"]),
+        "client_cpu_fraction_of_core": result["client_cpu_fraction_of_core"],
+        "errors": result["errors"][:3],
+    }
 
 
 def _server_checkout(python: str) -> dict:
     """Where the server's code comes from: the checkout `python` imports camdirector from, and its commit."""
     # camdirector.server: a checkout from before the src layout (measured against in the same run)
-    code = ("import os\ntry:\n    import camdirector.pipeline as s\nexcept ImportError:\n    import camdirector.server as s\n"
-            "print(os.path.dirname(s.__file__))")
+    code = (
+        "import os\ntry:\n    import camdirector.pipeline as s\nexcept ImportError:\n    import camdirector.server as s\n"
+        "print(os.path.dirname(s.__file__))"
+    )
     package = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
-    found = subprocess.run(["git", "-C", package, "rev-parse", "--show-toplevel"], capture_output=True,
-                           text=True).stdout.strip() or package
+    found = (
+        subprocess.run(["git", "-C", package, "rev-parse", "--show-toplevel"], capture_output=True, text=True).stdout.strip()
+        or package
+    )
     commit = subprocess.run(["git", "-C", found, "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     return {"python": python, "checkout": found, "commit": commit or None}
 
@@ -139,8 +156,16 @@ def _cpu_us_per_frame(before: dict | None, after: dict | None, frames: int) -> d
 def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
     """One mode over one transport: a fresh server, counts tried upward until one fails twice."""
     steps, workers = [], None
-    with ServerProcess("--workers", str(args.workers), "--max-sessions", str(max(counts) * 2),
-                       "--session-resume-s", "1", *args.server_arg, python=args.server_python) as server:
+    with ServerProcess(
+        "--workers",
+        str(args.workers),
+        "--max-sessions",
+        str(max(counts) * 2),
+        "--session-resume-s",
+        "1",
+        *args.server_arg,
+        python=args.server_python,
+    ) as server:
         workers = server.ready.get("workers")
         address = server.grpc if transport == "grpc" else server.zmq
 
@@ -148,13 +173,27 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
             """n sessions, run once more when they fail; whether they passed."""
             for _ in range(2):
                 cpu_before = server_cpu_s(server.proc.pid)
-                result = asyncio.run(stream.run(transport, address, n, args.rate, args.seconds,
-                                                visibility=pb.VisibilityMode.Value(mode),
-                                                warmup_frames=args.warmup_frames))
+                result = asyncio.run(
+                    stream.run(
+                        transport,
+                        address,
+                        n,
+                        args.rate,
+                        args.seconds,
+                        visibility=pb.VisibilityMode.Value(mode),
+                        warmup_frames=args.warmup_frames,
+                    )
+                )
                 passed = step_passes(result, args.p99_ms)
-                steps.append({**_step_summary(result, passed), "cpu_us_per_frame": {
-                    **(_cpu_us_per_frame(cpu_before, server_cpu_s(server.proc.pid), result["frames_received"]) or {}),
-                    "load_generator": round(result["client_cpu_s"] / max(result["frames_received"], 1) * 1e6, 1)}})
+                steps.append(
+                    {
+                        **_step_summary(result, passed),
+                        "cpu_us_per_frame": {
+                            **(_cpu_us_per_frame(cpu_before, server_cpu_s(server.proc.pid), result["frames_received"]) or {}),
+                            "load_generator": round(result["client_cpu_s"] / max(result["frames_received"], 1) * 1e6, 1),
+                        },
+                    }
+                )
                 time.sleep(args.settle_s)  # the step's sessions are reclaimed before the next starts
                 if passed:
                     return True
@@ -164,11 +203,15 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
         if not server.alive():
             raise RuntimeError(f"the server died during {mode} over {transport}: {server.log_tail()}")
     at_capacity = [s for s in steps if s["sessions"] == capacity and s["passed"]]
-    return {"mode": mode, "transport": transport, "capacity_sessions": capacity, "server_workers": workers,
-            "floor_rtt_ms_at_capacity": at_capacity[-1]["floor_rtt_ms"] if at_capacity else None,
-            "client_cpu_fraction_of_core_at_capacity":
-                at_capacity[-1]["client_cpu_fraction_of_core"] if at_capacity else None,
-            "steps": steps}
+    return {
+        "mode": mode,
+        "transport": transport,
+        "capacity_sessions": capacity,
+        "server_workers": workers,
+        "floor_rtt_ms_at_capacity": at_capacity[-1]["floor_rtt_ms"] if at_capacity else None,
+        "client_cpu_fraction_of_core_at_capacity": at_capacity[-1]["client_cpu_fraction_of_core"] if at_capacity else None,
+        "steps": steps,
+    }
 
 
 def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
@@ -185,18 +228,28 @@ def main(argv=None) -> int:
     parser.add_argument("--rate", type=float, default=60.0, help="frames per second per session, Hz")
     parser.add_argument("--max-sessions", type=int, default=64, help="the largest count tried")
     parser.add_argument("--p99-ms", type=float, default=10.0, help="round trip p99 a step must not exceed, ms")
-    parser.add_argument("--warmup-frames", type=int, default=10,
-                        help="each session's first frames, answered but not judged (set-up: ~30 ms in the map modes)")
+    parser.add_argument(
+        "--warmup-frames",
+        type=int,
+        default=10,
+        help="each session's first frames, answered but not judged (set-up: ~30 ms in the map modes)",
+    )
     parser.add_argument("--modes", default=",".join(MODES), help="visibility modes, comma-separated")
     parser.add_argument("--transports", default=",".join(TRANSPORTS), help="grpc, zmq or both, comma-separated")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="server worker processes")
-    parser.add_argument("--settle-s", type=float, default=1.5,
-                        help="pause after a step while its sessions are reclaimed, s")
-    parser.add_argument("--server-python", default=sys.executable,
-                        help="the interpreter that runs the server (another checkout's venv measures that checkout)")
-    parser.add_argument("--server-arg", action="append", default=[],
-                        help="one more argument of `camdirector serve` (repeat it), e.g. --server-arg=--checkpoint-store "
-                             "--server-arg=off to measure without checkpoints")
+    parser.add_argument("--settle-s", type=float, default=1.5, help="pause after a step while its sessions are reclaimed, s")
+    parser.add_argument(
+        "--server-python",
+        default=sys.executable,
+        help="the interpreter that runs the server (another checkout's venv measures that checkout)",
+    )
+    parser.add_argument(
+        "--server-arg",
+        action="append",
+        default=[],
+        help="one more argument of `camdirector serve` (repeat it), e.g. --server-arg=--checkpoint-store "
+        "--server-arg=off to measure without checkpoints",
+    )
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     try:
@@ -210,13 +263,19 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     cases = [measure_case(mode, transport, counts, args) for mode in modes for transport in transports]
     result = {
-        "p99_limit_ms": args.p99_ms, "rate_hz": args.rate, "seconds_per_step": args.seconds,
+        "p99_limit_ms": args.p99_ms,
+        "rate_hz": args.rate,
+        "seconds_per_step": args.seconds,
         "warmup_frames_per_session": args.warmup_frames,
-        "counts_tried_up_to": counts, "cpus": os.cpu_count(), "server": _server_checkout(args.server_python),
+        "counts_tried_up_to": counts,
+        "cpus": os.cpu_count(),
+        "server": _server_checkout(args.server_python),
         "server_args": args.server_arg,
-        "capacity_sessions": {mode: {c["transport"]: c["capacity_sessions"] for c in cases if c["mode"] == mode}
-                              for mode in modes},
-        "wall_s": round(time.perf_counter() - t0, 1), "cases": cases,
+        "capacity_sessions": {
+            mode: {c["transport"]: c["capacity_sessions"] for c in cases if c["mode"] == mode} for mode in modes
+        },
+        "wall_s": round(time.perf_counter() - t0, 1),
+        "cases": cases,
     }
     emit(result, args.json)
     return 0

@@ -9,6 +9,7 @@ mode and store, the frame's median and p99 (ms) and their ratio to the baseline,
 size (bytes), and the restore of the session by a second table after 1.5 snapshot periods
 (create, snapshot, inputs since: ms).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,8 +44,7 @@ def _measure(create: bytes, frames: list[bytes], timed: int, store: str, every: 
     """The first `timed` frames timed; then, with checkpoints, 1.5 snapshot periods more and a
     second table (another worker) restoring the session for the frame after them."""
     with tempfile.TemporaryDirectory() as folder:
-        settings = ServerSettings(data_dir=folder, checkpoint_store=store, checkpoint_every_frames=every,
-                                  max_triangles=10**7)
+        settings = ServerSettings(data_dir=folder, checkpoint_store=store, checkpoint_every_frames=every, max_triangles=10**7)
         table = SessionTable(settings)
         requests = Dispatcher(table)
         requests.handle_bytes("create", "s", create)
@@ -56,8 +56,7 @@ def _measure(create: bytes, frames: list[bytes], timed: int, store: str, every: 
         out = {"frame_ms_p50": float(np.median(times_ms)), "frame_ms_p99": float(np.percentile(times_ms, 99))}
         if store != "off":
             held = table.held["s"]
-            out["snapshot_bytes"] = len(dumps_state((held.session, held.style_msg),
-                                                    held.session.creation_objects()))
+            out["snapshot_bytes"] = len(dumps_state((held.session, held.style_msg), held.session.creation_objects()))
             for payload in frames[timed:-1]:
                 requests.handle_bytes("frame", "s", payload)
             other = SessionTable(settings)
@@ -83,10 +82,13 @@ def main() -> None:
         redis = RedisServer(Path(folder)).start()
         try:
             for mode in ("FRAMING_ONLY", "ANTICIPATION"):
-                create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9),
-                                         getattr(cd.pb, mode)).SerializeToString()
-                rows = {name: _measure(create, frames, args.frames, store, args.every)
-                        for name, store in (("off", "off"), ("folder", ""), ("redis", redis.url))}
+                create = session_request(
+                    scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9), getattr(cd.pb, mode)
+                ).SerializeToString()
+                rows = {
+                    name: _measure(create, frames, args.frames, store, args.every)
+                    for name, store in (("off", "off"), ("folder", ""), ("redis", redis.url))
+                }
                 for name in ("folder", "redis"):
                     rows[name]["ratio_p50_vs_off"] = rows[name]["frame_ms_p50"] / rows["off"]["frame_ms_p50"]
                 report["modes"][mode] = rows

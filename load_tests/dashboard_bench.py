@@ -10,6 +10,7 @@ Reports both runs' frame round trip p50/p99 and their ratio, and the latency of 
 requests. The dashboard client runs in a process of its own on the same machine (as a browser
 would), so the ratio includes its CPU as well as the server's.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,8 +39,9 @@ def _watch(http: str, hz: float, stop, out) -> None:
             for session in client.get("/v1/sessions").json()["sessions"]:
                 session_id = session["session_id"]
                 t0 = time.perf_counter()
-                reply = client.get(f"/v1/sessions/{session_id}",
-                                   params={} if session_id not in seen else {"after_frame": seen[session_id]})
+                reply = client.get(
+                    f"/v1/sessions/{session_id}", params={} if session_id not in seen else {"after_frame": seen[session_id]}
+                )
                 latencies_ms.append((time.perf_counter() - t0) * 1e3)
                 frames = reply.json()["frames"] if reply.status_code == 200 else []
                 frames_seen.append(len(frames))
@@ -81,12 +83,29 @@ def main(argv=None) -> int:
         alone = asyncio.run(stream.run("grpc", server.grpc, args.sessions, args.rate, args.seconds))
         watched = _watched_run(server, args.sessions, args.rate, args.seconds, args.watch_hz)
     ratio = {k: watched["rtt_ms"][k] / alone["rtt_ms"][k] for k in ("p50", "p99") if alone["rtt_ms"][k]}
-    result = {"sessions": args.sessions, "rate_hz": args.rate, "seconds": args.seconds,
-              "watch_hz": args.watch_hz, "server_workers": workers,
-              "alone": {k: alone[k] for k in ("rtt_ms", "compute_ms", "late_frames", "dropped_frames", "errors")},
-              "watched": {k: watched[k] for k in ("rtt_ms", "compute_ms", "late_frames", "dropped_frames", "errors",
-                                                 "detail_requests", "detail_ms", "detail_frames_median")},
-              "rtt_ratio_watched_vs_alone": ratio, "cpus": os.cpu_count()}
+    result = {
+        "sessions": args.sessions,
+        "rate_hz": args.rate,
+        "seconds": args.seconds,
+        "watch_hz": args.watch_hz,
+        "server_workers": workers,
+        "alone": {k: alone[k] for k in ("rtt_ms", "compute_ms", "late_frames", "dropped_frames", "errors")},
+        "watched": {
+            k: watched[k]
+            for k in (
+                "rtt_ms",
+                "compute_ms",
+                "late_frames",
+                "dropped_frames",
+                "errors",
+                "detail_requests",
+                "detail_ms",
+                "detail_frames_median",
+            )
+        },
+        "rtt_ratio_watched_vs_alone": ratio,
+        "cpus": os.cpu_count(),
+    }
     emit(result, args.json)
     ok = not alone["errors"] and not watched["errors"] and watched["detail_requests"] > 0
     return 0 if ok and alone["dropped_frames"] == watched["dropped_frames"] == 0 else 1

@@ -25,6 +25,7 @@ and per session, and the
 floor: a health check's round trip over the same path (TLS to the balancer for a node) measured in
 the same run.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,8 +59,13 @@ def _undisturbed(create: pb.CreateSessionRequest, updates: list[pb.FrameUpdate])
         table.create("ref", create)
         poses = []
         for update in updates:
-            update = pb.FrameUpdate(session_id="ref", frame=update.frame, time_s=update.time_s,
-                                    packed_ids=update.packed_ids, packed_transforms=update.packed_transforms)
+            update = pb.FrameUpdate(
+                session_id="ref",
+                frame=update.frame,
+                time_s=update.time_s,
+                packed_ids=update.packed_ids,
+                packed_transforms=update.packed_transforms,
+            )
             poses.append(table.frame(update).pose)
         return poses
 
@@ -72,8 +78,11 @@ def _pose_difference(a: pb.CameraPose, b: pb.CameraPose) -> float:
 
 def _health_floor_ms(address: str, ca_file: Path | None, n: int = 50) -> float:
     """The median round trip of a health check to `address`, over TLS trusting `ca_file` if given."""
-    channel = (grpc.insecure_channel(address) if ca_file is None
-               else grpc.secure_channel(address, grpc.ssl_channel_credentials(ca_file.read_bytes())))
+    channel = (
+        grpc.insecure_channel(address)
+        if ca_file is None
+        else grpc.secure_channel(address, grpc.ssl_channel_credentials(ca_file.read_bytes()))
+    )
     with channel:
         stub = health_pb2_grpc.HealthStub(channel)
         times = []
@@ -92,6 +101,7 @@ def _stream(session, updates, rate_hz: float, start_s: float, out: dict) -> None
                 time.sleep(delay)
             update.session_id = session.id
             yield update
+
     answers, times = [], []
     try:
         for answer in session.stream(paced()):
@@ -102,8 +112,7 @@ def _stream(session, updates, rate_hz: float, start_s: float, out: dict) -> None
     out.update(answers=answers, times=times)
 
 
-def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float,
-        compose_cluster=None) -> dict:
+def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float, compose_cluster=None) -> dict:
     """The benchmark (the module docstring). `compose_cluster`: a `ComposeCluster` already up for
     `--kill node-container`, used and left up (a test's); by default one is brought up and down."""
     scene = build_demo_scene()
@@ -116,22 +125,33 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
         if kill in ("node", "node-container"):
             if kill == "node-container":
                 from camdirector.deploy.compose import ComposeCluster
-                cluster = compose_cluster or ComposeCluster.up(Path(__file__).resolve().parents[1], folder,
-                                                               project="camdirector-failover",
-                                                               log=lambda line: print(line, file=sys.stderr))
+
+                cluster = compose_cluster or ComposeCluster.up(
+                    Path(__file__).resolve().parents[1],
+                    folder,
+                    project="camdirector-failover",
+                    log=lambda line: print(line, file=sys.stderr),
+                )
             else:
                 from camdirector.deploy.cluster import Cluster
+
                 cluster = Cluster.up(nodes=nodes, folder=folder)
             floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
-            engine = _admin_call(cluster, "POST", f"https://{cluster.http}/v1/keys",
-                                 json={"role": "engine", "name": "load_tests.failover"})["key"]
+            engine = _admin_call(
+                cluster, "POST", f"https://{cluster.http}/v1/keys", json={"role": "engine", "name": "load_tests.failover"}
+            )["key"]
             # in containers a create sometimes waits 10, 20 or 30 s (nothing logged by HAProxy or the
             # nodes; podman's DNS, which fails lookups while a container starts on the network, is
             # the suspect): the calls get 60 s there, and the slowest create is reported
-            client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file,
-                                timeout_s=60.0 if kill == "node-container" else cd.wire.DEFAULT_TIMEOUT_S)
+            client = cd.connect(
+                f"grpcs://{cluster.grpc}",
+                key=engine,
+                ca_file=cluster.ca_file,
+                timeout_s=60.0 if kill == "node-container" else cd.wire.DEFAULT_TIMEOUT_S,
+            )
         else:
             from camdirector.deploy.server_process import ServerProcess
+
             server = ServerProcess("--workers", "2", "--data-dir", str(folder), transports=("grpc", "http"))
             floor_ms = _health_floor_ms(server.grpc, None)
             client = cd.connect(server.url("grpc"))
@@ -146,9 +166,12 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             counts = {node: len(cluster.sessions_on(node) & {s.id for s in opened}) for node in cluster.nodes}
         results = [{} for _ in opened]
         start_s = time.perf_counter() + 0.5
-        threads = [threading.Thread(target=_stream, args=(s, [pb.FrameUpdate.FromString(u.SerializeToString())
-                                                             for u in updates], rate_hz, start_s, r))
-                   for s, r in zip(opened, results)]
+        threads = [
+            threading.Thread(
+                target=_stream, args=(s, [pb.FrameUpdate.FromString(u.SerializeToString()) for u in updates], rate_hz, start_s, r)
+            )
+            for s, r in zip(opened, results)
+        ]
         for thread in threads:
             thread.start()
         time.sleep(max(0.0, start_s + kill_after_s - time.perf_counter()))
@@ -158,8 +181,7 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             killed_at = time.monotonic()
             cluster.kill(victim)
         elif kill == "node":
-            counts = [len(_admin_call(cluster, "GET", f"https://{node.http}/v1/sessions")["sessions"])
-                      for node in cluster.nodes]
+            counts = [len(_admin_call(cluster, "GET", f"https://{node.http}/v1/sessions")["sessions"]) for node in cluster.nodes]
             victim = max(range(len(counts)), key=counts.__getitem__)
             held = counts[victim]
             killed_at = time.monotonic()
@@ -194,26 +216,36 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             first_differing.append(next((a.frame for a, d in zip(r["answers"], differences) if d > 0.0), None))
             answered_at_kill.append(len(before))
         client.close()
-        return {"kill": kill, "nodes": len(cluster.nodes) if cluster is not None else 1, "sessions": sessions, "rate_hz": rate_hz,
-                "seconds": seconds, "kill_after_s": kill_after_s, "sessions_on_killed": held,
-                "sessions_lost": len(lost), "errors": [r["error"] for r in lost][:3],
-                "frames_not_answered": unanswered, "frames_expected": sessions * len(updates),
-                "retries": sum(s.retries for s in opened),
-                "recovery_s_p50": float(np.percentile(recoveries, 50)) if recoveries else None,
-                "recovery_s_p99": float(np.percentile(recoveries, 99)) if recoveries else None,
-                "recovery_s_max": max(recoveries) if recoveries else None,
-                # the same over the sessions whose stream the kill broke (the others only paused)
-                "interrupted_sessions": len(interrupted),
-                "interrupted_recovery_s_p50": float(np.percentile(interrupted, 50)) if interrupted else None,
-                "interrupted_recovery_s_p99": float(np.percentile(interrupted, 99)) if interrupted else None,
-                "max_pose_difference": max(worst_each),
-                "max_pose_difference_per_session": worst_each,
-                "first_differing_frame_per_session": first_differing,
-                "frames_answered_at_kill_per_session": answered_at_kill,
-                "retries_per_session": [s.retries for s in opened],
-                "sessions_per_node_before_kill": counts if kill != "worker" else None,
-                "killed_container_rejoined_s": rejoined_s,
-                "create_s_max": max(create_s), "floor_health_ms_p50": floor_ms}
+        return {
+            "kill": kill,
+            "nodes": len(cluster.nodes) if cluster is not None else 1,
+            "sessions": sessions,
+            "rate_hz": rate_hz,
+            "seconds": seconds,
+            "kill_after_s": kill_after_s,
+            "sessions_on_killed": held,
+            "sessions_lost": len(lost),
+            "errors": [r["error"] for r in lost][:3],
+            "frames_not_answered": unanswered,
+            "frames_expected": sessions * len(updates),
+            "retries": sum(s.retries for s in opened),
+            "recovery_s_p50": float(np.percentile(recoveries, 50)) if recoveries else None,
+            "recovery_s_p99": float(np.percentile(recoveries, 99)) if recoveries else None,
+            "recovery_s_max": max(recoveries) if recoveries else None,
+            # the same over the sessions whose stream the kill broke (the others only paused)
+            "interrupted_sessions": len(interrupted),
+            "interrupted_recovery_s_p50": float(np.percentile(interrupted, 50)) if interrupted else None,
+            "interrupted_recovery_s_p99": float(np.percentile(interrupted, 99)) if interrupted else None,
+            "max_pose_difference": max(worst_each),
+            "max_pose_difference_per_session": worst_each,
+            "first_differing_frame_per_session": first_differing,
+            "frames_answered_at_kill_per_session": answered_at_kill,
+            "retries_per_session": [s.retries for s in opened],
+            "sessions_per_node_before_kill": counts if kill != "worker" else None,
+            "killed_container_rejoined_s": rejoined_s,
+            "create_s_max": max(create_s),
+            "floor_health_ms_p50": floor_ms,
+        }
     finally:
         if cluster is not None and cluster is not compose_cluster:
             cluster.down()
@@ -225,8 +257,14 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
 
 def _admin_call(cluster, method: str, url: str, **kwargs) -> dict:
     """A REST call to the cluster (the balancer or a node) with its admin key, over TLS."""
-    answer = httpx.request(method, url, headers={"Authorization": f"Bearer {cluster.admin_key}"}, timeout=10,
-                           verify=ssl.create_default_context(cafile=str(cluster.ca_file)), **kwargs)
+    answer = httpx.request(
+        method,
+        url,
+        headers={"Authorization": f"Bearer {cluster.admin_key}"},
+        timeout=10,
+        verify=ssl.create_default_context(cafile=str(cluster.ca_file)),
+        **kwargs,
+    )
     answer.raise_for_status()
     return answer.json()
 

@@ -11,6 +11,7 @@ A-map update of an amortized step (predict 2 maps, aggregate 10, apply a mask); 
 scene sizes at 64 x 64 that locates where ray casting overtakes GL on this machine, which is the
 constant of geometry.toric_maps.choose_backend. Prints JSON (and writes it to --json).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -51,8 +52,7 @@ FRAME_S = 1.0 / 60.0
 class Forest:
     """Cylinders around two targets; `step` advances the moving ones and the targets by one frame."""
 
-    def __init__(self, trees: int = 100, sections: int = 12, moving: int = 30, seed: int = 0,
-                 moving_sections: int | None = None):
+    def __init__(self, trees: int = 100, sections: int = 12, moving: int = 30, seed: int = 0, moving_sections: int | None = None):
         rng = np.random.default_rng(seed)
         spots = []
         while len(spots) < trees:
@@ -67,7 +67,7 @@ class Forest:
         self.moving = []
         for i, s in enumerate(spots[:moving]):
             heading = rng.uniform(0.0, math.tau)
-            velocity = np.array([math.cos(heading), 0.0, math.sin(heading)])      # 1 m/s
+            velocity = np.array([math.cos(heading), 0.0, math.sin(heading)])  # 1 m/s
             self.scene.add_dynamic(f"tree{i}", trunk, RigidTransform(position_world=s + [0.0, 2.5, 0.0]), velocity)
             self.moving.append((f"tree{i}", s + [0.0, 2.5, 0.0], velocity))
         self.target_meshes = [sphere(0.3), capsule(0.25, 1.7)]
@@ -109,8 +109,7 @@ def _time_maps(backend, forest: Forest, resolution: int, count: int, reps: int, 
         window = MapWindow.around(forest.torus, theta, phi, WindowSettings(resolution=resolution))
         points, owners = forest.samples(count, rng)
         t0 = time.perf_counter()
-        backend.compute(forest.torus, window, points, exclude_ids=owners,
-                        previous_torus=forest.previous_torus, dt_s=FRAME_S)
+        backend.compute(forest.torus, window, points, exclude_ids=owners, previous_torus=forest.previous_torus, dt_s=FRAME_S)
         if rep:  # the first call builds scenes and atlases
             times.append(time.perf_counter() - t0)
     return summary(times, 1e3)
@@ -151,16 +150,20 @@ def bench_agreement(resolution: int = 64) -> dict:
     maps = {}
     for name in ("embree", "gl"):
         backend = make_backend(name, forest.scene)
-        maps[name] = backend.compute(forest.torus, window, points, exclude_ids=owners,
-                                     previous_torus=forest.previous_torus, dt_s=FRAME_S)
+        maps[name] = backend.compute(
+            forest.torus, window, points, exclude_ids=owners, previous_torus=forest.previous_torus, dt_s=FRAME_S
+        )
         backend.close()
     ray, gl = maps["embree"], maps["gl"]
     both = (ray.shadow > 0) & (gl.shadow > 0) & (np.linalg.norm(ray.velocity_rad_s, axis=-1) > 1e-3)
     v1, v2 = ray.velocity_rad_s[both], gl.velocity_rad_s[both]
     cos = np.einsum("ij,ij->i", v1, v2) / (np.linalg.norm(v1, axis=1) * np.linalg.norm(v2, axis=1) + 1e-12)
-    return {"resolution": resolution, "occluded_share": round(float(ray.shadow.mean()), 4),
-            "shadow_agreement": round(float(np.mean(ray.shadow == gl.shadow)), 4),
-            "velocity_cos_over_0.9_share": round(float(np.mean(cos > 0.9)), 4)}
+    return {
+        "resolution": resolution,
+        "occluded_share": round(float(ray.shadow.mean()), 4),
+        "shadow_agreement": round(float(np.mean(ray.shadow == gl.shadow)), 4),
+        "velocity_cos_over_0.9_share": round(float(np.mean(cos > 0.9)), 4),
+    }
 
 
 def bench_anticipation(quick: bool) -> dict:
@@ -181,8 +184,9 @@ def bench_anticipation(quick: bool) -> dict:
             slots = amap.next_slots()
             window = MapWindow.around(forest.torus, theta, phi, settings.window, lattice=amap.window)
             points, owners = forest.samples(len(slots), rng)
-            maps = backend.compute(forest.torus, window, points, exclude_ids=owners,
-                                   previous_torus=forest.previous_torus, dt_s=FRAME_S)
+            maps = backend.compute(
+                forest.torus, window, points, exclude_ids=owners, previous_torus=forest.previous_torus, dt_s=FRAME_S
+            )
             t0 = time.perf_counter()
             amap.refresh(forest.time_s, slots, maps, forest.torus)
             if rep >= 2:  # after the first fill of all 10 slots
@@ -190,8 +194,11 @@ def bench_anticipation(quick: bool) -> dict:
                 predict.append(amap.last_refresh_ms["predict"] / 1e3)
                 occluded.append(float(maps.shadow.mean()))
         backend.close()
-        out[str(resolution)] = {"update_ms": summary(times, 1e3), "predict_2_maps_ms": summary(predict, 1e3),
-                                "occluded_share": round(float(np.mean(occluded)), 4)}
+        out[str(resolution)] = {
+            "update_ms": summary(times, 1e3),
+            "predict_2_maps_ms": summary(predict, 1e3),
+            "occluded_share": round(float(np.mean(occluded)), 4),
+        }
     return out
 
 
@@ -201,9 +208,10 @@ def bench_backend_rule(quick: bool) -> dict:
     The static trees' tessellation grows while the 30 moving trees stay at 12 sections (1,440
     moving triangles), so the sweep measures scene size, not the moving objects' handling.
     """
-    sizes = {64: [(10, 3), (25, 4), (100, 3), (100, 6), (100, 12), (100, 24), (100, 32), (100, 48), (100, 64),
-                  (100, 96), (100, 192)],
-             128: [(100, 12), (100, 48), (100, 96), (100, 192), (100, 384)]}
+    sizes = {
+        64: [(10, 3), (25, 4), (100, 3), (100, 6), (100, 12), (100, 24), (100, 32), (100, 48), (100, 64), (100, 96), (100, 192)],
+        128: [(100, 12), (100, 48), (100, 96), (100, 192), (100, 384)],
+    }
     rng = np.random.default_rng(4)
     out = {}
     for resolution, scenes in sizes.items():
@@ -219,15 +227,21 @@ def bench_backend_rule(quick: bool) -> dict:
                 row[f"{name}_10_maps_ms"] = _time_maps(backend, forest, resolution, 10, max(2, reps // 3), rng)["median"]
                 backend.close()
             rows.append(row)
-        out[str(resolution)] = {"sweep": rows, "crossover_triangles_2_maps": _crossover(rows, "2_maps_ms"),
-                                "crossover_triangles_10_maps": _crossover(rows, "10_maps_ms")}
+        out[str(resolution)] = {
+            "sweep": rows,
+            "crossover_triangles_2_maps": _crossover(rows, "2_maps_ms"),
+            "crossover_triangles_10_maps": _crossover(rows, "10_maps_ms"),
+        }
     renderer = probe_gl_renderer()
     forest_triangles = Forest().scene.triangle_count
-    return {**out, "GL_MAX_TRIANGLES_ON_CPU": GL_MAX_TRIANGLES_ON_CPU,
-            "rule": "no EGL -> embree; hardware GPU -> gl; software GL (llvmpipe) -> gl up to "
-                    "GL_MAX_TRIANGLES_ON_CPU * (resolution / 64)^2 triangles, embree above",
-            "renderer": renderer,
-            "chosen_for_forest": {str(r): choose_backend(forest_triangles, renderer, r) for r in RESOLUTIONS}}
+    return {
+        **out,
+        "GL_MAX_TRIANGLES_ON_CPU": GL_MAX_TRIANGLES_ON_CPU,
+        "rule": "no EGL -> embree; hardware GPU -> gl; software GL (llvmpipe) -> gl up to "
+        "GL_MAX_TRIANGLES_ON_CPU * (resolution / 64)^2 triangles, embree above",
+        "renderer": renderer,
+        "chosen_for_forest": {str(r): choose_backend(forest_triangles, renderer, r) for r in RESOLUTIONS},
+    }
 
 
 def _crossover(rows: list[dict], key: str):
@@ -246,8 +260,13 @@ def main(argv=None) -> int:
     forest = Forest()
     result = {
         "machine": {"cpus": os.cpu_count(), "gl_renderer": probe_gl_renderer(), "python": sys.version.split()[0]},
-        "scene": {"triangles": forest.scene.triangle_count, "cylinders": 100, "moving_cylinders": 30,
-                  "samples_per_target": SAMPLES_PER_TARGET, "targets": 2},
+        "scene": {
+            "triangles": forest.scene.triangle_count,
+            "cylinders": 100,
+            "moving_cylinders": 30,
+            "samples_per_target": SAMPLES_PER_TARGET,
+            "targets": 2,
+        },
         "maps": bench_maps(args.quick),
         "agreement": bench_agreement(),
         "anticipation": bench_anticipation(args.quick),
@@ -258,8 +277,12 @@ def main(argv=None) -> int:
     summary = {}
     for name in ("embree", "gl"):
         maps64 = result["maps"][name]["64"]["amortized_2_maps_ms"]["median"]
-        summary[name] = {"maps_ms": maps64, "a_map_ms": update64, "update_total_ms": round(maps64 + update64, 3),
-                         "per_frame_average_ms_at_60fps": round((maps64 + update64) * updates_per_frame, 3)}
+        summary[name] = {
+            "maps_ms": maps64,
+            "a_map_ms": update64,
+            "update_total_ms": round(maps64 + update64, 3),
+            "per_frame_average_ms_at_60fps": round((maps64 + update64) * updates_per_frame, 3),
+        }
     result["amortized_update_64"] = summary
     emit(result, args.json)
     return 0

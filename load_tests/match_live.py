@@ -11,6 +11,7 @@ program frame, ezQuake's autotrack paced alike (a first-person view: nearly no p
 p99 and max in ms, frames over 5 ms; `p99_ratio_to_floor` = ours paced / autotrack paced. A 10 s
 delay. The three programs' cuts say whether the pacing changed the program (it must not).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -50,14 +51,19 @@ def main(argv=None) -> int:
             with cd.connect(server.url("grpc")) as client:
                 for rate in (float(r) for r in args.rates.split(",")):
                     row = {}
-                    for name, director, speed in (("planned_live", "planned", 1.0),
-                                                  ("planned_unpaced", "planned", 1e6),
-                                                  ("autotrack_live", "autotrack", 1.0)):
+                    for name, director, speed in (
+                        ("planned_live", "planned", 1.0),
+                        ("planned_unpaced", "planned", 1e6),
+                        ("autotrack_live", "autotrack", 1.0),
+                    ):
                         t0 = time.perf_counter()
-                        played = play_match(client, match, director=director, delay_s=args.delay, rate_hz=rate,
-                                            speed=speed)
-                        row[name] = dict(_timing(played.compute_ms), cuts=played.counts.cuts,
-                                         late_frames=played.counts.late, wall_s=round(time.perf_counter() - t0, 1))
+                        played = play_match(client, match, director=director, delay_s=args.delay, rate_hz=rate, speed=speed)
+                        row[name] = dict(
+                            _timing(played.compute_ms),
+                            cuts=played.counts.cuts,
+                            late_frames=played.counts.late,
+                            wall_s=round(time.perf_counter() - t0, 1),
+                        )
                         print(f"match_live {rate:g} Hz {name}: {row[name]}", file=sys.stderr, flush=True)
                     row["p99_ratio_to_floor"] = round(row["planned_live"]["p99"] / row["autotrack_live"]["p99"], 2)
                     result[f"{rate:g}hz"] = row

@@ -14,6 +14,7 @@ through the same table (its shortest path: parse, look up, answer the last pose,
 measured after every case, with each case's median over it. Poses are a function of the frame
 number and the seed alone, so a run is reproducible frame for frame.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,21 +47,40 @@ def _box(size) -> pb.Mesh:
 
 def scene_request(movers: int, mode: int, seed: int = 0) -> pb.CreateSessionRequest:
     """The floor (2 triangles), 160 static crates (1,920 triangles), `movers` dynamic boxes, the actor."""
-    objects = [pb.SceneObject(id="floor", mesh=pb.Mesh(triangles=pb.TriangleMesh(
-        vertices=[-40, 0, -40, 40, 0, -40, 40, 0, 40, -40, 0, 40], indices=[0, 2, 1, 0, 3, 2])))]
+    objects = [
+        pb.SceneObject(
+            id="floor",
+            mesh=pb.Mesh(
+                triangles=pb.TriangleMesh(vertices=[-40, 0, -40, 40, 0, -40, 40, 0, 40, -40, 0, 40], indices=[0, 2, 1, 0, 3, 2])
+            ),
+        )
+    ]
     for i in range(160):
         angle = 2.0 * math.pi * i / 160
         radius = 18.0 + 4.0 * (i % 3)
-        objects.append(pb.SceneObject(id=f"crate{i}", mesh=_box((1.0, 1.5, 1.0)), transform=pb.Transform(
-            position=_vec(radius * math.cos(angle), 0.75, radius * math.sin(angle)))))
+        objects.append(
+            pb.SceneObject(
+                id=f"crate{i}",
+                mesh=_box((1.0, 1.5, 1.0)),
+                transform=pb.Transform(position=_vec(radius * math.cos(angle), 0.75, radius * math.sin(angle))),
+            )
+        )
     for i in range(movers):
         x, z = _mover_xz(i, 0.0, seed)
-        objects.append(pb.SceneObject(id=f"mover{i}", dynamic=True, mesh=_box((1.0, 2.0, 1.0)),
-                                      transform=pb.Transform(position=_vec(x, 1.0, z))))
-    actor = pb.Target(id="actor", mesh=pb.Mesh(primitive=pb.Primitive(capsule=pb.Primitive.Capsule(radius=0.3, height=1.8))),
-                      transform=pb.Transform(position=_vec(ACTOR_RADIUS_M, 0.9, 0.0)), aim_offset=_vec(0.0, 0.6, 0.0))
-    return pb.CreateSessionRequest(objects=objects, targets=[actor], seed=seed,
-                                   style=pb.Style(visibility=mode, map_resolution=64))
+        objects.append(
+            pb.SceneObject(
+                id=f"mover{i}", dynamic=True, mesh=_box((1.0, 2.0, 1.0)), transform=pb.Transform(position=_vec(x, 1.0, z))
+            )
+        )
+    actor = pb.Target(
+        id="actor",
+        mesh=pb.Mesh(primitive=pb.Primitive(capsule=pb.Primitive.Capsule(radius=0.3, height=1.8))),
+        transform=pb.Transform(position=_vec(ACTOR_RADIUS_M, 0.9, 0.0)),
+        aim_offset=_vec(0.0, 0.6, 0.0),
+    )
+    return pb.CreateSessionRequest(
+        objects=objects, targets=[actor], seed=seed, style=pb.Style(visibility=mode, map_resolution=64)
+    )
 
 
 def _actor_xz(t: float) -> tuple[float, float]:
@@ -86,14 +106,15 @@ def frame_bytes(session_id: str, frame: int, movers: int, seed: int = 0) -> byte
         yaw = 0.3 * t + i
         ids.append(f"mover{i}")
         values += [x, 1.0, z, 0.0, math.sin(yaw / 2), 0.0, math.cos(yaw / 2), 1.0, 1.0, 1.0]
-    return pb.FrameUpdate(session_id=session_id, frame=frame, time_s=t, packed_ids=ids,
-                          packed_transforms=values).SerializeToString()
+    return pb.FrameUpdate(
+        session_id=session_id, frame=frame, time_s=t, packed_ids=ids, packed_transforms=values
+    ).SerializeToString()
 
 
 def run_case(table: SessionTable, mode_name: str, movers: int, frames: int, warmup: int) -> dict:
     session_id = f"{mode_name}-{movers}"
     table.create(session_id, scene_request(movers, MODES[mode_name]))
-    requests = Dispatcher(table)   # frames as a worker answers them: bytes in, bytes out
+    requests = Dispatcher(table)  # frames as a worker answers them: bytes in, bytes out
     compute, stages = [], {}
     for k in range(1, warmup + frames + 1):
         reply = pb.CameraUpdate.FromString(requests.handle_bytes("frame", session_id, frame_bytes(session_id, k, movers))[0])
@@ -108,11 +129,15 @@ def run_case(table: SessionTable, mode_name: str, movers: int, frames: int, warm
         requests.handle_bytes("frame", session_id, stale_payload)
         stale.append((time.perf_counter() - t0) * 1e3)
     table.drop(session_id)
-    return {"mode": mode_name, "movers": movers, "map_backend": maps.backend_name if maps is not None else None,
-            "compute_ms": summary(compute),
-            "stage_ms_median": {name: round(float(np.median(v)), 4) for name, v in sorted(stages.items())},
-            "stale_frame_wall_ms": summary(stale),
-            "median_over_floor": round(float(np.median(compute) / max(np.median(stale), 1e-9)), 2)}
+    return {
+        "mode": mode_name,
+        "movers": movers,
+        "map_backend": maps.backend_name if maps is not None else None,
+        "compute_ms": summary(compute),
+        "stage_ms_median": {name: round(float(np.median(v)), 4) for name, v in sorted(stages.items())},
+        "stale_frame_wall_ms": summary(stale),
+        "median_over_floor": round(float(np.median(compute) / max(np.median(stale), 1e-9)), 2),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -136,9 +161,19 @@ def main(argv: list[str] | None = None) -> int:
         by_count = {c["movers"]: c["compute_ms"]["median"] for c in cases if c["mode"] == mode}
         if 0 in by_count:
             ratios[mode] = {f"{n}_over_0": round(ms / max(by_count[0], 1e-9), 3) for n, ms in by_count.items() if n}
-    emit({"benchmark": "movers_bench", "frames_per_case": args.frames, "rate_hz": RATE_HZ,
-          "static_triangles": 2 + 160 * 12, "in_process": True, "floor_stale_frame_wall_ms": floor, "cases": cases,
-          "median_ratio_to_0_movers": ratios}, args.json)
+    emit(
+        {
+            "benchmark": "movers_bench",
+            "frames_per_case": args.frames,
+            "rate_hz": RATE_HZ,
+            "static_triangles": 2 + 160 * 12,
+            "in_process": True,
+            "floor_stale_frame_wall_ms": floor,
+            "cases": cases,
+            "median_ratio_to_0_movers": ratios,
+        },
+        args.json,
+    )
     return 0
 
 

@@ -15,6 +15,7 @@ reported as medians. The baseline, measured in the same run on the same frames, 
 its worker's imports, as every job of a fresh server does; its time is listed apart (`first_s`)
 and the medians are over all reps. Prints JSON (and writes it to --json); asserts nothing.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,7 +45,7 @@ CLIPS = {
     "bandai_kick_30fps": ("bandai_namco/dataset-1_kick_normal_001.bvh", 0),
     "bandai_punch_30fps": ("bandai_namco/dataset-1_punch_normal_001.bvh", 0),
 }
-LONG_CLIPS = ("bandai_dance_30fps", "cmu_01_01_120fps", "perfume_a_40fps")   # over 1000 frames each
+LONG_CLIPS = ("bandai_dance_30fps", "cmu_01_01_120fps", "perfume_a_40fps")  # over 1000 frames each
 JOB_TIMEOUT_S = 300.0
 
 
@@ -52,18 +53,27 @@ def cut_bvh(text: str, skip: int, frames: int) -> bytes:
     """The BVH with only frames [skip, skip + frames) of its motion."""
     lines = text.splitlines()
     at = next(i for i, line in enumerate(lines) if line.strip().lower().startswith("frame time"))
-    motion = [line for line in lines[at + 1:] if line.strip()][skip:skip + frames]
-    header = [f"Frames: {len(motion)}" if line.strip().lower().startswith("frames:") else line
-              for line in lines[:at + 1]]
+    motion = [line for line in lines[at + 1 :] if line.strip()][skip : skip + frames]
+    header = [f"Frames: {len(motion)}" if line.strip().lower().startswith("frames:") else line for line in lines[: at + 1]]
     return ("\n".join(header + motion) + "\n").encode()
 
 
 def _post(http: str, clip: bytes) -> str:
     boundary = uuid.uuid4().hex
-    body = (f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="clip.bvh"\r\n'
-            "Content-Type: application/octet-stream\r\n\r\n").encode() + clip + f"\r\n--{boundary}--\r\n".encode()
-    request = urllib.request.Request(f"http://{http}/v1/overview-jobs", data=body, method="POST",
-                                     headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+    body = (
+        (
+            f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="clip.bvh"\r\n'
+            "Content-Type: application/octet-stream\r\n\r\n"
+        ).encode()
+        + clip
+        + f"\r\n--{boundary}--\r\n".encode()
+    )
+    request = urllib.request.Request(
+        f"http://{http}/v1/overview-jobs",
+        data=body,
+        method="POST",
+        headers={"Content-Type": f"multipart/form-data; boundary={boundary}"},
+    )
     with urllib.request.urlopen(request, timeout=60) as reply:
         return json.loads(reply.read())["id"]
 
@@ -99,11 +109,16 @@ def bench_clip(http: str, path: Path, skip: int, frames: int, reps: int) -> dict
         planning.append(time.perf_counter() - start)
     keys = sorted({k for s in stages for k in s})
     e2e, plan = summary(end_to_end), summary(planning)
-    return {"frames": clip.frame_count, "fps": round(1.0 / clip.frame_time_s, 3),
-            "end_to_end_s": e2e, "first_s": round(end_to_end[0], 3), "planning_only_s": plan,
-            "ratio_end_to_end_vs_planning": round(e2e["median"] / plan["median"], 3),
-            "under_10_s": e2e["median"] < 10.0,
-            "job_stage_ms_median": {k: round(float(np.median([s[k] for s in stages if k in s])), 1) for k in keys}}
+    return {
+        "frames": clip.frame_count,
+        "fps": round(1.0 / clip.frame_time_s, 3),
+        "end_to_end_s": e2e,
+        "first_s": round(end_to_end[0], 3),
+        "planning_only_s": plan,
+        "ratio_end_to_end_vs_planning": round(e2e["median"] / plan["median"], 3),
+        "under_10_s": e2e["median"] < 10.0,
+        "job_stage_ms_median": {k: round(float(np.median([s[k] for s in stages if k in s])), 1) for k in keys},
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,16 +126,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data-dir", type=Path, default=SHARED_DATA_DIR)
     parser.add_argument("--frames", type=int, default=1000, help="frames per clip (a shorter clip is taken whole)")
     parser.add_argument("--reps", type=int, default=3)
-    parser.add_argument("--clips", nargs="+", choices=sorted(CLIPS), default=list(LONG_CLIPS),
-                        help="default: the three clips longer than 1000 frames")
+    parser.add_argument(
+        "--clips",
+        nargs="+",
+        choices=sorted(CLIPS),
+        default=list(LONG_CLIPS),
+        help="default: the three clips longer than 1000 frames",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     mocap = shared_subfolder(args.data_dir, "mocap", "overview_bench")
     if mocap is None:
         return 2
     out = {"benchmark": "overview_end_to_end", "frames_per_clip": args.frames, "reps": args.reps, "clips": {}}
-    with tempfile.TemporaryDirectory() as data_dir, \
-            ServerProcess("--data-dir", data_dir, transports=("http",)) as server:
+    with tempfile.TemporaryDirectory() as data_dir, ServerProcess("--data-dir", data_dir, transports=("http",)) as server:
         for name in args.clips:
             relative, skip = CLIPS[name]
             out["clips"][name] = bench_clip(server.http, mocap / relative, skip, args.frames, args.reps)

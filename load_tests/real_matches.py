@@ -12,6 +12,7 @@ server) and reports whether every director's program digest is the same. The two
 of the issue are not in this list and must never be: they judge the director.
 Prints the JSON result; --markdown writes the per-match, per-director table of docs/casting.md.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,17 +43,19 @@ SIM_MATCHES = {
     "sim_zdm2": "sauerbraten/zdm2.obj",
 }
 SIM_PLAYERS, SIM_SEED = 10, 1
-COLUMNS = (("kill coverage", lambda f: f["kill_coverage"]),
-           ("first person", lambda f: f["kill_coverage_first_person"]),
-           ("program vis.", lambda f: f["program_visibility"]),
-           ("height", lambda f: f["shown_height"]["median"]),
-           ("subjects' height", lambda f: f["shown_height"].get("subjects_median")),
-           ("shots <2 s", lambda f: f["shots"]["under_2s"]),
-           ("shot median s", lambda f: f["shots"]["median"]),
-           ("shot max s", lambda f: f["shots"]["max"]),
-           (">20 s missing a kill", lambda f: f["long_shots_missing_kills"]),
-           ("cuts/min", lambda f: f["cuts_per_min"]),
-           ("compute p50/p99 ms", lambda f: f"{f['compute_ms']['median']:.2f} / {f['compute_ms']['p99']:.1f}"))
+COLUMNS = (
+    ("kill coverage", lambda f: f["kill_coverage"]),
+    ("first person", lambda f: f["kill_coverage_first_person"]),
+    ("program vis.", lambda f: f["program_visibility"]),
+    ("height", lambda f: f["shown_height"]["median"]),
+    ("subjects' height", lambda f: f["shown_height"].get("subjects_median")),
+    ("shots <2 s", lambda f: f["shots"]["under_2s"]),
+    ("shot median s", lambda f: f["shots"]["median"]),
+    ("shot max s", lambda f: f["shots"]["max"]),
+    (">20 s missing a kill", lambda f: f["long_shots_missing_kills"]),
+    ("cuts/min", lambda f: f["cuts_per_min"]),
+    ("compute p50/p99 ms", lambda f: f"{f['compute_ms']['median']:.2f} / {f['compute_ms']['p99']:.1f}"),
+)
 
 
 def prepare(name: str, folder: Path, minutes: float | None):
@@ -71,15 +74,15 @@ def prepare(name: str, folder: Path, minutes: float | None):
         with LevelRegistry(folder / "data") as registry:
             registry.add_level(level, SHARED_LEVELS / SIM_MATCHES[name])
             artifact = registry.load(level)
-        return simulate_match(artifact, level, SIM_PLAYERS, 60.0 * (minutes or 3.0), np.random.default_rng(SIM_SEED),
-                              SIM_SEED)
+        return simulate_match(artifact, level, SIM_PLAYERS, 60.0 * (minutes or 3.0), np.random.default_rng(SIM_SEED), SIM_SEED)
     demo, bsp = MATCHES[name]
     level = bsp.split(".")[0]
     map_path = folder / f"{level}.bsp"
     map_path.write_bytes(gzip.decompress((MAPS / bsp).read_bytes()))
     with LevelRegistry(folder / "data") as registry:
-        registry.add_level(level, map_path, agent_height_m=quake_frame.PLAYER_HEIGHT_M,
-                           agent_radius_m=quake_frame.PLAYER_RADIUS_M)
+        registry.add_level(
+            level, map_path, agent_height_m=quake_frame.PLAYER_HEIGHT_M, agent_radius_m=quake_frame.PLAYER_RADIUS_M
+        )
     match = import_mvd(gzip.decompress((DEMOS / demo).read_bytes()), level=level, name=demo)
     return match if minutes is None else match.until(match.time_s[0] + 60.0 * minutes)
 
@@ -92,28 +95,36 @@ def run_match(name: str, args) -> dict:
         with tempfile.TemporaryDirectory(prefix=f"real-{name}-") as tmp:
             t0 = time.perf_counter()
             match = prepare(name, Path(tmp), args.minutes)
-            result, _ = evaluate_match(match, args.delay, data_dir=Path(tmp) / "data", rate_hz=args.rate_hz, seed=0,
-                                       progress=lambda text: print(f"{name}: {text}", file=sys.stderr, flush=True))
+            result, _ = evaluate_match(
+                match,
+                args.delay,
+                data_dir=Path(tmp) / "data",
+                rate_hz=args.rate_hz,
+                seed=0,
+                progress=lambda text: print(f"{name}: {text}", file=sys.stderr, flush=True),
+            )
             result["wall_s"] = round(time.perf_counter() - t0, 1)
             runs.append(result)
     out = runs[0]
     if args.twice:
-        out["same_program_twice"] = {d: runs[0]["directors"][d]["program_sha256"] == runs[1]["directors"][d]["program_sha256"]
-                                     for d in out["directors"]}
+        out["same_program_twice"] = {
+            d: runs[0]["directors"][d]["program_sha256"] == runs[1]["directors"][d]["program_sha256"] for d in out["directors"]
+        }
     return out
 
 
 def markdown(results: dict) -> str:
     """One row per match and director: the figures of COLUMNS, the ceilings beside each match."""
-    lines = ["| match | director | " + " | ".join(c for c, _ in COLUMNS) + " |",
-             "|---|---|" + "---|" * len(COLUMNS)]
+    lines = ["| match | director | " + " | ".join(c for c, _ in COLUMNS) + " |", "|---|---|" + "---|" * len(COLUMNS)]
     for name, result in results.items():
         c = result["ceilings"]
         for director, figures in result["directors"].items():
             cells = [str(get(figures)) for _, get in COLUMNS]
             lines.append(f"| {name} | {director} | " + " | ".join(cells) + " |")
-        lines.append(f"| {name} | ceilings | reference {c['reference_kill_coverage']}, greedy 2-s "
-                     f"{c['greedy_2s_kill_coverage']} ({c['kills']} kills) |" + " |" * (len(COLUMNS) - 1))
+        lines.append(
+            f"| {name} | ceilings | reference {c['reference_kill_coverage']}, greedy 2-s "
+            f"{c['greedy_2s_kill_coverage']} ({c['kills']} kills) |" + " |" * (len(COLUMNS) - 1)
+        )
     return "\n".join(lines) + "\n"
 
 

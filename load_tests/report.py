@@ -1,5 +1,6 @@
 """What every benchmark here does with its result (summaries, printing), and where they find the
 shared data by default."""
+
 from __future__ import annotations
 
 import json

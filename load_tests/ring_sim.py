@@ -26,6 +26,7 @@ arcs: the spread of infinitely many keys). With
 fraction of sessions that bounded loads sent to a node other than their key's (each of which would
 be restored from its checkpoint there).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,7 +38,7 @@ import numpy as np
 
 from load_tests.report import emit
 
-BE_WEIGHT_SCALE = 16               # ring points per unit of weight (include/haproxy/backend-t.h)
+BE_WEIGHT_SCALE = 16  # ring points per unit of weight (include/haproxy/backend-t.h)
 SRV_EWGHT_RANGE = 256 * BE_WEIGHT_SCALE  # spacing of server ids' point numbers (include/haproxy/server-t.h)
 DEFAULT_NODES = (2, 3, 4, 5, 8, 10, 16, 20, 32, 50, 64, 100, 128, 200)
 M32 = np.uint64(0xFFFFFFFF)
@@ -80,8 +81,8 @@ class Ring:
         """The index in `points` of the point nearest each hash (chash_get_server_hash)."""
         h = hashes.astype(np.int64)
         n = len(self.points)
-        after = np.searchsorted(self.points, h, side="left") % n   # eb32_lookup_ge, wrapping to the first
-        before = (after - 1) % n                                   # eb32_prev, wrapping to the last
+        after = np.searchsorted(self.points, h, side="left") % n  # eb32_lookup_ge, wrapping to the first
+        before = (after - 1) % n  # eb32_prev, wrapping to the last
         dp = (h - self.points[before]) % (1 << 32)
         dn = (self.points[after] - h) % (1 << 32)
         return np.where(dp <= dn, before, after)
@@ -106,7 +107,7 @@ class Ring:
         ceil((served + 1) * factor / 100), shared out by weight."""
         servers = list(np.unique(self.owners))
         rank = {int(s): i for i, s in enumerate(servers)}  # cumulative_weight follows the servers' order
-        weight = int(np.sum(self.owners == servers[0]))      # effective weight: one per point
+        weight = int(np.sum(self.owners == servers[0]))  # effective weight: one per point
         total = weight * len(servers)
         served = np.zeros(len(servers), dtype=np.int64)
         out = np.empty(len(hashes), dtype=np.int64)
@@ -146,40 +147,68 @@ def simulate(n_keys: int, node_counts, weights, balance_factor: int, seed: int =
             moved = before != joined
             busiest = int(np.bincount(before).argmax())
             left = Ring({sid: weight for sid in range(1, n + 1) if sid != busiest}).owner(hashes)
-            rows.append({
-                "nodes": n, "weight": weight, "points_per_node": weight * BE_WEIGHT_SCALE,
-                "moved_on_join": round(float(moved.mean()), 4), "ideal_on_join": round(1 / (n + 1), 4),
-                "moved_to_others_on_join": int((moved & (joined != n + 1)).sum()),
-                "moved_on_leave": round(float((before != left).mean()), 4), "ideal_on_leave": round(1 / n, 4),
-                "max_over_mean": round(spread(before), 3), "max_arc_over_mean": round(ring.arc_spread(), 3)})
+            rows.append(
+                {
+                    "nodes": n,
+                    "weight": weight,
+                    "points_per_node": weight * BE_WEIGHT_SCALE,
+                    "moved_on_join": round(float(moved.mean()), 4),
+                    "ideal_on_join": round(1 / (n + 1), 4),
+                    "moved_to_others_on_join": int((moved & (joined != n + 1)).sum()),
+                    "moved_on_leave": round(float((before != left).mean()), 4),
+                    "ideal_on_leave": round(1 / n, 4),
+                    "max_over_mean": round(spread(before), 3),
+                    "max_arc_over_mean": round(ring.arc_spread(), 3),
+                }
+            )
     bounded = []
     for weight in sorted({min(weights), max(weights)}) if balance_factor else ():
         for n in (n for n in node_counts if n in (10, 50, 100)):
             ring = Ring({sid: weight for sid in range(1, n + 1)})
             placed = ring.bounded(hashes, balance_factor)
-            bounded.append({"nodes": n, "weight": weight, "balance_factor_pct": balance_factor,
-                            "max_over_mean": round(spread(placed), 3),
-                            "max_over_mean_unbounded": round(spread(ring.owner(hashes)), 3),
-                            "off_their_key_node": round(float((placed != ring.owner(hashes)).mean()), 4)})
-    return {"keys": n_keys, "key_kind": "uuid4 hex (32 characters), as the SDKs make route keys",
-            "model": "HAProxy 2.x hash-type consistent, sdbm + avalanche, weight * 16 points per server",
-            "rows": rows, "bounded_loads": bounded}
+            bounded.append(
+                {
+                    "nodes": n,
+                    "weight": weight,
+                    "balance_factor_pct": balance_factor,
+                    "max_over_mean": round(spread(placed), 3),
+                    "max_over_mean_unbounded": round(spread(ring.owner(hashes)), 3),
+                    "off_their_key_node": round(float((placed != ring.owner(hashes)).mean()), 4),
+                }
+            )
+    return {
+        "keys": n_keys,
+        "key_kind": "uuid4 hex (32 characters), as the SDKs make route keys",
+        "model": "HAProxy 2.x hash-type consistent, sdbm + avalanche, weight * 16 points per server",
+        "rows": rows,
+        "bounded_loads": bounded,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--keys", type=int, default=100_000, help="route keys (sessions) placed")
     parser.add_argument("--nodes", default=",".join(map(str, DEFAULT_NODES)), help="node counts, comma-separated")
-    parser.add_argument("--weights", default="1,16,256",
-                        help="server weights, comma-separated (1 is HAProxy's default; cluster.py uses 256)")
-    parser.add_argument("--balance-factor", type=int, default=125,
-                        help="hash-balance-factor to simulate for 10, 50 and 100 nodes, percent (0: none)")
+    parser.add_argument(
+        "--weights", default="1,16,256", help="server weights, comma-separated (1 is HAProxy's default; cluster.py uses 256)"
+    )
+    parser.add_argument(
+        "--balance-factor",
+        type=int,
+        default=125,
+        help="hash-balance-factor to simulate for 10, 50 and 100 nodes, percent (0: none)",
+    )
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    result = simulate(args.keys, [int(n) for n in args.nodes.split(",")], [int(w) for w in args.weights.split(",")],
-                      args.balance_factor, args.seed)
+    result = simulate(
+        args.keys,
+        [int(n) for n in args.nodes.split(",")],
+        [int(w) for w in args.weights.split(",")],
+        args.balance_factor,
+        args.seed,
+    )
     result["wall_s"] = round(time.perf_counter() - start, 1)
     emit(result, args.json)
     return 0

@@ -15,6 +15,7 @@ the least-squares slope of the total resident memory over the whole run and over
 (MB/min), sessions and frames per combination, errors, and worker restarts (a worker pid that
 changed). The exit code is 1 on errors or a worker restart; growth is reported, not judged.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,14 +42,15 @@ from load_tests.report import emit
 class ProcessSample:
     """One process's resources at one moment."""
 
-    rss_mb: float   # resident memory (VmRSS), MB
-    open_fds: int   # entries of /proc/<pid>/fd
+    rss_mb: float  # resident memory (VmRSS), MB
+    open_fds: int  # entries of /proc/<pid>/fd
 
 
 def sample_process(pid: int) -> ProcessSample:
     """VmRSS and open descriptors of a live process (Linux /proc)."""
-    rss_kb = next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
-                  if line.startswith("VmRSS:"))
+    rss_kb = next(
+        int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("VmRSS:")
+    )
     return ProcessSample(rss_mb=rss_kb / 1024.0, open_fds=len(os.listdir(f"/proc/{pid}/fd")))
 
 
@@ -100,8 +102,7 @@ class Loop:
         self.errors: list[str] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        self._threads = [threading.Thread(target=self._run, args=(url, k), daemon=True)
-                         for k, url in enumerate(self.urls)]
+        self._threads = [threading.Thread(target=self._run, args=(url, k), daemon=True) for k, url in enumerate(self.urls)]
 
     def start(self) -> None:
         for thread in self._threads:
@@ -147,7 +148,7 @@ def run(server: ServerProcess, minutes: float, warmup_s: float, sample_s: float,
     front = server.proc.pid
     workers = worker_pids(front)
     warm_sessions = sum(loop.sessions.values())
-    samples = []   # (minutes since start, front sample, [worker samples])
+    samples = []  # (minutes since start, front sample, [worker samples])
     restarted = False
     start = time.monotonic()
     end = start + minutes * 60.0
@@ -174,20 +175,32 @@ def run(server: ServerProcess, minutes: float, warmup_s: float, sample_s: float,
         return {"start": round(float(values[0]), 1), "end": round(float(values[-1]), 1)} if len(values) else {}
 
     return {
-        "minutes": minutes, "warmup_s": warmup_s, "sample_s": sample_s, "clients": clients,
-        "frames_per_session": frames, "samples": len(samples),
-        "sessions": dict(loop.sessions), "sessions_total": sum(loop.sessions.values()) - warm_sessions,
-        "sessions_in_warmup": warm_sessions, "frames_total": loop.frames,
+        "minutes": minutes,
+        "warmup_s": warmup_s,
+        "sample_s": sample_s,
+        "clients": clients,
+        "frames_per_session": frames,
+        "samples": len(samples),
+        "sessions": dict(loop.sessions),
+        "sessions_total": sum(loop.sessions.values()) - warm_sessions,
+        "sessions_in_warmup": warm_sessions,
+        "frames_total": loop.frames,
         "rss_total_mb": start_end(total_mb),
         "rss_slope_mb_per_min": _slope_mb_min(t_min, total_mb),
         "rss_slope_second_half_mb_per_min": _slope_mb_min(t_min[half], total_mb[half]),
-        "front": {"rss_mb": start_end([s[1].rss_mb for s in samples]),
-                  "open_fds": start_end([s[1].open_fds for s in samples])},
-        "workers": [{"rss_mb": start_end([s[2][i].rss_mb for s in samples]),
-                     "open_fds": start_end([s[2][i].open_fds for s in samples])} for i in range(len(workers))],
-        "series": {"t_min": [round(float(t), 3) for t in t_min], "rss_total_mb": [round(float(m), 1) for m in total_mb],
-                   "open_fds_total": [s[1].open_fds + sum(w.open_fds for w in s[2]) for s in samples]},
-        "worker_restarted": restarted, "errors": loop.errors[:20], "error_count": len(loop.errors),
+        "front": {"rss_mb": start_end([s[1].rss_mb for s in samples]), "open_fds": start_end([s[1].open_fds for s in samples])},
+        "workers": [
+            {"rss_mb": start_end([s[2][i].rss_mb for s in samples]), "open_fds": start_end([s[2][i].open_fds for s in samples])}
+            for i in range(len(workers))
+        ],
+        "series": {
+            "t_min": [round(float(t), 3) for t in t_min],
+            "rss_total_mb": [round(float(m), 1) for m in total_mb],
+            "open_fds_total": [s[1].open_fds + sum(w.open_fds for w in s[2]) for s in samples],
+        },
+        "worker_restarted": restarted,
+        "errors": loop.errors[:20],
+        "error_count": len(loop.errors),
         "cpus": os.cpu_count(),
     }
 

@@ -15,6 +15,7 @@ The baseline, measured in the same run against the same server process, is the t
 a gRPC health check (served by the front process) or a ZeroMQ request the front answers at once
 with an error; `rtt_ratio_vs_baseline` divides our round trip by it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,9 +55,11 @@ def _with_session(session_id: str, frame_bytes: bytes) -> bytes:
 class GrpcDriver:
     def __init__(self, address: str):
         self.channel = grpc.aio.insecure_channel(address, options=[("grpc.max_send_message_length", 64 << 20)])
-        self.create = self.channel.unary_unary("/camdirector.v1.Director/CreateSession",
-                                               request_serializer=pb.CreateSessionRequest.SerializeToString,
-                                               response_deserializer=pb.CreateSessionResponse.FromString)
+        self.create = self.channel.unary_unary(
+            "/camdirector.v1.Director/CreateSession",
+            request_serializer=pb.CreateSessionRequest.SerializeToString,
+            response_deserializer=pb.CreateSessionResponse.FromString,
+        )
         self.stream = self.channel.stream_stream("/camdirector.v1.Director/StreamFrames")  # bytes in, bytes out
         self.health = health_pb2_grpc.HealthStub(self.channel)
 
@@ -131,9 +134,16 @@ async def _sleep_until(deadline: float) -> None:
         await asyncio.sleep(delay)
 
 
-async def run(transport: str, address: str, sessions: int, rate_hz: float, seconds: float,
-              visibility: int = pb.FRAMING_ONLY, warmup_frames: int = 0,
-              alongside: Callable[[list[str]], AbstractAsyncContextManager] | None = None) -> dict:
+async def run(
+    transport: str,
+    address: str,
+    sessions: int,
+    rate_hz: float,
+    seconds: float,
+    visibility: int = pb.FRAMING_ONLY,
+    warmup_frames: int = 0,
+    alongside: Callable[[list[str]], AbstractAsyncContextManager] | None = None,
+) -> dict:
     """warmup_frames: each session's first frames, answered and counted as received but left out of
     the round trips, compute times, late and stale counts (a session's first frame sets up what
     it keeps: about 30 ms in the map modes).
@@ -159,6 +169,7 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
             compute_ms.append(update.compute_ms)
             late[0] += bool(period) and (t_recv - t_sent) > period
             stale[0] += update.stale
+
         return record
 
     async with alongside(session_ids) if alongside is not None else contextlib.nullcontext():
@@ -167,8 +178,13 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
         start = time.perf_counter() + 0.1
         cpu_start_s = time.process_time()
         # sessions start staggered over one frame period, as independent game clients would
-        results = await asyncio.gather(*(driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
-                                         for k, sid in enumerate(session_ids)), return_exceptions=True)
+        results = await asyncio.gather(
+            *(
+                driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
+                for k, sid in enumerate(session_ids)
+            ),
+            return_exceptions=True,
+        )
         wall_s = time.perf_counter() - start
         client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
     errors = [repr(r) for r in results if isinstance(r, BaseException)]
@@ -177,15 +193,28 @@ async def run(transport: str, address: str, sessions: int, rate_hz: float, secon
     rtt = percentiles(rtt_ms)
     base = percentiles([b * 1e3 for b in baseline_s])
     return {
-        "transport": transport, "sessions": sessions, "rate_hz": rate_hz, "seconds": seconds,
-        "wall_s": round(wall_s, 3), "frames_sent": sent, "frames_received": sum(received),
+        "transport": transport,
+        "sessions": sessions,
+        "rate_hz": rate_hz,
+        "seconds": seconds,
+        "wall_s": round(wall_s, 3),
+        "frames_sent": sent,
+        "frames_received": sum(received),
         "warmup_frames_per_session": warmup_frames,
-        "dropped_frames": sent - sum(received), "late_frames": late[0], "stale_frames": stale[0],
-        "rtt_ms": rtt, "compute_ms": percentiles(compute_ms), "baseline_rtt_ms": base,
-        "rtt_ratio_vs_baseline": {"p50": rtt["p50"] / base["p50"] if rtt["p50"] else None,
-                                  "p99": rtt["p99"] / base["p99"] if rtt["p99"] else None},
-        "errors": errors, "cpus": os.cpu_count(),
-        "client_cpu_s": round(client_cpu_s, 3), "client_cpu_fraction_of_core": round(client_cpu_s / wall_s, 3),
+        "dropped_frames": sent - sum(received),
+        "late_frames": late[0],
+        "stale_frames": stale[0],
+        "rtt_ms": rtt,
+        "compute_ms": percentiles(compute_ms),
+        "baseline_rtt_ms": base,
+        "rtt_ratio_vs_baseline": {
+            "p50": rtt["p50"] / base["p50"] if rtt["p50"] else None,
+            "p99": rtt["p99"] / base["p99"] if rtt["p99"] else None,
+        },
+        "errors": errors,
+        "cpus": os.cpu_count(),
+        "client_cpu_s": round(client_cpu_s, 3),
+        "client_cpu_fraction_of_core": round(client_cpu_s / wall_s, 3),
     }
 
 

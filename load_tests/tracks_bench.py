@@ -19,6 +19,7 @@ corridor and its most open place, walked there and back (evaluation/tracks/route
 they are picked; `half_width_m` is half the narrowest width between walls there, `length_m` the
 distance walked). Prints JSON (and writes it to --json); asserts nothing.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,10 +46,25 @@ LEVELS = {
     "undulating": ("recast/undulating.obj", 1.0),
     "zdm2": ("sauerbraten/zdm2.obj", 0.12),
 }
-_ROUTE_KEYS = ("target_update_ms_median", "target_update_ms_mean", "camera_update_ms_median", "visible", "line_of_sight",
-               "framed_in_frame", "cuts")
-_MEASURED_KEYS = ("frames", "visible", "line_of_sight", "framed_in_frame", "cuts", "cuts_per_min",
-                  "target_update_ms_median", "framing_error_median")
+_ROUTE_KEYS = (
+    "target_update_ms_median",
+    "target_update_ms_mean",
+    "camera_update_ms_median",
+    "visible",
+    "line_of_sight",
+    "framed_in_frame",
+    "cuts",
+)
+_MEASURED_KEYS = (
+    "frames",
+    "visible",
+    "line_of_sight",
+    "framed_in_frame",
+    "cuts",
+    "cuts_per_min",
+    "target_update_ms_median",
+    "framing_error_median",
+)
 
 
 def _ratio(a: float, b: float) -> float | None:
@@ -70,8 +86,10 @@ def bench_routes(artifact, record, seed: int) -> dict:
     places = corridor_and_open_routes(paths, artifact.skeleton_segments, scene, artifact.agent_height_m)
     routes = {"default": (route_for(artifact, record, np.random.default_rng(seed)), {})}
     for name, place in places.items():
-        routes[name] = (there_and_back(place.polyline_world), {"place_world": np.round(place.place_world, 2).tolist(),
-                                                               "half_width_m": round(place.half_width_m, 2)})
+        routes[name] = (
+            there_and_back(place.polyline_world),
+            {"place_world": np.round(place.place_world, 2).tolist(), "half_width_m": round(place.half_width_m, 2)},
+        )
     out = {}
     for name, (route, about) in routes.items():
         runs = measure_shot_sizes(artifact, route, scene, lambda: np.random.default_rng(seed))
@@ -87,9 +105,14 @@ def bench_level(registry: LevelRegistry, name: str, path: Path, scale: float, se
     start = time.perf_counter()
     artifact = registry.load(name)
     load_ms = (time.perf_counter() - start) * 1e3
-    out = {"precompute_s": round(precompute_s, 2), "under_30_s": precompute_s < 30.0,
-           "stage_ms": {k: round(v, 1) for k, v in record.timings_ms.items()},
-           "artifact_load_ms": round(load_ms, 1), "nodes": len(artifact.nodes_world), "edges": len(artifact.edges)}
+    out = {
+        "precompute_s": round(precompute_s, 2),
+        "under_30_s": precompute_s < 30.0,
+        "stage_ms": {k: round(v, 1) for k, v in record.timings_ms.items()},
+        "artifact_load_ms": round(load_ms, 1),
+        "nodes": len(artifact.nodes_world),
+        "edges": len(artifact.edges),
+    }
     if prm:
         out.update(_prm_comparison(artifact, record, seed))
     out["routes"] = bench_routes(artifact, record, seed)
@@ -104,16 +127,27 @@ def _prm_comparison(artifact, record, seed: int) -> dict:
     ours, verdict = rows["ours"], result["verdict"]
     baseline = rows.get("prm_equal_coverage")
     compared = verdict["compared_with"] or {}
-    out = {"ours": {"nodes": ours["nodes"], "edges": ours["edges"], "coverage": round(ours["coverage"], 4),
-                    **{k: ours[k] for k in _ROUTE_KEYS}},
-           "target_update_under_2_ms": ours["target_update_ms_median"] < 2.0,
-           "prm_reached_our_coverage": verdict["prm_reached_our_coverage"],
-           "prm_compared": {"density_per_m2": compared.get("density_per_m2"), "mean_nodes": compared.get("mean_nodes"),
-                            "mean_edges": compared.get("mean_edges"), "mean_coverage": compared.get("mean_coverage")},
-           "fewer_nodes": verdict["fewer_nodes"], "fewer_edges": verdict["fewer_edges"],
-           "ratio_nodes_vs_prm": _ratio(ours["nodes"], compared.get("mean_nodes") or 0.0),
-           "ratio_edges_vs_prm": _ratio(ours["edges"], compared.get("mean_edges") or 0.0),
-           "route_frames": result["route_frames"]}
+    out = {
+        "ours": {
+            "nodes": ours["nodes"],
+            "edges": ours["edges"],
+            "coverage": round(ours["coverage"], 4),
+            **{k: ours[k] for k in _ROUTE_KEYS},
+        },
+        "target_update_under_2_ms": ours["target_update_ms_median"] < 2.0,
+        "prm_reached_our_coverage": verdict["prm_reached_our_coverage"],
+        "prm_compared": {
+            "density_per_m2": compared.get("density_per_m2"),
+            "mean_nodes": compared.get("mean_nodes"),
+            "mean_edges": compared.get("mean_edges"),
+            "mean_coverage": compared.get("mean_coverage"),
+        },
+        "fewer_nodes": verdict["fewer_nodes"],
+        "fewer_edges": verdict["fewer_edges"],
+        "ratio_nodes_vs_prm": _ratio(ours["nodes"], compared.get("mean_nodes") or 0.0),
+        "ratio_edges_vs_prm": _ratio(ours["edges"], compared.get("mean_edges") or 0.0),
+        "route_frames": result["route_frames"],
+    }
     if baseline is not None:
         out["prm_equal_coverage_route"] = {k: baseline[k] for k in _ROUTE_KEYS}
         out["ratio_target_update_vs_prm"] = _ratio(ours["target_update_ms_median"], baseline["target_update_ms_median"])
@@ -125,8 +159,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data-dir", type=Path, default=SHARED_DATA_DIR)
     parser.add_argument("--levels", nargs="+", choices=sorted(LEVELS), default=list(LEVELS))
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--no-prm", dest="prm", action="store_false",
-                        help="leave out the comparison with PRMs (the routes only: a level in well under a minute)")
+    parser.add_argument(
+        "--no-prm",
+        dest="prm",
+        action="store_false",
+        help="leave out the comparison with PRMs (the routes only: a level in well under a minute)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     folder = shared_subfolder(args.data_dir, "levels", "tracks_bench")

@@ -12,6 +12,7 @@ came). A round trip is timed at the caller, building the update included. Report
 mode: median and p99 (ms) over all rounds; `ratio` = TypeScript median / Python median. Needs
 `npm ci && npm run build` in client_sdk/typescript first.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,16 +35,23 @@ PACKAGE = Path(__file__).resolve().parents[1] / "client_sdk" / "typescript"
 
 def scene() -> cd.pb.CreateSessionRequest:
     capsule = cd.pb.Mesh(primitive=cd.pb.Primitive(capsule=cd.pb.Primitive.Capsule(radius=0.3, height=1.8)))
-    return cd.pb.CreateSessionRequest(seed=1, style=cd.pb.Style(visibility=cd.pb.FRAMING_ONLY), targets=[
-        cd.pb.Target(id="a", mesh=capsule, transform=cd.transform_msg([0, 0.9, 0])),
-        cd.pb.Target(id="b", mesh=capsule, transform=cd.transform_msg([3, 0.9, 1])),
-    ])
+    return cd.pb.CreateSessionRequest(
+        seed=1,
+        style=cd.pb.Style(visibility=cd.pb.FRAMING_ONLY),
+        targets=[
+            cd.pb.Target(id="a", mesh=capsule, transform=cd.transform_msg([0, 0.9, 0])),
+            cd.pb.Target(id="b", mesh=capsule, transform=cd.transform_msg([3, 0.9, 1])),
+        ],
+    )
 
 
 def packed_at(i: int):
     t = i / 60
-    return cd.pack_states(["a", "b"], np.array([[math.sin(t), 0.9, t], [3 - t, 0.9, 1.0]]),
-                          np.array([[0, math.sin(t / 4), 0, math.cos(t / 4)], [0, 0, 0, 1.0]]))
+    return cd.pack_states(
+        ["a", "b"],
+        np.array([[math.sin(t), 0.9, t], [3 - t, 0.9, 1.0]]),
+        np.array([[0, math.sin(t / 4), 0, math.cos(t / 4)], [0, 0, 0, 1.0]]),
+    )
 
 
 def python_round(url: str, frames: int, warmup: int) -> dict[str, list[float]]:
@@ -76,9 +84,16 @@ def python_round(url: str, frames: int, warmup: int) -> dict[str, list[float]]:
 
 def ts_round(url: str, frames: int, warmup: int) -> dict[str, list[float]]:
     import base64
+
     create = base64.b64encode(scene().SerializeToString()).decode()
-    done = subprocess.run(["node", "bench/frame_rtt.mjs", url, create, str(frames), str(warmup)], cwd=PACKAGE,
-                          capture_output=True, text=True, timeout=300, check=True)
+    done = subprocess.run(
+        ["node", "bench/frame_rtt.mjs", url, create, str(frames), str(warmup)],
+        cwd=PACKAGE,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -100,13 +115,21 @@ def main(argv: list[str] | None = None) -> int:
             for sdk, run in order if r % 2 == 0 else order[::-1]:
                 for mode, values in run(url, args.frames, args.warmup).items():
                     runs[sdk][mode].extend(values)
-    result: dict = {"benchmark": "ts_sdk_bench", "transport": "grpc", "frames_per_round": args.frames,
-                    "rounds": args.rounds, "node": subprocess.run(["node", "--version"], capture_output=True,
-                                                                   text=True).stdout.strip()}
+    result: dict = {
+        "benchmark": "ts_sdk_bench",
+        "transport": "grpc",
+        "frames_per_round": args.frames,
+        "rounds": args.rounds,
+        "node": subprocess.run(["node", "--version"], capture_output=True, text=True).stdout.strip(),
+    }
     for mode in ("unary", "stream"):
         py, ts = summary(runs["python"][mode]), summary(runs["typescript"][mode])
-        result[mode] = {"python_ms": py, "typescript_ms": ts, "ratio": round(ts["median"] / py["median"], 3),
-                        "ratio_p99": round(ts["p99"] / py["p99"], 3)}
+        result[mode] = {
+            "python_ms": py,
+            "typescript_ms": ts,
+            "ratio": round(ts["median"] / py["median"], 3),
+            "ratio_p99": round(ts["p99"] / py["p99"], 3),
+        }
     result["within_1_3x"] = all(result[m]["ratio"] <= 1.3 for m in ("unary", "stream"))
     emit(result, args.json)
     return 0

@@ -1,5 +1,6 @@
 """Fixtures shared by the whole suite: a real `camdirector serve` process, the shared data, and
 the release artifacts (`make dist`)."""
+
 from __future__ import annotations
 
 import os
@@ -25,10 +26,12 @@ def shared_data() -> Path:
         pytest.skip(f"{SHARED_DATA} is absent: third-party levels and clips are not in this clone")
     return SHARED_DATA
 
+
 @pytest.fixture(scope="session")
 def run_bvh(shared_data) -> bytes:
     """The motion-capture clip of a run (../shared/data/mocap), as a client uploads it."""
     from tests.precompute.overview.overview_mocap import CLIPS
+
     return (shared_data / "mocap" / CLIPS["run"][0]).read_bytes()
 
 
@@ -36,8 +39,18 @@ def run_bvh(shared_data) -> bytes:
 def server(tmp_path_factory):
     """One shared server with two worker processes for the integration tests."""
     data_dir = tmp_path_factory.mktemp("server-data")
-    srv = ServerProcess("--workers", "2", "--data-dir", str(data_dir), "--max-sessions", "32",
-                        "--max-message-bytes", str(4 * 1024 * 1024), "--max-triangles", "200000")
+    srv = ServerProcess(
+        "--workers",
+        "2",
+        "--data-dir",
+        str(data_dir),
+        "--max-sessions",
+        "32",
+        "--max-message-bytes",
+        str(4 * 1024 * 1024),
+        "--max-triangles",
+        "200000",
+    )
     yield srv
     assert srv.stop() == 0, "server did not exit cleanly"
 
@@ -61,6 +74,7 @@ def service_or_skip(start):
     """A Debian service started for the tests, or a skip with the reason where its package is
     missing; a failure under CI (.ci/run sets CAMDIRECTOR_REQUIRE_CLUSTER=1)."""
     from camdirector.deploy.services import ServiceError
+
     try:
         return start()
     except ServiceError as exc:
@@ -73,6 +87,7 @@ def service_or_skip(start):
 def redis_server(tmp_path_factory):
     """One redis-server on a free loopback port for the whole run (deploy/services.py)."""
     from camdirector.deploy.services import RedisServer
+
     server = service_or_skip(lambda: RedisServer(tmp_path_factory.mktemp("redis")).start())
     yield server
     server.stop()
@@ -82,6 +97,7 @@ def redis_server(tmp_path_factory):
 def redis_url(redis_server) -> str:
     """The shared Redis, emptied for each test."""
     import redis
+
     client = redis.from_url(redis_server.url)
     client.flushall()
     client.close()
@@ -92,6 +108,7 @@ def redis_url(redis_server) -> str:
 def postgres_server(tmp_path_factory):
     """One PostgreSQL cluster on a free loopback port for the whole run (deploy/services.py)."""
     from camdirector.deploy.services import PostgresServer
+
     server = service_or_skip(lambda: PostgresServer(tmp_path_factory.mktemp("postgres")).start())
     yield server
     server.stop()
@@ -123,6 +140,7 @@ def postgres_url(postgres_server) -> str:
 def tls_files(tmp_path_factory):
     """A CA and a server certificate for 127.0.0.1 and localhost (camdirector.deploy.tls)."""
     from camdirector.deploy.tls import make_tls_files
+
     return make_tls_files(tmp_path_factory.mktemp("tls"))
 
 
@@ -131,6 +149,7 @@ def why_no_image() -> str | None:
     None when it can."""
     from camdirector.deploy.image import require_podman
     from camdirector.deploy.services import ServiceError
+
     try:
         require_podman()
     except ServiceError as exc:
@@ -153,7 +172,11 @@ def release_dist(tmp_path_factory) -> Path:
     assert not out.resolve().is_relative_to(ROOT), "the distributions must be built outside the checkout"
     # the image only where podman runs (root); tests/test_dist.py says so where it is left out
     no_image = {"NO_IMAGE": "1"} if why_no_image() else {}
-    done = subprocess.run(["bash", str(ROOT / "scripts" / "dist.sh"), str(out)], capture_output=True, text=True,
-                          env={"PATH": "/usr/bin:/bin:/usr/sbin:/sbin", "PYTHON": sys.executable, **no_image})
+    done = subprocess.run(
+        ["bash", str(ROOT / "scripts" / "dist.sh"), str(out)],
+        capture_output=True,
+        text=True,
+        env={"PATH": "/usr/bin:/bin:/usr/sbin:/sbin", "PYTHON": sys.executable, **no_image},
+    )
     assert done.returncode == 0, f"scripts/dist.sh failed:\n{done.stdout[-5000:]}\n{done.stderr[-5000:]}"
     return out

@@ -2,6 +2,7 @@
 over gRPC and ZeroMQ, a level added over REST, an overview job, a monitor picture. Shared by
 tests/test_installed_package.py (the installed package, plaintext on loopback, keys off) and
 tests/deploy/test_image.py (the image in a container, TLS and keys on)."""
+
 from __future__ import annotations
 
 import io
@@ -29,6 +30,7 @@ TRACKS_START = (2.0, 0.0, 2.0)  # the actor's feet in tiny_levels.corridor() and
 class Served:
     """Where a server answers and how a client gets in: `client` is an httpx client on its REST
     base URL (carrying the key and trusting the CA where those are on)."""
+
     grpc: str
     zmq: str
     client: httpx.Client

@@ -4,6 +4,7 @@ SDK's install tree with its CMake package and pkg-config file, a C library that 
 version, and the service image as a docker archive (where podman runs). The artifacts are
 tests/conftest.py's release_dist, built once per run: the wheels that
 tests/test_installed_package.py installs are these."""
+
 from __future__ import annotations
 
 import hashlib
@@ -34,8 +35,11 @@ def image_or_skip() -> None:
 
 def test_every_artifact_is_named_with_the_version_and_checksummed(release_dist):
     sdk = f"camdirector-cpp-sdk-{VERSION}-linux-{platform.machine()}.tar.gz"
-    expected = {f"{name}-{VERSION}{suffix}" for name in ("camdirector", "camdirector_proto", "camdirector_client")
-                for suffix in (".tar.gz", "-py3-none-any.whl")} | {sdk, "SHA256SUMS"}
+    expected = {
+        f"{name}-{VERSION}{suffix}"
+        for name in ("camdirector", "camdirector_proto", "camdirector_client")
+        for suffix in (".tar.gz", "-py3-none-any.whl")
+    } | {sdk, "SHA256SUMS"}
     if why_no_image() is None:
         expected.add(IMAGE)
     assert {p.name for p in release_dist.iterdir()} == expected
@@ -57,7 +61,7 @@ def test_the_wheels_and_sdists_hold_their_sources_at_the_version(release_dist):
     with tarfile.open(release_dist / f"camdirector-{VERSION}.tar.gz") as sdist:
         names = sdist.getnames()
     assert f"camdirector-{VERSION}/src/camdirector/access/guard.py" in names
-    assert not [n for n in names if "__pycache__" in n]   # staged sources, not the checkout's leftovers
+    assert not [n for n in names if "__pycache__" in n]  # staged sources, not the checkout's leftovers
 
 
 def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(release_dist, tmp_path):
@@ -65,15 +69,29 @@ def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(r
     with tarfile.open(release_dist / f"{sdk}.tar.gz") as archive:
         archive.extractall(tmp_path, filter="data")
     prefix = tmp_path / sdk
-    for part in ("include/camdirector/camdirector.h", "include/camdirector/camdirector.hpp", "lib/libcamdirector.a",
-                 "lib/cmake/camdirector/camdirectorConfig.cmake", "lib/pkgconfig/camdirector.pc"):
+    for part in (
+        "include/camdirector/camdirector.h",
+        "include/camdirector/camdirector.hpp",
+        "lib/libcamdirector.a",
+        "lib/cmake/camdirector/camdirectorConfig.cmake",
+        "lib/pkgconfig/camdirector.pc",
+    ):
         assert (prefix / part).is_file(), part
     assert f"Version: {VERSION}" in (prefix / "lib/pkgconfig/camdirector.pc").read_text()
     # Loaded in a fresh interpreter: the library carries the system's gRPC and protobuf, which must
     # not meet the copies this test process has loaded (that aborts the process).
-    said = subprocess.run([sys.executable, "-c", "import ctypes, sys; lib = ctypes.CDLL(sys.argv[1]); "
-                           "lib.cd_version.restype = ctypes.c_char_p; print(lib.cd_version().decode())",
-                           str(prefix / "lib/libcamdirector_c.so")], capture_output=True, text=True, check=True)
+    said = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import ctypes, sys; lib = ctypes.CDLL(sys.argv[1]); "
+            "lib.cd_version.restype = ctypes.c_char_p; print(lib.cd_version().decode())",
+            str(prefix / "lib/libcamdirector_c.so"),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     assert said.stdout.strip() == VERSION
 
 

@@ -11,6 +11,7 @@ module, a dependency or a data file that the distributions leave out fails here,
 The venv is made by the interpreter running the tests (the project's Python 3.11, requires-python),
 so no other interpreter need be on PATH; pip's cache is reused. Installing takes about half a minute
 with a warm cache (several the first time: every dependency is downloaded), after the build."""
+
 from __future__ import annotations
 
 import json
@@ -46,16 +47,17 @@ def outside_env() -> dict[str, str]:
 class Installed:
     venv: Path
     site_packages: Path
-    cwd: Path            # a folder outside the checkout, where every child runs
-    dist: Path           # the wheels it was installed from
+    cwd: Path  # a folder outside the checkout, where every child runs
+    dist: Path  # the wheels it was installed from
 
     @property
     def python(self) -> Path:
         return self.venv / "bin" / "python"
 
     def run(self, *args, timeout: float = 120) -> subprocess.CompletedProcess:
-        done = subprocess.run([str(a) for a in args], cwd=self.cwd, env=outside_env(), capture_output=True,
-                              text=True, timeout=timeout)
+        done = subprocess.run(
+            [str(a) for a in args], cwd=self.cwd, env=outside_env(), capture_output=True, text=True, timeout=timeout
+        )
         assert done.returncode == 0, f"{args} exited {done.returncode}:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
         return done
 
@@ -73,15 +75,28 @@ def installed(tmp_path_factory, release_dist) -> Installed:
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120, cwd=cwd)
     # Nothing is built here: release_dist built the wheels with the `build` of the interpreter running
     # the tests (the dev extra), so the venv under test gets only what pip installs.
-    done = subprocess.run(["bash", str(ROOT / SCRIPT), "--prebuilt", str(venv / "bin" / "python"), str(release_dist)],
-                          cwd=cwd, env=outside_env(), capture_output=True, text=True, timeout=840)
+    done = subprocess.run(
+        ["bash", str(ROOT / SCRIPT), "--prebuilt", str(venv / "bin" / "python"), str(release_dist)],
+        cwd=cwd,
+        env=outside_env(),
+        capture_output=True,
+        text=True,
+        timeout=840,
+    )
     assert done.returncode == 0, f"{SCRIPT} failed:\n{done.stdout[-5000:]}\n{done.stderr[-5000:]}"
-    site_packages = subprocess.run([str(venv / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-                                   cwd=cwd, env=outside_env(), capture_output=True, text=True, check=True).stdout.strip()
+    site_packages = subprocess.run(
+        [str(venv / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+        cwd=cwd,
+        env=outside_env(),
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
     return Installed(venv, Path(site_packages), cwd, release_dist)
 
 
 # -- the installed distributions --------------------------------------------------------------
+
 
 def test_the_dockerfile_installs_with_the_same_script_and_copies_what_exists():
     text = DOCKERFILE.read_text()
@@ -131,8 +146,10 @@ for m in pkgutil.walk_packages(camdirector.__path__, "camdirector.", onerror=wal
 print(json.dumps({"names": names, "failed": failed}))
 """)
     assert found["failed"] == {}
-    checkout = {".".join(p.relative_to(ROOT / "src").with_suffix("").parts).removesuffix(".__init__")
-                for p in (ROOT / "src" / "camdirector").rglob("*.py")}
+    checkout = {
+        ".".join(p.relative_to(ROOT / "src").with_suffix("").parts).removesuffix(".__init__")
+        for p in (ROOT / "src" / "camdirector").rglob("*.py")
+    }
     missing = sorted(checkout - set(found["names"]) - {"camdirector"})
     assert missing == [], f"modules of the checkout that the installed package lacks: {missing}"
     assert "camdirector.v1.director_pb2_grpc" in found["names"]  # camdirector-proto shares the namespace
@@ -154,18 +171,25 @@ print(json.dumps({"shipped": sorted(shipped_scenarios()), "paper": [load_scenari
 
 # -- the installed server ---------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def server(installed, tmp_path_factory):
     """The installed server, on a data directory where the installed CLI added the corridor level."""
     data_dir = tmp_path_factory.mktemp("installed-server") / "data"
     level_file = data_dir.parent / "corridor.obj"
     level_file.write_text(obj_text(corridor()))
-    added = installed.run(installed.venv / "bin" / "camdirector", "level", "add", "corridor", level_file,
-                          "--data-dir", data_dir)
+    added = installed.run(installed.venv / "bin" / "camdirector", "level", "add", "corridor", level_file, "--data-dir", data_dir)
     assert json.loads(added.stdout)["counts"]["nodes"] > 0
     # through the console script, in a folder outside the checkout, with nothing pointing back into it
-    srv = ServerProcess("--workers", "1", "--data-dir", str(data_dir), command=[str(installed.venv / "bin" / "camdirector"),
-                        "serve"], base_env=outside_env(), cwd=installed.cwd)
+    srv = ServerProcess(
+        "--workers",
+        "1",
+        "--data-dir",
+        str(data_dir),
+        command=[str(installed.venv / "bin" / "camdirector"), "serve"],
+        base_env=outside_env(),
+        cwd=installed.cwd,
+    )
     srv.client = httpx.Client(base_url=f"http://{srv.http}", timeout=30.0)
     yield srv
     srv.client.close()

@@ -17,6 +17,7 @@ The pipeline check imports every module under camdirector.pipeline in a fresh in
 what the test suite has already imported cannot hide an import the pipeline makes (and the same for
 what a job process loads); the other checks read import statements (lazy ones inside functions
 included)."""
+
 from __future__ import annotations
 
 import ast
@@ -40,8 +41,15 @@ PROCESSES = ("front", "worker", "render", "jobs")
 # The one way a process folder may import another's: the parent holds its child's handle.
 PARENT_TO_CHILD = {("front", "worker"), ("front", "jobs"), ("worker", "render")}
 # The top-level folders of the repository that may hold Python, and what they hold.
-PYTHON_FOLDERS = {"src": "the service", "proto": "the generated wire code", "client_sdk": "the SDKs",
-                  "tests": "tests", "load_tests": "benchmarks", "scripts": "scripts", "docs": "docs"}
+PYTHON_FOLDERS = {
+    "src": "the service",
+    "proto": "the generated wire code",
+    "client_sdk": "the SDKs",
+    "tests": "tests",
+    "load_tests": "benchmarks",
+    "scripts": "scripts",
+    "docs": "docs",
+}
 # A name that may repeat outside sibling folders: every area's subcommands of `camdirector`.
 AREA_ROLES = {"__init__.py", "cli.py"}
 RIG_CLASSES = {"ToricRig": "toric", "TracksRig": "tracks", "MatchRig": "match"}
@@ -66,8 +74,13 @@ print(json.dumps({"modules": names, "loaded": loaded}))
 def loaded_by(packages: tuple[str, ...], forbidden: tuple[str, ...]) -> dict:
     """Imports `packages` and every module under them in a fresh interpreter (what this test
     session has imported cannot hide anything); returns {"modules": [...], "loaded": [forbidden ones]}."""
-    done = subprocess.run([sys.executable, "-c", _IMPORT_IN_FRESH_INTERPRETER, *packages, "--", *forbidden],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    done = subprocess.run(
+        [sys.executable, "-c", _IMPORT_IN_FRESH_INTERPRETER, *packages, "--", *forbidden],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.splitlines()[-1])
 
@@ -81,13 +94,15 @@ def test_the_pipeline_imports_no_protobuf_grpc_or_fastapi():
 def test_a_job_process_imports_no_web_framework_or_grpc():
     """What the job executor's forkserver preloads: the command's main module, the job process's
     entry, the job bodies of every kind the service offers."""
-    found = loaded_by(("camdirector.__main__", "camdirector.jobs", "camdirector.jobs.main",
-                       *_service_job_modules()), WEB_AND_GRPC)
+    found = loaded_by(
+        ("camdirector.__main__", "camdirector.jobs", "camdirector.jobs.main", *_service_job_modules()), WEB_AND_GRPC
+    )
     assert found["loaded"] == [], f"a job process would import: {found['loaded']}"
 
 
 def _service_job_modules() -> tuple[str, ...]:
     from camdirector.jobs import service_kinds
+
     modules = service_kinds().modules
     assert modules, "the service offers no job kind"
     return modules
@@ -120,18 +135,24 @@ def _camdirector(*folders: str) -> tuple[str, ...]:
 
 # access/ (who may do what) sits beside the processes: the areas below them name tenants through
 # infra/tenants.py, never through the roles.
-@pytest.mark.parametrize("folder, forbidden", [
-    ("infra", _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "matches", "demo", "deploy",
-                           "access")),
-    ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "matches", "demo", "deploy", "access")),
-    ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "matches", "demo", "deploy", "access")),
-    ("pipeline", _camdirector(*PROCESSES, "evaluation", "matches", "demo", "deploy", "access")),
-])
+@pytest.mark.parametrize(
+    "folder, forbidden",
+    [
+        (
+            "infra",
+            _camdirector(*PROCESSES, "pipeline", "precompute", "geometry", "evaluation", "matches", "demo", "deploy", "access"),
+        ),
+        ("geometry", _camdirector(*PROCESSES, "pipeline", "precompute", "evaluation", "matches", "demo", "deploy", "access")),
+        ("precompute", _camdirector(*PROCESSES, "pipeline", "evaluation", "matches", "demo", "deploy", "access")),
+        ("pipeline", _camdirector(*PROCESSES, "evaluation", "matches", "demo", "deploy", "access")),
+    ],
+)
 def test_dependencies_point_one_way(folder, forbidden):
     files = sorted((PACKAGE / folder).rglob("*.py"))
     assert files, f"no Python files under src/camdirector/{folder}/"
-    bad = sorted(f"{path.relative_to(ROOT)}: {name}" for path in files for name in imported_modules(path)
-                 if _under(name, forbidden))
+    bad = sorted(
+        f"{path.relative_to(ROOT)}: {name}" for path in files for name in imported_modules(path) if _under(name, forbidden)
+    )
     assert bad == []
 
 
@@ -144,8 +165,7 @@ def test_imported_modules_sees_lazy_and_from_imports(tmp_path):
 
 def test_the_service_is_one_package_under_src():
     """No Python of the service outside src/camdirector/: a folder the wheel would not contain."""
-    tracked = subprocess.run(["git", "ls-files", "*.py"], cwd=ROOT, capture_output=True, text=True,
-                             check=True).stdout.split()
+    tracked = subprocess.run(["git", "ls-files", "*.py"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
     assert tracked, "git ls-files found no Python"
     outside = sorted(f for f in tracked if f.split("/")[0] not in PYTHON_FOLDERS)
     assert outside == []
@@ -164,8 +184,11 @@ def duplicate_names(paths: list[Path]) -> dict[str, list[str]]:
     folders = defaultdict(list)
     for path in paths:
         folders[path.name].append(path.parent)
-    return {name: sorted(str(f) for f in where) for name, where in folders.items()
-            if len(where) > 1 and name not in AREA_ROLES and len({f.parent for f in where}) > 1}
+    return {
+        name: sorted(str(f) for f in where)
+        for name, where in folders.items()
+        if len(where) > 1 and name not in AREA_ROLES and len({f.parent for f in where}) > 1
+    }
 
 
 def test_no_two_modules_share_a_name_unless_siblings():
@@ -174,8 +197,14 @@ def test_no_two_modules_share_a_name_unless_siblings():
 
 
 def test_the_name_check_tells_siblings_from_strangers():
-    paths = [Path("pipeline/toric/rig.py"), Path("pipeline/tracks/rig.py"), Path("a/cli.py"), Path("b/c/cli.py"),
-             Path("worker/views.py"), Path("front/http/views.py")]
+    paths = [
+        Path("pipeline/toric/rig.py"),
+        Path("pipeline/tracks/rig.py"),
+        Path("a/cli.py"),
+        Path("b/c/cli.py"),
+        Path("worker/views.py"),
+        Path("front/http/views.py"),
+    ]
     assert duplicate_names(paths) == {"views.py": ["front/http", "worker"]}
 
 
@@ -183,8 +212,12 @@ def rig_sniffing(path: Path, folder_of_rig: dict[str, str]) -> list[str]:
     """isinstance(..., <a rig class>) calls in `path` that are outside that rig's own folder."""
     found = []
     for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "isinstance" \
-                and len(node.args) == 2:
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id == "isinstance"
+            and len(node.args) == 2
+        ):
             classes = node.args[1].elts if isinstance(node.args[1], ast.Tuple) else [node.args[1]]
             for cls in classes:
                 name = cls.id if isinstance(cls, ast.Name) else cls.attr if isinstance(cls, ast.Attribute) else None
@@ -231,10 +264,9 @@ def module_graph(root: Path, package: str) -> dict[str, set[str]]:
             elif isinstance(node, ast.ImportFrom):
                 base = node.module or ""
                 if node.level:
-                    above = here.split(".")[:len(here.split(".")) - (node.level - 1)]
+                    above = here.split(".")[: len(here.split(".")) - (node.level - 1)]
                     base = ".".join(above + ([node.module] if node.module else []))
-                named.update(f"{base}.{alias.name}" if f"{base}.{alias.name}" in paths else nearest(base)
-                             for alias in node.names)
+                named.update(f"{base}.{alias.name}" if f"{base}.{alias.name}" in paths else nearest(base) for alias in node.names)
         graph[module] = {name for name in named if name is not None and name != module}
     return graph
 
@@ -271,13 +303,20 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def process_crossings(graph: dict[str, set[str]]) -> list[str]:
     """Imports from one process folder into another's other than PARENT_TO_CHILD."""
+
     def process(module: str) -> str | None:
         parts = module.split(".")
         return parts[1] if len(parts) > 1 and parts[1] in PROCESSES else None
 
-    return sorted(f"{module} -> {other}" for module, others in graph.items() for other in others
-                  if process(module) and process(other) and process(module) != process(other)
-                  and (process(module), process(other)) not in PARENT_TO_CHILD)
+    return sorted(
+        f"{module} -> {other}"
+        for module, others in graph.items()
+        for other in others
+        if process(module)
+        and process(other)
+        and process(module) != process(other)
+        and (process(module), process(other)) not in PARENT_TO_CHILD
+    )
 
 
 def test_no_import_cycle():
@@ -304,10 +343,17 @@ def _tree(root: Path, files: dict[str, str]) -> Path:
 
 
 def test_the_cycle_check_sees_a_lazy_relative_circle(tmp_path):
-    tree = _tree(tmp_path, {"pkg/__init__.py": "", "pkg/a.py": "from pkg import b\n",
-                            "pkg/b.py": "import os\n\ndef f():\n    from . import c\n",
-                            "pkg/c.py": "from .sub.d import VALUE\n",
-                            "pkg/sub/__init__.py": "", "pkg/sub/d.py": "from ..a import NAME\n"})
+    tree = _tree(
+        tmp_path,
+        {
+            "pkg/__init__.py": "",
+            "pkg/a.py": "from pkg import b\n",
+            "pkg/b.py": "import os\n\ndef f():\n    from . import c\n",
+            "pkg/c.py": "from .sub.d import VALUE\n",
+            "pkg/sub/__init__.py": "",
+            "pkg/sub/d.py": "from ..a import NAME\n",
+        },
+    )
     graph = module_graph(tree, "pkg")
     assert graph["pkg.a"] == {"pkg.b"} and graph["pkg.b"] == {"pkg.c"} and graph["pkg.sub.d"] == {"pkg.a"}
     assert import_cycles(graph) == [["pkg.a", "pkg.b", "pkg.c", "pkg.sub.d"]]
@@ -315,19 +361,31 @@ def test_the_cycle_check_sees_a_lazy_relative_circle(tmp_path):
 
 def test_the_cycle_check_passes_a_package_that_gathers_its_modules(tmp_path):
     """`from pkg import b` names the module b, not pkg's __init__ (which imports a): no circle."""
-    tree = _tree(tmp_path, {"pkg/__init__.py": "from pkg.a import A\nfrom pkg.b import B\n",
-                            "pkg/a.py": "from pkg import b\nA = 1\n", "pkg/b.py": "import pkg.c\nB = 2\n",
-                            "pkg/c.py": "import json\n"})
+    tree = _tree(
+        tmp_path,
+        {
+            "pkg/__init__.py": "from pkg.a import A\nfrom pkg.b import B\n",
+            "pkg/a.py": "from pkg import b\nA = 1\n",
+            "pkg/b.py": "import pkg.c\nB = 2\n",
+            "pkg/c.py": "import json\n",
+        },
+    )
     graph = module_graph(tree, "pkg")
     assert graph["pkg"] == {"pkg.a", "pkg.b"} and graph["pkg.a"] == {"pkg.b"}
     assert import_cycles(graph) == []
 
 
 def test_the_process_check_allows_only_parent_to_child(tmp_path):
-    tree = _tree(tmp_path, {"pkg/front/main.py": "from pkg.worker import main\nfrom pkg.jobs import queue\n",
-                            "pkg/worker/main.py": "from pkg.render import monitor\nfrom pkg.infra import channels\n",
-                            "pkg/render/monitor.py": "def f():\n    from pkg.worker import main\n",
-                            "pkg/jobs/queue.py": "", "pkg/infra/channels.py": ""})
+    tree = _tree(
+        tmp_path,
+        {
+            "pkg/front/main.py": "from pkg.worker import main\nfrom pkg.jobs import queue\n",
+            "pkg/worker/main.py": "from pkg.render import monitor\nfrom pkg.infra import channels\n",
+            "pkg/render/monitor.py": "def f():\n    from pkg.worker import main\n",
+            "pkg/jobs/queue.py": "",
+            "pkg/infra/channels.py": "",
+        },
+    )
     graph = module_graph(tree, "pkg")
     assert process_crossings(graph) == ["pkg.render.monitor -> pkg.worker.main"]
     (tree / "pkg/render/monitor.py").write_text("")

@@ -1,4 +1,5 @@
 """The `camdirector` command."""
+
 from __future__ import annotations
 
 import argparse
@@ -26,53 +27,104 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--max-objects", dest="max_objects", type=int)
     p.add_argument("--max-triangles", dest="max_triangles", type=int)
     p.add_argument("--max-message-bytes", dest="max_message_bytes", type=int)
-    p.add_argument("--session-resume-s", dest="session_resume_s", type=float,
-                   help="seconds an idle session without a stream is kept for a client to resume")
+    p.add_argument(
+        "--session-resume-s",
+        dest="session_resume_s",
+        type=float,
+        help="seconds an idle session without a stream is kept for a client to resume",
+    )
     p.add_argument("--data-dir", dest="data_dir", help="recordings and artifacts")
-    p.add_argument("--record-all", dest="record_all", action="store_const", const=True,
-                   help="record every session")
+    p.add_argument("--record-all", dest="record_all", action="store_const", const=True, help="record every session")
     p.add_argument("--max-concurrent-jobs", dest="max_concurrent_jobs", type=int)
     p.add_argument("--max-queued-jobs", dest="max_queued_jobs", type=int)
     p.add_argument("--max-upload-bytes", dest="max_upload_bytes", type=int)
-    p.add_argument("--job-retention-s", dest="job_retention_s", type=float,
-                   help="seconds a finished offline job's result is kept (0: forever)")
-    p.add_argument("--job-store", dest="job_store",
-                   help="job records: empty for SQLite in the data directory, or postgresql://USER@HOST:PORT/DB")
-    p.add_argument("--job-queue", dest="job_queue",
-                   help="empty to run jobs in this process's runner, or redis://HOST:PORT/DB for the shared queue")
-    p.add_argument("--checkpoint-store", dest="checkpoint_store",
-                   help="session checkpoints: empty for a folder in the data directory, redis://HOST:PORT/DB "
-                        "to let any node restore any session, or off")
-    p.add_argument("--checkpoint-every-frames", dest="checkpoint_every_frames", type=int,
-                   help="frames between two snapshots of a session's state")
+    p.add_argument(
+        "--job-retention-s",
+        dest="job_retention_s",
+        type=float,
+        help="seconds a finished offline job's result is kept (0: forever)",
+    )
+    p.add_argument(
+        "--job-store",
+        dest="job_store",
+        help="job records: empty for SQLite in the data directory, or postgresql://USER@HOST:PORT/DB",
+    )
+    p.add_argument(
+        "--job-queue",
+        dest="job_queue",
+        help="empty to run jobs in this process's runner, or redis://HOST:PORT/DB for the shared queue",
+    )
+    p.add_argument(
+        "--checkpoint-store",
+        dest="checkpoint_store",
+        help="session checkpoints: empty for a folder in the data directory, redis://HOST:PORT/DB "
+        "to let any node restore any session, or off",
+    )
+    p.add_argument(
+        "--checkpoint-every-frames",
+        dest="checkpoint_every_frames",
+        type=int,
+        help="frames between two snapshots of a session's state",
+    )
     p.add_argument("--node-id", dest="node_id", help="this node's name (default: host name and pid)")
-    p.add_argument("--no-auth", dest="auth", action="store_const", const=False,
-                   help="let every caller in without a key (a machine of your own; docs/security.md)")
+    p.add_argument(
+        "--no-auth",
+        dest="auth",
+        action="store_const",
+        const=False,
+        help="let every caller in without a key (a machine of your own; docs/security.md)",
+    )
     p.add_argument("--tls-cert", dest="tls_cert", help="PEM certificate chain: serve gRPC and HTTP over TLS")
     p.add_argument("--tls-key", dest="tls_key", help="the certificate's PEM private key")
-    p.add_argument("--insecure", dest="insecure", action="store_const", const=True,
-                   help="allow plaintext on a non-loopback address (TLS ends at a proxy you trust)")
-    p.add_argument("--tenant-max-sessions", dest="tenant_max_sessions", type=int,
-                   help="sessions one tenant may have open on this node")
+    p.add_argument(
+        "--insecure",
+        dest="insecure",
+        action="store_const",
+        const=True,
+        help="allow plaintext on a non-loopback address (TLS ends at a proxy you trust)",
+    )
+    p.add_argument(
+        "--tenant-max-sessions", dest="tenant_max_sessions", type=int, help="sessions one tenant may have open on this node"
+    )
     p.add_argument("--tenant-max-fps", dest="tenant_max_fps", type=float, help="frames a second into one session")
-    p.add_argument("--tenant-max-upload-bytes", dest="tenant_max_upload_bytes", type=int,
-                   help="bytes of uploads one tenant's jobs may hold at once")
-    p.add_argument("--tenant-max-queued-jobs", dest="tenant_max_queued_jobs", type=int,
-                   help="jobs one tenant may have queued or running at once")
-    p.add_argument("--plugin", dest="plugins", action="append", metavar="MODULE",
-                   help="a Python module to import at start, in the front and every worker (a studio's own match "
-                        "director registers itself); repeatable")
+    p.add_argument(
+        "--tenant-max-upload-bytes",
+        dest="tenant_max_upload_bytes",
+        type=int,
+        help="bytes of uploads one tenant's jobs may hold at once",
+    )
+    p.add_argument(
+        "--tenant-max-queued-jobs",
+        dest="tenant_max_queued_jobs",
+        type=int,
+        help="jobs one tenant may have queued or running at once",
+    )
+    p.add_argument(
+        "--plugin",
+        dest="plugins",
+        action="append",
+        metavar="MODULE",
+        help="a Python module to import at start, in the front and every worker (a studio's own match "
+        "director registers itself); repeatable",
+    )
 
 
 def _job_worker_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("job-worker", help="run offline jobs from the shared job queue (jobs/queue.py)")
     p.add_argument("--job-queue", dest="job_queue", help="the queue, redis://HOST:PORT/DB (required)")
-    p.add_argument("--job-store", dest="job_store",
-                   help="job records: empty for SQLite in the data directory, or postgresql://USER@HOST:PORT/DB")
+    p.add_argument(
+        "--job-store",
+        dest="job_store",
+        help="job records: empty for SQLite in the data directory, or postgresql://USER@HOST:PORT/DB",
+    )
     p.add_argument("--data-dir", dest="data_dir", help="the data directory every node mounts (uploads, results, levels)")
     p.add_argument("--concurrency", type=int, help="jobs run at once by this worker (default: --max-concurrent-jobs's)")
-    p.add_argument("--heartbeat-timeout-s", dest="heartbeat_timeout_s", type=float,
-                   help="a worker silent this long is taken for dead and its jobs run again (same on every worker)")
+    p.add_argument(
+        "--heartbeat-timeout-s",
+        dest="heartbeat_timeout_s",
+        type=float,
+        help="a worker silent this long is taken for dead and its jobs run again (same on every worker)",
+    )
     p.set_defaults(handler=_job_worker)
 
 
@@ -80,14 +132,19 @@ def _job_worker(args: argparse.Namespace) -> int:
     import dataclasses
 
     from camdirector.jobs import JobSettings, run_job_worker
+
     try:
         settings = ServerSettings.from_env(data_dir=args.data_dir, job_store=args.job_store, job_queue=args.job_queue)
         if not settings.job_queue:
             raise ValueError("--job-queue redis://HOST:PORT/DB is required")
-        jobs = dataclasses.replace(JobSettings.for_server(settings),
-                                   **{k: v for k, v in (("max_concurrent_jobs", args.concurrency),
-                                                        ("worker_heartbeat_timeout_s", args.heartbeat_timeout_s))
-                                      if v is not None})
+        jobs = dataclasses.replace(
+            JobSettings.for_server(settings),
+            **{
+                k: v
+                for k, v in (("max_concurrent_jobs", args.concurrency), ("worker_heartbeat_timeout_s", args.heartbeat_timeout_s))
+                if v is not None
+            },
+        )
     except ValueError as exc:
         print(f"camdirector job-worker: {exc}", file=sys.stderr)
         return 2
@@ -108,14 +165,19 @@ def main(argv: list[str] | None = None) -> int:
     add_import_match_parser(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
-    p.add_argument("--data-dir", dest="data_dir", type=Path,
-                   help="where a TRACKS session's level is registered (default: the folder the recording is in)")
+    p.add_argument(
+        "--data-dir",
+        dest="data_dir",
+        type=Path,
+        help="where a TRACKS session's level is registered (default: the folder the recording is in)",
+    )
     p = sub.add_parser("demo", help="server plus demo client on a built-in scene; writes a video")
     p.add_argument("--out", type=Path, default=Path("out"))
     p.add_argument("--seconds", type=float, default=20.0)
     p.add_argument("--transport", choices=("grpc", "zmq"), default="grpc")
-    p.add_argument("--visibility", default="ANTICIPATION",
-                   choices=("ANTICIPATION", "NO_ANTICIPATION", "RAYCAST", "REACTIVE", "FRAMING_ONLY"))
+    p.add_argument(
+        "--visibility", default="ANTICIPATION", choices=("ANTICIPATION", "NO_ANTICIPATION", "RAYCAST", "REACTIVE", "FRAMING_ONLY")
+    )
     args = parser.parse_args(argv)
 
     if args.command == "serve":
@@ -126,9 +188,11 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             parser.error(str(exc))
         from camdirector.front.main import run
+
         return run(settings)
     if args.command == "replay":
         from camdirector.worker.replay import replay
+
         try:
             report = replay(args.file, data_dir=args.data_dir)
         except (OSError, ValueError) as exc:
@@ -138,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if report.ok else 1
     if args.command == "demo":
         from camdirector.demo.client import run_demo
+
         return run_demo(out_dir=args.out, seconds=args.seconds, transport=args.transport, visibility=args.visibility)
     return args.handler(args)  # eval, overview, eval-overview, level, eval-graph, keys
 

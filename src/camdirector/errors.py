@@ -1,4 +1,5 @@
 """The one error type the edges (servicers, ZeroMQ handler, routes) turn into a status."""
+
 from __future__ import annotations
 
 import logging
@@ -51,5 +52,6 @@ def internal(exc: Exception, what: str, session_id: str | None, logger: logging.
     ("Frame", "CreateSession"); `session_id`: the session it names, None when it names none."""
     where = f"session {session_id}" if session_id else "no session"
     logger.error("%s of %s failed", what, where, exc_info=exc)
-    return DirectorError(grpc.StatusCode.INTERNAL, f"internal error ({type(exc).__name__}) in {what} of {where}; "
-                                                   "the server's log has the details")
+    return DirectorError(
+        grpc.StatusCode.INTERNAL, f"internal error ({type(exc).__name__}) in {what} of {where}; the server's log has the details"
+    )

@@ -6,6 +6,7 @@ The other tenant's key is an admin's (it holds every verb), so its only reason t
 the tenant: its answer must be, word for word, the answer for an id that does not exist. The
 owner's answer must not be that (the thing exists for it), nor 401/403 when its role has the verb.
 """
+
 from __future__ import annotations
 
 import re
@@ -38,6 +39,7 @@ DENIED = {"403", "PERMISSION_DENIED"}
 
 # -- the page -------------------------------------------------------------------------------------
 
+
 def _table(heading: str) -> list[list[str]]:
     """The body rows (cells stripped of backticks) of the table in the page's section `heading`."""
     section = DOC.read_text().split(f"\n## {heading}\n", 1)[1].split("\n## ", 1)[0]
@@ -47,10 +49,10 @@ def _table(heading: str) -> list[list[str]]:
 
 @dataclass(frozen=True)
 class Door:
-    transport: str   # gRPC, ZeroMQ, HTTP
-    name: str        # RPC name, or "METHOD /path"
-    verb: str        # a Verb's value, "open" or "any key"
-    owned: str       # "session", "level", "job", "key" or "" (what it reaches by id)
+    transport: str  # gRPC, ZeroMQ, HTTP
+    name: str  # RPC name, or "METHOD /path"
+    verb: str  # a Verb's value, "open" or "any key"
+    owned: str  # "session", "level", "job", "key" or "" (what it reaches by id)
 
 
 def doors() -> list[Door]:
@@ -69,19 +71,23 @@ def test_every_door_of_the_server_is_in_the_page(world):
     openapi = httpx.get(f"{world.http}/openapi.json").json()
     served = {("HTTP", f"{method.upper()} {path}") for path, ops in openapi["paths"].items() for method in ops}
     served |= {("gRPC", m.name) for m in pb.DESCRIPTOR.services_by_name["Director"].methods}
-    served |= {("gRPC", "grpc.health.v1.Health/Check"), ("gRPC", "grpc.reflection.v1alpha.ServerReflection"),
-               ("HTTP", "GET /dashboard/")}
+    served |= {
+        ("gRPC", "grpc.health.v1.Health/Check"),
+        ("gRPC", "grpc.reflection.v1alpha.ServerReflection"),
+        ("HTTP", "GET /dashboard/"),
+    }
     served |= {("ZeroMQ", name) for name in RPCS if name != "StreamFrames"}
     assert listed == served
 
 
 # -- the server, its keys and one tenant's things ------------------------------------------------
 
+
 @dataclass
 class World:
     server: ServerProcess
     http: str
-    keys: dict[str, str]          # caller -> key ("none": "")
+    keys: dict[str, str]  # caller -> key ("none": "")
     session_id: str
     level: str
     level_job: str
@@ -90,8 +96,12 @@ class World:
 
 
 def _cli_key(data_dir: Path, role: str, tenant: str) -> str:
-    out = subprocess.run([sys.executable, "-m", "camdirector", "keys", "create", "--role", role, "--tenant", tenant,
-                          "--data-dir", str(data_dir)], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "camdirector", "keys", "create", "--role", role, "--tenant", tenant, "--data-dir", str(data_dir)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     assert len(out.splitlines()) == 1, out  # the key alone on one line
     return out.strip()
 
@@ -120,19 +130,28 @@ def world(tmp_path_factory, run_bvh):
             keys[role] = _cli_key(data_dir, role, "alpha")
         keys["other tenant"] = _cli_key(data_dir, "admin", "beta")
         keys["revoked"] = _cli_key(data_dir, "admin", "alpha")
-        subprocess.run([sys.executable, "-m", "camdirector", "keys", "revoke", keys["revoked"], "--data-dir",
-                        str(data_dir)], check=True, capture_output=True)
+        subprocess.run(
+            [sys.executable, "-m", "camdirector", "keys", "revoke", keys["revoked"], "--data-dir", str(data_dir)],
+            check=True,
+            capture_output=True,
+        )
         http = f"http://{server.http}"
         raw = wc.GrpcRaw(server.grpc, key=keys["engine"])
         session_id = raw.call("CreateSession", wc.two_target_request()).session_id
         raw.stream(wc.walk(session_id, 30))
         raw.close()
-        posted = httpx.post(f"{http}/v1/levels", data={"name": "corridor"}, headers=_auth(keys["admin"]),
-                            files={"level": ("level.obj", obj_text(corridor()))}, timeout=30)
+        posted = httpx.post(
+            f"{http}/v1/levels",
+            data={"name": "corridor"},
+            headers=_auth(keys["admin"]),
+            files={"level": ("level.obj", obj_text(corridor()))},
+            timeout=30,
+        )
         assert posted.status_code == 202, posted.text
         assert _wait_job(http, "/v1/level-jobs", posted.json()["id"], keys["admin"]) == "succeeded"
-        overview = httpx.post(f"{http}/v1/overview-jobs", headers=_auth(keys["director"]),
-                              files={"file": ("run.bvh", run_bvh)}, timeout=30)
+        overview = httpx.post(
+            f"{http}/v1/overview-jobs", headers=_auth(keys["director"]), files={"file": ("run.bvh", run_bvh)}, timeout=30
+        )
         assert overview.status_code == 202, overview.text
         assert _wait_job(http, "/v1/overview-jobs", overview.json()["id"], keys["director"]) == "succeeded"
         yield World(server, http, keys, session_id, "corridor", posted.json()["id"], overview.json()["id"])
@@ -141,6 +160,7 @@ def world(tmp_path_factory, run_bvh):
 
 
 # -- calling a door -------------------------------------------------------------------------------
+
 
 def _normal(text: str, ids: list[str]) -> str:
     for value in filter(None, ids):
@@ -152,16 +172,19 @@ def _target(world: World, door: Door, owned: bool) -> str:
     """The id the door is called with: the alpha tenant's thing, or one that does not exist."""
     if not owned:
         return MISSING[door.owned]
-    if door.name in ("CloseSession",):   # each call closes a fresh session of alpha's
+    if door.name in ("CloseSession",):  # each call closes a fresh session of alpha's
         raw = wc.GrpcRaw(world.server.grpc, key=world.keys["engine"])
         session_id = raw.call("CreateSession", wc.two_target_request()).session_id
         raw.close()
         return session_id
-    if door.owned == "key":              # each call revokes a fresh key of alpha's
+    if door.owned == "key":  # each call revokes a fresh key of alpha's
         made = httpx.post(f"{world.http}/v1/keys", json={"role": "viewer"}, headers=_auth(world.keys["admin"]))
         return made.json()["id"]
-    return {"session": world.session_id, "level": world.level,
-            "job": world.level_job if "level-jobs" in door.name else world.overview_job}[door.owned]
+    return {
+        "session": world.session_id,
+        "level": world.level,
+        "job": world.level_job if "level-jobs" in door.name else world.overview_job,
+    }[door.owned]
 
 
 def _frames(world: World, session_id: str, n: int) -> list[pb.FrameUpdate]:
@@ -185,8 +208,11 @@ def _rpc(world: World, door: Door, key: str, target: str) -> tuple[str, str]:
         with grpc.insecure_channel(world.server.grpc) as channel:
             services = ProtoReflectionDescriptorDatabase(channel).get_services()
         return ("OK" if "camdirector.v1.Director" in services else "NO_DIRECTOR"), ""
-    client = (wc.GrpcRaw(world.server.grpc, key=key or None) if door.transport == "gRPC"
-              else wc.ZmqRaw(world.server.zmq, key=key or None, server_key=world.server.zmq_server_key))
+    client = (
+        wc.GrpcRaw(world.server.grpc, key=key or None)
+        if door.transport == "gRPC"
+        else wc.ZmqRaw(world.server.zmq, key=key or None, server_key=world.server.zmq_server_key)
+    )
     try:
         if door.name == "StreamFrames":
             client.stream(_frames(world, target, 2))
@@ -211,15 +237,14 @@ def _http(world: World, door: Door, key: str, target: str) -> tuple[str, str]:
     elif path == "/v1/keys" and method == "POST":
         kwargs["json"] = {"role": "viewer", "name": "door test"}
     elif path == "/v1/login":
-        kwargs["json"] = {"key": world.keys["viewer"]}   # an open door: no Authorization needed
+        kwargs["json"] = {"key": world.keys["viewer"]}  # an open door: no Authorization needed
     elif method == "POST":
         kwargs["data"] = {"seed": "1"} if "overview" in path else {"name": "door-test"}  # no file: 422 once let in
     if path.endswith(".mjpeg"):
         with httpx.stream(method, url, headers=headers, params={"fps": 1}, timeout=30) as reply:
             return str(reply.status_code), "" if reply.status_code == 200 else reply.read().decode()
     reply = httpx.request(method, url, headers=headers, timeout=60, **kwargs)
-    detail = reply.json().get("detail", "") if reply.headers.get("content-type", "").startswith("application/json") \
-        else ""
+    detail = reply.json().get("detail", "") if reply.headers.get("content-type", "").startswith("application/json") else ""
     return str(reply.status_code), str(detail)
 
 
@@ -229,8 +254,16 @@ def _call(world: World, door: Door, caller: str, owned: bool = True) -> tuple[st
     return answer[0], _normal(answer[1], [target])
 
 
-@pytest.mark.parametrize("route, item", [("/v1/sessions", "session_id"), ("/v1/levels", "name"),
-                                         ("/v1/overview-jobs", "id"), ("/v1/level-jobs", "id"), ("/v1/keys", "id")])
+@pytest.mark.parametrize(
+    "route, item",
+    [
+        ("/v1/sessions", "session_id"),
+        ("/v1/levels", "name"),
+        ("/v1/overview-jobs", "id"),
+        ("/v1/level-jobs", "id"),
+        ("/v1/keys", "id"),
+    ],
+)
 def test_lists_show_only_the_callers_tenant(world, route, item):
     """(Before the doors' walk, which ends by deleting the level.)"""
     field = route.rsplit("/", 1)[1].replace("overview-", "").replace("level-", "")

@@ -1,5 +1,6 @@
 """The access store on both backends (SQLite and PostgreSQL: tests/conftest.py's records_url), and
 the guard over it: keys made, checked, revoked; the first admin key; session owners; the audit."""
+
 from __future__ import annotations
 
 import asyncio
@@ -54,8 +55,10 @@ def test_a_key_is_shown_once_and_stored_hashed(make_store):
     assert [k.key_id for k in store.list_keys("studio-a")] == [key_id] and store.list_keys("other") == []
 
 
-@pytest.mark.parametrize("role, tenant, name", [("root", "default", ""), ("admin", "Big Studio", ""),
-                                                ("admin", "", ""), ("viewer", "default", "x" * 201)])
+@pytest.mark.parametrize(
+    "role, tenant, name",
+    [("root", "default", ""), ("admin", "Big Studio", ""), ("admin", "", ""), ("viewer", "default", "x" * 201)],
+)
 def test_bad_roles_tenants_and_names_are_refused(make_store, role, tenant, name):
     with pytest.raises(ValueError):
         make_store().create_key(role, tenant, name)
@@ -67,8 +70,16 @@ def test_the_guard_answers_unauthenticated_and_permission_denied_apart(make_stor
     _, viewer = store.create_key("viewer", "alpha")
     assert guard.authorize(f"Bearer {viewer}", Verb.SESSION_READ).tenant == "alpha"
     assert _code(lambda: guard.authorize(f"Bearer {viewer}", Verb.SESSION_TAKE)) == "PERMISSION_DENIED"
-    for authorization in (None, "", "Bearer", "Basic abc", "Bearer cdk_nothing", f"Bearer {viewer}x",
-                          f"Bearer {viewer[:-1]}", "Bearer cdk_000000000000_secret"):
+    for authorization in (
+        None,
+        "",
+        "Bearer",
+        "Basic abc",
+        "Bearer cdk_nothing",
+        f"Bearer {viewer}x",
+        f"Bearer {viewer[:-1]}",
+        "Bearer cdk_000000000000_secret",
+    ):
         assert _code(lambda a=authorization: guard.identify(a)) == "UNAUTHENTICATED", authorization
 
 
@@ -77,9 +88,9 @@ def test_a_revoked_key_is_refused_at_once_by_every_call_but_a_frame(make_store):
     guard = Guard(store)
     record, key = other_node.create_key("engine")
     guard.identify(f"Bearer {key}", fresh=False)  # cached by this node now
-    other_node.revoke(record.key_id)              # through another node
+    other_node.revoke(record.key_id)  # through another node
     assert guard.identify(f"Bearer {key}", fresh=False).key_id == record.key_id  # a frame: until the poll
-    assert _code(lambda: guard.identify(f"Bearer {key}")) == "UNAUTHENTICATED"   # any other call: at once
+    assert _code(lambda: guard.identify(f"Bearer {key}")) == "UNAUTHENTICATED"  # any other call: at once
     assert _code(lambda: guard.identify(f"Bearer {key}", fresh=False)) == "UNAUTHENTICATED"  # the cache learnt it
 
 
@@ -90,7 +101,7 @@ def test_a_stream_learns_of_a_revocation_from_the_poll(make_store):
     identity = guard.identify(f"Bearer {key}", fresh=False)
     guard.still_valid(identity)
     other_node.revoke(record.key_id)
-    guard.still_valid(identity)   # the cache has not heard yet
+    guard.still_valid(identity)  # the cache has not heard yet
     assert guard.poll_revocations() == [record.key_id]
     assert _code(lambda: guard.still_valid(identity)) == "UNAUTHENTICATED"
 
@@ -120,8 +131,10 @@ def test_the_first_admin_key_is_made_once_with_mode_0600(make_store, tmp_path):
 def test_nodes_starting_together_make_one_admin_key(make_store, tmp_path):
     stores = [make_store() for _ in range(4)]
     made = []
-    threads = [threading.Thread(target=lambda s=s, i=i: made.append(ensure_admin_key(s, tmp_path / str(i))))
-               for i, s in enumerate(stores)]
+    threads = [
+        threading.Thread(target=lambda s=s, i=i: made.append(ensure_admin_key(s, tmp_path / str(i))))
+        for i, s in enumerate(stores)
+    ]
     for t in threads:
         t.start()
     for t in threads:
@@ -139,8 +152,9 @@ def test_session_owners_audit_and_shared_secrets(make_store):
     store.audit("alpha", "k1", "take", "s1", {"subject_ids": ["p1"]})
     store.audit("beta", "k2", "style", "s2", {})
     trail = other_node.audit_trail("alpha")
-    assert [(e["key_id"], e["action"], e["session_id"], e["detail"]) for e in trail] == \
-        [("k1", "take", "s1", {"subject_ids": ["p1"]})]
+    assert [(e["key_id"], e["action"], e["session_id"], e["detail"]) for e in trail] == [
+        ("k1", "take", "s1", {"subject_ids": ["p1"]})
+    ]
     assert other_node.audit_trail("alpha", after_seq=trail[0]["seq"]) == []
     assert store.shared_secret("cookie") == other_node.shared_secret("cookie") != store.shared_secret("other")
 

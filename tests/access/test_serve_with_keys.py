@@ -1,6 +1,7 @@
 """A real `camdirector serve` with authentication on: the first admin key, the keys command, TLS,
 CURVE, protected mode on non-loopback addresses, tenants' limits, the audit trail, and a stream
 whose key is revoked."""
+
 from __future__ import annotations
 
 import os
@@ -24,8 +25,9 @@ from tests.service import wire_client as wc
 
 
 def keys_command(data_dir: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "camdirector", "keys", *args, "--data-dir", str(data_dir)],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "camdirector", "keys", *args, "--data-dir", str(data_dir)], capture_output=True, text=True
+    )
 
 
 def _auth(key: str) -> dict:
@@ -40,7 +42,7 @@ def test_the_first_start_makes_an_admin_key_and_logs_its_path_only(tmp_path):
         assert str(key_file) in server.log_tail() and server.admin_key not in server.log_tail()
         assert httpx.get(f"http://{server.http}/v1/whoami", headers=_auth(server.admin_key)).json()["role"] == "admin"
     with ServerProcess("--workers", "0", "--data-dir", str(tmp_path), auth=True) as again:
-        assert "admin_key_file" not in again.ready   # one existed: none made
+        assert "admin_key_file" not in again.ready  # one existed: none made
 
 
 def test_keys_are_made_listed_and_revoked_from_the_command_line(tmp_path):
@@ -60,14 +62,21 @@ def test_keys_are_made_listed_and_revoked_from_the_command_line(tmp_path):
         assert bad.returncode == 2 and "tenant" in bad.stderr
 
 
-@pytest.mark.parametrize("args, refused", [
-    (("--grpc", "0.0.0.0:0", "--zmq", "", "--http", ""), "grpc on 0.0.0.0:0"),
-    (("--grpc", "", "--zmq", "", "--http", "0.0.0.0:0"), "http on 0.0.0.0:0"),
-    (("--grpc", "", "--zmq", "tcp://0.0.0.0:*", "--http", "", "--no-auth"), "zmq on 0.0.0.0:*"),
-])
+@pytest.mark.parametrize(
+    "args, refused",
+    [
+        (("--grpc", "0.0.0.0:0", "--zmq", "", "--http", ""), "grpc on 0.0.0.0:0"),
+        (("--grpc", "", "--zmq", "", "--http", "0.0.0.0:0"), "http on 0.0.0.0:0"),
+        (("--grpc", "", "--zmq", "tcp://0.0.0.0:*", "--http", "", "--no-auth"), "zmq on 0.0.0.0:*"),
+    ],
+)
 def test_a_non_loopback_address_without_encryption_refuses_to_start(tmp_path, args, refused):
-    run = subprocess.run([sys.executable, "-m", "camdirector", "serve", "--workers", "0", "--data-dir", str(tmp_path),
-                          *args], capture_output=True, text=True, timeout=60)
+    run = subprocess.run(
+        [sys.executable, "-m", "camdirector", "serve", "--workers", "0", "--data-dir", str(tmp_path), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert run.returncode == 2 and refused in run.stderr and "--tls-cert" in run.stderr, run.stderr
 
 
@@ -77,8 +86,7 @@ def test_insecure_lets_a_non_loopback_address_start(tmp_path):
 
 
 def test_over_tls_a_plaintext_client_is_refused_and_one_with_the_ca_served(tmp_path, tls_files):
-    with ServerProcess("--workers", "0", "--tls-cert", str(tls_files.cert), "--tls-key", str(tls_files.key),
-                       auth=True) as server:
+    with ServerProcess("--workers", "0", "--tls-cert", str(tls_files.cert), "--tls-key", str(tls_files.key), auth=True) as server:
         assert server.url("grpc").startswith("grpcs://")
         trusted = wc.GrpcRaw(server.grpc, key=server.admin_key, ca_file=tls_files.ca_cert)
         assert trusted.call("CreateSession", wc.two_target_request()).session_id
@@ -103,7 +111,7 @@ def test_over_tls_a_plaintext_client_is_refused_and_one_with_the_ca_served(tmp_p
 
 def test_zeromq_is_curve_encrypted_and_a_client_without_the_servers_key_gets_nothing():
     with ServerProcess("--workers", "0", transports=("zmq",), auth=True) as server:
-        assert len(server.zmq_server_key) == 40   # Z85 of 32 bytes
+        assert len(server.zmq_server_key) == 40  # Z85 of 32 bytes
         curve = wc.ZmqRaw(server.zmq, key=server.admin_key, server_key=server.zmq_server_key)
         assert curve.call("CreateSession", wc.two_target_request()).session_id
         for junk in (b"", b"Bearer", b"Bearer cdk_x", b"\xff\xfe", b"Basic " + server.admin_key.encode()):
@@ -112,17 +120,28 @@ def test_zeromq_is_curve_encrypted_and_a_client_without_the_servers_key_gets_not
         curve.close()
         plain = wc.ZmqRaw(server.zmq, key=server.admin_key)
         plain.sock.setsockopt(zmq.RCVTIMEO, 1500)
-        with pytest.raises(zmq.Again):   # the handshake never completes: no request reaches the server
+        with pytest.raises(zmq.Again):  # the handshake never completes: no request reaches the server
             plain.call("CreateSession", wc.two_target_request())
         plain.close()
 
 
 def test_tenants_limits_answer_resource_exhausted_with_a_message(tmp_path):
-    with ServerProcess("--workers", "0", "--data-dir", str(tmp_path), "--tenant-max-sessions", "2",
-                       "--tenant-max-fps", "20", transports=("grpc",), auth=True) as server:
+    with ServerProcess(
+        "--workers",
+        "0",
+        "--data-dir",
+        str(tmp_path),
+        "--tenant-max-sessions",
+        "2",
+        "--tenant-max-fps",
+        "20",
+        transports=("grpc",),
+        auth=True,
+    ) as server:
         alpha = wc.GrpcRaw(server.grpc, key=server.admin_key)
-        beta = wc.GrpcRaw(server.grpc, key=keys_command(tmp_path, "create", "--role", "engine", "--tenant", "beta")
-                          .stdout.strip())
+        beta = wc.GrpcRaw(
+            server.grpc, key=keys_command(tmp_path, "create", "--role", "engine", "--tenant", "beta").stdout.strip()
+        )
         first = alpha.call("CreateSession", wc.two_target_request()).session_id
         alpha.call("CreateSession", wc.two_target_request())
         with pytest.raises(wc.RpcFailed) as full:
@@ -130,53 +149,59 @@ def test_tenants_limits_answer_resource_exhausted_with_a_message(tmp_path):
         assert full.value.code == grpc.StatusCode.RESOURCE_EXHAUSTED and "tenant 'default'" in full.value.message
         assert beta.call("CreateSession", wc.two_target_request()).session_id  # another tenant's share
         with pytest.raises(wc.RpcFailed) as fast:
-            for update in wc.walk(first, 60):   # as fast as it goes: far above 20 a second
+            for update in wc.walk(first, 60):  # as fast as it goes: far above 20 a second
                 alpha.call("Frame", update)
         assert fast.value.code == grpc.StatusCode.RESOURCE_EXHAUSTED and "20 frames a second" in fast.value.message
         time.sleep(0.2)
-        alpha.call("Frame", next(wc.walk(first, 1, start_frame=100)))   # the session goes on at its pace
+        alpha.call("Frame", next(wc.walk(first, 1, start_frame=100)))  # the session goes on at its pace
         alpha.close()
         beta.close()
 
 
 def test_style_changes_and_key_changes_are_in_the_tenants_audit_trail(tmp_path):
-    with ServerProcess("--workers", "0", "--data-dir", str(tmp_path), transports=("grpc", "http"),
-                       auth=True) as server:
+    with ServerProcess("--workers", "0", "--data-dir", str(tmp_path), transports=("grpc", "http"), auth=True) as server:
         http = f"http://{server.http}"
         raw = wc.GrpcRaw(server.grpc, key=server.admin_key)
         session_id = raw.call("CreateSession", wc.two_target_request()).session_id
         raw.call("UpdateStyle", pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(preferred_phi_deg=40)))
         raw.close()
-        assert httpx.put(f"{http}/v1/sessions/{session_id}/style", json={"preferredPhiDeg": 30},
-                         headers=_auth(server.admin_key)).status_code == 200
-        made = httpx.post(f"{http}/v1/keys", json={"role": "viewer", "name": "producer"},
-                          headers=_auth(server.admin_key)).json()
+        assert (
+            httpx.put(
+                f"{http}/v1/sessions/{session_id}/style", json={"preferredPhiDeg": 30}, headers=_auth(server.admin_key)
+            ).status_code
+            == 200
+        )
+        made = httpx.post(f"{http}/v1/keys", json={"role": "viewer", "name": "producer"}, headers=_auth(server.admin_key)).json()
         assert httpx.delete(f"{http}/v1/keys/{made['id']}", headers=_auth(server.admin_key)).status_code == 200
         trail = httpx.get(f"{http}/v1/audit", headers=_auth(server.admin_key)).json()["entries"]
         admin_id = server.admin_key.split("_")[1]
         assert [(e["action"], e["session_id"], e["key_id"]) for e in trail] == [
-            ("style", session_id, admin_id), ("style", session_id, admin_id),
-            ("key.create", None, admin_id), ("key.revoke", None, admin_id)]
+            ("style", session_id, admin_id),
+            ("style", session_id, admin_id),
+            ("key.create", None, admin_id),
+            ("key.revoke", None, admin_id),
+        ]
         assert trail[0]["detail"]["via"] == "grpc" and trail[1]["detail"]["style"] == {"preferredPhiDeg": 30}
         viewer = httpx.post(f"{http}/v1/keys", json={"role": "viewer"}, headers=_auth(server.admin_key)).json()["key"]
         assert httpx.get(f"{http}/v1/audit", headers=_auth(viewer)).status_code == 403
 
 
 def test_a_stream_whose_key_is_revoked_ends_unauthenticated_within_the_poll(tmp_path):
-    with ServerProcess("--workers", "1", "--data-dir", str(tmp_path), transports=("grpc", "http"),
-                       auth=True) as server:
-        engine = httpx.post(f"http://{server.http}/v1/keys", json={"role": "engine"},
-                            headers=_auth(server.admin_key)).json()
+    with ServerProcess("--workers", "1", "--data-dir", str(tmp_path), transports=("grpc", "http"), auth=True) as server:
+        engine = httpx.post(f"http://{server.http}/v1/keys", json={"role": "engine"}, headers=_auth(server.admin_key)).json()
         raw = wc.GrpcRaw(server.grpc, key=engine["key"])
         session_id = raw.call("CreateSession", wc.two_target_request()).session_id
         revoked_at, answered = [], []
 
         def paced():
             for n, update in enumerate(wc.walk(session_id, 100_000)):
-                if n == 30:   # revoked_at: when the revocation is asked for (it holds before the answer comes)
+                if n == 30:  # revoked_at: when the revocation is asked for (it holds before the answer comes)
                     revoked_at.append(time.monotonic())
-                    threading.Thread(target=lambda: httpx.delete(f"http://{server.http}/v1/keys/{engine['id']}",
-                                                                 headers=_auth(server.admin_key))).start()
+                    threading.Thread(
+                        target=lambda: httpx.delete(
+                            f"http://{server.http}/v1/keys/{engine['id']}", headers=_auth(server.admin_key)
+                        )
+                    ).start()
                 answered.append(time.monotonic())
                 time.sleep(1 / 60)
                 yield update
@@ -184,5 +209,5 @@ def test_a_stream_whose_key_is_revoked_ends_unauthenticated_within_the_poll(tmp_
         with pytest.raises(wc.RpcFailed) as ended:
             raw.stream(paced())
         assert ended.value.code == grpc.StatusCode.UNAUTHENTICATED and "revoked" in ended.value.message
-        assert answered[-1] - revoked_at[0] < 1.0   # the poll is every 0.25 s
+        assert answered[-1] - revoked_at[0] < 1.0  # the poll is every 0.25 s
         raw.close()

@@ -167,9 +167,7 @@ def main() -> None:
                     if name == "grpc":
                         channel = grpc.aio.insecure_channel(f"127.0.0.1:{grpc_port}")
                         stub = director_pb2_grpc.DirectorStub(channel)
-                        results[f"{name}_async"] = await interleaved_async(
-                            sdk_call, lambda i: stub.Frame(prebuilt), n, warmup
-                        )
+                        results[f"{name}_async"] = await interleaved_async(sdk_call, lambda i: stub.Frame(prebuilt), n, warmup)
                         await channel.close()
                     else:
                         sock = zmq.asyncio.Context.instance().socket(zmq.DEALER)

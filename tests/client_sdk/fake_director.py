@@ -215,9 +215,13 @@ class FakeZmqServer:
                 continue
             frames = sock.recv_multipart()
             self.requests += 1
-            envelope, body = ([frames[0], b""], frames[2:]) if len(frames) > 1 and frames[1] == b"" else (
-                frames[:1],
-                frames[1:],
+            envelope, body = (
+                ([frames[0], b""], frames[2:])
+                if len(frames) > 1 and frames[1] == b""
+                else (
+                    frames[:1],
+                    frames[1:],
+                )
             )
             reply = envelope + self._answer(body)
             slow = body[0:1] == [b"Frame"] and len(body) == 2 and pb.FrameUpdate.FromString(body[1]).time_s == SLOW_TIME_S

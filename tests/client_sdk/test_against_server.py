@@ -1,4 +1,5 @@
 """The SDK against a real server process, sync and async, over gRPC and ZeroMQ."""
+
 from __future__ import annotations
 
 import asyncio
@@ -22,8 +23,13 @@ def url(request, server):
 def _packed_walk(n: int):
     for i in range(1, n + 1):
         t = i / 60
-        yield i, t, cd.pack_states(["a", "cart"], np.array([[np.sin(t), 0.9, t], [-2 + t, 0.5, 2.0]]),
-                                   np.array([[0, 0, 0, 1.0], [0, 0, 0, 1.0]]))
+        yield (
+            i,
+            t,
+            cd.pack_states(
+                ["a", "cart"], np.array([[np.sin(t), 0.9, t], [-2 + t, 0.5, 2.0]]), np.array([[0, 0, 0, 1.0], [0, 0, 0, 1.0]])
+            ),
+        )
 
 
 def test_sync_session_frames_stream_style_close(url):
@@ -31,8 +37,7 @@ def test_sync_session_frames_stream_style_close(url):
         with client.create_session(two_target_request(seed=4)) as session:
             updates = [session.frame(i, t, packed=p) for i, t, p in _packed_walk(30)]
             assert [u.frame for u in updates] == list(range(1, 31))
-            streamed = list(session.stream(session.frame_update(i + 30, t + 0.5, packed=p)
-                                           for i, t, p in _packed_walk(30)))
+            streamed = list(session.stream(session.frame_update(i + 30, t + 0.5, packed=p) for i, t, p in _packed_walk(30)))
             assert [u.frame for u in streamed] == list(range(31, 61))
             pose = cd.pose_from_msg(streamed[-1].pose)
             assert pose.matrix().shape == (4, 4) and abs(np.linalg.det(pose.matrix()[:3, :3]) - 1) < 1e-9
@@ -53,6 +58,7 @@ def test_async_session(url):
                     await session.frame(21, 0.4, states=[cd.pb.ObjectState(id="ghost")])
                 assert err.value.code == grpc.StatusCode.NOT_FOUND and "ghost" in err.value.message
                 return updates
+
     updates = asyncio.run(main())
     assert [u.frame for u in updates] == list(range(1, 21)) and updates[0].cut
 
@@ -91,7 +97,7 @@ def _said_protocol(session) -> int:
 
 
 def test_sync_and_async_sessions_say_the_protocol(url):
-    request = two_target_request(seed=4, record=True)   # client_protocol 0: the SDK says its own
+    request = two_target_request(seed=4, record=True)  # client_protocol 0: the SDK says its own
     with cd.connect(url) as client:
         with client.create_session(request) as from_request:
             pass
@@ -103,16 +109,21 @@ def test_sync_and_async_sessions_say_the_protocol(url):
         async with cd.connect_async(url) as client:
             async with client.create_session(two_target_request(record=True)) as session:
                 return session
+
     assert _said_protocol(asyncio.run(run_async())) == PROTOCOL
 
 
 def _refused_as_newer(error: cd.DirectorError) -> bool:
-    return (error.code == grpc.StatusCode.FAILED_PRECONDITION and f"protocol {PROTOCOL + 1}," in error.message
-            and f"protocol {PROTOCOL}:" in error.message and "upgrade the server" in error.message)
+    return (
+        error.code == grpc.StatusCode.FAILED_PRECONDITION
+        and f"protocol {PROTOCOL + 1}," in error.message
+        and f"protocol {PROTOCOL}:" in error.message
+        and "upgrade the server" in error.message
+    )
 
 
 def test_a_request_claiming_a_newer_protocol_is_refused_and_the_client_goes_on(url):
-    newer = two_target_request(client_protocol=PROTOCOL + 1)   # said by the caller: the SDK keeps it
+    newer = two_target_request(client_protocol=PROTOCOL + 1)  # said by the caller: the SDK keeps it
     with cd.connect(url) as client:
         with pytest.raises(cd.DirectorError) as refused:
             client.create_session(newer)
@@ -126,6 +137,7 @@ def test_a_request_claiming_a_newer_protocol_is_refused_and_the_client_goes_on(u
                 await client.create_session(newer)
             async with client.create_session(two_target_request()) as session:
                 return refused.value, (await session.frame(1, 1 / 60)).frame
+
     error, answered = asyncio.run(run_async())
     assert _refused_as_newer(error) and answered == 1, error
 

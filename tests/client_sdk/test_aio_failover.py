@@ -10,6 +10,7 @@ A small grpc.aio Director of the tests' own, in the test's event loop, records e
 metadata and fails calls on demand, which a real server cannot; the last test SIGKILLs a real
 server's worker under live streams over both transports.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -48,8 +49,11 @@ class FlakyDirector(pb_grpc.DirectorServicer):
 
     def _answer(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
         self.answered.setdefault(update.session_id, []).append(update.frame)
-        return pb.CameraUpdate(frame=update.frame, time_s=update.time_s,
-                               pose=pb.CameraPose(position=pb.Vec3(x=update.frame), rotation=pb.Quat(w=1.0)))
+        return pb.CameraUpdate(
+            frame=update.frame,
+            time_s=update.time_s,
+            pose=pb.CameraPose(position=pb.Vec3(x=update.frame), rotation=pb.Quat(w=1.0)),
+        )
 
     async def CreateSession(self, request, context):
         session_id = f"session-{sum(c[0] == 'CreateSession' for c in self.calls) + 1}"
@@ -123,8 +127,16 @@ def test_every_call_of_a_session_carries_its_route_key():
             routes.setdefault(session_id, set()).add(route)
         assert routes == {first.id: {first.route}, second.id: {second.route}} and first.route != second.route
         methods = [m for m, s, _ in director.calls if s == first.id]
-        assert methods == ["CreateSession", "Frame", "Frame", "StreamFrames", "StreamFrames", "UpdateStyle",
-                           "TakeShot", "CloseSession"]
+        assert methods == [
+            "CreateSession",
+            "Frame",
+            "Frame",
+            "StreamFrames",
+            "StreamFrames",
+            "UpdateStyle",
+            "TakeShot",
+            "CloseSession",
+        ]
         assert first.retries == 1
 
     with_flaky_director(test)

@@ -104,8 +104,11 @@ def test_errors_carry_status_and_message(client):
     assert caught.value.message == "a session needs one or two targets"
     session = client.create_session(targets=TARGETS)
     session.close()
-    for call in (lambda: session.frame(1, 0.0), lambda: session.update_style({}),
-                 lambda: list(session.stream([pb.FrameUpdate(frame=1)]))):
+    for call in (
+        lambda: session.frame(1, 0.0),
+        lambda: session.update_style({}),
+        lambda: list(session.stream([pb.FrameUpdate(frame=1)])),
+    ):
         with pytest.raises(cd.DirectorError) as caught:
             call()
         assert caught.value.code is grpc.StatusCode.NOT_FOUND

@@ -70,10 +70,24 @@ quaternion_batches = (
 )
 
 ENGINES = {
-    "unity": (cd.from_unity_position, cd.to_unity_position, cd.from_unity_rotation, cd.to_unity_rotation,
-              cd.from_unity_scale, cd.to_unity_scale, 1.0),
-    "unreal": (cd.from_unreal_position, cd.to_unreal_position, cd.from_unreal_rotation, cd.to_unreal_rotation,
-               cd.from_unreal_scale, cd.to_unreal_scale, 100.0),
+    "unity": (
+        cd.from_unity_position,
+        cd.to_unity_position,
+        cd.from_unity_rotation,
+        cd.to_unity_rotation,
+        cd.from_unity_scale,
+        cd.to_unity_scale,
+        1.0,
+    ),
+    "unreal": (
+        cd.from_unreal_position,
+        cd.to_unreal_position,
+        cd.from_unreal_rotation,
+        cd.to_unreal_rotation,
+        cd.from_unreal_scale,
+        cd.to_unreal_scale,
+        100.0,
+    ),
 }
 engine_names = st.sampled_from(sorted(ENGINES))
 
@@ -238,8 +252,7 @@ def test_camera_pose_to_engine(engine, q, position):
     pose = cd.Pose(position, q, 40.0)
     position_engine, q_engine = CAMERA_POSE_TO[engine](pose)
     forward, up, _ = (np.array(a) for a in ENGINE_CAMERA_AXES[engine])
-    np.testing.assert_allclose(unit(rotate(q_engine, forward)), unit(ours_direction_to_engine(engine, pose.forward)),
-                               atol=1e-9)
+    np.testing.assert_allclose(unit(rotate(q_engine, forward)), unit(ours_direction_to_engine(engine, pose.forward)), atol=1e-9)
     np.testing.assert_allclose(unit(rotate(q_engine, up)), unit(ours_direction_to_engine(engine, pose.up)), atol=1e-9)
     from_position, *_ = ENGINES[engine]
     np.testing.assert_allclose(from_position(position_engine), position, rtol=1e-12, atol=1e-9)

@@ -1,6 +1,7 @@
 """The Python SDK against real servers with authentication on (issue 26): keys on every call over
 gRPC and ZeroMQ (CURVE), gRPC over TLS with a studio's own CA, refused keys raised at once and
 never tried again, and a key that shows in no log, repr or error message."""
+
 from __future__ import annotations
 
 import asyncio
@@ -32,8 +33,9 @@ def auth_server(tmp_path_factory):
 @pytest.fixture(scope="module")
 def tls_server(tls_files):
     """Authentication on, gRPC over TLS with a certificate signed by the test CA."""
-    with ServerProcess("--workers", "1", "--tls-cert", str(tls_files.cert), "--tls-key", str(tls_files.key),
-                       transports=("grpc",), auth=True) as srv:
+    with ServerProcess(
+        "--workers", "1", "--tls-cert", str(tls_files.cert), "--tls-key", str(tls_files.key), transports=("grpc",), auth=True
+    ) as srv:
         yield srv
 
 
@@ -44,8 +46,13 @@ def no_key_in_environment(monkeypatch):
 
 def keys(server, *args: str) -> str:
     """`camdirector keys ARGS` on the server's data directory; its output."""
-    done = subprocess.run([sys.executable, "-m", "camdirector", "keys", *args, "--data-dir", str(server.data_dir)],
-                          capture_output=True, text=True, timeout=60, check=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "camdirector", "keys", *args, "--data-dir", str(server.data_dir)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
     return done.stdout.strip()
 
 
@@ -120,6 +127,7 @@ def test_tls_refusals_are_unavailable_with_what_to_check(tls_server, tls_files):
     async def without_the_ca():  # the system's roots do not hold the test CA
         async with cd.connect_async(tls_server.url("grpc"), key=tls_server.admin_key) as client:
             await client.create_session(two_target_request())
+
     with pytest.raises(cd.DirectorError) as untrusted:
         asyncio.run(without_the_ca())
     assert untrusted.value.code == grpc.StatusCode.UNAVAILABLE
@@ -130,8 +138,11 @@ def test_tls_refusals_are_unavailable_with_what_to_check(tls_server, tls_files):
 def test_no_key_an_unknown_key_or_a_role_without_the_verb_are_refused(auth_server, transport):
     url, security = auth_server.url(transport), security_of(auth_server, transport)
     viewer = keys(auth_server, "create", "--role", "viewer", "--name", "sdk test viewer")
-    for key, code in [(None, grpc.StatusCode.UNAUTHENTICATED), ("cdk_0123456789ab_" + "x" * 43, grpc.StatusCode.UNAUTHENTICATED),
-                      (viewer, grpc.StatusCode.PERMISSION_DENIED)]:
+    for key, code in [
+        (None, grpc.StatusCode.UNAUTHENTICATED),
+        ("cdk_0123456789ab_" + "x" * 43, grpc.StatusCode.UNAUTHENTICATED),
+        (viewer, grpc.StatusCode.PERMISSION_DENIED),
+    ]:
         with cd.connect(url, key=key, **security) as client:
             with pytest.raises(cd.DirectorError) as refused:
                 client.create_session(two_target_request())
@@ -150,8 +161,10 @@ def refusals_sync(url: str, key: str, revoke, **security) -> list[tuple[grpc.Sta
         revoke()
         with pytest.raises(cd.DirectorError) as revoked:
             session.update_style({"gaze_room_m": 0.5})
-    return [(denied.value.code, denied.value.message, retries_denied),
-            (revoked.value.code, revoked.value.message, session.retries)]
+    return [
+        (denied.value.code, denied.value.message, retries_denied),
+        (revoked.value.code, revoked.value.message, session.retries),
+    ]
 
 
 async def refusals_async(url: str, key: str, revoke, **security) -> list[tuple[grpc.StatusCode, str, int]]:
@@ -164,8 +177,10 @@ async def refusals_async(url: str, key: str, revoke, **security) -> list[tuple[g
         revoke()
         with pytest.raises(cd.DirectorError) as revoked:
             await session.update_style({"gaze_room_m": 0.5})
-    return [(denied.value.code, denied.value.message, retries_denied),
-            (revoked.value.code, revoked.value.message, session.retries)]
+    return [
+        (denied.value.code, denied.value.message, retries_denied),
+        (revoked.value.code, revoked.value.message, session.retries),
+    ]
 
 
 @pytest.mark.parametrize("mode", ["sync", "async"])
@@ -192,14 +207,19 @@ def test_the_key_shows_in_no_log_repr_or_message(auth_server, tls_server, tls_fi
             session.frame(1, 1 / 60)
             with pytest.raises(cd.DirectorError) as denied:
                 session.take_shot(["a"])
-            seen += [repr(client), str(client), repr(session), repr(denied.value), str(denied.value),
-                     repr(client._transport._security)]
+            seen += [
+                repr(client),
+                str(client),
+                repr(session),
+                repr(denied.value),
+                str(denied.value),
+                repr(client._transport._security),
+            ]
             session.close()
     # Refusals that name the connection: TLS with a CA not given, ZeroMQ without CURVE.
     with cd.connect(tls_server.url("grpc"), key=secret) as client, pytest.raises(cd.DirectorError) as untrusted:
         client.create_session(two_target_request())
-    with cd.connect(auth_server.url("zmq"), timeout_s=0.3, key=secret) as client, \
-            pytest.raises(cd.DirectorError) as unanswered:
+    with cd.connect(auth_server.url("zmq"), timeout_s=0.3, key=secret) as client, pytest.raises(cd.DirectorError) as unanswered:
         client.create_session(two_target_request())
     with pytest.raises(ValueError) as bad:
         cd.connect(auth_server.url("grpc"), key=secret + "\n")

@@ -48,14 +48,27 @@ def test_grpc_channel_options():
 def test_create_session_request_from_keywords():
     target = pb.Target(id="hero")
     msg = wire.create_session_request(
-        None, objects=None, targets=[target], lens=pb.Lens(vertical_fov_deg=40), style={"gaze_room_m": 1.5},
-        seed=7, record=True,
+        None,
+        objects=None,
+        targets=[target],
+        lens=pb.Lens(vertical_fov_deg=40),
+        style={"gaze_room_m": 1.5},
+        seed=7,
+        record=True,
     )
     assert [t.id for t in msg.targets] == ["hero"] and not msg.objects
     assert msg.lens.vertical_fov_deg == 40 and msg.style.gaze_room_m == 1.5
     assert (msg.seed, msg.record) == (7, True)
-    tracks = wire.create_session_request(None, objects=None, targets=[target], lens=None, seed=0, record=False,
-                                         style={"rig": "RIG_TRACKS", "shot_size": "SHOT_SIZE_MEDIUM"}, level_id="arena")
+    tracks = wire.create_session_request(
+        None,
+        objects=None,
+        targets=[target],
+        lens=None,
+        seed=0,
+        record=False,
+        style={"rig": "RIG_TRACKS", "shot_size": "SHOT_SIZE_MEDIUM"},
+        level_id="arena",
+    )
     assert tracks.level_id == "arena" and tracks.style.rig == pb.RIG_TRACKS
 
 

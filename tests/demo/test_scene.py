@@ -1,4 +1,5 @@
 """The procedural demo scene: determinism, layout guarantees and valid motion."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -80,8 +81,7 @@ def test_obstacles_never_enter_columns_nor_the_avatar(scene):
     for obj, track in zip(scene.dynamic_objects, scene.obstacle_tracks):
         assert obj.id == track.object_id
         footprint_m = _footprint_radius_m(obj.vertices)
-        obstacle_xz = np.array([scene.transforms_at(t)[obj.id].position_world[[0, 2]]
-                                for t in times_s[::4]])
+        obstacle_xz = np.array([scene.transforms_at(t)[obj.id].position_world[[0, 2]] for t in times_s[::4]])
         gap_m = np.linalg.norm(obstacle_xz[:, None] - scene.column_centers_xz[None], axis=2)
         assert np.all(gap_m >= scene.column_radii_m + footprint_m)
         # Checked densely on the track too, for the instants between the samples above.

@@ -1,4 +1,5 @@
 """Smoke test of the top-down map of a demo run."""
+
 from __future__ import annotations
 
 import numpy as np

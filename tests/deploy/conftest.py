@@ -1,6 +1,7 @@
 """A cluster of two nodes behind HAProxy, with keys and TLS, for the module that routes through it;
 helpers to reach it as a client does (grpcs:// and https:// trusting the cluster's CA, a key on
 every call) and to see where sessions live."""
+
 from __future__ import annotations
 
 import json
@@ -31,13 +32,23 @@ def trusting(cluster: Cluster) -> ssl.SSLContext:
     return ssl.create_default_context(cafile=str(cluster.ca_file))
 
 
-def https(cluster: Cluster, address: str, path: str, key: str, method: str = "GET", body: dict | None = None,
-          headers: dict | None = None) -> tuple[int, dict]:
+def https(
+    cluster: Cluster,
+    address: str,
+    path: str,
+    key: str,
+    method: str = "GET",
+    body: dict | None = None,
+    headers: dict | None = None,
+) -> tuple[int, dict]:
     """(status, JSON answer) of one REST call to HOST:PORT over TLS with `key`; an error status is
     an answer too. OSError when nothing answers (a killed node)."""
     request = urllib.request.Request(
-        f"https://{address}{path}", method=method, data=None if body is None else json.dumps(body).encode(),
-        headers={"Authorization": f"Bearer {key}", "Content-Type": "application/json", **(headers or {})})
+        f"https://{address}{path}",
+        method=method,
+        data=None if body is None else json.dumps(body).encode(),
+        headers={"Authorization": f"Bearer {key}", "Content-Type": "application/json", **(headers or {})},
+    )
     try:
         with urllib.request.urlopen(request, timeout=10, context=trusting(cluster)) as reply:
             return reply.status, json.load(reply)
@@ -48,16 +59,18 @@ def https(cluster: Cluster, address: str, path: str, key: str, method: str = "GE
 def make_key(cluster: Cluster, role: str, address: str | None = None) -> dict:
     """A new key of tenant `default` (its record and, under "key", the key itself), made by the
     admin through `address` (default the balancer)."""
-    status, made = https(cluster, address or cluster.http, "/v1/keys", cluster.admin_key, "POST",
-                         {"role": role, "name": f"tests/deploy {role}"})
+    status, made = https(
+        cluster, address or cluster.http, "/v1/keys", cluster.admin_key, "POST", {"role": role, "name": f"tests/deploy {role}"}
+    )
     assert status == 201, made
     return made
 
 
 def channel(cluster: Cluster, address: str, key: str) -> grpc.Channel:
     """A channel to HOST:PORT over TLS (the cluster's CA) that sends `key` with every call."""
-    credentials = grpc.composite_channel_credentials(grpc.ssl_channel_credentials(cluster.ca_file.read_bytes()),
-                                                     grpc.access_token_call_credentials(key))
+    credentials = grpc.composite_channel_credentials(
+        grpc.ssl_channel_credentials(cluster.ca_file.read_bytes()), grpc.access_token_call_credentials(key)
+    )
     return grpc.secure_channel(address, credentials)
 
 

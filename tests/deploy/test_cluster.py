@@ -6,6 +6,7 @@ its route keys going to the others; with no node left, UNAVAILABLE. An API key r
 node is refused by the others: at once for every call but a frame, and a stream on another node
 is ended within a second. The tests run in order on one cluster: the join adds node-3, the last
 test kills nodes."""
+
 from __future__ import annotations
 
 import threading
@@ -64,8 +65,9 @@ def test_keys_spread_over_the_nodes_where_the_ring_model_puts_them(cluster, stub
 def test_rest_calls_with_the_route_key_reach_the_node_of_the_session(cluster, stub):
     keys = new_keys(6)
     for key, session_id in zip(keys, [create(stub, key) for key in keys]):
-        status, session = https(cluster, cluster.http, f"/v1/sessions/{session_id}", cluster.admin_key,
-                                headers={ROUTE_HEADER: key})
+        status, session = https(
+            cluster, cluster.http, f"/v1/sessions/{session_id}", cluster.admin_key, headers={ROUTE_HEADER: key}
+        )
         assert status == 200, session
 
 
@@ -76,8 +78,12 @@ def test_a_level_added_through_one_node_directs_a_session_on_the_other(cluster):
     from tests.service.tracks_sessions import actor_frames, check_directed, corridor_walk, obj_text, tracks_request
 
     def admin(node) -> httpx.Client:
-        return httpx.Client(base_url=f"https://{node.http}", verify=trusting(cluster), timeout=30,
-                            headers={"Authorization": f"Bearer {cluster.admin_key}"})
+        return httpx.Client(
+            base_url=f"https://{node.http}",
+            verify=trusting(cluster),
+            timeout=30,
+            headers={"Authorization": f"Bearer {cluster.admin_key}"},
+        )
 
     with admin(cluster.nodes[0]) as first, admin(cluster.nodes[1]) as second:
         upload = {"level": ("level.obj", obj_text(corridor()))}
@@ -85,8 +91,11 @@ def test_a_level_added_through_one_node_directs_a_session_on_the_other(cluster):
         assert posted.status_code == 202, posted.text
         job = posted.json()["id"]
         deadline = time.monotonic() + 120
-        while (status := first.get(f"/v1/level-jobs/{job}").json()["status"]) not in \
-                ("succeeded", "failed", "cancelled") and time.monotonic() < deadline:
+        while (status := first.get(f"/v1/level-jobs/{job}").json()["status"]) not in (
+            "succeeded",
+            "failed",
+            "cancelled",
+        ) and time.monotonic() < deadline:
             time.sleep(0.2)
         assert status == "succeeded"
         assert second.get(f"/v1/level-jobs/{job}").json()["status"] == "succeeded"
@@ -105,10 +114,12 @@ def test_a_level_added_through_one_node_directs_a_session_on_the_other(cluster):
 def _stream_until_ended(stub, session_id: str, metadata, ended: dict) -> None:
     """Streams frames into the session at 60 Hz (10 s at most); notes in `ended` how many were
     answered and when and how the stream was ended."""
+
     def paced():
         for update in wc.walk(session_id, 600):
             yield update
             time.sleep(1 / 60)
+
     ended["answered"] = 0
     try:
         for _ in stub.StreamFrames(paced(), metadata=metadata, timeout=30):
@@ -131,15 +142,18 @@ def test_a_key_revoked_through_one_node_is_refused_by_the_others(cluster):
     first, second = cluster.nodes[:2]
     checked, streaming = make_key(cluster, "engine", first.http), make_key(cluster, "engine", first.http)
     keys = new_keys(40)
-    balanced_route, direct_route, create_route = [k for k, n in zip(keys, predicted(cluster, keys))
-                                                  if n == second.node_id][:3]
-    with channel(cluster, cluster.grpc, checked["key"]) as checked_channel, \
-            channel(cluster, cluster.grpc, streaming["key"]) as balanced, \
-            channel(cluster, second.grpc, streaming["key"]) as direct:
+    balanced_route, direct_route, create_route = [k for k, n in zip(keys, predicted(cluster, keys)) if n == second.node_id][:3]
+    with (
+        channel(cluster, cluster.grpc, checked["key"]) as checked_channel,
+        channel(cluster, cluster.grpc, streaming["key"]) as balanced,
+        channel(cluster, second.grpc, streaming["key"]) as direct,
+    ):
         checked_stub = pbg.DirectorStub(checked_channel)
         stubs = {"balancer": pbg.DirectorStub(balanced), second.node_id: pbg.DirectorStub(direct)}
-        sessions = {"balancer": create(stubs["balancer"], balanced_route),
-                    second.node_id: create(stubs[second.node_id], direct_route)}
+        sessions = {
+            "balancer": create(stubs["balancer"], balanced_route),
+            second.node_id: create(stubs[second.node_id], direct_route),
+        }
         held = sessions_by_node(cluster)
         assert {node_of(held, session_id) for session_id in sessions.values()} == {second.node_id}
         assert https(cluster, second.http, "/v1/whoami", checked["key"])[0] == 200
@@ -155,8 +169,10 @@ def test_a_key_revoked_through_one_node_is_refused_by_the_others(cluster):
         assert refused.value.code() == grpc.StatusCode.UNAUTHENTICATED, refused.value
 
         ended = {via: {} for via in stubs}
-        threads = [threading.Thread(target=_stream_until_ended, args=(stubs[via], sessions[via], route(r), ended[via]))
-                   for via, r in (("balancer", balanced_route), (second.node_id, direct_route))]
+        threads = [
+            threading.Thread(target=_stream_until_ended, args=(stubs[via], sessions[via], route(r), ended[via]))
+            for via, r in (("balancer", balanced_route), (second.node_id, direct_route))
+        ]
         for thread in threads:
             thread.start()
         time.sleep(1.0)
@@ -171,9 +187,11 @@ def test_a_key_revoked_through_one_node_is_refused_by_the_others(cluster):
         assert refused.value.code() == grpc.StatusCode.UNAUTHENTICATED, refused.value
     for via, stream in ended.items():
         assert "code" in stream, (via, stream)  # ended, not run out
-        print(f"stream via {via}: {stream['answered']} frames answered, ended {stream['code'].name} "
-              f"{stream['at'] - answered:.3f} s after the revocation through {first.node_id} answered "
-              f"({stream['at'] - asked:.3f} s after it was asked)")
+        print(
+            f"stream via {via}: {stream['answered']} frames answered, ended {stream['code'].name} "
+            f"{stream['at'] - answered:.3f} s after the revocation through {first.node_id} answered "
+            f"({stream['at'] - asked:.3f} s after it was asked)"
+        )
         assert stream["answered"] > 30  # it streamed for a second before
         assert stream["at"] - asked < 1.0
     assert ended[second.node_id]["code"] == grpc.StatusCode.UNAUTHENTICATED
@@ -196,6 +214,7 @@ def test_live_streams_go_on_while_a_node_joins(cluster, stub):
                 sent.append(update.frame)
                 yield update
                 time.sleep(0.02)
+
         try:
             replies = [r.frame for r in stub.StreamFrames(paced(), metadata=route(key), timeout=60)]
             results[key] = (sent, replies)

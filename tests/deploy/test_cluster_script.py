@@ -1,6 +1,7 @@
 """`scripts/cluster.sh up --nodes 2` prints one JSON object and returns with the cluster running,
 over TLS and with keys: the JSON names the CA to trust and the admin key's file, never a key;
 `down` stops every process of it, the nodes' own workers included."""
+
 from __future__ import annotations
 
 import json
@@ -32,8 +33,12 @@ def listening(address: str) -> bool:
 
 def test_cluster_sh_up_prints_the_cluster_and_down_leaves_nothing(tmp_path):
     folder = tmp_path / "c"
-    up = subprocess.run([str(ROOT / "scripts" / "cluster.sh"), "up", "--nodes", "2", "--dir", str(folder)],
-                        capture_output=True, text=True, timeout=120)
+    up = subprocess.run(
+        [str(ROOT / "scripts" / "cluster.sh"), "up", "--nodes", "2", "--dir", str(folder)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     if up.returncode != 0 and "is not installed" in up.stderr and os.environ.get("CAMDIRECTOR_REQUIRE_CLUSTER") != "1":
         pytest.skip(up.stderr)
     assert up.returncode == 0, up.stderr
@@ -54,18 +59,24 @@ def test_cluster_sh_up_prints_the_cluster_and_down_leaves_nothing(tmp_path):
         assert reply.status == health_pb2.HealthCheckResponse.SERVING
         key_file = Path(cluster["admin_key_file"])
         assert key_file.stat().st_mode & 0o777 == 0o600
-        whoami = urllib.request.Request(f"https://{cluster['http']}/v1/whoami",
-                                        headers={"Authorization": f"Bearer {key_file.read_text().strip()}"})
+        whoami = urllib.request.Request(
+            f"https://{cluster['http']}/v1/whoami", headers={"Authorization": f"Bearer {key_file.read_text().strip()}"}
+        )
         with urllib.request.urlopen(whoami, timeout=10, context=ssl.create_default_context(cafile=str(ca))) as reply:
             assert json.load(reply)["role"] == "admin"
         assert len(processes) > len(nodes)  # the nodes' worker processes too
     finally:
-        down = subprocess.run([str(ROOT / "scripts" / "cluster.sh"), "down", "--dir", str(folder)],
-                              capture_output=True, text=True, timeout=120)
+        down = subprocess.run(
+            [str(ROOT / "scripts" / "cluster.sh"), "down", "--dir", str(folder)], capture_output=True, text=True, timeout=120
+        )
     assert down.returncode == 0, down.stderr
     assert not [pid for pid in processes if is_running(pid, "")]
-    addresses = [cluster["grpc"], cluster["http"], urlsplit(cluster["redis"]).netloc,
-                 urlsplit(cluster["postgres"]).netloc.rpartition("@")[2]]
+    addresses = [
+        cluster["grpc"],
+        cluster["http"],
+        urlsplit(cluster["redis"]).netloc,
+        urlsplit(cluster["postgres"]).netloc.rpartition("@")[2],
+    ]
     addresses += [n[k] for n in cluster["nodes"] for k in ("grpc", "http")]
     assert not [a for a in addresses if listening(a)]
     assert not (folder / "cluster.json").exists()

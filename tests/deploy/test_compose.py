@@ -3,6 +3,7 @@ it): the services, one data volume shared by every node and worker, one node id 
 for every node and the balancer, the public images by default, and the haproxy.cfg it mounts
 (docker/haproxy.cluster.cfg), which is what deploy/haproxy.py writes for those nodes and what
 HAProxy accepts."""
+
 from __future__ import annotations
 
 import re
@@ -46,8 +47,9 @@ def test_the_services_and_what_each_node_is_told(compose):
         tls = files_in(COMPOSE_TLS_DIR)
         assert (env["CAMDIRECTOR_TLS_CERT"], env["CAMDIRECTOR_TLS_KEY"]) == (str(tls.cert), str(tls.key))
     # node-1 makes the admin key and the CURVE key pair in the shared volume before the others start
-    assert all(s["depends_on"] == {"node-1": {"condition": "service_healthy"}}
-               for name, s in nodes(compose).items() if name != "node-1")
+    assert all(
+        s["depends_on"] == {"node-1": {"condition": "service_healthy"}} for name, s in nodes(compose).items() if name != "node-1"
+    )
     mounting_tls = [s for name, s in compose["services"].items() if name in nodes(compose) or name == "haproxy"]
     assert all(TLS_MOUNT in s["volumes"] for s in mounting_tls)
     sharing = [s for name, s in compose["services"].items() if name in nodes(compose) or name == "job-worker"]
@@ -68,8 +70,10 @@ def test_users_get_the_public_images_and_the_documented_ports_by_default(compose
     assert images["postgres"] == "${CAMDIRECTOR_POSTGRES_IMAGE:-postgres:15-bookworm}"
     assert images["haproxy"] == "${CAMDIRECTOR_HAPROXY_IMAGE:-haproxy:2.6}"
     assert {images[name] for name in nodes(compose)} | {images["job-worker"]} == {"${CAMDIRECTOR_IMAGE:-camdirector:latest}"}
-    assert compose["services"]["haproxy"]["ports"] == ["${CAMDIRECTOR_GRPC_PORT:-50051}:50051",
-                                                       "${CAMDIRECTOR_HTTP_PORT:-8080}:8080"]
+    assert compose["services"]["haproxy"]["ports"] == [
+        "${CAMDIRECTOR_GRPC_PORT:-50051}:50051",
+        "${CAMDIRECTOR_HTTP_PORT:-8080}:8080",
+    ]
     # each stand-in is a target of docker/stand-ins/Dockerfile
     targets = re.findall(r"^FROM \S+ AS (\w+)$", (DOCKER / "stand-ins" / "Dockerfile").read_text(), re.MULTILINE)
     assert sorted(targets) == ["haproxy", "postgres", "redis"]
@@ -84,6 +88,9 @@ def test_the_haproxy_config_is_what_haproxy_py_writes_and_haproxy_accepts(compos
         pytest.skip("haproxy is not installed (Debian package haproxy)")
     # HAProxy reads the TLS files it names while checking: those of `python -m camdirector.deploy.tls`
     (tmp_path / "haproxy.cfg").write_text(content.replace(str(COMPOSE_TLS_DIR), str(tls_files.ca_cert.parent)))
-    checked = subprocess.run([shutil.which("haproxy") or "/usr/sbin/haproxy", "-c", "-f", str(tmp_path / "haproxy.cfg")],
-                             capture_output=True, text=True)
+    checked = subprocess.run(
+        [shutil.which("haproxy") or "/usr/sbin/haproxy", "-c", "-f", str(tmp_path / "haproxy.cfg")],
+        capture_output=True,
+        text=True,
+    )
     assert checked.returncode == 0, checked.stderr  # node names unresolved here leave those servers down, not an error

@@ -8,6 +8,7 @@ started again rejoins the balancer.
 
 Skips with the reason where podman, runc, debootstrap or podman-compose is missing or the tests do
 not run as root; under CI (CAMDIRECTOR_REQUIRE_PODMAN=1) that is a failure."""
+
 from __future__ import annotations
 
 import ssl
@@ -27,16 +28,16 @@ pytestmark = pytest.mark.timeout(1800)  # a fresh machine builds the image and t
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
     podman_or_skip(compose=True)
-    started = ComposeCluster.up(ROOT, tmp_path_factory.mktemp("compose-cluster"),
-                                project=f"camdirector-test-{uuid.uuid4().hex[:8]}")
+    started = ComposeCluster.up(
+        ROOT, tmp_path_factory.mktemp("compose-cluster"), project=f"camdirector-test-{uuid.uuid4().hex[:8]}"
+    )
     yield started
     started.down()
 
 
 def test_every_node_is_up_behind_the_balancer(cluster):
     states = cluster.balancer().server_states()
-    assert {backend: set(servers.values()) for backend, servers in states.items()} == \
-        {"nodes_grpc": {"UP"}, "nodes_http": {"UP"}}
+    assert {backend: set(servers.values()) for backend, servers in states.items()} == {"nodes_grpc": {"UP"}, "nodes_http": {"UP"}}
     assert sorted(states["nodes_grpc"]) == cluster.nodes == ["node-1", "node-2", "node-3"]
 
 
@@ -44,17 +45,20 @@ def test_every_node_is_up_behind_the_balancer(cluster):
 def test_an_overview_job_is_run_by_the_queue_worker_container(cluster, run_bvh):
     """Nodes only queue jobs in a cluster (docs/jobs.md): this one finishing means the worker's
     container took it from Redis, and its record is in PostgreSQL."""
-    with httpx.Client(base_url=f"https://{cluster.http}", timeout=30.0,
-                      verify=ssl.create_default_context(cafile=str(cluster.ca_file)),
-                      headers={"Authorization": f"Bearer {cluster.admin_key}"}) as client:
-        served = checks.Served(grpc=cluster.grpc, zmq="", client=client,
-                               log_tail=lambda: cluster.logs("job-worker"))
+    with httpx.Client(
+        base_url=f"https://{cluster.http}",
+        timeout=30.0,
+        verify=ssl.create_default_context(cafile=str(cluster.ca_file)),
+        headers={"Authorization": f"Bearer {cluster.admin_key}"},
+    ) as client:
+        served = checks.Served(grpc=cluster.grpc, zmq="", client=client, log_tail=lambda: cluster.logs("job-worker"))
         checks.assert_overview_done(served, checks.post_overview_job(served, run_bvh))
 
 
 def test_a_killed_node_container_loses_no_session(cluster):
-    report = failover.run("node-container", nodes=3, sessions=12, rate_hz=30.0, seconds=8.0, kill_after_s=3.0,
-                          compose_cluster=cluster)
+    report = failover.run(
+        "node-container", nodes=3, sessions=12, rate_hz=30.0, seconds=8.0, kill_after_s=3.0, compose_cluster=cluster
+    )
     assert report["sessions_on_killed"] > 0, report
     assert report["sessions_lost"] == 0 and report["frames_not_answered"] == 0, report
     assert report["max_pose_difference"] == 0.0, report["max_pose_difference_per_session"]

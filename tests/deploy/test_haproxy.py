@@ -1,6 +1,7 @@
 """HAProxy's health check speaks gRPC health checking over TLS (deploy/haproxy.py): a node is up
 only while grpc.health.v1.Health/Check answers SERVING, and only with a certificate of the CA; and
 a balancer with no healthy node answers gRPC calls with UNAVAILABLE at once."""
+
 from __future__ import annotations
 
 import time

@@ -10,6 +10,7 @@ The image is built once for the module (deploy/image.py: the local debootstrap b
 machine, then podman's layer cache). Where podman, runc or debootstrap is missing, or the tests do
 not run as root (rootful podman, debootstrap), the module skips with the reason; under CI (.ci/run
 sets CAMDIRECTOR_REQUIRE_PODMAN=1) that is a failure. A failed build is a failure everywhere."""
+
 from __future__ import annotations
 
 import os
@@ -40,7 +41,7 @@ from tests.service.test_failover import _undisturbed as undisturbed
 from tests.service.wire_client import two_target_request, walk
 
 ROOT = Path(__file__).resolve().parents[2]
-USER_ID = 10001        # the image's `camdirector` user (docker/Dockerfile)
+USER_ID = 10001  # the image's `camdirector` user (docker/Dockerfile)
 TLS_IN = "/etc/camdirector/tls"
 
 pytestmark = pytest.mark.timeout(1800)  # a fresh machine downloads every dependency into the image
@@ -80,6 +81,7 @@ def image() -> str:
 @dataclass
 class Running(checks.Served):
     """The container, reached from the host as a client (served_checks.Served)."""
+
     container: podman_image.Container | None = None
     ports: dict[str, int] = field(default_factory=dict)
 
@@ -101,12 +103,18 @@ def reach(container: podman_image.Container, ca: Path, ports: dict[str, int]) ->
         time.sleep(0.5)
     volume = container.volume_path()
     key = (volume / "admin.key").read_text().strip()
-    client = httpx.Client(base_url=f"https://{http}", verify=context, timeout=30.0,
-                          headers={"Authorization": f"Bearer {key}"})
-    return Running(grpc=f"127.0.0.1:{ports['grpc']}", zmq=f"tcp://127.0.0.1:{ports['zmq']}", client=client,
-                   log_tail=container.logs, key=key, ca_file=ca,
-                   zmq_server_key=zmq.auth.load_certificate(volume / "zmq" / "server.key")[0].decode(),
-                   container=container, ports=ports)
+    client = httpx.Client(base_url=f"https://{http}", verify=context, timeout=30.0, headers={"Authorization": f"Bearer {key}"})
+    return Running(
+        grpc=f"127.0.0.1:{ports['grpc']}",
+        zmq=f"tcp://127.0.0.1:{ports['zmq']}",
+        client=client,
+        log_tail=container.logs,
+        key=key,
+        ca_file=ca,
+        zmq_server_key=zmq.auth.load_certificate(volume / "zmq" / "server.key")[0].decode(),
+        container=container,
+        ports=ports,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -119,15 +127,21 @@ def served(image, tmp_path_factory):
     os.chown(tls.key, USER_ID, USER_ID)
     ports = {"grpc": free_port(), "zmq": free_port(), "http": free_port()}
     name = f"camdirector-test-{uuid.uuid4().hex[:10]}"
-    container = podman_image.Container(image, name, volume=name, mounts=[f"{tls_dir}:{TLS_IN}:ro"], env={
-        "CAMDIRECTOR_GRPC_ADDR": f"127.0.0.1:{ports['grpc']}",
-        "CAMDIRECTOR_ZMQ_ADDR": f"tcp://127.0.0.1:{ports['zmq']}",
-        "CAMDIRECTOR_HTTP_ADDR": f"127.0.0.1:{ports['http']}",
-        "CAMDIRECTOR_TLS_CERT": f"{TLS_IN}/server.pem",
-        "CAMDIRECTOR_TLS_KEY": f"{TLS_IN}/server.key",
-        "CAMDIRECTOR_WORKERS": "1",
-        "CAMDIRECTOR_MAX_CONCURRENT_JOBS": "1",
-    })
+    container = podman_image.Container(
+        image,
+        name,
+        volume=name,
+        mounts=[f"{tls_dir}:{TLS_IN}:ro"],
+        env={
+            "CAMDIRECTOR_GRPC_ADDR": f"127.0.0.1:{ports['grpc']}",
+            "CAMDIRECTOR_ZMQ_ADDR": f"tcp://127.0.0.1:{ports['zmq']}",
+            "CAMDIRECTOR_HTTP_ADDR": f"127.0.0.1:{ports['http']}",
+            "CAMDIRECTOR_TLS_CERT": f"{TLS_IN}/server.pem",
+            "CAMDIRECTOR_TLS_KEY": f"{TLS_IN}/server.key",
+            "CAMDIRECTOR_WORKERS": "1",
+            "CAMDIRECTOR_MAX_CONCURRENT_JOBS": "1",
+        },
+    )
     try:
         container.start()
         running = reach(container, tls.ca_cert, ports)
@@ -154,8 +168,9 @@ def test_the_image_is_labelled_runs_unprivileged_and_keeps_its_data_in_a_volume(
 
 
 def test_grpc_health_and_the_image_health_check(served):
-    credentials = grpc.composite_channel_credentials(grpc.ssl_channel_credentials(served.ca_file.read_bytes()),
-                                                     grpc.access_token_call_credentials(served.key))
+    credentials = grpc.composite_channel_credentials(
+        grpc.ssl_channel_credentials(served.ca_file.read_bytes()), grpc.access_token_call_credentials(served.key)
+    )
     with grpc.secure_channel(served.grpc, credentials) as channel:
         reply = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=10)
     assert reply.status == health_pb2.HealthCheckResponse.SERVING

@@ -1,4 +1,5 @@
 """Scenario files: what loads, what is refused with which message, and how keyframes interpolate."""
+
 from __future__ import annotations
 
 import copy
@@ -19,8 +20,13 @@ from camdirector.v1 import director_pb2 as pb
 
 def tiny(**overrides) -> dict:
     """A valid one-target scenario: a sphere standing still for 1 s at 10 Hz."""
-    doc = {"format": FORMAT, "name": "tiny", "duration_s": 1.0, "frame_rate_hz": 10,
-           "targets": [{"id": "t", "shape": {"sphere": {"radius": 0.5}}, "position": [0.0, 1.0, 0.0]}]}
+    doc = {
+        "format": FORMAT,
+        "name": "tiny",
+        "duration_s": 1.0,
+        "frame_rate_hz": 10,
+        "targets": [{"id": "t", "shape": {"sphere": {"radius": 0.5}}, "position": [0.0, 1.0, 0.0]}],
+    }
     doc.update(overrides)
     return doc
 
@@ -50,14 +56,23 @@ def test_minimal_file_loads_with_defaults(tmp_path):
 
 
 def test_every_field_reaches_the_request(tmp_path):
-    doc = tiny(seed=7, lens={"vertical_fov_deg": 40, "aspect": 1.5},
-               style={"screen_a": [-0.4, 0.1], "screen_b": [0.3, 0.0], "visibility": "raycast",
-                      "gaze_room_m": 3.0, "preferred_phi_deg": 60, "max_speed_m_s": 5.0},
-               objects=[{"id": "crate", "shape": {"box": {"size": [1, 2, 3]}}, "position": [1, 1, 1],
-                         "yaw_deg": 90, "scale": [1, 2, 1]},
-                        {"id": "pole", "shape": {"cylinder": {"radius": 0.2, "height": 3}}, "dynamic": True},
-                        {"id": "pill", "shape": {"capsule": {"radius": 0.3, "height": 1.8}},
-                         "rotation": [0, 0, 0, 2]}])
+    doc = tiny(
+        seed=7,
+        lens={"vertical_fov_deg": 40, "aspect": 1.5},
+        style={
+            "screen_a": [-0.4, 0.1],
+            "screen_b": [0.3, 0.0],
+            "visibility": "raycast",
+            "gaze_room_m": 3.0,
+            "preferred_phi_deg": 60,
+            "max_speed_m_s": 5.0,
+        },
+        objects=[
+            {"id": "crate", "shape": {"box": {"size": [1, 2, 3]}}, "position": [1, 1, 1], "yaw_deg": 90, "scale": [1, 2, 1]},
+            {"id": "pole", "shape": {"cylinder": {"radius": 0.2, "height": 3}}, "dynamic": True},
+            {"id": "pill", "shape": {"capsule": {"radius": 0.3, "height": 1.8}}, "rotation": [0, 0, 0, 2]},
+        ],
+    )
     doc["targets"][0]["aim_offset"] = [0, 0.5, 0]
     s = load_scenario(write(tmp_path, doc))
     r = s.create_session_request()
@@ -80,8 +95,12 @@ def test_mesh_files_are_sent_as_obj_or_glb_relative_to_the_scenario(tmp_path):
     (tmp_path / "meshes" / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 2 3 4\n")
     trimesh.creation.box(extents=(1, 1, 1)).export(tmp_path / "meshes" / "box.glb")
     (tmp_path / "scenarios").mkdir()
-    doc = tiny(objects=[{"id": "floor", "shape": {"mesh": {"path": "../meshes/quad.obj", "scale": 2.0}}},
-                        {"id": "crate", "shape": {"mesh": {"path": "../meshes/box.glb"}}, "scale": 3}])
+    doc = tiny(
+        objects=[
+            {"id": "floor", "shape": {"mesh": {"path": "../meshes/quad.obj", "scale": 2.0}}},
+            {"id": "crate", "shape": {"mesh": {"path": "../meshes/box.glb"}}, "scale": 3},
+        ]
+    )
     s = load_scenario(write(tmp_path / "scenarios", doc))
     floor, crate = s.create_session_request().objects
     assert floor.mesh.obj.startswith(b"v 0 0 0") and floor.transform.scale.x == 2.0
@@ -99,6 +118,7 @@ def _set(path, value):
         for key in path[:-1]:
             node = node[key]
         node[path[-1]] = value
+
     return edit
 
 
@@ -116,8 +136,7 @@ INVALID = {
     "three targets": (lambda d: d["targets"].extend(copy.deepcopy(d["targets"]) * 2), "one or two targets"),
     "unknown shape": (_set(["targets", 0, "shape"], {"cube": {"size": 1}}), "targets[0].shape: unknown shape 'cube'"),
     "two shapes": (_set(["targets", 0, "shape"], {"sphere": {"radius": 1}, "box": {}}), "exactly one of"),
-    "negative radius": (_set(["targets", 0, "shape"], {"sphere": {"radius": -1}}),
-                        "targets[0].shape.sphere.radius: must be > 0"),
+    "negative radius": (_set(["targets", 0, "shape"], {"sphere": {"radius": -1}}), "targets[0].shape.sphere.radius: must be > 0"),
     "flat box": (_set(["targets", 0, "shape"], {"box": {"size": [1, 0, 1]}}), "targets[0].shape.box.size: must be positive"),
     "short capsule": (_set(["targets", 0, "shape"], {"capsule": {"radius": 1, "height": 1}}), "at least twice its radius"),
     "missing mesh": (_set(["targets", 0, "shape"], {"mesh": {"path": "nowhere.obj"}}), "'nowhere.obj' does not exist"),
@@ -125,48 +144,104 @@ INVALID = {
     "position of two": (_set(["targets", 0, "position"], [1, 2]), "targets[0].position: must be a list of 3 numbers"),
     "yaw and rotation": (lambda d: d["targets"][0].update(yaw_deg=10, rotation=[0, 0, 0, 1]), "at most one of 'yaw_deg'"),
     "zero quaternion": (_set(["targets", 0, "rotation"], [0, 0, 0, 0]), "zero-length quaternion"),
-    "keys not increasing": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0], [0, 1, 0, 0]])),
-                            "targets[0].motion.position_keys[1]: key times must be strictly increasing"),
+    "keys not increasing": (
+        _set(["targets", 0], motion(position_keys=[[0, 0, 0, 0], [0, 1, 0, 0]])),
+        "targets[0].motion.position_keys[1]: key times must be strictly increasing",
+    ),
     "key of three": (_set(["targets", 0], motion(position_keys=[[0, 0, 0]])), "position_keys[0]: must be a list of 4"),
-    "keys and waypoints": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], waypoints=[[0, 0, 0], [1, 0, 0]],
-                                                       speed_m_s=1)), "exactly one of 'position_keys' and 'waypoints'"),
-    "waypoints without speed": (_set(["targets", 0], motion(waypoints=[[0, 0, 0], [1, 0, 0]])),
-                                "targets[0].motion: missing required key 'speed_m_s'"),
-    "repeated waypoint": (_set(["targets", 0], motion(waypoints=[[0, 0, 0], [0, 0, 0]], speed_m_s=1)),
-                          "waypoints[1]: repeats the previous waypoint"),
+    "keys and waypoints": (
+        _set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], waypoints=[[0, 0, 0], [1, 0, 0]], speed_m_s=1)),
+        "exactly one of 'position_keys' and 'waypoints'",
+    ),
+    "waypoints without speed": (
+        _set(["targets", 0], motion(waypoints=[[0, 0, 0], [1, 0, 0]])),
+        "targets[0].motion: missing required key 'speed_m_s'",
+    ),
+    "repeated waypoint": (
+        _set(["targets", 0], motion(waypoints=[[0, 0, 0], [0, 0, 0]], speed_m_s=1)),
+        "waypoints[1]: repeats the previous waypoint",
+    ),
     "speed with keys": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], speed_m_s=1)), "only goes with 'waypoints'"),
-    "unknown interpolation": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], interpolation="bezier")),
-                              "interpolation: must be 'linear' or 'catmull_rom'"),
-    "open loop": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0], [1, 1, 0, 0], [2, 2, 0, 0]], loop=True)),
-                  "must end where it starts"),
-    "two orientations": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], orient="path", yaw_keys=[[0, 0]])),
-                         "at most one of yaw_keys, rotation_keys, orient"),
+    "unknown interpolation": (
+        _set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], interpolation="bezier")),
+        "interpolation: must be 'linear' or 'catmull_rom'",
+    ),
+    "open loop": (
+        _set(["targets", 0], motion(position_keys=[[0, 0, 0, 0], [1, 1, 0, 0], [2, 2, 0, 0]], loop=True)),
+        "must end where it starts",
+    ),
+    "two orientations": (
+        _set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], orient="path", yaw_keys=[[0, 0]])),
+        "at most one of yaw_keys, rotation_keys, orient",
+    ),
     "unknown orient": (_set(["targets", 0], motion(position_keys=[[0, 0, 0, 0]], orient="target")), "orient: must be 'path'"),
-    "static object moving": (_set(["objects"], [{"id": "o", "shape": {"sphere": {"radius": 1}},
-                                                 "motion": {"position_keys": [[0, 0, 0, 0]]}}]),
-                             "objects[0].motion: a static object cannot move"),
-    "static object spawning": (_set(["objects"], [{"id": "o", "shape": {"sphere": {"radius": 1}}, "spawn_s": 1}]),
-                               "objects[0].spawn_s: only a dynamic object can spawn"),
-    "aim offset on object": (_set(["objects"], [{"id": "o", "shape": {"sphere": {"radius": 1}}, "aim_offset": [0, 0, 0]}]),
-                             "objects[0]: unknown key 'aim_offset'"),
+    "static object moving": (
+        _set(["objects"], [{"id": "o", "shape": {"sphere": {"radius": 1}}, "motion": {"position_keys": [[0, 0, 0, 0]]}}]),
+        "objects[0].motion: a static object cannot move",
+    ),
+    "static object spawning": (
+        _set(["objects"], [{"id": "o", "shape": {"sphere": {"radius": 1}}, "spawn_s": 1}]),
+        "objects[0].spawn_s: only a dynamic object can spawn",
+    ),
+    "aim offset on object": (
+        _set(["objects"], [{"id": "o", "shape": {"sphere": {"radius": 1}}, "aim_offset": [0, 0, 0]}]),
+        "objects[0]: unknown key 'aim_offset'",
+    ),
     "duplicate id": (_set(["objects"], [{"id": "t", "shape": {"sphere": {"radius": 1}}}]), "id 't' is used twice"),
     "unknown mode": (_set(["style"], {"visibility": "XRAY"}), "style.visibility: unknown visibility mode 'XRAY'"),
     "screen point off screen": (_set(["style"], {"screen_a": [2, 0]}), "style.screen_a: must have x and y in [-1, 1]"),
     "fov out of range": (_set(["lens"], {"vertical_fov_deg": 180}), "lens.vertical_fov_deg: must be <= 170"),
     "unknown generator": (_set(["generators"], [{"kind": "rain"}]), "generators[0].kind: must be 'scatter' or 'spawn'"),
-    "crowded scatter": (_set(["generators"], [{"kind": "scatter", "id_prefix": "tree", "count": 50, "min_spacing_m": 5,
-                                               "region": {"x": [0, 10], "z": [0, 10]},
-                                               "parts": [{"shape": {"sphere": {"radius": 0.1}}}]}]),
-                        "generators[0]: placed only"),
-    "misspelt generator key": (_set(["generators"], [{"kind": "spawn", "id_prefix": "c", "count": 1, "speed_m_s": [1, 2],
-                                                      "region": {"x": [0, 5], "z": [0, 5]}, "spedd": 1,
-                                                      "shape": {"sphere": {"radius": 0.1}}}]),
-                               "generators[0]: unknown key 'spedd'; expected one of batch, clear_of_targets_m"),
+    "crowded scatter": (
+        _set(
+            ["generators"],
+            [
+                {
+                    "kind": "scatter",
+                    "id_prefix": "tree",
+                    "count": 50,
+                    "min_spacing_m": 5,
+                    "region": {"x": [0, 10], "z": [0, 10]},
+                    "parts": [{"shape": {"sphere": {"radius": 0.1}}}],
+                }
+            ],
+        ),
+        "generators[0]: placed only",
+    ),
+    "misspelt generator key": (
+        _set(
+            ["generators"],
+            [
+                {
+                    "kind": "spawn",
+                    "id_prefix": "c",
+                    "count": 1,
+                    "speed_m_s": [1, 2],
+                    "region": {"x": [0, 5], "z": [0, 5]},
+                    "spedd": 1,
+                    "shape": {"sphere": {"radius": 0.1}},
+                }
+            ],
+        ),
+        "generators[0]: unknown key 'spedd'; expected one of batch, clear_of_targets_m",
+    ),
     "string seed": (_set(["seed"], "7"), "seed: must be an integer, got '7'"),
-    "inverted region": (_set(["generators"], [{"kind": "spawn", "id_prefix": "c", "count": 1, "speed_m_s": [1, 2],
-                                               "region": {"x": [5, 0], "z": [0, 10]},
-                                               "shape": {"sphere": {"radius": 0.1}}}]),
-                        "generators[0].region.x: must be [min, max]"),
+    "inverted region": (
+        _set(
+            ["generators"],
+            [
+                {
+                    "kind": "spawn",
+                    "id_prefix": "c",
+                    "count": 1,
+                    "speed_m_s": [1, 2],
+                    "region": {"x": [5, 0], "z": [0, 10]},
+                    "shape": {"sphere": {"radius": 0.1}},
+                }
+            ],
+        ),
+        "generators[0].region.x: must be [min, max]",
+    ),
 }
 
 
@@ -253,8 +328,9 @@ def test_orientation_tracks():
     half = Rotation.from_quat(slerp.rotations_at(np.array([0.5]), np.array([0, 0, 0, 1.0]))[0])
     assert half.magnitude() == pytest.approx(math.radians(45))
     # faces +X while walking along +X, holds that heading while standing, then turns to +Z
-    walk = KeyframedMotion(np.array([0.0, 1.0, 2.0, 3.0]), np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0], [1, 0, 1.0]]),
-                           orient_path=True)
+    walk = KeyframedMotion(
+        np.array([0.0, 1.0, 2.0, 3.0]), np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0], [1, 0, 1.0]]), orient_path=True
+    )
     yaws = _yaw_deg(walk.rotations_at(np.array([0.5, 1.5, 2.5]), np.array([0, 0, 0, 1.0])))
     assert np.allclose(yaws, [90.0, 90.0, 0.0], atol=1e-6)
     # no orientation track: the actor's own rotation
@@ -278,9 +354,19 @@ def test_bounce_stays_in_its_region_at_constant_speed():
 # generators, spawning and frames
 
 
-SPAWN = {"kind": "spawn", "id_prefix": "cyl", "count": 70, "batch": 4, "start_s": 0.0, "end_s": 47.0,
-         "region": {"x": [-20, 20], "z": [-20, 20]}, "shape": {"cylinder": {"radius": 0.5, "height": 3}},
-         "speed_m_s": [0.5, 2.0], "clear_of_targets_m": 3.0, "seed": 4}
+SPAWN = {
+    "kind": "spawn",
+    "id_prefix": "cyl",
+    "count": 70,
+    "batch": 4,
+    "start_s": 0.0,
+    "end_s": 47.0,
+    "region": {"x": [-20, 20], "z": [-20, 20]},
+    "shape": {"cylinder": {"radius": 0.5, "height": 3}},
+    "speed_m_s": [0.5, 2.0],
+    "clear_of_targets_m": 3.0,
+    "seed": 4,
+}
 
 
 def test_spawn_generator_spreads_batches_and_parks_objects_until_their_time():
@@ -304,11 +390,20 @@ def test_spawn_generator_spreads_batches_and_parks_objects_until_their_time():
 
 def test_scatter_keeps_spacing_clearance_and_exclusions():
     walker = motion(waypoints=[[-10, 1, 0], [10, 1, 0]], speed_m_s=2.0)
-    scatter = {"kind": "scatter", "id_prefix": "tree", "count": 60, "region": {"x": [-15, 15], "z": [-15, 15]},
-               "parts": [{"shape": {"cylinder": {"radius": 0.3, "height": 6}}},
-                         {"shape": {"sphere": {"radius": 1.5}}, "offset": [0, 4, 0]}],
-               "scale": [0.8, 1.2], "min_spacing_m": 2.0, "clear_of_targets_m": 1.0,
-               "exclude": [{"x": [5, 15], "z": [5, 15]}]}
+    scatter = {
+        "kind": "scatter",
+        "id_prefix": "tree",
+        "count": 60,
+        "region": {"x": [-15, 15], "z": [-15, 15]},
+        "parts": [
+            {"shape": {"cylinder": {"radius": 0.3, "height": 6}}},
+            {"shape": {"sphere": {"radius": 1.5}}, "offset": [0, 4, 0]},
+        ],
+        "scale": [0.8, 1.2],
+        "min_spacing_m": 2.0,
+        "clear_of_targets_m": 1.0,
+        "exclude": [{"x": [5, 15], "z": [5, 15]}],
+    }
     s = parse_scenario(tiny(duration_s=10, targets=[walker], generators=[scatter]))
     trunks = [a for a in s.objects if a.id.endswith(".0")]
     crowns = [a for a in s.objects if a.id.endswith(".1")]
@@ -318,7 +413,7 @@ def test_scatter_keeps_spacing_clearance_and_exclusions():
     assert gaps.min() >= 2.0
     scale = np.array([a.scale[0] for a in trunks])
     assert scale.min() >= 0.8 and scale.max() <= 1.2
-    on_path = (np.abs(xz[:, 0]) <= 10)
+    on_path = np.abs(xz[:, 0]) <= 10
     assert np.all(np.abs(xz[on_path, 1]) >= 1.0 + 0.3 * scale[on_path] - 0.01)  # path sampled every 0.1 m
     assert not np.any((xz[:, 0] >= 5) & (xz[:, 1] >= 5))
     # parts stand on the ground: the trunk's base at 0, the crown's lowest point 4 m up (scaled)
@@ -328,8 +423,12 @@ def test_scatter_keeps_spacing_clearance_and_exclusions():
 
 
 def test_frames_carry_only_what_moved_packed():
-    doc = tiny(duration_s=1.0, frame_rate_hz=10, generators=[dict(SPAWN, count=3, batch=1, start_s=0.25, end_s=0.45)],
-               objects=[{"id": "idle", "shape": {"sphere": {"radius": 1}}, "dynamic": True, "position": [5, 1, 5]}])
+    doc = tiny(
+        duration_s=1.0,
+        frame_rate_hz=10,
+        generators=[dict(SPAWN, count=3, batch=1, start_s=0.25, end_s=0.45)],
+        objects=[{"id": "idle", "shape": {"sphere": {"radius": 1}}, "dynamic": True, "position": [5, 1, 5]}],
+    )
     doc["targets"][0]["motion"] = {"position_keys": [[0.0, 0, 1, 0], [0.5, 1, 1, 0]]}
     s = parse_scenario(doc)
     frames = list(s.frame_updates("sid"))
@@ -338,7 +437,7 @@ def test_frames_carry_only_what_moved_packed():
     assert sorted(frames[0].packed_ids) == ["cyl000", "cyl001", "cyl002", "idle", "t"]
     assert len(frames[0].packed_transforms) == 50
     ids = [sorted(f.packed_ids) for f in frames]
-    assert ids[3] == ["cyl000", "t"]           # 0.3 s: cyl000 appeared at 0.25 s (teleport from its park)
+    assert ids[3] == ["cyl000", "t"]  # 0.3 s: cyl000 appeared at 0.25 s (teleport from its park)
     assert ids[6] == ["cyl000", "cyl001", "cyl002"]  # 0.6 s: the target stopped at 0.5 s
     assert all("idle" not in i for i in ids[1:])
     values = np.array(frames[3].packed_transforms).reshape(-1, 10)

@@ -1,4 +1,5 @@
 """Every shipped scenario loads, and the server's own validation accepts what it builds."""
+
 from __future__ import annotations
 
 import pytest

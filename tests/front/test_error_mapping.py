@@ -1,6 +1,7 @@
 """An unexpected exception reaches a client as INTERNAL on every transport (gRPC would say
 UNKNOWN on its own), with the details in the server's log; and the front reads a request's
 session id from field 1 without parsing the rest."""
+
 from __future__ import annotations
 
 import asyncio
@@ -70,6 +71,7 @@ def test_an_unexpected_exception_is_internal_over_grpc_and_logged(caplog):
 def test_an_unexpected_exception_is_internal_over_zeromq_and_logged_with_its_session(caplog, tmp_path):
     """The same mapping on the ZeroMQ socket: a real ROUTER socket and DEALER client, a real
     router (sessions inline) whose Frame handler is broken."""
+
     async def exchange() -> list[bytes]:
         router = SessionRouter(ServerSettings(workers=0, data_dir=str(tmp_path)), Metrics())
         transport = ZmqTransport(router, "tcp://127.0.0.1:*", router.guard)
@@ -88,8 +90,9 @@ def test_an_unexpected_exception_is_internal_over_zeromq_and_logged_with_its_ses
         finally:
             client.close()
             await transport.stop()
-        assert router.metrics.registry.get_sample_value("camdirector_errors_total",
-                                                        {"transport": "zmq", "code": "INTERNAL"}) == 1.0
+        assert (
+            router.metrics.registry.get_sample_value("camdirector_errors_total", {"transport": "zmq", "code": "INTERNAL"}) == 1.0
+        )
         return reply
 
     with caplog.at_level(logging.ERROR, logger="camdirector.zmq"):
@@ -109,24 +112,30 @@ def test_a_director_error_keeps_its_status_over_grpc():
     assert context.status == (grpc.StatusCode.NOT_FOUND, "no such thing")
 
 
-@pytest.mark.parametrize("message", [
-    pb.FrameUpdate(session_id="s-1", frame=7, time_s=0.5, packed_ids=["a", "b"], packed_transforms=[0.0] * 20),
-    pb.FrameUpdate(frame=9, session_id="ünï"),  # other fields first, non-ASCII id
-    pb.UpdateStyleRequest(session_id="s-2", style=pb.Style(visibility=pb.RAYCAST)),
-    pb.CloseSessionRequest(session_id="s-3"),
-    pb.TakeShotRequest(session_id="s-4", subject_ids=["p1"], release=True),
-])
+@pytest.mark.parametrize(
+    "message",
+    [
+        pb.FrameUpdate(session_id="s-1", frame=7, time_s=0.5, packed_ids=["a", "b"], packed_transforms=[0.0] * 20),
+        pb.FrameUpdate(frame=9, session_id="ünï"),  # other fields first, non-ASCII id
+        pb.UpdateStyleRequest(session_id="s-2", style=pb.Style(visibility=pb.RAYCAST)),
+        pb.CloseSessionRequest(session_id="s-3"),
+        pb.TakeShotRequest(session_id="s-4", subject_ids=["p1"], release=True),
+    ],
+)
 def test_field_one_is_the_parsed_session_id(message):
     assert session_id_of(type(message), message.SerializeToString()) == message.session_id
 
 
-@pytest.mark.parametrize("payload, contains", [
-    (b"", "session_id is empty"),
-    (pb.FrameUpdate(frame=3).SerializeToString(), "session_id is empty"),
-    (b"\x0a\x05ab", "not a serialized"),        # a length past the end
-    (b"\xff\xff\xff", "not a serialized"),      # a truncated varint
-    (b"\x0a\x02\xff\xfe", "not a serialized"),  # not UTF-8
-])
+@pytest.mark.parametrize(
+    "payload, contains",
+    [
+        (b"", "session_id is empty"),
+        (pb.FrameUpdate(frame=3).SerializeToString(), "session_id is empty"),
+        (b"\x0a\x05ab", "not a serialized"),  # a length past the end
+        (b"\xff\xff\xff", "not a serialized"),  # a truncated varint
+        (b"\x0a\x02\xff\xfe", "not a serialized"),  # not UTF-8
+    ],
+)
 def test_an_unreadable_session_id_is_invalid(payload, contains):
     with pytest.raises(DirectorError) as err:
         session_id_of(pb.FrameUpdate, payload)

@@ -2,6 +2,7 @@
 bounded concurrency, cancellation, a full queue, retention, and restart survival (a runner process
 killed with SIGKILL while one job runs and one is queued, then a new runner on the same folder, with
 its records in SQLite and in PostgreSQL)."""
+
 from __future__ import annotations
 
 import os
@@ -40,6 +41,7 @@ def test_settings_are_validated():
 
 # -- runner -----------------------------------------------------------------------------------
 
+
 def test_runner_runs_jobs_in_processes_and_renames_results(tmp_path):
     with JobRunner(tmp_path, KINDS) as runner:
         job = runner.submit("echo", {}, {"in.txt": b"hi"})
@@ -60,7 +62,7 @@ def test_runner_removes_finished_jobs_after_their_retention(tmp_path):
     with JobRunner(tmp_path, KINDS, settings, clock=lambda: now[0]) as runner:
         job = runner.submit("echo", {}, {"in.txt": b"hi"})
         assert runner.wait(job.id, 30.0).state is JobState.SUCCEEDED
-        assert runner.purge_expired() == []                 # ended just now
+        assert runner.purge_expired() == []  # ended just now
         now[0] += 3599.0
         assert runner.purge_expired() == []
         now[0] += 2.0
@@ -75,11 +77,14 @@ def test_runner_removes_finished_jobs_after_their_retention(tmp_path):
         assert kept.purge_expired() == [] and kept.get(job.id).state is JobState.SUCCEEDED
 
 
-@pytest.mark.parametrize("how, message", [
-    ("job_error", "the clip is upside down"),
-    ("exception", "ZeroDivisionError: division by zero"),
-    ("exit", "exited with code 3"),
-])
+@pytest.mark.parametrize(
+    "how, message",
+    [
+        ("job_error", "the clip is upside down"),
+        ("exception", "ZeroDivisionError: division by zero"),
+        ("exit", "exited with code 3"),
+    ],
+)
 def test_failed_jobs_report_why_and_keep_no_result(tmp_path, how, message):
     with JobRunner(tmp_path, KINDS) as runner:
         job = runner.wait(runner.submit("fail", {"how": how}, {}).id, 30.0)
@@ -97,7 +102,7 @@ def test_bounded_concurrency_and_cancellation(tmp_path):
         pid = wait_until(lambda: started_pids(Path(first["started"])), what="job a to start")[0]
         wait_until(lambda: runner.get(a.id).progress > 0.0, what="progress")
         time.sleep(0.3)
-        assert runner.get(b.id).state is JobState.QUEUED          # one at a time
+        assert runner.get(b.id).state is JobState.QUEUED  # one at a time
         # cancel the running job: its process is ended, the queued one starts
         assert runner.cancel(a.id).state is JobState.CANCELLED
         wait_until(lambda: not alive(pid), 10.0, "the cancelled job's process to end")
@@ -113,7 +118,7 @@ def test_bounded_concurrency_and_cancellation(tmp_path):
 
 
 def test_full_queue_refuses_and_leaves_nothing(tmp_path):
-    runner = JobRunner(tmp_path, KINDS, JobSettings(max_queued_jobs=2))   # not started
+    runner = JobRunner(tmp_path, KINDS, JobSettings(max_queued_jobs=2))  # not started
     runner.submit("echo", {}, {"in.txt": b"1"})
     runner.submit("echo", {}, {"in.txt": b"2"})
     with pytest.raises(QueueFull):
@@ -166,9 +171,13 @@ def test_restart_survival_with_a_job_running_and_a_job_queued(tmp_path, records_
     b = store.submit("wait", b_params, {})
     script = tmp_path / "front.py"
     script.write_text(_CRASHING_FRONT)
-    front = subprocess.Popen([sys.executable, str(script), str(data_dir), records_url], cwd=ROOT,
-                             stdout=subprocess.PIPE, text=True,
-                             env={**os.environ, "PYTHONPATH": str(ROOT.parent) + os.pathsep + str(ROOT)})
+    front = subprocess.Popen(
+        [sys.executable, str(script), str(data_dir), records_url],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT.parent) + os.pathsep + str(ROOT)},
+    )
     try:
         assert front.stdout.readline().strip() == "ready"
         pid = wait_until(lambda: started_pids(Path(a_params["started"])), 30.0, "job A to start")[0]
@@ -177,11 +186,11 @@ def test_restart_survival_with_a_job_running_and_a_job_queued(tmp_path, records_
         front.send_signal(signal.SIGKILL)
         front.wait(10)
     wait_until(lambda: not alive(pid), 10.0, "job A's process to die with the front")
-    assert store.get(a.id).state is JobState.RUNNING               # as the crash left it
+    assert store.get(a.id).state is JobState.RUNNING  # as the crash left it
     Path(a_params["release"]).touch()
     Path(b_params["release"]).touch()
     with JobRunner(data_dir, KINDS, JobSettings(job_store=records_url)) as runner:
         done_a, done_b = runner.wait(a.id, 30.0), runner.wait(b.id, 30.0)
-    assert done_a.state is JobState.SUCCEEDED and done_a.attempts == 2     # rerun
+    assert done_a.state is JobState.SUCCEEDED and done_a.attempts == 2  # rerun
     assert done_b.state is JobState.SUCCEEDED and done_b.attempts == 1
     assert (runner.result_dir(a.id) / "done.txt").read_text() == "done"

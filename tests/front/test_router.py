@@ -1,4 +1,5 @@
 """The session router's memory of sessions lost with their worker, and the front's metrics of a frame."""
+
 from __future__ import annotations
 
 import grpc
@@ -68,14 +69,14 @@ def test_another_tenants_session_is_answered_as_one_that_does_not_exist(tmp_path
 
 def test_with_keys_a_node_adopts_only_a_session_the_records_say_is_the_callers(tmp_path):
     store = SqliteAccessStore(tmp_path)
-    store.set_session_owner("s-alpha", "alpha")   # written by the node that created it
+    store.set_session_owner("s-alpha", "alpha")  # written by the node that created it
     router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics(), guard=Guard(store))
     with pytest.raises(DirectorError) as refused:
         router._entry("s-alpha", "beta", adopt=True)
     assert refused.value.code == grpc.StatusCode.NOT_FOUND and "s-alpha" not in router.sessions
     assert router._entry("s-alpha", "alpha", adopt=True).restoring
     with pytest.raises(DirectorError):
-        router._entry("s-unknown", "alpha", adopt=True)   # no owner on record: nobody's
+        router._entry("s-unknown", "alpha", adopt=True)  # no owner on record: nobody's
     store.close()
 
 

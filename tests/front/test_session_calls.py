@@ -1,6 +1,7 @@
 """session_calls.py's protocol check: client_protocol read from a serialized CreateSessionRequest
 without parsing the scene, as protobuf would read it, and a client newer than the server refused
 FAILED_PRECONDITION naming both protocols (the same words as gRPC's metadata check)."""
+
 from __future__ import annotations
 
 import grpc
@@ -13,15 +14,18 @@ from camdirector.v1 import director_pb2 as pb
 from camdirector.version import PROTOCOL, VERSION
 from tests.service.wire_client import two_target_request
 
-REFUSAL = (f"this client speaks camdirector protocol {PROTOCOL + 1}, this server (camdirector {VERSION}) "
-           f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}")
+REFUSAL = (
+    f"this client speaks camdirector protocol {PROTOCOL + 1}, this server (camdirector {VERSION}) "
+    f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}"
+)
 
 
 def _mesh_request(**fields) -> pb.CreateSessionRequest:
     """A scene with a triangle mesh (length-delimited fields, fixed-width floats) and every scalar."""
     request = two_target_request(seed=2**40, record=True, level_id="lvl", delay_s=1.5, **fields)
-    request.objects.add(id="tri", mesh=pb.Mesh(triangles=pb.TriangleMesh(vertices=[0.0, 1.0, 2.5] * 300,
-                                                                             indices=list(range(300)))))
+    request.objects.add(
+        id="tri", mesh=pb.Mesh(triangles=pb.TriangleMesh(vertices=[0.0, 1.0, 2.5] * 300, indices=list(range(300))))
+    )
     return request
 
 
@@ -32,10 +36,9 @@ def test_client_protocol_is_read_as_protobuf_reads_it(said):
 
 
 def test_the_last_occurrence_counts_and_a_uint32_keeps_its_low_bits():
-    twice = pb.CreateSessionRequest(client_protocol=7).SerializeToString() + _mesh_request(
-        client_protocol=3).SerializeToString()
+    twice = pb.CreateSessionRequest(client_protocol=7).SerializeToString() + _mesh_request(client_protocol=3).SerializeToString()
     assert client_protocol_of(twice) == pb.CreateSessionRequest.FromString(twice).client_protocol == 3
-    wide = bytes([10 << 3]) + bytes([0x82, 0x80, 0x80, 0x80, 0x10])   # 2 + 2**32 as a varint
+    wide = bytes([10 << 3]) + bytes([0x82, 0x80, 0x80, 0x80, 0x10])  # 2 + 2**32 as a varint
     assert client_protocol_of(wide) == pb.CreateSessionRequest.FromString(wide).client_protocol == 2
 
 
@@ -53,7 +56,7 @@ def test_a_newer_client_is_refused_with_both_protocols():
 
 
 def test_the_metadata_check_says_the_same():
-    check_protocol_metadata(None)   # a client from before the header
+    check_protocol_metadata(None)  # a client from before the header
     check_protocol_metadata(str(PROTOCOL))
     with pytest.raises(DirectorError) as refused:
         check_protocol_metadata(str(PROTOCOL + 1))

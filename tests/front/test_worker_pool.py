@@ -1,6 +1,7 @@
 """The front's end of the socket pair against a real worker process: requests, replies, a frame's
 metrics and errors cross the binary framing (worker/main.py) intact, and a request far
 larger than the pool's stream buffer gets its answer without blocking the other calls."""
+
 from __future__ import annotations
 
 import asyncio
@@ -41,8 +42,7 @@ async def _exchange(tmp_path):
         big = pool.call(0, "create", "b" * 32, b"\xff" * (8 << 20))
         ping = pool.call(0, "ping", "", b"")
         big_result, ping_result = await asyncio.gather(big, ping, return_exceptions=True)
-        return created, metrics, pb.CameraUpdate.FromString(frame_body), frame_metrics, unknown.value, big_result, \
-            ping_result
+        return created, metrics, pb.CameraUpdate.FromString(frame_body), frame_metrics, unknown.value, big_result, ping_result
     finally:
         await pool.stop()
 

@@ -1,6 +1,7 @@
 """Quake BSP maps (geometry/bsp.py): a room written here byte by byte as BSP29, BSP2 and 2PSB, the
 real maps of tests/data/real_maps (SOURCES.md) with their spawn points standing on floors, corrupt
 and truncated files, and `camdirector level add` of a .bsp end to end."""
+
 from __future__ import annotations
 
 import gzip
@@ -36,10 +37,10 @@ FORMATS = {"BSP29": struct.pack("<i", 29), "BSP2": b"BSP2", "2PSB": b"2PSB"}
 X, Y, Z = 256.0, 128.0, 128.0
 WORLD_FACES = [
     ("floor", [(0, 0, 0), (0, Y, 0), (X, Y, 0), (X, 0, 0)]),
-    ("sky1", [(0, 0, Z), (X, 0, Z), (X, Y, Z), (0, Y, Z)]),           # ceiling: sky, left out
-    ("wall", [(0, 0, 0), (X, 0, 0), (X, 0, Z), (0, 0, Z)]),           # y = 0, seen from +y
-    ("wall", [(0, Y, 0), (0, Y, Z), (X, Y, Z), (X, Y, 0)]),           # y = Y, seen from -y
-    ("wall", [(0, 0, 0), (0, 0, Z), (0, Y, Z), (0, Y, 0)]),           # x = 0, seen from +x
+    ("sky1", [(0, 0, Z), (X, 0, Z), (X, Y, Z), (0, Y, Z)]),  # ceiling: sky, left out
+    ("wall", [(0, 0, 0), (X, 0, 0), (X, 0, Z), (0, 0, Z)]),  # y = 0, seen from +y
+    ("wall", [(0, Y, 0), (0, Y, Z), (X, Y, Z), (X, Y, 0)]),  # y = Y, seen from -y
+    ("wall", [(0, 0, 0), (0, 0, Z), (0, Y, Z), (0, Y, 0)]),  # x = 0, seen from +x
     # x = X, seen from -x: a pentagon with a corner on an edge (as qbsp leaves T-junctions), 3 triangles
     ("WALL", [(X, 0, 0), (X, Y, 0), (X, Y, 64), (X, Y, Z), (X, 0, Z)]),
     ("*water0", [(0, 0, 32), (0, 64, 32), (64, 64, 32), (64, 0, 32)]),  # liquid, left out
@@ -47,13 +48,17 @@ WORLD_FACES = [
     ("Clip", [(128, 0, 0), (128, 0, 64), (128, 64, 64), (128, 64, 0)]),  # tool texture, left out
 ]
 DOOR_FACES = [("door", [(100, 50, 0), (100, 50, 90), (100, 80, 90), (100, 80, 0)])]  # model 1: not the world
-ENTITIES = (b'{\n"classname" "worldspawn"\n"message" "Test room"\n}\n'
-            b'// a comment, as COM_Parse allows\n'
-            b'{\n"classname" "info_player_deathmatch"\n"origin" "64 32 24"\n"angle" "90"\n}\n'
-            b'{ "classname" "func_door" "model" "*1" }\n\0')
-EXPECTED_ENTITIES = [{"classname": "worldspawn", "message": "Test room"},
-                     {"classname": "info_player_deathmatch", "origin": "64 32 24", "angle": "90"},
-                     {"classname": "func_door", "model": "*1"}]
+ENTITIES = (
+    b'{\n"classname" "worldspawn"\n"message" "Test room"\n}\n'
+    b"// a comment, as COM_Parse allows\n"
+    b'{\n"classname" "info_player_deathmatch"\n"origin" "64 32 24"\n"angle" "90"\n}\n'
+    b'{ "classname" "func_door" "model" "*1" }\n\0'
+)
+EXPECTED_ENTITIES = [
+    {"classname": "worldspawn", "message": "Test room"},
+    {"classname": "info_player_deathmatch", "origin": "64 32 24", "angle": "90"},
+    {"classname": "func_door", "model": "*1"},
+]
 
 
 def write_bsp(magic: bytes = FORMATS["BSP29"], world=WORLD_FACES, door=DOOR_FACES, entities=ENTITIES) -> bytes:
@@ -62,7 +67,7 @@ def write_bsp(magic: bytes = FORMATS["BSP29"], world=WORLD_FACES, door=DOOR_FACE
     wide = magic != FORMATS["BSP29"]
     names = sorted({name for name, _ in world + door})
     vertexes: list[tuple] = []
-    edges = [(0, 0)]                       # edge 0 is never used (a surfedge's sign needs it)
+    edges = [(0, 0)]  # edge 0 is never used (a surfedge's sign needs it)
     surfedges, faces = [], []
     for face_number, (name, corners) in enumerate(world + door):
         first, base = len(surfedges), len(vertexes)
@@ -86,11 +91,16 @@ def write_bsp(magic: bytes = FORMATS["BSP29"], world=WORLD_FACES, door=DOOR_FACE
     def model(first, count):
         return struct.pack("<9f4iiii", *([0.0] * 9), 0, 0, 0, 0, 0, first, count)
 
-    lumps = {"entities": entities, "textures": textures, "texinfo": texinfo, "faces": b"".join(faces),
-             "edges": b"".join(struct.pack("<II" if wide else "<HH", *e) for e in edges),
-             "surfedges": struct.pack(f"<{len(surfedges)}i", *surfedges),
-             "vertexes": b"".join(struct.pack("<3f", *v) for v in vertexes),
-             "models": model(0, len(world)) + model(len(world), len(door))}
+    lumps = {
+        "entities": entities,
+        "textures": textures,
+        "texinfo": texinfo,
+        "faces": b"".join(faces),
+        "edges": b"".join(struct.pack("<II" if wide else "<HH", *e) for e in edges),
+        "surfedges": struct.pack(f"<{len(surfedges)}i", *surfedges),
+        "vertexes": b"".join(struct.pack("<3f", *v) for v in vertexes),
+        "models": model(0, len(world)) + model(len(world), len(door)),
+    }
     body, directory = b"", []
     for name in LUMP_NAMES:
         data = lumps.get(name, b"")
@@ -126,7 +136,7 @@ def lump_directory(data: bytes) -> dict[str, tuple[int, int]]:
 
 def with_lump_entry(data: bytes, name: str, offset: int, length: int) -> bytes:
     at = 4 + 8 * LUMP_NAMES.index(name)
-    return data[:at] + struct.pack("<ii", offset, length) + data[at + 8:]
+    return data[:at] + struct.pack("<ii", offset, length) + data[at + 8 :]
 
 
 def patched(data: bytes, at: int, fmt: str, *values) -> bytes:
@@ -136,6 +146,7 @@ def patched(data: bytes, at: int, fmt: str, *values) -> bytes:
 
 
 # -- the hand-built room ----------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_the_room_gives_exactly_its_visible_walls_in_metres_y_up(fmt):
@@ -172,21 +183,25 @@ def test_a_world_of_sky_and_water_only_is_refused():
 
 # -- bad files ----------------------------------------------------------------------------------
 
+
 def test_a_wrong_magic_or_version_names_the_header():
     data = write_bsp()
     for magic in (struct.pack("<i", 30), struct.pack("<i", 38), b"IBSP", b"bsp2"):
         with pytest.raises(MeshError, match=r"BSP header at byte 0: version/magic"):
             from_bsp(magic + data[4:])
     with pytest.raises(MeshError, match="shorter than the 124-byte header"):
-        from_bsp(data[:HEADER_BYTES - 1])
+        from_bsp(data[: HEADER_BYTES - 1])
 
 
 @pytest.mark.parametrize("name", ["faces", "edges", "surfedges", "vertexes", "textures", "texinfo", "models"])
 def test_a_lump_outside_the_file_names_the_lump_and_its_bytes(name):
     data = write_bsp()
     offset, length = lump_directory(data)[name]
-    with pytest.raises(MeshError, match=rf"BSP {name} lump \(header byte {4 + 8 * LUMP_NAMES.index(name)}\): "
-                                        rf"bytes {len(data) - 4}\.\.{len(data) - 4 + length} lie outside"):
+    with pytest.raises(
+        MeshError,
+        match=rf"BSP {name} lump \(header byte {4 + 8 * LUMP_NAMES.index(name)}\): "
+        rf"bytes {len(data) - 4}\.\.{len(data) - 4 + length} lie outside",
+    ):
         from_bsp(with_lump_entry(data, name, len(data) - 4, length))
     with pytest.raises(MeshError, match=rf"BSP {name} lump"):
         from_bsp(with_lump_entry(data, name, -8, length))
@@ -202,8 +217,9 @@ def test_a_lump_of_part_records_is_refused():
 def test_indices_out_of_range_name_the_lump_and_the_record_byte():
     data = write_bsp()
     lumps = lump_directory(data)
-    faces_at, edges_at, surf_at, models_at, texinfo_at = (lumps[n][0] for n in
-                                                           ("faces", "edges", "surfedges", "models", "texinfo"))
+    faces_at, edges_at, surf_at, models_at, texinfo_at = (
+        lumps[n][0] for n in ("faces", "edges", "surfedges", "models", "texinfo")
+    )
     # face 0's texinfo (dface_t offset 10) past the texinfos
     with pytest.raises(MeshError, match=rf"BSP faces lump at byte {faces_at}: face 0: texinfo 999 out of range"):
         from_bsp(patched(data, faces_at + 10, "<h", 999))
@@ -230,11 +246,13 @@ def test_indices_out_of_range_name_the_lump_and_the_record_byte():
 
 def test_bad_entity_text_names_the_byte():
     head = b'{\n"classname" "worldspawn"\n}\n'
-    for text, what in [(head + b'{ "origin" "1 2 3\n', "string without its closing quote"),
-                       (head + b'{ "origin" "1 2 3"\n', "entity without its closing '}'"),
-                       (head + b'"stray" "pair"\n', "unexpected 'stray'"),
-                       (head + b'{ { }\n', "unexpected '{'"),
-                       (head + b'{ "key" }\n', "unexpected '}'")]:
+    for text, what in [
+        (head + b'{ "origin" "1 2 3\n', "string without its closing quote"),
+        (head + b'{ "origin" "1 2 3"\n', "entity without its closing '}'"),
+        (head + b'"stray" "pair"\n', "unexpected 'stray'"),
+        (head + b"{ { }\n", "unexpected '{'"),
+        (head + b'{ "key" }\n', "unexpected '}'"),
+    ]:
         data = write_bsp(entities=text)
         at = lump_directory(data)["entities"][0]
         with pytest.raises(MeshError, match=rf"BSP entities lump at byte {at}: {re.escape(what)}.* at byte \d+"):
@@ -258,6 +276,7 @@ def test_random_damage_raises_mesh_error_or_gives_a_mesh():
 
 
 # -- the real maps ------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def real_maps() -> dict[str, bytes]:
@@ -300,8 +319,7 @@ def test_every_deathmatch_spawn_stands_on_a_floor_under_a_free_ceiling(real_maps
     assert np.all(up.min(axis=1) >= 1.0), f"spawns under a low ceiling: {np.flatnonzero(up.min(axis=1) < 1.0)}"
     # The floor right under a spawn faces up (the winding is the player's side).
     centre = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
-    _, ray, tri = centre.ray.intersects_location(origins, np.tile([0.0, -1.0, 0.0], (len(origins), 1)),
-                                                 multiple_hits=False)
+    _, ray, tri = centre.ray.intersects_location(origins, np.tile([0.0, -1.0, 0.0], (len(origins), 1)), multiple_hits=False)
     assert len(ray) >= len(origins) // 2 and np.all(centre.face_normals[tri, 1] > 0.7)
 
 

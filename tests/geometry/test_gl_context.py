@@ -1,4 +1,5 @@
 """geometry.gl_context: moderngl's EGL context and a program's uniforms, typed."""
+
 from __future__ import annotations
 
 import moderngl

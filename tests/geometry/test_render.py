@@ -1,4 +1,5 @@
 """OffscreenRenderer (EGL, llvmpipe here) and VideoWriter on hand-built one-box scenes."""
+
 from __future__ import annotations
 
 import math
@@ -78,9 +79,7 @@ def test_box_behind_the_camera_is_not_drawn(renderer):
 
 def test_rotation_is_camera_to_world(renderer):
     # A turn of +90 degrees about +Y points the camera's -Z along world -X.
-    turned = CameraPose(
-        np.zeros(3), np.array([0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)]), 50.0
-    )
+    turned = CameraPose(np.zeros(3), np.array([0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)]), 50.0)
     mask = _box_mask(_render_box_at(renderer, (-5.0, 0.0, 0.0), turned))
     assert mask[HEIGHT_PX // 2, WIDTH_PX // 2]
     assert not _box_mask(_render_box_at(renderer, (0.0, 0.0, -5.0), turned)).any()
@@ -126,8 +125,9 @@ def test_instanced_meshes_draw_what_separate_meshes_draw():
     box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     rng = np.random.default_rng(3)
     colors = [(1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.2, 0.8, 0.1), (0.9, 0.9, 0.2)]
-    placed = [RigidTransform(position_world=np.array(p)).matrix()
-              for p in ((-1.2, 0.0, -4.0), (0.9, 0.3, -5.0), (0.0, -1.0, -6.0))]
+    placed = [
+        RigidTransform(position_world=np.array(p)).matrix() for p in ((-1.2, 0.0, -4.0), (0.9, 0.3, -5.0), (0.0, -1.0, -6.0))
+    ]
     ground = np.diag([8.0, 0.1, 8.0, 1.0])
     ground[:3, 3] = (0.0, -1.6, -6.0)
     matrices = np.stack([*placed, ground])
@@ -137,8 +137,7 @@ def test_instanced_meshes_draw_what_separate_meshes_draw():
         with OffscreenRenderer(WIDTH_PX, HEIGHT_PX) as r:
             for _k, (mesh_id, color) in enumerate(zip(ids, colors)):
                 faces = box.faces if instanced else box.faces[rng.permutation(len(box.faces))]
-                r.add_mesh(mesh_id, box.vertices, faces, color, closed=closed,
-                           checker_m=0.5 if mesh_id == "ground" else 0.0)
+                r.add_mesh(mesh_id, box.vertices, faces, color, closed=closed, checker_m=0.5 if mesh_id == "ground" else 0.0)
             assert r.mesh_ids() == ids
             assert len(r._geometries) == (1 if instanced else len(ids))
             r.set_transforms(ids, matrices)
@@ -146,7 +145,7 @@ def test_instanced_meshes_draw_what_separate_meshes_draw():
             if closed:
                 with pytest.raises(ValueError, match="mirrored"):
                     r.set_transform("a", np.diag([-1.0, 1.0, 1.0, 1.0]))
-    for mesh_id, color in zip(ids[:3], colors):   # each box shows in its own colour
+    for mesh_id, color in zip(ids[:3], colors):  # each box shows in its own colour
         assert (np.abs(images[0] / 255.0 - color).max(axis=2) < 0.5).any(), mesh_id
     assert np.array_equal(images[0], images[1])
     # Culling the back faces of closed meshes seen from outside changes at most a few silhouette
@@ -165,8 +164,9 @@ def test_top_down_view_puts_x_across_and_z_down():
         for x, z in [(6.0, -3.0), (-4.0, 2.0), (0.0, 0.0)]:
             r.set_transform("box", RigidTransform(position_world=np.array([x, 0.5, z])).matrix())
             mask = _box_mask(r.render_view(view, (0.0, 100.0, 0.0)))
-            np.testing.assert_allclose(_centroid_px(mask), [(x + 10.0) / 20.0 * 200 - 0.5, (z + 5.0) / 10.0 * 100 - 0.5],
-                                       atol=1.0)
+            np.testing.assert_allclose(
+                _centroid_px(mask), [(x + 10.0) / 20.0 * 200 - 0.5, (z + 5.0) / 10.0 * 100 - 0.5], atol=1.0
+            )
             assert 80 <= mask.sum() <= 120  # a 1 m square at 10 px per metre
     with pytest.raises(ValueError):
         top_down_matrix((1.0, 1.0), (0.0, 1.0), (0.0, 1.0))
@@ -231,4 +231,3 @@ def test_concat_videos_joins_parts_without_losing_frames(tmp_path):
     with pytest.raises(RuntimeError, match="2 video parts"):
         concat_videos([parts[0], tmp_path / "missing.mp4"], tmp_path / "bad.mp4")
     assert not (tmp_path / "bad.mp4").exists()
-

@@ -1,4 +1,5 @@
 """Toric space (geometry/toric.py): composition, inverse map, continuity, world-unit steps, conventions."""
+
 from __future__ import annotations
 
 import math
@@ -64,6 +65,7 @@ def interior(torus: Torus, fraction: float) -> float:
 
 # --- composition -------------------------------------------------------------------------------
 
+
 @FAST
 @given(scenes(), unit_interval, phis)
 def test_pose_projects_targets_onto_their_screen_points(scene, fraction, phi):
@@ -108,6 +110,7 @@ def test_hand_built_symmetric_case():
 
 
 # --- conventions -------------------------------------------------------------------------------
+
 
 @FAST
 @given(scenes(), unit_interval)
@@ -170,6 +173,7 @@ def test_matches_primer_law_of_sines(scene, fraction, phi):
 
 # --- inverse map -------------------------------------------------------------------------------
 
+
 @FAST
 @given(scenes(), unit_interval, phis)
 def test_round_trip_position_angles_position(scene, fraction, phi):
@@ -214,6 +218,7 @@ def test_phi_range_is_half_open():
 
 
 # --- continuity and world-unit steps -----------------------------------------------------------
+
 
 def pose_change(p1, p2) -> tuple[float, float]:
     """(metres moved, radians turned) between two poses."""
@@ -301,6 +306,7 @@ def test_torus_position_vectorises_like_the_scalar_path():
 
 # --- degenerate input --------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize(
     "a, b, alpha",
     [
@@ -376,6 +382,7 @@ def test_torus_arrays_are_read_only():
 @given(st.integers(0, 2**32 - 1))
 def test_torus_angles_many_matches_the_scalar_form(seed):
     from camdirector.geometry.toric import torus_angles_many
+
     rng = np.random.default_rng(seed)
     torus = make_torus(rng.normal(size=3), rng.normal(size=3) + [3.0, 0.0, 0.0], rng.uniform(0.2, 2.5))
     points = rng.normal(size=(40, 3)) * 4.0
@@ -393,8 +400,7 @@ wide_lenses = st.builds(Lens, vertical_fov_deg=st.floats(20.0, 100.0), aspect=st
 def level_rotation(yaw: float, pitch: float) -> np.ndarray:
     """Ry(yaw) Rx(pitch): a camera-to-world rotation with no roll."""
     cy, sy, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
-    return np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]]) @ np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp],
-                                                                                  [0.0, sp, cp]])
+    return np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]]) @ np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
 
 
 @FAST
@@ -413,10 +419,10 @@ def test_level_pair_rotation_never_rolls_and_matches_its_many_camera_form(camera
 
 
 @FAST
-@given(point, phis, st.floats(-0.9, 0.9), level_screen, level_screen, lenses, st.floats(0.5, 30.0),
-       st.floats(0.5, 30.0))
-def test_level_pair_rotation_is_the_exact_composition_when_that_has_no_roll(camera, yaw, pitch, sa, sb, lens,
-                                                                            distance_a, distance_b):
+@given(point, phis, st.floats(-0.9, 0.9), level_screen, level_screen, lenses, st.floats(0.5, 30.0), st.floats(0.5, 30.0))
+def test_level_pair_rotation_is_the_exact_composition_when_that_has_no_roll(
+    camera, yaw, pitch, sa, sb, lens, distance_a, distance_b
+):
     truth = level_rotation(yaw, pitch)
     a = camera + distance_a * truth @ view_direction(sa, lens)
     b = camera + distance_b * truth @ view_direction(sb, lens)
@@ -430,8 +436,7 @@ def test_level_pair_rotation_is_the_exact_composition_when_that_has_no_roll(came
 
 @FAST
 @given(point, point, unit_interval, phis, st.floats(0.0, 0.9), st.floats(-0.9, 0.9), wide_lenses)
-def test_a_pair_composed_about_the_centre_stays_in_frame_at_every_place_of_its_torus(a, b, fraction, phi, sx, sy,
-                                                                                   lens):
+def test_a_pair_composed_about_the_centre_stays_in_frame_at_every_place_of_its_torus(a, b, fraction, phi, sx, sy, lens):
     # screen points symmetric about the centre whose rays fit inside the vertical field of view:
     # the level camera shows them turned about the centre by the exact composition's roll, on the
     # circle of angular radius alpha / 2 about the view axis, so both stay in the frame, equally
@@ -463,8 +468,11 @@ def test_a_level_pair_seen_from_beside_it_keeps_its_composition(fraction, headin
     b = a + np.array([distance * math.cos(heading), 0.0, distance * math.sin(heading)])
     torus = make_torus(a, b, composition_angle(sa, sb, lens))
     beside = torus_position(torus, interior(torus, fraction), math.pi / 2)
-    np.testing.assert_allclose(quat_to_matrix(level_pair_rotation(beside, a, b, sa, sb, lens)),
-                               quat_to_matrix(look_rotation(beside, a, b, sa, sb, lens)), atol=1e-9)
+    np.testing.assert_allclose(
+        quat_to_matrix(level_pair_rotation(beside, a, b, sa, sb, lens)),
+        quat_to_matrix(look_rotation(beside, a, b, sa, sb, lens)),
+        atol=1e-9,
+    )
     b = b + np.array([0.0, rise, 0.0])
     torus = make_torus(a, b, composition_angle(sa, sb, lens))
     upright = math.copysign(max(abs(phi), 0.05), phi) if abs(phi) < math.pi - 0.05 else math.copysign(math.pi - 0.05, phi)

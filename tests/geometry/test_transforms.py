@@ -1,4 +1,5 @@
 """Quaternions and rigid transforms (geometry/transforms.py): round trips and agreement with matrices."""
+
 from __future__ import annotations
 
 import math
@@ -73,12 +74,14 @@ def test_quat_rotate_matches_hamilton_product(q1, q2, v):
     """Rotating by q1 q2 is rotating by q2 then by q1 (Hamilton product, xyzw)."""
     x1, y1, z1, w1 = q1
     x2, y2, z2, w2 = q2
-    q12 = np.array([
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-    ])
+    q12 = np.array(
+        [
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        ]
+    )
     np.testing.assert_allclose(quat_rotate(q12, v), quat_rotate(q1, quat_rotate(q2, v)), atol=1e-10)
 
 

@@ -2,6 +2,7 @@
 requests and replies come out as they went in, over a real socket pair, whatever their size; a
 create request carries its session's tenant. A monitor's view query and its answer cross as they
 were, and a query out of range is refused."""
+
 from __future__ import annotations
 
 import asyncio
@@ -30,18 +31,20 @@ from camdirector.infra.channels import (
 from camdirector.v1 import director_pb2 as pb
 
 
-@pytest.mark.parametrize("op, session_id, payload", [
-    ("frame", "4296f374589b4d8987f2b500edea56b5", b"\x0a\x20" + bytes(range(200))),
-    ("ping", "", b""),
-    ("create", "ünï", bytes(3_000_000)),  # larger than the reader's buffer and the socket's
-    ("drop", "s", b""),
-])
+@pytest.mark.parametrize(
+    "op, session_id, payload",
+    [
+        ("frame", "4296f374589b4d8987f2b500edea56b5", b"\x0a\x20" + bytes(range(200))),
+        ("ping", "", b""),
+        ("create", "ünï", bytes(3_000_000)),  # larger than the reader's buffer and the socket's
+        ("drop", "s", b""),
+    ],
+)
 def test_a_request_crosses_the_socket_pair_unchanged(op, session_id, payload):
     front, worker = socket.socketpair()
     request_id = REQUEST_ID_MODULUS - 1
     # a writer thread: a large request does not fit the socket's buffer before it is read
-    writer = threading.Thread(target=lambda: [front.sendall(b) for b in encode_request(request_id, op, session_id,
-                                                                                          payload)])
+    writer = threading.Thread(target=lambda: [front.sendall(b) for b in encode_request(request_id, op, session_id, payload)])
     writer.start()
     with worker.makefile("rb", buffering=1 << 16) as reader:
         assert read_request(reader) == (request_id, op, session_id, payload)
@@ -68,12 +71,15 @@ async def _read_reply(data: bytes):
     return header[0], header[1], body, metrics
 
 
-@pytest.mark.parametrize("metrics", [
-    FrameMetrics(0.55, {"ingest": 0.02, "framing": 0.041, "motion": 0.13, "visibility": 0.185}, False),
-    FrameMetrics(0.012, {}, True),  # a stale frame: no stage ran
-    FrameMetrics(3.5, {"cut_check": 1.0, "target_update": 0.25, "camera_update": 2.0}, False),  # the tracks rig
-    None,
-])
+@pytest.mark.parametrize(
+    "metrics",
+    [
+        FrameMetrics(0.55, {"ingest": 0.02, "framing": 0.041, "motion": 0.13, "visibility": 0.185}, False),
+        FrameMetrics(0.012, {}, True),  # a stale frame: no stage ran
+        FrameMetrics(3.5, {"cut_check": 1.0, "target_update": 0.25, "camera_update": 2.0}, False),  # the tracks rig
+        None,
+    ],
+)
 def test_a_reply_and_its_metrics_come_back_as_sent(metrics):
     body = b"\x08\x07" + bytes(300)
     request_id, status, got_body, got_metrics = asyncio.run(_read_reply(encode_reply(42, 0, body, metrics)))
@@ -109,17 +115,20 @@ def test_a_create_payload_carries_the_tenant_and_reads_one_from_before_tenants()
     assert tenant == "a" * 63 and bytes(body) == request
     assert pb.CreateSessionRequest.FromString(body).level_id == "arena"
     assert decode_create(encode_create("acme", b"")) == ("acme", b"")
-    assert decode_create(request) == ("default", request)   # a checkpoint written before tenants
+    assert decode_create(request) == ("default", request)  # a checkpoint written before tenants
 
 
-@pytest.mark.parametrize("fields, message", [
-    ({"shot": "sideways"}, "view shot must be one of"),
-    ({"width_px": 5000}, "view width must be in [16, 1280] px"),
-    ({"width_px": 8}, "view width must be in [16, 1280] px"),
-    ({"height_px": 721}, "view height must be in [16, 720] px"),
-    ({"image_format": "gif"}, "view format must be one of jpeg, png"),
-    ({"shot": "candidate"}, "a candidate view names the candidate's players"),
-])
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"shot": "sideways"}, "view shot must be one of"),
+        ({"width_px": 5000}, "view width must be in [16, 1280] px"),
+        ({"width_px": 8}, "view width must be in [16, 1280] px"),
+        ({"height_px": 721}, "view height must be in [16, 720] px"),
+        ({"image_format": "gif"}, "view format must be one of jpeg, png"),
+        ({"shot": "candidate"}, "a candidate view names the candidate's players"),
+    ],
+)
 def test_view_queries_out_of_range_are_refused(fields, message):
     with pytest.raises(ValueError) as refused:
         ViewQuery(**fields)
@@ -132,7 +141,7 @@ def test_a_view_query_survives_its_trip_to_the_worker_and_garbage_is_refused():
     for payload in (b"", b"[]", b'{"shot": "program"}', b"\xff"):
         with pytest.raises(ValueError, match="not a view query"):
             ViewQuery.from_json(payload)
-    with pytest.raises(ValueError, match="view shot must be one of"):   # well formed, out of range: its own reason
+    with pytest.raises(ValueError, match="view shot must be one of"):  # well formed, out of range: its own reason
         ViewQuery.from_json(ViewQuery().to_json().replace(b"program", b"sideways"))
 
 

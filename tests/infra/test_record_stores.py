@@ -2,6 +2,7 @@
 SqliteStore): the tables made when a store opens, each write one transaction under the store's
 lock, the caller's own error when PostgreSQL cannot be reached. jobs/records.py, access/keys.py and
 precompute/tracks/registry.py build their stores on them (their own tests run on both backends)."""
+
 from __future__ import annotations
 
 import socket
@@ -49,8 +50,7 @@ class SqliteCounts(SqliteStore, Counts):
 @pytest.fixture
 def two_stores(tmp_path, records_url):
     """Two stores of one database, as two nodes (or two processes of one) open it."""
-    stores = [PostgresCounts(records_url) if records_url else SqliteCounts(tmp_path / "counts.sqlite3")
-              for _ in range(2)]
+    stores = [PostgresCounts(records_url) if records_url else SqliteCounts(tmp_path / "counts.sqlite3") for _ in range(2)]
     yield stores
     for store in stores:
         store.close()

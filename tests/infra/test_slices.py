@@ -1,4 +1,5 @@
 """infra/slices.py: a computation run in slices of time, or up to an amount of work."""
+
 from __future__ import annotations
 
 import itertools
@@ -10,11 +11,13 @@ from camdirector.infra.slices import SlicedRun, pause
 
 def _counting(steps: list[float], reached: list[int]):
     """Work that pauses before each step with the step's work and records how many steps it reached."""
+
     def work() -> str:
         for k, step in enumerate(steps):
             pause(step)
             reached.append(k)
         return "done"
+
     return work
 
 
@@ -25,9 +28,9 @@ def test_pause_outside_a_sliced_run_does_nothing():
 def test_run_until_stops_before_the_step_that_would_pass_the_work_and_goes_on_from_there():
     reached: list[int] = []
     run = SlicedRun(_counting([3.0, 3.0, 3.0, 3.0], reached))
-    assert not run.run_until(7.0)       # 3 + 3 fit, a third would make 9
+    assert not run.run_until(7.0)  # 3 + 3 fit, a third would make 9
     assert reached == [0, 1] and run.work == 6.0 and not run.done
-    assert not run.run_until(7.0)       # no room: nothing more runs
+    assert not run.run_until(7.0)  # no room: nothing more runs
     assert reached == [0, 1]
     assert not run.run_until(9.5)
     assert reached == [0, 1, 2]
@@ -53,7 +56,7 @@ def test_time_slices_run_past_the_work_of_an_earlier_run_until():
     reached: list[int] = []
     run = SlicedRun(_counting([1.0] * 4, reached))
     assert not run.run_until(2.0)
-    assert run.step(1.0)               # idle moments are not held to any work
+    assert run.step(1.0)  # idle moments are not held to any work
     assert reached == [0, 1, 2, 3] and run.work == 4.0
     assert not run.run_until(3.0) and run.run_until(4.0)  # ended, but not within 3
 
@@ -62,6 +65,7 @@ def test_an_exception_in_the_work_is_raised_by_the_call_that_ran_into_it():
     def failing() -> None:
         pause(1.0)
         raise RuntimeError("boom")
+
     run = SlicedRun(failing)
     assert not run.run_until(0.5)
     with pytest.raises(RuntimeError, match="boom"):

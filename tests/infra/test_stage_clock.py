@@ -1,4 +1,5 @@
 """StageClock laps stages on the clock it is given, sums a stage lapped twice, and reports progress."""
+
 from __future__ import annotations
 
 import enum
@@ -21,9 +22,9 @@ def _ticking(times_s):
 def test_laps_sum_per_stage_on_the_given_clock_into_the_given_dict():
     timings = {"before": 9.0}
     clock = StageClock(clock=_ticking([10.0, 10.002, 10.005, 10.006]), timings_ms=timings)
-    clock.done(_Stage.A)   # 2 ms
-    clock.done(_Stage.B)   # 3 ms
-    clock.done(_Stage.A)   # 1 ms more
+    clock.done(_Stage.A)  # 2 ms
+    clock.done(_Stage.B)  # 3 ms
+    clock.done(_Stage.A)  # 1 ms more
     assert clock.timings_ms is timings
     assert timings == pytest.approx({"before": 9.0, "a": 3.0, "b": 3.0})
 

@@ -1,4 +1,5 @@
 """Tenant names (infra/tenants.py): what may name a tenant, since a tenant names folders."""
+
 from __future__ import annotations
 
 import pytest

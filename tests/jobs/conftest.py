@@ -1,5 +1,6 @@
 """Fixtures of the job tests: the record store on both backends (SQLite and PostgreSQL, a fresh
 database per test: tests/conftest.py's records_url; every store test runs on each)."""
+
 from __future__ import annotations
 
 from pathlib import Path

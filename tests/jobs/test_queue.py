@@ -3,6 +3,7 @@ QueueWorker in a thread of the test runs them in real job processes. Jobs run an
 progress, a running job is cancelled, a worker that stops hands its job back (and another worker
 finishes it), a message delivered twice runs its job once, and Redis or PostgreSQL down is one
 clear line: at a worker's start (the `camdirector job-worker` command) and at a submit."""
+
 from __future__ import annotations
 
 import subprocess
@@ -21,8 +22,9 @@ CAMDIRECTOR = [sys.executable, "-m", "camdirector.__main__"]
 
 @pytest.fixture
 def settings(redis_url, postgres_url) -> JobSettings:
-    return JobSettings(job_queue=redis_url, job_store=postgres_url, worker_heartbeat_timeout_s=2.0,
-                       cancel_grace_s=1.0, max_attempts=3)
+    return JobSettings(
+        job_queue=redis_url, job_store=postgres_url, worker_heartbeat_timeout_s=2.0, cancel_grace_s=1.0, max_attempts=3
+    )
 
 
 @pytest.fixture
@@ -54,6 +56,7 @@ def start_worker(tmp_path, settings):
 
     def start(**changes) -> WorkerThread:
         from dataclasses import replace
+
         started.append(WorkerThread(tmp_path, replace(settings, **changes)))
         return started[-1]
 
@@ -94,7 +97,7 @@ def test_a_stopping_worker_hands_its_job_to_another(tmp_path, client, start_work
     first = start_worker()
     job = client.submit("wait", params, {})
     wait_until(lambda: started_pids(Path(params["started"])), what="the job to start")
-    first.stop()                                   # SIGTERM's path: the job goes back, uncounted
+    first.stop()  # SIGTERM's path: the job goes back, uncounted
     again = client.get(job.id)
     assert again.state is JobState.QUEUED and again.attempts == 0
     Path(params["release"]).touch()
@@ -111,7 +114,7 @@ def test_a_message_delivered_twice_runs_its_job_once(tmp_path, client, start_wor
     start_worker(max_concurrent_jobs=2)
     job = client.submit("wait", params, {})
     first_pid = wait_until(lambda: started_pids(Path(params["started"])), what="attempt 1")[0]
-    client._actor.send(job.id)                    # the duplicate
+    client._actor.send(job.id)  # the duplicate
     wait_until(lambda: len(started_pids(Path(params["started"]))) == 2, what="attempt 2")
     wait_until(lambda: not alive(first_pid), 10.0, "the superseded attempt's process to end")
     Path(params["release"]).touch()
@@ -137,11 +140,18 @@ def test_submit_with_redis_down_fails_the_job_and_says_why(tmp_path, settings, r
 
 @pytest.mark.parametrize("down", ["redis", "postgres"])
 def test_a_worker_or_front_refuses_to_start_when_a_service_is_down(tmp_path, redis_url, postgres_url, down):
-    dead = f"redis://127.0.0.1:{free_port()}/0" if down == "redis" else \
-        f"postgresql://camdirector@127.0.0.1:{free_port()}/camdirector"
+    dead = (
+        f"redis://127.0.0.1:{free_port()}/0"
+        if down == "redis"
+        else f"postgresql://camdirector@127.0.0.1:{free_port()}/camdirector"
+    )
     queue, store = (dead, postgres_url) if down == "redis" else (redis_url, dead)
-    done = subprocess.run([*CAMDIRECTOR, "job-worker", "--job-queue", queue, "--job-store", store,
-                           "--data-dir", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [*CAMDIRECTOR, "job-worker", "--job-queue", queue, "--job-store", store, "--data-dir", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     what = "job queue" if down == "redis" else "job store"
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.startswith(f"camdirector job-worker: {what} {dead} is unreachable: ")
@@ -151,19 +161,47 @@ def test_a_worker_or_front_refuses_to_start_when_a_service_is_down(tmp_path, red
 
 
 def test_job_worker_needs_a_queue(tmp_path):
-    done = subprocess.run([*CAMDIRECTOR, "job-worker", "--data-dir", str(tmp_path)], capture_output=True,
-                          text=True, timeout=60, env={"PATH": "/usr/bin:/bin"})
+    done = subprocess.run(
+        [*CAMDIRECTOR, "job-worker", "--data-dir", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"PATH": "/usr/bin:/bin"},
+    )
     assert done.returncode == 2 and "--job-queue redis://HOST:PORT/DB is required" in done.stderr
 
 
 @pytest.mark.parametrize("down", ["redis", "postgres"])
 def test_serve_refuses_to_start_when_a_service_is_down(tmp_path, redis_url, postgres_url, down):
-    dead = f"redis://127.0.0.1:{free_port()}/0" if down == "redis" else \
-        f"postgresql://camdirector@127.0.0.1:{free_port()}/camdirector"
+    dead = (
+        f"redis://127.0.0.1:{free_port()}/0"
+        if down == "redis"
+        else f"postgresql://camdirector@127.0.0.1:{free_port()}/camdirector"
+    )
     queue, store = (dead, postgres_url) if down == "redis" else (redis_url, dead)
-    done = subprocess.run([*CAMDIRECTOR, "serve", "--grpc", "", "--zmq", "", "--http", "127.0.0.1:0", "--workers", "0",
-                           "--data-dir", str(tmp_path), "--job-queue", queue, "--job-store", store],
-                          capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [
+            *CAMDIRECTOR,
+            "serve",
+            "--grpc",
+            "",
+            "--zmq",
+            "",
+            "--http",
+            "127.0.0.1:0",
+            "--workers",
+            "0",
+            "--data-dir",
+            str(tmp_path),
+            "--job-queue",
+            queue,
+            "--job-store",
+            store,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     what = "job queue" if down == "redis" else "records database (keys)"  # the first to reach PostgreSQL
     assert done.returncode != 0 and done.stdout == "", done.stdout
     assert done.stderr.splitlines()[-1].startswith(f"camdirector serve: {what} {dead} is unreachable: "), done.stderr

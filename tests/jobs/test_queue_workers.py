@@ -4,6 +4,7 @@ both modes, a level job lands in the shared data directory's registry, and (the 
 test) a worker SIGKILLed while it runs a job loses nothing: the job is run again by the other
 worker, and both jobs succeed exactly once, with the same files as an undisturbed run. Uses the
 72-frame run clip and the tiny corridor level."""
+
 from __future__ import annotations
 
 import json
@@ -49,10 +50,27 @@ class JobWorker:
         self.log = log
         with open(log, "w") as err:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "camdirector.__main__", "job-worker", "--job-queue", queue,
-                 "--job-store", store, "--data-dir", str(data_dir), "--concurrency", "1",
-                 "--heartbeat-timeout-s", str(HEARTBEAT_TIMEOUT_S)],
-                stdout=subprocess.PIPE, stderr=err, text=True, start_new_session=True)
+                [
+                    sys.executable,
+                    "-m",
+                    "camdirector.__main__",
+                    "job-worker",
+                    "--job-queue",
+                    queue,
+                    "--job-store",
+                    store,
+                    "--data-dir",
+                    str(data_dir),
+                    "--concurrency",
+                    "1",
+                    "--heartbeat-timeout-s",
+                    str(HEARTBEAT_TIMEOUT_S),
+                ],
+                stdout=subprocess.PIPE,
+                stderr=err,
+                text=True,
+                start_new_session=True,
+            )
         line = self.proc.stdout.readline()
         assert line, f"the job worker did not start: {log.read_text()[-3000:]}"
         self.id = json.loads(line)["worker"]
@@ -77,10 +95,11 @@ class JobWorker:
 def cluster(tmp_path, redis_url, postgres_url):
     """REST routes in queue mode (as front/main.py mounts them) and a way to start workers."""
     data_dir = tmp_path / "shared"
-    settings = JobSettings(job_queue=redis_url, job_store=postgres_url, max_upload_bytes=150_000,
-                           worker_heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S)
+    settings = JobSettings(
+        job_queue=redis_url, job_store=postgres_url, max_upload_bytes=150_000, worker_heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S
+    )
     app = FastAPI()
-    app.state.guard = Guard(None)   # authentication off, as a `--no-auth` node's app
+    app.state.guard = Guard(None)  # authentication off, as a `--no-auth` node's app
     jobs = open_jobs(data_dir, service_kinds(), settings)
     install_overview_routes(app, jobs, settings)
     install_level_routes(app, jobs, data_dir, settings)
@@ -105,8 +124,11 @@ def submit(client, bvh: bytes) -> str:
 
 
 def finished(client, job_id: str, timeout_s: float = 60.0) -> dict:
-    return wait_until(lambda: (s := client.get(f"/v1/overview-jobs/{job_id}").json())["status"]
-                      in ("succeeded", "failed", "cancelled") and s, timeout_s, f"job {job_id} to end")
+    return wait_until(
+        lambda: (s := client.get(f"/v1/overview-jobs/{job_id}").json())["status"] in ("succeeded", "failed", "cancelled") and s,
+        timeout_s,
+        f"job {job_id} to end",
+    )
 
 
 def result_files(jobs, job_id: str) -> dict[str, bytes]:
@@ -137,17 +159,22 @@ def test_the_rest_api_is_the_same_in_both_modes(tmp_path, cluster, run_bvh):
                 job_id = submit(client, run_bvh)
                 status = finished(client, job_id)
                 assert status["status"] == "succeeded", status
-                answers.append({
-                    "status_keys": sorted(status), "timing_keys": sorted(status["timings"]),
-                    "list": sorted(client.get("/v1/overview-jobs").json()["jobs"][0]),
-                    "result": client.get(f"/v1/overview-jobs/{job_id}/result").json(),
-                    "files": [client.get(f"/v1/overview-jobs/{job_id}/{name}").status_code
-                              for name in ("preview.mp4", "contact-sheet.png")],
-                    "cancel_finished": client.delete(f"/v1/overview-jobs/{job_id}").status_code,
-                    "unknown": client.get("/v1/overview-jobs/" + "0" * 32).json(),
-                    "bad": client.post("/v1/overview-jobs", files={"file": ("x.bvh", b"nope")}).json(),
-                    "openapi": client.get("/openapi.json").json(),
-                })
+                answers.append(
+                    {
+                        "status_keys": sorted(status),
+                        "timing_keys": sorted(status["timings"]),
+                        "list": sorted(client.get("/v1/overview-jobs").json()["jobs"][0]),
+                        "result": client.get(f"/v1/overview-jobs/{job_id}/result").json(),
+                        "files": [
+                            client.get(f"/v1/overview-jobs/{job_id}/{name}").status_code
+                            for name in ("preview.mp4", "contact-sheet.png")
+                        ],
+                        "cancel_finished": client.delete(f"/v1/overview-jobs/{job_id}").status_code,
+                        "unknown": client.get("/v1/overview-jobs/" + "0" * 32).json(),
+                        "bad": client.post("/v1/overview-jobs", files={"file": ("x.bvh", b"nope")}).json(),
+                        "openapi": client.get("/openapi.json").json(),
+                    }
+                )
     finally:
         local_jobs.close()
     local, queued = answers
@@ -160,8 +187,11 @@ def test_a_level_job_runs_on_a_worker(cluster):
     start_worker()
     reply = client.post("/v1/levels", data={"name": "corridor"}, files={"level": ("level.obj", obj_text(corridor()))})
     assert reply.status_code == 202, reply.text
-    status = wait_until(lambda: (s := client.get(f"/v1/level-jobs/{reply.json()['id']}").json())["status"]
-                        in ("succeeded", "failed") and s, 60.0, "the level job")
+    status = wait_until(
+        lambda: (s := client.get(f"/v1/level-jobs/{reply.json()['id']}").json())["status"] in ("succeeded", "failed") and s,
+        60.0,
+        "the level job",
+    )
     assert status["status"] == "succeeded" and status["name"] == "corridor", status
     level = client.get("/v1/levels/corridor").json()
     assert level["counts"]["tracks"] > 0 and level["source_file"] == "level.obj"
@@ -194,7 +224,9 @@ def test_a_killed_worker_job_runs_again_once_with_the_same_result(cluster, run_b
     assert result_files(jobs, a) == result_files(jobs, b)
     assert decoded_preview(jobs, a).shape == decoded_preview(jobs, b).shape
     assert client.get(f"/v1/overview-jobs/{a}/result").json() == client.get(f"/v1/overview-jobs/{b}/result").json()
-    print(f"\nredelivered job finished {redelivered_s:.2f} s after the kill "
-          f"(heartbeat timeout {HEARTBEAT_TIMEOUT_S} s; job process {done_a.timings_ms['job_process_total']:.0f} ms)")
+    print(
+        f"\nredelivered job finished {redelivered_s:.2f} s after the kill "
+        f"(heartbeat timeout {HEARTBEAT_TIMEOUT_S} s; job process {done_a.timings_ms['job_process_total']:.0f} ms)"
+    )
     assert redelivered_s < HEARTBEAT_TIMEOUT_S + 30.0
     assert survivor.stop() == 0

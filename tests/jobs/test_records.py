@@ -2,6 +2,7 @@
 files renamed into place, a full queue, recovery, retention, the compare-and-set of attempts
 that lets a job succeed once when a redelivered message runs it twice, tenants and their shares,
 and a table from before tenants gaining them."""
+
 from __future__ import annotations
 
 import contextlib
@@ -38,11 +39,17 @@ def test_submit_claim_finish_and_files(store):
     assert store.finish(a.id, JobState.SUCCEEDED, timings_ms={"x": 2.0})
     done = store.get(a.id)
     assert done.progress == 1.0 and done.timings_ms == {"x": 2.0} and done.finished_s is not None
-    assert done.as_public() == {"id": a.id, "status": "succeeded", "progress": 1.0,
-                                "timings": {"x": 2.0}, "created_unix_s": a.created_s,
-                                "started_unix_s": claimed.started_s, "finished_unix_s": done.finished_s}
+    assert done.as_public() == {
+        "id": a.id,
+        "status": "succeeded",
+        "progress": 1.0,
+        "timings": {"x": 2.0},
+        "created_unix_s": a.created_s,
+        "started_unix_s": claimed.started_s,
+        "finished_unix_s": done.finished_s,
+    }
     assert store.cancel(b.id).state is JobState.CANCELLED
-    assert store.cancel(a.id).state is JobState.SUCCEEDED       # finished: unchanged
+    assert store.cancel(a.id).state is JobState.SUCCEEDED  # finished: unchanged
     with pytest.raises(JobNotFound):
         store.get("nope")
     with pytest.raises(JobNotFound):
@@ -58,7 +65,7 @@ def test_submit_answers_the_job_as_created_though_a_runner_claims_it_at_once(sto
     def tx_then_claim():
         with tx() as db:
             yield db
-        monkeypatch.setattr(store, "_tx", tx)      # one claim, as by a runner, right after the commit
+        monkeypatch.setattr(store, "_tx", tx)  # one claim, as by a runner, right after the commit
         store.claim_next()
 
     monkeypatch.setattr(store, "_tx", tx_then_claim)
@@ -88,11 +95,11 @@ def test_recover_requeues_then_fails_after_max_attempts(store):
     job = store.submit("echo", {}, {})
     (store.root / "orphan").mkdir()
     (store.root / ".tmp-leftover").mkdir()
-    store.claim_next()                                     # attempt 1, then "the server died"
+    store.claim_next()  # attempt 1, then "the server died"
     assert store.recover(max_attempts=2) == ([job.id], [])
     assert store.get(job.id).state is JobState.QUEUED
-    assert job_dirs(store) == {job.id}                     # orphans removed
-    store.claim_next()                                     # attempt 2, died again
+    assert job_dirs(store) == {job.id}  # orphans removed
+    store.claim_next()  # attempt 2, died again
     assert store.recover(max_attempts=2) == ([], [job.id])
     failed = store.get(job.id)
     assert failed.state is JobState.FAILED and "interrupted" in failed.error and "2 time" in failed.error
@@ -122,11 +129,11 @@ def test_purges_only_jobs_that_ended_before_the_cutoff(store):
     for job in (old, recent):
         store.claim_next()
         store.finish(job.id, JobState.SUCCEEDED)
-    cutoff = store.get(recent.id).finished_s            # strictly before: `recent` stays
+    cutoff = store.get(recent.id).finished_s  # strictly before: `recent` stays
     assert store.purge_finished(cutoff) == [old.id]
     assert [j.id for j in store.list()] == [recent.id, queued.id]
     assert job_dirs(store) == {recent.id, queued.id}
-    assert sorted(store.purge_finished(cutoff + 3600.0)) == [recent.id]   # a queued job is never purged
+    assert sorted(store.purge_finished(cutoff + 3600.0)) == [recent.id]  # a queued job is never purged
     assert [j.id for j in store.list()] == [queued.id]
 
 
@@ -135,30 +142,32 @@ def test_a_redelivered_job_succeeds_once_with_the_latest_attempt(store):
     worker 2's outcome is recorded, and only its result is renamed into place."""
     job = store.submit("echo", {}, {})
     first = store.claim(job.id, max_attempts=3)
-    second = store.claim(job.id, max_attempts=3)             # the same message, delivered again
+    second = store.claim(job.id, max_attempts=3)  # the same message, delivered again
     assert (first.attempts, second.attempts) == (1, 2) and second.state is JobState.RUNNING
     published = []
-    assert not store.finish(job.id, JobState.SUCCEEDED, attempt=first.attempts, only_if=JobState.RUNNING,
-                            publish=lambda: published.append(1))
+    assert not store.finish(
+        job.id, JobState.SUCCEEDED, attempt=first.attempts, only_if=JobState.RUNNING, publish=lambda: published.append(1)
+    )
     store.set_progress(job.id, 0.9, attempt=first.attempts)  # a stale attempt's progress is ignored
     assert store.get(job.id).progress == 0.0 and published == []
-    assert store.finish(job.id, JobState.SUCCEEDED, attempt=second.attempts, only_if=JobState.RUNNING,
-                        publish=lambda: published.append(2))
+    assert store.finish(
+        job.id, JobState.SUCCEEDED, attempt=second.attempts, only_if=JobState.RUNNING, publish=lambda: published.append(2)
+    )
     assert published == [2] and store.get(job.id).state is JobState.SUCCEEDED
-    assert store.claim(job.id, max_attempts=3) is None       # a late duplicate runs nothing
+    assert store.claim(job.id, max_attempts=3) is None  # a late duplicate runs nothing
     assert not store.finish(job.id, JobState.FAILED, attempt=second.attempts, only_if=JobState.RUNNING)
 
 
 def test_claim_fails_a_job_interrupted_too_often_and_skips_cancelled_ones(store):
     job = store.submit("echo", {}, {})
     store.claim(job.id, max_attempts=1)
-    assert store.claim(job.id, max_attempts=1) is None        # its worker died once: limit 1
+    assert store.claim(job.id, max_attempts=1) is None  # its worker died once: limit 1
     failed = store.get(job.id)
     assert failed.state is JobState.FAILED and "interrupted" in failed.error
     other = store.submit("echo", {}, {})
     store.cancel(other.id)
     assert store.claim(other.id, max_attempts=2) is None and store.get(other.id).attempts == 0
-    assert store.claim("0" * 32, max_attempts=2) is None      # purged meanwhile
+    assert store.claim("0" * 32, max_attempts=2) is None  # purged meanwhile
 
 
 def test_a_failed_publish_changes_nothing(store):
@@ -176,8 +185,8 @@ def test_a_failed_publish_changes_nothing(store):
 def test_requeue_is_compare_and_set_on_the_attempt(store):
     job = store.submit("echo", {}, {})
     store.claim(job.id, max_attempts=3)
-    store.claim(job.id, max_attempts=3)                       # taken over: attempt 2
-    store.requeue(job.id, uncount_attempt=True, attempt=1)    # the old attempt's stop: no effect
+    store.claim(job.id, max_attempts=3)  # taken over: attempt 2
+    store.requeue(job.id, uncount_attempt=True, attempt=1)  # the old attempt's stop: no effect
     assert store.get(job.id).state is JobState.RUNNING
     store.requeue(job.id, uncount_attempt=True, attempt=2)
     again = store.get(job.id)
@@ -203,6 +212,7 @@ def test_records_survive_a_restart(make_store, records_url):
 
 def test_unreachable_postgres_is_one_clear_line(tmp_path):
     from camdirector.deploy.services import free_port
+
     url = f"postgresql://camdirector@127.0.0.1:{free_port()}/camdirector"
     with pytest.raises(JobsUnavailable) as caught:
         PostgresJobStore(url, tmp_path)
@@ -226,18 +236,18 @@ def test_a_tenants_share_of_jobs_and_of_stored_inputs(store):
         return store.submit("echo", {}, {"in.txt": b"x" * size}, tenant=tenant, **share)
 
     first, second = submit("acme", 3), submit("acme", 3)
-    store.claim_next()                                       # running counts as much as queued
+    store.claim_next()  # running counts as much as queued
     before = job_dirs(store)
     with pytest.raises(TenantLimitReached, match="tenant 'acme' has 2 jobs queued or running"):
         submit("acme", 1)
-    assert job_dirs(store) == before and len(store.list()) == 2    # refused: nothing left behind
-    assert submit("beta", 10).tenant == "beta"              # another tenant's share is its own
+    assert job_dirs(store) == before and len(store.list()) == 2  # refused: nothing left behind
+    assert submit("beta", 10).tenant == "beta"  # another tenant's share is its own
     store.finish(first.id, JobState.SUCCEEDED)
-    third = submit("acme", 4)                               # a place again: 10 bytes kept, the limit
+    third = submit("acme", 4)  # a place again: 10 bytes kept, the limit
     store.cancel(third.id)
     store.cancel(second.id)
     with pytest.raises(TenantLimitReached, match=r"keep 10 bytes of uploads; 1 more would pass its limit of 10"):
-        submit("acme", 1)                                   # finished jobs keep their inputs until purged
+        submit("acme", 1)  # finished jobs keep their inputs until purged
     store.purge_finished(time.time() + 1)
     assert submit("acme", 10).tenant == "acme"
 
@@ -250,7 +260,7 @@ _OLD_POSTGRES_TABLE = """CREATE TABLE jobs (id TEXT PRIMARY KEY, kind TEXT NOT N
     state TEXT NOT NULL, progress DOUBLE PRECISION NOT NULL DEFAULT 0, error TEXT, attempts INTEGER NOT NULL DEFAULT 0,
     created_s DOUBLE PRECISION NOT NULL, started_s DOUBLE PRECISION, finished_s DOUBLE PRECISION,
     timings TEXT NOT NULL DEFAULT '{}', seq BIGSERIAL NOT NULL)"""
-_OLD_ROW = ("INSERT INTO jobs (id, kind, params, state, created_s, seq) VALUES ('0ld', 'echo', '{}', 'queued', 1.0, 1)")
+_OLD_ROW = "INSERT INTO jobs (id, kind, params, state, created_s, seq) VALUES ('0ld', 'echo', '{}', 'queued', 1.0, 1)"
 
 
 def test_a_table_from_before_tenants_gains_them(make_store, records_url, tmp_path):
@@ -258,6 +268,7 @@ def test_a_table_from_before_tenants_gains_them(make_store, records_url, tmp_pat
     inputs counted as 0 bytes, and new jobs go in beside them."""
     if records_url:
         import psycopg
+
         with psycopg.connect(records_url, autocommit=True) as db:
             db.execute(_OLD_POSTGRES_TABLE)
             db.execute(_OLD_ROW)
@@ -272,4 +283,4 @@ def test_a_table_from_before_tenants_gains_them(make_store, records_url, tmp_pat
     assert old.tenant == "default" and old.state is JobState.QUEUED
     new = store.submit("echo", {}, {"in.txt": b"abc"}, tenant="acme", tenant_max_upload_bytes=3)
     assert [j.id for j in store.list()] == ["0ld", new.id] and store.list(tenant="acme") == [store.get(new.id)]
-    assert make_store().get("0ld") == old                   # opened again: migrated once
+    assert make_store().get("0ld") == old  # opened again: migrated once

@@ -1,5 +1,6 @@
 """Toy job kinds and waiting helpers of the job tests. The kinds are module-level so that job
 processes import them by reference."""
+
 from __future__ import annotations
 
 import os
@@ -65,7 +66,7 @@ def alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    try:   # a zombie counts as dead
+    try:  # a zombie counts as dead
         with open(f"/proc/{pid}/stat") as f:
             return f.read().split()[2] != "Z"
     except OSError:

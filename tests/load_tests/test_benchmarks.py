@@ -1,4 +1,5 @@
 """The benchmarks run and report what their docstrings promise (tiny runs; they assert no timing)."""
+
 from __future__ import annotations
 
 import json
@@ -26,8 +27,18 @@ def _run(main, tmp_path, *args) -> dict:
 
 @pytest.mark.shared_data
 def test_overview_bench_reports_end_to_end_against_planning(shared_data, tmp_path):
-    result = _run(overview_bench.main, tmp_path, "--data-dir", str(shared_data), "--clips", "bandai_run_30fps",
-                  "--frames", "40", "--reps", "1")
+    result = _run(
+        overview_bench.main,
+        tmp_path,
+        "--data-dir",
+        str(shared_data),
+        "--clips",
+        "bandai_run_30fps",
+        "--frames",
+        "40",
+        "--reps",
+        "1",
+    )
     clip = result["clips"]["bandai_run_30fps"]
     assert clip["frames"] == 40 and clip["end_to_end_s"]["n"] == 1
     # Both measured, never compared: two runs of a shared machine's seconds (end to end includes
@@ -61,36 +72,62 @@ def test_stream_bench_reports_round_trips(tmp_path):
 
 
 def test_capacity_reports_the_last_count_that_held_with_its_floor_and_load_generator(tmp_path):
-    result = _run(capacity.main, tmp_path, "--modes", "FRAMING_ONLY", "--transports", "zmq", "--max-sessions", "2",
-                  "--seconds", "0.5", "--warmup-frames", "2", "--settle-s", "0", "--workers", "1")
+    result = _run(
+        capacity.main,
+        tmp_path,
+        "--modes",
+        "FRAMING_ONLY",
+        "--transports",
+        "zmq",
+        "--max-sessions",
+        "2",
+        "--seconds",
+        "0.5",
+        "--warmup-frames",
+        "2",
+        "--settle-s",
+        "0",
+        "--workers",
+        "1",
+    )
     (case,) = result["cases"]
     assert (case["mode"], case["transport"], case["server_workers"]) == ("FRAMING_ONLY", "zmq", 1)
     assert result["counts_tried_up_to"] == [1, 2] and result["server"]["checkout"]
     passed = [s["sessions"] for s in case["steps"] if s["passed"]]
     assert case["capacity_sessions"] == result["capacity_sessions"]["FRAMING_ONLY"]["zmq"] == max(passed, default=0)
     for step in case["steps"]:  # each verdict is the rule applied to the step's own numbers
-        assert step["passed"] == (step["rtt_ms"]["p99"] <= 10.0 and step["late_frames"] == step["dropped_frames"] == 0
-                                  and not step["errors"])
+        assert step["passed"] == (
+            step["rtt_ms"]["p99"] <= 10.0 and step["late_frames"] == step["dropped_frames"] == 0 and not step["errors"]
+        )
         assert step["floor_rtt_ms"]["p50"] > 0 and step["client_cpu_fraction_of_core"] > 0
         assert step["frames_sent"] == step["sessions"] * 30
         # where a frame's CPU goes: the front and the one worker both worked, and so did the generator
         assert min(step["cpu_us_per_frame"][k] for k in ("front", "workers", "load_generator")) > 0
 
 
-@pytest.mark.parametrize("max_sessions, counts", [
-    (1, [1]), (2, [1, 2]), (20, [1, 2, 4, 8, 16, 20]), (40, [1, 2, 4, 8, 16, 24, 32, 40]),
-])
+@pytest.mark.parametrize(
+    "max_sessions, counts",
+    [
+        (1, [1]),
+        (2, [1, 2]),
+        (20, [1, 2, 4, 8, 16, 20]),
+        (40, [1, 2, 4, 8, 16, 24, 32, 40]),
+    ],
+)
 def test_capacity_tries_counts_doubling_then_by_eight(max_sessions, counts):
     assert capacity.session_counts(max_sessions) == counts
 
 
-@pytest.mark.parametrize("holds, counts, tried, found", [
-    (0, [1, 2], [1], 0),
-    (2, [1, 2], [1, 2], 2),
-    (19, [1, 2, 4, 8, 16, 24], [1, 2, 4, 8, 16, 24, 20, 18, 19], 19),
-    (21, [1, 2, 4, 8, 16, 24], [1, 2, 4, 8, 16, 24, 20, 22, 21], 21),
-    (40, [1, 2, 4, 8, 16, 24, 32, 40], [1, 2, 4, 8, 16, 24, 32, 40], 40),
-])
+@pytest.mark.parametrize(
+    "holds, counts, tried, found",
+    [
+        (0, [1, 2], [1], 0),
+        (2, [1, 2], [1, 2], 2),
+        (19, [1, 2, 4, 8, 16, 24], [1, 2, 4, 8, 16, 24, 20, 18, 19], 19),
+        (21, [1, 2, 4, 8, 16, 24], [1, 2, 4, 8, 16, 24, 20, 22, 21], 21),
+        (40, [1, 2, 4, 8, 16, 24, 32, 40], [1, 2, 4, 8, 16, 24, 32, 40], 40),
+    ],
+)
 def test_capacity_halves_the_gap_after_the_first_count_that_fails(holds, counts, tried, found):
     asked = []
 
@@ -107,10 +144,10 @@ def test_dashboard_bench_reports_watched_against_alone(tmp_path):
     assert result["watched"]["detail_requests"] >= 1 and set(result["rtt_ratio_watched_vs_alone"]) == {"p50", "p99"}
 
 
-
 def test_monitors_bench_reports_render_cost_and_watched_against_unwatched(tmp_path):
-    result = _run(monitors_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1", "--renders", "3",
-                  "--rounds", "1")
+    result = _run(
+        monitors_bench.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1", "--renders", "3", "--rounds", "1"
+    )
     (round_,) = result["rounds"]
     assert round_["unwatched"]["dropped_frames"] == round_["watched"]["dropped_frames"] == 0
     watched = round_["watched"]
@@ -125,8 +162,9 @@ def test_monitors_bench_reports_render_cost_and_watched_against_unwatched(tmp_pa
 
 
 def test_soak_reports_memory_and_descriptors_over_every_kind_of_session(tmp_path):
-    result = _run(soak.main, tmp_path, "--minutes", "0.05", "--warmup-s", "2", "--sample-s", "0.5",
-                  "--workers", "1", "--frames", "5")
+    result = _run(
+        soak.main, tmp_path, "--minutes", "0.05", "--warmup-s", "2", "--sample-s", "0.5", "--workers", "1", "--frames", "5"
+    )
     assert result["error_count"] == 0 and not result["worker_restarted"]
     assert set(result["sessions"]) == {c.name for c in soak.combinations()} and min(result["sessions"].values()) >= 1
     assert result["samples"] >= 3 and len(result["workers"]) == 1 and result["rss_slope_mb_per_min"] is not None
@@ -143,12 +181,22 @@ def test_movers_bench_reports_every_mode_and_count_against_none(tmp_path):
     assert result["floor_stale_frame_wall_ms"]["median"] > 0 and all(c["median_over_floor"] > 0 for c in cases.values())
 
 
-
 def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_program_twice(tmp_path):
     """A real duel's first 24 s (its first kill at 20 s), run twice from scratch (the level added anew, a new server):
     issue 29's "two runs of the same match give the same program, pose for pose"."""
-    result = _run(real_matches.main, tmp_path, "--only", "duel_bravado", "--minutes", "0.4", "--rate-hz", "15", "--twice",
-                  "--markdown", str(tmp_path / "table.md"))
+    result = _run(
+        real_matches.main,
+        tmp_path,
+        "--only",
+        "duel_bravado",
+        "--minutes",
+        "0.4",
+        "--rate-hz",
+        "15",
+        "--twice",
+        "--markdown",
+        str(tmp_path / "table.md"),
+    )
     duel = result["matches"]["duel_bravado"]
     assert set(duel["directors"]) == {"planned", "hltv", "autotrack"} and duel["match"]["players"] == 2
     assert duel["same_program_twice"] == {"planned": True, "hltv": True, "autotrack": True}

@@ -1,6 +1,7 @@
 """load_tests.failover at a small size, in `make test`: a worker SIGKILL on one node and a node
 SIGKILL in a two-node cluster behind HAProxy lose no session and no frame, and every answer equals
 the undisturbed session's. Its recovery times are printed, never asserted (a loaded CI machine)."""
+
 from __future__ import annotations
 
 import pytest

@@ -3,6 +3,7 @@
 Hand-built demoparser2 tables pin the conversion (players, teams, late joiners, kills, bombs), the
 real demos of tests/data/real_matches/cs2/ (SOURCES.md) go through demoparser2 end to end, and bad
 files must end in Cs2DemoError, never in a crash."""
+
 from __future__ import annotations
 
 import gzip
@@ -35,8 +36,10 @@ REAL_DEMOS = sorted(CS2_DEMOS.glob("*.dem.gz"))
 # over 1024 pixels) covers the playable map: X -2476..2030, Y -1267..3239 units.
 DUST2_BOX_UNITS = ((-2476.0, 2029.6), (-1266.6, 3239.0))
 # What the two shipped demos hold (SOURCES.md): the player's side, origin (units), pitch and yaw.
-SHIPPED = {"14155.dem.gz": (1, (160.12274169921875, 2369.67626953125, -119.918701171875), 0.0, 23.999969482421875, 161),
-           "14160.dem.gz": (0, (-980.0, -754.0, 120.1812515258789), 0.0, -147.50003051757812, 156)}
+SHIPPED = {
+    "14155.dem.gz": (1, (160.12274169921875, 2369.67626953125, -119.918701171875), 0.0, 23.999969482421875, 161),
+    "14160.dem.gz": (0, (-980.0, -754.0, 120.1812515258789), 0.0, -147.50003051757812, 156),
+}
 
 
 def _forward(pitch_deg: float, yaw_deg: float) -> np.ndarray:
@@ -47,18 +50,21 @@ def _up(pitch_deg: float, yaw_deg: float) -> np.ndarray:
     return quat_rotate(view_rotation(np.array(pitch_deg), np.array(yaw_deg)), np.array([0.0, 1.0, 0.0]))
 
 
-@pytest.mark.parametrize(("pitch", "yaw", "world"), [
-    (0.0, 0.0, (1.0, 0.0, 0.0)),                       # Source +X
-    (0.0, 90.0, (0.0, 0.0, -1.0)),                     # Source +Y is world -Z
-    (0.0, 180.0, (-1.0, 0.0, 0.0)),
-    (0.0, -90.0, (0.0, 0.0, 1.0)),
-    (89.0, 0.0, (np.cos(np.radians(89.0)), -np.sin(np.radians(89.0)), 0.0)),  # positive pitch looks down
-    (-45.0, 180.0, (-np.sqrt(0.5), np.sqrt(0.5), 0.0)),
-])
+@pytest.mark.parametrize(
+    ("pitch", "yaw", "world"),
+    [
+        (0.0, 0.0, (1.0, 0.0, 0.0)),  # Source +X
+        (0.0, 90.0, (0.0, 0.0, -1.0)),  # Source +Y is world -Z
+        (0.0, 180.0, (-1.0, 0.0, 0.0)),
+        (0.0, -90.0, (0.0, 0.0, 1.0)),
+        (89.0, 0.0, (np.cos(np.radians(89.0)), -np.sin(np.radians(89.0)), 0.0)),  # positive pitch looks down
+        (-45.0, 180.0, (-np.sqrt(0.5), np.sqrt(0.5), 0.0)),
+    ],
+)
 def test_source_view_angles_turn_local_z_onto_the_view(pitch, yaw, world):
     np.testing.assert_allclose(_forward(pitch, yaw), world, atol=1e-12)
     if abs(pitch) < 60:
-        assert _up(pitch, yaw)[1] > 0.5                # no roll: the head stays up
+        assert _up(pitch, yaw)[1] > 0.5  # no roll: the head stays up
 
 
 def test_source_units_are_inches_and_z_up_becomes_y_up():
@@ -69,11 +75,23 @@ def test_source_units_are_inches_and_z_up_becomes_y_up():
 
 # --- hand-built demoparser2 tables -------------------------------------------------------------
 
+
 def _ticks(rows: list[dict]) -> dict[str, np.ndarray]:
     """parse_ticks' columns from rows of (tick, steamid, name, team, x, y, z, ...); the props a
     row leaves out take a living, unarmed player's values."""
-    defaults = {"X": 0.0, "Y": 0.0, "Z": 0.0, "pitch": 0.0, "yaw": 0.0, "is_alive": True, "health": 100,
-                "armor_value": 0, "kills_total": 0, "has_helmet": False, "has_defuser": False}
+    defaults = {
+        "X": 0.0,
+        "Y": 0.0,
+        "Z": 0.0,
+        "pitch": 0.0,
+        "yaw": 0.0,
+        "is_alive": True,
+        "health": 100,
+        "armor_value": 0,
+        "kills_total": 0,
+        "has_helmet": False,
+        "has_defuser": False,
+    }
     full = [{**defaults, **row} for row in rows]
     return {name: np.array([row[name] for row in full]) for name in ("tick", "steamid", "name", *TICK_PROPS)}
 
@@ -91,10 +109,31 @@ def _two_teams(last_tick: int = 8) -> list[dict]:
     joining at tick 5, and Dave (CT) leaving after tick 3."""
     rows = []
     for t in range(1, last_tick + 1):
-        rows.append({"tick": t, "steamid": int(ALICE), "name": "alice", "team_num": 2, "X": 10.0 * t, "yaw": 90.0,
-                     "kills_total": 1 if t >= 4 else 0, "armor_value": 100, "has_helmet": True})
-        rows.append({"tick": t, "steamid": int(BOB), "name": "bob", "team_num": 3, "Y": 100.0,
-                     "is_alive": t < 4, "health": 100 if t < 4 else 0, "has_defuser": True})
+        rows.append(
+            {
+                "tick": t,
+                "steamid": int(ALICE),
+                "name": "alice",
+                "team_num": 2,
+                "X": 10.0 * t,
+                "yaw": 90.0,
+                "kills_total": 1 if t >= 4 else 0,
+                "armor_value": 100,
+                "has_helmet": True,
+            }
+        )
+        rows.append(
+            {
+                "tick": t,
+                "steamid": int(BOB),
+                "name": "bob",
+                "team_num": 3,
+                "Y": 100.0,
+                "is_alive": t < 4,
+                "health": 100 if t < 4 else 0,
+                "has_defuser": True,
+            }
+        )
         rows.append({"tick": t, "steamid": 76561190000000009, "name": "caster", "team_num": 1})
         if t >= 5:
             rows.append({"tick": t, "steamid": int(CAROL), "name": "carol", "team_num": 2, "X": -50.0})
@@ -118,9 +157,9 @@ def test_feet_facing_alive_and_stats_per_frame():
     np.testing.assert_allclose(match.positions_world[0, bob], [0.0, 0.0, -100.0 * 0.0254])
     np.testing.assert_allclose(match.rotations_xyzw[0, alice], view_rotation(np.array(0.0), np.array(90.0)))
     assert match.alive[:, alice].all()
-    assert match.alive[:3, bob].all() and not match.alive[3:, bob].any()          # died at tick 4
+    assert match.alive[:3, bob].all() and not match.alive[3:, bob].any()  # died at tick 4
     assert match.stats[0, alice].tolist() == [100, 100, ITEM_HELMET, 0]
-    assert match.stats[5, alice, 3] == 1                                            # a frag from tick 4
+    assert match.stats[5, alice, 3] == 1  # a frag from tick 4
     assert match.stats[0, bob, 2] == ITEM_DEFUSER and match.stats[5, bob, 0] == 0
 
 
@@ -130,8 +169,8 @@ def test_late_joiners_and_leavers_are_absent_and_held_in_place():
     assert match.alive[:3, dave].all() and not match.alive[3:, dave].any()
     assert not match.alive[:4, carol].any() and match.alive[4:, carol].all()
     np.testing.assert_allclose(match.positions_world[:, dave], np.tile([0.0, 64.0 * 0.0254, 0.0], (8, 1)))
-    np.testing.assert_allclose(match.positions_world[:, carol, 0], -50.0 * 0.0254)   # before joining: where it joins
-    assert match.stats[7, dave].tolist() == [0, 0, 0, 2]                            # gone: frags held, the rest 0
+    np.testing.assert_allclose(match.positions_world[:, carol, 0], -50.0 * 0.0254)  # before joining: where it joins
+    assert match.stats[7, dave].tolist() == [0, 0, 0, 2]  # gone: frags held, the rest 0
     assert match.stats[0, carol].tolist() == [0, 0, 0, 0]
 
 
@@ -164,47 +203,66 @@ def test_a_demo_without_players_on_a_team_is_refused():
 
 def _death(tick, victim, attacker, weapon, headshot=False, at=(0.0, 0.0, 0.0)):
     (victim_id, victim_name), attacker = victim, attacker or (None, None)
-    return {"tick": tick, "user_steamid": victim_id, "user_name": victim_name, "attacker_steamid": attacker[0],
-            "attacker_name": attacker[1], "weapon": weapon, "headshot": headshot,
-            "user_X": at[0], "user_Y": at[1], "user_Z": at[2]}
+    return {
+        "tick": tick,
+        "user_steamid": victim_id,
+        "user_name": victim_name,
+        "attacker_steamid": attacker[0],
+        "attacker_name": attacker[1],
+        "weapon": weapon,
+        "headshot": headshot,
+        "user_X": at[0],
+        "user_Y": at[1],
+        "user_Z": at[2],
+    }
 
 
 def test_every_player_death_is_a_kill_with_weapon_headshot_and_place():
     alice, bob, dave, carol = (ALICE, "alice"), (BOB, "bob"), (DAVE, "dave"), (CAROL, "carol")
-    deaths = _events([
-        _death(4, bob, alice, "ak47", headshot=True, at=(0.0, 100.0, 0.0)),
-        _death(6, carol, None, "world"),
-        _death(7, carol, carol, "hegrenade"),
-        _death(3, dave, (DAVE, "dave"), "inferno"),
-        _death(8, carol, alice, "glock"),
-        _death(99, dave, alice, "knife"),                   # after the last frame: at the last frame
-    ])
+    deaths = _events(
+        [
+            _death(4, bob, alice, "ak47", headshot=True, at=(0.0, 100.0, 0.0)),
+            _death(6, carol, None, "world"),
+            _death(7, carol, carol, "hegrenade"),
+            _death(3, dave, (DAVE, "dave"), "inferno"),
+            _death(8, carol, alice, "glock"),
+            _death(99, dave, alice, "knife"),  # after the last frame: at the last frame
+        ]
+    )
     match = match_from_tables(_ticks(_two_teams()), deaths, {}, level="de_test")
     kills = [(e.actor_id, e.other_actor_id, e.label, round(e.time_s * 64)) for e in match.events]
-    assert kills == [("p02", "p02", "suicide:inferno", 3), ("p00", "p01", "ak47 headshot", 4),
-                     ("p03", "p03", "world:world", 6), ("p03", "p03", "suicide:hegrenade", 7),
-                     ("p00", "p03", "teamkill:glock", 8), ("p00", "p02", "knife", 8)]
+    assert kills == [
+        ("p02", "p02", "suicide:inferno", 3),
+        ("p00", "p01", "ak47 headshot", 4),
+        ("p03", "p03", "world:world", 6),
+        ("p03", "p03", "suicide:hegrenade", 7),
+        ("p00", "p03", "teamkill:glock", 8),
+        ("p00", "p02", "knife", 8),
+    ]
     assert all(e.kind == "kill" for e in match.events)
     np.testing.assert_allclose(match.events[1].position_world, [0.0, 0.0, -100.0 * 0.0254])
 
 
 def test_bomb_events_are_objectives_at_the_bomb():
-    planted = _events([{"tick": 2, "user_steamid": ALICE, "user_name": "alice", "user_X": 500.0, "user_Y": 600.0,
-                        "user_Z": 10.0}])
-    defused = _events([{"tick": 5, "user_steamid": BOB, "user_name": "bob", "user_X": 510.0, "user_Y": 590.0,
-                        "user_Z": 10.0}])
-    exploded = _events([{"tick": 7, "user_steamid": None, "user_name": None, "user_X": None, "user_Y": None,
-                         "user_Z": None}])
+    planted = _events(
+        [{"tick": 2, "user_steamid": ALICE, "user_name": "alice", "user_X": 500.0, "user_Y": 600.0, "user_Z": 10.0}]
+    )
+    defused = _events([{"tick": 5, "user_steamid": BOB, "user_name": "bob", "user_X": 510.0, "user_Y": 590.0, "user_Z": 10.0}])
+    exploded = _events([{"tick": 7, "user_steamid": None, "user_name": None, "user_X": None, "user_Y": None, "user_Z": None}])
     bombs = {"bomb_planted": planted, "bomb_defused": defused, "bomb_exploded": exploded}
     match = match_from_tables(_ticks(_two_teams()), {}, bombs, level="de_test")
     bomb_world = source_points_to_world(np.array([500.0, 600.0, 10.0]))
     assert [(e.kind, e.actor_id, e.label) for e in match.events] == [
-        ("objective", "p00", "bomb planted"), ("objective", "p01", "bomb defused"), ("objective", "p00", "bomb exploded")]
+        ("objective", "p00", "bomb planted"),
+        ("objective", "p01", "bomb defused"),
+        ("objective", "p00", "bomb exploded"),
+    ]
     for event in match.events:
         np.testing.assert_allclose(event.position_world, bomb_world)
 
 
 # --- bad files ---------------------------------------------------------------------------------
+
 
 def _real_demo(tmp_path: Path, name: str) -> Path:
     path = tmp_path / name.removesuffix(".gz")
@@ -216,8 +274,11 @@ def test_a_truncated_demo_is_refused_with_the_offsets(tmp_path):
     whole = _real_demo(tmp_path, "14160.dem.gz")
     cut = tmp_path / "cut.dem"
     cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
-    with pytest.raises(Cs2DemoError, match=r"cut\.dem: truncated CS2 demo: it ends at byte 103945, but its header "
-                                           r"places the closing file info at byte 207875"):
+    with pytest.raises(
+        Cs2DemoError,
+        match=r"cut\.dem: truncated CS2 demo: it ends at byte 103945, but its header "
+        r"places the closing file info at byte 207875",
+    ):
         import_cs2_demo(cut)
     header_only = tmp_path / "header.dem"
     header_only.write_bytes(whole.read_bytes()[:10])
@@ -242,7 +303,7 @@ def test_a_cs2_header_over_random_bytes_is_refused_by_demoparser2(tmp_path):
     body = np.random.default_rng(3).bytes(3000)
     fake = tmp_path / "fake.dem"
     fake.write_bytes(b"PBDEMS2\x00" + (3004).to_bytes(4, "little") + (3000).to_bytes(4, "little") + body)
-    check_demo_file(fake)                                    # the header alone looks whole
+    check_demo_file(fake)  # the header alone looks whole
     with pytest.raises(Cs2DemoError, match="fake.dem: demoparser2 cannot read this demo"):
         import_cs2_demo(fake)
 
@@ -257,12 +318,14 @@ def test_a_panic_inside_demoparser2_is_caught(tmp_path):
 
 def test_without_demoparser2_the_error_says_how_to_install_it(tmp_path):
     demo = _real_demo(tmp_path, "14160.dem.gz")
-    script = ("import sys; sys.modules['demoparser2'] = None\n"
-              "from camdirector.matches.cs2_demo import Cs2SupportMissing, import_cs2_demo\n"
-              "try:\n"
-              "    import_cs2_demo(sys.argv[1])\n"
-              "except Cs2SupportMissing as exc:\n"
-              "    print('MISSING', exc)\n")
+    script = (
+        "import sys; sys.modules['demoparser2'] = None\n"
+        "from camdirector.matches.cs2_demo import Cs2SupportMissing, import_cs2_demo\n"
+        "try:\n"
+        "    import_cs2_demo(sys.argv[1])\n"
+        "except Cs2SupportMissing as exc:\n"
+        "    print('MISSING', exc)\n"
+    )
     result = subprocess.run([sys.executable, "-c", script, str(demo)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "MISSING reading CS2 demos needs the demoparser2 package: pip install 'camdirector[cs2]'" in result.stdout
@@ -270,8 +333,10 @@ def test_without_demoparser2_the_error_says_how_to_install_it(tmp_path):
 
 # --- the real demos ----------------------------------------------------------------------------
 
+
 def _death_count(path: Path) -> int:
     from demoparser2 import DemoParser
+
     deaths = DemoParser(str(path)).parse_event("player_death")
     return len(deaths)
 
@@ -282,7 +347,7 @@ def _check_plausible(match, path: Path) -> None:
     kills = [e for e in match.events if e.kind == "kill"]
     assert len(kills) == _death_count(path)
     feet_units = match.positions_world / M_PER_UNIT
-    assert np.all(np.abs(feet_units) < 16384.0)                       # Source 2's world limit
+    assert np.all(np.abs(feet_units) < 16384.0)  # Source 2's world limit
     if match.level == "de_dust2":
         (x0, x1), (y0, y1) = DUST2_BOX_UNITS
         on = match.alive
@@ -290,7 +355,7 @@ def _check_plausible(match, path: Path) -> None:
         assert np.all((-feet_units[..., 2][on] >= y0) & (-feet_units[..., 2][on] <= y1))
     both_alive = match.alive[1:] & match.alive[:-1]
     speed = np.linalg.norm(np.diff(match.positions_world, axis=0), axis=-1) / np.diff(match.time_s)[:, None]
-    assert np.all(speed[both_alive] < 15.0)     # 6.35 m/s running; falls and boosts stay under 15
+    assert np.all(speed[both_alive] < 15.0)  # 6.35 m/s running; falls and boosts stay under 15
     index = match.player_index()
     for kill in kills:
         after = np.searchsorted(match.time_s, kill.time_s + 0.5)
@@ -307,8 +372,7 @@ def test_a_real_demo_imports(tmp_path, name):
         team, origin, pitch, yaw, n_ticks = SHIPPED[name]
         assert [(p.name, p.team) for p in match.players] == [("Partridge", team)]
         np.testing.assert_allclose(match.time_s, np.arange(1, n_ticks + 1) / 64.0)
-        np.testing.assert_allclose(match.positions_world[:, 0], np.tile(source_points_to_world(np.array(origin)),
-                                                                         (n_ticks, 1)))
+        np.testing.assert_allclose(match.positions_world[:, 0], np.tile(source_points_to_world(np.array(origin)), (n_ticks, 1)))
         np.testing.assert_allclose(match.rotations_xyzw[0, 0], view_rotation(np.array(pitch), np.array(yaw)))
         assert match.alive.all() and match.events == []
         assert match.stats[0, 0].tolist() == [100, 0, 0, 0]
@@ -324,8 +388,10 @@ def test_a_real_match_demo_has_ten_players_in_two_teams(tmp_path):
     matches = [(p, import_cs2_demo(path)) for p in REAL_DEMOS for path in [_real_demo(tmp_path, p.name)]]
     full = [(p, m) for p, m in matches if len(m.players) >= 10]
     if not full:
-        pytest.skip("no CS2 demo of a whole match is shipped: none public, small and licensed was found "
-                    "(tests/data/real_matches/cs2/SOURCES.md)")
+        pytest.skip(
+            "no CS2 demo of a whole match is shipped: none public, small and licensed was found "
+            "(tests/data/real_matches/cs2/SOURCES.md)"
+        )
     for path, match in full:
         assert len(match.players) == 10, path
         assert sorted(p.team for p in match.players) == [0] * 5 + [1] * 5, path

@@ -1,6 +1,7 @@
 """The match importers' registry (matches/importers.py) and `camdirector import-match` over it:
 an importer is picked by the file's name, and one registered in a test alone (a module with its
 load function, and an entry) is read end to end by the command."""
+
 from __future__ import annotations
 
 import json
@@ -35,8 +36,7 @@ TOY_IMPORTER = textwrap.dedent('''
 ''')
 
 
-@pytest.mark.parametrize("name, game", [("duel.mvd", "QuakeWorld"), ("DUEL.MVD.GZ", "QuakeWorld"),
-                                        ("final.dem", "CS2")])
+@pytest.mark.parametrize("name, game", [("duel.mvd", "QuakeWorld"), ("DUEL.MVD.GZ", "QuakeWorld"), ("final.dem", "CS2")])
 def test_the_importer_is_picked_by_the_files_name(name, game):
     assert importer_for(Path("demos") / name).name == game
 

@@ -2,6 +2,7 @@
 match files. A hand-built demo with exact expectations, the five development demos of
 tests/data/real_matches/ (SOURCES.md) judged by what the demo says elsewhere (health stats,
 scoreboard, the bravado duel's ktxstats.json), and bad bytes that must give MvdError."""
+
 from __future__ import annotations
 
 import gzip
@@ -29,8 +30,10 @@ DEMOS = {
 }
 # (map, [(name, team index)]) as the demos' userinfo and serverinfo say.
 EXPECTED = {
-    "4on4": ("dm2", [("bps", 0), ("goblin", 0), ("maCLer", 1), ("irn", 1), ("tom", 1), ("andeh", 0),
-                     ("carapace", 0), ("ThundeR", 1)]),
+    "4on4": (
+        "dm2",
+        [("bps", 0), ("goblin", 0), ("maCLer", 1), ("irn", 1), ("tom", 1), ("andeh", 0), ("carapace", 0), ("ThundeR", 1)],
+    ),
     "2on2": ("frobodm2", [("Final", 0), (": Timber", 1), ("> MrJustice", 0), (": Sujoy", 1)]),
     "duel": ("bravado", [("HoLy", 0), ("dago", 1)]),
     "1on1": ("tron", [("mushi", 0), ("Milton", 1)]),
@@ -52,6 +55,7 @@ def demos() -> dict:
 
 # ------------------------------------------------------------------ a hand-built demo
 
+
 def _block(target: int, body: bytes, msec: int = 0, to: int = 0) -> bytes:
     return bytes([msec, target | (to << 3)]) + struct.pack("<I", len(body)) + body
 
@@ -60,17 +64,34 @@ def _tiny_demo() -> tuple[bytes, list[int]]:
     """serverdata, one player "ab" of team "red", its stats and frags, two playerinfo frames 0.1 s
     apart (origin (0, 0, 24) -> (32, 0, 24) units, looking along yaw 90), then "ab suicides".
     Returns the bytes and the offsets where its blocks end."""
-    serverdata = (bytes([11]) + struct.pack("<ii", 28, 7) + b"qw\0" + struct.pack("<f", 0.0) + b"Tiny Level\0"
-                  + struct.pack("<10f", *([1.0] * 10)))
+    serverdata = (
+        bytes([11])
+        + struct.pack("<ii", 28, 7)
+        + b"qw\0"
+        + struct.pack("<f", 0.0)
+        + b"Tiny Level\0"
+        + struct.pack("<10f", *([1.0] * 10))
+    )
     modellist = bytes([45, 0]) + b"maps/tiny.bsp\0progs/player.mdl\0\0" + bytes([0])
     userinfo = bytes([40, 0]) + struct.pack("<i", 1) + b"\\name\\ab\\team\\red\0"
     stats = bytes([3, 0, 100, 3, 4, 50, 38, 15]) + struct.pack("<i", 4097)
-    first = bytes([14, 0]) + struct.pack("<h", 3) + bytes([42, 0]) + struct.pack("<H", 0b11111) + bytes([0]) \
+    first = (
+        bytes([14, 0])
+        + struct.pack("<h", 3)
+        + bytes([42, 0])
+        + struct.pack("<H", 0b11111)
+        + bytes([0])
         + struct.pack("<hhhhh", 0, 0, 24 * 8, 0, 16384)
+    )
     second = bytes([42, 0]) + struct.pack("<H", 0b1) + bytes([0]) + struct.pack("<h", 32 * 8)
     obituary = bytes([8, 1]) + b"ab suicides\n\0"
-    blocks = [_block(6, serverdata + modellist + userinfo), _block(5, stats, to=0), _block(6, first),
-              _block(6, second, msec=100), _block(6, obituary)]
+    blocks = [
+        _block(6, serverdata + modellist + userinfo),
+        _block(5, stats, to=0),
+        _block(6, first),
+        _block(6, second, msec=100),
+        _block(6, obituary),
+    ]
     ends = list(np.cumsum([len(b) for b in blocks]))
     return b"".join(blocks), ends
 
@@ -81,10 +102,8 @@ def test_a_hand_built_demo_imports_exactly():
     assert match.level == "tiny"
     assert [(p.id, p.name, p.team) for p in match.players] == [("p00", "ab", 0)]
     np.testing.assert_allclose(match.time_s, [0.0, 0.05, 0.1])
-    np.testing.assert_allclose(match.positions_world[:, 0], [[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0]],
-                               atol=1e-12)
-    np.testing.assert_allclose(match.rotations_xyzw[:, 0], np.tile(quake_frame.view_rotation(0.0, 90.0), (3, 1)),
-                               atol=1e-12)
+    np.testing.assert_allclose(match.positions_world[:, 0], [[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(match.rotations_xyzw[:, 0], np.tile(quake_frame.view_rotation(0.0, 90.0), (3, 1)), atol=1e-12)
     assert STAT_COLUMNS == ("health", "armor", "items", "frags")
     assert match.stats.tolist() == [[[100, 50, 4097, 3]]] * 3
     [kill] = match.events
@@ -112,7 +131,7 @@ def test_unknown_messages_and_bad_blocks_name_their_offset():
     with pytest.raises(MvdError, match="offset 0: empty file"):
         parse_mvd(b"")
     with pytest.raises(MvdError, match=r"truncated svc_playerinfo \(needs 2 bytes, 0 left\)"):
-        parse_mvd(data[:ends[2]] + _block(6, bytes([42, 0]) + struct.pack("<H", 1) + bytes([0])))
+        parse_mvd(data[: ends[2]] + _block(6, bytes([42, 0]) + struct.pack("<H", 1) + bytes([0])))
     with pytest.raises(MvdError, match="not a server's MVD"):
         parse_mvd(bytes([0, 0]) + data)
 
@@ -139,6 +158,7 @@ def test_obituaries_name_both_sides_and_the_weapon():
 
 # ------------------------------------------------------------------ the development demos
 
+
 def test_every_demo_imports_with_its_map_names_and_teams(demos):
     for key, (_, _, imported) in demos.items():
         match = imported.match
@@ -156,8 +176,7 @@ def test_the_4on4_has_eight_players_in_two_teams_of_four(demos):
     assert sorted(p.team for p in match.players) == [0, 0, 0, 0, 1, 1, 1, 1]
     team = {p.id: p.team for p in match.players}
     teamkills = [e for e in match.events if e.label.startswith("teamkill")]
-    assert teamkills and all(team[e.actor_id] == team[e.other_actor_id] and e.actor_id != e.other_actor_id
-                             for e in teamkills)
+    assert teamkills and all(team[e.actor_id] == team[e.other_actor_id] and e.actor_id != e.other_actor_id for e in teamkills)
 
 
 def test_frags_at_the_end_are_the_last_scoreboard_and_the_obituaries_sum(demos):
@@ -172,8 +191,9 @@ def test_frags_at_the_end_are_the_last_scoreboard_and_the_obituaries_sum(demos):
             continue
         frags = dict.fromkeys([p.id for p in match.players], 0)
         for e in match.events:
-            frags[e.actor_id] += -2 if e.label == "suicide" else -1 if e.actor_id == e.other_actor_id or \
-                e.label.startswith("teamkill") else 1
+            frags[e.actor_id] += (
+                -2 if e.label == "suicide" else -1 if e.actor_id == e.other_actor_id or e.label.startswith("teamkill") else 1
+            )
         assert list(frags.values()) == match.stats[-1, :, 3].tolist(), key
 
 

@@ -4,6 +4,7 @@ answers, the registry (pipeline/rigs.py) has one entry per rig and `make_rig` ch
 and what only some rigs do answers as declared, on tiny scenes run through real sessions: two
 capsules (TORIC), an actor in the corridor level (TRACKS, tests/precompute/tracks/tiny_levels.py),
 two fronts of four players (MATCH, tests/pipeline/match/scenes.py)."""
+
 from __future__ import annotations
 
 import inspect
@@ -30,10 +31,10 @@ from tests.pipeline.match.scenes import LENS, RATE_HZ, Match, facing
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service.tracks_sessions import corridor_walk
 
-RIGS = (ToricRig, TracksRig, MatchRig)   # the classes the registry's entries make, in its order
+RIGS = (ToricRig, TracksRig, MatchRig)  # the classes the registry's entries make, in its order
 METHODS = ("run", "set_style", "close", "do_deferred_work", "anticipation_map")
-PROPERTIES = ("has_deferred_work", "program_transforms", "player_inputs")   # looked for on built rigs
-OPTIONAL_METHODS = ("do_deferred_work", "anticipation_map")                 # RigBase answers them
+PROPERTIES = ("has_deferred_work", "program_transforms", "player_inputs")  # looked for on built rigs
+OPTIONAL_METHODS = ("do_deferred_work", "anticipation_map")  # RigBase answers them
 
 
 def members(protocol: type) -> set[str]:
@@ -110,18 +111,21 @@ def test_the_registry_has_one_entry_per_rig():
 
 # -- the tiny scenes, each run through a real Session (INGEST, then the rig make_rig chose) --------
 
+
 def _target(target_id: str, position_world, aim_m: float = 0.6, team: int = 0) -> TargetSpec:
-    return TargetSpec(target_id, capsule(0.3, 1.8), RigidTransform(np.asarray(position_world, dtype=float)),
-                      np.array([0.0, aim_m, 0.0]), team)
+    return TargetSpec(
+        target_id, capsule(0.3, 1.8), RigidTransform(np.asarray(position_world, dtype=float)), np.array([0.0, aim_m, 0.0]), team
+    )
 
 
 def toric_session(mode: VisibilityMode, frames: int) -> tuple[Session, list]:
     """Two capsules 3 m apart, A walking away from B at 60 Hz."""
-    scene = SceneSpec([], [_target("a", (0.0, 0.9, 0.0)), _target("b", (3.0, 0.9, 1.0))], LENS,
-                      Style(visibility=mode), seed=3)
+    scene = SceneSpec([], [_target("a", (0.0, 0.9, 0.0)), _target("b", (3.0, 0.9, 1.0))], LENS, Style(visibility=mode), seed=3)
     session = Session("s", scene)
-    states = [session.frame(FrameInput("s", k, k / 60.0, [("a", RigidTransform(np.array([0.0, 0.9, -0.02 * k])))]))
-              for k in range(1, frames + 1)]
+    states = [
+        session.frame(FrameInput("s", k, k / 60.0, [("a", RigidTransform(np.array([0.0, 0.9, -0.02 * k])))]))
+        for k in range(1, frames + 1)
+    ]
     return session, states
 
 
@@ -136,8 +140,10 @@ def tracks_session(level: LoadedLevel) -> tuple[Session, list]:
     times_s, feet_world = corridor_walk(1.0)
     scene = SceneSpec([], [_target("hero", feet_world[0], aim_m=1.6)], LENS, Style(rig=Rig.TRACKS), seed=1, level=level)
     session = Session("s", scene)
-    states = [session.frame(FrameInput("s", k + 1, float(t), [("hero", RigidTransform(np.asarray(feet)))]))
-              for k, (t, feet) in enumerate(zip(times_s, feet_world))]
+    states = [
+        session.frame(FrameInput("s", k + 1, float(t), [("hero", RigidTransform(np.asarray(feet)))]))
+        for k, (t, feet) in enumerate(zip(times_s, feet_world))
+    ]
     return session, states
 
 
@@ -145,22 +151,27 @@ TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
 
 
 def two_fronts(t: float):
-    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 8))), "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
-            "a2": ((40.0, 0.0), 0.0), "b2": ((40.0, 15.0), 0.0)}
+    return {
+        "a1": ((0.0, 0.0), facing((0, 0), (0, 8))),
+        "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
+        "a2": ((40.0, 0.0), 0.0),
+        "b2": ((40.0, 15.0), 0.0),
+    }
 
 
 # -- what only some rigs do, answered as declared ------------------------------------------------
 
+
 def test_toric_draws_the_a_map_in_a_map_mode_and_defers_its_updates():
     session, states = toric_session(VisibilityMode.FRAMING_ONLY, 5)
     assert isinstance(session.rig, ToricRig)
-    assert session.rig.anticipation_map(session.last_state) is None   # not a map mode
+    assert session.rig.anticipation_map(session.last_state) is None  # not a map mode
     assert not session.rig.has_deferred_work and session.rig.do_deferred_work() is False
     session, states = toric_session(VisibilityMode.ANTICIPATION, 60)
     a_map, (i, j) = session.rig.anticipation_map(session.last_state)
     n = session.style.map_resolution
     assert a_map.shape == (n, n) and np.nanmin(a_map) >= 0.0 and np.nanmax(a_map) <= 1.0
-    assert -0.5 <= i <= n - 0.5 and -0.5 <= j <= n - 0.5          # the camera is on the window
+    assert -0.5 <= i <= n - 0.5 and -0.5 <= j <= n - 0.5  # the camera is on the window
     update = FrameInput("s", 61, 61 / 60.0, [])
     while not session.rig.has_deferred_work and update.frame < 180:  # an amortized map update, left for later
         session.frame(update)
@@ -172,7 +183,7 @@ def test_toric_draws_the_a_map_in_a_map_mode_and_defers_its_updates():
     assert session.rig.program_transforms is None and session.rig.player_inputs is None
     assert session.view_target_transforms() is session.target_transforms
     session.close()
-    session.close()   # idempotent
+    session.close()  # idempotent
     assert session.rig.anticipation_map(session.last_state) is None
 
 
@@ -180,7 +191,7 @@ def test_tracks_has_none_of_the_optional_capabilities(corridor_level):
     session, states = tracks_session(corridor_level)
     assert isinstance(session.rig, TracksRig)
     assert all(s.pose is not None for s in states) and any(s.scores for s in states)
-    assert all(s.toric is None and s.match is None for s in states)   # all it answers is core
+    assert all(s.toric is None and s.match is None for s in states)  # all it answers is core
     assert session.rig.anticipation_map(session.last_state) is None
     assert not session.rig.has_deferred_work and session.rig.do_deferred_work() is False
     assert session.rig.program_transforms is None and session.rig.player_inputs is None
@@ -193,9 +204,9 @@ def test_match_takes_player_inputs_and_shows_a_delayed_program():
     session = Session("s", match.scene())
     assert isinstance(session.rig, MatchRig)
     frames = list(match.frames(2.0))
-    buffering = [session.frame(update) for update in frames[:int(0.5 * RATE_HZ)]]
+    buffering = [session.frame(update) for update in frames[: int(0.5 * RATE_HZ)]]
     assert all(isinstance(s.match, MatchFrame) and s.match.buffering and s.toric is None for s in buffering)
-    assert session.rig.program_transforms is None   # the delay still fills: the latest frame's targets
+    assert session.rig.program_transforms is None  # the delay still fills: the latest frame's targets
     assert session.view_target_transforms() is session.target_transforms
     inputs = session.rig.player_inputs
     assert inputs is not None and inputs.player_ids == frozenset(TEAMS)
@@ -203,12 +214,12 @@ def test_match_takes_player_inputs_and_shows_a_delayed_program():
     assert (taken.subject_ids, taken.kind, taken.held) == (("a2",), ShotKind.FOLLOW, True)
     with pytest.raises(ValueError, match="unknown player"):
         inputs.take(["zz"], None, release=False)
-    shown = [session.frame(update) for update in frames[int(0.5 * RATE_HZ):]]
+    shown = [session.frame(update) for update in frames[int(0.5 * RATE_HZ) :]]
     assert all(not s.match.buffering and s.match.shot.subject_ids == ("a2",) for s in shown)
     program = session.rig.program_transforms
     assert len(program) == len(TEAMS) and session.view_target_transforms() is program
     assert session.rig.anticipation_map(session.last_state) is None
-    assert session.rig.has_deferred_work   # the plan drawn at the last tick (held take: the fallback's check)
+    assert session.rig.has_deferred_work  # the plan drawn at the last tick (held take: the fallback's check)
     assert session.rig.do_deferred_work() is True and not session.rig.has_deferred_work
     assert session.rig.do_deferred_work() is False
     assert inputs.take([], None, release=True) is None

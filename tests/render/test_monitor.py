@@ -2,6 +2,7 @@
 its colour where the camera projects it, the worker's loop never waits for a render, a render
 process that dies fails its pending views and the next view starts another, and what a session's
 views hold goes with the session."""
+
 from __future__ import annotations
 
 import io
@@ -92,7 +93,7 @@ def test_asking_for_a_view_never_waits_for_the_render(table):
     loop only queues the snapshot. Resumed, the view is answered with the frame it was asked at."""
     table.create("s", two_target_request(seed=2))
     stream(table, "s", 5)
-    view(table, "s").wait()                    # started and warm
+    view(table, "s").wait()  # started and warm
     pid = table.monitor.pid
     os.kill(pid, signal.SIGSTOP)
     try:
@@ -101,7 +102,7 @@ def test_asking_for_a_view_never_waits_for_the_render(table):
         asked.start()
         asked.join(timeout=10.0)
         assert not asked.is_alive(), "asking for a view waited for the stopped render process"
-        stream(table, "s", 30, start=6)        # the session streams on meanwhile
+        stream(table, "s", 30, start=6)  # the session streams on meanwhile
         assert table.held["s"].session.last_state.frame == 35 and not answer.done.is_set()
     finally:
         os.kill(pid, signal.SIGCONT)
@@ -118,11 +119,11 @@ def test_a_render_process_that_dies_fails_what_waits_and_the_next_view_starts_an
     pending = view(table, "s")
     os.kill(pid, signal.SIGKILL)
     assert pending.done.wait(REPLY_TIMEOUT_S)
-    assert pending.status == 14 and b"the view renderer exited" in pending.body   # UNAVAILABLE
+    assert pending.status == 14 and b"the view renderer exited" in pending.body  # UNAVAILABLE
     deadline = time.monotonic() + 10.0
     while table.monitor.pid == pid and time.monotonic() < deadline:
         time.sleep(0.05)
-    header, pixels = view(table, "s").wait()   # a new process, sent the session's meshes again
+    header, pixels = view(table, "s").wait()  # a new process, sent the session's meshes again
     assert table.monitor.pid not in (None, pid) and header["frame"] == 5 and pixels.shape == (180, 320, 3)
     stream(table, "s", 5, start=6)
     assert table.held["s"].session.last_state.frame == 10
@@ -175,6 +176,7 @@ def test_sessions_viewed_and_closed_leave_the_render_process_where_it_started(ta
     the render process's memory grows by less than MAX_RENDER_PROCESS_GROWTH_MB and its open
     descriptors come back to where they were (each session's renderers, their GL objects and
     meshes, go with it). The first session is a warm-up: the GL driver loads once."""
+
     def one_session(k: int) -> None:
         session_id = f"s{k}"
         table.create(session_id, two_target_request(seed=k))
@@ -189,7 +191,7 @@ def test_sessions_viewed_and_closed_leave_the_render_process_where_it_started(ta
     for k in range(1, VIEWED_SESSIONS + 1):
         one_session(k)
     table.create("last", two_target_request(seed=1))
-    view(table, "last", ViewQuery(shot="top")).wait()   # answered after every forget before it
+    view(table, "last", ViewQuery(shot="top")).wait()  # answered after every forget before it
     after = sample_process(pid)
     assert table.monitor.pid == pid, "one render process served them all"
     assert after.rss_mb - before.rss_mb < MAX_RENDER_PROCESS_GROWTH_MB, (before, after)

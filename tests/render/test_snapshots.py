@@ -1,5 +1,6 @@
 """What a monitor shows (render/snapshots.py): the snapshot taken of a session for each kind of
 view, and the placeholders that say why there is no picture."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -63,10 +64,13 @@ def test_no_pose_yet_a_missing_cut_and_a_candidate_outside_a_match_are_placehold
 def test_the_cut_views_show_the_two_poses_around_the_last_cut(table):
     session = table.held[_streamed(table, 10)].session
     before_pose, walker_before = session.last_state.pose, session.target_transforms[0]
-    assert session.last_cut is None   # the first pose is a cut from nothing: no before picture
+    assert session.last_cut is None  # the first pose is a cut from nothing: no before picture
     # A new composition cuts to it on the next frame (tests/service/test_director.py).
-    table.update_style(pb.UpdateStyleRequest(session_id="s", style=pb.Style(
-        screen_a=pb.ScreenPoint(x=-0.6, y=0.2), screen_b=pb.ScreenPoint(x=0.6, y=0.2))))
+    table.update_style(
+        pb.UpdateStyleRequest(
+            session_id="s", style=pb.Style(screen_a=pb.ScreenPoint(x=-0.6, y=0.2), screen_b=pb.ScreenPoint(x=0.6, y=0.2))
+        )
+    )
     table.frame(next(walk("s", 1, start_frame=11)))
     cut = session.last_cut
     assert cut is not None and cut.frame == 11 and session.last_state.cut

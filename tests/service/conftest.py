@@ -1,4 +1,5 @@
 """The `raw` fixture: the same tests over both transports."""
+
 from __future__ import annotations
 
 import pytest
@@ -13,5 +14,3 @@ def raw(request, server):
     client.transport = request.param
     yield client
     client.close()
-
-

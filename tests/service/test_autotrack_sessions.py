@@ -1,5 +1,6 @@
 """An AUTOTRACK MATCH session on a real server over gRPC, fed by the Python SDK: player stats
 streamed with the frames pick the tracked player; bad stats are refused and the session goes on."""
+
 from __future__ import annotations
 
 import asyncio
@@ -12,7 +13,7 @@ import camdirector_client as cd
 from tests.service.test_match_sessions import PLAYERS, match_request
 
 RATE_HZ = 30.0
-START = 4096 | 1                        # IT_AXE | IT_SHOTGUN
+START = 4096 | 1  # IT_AXE | IT_SHOTGUN
 RL, LG, RED_ARMOR, QUAD = 32, 64, 32768, 4194304
 
 
@@ -31,15 +32,16 @@ def test_stats_streamed_to_an_autotrack_session_pick_the_tracked_player(server):
             def updates():
                 for k in range(60):
                     t = k / RATE_HZ
-                    stats = first if k == 0 else [{"id": "a1", "health": 100, "items": START | LG | QUAD}] \
-                        if k == 30 else None  # a1 takes the quad at 1 s: a switch moment (b0 has none)
+                    stats = (
+                        first if k == 0 else [{"id": "a1", "health": 100, "items": START | LG | QUAD}] if k == 30 else None
+                    )  # a1 takes the quad at 1 s: a switch moment (b0 has none)
                     yield session.frame_update(k + 1, t, packed=packed(t), player_stats=stats)
 
             replies = list(session.stream(updates()))
             assert all(r.HasField("pose") for r in replies)
             tracked = [tuple(r.shot.subject_ids) for r in replies]
-            assert set(tracked[:30]) == {("b0",)}       # RL and red armor: 200 * 3 + 50 * 8
-            switch = tracked.index(("a1",))              # quad and LG: 50 * 8 + 900
+            assert set(tracked[:30]) == {("b0",)}  # RL and red armor: 200 * 3 + 50 * 8
+            switch = tracked.index(("a1",))  # quad and LG: 50 * 8 + 900
             assert 30 <= switch <= 30 + 0.6 * RATE_HZ and set(tracked[switch:]) == {("a1",)}
             assert replies[switch].cut and replies[switch].shot.kind == cd.pb.SHOT_FOLLOW
             assert "autotrack (2on2" in replies[switch].shot.reason
@@ -57,4 +59,5 @@ def test_async_frames_carry_player_stats(server):
             async with client.create_session(request) as session:
                 stats = [cd.pb.PlayerStats(id="a1", health=100, items=START | RL)]
                 return await session.frame(1, 0.0, packed=packed(0.0), player_stats=stats)
+
     assert list(asyncio.run(main()).shot.subject_ids) == ["a1"]

@@ -1,5 +1,6 @@
 """Every kind of bad input gets a status with a message, over both transports, and loses nothing:
 the server keeps running and a healthy session beside the bad ones keeps its exact framing."""
+
 from __future__ import annotations
 
 import math
@@ -50,8 +51,9 @@ def test_nan_and_infinite_transforms(raw, canary):
     frame = list(walk(session_id, 1))[0]
     frame.time_s = math.nan
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "Frame", frame, contains="time_s")
-    packed = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0, packed_ids=["a"],
-                            packed_transforms=[0, 0, math.nan, 0, 0, 0, 1, 1, 1, 1])
+    packed = pb.FrameUpdate(
+        session_id=session_id, frame=1, time_s=0.0, packed_ids=["a"], packed_transforms=[0, 0, math.nan, 0, 0, 0, 1, 1, 1, 1]
+    )
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "Frame", packed, contains="NaN")
     # the session survived its bad frames
     assert raw.call("Frame", list(walk(session_id, 1))[0]).frame == 1
@@ -62,12 +64,17 @@ def test_zero_length_quaternion_and_zero_scale(raw, canary):
     bad.targets[1].transform.rotation.CopyFrom(pb.Quat(x=0, y=0, z=0, w=0))
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", bad, contains="zero-length quaternion")
     session_id = raw.call("CreateSession", two_target_request()).session_id
-    frame = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0, states=[
-        pb.ObjectState(id="a", transform=pb.Transform(rotation=pb.Quat()))])
+    frame = pb.FrameUpdate(
+        session_id=session_id, frame=1, time_s=0.0, states=[pb.ObjectState(id="a", transform=pb.Transform(rotation=pb.Quat()))]
+    )
     # an all-zero Quat message that is set (not absent) is a zero-length quaternion
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "Frame", frame, contains="zero-length quaternion")
-    frame = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0, states=[
-        pb.ObjectState(id="a", transform=pb.Transform(scale=pb.Vec3(x=1, y=0, z=1)))])
+    frame = pb.FrameUpdate(
+        session_id=session_id,
+        frame=1,
+        time_s=0.0,
+        states=[pb.ObjectState(id="a", transform=pb.Transform(scale=pb.Vec3(x=1, y=0, z=1)))],
+    )
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "Frame", frame, contains="scale")
 
 
@@ -77,17 +84,18 @@ def test_unknown_ids(raw, canary):
     expect(grpc.StatusCode.NOT_FOUND, raw.call, "CloseSession", pb.CloseSessionRequest(session_id="nope"))
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "Frame", pb.FrameUpdate(frame=1), contains="session_id is empty")
     session_id = raw.call("CreateSession", two_target_request()).session_id
-    frame = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0,
-                           states=[pb.ObjectState(id="ghost", transform=pb.Transform())])
+    frame = pb.FrameUpdate(
+        session_id=session_id, frame=1, time_s=0.0, states=[pb.ObjectState(id="ghost", transform=pb.Transform())]
+    )
     expect(grpc.StatusCode.NOT_FOUND, raw.call, "Frame", frame, contains="ghost")
-    frame = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0,
-                           states=[pb.ObjectState(id="pillar", transform=pb.Transform())])
+    frame = pb.FrameUpdate(
+        session_id=session_id, frame=1, time_s=0.0, states=[pb.ObjectState(id="pillar", transform=pb.Transform())]
+    )
     expect(grpc.StatusCode.FAILED_PRECONDITION, raw.call, "Frame", frame, contains="static")
     dup = two_target_request()
     dup.objects[1].id = "a"
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", dup, contains="used twice")
-    expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", pb.CreateSessionRequest(),
-           contains="one or two targets")
+    expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", pb.CreateSessionRequest(), contains="one or two targets")
 
 
 def test_bad_meshes(raw, canary):
@@ -115,8 +123,9 @@ def test_bad_meshes(raw, canary):
 def test_mesh_and_message_over_the_limits(raw, canary):
     # the shared server allows 200,000 triangles per scene and 4 MiB per message
     big = two_target_request()  # one triangle repeated: small on the wire, 200,001 triangles in the scene
-    big.objects[0].mesh.CopyFrom(pb.Mesh(triangles=pb.TriangleMesh(vertices=[0, 0, 0, 1, 0, 0, 0, 1, 0],
-                                                                   indices=[0, 1, 2] * 200_001)))
+    big.objects[0].mesh.CopyFrom(
+        pb.Mesh(triangles=pb.TriangleMesh(vertices=[0, 0, 0, 1, 0, 0, 0, 1, 0], indices=[0, 1, 2] * 200_001))
+    )
     expect(grpc.StatusCode.RESOURCE_EXHAUSTED, raw.call, "CreateSession", big, contains="200000 triangles")
     huge = two_target_request()
     huge.objects[0].mesh.CopyFrom(pb.Mesh(obj=b"#" * (5 * 1024 * 1024)))
@@ -125,25 +134,35 @@ def test_mesh_and_message_over_the_limits(raw, canary):
 
 
 def test_screen_points_and_lens_out_of_range(raw, canary):
-    for style, message in [(pb.Style(screen_a=pb.ScreenPoint(x=1.5)), "screen_a"),
-                           (pb.Style(screen_a=pb.ScreenPoint(x=0.1), screen_b=pb.ScreenPoint(x=0.1)), "differ"),
-                           (pb.Style(gaze_room_m=-1), "gaze_room_m"),
-                           (pb.Style(visibility=42), "not a VisibilityMode"),
-                           (pb.Style(map_resolution=8), "map_resolution"),
-                           (pb.Style(mask=9), "style.mask")]:
-        expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", two_target_request(style=style),
-               contains=message)
-    expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession",
-           two_target_request(lens=pb.Lens(vertical_fov_deg=179)), contains="vertical_fov_deg")
+    for style, message in [
+        (pb.Style(screen_a=pb.ScreenPoint(x=1.5)), "screen_a"),
+        (pb.Style(screen_a=pb.ScreenPoint(x=0.1), screen_b=pb.ScreenPoint(x=0.1)), "differ"),
+        (pb.Style(gaze_room_m=-1), "gaze_room_m"),
+        (pb.Style(visibility=42), "not a VisibilityMode"),
+        (pb.Style(map_resolution=8), "map_resolution"),
+        (pb.Style(mask=9), "style.mask"),
+    ]:
+        expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "CreateSession", two_target_request(style=style), contains=message)
+    expect(
+        grpc.StatusCode.INVALID_ARGUMENT,
+        raw.call,
+        "CreateSession",
+        two_target_request(lens=pb.Lens(vertical_fov_deg=179)),
+        contains="vertical_fov_deg",
+    )
     session_id = raw.call("CreateSession", two_target_request()).session_id
-    expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "UpdateStyle",
-           pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(max_speed_m_s=0)), contains="max_speed_m_s")
+    expect(
+        grpc.StatusCode.INVALID_ARGUMENT,
+        raw.call,
+        "UpdateStyle",
+        pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(max_speed_m_s=0)),
+        contains="max_speed_m_s",
+    )
 
 
 def test_packed_states_of_the_wrong_length(raw, canary):
     session_id = raw.call("CreateSession", two_target_request()).session_id
-    frame = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0, packed_ids=["a", "b"],
-                           packed_transforms=[0.0] * 13)
+    frame = pb.FrameUpdate(session_id=session_id, frame=1, time_s=0.0, packed_ids=["a", "b"], packed_transforms=[0.0] * 13)
     expect(grpc.StatusCode.INVALID_ARGUMENT, raw.call, "Frame", frame, contains="10 per packed id")
 
 
@@ -151,8 +170,13 @@ def test_more_sessions_than_allowed(server_factory):
     srv = server_factory("--workers", "0", "--max-sessions", "2")
     for client in (GrpcRaw(srv.grpc), ZmqRaw(srv.zmq)):
         ids = [client.call("CreateSession", two_target_request()).session_id for _ in range(2)]
-        expect(grpc.StatusCode.RESOURCE_EXHAUSTED, client.call, "CreateSession", two_target_request(),
-               contains="maximum of 2 sessions")
+        expect(
+            grpc.StatusCode.RESOURCE_EXHAUSTED,
+            client.call,
+            "CreateSession",
+            two_target_request(),
+            contains="maximum of 2 sessions",
+        )
         for session_id in ids:
             client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         client.close()
@@ -217,6 +241,7 @@ def test_abandoned_session_is_reclaimed_after_the_resume_window(server_factory):
     else:
         pytest.fail("session was never reclaimed")
     import urllib.request
+
     text = urllib.request.urlopen(f"http://{srv.http}/metrics").read().decode()
     assert "camdirector_sessions_reclaimed_total 1.0" in text
     client.close()
@@ -228,6 +253,7 @@ def test_without_checkpoints_a_dead_worker_is_replaced(server_factory):
     default, they are restored: tests/service/test_failover.py)."""
     import os
     import signal
+
     srv = server_factory("--workers", "1", "--checkpoint-store", "off")
     client, zmq_client = GrpcRaw(srv.grpc), ZmqRaw(srv.zmq)
     session_id = client.call("CreateSession", two_target_request()).session_id
@@ -245,10 +271,10 @@ def test_without_checkpoints_a_dead_worker_is_replaced(server_factory):
         time.sleep(0.2)
     else:
         pytest.fail("the killed worker's session still answers")
-    expect(grpc.StatusCode.UNAVAILABLE, zmq_client.call, "Frame", list(walk(session_id, 1, start_frame=2))[0],
-           contains="died")
-    expect(grpc.StatusCode.UNAVAILABLE, client.call, "CloseSession", pb.CloseSessionRequest(session_id=session_id),
-           contains="died")
+    expect(grpc.StatusCode.UNAVAILABLE, zmq_client.call, "Frame", list(walk(session_id, 1, start_frame=2))[0], contains="died")
+    expect(
+        grpc.StatusCode.UNAVAILABLE, client.call, "CloseSession", pb.CloseSessionRequest(session_id=session_id), contains="died"
+    )
     expect(grpc.StatusCode.NOT_FOUND, client.call, "Frame", list(walk("never-made", 1))[0], contains="unknown")
     fresh = client.call("CreateSession", two_target_request()).session_id
     assert client.stream(list(walk(fresh, 5)))[-1].frame == 5
@@ -270,8 +296,13 @@ def test_an_unexpected_failure_is_internal_on_both_transports(server_factory, tm
     request = two_target_request()
     request.record = True
     for transport in (client, zmq_client):
-        message = expect(grpc.StatusCode.INTERNAL, transport.call, "CreateSession", request,
-                         contains="internal error (FileExistsError) in create of session").message
+        message = expect(
+            grpc.StatusCode.INTERNAL,
+            transport.call,
+            "CreateSession",
+            request,
+            contains="internal error (FileExistsError) in create of session",
+        ).message
         assert "Traceback" not in message and str(data_dir) not in message  # details stay in the log
         session_id = re.search(r"of session (\w+)", message).group(1)
         log = srv.log_tail(1_000_000)

@@ -1,5 +1,6 @@
 """The Director contract over both transports, with a client written only from the .proto file:
 composition, ordering, style updates, stale frames, close, resume."""
+
 from __future__ import annotations
 
 import math
@@ -17,9 +18,13 @@ def project(update: pb.CameraUpdate, points_world: np.ndarray, fov_deg: float, a
     camera looking down -Z with +Y up, screen x right, y up in [-1, 1]."""
     q = update.pose.rotation
     x, y, z, w = q.x, q.y, q.z, q.w
-    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
     c = np.array([update.pose.position.x, update.pose.position.y, update.pose.position.z])
     p_cam = (points_world - c) @ r
     t = math.tan(math.radians(fov_deg) / 2)
@@ -28,22 +33,24 @@ def project(update: pb.CameraUpdate, points_world: np.ndarray, fov_deg: float, a
 
 def aim_points(frame: pb.FrameUpdate, request: pb.CreateSessionRequest, positions: dict) -> np.ndarray:
     for state in frame.states:
-        positions[state.id] = np.array([state.transform.position.x, state.transform.position.y,
-                                        state.transform.position.z])
+        positions[state.id] = np.array([state.transform.position.x, state.transform.position.y, state.transform.position.z])
     return np.stack([positions[t.id] + [t.aim_offset.x, t.aim_offset.y, t.aim_offset.z] for t in request.targets])
 
 
 def test_600_frames_frame_both_targets_exactly(raw):
     screen_a, screen_b = pb.ScreenPoint(x=-0.4, y=0.1), pb.ScreenPoint(x=0.3, y=-0.05)
-    request = two_target_request(lens=pb.Lens(vertical_fov_deg=40, aspect=1.5),
-                                 style=pb.Style(screen_a=screen_a, screen_b=screen_b,
-                                                visibility=pb.FRAMING_ONLY), seed=11)
+    request = two_target_request(
+        lens=pb.Lens(vertical_fov_deg=40, aspect=1.5),
+        style=pb.Style(screen_a=screen_a, screen_b=screen_b, visibility=pb.FRAMING_ONLY),
+        seed=11,
+    )
     session_id = raw.call("CreateSession", request).session_id
     frames = list(walk(session_id, 600))
     updates = raw.stream(frames)
     assert [u.frame for u in updates] == [f.frame for f in frames]
-    positions = {t.id: np.array([t.transform.position.x, t.transform.position.y, t.transform.position.z])
-                 for t in request.targets}
+    positions = {
+        t.id: np.array([t.transform.position.x, t.transform.position.y, t.transform.position.z]) for t in request.targets
+    }
     worst = 0.0
     for frame, update in zip(frames, updates):
         screen = project(update, aim_points(frame, request, positions), 40, 1.5)
@@ -61,8 +68,15 @@ def test_600_frames_frame_both_targets_exactly(raw):
 def test_one_target_gets_gaze_room_ahead_and_moves_smoothly(raw):
     request = pb.CreateSessionRequest(targets=[capsule_target("solo")], seed=1)
     session_id = raw.call("CreateSession", request).session_id
-    frames = [pb.FrameUpdate(session_id=session_id, frame=i, time_s=i / 60, states=[pb.ObjectState(
-        id="solo", transform=pb.Transform(position=pb.Vec3(x=1.5 * i / 60, y=0.9)))]) for i in range(1, 301)]
+    frames = [
+        pb.FrameUpdate(
+            session_id=session_id,
+            frame=i,
+            time_s=i / 60,
+            states=[pb.ObjectState(id="solo", transform=pb.Transform(position=pb.Vec3(x=1.5 * i / 60, y=0.9)))],
+        )
+        for i in range(1, 301)
+    ]
     updates = raw.stream(frames)
     last = frames[-1].states[0].transform.position
     target = np.array([[last.x, last.y + 0.6, last.z]])
@@ -85,13 +99,13 @@ def test_update_style_cuts_to_the_new_composition(raw):
     session_id = raw.call("CreateSession", request).session_id
     first = raw.stream(list(walk(session_id, 30)))
     new_a, new_b = pb.ScreenPoint(x=-0.6, y=0.2), pb.ScreenPoint(x=0.6, y=0.2)
-    raw.call("UpdateStyle", pb.UpdateStyleRequest(session_id=session_id,
-                                                  style=pb.Style(screen_a=new_a, screen_b=new_b)))
+    raw.call("UpdateStyle", pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(screen_a=new_a, screen_b=new_b)))
     frames = list(walk(session_id, 30, start_frame=31))
     after = raw.stream(frames)
     assert after[0].cut and after[0].shot_id == first[0].shot_id + 1 and not any(u.cut for u in after[1:])
-    positions = {t.id: np.array([t.transform.position.x, t.transform.position.y, t.transform.position.z])
-                 for t in request.targets}
+    positions = {
+        t.id: np.array([t.transform.position.x, t.transform.position.y, t.transform.position.z]) for t in request.targets
+    }
     for frame, update in zip(frames, after):
         screen = project(update, aim_points(frame, request, positions), 50, 16 / 9)
         assert np.allclose(screen, [[-0.6, 0.2], [0.6, 0.2]], atol=1e-6)
@@ -131,8 +145,9 @@ def test_every_visibility_mode_keeps_the_composition_over_the_wire(raw, mode):
     session_id = raw.call("CreateSession", request).session_id
     frames = list(walk(session_id, 60))
     updates = raw.stream(frames)
-    positions = {t.id: np.array([t.transform.position.x, t.transform.position.y, t.transform.position.z])
-                 for t in request.targets}
+    positions = {
+        t.id: np.array([t.transform.position.x, t.transform.position.y, t.transform.position.z]) for t in request.targets
+    }
     for frame, update in zip(frames, updates):
         screen = project(update, aim_points(frame, request, positions), 50, 16 / 9)
         if mode != pb.REACTIVE:  # REACTIVE leaves the torus when it pulls in: only A stays exact

@@ -1,6 +1,7 @@
 """A node that loses a worker, or restarts, loses no session (issue 15's first "done when"): real
 server processes, the Python SDK's streams, SIGKILL. Every answer is compared with a session
 table that ran the same inputs undisturbed (checkpoints off)."""
+
 from __future__ import annotations
 
 import os
@@ -71,8 +72,8 @@ def test_a_killed_worker_loses_none_of_16_streaming_sessions(server_factory, tmp
     for session in sessions:
         answers, times = results[session.id]
         assert [a.frame for a in answers] == list(range(1, FRAMES + 1)), session.id  # none lost, in order
-        assert [a.pose for a in answers] == expected, session.id                    # bit for bit, restored or not
-        assert session.retries <= 1, session.id   # at most one UNAVAILABLE per stream
+        assert [a.pose for a in answers] == expected, session.id  # bit for bit, restored or not
+        assert session.retries <= 1, session.id  # at most one UNAVAILABLE per stream
         after = [t for t in times if t > killed_at]
         before = [t for t in times if t <= killed_at]
         gaps.append(after[0] - before[-1])
@@ -105,8 +106,27 @@ def test_a_session_goes_on_after_its_server_restarts_on_the_same_data(tmp_path):
 def test_a_node_whose_checkpoint_store_is_down_refuses_to_start(tmp_path):
     import subprocess
     import sys
+
     port = free_port()  # nothing listens there
-    done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "serve", "--grpc", "127.0.0.1:0", "--zmq", "",
-                           "--http", "", "--data-dir", str(tmp_path), "--checkpoint-store", f"redis://127.0.0.1:{port}/0"],
-                          capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camdirector.__main__",
+            "serve",
+            "--grpc",
+            "127.0.0.1:0",
+            "--zmq",
+            "",
+            "--http",
+            "",
+            "--data-dir",
+            str(tmp_path),
+            "--checkpoint-store",
+            f"redis://127.0.0.1:{port}/0",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 2 and "checkpoint store" in done.stderr and str(port) in done.stderr, done.stderr

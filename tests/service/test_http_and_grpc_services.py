@@ -1,4 +1,5 @@
 """The HTTP address (/healthz, /metrics, /v1/sessions) and gRPC health checking and reflection."""
+
 from __future__ import annotations
 
 import json
@@ -27,9 +28,13 @@ def test_healthz_metrics_and_sessions(server):
     mine = next(s for s in sessions if s["session_id"] == session_id)
     assert mine["frames"] == 12 and mine["transports"] == ["grpc"]
     metrics = _get(server, "/metrics")
-    for name in ("camdirector_sessions ", 'camdirector_frames_total{transport="grpc"}',
-                 'camdirector_stage_seconds_bucket{le="0.001",stage="motion"}',
-                 "camdirector_frame_compute_seconds_count", 'camdirector_request_seconds_count{rpc="StreamFrames"'):
+    for name in (
+        "camdirector_sessions ",
+        'camdirector_frames_total{transport="grpc"}',
+        'camdirector_stage_seconds_bucket{le="0.001",stage="motion"}',
+        "camdirector_frame_compute_seconds_count",
+        'camdirector_request_seconds_count{rpc="StreamFrames"',
+    ):
         assert name in metrics, name
     client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
     client.close()
@@ -39,8 +44,7 @@ def test_grpc_health_and_reflection(server):
     with grpc.insecure_channel(server.grpc) as channel:
         health = health_pb2_grpc.HealthStub(channel)
         for service in ("", "camdirector.v1.Director"):
-            assert health.Check(health_pb2.HealthCheckRequest(service=service)).status == \
-                health_pb2.HealthCheckResponse.SERVING
+            assert health.Check(health_pb2.HealthCheckRequest(service=service)).status == health_pb2.HealthCheckResponse.SERVING
         stub = reflection_pb2_grpc.ServerReflectionStub(channel)
         replies = list(stub.ServerReflectionInfo(iter([reflection_pb2.ServerReflectionRequest(list_services="")])))
         names = {s.name for s in replies[0].list_services_response.service}
@@ -50,9 +54,11 @@ def test_grpc_health_and_reflection(server):
 def test_wrong_method_answers_405_naming_every_allowed_method(server):
     """Starlette names only the first matching route's methods; a path served by two routes
     (GET and POST /v1/levels, GET and DELETE of a job) must name both."""
-    for path, method, allowed in (("/v1/levels", "PUT", "GET, POST"),
-                                  ("/v1/overview-jobs/abc", "POST", "DELETE, GET"),
-                                  ("/healthz", "DELETE", "GET")):
+    for path, method, allowed in (
+        ("/v1/levels", "PUT", "GET, POST"),
+        ("/v1/overview-jobs/abc", "POST", "DELETE, GET"),
+        ("/healthz", "DELETE", "GET"),
+    ):
         request = urllib.request.Request(f"http://{server.http}{path}", method=method)
         try:
             urllib.request.urlopen(request, timeout=10)

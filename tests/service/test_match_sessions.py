@@ -1,6 +1,7 @@
 """MATCH sessions on a real server, over both transports: the delay's buffering and delayed
 answers, the shot and candidates, TakeShot held until released, each kind of bad match input
 (with a healthy session beside them that must not notice), recording and replay of a take."""
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,9 @@ def match_request(delay_s: float, players=PLAYERS, record: bool = False, **style
         target = capsule_target(player, position=(2.0 * i, 0.9, 0.0), aim=(0.0, 0.6, 0.0))
         target.team = 0 if player.startswith("a") else 1
         targets.append(target)
-    return pb.CreateSessionRequest(targets=targets, delay_s=delay_s, seed=3, record=record,
-                                   style=pb.Style(rig=pb.RIG_MATCH, **style))
+    return pb.CreateSessionRequest(
+        targets=targets, delay_s=delay_s, seed=3, record=record, style=pb.Style(rig=pb.RIG_MATCH, **style)
+    )
 
 
 def frames(session_id: str, count: int, start: int = 0, kill_at: dict[int, tuple[str, str]] | None = None):
@@ -38,8 +40,12 @@ def frames(session_id: str, count: int, start: int = 0, kill_at: dict[int, tuple
             angle = 0.4 * t + (math.pi if player.startswith("b") else 0.0)
             x, z = centre[0] + 2.5 * math.cos(angle), centre[1] + 2.5 * math.sin(angle)
             yaw = math.atan2(centre[0] - x, centre[1] - z)  # facing the middle: the opponent
-            update.states.add(id=player, transform=pb.Transform(
-                position=pb.Vec3(x=x, y=0.9, z=z), rotation=pb.Quat(y=math.sin(yaw / 2), w=math.cos(yaw / 2))))
+            update.states.add(
+                id=player,
+                transform=pb.Transform(
+                    position=pb.Vec3(x=x, y=0.9, z=z), rotation=pb.Quat(y=math.sin(yaw / 2), w=math.cos(yaw / 2))
+                ),
+            )
         if kill_at and k in kill_at:
             attacker, victim = kill_at[k]
             update.events.add(kind=pb.EVENT_KILL, actor_id=attacker, other_actor_id=victim)
@@ -78,8 +84,7 @@ def test_a_take_is_held_until_released(raw):
 def test_bad_match_input_is_refused_and_the_session_streams_on(raw, canary):  # noqa: F811
     invalid, missing = grpc.StatusCode.INVALID_ARGUMENT, grpc.StatusCode.NOT_FOUND
     expect(invalid, raw.call, "CreateSession", match_request(delay_s=300.5), contains="delay_s")
-    expect(invalid, raw.call, "CreateSession", match_request(0.0, players=[f"a{i}" for i in range(65)]),
-           contains="2 to 64")
+    expect(invalid, raw.call, "CreateSession", match_request(0.0, players=[f"a{i}" for i in range(65)]), contains="2 to 64")
     session_id = raw.call("CreateSession", match_request(delay_s=1.0)).session_id
     raw.stream(list(frames(session_id, 10)))
     bad_events = [
@@ -91,15 +96,19 @@ def test_bad_match_input_is_refused_and_the_session_streams_on(raw, canary):  # 
         update = next(frames(session_id, 1, start=10))
         update.events.append(event)
         expect(code, raw.call, "Frame", update, contains=contains)
-    expect(missing, raw.call, "TakeShot", pb.TakeShotRequest(session_id="no-such", subject_ids=["a0"]),
-           contains="unknown session")
-    expect(missing, raw.call, "TakeShot", pb.TakeShotRequest(session_id=session_id, subject_ids=["zz"]),
-           contains="zz")
-    expect(invalid, raw.call, "TakeShot", pb.TakeShotRequest(session_id=session_id, subject_ids=["a0", "a0"]),
-           contains="twice")
+    expect(
+        missing, raw.call, "TakeShot", pb.TakeShotRequest(session_id="no-such", subject_ids=["a0"]), contains="unknown session"
+    )
+    expect(missing, raw.call, "TakeShot", pb.TakeShotRequest(session_id=session_id, subject_ids=["zz"]), contains="zz")
+    expect(invalid, raw.call, "TakeShot", pb.TakeShotRequest(session_id=session_id, subject_ids=["a0", "a0"]), contains="twice")
     toric = raw.call("CreateSession", pb.CreateSessionRequest(targets=[capsule_target()])).session_id
-    expect(grpc.StatusCode.FAILED_PRECONDITION, raw.call, "TakeShot",
-           pb.TakeShotRequest(session_id=toric, subject_ids=["hero"]), contains="RIG_MATCH")
+    expect(
+        grpc.StatusCode.FAILED_PRECONDITION,
+        raw.call,
+        "TakeShot",
+        pb.TakeShotRequest(session_id=toric, subject_ids=["hero"]),
+        contains="RIG_MATCH",
+    )
     # Nothing was lost: the match session answers its next frames in order.
     after = raw.stream(list(frames(session_id, 40, start=10)))
     assert [u.frame for u in after if not u.buffering][-1] <= 50 and not any(u.stale for u in after)

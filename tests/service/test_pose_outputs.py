@@ -3,6 +3,7 @@ every answered pose to UDP sockets this test binds on 127.0.0.1; SMPTE's referen
 reassembles and decodes the OpenTrackIO datagrams and SMPTE's schema judges every sample; FreeD is
 read by the spec's decoder (tests/worker/test_pose_out.py). Bad pose outputs are refused
 at CreateSession with INVALID_ARGUMENT, and a destination nobody listens on stalls nothing."""
+
 from __future__ import annotations
 
 import math
@@ -73,10 +74,14 @@ def position_of(update: pb.CameraUpdate) -> np.ndarray:
 
 def test_every_answered_pose_goes_out_in_each_format(server, client, listeners, reference):
     json_sock, cbor_sock, freed_sock = listeners(), listeners(), listeners()
-    request = two_target_request(seed=11, pose_outputs=[
-        output(pb.POSE_FORMAT_OPENTRACKIO_JSON, json_sock, source_number=3),
-        output(pb.POSE_FORMAT_OPENTRACKIO_CBOR, cbor_sock, sensor_height_mm=15.6),
-        output(pb.POSE_FORMAT_FREED_D1, freed_sock, source_number=200)])
+    request = two_target_request(
+        seed=11,
+        pose_outputs=[
+            output(pb.POSE_FORMAT_OPENTRACKIO_JSON, json_sock, source_number=3),
+            output(pb.POSE_FORMAT_OPENTRACKIO_CBOR, cbor_sock, sensor_height_mm=15.6),
+            output(pb.POSE_FORMAT_FREED_D1, freed_sock, source_number=200),
+        ],
+    )
     session_id = client.call("CreateSession", request).session_id
     updates = client.stream(list(walk(session_id, FRAMES)))
     assert len(updates) == FRAMES and not any(u.stale for u in updates)
@@ -99,7 +104,8 @@ def test_every_answered_pose_goes_out_in_each_format(server, client, listeners, 
             np.testing.assert_allclose(ours_from_opentrackio(pan, tilt, roll), rotation_of(update), atol=1e-9)
             np.testing.assert_allclose(receiver.protocol.get_camera_translations(), M @ position_of(update), atol=1e-12)
             assert receiver.protocol.get_focal_length() == pytest.approx(
-                sensor_mm / 2 / math.tan(math.radians(update.pose.vertical_fov_deg) / 2))
+                sensor_mm / 2 / math.tan(math.radians(update.pose.vertical_fov_deg) / 2)
+            )
         assert len({s["sourceId"] for s in samples}) == 1 and len({s["sampleId"] for s in samples}) == FRAMES
         assert samples[0]["static"]["camera"]["activeSensorPhysicalDimensions"]["height"] == sensor_mm
 
@@ -108,8 +114,9 @@ def test_every_answered_pose_goes_out_in_each_format(server, client, listeners, 
         assert decoded["camera_id"] == 200
         rebuilt = ours_from_opentrackio(-decoded["pan"], decoded["tilt"], decoded["roll"])  # FreeD pans the other way
         np.testing.assert_allclose(rebuilt, rotation_of(update), atol=1e-4)  # 1/32768 degree steps
-        np.testing.assert_allclose([decoded["x_mm"], decoded["y_mm"], decoded["z_mm"]],
-                                   M @ position_of(update) * 1e3, atol=1 / 128)
+        np.testing.assert_allclose(
+            [decoded["x_mm"], decoded["y_mm"], decoded["z_mm"]], M @ position_of(update) * 1e3, atol=1 / 128
+        )
         focal_mm = 12.0 / math.tan(math.radians(update.pose.vertical_fov_deg) / 2)
         assert decoded["zoom"] == round(focal_mm * 100) and decoded["focus"] == 0
 
@@ -117,8 +124,10 @@ def test_every_answered_pose_goes_out_in_each_format(server, client, listeners, 
     assert client.call("Frame", list(walk(session_id, 1, start_frame=FRAMES))[0]).stale
     detail = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", params={"last": 1}, timeout=30).json()
     assert [(o["format"], o["sent"], o["dropped"]) for o in detail["pose_outputs"]] == [
-        ("POSE_FORMAT_OPENTRACKIO_JSON", FRAMES, 0), ("POSE_FORMAT_OPENTRACKIO_CBOR", FRAMES, 0),
-        ("POSE_FORMAT_FREED_D1", FRAMES, 0)]
+        ("POSE_FORMAT_OPENTRACKIO_JSON", FRAMES, 0),
+        ("POSE_FORMAT_OPENTRACKIO_CBOR", FRAMES, 0),
+        ("POSE_FORMAT_FREED_D1", FRAMES, 0),
+    ]
     client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
 
 
@@ -129,8 +138,9 @@ def canary(server):
     with closing(GrpcRaw(server.grpc)) as raw, closing(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) as sock:
         sock.bind(("127.0.0.1", 0))
         sock.settimeout(10.0)
-        session_id = raw.call("CreateSession", two_target_request(
-            seed=5, pose_outputs=[output(pb.POSE_FORMAT_FREED_D1, sock)])).session_id
+        session_id = raw.call(
+            "CreateSession", two_target_request(seed=5, pose_outputs=[output(pb.POSE_FORMAT_FREED_D1, sock)])
+        ).session_id
         before = raw.stream(list(walk(session_id, 10)))
         yield
         after = raw.stream(list(walk(session_id, 10, start_frame=11)))
@@ -146,36 +156,61 @@ def closed_port() -> int:
         return probe.getsockname()[1]
 
 
-@pytest.mark.parametrize("outputs, message", [
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="tcp://127.0.0.1:40000")],
-     "pose_outputs[0].address 'tcp://127.0.0.1:40000' is not udp://HOST:PORT"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="127.0.0.1:40000")], "is not udp://HOST:PORT"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1")], "has no port"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://:40000")], "has no host"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:freed")], "port 'freed' is not a number"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:0")], "port 0 is out of range [1, 65535]"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:65536")], "port 65536 is out of range"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://no-such-host.invalid:40000")],
-     "host 'no-such-host.invalid' does not resolve to an IPv4 address"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://[::1]:40000")], "IPv6 is not supported"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000/x")], "more than HOST:PORT"),
-    ([pb.PoseOutput(address="udp://127.0.0.1:40000")], "pose_outputs[0].format is unset"),
-    ([pb.PoseOutput(format=9, address="udp://127.0.0.1:40000")], "pose_outputs[0].format 9 is not a PoseFormat"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_OPENTRACKIO_JSON, address="udp://127.0.0.1:40000", sensor_height_mm=-24)],
-     "pose_outputs[0].sensor_height_mm must be in [1, 100] mm (0 means 24), got -24"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_OPENTRACKIO_JSON, address="udp://127.0.0.1:40000", sensor_height_mm=1e6)],
-     "sensor_height_mm must be in [1, 100] mm"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000", sensor_height_mm=math.nan)],
-     "sensor_height_mm must be in [1, 100] mm"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_OPENTRACKIO_CBOR, address="udp://127.0.0.1:40000", source_number=201)],
-     "pose_outputs[0].source_number must be in [1, 200] for POSE_FORMAT_OPENTRACKIO_CBOR"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000", source_number=256)],
-     "source_number must be in [1, 255] for POSE_FORMAT_FREED_D1"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000")] * 9,
-     "a session has at most 8 pose_outputs, got 9"),
-    ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000"),
-      pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:99999")], "pose_outputs[1].address"),
-], ids=lambda v: v if isinstance(v, str) else None)
+@pytest.mark.parametrize(
+    "outputs, message",
+    [
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="tcp://127.0.0.1:40000")],
+            "pose_outputs[0].address 'tcp://127.0.0.1:40000' is not udp://HOST:PORT",
+        ),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="127.0.0.1:40000")], "is not udp://HOST:PORT"),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1")], "has no port"),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://:40000")], "has no host"),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:freed")], "port 'freed' is not a number"),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:0")], "port 0 is out of range [1, 65535]"),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:65536")], "port 65536 is out of range"),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://no-such-host.invalid:40000")],
+            "host 'no-such-host.invalid' does not resolve to an IPv4 address",
+        ),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://[::1]:40000")], "IPv6 is not supported"),
+        ([pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000/x")], "more than HOST:PORT"),
+        ([pb.PoseOutput(address="udp://127.0.0.1:40000")], "pose_outputs[0].format is unset"),
+        ([pb.PoseOutput(format=9, address="udp://127.0.0.1:40000")], "pose_outputs[0].format 9 is not a PoseFormat"),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_OPENTRACKIO_JSON, address="udp://127.0.0.1:40000", sensor_height_mm=-24)],
+            "pose_outputs[0].sensor_height_mm must be in [1, 100] mm (0 means 24), got -24",
+        ),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_OPENTRACKIO_JSON, address="udp://127.0.0.1:40000", sensor_height_mm=1e6)],
+            "sensor_height_mm must be in [1, 100] mm",
+        ),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000", sensor_height_mm=math.nan)],
+            "sensor_height_mm must be in [1, 100] mm",
+        ),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_OPENTRACKIO_CBOR, address="udp://127.0.0.1:40000", source_number=201)],
+            "pose_outputs[0].source_number must be in [1, 200] for POSE_FORMAT_OPENTRACKIO_CBOR",
+        ),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000", source_number=256)],
+            "source_number must be in [1, 255] for POSE_FORMAT_FREED_D1",
+        ),
+        (
+            [pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000")] * 9,
+            "a session has at most 8 pose_outputs, got 9",
+        ),
+        (
+            [
+                pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:40000"),
+                pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://127.0.0.1:99999"),
+            ],
+            "pose_outputs[1].address",
+        ),
+    ],
+    ids=lambda v: v if isinstance(v, str) else None,
+)
 def test_bad_pose_outputs_are_refused_at_create(raw, canary, outputs, message):
     with pytest.raises(RpcFailed) as err:
         raw.call("CreateSession", two_target_request(pose_outputs=outputs))
@@ -187,9 +222,16 @@ def test_a_destination_nobody_listens_on_fails_and_stalls_nothing(server, client
     and the other outputs of the session still get every pose."""
     port = closed_port()
     healthy = listeners()
-    session_id = client.call("CreateSession", two_target_request(pose_outputs=[
-        output(pb.POSE_FORMAT_FREED_D1, port), output(pb.POSE_FORMAT_OPENTRACKIO_JSON, port),
-        output(pb.POSE_FORMAT_FREED_D1, healthy)])).session_id
+    session_id = client.call(
+        "CreateSession",
+        two_target_request(
+            pose_outputs=[
+                output(pb.POSE_FORMAT_FREED_D1, port),
+                output(pb.POSE_FORMAT_OPENTRACKIO_JSON, port),
+                output(pb.POSE_FORMAT_FREED_D1, healthy),
+            ]
+        ),
+    ).session_id
     updates = client.stream(list(walk(session_id, 240)))
     assert [u.frame for u in updates] == list(range(1, 241)) and not any(u.stale for u in updates)
     assert len(receive(healthy, 240)) == 240

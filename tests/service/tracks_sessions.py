@@ -1,5 +1,6 @@
 """Helpers of the TRACKS rig tests: levels written as OBJ and added by the CLI, session requests, an
 actor's frames, and where a pose puts the actor on screen."""
+
 from __future__ import annotations
 
 import contextlib
@@ -17,29 +18,41 @@ from camdirector.v1 import director_pb2 as pb
 from tests.service.wire_client import GrpcRaw, capsule_target
 
 ROOT = Path(__file__).resolve().parents[2]
-AGENT_HEIGHT_M = 2.0       # the CLI's default; the director frames this far up the actor
-LOOK_AT_FRACTION = 0.6     # DirectorSettings.look_at_fraction
+AGENT_HEIGHT_M = 2.0  # the CLI's default; the director frames this far up the actor
+LOOK_AT_FRACTION = 0.6  # DirectorSettings.look_at_fraction
 
 
 def obj_text(mesh: TriMesh) -> str:
-    return ("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
-            + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    return "".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices) + "".join(
+        f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces
+    )
 
 
 def cli_add_level(data_dir: Path, name: str, level_file: Path) -> dict:
     """`camdirector level add NAME FILE --data-dir DIR` in a child process; its JSON record."""
-    done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "level", "add", name, str(level_file),
-                           "--data-dir", str(data_dir)], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-m", "camdirector.__main__", "level", "add", name, str(level_file), "--data-dir", str(data_dir)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
 
-def tracks_request(level_id: str, actor_world, shot_size=pb.SHOT_SIZE_LONG, movement=pb.MOVEMENT_DYNAMIC_WITH_CUTS,
-                   seed: int = 1, **kwargs) -> pb.CreateSessionRequest:
+def tracks_request(
+    level_id: str, actor_world, shot_size=pb.SHOT_SIZE_LONG, movement=pb.MOVEMENT_DYNAMIC_WITH_CUTS, seed: int = 1, **kwargs
+) -> pb.CreateSessionRequest:
     """One capsule actor standing on actor_world (its feet: the capsule stands on its origin)."""
     actor = capsule_target("actor", position=tuple(float(v) for v in actor_world))
-    return pb.CreateSessionRequest(targets=[actor], level_id=level_id, seed=seed,
-                                   style=pb.Style(rig=pb.RIG_TRACKS, shot_size=shot_size, movement=movement), **kwargs)
+    return pb.CreateSessionRequest(
+        targets=[actor],
+        level_id=level_id,
+        seed=seed,
+        style=pb.Style(rig=pb.RIG_TRACKS, shot_size=shot_size, movement=movement),
+        **kwargs,
+    )
 
 
 def actor_frames(session_id: str, times_s, positions_world, start_frame: int = 1) -> list[pb.FrameUpdate]:
@@ -49,9 +62,15 @@ def actor_frames(session_id: str, times_s, positions_world, start_frame: int = 1
     for i, (t, p) in enumerate(zip(times_s, positions_world)):
         step = positions_world[min(i + 1, len(positions_world) - 1)] - positions_world[max(i - 1, 0)]
         yaw = np.arctan2(step[0], step[2]) if np.hypot(step[0], step[2]) > 1e-9 else 0.0
-        frames.append(pb.FrameUpdate(session_id=session_id, frame=start_frame + i, time_s=float(t),
-                                     packed_ids=["actor"],
-                                     packed_transforms=[*p, 0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2), 1, 1, 1]))
+        frames.append(
+            pb.FrameUpdate(
+                session_id=session_id,
+                frame=start_frame + i,
+                time_s=float(t),
+                packed_ids=["actor"],
+                packed_transforms=[*p, 0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2), 1, 1, 1],
+            )
+        )
     return frames
 
 

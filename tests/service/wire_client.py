@@ -1,4 +1,5 @@
 """A client written only from the .proto files (no SDK), over gRPC or ZeroMQ, and scene builders."""
+
 from __future__ import annotations
 
 import grpc
@@ -88,33 +89,47 @@ def _name(value: int) -> str:
 
 
 def capsule_target(target_id="hero", position=(0.0, 0.9, 0.0), aim=(0.0, 0.6, 0.0)) -> pb.Target:
-    return pb.Target(id=target_id,
-                     mesh=pb.Mesh(primitive=pb.Primitive(capsule=pb.Primitive.Capsule(radius=0.3, height=1.8))),
-                     transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2])),
-                     aim_offset=pb.Vec3(x=aim[0], y=aim[1], z=aim[2]))
+    return pb.Target(
+        id=target_id,
+        mesh=pb.Mesh(primitive=pb.Primitive(capsule=pb.Primitive.Capsule(radius=0.3, height=1.8))),
+        transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2])),
+        aim_offset=pb.Vec3(x=aim[0], y=aim[1], z=aim[2]),
+    )
 
 
 def box_object(object_id, position, size=(1.0, 3.0, 1.0), dynamic=False) -> pb.SceneObject:
-    return pb.SceneObject(id=object_id, dynamic=dynamic,
-                          mesh=pb.Mesh(primitive=pb.Primitive(
-                              box=pb.Primitive.Box(size=pb.Vec3(x=size[0], y=size[1], z=size[2])))),
-                          transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2])))
+    return pb.SceneObject(
+        id=object_id,
+        dynamic=dynamic,
+        mesh=pb.Mesh(primitive=pb.Primitive(box=pb.Primitive.Box(size=pb.Vec3(x=size[0], y=size[1], z=size[2])))),
+        transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2])),
+    )
 
 
 def two_target_request(**kwargs) -> pb.CreateSessionRequest:
     return pb.CreateSessionRequest(
         targets=[capsule_target("a", (0.0, 0.9, 0.0)), capsule_target("b", (3.0, 0.9, 1.0))],
         objects=[box_object("pillar", (1.5, 1.5, 4.0)), box_object("cart", (-2.0, 0.5, 2.0), (1, 1, 1), True)],
-        **kwargs)
+        **kwargs,
+    )
 
 
 def walk(session_id: str, n: int, start_frame: int = 1, target_id: str = "a"):
     """FrameUpdates of target `target_id` walking a curve at 60 Hz, the cart sliding along x."""
     for i in range(start_frame, start_frame + n):
         t = i / 60.0
-        yield pb.FrameUpdate(session_id=session_id, frame=i, time_s=t, states=[
-            pb.ObjectState(id=target_id, transform=pb.Transform(
-                position=pb.Vec3(x=np.sin(0.5 * t) * 2.0, y=0.9, z=1.4 * t),
-                rotation=pb.Quat(y=np.sin(0.25 * t), w=np.cos(0.25 * t)))),
-            pb.ObjectState(id="cart", transform=pb.Transform(position=pb.Vec3(x=-2.0 + np.sin(t), y=0.5, z=2.0))),
-        ])
+        yield pb.FrameUpdate(
+            session_id=session_id,
+            frame=i,
+            time_s=t,
+            states=[
+                pb.ObjectState(
+                    id=target_id,
+                    transform=pb.Transform(
+                        position=pb.Vec3(x=np.sin(0.5 * t) * 2.0, y=0.9, z=1.4 * t),
+                        rotation=pb.Quat(y=np.sin(0.25 * t), w=np.cos(0.25 * t)),
+                    ),
+                ),
+                pb.ObjectState(id="cart", transform=pb.Transform(position=pb.Vec3(x=-2.0 + np.sin(t), y=0.5, z=2.0))),
+            ],
+        )

@@ -1,6 +1,7 @@
 """Session checkpoints (worker/checkpoint_stores.py, worker/checkpointing.py): the two stores held
 to one contract, and sessions of every rig restored bit for bit by a session table that never saw
 them (a new worker, another node), with the failures a store can have."""
+
 from __future__ import annotations
 
 import pytest
@@ -32,8 +33,10 @@ def store_url(request, tmp_path):
 
 def _requests(tmp_path, store_url: str, owner: str, every: int = 20, defer_snapshots: bool = False) -> Dispatcher:
     """A session table that checkpoints, with the requests' dispatch a worker puts above it."""
-    table = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url,
-                                        checkpoint_every_frames=every), defer_snapshots=defer_snapshots)
+    table = SessionTable(
+        ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url, checkpoint_every_frames=every),
+        defer_snapshots=defer_snapshots,
+    )
     table.checkpoints.owner = owner  # one process plays several: each table its own owner
     return Dispatcher(table)
 
@@ -72,7 +75,7 @@ def test_both_stores_keep_the_same_checkpoint_and_refuse_a_stale_owner(tmp_path,
 
 
 def test_an_entry_keeps_its_number_kind_and_bytes():
-    assert decode_entry(encode_entry(2 ** 40, "take", b"\x00\xff")) == (2 ** 40, "take", b"\x00\xff")
+    assert decode_entry(encode_entry(2**40, "take", b"\x00\xff")) == (2**40, "take", b"\x00\xff")
 
 
 def test_a_torn_last_write_is_ignored(tmp_path):
@@ -127,8 +130,13 @@ def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, s
     """A table that checkpoints answers part of the inputs; a second table (another worker or
     node) is asked the rest: it restores the session (creation, snapshot, inputs since) and every
     answer equals the one of a table that ran all the inputs without checkpoints."""
-    create, requests = (_match_requests(120) if kind == "MATCH" else _tracks_requests(tmp_path) if kind == "TRACKS"
-                        else _toric_requests(getattr(pb, kind), 100))
+    create, requests = (
+        _match_requests(120)
+        if kind == "MATCH"
+        else _tracks_requests(tmp_path)
+        if kind == "TRACKS"
+        else _toric_requests(getattr(pb, kind), 100)
+    )
     # the reference reads the same level registry (TRACKS) but keeps no checkpoints
     reference = _reference(tmp_path)
     reference.handle_bytes("create", "s", create.SerializeToString())
@@ -181,6 +189,7 @@ def test_closing_removes_the_checkpoint_and_stopping_keeps_it(tmp_path, store_ur
 
 def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoint_is_written_again(tmp_path):
     from camdirector.deploy.services import RedisServer
+
     redis_server = RedisServer(tmp_path / "redis").start()
     requests = _requests(tmp_path, redis_server.url, "n/1", every=1000)
     requests.handle_bytes("create", "s", two_target_request().SerializeToString())
@@ -204,8 +213,9 @@ def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoi
         reference.handle_bytes("create", "s", two_target_request().SerializeToString())
         for payload in updates[:30]:
             reference.handle_bytes("frame", "s", payload)
-        assert _answers(other, [("frame", "s", p) for p in updates[30:]]) == \
-            _answers(reference, [("frame", "s", p) for p in updates[30:]])
+        assert _answers(other, [("frame", "s", p) for p in updates[30:]]) == _answers(
+            reference, [("frame", "s", p) for p in updates[30:]]
+        )
     finally:
         restarted.stop()
 
@@ -218,7 +228,7 @@ def test_deferred_snapshots_wait_for_idle_work_but_never_past_twice_their_period
         requests.handle_bytes("frame", "s", payload)
     store = DirectoryStore(tmp_path / "checkpoints", keep_s=60.0)
     assert store.load("s").snapshot is None and len(store.load("s").entries) == 12  # due, not yet taken
-    assert requests.table.idle_work() is False                                  # taken now, none left
+    assert requests.table.idle_work() is False  # taken now, none left
     assert (store.load("s").seq, len(store.load("s").entries)) == (12, 0)
     for payload in updates[12:]:  # never idle: at twice the period the snapshot is taken inline
         requests.handle_bytes("frame", "s", payload)
@@ -239,6 +249,6 @@ def test_an_input_a_bypassed_table_computes_after_restoring_is_in_the_checkpoint
     a.handle_bytes("create", "s", create.SerializeToString())
     answered = _answers(a, requests[:30])
     answered += _answers(_requests(tmp_path, store_url, "node-b/2"), requests[30:45])
-    answered += _answers(a, requests[45:50])   # bypassed, then asked again
+    answered += _answers(a, requests[45:50])  # bypassed, then asked again
     answered += _answers(_requests(tmp_path, store_url, "node-c/3"), requests[50:])
     assert answered == expected

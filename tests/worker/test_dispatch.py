@@ -1,5 +1,6 @@
 """Requests as bytes to the session table (worker/dispatch.py): a monitor's view refused at once
 for an unknown session or a query that is not one, before anything is rendered."""
+
 from __future__ import annotations
 
 import pytest
@@ -24,5 +25,5 @@ def test_a_view_of_an_unknown_session_or_with_a_garbled_query_is_refused_at_once
         with pytest.raises(DirectorError) as refused:
             requests.view("s", payload, lambda *answer: never_called.append(answer))
         assert refused.value.code.name == "INVALID_ARGUMENT"
-    assert not never_called and table.monitor is None   # no render process started for them
+    assert not never_called and table.monitor is None  # no render process started for them
     table.close_all()

@@ -1,4 +1,5 @@
 """A worker's idle moments (SessionTable.idle_work) move deferred work earlier, never change an answer."""
+
 from __future__ import annotations
 
 from camdirector.server_settings import ServerSettings
@@ -14,8 +15,9 @@ def _run(tmp_path, idle: bool) -> tuple[list, int]:
     many deferred map updates idle_work did (with `idle`, after every request, as a worker does)."""
     table = SessionTable(ServerSettings(data_dir=str(tmp_path), checkpoint_store="off"))
     requests = Dispatcher(table)
-    requests.handle_bytes("create", "s", two_target_request(style=pb.Style(visibility=pb.ANTICIPATION), seed=3)
-                         .SerializeToString())
+    requests.handle_bytes(
+        "create", "s", two_target_request(style=pb.Style(visibility=pb.ANTICIPATION), seed=3).SerializeToString()
+    )
     inputs = [("frame", f.SerializeToString()) for f in walk("s", 90)]
     style = pb.UpdateStyleRequest(session_id="s", style=pb.Style(visibility=pb.ANTICIPATION, mask=pb.STYLE_MASK_SOFT_BEHIND))
     inputs.insert(45, ("style", style.SerializeToString()))
@@ -34,5 +36,5 @@ def _run(tmp_path, idle: bool) -> tuple[list, int]:
 def test_deferred_map_updates_done_when_idle_give_the_same_answers(tmp_path):
     lazy, none_done = _run(tmp_path / "lazy", idle=False)
     eager, done = _run(tmp_path / "eager", idle=True)
-    assert none_done == 0 and done >= 10   # 1.5 s at one amortized update every 0.1 s
+    assert none_done == 0 and done >= 10  # 1.5 s at one amortized update every 0.1 s
     assert eager == lazy

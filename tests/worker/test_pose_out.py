@@ -2,6 +2,7 @@
 by a decoder written here from the FreeD spec (D1 message, Appendix B), OpenTrackIO by SMPTE's
 1.0.1 schema and reference receiver (tests/server/opentrackio_ref.py), the axes by rebuilding the
 rotation from the sent angles with OpenTrackIO's own definition (intrinsic Z-X-Y, right-handed)."""
+
 from __future__ import annotations
 
 import math
@@ -38,6 +39,7 @@ def reference():
 
 # --- independent references -------------------------------------------------------------------
 
+
 def rotation_from_opentrackio(pan_deg: float, tilt_deg: float, roll_deg: float) -> np.ndarray:
     """OpenTrackIO's camera-to-stage rotation: intrinsic Z (pan), X (tilt), Y (roll), each
     right-handed ("Pan +ve X to Y, Tilt +ve Y to Z, Roll +ve Z to X")."""
@@ -69,15 +71,24 @@ def decode_freed(data: bytes) -> dict:
     assert data[28] == (0x40 - sum(data[:28])) % 256, "checksum"
 
     def signed(at: int) -> int:
-        value = int.from_bytes(data[at:at + 3], "big")
+        value = int.from_bytes(data[at : at + 3], "big")
         return value - (1 << 24) if value & 0x800000 else value
 
     def unsigned(at: int) -> int:
-        return int.from_bytes(data[at:at + 3], "big")
+        return int.from_bytes(data[at : at + 3], "big")
 
-    return {"camera_id": data[1], "pan": signed(2) / 32768, "tilt": signed(5) / 32768, "roll": signed(8) / 32768,
-            "x_mm": signed(11) / 64, "y_mm": signed(14) / 64, "z_mm": signed(17) / 64,
-            "zoom": unsigned(20), "focus": unsigned(23), "spare": int.from_bytes(data[26:28], "big")}
+    return {
+        "camera_id": data[1],
+        "pan": signed(2) / 32768,
+        "tilt": signed(5) / 32768,
+        "roll": signed(8) / 32768,
+        "x_mm": signed(11) / 64,
+        "y_mm": signed(14) / 64,
+        "z_mm": signed(17) / 64,
+        "zoom": unsigned(20),
+        "focus": unsigned(23),
+        "spare": int.from_bytes(data[26:28], "big"),
+    }
 
 
 class Capture:
@@ -111,17 +122,21 @@ quaternions = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(lamb
 
 # --- the conversion ---------------------------------------------------------------------------
 
-@pytest.mark.parametrize("forward, up, expected", [
-    ((0, 0, -1), (0, 1, 0), (0.0, 0.0, 0.0)),                    # our -Z: OpenTrackIO's +Y
-    ((-1, 0, 0), (0, 1, 0), (90.0, 0.0, 0.0)),                   # to the left: pan positive (X to Y)
-    ((1, 0, 0), (0, 1, 0), (-90.0, 0.0, 0.0)),
-    ((0, 0, 1), (0, 1, 0), (180.0, 0.0, 0.0)),
-    ((0, math.sin(math.radians(30)), -math.cos(math.radians(30))), (0, 1, 0), (0.0, 30.0, 0.0)),  # up: tilt positive
-    ((0, -math.sin(math.radians(20)), -math.cos(math.radians(20))), (0, 1, 0), (0.0, -20.0, 0.0)),
-    # the top leaning to the camera's right: a clockwise roll seen from behind, positive (Z to X)
-    ((0, 0, -1), (math.sin(math.radians(15)), math.cos(math.radians(15)), 0), (0.0, 0.0, 15.0)),
-    ((-1, 0, -1), (0, 1, 0), (45.0, 0.0, 0.0)),
-])
+
+@pytest.mark.parametrize(
+    "forward, up, expected",
+    [
+        ((0, 0, -1), (0, 1, 0), (0.0, 0.0, 0.0)),  # our -Z: OpenTrackIO's +Y
+        ((-1, 0, 0), (0, 1, 0), (90.0, 0.0, 0.0)),  # to the left: pan positive (X to Y)
+        ((1, 0, 0), (0, 1, 0), (-90.0, 0.0, 0.0)),
+        ((0, 0, 1), (0, 1, 0), (180.0, 0.0, 0.0)),
+        ((0, math.sin(math.radians(30)), -math.cos(math.radians(30))), (0, 1, 0), (0.0, 30.0, 0.0)),  # up: tilt positive
+        ((0, -math.sin(math.radians(20)), -math.cos(math.radians(20))), (0, 1, 0), (0.0, -20.0, 0.0)),
+        # the top leaning to the camera's right: a clockwise roll seen from behind, positive (Z to X)
+        ((0, 0, -1), (math.sin(math.radians(15)), math.cos(math.radians(15)), 0), (0.0, 0.0, 15.0)),
+        ((-1, 0, -1), (0, 1, 0), (45.0, 0.0, 0.0)),
+    ],
+)
 def test_known_poses_in_opentrackio_axes(forward, up, expected):
     translation, angles = po.opentrackio_transform(np.array([1.0, 1.5, 2.0]), look(forward, up))
     assert translation == pytest.approx((1.0, -2.0, 1.5))  # X = x, Y = -z, Z = y
@@ -130,8 +145,9 @@ def test_known_poses_in_opentrackio_axes(forward, up, expected):
     assert (tilt, roll) == pytest.approx(expected[1:], abs=1e-9)
 
 
-@pytest.mark.parametrize("forward, up", [((0, 1, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0)), ((0, -1, 0), (0, 0, -1)),
-                                         ((0, -1, 0), (-1, 0, 1))])
+@pytest.mark.parametrize(
+    "forward, up", [((0, 1, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0)), ((0, -1, 0), (0, 0, -1)), ((0, -1, 0), (-1, 0, 1))]
+)
 def test_straight_up_or_down_puts_it_all_in_pan(forward, up):
     _, (pan, tilt, roll) = po.opentrackio_transform([0, 0, 0], look(forward, up))
     assert tilt == pytest.approx(90.0 * forward[1]) and roll == 0.0
@@ -156,11 +172,22 @@ def test_focal_length_from_the_vertical_field_of_view():
     assert po.focal_length_mm(90.0, 24.0) == pytest.approx(12.0)
 
 
-@pytest.mark.parametrize("dt_s, rate", [(1 / 60, Fraction(60)), (1001 / 60000, Fraction(60000, 1001)),
-                                        (1 / 24, Fraction(24)), (1001 / 24000, Fraction(24000, 1001)),
-                                        (1 / 25, Fraction(25)), (2 / 60, Fraction(30)), (1 / 37.5, Fraction(75, 2)),
-                                        (0.0, Fraction(60)), (-1.0, Fraction(60)), (math.nan, Fraction(60)),
-                                        (10.0, Fraction(1, 10))])
+@pytest.mark.parametrize(
+    "dt_s, rate",
+    [
+        (1 / 60, Fraction(60)),
+        (1001 / 60000, Fraction(60000, 1001)),
+        (1 / 24, Fraction(24)),
+        (1001 / 24000, Fraction(24000, 1001)),
+        (1 / 25, Fraction(25)),
+        (2 / 60, Fraction(30)),
+        (1 / 37.5, Fraction(75, 2)),
+        (0.0, Fraction(60)),
+        (-1.0, Fraction(60)),
+        (math.nan, Fraction(60)),
+        (10.0, Fraction(1, 10)),
+    ],
+)
 def test_sample_rate_from_the_frames(dt_s, rate):
     assert po.estimate_rate(dt_s) == rate
     assert po.estimate_rate(dt_s, Fraction(30)) == (Fraction(30) if rate == Fraction(60) and not dt_s > 0 else rate)
@@ -173,47 +200,59 @@ def test_a_rate_within_a_twentieth_of_a_percent_keeps_the_last():
 
 # --- FreeD -------------------------------------------------------------------------------------
 
+
 def test_freed_d1_known_message():
     # Worked by hand from the spec: pan 90 deg = 90 * 32768 = 0x2D0000; tilt -45 deg =
     # 2**24 - 0x168000 = 0xE98000; X 1000 mm = 64000 = 0x00FA00; Y -2000 mm = 2**24 - 128000 =
     # 0xFE0C00; height 1500 mm = 96000 = 0x017700; zoom 3500 = 0x000DAC; the byte sum 1437 = 157
     # mod 256, and 0x40 - 157 = -93 = 0xA3 mod 256.
     message = po.freed_d1(1, 90.0, -45.0, 0.0, 1000.0, -2000.0, 1500.0, 3500, 0)
-    assert message.hex() == "d1" "01" "2d0000" "e98000" "000000" "00fa00" "fe0c00" "017700" "000dac" "000000" "0000" "a3"
+    assert message.hex() == "d1012d0000e9800000000000fa00fe0c00017700000dac0000000000a3"
 
 
 def test_freed_d1_range_ends_from_the_spec():
-    assert po.freed_d1(0, -180.0, -90.0, 180.0, 0, 0, 0, 0, 0)[2:11].hex() == "a60000" "d30000" "5a0000"
-    assert po.freed_d1(0, 180.0, 90.0, 0, 0, 0, 0, 0, 0)[2:8].hex() == "5a0000" "2d0000"
+    assert po.freed_d1(0, -180.0, -90.0, 180.0, 0, 0, 0, 0, 0)[2:11].hex() == "a60000d300005a0000"
+    assert po.freed_d1(0, 180.0, 90.0, 0, 0, 0, 0, 0, 0)[2:8].hex() == "5a00002d0000"
     far = po.freed_d1(0, 0, 0, 0, -131_072.0, 1e9, 0, 1 << 30, -5)  # clamped to the fields' ranges
-    assert far[11:17].hex() == "800000" "7fffff" and far[20:26].hex() == "ffffff" "000000"
+    assert far[11:17].hex() == "8000007fffff" and far[20:26].hex() == "ffffff000000"
     with pytest.raises(ValueError, match="camera id"):
         po.freed_d1(256, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.integers(0, 255), st.floats(-180, 180), st.floats(-90, 90), st.floats(-180, 180),
-       st.floats(-131_000, 131_000), st.floats(-131_000, 131_000), st.floats(-131_000, 131_000),
-       st.integers(0, (1 << 24) - 1), st.integers(0, (1 << 24) - 1), st.integers(0, 0xFFFF))
+@given(
+    st.integers(0, 255),
+    st.floats(-180, 180),
+    st.floats(-90, 90),
+    st.floats(-180, 180),
+    st.floats(-131_000, 131_000),
+    st.floats(-131_000, 131_000),
+    st.floats(-131_000, 131_000),
+    st.integers(0, (1 << 24) - 1),
+    st.integers(0, (1 << 24) - 1),
+    st.integers(0, 0xFFFF),
+)
 def test_freed_d1_round_trip(camera_id, pan, tilt, roll, x, y, z, zoom, focus, spare):
     message = po.freed_d1(camera_id, pan, tilt, roll, x, y, z, zoom, focus, spare)
     decoded = decode_freed(message)
     assert sum(message) % 256 == 0x40  # the checksum's own statement
-    assert decoded["camera_id"] == camera_id and (decoded["zoom"], decoded["focus"], decoded["spare"]) == (zoom, focus,
-                                                                                                           spare)
+    assert decoded["camera_id"] == camera_id and (decoded["zoom"], decoded["focus"], decoded["spare"]) == (zoom, focus, spare)
     for name, value in (("pan", pan), ("tilt", tilt), ("roll", roll)):
         assert abs(decoded[name] - value) <= 0.5 / 32768 + 1e-12
     for name, value in (("x_mm", x), ("y_mm", y), ("z_mm", z)):
         assert abs(decoded[name] - value) <= 0.5 / 64 + 1e-9
 
 
-@pytest.mark.parametrize("forward, up, expected", [
-    ((0, 0, -1), (0, 1, 0), (0.0, 0.0, 0.0)),
-    ((-1, 0, 0), (0, 1, 0), (-90.0, 0.0, 0.0)),   # FreeD: a pan to the right is positive, to the left negative
-    ((1, 0, 0), (0, 1, 0), (90.0, 0.0, 0.0)),
-    ((0, 0.5, -math.sqrt(0.75)), (0, 1, 0), (0.0, 30.0, 0.0)),
-    ((0, 0, -1), (math.sin(math.radians(10)), math.cos(math.radians(10)), 0), (0.0, 0.0, 10.0)),  # clockwise from behind
-])
+@pytest.mark.parametrize(
+    "forward, up, expected",
+    [
+        ((0, 0, -1), (0, 1, 0), (0.0, 0.0, 0.0)),
+        ((-1, 0, 0), (0, 1, 0), (-90.0, 0.0, 0.0)),  # FreeD: a pan to the right is positive, to the left negative
+        ((1, 0, 0), (0, 1, 0), (90.0, 0.0, 0.0)),
+        ((0, 0.5, -math.sqrt(0.75)), (0, 1, 0), (0.0, 30.0, 0.0)),
+        ((0, 0, -1), (math.sin(math.radians(10)), math.cos(math.radians(10)), 0), (0.0, 0.0, 10.0)),  # clockwise from behind
+    ],
+)
 def test_freed_from_a_pose(forward, up, expected):
     fov = math.degrees(2 * math.atan(12.0 / 35.0))
     decoded = decode_freed(po.freed_from_pose(pose(forward, up, position=(1.0, 1.5, 2.0), fov=fov), 7, 24.0))
@@ -225,11 +264,20 @@ def test_freed_from_a_pose(forward, up, expected):
 
 # --- OpenTrackIO packets -----------------------------------------------------------------------
 
+
 def big_sample(related: int = 120) -> dict:
     sample = po.opentrackio_sample(
-        (1.0, -2.0, 1.5), (10.0, 5.0, -3.0), focal_length_mm=35.0, source_id=f"urn:uuid:{uuid.uuid4()}",
-        sample_id=f"urn:uuid:{uuid.uuid4()}", source_number=3, sequence=7, sample_rate=Fraction(60000, 1001),
-        timestamp_s=1_700_000_000.25, static=po.opentrackio_static(24.0, 16 / 9, "a-session"))
+        (1.0, -2.0, 1.5),
+        (10.0, 5.0, -3.0),
+        focal_length_mm=35.0,
+        source_id=f"urn:uuid:{uuid.uuid4()}",
+        sample_id=f"urn:uuid:{uuid.uuid4()}",
+        source_number=3,
+        sequence=7,
+        sample_rate=Fraction(60000, 1001),
+        timestamp_s=1_700_000_000.25,
+        static=po.opentrackio_static(24.0, 16 / 9, "a-session"),
+    )
     sample["relatedSampleIds"] = [f"urn:uuid:{uuid.uuid4()}" for _ in range(related)]  # a payload past the MTU
     return sample
 
@@ -276,6 +324,7 @@ def test_smptes_receiver_rejects_a_damaged_or_incomplete_payload(reference):
 
 # --- the sender --------------------------------------------------------------------------------
 
+
 def samples_of(reference, datagrams: list[bytes]) -> list[dict]:
     receiver = reference.new_receiver()
     return [reference.feed(receiver, [d]) for d in datagrams]
@@ -284,8 +333,9 @@ def samples_of(reference, datagrams: list[bytes]) -> list[dict]:
 @pytest.mark.parametrize("fmt", [po.PoseFormat.OPENTRACKIO_JSON, po.PoseFormat.OPENTRACKIO_CBOR])
 def test_every_sample_passes_smptes_schema_and_receiver(reference, fmt):
     capture = Capture()
-    sender = po.PoseSender("session-1", [spec(fmt, source_number=9, sensor_height_mm=18.0)], 16 / 9,
-                           wall_clock=lambda: 1_700_000_000.5, sock=capture)
+    sender = po.PoseSender(
+        "session-1", [spec(fmt, source_number=9, sensor_height_mm=18.0)], 16 / 9, wall_clock=lambda: 1_700_000_000.5, sock=capture
+    )
     poses = [pose((math.sin(0.1 * i), 0.1, -math.cos(0.1 * i)), position=(i * 0.1, 1.5, -i * 0.2)) for i in range(150)]
     for i, p in enumerate(poses):
         sender.send(p, i / 60)
@@ -298,14 +348,19 @@ def test_every_sample_passes_smptes_schema_and_receiver(reference, fmt):
         assert sample is not None and not reference.errors(sample), (i, reference.errors(sample or {}))
         assert sample["protocol"] == {"name": "OpenTrackIO", "version": [1, 0, 1]}
         assert sample["sourceId"] == source_id and URN_UUID.match(sample["sampleId"]) and sample["sourceNumber"] == 9
-        assert sample["timing"] == {"mode": "internal", "sampleRate": {"num": 60, "denom": 1}, "sequenceNumber": i,
-                                    "sampleTimestamp": {"seconds": 1_700_000_000, "nanoseconds": 500_000_000}}
+        assert sample["timing"] == {
+            "mode": "internal",
+            "sampleRate": {"num": 60, "denom": 1},
+            "sequenceNumber": i,
+            "sampleTimestamp": {"seconds": 1_700_000_000, "nanoseconds": 500_000_000},
+        }
         assert sample["lens"]["pinholeFocalLength"] == pytest.approx(9.0 / math.tan(math.radians(20.0)))
         (transform,) = sample["transforms"]
         assert transform["id"] == "Camera"
         rotation = transform["rotation"]
-        np.testing.assert_allclose(ours_from_opentrackio(rotation["pan"], rotation["tilt"], rotation["roll"]),
-                                   quat_to_matrix(p.rotation_xyzw), atol=1e-9)
+        np.testing.assert_allclose(
+            ours_from_opentrackio(rotation["pan"], rotation["tilt"], rotation["roll"]), quat_to_matrix(p.rotation_xyzw), atol=1e-9
+        )
         t = transform["translation"]
         np.testing.assert_allclose([t["x"], t["y"], t["z"]], M @ p.position_world)
         assert ("static" in sample) == (i in (0, 120)), i  # the first, then every 2 s of the frames' time
@@ -322,13 +377,17 @@ def test_static_again_when_time_goes_back_and_the_rate_follows_the_frames():
     samples = [orjson.loads(data[16:]) for data, _ in capture.sent]
     assert ["static" in s for s in samples] == [True, False, False, True, True, False]
     assert [Fraction(s["timing"]["sampleRate"]["num"], s["timing"]["sampleRate"]["denom"]) for s in samples[:3]] == [
-        Fraction(60), Fraction(30), Fraction(30)]
+        Fraction(60),
+        Fraction(30),
+        Fraction(30),
+    ]
 
 
 def test_freed_output_sends_the_converted_pose():
     capture = Capture()
-    sender = po.PoseSender("s", [spec(po.PoseFormat.FREED_D1, port=40_000, source_number=12, sensor_height_mm=12.0)],
-                           16 / 9, sock=capture)
+    sender = po.PoseSender(
+        "s", [spec(po.PoseFormat.FREED_D1, port=40_000, source_number=12, sensor_height_mm=12.0)], 16 / 9, sock=capture
+    )
     sender.send(pose((-1, 0, 0), position=(0.5, 2.0, -3.0), fov=90.0), 0.0)
     ((data, address),) = capture.sent
     decoded = decode_freed(data)
@@ -338,9 +397,14 @@ def test_freed_output_sends_the_converted_pose():
     assert decoded["zoom"] == 600  # 6 mm: a 90-degree field of view on a 12 mm-high sensor
 
 
-@pytest.mark.parametrize("failure", [BlockingIOError(11, "Resource temporarily unavailable"),
-                                     ConnectionRefusedError(111, "Connection refused"),
-                                     OSError(101, "Network is unreachable")])
+@pytest.mark.parametrize(
+    "failure",
+    [
+        BlockingIOError(11, "Resource temporarily unavailable"),
+        ConnectionRefusedError(111, "Connection refused"),
+        OSError(101, "Network is unreachable"),
+    ],
+)
 def test_a_send_that_fails_is_dropped_and_counted_never_raised(failure):
     capture = Capture(fail=failure)
     outputs = [spec(po.PoseFormat.FREED_D1), spec(po.PoseFormat.OPENTRACKIO_CBOR)]
@@ -357,8 +421,7 @@ def test_a_closed_port_on_a_real_socket_never_raises():
     probe.bind(("127.0.0.1", 0))
     port = probe.getsockname()[1]
     probe.close()  # nobody listens there: the kernel answers ICMP port unreachable
-    sender = po.PoseSender("s", [spec(po.PoseFormat.FREED_D1, port=port), spec(po.PoseFormat.OPENTRACKIO_JSON, port=port)],
-                           1.0)
+    sender = po.PoseSender("s", [spec(po.PoseFormat.FREED_D1, port=port), spec(po.PoseFormat.OPENTRACKIO_JSON, port=port)], 1.0)
     for i in range(200):
         sender.send(pose(), i / 60)
     assert all(s["sent"] + s["dropped"] == 200 for s in sender.status())
@@ -368,14 +431,16 @@ def test_a_closed_port_on_a_real_socket_never_raises():
 
 # --- in the session table ----------------------------------------------------------------------
 
+
 def test_the_table_sends_answered_frames_only_and_closes_the_socket_with_the_session(tmp_path):
     listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     listener.bind(("127.0.0.1", 0))
     listener.settimeout(5.0)
     port = listener.getsockname()[1]
     table = SessionTable(ServerSettings(workers=0, data_dir=str(tmp_path)))
-    request = two_target_request(pose_outputs=[pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1,
-                                                             address=f"udp://localhost:{port}", source_number=4)])
+    request = two_target_request(
+        pose_outputs=[pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address=f"udp://localhost:{port}", source_number=4)]
+    )
     table.create("s1", request)
     frames = list(walk("s1", 5))
     replies = [table.frame(f) for f in frames]
@@ -383,16 +448,23 @@ def test_the_table_sends_answered_frames_only_and_closes_the_socket_with_the_ses
     assert stale.stale
     for reply in replies:
         decoded = decode_freed(listener.recv(64))
-        _, (pan, tilt, roll) = po.opentrackio_transform([0, 0, 0], [reply.pose.rotation.x, reply.pose.rotation.y,
-                                                                    reply.pose.rotation.z, reply.pose.rotation.w])
+        _, (pan, tilt, roll) = po.opentrackio_transform(
+            [0, 0, 0], [reply.pose.rotation.x, reply.pose.rotation.y, reply.pose.rotation.z, reply.pose.rotation.w]
+        )
         assert decoded["camera_id"] == 4 and decoded["pan"] == pytest.approx(-pan, abs=1e-4)
         assert decoded["x_mm"] == pytest.approx(reply.pose.position.x * 1e3, abs=0.01)
     listener.settimeout(0.2)
     with pytest.raises(TimeoutError):  # the stale frame sent nothing
         listener.recv(64)
     (status,) = table.timeline("s1")["pose_outputs"]
-    assert status == {"format": "POSE_FORMAT_FREED_D1", "address": f"udp://localhost:{port}", "source_number": 4,
-                      "sent": 5, "dropped": 0, "last_error": None}
+    assert status == {
+        "format": "POSE_FORMAT_FREED_D1",
+        "address": f"udp://localhost:{port}",
+        "source_number": 4,
+        "sent": 5,
+        "dropped": 0,
+        "last_error": None,
+    }
     sender = table.held["s1"].pose_sender
     table.close("s1")
     assert sender.sock.fileno() == -1

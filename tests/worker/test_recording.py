@@ -1,4 +1,5 @@
 """Recording a session on the server and replaying it bit for bit with `camdirector replay`."""
+
 from __future__ import annotations
 
 import json
@@ -18,8 +19,13 @@ def _record(server) -> Path:
     response = client.call("CreateSession", two_target_request(seed=21, record=True))
     session_id = response.session_id
     client.stream(list(walk(session_id, 90)))
-    client.call("UpdateStyle", pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(
-        screen_a=pb.ScreenPoint(x=-0.5), screen_b=pb.ScreenPoint(x=0.2, y=0.1), response_time_s=0.2)))
+    client.call(
+        "UpdateStyle",
+        pb.UpdateStyleRequest(
+            session_id=session_id,
+            style=pb.Style(screen_a=pb.ScreenPoint(x=-0.5), screen_b=pb.ScreenPoint(x=0.2, y=0.1), response_time_s=0.2),
+        ),
+    )
     client.call("Frame", list(walk(session_id, 1, start_frame=50))[0])  # stale: recorded too
     client.stream(list(walk(session_id, 90, start_frame=91)))
     client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
@@ -32,8 +38,9 @@ def test_recording_replays_bit_for_bit(server):
     kinds = [e.WhichOneof("entry") for e in read_entries(path)]
     assert kinds[0] == "create" and kinds.count("frame") == 181 and kinds.count("camera") == 181
     assert kinds.count("style") == 1
-    out = subprocess.run([sys.executable, "-m", "camdirector.__main__", "replay", str(path)],
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "camdirector.__main__", "replay", str(path)], capture_output=True, text=True, timeout=120
+    )
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout) == {"frames": 181, "identical": 181, "first_mismatch": None, "ok": True}
 
@@ -70,8 +77,9 @@ def _varint(n: int) -> bytes:
 def test_replay_refuses_a_file_that_is_not_a_recording(tmp_path):
     bogus = tmp_path / "bogus.cdrec"
     bogus.write_bytes(b"hello")
-    out = subprocess.run([sys.executable, "-m", "camdirector.__main__", "replay", str(bogus)],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "camdirector.__main__", "replay", str(bogus)], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "not a camdirector recording" in out.stderr
 
 

@@ -5,6 +5,7 @@ Bit for bit is defined on the kind of machine that made them: numpy's SIMD paths
 kernels, llvmpipe's JIT and Embree's ISA are chosen by the CPU, and their last bits differ between
 CPUs (the demo's own trajectory differs between this project's machines). `machine.json` beside
 the recordings says which machine made them; elsewhere the test skips and says why."""
+
 from __future__ import annotations
 
 import json
@@ -26,12 +27,25 @@ TORIC_AND_MATCH = ["framing_only", "reactive", "raycast", "anticipation", "match
 
 def machine() -> dict:
     """What decides the last bits of a frame's floats on this machine (module docstring)."""
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor())
-    mesa = subprocess.run(["dpkg-query", "-W", "-f", "${Version}", "libgl1-mesa-dri"], capture_output=True,
-                          text=True).stdout if Path("/usr/bin/dpkg-query").exists() else ""
-    return {"cpu": cpu, "numpy_simd": np.show_config(mode="dicts")["SIMD Extensions"]["found"],
-            "numpy": np.__version__, "mesa": mesa}
+    cpu = next(
+        (
+            line.split(":", 1)[1].strip()
+            for line in Path("/proc/cpuinfo").read_text().splitlines()
+            if line.startswith("model name")
+        ),
+        platform.processor(),
+    )
+    mesa = (
+        subprocess.run(["dpkg-query", "-W", "-f", "${Version}", "libgl1-mesa-dri"], capture_output=True, text=True).stdout
+        if Path("/usr/bin/dpkg-query").exists()
+        else ""
+    )
+    return {
+        "cpu": cpu,
+        "numpy_simd": np.show_config(mode="dicts")["SIMD Extensions"]["found"],
+        "numpy": np.__version__,
+        "mesa": mesa,
+    }
 
 
 @pytest.fixture(autouse=True)
@@ -39,14 +53,16 @@ def same_kind_of_machine():
     made_on = json.loads((RECORDINGS / "machine.json").read_text())
     here = machine()
     if here != made_on:
-        pytest.skip(f"the recordings were made on {made_on}, this machine is {here}: a bit-for-bit replay is "
-                    "only defined on the kind of machine that made them")
+        pytest.skip(
+            f"the recordings were made on {made_on}, this machine is {here}: a bit-for-bit replay is "
+            "only defined on the kind of machine that made them"
+        )
 
 
 def _replayed(name: str, data_dir: Path) -> dict:
     path = RECORDINGS / f"{name}.cdrec"
     kinds = [entry.WhichOneof("entry") for entry in read_entries(path)]
-    assert kinds[0] == "create" and kinds.count("camera") >= 120   # a real session, not an empty file
+    assert kinds[0] == "create" and kinds.count("camera") >= 120  # a real session, not an empty file
     return replay(path, data_dir=data_dir).as_dict()
 
 

@@ -1,6 +1,7 @@
 """Resources are released with their session: wherever a session ends, its occlusion maps'
 backend is closed, and a worker that creates, streams and closes 200 GL-backed sessions returns
 to its memory and descriptors (issue 11, item 4)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,17 @@ def demo():
     frames = []
     for i in range(FRAMES):
         transforms = scene.transforms_at(i / 60.0)
-        frames.append((i + 1, i / 60.0, cd.pack_states(ids, np.stack([transforms[k].position_world for k in ids]),
-                                                       np.stack([transforms[k].rotation_xyzw for k in ids]))))
+        frames.append(
+            (
+                i + 1,
+                i / 60.0,
+                cd.pack_states(
+                    ids,
+                    np.stack([transforms[k].position_world for k in ids]),
+                    np.stack([transforms[k].rotation_xyzw for k in ids]),
+                ),
+            )
+        )
     return session_request(scene, Lens(), visibility=cd.pb.ANTICIPATION), frames
 
 
@@ -81,10 +91,10 @@ def test_every_way_a_session_ends_closes_its_map_backend(demo, backends, backend
         for frame in demo[1]:
             _frame(requests, session_id, *frame)
     assert backends == {"made": 4, "closed": 0}
-    requests.handle_bytes("close", "closed", b"")        # CloseSession
-    requests.handle_bytes("drop", "reclaimed", b"")      # the front's reaper, an idle session
+    requests.handle_bytes("close", "closed", b"")  # CloseSession
+    requests.handle_bytes("drop", "reclaimed", b"")  # the front's reaper, an idle session
     assert backends == {"made": 4, "closed": 2}
-    table.close_all()                                    # the worker stops
+    table.close_all()  # the worker stops
     assert backends == {"made": 4, "closed": 4} and not table.held
 
 
@@ -102,7 +112,8 @@ def test_recording_file_is_closed_with_its_session(demo, tmp_path):
     table = SessionTable(ServerSettings(data_dir=str(tmp_path)))
     requests = Dispatcher(table)
     reply = pb.CreateSessionResponse.FromString(
-        requests.handle_bytes("create", "rec", _request(demo, pb.MAP_BACKEND_EMBREE, record=True).SerializeToString())[0])
+        requests.handle_bytes("create", "rec", _request(demo, pb.MAP_BACKEND_EMBREE, record=True).SerializeToString())[0]
+    )
     recorder = table.held["rec"].recorder
     _frame(requests, "rec", *demo[1][0])
     table.close_all()
@@ -114,8 +125,7 @@ def test_200_gl_sessions_leave_the_worker_where_it_started(demo):
     grows by less than MAX_GROWTH_MB and its open descriptors come back to where they were. The
     first session is a warm-up: loading the GL driver and the kernel banks happens once."""
     request = _request(demo, pb.MAP_BACKEND_GL)
-    with ServerProcess("--workers", "1", transports=("grpc",)) as server, \
-            cd.connect(server.url("grpc")) as client:
+    with ServerProcess("--workers", "1", transports=("grpc",)) as server, cd.connect(server.url("grpc")) as client:
         (worker,) = worker_pids(server.proc.pid)
 
         def one_session() -> list[pb.CameraUpdate]:

@@ -1,6 +1,7 @@
 """Stage times come from the session's injected clock, lapped by one helper: with a clock that
 moves 1 ms per reading every stage of a frame reads exactly its number of laps, and the keys are
 the ones on the wire (pipeline/stages.py)."""
+
 from __future__ import annotations
 
 import itertools
@@ -28,10 +29,12 @@ def _stage_ms(visibility: int, frames: int, tmp_path) -> list[dict[str, float]]:
     out = []
     for i in range(frames):
         transforms = scene.transforms_at(i / 60.0)
-        packed_ids, packed = cd.pack_states(ids, np.stack([transforms[k].position_world for k in ids]),
-                                            np.stack([transforms[k].rotation_xyzw for k in ids]))
-        reply = table.frame(pb.FrameUpdate(session_id="s", frame=i + 1, time_s=i / 60.0, packed_ids=packed_ids,
-                                           packed_transforms=packed))
+        packed_ids, packed = cd.pack_states(
+            ids, np.stack([transforms[k].position_world for k in ids]), np.stack([transforms[k].rotation_xyzw for k in ids])
+        )
+        reply = table.frame(
+            pb.FrameUpdate(session_id="s", frame=i + 1, time_s=i / 60.0, packed_ids=packed_ids, packed_transforms=packed)
+        )
         out.append(dict(reply.diagnostics.stage_ms))
     table.close_all()
     return out
@@ -51,7 +54,8 @@ def test_map_modes_lap_motion_around_the_map_stages(tmp_path):
     without = [f for f in frames if "projection" not in f]
     assert with_maps and without
     for stage_ms in with_maps:
-        assert stage_ms == pytest.approx({"ingest": 1.0, "framing": 1.0, "motion": 2.0, "projection": 1.0,
-                                          "amap": 2.0, "visibility": 1.0})
+        assert stage_ms == pytest.approx(
+            {"ingest": 1.0, "framing": 1.0, "motion": 2.0, "projection": 1.0, "amap": 2.0, "visibility": 1.0}
+        )
     for stage_ms in without:
         assert stage_ms == pytest.approx({"ingest": 1.0, "framing": 1.0, "motion": 2.0, "visibility": 1.0})

@@ -1,6 +1,7 @@
 """The session timeline (worker/timeline.py): bounded, oldest first, and its JSON read off the
 frame (the framing error null where not measured); a MATCH frame's shot, candidates, players, events
 and planned cut; buffering frames."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,10 +16,12 @@ from camdirector.worker.timeline import Timeline, dumps
 
 
 def state(frame: int, yaw_rad: float = 0.0, cut: bool = False) -> FrameState:
-    s = FrameState(frame=frame, time_s=frame / 60.0, dt_s=1 / 60.0, cut=cut, shot_id=frame // 10,
-                   visibility=0.5, flags=["search_coast"])
-    s.pose = CameraPose(np.array([float(frame), 1.5, -2.0]),
-                        np.array([0.0, np.sin(yaw_rad / 2), 0.0, np.cos(yaw_rad / 2)]), 50.0)  # yaw about +Y
+    s = FrameState(
+        frame=frame, time_s=frame / 60.0, dt_s=1 / 60.0, cut=cut, shot_id=frame // 10, visibility=0.5, flags=["search_coast"]
+    )
+    s.pose = CameraPose(
+        np.array([float(frame), 1.5, -2.0]), np.array([0.0, np.sin(yaw_rad / 2), 0.0, np.cos(yaw_rad / 2)]), 50.0
+    )  # yaw about +Y
     s.aim_points_world = [np.array([0.0, 1.0, float(frame)])]
     return s
 
@@ -40,13 +43,23 @@ def test_a_frame_as_json():
     s = state(12, yaw_rad=np.pi / 2, cut=True)
     s.framing_error = 0.123456
     timeline.add(s, compute_ms=0.125)
-    s.flags.append("later")                       # the state is not kept by reference
+    s.flags.append("later")  # the state is not kept by reference
     s.pose.position_world[0] = 99.0
     (frame,) = orjson.loads(dumps(timeline.as_json()))
-    assert frame == {"frame": 12, "time_s": 0.2, "camera": [12.0, 1.5, -2.0],
-                     "forward": pytest.approx([-1.0, 0.0, 0.0], abs=1e-4),   # -Z turned 90 deg about +Y
-                     "targets": [[0.0, 1.0, 12.0]], "cut": True, "shot_id": 1, "visibility": 0.5,
-                     "framing_error": 0.1235, "flags": ["search_coast"], "scores": {}, "compute_ms": 0.125}
+    assert frame == {
+        "frame": 12,
+        "time_s": 0.2,
+        "camera": [12.0, 1.5, -2.0],
+        "forward": pytest.approx([-1.0, 0.0, 0.0], abs=1e-4),  # -Z turned 90 deg about +Y
+        "targets": [[0.0, 1.0, 12.0]],
+        "cut": True,
+        "shot_id": 1,
+        "visibility": 0.5,
+        "framing_error": 0.1235,
+        "flags": ["search_coast"],
+        "scores": {},
+        "compute_ms": 0.125,
+    }
 
 
 def test_a_frame_with_no_framing_error_shows_null():
@@ -86,15 +99,23 @@ def test_a_match_frame_as_json():
     (frame,) = orjson.loads(dumps(timeline.as_json()))
     assert frame["targets"] == [[0.0, 1.5, 0.0], [4.0, 1.5, 0.0]]
     assert frame["players"] == ["a0", "b0"] and frame["teams"] == [0, 1] and frame["buffering"] is False
-    assert frame["framing_error"] is None                 # the MATCH rig does not measure it
+    assert frame["framing_error"] is None  # the MATCH rig does not measure it
     assert frame["shot"] == {"subject_ids": ["a0", "b0"], "kind": "SHOT_DUEL", "reason": "fight: a0 vs b0", "held": False}
-    assert frame["candidates"] == [{"shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0",
-                                             "held": False},
-                                    "score": 0.4123, "camera": [2.0, 3.0, -5.0], "forward": [-0.0, -0.0, -1.0]}]
-    assert frame["events"] == [{"time_s": 0.5, "kind": "EVENT_KILL", "actor_id": "a0", "other_actor_id": "b0",
-                                "priority": 0, "label": "headshot"}]
-    assert frame["planned_cut"] == {"time_s": 2.75, "shot": {"subject_ids": ["a0"], "kind": "SHOT_FOLLOW",
-                                                             "reason": "planned objective in 2.2 s: a0", "held": False}}
+    assert frame["candidates"] == [
+        {
+            "shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0", "held": False},
+            "score": 0.4123,
+            "camera": [2.0, 3.0, -5.0],
+            "forward": [-0.0, -0.0, -1.0],
+        }
+    ]
+    assert frame["events"] == [
+        {"time_s": 0.5, "kind": "EVENT_KILL", "actor_id": "a0", "other_actor_id": "b0", "priority": 0, "label": "headshot"}
+    ]
+    assert frame["planned_cut"] == {
+        "time_s": 2.75,
+        "shot": {"subject_ids": ["a0"], "kind": "SHOT_FOLLOW", "reason": "planned objective in 2.2 s: a0", "held": False},
+    }
 
 
 def test_candidates_keep_to_their_frames():
@@ -102,9 +123,14 @@ def test_candidates_keep_to_their_frames():
     for frame, count in ((1, 2), (2, 0), (3, 1)):
         s = match_state(frame)
         s.match.shot = ShotChoice((), ShotKind.OVERVIEW, "overview")
-        s.match.candidates = [Candidate(CameraPose(np.array([float(frame), float(k), 0.0]), np.array([0.0, 0.0, 0.0, 1.0]),
-                                             50.0), ShotChoice(("a0",), ShotKind.FOLLOW, "f"), 1.0)
-                        for k in range(count)]
+        s.match.candidates = [
+            Candidate(
+                CameraPose(np.array([float(frame), float(k), 0.0]), np.array([0.0, 0.0, 0.0, 1.0]), 50.0),
+                ShotChoice(("a0",), ShotKind.FOLLOW, "f"),
+                1.0,
+            )
+            for k in range(count)
+        ]
         timeline.add(s, compute_ms=1.0)
     rows = orjson.loads(dumps(timeline.as_json()))
     assert [[c["camera"][:2] for c in row["candidates"]] for row in rows] == [[[1.0, 0.0], [1.0, 1.0]], [], [[3.0, 0.0]]]
@@ -113,16 +139,17 @@ def test_candidates_keep_to_their_frames():
 
 def test_buffering_frames_have_no_camera_and_give_way_to_the_program():
     timeline = Timeline()
-    for frame in (1, 2, 3):                       # input frames while the delay fills
+    for frame in (1, 2, 3):  # input frames while the delay fills
         timeline.add(match_state(frame, buffering=True), compute_ms=0.5)
     rows = timeline.as_json()
-    assert [(r["frame"], r["buffering"], r["camera"], r["forward"], r["shot"]) for r in rows] == \
-        [(f, True, None, None, None) for f in (1, 2, 3)]
+    assert [(r["frame"], r["buffering"], r["camera"], r["forward"], r["shot"]) for r in rows] == [
+        (f, True, None, None, None) for f in (1, 2, 3)
+    ]
     assert timeline.as_json(after_frame=2)[0]["frame"] == 3
-    program = match_state(1)                      # the program's first moment: the game's frame 1
+    program = match_state(1)  # the program's first moment: the game's frame 1
     program.match.shot = ShotChoice((), ShotKind.OVERVIEW, "overview")
     timeline.add(program, compute_ms=0.5)
     timeline.add(match_state(2), compute_ms=0.5)
     rows = timeline.as_json()
-    assert [(r["frame"], r["buffering"]) for r in rows] == [(1, False), (2, False)]   # frame numbers still grow
+    assert [(r["frame"], r["buffering"]) for r in rows] == [(1, False), (2, False)]  # frame numbers still grow
     assert rows[0]["camera"].tolist() == [1.0, 1.5, -2.0] and [r["frame"] for r in timeline.as_json(after_frame=1)] == [2]

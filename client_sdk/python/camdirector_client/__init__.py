@@ -11,6 +11,7 @@
 this SDK's release, the same as the server's it was released with (a server says its own in
 ``/healthz`` and in every gRPC call's initial metadata, ``camdirector-version``).
 """
+
 from importlib.metadata import version as _version
 
 from camdirector.v1 import director_pb2 as pb

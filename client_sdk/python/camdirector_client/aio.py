@@ -167,9 +167,7 @@ class _AioZmqTransport:
     so a late reply can not be taken for the answer to a later request.
     """
 
-    def __init__(
-        self, endpoint: str, timeout_s: float, context: zmq.asyncio.Context | None, security: wire.Security
-    ) -> None:
+    def __init__(self, endpoint: str, timeout_s: float, context: zmq.asyncio.Context | None, security: wire.Security) -> None:
         self._endpoint = endpoint
         self._timeout_s = timeout_s
         self._timeout_ms = max(1, round(timeout_s * 1000.0))
@@ -376,9 +374,7 @@ class AsyncSession(wire.SessionBase):
     async def __aenter__(self) -> AsyncSession:
         return self
 
-    async def __aexit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         if exc_type is None:
             await self.close()
             return
@@ -405,9 +401,7 @@ class _SessionOpening:
         self._session = await self._opening
         return self._session
 
-    async def __aexit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         assert self._session is not None
         await self._session.__aexit__(exc_type, exc, tb)
 
@@ -439,8 +433,15 @@ class AsyncClient:
         ``async with client.create_session(...) as session``. Arguments as in the sync client.
         """
         msg = wire.create_session_request(
-            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
-            level_id=level_id, delay_s=delay_s,
+            request,
+            objects=objects,
+            targets=targets,
+            lens=lens,
+            style=style,
+            seed=seed,
+            record=record,
+            level_id=level_id,
+            delay_s=delay_s,
         )
         return _SessionOpening(self._open_session(msg))
 
@@ -455,9 +456,7 @@ class AsyncClient:
     async def __aenter__(self) -> AsyncClient:
         return self
 
-    async def __aexit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         await self.close()
 
 

@@ -242,8 +242,6 @@ class _Resumable:
             yield update
 
 
-
-
 class Session(wire.SessionBase):
     """One director session; closes itself at the end of a ``with`` block (see wire.SessionBase).
 
@@ -340,9 +338,7 @@ class Session(wire.SessionBase):
     def __enter__(self) -> Session:
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         if exc_type is None:
             self.close()
             return
@@ -377,8 +373,15 @@ class Client:
     ) -> Session:
         """Opens a session from a ``CreateSessionRequest`` or from its fields as keywords."""
         msg = wire.create_session_request(
-            request, objects=objects, targets=targets, lens=lens, style=style, seed=seed, record=record,
-            level_id=level_id, delay_s=delay_s,
+            request,
+            objects=objects,
+            targets=targets,
+            lens=lens,
+            style=style,
+            seed=seed,
+            record=record,
+            level_id=level_id,
+            delay_s=delay_s,
         )
         route = wire.new_route_key()
         return Session(self._transport, self._transport.create_session(msg, route), route)
@@ -390,9 +393,7 @@ class Client:
     def __enter__(self) -> Client:
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         self.close()
 
 

@@ -305,9 +305,7 @@ def quat(q: ArrayLike) -> pb.Quat:
     return pb.Quat(x=x, y=y, z=z, w=w)
 
 
-def transform_msg(
-    position: ArrayLike, rotation_xyzw: ArrayLike | None = None, scale: ArrayLike | None = None
-) -> pb.Transform:
+def transform_msg(position: ArrayLike, rotation_xyzw: ArrayLike | None = None, scale: ArrayLike | None = None) -> pb.Transform:
     """A ``Transform``; a rotation or scale left as None stays unset (identity, (1, 1, 1))."""
     msg = pb.Transform(position=vec3(position))
     if rotation_xyzw is not None:

@@ -128,9 +128,7 @@ def parse_url(url: str) -> Endpoint:
         return Endpoint("grpc", rest, tls=scheme == "grpcs")
     if scheme == "tcp":
         return Endpoint("zmq", url)
-    raise ValueError(
-        f"unknown scheme {scheme!r} in {url!r}: use grpc:// (gRPC), grpcs:// (gRPC over TLS) or tcp:// (ZeroMQ)"
-    )
+    raise ValueError(f"unknown scheme {scheme!r} in {url!r}: use grpc:// (gRPC), grpcs:// (gRPC over TLS) or tcp:// (ZeroMQ)")
 
 
 KEY_ENV = "CAMDIRECTOR_KEY"
@@ -157,11 +155,13 @@ class Security:
         self._grpc_auth: tuple[tuple[str, str], ...] = (("authorization", authorization),) if authorization else ()
         self._zmq_frames: tuple[bytes, ...] = (authorization.encode(),) if authorization else ()
         self.credentials = credentials  # None: a plaintext channel
-        self.curve = curve              # (server public, client public, client secret), Z85; None: no CURVE
+        self.curve = curve  # (server public, client public, client secret), Z85; None: no CURVE
 
     def __repr__(self) -> str:
-        return (f"Security(key={'set' if self._grpc_auth else 'none'}, tls={self.credentials is not None}, "
-                f"curve={self.curve is not None})")
+        return (
+            f"Security(key={'set' if self._grpc_auth else 'none'}, tls={self.credentials is not None}, "
+            f"curve={self.curve is not None})"
+        )
 
     def grpc_metadata(self, route: str) -> tuple[tuple[str, str], ...]:
         """The metadata of a session's gRPC call: its route key (ROUTE_HEADER), the protocol this
@@ -190,8 +190,10 @@ def _connection_hint(error: DirectorError, *, tls: bool) -> str | None:
     if not tls:
         return "the server closed the connection: if it serves TLS, connect with grpcs://"
     if "certificate verify failed" in said:
-        return ("the server's certificate is not signed by an authority this client trusts: "
-                "give ca_file, the PEM of the CA that signed it")
+        return (
+            "the server's certificate is not signed by an authority this client trusts: "
+            "give ca_file, the PEM of the CA that signed it"
+        )
     if "handshake" in said:
         return "the TLS handshake failed: does the server serve TLS (--tls-cert)? grpc:// is plaintext"
     return None
@@ -244,8 +246,10 @@ def _curve_server_key(value: str | bytes | os.PathLike[str]) -> bytes:
             raise ValueError("zmq_server_key is 40 characters long but not Z85 text") from None
         return text
     if not os.path.isfile(value):
-        raise ValueError(f"zmq_server_key must be the server's CURVE public key (40 characters of Z85 text) or "
-                         f"the path of its server.key file; {os.fsdecode(value)!r} is neither")
+        raise ValueError(
+            f"zmq_server_key must be the server's CURVE public key (40 characters of Z85 text) or "
+            f"the path of its server.key file; {os.fsdecode(value)!r} is neither"
+        )
     public, _secret = zmq.auth.load_certificate(value)
     return public
 
@@ -267,17 +271,18 @@ def open_dealer(context: zmq.Context, endpoint: str, timeout_ms: int, curve: tup
 def zmq_no_reply(rpc: bytes, endpoint: str, timeout_s: float, curve: bool) -> DirectorError:
     """DEADLINE_EXCEEDED for a ZeroMQ request left unanswered. A CURVE server drops a client that
     does not know its key (or a plaintext one) without a word, so the message says what to check."""
-    hint = ("is zmq_server_key the server's public key?" if curve else
-            "a server with authentication on answers only clients given its CURVE key (zmq_server_key)")
+    hint = (
+        "is zmq_server_key the server's public key?"
+        if curve
+        else "a server with authentication on answers only clients given its CURVE key (zmq_server_key)"
+    )
     return DirectorError(
         grpc.StatusCode.DEADLINE_EXCEEDED,
         f"no reply to {rpc.decode()} from {endpoint} within {timeout_s:g} s ({hint})",
     )
 
 
-def grpc_channel_options(
-    max_message_bytes: int, extra: Sequence[tuple[str, Any]] | None
-) -> list[tuple[str, Any]]:
+def grpc_channel_options(max_message_bytes: int, extra: Sequence[tuple[str, Any]] | None) -> list[tuple[str, Any]]:
     if max_message_bytes <= 0:
         raise ValueError(f"max_message_bytes must be > 0, got {max_message_bytes}")
     options: dict[str, Any] = {
@@ -313,14 +318,21 @@ def create_session_request(
     ``RIG_TRACKS`` or ``RIG_MATCH`` session; ``delay_s``: a ``RIG_MATCH`` session's broadcast
     delay, seconds."""
     if request is not None:
-        if (objects is not None or targets is not None or lens is not None or style is not None or seed or record
-                or level_id or delay_s):
+        if (
+            objects is not None
+            or targets is not None
+            or lens is not None
+            or style is not None
+            or seed
+            or record
+            or level_id
+            or delay_s
+        ):
             raise TypeError("pass either a CreateSessionRequest or keywords, not both")
         if not request.client_protocol:
             request.client_protocol = PROTOCOL
         return request
-    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id, delay_s=delay_s,
-                                  client_protocol=PROTOCOL)
+    msg = pb.CreateSessionRequest(seed=seed, record=record, level_id=level_id, delay_s=delay_s, client_protocol=PROTOCOL)
     if objects is not None:
         msg.objects.extend(objects)
     if targets is not None:
@@ -399,8 +411,9 @@ def _varint(value: int) -> bytes:
     return bytes(out)
 
 
-def _frame_update_head(session_id: str, frame: int, time_s: float, states: States | None,
-                       player_stats: Iterable[PlayerStatsLike] | None = None) -> pb.FrameUpdate:
+def _frame_update_head(
+    session_id: str, frame: int, time_s: float, states: States | None, player_stats: Iterable[PlayerStatsLike] | None = None
+) -> pb.FrameUpdate:
     msg = pb.FrameUpdate(session_id=session_id, frame=frame, time_s=time_s)
     if player_stats is not None:
         msg.player_stats.extend(s if isinstance(s, pb.PlayerStats) else pb.PlayerStats(**s) for s in player_stats)
@@ -484,8 +497,8 @@ class SessionBase:
         self._transport = transport
         self.id: str = response.session_id
         self.recording_path: str = response.recording_path
-        self.route = route        # the ROUTE_HEADER key of every call of this session (new_route_key)
-        self.retries = 0          # calls and streams tried again after UNAVAILABLE (the server restoring the session)
+        self.route = route  # the ROUTE_HEADER key of every call of this session (new_route_key)
+        self.retries = 0  # calls and streams tried again after UNAVAILABLE (the server restoring the session)
         self._closed_frames: int | None = None
 
     def __repr__(self) -> str:

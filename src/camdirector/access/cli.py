@@ -2,6 +2,7 @@
 records database (or with `--job-store` the cluster's PostgreSQL). Whoever runs this can read the
 data directory, so the command may make keys of any tenant; over HTTP an admin manages only its
 own tenant's (`/v1/keys`)."""
+
 from __future__ import annotations
 
 import argparse
@@ -40,8 +41,13 @@ def _run(args: argparse.Namespace) -> int:
     try:
         if args.keys_command == "create":
             record, text = store.create_key(args.role, args.tenant, args.name)
-            store.audit(record.tenant, None, "key.create", None,
-                        {"key_id": record.key_id, "role": record.role, "name": record.name, "via": "cli"})
+            store.audit(
+                record.tenant,
+                None,
+                "key.create",
+                None,
+                {"key_id": record.key_id, "role": record.role, "name": record.name, "via": "cli"},
+            )
             print(text)
         elif args.keys_command == "list":
             for key in store.list_keys(args.tenant):

@@ -12,6 +12,7 @@ any node holds at once for them.
 
 With authentication off (`--no-auth`) every caller is `OPEN`: tenant `default`, role `admin`.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -30,12 +31,12 @@ from camdirector.errors import DirectorError
 log = logging.getLogger("camdirector.access")
 
 REVOCATION_POLL_S = 0.25  # how often each node looks for keys revoked elsewhere, s
-CLOCK_SKEW_S = 30.0       # revocations are read this far back from the last poll (nodes' clocks differ)
+CLOCK_SKEW_S = 30.0  # revocations are read this far back from the last poll (nodes' clocks differ)
 
 
 @dataclass(frozen=True)
 class Identity:
-    key_id: str | None   # None when authentication is off
+    key_id: str | None  # None when authentication is off
     role: str
     tenant: str
 
@@ -65,8 +66,14 @@ def bearer(authorization: str | None) -> str | None:
 class Guard:
     """`store` None: authentication off. `clock`: wall time, s (revocation times are wall times)."""
 
-    def __init__(self, store: AccessStore | None, *, enabled: bool = True, poll_s: float = REVOCATION_POLL_S,
-                 clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self,
+        store: AccessStore | None,
+        *,
+        enabled: bool = True,
+        poll_s: float = REVOCATION_POLL_S,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         self.store = store
         self.enabled = enabled and store is not None
         self.poll_s = poll_s
@@ -172,7 +179,6 @@ class Guard:
             self._watcher.cancel()
 
     # -- the audit trail (module docstring of keys.py)
-    def audit(self, identity: Identity, action: str, session_id: str | None = None,
-              detail: dict[str, Any] | None = None) -> None:
+    def audit(self, identity: Identity, action: str, session_id: str | None = None, detail: dict[str, Any] | None = None) -> None:
         if self.store is not None:
             self.store.audit(identity.tenant, identity.key_id, action, session_id, detail)

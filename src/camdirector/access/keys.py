@@ -12,6 +12,7 @@ keeps checking a streaming frame's key within its budget (docs/security.md).
 
 Revocation sets `revoked_s`; `revoked_since(t)` is what each node's guard polls (access/guard.py).
 """
+
 from __future__ import annotations
 
 import base64
@@ -60,15 +61,21 @@ class ApiKey:
         return self.revoked_s is not None
 
     def as_public(self) -> dict[str, Any]:
-        return {"id": self.key_id, "name": self.name, "role": self.role, "tenant": self.tenant,
-                "created_s": self.created_s, "revoked_s": self.revoked_s}
+        return {
+            "id": self.key_id,
+            "name": self.name,
+            "role": self.role,
+            "tenant": self.tenant,
+            "created_s": self.created_s,
+            "revoked_s": self.revoked_s,
+        }
 
 
 def split_key(token: str) -> tuple[str, str] | None:
     """(id, secret) of a key's text, None when it is not shaped like one."""
     if not token.startswith(KEY_PREFIX):
         return None
-    key_id, sep, secret = token[len(KEY_PREFIX):].partition("_")
+    key_id, sep, secret = token[len(KEY_PREFIX) :].partition("_")
     if not sep or len(key_id) != 12 or not secret or len(secret) > 128:
         return None
     return key_id, secret
@@ -127,8 +134,10 @@ def _insert_key(db: Any, role: str, tenant: str, name: str) -> tuple[ApiKey, str
         raise ValueError("a key's name is at most 200 characters")
     key_id, secret = secrets.token_hex(6), base64.urlsafe_b64encode(secrets.token_bytes(32)).decode().rstrip("=")
     record = ApiKey(key_id, name, role, tenant, time.time())
-    db.execute("INSERT INTO api_keys (id, name, role, tenant, secret_sha256, created_s) VALUES (?, ?, ?, ?, ?, ?)",
-               (key_id, name, role, tenant, secret_hash(secret), record.created_s))
+    db.execute(
+        "INSERT INTO api_keys (id, name, role, tenant, secret_sha256, created_s) VALUES (?, ?, ?, ?, ?, ?)",
+        (key_id, name, role, tenant, secret_hash(secret), record.created_s),
+    )
     return record, f"{KEY_PREFIX}{key_id}_{secret}"
 
 
@@ -173,8 +182,9 @@ class AccessStore:
             if tenant is None:
                 rows = db.execute(f"SELECT {_COLUMNS} FROM api_keys ORDER BY created_s, id").fetchall()
             else:
-                rows = db.execute(f"SELECT {_COLUMNS} FROM api_keys WHERE tenant = ? ORDER BY created_s, id",
-                                  (tenant,)).fetchall()
+                rows = db.execute(
+                    f"SELECT {_COLUMNS} FROM api_keys WHERE tenant = ? ORDER BY created_s, id", (tenant,)
+                ).fetchall()
         return [_key(r) for r in rows]
 
     def revoke(self, key_id: str, tenant: str | None = None) -> ApiKey:
@@ -192,15 +202,17 @@ class AccessStore:
     def revoked_since(self, since_s: float) -> list[tuple[str, float]]:
         """(id, revoked_s) of keys revoked at or after `since_s`."""
         with self._read() as db:
-            return [tuple(r) for r in db.execute("SELECT id, revoked_s FROM api_keys WHERE revoked_s >= ?",
-                                                 (since_s,)).fetchall()]
+            return [
+                tuple(r) for r in db.execute("SELECT id, revoked_s FROM api_keys WHERE revoked_s >= ?", (since_s,)).fetchall()
+            ]
 
     # -- session owners
     def set_session_owner(self, session_id: str, tenant: str) -> None:
         with self._tx() as db:
             db.execute("DELETE FROM session_owners WHERE session_id = ?", (session_id,))
-            db.execute("INSERT INTO session_owners (session_id, tenant, created_s) VALUES (?, ?, ?)",
-                       (session_id, tenant, time.time()))
+            db.execute(
+                "INSERT INTO session_owners (session_id, tenant, created_s) VALUES (?, ?, ?)", (session_id, tenant, time.time())
+            )
 
     def session_owner(self, session_id: str) -> str | None:
         with self._read() as db:
@@ -212,18 +224,26 @@ class AccessStore:
             db.execute("DELETE FROM session_owners WHERE session_id = ?", (session_id,))
 
     # -- audit
-    def audit(self, tenant: str, key_id: str | None, action: str, session_id: str | None = None,
-              detail: dict[str, Any] | None = None) -> None:
+    def audit(
+        self, tenant: str, key_id: str | None, action: str, session_id: str | None = None, detail: dict[str, Any] | None = None
+    ) -> None:
         with self._tx() as db:
-            db.execute("INSERT INTO audit (at_s, tenant, key_id, action, session_id, detail) VALUES (?, ?, ?, ?, ?, ?)",
-                       (time.time(), tenant, key_id, action, session_id, json.dumps(detail or {}, sort_keys=True)))
+            db.execute(
+                "INSERT INTO audit (at_s, tenant, key_id, action, session_id, detail) VALUES (?, ?, ?, ?, ?, ?)",
+                (time.time(), tenant, key_id, action, session_id, json.dumps(detail or {}, sort_keys=True)),
+            )
 
     def audit_trail(self, tenant: str, after_seq: int = 0, limit: int = 500) -> list[dict[str, Any]]:
         with self._read() as db:
-            rows = db.execute("SELECT seq, at_s, key_id, action, session_id, detail FROM audit "
-                              "WHERE tenant = ? AND seq > ? ORDER BY seq LIMIT ?", (tenant, after_seq, limit)).fetchall()
-        return [{"seq": r[0], "at_s": r[1], "key_id": r[2], "action": r[3], "session_id": r[4],
-                 "detail": json.loads(r[5])} for r in rows]
+            rows = db.execute(
+                "SELECT seq, at_s, key_id, action, session_id, detail FROM audit "
+                "WHERE tenant = ? AND seq > ? ORDER BY seq LIMIT ?",
+                (tenant, after_seq, limit),
+            ).fetchall()
+        return [
+            {"seq": r[0], "at_s": r[1], "key_id": r[2], "action": r[3], "session_id": r[4], "detail": json.loads(r[5])}
+            for r in rows
+        ]
 
     # -- secrets the nodes share (the dashboard's cookie signing key)
     def shared_secret(self, name: str) -> bytes:
@@ -256,8 +276,9 @@ class PostgresAccessStore(PostgresStore, AccessStore):
 
     def __init__(self, url: str) -> None:
         self.where = "PostgreSQL"
-        PostgresStore.__init__(self, url, "records database (keys)", AccessUnavailable, _POSTGRES_SCHEMA,
-                               write_lock=advisory_lock(_WRITE_LOCK_KEY))
+        PostgresStore.__init__(
+            self, url, "records database (keys)", AccessUnavailable, _POSTGRES_SCHEMA, write_lock=advisory_lock(_WRITE_LOCK_KEY)
+        )
 
 
 def open_access_store(records_url: str, data_dir: str | Path) -> AccessStore:

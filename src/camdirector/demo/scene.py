@@ -19,6 +19,7 @@ Layout guarantees (checked while placing, with rejection sampling):
 A 20 s walk (26-32 m) gets 10-17 columns and 3-6 obstacles; longer walks get proportionally more,
 and walks much shorter than 20 s fit fewer, because spacing rules win over counts.
 """
+
 from __future__ import annotations
 
 import math
@@ -181,9 +182,7 @@ class DemoScene:
         return t * self.avatar_speed_m_s
 
 
-def build_demo_scene(
-    seed: int = 7, duration_s: float = 20.0, rng: np.random.Generator | None = None
-) -> DemoScene:
+def build_demo_scene(seed: int = 7, duration_s: float = 20.0, rng: np.random.Generator | None = None) -> DemoScene:
     """The demo scene for `seed` (or for the given generator, which then overrides seed).
 
     duration_s: walking time in seconds, in (0, MAX_DURATION_S]; the path is as long as the avatar
@@ -315,9 +314,7 @@ def distance_to_polyline(points_xz: np.ndarray, polyline_xz: np.ndarray) -> np.n
 
 
 def _ground_object() -> DemoObject:
-    slab = trimesh.creation.box(
-        extents=(2 * GROUND_HALF_EXTENT_M, GROUND_THICKNESS_M, 2 * GROUND_HALF_EXTENT_M)
-    )
+    slab = trimesh.creation.box(extents=(2 * GROUND_HALF_EXTENT_M, GROUND_THICKNESS_M, 2 * GROUND_HALF_EXTENT_M))
     slab.apply_translation((0.0, -GROUND_THICKNESS_M / 2.0, 0.0))  # top face at y = 0
     return DemoObject(
         id="ground",
@@ -363,8 +360,7 @@ def _place_columns(
             if any(np.linalg.norm(center - c) < radius_m + r + 1.5 for c, r in zip(centers, radii)):
                 continue
             if any(
-                np.min(np.linalg.norm(points - center, axis=1))
-                < radius_m + track.footprint_radius_m + 0.2
+                np.min(np.linalg.norm(points - center, axis=1)) < radius_m + track.footprint_radius_m + 0.2
                 for points, track in zip(track_points, tracks)
             ):
                 continue
@@ -401,8 +397,7 @@ def _place_obstacles(
     count = round(int(rng.integers(3, 7)) * _density_scale(length_m))
     times_s = np.linspace(0.0, duration_s, int(duration_s * 20) + 1)  # 50 ms checks
     avatar_xz = np.stack(
-        [np.interp(times_s * speed_m_s, np.arange(len(path_xz)) * PATH_STEP_M, path_xz[:, i])
-         for i in range(2)],
+        [np.interp(times_s * speed_m_s, np.arange(len(path_xz)) * PATH_STEP_M, path_xz[:, i]) for i in range(2)],
         axis=1,
     )
     tracks: list[ObstacleTrack] = []
@@ -463,9 +458,7 @@ def _obstacle_mesh(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
     return _upright_cylinder(radius_m, float(rng.uniform(2.4, 3.2))), radius_m
 
 
-def _track_is_clear(
-    track: ObstacleTrack, tracks: list[ObstacleTrack], times_s: np.ndarray, avatar_xz: np.ndarray
-) -> bool:
+def _track_is_clear(track: ObstacleTrack, tracks: list[ObstacleTrack], times_s: np.ndarray, avatar_xz: np.ndarray) -> bool:
     """Whether the track stays on the ground, off the other tracks, and off the avatar."""
     segment = _sample_segment(track)  # (32, 2)
     if np.max(np.abs(segment)) > GROUND_HALF_EXTENT_M - 2.0:

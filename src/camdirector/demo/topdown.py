@@ -7,6 +7,7 @@ camera above the scene would see.
 Uses matplotlib's object API with the Agg canvas, not pyplot, so it keeps no global figure state
 and is safe to call from server threads.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -59,38 +60,37 @@ def draw_topdown(
             continue
         footprint = obj.transform.apply(obj.vertices)[:, [0, 2]]  # (n, 2) world xz
         hull = footprint[ConvexHull(footprint).vertices]
-        ax.add_patch(Polygon(hull, closed=True, facecolor=_COLUMN_COLOR, edgecolor="#555555",
-                             linewidth=0.6, zorder=2))
+        ax.add_patch(Polygon(hull, closed=True, facecolor=_COLUMN_COLOR, edgecolor="#555555", linewidth=0.6, zorder=2))
 
     for track in scene.obstacle_tracks:
         ends = track.endpoints_xz
         # A band as wide as the obstacle: the ground it can occupy at some time.
-        ax.plot(ends[:, 0], ends[:, 1], color=_TRACK_COLOR, alpha=0.18,
-                linewidth=2.0 * track.footprint_radius_m * points_per_m,
-                solid_capstyle="round", zorder=1)
-        ax.plot(ends[:, 0], ends[:, 1], color=_TRACK_COLOR, alpha=0.5, linewidth=0.8,
-                linestyle="--", zorder=1)
+        ax.plot(
+            ends[:, 0],
+            ends[:, 1],
+            color=_TRACK_COLOR,
+            alpha=0.18,
+            linewidth=2.0 * track.footprint_radius_m * points_per_m,
+            solid_capstyle="round",
+            zorder=1,
+        )
+        ax.plot(ends[:, 0], ends[:, 1], color=_TRACK_COLOR, alpha=0.5, linewidth=0.8, linestyle="--", zorder=1)
 
     ax.plot(target[:, 0], target[:, 1], color=_TARGET_COLOR, linewidth=2.0, zorder=3)
     # Split the camera path at cuts so a cut does not read as a fast camera move.
     bounds = [0, *cuts, len(camera)]
     for start, stop in zip(bounds[:-1], bounds[1:]):
-        ax.plot(camera[start:stop, 0], camera[start:stop, 1], color=_CAMERA_COLOR,
-                linewidth=1.6, zorder=4)
+        ax.plot(camera[start:stop, 0], camera[start:stop, 1], color=_CAMERA_COLOR, linewidth=1.6, zorder=4)
     for i in cuts:
-        ax.plot(camera[i - 1 : i + 1, 0], camera[i - 1 : i + 1, 1], color=_CAMERA_COLOR,
-                linewidth=0.8, linestyle=":", zorder=4)
+        ax.plot(camera[i - 1 : i + 1, 0], camera[i - 1 : i + 1, 1], color=_CAMERA_COLOR, linewidth=0.8, linestyle=":", zorder=4)
         ax.scatter(camera[i, 0], camera[i, 1], marker="X", s=60, color="#c01f3c", zorder=6)
         if i < len(target):
             sight = np.stack([camera[i], target[i]])
-            ax.plot(sight[:, 0], sight[:, 1], color="#c01f3c", linewidth=0.6, alpha=0.6,
-                    zorder=5)
+            ax.plot(sight[:, 0], sight[:, 1], color="#c01f3c", linewidth=0.6, alpha=0.6, zorder=5)
 
     for path, color in ((target, _TARGET_COLOR), (camera, _CAMERA_COLOR)):
-        ax.scatter(path[0, 0], path[0, 1], marker="o", s=55, color=color, edgecolor="black",
-                   zorder=7)
-        ax.scatter(path[-1, 0], path[-1, 1], marker="s", s=55, color=color, edgecolor="black",
-                   zorder=7)
+        ax.scatter(path[0, 0], path[0, 1], marker="o", s=55, color=color, edgecolor="black", zorder=7)
+        ax.scatter(path[-1, 0], path[-1, 1], marker="s", s=55, color=color, edgecolor="black", zorder=7)
 
     ax.set_xlim(*x_range_m)
     ax.set_ylim(z_range_m[1], z_range_m[0])  # +Z down the page, see module doc
@@ -102,16 +102,11 @@ def draw_topdown(
         handles=[
             Line2D([], [], color=_TARGET_COLOR, linewidth=2.0, label="target path"),
             Line2D([], [], color=_CAMERA_COLOR, linewidth=1.6, label="camera path"),
-            Line2D([], [], marker="o", linestyle="", color="grey", markeredgecolor="black",
-                   label="start"),
-            Line2D([], [], marker="s", linestyle="", color="grey", markeredgecolor="black",
-                   label="end"),
-            Line2D([], [], marker="X", linestyle="", color="#c01f3c",
-                   label=f"cut ({len(cuts)}) and new line of sight"),
-            Polygon(np.zeros((3, 2)), facecolor=_COLUMN_COLOR, edgecolor="#555555",
-                    label="column"),
-            Line2D([], [], color=_TRACK_COLOR, alpha=0.4, linewidth=6.0,
-                   label="moving obstacle track"),
+            Line2D([], [], marker="o", linestyle="", color="grey", markeredgecolor="black", label="start"),
+            Line2D([], [], marker="s", linestyle="", color="grey", markeredgecolor="black", label="end"),
+            Line2D([], [], marker="X", linestyle="", color="#c01f3c", label=f"cut ({len(cuts)}) and new line of sight"),
+            Polygon(np.zeros((3, 2)), facecolor=_COLUMN_COLOR, edgecolor="#555555", label="column"),
+            Line2D([], [], color=_TRACK_COLOR, alpha=0.4, linewidth=6.0, label="moving obstacle track"),
         ],
         loc="upper right",
         fontsize=8,
@@ -137,12 +132,9 @@ def _as_path(path_xz: np.ndarray, name: str) -> np.ndarray:
     return path
 
 
-def _limits(
-    target: np.ndarray, camera: np.ndarray, scene: DemoScene
-) -> tuple[tuple[float, float], tuple[float, float]]:
+def _limits(target: np.ndarray, camera: np.ndarray, scene: DemoScene) -> tuple[tuple[float, float], tuple[float, float]]:
     """Square x and z ranges around the paths and obstacle tracks (not the whole ground)."""
     points = np.concatenate([target, camera, *(t.endpoints_xz for t in scene.obstacle_tracks)])
     low, high = points.min(axis=0) - 3.0, points.max(axis=0) + 3.0
     center, half = (low + high) / 2.0, float(np.max(high - low)) / 2.0
     return (center[0] - half, center[0] + half), (center[1] - half, center[1] + half)
-

@@ -22,6 +22,7 @@ returns with everything running; the same object is kept in DIR/cluster.json, wh
 `add-node` and `status` read. From Python, `Cluster.up(nodes, folder)` gives the same cluster with
 `kill_node`, `add_node` and `down` (the failover benchmark's handle).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -65,7 +66,7 @@ class ClusterSettings:
     # `camdirector job-worker` processes taking jobs off the Redis queue (started only where that
     # command exists). [0, 64]
     queue_workers: int = 1
-    start_timeout_s: float = 60.0   # the longest one node may take to print its ready line, s. [1, 600]
+    start_timeout_s: float = 60.0  # the longest one node may take to print its ready line, s. [1, 600]
     healthy_timeout_s: float = 30.0  # the longest HAProxy may take to see every node healthy, s. [1, 600]
     node_args: tuple[str, ...] = ()  # more `camdirector serve` flags for every node (e.g. --max-sessions 128)
     balancer: BalancerSettings = field(default_factory=BalancerSettings)
@@ -91,12 +92,12 @@ class ClusterSettings:
 
 @dataclass(frozen=True)
 class NodeInfo:
-    node_id: str     # "node-K", its --node-id and its server name in HAProxy
-    server_id: int   # K: HAProxy's server id, which places the node on the hash ring
-    pid: int         # the node's `camdirector serve` (front) process
-    grpc: str        # HOST:PORT
-    http: str        # HOST:PORT
-    zmq: str         # tcp://HOST:PORT, for ZeroMQ clients, which connect to a node directly
+    node_id: str  # "node-K", its --node-id and its server name in HAProxy
+    server_id: int  # K: HAProxy's server id, which places the node on the hash ring
+    pid: int  # the node's `camdirector serve` (front) process
+    grpc: str  # HOST:PORT
+    http: str  # HOST:PORT
+    zmq: str  # tcp://HOST:PORT, for ZeroMQ clients, which connect to a node directly
 
     @property
     def backend(self) -> Backend:
@@ -120,8 +121,11 @@ class Cluster:
         balancer = state.get("balancer")
         self.haproxy: HAProxy | None = None
         if balancer is not None:
-            self.haproxy = HAProxy(self.folder, self.tls, dataclasses.replace(
-                settings.balancer, grpc_port=balancer["grpc_port"], http_port=balancer["http_port"]))
+            self.haproxy = HAProxy(
+                self.folder,
+                self.tls,
+                dataclasses.replace(settings.balancer, grpc_port=balancer["grpc_port"], http_port=balancer["http_port"]),
+            )
             self.haproxy.pid = balancer["pid"]  # started by another process: known by its pid alone
             self.haproxy.backends = [n.backend for n in self.nodes]
 
@@ -195,13 +199,17 @@ class Cluster:
         if (folder / STATE_FILE).exists():
             old = cls.attach(folder)
             if old.running_pids():
-                raise ClusterError(f"a cluster already runs in {folder} (pids {old.running_pids()}): "
-                                   f"scripts/cluster.sh down --dir {folder}")
+                raise ClusterError(
+                    f"a cluster already runs in {folder} (pids {old.running_pids()}): scripts/cluster.sh down --dir {folder}"
+                )
             old.down()  # what is left of one that died: its PostgreSQL, its state file
         folder.mkdir(parents=True, exist_ok=True)
         started = time.monotonic()
-        cluster = cls(folder, settings, {"folder": str(folder), "nodes": [], "queue_workers": [], "notes": [],
-                                         "settings": settings.as_dict()})
+        cluster = cls(
+            folder,
+            settings,
+            {"folder": str(folder), "nodes": [], "queue_workers": [], "notes": [], "settings": settings.as_dict()},
+        )
         try:
             cluster._start(nodes)
         except BaseException:
@@ -213,8 +221,9 @@ class Cluster:
 
     def _start(self, nodes: int) -> None:
         # whether this checkout has `camdirector job-worker` (the Redis queue's worker), found meanwhile
-        has_job_worker = subprocess.Popen([*_serve_command(), "job-worker", "--help"],
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        has_job_worker = subprocess.Popen(
+            [*_serve_command(), "job-worker", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
         self._children.append(has_job_worker)
         redis = RedisServer(self.folder / "redis", persist=True).start()
         assert redis.proc is not None  # start() launched it
@@ -243,9 +252,17 @@ class Cluster:
         self.haproxy = haproxy = HAProxy(self.folder, tls, self.settings.balancer).start([n.backend for n in self.nodes])
         assert haproxy.proc is not None  # start() launched it
         self._children.append(haproxy.proc)
-        self.state.update(grpc=haproxy.grpc, http=haproxy.http, balancer={
-            "pid": haproxy.pid, "grpc_port": haproxy.grpc_port, "http_port": haproxy.http_port,
-            "config": str(haproxy.config_path), "socket": str(haproxy.socket_path)})
+        self.state.update(
+            grpc=haproxy.grpc,
+            http=haproxy.http,
+            balancer={
+                "pid": haproxy.pid,
+                "grpc_port": haproxy.grpc_port,
+                "http_port": haproxy.http_port,
+                "config": str(haproxy.config_path),
+                "socket": str(haproxy.socket_path),
+            },
+        )
         self._save()
         haproxy.wait_until({n.node_id: "UP" for n in self.nodes}, self.settings.healthy_timeout_s)
 
@@ -255,16 +272,36 @@ class Cluster:
         for k in numbers:
             name = f"node-{k}"
             out, log = self.folder / f"{name}.out", self.folder / f"{name}.log"
-            cmd = [*_serve_command(), "serve", "--grpc", "127.0.0.1:0", "--zmq", "tcp://127.0.0.1:*",
-                   "--http", "127.0.0.1:0", "--workers", str(self.settings.workers_per_node),
-                   "--node-id", name, "--data-dir", str(self.data_dir),
-                   "--tls-cert", str(self.tls.cert), "--tls-key", str(self.tls.key),
-                   "--checkpoint-store", self.state["redis"], "--job-store", self.state["postgres"],
-                   "--job-queue", self.state["job_queue"], *self.settings.node_args]
+            cmd = [
+                *_serve_command(),
+                "serve",
+                "--grpc",
+                "127.0.0.1:0",
+                "--zmq",
+                "tcp://127.0.0.1:*",
+                "--http",
+                "127.0.0.1:0",
+                "--workers",
+                str(self.settings.workers_per_node),
+                "--node-id",
+                name,
+                "--data-dir",
+                str(self.data_dir),
+                "--tls-cert",
+                str(self.tls.cert),
+                "--tls-key",
+                str(self.tls.key),
+                "--checkpoint-store",
+                self.state["redis"],
+                "--job-store",
+                self.state["postgres"],
+                "--job-queue",
+                self.state["job_queue"],
+                *self.settings.node_args,
+            ]
             # stdout to a file, not a pipe: the node outlives this process, and a pipe would close
             with open(out, "wb") as stdout, open(log, "ab") as stderr:
-                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr,
-                                        start_new_session=True)
+                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr, start_new_session=True)
             self._children.append(proc)
             launched.append((k, name, proc, out, log))
         nodes = []
@@ -277,8 +314,9 @@ class Cluster:
                     other.kill()
                     other.wait()
                 raise
-            nodes.append(NodeInfo(node_id=name, server_id=k, pid=proc.pid, grpc=ready["grpc"], http=ready["http"],
-                                  zmq=ready["zmq"]))
+            nodes.append(
+                NodeInfo(node_id=name, server_id=k, pid=proc.pid, grpc=ready["grpc"], http=ready["http"], zmq=ready["zmq"])
+            )
         return nodes
 
     def _check_access(self, name: str, ready: dict) -> None:
@@ -289,14 +327,18 @@ class Cluster:
             raise ClusterError(f"{name} serves without TLS or without keys: {ready}")
         self.state.setdefault("zmq_server_key", ready["zmq_server_key"])
         if ready["zmq_server_key"] != self.state["zmq_server_key"]:
-            raise ClusterError(f"{name} announces the CURVE key {ready['zmq_server_key']}, its peers "
-                               f"{self.state['zmq_server_key']}: their shared data folder's zmq/ was made twice")
+            raise ClusterError(
+                f"{name} announces the CURVE key {ready['zmq_server_key']}, its peers "
+                f"{self.state['zmq_server_key']}: their shared data folder's zmq/ was made twice"
+            )
         key_file = ready.get("admin_key_file", self.state.get("admin_key_file"))
         if key_file is None:  # a folder used before: PostgreSQL kept its keys, the data folder the file
             key_file = str(self.data_dir / ADMIN_KEY_FILE)
             if not Path(key_file).is_file():
-                raise ClusterError(f"the keys in {self.state['postgres']} include an admin key, but {key_file} "
-                                   f"is gone: scripts/cluster.sh down, then remove {self.folder}")
+                raise ClusterError(
+                    f"the keys in {self.state['postgres']} include an admin key, but {key_file} "
+                    f"is gone: scripts/cluster.sh down, then remove {self.folder}"
+                )
         self.state["admin_key_file"] = key_file
 
     def _wait_ready(self, proc: subprocess.Popen, out: Path, log: Path, name: str) -> dict:
@@ -313,9 +355,21 @@ class Cluster:
     def _start_queue_worker(self, k: int) -> subprocess.Popen:
         with open(self.folder / f"queue-worker-{k}.log", "ab") as log:
             proc = subprocess.Popen(
-                [*_serve_command(), "job-worker", "--job-queue", self.state["job_queue"],
-                 "--job-store", self.state["postgres"], "--data-dir", str(self.data_dir)],
-                stdin=subprocess.DEVNULL, stdout=log, stderr=log, start_new_session=True)
+                [
+                    *_serve_command(),
+                    "job-worker",
+                    "--job-queue",
+                    self.state["job_queue"],
+                    "--job-store",
+                    self.state["postgres"],
+                    "--data-dir",
+                    str(self.data_dir),
+                ],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
+                start_new_session=True,
+            )
         self._children.append(proc)
         return proc
 
@@ -395,18 +449,24 @@ class Cluster:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="cluster.sh", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    commands = {name: sub.add_parser(name, help=text) for name, text in (
-        ("up", "start the cluster and print its addresses as one JSON object"),
-        ("down", "stop everything the cluster in --dir runs"),
-        ("add-node", "start one more node and add it to the balancer; prints it as JSON"),
-        ("status", "the cluster's JSON and what HAProxy thinks of each node"))}
+    commands = {
+        name: sub.add_parser(name, help=text)
+        for name, text in (
+            ("up", "start the cluster and print its addresses as one JSON object"),
+            ("down", "stop everything the cluster in --dir runs"),
+            ("add-node", "start one more node and add it to the balancer; prints it as JSON"),
+            ("status", "the cluster's JSON and what HAProxy thinks of each node"),
+        )
+    }
     for p in commands.values():
         p.add_argument("--dir", type=Path, default=DEFAULT_FOLDER, help=f"the cluster's folder (default {DEFAULT_FOLDER})")
     commands["up"].add_argument("--nodes", type=int, default=2, help="nodes to start [1, 256]")
-    commands["up"].add_argument("--workers-per-node", type=int, default=ClusterSettings.workers_per_node,
-                                help="worker processes per node")
-    commands["up"].add_argument("--queue-workers", type=int, default=ClusterSettings.queue_workers,
-                                help="`camdirector job-worker` processes")
+    commands["up"].add_argument(
+        "--workers-per-node", type=int, default=ClusterSettings.workers_per_node, help="worker processes per node"
+    )
+    commands["up"].add_argument(
+        "--queue-workers", type=int, default=ClusterSettings.queue_workers, help="`camdirector job-worker` processes"
+    )
     args = parser.parse_args(argv)
     try:
         if args.command == "up":
@@ -418,8 +478,16 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps(dataclasses.asdict(Cluster.attach(args.dir).add_node())), flush=True)
         else:
             cluster = Cluster.attach(args.dir)
-            print(json.dumps({**cluster.as_dict(), "running_pids": cluster.running_pids(),
-                              "balancer_sees": cluster.balancer().server_states()}), flush=True)
+            print(
+                json.dumps(
+                    {
+                        **cluster.as_dict(),
+                        "running_pids": cluster.running_pids(),
+                        "balancer_sees": cluster.balancer().server_states(),
+                    }
+                ),
+                flush=True,
+            )
     except (ClusterError, ServiceError, ValueError) as exc:
         print(f"cluster.sh {args.command}: {exc}", file=sys.stderr)
         return 1

@@ -19,6 +19,7 @@ What differs from a user's machine, and how:
   is this cluster's (${CAMDIRECTOR_TLS_DIR}): several runs never collide, and the checkout's
   docker/tls is left alone.
 """
+
 from __future__ import annotations
 
 import json
@@ -43,8 +44,7 @@ from camdirector.deploy.services import ServiceError, free_port
 from camdirector.deploy.tls import make_tls_files
 
 COMPOSE_FILE = Path("docker") / "compose.cluster.yaml"
-STAND_INS = {"redis": "CAMDIRECTOR_REDIS_IMAGE", "postgres": "CAMDIRECTOR_POSTGRES_IMAGE",
-             "haproxy": "CAMDIRECTOR_HAPROXY_IMAGE"}
+STAND_INS = {"redis": "CAMDIRECTOR_REDIS_IMAGE", "postgres": "CAMDIRECTOR_POSTGRES_IMAGE", "haproxy": "CAMDIRECTOR_HAPROXY_IMAGE"}
 SERVICE_UID = 10001  # docker/Dockerfile's user: it must read the TLS key
 DATA_DIR = "/var/lib/camdirector"
 
@@ -64,8 +64,21 @@ def build_stand_ins(root: Path, base: str | None = None, log=print) -> dict[str,
     for target, variable in STAND_INS.items():
         tag = f"localhost/camdirector-stand-in-{target}:bookworm-{BASE_REVISION}"
         started = time.monotonic()
-        podman("build", "--format", "docker", "--network", "host", "--build-arg", f"BASE={base}",
-               "--target", target, "-t", tag, str(Path(root) / "docker" / "stand-ins"), timeout_s=900)
+        podman(
+            "build",
+            "--format",
+            "docker",
+            "--network",
+            "host",
+            "--build-arg",
+            f"BASE={base}",
+            "--target",
+            target,
+            "-t",
+            tag,
+            str(Path(root) / "docker" / "stand-ins"),
+            timeout_s=900,
+        )
         log(f"built {tag} in {time.monotonic() - started:.0f} s")
         images[variable] = tag
     return images
@@ -73,11 +86,13 @@ def build_stand_ins(root: Path, base: str | None = None, log=print) -> dict[str,
 
 def _containers_conf(path: Path) -> Path:
     """podman's settings for every command podman-compose runs (the module docstring)."""
-    path.write_text("[containers]\n"
-                    f"default_ulimits = {json.dumps(container_ulimits())}\n"
-                    "[engine]\n"
-                    'runtime = "runc"\n'
-                    'cgroup_manager = "cgroupfs"\n')
+    path.write_text(
+        "[containers]\n"
+        f"default_ulimits = {json.dumps(container_ulimits())}\n"
+        "[engine]\n"
+        'runtime = "runc"\n'
+        'cgroup_manager = "cgroupfs"\n'
+    )
     return path
 
 
@@ -107,8 +122,17 @@ class ComposeCluster:
         return self.folder / "tls" / "ca.pem"
 
     @classmethod
-    def up(cls, root: Path, folder: Path, *, project: str = "camdirector-cluster", image: str | None = None,
-           stand_ins: bool = True, timeout_s: float = 180.0, log=print) -> ComposeCluster:
+    def up(
+        cls,
+        root: Path,
+        folder: Path,
+        *,
+        project: str = "camdirector-cluster",
+        image: str | None = None,
+        stand_ins: bool = True,
+        timeout_s: float = 180.0,
+        log=print,
+    ) -> ComposeCluster:
         """Builds what is missing (the service image, the stand-ins), then brings the cluster up
         and returns once HAProxy sees every node healthy. ServiceError (with the logs' tails) when
         something does not come up within timeout_s."""
@@ -118,9 +142,13 @@ class ComposeCluster:
         folder.mkdir(parents=True, exist_ok=True)
         tls = make_tls_files(folder / "tls")
         os.chown(tls.key, SERVICE_UID, -1)  # the key stays 0600; the nodes' user reads it
-        env = {"CAMDIRECTOR_IMAGE": image or build_image(root, log=log), "CAMDIRECTOR_TLS_DIR": str(tls.cert.parent),
-               "CAMDIRECTOR_GRPC_PORT": str(free_port()), "CAMDIRECTOR_HTTP_PORT": str(free_port()),
-               "CONTAINERS_CONF": str(_containers_conf(folder / "containers.conf"))}
+        env = {
+            "CAMDIRECTOR_IMAGE": image or build_image(root, log=log),
+            "CAMDIRECTOR_TLS_DIR": str(tls.cert.parent),
+            "CAMDIRECTOR_GRPC_PORT": str(free_port()),
+            "CAMDIRECTOR_HTTP_PORT": str(free_port()),
+            "CONTAINERS_CONF": str(_containers_conf(folder / "containers.conf")),
+        }
         env.update({f"CAMDIRECTOR_ZMQ_PORT_{k}": str(free_port()) for k in (1, 2, 3)})
         if stand_ins:
             env.update(build_stand_ins(root, log=log))
@@ -152,9 +180,13 @@ class ComposeCluster:
         with open(self.log_path, "a") as log:
             log.write(f"\n$ podman-compose {' '.join(args)}\n")
             log.flush()
-            done = subprocess.run([require_podman_compose(), "-p", self.project, "-f", str(self.file), *args],
-                                  stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **self.env},
-                                  timeout=timeout_s)
+            done = subprocess.run(
+                [require_podman_compose(), "-p", self.project, "-f", str(self.file), *args],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env={**os.environ, **self.env},
+                timeout=timeout_s,
+            )
         if done.returncode != 0:
             raise ServiceError(f"podman-compose {' '.join(args)} exited {done.returncode}: {self._log_tail()}")
 
@@ -192,8 +224,9 @@ class ComposeCluster:
         deadline = time.monotonic() + timeout_s
         while True:
             try:
-                return self.balancer().wait_until({n: "UP" if n in up else "DOWN" for n in self.nodes},
-                                                  timeout_s=max(0.1, deadline - time.monotonic()))
+                return self.balancer().wait_until(
+                    {n: "UP" if n in up else "DOWN" for n in self.nodes}, timeout_s=max(0.1, deadline - time.monotonic())
+                )
             except (OSError, KeyError, IndexError):  # HAProxy starting: no socket yet
                 if time.monotonic() > deadline:
                     raise ServiceError(f"haproxy's runtime API did not answer: {self.logs('haproxy')}") from None
@@ -207,10 +240,12 @@ class ComposeCluster:
     def sessions_on(self, node: str) -> set[str]:
         """The ids of the sessions `node` holds, from its own REST listing (asked inside its
         container: the nodes' HTTP ports are reached through the balancer only)."""
-        script = ("import json, ssl, urllib.request; "
-                  f"key = open('{DATA_DIR}/admin.key').read().strip(); "
-                  "r = urllib.request.Request('https://127.0.0.1:8080/v1/sessions', headers={'Authorization': 'Bearer ' + key}); "
-                  "print(urllib.request.urlopen(r, context=ssl._create_unverified_context(), timeout=10).read().decode())")
+        script = (
+            "import json, ssl, urllib.request; "
+            f"key = open('{DATA_DIR}/admin.key').read().strip(); "
+            "r = urllib.request.Request('https://127.0.0.1:8080/v1/sessions', headers={'Authorization': 'Bearer ' + key}); "
+            "print(urllib.request.urlopen(r, context=ssl._create_unverified_context(), timeout=10).read().decode())"
+        )
         listing = json.loads(podman("exec", self.container(node), "python", "-c", script).stdout)
         return {s["session_id"] for s in listing["sessions"]}
 
@@ -232,8 +267,9 @@ class ComposeCluster:
     def down(self, keep_folder: bool = False) -> None:
         """Containers, network and volumes removed; the folder too unless `keep_folder`. podman
         directly, all at once: `podman-compose down` stops them one by one, a second apart."""
-        names = podman("ps", "-a", "--filter", f"label=com.docker.compose.project={self.project}",
-                       "--format", "{{.Names}}", check=False).stdout.split()
+        names = podman(
+            "ps", "-a", "--filter", f"label=com.docker.compose.project={self.project}", "--format", "{{.Names}}", check=False
+        ).stdout.split()
         if names:
             podman("rm", "-f", "-t", "0", *names, check=False)
         for volume in ("camdirector-data", "postgres-data"):

@@ -29,6 +29,7 @@ DATA frame holding the empty HealthCheckRequest, and `tcp-check expect binary` w
 HealthCheckResponse{status: SERVING} message in the reply. NOT_SERVING, an unknown service, a
 refused connection or silence all fail it.
 """
+
 from __future__ import annotations
 
 import csv
@@ -48,14 +49,14 @@ UNIX_PATH_MAX = 107  # bytes in a unix socket's path, Linux's sun_path less the 
 
 @dataclass(frozen=True)
 class BalancerSettings:
-    host: str = "127.0.0.1"                # where the frontends listen (loopback: nothing else reaches them)
-    grpc_port: int = 0                     # the gRPC frontend's port; 0 picks a free one
-    http_port: int = 0                     # the REST frontend's port; 0 picks a free one
-    check_interval_s: float = 1.0          # between two health checks of a node in a steady state, s. [0.05, 60]
-    check_fast_interval_s: float = 0.25    # between checks while a node is going up or down, s. [0.05, 60]
-    check_timeout_s: float = 1.0           # a check unanswered this long fails, s. [0.05, 60]
-    fall: int = 2                          # failed checks in a row that mark a node down. [1, 100]
-    rise: int = 2                          # passed checks in a row that mark it up again. [1, 100]
+    host: str = "127.0.0.1"  # where the frontends listen (loopback: nothing else reaches them)
+    grpc_port: int = 0  # the gRPC frontend's port; 0 picks a free one
+    http_port: int = 0  # the REST frontend's port; 0 picks a free one
+    check_interval_s: float = 1.0  # between two health checks of a node in a steady state, s. [0.05, 60]
+    check_fast_interval_s: float = 0.25  # between checks while a node is going up or down, s. [0.05, 60]
+    check_timeout_s: float = 1.0  # a check unanswered this long fails, s. [0.05, 60]
+    fall: int = 2  # failed checks in a row that mark a node down. [1, 100]
+    rise: int = 2  # passed checks in a row that mark it up again. [1, 100]
     # Every node's weight. HAProxy puts 16 points per unit of weight on the hash ring: at weight 1
     # (its default) the busiest node's share of the ring is 1.34x the mean at 10 nodes and 1.44x at
     # 100; at 256 (4096 points) 1.02x and 1.03x (load_tests/ring_sim.py). [1, 256]
@@ -63,7 +64,7 @@ class BalancerSettings:
     # The longest a client or node may stay silent on an open connection or stream before HAProxy
     # closes it: a game paused longer than this reconnects (its session waits for it), s. [1, 86400]
     idle_timeout_s: float = 600.0
-    connect_timeout_s: float = 1.0         # a loopback or LAN connect takes far less; more means the node is gone, s
+    connect_timeout_s: float = 1.0  # a loopback or LAN connect takes far less; more means the node is gone, s
     # The name every node's certificate holds, which HAProxy checks (verifyhost); deploy/tls.py's
     # certificates hold "localhost" and 127.0.0.1, and HAProxy checks a name only.
     node_tls_name: str = "localhost"
@@ -86,11 +87,12 @@ class BalancerSettings:
 @dataclass(frozen=True)
 class Backend:
     """One node as the balancer sees it."""
-    name: str        # the server's name in both backends, e.g. "node-1"
-    server_id: int   # HAProxy's server id: a node's points on the hash ring are derived from it alone,
-                     # so the same id gives the same sessions on every balancer and after a restart
-    grpc: str        # the node's gRPC HOST:PORT
-    http: str        # the node's HTTP HOST:PORT
+
+    name: str  # the server's name in both backends, e.g. "node-1"
+    server_id: int  # HAProxy's server id: a node's points on the hash ring are derived from it alone,
+    # so the same id gives the same sessions on every balancer and after a restart
+    grpc: str  # the node's gRPC HOST:PORT
+    http: str  # the node's HTTP HOST:PORT
 
 
 def _h2_frame(kind: int, flags: int, stream: int, payload: bytes) -> bytes:
@@ -108,16 +110,25 @@ def grpc_health_check_request() -> bytes:
     """The bytes of a whole gRPC call of grpc.health.v1.Health/Check for the server's overall
     health (service ""), from the connection preface on, as `tcp-check send-binary` sends them
     (over the TLS connection that `check-ssl` opens)."""
-    headers = (bytes([0x83, 0x87])                                         # :method POST, :scheme https
-               + _hpack_literal(4, b"/grpc.health.v1.Health/Check")         # :path
-               + _hpack_literal(1, b"localhost")                            # :authority
-               + bytes([0x0F, 0x10]) + bytes([16]) + b"application/grpc"    # content-type (static entry 31)
-               + bytes([0x00, 2]) + b"te" + bytes([8]) + b"trailers")       # te: trailers (a new name)
+    headers = (
+        bytes([0x83, 0x87])  # :method POST, :scheme https
+        + _hpack_literal(4, b"/grpc.health.v1.Health/Check")  # :path
+        + _hpack_literal(1, b"localhost")  # :authority
+        + bytes([0x0F, 0x10])
+        + bytes([16])
+        + b"application/grpc"  # content-type (static entry 31)
+        + bytes([0x00, 2])
+        + b"te"
+        + bytes([8])
+        + b"trailers"
+    )  # te: trailers (a new name)
     empty_request = bytes(5)  # not compressed, length 0: HealthCheckRequest{service: ""}
-    return (b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
-            + _h2_frame(0x4, 0x0, 0, b"")               # SETTINGS, all defaults
-            + _h2_frame(0x1, 0x4, 1, headers)           # HEADERS, END_HEADERS, stream 1
-            + _h2_frame(0x0, 0x1, 1, empty_request))    # DATA, END_STREAM
+    return (
+        b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
+        + _h2_frame(0x4, 0x0, 0, b"")  # SETTINGS, all defaults
+        + _h2_frame(0x1, 0x4, 1, headers)  # HEADERS, END_HEADERS, stream 1
+        + _h2_frame(0x0, 0x1, 1, empty_request)
+    )  # DATA, END_STREAM
 
 
 # The reply's message: not compressed, length 2, HealthCheckResponse{status: SERVING (field 1 = 1)}.
@@ -132,14 +143,25 @@ def _ms(seconds: float) -> str:
 def _server_args(s: BalancerSettings, tls: TlsFiles, grpc: bool) -> str:
     """A node's TLS, health check and weight: the traffic and the checks over TLS to a node that
     proves itself with the CA's certificate, gRPC's (`grpc`) as HTTP/2."""
-    args = (f"ssl verify required ca-file {tls.ca_cert} verifyhost {s.node_tls_name} "
-            f"check check-ssl inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
-            f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight}")
+    args = (
+        f"ssl verify required ca-file {tls.ca_cert} verifyhost {s.node_tls_name} "
+        f"check check-ssl inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
+        f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight}"
+    )
     return args + " proto h2 alpn h2 check-alpn h2" if grpc else args
 
 
-def render_config(settings: BalancerSettings, backends: list[Backend], *, tls: TlsFiles, stats_socket: str,
-                  grpc_port: int, http_port: int, resolvers: bool = False, user: str = "") -> str:
+def render_config(
+    settings: BalancerSettings,
+    backends: list[Backend],
+    *,
+    tls: TlsFiles,
+    stats_socket: str,
+    grpc_port: int,
+    http_port: int,
+    resolvers: bool = False,
+    user: str = "",
+) -> str:
     """haproxy.cfg for these nodes, its frontends presenting `tls.bundle`, the nodes checked against
     `tls.ca_cert`. `resolvers`: node names are found again while it runs, through the nameservers of
     its /etc/resolv.conf: names that only a container network's DNS knows, and whose address
@@ -243,20 +265,26 @@ class RuntimeApi:
             states.setdefault(row["pxname"], {})[row["svname"]] = status
         return states
 
-    def wait_until(self, expected: dict[str, str], timeout_s: float = 30.0,
-                   backends: tuple[str, ...] = (GRPC_BACKEND, HTTP_BACKEND)) -> float:
+    def wait_until(
+        self, expected: dict[str, str], timeout_s: float = 30.0, backends: tuple[str, ...] = (GRPC_BACKEND, HTTP_BACKEND)
+    ) -> float:
         """Waits until every named server has the given status ("UP" or "DOWN") in `backends`;
         returns the seconds it took. ServiceError after timeout_s."""
         start = time.monotonic()
         while True:
             states = self.server_states()
-            wrong = {(backend, name): states.get(backend, {}).get(name) for backend in backends
-                     for name, status in expected.items() if states.get(backend, {}).get(name) != status}
+            wrong = {
+                (backend, name): states.get(backend, {}).get(name)
+                for backend in backends
+                for name, status in expected.items()
+                if states.get(backend, {}).get(name) != status
+            }
             if not wrong:
                 return time.monotonic() - start
             if time.monotonic() - start > timeout_s:
-                raise ServiceError(f"haproxy: after {timeout_s:g} s, servers not as expected {expected}: {wrong}; "
-                                   f"{self.failure_context()}")
+                raise ServiceError(
+                    f"haproxy: after {timeout_s:g} s, servers not as expected {expected}: {wrong}; {self.failure_context()}"
+                )
             time.sleep(0.05)
 
 
@@ -278,8 +306,10 @@ class HAProxy(RuntimeApi):
         self.pid: int | None = None
         self.proc: subprocess.Popen | None = None  # None where another process started it
         if len(str(self.socket_path).encode()) > UNIX_PATH_MAX:
-            raise ServiceError(f"the runtime API socket's path {self.socket_path} is longer than "
-                               f"{UNIX_PATH_MAX} bytes: use a shorter cluster folder")
+            raise ServiceError(
+                f"the runtime API socket's path {self.socket_path} is longer than "
+                f"{UNIX_PATH_MAX} bytes: use a shorter cluster folder"
+            )
 
     @property
     def grpc(self) -> str:
@@ -290,9 +320,16 @@ class HAProxy(RuntimeApi):
         return f"{self.settings.host}:{self.http_port}"
 
     def _write_config(self) -> None:
-        self.config_path.write_text(render_config(self.settings, self.backends, tls=self.tls,
-                                                  stats_socket=str(self.socket_path),
-                                                  grpc_port=self.grpc_port, http_port=self.http_port))
+        self.config_path.write_text(
+            render_config(
+                self.settings,
+                self.backends,
+                tls=self.tls,
+                stats_socket=str(self.socket_path),
+                grpc_port=self.grpc_port,
+                http_port=self.http_port,
+            )
+        )
 
     def start(self, backends: list[Backend], timeout_s: float = 10.0) -> HAProxy:
         """Writes the configuration, checks it (`haproxy -c`) and starts HAProxy; returns once
@@ -305,8 +342,9 @@ class HAProxy(RuntimeApi):
         if checked.returncode != 0:
             raise ServiceError(f"haproxy rejected {self.config_path}: {checked.stderr[-2000:]}")
         with open(self.log_path, "ab") as log:
-            self.proc = subprocess.Popen([binary, "-f", str(self.config_path)], stdin=subprocess.DEVNULL,
-                                         stdout=log, stderr=log, start_new_session=True)
+            self.proc = subprocess.Popen(
+                [binary, "-f", str(self.config_path)], stdin=subprocess.DEVNULL, stdout=log, stderr=log, start_new_session=True
+            )
         self.pid = self.proc.pid
         _wait_port(self.grpc_port, self.proc, timeout_s, "haproxy", self.log_path)
         _wait_port(self.http_port, self.proc, timeout_s, "haproxy", self.log_path)
@@ -324,8 +362,9 @@ class HAProxy(RuntimeApi):
             raise ServiceError(f"haproxy: a server named {backend.name} or with id {backend.server_id} exists")
         # a dynamic server takes nothing from `default-server`: the same arguments, spelt out
         for name, address, grpc in ((GRPC_BACKEND, backend.grpc, True), (HTTP_BACKEND, backend.http, False)):
-            answer = self.command(f"add server {name}/{backend.name} {address} id {backend.server_id} "
-                                  f"{_server_args(self.settings, self.tls, grpc)}")
+            answer = self.command(
+                f"add server {name}/{backend.name} {address} id {backend.server_id} {_server_args(self.settings, self.tls, grpc)}"
+            )
             if "New server registered" not in answer:
                 raise ServiceError(f"haproxy: add server {name}/{backend.name}: {answer.strip()}")
             for verb in ("enable health", "enable server"):
@@ -348,13 +387,21 @@ def compose_config(nodes: int) -> str:
     starts as root there to read the bundle (its key is its owner's alone, mode 0600), then
     becomes the image's `haproxy` user."""
     backends = [Backend(f"node-{k}", k, f"node-{k}:50051", f"node-{k}:8080") for k in range(1, nodes + 1)]
-    return render_config(BalancerSettings(host="0.0.0.0"), backends, tls=files_in(COMPOSE_TLS_DIR),
-                         stats_socket="/tmp/haproxy.sock",
-                         grpc_port=50051, http_port=8080, resolvers=True, user="haproxy")
+    return render_config(
+        BalancerSettings(host="0.0.0.0"),
+        backends,
+        tls=files_in(COMPOSE_TLS_DIR),
+        stats_socket="/tmp/haproxy.sock",
+        grpc_port=50051,
+        http_port=8080,
+        resolvers=True,
+        user="haproxy",
+    )
 
 
 if __name__ == "__main__":
     import argparse
+
     parser = argparse.ArgumentParser(description="print docker/haproxy.cluster.cfg, docker/compose.cluster.yaml's haproxy.cfg")
     parser.add_argument("--compose-nodes", type=int, default=3, help="node services node-1..node-N")
     print(compose_config(parser.parse_args().compose_nodes), end="")

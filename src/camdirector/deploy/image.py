@@ -15,6 +15,7 @@ host's extra CA certificates are added), so pip reaches PyPI through the same pr
 Nothing is installed here (scripts/system-deps.sh --tests installs podman, runc and debootstrap);
 a missing program is a `ServiceError` (deploy/services.py) that says which package provides it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -65,8 +66,11 @@ def image_exists(name: str) -> bool:
 
 def apt_mirror() -> str:
     """The Debian mirror apt uses on this host (its sources), else deb.debian.org."""
-    for source in [*Path("/etc/apt/sources.list.d").glob("*.sources"), Path("/etc/apt/sources.list"),
-                   *Path("/etc/apt/sources.list.d").glob("*.list")]:
+    for source in [
+        *Path("/etc/apt/sources.list.d").glob("*.sources"),
+        Path("/etc/apt/sources.list"),
+        *Path("/etc/apt/sources.list.d").glob("*.list"),
+    ]:
         try:
             text = source.read_text()
         except OSError:
@@ -93,8 +97,12 @@ def local_base(name: str = LOCAL_BASE, log=print) -> str:
     started = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="camdirector-base-") as work:
         rootfs = Path(work) / "rootfs"
-        done = subprocess.run([debootstrap, "--variant=minbase", f"--include={','.join(BASE_PACKAGES)}", "bookworm",
-                               str(rootfs), apt_mirror()], capture_output=True, text=True, timeout=1200)
+        done = subprocess.run(
+            [debootstrap, "--variant=minbase", f"--include={','.join(BASE_PACKAGES)}", "bookworm", str(rootfs), apt_mirror()],
+            capture_output=True,
+            text=True,
+            timeout=1200,
+        )
         if done.returncode != 0:
             raise ServiceError(f"debootstrap exited {done.returncode}:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}")
         # the host's extra CAs (a TLS-inspecting proxy's, a studio's own): pip in the build trusts them as the host does
@@ -111,10 +119,19 @@ def local_base(name: str = LOCAL_BASE, log=print) -> str:
         archive = tar.stdout
         assert archive is not None  # stdout=PIPE
         try:
-            podman("import", "--change", "CMD [\"/bin/bash\"]",
-                   "--change", "ENV PIP_CERT=/etc/ssl/certs/ca-certificates.crt",
-                   "--change", f"LABEL camdirector.base-revision={BASE_REVISION}",
-                   "-", name, stdin=archive, timeout_s=600)
+            podman(
+                "import",
+                "--change",
+                'CMD ["/bin/bash"]',
+                "--change",
+                "ENV PIP_CERT=/etc/ssl/certs/ca-certificates.crt",
+                "--change",
+                f"LABEL camdirector.base-revision={BASE_REVISION}",
+                "-",
+                name,
+                stdin=archive,
+                timeout_s=600,
+            )
         finally:
             archive.close()
             tar.wait()
@@ -125,6 +142,7 @@ def local_base(name: str = LOCAL_BASE, log=print) -> str:
 def version_of(root: Path) -> str:
     """The project's version, as the checkout's pyproject.toml says."""
     import tomllib
+
     return tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
 
 
@@ -140,10 +158,29 @@ def build_image(root: Path, base: str | None = None, tag: str | None = None, log
     # --format docker: the OCI format has no HEALTHCHECK. The build's output goes to a log file
     # (a pipe could fill); its tail is in the error when it fails.
     with tempfile.TemporaryFile("w+") as output:
-        done = subprocess.run([require_podman(), *PODMAN, "build", "--format", "docker", "--network", "host",
-                               "--build-arg", f"BASE={base}", "--build-arg", f"VERSION={version}",
-                               "-f", str(root / "docker" / "Dockerfile"), "-t", tag, str(root)],
-                              stdout=output, stderr=subprocess.STDOUT, timeout=1800)
+        done = subprocess.run(
+            [
+                require_podman(),
+                *PODMAN,
+                "build",
+                "--format",
+                "docker",
+                "--network",
+                "host",
+                "--build-arg",
+                f"BASE={base}",
+                "--build-arg",
+                f"VERSION={version}",
+                "-f",
+                str(root / "docker" / "Dockerfile"),
+                "-t",
+                tag,
+                str(root),
+            ],
+            stdout=output,
+            stderr=subprocess.STDOUT,
+            timeout=1800,
+        )
         if done.returncode != 0:
             output.seek(0)
             raise ServiceError(f"podman build exited {done.returncode}:\n{output.read()[-6000:]}")
@@ -178,8 +215,15 @@ class Container:
     """One container of the image on the host's network, `name` unique on this machine; its
     data directory the named volume `volume`. start() / kill() / start() again keep the volume."""
 
-    def __init__(self, image: str, name: str, volume: str, args: Sequence[str] = (), env: dict[str, str] | None = None,
-                 mounts: Sequence[str] = ()):
+    def __init__(
+        self,
+        image: str,
+        name: str,
+        volume: str,
+        args: Sequence[str] = (),
+        env: dict[str, str] | None = None,
+        mounts: Sequence[str] = (),
+    ):
         self.image, self.name, self.volume = image, name, volume
         self.args, self.env, self.mounts = list(args), dict(env or {}), list(mounts)
         self.created = False
@@ -189,9 +233,19 @@ class Container:
         if not self.created:
             # --health-interval disable: no timer (podman's are systemd's, absent here);
             # `podman healthcheck run` (health()) still runs the image's check.
-            run = ["run", "-d", "--name", self.name, "--network", "host",
-                   *(arg for limit in container_ulimits() for arg in ("--ulimit", limit)),
-                   "--health-interval", "disable", "-v", f"{self.volume}:/var/lib/camdirector"]
+            run = [
+                "run",
+                "-d",
+                "--name",
+                self.name,
+                "--network",
+                "host",
+                *(arg for limit in container_ulimits() for arg in ("--ulimit", limit)),
+                "--health-interval",
+                "disable",
+                "-v",
+                f"{self.volume}:/var/lib/camdirector",
+            ]
             for mount in self.mounts:
                 run += ["-v", mount]
             for key, value in self.env.items():
@@ -251,14 +305,19 @@ def main(argv: list[str] | None = None) -> int:
     save.add_argument("tag")
     save.add_argument("file", type=Path)
     args = parser.parse_args(argv)
+
     def log(line: str) -> None:  # progress on stderr: stdout is the answer, one line of JSON
         print(line, file=sys.stderr)
+
     try:
         if args.command == "base":
             print(local_base(log=log))
         elif args.command == "save":
-            print(json.dumps({"image": args.tag, "file": str(save_image(args.tag, args.file)),
-                              "size_bytes": args.file.stat().st_size}))
+            print(
+                json.dumps(
+                    {"image": args.tag, "file": str(save_image(args.tag, args.file)), "size_bytes": args.file.stat().st_size}
+                )
+            )
         else:
             tag = build_image(args.root, args.base, args.tag, log=log)
             print(json.dumps({"image": tag, "version": image_label(tag), "size_bytes": image_size(tag)}))

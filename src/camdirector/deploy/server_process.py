@@ -1,6 +1,7 @@
 """A `camdirector serve` child process on free loopback ports, for the demo, benchmarks,
 evaluation and tests: started, waited for (its one JSON ready line names the bound addresses),
 and stopped."""
+
 from __future__ import annotations
 
 import json
@@ -46,9 +47,17 @@ class ServerProcess:
     authentication on, `admin_key` then holding the admin key it made and `zmq_server_key` its
     CURVE public key (docs/security.md)."""
 
-    def __init__(self, *args: str, transports: Collection[str] = ("grpc", "zmq", "http"),
-                 env: Mapping[str, str] | None = None, python: str = sys.executable, command: list[str] | None = None,
-                 base_env: Mapping[str, str] | None = None, cwd: str | Path | None = None, auth: bool = False):
+    def __init__(
+        self,
+        *args: str,
+        transports: Collection[str] = ("grpc", "zmq", "http"),
+        env: Mapping[str, str] | None = None,
+        python: str = sys.executable,
+        command: list[str] | None = None,
+        base_env: Mapping[str, str] | None = None,
+        cwd: str | Path | None = None,
+        auth: bool = False,
+    ):
         self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
         self.log_path = Path(self._dir.name) / "server.log"
         self._log = open(self.log_path, "w+")
@@ -60,8 +69,14 @@ class ServerProcess:
             cmd += ["--data-dir", self._dir.name]
         if not auth:
             cmd.append("--no-auth")
-        self.proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=self._log, text=True,
-                                     env={**(os.environ if base_env is None else base_env), **(env or {})}, cwd=cwd)
+        self.proc = subprocess.Popen(
+            [*cmd, *args],
+            stdout=subprocess.PIPE,
+            stderr=self._log,
+            text=True,
+            env={**(os.environ if base_env is None else base_env), **(env or {})},
+            cwd=cwd,
+        )
         stdout = self.proc.stdout
         assert stdout is not None  # stdout=PIPE
         self._stdout = stdout

@@ -5,6 +5,7 @@ missing binary is a `ServiceError` that says which package provides it.
 
 PostgreSQL refuses to run as root, so as root its data folder is given to Debian's `postgres`
 user and its commands run as that user (runuser)."""
+
 from __future__ import annotations
 
 import contextlib
@@ -135,9 +136,27 @@ class RedisServer:
         self.folder.mkdir(parents=True, exist_ok=True)
         log = self.folder / "redis.log"
         self.proc = subprocess.Popen(
-            [_binary("redis-server", "redis-server"), "--port", str(self.port), "--bind", "127.0.0.1",
-             "--dir", str(self.folder), "--save", "", "--appendonly", "yes" if self.persist else "no", "--protected-mode", "yes",
-             "--logfile", str(log)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+            [
+                _binary("redis-server", "redis-server"),
+                "--port",
+                str(self.port),
+                "--bind",
+                "127.0.0.1",
+                "--dir",
+                str(self.folder),
+                "--save",
+                "",
+                "--appendonly",
+                "yes" if self.persist else "no",
+                "--protected-mode",
+                "yes",
+                "--logfile",
+                str(log),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
         _wait_port(self.port, self.proc, timeout_s, "redis-server", log)
         return self
 
@@ -187,12 +206,28 @@ class PostgresServer:
         if not (self.data / "PG_VERSION").exists():
             self._run(initdb, "-D", str(self.data), "-A", "trust", "-U", "camdirector", "--no-sync", "-E", "UTF8")
         options = f"-p {self.port} -k {self.folder} -c listen_addresses=127.0.0.1 -c fsync=off"
-        self._run(pg_ctl, "-D", str(self.data), "-o", options, "-l", str(self.folder / "postgres.log"),
-                  "-w", "-t", str(int(timeout_s)), "start", timeout_s=timeout_s + 5)
+        self._run(
+            pg_ctl,
+            "-D",
+            str(self.data),
+            "-o",
+            options,
+            "-l",
+            str(self.folder / "postgres.log"),
+            "-w",
+            "-t",
+            str(int(timeout_s)),
+            "start",
+            timeout_s=timeout_s + 5,
+        )
         createdb = _binary("createdb", "postgresql", POSTGRES_BIN)
-        done = subprocess.run((["runuser", "-u", "postgres", "--"] if self._as_postgres else [])
-                              + [createdb, "-h", "127.0.0.1", "-p", str(self.port), "-U", "camdirector", "camdirector"],
-                              capture_output=True, text=True, timeout=30)
+        done = subprocess.run(
+            (["runuser", "-u", "postgres", "--"] if self._as_postgres else [])
+            + [createdb, "-h", "127.0.0.1", "-p", str(self.port), "-U", "camdirector", "camdirector"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         if done.returncode != 0 and "already exists" not in done.stderr:
             raise ServiceError(f"createdb failed: {done.stderr[-2000:]}")
         return self
@@ -200,8 +235,9 @@ class PostgresServer:
     def stop(self) -> None:
         if (self.data / "postmaster.pid").exists():
             try:
-                self._run(_binary("pg_ctl", "postgresql", POSTGRES_BIN), "-D", str(self.data), "-m", "fast",
-                          "-w", "stop", timeout_s=30)
+                self._run(
+                    _binary("pg_ctl", "postgresql", POSTGRES_BIN), "-D", str(self.data), "-m", "fast", "-w", "stop", timeout_s=30
+                )
             except ServiceError:
                 pass
         if self._as_postgres:

@@ -9,6 +9,7 @@ The TLS tests make theirs through the `tls_files` fixture. For docker/compose.cl
 The private keys are readable by their owner alone (mode 0600), and the CA's is deleted once it
 has signed: nothing else can be made that the CA's certificate vouches for.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -22,10 +23,10 @@ HOSTS = ("127.0.0.1", "localhost")  # what a loopback server's certificate names
 
 @dataclass(frozen=True)
 class TlsFiles:
-    ca_cert: Path       # the CA's certificate: what clients trust (`ca_file`)
-    cert: Path          # the server's certificate, signed by the CA (`--tls-cert`)
-    key: Path           # its private key (`--tls-key`)
-    bundle: Path        # the certificate and its key in one file, as HAProxy's `crt` reads them
+    ca_cert: Path  # the CA's certificate: what clients trust (`ca_file`)
+    cert: Path  # the server's certificate, signed by the CA (`--tls-cert`)
+    key: Path  # its private key (`--tls-key`)
+    bundle: Path  # the certificate and its key in one file, as HAProxy's `crt` reads them
 
 
 def _openssl(*args: str) -> None:
@@ -44,16 +45,60 @@ def make_tls_files(folder: Path, hosts: tuple[str, ...] = HOSTS, days: int = 365
     made = files_in(folder)
     ca_key, ca_cert, key, cert = folder / "ca.key", made.ca_cert, made.key, made.cert
     csr, ext = folder / "server.csr", folder / "server.ext"
-    _openssl("req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
-             "-keyout", str(ca_key), "-out", str(ca_cert), "-days", str(days), "-subj", "/CN=camdirector CA",
-             "-addext", "basicConstraints=critical,CA:TRUE", "-addext", "keyUsage=critical,keyCertSign,cRLSign")
-    _openssl("req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
-             "-keyout", str(key), "-out", str(csr), "-subj", f"/CN={hosts[0]}")
+    _openssl(
+        "req",
+        "-x509",
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:prime256v1",
+        "-nodes",
+        "-keyout",
+        str(ca_key),
+        "-out",
+        str(ca_cert),
+        "-days",
+        str(days),
+        "-subj",
+        "/CN=camdirector CA",
+        "-addext",
+        "basicConstraints=critical,CA:TRUE",
+        "-addext",
+        "keyUsage=critical,keyCertSign,cRLSign",
+    )
+    _openssl(
+        "req",
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:prime256v1",
+        "-nodes",
+        "-keyout",
+        str(key),
+        "-out",
+        str(csr),
+        "-subj",
+        f"/CN={hosts[0]}",
+    )
     san = ",".join(f"IP:{h}" if h.replace(".", "").isdigit() or ":" in h else f"DNS:{h}" for h in hosts)
-    ext.write_text(f"subjectAltName={san}\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n"
-                   "extendedKeyUsage=serverAuth\n")
-    _openssl("x509", "-req", "-in", str(csr), "-CA", str(ca_cert), "-CAkey", str(ca_key), "-CAcreateserial",
-             "-out", str(cert), "-days", str(days), "-extfile", str(ext))
+    ext.write_text(f"subjectAltName={san}\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature\nextendedKeyUsage=serverAuth\n")
+    _openssl(
+        "x509",
+        "-req",
+        "-in",
+        str(csr),
+        "-CA",
+        str(ca_cert),
+        "-CAkey",
+        str(ca_key),
+        "-CAcreateserial",
+        "-out",
+        str(cert),
+        "-days",
+        str(days),
+        "-extfile",
+        str(ext),
+    )
     for used in (ca_key, csr, ext, folder / "ca.srl"):
         used.unlink()
     key.chmod(0o600)

@@ -4,6 +4,7 @@ paper's scenarios and suite: toric/cli.py), `eval-graph` (TRACKS: tracks/cli.py)
 
 `add_parsers(subparsers)` registers them on the `camdirector` parser; each sets its own `handler`.
 """
+
 from __future__ import annotations
 
 import argparse

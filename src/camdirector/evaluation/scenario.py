@@ -16,6 +16,7 @@ Frames. Frame i (i = 0, 1, ...) has frame number i + 1 and time_s = i / frame_ra
 FrameUpdate carries, packed (FrameUpdate.packed_ids / packed_transforms), the transforms of the
 targets and dynamic objects that changed since the previous frame (all of them in frame 1).
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -32,20 +33,26 @@ from camdirector.v1 import director_pb2 as pb
 
 PARK_OFFSET_M = np.array([0.0, -1000.0, 0.0])  # where an object waits for its spawn_s, from its spawn place
 PACKED_STRIDE = 10  # px, py, pz, qx, qy, qz, qw, sx, sy, sz per packed id (camdirector.v1.FrameUpdate)
-STYLE_NUMBERS = ("gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg", "response_time_s",
-                 "max_speed_m_s", "max_accel_m_s2")
+STYLE_NUMBERS = (
+    "gaze_room_m",
+    "preferred_theta_ratio",
+    "preferred_phi_deg",
+    "response_time_s",
+    "max_speed_m_s",
+    "max_accel_m_s2",
+)
 
 
 @dataclass(eq=False)
 class Shape:
     """An actor's geometry in its local frame; `mesh` is decoded as the server decodes it."""
 
-    kind: str                      # box | sphere | cylinder | capsule | mesh
-    params: dict[str, Any]         # box: size (3,); sphere: radius; cylinder, capsule: radius, height
-    mesh: TriMesh                  # local frame, unscaled
+    kind: str  # box | sphere | cylinder | capsule | mesh
+    params: dict[str, Any]  # box: size (3,); sphere: radius; cylinder, capsule: radius, height
+    mesh: TriMesh  # local frame, unscaled
     file_bytes: bytes | None = None  # mesh files: the raw OBJ / GLB
     file_path: Path | None = None
-    file_scale: float = 1.0        # mesh files: uniform scale, folded into the actor's scale
+    file_scale: float = 1.0  # mesh files: uniform scale, folded into the actor's scale
 
     def mesh_msg(self) -> pb.Mesh:
         if self.kind == "box":
@@ -77,12 +84,12 @@ class Actor:
     """A target or a scene object. position/rotation/scale: the transform when nothing moves it."""
 
     id: str
-    role: str                       # "target" | "object"
+    role: str  # "target" | "object"
     shape: Shape
-    position: np.ndarray            # (3,) m
-    rotation: np.ndarray            # (4,) xyzw
-    scale: np.ndarray               # (3,), the mesh file's scale included
-    dynamic: bool                   # targets: True
+    position: np.ndarray  # (3,) m
+    rotation: np.ndarray  # (4,) xyzw
+    scale: np.ndarray  # (3,), the mesh file's scale included
+    dynamic: bool  # targets: True
     motion: KeyframedMotion | BounceMotion | None = None
     spawn_s: float | None = None
     aim_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))  # targets, local frame
@@ -104,9 +111,11 @@ class Actor:
         return pos, rot
 
     def transform_msg(self, position: np.ndarray, rotation: np.ndarray) -> pb.Transform:
-        return pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2]),
-                            rotation=pb.Quat(x=rotation[0], y=rotation[1], z=rotation[2], w=rotation[3]),
-                            scale=pb.Vec3(x=self.scale[0], y=self.scale[1], z=self.scale[2]))
+        return pb.Transform(
+            position=pb.Vec3(x=position[0], y=position[1], z=position[2]),
+            rotation=pb.Quat(x=rotation[0], y=rotation[1], z=rotation[2], w=rotation[3]),
+            scale=pb.Vec3(x=self.scale[0], y=self.scale[1], z=self.scale[2]),
+        )
 
 
 def visibility_mode(name: str) -> int:
@@ -122,10 +131,10 @@ def visibility_mode(name: str) -> int:
 class Timeline:
     """Every movable actor's transform at every frame time (what the frames send and measure uses)."""
 
-    time_s: np.ndarray                         # (n,) s
-    frame: np.ndarray                          # (n,) frame numbers, from 1
-    position: dict[str, np.ndarray]            # id -> (n, 3) m
-    rotation: dict[str, np.ndarray]            # id -> (n, 4) xyzw
+    time_s: np.ndarray  # (n,) s
+    frame: np.ndarray  # (n,) frame numbers, from 1
+    position: dict[str, np.ndarray]  # id -> (n, 3) m
+    rotation: dict[str, np.ndarray]  # id -> (n, 4) xyzw
 
     def __len__(self) -> int:
         return len(self.time_s)
@@ -143,7 +152,7 @@ class Scenario:
     lens: dict[str, float]
     style: dict[str, Any]
     targets: list[Actor]
-    objects: list[Actor]      # hand-written and generated, in file order
+    objects: list[Actor]  # hand-written and generated, in file order
 
     @property
     def actors(self) -> list[Actor]:
@@ -166,20 +175,25 @@ class Scenario:
             pos[a.id], rot[a.id] = a.transforms_at(times)
         return Timeline(times, np.arange(1, len(times) + 1, dtype=np.uint64), pos, rot)
 
-    def create_session_request(self, visibility: int | str | None = None, *, record: bool = False,
-                               timeline: Timeline | None = None) -> pb.CreateSessionRequest:
+    def create_session_request(
+        self, visibility: int | str | None = None, *, record: bool = False, timeline: Timeline | None = None
+    ) -> pb.CreateSessionRequest:
         """The CreateSessionRequest: every actor at its frame-1 transform; `visibility` overrides
         the file's style mode (a VisibilityMode value or name)."""
         tl = timeline if timeline is not None else self.timeline(0.0)
         objects = []
         for a in self.objects:
             p, q = (tl.position[a.id][0], tl.rotation[a.id][0]) if a.dynamic else (a.position, a.rotation)
-            objects.append(pb.SceneObject(id=a.id, mesh=a.shape.mesh_msg(), transform=a.transform_msg(p, q),
-                                          dynamic=a.dynamic))
-        targets = [pb.Target(id=a.id, mesh=a.shape.mesh_msg(),
-                             transform=a.transform_msg(tl.position[a.id][0], tl.rotation[a.id][0]),
-                             aim_offset=pb.Vec3(x=a.aim_offset[0], y=a.aim_offset[1], z=a.aim_offset[2]))
-                   for a in self.targets]
+            objects.append(pb.SceneObject(id=a.id, mesh=a.shape.mesh_msg(), transform=a.transform_msg(p, q), dynamic=a.dynamic))
+        targets = [
+            pb.Target(
+                id=a.id,
+                mesh=a.shape.mesh_msg(),
+                transform=a.transform_msg(tl.position[a.id][0], tl.rotation[a.id][0]),
+                aim_offset=pb.Vec3(x=a.aim_offset[0], y=a.aim_offset[1], z=a.aim_offset[2]),
+            )
+            for a in self.targets
+        ]
         style = dict(self.style)
         if visibility is not None:
             style["visibility"] = visibility_mode(visibility) if isinstance(visibility, str) else int(visibility)
@@ -190,15 +204,16 @@ class Scenario:
         for name in STYLE_NUMBERS:
             if name in style:
                 setattr(style_msg, name, style[name])
-        return pb.CreateSessionRequest(objects=objects, targets=targets, lens=pb.Lens(**self.lens),
-                                       style=style_msg, seed=self.seed, record=record)
+        return pb.CreateSessionRequest(
+            objects=objects, targets=targets, lens=pb.Lens(**self.lens), style=style_msg, seed=self.seed, record=record
+        )
 
     def frame_updates(self, session_id: str, timeline: Timeline | None = None) -> Iterator[pb.FrameUpdate]:
         """One FrameUpdate per frame of the timeline, lazily; see "Frames" in the module doc."""
         tl = timeline if timeline is not None else self.timeline()
         movable = self.movable
         ids = [a.id for a in movable]
-        scale = np.array([a.scale for a in movable])                              # (m, 3)
+        scale = np.array([a.scale for a in movable])  # (m, 3)
         packed = np.empty((len(tl), len(movable), PACKED_STRIDE))
         packed[:, :, 0:3] = np.stack([tl.position[i] for i in ids], axis=1)
         packed[:, :, 3:7] = np.stack([tl.rotation[i] for i in ids], axis=1)
@@ -207,8 +222,13 @@ class Scenario:
         changed[1:] = np.any(packed[1:] != packed[:-1], axis=2)
         for i in range(len(tl)):
             sel = np.flatnonzero(changed[i])
-            yield pb.FrameUpdate(session_id=session_id, frame=int(tl.frame[i]), time_s=float(tl.time_s[i]),
-                                 packed_ids=[ids[k] for k in sel], packed_transforms=packed[i, sel].ravel().tolist())
+            yield pb.FrameUpdate(
+                session_id=session_id,
+                frame=int(tl.frame[i]),
+                time_s=float(tl.time_s[i]),
+                packed_ids=[ids[k] for k in sel],
+                packed_transforms=packed[i, sel].ravel().tolist(),
+            )
 
 
 def transform_at(timeline: Timeline, actor: Actor, index: int) -> RigidTransform:

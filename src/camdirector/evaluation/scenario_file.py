@@ -5,6 +5,7 @@ checked here, as the scenario is built: mesh files (relative to the scenario fil
 server decodes them), primitives the mesh builders refuse, generated items that cannot be placed,
 ids used twice. Every refusal is a ScenarioError naming the file and the offending key.
 """
+
 from __future__ import annotations
 
 import json
@@ -101,8 +102,7 @@ def _motion(spec: MotionSpec) -> KeyframedMotion:
     if spec.rotation_keys is not None:
         rotation_keys = np.array(spec.rotation_keys)
         rotation_keys[:, 1:] /= np.linalg.norm(rotation_keys[:, 1:], axis=1)[:, None]
-    return KeyframedMotion(times, positions, spec.interpolation, spec.loop, yaw_keys, rotation_keys,
-                           spec.orient == "path")
+    return KeyframedMotion(times, positions, spec.interpolation, spec.loop, yaw_keys, rotation_keys, spec.orient == "path")
 
 
 def _actor(spec: ActorSpec, where: str, base_dir: Path) -> Actor:
@@ -132,8 +132,9 @@ def _build(spec: ScenarioSpec, base_dir: Path) -> Scenario:
         seed = spec.seed + 1000 + i if g.seed is None else g.seed
         try:
             if isinstance(g, ScatterSpec):
-                parts = [(_shape(p.shape, f"{where}.parts[{j}].shape", base_dir), np.array(p.offset))
-                         for j, p in enumerate(g.parts)]
+                parts = [
+                    (_shape(p.shape, f"{where}.parts[{j}].shape", base_dir), np.array(p.offset)) for j, p in enumerate(g.parts)
+                ]
                 objects += scatter(g, parts, seed, targets, spec.duration_s)
             else:
                 objects += spawn(g, _shape(g.shape, f"{where}.shape", base_dir), seed, targets)
@@ -148,8 +149,19 @@ def _build(spec: ScenarioSpec, base_dir: Path) -> Scenario:
     style: dict[str, Any] = {}
     for name, value in spec.style.model_dump(exclude_none=True).items():
         style[name] = visibility_mode(value) if name == "visibility" else tuple(value) if isinstance(value, list) else value
-    return Scenario(spec.name, spec.description, spec.notes, None, spec.duration_s, spec.frame_rate_hz, spec.seed,
-                    lens, style, targets, objects)
+    return Scenario(
+        spec.name,
+        spec.description,
+        spec.notes,
+        None,
+        spec.duration_s,
+        spec.frame_rate_hz,
+        spec.seed,
+        lens,
+        style,
+        targets,
+        objects,
+    )
 
 
 def parse_scenario(data: Any, *, source: str = "<scenario>", base_dir: Path | str = ".") -> Scenario:

@@ -8,6 +8,7 @@ every target's path centre line; a spawn starts its objects in batches spread ev
 [start_s, end_s], each clear_of_targets_m from the targets at that moment, on a straight line in a
 random horizontal direction bouncing off the region's sides (scenario_motion.BounceMotion).
 """
+
 from __future__ import annotations
 
 import math
@@ -51,8 +52,9 @@ def _target_paths_xz(targets: list[Actor], duration_s: float) -> cKDTree | None:
     return cKDTree(np.concatenate([a.transforms_at(times)[0][:, [0, 2]] for a in targets]))
 
 
-def scatter(spec: ScatterSpec, parts: list[tuple[Shape, np.ndarray]], seed: int, targets: list[Actor],
-            duration_s: float) -> list[Actor]:
+def scatter(
+    spec: ScatterSpec, parts: list[tuple[Shape, np.ndarray]], seed: int, targets: list[Actor], duration_s: float
+) -> list[Actor]:
     """The scatter's static items, each of `parts` (its shape, and the offset from the item's ground
     point to the part's lowest point). Raises PlacementError."""
     count, prefix = spec.count, spec.id_prefix
@@ -70,8 +72,10 @@ def scatter(spec: ScatterSpec, parts: list[tuple[Shape, np.ndarray]], seed: int,
     while len(placed) < count:
         tries += 1
         if tries > _MAX_PLACEMENT_TRIES * count:
-            raise PlacementError(f"placed only {len(placed)} of {count} items; lower count, "
-                                 "min_spacing_m or clear_of_targets_m, or widen the region")
+            raise PlacementError(
+                f"placed only {len(placed)} of {count} items; lower count, "
+                "min_spacing_m or clear_of_targets_m, or widen the region"
+            )
         xz = np.array([rng.uniform(*region[0]), rng.uniform(*region[1])])
         scale = rng.uniform(scale_lo, scale_hi)
         yaw = rng.uniform(-math.pi, math.pi) if spec.random_yaw else 0.0
@@ -90,8 +94,7 @@ def scatter(spec: ScatterSpec, parts: list[tuple[Shape, np.ndarray]], seed: int,
             local[1] -= shape.lowest_y * scale  # offset is to the part's lowest point
             pos = np.array([xz[0], spec.ground_y, xz[1]]) + r.apply(local)
             part_id = f"{prefix}{index:03d}" + (f".{j}" if len(parts) > 1 else "")
-            out.append(Actor(part_id, "object", shape, pos, rot.copy(),
-                             np.full(3, scale * shape.file_scale), dynamic=False))
+            out.append(Actor(part_id, "object", shape, pos, rot.copy(), np.full(3, scale * shape.file_scale), dynamic=False))
     return out
 
 
@@ -119,13 +122,26 @@ def spawn(spec: SpawnSpec, shape: Shape, seed: int, targets: list[Actor]) -> lis
             if all(np.linalg.norm(xz - p) >= clearance + radius for p in near):
                 break
         else:
-            raise PlacementError(f"cannot place {prefix}{i:03d} {clearance:g} m clear of the targets at "
-                                 f"t = {t:g} s; lower clear_of_targets_m or widen the region")
+            raise PlacementError(
+                f"cannot place {prefix}{i:03d} {clearance:g} m clear of the targets at "
+                f"t = {t:g} s; lower clear_of_targets_m or widen the region"
+            )
         heading = rng.uniform(-math.pi, math.pi)
         speed = rng.uniform(speed_lo, speed_hi)
         origin = np.array([xz[0], spec.ground_y - shape.lowest_y, xz[1]])
         velocity = speed * np.array([math.sin(heading), 0.0, math.cos(heading)])
         motion = BounceMotion(origin, velocity, t, x_range, z_range)
-        out.append(Actor(f"{prefix}{i:03d}", "object", shape, origin, IDENTITY_QUAT.copy(),
-                         np.full(3, shape.file_scale), dynamic=True, motion=motion, spawn_s=t))
+        out.append(
+            Actor(
+                f"{prefix}{i:03d}",
+                "object",
+                shape,
+                origin,
+                IDENTITY_QUAT.copy(),
+                np.full(3, shape.file_scale),
+                dynamic=True,
+                motion=motion,
+                spawn_s=t,
+            )
+        )
     return out

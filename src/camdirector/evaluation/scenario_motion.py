@@ -9,6 +9,7 @@ linear interpolation), the horizontal direction of travel (local +Z forward, hol
 heading while it stands still), or else the actor's own rotation. `BounceMotion` is a spawn
 generator's object: a straight horizontal line folded back into its region, a bounce off each side.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,9 +33,9 @@ class KeyframedMotion:
 
     times: np.ndarray
     positions: np.ndarray
-    interpolation: str = "linear"         # linear | catmull_rom
+    interpolation: str = "linear"  # linear | catmull_rom
     loop: bool = False
-    yaw_keys: np.ndarray | None = None    # (k, 2) t, yaw_rad
+    yaw_keys: np.ndarray | None = None  # (k, 2) t, yaw_rad
     rotation_keys: np.ndarray | None = None  # (k, 5) t, qx, qy, qz, qw
     orient_path: bool = False
 
@@ -73,8 +74,12 @@ class KeyframedMotion:
             return p[j] + u * (p[j + 1] - p[j])
         m = self._tangents()
         u2, u3 = u * u, u * u * u
-        return ((2 * u3 - 3 * u2 + 1) * p[j] + (u3 - 2 * u2 + u) * h[:, None] * m[j]
-                + (-2 * u3 + 3 * u2) * p[j + 1] + (u3 - u2) * h[:, None] * m[j + 1])
+        return (
+            (2 * u3 - 3 * u2 + 1) * p[j]
+            + (u3 - 2 * u2 + u) * h[:, None] * m[j]
+            + (-2 * u3 + 3 * u2) * p[j + 1]
+            + (u3 - u2) * h[:, None] * m[j + 1]
+        )
 
     def rotations_at(self, times_s: np.ndarray, base_xyzw: np.ndarray) -> np.ndarray:
         """(n,) times, sorted -> (n, 4) xyzw quaternions."""
@@ -111,7 +116,7 @@ class KeyframedMotion:
 class BounceMotion:
     """Straight line from `origin` at `velocity`, folded back into the region (a bounce off each side)."""
 
-    origin: np.ndarray    # (3,) m, at start_s
+    origin: np.ndarray  # (3,) m, at start_s
     velocity: np.ndarray  # (3,) m/s, horizontal
     start_s: float
     x_range: tuple[float, float]  # allowed range of the centre, m

@@ -83,6 +83,7 @@ models check types, ranges and which keys go together; what needs the files besi
 or the placement of generated items is checked when the scenario is built
 (evaluation/scenario_file.py).
 """
+
 from __future__ import annotations
 
 import re
@@ -108,8 +109,9 @@ def _refuse(problem: str, at: tuple[str | int, ...] = ()) -> PydanticCustomError
 
 
 def _kind(value: Any) -> str:
-    return {dict: "an object", list: "a list", str: "a string", bool: "a boolean",
-            type(None): "null"}.get(type(value), "a number")
+    return {dict: "an object", list: "a list", str: "a string", bool: "a boolean", type(None): "null"}.get(
+        type(value), "a number"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -121,6 +123,7 @@ def _vector_of(n: int) -> BeforeValidator:
         if not isinstance(value, list) or len(value) != n:
             raise _refuse(f"must be a list of {n} numbers, got {value!r}")
         return value
+
     return BeforeValidator(check)
 
 
@@ -158,6 +161,7 @@ def _name(value: str) -> str:
 
 def _keys_of(width: int) -> AfterValidator:
     """[[t, v1, ... v_width-1], ...]: at least one key, times strictly increasing."""
+
     def check(rows: list[list[float]]) -> list[list[float]]:
         if not rows:
             raise _refuse("must hold at least one key")
@@ -165,6 +169,7 @@ def _keys_of(width: int) -> AfterValidator:
             if rows[i][0] <= rows[i - 1][0]:
                 raise _refuse(f"key times must be strictly increasing ({rows[i - 1][0]:g} then {rows[i][0]:g})", (i,))
         return rows
+
     return AfterValidator(check)
 
 
@@ -211,6 +216,7 @@ def _at_least(n: int, what: str) -> AfterValidator:
         if len(items) < n:
             raise _refuse(f"must hold at least {what}")
         return items
+
     return AfterValidator(check)
 
 
@@ -479,14 +485,23 @@ def problem(error: ErrorDetails) -> tuple[str, str]:
         return _path(loc + ("kind",)), f"must be {tags}, got {ctx['tag']!r}"
     if kind == "literal_error":
         return _path(loc), f"must be {ctx['expected']}, got {value!r}"
-    bound = {"greater_than": (">", "gt"), "greater_than_equal": (">=", "ge"), "less_than": ("<", "lt"),
-             "less_than_equal": ("<=", "le")}
+    bound = {
+        "greater_than": (">", "gt"),
+        "greater_than_equal": (">=", "ge"),
+        "less_than": ("<", "lt"),
+        "less_than_equal": ("<=", "le"),
+    }
     if kind in bound:
         sign, name = bound[kind]
         return _path(loc), f"must be {sign} {ctx[name]:g}, got {value!r}"
-    said = {"float_type": "must be a finite number", "finite_number": "must be a finite number",
-            "int_type": "must be an integer", "bool_type": "must be true or false",
-            "string_type": "must be a non-empty string", "string_too_short": "must be a non-empty string"}
+    said = {
+        "float_type": "must be a finite number",
+        "finite_number": "must be a finite number",
+        "int_type": "must be an integer",
+        "bool_type": "must be true or false",
+        "string_type": "must be a non-empty string",
+        "string_too_short": "must be a non-empty string",
+    }
     if kind in said:
         return _path(loc), f"{said[kind]}, got {value!r}"
     if kind in ("model_type", "model_attributes_type", "dict_type"):
@@ -517,9 +532,11 @@ def _walk(loc: tuple[str | int, ...]) -> tuple[str, Any]:
             annotation = next((m for m in models if get_args(m.model_fields["kind"].annotation) == (key,)), None)
             continue
         out += f"[{key}]" if isinstance(key, int) else (f".{key}" if out else key)
-        annotation = next((_bare(get_args(m)[0]) for m in _members(annotation) if get_origin(m) is list), None) \
-            if isinstance(key, int) else next((_bare(m.model_fields[key].annotation) for m in models
-                                               if key in m.model_fields), None)
+        annotation = (
+            next((_bare(get_args(m)[0]) for m in _members(annotation) if get_origin(m) is list), None)
+            if isinstance(key, int)
+            else next((_bare(m.model_fields[key].annotation) for m in models if key in m.model_fields), None)
+        )
     return out or "(top level)", annotation
 
 

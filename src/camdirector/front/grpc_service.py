@@ -9,6 +9,7 @@ Every Director call's initial metadata says which server answers: `camdirector-v
 release) and `camdirector-protocol` (version.py), which the SDKs compare with their own.
 A bad frame ends its stream with a status; the session itself stays and a new stream may resume it.
 """
+
 from __future__ import annotations
 
 import logging
@@ -79,8 +80,7 @@ class DirectorGrpc:
         finally:
             self.metrics.labelled(self.metrics.request, TRANSPORT, rpc).observe(time.perf_counter() - t0)
 
-    async def _abort_internal(self, rpc: str, exc: Exception, session_id: str | None,
-                              context: grpc.aio.ServicerContext) -> None:
+    async def _abort_internal(self, rpc: str, exc: Exception, session_id: str | None, context: grpc.aio.ServicerContext) -> None:
         error = internal(exc, rpc, session_id, log)
         self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
         await context.abort(error.code, error.message)
@@ -88,6 +88,7 @@ class DirectorGrpc:
     def _unary_handler(self, rpc: str) -> grpc.RpcMethodHandler:
         async def handle(payload: bytes, context: grpc.aio.ServicerContext) -> bytes:
             return await self._unary(rpc, payload, context)
+
         return grpc.unary_unary_rpc_method_handler(handle)  # bytes in, bytes out
 
     async def stream_frames(self, request_iterator, context: grpc.aio.ServicerContext):
@@ -104,8 +105,10 @@ class DirectorGrpc:
                     self.router.stream_opened(frame_session, identity.tenant)
                     session_id = frame_session
                 elif frame_session != session_id:
-                    raise DirectorError(grpc.StatusCode.INVALID_ARGUMENT,
-                                        f"a stream carries one session: got {frame_session!r} on the stream of {session_id!r}")
+                    raise DirectorError(
+                        grpc.StatusCode.INVALID_ARGUMENT,
+                        f"a stream carries one session: got {frame_session!r} on the stream of {session_id!r}",
+                    )
                 reply = await self.router.frame(payload, session_id, TRANSPORT, identity.tenant)
                 self.metrics.labelled(self.metrics.request, TRANSPORT, "StreamFrames").observe(time.perf_counter() - t0)
                 yield reply
@@ -124,21 +127,25 @@ class DirectorGrpc:
         return grpc.method_handlers_generic_handler(SERVICE, handlers)
 
 
-async def start_grpc(router: SessionRouter, address: str, guard: Guard,
-                     tls: grpc.ServerCredentials | None = None) -> tuple[grpc.aio.Server, str]:
+async def start_grpc(
+    router: SessionRouter, address: str, guard: Guard, tls: grpc.ServerCredentials | None = None
+) -> tuple[grpc.aio.Server, str]:
     """Starts the server (over TLS with `tls`); returns it and the bound HOST:PORT (port 0 picks a
     free one)."""
     limit = router.settings.max_message_bytes
-    server = grpc.aio.server(options=[
-        ("grpc.max_receive_message_length", limit),
-        ("grpc.max_send_message_length", limit),
-        ("grpc.so_reuseport", 0),
-    ])
+    server = grpc.aio.server(
+        options=[
+            ("grpc.max_receive_message_length", limit),
+            ("grpc.max_send_message_length", limit),
+            ("grpc.so_reuseport", 0),
+        ]
+    )
     server.add_generic_rpc_handlers((DirectorGrpc(router, guard).handler(),))
     health_servicer = health.aio.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
     reflection.enable_server_reflection(
-        (pb.DESCRIPTOR.services_by_name["Director"].full_name, health.SERVICE_NAME, reflection.SERVICE_NAME), server)
+        (pb.DESCRIPTOR.services_by_name["Director"].full_name, health.SERVICE_NAME, reflection.SERVICE_NAME), server
+    )
     host, _, _ = address.rpartition(":")
     port = server.add_secure_port(address, tls) if tls is not None else server.add_insecure_port(address)
     if port == 0:

@@ -11,6 +11,7 @@ queue without counting the attempt. One runner owns a data directory (runner.loc
 (jobs/queue.py) when `job_queue` is set; front/main.py opens them with the service's kinds
 (jobs/kinds.py) and hands them to the job routes.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -42,10 +43,16 @@ class JobRunner:
     runner thread; `stop()` ends running jobs and requeues them.
     """
 
-    def __init__(self, data_dir: str | Path, registry: JobRegistry,
-                 settings: JobSettings = JobSettings(), *, clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self,
+        data_dir: str | Path,
+        registry: JobRegistry,
+        settings: JobSettings = JobSettings(),
+        *,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         self.settings = settings
-        self._clock = clock            # Unix seconds, for the retention of finished jobs
+        self._clock = clock  # Unix seconds, for the retention of finished jobs
         self.registry = registry
         self.store = open_store(settings.job_store, Path(data_dir) / "jobs")
         self._executor = JobExecutor(self.store, registry, settings)
@@ -74,8 +81,7 @@ class JobRunner:
         self._executor.start()
         requeued, failed = self.store.recover(self.settings.max_attempts)
         if requeued or failed:
-            log.info("recovered jobs: %d requeued, %d failed after too many attempts",
-                     len(requeued), len(failed))
+            log.info("recovered jobs: %d requeued, %d failed after too many attempts", len(requeued), len(failed))
         self.purge_expired()
         self._stopping.clear()
         self._thread = threading.Thread(target=self._loop, name="job-runner", daemon=True)

@@ -1,4 +1,5 @@
 """`camdirector serve`: the front process with its transports, and the worker pool."""
+
 from __future__ import annotations
 
 import asyncio
@@ -35,8 +36,7 @@ def _bind_http(address: str) -> socket.socket:
     # IPPROTO_TCP spelled out: asyncio turns Nagle off (TCP_NODELAY) on accepted connections only
     # when the listening socket says it is TCP; with proto 0 every answer after the first on a
     # kept-alive connection waited about 40 ms for the client's delayed ACK.
-    sock = socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET, socket.SOCK_STREAM,
-                         socket.IPPROTO_TCP)
+    sock = socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET, socket.SOCK_STREAM, socket.IPPROTO_TCP)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host.strip("[]"), int(port)))
     sock.listen(2048)  # before the ready line: connections queue until uvicorn accepts them
@@ -52,8 +52,11 @@ def open_guard(settings: ServerSettings) -> tuple[Guard, dict]:
     if settings.auth:
         made = ensure_admin_key(store, settings.data_dir)
         if made is not None:
-            log.warning("no key existed: an admin key was written to %s (mode 0600); make others with "
-                        "`camdirector keys create` or POST /v1/keys", made)
+            log.warning(
+                "no key existed: an admin key was written to %s (mode 0600); make others with "
+                "`camdirector keys create` or POST /v1/keys",
+                made,
+            )
             announce["admin_key_file"] = str(made)
     return Guard(store, enabled=settings.auth), announce
 
@@ -100,13 +103,17 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             install_level_routes(app, jobs, Path(settings.data_dir), job_settings)
             jobs.start()  # queued and interrupted jobs from before a restart run again
             # A live view left open past shutdown is cut after this long (the hub ends its own first).
-            config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3,
-                                    ssl_certfile=settings.tls_cert if settings.tls else None,
-                                    ssl_keyfile=settings.tls_key if settings.tls else None)
+            config = uvicorn.Config(
+                app,
+                log_level="warning",
+                lifespan="off",
+                timeout_graceful_shutdown=3,
+                ssl_certfile=settings.tls_cert if settings.tls else None,
+                ssl_keyfile=settings.tls_key if settings.tls else None,
+            )
             http_server = uvicorn.Server(config)
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
-        print(json.dumps({"event": "ready", **bound, "workers": settings.workers, "tls": settings.tls, **announce}),
-              flush=True)
+        print(json.dumps({"event": "ready", **bound, "workers": settings.workers, "tls": settings.tls, **announce}), flush=True)
         await stop.wait()
     finally:
         log.info("stopping")
@@ -128,14 +135,15 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
 
 
 def run(settings: ServerSettings) -> int:
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     exposed = settings.plaintext_exposed()
     if exposed and not settings.insecure:  # as Redis's protected mode: never in clear by accident
-        print(f"camdirector serve: refusing to serve {', '.join(exposed)} without encryption: keys and scenes would "
-              "cross the network in clear. Give --tls-cert and --tls-key (ZeroMQ is encrypted whenever "
-              "authentication is on), bind to 127.0.0.1, or pass --insecure when TLS ends at a proxy you trust.",
-              file=sys.stderr)
+        print(
+            f"camdirector serve: refusing to serve {', '.join(exposed)} without encryption: keys and scenes would "
+            "cross the network in clear. Give --tls-cert and --tls-key (ZeroMQ is encrypted whenever "
+            "authentication is on), bind to 127.0.0.1, or pass --insecure when TLS ends at a proxy you trust.",
+            file=sys.stderr,
+        )
         return 2
     if settings.tls:
         for what in (settings.tls_cert, settings.tls_key):

@@ -13,6 +13,7 @@ request naming another tenant's session is answered NOT_FOUND with the words an 
 With authentication on, each session's tenant is also written to the records database, so a node
 that adopts the session after its first node died knows whose it is.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -46,15 +47,16 @@ class SessionEntry:
     streams: int = 0
     frames: int = 0
     transport: set[str] = field(default_factory=set)
-    restoring: bool = False   # given to a worker that has to restore it from its checkpoint first
-    tenant: str = "default"   # the tenant of the key that created it
+    restoring: bool = False  # given to a worker that has to restore it from its checkpoint first
+    tenant: str = "default"  # the tenant of the key that created it
     frame_tokens: float = 0.0  # frames it may still send at once (the tenant's rate limit, _admit_frame)
     tokens_at_s: float = 0.0
 
 
 class SessionRouter:
-    def __init__(self, settings: ServerSettings, metrics: Metrics, clock: Callable[[], float] = time.monotonic,
-                 guard: Guard | None = None):
+    def __init__(
+        self, settings: ServerSettings, metrics: Metrics, clock: Callable[[], float] = time.monotonic, guard: Guard | None = None
+    ):
         self.settings = settings
         self.guard = guard or Guard(None)
         self.metrics = metrics
@@ -84,12 +86,15 @@ class SessionRouter:
         entry = self.sessions.get(session_id)
         if entry is None and adopt and self.checkpoints and self._owner(session_id) == tenant:
             now = self.clock()
-            entry = self.sessions[session_id] = SessionEntry(slot=self._least_loaded_slot(), created_s=now,
-                                                             last_seen_s=now, restoring=True, tenant=tenant)
+            entry = self.sessions[session_id] = SessionEntry(
+                slot=self._least_loaded_slot(), created_s=now, last_seen_s=now, restoring=True, tenant=tenant
+            )
         if entry is None or entry.tenant != tenant:
             if entry is None and session_id in self._lost:
-                raise unavailable(f"session {session_id!r} was lost: the worker process holding it (worker "
-                                  f"{self._lost[session_id]}) died; create a new session")
+                raise unavailable(
+                    f"session {session_id!r} was lost: the worker process holding it (worker "
+                    f"{self._lost[session_id]}) died; create a new session"
+                )
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return entry
 
@@ -132,8 +137,10 @@ class SessionRouter:
         if self.guard.enabled:  # tenants' shares: with keys only (without, everyone is one tenant)
             held = sum(e.tenant == tenant for e in self.sessions.values()) + self._reserved_by.get(tenant, 0)
             if held >= self.settings.tenant_max_sessions:
-                raise exhausted(f"tenant {tenant!r} has its maximum of {self.settings.tenant_max_sessions} sessions "
-                                "open on this node; close one first")
+                raise exhausted(
+                    f"tenant {tenant!r} has its maximum of {self.settings.tenant_max_sessions} sessions "
+                    "open on this node; close one first"
+                )
         session_id = uuid.uuid4().hex
         slot = self._least_loaded_slot()
         self._reserved += 1
@@ -146,8 +153,7 @@ class SessionRouter:
         if self.guard.enabled:
             self.guard.key_store().set_session_owner(session_id, tenant)
         now = self.clock()
-        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport},
-                                                 tenant=tenant)
+        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport}, tenant=tenant)
         self.metrics.sessions.set(len(self.sessions))
         self.metrics.sessions_created.inc()
         return body
@@ -160,8 +166,9 @@ class SessionRouter:
         body, frame_metrics = await self._call(entry, "frame", session_id, payload)
         entry.frames += 1
         entry.transport.add(transport)
-        self.metrics.frame_answered(transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale,
-                                    frame_metrics.checkpoint_failed)
+        self.metrics.frame_answered(
+            transport, frame_metrics.compute_ms, frame_metrics.stage_ms, frame_metrics.stale, frame_metrics.checkpoint_failed
+        )
         return body
 
     def _admit_frame(self, entry: SessionEntry, session_id: str) -> None:
@@ -169,8 +176,7 @@ class SessionRouter:
         RESOURCE_EXHAUSTED (the frame is not answered, the session goes on) when it is empty."""
         rate = self.settings.tenant_max_fps
         now = self.clock()
-        entry.frame_tokens = min(rate, entry.frame_tokens + (now - entry.tokens_at_s) * rate) \
-            if entry.tokens_at_s else rate
+        entry.frame_tokens = min(rate, entry.frame_tokens + (now - entry.tokens_at_s) * rate) if entry.tokens_at_s else rate
         entry.tokens_at_s = now
         if entry.frame_tokens < 1.0:
             raise exhausted(f"session {session_id} sends more than {rate:g} frames a second, its tenant's limit")
@@ -213,8 +219,9 @@ class SessionRouter:
     async def reap_once(self) -> list[str]:
         """Reclaims sessions with no stream and no request for `session_resume_s`."""
         now = self.clock()
-        idle = [sid for sid, e in self.sessions.items()
-                if e.streams == 0 and now - e.last_seen_s > self.settings.session_resume_s]
+        idle = [
+            sid for sid, e in self.sessions.items() if e.streams == 0 and now - e.last_seen_s > self.settings.session_resume_s
+        ]
         for session_id in idle:
             entry = self.sessions.pop(session_id)
             self._forget(session_id)
@@ -241,8 +248,7 @@ class SessionRouter:
             for session_id in lost:
                 entry = self.sessions[session_id]
                 entry.slot, entry.restoring = self._least_loaded_slot(exclude=slot), True
-            log.error("worker %d died; its %d sessions are restored from their checkpoints on other workers",
-                      slot, len(lost))
+            log.error("worker %d died; its %d sessions are restored from their checkpoints on other workers", slot, len(lost))
             return
         for session_id in lost:
             del self.sessions[session_id]
@@ -253,14 +259,16 @@ class SessionRouter:
         self.metrics.sessions.set(len(self.sessions))
         log.error("worker %d lost %d sessions", slot, len(lost))
 
-    async def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None,
-                       tenant: str = "default") -> dict:
+    async def timeline(
+        self, session_id: str, last: int | None = None, after_frame: int | None = None, tenant: str = "default"
+    ) -> dict:
         """The session's summary (as `describe`), style and newest `last` frames after
         `after_frame` (sessions.py); NOT_FOUND for an unknown id. Not a request of the session's
         client: it does not keep the session alive."""
         entry = self._entry(session_id, tenant)
-        body, _ = await self.pool.call(entry.slot, "timeline", session_id,
-                                       orjson.dumps({"last": last, "after_frame": after_frame}))
+        body, _ = await self.pool.call(
+            entry.slot, "timeline", session_id, orjson.dumps({"last": last, "after_frame": after_frame})
+        )
         return {"session": self._describe(session_id, entry, self.clock()), **orjson.loads(body)}
 
     async def anticipation_png(self, session_id: str, tenant: str = "default") -> bytes:
@@ -273,8 +281,7 @@ class SessionRouter:
         (render/monitor.py); NOT_FOUND for an unknown id, UNAVAILABLE when it takes more than
         timeout_s. Not a request of the session's client: it does not keep the session alive."""
         try:
-            body, _ = await self.pool.call(self._entry(session_id, tenant).slot, "view", session_id, query_json,
-                                           timeout_s)
+            body, _ = await self.pool.call(self._entry(session_id, tenant).slot, "view", session_id, query_json, timeout_s)
         except TimeoutError:
             raise unavailable(f"the view of session {session_id} took more than {timeout_s:g} s") from None
         return body
@@ -285,9 +292,15 @@ class SessionRouter:
 
     @staticmethod
     def _describe(session_id: str, e: SessionEntry, now: float) -> dict:
-        return {"session_id": session_id, "worker": e.slot, "frames": e.frames, "streams": e.streams,
-                "idle_s": round(now - e.last_seen_s, 3), "age_s": round(now - e.created_s, 3),
-                "transports": sorted(e.transport)}
+        return {
+            "session_id": session_id,
+            "worker": e.slot,
+            "frames": e.frames,
+            "streams": e.streams,
+            "idle_s": round(now - e.last_seen_s, 3),
+            "age_s": round(now - e.created_s, 3),
+            "transports": sorted(e.transport),
+        }
 
 
 def varint_at(payload: bytes, at: int) -> tuple[int, int]:

@@ -13,6 +13,7 @@ trail of style changes, takes and releases.
 CreateSession is refused FAILED_PRECONDITION, on every transport, when its client_protocol says
 the client speaks a newer protocol than this server (version.py; docs/protocol.md, "Versions").
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,7 +32,7 @@ from camdirector.version import PROTOCOL, VERSION
 @dataclass(frozen=True)
 class Rpc:
     verb: Verb
-    fresh: bool   # read the key from the records database (False: this node's cache)
+    fresh: bool  # read the key from the records database (False: this node's cache)
 
 
 RPCS = {
@@ -51,8 +52,10 @@ def check_client_protocol(protocol: int) -> None:
     """FAILED_PRECONDITION for a client that speaks a newer protocol than this server's PROTOCOL,
     said in CreateSessionRequest.client_protocol or gRPC's `camdirector-protocol` metadata."""
     if protocol > PROTOCOL:
-        raise precondition(f"this client speaks camdirector protocol {protocol}, this server (camdirector {VERSION}) "
-                           f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}")
+        raise precondition(
+            f"this client speaks camdirector protocol {protocol}, this server (camdirector {VERSION}) "
+            f"protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}"
+        )
 
 
 def client_protocol_of(payload: bytes) -> int:
@@ -63,7 +66,7 @@ def client_protocol_of(payload: bytes) -> int:
     try:
         for field_number, wire_type, start, _ in wire_fields(payload):
             if field_number == _CLIENT_PROTOCOL_FIELD and wire_type == 0:
-                protocol = varint_at(payload, start)[0] & 0xFFFFFFFF   # uint32: protobuf keeps the low 32 bits
+                protocol = varint_at(payload, start)[0] & 0xFFFFFFFF  # uint32: protobuf keeps the low 32 bits
     except ValueError:
         return 0
     return protocol
@@ -80,22 +83,25 @@ class SessionCalls:
         self.router = router
         self.guard = guard
         self.transport = transport
-        self.by_rpc = {"CreateSession": self.create, "Frame": self.frame, "UpdateStyle": self.update_style,
-                       "TakeShot": self.take_shot, "CloseSession": self.close}
+        self.by_rpc = {
+            "CreateSession": self.create,
+            "Frame": self.frame,
+            "UpdateStyle": self.update_style,
+            "TakeShot": self.take_shot,
+            "CloseSession": self.close,
+        }
 
     async def create(self, payload: bytes, identity: Identity) -> bytes:
         check_client_protocol(client_protocol_of(payload))
         return await self.router.create(payload, self.transport, identity.tenant)
 
     async def frame(self, payload: bytes, identity: Identity) -> bytes:
-        return await self.router.frame(payload, session_id_of(pb.FrameUpdate, payload), self.transport,
-                                       identity.tenant)
+        return await self.router.frame(payload, session_id_of(pb.FrameUpdate, payload), self.transport, identity.tenant)
 
     async def update_style(self, payload: bytes, identity: Identity) -> bytes:
         reply = await self.router.update_style(payload, identity.tenant)
         request = pb.UpdateStyleRequest.FromString(payload)  # the worker took it: it parses
-        self.guard.audit(identity, "style", request.session_id, {"style": _as_dict(request.style),
-                                                                 "via": self.transport})
+        self.guard.audit(identity, "style", request.session_id, {"style": _as_dict(request.style), "via": self.transport})
         return reply
 
     async def take_shot(self, payload: bytes, identity: Identity) -> bytes:

@@ -9,6 +9,7 @@ stream (`stream`) is a loop of such asks at its rate; it holds nothing but its p
 changes: it is kept until its entry is pushed out (the hub keeps MAX_ENTRIES pictures, the least
 recently asked dropped first).
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -22,11 +23,11 @@ from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
 from camdirector.infra.channels import ViewQuery, decode_view
 
-MAX_ENTRIES = 256        # pictures kept (a few per watched session)
+MAX_ENTRIES = 256  # pictures kept (a few per watched session)
 RENDER_TIMEOUT_S = 10.0  # a render taking longer answers UNAVAILABLE (503)
-MAX_STREAMS = 64         # live streams at once, all sessions together; more answer 429
-MAX_STREAM_FPS = 10.0    # a live stream's highest rate, frames per second
-KEEPALIVE_S = 1.0        # a stream whose picture does not change repeats it this often
+MAX_STREAMS = 64  # live streams at once, all sessions together; more answer 429
+MAX_STREAM_FPS = 10.0  # a live stream's highest rate, frames per second
+KEEPALIVE_S = 1.0  # a stream whose picture does not change repeats it this often
 
 
 @dataclass(frozen=True)
@@ -35,12 +36,12 @@ class View:
 
     image: bytes
     media_type: str
-    frame: int | None           # the session frame it shows; None for the top view or a placeholder
-    placeholder: str | None     # why it is a placeholder, if it is one
-    note: str | None            # what its banner says (a world without geometry), if it has one
-    render_ms: float            # in the render process
+    frame: int | None  # the session frame it shows; None for the top view or a placeholder
+    placeholder: str | None  # why it is a placeholder, if it is one
+    note: str | None  # what its banner says (a world without geometry), if it has one
+    render_ms: float  # in the render process
     bounds_m: list[float] | None  # the top view's world rectangle [x0, z0, x1, z1], m
-    made_s: float               # when the hub got it, on its clock
+    made_s: float  # when the hub got it, on its clock
 
 
 class ViewHub:
@@ -73,15 +74,23 @@ class ViewHub:
         try:
             self.metrics.view_renders.inc()
             header, image = decode_view(await self.router.view(session_id, query.to_json(), RENDER_TIMEOUT_S, tenant))
-            view = View(image, header["media_type"], header["frame"], header["placeholder"], header["note"],
-                        header["render_ms"], header["bounds_m"], self.clock())
+            view = View(
+                image,
+                header["media_type"],
+                header["frame"],
+                header["placeholder"],
+                header["note"],
+                header["render_ms"],
+                header["bounds_m"],
+                self.clock(),
+            )
             self._views[key] = view
             self._views.move_to_end(key)
             while len(self._views) > MAX_ENTRIES:
                 self._views.popitem(last=False)
             return view
         except DirectorError:
-            self._views.pop(key, None)   # a closed session's pictures go with it
+            self._views.pop(key, None)  # a closed session's pictures go with it
             raise
         finally:
             self._rendering.pop(key, None)
@@ -91,8 +100,9 @@ class ViewHub:
         if self.streams >= MAX_STREAMS:
             raise exhausted(f"the server serves its maximum of {MAX_STREAMS} live views")
 
-    async def stream(self, session_id: str, query: ViewQuery, fps: float, first: View,
-                     tenant: str = "default") -> AsyncIterator[View]:
+    async def stream(
+        self, session_id: str, query: ViewQuery, fps: float, first: View, tenant: str = "default"
+    ) -> AsyncIterator[View]:
         """A live view at `fps`: `first`, then each new picture (the same one again after
         KEEPALIVE_S without change), until the session ends, the hub closes or the viewer goes
         away (the caller stops iterating, or is cancelled). Counted in `streams` while it runs."""
@@ -113,9 +123,8 @@ class ViewHub:
                 try:
                     fresh = await self.get(session_id, query, period_s / 2, tenant)
                 except DirectorError:
-                    return   # the session ended (or its worker): the stream ends with it
-                if fresh.frame != view.frame or fresh.placeholder != view.placeholder or \
-                        self.clock() - sent_s >= KEEPALIVE_S:
+                    return  # the session ended (or its worker): the stream ends with it
+                if fresh.frame != view.frame or fresh.placeholder != view.placeholder or self.clock() - sent_s >= KEEPALIVE_S:
                     view, sent_s = fresh, self.clock()
                     yield view
         finally:
@@ -125,4 +134,3 @@ class ViewHub:
     def close(self) -> None:
         """Ends every live stream (the server is stopping: an endless response would hold it)."""
         self._closing.set()
-

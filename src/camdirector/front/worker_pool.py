@@ -15,6 +15,7 @@ which restore them from their checkpoints), and it is restarted; requests for it
 for the new one. A worker whose front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
 the front process.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -47,7 +48,7 @@ class _Worker:
         self.process: multiprocessing.process.BaseProcess
         self.writer: asyncio.StreamWriter
         self.reader_task: asyncio.Task[None]
-        self.ready = asyncio.Event()   # started and answering; cleared from its death to its successor's start
+        self.ready = asyncio.Event()  # started and answering; cleared from its death to its successor's start
         self.replacing: asyncio.Task[None] | None = None
 
 
@@ -86,13 +87,14 @@ class WorkerPool:
 
     async def _spawn(self, worker: _Worker) -> None:
         front_end, worker_end = self._mp.Pipe(duplex=True)
-        worker.process = self._mp.Process(target=worker_main, args=(worker_end, self.settings),
-                                          name=f"camdirector-worker-{worker.index}", daemon=True)
+        worker.process = self._mp.Process(
+            target=worker_main, args=(worker_end, self.settings), name=f"camdirector-worker-{worker.index}", daemon=True
+        )
         worker.process.start()
         worker_end.close()
         sock = socket.socket(fileno=os.dup(front_end.fileno()))
         front_end.close()
-        reader, worker.writer = await asyncio.open_unix_connection(sock=sock, limit=2 ** 20)
+        reader, worker.writer = await asyncio.open_unix_connection(sock=sock, limit=2**20)
         worker.reader_task = asyncio.create_task(self._read(worker, reader))
 
     async def _read(self, worker: _Worker, reader: asyncio.StreamReader) -> None:
@@ -122,8 +124,11 @@ class WorkerPool:
         worker.writer.close()
         for request_id, (future, worker_index) in list(self._pending.items()):
             if worker_index == worker.index and not future.done():
-                future.set_exception(DirectorError(grpc.StatusCode.UNAVAILABLE,
-                                                   "the worker holding this session died; retry: it is being restored"))
+                future.set_exception(
+                    DirectorError(
+                        grpc.StatusCode.UNAVAILABLE, "the worker holding this session died; retry: it is being restored"
+                    )
+                )
                 self._pending.pop(request_id, None)
         if self.on_worker_lost is not None:
             self.on_worker_lost(worker.index)
@@ -143,8 +148,7 @@ class WorkerPool:
                 if not worker.process.is_alive() and worker.ready.is_set():
                     self._lost(worker)
 
-    async def _call_worker(self, worker: _Worker, op: str, session_id: str, payload: bytes,
-                           timeout_s: float | None = None):
+    async def _call_worker(self, worker: _Worker, op: str, session_id: str, payload: bytes, timeout_s: float | None = None):
         if not worker.ready.is_set():  # its successor is starting: wait for it rather than fail
             try:
                 await asyncio.wait_for(worker.ready.wait(), WORKER_START_WAIT_S)
@@ -170,8 +174,9 @@ class WorkerPool:
         finally:
             self._pending.pop(request_id, None)
 
-    async def call(self, slot: int, op: str, session_id: str, payload: bytes,
-                   timeout_s: float | None = None) -> tuple[bytes, FrameMetrics | None]:
+    async def call(
+        self, slot: int, op: str, session_id: str, payload: bytes, timeout_s: float | None = None
+    ) -> tuple[bytes, FrameMetrics | None]:
         """Runs one request on the session table of `slot`. Raises DirectorError (TimeoutError
         past timeout_s, when given)."""
         if self._inline is not None:

@@ -11,6 +11,7 @@ With authentication on the socket is a CURVE server (RFC 26): traffic is encrypt
 must know the server's public key, `DIR/zmq/server.key` (made at the first start; the secret half
 beside it, mode 0600). Clients are not told apart by CURVE keys: the bearer key says who calls.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -48,7 +49,7 @@ def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
             public, secret = zmq.auth.create_certificates(aside, "server")
             os.chmod(secret, 0o600)
             try:
-                os.link(secret, secret_file)   # atomic, and refuses to replace another node's
+                os.link(secret, secret_file)  # atomic, and refuses to replace another node's
                 os.replace(public, folder / "server.key")
             except FileExistsError:
                 pass
@@ -60,8 +61,7 @@ def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
 class ZmqTransport:
     """`curve`: the server's (public, secret) keys, None for a plaintext socket (`--no-auth`)."""
 
-    def __init__(self, router: SessionRouter, address: str, guard: Guard,
-                 curve: tuple[bytes, bytes] | None = None):
+    def __init__(self, router: SessionRouter, address: str, guard: Guard, curve: tuple[bytes, bytes] | None = None):
         self.router = router
         self.guard = guard
         self.calls = SessionCalls(router, guard, TRANSPORT)
@@ -110,8 +110,9 @@ class ZmqTransport:
             authorization = body[2].decode("utf-8", errors="replace") if len(body) == 3 else None
             handler = self._handlers.get(name)
             if handler is None:
-                raise unimplemented(f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, "
-                                    "TakeShot, CloseSession")
+                raise unimplemented(
+                    f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, TakeShot, CloseSession"
+                )
             need, call = handler
             caller = self.guard.authorize(authorization, need.verb, fresh=need.fresh)
             if len(payload) > self.router.settings.max_message_bytes:

@@ -23,6 +23,7 @@ Every fault of the file (magic, a lump outside the file or of a size that is not
 of records, an index out of range, a string without its end) raises MeshError naming the lump
 and the byte offset in the file.
 """
+
 from __future__ import annotations
 
 import struct
@@ -36,13 +37,28 @@ import numpy.typing as npt
 from camdirector.geometry.meshes import MeshError, TriMesh, from_arrays
 from camdirector.geometry.quake_frame import points_to_world
 
-LUMP_NAMES = ("entities", "planes", "textures", "vertexes", "visibility", "nodes", "texinfo", "faces",
-              "lighting", "clipnodes", "leafs", "marksurfaces", "edges", "surfedges", "models")
+LUMP_NAMES = (
+    "entities",
+    "planes",
+    "textures",
+    "vertexes",
+    "visibility",
+    "nodes",
+    "texinfo",
+    "faces",
+    "lighting",
+    "clipnodes",
+    "leafs",
+    "marksurfaces",
+    "edges",
+    "surfedges",
+    "models",
+)
 _LUMP = {name: i for i, name in enumerate(LUMP_NAMES)}
 HEADER_BYTES = 4 + 8 * len(LUMP_NAMES)
-MODEL_BYTES = 64          # dmodel_t: mins, maxs, origin (9 floats), 4 headnodes, visleafs, firstface, numfaces
+MODEL_BYTES = 64  # dmodel_t: mins, maxs, origin (9 floats), 4 headnodes, visleafs, firstface, numfaces
 MODEL_FIRSTFACE_AT = 56
-TEXINFO_BYTES = 40        # texinfo_t: vecs[2][4] floats, miptex, flags
+TEXINFO_BYTES = 40  # texinfo_t: vecs[2][4] floats, miptex, flags
 TEXINFO_MIPTEX_AT = 32
 MIPTEX_NAME_BYTES = 16
 # Texture names (lower case) whose faces are not level geometry (module docstring).
@@ -53,14 +69,32 @@ _SKIPPED_WORDS = ("trigger", "clip")
 @dataclass(frozen=True)
 class _Format:
     name: str
-    face: np.dtype[np.void]   # dface_t: planenum, side, firstedge, numedges, texinfo, styles[4], lightofs
-    edge: np.dtype[np.void]   # dedge_t: two vertex numbers
+    face: np.dtype[np.void]  # dface_t: planenum, side, firstedge, numedges, texinfo, styles[4], lightofs
+    edge: np.dtype[np.void]  # dedge_t: two vertex numbers
 
 
-_FACE29 = np.dtype([("planenum", "<i2"), ("side", "<i2"), ("firstedge", "<i4"), ("numedges", "<i2"),
-                    ("texinfo", "<i2"), ("styles", "u1", 4), ("lightofs", "<i4")])
-_FACE2 = np.dtype([("planenum", "<i4"), ("side", "<i4"), ("firstedge", "<i4"), ("numedges", "<i4"),
-                   ("texinfo", "<i4"), ("styles", "u1", 4), ("lightofs", "<i4")])
+_FACE29 = np.dtype(
+    [
+        ("planenum", "<i2"),
+        ("side", "<i2"),
+        ("firstedge", "<i4"),
+        ("numedges", "<i2"),
+        ("texinfo", "<i2"),
+        ("styles", "u1", 4),
+        ("lightofs", "<i4"),
+    ]
+)
+_FACE2 = np.dtype(
+    [
+        ("planenum", "<i4"),
+        ("side", "<i4"),
+        ("firstedge", "<i4"),
+        ("numedges", "<i4"),
+        ("texinfo", "<i4"),
+        ("styles", "u1", 4),
+        ("lightofs", "<i4"),
+    ]
+)
 _FORMATS = {
     struct.pack("<i", 29): _Format("BSP29", _FACE29, np.dtype(("<u2", 2))),
     b"BSP2": _Format("BSP2", _FACE2, np.dtype(("<u4", 2))),
@@ -70,8 +104,10 @@ _FORMATS = {
 
 def _format(data: bytes) -> _Format:
     if len(data) < HEADER_BYTES:
-        raise MeshError(f"BSP header: file of {len(data)} bytes is shorter than the {HEADER_BYTES}-byte header "
-                        f"(truncated at byte {len(data)})")
+        raise MeshError(
+            f"BSP header: file of {len(data)} bytes is shorter than the {HEADER_BYTES}-byte header "
+            f"(truncated at byte {len(data)})"
+        )
     fmt = _FORMATS.get(bytes(data[:4]))
     if fmt is None:
         raise MeshError(f"BSP header at byte 0: version/magic {bytes(data[:4])!r} is not BSP29 (29), BSP2 or 2PSB")
@@ -83,12 +119,13 @@ def _lump(data: bytes, name: str, record_bytes: int = 1) -> tuple[int, memoryvie
     at = 4 + 8 * _LUMP[name]
     offset, length = struct.unpack_from("<ii", data, at)
     if offset < 0 or length < 0 or offset + length > len(data):
-        raise MeshError(f"BSP {name} lump (header byte {at}): bytes {offset}..{offset + length} lie outside "
-                        f"the file of {len(data)} bytes (truncated or corrupt)")
+        raise MeshError(
+            f"BSP {name} lump (header byte {at}): bytes {offset}..{offset + length} lie outside "
+            f"the file of {len(data)} bytes (truncated or corrupt)"
+        )
     if length % record_bytes:
-        raise MeshError(f"BSP {name} lump at byte {offset}: {length} bytes is not a whole number of "
-                        f"{record_bytes}-byte records")
-    return offset, memoryview(data)[offset:offset + length]
+        raise MeshError(f"BSP {name} lump at byte {offset}: {length} bytes is not a whole number of {record_bytes}-byte records")
+    return offset, memoryview(data)[offset : offset + length]
 
 
 _Scalar = TypeVar("_Scalar", bound=np.generic)
@@ -118,25 +155,29 @@ def _texture_names(data: bytes) -> list[str]:
         if at == -1:
             names.append("")
         elif at < 0 or at + MIPTEX_NAME_BYTES > len(raw):
-            raise _fault("textures", offset + 4 + 4 * i,
-                         f"texture {i} starts at lump byte {at}, outside the lump's {len(raw)} bytes")
+            raise _fault(
+                "textures", offset + 4 + 4 * i, f"texture {i} starts at lump byte {at}, outside the lump's {len(raw)} bytes"
+            )
         else:
-            names.append(bytes(raw[at:at + MIPTEX_NAME_BYTES]).split(b"\0", 1)[0].decode("latin-1").lower())
+            names.append(bytes(raw[at : at + MIPTEX_NAME_BYTES]).split(b"\0", 1)[0].decode("latin-1").lower())
     return names
 
 
 def _kept_texinfo(data: bytes) -> npt.NDArray[np.bool_]:
     """(n_texinfo,) bool: the texinfo's texture is level geometry (module docstring)."""
     names = _texture_names(data)
-    skipped = np.array([n.startswith(_SKIPPED_PREFIXES) or any(w in n for w in _SKIPPED_WORDS) for n in names],
-                       dtype=bool)
+    skipped = np.array([n.startswith(_SKIPPED_PREFIXES) or any(w in n for w in _SKIPPED_WORDS) for n in names], dtype=bool)
     offset, raw = _lump(data, "texinfo", TEXINFO_BYTES)
-    miptex = np.frombuffer(raw, dtype=np.dtype({"names": ["miptex"], "formats": ["<i4"],
-                                                "offsets": [TEXINFO_MIPTEX_AT], "itemsize": TEXINFO_BYTES}))["miptex"]
+    miptex = np.frombuffer(
+        raw, dtype=np.dtype({"names": ["miptex"], "formats": ["<i4"], "offsets": [TEXINFO_MIPTEX_AT], "itemsize": TEXINFO_BYTES})
+    )["miptex"]
     bad = np.flatnonzero((miptex < 0) | (miptex >= len(names)))
     if len(bad):
-        raise _fault("texinfo", offset + int(bad[0]) * TEXINFO_BYTES,
-                     f"texinfo {bad[0]}: texture {miptex[bad[0]]} out of range ({len(names)} textures)")
+        raise _fault(
+            "texinfo",
+            offset + int(bad[0]) * TEXINFO_BYTES,
+            f"texinfo {bad[0]}: texture {miptex[bad[0]]} out of range ({len(names)} textures)",
+        )
     kept: npt.NDArray[np.bool_] = ~skipped[miptex]
     return kept
 
@@ -149,9 +190,12 @@ def _world_faces(data: bytes, fmt: _Format) -> tuple[int, int, npt.NDArray[np.vo
     first, count = struct.unpack_from("<ii", models, MODEL_FIRSTFACE_AT)
     faces_at, faces = _records(data, "faces", fmt.face)
     if first < 0 or count < 0 or first + count > len(faces):
-        raise _fault("models", offset + MODEL_FIRSTFACE_AT,
-                     f"model 0's faces {first}..{first + count} are out of range ({len(faces)} faces)")
-    return faces_at, first, faces[first:first + count]
+        raise _fault(
+            "models",
+            offset + MODEL_FIRSTFACE_AT,
+            f"model 0's faces {first}..{first + count} are out of range ({len(faces)} faces)",
+        )
+    return faces_at, first, faces[first : first + count]
 
 
 def from_bsp(data: bytes) -> TriMesh:
@@ -184,11 +228,14 @@ def from_bsp(data: bytes) -> TriMesh:
     bad = (n_edges < 3) | (first_edge < 0) | (first_edge + n_edges > len(surfedges))
     if bad.any():
         i = np.flatnonzero(bad)[0]
-        raise face_fault(bad, f"surfedges {first_edge[i]}..{first_edge[i] + n_edges[i]} are not a polygon "
-                              f"within the {len(surfedges)} surfedges")
+        raise face_fault(
+            bad,
+            f"surfedges {first_edge[i]}..{first_edge[i] + n_edges[i]} are not a polygon within the {len(surfedges)} surfedges",
+        )
     if n_edges.sum() > len(surfedges):  # each surfedge belongs to one face; this also bounds the arrays below
-        raise _fault("faces", faces_at, f"the world's faces claim {n_edges.sum()} surfedges, the surfedges lump "
-                                        f"holds {len(surfedges)}")
+        raise _fault(
+            "faces", faces_at, f"the world's faces claim {n_edges.sum()} surfedges, the surfedges lump holds {len(surfedges)}"
+        )
     # Each face's corners in order, one per surfedge from first_edge on.
     start = np.cumsum(n_edges) - n_edges
     corner_face = np.repeat(np.arange(len(faces)), n_edges)
@@ -197,15 +244,21 @@ def from_bsp(data: bytes) -> TriMesh:
     edges_at, edges = _records(data, "edges", fmt.edge)
     bad_at = np.flatnonzero(np.abs(signed) >= len(edges))
     if len(bad_at):
-        raise _fault("surfedges", surfedges_at + 4 * int(corner_surfedge[bad_at[0]]),
-                     f"surfedge {corner_surfedge[bad_at[0]]}: edge {signed[bad_at[0]]} out of range ({len(edges)} edges)")
+        raise _fault(
+            "surfedges",
+            surfedges_at + 4 * int(corner_surfedge[bad_at[0]]),
+            f"surfedge {corner_surfedge[bad_at[0]]}: edge {signed[bad_at[0]]} out of range ({len(edges)} edges)",
+        )
     edge = np.abs(signed)
     corner_vertex = np.where(signed >= 0, edges[edge, 0], edges[edge, 1]).astype(np.int64)
     _, points = _records(data, "vertexes", np.dtype(("<f4", 3)))
     bad_at = np.flatnonzero(corner_vertex >= len(points))
     if len(bad_at):
-        raise _fault("edges", edges_at + int(edge[bad_at[0]]) * fmt.edge.itemsize,
-                     f"edge {edge[bad_at[0]]}: vertex {corner_vertex[bad_at[0]]} out of range ({len(points)} vertexes)")
+        raise _fault(
+            "edges",
+            edges_at + int(edge[bad_at[0]]) * fmt.edge.itemsize,
+            f"edge {edge[bad_at[0]]}: vertex {corner_vertex[bad_at[0]]} out of range ({len(points)} vertexes)",
+        )
     # Fan (c0, c_k+1, c_k) for k = 1..n-2: reversed, so counter-clockwise from the front.
     fans = n_edges - 2
     tri_face = np.repeat(np.arange(len(faces)), fans)
@@ -237,7 +290,7 @@ def _entity_tokens(text: bytes, offset: int) -> Iterator[tuple[int, str | None, 
             end = text.find(b'"', at + 1)
             if end < 0:
                 raise _fault("entities", offset, f"string without its closing quote at byte {offset + at}")
-            yield at, text[at + 1:end].decode("latin-1"), None
+            yield at, text[at + 1 : end].decode("latin-1"), None
             at = end + 1
         else:
             end = at

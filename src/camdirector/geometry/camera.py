@@ -4,6 +4,7 @@ whether they lie in the frame.
 Camera convention (glTF, as on the wire): the camera looks down its local -Z with +Y up; screen
 x is right, y is up, both in [-1, 1] at the frame's edges.
 """
+
 from __future__ import annotations
 
 import math
@@ -80,22 +81,26 @@ def _project_few(pose: CameraPose, lens: Lens, points: npt.NDArray[np.float64]) 
         if depth <= 0.0:
             out.append((math.nan, math.nan))
         else:
-            out.append(((dx * right[0] + dy * right[1] + dz * right[2]) / (depth * tan_x),
-                        (dx * up[0] + dy * up[1] + dz * up[2]) / (depth * tan_y)))
+            out.append(
+                (
+                    (dx * right[0] + dy * right[1] + dz * right[2]) / (depth * tan_x),
+                    (dx * up[0] + dy * up[1] + dz * up[2]) / (depth * tan_y),
+                )
+            )
     return np.array(out, dtype=np.float64).reshape(len(points), 2)
 
 
-def project_from_cameras(positions_world: npt.NDArray[np.float64], rotations: npt.NDArray[np.float64], lens: Lens,
-                         points_world: npt.ArrayLike) -> npt.NDArray[np.float64]:
+def project_from_cameras(
+    positions_world: npt.NDArray[np.float64], rotations: npt.NDArray[np.float64], lens: Lens, points_world: npt.ArrayLike
+) -> npt.NDArray[np.float64]:
     """project_to_screen for m cameras at once: (m, n, 2) normalised screen positions of world
     points (n, 3) from cameras at positions_world (m, 3) with camera-to-world rotation matrices
     (m, 3, 3); NaN for points behind a camera (and for a camera whose rotation is NaN)."""
     offsets = np.atleast_2d(points_world)[None, :, :] - positions_world[:, None, :]
-    p_cam = offsets @ rotations                                  # world -> camera: R^T p, per camera
+    p_cam = offsets @ rotations  # world -> camera: R^T p, per camera
     depth = -p_cam[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.stack([p_cam[..., 0] / (depth * lens.tan_half_fov_x), p_cam[..., 1] / (depth * lens.tan_half_fov_y)],
-                       axis=-1)
+        out = np.stack([p_cam[..., 0] / (depth * lens.tan_half_fov_x), p_cam[..., 1] / (depth * lens.tan_half_fov_y)], axis=-1)
     out[~(depth > 0.0)] = np.nan
     return out
 
@@ -106,15 +111,16 @@ def in_frame(pose: CameraPose, lens: Lens, points_world: npt.ArrayLike) -> npt.N
     (|x| <= 1 and |y| <= 1 in normalised screen units) at the pose's vertical field of view and the
     lens's aspect. lens.vertical_fov_deg is not used: the pose carries the field of view."""
     frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
-    screen = project_to_screen(pose, frame_lens, points_world)                  # NaN behind the camera
+    screen = project_to_screen(pose, frame_lens, points_world)  # NaN behind the camera
     z_camera = (np.atleast_2d(points_world) - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)[:, 2]
     with np.errstate(invalid="ignore"):
         inside: npt.NDArray[np.bool_] = (-z_camera >= NEAR_PLANE_M) & np.all(np.abs(screen) <= 1.0, axis=1)
     return inside
 
 
-def level_look_rotation(camera_world: npt.NDArray[np.float64], point_world: npt.ArrayLike, screen_xy: Sequence[float],
-                        lens: Lens) -> npt.NDArray[np.float64]:
+def level_look_rotation(
+    camera_world: npt.NDArray[np.float64], point_world: npt.ArrayLike, screen_xy: Sequence[float], lens: Lens
+) -> npt.NDArray[np.float64]:
     """Camera-to-world quaternion (4,) xyzw with no roll (camera x axis horizontal, +Y up) that
     shows point_world at normalised screen_xy (2,) (`level_rotation`)."""
     d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
@@ -122,8 +128,9 @@ def level_look_rotation(camera_world: npt.NDArray[np.float64], point_world: npt.
     return matrix_to_quat(level_rotation(a / np.linalg.norm(a), d / np.linalg.norm(d)))
 
 
-def level_look_matrices(cameras_world: npt.ArrayLike, point_world: npt.ArrayLike, screen_xy: Sequence[float],
-                        lens: Lens) -> npt.NDArray[np.float64]:
+def level_look_matrices(
+    cameras_world: npt.ArrayLike, point_world: npt.ArrayLike, screen_xy: Sequence[float], lens: Lens
+) -> npt.NDArray[np.float64]:
     """(m, 3, 3) camera-to-world rotation matrices of `level_look_rotation` for m cameras (m, 3) at
     once (a place search tries hundreds); rows of NaN for a camera at the point."""
     d = np.array([screen_xy[0] * lens.tan_half_fov_x, screen_xy[1] * lens.tan_half_fov_y, -1.0])
@@ -164,12 +171,21 @@ def level_rotations(world_dirs: npt.ArrayLike, camera_dir: Iterable[float]) -> n
     delta = math.atan2(dz, dy)
     base = np.arccos(np.clip(w[:, 1] / rho, -1.0, 1.0))
     up, down = base - delta, -base - delta
-    pitch = np.where(np.abs(np.remainder(up + math.pi, math.tau) - math.pi)
-                     <= np.abs(np.remainder(down + math.pi, math.tau) - math.pi), up, down)
+    pitch = np.where(
+        np.abs(np.remainder(up + math.pi, math.tau) - math.pi) <= np.abs(np.remainder(down + math.pi, math.tau) - math.pi),
+        up,
+        down,
+    )
     cp, sp = np.cos(pitch), np.sin(pitch)
     yaw = np.arctan2(w[:, 0], w[:, 2]) - np.arctan2(dx, dy * sp + dz * cp)
     cw, sw = np.cos(yaw), np.sin(yaw)
-    out = np.stack([np.stack([cw, sw * sp, sw * cp], axis=1), np.stack([np.zeros_like(cw), cp, -sp], axis=1),
-                    np.stack([-sw, cw * sp, cw * cp], axis=1)], axis=1)
-    out[np.isnan(pitch)] = np.nan   # the constant zero of a NaN row too
+    out = np.stack(
+        [
+            np.stack([cw, sw * sp, sw * cp], axis=1),
+            np.stack([np.zeros_like(cw), cp, -sp], axis=1),
+            np.stack([-sw, cw * sp, cw * cp], axis=1),
+        ],
+        axis=1,
+    )
+    out[np.isnan(pitch)] = np.nan  # the constant zero of a NaN row too
     return out

@@ -4,6 +4,7 @@
 machines without a GPU, the GPU's driver where there is one). `uniform(program, name)`: one of a
 program's plain uniforms by name.
 """
+
 from __future__ import annotations
 
 from typing import cast

@@ -3,6 +3,7 @@
 Every constructor returns a `TriMesh` in the object's local frame, or raises `MeshError` with a
 message fit for a client.
 """
+
 from __future__ import annotations
 
 import io

@@ -8,15 +8,16 @@ running speed 8 m/s; we size cameras for people, so the player's height sets the
 
 Axes: (x, y, z)_quake -> (x, z, -y)_world, a proper rotation (determinant +1), scaled.
 """
+
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
 
-M_PER_UNIT = 1.0 / 32.0          # 56 units = 1.75 m (module docstring)
-PLAYER_HEIGHT_UNITS = 56.0        # hull mins z -24 to maxs z +32
-PLAYER_RADIUS_UNITS = 16.0        # hull half width
-ORIGIN_ABOVE_FEET_UNITS = 24.0    # a player's origin is 24 units above its feet
+M_PER_UNIT = 1.0 / 32.0  # 56 units = 1.75 m (module docstring)
+PLAYER_HEIGHT_UNITS = 56.0  # hull mins z -24 to maxs z +32
+PLAYER_RADIUS_UNITS = 16.0  # hull half width
+ORIGIN_ABOVE_FEET_UNITS = 24.0  # a player's origin is 24 units above its feet
 PLAYER_HEIGHT_M = PLAYER_HEIGHT_UNITS * M_PER_UNIT
 PLAYER_RADIUS_M = PLAYER_RADIUS_UNITS * M_PER_UNIT
 

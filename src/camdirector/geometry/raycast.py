@@ -7,6 +7,7 @@ d' = M^-1 d, so the ray parameter t means the same point in both frames) instead
 anything when an object moves (RayScene says how many objects share one scene and one call,
 and how a few are cast one by one).
 """
+
 from __future__ import annotations
 
 import math
@@ -39,8 +40,9 @@ def _embree_scene(meshes: list[TriMesh]) -> rtcore_scene.EmbreeScene:
     return scene
 
 
-def _rebuilt(static_meshes_world: list[TriMesh], solo_max_objects: int,
-             objects: list[tuple[str, TriMesh, RigidTransform]]) -> RayScene:
+def _rebuilt(
+    static_meshes_world: list[TriMesh], solo_max_objects: int, objects: list[tuple[str, TriMesh, RigidTransform]]
+) -> RayScene:
     """A RayScene unpickled (RayScene.__reduce__): built again from its meshes, objects in their order."""
     scene = RayScene(static_meshes_world, solo_max_objects)
     for object_id, mesh_local, transform in objects:
@@ -80,9 +82,9 @@ class RayScene:
     def __init__(self, static_meshes_world: list[TriMesh], solo_max_objects: int = SOLO_MAX_OBJECTS):
         self._static_meshes = list(static_meshes_world)
         self._static = _embree_scene(static_meshes_world) if static_meshes_world else None
-        self._index: dict[str, int] = {}                  # object id -> row
+        self._index: dict[str, int] = {}  # object id -> row
         self._meshes_local: list[TriMesh] = []
-        self._reach_local: list[float] = []               # per object: farthest vertex from the local origin
+        self._reach_local: list[float] = []  # per object: farthest vertex from the local origin
         self._transforms: list[RigidTransform] = []
         # scene, offsets (m, 3), reach (m,)
         self._local: tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
@@ -113,8 +115,9 @@ class RayScene:
         if self._solo:
             self._solo[row] = (self._solo[row][0], None)
 
-    def _each(self, box: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
-              ) -> list[tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64]]]:
+    def _each(
+        self, box: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+    ) -> list[tuple[rtcore_scene.EmbreeScene, npt.NDArray[np.float64]]]:
         """Per object, for casting a few one by one (class docstring): its own scene and its
         world-to-local matrix (4, 4), made on first use after a move. With `box`, (lo, hi) (3,)
         world metres around every segment of a query, only the objects whose bounding sphere
@@ -159,12 +162,17 @@ class RayScene:
             positions = np.array([tf.position_world for tf in transforms])
             scales = np.array([tf.scale for tf in transforms])
             linear = quat_to_matrix(np.array([tf.rotation_xyzw for tf in transforms])).transpose(0, 2, 1) / scales[:, :, None]
-            self._poses = (positions, np.array(self._reach_local) * np.abs(scales).max(axis=1), linear,
-                           -np.einsum("mij,mj->mi", linear, positions))
+            self._poses = (
+                positions,
+                np.array(self._reach_local) * np.abs(scales).max(axis=1),
+                linear,
+                -np.einsum("mij,mj->mi", linear, positions),
+            )
         return self._poses
 
-    def _cast_dynamic(self, origins: npt.NDArray[np.float64], directions: npt.NDArray[np.float64], t_max: npt.NDArray[np.float64],
-                      query: str) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float64]]:
+    def _cast_dynamic(
+        self, origins: npt.NDArray[np.float64], directions: npt.NDArray[np.float64], t_max: npt.NDArray[np.float64], query: str
+    ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float64]]:
         """Rays o + t d, 0 <= t <= t_max, (n, 3), (n, 3), (n,), against every moving object.
         Returns (ray index (p,), ray parameter of the hit (p,) float64) of the hits; a ray may appear
         once per object it hits. query: "OCCLUDED" (the parameter is then that of the segment's
@@ -175,8 +183,9 @@ class RayScene:
         centres, radii, linear, translation = self._pose_arrays()
         # Objects whose sphere meets the box around all the segments.
         ends = origins + directions * t_max[:, None]
-        gap = np.maximum(np.maximum(np.minimum(origins, ends).min(axis=0) - centres,
-                                    centres - np.maximum(origins, ends).max(axis=0)), 0.0)  # (m, 3)
+        gap = np.maximum(
+            np.maximum(np.minimum(origins, ends).min(axis=0) - centres, centres - np.maximum(origins, ends).max(axis=0)), 0.0
+        )  # (m, 3)
         candidates = np.flatnonzero((gap * gap).sum(axis=1) <= radii * radii)
         if not len(candidates):
             return none
@@ -220,8 +229,10 @@ class RayScene:
         tmax = np.full(len(targets), 1.0 - 1e-4, dtype=np.float32)
         hit = np.zeros(len(targets), dtype=bool)
         if self._static is not None:
-            hit |= self._static.run(origins.astype(np.float32), directions.astype(np.float32),
-                                    dists=tmax.copy(), query="OCCLUDED") != _NO_HIT
+            hit |= (
+                self._static.run(origins.astype(np.float32), directions.astype(np.float32), dists=tmax.copy(), query="OCCLUDED")
+                != _NO_HIT
+            )
         if 0 < len(self._transforms) <= self._solo_max:
             box = np.minimum(origins, targets).min(axis=0), np.maximum(origins, targets).max(axis=0)
             for scene, world_to_local in self._each(box):
@@ -230,8 +241,7 @@ class RayScene:
                     break
                 o = origins[rest] @ world_to_local[:3, :3].T + world_to_local[:3, 3]
                 d = directions[rest] @ world_to_local[:3, :3].T
-                hit[rest] = scene.run(o.astype(np.float32), d.astype(np.float32),
-                                      dists=tmax[rest], query="OCCLUDED") != _NO_HIT
+                hit[rest] = scene.run(o.astype(np.float32), d.astype(np.float32), dists=tmax[rest], query="OCCLUDED") != _NO_HIT
         elif self._transforms:
             rest = np.flatnonzero(~hit)
             hit[rest[self._cast_dynamic(origins[rest], directions[rest], tmax[rest].astype(np.float64), "OCCLUDED")[0]]] = True
@@ -247,8 +257,9 @@ class RayScene:
         origins = np.broadcast_to(origins_world, directions.shape)
         best = np.full(len(directions), np.inf)
         if self._static is not None:
-            best = self._static.run(origins.astype(np.float32), directions.astype(np.float32),
-                                    query="DISTANCE").astype(np.float64)
+            best = self._static.run(origins.astype(np.float32), directions.astype(np.float32), query="DISTANCE").astype(
+                np.float64
+            )
             best[best >= _EMBREE_MISS] = np.inf
         if 0 < len(self._transforms) <= self._solo_max:
             for scene, world_to_local in self._each():

@@ -14,6 +14,7 @@ model matrix, normal matrix, colour and checker size travel as per-instance attr
 llvmpipe each draw call costs about as much as its pixels, so a character of 40 capsule pieces
 drawn as two instanced calls instead of 40 single ones renders 2-3x faster.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -109,8 +110,9 @@ def perspective_matrix(lens: Lens, near_m: float, far_m: float) -> npt.NDArray[n
     return m
 
 
-def top_down_matrix(x_range_m: tuple[float, float], z_range_m: tuple[float, float],
-                    y_range_m: tuple[float, float]) -> npt.NDArray[np.float64]:
+def top_down_matrix(
+    x_range_m: tuple[float, float], z_range_m: tuple[float, float], y_range_m: tuple[float, float]
+) -> npt.NDArray[np.float64]:
     """(4, 4) float64 clip-from-world matrix of an orthographic view straight down: world x across
     the image left to right over x_range_m, world z down it top to bottom over z_range_m (as the
     dashboard's top view draws them), depth from the top of y_range_m (near) to its bottom (far)."""
@@ -119,8 +121,8 @@ def top_down_matrix(x_range_m: tuple[float, float], z_range_m: tuple[float, floa
         raise ValueError("top_down_matrix: each range must be (low, high) with high > low")
     m = np.zeros((4, 4))
     m[0, 0], m[0, 3] = 2.0 / (x1 - x0), -(x1 + x0) / (x1 - x0)
-    m[1, 2], m[1, 3] = -2.0 / (z1 - z0), (z1 + z0) / (z1 - z0)   # z0 at the top row (clip y = 1)
-    m[2, 1], m[2, 3] = -2.0 / (y1 - y0), (y1 + y0) / (y1 - y0)   # the highest point nearest
+    m[1, 2], m[1, 3] = -2.0 / (z1 - z0), (z1 + z0) / (z1 - z0)  # z0 at the top row (clip y = 1)
+    m[2, 1], m[2, 3] = -2.0 / (y1 - y0), (y1 + y0) / (y1 - y0)  # the highest point nearest
     m[3, 3] = 1.0
     return m
 
@@ -157,6 +159,7 @@ class _Geometry:
     vao: moderngl.VertexArray
     closed: bool
     rows: list[int]
+
 
 class OffscreenRenderer:
     """Flat-shaded colour renderer of rigid meshes into an offscreen framebuffer.
@@ -206,8 +209,16 @@ class OffscreenRenderer:
         with ctx:
             self._setup(ctx, width_px, height_px, msaa_samples, light_dir_world, fog_start_m, fog_end_m)
 
-    def _setup(self, ctx: moderngl.Context, width_px: int, height_px: int, msaa_samples: int,
-               light_dir_world: tuple[float, float, float], fog_start_m: float, fog_end_m: float) -> None:
+    def _setup(
+        self,
+        ctx: moderngl.Context,
+        width_px: int,
+        height_px: int,
+        msaa_samples: int,
+        light_dir_world: tuple[float, float, float],
+        fog_start_m: float,
+        fog_end_m: float,
+    ) -> None:
         """The program, framebuffers and tables (the context `ctx` is current)."""
         self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
         light = np.asarray(light_dir_world, dtype=np.float64)
@@ -297,10 +308,13 @@ class OffscreenRenderer:
             ctx = self._live_context()
             vbo = ctx.buffer(key[0])
             instance_buffer = ctx.buffer(reserve=_INSTANCE_FLOATS * 4)
-            vao = ctx.vertex_array(self._prog, [
-                (vbo, "3f 3f", "in_position", "in_normal"),
-                (instance_buffer, _INSTANCE_FORMAT, *_INSTANCE_ATTRIBUTES),
-            ])
+            vao = ctx.vertex_array(
+                self._prog,
+                [
+                    (vbo, "3f 3f", "in_position", "in_normal"),
+                    (instance_buffer, _INSTANCE_FORMAT, *_INSTANCE_ATTRIBUTES),
+                ],
+            )
             geometry = self._geometries[key] = _Geometry(vbo, instance_buffer, vao, closed, [])
         row = np.zeros(_INSTANCE_FLOATS, dtype="f4")
         row[_MODEL] = np.eye(4).ravel()
@@ -350,9 +364,7 @@ class OffscreenRenderer:
 
     # -- frames ------------------------------------------------------------------------------
 
-    def render(
-        self, pose: CameraPose, lens: Lens, near_m: float = 0.05, far_m: float = 500.0
-    ) -> npt.NDArray[np.uint8]:
+    def render(self, pose: CameraPose, lens: Lens, near_m: float = 0.05, far_m: float = 500.0) -> npt.NDArray[np.uint8]:
         """(h, w, 3) uint8 image, top row first, seen from pose through lens.
 
         The projection uses lens.vertical_fov_deg and lens.aspect (as `project_to_screen` does);
@@ -373,8 +385,9 @@ class OffscreenRenderer:
             raise ValueError("OffscreenRenderer was released")
         return self._ctx
 
-    def _draw(self, ctx: moderngl.Context, view_proj: npt.NDArray[np.float64],
-              eye_world: Iterable[float]) -> npt.NDArray[np.uint8]:
+    def _draw(
+        self, ctx: moderngl.Context, view_proj: npt.NDArray[np.float64], eye_world: Iterable[float]
+    ) -> npt.NDArray[np.uint8]:
         self._draw_fbo.use()
         ctx.enable(moderngl.DEPTH_TEST)
         self._draw_fbo.clear(*self.sky_rgb, 1.0, depth=1.0)

@@ -31,6 +31,7 @@ axis it rolls by tens of degrees: up to 85 in the MATCH rig's programs). `level_
 (and `level_pair_matrices`) is the broadcast one: no roll, the bisector of the rays to A and B on
 the bisector of the screen points' rays, equal to look_rotation whenever that has no roll.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,9 +45,9 @@ from camdirector.geometry.camera import CameraPose, Lens, level_rotation, level_
 from camdirector.geometry.transforms import matrix_to_quat
 
 MIN_AB_DISTANCE_M = 1e-6
-MIN_ALPHA_RAD = 1e-4            # alpha must lie in [MIN_ALPHA_RAD, pi - MIN_ALPHA_RAD]
-PARALLEL_SIN_EPS = 1e-6         # |sin(AB, up)| below this uses the fallback reference direction
-THETA_MARGIN_RAD = 1e-6         # torus_angles keeps theta this far inside its open range
+MIN_ALPHA_RAD = 1e-4  # alpha must lie in [MIN_ALPHA_RAD, pi - MIN_ALPHA_RAD]
+PARALLEL_SIN_EPS = 1e-6  # |sin(AB, up)| below this uses the fallback reference direction
+THETA_MARGIN_RAD = 1e-6  # torus_angles keeps theta this far inside its open range
 
 
 class DegenerateTorus(ValueError):
@@ -71,9 +72,9 @@ class Torus:
     side_world: npt.NDArray[np.float64]
     length_ab_m: float
     arc_radius_m: float
-    mid_world: npt.NDArray[np.float64] = field(repr=False)      # (3,) midpoint of AB, the origin of the closed form
-    basis: npt.NDArray[np.float64] = field(repr=False)          # (3, 3) rows axis, ref, side: local -> world by @ basis
-    center_offset_m: float = field(repr=False)     # r cos(alpha): distance of the arc's centre off the axis
+    mid_world: npt.NDArray[np.float64] = field(repr=False)  # (3,) midpoint of AB, the origin of the closed form
+    basis: npt.NDArray[np.float64] = field(repr=False)  # (3, 3) rows axis, ref, side: local -> world by @ basis
+    center_offset_m: float = field(repr=False)  # r cos(alpha): distance of the arc's centre off the axis
 
 
 def _read_only(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -97,8 +98,7 @@ def _unit_tuple(x: float, y: float, z: float) -> tuple[float, float, float]:
     return x / n, y / n, z / n
 
 
-def make_torus(a_world: npt.ArrayLike, b_world: npt.ArrayLike, alpha: float,
-               up_world: npt.ArrayLike = (0.0, 1.0, 0.0)) -> Torus:
+def make_torus(a_world: npt.ArrayLike, b_world: npt.ArrayLike, alpha: float, up_world: npt.ArrayLike = (0.0, 1.0, 0.0)) -> Torus:
     """Torus of the camera centres C with angle(A - C, B - C) = alpha.
 
     a_world, b_world, up_world: (3,) metres (up: any length). alpha: radians.
@@ -134,9 +134,14 @@ def make_torus(a_world: npt.ArrayLike, b_world: npt.ArrayLike, alpha: float,
     basis.setflags(write=False)  # the rows below are views of it, read-only too
     radius = length / (2.0 * math.sin(alpha))
     return Torus(
-        a_world=_read_only(np.array(a)), b_world=_read_only(np.array(b)), alpha=alpha,
-        axis_world=basis[0], ref_world=basis[1], side_world=basis[2],
-        length_ab_m=length, arc_radius_m=radius,
+        a_world=_read_only(np.array(a)),
+        b_world=_read_only(np.array(b)),
+        alpha=alpha,
+        axis_world=basis[0],
+        ref_world=basis[1],
+        side_world=basis[2],
+        length_ab_m=length,
+        arc_radius_m=radius,
         mid_world=_read_only(np.array([0.5 * (p + q) for p, q in zip(a, b)])),
         basis=basis,
         center_offset_m=radius * math.cos(alpha),
@@ -166,8 +171,9 @@ def composition_angle(screen_a: Sequence[float], screen_b: Sequence[float], lens
     return math.atan2(cross, ax * bx + ay * by + az * bz)
 
 
-def torus_position(torus: Torus, theta: float | npt.NDArray[np.float64],
-                   phi: float | npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def torus_position(
+    torus: Torus, theta: float | npt.NDArray[np.float64], phi: float | npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
     """Camera centre, metres, at (theta, phi) radians.
 
     Scalars give (3,); arrays broadcast together, shape (...,) -> (..., 3). A theta outside its open
@@ -224,8 +230,9 @@ def torus_angles_many(torus: Torus, positions_world: npt.ArrayLike) -> tuple[npt
     return np.clip(theta, THETA_MARGIN_RAD, hi - THETA_MARGIN_RAD), phi
 
 
-def tangent_frame(torus: Torus, theta: float,
-                  phi: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+def tangent_frame(
+    torus: Torus, theta: float, phi: float
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(d pos/d theta, d pos/d phi, outward unit normal) at (theta, phi), each (3,) world.
 
     The derivatives are metres per radian: |d/d theta| = arc_radius_m, |d/d phi| = the camera's
@@ -237,11 +244,13 @@ def tangent_frame(torus: Torus, theta: float,
     s, c = math.sin(t), math.cos(t)
     sp, cp = math.sin(phi), math.cos(phi)
     radial = torus.center_offset_m - r * c
-    local = np.array((
-        (-r * c, r * s * cp, r * s * sp),
-        (0.0, -radial * sp, radial * cp),
-        (-s, -c * cp, -c * sp),
-    ))
+    local = np.array(
+        (
+            (-r * c, r * s * cp, r * s * sp),
+            (0.0, -radial * sp, radial * cp),
+            (-s, -c * cp, -c * sp),
+        )
+    )
     d_theta, d_phi, normal = local @ torus.basis
     return d_theta, d_phi, normal
 
@@ -255,15 +264,18 @@ def _frame(p: tuple[float, float, float], q: tuple[float, float, float]) -> npt.
     if n < 1e-12:
         raise ValueError("look_rotation: the two directions are parallel")
     ox, oy, oz = ox / n, oy / n, oz / n
-    return np.array((
-        (px, ox, py * oz - pz * oy),
-        (py, oy, pz * ox - px * oz),
-        (pz, oz, px * oy - py * ox),
-    ))
+    return np.array(
+        (
+            (px, ox, py * oz - pz * oy),
+            (py, oy, pz * ox - px * oz),
+            (pz, oz, px * oy - py * ox),
+        )
+    )
 
 
-def _rays_to(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
-             what: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+def _rays_to(
+    camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike, what: str
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Unit directions (3,) from the camera to A and to B; ValueError naming `what` if it is at one."""
     cx, cy, cz = np.asarray(camera_world, dtype=np.float64).tolist()
     ax, ay, az = np.asarray(a_world, dtype=np.float64).tolist()
@@ -274,8 +286,14 @@ def _rays_to(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.A
         raise ValueError(f"{what}: the camera is at a framed point") from None
 
 
-def look_rotation(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
-                  screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
+def look_rotation(
+    camera_world: npt.ArrayLike,
+    a_world: npt.ArrayLike,
+    b_world: npt.ArrayLike,
+    screen_a: Sequence[float],
+    screen_b: Sequence[float],
+    lens: Lens,
+) -> npt.NDArray[np.float64]:
     """Camera-to-world unit quaternion (4,) xyzw, w >= 0, that shows A at screen_a and B at screen_b.
 
     camera_world, a_world, b_world: (3,) metres; screen_a, screen_b: (2,). R = W D^T (primer step 4),
@@ -295,8 +313,14 @@ def _screen_bisector(screen_a: Sequence[float], screen_b: Sequence[float], lens:
     return _unit_tuple(u[0] + v[0], u[1] + v[1], u[2] + v[2])
 
 
-def level_pair_rotation(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
-                        screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
+def level_pair_rotation(
+    camera_world: npt.ArrayLike,
+    a_world: npt.ArrayLike,
+    b_world: npt.ArrayLike,
+    screen_a: Sequence[float],
+    screen_b: Sequence[float],
+    lens: Lens,
+) -> npt.NDArray[np.float64]:
     """Camera-to-world unit quaternion (4,) xyzw with no roll (camera x axis horizontal) that
     frames A near screen_a and B near screen_b: broadcast framing keeps the horizon level.
 
@@ -317,12 +341,17 @@ def level_pair_rotation(camera_world: npt.ArrayLike, a_world: npt.ArrayLike, b_w
     length = math.sqrt(wx * wx + wy * wy + wz * wz)
     if length < 1e-12:
         raise ValueError("level_pair_rotation: the camera is between the framed points")
-    return matrix_to_quat(level_rotation((wx / length, wy / length, wz / length),
-                                         _screen_bisector(screen_a, screen_b, lens)))
+    return matrix_to_quat(level_rotation((wx / length, wy / length, wz / length), _screen_bisector(screen_a, screen_b, lens)))
 
 
-def level_pair_matrices(cameras_world: npt.ArrayLike, a_world: npt.ArrayLike, b_world: npt.ArrayLike,
-                        screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens) -> npt.NDArray[np.float64]:
+def level_pair_matrices(
+    cameras_world: npt.ArrayLike,
+    a_world: npt.ArrayLike,
+    b_world: npt.ArrayLike,
+    screen_a: Sequence[float],
+    screen_b: Sequence[float],
+    lens: Lens,
+) -> npt.NDArray[np.float64]:
     """(m, 3, 3) camera-to-world rotation matrices of `level_pair_rotation` for m cameras (m, 3)
     at once (a shot's place search tries hundreds); rows of NaN where a camera is at A or B or
     between them on their line."""
@@ -338,8 +367,9 @@ def level_pair_matrices(cameras_world: npt.ArrayLike, a_world: npt.ArrayLike, b_
         return level_rotations(w, _screen_bisector(screen_a, screen_b, lens))
 
 
-def compose_pose(torus: Torus, theta: float, phi: float, screen_a: Sequence[float], screen_b: Sequence[float],
-                 lens: Lens) -> CameraPose:
+def compose_pose(
+    torus: Torus, theta: float, phi: float, screen_a: Sequence[float], screen_b: Sequence[float], lens: Lens
+) -> CameraPose:
     """Pose at (theta, phi) radians that frames torus.a_world at screen_a (2,) and torus.b_world at
     screen_b (2,); torus must be built with alpha = composition_angle(screen_a, screen_b, lens)."""
     position = torus_position(torus, theta, phi)

@@ -3,6 +3,7 @@
 Frames are (h, w, 3) uint8 RGB, top row first, as `OffscreenRenderer.render` returns them. The
 file is yuv420p (what browsers and most players decode), so width and height must be even.
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -66,9 +67,7 @@ class VideoWriter:
         frame = np.asarray(frame_hwc)
         width_px, height_px = self.size_wh
         if frame.shape != (height_px, width_px, 3) or frame.dtype != np.uint8:
-            raise ValueError(
-                f"frame must be ({height_px}, {width_px}, 3) uint8, got {frame.shape} {frame.dtype}"
-            )
+            raise ValueError(f"frame must be ({height_px}, {width_px}, 3) uint8, got {frame.shape} {frame.dtype}")
         self._writer.send(np.ascontiguousarray(frame))
         self.frames_written += 1
 
@@ -93,17 +92,33 @@ def concat_videos(parts: Sequence[str | Path], path: str | Path) -> None:
     path = Path(path)
     listing = path.with_name(f".{path.name}.parts.txt")
     # The concat demuxer reads a list of files; single quotes in names are escaped as '\''.
-    listing.write_text("".join(
-        "file '{}'\n".format(str(Path(p).resolve()).replace("'", "'\\''")) for p in parts))
+    listing.write_text("".join("file '{}'\n".format(str(Path(p).resolve()).replace("'", "'\\''")) for p in parts))
     try:
         done = subprocess.run(
             # -xerror: without it a part that cannot be read is logged and skipped, exit 0.
-            [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-xerror", "-loglevel", "error", "-f", "concat",
-             "-safe", "0", "-i", str(listing), "-c", "copy", "-movflags", "+faststart", str(path)],
-            stdin=subprocess.DEVNULL, capture_output=True)
+            [
+                imageio_ffmpeg.get_ffmpeg_exe(),
+                "-y",
+                "-xerror",
+                "-loglevel",
+                "error",
+                "-f",
+                "concat",
+                "-safe",
+                "0",
+                "-i",
+                str(listing),
+                "-c",
+                "copy",
+                "-movflags",
+                "+faststart",
+                str(path),
+            ],
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+        )
     finally:
         listing.unlink(missing_ok=True)
     if done.returncode != 0:
         path.unlink(missing_ok=True)
-        raise RuntimeError(f"joining {len(parts)} video parts failed: "
-                           f"{done.stderr.decode(errors='replace').strip()[-2000:]}")
+        raise RuntimeError(f"joining {len(parts)} video parts failed: {done.stderr.decode(errors='replace').strip()[-2000:]}")

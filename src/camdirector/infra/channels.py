@@ -36,6 +36,7 @@ JSON (`ViewQuery.to_json`, `ViewQuery.from_json`); each reply body is a view (`e
 the media type, and the top view's world bounds), then the image. A query that is not one raises
 ValueError, which each end answers as its own refusal (INVALID_ARGUMENT, HTTP 422).
 """
+
 from __future__ import annotations
 
 import pickle
@@ -53,7 +54,7 @@ class FrameMetrics:
     compute_ms: float
     stage_ms: dict[str, float]
     stale: bool
-    checkpoint_failed: bool = False   # its input could not be written to the checkpoint store
+    checkpoint_failed: bool = False  # its input could not be written to the checkpoint store
 
 
 # request id (u32, wraps), op (u8, index in OPS), session id bytes (u16), payload bytes (u64)
@@ -64,7 +65,7 @@ OPS = ("ping", "stop", "create", "frame", "style", "close", "take", "timeline", 
 OP_CODES = {name: code for code, name in enumerate(OPS)}
 HAS_METRICS, STALE, CHECKPOINT_FAILED = 1, 2, 4
 READ_BUFFER_BYTES = 1 << 16  # the worker's read buffer: a frame request (~1 KB) arrives in one read
-REQUEST_ID_MODULUS = 2 ** 32
+REQUEST_ID_MODULUS = 2**32
 
 
 def encode_request(request_id: int, op: str, session_id: str, payload: bytes) -> list[bytes]:
@@ -79,11 +80,15 @@ def encode_reply(request_id: int, status: int, body: bytes, metrics: FrameMetric
     names = ",".join(metrics.stage_ms).encode("ascii")
     values = struct.pack(f"!{len(metrics.stage_ms)}d", *metrics.stage_ms.values())
     flags = HAS_METRICS | (STALE if metrics.stale else 0) | (CHECKPOINT_FAILED if metrics.checkpoint_failed else 0)
-    return REPLY.pack(request_id, status, flags, metrics.compute_ms, len(metrics.stage_ms), len(names),
-                      len(body)) + names + values + body
+    return (
+        REPLY.pack(request_id, status, flags, metrics.compute_ms, len(metrics.stage_ms), len(names), len(body))
+        + names
+        + values
+        + body
+    )
 
 
-ReplyHeader = tuple[int, int, int, float, int, int, int]   # REPLY unpacked
+ReplyHeader = tuple[int, int, int, float, int, int, int]  # REPLY unpacked
 
 _stage_names: dict[bytes, tuple[str, ...]] = {}  # a rig's stage names recur every frame: split once
 
@@ -99,7 +104,7 @@ def decode_reply_tail(header: ReplyHeader, tail: bytes) -> tuple[bytes, FrameMet
     if names is None:
         names = _stage_names[blob] = tuple(blob.decode("ascii").split(",")) if blob else ()
     values = struct.unpack_from(f"!{stages}d", tail, names_len)
-    body = tail[names_len + 8 * stages:]
+    body = tail[names_len + 8 * stages :]
     return body, FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE), bool(flags & CHECKPOINT_FAILED))
 
 
@@ -144,7 +149,7 @@ def decode_create(payload: bytes) -> tuple[str, bytes | memoryview]:
         return "default", payload
     _, length = CREATE_TENANT.unpack_from(payload)
     start = CREATE_TENANT.size
-    return payload[start:start + length].decode("ascii"), memoryview(payload)[start + length:]
+    return payload[start : start + length].decode("ascii"), memoryview(payload)[start + length :]
 
 
 # -- a worker and its render process ----------------------------------------------------------
@@ -177,7 +182,7 @@ def read_message(stream: IO[bytes]) -> Any:
 SHOTS = ("program", "candidate", "cut_before", "cut_after", "top")
 FORMATS = ("jpeg", "png")
 MIN_SIDE_PX = 16
-MAX_WIDTH_PX = 1280      # a monitor is small: a larger picture is refused (the route answers 422)
+MAX_WIDTH_PX = 1280  # a monitor is small: a larger picture is refused (the route answers 422)
 MAX_HEIGHT_PX = 720
 DEFAULT_WIDTH_PX = 320
 _VIEW_HEADER = struct.Struct("!I")
@@ -189,10 +194,10 @@ class ViewQuery:
     its image format. ValueError for one that is not allowed."""
 
     shot: str = "program"
-    subjects: tuple[str, ...] = ()        # candidate: its players, in any order
-    width_px: int = DEFAULT_WIDTH_PX      # [MIN_SIDE_PX, MAX_WIDTH_PX]; the top view ignores it
-    height_px: int | None = None          # None: width / the lens's aspect; [MIN_SIDE_PX, MAX_HEIGHT_PX]
-    image_format: str = "jpeg"            # FORMATS; the top view is always PNG
+    subjects: tuple[str, ...] = ()  # candidate: its players, in any order
+    width_px: int = DEFAULT_WIDTH_PX  # [MIN_SIDE_PX, MAX_WIDTH_PX]; the top view ignores it
+    height_px: int | None = None  # None: width / the lens's aspect; [MIN_SIDE_PX, MAX_HEIGHT_PX]
+    image_format: str = "jpeg"  # FORMATS; the top view is always PNG
 
     def __post_init__(self) -> None:
         if self.shot not in SHOTS:
@@ -207,8 +212,15 @@ class ViewQuery:
             raise ValueError("a candidate view names the candidate's players (subjects)")
 
     def to_json(self) -> bytes:
-        return orjson.dumps({"shot": self.shot, "subjects": list(self.subjects), "width_px": self.width_px,
-                             "height_px": self.height_px, "image_format": self.image_format})
+        return orjson.dumps(
+            {
+                "shot": self.shot,
+                "subjects": list(self.subjects),
+                "width_px": self.width_px,
+                "height_px": self.height_px,
+                "image_format": self.image_format,
+            }
+        )
 
     @classmethod
     def from_json(cls, payload: bytes) -> ViewQuery:
@@ -233,5 +245,5 @@ def decode_view(body: bytes) -> tuple[dict[str, Any], bytes]:
     """(header, image) of a view's bytes (module docstring)."""
     (length,) = _VIEW_HEADER.unpack_from(body)
     start = _VIEW_HEADER.size
-    header: dict[str, Any] = orjson.loads(body[start:start + length])
-    return header, body[start + length:]
+    header: dict[str, Any] = orjson.loads(body[start : start + length])
+    return header, body[start + length :]

@@ -3,6 +3,7 @@ process (spawned: each imports them again from the settings it receives), and `e
 own process. A plugin extends the service by registering itself on import (a studio's own match
 director: pipeline/match/director_registry.py `register`); nothing else calls it.
 """
+
 from __future__ import annotations
 
 import importlib

@@ -6,6 +6,7 @@ their SQL once), and an unreachable database raised as the caller's own error wi
 reason and the password hidden. `PostgresStore` is what those three stores' PostgreSQL side
 shares: the tables created once when it opens, each write one transaction under its write lock.
 psycopg is imported only when used: a single node on SQLite never loads it."""
+
 from __future__ import annotations
 
 import contextlib
@@ -85,8 +86,16 @@ class PostgresStore:
     `write_lock`, as BEGIN IMMEDIATE serializes SQLite's writers; a read (`_read()`) takes none.
     Named first among a store's bases, so that these answer the store's `_tx`, `_read` and `close`."""
 
-    def __init__(self, url: str, what: str, unavailable: type[Exception], schema: Sequence[str], *,
-                 write_lock: str, schema_lock: str | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        what: str,
+        unavailable: type[Exception],
+        schema: Sequence[str],
+        *,
+        write_lock: str,
+        schema_lock: str | None = None,
+    ) -> None:
         self.url = url
         self._db = PostgresDatabase(url, what, unavailable)
         self._write_lock = write_lock

@@ -1,4 +1,5 @@
 """Child processes that must not outlive their parent: a killed server's jobs, a job's helpers."""
+
 from __future__ import annotations
 
 import contextlib

@@ -14,6 +14,7 @@ the work. Besides slices of time, a run can be taken up to an amount of work (`r
 it stops then depends on its inputs alone, never on the machine's speed, so an owner may decide
 from it when a result is used (pipeline/match/drawn_plan.py: a plan is applied at the tick its work allows).
 """
+
 from __future__ import annotations
 
 import math

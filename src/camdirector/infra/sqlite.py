@@ -3,6 +3,7 @@ owners and the audit, access/keys.py): WAL journal, one statement at a time behi
 write one `BEGIN IMMEDIATE` transaction, so a check and the write it guards are atomic across the
 node's processes. The SQLite twin of postgres.PostgresDatabase, and `SqliteStore` the twin of
 postgres.PostgresStore."""
+
 from __future__ import annotations
 
 import contextlib

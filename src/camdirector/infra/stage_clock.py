@@ -1,5 +1,6 @@
 """Per-stage wall time by laps: of an offline pipeline (with a progress callback after each stage),
 and of one director frame (on the session's injected clock, into `FrameState.stage_ms`)."""
+
 from __future__ import annotations
 
 import enum
@@ -18,9 +19,14 @@ class StageClock:
     frame's `stage_ms`), a new one when None.
     """
 
-    def __init__(self, progress: Callable[[float], None] | None = None,
-                 progress_after: Mapping[enum.Enum, float] | None = None, *,
-                 clock: Callable[[], float] = time.perf_counter, timings_ms: dict[str, float] | None = None):
+    def __init__(
+        self,
+        progress: Callable[[float], None] | None = None,
+        progress_after: Mapping[enum.Enum, float] | None = None,
+        *,
+        clock: Callable[[], float] = time.perf_counter,
+        timings_ms: dict[str, float] | None = None,
+    ):
         if progress is not None and progress_after is None:
             raise ValueError("StageClock: a progress callback needs progress_after")
         self.timings_ms: dict[str, float] = {} if timings_ms is None else timings_ms

@@ -29,6 +29,7 @@ its attempt succeeded.
 
 States: queued -> running -> succeeded | failed | cancelled (queued -> cancelled too).
 """
+
 from camdirector.jobs.executor import JobExecutor
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobKind, JobRegistry, service_kinds
@@ -47,6 +48,23 @@ from camdirector.jobs.records import (
     open_store,
 )
 
-__all__ = ["Job", "JobExecutor", "JobKind", "JobNotFound", "JobRegistry", "JobSettings", "JobState", "JobStore",
-           "JobsUnavailable", "PostgresJobStore", "QueueClient", "QueueFull", "QueueWorker", "SqliteJobStore",
-           "TenantLimitReached", "open_store", "run_job_worker", "service_kinds"]
+__all__ = [
+    "Job",
+    "JobExecutor",
+    "JobKind",
+    "JobNotFound",
+    "JobRegistry",
+    "JobSettings",
+    "JobState",
+    "JobStore",
+    "JobsUnavailable",
+    "PostgresJobStore",
+    "QueueClient",
+    "QueueFull",
+    "QueueWorker",
+    "SqliteJobStore",
+    "TenantLimitReached",
+    "open_store",
+    "run_job_worker",
+    "service_kinds",
+]

@@ -13,6 +13,7 @@ is renamed into `<id>/result/` inside the transaction that marks the attempt suc
 Retention: a finished job (its record, inputs and results) is removed `job_retention_s` after it
 ended, checked at start and every `PURGE_INTERVAL_S` (by the runner, or by every queue worker).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -34,8 +35,8 @@ from camdirector.jobs.records import Job, JobNotFound, JobState, JobStore
 
 log = logging.getLogger("camdirector.jobs")
 
-PURGE_INTERVAL_S = 60.0   # how often finished jobs past their retention are looked for
-POLL_S = 0.25            # a running job's record is checked at least this often (cancel, take-over), s
+PURGE_INTERVAL_S = 60.0  # how often finished jobs past their retention are looked for
+POLL_S = 0.25  # a running job's record is checked at least this often (cancel, take-over), s
 
 
 def purge_expired(store: JobStore, settings: JobSettings, now_s: float) -> list[str]:
@@ -63,8 +64,8 @@ class Attempt:
     process_start_ms: float | None = None
     outcome: tuple | None = None
     terminating_since: float | None = None
-    stop_reason: str | None = None    # "cancelled", "superseded", "timeout"
-    next_check: float = 0.0           # time.monotonic() of the next look at the record
+    stop_reason: str | None = None  # "cancelled", "superseded", "timeout"
+    next_check: float = 0.0  # time.monotonic() of the next look at the record
 
     def waitables(self) -> list:
         return [self.conn, self.process.sentinel]
@@ -78,7 +79,7 @@ class JobExecutor:
         self.store = store
         self.registry = registry
         self.settings = settings
-        self.preload = registry.modules   # imported once by the forkserver, not by every job
+        self.preload = registry.modules  # imported once by the forkserver, not by every job
         self._mp = multiprocessing.get_context("forkserver")
 
     def start(self) -> None:
@@ -88,7 +89,7 @@ class JobExecutor:
         from multiprocessing import forkserver
 
         if self.preload:
-            with contextlib.suppress(Exception):   # '__main__': imported once, not per job
+            with contextlib.suppress(Exception):  # '__main__': imported once, not per job
                 self._mp.set_forkserver_preload(["__main__", *self.preload])
         names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
         saved = {n: os.environ.get(n) for n in names}
@@ -116,23 +117,37 @@ class JobExecutor:
         work_dir = self.store.temp_dir()
         parent_conn, child_conn = self._mp.Pipe(duplex=False)
         process = self._mp.Process(
-            target=job_main, name=f"job-{job.id[:8]}", daemon=True,
-            args=(function, job.params, str(self.store.input_dir(job.id)), str(work_dir), child_conn))
+            target=job_main,
+            name=f"job-{job.id[:8]}",
+            daemon=True,
+            args=(function, job.params, str(self.store.input_dir(job.id)), str(work_dir), child_conn),
+        )
         started, started_wall = time.monotonic(), time.time()
         try:
             process.start()
-        except Exception as exc:   # e.g. no forkserver: fail this job, keep running others
+        except Exception as exc:  # e.g. no forkserver: fail this job, keep running others
             log.exception("cannot start the process of job %s", job.id)
             child_conn.close()
             parent_conn.close()
             shutil.rmtree(work_dir, ignore_errors=True)
-            self.store.finish(job.id, JobState.FAILED, only_if=JobState.RUNNING, attempt=job.attempts,
-                              error=f"cannot start a job process: {type(exc).__name__}: {exc}")
+            self.store.finish(
+                job.id,
+                JobState.FAILED,
+                only_if=JobState.RUNNING,
+                attempt=job.attempts,
+                error=f"cannot start a job process: {type(exc).__name__}: {exc}",
+            )
             return None
         child_conn.close()
-        return Attempt(job=job, process=process, conn=parent_conn, work_dir=work_dir,
-                       started_monotonic=started, started_wall=started_wall,
-                       queued_ms=max(0.0, ((job.started_s or time.time()) - job.created_s) * 1e3))
+        return Attempt(
+            job=job,
+            process=process,
+            conn=parent_conn,
+            work_dir=work_dir,
+            started_monotonic=started,
+            started_wall=started_wall,
+            queued_ms=max(0.0, ((job.started_s or time.time()) - job.created_s) * 1e3),
+        )
 
     def step(self, a: Attempt) -> bool:
         """Read the attempt's messages, end its process when the job was cancelled, taken over
@@ -193,7 +208,7 @@ class JobExecutor:
         if current.state is JobState.CANCELLED:
             return "cancelled"
         if current.state is not JobState.RUNNING or current.attempts != a.job.attempts:
-            return "superseded"   # another worker took over this job after a redelivery
+            return "superseded"  # another worker took over this job after a redelivery
         if now - a.started_monotonic > self.settings.job_timeout_s:
             return "timeout"
         return None
@@ -217,8 +232,13 @@ class JobExecutor:
             if a.stop_reason in ("cancelled", "superseded"):
                 return
             if a.stop_reason == "timeout":
-                self.store.finish(job_id, JobState.FAILED, only_if=JobState.RUNNING, attempt=attempt,
-                                  error=f"timed out after {self.settings.job_timeout_s:g} s")
+                self.store.finish(
+                    job_id,
+                    JobState.FAILED,
+                    only_if=JobState.RUNNING,
+                    attempt=attempt,
+                    error=f"timed out after {self.settings.job_timeout_s:g} s",
+                )
                 return
             if a.outcome is not None and a.outcome[0] == "ok":
                 timings = dict(a.outcome[1])
@@ -232,8 +252,14 @@ class JobExecutor:
                 error = str(a.outcome[1])
             else:
                 error = f"the job process exited with code {a.process.exitcode} without a result"
-            self.store.finish(job_id, JobState.FAILED, error=error, only_if=JobState.RUNNING,
-                              attempt=attempt, timings_ms={"job_process_total": run_ms, "queued": a.queued_ms})
+            self.store.finish(
+                job_id,
+                JobState.FAILED,
+                error=error,
+                only_if=JobState.RUNNING,
+                attempt=attempt,
+                timings_ms={"job_process_total": run_ms, "queued": a.queued_ms},
+            )
         finally:
             shutil.rmtree(a.work_dir, ignore_errors=True)
 
@@ -243,15 +269,21 @@ class JobExecutor:
         result = self.store.result_dir(a.job.id)
 
         def rename() -> None:
-            shutil.rmtree(result, ignore_errors=True)   # a folder left by a rolled-back attempt
+            shutil.rmtree(result, ignore_errors=True)  # a folder left by a rolled-back attempt
             os.rename(a.work_dir, result)
 
         try:
-            self.store.finish(a.job.id, JobState.SUCCEEDED, timings_ms=timings, only_if=JobState.RUNNING,
-                              attempt=a.job.attempts, publish=rename)
-        except OSError as exc:   # the rename failed: the transaction was rolled back
-            self.store.finish(a.job.id, JobState.FAILED, only_if=JobState.RUNNING, attempt=a.job.attempts,
-                              error=f"cannot store the result: {exc}")
+            self.store.finish(
+                a.job.id, JobState.SUCCEEDED, timings_ms=timings, only_if=JobState.RUNNING, attempt=a.job.attempts, publish=rename
+            )
+        except OSError as exc:  # the rename failed: the transaction was rolled back
+            self.store.finish(
+                a.job.id,
+                JobState.FAILED,
+                only_if=JobState.RUNNING,
+                attempt=a.job.attempts,
+                error=f"cannot store the result: {exc}",
+            )
 
 
 # -- the local runner ---------------------------------------------------------------------------

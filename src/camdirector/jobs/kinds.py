@@ -11,6 +11,7 @@ client, the routes (which read their kind's name from the body's module) and eve
 (`camdirector job-worker`) are given it. A new kind is one line there, its body beside the
 computation it runs (precompute/<area>/job.py), and its routes.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -60,5 +61,6 @@ def service_kinds() -> JobRegistry:
     from camdirector.precompute.overview import job as overview_job
     from camdirector.precompute.tracks import job as level_job
 
-    return JobRegistry((JobKind(overview_job.KIND, overview_job.run_overview_job),
-                        JobKind(level_job.KIND, level_job.run_level_job)))
+    return JobRegistry(
+        (JobKind(overview_job.KIND, overview_job.run_overview_job), JobKind(level_job.KIND, level_job.run_level_job))
+    )

@@ -3,6 +3,7 @@
 Started from a multiprocessing "forkserver" by executor.py (never forked from the front process
 that runs gRPC and asyncio, nor from a queue worker's threads); it dies with its parent.
 """
+
 from __future__ import annotations
 
 import logging
@@ -18,8 +19,9 @@ from camdirector.jobs.kinds import JobFunction
 log = logging.getLogger("camdirector.jobs")
 
 
-def job_main(function: JobFunction, params: dict, input_dir: str, output_dir: str,
-              conn: multiprocessing.connection.Connection) -> None:
+def job_main(
+    function: JobFunction, params: dict, input_dir: str, output_dir: str, conn: multiprocessing.connection.Connection
+) -> None:
     """Entry point of a job process: messages ("started", unix_s), ("progress", f), then
     ("ok", timings) or ("error", message)."""
     conn.send(("started", time.time()))
@@ -28,14 +30,13 @@ def job_main(function: JobFunction, params: dict, input_dir: str, output_dir: st
 
     def progress(fraction: float) -> None:
         now = time.monotonic()
-        if now - last[0] >= 0.05 or fraction >= 1.0:   # at most 20 messages a second
+        if now - last[0] >= 0.05 or fraction >= 1.0:  # at most 20 messages a second
             last[0] = now
             conn.send(("progress", float(fraction)))
 
     start = time.perf_counter()
     try:
-        timings = {k: float(v) for k, v in (function(params, Path(input_dir), Path(output_dir),
-                                                     progress) or {}).items()}
+        timings = {k: float(v) for k, v in (function(params, Path(input_dir), Path(output_dir), progress) or {}).items()}
         timings["job_function_total"] = (time.perf_counter() - start) * 1e3
         conn.send(("ok", timings))
     except JobError as exc:

@@ -40,6 +40,7 @@ with Dramatiq's Retries (backoff 1 s to 30 s, up to `STORE_RETRIES` times). Redi
 in memory: a Redis that restarts without persistence loses queued messages (their records stay
 queued); run the queue's Redis with `appendonly yes` in production.
 """
+
 from __future__ import annotations
 
 import logging
@@ -58,7 +59,7 @@ log = logging.getLogger("camdirector.jobs.queue")
 
 QUEUE_NAME = "camdirector-jobs"
 ACTOR_NAME = "camdirector_run_job"
-STORE_RETRIES = 100             # times a message is retried while the record store is unreachable
+STORE_RETRIES = 100  # times a message is retried while the record store is unreachable
 _RETRY_BACKOFF_MS = (1000, 30_000)
 
 
@@ -71,11 +72,14 @@ def broker_for(settings: JobSettings, *, worker: bool) -> RedisBroker:
     does not answer). Only workers run the maintenance step that requeues dead workers' messages
     (a client's heartbeat timeout is not the workers')."""
     url = settings.job_queue
-    broker = RedisBroker(url=url, middleware=[Retries(min_backoff=_RETRY_BACKOFF_MS[0],
-                                                      max_backoff=_RETRY_BACKOFF_MS[1])] if worker else [],
-                         heartbeat_timeout=int(settings.worker_heartbeat_timeout_s * 1000),
-                         maintenance_chance=MAINTENANCE_SCALE if worker else 0,
-                         socket_connect_timeout=5, socket_timeout=30)
+    broker = RedisBroker(
+        url=url,
+        middleware=[Retries(min_backoff=_RETRY_BACKOFF_MS[0], max_backoff=_RETRY_BACKOFF_MS[1])] if worker else [],
+        heartbeat_timeout=int(settings.worker_heartbeat_timeout_s * 1000),
+        maintenance_chance=MAINTENANCE_SCALE if worker else 0,
+        socket_connect_timeout=5,
+        socket_timeout=30,
+    )
     try:
         broker.client.ping()
     except redis.RedisError as exc:
@@ -96,8 +100,7 @@ class QueueClient:
         except JobsUnavailable:
             self.store.close()
             raise
-        self._actor = dramatiq.actor(broker=self._broker, actor_name=ACTOR_NAME,
-                                     queue_name=QUEUE_NAME)(_unbound_job_message)
+        self._actor = dramatiq.actor(broker=self._broker, actor_name=ACTOR_NAME, queue_name=QUEUE_NAME)(_unbound_job_message)
 
     def start(self) -> None:
         """Nothing runs here: the constructor has checked Redis and PostgreSQL."""
@@ -117,8 +120,7 @@ class QueueClient:
             self._actor.send(job.id)
         except redis.RedisError as exc:
             reason = f"job queue {self.settings.job_queue} is unreachable: {redis_reason(exc)}"
-            self.store.finish(job.id, JobState.FAILED, error=f"could not be queued: {reason}",
-                              only_if=JobState.QUEUED)
+            self.store.finish(job.id, JobState.FAILED, error=f"could not be queued: {reason}", only_if=JobState.QUEUED)
             raise JobsUnavailable(reason) from None
         return job
 

@@ -2,6 +2,7 @@
 (queue.py's module docstring: redelivery, heartbeats, exactly-once), each run in a job process by
 the executor (executor.py), with the service's job kinds (kinds.py).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -33,10 +34,15 @@ class QueueWorker:
     the jobs of the queue in job processes, a heartbeat thread, retention. Blocks in `run()`
     until `stop()` (SIGTERM, SIGINT); running jobs go back to the queue, their attempt not counted."""
 
-    def __init__(self, data_dir: str | Path, settings: JobSettings,
-                 registry: JobRegistry | None = None, clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self,
+        data_dir: str | Path,
+        settings: JobSettings,
+        registry: JobRegistry | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         self.settings = settings
-        self._clock = clock       # Unix seconds, for the retention of finished jobs
+        self._clock = clock  # Unix seconds, for the retention of finished jobs
         self.store: JobStore = open_store(settings.job_store, Path(data_dir) / "jobs")
         try:
             self._broker = broker_for(settings, worker=True)
@@ -44,9 +50,12 @@ class QueueWorker:
             self.store.close()
             raise
         self._executor = JobExecutor(self.store, service_kinds() if registry is None else registry, settings)
-        self._actor = dramatiq.actor(broker=self._broker, actor_name=ACTOR_NAME, queue_name=QUEUE_NAME,
-                                     retry_when=lambda retries, exc: isinstance(exc, JobsUnavailable)
-                                     and retries < STORE_RETRIES)(self._run_message)
+        self._actor = dramatiq.actor(
+            broker=self._broker,
+            actor_name=ACTOR_NAME,
+            queue_name=QUEUE_NAME,
+            retry_when=lambda retries, exc: isinstance(exc, JobsUnavailable) and retries < STORE_RETRIES,
+        )(self._run_message)
         self._stopping = threading.Event()
         self.worker_id = self._broker.broker_id
 
@@ -54,14 +63,19 @@ class QueueWorker:
         """Start the forkserver and the worker threads, call `ready`, beat until `stop()`."""
         self._executor.start()
         beat_s = self.settings.worker_heartbeat_timeout_s / 4
-        worker = dramatiq.Worker(self._broker, worker_threads=self.settings.max_concurrent_jobs,
-                                 worker_timeout=int(min(1.0, beat_s) * 1000))
+        worker = dramatiq.Worker(
+            self._broker, worker_threads=self.settings.max_concurrent_jobs, worker_timeout=int(min(1.0, beat_s) * 1000)
+        )
         # Dramatiq prefetches twice its threads by default; a message fetched is a job this worker
         # holds (and loses when killed), so fetch only what runs (module docstring).
         worker.queue_prefetch = self.settings.max_concurrent_jobs
         worker.start()
-        log.info("queue worker %s: %d job(s) at a time from %s", self.worker_id,
-                 self.settings.max_concurrent_jobs, self.settings.job_queue)
+        log.info(
+            "queue worker %s: %d job(s) at a time from %s",
+            self.worker_id,
+            self.settings.max_concurrent_jobs,
+            self.settings.job_queue,
+        )
         ready()
         next_purge = 0.0
         try:
@@ -104,8 +118,7 @@ def run_job_worker(data_dir: str | Path, settings: JobSettings) -> int:
     import json
     import sys
 
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         worker = QueueWorker(data_dir, settings)
     except JobsUnavailable as exc:

@@ -28,6 +28,7 @@ Columns added after the first release (`_ADDED_COLUMNS`) are added to a table th
 when a store opens it, so a data directory or database from before keeps its jobs (as tenant
 `default`, their inputs counted as 0 bytes).
 """
+
 from __future__ import annotations
 
 import builtins
@@ -97,9 +98,15 @@ class Job:
     def as_public(self) -> dict:
         """The REST view: id, status, progress, error (only when set), timings (ms), and the
         Unix times it was submitted, started and ended (null until then)."""
-        out = {"id": self.id, "status": self.state.value, "progress": round(self.progress, 4),
-               "timings": self.timings_ms, "created_unix_s": self.created_s,
-               "started_unix_s": self.started_s, "finished_unix_s": self.finished_s}
+        out = {
+            "id": self.id,
+            "status": self.state.value,
+            "progress": round(self.progress, 4),
+            "timings": self.timings_ms,
+            "created_unix_s": self.created_s,
+            "started_unix_s": self.started_s,
+            "finished_unix_s": self.finished_s,
+        }
         if self.error is not None:
             out["error"] = self.error
         return out
@@ -108,21 +115,33 @@ class Job:
 _COLUMNS = "id, kind, params, state, progress, error, attempts, created_s, started_s, finished_s, timings, tenant"
 # Columns added since the first release: (name, SQL type and default, with {int} SQLite's INTEGER
 # or PostgreSQL's BIGINT); each store adds those its table lacks (module docstring).
-_ADDED_COLUMNS = (("tenant", "TEXT NOT NULL DEFAULT 'default'"),
-                  ("input_bytes", "{int} NOT NULL DEFAULT 0"))   # bytes of the job's input files
+_ADDED_COLUMNS = (
+    ("tenant", "TEXT NOT NULL DEFAULT 'default'"),
+    ("input_bytes", "{int} NOT NULL DEFAULT 0"),
+)  # bytes of the job's input files
 _UNFINISHED = (JobState.QUEUED.value, JobState.RUNNING.value)
 
 
 def _row_to_job(row) -> Job:
-    return Job(id=row[0], kind=row[1], params=json.loads(row[2]), state=JobState(row[3]),
-               progress=float(row[4]), error=row[5], attempts=int(row[6]), created_s=row[7],
-               started_s=row[8], finished_s=row[9], timings_ms=json.loads(row[10]), tenant=row[11])
+    return Job(
+        id=row[0],
+        kind=row[1],
+        params=json.loads(row[2]),
+        state=JobState(row[3]),
+        progress=float(row[4]),
+        error=row[5],
+        attempts=int(row[6]),
+        created_s=row[7],
+        started_s=row[8],
+        finished_s=row[9],
+        timings_ms=json.loads(row[10]),
+        tenant=row[11],
+    )
 
 
 def interrupted_error(attempts: int, max_attempts: int) -> str:
     """The error of a job that was interrupted (its runner or worker died) too often."""
-    return (f"interrupted: the process running this job died, {attempts} time(s) (limit "
-            f"{max_attempts}); not retried")
+    return f"interrupted: the process running this job died, {attempts} time(s) (limit {max_attempts}); not retried"
 
 
 class JobStore:
@@ -137,7 +156,7 @@ class JobStore:
 
     # -- the connection (subclasses) ---------------------------------------------------------
 
-    _NEXT_SEQ: str   # SQL giving a new job's place in submission order
+    _NEXT_SEQ: str  # SQL giving a new job's place in submission order
 
     def _tx(self) -> contextlib.AbstractContextManager:
         raise NotImplementedError
@@ -169,9 +188,17 @@ class JobStore:
 
     # -- records ------------------------------------------------------------------------------
 
-    def submit(self, kind: str, params: dict, files: dict[str, bytes], *,
-               max_queued: int | None = None, tenant: str = DEFAULT_TENANT,
-               tenant_max_queued_jobs: int | None = None, tenant_max_upload_bytes: int | None = None) -> Job:
+    def submit(
+        self,
+        kind: str,
+        params: dict,
+        files: dict[str, bytes],
+        *,
+        max_queued: int | None = None,
+        tenant: str = DEFAULT_TENANT,
+        tenant_max_queued_jobs: int | None = None,
+        tenant_max_upload_bytes: int | None = None,
+    ) -> Job:
         """A new queued job of `tenant` with `files` (name -> content) in its input folder, as
         created (state queued, whatever a runner did since).
         Raises QueueFull when `max_queued` jobs are queued already (all tenants), and
@@ -190,22 +217,32 @@ class JobStore:
                 (tmp / "input" / name).write_bytes(data)
             with self._tx() as db:
                 if max_queued is not None:
-                    (queued,) = db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?",
-                                           (JobState.QUEUED.value,)).fetchone()
+                    (queued,) = db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (JobState.QUEUED.value,)).fetchone()
                     if queued >= max_queued:
-                        raise QueueFull(f"{queued} jobs are queued already (limit {max_queued}); "
-                                        "retry later")
-                self._check_tenant_share(db, tenant, input_bytes, tenant_max_queued_jobs,
-                                         tenant_max_upload_bytes)
+                        raise QueueFull(f"{queued} jobs are queued already (limit {max_queued}); retry later")
+                self._check_tenant_share(db, tenant, input_bytes, tenant_max_queued_jobs, tenant_max_upload_bytes)
                 os.rename(tmp, self.root / job_id)
                 try:
-                    db.execute(f"INSERT INTO jobs ({_COLUMNS}, input_bytes, seq) "
-                               f"VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
-                               (job_id, kind, params_text, JobState.QUEUED.value, 0.0, None, 0,
-                                time.time(), None, None, "{}", tenant, input_bytes))
+                    db.execute(
+                        f"INSERT INTO jobs ({_COLUMNS}, input_bytes, seq) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
+                        (
+                            job_id,
+                            kind,
+                            params_text,
+                            JobState.QUEUED.value,
+                            0.0,
+                            None,
+                            0,
+                            time.time(),
+                            None,
+                            None,
+                            "{}",
+                            tenant,
+                            input_bytes,
+                        ),
+                    )
                     # read in the same transaction: the job as created, before a runner claims it
-                    created = _row_to_job(db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?",
-                                                     (job_id,)).fetchone())
+                    created = _row_to_job(db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone())
                 except BaseException:
                     shutil.rmtree(self.root / job_id, ignore_errors=True)
                     raise
@@ -214,25 +251,25 @@ class JobStore:
         return created
 
     @staticmethod
-    def _check_tenant_share(db, tenant: str, input_bytes: int, max_jobs: int | None,
-                            max_bytes: int | None) -> None:
+    def _check_tenant_share(db, tenant: str, input_bytes: int, max_jobs: int | None, max_bytes: int | None) -> None:
         """TenantLimitReached when a new job of `input_bytes` would take `tenant` past its share
         (submit's transaction, so two nodes' submits cannot both take the last place)."""
         if max_jobs is not None:
-            (jobs,) = db.execute("SELECT COUNT(*) FROM jobs WHERE tenant = ? AND state IN (?, ?)",
-                                 (tenant, *_UNFINISHED)).fetchone()
+            (jobs,) = db.execute(
+                "SELECT COUNT(*) FROM jobs WHERE tenant = ? AND state IN (?, ?)", (tenant, *_UNFINISHED)
+            ).fetchone()
             if jobs >= max_jobs:
                 raise TenantLimitReached(
-                    f"tenant {tenant!r} has {jobs} jobs queued or running, its limit; retry when one "
-                    "has finished")
+                    f"tenant {tenant!r} has {jobs} jobs queued or running, its limit; retry when one has finished"
+                )
         if max_bytes is not None:
-            (held,) = db.execute("SELECT COALESCE(SUM(input_bytes), 0) FROM jobs WHERE tenant = ?",
-                                 (tenant,)).fetchone()
+            (held,) = db.execute("SELECT COALESCE(SUM(input_bytes), 0) FROM jobs WHERE tenant = ?", (tenant,)).fetchone()
             if int(held) + input_bytes > max_bytes:
                 raise TenantLimitReached(
                     f"tenant {tenant!r}'s jobs keep {int(held)} bytes of uploads; {input_bytes} more would "
                     f"pass its limit of {max_bytes} bytes (a finished job's files are removed when its "
-                    "retention ends)")
+                    "retention ends)"
+                )
 
     def get(self, job_id: str) -> Job:
         with self._read() as db:
@@ -241,12 +278,20 @@ class JobStore:
             raise JobNotFound(job_id)
         return _row_to_job(row)
 
-    def list(self, state: JobState | None = None, *, kind: str | None = None, tenant: str | None = None,
-             limit: int | None = None, newest_first: bool = False) -> list[Job]:
+    def list(
+        self,
+        state: JobState | None = None,
+        *,
+        kind: str | None = None,
+        tenant: str | None = None,
+        limit: int | None = None,
+        newest_first: bool = False,
+    ) -> list[Job]:
         """Jobs in submission order (newest first when asked), all or those in `state`, of
         `kind` and of `tenant`, at most `limit` of them."""
-        where = [(c, v) for c, v in (("state", state.value if state else None), ("kind", kind),
-                                     ("tenant", tenant)) if v is not None]
+        where = [
+            (c, v) for c, v in (("state", state.value if state else None), ("kind", kind), ("tenant", tenant)) if v is not None
+        ]
         sql = f"SELECT {_COLUMNS} FROM jobs"
         if where:
             sql += " WHERE " + " AND ".join(f"{c} = ?" for c, _ in where)
@@ -261,19 +306,18 @@ class JobStore:
 
     def count(self, state: JobState) -> int:
         with self._read() as db:
-            return int(db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?",
-                                  (state.value,)).fetchone()[0])
+            return int(db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (state.value,)).fetchone()[0])
 
     def _start_attempt(self, db, job_id: str) -> None:
-        db.execute("UPDATE jobs SET state = ?, attempts = attempts + 1, started_s = ?, "
-                   "progress = 0, error = NULL WHERE id = ?",
-                   (JobState.RUNNING.value, time.time(), job_id))
+        db.execute(
+            "UPDATE jobs SET state = ?, attempts = attempts + 1, started_s = ?, progress = 0, error = NULL WHERE id = ?",
+            (JobState.RUNNING.value, time.time(), job_id),
+        )
 
     def claim_next(self) -> Job | None:
         """The oldest queued job, now `running` with one more attempt; None when none is queued."""
         with self._tx() as db:
-            row = db.execute("SELECT id FROM jobs WHERE state = ? ORDER BY seq LIMIT 1",
-                             (JobState.QUEUED.value,)).fetchone()
+            row = db.execute("SELECT id FROM jobs WHERE state = ? ORDER BY seq LIMIT 1", (JobState.QUEUED.value,)).fetchone()
             if row is None:
                 return None
             self._start_attempt(db, row[0])
@@ -290,9 +334,10 @@ class JobStore:
             if row is None or JobState(row[0]).finished:
                 return None
             if row[0] == JobState.RUNNING.value and row[1] >= max_attempts:
-                db.execute("UPDATE jobs SET state = ?, error = ?, finished_s = ? WHERE id = ?",
-                           (JobState.FAILED.value, interrupted_error(row[1], max_attempts),
-                            time.time(), job_id))
+                db.execute(
+                    "UPDATE jobs SET state = ?, error = ?, finished_s = ? WHERE id = ?",
+                    (JobState.FAILED.value, interrupted_error(row[1], max_attempts), time.time(), job_id),
+                )
                 return None
             self._start_attempt(db, job_id)
         return self.get(job_id)
@@ -306,18 +351,27 @@ class JobStore:
         with self._tx() as db:
             db.execute(sql, args)
 
-    def finish(self, job_id: str, state: JobState, *, error: str | None = None,
-               timings_ms: dict[str, float] | None = None, only_if: JobState | None = None,
-               attempt: int | None = None, publish: Callable[[], None] | None = None) -> bool:
+    def finish(
+        self,
+        job_id: str,
+        state: JobState,
+        *,
+        error: str | None = None,
+        timings_ms: dict[str, float] | None = None,
+        only_if: JobState | None = None,
+        attempt: int | None = None,
+        publish: Callable[[], None] | None = None,
+    ) -> bool:
         """Set a final state (and progress 1 on success). only_if: change nothing unless the job
         is in that state now; attempt: nor unless this is its latest attempt. publish: called
         inside the transaction once the record changed (the runner renames the result folder
         into place there; if it raises, nothing changes). Returns whether the record changed."""
         assert state.finished
-        sql = ("UPDATE jobs SET state = ?, error = ?, finished_s = ?, timings = ?, "
-               "progress = CASE WHEN ? THEN 1.0 ELSE progress END WHERE id = ?")
-        args = [state.value, error, time.time(), json.dumps(timings_ms or {}),
-                state is JobState.SUCCEEDED, job_id]
+        sql = (
+            "UPDATE jobs SET state = ?, error = ?, finished_s = ?, timings = ?, "
+            "progress = CASE WHEN ? THEN 1.0 ELSE progress END WHERE id = ?"
+        )
+        args = [state.value, error, time.time(), json.dumps(timings_ms or {}), state is JobState.SUCCEEDED, job_id]
         if timings_ms is None:
             sql = sql.replace("timings = ?, ", "")
             del args[3]
@@ -344,9 +398,13 @@ class JobStore:
         records first, then their folders. Returns their ids."""
         finished = [s.value for s in JobState if s.finished]
         with self._tx() as db:
-            ids = [r[0] for r in db.execute(
-                f"SELECT id FROM jobs WHERE state IN ({','.join('?' * len(finished))}) "
-                "AND finished_s < ?", (*finished, ended_before_s)).fetchall()]
+            ids = [
+                r[0]
+                for r in db.execute(
+                    f"SELECT id FROM jobs WHERE state IN ({','.join('?' * len(finished))}) AND finished_s < ?",
+                    (*finished, ended_before_s),
+                ).fetchall()
+            ]
             for job_id in ids:
                 db.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
         for job_id in ids:
@@ -355,8 +413,7 @@ class JobStore:
 
     def requeue(self, job_id: str, *, uncount_attempt: bool, attempt: int | None = None) -> None:
         """A running job (of this attempt, when given) goes back to `queued`."""
-        sql = ("UPDATE jobs SET state = ?, progress = 0, started_s = NULL, attempts = attempts - ? "
-               "WHERE id = ? AND state = ?")
+        sql = "UPDATE jobs SET state = ?, progress = 0, started_s = NULL, attempts = attempts - ? WHERE id = ? AND state = ?"
         args = [JobState.QUEUED.value, 1 if uncount_attempt else 0, job_id, JobState.RUNNING.value]
         if attempt is not None:
             sql += " AND attempts = ?"
@@ -371,8 +428,9 @@ class JobStore:
         requeued, failed = [], []
         for job in self.list(JobState.RUNNING):
             if job.attempts >= max_attempts:
-                self.finish(job.id, JobState.FAILED, only_if=JobState.RUNNING,
-                            error=interrupted_error(job.attempts, max_attempts))
+                self.finish(
+                    job.id, JobState.FAILED, only_if=JobState.RUNNING, error=interrupted_error(job.attempts, max_attempts)
+                )
                 failed.append(job.id)
             else:
                 self.requeue(job.id, uncount_attempt=False)
@@ -455,13 +513,14 @@ _POSTGRES_SCHEMA = (
         seq BIGSERIAL NOT NULL
     )""",
     "CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq)",
-    *(f"ALTER TABLE jobs ADD COLUMN IF NOT EXISTS {name} {sql_type.format(int='BIGINT')}"
-      for name, sql_type in _ADDED_COLUMNS),
+    *(f"ALTER TABLE jobs ADD COLUMN IF NOT EXISTS {name} {sql_type.format(int='BIGINT')}" for name, sql_type in _ADDED_COLUMNS),
     _TENANT_INDEX,
 )
 # Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
 # SQLite (any constant that no other user of the database takes; these are "camd" in ASCII).
 _WRITE_LOCK_KEY = 0x63616D64
+
+
 class PostgresJobStore(PostgresStore, JobStore):
     """Records in the `jobs` table of the PostgreSQL database at `url` (created when missing),
     through infra/postgres.py's PostgresStore; files in `root` as for SQLite. Raises
@@ -471,8 +530,9 @@ class PostgresJobStore(PostgresStore, JobStore):
 
     def __init__(self, url: str, root: str | Path) -> None:
         JobStore.__init__(self, root)
-        PostgresStore.__init__(self, url, "job store", JobsUnavailable, _POSTGRES_SCHEMA,
-                               write_lock=advisory_lock(_WRITE_LOCK_KEY))
+        PostgresStore.__init__(
+            self, url, "job store", JobsUnavailable, _POSTGRES_SCHEMA, write_lock=advisory_lock(_WRITE_LOCK_KEY)
+        )
 
 
 def open_store(url: str, root: str | Path) -> JobStore:

@@ -42,6 +42,7 @@ Errors: a file that is not a CS2 demo, is cut short, or that demoparser2 refuses
 `Cs2DemoError` (a ValueError) naming the file; demoparser2's Rust panics are caught here too.
 Without the package, `Cs2SupportMissing` says how to install it.
 """
+
 from __future__ import annotations
 
 import struct
@@ -53,26 +54,38 @@ import numpy as np
 from camdirector.evaluation.match.match_file import MatchEvent, MatchPlayer, MatchRecording
 from camdirector.geometry import quake_frame
 
-TICK_RATE_HZ = 64.0                     # CS2's server simulation rate
-M_PER_UNIT = 0.0254                     # one unit = one inch (module docstring)
-PLAYER_HEIGHT_UNITS = 72.0              # standing hull height, origin at the feet
-PLAYER_RADIUS_UNITS = 16.0              # hull half width
+TICK_RATE_HZ = 64.0  # CS2's server simulation rate
+M_PER_UNIT = 0.0254  # one unit = one inch (module docstring)
+PLAYER_HEIGHT_UNITS = 72.0  # standing hull height, origin at the feet
+PLAYER_RADIUS_UNITS = 16.0  # hull half width
 PLAYER_HEIGHT_M = PLAYER_HEIGHT_UNITS * M_PER_UNIT
 PLAYER_RADIUS_M = PLAYER_RADIUS_UNITS * M_PER_UNIT
-TEAMS = {2: 0, 3: 1}                    # m_iTeamNum: 2 = T, 3 = CT -> the match file's team
-ITEM_HELMET, ITEM_DEFUSER = 1, 2        # bits of the stats' items column
+TEAMS = {2: 0, 3: 1}  # m_iTeamNum: 2 = T, 3 = CT -> the match file's team
+ITEM_HELMET, ITEM_DEFUSER = 1, 2  # bits of the stats' items column
 BOMB_EVENTS = {"bomb_planted": "bomb planted", "bomb_defused": "bomb defused", "bomb_exploded": "bomb exploded"}
 INSTALL_HINT = "pip install 'camdirector[cs2]'"
 
 # What parse_ticks is asked for: demoparser2's names (its README's list of player props).
-TICK_PROPS = ("X", "Y", "Z", "pitch", "yaw", "team_num", "is_alive", "health", "armor_value",
-              "kills_total", "has_helmet", "has_defuser")
-EVENT_PROPS = ("X", "Y", "Z")           # the event's players' feet, as user_X, attacker_X, ...
+TICK_PROPS = (
+    "X",
+    "Y",
+    "Z",
+    "pitch",
+    "yaw",
+    "team_num",
+    "is_alive",
+    "health",
+    "armor_value",
+    "kills_total",
+    "has_helmet",
+    "has_defuser",
+)
+EVENT_PROPS = ("X", "Y", "Z")  # the event's players' feet, as user_X, attacker_X, ...
 
 _MAGIC_CS2 = b"PBDEMS2\x00"
 _MAGIC_SOURCE1 = b"HL2DEMO\x00"
-_HEADER_BYTES = 16                      # magic, then the file info's offset and another, uint32 LE
-_MIN_FRAME_BYTES = 3                    # a frame's header: three varints of at least a byte each
+_HEADER_BYTES = 16  # magic, then the file info's offset and another, uint32 LE
+_MIN_FRAME_BYTES = 3  # a frame's header: three varints of at least a byte each
 
 
 class Cs2DemoError(ValueError):
@@ -124,8 +137,10 @@ def check_demo_file(path: Path) -> None:
         raise Cs2DemoError(path, f"truncated CS2 demo: {size} bytes, shorter than its {_HEADER_BYTES}-byte header")
     (file_info_at,) = struct.unpack_from("<I", head, 8)
     if file_info_at and size < file_info_at + _MIN_FRAME_BYTES:
-        raise Cs2DemoError(path, f"truncated CS2 demo: it ends at byte {size}, but its header places the "
-                                 f"closing file info at byte {file_info_at}")
+        raise Cs2DemoError(
+            path,
+            f"truncated CS2 demo: it ends at byte {size}, but its header places the closing file info at byte {file_info_at}",
+        )
 
 
 def _demo_parser_class():
@@ -171,8 +186,9 @@ def parse_demo_tables(path: Path) -> tuple[dict, dict[str, np.ndarray], dict[str
     header = _guarded(path, parser.parse_header)
     ticks = _guarded(path, lambda: _columns(parser.parse_ticks(list(TICK_PROPS))))
     deaths = _guarded(path, lambda: _columns(parser.parse_event("player_death", player=list(EVENT_PROPS))))
-    bombs = _guarded(path, lambda: {name: _columns(table) for name, table
-                                    in parser.parse_events(list(BOMB_EVENTS), player=list(EVENT_PROPS))})
+    bombs = _guarded(
+        path, lambda: {name: _columns(table) for name, table in parser.parse_events(list(BOMB_EVENTS), player=list(EVENT_PROPS))}
+    )
     return dict(header), ticks, deaths, bombs
 
 
@@ -185,8 +201,7 @@ def import_cs2_demo(path: Path, *, level: str | None = None, rate_hz: float = 64
     check_demo_file(path)
     header, ticks, deaths, bombs = parse_demo_tables(path)
     try:
-        return match_from_tables(ticks, deaths, bombs, level=level or header.get("map_name") or "unknown",
-                                 rate_hz=rate_hz)
+        return match_from_tables(ticks, deaths, bombs, level=level or header.get("map_name") or "unknown", rate_hz=rate_hz)
     except ValueError as exc:
         raise Cs2DemoError(path, str(exc)) from None
 
@@ -232,9 +247,14 @@ def _frame_ticks(all_ticks: np.ndarray, first: int, last: int, rate_hz: float) -
     return np.unique(recorded[index])
 
 
-def match_from_tables(ticks: Mapping[str, np.ndarray], deaths: Mapping[str, np.ndarray],
-                      bombs: Mapping[str, Mapping[str, np.ndarray]], *, level: str,
-                      rate_hz: float = 64.0) -> MatchRecording:
+def match_from_tables(
+    ticks: Mapping[str, np.ndarray],
+    deaths: Mapping[str, np.ndarray],
+    bombs: Mapping[str, Mapping[str, np.ndarray]],
+    *,
+    level: str,
+    rate_hz: float = 64.0,
+) -> MatchRecording:
     """demoparser2's tables (parse_demo_tables) as a match (module docstring).
 
     ticks: one row per player and tick, columns "tick", "steamid", "name" and TICK_PROPS (X, Y, Z
@@ -257,14 +277,22 @@ def match_from_tables(ticks: Mapping[str, np.ndarray], deaths: Mapping[str, np.n
 
     frame_ticks = _frame_ticks(tick, int(tick[on_team].min()), int(tick[on_team].max()), rate_hz)
     rows = np.flatnonzero(on_team & np.isin(tick, frame_ticks))
-    rows = rows[np.lexsort((keys[rows], tick[rows]))]   # by tick, then player
+    rows = rows[np.lexsort((keys[rows], tick[rows]))]  # by tick, then player
     unique_keys, first_at, inverse = np.unique(keys[rows], return_index=True, return_inverse=True)
-    appearance = np.argsort(first_at, kind="stable")      # the players' order: who showed up first
+    appearance = np.argsort(first_at, kind="stable")  # the players' order: who showed up first
     column_of_unique = np.empty(len(unique_keys), dtype=np.int64)
     column_of_unique[appearance] = np.arange(len(unique_keys))
     first_rows = rows[first_at[appearance]]
-    players = [MatchPlayer(id=f"p{i:02d}", team=TEAMS[int(team_num[r])], height_m=PLAYER_HEIGHT_M,
-                           radius_m=PLAYER_RADIUS_M, name=_text(ticks["name"][r])) for i, r in enumerate(first_rows)]
+    players = [
+        MatchPlayer(
+            id=f"p{i:02d}",
+            team=TEAMS[int(team_num[r])],
+            height_m=PLAYER_HEIGHT_M,
+            radius_m=PLAYER_RADIUS_M,
+            name=_text(ticks["name"][r]),
+        )
+        for i, r in enumerate(first_rows)
+    ]
 
     n_frames, n_players = len(frame_ticks), len(players)
     f_index = np.searchsorted(frame_ticks, tick[rows])
@@ -295,9 +323,18 @@ def match_from_tables(ticks: Mapping[str, np.ndarray], deaths: Mapping[str, np.n
     by_key = dict(zip(unique_keys[appearance].tolist(), players))
     events = _kill_events(deaths, by_key, time_s, positions) + _bomb_events(bombs, by_key, time_s)
     events.sort(key=lambda e: e.time_s)
-    return MatchRecording(level=level, seed=0, rate_hz=float(rate_hz), players=players, time_s=time_s,
-                           positions_world=positions, rotations_xyzw=view_rotation(angles[..., 0], angles[..., 1]),
-                           alive=alive, events=events, stats=stats)
+    return MatchRecording(
+        level=level,
+        seed=0,
+        rate_hz=float(rate_hz),
+        players=players,
+        time_s=time_s,
+        positions_world=positions,
+        rotations_xyzw=view_rotation(angles[..., 0], angles[..., 1]),
+        alive=alive,
+        events=events,
+        stats=stats,
+    )
 
 
 def _event_time(tick: int, time_s: np.ndarray) -> float:
@@ -320,22 +357,22 @@ def _key_at(columns: Mapping[str, np.ndarray], side: str, i: int) -> str | None:
     return _player_key(None if steamid is None else steamid[i], None if name is None else name[i])
 
 
-def _player_at(by_key: Mapping[str, MatchPlayer], columns: Mapping[str, np.ndarray], side: str,
-               i: int) -> MatchPlayer | None:
+def _player_at(by_key: Mapping[str, MatchPlayer], columns: Mapping[str, np.ndarray], side: str, i: int) -> MatchPlayer | None:
     """The player on an event's `side` at row i (_key_at), None where it has none or is no player."""
     key = _key_at(columns, side, i)
     return None if key is None else by_key.get(key)
 
 
-def _kill_events(deaths: Mapping[str, np.ndarray], by_key: dict[str, MatchPlayer], time_s: np.ndarray,
-                 positions: np.ndarray) -> list[MatchEvent]:
+def _kill_events(
+    deaths: Mapping[str, np.ndarray], by_key: dict[str, MatchPlayer], time_s: np.ndarray, positions: np.ndarray
+) -> list[MatchEvent]:
     """player_death's rows as kill events (module docstring); by_key: player key -> player, in
     the players' order; positions (F, P, 3) world feet, for a death whose row has no position."""
     column_of = {player.id: i for i, player in enumerate(by_key.values())}
     events = []
     for i in range(len(deaths.get("tick", []))):
         victim = _player_at(by_key, deaths, "user", i)
-        if victim is None:      # a death of no one on a team (cannot happen in a normal match)
+        if victim is None:  # a death of no one on a team (cannot happen in a normal match)
             continue
         attacker = _player_at(by_key, deaths, "attacker", i)
         weapon = str(deaths["weapon"][i]) if "weapon" in deaths else ""
@@ -354,16 +391,30 @@ def _kill_events(deaths: Mapping[str, np.ndarray], by_key: dict[str, MatchPlayer
         if feet is None:
             frame = min(int(np.searchsorted(time_s, t)), len(time_s) - 1)
             feet = positions[frame, column_of[victim.id]]
-        events.append(MatchEvent(kind="kill", actor_id=attacker.id, other_actor_id=victim.id, priority=0,
-                                 time_s=t, label=label, position_world=np.asarray(feet, dtype=np.float64)))
+        events.append(
+            MatchEvent(
+                kind="kill",
+                actor_id=attacker.id,
+                other_actor_id=victim.id,
+                priority=0,
+                time_s=t,
+                label=label,
+                position_world=np.asarray(feet, dtype=np.float64),
+            )
+        )
     return events
 
 
-def _bomb_events(bombs: Mapping[str, Mapping[str, np.ndarray]], by_key: dict[str, MatchPlayer],
-                 time_s: np.ndarray) -> list[MatchEvent]:
+def _bomb_events(
+    bombs: Mapping[str, Mapping[str, np.ndarray]], by_key: dict[str, MatchPlayer], time_s: np.ndarray
+) -> list[MatchEvent]:
     """BOMB_EVENTS' rows, in tick order, as objective events at the bomb (module docstring)."""
-    rows = sorted((int(columns["tick"][i]), name, i) for name, columns in bombs.items() if name in BOMB_EVENTS
-                  for i in range(len(columns.get("tick", []))))
+    rows = sorted(
+        (int(columns["tick"][i]), name, i)
+        for name, columns in bombs.items()
+        if name in BOMB_EVENTS
+        for i in range(len(columns.get("tick", [])))
+    )
     events, planter, bomb_at = [], None, None
     for tick, name, i in rows:
         columns = bombs[name]
@@ -378,7 +429,15 @@ def _bomb_events(bombs: Mapping[str, Mapping[str, np.ndarray]], by_key: dict[str
                 player = planter
         if player is None or where is None:
             continue
-        events.append(MatchEvent(kind="objective", actor_id=player.id, other_actor_id="", priority=0,
-                                 time_s=_event_time(tick, time_s), label=BOMB_EVENTS[name],
-                                 position_world=np.asarray(where, dtype=np.float64)))
+        events.append(
+            MatchEvent(
+                kind="objective",
+                actor_id=player.id,
+                other_actor_id="",
+                priority=0,
+                time_s=_event_time(tick, time_s),
+                label=BOMB_EVENTS[name],
+                position_world=np.asarray(where, dtype=np.float64),
+            )
+        )
     return events

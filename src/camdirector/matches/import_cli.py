@@ -15,6 +15,7 @@
 
 Kept light at import, as evaluation/match/sim_cli.py: numpy and the readers load when the command runs.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,8 +29,11 @@ from camdirector.matches.importers import IMPORTERS, importer_for, readable_suff
 def add_parser(subparsers) -> None:
     """Registers `import-match` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "import-match", help=f"import a real game's demo ({_games()}) as a match file",
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+        "import-match",
+        help=f"import a real game's demo ({_games()}) as a match file",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("demo", type=Path, help=f"the demo file: {readable_suffixes()}")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--map", type=Path, help="the demo's map (.bsp): added to the level registry under its stem")
@@ -56,9 +60,18 @@ def run_import_match(args: argparse.Namespace) -> int:
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_match(match, args.out)
-    print(json.dumps({"level": match.level, "players": [{"name": p.name, "team": p.team} for p in match.players],
-                      "frames": len(match.time_s), "duration_s": round(float(match.time_s[-1] - match.time_s[0]), 3),
-                      "kills": sum(e.kind == "kill" for e in match.events), "out": str(args.out)}))
+    print(
+        json.dumps(
+            {
+                "level": match.level,
+                "players": [{"name": p.name, "team": p.team} for p in match.players],
+                "frames": len(match.time_s),
+                "duration_s": round(float(match.time_s[-1] - match.time_s[0]), 3),
+                "kills": sum(e.kind == "kill" for e in match.events),
+                "out": str(args.out),
+            }
+        )
+    )
     return 0
 
 
@@ -74,6 +87,5 @@ def _add_map(map_path: Path, data_dir: Path | None) -> str:
 
     name = map_path.name.split(".")[0]
     with LevelRegistry(data_dir) as registry:
-        registry.add_level(name, map_path, agent_height_m=quake_frame.PLAYER_HEIGHT_M,
-                           agent_radius_m=quake_frame.PLAYER_RADIUS_M)
+        registry.add_level(name, map_path, agent_height_m=quake_frame.PLAYER_HEIGHT_M, agent_radius_m=quake_frame.PLAYER_RADIUS_M)
     return name

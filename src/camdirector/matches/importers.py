@@ -8,6 +8,7 @@ A load function takes the demo's path and returns its match (evaluation/match/ma
 reading the registry loads no reader (numpy, demoparser2) before a file is read. Adding a game's
 demo format is its module, with that function, and one entry in IMPORTERS.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -21,9 +22,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class MatchImporter:
-    name: str                   # the game, as help texts name it
-    suffixes: tuple[str, ...]   # lower-case endings of the file names it reads
-    load: str                   # "module:function", the load function (module docstring)
+    name: str  # the game, as help texts name it
+    suffixes: tuple[str, ...]  # lower-case endings of the file names it reads
+    load: str  # "module:function", the load function (module docstring)
 
     def reads(self, path: Path) -> bool:
         return path.name.lower().endswith(self.suffixes)

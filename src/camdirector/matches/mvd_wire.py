@@ -23,6 +23,7 @@ bit only colours a character, 0x12..0x1b are digits, 0x10/0x11 brackets (`quake_
 
 Anything that is not this format raises MvdError with the byte offset and what was wrong.
 """
+
 from __future__ import annotations
 
 import struct
@@ -35,9 +36,9 @@ from camdirector.matches.quakeworld_obituaries import parse_obituary
 # Block targets (protocol.h dem_*).
 DEM_CMD, DEM_READ, DEM_SET, DEM_MULTIPLE, DEM_SINGLE, DEM_STATS, DEM_ALL = range(7)
 # Protocol extension markers in svc_serverdata and the bits we honour.
-PROTOCOL_VERSION_FTE = 0x58455446      # "FTEX"
-PROTOCOL_VERSION_FTE2 = 0x32455446     # "FTE2"
-PROTOCOL_VERSION_MVD1 = 0x3144564D     # "MVD1"
+PROTOCOL_VERSION_FTE = 0x58455446  # "FTEX"
+PROTOCOL_VERSION_FTE2 = 0x32455446  # "FTE2"
+PROTOCOL_VERSION_MVD1 = 0x3144564D  # "MVD1"
 FTE_PEXT_TRANS = 0x00000008
 FTE_PEXT_ENTITYDBL = 0x00002000
 FTE_PEXT_FLOATCOORDS = 0x00008000
@@ -59,18 +60,22 @@ FRAGS_COLUMN = 3
 PRINT_MEDIUM = 1
 MAX_CLIENTS = 32
 # Temp entities: (type -> extra fields before the position) per CL_ParseTEnt.
-TE_BEAMS = {5, 6, 9}                    # entity short, start and end positions
-TE_COUNTED = {2, 12}                    # gunshot, blood: a count byte, then the position
+TE_BEAMS = {5, 6, 9}  # entity short, start and end positions
+TE_COUNTED = {2, 12}  # gunshot, blood: a count byte, then the position
 TE_POSITION_ONLY = {0, 1, 3, 4, 7, 8, 10, 11, 13}
 
 _I16, _U16, _I32, _U32, _F32 = (struct.Struct(f) for f in ("<h", "<H", "<i", "<I", "<f"))
 # svc_playerinfo: for each combination of its delta flags, (coordinates sent, other bytes sent).
 _PLAYERINFO_MASK = 0x3F | DF_EFFECTS | DF_SKINNUM | DF_WEAPONFRAME | DF_MODEL
 _PLAYERINFO_FIELDS = {
-    flags: (bin(flags & 7).count("1"), 2 * bin(flags & 0x38).count("1")
-            + sum(bool(flags & f) for f in (DF_EFFECTS, DF_SKINNUM, DF_WEAPONFRAME, DF_MODEL)))
-    for flags in range(_PLAYERINFO_MASK + 1) if flags & ~_PLAYERINFO_MASK == 0}
-_QUAKE_LOW = "[]0123456789.<=>"        # characters 0x10..0x1f
+    flags: (
+        bin(flags & 7).count("1"),
+        2 * bin(flags & 0x38).count("1") + sum(bool(flags & f) for f in (DF_EFFECTS, DF_SKINNUM, DF_WEAPONFRAME, DF_MODEL)),
+    )
+    for flags in range(_PLAYERINFO_MASK + 1)
+    if flags & ~_PLAYERINFO_MASK == 0
+}
+_QUAKE_LOW = "[]0123456789.<=>"  # characters 0x10..0x1f
 
 
 class MvdError(ValueError):
@@ -205,7 +210,7 @@ class _Cursor:
         end = self.data.find(b"\0", self.pos, self.end)
         if end < 0:
             raise MvdError(self.pos, f"truncated {self.what} (string without its terminating 0)")
-        raw = self.data[self.pos:end].replace(b"\xff", b"")  # 255 is dropped by every reader
+        raw = self.data[self.pos : end].replace(b"\xff", b"")  # 255 is dropped by every reader
         self.pos = end + 1
         return raw
 
@@ -220,10 +225,24 @@ def _info_pairs(raw: bytes) -> dict[str, bytes]:
 
 # Messages whose body is a fixed number of bytes, skipped whole: type -> (name in errors, bytes).
 FIXED_BODIES = {
-    1: ("_nop", 0), 7: ("_nq_time", 4), 16: ("_stopsound", 2), 24: ("_byte", 1), 27: ("_nop", 0),
-    28: ("_nop", 0), 32: ("_byte", 1), 33: ("_nop", 0), 34: ("_nop", 0), 35: ("_nop", 0),
-    36: ("_byte_short", 3), 37: ("_updateentertime", 5), 39: ("_short", 2), 44: ("_byte", 1), 49: ("_float", 4),
-    50: ("_float", 4), 53: ("_byte_byte", 2), 83: ("_qizmovoice", 34),
+    1: ("_nop", 0),
+    7: ("_nq_time", 4),
+    16: ("_stopsound", 2),
+    24: ("_byte", 1),
+    27: ("_nop", 0),
+    28: ("_nop", 0),
+    32: ("_byte", 1),
+    33: ("_nop", 0),
+    34: ("_nop", 0),
+    35: ("_nop", 0),
+    36: ("_byte_short", 3),
+    37: ("_updateentertime", 5),
+    39: ("_short", 2),
+    44: ("_byte", 1),
+    49: ("_float", 4),
+    50: ("_float", 4),
+    53: ("_byte_byte", 2),
+    83: ("_qizmovoice", 34),
 }
 
 
@@ -240,25 +259,49 @@ class _Reader:
         self.map_name = self.level_title = ""
         self.serverinfo: dict[str, bytes] = {}
         self.userinfo: dict[int, dict[str, bytes]] = {}
-        self.ever_named: dict[int, tuple[str, str]] = {}       # slot -> last (name, team) while playing
+        self.ever_named: dict[int, tuple[str, str]] = {}  # slot -> last (name, team) while playing
         self.origin = [[0.0, 0.0, 0.0] for _ in range(MAX_CLIENTS)]
         self.angles = [[0.0, 0.0, 0.0] for _ in range(MAX_CLIENTS)]
         self.dead = [False] * MAX_CLIENTS
         self.fixangle = [False] * MAX_CLIENTS
-        self.samples: dict[int, list[tuple]] = {}                # slot -> [(t, x, y, z, p, y, r, jump)]
+        self.samples: dict[int, list[tuple]] = {}  # slot -> [(t, x, y, z, p, y, r, jump)]
         self.stat_now = [[0, 0, 0, 0] for _ in range(MAX_CLIENTS)]
-        self.stat_changes: dict[int, list[tuple]] = {}           # slot -> [(t, h, a, i, f)]
+        self.stat_changes: dict[int, list[tuple]] = {}  # slot -> [(t, h, a, i, f)]
         self.print_buffer = b""
         self.deaths: list[MvdDeath] = []
         self.handlers = {
-            2: self._disconnect, 3: self._updatestat, 6: self._sound, 8: self._print,
-            9: self._stufftext, 10: self._setangle, 11: self._serverdata, 12: self._lightstyle,
-            14: self._updatefrags, 19: self._damage, 20: self._spawnstatic, 21: self._delta_from_short,
-            22: self._spawnbaseline, 23: self._temp_entity, 26: self._string, 29: self._spawnstaticsound,
-            30: self._intermission, 31: self._string, 38: self._updatestatlong, 40: self._updateuserinfo,
-            41: self._download, 42: self._playerinfo, 43: self._nails, 45: self._modellist,
-            46: self._soundlist, 47: self._packetentities, 48: self._deltapacketentities, 51: self._setinfo,
-            52: self._serverinfo, 54: self._nails2, 60: self._modellistshort, 66: self._delta_from_short,
+            2: self._disconnect,
+            3: self._updatestat,
+            6: self._sound,
+            8: self._print,
+            9: self._stufftext,
+            10: self._setangle,
+            11: self._serverdata,
+            12: self._lightstyle,
+            14: self._updatefrags,
+            19: self._damage,
+            20: self._spawnstatic,
+            21: self._delta_from_short,
+            22: self._spawnbaseline,
+            23: self._temp_entity,
+            26: self._string,
+            29: self._spawnstaticsound,
+            30: self._intermission,
+            31: self._string,
+            38: self._updatestatlong,
+            40: self._updateuserinfo,
+            41: self._download,
+            42: self._playerinfo,
+            43: self._nails,
+            45: self._modellist,
+            46: self._soundlist,
+            47: self._packetentities,
+            48: self._deltapacketentities,
+            51: self._setinfo,
+            52: self._serverinfo,
+            54: self._nails2,
+            60: self._modellistshort,
+            66: self._delta_from_short,
         }
 
     # ---------------------------------------------------------------- blocks
@@ -424,12 +467,12 @@ class _Reader:
                 break
         if not 24 <= protocol <= 28:
             raise MvdError(cur.pos - 4, f"unsupported protocol version {protocol}")
-        cur.skip(4)                       # servercount
-        cur.string()                      # game directory
-        cur.skip(4)                       # demo time
+        cur.skip(4)  # servercount
+        cur.string()  # game directory
+        cur.skip(4)  # demo time
         self.level_title = quake_text(cur.string())
         if protocol >= 25:
-            cur.skip(40)                  # movevars
+            cur.skip(40)  # movevars
         cur.coord_size = 4 if self.fte_ext & FTE_PEXT_FLOATCOORDS else 2
         cur.entity_float = bool(self.mvd_ext & MVD_PEXT1_FLOATCOORDS)
         self.saw_serverdata = True
@@ -437,7 +480,7 @@ class _Reader:
     def _stufftext(self) -> None:
         text = self.cur.string()
         if b"fullserverinfo" in text:
-            info = text[text.find(b"\\"):].rstrip(b"\n\" ")
+            info = text[text.find(b"\\") :].rstrip(b'\n" ')
             self.serverinfo.update(_info_pairs(info))
 
     def _serverinfo(self) -> None:
@@ -452,7 +495,7 @@ class _Reader:
 
     def _updateuserinfo(self) -> None:
         slot = self._slot()
-        self.cur.skip(4)                  # userid
+        self.cur.skip(4)  # userid
         self.userinfo[slot] = _info_pairs(self.cur.string())
         self._note_player(slot)
 
@@ -516,13 +559,16 @@ class _Reader:
             names = self._playing_names()
             obituary = parse_obituary(quake_text(line), list(names))
             if obituary is not None:
-                self.deaths.append(MvdDeath(self.time_ms / 1000.0, names.get(obituary.killer, -1),
-                                            names.get(obituary.victim, -1), obituary.label))
+                self.deaths.append(
+                    MvdDeath(
+                        self.time_ms / 1000.0, names.get(obituary.killer, -1), names.get(obituary.victim, -1), obituary.label
+                    )
+                )
 
     def _playerinfo(self) -> None:
         cur, data = self.cur, self.data
         slot = self._slot()
-        at = cur.need(3)                  # flags, animation frame
+        at = cur.need(3)  # flags, animation frame
         flags = data[at] | data[at + 1] << 8
         size = cur.coord_size
         present = _PLAYERINFO_FIELDS[flags & _PLAYERINFO_MASK]
@@ -589,7 +635,7 @@ class _Reader:
         self._entities()
 
     def _deltapacketentities(self) -> None:
-        self.cur.skip(1)                  # the frame it deltas from
+        self.cur.skip(1)  # the frame it deltas from
         self._entities()
 
     # ---------------------------------------------------------------- result
@@ -602,21 +648,32 @@ class _Reader:
         tracks = {}
         for s in slots:
             rows = np.array(self.samples[s], dtype=np.float64)
-            tracks[s] = MvdTrack(time_s=rows[:, 0], origin_units=rows[:, 1:4], angles_deg=rows[:, 4:7],
-                                 jump=rows[:, 7] > 0, dead=rows[:, 8] > 0)
+            tracks[s] = MvdTrack(
+                time_s=rows[:, 0], origin_units=rows[:, 1:4], angles_deg=rows[:, 4:7], jump=rows[:, 7] > 0, dead=rows[:, 8] > 0
+            )
         stats = {}
         for s in slots:
             changes = [(0.0, 0, 0, 0, 0)] + self.stat_changes.get(s, [])
-            stats[s] = MvdStats(time_s=np.array([r[0] for r in changes], dtype=np.float64),
-                                values=np.array([r[1:] for r in changes], dtype=np.int64))
+            stats[s] = MvdStats(
+                time_s=np.array([r[0] for r in changes], dtype=np.float64),
+                values=np.array([r[1:] for r in changes], dtype=np.int64),
+            )
         deaths = [d for d in self.deaths if d.killer in tracks or d.victim in tracks]
         try:
             teamplay = int(self.serverinfo.get("teamplay", b"0") or 0)
         except ValueError:
             teamplay = 0
         map_name = self.map_name or self.serverinfo.get("map", b"").decode("latin-1")
-        return MvdDemo(map_name=map_name, level_title=self.level_title, teamplay=teamplay,
-                       duration_s=self.time_ms / 1000.0, players=players, tracks=tracks, stats=stats, deaths=deaths)
+        return MvdDemo(
+            map_name=map_name,
+            level_title=self.level_title,
+            teamplay=teamplay,
+            duration_s=self.time_ms / 1000.0,
+            players=players,
+            tracks=tracks,
+            stats=stats,
+            deaths=deaths,
+        )
 
 
 def parse_mvd(data: bytes) -> MvdDemo:

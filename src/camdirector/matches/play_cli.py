@@ -17,6 +17,7 @@
 
 Kept light at import, as evaluation/cli.py: numpy and the client load when the command runs.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,17 +32,28 @@ from pathlib import Path
 def add_parser(subparsers) -> None:
     """Registers `play-match` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "play-match", help="stream a recorded match live into a server, to rehearse with the dashboard",
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+        "play-match",
+        help="stream a recorded match live into a server, to rehearse with the dashboard",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("file", type=Path, metavar="MATCH", help="match file (camdirector match-sim --out)")
     p.add_argument("--server", required=True, help="the server, grpc://HOST:PORT or grpcs://HOST:PORT")
     p.add_argument("--speed", type=float, default=1.0, help="playback speed, times real time (default 1)")
-    p.add_argument("--delay-s", dest="delay_s", type=float, default=10.0,
-                   help="broadcast delay, s, 0 to 300 (default 10)")
-    p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0,
-                   help="frames per second sent, a divisor of the file's rate (default 30)")
-    p.add_argument("--director", default="planned", metavar="NAME",
-                   help="who directs: a match director the server has (GET /v1/match-directors; default planned)")
+    p.add_argument("--delay-s", dest="delay_s", type=float, default=10.0, help="broadcast delay, s, 0 to 300 (default 10)")
+    p.add_argument(
+        "--rate-hz",
+        dest="rate_hz",
+        type=float,
+        default=30.0,
+        help="frames per second sent, a divisor of the file's rate (default 30)",
+    )
+    p.add_argument(
+        "--director",
+        default="planned",
+        metavar="NAME",
+        help="who directs: a match director the server has (GET /v1/match-directors; default planned)",
+    )
     p.add_argument("--key", help="API key (default: the CAMDIRECTOR_KEY environment variable)")
     p.add_argument("--ca-file", dest="ca_file", type=Path, help="grpcs:// only: PEM authorities to trust")
     p.add_argument("--session-id-file", dest="session_id_file", type=Path, help="write the session id here too")
@@ -93,9 +105,19 @@ def run_play_match(args: argparse.Namespace) -> int:
 
     def on_session(session_id: str) -> None:
         opened.append(session_id)
-        _print({"session_id": session_id, "level": match.level, "players": len(match.players),
-                "director": args.director, "frames_per_lap": len(lap.rows), "rate_hz": round(lap.rate_hz, 2),
-                "speed": args.speed, "delay_s": args.delay_s, "loop": args.loop})
+        _print(
+            {
+                "session_id": session_id,
+                "level": match.level,
+                "players": len(match.players),
+                "director": args.director,
+                "frames_per_lap": len(lap.rows),
+                "rate_hz": round(lap.rate_hz, 2),
+                "speed": args.speed,
+                "delay_s": args.delay_s,
+                "loop": args.loop,
+            }
+        )
         if args.session_id_file is not None:
             part = args.session_id_file.with_name(args.session_id_file.name + ".part")
             part.write_text(session_id + "\n")
@@ -114,9 +136,18 @@ def run_play_match(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_sigint)
     try:
         with client:
-            result = play_match(client, match, director=args.director, delay_s=args.delay_s,
-                                rate_hz=args.rate_hz, speed=args.speed, loop=args.loop, on_session=on_session,
-                                on_cut=lambda line: _print({"cut": line}), stop=stop)
+            result = play_match(
+                client,
+                match,
+                director=args.director,
+                delay_s=args.delay_s,
+                rate_hz=args.rate_hz,
+                speed=args.speed,
+                loop=args.loop,
+                on_session=on_session,
+                on_cut=lambda line: _print({"cut": line}),
+                stop=stop,
+            )
     except cd.DirectorError as exc:
         if not opened:
             return _fail(_refusal(args.server, exc))

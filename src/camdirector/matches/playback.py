@@ -10,6 +10,7 @@ game time since the first. Once played, the last row is held for the delay so th
 reaches the match's end; with `loop` the match starts again instead, one step after its last row,
 frame numbers and game times going on increasing, until stopped.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -56,12 +57,21 @@ class PlaybackResult:
     def summary(self) -> dict:
         c = self.counts
         compute = np.array(self.compute_ms) if self.compute_ms else np.zeros(1)
-        return {"frames_sent": c.sent, "answered": c.answered, "program_frames": c.program, "cuts": c.cuts,
-                "late_frames": c.late, "laps": c.laps, "wall_s": round(self.wall_s, 2),
-                "compute_ms": {"median": round(float(np.median(compute)), 3),
-                               "p99": round(float(np.percentile(compute, 99)), 3),
-                               "max": round(float(compute.max()), 3)},
-                "interrupted": self.interrupted}
+        return {
+            "frames_sent": c.sent,
+            "answered": c.answered,
+            "program_frames": c.program,
+            "cuts": c.cuts,
+            "late_frames": c.late,
+            "laps": c.laps,
+            "wall_s": round(self.wall_s, 2),
+            "compute_ms": {
+                "median": round(float(np.median(compute)), 3),
+                "p99": round(float(np.percentile(compute, 99)), 3),
+                "max": round(float(compute.max()), 3),
+            },
+            "interrupted": self.interrupted,
+        }
 
 
 def lap_feeds(match: MatchRecording, rate_hz: float, delay_s: float, loop: bool) -> Iterator[Feed]:
@@ -77,8 +87,15 @@ def lap_feeds(match: MatchRecording, rate_hz: float, delay_s: float, loop: bool)
         yield Feed(once.rows[:-1], once.frames[:-1] + lap * span_frames, once.times_s[:-1] + lap * span_s)
 
 
-def paced_updates(session: cd.Session, match: MatchRecording, feeds: Iterable[Feed], speed: float,
-                  clock: Callable[[], float], stop: threading.Event, counts: PlaybackCounts) -> Iterator[cd.pb.FrameUpdate]:
+def paced_updates(
+    session: cd.Session,
+    match: MatchRecording,
+    feeds: Iterable[Feed],
+    speed: float,
+    clock: Callable[[], float],
+    stop: threading.Event,
+    counts: PlaybackCounts,
+) -> Iterator[cd.pb.FrameUpdate]:
     """The laps' FrameUpdates (every player, with the events), each yielded once due on `clock`
     (monotonic wall seconds): at the first one's wall time plus its game time since the first's,
     divided by `speed`. Ends early once `stop` is set."""
@@ -102,16 +119,32 @@ def paced_updates(session: cd.Session, match: MatchRecording, feeds: Iterable[Fe
 def cut_line(reply: cd.pb.CameraUpdate) -> dict:
     """A cut as one JSON-ready object: the program moment (frame, time_s, s) and its new shot."""
     shot = reply.shot
-    return {"frame": reply.frame, "time_s": round(reply.time_s, 3), "shot_id": reply.shot_id,
-            "subjects": list(shot.subject_ids), "kind": cd.pb.ShotKind.Name(shot.kind).removeprefix("SHOT_"),
-            "reason": shot.reason, "held": shot.held}
+    return {
+        "frame": reply.frame,
+        "time_s": round(reply.time_s, 3),
+        "shot_id": reply.shot_id,
+        "subjects": list(shot.subject_ids),
+        "kind": cd.pb.ShotKind.Name(shot.kind).removeprefix("SHOT_"),
+        "reason": shot.reason,
+        "held": shot.held,
+    }
 
 
-def play_match(client: cd.Client, match: MatchRecording, *, director: str, delay_s: float, rate_hz: float = 30.0,
-               speed: float = 1.0, loop: bool = False, seed: int = 0, clock: Callable[[], float] = time.monotonic,
-               on_session: Callable[[str], None] = lambda session_id: None,
-               on_cut: Callable[[dict], None] = lambda line: None,
-               stop: threading.Event | None = None) -> PlaybackResult:
+def play_match(
+    client: cd.Client,
+    match: MatchRecording,
+    *,
+    director: str,
+    delay_s: float,
+    rate_hz: float = 30.0,
+    speed: float = 1.0,
+    loop: bool = False,
+    seed: int = 0,
+    clock: Callable[[], float] = time.monotonic,
+    on_session: Callable[[str], None] = lambda session_id: None,
+    on_cut: Callable[[dict], None] = lambda line: None,
+    stop: threading.Event | None = None,
+) -> PlaybackResult:
     """Plays the match into a new RIG_MATCH session of `director` (a registered name) with the
     broadcast delay delay_s, s (module docstring), then closes the session. `on_session` hears the
     session id as soon as it is open, `on_cut` each cut (cut_line). `stop`, once set (by another
@@ -125,8 +158,7 @@ def play_match(client: cd.Client, match: MatchRecording, *, director: str, delay
     start_s = clock()
     with client.create_session(**match_session_fields(match, director, delay_s, seed)) as session:
         on_session(session.id)
-        updates = paced_updates(session, match, lap_feeds(match, rate_hz, delay_s, loop), speed, clock, stop,
-                                result.counts)
+        updates = paced_updates(session, match, lap_feeds(match, rate_hz, delay_s, loop), speed, clock, stop, result.counts)
         replies = session.stream(updates)
         try:
             for reply in replies:

@@ -22,6 +22,7 @@ grid at rate_hz from the demo's first player sample to its end:
 - teams: with teamplay on and team names set, team names in slot order of first appearance -> 0,
   1, ...; otherwise (a duel, free for all) each player its own team.
 """
+
 from __future__ import annotations
 
 import gzip
@@ -37,10 +38,10 @@ from camdirector.matches.mvd_wire import MvdDemo, MvdError, MvdTrack, parse_mvd
 
 __all__ = ["MvdError", "MvdImport", "import_mvd", "load_mvd_file", "match_from_mvd", "parse_mvd"]
 
-STEP_SPEED_UNITS_S = 2000.0 * math.sqrt(3.0)   # sv_maxvelocity per axis, any direction
-MIN_STEP_DT_S = 0.001                          # two samples closer than this compare as this far apart
-TEAMKILL_WINDOW_S = 0.5                        # a teamkill's other side changes state within this
-LIMBO_RUN = 3                                  # setangle on this many samples in a row: steered, not playing
+STEP_SPEED_UNITS_S = 2000.0 * math.sqrt(3.0)  # sv_maxvelocity per axis, any direction
+MIN_STEP_DT_S = 0.001  # two samples closer than this compare as this far apart
+TEAMKILL_WINDOW_S = 0.5  # a teamkill's other side changes state within this
+LIMBO_RUN = 3  # setangle on this many samples in a row: steered, not playing
 
 
 @dataclass(frozen=True)
@@ -78,10 +79,16 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
     time_s = start_s + np.arange(n_frames, dtype=np.float64) / rate_hz
 
     jumps = {s: _jumps(demo.tracks[s]) for s in slots}
-    origin = np.stack([_interpolate(demo.tracks[s].time_s, demo.tracks[s].origin_units, jumps[s], time_s)
-                       for s in slots], axis=1)
-    angles = np.stack([_interpolate(demo.tracks[s].time_s, np.unwrap(demo.tracks[s].angles_deg[:, :2], period=360.0,
-                                                                      axis=0), jumps[s], time_s) for s in slots], axis=1)
+    origin = np.stack([_interpolate(demo.tracks[s].time_s, demo.tracks[s].origin_units, jumps[s], time_s) for s in slots], axis=1)
+    angles = np.stack(
+        [
+            _interpolate(
+                demo.tracks[s].time_s, np.unwrap(demo.tracks[s].angles_deg[:, :2], period=360.0, axis=0), jumps[s], time_s
+            )
+            for s in slots
+        ],
+        axis=1,
+    )
     stats = np.stack([_held(demo.stats[s].time_s, demo.stats[s].values, time_s) for s in slots], axis=1)
     dead_flag = np.stack([_held(demo.tracks[s].time_s, demo.tracks[s].dead, time_s) for s in slots], axis=1)
     limbo = {s: _limbo(demo.tracks[s].jump) for s in slots}
@@ -98,17 +105,35 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
         t = min(max(death.time_s, time_s[0]), time_s[-1])
         track = demo.tracks[death.victim]
         at = _interpolate(track.time_s, track.origin_units, jumps[death.victim], np.array([t]))[0]
-        events.append(MatchEvent(kind="kill", actor_id=ids[killer], other_actor_id=ids[victim], priority=0,
-                                 time_s=float(t), label=death.label, position_world=quake_frame.feet_world(at)))
+        events.append(
+            MatchEvent(
+                kind="kill",
+                actor_id=ids[killer],
+                other_actor_id=ids[victim],
+                priority=0,
+                time_s=float(t),
+                label=death.label,
+                position_world=quake_frame.feet_world(at),
+            )
+        )
         _dead_until_jump(alive[:, victim], time_s, t, track.time_s[jumps[death.victim] & ~limbo[death.victim]])
 
-    players = [MatchPlayer(id=pid, team=team, height_m=quake_frame.PLAYER_HEIGHT_M,
-                           radius_m=quake_frame.PLAYER_RADIUS_M, name=p.name)
-               for pid, team, p in zip(ids, _teams(demo), demo.players)]
-    match = MatchRecording(level=level or demo.map_name or name, seed=0, rate_hz=float(rate_hz), players=players,
-                           time_s=time_s, positions_world=quake_frame.feet_world(origin),
-                           rotations_xyzw=quake_frame.view_rotation(angles[..., 0], angles[..., 1]),
-                           alive=alive, events=events, stats=stats.astype(np.int32))
+    players = [
+        MatchPlayer(id=pid, team=team, height_m=quake_frame.PLAYER_HEIGHT_M, radius_m=quake_frame.PLAYER_RADIUS_M, name=p.name)
+        for pid, team, p in zip(ids, _teams(demo), demo.players)
+    ]
+    match = MatchRecording(
+        level=level or demo.map_name or name,
+        seed=0,
+        rate_hz=float(rate_hz),
+        players=players,
+        time_s=time_s,
+        positions_world=quake_frame.feet_world(origin),
+        rotations_xyzw=quake_frame.view_rotation(angles[..., 0], angles[..., 1]),
+        alive=alive,
+        events=events,
+        stats=stats.astype(np.int32),
+    )
     return MvdImport(match=match, steps=steps)
 
 

@@ -11,6 +11,7 @@ Labels: a frag's label is the weapon ("rl", "lg", "tele", "stomp", ...); a suici
 a teamkill's is "teamkill:<weapon>" (or "teamkill"). A teamkill's line names only one side
 (`Obituary.killer` or `.victim` is "" for the side it leaves out); the caller finds the other.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -134,17 +135,17 @@ def parse_obituary(line: str, names: list[str]) -> Obituary | None:
     (teamkills before frags: " was crushed by his teammate" is not a frag by "his teammate")."""
     by_length = sorted(set(names), key=len, reverse=True)
     for suffix, label in _TEAMKILLED:
-        if line.endswith(suffix) and line[:-len(suffix)] in names:
-            return Obituary("", line[:-len(suffix)], label)
+        if line.endswith(suffix) and line[: -len(suffix)] in names:
+            return Obituary("", line[: -len(suffix)], label)
     for suffix, label in _TEAMKILLS:
-        if line.endswith(suffix) and line[:-len(suffix)] in names:
-            return Obituary(line[:-len(suffix)], "", label)
+        if line.endswith(suffix) and line[: -len(suffix)] in names:
+            return Obituary(line[: -len(suffix)], "", label)
     for suffix, label in _SELF:
-        if line.endswith(suffix) and line[:-len(suffix)] in names:
-            return Obituary(line[:-len(suffix)], line[:-len(suffix)], label)
+        if line.endswith(suffix) and line[: -len(suffix)] in names:
+            return Obituary(line[: -len(suffix)], line[: -len(suffix)], label)
     for prefix, suffix, label in _SELF_WRAPPED:
-        if line.startswith(prefix) and line.endswith(suffix) and line[len(prefix):-len(suffix)] in names:
-            victim = line[len(prefix):-len(suffix)]
+        if line.startswith(prefix) and line.endswith(suffix) and line[len(prefix) : -len(suffix)] in names:
+            victim = line[len(prefix) : -len(suffix)]
             return Obituary(victim, victim, label)
     for first_is_victim, table in ((True, _VICTIM_FIRST), (False, _KILLER_FIRST)):
         for middle, end, label in table:
@@ -158,8 +159,8 @@ def _two_names(line: str, middle: str, end: str, by_length: list[str]) -> tuple[
     """(first, second) if line is "<first><middle><second><end>" with both among the names."""
     if not line.endswith(end):
         return None
-    body = line[:len(line) - len(end)]
+    body = line[: len(line) - len(end)]
     for first in by_length:
-        if body.startswith(first + middle) and body[len(first) + len(middle):] in by_length:
-            return first, body[len(first) + len(middle):]
+        if body.startswith(first + middle) and body[len(first) + len(middle) :] in by_length:
+            return first, body[len(first) + len(middle) :]
     return None

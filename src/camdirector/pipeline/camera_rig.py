@@ -20,6 +20,7 @@ so that a rig overrides what it does and says nothing about the rest.
 Code outside a rig's folder asks this contract, never which rig it holds (tests/test_layout.py);
 tests/pipeline/test_rig_contract.py holds every rig to it.
 """
+
 from __future__ import annotations
 
 from typing import Protocol
@@ -58,8 +59,9 @@ class CameraRig(Protocol):
 
     # -- What every rig does ------------------------------------------------------------------
 
-    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
-            last: FrameState | None) -> None:
+    def run(
+        self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
+    ) -> None:
         """The stages after INGEST: sets the rig's part of `state` (pipeline/state.py) and fills
         it and the core, timed into `state.stage_ms`. target_transforms: the targets' as of
         `update`, in target order; last: the session's last answered state (None before the first)."""

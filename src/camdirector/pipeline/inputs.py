@@ -1,5 +1,6 @@
 """The pipeline's input types: a validated scene and a validated frame, as the session codec
 (worker/codec.py) makes them from the wire. Nothing here knows protobuf."""
+
 from __future__ import annotations
 
 import enum
@@ -31,7 +32,7 @@ class LoadedLevel:
 @dataclass
 class ObjectSpec:
     id: str
-    mesh: TriMesh          # local frame
+    mesh: TriMesh  # local frame
     transform: RigidTransform
     dynamic: bool
 
@@ -39,10 +40,10 @@ class ObjectSpec:
 @dataclass
 class TargetSpec:
     id: str
-    mesh: TriMesh          # local frame
+    mesh: TriMesh  # local frame
     transform: RigidTransform
     aim_offset_local: npt.NDArray[np.float64]  # (3,)
-    team: int = 0          # MATCH: the player's team; players of different teams are opponents
+    team: int = 0  # MATCH: the player's team; players of different teams are opponents
 
 
 @dataclass
@@ -88,8 +89,8 @@ class GameEvent:
     kind: EventKind
     actor_id: str
     other_actor_id: str
-    priority: int            # [0, 15]; 0 = the kind's default (match/settings.py)
-    time_s: float            # game time, s (the codec fills the frame's time for 0)
+    priority: int  # [0, 15]; 0 = the kind's default (match/settings.py)
+    time_s: float  # game time, s (the codec fills the frame's time for 0)
     label: str
     position_world: npt.NDArray[np.float64] | None = None  # (3,) metres, where it happened, if the game says
 
@@ -100,6 +101,6 @@ class PlayerStats:
 
     id: str
     health: int
-    armor: int   # armor points
-    items: int   # the game's own item bitmask (QuakeWorld: its IT_* bits; match/autotrack.py reads them)
+    armor: int  # armor points
+    items: int  # the game's own item bitmask (QuakeWorld: its IT_* bits; match/autotrack.py reads them)
     frags: int

@@ -6,6 +6,7 @@ name, how it is made from a session's scene, and a line saying what it is. `make
 through it and nothing else does; code that lists the rigs (the codec's table of the wire's
 values) reads it. A new rig is its folder and one entry here (docs/architecture.md, "where a change goes").
 """
+
 from __future__ import annotations
 
 import time
@@ -28,8 +29,15 @@ from camdirector.pipeline.tracks.rig import TracksRig
 class MakeRig(Protocol):
     """Makes a session's rig from its scene and what the session keeps (`make_rig`'s arguments)."""
 
-    def __call__(self, scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh],
-                 dynamic: DynamicObjects, rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig: ...
+    def __call__(
+        self,
+        scene: SceneSpec,
+        ray_scene: RayScene,
+        static_meshes_world: list[TriMesh],
+        dynamic: DynamicObjects,
+        rng: np.random.Generator,
+        clock: Callable[[], float],
+    ) -> CameraRig: ...
 
 
 @dataclass(frozen=True)
@@ -37,41 +45,74 @@ class RigEntry:
     """One rig: `make` makes it for a session whose `style.rig` is `rig`."""
 
     rig: Rig
-    name: str          # lower case, as the rig's folder under pipeline/
+    name: str  # lower case, as the rig's folder under pipeline/
     make: MakeRig
-    description: str   # one line: what the rig does
+    description: str  # one line: what the rig does
 
 
-def _make_toric(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
-                rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig:
+def _make_toric(
+    scene: SceneSpec,
+    ray_scene: RayScene,
+    static_meshes_world: list[TriMesh],
+    dynamic: DynamicObjects,
+    rng: np.random.Generator,
+    clock: Callable[[], float],
+) -> CameraRig:
     return ToricRig(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
 
 
-def _make_tracks(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
-                 rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig:
+def _make_tracks(
+    scene: SceneSpec,
+    ray_scene: RayScene,
+    static_meshes_world: list[TriMesh],
+    dynamic: DynamicObjects,
+    rng: np.random.Generator,
+    clock: Callable[[], float],
+) -> CameraRig:
     if scene.level is None:  # worker/codec.py gives every TRACKS scene its level
         raise ValueError("the TRACKS rig needs the scene's level")
     return TracksRig(scene.level, scene.lens, scene.style, ray_scene, rng, clock)
 
 
-def _make_match(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
-                rng: np.random.Generator, clock: Callable[[], float]) -> CameraRig:
+def _make_match(
+    scene: SceneSpec,
+    ray_scene: RayScene,
+    static_meshes_world: list[TriMesh],
+    dynamic: DynamicObjects,
+    rng: np.random.Generator,
+    clock: Callable[[], float],
+) -> CameraRig:
     return MatchRig(scene, ray_scene, rng, clock)
 
 
 RIGS: tuple[RigEntry, ...] = (
-    RigEntry(Rig.TORIC, "toric", _make_toric,
-             "frames one or two targets on the Toric manifold, moving by the style's visibility mode"),
-    RigEntry(Rig.TRACKS, "tracks", _make_tracks,
-             "follows one actor on a precomputed level's camera tracks, cutting by the graph director"),
-    RigEntry(Rig.MATCH, "match", _make_match,
-             "directs a match among its players behind a broadcast delay, by the style's match director"),
+    RigEntry(
+        Rig.TORIC, "toric", _make_toric, "frames one or two targets on the Toric manifold, moving by the style's visibility mode"
+    ),
+    RigEntry(
+        Rig.TRACKS,
+        "tracks",
+        _make_tracks,
+        "follows one actor on a precomputed level's camera tracks, cutting by the graph director",
+    ),
+    RigEntry(
+        Rig.MATCH,
+        "match",
+        _make_match,
+        "directs a match among its players behind a broadcast delay, by the style's match director",
+    ),
 )
 _BY_RIG = {entry.rig: entry for entry in RIGS}
 
 
-def make_rig(scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
-             rng: np.random.Generator, clock: Callable[[], float] = time.perf_counter) -> CameraRig:
+def make_rig(
+    scene: SceneSpec,
+    ray_scene: RayScene,
+    static_meshes_world: list[TriMesh],
+    dynamic: DynamicObjects,
+    rng: np.random.Generator,
+    clock: Callable[[], float] = time.perf_counter,
+) -> CameraRig:
     """The rig of a session created from `scene`, for its whole life (worker/codec.py refuses a
     change of rig): the entry of `scene.style.rig` makes it (the codec gives a level to a TRACKS
     scene always, to a MATCH scene optionally, to no other). ray_scene, static_meshes_world and

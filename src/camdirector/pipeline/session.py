@@ -8,6 +8,7 @@ frames one target) and flags it in the diagnostics. `Session.close` releases wha
 outside Python's memory (the occlusion maps' GL objects or Embree scenes); whoever ends a session
 calls it.
 """
+
 from __future__ import annotations
 
 import time
@@ -62,7 +63,7 @@ class Session:
         self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
         self.delay_s = scene.delay_s  # MATCH: the broadcast delay, which a game event's time may run ahead by
         static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
-        self.static_meshes_world = static_meshes_world   # and the level's, what the monitors draw (render/snapshots.py)
+        self.static_meshes_world = static_meshes_world  # and the level's, what the monitors draw (render/snapshots.py)
         self.level = scene.level
         self.level_mesh_world = scene.level.mesh_world if scene.level is not None else None
         level_meshes = [scene.level.mesh_world] if scene.level is not None else []  # TRACKS: the level occludes
@@ -84,8 +85,7 @@ class Session:
         """What the session was built from and never changes, by a name that a session built from
         the same creation request gives the same object: its meshes, its level, its clock. A
         checkpoint refers to these by name instead of copying them (worker/checkpointing.py)."""
-        objects: dict[CreationName, object] = {"clock": self.clock, "level": self.level,
-                                               "level_mesh": self.level_mesh_world}
+        objects: dict[CreationName, object] = {"clock": self.clock, "level": self.level, "level_mesh": self.level_mesh_world}
         objects.update({("static", i): mesh for i, mesh in enumerate(self.static_meshes_world)})
         objects.update({("target", i): t.mesh for i, t in enumerate(self.targets)})
         objects.update({("dynamic", object_id): mesh for object_id, (mesh, _) in self.dynamic.items()})
@@ -131,7 +131,7 @@ class Session:
         if last_time_s is not None and update.time_s < last_time_s:
             state.flags.append("time_went_back")
         self.last_input = (update.frame, update.time_s)
-        targets_before = list(self.view_target_transforms())   # a few references: the last cut's "before"
+        targets_before = list(self.view_target_transforms())  # a few references: the last cut's "before"
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
         for object_id, transform in update.states:
             index = self.target_index.get(object_id)
@@ -140,8 +140,7 @@ class Session:
                 self.dynamic[object_id] = (self.dynamic[object_id][0], transform)
             else:
                 self.target_transforms[index] = transform
-        state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0]
-                                  for tf, t in zip(self.target_transforms, self.targets)]
+        state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0] for tf, t in zip(self.target_transforms, self.targets)]
         stages.done(Stage.INGEST)
         self.rig.run(state, update, self.target_transforms, last)  # the stages after INGEST, timed by the rig
         # The first pose is a cut (a MATCH session answers without a pose while its delay fills).
@@ -149,8 +148,15 @@ class Session:
         if state.cut:
             self.shot_id += 1
             if last is not None and last.pose is not None and state.pose is not None:  # a few references, on the frames that cut
-                self.last_cut = CutRecord(last.frame, last.pose, targets_before, state.frame, state.pose,
-                                          list(self.view_target_transforms()), dict(self.dynamic))
+                self.last_cut = CutRecord(
+                    last.frame,
+                    last.pose,
+                    targets_before,
+                    state.frame,
+                    state.pose,
+                    list(self.view_target_transforms()),
+                    dict(self.dynamic),
+                )
         state.shot_id = self.shot_id
         self.last_state = state
         self.frames_answered += 1

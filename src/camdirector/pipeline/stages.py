@@ -31,6 +31,7 @@ Building the reply (worker/codec.py) is no stage: it happens after `stage_ms` ha
 into the reply, so it is counted only in the frame's `compute_ms`, which the session table
 measures around the whole frame.
 """
+
 from __future__ import annotations
 
 import enum
@@ -51,7 +52,7 @@ class TracksStage(enum.Enum):
     """The TRACKS rig's stages after INGEST in order: the graph director's steps of one frame
     (pipeline/tracks/director.py, the camera-tracks paper's Section 5); values are their `stage_ms` keys."""
 
-    CUT_CHECK = "cut_check"          # direct visibility and framing feed the cutting strategy
+    CUT_CHECK = "cut_check"  # direct visibility and framing feed the cutting strategy
     TARGET_UPDATE = "target_update"  # a cut's continuity search, or the target moving strategy
     CAMERA_UPDATE = "camera_update"  # the camera jumps or follows; the actor's visibility from there
 
@@ -59,7 +60,7 @@ class TracksStage(enum.Enum):
 class MatchStage(enum.Enum):
     """The MATCH rig's stages after INGEST in order (pipeline/match/rig.py); values are their `stage_ms` keys."""
 
-    BUFFER = "buffer"          # the delay buffer takes the frame and gives the program moment
-    PLAN = "plan"              # a planning tick: takes, the director's cut decision, candidates
-    CAMERA = "camera"          # the program camera's motion and pose, the candidates' poses
+    BUFFER = "buffer"  # the delay buffer takes the frame and gives the program moment
+    PLAN = "plan"  # a planning tick: takes, the director's cut decision, candidates
+    CAMERA = "camera"  # the program camera's motion and pose, the candidates' poses
     VISIBILITY = "visibility"  # the framed subjects' visibility by ray casts

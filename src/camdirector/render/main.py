@@ -8,6 +8,7 @@ a session's top view made once and kept until the session is forgotten. It reads
 messages on stdin and answers on stdout (infra/channels.py), and exits when the worker closes its
 stdin (the worker stopped or died). The worker's end is render/monitor.py.
 """
+
 from __future__ import annotations
 
 import io
@@ -32,10 +33,10 @@ if TYPE_CHECKING:  # imported where it is used: only the render process loads GL
 
 log = logging.getLogger("camdirector.render")
 
-RENDER_NICENESS = 10        # where SCHED_IDLE is missing: added to the render process's niceness
-RENDERERS_KEPT = 8          # OffscreenRenderers kept per render process (sessions x picture sizes)
-JPEG_QUALITY = 80           # [1, 95]: 320x180 pictures of 5-15 KB
-TOP_VIEW_MARGIN_M = 1.0     # world kept around the static geometry in the top view, m
+RENDER_NICENESS = 10  # where SCHED_IDLE is missing: added to the render process's niceness
+RENDERERS_KEPT = 8  # OffscreenRenderers kept per render process (sessions x picture sizes)
+JPEG_QUALITY = 80  # [1, 95]: 320x180 pictures of 5-15 KB
+TOP_VIEW_MARGIN_M = 1.0  # world kept around the static geometry in the top view, m
 PLACEHOLDER_RGB = (58, 60, 66)
 
 
@@ -67,8 +68,7 @@ class Painter:
     def render(self, job: RenderJob) -> bytes:
         """The view's bytes (encode_view) for one job."""
         t0 = time.perf_counter()
-        header: dict[str, object] = {"frame": job.frame, "placeholder": job.placeholder, "note": job.note,
-                                     "bounds_m": None}
+        header: dict[str, object] = {"frame": job.frame, "placeholder": job.placeholder, "note": job.note, "bounds_m": None}
         if job.query.shot == "top":
             image, header["bounds_m"], header["placeholder"] = self._top_view(job.session_id)
             media_type = "image/png"
@@ -107,7 +107,7 @@ class Painter:
         self._renderers.move_to_end(key)
         if job.moving_ids:
             renderer.set_transforms(list(job.moving_ids), rigid_matrices(job))
-        assert job.pose is not None   # a job without a pose has a placeholder instead (snapshots.py)
+        assert job.pose is not None  # a job without a pose has a placeholder instead (snapshots.py)
         return renderer.render(job.pose, job.lens)
 
     def _top_view(self, session_id: str) -> tuple[bytes, list[float] | None, str | None]:
@@ -123,8 +123,11 @@ class Painter:
         world = [p for p in geometry.parts if not p.moving]
         if not world:
             reason = "no world geometry: the scene has no static object and no level"
-            return encode_image(placeholder_pixels(TOP_VIEW_LONG_SIDE_PX, TOP_VIEW_LONG_SIDE_PX // 2, reason), "png"), \
-                None, reason
+            return (
+                encode_image(placeholder_pixels(TOP_VIEW_LONG_SIDE_PX, TOP_VIEW_LONG_SIDE_PX // 2, reason), "png"),
+                None,
+                reason,
+            )
         vertices = np.concatenate([p.vertices for p in world]).astype(np.float64)
         low, high = vertices.min(axis=0) - TOP_VIEW_MARGIN_M, vertices.max(axis=0) + TOP_VIEW_MARGIN_M
         extent_x, extent_z = high[0] - low[0], high[2] - low[2]
@@ -181,10 +184,10 @@ def banner(pixels: np.ndarray, text: str) -> np.ndarray:
 def main() -> int:
     """The render process: answers the worker until it closes stdin."""
     channel = os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)   # whatever a library prints goes to stderr, never into the replies
-    try:   # runs only on a core nothing else wants (its threads, llvmpipe's included, inherit it)
+    os.dup2(2, 1)  # whatever a library prints goes to stderr, never into the replies
+    try:  # runs only on a core nothing else wants (its threads, llvmpipe's included, inherit it)
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):   # not Linux
+    except (AttributeError, OSError):  # not Linux
         os.nice(RENDER_NICENESS)
     inbox = sys.stdin.buffer
     painter = Painter()

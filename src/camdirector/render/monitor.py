@@ -10,6 +10,7 @@ On the worker's side (`Monitor`), the main thread only takes the snapshot
 a reader thread takes the picture back and hands it to the caller's `reply`.
 Each reply body is a view, framed by infra/channels.py (`encode_view`).
 """
+
 from __future__ import annotations
 
 import logging
@@ -26,9 +27,9 @@ from camdirector.render.snapshots import RenderJob, SceneGeometry
 
 log = logging.getLogger("camdirector.monitor")
 
-OK, UNAVAILABLE = 0, 14     # gRPC status codes, as the worker's replies carry them
+OK, UNAVAILABLE = 0, 14  # gRPC status codes, as the worker's replies carry them
 
-Reply = Callable[[int, bytes], None]   # (status, body): status OK with a view, else an error message
+Reply = Callable[[int, bytes], None]  # (status, body): status OK with a view, else an error message
 
 
 class Monitor:
@@ -38,10 +39,10 @@ class Monitor:
     def __init__(self, python: str = sys.executable):
         self.python = python
         self._lock = threading.Lock()
-        self._proc: subprocess.Popen[bytes] | None = None     # set by the writer thread once started
+        self._proc: subprocess.Popen[bytes] | None = None  # set by the writer thread once started
         self._outbox: queue.SimpleQueue[tuple[Any, ...]] | None = None  # None: no process (not yet, or it died)
-        self._sent: set[str] = set()                # sessions whose meshes the process holds
-        self._waiting: dict[int, Reply] = {}        # job number -> its reply
+        self._sent: set[str] = set()  # sessions whose meshes the process holds
+        self._waiting: dict[int, Reply] = {}  # job number -> its reply
         self._numbers = iter(range(1, 1 << 62))
 
     def submit(self, job: RenderJob, geometry: Callable[[], SceneGeometry], reply: Reply) -> None:
@@ -53,8 +54,7 @@ class Monitor:
             if self._outbox is None:
                 self._outbox = queue.SimpleQueue()
                 self._sent = set()
-                threading.Thread(target=self._send_forever, args=(self._outbox,), name="monitor-writer",
-                                 daemon=True).start()
+                threading.Thread(target=self._send_forever, args=(self._outbox,), name="monitor-writer", daemon=True).start()
             number = next(self._numbers)
             self._waiting[number] = reply
             if job.session_id not in self._sent:
@@ -67,7 +67,7 @@ class Monitor:
         with self._lock:
             if session_id in self._sent:
                 self._sent.discard(session_id)
-                if self._outbox is not None:   # else the process died, and the meshes with it
+                if self._outbox is not None:  # else the process died, and the meshes with it
                     self._outbox.put(("forget", session_id))
 
     @property
@@ -83,28 +83,28 @@ class Monitor:
         if outbox is None:
             return
         done = threading.Event()
-        outbox.put(("close", done))   # the writer closes stdin (the process exits) and waits for it
+        outbox.put(("close", done))  # the writer closes stdin (the process exits) and waits for it
         if not done.wait(timeout=10.0):
             log.error("the view renderer did not stop")
 
     def _send_forever(self, outbox: queue.SimpleQueue[tuple[Any, ...]]) -> None:
         """The writer thread of one render process: starts it, then sends what is queued."""
         env = dict(os.environ)
-        env.setdefault("LP_NUM_THREADS", "1")   # llvmpipe's rasterizer threads: one is plenty at monitor sizes
-        proc = subprocess.Popen([self.python, "-m", "camdirector.render.main"],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
-        assert proc.stdin is not None and proc.stdout is not None   # both asked for as pipes
+        env.setdefault("LP_NUM_THREADS", "1")  # llvmpipe's rasterizer threads: one is plenty at monitor sizes
+        proc = subprocess.Popen(
+            [self.python, "-m", "camdirector.render.main"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env
+        )
+        assert proc.stdin is not None and proc.stdout is not None  # both asked for as pipes
         self._proc = proc
-        reader = threading.Thread(target=self._receive_forever, args=(proc, outbox), name="monitor-reader",
-                                  daemon=True)
+        reader = threading.Thread(target=self._receive_forever, args=(proc, outbox), name="monitor-reader", daemon=True)
         reader.start()
         alive, closing = True, None
-        while True:   # until told to close, or that the process is gone
+        while True:  # until told to close, or that the process is gone
             message = outbox.get()
             if message[0] == "close":
                 closing = message[1]
                 break
-            if message[0] == "gone":   # it died: the reader has answered what waited
+            if message[0] == "gone":  # it died: the reader has answered what waited
                 break
             if not alive:
                 continue
@@ -113,7 +113,7 @@ class Monitor:
                     message = ("geometry", message[1], message[2]())
                 write_message(proc.stdin, message)
             except (BrokenPipeError, ValueError, OSError):
-                alive = False   # it died: the reader answers what waits, then says "gone"
+                alive = False  # it died: the reader answers what waits, then says "gone"
         try:
             proc.stdin.close()
         except OSError:
@@ -128,7 +128,7 @@ class Monitor:
 
     def _receive_forever(self, proc: subprocess.Popen[bytes], outbox: queue.SimpleQueue[tuple[Any, ...]]) -> None:
         stdout = proc.stdout
-        assert stdout is not None   # a pipe (_send_forever)
+        assert stdout is not None  # a pipe (_send_forever)
         while (message := read_message(stdout)) is not None:
             number, status, body = message
             with self._lock:
@@ -138,7 +138,7 @@ class Monitor:
         proc.wait()
         with self._lock:
             waiting, self._waiting = self._waiting, {}
-            if self._outbox is outbox:   # died on its own: the next submit starts another
+            if self._outbox is outbox:  # died on its own: the next submit starts another
                 self._outbox = None
                 outbox.put(("gone",))
             if self._proc is proc:

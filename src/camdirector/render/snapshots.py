@@ -19,6 +19,7 @@ a placeholder image that says why, not an error: a monitor keeps its place on a 
 A camera view of a session whose scene has no world at all (no object, no level: only targets)
 is drawn, the targets against the sky, under a banner that says so (`note`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,8 +42,12 @@ LEVEL_RGB = (0.62, 0.60, 0.56)
 LEVEL_CHECKER_M = 2.0
 MOVING_RGB = (0.30, 0.45, 0.70)
 TARGET_RGB = (0xE0 / 255, 0x7B / 255, 0x00 / 255)
-TEAM_RGB = (TARGET_RGB, (0x8E / 255, 0x24 / 255, 0xAA / 255), (0x2E / 255, 0x7D / 255, 0x32 / 255),
-            (0x79 / 255, 0x55 / 255, 0x48 / 255))
+TEAM_RGB = (
+    TARGET_RGB,
+    (0x8E / 255, 0x24 / 255, 0xAA / 255),
+    (0x2E / 255, 0x7D / 255, 0x32 / 255),
+    (0x79 / 255, 0x55 / 255, 0x48 / 255),
+)
 
 
 @dataclass(frozen=True)
@@ -50,8 +55,8 @@ class MeshPart:
     """One mesh to draw: static ones in the world frame, moving ones (objects, targets) local."""
 
     part_id: str
-    vertices: np.ndarray       # (n, 3) float32, m
-    faces: np.ndarray          # (m, 3) int32
+    vertices: np.ndarray  # (n, 3) float32, m
+    faces: np.ndarray  # (m, 3) int32
     rgb: tuple[float, float, float]
     checker_m: float = 0.0
     moving: bool = False
@@ -75,15 +80,15 @@ class RenderJob:
 
     session_id: str
     query: ViewQuery
-    frame: int | None                    # the frame the picture shows (None: the top view, a placeholder)
-    pose: CameraPose | None              # None: the top view, or a placeholder
-    aspect: float                        # the session lens's width / height
-    moving_ids: tuple[str, ...]          # part ids of the moving parts, in the order of the arrays
-    positions_world: np.ndarray          # (k, 3) float64, m
-    rotations_xyzw: np.ndarray           # (k, 4) float64
-    scales: np.ndarray                   # (k, 3) float64
-    placeholder: str | None = None       # why there is no picture; None: draw it
-    note: str | None = None              # drawn as a banner over the picture (a world without geometry)
+    frame: int | None  # the frame the picture shows (None: the top view, a placeholder)
+    pose: CameraPose | None  # None: the top view, or a placeholder
+    aspect: float  # the session lens's width / height
+    moving_ids: tuple[str, ...]  # part ids of the moving parts, in the order of the arrays
+    positions_world: np.ndarray  # (k, 3) float64, m
+    rotations_xyzw: np.ndarray  # (k, 4) float64
+    scales: np.ndarray  # (k, 3) float64
+    placeholder: str | None = None  # why there is no picture; None: draw it
+    note: str | None = None  # drawn as a banner over the picture (a world without geometry)
 
     @property
     def size_px(self) -> tuple[int, int]:
@@ -96,23 +101,32 @@ class RenderJob:
     def lens(self) -> Lens:
         """The pose's field of view at the picture's own aspect (the session's unless both sides were given)."""
         width, height = self.size_px
-        assert self.pose is not None   # only a camera view's picture has a lens
+        assert self.pose is not None  # only a camera view's picture has a lens
         return Lens(vertical_fov_deg=self.pose.vertical_fov_deg, aspect=width / height)
 
 
 def scene_geometry(session: Session) -> SceneGeometry:
     """The session's meshes: static objects and the level in the world frame, then its moving
     objects and targets in their local frames (ids `object:<id>` and `target:<id>`)."""
-    parts = [MeshPart(f"static:{k}", _f32(mesh.vertices), _i32(mesh.faces), STATIC_RGB)
-             for k, mesh in enumerate(session.static_meshes_world)]
+    parts = [
+        MeshPart(f"static:{k}", _f32(mesh.vertices), _i32(mesh.faces), STATIC_RGB)
+        for k, mesh in enumerate(session.static_meshes_world)
+    ]
     if session.level_mesh_world is not None:
         mesh = session.level_mesh_world
         parts.append(MeshPart("level", _f32(mesh.vertices), _i32(mesh.faces), LEVEL_RGB, checker_m=LEVEL_CHECKER_M))
     for object_id, (mesh, _) in session.dynamic.items():
         parts.append(MeshPart(f"object:{object_id}", _f32(mesh.vertices), _i32(mesh.faces), MOVING_RGB, moving=True))
     for target in session.targets:
-        parts.append(MeshPart(f"target:{target.id}", _f32(target.mesh.vertices), _i32(target.mesh.faces),
-                              TEAM_RGB[target.team % len(TEAM_RGB)], moving=True))
+        parts.append(
+            MeshPart(
+                f"target:{target.id}",
+                _f32(target.mesh.vertices),
+                _i32(target.mesh.faces),
+                TEAM_RGB[target.team % len(TEAM_RGB)],
+                moving=True,
+            )
+        )
     return SceneGeometry(tuple(parts))
 
 
@@ -121,12 +135,15 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
     dynamic, targets = session.dynamic, session.view_target_transforms()
     frame, pose, placeholder = None, None, None
     state = session.last_state
-    match = None if state is None else state.match   # the MATCH rig's part: the delay buffer, the candidates
+    match = None if state is None else state.match  # the MATCH rig's part: the delay buffer, the candidates
     if query.shot == "top":
         pass
     elif state is None or state.pose is None:
-        placeholder = ("buffering: the broadcast delay is still filling, no camera yet"
-                       if match is not None and match.buffering else "no camera yet: no frame answered")
+        placeholder = (
+            "buffering: the broadcast delay is still filling, no camera yet"
+            if match is not None and match.buffering
+            else "no camera yet: no frame answered"
+        )
     elif query.shot == "program":
         frame, pose = state.frame, state.pose
     elif query.shot == "candidate":
@@ -135,8 +152,11 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
         if found:
             frame, pose = state.frame, found[0].pose
         else:
-            placeholder = (f"no candidate shot of {', '.join(query.subjects)} now" if match is not None
-                           else "candidate shots are a MATCH session's")
+            placeholder = (
+                f"no candidate shot of {', '.join(query.subjects)} now"
+                if match is not None
+                else "candidate shots are a MATCH session's"
+            )
     else:
         cut = session.last_cut
         if cut is None:
@@ -152,11 +172,18 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
     moving += [(f"target:{t.id}", transform) for t, transform in zip(session.targets, targets)]
     transforms = [transform for _, transform in moving]
     return RenderJob(
-        session_id=session.id, query=query, frame=frame, pose=pose, aspect=session.lens.aspect,
+        session_id=session.id,
+        query=query,
+        frame=frame,
+        pose=pose,
+        aspect=session.lens.aspect,
         moving_ids=tuple(part_id for part_id, _ in moving),
         positions_world=_stack([tf.position_world for tf in transforms], 3),
         rotations_xyzw=_stack([tf.rotation_xyzw for tf in transforms], 4),
-        scales=_stack([tf.scale for tf in transforms], 3), placeholder=placeholder, note=note)
+        scales=_stack([tf.scale for tf in transforms], 3),
+        placeholder=placeholder,
+        note=note,
+    )
 
 
 def _stack(rows: list[np.ndarray], width: int) -> np.ndarray:

@@ -21,6 +21,7 @@ Two stores behind `CheckpointStore`, tested against each other (tests/worker/tes
   write is one script call (the owner checked and the entry added in one round trip); the keys of
   one session share a hash tag, so they stay together on Redis Cluster.
 """
+
 from __future__ import annotations
 
 import io
@@ -37,11 +38,11 @@ from typing import Protocol
 
 log = logging.getLogger("camdirector.checkpoints")
 
-OPS = ("frame", "style", "take")          # the inputs a checkpoint keeps, by code
+OPS = ("frame", "style", "take")  # the inputs a checkpoint keeps, by code
 OP_CODES = {name: code for code, name in enumerate(OPS)}
-_ENTRY = struct.Struct("!QB")             # sequence number, op code; then the request's bytes
-_LENGTH = struct.Struct("!I")             # DirectoryStore's log: each entry's length first
-_SEQ = struct.Struct("!Q")                # DirectoryStore's snapshot file: its sequence number first
+_ENTRY = struct.Struct("!QB")  # sequence number, op code; then the request's bytes
+_LENGTH = struct.Struct("!I")  # DirectoryStore's log: each entry's length first
+_SEQ = struct.Struct("!Q")  # DirectoryStore's snapshot file: its sequence number first
 
 
 class CheckpointError(RuntimeError):
@@ -52,9 +53,9 @@ class CheckpointError(RuntimeError):
 class Checkpoint:
     """One session's checkpoint as loaded: `entries` are (seq, op, request bytes) after `seq`."""
 
-    create: bytes                  # the serialized CreateSessionRequest
-    snapshot: bytes | None         # the pickled state (dumps_state), None before the first
-    seq: int                       # inputs the snapshot includes
+    create: bytes  # the serialized CreateSessionRequest
+    snapshot: bytes | None  # the pickled state (dumps_state), None before the first
+    seq: int  # inputs the snapshot includes
     entries: list[tuple[int, str, bytes]]
 
 
@@ -64,7 +65,7 @@ def encode_entry(seq: int, op: str, payload: bytes) -> bytes:
 
 def decode_entry(data: bytes) -> tuple[int, str, bytes]:
     seq, code = _ENTRY.unpack_from(data)
-    return seq, OPS[code], data[_ENTRY.size:]
+    return seq, OPS[code], data[_ENTRY.size :]
 
 
 class CheckpointStore(Protocol):
@@ -107,6 +108,7 @@ def open_store(url: str, data_dir: str | Path, keep_s: float, check: bool = Fals
 
 # -- the state: pickled, with creation objects by name ----------------------------------------------
 
+
 class _Pickler(pickle.Pickler):
     def __init__(self, file, names: dict[int, object]):
         super().__init__(file, protocol=5)
@@ -145,6 +147,7 @@ def loads_state(data: bytes, creation_objects: dict):
 
 # -- the embedded default: files --------------------------------------------------------------------
 
+
 class DirectoryStore:
     """Under `root`, per session: `create` (the request), `snapshot` (sequence number, then the
     state), `log` (length-prefixed entries, appended with one write each: a killed process's
@@ -161,7 +164,7 @@ class DirectoryStore:
             self.root.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise CheckpointError(f"cannot create the checkpoint folder {self.root}: {exc}") from None
-        self._logs: dict[str, int] = {}   # session id -> the open log's descriptor
+        self._logs: dict[str, int] = {}  # session id -> the open log's descriptor
         self._sweep(keep_s)
 
     def _dir(self, session_id: str) -> Path:
@@ -225,7 +228,7 @@ class DirectoryStore:
             raise CheckpointError(f"cannot read the checkpoint of session {session_id}: {exc}") from None
         try:
             data = (folder / "snapshot").read_bytes()
-            seq, snapshot = _SEQ.unpack_from(data)[0], data[_SEQ.size:]
+            seq, snapshot = _SEQ.unpack_from(data)[0], data[_SEQ.size :]
         except FileNotFoundError:
             seq, snapshot = 0, None
         try:
@@ -267,7 +270,7 @@ def _read_log(data: bytes) -> Iterator[bytes]:
         (length,) = _LENGTH.unpack_from(data, at)
         if at + _LENGTH.size + length > len(data):
             return  # the last write was torn
-        yield data[at + _LENGTH.size:at + _LENGTH.size + length]
+        yield data[at + _LENGTH.size : at + _LENGTH.size + length]
         at += _LENGTH.size + length
 
 

@@ -29,6 +29,7 @@ A write that fails (Redis down, a full disk) fails no frame: the session goes on
 metrics say so (`FrameMetrics.checkpoint_failed`), and once the store answers again (tried every
 CHECKPOINT_RETRY_S) the checkpoint is written again whole: begun anew, then a snapshot.
 """
+
 from __future__ import annotations
 
 import logging
@@ -60,10 +61,10 @@ CHECKPOINT_RETRY_S = 1.0  # a session whose checkpoint write failed tries again 
 class SessionCheckpoint:
     """What the protocol keeps beside one held session."""
 
-    create_payload: bytes = b""      # the create op's payload (tenant, request): a checkpoint lost with its store begins again
-    seq: int = 0                     # inputs taken (frames not stale, styles, takes): the checkpoint's numbering
-    snapshot_seq: int = 0            # the input the last snapshot includes
-    retry_s: float | None = None     # a failed write: when to try again (clock), else None
+    create_payload: bytes = b""  # the create op's payload (tenant, request): a checkpoint lost with its store begins again
+    seq: int = 0  # inputs taken (frames not stale, styles, takes): the checkpoint's numbering
+    snapshot_seq: int = 0  # the input the last snapshot includes
+    retry_s: float | None = None  # a failed write: when to try again (clock), else None
 
     @property
     def failed(self) -> bool:
@@ -80,21 +81,24 @@ class Checkpointing:
     writes, and when a snapshot is due. Without a store (the setting `checkpoint_store = "off"`)
     it keeps nothing and loads nothing."""
 
-    def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter,
-                 store: CheckpointStore | None = None):
+    def __init__(
+        self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter, store: CheckpointStore | None = None
+    ):
         """store: where sessions are checkpointed; by default the one settings.checkpoint_store names."""
         self.every_frames = settings.checkpoint_every_frames
         self.clock = clock
-        self.store = store if store is not None else open_store(
-            settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s)
+        self.store = (
+            store if store is not None else open_store(settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s)
+        )
         self.owner = f"{settings.node_name}/{os.getpid()}"  # this process, in checkpoints' ownership
 
     @property
     def enabled(self) -> bool:
         return self.store is not None
 
-    def begin(self, session_id: str, checkpoint: SessionCheckpoint, req: pb.CreateSessionRequest,
-              payload: bytes | None, tenant: str) -> None:
+    def begin(
+        self, session_id: str, checkpoint: SessionCheckpoint, req: pb.CreateSessionRequest, payload: bytes | None, tenant: str
+    ) -> None:
         """A session created: its checkpoint begins with the create op's payload, the session's
         tenant and its request (`payload`: those bytes as received, when at hand)."""
         if self.store is None:
@@ -112,7 +116,7 @@ class Checkpointing:
             return
         checkpoint.seq += 1
         if checkpoint.failed:
-            return   # the snapshot after this input repairs the checkpoint (snapshot_due)
+            return  # the snapshot after this input repairs the checkpoint (snapshot_due)
         try:
             owned = self.store.append(session_id, self.owner, encode_entry(checkpoint.seq, op, payload))
         except CheckpointError as exc:
@@ -135,8 +139,14 @@ class Checkpointing:
         period (a worker never idle still cuts it)."""
         return checkpoint.seq - checkpoint.snapshot_seq < 2 * self.every_frames
 
-    def snapshot(self, session_id: str, checkpoint: SessionCheckpoint, state: object,
-                 creation_objects: dict[CreationName, object], claim: bool) -> None:
+    def snapshot(
+        self,
+        session_id: str,
+        checkpoint: SessionCheckpoint,
+        state: object,
+        creation_objects: dict[CreationName, object],
+        claim: bool,
+    ) -> None:
         """Writes `state` (the session and its style as sent; its deferred work done: a snapshot
         holds computed maps, not the means to compute them) in place of the log; with `claim` (a
         restore) this process takes the session over. After a failed write the checkpoint is
@@ -186,6 +196,11 @@ class Checkpointing:
     def _failed(self, session_id: str, checkpoint: SessionCheckpoint, exc: CheckpointError) -> None:
         """The session goes on; its checkpoint is written whole again once the store answers."""
         if not checkpoint.failed:
-            log.error("session %s: %s; frames are still answered, the checkpoint is written again when the "
-                      "store answers (tried every %.0f s)", session_id, exc, CHECKPOINT_RETRY_S)
+            log.error(
+                "session %s: %s; frames are still answered, the checkpoint is written again when the "
+                "store answers (tried every %.0f s)",
+                session_id,
+                exc,
+                CHECKPOINT_RETRY_S,
+            )
         checkpoint.retry_s = self.clock() + CHECKPOINT_RETRY_S

@@ -24,6 +24,7 @@ an unknown name is refused, listing the registered ones, and `shown_style` shows
 2 s; IPv6 is refused: OpenTrackIO 1.0.1 has none), a port in [1, 65535], a source number in the
 format's range and a sensor height in [1, 100] mm (0: 24). Sending is worker/pose_out.py's.
 """
+
 from __future__ import annotations
 
 import ipaddress
@@ -61,27 +62,40 @@ from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.level_cache import LevelCache
 from camdirector.worker.pose_out import PoseFormat, PoseOutputSpec
 
-_MASKS = {pb.STYLE_MASK_EMPTY: MaskKind.EMPTY, pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
-          pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
-          pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM}
+_MASKS = {
+    pb.STYLE_MASK_EMPTY: MaskKind.EMPTY,
+    pb.STYLE_MASK_SOFT_BEHIND: MaskKind.SOFT_BEHIND,
+    pb.STYLE_MASK_HARD_BEHIND: MaskKind.HARD_BEHIND,
+    pb.STYLE_MASK_AVOID_BEHIND_TOP_BOTTOM: MaskKind.AVOID_BEHIND_TOP_BOTTOM,
+}
 _RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC} | {entry.rig.value: entry.rig for entry in RIGS}  # Rig has the wire's numbers
-MAX_PLAYERS = 64        # players of a MATCH session (the wire contract)
-MAX_DELAY_S = 300.0     # broadcast delay of a MATCH session, s (the wire contract)
-MAX_PRIORITY = 15       # a game event's priority (HLTV's scale)
-_SHOT_SIZES = {pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG, pb.SHOT_SIZE_MEDIUM: ShotSize.MEDIUM,
-               pb.SHOT_SIZE_LONG: ShotSize.LONG, pb.SHOT_SIZE_EXTREME_LONG: ShotSize.EXTREME_LONG}
-_MOVEMENTS = {pb.MOVEMENT_UNSPECIFIED: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_DYNAMIC_NO_CUTS: Movement.DYNAMIC_NO_CUTS,
-              pb.MOVEMENT_DYNAMIC_WITH_CUTS: Movement.DYNAMIC_WITH_CUTS, pb.MOVEMENT_STATIC: Movement.STATIC}
-MAX_POSE_OUTPUTS = 8            # pose outputs of a session (the wire contract)
+MAX_PLAYERS = 64  # players of a MATCH session (the wire contract)
+MAX_DELAY_S = 300.0  # broadcast delay of a MATCH session, s (the wire contract)
+MAX_PRIORITY = 15  # a game event's priority (HLTV's scale)
+_SHOT_SIZES = {
+    pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG,
+    pb.SHOT_SIZE_MEDIUM: ShotSize.MEDIUM,
+    pb.SHOT_SIZE_LONG: ShotSize.LONG,
+    pb.SHOT_SIZE_EXTREME_LONG: ShotSize.EXTREME_LONG,
+}
+_MOVEMENTS = {
+    pb.MOVEMENT_UNSPECIFIED: Movement.DYNAMIC_WITH_CUTS,
+    pb.MOVEMENT_DYNAMIC_NO_CUTS: Movement.DYNAMIC_NO_CUTS,
+    pb.MOVEMENT_DYNAMIC_WITH_CUTS: Movement.DYNAMIC_WITH_CUTS,
+    pb.MOVEMENT_STATIC: Movement.STATIC,
+}
+MAX_POSE_OUTPUTS = 8  # pose outputs of a session (the wire contract)
 DEFAULT_SENSOR_HEIGHT_MM = 24.0  # a pose output's sensor_height_mm when 0: a full-frame 35 mm still sensor
 SENSOR_HEIGHT_RANGE_MM = (1.0, 100.0)
-SOURCE_NUMBER_RANGES = {PoseFormat.OPENTRACKIO_JSON: (1, 200),  # OpenTrackIO: "Source Numbers above 200 are reserved"
-                        PoseFormat.OPENTRACKIO_CBOR: (1, 200),
-                        PoseFormat.FREED_D1: (1, 255)}          # FreeD: the camera id byte
-RESOLVE_TIMEOUT_S = 2.0          # a pose output's host name must resolve within this, s
+SOURCE_NUMBER_RANGES = {
+    PoseFormat.OPENTRACKIO_JSON: (1, 200),  # OpenTrackIO: "Source Numbers above 200 are reserved"
+    PoseFormat.OPENTRACKIO_CBOR: (1, 200),
+    PoseFormat.FREED_D1: (1, 255),
+}  # FreeD: the camera id byte
+RESOLVE_TIMEOUT_S = 2.0  # a pose output's host name must resolve within this, s
 _resolver: ThreadPoolExecutor | None = None  # looks names up off the worker's thread, so a slow one cannot hold it
 MIN_ALPHA_RAD = math.radians(0.5)  # screen points closer than this angle give no usable torus
-PACKED_STRIDE = 10                 # doubles per object in FrameUpdate.packed_transforms
+PACKED_STRIDE = 10  # doubles per object in FrameUpdate.packed_transforms
 
 
 def _vec3(msg: pb.Vec3, what: str) -> np.ndarray:
@@ -114,8 +128,11 @@ def transforms_from_packed(values: np.ndarray, ids) -> list[RigidTransform]:
     """values: (n, 10) rows px, py, pz, qx, qy, qz, qw, sx, sy, sz; validated all at once."""
     bad = ~np.isfinite(values).all(axis=1)
     norms = np.linalg.norm(values[:, 3:7], axis=1)
-    for row, message in ((bad, "has a NaN or infinite value"), (norms < 1e-6, "rotation is a zero-length quaternion"),
-                         ((np.abs(values[:, 7:10]) < 1e-9).any(axis=1), "scale has a zero component")):
+    for row, message in (
+        (bad, "has a NaN or infinite value"),
+        (norms < 1e-6, "rotation is a zero-length quaternion"),
+        ((np.abs(values[:, 7:10]) < 1e-9).any(axis=1), "scale has a zero component"),
+    ):
         if row.any():
             raise invalid(f"packed state {ids[int(np.argmax(row))]!r} {message}")
     rotations = values[:, 3:7] / norms[:, None]
@@ -127,8 +144,9 @@ def mesh_from_msg(msg: pb.Mesh, what: str) -> TriMesh:
     kind = msg.WhichOneof("source")
     try:
         if kind == "triangles":
-            return meshes.from_arrays(np.asarray(msg.triangles.vertices, dtype=np.float32),
-                                      np.asarray(msg.triangles.indices, dtype=np.uint32))
+            return meshes.from_arrays(
+                np.asarray(msg.triangles.vertices, dtype=np.float32), np.asarray(msg.triangles.indices, dtype=np.uint32)
+            )
         if kind == "glb":
             return meshes.from_glb(msg.glb)
         if kind == "obj":
@@ -165,13 +183,19 @@ def lens_from_msg(msg: pb.Lens) -> Lens:
 
 def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> Style:
     """The style of a CreateSession, or of an UpdateStyle to a session whose style is `current`."""
-    values: dict[str, Any] = {}   # Style's fields by name, each of its own type
+    values: dict[str, Any] = {}  # Style's fields by name, each of its own type
     for name in ("screen_a", "screen_b"):
         if msg.HasField(name):
             point = getattr(msg, name)
             values[name] = (point.x, point.y)
-    for name in ("gaze_room_m", "preferred_theta_ratio", "preferred_phi_deg",
-                 "response_time_s", "max_speed_m_s", "max_accel_m_s2"):
+    for name in (
+        "gaze_room_m",
+        "preferred_theta_ratio",
+        "preferred_phi_deg",
+        "response_time_s",
+        "max_speed_m_s",
+        "max_accel_m_s2",
+    ):
         if msg.HasField(name):
             values[name] = getattr(msg, name)
     try:
@@ -191,16 +215,22 @@ def style_from_msg(msg: pb.Style, lens: Lens, current: Style | None = None) -> S
             raise invalid(f"style.{name} {number} is not a known {name}")
         values[name] = table[number]
     if current is not None and values["rig"] != current.rig:
-        raise precondition(f"style.rig cannot change during a session ({current.rig.name} -> {values['rig'].name}): "
-                           "create a new session with that rig (an UpdateStyle replaces the whole style, so a "
-                           "TRACKS session repeats rig = RIG_TRACKS)")
+        raise precondition(
+            f"style.rig cannot change during a session ({current.rig.name} -> {values['rig'].name}): "
+            "create a new session with that rig (an UpdateStyle replaces the whole style, so a "
+            "TRACKS session repeats rig = RIG_TRACKS)"
+        )
     if values["rig"] != Rig.TRACKS and (msg.shot_size or msg.movement):
-        raise invalid("style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
-                      "(with a level_id) or leave them unset")
+        raise invalid(
+            "style.shot_size and style.movement direct the TRACKS rig; set style.rig = RIG_TRACKS "
+            "(with a level_id) or leave them unset"
+        )
     match_fields = [name for name in ("min_shot_s", "max_shot_s") if msg.HasField(name)]
     if values["rig"] != Rig.MATCH and (msg.match_director or msg.match_director_name or match_fields):
-        raise invalid("style.match_director, style.match_director_name, style.min_shot_s and style.max_shot_s "
-                      "direct the MATCH rig; set style.rig = RIG_MATCH or leave them unset")
+        raise invalid(
+            "style.match_director, style.match_director_name, style.min_shot_s and style.max_shot_s "
+            "direct the MATCH rig; set style.rig = RIG_MATCH or leave them unset"
+        )
     if values["rig"] == Rig.MATCH:
         values["match_director"] = _match_director(msg)
     for name in match_fields:
@@ -224,8 +254,9 @@ def _match_director(msg: pb.Style) -> str:
             raise invalid(f"style.match_director_name: {exc.args[0]}") from None
     if msg.match_director == pb.MATCH_DIRECTOR_UNSPECIFIED:
         return DEFAULT_DIRECTOR
-    entry = director_by_wire(pb.MatchDirector.Name(msg.match_director)) \
-        if msg.match_director in pb.MatchDirector.values() else None
+    entry = (
+        director_by_wire(pb.MatchDirector.Name(msg.match_director)) if msg.match_director in pb.MatchDirector.values() else None
+    )
     if entry is None:
         raise invalid(f"style.match_director {msg.match_director} is not a known match_director")
     return entry.name
@@ -250,8 +281,9 @@ def _check_id(object_id: str, what: str, seen: set[str]) -> None:
     seen.add(object_id)
 
 
-def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
-                       levels: LevelCache | None = None, tenant: str = DEFAULT_TENANT) -> SceneSpec:
+def scene_from_request(
+    req: pb.CreateSessionRequest, settings: ServerSettings, levels: LevelCache | None = None, tenant: str = DEFAULT_TENANT
+) -> SceneSpec:
     """levels: where a TRACKS or MATCH session's level is looked up (default: the registry in
     settings.data_dir); tenant: whose levels (the session's: the tenant of the key that created it)."""
     match = req.style.rig == pb.RIG_MATCH
@@ -260,8 +292,7 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
     if not match and not 1 <= len(req.targets) <= 2:
         raise invalid(f"a session frames one or two targets, got {len(req.targets)}")
     if not match and (req.delay_s or any(t.team for t in req.targets)):
-        raise invalid("delay_s and targets[].team are for a RIG_MATCH session; set style.rig = RIG_MATCH or leave "
-                      "them unset")
+        raise invalid("delay_s and targets[].team are for a RIG_MATCH session; set style.rig = RIG_MATCH or leave them unset")
     if not (math.isfinite(req.delay_s) and 0.0 <= req.delay_s <= MAX_DELAY_S):
         raise invalid(f"delay_s must be in [0, {MAX_DELAY_S:g}] s, got {req.delay_s}")
     if len(req.objects) > settings.max_objects:
@@ -284,8 +315,15 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
         triangles += mesh.triangle_count
         if triangles > settings.max_triangles:
             raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
-        targets.append(TargetSpec(target.id, mesh, transform_from_msg(target.transform, f"{what}.transform"),
-                                  _vec3(target.aim_offset, f"{what}.aim_offset"), team=int(target.team)))
+        targets.append(
+            TargetSpec(
+                target.id,
+                mesh,
+                transform_from_msg(target.transform, f"{what}.transform"),
+                _vec3(target.aim_offset, f"{what}.aim_offset"),
+                team=int(target.team),
+            )
+        )
     lens = lens_from_msg(req.lens)
     style = style_from_msg(req.style, lens)
     level = None
@@ -295,8 +333,9 @@ def scene_from_request(req: pb.CreateSessionRequest, settings: ServerSettings,
         if not req.level_id:
             raise invalid("style.rig RIG_TRACKS needs level_id: the name of a level in the server's level registry")
     elif req.level_id and style.rig != Rig.MATCH:
-        raise invalid(f"level_id {req.level_id!r} is for the TRACKS and MATCH rigs: set style.rig = RIG_TRACKS or "
-                      "leave level_id empty")
+        raise invalid(
+            f"level_id {req.level_id!r} is for the TRACKS and MATCH rigs: set style.rig = RIG_TRACKS or leave level_id empty"
+        )
     if req.level_id:
         levels = levels if levels is not None else LevelCache(settings.data_dir, settings.job_store)
         level = levels.get(req.level_id, tenant)
@@ -311,14 +350,16 @@ def _resolve_ipv4(host: str, what: str) -> str:
     except ValueError:
         pass
     if ":" in host or not all(c.isalnum() or c in "-._" for c in host) or not host.isascii():
-        raise invalid(f"{what}: host {host!r} is neither an IPv4 address nor a host name (IPv6 is not supported: "
-                      "OpenTrackIO 1.0.1 runs over IPv4)")
+        raise invalid(
+            f"{what}: host {host!r} is neither an IPv4 address nor a host name (IPv6 is not supported: "
+            "OpenTrackIO 1.0.1 runs over IPv4)"
+        )
     global _resolver
     if _resolver is None:
         _resolver = ThreadPoolExecutor(max_workers=2, thread_name_prefix="pose-output-resolve")
     lookup = _resolver.submit(socket.getaddrinfo, host, None, socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        return str(lookup.result(timeout=RESOLVE_TIMEOUT_S)[0][4][0])   # AF_INET: (address, port)
+        return str(lookup.result(timeout=RESOLVE_TIMEOUT_S)[0][4][0])  # AF_INET: (address, port)
     except FutureTimeout:
         raise invalid(f"{what}: host {host!r} did not resolve within {RESOLVE_TIMEOUT_S:g} s") from None
     except (OSError, IndexError, UnicodeError):
@@ -354,18 +395,22 @@ def pose_output_from_msg(msg: pb.PoseOutput, what: str) -> PoseOutputSpec:
         fmt = None
     if fmt is None or fmt == PoseFormat.UNSPECIFIED:
         problem = "is unset" if fmt is not None else f"{msg.format} is not a PoseFormat"
-        raise invalid(f"{what}.format {problem}: choose POSE_FORMAT_OPENTRACKIO_JSON, POSE_FORMAT_OPENTRACKIO_CBOR "
-                      "or POSE_FORMAT_FREED_D1")
+        raise invalid(
+            f"{what}.format {problem}: choose POSE_FORMAT_OPENTRACKIO_JSON, POSE_FORMAT_OPENTRACKIO_CBOR or POSE_FORMAT_FREED_D1"
+        )
     low, high = SOURCE_NUMBER_RANGES[fmt]
     source_number = msg.source_number or 1
     if not low <= source_number <= high:
-        raise invalid(f"{what}.source_number must be in [{low}, {high}] for POSE_FORMAT_{fmt.name} (0 means 1), "
-                      f"got {msg.source_number}")
+        raise invalid(
+            f"{what}.source_number must be in [{low}, {high}] for POSE_FORMAT_{fmt.name} (0 means 1), got {msg.source_number}"
+        )
     height = msg.sensor_height_mm or DEFAULT_SENSOR_HEIGHT_MM
     low_mm, high_mm = SENSOR_HEIGHT_RANGE_MM
     if not (math.isfinite(height) and low_mm <= height <= high_mm):
-        raise invalid(f"{what}.sensor_height_mm must be in [{low_mm:g}, {high_mm:g}] mm "
-                      f"(0 means {DEFAULT_SENSOR_HEIGHT_MM:g}), got {msg.sensor_height_mm}")
+        raise invalid(
+            f"{what}.sensor_height_mm must be in [{low_mm:g}, {high_mm:g}] mm "
+            f"(0 means {DEFAULT_SENSOR_HEIGHT_MM:g}), got {msg.sensor_height_mm}"
+        )
     host, port = _udp_address(msg.address, f"{what}.address")
     return PoseOutputSpec(fmt, msg.address, host, port, source_number, float(height))
 
@@ -405,11 +450,11 @@ def events_from_msg(msg: pb.FrameUpdate, player_ids: frozenset[str] | None, dela
         if not math.isfinite(time_s):
             raise invalid(f"{what}.time_s is NaN or infinite")
         if time_s > msg.time_s + delay_s + 1e-9:
-            raise invalid(f"{what}.time_s {time_s} is later than the frame's time {msg.time_s} plus the delay "
-                          f"{delay_s} s")
+            raise invalid(f"{what}.time_s {time_s} is later than the frame's time {msg.time_s} plus the delay {delay_s} s")
         position = _vec3(event.position, f"{what}.position") if event.HasField("position") else None
-        events.append(GameEvent(kind, event.actor_id, event.other_actor_id, int(event.priority), float(time_s),
-                                event.label, position))
+        events.append(
+            GameEvent(kind, event.actor_id, event.other_actor_id, int(event.priority), float(time_s), event.label, position)
+        )
     return events
 
 
@@ -441,16 +486,16 @@ def take_from_msg(msg: pb.TakeShotRequest, player_ids: frozenset[str]) -> tuple[
     except ValueError:
         raise invalid(f"kind {msg.kind} is not a ShotKind") from None
     if not msg.subject_ids and kind != ShotKind.OVERVIEW:
-        raise invalid("a TakeShot names its subject_ids (none only for SHOT_OVERVIEW), or sets release to give "
-                      "the program back")
+        raise invalid("a TakeShot names its subject_ids (none only for SHOT_OVERVIEW), or sets release to give the program back")
     for player in msg.subject_ids:
         if player not in player_ids:
             raise not_found(f"subject_ids: {player!r} is not a player of this session")
     return list(msg.subject_ids), kind, False
 
 
-def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
-                   player_ids: frozenset[str] | None = None, delay_s: float = 0.0) -> FrameInput:
+def frame_from_msg(
+    msg: pb.FrameUpdate, movable: set[str], static: set[str], player_ids: frozenset[str] | None = None, delay_s: float = 0.0
+) -> FrameInput:
     """`movable`: ids of targets and dynamic objects; `static`: ids of static objects; `player_ids`
     and `delay_s`: whom the game events and player stats may name and how far ahead events may be
     (events_from_msg, player_stats_from_msg)."""
@@ -474,14 +519,23 @@ def frame_from_msg(msg: pb.FrameUpdate, movable: set[str], static: set[str],
         for object_id in msg.packed_ids:
             check(object_id)
         states.extend(zip(msg.packed_ids, transforms_from_packed(values.reshape(-1, PACKED_STRIDE), msg.packed_ids)))
-    return FrameInput(msg.session_id, int(msg.frame), float(msg.time_s), states,
-                      events_from_msg(msg, player_ids, delay_s), player_stats_from_msg(msg, player_ids))
+    return FrameInput(
+        msg.session_id,
+        int(msg.frame),
+        float(msg.time_s),
+        states,
+        events_from_msg(msg, player_ids, delay_s),
+        player_stats_from_msg(msg, player_ids),
+    )
 
 
 def pose_msg(pose: CameraPose) -> pb.CameraPose:
     p, q = pose.position_world, pose.rotation_xyzw
-    return pb.CameraPose(position=pb.Vec3(x=p[0], y=p[1], z=p[2]), rotation=pb.Quat(x=q[0], y=q[1], z=q[2], w=q[3]),
-                         vertical_fov_deg=pose.vertical_fov_deg)
+    return pb.CameraPose(
+        position=pb.Vec3(x=p[0], y=p[1], z=p[2]),
+        rotation=pb.Quat(x=q[0], y=q[1], z=q[2], w=q[3]),
+        vertical_fov_deg=pose.vertical_fov_deg,
+    )
 
 
 def shot_msg(shot: ShotChoice) -> pb.ShotInfo:
@@ -520,4 +574,3 @@ def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False,
         for candidate in match.candidates:
             out.candidates.add(pose=pose_msg(candidate.pose), shot=shot_msg(candidate.shot), score=candidate.score)
     return out
-

@@ -14,6 +14,7 @@ then each input since parsed as a request is and computed again (`SessionTable.r
 claimed for this process. When the store refuses an input because another process has taken the
 session over (`TakenOver`), the request is answered on the newer state, rebuilt the same way.
 """
+
 from __future__ import annotations
 
 import logging
@@ -40,7 +41,10 @@ T = TypeVar("T")
 
 # The inputs a checkpoint keeps (checkpoint_stores.OPS), by the op they came as.
 INPUTS: dict[str, type[pb.FrameUpdate] | type[pb.UpdateStyleRequest] | type[pb.TakeShotRequest]] = {
-    "frame": pb.FrameUpdate, "style": pb.UpdateStyleRequest, "take": pb.TakeShotRequest}
+    "frame": pb.FrameUpdate,
+    "style": pb.UpdateStyleRequest,
+    "take": pb.TakeShotRequest,
+}
 
 
 class Dispatcher:
@@ -60,10 +64,11 @@ class Dispatcher:
             if op == "frame":
                 frame = parse_routed(pb.FrameUpdate, payload, session_id)
                 return self._on_session(session_id, lambda: table.frame_bytes(frame, payload))
-            if op == "create":   # payload: the session's tenant and the request (infra/channels.py)
+            if op == "create":  # payload: the session's tenant and the request (infra/channels.py)
                 tenant, request = decode_create(payload)
-                return table.create(session_id, parse(pb.CreateSessionRequest, request), payload,
-                                    tenant).SerializeToString(), None
+                return table.create(
+                    session_id, parse(pb.CreateSessionRequest, request), payload, tenant
+                ).SerializeToString(), None
             if op == "style":
                 style = parse_routed(pb.UpdateStyleRequest, payload, session_id)
                 return self._on_session(session_id, lambda: table.update_style(style, payload)).SerializeToString(), None
@@ -72,10 +77,9 @@ class Dispatcher:
             if op == "take":
                 take = parse_routed(pb.TakeShotRequest, payload, session_id)
                 return self._on_session(session_id, lambda: table.take_shot(take, payload)).SerializeToString(), None
-            if op == "timeline":   # payload: JSON {"last": n | null, "after_frame": n | null}
+            if op == "timeline":  # payload: JSON {"last": n | null, "after_frame": n | null}
                 query = orjson.loads(payload)
-                detail = self._on_session(session_id, lambda: table.timeline(session_id, query["last"],
-                                                                             query["after_frame"]))
+                detail = self._on_session(session_id, lambda: table.timeline(session_id, query["last"], query["after_frame"]))
                 return timeline_dumps(detail), None
             if op == "amap":
                 return self._on_session(session_id, lambda: table.anticipation_png(session_id)), None
@@ -107,7 +111,7 @@ class Dispatcher:
         while True:
             if session_id not in self.table.held:
                 checkpoint = self.table.checkpoints.load(session_id)
-                if checkpoint is not None:   # else the table answers NOT_FOUND
+                if checkpoint is not None:  # else the table answers NOT_FOUND
                     self._restore(session_id, checkpoint)
             try:
                 return call()
@@ -134,11 +138,16 @@ class Dispatcher:
         except Exception as exc:
             table.drop(session_id, keep_checkpoint=True)
             log.exception("session %s: restoring its checkpoint failed", session_id)
-            raise unavailable(f"session {session_id} could not be restored from its checkpoint: "
-                              f"{type(exc).__name__}: {exc}") from None
+            raise unavailable(
+                f"session {session_id} could not be restored from its checkpoint: {type(exc).__name__}: {exc}"
+            ) from None
         table.claim(session_id)
-        log.info("session %s restored from its checkpoint (%d inputs after the snapshot) in %.1f ms",
-                 session_id, len(checkpoint.entries), (table.clock() - t0) * 1e3)
+        log.info(
+            "session %s restored from its checkpoint (%d inputs after the snapshot) in %.1f ms",
+            session_id,
+            len(checkpoint.entries),
+            (table.clock() - t0) * 1e3,
+        )
 
     def _replay(self, op: str, session_id: str, payload: bytes) -> None:
         """One input of a checkpoint computed again; an unexpected exception becomes INTERNAL, as

@@ -8,6 +8,7 @@ take about 10 ms more per session; the cache leaves only those per-session costs
 that also answers other sessions' frames. A session finds only its own tenant's levels (the
 registry's namespaces): another tenant's name answers NOT_FOUND as an unknown one.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -44,8 +45,10 @@ class LevelCache:
             raise unavailable(str(exc)) from None
         if record is None:
             self._levels.pop(key, None)  # removed: sessions on it keep their own reference
-            raise not_found(f"level_id {name!r} is not in this server's level registry ({self._registry.where}); "
-                            "add it with `camdirector level add` or POST /v1/levels")
+            raise not_found(
+                f"level_id {name!r} is not in this server's level registry ({self._registry.where}); "
+                "add it with `camdirector level add` or POST /v1/levels"
+            )
         cached = self._levels.get(key)
         if cached is not None and cached[0] == record.artifact_path.name:
             return cached[1]

@@ -2,6 +2,7 @@
 infra/channels.py) one at a time (dispatch.py, over the process's session table, table.py), and do
 the sessions' deferred work while none waits.
 """
+
 from __future__ import annotations
 
 import functools
@@ -34,7 +35,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
     reader = io.BufferedReader(socket.SocketIO(sock, "rb"), READ_BUFFER_BYTES)  # sock.makefile("rb", ...)
     table = SessionTable(settings, defer_snapshots=True)  # snapshots taken below, when no request waits (idle_work)
     requests = Dispatcher(table)
-    sending = threading.Lock()   # views are answered from the render process's reader thread
+    sending = threading.Lock()  # views are answered from the render process's reader thread
 
     def send(data: bytes) -> None:
         with sending:

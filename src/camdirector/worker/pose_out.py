@@ -36,6 +36,7 @@ fresh sampleId 2.0, the sample dict 1.2, orjson 0.4 or cbor2 4.0, the OTrk heade
 Fletcher-16 3.8, the sample rate 0.5, sendto about 2); a sample that carries the static block
 (every 2 s) 0.5 to 2.5 us more. `SessionTable.frame_bytes` calls it after `compute_ms` is measured.
 """
+
 from __future__ import annotations
 
 import enum
@@ -74,10 +75,10 @@ class PoseOutputSpec:
     """One validated CreateSessionRequest.pose_outputs entry (worker/codec.py)."""
 
     format: PoseFormat
-    address: str            # as the client wrote it, udp://HOST:PORT
-    host: str               # the IPv4 address HOST resolved to at CreateSession
-    port: int               # [1, 65535]
-    source_number: int      # OpenTrackIO sourceNumber [1, 200]; FreeD camera id [1, 255]
+    address: str  # as the client wrote it, udp://HOST:PORT
+    host: str  # the IPv4 address HOST resolved to at CreateSession
+    port: int  # [1, 65535]
+    source_number: int  # OpenTrackIO sourceNumber [1, 200]; FreeD camera id [1, 255]
     sensor_height_mm: float  # [1, 100]
 
 
@@ -98,9 +99,24 @@ OTRK_ENCODING = {PoseFormat.OPENTRACKIO_JSON: 0x01, PoseFormat.OPENTRACKIO_CBOR:
 STATIC_EVERY_S = 2.0
 NOMINAL_RATE = Fraction(60)  # timing.sampleRate until two samples give the frames' own rate
 # Broadcast and display rates that an estimated rate within 0.05% snaps to (exact drop-frame ones).
-_KNOWN_RATES = (Fraction(24000, 1001), Fraction(24), Fraction(25), Fraction(30000, 1001), Fraction(30),
-                Fraction(48), Fraction(50), Fraction(60000, 1001), Fraction(60), Fraction(72), Fraction(90),
-                Fraction(100), Fraction(120000, 1001), Fraction(120), Fraction(144), Fraction(240))
+_KNOWN_RATES = (
+    Fraction(24000, 1001),
+    Fraction(24),
+    Fraction(25),
+    Fraction(30000, 1001),
+    Fraction(30),
+    Fraction(48),
+    Fraction(50),
+    Fraction(60000, 1001),
+    Fraction(60),
+    Fraction(72),
+    Fraction(90),
+    Fraction(100),
+    Fraction(120000, 1001),
+    Fraction(120),
+    Fraction(144),
+    Fraction(240),
+)
 _KNOWN_RATE_VALUES = tuple((float(rate), rate) for rate in _KNOWN_RATES)
 _RATE_TOLERANCE = 0.0005  # relative; 59.94 and 60 are 0.1% apart
 _MAX_RATE_HZ = 10_000.0
@@ -114,16 +130,17 @@ except importlib.metadata.PackageNotFoundError:  # run from a tree that is not i
 # --- FreeD D1 ----------------------------------------------------------------------------------
 FREED_D1 = 0xD1
 FREED_D1_BYTES = 29
-FREED_ANGLE_SCALE = 32768.0   # 1/32768 degree per unit (8.15 fixed point)
-FREED_POSITION_SCALE = 64.0   # 1/64 mm per unit (17.6 fixed point)
-FREED_ZOOM_SCALE = 100.0      # zoom: the focal length in 1/100 mm
+FREED_ANGLE_SCALE = 32768.0  # 1/32768 degree per unit (8.15 fixed point)
+FREED_POSITION_SCALE = 64.0  # 1/64 mm per unit (17.6 fixed point)
+FREED_ZOOM_SCALE = 100.0  # zoom: the focal length in 1/100 mm
 _I24_MIN, _I24_MAX, _U24_MAX = -(1 << 23), (1 << 23) - 1, (1 << 24) - 1
 
-Floats = Sequence[float] | npt.NDArray[np.float64]   # a pose's vectors as our geometry holds them, or plain numbers
+Floats = Sequence[float] | npt.NDArray[np.float64]  # a pose's vectors as our geometry holds them, or plain numbers
 
 
-def opentrackio_transform(position_world: Floats, rotation_xyzw: Floats
-                          ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+def opentrackio_transform(
+    position_world: Floats, rotation_xyzw: Floats
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Our camera pose as OpenTrackIO's stage transform: ((x, y, z) metres, (pan, tilt, roll)
     degrees), the conversion of the module docstring. rotation_xyzw: camera-to-world, unit."""
     px, py, pz = _floats(position_world)
@@ -174,17 +191,34 @@ def estimate_rate(dt_s: float, previous: Fraction = NOMINAL_RATE) -> Fraction:
 def opentrackio_static(sensor_height_mm: float, aspect: float, serial_number: str) -> dict:
     """The sample's `static` block: what describes the source rather than one frame."""
     return {
-        "camera": {"activeSensorPhysicalDimensions": {"height": sensor_height_mm, "width": sensor_height_mm * aspect},
-                   "make": "camdirector", "model": "virtual camera"},
+        "camera": {
+            "activeSensorPhysicalDimensions": {"height": sensor_height_mm, "width": sensor_height_mm * aspect},
+            "make": "camdirector",
+            "model": "virtual camera",
+        },
         "lens": {"make": "camdirector", "model": "pinhole"},
-        "tracker": {"make": "camdirector", "model": "automated cinematographer", "serialNumber": serial_number[:1023],
-                    "firmwareVersion": _VERSION},
+        "tracker": {
+            "make": "camdirector",
+            "model": "automated cinematographer",
+            "serialNumber": serial_number[:1023],
+            "firmwareVersion": _VERSION,
+        },
     }
 
 
-def opentrackio_sample(translation_m: Sequence[float], rotation_deg: Sequence[float], *, focal_length_mm: float,
-                       source_id: str, sample_id: str, source_number: int, sequence: int, sample_rate: Fraction,
-                       timestamp_s: float, static: dict | None = None) -> dict:
+def opentrackio_sample(
+    translation_m: Sequence[float],
+    rotation_deg: Sequence[float],
+    *,
+    focal_length_mm: float,
+    source_id: str,
+    sample_id: str,
+    source_number: int,
+    sequence: int,
+    sample_rate: Fraction,
+    timestamp_s: float,
+    static: dict | None = None,
+) -> dict:
     """One OpenTrackIO 1.0.1 sample (a dict for JSON or CBOR). translation_m, rotation_deg: the
     stage transform (opentrackio_transform); source_id, sample_id: urn:uuid URNs; sequence: the
     sample's number in its stream; timestamp_s: the system clock at the sample, Unix seconds."""
@@ -194,15 +228,20 @@ def opentrackio_sample(translation_m: Sequence[float], rotation_deg: Sequence[fl
         "sampleId": sample_id,
         "sourceId": source_id,
         "sourceNumber": source_number,
-        "timing": {"mode": "internal",
-                   "sampleRate": {"num": sample_rate.numerator, "denom": sample_rate.denominator},
-                   "sampleTimestamp": {"seconds": seconds, "nanoseconds": min(int((timestamp_s - seconds) * 1e9),
-                                                                              999_999_999)},
-                   "sequenceNumber": sequence & 0xFFFFFFFF},
+        "timing": {
+            "mode": "internal",
+            "sampleRate": {"num": sample_rate.numerator, "denom": sample_rate.denominator},
+            "sampleTimestamp": {"seconds": seconds, "nanoseconds": min(int((timestamp_s - seconds) * 1e9), 999_999_999)},
+            "sequenceNumber": sequence & 0xFFFFFFFF,
+        },
         "lens": {"pinholeFocalLength": focal_length_mm},
-        "transforms": [{"id": CAMERA_TRANSFORM_ID,
-                        "translation": {"x": translation_m[0], "y": translation_m[1], "z": translation_m[2]},
-                        "rotation": {"pan": rotation_deg[0], "tilt": rotation_deg[1], "roll": rotation_deg[2]}}],
+        "transforms": [
+            {
+                "id": CAMERA_TRANSFORM_ID,
+                "translation": {"x": translation_m[0], "y": translation_m[1], "z": translation_m[2]},
+                "rotation": {"pan": rotation_deg[0], "tilt": rotation_deg[1], "roll": rotation_deg[2]},
+            }
+        ],
     }
     if static is not None:
         sample["static"] = static
@@ -220,7 +259,7 @@ def fletcher16(data: bytes) -> int:
     if n > OTRK_MAX_DATAGRAM:  # only a test's own segment size gets here
         weights = np.arange(n, 0, -1, dtype=np.int64)
     else:
-        weights = _WEIGHTS[OTRK_MAX_DATAGRAM - n:]
+        weights = _WEIGHTS[OTRK_MAX_DATAGRAM - n :]
     values = np.frombuffer(data, dtype=np.uint8)
     return ((int(values @ weights) & 0xFF) << 8) | (int(values.sum(dtype=np.int64)) & 0xFF)
 
@@ -235,10 +274,11 @@ def otrk_packets(payload: bytes, encoding: int, sequence: int, max_segment: int 
     packets = []
     offsets = range(0, len(payload), max_segment) if payload else (0,)
     for i, offset in enumerate(offsets):
-        segment = payload[offset:offset + max_segment]
+        segment = payload[offset : offset + max_segment]
         last = offset + max_segment >= len(payload)
-        head = _OTRK_HEAD.pack(OTRK_IDENTIFIER, 0, encoding, (sequence + i) & 0xFFFF, offset,
-                               (0x8000 if last else 0) | len(segment))
+        head = _OTRK_HEAD.pack(
+            OTRK_IDENTIFIER, 0, encoding, (sequence + i) & 0xFFFF, offset, (0x8000 if last else 0) | len(segment)
+        )
         packets.append(head + fletcher16(head + segment).to_bytes(2, "big") + segment)
     return packets
 
@@ -252,8 +292,18 @@ def _u24(value: int) -> bytes:
     return max(0, min(_U24_MAX, int(value))).to_bytes(3, "big")
 
 
-def freed_d1(camera_id: int, pan_deg: float, tilt_deg: float, roll_deg: float, x_mm: float, y_mm: float,
-             z_mm: float, zoom: int, focus: int, spare: int = 0) -> bytes:
+def freed_d1(
+    camera_id: int,
+    pan_deg: float,
+    tilt_deg: float,
+    roll_deg: float,
+    x_mm: float,
+    y_mm: float,
+    z_mm: float,
+    zoom: int,
+    focus: int,
+    spare: int = 0,
+) -> bytes:
     """A FreeD D1 message (29 bytes): 0xD1, the camera id, pan, tilt, roll (signed 24-bit,
     1/32768 degree), X, Y, Z (signed 24-bit, 1/64 mm), zoom and focus (unsigned 24-bit), 16 spare
     bits, and the checksum 0x40 minus the sum of the 28 bytes before it, mod 256. Each field is
@@ -261,34 +311,47 @@ def freed_d1(camera_id: int, pan_deg: float, tilt_deg: float, roll_deg: float, x
     +-131.072 m)."""
     if not 0 <= camera_id <= 0xFF:
         raise ValueError(f"FreeD camera id must be in [0, 255], got {camera_id}")
-    body = b"".join((bytes((FREED_D1, camera_id)),
-                     _i24(pan_deg, FREED_ANGLE_SCALE), _i24(tilt_deg, FREED_ANGLE_SCALE), _i24(roll_deg, FREED_ANGLE_SCALE),
-                     _i24(x_mm, FREED_POSITION_SCALE), _i24(y_mm, FREED_POSITION_SCALE), _i24(z_mm, FREED_POSITION_SCALE),
-                     _u24(zoom), _u24(focus), (spare & 0xFFFF).to_bytes(2, "big")))
+    body = b"".join(
+        (
+            bytes((FREED_D1, camera_id)),
+            _i24(pan_deg, FREED_ANGLE_SCALE),
+            _i24(tilt_deg, FREED_ANGLE_SCALE),
+            _i24(roll_deg, FREED_ANGLE_SCALE),
+            _i24(x_mm, FREED_POSITION_SCALE),
+            _i24(y_mm, FREED_POSITION_SCALE),
+            _i24(z_mm, FREED_POSITION_SCALE),
+            _u24(zoom),
+            _u24(focus),
+            (spare & 0xFFFF).to_bytes(2, "big"),
+        )
+    )
     return body + bytes(((0x40 - sum(body)) & 0xFF,))
 
 
-def freed_from_transform(translation_m: Sequence[float], rotation_deg: Sequence[float], focal_length_mm: float,
-                         camera_id: int) -> bytes:
+def freed_from_transform(
+    translation_m: Sequence[float], rotation_deg: Sequence[float], focal_length_mm: float, camera_id: int
+) -> bytes:
     """A FreeD D1 message from the stage transform (opentrackio_transform: FreeD's axes are the
     same, its pan the opposite way) and the lens's focal length (zoom, in 1/100 mm; focus 0)."""
     (x, y, z), (pan, tilt, roll) = translation_m, rotation_deg
-    return freed_d1(camera_id, -pan, tilt, roll, x * 1e3, y * 1e3, z * 1e3,
-                    round(focal_length_mm * FREED_ZOOM_SCALE), 0)
+    return freed_d1(camera_id, -pan, tilt, roll, x * 1e3, y * 1e3, z * 1e3, round(focal_length_mm * FREED_ZOOM_SCALE), 0)
 
 
 def freed_from_pose(pose: CameraPose, camera_id: int, sensor_height_mm: float) -> bytes:
     """Our pose as a FreeD D1 message (the module docstring's axes and lens mapping)."""
-    return freed_from_transform(*opentrackio_transform(pose.position_world, pose.rotation_xyzw),
-                                focal_length_mm(pose.vertical_fov_deg, sensor_height_mm), camera_id)
+    return freed_from_transform(
+        *opentrackio_transform(pose.position_world, pose.rotation_xyzw),
+        focal_length_mm(pose.vertical_fov_deg, sensor_height_mm),
+        camera_id,
+    )
 
 
 @dataclass
 class _Output:
     spec: PoseOutputSpec
     sequence: int = 1  # OTrk header; SMPTE's receiver takes a first packet numbered 0 for a repeat
-    sent: int = 0      # datagrams
-    dropped: int = 0   # datagrams whose sendto failed
+    sent: int = 0  # datagrams
+    dropped: int = 0  # datagrams whose sendto failed
     last_error: str = ""
     static_block: dict | None = field(default=None, repr=False)
 
@@ -301,15 +364,22 @@ class PoseSender:
     sampleTimestamp's clock (Unix seconds); sock: a socket to send on instead of a new one (tests).
     """
 
-    def __init__(self, session_id: str, outputs: Sequence[PoseOutputSpec], aspect: float, *,
-                 wall_clock: Callable[[], float] = time.time, sock: socket.socket | None = None):
+    def __init__(
+        self,
+        session_id: str,
+        outputs: Sequence[PoseOutputSpec],
+        aspect: float,
+        *,
+        wall_clock: Callable[[], float] = time.time,
+        sock: socket.socket | None = None,
+    ):
         self.outputs = [_Output(spec) for spec in outputs]
         self.source_id = f"urn:uuid:{uuid.uuid5(_SOURCE_NAMESPACE, session_id)}"
         self.session_id = session_id
         self.aspect = aspect
         self.wall_clock = wall_clock
-        self.samples = 0                         # samples sent so far: the next timing.sequenceNumber
-        self.rate = NOMINAL_RATE                 # timing.sampleRate, from the frames' own times
+        self.samples = 0  # samples sent so far: the next timing.sequenceNumber
+        self.rate = NOMINAL_RATE  # timing.sampleRate, from the frames' own times
         self._last_time_s: float | None = None
         self._last_static_s: float | None = None
         if sock is None:
@@ -340,10 +410,17 @@ class PoseSender:
                 if static_due and out.static_block is None:
                     out.static_block = opentrackio_static(spec.sensor_height_mm, self.aspect, self.session_id)
                 sample = opentrackio_sample(
-                    translation, rotation, focal_length_mm=focal_mm,
-                    source_id=self.source_id, sample_id=f"urn:uuid:{uuid.uuid4()}", source_number=spec.source_number,
-                    sequence=self.samples, sample_rate=self.rate, timestamp_s=timestamp_s,
-                    static=out.static_block if static_due else None)
+                    translation,
+                    rotation,
+                    focal_length_mm=focal_mm,
+                    source_id=self.source_id,
+                    sample_id=f"urn:uuid:{uuid.uuid4()}",
+                    source_number=spec.source_number,
+                    sequence=self.samples,
+                    sample_rate=self.rate,
+                    timestamp_s=timestamp_s,
+                    static=out.static_block if static_due else None,
+                )
                 payload = orjson.dumps(sample) if spec.format == PoseFormat.OPENTRACKIO_JSON else cbor2.dumps(sample)
                 datagrams = otrk_packets(payload, OTRK_ENCODING[spec.format], out.sequence)
                 out.sequence = (out.sequence + len(datagrams)) & 0xFFFF
@@ -354,16 +431,28 @@ class PoseSender:
                 except OSError as exc:  # a full buffer, an unreachable network: drop it, never the frame
                     out.dropped += 1
                     if not out.last_error:
-                        log.warning("session %s: pose output %s dropped a datagram (%s); counting further drops "
-                                    "without logging them", self.session_id, spec.address, exc)
+                        log.warning(
+                            "session %s: pose output %s dropped a datagram (%s); counting further drops without logging them",
+                            self.session_id,
+                            spec.address,
+                            exc,
+                        )
                     out.last_error = f"{type(exc).__name__}: {exc.strerror or exc}"
         self.samples += 1
 
     def status(self) -> list[dict]:
         """Each output's format, address and counts, for the session's summary."""
-        return [{"format": f"POSE_FORMAT_{out.spec.format.name}", "address": out.spec.address,
-                 "source_number": out.spec.source_number, "sent": out.sent, "dropped": out.dropped,
-                 "last_error": out.last_error or None} for out in self.outputs]
+        return [
+            {
+                "format": f"POSE_FORMAT_{out.spec.format.name}",
+                "address": out.spec.address,
+                "source_number": out.spec.source_number,
+                "sent": out.sent,
+                "dropped": out.dropped,
+                "last_error": out.last_error or None,
+            }
+            for out in self.outputs
+        ]
 
     def close(self) -> None:
         self.sock.close()

@@ -6,6 +6,7 @@ first entry is the CreateSessionRequest; then, in the order the server handled t
 FrameUpdate followed by the CameraUpdate it was answered with, and every UpdateStyleRequest.
 A file cut short by a crash reads up to its last whole entry.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -87,5 +88,5 @@ def read_entries(path: Path) -> Iterator[pb.RecordEntry]:
                 break
         if pos + length > len(data):
             return  # cut inside an entry
-        yield pb.RecordEntry.FromString(data[pos:pos + length])
+        yield pb.RecordEntry.FromString(data[pos : pos + length])
         pos += length

@@ -6,6 +6,7 @@ bit), so a recording made on one machine kind replays identically on it (`camdir
 tests/data/recordings/). What must match is the answer less its timings and diagnostics
 (`_comparable`).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -21,8 +22,8 @@ from camdirector.worker.table import SessionTable
 
 @dataclass
 class ReplayReport:
-    frames: int          # CameraUpdates recorded
-    identical: int       # replayed poses equal to the recorded ones bit for bit
+    frames: int  # CameraUpdates recorded
+    identical: int  # replayed poses equal to the recorded ones bit for bit
     first_mismatch: int | None  # frame number of the first difference
 
     @property
@@ -30,19 +31,27 @@ class ReplayReport:
         return self.frames == self.identical
 
     def as_dict(self) -> dict[str, int | bool | None]:
-        return {"frames": self.frames, "identical": self.identical,
-                "first_mismatch": self.first_mismatch, "ok": self.ok}
+        return {"frames": self.frames, "identical": self.identical, "first_mismatch": self.first_mismatch, "ok": self.ok}
 
 
 def _comparable(update: pb.CameraUpdate) -> bytes:
     """The part of a CameraUpdate that must replay bit for bit (not timings, not diagnostics)."""
-    return pb.CameraUpdate(frame=update.frame, time_s=update.time_s, pose=update.pose, cut=update.cut,
-                           shot_id=update.shot_id, visibility=update.visibility, stale=update.stale,
-                           shot=update.shot, buffering=update.buffering).SerializeToString(deterministic=True)
+    return pb.CameraUpdate(
+        frame=update.frame,
+        time_s=update.time_s,
+        pose=update.pose,
+        cut=update.cut,
+        shot_id=update.shot_id,
+        visibility=update.visibility,
+        stale=update.stale,
+        shot=update.shot,
+        buffering=update.buffering,
+    ).SerializeToString(deterministic=True)
 
 
-def replay(path: Path, on_frame: Callable[[pb.CameraUpdate, pb.CameraUpdate | None], None] | None = None,
-           data_dir: Path | None = None) -> ReplayReport:
+def replay(
+    path: Path, on_frame: Callable[[pb.CameraUpdate, pb.CameraUpdate | None], None] | None = None, data_dir: Path | None = None
+) -> ReplayReport:
     """Runs a recording through a fresh in-process session and compares every answer.
 
     on_frame: called with each recorded answer and the replayed one (None: no frame was replayed

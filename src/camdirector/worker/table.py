@@ -9,6 +9,7 @@ session now: dispatch.py restores the newer state and asks again), and a snapsho
 is due (at once, or with `defer_snapshots` in `idle_work`). A session it does not hold is
 NOT_FOUND here: rebuilding one is `restore` and `replay`, driven from dispatch.py.
 """
+
 from __future__ import annotations
 
 import time
@@ -55,8 +56,13 @@ class HeldSession:
 class SessionTable:
     """The sessions one process holds (module docstring)."""
 
-    def __init__(self, settings: ServerSettings, clock: Callable[[], float] = time.perf_counter,
-                 store: CheckpointStore | None = None, defer_snapshots: bool = False):
+    def __init__(
+        self,
+        settings: ServerSettings,
+        clock: Callable[[], float] = time.perf_counter,
+        store: CheckpointStore | None = None,
+        defer_snapshots: bool = False,
+    ):
         """store: where sessions are checkpointed; by default the one settings.checkpoint_store names.
         defer_snapshots: snapshots due are left for idle_work (a worker's idle moments) rather than
         taken before the frame's answer leaves (a worker's table; inline tables snapshot at once)."""
@@ -64,7 +70,7 @@ class SessionTable:
         self.clock = clock
         self.held: dict[str, HeldSession] = {}
         self.levels = LevelCache(settings.data_dir, settings.job_store)  # the TRACKS rig's levels, loaded once per process
-        self.monitor: Monitor | None = None          # the render process of the sessions' views, started on the first
+        self.monitor: Monitor | None = None  # the render process of the sessions' views, started on the first
         self.checkpoints = Checkpointing(settings, clock, store)
         self.defer_snapshots = defer_snapshots
         # Sessions whose rig left work for later (Session.has_deferred_work), then those whose
@@ -80,8 +86,9 @@ class SessionTable:
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return held
 
-    def create(self, session_id: str, req: pb.CreateSessionRequest, payload: bytes | None = None,
-               tenant: str = DEFAULT_TENANT) -> pb.CreateSessionResponse:
+    def create(
+        self, session_id: str, req: pb.CreateSessionRequest, payload: bytes | None = None, tenant: str = DEFAULT_TENANT
+    ) -> pb.CreateSessionResponse:
         """payload: the create op's bytes as received, the tenant's and the request's (the checkpoint
         keeps them), when at hand; tenant: the session's, whose levels it may use."""
         held = self._build(session_id, req, tenant)
@@ -136,8 +143,9 @@ class SessionTable:
     def _recorder(self, session_id: str, append: bool = False) -> RecordingWriter:
         # With checkpoints every entry is written at once: a worker killed after answering a frame
         # leaves it in the recording, which its restored session goes on appending to.
-        return RecordingWriter(self.settings.recordings_dir / f"{session_id}.cdrec",
-                               flush_every=1 if self.checkpoints.enabled else 60, append=append)
+        return RecordingWriter(
+            self.settings.recordings_dir / f"{session_id}.cdrec", flush_every=1 if self.checkpoints.enabled else 60, append=append
+        )
 
     def frame(self, msg: pb.FrameUpdate) -> pb.CameraUpdate:
         return pb.CameraUpdate.FromString(self.frame_bytes(msg, msg.SerializeToString())[0])
@@ -165,15 +173,19 @@ class SessionTable:
         session = held.session
         if session.is_stale(msg.frame):
             last = session.last_state
-            assert last is not None   # a frame is stale only after one was answered
+            assert last is not None  # a frame is stale only after one was answered
             reply = codec.camera_update_msg(
-                last, compute_ms=(self.clock() - t0) * 1e3, stale=True,
-                message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced")
+                last,
+                compute_ms=(self.clock() - t0) * 1e3,
+                stale=True,
+                message=f"frame {msg.frame} is not newer than frame {last.frame}: pose repeated, rig not advanced",
+            )
             reply.frame, reply.time_s = msg.frame, msg.time_s
             return reply, None
-        inputs = session.rig.player_inputs   # whom the frame's game events may name, if the rig takes any
-        update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids,
-                                      None if inputs is None else inputs.player_ids, session.delay_s)
+        inputs = session.rig.player_inputs  # whom the frame's game events may name, if the rig takes any
+        update = codec.frame_from_msg(
+            msg, session.movable_ids, session.static_ids, None if inputs is None else inputs.player_ids, session.delay_s
+        )
         state = session.frame(update)
         if session.has_deferred_work:
             self._deferred[session.id] = held
@@ -184,9 +196,10 @@ class SessionTable:
 
     def update_style(self, msg: pb.UpdateStyleRequest, payload: bytes | None = None) -> pb.UpdateStyleResponse:
         held = self.get(msg.session_id)
-        style = self._checked_style(held, msg)   # refused before it is kept
-        self.checkpoints.write_input(msg.session_id, held.checkpoint, "style",
-                                     payload if payload is not None else msg.SerializeToString())
+        style = self._checked_style(held, msg)  # refused before it is kept
+        self.checkpoints.write_input(
+            msg.session_id, held.checkpoint, "style", payload if payload is not None else msg.SerializeToString()
+        )
         self._set_style(held, msg, style)
         self._after_input(held)
         if held.recorder is not None:
@@ -207,8 +220,9 @@ class SessionTable:
         (`PlayerInputs.take`, pipeline/camera_rig.py: MATCH)."""
         held = self.get(msg.session_id)
         take = self._checked_take(held, msg)
-        self.checkpoints.write_input(msg.session_id, held.checkpoint, "take",
-                                     payload if payload is not None else msg.SerializeToString())
+        self.checkpoints.write_input(
+            msg.session_id, held.checkpoint, "take", payload if payload is not None else msg.SerializeToString()
+        )
         shot = self._take(held, take)
         self._after_input(held)
         if held.recorder is not None:
@@ -220,18 +234,20 @@ class SessionTable:
         session = held.session
         inputs = session.rig.player_inputs
         if inputs is None:
-            raise precondition(f"TakeShot is for a RIG_MATCH session; session {msg.session_id} runs the "
-                               f"{session.style.rig.name} rig")
+            raise precondition(
+                f"TakeShot is for a RIG_MATCH session; session {msg.session_id} runs the {session.style.rig.name} rig"
+            )
         return codec.take_from_msg(msg, inputs.player_ids)
 
     @staticmethod
     def _take(held: HeldSession, take: tuple[list[str], ShotKind | None, bool]) -> ShotChoice | None:
         inputs = held.session.rig.player_inputs
-        assert inputs is not None   # _checked_take refused the take otherwise
+        assert inputs is not None  # _checked_take refused the take otherwise
         try:
             return inputs.take(*take)
         except ValueError as exc:  # a player named twice, a kind that does not fit the count
             raise invalid(str(exc)) from None
+
     def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
         """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it, a
         MATCH style's director by the name it resolved to: codec.shown_style),
@@ -249,9 +265,11 @@ class SessionTable:
         session = self.get(session_id).session
         found = session.rig.anticipation_map(session.last_state)
         if found is None:
-            raise precondition(f"session {session_id} has no anticipation map: its style's visibility is "
-                               f"{session.style.visibility.name} on the {session.style.rig.name} rig, and only "
-                               "ANTICIPATION and NO_ANTICIPATION build one (after their first frame)")
+            raise precondition(
+                f"session {session_id} has no anticipation map: its style's visibility is "
+                f"{session.style.visibility.name} on the {session.style.rig.name} rig, and only "
+                "ANTICIPATION and NO_ANTICIPATION build one (after their first frame)"
+            )
         return anticipation_png(*found)
 
     def view(self, session_id: str, query: ViewQuery, reply: Reply) -> None:
@@ -276,7 +294,7 @@ class SessionTable:
         abandoned one, on a failed create. Its checkpoint goes too, unless `keep_checkpoint` (the
         process is stopping, or another one has taken the session over)."""
         held = self.held.pop(session_id, None)
-        self._deferred.pop(session_id, None)   # deferred work or a snapshot left for later goes with it
+        self._deferred.pop(session_id, None)  # deferred work or a snapshot left for later goes with it
         self._snapshots_due.pop(session_id, None)
         self.checkpoints.end(session_id, keep_checkpoint)
         if held is None:
@@ -310,7 +328,7 @@ class SessionTable:
         if self._deferred:
             held = self._deferred.pop(next(iter(self._deferred)))
             held.session.do_deferred_work(whole=False)
-            if held.session.has_deferred_work:   # its other part, after the others' waiting parts
+            if held.session.has_deferred_work:  # its other part, after the others' waiting parts
                 self._deferred[held.session.id] = held
         elif self._snapshots_due:
             self._snapshot(self._snapshots_due.pop(next(iter(self._snapshots_due))))
@@ -330,8 +348,7 @@ class SessionTable:
 
     def _snapshot(self, held: HeldSession, claim: bool = False) -> None:
         session = held.session
-        session.do_deferred_work()   # a snapshot holds computed maps, not the means to compute them
+        session.do_deferred_work()  # a snapshot holds computed maps, not the means to compute them
         self._deferred.pop(session.id, None)
         # Not the dashboard's timeline: diagnostics, not state, up to 1 MB; a restored session's starts anew.
-        self.checkpoints.snapshot(session.id, held.checkpoint, (session, held.style_msg), session.creation_objects(),
-                                  claim)
+        self.checkpoints.snapshot(session.id, held.checkpoint, (session, held.style_msg), session.creation_objects(), claim)

@@ -14,6 +14,7 @@ MATCH session answers `buffering` frames with no camera, numbered as the input f
 program's first frame replaces them (its frame numbers restart at the game's first moment), so
 frame numbers still only grow within the ring.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,7 +29,7 @@ from camdirector.pipeline.inputs import EventKind
 from camdirector.pipeline.match.frame import MatchFrame, ShotChoice, ShotKind
 from camdirector.pipeline.state import FrameState
 
-TIMELINE_FRAMES = 600   # frames kept per session: 10 s at 60 Hz
+TIMELINE_FRAMES = 600  # frames kept per session: 10 s at 60 Hz
 
 
 @dataclass(frozen=True)
@@ -72,13 +73,23 @@ class Timeline:
         pose, match = state.pose, state.match
         if match is not None and not match.buffering and self._frames and self._frames[-1].buffering:
             self._frames.clear()
-        self._frames.append(TimelineFrame(
-            frame=int(state.frame), time_s=float(state.time_s),
-            camera_world=None if pose is None else pose.position_world.copy(),
-            rotation_xyzw=None if pose is None else pose.rotation_xyzw.copy(),
-            targets_world=np.array(state.aim_points_world), cut=bool(state.cut), shot_id=int(state.shot_id),
-            visibility=float(state.visibility), framing_error=state.framing_error, flags=tuple(state.flags),
-            scores=state.scores, compute_ms=float(compute_ms), match=match))
+        self._frames.append(
+            TimelineFrame(
+                frame=int(state.frame),
+                time_s=float(state.time_s),
+                camera_world=None if pose is None else pose.position_world.copy(),
+                rotation_xyzw=None if pose is None else pose.rotation_xyzw.copy(),
+                targets_world=np.array(state.aim_points_world),
+                cut=bool(state.cut),
+                shot_id=int(state.shot_id),
+                visibility=float(state.visibility),
+                framing_error=state.framing_error,
+                flags=tuple(state.flags),
+                scores=state.scores,
+                compute_ms=float(compute_ms),
+                match=match,
+            )
+        )
 
     def as_json(self, last: int | None = None, after_frame: int | None = None) -> list[dict]:
         """The newest `last` frames (all when None) of those after frame number `after_frame`
@@ -92,26 +103,36 @@ class Timeline:
         frames = list(self._frames)
         if after_frame is not None:
             first = len(frames)
-            while first > 0 and frames[first - 1].frame > after_frame:   # frame numbers only grow
+            while first > 0 and frames[first - 1].frame > after_frame:  # frame numbers only grow
                 first -= 1
             frames = frames[first:]
         frames = frames[-last:] if last else frames
         if not frames:
             return []
-        cameras = [f.camera_world for f in frames if f.camera_world is not None]   # both None while buffering
+        cameras = [f.camera_world for f in frames if f.camera_world is not None]  # both None while buffering
         rotations = [f.rotation_xyzw for f in frames if f.rotation_xyzw is not None]
         camera = iter(np.stack(cameras).round(4) if cameras else ())
         forward = iter(_forward(rotations))
-        targets = np.stack([f.targets_world for f in frames]).round(4)   # a session's targets are fixed
-        rows = [{"frame": f.frame, "time_s": f.time_s,
-                 "camera": None if f.camera_world is None else next(camera),
-                 "forward": None if f.camera_world is None else next(forward), "targets": t,
-                 "cut": f.cut, "shot_id": f.shot_id, "visibility": round(f.visibility, 4),
-                 "framing_error": None if math.isnan(f.framing_error) else round(f.framing_error, 4),
-                 "flags": f.flags, "scores": f.scores, "compute_ms": round(f.compute_ms, 3)}
-                for f, t in zip(frames, targets)]
+        targets = np.stack([f.targets_world for f in frames]).round(4)  # a session's targets are fixed
+        rows = [
+            {
+                "frame": f.frame,
+                "time_s": f.time_s,
+                "camera": None if f.camera_world is None else next(camera),
+                "forward": None if f.camera_world is None else next(forward),
+                "targets": t,
+                "cut": f.cut,
+                "shot_id": f.shot_id,
+                "visibility": round(f.visibility, 4),
+                "framing_error": None if math.isnan(f.framing_error) else round(f.framing_error, 4),
+                "flags": f.flags,
+                "scores": f.scores,
+                "compute_ms": round(f.compute_ms, 3),
+            }
+            for f, t in zip(frames, targets)
+        ]
         parts = [f.match for f in frames if f.match is not None]
-        if parts:   # a session's rig is fixed: every frame has its MATCH part, or none has
+        if parts:  # a session's rig is fixed: every frame has its MATCH part, or none has
             _match_json(parts, rows)
         return rows
 
@@ -123,7 +144,7 @@ def _forward(rotations_xyzw: list[np.ndarray]) -> np.ndarray:
     return (-quat_to_matrix(np.stack(rotations_xyzw))[:, :, 2]).round(4)
 
 
-_SHOT_KINDS = {kind: f"SHOT_{kind.name}" for kind in ShotKind}     # as camdirector.v1 names them
+_SHOT_KINDS = {kind: f"SHOT_{kind.name}" for kind in ShotKind}  # as camdirector.v1 names them
 _EVENT_KINDS = {kind: f"EVENT_{kind.name}" for kind in EventKind}
 
 
@@ -141,18 +162,32 @@ def _match_json(parts: list[MatchFrame], rows: list[dict]) -> None:
     forward = iter(_forward([c.pose.rotation_xyzw for c in candidates]))
     roster, ids, teams = None, [], []
     for m, row in zip(parts, rows):
-        if m.players is not roster:   # the rig shares one roster across frames: convert it once
+        if m.players is not roster:  # the rig shares one roster across frames: convert it once
             roster, ids, teams = m.players, [p for p, _ in m.players], [team for _, team in m.players]
         row.update(
-            buffering=m.buffering, shot=None if m.shot is None else _shot_json(m.shot),
-            candidates=[{"shot": _shot_json(c.shot), "score": round(c.score, 4), "camera": next(camera),
-                         "forward": next(forward)} for c in m.candidates],
-            players=ids, teams=teams,
-            events=[{"time_s": e.time_s, "kind": _EVENT_KINDS[e.kind], "actor_id": e.actor_id,
-                     "other_actor_id": e.other_actor_id, "priority": e.priority, "label": e.label}
-                    for e in m.events],
-            planned_cut=None if m.planned_cut is None else {"time_s": m.planned_cut.time_s,
-                                                           "shot": _shot_json(m.planned_cut.shot)})
+            buffering=m.buffering,
+            shot=None if m.shot is None else _shot_json(m.shot),
+            candidates=[
+                {"shot": _shot_json(c.shot), "score": round(c.score, 4), "camera": next(camera), "forward": next(forward)}
+                for c in m.candidates
+            ],
+            players=ids,
+            teams=teams,
+            events=[
+                {
+                    "time_s": e.time_s,
+                    "kind": _EVENT_KINDS[e.kind],
+                    "actor_id": e.actor_id,
+                    "other_actor_id": e.other_actor_id,
+                    "priority": e.priority,
+                    "label": e.label,
+                }
+                for e in m.events
+            ],
+            planned_cut=None
+            if m.planned_cut is None
+            else {"time_s": m.planned_cut.time_s, "shot": _shot_json(m.planned_cut.shot)},
+        )
 
 
 def dumps(value) -> bytes:

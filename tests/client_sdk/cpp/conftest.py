@@ -1,6 +1,7 @@
 """Fixtures for the C/C++ SDK's tests: its CMake build (once per test session, incremental in
 client_sdk/cpp/build/), a runner for its programs, `sdk_check stream` in the background, and a TCP
 proxy that can cut connections."""
+
 from __future__ import annotations
 
 import fcntl
@@ -53,8 +54,10 @@ def sdk_bin() -> Path:
     BUILD_DIR.mkdir(exist_ok=True)
     with open(BUILD_DIR / ".build-lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        for cmd in (["cmake", "-S", str(SDK_DIR), "-B", str(BUILD_DIR), "-DCMAKE_BUILD_TYPE=Release"],
-                    ["cmake", "--build", str(BUILD_DIR), "--parallel", str(os.cpu_count() or 2)]):
+        for cmd in (
+            ["cmake", "-S", str(SDK_DIR), "-B", str(BUILD_DIR), "-DCMAKE_BUILD_TYPE=Release"],
+            ["cmake", "--build", str(BUILD_DIR), "--parallel", str(os.cpu_count() or 2)],
+        ):
             done = subprocess.run(cmd, capture_output=True, text=True, timeout=BUILD_TIMEOUT_S)
             if done.returncode != 0:
                 pytest.fail(f"{' '.join(cmd)} failed:\n{done.stdout[-4000:]}\n{done.stderr[-4000:]}")
@@ -63,12 +66,12 @@ def sdk_bin() -> Path:
     return BUILD_DIR
 
 
-def run_json(binary: Path, *args: str, timeout_s: float = 60.0, stdin: str | None = None,
-             env: dict | None = None) -> dict:
+def run_json(binary: Path, *args: str, timeout_s: float = 60.0, stdin: str | None = None, env: dict | None = None) -> dict:
     """Runs one of the SDK's programs (with `env` over this process's environment); its last
     stdout line, parsed as JSON."""
-    done = subprocess.run([str(binary), *args], input=stdin, capture_output=True, text=True, timeout=timeout_s,
-                          env={**os.environ, **(env or {})})
+    done = subprocess.run(
+        [str(binary), *args], input=stdin, capture_output=True, text=True, timeout=timeout_s, env={**os.environ, **(env or {})}
+    )
     assert done.returncode == 0, f"{binary.name} {' '.join(args)} exited {done.returncode}:\n{done.stdout}\n{done.stderr}"
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -80,11 +83,14 @@ class StreamRun:
     """`sdk_check stream ADDRESS --until EVENT [OPTIONS]` in the background (with `env` over this
     process's environment): waits for its ready line, then for its report."""
 
-    def __init__(self, binary, address: str, until: str, timeout_s: float = 40.0, *options: str,
-                 env: dict | None = None):
-        self.proc = subprocess.Popen([str(binary), "stream", address, "--until", until, "--timeout", str(timeout_s),
-                                      *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     env={**os.environ, **(env or {})})
+    def __init__(self, binary, address: str, until: str, timeout_s: float = 40.0, *options: str, env: dict | None = None):
+        self.proc = subprocess.Popen(
+            [str(binary), "stream", address, "--until", until, "--timeout", str(timeout_s), *options],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, **(env or {})},
+        )
         self.lines: list[str] = []
         self._ready = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()

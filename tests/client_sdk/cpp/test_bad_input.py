@@ -1,6 +1,7 @@
 """The C/C++ SDK given bad input: an address that does not parse, a server that is down, NaN in a
 transform, frames out of order, and frames submitted faster than the server answers. The game
 thread's calls must answer at once and allocate nothing (sdk_check counts malloc calls)."""
+
 from __future__ import annotations
 
 import socket
@@ -10,18 +11,21 @@ import pytest
 from tests.client_sdk.cpp.conftest import free_port, run_json
 
 
-@pytest.mark.parametrize("address, reason", [
-    ("", "empty"),
-    ("127.0.0.1", "no port"),
-    ("127.0.0.1:", "port"),
-    ("127.0.0.1:99999", "port"),
-    ("127.0.0.1:http", "port"),
-    (":50051", "no host"),
-    ("::1:50051", "brackets"),
-    ("tcp://127.0.0.1:5555", "ZeroMQ"),
-    ("host name:50051", "space"),
-    ("host/x:50051", "host"),
-])
+@pytest.mark.parametrize(
+    "address, reason",
+    [
+        ("", "empty"),
+        ("127.0.0.1", "no port"),
+        ("127.0.0.1:", "port"),
+        ("127.0.0.1:99999", "port"),
+        ("127.0.0.1:http", "port"),
+        (":50051", "no host"),
+        ("::1:50051", "brackets"),
+        ("tcp://127.0.0.1:5555", "ZeroMQ"),
+        ("host name:50051", "space"),
+        ("host/x:50051", "host"),
+    ],
+)
 def test_an_unparseable_address_is_refused_at_creation(sdk_bin, address, reason):
     report = run_json(sdk_bin / "sdk_check", "address", address)
     assert report["status"] == "INVALID_ARGUMENT" and report["create_status"] == "INVALID_ARGUMENT"

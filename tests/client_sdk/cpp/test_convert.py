@@ -1,5 +1,6 @@
 """The C++ SDK's Unity and Unreal conversions against the Python SDK's, on the same numbers: both
 directions, both engines, camera poses, fields of view, mesh vertices and winding."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,12 +38,15 @@ def _columns(entries: list[dict], key: str) -> np.ndarray:
     return np.array([e[key] for e in entries])
 
 
-@pytest.mark.parametrize("direction, position_fn, rotation_fn, scale_fn", [
-    ("from_unity", convert.from_unity_position, convert.from_unity_rotation, convert.from_unity_scale),
-    ("to_unity", convert.to_unity_position, convert.to_unity_rotation, convert.to_unity_scale),
-    ("from_unreal", convert.from_unreal_position, convert.from_unreal_rotation, convert.from_unreal_scale),
-    ("to_unreal", convert.to_unreal_position, convert.to_unreal_rotation, convert.to_unreal_scale),
-])
+@pytest.mark.parametrize(
+    "direction, position_fn, rotation_fn, scale_fn",
+    [
+        ("from_unity", convert.from_unity_position, convert.from_unity_rotation, convert.from_unity_scale),
+        ("to_unity", convert.to_unity_position, convert.to_unity_rotation, convert.to_unity_scale),
+        ("from_unreal", convert.from_unreal_position, convert.from_unreal_rotation, convert.from_unreal_scale),
+        ("to_unreal", convert.to_unreal_position, convert.to_unreal_rotation, convert.to_unreal_scale),
+    ],
+)
 def test_transforms_equal_the_python_sdks_bit_for_bit(cpp, rows, direction, position_fn, rotation_fn, scale_fn):
     out = cpp[direction]
     assert len(out) == len(rows)
@@ -81,8 +85,9 @@ def test_mesh_vertices_and_winding_equal_the_python_sdks(cpp, rows, engine):
     position_fn = convert.from_unity_position if engine == "unity" else convert.from_unreal_position
     faces = np.array([[0, 1, 2], [3, 4, 5]])
     mesh = cd.mesh_from_arrays(position_fn(vertices32), faces, flip_winding=True)
-    np.testing.assert_array_equal(np.array(cpp[f"{engine}_vertices"], dtype=np.float32),
-                                  np.array(mesh.triangles.vertices, dtype=np.float32))
+    np.testing.assert_array_equal(
+        np.array(cpp[f"{engine}_vertices"], dtype=np.float32), np.array(mesh.triangles.vertices, dtype=np.float32)
+    )
     assert cpp["flipped"] == list(mesh.triangles.indices)
 
 
@@ -90,10 +95,12 @@ def test_round_trips_are_identities(cpp, rows):
     """to(from(x)) on the C++ side's numbers: the two directions are inverses."""
     for engine in ("unity", "unreal"):
         back = (convert.to_unity_position if engine == "unity" else convert.to_unreal_position)(
-            _columns(cpp[f"from_{engine}"], "position"))
+            _columns(cpp[f"from_{engine}"], "position")
+        )
         np.testing.assert_allclose(back, rows[:, 0:3], rtol=1e-15, atol=1e-12)
         back_q = (convert.to_unity_rotation if engine == "unity" else convert.to_unreal_rotation)(
-            _columns(cpp[f"from_{engine}"], "rotation"))
+            _columns(cpp[f"from_{engine}"], "rotation")
+        )
         np.testing.assert_array_equal(back_q, rows[:, 3:7])
 
 

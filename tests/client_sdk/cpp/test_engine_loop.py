@@ -1,5 +1,6 @@
 """examples/engine_loop against a real server: a 60 Hz game loop with a two-target session, 600
 frames streamed, both targets framed where the default style puts them."""
+
 from __future__ import annotations
 
 import json
@@ -28,8 +29,7 @@ def test_engine_loop_streams_600_frames_and_frames_both_targets(sdk_bin, server)
     assert 0 < report["pose_latency_ms_p50"] <= report["pose_latency_ms_p99"]
 
 
-def test_engine_loop_goes_on_with_the_same_session_through_a_server_killed_and_restarted(sdk_bin, server_factory,
-                                                                                        tmp_path):
+def test_engine_loop_goes_on_with_the_same_session_through_a_server_killed_and_restarted(sdk_bin, server_factory, tmp_path):
     """Issue 14's restart criterion: the server SIGKILLed mid-stream and started again on its port
     and data; the loop finishes its 600 frames on the same session (restored from its checkpoint)."""
     import signal
@@ -40,8 +40,7 @@ def test_engine_loop_goes_on_with_the_same_session_through_a_server_killed_and_r
 
     address, data_dir = f"127.0.0.1:{free_port()}", str(tmp_path / "data")
     first = server_factory("--workers", "1", "--grpc", address, "--data-dir", data_dir)
-    loop = subprocess.Popen([str(sdk_bin / "engine_loop"), address], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    loop = subprocess.Popen([str(sdk_bin / "engine_loop"), address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(3.0)  # about 180 frames in
     first.proc.send_signal(signal.SIGKILL)
     first.proc.wait(10)

@@ -2,6 +2,7 @@
 then examples/consumer, copied out of the tree, built against that prefix alone with
 find_package(camdirector CONFIG REQUIRED) and run against a real server for 600 frames; and a C
 file built with nothing but what `pkg-config --static camdirector` says."""
+
 from __future__ import annotations
 
 import json
@@ -37,8 +38,11 @@ def _cache(build_dir: Path, name: str) -> str:
 def _isolated_env() -> dict:
     """This environment without what could point CMake or pkg-config at another camdirector than
     the prefix under test."""
-    return {k: v for k, v in os.environ.items()
-            if k not in ("CMAKE_PREFIX_PATH", "PKG_CONFIG_PATH", "PKG_CONFIG_LIBDIR", "camdirector_DIR")}
+    return {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("CMAKE_PREFIX_PATH", "PKG_CONFIG_PATH", "PKG_CONFIG_LIBDIR", "camdirector_DIR")
+    }
 
 
 @pytest.fixture(scope="module")
@@ -65,13 +69,23 @@ def test_the_install_holds_the_headers_the_libraries_and_both_package_files(inst
     }, "the public headers need no generated protobuf header, so none is installed"
 
 
-def test_a_separate_cmake_project_finds_the_installed_sdk_and_streams_600_frames(installed, sdk_bin, server,
-                                                                                 tmp_path):
+def test_a_separate_cmake_project_finds_the_installed_sdk_and_streams_600_frames(installed, sdk_bin, server, tmp_path):
     prefix, libdir = installed
     source, build = tmp_path / "consumer", tmp_path / "consumer-build"
     shutil.copytree(SDK_DIR / "examples" / "consumer", source)  # nothing relative reaches the SDK's tree
-    _run(["cmake", "-S", str(source), "-B", str(build), f"-DCMAKE_PREFIX_PATH={prefix}",
-          "-DCMAKE_FIND_PACKAGE_NO_PACKAGE_REGISTRY=ON", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON"], env=_isolated_env())
+    _run(
+        [
+            "cmake",
+            "-S",
+            str(source),
+            "-B",
+            str(build),
+            f"-DCMAKE_PREFIX_PATH={prefix}",
+            "-DCMAKE_FIND_PACKAGE_NO_PACKAGE_REGISTRY=ON",
+            "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON",
+        ],
+        env=_isolated_env(),
+    )
     _run(["cmake", "--build", str(build)])
     assert Path(_cache(build, "camdirector_DIR")) == prefix / libdir / "cmake" / "camdirector"
     # The compile and link lines name the prefix and never the SDK's sources or build.
@@ -107,6 +121,9 @@ int main(void) {
 """)
     _run(["cc", "-std=c99", "check.c", "-o", "check", *flags], cwd=tmp_path)
     assert json.loads(_run([str(tmp_path / "check")])) == {
-        "good": "OK", "bad": "INVALID_ARGUMENT", "why": "address '127.0.0.1' has no port: expected HOST:PORT",
-        "version": VERSION}   # the project's one version (camdirector.version)
+        "good": "OK",
+        "bad": "INVALID_ARGUMENT",
+        "why": "address '127.0.0.1' has no port: expected HOST:PORT",
+        "version": VERSION,
+    }  # the project's one version (camdirector.version)
     assert version == VERSION

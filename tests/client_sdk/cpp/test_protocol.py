@@ -3,6 +3,7 @@ are the server's; against a real server (`sdk_check protocol`) cd_session_open s
 CreateSessionRequest.client_protocol (read back from the server's recording of the session), a
 request claiming a newer one is CD_FAILED_PRECONDITION with the server's words in cd_last_error,
 and the same client then opens another session."""
+
 from __future__ import annotations
 
 from camdirector.deploy.server_process import ServerProcess
@@ -26,5 +27,6 @@ def test_sessions_say_the_protocol_and_a_newer_claim_is_refused(sdk_bin, tmp_pat
     assert report["newer"] == "FAILED_PRECONDITION", report
     assert report["newer_error"] == (
         f"CreateSession on {server.grpc}: this client speaks camdirector protocol {PROTOCOL + 1}, this server "
-        f"(camdirector {VERSION}) protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}"), report
+        f"(camdirector {VERSION}) protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}"
+    ), report
     assert report["reopened"] and report["close"] == "OK", report

@@ -4,6 +4,7 @@ worker killed mid-stream, the server restoring the session from its checkpoint
 (worker/checkpointing.py); a session that expired meanwhile, or one lost by a server
 without checkpoints (`--checkpoint-store off`: a restart, a dead worker), gets the session
 created again (new id, reported as an event)."""
+
 from __future__ import annotations
 
 import time

@@ -8,6 +8,7 @@
 - UNAVAILABLE on every call for a while over a working connection (a balancer with no healthy
   node, a node restoring its sessions) does not make the SDK give the session up: it goes on with
   the same id once the server answers again."""
+
 from __future__ import annotations
 
 import re
@@ -38,7 +39,7 @@ class RecordingDirector(pb_grpc.DirectorServicer):
         self.calls: list[tuple[str, str, str | None]] = []
         self.created = 0
         self.forgotten: set[str] = set()
-        self.protocols: set[str | None] = set()   # every call's PROTOCOL_HEADER
+        self.protocols: set[str | None] = set()  # every call's PROTOCOL_HEADER
 
     def _record(self, method: str, session_id: str, context) -> None:
         metadata = dict(context.invocation_metadata())
@@ -62,8 +63,9 @@ class RecordingDirector(pb_grpc.DirectorServicer):
                 if answered:  # forgotten while this stream ran: the stream breaks
                     context.abort(grpc.StatusCode.UNAVAILABLE, "the server lost the session")
                 context.abort(grpc.StatusCode.NOT_FOUND, f"unknown session id {update.session_id!r}")
-            yield pb.CameraUpdate(frame=update.frame, time_s=update.time_s,
-                                  pose=pb.CameraPose(rotation=pb.Quat(w=1.0), vertical_fov_deg=50.0))
+            yield pb.CameraUpdate(
+                frame=update.frame, time_s=update.time_s, pose=pb.CameraPose(rotation=pb.Quat(w=1.0), vertical_fov_deg=50.0)
+            )
             answered = True
 
     def UpdateStyle(self, request, context):
@@ -112,8 +114,9 @@ class OutageDirector(RecordingDirector):
             self._down(context)
             with self.lock:
                 self.answered += 1
-            yield pb.CameraUpdate(frame=update.frame, time_s=update.time_s,
-                                  pose=pb.CameraPose(rotation=pb.Quat(w=1.0), vertical_fov_deg=50.0))
+            yield pb.CameraUpdate(
+                frame=update.frame, time_s=update.time_s, pose=pb.CameraPose(rotation=pb.Quat(w=1.0), vertical_fov_deg=50.0)
+            )
 
     def CloseSession(self, request, context):
         self._record("CloseSession", request.session_id, context)
@@ -140,8 +143,7 @@ def test_unavailable_on_every_call_for_a_while_keeps_the_session(sdk_bin):
     director = OutageDirector()
     server, address = _serve(director)
     try:
-        report = run_json(sdk_bin / "sdk_check", "stream", address, "--until", "resumed", "--timeout", "20",
-                          timeout_s=60)
+        report = run_json(sdk_bin / "sdk_check", "stream", address, "--until", "resumed", "--timeout", "20", timeout_s=60)
     finally:
         server.stop(grace=None)
     assert report["seen"] and report["answered_after"] >= 60, report

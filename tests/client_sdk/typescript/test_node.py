@@ -24,6 +24,7 @@ answers passed by environment and JSON files.
 Without node or npm the module is skipped with the reason; under CI (.ci/run sets
 CAMDIRECTOR_REQUIRE_NODE=1) that is a failure.
 """
+
 from __future__ import annotations
 
 import base64
@@ -63,8 +64,7 @@ def _missing_node() -> str | None:
 
 
 def _run(cmd: list[str], timeout: float, env: dict | None = None) -> subprocess.CompletedProcess:
-    done = subprocess.run(cmd, cwd=PACKAGE, capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, **(env or {})})
+    done = subprocess.run(cmd, cwd=PACKAGE, capture_output=True, text=True, timeout=timeout, env={**os.environ, **(env or {})})
     if done.returncode != 0:
         pytest.fail(f"{' '.join(cmd)} exited {done.returncode}\n{done.stdout[-6000:]}\n{done.stderr[-4000:]}")
     return done
@@ -96,8 +96,9 @@ def node_test(name: str, timeout: float = 90.0, **env: str) -> str:
 def server(built):
     """Two workers, gRPC only, checkpoints every 60 frames (the worker-kill test's, last), at most 5000
     triangles a scene (the bad-input test's RESOURCE_EXHAUSTED)."""
-    with ServerProcess("--workers", "2", "--checkpoint-every-frames", "60", "--max-triangles", "5000",
-                       transports=("grpc",)) as srv:
+    with ServerProcess(
+        "--workers", "2", "--checkpoint-every-frames", "60", "--max-triangles", "5000", transports=("grpc",)
+    ) as srv:
         yield srv
 
 
@@ -105,16 +106,21 @@ def server(built):
 
 
 def _pose(p: pb.CameraPose) -> list[float]:
-    return [p.position.x, p.position.y, p.position.z, p.rotation.x, p.rotation.y, p.rotation.z, p.rotation.w,
-            p.vertical_fov_deg]
+    return [p.position.x, p.position.y, p.position.z, p.rotation.x, p.rotation.y, p.rotation.z, p.rotation.w, p.vertical_fov_deg]
 
 
 def reply_json(u: pb.CameraUpdate) -> dict:
     """What of a reply must be the same for the same inputs (not compute_ms nor stage_ms)."""
     return {
-        "frame": u.frame, "timeS": u.time_s, "pose": _pose(u.pose) if u.HasField("pose") else None,
-        "cut": u.cut, "shotId": u.shot_id, "visibility": u.visibility, "stale": u.stale,
-        "buffering": u.buffering, "message": u.message,
+        "frame": u.frame,
+        "timeS": u.time_s,
+        "pose": _pose(u.pose) if u.HasField("pose") else None,
+        "cut": u.cut,
+        "shotId": u.shot_id,
+        "visibility": u.visibility,
+        "stale": u.stale,
+        "buffering": u.buffering,
+        "message": u.message,
         "diagnostics": [u.diagnostics.theta, u.diagnostics.phi, u.diagnostics.alpha],
         "shot": [list(u.shot.subject_ids), u.shot.kind, u.shot.reason, u.shot.held],
         "candidates": [[_pose(c.pose), list(c.shot.subject_ids), c.shot.kind, c.score] for c in u.candidates],
@@ -126,8 +132,13 @@ def frame_json(u: pb.FrameUpdate) -> dict:
     states = []
     for s in u.states:
         t = s.transform
-        states.append({"id": s.id, "p": [t.position.x, t.position.y, t.position.z],
-                       "q": [t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w] if t.HasField("rotation") else None})
+        states.append(
+            {
+                "id": s.id,
+                "p": [t.position.x, t.position.y, t.position.z],
+                "q": [t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w] if t.HasField("rotation") else None,
+            }
+        )
     events = [{"kind": e.kind, "actorId": e.actor_id, "otherActorId": e.other_actor_id} for e in u.events]
     return {"frame": u.frame, "timeS": u.time_s, "states": states, "events": events}
 
@@ -144,8 +155,9 @@ def _write(path: Path, data: dict) -> str:
 def _packed_walk(n: int, start: int = 1):
     for i in range(start, start + n):
         t = i / 60
-        ids, packed = cd.pack_states(["a", "cart"], np.array([[np.sin(t), 0.9, t], [-2 + t, 0.5, 2.0]]),
-                                     np.array([[0, 0, 0, 1.0], [0, 0, 0, 1.0]]))
+        ids, packed = cd.pack_states(
+            ["a", "cart"], np.array([[np.sin(t), 0.9, t], [-2 + t, 0.5, 2.0]]), np.array([[0, 0, 0, 1.0], [0, 0, 0, 1.0]])
+        )
         yield i, t, ids, packed
 
 
@@ -160,15 +172,29 @@ def _toric_reference(url: str, **options) -> dict:
             replies.append(session.frame(81, 81 / 60))
     frames = [{"frame": i, "timeS": t, "ids": ids, "transforms": p.tolist()} for i, t, ids, p in unary + streamed]
     encoded = wire.encode_frame_update("sid", 7, 0.125, packed=(unary[0][2], unary[0][3]))
-    return {"create": _b64(create), "frames": frames, "unary": len(unary), "expected": [reply_json(u) for u in replies],
-            "encoded": {"sessionId": "sid", "frame": 7, "timeS": 0.125, "ids": unary[0][2],
-                        "transforms": unary[0][3].tolist(), "bytes": base64.b64encode(encoded).decode()}}
+    return {
+        "create": _b64(create),
+        "frames": frames,
+        "unary": len(unary),
+        "expected": [reply_json(u) for u in replies],
+        "encoded": {
+            "sessionId": "sid",
+            "frame": 7,
+            "timeS": 0.125,
+            "ids": unary[0][2],
+            "transforms": unary[0][3].tolist(),
+            "bytes": base64.b64encode(encoded).decode(),
+        },
+    }
 
 
 def _match_reference(url: str, **options) -> dict:
     create = match_request(delay_s=0.0)
-    first, second, third = (list(match_frames("", 60, kill_at={40: ("a0", "b0")})), list(match_frames("", 30, start=60)),
-                            list(match_frames("", 30, start=90)))
+    first, second, third = (
+        list(match_frames("", 60, kill_at={40: ("a0", "b0")})),
+        list(match_frames("", 30, start=60)),
+        list(match_frames("", 30, start=90)),
+    )
     with cd.connect(url, **options) as client:
         with client.create_session(create) as session:
             replies = list(session.stream(first))
@@ -176,9 +202,14 @@ def _match_reference(url: str, **options) -> dict:
             replies += list(session.stream(second))
             released = session.take_shot(release=True)
             replies += list(session.stream(third))
-    return {"create": _b64(create), "parts": [[frame_json(u) for u in part] for part in (first, second, third)],
-            "take": ["a1", "b1"], "taken": [list(taken.subject_ids), taken.kind, taken.held],
-            "released": list(released.subject_ids), "expected": [reply_json(u) for u in replies]}
+    return {
+        "create": _b64(create),
+        "parts": [[frame_json(u) for u in part] for part in (first, second, third)],
+        "take": ["a1", "b1"],
+        "taken": [list(taken.subject_ids), taken.kind, taken.held],
+        "released": list(released.subject_ids),
+        "expected": [reply_json(u) for u in replies],
+    }
 
 
 def test_replies_equal_the_python_sdks_bit_for_bit(server, tmp_path):
@@ -195,7 +226,11 @@ def zmq_server(built, tmp_path_factory):
     with ServerProcess("--workers", "1", "--data-dir", str(data_dir), transports=("zmq",), auth=True) as srv:
         srv.viewer_key = subprocess.run(
             [sys.executable, "-m", "camdirector", "keys", "create", "--role", "viewer", "--data-dir", str(data_dir)],
-            capture_output=True, text=True, timeout=60, check=True).stdout.strip()
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+        ).stdout.strip()
         srv.key_file = data_dir / "zmq" / "server.key"
         yield srv
 
@@ -203,27 +238,40 @@ def zmq_server(built, tmp_path_factory):
 def test_replies_over_zeromq_with_curve_equal_the_python_sdks_bit_for_bit(zmq_server, tmp_path, monkeypatch):
     monkeypatch.delenv(wire.KEY_ENV, raising=False)
     url, key, server_key = zmq_server.url("zmq"), zmq_server.admin_key, zmq_server.zmq_server_key
-    data = {"toric": _toric_reference(url, key=key, zmq_server_key=server_key),
-            "match": _match_reference(url, key=key, zmq_server_key=server_key)}
-    node_test("parity", CAMDIRECTOR_TEST_URL=url, CAMDIRECTOR_TEST_DATA=_write(tmp_path / "parity.json", data),
-              CAMDIRECTOR_TEST_CONNECT=json.dumps({"key": key, "zmqServerKey": server_key}))
+    data = {
+        "toric": _toric_reference(url, key=key, zmq_server_key=server_key),
+        "match": _match_reference(url, key=key, zmq_server_key=server_key),
+    }
+    node_test(
+        "parity",
+        CAMDIRECTOR_TEST_URL=url,
+        CAMDIRECTOR_TEST_DATA=_write(tmp_path / "parity.json", data),
+        CAMDIRECTOR_TEST_CONNECT=json.dumps({"key": key, "zmqServerKey": server_key}),
+    )
 
 
 def test_zeromq_curve_and_keys(zmq_server, monkeypatch):
     monkeypatch.delenv(wire.KEY_ENV, raising=False)
     assert zmq_server.key_file.is_file()
-    node_test("zmq_curve", CAMDIRECTOR_TEST_URL=zmq_server.url("zmq"), CAMDIRECTOR_TEST_ADMIN_KEY=zmq_server.admin_key,
-              CAMDIRECTOR_TEST_VIEWER_KEY=zmq_server.viewer_key, CAMDIRECTOR_TEST_ZMQ_SERVER_KEY=zmq_server.zmq_server_key,
-              CAMDIRECTOR_TEST_ZMQ_SERVER_KEY_FILE=str(zmq_server.key_file))
+    node_test(
+        "zmq_curve",
+        CAMDIRECTOR_TEST_URL=zmq_server.url("zmq"),
+        CAMDIRECTOR_TEST_ADMIN_KEY=zmq_server.admin_key,
+        CAMDIRECTOR_TEST_VIEWER_KEY=zmq_server.viewer_key,
+        CAMDIRECTOR_TEST_ZMQ_SERVER_KEY=zmq_server.zmq_server_key,
+        CAMDIRECTOR_TEST_ZMQ_SERVER_KEY_FILE=str(zmq_server.key_file),
+    )
 
 
 def _said_protocol(url: str, tmp_path: Path, **connect_options) -> int:
     """test/protocol.test.mjs against `url`; the client_protocol its recorded session's
     CreateSessionRequest reached the server with (the recording's first entry)."""
     from camdirector.worker.recording import read_entries
+
     out = tmp_path / "protocol.json"
-    node_test("protocol", CAMDIRECTOR_TEST_URL=url, CAMDIRECTOR_TEST_OUT=str(out),
-              CAMDIRECTOR_TEST_CONNECT=json.dumps(connect_options))
+    node_test(
+        "protocol", CAMDIRECTOR_TEST_URL=url, CAMDIRECTOR_TEST_OUT=str(out), CAMDIRECTOR_TEST_CONNECT=json.dumps(connect_options)
+    )
     said = json.loads(out.read_text())
     assert said["protocol"] == PROTOCOL, "the SDK's PROTOCOL (src/wire.ts) is the server's"
     return next(read_entries(Path(said["recordingPath"]))).create.client_protocol
@@ -235,8 +283,7 @@ def test_create_session_says_the_protocol_over_grpc(server, tmp_path):
 
 def test_create_session_says_the_protocol_over_zeromq(zmq_server, tmp_path, monkeypatch):
     monkeypatch.delenv(wire.KEY_ENV, raising=False)
-    said = _said_protocol(zmq_server.url("zmq"), tmp_path, key=zmq_server.admin_key,
-                          zmqServerKey=zmq_server.zmq_server_key)
+    said = _said_protocol(zmq_server.url("zmq"), tmp_path, key=zmq_server.admin_key, zmqServerKey=zmq_server.zmq_server_key)
     assert said == PROTOCOL
 
 
@@ -250,13 +297,18 @@ def test_conversions_equal_the_python_sdks(built, tmp_path):
     raw_rotations[0] = 0.0
     scales = rng.uniform(0.1, 4.0, size=(n, 3))
     fovs, aspects = rng.uniform(5.0, 120.0, size=n), rng.uniform(0.5, 3.0, size=n)
-    poses = [pb.CameraPose(position=cd.vec3(p), rotation=cd.quat(q), vertical_fov_deg=f)
-             for p, q, f in zip(positions, raw_rotations, fovs)]
+    poses = [
+        pb.CameraPose(position=cd.vec3(p), rotation=cd.quat(q), vertical_fov_deg=f)
+        for p, q, f in zip(positions, raw_rotations, fovs)
+    ]
     converted = [cd.pose_from_msg(m) for m in poses]
     data = {
-        "positions": positions.ravel().tolist(), "rotations": rotations.ravel().tolist(),
-        "rawRotations": raw_rotations.ravel().tolist(), "scales": scales.ravel().tolist(),
-        "fovs": fovs.tolist(), "aspects": aspects.tolist(),
+        "positions": positions.ravel().tolist(),
+        "rotations": rotations.ravel().tolist(),
+        "rawRotations": raw_rotations.ravel().tolist(),
+        "scales": scales.ravel().tolist(),
+        "fovs": fovs.tolist(),
+        "aspects": aspects.tolist(),
         "expected": {
             "fromUnityPosition": cd.from_unity_position(positions).ravel().tolist(),
             "toUnityPosition": cd.to_unity_position(positions).ravel().tolist(),
@@ -289,21 +341,41 @@ def test_every_kind_of_bad_input_is_answered_with_its_code(server):
 def tls_server(built, tmp_path_factory):
     """Authentication on, gRPC over TLS with a certificate of the test CA; a viewer key beside the admin's."""
     from camdirector.deploy.tls import make_tls_files
+
     tls = make_tls_files(tmp_path_factory.mktemp("ts-tls"))
     data_dir = tmp_path_factory.mktemp("ts-auth")
-    with ServerProcess("--workers", "1", "--data-dir", str(data_dir), "--tls-cert", str(tls.cert),
-                       "--tls-key", str(tls.key), transports=("grpc",), auth=True) as srv:
+    with ServerProcess(
+        "--workers",
+        "1",
+        "--data-dir",
+        str(data_dir),
+        "--tls-cert",
+        str(tls.cert),
+        "--tls-key",
+        str(tls.key),
+        transports=("grpc",),
+        auth=True,
+    ) as srv:
         srv.viewer_key = subprocess.run(
             [sys.executable, "-m", "camdirector", "keys", "create", "--role", "viewer", "--data-dir", str(data_dir)],
-            capture_output=True, text=True, timeout=60, check=True).stdout.strip()
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+        ).stdout.strip()
         srv.ca = tls.ca_cert
         yield srv
 
 
 def test_keys_and_tls(tls_server, monkeypatch):
     monkeypatch.delenv(wire.KEY_ENV, raising=False)
-    node_test("keys_tls", CAMDIRECTOR_TEST_URL=tls_server.url("grpc"), CAMDIRECTOR_TEST_CA=str(tls_server.ca),
-              CAMDIRECTOR_TEST_ADMIN_KEY=tls_server.admin_key, CAMDIRECTOR_TEST_VIEWER_KEY=tls_server.viewer_key)
+    node_test(
+        "keys_tls",
+        CAMDIRECTOR_TEST_URL=tls_server.url("grpc"),
+        CAMDIRECTOR_TEST_CA=str(tls_server.ca),
+        CAMDIRECTOR_TEST_ADMIN_KEY=tls_server.admin_key,
+        CAMDIRECTOR_TEST_VIEWER_KEY=tls_server.viewer_key,
+    )
 
 
 def test_game_state_bridge(server):
@@ -323,8 +395,12 @@ def test_streams_survive_a_worker_sigkill(server, tmp_path):
     data = {"create": _b64(create), "frames": [frame_json(u) for u in updates], "expected": expected}
     worker = server.worker_pids()[0]
     started = time.monotonic()
-    output = node_test("worker_kill", CAMDIRECTOR_TEST_URL=server.url("grpc"), CAMDIRECTOR_TEST_WORKER_PID=str(worker),
-                       CAMDIRECTOR_TEST_DATA=_write(tmp_path / "kill.json", data))
+    output = node_test(
+        "worker_kill",
+        CAMDIRECTOR_TEST_URL=server.url("grpc"),
+        CAMDIRECTOR_TEST_WORKER_PID=str(worker),
+        CAMDIRECTOR_TEST_DATA=_write(tmp_path / "kill.json", data),
+    )
     assert server.alive() and worker not in server.worker_pids()
     print(f"worker kill under 4 TypeScript streams: {time.monotonic() - started:.1f} s\n{output[-1500:]}")
 
@@ -334,6 +410,7 @@ def cluster(built, tmp_path_factory):
     """Redis, PostgreSQL, two nodes and HAProxy (deploy/cluster.py), keys and TLS on every hop."""
     from camdirector.deploy.cluster import Cluster
     from tests.conftest import service_or_skip
+
     started = service_or_skip(lambda: Cluster.up(2, tmp_path_factory.mktemp("ts-cluster")))
     yield started
     started.down()
@@ -344,6 +421,7 @@ def test_streams_survive_a_node_sigkill(cluster, tmp_path, monkeypatch):
     them is SIGKILLed (the Node test waits for it, then checks every answer against an undisturbed
     run of the Python SDK through the same balancer, and prints the worst stall)."""
     from tests.deploy.conftest import make_key, sessions_by_node
+
     monkeypatch.delenv(wire.KEY_ENV, raising=False)
     engine = make_key(cluster, "engine")["key"]
     url, options = f"grpcs://{cluster.grpc}", {"key": engine, "caFile": str(cluster.ca_file)}
@@ -354,11 +432,22 @@ def test_streams_survive_a_node_sigkill(cluster, tmp_path, monkeypatch):
             expected = [reply_json(u) for u in session.stream(updates)]
     data = {"create": _b64(create), "frames": [frame_json(u) for u in updates], "expected": expected}
     ready, killed = tmp_path / "ready.json", tmp_path / "killed.json"
-    env = {**os.environ, "CAMDIRECTOR_TEST_URL": url, "CAMDIRECTOR_TEST_CONNECT": json.dumps(options),
-           "CAMDIRECTOR_TEST_DATA": _write(tmp_path / "node_kill.json", data),
-           "CAMDIRECTOR_TEST_READY": str(ready), "CAMDIRECTOR_TEST_KILLED": str(killed)}
-    node = subprocess.Popen(["node", "--test", "--test-reporter=spec", "test/node_kill.test.mjs"], cwd=PACKAGE,
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    env = {
+        **os.environ,
+        "CAMDIRECTOR_TEST_URL": url,
+        "CAMDIRECTOR_TEST_CONNECT": json.dumps(options),
+        "CAMDIRECTOR_TEST_DATA": _write(tmp_path / "node_kill.json", data),
+        "CAMDIRECTOR_TEST_READY": str(ready),
+        "CAMDIRECTOR_TEST_KILLED": str(killed),
+    }
+    node = subprocess.Popen(
+        ["node", "--test", "--test-reporter=spec", "test/node_kill.test.mjs"],
+        cwd=PACKAGE,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 90
         while not ready.is_file() and node.poll() is None and time.monotonic() < deadline:

@@ -1,5 +1,6 @@
 """`camdirector eval-match` end to end: a 20-second bot match on the tiny walled arena of
 test_sim.py, added to a registry by the CLI, streamed through a real server for both directors."""
+
 from __future__ import annotations
 
 import json
@@ -15,10 +16,26 @@ from camdirector.precompute.tracks.registry import LevelRegistry
 from tests.evaluation.match.test_sim import arena
 from tests.service.tracks_sessions import ROOT, cli_add_level, obj_text
 
-DIRECTOR_FIGURES = {"kill_coverage", "kill_coverage_first_person", "kills", "kills_covered", "lead_s", "shots",
-                    "cuts_per_min", "jump_cuts", "framed_visibility", "program_visibility", "first_person_share",
-                    "shown_height", "long_shots_missing_kills", "program_sha256", "compute_ms", "program_moments",
-                    "program_s", "buffering_replies"}
+DIRECTOR_FIGURES = {
+    "kill_coverage",
+    "kill_coverage_first_person",
+    "kills",
+    "kills_covered",
+    "lead_s",
+    "shots",
+    "cuts_per_min",
+    "jump_cuts",
+    "framed_visibility",
+    "program_visibility",
+    "first_person_share",
+    "shown_height",
+    "long_shots_missing_kills",
+    "program_sha256",
+    "compute_ms",
+    "program_moments",
+    "program_s",
+    "buffering_replies",
+}
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +48,7 @@ def registry(tmp_path_factory):
 
 def arena_match(folder, seed: int):
     """A 20-second match of 6 bots on the arena, written to folder/m<seed>.npz."""
-    match = simulate_match(LevelRegistry(folder / "data").load("arena"), "arena", 6, 20.0,
-                           np.random.default_rng(seed), seed)
+    match = simulate_match(LevelRegistry(folder / "data").load("arena"), "arena", 6, 20.0, np.random.default_rng(seed), seed)
     save_match(match, folder / f"m{seed}.npz")
     return match
 
@@ -43,9 +59,22 @@ def registry_and_match(registry):
 
 
 def eval_match(folder, *args: str, seed: int = 1) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "camdirector.__main__", "eval-match", str(folder / f"m{seed}.npz"),
-                           "--data-dir", str(folder / "data"), *args], capture_output=True, text=True, cwd=ROOT,
-                          timeout=300)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camdirector.__main__",
+            "eval-match",
+            str(folder / f"m{seed}.npz"),
+            "--data-dir",
+            str(folder / "data"),
+            *args,
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
 
 
 def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
@@ -83,14 +112,26 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
         expected = result["directors"][name]["compute_ms"]["median"] / result["tracks_reference"]["compute_ms"]["median"]
         assert ratio == pytest.approx(expected, abs=0.01)
     assert result["coverage_gain_over_hltv"] == pytest.approx(
-        result["directors"]["planned"]["kill_coverage"] - result["directors"]["hltv"]["kill_coverage"], abs=1e-3)
+        result["directors"]["planned"]["kill_coverage"] - result["directors"]["hltv"]["kill_coverage"], abs=1e-3
+    )
     assert (folder / "r.png").stat().st_size > 10_000
 
 
 def test_video_of_the_program_or_a_clean_skip(registry_and_match):
     folder, _ = registry_and_match
-    done = eval_match(folder, "--delay", "0", "--minutes", "0.2", "--json", str(folder / "v.json"), "--video",
-                      str(folder / "v.mp4"), "--video-seconds", "2")
+    done = eval_match(
+        folder,
+        "--delay",
+        "0",
+        "--minutes",
+        "0.2",
+        "--json",
+        str(folder / "v.json"),
+        "--video",
+        str(folder / "v.mp4"),
+        "--video-seconds",
+        "2",
+    )
     assert done.returncode == 0, done.stderr
     video = json.loads((folder / "v.json").read_text())["video"]
     if "skipped" in video:  # no EGL here: said, and the run still succeeds
@@ -104,9 +145,25 @@ def test_bad_arguments_and_unknown_level_exit_2(registry_and_match, tmp_path):
     done = eval_match(folder, "--delay", "301", "--json", str(tmp_path / "x.json"))
     assert done.returncode == 2 and "--delay" in done.stderr
     other = tmp_path / "empty-registry"
-    done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "eval-match", str(folder / "m1.npz"),
-                           "--delay", "0", "--json", str(tmp_path / "x.json"), "--data-dir", str(other)],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camdirector.__main__",
+            "eval-match",
+            str(folder / "m1.npz"),
+            "--delay",
+            "0",
+            "--json",
+            str(tmp_path / "x.json"),
+            "--data-dir",
+            str(other),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert done.returncode == 2 and "no level named 'arena'" in done.stderr
     assert not (tmp_path / "x.json").exists()
 
@@ -115,4 +172,3 @@ def test_a_match_whose_players_respawn_near_where_they_fell_streams_through(regi
     arena_match(registry, 3)
     done = eval_match(registry, "--delay", "2", "--json", str(registry / "r3.json"), seed=3)
     assert done.returncode == 0, done.stderr
-

@@ -1,5 +1,6 @@
 """Match files (evaluation/match/match_file.py): cutting a match short keeps every per-frame array,
 the stats included, and only the events up to the cut; saved and loaded, it is the same."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,12 +20,12 @@ def with_stats():
 
 def test_until_cuts_every_per_frame_array_and_the_events_alike():
     match = with_stats()
-    before = match.until(1.5)   # the kill is at 2 s
+    before = match.until(1.5)  # the kill is at 2 s
     assert len(before.time_s) == 16 and before.time_s[-1] == 1.5
     assert before.positions_world.shape[0] == before.rotations_xyzw.shape[0] == before.alive.shape[0] == 16
     assert before.stats[:, 0, 0].tolist() == list(range(16)) and before.events == []
     assert len(match.until(2.0).events) == 1
-    assert len(match.until(-5.0).time_s) == 1   # at least the first frame
+    assert len(match.until(-5.0).time_s) == 1  # at least the first frame
 
 
 def test_a_cut_match_with_stats_and_names_survives_a_save(tmp_path):

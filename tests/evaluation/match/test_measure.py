@@ -1,5 +1,6 @@
 """The match program's measures (evaluation/match/measure.py) on tiny hand-built matches: a camera
 that sees both duelists covers the kill, a wall between does not; jump cuts either side of 30 deg."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -44,17 +45,25 @@ def duel(kill_s: float = 2.0) -> MatchRecording:
     return MatchRecording("tiny", 0, RATE_HZ, players, time_s, positions, rotations, alive, [kill])
 
 
-def program_of(match: MatchRecording, cameras_world: np.ndarray, look_world: np.ndarray, cut_rows=(0,),
-               subjects=("a", "b")) -> Program:
+def program_of(
+    match: MatchRecording, cameras_world: np.ndarray, look_world: np.ndarray, cut_rows=(0,), subjects=("a", "b")
+) -> Program:
     """Every match frame a program moment; cameras (n, 3) looking at look (n, 3); cuts on cut_rows."""
     n = len(match.time_s)
     lens = Lens()
     rotation = np.array([level_look_rotation(c, p, (0.0, 0.0), lens) for c, p in zip(cameras_world, look_world)])
     cut = np.zeros(n, dtype=bool)
     cut[list(cut_rows)] = True
-    return Program(index=np.arange(n), time_s=match.time_s.copy(), position=np.asarray(cameras_world, dtype=float),
-                   rotation=rotation, vertical_fov_deg=np.full(n, lens.vertical_fov_deg), cut=cut,
-                   shot_id=np.cumsum(cut), subjects=[tuple(subjects)] * n)
+    return Program(
+        index=np.arange(n),
+        time_s=match.time_s.copy(),
+        position=np.asarray(cameras_world, dtype=float),
+        rotation=rotation,
+        vertical_fov_deg=np.full(n, lens.vertical_fov_deg),
+        cut=cut,
+        shot_id=np.cumsum(cut),
+        subjects=[tuple(subjects)] * n,
+    )
 
 
 def floor(*walls) -> RayScene:
@@ -143,8 +152,7 @@ def first_person_of_a(match: MatchRecording) -> Program:
     """In a's eyes (feet + EYE_HEIGHT_FRACTION of its height) looking at b, naming a as the subject."""
     n = len(match.time_s)
     eye = match.positions_world[0, 0] + [0.0, EYE_HEIGHT_FRACTION * 1.8, 0.0]
-    return program_of(match, np.tile(eye, (n, 1)), np.tile(match.positions_world[0, 1] + CHEST, (n, 1)),
-                      subjects=("a",))
+    return program_of(match, np.tile(eye, (n, 1)), np.tile(match.positions_world[0, 1] + CHEST, (n, 1)), subjects=("a",))
 
 
 def test_the_attackers_eyes_seeing_the_victim_cover_the_kill_first_person_only(match):
@@ -153,7 +161,7 @@ def test_the_attackers_eyes_seeing_the_victim_cover_the_kill_first_person_only(m
     shown = measure_shown(program, bodies, Lens(), floor())
     eyes = in_eyes_of(match, program)
     assert eyes.tolist() == [0] * FRAMES and shown[:, 1].min() >= 0.5
-    assert kill_coverage(match, program, shown).covered.tolist() == [False]   # a's body is not in the picture
+    assert kill_coverage(match, program, shown).covered.tolist() == [False]  # a's body is not in the picture
     assert kill_coverage(match, program, shown, eyes).covered.tolist() == [True]
     # In the victim's eyes instead, the attacker's eyes rule does not apply.
     swapped = duel()

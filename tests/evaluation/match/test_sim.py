@@ -1,5 +1,6 @@
 """The bot match simulator (evaluation/match/sim.py) and the match file (match_file.py) on a tiny
 hand-built arena, and `camdirector match-sim` on the shared nav_test level."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -25,10 +26,15 @@ SECONDS = 60.0
 
 def arena() -> TriMesh:
     """A walled 40 x 14 m floor (top at y=0) with two 3 m high blocks that break the line of sight."""
-    return boxes(((0, -0.2, 0), (40, 0, 14)),
-                 ((0, 0, -0.1), (40, 3, 0)), ((0, 0, 14), (40, 3, 14.1)),
-                 ((-0.1, 0, 0), (0, 3, 14)), ((40, 0, 0), (40.1, 3, 14)),
-                 ((12, 0, 3), (14, 3, 8)), ((26, 0, 6), (28, 3, 11)))
+    return boxes(
+        ((0, -0.2, 0), (40, 0, 14)),
+        ((0, 0, -0.1), (40, 3, 0)),
+        ((0, 0, 14), (40, 3, 14.1)),
+        ((-0.1, 0, 0), (0, 3, 14)),
+        ((40, 0, 0), (40.1, 3, 14)),
+        ((12, 0, 3), (14, 3, 8)),
+        ((26, 0, 6), (28, 3, 11)),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +57,7 @@ def test_same_seed_same_match_bit_for_bit(artifact, match):
         assert np.array_equal(getattr(again, name), getattr(match, name)), name
     assert [e.as_json() for e in again.events] == [e.as_json() for e in match.events]
     other = simulate_match(artifact, "arena", 6, 10.0, np.random.default_rng(8), 8)
-    assert not np.array_equal(other.positions_world, match.positions_world[:len(other.time_s)])
+    assert not np.array_equal(other.positions_world, match.positions_world[: len(other.time_s)])
 
 
 def test_bots_meet_fight_and_take_objectives(match):
@@ -64,8 +70,9 @@ def test_bots_meet_fight_and_take_objectives(match):
 
 def test_feet_stay_on_the_navmesh_and_speed_is_bounded(artifact, match):
     agent = artifact.settings
-    ground = NavGround(TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces), agent.agent_max_climb_m,
-                       0.5 * agent.navmesh_cell_m, 0.3, 32)
+    ground = NavGround(
+        TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces), agent.agent_max_climb_m, 0.5 * agent.navmesh_cell_m, 0.3, 32
+    )
     feet = match.positions_world[match.alive]
     triangle, height = ground.surface(feet)
     on = triangle >= 0
@@ -150,8 +157,9 @@ def test_file_round_trips_and_refuses_bad_shapes(match, tmp_path):
     back = load_match(tmp_path / "m.npz")
     assert (back.level, back.seed, back.rate_hz, back.players) == (match.level, match.seed, match.rate_hz, match.players)
     for name in ("time_s", "positions_world", "rotations_xyzw", "alive"):
-        assert np.array_equal(getattr(back, name), getattr(match, name)) and getattr(back, name).dtype == getattr(
-            match, name).dtype
+        assert (
+            np.array_equal(getattr(back, name), getattr(match, name)) and getattr(back, name).dtype == getattr(match, name).dtype
+        )
     assert [e.as_json() for e in back.events] == [e.as_json() for e in match.events]
     with pytest.raises(ValueError, match=r"positions_world must be \(F, P, 3\)"):
         dataclasses.replace(match, positions_world=match.positions_world[:, :-1])
@@ -175,16 +183,52 @@ def test_settings_and_arguments_are_checked_once(artifact):
 def test_cli_on_nav_test(shared_data, tmp_path):
     cli_add_level(tmp_path / "data", "nav_test", shared_data / "levels" / "recast" / "nav_test.obj")
     out = tmp_path / "m.npz"
-    done = subprocess.run([sys.executable, "-m", "camdirector.__main__", "match-sim", "--level", "nav_test",
-                           "--players", "10", "--minutes", "1", "--seed", "1", "--out", str(out),
-                           "--data-dir", str(tmp_path / "data")], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camdirector.__main__",
+            "match-sim",
+            "--level",
+            "nav_test",
+            "--players",
+            "10",
+            "--minutes",
+            "1",
+            "--seed",
+            "1",
+            "--out",
+            str(out),
+            "--data-dir",
+            str(tmp_path / "data"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     match = load_match(out)
     assert summary["frames"] == len(match.time_s) == 3600 and len(match.players) == 10
     assert [p.team for p in match.players].count(0) == 5
     assert summary["events"]["kill"] == sum(e.kind == "kill" for e in match.events) >= 5
-    unknown = subprocess.run([sys.executable, "-m", "camdirector.__main__", "match-sim", "--level", "nope", "--out",
-                              str(out), "--data-dir", str(tmp_path / "data")], capture_output=True, text=True,
-                             cwd=ROOT, timeout=120)
+    unknown = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camdirector.__main__",
+            "match-sim",
+            "--level",
+            "nope",
+            "--out",
+            str(out),
+            "--data-dir",
+            str(tmp_path / "data"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert unknown.returncode == 2 and "no level named 'nope'" in unknown.stderr

@@ -1,4 +1,5 @@
 """Measurement on tiny hand-built scenes whose answers are known."""
+
 from __future__ import annotations
 
 import math
@@ -20,20 +21,37 @@ from camdirector.v1 import director_pb2 as pb
 
 TARGET = {"id": "ball", "shape": {"sphere": {"radius": 0.5}}, "position": [0.0, 1.0, 0.0]}
 CAMERA = np.array([0.0, 1.0, -10.0])  # looking at the ball along +Z
-FACING_PLUS_Z = [0.0, 1.0, 0.0, 0.0]   # camera-to-world: half a turn about +Y, so the view (-Z) is +Z
+FACING_PLUS_Z = [0.0, 1.0, 0.0, 0.0]  # camera-to-world: half a turn about +Y, so the view (-Z) is +Z
 
 
 def scene(objects=(), targets=(TARGET,), duration_s=1.0, rate=10.0, **extra):
-    return parse_scenario({"format": FORMAT, "name": "probe", "duration_s": duration_s, "frame_rate_hz": rate,
-                           "targets": list(targets), "objects": list(objects), **extra})
+    return parse_scenario(
+        {
+            "format": FORMAT,
+            "name": "probe",
+            "duration_s": duration_s,
+            "frame_rate_hz": rate,
+            "targets": list(targets),
+            "objects": list(objects),
+            **extra,
+        }
+    )
 
 
 def track(times, positions, cut=None, rotation=FACING_PLUS_Z) -> CameraTrack:
     n = len(times)
-    return CameraTrack(frame=np.arange(1, n + 1), time_s=np.asarray(times, dtype=float),
-                       position=np.asarray(positions, dtype=float), rotation=np.tile(rotation, (n, 1)).astype(float),
-                       vertical_fov_deg=np.full(n, 50.0), cut=np.zeros(n, bool) if cut is None else np.asarray(cut),
-                       shot_id=np.ones(n, int), rig_visibility=np.ones(n), compute_ms=np.ones(n), stage_ms={})
+    return CameraTrack(
+        frame=np.arange(1, n + 1),
+        time_s=np.asarray(times, dtype=float),
+        position=np.asarray(positions, dtype=float),
+        rotation=np.tile(rotation, (n, 1)).astype(float),
+        vertical_fov_deg=np.full(n, 50.0),
+        cut=np.zeros(n, bool) if cut is None else np.asarray(cut),
+        shot_id=np.ones(n, int),
+        rig_visibility=np.ones(n),
+        compute_ms=np.ones(n),
+        stage_ms={},
+    )
 
 
 def visibility_from(camera, objects=(), targets=(TARGET,)) -> float:
@@ -119,8 +137,7 @@ def test_the_occluded_share_counts_frames_not_fully_visible():
 
 def test_dynamic_occluders_move_and_spawn():
     # frame 1 (t=0): the slab is off to the side; frame 2 (t=0.1): between camera and ball
-    slab = box("slab", [2, 2, 0.2], [10, 1, -5], dynamic=True,
-               motion={"position_keys": [[0.0, 10, 1, -5], [0.1, 0, 1, -5]]})
+    slab = box("slab", [2, 2, 0.2], [10, 1, -5], dynamic=True, motion={"position_keys": [[0.0, 10, 1, -5], [0.1, 0, 1, -5]]})
     late = box("late", [2, 2, 0.2], [0, 1, -3], dynamic=True, spawn_s=0.15)  # parked until 0.15 s
     s = scene([slab], duration_s=0.2)
     assert measure_visibility(s, s.timeline(), track([0.0, 0.1, 0.2], [CAMERA] * 3)).pooled.tolist() == [1.0, 0.0, 0.0]
@@ -168,9 +185,16 @@ def test_a_cut_is_counted_not_measured_as_motion():
 
 def test_camera_track_from_updates_drops_stale_replies():
     def update(frame, x, stale=False, cut=False):
-        u = pb.CameraUpdate(frame=frame, time_s=frame / 10, cut=cut, stale=stale, visibility=0.5, compute_ms=2.0,
-                            shot_id=1, pose=pb.CameraPose(position=pb.Vec3(x=x), rotation=pb.Quat(w=1),
-                                                          vertical_fov_deg=50))
+        u = pb.CameraUpdate(
+            frame=frame,
+            time_s=frame / 10,
+            cut=cut,
+            stale=stale,
+            visibility=0.5,
+            compute_ms=2.0,
+            shot_id=1,
+            pose=pb.CameraPose(position=pb.Vec3(x=x), rotation=pb.Quat(w=1), vertical_fov_deg=50),
+        )
         u.diagnostics.stage_ms.update({"ingest": 0.1, "motion": 0.3})
         if frame == 2:
             u.diagnostics.flags.append("degenerate_torus")

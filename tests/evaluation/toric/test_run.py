@@ -1,4 +1,5 @@
 """End to end: scenarios through a real `camdirector serve` session, the CLI, and the suite."""
+
 from __future__ import annotations
 
 import argparse
@@ -19,8 +20,23 @@ SHIPPED = shipped_scenarios()
 def test_columns_gate_runs_through_a_real_session_and_writes_json(server, tmp_path):
     out = tmp_path / "run.json"
     plot = tmp_path / "run.png"
-    rc = cli.main(["eval", "--scenario", str(SHIPPED["columns_gate"]), "--visibility", "FRAMING_ONLY",
-                   "--json", str(out), "--plot", str(plot), "--server", server.grpc, "--duration", "3"])
+    rc = cli.main(
+        [
+            "eval",
+            "--scenario",
+            str(SHIPPED["columns_gate"]),
+            "--visibility",
+            "FRAMING_ONLY",
+            "--json",
+            str(out),
+            "--plot",
+            str(plot),
+            "--server",
+            server.grpc,
+            "--duration",
+            "3",
+        ]
+    )
     assert rc == 0 and plot.stat().st_size > 10_000
     result = json.loads(out.read_text())
     assert (result["status"], result["mode"], result["scenario"]["name"]) == ("ok", "FRAMING_ONLY", "columns_gate")
@@ -52,8 +68,9 @@ def test_stress_scene_with_spawning_cylinders_runs(server):
 
 def test_suite_reports_unimplemented_modes_as_unavailable(server, tmp_path):
     scenario = load_scenario(SHIPPED["forest"])
-    suite = run_suite([scenario], ["ANTICIPATION", "FRAMING_ONLY"], out_dir=tmp_path, server=server.grpc,
-                      duration_s=1.0, plots=True)
+    suite = run_suite(
+        [scenario], ["ANTICIPATION", "FRAMING_ONLY"], out_dir=tmp_path, server=server.grpc, duration_s=1.0, plots=True
+    )
     status = {r.mode: r.status for r in suite.results}
     assert status["FRAMING_ONLY"] == "ok" and status["ANTICIPATION"] in ("ok", "unavailable")
     table = suite.table()

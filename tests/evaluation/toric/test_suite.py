@@ -1,4 +1,5 @@
 """The suite's modes: every visibility mode the style knows, the paper's methods first."""
+
 from __future__ import annotations
 
 from camdirector.evaluation.toric.suite import MODE_LABELS, MODES

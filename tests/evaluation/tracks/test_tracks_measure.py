@@ -1,5 +1,6 @@
 """The frame-aware measure of the TRACKS rig on hand-placed cameras, and the routes through a level's
 tightest corridor and its most open place on a hand-built level of two rooms and a corridor."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +18,7 @@ from tests.precompute.tracks.tiny_levels import boxes, two_rooms
 
 HEIGHT_M = 1.8
 FEET = np.zeros(3)
-LOOK_AT = np.array([0.0, 0.6 * HEIGHT_M, 0.0])   # where the director looks up the actor (look_at_fraction)
+LOOK_AT = np.array([0.0, 0.6 * HEIGHT_M, 0.0])  # where the director looks up the actor (look_at_fraction)
 
 
 def floor() -> TriMesh:
@@ -26,8 +27,14 @@ def floor() -> TriMesh:
 
 def view(camera_world, look_at_world=LOOK_AT, shot_size=ShotSize.LONG, level=None):
     lens = Lens()
-    return frame_view(shot_pose(np.asarray(camera_world, float), look_at_world, lens), lens, FEET,
-                      ActorBody.of_height(HEIGHT_M), shot_size, RayScene([level or floor()]))
+    return frame_view(
+        shot_pose(np.asarray(camera_world, float), look_at_world, lens),
+        lens,
+        FEET,
+        ActorBody.of_height(HEIGHT_M),
+        shot_size,
+        RayScene([level or floor()]),
+    )
 
 
 def test_a_camera_too_close_has_the_actor_in_sight_but_not_in_frame():
@@ -92,7 +99,7 @@ def test_the_tightest_route_runs_through_the_corridor_from_room_to_room(rooms_ro
     tight = rooms_routes["tightest"]
     x, _, z = tight.place_world
     assert 12.0 < x < 20.0 and 4.8 < z < 7.2, tight.place_world
-    assert tight.half_width_m == pytest.approx(1.2, abs=0.02)   # the corridor is 2.4 m wide
+    assert tight.half_width_m == pytest.approx(1.2, abs=0.02)  # the corridor is 2.4 m wide
     ends_x = sorted(tight.polyline_world[[0, -1], 0])
     assert ends_x[0] < 12.0 and ends_x[1] > 20.0, "it runs through, from one room to the other"
     assert np.linalg.norm(tight.polyline_world - tight.place_world, axis=1).min() == pytest.approx(0.0)
@@ -103,7 +110,7 @@ def test_the_open_route_runs_through_a_room(rooms_routes):
     wide = rooms_routes["open"]
     x, _, z = wide.place_world
     assert (x < 12.0 or x > 20.0) and 0.0 < z < 12.0, wide.place_world
-    assert wide.half_width_m == pytest.approx(6.0, abs=0.05)   # the rooms are 12 m across
+    assert wide.half_width_m == pytest.approx(6.0, abs=0.05)  # the rooms are 12 m across
     assert np.linalg.norm(wide.polyline_world - wide.place_world, axis=1).min() == pytest.approx(0.0)
     assert 15.0 <= _length_m(wide.polyline_world) <= 20.5
 

@@ -14,6 +14,7 @@ after; the top view drawn over the world seen from above.
 Where Chromium is absent (a clone without root, so `make test` could not install it) the tests skip
 with the reason; `.ci/run` sets CAMDIRECTOR_REQUIRE_BROWSER=1, which makes that a failure.
 """
+
 from __future__ import annotations
 
 import base64
@@ -61,23 +62,25 @@ def page(browser, server):
     page.set_default_timeout(TIMEOUT_MS)
     errors = []
     page.on("pageerror", lambda error: errors.append(str(error)))
-    page.goto(f"http://{server.http}/")                     # redirected to /dashboard/
+    page.goto(f"http://{server.http}/")  # redirected to /dashboard/
     yield page
     context.close()
     assert not errors, f"the page raised: {errors}"
 
 
 def canvas_has_drawing(page, selector: str) -> bool:
-    return page.eval_on_selector(selector, """c => {
+    return page.eval_on_selector(
+        selector,
+        """c => {
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
         for (let i = 3; i < d.length; i += 4) if (d[i] > 0) return true;
-        return false; }""")
+        return false; }""",
+    )
 
 
 def test_watch_a_session_and_change_its_style_live(server, page):
     raw = GrpcRaw(server.grpc)
-    session_id = raw.call("CreateSession", two_target_request(seed=5, style=pb.Style(
-        visibility=pb.FRAMING_ONLY))).session_id
+    session_id = raw.call("CreateSession", two_target_request(seed=5, style=pb.Style(visibility=pb.FRAMING_ONLY))).session_id
     raw.stream(list(walk(session_id, 90)))
     try:
         assert page.url.endswith("/dashboard/")
@@ -98,20 +101,21 @@ def test_watch_a_session_and_change_its_style_live(server, page):
         playwright.expect(page.locator("#why li").first).to_contain_text("search_")
         playwright.expect(page.locator("#style-json")).to_contain_text('"preferredPhiDeg": 50')
 
-        page.fill('#style-form input[name="preferredPhiDeg"]', "500")      # the form's own limit holds it back
+        page.fill('#style-form input[name="preferredPhiDeg"]', "500")  # the form's own limit holds it back
         page.click("#style-form button[type=submit]")
         assert page.eval_on_selector('#style-form input[name="preferredPhiDeg"]', "i => !i.validity.valid")
         page.fill('#style-form input[name="preferredPhiDeg"]', "50")
-        page.fill('#style-form input[name="maxSpeedMS"]', "0")              # the server refuses it
+        page.fill('#style-form input[name="maxSpeedMS"]', "0")  # the server refuses it
         page.click("#style-form button[type=submit]")
         playwright.expect(page.locator("#style-result")).to_contain_text("422")
         playwright.expect(page.locator("#style-result")).to_contain_text("max_speed_m_s")
         assert page.get_attribute("#style-result", "class") == "error"
-        more = raw.stream(list(walk(session_id, 3, start_frame=101)))     # the session goes on as it was
+        more = raw.stream(list(walk(session_id, 3, start_frame=101)))  # the session goes on as it was
         assert [u.frame for u in more] == [101, 102, 103] and all(
-            any(f.startswith("search_") for f in u.diagnostics.flags) for u in more)
+            any(f.startswith("search_") for f in u.diagnostics.flags) for u in more
+        )
 
-        playwright.expect(page.locator("#amap-figure")).to_be_hidden()      # RAYCAST builds no map
+        playwright.expect(page.locator("#amap-figure")).to_be_hidden()  # RAYCAST builds no map
         page.fill('#style-form input[name="maxSpeedMS"]', "")
         page.select_option('#style-form select[name="visibility"]', "ANTICIPATION")
         page.click("#style-form button[type=submit]")
@@ -125,13 +129,16 @@ def test_watch_a_session_and_change_its_style_live(server, page):
     playwright.expect(page.locator("#shot-summary")).to_have_text("the session has ended")
 
 
-FRAMING_RGB = (0xE0, 0x40, 0xFB)   # framing.js FRAMING_COLOUR (the dashboard): the strip's framing line and the top view's marks
+FRAMING_RGB = (0xE0, 0x40, 0xFB)  # framing.js FRAMING_COLOUR (the dashboard): the strip's framing line and the top view's marks
 
 
 def framing_pixels(page, selector: str) -> tuple[int, int | None]:
     """How many pixels of a canvas are drawn in the framing colour, and the topmost row holding one
     (None when none is)."""
-    return tuple(page.eval_on_selector(selector, """(c, [r, g, b]) => {
+    return tuple(
+        page.eval_on_selector(
+            selector,
+            """(c, [r, g, b]) => {
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
         let count = 0, top = null;
         for (let i = 0; i < d.length; i += 4) {
@@ -140,7 +147,10 @@ def framing_pixels(page, selector: str) -> tuple[int, int | None]:
                 if (top === null) top = Math.floor(i / 4 / c.width);
             }
         }
-        return [count, top]; }""", list(FRAMING_RGB)))
+        return [count, top]; }""",
+            list(FRAMING_RGB),
+        )
+    )
 
 
 def test_a_director_sees_where_the_framing_was_lost(server, page):
@@ -150,16 +160,29 @@ def test_a_director_sees_where_the_framing_was_lost(server, page):
     wall_size = (2.5, 2.5, 0.1)
     parked = (100.0, 1.5, 100.0)
     request = two_target_request(seed=6, style=pb.Style(visibility=pb.REACTIVE))
-    del request.objects[:]                                                 # no pillar or cart: only the wall
+    del request.objects[:]  # no pillar or cart: only the wall
     request.objects.append(box_object("wall", parked, wall_size, dynamic=True))
     raw = GrpcRaw(server.grpc)
     session_id = raw.call("CreateSession", request).session_id
 
     def wall_at(first: int, n: int, position, yaw_rad: float = 0.0) -> list[pb.FrameUpdate]:
-        return [pb.FrameUpdate(session_id=session_id, frame=i, time_s=i / 60.0, states=[pb.ObjectState(
-            id="wall", transform=pb.Transform(position=pb.Vec3(x=position[0], y=position[1], z=position[2]),
-                                              rotation=pb.Quat(y=np.sin(yaw_rad / 2), w=np.cos(yaw_rad / 2))))])
-                for i in range(first, first + n)]
+        return [
+            pb.FrameUpdate(
+                session_id=session_id,
+                frame=i,
+                time_s=i / 60.0,
+                states=[
+                    pb.ObjectState(
+                        id="wall",
+                        transform=pb.Transform(
+                            position=pb.Vec3(x=position[0], y=position[1], z=position[2]),
+                            rotation=pb.Quat(y=np.sin(yaw_rad / 2), w=np.cos(yaw_rad / 2)),
+                        ),
+                    )
+                ],
+            )
+            for i in range(first, first + n)
+        ]
 
     try:
         clear = raw.stream(wall_at(1, 40, parked))
@@ -167,33 +190,35 @@ def test_a_director_sees_where_the_framing_was_lost(server, page):
         summary = page.locator("#shot-summary")
         playwright.expect(summary).to_contain_text("frames 1–40")
         playwright.expect(summary).to_contain_text("framing error 0.00 now, at most 0.00, lost (above 0.5) in 0 frames")
-        assert framing_pixels(page, "#topview")[0] == 0                 # nothing lost: no mark
+        assert framing_pixels(page, "#topview")[0] == 0  # nothing lost: no mark
         clear_line = framing_pixels(page, "#timeline")
-        assert clear_line[0] > 0                                         # the error's line, along the band's floor
+        assert clear_line[0] > 0  # the error's line, along the band's floor
 
         p = clear[-1].pose.position
         a_world, camera_world = np.array([0.0, 1.5, 0.0]), np.array([p.x, p.y, p.z])
         spot = a_world + 0.3 * (camera_world - a_world)
         to_camera = camera_world - a_world
-        yaw_rad = np.arctan2(to_camera[0], to_camera[2])                    # the wall square to the line
+        yaw_rad = np.arctan2(to_camera[0], to_camera[2])  # the wall square to the line
         blocked = raw.stream(wall_at(41, 40, spot, yaw_rad))
         assert all("pulled_in" in u.diagnostics.flags for u in blocked)
         frames = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", timeout=30.0).json()["frames"]
         lost = [f["framing_error"] for f in frames if f["framing_error"] > 0.5]
-        assert len(lost) == 40 and min(lost) > 0.8                        # B is out of the frame
+        assert len(lost) == 40 and min(lost) > 0.8  # B is out of the frame
         playwright.expect(summary).to_contain_text("frames 1–80")
         playwright.expect(summary).to_contain_text(
-            f"framing error {frames[-1]['framing_error']:.2f} now, at most {max(lost):.2f}, lost (above 0.5) in 40 frames")
-        assert framing_pixels(page, "#topview")[0] > 0                   # the pulled-in camera places are marked
-        assert framing_pixels(page, "#timeline")[1] < clear_line[1]      # the error's line rose off the floor
+            f"framing error {frames[-1]['framing_error']:.2f} now, at most {max(lost):.2f}, lost (above 0.5) in 40 frames"
+        )
+        assert framing_pixels(page, "#topview")[0] > 0  # the pulled-in camera places are marked
+        assert framing_pixels(page, "#timeline")[1] < clear_line[1]  # the error's line rose off the floor
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
 
 
 def test_submit_an_overview_job_and_watch_its_preview(server, page, shared_data, tmp_path):
-    page.set_input_files('#overview-form input[name="file"]',
-                         str(shared_data / "mocap/bandai_namco/dataset-1_run_active_001.bvh"))
+    page.set_input_files(
+        '#overview-form input[name="file"]', str(shared_data / "mocap/bandai_namco/dataset-1_run_active_001.bvh")
+    )
     page.click("#overview-form button[type=submit]")
     playwright.expect(page.locator("#overview-result")).to_contain_text("queued")
     job_id = page.text_content("#overview-result").split()[1]
@@ -216,8 +241,7 @@ def test_submit_an_overview_job_and_watch_its_preview(server, page, shared_data,
 def corridor_session(server, http: httpx.Client, level_name: str, walk_s: float) -> tuple[GrpcRaw, str]:
     """A corridor level added over REST, and a TRACKS session in it that streamed `walk_s` s of
     the actor walking: (its gRPC client, its id)."""
-    added = http.post("/v1/levels", data={"name": level_name},
-                      files={"level": ("corridor.obj", obj_text(corridor()).encode())})
+    added = http.post("/v1/levels", data={"name": level_name}, files={"level": ("corridor.obj", obj_text(corridor()).encode())})
     assert added.status_code == 202, added.text
     deadline = time.monotonic() + 60.0
     while http.get(f"/v1/level-jobs/{added.json()['id']}").json()["status"] != "succeeded":
@@ -237,8 +261,9 @@ def test_a_tracks_session_shows_the_scores_of_its_targets(server, page):
         page.click(f'#sessions tbody tr[data-session="{session_id}"]')
         playwright.expect(page.locator("#why li").last).to_contain_text("tracks_cut_first_shot; target scored shot size")
         playwright.expect(page.locator("#why li").first).to_contain_text("graph distance")
-        playwright.expect(page.locator("#shot-summary")).to_contain_text(     # the tracks rig's framing error
-            re.compile(r"framing error \d+\.\d\d now, at most \d+\.\d\d"))
+        playwright.expect(page.locator("#shot-summary")).to_contain_text(  # the tracks rig's framing error
+            re.compile(r"framing error \d+\.\d\d now, at most \d+\.\d\d")
+        )
         assert framing_pixels(page, "#timeline")[0] > 0
         assert page.eval_on_selector("#toric-fields", "f => f.disabled")
         playwright.expect(page.locator("#match-fields")).to_be_hidden()
@@ -276,7 +301,7 @@ def test_a_director_takes_a_candidate_holds_it_and_sees_the_fallback(server, pag
         playwright.expect(page.locator("#release")).to_be_visible()
 
         victim = subjects[0]
-        attacker = next(p for p in PLAYERS if p[0] != victim[0])         # an opponent kills the held player
+        attacker = next(p for p in PLAYERS if p[0] != victim[0])  # an opponent kills the held player
         died = raw.stream(list(match_frames(session_id, 60, start=150, kill_at={160: (attacker, victim)})))
         fallback = f"take fallback: held player {victim} died (killed by {attacker}); following {attacker}"
         assert died[-1].shot.reason == fallback and list(died[-1].shot.subject_ids) == [attacker]
@@ -298,7 +323,8 @@ def test_a_director_takes_a_candidate_holds_it_and_sees_the_fallback(server, pag
         director = page.locator('#style-form select[name="matchDirectorName"]')
         directors = httpx.get(f"http://{server.http}/v1/match-directors").json()["directors"]
         assert director.evaluate("s => [...s.options].map((o) => [o.value, o.text])") == [
-            [d["name"], d["label"]] for d in directors]
+            [d["name"], d["label"]] for d in directors
+        ]
         playwright.expect(director).to_have_value("planned")
         page.select_option('#style-form select[name="matchDirectorName"]', "hltv")
         page.fill('#style-form input[name="maxShotS"]', "6")
@@ -306,12 +332,13 @@ def test_a_director_takes_a_candidate_holds_it_and_sees_the_fallback(server, pag
         playwright.expect(page.locator("#style-result")).to_have_text("applied")
         style = httpx.get(f"http://{server.http}/v1/sessions/{session_id}").json()["style"]
         assert style["matchDirectorName"] == "hltv" and style["maxShotS"] == 6 and style["rig"] == "RIG_MATCH"
-        assert "visibility" not in style   # nothing of the Toric rig's was sent
+        assert "visibility" not in style  # nothing of the Toric rig's was sent
         # A style that names its director by the wire's enum only shows the director of that enum.
-        httpx.put(f"http://{server.http}/v1/sessions/{session_id}/style",
-                  json={"rig": "RIG_MATCH", "matchDirector": "MATCH_DIRECTOR_AUTOTRACK"}).raise_for_status()
-        playwright.expect(director).to_have_value(
-            next(d["name"] for d in directors if d["wire"] == "MATCH_DIRECTOR_AUTOTRACK"))
+        httpx.put(
+            f"http://{server.http}/v1/sessions/{session_id}/style",
+            json={"rig": "RIG_MATCH", "matchDirector": "MATCH_DIRECTOR_AUTOTRACK"},
+        ).raise_for_status()
+        playwright.expect(director).to_have_value(next(d["name"] for d in directors if d["wire"] == "MATCH_DIRECTOR_AUTOTRACK"))
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
@@ -322,7 +349,7 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
     session_id = raw.call("CreateSession", match_request(delay_s=3.0)).session_id
     try:
         playwright.expect(page.locator(f'#sessions tbody tr[data-session="{session_id}"]')).to_be_visible()
-        raw.stream(list(match_frames(session_id, 30)))                   # less than the delay
+        raw.stream(list(match_frames(session_id, 30)))  # less than the delay
         page.click(f'#sessions tbody tr[data-session="{session_id}"]')
         playwright.expect(page.locator("#program-shot")).to_contain_text("buffering")
         shown = set(raw.stream(list(match_frames(session_id, 120, start=30)))[-1].shot.subject_ids)
@@ -338,8 +365,8 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
         first = next(u for u in program if u.shot.reason.startswith("planned kill"))
         # the DUEL's cut frames the attacker alone until the pair's window before the kill (pipeline/match/shots.py)
         assert list(first.shot.subject_ids) == [attacker] and first.cut and f"{attacker} alone" in first.shot.reason
-        assert first.time_s == pytest.approx(cut_s, abs=0.15)            # as announced, within a planning tick
-        assert first.time_s <= 210 / RATE_HZ - 1.0                        # and not in the last second before it
+        assert first.time_s == pytest.approx(cut_s, abs=0.15)  # as announced, within a planning tick
+        assert first.time_s <= 210 / RATE_HZ - 1.0  # and not in the last second before it
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
@@ -347,8 +374,8 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
 
 # -- the monitors (issue 16) ------------------------------------------------------------------
 
-MONITOR_SHAPE = (180, 320, 3)   # monitors.js MONITOR_WIDTH_PX (the dashboard), at the default lens's 16:9
-SAME_PICTURE = 4.0              # mean absolute difference (0-255) under which two pictures show one frame: JPEG's own is ~1-2
+MONITOR_SHAPE = (180, 320, 3)  # monitors.js MONITOR_WIDTH_PX (the dashboard), at the default lens's 16:9
+SAME_PICTURE = 4.0  # mean absolute difference (0-255) under which two pictures show one frame: JPEG's own is ~1-2
 
 
 def shown_pixels(img) -> np.ndarray:
@@ -356,13 +383,15 @@ def shown_pixels(img) -> np.ndarray:
     picture is the page's own origin's, so the canvas stays readable) and brought back losslessly;
     waits for a first picture."""
     deadline = time.monotonic() + TIMEOUT_MS / 1000
-    while (url := img.evaluate("""img => {
+    while (
+        url := img.evaluate("""img => {
             if (!img.naturalWidth) return null;
             const c = document.createElement('canvas');
             c.width = img.naturalWidth;
             c.height = img.naturalHeight;
             c.getContext('2d').drawImage(img, 0, 0);
-            return c.toDataURL('image/png'); }""")) is None:
+            return c.toDataURL('image/png'); }""")
+    ) is None:
         assert time.monotonic() < deadline, "the monitor shows no picture"
         time.sleep(0.1)
     return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"))
@@ -399,7 +428,7 @@ def pixel_at(pixels: np.ndarray, screen) -> np.ndarray:
     h, w = pixels.shape[:2]
     col, row = int((screen[0] + 1.0) / 2.0 * w), int((1.0 - screen[1]) / 2.0 * h)
     assert 1 <= col < w - 1 and 1 <= row < h - 1, f"{screen} is off the picture"
-    return np.median(pixels[row - 1:row + 2, col - 1:col + 2].reshape(-1, 3), axis=0)
+    return np.median(pixels[row - 1 : row + 2, col - 1 : col + 2].reshape(-1, 3), axis=0)
 
 
 def orange_like(rgb) -> bool:
@@ -424,7 +453,7 @@ def test_the_program_monitor_shows_the_camera_view_live(server, page):
     session streams; once it stops, it is the server's picture of the last frame, with each target
     in its orange where the last CameraUpdate's pose projects it, and no orange away from them."""
     request = two_target_request(seed=5, style=pb.Style(visibility=pb.FRAMING_ONLY))
-    del request.objects[0]                                   # no pillar: FRAMING_ONLY would film it
+    del request.objects[0]  # no pillar: FRAMING_ONLY would film it
     request.objects.append(box_object("ground", (0.0, -0.05, 4.0), (24.0, 0.1, 24.0)))
     raw = GrpcRaw(server.grpc)
     http = httpx.Client(base_url=f"http://{server.http}", timeout=30.0)
@@ -434,31 +463,32 @@ def test_the_program_monitor_shows_the_camera_view_live(server, page):
         page.click(f'#sessions tbody tr[data-session="{session_id}"]')
         program = page.locator("#program-view")
         playwright.expect(program).to_have_attribute(
-            "src", re.compile(rf"/v1/sessions/{session_id}/view\.mjpeg\?fps=4&width=320$"))
+            "src", re.compile(rf"/v1/sessions/{session_id}/view\.mjpeg\?fps=4&width=320$")
+        )
         first = served_view(http, session_id, 60)
         before = wait_for_picture(program, lambda p: difference(p, first) < SAME_PICTURE, "the monitor never showed frame 60")
         assert before.shape == MONITOR_SHAPE
-        playwright.expect(page.locator("#cut-caption")).to_have_text(   # the first pose has nothing before it
-            "Nothing to show: no cut yet.")
+        playwright.expect(page.locator("#cut-caption")).to_have_text(  # the first pose has nothing before it
+            "Nothing to show: no cut yet."
+        )
 
         streamed = list(walk(session_id, 60, start_frame=61))
         updates = raw.stream(streamed)
         last = served_view(http, session_id, 120)
-        assert difference(last, first) > 3 * SAME_PICTURE                  # a second on, another picture
-        shown = wait_for_picture(program, lambda p: difference(p, last) < SAME_PICTURE,
-                                 "the live monitor never showed frame 120")
+        assert difference(last, first) > 3 * SAME_PICTURE  # a second on, another picture
+        shown = wait_for_picture(program, lambda p: difference(p, last) < SAME_PICTURE, "the live monitor never showed frame 120")
 
         update = updates[-1]
         assert update.frame == 120
         lens = Lens(vertical_fov_deg=update.pose.vertical_fov_deg, aspect=MONITOR_SHAPE[1] / MONITOR_SHAPE[0])
-        a, b = position(streamed[-1], "a"), np.array([3.0, 0.9, 1.0])       # b stands still
-        centres = np.array([a, a + [0.0, 0.6, 0.0], b, b + [0.0, 0.6, 0.0]])   # bodies and aim points
+        a, b = position(streamed[-1], "a"), np.array([3.0, 0.9, 1.0])  # b stands still
+        centres = np.array([a, a + [0.0, 0.6, 0.0], b, b + [0.0, 0.6, 0.0]])  # bodies and aim points
         screen = project_to_screen(pose_of(update), lens, centres)
         for point, at in zip(centres, screen):
             assert orange_like(pixel_at(shown, at)), f"{point} at {at}: {pixel_at(shown, at)} is not the targets' orange"
         corners = np.array([[-0.95, 0.95], [0.95, 0.95], [-0.95, -0.95], [0.95, -0.95]])
         far = corners[np.argmax([np.linalg.norm(screen - c, axis=1).min() for c in corners])]
-        assert not orange_like(pixel_at(shown, far)), f"{far}: {pixel_at(shown, far)}"   # ground, sky or the cart
+        assert not orange_like(pixel_at(shown, far)), f"{far}: {pixel_at(shown, far)}"  # ground, sky or the cart
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
@@ -492,8 +522,11 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
             assert row.get_attribute("data-subjects") == subjects
             assert row.locator("img").get_attribute("data-subjects") == subjects
             assert f"&frame={frame['frame']}" in row.locator("img").get_attribute("src")
-            for text in (candidate["shot"]["kind"].replace("SHOT_", ""), candidate["shot"]["reason"],
-                         f"interest {candidate['score']:.2f}"):
+            for text in (
+                candidate["shot"]["kind"].replace("SHOT_", ""),
+                candidate["shot"]["reason"],
+                f"interest {candidate['score']:.2f}",
+            ):
                 playwright.expect(row).to_contain_text(text)
             assert row.locator("button").count() == 1
 
@@ -505,8 +538,10 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         # picture as now, and with the horizon level (match/shots.py) a duelist followed from beside
         # the duel shows much of what the duel shows. Level pictures of four capsules against the
         # sky differ less than the rolled duel did: "another picture" is 2 SAME_PICTURE here.
-        pictures = [served_view(http, session_id, frame["frame"], shot="candidate",
-                                subjects=",".join(c["shot"]["subject_ids"])) for c in listed]
+        pictures = [
+            served_view(http, session_id, frame["frame"], shot="candidate", subjects=",".join(c["shot"]["subject_ids"]))
+            for c in listed
+        ]
         chosen = int(np.argmax([difference(p, before) for p in pictures]))
         taken = listed[chosen]["shot"]["subject_ids"]
         candidate_monitor = rows.nth(chosen).locator("img")
@@ -523,13 +558,14 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         frames = http.get(f"/v1/sessions/{session_id}").json()["frames"]
         assert frames[-1]["frame"] == update.frame and frames[-1]["shot"]["subject_ids"] == taken
         now = served_view(http, session_id, update.frame)
-        after = wait_for_picture(program, lambda p: difference(p, now) < SAME_PICTURE,
-                                 "the program monitor never showed the take")
+        after = wait_for_picture(
+            program, lambda p: difference(p, now) < SAME_PICTURE, "the program monitor never showed the take"
+        )
         assert difference(after, before) > 2 * SAME_PICTURE
         assert difference(after, candidate) < difference(after, before)
 
         player = taken[0]
-        moment = next(u for u in streamed + more if u.frame == update.frame)   # the program's moment
+        moment = next(u for u in streamed + more if u.frame == update.frame)  # the program's moment
         feet = position(moment, player)
         lens = Lens(vertical_fov_deg=update.pose.vertical_fov_deg, aspect=MONITOR_SHAPE[1] / MONITOR_SHAPE[0])
         team_colour = orange_like if player.startswith("a") else purple_like
@@ -540,13 +576,16 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         cut = next(f for f in frames if f["cut"] and f["shot"]["subject_ids"] == taken)
         playwright.expect(page.locator("#cut-caption")).to_have_text(
             f"Cut at frame {cut['frame']} (from frame {cut['frame'] - 1}) to shot {cut['shot_id']}: "
-            "take: a human's choice, held until released.")
+            "take: a human's choice, held until released."
+        )
         pair = {}
         for shot, shown_frame in (("cut_before", cut["frame"] - 1), ("cut_after", cut["frame"])):
             pair[shot] = served = served_view(http, session_id, shown_frame, shot=shot)
-            wait_for_picture(page.locator(f"#{shot.replace('_', '-')}"),
-                             lambda p, served=served: difference(p, served) < SAME_PICTURE,
-                             f"the {shot} monitor does not show frame {shown_frame}")
+            wait_for_picture(
+                page.locator(f"#{shot.replace('_', '-')}"),
+                lambda p, served=served: difference(p, served) < SAME_PICTURE,
+                f"the {shot} monitor does not show frame {shown_frame}",
+            )
         # The program's camera as it was (the players drawn as of the cut: a frame on, render/snapshots.py).
         assert difference(pair["cut_before"], before) < 2 * SAME_PICTURE
         assert difference(pair["cut_after"], before) > 2 * SAME_PICTURE
@@ -556,7 +595,7 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         http.close()
 
 
-LEVEL_RGB_MIN = 60   # the level's beige (render/snapshots.py LEVEL_RGB) lit from above: no channel darker
+LEVEL_RGB_MIN = 60  # the level's beige (render/snapshots.py LEVEL_RGB) lit from above: no channel darker
 
 
 def test_the_top_view_shows_the_level(server, page):
@@ -570,7 +609,7 @@ def test_the_top_view_shows_the_level(server, page):
         assert reply.status_code == 200
         world = [float(v) for v in reply.headers["X-Camdirector-Bounds-M"].split(",")]
         top = np.asarray(Image.open(io.BytesIO(reply.content)).convert("RGB"))
-        assert world[0] < 0.0 and world[2] > 30.0 and world[1] < 0.0 and world[3] > 4.0   # the corridor, 30 x 4 m
+        assert world[0] < 0.0 and world[2] > 30.0 and world[1] < 0.0 and world[3] > 4.0  # the corridor, 30 x 4 m
 
         page.click(f'#sessions tbody tr[data-session="{session_id}"]')
         page.wait_for_function("(JSON.parse(document.querySelector('#topview').dataset.bounds || '{}').world)")
@@ -580,8 +619,9 @@ def test_the_top_view_shows_the_level(server, page):
 
         def canvas_rgba(x_m: float, z_m: float) -> list[int]:
             col, row = int((x_m - drawn["x0"]) * drawn["scale"]), int((z_m - drawn["z0"]) * drawn["scale"])
-            return page.eval_on_selector("#topview", "(c, [x, y]) => [...c.getContext('2d').getImageData(x, y, 1, 1).data]",
-                                         [col, row])
+            return page.eval_on_selector(
+                "#topview", "(c, [x, y]) => [...c.getContext('2d').getImageData(x, y, 1, 1).data]", [col, row]
+            )
 
         def picture_rgb(x_m: float, z_m: float) -> np.ndarray:
             h, w = top.shape[:2]
@@ -592,7 +632,7 @@ def test_the_top_view_shows_the_level(server, page):
             rgba = canvas_rgba(x_m, z_m)
             assert rgba[3] == 255 and min(rgba[:3]) >= LEVEL_RGB_MIN and max(rgba[:3]) < 250, (x_m, z_m, rgba)
             assert np.abs(np.array(rgba[:3]) - picture_rgb(x_m, z_m)).max() <= 12, (x_m, z_m, rgba)
-        assert canvas_rgba(21.0, 1.0)[:3] != canvas_rgba(23.0, 1.0)[:3]   # the checker: neighbouring squares differ
+        assert canvas_rgba(21.0, 1.0)[:3] != canvas_rgba(23.0, 1.0)[:3]  # the checker: neighbouring squares differ
         playwright.expect(page.locator("figure", has=page.locator("#topview"))).to_contain_text("the world underneath")
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))

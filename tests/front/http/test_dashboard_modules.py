@@ -3,6 +3,7 @@ whose static imports reach every module of the folder, each import naming someth
 exports, with no cycle among them; the server serves each with a JavaScript content type (a
 browser refuses a module served otherwise); and the wheel's package data takes every file of the
 folder. The browser tests (test_dashboard.py) run them."""
+
 from __future__ import annotations
 
 import re
@@ -17,7 +18,7 @@ import pytest
 import camdirector.front.http
 
 ROOT = Path(__file__).resolve().parents[3]
-DASHBOARD_DIR = Path(camdirector.front.http.__file__).with_name("dashboard")   # as front/http/app.py serves it
+DASHBOARD_DIR = Path(camdirector.front.http.__file__).with_name("dashboard")  # as front/http/app.py serves it
 IMPORT = re.compile(r'^import \{([^}]*)\} from "\./([^"]+)";$', re.MULTILINE)
 JAVASCRIPT_TYPES = ("text/javascript", "application/javascript")
 
@@ -48,13 +49,14 @@ def reached() -> dict[str, dict[str, list[str]]]:
 
 def test_the_entry_reaches_every_module_and_each_import_is_exported():
     graph = reached()
-    assert set(graph) == {p.name for p in DASHBOARD_DIR.glob("*.js")}   # none left unreached
+    assert set(graph) == {p.name for p in DASHBOARD_DIR.glob("*.js")}  # none left unreached
     for module, targets in graph.items():
         for target, names in targets.items():
             text = (DASHBOARD_DIR / target).read_text()
             for name in names:
                 assert re.search(rf"^export (?:async )?(?:function|const|class) {name}\b", text, re.MULTILINE), (
-                    f"{module} imports {name} from {target}, which does not export it")
+                    f"{module} imports {name} from {target}, which does not export it"
+                )
 
 
 def test_the_modules_import_each_other_without_a_cycle():

@@ -2,6 +2,7 @@
 session on it works; every bad upload answers its 4xx with a reason and leaves the registry as it
 was; a cancelled job writes nothing and a removed level serves no new session; all while a TRACKS
 session beside them keeps working."""
+
 from __future__ import annotations
 
 import math
@@ -33,8 +34,9 @@ def level_server(tmp_path_factory):
 
 
 def post_level(srv, name: str, content: bytes, file_name: str = "level.obj", **form):
-    return srv.http_client.post("/v1/levels", data={"name": name, **{k: str(v) for k, v in form.items()}},
-                                files={"level": (file_name, content)})
+    return srv.http_client.post(
+        "/v1/levels", data={"name": name, **{k: str(v) for k, v in form.items()}}, files={"level": (file_name, content)}
+    )
 
 
 def wait_job(srv, job_id: str, timeout_s: float = 60.0) -> tuple[dict, list[float]]:
@@ -86,21 +88,24 @@ def test_a_level_added_over_rest_serves_a_session(level_server, corridor_level):
     assert len(detail["frames"][-1]["targets"]) == 1
     assert all(math.isfinite(f["framing_error"]) and f["framing_error"] >= 0.0 for f in detail["frames"])
     first = http.get(f"/v1/sessions/{session_id}", params={"after_frame": 0, "last": 600}).json()["frames"][0]
-    assert first["cut"] and set(first["scores"]) == {"shot_size", "direct_visibility", "indirect_visibility",
-                                                      "total"}            # the first shot: no continuity terms
+    assert first["cut"] and set(first["scores"]) == {
+        "shot_size",
+        "direct_visibility",
+        "indirect_visibility",
+        "total",
+    }  # the first shot: no continuity terms
     moving = [f["scores"] for f in detail["frames"] if f["scores"] and not f["cut"]]
-    assert moving and all(set(m) == {"shot_size", "direct_visibility", "indirect_visibility", "graph_distance",
-                                     "total"} for m in moving)
+    assert moving and all(
+        set(m) == {"shot_size", "direct_visibility", "indirect_visibility", "graph_distance", "total"} for m in moving
+    )
     assert all(0.0 <= v <= 1.0 for m in moving for v in m.values())
     refused = http.put(f"/v1/sessions/{session_id}/style", json={"shotSize": "SHOT_SIZE_MEDIUM"})
-    assert refused.status_code == 409 and "RIG_TRACKS" in refused.json()["detail"]   # the rig cannot change
-    assert http.get(f"/v1/sessions/{session_id}/amap.png").status_code == 409       # no maps on tracks
-    changed = http.put(f"/v1/sessions/{session_id}/style",
-                       json={"rig": "RIG_TRACKS", "shotSize": "SHOT_SIZE_MEDIUM"})
+    assert refused.status_code == 409 and "RIG_TRACKS" in refused.json()["detail"]  # the rig cannot change
+    assert http.get(f"/v1/sessions/{session_id}/amap.png").status_code == 409  # no maps on tracks
+    changed = http.put(f"/v1/sessions/{session_id}/style", json={"rig": "RIG_TRACKS", "shotSize": "SHOT_SIZE_MEDIUM"})
     assert changed.status_code == 200, changed.text
     more_times, more_feet = corridor_walk(1.0)
-    after = raw.stream(actor_frames(session_id, more_times + times[-1] + 1 / 30, more_feet,
-                                    start_frame=len(times) + 1))
+    after = raw.stream(actor_frames(session_id, more_times + times[-1] + 1 / 30, more_feet, start_frame=len(times) + 1))
     assert len(after) == len(more_times) and not any(u.stale for u in after)
     assert http.get(f"/v1/sessions/{session_id}").json()["style"]["shotSize"] == "SHOT_SIZE_MEDIUM"
     raw.close()
@@ -114,8 +119,11 @@ def canary(level_server, corridor_level):
 
 
 def artifact_files(srv) -> set[str]:
-    return {p.name for p in (srv.data_dir / "levels").iterdir() if p.name != "index.sqlite3" and "-wal" not in p.name
-            and "-shm" not in p.name}
+    return {
+        p.name
+        for p in (srv.data_dir / "levels").iterdir()
+        if p.name != "index.sqlite3" and "-wal" not in p.name and "-shm" not in p.name
+    }
 
 
 def test_bad_uploads_answer_4xx_and_write_nothing(level_server, canary):
@@ -197,11 +205,14 @@ def test_cancelled_jobs_and_removed_levels(level_server, canary):
     finished = http.delete(f"/v1/level-jobs/{blocker.json()['id']}")
     assert finished.status_code == 409 and "already succeeded" in finished.json()["detail"]
     assert http.delete("/v1/level-jobs/no-such-job").status_code == 404
-    listed = http.get("/v1/level-jobs").json()["jobs"]        # newest first, with the level's name
+    listed = http.get("/v1/level-jobs").json()["jobs"]  # newest first, with the level's name
     assert [(j["id"], j["name"], j["status"]) for j in listed[:2]] == [
-        (replacing.json()["id"], "gone", "cancelled"), (blocker.json()["id"], "blocker", "succeeded")]
-    assert [j["id"] for j in http.get("/v1/level-jobs", params={"status": "cancelled"}).json()["jobs"]] \
-        == [replacing.json()["id"]]
+        (replacing.json()["id"], "gone", "cancelled"),
+        (blocker.json()["id"], "blocker", "succeeded"),
+    ]
+    assert [j["id"] for j in http.get("/v1/level-jobs", params={"status": "cancelled"}).json()["jobs"]] == [
+        replacing.json()["id"]
+    ]
     assert http.get("/v1/level-jobs", params={"status": "done"}).status_code == 422
     # the overview routes share the job store but do not see level jobs
     assert http.get("/v1/overview-jobs").json()["jobs"] == []
@@ -217,8 +228,13 @@ def test_cancelled_jobs_and_removed_levels(level_server, canary):
     assert "gone" not in {level["name"] for level in http.get("/v1/levels").json()["levels"]}
     assert len(before - artifact_files(level_server)) == 1 and not artifact_files(level_server) - before
     assert http.delete("/v1/levels/gone").status_code == 404
-    expect(grpc.StatusCode.NOT_FOUND, raw.call, "CreateSession", tracks_request("gone", START),
-           contains="'gone' is not in this server's level registry")
-    times, feet = corridor_walk(1.0, speed_m_s=1.0)   # the session made before keeps its copy
+    expect(
+        grpc.StatusCode.NOT_FOUND,
+        raw.call,
+        "CreateSession",
+        tracks_request("gone", START),
+        contains="'gone' is not in this server's level registry",
+    )
+    times, feet = corridor_walk(1.0, speed_m_s=1.0)  # the session made before keeps its copy
     check_directed(raw.stream(actor_frames(on_gone, times, feet)), feet)
     raw.close()

@@ -8,6 +8,7 @@ Left out: schemathesis' `positive_data_acceptance`, which sends the string "null
 multipart fields (multipart has no null) and integers just past a 2**63 - 1 bound after float
 rounding, and calls their 422 a bug.
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -21,16 +22,45 @@ EXAMPLES = 25
 
 
 def test_rest_api_conforms_to_its_openapi_document(tmp_path):
-    server = ServerProcess("--workers", "0", "--data-dir", str(tmp_path / "data"),
-                           "--max-upload-bytes", str(64 * 1024), transports=("http",), auth=True)
+    server = ServerProcess(
+        "--workers",
+        "0",
+        "--data-dir",
+        str(tmp_path / "data"),
+        "--max-upload-bytes",
+        str(64 * 1024),
+        transports=("http",),
+        auth=True,
+    )
     try:
         run = subprocess.run(
-            [str(Path(sys.executable).with_name("schemathesis")), "run",
-             f"http://{server.http}/openapi.json", "--checks", "all",
-             "--exclude-checks", "positive_data_acceptance", "--phases", "examples,coverage,fuzzing",
-             "--max-examples", str(EXAMPLES), "--seed", str(SEED), "--generation-database", "none",
-             "--request-timeout", "30", "--no-color", "--header", f"Authorization: Bearer {server.admin_key}"],
-            capture_output=True, text=True, timeout=600, cwd=tmp_path)
+            [
+                str(Path(sys.executable).with_name("schemathesis")),
+                "run",
+                f"http://{server.http}/openapi.json",
+                "--checks",
+                "all",
+                "--exclude-checks",
+                "positive_data_acceptance",
+                "--phases",
+                "examples,coverage,fuzzing",
+                "--max-examples",
+                str(EXAMPLES),
+                "--seed",
+                str(SEED),
+                "--generation-database",
+                "none",
+                "--request-timeout",
+                "30",
+                "--no-color",
+                "--header",
+                f"Authorization: Bearer {server.admin_key}",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=600,
+            cwd=tmp_path,
+        )
         assert server.alive(), server.log_tail()
     finally:
         server.stop()

@@ -1,5 +1,6 @@
 """Overview jobs through a real `camdirector serve`: submitted over REST, run, fetched, and a queued
 job still there after the server restarts on the same data directory."""
+
 from __future__ import annotations
 
 import json
@@ -12,13 +13,20 @@ from camdirector.deploy.server_process import ServerProcess
 
 def _post_clip(http: str, clip: bytes, **fields) -> dict:
     boundary = uuid.uuid4().hex
-    parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode()
-             for k, v in fields.items()]
-    parts.append(f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="clip.bvh"\r\n'
-                 f"Content-Type: application/octet-stream\r\n\r\n".encode() + clip + b"\r\n")
+    parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode() for k, v in fields.items()]
+    parts.append(
+        f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="clip.bvh"\r\n'
+        f"Content-Type: application/octet-stream\r\n\r\n".encode()
+        + clip
+        + b"\r\n"
+    )
     body = b"".join(parts) + f"--{boundary}--\r\n".encode()
-    request = urllib.request.Request(f"http://{http}/v1/overview-jobs", data=body, method="POST",
-                                     headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+    request = urllib.request.Request(
+        f"http://{http}/v1/overview-jobs",
+        data=body,
+        method="POST",
+        headers={"Content-Type": f"multipart/form-data; boundary={boundary}"},
+    )
     with urllib.request.urlopen(request, timeout=30) as reply:
         assert reply.status == 202
         return json.loads(reply.read())
@@ -48,8 +56,9 @@ def test_a_job_runs_in_the_server_and_a_queued_one_survives_a_restart(shared_dat
     try:
         for job in (first, second):
             assert _wait(server.http, job["id"])["status"] == "succeeded"
-        result = json.loads(urllib.request.urlopen(
-            f"http://{server.http}/v1/overview-jobs/{second['id']}/result", timeout=10).read())
+        result = json.loads(
+            urllib.request.urlopen(f"http://{server.http}/v1/overview-jobs/{second['id']}/result", timeout=10).read()
+        )
         assert len(result["frames"]) == 72 and result["shots"]
         video = urllib.request.urlopen(f"http://{server.http}/v1/overview-jobs/{first['id']}/preview.mp4", timeout=10)
         assert video.read(12)[4:8] == b"ftyp"

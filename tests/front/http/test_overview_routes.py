@@ -1,6 +1,7 @@
 """The /v1/overview-jobs routes (front/http/routes/overview.py) on a bare FastAPI app with a real
 JobRunner (real job processes): every route, every kind of bad upload with its status and detail
 (and nothing left behind), a full queue, and the OpenAPI listing. Uses the 72-frame run clip."""
+
 from __future__ import annotations
 
 import time
@@ -16,14 +17,14 @@ from camdirector.jobs import JobSettings, service_kinds
 
 pytestmark = pytest.mark.shared_data
 
-LIMIT = 150_000      # bytes: the run clip is 92 kB
+LIMIT = 150_000  # bytes: the run clip is 92 kB
 
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
     data_dir = tmp_path_factory.mktemp("overview-data")
     app = FastAPI()
-    app.state.guard = Guard(None)   # authentication off, as a `--no-auth` node's app
+    app.state.guard = Guard(None)  # authentication off, as a `--no-auth` node's app
     settings = JobSettings(max_upload_bytes=LIMIT, max_concurrent_jobs=1)
     runner = open_jobs(data_dir, service_kinds(), settings)
     install_overview_routes(app, runner, settings)
@@ -48,20 +49,31 @@ def finished_jobs(service, run_bvh):
     """Two jobs on the run clip: defaults, and skip_frames=10 with a square aspect."""
     client, _ = service
     a = client.post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)})
-    b = client.post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)},
-                    data={"skip_frames": "10", "aspect": "1.0", "seed": "3", "c5": "2"})
+    b = client.post(
+        "/v1/overview-jobs",
+        files={"file": ("run.bvh", run_bvh)},
+        data={"skip_frames": "10", "aspect": "1.0", "seed": "3", "c5": "2"},
+    )
     assert a.status_code == 202 and b.status_code == 202, (a.text, b.text)
     assert a.json()["status"] == "queued" and a.headers["location"].endswith(a.json()["id"])
-    return {"default": wait_finished(client, a.json()["id"]),
-            "skip": wait_finished(client, b.json()["id"])}
+    return {"default": wait_finished(client, a.json()["id"]), "skip": wait_finished(client, b.json()["id"])}
 
 
 def test_job_status_and_timings(service, finished_jobs):
     status = finished_jobs["default"]
     assert status["status"] == "succeeded", status
     assert status["progress"] == 1.0 and "error" not in status
-    for stage in ("parse_bvh", "saliency", "limb_visibility", "potential", "annealing_and_shots",
-                  "framing", "preview_video", "contact_sheet", "job_process_total"):
+    for stage in (
+        "parse_bvh",
+        "saliency",
+        "limb_visibility",
+        "potential",
+        "annealing_and_shots",
+        "framing",
+        "preview_video",
+        "contact_sheet",
+        "job_process_total",
+    ):
         assert status["timings"][stage] >= 0.0
 
 
@@ -110,14 +122,15 @@ def test_jobs_are_listed_newest_first_with_their_clip(service, finished_jobs):
     row = next(j for j in listed if j["id"] == first)
     assert row["status"] == "succeeded" and row["file_name"] == "run.bvh" and row["frames"] == 72
     assert row["created_unix_s"] <= row["started_unix_s"] <= row["finished_unix_s"]
-    assert next(j for j in listed if j["id"] == second)["frames"] == 62    # after skip_frames
+    assert next(j for j in listed if j["id"] == second)["frames"] == 62  # after skip_frames
     assert len(client.get("/v1/overview-jobs", params={"limit": 1}).json()["jobs"]) == 1
-    assert all(j["status"] == "succeeded" for j in
-               client.get("/v1/overview-jobs", params={"status": "succeeded"}).json()["jobs"])
+    assert all(j["status"] == "succeeded" for j in client.get("/v1/overview-jobs", params={"status": "succeeded"}).json()["jobs"])
 
 
-@pytest.mark.parametrize("query, field", [({"status": "done"}, "status"), ({"limit": "0"}, "limit"),
-                                          ({"limit": "1001"}, "limit"), ({"limit": "x"}, "limit")])
+@pytest.mark.parametrize(
+    "query, field",
+    [({"status": "done"}, "status"), ({"limit": "0"}, "limit"), ({"limit": "1001"}, "limit"), ({"limit": "x"}, "limit")],
+)
 def test_bad_list_queries_answer_422(service, query, field):
     client, _ = service
     r = client.get("/v1/overview-jobs", params=query)
@@ -148,16 +161,19 @@ def _corrupt(data: bytes, kind: str) -> bytes:
     raise ValueError(kind)
 
 
-@pytest.mark.parametrize("kind, status, detail", [
-    ("not_bvh", 400, "not a BVH file"),
-    ("truncated", 400, "truncated BVH"),
-    ("truncated_hierarchy", 400, "truncated BVH"),
-    ("channel_count", 400, "inconsistent BVH channels"),
-    ("row_values", 400, "inconsistent BVH channel count"),
-    ("zero_frames", 400, "zero frames"),
-    ("empty", 400, "empty upload"),
-    ("binary", 400, "not a BVH file"),
-])
+@pytest.mark.parametrize(
+    "kind, status, detail",
+    [
+        ("not_bvh", 400, "not a BVH file"),
+        ("truncated", 400, "truncated BVH"),
+        ("truncated_hierarchy", 400, "truncated BVH"),
+        ("channel_count", 400, "inconsistent BVH channels"),
+        ("row_values", 400, "inconsistent BVH channel count"),
+        ("zero_frames", 400, "zero frames"),
+        ("empty", 400, "empty upload"),
+        ("binary", 400, "not a BVH file"),
+    ],
+)
 def test_bad_uploads_answer_4xx_and_leave_nothing(service, run_bvh, kind, status, detail):
     client, runner = service
     before = (len(runner.store.list()), sorted(p.name for p in runner.store.root.iterdir()))
@@ -167,21 +183,24 @@ def test_bad_uploads_answer_4xx_and_leave_nothing(service, run_bvh, kind, status
     assert (len(runner.store.list()), sorted(p.name for p in runner.store.root.iterdir())) == before
 
 
-@pytest.mark.parametrize("fields, status, detail", [
-    ({"skip_frames": "72"}, 400, "skip_frames=72 must be in [0, 71]"),
-    ({"skip_frames": "-1"}, 422, "skip_frames"),
-    ({"scale": "0"}, 422, "scale"),
-    ({"aspect": "9"}, 422, "aspect must be in [0.2, 5]"),
-    ({"c1": "-1"}, 422, "c1..c5 must be in [0, 1e6]"),
-    # the speed limits' form fields carry the settings' unit suffixes (`_heights_s`, `_deg_s`)
-    ({"max_speed_heights_s": "0"}, 422, "max_speed_heights_s must be in (0, 100]"),
-    ({"max_angular_speed_deg_s": "4000"}, 422, "max_angular_speed_deg_s must be in (0, 3600]"),
-    ({"friction_speed_heights_s": "-1"}, 422, "friction_speed_heights_s must be in (0, 100]"),
-    ({"split_quality": "nan"}, 422, "finite"),
-    # a misspelt parameter is refused, not dropped (the job would run with the default)
-    ({"min_shot": "3"}, 422, "unknown form field(s) min_shot; this route takes"),
-    ({"c6": "1", "seeds": "2"}, 422, "unknown form field(s) c6, seeds"),
-])
+@pytest.mark.parametrize(
+    "fields, status, detail",
+    [
+        ({"skip_frames": "72"}, 400, "skip_frames=72 must be in [0, 71]"),
+        ({"skip_frames": "-1"}, 422, "skip_frames"),
+        ({"scale": "0"}, 422, "scale"),
+        ({"aspect": "9"}, 422, "aspect must be in [0.2, 5]"),
+        ({"c1": "-1"}, 422, "c1..c5 must be in [0, 1e6]"),
+        # the speed limits' form fields carry the settings' unit suffixes (`_heights_s`, `_deg_s`)
+        ({"max_speed_heights_s": "0"}, 422, "max_speed_heights_s must be in (0, 100]"),
+        ({"max_angular_speed_deg_s": "4000"}, 422, "max_angular_speed_deg_s must be in (0, 3600]"),
+        ({"friction_speed_heights_s": "-1"}, 422, "friction_speed_heights_s must be in (0, 100]"),
+        ({"split_quality": "nan"}, 422, "finite"),
+        # a misspelt parameter is refused, not dropped (the job would run with the default)
+        ({"min_shot": "3"}, 422, "unknown form field(s) min_shot; this route takes"),
+        ({"c6": "1", "seeds": "2"}, 422, "unknown form field(s) c6, seeds"),
+    ],
+)
 def test_bad_form_fields(service, run_bvh, fields, status, detail):
     client, runner = service
     count = len(runner.store.list())
@@ -204,9 +223,9 @@ def test_huge_uploads_answer_413(service, run_bvh, size):
 
 def test_queue_full_429_result_409_and_cancel(tmp_path, run_bvh):
     app = FastAPI()
-    app.state.guard = Guard(None)   # authentication off, as a `--no-auth` node's app
+    app.state.guard = Guard(None)  # authentication off, as a `--no-auth` node's app
     settings = JobSettings(max_queued_jobs=1)
-    runner = open_jobs(tmp_path, service_kinds(), settings)   # not started
+    runner = open_jobs(tmp_path, service_kinds(), settings)  # not started
     install_overview_routes(app, runner, settings)
     client = TestClient(app)
     first = client.post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)})

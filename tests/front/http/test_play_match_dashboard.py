@@ -5,6 +5,7 @@ candidate shots change as the match plays, a candidate taken from the page goes 
 session's shot becomes the taken players, held, and play-match prints that cut) until released.
 
 Where Chromium is absent the test skips with the reason (test_dashboard.py's `browser` fixture)."""
+
 from __future__ import annotations
 
 import json
@@ -21,9 +22,9 @@ from tests.front.http.test_dashboard import SAME_PICTURE, TIMEOUT_MS, browser, d
 from tests.matches.test_playback import registry
 from tests.service.tracks_sessions import ROOT
 
-__all__ = ["browser", "registry"]   # the fixtures this module uses from the others
+__all__ = ["browser", "registry"]  # the fixtures this module uses from the others
 
-CHANGE_TIMEOUT_S = 60.0   # three laps of the 20 s match
+CHANGE_TIMEOUT_S = 60.0  # three laps of the 20 s match
 
 
 def wait_until(ok, what: str, timeout_s: float = CHANGE_TIMEOUT_S):
@@ -46,10 +47,26 @@ def playing(registry, arena_server, tmp_path):
     """play-match looping the match at real time with a 2 s delay: (its session id, its stdout file)."""
     out, id_file = tmp_path / "out.jsonl", tmp_path / "sid"
     with open(out, "w") as stdout:
-        proc = subprocess.Popen([sys.executable, "-m", "camdirector", "play-match", str(registry / "m.npz"),
-                                 "--server", arena_server.url("grpc"), "--delay-s", "2", "--loop",
-                                 "--session-id-file", str(id_file)], stdout=stdout, stderr=subprocess.PIPE,
-                                text=True, cwd=ROOT)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "camdirector",
+                "play-match",
+                str(registry / "m.npz"),
+                "--server",
+                arena_server.url("grpc"),
+                "--delay-s",
+                "2",
+                "--loop",
+                "--session-id-file",
+                str(id_file),
+            ],
+            stdout=stdout,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+        )
     try:
         session_id = wait_until(lambda: id_file.exists() and id_file.read_text().strip(), "play-match opened no session")
         yield session_id, out
@@ -83,8 +100,10 @@ def test_a_played_match_drives_the_dashboard_and_takes_go_to_air(arena_server, b
         first = shown_pixels(program)
         wait_until(lambda: difference(shown_pixels(program), first) > SAME_PICTURE, "the program monitor never changed")
         rows = page.locator("#candidates tbody tr")
+
         def offered():
             return rows.evaluate_all("rows => rows.map(r => r.dataset.key)")
+
         first_offered = wait_until(offered, "no candidate shot offered")
         wait_until(lambda: offered() not in ([], first_offered), f"the candidates stayed {first_offered}")
 
@@ -100,19 +119,28 @@ def test_a_played_match_drives_the_dashboard_and_takes_go_to_air(arena_server, b
         def aired():
             frames = http.get(f"/v1/sessions/{session_id}", params={"after_frame": taken_at}).json()["frames"]
             return [f for f in frames if f.get("shot") and f["shot"]["held"]]
+
         held = wait_until(aired, "the take never went to air", timeout_s=30.0)
         assert held[0]["shot"]["subject_ids"] == taken and held[0]["cut"]
         playwright.expect(page.locator("#program-shot")).to_contain_text("(held): take: a human's choice")
-        printed = wait_until(lambda: [json.loads(line)["cut"] for line in out.read_text().splitlines()
-                                      if '"held": true' in line], "play-match printed no held cut", timeout_s=30.0)
+        printed = wait_until(
+            lambda: [json.loads(line)["cut"] for line in out.read_text().splitlines() if '"held": true' in line],
+            "play-match printed no held cut",
+            timeout_s=30.0,
+        )
         assert printed[0]["subjects"] == taken and printed[0]["reason"].startswith("take: a human's choice")
 
         page.click("#release")
         playwright.expect(result).to_have_text("released")
         released_at = http.get(f"/v1/sessions/{session_id}", params={"last": 1}).json()["frames"][-1]["frame"]
-        wait_until(lambda: any(f.get("shot") and not f["shot"]["held"] for f in http.get(
-            f"/v1/sessions/{session_id}", params={"after_frame": released_at}).json()["frames"]),
-            "the director never got the program back", timeout_s=30.0)
+        wait_until(
+            lambda: any(
+                f.get("shot") and not f["shot"]["held"]
+                for f in http.get(f"/v1/sessions/{session_id}", params={"after_frame": released_at}).json()["frames"]
+            ),
+            "the director never got the program back",
+            timeout_s=30.0,
+        )
         playwright.expect(page.locator("#release")).to_be_hidden()
         playwright.expect(page.locator("#program-shot")).to_contain_text("(the director's)")
     finally:

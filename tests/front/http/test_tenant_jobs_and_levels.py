@@ -6,6 +6,7 @@ stored uploads is answered 429; adding and deleting a level are in the tenant's 
 
 Keys of other tenants are made in the server's own records database (its data directory), as
 `camdirector keys create --tenant` makes them."""
+
 from __future__ import annotations
 
 import os
@@ -35,16 +36,32 @@ def service(tmp_path_factory, run_bvh):
     """A server with keys, one job at a time, and tenant shares of 2 jobs and 2.5 run clips of
     uploads; keys of tenants acme and beta (admins), gamma (a director) and beta's viewer."""
     data_dir = tmp_path_factory.mktemp("tenants")
-    srv = ServerProcess("--workers", "1", "--data-dir", str(data_dir), "--max-concurrent-jobs", "1",
-                        "--tenant-max-queued-jobs", "2", "--tenant-max-upload-bytes", str(int(2.5 * len(run_bvh))),
-                        auth=True)
+    srv = ServerProcess(
+        "--workers",
+        "1",
+        "--data-dir",
+        str(data_dir),
+        "--max-concurrent-jobs",
+        "1",
+        "--tenant-max-queued-jobs",
+        "2",
+        "--tenant-max-upload-bytes",
+        str(int(2.5 * len(run_bvh))),
+        auth=True,
+    )
     store = open_access_store("", data_dir)
-    keys = {"default": srv.admin_key, **{f"{tenant}-{role}": store.create_key(role, tenant)[1] for tenant, role in
-                                         (("acme", "admin"), ("beta", "admin"), ("beta", "viewer"),
-                                          ("gamma", "director"))}}
+    keys = {
+        "default": srv.admin_key,
+        **{
+            f"{tenant}-{role}": store.create_key(role, tenant)[1]
+            for tenant, role in (("acme", "admin"), ("beta", "admin"), ("beta", "viewer"), ("gamma", "director"))
+        },
+    }
     store.close()
-    clients = {who: httpx.Client(base_url=f"http://{srv.http}", headers={"Authorization": f"Bearer {key}"},
-                                 timeout=30.0) for who, key in keys.items()}
+    clients = {
+        who: httpx.Client(base_url=f"http://{srv.http}", headers={"Authorization": f"Bearer {key}"}, timeout=30.0)
+        for who, key in keys.items()
+    }
     yield srv, keys, clients
     for client in clients.values():
         client.close()
@@ -87,10 +104,15 @@ def test_each_tenant_has_its_own_arena_and_its_sessions_use_it(service):
         assert http[who].get("/v1/level-jobs").json()["jobs"] == []
     assert unknown(beta.delete("/v1/levels/arena"), "no level named 'arena'")
     assert unknown(beta.delete(f"/v1/level-jobs/{acme_job['id']}"), f"no level job {acme_job['id']!r}")
-    assert http["beta-viewer"].post("/v1/levels", data={"name": "x"}).status_code == 403   # level.write: admins
+    assert http["beta-viewer"].post("/v1/levels", data={"name": "x"}).status_code == 403  # level.write: admins
     beta_session = GrpcRaw(srv.grpc, key=keys["beta-admin"])
-    expect(grpc.StatusCode.NOT_FOUND, beta_session.call, "CreateSession", tracks_request("arena", START),
-           contains="'arena' is not in this server's level registry")
+    expect(
+        grpc.StatusCode.NOT_FOUND,
+        beta_session.call,
+        "CreateSession",
+        tracks_request("arena", START),
+        contains="'arena' is not in this server's level registry",
+    )
 
     beta_job = add_level(beta, "arena", obj_text(l_room()).encode())
     beta_arena = beta.get("/v1/levels/arena").json()
@@ -100,12 +122,12 @@ def test_each_tenant_has_its_own_arena_and_its_sessions_use_it(service):
     # beta's session on "arena" is beta's: it outlives its worker (restored from its checkpoint,
     # which has to find beta's level again on the new worker)
     session_id = beta_session.call("CreateSession", tracks_request("arena", START)).session_id
-    times, feet = corridor_walk(2.0, speed_m_s=1.0)   # x 2..4 along the L's first arm
+    times, feet = corridor_walk(2.0, speed_m_s=1.0)  # x 2..4 along the L's first arm
     check_directed(beta_session.stream(actor_frames(session_id, times[:30], feet[:30])), feet[:30])
     killed = srv.worker_pids()[0]
     os.kill(killed, signal.SIGKILL)
     deadline = time.monotonic() + 60
-    while srv.worker_pids() in ([], [killed]):      # the front has noticed and started another
+    while srv.worker_pids() in ([], [killed]):  # the front has noticed and started another
         assert time.monotonic() < deadline, "no worker replaced the one killed"
         time.sleep(0.05)
     after = beta_session.stream(actor_frames(session_id, times[30:], feet[30:], start_frame=31))
@@ -113,14 +135,24 @@ def test_each_tenant_has_its_own_arena_and_its_sessions_use_it(service):
     # a tenant without an "arena" has none, also when it writes another tenant's name for it
     default_session = GrpcRaw(srv.grpc, key=keys["default"])
     for level_id in ("arena", "beta/arena"):
-        expect(grpc.StatusCode.NOT_FOUND, default_session.call, "CreateSession", tracks_request(level_id, START),
-               contains="is not in this server's level registry")
+        expect(
+            grpc.StatusCode.NOT_FOUND,
+            default_session.call,
+            "CreateSession",
+            tracks_request(level_id, START),
+            contains="is not in this server's level registry",
+        )
 
     removed = beta.delete("/v1/levels/arena")
     assert removed.status_code == 200 and removed.json() == beta_arena
     assert acme.get("/v1/levels/arena").json() == acme_arena
-    expect(grpc.StatusCode.NOT_FOUND, beta_session.call, "CreateSession", tracks_request("arena", START),
-           contains="'arena' is not in this server's level registry")
+    expect(
+        grpc.StatusCode.NOT_FOUND,
+        beta_session.call,
+        "CreateSession",
+        tracks_request("arena", START),
+        contains="'arena' is not in this server's level registry",
+    )
     beta_session.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
     beta_session.close()
     default_session.close()
@@ -130,11 +162,13 @@ def test_each_tenant_has_its_own_arena_and_its_sessions_use_it(service):
         return [(e["action"], e["detail"]) for e in trail if e["action"].startswith("level.")]
 
     submitted = "job submitted: the level is registered when the job succeeds"
-    assert level_changes(acme) == [("level.add", {"name": "arena", "replace": False, "job_id": acme_job["id"],
-                                                  "stage": submitted})]
-    assert level_changes(beta) == [("level.add", {"name": "arena", "replace": False, "job_id": beta_job["id"],
-                                                  "stage": submitted}),
-                                   ("level.delete", {"name": "arena"})]
+    assert level_changes(acme) == [
+        ("level.add", {"name": "arena", "replace": False, "job_id": acme_job["id"], "stage": submitted})
+    ]
+    assert level_changes(beta) == [
+        ("level.add", {"name": "arena", "replace": False, "job_id": beta_job["id"], "stage": submitted}),
+        ("level.delete", {"name": "arena"}),
+    ]
     assert level_changes(http["default"]) == []
 
 
@@ -153,7 +187,7 @@ def test_a_tenants_overview_jobs_are_its_own(service, run_bvh):
         assert job_id not in {j["id"] for j in http[who].get("/v1/overview-jobs").json()["jobs"]}
     for who in ("beta-admin", "gamma-director"):
         assert unknown(http[who].delete(f"/v1/overview-jobs/{job_id}"), f"no overview job {job_id!r}")
-    assert http["beta-viewer"].delete(f"/v1/overview-jobs/{job_id}").status_code == 403   # job.cancel
+    assert http["beta-viewer"].delete(f"/v1/overview-jobs/{job_id}").status_code == 403  # job.cancel
     assert http["beta-viewer"].post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)}).status_code == 403
     assert [j["id"] for j in acme.get("/v1/overview-jobs").json()["jobs"]] == [job_id]
 
@@ -169,16 +203,16 @@ def test_a_tenant_past_its_share_of_jobs_or_uploads_is_answered_429(service, run
     assert first.status_code == second.status_code == 202, (first.text, second.text)
     refused = submit()
     assert refused.status_code == 429
-    assert refused.json()["detail"] == ("tenant 'gamma' has 2 jobs queued or running, its limit; retry when one "
-                                        "has finished")
+    assert refused.json()["detail"] == ("tenant 'gamma' has 2 jobs queued or running, its limit; retry when one has finished")
     other = http["beta-admin"].post("/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)})
-    assert other.status_code == 202, other.text                      # beta's share is its own
+    assert other.status_code == 202, other.text  # beta's share is its own
     for job in (first, second, other):
         client = http["beta-admin"] if job is other else gamma
         assert client.delete(f"/v1/overview-jobs/{job.json()['id']}").json()["status"] == "cancelled"
-    refused = submit()                    # no job pending now, but their uploads are kept with them
+    refused = submit()  # no job pending now, but their uploads are kept with them
     assert refused.status_code == 429
     assert refused.json()["detail"] == (
         f"tenant 'gamma''s jobs keep {2 * len(run_bvh)} bytes of uploads; {len(run_bvh)} more would pass its "
-        f"limit of {int(2.5 * len(run_bvh))} bytes (a finished job's files are removed when its retention ends)")
+        f"limit of {int(2.5 * len(run_bvh))} bytes (a finished job's files are removed when its retention ends)"
+    )
     assert len(gamma.get("/v1/overview-jobs").json()["jobs"]) == 2

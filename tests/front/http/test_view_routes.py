@@ -3,6 +3,7 @@ picture of a streaming session's camera, a live MJPEG stream that follows it and
 renders shared among viewers, viewers that go away leaving nothing open, placeholders that say
 why there is no picture, and every kind of bad request answered with its 4xx while the session
 streams on."""
+
 from __future__ import annotations
 
 import asyncio
@@ -59,7 +60,7 @@ def parts(stream: httpx.Response):
             end = head_end + 4 + int(headers["Content-Length"])
             if len(buffer) < end:
                 break
-            yield headers, buffer[head_end + 4:end]
+            yield headers, buffer[head_end + 4 : end]
             buffer = buffer[end:]
 
 
@@ -69,19 +70,19 @@ def test_a_view_is_a_picture_of_the_last_frame_at_the_size_asked(streamed):
     assert reply.status_code == 200 and reply.headers["content-type"] == "image/jpeg"
     assert reply.headers["x-camdirector-frame"] == "20" and "x-camdirector-placeholder" not in reply.headers
     assert float(reply.headers["x-camdirector-render-ms"]) > 0.0
-    assert image_of(reply).size == (320, 180)                          # the lens's 16:9
+    assert image_of(reply).size == (320, 180)  # the lens's 16:9
     wide = http.get(f"/v1/sessions/{session_id}/view", params={"width": 640, "format": "png"})
     assert wide.headers["content-type"] == "image/png" and image_of(wide).size == (640, 360)
     assert image_of(http.get(f"/v1/sessions/{session_id}/view", params={"width": 200, "height": 200})).size == (200, 200)
     top = http.get(f"/v1/sessions/{session_id}/topview.png")
     assert top.headers["content-type"] == "image/png"
     x0, z0, x1, z1 = (float(v) for v in top.headers["x-camdirector-bounds-m"].split(","))
-    assert x0 < 1.5 < x1 and z0 < 4.0 < z1                             # around the pillar
+    assert x0 < 1.5 < x1 and z0 < 4.0 < z1  # around the pillar
 
 
 def test_many_viewers_of_one_picture_share_one_render(streamed):
     _, http, session_id = streamed
-    http.get(f"/v1/sessions/{session_id}/view")                      # the render process is warm
+    http.get(f"/v1/sessions/{session_id}/view")  # the render process is warm
     time.sleep(0.3)
     before = metric(http, "camdirector_view_renders_total")
 
@@ -127,12 +128,13 @@ def test_viewers_that_go_away_leave_no_stream_and_no_socket(streamed, server):
     for _ in range(3):
         with httpx.Client(base_url=str(http.base_url), timeout=60.0) as viewer:
             with viewer.stream("GET", f"/v1/sessions/{session_id}/view.mjpeg", params={"fps": 5}) as stream:
-                received = parts(stream)   # held: a dropped generator closes the response at once
+                received = parts(stream)  # held: a dropped generator closes the response at once
                 next(received)
                 assert metric(http, "camdirector_view_streams") >= 1
     deadline = time.monotonic() + 15.0
-    while time.monotonic() < deadline and (metric(http, "camdirector_view_streams") > 0
-                                           or len(os.listdir(f"/proc/{front}/fd")) > descriptors):
+    while time.monotonic() < deadline and (
+        metric(http, "camdirector_view_streams") > 0 or len(os.listdir(f"/proc/{front}/fd")) > descriptors
+    ):
         time.sleep(0.2)
     assert metric(http, "camdirector_view_streams") == 0
     assert len(os.listdir(f"/proc/{front}/fd")) <= descriptors
@@ -145,8 +147,10 @@ def test_placeholders_say_why_there_is_no_picture(server):
         reply = http.get(f"/v1/sessions/{fresh}/view")
         assert reply.status_code == 200 and reply.headers["x-camdirector-placeholder"] == "no camera yet: no frame answered"
         assert image_of(reply).size == (320, 180)
-        assert http.get(f"/v1/sessions/{fresh}/view", params={"shot": "cut_before"}).headers[
-            "x-camdirector-placeholder"] == "no camera yet: no frame answered"
+        assert (
+            http.get(f"/v1/sessions/{fresh}/view", params={"shot": "cut_before"}).headers["x-camdirector-placeholder"]
+            == "no camera yet: no frame answered"
+        )
         match = raw.call("CreateSession", match_request(delay_s=5.0)).session_id
         raw.stream([pb.FrameUpdate(session_id=match, frame=1, time_s=0.0)])
         assert http.get(f"/v1/sessions/{match}/view").headers["x-camdirector-placeholder"].startswith("buffering")
@@ -157,8 +161,12 @@ def test_placeholders_say_why_there_is_no_picture(server):
         assert top.status_code == 200 and "no world geometry" in top.headers["x-camdirector-placeholder"]
         assert "x-camdirector-bounds-m" not in top.headers
         # its camera view: the targets against the sky, under a banner that says there is no world
-        raw.stream([pb.FrameUpdate(session_id=empty, frame=k, time_s=k / 60.0, states=[u.states[0]])
-                    for k, u in enumerate(walk(empty, 10), start=1)])   # the walker alone: no cart here
+        raw.stream(
+            [
+                pb.FrameUpdate(session_id=empty, frame=k, time_s=k / 60.0, states=[u.states[0]])
+                for k, u in enumerate(walk(empty, 10), start=1)
+            ]
+        )  # the walker alone: no cart here
         seen = http.get(f"/v1/sessions/{empty}/view", params={"format": "png"})
         assert seen.headers["x-camdirector-note"].startswith("no world geometry")
         assert "x-camdirector-placeholder" not in seen.headers and seen.headers["x-camdirector-frame"] == "10"
@@ -171,16 +179,19 @@ def test_placeholders_say_why_there_is_no_picture(server):
     raw.close()
 
 
-@pytest.mark.parametrize("path, params, status, detail", [
-    ("view", {"width": 2000}, 422, "less than or equal to 1280"),
-    ("view", {"width": 8}, 422, "greater than or equal to 16"),
-    ("view", {"height": 1000}, 422, "less than or equal to 720"),
-    ("view", {"shot": "sideways"}, 422, "'program', 'candidate'"),
-    ("view", {"shot": "candidate"}, 422, "a candidate view names the candidate's players"),
-    ("view", {"format": "gif"}, 422, "'jpeg' or 'png'"),
-    ("view.mjpeg", {"fps": 50}, 422, "less than or equal to 10"),
-    ("view.mjpeg", {"fps": 0}, 422, "greater than 0"),
-])
+@pytest.mark.parametrize(
+    "path, params, status, detail",
+    [
+        ("view", {"width": 2000}, 422, "less than or equal to 1280"),
+        ("view", {"width": 8}, 422, "greater than or equal to 16"),
+        ("view", {"height": 1000}, 422, "less than or equal to 720"),
+        ("view", {"shot": "sideways"}, 422, "'program', 'candidate'"),
+        ("view", {"shot": "candidate"}, 422, "a candidate view names the candidate's players"),
+        ("view", {"format": "gif"}, 422, "'jpeg' or 'png'"),
+        ("view.mjpeg", {"fps": 50}, 422, "less than or equal to 10"),
+        ("view.mjpeg", {"fps": 0}, 422, "greater than 0"),
+    ],
+)
 def test_bad_view_requests_are_refused_and_the_session_streams_on(streamed, path, params, status, detail):
     raw, http, session_id = streamed
     reply = http.get(f"/v1/sessions/{session_id}/{path}", params=params)

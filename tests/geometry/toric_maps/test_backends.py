@@ -1,5 +1,6 @@
 """The two map backends (GL deferred projection, Embree ray casting) held against each other on small
 hand-built scenes, plus outcomes checked by hand, the window both share, and the backend rule."""
+
 from __future__ import annotations
 
 import math
@@ -26,9 +27,9 @@ from camdirector.geometry.transforms import RigidTransform
 RES = 64
 ALPHA = composition_angle((-1.0 / 3.0, 0.0), (1.0 / 3.0, 0.0), Lens())
 A_WORLD = np.array([0.0, 1.0, 0.0])
-B_WORLD = np.array([2.5, 1.0, 0.0])           # A -> B along +X
+B_WORLD = np.array([2.5, 1.0, 0.0])  # A -> B along +X
 TORUS = make_torus(A_WORLD, B_WORLD, ALPHA)
-THETA, PHI = 1.8, 1.2                         # camera behind and above A, on the +Z side
+THETA, PHI = 1.8, 1.2  # camera behind and above A, on the +Z side
 WINDOW = MapWindow.around(TORUS, THETA, PHI, WindowSettings(resolution=RES))
 CAMERA = torus_position(TORUS, THETA, PHI)
 SAMPLES_A = A_WORLD + np.array([[0.0, 0.0, 0.0], [0.1, 0.2, 0.05], [-0.1, -0.15, 0.1]])
@@ -71,13 +72,15 @@ def _assert_agree(ray, gl, shadow_share=0.97, direction_share=0.95):
     moving = np.linalg.norm(v_ray, axis=-1) > 1e-3
     if moving.sum() > 10:
         cos = np.einsum("ij,ij->i", v_ray[moving], v_gl[moving]) / (
-            np.linalg.norm(v_ray[moving], axis=-1) * np.linalg.norm(v_gl[moving], axis=-1) + 1e-12)
+            np.linalg.norm(v_ray[moving], axis=-1) * np.linalg.norm(v_gl[moving], axis=-1) + 1e-12
+        )
         assert np.mean(cos > 0.9) >= direction_share
     if both.sum() > 10:  # the same occluder at the same distance, save along silhouettes
         assert np.median(np.abs(ray.depth_m[both] / gl.depth_m[both] - 1.0)) < 1e-2
 
 
 # -- hand-checked outcomes, both backends ---------------------------------------------------------
+
 
 def test_empty_scene_gives_empty_maps(pair):
     for maps in _both(pair, OccluderScene()):
@@ -93,15 +96,15 @@ def test_wall_between_target_and_window_shadows_every_texel(pair):
     assert nearest > 1.0  # the whole window lies beyond the wall built below
     side = np.cross(normal, [0.0, 1.0, 0.0])
     side /= np.linalg.norm(side)
-    frame = np.stack([side, np.cross(normal, side), normal], axis=1)       # local z -> normal
+    frame = np.stack([side, np.cross(normal, side), normal], axis=1)  # local z -> normal
     slab = box((200.0, 200.0, 0.05))
     wall = TriMesh(slab.vertices @ frame.T + A_WORLD + 0.5 * nearest * normal, slab.faces)
     ray, gl = _both(pair, OccluderScene([wall]))
     for maps in (ray, gl):
         assert maps.shadow.all()
-        assert not maps.velocity_rad_s.any()          # a still wall in front of a still torus
+        assert not maps.velocity_rad_s.any()  # a still wall in front of a still torus
         rays = torus_points(TORUS, WINDOW) - SAMPLES_A[0]
-        face_m = 0.5 * nearest - 0.025                                        # the slab's near face
+        face_m = 0.5 * nearest - 0.025  # the slab's near face
         expected = face_m * np.linalg.norm(rays, axis=-1) / (rays @ normal)
         # GL reads the depth at the nearest occluder-map pixel: exact up to the slope over half a pixel.
         np.testing.assert_allclose(maps.depth_m[0], expected, rtol=1e-3 if maps is ray else 1e-2)
@@ -118,8 +121,9 @@ def test_box_moving_plus_x_moves_its_shadow_toward_b(pair):
     """+X is the A -> B direction: phi turns about the A-B axis, so the shadow has no phi rate; theta
     grows toward B wherever the arc heads toward B (beyond its apex, theta > pi/2 - alpha)."""
     scene = OccluderScene()
-    scene.add_dynamic("crate", box((0.6, 0.6, 0.6)), RigidTransform(position_world=_toward_camera(0.35)),
-                      linear_velocity_m_s=(2.0, 0.0, 0.0))
+    scene.add_dynamic(
+        "crate", box((0.6, 0.6, 0.6)), RigidTransform(position_world=_toward_camera(0.35)), linear_velocity_m_s=(2.0, 0.0, 0.0)
+    )
     ray, gl = _both(pair, scene)
     assert ray.shadow.mean() > 0.02
     _assert_agree(ray, gl)
@@ -137,8 +141,13 @@ def test_box_moving_plus_x_moves_its_shadow_toward_b(pair):
 
 def test_spinning_object_agrees_in_direction(pair):
     scene = OccluderScene()
-    scene.add_dynamic("door", box((1.2, 1.5, 0.1)), RigidTransform(position_world=_toward_camera(0.45)),
-                      linear_velocity_m_s=(0.0, 0.3, 0.0), angular_velocity_rad_s=(0.0, 3.0, 0.0))
+    scene.add_dynamic(
+        "door",
+        box((1.2, 1.5, 0.1)),
+        RigidTransform(position_world=_toward_camera(0.45)),
+        linear_velocity_m_s=(0.0, 0.3, 0.0),
+        angular_velocity_rad_s=(0.0, 3.0, 0.0),
+    )
     ray, gl = _both(pair, scene)
     assert ray.shadow.mean() > 0.02
     _assert_agree(ray, gl)
@@ -176,8 +185,9 @@ def test_moving_torus_makes_still_occluders_move_back(pair):
     expected = texture_velocity(np.array([-2.0, 0.0, 0.0]), d_theta, d_phi)
     for maps in (ray, gl):
         hit = maps.shadow > 0
-        np.testing.assert_allclose(maps.velocity_rad_s[hit], np.broadcast_to(expected, maps.velocity_rad_s.shape)[hit],
-                                   rtol=1e-3, atol=1e-4)
+        np.testing.assert_allclose(
+            maps.velocity_rad_s[hit], np.broadcast_to(expected, maps.velocity_rad_s.shape)[hit], rtol=1e-3, atol=1e-4
+        )
         past_apex = np.broadcast_to(WINDOW.grid()[0] > math.pi / 2 - ALPHA, hit.shape)[hit]
         assert past_apex.sum() > 100 and np.all(maps.velocity_rad_s[hit][past_apex, 0] < 0.0)
 
@@ -202,14 +212,21 @@ def test_ray_casting_gives_the_same_maps_with_moving_objects_rebuilt_or_kept_loc
     scene = OccluderScene([_moved(cylinder(0.25, 6.0), _toward_camera(0.5) + [0.8, 0.0, 0.0])])
     for i in range(8):
         spot = _toward_camera(0.25 + 0.05 * i) + [0.35 * (i - 4), 0.0, 0.0]
-        scene.add_dynamic(f"post{i}", cylinder(0.15, 3.0), RigidTransform(position_world=spot),
-                          linear_velocity_m_s=(0.5, 0.1 * i, -0.3), angular_velocity_rad_s=(0.2 * i, 1.0, 0.0))
+        scene.add_dynamic(
+            f"post{i}",
+            cylinder(0.15, 3.0),
+            RigidTransform(position_world=spot),
+            linear_velocity_m_s=(0.5, 0.1 * i, -0.3),
+            angular_velocity_rad_s=(0.2 * i, 1.0, 0.0),
+        )
     scene.add_dynamic("a", sphere(0.4), RigidTransform(position_world=A_WORLD.copy()), linear_velocity_m_s=(1.0, 0.0, 0.0))
     points = A_WORLD + np.array([[0.0, 0.0, 0.0], [0.0, 0.38, 0.0], [0.0, 0.0, -0.38]])  # centre, top, far side
     rebuilt = EmbreeMapBackend(scene, EmbreeMapSettings(rebuild_triangles_per_ray=1000.0)).compute(
-        TORUS, WINDOW, points, exclude_ids=["a"] * 3)
+        TORUS, WINDOW, points, exclude_ids=["a"] * 3
+    )
     local = EmbreeMapBackend(scene, EmbreeMapSettings(rebuild_triangles_per_ray=0.0)).compute(
-        TORUS, WINDOW, points, exclude_ids=["a"] * 3)
+        TORUS, WINDOW, points, exclude_ids=["a"] * 3
+    )
     assert 0.05 < rebuilt.shadow.mean() < 0.95
     assert np.mean(rebuilt.shadow == local.shadow) > 0.999
     same = (rebuilt.shadow > 0) & (local.shadow > 0)
@@ -235,9 +252,10 @@ def test_many_objects_moved_together_agree_across_backends_after_every_move(pair
     version = scene.geometry_version
     for _ in range(3):
         quats = rng.normal(size=(len(ids), 4))
-        transforms = [RigidTransform(position_world=_toward_camera(f) + offset, rotation_xyzw=q / np.linalg.norm(q))
-                      for f, offset, q in zip(rng.uniform(0.2, 0.7, len(ids)), rng.normal(scale=0.7, size=(len(ids), 3)),
-                                              quats)]
+        transforms = [
+            RigidTransform(position_world=_toward_camera(f) + offset, rotation_xyzw=q / np.linalg.norm(q))
+            for f, offset, q in zip(rng.uniform(0.2, 0.7, len(ids)), rng.normal(scale=0.7, size=(len(ids), 3)), quats)
+        ]
         scene.set_motions(ids, transforms, rng.normal(size=(len(ids), 3)), rng.normal(size=(len(ids), 3)))
         assert scene.geometry_version == version
         ray, gl_maps = (b.compute(TORUS, WINDOW, SAMPLES_A) for b in (embree, gl))
@@ -278,6 +296,7 @@ def test_compute_rejects_bad_input(backend_name):
 
 # -- the window ------------------------------------------------------------------------------------
 
+
 def test_window_texel_coordinates_round_trip_and_wrap_phi():
     i, j = np.meshgrid(np.arange(RES, dtype=float), np.arange(RES, dtype=float), indexing="ij")
     theta, phi = WINDOW.angles(i, j)
@@ -298,8 +317,13 @@ def test_window_is_square_in_metres_at_the_camera_and_follows_the_sizing_rule():
 
 
 def test_windows_on_one_lattice_shift_by_whole_texels_and_resample_exactly():
-    moved = MapWindow.around(TORUS, THETA + 3.3 * WINDOW.theta_step_rad, PHI - 5.6 * WINDOW.phi_step_rad,
-                             WindowSettings(resolution=RES), lattice=WINDOW)
+    moved = MapWindow.around(
+        TORUS,
+        THETA + 3.3 * WINDOW.theta_step_rad,
+        PHI - 5.6 * WINDOW.phi_step_rad,
+        WindowSettings(resolution=RES),
+        lattice=WINDOW,
+    )
     assert moved.theta_step_rad == WINDOW.theta_step_rad and moved.phi_step_rad == WINDOW.phi_step_rad
     shift_i = (moved.theta_min_rad - WINDOW.theta_min_rad) / WINDOW.theta_step_rad
     shift_j = (moved.phi_min_rad - WINDOW.phi_min_rad) / WINDOW.phi_step_rad
@@ -307,7 +331,7 @@ def test_windows_on_one_lattice_shift_by_whole_texels_and_resample_exactly():
     values = np.random.default_rng(3).random((2, RES, RES)).astype(np.float32)
     out, covered = WINDOW.resample(values, moved)
     np.testing.assert_array_equal(out[:, : RES - 3, 6:], values[:, 3:, : RES - 6])
-    assert covered[: RES - 3, 6:].all() and not covered[RES - 3:, :].any() and not covered[:, :6].any()
+    assert covered[: RES - 3, 6:].all() and not covered[RES - 3 :, :].any() and not covered[:, :6].any()
     same, all_covered = WINDOW.resample(values, WINDOW)
     np.testing.assert_array_equal(same, values)
     assert all_covered.all()
@@ -321,6 +345,7 @@ def test_window_settings_are_validated():
 
 
 # -- the backend rule --------------------------------------------------------------------------------
+
 
 def test_backend_rule():
     assert choose_backend(10_000_000, "NVIDIA H100 80GB HBM3/PCIe/SSE2") == "gl"

@@ -1,5 +1,6 @@
 """Tiny hand-built matches for the MATCH rig's tests: box players on a floor, scripted motion and
 events, driven frame by frame through a real Session (or a bare MatchRig with tuned settings)."""
+
 from __future__ import annotations
 
 import math
@@ -60,8 +61,10 @@ class Match:
 
     def scene(self) -> SceneSpec:
         start = self.script(0.0)
-        targets = [TargetSpec(p, player_mesh(), _transform(*start[p]), np.array([0.0, EYE_M, 0.0]), team)
-                   for p, team in self.teams.items()]
+        targets = [
+            TargetSpec(p, player_mesh(), _transform(*start[p]), np.array([0.0, EYE_M, 0.0]), team)
+            for p, team in self.teams.items()
+        ]
         objects = [ObjectSpec(f"wall{i}", w, RigidTransform(), False) for i, w in enumerate(self.walls)]
         return SceneSpec(objects, targets, LENS, self.style, self.seed, None, self.delay_s)
 
@@ -72,7 +75,7 @@ class Match:
             t = k / RATE_HZ
             places = self.script(t)
             due = [e for e in pending if e.time_s <= t + 1e-9]
-            pending = pending[len(due):]
+            pending = pending[len(due) :]
             yield FrameInput("s", k, t, [(p, _transform(*places[p])) for p in self.teams], due)
 
 
@@ -126,8 +129,15 @@ def shots(states: list[FrameState]) -> list[tuple[float, float, FrameState]]:
     return out
 
 
-def melee(seed: int, duration_s: float, delay_s: float, players_per_team: int = 5, kill_every_s: float = 3.3,
-          respawn_s: float = 3.0, style: Style | None = None) -> Match:
+def melee(
+    seed: int,
+    duration_s: float,
+    delay_s: float,
+    players_per_team: int = 5,
+    kill_every_s: float = 3.3,
+    respawn_s: float = 3.0,
+    style: Style | None = None,
+) -> Match:
     """Two teams circling in a 40 m square with four pillars; a kill of a random living opponent
     every kill_every_s; the victim lies still, then respawns (a jump to its other spawn) respawn_s
     later. Deterministic by seed."""
@@ -165,7 +175,10 @@ def melee(seed: int, duration_s: float, delay_s: float, players_per_team: int = 
             yaw = facing((x, z), target)
         return (float(x), float(z)), float(yaw)
 
-    pillars = [TriMesh(box((2.0, 4.0, 2.0)).vertices + np.array([x, 2.0, z]), box((2.0, 4.0, 2.0)).faces)
-               for x, z in ((-6.0, -6.0), (6.0, -6.0), (-6.0, 6.0), (6.0, 6.0))]
-    return Match(teams, lambda time_s: {p: place(p, time_s) for p in ids}, events, delay_s, pillars,
-                 style or Style(rig=Rig.MATCH), seed)
+    pillars = [
+        TriMesh(box((2.0, 4.0, 2.0)).vertices + np.array([x, 2.0, z]), box((2.0, 4.0, 2.0)).faces)
+        for x, z in ((-6.0, -6.0), (6.0, -6.0), (-6.0, 6.0), (6.0, 6.0))
+    ]
+    return Match(
+        teams, lambda time_s: {p: place(p, time_s) for p in ids}, events, delay_s, pillars, style or Style(rig=Rig.MATCH), seed
+    )

@@ -1,6 +1,7 @@
 """AUTOTRACK, ezQuake's mvd_autotrack: ranking by stats (armor, weapon, powerups, frags), the value
 list chosen by the player count, the switch-moment rule, the first-person camera at the eye, the
 stats seen at the program moment under a delay, and the frags-from-kills fallback without stats."""
+
 from __future__ import annotations
 
 import math
@@ -34,7 +35,7 @@ from camdirector.pipeline.session import Session
 from camdirector.pipeline.style import Rig, Style
 from tests.pipeline.match.scenes import LENS, Match, kill, run_session
 
-START = IT_AXE | IT_SHOTGUN   # what a QuakeWorld player respawns with
+START = IT_AXE | IT_SHOTGUN  # what a QuakeWorld player respawns with
 AUTOTRACK = Style(rig=Rig.MATCH, match_director="autotrack")
 
 
@@ -60,14 +61,19 @@ def standing(count: int) -> dict:
 def test_rocket_launcher_and_red_armor_outrank_a_shotgun():
     d = director(2, {"p0": stats("p0"), "p1": stats("p1", START | IT_ROCKET_LAUNCHER | IT_ARMOR3, armor=200)})
     values = d.values([])
-    assert values[0] == 50 * 2                     # %W: the shotgun's 2; no armor
-    assert values[1] == 200 * 3 + 50 * 8           # red armor 3 per point, the rocket launcher's 8
+    assert values[0] == 50 * 2  # %W: the shotgun's 2; no armor
+    assert values[1] == 200 * 3 + 50 * 8  # red armor 3 per point, the rocket launcher's 8
     assert best_of(d) == "p1"
 
 
 def test_armor_type_and_best_weapon_follow_ezquake_order():
-    d = director(2, {"p0": stats("p0", START | IT_LIGHTNING | IT_ROCKET_LAUNCHER | IT_ARMOR1 | IT_ARMOR3, armor=50),
-                     "p1": stats("p1", START | IT_ARMOR2, armor=100)})
+    d = director(
+        2,
+        {
+            "p0": stats("p0", START | IT_LIGHTNING | IT_ROCKET_LAUNCHER | IT_ARMOR1 | IT_ARMOR3, armor=50),
+            "p1": stats("p1", START | IT_ARMOR2, armor=100),
+        },
+    )
     values = d.values([])
     assert values[0] == 50 * 1 + 50 * 8  # green armor is tested first; tp_weapon_order "78654321": the RL first
     assert values[1] == 100 * 2 + 50 * 2
@@ -113,8 +119,10 @@ def test_settings_are_checked_once():
         AutotrackSettings(mvd_autotrack=4)
     with pytest.raises(ValueError, match="tp_weapon_order"):
         AutotrackSettings(tp_weapon_order="79")
-    assert AutotrackSettings(mvd_autotrack_custom="(%h + %a) / 2 - %u", mvd_autotrack=2).mode(3)[1](
-        {"h": 100, "a": 50, "u": 1}) == 74.0
+    assert (
+        AutotrackSettings(mvd_autotrack_custom="(%h + %a) / 2 - %u", mvd_autotrack=2).mode(3)[1]({"h": 100, "a": 50, "u": 1})
+        == 74.0
+    )
 
 
 # -- switching ---------------------------------------------------------------------------------
@@ -122,6 +130,7 @@ def test_switches_only_at_a_switch_moment():
     """p0 holds the rocket launcher; p1 gets a better ranking (RL and red armor) but that is no
     switch moment: the camera stays. p0 respawns with a shotgun at 6 s: it has no RL or LG while
     p1 has, so the next 0.5-s update switches to p1."""
+
     def table(t: float) -> dict[str, PlayerStats]:
         p0 = stats("p0", START | (IT_ROCKET_LAUNCHER if t < 6.0 else 0), frags=1)
         p1 = stats("p1", START | (IT_ROCKET_LAUNCHER | IT_ARMOR3 if t >= 2.0 else 0), armor=200 if t >= 2.0 else 0)
@@ -221,8 +230,9 @@ def test_first_person_pose_sits_at_the_eye_and_looks_along_the_view():
     right = quat_rotate(pose.rotation_xyzw, np.array([1.0, 0.0, 0.0]))
     assert abs(right[1]) < 1e-9  # level horizon: the camera's x axis stays horizontal
     moment.alive[0] = False
-    assert np.allclose(FirstPersonCamera(0, LENS).pose(moment).position_world,
-                       feet + [0.0, (24 - 16) * M_PER_UNIT, 0.0])  # a corpse's view height
+    assert np.allclose(
+        FirstPersonCamera(0, LENS).pose(moment).position_world, feet + [0.0, (24 - 16) * M_PER_UNIT, 0.0]
+    )  # a corpse's view height
 
 
 def test_the_program_shows_the_tracked_players_first_person_view_without_a_delay_wait():
@@ -256,15 +266,20 @@ def test_under_a_delay_stats_count_from_their_own_moment():
 
 # -- without stats ------------------------------------------------------------------------------
 def test_without_stats_it_ranks_by_frags_from_kills_and_flags_it():
-    kills = [kill("p2", "p0", 1.0), kill("p2", "p1", 2.0), kill("p1", "p1", 2.5), kill("p0", "p2", 4.0),
-             kill("p0", "p1", 5.0), kill("p0", "p2", 6.0)]
-    session, states = run_session(Match({"p0": 1, "p1": 2, "p2": 3}, lambda t: standing(3), events=kills,
-                                        style=AUTOTRACK), 7.0)
+    kills = [
+        kill("p2", "p0", 1.0),
+        kill("p2", "p1", 2.0),
+        kill("p1", "p1", 2.5),
+        kill("p0", "p2", 4.0),
+        kill("p0", "p1", 5.0),
+        kill("p0", "p2", 6.0),
+    ]
+    session, states = run_session(Match({"p0": 1, "p1": 2, "p2": 3}, lambda t: standing(3), events=kills, style=AUTOTRACK), 7.0)
     at = {round(s.time_s, 3): s for s in states}
-    assert at[0.5].match.shot.subject_ids == ("p0",)   # nobody has a frag: the first player
-    assert at[3.0].match.shot.subject_ids == ("p2",)   # p2: 2 frags
-    assert at[5.7].match.shot.subject_ids == ("p2",)   # p0 ties p2 at 2 (5.0 s): the tracked p2 keeps it
-    assert at[7.0].match.shot.subject_ids == ("p0",)   # p0: 3 frags from 6.0 s
+    assert at[0.5].match.shot.subject_ids == ("p0",)  # nobody has a frag: the first player
+    assert at[3.0].match.shot.subject_ids == ("p2",)  # p2: 2 frags
+    assert at[5.7].match.shot.subject_ids == ("p2",)  # p0 ties p2 at 2 (5.0 s): the tracked p2 keeps it
+    assert at[7.0].match.shot.subject_ids == ("p0",)  # p0: 3 frags from 6.0 s
     assert "no stats" in at[7.0].match.shot.reason
     flagged = [s for s in states if NO_STATS_FLAG in s.flags]
     assert {int(s.time_s) for s in flagged} == set(range(7))  # at the planning ticks, all along

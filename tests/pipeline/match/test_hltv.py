@@ -1,6 +1,7 @@
 """The HLTV baseline against Valve's SourceTV director (hltvdirector.cpp, hltvcamera.cpp): the best
 player followed at rank 0, only the heard events with the SDK's priorities, fixed cameras that turn,
 a dead first-person target seen from the chase view, and the rank's and the chase camera's traces."""
+
 from __future__ import annotations
 
 import math
@@ -48,8 +49,9 @@ def moment(feet, forwards, alive=None) -> Moment:
 
 
 def director(n: int, walls=(), settings: MatchSettings = MatchSettings()) -> HltvDirector:
-    return HltvDirector([f"p{i}" for i in range(n)], settings, Lens(), RayScene(list(walls)),
-                        np.random.default_rng(0), 10.0, np.zeros((0, 3)))
+    return HltvDirector(
+        [f"p{i}" for i in range(n)], settings, Lens(), RayScene(list(walls)), np.random.default_rng(0), 10.0, np.zeros((0, 3))
+    )
 
 
 def forward_of(pose) -> np.ndarray:
@@ -87,8 +89,12 @@ def test_players_far_apart_are_still_followed_and_nobody_alive_gives_a_fixed_cam
 # -- 2. and 3. only the heard events, with the SDK's priorities ---------------------------------
 def standing(t):
     """a1 and b1 face each other 8 m apart; a2 and b2 likewise, 30 m away."""
-    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 8))), "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
-            "a2": ((30.0, 0.0), facing((30, 0), (30, 8))), "b2": ((30.0, 8.0), facing((30, 8), (30, 0)))}
+    return {
+        "a1": ((0.0, 0.0), facing((0, 0), (0, 8))),
+        "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
+        "a2": ((30.0, 0.0), facing((30, 0), (30, 8))),
+        "b2": ((30.0, 8.0), facing((30, 8), (30, 0))),
+    }
 
 
 def event_shot(events) -> tuple[str, tuple[str, ...], list[str]]:
@@ -109,13 +115,13 @@ def test_an_unheard_kind_never_draws_the_shot_however_high_its_priority():
 
 def test_damage_has_the_sdk_priority_5_and_a_client_priority_is_kept():
     damage = GameEvent(EventKind.DAMAGE, "a1", "b1", 0, EVENT_S, "hurt")
-    kill_at_4 = GameEvent(EventKind.KILL, "a2", "b2", 4, EVENT_S, "kill")   # the client's 4 beats no default
+    kill_at_4 = GameEvent(EventKind.KILL, "a2", "b2", 4, EVENT_S, "kill")  # the client's 4 beats no default
     reason, subjects, _ = event_shot([damage, kill_at_4])
     assert reason.startswith("hltv: damage") and set(subjects) == {"a1", "b1"}
     kill_at_6 = GameEvent(EventKind.KILL, "a2", "b2", 6, EVENT_S, "kill")
     reason, subjects, _ = event_shot([damage, kill_at_6])
     assert reason.startswith("hltv: kill") and set(subjects) == {"a2", "b2"}
-    assert MatchSettings().priorities[EventKind.DAMAGE] == 3   # our planner's table is not the baseline's
+    assert MatchSettings().priorities[EventKind.DAMAGE] == 3  # our planner's table is not the baseline's
 
 
 def test_hltv_settings_refuse_bad_priorities_and_hulls():
@@ -153,19 +159,23 @@ def test_fixed_camera_smooths_its_turn_by_three_per_second():
     scene = moment([[0.0, -EYE_M, 10.0]], [[0.0, 0.0, 1.0]])
     camera.advance(scene, 0.0, 0.0)
     assert camera.angles == pytest.approx((0.0, 0.0))
-    scene.aims_world[0] = [10.0, 0.0, 0.0]   # the target now 90 degrees to the side
+    scene.aims_world[0] = [10.0, 0.0, 0.0]  # the target now 90 degrees to the side
     camera.advance(scene, 0.1, 0.0)
-    assert camera.angles == pytest.approx((27.0, 0.0))   # 0.1 s * 3 / s of the 90-degree gap
+    assert camera.angles == pytest.approx((27.0, 0.0))  # 0.1 s * 3 / s of the 90-degree gap
     assert smooth_angles((170.0, 0.0), (-170.0, 10.0), 0.1, 3.0) == pytest.approx((176.0, 3.0))  # the short way
 
 
 # -- 5. first person of a target that dies becomes the chase view ------------------------------
 def test_first_person_of_a_victim_that_dies_becomes_the_chase_view():
     def duel(t):
-        return {"a1": ((0.0, 0.0), 0.0), "b1": ((30.0, 0.0), 0.0),
-                "a2": ((40.0, 0.0), facing((40, 0), (40, 15))), "b2": ((40.0, 15.0), facing((40, 15), (40, 0)))}
+        return {
+            "a1": ((0.0, 0.0), 0.0),
+            "b1": ((30.0, 0.0), 0.0),
+            "a2": ((40.0, 0.0), facing((40, 0), (40, 15))),
+            "b2": ((40.0, 15.0), facing((40, 15), (40, 0))),
+        }
 
-    hltv = HltvSettings(in_eye_kill_chance=1.0, swap_chance_in_eye=0.0)   # always the victim's eyes
+    hltv = HltvSettings(in_eye_kill_chance=1.0, swap_chance_in_eye=0.0)  # always the victim's eyes
     match = Match(TEAMS, duel, [kill("a2", "b2", EVENT_S)], delay_s=10.0, style=HLTV)
     states = BareRig(match, MatchSettings(hltv=hltv)).run(EVENT_S + 13.0)  # the program runs 10 s behind
     before, after = at_time(states, EVENT_S - 0.2), at_time(states, EVENT_S + 1.0)
@@ -174,7 +184,7 @@ def test_first_person_of_a_victim_that_dies_becomes_the_chase_view():
     dead_eye = np.array([40.0, 14 * INCH_M, 15.0])
     camera = after.pose.position_world
     assert np.linalg.norm(camera - dead_eye) == pytest.approx(96 * INCH_M, rel=1e-3)
-    assert camera[2] > dead_eye[2] and camera[1] > dead_eye[1]   # behind the body, from above (pitch offset 15)
+    assert camera[2] > dead_eye[2] and camera[1] > dead_eye[1]  # behind the body, from above (pitch offset 15)
 
 
 # -- 6. the rank's traces and facing, the chase camera's hull ----------------------------------
@@ -182,13 +192,13 @@ def test_rank_traces_go_feet_to_feet_and_other_players_block_them():
     toward, away = [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]
     open_pair = director(2).rank_players(moment([[0, 0, 0], [0, 0, 10]], [toward, away]))
     assert open_pair[0][0] > 0.0 and open_pair[1][0] == 1
-    low_wall = wall([0.0, 0.5, 5.0], (4.0, 1.0, 0.2))   # hides the feet, not the eyes
+    low_wall = wall([0.0, 0.5, 5.0], (4.0, 1.0, 0.2))  # hides the feet, not the eyes
     rank, target = director(2, [low_wall]).rank_players(moment([[0, 0, 0], [0, 0, 10]], [toward, away]))
     assert rank[0] == 0.0 and target[0] == -1
     between = moment([[0, 0, 0], [0, 0, 10], [0, 0, 5]], [toward, away, [1.0, 0.0, 0.0]])
     rank, target = director(3).rank_players(between)
-    assert target[0] == 2 and target[1] == 2   # each sees the one between, not the other
-    between.alive[2] = False   # a dead player is not solid
+    assert target[0] == 2 and target[1] == 2  # each sees the one between, not the other
+    between.alive[2] = False  # a dead player is not solid
     rank, target = director(3).rank_players(between)
     assert target[0] == 1
 
@@ -202,17 +212,18 @@ def test_rank_uses_the_facing_in_three_dimensions():
 
 def chase_distance(walls, feet, alive=None) -> float:
     scene = moment(feet, [[0.0, 0.0, 1.0]] * len(feet), alive)
-    camera = ChaseCamera(ShotKind.FOLLOW, 0, None, ChaseParams(96 * INCH_M, 0.0, 0.0, False), Lens(),
-                         RayScene(list(walls)), MatchSettings())
+    camera = ChaseCamera(
+        ShotKind.FOLLOW, 0, None, ChaseParams(96 * INCH_M, 0.0, 0.0, False), Lens(), RayScene(list(walls)), MatchSettings()
+    )
     camera.advance(scene, 0.0, 0.0)
     return float(np.linalg.norm(camera.pose(scene).position_world - scene.aims_world[0]))
 
 
 def test_the_chase_camera_sweeps_a_six_unit_box_back_from_the_eye():
     assert chase_distance([], [[0, 0, 0]]) == pytest.approx(96 * INCH_M)
-    back_wall = wall([0.0, 1.0, -1.6], (6.0, 6.0, 0.2))    # its face 1.5 m behind the eye
+    back_wall = wall([0.0, 1.0, -1.6], (6.0, 6.0, 0.2))  # its face 1.5 m behind the eye
     assert chase_distance([back_wall], [[0, 0, 0]]) == pytest.approx(1.5 - 6 * INCH_M, abs=1e-3)
-    post = wall([0.17, EYE_M, -1.5], (0.1, 6.0, 0.1))    # its edge 0.12 m beside the line: the ray misses it
+    post = wall([0.17, EYE_M, -1.5], (0.1, 6.0, 0.1))  # its edge 0.12 m beside the line: the ray misses it
     assert chase_distance([post], [[0, 0, 0]]) == pytest.approx(1.45 - 6 * INCH_M, abs=1e-3)
     # another living player 1.5 m behind: its hull grown by the box; dead, it is not solid
     behind = [[0, 0, 0], [0, 0, -1.5]]

@@ -1,6 +1,7 @@
 """The MATCH rig keeps the horizon level: every program pose has no roll, the place search judges
 the level picture that is shown, and at the style's composition every place of the grid frames a
 level pair."""
+
 from __future__ import annotations
 
 import math
@@ -38,22 +39,24 @@ def test_every_program_pose_of_a_melee_has_a_level_horizon(delay_s):
     kinds = {s.match.shot.kind for s in shown}
     assert ShotKind.DUEL in kinds or ShotKind.GROUP in kinds  # the two-point cameras are on air
     rotations = quat_to_matrix(np.stack([s.pose.rotation_xyzw for s in shown]))
-    assert np.abs(rotations[:, 1, 0]).max() < 1e-9   # the camera's right axis is horizontal
-    assert rotations[:, 1, 1].min() > 0.0            # and its up axis points up
+    assert np.abs(rotations[:, 1, 0]).max() < 1e-9  # the camera's right axis is horizontal
+    assert rotations[:, 1, 1].min() > 0.0  # and its up axis points up
 
 
 @pytest.mark.parametrize("kind", [ShotKind.DUEL, ShotKind.GROUP, ShotKind.FOLLOW])
 def test_the_place_search_judges_the_picture_that_is_shown(kind):
     moment = moment_of([(0.0, 0.0), (6.0, 3.0)], [0.0, 0.8])
-    camera = ToricCamera(kind, 0, None if kind == ShotKind.FOLLOW else 1, Style(rig=Rig.MATCH), LENS,
-                         Place(0.5, math.radians(70.0)))
+    camera = ToricCamera(
+        kind, 0, None if kind == ShotKind.FOLLOW else 1, Style(rig=Rig.MATCH), LENS, Place(0.5, math.radians(70.0))
+    )
     places = place_grid(1.0)
     positions = camera.positions(moment, places)
     many = camera.rotations(moment, positions, places)
     assert np.abs(many[:, 1, 0]).max() < 1e-9
     for place, position, matrix in zip(places[::7], positions[::7], many[::7]):
-        np.testing.assert_allclose(quat_to_matrix(camera.pose_from(moment, position, place.width).rotation_xyzw),
-                                   matrix, atol=1e-9)
+        np.testing.assert_allclose(
+            quat_to_matrix(camera.pose_from(moment, position, place.width).rotation_xyzw), matrix, atol=1e-9
+        )
 
 
 @settings(max_examples=30, derandomize=True, deadline=None, database=None)
@@ -63,8 +66,7 @@ def test_at_the_styles_composition_every_place_frames_a_level_pair(distance_m, h
     # degree frame turned any way: the level camera frames the pair from every place of the grid,
     # over a shoulder from above too (the pair one above the other); the wider compositions
     # cannot there, and the search's frame test (framed_seen) drops those places
-    moment = moment_of([(0.0, 0.0), (distance_m * math.cos(heading), distance_m * math.sin(heading))],
-                       [0.0, rise_m])
+    moment = moment_of([(0.0, 0.0), (distance_m * math.cos(heading), distance_m * math.sin(heading))], [0.0, rise_m])
     camera = ToricCamera(ShotKind.DUEL, 0, 1, Style(rig=Rig.MATCH), LENS, Place(0.5, math.radians(70.0)))
     places = [p for p in place_grid(1.0) if p.width == PLACE_WIDTHS[0]]
     positions = camera.positions(moment, places)
@@ -92,7 +94,7 @@ def test_the_search_ray_casts_only_the_points_inside_each_frame_and_judges_as_ca
     with mock.patch.object(scene, "occluded", wraps=scene.occluded) as cast:
         judged = framed_seen(rig.visibility, moment, subjects, positions, rotations, LENS)
     rays = sum(len(c.args[1]) for c in cast.call_args_list)
-    every = rig.visibility.seen_points(positions, moment, subjects)                      # (m, 2, k)
+    every = rig.visibility.seen_points(positions, moment, subjects)  # (m, 2, k)
     screen = project_from_cameras(positions, rotations, LENS, rig.visibility.points_world(moment, subjects))
     with np.errstate(invalid="ignore"):
         inside = (np.abs(screen) <= 1.0).all(axis=2).reshape(every.shape)

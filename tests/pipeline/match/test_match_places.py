@@ -1,5 +1,6 @@
 """Where our director puts the camera for a kill and which events it plans: a corridor that hides
 the style's place, an objective that gives way to a kill, and the hysteresis on discretionary cuts."""
+
 from __future__ import annotations
 
 import math
@@ -78,17 +79,21 @@ def test_a_corridor_hiding_the_styles_place_still_gets_a_place_that_sees_both_at
 
 def four_corners(t: float):
     """o1 stands on an objective at the west; a2 and b2 duel 60 m east, in a roofed corridor."""
-    return {"o1": ((-30.0, 0.0), 0.0), "o2": ((-30.0, 40.0), 0.0),
-            "a2": ((30.0, 0.0), facing((30, 0), (30, 8))), "b2": ((30.0, 8.0), facing((30, 8), (30, 0)))}
+    return {
+        "o1": ((-30.0, 0.0), 0.0),
+        "o2": ((-30.0, 40.0), 0.0),
+        "a2": ((30.0, 0.0), facing((30, 0), (30, 8))),
+        "b2": ((30.0, 8.0), facing((30, 8), (30, 0))),
+    }
 
 
 def test_a_kill_too_close_after_an_objective_takes_its_place():
     objective = GameEvent(EventKind.OBJECTIVE, "o1", "", 0, KILL_S - 0.8, "objective", None)
     # the corridor hides a2 and b2 from any camera far enough back to frame o1 with them (a GROUP)
-    corridor = [block((x, 1.5, 4.0), (0.2, 3.0, 40.0)) for x in (28.5, 31.5)] + [block((30.0, 3.1, 4.0),
-                                                                                        (3.2, 0.2, 40.0))]
-    match = Match({"o1": 1, "o2": 2, "a2": 1, "b2": 2}, four_corners, [objective, kill("a2", "b2", KILL_S)],
-                  delay_s=10.0, walls=corridor)
+    corridor = [block((x, 1.5, 4.0), (0.2, 3.0, 40.0)) for x in (28.5, 31.5)] + [block((30.0, 3.1, 4.0), (3.2, 0.2, 40.0))]
+    match = Match(
+        {"o1": 1, "o2": 2, "a2": 1, "b2": 2}, four_corners, [objective, kill("a2", "b2", KILL_S)], delay_s=10.0, walls=corridor
+    )
     _, states = run_session(match, KILL_S + 10.0 + 2.0)
     state = at_time(states, KILL_S)
     assert state.match.shot.kind == ShotKind.DUEL and set(state.match.shot.subject_ids) == {"a2", "b2"}
@@ -99,8 +104,11 @@ def test_without_a_delay_a_cut_for_a_better_situation_waits_for_settle_s():
     match = melee(seed=3, duration_s=60.0, delay_s=0.0)
     _, states = run_session(match, 60.0)
     program = shots(states)
-    better = [(previous, start) for (previous, _, _), (start, _, s) in zip(program, program[1:])
-              if s.match.shot.reason.endswith("(better situation)")]
+    better = [
+        (previous, start)
+        for (previous, _, _), (start, _, s) in zip(program, program[1:])
+        if s.match.shot.reason.endswith("(better situation)")
+    ]
     assert better, "the melee has discretionary cuts"
     settle_s = MatchSettings().settle_s
     assert all(start - previous >= settle_s - 1e-6 for previous, start in better)
@@ -108,16 +116,25 @@ def test_without_a_delay_a_cut_for_a_better_situation_waits_for_settle_s():
 
 def two_corridors(t: float):
     """a1 and b1 duel in one corridor, a2 and b2 in another 12 m east."""
-    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 6))), "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
-            "a2": ((12.0, 0.0), facing((12, 0), (12, 6))), "b2": ((12.0, 6.0), facing((12, 6), (12, 0)))}
+    return {
+        "a1": ((0.0, 0.0), facing((0, 0), (0, 6))),
+        "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
+        "a2": ((12.0, 0.0), facing((12, 0), (12, 6))),
+        "b2": ((12.0, 6.0), facing((12, 6), (12, 0))),
+    }
 
 
 def test_two_kills_too_close_for_two_cuts_share_a_high_wide_shot_when_no_group_framing_sees_them():
     # 5 m walls 3 m apart: every Toric GROUP place sees into one corridor at most; a camera 30 m
     # above the pair of corridors looks down into both
     walls = [block((x, 2.5, 3.0), (0.2, 5.0, 40.0)) for x in (-1.5, 1.5, 10.5, 13.5)]
-    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2}, two_corridors,
-                  [kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 0.5)], delay_s=10.0, walls=walls)
+    match = Match(
+        {"a1": 1, "b1": 2, "a2": 1, "b2": 2},
+        two_corridors,
+        [kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 0.5)],
+        delay_s=10.0,
+        walls=walls,
+    )
     states = BareRig(match, MatchSettings(overview_height_m=30.0)).run(KILL_S + 10.0 + 2.0)
     rng = np.random.default_rng(5)
     for time_s, pair in ((KILL_S, ("a1", "b1")), (KILL_S + 0.5, ("a2", "b2"))):
@@ -125,16 +142,20 @@ def test_two_kills_too_close_for_two_cuts_share_a_high_wide_shot_when_no_group_f
         assert state.match.shot.kind == ShotKind.OVERVIEW and "planned kill" in state.match.shot.reason
         places = two_corridors(time_s)
         for player in pair:
-            transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
-                                       yaw_quat(places[player][1]))
+            transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]), yaw_quat(places[player][1]))
             assert seen_share(state.pose, walls, transform, rng) >= 0.5, (time_s, player)
 
 
 def two_duels_side_by_side(t: float):
     """a1 and b1 duel on open ground, a2 and b2 6 m east of them; e1 and f1 duel 60 m away."""
-    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 6))), "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
-            "a2": ((6.0, 0.0), facing((6, 0), (6, 6))), "b2": ((6.0, 6.0), facing((6, 6), (6, 0))),
-            "e1": ((60.0, 0.0), facing((60, 0), (60, 6))), "f1": ((60.0, 6.0), facing((60, 6), (60, 0)))}
+    return {
+        "a1": ((0.0, 0.0), facing((0, 0), (0, 6))),
+        "b1": ((0.0, 6.0), facing((0, 6), (0, 0))),
+        "a2": ((6.0, 0.0), facing((6, 0), (6, 6))),
+        "b2": ((6.0, 6.0), facing((6, 6), (6, 0))),
+        "e1": ((60.0, 0.0), facing((60, 0), (60, 6))),
+        "f1": ((60.0, 6.0), facing((60, 6), (60, 0))),
+    }
 
 
 def test_a_kill_soon_after_another_gets_a_later_cut_so_that_the_shot_before_lasts_preferred_shot_s():
@@ -193,8 +214,13 @@ def test_a_planned_shot_is_placed_for_the_frame_that_shows_the_kill_too():
     for k in range(0, 30 * 40):
         t = k / 30.0
         places = duel(t)
-        buffer.push(k, t, [RigidTransform(np.array([x, 0.0, z]), yaw_quat(yaw)) for (x, z), yaw in places.values()],
-                    [np.array([x, 1.6, z]) for (x, z), _ in places.values()], [])
+        buffer.push(
+            k,
+            t,
+            [RigidTransform(np.array([x, 0.0, z]), yaw_quat(yaw)) for (x, z), yaw in places.values()],
+            [np.array([x, 1.6, z]) for (x, z), _ in places.values()],
+            [],
+        )
     kill_s = 25.01  # between the frames at 25.0 and 25.0333
     cover, weights = PlannedDirector.event_cover(buffer, 20.0, [kill_s])
     times = [m.time_s for m in cover]

@@ -1,6 +1,7 @@
 """What real maps asked of our director (issue 29): no fight through a wall, a player on the move
 rather than an overview of walls, and a camera that a wall comes between it and its subject pulled
 in front of the wall (and back out no faster than pull_regrow_m_s)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +32,10 @@ def moment_of(places: dict[str, tuple[float, float]], faces: dict[str, tuple[flo
 FACE_OFF = moment_of({"a": (0.0, 0.0), "b": (0.0, 8.0)}, {"a": (0.0, 8.0), "b": (0.0, 0.0)})
 
 
-@pytest.mark.parametrize("wall, fight", [(None, True), (block((0.0, 1.5, 4.0), (6.0, 3.0, 0.2)), False),
-                                         (block((5.0, 1.5, 4.0), (2.0, 3.0, 0.2)), True)])
+@pytest.mark.parametrize(
+    "wall, fight",
+    [(None, True), (block((0.0, 1.5, 4.0), (6.0, 3.0, 0.2)), False), (block((5.0, 1.5, 4.0), (2.0, 3.0, 0.2)), True)],
+)
 def test_opponents_face_to_face_fight_only_when_no_wall_stands_between_them(wall, fight):
     scene = RayScene([wall]) if wall is not None else RayScene([block((50.0, 0.0, 50.0), (1.0, 1.0, 1.0))])
     scores = fight_matrix(FACE_OFF, np.array([0, 1]), MatchSettings(), scene)
@@ -44,6 +47,7 @@ def test_players_apart_behind_walls_are_followed_on_the_move_not_shown_in_an_ove
     # two opponents 10 m apart, a wall between them the whole time, walking toward it
     def script(t: float):
         return {"a": ((-5.0, 0.2 * t), facing((-5, 0), (5, 0))), "b": ((5.0, -0.2 * t), facing((5, 0), (-5, 0)))}
+
     wall = block((0.0, 2.0, 0.0), (0.3, 4.0, 40.0))
     match = Match({"a": 1, "b": 2}, script, walls=[wall], style=Style(rig=Rig.MATCH))
     _, states = run_session(match, 6.0)
@@ -55,8 +59,10 @@ def test_players_apart_behind_walls_are_followed_on_the_move_not_shown_in_an_ove
 def test_players_beyond_fighting_range_are_followed_nearest_an_opponent_first():
     """No fight anywhere (a duel's players 60-90 m apart): a player, not an overview of nobody;
     the one nearer an opponent first."""
+
     def script(t: float):
         return {"a": ((0.0, 0.0), 0.0), "b": ((0.0, 60.0), 0.0), "c": ((0.0, -30.0), 0.0)}
+
     match = Match({"a": 1, "b": 2, "c": 1}, script, style=Style(rig=Rig.MATCH))
     _, states = run_session(match, 3.0)
     assert {s.match.shot.kind for s in states} == {ShotKind.FOLLOW}
@@ -73,7 +79,7 @@ def pulled_camera(wall_z: float) -> tuple[ToricCamera, Moment, RayScene]:
 
 
 def test_a_wall_between_the_camera_and_its_subject_pulls_it_in_front_and_it_goes_back_slowly():
-    camera, moment, scene = pulled_camera(-0.5)   # the wall's near face at z = -0.4
+    camera, moment, scene = pulled_camera(-0.5)  # the wall's near face at z = -0.4
     free = camera.pose(moment)
     a = moment.aims_world[0]
     assert free.position_world[2] < -0.6, "the place stands behind the wall"

@@ -1,6 +1,7 @@
 """The MATCH rig on tiny hand-built matches: planned cuts before buffered kills, the delay's
 buffering, film grammar (min shot, no jump cut, line of action), takes and their fallback, the
 HLTV baseline's chase on a kill, and determinism by seed."""
+
 from __future__ import annotations
 
 import copy
@@ -42,8 +43,12 @@ KILL_S = 25.0
 def two_fronts(t: float):
     """a1 and b1 face each other 8 m apart (the obvious fight); a2 and b2 stand 15 m apart, b2
     turned away, no fight until a2 kills b2 at KILL_S."""
-    return {"a1": ((0.0, 0.0), facing((0, 0), (0, 8))), "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
-            "a2": ((40.0, 0.0), 0.0), "b2": ((40.0, 15.0), 0.0)}
+    return {
+        "a1": ((0.0, 0.0), facing((0, 0), (0, 8))),
+        "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
+        "a2": ((40.0, 0.0), 0.0),
+        "b2": ((40.0, 15.0), 0.0),
+    }
 
 
 def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it():
@@ -112,8 +117,14 @@ def test_grammar_holds_over_a_melee(delay_s):
             continue
         subjects = [ids.index(p) for p in after.match.shot.subject_ids]
         points = np.array(after.aim_points_world)[subjects] if subjects else np.zeros((0, 3))
-        assert not is_jump_cut(before.match.shot.subject_ids, before.pose.position_world, after.match.shot.subject_ids,
-                               after.pose.position_world, points, 30.0)
+        assert not is_jump_cut(
+            before.match.shot.subject_ids,
+            before.pose.position_world,
+            after.match.shot.subject_ids,
+            after.pose.position_world,
+            points,
+            30.0,
+        )
         if after.match.shot.kind == ShotKind.DUEL:
             x = on_screen(after, points)[:, 0]
             left = after.match.shot.subject_ids[int(np.argmin(x))]
@@ -142,8 +153,9 @@ def test_take_is_held_past_max_shot_until_released():
     choice = session.rig.take(["a2"], None, release=False)
     assert choice.kind == ShotKind.FOLLOW
     held = [session.frame(u) for u in list(match.frames(20.0))[31:]]
-    assert all(shot.subject_ids == ("a2",) and shot.held and shot.reason.startswith("take")
-               for shot in (s.match.shot for s in held))
+    assert all(
+        shot.subject_ids == ("a2",) and shot.held and shot.reason.startswith("take") for shot in (s.match.shot for s in held)
+    )
     assert sum(s.cut for s in held) == 1
     session.rig.take([], None, release=True)
     after = [session.frame(u) for u in list(match.frames(25.0))[601:]]
@@ -262,9 +274,14 @@ def _program_of(session: Session, idle: str, worked_out: list[bool]) -> tuple[li
         state = session.frame(update)
         late += "plan_late" in state.flags
         if state.pose is not None:
-            program.append((np.concatenate([state.pose.position_world, state.pose.rotation_xyzw]), state.visibility,
-                            tuple(state.flags), [(c.shot, c.pose.position_world.tolist(), c.pose.rotation_xyzw.tolist())
-                                                 for c in state.match.candidates]))
+            program.append(
+                (
+                    np.concatenate([state.pose.position_world, state.pose.rotation_xyzw]),
+                    state.visibility,
+                    tuple(state.flags),
+                    [(c.shot, c.pose.position_world.tolist(), c.pose.rotation_xyzw.tolist()) for c in state.match.candidates],
+                )
+            )
         drawn += rig.plan_waiting
         if idle == "whole":
             session.do_deferred_work()
@@ -287,10 +304,10 @@ def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_
     none, drawn, _, late, ahead_none = _program_with_idle_work("none", work_per_tick)
     sliced, _, (partial, finished), late_sliced, ahead_sliced = _program_with_idle_work("slices", work_per_tick)
     whole, _, _, late_whole, ahead_whole = _program_with_idle_work("whole", work_per_tick)
-    assert drawn > 50                  # ours defers: a plan was waiting after many frames
+    assert drawn > 50  # ours defers: a plan was waiting after many frames
     assert partial > 0 and finished > 0  # slices of 2 ms (a clock ticking 1 ms a read) left some unfinished
     if work_per_tick is not None:
-        assert late > 20               # many plans were applied at a later tick
+        assert late > 20  # many plans were applied at a later tick
     assert late == late_sliced == late_whole
     assert ahead_none == 0 and ahead_sliced > 100 and ahead_whole > len(whole) / 2
     for other in (sliced, whole):
@@ -301,10 +318,12 @@ def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_
 
 def _plan_of_work(*steps: float) -> SlicedRun:
     """A stand-in plan: pauses with each step's work, then returns its total."""
+
     def work() -> float:
         for step in steps:
             pause(step)
         return sum(steps)
+
     return SlicedRun(work)
 
 

@@ -1,5 +1,6 @@
 """A kill no level Toric place can show: the DUEL gives way to a wide, level view of the pair
 from a camera that sees them both (shot_builder.py, ShotBuilder.build)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,8 +36,7 @@ def test_a_duel_no_level_toric_place_sees_is_shown_wide_from_a_camera_that_sees_
     rng = np.random.default_rng(5)
     places = tunnel_duel(KILL_S)
     for player in ("a", "b"):
-        transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]),
-                                   yaw_quat(places[player][1]))
+        transform = RigidTransform(np.array([places[player][0][0], 0.0, places[player][0][1]]), yaw_quat(places[player][1]))
         assert seen_share(state.pose, walls, transform, rng) >= 0.5, player
     assert state.match.shot.kind == ShotKind.OVERVIEW and "wide: no level duel place sees both" in state.match.shot.reason
     right = quat_to_matrix(state.pose.rotation_xyzw[None])[0][:, 0]

@@ -1,4 +1,5 @@
 """MomentBuffer: who is alive, and which moment the program shows under a delay."""
+
 from __future__ import annotations
 
 import pickle
@@ -20,8 +21,10 @@ def feed(buffer: MomentBuffer, path_b, kill_at_frame: int = 10, frames: int = 12
     flags = []
     for f in range(frames):
         t = f / RATE_HZ
-        poses = [RigidTransform(np.zeros(3), np.array([0, 0, 0, 1.0])),
-                 RigidTransform(np.asarray(path_b(f), dtype=np.float64), np.array([0, 0, 0, 1.0]))]
+        poses = [
+            RigidTransform(np.zeros(3), np.array([0, 0, 0, 1.0])),
+            RigidTransform(np.asarray(path_b(f), dtype=np.float64), np.array([0, 0, 0, 1.0])),
+        ]
         events = [kill("a", "b", t)] if f == kill_at_frame else []
         assert buffer.push(f, t, poses, [p.position_world for p in poses], events)
         flags.append(bool(buffer.newest.alive[1]))
@@ -41,6 +44,7 @@ def test_a_body_that_falls_or_slides_stays_dead():
         drop = min(0.5 * 9.81 * t * t, 20.0)
         slide = min(max(f - 80, 0) / RATE_HZ * 2.0, 3.0)
         return (5.0 + slide, -drop, 0.0)
+
     flags = feed(MomentBuffer(["a", "b"], MatchSettings()), path, frames=240)
     assert not any(flags[10:])
 
@@ -48,8 +52,7 @@ def test_a_body_that_falls_or_slides_stays_dead():
 def test_a_player_respawned_where_it_fell_is_alive_once_it_walks_away():
     settings = MatchSettings()
     walk_m_s = 5.0
-    flags = feed(MomentBuffer(["a", "b"], settings),
-                 lambda f: (5.0 + max(f - 60, 0) / RATE_HZ * walk_m_s, 0, 0), frames=180)
+    flags = feed(MomentBuffer(["a", "b"], settings), lambda f: (5.0 + max(f - 60, 0) / RATE_HZ * walk_m_s, 0, 0), frames=180)
     first_alive = flags.index(True, 10)
     walked_m = (first_alive - 60) / RATE_HZ * walk_m_s
     assert walked_m == pytest.approx(settings.respawn_walk_m, abs=walk_m_s / RATE_HZ)

@@ -1,5 +1,6 @@
 """shots.py's pair window of a planned DUEL: when it frames the pair, and the swing of its second
 framed point between the victim and the killer's gaze-room point."""
+
 from __future__ import annotations
 
 import math

@@ -2,6 +2,7 @@
 in process, over gRPC on a real server that imports it as a plugin (`--plugin`, its spawned worker
 too), listed by `GET /v1/match-directors`, and measured by `eval-match --plugin`. Adding a
 director is one module and one registry entry: nothing of the service names "toy"."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -43,8 +44,7 @@ def test_the_toy_is_registered_after_the_built_ins_and_a_name_is_never_taken_ove
 
 
 def test_the_toy_directs_a_session_in_process():
-    match = dataclasses.replace(melee(seed=2, duration_s=6.0, delay_s=1.0), style=Style(rig=Rig.MATCH,
-                                                                                        match_director="toy"))
+    match = dataclasses.replace(melee(seed=2, duration_s=6.0, delay_s=1.0), style=Style(rig=Rig.MATCH, match_director="toy"))
     first = match.scene().targets[0].id
     _, states = run_session(match, 6.0)
     shown = [s for s in states if s.pose is not None]
@@ -75,8 +75,11 @@ def test_the_toy_directs_a_session_over_grpc_on_a_server_that_imports_it(plugin_
 def test_the_server_lists_the_toy_after_the_built_ins_and_refuses_an_unknown_name(plugin_server):
     listed = httpx.get(f"http://{plugin_server.http}/v1/match-directors").json()["directors"]
     assert [(d["name"], d["wire"]) for d in listed] == [
-        ("planned", "MATCH_DIRECTOR_PLANNED"), ("hltv", "MATCH_DIRECTOR_HLTV"),
-        ("autotrack", "MATCH_DIRECTOR_AUTOTRACK"), ("toy", None)]
+        ("planned", "MATCH_DIRECTOR_PLANNED"),
+        ("hltv", "MATCH_DIRECTOR_HLTV"),
+        ("autotrack", "MATCH_DIRECTOR_AUTOTRACK"),
+        ("toy", None),
+    ]
     assert all(d["label"] for d in listed)
     with cd.connect(plugin_server.url("grpc")) as client, pytest.raises(cd.DirectorError) as refused:
         client.create_session(match_request(delay_s=0.5, match_director_name="nobody"))
@@ -94,8 +97,21 @@ def test_a_server_without_the_plugin_refuses_the_toy():
 def test_eval_match_measures_the_toy_beside_ours(registry_and_match, monkeypatch):  # noqa: F811 (a fixture)
     folder, _ = registry_and_match
     monkeypatch.setenv("PYTHONPATH", WITH_PLUGIN["PYTHONPATH"])
-    done = eval_match(folder, "--delay", "2", "--minutes", "0.1", "--plugin", PLUGIN, "--director", "toy",
-                      "--director", "planned", "--json", str(folder / "toy.json"))
+    done = eval_match(
+        folder,
+        "--delay",
+        "2",
+        "--minutes",
+        "0.1",
+        "--plugin",
+        PLUGIN,
+        "--director",
+        "toy",
+        "--director",
+        "planned",
+        "--json",
+        str(folder / "toy.json"),
+    )
     assert done.returncode == 0, done.stderr
     result = json.loads((folder / "toy.json").read_text())
     assert list(result["directors"]) == ["toy", "planned"] and "coverage_gain_over_hltv" not in result
@@ -105,11 +121,31 @@ def test_eval_match_measures_the_toy_beside_ours(registry_and_match, monkeypatch
 
 
 def test_plugins_come_from_the_environment_and_one_that_cannot_be_imported_stops_serve(tmp_path):
-    assert ServerSettings.from_env({"CAMDIRECTOR_PLUGINS": "studio.director, other"}).plugins == ("studio.director",
-                                                                                                   "other")
+    assert ServerSettings.from_env({"CAMDIRECTOR_PLUGINS": "studio.director, other"}).plugins == ("studio.director", "other")
     with pytest.raises(ValueError, match="plugins must be Python module names"):
         ServerSettings(plugins=("not a module",))
-    out = subprocess.run([sys.executable, "-m", "camdirector", "serve", "--plugin", "no_such_plugin_module",
-                          "--workers", "0", "--grpc", "127.0.0.1:0", "--zmq", "", "--http", "", "--data-dir",
-                          str(tmp_path)], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camdirector",
+            "serve",
+            "--plugin",
+            "no_such_plugin_module",
+            "--workers",
+            "0",
+            "--grpc",
+            "127.0.0.1:0",
+            "--zmq",
+            "",
+            "--http",
+            "",
+            "--data-dir",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
     assert out.returncode == 2 and "plugin 'no_such_plugin_module' could not be imported" in out.stderr

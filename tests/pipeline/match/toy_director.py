@@ -3,6 +3,7 @@ is to the server (a plugin module that registers itself on import: `camdirector 
 tests.pipeline.match.toy_director`). It always follows the first player, from its own camera: 3 m
 behind and 1.5 m above the player's aim point, looking at it. Nothing of the service names it.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -38,12 +39,17 @@ class ToyDirector(DirectorBase):
     def __init__(self, context: DirectorContext):
         self.first, self.fov_deg = context.players[0], context.lens.vertical_fov_deg
 
-    def decide(self, moment: Moment, buffer: MomentBuffer, current: Shot | None,
-               current_pose: CameraPose | None, flags: list[str]) -> Shot | None:
+    def decide(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
+    ) -> Shot | None:
         if current is not None:
             return None
-        return Shot(ShotChoice((self.first,), ShotKind.FOLLOW, f"toy: always {self.first}"), (0,),
-                    BehindCamera(0, self.fov_deg), moment.time_s)
+        return Shot(
+            ShotChoice((self.first,), ShotKind.FOLLOW, f"toy: always {self.first}"),
+            (0,),
+            BehindCamera(0, self.fov_deg),
+            moment.time_s,
+        )
 
 
 register(DirectorEntry("toy", "a test's toy: always the first player, from behind", ToyDirector))

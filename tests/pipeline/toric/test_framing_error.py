@@ -1,6 +1,7 @@
 """The TORIC rig's framing error (pipeline/toric/framing.py, `Framing.error`): how far the
 framed points land from the style's screen points, in normalised screen units (the frame is
 [-1, 1]), on tiny hand-built scenes with expected values, and through in-process sessions."""
+
 from __future__ import annotations
 
 import math
@@ -30,8 +31,7 @@ def framed(targets_world: list[np.ndarray]) -> tuple[Framing, FrameState]:
     state = FrameState(frame=1, time_s=0.0, dt_s=0.0, aim_points_world=targets_world, toric=ToricFrame())
     framing.run(state, state.toric)
     torus = state.toric.torus
-    state.pose = pose_on_torus(torus, 0.5 * theta_max(torus.alpha), math.radians(20.0), STYLE, LENS,
-                               state.toric.b_is_gaze_point)
+    state.pose = pose_on_torus(torus, 0.5 * theta_max(torus.alpha), math.radians(20.0), STYLE, LENS, state.toric.b_is_gaze_point)
     return framing, state
 
 
@@ -59,14 +59,13 @@ def test_sliding_the_camera_sideways_moves_the_nearer_target_most(shift_m):
     framing, state = framed([A_WORLD, B_WORLD])
     rotation = quat_to_matrix(state.pose.rotation_xyzw)
     depths_m = [-(rotation.T @ (p - state.pose.position_world))[2] for p in (A_WORLD, B_WORLD)]
-    state.pose = CameraPose(state.pose.position_world + shift_m * rotation[:, 0], state.pose.rotation_xyzw,
-                            LENS.vertical_fov_deg)
+    state.pose = CameraPose(state.pose.position_world + shift_m * rotation[:, 0], state.pose.rotation_xyzw, LENS.vertical_fov_deg)
     assert framing.error(state.pose, state.toric) == pytest.approx(shift_m / (min(depths_m) * LENS.tan_half_fov_x), rel=1e-9)
 
 
 def test_a_target_behind_the_camera_has_no_error_value():
     framing, state = framed([A_WORLD, B_WORLD])
-    turned_round = quat_to_matrix(state.pose.rotation_xyzw) @ np.diag([-1.0, 1.0, -1.0])   # half a turn about its up
+    turned_round = quat_to_matrix(state.pose.rotation_xyzw) @ np.diag([-1.0, 1.0, -1.0])  # half a turn about its up
     state.pose = CameraPose(state.pose.position_world, matrix_to_quat(turned_round), LENS.vertical_fov_deg)
     assert math.isnan(framing.error(state.pose, state.toric))
 

@@ -1,6 +1,7 @@
 """OcclusionMaps moves its occluder scene only on the frames that build maps, with velocities by
 finite differences between the latest frame and the one before it; an amortized update's maps are
 computed apart (do_deferred_work) and applied apply_after_frames frames later, a refill's at once."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -28,9 +29,13 @@ def _pose(x: float, yaw_rad: float = 0.0) -> RigidTransform:
 def maps():
     rng = np.random.default_rng(0)
     dynamic = {name: (box((0.5, 0.5, 0.5)), _pose(0.0)) for name in ("spinner", "slider", "still", "stopper")}
-    made = OcclusionMaps([box((20.0, 0.1, 20.0))], dynamic, TargetSampler([capsule(0.3, 1.8)], rng),
-                         Style(visibility=VisibilityMode.ANTICIPATION, map_resolution=16,
-                               map_backend=MapBackendChoice.EMBREE), rng)
+    made = OcclusionMaps(
+        [box((20.0, 0.1, 20.0))],
+        dynamic,
+        TargetSampler([capsule(0.3, 1.8)], rng),
+        Style(visibility=VisibilityMode.ANTICIPATION, map_resolution=16, map_backend=MapBackendChoice.EMBREE),
+        rng,
+    )
     yield made
     made.close()
 
@@ -79,8 +84,11 @@ def test_velocity_of_the_latest_step_reaches_the_scene(maps):
     while not built:
         frame += 1
         time_s = frame * DT_S
-        maps.ingest([("slider", _pose(0.6 * frame)), ("spinner", _pose(0.0, 0.3 * frame))]
-                    + ([("stopper", _pose(0.2 * frame))] if frame == 1 else []), time_s)
+        maps.ingest(
+            [("slider", _pose(0.6 * frame)), ("spinner", _pose(0.0, 0.3 * frame))]
+            + ([("stopper", _pose(0.2 * frame))] if frame == 1 else []),
+            time_s,
+        )
         built = _drawn(maps, time_s)
     assert frame > 1  # maps are built one frame in several
     scene = maps.scene.dynamic
@@ -100,18 +108,18 @@ def test_an_amortized_update_is_computed_apart_and_applied_on_a_later_frame_a_re
         time_s += DT_S
         assert "projection" not in _update(maps, time_s)
     drawn_s = time_s
-    assert maps.do_deferred_work(whole=False) and maps.has_deferred_work      # its maps: A_s still to do
+    assert maps.do_deferred_work(whole=False) and maps.has_deferred_work  # its maps: A_s still to do
     assert maps.do_deferred_work(whole=False) and not maps.has_deferred_work  # A_s
     assert not maps.do_deferred_work()
-    for _ in range(maps.amap.settings.apply_after_frames - 1):   # computed, not yet the search's
+    for _ in range(maps.amap.settings.apply_after_frames - 1):  # computed, not yet the search's
         time_s += DT_S
         assert _update(maps, time_s) == {}
         np.testing.assert_array_equal(maps.amap.a_map, a_map)
     time_s += DT_S
     timings = _update(maps, time_s)
-    assert "amap" in timings and "projection" not in timings    # applied on its frame, computed before
+    assert "amap" in timings and "projection" not in timings  # applied on its frame, computed before
     assert not np.array_equal(maps.amap.a_map, a_map)
-    made_at = maps.amap.computed_at_s   # one target: one slot refreshed, stamped with the time it was due at
+    made_at = maps.amap.computed_at_s  # one target: one slot refreshed, stamped with the time it was due at
     assert sorted(made_at) == [0.0] * (len(made_at) - 1) + [drawn_s]
 
 

@@ -1,5 +1,6 @@
 """The per-sample occlusion prediction (pipeline/toric/occlusion_prediction.py): fast A_s against the
 numpy reference, the uncertainty function, and what the prediction does."""
+
 from __future__ import annotations
 
 import math
@@ -34,6 +35,7 @@ def _velocity_for_travel(travel_texels, window: MapWindow, horizon_s: float = DE
 
 
 # -- fast == reference ---------------------------------------------------------------------------
+
 
 @st.composite
 def map_cases(draw):
@@ -79,15 +81,19 @@ def test_warm_bank_gives_the_same_answer_and_bins_are_stable():
     velocity = _velocity_for_travel(rng.normal(size=(2, 32, 32, 2)) * 6.0, window).astype(np.float32)
     warm = KernelBank(DEFAULTS)
     warm.warm()
-    np.testing.assert_allclose(predict_occlusion(shadow, velocity, window, DEFAULTS, warm),
-                               predict_occlusion(shadow, velocity, window, DEFAULTS), atol=1e-6)
+    np.testing.assert_allclose(
+        predict_occlusion(shadow, velocity, window, DEFAULTS, warm),
+        predict_occlusion(shadow, velocity, window, DEFAULTS),
+        atol=1e-6,
+    )
     bins, snapped = snap_travel(np.array([[3.0, 4.0], [0.1, 0.0], [100.0, 0.0]]), DEFAULTS)
-    assert bins[1] == 0 and np.all(snapped[1] == 0.0)                    # under half a texel: still
-    assert abs(np.hypot(*snapped[0]) - 5.0) / 5.0 < 0.05                  # length within half a bin
-    assert np.hypot(*snapped[2]) <= DEFAULTS.max_travel_texels * 1.0001   # clamped
+    assert bins[1] == 0 and np.all(snapped[1] == 0.0)  # under half a texel: still
+    assert abs(np.hypot(*snapped[0]) - 5.0) / 5.0 < 0.05  # length within half a bin
+    assert np.hypot(*snapped[2]) <= DEFAULTS.max_travel_texels * 1.0001  # clamped
 
 
 # -- the uncertainty function ----------------------------------------------------------------------
+
 
 def test_falloffs_are_the_papers_triangles():
     np.testing.assert_allclose(length_falloff([0.0, 0.3, -0.3, 0.6, 2.0], 0.6), [1.0, 0.5, 0.5, 0.0, 0.0])
@@ -117,8 +123,7 @@ def test_uncertainty_peaks_at_the_predicted_travel_and_falls_off_along_and_acros
     along = [float(uncertainty(travel, [x, 0.0], 0.6, 0.5)) for x in (3.0, 4.5, 6.0, 7.5, 9.0)]
     assert along[2] == 1.0 and along[1] < 1.0 and along[3] < 1.0
     assert along[0] < along[1] and along[4] < along[3]
-    across = [float(uncertainty(travel, 6.0 * np.array([math.cos(a), math.sin(a)]), 0.6, 0.5))
-              for a in (0.0, 0.2, 0.4, 0.6)]
+    across = [float(uncertainty(travel, 6.0 * np.array([math.cos(a), math.sin(a)]), 0.6, 0.5)) for a in (0.0, 0.2, 0.4, 0.6)]
     assert across == sorted(across, reverse=True) and across[-1] == 0.0
     # A still occluder stays where it is.
     assert float(uncertainty([0.0, 0.0], [0.0, 0.0], 0.6, 0.5)) == 1.0
@@ -126,6 +131,7 @@ def test_uncertainty_peaks_at_the_predicted_travel_and_falls_off_along_and_acros
 
 
 # -- what the prediction does ------------------------------------------------------------------------
+
 
 def test_still_occluders_and_no_anticipation_give_the_shadow_map():
     rng = np.random.default_rng(1)
@@ -145,11 +151,11 @@ def test_one_moving_texel_spreads_unit_mass_ahead_of_itself():
     shadow = np.zeros((n, n), np.float32)
     shadow[10, 20] = 1.0
     velocity = np.zeros((n, n, 2), np.float32)
-    velocity[10, 20] = _velocity_for_travel([8.0, 0.0], window)          # 8 texels toward +theta
+    velocity[10, 20] = _velocity_for_travel([8.0, 0.0], window)  # 8 texels toward +theta
     a = predict_occlusion(shadow, velocity, window)
     assert math.isclose(float(a.sum()), 1.0, rel_tol=1e-5)
     rows, cols = np.nonzero(a)
-    assert rows.min() > 10 and a[10, 20] == 0.0                          # nothing behind or in place
+    assert rows.min() > 10 and a[10, 20] == 0.0  # nothing behind or in place
     centroid = (np.array(np.nonzero(a)) * a[rows, cols]).sum(axis=1)
     assert abs(centroid[0] - 18.0) < 1.5 and abs(centroid[1] - 20.0) < 0.5
 
@@ -162,8 +168,8 @@ def test_a_wide_occluder_moving_uniformly_is_predicted_certain_inside_and_ahead(
     velocity = np.where(shadow[..., None] > 0, _velocity_for_travel([4.0, 0.0], window), 0.0).astype(np.float32)
     a = predict_occlusion(shadow, velocity, window)
     assert np.all(a <= 1.0)
-    np.testing.assert_allclose(a[15:30, 20:30], 1.0, atol=1e-5)          # inside, after the shift
-    assert a[31, 25] > 0.3 and a[5, 25] < 0.5                             # ahead filled, trailing edge freed
+    np.testing.assert_allclose(a[15:30, 20:30], 1.0, atol=1e-5)  # inside, after the shift
+    assert a[31, 25] > 0.3 and a[5, 25] < 0.5  # ahead filled, trailing edge freed
 
 
 def test_every_kernel_sums_to_one():

@@ -1,5 +1,6 @@
 """Style masks (pipeline/toric/style_masks.py, the paper's section 5.2 and Figure 10): where "behind"
 begins, and what each mask excludes."""
+
 from __future__ import annotations
 
 import math
@@ -37,14 +38,14 @@ def test_masks():
     assert np.all(hard[behind] == 1.0)
     np.testing.assert_array_equal(hard[~behind], a[~behind])
     soft = style_mask(StyleMaskSettings(kind=MaskKind.SOFT_BEHIND), MASK_WINDOW, ALPHA)
-    assert np.all(np.diff(soft, axis=0) >= 0.0)                             # a gradient toward the back
+    assert np.all(np.diff(soft, axis=0) >= 0.0)  # a gradient toward the back
     assert np.all(soft[~behind] == 1.0) and np.all(soft[theta < behind_theta_rad(ALPHA) - 0.6] == 0.0)
     assert 0 < np.count_nonzero((soft > 0) & (soft < 1))
     combined = style_mask(StyleMaskSettings(kind=MaskKind.AVOID_BEHIND_TOP_BOTTOM), MASK_WINDOW, ALPHA)
     front = ~behind
     abs_phi = np.abs(np.degrees(phi))
-    assert np.all(combined[front & (abs_phi < 15)] == 0.0)                  # top views
-    assert np.all(combined[front & (abs_phi > 150)] == 0.0)                 # bottom views
+    assert np.all(combined[front & (abs_phi < 15)] == 0.0)  # top views
+    assert np.all(combined[front & (abs_phi > 150)] == 0.0)  # bottom views
     assert np.all(combined[front & (abs_phi > 45) & (abs_phi < 120)] == 1.0)
     assert np.all((combined >= 0.0) & (combined <= 1.0))
     with pytest.raises(ValueError):

@@ -1,5 +1,6 @@
 """Sample points on the targets (pipeline/toric/target_sampling.py): uniform over the area, on the surface,
 reproducible from the seed, re-drawn slot by slot."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -9,13 +10,13 @@ from camdirector.geometry.meshes import TriMesh, box, sphere
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.toric.target_sampling import SurfaceSampler, TargetSampler, TargetSamplingSettings
 
-SIZE = np.array([1.0, 2.0, 4.0])   # a box whose face pairs have areas 8 : 4 : 2 (normal x : y : z)
+SIZE = np.array([1.0, 2.0, 4.0])  # a box whose face pairs have areas 8 : 4 : 2 (normal x : y : z)
 
 
 def test_points_are_uniform_over_the_area():
     points = SurfaceSampler(box(SIZE)).sample(40_000, np.random.default_rng(0))
-    on_face = np.isclose(np.abs(points), SIZE / 2.0, atol=1e-9)               # (n, 3): which face
-    assert np.all(on_face.sum(axis=1) >= 1)                                   # on the surface
+    on_face = np.isclose(np.abs(points), SIZE / 2.0, atol=1e-9)  # (n, 3): which face
+    assert np.all(on_face.sum(axis=1) >= 1)  # on the surface
     share = on_face.mean(axis=0)
     np.testing.assert_allclose(share, np.array([8.0, 4.0, 2.0]) / 14.0, atol=0.01)
     # Within a face: uniform, so each half of the big +-x faces gets half of their points.
@@ -27,7 +28,7 @@ def test_points_are_uniform_inside_a_triangle():
     triangle = TriMesh(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), np.array([[0, 1, 2]], np.int32))
     p = SurfaceSampler(triangle).sample(40_000, np.random.default_rng(1))
     assert np.all(p[:, 0] >= 0) and np.all(p[:, 1] >= 0) and np.all(p[:, 0] + p[:, 1] <= 1 + 1e-12)
-    assert abs(np.mean(p[:, 0] < 0.5) - 0.75) < 0.01                          # area share of x < 1/2
+    assert abs(np.mean(p[:, 0] < 0.5) - 0.75) < 0.01  # area share of x < 1/2
     np.testing.assert_allclose(p.mean(axis=0), [1 / 3, 1 / 3, 0.0], atol=0.01)
 
 
@@ -45,11 +46,10 @@ def test_the_same_seed_gives_the_same_points():
 
 
 def test_slots_are_numbered_per_target_and_redrawn_one_by_one():
-    sampler = TargetSampler([sphere(0.5), box(SIZE)], np.random.default_rng(0),
-                            TargetSamplingSettings(samples_per_target=5))
+    sampler = TargetSampler([sphere(0.5), box(SIZE)], np.random.default_rng(0), TargetSamplingSettings(samples_per_target=5))
     assert sampler.slot_count == 10 and [sampler.target_of(s) for s in (0, 4, 5, 9)] == [0, 0, 1, 1]
     radius = np.linalg.norm(sampler.points_local[:5], axis=1)
-    assert np.all(radius <= 0.5 + 1e-9) and np.all(radius > 0.45)           # on the sphere's surface
+    assert np.all(radius <= 0.5 + 1e-9) and np.all(radius > 0.45)  # on the sphere's surface
     assert np.all(np.isclose(np.abs(sampler.points_local[5:]), SIZE / 2.0).any(axis=1))
     before = sampler.points_local.copy()
     sampler.redraw([2, 6], np.random.default_rng(1))

@@ -1,4 +1,5 @@
 """The rig's visibility modes on tiny hand-built scenes with expected outcomes (in-process sessions)."""
+
 from __future__ import annotations
 
 import math
@@ -15,14 +16,15 @@ from tests.service.wire_client import box_object, capsule_target
 
 def _session(mode, objects, targets, seed=3):
     table = SessionTable(ServerSettings(workers=0, checkpoint_store="off"))
-    table.create("s", pb.CreateSessionRequest(objects=objects, targets=targets, seed=seed,
-                                              style=pb.Style(visibility=mode)))
+    table.create("s", pb.CreateSessionRequest(objects=objects, targets=targets, seed=seed, style=pb.Style(visibility=mode)))
     return table
 
 
 def _frames(table, n, start=1, states=lambda t: []):
-    return [table.frame(pb.FrameUpdate(session_id="s", frame=i, time_s=i / 60, states=states(i / 60)))
-            for i in range(start, start + n)]
+    return [
+        table.frame(pb.FrameUpdate(session_id="s", frame=i, time_s=i / 60, states=states(i / 60)))
+        for i in range(start, start + n)
+    ]
 
 
 def _pose(u):
@@ -92,8 +94,14 @@ def test_cuts_obey_the_30_degree_rule_and_motion_stays_within_the_limits_between
 
     def slide(t):
         p = middle + across * 9.0 * math.sin(0.8 * t)
-        return [pb.ObjectState(id="sweeper", transform=pb.Transform(
-            position=pb.Vec3(x=p[0], y=p[1], z=p[2]), rotation=pb.Quat(y=math.sin(yaw / 2), w=math.cos(yaw / 2))))]
+        return [
+            pb.ObjectState(
+                id="sweeper",
+                transform=pb.Transform(
+                    position=pb.Vec3(x=p[0], y=p[1], z=p[2]), rotation=pb.Quat(y=math.sin(yaw / 2), w=math.cos(yaw / 2))
+                ),
+            )
+        ]
 
     table = _session(pb.RAYCAST, objects, TARGETS, seed=11)
     updates = _frames(table, 900, states=slide)
@@ -144,8 +152,9 @@ def test_the_cut_search_never_picks_a_place_within_30_degrees():
 
     near_only = lambda places: np.where(angle_deg(places) < 25.0, 0.0, 1.0) if len(places) > 1 else np.ones(1)
     assert search._cut(torus, here, near_only, side=1.0) is None
-    far_band = lambda places: (np.where((angle_deg(places) > 40.0) & (angle_deg(places) < 60.0), 0.0, 1.0)
-                               if len(places) > 1 else np.ones(1))
+    far_band = lambda places: (
+        np.where((angle_deg(places) > 40.0) & (angle_deg(places) < 60.0), 0.0, 1.0) if len(places) > 1 else np.ones(1)
+    )
     theta, phi, occluded = search._cut(torus, here, far_band, side=1.0)
     assert occluded == 0.0 and 40.0 < angle_deg(torus_position(torus, theta, phi)[None])[0] < 60.0
 
@@ -163,8 +172,7 @@ def test_anticipation_moves_before_the_occluder_arrives_and_raycast_only_after()
 
     def slide(t):
         p = middle + across * (6.0 - 1.5 * t)
-        return [pb.ObjectState(id="w", transform=pb.Transform(position=pb.Vec3(x=p[0], y=p[1], z=p[2]),
-                                                              rotation=turn))]
+        return [pb.ObjectState(id="w", transform=pb.Transform(position=pb.Vec3(x=p[0], y=p[1], z=p[2]), rotation=turn))]
 
     first = {}
     for mode in (pb.RAYCAST, pb.ANTICIPATION):
@@ -172,14 +180,18 @@ def test_anticipation_moves_before_the_occluder_arrives_and_raycast_only_after()
         wall.transform.rotation.CopyFrom(turn)
         updates = _frames(_session(mode, [wall], TARGETS), 300, states=slide)
         occluded = [i for i, u in enumerate(updates) if u.visibility < 1.0]
-        moved = [i for i, u in enumerate(updates)
-                 if {"search_single_frame", "search_look_ahead", "search_cut"} & set(u.diagnostics.flags)]
+        moved = [
+            i
+            for i, u in enumerate(updates)
+            if {"search_single_frame", "search_look_ahead", "search_cut"} & set(u.diagnostics.flags)
+        ]
         first[mode] = (occluded[0] if occluded else len(updates), moved[0])
-    assert first[pb.RAYCAST][1] >= first[pb.RAYCAST][0]          # reacts once occluded
+    assert first[pb.RAYCAST][1] >= first[pb.RAYCAST][0]  # reacts once occluded
     assert first[pb.ANTICIPATION][1] < first[pb.ANTICIPATION][0] - 5  # moves well before
 
 
 # -- REACTIVE: Cinemachine's Deoccluder, pull camera forward (pipeline/toric/reactive.py) ---------------
+
 
 def _deoccluder_scene(pieces):
     """A RayScene of boxes (size, centre) that can move: each is a dynamic object "o<i>"."""
@@ -223,8 +235,7 @@ def test_reactive_ignores_obstacles_within_the_minimum_distance_and_catches_near
     assert np.allclose(Deoccluder(hugging_a).clear_position(RIG_CAMERA, A_POINT), RIG_CAMERA)
     # a thin pole 7 cm beside the line: the ray misses it, the camera's sphere (radius 0.1) does not
     pole = _deoccluder_scene([((0.04, 3.0, 0.04), (0.07, 1.5, -3.0))])
-    assert np.allclose(Deoccluder(pole, ReactiveSettings(camera_radius_m=0.0)).clear_position(RIG_CAMERA, A_POINT),
-                       RIG_CAMERA)
+    assert np.allclose(Deoccluder(pole, ReactiveSettings(camera_radius_m=0.0)).clear_position(RIG_CAMERA, A_POINT), RIG_CAMERA)
     c = Deoccluder(pole).clear_position(RIG_CAMERA, A_POINT)
     assert -3.0 < c[2] < -2.85
 

@@ -1,4 +1,5 @@
 """Artifact and registry persistence, continuity rules, shot durations and the director on tiny levels."""
+
 from __future__ import annotations
 
 import json
@@ -52,8 +53,10 @@ def test_artifact_round_trip_and_version_refusal(tmp_path, corridor_artifact):
 def test_registry_survives_a_reopen_and_deletes(tmp_path):
     level = tmp_path / "corridor.obj"
     mesh = corridor()
-    level.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
-                     + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    level.write_text(
+        "".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
+        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces)
+    )
     first = LevelRegistry(tmp_path / "data")
     record = first.add_level("corridor", level, scale=1.0)
     assert record.counts["nodes"] > 0
@@ -100,12 +103,13 @@ def _walk_corridor(director, scene):
 def test_director_keeps_the_actor_visible_and_cuts_by_the_rules(corridor_artifact, movement):
     scene = RayScene([corridor()])
     settings = DirectorSettings(shot_duration_median_s=1.5)
-    director = GraphDirector(corridor_artifact, settings, np.random.default_rng(1),
-                             DirectorStyle(ShotSize.LONG, movement))
+    director = GraphDirector(corridor_artifact, settings, np.random.default_rng(1), DirectorStyle(ShotSize.LONG, movement))
     shots = _walk_corridor(director, scene)
     lens, body = Lens(vertical_fov_deg=settings.vertical_fov_deg), ActorBody.of_height(corridor_artifact.agent_height_m)
-    views = [frame_view(shot_pose(s.position_world, s.look_at_world, lens), lens, feet, body, ShotSize.LONG, scene)
-             for s, (_, feet) in zip(shots, _corridor_feet())]
+    views = [
+        frame_view(shot_pose(s.position_world, s.look_at_world, lens), lens, feet, body, ShotSize.LONG, scene)
+        for s, (_, feet) in zip(shots, _corridor_feet())
+    ]
     assert visible_share(views) >= 0.9, "the actor inside the frame and unoccluded (evaluation/tracks/measure.py)"
     cuts = [i for i, s in enumerate(shots) if s.cut]
     assert cuts[0] == 0
@@ -120,8 +124,11 @@ def test_director_keeps_the_actor_visible_and_cuts_by_the_rules(corridor_artifac
         before = screen_motion(prev.position_world[None], actor, np.array([1.0, 0, 0]))[0]
         assert keeps_line_of_action(before, screen_motion(new.position_world[None], actor, np.array([1.0, 0, 0])))[0]
     if movement == Movement.STATIC:
-        moving = [i for i in range(1, len(shots)) if not shots[i].cut
-                  and not np.allclose(shots[i].position_world, shots[i - 1].position_world)]
+        moving = [
+            i
+            for i in range(1, len(shots))
+            if not shots[i].cut and not np.allclose(shots[i].position_world, shots[i - 1].position_world)
+        ]
         assert moving == []
     assert all(s.shot_id == sum(1 for c in cuts if c <= i) - 1 for i, s in enumerate(shots))
 
@@ -140,15 +147,22 @@ def test_each_frame_reports_the_scores_of_the_target_it_chose(corridor_artifact)
     director = GraphDirector(corridor_artifact, s, np.random.default_rng(1))
     shots = _walk_corridor(director, RayScene([corridor()]))
     move_keys = {"shot_size", "direct_visibility", "indirect_visibility", "graph_distance", "total"}
-    weights = {"shot_size": s.weight_shot_size, "direct_visibility": s.weight_direct_visibility,
-               "indirect_visibility": s.weight_indirect_visibility, "graph_distance": s.weight_distance,
-               "thirty_degree": s.weight_thirty_degree, "line_of_action": s.weight_line_of_action}
+    weights = {
+        "shot_size": s.weight_shot_size,
+        "direct_visibility": s.weight_direct_visibility,
+        "indirect_visibility": s.weight_indirect_visibility,
+        "graph_distance": s.weight_distance,
+        "thirty_degree": s.weight_thirty_degree,
+        "line_of_action": s.weight_line_of_action,
+    }
     assert set(shots[0].scores) == {"shot_size", "direct_visibility", "indirect_visibility", "total"}
     later_cuts = [shot.scores for shot in shots[1:] if shot.cut]
     moves = [shot.scores for shot in shots if not shot.cut and shot.scores]
     assert later_cuts and moves
-    assert all(set(c) == {"shot_size", "direct_visibility", "indirect_visibility", "thirty_degree",
-                          "line_of_action", "total"} for c in later_cuts)
+    assert all(
+        set(c) == {"shot_size", "direct_visibility", "indirect_visibility", "thirty_degree", "line_of_action", "total"}
+        for c in later_cuts
+    )
     assert all(set(m) == move_keys for m in moves)
     for scores in [shots[0].scores, *later_cuts, *moves]:
         parts = {k: v for k, v in scores.items() if k != "total"}
@@ -172,8 +186,9 @@ def test_cuts_that_can_wait_go_only_to_places_that_frame_solidly(corridor_artifa
     def fits(camera, k):
         return fit_ratio(camera[None], framed_ends_world(feet[k], height, size), radius, s.vertical_fov_deg, 0.0)[0] <= 1.0
 
-    waited = [k for k in range(1, len(shots))
-              if shots[k].cut and shots[k].cut_reason in (CutReason.SHOT_DURATION, CutReason.FRAMING)]
+    waited = [
+        k for k in range(1, len(shots)) if shots[k].cut and shots[k].cut_reason in (CutReason.SHOT_DURATION, CutReason.FRAMING)
+    ]
     assert len(waited) >= 3, "20 s of 1.5 s median shots must cut"
     for k in waited:
         camera = shots[k].position_world

@@ -1,6 +1,7 @@
 """Shot sizes on screen (pipeline/tracks/shot_sizes.py): the aim centres the framed extent, the
 fit ratio says whether it can be framed, and the framing error is 0 where the shot size puts it.
 Property tests over cameras around an actor standing at the origin."""
+
 from __future__ import annotations
 
 import math
@@ -82,8 +83,9 @@ def test_the_issues_camera_crops_the_feet_and_the_aim_keeps_them():
     ends = framed_ends_world(FEET, HEIGHT_M, ShotSize.LONG)
     for distance_m in (2.0, 2.1):
         position = camera_at(1.0, distance_m, 1.62)
-        fixed = CameraPose(position, level_look_rotation(position, [0.0, 0.6 * HEIGHT_M, 0.0], (0.0, 0.0), LENS),
-                           LENS.vertical_fov_deg)
+        fixed = CameraPose(
+            position, level_look_rotation(position, [0.0, 0.6 * HEIGHT_M, 0.0], (0.0, 0.0), LENS), LENS.vertical_fov_deg
+        )
         assert project_to_screen(fixed, LENS, ends)[0, 1] < -1.0
         assert fit_ratio(position[None], ends, 0.0, LENS.vertical_fov_deg, 0.0)[0] <= 1.0
         assert np.all(np.abs(project_to_screen(aimed(position, ends, 0.0), LENS, ends)[:, 1]) <= 1.0)

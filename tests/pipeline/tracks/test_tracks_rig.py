@@ -4,6 +4,7 @@ UpdateStyle changes the shot size live; every bad input is refused clearly while
 goes on; and on a real level (nav_test) the actor stays visible along a Recast route. Visible means
 what the returned poses show: the actor inside the frame and unoccluded
 (evaluation/tracks/measure.py), not the server's own estimate."""
+
 from __future__ import annotations
 
 import io
@@ -51,8 +52,7 @@ def shown_share(updates: list[pb.CameraUpdate], feet_world, level: TriMesh, heig
     """Share of the frames whose pose shows the actor (a long shot's, at the server's default lens)
     standing on feet_world (F, 3) in the level: evaluation/tracks/measure.py."""
     lens, body, scene = Lens(), ActorBody.of_height(height_m), RayScene([level])
-    return visible_share([frame_view(pose_of(u), lens, feet, body, ShotSize.LONG, scene)
-                          for u, feet in zip(updates, feet_world)])
+    return visible_share([frame_view(pose_of(u), lens, feet, body, ShotSize.LONG, scene) for u, feet in zip(updates, feet_world)])
 
 
 @pytest.fixture(scope="module")
@@ -86,11 +86,10 @@ def test_a_session_follows_the_actor_with_cuts(client):
     assert updates[-1].shot_id == updates[0].shot_id + cuts - 1
     assert shown_share(updates, feet, corridor()) >= 0.9
     flags = [f for u in updates for f in u.diagnostics.flags]
-    assert "tracks_cut_first_shot" in flags and any(f.startswith("tracks_cut_") and f != "tracks_cut_first_shot"
-                                                      for f in flags)
+    assert "tracks_cut_first_shot" in flags and any(f.startswith("tracks_cut_") and f != "tracks_cut_first_shot" for f in flags)
     assert {"ingest", "cut_check", "target_update", "camera_update"} <= set(updates[-1].diagnostics.stage_ms)
     assert set(updates[0].diagnostics.scores) == {"shot_size", "direct_visibility", "indirect_visibility", "total"}
-    assert any("graph_distance" in u.diagnostics.scores for u in updates if not u.cut)   # moves on the wire too
+    assert any("graph_distance" in u.diagnostics.scores for u in updates if not u.cut)  # moves on the wire too
     assert client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id)).frames == len(times)
 
 
@@ -100,21 +99,32 @@ def test_update_style_changes_the_shot_size_live(client):
     times, feet = corridor_walk(12.0)
     half = len(times) // 2
     first = client.stream(actor_frames(session_id, times[:half], feet[:half]))
-    client.call("UpdateStyle", pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(
-        rig=pb.RIG_TRACKS, shot_size=pb.SHOT_SIZE_EXTREME_LONG)))
+    client.call(
+        "UpdateStyle",
+        pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(rig=pb.RIG_TRACKS, shot_size=pb.SHOT_SIZE_EXTREME_LONG)),
+    )
     second = client.stream(actor_frames(session_id, times[half:], feet[half:], start_frame=half + 1))
     check_directed(first + second, feet)
     medium = np.median([camera_distance_m(u, p) for u, p in zip(first[30:], feet[30:half])])
-    extreme = np.median([camera_distance_m(u, p) for u, p in zip(second[60:], feet[half + 60:])])
+    extreme = np.median([camera_distance_m(u, p) for u, p in zip(second[60:], feet[half + 60 :])])
     # optimal distances: medium 1.3 m, extreme long 8.6 m (2 m actor, 50 deg lens)
     assert extreme > 2.5 * medium, (medium, extreme)
     # the rig cannot change during a session; an UpdateStyle must repeat RIG_TRACKS
-    expect(grpc.StatusCode.FAILED_PRECONDITION, client.call, "UpdateStyle",
-           pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(shot_size=pb.SHOT_SIZE_LONG)),
-           contains="style.rig cannot change")
+    expect(
+        grpc.StatusCode.FAILED_PRECONDITION,
+        client.call,
+        "UpdateStyle",
+        pb.UpdateStyleRequest(session_id=session_id, style=pb.Style(shot_size=pb.SHOT_SIZE_LONG)),
+        contains="style.rig cannot change",
+    )
     toric_id = client.call("CreateSession", two_target_request()).session_id
-    expect(grpc.StatusCode.FAILED_PRECONDITION, client.call, "UpdateStyle",
-           pb.UpdateStyleRequest(session_id=toric_id, style=pb.Style(rig=pb.RIG_TRACKS)), contains="TORIC -> TRACKS")
+    expect(
+        grpc.StatusCode.FAILED_PRECONDITION,
+        client.call,
+        "UpdateStyle",
+        pb.UpdateStyleRequest(session_id=toric_id, style=pb.Style(rig=pb.RIG_TRACKS)),
+        contains="TORIC -> TRACKS",
+    )
     for sid in (session_id, toric_id):
         client.call("CloseSession", pb.CloseSessionRequest(session_id=sid))
 
@@ -126,8 +136,11 @@ def test_static_cameras_only_pan_between_cuts(client):
     check_directed(updates, feet)
     for a, b in zip(updates, updates[1:]):
         if not b.cut:
-            assert (a.pose.position.x, a.pose.position.y, a.pose.position.z) == \
-                   (b.pose.position.x, b.pose.position.y, b.pose.position.z)
+            assert (a.pose.position.x, a.pose.position.y, a.pose.position.z) == (
+                b.pose.position.x,
+                b.pose.position.y,
+                b.pose.position.z,
+            )
 
 
 def test_a_tracks_recording_replays_bit_for_bit(tracks_server):
@@ -151,29 +164,51 @@ def canary(tracks_server):
 
 
 def test_bad_tracks_sessions_are_refused_clearly(client, canary):
-    expect(grpc.StatusCode.NOT_FOUND, client.call, "CreateSession", tracks_request("no-such-level", START),
-           contains="level_id 'no-such-level' is not in this server's level registry")
-    expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", tracks_request("", START),
-           contains="RIG_TRACKS needs level_id")
+    expect(
+        grpc.StatusCode.NOT_FOUND,
+        client.call,
+        "CreateSession",
+        tracks_request("no-such-level", START),
+        contains="level_id 'no-such-level' is not in this server's level registry",
+    )
+    expect(
+        grpc.StatusCode.INVALID_ARGUMENT,
+        client.call,
+        "CreateSession",
+        tracks_request("", START),
+        contains="RIG_TRACKS needs level_id",
+    )
     two = tracks_request("corridor", START)
     two.targets.append(capsule_target("second", (5.0, 0.0, 2.0)))
-    expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", two,
-           contains="exactly one target (the actor), got 2")
-    expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", two_target_request(level_id="corridor"),
-           contains="level_id 'corridor' is for the TRACKS and MATCH rigs")
+    expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", two, contains="exactly one target (the actor), got 2")
+    expect(
+        grpc.StatusCode.INVALID_ARGUMENT,
+        client.call,
+        "CreateSession",
+        two_target_request(level_id="corridor"),
+        contains="level_id 'corridor' is for the TRACKS and MATCH rigs",
+    )
     sized = two_target_request(style=pb.Style(shot_size=pb.SHOT_SIZE_MEDIUM))
     expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", sized, contains="style.shot_size")
     raycast = tracks_request("corridor", START)
     raycast.style.visibility = pb.RAYCAST
-    expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", raycast,
-           contains="RAYCAST is a mode of the TORIC rig")
+    expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", raycast, contains="RAYCAST is a mode of the TORIC rig")
     unknown = tracks_request("corridor", START)
     unknown.style.movement = 42
     expect(grpc.StatusCode.INVALID_ARGUMENT, client.call, "CreateSession", unknown, contains="style.movement 42")
     # a good session beside them, on the same level, with a dynamic occluder
-    good = tracks_request("corridor", START, objects=[pb.SceneObject(
-        id="crate", dynamic=True, mesh=pb.Mesh(primitive=pb.Primitive(box=pb.Primitive.Box(size=pb.Vec3(x=1, y=1, z=1)))),
-        transform=pb.Transform(position=pb.Vec3(x=10.0, y=0.0, z=1.0)))])
+    good = tracks_request(
+        "corridor",
+        START,
+        objects=[
+            pb.SceneObject(
+                id="crate",
+                dynamic=True,
+                mesh=pb.Mesh(primitive=pb.Primitive(box=pb.Primitive.Box(size=pb.Vec3(x=1, y=1, z=1)))),
+                transform=pb.Transform(position=pb.Vec3(x=10.0, y=0.0, z=1.0)),
+            )
+        ],
+    )
     session_id = client.call("CreateSession", good).session_id
     times, feet = corridor_walk(1.0)
     check_directed(client.stream(actor_frames(session_id, times, feet)), feet)
@@ -203,8 +238,9 @@ def test_actor_visible_along_a_recast_route_on_nav_test(shared_data, tmp_path):
         updates = raw.stream(actor_frames(session_id, route.time_s, route.position_world))
         raw.close()
     check_directed(updates, route.position_world)
-    visible = shown_share(updates, route.position_world, TriMesh(artifact.level_vertices, artifact.level_faces),
-                          artifact.agent_height_m)
+    visible = shown_share(
+        updates, route.position_world, TriMesh(artifact.level_vertices, artifact.level_faces), artifact.agent_height_m
+    )
     assert len(updates) > 300 and visible >= 0.9, visible
 
 

@@ -1,6 +1,7 @@
 """The shared BVH clips the overview tests use, read from the `shared_data` fixture's folder
 (tests/conftest.py: skipped with a reason where ../shared/data is absent, a failure under
 CAMDIRECTOR_REQUIRE_SHARED_DATA=1). Clips are read in place and never copied."""
+
 from __future__ import annotations
 
 import functools

@@ -1,4 +1,5 @@
 """Body-part mapping on every shared clip, by names and by topology (body_parts.py)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -11,14 +12,30 @@ from camdirector.precompute.overview.body_parts import BodyPart, map_body_parts
 from .overview_mocap import CLIPS, load_clip
 
 EXPECTED = {  # one joint name per part per skeleton family
-    "walk": {"Head": BodyPart.HEAD, "Chest": BodyPart.TORSO, "Hand_L": BodyPart.LEFT_ARM,
-             "Hand_R": BodyPart.RIGHT_ARM, "Foot_L": BodyPart.LEFT_LEG, "Foot_R": BodyPart.RIGHT_LEG},
-    "cmu_01_01": {"Head": BodyPart.HEAD, "Spine1": BodyPart.TORSO, "LThumb": BodyPart.LEFT_ARM,
-                  "RightForeArm": BodyPart.RIGHT_ARM, "LHipJoint": BodyPart.LEFT_LEG,
-                  "RightToeBase": BodyPart.RIGHT_LEG},
-    "perfume_a": {"Head": BodyPart.HEAD, "Chest4": BodyPart.TORSO, "LeftCollar": BodyPart.LEFT_ARM,
-                  "RightWrist": BodyPart.RIGHT_ARM, "LeftHip": BodyPart.LEFT_LEG,
-                  "RightKnee": BodyPart.RIGHT_LEG},
+    "walk": {
+        "Head": BodyPart.HEAD,
+        "Chest": BodyPart.TORSO,
+        "Hand_L": BodyPart.LEFT_ARM,
+        "Hand_R": BodyPart.RIGHT_ARM,
+        "Foot_L": BodyPart.LEFT_LEG,
+        "Foot_R": BodyPart.RIGHT_LEG,
+    },
+    "cmu_01_01": {
+        "Head": BodyPart.HEAD,
+        "Spine1": BodyPart.TORSO,
+        "LThumb": BodyPart.LEFT_ARM,
+        "RightForeArm": BodyPart.RIGHT_ARM,
+        "LHipJoint": BodyPart.LEFT_LEG,
+        "RightToeBase": BodyPart.RIGHT_LEG,
+    },
+    "perfume_a": {
+        "Head": BodyPart.HEAD,
+        "Chest4": BodyPart.TORSO,
+        "LeftCollar": BodyPart.LEFT_ARM,
+        "RightWrist": BodyPart.RIGHT_ARM,
+        "LeftHip": BodyPart.LEFT_LEG,
+        "RightKnee": BodyPart.RIGHT_LEG,
+    },
 }
 
 

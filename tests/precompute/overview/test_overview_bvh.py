@@ -1,4 +1,5 @@
 """BVH parsing, forward kinematics and unit inference (precompute/overview/bvh.py)."""
+
 from __future__ import annotations
 
 import math
@@ -85,9 +86,17 @@ def test_skip_frames_and_scale():
         forward_kinematics(parse_bvh(two_joint(rows)), skip_frames=2)
 
 
-@pytest.mark.parametrize("height_units, expected", [
-    (170.0, CM_PER_UNIT_M), (150.0, CM_PER_UNIT_M), (30.0, CMU_UNIT_M), (27.0, CMU_UNIT_M),
-    (1.7, METRE_UNIT_M), (1.5, METRE_UNIT_M)])
+@pytest.mark.parametrize(
+    "height_units, expected",
+    [
+        (170.0, CM_PER_UNIT_M),
+        (150.0, CM_PER_UNIT_M),
+        (30.0, CMU_UNIT_M),
+        (27.0, CMU_UNIT_M),
+        (1.7, METRE_UNIT_M),
+        (1.5, METRE_UNIT_M),
+    ],
+)
 def test_unit_inference(height_units, expected):
     assert infer_scale_m_per_unit(height_units) == expected
 
@@ -100,8 +109,7 @@ def test_unit_inference_from_a_centimetre_skeleton():
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.lists(st.floats(-180, 180), min_size=6, max_size=6),
-       st.lists(st.floats(-10, 10), min_size=3, max_size=3))
+@given(st.lists(st.floats(-180, 180), min_size=6, max_size=6), st.lists(st.floats(-10, 10), min_size=3, max_size=3))
 def test_fk_preserves_bone_lengths(angles, translation):
     rows = [translation + angles[:3] + angles[3:]]
     m = forward_kinematics(parse_bvh(two_joint(rows, length=2.0)), scale_m_per_unit=1.0)
@@ -114,21 +122,24 @@ def test_fk_preserves_bone_lengths(angles, translation):
 GOOD = two_joint([[0] * 9, [0] * 9])
 
 
-@pytest.mark.parametrize("text, message", [
-    ("", "not a BVH file"),
-    ("hello world", "not a BVH file"),
-    ("HIERARCHY\nJOINT x {", "expected 'ROOT'"),
-    (GOOD[: GOOD.index("End Site")], "truncated"),
-    (GOOD[: GOOD.index("MOTION")], "no 'MOTION'"),
-    (GOOD.replace("Frames: 2", "Frames: 3"), "truncated BVH: 'Frames: 3' but only 2"),
-    (GOOD.replace("Frames: 2", "Frames: 1"), "inconsistent BVH: 'Frames: 1' but 2"),
-    (GOOD.replace("Frames: 2", "Frames: 0").rsplit("\n", 3)[0] + "\n", "zero frames"),
-    (GOOD.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation"), "declares 4 channels but lists 3"),
-    (GOOD.replace("\n0 0 0 0 0 0 0 0 0\n", "\n0 0 0 0 0 0 0 0\n", 1), "inconsistent BVH channel count"),
-    (GOOD.replace("\n0 0 0 0 0 0 0 0 0\n", "\n0 0 0 0 x 0 0 0 0\n", 1), "non-numeric"),
-    (GOOD.replace("Frame Time: 0.5", "Frame Time: 0"), "frame time"),
-    (GOOD.replace("OFFSET 0 0 0", "OFFSET 0 zero 0", 1), "OFFSET expects 3 numbers"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("", "not a BVH file"),
+        ("hello world", "not a BVH file"),
+        ("HIERARCHY\nJOINT x {", "expected 'ROOT'"),
+        (GOOD[: GOOD.index("End Site")], "truncated"),
+        (GOOD[: GOOD.index("MOTION")], "no 'MOTION'"),
+        (GOOD.replace("Frames: 2", "Frames: 3"), "truncated BVH: 'Frames: 3' but only 2"),
+        (GOOD.replace("Frames: 2", "Frames: 1"), "inconsistent BVH: 'Frames: 1' but 2"),
+        (GOOD.replace("Frames: 2", "Frames: 0").rsplit("\n", 3)[0] + "\n", "zero frames"),
+        (GOOD.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation"), "declares 4 channels but lists 3"),
+        (GOOD.replace("\n0 0 0 0 0 0 0 0 0\n", "\n0 0 0 0 0 0 0 0\n", 1), "inconsistent BVH channel count"),
+        (GOOD.replace("\n0 0 0 0 0 0 0 0 0\n", "\n0 0 0 0 x 0 0 0 0\n", 1), "non-numeric"),
+        (GOOD.replace("Frame Time: 0.5", "Frame Time: 0"), "frame time"),
+        (GOOD.replace("OFFSET 0 0 0", "OFFSET 0 zero 0", 1), "OFFSET expects 3 numbers"),
+    ],
+)
 def test_bad_input_raises_clear_value_error(text, message):
     with pytest.raises(ValueError, match=message):
         parse_bvh(text)

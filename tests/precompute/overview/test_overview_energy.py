@@ -1,4 +1,5 @@
 """Path energy terms (energy.py) and the annealer's hard constraints (annealing.py)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,9 +9,17 @@ from hypothesis import strategies as st
 from camdirector.precompute.overview.annealing import SidePrior
 from camdirector.precompute.overview.energy import EnergyWeights, energy_below, internal_terms
 
-W = EnergyWeights(c1=10, c2=10, c3=5, c4=5, c5=2, max_speed_m_s=0.3,
-                  max_angular_speed_rad_s=np.radians(20.0), friction_speed_m_s=0.09,
-                  dt_s=1.0 / 15.0)
+W = EnergyWeights(
+    c1=10,
+    c2=10,
+    c3=5,
+    c4=5,
+    c5=2,
+    max_speed_m_s=0.3,
+    max_angular_speed_rad_s=np.radians(20.0),
+    friction_speed_m_s=0.09,
+    dt_s=1.0 / 15.0,
+)
 
 
 def test_resting_camera_on_a_resting_target_has_no_internal_energy():
@@ -22,7 +31,7 @@ def test_resting_camera_on_a_resting_target_has_no_internal_energy():
 
 def test_friction_rises_to_c5_at_the_friction_speed_and_stays():
     n = 5
-    look_at = np.tile([0.0, 0.0, 100.0], (n, 1))    # far ahead: no angular terms to speak of
+    look_at = np.tile([0.0, 0.0, 100.0], (n, 1))  # far ahead: no angular terms to speak of
     t = np.arange(n)[:, None]
     step = W.friction_speed_m_s * W.dt_s
     for fraction, expected in ((0.5, 0.25 * W.c5), (1.0, W.c5), (2.0, W.c5)):
@@ -31,15 +40,14 @@ def test_friction_rises_to_c5_at_the_friction_speed_and_stays():
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.integers(3, 17), st.integers(0, 2 ** 31 - 1))
+@given(st.integers(3, 17), st.integers(0, 2**31 - 1))
 def test_a_cut_never_raises_the_internal_energy(cut, seed):
     # The paper: "by splitting the shot into two different shots, we reduce the internal energy".
     rng = np.random.default_rng(seed)
     path = np.cumsum(rng.normal(scale=0.02, size=(20, 3)), axis=0) + [4.0, 1.0, 0.0]
     look_at = rng.normal(scale=0.1, size=(20, 3))
     whole = internal_terms(path, look_at, W).sum()
-    split = (internal_terms(path[:cut], look_at[:cut], W).sum()
-             + internal_terms(path[cut:], look_at[cut:], W).sum())
+    split = internal_terms(path[:cut], look_at[:cut], W).sum() + internal_terms(path[cut:], look_at[cut:], W).sum()
     assert split <= whole + 1e-12
 
 
@@ -64,7 +72,7 @@ def test_speed_term_is_zero_under_the_limit_and_quartic_above():
     fast_terms = internal_terms(fast, look_at, W)
     assert np.all(slow_terms < W.c5 + 1.0)
     # 2x the limit adds c2 * 2^4 = 160 per frame on top of friction and small angular terms
-    assert np.all(np.abs(fast_terms - W.c2 * 2.0 ** 4 - W.c5) < 1.0)
+    assert np.all(np.abs(fast_terms - W.c2 * 2.0**4 - W.c5) < 1.0)
 
 
 @settings(max_examples=30, deadline=None)
@@ -73,8 +81,7 @@ def test_internal_energy_is_translation_invariant(shift):
     rng = np.random.default_rng(3)
     path = np.cumsum(rng.normal(scale=0.01, size=(20, 3)), axis=0) + [4.0, 1.0, 0.0]
     look_at = rng.normal(scale=0.1, size=(20, 3))
-    np.testing.assert_allclose(internal_terms(path + shift, look_at + shift, W),
-                               internal_terms(path, look_at, W), atol=1e-9)
+    np.testing.assert_allclose(internal_terms(path + shift, look_at + shift, W), internal_terms(path, look_at, W), atol=1e-9)
 
 
 def test_side_prior_sides():
@@ -82,8 +89,7 @@ def test_side_prior_sides():
     # moving along +Z (xz direction (0, 1)); cross(d, rel) = d_x rel_z - d_z rel_x > 0 for x < 0
     assert prior.holds(np.array([-1.0, 0.0, 0.0]))
     assert not prior.holds(np.array([1.0, 0.0, 0.0]))
-    np.testing.assert_array_equal(prior.holds_for_nodes(np.array([[-1.0, 0, 0], [1.0, 0, 0]])),
-                                  [True, False])
+    np.testing.assert_array_equal(prior.holds_for_nodes(np.array([[-1.0, 0, 0], [1.0, 0, 0]])), [True, False])
 
 
 def test_energy_below_treats_rounding_as_a_tie():

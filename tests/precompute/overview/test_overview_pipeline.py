@@ -7,6 +7,7 @@ and E_external (Figure 10; strict xfail, with the measured reason, where it does
 All seven clips take about 30 s together on two cores (the dance, 1901 frames, about a third).
 The 10 s target for 1000 frames is measured, not asserted: `python -m load_tests.overview_bench`.
 """
+
 from __future__ import annotations
 
 import functools
@@ -29,27 +30,29 @@ ALL = [pytest.param(n, marks=pytest.mark.shared_data) for n in SHORT + LONG]
 # Measured with the paper's defaults and seed 7 (the report has the table). Figure 10 normalises
 # each attribute by the best static camera on it; ours must be strictly lower on E and E_external.
 # Strict xfail: the day one of these passes the test fails, so the lists cannot go stale.
-_IN_PLACE = ("in place: a single shot's E is lowest at the static start (leaving rest costs up to "
-             "c5 = 2 per frame; even the per-frame best views would gain 0.01-0.15 of E_external "
-             "per frame) and its quality Q = {q} is above the paper's 70% split threshold, so no "
-             "split is tried: ours equals the best static camera")
+_IN_PLACE = (
+    "in place: a single shot's E is lowest at the static start (leaving rest costs up to "
+    "c5 = 2 per frame; even the per-frame best views would gain 0.01-0.15 of E_external "
+    "per frame) and its quality Q = {q} is above the paper's 70% split threshold, so no "
+    "split is tried: ours equals the best static camera"
+)
 NOT_BEATING_BEST_STATIC = {
     "walk": "the best-view static camera pans past alpha_max as the walker passes; E's optimum "
-            "stands back and gives up ~6% of E_external, and Q = 0.74 stays above the 70% split "
-            "threshold",
+    "stands back and gives up ~6% of E_external, and Q = 0.74 stays above the 70% split "
+    "threshold",
     "run": "as the walk, stronger (2.5 m/s): ours is 1% below the lowest-E static camera on E "
-           "(from the second start) but ~26% behind the best-view one on E_external; 2.4 s is "
-           "too short to split",
+    "(from the second start) but ~26% behind the best-view one on E_external; 2.4 s is "
+    "too short to split",
     "kick": _IN_PLACE.format(q="0.79"),
     "punch": _IN_PLACE.format(q="0.98"),
     "dance": _IN_PLACE.format(q="0.84"),
     "cmu_01_01": "jumps with turn-arounds: 0.1% below the lowest-E static camera on E but 0.6% "
-                 "behind the best-view one on E_external (panning); Q = 0.92, no split",
+    "behind the best-view one on E_external (panning); Q = 0.92, no split",
     "perfume_a": _IN_PLACE.format(q="0.96"),
 }
 NOT_BEATING_GREEDY = {
     "walk": "the greedy path follows the walker faster than S_max and keeps better views "
-            "(E_external -1.01 against ours -0.94); ours wins on E only",
+    "(E_external -1.01 against ours -0.94); ours wins on E only",
     "run": "as the walk (greedy E_external -0.95, ours -0.75); ours wins on E only",
 }
 
@@ -100,8 +103,8 @@ def test_result_shapes_shots_and_timings(shared_data, name):
     assert r.shots[0, 0] == 0 and r.shots[-1, 1] == n - 1
     assert np.all(r.shots[1:, 0] == r.shots[:-1, 1] + 1)
     for k, (a, b) in enumerate(r.shots):
-        assert np.all(r.shot_index[a:b + 1] == k)
-        assert np.ptp(r.vertical_fov_deg[a:b + 1]) == 0.0        # one FOV per shot
+        assert np.all(r.shot_index[a : b + 1] == k)
+        assert np.ptp(r.vertical_fov_deg[a : b + 1]) == 0.0  # one FOV per shot
     assert 0 < r.vertical_fov_deg.max() < 150.0
     assert set(r.timings_ms) == {s.value for s in Stage}
 

@@ -1,4 +1,5 @@
 """Non-linear MDS and motion saliency (saliency.py)."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -3,6 +3,7 @@ the data directory and a table in PostgreSQL (a fresh database per test). Record
 reopen, a replace leaves one artifact file, a taken name without replace is refused by the index
 (LevelExists), and two registries over one index and one folder (two nodes) see each other's
 levels and add one name once."""
+
 from __future__ import annotations
 
 import threading
@@ -15,8 +16,10 @@ from .tiny_levels import corridor, l_room
 
 
 def obj_file(path, mesh):
-    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
-                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    path.write_text(
+        "".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
+        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces)
+    )
     return path
 
 
@@ -36,8 +39,7 @@ def open_registry(tmp_path, records_url):
 
 @pytest.fixture
 def levels(tmp_path):
-    return {"corridor": obj_file(tmp_path / "corridor.obj", corridor()),
-            "room": obj_file(tmp_path / "room.obj", l_room())}
+    return {"corridor": obj_file(tmp_path / "corridor.obj", corridor()), "room": obj_file(tmp_path / "room.obj", l_room())}
 
 
 def artifact_files(registry) -> list[str]:

@@ -2,6 +2,7 @@
 and the level job's body (precompute/tracks/job.py) writing where its params' records_url says,
 failing when another node's job took the name first. test_registry.py runs the rest on both
 indexes."""
+
 from __future__ import annotations
 
 import socket
@@ -24,8 +25,11 @@ def free_port() -> int:
 
 def test_postgres_down_is_one_clear_error(tmp_path):
     url = f"postgresql://camdirector:secret@127.0.0.1:{free_port()}/camdirector"
-    with pytest.raises(LevelsUnavailable, match=r"level index postgresql://camdirector:\*\*\*@127.0.0.1:\d+/camdirector "
-                                                "is unreachable") as caught:
+    with pytest.raises(
+        LevelsUnavailable,
+        match=r"level index postgresql://camdirector:\*\*\*@127.0.0.1:\d+/camdirector "
+        "is unreachable",
+    ) as caught:
         LevelRegistry(tmp_path, url)
     assert "secret" not in str(caught.value) and "\n" not in str(caught.value)
 
@@ -41,18 +45,30 @@ def test_a_dropped_connection_is_opened_again(tmp_path, postgres_url):
     registry = LevelRegistry(tmp_path, postgres_url)
     assert registry.list() == []
     with psycopg.connect(postgres_url, autocommit=True) as admin:
-        admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
-                      "WHERE datname = current_database() AND pid <> pg_backend_pid()")
+        admin.execute(
+            "SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+            "WHERE datname = current_database() AND pid <> pg_backend_pid()"
+        )
     with pytest.raises(LevelsUnavailable):
-        registry.list()   # the call that finds it dropped fails ...
+        registry.list()  # the call that finds it dropped fails ...
     assert registry.list() == []  # ... the next one connects again
     registry.close()
 
 
 def job_params(tmp_path, url: str, **changes) -> dict:
-    return {"name": "corridor", "level_file": "level.obj", "navmesh_file": None, "scale": 1.0,
-            "agent_height_m": 2.0, "agent_radius_m": 0.6, "replace": False, "seed": 0,
-            "data_dir": str(tmp_path / "shared"), "records_url": url, **changes}
+    return {
+        "name": "corridor",
+        "level_file": "level.obj",
+        "navmesh_file": None,
+        "scale": 1.0,
+        "agent_height_m": 2.0,
+        "agent_radius_m": 0.6,
+        "replace": False,
+        "seed": 0,
+        "data_dir": str(tmp_path / "shared"),
+        "records_url": url,
+        **changes,
+    }
 
 
 def test_the_level_job_writes_into_the_index_its_params_name(tmp_path, postgres_url):
@@ -62,10 +78,10 @@ def test_the_level_job_writes_into_the_index_its_params_name(tmp_path, postgres_
     seen = []
     timings = run_level_job(job_params(tmp_path, postgres_url), inputs, tmp_path / "out", seen.append)
     assert timings and seen[-1] == 1.0
-    with LevelRegistry(tmp_path / "shared", postgres_url) as registry:   # what another node sees
+    with LevelRegistry(tmp_path / "shared", postgres_url) as registry:  # what another node sees
         assert [r.name for r in registry.list()] == ["corridor"]
     assert not (tmp_path / "shared" / "levels" / "index.sqlite3").exists()
-    assert LevelRegistry(tmp_path / "shared").list() == []   # not in SQLite
+    assert LevelRegistry(tmp_path / "shared").list() == []  # not in SQLite
     with pytest.raises(JobError, match="'corridor' was added while this job waited"):
         run_level_job(job_params(tmp_path, postgres_url), inputs, tmp_path / "out", seen.append)
     run_level_job(job_params(tmp_path, postgres_url, replace=True), inputs, tmp_path / "out", seen.append)
@@ -80,6 +96,7 @@ def test_the_job_fails_when_another_node_took_the_name_while_it_ran(tmp_path, po
     obj_file(inputs / "level.obj", corridor())
     other = LevelRegistry(tmp_path / "shared", postgres_url)
     from camdirector.precompute.tracks import registry as registry_module
+
     real = registry_module.precompute_level
 
     def precompute_while_another_node_adds(*args, **kwargs):
@@ -109,11 +126,13 @@ def test_a_workers_level_cache_reads_the_shared_index(tmp_path, postgres_url):
     cache = LevelCache(tmp_path / "shared", postgres_url)
     assert cache.get("corridor").artifact.agent_height_m == 2.0
     with pytest.raises(DirectorError) as err:
-        LevelCache(tmp_path / "shared").get("corridor")     # SQLite in the folder holds none
+        LevelCache(tmp_path / "shared").get("corridor")  # SQLite in the folder holds none
     assert err.value.code == grpc.StatusCode.NOT_FOUND
     with psycopg.connect(postgres_url, autocommit=True) as admin:
-        admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
-                      "WHERE datname = current_database() AND pid <> pg_backend_pid()")
+        admin.execute(
+            "SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+            "WHERE datname = current_database() AND pid <> pg_backend_pid()"
+        )
     with pytest.raises(DirectorError) as err:
         cache.get("corridor")
     assert err.value.code == grpc.StatusCode.UNAVAILABLE and "unreachable" in err.value.message

@@ -1,4 +1,5 @@
 """`camdirector level add|list|remove` (precompute/tracks/cli.py) in child processes on one data directory."""
+
 from __future__ import annotations
 
 import json
@@ -10,8 +11,13 @@ from tests.service.tracks_sessions import ROOT, cli_add_level, obj_text
 
 
 def _level(data_dir, *args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "camdirector.__main__", "level", *args, "--data-dir", str(data_dir)],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "camdirector.__main__", "level", *args, "--data-dir", str(data_dir)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
 
 
 def test_add_list_remove(tmp_path):
@@ -39,7 +45,7 @@ def test_a_tenants_levels(tmp_path):
     assert _level(data, "list").stdout == ""
     listed = _level(data, "list", "--tenant", "acme")
     assert [(r["name"], r["tenant"]) for r in map(json.loads, listed.stdout.splitlines())] == [("room", "acme")]
-    assert _level(data, "remove", "room").returncode == 2           # not `default`'s
+    assert _level(data, "remove", "room").returncode == 2  # not `default`'s
     assert _level(data, "remove", "room", "--tenant", "acme").returncode == 0
     bad = _level(data, "list", "--tenant", "ACME!")
     assert bad.returncode == 2 and "tenant 'ACME!'" in bad.stderr

@@ -1,4 +1,5 @@
 """Navmesh, skeleton, sampling, RANSAC, filters, graph and visibility table on tiny hand-built levels."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -64,8 +65,9 @@ def test_corridor_gives_one_long_track_per_direction_not_many_short_ones():
     skeleton = extract_skeleton(derive_navmesh(level, scene, SETTINGS), SETTINGS)
     samples = sample_cameras(skeleton, scene, SETTINGS)
     rng = np.random.default_rng(0)
-    tracks = filter_tracks(cluster_tracks(samples.position_world, samples.group, SETTINGS, rng),
-                           samples.position_world, scene, SETTINGS, rng)
+    tracks = filter_tracks(
+        cluster_tracks(samples.position_world, samples.group, SETTINGS, rng), samples.position_world, scene, SETTINGS, rng
+    )
     groups = len(np.unique(samples.group))
     assert len(tracks) <= groups, "at most one track per sampling direction and side"
     assert np.all(tracks.length_m > 0.8 * skeleton.length_m), "each runs the corridor's length"
@@ -140,9 +142,9 @@ def test_ransac_finds_two_synthetic_lines():
 
 def test_ransac_takes_the_longest_track_first_and_does_not_bridge_gaps():
     rng = np.random.default_rng(4)
-    along = np.stack([np.arange(0.0, 30.0, 1.5), np.zeros(20), np.zeros(20)], 1)           # a corridor's line
-    across = np.stack([np.full(5, 9.0), np.zeros(5), np.arange(-3.0, 4.5, 1.5)], 1)        # a short chord over it
-    far = np.stack([np.arange(50.0, 56.0, 1.5), np.zeros(4), np.zeros(4)], 1)              # collinear, 20 m further
+    along = np.stack([np.arange(0.0, 30.0, 1.5), np.zeros(20), np.zeros(20)], 1)  # a corridor's line
+    across = np.stack([np.full(5, 9.0), np.zeros(5), np.arange(-3.0, 4.5, 1.5)], 1)  # a short chord over it
+    far = np.stack([np.arange(50.0, 56.0, 1.5), np.zeros(4), np.zeros(4)], 1)  # collinear, 20 m further
     pts = np.vstack([along, across, far]) + rng.normal(0, 0.02, (29, 3))
     tracks = cluster_tracks(pts, np.zeros(len(pts), int), SETTINGS, np.random.default_rng(0))
     longest = int(np.argmax(tracks.length_m))
@@ -159,27 +161,29 @@ def test_filters_cut_collisions_drop_hidden_points_and_empty_tracks():
     cut = remove_collisions(tracks, pts, scene, SETTINGS)
     assert len(cut) == 2
     assert not scene.occluded(cut.start_world, cut.end_world).any()
-    assert (cut.point_track[10] == -1)  # at the wall
+    assert cut.point_track[10] == -1  # at the wall
     off = np.array([[2.0, 0, 1.0], [8.0, 0, 1.0]])
     behind = Tracks(np.array([[4.0, 0, -1.0]]), np.array([[6.0, 0, -1.0]]), np.array([0, 0]))
-    hidden = remove_hidden_points(Tracks(np.array([[0.0, 0, 0]]), np.array([[4.0, 0, 0]]), np.array([0, 0])),
-                                  off, scene)
+    hidden = remove_hidden_points(Tracks(np.array([[0.0, 0, 0]]), np.array([[4.0, 0, 0]]), np.array([0, 0])), off, scene)
     assert hidden.point_track.tolist() == [0, -1]
     assert len(remove_empty(Tracks(behind.start_world, behind.end_world, np.array([-1, -1])), SETTINGS)) == 0
     noisy = np.vstack([pts[:8], [[3.0, 0, 2.0]]])
-    refitted = refit(Tracks(np.array([[0.0, 0, 0]]), np.array([[3.0, 0, 2.0]]), np.zeros(9, int)), noisy,
-                     SETTINGS, np.random.default_rng(0))
+    refitted = refit(
+        Tracks(np.array([[0.0, 0, 0]]), np.array([[3.0, 0, 2.0]]), np.zeros(9, int)), noisy, SETTINGS, np.random.default_rng(0)
+    )
     assert refitted.point_track[-1] == -1
     assert np.allclose(refitted.end_world[0, 1:], 0.0, atol=1e-6)
 
 
 def test_graph_joins_crossing_tracks_splits_and_links():
-    tracks = Tracks(np.array([[0.0, 2, 5], [5, 2, 0], [20, 2, 0]]), np.array([[10.0, 2, 5], [5, 2, 10], [20, 2, 10]]),
-                    np.zeros(0, int))
+    tracks = Tracks(
+        np.array([[0.0, 2, 5], [5, 2, 0], [20, 2, 0]]), np.array([[10.0, 2, 5], [5, 2, 10], [20, 2, 10]]), np.zeros(0, int)
+    )
     nodes, edges = insert_tracks(tracks, SETTINGS)
     assert len(nodes) == 7 and len(edges) == 5  # the cross shares its centre node
-    graph = build_graph(tracks, RayScene([boxes(((100, 0, 100), (101, 1, 101)))]),
-                        TrackSettings(max_edge_length_m=2.0, link_distance_m=12.0))
+    graph = build_graph(
+        tracks, RayScene([boxes(((100, 0, 100), (101, 1, 101)))]), TrackSettings(max_edge_length_m=2.0, link_distance_m=12.0)
+    )
     assert graph.edge_length_m[~graph.edge_is_link].max() <= 2.0 + 1e-9
     adjacency = sparse.coo_matrix((np.ones(len(graph.edges)), tuple(graph.edges.T)), shape=(len(graph.nodes_world),) * 2)
     assert connected_components(adjacency, directed=False)[0] == 1
@@ -210,15 +214,18 @@ def test_visibility_table_agrees_with_direct_ray_casts():
         seen = set(table.node_triangles[row].tolist())
         in_range = np.linalg.norm(centroid - nodes[node], axis=1) <= SETTINGS.visibility_range_m
         direct = ~scene.occluded(nodes[node], centroid) & in_range
-        clear_side = (refined.vertices[refined.faces][:, :, 0] < 9.5).all(1) if node == 0 else \
-            (refined.vertices[refined.faces][:, :, 0] > 10.5).all(1)
+        clear_side = (
+            (refined.vertices[refined.faces][:, :, 0] < 9.5).all(1)
+            if node == 0
+            else (refined.vertices[refined.faces][:, :, 0] > 10.5).all(1)
+        )
         assert set(np.flatnonzero(direct & clear_side)) <= seen
         assert not (seen & set(np.flatnonzero(~direct & ~clear_side & in_range)))
     # both directions of the table hold the same pairs
-    by_tri = sparse.csc_matrix((table.triangle_degree, table.triangle_nodes, table.triangle_indptr),
-                               shape=(2, table.triangle_count))
-    by_node = sparse.csr_matrix((table.node_degree, table.node_triangles, table.node_indptr),
-                                shape=(2, table.triangle_count))
+    by_tri = sparse.csc_matrix(
+        (table.triangle_degree, table.triangle_nodes, table.triangle_indptr), shape=(2, table.triangle_count)
+    )
+    by_node = sparse.csr_matrix((table.node_degree, table.node_triangles, table.node_indptr), shape=(2, table.triangle_count))
     assert (by_tri != by_node).nnz == 0
 
 

@@ -1,6 +1,7 @@
 """nav_test.obj (RecastDemo) end to end: the precompute, the route of Recast's test cases, and the
 comparison with PRMs (one precompute for the module). Times are measured, not asserted:
 `python -m load_tests.tracks_bench` (under 30 s per level, target update under 2 ms)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -46,8 +47,9 @@ def test_prm_comparison_along_a_recast_route(nav_test, tmp_path):
     polyline = paths.path(*queries[0])
     assert polyline is not None
     route = walk(polyline, 1.4, 30.0)
-    result = compare_with_prm(artifact, route, np.random.default_rng(0), densities_per_m2=(0.1, 0.5),
-                              plot_path=tmp_path / "top.png")
+    result = compare_with_prm(
+        artifact, route, np.random.default_rng(0), densities_per_m2=(0.1, 0.5), plot_path=tmp_path / "top.png"
+    )
     rows = {row["graph"]: row for row in result["rows"]}
     ours, prm_sparse, prm_dense = rows["ours"], rows["prm_0.1"], rows["prm_0.5"]
     assert (tmp_path / "top.png").stat().st_size > 0

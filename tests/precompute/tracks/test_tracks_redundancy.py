@@ -1,4 +1,5 @@
 """Redundant tracks (redundancy.py) and the sampling footprint on tiny hand-built levels."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -29,8 +30,7 @@ def _tracks():
     """Four long parallel tracks over the big floor, a short one between them (redundant), and a
     short one over the small floor, the only track that sees it (needed)."""
     start = np.array([[1, EYE_M, 2], [1, EYE_M, 3], [1, EYE_M, 5], [1, EYE_M, 6], [9, EYE_M, 4], [2, EYE_M, 33]], float)
-    end = np.array([[19, EYE_M, 2], [19, EYE_M, 3], [19, EYE_M, 5], [19, EYE_M, 6], [11, EYE_M, 4], [4, EYE_M, 33]],
-                   float)
+    end = np.array([[19, EYE_M, 2], [19, EYE_M, 3], [19, EYE_M, 5], [19, EYE_M, 6], [11, EYE_M, 4], [4, EYE_M, 33]], float)
     point_track = np.array([0, 0, 1, 2, 3, 4, 4, 5, -1])
     return Tracks(start, end, point_track)
 
@@ -78,6 +78,7 @@ def test_redundancy_k_zero_keeps_every_track():
 def test_samples_beyond_the_footprint_margin_are_outside():
     _, nav, _ = _level()
     margin = SETTINGS.footprint_margin_m
-    points = np.array([[10, EYE_M, 4], [10, EYE_M, 8 + margin + 1.0], [10, EYE_M, 8 + 0.5 * margin], [3, 0, 33],
-                       [30, 0, 4]], float)
+    points = np.array(
+        [[10, EYE_M, 4], [10, EYE_M, 8 + margin + 1.0], [10, EYE_M, 8 + 0.5 * margin], [3, 0, 33], [30, 0, 4]], float
+    )
     assert inside_footprint(points, nav, margin).tolist() == [True, False, True, True, False]

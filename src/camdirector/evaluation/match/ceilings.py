@@ -16,6 +16,7 @@ could show, ignoring and then obeying the film rules' shot length.
   exchange argument of interval scheduling): the count is an upper bound for any director that
   cuts to a new view for each kill, and the bound the issue's "0.85 of the greedy 2-s bound" means.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,11 +29,11 @@ from camdirector.evaluation.match.measure import SHOWN_FRACTION, BodySampler, sh
 from camdirector.geometry.camera import CameraPose, Lens, level_look_rotation
 from camdirector.geometry.raycast import RayScene
 
-CHASE_BACK_M = 2.0    # the chase camera this far behind the attacker, m
-CHASE_UP_M = 0.6      # and this far above its aim point, m
-SIDE_MARGIN_M = 1.0   # the side camera frames the aim points with this much room each side, m
-SIDE_MIN_M = 3.0      # and stands at least this far from their middle, m
-SIDE_UP_M = 1.0       # this far above the middle, m
+CHASE_BACK_M = 2.0  # the chase camera this far behind the attacker, m
+CHASE_UP_M = 0.6  # and this far above its aim point, m
+SIDE_MARGIN_M = 1.0  # the side camera frames the aim points with this much room each side, m
+SIDE_MIN_M = 3.0  # and stands at least this far from their middle, m
+SIDE_UP_M = 1.0  # this far above the middle, m
 
 
 @dataclass(frozen=True)
@@ -46,9 +47,11 @@ class Ceilings:
 
     def as_json(self) -> dict:
         k = len(self.kill_times_s)
-        return {"kills": k,
-                "reference_kill_coverage": round(float(self.reachable.mean()), 3) if k else None,
-                "greedy_2s_kill_coverage": round(float(self.greedy.mean()), 3) if k else None}
+        return {
+            "kills": k,
+            "reference_kill_coverage": round(float(self.reachable.mean()), 3) if k else None,
+            "greedy_2s_kill_coverage": round(float(self.greedy.mean()), 3) if k else None,
+        }
 
 
 def reference_poses(attacker_aim: np.ndarray, victim_aim: np.ndarray, lens: Lens) -> list[CameraPose]:
@@ -81,8 +84,7 @@ def greedy_schedule(kill_times_s: np.ndarray, reachable: np.ndarray, min_shot_s:
     return covered
 
 
-def match_ceilings(match: MatchRecording, bodies: BodySampler, lens: Lens, level: RayScene,
-                   min_shot_s: float = 2.0) -> Ceilings:
+def match_ceilings(match: MatchRecording, bodies: BodySampler, lens: Lens, level: RayScene, min_shot_s: float = 2.0) -> Ceilings:
     """The reference cameras' reach and the greedy bound of the match's kills (module docstring)."""
     column = match.player_index()
     times, reachable = [], []
@@ -93,8 +95,12 @@ def match_ceilings(match: MatchRecording, bodies: BodySampler, lens: Lens, level
         pair = [column[event.actor_id], column[event.other_actor_id]]
         aims = bodies.aims_world(row, pair)
         points = bodies.points_world(row)[pair]
-        reachable.append(any(shown_fractions(pose, lens, points, level).min() >= SHOWN_FRACTION
-                             for pose in reference_poses(aims[0], aims[1], lens)))
+        reachable.append(
+            any(
+                shown_fractions(pose, lens, points, level).min() >= SHOWN_FRACTION
+                for pose in reference_poses(aims[0], aims[1], lens)
+            )
+        )
         times.append(float(match.time_s[row]))
     times_s, reach = np.array(times), np.array(reachable, dtype=bool)
     return Ceilings(times_s, reach, greedy_schedule(times_s, reach, min_shot_s, float(match.time_s[0])))

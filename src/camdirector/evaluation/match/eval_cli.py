@@ -17,6 +17,7 @@
 
 Kept light at import, as evaluation/cli.py: numpy, the client and the server load when it runs.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,24 +29,44 @@ from pathlib import Path
 def add_parser(subparsers) -> None:
     """Registers `eval-match` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "eval-match", help="stream a match file through our match director and the baselines, and measure them",
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+        "eval-match",
+        help="stream a match file through our match director and the baselines, and measure them",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("file", type=Path, help="match file (camdirector match-sim --out)")
     p.add_argument("--delay", type=float, required=True, help="broadcast delay, s, 0 to 300")
     p.add_argument("--json", type=Path, required=True, help="write the result here")
-    p.add_argument("--director", dest="directors", action="append", metavar="NAME",
-                   help="a registered match director to run (repeatable; default: every registered one)")
-    p.add_argument("--plugin", dest="plugins", action="append", default=[], metavar="MODULE",
-                   help="a Python module to import here and in the server first (a director that registers "
-                        "itself; repeatable)")
+    p.add_argument(
+        "--director",
+        dest="directors",
+        action="append",
+        metavar="NAME",
+        help="a registered match director to run (repeatable; default: every registered one)",
+    )
+    p.add_argument(
+        "--plugin",
+        dest="plugins",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="a Python module to import here and in the server first (a director that registers itself; repeatable)",
+    )
     p.add_argument("--plot", type=Path, help="draw coverage, lead and shot lengths here (PNG)")
     p.add_argument("--video", type=Path, help="render our director's program here (MP4, 480x270)")
-    p.add_argument("--video-seconds", dest="video_seconds", type=float, default=20.0,
-                   help="seconds of program in the video (default 20)")
-    p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry holding the match's level "
-                   "(default: per-user data dir)")
-    p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0,
-                   help="frames per second sent, a divisor of the file's rate (default 30)")
+    p.add_argument(
+        "--video-seconds", dest="video_seconds", type=float, default=20.0, help="seconds of program in the video (default 20)"
+    )
+    p.add_argument(
+        "--data-dir", dest="data_dir", type=Path, help="registry holding the match's level (default: per-user data dir)"
+    )
+    p.add_argument(
+        "--rate-hz",
+        dest="rate_hz",
+        type=float,
+        default=30.0,
+        help="frames per second sent, a divisor of the file's rate (default 30)",
+    )
     p.add_argument("--minutes", type=float, help="only the match's first minutes (default: all of it)")
     p.add_argument("--seed", type=int, default=0, help="seed of the sessions and the body sample points (default 0)")
     p.set_defaults(handler=run_eval_match)
@@ -74,9 +95,16 @@ def run_eval_match(args: argparse.Namespace) -> int:
             match = match.until(match.time_s[0] + 60.0 * args.minutes)
         if args.rate_hz > match.rate_hz:
             raise ValueError(f"--rate-hz {args.rate_hz:g} is above the file's {match.rate_hz:g} Hz")
-        result, runs = evaluate_match(match, args.delay, directors=args.directors, plugins=args.plugins,
-                                      data_dir=args.data_dir, rate_hz=args.rate_hz, seed=args.seed,
-                                      progress=_progress)
+        result, runs = evaluate_match(
+            match,
+            args.delay,
+            directors=args.directors,
+            plugins=args.plugins,
+            data_dir=args.data_dir,
+            rate_hz=args.rate_hz,
+            seed=args.seed,
+            progress=_progress,
+        )
     except KeyError as exc:
         print(f"camdirector eval-match: {exc.args[0]}", file=sys.stderr)
         return 2
@@ -93,8 +121,7 @@ def run_eval_match(args: argparse.Namespace) -> int:
         try:
             _progress(f"rendering {args.video_seconds:g} s of program to {args.video}")
             shown = runs["planned"] if "planned" in runs else next(iter(runs.values()))
-            result["video"] = render_program(match, shown.program, args.video, args.video_seconds,
-                                             data_dir=args.data_dir)
+            result["video"] = render_program(match, shown.program, args.video, args.video_seconds, data_dir=args.data_dir)
         except VideoUnavailable as exc:
             _progress(f"no video: {exc}")
             result["video"] = {"skipped": str(exc)}

@@ -14,6 +14,7 @@ buffering and stale replies carry no program. The per-frame cost reference is a 
 RIG_TRACKS session on the same level in the same server, following the match's first player for
 as many frames.
 """
+
 from __future__ import annotations
 
 import time
@@ -54,8 +55,8 @@ from camdirector.infra.plugins import import_plugins
 from camdirector.pipeline.match.director_registry import director_entry, registered
 from camdirector.precompute.tracks.registry import LevelRegistry
 
-SHORT_SHOT_S = 2.0   # issue 12: no shot under 2 s (the film rules' default minimum)
-LONG_SHOT_S = 20.0   # issue 29: no shot over 20 s while a kill happens outside it
+SHORT_SHOT_S = 2.0  # issue 12: no shot under 2 s (the film rules' default minimum)
+LONG_SHOT_S = 20.0  # issue 29: no shot over 20 s while a kill happens outside it
 
 
 @dataclass(eq=False)
@@ -69,8 +70,9 @@ class DirectorRun:
     wall_s: float
 
 
-def stream_director(client: cd.Client, match: MatchRecording, feed: Feed, director: str, delay_s: float,
-                    seed: int) -> DirectorRun:
+def stream_director(
+    client: cd.Client, match: MatchRecording, feed: Feed, director: str, delay_s: float, seed: int
+) -> DirectorRun:
     """Streams the match through one RIG_MATCH session of `director` (a registered name); its
     program (module docstring)."""
     columns = list(range(len(match.players)))
@@ -82,27 +84,53 @@ def stream_director(client: cd.Client, match: MatchRecording, feed: Feed, direct
                 replies.append((u.buffering, None))
                 continue
             p, q = u.pose.position, u.pose.rotation
-            replies.append((False, (u.frame, u.time_s, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), u.pose.vertical_fov_deg,
-                                    u.cut, u.shot_id, tuple(u.shot.subject_ids), u.compute_ms)))
+            replies.append(
+                (
+                    False,
+                    (
+                        u.frame,
+                        u.time_s,
+                        (p.x, p.y, p.z),
+                        (q.x, q.y, q.z, q.w),
+                        u.pose.vertical_fov_deg,
+                        u.cut,
+                        u.shot_id,
+                        tuple(u.shot.subject_ids),
+                        u.compute_ms,
+                    ),
+                )
+            )
     wall_s = time.perf_counter() - start
     answered = [r for _, r in replies if r is not None and r[0] - 1 < len(match.time_s)]
     answered = [r for i, r in enumerate(answered) if i == 0 or r[0] > answered[i - 1][0]]  # one row per moment
     if not answered:
         raise RuntimeError("the server answered no program frame (is the match shorter than the delay?)")
     frame, time_s, position, rotation, fov, cut, shot_id, subjects, compute_ms = zip(*answered)
-    program = Program(index=np.array(frame, dtype=np.int64) - 1, time_s=np.array(time_s),
-                      position=np.array(position), rotation=np.array(rotation), vertical_fov_deg=np.array(fov),
-                      cut=np.array(cut, dtype=bool), shot_id=np.array(shot_id, dtype=np.int64), subjects=list(subjects))
+    program = Program(
+        index=np.array(frame, dtype=np.int64) - 1,
+        time_s=np.array(time_s),
+        position=np.array(position),
+        rotation=np.array(rotation),
+        vertical_fov_deg=np.array(fov),
+        cut=np.array(cut, dtype=bool),
+        shot_id=np.array(shot_id, dtype=np.int64),
+        subjects=list(subjects),
+    )
     return DirectorRun(program, np.array(compute_ms), sum(b for b, _ in replies), wall_s)
 
 
 def stream_tracks_reference(client: cd.Client, match: MatchRecording, feed: Feed) -> np.ndarray:
     """compute_ms (k,) of a one-actor RIG_TRACKS session on the match's level following its first
     player for the feed's frames: the per-frame cost reference of issue 12's "Done when"."""
-    with client.create_session(targets=player_targets(match, [match.players[0].id]), level_id=match.level, seed=1,
-                               style=cd.pb.Style(rig=cd.pb.RIG_TRACKS)) as session:
-        return np.array([u.compute_ms for u in session.stream(frame_updates(session, match, feed, [0], events=False))
-                         if not u.stale])
+    with client.create_session(
+        targets=player_targets(match, [match.players[0].id]),
+        level_id=match.level,
+        seed=1,
+        style=cd.pb.Style(rig=cd.pb.RIG_TRACKS),
+    ) as session:
+        return np.array(
+            [u.compute_ms for u in session.stream(frame_updates(session, match, feed, [0], events=False)) if not u.stale]
+        )
 
 
 def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens: Lens, level: RayScene) -> dict:
@@ -121,16 +149,21 @@ def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens:
         "kills": coverage.kills,
         "kills_covered": int(coverage.covered.sum()),
         "lead_s": {**_spread(coverage.lead_s), "values": [round(v, 2) for v in coverage.lead_s.tolist()]},
-        "shots": {**_spread(lengths), "under_2s": int((lengths < SHORT_SHOT_S - 1e-6).sum()),
-                  "values": [round(v, 2) for v in lengths.tolist()]},
+        "shots": {
+            **_spread(lengths),
+            "under_2s": int((lengths < SHORT_SHOT_S - 1e-6).sum()),
+            "values": [round(v, 2) for v in lengths.tolist()],
+        },
         "cuts_per_min": round(cuts_per_minute(program), 2),
         "jump_cuts": jump_cuts(program, bodies),
         "framed_visibility": round(framed_visibility(program, shown, column), 3),
         "program_visibility": round(program_visibility(program, shown, column, eyes), 3),
         "first_person_share": round(float((eyes >= 0).mean()), 3),
-        "shown_height": {"median": round(float(np.median(heights)), 3) if len(heights) else None,
-                         "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None,
-                         "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None},
+        "shown_height": {
+            "median": round(float(np.median(heights)), 3) if len(heights) else None,
+            "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None,
+            "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None,
+        },
         "long_shots_missing_kills": _long_shots_missing_kills(match, program, coverage),
         "program_sha256": program.digest(),
         "compute_ms": _timing(run.compute_ms),
@@ -146,9 +179,12 @@ def _long_shots_missing_kills(match: MatchRecording, program: Program, coverage)
     no shot over 20 s while a kill happens outside it)."""
     starts = np.flatnonzero(program.cut | (np.arange(len(program)) == 0))
     ends = np.append(starts[1:], len(program))
-    kill_rows = np.searchsorted(program.index, np.searchsorted(match.time_s, [
-        e.time_s for e in match.events if e.kind == "kill" and e.actor_id != e.other_actor_id]), side="left")
-    missed_rows = kill_rows[:len(coverage.covered)][~coverage.covered]
+    kill_rows = np.searchsorted(
+        program.index,
+        np.searchsorted(match.time_s, [e.time_s for e in match.events if e.kind == "kill" and e.actor_id != e.other_actor_id]),
+        side="left",
+    )
+    missed_rows = kill_rows[: len(coverage.covered)][~coverage.covered]
     count = 0
     for start, end in zip(starts, ends):
         if program.time_s[end - 1] - program.time_s[start] > LONG_SHOT_S:
@@ -160,21 +196,36 @@ def _spread(values: np.ndarray) -> dict:
     """count, median, mean, min and max of values (None where there are none), 2 decimals."""
     if not len(values):
         return {"count": 0, "median": None, "mean": None, "min": None, "max": None}
-    return {"count": len(values), "median": round(float(np.median(values)), 2),
-            "mean": round(float(np.mean(values)), 2), "min": round(float(values.min()), 2),
-            "max": round(float(values.max()), 2)}
+    return {
+        "count": len(values),
+        "median": round(float(np.median(values)), 2),
+        "mean": round(float(np.mean(values)), 2),
+        "min": round(float(values.min()), 2),
+        "max": round(float(values.max()), 2),
+    }
 
 
 def _timing(compute_ms: np.ndarray) -> dict:
     """median and p99, ms (3 decimals), and n: the benchmarks' timing summary (load_tests/report.py's
     `summary`; load_tests is not part of the installed package, so the command cannot import it)."""
-    return {"median": round(float(np.median(compute_ms)), 3), "p99": round(float(np.percentile(compute_ms, 99)), 3),
-            "n": len(compute_ms)}
+    return {
+        "median": round(float(np.median(compute_ms)), 3),
+        "p99": round(float(np.percentile(compute_ms, 99)), 3),
+        "n": len(compute_ms),
+    }
 
 
-def evaluate_match(match: MatchRecording, delay_s: float, *, directors: Sequence[str] | None = None,
-                   plugins: Sequence[str] = (), data_dir: Path | None = None, rate_hz: float = 30.0,
-                   seed: int = 0, progress=None) -> tuple[dict, dict[str, DirectorRun]]:
+def evaluate_match(
+    match: MatchRecording,
+    delay_s: float,
+    *,
+    directors: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    data_dir: Path | None = None,
+    rate_hz: float = 30.0,
+    seed: int = 0,
+    progress=None,
+) -> tuple[dict, dict[str, DirectorRun]]:
     """Runs the directors (registered names, default every one registered once the plugins are
     imported, in the registry's order) and the TRACKS reference through one server started with
     the plugins; the result (JSON-ready) and each director's run (for the plot and the video).
@@ -190,8 +241,10 @@ def evaluate_match(match: MatchRecording, delay_s: float, *, directors: Sequence
     feed = Feed.of(match, rate_hz, delay_s)
     runs: dict[str, DirectorRun] = {}
     plugin_flags = [flag for name in plugins for flag in ("--plugin", name)]
-    with ServerProcess("--data-dir", str(registry.data_dir), *plugin_flags, transports=("grpc",)) as server, \
-            cd.connect(server.url("grpc"), timeout_s=60.0) as client:
+    with (
+        ServerProcess("--data-dir", str(registry.data_dir), *plugin_flags, transports=("grpc",)) as server,
+        cd.connect(server.url("grpc"), timeout_s=60.0) as client,
+    ):
         for name in names:
             progress(f"streaming {len(feed.rows)} frames through {name}")
             runs[name] = stream_director(client, match, feed, name, delay_s, seed)
@@ -206,21 +259,27 @@ def evaluate_match(match: MatchRecording, delay_s: float, *, directors: Sequence
     tracks_median_ms = float(np.median(tracks_ms))
     kills = sum(e.kind == "kill" for e in match.events)
     result = {
-        "match": {"level": match.level, "seed": match.seed, "players": len(match.players), "kills": kills,
-                  "minutes": round(float(match.time_s[-1] - match.time_s[0]) / 60.0, 2)},
-        "delay_s": delay_s, "rate_hz": round(feed.rate_hz, 2), "frames_sent": len(feed.rows),
+        "match": {
+            "level": match.level,
+            "seed": match.seed,
+            "players": len(match.players),
+            "kills": kills,
+            "minutes": round(float(match.time_s[-1] - match.time_s[0]) / 60.0, 2),
+        },
+        "delay_s": delay_s,
+        "rate_hz": round(feed.rate_hz, 2),
+        "frames_sent": len(feed.rows),
         "directors": figures,
         "ceilings": ceilings.as_json(),
         "tracks_reference": {"player": match.players[0].id, "compute_ms": _timing(tracks_ms)},
-        "compute_ratio_to_tracks": {name: round(f["compute_ms"]["median"] / tracks_median_ms, 2)
-                                    for name, f in figures.items()},
+        "compute_ratio_to_tracks": {name: round(f["compute_ms"]["median"] / tracks_median_ms, 2) for name, f in figures.items()},
     }
     if "planned" in figures and "hltv" in figures:
-        result["coverage_gain_over_hltv"] = round(figures["planned"]["kill_coverage"]
-                                                  - figures["hltv"]["kill_coverage"], 3)
+        result["coverage_gain_over_hltv"] = round(figures["planned"]["kill_coverage"] - figures["hltv"]["kill_coverage"], 3)
     if "planned" in figures and "autotrack" in figures:
-        result["coverage_gain_over_autotrack"] = round(figures["planned"]["kill_coverage"]
-                                                       - figures["autotrack"]["kill_coverage_first_person"], 3)
+        result["coverage_gain_over_autotrack"] = round(
+            figures["planned"]["kill_coverage"] - figures["autotrack"]["kill_coverage_first_person"], 3
+        )
     return result, runs
 
 
@@ -234,7 +293,7 @@ def plot_result(result: dict, out_png: Path) -> None:
     names = list(result["directors"])
     figures = [result["directors"][n] for n in names]
     fig, (ax_cov, ax_lead, ax_shots) = plt.subplots(1, 3, figsize=(14, 4))
-    ax_cov.bar(names, [f["kill_coverage"] for f in figures], color=["tab:blue", "tab:orange", "tab:green"][:len(names)])
+    ax_cov.bar(names, [f["kill_coverage"] for f in figures], color=["tab:blue", "tab:orange", "tab:green"][: len(names)])
     ax_cov.set_ylim(0, 1)
     ax_cov.set_ylabel("kill coverage")
     ax_cov.set_title(f"{result['match']['level']}, delay {result['delay_s']:g} s, {result['match']['kills']} kills")

@@ -12,6 +12,7 @@ and None. Conventions are the wire contract's
 its local +Z onto its facing with local +Y up. `load` checks every shape and refuses anything
 else with ValueError, so a reader never works on a half-valid match.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -24,7 +25,7 @@ import numpy as np
 
 FORMAT_VERSION = 1
 EVENT_KINDS = ("kill", "damage", "objective", "custom")  # the wire contract's EventKind, in its order
-STAT_COLUMNS = ("health", "armor", "items", "frags")     # MatchRecording.stats's last axis
+STAT_COLUMNS = ("health", "armor", "items", "frags")  # MatchRecording.stats's last axis
 
 
 @dataclass(frozen=True)
@@ -58,9 +59,15 @@ class MatchEvent:
     position_world: np.ndarray
 
     def as_json(self) -> dict:
-        return {"kind": self.kind, "actor_id": self.actor_id, "other_actor_id": self.other_actor_id,
-                "priority": self.priority, "time_s": self.time_s, "label": self.label,
-                "position_world": [float(x) for x in self.position_world]}
+        return {
+            "kind": self.kind,
+            "actor_id": self.actor_id,
+            "other_actor_id": self.other_actor_id,
+            "priority": self.priority,
+            "time_s": self.time_s,
+            "label": self.label,
+            "position_world": [float(x) for x in self.position_world],
+        }
 
 
 @dataclass(frozen=True)
@@ -92,10 +99,14 @@ class MatchRecording:
         keep = self.time_s <= max(end_s, self.time_s[0])
         last_s = self.time_s[keep][-1]
         return dataclasses.replace(
-            self, time_s=self.time_s[keep], positions_world=self.positions_world[keep],
-            rotations_xyzw=self.rotations_xyzw[keep], alive=self.alive[keep],
+            self,
+            time_s=self.time_s[keep],
+            positions_world=self.positions_world[keep],
+            rotations_xyzw=self.rotations_xyzw[keep],
+            alive=self.alive[keep],
             stats=None if self.stats is None else self.stats[keep],
-            events=[e for e in self.events if e.time_s <= last_s])
+            events=[e for e in self.events if e.time_s <= last_s],
+        )
 
     def player_index(self) -> dict[str, int]:
         """player id -> column in the per-player arrays."""
@@ -116,23 +127,34 @@ def validate(match: MatchRecording) -> None:
     """Raises ValueError naming the first field that breaks the format (module docstring)."""
     n_frames, n_players = len(match.time_s), len(match.players)
     checks = [
-        (match.time_s.dtype == np.float64 and match.time_s.ndim == 1 and n_frames >= 1,
-         "time_s must be (F,) float64 with F >= 1"),
-        (bool(np.all(np.isfinite(match.time_s))) and bool(np.all(np.diff(match.time_s) > 0)),
-         "time_s must be finite and strictly increasing"),
+        (
+            match.time_s.dtype == np.float64 and match.time_s.ndim == 1 and n_frames >= 1,
+            "time_s must be (F,) float64 with F >= 1",
+        ),
+        (
+            bool(np.all(np.isfinite(match.time_s))) and bool(np.all(np.diff(match.time_s) > 0)),
+            "time_s must be finite and strictly increasing",
+        ),
         (n_players >= 1 and len({p.id for p in match.players}) == n_players, "players must have distinct ids"),
-        (all(isinstance(p.team, int) and p.team >= 0 for p in match.players),
-         "a player's team must be an int >= 0"),
-        (match.positions_world.dtype == np.float64 and match.positions_world.shape == (n_frames, n_players, 3),
-         f"positions_world must be (F, P, 3) = ({n_frames}, {n_players}, 3) float64"),
-        (match.rotations_xyzw.dtype == np.float64 and match.rotations_xyzw.shape == (n_frames, n_players, 4),
-         f"rotations_xyzw must be (F, P, 4) = ({n_frames}, {n_players}, 4) float64"),
-        (match.alive.dtype == bool and match.alive.shape == (n_frames, n_players),
-         f"alive must be (F, P) = ({n_frames}, {n_players}) bool"),
+        (all(isinstance(p.team, int) and p.team >= 0 for p in match.players), "a player's team must be an int >= 0"),
+        (
+            match.positions_world.dtype == np.float64 and match.positions_world.shape == (n_frames, n_players, 3),
+            f"positions_world must be (F, P, 3) = ({n_frames}, {n_players}, 3) float64",
+        ),
+        (
+            match.rotations_xyzw.dtype == np.float64 and match.rotations_xyzw.shape == (n_frames, n_players, 4),
+            f"rotations_xyzw must be (F, P, 4) = ({n_frames}, {n_players}, 4) float64",
+        ),
+        (
+            match.alive.dtype == bool and match.alive.shape == (n_frames, n_players),
+            f"alive must be (F, P) = ({n_frames}, {n_players}) bool",
+        ),
         (match.rate_hz > 0, "rate_hz must be positive"),
-        (match.stats is None or (match.stats.dtype == np.int32
-                                 and match.stats.shape == (n_frames, n_players, len(STAT_COLUMNS))),
-         f"stats must be None or (F, P, {len(STAT_COLUMNS)}) = ({n_frames}, {n_players}, {len(STAT_COLUMNS)}) int32"),
+        (
+            match.stats is None
+            or (match.stats.dtype == np.int32 and match.stats.shape == (n_frames, n_players, len(STAT_COLUMNS))),
+            f"stats must be None or (F, P, {len(STAT_COLUMNS)}) = ({n_frames}, {n_players}, {len(STAT_COLUMNS)}) int32",
+        ),
     ]
     for ok, message in checks:
         if not ok:
@@ -153,14 +175,25 @@ def validate(match: MatchRecording) -> None:
 
 def save_match(match: MatchRecording, path: Path) -> None:
     """Write the match to path (.npz, module docstring)."""
-    metadata = {"format_version": FORMAT_VERSION, "level": match.level, "seed": match.seed, "rate_hz": match.rate_hz,
-                "players": [dataclasses.asdict(p) for p in match.players],
-                "events": [e.as_json() for e in match.events]}
+    metadata = {
+        "format_version": FORMAT_VERSION,
+        "level": match.level,
+        "seed": match.seed,
+        "rate_hz": match.rate_hz,
+        "players": [dataclasses.asdict(p) for p in match.players],
+        "events": [e.as_json() for e in match.events],
+    }
     optional: dict[str, Any] = {} if match.stats is None else {"stats": match.stats}
     with open(path, "wb") as f:
-        np.savez_compressed(f, metadata=np.frombuffer(json.dumps(metadata).encode("utf-8"), dtype=np.uint8),
-                            time_s=match.time_s, positions_world=match.positions_world,
-                            rotations_xyzw=match.rotations_xyzw, alive=match.alive, **optional)
+        np.savez_compressed(
+            f,
+            metadata=np.frombuffer(json.dumps(metadata).encode("utf-8"), dtype=np.uint8),
+            time_s=match.time_s,
+            positions_world=match.positions_world,
+            rotations_xyzw=match.rotations_xyzw,
+            alive=match.alive,
+            **optional,
+        )
 
 
 def load_match(path: Path) -> MatchRecording:
@@ -178,16 +211,39 @@ def load_match(path: Path) -> MatchRecording:
         if "stats" in data.files:
             arrays["stats"] = data["stats"]
     if meta.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path}: match file format version {meta.get('format_version')}, this build reads "
-                         f"version {FORMAT_VERSION}")
+        raise ValueError(
+            f"{path}: match file format version {meta.get('format_version')}, this build reads version {FORMAT_VERSION}"
+        )
     try:
-        players = [MatchPlayer(id=str(p["id"]), team=int(p["team"]), height_m=float(p["height_m"]),
-                               radius_m=float(p["radius_m"]), name=str(p.get("name", ""))) for p in meta["players"]]
-        events = [MatchEvent(kind=str(e["kind"]), actor_id=str(e["actor_id"]), other_actor_id=str(e["other_actor_id"]),
-                             priority=int(e["priority"]), time_s=float(e["time_s"]), label=str(e["label"]),
-                             position_world=np.asarray(e["position_world"], dtype=np.float64))
-                  for e in meta["events"]]
-        return MatchRecording(level=str(meta["level"]), seed=int(meta["seed"]), rate_hz=float(meta["rate_hz"]),
-                              players=players, events=events, **arrays)
+        players = [
+            MatchPlayer(
+                id=str(p["id"]),
+                team=int(p["team"]),
+                height_m=float(p["height_m"]),
+                radius_m=float(p["radius_m"]),
+                name=str(p.get("name", "")),
+            )
+            for p in meta["players"]
+        ]
+        events = [
+            MatchEvent(
+                kind=str(e["kind"]),
+                actor_id=str(e["actor_id"]),
+                other_actor_id=str(e["other_actor_id"]),
+                priority=int(e["priority"]),
+                time_s=float(e["time_s"]),
+                label=str(e["label"]),
+                position_world=np.asarray(e["position_world"], dtype=np.float64),
+            )
+            for e in meta["events"]
+        ]
+        return MatchRecording(
+            level=str(meta["level"]),
+            seed=int(meta["seed"]),
+            rate_hz=float(meta["rate_hz"]),
+            players=players,
+            events=events,
+            **arrays,
+        )
     except (KeyError, TypeError) as exc:
         raise ValueError(f"{path}: match file metadata lacks {exc}") from None

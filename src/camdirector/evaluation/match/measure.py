@@ -37,6 +37,7 @@ players' bodies as the match file has them, never from what the director says it
   over all of them says whether players are large enough to read; the same over the players the
   shot names says whether its subjects are.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -51,12 +52,12 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.toric.target_sampling import SurfaceSampler
 
-SAMPLES_PER_PLAYER = 32    # body sample points per player (issue 12 brief: 16-32)
-SHOWN_FRACTION = 0.5       # a player is shown with at least this share of its points seen (issue 12, item 5)
-JUMP_CUT_DEG = 30.0        # a cut between views of the same subjects closer than this is a jump cut (issue 12)
+SAMPLES_PER_PLAYER = 32  # body sample points per player (issue 12 brief: 16-32)
+SHOWN_FRACTION = 0.5  # a player is shown with at least this share of its points seen (issue 12, item 5)
+JUMP_CUT_DEG = 30.0  # a cut between views of the same subjects closer than this is a jump cut (issue 12)
 AIM_HEIGHT_FRACTION = 0.6  # the aim point (chest) this far up a player: the simulator's chest_height_fraction
 EYE_HEIGHT_FRACTION = 46.0 / 56.0  # a Quake player's eye (origin + 22 units) over its 56-unit height
-EYE_TOLERANCE_M = 0.5      # a camera this near a player's eye point looks through its eyes, m
+EYE_TOLERANCE_M = 0.5  # a camera this near a player's eye point looks through its eyes, m
 
 
 def player_mesh(player: MatchPlayer) -> TriMesh:
@@ -112,11 +113,11 @@ class BodySampler:
     def __init__(self, match: MatchRecording, rng: np.random.Generator, count: int = SAMPLES_PER_PLAYER):
         self.match = match
         self.points_local = np.stack([SurfaceSampler(player_mesh(p)).sample(count, rng) for p in match.players])  # (P, S, 3)
-        self.aims_local = np.stack([aim_offset(p) for p in match.players])                                      # (P, 3)
+        self.aims_local = np.stack([aim_offset(p) for p in match.players])  # (P, 3)
 
     def points_world(self, index: int) -> np.ndarray:
         """(P, S, 3) m: every player's sample points at match frame `index`."""
-        rotation = quat_to_matrix(self.match.rotations_xyzw[index])                  # (P, 3, 3)
+        rotation = quat_to_matrix(self.match.rotations_xyzw[index])  # (P, 3, 3)
         return np.einsum("pij,psj->psi", rotation, self.points_local) + self.match.positions_world[index][:, None, :]
 
     def aims_world(self, index: int, players: list[int]) -> np.ndarray:
@@ -139,8 +140,9 @@ def shown_fractions(pose: CameraPose, lens: Lens, points_world: np.ndarray, leve
 
 def measure_shown(program: Program, bodies: BodySampler, lens: Lens, level: RayScene) -> np.ndarray:
     """(n, P) shown fraction of every player at every program moment (module docstring)."""
-    return np.stack([shown_fractions(program.pose(r), lens, bodies.points_world(int(program.index[r])), level)
-                     for r in range(len(program))]).reshape(len(program), len(bodies.match.players))
+    return np.stack(
+        [shown_fractions(program.pose(r), lens, bodies.points_world(int(program.index[r])), level) for r in range(len(program))]
+    ).reshape(len(program), len(bodies.match.players))
 
 
 @dataclass(frozen=True)
@@ -160,15 +162,14 @@ def in_eyes_of(match: MatchRecording, program: Program) -> np.ndarray:
     """(n,) int64: the column of the player in whose eyes the camera is at each program moment
     (module docstring), -1 where none."""
     heights = np.array([p.height_m for p in match.players])
-    eyes = match.positions_world[program.index].copy()                          # (n, P, 3) feet
+    eyes = match.positions_world[program.index].copy()  # (n, P, 3) feet
     eyes[..., 1] += EYE_HEIGHT_FRACTION * heights
-    distance = np.linalg.norm(eyes - program.position[:, None, :], axis=2)       # (n, P)
+    distance = np.linalg.norm(eyes - program.position[:, None, :], axis=2)  # (n, P)
     nearest = distance.argmin(axis=1)
     return np.where(distance[np.arange(len(program)), nearest] <= EYE_TOLERANCE_M, nearest, -1)
 
 
-def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray,
-                  eyes_of: np.ndarray | None = None) -> KillCoverage:
+def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray, eyes_of: np.ndarray | None = None) -> KillCoverage:
     """Coverage and lead of the match's kills (module docstring); shown (n, P) from measure_shown.
     With eyes_of (n,) from in_eyes_of, a moment in the attacker's eyes that shows the victim
     covers the kill too (kill coverage first person)."""
@@ -181,7 +182,7 @@ def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray,
         if row >= len(program):
             continue  # after the program's last moment
         pair = [column[event.actor_id], column[event.other_actor_id]]
-        both_shown = shown[:, pair].min(axis=1) >= SHOWN_FRACTION                    # (n,)
+        both_shown = shown[:, pair].min(axis=1) >= SHOWN_FRACTION  # (n,)
         if eyes_of is not None:
             both_shown |= (eyes_of == pair[0]) & (shown[:, pair[1]] >= SHOWN_FRACTION)
         ok = bool(both_shown[row])
@@ -237,8 +238,9 @@ def program_visibility(program: Program, shown: np.ndarray, column: dict[str, in
     return float(np.mean(values)) if values else float("nan")
 
 
-def shown_heights(program: Program, bodies: BodySampler, lens: Lens, shown: np.ndarray,
-                  eyes_of: np.ndarray, subjects_only: bool = False) -> np.ndarray:
+def shown_heights(
+    program: Program, bodies: BodySampler, lens: Lens, shown: np.ndarray, eyes_of: np.ndarray, subjects_only: bool = False
+) -> np.ndarray:
     """(m,) the on-screen heights, share of the frame's height, of every shown player at every
     program moment but the one in whose eyes the camera is (module docstring); subjects_only:
     of the players the moment's shot names alone (on open levels the players shown in the
@@ -247,12 +249,11 @@ def shown_heights(program: Program, bodies: BodySampler, lens: Lens, shown: np.n
     heights = []
     for r in range(len(program)):
         named = {column[p] for p in program.subjects[r]}
-        players = [p for p in np.flatnonzero(shown[r] >= SHOWN_FRACTION)
-                   if p != eyes_of[r] and (not subjects_only or p in named)]
+        players = [p for p in np.flatnonzero(shown[r] >= SHOWN_FRACTION) if p != eyes_of[r] and (not subjects_only or p in named)]
         if not players:
             continue
         pose = program.pose(r)
-        points = bodies.points_world(int(program.index[r]))[players]                       # (k, S, 3)
+        points = bodies.points_world(int(program.index[r]))[players]  # (k, S, 3)
         frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
         screen_y = np.clip(project_to_screen(pose, frame_lens, points.reshape(-1, 3))[:, 1], -1.0, 1.0)
         screen_y = screen_y.reshape(len(players), -1)

@@ -7,6 +7,7 @@ of the level sits in the top right corner, with every living player as a dot of 
 and the program camera as a white dot. Frames play at the program's rate, so the video runs in
 game time.
 """
+
 from __future__ import annotations
 
 import time
@@ -20,9 +21,9 @@ from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
 from camdirector.precompute.tracks.registry import LevelRegistry
 
-VIDEO_SIZE_PX = (480, 270)            # width, height; even for yuv420p
-INSET_SIZE_PX = (160, 90)             # the top view in the corner, same aspect
-INSET_FOG_M = (1.0e4, 2.0e4)          # the top view is far above the level: fog pushed out of the way, m
+VIDEO_SIZE_PX = (480, 270)  # width, height; even for yuv420p
+INSET_SIZE_PX = (160, 90)  # the top view in the corner, same aspect
+INSET_FOG_M = (1.0e4, 2.0e4)  # the top view is far above the level: fog pushed out of the way, m
 # Two teams' colours first; a free-for-all's players (a team each) cycle through the rest.
 TEAM_RGB = ((0.85, 0.25, 0.2), (0.2, 0.4, 0.9), (0.2, 0.7, 0.3), (0.9, 0.7, 0.1), (0.6, 0.3, 0.8), (0.1, 0.7, 0.8))
 LEVEL_RGB = (0.62, 0.6, 0.56)
@@ -52,11 +53,10 @@ def _dots(image: np.ndarray, pose: CameraPose, lens: Lens, points_world: np.ndar
         if not np.isfinite(x) or abs(x) > 1 or abs(y) > 1:
             continue
         col, row = int((x + 1) * 0.5 * (w - 1)), int((1 - y) * 0.5 * (h - 1))
-        image[max(row - 1, 0):row + 2, max(col - 1, 0):col + 2] = color
+        image[max(row - 1, 0) : row + 2, max(col - 1, 0) : col + 2] = color
 
 
-def render_program(match: MatchRecording, program: Program, out_mp4: Path, seconds: float,
-                   data_dir: Path | None = None) -> dict:
+def render_program(match: MatchRecording, program: Program, out_mp4: Path, seconds: float, data_dir: Path | None = None) -> dict:
     """Renders the program's first `seconds` to out_mp4; returns frames, fps and median ms per frame.
     Raises VideoUnavailable when EGL or the encoder cannot start."""
     try:
@@ -93,14 +93,25 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
             index = int(program.index[row])
             alive = match.alive[index]
             feet = match.positions_world[index] + np.where(alive[:, None], 0.0, HIDDEN_OFFSET_M)
-            renderer.set_transforms(ids, np.stack([RigidTransform(p, q).matrix()
-                                                   for p, q in zip(feet, match.rotations_xyzw[index])]))
+            renderer.set_transforms(
+                ids, np.stack([RigidTransform(p, q).matrix() for p, q in zip(feet, match.rotations_xyzw[index])])
+            )
             inset = top_image.copy()
-            _dots(inset, top, lens, np.concatenate([match.positions_world[index][alive], program.position[row][None]]),
-                  np.concatenate([team_rgb8[alive], np.full((1, 3), 255, dtype=np.uint8)]))
+            _dots(
+                inset,
+                top,
+                lens,
+                np.concatenate([match.positions_world[index][alive], program.position[row][None]]),
+                np.concatenate([team_rgb8[alive], np.full((1, 3), 255, dtype=np.uint8)]),
+            )
             frame = renderer.render(program.pose(int(row)), lens)
-            frame[:inset.shape[0], width - inset.shape[1]:] = inset
+            frame[: inset.shape[0], width - inset.shape[1] :] = inset
             video.write(frame)
             costs.append((time.perf_counter() - start) * 1e3)
-    return {"path": str(out_mp4), "frames": len(rows), "fps": round(fps, 2), "size_px": list(VIDEO_SIZE_PX),
-            "render_ms_median": round(float(np.median(costs)), 2) if costs else None}
+    return {
+        "path": str(out_mp4),
+        "frames": len(rows),
+        "fps": round(fps, 2),
+        "size_px": list(VIDEO_SIZE_PX),
+        "render_ms_median": round(float(np.median(costs)), 2) if costs else None,
+    }

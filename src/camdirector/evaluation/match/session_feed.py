@@ -9,6 +9,7 @@ where the match recorded them, the players' scoreboard values (player_stats: all
 first frame, then those that changed); then the delay's tail: the last row held for delay_s more
 seconds so that the program reaches the match's end. Frame numbers are match row + 1.
 """
+
 from __future__ import annotations
 
 import math
@@ -55,10 +56,15 @@ def player_targets(match: MatchRecording, player_ids: list[str] | None = None) -
         if player_ids is not None and player.id not in player_ids:
             continue
         body = player_mesh(player)
-        targets.append(cd.pb.Target(
-            id=player.id, team=player.team, mesh=cd.mesh_from_arrays(body.vertices, body.faces),
-            transform=cd.transform_msg(match.positions_world[0, i], match.rotations_xyzw[0, i]),
-            aim_offset=cd.vec3(aim_offset(player))))
+        targets.append(
+            cd.pb.Target(
+                id=player.id,
+                team=player.team,
+                mesh=cd.mesh_from_arrays(body.vertices, body.faces),
+                transform=cd.transform_msg(match.positions_world[0, i], match.rotations_xyzw[0, i]),
+                aim_offset=cd.vec3(aim_offset(player)),
+            )
+        )
     return targets
 
 
@@ -66,15 +72,26 @@ def match_session_fields(match: MatchRecording, director: str, delay_s: float, s
     """The CreateSessionRequest fields of the match's RIG_MATCH session directed by `director`
     (a registered name, pipeline/match/director_registry.py; the server refuses one it does not
     hold), as keywords of `Client.create_session`."""
-    return {"targets": player_targets(match), "level_id": match.level, "delay_s": delay_s, "seed": seed,
-            "style": cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director_name=director)}
+    return {
+        "targets": player_targets(match),
+        "level_id": match.level,
+        "delay_s": delay_s,
+        "seed": seed,
+        "style": cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director_name=director),
+    }
 
 
 def event_msg(event: MatchEvent) -> cd.pb.GameEvent:
     """The wire contract's GameEvent of a match event."""
-    return cd.pb.GameEvent(kind=EVENT_KIND_MSG[event.kind], actor_id=event.actor_id, other_actor_id=event.other_actor_id,
-                           priority=event.priority, time_s=event.time_s, label=event.label,
-                           position=cd.vec3(event.position_world))
+    return cd.pb.GameEvent(
+        kind=EVENT_KIND_MSG[event.kind],
+        actor_id=event.actor_id,
+        other_actor_id=event.other_actor_id,
+        priority=event.priority,
+        time_s=event.time_s,
+        label=event.label,
+        position=cd.vec3(event.position_world),
+    )
 
 
 def player_stats(match: MatchRecording, row: int, columns: list[int], since_row: int | None) -> list[cd.pb.PlayerStats]:
@@ -83,14 +100,21 @@ def player_stats(match: MatchRecording, row: int, columns: list[int], since_row:
     assert match.stats is not None  # asked only of a match that recorded them
     values = match.stats[row, columns].astype(np.int64)
     values[:, STAT_COLUMNS.index("items")] &= 0xFFFFFFFF  # a bitmask kept in int32: the wire's uint32
-    changed = np.ones(len(columns), dtype=bool) if since_row is None else \
-        np.any(match.stats[row, columns] != match.stats[since_row, columns], axis=1)
-    return [cd.pb.PlayerStats(id=match.players[c].id, **dict(zip(STAT_COLUMNS, v)))
-            for c, v, differs in zip(columns, values.tolist(), changed.tolist()) if differs]
+    changed = (
+        np.ones(len(columns), dtype=bool)
+        if since_row is None
+        else np.any(match.stats[row, columns] != match.stats[since_row, columns], axis=1)
+    )
+    return [
+        cd.pb.PlayerStats(id=match.players[c].id, **dict(zip(STAT_COLUMNS, v)))
+        for c, v, differs in zip(columns, values.tolist(), changed.tolist())
+        if differs
+    ]
 
 
-def frame_updates(session: cd.Session, match: MatchRecording, feed: Feed, columns: list[int],
-                  events: bool) -> Iterator[cd.pb.FrameUpdate]:
+def frame_updates(
+    session: cd.Session, match: MatchRecording, feed: Feed, columns: list[int], events: bool
+) -> Iterator[cd.pb.FrameUpdate]:
     """The feed's FrameUpdates for the players in `columns`, packed; with `events`, each match
     event on the first sent frame at or after its own (events_per_frame) and, where the match has
     stats, the players' values on the first frame and on each frame where they changed."""
@@ -98,8 +122,9 @@ def frame_updates(session: cd.Session, match: MatchRecording, feed: Feed, column
     ids = [match.players[c].id for c in columns]
     sent_through = -1
     for row, frame, time_s in zip(feed.rows.tolist(), feed.frames.tolist(), feed.times_s.tolist()):
-        update = session.frame_update(frame, time_s, packed=cd.pack_states(
-            ids, match.positions_world[row, columns], match.rotations_xyzw[row, columns]))
+        update = session.frame_update(
+            frame, time_s, packed=cd.pack_states(ids, match.positions_world[row, columns], match.rotations_xyzw[row, columns])
+        )
         if events:
             for r in range(sent_through + 1, row + 1):
                 update.events.extend(event_msg(e) for e in per_frame[r])

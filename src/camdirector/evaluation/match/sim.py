@@ -35,6 +35,7 @@ a damage at most every `damage_event_interval_s` per attacker and victim; an obj
 team takes one. Players are "p00", "p01", ..., alternating teams 0 and 1. Not modelled: bots
 walk through each other, do not strafe, take cover or jump, and shoot only at ticks.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -64,32 +65,32 @@ class SimSettings:
     0.3 m, 0.1-1.4% of the frames stood in one.
     """
 
-    rate_hz: float = 60.0                   # frames written per second (movement runs at this rate), Hz. [1, 240]
-    ai_rate_hz: float = 10.0                # decisions, sight and shots per second; whole frames apart, Hz. [0.5, rate_hz]
-    run_speed_m_s: float = 4.5              # walking speed of a shooter bot (Quake-like games run 5-8), m/s. (0, 20]
-    turn_rate_deg_s: float = 360.0          # fastest turn of a bot's facing, deg/s. [10, 3600]
-    turning_speed_fraction: float = 0.3     # speed kept facing >= 90 deg off the way (cos above), fraction. [0, 1]
-    view_range_m: float = 25.0              # opponents further away are neither seen nor shot, m. (0, 1000]
-    fov_deg: float = 120.0                  # horizontal field of view in which a bot notices opponents, deg. (0, 360]
-    aim_cone_deg: float = 15.0              # a fighter fires once its target is within this cone of its facing, deg. (0, 180]
-    fire_rate_hz: float = 5.0               # shots per second of a fighter; at most ai_rate_hz, Hz. (0, ai_rate_hz]
-    hit_chance: float = 0.2                 # chance that a shot hits (class docstring), fraction. [0, 1]
-    damage_per_hit: float = 20.0            # health taken by a hit, hp. (0, 1e4]
-    max_health: float = 100.0               # health at spawn, hp. (0, 1e4]
-    respawn_s: float = 8.0                  # time dead before respawning (class docstring), s. [0, 600]
-    spawn_radius_m: float = 8.0             # a team spawns within this path distance of its spawn point, m. (0, 1000]
-    memory_s: float = 6.0                   # a bot chases an opponent's last seen position for this long, s. [0, 600]
-    objective_count: int = 3                # objective points on the level, count. [0, 16]
-    objective_balance: float = 0.25         # objectives lie where |d(spawn0) - d(spawn1)| <= this x d(spawns), fraction. (0, 1]
-    objective_radius_m: float = 3.0         # within this horizontally (and a player height) is on the point, m. (0, 100]
-    capture_s: float = 3.0                  # time a team must hold an objective alone to take it, s. (0, 600]
-    objective_goal_chance: float = 0.7      # chance that a bot with nothing to chase takes an objective, fraction. [0, 1]
-    damage_event_interval_s: float = 1.0    # damage events per attacker and victim are at least this far apart, s. [0, 600]
-    eye_height_fraction: float = 0.9        # line of sight starts this far up the player, fraction of its height. (0, 1]
-    chest_height_fraction: float = 0.6      # line of sight ends this far up the target, fraction of its height. (0, 1]
-    reroute_m: float = 1.0                  # a chase goal moving less than this is not re-routed, m. (0, 100]
-    path_check_step_m: float = 0.05         # shortcuts are checked for ground this often (class docstring), m. (0, 10]
-    max_shortcut_waypoints: int = 32        # string pulling tries shortcuts over at most this many waypoints, count. [2, 1000]
+    rate_hz: float = 60.0  # frames written per second (movement runs at this rate), Hz. [1, 240]
+    ai_rate_hz: float = 10.0  # decisions, sight and shots per second; whole frames apart, Hz. [0.5, rate_hz]
+    run_speed_m_s: float = 4.5  # walking speed of a shooter bot (Quake-like games run 5-8), m/s. (0, 20]
+    turn_rate_deg_s: float = 360.0  # fastest turn of a bot's facing, deg/s. [10, 3600]
+    turning_speed_fraction: float = 0.3  # speed kept facing >= 90 deg off the way (cos above), fraction. [0, 1]
+    view_range_m: float = 25.0  # opponents further away are neither seen nor shot, m. (0, 1000]
+    fov_deg: float = 120.0  # horizontal field of view in which a bot notices opponents, deg. (0, 360]
+    aim_cone_deg: float = 15.0  # a fighter fires once its target is within this cone of its facing, deg. (0, 180]
+    fire_rate_hz: float = 5.0  # shots per second of a fighter; at most ai_rate_hz, Hz. (0, ai_rate_hz]
+    hit_chance: float = 0.2  # chance that a shot hits (class docstring), fraction. [0, 1]
+    damage_per_hit: float = 20.0  # health taken by a hit, hp. (0, 1e4]
+    max_health: float = 100.0  # health at spawn, hp. (0, 1e4]
+    respawn_s: float = 8.0  # time dead before respawning (class docstring), s. [0, 600]
+    spawn_radius_m: float = 8.0  # a team spawns within this path distance of its spawn point, m. (0, 1000]
+    memory_s: float = 6.0  # a bot chases an opponent's last seen position for this long, s. [0, 600]
+    objective_count: int = 3  # objective points on the level, count. [0, 16]
+    objective_balance: float = 0.25  # objectives lie where |d(spawn0) - d(spawn1)| <= this x d(spawns), fraction. (0, 1]
+    objective_radius_m: float = 3.0  # within this horizontally (and a player height) is on the point, m. (0, 100]
+    capture_s: float = 3.0  # time a team must hold an objective alone to take it, s. (0, 600]
+    objective_goal_chance: float = 0.7  # chance that a bot with nothing to chase takes an objective, fraction. [0, 1]
+    damage_event_interval_s: float = 1.0  # damage events per attacker and victim are at least this far apart, s. [0, 600]
+    eye_height_fraction: float = 0.9  # line of sight starts this far up the player, fraction of its height. (0, 1]
+    chest_height_fraction: float = 0.6  # line of sight ends this far up the target, fraction of its height. (0, 1]
+    reroute_m: float = 1.0  # a chase goal moving less than this is not re-routed, m. (0, 100]
+    path_check_step_m: float = 0.05  # shortcuts are checked for ground this often (class docstring), m. (0, 10]
+    max_shortcut_waypoints: int = 32  # string pulling tries shortcuts over at most this many waypoints, count. [2, 1000]
 
     def __post_init__(self):
         checks = [
@@ -137,8 +138,7 @@ class NavGround:
     _LINK_COST = 10.0  # a link between triangles that share no vertex costs this many times its length
     _BUCKET_M = 2.0  # cell of the top-view grid that finds the triangle under a point, m (navmesh cells are 0.6 m)
 
-    def __init__(self, navmesh: TriMesh, climb_m: float, link_m: float, path_check_step_m: float,
-                 max_shortcut_waypoints: int):
+    def __init__(self, navmesh: TriMesh, climb_m: float, link_m: float, path_check_step_m: float, max_shortcut_waypoints: int):
         adjacency = triangle_adjacency(navmesh, climb_m, link_m)
         labels = connected_components(adjacency, directed=False)[1]
         keep = np.flatnonzero(labels == np.bincount(labels).argmax())
@@ -155,7 +155,8 @@ class NavGround:
         link_only = ~np.asarray(touching[rows, cols]).reshape(-1).astype(bool)
         # a tiny floor on the weight keeps coincident centroids connected (csgraph drops zero weights)
         weight = (np.linalg.norm(self.centroids[rows] - self.centroids[cols], axis=1) + 1e-6) * np.where(
-            link_only, self._LINK_COST, 1.0)
+            link_only, self._LINK_COST, 1.0
+        )
         self._graph = sparse.csr_matrix((weight, (rows, cols)), shape=(len(self.faces),) * 2)
         self._tree = cKDTree(self.centroids)
         self._bucket(self._BUCKET_M)
@@ -235,8 +236,7 @@ class NavGround:
         """(n,) float64 height of the surface under points (n, 3) within a step above or below
         them, NaN where there is none."""
         span = 2.0 * self._climb_m
-        t = self._scene.first_hit(points_world + self._climb_m * UP_WORLD, np.broadcast_to(-span * UP_WORLD,
-                                                                                          points_world.shape))
+        t = self._scene.first_hit(points_world + self._climb_m * UP_WORLD, np.broadcast_to(-span * UP_WORLD, points_world.shape))
         return np.where(t <= 1.0, points_world[:, 1] + self._climb_m - t * span, np.nan)
 
     def random_points(self, rng: np.random.Generator, triangles: np.ndarray) -> np.ndarray:
@@ -314,8 +314,13 @@ class _Match:
         self.rng = rng
         agent = artifact.settings
         self.height_m, self.radius_m = agent.agent_height_m, agent.agent_radius_m
-        self.ground = NavGround(TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces), agent.agent_max_climb_m,
-                                0.5 * agent.navmesh_cell_m, s.path_check_step_m, s.max_shortcut_waypoints)
+        self.ground = NavGround(
+            TriMesh(artifact.navmesh_vertices, artifact.navmesh_faces),
+            agent.agent_max_climb_m,
+            0.5 * agent.navmesh_cell_m,
+            s.path_check_step_m,
+            s.max_shortcut_waypoints,
+        )
         self.level = RayScene([TriMesh(artifact.level_vertices, artifact.level_faces)])
         self.team = np.arange(n_players) % 2
         self.enemies = self.team[:, None] != self.team[None, :]
@@ -361,13 +366,17 @@ class _Match:
         chosen: list[int] = []
         nearest = np.full(ground.triangle_count, np.inf)
         for _ in range(min(s.objective_count, len(balanced))):
-            pick = (int(balanced[np.argmin((dist_a + dist_b)[balanced])]) if not chosen
-                    else int(balanced[np.argmax(nearest[balanced])]))
+            pick = (
+                int(balanced[np.argmin((dist_a + dist_b)[balanced])])
+                if not chosen
+                else int(balanced[np.argmax(nearest[balanced])])
+            )
             chosen.append(pick)
             nearest = np.minimum(nearest, ground.search(pick)[0])
         self.objectives = ground.centroids[chosen].reshape(-1, 3)
-        self.objective_triangles = [np.flatnonzero(np.linalg.norm(ground.centroids - o, axis=1) <= s.objective_radius_m)
-                                    for o in self.objectives]
+        self.objective_triangles = [
+            np.flatnonzero(np.linalg.norm(ground.centroids - o, axis=1) <= s.objective_radius_m) for o in self.objectives
+        ]
         self.objective_names = [chr(ord("A") + k) for k in range(len(chosen))]
 
     # --- per frame -------------------------------------------------------------------------------
@@ -513,16 +522,18 @@ class _Match:
             self.alive[j], self.died_s[j], self.target[j] = False, t_s, -1
             self._stop(j)
             self.target[self.target == j] = -1
-            self.events.append(MatchEvent("kill", self.ids[i], self.ids[j], 0, t_s, f"{self.ids[i]} killed {self.ids[j]}",
-                                          self.pos[j].copy()))
+            self.events.append(
+                MatchEvent("kill", self.ids[i], self.ids[j], 0, t_s, f"{self.ids[i]} killed {self.ids[j]}", self.pos[j].copy())
+            )
             return
         if self.target[j] < 0:  # turns on its attacker
             self.target[j] = i
             self._stop(j)
         if t_s - self.last_damage_event_s.get((i, j), -np.inf) >= s.damage_event_interval_s:
             self.last_damage_event_s[(i, j)] = t_s
-            self.events.append(MatchEvent("damage", self.ids[i], self.ids[j], 0, t_s,
-                                          f"{self.health[j]:.0f} hp left", self.pos[j].copy()))
+            self.events.append(
+                MatchEvent("damage", self.ids[i], self.ids[j], 0, t_s, f"{self.health[j]:.0f} hp left", self.pos[j].copy())
+            )
 
     def _choose_goal(self, i: int, t_s: float) -> None:
         s, team = self.settings, self.team[i]
@@ -565,8 +576,11 @@ class _Match:
             if self.held_s[k] >= s.capture_s:
                 self.owner[k], self.capturing[k], self.held_s[k] = team, -1, 0.0
                 actor = self.ids[int(np.flatnonzero(on)[0])]
-                self.events.append(MatchEvent("objective", actor, "", 0, t_s,
-                                              f"team {team} took objective {self.objective_names[k]}", point.copy()))
+                self.events.append(
+                    MatchEvent(
+                        "objective", actor, "", 0, t_s, f"team {team} took objective {self.objective_names[k]}", point.copy()
+                    )
+                )
 
 
 def yaw_to_quat(yaw: np.ndarray) -> np.ndarray:
@@ -576,9 +590,16 @@ def yaw_to_quat(yaw: np.ndarray) -> np.ndarray:
     return q
 
 
-def simulate_match(artifact: LevelArtifact, level_name: str, n_players: int, duration_s: float,
-                   rng: np.random.Generator, seed: int, settings: SimSettings | None = None,
-                   progress=None) -> MatchRecording:
+def simulate_match(
+    artifact: LevelArtifact,
+    level_name: str,
+    n_players: int,
+    duration_s: float,
+    rng: np.random.Generator,
+    seed: int,
+    settings: SimSettings | None = None,
+    progress=None,
+) -> MatchRecording:
     """A match of n_players bots (2 to 64) for duration_s seconds on a level (module docstring).
 
     rng: the only source of randomness; seed: recorded in the file (the seed rng was made from).
@@ -592,8 +613,18 @@ def simulate_match(artifact: LevelArtifact, level_name: str, n_players: int, dur
         raise ValueError(f"duration_s must give at least one frame at {settings.rate_hz} Hz, got {duration_s}")
     match = _Match(artifact, n_players, rng, settings)
     positions, yaws, alive = match.run(n_frames, progress)
-    players = [MatchPlayer(id=pid, team=int(t), height_m=match.height_m, radius_m=match.radius_m)
-               for pid, t in zip(match.ids, match.team)]
-    return MatchRecording(level=level_name, seed=seed, rate_hz=settings.rate_hz, players=players,
-                          time_s=np.arange(n_frames) / settings.rate_hz, positions_world=positions,
-                          rotations_xyzw=yaw_to_quat(yaws), alive=alive, events=match.events)
+    players = [
+        MatchPlayer(id=pid, team=int(t), height_m=match.height_m, radius_m=match.radius_m)
+        for pid, t in zip(match.ids, match.team)
+    ]
+    return MatchRecording(
+        level=level_name,
+        seed=seed,
+        rate_hz=settings.rate_hz,
+        players=players,
+        time_s=np.arange(n_frames) / settings.rate_hz,
+        positions_world=positions,
+        rotations_xyzw=yaw_to_quat(yaws),
+        alive=alive,
+        events=match.events,
+    )

@@ -9,6 +9,7 @@
 
 Kept light at import, as evaluation/cli.py: numpy and the simulator load when the command runs.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -21,8 +22,11 @@ from pathlib import Path
 def add_parser(subparsers) -> None:
     """Registers `match-sim` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "match-sim", help="simulate a bot match on a registered level and write it as a match file",
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+        "match-sim",
+        help="simulate a bot match on a registered level and write it as a match file",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--level", required=True, help="registered level name (camdirector level add)")
     p.add_argument("--players", type=int, default=10, help="players, both teams together, 2 to 64 (default 10)")
     p.add_argument("--minutes", type=float, default=5.0, help="length of the match, minutes (default 5)")
@@ -47,8 +51,9 @@ def run_match_sim(args: argparse.Namespace) -> int:
         settings = SimSettings(rate_hz=args.rate_hz, ai_rate_hz=min(SimSettings.ai_rate_hz, args.rate_hz))
         artifact = LevelRegistry(args.data_dir).load(args.level)
         start = time.perf_counter()
-        match = simulate_match(artifact, args.level, args.players, 60.0 * args.minutes, np.random.default_rng(args.seed),
-                               args.seed, settings)
+        match = simulate_match(
+            artifact, args.level, args.players, 60.0 * args.minutes, np.random.default_rng(args.seed), args.seed, settings
+        )
         wall_s = time.perf_counter() - start
     except KeyError as exc:
         print(f"camdirector match-sim: {exc.args[0]}", file=sys.stderr)
@@ -59,8 +64,20 @@ def run_match_sim(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_match(match, args.out)
     counts = {kind: sum(e.kind == kind for e in match.events) for kind in ("kill", "damage", "objective")}
-    print(json.dumps({"level": args.level, "players": args.players, "seed": args.seed, "frames": len(match.time_s),
-                      "rate_hz": settings.rate_hz, "minutes": args.minutes, "events": counts,
-                      "kills_per_min": round(counts["kill"] / args.minutes, 2), "sim_wall_s": round(wall_s, 2),
-                      "out": str(args.out)}))
+    print(
+        json.dumps(
+            {
+                "level": args.level,
+                "players": args.players,
+                "seed": args.seed,
+                "frames": len(match.time_s),
+                "rate_hz": settings.rate_hz,
+                "minutes": args.minutes,
+                "events": counts,
+                "kills_per_min": round(counts["kill"] / args.minutes, 2),
+                "sim_wall_s": round(wall_s, 2),
+                "out": str(args.out),
+            }
+        )
+    )
     return 0

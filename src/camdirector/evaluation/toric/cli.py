@@ -15,6 +15,7 @@ Without --server, a `camdirector serve` subprocess is started on a free loopback
 run. `add_parser(subparsers)` registers the subcommand on the `camdirector` parser
 (evaluation/cli.py); its `handler` default is `run_eval`.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,25 +31,40 @@ from pathlib import Path
 def add_parser(subparsers) -> None:
     """Registers `eval` on an argparse subparsers object; args.handler(args) runs it."""
     p = subparsers.add_parser(
-        "eval", help="replay scenarios through a real session and measure visibility and smoothness",
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+        "eval",
+        help="replay scenarios through a real session and measure visibility and smoothness",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--scenario", type=Path, help="a scenario file (evaluation/scenario_file.py documents the format)")
     which.add_argument("--suite", choices=("paper", "all"), help="every mode on the paper's scenes, or on all shipped ones")
-    p.add_argument("--visibility", default="FRAMING_ONLY", metavar="MODE",
-                   help="--scenario: a VisibilityMode name (default FRAMING_ONLY)")
-    p.add_argument("--modes", help="--suite: comma-separated modes (default: every VisibilityMode, the paper's "
-                                   "RAYCAST, NO_ANTICIPATION, ANTICIPATION first)")
+    p.add_argument(
+        "--visibility", default="FRAMING_ONLY", metavar="MODE", help="--scenario: a VisibilityMode name (default FRAMING_ONLY)"
+    )
+    p.add_argument(
+        "--modes",
+        help="--suite: comma-separated modes (default: every VisibilityMode, the paper's "
+        "RAYCAST, NO_ANTICIPATION, ANTICIPATION first)",
+    )
     p.add_argument("--json", type=Path, help="--scenario: write the result with per-frame series here")
     p.add_argument("--plot", type=Path, help="--scenario: draw visibility, speed and a top view here (PNG)")
     p.add_argument("--out", type=Path, help="--suite: output folder")
     p.add_argument("--server", help="gRPC HOST:PORT of a running server (default: start one)")
     p.add_argument("--duration", type=float, help="simulated seconds to run (default: each scenario's own)")
     p.add_argument("--no-plots", action="store_true", help="--suite: write no figures")
-    p.add_argument("--map-resolution", type=int, default=0,
-                   help="--scenario: occlusion map texels per side for the map modes (default: the server's, 64)")
-    p.add_argument("--map-backend", choices=("AUTO", "GL", "EMBREE"), default="AUTO",
-                   help="--scenario: how the map modes compute their maps (default AUTO)")
+    p.add_argument(
+        "--map-resolution",
+        type=int,
+        default=0,
+        help="--scenario: occlusion map texels per side for the map modes (default: the server's, 64)",
+    )
+    p.add_argument(
+        "--map-backend",
+        choices=("AUTO", "GL", "EMBREE"),
+        default="AUTO",
+        help="--scenario: how the map modes compute their maps (default AUTO)",
+    )
     p.set_defaults(handler=run_eval)
 
 
@@ -80,8 +96,15 @@ def run_eval(args: argparse.Namespace) -> int:
                 print("camdirector eval: --suite needs --out DIR", file=sys.stderr)
                 return 2
             modes = _modes(args.modes)
-            suite = run_suite(suite_scenarios(args.suite), modes, out_dir=args.out, server=args.server,
-                              duration_s=args.duration, plots=not args.no_plots, progress=print_progress)
+            suite = run_suite(
+                suite_scenarios(args.suite),
+                modes,
+                out_dir=args.out,
+                server=args.server,
+                duration_s=args.duration,
+                plots=not args.no_plots,
+                progress=print_progress,
+            )
             print(suite.table())
             print()
             print(suite.stage_table())
@@ -92,12 +115,17 @@ def run_eval(args: argparse.Namespace) -> int:
     except (ScenarioError, ValueError) as exc:
         print(f"camdirector eval: {exc}", file=sys.stderr)
         return 2
-    result = run_scenario(scenario, mode, server=args.server, duration_s=args.duration,
-                          map_resolution=args.map_resolution, map_backend=args.map_backend)
+    result = run_scenario(
+        scenario,
+        mode,
+        server=args.server,
+        duration_s=args.duration,
+        map_resolution=args.map_resolution,
+        map_backend=args.map_backend,
+    )
     if args.json:
         write_json(result, args.json)
     if args.plot:
         plot_run(result, args.plot)
     print(json.dumps(result.as_dict(series=False)))
     return {"ok": 0, "unavailable": 3}.get(result.status, 1)
-

@@ -35,6 +35,7 @@ add so that a rig that leaves the torus (REACTIVE) is measured on the same terms
 
 Stale replies (a frame the server did not advance on) are dropped before measuring.
 """
+
 from __future__ import annotations
 
 import math
@@ -55,18 +56,18 @@ from camdirector.v1 import director_pb2 as pb
 class CameraTrack:
     """The camera a server answered, frame by frame (stale replies dropped). n frames."""
 
-    frame: np.ndarray               # (n,) int64 frame numbers
-    time_s: np.ndarray              # (n,) s
-    position: np.ndarray            # (n, 3) m, camera centre
-    rotation: np.ndarray            # (n, 4) xyzw camera-to-world
-    vertical_fov_deg: np.ndarray    # (n,)
-    cut: np.ndarray                 # (n,) bool
-    shot_id: np.ndarray             # (n,) int64
-    rig_visibility: np.ndarray      # (n,) the server's own estimate, [0, 1]
-    compute_ms: np.ndarray          # (n,)
+    frame: np.ndarray  # (n,) int64 frame numbers
+    time_s: np.ndarray  # (n,) s
+    position: np.ndarray  # (n, 3) m, camera centre
+    rotation: np.ndarray  # (n, 4) xyzw camera-to-world
+    vertical_fov_deg: np.ndarray  # (n,)
+    cut: np.ndarray  # (n,) bool
+    shot_id: np.ndarray  # (n,) int64
+    rig_visibility: np.ndarray  # (n,) the server's own estimate, [0, 1]
+    compute_ms: np.ndarray  # (n,)
     stage_ms: dict[str, np.ndarray]  # stage name -> (n,), NaN where a frame did not report it
     flags: dict[str, int] = field(default_factory=dict)  # diagnostics flag -> frames that raised it
-    stale: int = 0                  # stale replies dropped
+    stale: int = 0  # stale replies dropped
 
     @classmethod
     def from_updates(cls, updates: list[pb.CameraUpdate]) -> CameraTrack:
@@ -110,8 +111,12 @@ class VisibilityMeter:
         self.scenario = scenario
         self.lens = Lens(**scenario.lens)  # the server's defaults where the scenario gives none
         static = [a for a in scenario.objects if not a.dynamic]
-        self.static = RayScene([TriMesh(RigidTransform(a.position, a.rotation, a.scale).apply(a.shape.mesh.vertices),
-                                        a.shape.mesh.faces) for a in static])
+        self.static = RayScene(
+            [
+                TriMesh(RigidTransform(a.position, a.rotation, a.scale).apply(a.shape.mesh.vertices), a.shape.mesh.faces)
+                for a in static
+            ]
+        )
         self.dynamic: list[Actor] = [a for a in scenario.objects if a.dynamic]
         self._dynamic_scenes: list[RayScene] = []
         spheres = []
@@ -127,14 +132,12 @@ class VisibilityMeter:
     def visible_fractions(self, pose: CameraPose, timeline: Timeline, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Per target (k,) at timeline frame `index`: the fraction of its vertices in the frame of
         `pose` and unobstructed from its centre, and the fraction unobstructed (the paper's rays only)."""
-        points = [transform_at(timeline, a, index).apply(v)
-                  for a, v in zip(self.scenario.targets, self.target_vertices_local)]
+        points = [transform_at(timeline, a, index).apply(v) for a, v in zip(self.scenario.targets, self.target_vertices_local)]
         counts = np.cumsum([len(p) for p in points])[:-1]
         points_world = np.concatenate(points)
         clear = ~self.hidden(pose.position_world, points_world, timeline, index)
         seen = clear & in_frame(pose, self.lens, points_world)
-        return (np.array([s.mean() for s in np.split(seen, counts)]),
-                np.array([c.mean() for c in np.split(clear, counts)]))
+        return (np.array([s.mean() for s in np.split(seen, counts)]), np.array([c.mean() for c in np.split(clear, counts)]))
 
     def hidden(self, camera_world: np.ndarray, points_world: np.ndarray, timeline: Timeline, index: int) -> np.ndarray:
         """(n,) bool: whether the segment from camera_world (3,) to each point (n, 3) is blocked."""
@@ -145,11 +148,11 @@ class VisibilityMeter:
         transforms = [transform_at(timeline, a, index) for a in self.dynamic]
         centres = np.array([t.apply(c[None, :])[0] for t, c in zip(transforms, self._sphere_centre_local)])
         radii = self._sphere_radius_local * np.array([np.abs(t.scale).max() for t in transforms])
-        d = points_world - camera_world                                          # (n, 3)
-        w = centres - camera_world                                               # (m, 3)
+        d = points_world - camera_world  # (n, 3)
+        w = centres - camera_world  # (m, 3)
         along = np.clip((w @ d.T) / np.maximum((d * d).sum(axis=1), 1e-12), 0.0, 1.0)  # (m, n)
         gap = np.linalg.norm(centres[:, None, :] - (camera_world + along[:, :, None] * d[None, :, :]), axis=2)
-        near = gap <= radii[:, None]                                             # (m, n)
+        near = gap <= radii[:, None]  # (m, n)
         for k in np.flatnonzero(near.any(axis=1)):
             rays = near[k] & ~hidden
             if not rays.any():
@@ -164,17 +167,18 @@ class VisibilityMeter:
 class VisibilitySeries:
     """Per-frame visibility of a track (n frames, k targets)."""
 
-    pooled: np.ndarray          # (n,) in frame and unobstructed, pooled over all target vertices
-    per_target: np.ndarray      # (n, k) the same per target
-    line_of_sight: np.ndarray   # (n,) unobstructed only, pooled (the paper's measure)
+    pooled: np.ndarray  # (n,) in frame and unobstructed, pooled over all target vertices
+    per_target: np.ndarray  # (n, k) the same per target
+    line_of_sight: np.ndarray  # (n,) unobstructed only, pooled (the paper's measure)
 
 
 def _poses(track: CameraTrack) -> list[CameraPose]:
     return [CameraPose(p, q, float(f)) for p, q, f in zip(track.position, track.rotation, track.vertical_fov_deg)]
 
 
-def measure_visibility(scenario: Scenario, timeline: Timeline, track: CameraTrack,
-                       meter: VisibilityMeter | None = None) -> VisibilitySeries:
+def measure_visibility(
+    scenario: Scenario, timeline: Timeline, track: CameraTrack, meter: VisibilityMeter | None = None
+) -> VisibilitySeries:
     """Visibility at every frame of the track (see the module docstring)."""
     meter = meter or VisibilityMeter(scenario)
     counts = np.array([len(v) for v in meter.target_vertices_local], dtype=np.float64)
@@ -201,16 +205,19 @@ def measure_composition(scenario: Scenario, timeline: Timeline, track: CameraTra
     distance = np.full(len(track), np.nan)
     for k, (actor, screen) in enumerate(zip(scenario.targets, wanted)):
         aims = np.array([transform_at(timeline, actor, int(i)).apply(actor.aim_offset[None, :])[0] for i in index])
-        landed = np.array([project_to_screen(pose, Lens(pose.vertical_fov_deg, lens.aspect), aim[None])[0]
-                           for pose, aim in zip(_poses(track), aims)])
+        landed = np.array(
+            [
+                project_to_screen(pose, Lens(pose.vertical_fov_deg, lens.aspect), aim[None])[0]
+                for pose, aim in zip(_poses(track), aims)
+            ]
+        )
         error = np.maximum(error, np.linalg.norm(landed.reshape(-1, 2) - np.asarray(screen), axis=1))  # NaN stays NaN
         if k == 0:
             distance = np.linalg.norm(track.position - aims.reshape(-1, 3), axis=1)
     return error, distance
 
 
-def camera_kinematics(time_s: np.ndarray, position: np.ndarray, cut: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def camera_kinematics(time_s: np.ndarray, position: np.ndarray, cut: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Speed (n,) m/s and acceleration magnitude (n,) m/s^2 by finite differences; NaN where
     undefined (speed at frame 0, acceleration at the ends, intervals of zero length or ending on a
     cut). time_s: (n,) s; position: (n, 3) m; cut: (n,) bool, cut[i] = a teleport from i-1 to i."""
@@ -239,8 +246,16 @@ def summarize(values: np.ndarray) -> dict[str, float | int | None]:
     if x.size == 0:
         return {"n": 0, "median": None, "q1": None, "q3": None, "mean": None, "min": None, "max": None, "p99": None}
     q1, med, q3, p99 = np.percentile(x, [25, 50, 75, 99])
-    return {"n": int(x.size), "median": float(med), "q1": float(q1), "q3": float(q3), "mean": float(x.mean()),
-            "min": float(x.min()), "max": float(x.max()), "p99": float(p99)}
+    return {
+        "n": int(x.size),
+        "median": float(med),
+        "q1": float(q1),
+        "q3": float(q3),
+        "mean": float(x.mean()),
+        "min": float(x.min()),
+        "max": float(x.max()),
+        "p99": float(p99),
+    }
 
 
 @dataclass(eq=False)
@@ -248,14 +263,14 @@ class Measurement:
     """Per-frame series (n frames answered) and their summary."""
 
     track: CameraTrack
-    visibility: np.ndarray                    # (n,) pooled, in frame and unobstructed, [0, 1]
+    visibility: np.ndarray  # (n,) pooled, in frame and unobstructed, [0, 1]
     visibility_per_target: dict[str, np.ndarray]  # target id -> (n,)
-    line_of_sight: np.ndarray                 # (n,) pooled, unobstructed only (the paper's rays), [0, 1]
-    composition_error: np.ndarray             # (n,) normalised screen units, see measure_composition
-    distance_to_a_m: np.ndarray               # (n,) m
-    speed_m_s: np.ndarray                     # (n,)
-    accel_m_s2: np.ndarray                    # (n,)
-    target_position: dict[str, np.ndarray]    # target id -> (n, 3) m, at the answered frames
+    line_of_sight: np.ndarray  # (n,) pooled, unobstructed only (the paper's rays), [0, 1]
+    composition_error: np.ndarray  # (n,) normalised screen units, see measure_composition
+    distance_to_a_m: np.ndarray  # (n,) m
+    speed_m_s: np.ndarray  # (n,)
+    accel_m_s2: np.ndarray  # (n,)
+    target_position: dict[str, np.ndarray]  # target id -> (n, 3) m, at the answered frames
 
     @property
     def cuts(self) -> int:
@@ -282,8 +297,7 @@ class Measurement:
             "cuts": self.cuts,
             "shots": int(len(np.unique(track.shot_id))),
             "rig_visibility": summarize(track.rig_visibility),
-            "compute_ms": {"p50": compute["median"], "p99": compute["p99"], "mean": compute["mean"],
-                           "max": compute["max"]},
+            "compute_ms": {"p50": compute["median"], "p99": compute["p99"], "mean": compute["mean"], "max": compute["max"]},
             "stage_ms_median": {k: summarize(v)["median"] for k, v in track.stage_ms.items()},
             "stage_ms_mean": {k: summarize(v)["mean"] for k, v in track.stage_ms.items()},
             "stage_ms_sd": {k: _sd(v) for k, v in track.stage_ms.items()},  # Table 3 gives mean (sd)
@@ -328,12 +342,10 @@ def _json_list(a: np.ndarray) -> list:
     return [float(f"{x:.6g}") if math.isfinite(x) else None for x in a.tolist()]
 
 
-def measure(scenario: Scenario, timeline: Timeline, track: CameraTrack,
-            meter: VisibilityMeter | None = None) -> Measurement:
+def measure(scenario: Scenario, timeline: Timeline, track: CameraTrack, meter: VisibilityMeter | None = None) -> Measurement:
     """Visibility, speed and acceleration of a camera track filmed over the scenario's timeline."""
     if len(track) and (track.frame.min() < 1 or track.frame.max() > len(timeline)):
-        raise ValueError(f"track frames {track.frame.min()}..{track.frame.max()} are outside the timeline "
-                         f"(1..{len(timeline)})")
+        raise ValueError(f"track frames {track.frame.min()}..{track.frame.max()} are outside the timeline (1..{len(timeline)})")
     seen = measure_visibility(scenario, timeline, track, meter)
     composition, distance = measure_composition(scenario, timeline, track)
     speed, accel = camera_kinematics(track.time_s, track.position, track.cut)

@@ -8,6 +8,7 @@ reproducible (same scenario, mode and seed, same poses) and independent of the m
 A mode the server answers UNIMPLEMENTED for is an outcome, not an error: the result's status is
 "unavailable" (the visibility modes land one by one).
 """
+
 from __future__ import annotations
 
 import json
@@ -26,8 +27,8 @@ from camdirector.v1 import director_pb2 as pb
 from camdirector.v1 import director_pb2_grpc as pbg
 
 MAX_MESSAGE_BYTES = 256 << 20  # client side; the server applies its own limit
-RPC_TIMEOUT_S = 60.0           # CreateSession / CloseSession
-STREAM_TIMEOUT_S = 3600.0      # a whole run
+RPC_TIMEOUT_S = 60.0  # CreateSession / CloseSession
+STREAM_TIMEOUT_S = 3600.0  # a whole run
 
 
 @dataclass(eq=False)
@@ -35,21 +36,27 @@ class RunResult:
     """status: "ok", "unavailable" (the server does not implement the mode) or "error"."""
 
     scenario: Scenario
-    mode: str                          # VisibilityMode name
+    mode: str  # VisibilityMode name
     status: str
     message: str = ""
     measurement: Measurement | None = None
-    wall_s: float = 0.0                # streaming time, s
+    wall_s: float = 0.0  # streaming time, s
     server: str = ""
-    duration_s: float = 0.0            # simulated time run, s
-    timeline: Timeline | None = None   # what the frames carried
+    duration_s: float = 0.0  # simulated time run, s
+    timeline: Timeline | None = None  # what the frames carried
 
     def as_dict(self, series: bool = True) -> dict:
         s = self.scenario
         out = {
-            "scenario": {"name": s.name, "file": str(s.path) if s.path else None, "duration_s": self.duration_s,
-                         "frame_rate_hz": s.frame_rate_hz, "seed": s.seed,
-                         "targets": [a.id for a in s.targets], "objects": len(s.objects)},
+            "scenario": {
+                "name": s.name,
+                "file": str(s.path) if s.path else None,
+                "duration_s": self.duration_s,
+                "frame_rate_hz": s.frame_rate_hz,
+                "seed": s.seed,
+                "targets": [a.id for a in s.targets],
+                "objects": len(s.objects),
+            },
             "mode": self.mode,
             "status": self.status,
             "message": self.message,
@@ -67,9 +74,16 @@ def _mode_name(mode: int | str) -> str:
     return pb.VisibilityMode.Name(visibility_mode(mode) if isinstance(mode, str) else int(mode))
 
 
-def run_on_channel(channel: grpc.Channel, scenario: Scenario, mode: int | str, *,
-                   duration_s: float | None = None, meter: VisibilityMeter | None = None,
-                   map_resolution: int = 0, map_backend: str = "AUTO") -> RunResult:
+def run_on_channel(
+    channel: grpc.Channel,
+    scenario: Scenario,
+    mode: int | str,
+    *,
+    duration_s: float | None = None,
+    meter: VisibilityMeter | None = None,
+    map_resolution: int = 0,
+    map_backend: str = "AUTO",
+) -> RunResult:
     """Runs the scenario (up to duration_s of simulated time) in a new session on `channel`.
     map_resolution (texels per side, 0: the server's default) and map_backend ("AUTO", "GL",
     "EMBREE") override the scenario's style for the map modes."""
@@ -109,12 +123,20 @@ def run_on_channel(channel: grpc.Channel, scenario: Scenario, mode: int | str, *
 def open_channel(address: str) -> grpc.Channel:
     """An insecure gRPC channel to HOST:PORT (a leading grpc:// is accepted)."""
     address = address.removeprefix("grpc://")
-    return grpc.insecure_channel(address, options=[("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
-                                                   ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES)])
+    return grpc.insecure_channel(
+        address,
+        options=[("grpc.max_send_message_length", MAX_MESSAGE_BYTES), ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES)],
+    )
 
 
-def run_scenario(scenario: Scenario, mode: int | str = "FRAMING_ONLY", *, server: str | None = None,
-                 duration_s: float | None = None, **overrides) -> RunResult:
+def run_scenario(
+    scenario: Scenario,
+    mode: int | str = "FRAMING_ONLY",
+    *,
+    server: str | None = None,
+    duration_s: float | None = None,
+    **overrides,
+) -> RunResult:
     """Runs one scenario with one visibility mode on the server at `server` (gRPC HOST:PORT), or on
     a server subprocess started for this run when `server` is None. overrides: run_on_channel's
     map_resolution and map_backend."""
@@ -140,8 +162,10 @@ def write_json(result: RunResult, path: Path | str, series: bool = True) -> None
 def pyplot_agg():
     """matplotlib.pyplot on the Agg backend (no display needed)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
 
 
@@ -150,6 +174,7 @@ def draw_top_view(ax, scenario: Scenario) -> None:
     from matplotlib.collections import LineCollection
 
     from camdirector.geometry.transforms import RigidTransform
+
     segments = []
     for a in scenario.objects:
         if a.dynamic:
@@ -217,8 +242,10 @@ def plot_run(result: RunResult, path: Path | str) -> None:
     ax_top.set_ylabel("z, m")
     ax_top.legend(loc="best", fontsize=8)
     summary = m.summary()
-    fig.suptitle(f"{result.scenario.name}, {result.mode}: visibility median {_fmt(summary['visibility']['median'])}, "
-                 f"speed median {_fmt(summary['speed_m_s']['median'])} m/s, {summary['cuts']} cuts")
+    fig.suptitle(
+        f"{result.scenario.name}, {result.mode}: visibility median {_fmt(summary['visibility']['median'])}, "
+        f"speed median {_fmt(summary['speed_m_s']['median'])} m/s, {summary['cuts']} cuts"
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -12,6 +12,7 @@ Figure 11 (map resolutions) is one `camdirector eval --scenario F --visibility A
 --map-resolution N` run per resolution (Style.map_resolution); the suite runs every scene, the
 stress scenes included, at the default 64x64.
 """
+
 from __future__ import annotations
 
 import json
@@ -35,14 +36,15 @@ PAPER_SCENES = ("stress_medium", "stress_large", "columns_gate", "forest", "fore
 PAPER_METHODS = (VisibilityMode.RAYCAST, VisibilityMode.NO_ANTICIPATION, VisibilityMode.ANTICIPATION)  # R, W, A
 # Every mode the style knows, so a new one is measured without a list to keep: the paper's methods
 # in its order, then the others (the baselines) in the enum's.
-MODES = tuple(m.name for m in (*PAPER_METHODS, *(m for m in VisibilityMode
-                                                 if m not in PAPER_METHODS and m is not VisibilityMode.UNSPECIFIED)))
-MODE_LABELS = {"RAYCAST": "R", "NO_ANTICIPATION": "W", "ANTICIPATION": "A", "REACTIVE": "reactive",
-               "FRAMING_ONLY": "framing"}
+MODES = tuple(
+    m.name
+    for m in (*PAPER_METHODS, *(m for m in VisibilityMode if m not in PAPER_METHODS and m is not VisibilityMode.UNSPECIFIED))
+)
+MODE_LABELS = {"RAYCAST": "R", "NO_ANTICIPATION": "W", "ANTICIPATION": "A", "REACTIVE": "reactive", "FRAMING_ONLY": "framing"}
 
 
 def suite_scenarios(name: str) -> list[Path]:
-    """"paper": the paper's benchmark scenes; "all": every shipped scenario."""
+    """ "paper": the paper's benchmark scenes; "all": every shipped scenario."""
     shipped = shipped_scenarios()
     if name == "paper":
         return [shipped[s] for s in PAPER_SCENES]
@@ -64,9 +66,11 @@ class SuiteResult:
         of the paper's rays-only measure (los),
         the median composition error (comp, normalised screen units) and distance to A (m), speed
         and acceleration per run."""
-        head = (f"{'scene':<17} {'mode':<16} {'status':<6} {'visibility med [q1 q3]':<23} {'mean':>5} {'occl':>5} {'los':>5} "
-                f"{'comp':>5} {'distA':>5} {'speed m/s med [q1 q3]':<23} {'accel m/s2 med [q1 q3]':<24} {'cuts':>4} "
-                f"{'compute ms p50/p99':>19}")
+        head = (
+            f"{'scene':<17} {'mode':<16} {'status':<6} {'visibility med [q1 q3]':<23} {'mean':>5} {'occl':>5} {'los':>5} "
+            f"{'comp':>5} {'distA':>5} {'speed m/s med [q1 q3]':<23} {'accel m/s2 med [q1 q3]':<24} {'cuts':>4} "
+            f"{'compute ms p50/p99':>19}"
+        )
         lines = [head, "-" * len(head)]
         for r in self.results:
             row = f"{r.scenario.name:<17} {r.mode:<16} {r.status:<6} "
@@ -75,10 +79,12 @@ class SuiteResult:
                 continue
             s = r.measurement.summary()
             c = s["compute_ms"]
-            row += (f"{_quartiles(s['visibility']):<23} {_num(s['visibility']['mean']):>5} {_num(s['occluded_share']):>5} "
-                    f"{_num(s['line_of_sight']['mean']):>5} {_num(s['composition_error']['median']):>5} "
-                    f"{_num(s['distance_to_a_m']['median'], 1):>5} {_quartiles(s['speed_m_s']):<23} "
-                    f"{_quartiles(s['accel_m_s2']):<24} {s['cuts']:>4} {_num(c['p50']):>9}/{_num(c['p99']):<9}")
+            row += (
+                f"{_quartiles(s['visibility']):<23} {_num(s['visibility']['mean']):>5} {_num(s['occluded_share']):>5} "
+                f"{_num(s['line_of_sight']['mean']):>5} {_num(s['composition_error']['median']):>5} "
+                f"{_num(s['distance_to_a_m']['median'], 1):>5} {_quartiles(s['speed_m_s']):<23} "
+                f"{_quartiles(s['accel_m_s2']):<24} {s['cuts']:>4} {_num(c['p50']):>9}/{_num(c['p99']):<9}"
+            )
             if r.status != "ok":
                 row += f"  ({r.status}: {r.message})"
             lines.append(row)
@@ -88,8 +94,10 @@ class SuiteResult:
         """Table 3 analogue: median server time per pipeline stage, ms."""
         measured = [(r, r.measurement) for r in self.results if r.measurement is not None]
         pipeline = [s.name.lower() for s in Stage]
-        stages = sorted({k for _, m in measured for k in m.track.stage_ms},
-                        key=lambda k: (pipeline.index(k) if k in pipeline else len(pipeline), k))
+        stages = sorted(
+            {k for _, m in measured for k in m.track.stage_ms},
+            key=lambda k: (pipeline.index(k) if k in pipeline else len(pipeline), k),
+        )
         head = f"{'scene':<17} {'mode':<16} " + " ".join(f"{k:>12}" for k in stages) + f" {'compute':>9}"
         lines = [head, "-" * len(head)]
         for r, m in measured:
@@ -107,16 +115,24 @@ def _quartiles(s: dict) -> str:
     return f"{_num(s['median'])} [{_num(s['q1'])} {_num(s['q3'])}]"
 
 
-def run_suite(scenarios: Sequence[Path | Scenario], modes: tuple[str, ...] | list[str] = MODES, *,
-              out_dir: Path | str | None = None, server: str | None = None, duration_s: float | None = None,
-              plots: bool = True, progress: Callable[[str], None] | None = None) -> SuiteResult:
+def run_suite(
+    scenarios: Sequence[Path | Scenario],
+    modes: tuple[str, ...] | list[str] = MODES,
+    *,
+    out_dir: Path | str | None = None,
+    server: str | None = None,
+    duration_s: float | None = None,
+    plots: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> SuiteResult:
     """Runs every mode on every scenario (one session each, in turn) on the server at `server`, or
     on a server subprocess started for the suite. With out_dir: writes runs/<scene>__<mode>.json
     (series included), suite.json, table.txt and, with plots, one figure per scene and per run."""
     if server is None:
         with ServerProcess("--workers", "0", transports=("grpc",)) as proc:
-            return run_suite(scenarios, modes, out_dir=out_dir, server=proc.grpc, duration_s=duration_s,
-                             plots=plots, progress=progress)
+            return run_suite(
+                scenarios, modes, out_dir=out_dir, server=proc.grpc, duration_s=duration_s, plots=plots, progress=progress
+            )
     out = Path(out_dir) if out_dir is not None else None
     results: list[RunResult] = []
     with open_channel(server) as channel:
@@ -150,8 +166,10 @@ def _progress_line(r: RunResult) -> str:
     if r.measurement is None:
         return f"{r.scenario.name} {r.mode}: {r.status} {r.message}"
     s = r.measurement.summary()
-    return (f"{r.scenario.name} {r.mode}: {r.status}, {s['frames']} frames in {r.wall_s:.1f} s, "
-            f"visibility median {_num(s['visibility']['median'])}")
+    return (
+        f"{r.scenario.name} {r.mode}: {r.status}, {s['frames']} frames in {r.wall_s:.1f} s, "
+        f"visibility median {_num(s['visibility']['median'])}"
+    )
 
 
 def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
@@ -164,8 +182,11 @@ def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
     fig = plt.figure(figsize=(16, 8), layout="constrained")
     grid = fig.add_gridspec(2, 4)
     ax_vis_t, ax_vis_box = fig.add_subplot(grid[0, :3]), fig.add_subplot(grid[0, 3])
-    ax_speed_t, ax_speed_box, ax_accel_box = (fig.add_subplot(grid[1, :2]), fig.add_subplot(grid[1, 2]),
-                                              fig.add_subplot(grid[1, 3]))
+    ax_speed_t, ax_speed_box, ax_accel_box = (
+        fig.add_subplot(grid[1, :2]),
+        fig.add_subplot(grid[1, 2]),
+        fig.add_subplot(grid[1, 3]),
+    )
     labels = [MODE_LABELS.get(r.mode, r.mode) for r, _ in measured]
     for (_, m), label in zip(measured, labels):
         ax_vis_t.plot(m.track.time_s, m.visibility, lw=0.9, label=label)
@@ -176,10 +197,17 @@ def plot_scene_comparison(results: list[RunResult], path: Path | str) -> None:
     ax_speed_t.set_ylabel("camera speed, m/s")
     ax_speed_t.set_xlabel("time, s")
     red = {"color": "r"}
-    for ax, series, title in ((ax_vis_box, "visibility", "visibility"), (ax_speed_box, "speed_m_s", "speed, m/s"),
-                              (ax_accel_box, "accel_m_s2", "acceleration, m/s^2")):
-        ax.boxplot([_finite(getattr(m, series)) for _, m in measured], tick_labels=labels,
-                   medianprops=red, flierprops={"marker": "+", "markeredgecolor": "r", "markersize": 3})
+    for ax, series, title in (
+        (ax_vis_box, "visibility", "visibility"),
+        (ax_speed_box, "speed_m_s", "speed, m/s"),
+        (ax_accel_box, "accel_m_s2", "acceleration, m/s^2"),
+    ):
+        ax.boxplot(
+            [_finite(getattr(m, series)) for _, m in measured],
+            tick_labels=labels,
+            medianprops=red,
+            flierprops={"marker": "+", "markeredgecolor": "r", "markersize": 3},
+        )
         ax.set_title(title, fontsize=9)
     ax_vis_box.set_ylim(-0.05, 1.05)
     unavailable = [r.mode for r in results if r.status == "unavailable"]

@@ -9,6 +9,7 @@
         sight to it (`line_of_sight`), by evaluation/tracks/measure.py.
 Exit status: 0 ok, 1 the registry is unreachable, 2 bad arguments or an unknown level.
 """
+
 from __future__ import annotations
 
 import json

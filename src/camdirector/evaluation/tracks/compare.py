@@ -25,6 +25,7 @@ densities `PRM_DENSITIES_PER_M2` show the trend. The verdict also names, for inf
 sparsest reference PRM that shows the actor along the route (`visible`) at least as often as ours:
 the paper's sense of a PRM dense enough "for a correct result".
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -59,29 +60,49 @@ def coverage(artifact: LevelArtifact) -> float:
     return float(area[artifact.visibility.seen_triangles()].sum() / max(area.sum(), 1e-12))
 
 
-def _prm_artifact(artifact: LevelArtifact, navmesh: TriMesh, refined: TriMesh, scene: RayScene, density: float,
-                  rng: np.random.Generator) -> LevelArtifact:
+def _prm_artifact(
+    artifact: LevelArtifact, navmesh: TriMesh, refined: TriMesh, scene: RayScene, density: float, rng: np.random.Generator
+) -> LevelArtifact:
     """Our artifact with its graph and visibility table replaced by a PRM's."""
     graph = build_prm(navmesh, scene, artifact.settings, density, PRM_LINK_DISTANCE_M, rng)
     table = build_visibility_table(graph.nodes_world, refined, scene, artifact.settings, rng)
-    return dataclasses.replace(artifact, nodes_world=graph.nodes_world, edges=graph.edges,
-                               edge_is_link=graph.edge_is_link, visibility=table,
-                               track_start=np.empty((0, 3)), track_end=np.empty((0, 3)))
+    return dataclasses.replace(
+        artifact,
+        nodes_world=graph.nodes_world,
+        edges=graph.edges,
+        edge_is_link=graph.edge_is_link,
+        visibility=table,
+        track_start=np.empty((0, 3)),
+        track_end=np.empty((0, 3)),
+    )
 
 
-def prm_at_coverage(artifact: LevelArtifact, navmesh: TriMesh, refined: TriMesh, scene: RayScene, target: float,
-                    rng: np.random.Generator, trials: list[dict] | None = None) -> tuple[float, list[LevelArtifact]] | None:
+def prm_at_coverage(
+    artifact: LevelArtifact,
+    navmesh: TriMesh,
+    refined: TriMesh,
+    scene: RayScene,
+    target: float,
+    rng: np.random.Generator,
+    trials: list[dict] | None = None,
+) -> tuple[float, list[LevelArtifact]] | None:
     """The sparsest density (per m^2) whose PRMs' mean coverage reaches target, with its
     `PRM_SEEDS` roadmaps (module docstring); None when the search passes `PRM_MAX_DENSITY_PER_M2`
     or PRMs of `PRM_MAX_NODES` nodes without reaching it.
     trials, when given, receives every density tried with its mean coverage, nodes and edges."""
+
     def trial(density: float) -> tuple[float, list[LevelArtifact]]:
         prms = [_prm_artifact(artifact, navmesh, refined, scene, density, rng) for _ in range(PRM_SEEDS)]
         reached = float(np.mean([coverage(p) for p in prms]))
         if trials is not None:
-            trials.append({"density_per_m2": density, "mean_coverage": reached,
-                           "mean_nodes": float(np.mean([len(p.nodes_world) for p in prms])),
-                           "mean_edges": float(np.mean([len(p.edges) for p in prms]))})
+            trials.append(
+                {
+                    "density_per_m2": density,
+                    "mean_coverage": reached,
+                    "mean_nodes": float(np.mean([len(p.nodes_world) for p in prms])),
+                    "mean_edges": float(np.mean([len(p.edges) for p in prms])),
+                }
+            )
         return reached, prms
 
     low, density, found = None, PRM_MIN_DENSITY_PER_M2, None
@@ -106,9 +127,13 @@ def prm_at_coverage(artifact: LevelArtifact, navmesh: TriMesh, refined: TriMesh,
     return found
 
 
-def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.Generator,
-                     densities_per_m2: tuple[float, ...] = PRM_DENSITIES_PER_M2,
-                     plot_path: Path | None = None) -> dict:
+def compare_with_prm(
+    artifact: LevelArtifact,
+    route: ActorRoute,
+    rng: np.random.Generator,
+    densities_per_m2: tuple[float, ...] = PRM_DENSITIES_PER_M2,
+    plot_path: Path | None = None,
+) -> dict:
     """The comparison table of the module docstring, as a JSON-ready dict."""
     level = TriMesh(artifact.level_vertices, artifact.level_faces)
     scene = RayScene([level])
@@ -116,24 +141,38 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
     refined = TriMesh(artifact.refined_vertices, artifact.refined_faces)
     rows = []
     ours = measure_route(artifact, route, scene, np.random.default_rng(rng.integers(1 << 32)))
-    rows.append({"graph": "ours", "nodes": len(artifact.nodes_world), "edges": len(artifact.edges),
-                 "coverage": coverage(artifact), "build_s": sum(artifact.timings_ms.values()) / 1e3,
-                 **{k: v for k, v in ours.items() if k != "camera_path"}})
+    rows.append(
+        {
+            "graph": "ours",
+            "nodes": len(artifact.nodes_world),
+            "edges": len(artifact.edges),
+            "coverage": coverage(artifact),
+            "build_s": sum(artifact.timings_ms.values()) / 1e3,
+            **{k: v for k, v in ours.items() if k != "camera_path"},
+        }
+    )
     paths = {"ours": (artifact, ours["camera_path"])}
     # our graph in every shot size (dynamic with cuts), the rows above being the long shot
-    by_size = {size: {k: run[k] for k in ("visible", "line_of_sight", "framed_in_frame", "cuts_per_min")}
-               for size, run in measure_shot_sizes(artifact, route, scene,
-                                                   lambda: np.random.default_rng(rng.integers(1 << 32))).items()}
+    by_size = {
+        size: {k: run[k] for k in ("visible", "line_of_sight", "framed_in_frame", "cuts_per_min")}
+        for size, run in measure_shot_sizes(artifact, route, scene, lambda: np.random.default_rng(rng.integers(1 << 32))).items()
+    }
 
     def prm_row(name: str, density: float, prms: list[LevelArtifact], build_s: float) -> dict:
         run = measure_route(prms[0], route, scene, np.random.default_rng(rng.integers(1 << 32)))
         paths[name] = (prms[0], run["camera_path"])
-        return {"graph": name, "density_per_m2": density, "nodes": len(prms[0].nodes_world),
-                "edges": len(prms[0].edges), "coverage": coverage(prms[0]),
-                "mean_nodes": float(np.mean([len(p.nodes_world) for p in prms])),
-                "mean_edges": float(np.mean([len(p.edges) for p in prms])),
-                "mean_coverage": float(np.mean([coverage(p) for p in prms])), "build_s": build_s,
-                **{k: v for k, v in run.items() if k != "camera_path"}}
+        return {
+            "graph": name,
+            "density_per_m2": density,
+            "nodes": len(prms[0].nodes_world),
+            "edges": len(prms[0].edges),
+            "coverage": coverage(prms[0]),
+            "mean_nodes": float(np.mean([len(p.nodes_world) for p in prms])),
+            "mean_edges": float(np.mean([len(p.edges) for p in prms])),
+            "mean_coverage": float(np.mean([coverage(p) for p in prms])),
+            "build_s": build_s,
+            **{k: v for k, v in run.items() if k != "camera_path"},
+        }
 
     for density in densities_per_m2:
         clock = time.perf_counter()
@@ -146,25 +185,44 @@ def compare_with_prm(artifact: LevelArtifact, route: ActorRoute, rng: np.random.
     if searched is not None:
         equal = prm_row("prm_equal_coverage", searched[0], searched[1], time.perf_counter() - clock)
         rows.append(equal)
-    visible_as_often = next((r for r in rows[1:len(densities_per_m2) + 1]
-                             if r["visible"] >= rows[0]["visible"]), None)
+    visible_as_often = next((r for r in rows[1 : len(densities_per_m2) + 1] if r["visible"] >= rows[0]["visible"]), None)
     # where no PRM reached our coverage, the densest one tried bounds the one that would from below
-    bound = {k: equal[k] for k in ("density_per_m2", "mean_coverage", "mean_nodes", "mean_edges")} if equal \
+    bound = (
+        {k: equal[k] for k in ("density_per_m2", "mean_coverage", "mean_nodes", "mean_edges")}
+        if equal
         else (trials[-1] if trials else None)
-    verdict = {"prm_at_equal_coverage": equal["graph"] if equal else None,
-               "prm_reached_our_coverage": equal is not None, "compared_with": bound,
-               "fewer_nodes": bool(bound and rows[0]["nodes"] < bound["mean_nodes"]),
-               "fewer_edges": bool(bound and rows[0]["edges"] < bound["mean_edges"]),
-               "prm_at_equal_route_visibility": visible_as_often["graph"] if visible_as_often else None}
+    )
+    verdict = {
+        "prm_at_equal_coverage": equal["graph"] if equal else None,
+        "prm_reached_our_coverage": equal is not None,
+        "compared_with": bound,
+        "fewer_nodes": bool(bound and rows[0]["nodes"] < bound["mean_nodes"]),
+        "fewer_edges": bool(bound and rows[0]["edges"] < bound["mean_edges"]),
+        "prm_at_equal_route_visibility": visible_as_often["graph"] if visible_as_often else None,
+    }
     if plot_path is not None:
         shown = ["ours"] + ([equal["graph"]] if equal else [rows[-1]["graph"]])
-        save_panels(Path(plot_path), [
-            dict(navmesh_vertices=artifact.navmesh_vertices, navmesh_faces=artifact.navmesh_faces,
-                 nodes_world=paths[name][0].nodes_world, edges=paths[name][0].edges,
-                 title=f"{name}: {len(paths[name][0].nodes_world)} nodes, {len(paths[name][0].edges)} edges",
-                 skeleton_segments=artifact.skeleton_segments if name == "ours" else None,
-                 route_world=route.position_world, camera_world=paths[name][1]) for name in shown])
-    return {"rows": rows, "ours_by_shot_size": by_size, "verdict": verdict,
-            "coverage_search": sorted(trials, key=lambda t: t["density_per_m2"]),
-            "route_frames": len(route.time_s),
-            "route_length_m": float(np.linalg.norm(np.diff(route.position_world, axis=0), axis=1).sum())}
+        save_panels(
+            Path(plot_path),
+            [
+                dict(
+                    navmesh_vertices=artifact.navmesh_vertices,
+                    navmesh_faces=artifact.navmesh_faces,
+                    nodes_world=paths[name][0].nodes_world,
+                    edges=paths[name][0].edges,
+                    title=f"{name}: {len(paths[name][0].nodes_world)} nodes, {len(paths[name][0].edges)} edges",
+                    skeleton_segments=artifact.skeleton_segments if name == "ours" else None,
+                    route_world=route.position_world,
+                    camera_world=paths[name][1],
+                )
+                for name in shown
+            ],
+        )
+    return {
+        "rows": rows,
+        "ours_by_shot_size": by_size,
+        "verdict": verdict,
+        "coverage_search": sorted(trials, key=lambda t: t["density_per_m2"]),
+        "route_frames": len(route.time_s),
+        "route_length_m": float(np.linalg.norm(np.diff(route.position_world, axis=0), axis=1).sum()),
+    }

@@ -29,6 +29,7 @@ The same measure as the Toric evaluation (evaluation/toric/measure.py), on the t
   screen units). A frame where the director has no camera yet (no track near the actor) shows
   nothing: not visible, not framed, its framing error infinite.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -46,9 +47,9 @@ from camdirector.pipeline.tracks.settings import DirectorSettings
 from camdirector.pipeline.tracks.shot_sizes import FRAMED_EXTENT, framing_error
 from camdirector.precompute.tracks.artifact import LevelArtifact
 
-ACTOR_RADIUS_FRACTION = 0.15   # the measured body's radius, fraction of its height (module docstring)
-VISIBLE_FRACTION = 0.5         # a frame counts as showing the actor when this share of its points is seen
-_HEIGHT_TOLERANCE_M = 1e-9     # points on an extent's ends (the feet's pole) stay in it despite rounding
+ACTOR_RADIUS_FRACTION = 0.15  # the measured body's radius, fraction of its height (module docstring)
+VISIBLE_FRACTION = 0.5  # a frame counts as showing the actor when this share of its points is seen
+_HEIGHT_TOLERANCE_M = 1e-9  # points on an extent's ends (the feet's pole) stay in it despite rounding
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ class ActorBody:
 
     @classmethod
     def of_height(cls, height_m: float) -> ActorBody:
-        mesh = capsule(ACTOR_RADIUS_FRACTION * height_m, height_m)   # centred on its origin
+        mesh = capsule(ACTOR_RADIUS_FRACTION * height_m, height_m)  # centred on its origin
         return cls(np.unique(mesh.vertices, axis=0) + [0.0, 0.5 * height_m, 0.0], float(height_m))
 
     def framed(self, shot_size: ShotSize) -> np.ndarray:
@@ -84,19 +85,24 @@ class FrameView:
 def shot_pose(position_world: np.ndarray, look_at_world: np.ndarray, lens: Lens) -> CameraPose:
     """The TRACKS rig's pose of a director shot: from position_world (3,) m looking at
     look_at_world (3,) m at the screen centre, no roll, the lens's vertical field of view."""
-    return CameraPose(np.asarray(position_world, dtype=np.float64),
-                      level_look_rotation(position_world, look_at_world, (0.0, 0.0), lens), lens.vertical_fov_deg)
+    return CameraPose(
+        np.asarray(position_world, dtype=np.float64),
+        level_look_rotation(position_world, look_at_world, (0.0, 0.0), lens),
+        lens.vertical_fov_deg,
+    )
 
 
-def frame_view(pose: CameraPose, lens: Lens, feet_world: np.ndarray, body: ActorBody, shot_size: ShotSize,
-               scene: RayScene) -> FrameView:
+def frame_view(
+    pose: CameraPose, lens: Lens, feet_world: np.ndarray, body: ActorBody, shot_size: ShotSize, scene: RayScene
+) -> FrameView:
     """What the frame of `pose` shows of the body standing on feet_world (3,) m; scene: the level
     (and any occluders) the rays cross."""
     points = body.points_local[body.framed(shot_size)] + np.asarray(feet_world, dtype=np.float64)
     framed = in_frame(pose, lens, points)
     clear = ~scene.occluded(pose.position_world, points)
-    return FrameView(visible=float((framed & clear).mean()), line_of_sight=float(clear.mean()),
-                     framed_in_frame=bool(framed.all()))
+    return FrameView(
+        visible=float((framed & clear).mean()), line_of_sight=float(clear.mean()), framed_in_frame=bool(framed.all())
+    )
 
 
 def visible_share(views: list[FrameView]) -> float:
@@ -104,8 +110,14 @@ def visible_share(views: list[FrameView]) -> float:
     return float(np.mean([v.visible >= VISIBLE_FRACTION for v in views]))
 
 
-def measure_route(artifact: LevelArtifact, route: ActorRoute, scene: RayScene, rng: np.random.Generator,
-                  style: DirectorStyle = DirectorStyle(), lens: Lens = Lens()) -> dict:
+def measure_route(
+    artifact: LevelArtifact,
+    route: ActorRoute,
+    scene: RayScene,
+    rng: np.random.Generator,
+    style: DirectorStyle = DirectorStyle(),
+    lens: Lens = Lens(),
+) -> dict:
     """A GraphDirector of `style` along the route, measured frame by frame (module docstring).
     scene: a RayScene of the artifact's level. Returns the route's numbers, JSON-ready, and
     'camera_path' (k, 3) m, the camera of the k frames that had one."""
@@ -130,7 +142,7 @@ def measure_route(artifact: LevelArtifact, route: ActorRoute, scene: RayScene, r
         pose = shot_pose(shot.position_world, shot.look_at_world, lens)
         views.append(frame_view(pose, lens, feet, body, style.shot_size, scene))
         error = framing_error(pose, lens, feet, body.height_m, style.shot_size, director.screen_fraction())
-        errors.append(error if np.isfinite(error) else np.inf)   # an end behind the camera: the worst framing
+        errors.append(error if np.isfinite(error) else np.inf)  # an end behind the camera: the worst framing
         path.append(shot.position_world)
     target_ms, camera_ms = np.asarray(target_list_ms), np.asarray(camera_list_ms)
     minutes = float(route.time_s[-1] - route.time_s[0]) / 60.0 if len(route.time_s) > 1 else 0.0
@@ -138,20 +150,27 @@ def measure_route(artifact: LevelArtifact, route: ActorRoute, scene: RayScene, r
     def timing(values: np.ndarray, statistic) -> float | None:
         return float(statistic(values)) if len(values) else None
 
-    return {"frames": len(views),
-            "visible": visible_share(views),
-            "line_of_sight": float(np.mean([v.line_of_sight >= VISIBLE_FRACTION for v in views])),
-            "framed_in_frame": float(np.mean([v.framed_in_frame for v in views])),
-            "cuts": cuts, "cuts_per_min": cuts / minutes if minutes > 0.0 else None,
-            "target_update_ms_median": timing(target_ms, np.median), "target_update_ms_mean": timing(target_ms, np.mean),
-            "target_update_ms_std": timing(target_ms, np.std), "camera_update_ms_median": timing(camera_ms, np.median),
-            "camera_update_ms_mean": timing(camera_ms, np.mean), "camera_update_ms_std": timing(camera_ms, np.std),
-            "framing_error_median": float(np.median(errors)),
-            "camera_path": np.asarray(path, dtype=np.float64).reshape(-1, 3)}
+    return {
+        "frames": len(views),
+        "visible": visible_share(views),
+        "line_of_sight": float(np.mean([v.line_of_sight >= VISIBLE_FRACTION for v in views])),
+        "framed_in_frame": float(np.mean([v.framed_in_frame for v in views])),
+        "cuts": cuts,
+        "cuts_per_min": cuts / minutes if minutes > 0.0 else None,
+        "target_update_ms_median": timing(target_ms, np.median),
+        "target_update_ms_mean": timing(target_ms, np.mean),
+        "target_update_ms_std": timing(target_ms, np.std),
+        "camera_update_ms_median": timing(camera_ms, np.median),
+        "camera_update_ms_mean": timing(camera_ms, np.mean),
+        "camera_update_ms_std": timing(camera_ms, np.std),
+        "framing_error_median": float(np.median(errors)),
+        "camera_path": np.asarray(path, dtype=np.float64).reshape(-1, 3),
+    }
 
 
-def measure_shot_sizes(artifact: LevelArtifact, route: ActorRoute, scene: RayScene,
-                       new_rng: Callable[[], np.random.Generator], lens: Lens = Lens()) -> dict[str, dict]:
+def measure_shot_sizes(
+    artifact: LevelArtifact, route: ActorRoute, scene: RayScene, new_rng: Callable[[], np.random.Generator], lens: Lens = Lens()
+) -> dict[str, dict]:
     """`measure_route` of the director (dynamic with cuts) in every shot size along one route,
     by ShotSize value, each run with a generator from new_rng (called once per shot size, in
     ShotSize order); the runs' camera paths are left out."""

@@ -8,6 +8,7 @@ would be inside geometry). Every pair of nodes closer than `link_distance_m` who
 free is an edge. The result is a `CameraGraph`, so the same director, visibility table and
 measures run on it.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,14 @@ def _draw(navmesh: TriMesh, count: int, settings: TrackSettings, rng: np.random.
     return floor, floor + height[:, None] * UP_WORLD
 
 
-def build_prm(navmesh: TriMesh, scene: RayScene, settings: TrackSettings, density_per_m2: float,
-              link_distance_m: float, rng: np.random.Generator) -> CameraGraph:
+def build_prm(
+    navmesh: TriMesh,
+    scene: RayScene,
+    settings: TrackSettings,
+    density_per_m2: float,
+    link_distance_m: float,
+    rng: np.random.Generator,
+) -> CameraGraph:
     """PRM of the module docstring."""
     count = max(1, int(round(density_per_m2 * triangle_areas(navmesh.vertices, navmesh.faces).sum())))
     floor, node = _draw(navmesh, count, settings, rng)
@@ -43,8 +50,7 @@ def build_prm(navmesh: TriMesh, scene: RayScene, settings: TrackSettings, densit
         node[blocked] = node2
         blocked[blocked] = scene.occluded(floor2 + 0.05 * UP_WORLD, node2)
     node = node[~blocked]
-    pairs = cKDTree(node).query_pairs(link_distance_m, output_type="ndarray") if len(node) > 1 \
-        else np.empty((0, 2), np.int64)
+    pairs = cKDTree(node).query_pairs(link_distance_m, output_type="ndarray") if len(node) > 1 else np.empty((0, 2), np.int64)
     if len(pairs):
         pairs = pairs[~scene.occluded(node[pairs[:, 0]], node[pairs[:, 1]])]
     edges = np.unique(np.sort(pairs, axis=1), axis=0) if len(pairs) else np.empty((0, 2), np.int64)

@@ -25,6 +25,7 @@ shortest path from A to B (to `_THROUGH_RATIO`) and the path is at least `_MIN_R
 the length: a dead end or a niche is passed over. Nothing is random: the same level gives the same
 routes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -42,17 +43,17 @@ from camdirector.pipeline.tracks.graph_search import adjacency_lists, astar_many
 from camdirector.precompute.tracks.navmesh import navmesh_components, triangle_adjacency
 from camdirector.precompute.tracks.track_settings import TrackSettings
 
-ROUTE_LENGTH_M = 20.0      # a tightest or open route's length one way, m (the issue's scenario)
-OPEN_RANGE_M = 25.0        # clearance rays are capped here: past the visibility table's 15 m, more room changes nothing, m
-WALK_SPEED_M_S = 1.4       # the actor's walking speed on every evaluation route, m/s
-FRAME_RATE_HZ = 30.0       # frames per second of every evaluation route
-_SKELETON_STEP_M = 0.5     # candidate places lie this far apart along the skeleton, m
-_CLEARANCE_RAYS = 32       # horizontal rays per candidate place and height
+ROUTE_LENGTH_M = 20.0  # a tightest or open route's length one way, m (the issue's scenario)
+OPEN_RANGE_M = 25.0  # clearance rays are capped here: past the visibility table's 15 m, more room changes nothing, m
+WALK_SPEED_M_S = 1.4  # the actor's walking speed on every evaluation route, m/s
+FRAME_RATE_HZ = 30.0  # frames per second of every evaluation route
+_SKELETON_STEP_M = 0.5  # candidate places lie this far apart along the skeleton, m
+_CLEARANCE_RAYS = 32  # horizontal rays per candidate place and height
 _WIDTH_HEIGHT_FRACTIONS = (0.25, 0.5, 0.9)  # widths are measured at the actor's knees, waist and eyes, fractions of its height
-_ON_NAVMESH_M = 0.25       # a candidate place is on the navmesh when this close to it vertically, m
-_HEAD_LIFT_M = 0.05        # the head-room ray starts this far above the place, clear of its own floor, m
-_THROUGH_RATIO = 0.9       # p is on a through path when the A-B distance is at least this share of A-p-B
-_MIN_ROUTE_SHARE = 0.75    # a route shorter than this share of the length asked for is passed over
+_ON_NAVMESH_M = 0.25  # a candidate place is on the navmesh when this close to it vertically, m
+_HEAD_LIFT_M = 0.05  # the head-room ray starts this far above the place, clear of its own floor, m
+_THROUGH_RATIO = 0.9  # p is on a through path when the A-B distance is at least this share of A-p-B
+_MIN_ROUTE_SHARE = 0.75  # a route shorter than this share of the length asked for is passed over
 
 
 @dataclass(frozen=True)
@@ -150,7 +151,7 @@ class NavmeshPaths:
 
         to_p = chain(a)[::-1]
         polyline = self.centroids[to_p + chain(b)[1:]]
-        polyline[len(to_p) - 1] = point_world   # through the place itself, not its triangle's centroid
+        polyline[len(to_p) - 1] = point_world  # through the place itself, not its triangle's centroid
         return polyline
 
 
@@ -170,7 +171,7 @@ def passage_half_width_m(points_world: np.ndarray, scene: RayScene, height_m: fl
         origins = np.repeat(points + fraction * height_m * UP_WORLD, _CLEARANCE_RAYS, axis=0)
         hit = scene.first_hit(origins, np.tile(directions, (len(points), 1))).reshape(-1, _CLEARANCE_RAYS)
         distance = OPEN_RANGE_M * np.minimum(hit, 1.0)
-        opposite = distance[:, :_CLEARANCE_RAYS // 2] + distance[:, _CLEARANCE_RAYS // 2:]
+        opposite = distance[:, : _CLEARANCE_RAYS // 2] + distance[:, _CLEARANCE_RAYS // 2 :]
         half = np.maximum(half, 0.5 * opposite.min(axis=1))
         mean = np.maximum(mean, distance.mean(axis=1))
     return half, mean
@@ -208,8 +209,13 @@ class PlaceRoute:
     polyline_world: np.ndarray
 
 
-def corridor_and_open_routes(paths: NavmeshPaths, skeleton_segments_world: np.ndarray, scene: RayScene,
-                             actor_height_m: float, length_m: float = ROUTE_LENGTH_M) -> dict[str, PlaceRoute]:
+def corridor_and_open_routes(
+    paths: NavmeshPaths,
+    skeleton_segments_world: np.ndarray,
+    scene: RayScene,
+    actor_height_m: float,
+    length_m: float = ROUTE_LENGTH_M,
+) -> dict[str, PlaceRoute]:
     """'tightest' and 'open': routes through the level's tightest corridor and its most open
     place (module docstring); a name is missing when no place of its kind has a route through it.
     skeleton_segments_world (k, 2, 3) m; scene: a RayScene of the level."""
@@ -246,8 +252,11 @@ def walk(polyline_world: np.ndarray, speed_m_s: float, frame_rate_hz: float) -> 
     times = np.arange(0.0, total / speed_m_s + 1e-9, 1.0 / frame_rate_hz)
     travelled = np.minimum(times * speed_m_s, total)
     position = np.stack([np.interp(travelled, cumulative, points[:, k]) for k in range(3)], axis=1)
-    heading = np.diff(position, axis=0, append=position[-1:] + (position[-1:] - position[-2:-1] if len(position) > 1
-                                                                 else np.array([[0.0, 0.0, 1.0]])))
+    heading = np.diff(
+        position,
+        axis=0,
+        append=position[-1:] + (position[-1:] - position[-2:-1] if len(position) > 1 else np.array([[0.0, 0.0, 1.0]])),
+    )
     heading[:, 1] = 0.0
     norm = np.linalg.norm(heading, axis=1, keepdims=True)
     heading = np.where(norm > 1e-9, heading / np.maximum(norm, 1e-12), np.array([0.0, 0.0, 1.0]))

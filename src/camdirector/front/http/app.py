@@ -3,6 +3,7 @@ director's dashboard (static files under /dashboard/ that read those routes).
 
 Every route but `/healthz` (balancers probe it) and the dashboard's static files asks for a key
 (auth.py); `/metrics` wants an admin's."""
+
 from __future__ import annotations
 
 import secrets
@@ -35,28 +36,43 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
     """The app; `app.state.views` is its ViewHub, which the server closes before stopping (its
     live streams would hold the HTTP server open). The router's guard checks every caller;
     `secure_cookie`: the login cookie is sent over TLS only."""
-    app = FastAPI(title="camdirector", version=VERSION,
-                  description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.")
+    app = FastAPI(
+        title="camdirector",
+        version=VERSION,
+        description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.",
+    )
     app.state.views = ViewHub(router, router.metrics)
     app.state.guard = guard = router.guard
-    app.state.cookies = CookieSigner(guard.key_store().shared_secret("dashboard-cookie") if guard.enabled
-                                     else secrets.token_bytes(32))
+    app.state.cookies = CookieSigner(
+        guard.key_store().shared_secret("dashboard-cookie") if guard.enabled else secrets.token_bytes(32)
+    )
 
     @app.get("/healthz")
     def healthz() -> dict:
         """Liveness and a short status: version and protocol, open sessions, worker processes, bound
         transports (a cluster upgraded node by node shows which node runs what)."""
-        return {"status": "ok", "version": VERSION, "protocol": PROTOCOL, "sessions": len(router.sessions),
-                "workers": router.pool.size, "transports": transports}
+        return {
+            "status": "ok",
+            "version": VERSION,
+            "protocol": PROTOCOL,
+            "sessions": len(router.sessions),
+            "workers": router.pool.size,
+            "transports": transports,
+        }
 
     @app.exception_handler(StarletteHTTPException)
     async def allow_every_method(request: Request, exc: StarletteHTTPException) -> Response:
         """A 405's Allow header names the methods of every documented route on the path:
         Starlette's names only those of the first route that matched (GET /v1/levels beside POST)."""
         if exc.status_code == 405:
-            allowed = sorted({method.upper() for template, operations in app.openapi()["paths"].items()
-                              if compile_path(template)[0].match(request.url.path)
-                              for method in operations})
+            allowed = sorted(
+                {
+                    method.upper()
+                    for template, operations in app.openapi()["paths"].items()
+                    if compile_path(template)[0].match(request.url.path)
+                    for method in operations
+                }
+            )
             if allowed:
                 exc = StarletteHTTPException(405, exc.detail, headers={"Allow": ", ".join(allowed)})
         return await http_exception_handler(request, exc)

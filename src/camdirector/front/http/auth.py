@@ -12,6 +12,7 @@ A request proves itself one of two ways:
 Answers: 401 (with `WWW-Authenticate: Bearer`) without a valid key, 403 for a role without the
 verb; another tenant's things answer 404 in the routes themselves.
 """
+
 from __future__ import annotations
 
 import base64
@@ -28,7 +29,7 @@ from camdirector.access.roles import Verb
 from camdirector.errors import DirectorError
 
 COOKIE = "camdirector_login"
-COOKIE_TTL_S = 12 * 3600.0   # a dashboard login lasts a working day, s
+COOKIE_TTL_S = 12 * 3600.0  # a dashboard login lasts a working day, s
 CSRF_HEADER = "X-CSRF-Token"
 _SAFE_METHODS = {"GET", "HEAD", "OPTIONS"}
 
@@ -94,8 +95,10 @@ def identify(request: Request) -> Identity:
         if request.method not in _SAFE_METHODS:
             token = request.headers.get(CSRF_HEADER, "")
             if not hmac.compare_digest(token, signer.csrf_token(cookie)) or not _same_origin(request):
-                raise denied(f"a request with the login cookie that changes anything needs the {CSRF_HEADER} "
-                             "header of /v1/whoami, from this service's own pages")
+                raise denied(
+                    f"a request with the login cookie that changes anything needs the {CSRF_HEADER} "
+                    "header of /v1/whoami, from this service's own pages"
+                )
         return guard.identify_key_id(key_id)
     except DirectorError as exc:
         raise _http(exc) from None

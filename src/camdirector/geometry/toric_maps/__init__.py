@@ -13,6 +13,7 @@ Typical use, once per map update (pipeline/toric/anticipation_map.py consumes th
     maps = backend.compute(torus, window, sample_points_world, exclude_ids=owners,
                            previous_torus=torus_before, dt_s=dt)
 """
+
 from __future__ import annotations
 
 import functools
@@ -31,8 +32,17 @@ if TYPE_CHECKING:  # gl imports moderngl, which only the "gl" backend needs
     from camdirector.geometry.toric_maps.gl import GLMapSettingsArgs
 
 __all__ = [
-    "DynamicOccluder", "MapBackend", "MapWindow", "OccluderScene", "ShadowVelocityMaps", "WindowSettings",
-    "SOFTWARE_RENDERERS", "GL_MAX_TRIANGLES_ON_CPU", "choose_backend", "make_backend", "probe_gl_renderer",
+    "DynamicOccluder",
+    "MapBackend",
+    "MapWindow",
+    "OccluderScene",
+    "ShadowVelocityMaps",
+    "WindowSettings",
+    "SOFTWARE_RENDERERS",
+    "GL_MAX_TRIANGLES_ON_CPU",
+    "choose_backend",
+    "make_backend",
+    "probe_gl_renderer",
 ]
 
 # GL_RENDERER substrings of software rasterizers: GL runs on the CPU there and competes with Embree.
@@ -45,7 +55,7 @@ GL_MAX_TRIANGLES_ON_CPU = 10_000
 
 
 def choose_backend(triangle_count: int, renderer_string: str | None, resolution: int = 64) -> str:
-    """"gl" or "embree": the faster backend for a scene of ``triangle_count`` triangles.
+    """ "gl" or "embree": the faster backend for a scene of ``triangle_count`` triangles.
 
     renderer_string: GL_RENDERER of the EGL context (probe_gl_renderer()), None when EGL is
     unavailable. resolution: map texels per side. Rule:

@@ -14,6 +14,7 @@ Array conventions, shared by every backend and by pipeline/toric/occlusion_predi
   texels) so a map stays meaningful when it is resampled onto another window; multiply by
   ``1 / window.theta_step_rad`` and ``1 / window.phi_step_rad`` for texels per second.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,9 +32,9 @@ from camdirector.geometry.transforms import RigidTransform
 # A ray (GL: a depth comparison) stops this fraction short of the torus point, and starts this far
 # from the sample point: a sample on a surface the target touches (feet on the ground) must not be
 # occluded by that surface at distance zero. Both backends use the same two numbers.
-SEGMENT_END_MARGIN = 1e-4        # relative to the sample-to-torus distance
-SAMPLE_CLEARANCE_M = 1e-3        # occluders nearer than this to the sample point are ignored, m
-NOT_OCCLUDED_DEPTH = np.inf      # depth_m where a texel is not occluded
+SEGMENT_END_MARGIN = 1e-4  # relative to the sample-to-torus distance
+SAMPLE_CLEARANCE_M = 1e-3  # occluders nearer than this to the sample point are ignored, m
+NOT_OCCLUDED_DEPTH = np.inf  # depth_m where a texel is not occluded
 
 
 @dataclass(frozen=True)
@@ -46,19 +47,21 @@ class WindowSettings:
     from the sample points whatever the shot size.
     """
 
-    resolution: int = 64                 # texels per side; the paper's default (section 6). [8, 1024]
-    half_view_angle_deg: float = 30.0    # half-side of the window seen from the A-B midpoint, deg. [1, 75]
-    min_half_extent_m: float = 0.25      # lower clamp of the window's half-side on the torus, m. (0, 1000]
-    max_half_extent_m: float = 50.0      # upper clamp, m. [min_half_extent_m, 10000]
-    lattice_tolerance: float = 0.15      # keep the previous texel size while the ideal is within this ratio. [0, 1]
+    resolution: int = 64  # texels per side; the paper's default (section 6). [8, 1024]
+    half_view_angle_deg: float = 30.0  # half-side of the window seen from the A-B midpoint, deg. [1, 75]
+    min_half_extent_m: float = 0.25  # lower clamp of the window's half-side on the torus, m. (0, 1000]
+    max_half_extent_m: float = 50.0  # upper clamp, m. [min_half_extent_m, 10000]
+    lattice_tolerance: float = 0.15  # keep the previous texel size while the ideal is within this ratio. [0, 1]
 
     def __post_init__(self) -> None:
         checks = [
             (8 <= self.resolution <= 1024, "resolution must be in [8, 1024]"),
             (1.0 <= self.half_view_angle_deg <= 75.0, "half_view_angle_deg must be in [1, 75]"),
             (0.0 < self.min_half_extent_m <= 1000.0, "min_half_extent_m must be in (0, 1000]"),
-            (self.min_half_extent_m <= self.max_half_extent_m <= 10000.0,
-             "max_half_extent_m must be in [min_half_extent_m, 10000]"),
+            (
+                self.min_half_extent_m <= self.max_half_extent_m <= 10000.0,
+                "max_half_extent_m must be in [min_half_extent_m, 10000]",
+            ),
             (0.0 <= self.lattice_tolerance <= 1.0, "lattice_tolerance must be in [0, 1]"),
         ]
         for ok, message in checks:
@@ -125,8 +128,9 @@ class MapWindow:
         """(theta, phi) of the window's centre, radians."""
         return (self.theta_min_rad + 0.5 * self.theta_span_rad, self.phi_min_rad + 0.5 * self.phi_span_rad)
 
-    def texel_coords(self, theta_rad: npt.ArrayLike, phi_rad: npt.ArrayLike
-                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    def texel_coords(
+        self, theta_rad: npt.ArrayLike, phi_rad: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Float texel coordinates (i, j) of angles; integers are texel centres.
 
         theta_rad, phi_rad: broadcastable arrays or scalars, radians. phi is wrapped into the turn
@@ -160,8 +164,14 @@ class MapWindow:
     # -- sizing --------------------------------------------------------------------------------
 
     @classmethod
-    def around(cls, torus: Torus, theta_rad: float, phi_rad: float,
-               settings: WindowSettings = WindowSettings(), lattice: MapWindow | None = None) -> MapWindow:
+    def around(
+        cls,
+        torus: Torus,
+        theta_rad: float,
+        phi_rad: float,
+        settings: WindowSettings = WindowSettings(),
+        lattice: MapWindow | None = None,
+    ) -> MapWindow:
         """The window centred on the camera at (theta_rad, phi_rad) on ``torus``.
 
         Sizing rule: the window is a square of side 2 h metres on the torus at the camera, with
@@ -192,13 +202,19 @@ class MapWindow:
                 theta_min = float(theta_rad) - 0.5 * n * step_theta
                 d_phi = math.remainder(float(phi_rad) - 0.5 * n * step_phi - lattice.phi_min_rad, math.tau)
                 return cls(
-                    theta_min_rad=lattice.theta_min_rad
-                    + round((theta_min - lattice.theta_min_rad) / step_theta) * step_theta,
+                    theta_min_rad=lattice.theta_min_rad + round((theta_min - lattice.theta_min_rad) / step_theta) * step_theta,
                     phi_min_rad=lattice.phi_min_rad + round(d_phi / step_phi) * step_phi,
-                    theta_step_rad=step_theta, phi_step_rad=step_phi, resolution=n)
-        return cls(theta_min_rad=float(theta_rad) - 0.5 * n * step_theta,
-                   phi_min_rad=float(phi_rad) - 0.5 * n * step_phi,
-                   theta_step_rad=step_theta, phi_step_rad=step_phi, resolution=n)
+                    theta_step_rad=step_theta,
+                    phi_step_rad=step_phi,
+                    resolution=n,
+                )
+        return cls(
+            theta_min_rad=float(theta_rad) - 0.5 * n * step_theta,
+            phi_min_rad=float(phi_rad) - 0.5 * n * step_phi,
+            theta_step_rad=step_theta,
+            phi_step_rad=step_phi,
+            resolution=n,
+        )
 
     # -- resampling ----------------------------------------------------------------------------
 
@@ -217,7 +233,7 @@ class MapWindow:
         v = np.asarray(values, dtype=np.float32)
         r0 = v[..., rows[0], :]
         r1 = v[..., rows[1], :]
-        by_row = r0 + (r1 - r0) * row_w[:, None].astype(np.float32)       # (..., res_d, res)
+        by_row = r0 + (r1 - r0) * row_w[:, None].astype(np.float32)  # (..., res_d, res)
         c0 = by_row[..., cols[0]]
         c1 = by_row[..., cols[1]]
         out = c0 + (c1 - c0) * col_w.astype(np.float32)
@@ -226,8 +242,9 @@ class MapWindow:
         return out, covered
 
 
-def _linear_taps(coord: npt.NDArray[np.float64], n: int
-                 ) -> tuple[tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+def _linear_taps(
+    coord: npt.NDArray[np.float64], n: int
+) -> tuple[tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """Indices (2, m), weights (m,) and validity (m,) for linear interpolation at float coords."""
     ok = (coord >= -0.5 - 1e-6) & (coord <= n - 0.5 + 1e-6)
     # Whole-texel shifts arrive as x.9999999 or x.0000001: snap them so they copy exactly.
@@ -240,6 +257,7 @@ def _linear_taps(coord: npt.NDArray[np.float64], n: int
 
 # -- the occluder scene ------------------------------------------------------------------------
 
+
 @dataclass
 class DynamicOccluder:
     """One moving rigid object: local mesh, current pose, and its velocity (world frame).
@@ -250,10 +268,10 @@ class DynamicOccluder:
 
     mesh_local: TriMesh
     transform: RigidTransform
-    linear_velocity_m_s: npt.NDArray[np.float64]          # (3,) world, m/s
-    angular_velocity_rad_s: npt.NDArray[np.float64]       # (3,) world, rad/s
-    bound_center_local: npt.NDArray[np.float64] = field(init=False, repr=False)   # (3,) centre of the local bounding sphere
-    bound_radius_local: float = field(init=False, repr=False)          # its radius, local units
+    linear_velocity_m_s: npt.NDArray[np.float64]  # (3,) world, m/s
+    angular_velocity_rad_s: npt.NDArray[np.float64]  # (3,) world, rad/s
+    bound_center_local: npt.NDArray[np.float64] = field(init=False, repr=False)  # (3,) centre of the local bounding sphere
+    bound_radius_local: float = field(init=False, repr=False)  # its radius, local units
 
     def __post_init__(self) -> None:
         lo, hi = self.mesh_local.vertices.min(axis=0), self.mesh_local.vertices.max(axis=0)
@@ -302,36 +320,56 @@ class OccluderScene:
 
     @property
     def triangle_count(self) -> int:
-        return sum(m.triangle_count for m in self._static) + sum(
-            o.mesh_local.triangle_count for o in self._dynamic.values())
+        return sum(m.triangle_count for m in self._static) + sum(o.mesh_local.triangle_count for o in self._dynamic.values())
 
     def add_static(self, mesh_world: TriMesh) -> None:
         self._static.append(mesh_world)
         self.geometry_version += 1
 
-    def add_dynamic(self, object_id: str, mesh_local: TriMesh, transform: RigidTransform,
-                    linear_velocity_m_s: npt.ArrayLike = (0.0, 0.0, 0.0),
-                    angular_velocity_rad_s: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
+    def add_dynamic(
+        self,
+        object_id: str,
+        mesh_local: TriMesh,
+        transform: RigidTransform,
+        linear_velocity_m_s: npt.ArrayLike = (0.0, 0.0, 0.0),
+        angular_velocity_rad_s: npt.ArrayLike = (0.0, 0.0, 0.0),
+    ) -> None:
         if object_id in self._dynamic:
             raise ValueError(f"dynamic object {object_id!r} already added")
         self._dynamic[object_id] = DynamicOccluder(
-            mesh_local, transform, _vector3(linear_velocity_m_s, "linear_velocity_m_s"),
-            _vector3(angular_velocity_rad_s, "angular_velocity_rad_s"))
+            mesh_local,
+            transform,
+            _vector3(linear_velocity_m_s, "linear_velocity_m_s"),
+            _vector3(angular_velocity_rad_s, "angular_velocity_rad_s"),
+        )
         self.geometry_version += 1
 
     def remove_dynamic(self, object_id: str) -> None:
         del self._dynamic[object_id]
         self.geometry_version += 1
 
-    def set_motion(self, object_id: str, transform: RigidTransform,
-                   linear_velocity_m_s: npt.ArrayLike = (0.0, 0.0, 0.0),
-                   angular_velocity_rad_s: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
+    def set_motion(
+        self,
+        object_id: str,
+        transform: RigidTransform,
+        linear_velocity_m_s: npt.ArrayLike = (0.0, 0.0, 0.0),
+        angular_velocity_rad_s: npt.ArrayLike = (0.0, 0.0, 0.0),
+    ) -> None:
         """New pose and velocity (world frame; the caller estimates it from successive poses)."""
-        self.set_motions([object_id], [transform], _vector3(linear_velocity_m_s, "linear_velocity_m_s")[None],
-                         _vector3(angular_velocity_rad_s, "angular_velocity_rad_s")[None])
+        self.set_motions(
+            [object_id],
+            [transform],
+            _vector3(linear_velocity_m_s, "linear_velocity_m_s")[None],
+            _vector3(angular_velocity_rad_s, "angular_velocity_rad_s")[None],
+        )
 
-    def set_motions(self, object_ids: Sequence[str], transforms: Sequence[RigidTransform],
-                    linear_velocities_m_s: npt.ArrayLike, angular_velocities_rad_s: npt.ArrayLike) -> None:
+    def set_motions(
+        self,
+        object_ids: Sequence[str],
+        transforms: Sequence[RigidTransform],
+        linear_velocities_m_s: npt.ArrayLike,
+        angular_velocities_rad_s: npt.ArrayLike,
+    ) -> None:
         """set_motion for m objects at once, velocities (m, 3) world, checked in one pass: a map
         build moves every object of a scene that has a hundred of them."""
         m = len(object_ids)
@@ -349,6 +387,7 @@ class OccluderScene:
 
 
 # -- results and the backend interface ---------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class ShadowVelocityMaps:
@@ -377,9 +416,16 @@ class MapBackend(Protocol):
 
     name: str
 
-    def compute(self, torus: Torus, window: MapWindow, sample_points_world: npt.ArrayLike, *,
-                exclude_ids: Sequence[str | None] | None = None, previous_torus: Torus | None = None,
-                dt_s: float = 0.0) -> ShadowVelocityMaps:
+    def compute(
+        self,
+        torus: Torus,
+        window: MapWindow,
+        sample_points_world: npt.ArrayLike,
+        *,
+        exclude_ids: Sequence[str | None] | None = None,
+        previous_torus: Torus | None = None,
+        dt_s: float = 0.0,
+    ) -> ShadowVelocityMaps:
         """Maps of k sample points (k, 3) world metres over ``window`` of ``torus``.
 
         exclude_ids: k entries, the id of the dynamic object each sample lies on (its own target,
@@ -394,16 +440,20 @@ class MapBackend(Protocol):
         ...
 
 
-def check_compute_args(window: MapWindow, sample_points_world: npt.ArrayLike, exclude_ids: Sequence[str | None] | None,
-                       previous_torus: Torus | None, dt_s: float,
-                       max_samples: int = 64) -> tuple[npt.NDArray[np.float64], list[str | None]]:
+def check_compute_args(
+    window: MapWindow,
+    sample_points_world: npt.ArrayLike,
+    exclude_ids: Sequence[str | None] | None,
+    previous_torus: Torus | None,
+    dt_s: float,
+    max_samples: int = 64,
+) -> tuple[npt.NDArray[np.float64], list[str | None]]:
     """Validated (k, 3) float64 sample points and a k-list of excluded ids; ValueError otherwise."""
     points = np.asarray(sample_points_world, dtype=np.float64)
     if points.ndim == 1 and points.shape == (3,):
         points = points[None, :]
     if points.ndim != 2 or points.shape[1] != 3 or not 1 <= len(points) <= max_samples:
-        raise ValueError(f"sample_points_world must be (k, 3) with 1 <= k <= {max_samples}, "
-                         f"got {np.shape(sample_points_world)}")
+        raise ValueError(f"sample_points_world must be (k, 3) with 1 <= k <= {max_samples}, got {np.shape(sample_points_world)}")
     if not np.all(np.isfinite(points)):
         raise ValueError("sample_points_world must be finite")
     excluded: list[str | None] = [None] * len(points) if exclude_ids is None else list(exclude_ids)
@@ -445,8 +495,9 @@ def torus_tangents(torus: Torus, window: MapWindow) -> tuple[npt.NDArray[np.floa
     return d_theta, d_phi
 
 
-def texture_velocity(velocity_world: npt.NDArray[np.float64], d_theta: npt.NDArray[np.float64],
-                     d_phi: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def texture_velocity(
+    velocity_world: npt.NDArray[np.float64], d_theta: npt.NDArray[np.float64], d_phi: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
     """World velocities (..., 3) m/s -> Toric angular rates (..., 2) rad/s.
 
     TBN^t v keeps the tangent-plane part (section 4.1.2); dividing each component by the length of

@@ -20,6 +20,7 @@ every frame, are handled in one of two ways (EmbreeMapSettings.rebuild_triangles
 A sample point ignores its own target (section 4.1, "without the object o"): an object that some
 sample ignores gets a world-space scene of its own, cast only with the other samples' rays.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -57,7 +58,7 @@ class EmbreeMapSettings:
     # 0.4 ms per 1,000 triangles per call here, the local casts about 1 ms per 2 samples at 64 x 64
     # whatever the triangle count (2-core CPU, 30 moving cylinders): rebuilding wins at 10 samples
     # with 2,000 moving triangles (6.6 vs 8.8 ms), loses at 2 samples (3.2 vs 2.6 ms).
-    rebuild_triangles_per_ray: float = 0.125   # [0, 1000]
+    rebuild_triangles_per_ray: float = 0.125  # [0, 1000]
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.rebuild_triangles_per_ray <= 1000.0:
@@ -102,25 +103,32 @@ class EmbreeMapBackend:
         self._local = {}  # per-object local scenes, built on demand
         self._version = self.scene.geometry_version
 
-    def compute(self, torus: Torus, window: MapWindow, sample_points_world: npt.ArrayLike, *,
-                exclude_ids: Sequence[str | None] | None = None, previous_torus: Torus | None = None,
-                dt_s: float = 0.0) -> ShadowVelocityMaps:
+    def compute(
+        self,
+        torus: Torus,
+        window: MapWindow,
+        sample_points_world: npt.ArrayLike,
+        *,
+        exclude_ids: Sequence[str | None] | None = None,
+        previous_torus: Torus | None = None,
+        dt_s: float = 0.0,
+    ) -> ShadowVelocityMaps:
         """See base.MapBackend.compute."""
         points, excluded = check_compute_args(window, sample_points_world, exclude_ids, previous_torus, dt_s)
         self._sync()
         k, n = len(points), window.resolution
-        torus_world = torus_points(torus, window).reshape(-1, 3)                     # (m, 3), m = res^2
+        torus_world = torus_points(torus, window).reshape(-1, 3)  # (m, 3), m = res^2
         m = len(torus_world)
-        rel = (torus_world[None, :, :] - points[:, None, :]).reshape(-1, 3)           # (k m, 3): P - s
-        length = np.sqrt(np.einsum("ij,ij->i", rel, rel))                            # (k m,)
+        rel = (torus_world[None, :, :] - points[:, None, :]).reshape(-1, 3)  # (k m, 3): P - s
+        length = np.sqrt(np.einsum("ij,ij->i", rel, rel))  # (k m,)
         # Rays start SAMPLE_CLEARANCE_M from s (embreex has no tnear) and end just short of P.
         t_start = np.minimum(SAMPLE_CLEARANCE_M / np.maximum(length, 1e-12), 0.5).astype(np.float32)
         dirs = rel.astype(np.float32)
         start = np.repeat(points.astype(np.float32), m, axis=0)
         start += dirs * t_start[:, None]
-        t_limit = np.float32(1.0 - SEGMENT_END_MARGIN) - t_start                      # ray parameter from `start`
+        t_limit = np.float32(1.0 - SEGMENT_END_MARGIN) - t_start  # ray parameter from `start`
         t_best = t_limit.copy()
-        hit_object = np.full(k * m, -1, dtype=np.int32)                              # -1: static or none
+        hit_object = np.full(k * m, -1, dtype=np.int32)  # -1: static or none
         if self._static is not None:
             hit = np.flatnonzero(self._static.run(start, dirs, dists=t_limit.copy(), query="OCCLUDED") != _NO_HIT)
             if len(hit):
@@ -133,8 +141,9 @@ class EmbreeMapBackend:
             if moving_triangles <= self.settings.rebuild_triangles_per_ray * k * m:
                 self._cast_world(objects, own, start, dirs, t_best, hit_object, m)
             else:
-                self._cast_local(objects, points, rel.reshape(k, m, 3), length.reshape(k, m), t_start, start, dirs,
-                                 own, t_best, hit_object)
+                self._cast_local(
+                    objects, points, rel.reshape(k, m, 3), length.reshape(k, m), t_start, start, dirs, own, t_best, hit_object
+                )
 
         # Velocities only where occluded: the first hit's rigid motion minus the torus point's.
         hits = np.flatnonzero(t_best < t_limit)
@@ -156,12 +165,23 @@ class EmbreeMapBackend:
         velocity[hits] = texture_velocity(velocity_world, d_theta.reshape(-1, 3)[texel], d_phi.reshape(-1, 3)[texel])
         depth = np.full(k * m, NOT_OCCLUDED_DEPTH, dtype=np.float32)
         depth[hits] = t_total * length[hits]
-        return ShadowVelocityMaps(window=window, shadow=shadow.reshape(k, n, n),
-                                  velocity_rad_s=velocity.reshape(k, n, n, 2), depth_m=depth.reshape(k, n, n))
+        return ShadowVelocityMaps(
+            window=window,
+            shadow=shadow.reshape(k, n, n),
+            velocity_rad_s=velocity.reshape(k, n, n, 2),
+            depth_m=depth.reshape(k, n, n),
+        )
 
-    def _cast_world(self, objects: list[DynamicOccluder], own: npt.NDArray[np.int32], start: npt.NDArray[np.float32],
-                    dirs: npt.NDArray[np.float32], t_best: npt.NDArray[np.float32], hit_object: npt.NDArray[np.int32],
-                    m: int) -> None:
+    def _cast_world(
+        self,
+        objects: list[DynamicOccluder],
+        own: npt.NDArray[np.int32],
+        start: npt.NDArray[np.float32],
+        dirs: npt.NDArray[np.float32],
+        t_best: npt.NDArray[np.float32],
+        hit_object: npt.NDArray[np.int32],
+        m: int,
+    ) -> None:
         """First hits on the moving objects, posed in world-space scenes built for this call.
 
         Objects no sample ignores share one scene; each object some sample ignores (its own target)
@@ -174,8 +194,9 @@ class EmbreeMapBackend:
         for members, samples in groups:
             if len(samples) == 0:
                 continue
-            scene = _embree_scene([(objects[i].transform.apply(objects[i].mesh_local.vertices),
-                                    objects[i].mesh_local.faces) for i in members])
+            scene = _embree_scene(
+                [(objects[i].transform.apply(objects[i].mesh_local.vertices), objects[i].mesh_local.faces) for i in members]
+            )
             rays = (samples[:, None] * m + np.arange(m)[None, :]).ravel() if len(samples) < len(own) else None
             s, d, t = (start, dirs, t_best) if rays is None else (start[rays], dirs[rays], t_best[rays])
             hit = np.flatnonzero(scene.run(s, d, dists=t.copy(), query="OCCLUDED") != _NO_HIT)
@@ -187,10 +208,19 @@ class EmbreeMapBackend:
             t_best[index] = found["tfar"][first]
             hit_object[index] = np.asarray(members, dtype=np.int32)[found["geomID"][first]]
 
-    def _cast_local(self, objects: list[DynamicOccluder], points: npt.NDArray[np.float64], rel: npt.NDArray[np.float64],
-                    length: npt.NDArray[np.float64], t_start: npt.NDArray[np.float32], start: npt.NDArray[np.float32],
-                    dirs: npt.NDArray[np.float32], own: npt.NDArray[np.int32], t_best: npt.NDArray[np.float32],
-                    hit_object: npt.NDArray[np.int32]) -> None:
+    def _cast_local(
+        self,
+        objects: list[DynamicOccluder],
+        points: npt.NDArray[np.float64],
+        rel: npt.NDArray[np.float64],
+        length: npt.NDArray[np.float64],
+        t_start: npt.NDArray[np.float32],
+        start: npt.NDArray[np.float32],
+        dirs: npt.NDArray[np.float32],
+        own: npt.NDArray[np.int32],
+        t_best: npt.NDArray[np.float32],
+        hit_object: npt.NDArray[np.int32],
+    ) -> None:
         """First hits on the moving objects, one local-frame scene each, for the rays that pass near.
 
         Culling, cheapest first, for all (object, sample) pairs at once: a pair is skipped when the
@@ -198,17 +228,17 @@ class EmbreeMapBackend:
         for the pairs left, only the rays whose line passes within the sphere are cast.
         """
         k, m = length.shape
-        unit = rel / np.maximum(length, 1e-12)[..., None]                          # (k, m, 3)
+        unit = rel / np.maximum(length, 1e-12)[..., None]  # (k, m, 3)
         axis = unit.sum(axis=1)
-        axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)      # (k, 3)
+        axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)  # (k, 3)
         half = np.arccos(np.clip(np.einsum("kmc,kc->km", unit, axis).min(axis=1), -1.0, 1.0))
-        reach = length.max(axis=1)                                                  # (k,) farthest torus point
-        rotation = quat_to_matrix(np.stack([o.transform.rotation_xyzw for o in objects]))    # (N, 3, 3)
-        scale = np.stack([o.transform.scale for o in objects])                               # (N, 3)
-        position = np.stack([o.transform.position_world for o in objects])                   # (N, 3)
+        reach = length.max(axis=1)  # (k,) farthest torus point
+        rotation = quat_to_matrix(np.stack([o.transform.rotation_xyzw for o in objects]))  # (N, 3, 3)
+        scale = np.stack([o.transform.scale for o in objects])  # (N, 3)
+        position = np.stack([o.transform.position_world for o in objects])  # (N, 3)
         centers = np.einsum("nij,nj->ni", rotation, np.stack([o.bound_center_local for o in objects]) * scale) + position
         radii = np.array([o.bound_radius_local for o in objects]) * np.abs(scale).max(axis=1)
-        to_center = centers[:, None, :] - points[None, :, :]                        # (N, k, 3)
+        to_center = centers[:, None, :] - points[None, :, :]  # (N, k, 3)
         dist = np.linalg.norm(to_center, axis=2)
         off_axis = np.arccos(np.clip(np.einsum("nkc,kc->nk", to_center, axis) / np.maximum(dist, 1e-12), -1.0, 1.0))
         spread = np.arcsin(np.clip(radii[:, None] / np.maximum(dist, 1e-12), 0.0, 1.0))
@@ -218,7 +248,7 @@ class EmbreeMapBackend:
         for index in np.flatnonzero(candidates.any(axis=1)):
             chosen = []
             for sample in np.flatnonzero(candidates[index]):
-                along = unit[sample] @ to_center[index, sample]                      # (m,)
+                along = unit[sample] @ to_center[index, sample]  # (m,)
                 miss2 = dist[index, sample] ** 2 - along * along
                 span = slice(sample * m, (sample + 1) * m)
                 limit = (t_start[span] + t_best[span]) * length[sample]

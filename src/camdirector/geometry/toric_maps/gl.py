@@ -25,6 +25,7 @@ Vertex data is uploaded when the scene's geometry changes, not per call. One EGL
 thread, shared by the thread's backends (`_thread_context`), made current around every call
 (another context may be current in the thread); `close()` releases a backend's own GL objects.
 """
+
 from __future__ import annotations
 
 import math
@@ -50,10 +51,10 @@ from camdirector.geometry.toric_maps.base import (
 )
 from camdirector.geometry.transforms import quat_to_matrix
 
-MAX_SAMPLES = 32                 # sample points per call: size of the shaders' uniform arrays
+MAX_SAMPLES = 32  # sample points per call: size of the shaders' uniform arrays
 _GL_CLIP_DISTANCE0 = 0x3000
-_NO_OCCLUDER_DISTANCE = 1e30     # clear value of the occluder atlas's distance channel
-_THREAD = threading.local()      # .ctx: the thread's EGL context (_thread_context)
+_NO_OCCLUDER_DISTANCE = 1e30  # clear value of the occluder atlas's distance channel
+_THREAD = threading.local()  # .ctx: the thread's EGL context (_thread_context)
 
 
 def _thread_context() -> moderngl.Context:
@@ -87,10 +88,10 @@ class GLMapSettingsArgs(TypedDict, total=False):
 
 @dataclass(frozen=True)
 class GLMapSettings:
-    shadow_map_scale: float = 2.0      # occluder-pass pixels per map texel, per side. [0.5, 8]
-    max_shadow_map_px: int = 2048      # cap on one occluder tile's side, px. [16, 8192]
-    frustum_margin: float = 0.02       # widening of each fitted frustum, fraction of its extent. [0, 0.5]
-    max_half_angle_deg: float = 80.0   # widest frustum half-angle; texels seen beyond it read "not occluded", deg. [10, 85]
+    shadow_map_scale: float = 2.0  # occluder-pass pixels per map texel, per side. [0.5, 8]
+    max_shadow_map_px: int = 2048  # cap on one occluder tile's side, px. [16, 8192]
+    frustum_margin: float = 0.02  # widening of each fitted frustum, fraction of its extent. [0, 0.5]
+    max_half_angle_deg: float = 80.0  # widest frustum half-angle; texels seen beyond it read "not occluded", deg. [10, 85]
 
     def __post_init__(self) -> None:
         checks = [
@@ -238,8 +239,9 @@ def _vec3_bytes(vectors: npt.NDArray[np.float64], length: int) -> bytes:
 
 # One atlas set (GLMapBackend._target_for): tile columns and rows, occluder tile side px, the
 # occluder texture and framebuffer, the output texture and framebuffer, and the readback array.
-_Atlases = tuple[int, int, int, moderngl.Texture, moderngl.Framebuffer, moderngl.Texture, moderngl.Framebuffer,
-                 npt.NDArray[np.float32]]
+_Atlases = tuple[
+    int, int, int, moderngl.Texture, moderngl.Framebuffer, moderngl.Texture, moderngl.Framebuffer, npt.NDArray[np.float32]
+]
 
 
 class GLMapBackend:
@@ -269,7 +271,7 @@ class GLMapBackend:
         self._scene_buffers: list[moderngl.Buffer] = []
         self._objects_tex: moderngl.Texture | None = None
         self._object_index: dict[str, int] = {}
-        self._targets: dict[tuple[int, int, int], _Atlases] = {}   # atlases by (samples, resolution, tile px)
+        self._targets: dict[tuple[int, int, int], _Atlases] = {}  # atlases by (samples, resolution, tile px)
 
     def __reduce__(self) -> tuple[type[GLMapBackend], tuple[OccluderScene, GLMapSettings]]:
         """Pickled as its scene and settings: unpickling makes its GL objects again, in the
@@ -302,8 +304,9 @@ class GLMapBackend:
         if parts:
             vbo = ctx.buffer(np.concatenate(parts).tobytes())
             ibo = ctx.buffer(np.concatenate(faces).tobytes())
-            self._scene_vao = ctx.vertex_array(self._occ_prog, [(vbo, "3f 1f", "in_position", "in_object")],
-                                               index_buffer=ibo, index_element_size=4)
+            self._scene_vao = ctx.vertex_array(
+                self._occ_prog, [(vbo, "3f 1f", "in_position", "in_object")], index_buffer=ibo, index_element_size=4
+            )
             self._scene_buffers = [vbo, ibo]
         if self._objects_tex is not None:
             self._objects_tex.release()
@@ -360,8 +363,9 @@ class GLMapBackend:
 
     # -- frusta --------------------------------------------------------------------------------
 
-    def _frusta(self, torus: Torus, window: MapWindow, points: npt.NDArray[np.float64],
-                shadow_px: int) -> tuple[npt.NDArray[np.float64], float]:
+    def _frusta(
+        self, torus: Torus, window: MapWindow, points: npt.NDArray[np.float64], shadow_px: int
+    ) -> tuple[npt.NDArray[np.float64], float]:
         """Per sample: clip-from-(world - eye) matrices (k, 4, 4) and the common far distance, m.
 
         Each frustum is the tightest off-axis one around the directions from s to the window's
@@ -374,7 +378,7 @@ class GLMapBackend:
         ii = np.concatenate([edge, edge, np.zeros(n, int), np.full(n, n - 1), np.repeat(inner, 9)])
         jj = np.concatenate([np.zeros(n, int), np.full(n, n - 1), edge, edge, np.tile(inner, 9)])
         patch = torus_position(torus, window.theta_centers_rad[ii], window.phi_centers_rad[jj])  # (q, 3)
-        rel = patch[None, :, :] - points[:, None, :]                                # (k, q, 3)
+        rel = patch[None, :, :] - points[:, None, :]  # (k, q, 3)
         dist = np.linalg.norm(rel, axis=2)
         unit = rel / np.maximum(dist, 1e-12)[..., None]
         axis = unit.sum(axis=1)
@@ -412,15 +416,23 @@ class GLMapBackend:
 
     # -- the maps ------------------------------------------------------------------------------
 
-    def compute(self, torus: Torus, window: MapWindow, sample_points_world: npt.ArrayLike, *,
-                exclude_ids: Sequence[str | None] | None = None, previous_torus: Torus | None = None,
-                dt_s: float = 0.0) -> ShadowVelocityMaps:
+    def compute(
+        self,
+        torus: Torus,
+        window: MapWindow,
+        sample_points_world: npt.ArrayLike,
+        *,
+        exclude_ids: Sequence[str | None] | None = None,
+        previous_torus: Torus | None = None,
+        dt_s: float = 0.0,
+    ) -> ShadowVelocityMaps:
         """See base.MapBackend.compute; at most MAX_SAMPLES sample points per call."""
         ctx = self._ctx
         if ctx is None:
             raise ValueError("GLMapBackend was closed")
-        points, excluded = check_compute_args(window, sample_points_world, exclude_ids, previous_torus, dt_s,
-                                              max_samples=MAX_SAMPLES)
+        points, excluded = check_compute_args(
+            window, sample_points_world, exclude_ids, previous_torus, dt_s, max_samples=MAX_SAMPLES
+        )
         k, n = len(points), window.resolution
         with ctx:
             self._sync_scene(ctx)
@@ -462,8 +474,12 @@ class GLMapBackend:
             uniform(prog, "u_shadow_px").value = shadow_px
             uniform(prog, "u_count").value = k
             uniform(prog, "u_tiles").value = (cols, rows)
-            uniform(prog, "u_window").value = (window.theta_min_rad, window.phi_min_rad, window.theta_step_rad,
-                                                window.phi_step_rad)
+            uniform(prog, "u_window").value = (
+                window.theta_min_rad,
+                window.phi_min_rad,
+                window.theta_step_rad,
+                window.phi_step_rad,
+            )
             uniform(prog, "u_torus").value = (torus.alpha, torus.arc_radius_m, torus.center_offset_m)
             uniform(prog, "u_basis").write(np.asarray(torus.basis, dtype="f4").tobytes())
             uniform(prog, "u_prev_torus").value = (prev.alpha, prev.arc_radius_m, prev.center_offset_m)
@@ -490,8 +506,15 @@ class GLMapBackend:
             return
         with self._ctx:
             self._release_targets()
-            for obj in [self._scene_vao, *self._scene_buffers, self._objects_tex, self._quad_vao, self._quad_vbo,
-                        self._occ_prog, self._toric_prog]:
+            for obj in [
+                self._scene_vao,
+                *self._scene_buffers,
+                self._objects_tex,
+                self._quad_vao,
+                self._quad_vbo,
+                self._occ_prog,
+                self._toric_prog,
+            ]:
                 if obj is not None:
                     obj.release()
         self._ctx = None

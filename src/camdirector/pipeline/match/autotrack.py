@@ -39,6 +39,7 @@ ranks by frags counted from kill events (+1 for killing another player, -1 for a
 0.5-s rank instead, switching to a player with strictly more, and flags every planning tick
 `autotrack_no_stats`.
 """
+
 from __future__ import annotations
 
 import math
@@ -68,13 +69,27 @@ IT_INVISIBILITY, IT_INVULNERABILITY, IT_QUAD = 524288, 1048576, 4194304
 DEFAULT_EXPRESSION = "%a * %A + 50 * %W + %p + %f"
 VALUE_NAMES = ("axe", "sg", "ssg", "ng", "sng", "gl", "rl", "lg", "ga", "ya", "ra", "ring", "quad", "pent")
 # tp_weapon_order's digits: the weapon's item bit and its index in a value list
-WEAPONS = {"1": (IT_AXE, 0), "2": (IT_SHOTGUN, 1), "3": (IT_SUPER_SHOTGUN, 2), "4": (IT_NAILGUN, 3),
-           "5": (IT_SUPER_NAILGUN, 4), "6": (IT_GRENADE_LAUNCHER, 5), "7": (IT_ROCKET_LAUNCHER, 6),
-           "8": (IT_LIGHTNING, 7)}
+WEAPONS = {
+    "1": (IT_AXE, 0),
+    "2": (IT_SHOTGUN, 1),
+    "3": (IT_SUPER_SHOTGUN, 2),
+    "4": (IT_NAILGUN, 3),
+    "5": (IT_SUPER_NAILGUN, 4),
+    "6": (IT_GRENADE_LAUNCHER, 5),
+    "7": (IT_ROCKET_LAUNCHER, 6),
+    "8": (IT_LIGHTNING, 7),
+}
 FALLBACK_WEAPON_ORDER = "78654321"  # MVD_AutoTrackBW tries it after tp_weapon_order
-VARIABLES = {"a": "armor points", "A": "armor type value", "W": "best weapon value", "p": "powerups value",
-             "f": "frags", "h": "health", "u": "player number"}  # of MVD_Var_Vals, those the wire carries
-VIEWHEIGHT_UNITS = 22.0         # DEFAULT_VIEWHEIGHT: the eye above a living player's origin
+VARIABLES = {
+    "a": "armor points",
+    "A": "armor type value",
+    "W": "best weapon value",
+    "p": "powerups value",
+    "f": "frags",
+    "h": "health",
+    "u": "player number",
+}  # of MVD_Var_Vals, those the wire carries
+VIEWHEIGHT_UNITS = 22.0  # DEFAULT_VIEWHEIGHT: the eye above a living player's origin
 CORPSE_VIEWHEIGHT_UNITS = -16.0  # cl_view.c: a corpse's eye below its origin
 EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + VIEWHEIGHT_UNITS) * M_PER_UNIT
 CORPSE_EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + CORPSE_VIEWHEIGHT_UNITS) * M_PER_UNIT
@@ -99,10 +114,13 @@ class RankExpression:
                 raise ValueError(f"{what}: unexpected {text[position:].lstrip()[:1]!r} in {self.text!r}")
             number, variable, operator = match.groups()
             if variable is not None and variable not in VARIABLES:
-                raise ValueError(f"{what}: %{variable} is not a variable the wire carries; use "
-                                 + ", ".join(f"%{v} ({meaning})" for v, meaning in VARIABLES.items()))
-            self._tokens.append(("n", number) if number is not None else
-                                ("v", variable) if variable is not None else ("o", operator))
+                raise ValueError(
+                    f"{what}: %{variable} is not a variable the wire carries; use "
+                    + ", ".join(f"%{v} ({meaning})" for v, meaning in VARIABLES.items())
+                )
+            self._tokens.append(
+                ("n", number) if number is not None else ("v", variable) if variable is not None else ("o", operator)
+            )
             position = match.end()
         self._next = 0
         self._evaluate = self._sum()
@@ -127,8 +145,9 @@ class RankExpression:
     def _product(self) -> Callable[[Mapping[str, float]], float]:
         return self._chain(self._unary, {"*": operator.mul, "/": operator.truediv})
 
-    def _chain(self, operand: Callable[[], Callable[[Mapping[str, float]], float]],
-               operators: dict[str, Callable[[float, float], float]]) -> Callable[[Mapping[str, float]], float]:
+    def _chain(
+        self, operand: Callable[[], Callable[[Mapping[str, float]], float]], operators: dict[str, Callable[[float, float], float]]
+    ) -> Callable[[Mapping[str, float]], float]:
         """operand (op operand)*, left to right, for one precedence level's operators."""
         left = operand()
         while (token := self._peek()) is not None and token[0] == "o" and token[1] in operators:
@@ -163,9 +182,9 @@ class RankExpression:
 class AutotrackSettings:
     """ezQuake's mvd_autotrack cvars (src/mvd_autotrack.c, src/teamplay.c), their defaults but the first."""
 
-    mvd_autotrack: int = 1                # the mode: 1 expression and values by player count, 2 the custom ones
-                                          # (ezQuake's default 0 is off; this director is on). {1, 2}
-    mvd_autotrack_instant: bool = False   # re-rank at every update, not only at a switch moment
+    mvd_autotrack: int = 1  # the mode: 1 expression and values by player count, 2 the custom ones
+    # (ezQuake's default 0 is off; this director is on). {1, 2}
+    mvd_autotrack_instant: bool = False  # re-rank at every update, not only at a switch moment
     mvd_autotrack_lockteam: bool = False  # teamplay: consider only the tracked player's team
     mvd_autotrack_1on1: str = DEFAULT_EXPRESSION  # the ranking expression of 2 players (RankExpression)
     mvd_autotrack_1on1_values: tuple[float, ...] = (1, 2, 3, 2, 3, 5, 8, 8, 1, 2, 3, 0, 0, 0)  # 14, VALUE_NAMES order
@@ -175,8 +194,8 @@ class AutotrackSettings:
     mvd_autotrack_4on4_values: tuple[float, ...] = (1, 2, 4, 2, 4, 6, 10, 10, 1, 2, 3, 500, 900, 1000)
     mvd_autotrack_custom: str = DEFAULT_EXPRESSION  # with mvd_autotrack 2
     mvd_autotrack_custom_values: tuple[float, ...] = (1, 2, 3, 2, 3, 4, 6, 6, 1, 2, 3, 500, 900, 1000)
-    tp_weapon_order: str = "78654321"     # %W: the best weapon is the first held in this order, digits 1-8
-    update_interval_s: float = 0.5        # MVD_AutoTrack's hard-coded 0.5 s between updates, s. (0, 10]
+    tp_weapon_order: str = "78654321"  # %W: the best weapon is the first held in this order, digits 1-8
+    update_interval_s: float = 0.5  # MVD_AutoTrack's hard-coded 0.5 s between updates, s. (0, 10]
 
     def __post_init__(self) -> None:
         if self.mvd_autotrack not in (1, 2):
@@ -185,8 +204,10 @@ class AutotrackSettings:
             RankExpression(getattr(self, f"mvd_autotrack_{mode}"), f"AutotrackSettings.mvd_autotrack_{mode}")
             values = getattr(self, f"mvd_autotrack_{mode}_values")
             if len(values) != len(VALUE_NAMES) or not all(math.isfinite(v) for v in values):
-                raise ValueError(f"AutotrackSettings: mvd_autotrack_{mode}_values must be {len(VALUE_NAMES)} finite "
-                                 f"numbers ({' '.join(VALUE_NAMES)}), got {values}")
+                raise ValueError(
+                    f"AutotrackSettings: mvd_autotrack_{mode}_values must be {len(VALUE_NAMES)} finite "
+                    f"numbers ({' '.join(VALUE_NAMES)}), got {values}"
+                )
         if not self.tp_weapon_order or set(self.tp_weapon_order) - set(WEAPONS):
             raise ValueError(f"AutotrackSettings: tp_weapon_order must be digits 1-8, got {self.tp_weapon_order!r}")
         if not (math.isfinite(self.update_interval_s) and 0.0 < self.update_interval_s <= 10.0):
@@ -211,12 +232,21 @@ def best_weapon_value(items: int, values: tuple[float, ...], weapon_order: str) 
 def stats_variables(stats: PlayerStats, number: int, values: tuple[float, ...], weapon_order: str) -> dict[str, float]:
     """One player's %-variables (MVD_Var_Vals) from its stats; `number` is %u."""
     items = stats.items
-    armor_type = (values[8] if items & IT_ARMOR1 else values[9] if items & IT_ARMOR2
-                  else values[10] if items & IT_ARMOR3 else 0.0)
-    powerups = ((values[12] if items & IT_QUAD else 0.0) + (values[13] if items & IT_INVULNERABILITY else 0.0)
-                + (values[11] if items & IT_INVISIBILITY else 0.0))
-    return {"a": stats.armor, "A": armor_type, "W": best_weapon_value(items, values, weapon_order), "p": powerups,
-            "f": stats.frags, "h": stats.health, "u": number}
+    armor_type = values[8] if items & IT_ARMOR1 else values[9] if items & IT_ARMOR2 else values[10] if items & IT_ARMOR3 else 0.0
+    powerups = (
+        (values[12] if items & IT_QUAD else 0.0)
+        + (values[13] if items & IT_INVULNERABILITY else 0.0)
+        + (values[11] if items & IT_INVISIBILITY else 0.0)
+    )
+    return {
+        "a": stats.armor,
+        "A": armor_type,
+        "W": best_weapon_value(items, values, weapon_order),
+        "p": powerups,
+        "f": stats.frags,
+        "h": stats.health,
+        "u": number,
+    }
 
 
 class FirstPersonCamera:
@@ -244,8 +274,14 @@ class AutotrackDirector(DirectorBase):
     """ezQuake's mvd_autotrack (module docstring) over the rig's players (target order), their
     teams (n,) and the read-only view of their latest stats by id."""
 
-    def __init__(self, players: list[str], teams: np.ndarray, lens: Lens, stats: Mapping[str, PlayerStats],
-                 settings: AutotrackSettings = AutotrackSettings()):
+    def __init__(
+        self,
+        players: list[str],
+        teams: np.ndarray,
+        lens: Lens,
+        stats: Mapping[str, PlayerStats],
+        settings: AutotrackSettings = AutotrackSettings(),
+    ):
         self.players, self.teams, self.lens, self.stats, self.settings = players, np.asarray(teams), lens, stats, settings
         self.mode_name, self.expression, self.values_list = settings.mode(len(players))
         self.teamplay = len(set(self.teams.tolist())) < len(players)
@@ -280,8 +316,7 @@ class AutotrackDirector(DirectorBase):
         """MVD_SwitchMoment: why to re-rank now, or None."""
         if self.settings.mvd_autotrack_instant:
             return "instant"
-        items = np.array([s.items if (s := self.stats.get(p)) is not None else 0 for p in self.players],
-                         dtype=np.int64)
+        items = np.array([s.items if (s := self.stats.get(p)) is not None else 0 for p in self.players], dtype=np.int64)
         weapon = (items & (IT_ROCKET_LAUNCHER | IT_LIGHTNING)) != 0
         powerup = (items & (IT_QUAD | IT_INVULNERABILITY)) != 0
         pent_rl = ((items & IT_ROCKET_LAUNCHER) != 0) & ((items & IT_INVULNERABILITY) != 0)
@@ -313,8 +348,9 @@ class AutotrackDirector(DirectorBase):
                 self.frags_from_kills[self._index[event.actor_id]] += 1
         self._counted_s = max(self._counted_s, now_s)
 
-    def decide(self, moment: Moment, buffer: MomentBuffer, current: Shot | None,
-               current_pose: CameraPose | None, flags: list[str]) -> Shot | None:
+    def decide(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
+    ) -> Shot | None:
         """The rig's plan tick: a new first-person shot when the tracked player changes (or there
         is no current shot of ours), else None."""
         now = moment.time_s

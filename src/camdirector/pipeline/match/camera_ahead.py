@@ -10,6 +10,7 @@ answers does not depend on whether they were worked out ahead
 (tests/pipeline/match/test_match_rig.py). A session with dynamic objects does not look ahead.
 What it saved the frames: docs/casting.md.
 """
+
 from __future__ import annotations
 
 import copy
@@ -31,25 +32,31 @@ class CameraStep:
 
     moment: Moment
     dt_s: float
-    shot: Shot                      # the shot, and its camera, it is a step of
+    shot: Shot  # the shot, and its camera, it is a step of
     camera: ShotCamera
-    camera_before: dict[str, Any]   # the camera's attributes it stepped from (compared by identity)
-    camera_after: dict[str, Any]    # and those it left
-    last_pose: CameraPose | None    # the pose shown before, held when the camera has none
+    camera_before: dict[str, Any]  # the camera's attributes it stepped from (compared by identity)
+    camera_after: dict[str, Any]  # and those it left
+    last_pose: CameraPose | None  # the pose shown before, held when the camera has none
     style: Style
     pose: CameraPose
     flags: list[str]
-    visibility: float               # mean share of the framed subjects seen
+    visibility: float  # mean share of the framed subjects seen
 
     def holds(self, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None) -> bool:
         """Whether it is this frame's step: the same moment, time step, style and pose before,
         from the shot's camera exactly as it is (every camera changes by assigning its
         attributes, so identity tells any change: a tick's new goal or pair window, a cut)."""
         camera = shot.camera
-        return (self.moment is moment and self.dt_s == dt_s and self.shot is shot and self.camera is camera
-                and self.style is style
-                and self.last_pose is last_pose and vars(camera).keys() == self.camera_before.keys()
-                and all(vars(camera)[k] is v for k, v in self.camera_before.items()))
+        return (
+            self.moment is moment
+            and self.dt_s == dt_s
+            and self.shot is shot
+            and self.camera is camera
+            and self.style is style
+            and self.last_pose is last_pose
+            and vars(camera).keys() == self.camera_before.keys()
+            and all(vars(camera)[k] is v for k, v in self.camera_before.items())
+        )
 
 
 @dataclass
@@ -57,12 +64,13 @@ class CandidatePoses:
     """The candidates' cameras' poses at a moment (None: an OVERVIEW candidate's, the program's)."""
 
     moment: Moment
-    candidates: list[CandidateShot]   # the list they are of (by identity)
+    candidates: list[CandidateShot]  # the list they are of (by identity)
     poses: list[CameraPose | None]
 
 
-def step_ahead(program_camera: ProgramCamera, moment: Moment, dt_s: float, shot: Shot, style: Style,
-               last_pose: CameraPose | None) -> CameraStep | None:
+def step_ahead(
+    program_camera: ProgramCamera, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None
+) -> CameraStep | None:
     """The shot's camera's step to the moment, from a copy of it; None when it has no pose and
     none was shown before."""
     camera = shot.camera
@@ -71,18 +79,29 @@ def step_ahead(program_camera: ProgramCamera, moment: Moment, dt_s: float, shot:
     if stepped is None:
         return None
     pose, flags = stepped
-    return CameraStep(moment, dt_s, shot, camera, dict(vars(camera)), dict(vars(ahead)), last_pose, style, pose,
-                      flags, program_camera.visibility(moment, pose, shot))
+    return CameraStep(
+        moment,
+        dt_s,
+        shot,
+        camera,
+        dict(vars(camera)),
+        dict(vars(ahead)),
+        last_pose,
+        style,
+        pose,
+        flags,
+        program_camera.visibility(moment, pose, shot),
+    )
 
 
 def candidate_poses(moment: Moment, lists: list[list[CandidateShot]]) -> list[CandidatePoses]:
     """Each list's candidates' poses at the moment."""
-    return [CandidatePoses(moment, c, [None if cam is None else cam.pose(moment) for _, cam, _ in c])
-            for c in lists]
+    return [CandidatePoses(moment, c, [None if cam is None else cam.pose(moment) for _, cam, _ in c]) for c in lists]
 
 
-def candidate_views(moment: Moment, pose: CameraPose, candidates: list[CandidateShot],
-                    ahead: list[CandidatePoses], program: ShotCamera) -> list[Candidate]:
+def candidate_views(
+    moment: Moment, pose: CameraPose, candidates: list[CandidateShot], ahead: list[CandidatePoses], program: ShotCamera
+) -> list[Candidate]:
     """The frame's candidates: each camera's pose at the moment (worked out ahead, or now; an
     OVERVIEW candidate's is the program's pose)."""
     known_poses = next((a for a in ahead if a.moment is moment and a.candidates is candidates), None)

@@ -24,6 +24,7 @@ director that subclasses `DirectorBase` has them all answered as "no":
 - `planned_cuts()`: the cuts its last decision planned (with a delay, for events it knows are
   coming), which the program shows as its next planned cut. Ours has them.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -47,24 +48,25 @@ from camdirector.pipeline.match.situations import Situations
 class DirectorContext:
     """What a director is made from: the session's players and what the rig shares with it."""
 
-    players: list[str]                       # the players' ids, the session's targets in target order
-    teams: np.ndarray                        # (n,) int their teams
+    players: list[str]  # the players' ids, the session's targets in target order
+    teams: np.ndarray  # (n,) int their teams
     lens: Lens
     settings: MatchSettings
-    delay_s: float                           # the broadcast delay, s: how far the buffer reaches ahead
-    ray_scene: RayScene                      # the session's level and static objects
-    rng: np.random.Generator                 # the session's, seeded
-    level_nodes_world: np.ndarray            # (m, 3) the level graph's nodes, m; (0, 3) without a level
+    delay_s: float  # the broadcast delay, s: how far the buffer reaches ahead
+    ray_scene: RayScene  # the session's level and static objects
+    rng: np.random.Generator  # the session's, seeded
+    level_nodes_world: np.ndarray  # (m, 3) the level graph's nodes, m; (0, 3) without a level
     player_stats: Mapping[str, PlayerStats]  # each player's latest scoreboard values up to the program moment
-    builder: ShotBuilder                     # Toric shots placed by ray casts and the grammar (shot_builder.py)
-    situations: Situations                   # the situations of a moment by interest (situations.py)
+    builder: ShotBuilder  # Toric shots placed by ray casts and the grammar (shot_builder.py)
+    situations: Situations  # the situations of a moment by interest (situations.py)
 
 
 class MatchDirector(Protocol):
     """What the rig asks of a match director (module docstring)."""
 
-    def decide(self, moment: Moment, buffer: MomentBuffer, current: Shot | None,
-               current_pose: CameraPose | None, flags: list[str]) -> Shot | None:
+    def decide(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
+    ) -> Shot | None:
         """At a planning tick: the shot to cut to at the moment, or None to keep `current` (None:
         no shot of this director's on air: the first, or after a take was released). `buffer`
         holds the moments up to the delay's horizon; `current_pose` is the pose on air; a

@@ -12,6 +12,7 @@ imported, named in the server's `plugins` (server_settings.py: every process tha
 session imports it at start, infra/plugins.py). A registered name is never taken over: a second
 registration of one name is refused.
 """
+
 from __future__ import annotations
 
 import re
@@ -28,10 +29,10 @@ from camdirector.pipeline.match.planned import PlannedDirector
 class DirectorEntry:
     """A registered director."""
 
-    name: str                                          # what a Style names it by: [a-z0-9_-]{1,64}
-    label: str                                         # one line for a person choosing it (the dashboard)
+    name: str  # what a Style names it by: [a-z0-9_-]{1,64}
+    label: str  # one line for a person choosing it (the dashboard)
     factory: Callable[[DirectorContext], MatchDirector]  # makes it for a session (director_contract.py)
-    wire: str | None = None                            # its camdirector.v1.MatchDirector value's name; None: by name only
+    wire: str | None = None  # its camdirector.v1.MatchDirector value's name; None: by name only
 
 
 _ENTRIES: dict[str, DirectorEntry] = {}
@@ -58,8 +59,7 @@ def director_entry(name: str) -> DirectorEntry:
     try:
         return _ENTRIES[name]
     except KeyError:
-        raise KeyError(f"{name!r} is not a registered match director; the registered ones are "
-                       f"{', '.join(_ENTRIES)}") from None
+        raise KeyError(f"{name!r} is not a registered match director; the registered ones are {', '.join(_ENTRIES)}") from None
 
 
 def director_by_wire(wire: str) -> DirectorEntry | None:
@@ -67,12 +67,22 @@ def director_by_wire(wire: str) -> DirectorEntry | None:
     return next((e for e in _ENTRIES.values() if e.wire == wire), None)
 
 
-register(DirectorEntry("planned", "ours: interest, the delay's look-ahead plan, film rules", PlannedDirector,
-                       "MATCH_DIRECTOR_PLANNED"))
-register(DirectorEntry(
-    "hltv", "the baseline: Valve's HLTV director's published rules",
-    lambda c: HltvDirector(c.players, c.settings, c.lens, c.ray_scene, c.rng, c.delay_s, c.level_nodes_world),
-    "MATCH_DIRECTOR_HLTV"))
-register(DirectorEntry(
-    "autotrack", "QuakeWorld casters' baseline: ezQuake's mvd_autotrack, the best player in first person",
-    lambda c: AutotrackDirector(c.players, c.teams, c.lens, c.player_stats), "MATCH_DIRECTOR_AUTOTRACK"))
+register(
+    DirectorEntry("planned", "ours: interest, the delay's look-ahead plan, film rules", PlannedDirector, "MATCH_DIRECTOR_PLANNED")
+)
+register(
+    DirectorEntry(
+        "hltv",
+        "the baseline: Valve's HLTV director's published rules",
+        lambda c: HltvDirector(c.players, c.settings, c.lens, c.ray_scene, c.rng, c.delay_s, c.level_nodes_world),
+        "MATCH_DIRECTOR_HLTV",
+    )
+)
+register(
+    DirectorEntry(
+        "autotrack",
+        "QuakeWorld casters' baseline: ezQuake's mvd_autotrack, the best player in first person",
+        lambda c: AutotrackDirector(c.players, c.teams, c.lens, c.player_stats),
+        "MATCH_DIRECTOR_AUTOTRACK",
+    )
+)

@@ -16,6 +16,7 @@ reads, finishes it first (rig.py). The first shot and a take's are planned at on
 baselines (cheap) and a session with dynamic objects (whose ray scene every frame moves) plan in
 the frame. What a plan costs, and what drawing it saved the frames: docs/casting.md.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,12 +33,12 @@ PLAN_SLICE_S = 0.002  # a drawn plan is computed this long per idle moment of th
 class PlanResult:
     """What one planning tick decided, applied to the program at once or at the next tick."""
 
-    shot: Shot | None                  # the cut, None: the current shot goes on
-    goal: Place | None                 # the current Toric camera's new goal (re-placed for visibility)
-    pair_place: Place | None           # its pair window's new place (re-placed for visibility)
-    held: ShotChoice | None            # the take held from now on (a fallback when its subject died)
+    shot: Shot | None  # the cut, None: the current shot goes on
+    goal: Place | None  # the current Toric camera's new goal (re-placed for visibility)
+    pair_place: Place | None  # its pair window's new place (re-placed for visibility)
+    held: ShotChoice | None  # the take held from now on (a fallback when its subject died)
     candidates: list[CandidateShot]
-    planned_cuts: list[PlannedCut]     # the director's planned cuts (MatchRig.planned_cut)
+    planned_cuts: list[PlannedCut]  # the director's planned cuts (MatchRig.planned_cut)
     flags: list[str]
 
 
@@ -49,8 +50,8 @@ class DrawnPlan:
     current: Shot | None
     run: SlicedRun[PlanResult] | None  # None once finished (a snapshot pickles the rig)
     result: PlanResult | None = None
-    work: float = 0.0                  # its whole work once finished, camera-point pairs (infra/slices.py)
-    ticks: int = 0                     # the ticks since it was drawn
+    work: float = 0.0  # its whole work once finished, camera-point pairs (infra/slices.py)
+    ticks: int = 0  # the ticks since it was drawn
 
     def finish(self) -> PlanResult:
         if self.run is not None:

@@ -5,6 +5,7 @@ director could cut to (`Candidate`), and its next planned cut (`PlannedCut`).
 rig.py makes a new part every frame and shares only constant values between frames (the roster),
 so a reader may keep a frame's part (the dashboard's timeline does) without copying it.
 """
+
 from __future__ import annotations
 
 import enum
@@ -17,9 +18,9 @@ from camdirector.pipeline.inputs import GameEvent
 class ShotKind(enum.IntEnum):
     """What a shot shows (same numbers as camdirector.v1.ShotKind)."""
 
-    DUEL = 1      # two opposing players, the Toric framing of both
-    FOLLOW = 2    # one player
-    GROUP = 3     # several players
+    DUEL = 1  # two opposing players, the Toric framing of both
+    FOLLOW = 2  # one player
+    GROUP = 3  # several players
     OVERVIEW = 4  # a high static view of the action
 
 
@@ -46,15 +47,15 @@ class Candidate:
 class PlannedCut:
     """The next cut the director has planned (with a delay, for an event it knows is coming)."""
 
-    time_s: float     # program time of the cut, s
+    time_s: float  # program time of the cut, s
     shot: ShotChoice  # the shot it will cut to, with the reason
 
 
 @dataclass
 class MatchFrame:
-    players: tuple[tuple[str, int], ...]          # (id, team) of each target in target order (the rig's roster)
-    buffering: bool = False                       # the broadcast delay is still filling: no pose, no shot
-    shot: ShotChoice | None = None                # the program's shot (None while buffering)
+    players: tuple[tuple[str, int], ...]  # (id, team) of each target in target order (the rig's roster)
+    buffering: bool = False  # the broadcast delay is still filling: no pose, no shot
+    shot: ShotChoice | None = None  # the program's shot (None while buffering)
     candidates: list[Candidate] = field(default_factory=list)  # the best other shots now
-    events: list[GameEvent] = field(default_factory=list)     # the game events at the program moment
-    planned_cut: PlannedCut | None = None         # the director's next planned cut, if it has one
+    events: list[GameEvent] = field(default_factory=list)  # the game events at the program moment
+    planned_cut: PlannedCut | None = None  # the director's next planned cut, if it has one

@@ -7,6 +7,7 @@
   left of the screen (the side of the line between them the camera is on); every later DUEL of
   that pair keeps it, so the duelists never swap sides across cuts.
 """
+
 from __future__ import annotations
 
 import math
@@ -35,8 +36,9 @@ class Grammar:
     def remember_duel(self, left: str, right: str) -> None:
         self._left_of.setdefault(frozenset((left, right)), left)
 
-    def allows_cut(self, previous_camera_world: np.ndarray | None, shared_points_world: np.ndarray,
-                   new_cameras_world: np.ndarray) -> np.ndarray:
+    def allows_cut(
+        self, previous_camera_world: np.ndarray | None, shared_points_world: np.ndarray, new_cameras_world: np.ndarray
+    ) -> np.ndarray:
         """(m,) bool: which of (m, 3) new camera centres respect the 30-degree rule against the
         previous centre (3,) for shared subjects at (s, 3) points (no shared subject: all allowed)."""
         new = np.atleast_2d(new_cameras_world)
@@ -46,8 +48,14 @@ class Grammar:
         return view_turn_deg(previous_camera_world, new, centroid) >= self.jump_cut_deg
 
 
-def is_jump_cut(subjects_a: tuple[str, ...], camera_a_world: np.ndarray, subjects_b: tuple[str, ...],
-                camera_b_world: np.ndarray, subject_points_world: np.ndarray, jump_cut_deg: float) -> bool:
+def is_jump_cut(
+    subjects_a: tuple[str, ...],
+    camera_a_world: np.ndarray,
+    subjects_b: tuple[str, ...],
+    camera_b_world: np.ndarray,
+    subject_points_world: np.ndarray,
+    jump_cut_deg: float,
+) -> bool:
     """Whether a cut from view A to view B of the same subjects, at (s, 3) points, turns less than
     jump_cut_deg (what evaluation counts as a jump cut)."""
     if set(subjects_a) != set(subjects_b) or not subjects_a:

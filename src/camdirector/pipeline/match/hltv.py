@@ -49,6 +49,7 @@ Fixed cameras stand for the level designer's point_viewcontrol entities: the lev
 graph nodes (at most 64, MAX_NUM_CAMERAS) when there is a level, else a ring around the players'
 first bounding box at 4 m and 8 m, placed once per session.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -68,16 +69,16 @@ from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import INCH_M, HltvSettings, MatchSettings
 
-MAX_FIXED_CAMERAS = 64           # MAX_NUM_CAMERAS
+MAX_FIXED_CAMERAS = 64  # MAX_NUM_CAMERAS
 MIN_RANK_DISTANCE_M = 4 * INCH_M  # closer players do not rank each other
 DEAD_VIEW_HEIGHT_M = 14 * INCH_M  # VEC_DEAD_VIEWHEIGHT
-REGROW_M_S = 32 * INCH_M          # the pulled-in chase camera moves back out this fast
-HULL_HALF_WIDTH_M = 16 * INCH_M   # VEC_HULL_MIN/MAX: a player blocks traces as a 32 x 32 x 72-unit box
+REGROW_M_S = 32 * INCH_M  # the pulled-in chase camera moves back out this fast
+HULL_HALF_WIDTH_M = 16 * INCH_M  # VEC_HULL_MIN/MAX: a player blocks traces as a 32 x 32 x 72-unit box
 HULL_HEIGHT_M = 72 * INCH_M
 # Source's origins rest on the floor and its traces count a point on a plane as outside; a ray
 # lying in a floor's plane is a coin toss for Embree, so rank traces run one unit above the feet.
 TRACE_LIFT_M = INCH_M
-MIN_SMOOTHING = 0.01              # SmoothCameraAngle's least step, of the gap
+MIN_SMOOTHING = 0.01  # SmoothCameraAngle's least step, of the gap
 RING_HEIGHTS_M = (4.0, 8.0)
 RING_CAMERAS = 8
 BOX_CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))  # (8, 3) of a unit half-width box
@@ -97,12 +98,15 @@ def _direction(yaw_deg: float, pitch_deg: float) -> np.ndarray:
 
 def _angles(direction: np.ndarray) -> tuple[float, float]:
     """(yaw, pitch) deg of a direction (3,), Source convention as _direction."""
-    return (math.degrees(math.atan2(direction[0], direction[2])),
-            -math.degrees(math.atan2(direction[1], math.hypot(direction[0], direction[2]))))
+    return (
+        math.degrees(math.atan2(direction[0], direction[2])),
+        -math.degrees(math.atan2(direction[1], math.hypot(direction[0], direction[2]))),
+    )
 
 
-def smooth_angles(angles: tuple[float, float], goal: tuple[float, float], dt_s: float,
-                  inertia_per_s: float) -> tuple[float, float]:
+def smooth_angles(
+    angles: tuple[float, float], goal: tuple[float, float], dt_s: float, inertia_per_s: float
+) -> tuple[float, float]:
     """(yaw, pitch) deg moved toward goal by clamp(dt * inertia, 0.01, 1) of the gap, yaw the short
     way round (C_HLTVCamera::SmoothCameraAngle). Source slerps the two rotations
     (InterpolateAngles, cdll_util.cpp); interpolating yaw and pitch instead keeps the view free of roll."""
@@ -141,8 +145,7 @@ def box_entry(origins: np.ndarray, deltas: np.ndarray, low: np.ndarray, high: np
 
 def _eye(moment: Moment, i: int) -> np.ndarray:
     """A player's eye point (3,) m: its aim point, or its feet plus VEC_DEAD_VIEWHEIGHT when dead."""
-    eye: np.ndarray = moment.aims_world[i] if moment.alive[i] else \
-        moment.feet_world[i] + np.array([0.0, DEAD_VIEW_HEIGHT_M, 0.0])
+    eye: np.ndarray = moment.aims_world[i] if moment.alive[i] else moment.feet_world[i] + np.array([0.0, DEAD_VIEW_HEIGHT_M, 0.0])
     return eye
 
 
@@ -159,8 +162,16 @@ class ChaseCamera:
     target1's facing); in_eye puts the camera in target1's eyes while it lives. `advance` runs
     one frame of C_HLTVCamera::CalcChaseCamView (or CalcInEyeCamView); `pose` reads it."""
 
-    def __init__(self, kind: ShotKind, target1: int, target2: int | None, params: ChaseParams, lens: Lens,
-                 ray_scene: RayScene, settings: MatchSettings):
+    def __init__(
+        self,
+        kind: ShotKind,
+        target1: int,
+        target2: int | None,
+        params: ChaseParams,
+        lens: Lens,
+        ray_scene: RayScene,
+        settings: MatchSettings,
+    ):
         self.kind, self.target1, self.target2, self.params = kind, target1, target2, params
         self.lens, self.ray_scene, self.hltv = lens, ray_scene, settings.hltv
         self.last_distance_m = params.distance_m
@@ -201,10 +212,8 @@ class ChaseCamera:
         if eye2 is None:
             self.angles = (yaw, pitch)  # SetCameraAngle: no smoothing with one target
         else:
-            goal = (_angles((eye1 + eye2) / 2.0 - camera)[0],
-                    max(-self.hltv.max_pitch_deg, min(self.hltv.max_pitch_deg, pitch)))
-            self.angles = goal if self.angles is None else smooth_angles(self.angles, goal, dt_s,
-                                                                          self.hltv.angle_inertia_per_s)
+            goal = (_angles((eye1 + eye2) / 2.0 - camera)[0], max(-self.hltv.max_pitch_deg, min(self.hltv.max_pitch_deg, pitch)))
+            self.angles = goal if self.angles is None else smooth_angles(self.angles, goal, dt_s, self.hltv.angle_inertia_per_s)
         return look_along(camera, _direction(*self.angles), fov)
 
     def _clear_distance(self, moment: Moment, eye: np.ndarray, back: np.ndarray) -> float:
@@ -234,8 +243,7 @@ class FixedCamera:
 
     kind = ShotKind.OVERVIEW
 
-    def __init__(self, position: np.ndarray, target: int | None, look_at: np.ndarray, lens: Lens,
-                 hltv: HltvSettings):
+    def __init__(self, position: np.ndarray, target: int | None, look_at: np.ndarray, lens: Lens, hltv: HltvSettings):
         self.position, self.target, self.lens, self.hltv = position, target, lens, hltv
         toward = look_at - position
         self.angles = _angles(toward) if np.linalg.norm(toward) > 1e-6 else (0.0, 0.0)
@@ -260,8 +268,16 @@ class FixedCamera:
 class HltvDirector(DirectorBase):
     """The HLTV baseline (module docstring)."""
 
-    def __init__(self, players: list[str], settings: MatchSettings, lens: Lens, ray_scene: RayScene,
-                 rng: np.random.Generator, delay_s: float, level_nodes_world: np.ndarray):
+    def __init__(
+        self,
+        players: list[str],
+        settings: MatchSettings,
+        lens: Lens,
+        ray_scene: RayScene,
+        rng: np.random.Generator,
+        delay_s: float,
+        level_nodes_world: np.ndarray,
+    ):
         self.players, self.settings, self.hltv = players, settings, settings.hltv
         self.index = {p: i for i, p in enumerate(players)}
         self.lens, self.ray_scene, self.rng = lens, ray_scene, rng
@@ -274,8 +290,13 @@ class HltvDirector(DirectorBase):
     def _ring(self, moment: Moment) -> np.ndarray:
         centre = moment.feet_world.mean(axis=0)
         radius = float(np.max(np.linalg.norm((moment.feet_world - centre)[:, [0, 2]], axis=1))) + 2.0
-        return np.array([centre + np.array([radius * math.sin(a), h, radius * math.cos(a)])
-                         for h in RING_HEIGHTS_M for a in np.linspace(0.0, math.tau, RING_CAMERAS, endpoint=False)])
+        return np.array(
+            [
+                centre + np.array([radius * math.sin(a), h, radius * math.cos(a)])
+                for h in RING_HEIGHTS_M
+                for a in np.linspace(0.0, math.tau, RING_CAMERAS, endpoint=False)
+            ]
+        )
 
     # -- ranking ----------------------------------------------------------------------------
     def _rank_times(self, now_s: float, buffer: MomentBuffer) -> list[float]:
@@ -289,7 +310,7 @@ class HltvDirector(DirectorBase):
         nor the hull of a living player other than those marked in passable (m, n) bool."""
         clear = ~self.ray_scene.occluded(starts, ends)
         low, high = player_hulls(moment.feet_world)
-        entry = box_entry(starts[:, None], (ends - starts)[:, None], low[None], high[None])   # (m, n)
+        entry = box_entry(starts[:, None], (ends - starts)[:, None], low[None], high[None])  # (m, n)
         seen: np.ndarray = clear & ~((entry < 1.0) & moment.alive[None, :] & ~passable).any(axis=1)
         return seen
 
@@ -310,7 +331,7 @@ class HltvDirector(DirectorBase):
             passable = np.zeros((len(ii), n), dtype=bool)
             passable[np.arange(len(ii)), ii] = passable[np.arange(len(ii)), jj] = True
             pair[ii, jj] = self._in_sight(moment, feet[ii], feet[jj], passable)
-        facing = weighted_angle(-forward[:, None, :], forward[None, :, :])          # (n, n)
+        facing = weighted_angle(-forward[:, None, :], forward[None, :, :])  # (n, n)
         with np.errstate(divide="ignore", invalid="ignore"):
             contribution = np.where(pair, facing / np.sqrt(distance / INCH_M), 0.0)
         count = pair.sum(axis=1)
@@ -325,7 +346,7 @@ class HltvDirector(DirectorBase):
         (CHLTVDirector::AnalyzeCameras)."""
         n = len(self.players)
         feet, alive = moment.feet_world + np.array([0.0, TRACE_LIFT_M, 0.0]), moment.alive
-        to_camera = cameras[:, None, :] - feet[None]                                   # (c, n, 3)
+        to_camera = cameras[:, None, :] - feet[None]  # (c, n, 3)
         distance = np.linalg.norm(to_camera, axis=2)
         seen = alive[None, :] & (distance >= MIN_RANK_DISTANCE_M) & (distance <= self.hltv.rank_range_m)
         cc, pp = np.nonzero(seen)
@@ -335,8 +356,7 @@ class HltvDirector(DirectorBase):
             seen[cc, pp] = self._in_sight(moment, cameras[cc], feet[pp], passable)
         unit = to_camera / np.maximum(distance, 1e-9)[..., None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            contribution = np.where(seen, weighted_angle(eye_forward(moment)[None], unit) / np.sqrt(distance / INCH_M),
-                                    0.0)
+            contribution = np.where(seen, weighted_angle(eye_forward(moment)[None], unit) / np.sqrt(distance / INCH_M), 0.0)
         count = seen.sum(axis=1)
         spread = np.linalg.norm(np.einsum("cn,cnk->ck", seen.astype(float), unit), axis=1) / np.maximum(count, 1)
         closest = np.where(count > 0, np.argmin(np.where(seen, distance, np.inf), axis=1), -1)
@@ -358,8 +378,9 @@ class HltvDirector(DirectorBase):
         return best, best_rank, best_target
 
     # -- shots ------------------------------------------------------------------------------
-    def decide(self, moment: Moment, buffer: MomentBuffer, current: Shot | None,
-               current_pose: CameraPose | None, flags: list[str]) -> Shot | None:
+    def decide(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
+    ) -> Shot | None:
         now = moment.time_s
         if self.fixed_cameras is None:
             self.fixed_cameras = self._ring(moment)
@@ -422,17 +443,21 @@ class HltvDirector(DirectorBase):
             params = ChaseParams(h.kill_chase_distance_m, -h.kill_chase_pitch_deg, 0.0, False)
             camera = ChaseCamera(ShotKind.FOLLOW, victim, None, params, self.lens, self.ray_scene, self.settings)
             return self._shot(camera, (victim,), ShotKind.FOLLOW, "hltv: death, chase on the victim", now_s)
-        in_eye = bool(self.rng.random() < (h.in_eye_kill_chance if event.kind == EventKind.KILL
-                                           else 1.0 - h.in_eye_kill_chance))
+        in_eye = bool(self.rng.random() < (h.in_eye_kill_chance if event.kind == EventKind.KILL else 1.0 - h.in_eye_kill_chance))
         if self.rng.random() < (h.swap_chance_in_eye if in_eye else h.swap_chance_chase):
             victim, attacker = attacker, victim
         yaw = h.kill_chase_yaw_deg if self.rng.random() > 0.5 else -h.kill_chase_yaw_deg
         params = ChaseParams(h.kill_chase_distance_m, h.kill_chase_pitch_deg, yaw, in_eye)
         camera = ChaseCamera(ShotKind.DUEL, victim, attacker, params, self.lens, self.ray_scene, self.settings)
         how = "first person of" if in_eye else "chase behind"
-        return self._shot(camera, (victim, attacker), ShotKind.DUEL,
-                          f"hltv: {event.kind.name.lower()} in {event.time_s - now_s:.1f} s, {how} "
-                          f"{self.players[victim]} toward {self.players[attacker]}", now_s)
+        return self._shot(
+            camera,
+            (victim, attacker),
+            ShotKind.DUEL,
+            f"hltv: {event.kind.name.lower()} in {event.time_s - now_s:.1f} s, {how} "
+            f"{self.players[victim]} toward {self.players[attacker]}",
+            now_s,
+        )
 
     def _random_shot(self, moment: Moment, buffer: MomentBuffer) -> Shot | None:
         """StartRandomShot: the best fixed camera (unforced) 25% of the time, else the best player."""
@@ -456,8 +481,9 @@ class HltvDirector(DirectorBase):
         params = ChaseParams(h.player_chase_distance_m, h.player_chase_pitch_deg, yaw, False)
         target2 = best_target if best_target >= 0 else None
         camera = ChaseCamera(ShotKind.FOLLOW, best_player, target2, params, self.lens, self.ray_scene, self.settings)
-        shot = self._shot(camera, (best_player,), ShotKind.FOLLOW,
-                          f"hltv: best-ranked player {self.players[best_player]}", moment.time_s)
+        shot = self._shot(
+            camera, (best_player,), ShotKind.FOLLOW, f"hltv: best-ranked player {self.players[best_player]}", moment.time_s
+        )
         shot.scores = {"rank": best_rank}
         return shot
 

@@ -10,6 +10,7 @@ idea (opponents near and facing, hltvdirector.cpp AnalyzePlayers) restricted to 
 made symmetric so a pair, not only a player, has a value. Recent DAMAGE and KILL events add their
 priority (of 15) to their pair, fading over `recent_event_s`: a fight that draws blood is a fight.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,16 +28,15 @@ def event_priority(event: GameEvent, settings: MatchSettings) -> int:
     return event.priority if event.priority > 0 else settings.priorities[event.kind]
 
 
-def fight_matrix(moment: Moment, teams: np.ndarray, settings: MatchSettings,
-                 ray_scene: RayScene | None = None) -> np.ndarray:
+def fight_matrix(moment: Moment, teams: np.ndarray, settings: MatchSettings, ray_scene: RayScene | None = None) -> np.ndarray:
     """(n, n) symmetric fight scores in [0, 1] of a moment (module docstring); teams (n,) int.
     Without a ray scene every pair is in sight (a session without a level)."""
-    delta = moment.feet_world[None, :, :] - moment.feet_world[:, None, :]   # (n, n, 3): i -> j
+    delta = moment.feet_world[None, :, :] - moment.feet_world[:, None, :]  # (n, n, 3): i -> j
     delta[..., 1] = 0.0
     distance = np.linalg.norm(delta, axis=2)
     np.fill_diagonal(distance, np.inf)
     toward = delta / np.maximum(distance, 1e-6)[..., None]
-    cos_facing = np.einsum("ik,ijk->ij", moment.forward_world, toward)       # (n, n): i's forward . unit(i -> j)
+    cos_facing = np.einsum("ik,ijk->ij", moment.forward_world, toward)  # (n, n): i's forward . unit(i -> j)
     facing = np.clip((cos_facing - settings.facing_cos) / max(1.0 - settings.facing_cos, 1e-6), 0.0, 1.0)
     proximity = np.clip(1.0 - distance / settings.engage_range_m, 0.0, 1.0)
     opponents = (teams[:, None] != teams[None, :]) & moment.alive[:, None] & moment.alive[None, :] & (proximity > 0.0)
@@ -56,8 +56,9 @@ def in_sight(moment: Moment, pairs: np.ndarray, ray_scene: RayScene) -> np.ndarr
     return seen | seen.T
 
 
-def recent_event_boost(events: list[GameEvent], index: dict[str, int], now_s: float, n: int,
-                       settings: MatchSettings) -> np.ndarray:
+def recent_event_boost(
+    events: list[GameEvent], index: dict[str, int], now_s: float, n: int, settings: MatchSettings
+) -> np.ndarray:
     """(n, n) symmetric boost of the pairs named by events in (now - recent_event_s, now]: each adds
     priority / 15, fading linearly to 0 over recent_event_s."""
     boost = np.zeros((n, n))

@@ -1,6 +1,7 @@
 """The level camera looking along a direction: the view of the baselines' cameras, HLTV's chase,
 fixed and in-eye views (hltv.py) and the autotrack's first-person view (autotrack.py).
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -15,6 +15,7 @@ that lies still, falls or is dragged a little stays dead. Events are applied to 
 whose time reaches theirs; an event announced late (its time before the newest moment) is applied
 to the newest moment, the earliest the director can know it.
 """
+
 from __future__ import annotations
 
 import bisect
@@ -36,27 +37,42 @@ class Moment:
     frame: int
     time_s: float
     transforms: list[RigidTransform]
-    aims_world: np.ndarray      # (n, 3) framed points (the target's aim offset), metres
-    feet_world: np.ndarray      # (n, 3) transform positions, metres
-    forward_world: np.ndarray   # (n, 3) horizontal unit facing (local +Z), metres/metre
-    alive: np.ndarray           # (n,) bool
+    aims_world: np.ndarray  # (n, 3) framed points (the target's aim offset), metres
+    feet_world: np.ndarray  # (n, 3) transform positions, metres
+    forward_world: np.ndarray  # (n, 3) horizontal unit facing (local +Z), metres/metre
+    alive: np.ndarray  # (n,) bool
     events: list[GameEvent] = field(default_factory=list)  # applied at this moment
 
     def __reduce__(self) -> tuple[Callable[..., Moment], tuple[object, ...]]:
         """Pickled as three arrays: a session's snapshot holds every buffered moment (hundreds),
         and as 29 numpy arrays each (8 players) 700 KB took 60-190 ms to pickle."""
-        transforms = np.array([np.concatenate([t.position_world, t.rotation_xyzw, t.scale]) for t in self.transforms],
-                              dtype=np.float64).reshape(len(self.transforms), 10)
-        return _unpacked_moment, (self.frame, self.time_s, transforms,
-                                  np.stack([self.aims_world, self.feet_world, self.forward_world]), self.alive,
-                                  self.events)
+        transforms = np.array(
+            [np.concatenate([t.position_world, t.rotation_xyzw, t.scale]) for t in self.transforms], dtype=np.float64
+        ).reshape(len(self.transforms), 10)
+        return _unpacked_moment, (
+            self.frame,
+            self.time_s,
+            transforms,
+            np.stack([self.aims_world, self.feet_world, self.forward_world]),
+            self.alive,
+            self.events,
+        )
 
 
-def _unpacked_moment(frame: int, time_s: float, transforms: np.ndarray, points: np.ndarray, alive: np.ndarray,
-                     events: list[GameEvent]) -> Moment:
+def _unpacked_moment(
+    frame: int, time_s: float, transforms: np.ndarray, points: np.ndarray, alive: np.ndarray, events: list[GameEvent]
+) -> Moment:
     """Moment.__reduce__'s moment again: transforms (n, 10) position, rotation, scale; points (3, n, 3)."""
-    return Moment(frame, time_s, [RigidTransform(row[0:3].copy(), row[3:7].copy(), row[7:10].copy()) for row in transforms],
-                  points[0].copy(), points[1].copy(), points[2].copy(), alive, events)
+    return Moment(
+        frame,
+        time_s,
+        [RigidTransform(row[0:3].copy(), row[3:7].copy(), row[7:10].copy()) for row in transforms],
+        points[0].copy(),
+        points[1].copy(),
+        points[2].copy(),
+        alive,
+        events,
+    )
 
 
 def horizontal_forward(rotations_xyzw: np.ndarray) -> np.ndarray:
@@ -71,7 +87,7 @@ def horizontal_forward(rotations_xyzw: np.ndarray) -> np.ndarray:
     return unit
 
 
-COMPACT_AFTER = 32      # moments gone (before the program's) that the buffer drops at once
+COMPACT_AFTER = 32  # moments gone (before the program's) that the buffer drops at once
 TIME_EPSILON_S = 1e-6  # frame times this close are the same instant (floating-point rounding of t - D), s
 
 
@@ -85,18 +101,19 @@ class MomentBuffer:
         self._fell_world = np.full((len(player_ids), 3), np.nan)  # (n, 3) feet at each dead player's death
         self.moments: list[Moment] = []
         self.times: list[float] = []
-        self.events: list[GameEvent] = []       # every event, in time order (the planner reads ahead)
+        self.events: list[GameEvent] = []  # every event, in time order (the planner reads ahead)
         self._event_times: list[float] = []
-        self._pending: list[GameEvent] = []     # announced before their time, not yet applied
-        self.killed_by: dict[str, str] = {}     # victim -> attacker of its last death
-        self._start = 0                         # moments before this index are gone
+        self._pending: list[GameEvent] = []  # announced before their time, not yet applied
+        self.killed_by: dict[str, str] = {}  # victim -> attacker of its last death
+        self._start = 0  # moments before this index are gone
 
     @property
     def newest(self) -> Moment | None:
         return self.moments[-1] if len(self.moments) > self._start else None
 
-    def push(self, frame: int, time_s: float, transforms: list[RigidTransform], aims_world: list[np.ndarray],
-             events: list[GameEvent]) -> bool:
+    def push(
+        self, frame: int, time_s: float, transforms: list[RigidTransform], aims_world: list[np.ndarray], events: list[GameEvent]
+    ) -> bool:
         """Adds the newest frame; False (nothing added) when it is not newer than the last one."""
         last = self.newest
         if last is not None and (frame <= last.frame or time_s < last.time_s):
@@ -125,8 +142,18 @@ class MomentBuffer:
                 if event.actor_id in self.index and event.actor_id != event.other_actor_id:
                     self.killed_by[event.other_actor_id] = event.actor_id
         rotations = np.array([t.rotation_xyzw for t in transforms], dtype=np.float64)
-        self.moments.append(Moment(frame, time_s, list(transforms), np.array(aims_world, dtype=np.float64),
-                                   feet, horizontal_forward(rotations), alive, due))
+        self.moments.append(
+            Moment(
+                frame,
+                time_s,
+                list(transforms),
+                np.array(aims_world, dtype=np.float64),
+                feet,
+                horizontal_forward(rotations),
+                alive,
+                due,
+            )
+        )
         self.times.append(time_s)
         return True
 
@@ -136,7 +163,7 @@ class MomentBuffer:
         the program's moment on, the moments themselves shared (a moment never changes once
         pushed). Read it only (at, horizon_s, events_between, killed_by)."""
         view = copy.copy(self)
-        view.moments, view.times, view._start = self.moments[self._start:], self.times[self._start:], 0
+        view.moments, view.times, view._start = self.moments[self._start :], self.times[self._start :], 0
         view.events, view._event_times = list(self.events), list(self._event_times)
         view.killed_by, view._pending = dict(self.killed_by), []
         return view
@@ -160,7 +187,7 @@ class MomentBuffer:
         # again, but a session's snapshot pickles what the buffer holds (at 4096, up to 9 MB
         # that took 1.5 s every 60 frames) and the garbage collector walks it
         if self._start > COMPACT_AFTER:
-            del self.moments[:self._start], self.times[:self._start]
+            del self.moments[: self._start], self.times[: self._start]
             self._start = 0
         return self.moments[self._start]
 

@@ -39,6 +39,7 @@ at one tick and applied at the next, computed off the frame path (drawn_plan.py,
 `PlannedDirector` implements `MatchDirector` (director_contract.py) with every capability; it is
 registered as "planned" (director_registry.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -55,13 +56,13 @@ from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.style import Style
 
-OPTION_COVER_S = (1.0, 2.0, 3.0)             # a discretionary shot is placed for now and these times ahead (as far
-                                             # as the buffer reaches: a shot lasts 2 s at least, 4 s before it may be bettered), s
-MAX_UNSEEN_FIGHTS = 2                        # fights a decision tries and passes over as unseen before it takes a player
-MIN_SWITCH_GAIN = 0.05                       # a better situation must gain at least this much (situations.py)
-PRE_EVENT_S = 0.5                            # a planned shot's camera is also scored this long before its event, s
-PRE_EVENT_WEIGHT = 0.25                      # with this weight against 1 for each event's own moment
-POST_EVENT_S = 0.1                           # and this long after it (the next frame, at 10 Hz and more), s
+OPTION_COVER_S = (1.0, 2.0, 3.0)  # a discretionary shot is placed for now and these times ahead (as far
+# as the buffer reaches: a shot lasts 2 s at least, 4 s before it may be bettered), s
+MAX_UNSEEN_FIGHTS = 2  # fights a decision tries and passes over as unseen before it takes a player
+MIN_SWITCH_GAIN = 0.05  # a better situation must gain at least this much (situations.py)
+PRE_EVENT_S = 0.5  # a planned shot's camera is also scored this long before its event, s
+PRE_EVENT_WEIGHT = 0.25  # with this weight against 1 for each event's own moment
+POST_EVENT_S = 0.1  # and this long after it (the next frame, at 10 Hz and more), s
 
 
 @dataclass
@@ -103,14 +104,16 @@ class PlannedDirector(DirectorBase):
 
     def planned_cuts(self) -> list[PlannedCut]:
         """The cuts of the last decision's beats (the current shot's own beat has none)."""
-        return [PlannedCut(b.cut_s, ShotChoice(tuple(self.players[i] for i in b.subjects), b.kind, "planned " + b.reason))
-                for b in self.plan if b.cut_s is not None]
+        return [
+            PlannedCut(b.cut_s, ShotChoice(tuple(self.players[i] for i in b.subjects), b.kind, "planned " + b.reason))
+            for b in self.plan
+            if b.cut_s is not None
+        ]
 
     # -- planned beats ----------------------------------------------------------------------
     def _event_shot(self, event: GameEvent) -> tuple[ShotKind, tuple[int, ...]] | None:
         actor, other = self.index.get(event.actor_id), self.index.get(event.other_actor_id)
-        if event.kind in (EventKind.KILL, EventKind.DAMAGE) and actor is not None and other is not None \
-                and actor != other:
+        if event.kind in (EventKind.KILL, EventKind.DAMAGE) and actor is not None and other is not None and actor != other:
             return ShotKind.DUEL, (actor, other)
         subject = actor if actor is not None else other
         return None if subject is None else (ShotKind.FOLLOW, (subject,))
@@ -137,8 +140,7 @@ class PlannedDirector(DirectorBase):
             if shot is None:
                 continue
             kind, subjects = shot
-            what = (f"{event.kind.name.lower()} in {event.time_s - now:.1f} s: "
-                    f"{' -> '.join(self.players[i] for i in subjects)}")
+            what = f"{event.kind.name.lower()} in {event.time_s - now:.1f} s: {' -> '.join(self.players[i] for i in subjects)}"
             if beats and set(subjects) <= set(beats[-1].subjects):
                 beats[-1].add(event.time_s, priority)
                 continue
@@ -170,8 +172,9 @@ class PlannedDirector(DirectorBase):
             dropped += 1
         return beats, dropped
 
-    def _join(self, last: Beat | None, beat: Beat, buffer: MomentBuffer, now_s: float, start_s: float, free_s: float,
-              shows: set[int]) -> bool:
+    def _join(
+        self, last: Beat | None, beat: Beat, buffer: MomentBuffer, now_s: float, start_s: float, free_s: float, shows: set[int]
+    ) -> bool:
         """Makes the previous beat show the new one's event too, as a GROUP or else an OVERVIEW of
         all their players, when they fit in max_group, stand within join_spread_max_m of each
         other at the events' moments, and one such shot sees them all then (_shot_sees); whether
@@ -182,8 +185,11 @@ class PlannedDirector(DirectorBase):
         times_s = [*last.times_s, beat.time_s]
         if self._spread_m(union, times_s, buffer) > self.settings.join_spread_max_m:
             return False
-        joint = None if len(union) > self.settings.max_group else next(
-            (k for k in (ShotKind.GROUP, ShotKind.OVERVIEW) if self._shot_sees(k, union, times_s, buffer, now_s)), None)
+        joint = (
+            None
+            if len(union) > self.settings.max_group
+            else next((k for k in (ShotKind.GROUP, ShotKind.OVERVIEW) if self._shot_sees(k, union, times_s, buffer, now_s)), None)
+        )
         if joint is None:
             return False
         last.subjects, last.kind, last.reason = union, joint, last.reason + "; and " + beat.reason
@@ -195,19 +201,19 @@ class PlannedDirector(DirectorBase):
     @staticmethod
     def _spread_m(players: tuple[int, ...], times_s: list[float], buffer: MomentBuffer) -> float:
         """The greatest distance between two of the players' aim points at any of the moments, m."""
-        aims = np.stack([buffer.at(t).aims_world[list(players)] for t in times_s])           # (t, p, 3)
+        aims = np.stack([buffer.at(t).aims_world[list(players)] for t in times_s])  # (t, p, 3)
         return float(np.linalg.norm(aims[:, :, None] - aims[:, None, :], axis=3).max())
 
-    def _beat_cut(self, beat: Beat, previous: Beat | None, start_s: float, free_s: float,
-                  now_s: float) -> float | None:
+    def _beat_cut(self, beat: Beat, previous: Beat | None, start_s: float, free_s: float, now_s: float) -> float | None:
         """The cut time of a beat after the previous planned one (None: after the current shot
         that started at start_s and holds its events until free_s)."""
         previous_start = start_s if previous is None or previous.cut_s is None else previous.cut_s
         free = free_s if previous is None else previous.last_time_s + self.settings.event_hold_s
         return self._cut_time(beat.time_s, previous_start, free, now_s)
 
-    def _shot_sees(self, kind: ShotKind, subjects: tuple[int, ...], times_s: list[float], buffer: MomentBuffer,
-                   now_s: float) -> bool:
+    def _shot_sees(
+        self, kind: ShotKind, subjects: tuple[int, ...], times_s: list[float], buffer: MomentBuffer, now_s: float
+    ) -> bool:
         """Whether a shot of the kind (GROUP or OVERVIEW) has a place that sees every subject (min_visible) at the events'
         moments, cached per subjects and times (module docstring)."""
         key = (kind, subjects, tuple(times_s))
@@ -242,8 +248,9 @@ class PlannedDirector(DirectorBase):
         return None
 
     # -- the decision -----------------------------------------------------------------------
-    def decide(self, moment: Moment, buffer: MomentBuffer, current: Shot | None,
-               current_pose: CameraPose | None, flags: list[str]) -> Shot | None:
+    def decide(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
+    ) -> Shot | None:
         """The shot to cut to now, or None to keep the current one."""
         s, style = self.settings, self.style
         now = moment.time_s
@@ -265,8 +272,9 @@ class PlannedDirector(DirectorBase):
         elif first is not None and first.cut_s is not None and first.cut_s <= now + 1e-9:
             choice = ShotChoice(tuple(self.players[i] for i in first.subjects), first.kind, "planned " + first.reason)
             cover, weights = self.event_cover(buffer, now, first.times_s)
-            shot, seen = self.builder.build(choice, first.subjects, moment, cover, current, current_pose, now, weights,
-                                            tuple(first.times_s), buffer)
+            shot, seen = self.builder.build(
+                choice, first.subjects, moment, cover, current, current_pose, now, weights, tuple(first.times_s), buffer
+            )
             if shot is not None:
                 shot.hold_until_s, shot.cover_times_s = first.last_time_s + s.event_hold_s, list(first.times_s)
                 shot.scores = {"priority": float(first.priority), "lead_s": first.time_s - now, "place_visibility": seen}
@@ -282,22 +290,25 @@ class PlannedDirector(DirectorBase):
         options = self.situations.options(moment, buffer)
         current_set = set(current.subjects) if current is not None else None
         current_kind = current.choice.kind if current is not None else None
-        current_score = next((o.score for o in options if set(o.subjects) == current_set and o.kind == current_kind),
-                             0.0)
+        current_score = next((o.score for o in options if set(o.subjects) == current_set and o.kind == current_kind), 0.0)
         dead_too_long = current is not None and any(
-            now - self.dead_since.get(i, math.inf) >= s.dead_hold_s for i in current.subjects)
+            now - self.dead_since.get(i, math.inf) >= s.dead_hold_s for i in current.subjects
+        )
         skipped = 0
         for option in options:
             if current is not None and set(option.subjects) == current_set and option.kind == current_kind:
                 continue
-            better = (option.score > current_score * (1.0 + s.switch_margin) + MIN_SWITCH_GAIN
-                      and length_s >= s.settle_s)
+            better = option.score > current_score * (1.0 + s.switch_margin) + MIN_SWITCH_GAIN and length_s >= s.settle_s
             if not (current is None or length_s >= style.max_shot_s or dead_too_long or better):
                 return None
-            why = ("max shot length" if current is not None and length_s >= style.max_shot_s
-                   else "subject dead" if dead_too_long else "better situation")
-            choice = ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind,
-                                f"{option.reason} ({why})")
+            why = (
+                "max shot length"
+                if current is not None and length_s >= style.max_shot_s
+                else "subject dead"
+                if dead_too_long
+                else "better situation"
+            )
+            choice = ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, f"{option.reason} ({why})")
             if len(option.subjects) > 1 and skipped >= MAX_UNSEEN_FIGHTS:
                 continue  # a plan's cost stays bounded: each try is a place search
             cover = [moment] + [buffer.at(now + ahead_s) for ahead_s in OPTION_COVER_S if now + ahead_s <= buffer.horizon_s]

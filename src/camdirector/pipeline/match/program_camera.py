@@ -4,6 +4,7 @@ program moment, a Toric camera whose first subject walls hide pulled in front of
 sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of it, on a copy
 of the camera (camera_ahead.py): the same computation either way.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -24,8 +25,9 @@ class ProgramCamera:
     def __init__(self, settings: MatchSettings, visibility: SubjectVisibility, ray_scene: RayScene, lens: Lens):
         self.settings, self.subject_visibility, self.ray_scene, self.lens = settings, visibility, ray_scene, lens
 
-    def step(self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, response_time_s: float,
-             last_pose: CameraPose | None) -> tuple[CameraPose, list[str]] | None:
+    def step(
+        self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, response_time_s: float, last_pose: CameraPose | None
+    ) -> tuple[CameraPose, list[str]] | None:
         """CAMERA of `shot` by `camera` (its own, or a copy ahead) stepped dt_s to the moment: the
         pose and its flags; the last pose shown held when the camera has none. None when it has
         no pose and none was shown before (a degenerate first shot)."""
@@ -46,27 +48,31 @@ class ProgramCamera:
     def visibility(self, moment: Moment, pose: CameraPose, shot: Shot) -> float:
         """VISIBILITY: the mean share of the shot's framed subjects seen from the pose (1 for none)."""
         subjects = shot.framed(moment.time_s)
-        return float(self.subject_visibility.visible_share(pose.position_world, moment, subjects).mean()) \
-            if subjects else 1.0
+        return float(self.subject_visibility.visible_share(pose.position_world, moment, subjects).mean()) if subjects else 1.0
 
-    def _pulled_in(self, moment: Moment, pose: CameraPose, dt_s: float, camera: ToricCamera,
-                   shot: Shot) -> tuple[CameraPose, bool]:
+    def _pulled_in(
+        self, moment: Moment, pose: CameraPose, dt_s: float, camera: ToricCamera, shot: Shot
+    ) -> tuple[CameraPose, bool]:
         """The Toric shot's pose pulled in front of a wall (shots.py `pulled_in`) when walls hide
         most of its first subject, kept only if it frames the shot's subjects better (their mean
         seen share, framed_seen): close to A, a pair far apart may no longer fit. On 90 s of the
         4on4 on dm2 this kept program visibility 0.58 and kill coverage 0.60 (0.38 and 0.53 with no
         pull; 0.52 and 0.63 judging by the worst-seen subject; 0.56 and 0.57 pulling always)."""
         s, subjects = self.settings, shot.framed(moment.time_s)
-        hidden = self.subject_visibility.visible_share(pose.position_world, moment,
-                                                       (camera.anchor_index,))[0, 0] < s.pull_below
+        hidden = self.subject_visibility.visible_share(pose.position_world, moment, (camera.anchor_index,))[0, 0] < s.pull_below
         reach_before = camera.reach_m
-        pulled, moved = camera.pulled_in(moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m,
-                                         s.pull_regrow_m_s)
+        pulled, moved = camera.pulled_in(moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m, s.pull_regrow_m_s)
         if not moved or not subjects:
             return pulled, moved
         both = [pose, pulled]
-        seen = framed_seen(self.subject_visibility, moment, subjects, np.array([p.position_world for p in both]),
-                           quat_to_matrix(np.array([p.rotation_xyzw for p in both])), self.lens).mean(axis=1)
+        seen = framed_seen(
+            self.subject_visibility,
+            moment,
+            subjects,
+            np.array([p.position_world for p in both]),
+            quat_to_matrix(np.array([p.rotation_xyzw for p in both])),
+            self.lens,
+        ).mean(axis=1)
         if seen[1] > seen[0] or (reach_before is not None and not hidden):  # going back out: at its pace
             return pulled, True
         camera.reach_m = None

@@ -7,6 +7,7 @@ autotrack's first-person view (autotrack.py), or a plugin director's own. The ri
 frame (CAMERA, rig.py) and copies it to step it ahead of the frame (camera_ahead.py): a camera
 changes only by assigning its attributes, so the rig tells a changed camera by their identity.
 """
+
 from __future__ import annotations
 
 import math

@@ -2,6 +2,7 @@
 glides to a better place on its side. The rig asks it at each tick without a cut for a director
 that `replaces_occluded_places` (director_contract.py; ours, planned.py) and for a human's take.
 """
+
 from __future__ import annotations
 
 import math
@@ -17,9 +18,15 @@ from camdirector.pipeline.match.visibility import SubjectVisibility
 REPLACE_LOOKAHEAD_S = 1.0  # an occluded place is replaced by the best one over now and this far ahead, s
 
 
-def replaced_places(moment: Moment, buffer: MomentBuffer, shot: Shot, camera: ShotCamera,
-                    visibility: SubjectVisibility, settings: MatchSettings,
-                    flags: list[str]) -> tuple[Place | None, Place | None]:
+def replaced_places(
+    moment: Moment,
+    buffer: MomentBuffer,
+    shot: Shot,
+    camera: ShotCamera,
+    visibility: SubjectVisibility,
+    settings: MatchSettings,
+    flags: list[str],
+) -> tuple[Place | None, Place | None]:
     """A Toric camera whose goal place sees its subjects under min_visible glides to the best
     place on its side: the new goal, None to keep it. With planned events still ahead in the
     buffer the place is judged at their moments (planned.py's event cover: being hidden now
@@ -38,24 +45,37 @@ def replaced_places(moment: Moment, buffer: MomentBuffer, shot: Shot, camera: Sh
     if not camera.split:
         side = None if camera.b_index is None else camera.side
         cover, weights = PlannedDirector.event_cover(buffer, now, upcoming) if upcoming else (soon, None)
-        return _better_place(camera, camera.goal, place_grid(side), cover, weights, shot.subjects, visibility,
-                             settings, flags), None
+        return _better_place(
+            camera, camera.goal, place_grid(side), cover, weights, shot.subjects, visibility, settings, flags
+        ), None
     pair, pair_place = camera.pair, None
     assert pair is not None and pair.place is not None  # a split camera's pair window holds the pair's place
     if upcoming and pair.weight(now) <= 0.0:
         cover, weights = PlannedDirector.event_cover(buffer, now, upcoming)
         side = math.copysign(1.0, pair.place.phi_rad)
-        pair_place = _better_place(camera, pair.place, place_grid(side), cover, weights, shot.subjects, visibility,
-                                   settings, flags)
+        pair_place = _better_place(
+            camera, pair.place, place_grid(side), cover, weights, shot.subjects, visibility, settings, flags
+        )
     alone = [m for m in soon if pair.weight(m.time_s) <= 0.0]
-    goal = _better_place(camera, camera.goal, place_grid(None), alone, None, (pair.keep_index,), visibility, settings,
-                         flags) if alone else None
+    goal = (
+        _better_place(camera, camera.goal, place_grid(None), alone, None, (pair.keep_index,), visibility, settings, flags)
+        if alone
+        else None
+    )
     return goal, pair_place
 
 
-def _better_place(camera: ToricCamera, place: Place, grid: Sequence[Place], cover: list[Moment],
-                  weights: list[float] | None, subjects: tuple[int, ...], visibility: SubjectVisibility,
-                  settings: MatchSettings, flags: list[str]) -> Place | None:
+def _better_place(
+    camera: ToricCamera,
+    place: Place,
+    grid: Sequence[Place],
+    cover: list[Moment],
+    weights: list[float] | None,
+    subjects: tuple[int, ...],
+    visibility: SubjectVisibility,
+    settings: MatchSettings,
+    flags: list[str],
+) -> Place | None:
     """The best place of grid for the subjects over cover when `place` sees them under
     min_visible and it sees them better (flagged replaced_for_visibility); else None."""
     _, seen = best_place(camera, [place], cover, subjects, visibility, weights=weights)

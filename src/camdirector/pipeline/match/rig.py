@@ -35,6 +35,7 @@ delayed target transforms; it has no occlusion maps; its deferred work is the ca
 ahead and the drawn plan. Its part of a frame's state is `MatchFrame` (frame.py), made anew every
 frame.
 """
+
 from __future__ import annotations
 
 import copy
@@ -84,8 +85,14 @@ class MatchRig(RigBase):
     """The match director of one session; implements `CameraRig` (module docstring). Players are
     the scene's targets."""
 
-    def __init__(self, scene: SceneSpec, ray_scene: RayScene, rng: np.random.Generator,
-                 clock: Callable[[], float] = time.perf_counter, settings: MatchSettings = MatchSettings()):
+    def __init__(
+        self,
+        scene: SceneSpec,
+        ray_scene: RayScene,
+        rng: np.random.Generator,
+        clock: Callable[[], float] = time.perf_counter,
+        settings: MatchSettings = MatchSettings(),
+    ):
         self.players = [t.id for t in scene.targets]
         self.player_ids = frozenset(self.players)  # PlayerInputs: whom events and takes may name
         self.index = {p: i for i, p in enumerate(self.players)}
@@ -95,10 +102,10 @@ class MatchRig(RigBase):
         self.ray_scene, self.rng, self.clock, self.settings = ray_scene, rng, clock, settings
         self.buffer = MomentBuffer(self.players, settings)
         self.visibility = SubjectVisibility(ray_scene, [t.mesh for t in scene.targets], settings.samples_per_player, rng)
-        self.level_nodes = (scene.level.artifact.nodes_world if scene.level is not None
-                            else np.zeros((0, 3)))
-        self.builder = ShotBuilder(self.players, self.style, self.lens, settings, self.visibility,
-                                   Grammar(settings.jump_cut_deg), self.level_nodes)
+        self.level_nodes = scene.level.artifact.nodes_world if scene.level is not None else np.zeros((0, 3))
+        self.builder = ShotBuilder(
+            self.players, self.style, self.lens, settings, self.visibility, Grammar(settings.jump_cut_deg), self.level_nodes
+        )
         self.situations = Situations(self.players, self.teams, settings, ray_scene)
         self.takes = Takes(self.players, settings, self.builder, self.situations)
         self.program_camera = ProgramCamera(settings, self.visibility, ray_scene, self.lens)
@@ -116,8 +123,8 @@ class MatchRig(RigBase):
         self._last_time_s: float | None = None
         self._last_pose: CameraPose | None = None
         self._candidates: list[CandidateShot] = []
-        self._ahead_for: Moment | None = None    # the next frame's likely moment, not yet worked out ahead
-        self._ahead: CameraStep | None = None     # the camera's step to it, worked out ahead
+        self._ahead_for: Moment | None = None  # the next frame's likely moment, not yet worked out ahead
+        self._ahead: CameraStep | None = None  # the camera's step to it, worked out ahead
         self._ahead_candidates: list[CandidatePoses] = []  # the candidates' poses at it
         self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
 
@@ -128,9 +135,21 @@ class MatchRig(RigBase):
             entry = director_entry(name)
         except KeyError as exc:
             raise ValueError(exc.args[0]) from None
-        return entry.factory(DirectorContext(self.players, self.teams, self.lens, self.settings, self.delay_s,
-                                             self.ray_scene, self.rng, self.level_nodes, self.player_stats,
-                                             self.builder, self.situations))
+        return entry.factory(
+            DirectorContext(
+                self.players,
+                self.teams,
+                self.lens,
+                self.settings,
+                self.delay_s,
+                self.ray_scene,
+                self.rng,
+                self.level_nodes,
+                self.player_stats,
+                self.builder,
+                self.situations,
+            )
+        )
 
     def _stats_to(self, time_s: float) -> None:
         """The stats sent with the frames up to the program moment (time_s) join the directors' view."""
@@ -200,8 +219,9 @@ class MatchRig(RigBase):
         return self.takes.take(subject_ids, kind, release)
 
     # -- the frame --------------------------------------------------------------------------
-    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
-            last: FrameState | None) -> None:
+    def run(
+        self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
+    ) -> None:
         """BUFFER, PLAN, CAMERA and VISIBILITY (module docstring) into state and its part
         `state.match`, timed into state.stage_ms."""
         match = state.match = MatchFrame(self.roster)
@@ -238,8 +258,15 @@ class MatchRig(RigBase):
         else:
             stepped = self._camera_step(moment, dt_s, self.shot.camera)
             if stepped is None:  # a degenerate first shot: look from the overview
-                overview = self.builder.build(ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"), (),
-                                              moment, [moment], None, None, moment.time_s)[0]
+                overview = self.builder.build(
+                    ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"),
+                    (),
+                    moment,
+                    [moment],
+                    None,
+                    None,
+                    moment.time_s,
+                )[0]
                 assert overview is not None  # an overview has no grammar to refuse it
                 self.shot = overview
                 stepped = self._camera_step(moment, dt_s, self.shot.camera)
@@ -250,18 +277,25 @@ class MatchRig(RigBase):
         match.candidates = candidate_views(moment, pose, self._candidates, self._ahead_candidates, self.shot.camera)
         self._last_pose, self._ahead_candidates = pose, []
         stages.done(MatchStage.CAMERA)
-        state.visibility = ahead.visibility if ahead is not None and worked_out else \
-            self.program_camera.visibility(moment, pose, self.shot)
+        state.visibility = (
+            ahead.visibility if ahead is not None and worked_out else self.program_camera.visibility(moment, pose, self.shot)
+        )
         # the next frame's moment is most likely the next buffered one: its camera is worked out
         # in the worker's idle moments (a session whose ray scene moves every frame cannot)
         self._ahead_for = self.buffer.following(moment) if self._defer_plans else None
         subjects = self.shot.framed(moment.time_s)
-        match.shot = self.shot.choice if subjects == self.shot.subjects else dataclasses.replace(
-            self.shot.choice, subject_ids=tuple(self.players[i] for i in subjects), kind=ShotKind.FOLLOW,
-            reason=f"{self.shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills")
+        match.shot = (
+            self.shot.choice
+            if subjects == self.shot.subjects
+            else dataclasses.replace(
+                self.shot.choice,
+                subject_ids=tuple(self.players[i] for i in subjects),
+                kind=ShotKind.FOLLOW,
+                reason=f"{self.shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills",
+            )
+        )
         match.events, match.planned_cut = moment.events, self.planned_cut(moment.time_s)
-        state.scores = dict(self.shot.scores, visibility=state.visibility,
-                            shot_length_s=moment.time_s - self.shot.start_s)
+        state.scores = dict(self.shot.scores, visibility=state.visibility, shot_length_s=moment.time_s - self.shot.start_s)
         stages.done(MatchStage.VISIBILITY)
 
     # -- the camera's step, in the frame or ahead of it -------------------------------------
@@ -304,8 +338,7 @@ class MatchRig(RigBase):
         # planned for the moment it goes on air, the next tick's (buffered: the delay's future)
         on_air = self.buffer.at(moment.time_s + self.settings.plan_interval_s)
         current, camera, buffer, last_pose = self.shot, copy.copy(self.shot.camera), self.buffer.view(), self._last_pose
-        self._drawn = DrawnPlan(current, SlicedRun(lambda: self._plan(on_air, buffer, current, camera, last_pose),
-                                                   self.clock))
+        self._drawn = DrawnPlan(current, SlicedRun(lambda: self._plan(on_air, buffer, current, camera, last_pose), self.clock))
         return cut
 
     def _apply(self, result: PlanResult, moment: Moment, flags: list[str], drawn_on: Shot | None = None) -> bool:
@@ -328,8 +361,9 @@ class MatchRig(RigBase):
                 if result.goal is not None and result.goal != camera.goal:
                     camera.goal = result.goal
                 if camera.pair is not None:  # the plan may have held it for more events
-                    pair = dataclasses.replace(camera.pair, times_s=tuple(self.shot.cover_times_s),
-                                               place=result.pair_place or camera.pair.place)
+                    pair = dataclasses.replace(
+                        camera.pair, times_s=tuple(self.shot.cover_times_s), place=result.pair_place or camera.pair.place
+                    )
                     if pair != camera.pair:
                         camera.pair = pair
         return False
@@ -343,11 +377,13 @@ class MatchRig(RigBase):
         pose = shot.camera.pose(moment)
         if not shared or pose is None or self._last_pose is None:
             return False
-        return not self.builder.grammar.allows_cut(self._last_pose.position_world, moment.aims_world[shared],
-                                                   pose.position_world)[0]
+        return not self.builder.grammar.allows_cut(
+            self._last_pose.position_world, moment.aims_world[shared], pose.position_world
+        )[0]
 
-    def _plan(self, moment: Moment, buffer: MomentBuffer, current: Shot | None, camera: ShotCamera | None,
-              last_pose: CameraPose | None) -> PlanResult:
+    def _plan(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, camera: ShotCamera | None, last_pose: CameraPose | None
+    ) -> PlanResult:
         """The cut decision of a tick (take, else the director), the re-placement of an occluded
         camera (a director that asks for it, or a take) and the candidates, from the moment, a
         buffer, the current shot, a copy of its camera (None: the shot's own) and the last pose."""
@@ -356,16 +392,23 @@ class MatchRig(RigBase):
         if held is not None:
             new, held = self.takes.held_shot(moment, buffer, current, self._candidates, flags)
         else:
-            new = self.director.decide(moment, buffer, None if current is None or current.held else current,
-                                       last_pose, flags)
+            new = self.director.decide(moment, buffer, None if current is None or current.held else current, last_pose, flags)
             if new is None and current is not None and current.held:  # released: the director starts afresh
                 new = self.director.decide(moment, buffer, None, last_pose, flags)
         goal = pair_place = None
         if new is None and current is not None and (self.director.replaces_occluded_places or held is not None):
-            goal, pair_place = replaced_places(moment, buffer, current, camera or current.camera, self.visibility,
-                                               self.settings, flags)
-        return PlanResult(new, goal, pair_place, held, self._candidate_shots(moment, buffer, new or current),
-                          self.director.planned_cuts(), flags)
+            goal, pair_place = replaced_places(
+                moment, buffer, current, camera or current.camera, self.visibility, self.settings, flags
+            )
+        return PlanResult(
+            new,
+            goal,
+            pair_place,
+            held,
+            self._candidate_shots(moment, buffer, new or current),
+            self.director.planned_cuts(),
+            flags,
+        )
 
     def _candidate_shots(self, moment: Moment, buffer: MomentBuffer, program: Shot | None) -> list[CandidateShot]:
         """The best other situations, each with a Toric camera at the style's place (an OVERVIEW
@@ -378,6 +421,7 @@ class MatchRig(RigBase):
             if set(option.subjects) == program_set or option.kind == ShotKind.OVERVIEW:
                 continue
             camera = self.builder.cameras(option.kind, option.subjects, moment, default=True)[0][0]
-            out.append((ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, option.reason),
-                        camera, option.score))
+            out.append(
+                (ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, option.reason), camera, option.score)
+            )
         return out

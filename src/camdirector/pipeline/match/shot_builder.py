@@ -11,6 +11,7 @@ subjects when one of its cameras (above them, or a node of the level's graph), a
 level Toric pictures cannot show a pair far apart along a corridor, seen only from above it over a
 shoulder, one above the other (shots.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -37,15 +38,23 @@ from camdirector.pipeline.match.shots import (
 from camdirector.pipeline.match.visibility import SubjectVisibility
 from camdirector.pipeline.style import Style
 
-ALONE_GAP_S = 0.6                            # a killer alone this long before its pair's window is also placed for halfway, s
-ALONE_AFTER_S = 0.5                          # and for this long after the window closes, s
+ALONE_GAP_S = 0.6  # a killer alone this long before its pair's window is also placed for halfway, s
+ALONE_AFTER_S = 0.5  # and for this long after the window closes, s
 
 
 class ShotBuilder:
     """Makes a shot's camera for a kind and subjects, placed by ray casts and the grammar."""
 
-    def __init__(self, players: list[str], style: Style, lens: Lens, settings: MatchSettings,
-                 visibility: SubjectVisibility, grammar: Grammar, extra_overview_cameras: np.ndarray):
+    def __init__(
+        self,
+        players: list[str],
+        style: Style,
+        lens: Lens,
+        settings: MatchSettings,
+        visibility: SubjectVisibility,
+        grammar: Grammar,
+        extra_overview_cameras: np.ndarray,
+    ):
         self.players, self.style, self.lens = players, style, lens
         self.settings, self.visibility, self.grammar = settings, visibility, grammar
         self.extra_overview_cameras = extra_overview_cameras
@@ -59,12 +68,17 @@ class ShotBuilder:
     def default_place(self) -> Place:
         return Place(self.style.preferred_theta_ratio, self.upright * math.radians(self.style.preferred_phi_deg))
 
-    def cameras(self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment,
-                default: bool) -> list[tuple[ToricCamera, Sequence[Place]]]:
+    def cameras(
+        self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, default: bool
+    ) -> list[tuple[ToricCamera, Sequence[Place]]]:
         """The Toric cameras a shot may use, each with the places to try (default: the style's only)."""
         if kind == ShotKind.FOLLOW:
-            return [(ToricCamera(kind, subjects[0], None, self.style, self.lens, self.default_place()),
-                     [self.default_place()] if default else place_grid(None))]
+            return [
+                (
+                    ToricCamera(kind, subjects[0], None, self.style, self.lens, self.default_place()),
+                    [self.default_place()] if default else place_grid(None),
+                )
+            ]
         if kind == ShotKind.DUEL:
             i, j = subjects
             left = self.grammar.duel_left(self.players[i], self.players[j])
@@ -75,12 +89,21 @@ class ShotBuilder:
             a, b = np.unravel_index(int(np.argmax(d)), d.shape)
             orders = [(subjects[a], subjects[b]), (subjects[b], subjects[a])]
         grid = [self.default_place()] if default else place_grid(self.upright)
-        return [(ToricCamera(kind, a, b, self.style, self.lens, self.default_place()), grid)
-                for a, b in (orders[:1] if default else orders)]
+        return [
+            (ToricCamera(kind, a, b, self.style, self.lens, self.default_place()), grid)
+            for a, b in (orders[:1] if default else orders)
+        ]
 
-    def _best(self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
-              weights: list[float] | None, allowed: Callable[[np.ndarray], np.ndarray] | None,
-              pair: PairWindow | None = None) -> tuple[ToricCamera, Place, float]:
+    def _best(
+        self,
+        kind: ShotKind,
+        subjects: tuple[int, ...],
+        moment: Moment,
+        cover: list[Moment],
+        weights: list[float] | None,
+        allowed: Callable[[np.ndarray], np.ndarray] | None,
+        pair: PairWindow | None = None,
+    ) -> tuple[ToricCamera, Place, float]:
         """The camera (of those cameras() offers at the moment, with the pair window of a planned
         DUEL) and place that best see the subjects over cover, and its score (-1: the grammar
         refuses every place)."""
@@ -93,22 +116,45 @@ class ShotBuilder:
         assert best is not None  # every kind offers a camera
         return best
 
-    def place_score(self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
-                    weights: list[float]) -> float:
+    def place_score(
+        self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, cover: list[Moment], weights: list[float]
+    ) -> float:
         """How well the best place of a shot from the moment on sees the subjects over cover, [0, 1]."""
         if kind == ShotKind.OVERVIEW:
             return self._overview(subjects, cover, weights)[1]
         return self._best(kind, subjects, moment, cover, weights, None)[2]
 
-    def _overview(self, subjects: tuple[int, ...], cover: list[Moment], weights: list[float],
-                  allowed: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[CameraPose, float]:
-        return overview_pose(cover, weights, subjects, self.lens, self.visibility, self.settings.overview_height_m,
-                             self.extra_overview_cameras, allowed)
+    def _overview(
+        self,
+        subjects: tuple[int, ...],
+        cover: list[Moment],
+        weights: list[float],
+        allowed: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> tuple[CameraPose, float]:
+        return overview_pose(
+            cover,
+            weights,
+            subjects,
+            self.lens,
+            self.visibility,
+            self.settings.overview_height_m,
+            self.extra_overview_cameras,
+            allowed,
+        )
 
-    def build(self, choice: ShotChoice, subjects: tuple[int, ...], moment: Moment, cover: list[Moment],
-              previous: Shot | None, previous_pose: CameraPose | None, start_s: float,
-              weights: list[float] | None = None, events_s: tuple[float, ...] = (),
-              buffer: MomentBuffer | None = None) -> tuple[Shot | None, float]:
+    def build(
+        self,
+        choice: ShotChoice,
+        subjects: tuple[int, ...],
+        moment: Moment,
+        cover: list[Moment],
+        previous: Shot | None,
+        previous_pose: CameraPose | None,
+        start_s: float,
+        weights: list[float] | None = None,
+        events_s: tuple[float, ...] = (),
+        buffer: MomentBuffer | None = None,
+    ) -> tuple[Shot | None, float]:
         """A shot showing `subjects` from `moment` on, placed for the moments in `cover` (with
         `weights`, default equal), respecting the 30-degree rule against the previous picture at
         `moment`; and its place's score. None (and -1) when no place respects the rule. A DUEL or
@@ -134,26 +180,38 @@ class ShotBuilder:
             return lambda positions: self.grammar.allows_cut(previous_world, moment.aims_world[shared], positions)
 
         s = self.settings
-        pair = PairWindow(subjects[0], events_s, s.pair_before_s, s.pair_after_s, s.reframe_s) \
-            if events_s and choice.kind == ShotKind.DUEL else None
+        pair = (
+            PairWindow(subjects[0], events_s, s.pair_before_s, s.pair_after_s, s.reframe_s)
+            if events_s and choice.kind == ShotKind.DUEL
+            else None
+        )
         alone = pair is not None and buffer is not None and pair.weight(moment.time_s) <= 0.0
         allowed = allowed_after(subjects)
-        camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, None if alone else allowed,
-                                          pair)
+        camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, None if alone else allowed, pair)
         if score < s.min_visible and not choice.held:  # a wide view of them may see them better
             pose, seen = self._overview(subjects, cover, [1.0] * len(cover) if weights is None else weights, allowed)
             # a killer shown alone until its kill sees more than a static view seeing the pair under min_visible
             if seen > max(score, 0.0) and (seen >= s.min_visible or not alone):
                 what = "both" if choice.kind == ShotKind.DUEL else "them all"
-                wide = replace(choice, kind=ShotKind.OVERVIEW,
-                               reason=f"{choice.reason}; wide: no level {choice.kind.name.lower()} place sees {what}")
+                wide = replace(
+                    choice,
+                    kind=ShotKind.OVERVIEW,
+                    reason=f"{choice.reason}; wide: no level {choice.kind.name.lower()} place sees {what}",
+                )
                 return Shot(wide, subjects, StaticCamera(pose), start_s), seen
         if alone and score >= 0.0:
             assert pair is not None and buffer is not None  # `alone` needs both
             keep = (pair.keep_index,)
             camera.pair = replace(pair, place=place)
-            place, alone_score = best_place(camera, place_grid(None), self._alone_cover(pair, moment, buffer),
-                                            keep, self.visibility, allowed_after(keep), moment)
+            place, alone_score = best_place(
+                camera,
+                place_grid(None),
+                self._alone_cover(pair, moment, buffer),
+                keep,
+                self.visibility,
+                allowed_after(keep),
+                moment,
+            )
             score = score if alone_score >= 0.0 else -1.0
         if score < 0.0:
             return None, -1.0
@@ -171,6 +229,9 @@ class ShotBuilder:
         now = moment.time_s
         opens = pair.times_s[0] - pair.before_s - pair.ramp_s
         closed = pair.times_s[-1] + pair.after_s + pair.ramp_s + ALONE_AFTER_S
-        times = [now] + ([0.5 * (now + opens)] if opens - now > ALONE_GAP_S else []) \
+        times = (
+            [now]
+            + ([0.5 * (now + opens)] if opens - now > ALONE_GAP_S else [])
             + ([closed] if closed <= buffer.horizon_s else [])
+        )
         return [buffer.at(t) for t in times]

@@ -46,6 +46,7 @@ a place that falls under `min_visible` is replaced by the best one on the same s
 camera glides there (and to its width) with the style's response time, so the composition never
 jumps inside a shot.
 """
+
 from __future__ import annotations
 
 import functools
@@ -74,7 +75,7 @@ from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.visibility import SubjectVisibility
 from camdirector.pipeline.style import Style
 
-THETA_MARGIN = 0.04                                     # keep the camera off A and B, ratio of the arc
+THETA_MARGIN = 0.04  # keep the camera off A and B, ratio of the arc
 # The place grid along the arc (the ends are over a shoulder) and about the axis (0 above, 90 level
 # beside), and the framing widths (module docstring), the style's own first so that it wins ties.
 # Dense at the ends of the arc (over a shoulder, where a close camera sees past the walls) and
@@ -86,11 +87,11 @@ THETA_MARGIN = 0.04                                     # keep the camera off A 
 PLACE_RATIOS = np.array([0.01, 0.03, 0.06, 0.1, 0.15, 0.3, 0.5, 0.7, 0.85, 0.9, 0.94, 0.97, 0.99])
 PLACE_PHI_RAD = np.radians([5.0, 10.0, 20.0, 30.0, 45.0, 65.0, 80.0, 95.0, 110.0, 125.0])
 PLACE_WIDTHS = (1.0, 1.8, 2.6)
-MAX_SCREEN = 0.9                                        # a widened screen point stays this far inside the frame
+MAX_SCREEN = 0.9  # a widened screen point stays this far inside the frame
 MIN_CAMERA_HEIGHT_M = 0.5  # a place lower than this above the lowest subject's feet is under the ground: never chosen
-HEADING_TIME_CONSTANT_S = 0.6                           # FOLLOW: smoothing of the facing, as framing.py
-GROUP_SCREEN_SCALE = 1.5                                # GROUP: screen points this much wider than the style's
-OVERVIEW_HEIGHTS_M = (4.0, 8.0)                         # overview heights tried below overview_height_m
+HEADING_TIME_CONSTANT_S = 0.6  # FOLLOW: smoothing of the facing, as framing.py
+GROUP_SCREEN_SCALE = 1.5  # GROUP: screen points this much wider than the style's
+OVERVIEW_HEIGHTS_M = (4.0, 8.0)  # overview heights tried below overview_height_m
 OVERVIEW_AZIMUTHS = 8
 
 
@@ -132,27 +133,31 @@ def swung_point(origin: np.ndarray, from_offset: np.ndarray, to_offset: np.ndarr
     yaw = yaws[0] + weight * math.remainder(yaws[1] - yaws[0], math.tau)
     pitch = pitches[0] + weight * (pitches[1] - pitches[0])
     length = lengths[0] ** (1.0 - weight) * lengths[1] ** weight
-    point: np.ndarray = origin + length * np.array([math.cos(pitch) * math.sin(yaw), math.sin(pitch),
-                                                    math.cos(pitch) * math.cos(yaw)])
+    point: np.ndarray = origin + length * np.array(
+        [math.cos(pitch) * math.sin(yaw), math.sin(pitch), math.cos(pitch) * math.cos(yaw)]
+    )
     return point
 
 
 @dataclass(frozen=True)
 class Place:
     theta_ratio: float  # along the arc, 0 at A .. 1 at B, [0, 1]
-    phi_rad: float      # about the A-B axis, rad
+    phi_rad: float  # about the A-B axis, rad
     width: float = 1.0  # the screen points this many times the style's apart (module docstring), [1, 10]
 
     def eased(self, goal: Place, keep: float) -> Place:
         """The place `keep` of the way back from goal to this one ([0, 1]: 0 is the goal), phi the shorter way round."""
-        return Place(goal.theta_ratio + keep * (self.theta_ratio - goal.theta_ratio),
-                     goal.phi_rad - keep * math.remainder(goal.phi_rad - self.phi_rad, math.tau),
-                     goal.width + keep * (self.width - goal.width))
+        return Place(
+            goal.theta_ratio + keep * (self.theta_ratio - goal.theta_ratio),
+            goal.phi_rad - keep * math.remainder(goal.phi_rad - self.phi_rad, math.tau),
+            goal.width + keep * (self.width - goal.width),
+        )
 
 
 @functools.lru_cache(maxsize=256)
-def _composition(style_a: tuple[float, ...], style_b: tuple[float, ...], lens: Lens,
-                 width: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+def _composition(
+    style_a: tuple[float, ...], style_b: tuple[float, ...], lens: Lens, width: float
+) -> tuple[tuple[float, ...], tuple[float, ...], float]:
     """ToricCamera.composition, made once per style, lens and width (a place search asks thousands of times)."""
     screen_a = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in style_a)
     screen_b = tuple(max(-MAX_SCREEN, min(MAX_SCREEN, c * width)) for c in style_b)
@@ -227,8 +232,9 @@ class ToricCamera:
                 return None
             rows = np.flatnonzero(widths == width)
             arc = theta_max(torus.alpha)
-            theta = arc * THETA_MARGIN + arc * (1.0 - 2.0 * THETA_MARGIN) * np.array([places[r].theta_ratio
-                                                                                     for r in rows.tolist()])
+            theta = arc * THETA_MARGIN + arc * (1.0 - 2.0 * THETA_MARGIN) * np.array(
+                [places[r].theta_ratio for r in rows.tolist()]
+            )
             out[rows] = torus_position(torus, theta, np.array([places[r].phi_rad for r in rows.tolist()]))
         return out
 
@@ -254,8 +260,11 @@ class ToricCamera:
         for width in dict.fromkeys(widths.tolist()):
             rows = np.flatnonzero(widths == width)
             screen_a, screen_b, _ = self.composition(width)
-            out[rows] = level_look_matrices(positions_world[rows], a, screen_a, self.lens) if self.b_index is None \
+            out[rows] = (
+                level_look_matrices(positions_world[rows], a, screen_a, self.lens)
+                if self.b_index is None
                 else level_pair_matrices(positions_world[rows], a, b, screen_a, screen_b, self.lens)
+            )
         return out
 
     def pose(self, moment: Moment) -> CameraPose | None:
@@ -291,9 +300,9 @@ class ToricCamera:
             rotation = level_pair_rotation(position_world, a, b, screen_a, screen_b, self.lens)
         return CameraPose(position_world, rotation, self.lens.vertical_fov_deg)
 
-
-    def pulled_in(self, moment: Moment, pose: CameraPose, hidden: bool, ray_scene: RayScene, dt_s: float,
-                  margin_m: float, regrow_m_s: float) -> tuple[CameraPose, bool]:
+    def pulled_in(
+        self, moment: Moment, pose: CameraPose, hidden: bool, ray_scene: RayScene, dt_s: float, margin_m: float, regrow_m_s: float
+    ) -> tuple[CameraPose, bool]:
         """The pose kept in front of the walls between it and the anchor's aim point (A, or the
         player a pair window keeps), and
         whether it was pulled in: a degrade for the moments the place search did not foresee (a
@@ -346,12 +355,19 @@ def place_grid(side: float | None) -> tuple[Place, ...]:
     """The places tried: every width, ratio and phi, on one side (sign of phi) or both when side is None.
     Made once per side (a plan asks for it at every search; made anew, it was a tenth of a plan's cost)."""
     signs = (1.0, -1.0) if side is None else (side,)
-    return tuple(Place(float(r), s * float(p), w) for w in PLACE_WIDTHS for s in signs for r in PLACE_RATIOS
-                 for p in PLACE_PHI_RAD)
+    return tuple(
+        Place(float(r), s * float(p), w) for w in PLACE_WIDTHS for s in signs for r in PLACE_RATIOS for p in PLACE_PHI_RAD
+    )
 
 
-def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...],
-                positions_world: np.ndarray, rotations: np.ndarray, lens: Lens) -> np.ndarray:
+def framed_seen(
+    visibility: SubjectVisibility,
+    moment: Moment,
+    subjects: tuple[int, ...],
+    positions_world: np.ndarray,
+    rotations: np.ndarray,
+    lens: Lens,
+) -> np.ndarray:
     """(m, len(subjects)) the share of each subject's sample points that each of m cameras,
     positions (m, 3) and camera-to-world rotation matrices (m, 3, 3), sees at the moment:
     unoccluded and inside the frame, and not from under the subjects' ground. A camera whose
@@ -361,16 +377,23 @@ def framed_seen(visibility: SubjectVisibility, moment: Moment, subjects: tuple[i
     pause(len(positions_world) * len(subjects) * visibility.k)
     screen = project_from_cameras(positions_world, rotations, lens, visibility.points_world(moment, subjects))
     with np.errstate(invalid="ignore"):
-        asked = np.asarray((np.abs(screen) <= 1.0).all(axis=2))        # (m, s * k); NaN (behind, degenerate) is False
+        asked = np.asarray((np.abs(screen) <= 1.0).all(axis=2))  # (m, s * k); NaN (behind, degenerate) is False
     ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
     asked[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
     share: np.ndarray = visibility.seen_points(positions_world, moment, subjects, asked).mean(axis=2)
     return share
 
 
-def best_place(camera: ToricCamera, places: Sequence[Place], moments: list[Moment], subjects: tuple[int, ...],
-               visibility: SubjectVisibility, allowed: Callable[[np.ndarray], np.ndarray] | None = None,
-               cut_moment: Moment | None = None, weights: list[float] | None = None) -> tuple[Place, float]:
+def best_place(
+    camera: ToricCamera,
+    places: Sequence[Place],
+    moments: list[Moment],
+    subjects: tuple[int, ...],
+    visibility: SubjectVisibility,
+    allowed: Callable[[np.ndarray], np.ndarray] | None = None,
+    cut_moment: Moment | None = None,
+    weights: list[float] | None = None,
+) -> tuple[Place, float]:
     """The place of `places` whose worst-seen subject is best seen (framed_seen), a mean over
     `moments` with `weights` (default equal), and that score in [0, 1]; at a moment where the
     camera's pair window frames its kept player alone, that player is the subject. allowed: (m, 3) positions
@@ -395,9 +418,16 @@ def best_place(camera: ToricCamera, places: Sequence[Place], moments: list[Momen
     return places[best], float(score[best])
 
 
-def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[int, ...], lens: Lens,
-                  visibility: SubjectVisibility, top_height_m: float, extra_cameras_world: np.ndarray,
-                  allowed: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[CameraPose, float]:
+def overview_pose(
+    moments: list[Moment],
+    weights: list[float],
+    subjects: tuple[int, ...],
+    lens: Lens,
+    visibility: SubjectVisibility,
+    top_height_m: float,
+    extra_cameras_world: np.ndarray,
+    allowed: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[CameraPose, float]:
     """A high view of the subjects' bounding box over `moments`, looking at its centre, and its
     worst-seen subject's share (framed_seen, a mean over the moments with `weights`). Tries
     OVERVIEW_AZIMUTHS directions at each height up to top_height_m, and the (k, 3) extra camera
@@ -423,7 +453,7 @@ def overview_pose(moments: list[Moment], weights: list[float], subjects: tuple[i
     seen = np.zeros((len(cameras), len(subjects)))
     for m, w in zip(moments, weights):
         seen = seen + w * framed_seen(visibility, m, subjects, cameras, rotations, lens)
-    seen /= max(sum(weights), 1e-9)                                          # (cameras, subjects)
+    seen /= max(sum(weights), 1e-9)  # (cameras, subjects)
     worst = seen.min(axis=1)
     if allowed is not None:
         worst = np.where(allowed(cameras), worst, -1.0)

@@ -6,6 +6,7 @@ Situations (interest.py): a DUEL per fighting pair, a FOLLOW per fighting player
 cluster of fighters, a FOLLOW of every other living player, and an OVERVIEW, below them all; with
 a delay, fights are anticipated by reading the next 2 s of the buffer.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -19,12 +20,12 @@ from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
 
 ANTICIPATION_STEPS_S = (0.5, 1.0, 1.5, 2.0)  # buffered future read for fights, s after the moment
-ANTICIPATION_DISCOUNT = 0.9                  # a future fight counts this much of a present one
-FOLLOW_SHARE = 0.5                           # one fighter alone is worth this share of its best fight
-GROUP_SHARE = 0.6                            # a group: this share of its best fight, plus GROUP_EXTRA per extra player
+ANTICIPATION_DISCOUNT = 0.9  # a future fight counts this much of a present one
+FOLLOW_SHARE = 0.5  # one fighter alone is worth this share of its best fight
+GROUP_SHARE = 0.6  # a group: this share of its best fight, plus GROUP_EXTRA per extra player
 GROUP_EXTRA = 0.1
-ROAM_FLOOR = 0.01                            # a player in no fight: the overview's score plus this,
-ROAM_BONUS = 0.1                             # plus this times its nearness to an opponent
+ROAM_FLOOR = 0.01  # a player in no fight: the overview's score plus this,
+ROAM_BONUS = 0.1  # plus this times its nearness to an opponent
 
 
 @dataclass
@@ -63,20 +64,23 @@ class Situations:
         for step_s in ANTICIPATION_STEPS_S:
             if now + step_s > buffer.horizon_s:
                 break
-            ahead = fight_matrix(buffer.at(now + step_s), self.teams, s, ray_scene) \
-                * moment.alive[:, None] * moment.alive[None, :]
+            ahead = (
+                fight_matrix(buffer.at(now + step_s), self.teams, s, ray_scene) * moment.alive[:, None] * moment.alive[None, :]
+            )
             fights = np.maximum(fights, ANTICIPATION_DISCOUNT * ahead)
-        interest = fights + recent_event_boost(buffer.events_between(now - s.recent_event_s, now), self.index, now,
-                                               len(self.players), s) * moment.alive[:, None] * moment.alive[None, :]
+        interest = (
+            fights
+            + recent_event_boost(buffer.events_between(now - s.recent_event_s, now), self.index, now, len(self.players), s)
+            * moment.alive[:, None]
+            * moment.alive[None, :]
+        )
         options: list[Option] = []
         ii, jj = np.nonzero(np.triu(interest) > 0.0)
         for i, j in zip(ii.tolist(), jj.tolist()):
-            options.append(Option(ShotKind.DUEL, (i, j), float(interest[i, j]),
-                                  f"fight: {self.players[i]} vs {self.players[j]}"))
+            options.append(Option(ShotKind.DUEL, (i, j), float(interest[i, j]), f"fight: {self.players[i]} vs {self.players[j]}"))
         best_fight = interest.max(axis=1)
         for i in np.flatnonzero(best_fight > 0.0).tolist():
-            options.append(Option(ShotKind.FOLLOW, (i,), FOLLOW_SHARE * float(best_fight[i]),
-                                  f"fighter: {self.players[i]}"))
+            options.append(Option(ShotKind.FOLLOW, (i,), FOLLOW_SHARE * float(best_fight[i]), f"fighter: {self.players[i]}"))
         options += self._roaming(moment, best_fight)
         fighters = np.flatnonzero(best_fight > 0.0)
         if len(fighters) >= 3:
@@ -86,9 +90,14 @@ class Situations:
                 if len(near) >= 3 and near.min() == i:  # one group per leftmost member
                     members = tuple(int(m) for m in near[: s.max_group])
                     sub = interest[np.ix_(members, members)]
-                    options.append(Option(ShotKind.GROUP, members,
-                                          GROUP_SHARE * float(sub.max()) + GROUP_EXTRA * (len(members) - 2),
-                                          "group: " + ", ".join(self.players[m] for m in members)))
+                    options.append(
+                        Option(
+                            ShotKind.GROUP,
+                            members,
+                            GROUP_SHARE * float(sub.max()) + GROUP_EXTRA * (len(members) - 2),
+                            "group: " + ", ".join(self.players[m] for m in members),
+                        )
+                    )
         options.append(Option(ShotKind.OVERVIEW, (), s.overview_min_interest, "overview: no fight worth a closer shot"))
         options.sort(key=lambda o: -o.score)
         return options
@@ -106,6 +115,12 @@ class Situations:
         opponents = (self.teams[:, None] != self.teams[None, :]) & alive[:, None] & alive[None, :]
         nearest = np.where(opponents, distance, np.inf).min(axis=1)
         proximity = s.engage_range_m / (s.engage_range_m + nearest)
-        return [Option(ShotKind.FOLLOW, (i,), s.overview_min_interest + ROAM_FLOOR + ROAM_BONUS * float(proximity[i]),
-                       f"on the move: {self.players[i]}, an opponent {nearest[i]:.0f} m away")
-                for i in np.flatnonzero(alive & (best_fight <= 0.0)).tolist()]
+        return [
+            Option(
+                ShotKind.FOLLOW,
+                (i,),
+                s.overview_min_interest + ROAM_FLOOR + ROAM_BONUS * float(proximity[i]),
+                f"on the move: {self.players[i]}, an opponent {nearest[i]:.0f} m away",
+            )
+            for i in np.flatnonzero(alive & (best_fight <= 0.0)).tolist()
+        ]

@@ -8,6 +8,7 @@ Toric camera of it is re-placed for visibility (replacement.py). A take whose he
 (at the program moment) falls back, still held: to the player who killed it, else the nearest
 fight to where it died, else an overview; `shot.reason` says so.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -46,17 +47,21 @@ class Takes:
         n = len(subject_ids)
         if kind is None:
             kind = {0: ShotKind.OVERVIEW, 1: ShotKind.FOLLOW, 2: ShotKind.DUEL}.get(n, ShotKind.GROUP)
-        fits = {ShotKind.FOLLOW: n == 1, ShotKind.DUEL: n == 2, ShotKind.GROUP: 2 <= n <= self.settings.max_group,
-                ShotKind.OVERVIEW: True}[ShotKind(kind)]
+        fits = {
+            ShotKind.FOLLOW: n == 1,
+            ShotKind.DUEL: n == 2,
+            ShotKind.GROUP: 2 <= n <= self.settings.max_group,
+            ShotKind.OVERVIEW: True,
+        }[ShotKind(kind)]
         if not fits:
             raise ValueError(f"take: a {ShotKind(kind).name} shot cannot show {n} players")
-        self.held = ShotChoice(tuple(subject_ids), ShotKind(kind), "take: a human's choice, held until released",
-                               held=True)
+        self.held = ShotChoice(tuple(subject_ids), ShotKind(kind), "take: a human's choice, held until released", held=True)
         self.pending = True
         return self.held
 
-    def held_shot(self, moment: Moment, buffer: MomentBuffer, current: Shot | None, candidates: list[CandidateShot],
-                  flags: list[str]) -> tuple[Shot | None, ShotChoice]:
+    def held_shot(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, candidates: list[CandidateShot], flags: list[str]
+    ) -> tuple[Shot | None, ShotChoice]:
         """The held take as a shot when it must be (re)built: just taken, or a held subject died;
         and the take held from now on (the fallback's, when one died)."""
         held = self.held
@@ -98,16 +103,21 @@ class Takes:
         who = self.players[dead]
         killer = buffer.killed_by.get(who)
         if killer is not None and moment.alive[self.index[killer]]:
-            return (ShotChoice((killer,), ShotKind.FOLLOW,
-                               f"take fallback: held player {who} died (killed by {killer}); following {killer}"),
-                    (self.index[killer],))
+            return (
+                ShotChoice(
+                    (killer,), ShotKind.FOLLOW, f"take fallback: held player {who} died (killed by {killer}); following {killer}"
+                ),
+                (self.index[killer],),
+            )
         place = moment.feet_world[dead]
         fights = [o for o in self.situations.options(moment, buffer) if o.kind == ShotKind.DUEL]
         if fights:
-            nearest = min(fights, key=lambda o: float(np.linalg.norm(moment.feet_world[list(o.subjects)].mean(axis=0)
-                                                                      - place)))
+            nearest = min(fights, key=lambda o: float(np.linalg.norm(moment.feet_world[list(o.subjects)].mean(axis=0) - place)))
             names = tuple(self.players[i] for i in nearest.subjects)
-            return (ShotChoice(names, ShotKind.DUEL,
-                               f"take fallback: held player {who} died; the nearest fight, {names[0]} vs {names[1]}"),
-                    nearest.subjects)
+            return (
+                ShotChoice(
+                    names, ShotKind.DUEL, f"take fallback: held player {who} died; the nearest fight, {names[0]} vs {names[1]}"
+                ),
+                nearest.subjects,
+            )
         return ShotChoice((), ShotKind.OVERVIEW, f"take fallback: held player {who} died; no fight, overview"), ()

@@ -5,6 +5,7 @@ session's seeded generator (as toric/visibility.py does for the TORIC rig) and c
 player's transform at the moment asked about. Players do not occlude each other (they are not in
 the RayScene); the level, the static objects and the dynamic objects at their newest transforms do.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,8 +17,7 @@ from camdirector.pipeline.toric.target_sampling import SurfaceSampler
 
 
 class SubjectVisibility:
-    def __init__(self, ray_scene: RayScene, player_meshes: list[TriMesh], samples_per_player: int,
-                 rng: np.random.Generator):
+    def __init__(self, ray_scene: RayScene, player_meshes: list[TriMesh], samples_per_player: int, rng: np.random.Generator):
         self.ray_scene = ray_scene
         self.samples_local = [SurfaceSampler(m).sample(samples_per_player, rng) for m in player_meshes]
         self.k = samples_per_player
@@ -26,8 +26,9 @@ class SubjectVisibility:
         """(len(subjects) * k, 3) the subjects' sample points at the moment, subject after subject."""
         return np.concatenate([moment.transforms[i].apply(self.samples_local[i]) for i in subjects])
 
-    def seen_points(self, cameras_world: np.ndarray, moment: Moment, subjects: tuple[int, ...],
-                    asked: np.ndarray | None = None) -> np.ndarray:
+    def seen_points(
+        self, cameras_world: np.ndarray, moment: Moment, subjects: tuple[int, ...], asked: np.ndarray | None = None
+    ) -> np.ndarray:
         """(m, len(subjects), k) bool: which sample points each of (m, 3) camera places sees.
         asked: (m, len(subjects) * k) bool, the camera-point pairs to ray-cast (default all);
         the others are False (a place search asks only for the points inside each frame)."""

@@ -19,6 +19,7 @@ with geometry.toric_maps and pipeline/toric/target_sampling.py::
         amap.refresh(time_s, slots, maps, torus)
     a = amap.lookup(theta_samples, phi_samples)          # the search reads A (nan outside the window)
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -44,8 +45,13 @@ class AnticipationMap:
     1 / (2r) sum when all do); texels no map covers read 0 with coverage 0.
     """
 
-    def __init__(self, target_count: int, settings: AnticipationSettings = AnticipationSettings(),
-                 mask: StyleMaskSettings = StyleMaskSettings(), bank: KernelBank | None = None) -> None:
+    def __init__(
+        self,
+        target_count: int,
+        settings: AnticipationSettings = AnticipationSettings(),
+        mask: StyleMaskSettings = StyleMaskSettings(),
+        bank: KernelBank | None = None,
+    ) -> None:
         if target_count not in (1, 2):
             raise ValueError("AnticipationMap: target_count must be 1 or 2")
         if bank is not None and kernel_key(bank.settings) != kernel_key(settings):
@@ -58,14 +64,14 @@ class AnticipationMap:
         self.slot_count = target_count * r
         self._a_s = np.zeros((self.slot_count, n, n), dtype=np.float32)
         self._windows: list[MapWindow | None] = [None] * self.slot_count
-        self.computed_at_s = np.full(self.slot_count, np.nan)    # when each slot's map was made, s
-        self._cursor = 0                                         # sample index refreshed next
+        self.computed_at_s = np.full(self.slot_count, np.nan)  # when each slot's map was made, s
+        self._cursor = 0  # sample index refreshed next
         self._next_due_s: float | None = None
         self._last_update_s: float | None = None
         self._alpha_rad = 0.0
-        self.window: MapWindow | None = None                     # the window of a_map
-        self.a_map: npt.NDArray[np.float32] | None = None                  # (res, res) float32, masked A
-        self.coverage: npt.NDArray[np.floating[Any]] | None = None           # (res, res) float32, fraction of slots covering
+        self.window: MapWindow | None = None  # the window of a_map
+        self.a_map: npt.NDArray[np.float32] | None = None  # (res, res) float32, masked A
+        self.coverage: npt.NDArray[np.floating[Any]] | None = None  # (res, res) float32, fraction of slots covering
 
     # -- schedule (section 6) ------------------------------------------------------------------
 
@@ -125,8 +131,9 @@ class AnticipationMap:
             self._cursor = (self._cursor + 1) % r
         period = self.settings.update_period_s
         next_due_s = self._next_due_s
-        if next_due_s is None or self._last_update_s is None or time_s < self._last_update_s \
-                or time_s >= next_due_s + period:  # behind schedule, or time went back
+        if (
+            next_due_s is None or self._last_update_s is None or time_s < self._last_update_s or time_s >= next_due_s + period
+        ):  # behind schedule, or time went back
             self._next_due_s = time_s + period
         else:
             self._next_due_s = next_due_s + period
@@ -138,8 +145,7 @@ class AnticipationMap:
             raise ValueError("AnticipationMap: maps have another resolution than the settings")
         return predict_occlusion(maps.shadow, maps.velocity_rad_s, maps.window, self.settings, self.bank)
 
-    def store(self, time_s: float, slots: list[int], predicted: npt.NDArray[np.float32], window: MapWindow,
-              torus: Torus) -> None:
+    def store(self, time_s: float, slots: list[int], predicted: npt.NDArray[np.float32], window: MapWindow, torus: Torus) -> None:
         """Keeps the predictions (k, res, res) of `slots`, made at time_s on `window`, which becomes
         the aggregate's, and re-aggregates."""
         for slot, a_s in zip(slots, predicted):
@@ -189,6 +195,5 @@ class AnticipationMap:
         i1, j1 = np.minimum(i0 + 1, n - 1), np.minimum(j0 + 1, n - 1)
         wi, wj = ic - i0, jc - j0
         a = self.a_map
-        value = ((1 - wi) * ((1 - wj) * a[i0, j0] + wj * a[i0, j1])
-                 + wi * ((1 - wj) * a[i1, j0] + wj * a[i1, j1]))
+        value = (1 - wi) * ((1 - wj) * a[i0, j0] + wj * a[i0, j1]) + wi * ((1 - wj) * a[i1, j0] + wj * a[i1, j1])
         return np.where(ok, value, outside)

@@ -9,6 +9,7 @@ speed are limited in world units through the torus's tangent frame, because equa
 (theta, phi) are not equal steps in metres (toric-space-primer.md, "Distortion"; the
 occlusion-anticipation paper, section 5, plans motion the same way).
 """
+
 from __future__ import annotations
 
 import math
@@ -28,9 +29,9 @@ from camdirector.pipeline.toric.frame import ToricFrame
 @dataclass(frozen=True)
 class MotionSettings:
     max_substep_s: float = 1.0 / 60.0  # integration step, s; longer frame gaps are subdivided. (0, 0.1]
-    max_substeps: int = 30             # at most this many per frame; the rest of a long gap is dropped. [1, 1000]
-    theta_margin_rad: float = 0.02     # keep theta this far inside its open range, rad. (0, 0.5]
-    side_hysteresis: float = 0.2       # the upright side changes only when the other is better by this (up-vector dot). [0, 2]
+    max_substeps: int = 30  # at most this many per frame; the rest of a long gap is dropped. [1, 1000]
+    theta_margin_rad: float = 0.02  # keep theta this far inside its open range, rad. (0, 0.5]
+    side_hysteresis: float = 0.2  # the upright side changes only when the other is better by this (up-vector dot). [0, 2]
     side_recheck_axis_dot: float = 0.02  # re-choose the side when the A-B axis elevation (dot with up) moves this much. [0, 1]
 
 
@@ -43,9 +44,9 @@ class ToricMotion:
         self.style = style
         self.theta: float | None = None  # None until the first torus
         self.phi = 0.0
-        self.rate = np.zeros(2)          # (dtheta/dt, dphi/dt), rad/s
+        self.rate = np.zeros(2)  # (dtheta/dt, dphi/dt), rad/s
         self.position_world: npt.NDArray[np.float64] | None = None
-        self.side = 0.0                  # +1 or -1: which half of the torus is upright
+        self.side = 0.0  # +1 or -1: which half of the torus is upright
         self._side_key: float | None = None  # axis elevation (A-B . up) the side was chosen at
 
     def set_style(self, style: Style) -> None:

@@ -5,6 +5,7 @@ FRAMING (framing.py) fills the points and the torus; MOTION (camera_motion.py, o
 the place. The wire carries the place and the torus's composition angle in the reply's
 diagnostics (worker/codec.py); the A-map picture marks the place (rig.py: `anticipation_map`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -17,9 +18,9 @@ from camdirector.geometry.toric import Torus
 
 @dataclass
 class ToricFrame:
-    a_world: npt.NDArray[np.float64] | None = None   # (3,) framed point A, m
-    b_world: npt.NDArray[np.float64] | None = None   # (3,) framed point B, m
-    b_is_gaze_point: bool = False       # B is the one target's gaze-room point, not a target
-    torus: Torus | None = None          # None: the framing is degenerate (the pose is held)
-    theta: float = 0.0                  # the camera's place on the torus, rad
-    phi: float = 0.0                    # rad
+    a_world: npt.NDArray[np.float64] | None = None  # (3,) framed point A, m
+    b_world: npt.NDArray[np.float64] | None = None  # (3,) framed point B, m
+    b_is_gaze_point: bool = False  # B is the one target's gaze-room point, not a target
+    torus: Torus | None = None  # None: the framing is degenerate (the pose is held)
+    theta: float = 0.0  # the camera's place on the torus, rad
+    phi: float = 0.0  # rad

@@ -10,6 +10,7 @@ last value; before any motion it is the target's facing (its local +Z, the glTF 
 the framed points land from the style's screen points: the frame's `framing_error`. The points and
 the torus are the rig's part of the frame's state (`ToricFrame`, frame.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -29,15 +30,20 @@ from camdirector.pipeline.toric.frame import ToricFrame
 @dataclass(frozen=True)
 class FramingSettings:
     heading_time_constant_s: float = 0.6  # smoothing of the one-target heading, s. [0.01, 10]
-    heading_min_speed_m_s: float = 0.2    # slower than this the heading holds, m/s. [0, 10]
-    min_ab_distance_m: float = 1e-3       # two targets closer than this frame as one, m. (0, 1]
+    heading_min_speed_m_s: float = 0.2  # slower than this the heading holds, m/s. [0, 10]
+    min_ab_distance_m: float = 1e-3  # two targets closer than this frame as one, m. (0, 1]
 
 
 class Framing:
     """Keeps the one-target heading between frames and fills A, B and the torus of a frame."""
 
-    def __init__(self, lens: Lens, style: Style, initial_rotation_xyzw: npt.NDArray[np.float64],
-                 settings: FramingSettings = FramingSettings()):
+    def __init__(
+        self,
+        lens: Lens,
+        style: Style,
+        initial_rotation_xyzw: npt.NDArray[np.float64],
+        settings: FramingSettings = FramingSettings(),
+    ):
         self.settings = settings
         self.lens = lens
         self.set_style(style)
@@ -48,8 +54,8 @@ class Framing:
     def set_style(self, style: Style) -> None:
         self.style = style
         self.alpha = composition_angle(style.screen_a, style.screen_b, self.lens)
-        self._screen_a = np.array([style.screen_a])                     # (1, 2): `error`'s goals, made once
-        self._screen_ab = np.array([style.screen_a, style.screen_b])    # (2, 2)
+        self._screen_a = np.array([style.screen_a])  # (1, 2): `error`'s goals, made once
+        self._screen_ab = np.array([style.screen_a, style.screen_b])  # (2, 2)
 
     def _gaze_point(self, aim_world: npt.NDArray[np.float64], dt_s: float) -> npt.NDArray[np.float64]:
         if self._last_aim is not None and dt_s > 0.0:
@@ -59,8 +65,9 @@ class Framing:
                 self.heading_rad += error * (1.0 - math.exp(-dt_s / self.settings.heading_time_constant_s))
         self._last_aim = aim_world
         g = self.style.gaze_room_m
-        gaze_point: npt.NDArray[np.float64] = aim_world + np.array([g * math.sin(self.heading_rad), 0.0,
-                                                                     g * math.cos(self.heading_rad)])
+        gaze_point: npt.NDArray[np.float64] = aim_world + np.array(
+            [g * math.sin(self.heading_rad), 0.0, g * math.cos(self.heading_rad)]
+        )
         return gaze_point
 
     def run(self, state: FrameState, toric: ToricFrame) -> None:

@@ -24,6 +24,7 @@ frame: what a session answers does not depend on when its worker was idle. (Late
 cost the demo scene's visibility: docs/toric.md.) A refill (the first update, and the first after a
 cut) is computed and applied at once: the search has no A-map without it.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -56,20 +57,26 @@ class _DeferredUpdate:
     slots: list[int]
     torus: Torus
     window: MapWindow
-    points_world: npt.NDArray[np.float64]    # (k, 3): the slots' sample points, world metres
-    exclude_ids: list[str]                   # k: the target each point lies on
+    points_world: npt.NDArray[np.float64]  # (k, 3): the slots' sample points, world metres
+    exclude_ids: list[str]  # k: the target each point lies on
     previous_torus: Torus | None
     dt_s: float
-    frames_left: int                         # updates (one a frame) until it is applied
-    maps: ShadowVelocityMaps | None = None   # once computed, until A_s is
+    frames_left: int  # updates (one a frame) until it is applied
+    maps: ShadowVelocityMaps | None = None  # once computed, until A_s is
     predicted: npt.NDArray[np.float32] | None = None  # (k, res, res) A_s, once computed
 
 
 class OcclusionMaps:
     """The map modes' state for one session: occluder scene, backend, sampler and A-map."""
 
-    def __init__(self, static_meshes_world: list[TriMesh], dynamic: DynamicObjects,
-                 sampler: TargetSampler, style: Style, rng: np.random.Generator) -> None:
+    def __init__(
+        self,
+        static_meshes_world: list[TriMesh],
+        dynamic: DynamicObjects,
+        sampler: TargetSampler,
+        style: Style,
+        rng: np.random.Generator,
+    ) -> None:
         self.scene = OccluderScene(static_meshes_world)
         for object_id, (mesh, transform) in dynamic.items():
             self.scene.add_dynamic(object_id, mesh, transform)
@@ -84,8 +91,9 @@ class OcclusionMaps:
         self._previous: tuple[Torus, float] | None = None
         self._deferred: _DeferredUpdate | None = None
         settings = self._settings(style)
-        self.amap = AnticipationMap(self.sampler.target_count, settings, StyleMaskSettings(kind=style.mask),
-                                    shared_bank(settings))
+        self.amap = AnticipationMap(
+            self.sampler.target_count, settings, StyleMaskSettings(kind=style.mask), shared_bank(settings)
+        )
         self._backend_key = self._backend_of(style)
         self.backend: MapBackend | None = make_backend(self._backend_key, self.scene)  # None once closed
 
@@ -93,11 +101,13 @@ class OcclusionMaps:
         return AnticipationSettings(
             samples_per_target=self.sampler.settings.samples_per_target,
             anticipate=style.visibility != VisibilityMode.NO_ANTICIPATION,
-            window=WindowSettings(resolution=style.map_resolution))
+            window=WindowSettings(resolution=style.map_resolution),
+        )
 
     def _backend_of(self, style: Style) -> str:
-        return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or \
-            choose_backend(self.scene.triangle_count, probe_gl_renderer(), style.map_resolution)
+        return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or choose_backend(
+            self.scene.triangle_count, probe_gl_renderer(), style.map_resolution
+        )
 
     def set_style(self, style: Style) -> None:
         """A new map resolution, anticipation switch or backend starts the maps afresh; a new mask
@@ -141,15 +151,26 @@ class OcclusionMaps:
             rows = [row[object_id] for object_id in moving]
             now = [self._latest[object_id] for object_id in moving]
             before = [self._before[object_id] for object_id in moving]
-            turn = Rotation.from_quat([tf.rotation_xyzw for tf in now]) * \
-                Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
-            linear[rows] = (np.array([tf.position_world for tf in now])
-                            - np.array([tf.position_world for tf in before])) / (now_s - before_s)
+            turn = (
+                Rotation.from_quat([tf.rotation_xyzw for tf in now])
+                * Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
+            )
+            linear[rows] = (np.array([tf.position_world for tf in now]) - np.array([tf.position_world for tf in before])) / (
+                now_s - before_s
+            )
             angular[rows] = turn.as_rotvec() / (now_s - before_s)
         self.scene.set_motions(ids, [self._latest[object_id] for object_id in ids], linear, angular)
 
-    def update(self, torus: Torus, theta: float, phi: float, time_s: float, target_transforms: list[RigidTransform],
-               target_ids: list[str], stages: StageClock) -> None:
+    def update(
+        self,
+        torus: Torus,
+        theta: float,
+        phi: float,
+        time_s: float,
+        target_transforms: list[RigidTransform],
+        target_ids: list[str],
+        stages: StageClock,
+    ) -> None:
         """Applies a deferred update whose frame has come, then draws the update due at time_s
         (2 of the 2r maps, one update every W / r s), computed and applied at once when it is a
         refill, deferred otherwise (module docstring); laps PROJECTION and AMAP on `stages` for
@@ -164,11 +185,16 @@ class OcclusionMaps:
             amap.schedule(time_s, slots)
             previous_torus, dt_s = (self._previous[0], time_s - self._previous[1]) if self._previous else (None, 0.0)
             self._deferred = _DeferredUpdate(
-                time_s, slots, torus, MapWindow.around(torus, theta, phi, amap.settings.window, lattice=amap.window),
+                time_s,
+                slots,
+                torus,
+                MapWindow.around(torus, theta, phi, amap.settings.window, lattice=amap.window),
                 self.sampler.points_world(target_transforms, slots),
                 [target_ids[self.sampler.target_of(s)] for s in slots],
-                previous_torus if dt_s > 0 else None, max(dt_s, 0.0),
-                frames_left=0 if refill else amap.settings.apply_after_frames)
+                previous_torus if dt_s > 0 else None,
+                max(dt_s, 0.0),
+                frames_left=0 if refill else amap.settings.apply_after_frames,
+            )
             self._apply_deferred(stages, count=False)
         self._previous = (torus, time_s)
 
@@ -187,9 +213,14 @@ class OcclusionMaps:
             return False
         if update.maps is None:
             assert self.backend is not None  # closing drops the deferred update with the backend
-            update.maps = self.backend.compute(update.torus, update.window, update.points_world,
-                                               exclude_ids=update.exclude_ids, previous_torus=update.previous_torus,
-                                               dt_s=update.dt_s)
+            update.maps = self.backend.compute(
+                update.torus,
+                update.window,
+                update.points_world,
+                exclude_ids=update.exclude_ids,
+                previous_torus=update.previous_torus,
+                dt_s=update.dt_s,
+            )
             if stages is not None:
                 stages.done(Stage.PROJECTION)
             if not whole:

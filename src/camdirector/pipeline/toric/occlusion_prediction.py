@@ -32,6 +32,7 @@ numpy blur: docs/toric.md). `anticipation_reference` computes the same snapped m
 texel and is the test oracle; the snapping (at most 2.8 deg and 5 % of the travel with the
 defaults) is part of the model, so the two agree to float rounding.
 """
+
 from __future__ import annotations
 
 import functools
@@ -49,6 +50,7 @@ KernelTable = tuple[npt.NDArray[np.int32], npt.NDArray[np.int32], npt.NDArray[np
 
 # -- the uncertainty function (section 4.2, eq. 1) ----------------------------------------------
 
+
 def length_falloff(delta: npt.ArrayLike, cutoff: float) -> npt.NDArray[np.float64]:
     """U_l(delta) = max(1 - |delta| / delta_W, 0)."""
     return np.maximum(1.0 - np.abs(np.asarray(delta, dtype=np.float64)) / cutoff, 0.0)
@@ -59,8 +61,9 @@ def angle_falloff(gamma_rad: npt.ArrayLike, cutoff_rad: float) -> npt.NDArray[np
     return np.maximum(1.0 - np.abs(np.asarray(gamma_rad, dtype=np.float64)) / cutoff_rad, 0.0)
 
 
-def uncertainty(travel: npt.ArrayLike, offset: npt.ArrayLike, length_cutoff: float,
-                angle_cutoff_rad: float) -> npt.NDArray[np.float64]:
+def uncertainty(
+    travel: npt.ArrayLike, offset: npt.ArrayLike, length_cutoff: float, angle_cutoff_rad: float
+) -> npt.NDArray[np.float64]:
     """U(v1, v2) = U_l(delta) * U_a(gamma) for travel v1 (..., 2) and offset v2 (..., 2), in texels.
 
     v1: the occluder's predicted travel over W from the neighbour texel; v2: the offset from that
@@ -88,8 +91,7 @@ def travel_texels(velocity_rad_s: npt.ArrayLike, window: MapWindow, horizon_s: f
     return v * (horizon_s / np.array([window.theta_step_rad, window.phi_step_rad]))
 
 
-def snap_travel(travel: npt.ArrayLike,
-                settings: AnticipationSettings) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+def snap_travel(travel: npt.ArrayLike, settings: AnticipationSettings) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
     """Kernel-bank bin (...,) int and the bin's travel (..., 2) texels for travels (..., 2) texels.
 
     Bin 0: a still occluder (travel under min_travel_texels). Others: 1 + length * direction_bins +
@@ -102,13 +104,12 @@ def snap_travel(travel: npt.ArrayLike,
     n_dir, n_len = settings.direction_bins, settings.length_bins
     clamped = np.minimum(length, settings.max_travel_texels)
     with np.errstate(divide="ignore"):
-        k_len = np.rint(np.log(np.maximum(clamped, 1e-300) / settings.min_travel_texels)
-                        / math.log(settings.length_bin_ratio))
+        k_len = np.rint(np.log(np.maximum(clamped, 1e-300) / settings.min_travel_texels) / math.log(settings.length_bin_ratio))
     k_len = np.clip(k_len, 0, n_len - 1).astype(np.int64)
     k_dir = np.mod(np.rint(np.arctan2(t[..., 1], t[..., 0]) / math.tau * n_dir), n_dir).astype(np.int64)
     still = length < settings.min_travel_texels
     bins = np.where(still, 0, 1 + k_len * n_dir + k_dir)
-    snapped_length = np.where(still, 0.0, settings.min_travel_texels * settings.length_bin_ratio ** k_len)
+    snapped_length = np.where(still, 0.0, settings.min_travel_texels * settings.length_bin_ratio**k_len)
     angle = k_dir * (math.tau / n_dir)
     snapped = np.stack([snapped_length * np.cos(angle), snapped_length * np.sin(angle)], axis=-1)
     return bins, snapped
@@ -116,8 +117,14 @@ def snap_travel(travel: npt.ArrayLike,
 
 def kernel_key(settings: AnticipationSettings) -> tuple[float, float, float, float, int, float]:
     """The settings a kernel bank depends on (not the window: kernels are in texels)."""
-    return (settings.length_cutoff, settings.angle_cutoff_rad, settings.max_travel_texels,
-            settings.min_travel_texels, settings.direction_bins, settings.length_bin_ratio)
+    return (
+        settings.length_cutoff,
+        settings.angle_cutoff_rad,
+        settings.max_travel_texels,
+        settings.min_travel_texels,
+        settings.direction_bins,
+        settings.length_bin_ratio,
+    )
 
 
 def _kernel_radius(length_texels: float, settings: AnticipationSettings) -> int:
@@ -127,8 +134,13 @@ def _kernel_radius(length_texels: float, settings: AnticipationSettings) -> int:
 
 # -- reference (the oracle) ---------------------------------------------------------------------
 
-def anticipation_reference(shadow: npt.ArrayLike, velocity_rad_s: npt.ArrayLike, window: MapWindow,
-                           settings: AnticipationSettings = AnticipationSettings()) -> npt.NDArray[np.float64]:
+
+def anticipation_reference(
+    shadow: npt.ArrayLike,
+    velocity_rad_s: npt.ArrayLike,
+    window: MapWindow,
+    settings: AnticipationSettings = AnticipationSettings(),
+) -> npt.NDArray[np.float64]:
     """A_s of one sample: (res, res) float64 from its S-map (res, res) and V-map (res, res, 2) rad/s.
 
     Plain and slow, the test oracle of predict_occlusion. For every occluded texel n, the kernel
@@ -161,6 +173,7 @@ def anticipation_reference(shadow: npt.ArrayLike, velocity_rad_s: npt.ArrayLike,
 
 
 # -- fast: the kernel bank ----------------------------------------------------------------------
+
 
 @functools.lru_cache(maxsize=8)
 def shared_bank(settings: AnticipationSettings) -> KernelBank:
@@ -201,12 +214,12 @@ class KernelBank:
         if cached is not None:
             return cached
         st = self.settings
-        length = st.min_travel_texels * st.length_bin_ratio ** length_bin
+        length = st.min_travel_texels * st.length_bin_ratio**length_bin
         radius = _kernel_radius(length, st)
         di, dj = np.meshgrid(np.arange(-radius, radius + 1), np.arange(-radius, radius + 1), indexing="ij")
-        offsets = np.stack([di.ravel(), dj.ravel()], axis=-1)                       # (g, 2)
+        offsets = np.stack([di.ravel(), dj.ravel()], axis=-1)  # (g, 2)
         angle = np.arange(st.direction_bins) * (math.tau / st.direction_bins)
-        travel = length * np.stack([np.cos(angle), np.sin(angle)], axis=-1)        # (n_dir, 2)
+        travel = length * np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (n_dir, 2)
         weights = uncertainty(travel[:, None, :], offsets[None, :, :], st.length_cutoff, st.angle_cutoff_rad)
         width = max(int((weights > 0.0).sum(axis=1).max()), 1)
         t_di = np.zeros((st.direction_bins, width), dtype=np.int32)
@@ -217,8 +230,8 @@ class KernelBank:
             if len(keep) == 0:  # no texel centre in the wedge: the occluder stays
                 t_w[d, 0] = 1.0
                 continue
-            t_di[d, :len(keep)], t_dj[d, :len(keep)] = offsets[keep, 0], offsets[keep, 1]
-            t_w[d, :len(keep)] = row[keep] / row[keep].sum()
+            t_di[d, : len(keep)], t_dj[d, : len(keep)] = offsets[keep, 0], offsets[keep, 1]
+            t_w[d, : len(keep)] = row[keep] / row[keep].sum()
         self._tables[length_bin] = (t_di, t_dj, t_w)
         return self._tables[length_bin]
 
@@ -245,8 +258,9 @@ class KernelBank:
             self._flat[key] = flat
         return flat
 
-    def scatter(self, bins: npt.ArrayLike, base: npt.NDArray[np.intp], values: npt.NDArray[np.float64] | None,
-                width: int, size: int) -> npt.NDArray[np.float64]:
+    def scatter(
+        self, bins: npt.ArrayLike, base: npt.NDArray[np.intp], values: npt.NDArray[np.float64] | None, width: int, size: int
+    ) -> npt.NDArray[np.float64]:
         """Sum of every source's kernel placed at its flat position: (size,) float64.
 
         bins (m,): each source's bin; base (m,) intp: its flat index in a buffer of rows ``width``
@@ -279,9 +293,13 @@ class KernelBank:
         return out
 
 
-def predict_occlusion(shadow: npt.ArrayLike, velocity_rad_s: npt.ArrayLike, window: MapWindow,
-                      settings: AnticipationSettings = AnticipationSettings(),
-                      bank: KernelBank | None = None) -> npt.NDArray[np.float32]:
+def predict_occlusion(
+    shadow: npt.ArrayLike,
+    velocity_rad_s: npt.ArrayLike,
+    window: MapWindow,
+    settings: AnticipationSettings = AnticipationSettings(),
+    bank: KernelBank | None = None,
+) -> npt.NDArray[np.float32]:
     """A_s for k samples at once: (k, res, res) float32 from S (k, res, res) and V (k, res, res, 2) rad/s.
 
     Same model as anticipation_reference (equal to it within float rounding); 2-D inputs are one sample.
@@ -313,5 +331,5 @@ def predict_occlusion(shadow: npt.ArrayLike, velocity_rad_s: npt.ArrayLike, wind
     occluded_s = flat_s[occluded]
     values = None if np.all(occluded_s == 1.0) else occluded_s.astype(np.float64)
     padded = bank.scatter(bins, base, values, width, k * width * width).reshape(k, width, width)
-    predicted = np.minimum(padded[:, pad:pad + n, pad:pad + n], 1.0).astype(np.float32)
+    predicted = np.minimum(padded[:, pad : pad + n, pad : pad + n], 1.0).astype(np.float32)
     return predicted[0] if single else predicted

@@ -29,6 +29,7 @@ flurry of cuts; and when the camera has been mostly occluded (ray casts to the s
 inside an occluder's shadow (we saw the A-map do so under a wide, slow wall), and the local
 searches would never give up.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,20 +53,20 @@ class RiskField(Protocol):
 
 @dataclass(frozen=True)
 class SearchSettings:
-    samples: int = 50                # candidates per local search area (paper, section 6). [1, 10000]
-    chi_deg: float = 10.0            # angular span at high speed, chi (Table 2), deg. (0, 360]
-    g_per_m: float = 5.0             # how fast the angular span narrows with the step length, g (Table 2), 1/m. [0, 1000]
-    h: float = 0.5                   # linear freedom in speed, h (Table 2). [0, 10]
-    rho_m: float = 0.1               # smallest linear span, rho (Table 2), m. (0, 100]
-    look_ahead_frames: int = 10      # N of D_LA (user-defined in the paper). [2, 1000]
-    damping_per_s: float = 4.0       # c/m of the damping force (the paper gives no value), 1/s. [0, 30]
-    cut_samples: int = 64            # cut candidates over the torus. [1, 100000]
+    samples: int = 50  # candidates per local search area (paper, section 6). [1, 10000]
+    chi_deg: float = 10.0  # angular span at high speed, chi (Table 2), deg. (0, 360]
+    g_per_m: float = 5.0  # how fast the angular span narrows with the step length, g (Table 2), 1/m. [0, 1000]
+    h: float = 0.5  # linear freedom in speed, h (Table 2). [0, 10]
+    rho_m: float = 0.1  # smallest linear span, rho (Table 2), m. (0, 100]
+    look_ahead_frames: int = 10  # N of D_LA (user-defined in the paper). [2, 1000]
+    damping_per_s: float = 4.0  # c/m of the damping force (the paper gives no value), 1/s. [0, 30]
+    cut_samples: int = 64  # cut candidates over the torus. [1, 100000]
     min_cut_angle_deg: float = 30.0  # the 30-degree rule: a cut turns the view at least this much, deg. [0, 180]
-    min_shot_s: float = 1.0          # no cut before a shot is this long (not in the paper), s. [0, 600]
-    improvement: float = 0.005        # a place is less occluded only when better by this much (above the maps' noise). [0, 1]
-    stuck_occluded: float = 0.5      # ray-cast occluded share of the samples that counts as "stuck" (not in the paper). [0, 1]
-    stuck_s: float = 0.25            # stuck this long: try the cut before any local move (not in the paper), s. [0, 60]
-    theta_margin_ratio: float = 0.2   # the camera keeps this share of theta's range from either end (not in the paper). [0, 0.45]
+    min_shot_s: float = 1.0  # no cut before a shot is this long (not in the paper), s. [0, 600]
+    improvement: float = 0.005  # a place is less occluded only when better by this much (above the maps' noise). [0, 1]
+    stuck_occluded: float = 0.5  # ray-cast occluded share of the samples that counts as "stuck" (not in the paper). [0, 1]
+    stuck_s: float = 0.25  # stuck this long: try the cut before any local move (not in the paper), s. [0, 60]
+    theta_margin_ratio: float = 0.2  # the camera keeps this share of theta's range from either end (not in the paper). [0, 0.45]
     view_phi_margin_deg: float = 25.0  # margin kept from top (phi 0) and bottom (phi 180) views (not in the paper), deg. [0, 89]
 
     def __post_init__(self) -> None:
@@ -80,8 +81,8 @@ class SearchResult:
     theta: float
     phi: float
     cut: bool
-    strategy: str   # "start", "single_frame", "look_ahead", "cut", "coast"
-    risk: float     # risk of the chosen place (local searches) or its occluded fraction (cut)
+    strategy: str  # "start", "single_frame", "look_ahead", "cut", "coast"
+    risk: float  # risk of the chosen place (local searches) or its occluded fraction (cut)
 
 
 def _spans(settings: SearchSettings, speed_m_s: float, dt_s: float) -> tuple[float, float]:
@@ -111,8 +112,14 @@ class OcclusionSearch:
         self._occluded_since_s = None
         return SearchResult(theta, phi, cut=True, strategy="start", risk=0.0)
 
-    def _sector(self, p: npt.NDArray[np.float64], e1: npt.NDArray[np.float64], e2: npt.NDArray[np.float64],
-                v_t: npt.NDArray[np.float64], dt_s: float) -> tuple[npt.NDArray[np.float64], float]:
+    def _sector(
+        self,
+        p: npt.NDArray[np.float64],
+        e1: npt.NDArray[np.float64],
+        e2: npt.NDArray[np.float64],
+        v_t: npt.NDArray[np.float64],
+        dt_s: float,
+    ) -> tuple[npt.NDArray[np.float64], float]:
         """(samples (n, 3) world on the tangent plane, f_l) of the area reachable in dt_s."""
         speed = float(np.linalg.norm(v_t))
         f_r, f_l = _spans(self.settings, speed, dt_s)
@@ -124,9 +131,17 @@ class OcclusionSearch:
         offsets = dist[:, None] * (np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2)
         return p + offsets, f_l
 
-    def step(self, torus: Torus, dt_s: float, time_s: float, risk: RiskField,
-             cut_occlusion: Occlusion, side: float,
-             max_speed_m_s: float, max_accel_m_s2: float) -> SearchResult:
+    def step(
+        self,
+        torus: Torus,
+        dt_s: float,
+        time_s: float,
+        risk: RiskField,
+        cut_occlusion: Occlusion,
+        side: float,
+        max_speed_m_s: float,
+        max_accel_m_s2: float,
+    ) -> SearchResult:
         """One frame of section 5. `cut_occlusion(positions (n, 3)) -> (n,)` occluded fraction by
         ray casts; `side` (+1 / -1) is the upright half of the torus for cut candidates."""
         s = self.settings
@@ -195,8 +210,9 @@ class OcclusionSearch:
         self.velocity_world = (p_next - p) / dt_s
         return SearchResult(self.theta, self.phi, cut=False, strategy=strategy, risk=chosen_risk)
 
-    def _outside(self, theta: npt.NDArray[np.float64], phi: npt.NDArray[np.float64], lo: float,
-                 hi: float) -> npt.NDArray[np.bool_]:
+    def _outside(
+        self, theta: npt.NDArray[np.float64], phi: npt.NDArray[np.float64], lo: float, hi: float
+    ) -> npt.NDArray[np.bool_]:
         """Places the camera may not go: the arc's ends, and top and bottom views."""
         margin = math.radians(self.settings.view_phi_margin_deg)
         outside: npt.NDArray[np.bool_] = (theta < lo) | (theta > hi) | (np.abs(phi) < margin) | (np.abs(phi) > math.pi - margin)
@@ -207,8 +223,9 @@ class OcclusionSearch:
         top = theta_max(torus.alpha)
         return self.settings.theta_margin_ratio * top, (1.0 - self.settings.theta_margin_ratio) * top
 
-    def _cut_to(self, torus: Torus, coast: npt.NDArray[np.float64], cut_occlusion: Occlusion, side: float,
-                time_s: float) -> SearchResult | None:
+    def _cut_to(
+        self, torus: Torus, coast: npt.NDArray[np.float64], cut_occlusion: Occlusion, side: float, time_s: float
+    ) -> SearchResult | None:
         """Teleports to a cut place when there is one (velocity reset, a new shot)."""
         cut = self._cut(torus, coast, cut_occlusion, side)
         if cut is None:
@@ -219,8 +236,9 @@ class OcclusionSearch:
         self._occluded_since_s = None
         return SearchResult(self.theta, self.phi, cut=True, strategy="cut", risk=occluded)
 
-    def _cut(self, torus: Torus, coast: npt.NDArray[np.float64], cut_occlusion: Occlusion,
-             side: float) -> tuple[float, float, float] | None:
+    def _cut(
+        self, torus: Torus, coast: npt.NDArray[np.float64], cut_occlusion: Occlusion, side: float
+    ) -> tuple[float, float, float] | None:
         """(theta, phi, occluded fraction) of a less occluded place obeying the 30-degree rule, or None."""
         s = self.settings
         current = float(cut_occlusion(coast[None])[0])

@@ -32,6 +32,7 @@ at that ray's offset. SmoothingTime and MinimumOcclusionTime are left out: both 
 (off), and with 0 Cinemachine's code skips them. RotationDampingBypass is identity (our rigs have
 no rotation damping).
 """
+
 from __future__ import annotations
 
 import math
@@ -45,9 +46,9 @@ from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 
-_EPSILON = 1e-4          # Cinemachine's UnityVectorExtensions.Epsilon
+_EPSILON = 1e-4  # Cinemachine's UnityVectorExtensions.Epsilon
 _LOG_RESIDUAL = math.log(100.0)  # Cinemachine's Damper: a damping time reaches 99 % of the way
-_RING_RAYS = 8           # rays per ring of the sampled sphere cast
+_RING_RAYS = 8  # rays per ring of the sampled sphere cast
 _Amount = TypeVar("_Amount", float, npt.NDArray[np.float64])  # what `damp` damps: a time, or a displacement
 
 
@@ -56,14 +57,18 @@ class ReactiveSettings:
     """Cinemachine 3's defaults (CinemachineDeoccluder: MinimumDistanceFromTarget,
     ObstacleAvoidance.Default)."""
 
-    minimum_distance_m: float = 0.1    # obstacles nearer A than this are ignored (MinimumDistanceFromTarget), m. [0.01, 100]
-    camera_radius_m: float = 0.1       # the camera keeps this far from an obstacle (CameraRadius), m. [0, 10]
-    damping_s: float = 0.2             # time to go 99 % of the way back out once clear (Damping), s. [0, 10]
+    minimum_distance_m: float = 0.1  # obstacles nearer A than this are ignored (MinimumDistanceFromTarget), m. [0.01, 100]
+    camera_radius_m: float = 0.1  # the camera keeps this far from an obstacle (CameraRadius), m. [0, 10]
+    damping_s: float = 0.2  # time to go 99 % of the way back out once clear (Damping), s. [0, 10]
     damping_when_occluded_s: float = 0.0  # time to go 99 % of the way in when occluded (DampingWhenOccluded), s. [0, 10]
 
     def __post_init__(self) -> None:
-        if not (0.01 <= self.minimum_distance_m <= 100.0 and 0.0 <= self.camera_radius_m <= 10.0
-                and 0.0 <= self.damping_s <= 10.0 and 0.0 <= self.damping_when_occluded_s <= 10.0):
+        if not (
+            0.01 <= self.minimum_distance_m <= 100.0
+            and 0.0 <= self.camera_radius_m <= 10.0
+            and 0.0 <= self.damping_s <= 10.0
+            and 0.0 <= self.damping_when_occluded_s <= 10.0
+        ):
             raise ValueError(f"ReactiveSettings out of range: {self}")
 
 
@@ -99,9 +104,9 @@ class Deoccluder:
         self.ray_scene = ray_scene
         self.settings = settings
         self._offset_from_a: npt.NDArray[np.float64] | None = None  # last camera position - A, m (PreviousCameraOffset)
-        self._displacement = np.zeros(3)               # last correction, m (PreviousDisplacement)
-        self._damp_time_s = 0.0                        # last damping time, s (PreviousDampTime)
-        self._time_s: float | None = None              # when it last ran, s
+        self._displacement = np.zeros(3)  # last correction, m (PreviousDisplacement)
+        self._damp_time_s = 0.0  # last damping time, s (PreviousDampTime)
+        self._time_s: float | None = None  # when it last ran, s
 
     def clear_position(self, camera_world: npt.NDArray[np.float64], a_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Where pull-forward puts a camera wanted at camera_world (3,) looking at a_world (3,):
@@ -158,12 +163,14 @@ class Deoccluder:
         displaced = bool(np.linalg.norm(displacement) > 1e-3)
         if not displaced:
             return proposed, False
-        return CameraPose(camera, _turn_toward(proposed.rotation_xyzw, wanted - a_world, camera - a_world),
-                          proposed.vertical_fov_deg), True
+        return CameraPose(
+            camera, _turn_toward(proposed.rotation_xyzw, wanted - a_world, camera - a_world), proposed.vertical_fov_deg
+        ), True
 
 
-def _turn_toward(rotation_xyzw: npt.NDArray[np.float64], from_offset: npt.NDArray[np.float64],
-                 to_offset: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def _turn_toward(
+    rotation_xyzw: npt.NDArray[np.float64], from_offset: npt.NDArray[np.float64], to_offset: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
     """The camera rotation turned by the least rotation taking A's direction seen from a camera at
     A + from_offset to the direction seen from A + to_offset: A keeps its place on screen."""
     a = -from_offset / np.linalg.norm(from_offset)

@@ -16,6 +16,7 @@ the A-map (`anticipation_map`, in the map modes) and defers its amortized map up
 (`do_deferred_work`); for the rest (no player inputs, the targets as of the latest frame) it
 answers as `RigBase` does. Its part of a frame's state is `ToricFrame` (frame.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -51,9 +52,15 @@ class ToricRig(RigBase):
     static_meshes_world and dynamic (object id -> (mesh, latest transform)) are the session's,
     kept current by INGEST."""
 
-    def __init__(self, scene: SceneSpec, ray_scene: RayScene, static_meshes_world: list[TriMesh],
-                 dynamic: DynamicObjects, rng: np.random.Generator,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(
+        self,
+        scene: SceneSpec,
+        ray_scene: RayScene,
+        static_meshes_world: list[TriMesh],
+        dynamic: DynamicObjects,
+        rng: np.random.Generator,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
         self.lens = scene.lens
         self.style = scene.style
         self.target_ids = [t.id for t in scene.targets]
@@ -115,8 +122,9 @@ class ToricRig(RigBase):
             self.maps.close()
             self.maps = None
 
-    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
-            last: FrameState | None) -> None:
+    def run(
+        self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
+    ) -> None:
         """FRAMING, PROJECTION, AMAP, MOTION and VISIBILITY into state and its part `state.toric`,
         timed into state.stage_ms; a composition changed by set_style since the last frame makes
         this frame a cut."""
@@ -137,8 +145,14 @@ class ToricRig(RigBase):
         state.cut = state.cut or self._style_cut
         self._style_cut = False
 
-    def _move(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform],
-              last: FrameState | None, stages: StageClock) -> None:
+    def _move(
+        self,
+        state: FrameState,
+        toric: ToricFrame,
+        target_transforms: list[RigidTransform],
+        last: FrameState | None,
+        stages: StageClock,
+    ) -> None:
         """MOTION: the rig of the style's visibility mode (FRAMING_ONLY: camera_motion.py; REACTIVE:
         that plus reactive.py; RAYCAST and the map modes: occlusion_search.py), with PROJECTION and
         AMAP lapped on `stages` in the map modes when the maps are due."""
@@ -173,14 +187,14 @@ class ToricRig(RigBase):
             stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
             assert self.maps is not None  # built when the style entered a map mode
             assert self.search.theta is not None  # the search started above
-            self.maps.update(torus, self.search.theta, self.search.phi, state.time_s, target_transforms,
-                             self.target_ids, stages)
+            self.maps.update(torus, self.search.theta, self.search.phi, state.time_s, target_transforms, self.target_ids, stages)
             risk = self.maps
         else:
             risk = RaycastRisk(torus, occluded)
         side = math.copysign(1.0, self.motion.preferred_place(torus)[1])  # upright half for cuts
-        result = self.search.step(torus, state.dt_s, state.time_s, risk, occluded, side,
-                                  self.style.max_speed_m_s, self.style.max_accel_m_s2)
+        result = self.search.step(
+            torus, state.dt_s, state.time_s, risk, occluded, side, self.style.max_speed_m_s, self.style.max_accel_m_s2
+        )
         toric.theta, toric.phi, state.cut = result.theta, result.phi, result.cut
         state.flags.append(f"search_{result.strategy}")
         if result.cut and self.maps is not None:

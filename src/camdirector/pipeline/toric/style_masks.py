@@ -8,6 +8,7 @@ Our reading: the paper writes A = 1 - (1 - A * Mask), which is A * Mask and woul
 places look free. We apply A = 1 - (1 - A) * Mask with Mask = 1 allowed, 0 excluded, so an empty
 mask leaves A unchanged and an excluded place reads as certainly occluded.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,10 +32,10 @@ class StyleMaskSettings:
     """
 
     kind: MaskKind = MaskKind.EMPTY
-    soft_width_rad: float = 0.6          # width in theta of the soft "behind" gradient, rad. (0, 3]
-    top_view_phi_deg: float = 30.0       # |phi| below this is a top view, deg. [0, 90]
-    bottom_view_phi_deg: float = 135.0   # |phi| above this is a bottom view, deg. [90, 180]
-    view_ramp_deg: float = 20.0          # width of the smooth top/bottom transitions, deg. (0, 90]
+    soft_width_rad: float = 0.6  # width in theta of the soft "behind" gradient, rad. (0, 3]
+    top_view_phi_deg: float = 30.0  # |phi| below this is a top view, deg. [0, 90]
+    bottom_view_phi_deg: float = 135.0  # |phi| above this is a bottom view, deg. [90, 180]
+    view_ramp_deg: float = 20.0  # width of the smooth top/bottom transitions, deg. (0, 90]
 
     def __post_init__(self) -> None:
         checks = [
@@ -88,4 +89,3 @@ def apply_style_mask(a_map: npt.ArrayLike, mask: npt.ArrayLike) -> npt.NDArray[n
     """
     a = np.asarray(a_map, dtype=np.float64)
     return (1.0 - (1.0 - a) * np.asarray(mask, dtype=np.float64)).astype(np.float32)
-

@@ -11,6 +11,7 @@ Points are uniform over each mesh's area, drawn in the target's local frame and 
 current transform. Slots are numbered slot = target * r + sample, as in pipeline/toric/anticipation_map.py.
 (pipeline/toric/visibility.py keeps its own fixed per-session points for the rig's visibility estimate.)
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -27,7 +28,7 @@ class SurfaceSampler:
     """Uniform points on one mesh's surface: the area table is built once, a draw is O(log faces)."""
 
     def __init__(self, mesh: TriMesh) -> None:
-        tri = mesh.vertices[mesh.faces]                                              # (m, 3, 3)
+        tri = mesh.vertices[mesh.faces]  # (m, 3, 3)
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
         total = float(area.sum())
         if not total > 0.0:
@@ -56,7 +57,7 @@ class SurfaceSampler:
 
 @dataclass(frozen=True)
 class TargetSamplingSettings:
-    samples_per_target: int = 5   # r (the paper's Table 2); keep equal to AnticipationSettings.samples_per_target. [1, 64]
+    samples_per_target: int = 5  # r (the paper's Table 2); keep equal to AnticipationSettings.samples_per_target. [1, 64]
 
     def __post_init__(self) -> None:
         if not 1 <= self.samples_per_target <= 64:
@@ -66,8 +67,12 @@ class TargetSamplingSettings:
 class TargetSampler:
     """r sample points per target (one or two targets), each re-drawn when its map is refreshed."""
 
-    def __init__(self, target_meshes: Sequence[TriMesh], rng: np.random.Generator,
-                 settings: TargetSamplingSettings = TargetSamplingSettings()) -> None:
+    def __init__(
+        self,
+        target_meshes: Sequence[TriMesh],
+        rng: np.random.Generator,
+        settings: TargetSamplingSettings = TargetSamplingSettings(),
+    ) -> None:
         if len(target_meshes) not in (1, 2):
             raise ValueError("TargetSampler: one or two target meshes")
         self.settings = settings
@@ -94,8 +99,9 @@ class TargetSampler:
         for slot in slots:
             self.points_local[slot] = self._samplers[self.target_of(int(slot))].sample(1, rng)[0]
 
-    def points_world(self, target_transforms: Sequence[RigidTransform],
-                     slots: Sequence[int] | None = None) -> npt.NDArray[np.float64]:
+    def points_world(
+        self, target_transforms: Sequence[RigidTransform], slots: Sequence[int] | None = None
+    ) -> npt.NDArray[np.float64]:
         """(len(slots), 3) world metres: the slots' points (all slots if None) under the targets' transforms."""
         if len(target_transforms) != self.target_count:
             raise ValueError("points_world: one transform per target")

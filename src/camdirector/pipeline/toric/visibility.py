@@ -4,6 +4,7 @@ Sample points are drawn once per session on each target's surface (area-weighted
 session's seeded generator), carried by the targets' transforms, and tested by ray casting from
 the camera against the rest of the scene (targets do not occlude themselves or each other).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,8 +25,13 @@ class VisibilitySettings:
 
 
 class VisibilityEstimate:
-    def __init__(self, ray_scene: RayScene, target_meshes: list[TriMesh], rng: np.random.Generator,
-                 settings: VisibilitySettings = VisibilitySettings()):
+    def __init__(
+        self,
+        ray_scene: RayScene,
+        target_meshes: list[TriMesh],
+        rng: np.random.Generator,
+        settings: VisibilitySettings = VisibilitySettings(),
+    ):
         self.ray_scene = ray_scene
         self.samples_local = [SurfaceSampler(m).sample(settings.samples_per_target, rng) for m in target_meshes]
 
@@ -33,8 +39,9 @@ class VisibilityEstimate:
         """(k, 3) the sample points carried by the targets' current RigidTransforms (target order)."""
         return np.concatenate([t.apply(s) for t, s in zip(target_transforms, self.samples_local)])
 
-    def occluded_fraction(self, cameras_world: npt.NDArray[np.float64],
-                          points_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    def occluded_fraction(
+        self, cameras_world: npt.NDArray[np.float64], points_world: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.float64]:
         """(n,) share of the points hidden from each of (n, 3) camera places, by ray casting."""
         n, k = len(cameras_world), len(points_world)
         hidden = self.ray_scene.occluded(np.repeat(cameras_world, k, axis=0), np.tile(points_world, (n, 1)))

@@ -16,6 +16,7 @@ camera came closer than its shot size allows while the target retreated ahead of
 Integration: semi-implicit Euler in substeps of at most `max_substep_s`, so the motion is the
 same at any frame rate.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,11 +27,17 @@ import numpy.typing as npt
 from camdirector.pipeline.tracks.settings import DirectorSettings
 
 
-def move_camera(position_world: npt.NDArray[np.float64], velocity_m_s: npt.NDArray[np.float64],
-                target_world: npt.NDArray[np.float64],
-                target_velocity_m_s: npt.NDArray[np.float64], actor_world: npt.NDArray[np.float64], dt_s: float,
-                settings: DirectorSettings, repulsion_radius_m: float,
-                nearest_m: float = 0.0) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+def move_camera(
+    position_world: npt.NDArray[np.float64],
+    velocity_m_s: npt.NDArray[np.float64],
+    target_world: npt.NDArray[np.float64],
+    target_velocity_m_s: npt.NDArray[np.float64],
+    actor_world: npt.NDArray[np.float64],
+    dt_s: float,
+    settings: DirectorSettings,
+    repulsion_radius_m: float,
+    nearest_m: float = 0.0,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(position (3,), velocity (3,)) after dt_s seconds; target_velocity_m_s (3,): the target's
     over the last frame; actor_world (3,) is the repelling point, pushing inside
     repulsion_radius_m (the director's, from its shot size); the camera never comes nearer to it

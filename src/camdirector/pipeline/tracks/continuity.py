@@ -15,6 +15,7 @@ in for its motion.
 The director treats both rules as hard constraints (a cut that breaks one is not taken) and uses
 the two sub-scores to rank the cuts that keep them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,8 +24,9 @@ import numpy.typing as npt
 from camdirector.geometry.transforms import UP_WORLD
 
 
-def cut_angle_deg(previous_camera_world: npt.NDArray[np.float64], cameras_world: npt.NDArray[np.float64],
-                  actor_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def cut_angle_deg(
+    previous_camera_world: npt.NDArray[np.float64], cameras_world: npt.NDArray[np.float64], actor_world: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
     """(k,) angle at actor_world (3,) between the previous camera (3,) and each camera (k, 3), deg."""
     a = previous_camera_world - actor_world
     b = np.atleast_2d(cameras_world) - actor_world
@@ -33,8 +35,9 @@ def cut_angle_deg(previous_camera_world: npt.NDArray[np.float64], cameras_world:
     return angle_deg
 
 
-def action_direction(velocity_world: npt.NDArray[np.float64], forward_world: npt.NDArray[np.float64],
-                     min_speed_m_s: float) -> npt.NDArray[np.float64]:
+def action_direction(
+    velocity_world: npt.NDArray[np.float64], forward_world: npt.NDArray[np.float64], min_speed_m_s: float
+) -> npt.NDArray[np.float64]:
     """Unit horizontal direction of the line of action (3,): the motion, or the facing when slow
     (zero vector when neither has a horizontal part)."""
     v = np.array([velocity_world[0], 0.0, velocity_world[2]])
@@ -44,8 +47,9 @@ def action_direction(velocity_world: npt.NDArray[np.float64], forward_world: npt
     return v / norm if norm > 1e-9 else np.zeros(3)
 
 
-def screen_motion(cameras_world: npt.NDArray[np.float64], actor_world: npt.NDArray[np.float64],
-                  direction_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def screen_motion(
+    cameras_world: npt.NDArray[np.float64], actor_world: npt.NDArray[np.float64], direction_world: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
     """(k, 2) the motion direction (3,) as seen on screen (right, up) from each level camera
     (k, 3) looking at actor_world (3,)."""
     forward = actor_world - np.atleast_2d(cameras_world)

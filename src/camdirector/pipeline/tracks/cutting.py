@@ -6,6 +6,7 @@ never under `min_shot_s`), when the actor has been occluded for longer than `occ
 (200 ms in the paper), or when the framing (shot size) has been violated for longer than
 `framing_cut_s` (200 ms). Occlusion and framing count from the first frame they are seen bad.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,8 +27,7 @@ class CutReason(Enum):
 
 def draw_shot_duration_s(rng: np.random.Generator, settings: DirectorSettings) -> float:
     """One shot duration from the log-normal model, seconds (at least `min_shot_s`)."""
-    return max(settings.min_shot_s, float(rng.lognormal(np.log(settings.shot_duration_median_s),
-                                                         settings.shot_duration_sigma)))
+    return max(settings.min_shot_s, float(rng.lognormal(np.log(settings.shot_duration_median_s), settings.shot_duration_sigma)))
 
 
 @dataclass

@@ -43,6 +43,7 @@ Scores are averages weighted by the settings' weights; to keep a frame cheap onl
 `_SCORED_POIS` POIs best on the two sub-scores that need no ray or search (shot size, indirect
 visibility) get the direct-visibility rays and the A* distance.
 """
+
 from __future__ import annotations
 
 import time
@@ -123,11 +124,18 @@ class GraphDirector:
     """Follows one actor on a level's camera navigation graph (module docstring). clock: seconds,
     any origin, for the step's timings (the session's injected clock in the server)."""
 
-    def __init__(self, artifact: LevelArtifact, settings: DirectorSettings, rng: np.random.Generator,
-                 style: DirectorStyle = DirectorStyle(), clock: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(
+        self,
+        artifact: LevelArtifact,
+        settings: DirectorSettings,
+        rng: np.random.Generator,
+        style: DirectorStyle = DirectorStyle(),
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
         self.graph = RuntimeGraph(artifact.nodes_world, artifact.edges)
-        centroids = artifact.refined_vertices[artifact.refined_faces].mean(axis=1) if len(artifact.refined_faces) \
-            else np.empty((0, 3))
+        centroids = (
+            artifact.refined_vertices[artifact.refined_faces].mean(axis=1) if len(artifact.refined_faces) else np.empty((0, 3))
+        )
         self._indirect = IndirectVisibility(centroids, artifact.visibility)
         self._actor_height_m = artifact.agent_height_m
         self._actor_radius_m = settings.actor_radius_fraction * artifact.agent_height_m
@@ -145,7 +153,7 @@ class GraphDirector:
         self._last_time_s: float | None = None
         self._last_actor: _Floats | None = None
         self._actor_velocity = np.zeros(3)
-        self._scores: dict[str, float] = {}   # of the target chosen in the current step
+        self._scores: dict[str, float] = {}  # of the target chosen in the current step
 
     @property
     def style(self) -> DirectorStyle:
@@ -157,8 +165,11 @@ class GraphDirector:
 
     def screen_fraction(self) -> float:
         s = self._settings
-        return {ShotSize.MEDIUM: s.medium_shot_screen_fraction, ShotSize.LONG: s.long_shot_screen_fraction,
-                ShotSize.EXTREME_LONG: s.extreme_long_shot_screen_fraction}[self._style.shot_size]
+        return {
+            ShotSize.MEDIUM: s.medium_shot_screen_fraction,
+            ShotSize.LONG: s.long_shot_screen_fraction,
+            ShotSize.EXTREME_LONG: s.extreme_long_shot_screen_fraction,
+        }[self._style.shot_size]
 
     def nearest_m(self, frame_margin: float) -> float:
         """The distance under which the shot size's framed extent, centred, no longer fits with
@@ -178,8 +189,9 @@ class GraphDirector:
     def optimal_distance_m(self) -> float:
         return optimal_distance_m(self._actor_height_m, self.screen_fraction(), self._settings.vertical_fov_deg)
 
-    def step(self, time_s: float, actor_position_world: npt.ArrayLike, actor_forward: npt.ArrayLike,
-             ray_scene: RayScene) -> TrackShot | None:
+    def step(
+        self, time_s: float, actor_position_world: npt.ArrayLike, actor_forward: npt.ArrayLike, ray_scene: RayScene
+    ) -> TrackShot | None:
         """One frame. actor_position_world (3,): the actor's feet, metres; actor_forward (3,): its
         facing (any length); ray_scene: the level and its dynamic occluders, current transforms.
         Frames must come in time order; a repeated or older time moves nothing. None until a first
@@ -248,33 +260,49 @@ class GraphDirector:
         if cut:
             self._camera, self._velocity = target.copy(), np.zeros(3)
         elif movement != Movement.STATIC and self._camera is not None:
-            self._camera, self._velocity = move_camera(self._camera, self._velocity, target, target_velocity, look_at,
-                                                       dt, s, self.repulsion_radius_m(), self.nearest_m(0.0))
+            self._camera, self._velocity = move_camera(
+                self._camera,
+                self._velocity,
+                target,
+                target_velocity,
+                look_at,
+                dt,
+                s,
+                self.repulsion_radius_m(),
+                self.nearest_m(0.0),
+            )
         camera = self._camera
         assert camera is not None  # a target comes with a camera: the cut that chose the first one placed it
         visible = float(direct_visibility(camera[None], actor_points, ray_scene)[0])
         stages.done(TracksStage.CAMERA_UPDATE)
         aim = aim_point(camera, ends, self._actor_radius_m)
-        return TrackShot(position_world=camera.copy(), look_at_world=aim, cut=cut,
-                         shot_id=self._shot_id,
-                         visible_fraction=visible, cut_reason=reason if cut else None,
-                         timings_ms=stages.timings_ms,
-                         scores=self._scores)
+        return TrackShot(
+            position_world=camera.copy(),
+            look_at_world=aim,
+            cut=cut,
+            shot_id=self._shot_id,
+            visible_fraction=visible,
+            cut_reason=reason if cut else None,
+            timings_ms=stages.timings_ms,
+            scores=self._scores,
+        )
 
     # --- target search -------------------------------------------------------------------------
 
     def _target_position(self) -> npt.NDArray[np.float64]:
         assert self._target is not None  # asked only once a first shot has a target
         a, b, t = self._target
-        position: npt.NDArray[np.float64] = self.graph.nodes_world[a] + t * (self.graph.nodes_world[b]
-                                                                             - self.graph.nodes_world[a])
+        position: npt.NDArray[np.float64] = self.graph.nodes_world[a] + t * (
+            self.graph.nodes_world[b] - self.graph.nodes_world[a]
+        )
         return position
 
     def _radius(self, distance: float) -> float:
         return max(self._settings.candidate_radius_m, 1.5 * distance)
 
-    def _frames(self, positions_world: _Floats, look_at: _Floats, ends: _Floats, distance: float,
-                tolerance_log: float | None = None) -> npt.NDArray[np.bool_]:
+    def _frames(
+        self, positions_world: _Floats, look_at: _Floats, ends: _Floats, distance: float, tolerance_log: float | None = None
+    ) -> npt.NDArray[np.bool_]:
         """(k,) bool for positions (k, 3): within `tolerance_log` (default: the framing tolerance,
         Section 5.1's framing check) of the optimal distance, in log ratio, and the framed extent
         fits in the frame (framing.py)."""
@@ -287,27 +315,46 @@ class GraphDirector:
         """(k,) bool for positions (k, 3): the framed extent fits in the frame (framing.py, no margin)."""
         return fit_ratio(positions_world, ends, self._actor_radius_m, self._settings.vertical_fov_deg, 0.0) <= 1.0
 
-    def _cheap_scores(self, pois: Pois, look_at: npt.NDArray[np.float64], ends: npt.NDArray[np.float64], distance: float,
-                      indirect: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    def _cheap_scores(
+        self,
+        pois: Pois,
+        look_at: npt.NDArray[np.float64],
+        ends: npt.NDArray[np.float64],
+        distance: float,
+        indirect: npt.NDArray[np.float64],
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Shot size (the distance's Gaussian, down to 0 where the framed extent cannot fit:
         framing.py) and indirect visibility, (k,) each."""
         s = self._settings
         fit = fit_ratio(pois.position_world, ends, self._actor_radius_m, s.vertical_fov_deg, s.frame_margin)
-        size = shot_size_score(pois.position_world, look_at, distance, s.shot_size_tolerance_log) \
-            * np.clip(1.0 - (fit - 1.0) / s.fit_softness, 0.0, 1.0)
+        size = shot_size_score(pois.position_world, look_at, distance, s.shot_size_tolerance_log) * np.clip(
+            1.0 - (fit - 1.0) / s.fit_softness, 0.0, 1.0
+        )
         ind = (1.0 - pois.t) * indirect[pois.node_a] + pois.t * indirect[pois.node_b]
         return size, ind
 
-    def _move_target(self, actor: _Floats, look_at: _Floats, ends: _Floats, scored_points: _Floats,
-                     distance: float, indirect: _Floats, scene: RayScene) -> bool:
+    def _move_target(
+        self,
+        actor: _Floats,
+        look_at: _Floats,
+        ends: _Floats,
+        scored_points: _Floats,
+        distance: float,
+        indirect: _Floats,
+        scene: RayScene,
+    ) -> bool:
         """Target moving strategy; False when no POI is reachable from the current target."""
         s = self._settings
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only=False)
         current = self._target
         assert current is not None  # the target moves only once a first shot has one
         cur_pos = self._target_position()
-        pois = Pois(np.append(pois.node_a, current[0]), np.append(pois.node_b, current[1]),
-                    np.append(pois.t, current[2]), np.vstack([pois.position_world, cur_pos]))
+        pois = Pois(
+            np.append(pois.node_a, current[0]),
+            np.append(pois.node_b, current[1]),
+            np.append(pois.t, current[2]),
+            np.vstack([pois.position_world, cur_pos]),
+        )
         size, ind = self._cheap_scores(pois, look_at, ends, distance, indirect)
         partial = s.weight_shot_size * size + s.weight_indirect_visibility * ind
         keep = np.argsort(-partial, kind="stable")[:_SCORED_POIS]
@@ -319,19 +366,34 @@ class GraphDirector:
         pois, size, ind, dist = pois.take(reach), size[reach], ind[reach], dist[reach]
         direct = direct_visibility(pois.position_world, scored_points, scene).min(axis=1)  # the worse of now and ahead
         near = np.clip(1.0 - dist / s.max_graph_distance_m, 0.0, 1.0)
-        total = (s.weight_shot_size * size + s.weight_direct_visibility * direct + s.weight_indirect_visibility * ind
-                 + s.weight_distance * near)
+        total = (
+            s.weight_shot_size * size
+            + s.weight_direct_visibility * direct
+            + s.weight_indirect_visibility * ind
+            + s.weight_distance * near
+        )
         total /= s.weight_shot_size + s.weight_direct_visibility + s.weight_indirect_visibility + s.weight_distance
         best = int(np.argmax(total))
-        self._scores = _scored(best, shot_size=size, direct_visibility=direct, indirect_visibility=ind,
-                               graph_distance=near, total=total)
-        self._target = self._descend(pois.take([best]), float(total[best]), float(dist[best]), look_at, ends,
-                                     scored_points, distance, indirect, scene)
+        self._scores = _scored(
+            best, shot_size=size, direct_visibility=direct, indirect_visibility=ind, graph_distance=near, total=total
+        )
+        self._target = self._descend(
+            pois.take([best]), float(total[best]), float(dist[best]), look_at, ends, scored_points, distance, indirect, scene
+        )
         return True
 
-    def _descend(self, poi: Pois, score: float, dist: float, look_at: _Floats, ends: _Floats,
-                 scored_points: _Floats, distance: float, indirect: _Floats,
-                 scene: RayScene) -> tuple[int, int, float]:
+    def _descend(
+        self,
+        poi: Pois,
+        score: float,
+        dist: float,
+        look_at: _Floats,
+        ends: _Floats,
+        scored_points: _Floats,
+        distance: float,
+        indirect: _Floats,
+        scene: RayScene,
+    ) -> tuple[int, int, float]:
         """Local descent of the (negated) score along the POI's edge in fixed steps."""
         s = self._settings
         a, b, t = int(poi.node_a[0]), int(poi.node_b[0]), float(poi.t[0])
@@ -351,19 +413,33 @@ class GraphDirector:
             direct = direct_visibility(pos, scored_points, scene).min(axis=1)
             moved = dist + np.abs(ts - t) * length
             near = np.clip(1.0 - moved / s.max_graph_distance_m, 0.0, 1.0)
-            total = (s.weight_shot_size * size + s.weight_direct_visibility * direct
-                     + s.weight_indirect_visibility * ind
-                     + s.weight_distance * near) / weights
+            total = (
+                s.weight_shot_size * size
+                + s.weight_direct_visibility * direct
+                + s.weight_indirect_visibility * ind
+                + s.weight_distance * near
+            ) / weights
             k = int(np.argmax(total))
             if total[k] <= score:
                 break
             score, dist, t = float(total[k]), float(moved[k]), float(ts[k])
-            self._scores = _scored(k, shot_size=size, direct_visibility=direct, indirect_visibility=ind,
-                                   graph_distance=near, total=total)
+            self._scores = _scored(
+                k, shot_size=size, direct_visibility=direct, indirect_visibility=ind, graph_distance=near, total=total
+            )
         return a, b, t
 
-    def _cut(self, actor: _Floats, look_at: _Floats, ends: _Floats, scored_points: _Floats,
-             forward: _Floats, distance: float, indirect: _Floats, scene: RayScene, reason: CutReason) -> bool:
+    def _cut(
+        self,
+        actor: _Floats,
+        look_at: _Floats,
+        ends: _Floats,
+        scored_points: _Floats,
+        forward: _Floats,
+        distance: float,
+        indirect: _Floats,
+        scene: RayScene,
+        reason: CutReason,
+    ) -> bool:
         """Continuity search (Section 5.3); False when no POI keeps the rules (or none exists).
         The POIs are tried in tiers, the first that holds a cut wins:
         1. those that frame the actor solidly: within `framing_cut_margin` of the framing
@@ -384,9 +460,10 @@ class GraphDirector:
         pois = candidate_pois(self.graph, actor, look_at, distance, self._radius(distance), nodes_only)
         if first:
             return self._cut_to(pois, look_at, ends, scored_points, forward, distance, indirect, scene, first)
-        shift = scored_points[1, 0] - scored_points[0, 0]   # where the actor walks in visibility_lookahead_s
-        solid = self._frames(pois.position_world, look_at, ends, distance, s.framing_violation_log * s.framing_cut_margin) \
-            & self._frames(pois.position_world, look_at + shift, ends + shift, distance)
+        shift = scored_points[1, 0] - scored_points[0, 0]  # where the actor walks in visibility_lookahead_s
+        solid = self._frames(
+            pois.position_world, look_at, ends, distance, s.framing_violation_log * s.framing_cut_margin
+        ) & self._frames(pois.position_world, look_at + shift, ends + shift, distance)
         tiers = [solid]
         assert self._camera is not None  # every cut but the first leaves a camera
         if nodes_only and not self._fits(self._camera[None], ends)[0]:  # cropping: a shot too wide is better
@@ -394,11 +471,23 @@ class GraphDirector:
             tiers.append(fits & ~solid)
         if reason in _MUST_LEAVE:
             tiers.append(~solid)
-        return any(self._cut_to(pois.take(tier), look_at, ends, scored_points, forward, distance, indirect, scene, first)
-                   for tier in tiers)
+        return any(
+            self._cut_to(pois.take(tier), look_at, ends, scored_points, forward, distance, indirect, scene, first)
+            for tier in tiers
+        )
 
-    def _cut_to(self, pois: Pois, look_at: _Floats, ends: _Floats, scored_points: _Floats,
-                forward: _Floats, distance: float, indirect: _Floats, scene: RayScene, first: bool) -> bool:
+    def _cut_to(
+        self,
+        pois: Pois,
+        look_at: _Floats,
+        ends: _Floats,
+        scored_points: _Floats,
+        forward: _Floats,
+        distance: float,
+        indirect: _Floats,
+        scene: RayScene,
+        first: bool,
+    ) -> bool:
         """The best of `pois` by the cut's scores, made the target; False when none keeps the
         continuity rules or, after the first shot, none sees the actor now, midway and ahead (a
         cut to a place that does not see the actor is a cut for nothing: it waits)."""
@@ -428,7 +517,7 @@ class GraphDirector:
         # now and ahead score the place; a cut also needs the actor seen midway: one batch of rays
         moments = scored_points if first else np.concatenate([scored_points, scored_points.mean(axis=0)[None]])
         per_moment = direct_visibility(pois.position_world, moments, scene)
-        direct = per_moment[:, :len(scored_points)].min(axis=1)
+        direct = per_moment[:, : len(scored_points)].min(axis=1)
         total = (partial + s.weight_direct_visibility * direct) / weights
         if not first:
             seen = per_moment.min(axis=1) >= s.occluded_below_fraction
@@ -438,6 +527,7 @@ class GraphDirector:
         best = int(np.argmax(total))
         self._target = (int(pois.node_a[best]), int(pois.node_b[best]), float(pois.t[best]))
         continuity = {} if first else {"thirty_degree": thirty[keep], "line_of_action": line[keep]}
-        self._scores = _scored(best, shot_size=size[keep], direct_visibility=direct,
-                               indirect_visibility=ind[keep], **continuity, total=total)
+        self._scores = _scored(
+            best, shot_size=size[keep], direct_visibility=direct, indirect_visibility=ind[keep], **continuity, total=total
+        )
         return True

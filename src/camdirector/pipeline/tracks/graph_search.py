@@ -5,6 +5,7 @@ A* (`astar_many`) searches from a point on an edge towards several goal nodes at
 distance to the goals' bounding box as heuristic (admissible and consistent). The graph itself is
 built offline (precompute/tracks/graph.py).
 """
+
 from __future__ import annotations
 
 import heapq
@@ -22,21 +23,29 @@ def csr_rows(indptr: npt.NDArray[np.integer[Any]], rows: npt.ArrayLike) -> npt.N
     total = int(lengths.sum())
     if not total:
         return np.empty(0, np.int64)
-    positions: npt.NDArray[np.int64] = (np.repeat(indptr[row_ids], lengths)
-                                        + (np.arange(total) - np.repeat(np.cumsum(lengths) - lengths, lengths)))
+    positions: npt.NDArray[np.int64] = np.repeat(indptr[row_ids], lengths) + (
+        np.arange(total) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    )
     return positions
 
 
-def adjacency_lists(indptr: npt.NDArray[np.integer[Any]], neighbours: npt.NDArray[np.integer[Any]],
-                    weights: npt.NDArray[np.float64]) -> list[list[tuple[int, float]]]:
+def adjacency_lists(
+    indptr: npt.NDArray[np.integer[Any]], neighbours: npt.NDArray[np.integer[Any]], weights: npt.NDArray[np.float64]
+) -> list[list[tuple[int, float]]]:
     """CSR adjacency as Python lists of (neighbour, weight), what `astar_many` walks."""
     pairs = list(zip(neighbours.tolist(), weights.tolist()))
     bounds = indptr.tolist()
-    return [pairs[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+    return [pairs[bounds[i] : bounds[i + 1]] for i in range(len(bounds) - 1)]
 
 
-def astar_many(adjacency: list[list[tuple[int, float]]], positions: list[list[float]], sources: dict[int, float],
-               goals: set[int], max_cost: float, parent: dict[int, int] | None = None) -> dict[int, float]:
+def astar_many(
+    adjacency: list[list[tuple[int, float]]],
+    positions: list[list[float]],
+    sources: dict[int, float],
+    goals: set[int],
+    max_cost: float,
+    parent: dict[int, int] | None = None,
+) -> dict[int, float]:
     """Graph distances from a start point to several goal nodes by A*.
 
     The start is given as `sources`: node -> cost already paid to reach it (the two ends of the
@@ -96,8 +105,7 @@ class RuntimeGraph:
     def __init__(self, nodes_world: npt.NDArray[np.float64], edges: npt.NDArray[np.integer[Any]]) -> None:
         self.nodes_world = np.asarray(nodes_world, dtype=np.float64)
         self.edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-        self.edge_length_m = np.linalg.norm(self.nodes_world[self.edges[:, 1]] - self.nodes_world[self.edges[:, 0]],
-                                            axis=1)
+        self.edge_length_m = np.linalg.norm(self.nodes_world[self.edges[:, 1]] - self.nodes_world[self.edges[:, 0]], axis=1)
         self.tree = cKDTree(self.nodes_world)
         n = len(self.nodes_world)
         src = np.concatenate([self.edges[:, 0], self.edges[:, 1]])
@@ -112,8 +120,9 @@ class RuntimeGraph:
         self._adjacency = adjacency_lists(self.indptr, self.neighbours, self.weights)
         self._positions = self.nodes_world.tolist()
 
-    def edges_near(self, point_world: npt.NDArray[np.float64],
-                   radius_m: float) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    def edges_near(
+        self, point_world: npt.NDArray[np.float64], radius_m: float
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
         """Edges touching a node within radius_m of point (3,), and the isolated nodes there:
         ((e,) int edge ids, (i,) int node ids)."""
         near = np.asarray(self.tree.query_ball_point(point_world, radius_m), dtype=np.int64)

@@ -22,6 +22,7 @@ it answers all of that as `RigBase` does: no occlusion maps (it cuts away from o
 deferred work, no player inputs, no delayed program. It has no part of its own in a frame's
 state: all it answers is the core (pipeline/state.py).
 """
+
 from __future__ import annotations
 
 import time
@@ -54,8 +55,15 @@ def director_style(style: Style) -> DirectorStyle:
 class TracksRig(RigBase):
     """The graph director of one session; implements `CameraRig` (module docstring)."""
 
-    def __init__(self, level: LoadedLevel, lens: Lens, style: Style, ray_scene: RayScene, rng: np.random.Generator,
-                 clock: Callable[[], float] = time.perf_counter):
+    def __init__(
+        self,
+        level: LoadedLevel,
+        lens: Lens,
+        style: Style,
+        ray_scene: RayScene,
+        rng: np.random.Generator,
+        clock: Callable[[], float] = time.perf_counter,
+    ):
         self.level = level
         self.lens = lens
         self.ray_scene = ray_scene
@@ -71,8 +79,9 @@ class TracksRig(RigBase):
     def close(self) -> None:
         """Nothing to release: the level is the worker's (its LevelCache), the ray scene the session's."""
 
-    def run(self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform],
-            last: FrameState | None) -> None:
+    def run(
+        self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
+    ) -> None:
         """MOTION and VISIBILITY: fills state.pose, cut, visibility, flags, scores and stage_ms."""
         actor, last_pose = target_transforms[0], None if last is None else last.pose
         forward = quat_rotate(actor.rotation_xyzw, _LOCAL_FORWARD)
@@ -97,8 +106,14 @@ class TracksRig(RigBase):
         else:
             rotation = level_look_rotation(shot.position_world, shot.look_at_world, (0.0, 0.0), self.lens)
         state.pose = CameraPose(shot.position_world, rotation, self.lens.vertical_fov_deg)
-        state.framing_error = framing_error(state.pose, self.lens, actor.position_world, self.level.artifact.agent_height_m,
-                                            self.director.style.shot_size, self.director.screen_fraction())
+        state.framing_error = framing_error(
+            state.pose,
+            self.lens,
+            actor.position_world,
+            self.level.artifact.agent_height_m,
+            self.director.style.shot_size,
+            self.director.screen_fraction(),
+        )
 
     def _waiting_pose(self, actor_world: npt.NDArray[np.float64], forward: npt.NDArray[np.float64]) -> CameraPose:
         flat = np.array([forward[0], 0.0, forward[2]])
@@ -106,5 +121,4 @@ class TracksRig(RigBase):
         flat = flat / norm if norm > 1e-9 else _LOCAL_FORWARD
         look_at = actor_world + np.array([0.0, self.settings.look_at_fraction * self.level.artifact.agent_height_m, 0.0])
         position = actor_world - 6.0 * flat + _WAIT_OFFSET_M
-        return CameraPose(position, level_look_rotation(position, look_at, (0.0, 0.0), self.lens),
-                          self.lens.vertical_fov_deg)
+        return CameraPose(position, level_look_rotation(position, look_at, (0.0, 0.0), self.lens), self.lens.vertical_fov_deg)

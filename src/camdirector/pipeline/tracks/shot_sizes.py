@@ -18,6 +18,7 @@ extent fits when half its angular span is within the half field of view less `fr
 (`fit_ratio` <= 1): nearer than that no aim shows it, and the director treats the place as a
 framing violation and scores it down (director.py).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -38,8 +39,14 @@ def framed_ends_world(feet_world: npt.NDArray[np.float64], height_m: float, shot
     return np.asarray(feet_world, dtype=np.float64) + np.outer([low * height_m, high * height_m], UP_WORLD)
 
 
-def framing_error(pose: CameraPose, lens: Lens, feet_world: npt.NDArray[np.float64], height_m: float, shot_size: ShotSize,
-                  screen_fraction: float) -> float:
+def framing_error(
+    pose: CameraPose,
+    lens: Lens,
+    feet_world: npt.NDArray[np.float64],
+    height_m: float,
+    shot_size: ShotSize,
+    screen_fraction: float,
+) -> float:
     """How far the framed extent's ends land from where the shot size puts them, in normalised
     screen units (the frame is [-1, 1]; the Toric rig's framing error is in the same units): the
     ends belong centred at (0, -h) and (0, h), h = screen_fraction * (high - low), the half of the
@@ -51,8 +58,9 @@ def framing_error(pose: CameraPose, lens: Lens, feet_world: npt.NDArray[np.float
     return float(np.abs(screen - np.array([[0.0, -half], [0.0, half]])).max())
 
 
-def _pitches(cameras_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64], radius_m: float
-             ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+def _pitches(
+    cameras_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64], radius_m: float
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Per camera (m, 3): the lowest pitch to the extent's bottom and the highest to its top,
     rad, over the actor's girth (its axis distance less and plus radius_m: the near side of the
     feet is lower on screen than the axis), and the horizontal distance to its axis, m."""
@@ -61,13 +69,14 @@ def _pitches(cameras_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.
     horizontal = np.hypot(offset[:, 0], offset[:, 2])
     near = np.maximum(horizontal - radius_m, 1e-6)[:, None]
     far = (horizontal + radius_m)[:, None]
-    rise = ends_world[:, 1][None, :] - cameras[:, 1:2]                 # (m, 2): up to the bottom and the top
+    rise = ends_world[:, 1][None, :] - cameras[:, 1:2]  # (m, 2): up to the bottom and the top
     from_near, from_far = np.arctan2(rise, near), np.arctan2(rise, far)
     return np.minimum(from_near, from_far)[:, 0], np.maximum(from_near, from_far)[:, 1], horizontal
 
 
-def aim_point(camera_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64],
-              radius_m: float) -> npt.NDArray[np.float64]:
+def aim_point(
+    camera_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64], radius_m: float
+) -> npt.NDArray[np.float64]:
     """(3,) the point on the actor's axis to put at the screen centre so that the framed extent
     (ends_world (2, 3): bottom, top; an actor radius_m wide) is centred vertically (module docstring)."""
     bottom, top, horizontal = _pitches(camera_world, ends_world, radius_m)
@@ -75,9 +84,13 @@ def aim_point(camera_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.
     return np.array([ends_world[0, 0], height, ends_world[0, 2]])
 
 
-def fit_ratio(cameras_world: npt.NDArray[np.float64], ends_world: npt.NDArray[np.float64], radius_m: float,
-              vertical_fov_deg: float,
-              frame_margin: float) -> npt.NDArray[np.float64]:
+def fit_ratio(
+    cameras_world: npt.NDArray[np.float64],
+    ends_world: npt.NDArray[np.float64],
+    radius_m: float,
+    vertical_fov_deg: float,
+    frame_margin: float,
+) -> npt.NDArray[np.float64]:
     """(m,) for cameras (m, 3): tan of half the framed extent's angular span (an actor radius_m
     wide) over the most a centred extent may have, (1 - frame_margin) tan(fov / 2); above 1 it
     cannot be framed."""

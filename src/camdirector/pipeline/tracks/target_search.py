@@ -20,6 +20,7 @@ Sub-scores, each in [0, 1], higher is better:
   graph; POIs A* cannot reach within that distance are not strongly connected to the current
   target and are dropped (the paper's edge filter).
 """
+
 from __future__ import annotations
 
 import math
@@ -57,9 +58,14 @@ def optimal_distance_m(actor_height_m: float, screen_fraction: float, vertical_f
     return actor_height_m / (screen_fraction * 2.0 * math.tan(math.radians(vertical_fov_deg) / 2.0))
 
 
-def candidate_pois(graph: RuntimeGraph, actor_world: npt.NDArray[np.float64], look_at_world: npt.NDArray[np.float64],
-                   distance_m: float,
-                   radius_m: float, nodes_only: bool) -> Pois:
+def candidate_pois(
+    graph: RuntimeGraph,
+    actor_world: npt.NDArray[np.float64],
+    look_at_world: npt.NDArray[np.float64],
+    distance_m: float,
+    radius_m: float,
+    nodes_only: bool,
+) -> Pois:
     """POIs near the actor (module docstring); nodes_only: the nodes of those edges instead (static cameras)."""
     edge_ids, isolated = graph.edges_near(actor_world, radius_m)
     if nodes_only:
@@ -90,16 +96,18 @@ def candidate_pois(graph: RuntimeGraph, actor_world: npt.NDArray[np.float64], lo
     return Pois(na, nb, t, position)
 
 
-def shot_size_score(positions_world: npt.NDArray[np.float64], look_at_world: npt.NDArray[np.float64], distance_m: float,
-                    tolerance_log: float) -> npt.NDArray[np.float64]:
+def shot_size_score(
+    positions_world: npt.NDArray[np.float64], look_at_world: npt.NDArray[np.float64], distance_m: float, tolerance_log: float
+) -> npt.NDArray[np.float64]:
     """(k,) Gaussian in ln(distance / optimal distance)."""
     d = np.maximum(np.linalg.norm(positions_world - look_at_world, axis=1), 1e-6)
     score: npt.NDArray[np.float64] = np.exp(-0.5 * (np.log(d / distance_m) / tolerance_log) ** 2)
     return score
 
 
-def direct_visibility(positions_world: npt.NDArray[np.float64], actor_points_world: npt.NDArray[np.float64],
-                      scene: RayScene) -> npt.NDArray[np.float64]:
+def direct_visibility(
+    positions_world: npt.NDArray[np.float64], actor_points_world: npt.NDArray[np.float64], scene: RayScene
+) -> npt.NDArray[np.float64]:
     """(k, ...) fraction of the actor's points each position (k, 3) sees: actor_points_world
     (..., p, 3), the points at one moment (p, 3) -> (k,), or at m moments (m, p, 3) -> (k, m),
     all in one batch of rays."""

@@ -33,6 +33,7 @@ Our choices:
   (potential.py: outside the character's box, far enough to frame the body, inside the grid), or
   puts a frame with a line-of-movement prior (shots.py) on the wrong side of that line.
 """
+
 from __future__ import annotations
 
 import math
@@ -45,9 +46,9 @@ from camdirector.precompute.overview.energy import EnergyWeights, energy_below, 
 from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.potential import PotentialSpace, allowed_positions
 
-_RIGID_MOVE_SHARE = 0.1     # share of proposals that translate the whole shot
-_SPEED_SLACK = 1.0 - 1e-9   # a step may use the whole speed limit but for rounding
-_STATIC_NODES_PER_CHUNK = 256   # static cameras whose E_internal is evaluated at once (memory: n x chunk x 3)
+_RIGID_MOVE_SHARE = 0.1  # share of proposals that translate the whole shot
+_SPEED_SLACK = 1.0 - 1e-9  # a step may use the whole speed limit but for rounding
+_STATIC_NODES_PER_CHUNK = 256  # static cameras whose E_internal is evaluated at once (memory: n x chunk x 3)
 
 
 @dataclass(frozen=True)
@@ -84,20 +85,27 @@ class StaticCameras:
     external: np.ndarray
 
     @classmethod
-    def of_shot(cls, space: PotentialSpace, pose_saliency: np.ndarray, first: int, last: int,
-                priors: tuple[SidePrior, ...] = ()) -> StaticCameras:
+    def of_shot(
+        cls, space: PotentialSpace, pose_saliency: np.ndarray, first: int, last: int, priors: tuple[SidePrior, ...] = ()
+    ) -> StaticCameras:
         """Raises ValueError when no node is allowed in every frame and meets the priors."""
-        ok = space.allowed[first:last + 1].reshape(last - first + 1, -1).all(axis=0)
+        ok = space.allowed[first : last + 1].reshape(last - first + 1, -1).all(axis=0)
         positions = space.positions()
         for prior in priors:
             ok &= prior.holds_for_nodes(positions)
         if not np.any(ok):
-            raise ValueError(f"no static camera position frames the character over frames "
-                             f"{first}..{last}: raise grid_margin_heights")
+            raise ValueError(
+                f"no static camera position frames the character over frames {first}..{last}: raise grid_margin_heights"
+            )
         nodes = np.flatnonzero(ok)
-        values = space.values[first:last + 1].reshape(last - first + 1, -1)[:, nodes]
-        return cls(first=first, last=last, nodes=nodes, position_m=positions[nodes],
-                   external=-(pose_saliency[first:last + 1] @ values.astype(np.float64)))
+        values = space.values[first : last + 1].reshape(last - first + 1, -1)[:, nodes]
+        return cls(
+            first=first,
+            last=last,
+            nodes=nodes,
+            position_m=positions[nodes],
+            external=-(pose_saliency[first : last + 1] @ values.astype(np.float64)),
+        )
 
     def paper_start(self) -> np.ndarray:
         """(3,) the node maximising sum_t S_p(t) V_t(p): the paper's start."""
@@ -106,14 +114,14 @@ class StaticCameras:
     def lowest_energy(self, track: CharacterTrack, weights: EnergyWeights) -> tuple[np.ndarray, float]:
         """The (3,) position and E of the static camera with the lowest E over the shot. Its
         E_internal is the angular terms of a camera that only turns."""
-        look_at = track.look_at_m[self.first:self.last + 1]
+        look_at = track.look_at_m[self.first : self.last + 1]
         n = self.last - self.first + 1
         # E_internal >= 0: visiting nodes by increasing E_external, none after the first whose
         # E_external alone reaches the lowest E found can do better.
         best_i, best_e = -1, np.inf
         order = np.argsort(self.external, kind="stable")
         for start in range(0, len(order), _STATIC_NODES_PER_CHUNK):
-            idx = order[start:start + _STATIC_NODES_PER_CHUNK]
+            idx = order[start : start + _STATIC_NODES_PER_CHUNK]
             if self.external[idx[0]] >= best_e:
                 break
             chunk = self.position_m[idx]
@@ -125,9 +133,17 @@ class StaticCameras:
         return self.position_m[best_i], best_e
 
 
-def anneal_shot(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray,
-                weights: EnergyWeights, settings: OverviewSettings, rng: np.random.Generator,
-                first: int, last: int, priors: tuple[SidePrior, ...] = ()) -> np.ndarray:
+def anneal_shot(
+    track: CharacterTrack,
+    space: PotentialSpace,
+    pose_saliency: np.ndarray,
+    weights: EnergyWeights,
+    settings: OverviewSettings,
+    rng: np.random.Generator,
+    first: int,
+    last: int,
+    priors: tuple[SidePrior, ...] = (),
+) -> np.ndarray:
     """(last - first + 1, 3) optimised camera path over track frames [first, last], metres: the
     paper's start annealed, or, where that ends above the lowest-E static camera, the better of
     it and that camera annealed (module docstring)."""
@@ -142,16 +158,24 @@ def anneal_shot(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.
     return path
 
 
-def _anneal_from(start_m: np.ndarray, track: CharacterTrack, space: PotentialSpace,
-                 pose_saliency: np.ndarray, weights: EnergyWeights, settings: OverviewSettings,
-                 rng: np.random.Generator, first: int, last: int, priors: tuple[SidePrior, ...]
-                 ) -> tuple[np.ndarray, float]:
+def _anneal_from(
+    start_m: np.ndarray,
+    track: CharacterTrack,
+    space: PotentialSpace,
+    pose_saliency: np.ndarray,
+    weights: EnergyWeights,
+    settings: OverviewSettings,
+    rng: np.random.Generator,
+    first: int,
+    last: int,
+    priors: tuple[SidePrior, ...],
+) -> tuple[np.ndarray, float]:
     """The path annealed from a static camera at start_m (3,) over frames [first, last], and its E."""
     n = last - first + 1
     path = np.tile(start_m, (n, 1))
     frames = np.arange(first, last + 1)
-    look_at = track.look_at_m[first:last + 1]
-    sal = pose_saliency[first:last + 1]
+    look_at = track.look_at_m[first : last + 1]
+    sal = pose_saliency[first : last + 1]
     if n < 2:
         return path, -float(np.dot(sal, space.sample(frames, path)))
     v_now = space.sample(frames, path)
@@ -159,8 +183,7 @@ def _anneal_from(start_m: np.ndarray, track: CharacterTrack, space: PotentialSpa
     local_priors = [(p.frame - first, p) for p in priors if first <= p.frame <= last]
     h = track.height_m
     r0, r1 = settings.initial_neighbourhood_heights * h, settings.final_neighbourhood_heights * h
-    iterations = max(settings.annealing_min_iterations,
-                     int(round(settings.annealing_iterations_per_frame * n)))
+    iterations = max(settings.annealing_min_iterations, int(round(settings.annealing_iterations_per_frame * n)))
     decay = (r1 / r0) ** (1.0 / iterations)
     radius = r0
     for _ in range(iterations):
@@ -178,23 +201,22 @@ def _anneal_from(start_m: np.ndarray, track: CharacterTrack, space: PotentialSpa
             lo, hi = max(0, int(math.ceil(centre - half))), min(n - 1, int(math.floor(centre + half)))
             offsets = (np.arange(lo, hi + 1) - centre) / half
             bump = 0.5 * (1.0 + np.cos(np.pi * np.clip(offsets, -1.0, 1.0)))
-        new_seg = path[lo:hi + 1] + bump[:, None] * displacement
-        if not np.all(allowed_positions(track, space, frames[lo:hi + 1], new_seg)):
+        new_seg = path[lo : hi + 1] + bump[:, None] * displacement
+        if not np.all(allowed_positions(track, space, frames[lo : hi + 1], new_seg)):
             continue
         if any(lo <= k <= hi and not prior.holds(new_seg[k - lo]) for k, prior in local_priors):
             continue
-        a, b = max(lo - 2, 0), min(hi + 2, n - 1)   # internal terms at lo-1..hi+1 change
-        old_internal = internal_terms(path[a:b + 1], look_at[a:b + 1], weights).sum()
-        trial = path[a:b + 1].copy()
-        trial[lo - a:hi - a + 1] = new_seg
+        a, b = max(lo - 2, 0), min(hi + 2, n - 1)  # internal terms at lo-1..hi+1 change
+        old_internal = internal_terms(path[a : b + 1], look_at[a : b + 1], weights).sum()
+        trial = path[a : b + 1].copy()
+        trial[lo - a : hi - a + 1] = new_seg
         steps = np.linalg.norm(np.diff(trial, axis=0), axis=1)
         if np.any(steps > step_limit):
             continue
-        new_internal = internal_terms(trial, look_at[a:b + 1], weights).sum()
-        v_new = space.sample(frames[lo:hi + 1], new_seg)
-        delta = (new_internal - old_internal) - float(
-            np.dot(sal[lo:hi + 1], v_new - v_now[lo:hi + 1]))
+        new_internal = internal_terms(trial, look_at[a : b + 1], weights).sum()
+        v_new = space.sample(frames[lo : hi + 1], new_seg)
+        delta = (new_internal - old_internal) - float(np.dot(sal[lo : hi + 1], v_new - v_now[lo : hi + 1]))
         if delta < 0.0:
-            path[lo:hi + 1] = new_seg
-            v_now[lo:hi + 1] = v_new
+            path[lo : hi + 1] = new_seg
+            v_now[lo : hi + 1] = v_new
     return path, float(internal_terms(path, look_at, weights).sum() - np.dot(sal, v_now))

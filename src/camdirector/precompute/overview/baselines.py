@@ -13,6 +13,7 @@
   not projected back onto the allowed positions or the speed limit: that is what makes it a
   baseline, and E's speed terms charge it for any excess.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -47,8 +48,7 @@ def static_path(space: PotentialSpace, pose_saliency: np.ndarray) -> np.ndarray:
     return np.tile(StaticCameras.of_shot(space, pose_saliency, 0, n - 1).paper_start(), (n, 1))
 
 
-def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray,
-                weights: EnergyWeights) -> BestStatic:
+def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray, weights: EnergyWeights) -> BestStatic:
     """Each attribute's best static camera among nodes allowed in every frame (module docstring).
     Scores are those `energy.path_energy` gives the static path as one shot."""
     n = track.frame_count
@@ -56,16 +56,19 @@ def best_static(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.
     v_sum = space.values.reshape(n, -1)[:, statics.nodes].astype(np.float64).sum(axis=0)
     e_position, e = statics.lowest_energy(track, weights)
     i_x, i_v = int(np.argmin(statics.external)), int(np.argmax(v_sum))
-    return BestStatic(e=e, e_external=float(statics.external[i_x]), v_sum=float(v_sum[i_v]),
-                      e_position_m=e_position, e_external_position_m=statics.position_m[i_x],
-                      v_position_m=statics.position_m[i_v])
+    return BestStatic(
+        e=e,
+        e_external=float(statics.external[i_x]),
+        v_sum=float(v_sum[i_v]),
+        e_position_m=e_position,
+        e_external_position_m=statics.position_m[i_x],
+        v_position_m=statics.position_m[i_v],
+    )
 
 
-def greedy_path(track: CharacterTrack, space: PotentialSpace, settings: OverviewSettings
-                ) -> np.ndarray:
+def greedy_path(track: CharacterTrack, space: PotentialSpace, settings: OverviewSettings) -> np.ndarray:
     """(T, 3) the per-frame best allowed node, smoothed in time."""
     n = track.frame_count
     values = np.where(space.allowed, space.values, -np.inf).reshape(n, -1)
     best = space.positions()[np.argmax(values, axis=1)]
-    return gaussian_filter1d(best, settings.greedy_smoothing_s / track.dt_s, axis=0,
-                             mode="nearest")
+    return gaussian_filter1d(best, settings.greedy_smoothing_s / track.dt_s, axis=0, mode="nearest")

@@ -13,6 +13,7 @@ them, first by name (Bandai ``UpperArm_L``, CMU/cgspeed ``LeftForeArm``/``LHipJo
   bone of a planted foot (ankle to toe) points forward, the character's left is up x forward, and
   a limb is left when its joints lie on that side of the hips on average.
 """
+
 from __future__ import annotations
 
 import re
@@ -62,8 +63,7 @@ class BodyPartMap:
 
 
 _HEAD = re.compile(r"head", re.IGNORECASE)
-_ARM = re.compile(r"shoulder|collar|clavicle|arm|elbow|wrist|hand|finger|thumb|index|pinky",
-                  re.IGNORECASE)
+_ARM = re.compile(r"shoulder|collar|clavicle|arm|elbow|wrist|hand|finger|thumb|index|pinky", re.IGNORECASE)
 _LEG = re.compile(r"hip|thigh|upleg|leg|knee|ankle|foot|toe|heel", re.IGNORECASE)
 
 
@@ -83,8 +83,7 @@ def _map_by_name(names: tuple[str, ...], parents: np.ndarray) -> np.ndarray:
         side = _side_of(name)
         parent = parents[j]
         inherited = parts[parent] if parent >= 0 else BodyPart.TORSO
-        if inherited in (BodyPart.LEFT_ARM, BodyPart.RIGHT_ARM, BodyPart.LEFT_LEG,
-                         BodyPart.RIGHT_LEG, BodyPart.HEAD):
+        if inherited in (BodyPart.LEFT_ARM, BodyPart.RIGHT_ARM, BodyPart.LEFT_LEG, BodyPart.RIGHT_LEG, BodyPart.HEAD):
             parts[j] = inherited
         elif _HEAD.search(name):
             parts[j] = BodyPart.HEAD
@@ -123,12 +122,14 @@ def _map_by_topology(clip: MotionClip) -> np.ndarray:
     trunk = [head_leaf]
     while parents[trunk[-1]] >= 0:
         trunk.append(int(parents[trunk[-1]]))
-    trunk = trunk[::-1]                                   # root ... head leaf
+    trunk = trunk[::-1]  # root ... head leaf
     on_trunk = set(trunk)
     hanging = [(t_idx, c) for t_idx, t in enumerate(trunk) for c in kids[t] if c not in on_trunk]
     if len(hanging) < 4:
-        raise ValueError("cannot map the skeleton to head, torso, two arms and two legs: "
-                         f"fewer than four limbs hang off the trunk ({len(hanging)})")
+        raise ValueError(
+            "cannot map the skeleton to head, torso, two arms and two legs: "
+            f"fewer than four limbs hang off the trunk ({len(hanging)})"
+        )
     tip_y = {c: min(mean_y[k] for k in _subtree(kids, c)) for _, c in hanging}
     size = {c: len(_subtree(kids, c)) for _, c in hanging}
     legs = sorted(hanging, key=lambda h: tip_y[h[1]])[:2]
@@ -137,12 +138,13 @@ def _map_by_topology(clip: MotionClip) -> np.ndarray:
     parts = np.full(len(parents), BodyPart.TORSO, dtype=np.int64)
     parts[head_leaf] = BodyPart.HEAD
     lateral = _left_offsets(clip, kids, legs[0][1], legs[1][1])
-    for pair, left_part, right_part in ((legs, BodyPart.LEFT_LEG, BodyPart.RIGHT_LEG),
-                                        (arms, BodyPart.LEFT_ARM, BodyPart.RIGHT_ARM)):
+    for pair, left_part, right_part in (
+        (legs, BodyPart.LEFT_LEG, BodyPart.RIGHT_LEG),
+        (arms, BodyPart.LEFT_ARM, BodyPart.RIGHT_ARM),
+    ):
         a, b = pair[0][1], pair[1][1]
         side_a = _side_of(clip.joint_names[a])
-        a_is_left = side_a == "left" if side_a else lateral[_subtree(kids, a)].mean() > \
-            lateral[_subtree(kids, b)].mean()
+        a_is_left = side_a == "left" if side_a else lateral[_subtree(kids, a)].mean() > lateral[_subtree(kids, b)].mean()
         parts[_subtree(kids, a)] = left_part if a_is_left else right_part
         parts[_subtree(kids, b)] = right_part if a_is_left else left_part
     return parts
@@ -172,7 +174,7 @@ def _left_offsets(clip: MotionClip, kids: list[list[int]], leg_a: int, leg_b: in
         forward += foot[planted].sum(axis=0)
     left = np.cross(np.array([0.0, 1.0, 0.0]), forward)
     left /= max(float(np.linalg.norm(left)), 1e-9)
-    reference = 0.5 * (pos[:, leg_a] + pos[:, leg_b])[:, None]     # between the hips
+    reference = 0.5 * (pos[:, leg_a] + pos[:, leg_b])[:, None]  # between the hips
     return np.einsum("fjk,k->fj", pos - reference, left).mean(axis=0)
 
 
@@ -188,8 +190,13 @@ def map_body_parts(clip: MotionClip) -> BodyPartMap:
         # The leg's first joint: the member whose parent is not in the leg.
         first[p] = int(next(j for j in members if parts[clip.parents[j]] != p))
     root = int(np.flatnonzero(clip.parents < 0)[0])
-    return BodyPartMap(part_of_joint=parts, root=root, left_hip=first[BodyPart.LEFT_LEG],
-                       right_hip=first[BodyPart.RIGHT_LEG], body_points=_body_points(clip))
+    return BodyPartMap(
+        part_of_joint=parts,
+        root=root,
+        left_hip=first[BodyPart.LEFT_LEG],
+        right_hip=first[BodyPart.RIGHT_LEG],
+        body_points=_body_points(clip),
+    )
 
 
 def rigid_bones(clip: MotionClip) -> tuple[np.ndarray, np.ndarray]:
@@ -200,7 +207,7 @@ def rigid_bones(clip: MotionClip) -> tuple[np.ndarray, np.ndarray]:
     parent = np.concatenate([clip.parents[order], clip.end_site_parents]).astype(np.int64)
     child = np.concatenate([order, n_joints + np.arange(len(clip.end_site_parents))])
     points = clip.all_points_m
-    lengths = np.linalg.norm(points[:, child] - points[:, parent], axis=2)      # (F, B)
+    lengths = np.linalg.norm(points[:, child] - points[:, parent], axis=2)  # (F, B)
     mean = lengths.mean(axis=0)
     rigid = lengths.std(axis=0) <= _RIGID_BONE_TOLERANCE * np.maximum(mean, 1e-9)
     return parent[rigid], child[rigid]

@@ -13,6 +13,7 @@ BVH conventions used here (they hold for the three shared skeletons: Bandai, CMU
   (0.01 m/unit), CMU units (0.056444 m/unit) or metres (1 m/unit), whichever makes the character
   closest to ``TYPICAL_HEIGHT_M``.
 """
+
 from __future__ import annotations
 
 import math
@@ -21,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-CM_PER_UNIT_M = 0.01            # centimetre skeletons (Bandai, Perfume), m per file unit
-CMU_UNIT_M = 0.056444           # CMU/cgspeed skeletons, m per file unit (SOURCES.md section 2b)
-METRE_UNIT_M = 1.0              # skeletons already in metres
+CM_PER_UNIT_M = 0.01  # centimetre skeletons (Bandai, Perfume), m per file unit
+CMU_UNIT_M = 0.056444  # CMU/cgspeed skeletons, m per file unit (SOURCES.md section 2b)
+METRE_UNIT_M = 1.0  # skeletons already in metres
 KNOWN_SCALES_M_PER_UNIT = (CM_PER_UNIT_M, CMU_UNIT_M, METRE_UNIT_M)
-TYPICAL_HEIGHT_M = 1.7          # adult height the unit inference aims at, m
+TYPICAL_HEIGHT_M = 1.7  # adult height the unit inference aims at, m
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
@@ -124,7 +125,7 @@ def _parse_hierarchy(tokens: list[str]) -> BvhSkeleton:
     channels: list[tuple[str, ...]] = []
     end_parents: list[int] = []
     end_offsets: list[list[float]] = []
-    stack: list[int] = []          # joint index per open brace; -2 marks an End Site block
+    stack: list[int] = []  # joint index per open brace; -2 marks an End Site block
     pos = 0
 
     def take() -> str:
@@ -185,8 +186,8 @@ def _parse_hierarchy(tokens: list[str]) -> BvhSkeleton:
                 pos += 1
             if len(listed) != count:
                 raise ValueError(
-                    f"inconsistent BVH channels: joint '{names[current]}' declares {count} channels "
-                    f"but lists {len(listed)}")
+                    f"inconsistent BVH channels: joint '{names[current]}' declares {count} channels but lists {len(listed)}"
+                )
             channels[current] = tuple(_CHANNEL_NAMES[c.upper()] for c in listed)
         elif upper == "JOINT":
             if current == -2:
@@ -215,10 +216,7 @@ def _parse_hierarchy(tokens: list[str]) -> BvhSkeleton:
     )
 
 
-_CHANNEL_NAMES = {
-    n.upper(): n
-    for n in ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
-}
+_CHANNEL_NAMES = {n.upper(): n for n in ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")}
 
 
 def _parse_motion(text: str, channel_count: int) -> tuple[np.ndarray, float]:
@@ -250,7 +248,8 @@ def _parse_motion(text: str, channel_count: int) -> tuple[np.ndarray, float]:
         if len(values) != channel_count:
             raise ValueError(
                 f"inconsistent BVH channel count: frame {i} has {len(values)} values, "
-                f"the hierarchy declares {channel_count} channels")
+                f"the hierarchy declares {channel_count} channels"
+            )
         try:
             motion[i] = [float(v) for v in values]
         except ValueError:
@@ -313,9 +312,7 @@ def infer_scale_m_per_unit(height_units: float) -> float:
     return KNOWN_SCALES_M_PER_UNIT[int(np.argmin(errors))]
 
 
-def forward_kinematics(
-    clip: BvhClip, *, scale_m_per_unit: float | None = None, skip_frames: int = 0
-) -> MotionClip:
+def forward_kinematics(clip: BvhClip, *, scale_m_per_unit: float | None = None, skip_frames: int = 0) -> MotionClip:
     """Joint positions of a parsed clip, metres, +Y up.
 
     scale_m_per_unit: metres per file unit; None infers it from the skeleton height (see
@@ -323,14 +320,20 @@ def forward_kinematics(
     files start with a T-pose or rest pose, SOURCES.md section 2).
     """
     if skip_frames < 0 or skip_frames >= clip.motion.shape[0]:
-        raise ValueError(
-            f"skip_frames={skip_frames} must be in [0, {clip.motion.shape[0] - 1}] for this clip")
+        raise ValueError(f"skip_frames={skip_frames} must be in [0, {clip.motion.shape[0] - 1}] for this clip")
     if scale_m_per_unit is not None and not (scale_m_per_unit > 0 and math.isfinite(scale_m_per_unit)):
         raise ValueError("scale_m_per_unit must be a positive number of metres per file unit")
     joints_u, ends_u = _fk_units(clip.skeleton, clip.motion[skip_frames:])
     if scale_m_per_unit is None:
-        unscaled = MotionClip(clip.skeleton.joint_names, clip.skeleton.parents, joints_u,
-                              clip.skeleton.end_site_parents, ends_u, clip.frame_time_s, 1.0)
+        unscaled = MotionClip(
+            clip.skeleton.joint_names,
+            clip.skeleton.parents,
+            joints_u,
+            clip.skeleton.end_site_parents,
+            ends_u,
+            clip.frame_time_s,
+            1.0,
+        )
         scale_m_per_unit = infer_scale_m_per_unit(unscaled.character_height_m())
     return MotionClip(
         joint_names=clip.skeleton.joint_names,
@@ -343,9 +346,6 @@ def forward_kinematics(
     )
 
 
-def load_motion(
-    path: str | Path, *, scale_m_per_unit: float | None = None, skip_frames: int = 0
-) -> MotionClip:
+def load_motion(path: str | Path, *, scale_m_per_unit: float | None = None, skip_frames: int = 0) -> MotionClip:
     """Read a BVH file and run forward kinematics on it (see `forward_kinematics`)."""
-    return forward_kinematics(read_bvh(path), scale_m_per_unit=scale_m_per_unit,
-                              skip_frames=skip_frames)
+    return forward_kinematics(read_bvh(path), scale_m_per_unit=scale_m_per_unit, skip_frames=skip_frames)

@@ -3,6 +3,7 @@
 Every stage after this one works on frames sampled every `step` clip frames (the analysis rate,
 see pipeline.py); framing.py builds the same track at step 1 to frame every clip frame.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from camdirector.precompute.overview.body_parts import BodyPartMap
 from camdirector.precompute.overview.bvh import MotionClip
 from camdirector.precompute.overview.overview_settings import OverviewSettings
 
-_FACING_SMOOTHING_S = 0.2    # Gaussian sigma on the hips' lateral axis before taking the front, s
+_FACING_SMOOTHING_S = 0.2  # Gaussian sigma on the hips' lateral axis before taking the front, s
 _VELOCITY_SMOOTHING_S = 0.25  # Gaussian sigma on the root path before differentiating, s
 
 
@@ -61,8 +62,9 @@ def sample_frames(frame_count: int, clip_frame_time_s: float, analysis_rate_hz: 
     return np.arange(0, frame_count, step)
 
 
-def track_character(clip: MotionClip, parts: BodyPartMap, settings: OverviewSettings,
-                    frame_indices: np.ndarray) -> CharacterTrack:
+def track_character(
+    clip: MotionClip, parts: BodyPartMap, settings: OverviewSettings, frame_indices: np.ndarray
+) -> CharacterTrack:
     """The character at `frame_indices` (evenly spaced increasing clip frames)."""
     height = clip.character_height_m()
     if len(frame_indices) > 1:
@@ -71,8 +73,9 @@ def track_character(clip: MotionClip, parts: BodyPartMap, settings: OverviewSett
         dt_s = clip.frame_time_s
     joints = clip.positions_m[frame_indices]
     points = clip.all_points_m[frame_indices][:, parts.body_points]
-    thickest = height * max(settings.head_radius_heights, settings.torso_radius_heights,
-                            settings.arm_radius_heights, settings.leg_radius_heights)
+    thickest = height * max(
+        settings.head_radius_heights, settings.torso_radius_heights, settings.arm_radius_heights, settings.leg_radius_heights
+    )
     lo, hi = points.min(axis=1), points.max(axis=1)
     centre = 0.5 * (lo + hi)
     sigma = settings.look_at_smoothing_s / dt_s
@@ -84,12 +87,21 @@ def track_character(clip: MotionClip, parts: BodyPartMap, settings: OverviewSett
     forward[:, 1] = 0.0
     forward /= np.maximum(np.linalg.norm(forward, axis=1, keepdims=True), 1e-9)
     pelvis = 0.5 * (joints[:, parts.left_hip] + joints[:, parts.right_hip])
-    root_path = gaussian_filter1d(pelvis, _VELOCITY_SMOOTHING_S / dt_s, axis=0,
-                                  mode="nearest")
+    root_path = gaussian_filter1d(pelvis, _VELOCITY_SMOOTHING_S / dt_s, axis=0, mode="nearest")
     velocity = np.gradient(root_path, dt_s, axis=0) if len(root_path) > 1 else np.zeros_like(root_path)
     velocity[:, 1] = 0.0
     return CharacterTrack(
-        frame_indices=np.asarray(frame_indices, dtype=np.int64), dt_s=dt_s, joints_m=joints,
-        points_m=points, look_at_m=look_at, radius_m=radius, box_min_m=lo - thickest,
-        box_max_m=hi + thickest, forward=forward, velocity_m_s=velocity, pelvis_m=pelvis,
-        height_m=height, floor_y_m=float(clip.all_points_m[:, :, 1].min()))
+        frame_indices=np.asarray(frame_indices, dtype=np.int64),
+        dt_s=dt_s,
+        joints_m=joints,
+        points_m=points,
+        look_at_m=look_at,
+        radius_m=radius,
+        box_min_m=lo - thickest,
+        box_max_m=hi + thickest,
+        forward=forward,
+        velocity_m_s=velocity,
+        pelvis_m=pelvis,
+        height_m=height,
+        floor_y_m=float(clip.all_points_m[:, :, 1].min()),
+    )

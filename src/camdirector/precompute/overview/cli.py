@@ -17,6 +17,7 @@
 
 `add_parsers(subparsers)` registers both; each sets `handler` (call `args.handler(args)`).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,26 +31,41 @@ from pathlib import Path
 
 def add_parsers(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Registers `overview` and `eval-overview`; args.handler(args) runs them."""
-    p = subparsers.add_parser("overview", help="plan a multi-shot overview camera for a BVH clip",
-                              description=__doc__.split("\n\n")[0],
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "overview",
+        help="plan a multi-shot overview camera for a BVH clip",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("clip", type=Path, help="BVH file")
     p.add_argument("--out", type=Path, required=True, help="output folder (created)")
     p.add_argument("--scale", type=float, help="metres per file unit (default: inferred)")
-    p.add_argument("--skip-frames", dest="skip_frames", type=int, default=0,
-                   help="leading frames to ignore, e.g. a T-pose (default 0)")
+    p.add_argument(
+        "--skip-frames", dest="skip_frames", type=int, default=0, help="leading frames to ignore, e.g. a T-pose (default 0)"
+    )
     p.add_argument("--aspect", type=float, help="frame width / height (default 16/9)")
     p.add_argument("--seed", type=int, default=0, help="annealing random seed (default 0)")
     p.set_defaults(handler=run_overview)
 
     p = subparsers.add_parser("eval-overview", help="Figure 10 comparison of overview paths")
     p.add_argument("clips", type=Path, nargs="+", help="BVH files")
-    p.add_argument("--skip-frames", dest="skip_frames", type=int, nargs="+", default=[0],
-                   help="leading frames to skip: one value for all clips or one per clip")
+    p.add_argument(
+        "--skip-frames",
+        dest="skip_frames",
+        type=int,
+        nargs="+",
+        default=[0],
+        help="leading frames to skip: one value for all clips or one per clip",
+    )
     p.add_argument("--scale", type=float, help="metres per file unit for every clip (default: inferred)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="one of the paper's parameters (the REST form fields), repeatable")
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="one of the paper's parameters (the REST form fields), repeatable",
+    )
     p.add_argument("--json", type=Path, help="write the comparison here")
     p.add_argument("--plot", type=Path, help="folder for the Figure 9 plots, one PNG per clip")
     p.set_defaults(handler=run_eval_overview)
@@ -87,17 +103,25 @@ def run_overview(args: argparse.Namespace) -> int:
     try:
         metrics = comparison_metrics(result)
         timings = {"parse_bvh": parse_ms, **result.timings_ms}
-        timings.update(write_overview_outputs(clip, result, tmp, skip_frames=args.skip_frames,
-                                              metrics=metrics))
+        timings.update(write_overview_outputs(clip, result, tmp, skip_frames=args.skip_frames, metrics=metrics))
         for f in tmp.iterdir():
             os.replace(f, args.out / f.name)
     finally:
         for f in tmp.iterdir():
             f.unlink()
         tmp.rmdir()
-    print(json.dumps({"clip": str(args.clip), "out": str(args.out), "frames": clip.frame_count,
-                      "shots": [[int(a), int(b)] for a, b in result.shots], "metrics": metrics,
-                      "timings_ms": {k: round(v, 1) for k, v in timings.items()}}))
+    print(
+        json.dumps(
+            {
+                "clip": str(args.clip),
+                "out": str(args.out),
+                "frames": clip.frame_count,
+                "shots": [[int(a), int(b)] for a, b in result.shots],
+                "metrics": metrics,
+                "timings_ms": {k: round(v, 1) for k, v in timings.items()},
+            }
+        )
+    )
     return 0
 
 
@@ -113,8 +137,9 @@ def run_eval_overview(args: argparse.Namespace) -> int:
     for item in args.param:
         name, sep, value = item.partition("=")
         if not sep or name not in PAPER_PARAMETERS:
-            return _error("eval-overview", f"--param {item!r}: expected NAME=VALUE with NAME one of "
-                                           f"{', '.join(PAPER_PARAMETERS)}")
+            return _error(
+                "eval-overview", f"--param {item!r}: expected NAME=VALUE with NAME one of {', '.join(PAPER_PARAMETERS)}"
+            )
         try:
             params[name] = float(value)
         except ValueError:
@@ -146,15 +171,25 @@ def run_eval_overview(args: argparse.Namespace) -> int:
         if args.plot is not None:
             plot_quality(result, args.plot / f"{name}.png", name)
         rows.append((name, clip.frame_count, len(result.shots), cmp))
-    print(f"{'clip':32s} {'frames':>6s} {'shots':>5s}   {'E ours/static/greedy':>26s}   "
-          f"{'E_ext ours/static/greedy':>26s}   {'V ours/static/greedy':>23s}   beats static/greedy")
+    print(
+        f"{'clip':32s} {'frames':>6s} {'shots':>5s}   {'E ours/static/greedy':>26s}   "
+        f"{'E_ext ours/static/greedy':>26s}   {'V ours/static/greedy':>23s}   beats static/greedy"
+    )
     for name, n, s, c in rows:
-        print(f"{name:32s} {n:6d} {s:5d}   {c.ours.e:7.3f} {c.static.e:7.3f} {c.greedy.e:10.4g}   "
-              f"{c.ours.e_external:8.3f} {c.static.e_external:8.3f} {c.greedy.e_external:8.3f}   "
-              f"{c.ours.neg_v:7.3f} {c.static.neg_v:7.3f} {c.greedy.neg_v:7.3f}   "
-              f"{'yes' if c.beats_best_static else 'no':>6s} {'yes' if c.beats_greedy else 'no':>6s}")
+        print(
+            f"{name:32s} {n:6d} {s:5d}   {c.ours.e:7.3f} {c.static.e:7.3f} {c.greedy.e:10.4g}   "
+            f"{c.ours.e_external:8.3f} {c.static.e_external:8.3f} {c.greedy.e_external:8.3f}   "
+            f"{c.ours.neg_v:7.3f} {c.static.neg_v:7.3f} {c.greedy.neg_v:7.3f}   "
+            f"{'yes' if c.beats_best_static else 'no':>6s} {'yes' if c.beats_greedy else 'no':>6s}"
+        )
     if args.json is not None:
-        args.json.write_text(json.dumps({"normalisation": "value / |best static camera's value on that "
-                                         "attribute|; lower is better; V as -sum V",
-                                         "clips": table}, indent=1))
+        args.json.write_text(
+            json.dumps(
+                {
+                    "normalisation": "value / |best static camera's value on that attribute|; lower is better; V as -sum V",
+                    "clips": table,
+                },
+                indent=1,
+            )
+        )
     return 0

@@ -30,6 +30,7 @@ coefficients keep their published meaning at any frame rate and skeleton size):
 * Terms need both neighbours: a shot of n frames has n - 2 internal terms; there are no terms
   across a cut.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -40,7 +41,7 @@ from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.potential import PotentialSpace
 
-_TIE_RELATIVE = 1e-9   # relative difference below which two energies are a tie
+_TIE_RELATIVE = 1e-9  # relative difference below which two energies are a tie
 
 
 @dataclass(frozen=True)
@@ -61,11 +62,17 @@ class EnergyWeights:
     @classmethod
     def for_track(cls, track: CharacterTrack, settings: OverviewSettings) -> EnergyWeights:
         h = track.height_m
-        return cls(c1=settings.c1, c2=settings.c2, c3=settings.c3, c4=settings.c4, c5=settings.c5,
-                   max_speed_m_s=settings.max_speed_heights_s * h,
-                   max_angular_speed_rad_s=np.radians(settings.max_angular_speed_deg_s),
-                   friction_speed_m_s=settings.friction_speed_heights_s * h,
-                   dt_s=track.dt_s)
+        return cls(
+            c1=settings.c1,
+            c2=settings.c2,
+            c3=settings.c3,
+            c4=settings.c4,
+            c5=settings.c5,
+            max_speed_m_s=settings.max_speed_heights_s * h,
+            max_angular_speed_rad_s=np.radians(settings.max_angular_speed_deg_s),
+            friction_speed_m_s=settings.friction_speed_heights_s * h,
+            dt_s=track.dt_s,
+        )
 
 
 @dataclass(frozen=True)
@@ -102,25 +109,30 @@ def internal_terms(path_m: np.ndarray, look_at_m: np.ndarray, w: EnergyWeights) 
     span = np.linalg.norm(nxt - prev, axis=-1) / (2.0 * w.dt_s)
     speed = span / w.max_speed_m_s
     u_prev, u_cur, u_next = u[:-2], u[1:-1], u[2:]
-    ang_acc = (np.linalg.norm(u_prev - 2.0 * u_cur + u_next, axis=-1)
-               / (w.dt_s * w.max_angular_speed_rad_s))
+    ang_acc = np.linalg.norm(u_prev - 2.0 * u_cur + u_next, axis=-1) / (w.dt_s * w.max_angular_speed_rad_s)
     ang = np.arccos(np.clip(np.einsum("...k,...k->...", u_prev, u_next), -1.0, 1.0))
     ang_speed = ang / (2.0 * w.dt_s * w.max_angular_speed_rad_s)
     friction = span / w.friction_speed_m_s
-    return (w.c1 * acc ** 2
-            + w.c2 * np.where(speed > 1.0, speed, 0.0) ** 4
-            + w.c3 * ang_acc ** 2
-            + w.c4 * np.where(ang_speed > 1.0, ang_speed, 0.0) ** 4
-            + w.c5 * np.minimum(friction, 1.0) ** 2)
+    return (
+        w.c1 * acc**2
+        + w.c2 * np.where(speed > 1.0, speed, 0.0) ** 4
+        + w.c3 * ang_acc**2
+        + w.c4 * np.where(ang_speed > 1.0, ang_speed, 0.0) ** 4
+        + w.c5 * np.minimum(friction, 1.0) ** 2
+    )
 
 
-def path_energy(path_m: np.ndarray, shots: np.ndarray, track: CharacterTrack,
-                space: PotentialSpace, pose_saliency: np.ndarray, w: EnergyWeights) -> PathEnergy:
+def path_energy(
+    path_m: np.ndarray,
+    shots: np.ndarray,
+    track: CharacterTrack,
+    space: PotentialSpace,
+    pose_saliency: np.ndarray,
+    w: EnergyWeights,
+) -> PathEnergy:
     """E of a path (T, 3) over all track frames, cut into shots (S, 2) [first, last] frames."""
     frames = np.arange(track.frame_count)
     v = space.sample(frames, path_m)
-    internal = sum(float(internal_terms(path_m[a:b + 1], track.look_at_m[a:b + 1], w).sum())
-                   for a, b in shots)
+    internal = sum(float(internal_terms(path_m[a : b + 1], track.look_at_m[a : b + 1], w).sum()) for a, b in shots)
     external = -float(np.sum(pose_saliency * v))
-    return PathEnergy(total=internal + external, internal=internal, external=external,
-                      v_sum=float(v.sum()))
+    return PathEnergy(total=internal + external, internal=internal, external=external, v_sum=float(v.sum()))

@@ -22,6 +22,7 @@ by two summation orders, a tie, not a win.
 Figure 9 plots Q(p_t) per frame after each split-and-optimise iteration, with the shot segments
 below; `plot_quality` draws it with matplotlib's Agg backend.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -45,9 +46,14 @@ class MethodScore:
     neg_v: float
 
     def as_dict(self) -> dict[str, float]:
-        return {"E": self.e, "E_external": self.e_external, "V": self.neg_v,
-                "E_raw": self.energy.total, "E_external_raw": self.energy.external,
-                "V_raw": self.energy.v_sum}
+        return {
+            "E": self.e,
+            "E_external": self.e_external,
+            "V": self.neg_v,
+            "E_raw": self.energy.total,
+            "E_external_raw": self.energy.external,
+            "V_raw": self.energy.v_sum,
+        }
 
 
 @dataclass(frozen=True)
@@ -75,20 +81,30 @@ class Comparison:
 
     def as_dict(self) -> dict:
         b = self.best_static
-        return {"ours": self.ours.as_dict(), "static": self.static.as_dict(),
-                "greedy": self.greedy.as_dict(),
-                "best_static_raw": {"E": b.e, "E_external": b.e_external, "V": b.v_sum,
-                                    "E_position_m": b.e_position_m.tolist(),
-                                    "E_external_position_m": b.e_external_position_m.tolist(),
-                                    "V_position_m": b.v_position_m.tolist()},
-                "beats_best_static": self.beats_best_static, "beats_greedy": self.beats_greedy}
+        return {
+            "ours": self.ours.as_dict(),
+            "static": self.static.as_dict(),
+            "greedy": self.greedy.as_dict(),
+            "best_static_raw": {
+                "E": b.e,
+                "E_external": b.e_external,
+                "V": b.v_sum,
+                "E_position_m": b.e_position_m.tolist(),
+                "E_external_position_m": b.e_external_position_m.tolist(),
+                "V_position_m": b.v_position_m.tolist(),
+            },
+            "beats_best_static": self.beats_best_static,
+            "beats_greedy": self.beats_greedy,
+        }
 
 
 def _score(energy: PathEnergy, best: BestStatic) -> MethodScore:
-    return MethodScore(energy=energy,
-                       e=energy.total / abs(best.e),
-                       e_external=energy.external / abs(best.e_external),
-                       neg_v=-energy.v_sum / abs(best.v_sum))
+    return MethodScore(
+        energy=energy,
+        e=energy.total / abs(best.e),
+        e_external=energy.external / abs(best.e_external),
+        neg_v=-energy.v_sum / abs(best.v_sum),
+    )
 
 
 def compare_with_baselines(result: OverviewResult) -> Comparison:
@@ -99,10 +115,10 @@ def compare_with_baselines(result: OverviewResult) -> Comparison:
     one_shot = np.array([[0, n - 1]])
     best = best_static(a.track, a.space, sal, a.weights)
     static = path_energy(static_path(a.space, sal), one_shot, a.track, a.space, sal, a.weights)
-    greedy = path_energy(greedy_path(a.track, a.space, result.settings), one_shot,
-                         a.track, a.space, sal, a.weights)
-    return Comparison(ours=_score(result.energy, best), static=_score(static, best),
-                      greedy=_score(greedy, best), best_static=best)
+    greedy = path_energy(greedy_path(a.track, a.space, result.settings), one_shot, a.track, a.space, sal, a.weights)
+    return Comparison(
+        ours=_score(result.energy, best), static=_score(static, best), greedy=_score(greedy, best), best_static=best
+    )
 
 
 def plot_quality(result: OverviewResult, path: str | Path, title: str = "") -> Path:
@@ -114,8 +130,7 @@ def plot_quality(result: OverviewResult, path: str | Path, title: str = "") -> P
 
     plan = result.analysis.plan
     t_s = result.analysis_frames * result.frame_time_s
-    fig, (ax, bar) = plt.subplots(2, 1, figsize=(10, 4.5), sharex=True,
-                                  gridspec_kw={"height_ratios": [4, 1]})
+    fig, (ax, bar) = plt.subplots(2, 1, figsize=(10, 4.5), sharex=True, gridspec_kw={"height_ratios": [4, 1]})
     blues = plt.cm.Blues(np.linspace(0.35, 1.0, len(plan.quality_history)))
     for k, q in enumerate(plan.quality_history):
         ax.plot(t_s, q, color=blues[k], lw=1.0, label=f"iteration {k} ({len(plan.shots_history[k])} shots)")

@@ -13,6 +13,7 @@ lookat vector to point to the character").
   the look-at direction that holds the projected bounding box of every body point (joints and end
   sites) in every frame of the shot, with `frame_margin` of the half-frame to spare.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,13 +48,12 @@ def camera_rotations(position_m: np.ndarray, look_at_m: np.ndarray) -> np.ndarra
     right = np.cross(UP_WORLD, back)
     right /= np.maximum(np.linalg.norm(right, axis=1, keepdims=True), 1e-12)
     up = np.cross(back, right)
-    return np.stack([right, up, back], axis=2)       # columns: camera x, y, z in world
+    return np.stack([right, up, back], axis=2)  # columns: camera x, y, z in world
 
 
-def required_tan_half_fov(rotations: np.ndarray, position_m: np.ndarray, points_m: np.ndarray,
-                          aspect: float) -> np.ndarray:
+def required_tan_half_fov(rotations: np.ndarray, position_m: np.ndarray, points_m: np.ndarray, aspect: float) -> np.ndarray:
     """(F,) tan(vertical FOV / 2) that just holds (F, K, 3) points; inf if one is behind."""
-    cam = np.einsum("fkj,fji->fki", points_m - position_m[:, None], rotations)   # R^T (p - c)
+    cam = np.einsum("fkj,fji->fki", points_m - position_m[:, None], rotations)  # R^T (p - c)
     depth = -cam[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         need = np.maximum(np.abs(cam[..., 1]) / depth, np.abs(cam[..., 0]) / (depth * aspect))
@@ -61,8 +61,9 @@ def required_tan_half_fov(rotations: np.ndarray, position_m: np.ndarray, points_
     return need.max(axis=1)
 
 
-def frame_clip(track_full: CharacterTrack, path_m: np.ndarray, shots: np.ndarray,
-               analysis_frames: np.ndarray, settings: OverviewSettings) -> Framing:
+def frame_clip(
+    track_full: CharacterTrack, path_m: np.ndarray, shots: np.ndarray, analysis_frames: np.ndarray, settings: OverviewSettings
+) -> Framing:
     """Framing at every clip frame. track_full: the character at every clip frame; path_m (T, 3)
     at `analysis_frames` (T,) clip frames; shots (S, 2) in analysis-frame indices."""
     n = track_full.frame_count
@@ -73,11 +74,11 @@ def frame_clip(track_full: CharacterTrack, path_m: np.ndarray, shots: np.ndarray
         start = int(analysis_frames[a]) if k > 0 else 0
         end = int(analysis_frames[shots[k + 1][0]]) - 1 if k + 1 < len(shots) else n - 1
         clip_shots.append((start, end))
-        shot_index[start:end + 1] = k
+        shot_index[start : end + 1] = k
         frames = np.arange(start, end + 1)
-        keys = analysis_frames[a:b + 1]
+        keys = analysis_frames[a : b + 1]
         for axis in range(3):
-            position[start:end + 1, axis] = np.interp(frames, keys, path_m[a:b + 1, axis])
+            position[start : end + 1, axis] = np.interp(frames, keys, path_m[a : b + 1, axis])
     look_at = track_full.look_at_m
     rotations = camera_rotations(position, look_at)
     points = track_full.points_m
@@ -85,8 +86,14 @@ def frame_clip(track_full: CharacterTrack, path_m: np.ndarray, shots: np.ndarray
     tan_need = tan_need / (1.0 - settings.frame_margin)
     fov = np.empty(n)
     for start, end in clip_shots:
-        fov[start:end + 1] = 2.0 * math.degrees(math.atan(float(tan_need[start:end + 1].max())))
+        fov[start : end + 1] = 2.0 * math.degrees(math.atan(float(tan_need[start : end + 1].max())))
     quats = np.array([matrix_to_quat(r) for r in rotations])
-    return Framing(position_m=position, look_at_m=look_at, up=np.tile(UP_WORLD, (n, 1)),
-                   rotation_xyzw=quats, vertical_fov_deg=fov, shot_index=shot_index,
-                   shots=np.array(clip_shots, dtype=np.int64))
+    return Framing(
+        position_m=position,
+        look_at_m=look_at,
+        up=np.tile(UP_WORLD, (n, 1)),
+        rotation_xyzw=quats,
+        vertical_fov_deg=fov,
+        shot_index=shot_index,
+        shots=np.array(clip_shots, dtype=np.int64),
+    )

@@ -2,6 +2,7 @@
 parse an uploaded BVH clip, plan the overview (pipeline.py), write the result JSON, the preview
 video and the contact sheet. Job files: the upload is `input/clip.bvh`, the parameters are the
 job's JSON; the job writes `result.json`, `preview.mp4` and `contact-sheet.png`."""
+
 from __future__ import annotations
 
 import json
@@ -23,10 +24,21 @@ PREVIEW_MP4 = "preview.mp4"
 CONTACT_SHEET_PNG = "contact-sheet.png"
 
 # OverviewSettings fields a client may set (the paper's parameters, and the frame's aspect).
-PAPER_PARAMETERS = ("c1", "c2", "c3", "c4", "c5", "max_speed_heights_s",
-                    "max_angular_speed_deg_s", "friction_speed_heights_s",
-                    "split_quality", "split_max_saliency", "min_shot_s",
-                    "max_shots_per_1000_frames", "analysis_rate_hz")
+PAPER_PARAMETERS = (
+    "c1",
+    "c2",
+    "c3",
+    "c4",
+    "c5",
+    "max_speed_heights_s",
+    "max_angular_speed_deg_s",
+    "friction_speed_heights_s",
+    "split_quality",
+    "split_max_saliency",
+    "min_shot_s",
+    "max_shots_per_1000_frames",
+    "analysis_rate_hz",
+)
 
 
 def load_clip_bytes(data: bytes, *, scale: float | None, skip_frames: int) -> MotionClip:
@@ -41,31 +53,44 @@ def load_clip_bytes(data: bytes, *, scale: float | None, skip_frames: int) -> Mo
     return clip
 
 
-def result_document(result: OverviewResult, *, skip_frames: int = 0,
-                    metrics: dict | None = None) -> dict:
+def result_document(result: OverviewResult, *, skip_frames: int = 0, metrics: dict | None = None) -> dict:
     """The result JSON: fps; frames (one per clip frame after skip_frames; "frame" counts from
     0 at the first kept frame) with position, look_at, up (metres, world, +Y up),
     vertical_fov_deg and shot; shots [{start, end}] inclusive frames; metrics."""
-    frames = [{"frame": i,
-               "position": [round(float(v), 5) for v in result.camera_position_m[i]],
-               "look_at": [round(float(v), 5) for v in result.look_at_m[i]],
-               "up": [round(float(v), 6) for v in result.up[i]],
-               "vertical_fov_deg": round(float(result.vertical_fov_deg[i]), 4),
-               "shot": int(result.shot_index[i])}
-              for i in range(len(result.camera_position_m))]
+    frames = [
+        {
+            "frame": i,
+            "position": [round(float(v), 5) for v in result.camera_position_m[i]],
+            "look_at": [round(float(v), 5) for v in result.look_at_m[i]],
+            "up": [round(float(v), 6) for v in result.up[i]],
+            "vertical_fov_deg": round(float(result.vertical_fov_deg[i]), 4),
+            "shot": int(result.shot_index[i]),
+        }
+        for i in range(len(result.camera_position_m))
+    ]
     e = result.energy
     q = result.quality
     sal = result.analysis.saliency.pose
-    base = {"E": e.total, "E_internal": e.internal, "E_external": e.external, "V_sum": e.v_sum,
-            "quality_mean": float(np.mean(q)),
-            "quality_saliency_weighted": float(np.dot(sal, q) / max(float(sal.sum()), 1e-12)),
-            "shot_count": int(len(result.shots)), "character_height_m": result.character_height_m,
-            "max_speed_m_s": result.max_speed_m_s, "skip_frames": int(skip_frames),
-            "analysis_frames": int(len(result.analysis_frames))}
+    base = {
+        "E": e.total,
+        "E_internal": e.internal,
+        "E_external": e.external,
+        "V_sum": e.v_sum,
+        "quality_mean": float(np.mean(q)),
+        "quality_saliency_weighted": float(np.dot(sal, q) / max(float(sal.sum()), 1e-12)),
+        "shot_count": int(len(result.shots)),
+        "character_height_m": result.character_height_m,
+        "max_speed_m_s": result.max_speed_m_s,
+        "skip_frames": int(skip_frames),
+        "analysis_frames": int(len(result.analysis_frames)),
+    }
     base.update(metrics or {})
-    return {"fps": 1.0 / result.frame_time_s, "frames": frames,
-            "shots": [{"start": int(a), "end": int(b)} for a, b in result.shots],
-            "metrics": base}
+    return {
+        "fps": 1.0 / result.frame_time_s,
+        "frames": frames,
+        "shots": [{"start": int(a), "end": int(b)} for a, b in result.shots],
+        "metrics": base,
+    }
 
 
 def comparison_metrics(result: OverviewResult) -> dict[str, float]:
@@ -88,9 +113,9 @@ def settings_from_params(params: dict) -> OverviewSettings:
     return OverviewSettings(**values)
 
 
-def write_overview_outputs(clip: MotionClip, result: OverviewResult, out_dir: Path, *,
-                           skip_frames: int = 0, metrics: dict | None = None,
-                           progress=None) -> dict[str, float]:
+def write_overview_outputs(
+    clip: MotionClip, result: OverviewResult, out_dir: Path, *, skip_frames: int = 0, metrics: dict | None = None, progress=None
+) -> dict[str, float]:
     """result.json, preview.mp4 and contact-sheet.png into out_dir; returns timings in ms."""
     t = time.perf_counter()
     doc = result_document(result, skip_frames=skip_frames, metrics=metrics)
@@ -98,8 +123,11 @@ def write_overview_outputs(clip: MotionClip, result: OverviewResult, out_dir: Pa
     timings = {"result_json": (time.perf_counter() - t) * 1e3}
     if progress is not None:
         progress(0.8)
-    timings.update(render_preview(clip, result.analysis.parts, PreviewCamera.from_result(result),
-                                  out_dir / PREVIEW_MP4, out_dir / CONTACT_SHEET_PNG))
+    timings.update(
+        render_preview(
+            clip, result.analysis.parts, PreviewCamera.from_result(result), out_dir / PREVIEW_MP4, out_dir / CONTACT_SHEET_PNG
+        )
+    )
     return timings
 
 
@@ -107,8 +135,9 @@ def run_overview_job(params: dict, input_dir: Path, output_dir: Path, progress) 
     """The "overview" job kind (runs in a job process): plan the camera, write the outputs."""
     t = time.perf_counter()
     try:
-        clip = load_clip_bytes((input_dir / CLIP_FILE).read_bytes(), scale=params.get("scale"),
-                               skip_frames=int(params.get("skip_frames", 0)))
+        clip = load_clip_bytes(
+            (input_dir / CLIP_FILE).read_bytes(), scale=params.get("scale"), skip_frames=int(params.get("skip_frames", 0))
+        )
         settings = settings_from_params(params)
     except ValueError as exc:
         raise JobError(str(exc)) from None
@@ -122,8 +151,10 @@ def run_overview_job(params: dict, input_dir: Path, output_dir: Path, progress) 
     t = time.perf_counter()
     metrics = comparison_metrics(result)
     timings["baselines"] = (time.perf_counter() - t) * 1e3
-    timings.update(write_overview_outputs(clip, result, output_dir,
-                                          skip_frames=int(params.get("skip_frames", 0)),
-                                          metrics=metrics, progress=progress))
+    timings.update(
+        write_overview_outputs(
+            clip, result, output_dir, skip_frames=int(params.get("skip_frames", 0)), metrics=metrics, progress=progress
+        )
+    )
     progress(1.0)
     return timings

@@ -26,6 +26,7 @@ Our choices where the paper gives none:
 Rendering uses moderngl with EGL (Mesa llvmpipe on CPU machines): every (frame, direction) is one
 tile of an atlas; one instanced draw call renders a whole atlas, one read gives every count.
 """
+
 from __future__ import annotations
 
 import math
@@ -39,8 +40,8 @@ from camdirector.precompute.overview.bvh import MotionClip
 from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.overview_settings import OverviewSettings
 
-_ATLAS_MAX_PX = 2048          # atlas side, pixels (llvmpipe handles 2048^2 in one pass)
-_MIN_BONE_HEIGHTS = 0.01      # bones shorter than this (heights) are left out
+_ATLAS_MAX_PX = 2048  # atlas side, pixels (llvmpipe handles 2048^2 in one pass)
+_MIN_BONE_HEIGHTS = 0.01  # bones shorter than this (heights) are left out
 
 _VERTEX_SHADER = """
 #version 330
@@ -93,33 +94,73 @@ def _unit_sphere(subdivisions: int = 0) -> np.ndarray:
     subdivisions, 80 at 1. The icosahedron is the default: llvmpipe's cost is per triangle, and at
     a few pixels per bone the shape error (the icosahedron's inradius is 0.79) is below a pixel."""
     t = (1.0 + math.sqrt(5.0)) / 2.0
-    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t),
-             (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    verts = [
+        (-1, t, 0),
+        (1, t, 0),
+        (-1, -t, 0),
+        (1, -t, 0),
+        (0, -1, t),
+        (0, 1, t),
+        (0, -1, -t),
+        (0, 1, -t),
+        (t, 0, -1),
+        (t, 0, 1),
+        (-t, 0, -1),
+        (-t, 0, 1),
+    ]
+    faces = [
+        (0, 11, 5),
+        (0, 5, 1),
+        (0, 1, 7),
+        (0, 7, 10),
+        (0, 10, 11),
+        (1, 5, 9),
+        (5, 11, 4),
+        (11, 10, 2),
+        (10, 7, 6),
+        (7, 1, 8),
+        (3, 9, 4),
+        (3, 4, 2),
+        (3, 2, 6),
+        (3, 6, 8),
+        (3, 8, 9),
+        (4, 9, 5),
+        (2, 4, 11),
+        (6, 2, 10),
+        (8, 6, 7),
+        (9, 8, 1),
+    ]
     tris = np.array([[verts[i] for i in f] for f in faces], dtype=np.float64)
     tris /= np.linalg.norm(tris, axis=2, keepdims=True)
     for _ in range(subdivisions):
         a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-        ab, bc, ca = [(p + q) / np.linalg.norm(p + q, axis=1, keepdims=True)
-                      for p, q in ((a, b), (b, c), (c, a))]
-        tris = np.concatenate([np.stack(x, axis=1) for x in
-                               ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+        ab, bc, ca = [(p + q) / np.linalg.norm(p + q, axis=1, keepdims=True) for p, q in ((a, b), (b, c), (c, a))]
+        tris = np.concatenate([np.stack(x, axis=1) for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
     return tris.reshape(-1, 3).astype(np.float32)
 
 
-def _bones(clip: MotionClip, parts: BodyPartMap, settings: OverviewSettings, height_m: float
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _bones(
+    clip: MotionClip, parts: BodyPartMap, settings: OverviewSettings, height_m: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ellipsoid bones: parent and child point indices (into `MotionClip.all_points_m`), body part
     (B,) of the child (of the parent for an end site), radius_m (B,)."""
     parent, child = rigid_bones(clip)
     n_joints = len(clip.joint_names)
     owner = np.where(child < n_joints, child, parent)
     part = parts.part_of_joint[owner]
-    radius_of = np.array([settings.head_radius_heights, settings.torso_radius_heights,
-                          settings.arm_radius_heights, settings.arm_radius_heights,
-                          settings.leg_radius_heights, settings.leg_radius_heights]) * height_m
+    radius_of = (
+        np.array(
+            [
+                settings.head_radius_heights,
+                settings.torso_radius_heights,
+                settings.arm_radius_heights,
+                settings.arm_radius_heights,
+                settings.leg_radius_heights,
+                settings.leg_radius_heights,
+            ]
+        )
+        * height_m
+    )
     points = clip.all_points_m
     length = np.linalg.norm(points[:, child] - points[:, parent], axis=2).mean(axis=0)
     keep = length >= _MIN_BONE_HEIGHTS * height_m
@@ -140,14 +181,12 @@ class LimbVisibilityRenderer:
         self.tiles_per_side = max(1, _ATLAS_MAX_PX // self.tile_px)
         side = self.tiles_per_side * self.tile_px
         self._ctx = egl_context()
-        self._program = self._ctx.program(vertex_shader=_VERTEX_SHADER,
-                                          fragment_shader=_FRAGMENT_SHADER)
+        self._program = self._ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
         uniform(self._program, "tiles").value = (float(self.tiles_per_side), float(self.tiles_per_side))
         self._sphere = self._ctx.buffer(_unit_sphere().tobytes())
         self._colour_rb = self._ctx.renderbuffer((side, side), components=1, dtype="f1")
         self._depth_rb = self._ctx.depth_renderbuffer((side, side))
-        self._fbo = self._ctx.framebuffer(color_attachments=[self._colour_rb],
-                                          depth_attachment=self._depth_rb)
+        self._fbo = self._ctx.framebuffer(color_attachments=[self._colour_rb], depth_attachment=self._depth_rb)
         self._side = side
 
     def __enter__(self) -> LimbVisibilityRenderer:
@@ -164,11 +203,13 @@ class LimbVisibilityRenderer:
         `tile_count` tiles of one atlas; (tile_count, 7) pixel counts per colour id (0 = empty)."""
         ctx = self._ctx
         inst = ctx.buffer(np.ascontiguousarray(instances, dtype=np.float32).tobytes())
-        vao = ctx.vertex_array(self._program, [
-            (self._sphere, "3f", "in_vertex"),
-            (inst, "3f 3f 3f 3f 2f 1f/i", "in_axis_x", "in_axis_y", "in_axis_z", "in_offset",
-             "in_tile", "in_colour"),
-        ])
+        vao = ctx.vertex_array(
+            self._program,
+            [
+                (self._sphere, "3f", "in_vertex"),
+                (inst, "3f 3f 3f 3f 2f 1f/i", "in_axis_x", "in_axis_y", "in_axis_z", "in_offset", "in_tile", "in_colour"),
+            ],
+        )
         self._fbo.use()
         ctx.enable(ctx.DEPTH_TEST)
         self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -177,17 +218,22 @@ class LimbVisibilityRenderer:
         vao.release()
         inst.release()
         n, px = self.tiles_per_side, self.tile_px
-        image = raw.reshape(n, px, n, px)                    # (tile row, y, tile col, x)
-        tile_of_pixel = (np.arange(n)[:, None, None, None] * n + np.arange(n)[None, None, :, None])
+        image = raw.reshape(n, px, n, px)  # (tile row, y, tile col, x)
+        tile_of_pixel = np.arange(n)[:, None, None, None] * n + np.arange(n)[None, None, :, None]
         tile_of_pixel = np.broadcast_to(tile_of_pixel, image.shape)
         keys = tile_of_pixel.astype(np.int64) * 8 + image
         counts = np.bincount(keys.ravel(), minlength=n * n * 8).reshape(n * n, 8)
         return counts[:tile_count, :7]
 
 
-def render_limb_visibility(clip: MotionClip, parts: BodyPartMap, track: CharacterTrack,
-                           pose_saliency: np.ndarray, settings: OverviewSettings,
-                           renderer: LimbVisibilityRenderer) -> LimbVisibility:
+def render_limb_visibility(
+    clip: MotionClip,
+    parts: BodyPartMap,
+    track: CharacterTrack,
+    pose_saliency: np.ndarray,
+    settings: OverviewSettings,
+    renderer: LimbVisibilityRenderer,
+) -> LimbVisibility:
     """E_limb per track frame with pose saliency (T,) at least `limb_min_saliency`, per body part
     and view direction (see the module docstring)."""
     selected = np.flatnonzero(pose_saliency >= settings.limb_min_saliency)
@@ -195,14 +241,14 @@ def render_limb_visibility(clip: MotionClip, parts: BodyPartMap, track: Characte
     row_of_frame[selected] = np.arange(len(selected))
     azimuths = np.linspace(0.0, 2.0 * np.pi, settings.limb_view_azimuths, endpoint=False)
     elevations = np.radians(np.asarray(settings.limb_view_elevations_deg, dtype=np.float64))
-    dirs = view_directions(azimuths, elevations).reshape(-1, 3)            # (V, 3) back axis
+    dirs = view_directions(azimuths, elevations).reshape(-1, 3)  # (V, 3) back axis
     right = np.cross(UP_WORLD, dirs)
     right /= np.linalg.norm(right, axis=1, keepdims=True)
     cam_up = np.cross(dirs, right)
-    view = np.stack([right, cam_up, dirs], axis=1)                         # (V, 3, 3) rows
+    view = np.stack([right, cam_up, dirs], axis=1)  # (V, 3, 3) rows
     parent, child, part, radius = _bones(clip, parts, settings, track.height_m)
-    points = clip.all_points_m[track.frame_indices[selected]]              # (R, P, 3)
-    a, b = points[:, parent], points[:, child]                             # (T, B, 3)
+    points = clip.all_points_m[track.frame_indices[selected]]  # (R, P, 3)
+    a, b = points[:, parent], points[:, child]  # (T, B, 3)
     centre = 0.5 * (a + b)
     axis = b - a
     length = np.linalg.norm(axis, axis=2, keepdims=True)
@@ -212,35 +258,37 @@ def render_limb_visibility(clip: MotionClip, parts: BodyPartMap, track: Characte
     v /= np.linalg.norm(v, axis=2, keepdims=True)
     w = np.cross(u, v)
     semi_long = 0.5 * length + 0.5 * radius[None, :, None]
-    axes = np.stack([u * semi_long, v * radius[None, :, None], w * radius[None, :, None]],
-                    axis=2)                                                 # (T, B, 3 axes, 3)
-    extent = track.radius_m[selected]                                      # (R,)
+    axes = np.stack([u * semi_long, v * radius[None, :, None], w * radius[None, :, None]], axis=2)  # (T, B, 3 axes, 3)
+    extent = track.radius_m[selected]  # (R,)
     rel_centre = (centre - track.look_at_m[selected][:, None]) / extent[:, None, None]
     axes = axes / extent[:, None, None, None]
     n_frames, n_bones, n_views = len(points), len(parent), len(dirs)
-    tiles_per_atlas = renderer.tiles_per_side ** 2
+    tiles_per_atlas = renderer.tiles_per_side**2
     pixels = np.zeros((n_frames * n_views, PART_COUNT))
     colour = (part + 1).astype(np.float32)
     # Flattened (frame, view) tile order; each atlas takes the next tiles_per_atlas of them.
     for first in range(0, n_frames * n_views, tiles_per_atlas):
         ids = np.arange(first, min(first + tiles_per_atlas, n_frames * n_views))
         f, vw = ids // n_views, ids % n_views
-        rot = view[vw]                                                      # (K, 3, 3)
-        ax = np.einsum("kij,kbaj->kbai", rot, axes[f])                      # (K, B, 3, 3)
-        off = np.einsum("kij,kbj->kbi", rot, rel_centre[f])                 # (K, B, 3)
+        rot = view[vw]  # (K, 3, 3)
+        ax = np.einsum("kij,kbaj->kbai", rot, axes[f])  # (K, B, 3, 3)
+        off = np.einsum("kij,kbj->kbi", rot, rel_centre[f])  # (K, B, 3)
         local = np.arange(len(ids))
-        tile_xy = np.stack([local % renderer.tiles_per_side, local // renderer.tiles_per_side],
-                           axis=1).astype(np.float32)
-        inst = np.concatenate([
-            ax.reshape(len(ids), n_bones, 9),
-            off,
-            np.broadcast_to(tile_xy[:, None], (len(ids), n_bones, 2)),
-            np.broadcast_to(colour[None, :, None], (len(ids), n_bones, 1)),
-        ], axis=2).reshape(-1, 15)
+        tile_xy = np.stack([local % renderer.tiles_per_side, local // renderer.tiles_per_side], axis=1).astype(np.float32)
+        inst = np.concatenate(
+            [
+                ax.reshape(len(ids), n_bones, 9),
+                off,
+                np.broadcast_to(tile_xy[:, None], (len(ids), n_bones, 2)),
+                np.broadcast_to(colour[None, :, None], (len(ids), n_bones, 1)),
+            ],
+            axis=2,
+        ).reshape(-1, 15)
         counts = renderer.count_pixels(inst, len(ids))
-        pixels[ids] = counts[:, 1:PART_COUNT + 1]
+        pixels[ids] = counts[:, 1 : PART_COUNT + 1]
     per_view = pixels.reshape(n_frames, len(elevations), len(azimuths), PART_COUNT).transpose(0, 3, 1, 2)
     best = per_view.max(axis=(2, 3), keepdims=True)
     normalised = np.where(best > 0, per_view / np.maximum(best, 1.0), 0.0)
-    return LimbVisibility(row_of_frame=row_of_frame, pixels=per_view, normalised=normalised,
-                          azimuths_rad=azimuths, elevations_rad=elevations)
+    return LimbVisibility(
+        row_of_frame=row_of_frame, pixels=per_view, normalised=normalised, azimuths_rad=azimuths, elevations_rad=elevations
+    )

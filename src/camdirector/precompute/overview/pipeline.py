@@ -13,6 +13,7 @@ round(clip rate / `analysis_rate_hz`) frames (15 Hz by default: every 2nd frame 
 frame; sampling keeps a 1000-frame clip under 10 s on two CPU cores. The speed limit, the frame
 containment and the bounding-volume checks hold at every clip frame (framing.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -46,8 +47,14 @@ class Stage(Enum):
     FRAMING = "framing"
 
 
-_PROGRESS_AFTER: dict[Enum, float] = {Stage.TRACK: 0.02, Stage.SALIENCY: 0.2, Stage.LIMBS: 0.45,
-                   Stage.POTENTIAL: 0.6, Stage.SHOTS: 0.97, Stage.FRAMING: 1.0}
+_PROGRESS_AFTER: dict[Enum, float] = {
+    Stage.TRACK: 0.02,
+    Stage.SALIENCY: 0.2,
+    Stage.LIMBS: 0.45,
+    Stage.POTENTIAL: 0.6,
+    Stage.SHOTS: 0.97,
+    Stage.FRAMING: 1.0,
+}
 
 
 @dataclass(frozen=True)
@@ -94,9 +101,15 @@ class OverviewResult:
     analysis: OverviewAnalysis
 
 
-def plan_overview(clip: MotionClip, settings: OverviewSettings, rng: np.random.Generator, *,
-                  scene=None, progress: Callable[[float], None] | None = None,
-                  renderer: LimbVisibilityRenderer | None = None) -> OverviewResult:
+def plan_overview(
+    clip: MotionClip,
+    settings: OverviewSettings,
+    rng: np.random.Generator,
+    *,
+    scene=None,
+    progress: Callable[[float], None] | None = None,
+    renderer: LimbVisibilityRenderer | None = None,
+) -> OverviewResult:
     """Plan a multi-shot overview camera for a motion clip (the paper's whole method).
 
     scene: optional static trimesh.Trimesh whose triangles occlude the character;
@@ -132,12 +145,20 @@ def plan_overview(clip: MotionClip, settings: OverviewSettings, rng: np.random.G
     framing: Framing = frame_clip(track_full, plan.path_m, plan.shots, analysis_frames, settings)
     done(Stage.FRAMING)
     return OverviewResult(
-        camera_position_m=framing.position_m, look_at_m=framing.look_at_m, up=framing.up,
-        rotation_xyzw=framing.rotation_xyzw, vertical_fov_deg=framing.vertical_fov_deg,
-        shot_index=framing.shot_index, shots=framing.shots,
+        camera_position_m=framing.position_m,
+        look_at_m=framing.look_at_m,
+        up=framing.up,
+        rotation_xyzw=framing.rotation_xyzw,
+        vertical_fov_deg=framing.vertical_fov_deg,
+        shot_index=framing.shot_index,
+        shots=framing.shots,
         energy=path_energy(plan.path_m, plan.shots, track, space, saliency.pose, weights),
-        quality=plan.quality_history[-1], analysis_frames=analysis_frames,
-        frame_time_s=clip.frame_time_s, character_height_m=track.height_m,
-        max_speed_m_s=weights.max_speed_m_s, timings_ms=timings, settings=settings,
-        analysis=OverviewAnalysis(parts=parts, track=track, saliency=saliency, space=space,
-                                  weights=weights, plan=plan))
+        quality=plan.quality_history[-1],
+        analysis_frames=analysis_frames,
+        frame_time_s=clip.frame_time_s,
+        character_height_m=track.height_m,
+        max_speed_m_s=weights.max_speed_m_s,
+        timings_ms=timings,
+        settings=settings,
+        analysis=OverviewAnalysis(parts=parts, track=track, saliency=saliency, space=space, weights=weights, plan=plan),
+    )

@@ -12,6 +12,7 @@ holding the whole body fits a lens of `max_vertical_fov_deg` with `frame_margin`
 (d >= r / sin(atan(tan(fov_max / 2) * (1 - margin)))). Those two distance rules are what keep every
 joint inside the frame and the camera out of the character in the result.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,7 +27,7 @@ from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.saliency import Saliency
 from camdirector.precompute.overview.viewpoint_quality import scene_visibility, viewpoint_quality
 
-_FRAMES_PER_CHUNK = 64   # frames evaluated at once (bounds memory to chunk * positions floats)
+_FRAMES_PER_CHUNK = 64  # frames evaluated at once (bounds memory to chunk * positions floats)
 
 
 @dataclass(frozen=True)
@@ -81,29 +82,24 @@ class PotentialSpace:
 
 def closest_distance_m(track: CharacterTrack, settings: OverviewSettings) -> np.ndarray:
     """(T,) the closest camera distance from the look-at point that frames the whole body."""
-    half = math.atan(math.tan(math.radians(settings.max_vertical_fov_deg) / 2.0)
-                     * (1.0 - settings.frame_margin))
+    half = math.atan(math.tan(math.radians(settings.max_vertical_fov_deg) / 2.0) * (1.0 - settings.frame_margin))
     return track.radius_m / math.sin(half)
 
 
-def allowed_positions(track: CharacterTrack, space: PotentialSpace, frames: np.ndarray,
-                      positions_m: np.ndarray) -> np.ndarray:
+def allowed_positions(track: CharacterTrack, space: PotentialSpace, frames: np.ndarray, positions_m: np.ndarray) -> np.ndarray:
     """bool of shape broadcast(frames.shape, positions_m.shape[:-1]): positions (..., 3) allowed
     at track frames (...) (see the module docstring). Frames (n,) with positions (n, 3) test
     pairs; frames (T, 1) with positions (P, 3) test every pair (T, P)."""
-    inside_grid = np.all((positions_m >= space.lower() - 1e-9)
-                         & (positions_m <= space.upper() + 1e-9), axis=-1)
-    far = (np.linalg.norm(positions_m - track.look_at_m[frames], axis=-1)
-           >= space.min_distance_m[frames])
+    inside_grid = np.all((positions_m >= space.lower() - 1e-9) & (positions_m <= space.upper() + 1e-9), axis=-1)
+    far = np.linalg.norm(positions_m - track.look_at_m[frames], axis=-1) >= space.min_distance_m[frames]
     c = space.box_clearance_m
-    in_box = np.all((positions_m >= track.box_min_m[frames] - c)
-                    & (positions_m <= track.box_max_m[frames] + c), axis=-1)
+    in_box = np.all((positions_m >= track.box_min_m[frames] - c) & (positions_m <= track.box_max_m[frames] + c), axis=-1)
     return inside_grid & far & ~in_box
 
 
-def build_potential_space(track: CharacterTrack, parts: BodyPartMap, saliency: Saliency,
-                          limbs: LimbVisibility, settings: OverviewSettings, scene=None
-                          ) -> PotentialSpace:
+def build_potential_space(
+    track: CharacterTrack, parts: BodyPartMap, saliency: Saliency, limbs: LimbVisibility, settings: OverviewSettings, scene=None
+) -> PotentialSpace:
     """V over the candidate grid at every track frame; `scene`: optional static trimesh.Trimesh."""
     h = track.height_m
     margin = settings.grid_margin_heights * h
@@ -121,20 +117,33 @@ def build_potential_space(track: CharacterTrack, parts: BodyPartMap, saliency: S
     values = np.empty((n_frames, len(nodes)), dtype=np.float32)
     for first in range(0, n_frames, _FRAMES_PER_CHUNK):
         frames = np.arange(first, min(first + _FRAMES_PER_CHUNK, n_frames))
-        values[frames] = viewpoint_quality(track, frames, nodes, saliency, limbs, settings,
-                                           visibility)
-    space = PotentialSpace(xs=xs, ys=ys, zs=zs, values=values.reshape((n_frames,) + shape),
-                           allowed=np.zeros((n_frames,) + shape, dtype=bool),
-                           best=np.zeros(n_frames), min_distance_m=closest_distance_m(track, settings),
-                           box_clearance_m=settings.clearance_heights * h)
+        values[frames] = viewpoint_quality(track, frames, nodes, saliency, limbs, settings, visibility)
+    space = PotentialSpace(
+        xs=xs,
+        ys=ys,
+        zs=zs,
+        values=values.reshape((n_frames,) + shape),
+        allowed=np.zeros((n_frames,) + shape, dtype=bool),
+        best=np.zeros(n_frames),
+        min_distance_m=closest_distance_m(track, settings),
+        box_clearance_m=settings.clearance_heights * h,
+    )
     allowed = np.empty((n_frames, len(nodes)), dtype=bool)
     for first in range(0, n_frames, _FRAMES_PER_CHUNK):
         frames = np.arange(first, min(first + _FRAMES_PER_CHUNK, n_frames))
         allowed[frames] = allowed_positions(track, space, frames[:, None], nodes)
     if not np.all(allowed.any(axis=1)):
-        raise ValueError("no candidate camera position frames the character in some frame: "
-                         "raise grid_margin_heights or max_vertical_fov_deg")
+        raise ValueError(
+            "no candidate camera position frames the character in some frame: raise grid_margin_heights or max_vertical_fov_deg"
+        )
     best = np.where(allowed, values, -np.inf).max(axis=1)
-    return PotentialSpace(xs=xs, ys=ys, zs=zs, values=space.values,
-                          allowed=allowed.reshape((n_frames,) + shape), best=best,
-                          min_distance_m=space.min_distance_m, box_clearance_m=space.box_clearance_m)
+    return PotentialSpace(
+        xs=xs,
+        ys=ys,
+        zs=zs,
+        values=space.values,
+        allowed=allowed.reshape((n_frames,) + shape),
+        best=best,
+        min_distance_m=space.min_distance_m,
+        box_clearance_m=space.box_clearance_m,
+    )

@@ -14,6 +14,7 @@ cores busy, so the video is rendered by `processes` processes at once, each a pa
 range, and joined without re-encoding. Clips faster than `max_fps` are shown every k-th frame
 (CMU's 120 fps at 30 fps).
 """
+
 from __future__ import annotations
 
 import functools
@@ -49,11 +50,23 @@ PART_RGB = {
 # Capsule radius per part, character heights (thinner than limb_visibility's ellipsoids, which
 # stand for the flesh around a whole part: capsules per bone overlap at the joints).
 PART_RADIUS_HEIGHTS = {
-    BodyPart.HEAD: 0.055, BodyPart.TORSO: 0.06, BodyPart.LEFT_ARM: 0.025,
-    BodyPart.RIGHT_ARM: 0.025, BodyPart.LEFT_LEG: 0.035, BodyPart.RIGHT_LEG: 0.035,
+    BodyPart.HEAD: 0.055,
+    BodyPart.TORSO: 0.06,
+    BodyPart.LEFT_ARM: 0.025,
+    BodyPart.RIGHT_ARM: 0.025,
+    BodyPart.LEFT_LEG: 0.035,
+    BodyPart.RIGHT_LEG: 0.035,
 }
-SHOT_RGB = ((230, 57, 70), (42, 157, 143), (244, 162, 97), (69, 123, 157), (131, 56, 236),
-            (255, 190, 11), (58, 134, 255), (251, 86, 7))
+SHOT_RGB = (
+    (230, 57, 70),
+    (42, 157, 143),
+    (244, 162, 97),
+    (69, 123, 157),
+    (131, 56, 236),
+    (255, 190, 11),
+    (58, 134, 255),
+    (251, 86, 7),
+)
 
 
 @dataclass(frozen=True)
@@ -113,9 +126,13 @@ class PreviewCamera:
     @classmethod
     def from_result(cls, result) -> PreviewCamera:
         """From a pipeline.OverviewResult."""
-        return cls(position_m=result.camera_position_m, rotation_xyzw=result.rotation_xyzw,
-                   vertical_fov_deg=result.vertical_fov_deg, shots=result.shots,
-                   aspect=result.settings.aspect)
+        return cls(
+            position_m=result.camera_position_m,
+            rotation_xyzw=result.rotation_xyzw,
+            vertical_fov_deg=result.vertical_fov_deg,
+            shots=result.shots,
+            aspect=result.settings.aspect,
+        )
 
     def shot_of(self, frame: int) -> int:
         return int(np.searchsorted(self.shots[:, 0], frame, side="right") - 1)
@@ -159,8 +176,7 @@ class CharacterScene:
         keep = lengths > 1e-4
         self.parent, self.child = parent[keep], child[keep]
         n_joints = len(clip.joint_names)
-        owner = np.where(self.child < n_joints, self.child,
-                         clip.end_site_parents[np.maximum(self.child - n_joints, 0)])
+        owner = np.where(self.child < n_joints, self.child, clip.end_site_parents[np.maximum(self.child - n_joints, 0)])
         self.part = parts.part_of_joint[owner]
         height = clip.character_height_m()
         self.radius = np.array([PART_RADIUS_HEIGHTS[BodyPart(p)] * height for p in self.part])
@@ -181,16 +197,13 @@ class CharacterScene:
         self.bone_ids = np.array([f"bone{i}" for i in range(len(self.part))], dtype=object)
         self.joint_ids = [f"joint{k}" for k in range(len(self.sphere_part))]
         for mesh_id, p in zip(self.bone_ids, self.part):
-            self.renderer.add_mesh(mesh_id, cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)],
-                                   closed=True)
+            self.renderer.add_mesh(mesh_id, cyl.vertices, cyl.faces, PART_RGB[BodyPart(p)], closed=True)
         for mesh_id, p in zip(self.joint_ids, self.sphere_part):
-            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(int(p))],
-                                   closed=True)
+            self.renderer.add_mesh(mesh_id, sph.vertices, sph.faces, PART_RGB[BodyPart(int(p))], closed=True)
         centre = body.reshape(-1, 3).mean(axis=0)
         extent = float(np.ptp(body[:, :, [0, 2]].reshape(-1, 2), axis=0).max()) + 40.0
         ground = meshes.box((extent, 0.02, extent))
-        self.renderer.add_mesh("ground", ground.vertices, ground.faces, (0.78, 0.78, 0.74),
-                               checker_m=0.5, closed=True)
+        self.renderer.add_mesh("ground", ground.vertices, ground.faces, (0.78, 0.78, 0.74), checker_m=0.5, closed=True)
         g = np.eye(4)
         g[:3, 3] = (centre[0], self.floor_y_m - 0.01, centre[2])
         self.renderer.set_transform("ground", g)
@@ -203,8 +216,7 @@ class CharacterScene:
         joints = self.sphere_radius[:, None, None] * np.eye(4)
         joints[:, 3, 3] = 1.0
         joints[:, :3, 3] = pts[self.sphere_points]
-        self.renderer.set_transforms(self.bone_ids[placed].tolist() + self.joint_ids,
-                                     np.concatenate([matrices[placed], joints]))
+        self.renderer.set_transforms(self.bone_ids[placed].tolist() + self.joint_ids, np.concatenate([matrices[placed], joints]))
 
     def render(self, frame: int, camera: PreviewCamera) -> np.ndarray:
         """(h, w, 3) uint8 image of clip frame `frame` through `camera`."""
@@ -228,7 +240,7 @@ class CharacterScene:
 def _font(size: int):
     try:
         return ImageFont.load_default(size=size)
-    except TypeError:   # Pillow < 10.1
+    except TypeError:  # Pillow < 10.1
         return ImageFont.load_default()
 
 
@@ -236,8 +248,7 @@ def shot_rgb(shot: int) -> tuple[int, int, int]:
     return SHOT_RGB[shot % len(SHOT_RGB)]
 
 
-def mark_frame(image: np.ndarray, shot: int, shot_count: int, time_s: float, flash: bool,
-               border_px: int) -> np.ndarray:
+def mark_frame(image: np.ndarray, shot: int, shot_count: int, time_s: float, flash: bool, border_px: int) -> np.ndarray:
     """Draw the shot label (always) and the shot-start border (when `flash`) onto a copy."""
     out = image.copy()
     if flash and border_px > 0:
@@ -261,12 +272,13 @@ def mark_frame(image: np.ndarray, shot: int, shot_count: int, time_s: float, fla
 
 def preview_frames(frame_count: int, frame_time_s: float, max_fps: float) -> tuple[np.ndarray, float]:
     """(clip frames shown, video fps): every k-th frame with k = ceil(clip rate / max_fps)."""
-    step = max(1, math.ceil((1.0 / frame_time_s) / max_fps - 1e-3))   # 30.00003 fps is 30
+    step = max(1, math.ceil((1.0 / frame_time_s) / max_fps - 1e-3))  # 30.00003 fps is 30
     return np.arange(0, frame_count, step), 1.0 / (frame_time_s * step)
 
 
-def _write_frames(scene: CharacterScene, camera: PreviewCamera, frames: np.ndarray,
-                  video: VideoWriter, settings: PreviewSettings) -> None:
+def _write_frames(
+    scene: CharacterScene, camera: PreviewCamera, frames: np.ndarray, video: VideoWriter, settings: PreviewSettings
+) -> None:
     """Render, mark and append the clip frames `frames` (k,) int to `video`."""
     dt = scene.clip.frame_time_s
     flash_frames = settings.border_flash_s / dt
@@ -274,12 +286,12 @@ def _write_frames(scene: CharacterScene, camera: PreviewCamera, frames: np.ndarr
         shot = camera.shot_of(int(f))
         since_cut = f - camera.shots[shot, 0]
         image = scene.render(int(f), camera)
-        video.write(mark_frame(image, shot, len(camera.shots), f * dt,
-                               shot > 0 and since_cut < flash_frames, settings.border_px))
+        video.write(mark_frame(image, shot, len(camera.shots), f * dt, shot > 0 and since_cut < flash_frames, settings.border_px))
 
 
-def render_video(scene: CharacterScene, camera: PreviewCamera, path: str | Path,
-                 settings: PreviewSettings = PreviewSettings()) -> int:
+def render_video(
+    scene: CharacterScene, camera: PreviewCamera, path: str | Path, settings: PreviewSettings = PreviewSettings()
+) -> int:
     """Write the preview mp4; returns the number of video frames.
 
     With `settings.processes` > 1 and enough frames, the frame range is cut into consecutive
@@ -295,8 +307,10 @@ def render_video(scene: CharacterScene, camera: PreviewCamera, path: str | Path,
             return video.frames_written
     # This process starts rendering at once, children ~1 s later: it takes that head start on
     # top of an equal share.
-    head = min((len(frames) + (processes - 1) * settings.head_start_frames) // processes,
-               len(frames) - (processes - 1) * settings.min_frames_per_process)
+    head = min(
+        (len(frames) + (processes - 1) * settings.head_start_frames) // processes,
+        len(frames) - (processes - 1) * settings.min_frames_per_process,
+    )
     chunks = [frames[:head], *np.array_split(frames[head:], processes - 1)]
     path = Path(path)
     with tempfile.TemporaryDirectory(prefix=".preview-", dir=path.parent) as tmp_dir:
@@ -306,22 +320,27 @@ def render_video(scene: CharacterScene, camera: PreviewCamera, path: str | Path,
         try:
             for k in range(1, processes):
                 job = tmp / f"part{k}.pickle"
-                job.write_bytes(pickle.dumps((os.getpid(), clip, scene.parts, camera, settings,
-                                              size, fps, chunks[k], segments[k])))
+                job.write_bytes(
+                    pickle.dumps((os.getpid(), clip, scene.parts, camera, settings, size, fps, chunks[k], segments[k]))
+                )
                 # stderr to a file, not a pipe: a chatty child can never block on a full pipe.
                 with open(tmp / f"part{k}.log", "wb") as log:
-                    children.append(subprocess.Popen([sys.executable, "-m", __name__, str(job)],
-                                                     stdin=subprocess.DEVNULL,
-                                                     stdout=subprocess.DEVNULL, stderr=log))
-            with VideoWriter(segments[0], fps, size, crf=settings.crf,
-                             preset=settings.preset) as video:
+                    children.append(
+                        subprocess.Popen(
+                            [sys.executable, "-m", __name__, str(job)],
+                            stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL,
+                            stderr=log,
+                        )
+                    )
+            with VideoWriter(segments[0], fps, size, crf=settings.crf, preset=settings.preset) as video:
                 _write_frames(scene, camera, chunks[0], video, settings)
             for k, child in enumerate(children, start=1):
                 if child.wait() != 0:
                     tail = (tmp / f"part{k}.log").read_text(errors="replace").strip()[-2000:]
                     raise RuntimeError(f"preview part {k} failed (exit {child.returncode}): {tail}")
         finally:
-            for child in children:   # on error here or in a sibling: stop the rest
+            for child in children:  # on error here or in a sibling: stop the rest
                 if child.poll() is None:
                     child.kill()
                     child.wait()
@@ -335,10 +354,12 @@ def _render_part(job_path: str) -> None:
     parent_pid, clip, parts, camera, settings, size, fps, frames, out = job
     # A cancelled job's process is terminated without running its cleanup: die with it.
     die_with_parent()
-    if os.getppid() != parent_pid:   # it died before the line above
+    if os.getppid() != parent_pid:  # it died before the line above
         sys.exit(1)
-    with CharacterScene(clip, parts, *size) as scene, \
-            VideoWriter(out, fps, size, crf=settings.crf, preset=settings.preset) as video:
+    with (
+        CharacterScene(clip, parts, *size) as scene,
+        VideoWriter(out, fps, size, crf=settings.crf, preset=settings.preset) as video,
+    ):
         _write_frames(scene, camera, frames, video, settings)
 
 
@@ -351,8 +372,9 @@ def contact_sheet_frames(shots: np.ndarray) -> list[tuple[int, str, int]]:
     return out
 
 
-def render_contact_sheet(scene: CharacterScene, camera: PreviewCamera, path: str | Path,
-                         settings: PreviewSettings = PreviewSettings()) -> tuple[int, int]:
+def render_contact_sheet(
+    scene: CharacterScene, camera: PreviewCamera, path: str | Path, settings: PreviewSettings = PreviewSettings()
+) -> tuple[int, int]:
     """Write the contact sheet PNG: two tiles per shot (start, middle), two shots per row when
     there are several; each tile labelled. Returns (columns, rows)."""
     tiles = contact_sheet_frames(camera.shots)
@@ -361,8 +383,7 @@ def render_contact_sheet(scene: CharacterScene, camera: PreviewCamera, path: str
     cols = 2 if len(camera.shots) == 1 else 4
     rows = math.ceil(len(tiles) / cols)
     pad = 4
-    sheet = Image.new("RGB", (cols * (tw + pad) + pad, rows * (th + label_h + pad) + pad),
-                      (245, 245, 245))
+    sheet = Image.new("RGB", (cols * (tw + pad) + pad, rows * (th + label_h + pad) + pad), (245, 245, 245))
     draw = ImageDraw.Draw(sheet)
     font = _font(max(10, label_h - 4))
     dt = scene.clip.frame_time_s
@@ -374,15 +395,21 @@ def render_contact_sheet(scene: CharacterScene, camera: PreviewCamera, path: str
         y = pad + (i // cols) * (th + label_h + pad)
         sheet.paste(image, (x, y))
         draw.rectangle([x, y + th, x + tw - 1, y + th + label_h - 1], fill=shot_rgb(shot))
-        draw.text((x + 4, y + th + 1), f"shot {shot + 1} {which}  frame {frame}  {frame * dt:.2f} s",
-                  fill=(255, 255, 255), font=font)
+        draw.text(
+            (x + 4, y + th + 1), f"shot {shot + 1} {which}  frame {frame}  {frame * dt:.2f} s", fill=(255, 255, 255), font=font
+        )
     sheet.save(path, format="PNG")
     return cols, rows
 
 
-def render_preview(clip: MotionClip, parts: BodyPartMap, camera: PreviewCamera,
-                   video_path: str | Path | None, sheet_path: str | Path | None,
-                   settings: PreviewSettings = PreviewSettings()) -> dict[str, float]:
+def render_preview(
+    clip: MotionClip,
+    parts: BodyPartMap,
+    camera: PreviewCamera,
+    video_path: str | Path | None,
+    sheet_path: str | Path | None,
+    settings: PreviewSettings = PreviewSettings(),
+) -> dict[str, float]:
     """Write the preview mp4 and/or the contact sheet PNG; returns timings in ms
     ("preview_video", "contact_sheet")."""
     if len(camera.position_m) != clip.frame_count:

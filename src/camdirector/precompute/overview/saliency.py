@@ -20,6 +20,7 @@ Method, as the paper describes it:
    (1/6 each) when max/mean of the six is below `limb_contrast_ratio` (our choice, 2): weight
    w = clip((max/mean - 1) / (ratio - 1), 0, 1).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,7 +32,7 @@ from camdirector.precompute.overview.body_parts import PART_COUNT, BodyPartMap
 from camdirector.precompute.overview.character_track import CharacterTrack
 from camdirector.precompute.overview.overview_settings import OverviewSettings
 
-_MAX_STEP_HALVINGS = 20   # a Sammon step is halved until the stress does not grow, at most this often
+_MAX_STEP_HALVINGS = 20  # a Sammon step is halved until the stress does not grow, at most this often
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,7 @@ def sammon_mapping(points: np.ndarray, dimensions: int, iterations: int) -> np.n
     target /= scale
     coords = classical_mds(points, dimensions) / scale
     diagonal = np.arange(n)
-    target[diagonal, diagonal] = 1.0          # the diagonal is ignored: make it 1 on both sides
+    target[diagonal, diagonal] = 1.0  # the diagonal is ignored: make it 1 on both sides
     np.maximum(target, 1e-9, out=target)
     inv_target = 1.0 / target
 
@@ -101,11 +102,10 @@ def sammon_mapping(points: np.ndarray, dimensions: int, iterations: int) -> np.n
         delta_one = delta.sum(axis=1, keepdims=True)
         gradient = delta @ coords - coords * delta_one
         inv_d3 = np.power(inv_d, 3, out=inv_d)
-        y2 = coords ** 2
-        hessian = inv_d3 @ y2 - delta_one - 2.0 * coords * (inv_d3 @ coords) + y2 * inv_d3.sum(
-            axis=1, keepdims=True)
+        y2 = coords**2
+        hessian = inv_d3 @ y2 - delta_one - 2.0 * coords * (inv_d3 @ coords) + y2 * inv_d3.sum(axis=1, keepdims=True)
         direction = -gradient / np.maximum(np.abs(hessian), 1e-12)
-        step = min(1.0, 2.0 * step)      # start near the last accepted step: fewer stress passes
+        step = min(1.0, 2.0 * step)  # start near the last accepted step: fewer stress passes
         for _halving in range(_MAX_STEP_HALVINGS):
             trial = coords + step * direction
             trial_stress, trial_d = stress(trial)
@@ -118,8 +118,7 @@ def sammon_mapping(points: np.ndarray, dimensions: int, iterations: int) -> np.n
     return coords * scale
 
 
-def _curve_distance(features: np.ndarray, settings: OverviewSettings, dt_s: float
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _curve_distance(features: np.ndarray, settings: OverviewSettings, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Distance (T,) of the MDS curve of (T, D) features to its smooth average; curve; smooth."""
     curve = sammon_mapping(features, settings.mds_dimensions, settings.mds_iterations)
     smooth = gaussian_filter1d(curve, settings.saliency_smoothing_s / dt_s, axis=0, mode="nearest")
@@ -140,8 +139,9 @@ def compute_saliency(track: CharacterTrack, parts: BodyPartMap, settings: Overvi
     raw, curve, smooth = _curve_distance(_features(track, every_joint, settings), settings, track.dt_s)
     pose = raw / max(float(raw.max()), 1e-12)
     limb_raw = np.stack(
-        [_curve_distance(_features(track, parts.joints_of(p), settings), settings, track.dt_s)[0]
-         for p in range(PART_COUNT)], axis=1)
+        [_curve_distance(_features(track, parts.joints_of(p), settings), settings, track.dt_s)[0] for p in range(PART_COUNT)],
+        axis=1,
+    )
     total = np.maximum(limb_raw.sum(axis=1, keepdims=True), 1e-12)
     share = limb_raw / total
     contrast = limb_raw.max(axis=1) / np.maximum(limb_raw.mean(axis=1), 1e-12)

@@ -23,6 +23,7 @@ Our reading of the ambiguous parts:
   has no line of movement of its own and we use its facing direction (the line of action).
 * "better viewpoint quality": the larger saliency-weighted quality over the two new shots.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -56,19 +57,25 @@ def frame_quality(space: PotentialSpace, path_m: np.ndarray) -> np.ndarray:
 
 def shot_quality(quality: np.ndarray, pose_saliency: np.ndarray, first: int, last: int) -> float:
     """Saliency-weighted mean of Q over frames [first, last]."""
-    s = pose_saliency[first:last + 1]
-    return float(np.dot(s, quality[first:last + 1]) / max(float(s.sum()), 1e-12))
+    s = pose_saliency[first : last + 1]
+    return float(np.dot(s, quality[first : last + 1]) / max(float(s.sum()), 1e-12))
 
 
-def _shot_energy(path_m: np.ndarray, track: CharacterTrack, space: PotentialSpace,
-                 pose_saliency: np.ndarray, w: EnergyWeights, first: int, last: int) -> float:
+def _shot_energy(
+    path_m: np.ndarray,
+    track: CharacterTrack,
+    space: PotentialSpace,
+    pose_saliency: np.ndarray,
+    w: EnergyWeights,
+    first: int,
+    last: int,
+) -> float:
     frames = np.arange(first, last + 1)
-    internal = internal_terms(path_m, track.look_at_m[first:last + 1], w).sum()
-    return float(internal - np.dot(pose_saliency[first:last + 1], space.sample(frames, path_m)))
+    internal = internal_terms(path_m, track.look_at_m[first : last + 1], w).sum()
+    return float(internal - np.dot(pose_saliency[first : last + 1], space.sample(frames, path_m)))
 
 
-def _line_of_movement(track: CharacterTrack, t: int, settings: OverviewSettings
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def _line_of_movement(track: CharacterTrack, t: int, settings: OverviewSettings) -> tuple[np.ndarray, np.ndarray]:
     velocity = track.velocity_m_s[t, [0, 2]]
     speed = float(np.linalg.norm(velocity))
     if speed >= 0.5 * settings.moving_speed_heights_s * track.height_m:
@@ -78,9 +85,15 @@ def _line_of_movement(track: CharacterTrack, t: int, settings: OverviewSettings
     return track.look_at_m[t, [0, 2]], direction
 
 
-def plan_shots(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.ndarray,
-               weights: EnergyWeights, settings: OverviewSettings, rng: np.random.Generator,
-               max_shots: int) -> ShotPlan:
+def plan_shots(
+    track: CharacterTrack,
+    space: PotentialSpace,
+    pose_saliency: np.ndarray,
+    weights: EnergyWeights,
+    settings: OverviewSettings,
+    rng: np.random.Generator,
+    max_shots: int,
+) -> ShotPlan:
     """Optimise one shot over the whole clip, then split while shots are of low quality."""
     n = track.frame_count
     min_len = max(2, int(round(settings.min_shot_s / track.dt_s)))
@@ -91,13 +104,16 @@ def plan_shots(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.n
     quality = frame_quality(space, path)
     history, shots_history = [quality], [np.array(shots)]
     while len(shots) < max_shots:
-        open_shots = [(shot_quality(quality, pose_saliency, a, b), (a, b)) for a, b in shots
-                      if (a, b) not in final and b - a + 1 >= 2 * min_len]
+        open_shots = [
+            (shot_quality(quality, pose_saliency, a, b), (a, b))
+            for a, b in shots
+            if (a, b) not in final and b - a + 1 >= 2 * min_len
+        ]
         open_shots = [item for item in open_shots if item[0] < settings.split_quality]
         if not open_shots:
             break
         _, (a, b) = min(open_shots)
-        candidates = np.arange(a + min_len - 1, b - min_len + 1)     # t_split: last of shot one
+        candidates = np.arange(a + min_len - 1, b - min_len + 1)  # t_split: last of shot one
         candidates = candidates[pose_saliency[candidates] < settings.split_max_saliency]
         if len(candidates) == 0:
             final.add((a, b))
@@ -107,18 +123,17 @@ def plan_shots(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.n
         inherited = tuple(p for p in priors if a <= p.frame <= b)
         best = None
         for side in (1, -1):
-            new_priors = (SidePrior(t_split, point, direction, side),
-                          SidePrior(t_split + 1, point, direction, side))
+            new_priors = (SidePrior(t_split, point, direction, side), SidePrior(t_split + 1, point, direction, side))
             try:
-                first_path = anneal_shot(track, space, pose_saliency, weights, settings, rng, a,
-                                         t_split, inherited + new_priors)
-                second_path = anneal_shot(track, space, pose_saliency, weights, settings, rng,
-                                          t_split + 1, b, inherited + new_priors)
+                first_path = anneal_shot(track, space, pose_saliency, weights, settings, rng, a, t_split, inherited + new_priors)
+                second_path = anneal_shot(
+                    track, space, pose_saliency, weights, settings, rng, t_split + 1, b, inherited + new_priors
+                )
             except ValueError:
-                continue          # no static start on this side of the line
+                continue  # no static start on this side of the line
             trial = path.copy()
-            trial[a:t_split + 1] = first_path
-            trial[t_split + 1:b + 1] = second_path
+            trial[a : t_split + 1] = first_path
+            trial[t_split + 1 : b + 1] = second_path
             q = frame_quality(space, trial)
             score = shot_quality(q, pose_saliency, a, b)
             if best is None or score > best[0]:
@@ -127,10 +142,10 @@ def plan_shots(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.n
             final.add((a, b))
             continue
         _, trial, new_priors = best
-        before = _shot_energy(path[a:b + 1], track, space, pose_saliency, weights, a, b)
-        after = (_shot_energy(trial[a:t_split + 1], track, space, pose_saliency, weights, a, t_split)
-                 + _shot_energy(trial[t_split + 1:b + 1], track, space, pose_saliency, weights,
-                                t_split + 1, b))
+        before = _shot_energy(path[a : b + 1], track, space, pose_saliency, weights, a, b)
+        after = _shot_energy(trial[a : t_split + 1], track, space, pose_saliency, weights, a, t_split) + _shot_energy(
+            trial[t_split + 1 : b + 1], track, space, pose_saliency, weights, t_split + 1, b
+        )
         if after >= before:
             final.add((a, b))
             continue
@@ -142,5 +157,6 @@ def plan_shots(track: CharacterTrack, space: PotentialSpace, pose_saliency: np.n
         quality = frame_quality(space, path)
         history.append(quality)
         shots_history.append(np.array(shots))
-    return ShotPlan(path_m=path, shots=np.array(shots, dtype=np.int64),
-                    quality_history=np.array(history), shots_history=tuple(shots_history))
+    return ShotPlan(
+        path_m=path, shots=np.array(shots, dtype=np.int64), quality_history=np.array(history), shots_history=tuple(shots_history)
+    )

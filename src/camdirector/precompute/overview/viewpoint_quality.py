@@ -26,6 +26,7 @@ Limb term: E_limb is read from limb_visibility.py's renders by bilinear interpol
 direction from the look-at point to the camera. Frames that were not rendered (pose saliency below
 `limb_min_saliency`) use E_wide in place of the limb term.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,22 +37,23 @@ from camdirector.precompute.overview.limb_visibility import LimbVisibility
 from camdirector.precompute.overview.overview_settings import OverviewSettings
 from camdirector.precompute.overview.saliency import Saliency
 
-_OCCLUSION_STEP_S = 0.5   # occlusion by the static scene is computed this often, s
+_OCCLUSION_STEP_S = 0.5  # occlusion by the static scene is computed this often, s
 
 
-def three_quarter_view(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
-                       settings: OverviewSettings) -> np.ndarray:
+def three_quarter_view(
+    track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray, settings: OverviewSettings
+) -> np.ndarray:
     """(len(frames), P) descriptor in [0, 1] of (P, 3) camera positions."""
     to_cam = positions_m[None, :, [0, 2]] - track.look_at_m[frames][:, None, [0, 2]]
     to_cam /= np.maximum(np.linalg.norm(to_cam, axis=2, keepdims=True), 1e-9)
     cos_phi = np.einsum("tpk,tk->tp", to_cam, track.forward[frames][:, [0, 2]])
     phi_deg = np.degrees(np.arccos(np.clip(cos_phi, -1.0, 1.0)))
-    return np.exp(-((phi_deg - settings.three_quarter_angle_deg)
-                    / settings.three_quarter_width_deg) ** 2)
+    return np.exp(-(((phi_deg - settings.three_quarter_angle_deg) / settings.three_quarter_width_deg) ** 2))
 
 
-def perpendicular_to_motion(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
-                            settings: OverviewSettings) -> np.ndarray:
+def perpendicular_to_motion(
+    track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray, settings: OverviewSettings
+) -> np.ndarray:
     """(len(frames), P) descriptor in [0, 1]: 1 when the camera looks across the motion."""
     velocity = track.velocity_m_s[frames][:, [0, 2]]
     speed = np.linalg.norm(velocity, axis=1)
@@ -63,23 +65,22 @@ def perpendicular_to_motion(track: CharacterTrack, frames: np.ndarray, positions
     return weight[:, None] * (1.0 - cos_theta)
 
 
-def distance_preference(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
-                        settings: OverviewSettings) -> np.ndarray:
+def distance_preference(
+    track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray, settings: OverviewSettings
+) -> np.ndarray:
     """(len(frames), P) descriptor in [0, 1]: 1 at the preferred distance."""
     d = np.linalg.norm(positions_m[None] - track.look_at_m[frames][:, None], axis=2)
     preferred = settings.preferred_distance_heights * track.height_m
-    return np.exp(-np.log(np.maximum(d, 1e-6) / preferred) ** 2
-                  / (2.0 * settings.distance_tolerance_log ** 2))
+    return np.exp(-(np.log(np.maximum(d, 1e-6) / preferred) ** 2) / (2.0 * settings.distance_tolerance_log**2))
 
 
-def widest_aspect(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
-                  settings: OverviewSettings) -> np.ndarray:
+def widest_aspect(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray, settings: OverviewSettings) -> np.ndarray:
     """(len(frames), P) E_wide in [0, 1] from the PCA of the body points."""
     pts = track.points_m[frames]
     centred = pts - pts.mean(axis=1, keepdims=True)
     cov = np.einsum("tki,tkj->tij", centred, centred) / pts.shape[1]
-    values, vectors = np.linalg.eigh(cov)                 # ascending eigenvalues
-    normal = vectors[:, :, 0]                             # (T, 3) third principal axis
+    values, vectors = np.linalg.eigh(cov)  # ascending eigenvalues
+    normal = vectors[:, :, 0]  # (T, 3) third principal axis
     ratio = values[:, 0] / np.maximum(values[:, 1], 1e-12)
     weight = np.clip(1.0 - ratio / settings.wide_max_eigen_ratio, 0.0, 1.0)
     view = positions_m[None] - track.look_at_m[frames][:, None]
@@ -87,8 +88,9 @@ def widest_aspect(track: CharacterTrack, frames: np.ndarray, positions_m: np.nda
     return weight[:, None] * np.abs(np.einsum("tpk,tk->tp", view, normal))
 
 
-def limb_visibility_term(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
-                         saliency: Saliency, limbs: LimbVisibility) -> np.ndarray:
+def limb_visibility_term(
+    track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray, saliency: Saliency, limbs: LimbVisibility
+) -> np.ndarray:
     """(len(frames), P) sum over body parts of S_limb * E_limb, bilinear in view direction;
     0 in frames that were not rendered (`viewpoint_quality` puts E_wide there)."""
     rows = limbs.row_of_frame[frames]
@@ -97,7 +99,7 @@ def limb_visibility_term(track: CharacterTrack, frames: np.ndarray, positions_m:
     if not np.any(have):
         return out
     f_sel = frames[have]
-    view = positions_m[None] - track.look_at_m[f_sel][:, None]            # (Tr, P, 3)
+    view = positions_m[None] - track.look_at_m[f_sel][:, None]  # (Tr, P, 3)
     dist = np.maximum(np.linalg.norm(view, axis=2), 1e-9)
     az = np.mod(np.arctan2(view[..., 0], view[..., 2]), 2.0 * np.pi)
     el = np.arcsin(np.clip(view[..., 1] / dist, -1.0, 1.0))
@@ -112,8 +114,9 @@ def limb_visibility_term(track: CharacterTrack, frames: np.ndarray, positions_m:
     # Weighted sum over parts first: (Tr, n_el, n_az) table per frame.
     table = np.einsum("tl,tlea->tea", saliency.limbs[f_sel], limbs.normalised[rows[have]])
     t = np.arange(len(f_sel))[:, None]
-    value = ((1 - we) * ((1 - wa) * table[t, e0, a0] + wa * table[t, e0, a1])
-             + we * ((1 - wa) * table[t, e0 + 1, a0] + wa * table[t, e0 + 1, a1]))
+    value = (1 - we) * ((1 - wa) * table[t, e0, a0] + wa * table[t, e0, a1]) + we * (
+        (1 - wa) * table[t, e0 + 1, a0] + wa * table[t, e0 + 1, a1]
+    )
     out[have] = value
     return out
 
@@ -121,14 +124,14 @@ def limb_visibility_term(track: CharacterTrack, frames: np.ndarray, positions_m:
 def occlusion_sample_points(track: CharacterTrack, parts: BodyPartMap) -> np.ndarray:
     """(T, 6, 3) pelvis and the last joint of head, arms and legs, metres."""
     ends = []
-    for part in (BodyPart.HEAD, BodyPart.LEFT_ARM, BodyPart.RIGHT_ARM, BodyPart.LEFT_LEG,
-                 BodyPart.RIGHT_LEG):
+    for part in (BodyPart.HEAD, BodyPart.LEFT_ARM, BodyPart.RIGHT_ARM, BodyPart.LEFT_LEG, BodyPart.RIGHT_LEG):
         ends.append(parts.joints_of(part)[-1])
     return np.concatenate([track.pelvis_m[:, None], track.joints_m[:, ends]], axis=1)
 
 
-def scene_visibility(track: CharacterTrack, parts: BodyPartMap, positions_m: np.ndarray,
-                     scene, settings: OverviewSettings) -> np.ndarray:
+def scene_visibility(
+    track: CharacterTrack, parts: BodyPartMap, positions_m: np.ndarray, scene, settings: OverviewSettings
+) -> np.ndarray:
     """(T, P) fraction of the character's sample points seen from each position past a static
     `scene` (a trimesh.Trimesh); computed every `_OCCLUSION_STEP_S` and held between."""
     step = max(1, int(round(_OCCLUSION_STEP_S / track.dt_s)))
@@ -141,8 +144,7 @@ def scene_visibility(track: CharacterTrack, parts: BodyPartMap, positions_m: np.
         rays = ends - origins
         length = np.linalg.norm(rays, axis=1)
         dirs = rays / np.maximum(length, 1e-9)[:, None]
-        _, ray_ids, hits = scene.ray.intersects_id(origins, dirs, multiple_hits=False,
-                                                   return_locations=True)
+        _, ray_ids, hits = scene.ray.intersects_id(origins, dirs, multiple_hits=False, return_locations=True)
         blocked = np.zeros(len(origins), dtype=bool)
         if len(ray_ids):
             hit_dist = np.linalg.norm(hits - origins[ray_ids], axis=1)
@@ -151,9 +153,15 @@ def scene_visibility(track: CharacterTrack, parts: BodyPartMap, positions_m: np.
     return out_keys[np.minimum(np.arange(track.frame_count) // step, len(keys) - 1)]
 
 
-def viewpoint_quality(track: CharacterTrack, frames: np.ndarray, positions_m: np.ndarray,
-                      saliency: Saliency, limbs: LimbVisibility, settings: OverviewSettings, visibility: np.ndarray | None = None
-                      ) -> np.ndarray:
+def viewpoint_quality(
+    track: CharacterTrack,
+    frames: np.ndarray,
+    positions_m: np.ndarray,
+    saliency: Saliency,
+    limbs: LimbVisibility,
+    settings: OverviewSettings,
+    visibility: np.ndarray | None = None,
+) -> np.ndarray:
     """(len(frames), P) V of (P, 3) positions at track frames `frames` (see module docstring).
 
     visibility: (T, P) scene visibility of these positions, or None without a scene."""
@@ -161,10 +169,13 @@ def viewpoint_quality(track: CharacterTrack, frames: np.ndarray, positions_m: np
     limb = limb_visibility_term(track, frames, positions_m, saliency, limbs)
     limb = np.where((limbs.row_of_frame[frames] >= 0)[:, None], limb, wide)
     s_p = saliency.pose[frames][:, None]
-    v = (three_quarter_view(track, frames, positions_m, settings)
-         + perpendicular_to_motion(track, frames, positions_m, settings)
-         + distance_preference(track, frames, positions_m, settings)
-         + (1.0 - s_p) * wide + s_p * limb)
+    v = (
+        three_quarter_view(track, frames, positions_m, settings)
+        + perpendicular_to_motion(track, frames, positions_m, settings)
+        + distance_preference(track, frames, positions_m, settings)
+        + (1.0 - s_p) * wide
+        + s_p * limb
+    )
     if visibility is not None:
         v = v + visibility[frames]
     return v

@@ -8,6 +8,7 @@ artifact is never half-read; all arrays are read into memory at once (the file c
 replaced or deleted under a reader). `save_artifact` writes a temporary file in the same folder
 and renames it over the target, so a reader sees the old file or the new one, never a partial one.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -66,8 +67,20 @@ class LevelArtifact:
         return self.settings.agent_height_m
 
 
-_ARRAYS = ("level_vertices", "level_faces", "navmesh_vertices", "navmesh_faces", "skeleton_segments",
-           "track_start", "track_end", "nodes_world", "edges", "edge_is_link", "refined_vertices", "refined_faces")
+_ARRAYS = (
+    "level_vertices",
+    "level_faces",
+    "navmesh_vertices",
+    "navmesh_faces",
+    "skeleton_segments",
+    "track_start",
+    "track_end",
+    "nodes_world",
+    "edges",
+    "edge_is_link",
+    "refined_vertices",
+    "refined_faces",
+)
 _TABLE = tuple(f.name for f in dataclasses.fields(VisibilityTable))
 
 
@@ -77,9 +90,13 @@ def _settings_dict(settings: TrackSettings) -> dict:
 
 def header_of(artifact: LevelArtifact) -> dict:
     """The JSON header of an artifact (also what the registry indexes)."""
-    return {"format_version": FORMAT_VERSION, "m_per_unit": artifact.m_per_unit,
-            "settings": _settings_dict(artifact.settings), "timings_ms": artifact.timings_ms,
-            "counts": artifact.counts}
+    return {
+        "format_version": FORMAT_VERSION,
+        "m_per_unit": artifact.m_per_unit,
+        "settings": _settings_dict(artifact.settings),
+        "timings_ms": artifact.timings_ms,
+        "counts": artifact.counts,
+    }
 
 
 def save_artifact(artifact: LevelArtifact, path: Path) -> None:
@@ -115,7 +132,8 @@ def _checked_header(data, path: Path) -> dict:
     if version != FORMAT_VERSION:
         raise ArtifactVersionError(
             f"{path}: level artifact format version {version}, this build reads version {FORMAT_VERSION}; "
-            "add the level again (camdirector level add) to rebuild it")
+            "add the level again (camdirector level add) to rebuild it"
+        )
     return header
 
 
@@ -132,5 +150,11 @@ def load_artifact(path: Path) -> LevelArtifact:
         table = VisibilityTable(**{name: data[f"visibility_{name}"] for name in _TABLE})
     fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in header["settings"].items()}  # JSON
     settings = TrackSettings(**fields)
-    return LevelArtifact(**arrays, visibility=table, m_per_unit=float(header["m_per_unit"]), settings=settings,
-                         timings_ms=dict(header["timings_ms"]), counts=dict(header["counts"]))
+    return LevelArtifact(
+        **arrays,
+        visibility=table,
+        m_per_unit=float(header["m_per_unit"]),
+        settings=settings,
+        timings_ms=dict(header["timings_ms"]),
+        counts=dict(header["counts"]),
+    )

@@ -17,6 +17,7 @@ Exit status: 0 ok, 1 failed, 2 bad arguments or input.
 
 `add_parsers(subparsers)` registers `level` on the `camdirector` parser; each subcommand sets `handler`.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,8 +30,10 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # the registry is imported where a command needs it
     from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry
 
-_RECORDS_URL_HELP = ("the registry's index: postgresql://... (a cluster's --job-store) or empty for SQLite in "
-                     "the data dir (default: $CAMDIRECTOR_JOB_STORE)")
+_RECORDS_URL_HELP = (
+    "the registry's index: postgresql://... (a cluster's --job-store) or empty for SQLite in "
+    "the data dir (default: $CAMDIRECTOR_JOB_STORE)"
+)
 
 
 def add_records_url_argument(parser: argparse.ArgumentParser) -> None:
@@ -38,8 +41,9 @@ def add_records_url_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_tenant_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--tenant", default="default",
-                        help="whose level: the tenant of the keys whose sessions use it (default: default)")
+    parser.add_argument(
+        "--tenant", default="default", help="whose level: the tenant of the keys whose sessions use it (default: default)"
+    )
 
 
 def registry_from_args(args: argparse.Namespace) -> LevelRegistry:
@@ -58,8 +62,12 @@ def add_parsers(subparsers: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument("name")
     p.add_argument("level", type=Path, help="level mesh, .obj or .glb, or a Quake .bsp map (read in metres)")
     p.add_argument("--navmesh", type=Path, help="navigation mesh (.obj or .glb); derived when absent")
-    p.add_argument("--scale", type=float, default=1.0,
-                   help="metres per level unit (default 1; a .bsp is read in metres already, so it multiplies those)")
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=1.0,
+        help="metres per level unit (default 1; a .bsp is read in metres already, so it multiplies those)",
+    )
     p.add_argument("--agent-height", dest="agent_height", type=float, default=2.0, help="m (default 2.0)")
     p.add_argument("--agent-radius", dest="agent_radius", type=float, default=0.6, help="m (default 0.6)")
     p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder (default: per-user data dir)")
@@ -80,10 +88,19 @@ def add_parsers(subparsers: argparse._SubParsersAction[argparse.ArgumentParser])
 
 
 def _record_json(record: LevelRecord) -> dict[str, Any]:
-    return {"name": record.name, "tenant": record.tenant, "artifact": str(record.artifact_path),
-            "format_version": record.format_version, "source": record.source_path, "navmesh": record.navmesh_path,
-            "m_per_unit": record.m_per_unit, "agent_height_m": record.agent_height_m, "agent_radius_m": record.agent_radius_m,
-            "counts": record.counts, "timings_ms": {k: round(v, 1) for k, v in record.timings_ms.items()}}
+    return {
+        "name": record.name,
+        "tenant": record.tenant,
+        "artifact": str(record.artifact_path),
+        "format_version": record.format_version,
+        "source": record.source_path,
+        "navmesh": record.navmesh_path,
+        "m_per_unit": record.m_per_unit,
+        "agent_height_m": record.agent_height_m,
+        "agent_radius_m": record.agent_radius_m,
+        "counts": record.counts,
+        "timings_ms": {k: round(v, 1) for k, v in record.timings_ms.items()},
+    }
 
 
 def run_level_add(args: argparse.Namespace) -> int:
@@ -95,8 +112,15 @@ def run_level_add(args: argparse.Namespace) -> int:
     try:
         with registry_from_args(args) as registry:
             record = registry.add_level(
-                args.name, args.level, args.navmesh, scale=args.scale, agent_height_m=args.agent_height,
-                agent_radius_m=args.agent_radius, progress=progress, tenant=args.tenant)
+                args.name,
+                args.level,
+                args.navmesh,
+                scale=args.scale,
+                agent_height_m=args.agent_height,
+                agent_radius_m=args.agent_radius,
+                progress=progress,
+                tenant=args.tenant,
+            )
     except LevelsUnavailable as exc:
         print(f"camdirector level add: {exc}", file=sys.stderr)
         return 1

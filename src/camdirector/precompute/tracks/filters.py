@@ -13,6 +13,7 @@
 
 The default order ends with #1 and #3 again: a refit line may cross a wall the old one missed.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -102,7 +103,7 @@ def refit(tracks: Tracks, points: np.ndarray, settings: TrackSettings, rng: np.r
     order = np.argsort(point_track, kind="stable")
     bounds = np.searchsorted(point_track[order], np.arange(len(tracks) + 1))
     for k in range(len(tracks)):
-        members = order[bounds[k]:bounds[k + 1]]
+        members = order[bounds[k] : bounds[k + 1]]
         if len(members) < 2:
             continue
         own = points[members]
@@ -116,7 +117,7 @@ def refit(tracks: Tracks, points: np.ndarray, settings: TrackSettings, rng: np.r
             d = own[None, :, :] - origins[:, None, :]
             along = np.einsum("hsk,hk->hs", d, directions)
             dist2 = np.einsum("hsk,hsk->hs", d, d) - along * along
-            best = int(np.argmax((dist2 < settings.ransac_threshold_m ** 2).sum(axis=1)))
+            best = int(np.argmax((dist2 < settings.ransac_threshold_m**2).sum(axis=1)))
             inlier = line_distance(own, origins[best], directions[best]) < settings.ransac_threshold_m
         else:
             inlier = np.ones(len(own), dtype=bool)
@@ -129,8 +130,9 @@ def refit(tracks: Tracks, points: np.ndarray, settings: TrackSettings, rng: np.r
     return Tracks(start, end, point_track)
 
 
-def filter_tracks(tracks: Tracks, points_world: np.ndarray, scene: RayScene, settings: TrackSettings,
-                  rng: np.random.Generator) -> Tracks:
+def filter_tracks(
+    tracks: Tracks, points_world: np.ndarray, scene: RayScene, settings: TrackSettings, rng: np.random.Generator
+) -> Tracks:
     """Filters of `settings.filter_sequence` in order; points_world (n, 3) are the samples the
     tracks' `point_track` refers to."""
     for number in settings.filter_sequence:

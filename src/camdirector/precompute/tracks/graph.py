@@ -14,6 +14,7 @@ Built in the paper's four steps:
 (iv)  a KD-tree over the nodes, built when the graph is loaded (pipeline/tracks/graph_search.py's
       `RuntimeGraph`), not stored.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -5,6 +5,7 @@ stage works in metres, world frame, +Y up, so `m_per_unit` is applied at this on
 Quake BSP map (.bsp) is already in metres and world axes when decoded (geometry/bsp.py: 1/32 m
 per Quake unit, Z up turned to Y up), so its scale stays 1 unless a different size is wanted.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -20,6 +20,7 @@ narrower than the agent between two walls survives when no centroid lands within
 either wall; steps connect only where their edges' vertices stack within half a cell; winding
 decides which side is up, so a level with flipped floors yields no walkable surface there.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,8 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import UP_WORLD
 from camdirector.precompute.tracks.track_settings import TrackSettings
 
-_WELD_M = 1e-4           # vertices closer than this are one vertex
-_SURFACE_LIFT_M = 0.05   # clearance rays start this far above the surface
+_WELD_M = 1e-4  # vertices closer than this are one vertex
+_SURFACE_LIFT_M = 0.05  # clearance rays start this far above the surface
 _EROSION_RAYS = 8
 
 
@@ -43,8 +44,9 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
 
 
-def refine_triangles(vertices: np.ndarray, faces: np.ndarray, *, max_edge_m: float = np.inf,
-                     max_area_m2: float = np.inf, max_rounds: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def refine_triangles(
+    vertices: np.ndarray, faces: np.ndarray, *, max_edge_m: float = np.inf, max_area_m2: float = np.inf, max_rounds: int = 64
+) -> tuple[np.ndarray, np.ndarray]:
     """Longest-edge bisection: split each triangle with an edge longer than max_edge_m or an area
     over max_area_m2 in two at the midpoint of its longest edge, until none is left (midpoints
     shared between triangles split on the same edge; T-junctions remain where a split triangle
@@ -83,14 +85,17 @@ def triangle_adjacency(navmesh: TriMesh, climb_m: float, link_m: float) -> spars
     vertices within link_m of each other horizontally and climb_m vertically (steps)."""
     vertices, faces = weld_vertices(navmesh.vertices, navmesh.faces)
     m, n = len(faces), len(vertices)
-    incidence = sparse.csr_matrix((np.ones(3 * m, dtype=np.int32), (np.repeat(np.arange(m), 3), faces.reshape(-1))),
-                                  shape=(m, n))
+    incidence = sparse.csr_matrix((np.ones(3 * m, dtype=np.int32), (np.repeat(np.arange(m), 3), faces.reshape(-1))), shape=(m, n))
     pairs = cKDTree(vertices[:, [0, 2]]).query_pairs(link_m, output_type="ndarray") if link_m > 0 else np.empty((0, 2), int)
     if len(pairs):
         pairs = pairs[np.abs(vertices[pairs[:, 0], 1] - vertices[pairs[:, 1], 1]) <= climb_m]
-    links = sparse.coo_matrix((np.ones(2 * len(pairs), dtype=np.int32),
-                               (np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]]))),
-                              shape=(n, n)).tocsr() + sparse.identity(n, dtype=np.int32, format="csr")
+    links = sparse.coo_matrix(
+        (
+            np.ones(2 * len(pairs), dtype=np.int32),
+            (np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])),
+        ),
+        shape=(n, n),
+    ).tocsr() + sparse.identity(n, dtype=np.int32, format="csr")
     return ((incidence @ links @ incidence.T) > 0).tocsr()
 
 
@@ -110,8 +115,10 @@ def _lattice_centroids(triangles: np.ndarray, n: int) -> np.ndarray:
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     up = (i + j) <= n - 1
     down = (i + j) <= n - 2
-    bary = np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], axis=1),
-                           np.stack([i[down] + 2 / 3, j[down] + 2 / 3], axis=1)]) / n  # (n^2, 2)
+    bary = (
+        np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], axis=1), np.stack([i[down] + 2 / 3, j[down] + 2 / 3], axis=1)])
+        / n
+    )  # (n^2, 2)
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     return a[:, None] + bary[None, :, :1] * (b - a)[:, None] + bary[None, :, 1:] * (c - a)[:, None]
 

@@ -18,6 +18,7 @@ nodes the tracks did not have). Between the filters and the graph, our redundanc
 counterpart in the paper) drops tracks whose view of the remeshed navmesh enough other tracks
 repeat, so it needs the remeshing first.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -55,14 +56,29 @@ class Stage(Enum):
     VISIBILITY = "visibility"
 
 
-_PROGRESS_AFTER: dict[Enum, float] = {Stage.RAY_SCENE: 0.02, Stage.NAVMESH: 0.1, Stage.SKELETON: 0.25, Stage.SAMPLING: 0.27,
-                   Stage.CLUSTERING: 0.45, Stage.FILTERING: 0.5, Stage.REMESHING: 0.55, Stage.REDUNDANCY: 0.65,
-                   Stage.GRAPH: 0.7, Stage.VISIBILITY: 1.0}
+_PROGRESS_AFTER: dict[Enum, float] = {
+    Stage.RAY_SCENE: 0.02,
+    Stage.NAVMESH: 0.1,
+    Stage.SKELETON: 0.25,
+    Stage.SAMPLING: 0.27,
+    Stage.CLUSTERING: 0.45,
+    Stage.FILTERING: 0.5,
+    Stage.REMESHING: 0.55,
+    Stage.REDUNDANCY: 0.65,
+    Stage.GRAPH: 0.7,
+    Stage.VISIBILITY: 1.0,
+}
 
 
-def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Generator, *,
-                     navmesh: TriMesh | None = None, m_per_unit: float = 1.0,
-                     progress: Callable[[float], None] | None = None) -> LevelArtifact:
+def precompute_level(
+    mesh: TriMesh,
+    settings: TrackSettings,
+    rng: np.random.Generator,
+    *,
+    navmesh: TriMesh | None = None,
+    m_per_unit: float = 1.0,
+    progress: Callable[[float], None] | None = None,
+) -> LevelArtifact:
     """Camera navigation graph and dual visibility table of a level.
 
     mesh: the level in metres, world frame, +Y up (level.load_level_mesh applies the scale);
@@ -83,8 +99,9 @@ def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Gene
     samples = sample_cameras(skeleton, scene, settings, nav)
     done(Stage.SAMPLING)
     clustered = cluster_tracks(samples.position_world, samples.group, settings, rng)
-    clustered = add_static_cameras(clustered, samples.position_world, samples.origin_world,
-                                   segment_components(skeleton.segments_world)[samples.segment])
+    clustered = add_static_cameras(
+        clustered, samples.position_world, samples.origin_world, segment_components(skeleton.segments_world)[samples.segment]
+    )
     done(Stage.CLUSTERING)
     tracks = filter_tracks(clustered, samples.position_world, scene, settings, rng)
     done(Stage.FILTERING)
@@ -97,16 +114,37 @@ def precompute_level(mesh: TriMesh, settings: TrackSettings, rng: np.random.Gene
     done(Stage.GRAPH)
     table = build_visibility_table(graph.nodes_world, refined, scene, settings, rng)
     done(Stage.VISIBILITY)
-    counts = {"level_triangles": mesh.triangle_count, "navmesh_triangles": nav.triangle_count,
-              "skeleton_layers": skeleton.layer_count, "skeleton_segments": len(skeleton.segments_world),
-              "camera_samples": len(samples), "clustered_tracks": len(clustered), "filtered_tracks": filtered_count,
-              "tracks": len(tracks),
-              "nodes": len(graph.nodes_world), "edges": len(graph.edges), "link_edges": int(graph.edge_is_link.sum()),
-              "refined_triangles": refined.triangle_count, "visibility_pairs": int(len(table.node_triangles))}
+    counts = {
+        "level_triangles": mesh.triangle_count,
+        "navmesh_triangles": nav.triangle_count,
+        "skeleton_layers": skeleton.layer_count,
+        "skeleton_segments": len(skeleton.segments_world),
+        "camera_samples": len(samples),
+        "clustered_tracks": len(clustered),
+        "filtered_tracks": filtered_count,
+        "tracks": len(tracks),
+        "nodes": len(graph.nodes_world),
+        "edges": len(graph.edges),
+        "link_edges": int(graph.edge_is_link.sum()),
+        "refined_triangles": refined.triangle_count,
+        "visibility_pairs": int(len(table.node_triangles)),
+    }
     return LevelArtifact(
-        level_vertices=mesh.vertices, level_faces=mesh.faces, navmesh_vertices=nav.vertices,
-        navmesh_faces=nav.faces.astype(np.int32), skeleton_segments=skeleton.segments_world,
-        track_start=tracks.start_world, track_end=tracks.end_world, nodes_world=graph.nodes_world,
-        edges=graph.edges.astype(np.int64), edge_is_link=graph.edge_is_link, refined_vertices=refined.vertices,
-        refined_faces=refined.faces, visibility=table, m_per_unit=m_per_unit, settings=settings,
-        timings_ms=timings, counts=counts)
+        level_vertices=mesh.vertices,
+        level_faces=mesh.faces,
+        navmesh_vertices=nav.vertices,
+        navmesh_faces=nav.faces.astype(np.int32),
+        skeleton_segments=skeleton.segments_world,
+        track_start=tracks.start_world,
+        track_end=tracks.end_world,
+        nodes_world=graph.nodes_world,
+        edges=graph.edges.astype(np.int64),
+        edge_is_link=graph.edge_is_link,
+        refined_vertices=refined.vertices,
+        refined_faces=refined.faces,
+        visibility=table,
+        m_per_unit=m_per_unit,
+        settings=settings,
+        timings_ms=timings,
+        counts=counts,
+    )

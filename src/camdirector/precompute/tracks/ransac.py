@@ -37,6 +37,7 @@ from opposite ends of the level almost never lies on a track); when more than
 `ransac_score_subsample` points are left, hypotheses are pre-scored on that many of them and the
 16 best have their runs measured on all, so a step costs O(n) as the paper wants.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -96,8 +97,15 @@ def neighbour_table(points: np.ndarray, radius_m: float) -> np.ndarray:
     return idx
 
 
-def _hypotheses(points: np.ndarray, alive_idx: np.ndarray, alive: np.ndarray, neighbours: np.ndarray, count: int,
-                min_separation_m: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _hypotheses(
+    points: np.ndarray,
+    alive_idx: np.ndarray,
+    alive: np.ndarray,
+    neighbours: np.ndarray,
+    count: int,
+    min_separation_m: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
     """Up to `count` lines (origins (h, 3), unit directions (h, 3)) through a random alive point
     and a random alive one of its neighbours."""
     first = rng.choice(alive_idx, size=count)
@@ -114,10 +122,10 @@ def _hypotheses(points: np.ndarray, alive_idx: np.ndarray, alive: np.ndarray, ne
 
 def _inlier_counts(points: np.ndarray, origins: np.ndarray, directions: np.ndarray, threshold_m: float) -> np.ndarray:
     """(h,) number of points (s, 3) within threshold_m of each line (h, 3)-(h, 3)."""
-    d = points[None, :, :] - origins[:, None, :]                                # (h, s, 3)
+    d = points[None, :, :] - origins[:, None, :]  # (h, s, 3)
     along = np.einsum("hsk,hk->hs", d, directions)
     dist2 = np.einsum("hsk,hsk->hs", d, d) - along * along
-    return (dist2 < threshold_m ** 2).sum(axis=1)
+    return (dist2 < threshold_m**2).sum(axis=1)
 
 
 def largest_run(t: np.ndarray, max_gap_m: float) -> np.ndarray:
@@ -127,8 +135,9 @@ def largest_run(t: np.ndarray, max_gap_m: float) -> np.ndarray:
     return max(runs, key=len)
 
 
-def _segment_inliers(points: np.ndarray, candidates: np.ndarray, origin: np.ndarray, direction: np.ndarray,
-                     settings: TrackSettings) -> np.ndarray:
+def _segment_inliers(
+    points: np.ndarray, candidates: np.ndarray, origin: np.ndarray, direction: np.ndarray, settings: TrackSettings
+) -> np.ndarray:
     """The consensus set of a track on the line origin + t direction: the largest run of the
     candidates within `ransac_threshold_m` of it (module docstring), as indices into points."""
     near = candidates[line_distance(points[candidates], origin, direction) < settings.ransac_threshold_m]
@@ -137,8 +146,9 @@ def _segment_inliers(points: np.ndarray, candidates: np.ndarray, origin: np.ndar
     return near[largest_run((points[near] - origin) @ direction, settings.max_inlier_gap_m)]
 
 
-def ransac_line(points: np.ndarray, alive: np.ndarray, neighbours: np.ndarray, settings: TrackSettings,
-                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def ransac_line(
+    points: np.ndarray, alive: np.ndarray, neighbours: np.ndarray, settings: TrackSettings, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """One RANSAC step over the alive points: (origin (3,), unit direction (3,), inlier indices
     into points) of the track with the largest consensus set, refitted by least squares, or None
     when no hypothesis can be drawn.
@@ -148,12 +158,16 @@ def ransac_line(points: np.ndarray, alive: np.ndarray, neighbours: np.ndarray, s
     alive_idx = np.flatnonzero(alive)
     if len(alive_idx) < 2:
         return None
-    origins, directions = _hypotheses(points, alive_idx, alive, neighbours, settings.ransac_hypotheses,
-                                      settings.ransac_threshold_m, rng)
+    origins, directions = _hypotheses(
+        points, alive_idx, alive, neighbours, settings.ransac_hypotheses, settings.ransac_threshold_m, rng
+    )
     if not len(origins):
         return None
-    subset = alive_idx if len(alive_idx) <= settings.ransac_score_subsample else \
-        rng.choice(alive_idx, size=settings.ransac_score_subsample, replace=False)
+    subset = (
+        alive_idx
+        if len(alive_idx) <= settings.ransac_score_subsample
+        else rng.choice(alive_idx, size=settings.ransac_score_subsample, replace=False)
+    )
     rough = _inlier_counts(points[subset], origins, directions, settings.ransac_threshold_m)
     best, inliers = None, np.empty(0, np.int64)
     for h in np.argsort(-rough, kind="stable")[:_EXACT_SCORED].tolist():  # the line's count bounds its run's
@@ -171,8 +185,7 @@ def ransac_line(points: np.ndarray, alive: np.ndarray, neighbours: np.ndarray, s
     return origin, direction, inliers
 
 
-def cluster_tracks(points_world: np.ndarray, group: np.ndarray, settings: TrackSettings,
-                   rng: np.random.Generator) -> Tracks:
+def cluster_tracks(points_world: np.ndarray, group: np.ndarray, settings: TrackSettings, rng: np.random.Generator) -> Tracks:
     """Sequential RANSAC over camera samples (n, 3) metres, run separately on each group of
     samples (n,) int (the sampling direction): the module docstring's tracks."""
     points = np.asarray(points_world, dtype=np.float64)
@@ -186,12 +199,12 @@ def cluster_tracks(points_world: np.ndarray, group: np.ndarray, settings: TrackS
         point_track[members[assigned]] = own.point_track[assigned] + len(starts)
         starts.extend(own.start_world)
         ends.extend(own.end_world)
-    return Tracks(np.asarray(starts, dtype=np.float64).reshape(-1, 3),
-                  np.asarray(ends, dtype=np.float64).reshape(-1, 3), point_track)
+    return Tracks(
+        np.asarray(starts, dtype=np.float64).reshape(-1, 3), np.asarray(ends, dtype=np.float64).reshape(-1, 3), point_track
+    )
 
 
-def add_static_cameras(tracks: Tracks, points_world: np.ndarray, origin_world: np.ndarray,
-                       component: np.ndarray) -> Tracks:
+def add_static_cameras(tracks: Tracks, points_world: np.ndarray, origin_world: np.ndarray, component: np.ndarray) -> Tracks:
     """Tracks plus one static camera (a track of one point) for every skeleton component none of
     whose samples supports a track: its sample furthest from its ray origin (module docstring).
 
@@ -210,12 +223,12 @@ def add_static_cameras(tracks: Tracks, points_world: np.ndarray, origin_world: n
         return tracks
     point_track = tracks.point_track.copy()
     point_track[picks] = len(tracks) + np.arange(len(picks))
-    return Tracks(np.vstack([tracks.start_world, points_world[picks]]),
-                  np.vstack([tracks.end_world, points_world[picks]]), point_track)
+    return Tracks(
+        np.vstack([tracks.start_world, points_world[picks]]), np.vstack([tracks.end_world, points_world[picks]]), point_track
+    )
 
 
-def _sequential_ransac(points: np.ndarray, max_lines: int, settings: TrackSettings,
-                       rng: np.random.Generator) -> Tracks:
+def _sequential_ransac(points: np.ndarray, max_lines: int, settings: TrackSettings, rng: np.random.Generator) -> Tracks:
     n = len(points)
     point_track = np.full(n, -1, dtype=np.int64)
     starts: list[npt.NDArray[np.float64]] = []
@@ -232,5 +245,6 @@ def _sequential_ransac(points: np.ndarray, max_lines: int, settings: TrackSettin
         starts.append(origin + t.min() * direction)
         ends.append(origin + t.max() * direction)
         alive[inliers] = False
-    return Tracks(np.asarray(starts, dtype=np.float64).reshape(-1, 3),
-                  np.asarray(ends, dtype=np.float64).reshape(-1, 3), point_track)
+    return Tracks(
+        np.asarray(starts, dtype=np.float64).reshape(-1, 3), np.asarray(ends, dtype=np.float64).reshape(-1, 3), point_track
+    )

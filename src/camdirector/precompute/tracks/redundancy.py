@@ -42,6 +42,7 @@ Connectivity: dropping a track can split a chain of tracks into components; the 
 follows edges only within a shot and cuts between components (graph distance is a sub-score,
 not a constraint), and the graph stage links components again where they come close (step iii).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -69,8 +70,9 @@ def track_points(tracks: Tracks, max_edge_length_m: float) -> tuple[np.ndarray, 
     return start + frac[:, None] * (end - start), owner
 
 
-def prune_redundant_tracks(tracks: Tracks, refined: TriMesh, scene: RayScene, settings: TrackSettings,
-                           rng: np.random.Generator) -> Tracks:
+def prune_redundant_tracks(
+    tracks: Tracks, refined: TriMesh, scene: RayScene, settings: TrackSettings, rng: np.random.Generator
+) -> Tracks:
     """Tracks (module docstring) with the redundant ones dropped; `point_track` is renumbered,
     -1 for the samples of dropped tracks."""
     k = settings.redundancy_k
@@ -94,7 +96,7 @@ def prune_redundant_tracks(tracks: Tracks, refined: TriMesh, scene: RayScene, se
     seers = np.asarray(sees.sum(axis=0)).ravel().astype(np.int64)  # kept tracks seeing each column
     keep = np.ones(len(tracks), dtype=bool)
     for t in np.lexsort((tracks.length_m, seen_count)):
-        seen = sees.indices[sees.indptr[t]:sees.indptr[t + 1]]
+        seen = sees.indices[sees.indptr[t] : sees.indptr[t + 1]]
         if np.all(seers[seen] > others_needed[seen]):  # enough others besides t
             keep[t] = False
             seers[seen] -= 1

@@ -33,6 +33,7 @@ level at all. This keeps one table with its one primary key (a name per tenant i
 same constraint, with no migration of an existing index), where a tenant column would have
 meant rebuilding the SQLite table to widen its primary key.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -57,8 +58,10 @@ from camdirector.precompute.tracks.track_settings import TrackSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 _TENANT_SEPARATOR = "/"  # in neither a level name nor a tenant (module docstring)
-_COLUMNS = ("name, artifact_file, format_version, source_path, navmesh_path, m_per_unit, agent_height_m, "
-            "agent_radius_m, created_unix_s, counts_json, timings_json")
+_COLUMNS = (
+    "name, artifact_file, format_version, source_path, navmesh_path, m_per_unit, agent_height_m, "
+    "agent_radius_m, created_unix_s, counts_json, timings_json"
+)
 # {real}: SQLite's REAL is 8 bytes, PostgreSQL's is 4 (DOUBLE PRECISION there).
 _SCHEMA = """CREATE TABLE IF NOT EXISTS levels (
     name TEXT PRIMARY KEY, artifact_file TEXT NOT NULL, format_version INTEGER NOT NULL,
@@ -70,8 +73,7 @@ _INSERT = f"INSERT INTO levels ({_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?
 def check_level_name(name: str) -> None:
     """Raises ValueError unless name is 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit."""
     if not isinstance(name, str) or not _NAME.fullmatch(name):
-        raise ValueError(f"level name {name!r}: use 1-64 letters, digits, '.', '_' or '-', starting with a letter "
-                         "or digit")
+        raise ValueError(f"level name {name!r}: use 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")
 
 
 def qualified_name(name: str, tenant: str) -> str:
@@ -120,6 +122,7 @@ class LevelRecord:
 
 
 # -- the index: one interface, two implementations -------------------------------------------------
+
 
 class LevelIndex:
     """The rows of the registry (tuples in _COLUMNS' order; artifact_file relative to the levels
@@ -229,9 +232,15 @@ class PostgresLevelIndex(PostgresStore, LevelIndex):
 
     def __init__(self, url: str) -> None:
         self.where = f"{redacted(url)} (table levels)"
-        PostgresStore.__init__(self, url, "level index", LevelsUnavailable, [_SCHEMA.format(real="DOUBLE PRECISION")],
-                               write_lock="LOCK TABLE levels IN SHARE ROW EXCLUSIVE MODE",
-                               schema_lock=advisory_lock(_SCHEMA_LOCK_KEY))
+        PostgresStore.__init__(
+            self,
+            url,
+            "level index",
+            LevelsUnavailable,
+            [_SCHEMA.format(real="DOUBLE PRECISION")],
+            write_lock="LOCK TABLE levels IN SHARE ROW EXCLUSIVE MODE",
+            schema_lock=advisory_lock(_SCHEMA_LOCK_KEY),
+        )
 
     def _is_duplicate(self, exc: Exception) -> bool:
         return is_unique_violation(exc)
@@ -247,6 +256,7 @@ def open_level_index(records_url: str, levels_dir: Path) -> LevelIndex:
 
 
 # -- the registry -----------------------------------------------------------------------------------
+
 
 class LevelRegistry:
     """The registry in data_dir (created if missing). records_url: where its index lives, "" for
@@ -278,15 +288,35 @@ class LevelRegistry:
 
     def _record(self, row) -> LevelRecord:
         tenant, name = _split_qualified(row[0])
-        return LevelRecord(name=name, tenant=tenant, artifact_path=self.levels_dir / row[1], format_version=row[2],
-                           source_path=row[3], navmesh_path=row[4], m_per_unit=row[5], agent_height_m=row[6],
-                           agent_radius_m=row[7], created_unix_s=row[8], counts=json.loads(row[9]),
-                           timings_ms=json.loads(row[10]))
+        return LevelRecord(
+            name=name,
+            tenant=tenant,
+            artifact_path=self.levels_dir / row[1],
+            format_version=row[2],
+            source_path=row[3],
+            navmesh_path=row[4],
+            m_per_unit=row[5],
+            agent_height_m=row[6],
+            agent_radius_m=row[7],
+            created_unix_s=row[8],
+            counts=json.loads(row[9]),
+            timings_ms=json.loads(row[10]),
+        )
 
-    def add_level(self, name: str, level_path: Path, navmesh_path: Path | None = None, *, scale: float = 1.0,
-                  agent_height_m: float = 2.0, agent_radius_m: float = 0.6,
-                  progress: Callable[[float], None] | None = None, seed: int = 0,
-                  replace: bool = True, tenant: str = DEFAULT_TENANT) -> LevelRecord:
+    def add_level(
+        self,
+        name: str,
+        level_path: Path,
+        navmesh_path: Path | None = None,
+        *,
+        scale: float = 1.0,
+        agent_height_m: float = 2.0,
+        agent_radius_m: float = 0.6,
+        progress: Callable[[float], None] | None = None,
+        seed: int = 0,
+        replace: bool = True,
+        tenant: str = DEFAULT_TENANT,
+    ) -> LevelRecord:
         """Precompute a level file (OBJ/GLB in units of `scale` metres, or a Quake BSP, already in
         metres, times `scale`) and index it under name in `tenant`'s namespace, replacing a level
         of that name (unless `replace` is false: then LevelExists when the name is taken by the
@@ -295,15 +325,25 @@ class LevelRegistry:
         settings = TrackSettings(agent_height_m=agent_height_m, agent_radius_m=agent_radius_m)
         mesh = load_level_mesh(Path(level_path), scale)
         navmesh = load_level_mesh(Path(navmesh_path), scale) if navmesh_path is not None else None
-        artifact = precompute_level(mesh, settings, np.random.default_rng(seed), navmesh=navmesh, m_per_unit=scale,
-                                    progress=progress)
+        artifact = precompute_level(
+            mesh, settings, np.random.default_rng(seed), navmesh=navmesh, m_per_unit=scale, progress=progress
+        )
         file_name = f"{qualified}.{secrets.token_hex(6)}.npz"  # in the tenant's folder unless `default`
         (self.levels_dir / file_name).parent.mkdir(exist_ok=True)
         save_artifact(artifact, self.levels_dir / file_name)
-        row = (qualified, file_name, FORMAT_VERSION, str(Path(level_path).resolve()),
-               str(Path(navmesh_path).resolve()) if navmesh_path is not None else None, scale,
-               agent_height_m, agent_radius_m, time.time(), json.dumps(artifact.counts),
-               json.dumps(artifact.timings_ms))
+        row = (
+            qualified,
+            file_name,
+            FORMAT_VERSION,
+            str(Path(level_path).resolve()),
+            str(Path(navmesh_path).resolve()) if navmesh_path is not None else None,
+            scale,
+            agent_height_m,
+            agent_radius_m,
+            time.time(),
+            json.dumps(artifact.counts),
+            json.dumps(artifact.timings_ms),
+        )
         try:
             old = self.index.put(row, replace=replace)
         except BaseException:

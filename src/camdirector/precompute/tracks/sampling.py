@@ -18,6 +18,7 @@ split to at most the margin, and a sample is kept when a vertex lies within the 
 sample farther than the margin from it is dropped. Height is not tested, so a sample above or
 below another floor counts as inside.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -82,8 +83,7 @@ def inside_footprint(points_world: np.ndarray, navmesh: TriMesh, margin_m: float
     return np.isfinite(distance)
 
 
-def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings,
-                   navmesh: TriMesh | None = None) -> CameraSamples:
+def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings, navmesh: TriMesh | None = None) -> CameraSamples:
     """Camera samples of the module docstring; scene is the level (static geometry); navmesh,
     when given, bounds the samples to its footprint."""
     ground, tangent, segment = skeleton_origins(skeleton, settings.skeleton_spacing_m)
@@ -101,8 +101,14 @@ def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings,
             sides.append(np.full(len(origin), 0 if len(signs) == 1 else int(sign)))
             owners.append(np.arange(len(origin)))
     if not rays or not len(origin):
-        return CameraSamples(np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)), np.empty(0, np.int64),
-                             np.empty(0, np.int64), np.empty(0, np.int64))
+        return CameraSamples(
+            np.empty((0, 3)),
+            np.empty((0, 3)),
+            np.empty((0, 3)),
+            np.empty(0, np.int64),
+            np.empty(0, np.int64),
+            np.empty(0, np.int64),
+        )
     ray = np.concatenate(rays)
     owner = np.concatenate(owners)
     kind = np.concatenate(kinds)
@@ -116,6 +122,14 @@ def sample_cameras(skeleton: Skeleton, scene: RayScene, settings: TrackSettings,
     position = position[keep]
     parts = [(position, origin[owner[keep]], ray[keep], kind[keep], side_of[keep], segment[owner[keep]])]
     if settings.include_skeleton_points:
-        parts.append((origin, origin, np.zeros_like(origin), np.full(len(origin), SKELETON_DIRECTION),
-                      np.zeros(len(origin), np.int64), segment))
+        parts.append(
+            (
+                origin,
+                origin,
+                np.zeros_like(origin),
+                np.full(len(origin), SKELETON_DIRECTION),
+                np.zeros(len(origin), np.int64),
+                segment,
+            )
+        )
     return CameraSamples(*(np.concatenate(p) for p in zip(*parts)))

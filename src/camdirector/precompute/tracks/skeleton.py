@@ -32,6 +32,7 @@ What this loses against a curve skeleton: skeleton lines stop where a layer is c
 between two floors carries two skeleton pieces that nearly meet instead of one line); the graph's
 linking step (Section 4.6 iii) joins the tracks on either side.
 """
+
 from __future__ import annotations
 
 from collections import deque
@@ -49,9 +50,9 @@ from camdirector.geometry.meshes import TriMesh
 from camdirector.precompute.tracks.navmesh import triangle_adjacency
 from camdirector.precompute.tracks.track_settings import TrackSettings
 
-_OVERLAP_M2 = 1e-4   # projections overlapping by less than this do not make two floors
-_CLOSING_M = 0.01    # closes cracks between triangles meeting at T-junctions
-_WELD_M = 1e-3       # medial axis segment ends closer than this are one vertex
+_OVERLAP_M2 = 1e-4  # projections overlapping by less than this do not make two floors
+_CLOSING_M = 0.01  # closes cracks between triangles meeting at T-junctions
+_WELD_M = 1e-3  # medial axis segment ends closer than this are one vertex
 
 
 @dataclass(frozen=True)
@@ -76,8 +77,7 @@ def _weld(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (v, d) of segments (s, 2, d) whose ends closer than 1 mm are one, and the (s, 2)
     int vertex pairs of the segments."""
     ends = segments.reshape(-1, segments.shape[-1])
-    _, first, inverse = np.unique(np.round(ends / _WELD_M).astype(np.int64), axis=0, return_index=True,
-                                  return_inverse=True)
+    _, first, inverse = np.unique(np.round(ends / _WELD_M).astype(np.int64), axis=0, return_index=True, return_inverse=True)
     return ends[first], inverse.reshape(-1, 2)
 
 
@@ -134,7 +134,7 @@ def split_layers(navmesh: TriMesh, settings: TrackSettings) -> tuple[np.ndarray,
         queue = deque([seed])
         while queue:
             t = queue.popleft()
-            for n in indices[indptr[t]:indptr[t + 1]].tolist():
+            for n in indices[indptr[t] : indptr[t + 1]].tolist():
                 if layer[n] < 0 and not any(layer[c] == count for c in conflicts[n]):
                     layer[n] = count
                     queue.append(n)
@@ -147,8 +147,7 @@ def layer_outline(triangles_xz: np.ndarray, simplify_m: float, min_hole_m2: floa
     holes smaller than min_hole_m2."""
     merged = shapely.union_all(shapely.polygons(triangles_xz)).buffer(_CLOSING_M).buffer(-_CLOSING_M)
     parts = [p for p in getattr(merged, "geoms", [merged]) if p.geom_type == "Polygon" and p.area > 1e-6]
-    parts = [shapely.Polygon(p.exterior, [r for r in p.interiors if shapely.Polygon(r).area >= min_hole_m2])
-             for p in parts]
+    parts = [shapely.Polygon(p.exterior, [r for r in p.interiors if shapely.Polygon(r).area >= min_hole_m2]) for p in parts]
     if simplify_m > 0.0:
         parts = [p.simplify(simplify_m, preserve_topology=True) for p in parts]
     return [orient(p, 1.0) for p in parts if p.geom_type == "Polygon" and p.area > 1e-6]
@@ -219,14 +218,19 @@ def clean_axis(segments: np.ndarray, polygon, prune_m: float, tolerance_m: float
             drop.update(k for _, k in spokes)
         if not drop:
             break
-        segments = np.asarray([[vertices[c[i]], vertices[c[i + 1]]] for k, c in enumerate(chains) if k not in drop
-                               for i in range(len(c) - 1)], dtype=np.float64).reshape(-1, 2, 2)
+        segments = np.asarray(
+            [[vertices[c[i]], vertices[c[i + 1]]] for k, c in enumerate(chains) if k not in drop for i in range(len(c) - 1)],
+            dtype=np.float64,
+        ).reshape(-1, 2, 2)
         if not len(segments):
             return segments
     out: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = []
     for chain in chains:
-        line = shapely.LineString(vertices[chain]).simplify(tolerance_m, preserve_topology=False) \
-            if tolerance_m > 0.0 else shapely.LineString(vertices[chain])
+        line = (
+            shapely.LineString(vertices[chain]).simplify(tolerance_m, preserve_topology=False)
+            if tolerance_m > 0.0
+            else shapely.LineString(vertices[chain])
+        )
         pts = np.asarray(line.coords)
         out.extend(zip(pts[:-1], pts[1:]))
     return np.asarray(out, dtype=np.float64).reshape(-1, 2, 2)
@@ -259,14 +263,15 @@ def extract_skeleton(navmesh: TriMesh, settings: TrackSettings) -> Skeleton:
     """Skeleton of a navigation mesh (metres, world frame): the module docstring's four steps."""
     triangle_layer, layer_count = split_layers(navmesh, settings)
     tri = navmesh.vertices[navmesh.faces]
-    outlines = tuple(layer_outline(tri[triangle_layer == layer][:, :, [0, 2]], settings.skeleton_simplify_m,
-                                   settings.skeleton_min_hole_m2) for layer in range(layer_count))
+    outlines = tuple(
+        layer_outline(tri[triangle_layer == layer][:, :, [0, 2]], settings.skeleton_simplify_m, settings.skeleton_min_hole_m2)
+        for layer in range(layer_count)
+    )
     segments, layers = [], []
     for layer in range(layer_count):
         own = tri[triangle_layer == layer]
         for polygon in outlines[layer]:
-            seg2 = clean_axis(_medial_axis_2d(polygon), polygon, settings.skeleton_prune_m,
-                              settings.skeleton_line_tolerance_m)
+            seg2 = clean_axis(_medial_axis_2d(polygon), polygon, settings.skeleton_prune_m, settings.skeleton_line_tolerance_m)
             if not len(seg2):
                 continue
             height = layer_height(seg2.reshape(-1, 2), own).reshape(-1, 2)

@@ -17,6 +17,7 @@ their point (Embree, static level only). Pairs seen by no ray are not stored. Th
 both ways, as the paper does: per node the triangles it sees, per triangle the nodes that see it
 (two CSR matrices of degrees in 1/255).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -81,10 +82,12 @@ def remesh(navmesh: TriMesh, skeleton: Skeleton, settings: TrackSettings) -> Tri
             e1, e2 = flat[:, 1] - flat[:, 0], flat[:, 2] - flat[:, 0]
             ccw = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0.0
             flat[ccw] = flat[ccw][:, ::-1]  # clockwise in (x, z) is counter-clockwise seen from +Y: faces up
-            v2, f = refine_triangles(np.column_stack([flat.reshape(-1, 2), np.zeros(3 * len(flat))]),
-                                     np.arange(3 * len(flat)).reshape(-1, 3),
-                                     max_area_m2=settings.max_triangle_area_m2,
-                                     max_edge_m=2.0 * np.sqrt(settings.max_triangle_area_m2))
+            v2, f = refine_triangles(
+                np.column_stack([flat.reshape(-1, 2), np.zeros(3 * len(flat))]),
+                np.arange(3 * len(flat)).reshape(-1, 3),
+                max_area_m2=settings.max_triangle_area_m2,
+                max_edge_m=2.0 * np.sqrt(settings.max_triangle_area_m2),
+            )
             xz = v2[:, :2]
             vertices.append(np.column_stack([xz[:, 0], layer_height(xz, own), xz[:, 1]]))
             faces.append(f + offset)
@@ -94,8 +97,9 @@ def remesh(navmesh: TriMesh, skeleton: Skeleton, settings: TrackSettings) -> Tri
     return TriMesh(vertices=np.vstack(vertices), faces=np.vstack(faces).astype(np.int32))
 
 
-def build_visibility_table(nodes_world: np.ndarray, refined: TriMesh, scene: RayScene, settings: TrackSettings,
-                           rng: np.random.Generator) -> VisibilityTable:
+def build_visibility_table(
+    nodes_world: np.ndarray, refined: TriMesh, scene: RayScene, settings: TrackSettings, rng: np.random.Generator
+) -> VisibilityTable:
     """Monte Carlo dual visibility table of nodes (N, 3) against refined triangles (module docstring)."""
     triangles = refined.vertices[refined.faces]
     centroid = triangles.mean(axis=1)
@@ -113,8 +117,8 @@ def build_visibility_table(nodes_world: np.ndarray, refined: TriMesh, scene: Ray
         tri_of_pair = np.fromiter((t for x in near for t in x), dtype=np.int64, count=int(counts.sum()))
         per_batch = max(1, _RAYS_PER_BATCH // rays)
         for lo in range(0, len(node_of_pair), per_batch):
-            node = node_of_pair[lo:lo + per_batch]
-            tri = tri_of_pair[lo:lo + per_batch]
+            node = node_of_pair[lo : lo + per_batch]
+            tri = tri_of_pair[lo : lo + per_batch]
             origin = nodes_world[node].astype(np.float32)
             a, e1, e2 = corner[tri], edge1[tri], edge2[tri]
             seen = np.zeros(len(node), dtype=np.int64)
@@ -135,6 +139,10 @@ def build_visibility_table(nodes_world: np.ndarray, refined: TriMesh, scene: Ray
     by_tri = by_node.tocsc()
     by_tri.sort_indices()
     return VisibilityTable(
-        node_indptr=by_node.indptr.astype(np.int64), node_triangles=by_node.indices.astype(np.int32),
-        node_degree=by_node.data.astype(np.uint8), triangle_indptr=by_tri.indptr.astype(np.int64),
-        triangle_nodes=by_tri.indices.astype(np.int32), triangle_degree=by_tri.data.astype(np.uint8))
+        node_indptr=by_node.indptr.astype(np.int64),
+        node_triangles=by_node.indices.astype(np.int32),
+        node_degree=by_node.data.astype(np.uint8),
+        triangle_indptr=by_tri.indptr.astype(np.int64),
+        triangle_nodes=by_tri.indices.astype(np.int32),
+        triangle_degree=by_tri.data.astype(np.uint8),
+    )

@@ -1,13 +1,14 @@
 """REST routes of keys, logins and the audit trail (access/, docs/security.md).
 
-    POST   /v1/login        body {"key": KEY} -> the caller; sets the dashboard's login cookie
-    POST   /v1/logout       clears it
-    GET    /v1/whoami       the caller: key id, role, tenant (and the CSRF token with the cookie)
-    GET    /v1/keys         the tenant's keys (admin)
-    POST   /v1/keys         body {"role", "name"} -> 201 the new key, shown this once (admin)
-    DELETE /v1/keys/{id}    revoke one of the tenant's keys (admin): refused at once on every node
-    GET    /v1/audit?after_seq=&limit=   the tenant's takes, releases, style, level and key changes (admin)
+POST   /v1/login        body {"key": KEY} -> the caller; sets the dashboard's login cookie
+POST   /v1/logout       clears it
+GET    /v1/whoami       the caller: key id, role, tenant (and the CSRF token with the cookie)
+GET    /v1/keys         the tenant's keys (admin)
+POST   /v1/keys         body {"role", "name"} -> 201 the new key, shown this once (admin)
+DELETE /v1/keys/{id}    revoke one of the tenant's keys (admin): refused at once on every node
+GET    /v1/audit?after_seq=&limit=   the tenant's takes, releases, style, level and key changes (admin)
 """
+
 from __future__ import annotations
 
 from typing import Annotated, Literal, get_args
@@ -75,8 +76,13 @@ class AuditTrail(BaseModel):
 
 def _caller(request: Request, identity: Identity, cookie: str | None) -> dict:
     token = request.app.state.cookies.csrf_token(cookie) if cookie else None
-    return {"key_id": identity.key_id, "role": identity.role, "tenant": identity.tenant,
-            "verbs": sorted(verb.value for verb in ROLE_VERBS[identity.role]), "csrf_token": token}
+    return {
+        "key_id": identity.key_id,
+        "role": identity.role,
+        "tenant": identity.tenant,
+        "verbs": sorted(verb.value for verb in ROLE_VERBS[identity.role]),
+        "csrf_token": token,
+    }
 
 
 def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
@@ -93,8 +99,9 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
         if identity.key_id is None:
             return _caller(request, identity, None)
         cookie = request.app.state.cookies.cookie(identity.key_id)
-        response.set_cookie(COOKIE, cookie, max_age=int(COOKIE_TTL_S), httponly=True, samesite="strict",
-                            secure=secure_cookie, path="/")
+        response.set_cookie(
+            COOKIE, cookie, max_age=int(COOKIE_TTL_S), httponly=True, samesite="strict", secure=secure_cookie, path="/"
+        )
         return _caller(request, identity, cookie)
 
     @routes.post("/logout", status_code=204, response_class=Response)
@@ -108,8 +115,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     def whoami(request: Request) -> dict:
         """The caller's key, role and tenant."""
         identity = identify(request)
-        return _caller(request, identity, request.cookies.get(COOKIE) if "authorization" not in request.headers
-                       else None)
+        return _caller(request, identity, request.cookies.get(COOKIE) if "authorization" not in request.headers else None)
 
     @routes.get("/keys", response_model=KeyList)
     def list_keys(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))]) -> dict:
@@ -117,8 +123,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
         return {"keys": [k.as_public() for k in guard.key_store().list_keys(identity.tenant)]}
 
     @routes.post("/keys", status_code=201, response_model=KeyCreated, responses={400: _NOT_JSON})
-    def create_key(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))],
-                   body: Annotated[NewKey, Body()]) -> dict:
+    def create_key(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))], body: Annotated[NewKey, Body()]) -> dict:
         """A new key of the caller's tenant."""
         record, text = guard.key_store().create_key(body.role, identity.tenant, body.name)
         guard.audit(identity, "key.create", None, {"key_id": record.key_id, "role": body.role, "name": body.name})
@@ -136,9 +141,11 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
         return record.as_public()
 
     @routes.get("/audit", response_model=AuditTrail)
-    def audit(identity: Annotated[Identity, Depends(require(Verb.AUDIT_READ))],
-              after_seq: Annotated[int, Query(ge=0, le=2**62, description="only entries after this one")] = 0,
-              limit: Annotated[int, Query(ge=1, le=5000)] = 500) -> dict:
+    def audit(
+        identity: Annotated[Identity, Depends(require(Verb.AUDIT_READ))],
+        after_seq: Annotated[int, Query(ge=0, le=2**62, description="only entries after this one")] = 0,
+        limit: Annotated[int, Query(ge=1, le=5000)] = 500,
+    ) -> dict:
         """The tenant's audit trail, oldest first: when, which key, which session, what."""
         return {"entries": guard.store.audit_trail(identity.tenant, after_seq, limit)} if guard.store else {"entries": []}
 

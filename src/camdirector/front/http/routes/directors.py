@@ -8,6 +8,7 @@ baselines, then the directors of the server's plugins (`camdirector serve --plug
 "wire" is null: a style names them by `match_director_name`. Its verb is `session.read`: whoever
 may read a session's style may read what it may name.
 """
+
 from __future__ import annotations
 
 from typing import Annotated

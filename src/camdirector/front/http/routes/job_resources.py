@@ -6,6 +6,7 @@ both modes (jobs/__init__.py): `Jobs` is either.
 Every job belongs to the tenant of the key that submitted it: a route's caller sees, cancels and
 fetches only its tenant's jobs, and another tenant's job answers 404 with the words an unknown id
 gets (access/roles.py)."""
+
 from __future__ import annotations
 
 import json
@@ -59,8 +60,9 @@ async def known_form_fields(request: Request) -> None:
     known = {field.alias for field in request.scope["route"].dependant.body_params}
     unknown = sorted(set((await request.form()).keys()) - known)
     if unknown:
-        raise HTTPException(status_code=422, detail=f"unknown form field(s) {', '.join(unknown)}; "
-                                                    f"this route takes {', '.join(sorted(known))}")
+        raise HTTPException(
+            status_code=422, detail=f"unknown form field(s) {', '.join(unknown)}; this route takes {', '.join(sorted(known))}"
+        )
 
 
 def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], tenant: str) -> Job:
@@ -70,8 +72,7 @@ def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], t
     try:
         return runner.submit(kind, params, files, tenant)
     except QueueFull as exc:
-        raise HTTPException(status_code=429, detail=f"job queue full: {exc}",
-                            headers={"Retry-After": "10"}) from None
+        raise HTTPException(status_code=429, detail=f"job queue full: {exc}", headers={"Retry-After": "10"}) from None
     except TenantLimitReached as exc:
         raise HTTPException(status_code=429, detail=str(exc), headers={"Retry-After": "10"}) from None
     except JobsUnavailable as exc:
@@ -81,6 +82,7 @@ def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], t
 def answer_unavailable_jobs(app: FastAPI) -> None:
     """Any route that finds the job store (PostgreSQL) or queue (Redis) down answers 503 with
     the reason, not 500."""
+
     async def unavailable(request: Request, exc: Exception) -> JSONResponse:  # exc: JobsUnavailable
         return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
 
@@ -90,13 +92,16 @@ def answer_unavailable_jobs(app: FastAPI) -> None:
 MAX_LISTED_JOBS = 1000
 
 
-def list_jobs(runner: Jobs, kind: str, status: JobState | None, limit: int,
-              extra: Callable[[dict], dict], tenant: str) -> list[dict]:
+def list_jobs(
+    runner: Jobs, kind: str, status: JobState | None, limit: int, extra: Callable[[dict], dict], tenant: str
+) -> list[dict]:
     """GET of a job collection: the newest `limit` jobs of `kind` and `tenant` (in `status` when
     given), each its public view with `extra(params)` added (finished jobs are kept
     `job_retention_s`)."""
-    return [{**j.as_public(), **extra(j.params)}
-            for j in runner.store.list(status, kind=kind, tenant=tenant, limit=limit, newest_first=True)]
+    return [
+        {**j.as_public(), **extra(j.params)}
+        for j in runner.store.list(status, kind=kind, tenant=tenant, limit=limit, newest_first=True)
+    ]
 
 
 def cancel_job(runner: Jobs, job_id: str, noun: str = "job"):
@@ -120,8 +125,7 @@ class UploadLimit:
         self.path_prefix = path_prefix
 
     async def __call__(self, scope, receive, send):
-        if scope["type"] != "http" or scope["method"] != "POST" or \
-                not scope["path"].startswith(self.path_prefix):
+        if scope["type"] != "http" or scope["method"] != "POST" or not scope["path"].startswith(self.path_prefix):
             return await self.app(scope, receive, send)
         for name, value in scope.get("headers", []):
             if name == b"content-length":
@@ -148,12 +152,18 @@ class UploadLimit:
             await self._reject(send)
 
     async def _reject(self, send) -> None:
-        body = json.dumps({"detail": f"upload larger than the limit of {self.max_body_bytes} "
-                                     "bytes"}).encode()
-        await send({"type": "http.response.start", "status": 413,
-                    "headers": [(b"content-type", b"application/json"),
-                                (b"content-length", str(len(body)).encode()),
-                                (b"connection", b"close")]})
+        body = json.dumps({"detail": f"upload larger than the limit of {self.max_body_bytes} bytes"}).encode()
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 413,
+                "headers": [
+                    (b"content-type", b"application/json"),
+                    (b"content-length", str(len(body)).encode()),
+                    (b"connection", b"close"),
+                ],
+            }
+        )
         await send({"type": "http.response.body", "body": body})
 
 

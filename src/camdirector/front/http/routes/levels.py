@@ -42,6 +42,7 @@ answers 404 as an unknown one, and a TRACKS session finds only its own tenant's 
 A level added (when its job is submitted) and a level deleted go into the tenant's audit trail
 (GET /v1/audit).
 """
+
 from __future__ import annotations
 
 import math
@@ -84,6 +85,7 @@ _FORM_OVERHEAD_BYTES = 64 * 1024
 
 # -- the routes -----------------------------------------------------------------------------
 
+
 class LevelJobCreated(JobCreated):
     """Poll GET /v1/level-jobs/{id}."""
 
@@ -117,19 +119,26 @@ class LevelList(BaseModel):
 
 
 def _level_json(record: LevelRecord) -> dict:
-    return {"name": record.name, "format_version": record.format_version,
-            "source_file": Path(record.source_path).name, "m_per_unit": record.m_per_unit,
-            "agent_height_m": record.agent_height_m, "agent_radius_m": record.agent_radius_m,
-            "created_unix_s": record.created_unix_s, "counts": record.counts,
-            "timings_ms": {k: round(v, 3) for k, v in record.timings_ms.items()}}
+    return {
+        "name": record.name,
+        "format_version": record.format_version,
+        "source_file": Path(record.source_path).name,
+        "m_per_unit": record.m_per_unit,
+        "agent_height_m": record.agent_height_m,
+        "agent_radius_m": record.agent_radius_m,
+        "created_unix_s": record.created_unix_s,
+        "counts": record.counts,
+        "timings_ms": {k: round(v, 3) for k, v in record.timings_ms.items()},
+    }
 
 
 def _mesh_file(upload: UploadFile, field: str, limit: int, scale: float) -> tuple[str, bytes]:
     """(stored file name, bytes) of an uploaded level or navmesh; HTTPException when unusable."""
     suffix = Path(upload.filename or "").suffix.lower()
     if suffix not in LEVEL_SUFFIXES:
-        raise HTTPException(status_code=400, detail=(
-            f"{field}: file name {upload.filename!r} must end in {' or '.join(LEVEL_SUFFIXES)}"))
+        raise HTTPException(
+            status_code=400, detail=(f"{field}: file name {upload.filename!r} must end in {' or '.join(LEVEL_SUFFIXES)}")
+        )
     data = upload.file.read(limit + 1)
     if len(data) > limit:
         raise HTTPException(status_code=413, detail=f"{field}: upload larger than the limit of {limit} bytes")
@@ -143,8 +152,10 @@ def _mesh_file(upload: UploadFile, field: str, limit: int, scale: float) -> tupl
         raise HTTPException(status_code=400, detail=f"{field}: not a usable mesh: {exc}") from None
     extent = (mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)) * scale
     if (extent > 1e-3).sum() < 2:
-        raise HTTPException(status_code=400, detail=(
-            f"{field}: degenerate mesh: it spans {extent.round(4).tolist()} m, under 1 mm in two directions"))
+        raise HTTPException(
+            status_code=400,
+            detail=(f"{field}: degenerate mesh: it spans {extent.round(4).tolist()} m, under 1 mm in two directions"),
+        )
     return f"{field}{suffix}", data
 
 
@@ -157,29 +168,40 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
 
     def pending_names(tenant: str) -> set[str]:
         """The names the tenant's queued and running level jobs are adding."""
-        jobs = [job for state in (JobState.QUEUED, JobState.RUNNING)
-                for job in runner.store.list(state, kind=KIND, tenant=tenant)]
+        jobs = [
+            job for state in (JobState.QUEUED, JobState.RUNNING) for job in runner.store.list(state, kind=KIND, tenant=tenant)
+        ]
         return {j.params["name"] for j in jobs}
 
     def level_job_or_404(job_id: str, identity: Identity):
         return job_of_kind(runner, job_id, KIND, "level job", identity.tenant)
 
-    @router.post(LEVELS_PREFIX, status_code=202, dependencies=[Depends(known_form_fields)], response_model=LevelJobCreated,
-                 responses={
-        400: {"description": "a file is not a usable .obj/.glb mesh or .bsp map (detail says why)"},
-        409: {"description": "the name is taken (registered or being added) and replace is false"},
-        413: {"description": "an upload is larger than the server's limit"},
-        422: {"description": "a bad name, or scale or agent out of range"},
-        429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
-        503: {"description": "the job store or queue is unreachable; retry later"}})
+    @router.post(
+        LEVELS_PREFIX,
+        status_code=202,
+        dependencies=[Depends(known_form_fields)],
+        response_model=LevelJobCreated,
+        responses={
+            400: {"description": "a file is not a usable .obj/.glb mesh or .bsp map (detail says why)"},
+            409: {"description": "the name is taken (registered or being added) and replace is false"},
+            413: {"description": "an upload is larger than the server's limit"},
+            422: {"description": "a bad name, or scale or agent out of range"},
+            429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
+            503: {"description": "the job store or queue is unreachable; retry later"},
+        },
+    )
     def add_level(
         request: Request,
         identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))],
         name: Annotated[str, Form(description="1-64 letters, digits, '.', '_' or '-', starting with a letter or digit")],
-        level: Annotated[UploadFile, File(description=(
-            "the level's geometry, .obj, .glb or a Quake .bsp map (decoded in metres: leave scale at 1)"))],
-        navmesh: Annotated[UploadFile | None, File(
-            description="its navigation mesh, .obj or .glb (derived from the walkable surfaces when absent)")] = None,
+        level: Annotated[
+            UploadFile,
+            File(description=("the level's geometry, .obj, .glb or a Quake .bsp map (decoded in metres: leave scale at 1)")),
+        ],
+        navmesh: Annotated[
+            UploadFile | None,
+            File(description="its navigation mesh, .obj or .glb (derived from the walkable surfaces when absent)"),
+        ] = None,
         scale: Annotated[float, Form(gt=0, description="metres per file unit")] = 1.0,
         agent_height: Annotated[float, Form(description="agent (and actor) height, m, [0.1, 100]")] = 2.0,
         agent_radius: Annotated[float, Form(description="agent radius, m, [0, 50]")] = 0.6,
@@ -203,21 +225,41 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         if navmesh is not None:
             navmesh_file, navmesh_data = _mesh_file(navmesh, "navmesh", limit, scale)
             files[navmesh_file] = navmesh_data
-        params = {"name": name, "level_file": level_file, "navmesh_file": navmesh_file, "scale": scale,
-                  "agent_height_m": agent_height, "agent_radius_m": agent_radius, "replace": replace,
-                  "seed": seed, "data_dir": str(registry.data_dir), "records_url": job_settings.job_store,
-                  "tenant": identity.tenant}
+        params = {
+            "name": name,
+            "level_file": level_file,
+            "navmesh_file": navmesh_file,
+            "scale": scale,
+            "agent_height_m": agent_height,
+            "agent_radius_m": agent_radius,
+            "replace": replace,
+            "seed": seed,
+            "data_dir": str(registry.data_dir),
+            "records_url": job_settings.job_store,
+            "tenant": identity.tenant,
+        }
         with submit_lock:
-            if not replace and (registry.get(name, identity.tenant) is not None
-                                or name in pending_names(identity.tenant)):
-                raise HTTPException(status_code=409, detail=(
-                    f"level {name!r} exists or is being added; send replace=true to replace it"))
+            if not replace and (registry.get(name, identity.tenant) is not None or name in pending_names(identity.tenant)):
+                raise HTTPException(
+                    status_code=409, detail=(f"level {name!r} exists or is being added; send replace=true to replace it")
+                )
             job = submit_job(runner, KIND, params, files, identity.tenant)
-        request.app.state.guard.audit(identity, "level.add", None, {
-            "name": name, "replace": replace, "job_id": job.id,
-            "stage": "job submitted: the level is registered when the job succeeds"})
-        return JSONResponse({"id": job.id, "status": job.state.value, "name": name}, status_code=202,
-                            headers={"Location": f"{JOBS_PREFIX}/{job.id}"})
+        request.app.state.guard.audit(
+            identity,
+            "level.add",
+            None,
+            {
+                "name": name,
+                "replace": replace,
+                "job_id": job.id,
+                "stage": "job submitted: the level is registered when the job succeeds",
+            },
+        )
+        return JSONResponse(
+            {"id": job.id, "status": job.state.value, "name": name},
+            status_code=202,
+            headers={"Location": f"{JOBS_PREFIX}/{job.id}"},
+        )
 
     @router.get(JOBS_PREFIX, response_model=LevelJobList)
     def list_level_jobs(
@@ -228,18 +270,18 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         """The newest level jobs of the caller's tenant first, with the level each adds."""
         return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {"name": p["name"]}, identity.tenant)}
 
-    @router.get(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus,
-                responses={404: {"description": "no such level job"}})
+    @router.get(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus, responses={404: {"description": "no such level job"}})
     def get_level_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_READ))]) -> JSONResponse:
         """State, progress 0..1, error and per-stage timings (ms) of a level job."""
         job = level_job_or_404(job_id, identity)
         return JSONResponse({**job.as_public(), "name": job.params["name"]})
 
-    @router.delete(JOBS_PREFIX + "/{job_id}", response_model=LevelJobStatus, responses={
-        404: {"description": "no such level job"},
-        409: {"description": "the job already succeeded or failed"}})
-    def cancel_level_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))]
-                         ) -> JSONResponse:
+    @router.delete(
+        JOBS_PREFIX + "/{job_id}",
+        response_model=LevelJobStatus,
+        responses={404: {"description": "no such level job"}, 409: {"description": "the job already succeeded or failed"}},
+    )
+    def cancel_level_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))]) -> JSONResponse:
         """Cancel a queued or running level job (a running job's process is ended; the registry
         is left as it was). Cancelling a cancelled job is a no-op; a finished job answers 409."""
         level_job_or_404(job_id, identity)
@@ -251,8 +293,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         """The caller's tenant's registered levels, by name."""
         return {"levels": [_level_json(r) for r in registry.list(identity.tenant)]}
 
-    @router.get(LEVELS_PREFIX + "/{name}", response_model=LevelOut,
-                responses={404: {"description": "no such level"}})
+    @router.get(LEVELS_PREFIX + "/{name}", response_model=LevelOut, responses={404: {"description": "no such level"}})
     def get_level(name: str, identity: Annotated[Identity, Depends(require(Verb.LEVEL_READ))]) -> dict:
         """One registered level: scale, agent, counts and precompute stage timings."""
         record = registry.get(name, identity.tenant)
@@ -260,16 +301,21 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
             raise HTTPException(status_code=404, detail=f"no level named {name!r}")
         return _level_json(record)
 
-    @router.delete(LEVELS_PREFIX + "/{name}", response_model=LevelOut, responses={
-        404: {"description": "no such level"},
-        409: {"description": "a queued or running level job is adding or replacing it"}})
-    def delete_level(name: str, request: Request,
-                     identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))]) -> dict:
+    @router.delete(
+        LEVELS_PREFIX + "/{name}",
+        response_model=LevelOut,
+        responses={
+            404: {"description": "no such level"},
+            409: {"description": "a queued or running level job is adding or replacing it"},
+        },
+    )
+    def delete_level(name: str, request: Request, identity: Annotated[Identity, Depends(require(Verb.LEVEL_WRITE))]) -> dict:
         """Remove a level from the registry (module docstring); answers the level removed."""
         with submit_lock:  # no job for this name can be submitted between the check and the delete
             if name in pending_names(identity.tenant):
-                raise HTTPException(status_code=409, detail=(
-                    f"a level job is adding {name!r}; cancel it (DELETE {JOBS_PREFIX}/ID) first"))
+                raise HTTPException(
+                    status_code=409, detail=(f"a level job is adding {name!r}; cancel it (DELETE {JOBS_PREFIX}/ID) first")
+                )
             record = registry.get(name, identity.tenant)
             if record is None or not registry.delete(name, identity.tenant):
                 raise HTTPException(status_code=404, detail=f"no level named {name!r}")
@@ -279,8 +325,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
     return router
 
 
-def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path,
-                         settings: JobSettings = JobSettings()) -> None:
+def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path, settings: JobSettings = JobSettings()) -> None:
     """Mount the level routes on `app`, over the node's jobs (opened by front/main.py with the
     service's job kinds), with an upload limit of two files plus the form."""
     app.include_router(build_level_router(runner, settings, Path(data_dir)))
@@ -290,5 +335,6 @@ def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path,
         return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
 
     app.add_exception_handler(LevelsUnavailable, levels_unavailable)
-    app.add_middleware(UploadLimit, max_body_bytes=2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES,
-                       path_prefix=LEVELS_PREFIX)
+    app.add_middleware(
+        UploadLimit, max_body_bytes=2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES, path_prefix=LEVELS_PREFIX
+    )

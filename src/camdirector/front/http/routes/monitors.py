@@ -24,6 +24,7 @@ Errors: an unknown or closed session 404; a size over its limit or an unknown sh
 than MAX_STREAMS live streams 429; a render that fails or takes more than RENDER_TIMEOUT_S, or a
 worker lost, 503.
 """
+
 from __future__ import annotations
 
 import math
@@ -42,16 +43,23 @@ from camdirector.infra.channels import DEFAULT_WIDTH_PX, MAX_HEIGHT_PX, MAX_WIDT
 
 BOUNDARY = "camdirector-view"
 DEFAULT_FPS = 4.0
-_ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "no such session (or it closed)"},
-           422: {"description": "a size over its limit, or an unknown shot"},
-           503: {"description": "the render failed or timed out, or the worker holding the session died"}}
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    404: {"description": "no such session (or it closed)"},
+    422: {"description": "a size over its limit, or an unknown shot"},
+    503: {"description": "the render failed or timed out, or the worker holding the session died"},
+}
 
 Shot = Literal["program", "candidate", "cut_before", "cut_after"]
 Width = Annotated[int, Query(ge=MIN_SIDE_PX, le=MAX_WIDTH_PX, description="picture width, px")]
-Height = Annotated[int | None, Query(ge=MIN_SIDE_PX, le=MAX_HEIGHT_PX, description=(
-    "picture height, px; left out: the width over the session lens's aspect"))]
-Subjects = Annotated[str, Query(max_length=4096, description=(
-    "shot=candidate: the candidate's players, comma-separated, in any order"))]
+Height = Annotated[
+    int | None,
+    Query(
+        ge=MIN_SIDE_PX, le=MAX_HEIGHT_PX, description=("picture height, px; left out: the width over the session lens's aspect")
+    ),
+]
+Subjects = Annotated[
+    str, Query(max_length=4096, description=("shot=candidate: the candidate's players, comma-separated, in any order"))
+]
 
 
 def _headers(view: View) -> dict[str, str]:
@@ -69,8 +77,13 @@ def _headers(view: View) -> dict[str, str]:
 
 def _query(shot: str, subjects: str, width: int, height: int | None, image_format: str) -> ViewQuery:
     try:
-        return ViewQuery(shot=shot, subjects=tuple(s for s in subjects.split(",") if s), width_px=width,
-                         height_px=height, image_format=image_format)
+        return ViewQuery(
+            shot=shot,
+            subjects=tuple(s for s in subjects.split(",") if s),
+            width_px=width,
+            height_px=height,
+            image_format=image_format,
+        )
     except ValueError as exc:
         raise http_error(invalid(str(exc))) from None
 
@@ -84,28 +97,46 @@ def build_view_router(hub: ViewHub) -> APIRouter:
         except DirectorError as exc:
             raise http_error(exc) from None
 
-    @routes.get("/{session_id}/view", response_class=Response, responses={
-        200: {"content": {"image/jpeg": {}, "image/png": {}}}, **_ERRORS})
-    async def get_view(session_id: str, identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
-                       shot: Shot = "program", subjects: Subjects = "",
-                       width: Width = DEFAULT_WIDTH_PX, height: Height = None,
-                       format: Literal["jpeg", "png"] = "jpeg") -> Response:  # noqa: A002 - the query's name
+    @routes.get(
+        "/{session_id}/view",
+        response_class=Response,
+        responses={200: {"content": {"image/jpeg": {}, "image/png": {}}}, **_ERRORS},
+    )
+    async def get_view(
+        session_id: str,
+        identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
+        shot: Shot = "program",
+        subjects: Subjects = "",
+        width: Width = DEFAULT_WIDTH_PX,
+        height: Height = None,
+        format: Literal["jpeg", "png"] = "jpeg",
+    ) -> Response:  # noqa: A002 - the query's name
         """What the session's camera (or a candidate's, or the last cut's) sees, rendered now or
         shared with another viewer's render of the same picture made within a tenth of a second."""
         view = await picture(session_id, _query(shot, subjects, width, height, format), 0.1, identity)
         return Response(view.image, media_type=view.media_type, headers=_headers(view))
 
-    @routes.get("/{session_id}/view.mjpeg", response_class=StreamingResponse, responses={
-        200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}": {}}},
-        429: {"description": "too many live streams"}, **_ERRORS})
-    async def stream_view(session_id: str, identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
-                          shot: Shot = "program", subjects: Subjects = "",
-                          width: Width = DEFAULT_WIDTH_PX, height: Height = None,
-                          fps: Annotated[float, Query(gt=0.0, le=MAX_STREAM_FPS, description="frames a second")]
-                          = DEFAULT_FPS) -> StreamingResponse:
+    @routes.get(
+        "/{session_id}/view.mjpeg",
+        response_class=StreamingResponse,
+        responses={
+            200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}": {}}},
+            429: {"description": "too many live streams"},
+            **_ERRORS,
+        },
+    )
+    async def stream_view(
+        session_id: str,
+        identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
+        shot: Shot = "program",
+        subjects: Subjects = "",
+        width: Width = DEFAULT_WIDTH_PX,
+        height: Height = None,
+        fps: Annotated[float, Query(gt=0.0, le=MAX_STREAM_FPS, description="frames a second")] = DEFAULT_FPS,
+    ) -> StreamingResponse:
         """The view as a live MJPEG stream (module docstring), until the session ends."""
         query = _query(shot, subjects, width, height, "jpeg")
-        first = await picture(session_id, query, 0.5 / fps, identity)   # a 404 before the stream starts
+        first = await picture(session_id, query, 0.5 / fps, identity)  # a 404 before the stream starts
         try:
             hub.check_stream_room()
         except DirectorError as exc:
@@ -113,18 +144,23 @@ def build_view_router(hub: ViewHub) -> APIRouter:
 
         async def parts():
             async for view in hub.stream(session_id, query, fps, first, identity.tenant):
-                head = (f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(view.image)}\r\n"
-                        + "".join(f"{k}: {v}\r\n" for k, v in _headers(view).items() if k.startswith("X-"))
-                        + "\r\n")
+                head = (
+                    f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(view.image)}\r\n"
+                    + "".join(f"{k}: {v}\r\n" for k, v in _headers(view).items() if k.startswith("X-"))
+                    + "\r\n"
+                )
                 yield head.encode() + view.image + b"\r\n"
 
-        return StreamingResponse(parts(), media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}",
-                                 headers={"Cache-Control": "no-store"})
+        return StreamingResponse(
+            parts(), media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}", headers={"Cache-Control": "no-store"}
+        )
 
-    @routes.get("/{session_id}/topview.png", response_class=Response, responses={
-        200: {"content": {"image/png": {}}}, 404: _ERRORS[404], 503: _ERRORS[503]})
-    async def get_top_view(session_id: str,
-                           identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]) -> Response:
+    @routes.get(
+        "/{session_id}/topview.png",
+        response_class=Response,
+        responses={200: {"content": {"image/png": {}}}, 404: _ERRORS[404], 503: _ERRORS[503]},
+    )
+    async def get_top_view(session_id: str, identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]) -> Response:
         """The session's static world (objects and level) from straight above, made once."""
         view = await picture(session_id, ViewQuery(shot="top"), math.inf, identity)
         headers = _headers(view)

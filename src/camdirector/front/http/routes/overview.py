@@ -20,6 +20,7 @@ jobs or uploads is answered 429.
 
 Conventions as on the wire: right-handed, +Y up, metres, in the clip's world frame.
 """
+
 from __future__ import annotations
 
 import math
@@ -59,6 +60,7 @@ from camdirector.precompute.overview.job import (
 )
 
 # -- the routes -----------------------------------------------------------------------------
+
 
 class OverviewJobOut(JobStatus):
     file_name: str = Field(description="the uploaded clip's file name")
@@ -105,20 +107,31 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
     def file_of(job_id: str, identity: Identity, name: str, media_type: str) -> FileResponse:
         job = job_or_404(job_id, identity)
         if job.state is not JobState.SUCCEEDED:
-            raise HTTPException(status_code=409, detail=(
-                f"job {job_id} is {job.state.value}: its result exists only once it succeeded"
-                + (f" ({job.error})" if job.error else "")))
+            raise HTTPException(
+                status_code=409,
+                detail=(
+                    f"job {job_id} is {job.state.value}: its result exists only once it succeeded"
+                    + (f" ({job.error})" if job.error else "")
+                ),
+            )
         path = runner.result_dir(job_id) / name
         if not path.is_file():
             raise HTTPException(status_code=404, detail=f"job {job_id} has no {name}")
         return FileResponse(path, media_type=media_type)
 
-    @router.post("", status_code=202, dependencies=[Depends(known_form_fields)], response_model=JobCreated, responses={
-        400: {"description": "the upload is not a usable BVH clip (detail says why)"},
-        413: {"description": "the upload is larger than the server's limit"},
-        422: {"description": "a form field is out of range"},
-        429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
-        503: {"description": "the job store or queue is unreachable; retry later"}})
+    @router.post(
+        "",
+        status_code=202,
+        dependencies=[Depends(known_form_fields)],
+        response_model=JobCreated,
+        responses={
+            400: {"description": "the upload is not a usable BVH clip (detail says why)"},
+            413: {"description": "the upload is larger than the server's limit"},
+            422: {"description": "a form field is out of range"},
+            429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
+            503: {"description": "the job store or queue is unreachable; retry later"},
+        },
+    )
     def create_overview_job(
         identity: Annotated[Identity, Depends(require(Verb.JOB_SUBMIT))],
         file: Annotated[UploadFile, File(description="BVH motion capture clip")],
@@ -144,18 +157,28 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
         bad upload answers 4xx with the reason and never becomes a job."""
         data = file.file.read(limit + 1)
         if len(data) > limit:
-            raise HTTPException(status_code=413, detail=(
-                f"upload larger than the limit of {limit} bytes"))
+            raise HTTPException(status_code=413, detail=(f"upload larger than the limit of {limit} bytes"))
         if not data:
             raise HTTPException(status_code=400, detail="empty upload: expected a BVH file")
-        params: dict[str, float | str | None] = {"scale": scale, "skip_frames": skip_frames, "aspect": aspect, "seed": seed,
-                  "c1": c1, "c2": c2, "c3": c3, "c4": c4, "c5": c5,
-                  "max_speed_heights_s": max_speed_heights_s,
-                  "max_angular_speed_deg_s": max_angular_speed_deg_s,
-                  "friction_speed_heights_s": friction_speed_heights_s,
-                  "split_quality": split_quality, "split_max_saliency": split_max_saliency,
-                  "min_shot_s": min_shot_s, "max_shots_per_1000_frames": max_shots_per_1000_frames,
-                  "analysis_rate_hz": analysis_rate_hz}
+        params: dict[str, float | str | None] = {
+            "scale": scale,
+            "skip_frames": skip_frames,
+            "aspect": aspect,
+            "seed": seed,
+            "c1": c1,
+            "c2": c2,
+            "c3": c3,
+            "c4": c4,
+            "c5": c5,
+            "max_speed_heights_s": max_speed_heights_s,
+            "max_angular_speed_deg_s": max_angular_speed_deg_s,
+            "friction_speed_heights_s": friction_speed_heights_s,
+            "split_quality": split_quality,
+            "split_max_saliency": split_max_saliency,
+            "min_shot_s": min_shot_s,
+            "max_shots_per_1000_frames": max_shots_per_1000_frames,
+            "analysis_rate_hz": analysis_rate_hz,
+        }
         params = {k: v for k, v in params.items() if v is not None}
         if any(isinstance(v, float) and not math.isfinite(v) for v in params.values()):
             raise HTTPException(status_code=422, detail="form fields must be finite numbers")
@@ -171,8 +194,9 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
         params["frames"] = clip.frame_count
         params["file_name"] = os.path.basename(file.filename or CLIP_FILE)[:200]
         job = submit_job(runner, KIND, params, {CLIP_FILE: data}, identity.tenant)
-        return JSONResponse({"id": job.id, "status": job.state.value}, status_code=202,
-                            headers={"Location": f"/v1/overview-jobs/{job.id}"})
+        return JSONResponse(
+            {"id": job.id, "status": job.state.value}, status_code=202, headers={"Location": f"/v1/overview-jobs/{job.id}"}
+        )
 
     @router.get("", response_model=OverviewJobList)
     def list_overview_jobs(
@@ -181,44 +205,65 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
         limit: Annotated[int, Query(ge=1, le=MAX_LISTED_JOBS, description="at most this many")] = 100,
     ) -> dict:
         """The newest overview jobs of the caller's tenant first, with the clip's file name and frame count."""
-        return {"jobs": list_jobs(runner, KIND, status, limit, lambda p: {
-            "file_name": p.get("file_name", CLIP_FILE), "frames": int(p.get("frames", 0))}, identity.tenant)}
+        return {
+            "jobs": list_jobs(
+                runner,
+                KIND,
+                status,
+                limit,
+                lambda p: {"file_name": p.get("file_name", CLIP_FILE), "frames": int(p.get("frames", 0))},
+                identity.tenant,
+            )
+        }
 
     @router.get("/{job_id}", response_model=JobStatus, responses={404: {"description": "no such job"}})
     def get_overview_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]) -> JSONResponse:
         """State, progress 0..1, error and per-stage timings (ms) of a job."""
         return _status(job_or_404(job_id, identity))
 
-    @router.delete("/{job_id}", response_model=JobStatus, responses={
-        404: {"description": "no such job"},
-        409: {"description": "the job already succeeded or failed"}})
-    def cancel_overview_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_CANCEL))]
-                            ) -> JSONResponse:
+    @router.delete(
+        "/{job_id}",
+        response_model=JobStatus,
+        responses={404: {"description": "no such job"}, 409: {"description": "the job already succeeded or failed"}},
+    )
+    def cancel_overview_job(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_CANCEL))]) -> JSONResponse:
         """Cancel a queued or running job (a running job's process is ended). Cancelling a
         cancelled job is a no-op; a finished job answers 409."""
         job_or_404(job_id, identity)
         return _status(cancel_job(runner, job_id))
 
-    @router.get("/{job_id}/result", response_model=OverviewResultOut, responses={
-        404: {"description": "no such job"}, 409: {"description": "the job has not succeeded"}})
-    def get_overview_result(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]
-                            ) -> FileResponse:
+    @router.get(
+        "/{job_id}/result",
+        response_model=OverviewResultOut,
+        responses={404: {"description": "no such job"}, 409: {"description": "the job has not succeeded"}},
+    )
+    def get_overview_result(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]) -> FileResponse:
         """The camera path: one entry per clip frame after skip_frames (metres, +Y up)."""
         return file_of(job_id, identity, RESULT_JSON, "application/json")
 
-    @router.get("/{job_id}/preview.mp4", response_class=FileResponse, responses={
-        200: {"content": {"video/mp4": {}}}, 404: {"description": "no such job"},
-        409: {"description": "the job has not succeeded"}})
-    def get_overview_preview(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]
-                             ) -> FileResponse:
+    @router.get(
+        "/{job_id}/preview.mp4",
+        response_class=FileResponse,
+        responses={
+            200: {"content": {"video/mp4": {}}},
+            404: {"description": "no such job"},
+            409: {"description": "the job has not succeeded"},
+        },
+    )
+    def get_overview_preview(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]) -> FileResponse:
         """The clip rendered through the camera path (capsule character, shot starts flashed)."""
         return file_of(job_id, identity, PREVIEW_MP4, "video/mp4")
 
-    @router.get("/{job_id}/contact-sheet.png", response_class=FileResponse, responses={
-        200: {"content": {"image/png": {}}}, 404: {"description": "no such job"},
-        409: {"description": "the job has not succeeded"}})
-    def get_overview_contact_sheet(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]
-                                   ) -> FileResponse:
+    @router.get(
+        "/{job_id}/contact-sheet.png",
+        response_class=FileResponse,
+        responses={
+            200: {"content": {"image/png": {}}},
+            404: {"description": "no such job"},
+            409: {"description": "the job has not succeeded"},
+        },
+    )
+    def get_overview_contact_sheet(job_id: str, identity: Annotated[Identity, Depends(require(Verb.JOB_READ))]) -> FileResponse:
         """Start and middle frame of every shot, labelled."""
         return file_of(job_id, identity, CONTACT_SHEET_PNG, "image/png")
 

@@ -26,6 +26,7 @@ is not JSON at all 400; a take naming an unknown player 404, for a session of an
 body that is not a TakeShotRequest (or names a session) or a kind that does not fit its players 422;
 a worker lost while answering 503.
 """
+
 from __future__ import annotations
 
 from typing import Annotated, Any
@@ -44,9 +45,14 @@ from camdirector.front.router import SessionRouter
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.timeline import TIMELINE_FRAMES
 
-_HTTP_STATUS = {grpc.StatusCode.INVALID_ARGUMENT: 422, grpc.StatusCode.NOT_FOUND: 404,
-                grpc.StatusCode.FAILED_PRECONDITION: 409, grpc.StatusCode.RESOURCE_EXHAUSTED: 429,
-                grpc.StatusCode.UNIMPLEMENTED: 501, grpc.StatusCode.UNAVAILABLE: 503}
+_HTTP_STATUS = {
+    grpc.StatusCode.INVALID_ARGUMENT: 422,
+    grpc.StatusCode.NOT_FOUND: 404,
+    grpc.StatusCode.FAILED_PRECONDITION: 409,
+    grpc.StatusCode.RESOURCE_EXHAUSTED: 429,
+    grpc.StatusCode.UNIMPLEMENTED: 501,
+    grpc.StatusCode.UNAVAILABLE: 503,
+}
 _WORKER_LOST = {"description": "the worker holding the session died while answering; the session is gone"}
 
 
@@ -101,13 +107,17 @@ class TimelineFrameOut(BaseModel):
     cut: bool
     shot_id: int
     visibility: float = Field(ge=0.0, le=1.0)
-    framing_error: float | None = Field(description=(
-        "how far the framed points land from where the style puts them, normalised screen units (the frame is "
-        "[-1, 1], so above 1 they may be out of it); null when the rig does not measure it (MATCH) or a point "
-        "is behind the camera"))
+    framing_error: float | None = Field(
+        description=(
+            "how far the framed points land from where the style puts them, normalised screen units (the frame is "
+            "[-1, 1], so above 1 they may be out of it); null when the rig does not measure it (MATCH) or a point "
+            "is behind the camera"
+        )
+    )
     flags: list[str] = Field(description="why the camera moved or degraded (search_cut, pulled_in, ...)")
-    scores: dict[str, float] = Field(description="TRACKS: sub-scores in [0, 1] of the target chosen, and their "
-                                                 "total; MATCH: the shot's")
+    scores: dict[str, float] = Field(
+        description="TRACKS: sub-scores in [0, 1] of the target chosen, and their total; MATCH: the shot's"
+    )
     compute_ms: float
     # MATCH sessions only (timeline.py): the program, what the director could cut to, and what it plans
     buffering: bool | None = Field(None, description="the broadcast delay is still filling: no camera")
@@ -149,14 +159,19 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         # async: run on the event loop that adds and removes sessions, not beside it in a thread
         return {"sessions": router.describe(identity.tenant)}
 
-    @routes.get("/{session_id}", response_model=SessionDetail,
-                responses={404: {"description": "no such session"}, 503: _WORKER_LOST})
+    @routes.get(
+        "/{session_id}", response_model=SessionDetail, responses={404: {"description": "no such session"}, 503: _WORKER_LOST}
+    )
     async def get_session(
         session_id: str,
         identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))],
         last: Annotated[int, Query(ge=1, le=TIMELINE_FRAMES, description="newest frames wanted")] = TIMELINE_FRAMES,
-        after_frame: Annotated[int | None, Query(ge=0, le=2**63 - 1, description=(
-            "only frames numbered above this (a live view asks for what it has not seen)"))] = None,
+        after_frame: Annotated[
+            int | None,
+            Query(
+                ge=0, le=2**63 - 1, description=("only frames numbered above this (a live view asks for what it has not seen)")
+            ),
+        ] = None,
     ) -> Response:
         """One session: summary, style, and its newest frames with why the camera moved."""
         try:
@@ -167,11 +182,19 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         # which routes every session's frames, for milliseconds.
         return Response(orjson.dumps(detail), media_type="application/json")
 
-    @routes.get("/{session_id}/amap.png", response_class=Response, responses={
-        200: {"content": {"image/png": {}}}, 404: {"description": "no such session"},
-        409: {"description": "the session's style builds no anticipation map"}, 503: _WORKER_LOST})
-    async def get_anticipation_map(session_id: str,
-                                   identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]) -> Response:
+    @routes.get(
+        "/{session_id}/amap.png",
+        response_class=Response,
+        responses={
+            200: {"content": {"image/png": {}}},
+            404: {"description": "no such session"},
+            409: {"description": "the session's style builds no anticipation map"},
+            503: _WORKER_LOST,
+        },
+    )
+    async def get_anticipation_map(
+        session_id: str, identity: Annotated[Identity, Depends(require(Verb.SESSION_READ))]
+    ) -> Response:
         """The occlusion anticipation map around the camera now (map_view.py): rows theta,
         columns phi, white visible to red occluded, the camera crossed in blue."""
         try:
@@ -180,16 +203,24 @@ def build_session_router(router: SessionRouter) -> APIRouter:
             raise http_error(exc) from None
         return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
 
-    @routes.put("/{session_id}/style", response_model=StyleChanged, responses={
-        400: {"description": "the body cannot be read as JSON"},
-        404: {"description": "no such session"},
-        409: {"description": "the session's rig cannot take this style"},
-        422: {"description": "not a Style, or a value out of range"}, 503: _WORKER_LOST})
+    @routes.put(
+        "/{session_id}/style",
+        response_model=StyleChanged,
+        responses={
+            400: {"description": "the body cannot be read as JSON"},
+            404: {"description": "no such session"},
+            409: {"description": "the session's rig cannot take this style"},
+            422: {"description": "not a Style, or a value out of range"},
+            503: _WORKER_LOST,
+        },
+    )
     async def put_style(
         session_id: str,
         identity: Annotated[Identity, Depends(require(Verb.SESSION_STYLE))],
-        style: Annotated[dict[str, Any], Body(description="camdirector.v1.Style, protobuf JSON (e.g. "
-                                                           '{"visibility": "RAYCAST", "preferredPhiDeg": 40})')],
+        style: Annotated[
+            dict[str, Any],
+            Body(description='camdirector.v1.Style, protobuf JSON (e.g. {"visibility": "RAYCAST", "preferredPhiDeg": 40})'),
+        ],
     ) -> dict:
         """Replace the session's style, as UpdateStyle does."""
         try:
@@ -197,24 +228,36 @@ def build_session_router(router: SessionRouter) -> APIRouter:
         except json_format.ParseError as exc:
             raise HTTPException(status_code=422, detail=f"not a camdirector.v1.Style: {exc}") from None
         try:
-            await router.update_style(pb.UpdateStyleRequest(session_id=session_id, style=msg).SerializeToString(),
-                                      identity.tenant)
+            await router.update_style(
+                pb.UpdateStyleRequest(session_id=session_id, style=msg).SerializeToString(), identity.tenant
+            )
         except DirectorError as exc:
             raise http_error(exc) from None
         router.guard.audit(identity, "style", session_id, {"style": style, "via": "http"})
         return {"session_id": session_id, "style": json_format.MessageToDict(msg)}
 
-    @routes.post("/{session_id}/take", response_model=ShotTaken, responses={
-        400: {"description": "the body cannot be read as JSON"},
-        404: {"description": "no such session, or a subject that is not one of its players"},
-        409: {"description": "not a MATCH session"},
-        422: {"description": "not a TakeShotRequest, or a kind that does not fit the subjects"}, 503: _WORKER_LOST})
+    @routes.post(
+        "/{session_id}/take",
+        response_model=ShotTaken,
+        responses={
+            400: {"description": "the body cannot be read as JSON"},
+            404: {"description": "no such session, or a subject that is not one of its players"},
+            409: {"description": "not a MATCH session"},
+            422: {"description": "not a TakeShotRequest, or a kind that does not fit the subjects"},
+            503: _WORKER_LOST,
+        },
+    )
     async def take_shot(
         session_id: str,
         identity: Annotated[Identity, Depends(require(Verb.SESSION_TAKE))],
-        take: Annotated[dict[str, Any], Body(description="camdirector.v1.TakeShotRequest without session_id, "
-                                                          'protobuf JSON (e.g. {"subject_ids": ["p1", "p6"], '
-                                                          '"kind": "SHOT_DUEL"} or {"release": true})')],
+        take: Annotated[
+            dict[str, Any],
+            Body(
+                description="camdirector.v1.TakeShotRequest without session_id, "
+                'protobuf JSON (e.g. {"subject_ids": ["p1", "p6"], '
+                '"kind": "SHOT_DUEL"} or {"release": true})'
+            ),
+        ],
     ) -> dict:
         """Hold a human's shot on a MATCH session's program until released, as TakeShot does."""
         if {"session_id", "sessionId"} & take.keys():
@@ -228,12 +271,19 @@ def build_session_router(router: SessionRouter) -> APIRouter:
             reply = pb.TakeShotResponse.FromString(await router.take_shot(msg.SerializeToString(), identity.tenant))
         except DirectorError as exc:
             raise http_error(exc) from None
-        router.guard.audit(identity, "release" if msg.release else "take", session_id,
-                           {"via": "http"} if msg.release else
-                           {"via": "http", "subject_ids": list(msg.subject_ids), "kind": pb.ShotKind.Name(msg.kind)})
-        shot = (json_format.MessageToDict(reply.shot, preserving_proto_field_name=True,
-                                          always_print_fields_with_no_presence=True)
-                if reply.HasField("shot") else None)
+        router.guard.audit(
+            identity,
+            "release" if msg.release else "take",
+            session_id,
+            {"via": "http"}
+            if msg.release
+            else {"via": "http", "subject_ids": list(msg.subject_ids), "kind": pb.ShotKind.Name(msg.kind)},
+        )
+        shot = (
+            json_format.MessageToDict(reply.shot, preserving_proto_field_name=True, always_print_fields_with_no_presence=True)
+            if reply.HasField("shot")
+            else None
+        )
         return {"session_id": session_id, "shot": shot}
 
     return routes
