@@ -202,4 +202,4 @@ def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_pro
     assert duel["same_program_twice"] == {"planned": True, "hltv": True, "autotrack": True}
     assert duel["ceilings"]["kills"] >= 1
     table = (tmp_path / "table.md").read_text().splitlines()
-    assert len(table) == 2 + 4 and table[2].startswith("| duel_bravado | PLANNED |")
+    assert len(table) == 2 + 4 and table[2].startswith("| duel_bravado | planned |")

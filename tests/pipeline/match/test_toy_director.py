@@ -6,10 +6,13 @@ director is one module and one registry entry: nothing of the service names "toy
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import json
 import os
 import subprocess
 import sys
+from types import ModuleType
+from unittest import mock
 
 import grpc
 import httpx
@@ -18,20 +21,31 @@ import pytest
 
 import camdirector_client as cd
 from camdirector.deploy.server_process import ServerProcess
+from camdirector.pipeline.match import director_registry
 from camdirector.pipeline.match.director_registry import DirectorEntry, director_entry, register, registered
 from camdirector.pipeline.style import Rig, Style
 from camdirector.server_settings import ServerSettings
 from tests.evaluation.match.test_evaluate import eval_match, registry, registry_and_match  # noqa: F401 (fixtures)
-from tests.pipeline.match import toy_director
 from tests.pipeline.match.scenes import melee, run_session
 from tests.service.test_match_sessions import frames, match_request
 from tests.service.tracks_sessions import ROOT
 
-PLUGIN = toy_director.__name__
+PLUGIN = "tests.pipeline.match.toy_director"
 WITH_PLUGIN = {"PYTHONPATH": os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)}
 
 
-def test_the_toy_is_registered_after_the_built_ins_and_a_name_is_never_taken_over():
+@pytest.fixture
+def toy_director():
+    """The toy imported (so registered) in this process for the test that asks for it alone: the registry
+    and the module cache are as before afterwards, so later tests (a benchmark that runs every
+    registered director against a server without the plugin) never see it."""
+    with mock.patch.dict(director_registry._ENTRIES):
+        module: ModuleType = importlib.import_module(PLUGIN)
+        yield module
+        sys.modules.pop(PLUGIN)
+
+
+def test_the_toy_is_registered_after_the_built_ins_and_a_name_is_never_taken_over(toy_director):
     names = [e.name for e in registered()]
     assert names[:3] == ["planned", "hltv", "autotrack"] and "toy" in names
     assert director_entry("toy").wire is None
@@ -43,7 +57,7 @@ def test_the_toy_is_registered_after_the_built_ins_and_a_name_is_never_taken_ove
         director_entry("nobody")
 
 
-def test_the_toy_directs_a_session_in_process():
+def test_the_toy_directs_a_session_in_process(toy_director):
     match = dataclasses.replace(melee(seed=2, duration_s=6.0, delay_s=1.0), style=Style(rig=Rig.MATCH, match_director="toy"))
     first = match.scene().targets[0].id
     _, states = run_session(match, 6.0)
@@ -118,6 +132,10 @@ def test_eval_match_measures_the_toy_beside_ours(registry_and_match, monkeypatch
     assert result["directors"]["toy"]["program_moments"] > 0
     unknown = eval_match(folder, "--delay", "2", "--director", "toy", "--json", str(folder / "x.json"))
     assert unknown.returncode == 2 and "'toy' is not a registered match director" in unknown.stderr
+
+
+def test_the_toy_is_registered_for_its_tests_alone():
+    assert "toy" not in [e.name for e in registered()] and PLUGIN not in sys.modules
 
 
 def test_plugins_come_from_the_environment_and_one_that_cannot_be_imported_stops_serve(tmp_path):
