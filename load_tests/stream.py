@@ -53,8 +53,11 @@ def _with_session(session_id: str, frame_bytes: bytes) -> bytes:
 
 
 class GrpcDriver:
-    def __init__(self, address: str):
+    """`key`: sent in every call's metadata (a server with keys)."""
+
+    def __init__(self, address: str, key: str | None = None):
         self.channel = grpc.aio.insecure_channel(address, options=[("grpc.max_send_message_length", 64 << 20)])
+        self.metadata = (("authorization", f"Bearer {key}"),) if key else None
         self.create = self.channel.unary_unary(
             "/camdirector.v1.Director/CreateSession",
             request_serializer=pb.CreateSessionRequest.SerializeToString,
@@ -64,10 +67,10 @@ class GrpcDriver:
         self.health = health_pb2_grpc.HealthStub(self.channel)
 
     async def open_session(self, request) -> str:
-        return (await self.create(request)).session_id
+        return (await self.create(request, metadata=self.metadata)).session_id
 
     async def run_session(self, session_id: str, frames: list[bytes], period_s: float, start: float, record):
-        call = self.stream()
+        call = self.stream(metadata=self.metadata)
         for i, payload in enumerate(frames):
             await _sleep_until(start + i * period_s)
             t0 = time.perf_counter()
@@ -143,19 +146,24 @@ async def run(
     visibility: int = pb.FRAMING_ONLY,
     warmup_frames: int = 0,
     alongside: Callable[[list[str]], AbstractAsyncContextManager] | None = None,
+    key: str | None = None,
 ) -> dict:
     """warmup_frames: each session's first frames, answered and counted as received but left out of
     the round trips, compute times, late and stale counts (a session's first frame sets up what
     it keeps: about 30 ms in the map modes).
     alongside: called with the session ids once they are open; the context it returns is entered
     before the baseline and the streams and left when they end, so both are measured with it
-    running (load_tests.monitors_bench: a live monitor on each session)."""
+    running (load_tests.monitors_bench: a live monitor on each session).
+    key: the key gRPC sends (a server with keys: load_tests.oversize); ZeroMQ's would need the
+    server's CURVE key as well, so it takes none."""
+    if key is not None and transport != "grpc":
+        raise ValueError("only the gRPC driver sends a key")
     scene = build_demo_scene(seed=7, duration_s=max(seconds, 1.0))
     lens = Lens()
     nominal_hz = rate_hz or 60.0
     n_frames = int(round(seconds * nominal_hz))
     frames = _frames(scene, n_frames, nominal_hz)
-    driver = GrpcDriver(address) if transport == "grpc" else ZmqDriver(address)
+    driver = GrpcDriver(address, key) if transport == "grpc" else ZmqDriver(address)
     session_ids = [await driver.open_session(session_request(scene, lens, visibility)) for _ in range(sessions)]
     period = 1.0 / rate_hz if rate_hz else 0.0
     rtt_ms, compute_ms, received, late, stale = [], [], [0] * sessions, [0], [0]

@@ -38,6 +38,7 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--max-concurrent-jobs", dest="max_concurrent_jobs", type=int)
     p.add_argument("--max-queued-jobs", dest="max_queued_jobs", type=int)
     p.add_argument("--max-upload-bytes", dest="max_upload_bytes", type=int)
+    p.add_argument("--max-json-body-bytes", dest="max_json_body_bytes", type=int, help="largest JSON body of an HTTP route")
     p.add_argument(
         "--job-retention-s",
         dest="job_retention_s",
@@ -98,6 +99,19 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         dest="tenant_max_queued_jobs",
         type=int,
         help="jobs one tenant may have queued or running at once",
+    )
+    p.add_argument(
+        "--tenant-max-live-views",
+        dest="tenant_max_live_views",
+        type=int,
+        help="live monitor streams one tenant may hold open on this node",
+    )
+    p.add_argument(
+        "--pose-output-allow",
+        dest="pose_output_allow",
+        action="append",
+        metavar="CIDR",
+        help="an IPv4 network sessions' pose outputs may send to (default: 127.0.0.0/8 only); repeatable",
     )
     p.add_argument(
         "--plugin",
@@ -183,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "serve":
         overrides = {k: v for k, v in vars(args).items() if k != "command"}
         overrides["plugins"] = tuple(args.plugins) if args.plugins else None
+        overrides["pose_output_allow"] = tuple(args.pose_output_allow) if args.pose_output_allow else None
         try:
             settings = ServerSettings.from_env(**overrides)
         except ValueError as exc:

@@ -37,6 +37,7 @@ class ServerSettings:
     max_concurrent_jobs: int = 1             # offline jobs (motion overviews) running at once. [1, 64]
     max_queued_jobs: int = 16                # offline jobs waiting; more answer HTTP 429. [0, 100000]
     max_upload_bytes: int = 64 * 1024 * 1024  # largest job upload, bytes (HTTP 413 above). [1 KiB, 4 GiB]
+    max_json_body_bytes: int = 64 * 1024     # largest body of an HTTP route but uploads and login (4 KiB), bytes (413 above). [1 KiB, 16 MiB]
     job_retention_s: float = 7 * 86400.0     # finished offline jobs are removed this long after they ended; 0 keeps them, s. [0, 1e9]
     # Where job records live: "" is SQLite in data_dir (one node); postgresql://... is shared by many nodes.
     job_store: str = ""
@@ -60,6 +61,10 @@ class ServerSettings:
     tenant_max_fps: float = 240.0            # frames a second into one session (a bucket of 1 s of frames). [1, 10000]
     tenant_max_upload_bytes: int = 4 * 1024 ** 3  # bytes of uploads a tenant's jobs hold at once (inputs kept with jobs). [1 KiB, 1 TiB]
     tenant_max_queued_jobs: int = 16         # jobs a tenant has queued or running at once. [1, 100000]
+    tenant_max_live_views: int = 16          # live monitor streams a tenant's viewers hold open on this node. [1, 64]
+    # Where a session's pose outputs may send UDP datagrams (worker/codec.py): IPv4 networks, CIDR; any other
+    # destination is refused at CreateSession. Comma-separated in the environment. [1, 64 networks]
+    pose_output_allow: tuple[str, ...] = ("127.0.0.0/8",)
     # Python modules imported at start by the front and every worker (infra/plugins.py): a studio's own
     # match director registers itself (pipeline/match/director_registry.py). Comma-separated in the environment.
     plugins: tuple[str, ...] = ()
@@ -71,6 +76,7 @@ class ServerSettings:
             (1 <= self.max_objects <= 1_000_000, "max_objects must be in [1, 1000000]"),
             (1 <= self.max_triangles <= 100_000_000, "max_triangles must be in [1, 1e8]"),
             (1024 <= self.max_message_bytes <= 1 << 30, "max_message_bytes must be in [1 KiB, 1 GiB]"),
+            (1024 <= self.max_json_body_bytes <= 1 << 24, "max_json_body_bytes must be in [1 KiB, 16 MiB]"),
             (0.1 <= self.session_resume_s <= 86_400, "session_resume_s must be in [0.1, 86400]"),
             (0.01 <= self.reap_interval_s <= 60, "reap_interval_s must be in [0.01, 60]"),
             (not self.zmq_addr or self.zmq_addr.startswith(("tcp://", "ipc://")),
@@ -88,6 +94,9 @@ class ServerSettings:
             (1 <= self.tenant_max_fps <= 10_000, "tenant_max_fps must be in [1, 10000]"),
             (1024 <= self.tenant_max_upload_bytes <= 1 << 40, "tenant_max_upload_bytes must be in [1 KiB, 1 TiB]"),
             (1 <= self.tenant_max_queued_jobs <= 100_000, "tenant_max_queued_jobs must be in [1, 100000]"),
+            (1 <= self.tenant_max_live_views <= 64, "tenant_max_live_views must be in [1, 64]"),
+            (1 <= len(self.pose_output_allow) <= 64 and all(map(_ipv4_network, self.pose_output_allow)),
+             "pose_output_allow must be 1 to 64 IPv4 networks (CIDR, like 127.0.0.0/8 or 10.1.2.3/32)"),
             (all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", m) for m in self.plugins),
              "plugins must be Python module names (a.b.c)"),
         ]
@@ -103,12 +112,19 @@ class ServerSettings:
         """The transports that would carry keys and scenes in clear beyond this machine: bound
         to a non-loopback address without TLS (gRPC, HTTP) or without CURVE (ZeroMQ, which has
         CURVE whenever authentication is on)."""
-        exposed = []
-        for name, address, encrypted in (("grpc", self.grpc_addr, self.tls), ("http", self.http_addr, self.tls),
-                                         ("zmq", self.zmq_addr.removeprefix("tcp://"), self.auth)):
-            if address and not encrypted and not address.startswith("ipc://") and not _loopback(address):
-                exposed.append(f"{name} on {address}")
-        return exposed
+        return [f"{name} on {address}" for name, address, encrypted in self._beyond_loopback() if not encrypted]
+
+    def network_exposed(self) -> list[str]:
+        """The transports bound to a non-loopback address, encrypted or not (without keys, anyone
+        who reaches one is an admin)."""
+        return [f"{name} on {address}" for name, address, _ in self._beyond_loopback()]
+
+    def _beyond_loopback(self) -> list[tuple[str, str, bool]]:
+        """(name, address, encrypted) of each transport that is on and bound beyond this machine."""
+        transports = (("grpc", self.grpc_addr, self.tls), ("http", self.http_addr, self.tls),
+                      ("zmq", self.zmq_addr.removeprefix("tcp://"), self.auth))
+        return [(name, address, encrypted) for name, address, encrypted in transports
+                if address and not address.startswith("ipc://") and not _loopback(address)]
 
     @property
     def node_name(self) -> str:
@@ -142,6 +158,16 @@ def _loopback(address: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+def _ipv4_network(cidr: str) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.IPv4Network(cidr)
+    except ValueError:  # not CIDR, host bits set, or IPv6
+        return False
+    return True
 
 
 def _parse(type_name: str, raw: str, name: str):

@@ -19,12 +19,22 @@ from pathlib import Path
 import grpc
 import httpx
 import pytest
+from fastapi.routing import iter_route_contexts
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha.proto_reflection_descriptor_database import ProtoReflectionDescriptorDatabase
+from starlette.routing import Mount, Route
 
 from camdirector.access.roles import ROLE_VERBS, Verb, allows
 from camdirector.deploy.server_process import ServerProcess
+from camdirector.front.http.app import build_app
+from camdirector.front.http.routes.levels import install_level_routes
+from camdirector.front.http.routes.overview import install_overview_routes
+from camdirector.front.job_runner import open_jobs
+from camdirector.front.metrics import Metrics
+from camdirector.front.router import SessionRouter
 from camdirector.front.session_calls import RPCS
+from camdirector.jobs import JobSettings, service_kinds
+from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from tests.precompute.tracks.tiny_levels import corridor
 from tests.service import wire_client as wc
@@ -66,18 +76,46 @@ def test_the_role_table_of_the_page_is_the_code():
         assert table[verb.value] == {role for role in ROLES if verb in ROLE_VERBS[role]}, verb
 
 
-def test_every_door_of_the_server_is_in_the_page(world):
+def served_http_routes(data_dir: Path) -> set[str]:
+    """Every route of the HTTP app as `camdirector serve` builds it (front/main.py: the app, then
+    the job routes), documented or not, as "METHOD /path"; a mount is "GET /path/"."""
+    settings = ServerSettings(workers=0, data_dir=str(data_dir))
+    app = build_app(SessionRouter(settings, Metrics()), {"http": settings.http_addr})
+    job_settings = JobSettings.for_server(settings)
+    jobs = open_jobs(data_dir, service_kinds(), job_settings)  # not started
+    install_overview_routes(app, jobs, job_settings)
+    install_level_routes(app, jobs, data_dir, job_settings)
+    served = set()
+    for route in iter_route_contexts(app.routes):  # included routers' routes with their prefixes
+        if isinstance(route.original_route, Mount):
+            served.add(f"GET {route.path}/")
+        else:
+            assert isinstance(route.original_route, Route), route.original_route  # nothing else (no WebSocket)
+            served |= {f"{method} {route.path}" for method in route.methods or () if method != "HEAD"}
+    return served
+
+
+def test_every_door_of_the_server_is_in_the_page(world, tmp_path):
+    """Every route the app serves, the undocumented ones included (`/`, the dashboard's files, the
+    OpenAPI document), is in the table; the document an admin reads names none other."""
     listed = {(d.transport, d.name) for d in doors()}
-    openapi = httpx.get(f"{world.http}/openapi.json").json()
-    served = {("HTTP", f"{method.upper()} {path}") for path, ops in openapi["paths"].items() for method in ops}
+    routes = served_http_routes(tmp_path)
+    openapi = httpx.get(f"{world.http}/openapi.json", headers=_auth(world.keys["admin"])).json()
+    assert {f"{method.upper()} {path}" for path, ops in openapi["paths"].items() for method in ops} <= routes
+    served = {("HTTP", route) for route in routes}
     served |= {("gRPC", m.name) for m in pb.DESCRIPTOR.services_by_name["Director"].methods}
     served |= {
         ("gRPC", "grpc.health.v1.Health/Check"),
         ("gRPC", "grpc.reflection.v1alpha.ServerReflection"),
-        ("HTTP", "GET /dashboard/"),
     }
     served |= {("ZeroMQ", name) for name in RPCS if name != "StreamFrames"}
     assert listed == served
+
+
+@pytest.mark.parametrize("path", ["/docs", "/redoc", "/docs/oauth2-redirect"])
+def test_no_page_loads_scripts_from_elsewhere(world, path):
+    """FastAPI's Swagger UI and ReDoc pages (scripts from a CDN in the cookie's origin) are not served."""
+    assert httpx.get(world.http + path, headers=_auth(world.keys["admin"])).status_code == 404
 
 
 # -- the server, its keys and one tenant's things ------------------------------------------------

@@ -7,6 +7,7 @@ import asyncio
 import os
 import stat
 import threading
+import time
 
 import grpc
 import pytest
@@ -14,6 +15,7 @@ import pytest
 from camdirector.access.guard import OPEN, Guard, bearer
 from camdirector.access.keys import (
     ADMIN_KEY_FILE,
+    LOGIN_SECRET,
     KeyNotFound,
     PostgresAccessStore,
     SqliteAccessStore,
@@ -79,6 +81,9 @@ def test_the_guard_answers_unauthenticated_and_permission_denied_apart(make_stor
         f"Bearer {viewer}x",
         f"Bearer {viewer[:-1]}",
         "Bearer cdk_000000000000_secret",
+        "Bearer cdk_" + "\x00" * 12 + "_secret",  # PostgreSQL would refuse it with an error: never asked
+        "Bearer cdk_00000000000é_secret",
+        "Bearer cdk_ABCDEF012345_secret",
     ):
         assert _code(lambda a=authorization: guard.identify(a)) == "UNAUTHENTICATED", authorization
 
@@ -157,6 +162,37 @@ def test_session_owners_audit_and_shared_secrets(make_store):
     ]
     assert other_node.audit_trail("alpha", after_seq=trail[0]["seq"]) == []
     assert store.shared_secret("cookie") == other_node.shared_secret("cookie") != store.shared_secret("other")
+
+
+def test_a_replaced_login_secret_reaches_every_node_at_its_next_poll(make_store):
+    store, other_node = make_store(), make_store()
+    here, there = Guard(store), Guard(other_node)
+    first = here.login_secret
+    assert there.login_secret == first == store.shared_secret(LOGIN_SECRET)  # the nodes sign alike
+    other_node.rotate_secret(LOGIN_SECRET)
+    assert here.login_secret == first  # until the poll
+    here.poll_revocations()
+    assert here.login_secret == other_node.shared_secret(LOGIN_SECRET) != first
+
+
+def test_a_login_ended_on_one_node_is_refused_by_every_node_until_its_cookie_expires(make_store):
+    store, other_node = make_store(), make_store()
+    now = [time.time()]
+    here, there = Guard(store), Guard(other_node, clock=lambda: now[0])
+    expires_s = now[0] + 3600
+    here.end_login("a" * 32, expires_s)
+    assert here.login_ended("a" * 32) and not there.login_ended("a" * 32)  # here at once, there at its poll
+    there.poll_revocations()
+    assert there.login_ended("a" * 32) and not there.login_ended("b" * 32)
+    assert Guard(make_store()).login_ended("a" * 32)  # a node started later knows it from the start
+    now[0] = expires_s + 1  # its cookie has expired: nothing left to refuse
+    there.poll_revocations()
+    assert not there.login_ended("a" * 32)
+    store.end_login("b" * 32, time.time() - 1)  # recorded, and gone with the next one ended
+    store.end_login("c" * 32, time.time() + 3600)
+    with store._read() as db:  # the records keep no login past its cookie's expiry
+        assert sorted(row[0] for row in db.execute("SELECT login_id FROM ended_logins").fetchall()) == ["a" * 32, "c" * 32]
+    assert sorted(store.ended_logins(0.0))[0] == ("a" * 32, expires_s)
 
 
 def test_the_sqlite_store_is_readable_by_its_user_only(tmp_path):

@@ -4,7 +4,9 @@ whose key is revoked."""
 
 from __future__ import annotations
 
+import json
 import os
+import signal
 import ssl
 import stat
 import subprocess
@@ -60,6 +62,29 @@ def test_keys_are_made_listed_and_revoked_from_the_command_line(tmp_path):
         assert missing.returncode == 1 and "no key" in missing.stderr
         bad = keys_command(tmp_path, "create", "--role", "admin", "--tenant", "Not A Tenant")
         assert bad.returncode == 2 and "tenant" in bad.stderr
+
+
+def test_a_key_is_revoked_from_a_file_stdin_or_the_environment_never_from_the_arguments(tmp_path):
+    """`keys revoke` takes the id, or a whole key from --key-file PATH, --key-file - (stdin) or
+    --key-from-env (CAMDIRECTOR_KEY): the key never needs to be in the process's arguments. A file
+    without a key is refused with a message that does not show what it holds."""
+    keys = [keys_command(tmp_path, "create", "--role", "viewer").stdout.strip() for _ in range(3)]
+    (tmp_path / "viewer.key").write_text(keys[0] + "\n")
+    base = [sys.executable, "-m", "camdirector", "keys", "revoke", "--data-dir", str(tmp_path)]
+    env = {**os.environ, "CAMDIRECTOR_KEY": keys[2]}
+    for extra, stdin in (
+        (["--key-file", str(tmp_path / "viewer.key")], None),
+        (["--key-file", "-"], keys[1]),
+        (["--key-from-env"], None),
+    ):
+        done = subprocess.run([*base, *extra], input=stdin, capture_output=True, text=True, env=env)
+        assert done.returncode == 0, done.stderr
+    listed = [json.loads(line) for line in keys_command(tmp_path, "list").stdout.splitlines()]
+    revoked = {key["id"] for key in listed if key["revoked_s"]}
+    assert revoked == {key.split("_")[1] for key in keys}
+    (tmp_path / "wrong.key").write_text("cdk_secret-looking but not a key\n")
+    wrong = subprocess.run([*base, "--key-file", str(tmp_path / "wrong.key")], capture_output=True, text=True)
+    assert wrong.returncode == 2 and "does not hold a key" in wrong.stderr and "secret-looking" not in wrong.stderr
 
 
 @pytest.mark.parametrize(
@@ -211,3 +236,95 @@ def test_a_stream_whose_key_is_revoked_ends_unauthenticated_within_the_poll(tmp_
         assert ended.value.code == grpc.StatusCode.UNAUTHENTICATED and "revoked" in ended.value.message
         assert answered[-1] - revoked_at[0] < 1.0  # the poll is every 0.25 s
         raw.close()
+
+
+def test_one_tenants_live_views_leave_room_for_another_tenants(tmp_path):
+    """Each tenant holds at most its share of the node's live views (`--tenant-max-live-views`,
+    16 by default, of the node's 64): the next is 429 saying whose share it is, and another
+    tenant's viewer still gets its stream."""
+    with ServerProcess("--workers", "1", "--data-dir", str(tmp_path), transports=("grpc", "http"), auth=True) as server:
+        beta_key = keys_command(tmp_path, "create", "--role", "admin", "--tenant", "beta").stdout.strip()
+        sessions = {}
+        for tenant, key in (("alpha", server.admin_key), ("beta", beta_key)):
+            raw = wc.GrpcRaw(server.grpc, key=key)
+            sessions[tenant] = raw.call("CreateSession", wc.two_target_request()).session_id
+            raw.stream(list(wc.walk(sessions[tenant], 5)))
+            raw.close()
+
+        parts = []  # each open stream's iterator, held: a dropped one closes its response
+
+        def view(tenant: str, key: str, client: httpx.Client) -> httpx.Response:
+            url = f"http://{server.http}/v1/sessions/{sessions[tenant]}/view.mjpeg"
+            reply = client.send(client.build_request("GET", url, params={"fps": 1}, headers=_auth(key)), stream=True)
+            if reply.status_code == 200:
+                parts.append(reply.iter_bytes())
+                next(parts[-1])  # its first part: the stream is counted
+            return reply
+
+        with httpx.Client(timeout=60, limits=httpx.Limits(max_connections=32)) as client:
+            held = [view("alpha", server.admin_key, client) for _ in range(16)]
+            try:
+                assert [reply.status_code for reply in held] == [200] * 16
+                refused = view("alpha", server.admin_key, client)
+                assert refused.status_code == 429, refused.status_code
+                assert "tenant 'default' has its maximum of 16 live views" in refused.read().decode()
+                theirs = view("beta", beta_key, client)
+                assert theirs.status_code == 200
+                theirs.close()
+            finally:
+                for reply in held:
+                    reply.close()
+
+
+def test_another_tenants_session_live_or_lost_answers_as_a_made_up_id(tmp_path):
+    """An id that is not the caller's tenant's takes one path whatever it names: a made-up id,
+    another tenant's live session, and another tenant's session lost with its worker (checkpoints
+    off) answer the same status and the same words on every RPC and route that names a session;
+    the session's own tenant is still told its session was lost."""
+    with ServerProcess(
+        "--workers", "1", "--checkpoint-store", "off", "--data-dir", str(tmp_path), transports=("grpc", "http"), auth=True
+    ) as server:
+        alpha = wc.GrpcRaw(server.grpc, key=server.admin_key)
+        beta_key = keys_command(tmp_path, "create", "--role", "admin", "--tenant", "beta").stdout.strip()
+        beta = wc.GrpcRaw(server.grpc, key=beta_key)
+        lost = alpha.call("CreateSession", wc.two_target_request()).session_id
+        os.kill(server.worker_pids()[0], signal.SIGKILL)
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                alpha.call("Frame", next(wc.walk(lost, 1)))
+            except wc.RpcFailed as exc:
+                if "worker process holding it" in exc.message:
+                    break
+            assert time.monotonic() < deadline, "the killed worker's session still answers"
+            time.sleep(0.2)
+        live = alpha.call("CreateSession", wc.two_target_request()).session_id
+        requests = {
+            "Frame": lambda sid: next(wc.walk(sid, 1)),
+            "UpdateStyle": lambda sid: pb.UpdateStyleRequest(session_id=sid, style=pb.Style()),
+            "TakeShot": lambda sid: pb.TakeShotRequest(session_id=sid, release=True),
+            "CloseSession": lambda sid: pb.CloseSessionRequest(session_id=sid),
+        }
+
+        def answer(rpc: str, session_id: str) -> tuple[str, str]:
+            try:
+                beta.call(rpc, requests[rpc](session_id))
+            except wc.RpcFailed as exc:
+                return exc.code.name, exc.message.replace(session_id, "<ID>")
+            return "OK", ""
+
+        made_up = "0123456789abcdef0123456789abcdef"
+        for rpc in requests:
+            unknown = ("NOT_FOUND", "unknown session id '<ID>' (closed, reclaimed, or never created)")
+            assert answer(rpc, live) == answer(rpc, lost) == answer(rpc, made_up) == unknown, rpc
+        for route in ("", "/amap.png", "/view", "/topview.png"):
+            answers = set()
+            for session_id in (live, lost, made_up):
+                reply = httpx.get(f"http://{server.http}/v1/sessions/{session_id}{route}", headers=_auth(beta_key), timeout=30)
+                answers.add((reply.status_code, reply.text.replace(session_id, "<ID>")))
+            assert len(answers) == 1 and answers.pop()[0] == 404, route
+        with pytest.raises(wc.RpcFailed) as own:
+            alpha.call("Frame", next(wc.walk(lost, 1, start_frame=2)))
+        assert own.value.code == grpc.StatusCode.UNAVAILABLE and "died" in own.value.message
+        alpha.close()
+        beta.close()

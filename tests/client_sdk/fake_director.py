@@ -52,8 +52,8 @@ class FakeDirector:
         with self._lock:
             session_id = f"s{next(self._ids)}"
             self.sessions[session_id] = {"last": None, "frames": 0, "request": request}
-        path = f"/rec/{session_id}.cdrec" if request.record else ""
-        return pb.CreateSessionResponse(session_id=session_id, recording_path=path)
+        name = f"{session_id}.cdrec" if request.record else ""  # as the server names it: by id, no path
+        return pb.CreateSessionResponse(session_id=session_id, recording_path=name)
 
     def _session(self, session_id: str) -> dict:
         try:

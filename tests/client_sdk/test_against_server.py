@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-from pathlib import Path
 
 import grpc
 import numpy as np
@@ -91,26 +90,26 @@ def test_match_session_take_shot_sync_and_async(url):
     asyncio.run(run_async())
 
 
-def _said_protocol(session) -> int:
+def _said_protocol(server, session) -> int:
     """The client_protocol the server received: its recording's CreateSessionRequest (the session closed)."""
-    return next(read_entries(Path(session.recording_path))).create.client_protocol
+    return next(read_entries(server.data_dir / "recordings" / session.recording_path)).create.client_protocol
 
 
-def test_sync_and_async_sessions_say_the_protocol(url):
+def test_sync_and_async_sessions_say_the_protocol(url, server):
     request = two_target_request(seed=4, record=True)  # client_protocol 0: the SDK says its own
     with cd.connect(url) as client:
         with client.create_session(request) as from_request:
             pass
         with client.create_session(targets=request.targets, objects=request.objects, record=True) as from_keywords:
             pass
-    assert _said_protocol(from_request) == _said_protocol(from_keywords) == PROTOCOL
+    assert _said_protocol(server, from_request) == _said_protocol(server, from_keywords) == PROTOCOL
 
     async def run_async():
         async with cd.connect_async(url) as client:
             async with client.create_session(two_target_request(record=True)) as session:
                 return session
 
-    assert _said_protocol(asyncio.run(run_async())) == PROTOCOL
+    assert _said_protocol(server, asyncio.run(run_async())) == PROTOCOL
 
 
 def _refused_as_newer(error: cd.DirectorError) -> bool:

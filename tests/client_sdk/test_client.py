@@ -37,7 +37,7 @@ def client(server):
 def test_session_round_trip(server, client):
     with client.create_session(targets=TARGETS, seed=3, record=True) as session:
         assert session.id in server.core.sessions
-        assert session.recording_path == f"/rec/{session.id}.cdrec"
+        assert session.recording_path == f"{session.id}.cdrec"
         assert server.core.sessions[session.id]["request"].seed == 3
         update = session.frame(1, 0.5)
         assert (update.frame, update.time_s, update.stale) == (1, 0.5, False)

@@ -11,6 +11,7 @@ import json
 import os
 import re
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -195,6 +196,24 @@ def test_a_level_job_runs_on_a_worker(cluster):
     assert status["status"] == "succeeded" and status["name"] == "corridor", status
     level = client.get("/v1/levels/corridor").json()
     assert level["counts"]["tracks"] > 0 and level["source_file"] == "level.obj"
+
+
+def test_a_worker_tightens_the_data_folder_and_writes_private_files(cluster, tmp_path):
+    """The in-process front of `cluster` made the shared folder with the test's umask (0755): the
+    worker tightens it at start, saying so once, and its job processes write the level 0600."""
+    client, jobs, start_worker = cluster
+    worker = start_worker()
+    assert stat.S_IMODE((tmp_path / "shared").stat().st_mode) == 0o700
+    assert len(re.findall("open to group or others", worker.log.read_text())) == 1
+    reply = client.post("/v1/levels", data={"name": "corridor"}, files={"level": ("level.obj", obj_text(corridor()))})
+    job = wait_until(
+        lambda: (s := client.get(f"/v1/level-jobs/{reply.json()['id']}").json())["status"] in ("succeeded", "failed") and s,
+        60.0,
+        "the level job",
+    )
+    assert job["status"] == "succeeded", job
+    (artifact,) = (tmp_path / "shared" / "levels").glob("corridor.*.npz")
+    assert stat.S_IMODE(artifact.stat().st_mode) == 0o600
 
 
 def test_a_killed_worker_job_runs_again_once_with_the_same_result(cluster, run_bvh):

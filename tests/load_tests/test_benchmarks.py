@@ -11,6 +11,7 @@ from load_tests import (
     dashboard_bench,
     monitors_bench,
     movers_bench,
+    oversize,
     overview_bench,
     real_matches,
     soak,
@@ -203,3 +204,15 @@ def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_pro
     assert duel["ceilings"]["kills"] >= 1
     table = (tmp_path / "table.md").read_text().splitlines()
     assert len(table) == 2 + 4 and table[2].startswith("| duel_bravado | planned |")
+
+
+def test_oversize_bench_reports_frames_quiet_and_attacked_and_every_attack_answered(tmp_path):
+    result = _run(oversize.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1", "--oversize-mib", "6")
+    assert result["quiet"]["dropped_frames"] == result["attacked"]["dropped_frames"] == 0
+    assert set(result["rtt_ratio_attacked_vs_quiet"]) == {"p50", "p99", "max"}
+    attacks = result["attacks"]
+    assert set(attacks) == {"http_login", "http_login_chunked", "http_upload_without_key", "zmq_without_key"}
+    assert all(attack["sent"] >= 1 for attack in attacks.values())
+    assert set(attacks["http_login"]["outcomes"]) <= {"413", "closed"}
+    assert set(attacks["http_upload_without_key"]["outcomes"]) <= {"401", "closed"}
+    assert set(attacks["zmq_without_key"]["outcomes"]) == {"dropped"}

@@ -235,6 +235,13 @@ def test_the_key_comes_from_the_environment_and_a_refused_one_is_said(registry, 
         assert main(args) == 0
         summary = json_lines(capsys.readouterr().out)[-1]["summary"]
         assert summary["answered"] == summary["frames_sent"] > 0
+        monkeypatch.delenv("CAMDIRECTOR_KEY")  # the key from a file: never in the process's arguments
+        (registry / "engine.key").write_text(server.admin_key + "\n")
+        assert main([*args, "--key-file", str(registry / "engine.key")]) == 0
+        assert json_lines(capsys.readouterr().out)[-1]["summary"]["answered"] > 0
+        (registry / "empty.key").write_text("")
+        assert main([*args, "--key-file", str(registry / "empty.key")]) == 2
+        assert "does not hold a key" in capsys.readouterr().err
 
 
 def _unreadable(folder):

@@ -5,7 +5,6 @@ answers, the shot and candidates, TakeShot held until released, each kind of bad
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import grpc
 import pytest
@@ -116,12 +115,12 @@ def test_bad_match_input_is_refused_and_the_session_streams_on(raw, canary):  # 
     raw.call("CloseSession", pb.CloseSessionRequest(session_id=toric))
 
 
-def test_a_recorded_match_with_a_take_replays_bit_for_bit(raw):
+def test_a_recorded_match_with_a_take_replays_bit_for_bit(raw, server):
     response = raw.call("CreateSession", match_request(delay_s=1.0, record=True))
     session_id = response.session_id
     raw.stream(list(frames(session_id, 60, kill_at={40: ("b1", "a1")})))
     raw.call("TakeShot", pb.TakeShotRequest(session_id=session_id, subject_ids=["a0"]))
     raw.stream(list(frames(session_id, 60, start=60)))
     raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
-    report = replay(Path(response.recording_path))
+    report = replay(server.data_dir / "recordings" / response.recording_path)
     assert report.frames == 120 and report.identical == 120, report

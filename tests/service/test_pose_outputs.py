@@ -217,6 +217,33 @@ def test_bad_pose_outputs_are_refused_at_create(raw, canary, outputs, message):
     assert err.value.code == grpc.StatusCode.INVALID_ARGUMENT and message in err.value.message, err.value
 
 
+@pytest.mark.parametrize("address", ["udp://10.1.2.3:40000", "udp://192.0.2.1:6301", "udp://255.255.255.255:40000"])
+def test_a_destination_the_operator_did_not_allow_is_refused_at_create(raw, canary, address):
+    """Loopback only by default: an engine key cannot aim the server's datagrams at any host."""
+    with pytest.raises(RpcFailed) as err:
+        raw.call(
+            "CreateSession", two_target_request(pose_outputs=[pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address=address)])
+        )
+    assert err.value.code == grpc.StatusCode.INVALID_ARGUMENT, err.value
+    assert f"pose_outputs[0].address {address!r}" in err.value.message and "--pose-output-allow" in err.value.message
+
+
+def test_an_allowed_network_is_sent_to(server_factory):
+    """`--pose-output-allow` opens a network (and only it): the session is made, its outputs counted."""
+    srv = server_factory("--workers", "0", "--pose-output-allow", "192.0.2.0/24", "--pose-output-allow", "127.0.0.1/32")
+    with closing(GrpcRaw(srv.grpc)) as client:
+        outside = pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://192.0.3.1:6301")
+        with pytest.raises(RpcFailed) as err:
+            client.call("CreateSession", two_target_request(pose_outputs=[outside]))
+        assert err.value.code == grpc.StatusCode.INVALID_ARGUMENT and "--pose-output-allow" in err.value.message
+        allowed = pb.PoseOutput(format=pb.POSE_FORMAT_FREED_D1, address="udp://192.0.2.9:6301")
+        session_id = client.call("CreateSession", two_target_request(pose_outputs=[allowed])).session_id
+        client.stream(list(walk(session_id, 5)))
+        detail = httpx.get(f"http://{srv.http}/v1/sessions/{session_id}", params={"last": 1}, timeout=30).json()
+        assert detail["pose_outputs"][0]["address"] == "udp://192.0.2.9:6301"
+        assert detail["pose_outputs"][0]["sent"] + detail["pose_outputs"][0]["dropped"] == 5
+
+
 def test_a_destination_nobody_listens_on_fails_and_stalls_nothing(server, client, listeners):
     """ICMP port unreachable from a closed port on 127.0.0.1: frames go on, answered in order,
     and the other outputs of the session still get every pose."""

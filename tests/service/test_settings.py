@@ -22,6 +22,10 @@ def test_environment_then_flags():
     ({"CAMDIRECTOR_MAX_SESSIONS": "0"}, "max_sessions"),
     ({"CAMDIRECTOR_ZMQ_ADDR": "udp://x"}, "zmq_addr"),
     ({"CAMDIRECTOR_RECORD_ALL": "maybe"}, "RECORD_ALL"),
+    ({"CAMDIRECTOR_POSE_OUTPUT_ALLOW": "10.0.0.1/8"}, "pose_output_allow"),  # host bits set
+    ({"CAMDIRECTOR_POSE_OUTPUT_ALLOW": "::1/128"}, "pose_output_allow"),
+    ({"CAMDIRECTOR_POSE_OUTPUT_ALLOW": ""}, "pose_output_allow"),
+    ({"CAMDIRECTOR_TENANT_MAX_LIVE_VIEWS": "65"}, "tenant_max_live_views"),
 ])
 def test_bad_settings_are_refused(env, message):
     with pytest.raises(ValueError, match=message):
@@ -32,3 +36,9 @@ def test_serve_refuses_a_bad_flag_with_a_message():
     out = subprocess.run([sys.executable, "-m", "camdirector.__main__", "serve", "--max-sessions", "0"],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "max_sessions must be in" in out.stderr
+
+
+def test_pose_outputs_go_to_loopback_unless_the_operator_allows_more():
+    assert ServerSettings().pose_output_allow == ("127.0.0.0/8",)
+    env = {"CAMDIRECTOR_POSE_OUTPUT_ALLOW": "10.20.0.0/16, 192.0.2.7/32"}
+    assert ServerSettings.from_env(env).pose_output_allow == ("10.20.0.0/16", "192.0.2.7/32")

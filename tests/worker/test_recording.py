@@ -30,7 +30,7 @@ def _record(server) -> Path:
     client.stream(list(walk(session_id, 90, start_frame=91)))
     client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
     client.close()
-    return Path(response.recording_path)
+    return server.data_dir / "recordings" / response.recording_path
 
 
 def test_recording_replays_bit_for_bit(server):
@@ -104,7 +104,7 @@ def test_a_replay_sends_no_pose_output(server):
     except TimeoutError:
         pass
     assert live == 30, "the live session sent one datagram a frame"
-    result = replay(Path(response.recording_path))
+    result = replay(server.data_dir / "recordings" / response.recording_path)
     receiver.settimeout(1.0)
     try:
         receiver.recv(64)

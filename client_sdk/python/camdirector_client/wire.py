@@ -488,7 +488,8 @@ class SessionBase:
     id : str
         The session id the server chose.
     recording_path : str
-        Where the server records the session; empty unless ``record=True`` and it records.
+        The recording's name in the server's recordings folder (``<session id>.cdrec``, never a
+        path on the server); empty unless ``record=True`` and it records.
     """
 
     __slots__ = ("_closed_frames", "_transport", "id", "recording_path", "retries", "route")

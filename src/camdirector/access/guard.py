@@ -10,6 +10,10 @@ keeps current: a key revoked on any node stops streaming frames here within `pol
 other call (`fresh=True`) reads the key's row from the records database, so a revocation through
 any node holds at once for them.
 
+The same poll keeps the dashboard's logins current (front/http/auth.py checks the cookies): the
+secret that signs them (`login_secret`; rotated by `camdirector keys rotate-secret`, every login
+made before is refused) and the logins ended by logout on any node (`login_ended`).
+
 With authentication off (`--no-auth`) every caller is `OPEN`: tenant `default`, role `admin`.
 """
 
@@ -17,6 +21,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import secrets
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,7 +30,7 @@ from typing import Any
 
 import grpc
 
-from camdirector.access.keys import AccessStore, ApiKey, secret_matches, split_key
+from camdirector.access.keys import LOGIN_SECRET, AccessStore, ApiKey, secret_matches, split_key
 from camdirector.access.roles import Verb, allows
 from camdirector.errors import DirectorError
 
@@ -81,6 +87,13 @@ class Guard:
         self._cache: dict[str, tuple[ApiKey, str]] = {}
         self._polled_s = clock()
         self._watcher: asyncio.Task[None] | None = None
+        self._ended_logins: dict[str, float] = {}  # login id -> when its cookie expires, s
+        self._ended_lock = threading.Lock()  # the poll's thread and the routes' threads note ended logins
+        # Without keys no login is made: a secret of this process's own signs nothing anyone uses.
+        self.login_secret = secrets.token_bytes(32)
+        if self.enabled:
+            self.login_secret = self.key_store().shared_secret(LOGIN_SECRET)
+            self._note_ended_logins(self.key_store().ended_logins(0.0))
 
     def key_store(self) -> AccessStore:
         """The key store, for the calls made with authentication on (`enabled` implies a store)."""
@@ -150,16 +163,41 @@ class Guard:
                 self._cache[key_id] = found
 
     def poll_revocations(self) -> list[str]:
-        """Marks keys revoked since the last poll (on any node) in the cache; their ids."""
+        """Learns what changed on any node since the last poll: keys revoked (marked in the cache;
+        their ids returned), logins ended, and the login secret replaced."""
         now = self.clock()
-        revoked = self.key_store().revoked_since(self._polled_s - CLOCK_SKEW_S)
+        store = self.key_store()
+        revoked = store.revoked_since(self._polled_s - CLOCK_SKEW_S)
+        self._note_ended_logins(store.ended_logins(self._polled_s - CLOCK_SKEW_S))
+        login_secret = store.shared_secret(LOGIN_SECRET)
         self._polled_s = now
+        if login_secret != self.login_secret:
+            self.login_secret = login_secret
+            log.info("the dashboard's login secret was replaced: every login made before is refused")
         hit = []
         for key_id, _ in revoked:
             if key_id in self._cache and not self._cache[key_id][0].revoked:
                 self.refresh(key_id)
                 hit.append(key_id)
         return hit
+
+    # -- the dashboard's logins
+    def end_login(self, login_id: str, expires_s: float) -> None:
+        """Logout: the login is refused from now on, here at once and by other nodes from their
+        next poll; `expires_s`, when its cookie expires anyway."""
+        self.key_store().end_login(login_id, expires_s)
+        self._note_ended_logins([(login_id, expires_s)])
+
+    def login_ended(self, login_id: str) -> bool:
+        return login_id in self._ended_logins
+
+    def _note_ended_logins(self, ended: list[tuple[str, float]]) -> None:
+        """Adds logins ended and forgets those whose cookies have expired since."""
+        now = self.clock()
+        with self._ended_lock:
+            self._ended_logins.update(ended)
+            for login_id in [i for i, expires_s in self._ended_logins.items() if expires_s <= now]:
+                del self._ended_logins[login_id]
 
     async def _watch(self) -> None:
         while True:

@@ -10,7 +10,10 @@ URL-safe base64) is stored only as its SHA-256. A salted slow hash (bcrypt, argo
 passwords people choose; a 256-bit random secret cannot be guessed from its hash, and a fast one
 keeps checking a streaming frame's key within its budget (docs/security.md).
 
-Revocation sets `revoked_s`; `revoked_since(t)` is what each node's guard polls (access/guard.py).
+Revocation sets `revoked_s`; `revoked_since(t)` is what each node's guard polls (access/guard.py),
+with the dashboard's logins: the secret that signs them (`LOGIN_SECRET`, replaced by `camdirector
+keys rotate-secret`) and the logins ended by logout (`ended_logins`, kept until their cookies would
+have expired).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import hmac
 import json
 import os
 import secrets
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -30,11 +34,13 @@ from typing import Any
 
 from camdirector.access.roles import ROLES
 from camdirector.infra.postgres import PostgresStore, advisory_lock
+from camdirector.infra.redaction import redacted
 from camdirector.infra.sqlite import SqliteStore
 from camdirector.infra.tenants import DEFAULT_TENANT, check_tenant
 
 KEY_PREFIX = "cdk_"
 ADMIN_KEY_FILE = "admin.key"
+LOGIN_SECRET = "dashboard-cookie"  # the shared secret that signs the dashboard's login cookies
 
 
 class AccessUnavailable(RuntimeError):
@@ -71,14 +77,32 @@ class ApiKey:
         }
 
 
+_HEX_DIGITS = frozenset("0123456789abcdef")  # a key id's, secrets.token_hex's
+
+
 def split_key(token: str) -> tuple[str, str] | None:
-    """(id, secret) of a key's text, None when it is not shaped like one."""
+    """(id, secret) of a key's text, None when it is not shaped like one (an id of 12 hex digits:
+    nothing else reaches the database, where PostgreSQL refuses some text, a NUL, with an error)."""
     if not token.startswith(KEY_PREFIX):
         return None
     key_id, sep, secret = token[len(KEY_PREFIX) :].partition("_")
-    if not sep or len(key_id) != 12 or not secret or len(secret) > 128:
+    if not sep or len(key_id) != 12 or not _HEX_DIGITS.issuperset(key_id) or not secret or len(secret) > 128:
         return None
     return key_id, secret
+
+
+def read_key_file(path: str) -> str:
+    """The key in the file at `path` ("-": standard input), alone on its line: how a command takes a
+    key without it showing in the process's arguments (`ps`, shell history). ValueError, never
+    naming the key, when the file cannot be read or holds no key."""
+    try:
+        text = sys.stdin.read() if path == "-" else Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--key-file {path}: cannot read it ({exc.__class__.__name__})") from None
+    token = text.strip()
+    if split_key(token) is None:
+        raise ValueError(f"--key-file {path}: it does not hold a key (cdk_<id>_<secret>, alone on one line)")
+    return token
 
 
 def secret_hash(secret: str) -> str:
@@ -105,6 +129,7 @@ CREATE TABLE IF NOT EXISTS audit (
 );
 CREATE INDEX IF NOT EXISTS audit_tenant_seq ON audit (tenant, seq);
 CREATE TABLE IF NOT EXISTS access_secrets (name TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS ended_logins (login_id TEXT PRIMARY KEY, ended_s REAL NOT NULL, expires_s REAL NOT NULL);
 """
 
 _POSTGRES_SCHEMA = (
@@ -118,6 +143,8 @@ _POSTGRES_SCHEMA = (
         action TEXT NOT NULL, session_id TEXT, detail TEXT NOT NULL)""",
     "CREATE INDEX IF NOT EXISTS audit_tenant_seq ON audit (tenant, seq)",
     "CREATE TABLE IF NOT EXISTS access_secrets (name TEXT PRIMARY KEY, value TEXT NOT NULL)",
+    """CREATE TABLE IF NOT EXISTS ended_logins (
+        login_id TEXT PRIMARY KEY, ended_s DOUBLE PRECISION NOT NULL, expires_s DOUBLE PRECISION NOT NULL)""",
 )
 _WRITE_LOCK_KEY = 0x63616D6B  # "camk": the access tables' advisory write lock (records.py has "camd")
 
@@ -245,16 +272,44 @@ class AccessStore:
             for r in rows
         ]
 
-    # -- secrets the nodes share (the dashboard's cookie signing key)
+    # -- secrets the nodes share (LOGIN_SECRET), and the logins ended by logout
     def shared_secret(self, name: str) -> bytes:
-        """The named random secret, made by the first node that asks."""
+        """The named random secret, made by the first node that asks. Read first, outside a write
+        transaction: every node's guard reads it at each poll."""
+        with self._read() as db:
+            row = db.execute("SELECT value FROM access_secrets WHERE name = ?", (name,)).fetchone()
+        if row is not None:
+            return bytes.fromhex(row[0])
         with self._tx() as db:
             row = db.execute("SELECT value FROM access_secrets WHERE name = ?", (name,)).fetchone()
             if row is None:
-                value = secrets.token_hex(32)
-                db.execute("INSERT INTO access_secrets (name, value) VALUES (?, ?)", (name, value))
-                return bytes.fromhex(value)
+                row = (secrets.token_hex(32),)
+                db.execute("INSERT INTO access_secrets (name, value) VALUES (?, ?)", (name, row[0]))
         return bytes.fromhex(row[0])
+
+    def rotate_secret(self, name: str) -> None:
+        """Replaces the named secret with a new random one: what the old one signed is refused by
+        every node from its next poll (access/guard.py)."""
+        with self._tx() as db:
+            db.execute("DELETE FROM access_secrets WHERE name = ?", (name,))
+            db.execute("INSERT INTO access_secrets (name, value) VALUES (?, ?)", (name, secrets.token_hex(32)))
+
+    def end_login(self, login_id: str, expires_s: float) -> None:
+        """Records a login as ended until `expires_s`, when its cookie expires anyway; the records of
+        logins past that go in the same transaction."""
+        now = time.time()
+        with self._tx() as db:
+            db.execute("DELETE FROM ended_logins WHERE expires_s <= ? OR login_id = ?", (now, login_id))
+            db.execute("INSERT INTO ended_logins (login_id, ended_s, expires_s) VALUES (?, ?, ?)", (login_id, now, expires_s))
+
+    def ended_logins(self, since_s: float) -> list[tuple[str, float]]:
+        """(login id, expires_s) of the logins ended at or after `since_s` whose cookies have not
+        expired yet."""
+        with self._read() as db:
+            rows = db.execute(
+                "SELECT login_id, expires_s FROM ended_logins WHERE ended_s >= ? AND expires_s > ?", (since_s, time.time())
+            ).fetchall()
+        return [(r[0], r[1]) for r in rows]
 
 
 class SqliteAccessStore(SqliteStore, AccessStore):
@@ -287,7 +342,7 @@ def open_access_store(records_url: str, data_dir: str | Path) -> AccessStore:
         return SqliteAccessStore(data_dir)
     if records_url.startswith(("postgresql://", "postgres://")):
         return PostgresAccessStore(records_url)
-    raise ValueError(f"records database {records_url!r}: expected empty (SQLite) or a postgresql:// URL")
+    raise ValueError(f"records database {redacted(records_url)!r}: expected empty (SQLite) or a postgresql:// URL")
 
 
 def ensure_admin_key(store: AccessStore, data_dir: str | Path) -> Path | None:

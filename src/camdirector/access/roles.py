@@ -26,6 +26,7 @@ class Verb(str, Enum):
     KEY_MANAGE = "key.manage"  # create, list, revoke the tenant's keys
     AUDIT_READ = "audit.read"  # GET /v1/audit
     METRICS_READ = "metrics.read"  # GET /metrics (node-wide counters, no tenant's data)
+    SCHEMA_READ = "schema.read"  # GET /openapi.json (the REST API's OpenAPI document)
 
 
 _VIEWER = {Verb.SESSION_READ, Verb.LEVEL_READ, Verb.JOB_READ}

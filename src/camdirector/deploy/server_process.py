@@ -60,13 +60,16 @@ class ServerProcess:
     ):
         self._dir = tempfile.TemporaryDirectory(prefix="camdirector-server-")
         self.log_path = Path(self._dir.name) / "server.log"
-        self._log = open(self.log_path, "w+")
+        # 0600: without --data-dir it lies in the data folder, which the server keeps private
+        self._log = open(self.log_path, "w+", opener=lambda path, flags: os.open(path, flags, 0o600))
         bind = {"grpc": "127.0.0.1:0", "zmq": "tcp://127.0.0.1:*", "http": "127.0.0.1:0"}
         cmd = list(command) if command is not None else [python, "-m", "camdirector", "serve"]
         for name, address in bind.items():
             cmd += [f"--{name}", address if name in transports else ""]
         if "--data-dir" not in args:
             cmd += ["--data-dir", self._dir.name]
+        # its data folder: where a test finds what the server wrote (a recording is named by its id)
+        self.data_dir = Path(args[args.index("--data-dir") + 1] if "--data-dir" in args else self._dir.name)
         if not auth:
             cmd.append("--no-auth")
         self.proc = subprocess.Popen(

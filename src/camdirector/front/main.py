@@ -24,6 +24,7 @@ from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
 from camdirector.front.zmq_service import ZmqTransport, curve_server_keys
 from camdirector.infra.plugins import import_plugins
+from camdirector.infra.private_files import make_private
 from camdirector.jobs import JobSettings, JobsUnavailable, service_kinds
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.checkpoint_stores import CheckpointError, open_store
@@ -101,6 +102,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             jobs = open_jobs(Path(settings.data_dir), service_kinds(), job_settings)
             install_overview_routes(app, jobs, job_settings)
             install_level_routes(app, jobs, Path(settings.data_dir), job_settings)
+            app.openapi()  # built now, not on the loop by the first request that reads it (body_limits.py)
             jobs.start()  # queued and interrupted jobs from before a restart run again
             # A live view left open past shutdown is cut after this long (the hub ends its own first).
             config = uvicorn.Config(
@@ -134,6 +136,22 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             guard.store.close()
 
 
+def _warn_unsafe(settings: ServerSettings, exposed: list[str]) -> None:
+    """One warning on stderr at start for each of --no-auth and --insecure (/healthz says them too);
+    `exposed`: the transports in clear beyond loopback (ServerSettings.plaintext_exposed)."""
+    if not settings.auth:
+        log.warning(
+            "--no-auth: every caller is an admin of tenant default, without a key; for a machine of "
+            "your own only (docs/security.md)"
+        )
+    if settings.insecure:
+        log.warning(
+            "--insecure: keys and scenes may cross the network in clear (%s); only where TLS ends at a "
+            "proxy you trust (docs/security.md)",
+            ", ".join(exposed) or "none beyond loopback now",
+        )
+
+
 def run(settings: ServerSettings) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     exposed = settings.plaintext_exposed()
@@ -145,11 +163,26 @@ def run(settings: ServerSettings) -> int:
             file=sys.stderr,
         )
         return 2
+    reachable = settings.network_exposed()
+    if reachable and not settings.auth and not settings.insecure:  # TLS or not: anyone who connects is admin
+        print(
+            f"camdirector serve: refusing to serve {', '.join(reachable)} without keys (--no-auth): anyone who "
+            "reaches it would be an admin. Drop --no-auth, bind to 127.0.0.1, or pass --insecure as well when "
+            "the network in front of it is yours alone.",
+            file=sys.stderr,
+        )
+        return 2
+    _warn_unsafe(settings, exposed)
     if settings.tls:
         for what in (settings.tls_cert, settings.tls_key):
             if not Path(what).is_file():
                 print(f"camdirector serve: TLS file {what} cannot be read", file=sys.stderr)
                 return 2
+    try:  # before anything is written or spawned: every process of the node inherits the umask
+        make_private(settings.data_dir)
+    except OSError as exc:
+        print(f"camdirector serve: {exc}", file=sys.stderr)
+        return 2
     try:  # the plugins register themselves in the front; every worker imports them again (worker/main.py)
         import_plugins(settings.plugins)
     except ValueError as exc:

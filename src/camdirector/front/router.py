@@ -64,7 +64,8 @@ class SessionRouter:
         self.pool = WorkerPool(settings, on_worker_lost=self._worker_lost)
         self.checkpoints = settings.checkpoint_store != "off"
         self.sessions: dict[str, SessionEntry] = {}
-        self._lost: OrderedDict[str, int] = OrderedDict()  # session id -> the worker slot that died with it
+        # session id -> (the worker slot that died with it, the session's tenant)
+        self._lost: OrderedDict[str, tuple[int, str]] = OrderedDict()
         self._reserved = 0  # creations in flight, counted against max_sessions
         self._reserved_by: dict[str, int] = {}  # the same by tenant, against tenant_max_sessions
         self._reaper: asyncio.Task | None = None
@@ -82,21 +83,25 @@ class SessionRouter:
         """The session's entry, when it is `tenant`'s. With `adopt` (a request of the session's
         client) and checkpoints, an unknown session of the tenant is given to the least loaded
         worker to restore (module docstring); other requests (the dashboard's) never move a
-        session here."""
+        session here. An id that is not the tenant's, unknown or another tenant's (held here, or
+        lost with its worker), takes one path: the same owner lookup, the same NOT_FOUND, so
+        neither its answer nor its time tells which it was."""
         entry = self.sessions.get(session_id)
-        if entry is None and adopt and self.checkpoints and self._owner(session_id) == tenant:
+        if entry is not None and entry.tenant == tenant:
+            return entry
+        owner = self._owner(session_id) if adopt and self.checkpoints else None
+        if entry is None and owner == tenant:
             now = self.clock()
             entry = self.sessions[session_id] = SessionEntry(
                 slot=self._least_loaded_slot(), created_s=now, last_seen_s=now, restoring=True, tenant=tenant
             )
-        if entry is None or entry.tenant != tenant:
-            if entry is None and session_id in self._lost:
-                raise unavailable(
-                    f"session {session_id!r} was lost: the worker process holding it (worker "
-                    f"{self._lost[session_id]}) died; create a new session"
-                )
-            raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
-        return entry
+            return entry
+        lost = self._lost.get(session_id)
+        if lost is not None and lost[1] == tenant:
+            raise unavailable(
+                f"session {session_id!r} was lost: the worker process holding it (worker {lost[0]}) died; create a new session"
+            )
+        raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
 
     def _owner(self, session_id: str) -> str | None:
         """The tenant of a session this node does not hold: from the records database with
@@ -251,8 +256,7 @@ class SessionRouter:
             log.error("worker %d died; its %d sessions are restored from their checkpoints on other workers", slot, len(lost))
             return
         for session_id in lost:
-            del self.sessions[session_id]
-            self._lost[session_id] = slot
+            self._lost[session_id] = (slot, self.sessions.pop(session_id).tenant)
             self.metrics.sessions_reclaimed.inc()
         while len(self._lost) > LOST_IDS_KEPT:
             self._lost.popitem(last=False)

@@ -7,7 +7,8 @@ many dashboards watching one session cost one render per period, not one per vie
 stream (`stream`) is a loop of such asks at its rate; it holds nothing but its place in the
 `streams` count, which its `finally` gives back when the viewer goes away. The top view never
 changes: it is kept until its entry is pushed out (the hub keeps MAX_ENTRIES pictures, the least
-recently asked dropped first).
+recently asked dropped first). With keys on, each tenant's live streams are also counted against
+its share (`ServerSettings.tenant_max_live_views`), so one tenant's viewers cannot hold every place.
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ class ViewHub:
         self._views: OrderedDict[tuple[str, str, ViewQuery], View] = OrderedDict()
         self._rendering: dict[tuple[str, str, ViewQuery], asyncio.Future] = {}
         self.streams = 0
+        self.streams_by_tenant: dict[str, int] = {}
         self._closing = asyncio.Event()
 
     async def get(self, session_id: str, query: ViewQuery, max_age_s: float, tenant: str = "default") -> View:
@@ -95,10 +97,14 @@ class ViewHub:
         finally:
             self._rendering.pop(key, None)
 
-    def check_stream_room(self) -> None:
-        """RESOURCE_EXHAUSTED when MAX_STREAMS live streams are open already."""
+    def check_stream_room(self, tenant: str) -> None:
+        """RESOURCE_EXHAUSTED when MAX_STREAMS live streams are open already, or (with keys on)
+        `tenant` holds its share of them."""
         if self.streams >= MAX_STREAMS:
             raise exhausted(f"the server serves its maximum of {MAX_STREAMS} live views")
+        share = self.router.settings.tenant_max_live_views
+        if self.router.guard.enabled and self.streams_by_tenant.get(tenant, 0) >= share:
+            raise exhausted(f"tenant {tenant!r} has its maximum of {share} live views open on this node; close one first")
 
     async def stream(
         self, session_id: str, query: ViewQuery, fps: float, first: View, tenant: str = "default"
@@ -108,6 +114,7 @@ class ViewHub:
         away (the caller stops iterating, or is cancelled). Counted in `streams` while it runs."""
         period_s = 1.0 / fps
         self.streams += 1
+        self.streams_by_tenant[tenant] = self.streams_by_tenant.get(tenant, 0) + 1
         self.metrics.view_streams.set(self.streams)
         try:
             view = first
@@ -129,6 +136,9 @@ class ViewHub:
                     yield view
         finally:
             self.streams -= 1
+            self.streams_by_tenant[tenant] -= 1
+            if not self.streams_by_tenant[tenant]:
+                del self.streams_by_tenant[tenant]
             self.metrics.view_streams.set(self.streams)
 
     def close(self) -> None:

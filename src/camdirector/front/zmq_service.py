@@ -34,6 +34,7 @@ log = logging.getLogger("camdirector.zmq")
 TRANSPORT = "zmq"
 
 
+ENVELOPE_SLACK_BYTES = 64 * 1024  # over max_message_bytes a frame may be and still get an answer, bytes
 CURVE_DIR = "zmq"  # in the data directory: server.key (public) and server.key_secret
 
 
@@ -72,9 +73,10 @@ class ZmqTransport:
         if curve is not None:
             self.socket.curve_server = True
             self.socket.curve_publickey, self.socket.curve_secretkey = curve
-        # ZeroMQ drops (and disconnects) anything far over the limit before we see it; between the
-        # limit and this cap we answer RESOURCE_EXHAUSTED ourselves.
-        self.socket.setsockopt(zmq.MAXMSGSIZE, 2 * router.settings.max_message_bytes)
+        # libzmq drops a frame over this cap as its length arrives, before reading it, and
+        # disconnects the peer: an oversized message costs the loop nothing, key or not. A frame
+        # between the limit and the cap (CURVE's box included) is answered RESOURCE_EXHAUSTED.
+        self.socket.setsockopt(zmq.MAXMSGSIZE, router.settings.max_message_bytes + ENVELOPE_SLACK_BYTES)
         self.socket.bind(address)
         self.address = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         self._loop_task: asyncio.Task | None = None
@@ -113,10 +115,10 @@ class ZmqTransport:
                 raise unimplemented(
                     f"unknown RPC {name[:64]!r}; expected one of CreateSession, Frame, UpdateStyle, TakeShot, CloseSession"
                 )
-            need, call = handler
-            caller = self.guard.authorize(authorization, need.verb, fresh=need.fresh)
-            if len(payload) > self.router.settings.max_message_bytes:
+            if len(payload) > self.router.settings.max_message_bytes:  # the size first: it costs nothing
                 raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
+            need, call = handler
+            caller = self.guard.authorize(authorization, need.verb, fresh=need.fresh)  # before the payload is parsed
             reply = [b"0", await call(payload, caller)]
         except DirectorError as exc:
             self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()

@@ -3,8 +3,9 @@ jobs/records.py; keys, session owners and the audit, access/keys.py; the level i
 precompute/tracks/registry.py): opened lazily and again after PostgreSQL dropped it, one
 statement at a time behind a lock, `?` placeholders as SQLite's (so both record stores write
 their SQL once), and an unreachable database raised as the caller's own error with a one-line
-reason and the password hidden. `PostgresStore` is what those three stores' PostgreSQL side
-shares: the tables created once when it opens, each write one transaction under its write lock.
+reason and the URL's secrets hidden (infra/redaction.py). `PostgresStore` is what those three
+stores' PostgreSQL side shares: the tables created once when it opens, each write one transaction
+under its write lock.
 psycopg is imported only when used: a single node on SQLite never loads it."""
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import contextlib
 import threading
 from collections.abc import Iterator, Sequence
 from typing import Any
+
+from camdirector.infra.redaction import redacted
 
 CONNECT_TIMEOUT_S = 5  # seconds to wait for PostgreSQL to answer a connection before calling it down
 
@@ -124,12 +127,3 @@ def is_unique_violation(exc: Exception) -> bool:
     import psycopg
 
     return isinstance(exc, psycopg.errors.UniqueViolation)
-
-
-def redacted(url: str) -> str:
-    """The URL without its password, for messages."""
-    scheme, sep, rest = url.partition("://")
-    userinfo, at, host = rest.rpartition("@")
-    if not at or ":" not in userinfo:
-        return url
-    return f"{scheme}{sep}{userinfo.split(':', 1)[0]}:***@{host}"

@@ -7,15 +7,25 @@ postgres.PostgresStore."""
 from __future__ import annotations
 
 import contextlib
+import os
 import sqlite3
 import threading
 from collections.abc import Iterator
 from pathlib import Path
 
 
+def create_private(path: str | Path) -> None:
+    """Creates the database file at `path` 0600 when missing, before SQLite opens it: SQLite gives
+    the -wal and -shm files it creates the main file's mode, whatever the umask, and the WAL holds
+    what is written in clear (a key's hash, the cookie secret). An empty file is an empty database
+    to SQLite."""
+    os.close(os.open(path, os.O_RDWR | os.O_CREAT, 0o600))
+
+
 class SqliteDatabase:
     def __init__(self, path: str | Path, schema: str) -> None:
         self._lock = threading.Lock()
+        create_private(path)
         self._db = sqlite3.connect(path, timeout=30.0, isolation_level=None, check_same_thread=False)
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")

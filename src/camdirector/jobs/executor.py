@@ -135,7 +135,7 @@ class JobExecutor:
                 JobState.FAILED,
                 only_if=JobState.RUNNING,
                 attempt=job.attempts,
-                error=f"cannot start a job process: {type(exc).__name__}: {exc}",
+                error=f"cannot start a job process ({type(exc).__name__}); the server's log has the details",
             )
             return None
         child_conn.close()
@@ -277,12 +277,13 @@ class JobExecutor:
                 a.job.id, JobState.SUCCEEDED, timings_ms=timings, only_if=JobState.RUNNING, attempt=a.job.attempts, publish=rename
             )
         except OSError as exc:  # the rename failed: the transaction was rolled back
+            log.error("job %s: cannot store the result: %s", a.job.id, exc)  # names paths: the log's, not the client's
             self.store.finish(
                 a.job.id,
                 JobState.FAILED,
                 only_if=JobState.RUNNING,
                 attempt=a.job.attempts,
-                error=f"cannot store the result: {exc}",
+                error=f"cannot store the result ({type(exc).__name__}); the server's log has the details",
             )
 
 

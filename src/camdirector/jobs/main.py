@@ -23,7 +23,7 @@ def job_main(
     function: JobFunction, params: dict, input_dir: str, output_dir: str, conn: multiprocessing.connection.Connection
 ) -> None:
     """Entry point of a job process: messages ("started", unix_s), ("progress", f), then
-    ("ok", timings) or ("error", message)."""
+    ("ok", timings) or ("error", message): a JobError's own, or for any other exception its type."""
     conn.send(("started", time.time()))
     die_with_parent()  # a job does not outlive a killed server or queue worker
     last = [0.0, -1.0]
@@ -43,6 +43,8 @@ def job_main(
         conn.send(("error", str(exc)))
     except BaseException as exc:  # report everything: the parent only sees the exit code otherwise
         log.error("job failed:\n%s", traceback.format_exc())
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        # the job's error is its client's to read: an unexpected exception's words may name a path,
+        # a database or a host, so they go to the log only (as errors.internal does for requests)
+        conn.send(("error", f"internal error ({type(exc).__name__}) in the job; the server's log has the details"))
     finally:
         conn.close()

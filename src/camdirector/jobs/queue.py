@@ -51,6 +51,7 @@ import redis
 from dramatiq.brokers.redis import MAINTENANCE_SCALE, RedisBroker
 from dramatiq.middleware import Retries
 
+from camdirector.infra.redaction import redacted
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobRegistry
 from camdirector.jobs.records import Job, JobState, JobsUnavailable, open_store
@@ -83,7 +84,7 @@ def broker_for(settings: JobSettings, *, worker: bool) -> RedisBroker:
     try:
         broker.client.ping()
     except redis.RedisError as exc:
-        raise JobsUnavailable(f"job queue {url} is unreachable: {redis_reason(exc)}") from None
+        raise JobsUnavailable(f"job queue {redacted(url)} is unreachable: {redis_reason(exc)}") from None
     return broker
 
 
@@ -119,9 +120,11 @@ class QueueClient:
         try:
             self._actor.send(job.id)
         except redis.RedisError as exc:
-            reason = f"job queue {self.settings.job_queue} is unreachable: {redis_reason(exc)}"
-            self.store.finish(job.id, JobState.FAILED, error=f"could not be queued: {reason}", only_if=JobState.QUEUED)
-            raise JobsUnavailable(reason) from None
+            # the job's error is the client's to read: it names no URL or host (the log does)
+            self.store.finish(
+                job.id, JobState.FAILED, error="could not be queued: the job queue is unreachable", only_if=JobState.QUEUED
+            )
+            raise JobsUnavailable(f"job queue {redacted(self.settings.job_queue)} is unreachable: {redis_reason(exc)}") from None
         return job
 
     def get(self, job_id: str) -> Job:

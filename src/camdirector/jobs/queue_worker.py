@@ -16,6 +16,8 @@ from pathlib import Path
 import dramatiq
 import redis
 
+from camdirector.infra.private_files import make_private
+from camdirector.infra.redaction import redacted
 from camdirector.jobs.executor import PURGE_INTERVAL_S, JobExecutor, purge_expired
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobRegistry, service_kinds
@@ -74,7 +76,7 @@ class QueueWorker:
             "queue worker %s: %d job(s) at a time from %s",
             self.worker_id,
             self.settings.max_concurrent_jobs,
-            self.settings.job_queue,
+            redacted(self.settings.job_queue),
         )
         ready()
         next_purge = 0.0
@@ -99,7 +101,7 @@ class QueueWorker:
         try:
             self._broker.do_qsize(QUEUE_NAME)
         except redis.RedisError as exc:
-            log.warning("job queue %s: %s", self.settings.job_queue, redis_reason(exc))
+            log.warning("job queue %s: %s", redacted(self.settings.job_queue), redis_reason(exc))
 
     def _run_message(self, job_id: str) -> None:
         """One message: claim its job and run it here; when this worker stops first, the message
@@ -120,8 +122,9 @@ def run_job_worker(data_dir: str | Path, settings: JobSettings) -> int:
 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
+        make_private(data_dir)  # before the job store and the forkserver: its job processes inherit the umask
         worker = QueueWorker(data_dir, settings)
-    except JobsUnavailable as exc:
+    except (JobsUnavailable, OSError) as exc:
         print(f"camdirector job-worker: {exc}", file=sys.stderr)
         return 2
     for sig in (signal.SIGTERM, signal.SIGINT):

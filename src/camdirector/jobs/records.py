@@ -44,6 +44,7 @@ from enum import Enum
 from pathlib import Path
 
 from camdirector.infra.postgres import PostgresStore, advisory_lock
+from camdirector.infra.redaction import redacted
 from camdirector.infra.sqlite import SqliteStore
 from camdirector.infra.tenants import DEFAULT_TENANT
 
@@ -542,4 +543,4 @@ def open_store(url: str, root: str | Path) -> JobStore:
         return SqliteJobStore(root)
     if url.startswith(("postgresql://", "postgres://")):
         return PostgresJobStore(url, root)
-    raise ValueError(f"job store {url!r}: expected empty (SQLite) or a postgresql:// URL")
+    raise ValueError(f"job store {redacted(url)!r}: expected empty (SQLite) or a postgresql:// URL")

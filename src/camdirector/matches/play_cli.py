@@ -1,7 +1,7 @@
 """`camdirector play-match`: a recorded match streamed live into a server, to rehearse with the dashboard.
 
     camdirector play-match MATCH --server URL [--speed 1.0] [--delay-s 10] [--rate-hz 30]
-                           [--director NAME] [--key KEY] [--ca-file CA]
+                           [--director NAME] [--key-file PATH] [--ca-file CA]
                            [--session-id-file PATH] [--loop]
         opens a RIG_MATCH session for the match's players on its level (the server must hold the
         level: camdirector level add) with the broadcast delay, and streams the match over one
@@ -10,8 +10,9 @@
         session id (open it in the dashboard; --session-id-file writes it there too), then one
         line per cut, then the summary: frames sent, answered, cuts, late frames (sent more than a
         frame period after due). Ctrl-C (SIGINT) stops sending: the server answers what was sent,
-        the stream ends and the session is closed; a second Ctrl-C stops at once. The key
-        defaults to the CAMDIRECTOR_KEY environment variable.
+        the stream ends and the session is closed; a second Ctrl-C stops at once. The key is
+        read from --key-file (a file holding it, or - for stdin), else the CAMDIRECTOR_KEY
+        environment variable; --key KEY works too, but puts the key where `ps` shows it.
         Exit status: 0 played to the end, 1 the stream failed, 2 bad arguments, match file,
         server, level or key, 130 stopped by Ctrl-C.
 
@@ -54,7 +55,11 @@ def add_parser(subparsers) -> None:
         metavar="NAME",
         help="who directs: a match director the server has (GET /v1/match-directors; default planned)",
     )
-    p.add_argument("--key", help="API key (default: the CAMDIRECTOR_KEY environment variable)")
+    key = p.add_mutually_exclusive_group()
+    key.add_argument(
+        "--key-file", dest="key_file", metavar="PATH", help="a file holding the API key (-: stdin; default: CAMDIRECTOR_KEY)"
+    )
+    key.add_argument("--key", help="the API key itself (visible in `ps`: prefer --key-file or CAMDIRECTOR_KEY)")
     p.add_argument("--ca-file", dest="ca_file", type=Path, help="grpcs:// only: PEM authorities to trust")
     p.add_argument("--session-id-file", dest="session_id_file", type=Path, help="write the session id here too")
     p.add_argument("--loop", action="store_true", help="play the match again and again until Ctrl-C")
@@ -83,6 +88,7 @@ def _refusal(server: str, error) -> str:
 def run_play_match(args: argparse.Namespace) -> int:
     """Runs `camdirector play-match` from parsed arguments; returns the exit status."""
     import camdirector_client as cd
+    from camdirector.access.keys import read_key_file
     from camdirector.evaluation.match.match_file import load_match
     from camdirector.matches.playback import lap_feeds, play_match
 
@@ -96,7 +102,8 @@ def run_play_match(args: argparse.Namespace) -> int:
         match = load_match(args.file)
         if args.rate_hz > match.rate_hz:
             raise ValueError(f"--rate-hz {args.rate_hz:g} is above the file's {match.rate_hz:g} Hz")
-        client = cd.connect(args.server, key=args.key, ca_file=args.ca_file)
+        key = read_key_file(args.key_file) if args.key_file is not None else args.key
+        client = cd.connect(args.server, key=key, ca_file=args.ca_file)
     except (OSError, ValueError) as exc:
         return _fail(str(exc))
 

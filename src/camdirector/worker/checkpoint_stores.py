@@ -36,6 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from camdirector.infra.redaction import redacted
+
 log = logging.getLogger("camdirector.checkpoints")
 
 OPS = ("frame", "style", "take")  # the inputs a checkpoint keeps, by code
@@ -329,7 +331,7 @@ class RedisStore:
             try:
                 self._client.ping()
             except self._errors as exc:
-                raise CheckpointError(f"the checkpoint store {url} does not answer: {exc}") from None
+                raise CheckpointError(f"the checkpoint store {redacted(url)} does not answer: {exc}") from None
         self._append = self._client.register_script(_APPEND)
         self._snapshot = self._client.register_script(_SNAPSHOT)
         self._begin = self._client.register_script(_BEGIN)
@@ -344,7 +346,7 @@ class RedisStore:
         try:
             return script(keys=self._keys(session_id), args=args)
         except self._errors as exc:
-            raise CheckpointError(f"{what} of session {session_id}'s checkpoint in {self.url} failed: {exc}") from None
+            raise CheckpointError(f"{what} of session {session_id}'s checkpoint in {redacted(self.url)} failed: {exc}") from None
 
     def begin(self, session_id: str, owner: str, create: bytes) -> None:
         self._call("the start", session_id, self._begin, [owner, create, self._keep_ms])
@@ -364,7 +366,7 @@ class RedisStore:
                 pipe.lrange(log_key, 0, -1)
                 meta, log_entries = pipe.execute()
         except self._errors as exc:
-            raise CheckpointError(f"reading session {session_id}'s checkpoint in {self.url} failed: {exc}") from None
+            raise CheckpointError(f"reading session {session_id}'s checkpoint in {redacted(self.url)} failed: {exc}") from None
         if b"create" not in meta:
             return None
         seq = int(meta.get(b"seq", 0))

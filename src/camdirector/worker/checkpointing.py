@@ -172,8 +172,9 @@ class Checkpointing:
             return None
         try:
             return self.store.load(session_id)
-        except CheckpointError as exc:
-            raise unavailable(f"session {session_id} cannot be restored now: {exc}") from None
+        except CheckpointError as exc:  # its words name the store's URL or folder: the log's, not the client's
+            log.warning("session %s cannot be restored now: %s", session_id, exc)
+            raise unavailable(f"session {session_id} cannot be restored now: its checkpoint store does not answer") from None
 
     def end(self, session_id: str, keep_checkpoint: bool) -> None:
         """A session the table no longer holds: its checkpoint is deleted, or with

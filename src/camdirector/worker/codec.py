@@ -22,7 +22,10 @@ an unknown name is refused, listing the registered ones, and `shown_style` shows
 `pose_outputs` (at most 8) are checked here, before the scene: a known format, an address
 `udp://HOST:PORT` whose HOST is an IPv4 address or a name that resolves to one (once, here, within
 2 s; IPv6 is refused: OpenTrackIO 1.0.1 has none), a port in [1, 65535], a source number in the
-format's range and a sensor height in [1, 100] mm (0: 24). Sending is worker/pose_out.py's.
+format's range and a sensor height in [1, 100] mm (0: 24), and the address it resolved to inside one
+of the networks the operator allowed (`ServerSettings.pose_output_allow`, loopback by default): a
+key to a session is not a key to make the server send datagrams anywhere. Sending is
+worker/pose_out.py's.
 """
 
 from __future__ import annotations
@@ -366,8 +369,8 @@ def _resolve_ipv4(host: str, what: str) -> str:
         raise invalid(f"{what}: host {host!r} does not resolve to an IPv4 address") from None
 
 
-def _udp_address(address: str, what: str) -> tuple[str, int]:
-    """(IPv4 address, port) of a `udp://HOST:PORT`."""
+def _udp_address(address: str, what: str, allowed: tuple[str, ...]) -> tuple[str, int]:
+    """(IPv4 address, port) of a `udp://HOST:PORT` whose address is in one of the `allowed` networks."""
     scheme, separator, rest = address.partition("://")
     if not separator or scheme.lower() != "udp":
         raise invalid(f"{what} {address!r} is not udp://HOST:PORT")
@@ -385,10 +388,16 @@ def _udp_address(address: str, what: str) -> tuple[str, int]:
     port = int(port_text)
     if not 1 <= port <= 65535:
         raise invalid(f"{what} {address!r}: port {port} is out of range [1, 65535]")
-    return _resolve_ipv4(host, what), port
+    resolved = _resolve_ipv4(host, what)
+    if not any(ipaddress.IPv4Address(resolved) in ipaddress.IPv4Network(network) for network in allowed):
+        raise invalid(
+            f"{what} {address!r}: this server sends poses only to the networks its operator allowed, "
+            "and this address is outside them (the operator adds one with `camdirector serve --pose-output-allow`)"
+        )
+    return resolved, port
 
 
-def pose_output_from_msg(msg: pb.PoseOutput, what: str) -> PoseOutputSpec:
+def pose_output_from_msg(msg: pb.PoseOutput, what: str, allowed: tuple[str, ...]) -> PoseOutputSpec:
     try:
         fmt = PoseFormat(msg.format)
     except ValueError:
@@ -411,15 +420,16 @@ def pose_output_from_msg(msg: pb.PoseOutput, what: str) -> PoseOutputSpec:
             f"{what}.sensor_height_mm must be in [{low_mm:g}, {high_mm:g}] mm "
             f"(0 means {DEFAULT_SENSOR_HEIGHT_MM:g}), got {msg.sensor_height_mm}"
         )
-    host, port = _udp_address(msg.address, f"{what}.address")
+    host, port = _udp_address(msg.address, f"{what}.address", allowed)
     return PoseOutputSpec(fmt, msg.address, host, port, source_number, float(height))
 
 
-def pose_outputs_from_request(req: pb.CreateSessionRequest) -> list[PoseOutputSpec]:
-    """The session's pose outputs, checked (module docstring); empty when it asks for none."""
+def pose_outputs_from_request(req: pb.CreateSessionRequest, allowed: tuple[str, ...]) -> list[PoseOutputSpec]:
+    """The session's pose outputs, checked (module docstring), each to an address in one of the
+    `allowed` networks (CIDR); empty when it asks for none."""
     if len(req.pose_outputs) > MAX_POSE_OUTPUTS:
         raise invalid(f"a session has at most {MAX_POSE_OUTPUTS} pose_outputs, got {len(req.pose_outputs)}")
-    return [pose_output_from_msg(output, f"pose_outputs[{i}]") for i, output in enumerate(req.pose_outputs)]
+    return [pose_output_from_msg(output, f"pose_outputs[{i}]", allowed) for i, output in enumerate(req.pose_outputs)]
 
 
 def events_from_msg(msg: pb.FrameUpdate, player_ids: frozenset[str] | None, delay_s: float) -> list[GameEvent]:

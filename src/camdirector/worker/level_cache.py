@@ -11,14 +11,17 @@ registry's namespaces): another tenant's name answers NOT_FOUND as an unknown on
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
-from camdirector.errors import not_found, precondition, unavailable
+from camdirector.errors import DirectorError, not_found, precondition, unavailable
 from camdirector.geometry.meshes import TriMesh
 from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.inputs import LoadedLevel
 from camdirector.precompute.tracks.artifact import ArtifactVersionError
 from camdirector.precompute.tracks.registry import LevelRegistry, LevelsUnavailable
+
+log = logging.getLogger("camdirector.worker.level_cache")
 
 
 class LevelCache:
@@ -42,11 +45,11 @@ class LevelCache:
                 self._registry = LevelRegistry(self.data_dir, self.records_url)
             record = self._registry.get(name, tenant)
         except LevelsUnavailable as exc:
-            raise unavailable(str(exc)) from None
+            raise _index_down(exc) from None
         if record is None:
             self._levels.pop(key, None)  # removed: sessions on it keep their own reference
             raise not_found(
-                f"level_id {name!r} is not in this server's level registry ({self._registry.where}); "
+                f"level_id {name!r} is not in this server's level registry; "
                 "add it with `camdirector level add` or POST /v1/levels"
             )
         cached = self._levels.get(key)
@@ -57,9 +60,20 @@ class LevelCache:
         except KeyError:
             raise not_found(f"level_id {name!r} was removed from the level registry") from None
         except LevelsUnavailable as exc:
-            raise unavailable(str(exc)) from None
+            raise _index_down(exc) from None
         except ArtifactVersionError as exc:
-            raise precondition(f"level_id {name!r}: {exc}") from None
+            log.warning("level %r of tenant %s: %s", name, tenant, exc)  # the message names the file: not the client's
+            raise precondition(
+                f"level_id {name!r} was built by another version of the precompute; add it again "
+                "(`camdirector level add` or POST /v1/levels)"
+            ) from None
         level = LoadedLevel(name, artifact, TriMesh(artifact.level_vertices, artifact.level_faces))
         self._levels[key] = (record.artifact_path.name, level)
         return level
+
+
+def _index_down(exc: LevelsUnavailable) -> DirectorError:
+    """UNAVAILABLE in words that name no database or host (any tenant's engine key reads them);
+    the reason, the URL's secrets hidden, goes to the server's log."""
+    log.warning("%s", exc)
+    return unavailable("the level index is unreachable; retry later")

@@ -96,7 +96,8 @@ class SessionTable:
         if req.record or self.settings.record_all:
             held.recorder = self._recorder(session_id)
             held.recorder.write(pb.RecordEntry(create=req))
-            response.recording_path = str(held.recorder.path)
+            # its name in the recordings folder, never the server's path (docs/protocol.md)
+            response.recording_path = held.recorder.path.name
         self.checkpoints.begin(session_id, held.checkpoint, req, payload, tenant)
         return response
 
@@ -133,7 +134,7 @@ class SessionTable:
         self._snapshot(self.get(session_id), claim=True)
 
     def _build(self, session_id: str, req: pb.CreateSessionRequest, tenant: str) -> HeldSession:
-        pose_outputs = codec.pose_outputs_from_request(req)  # cheap checks before the scene's meshes
+        pose_outputs = codec.pose_outputs_from_request(req, self.settings.pose_output_allow)  # cheap checks before the meshes
         scene = codec.scene_from_request(req, self.settings, self.levels, tenant)
         held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
         if pose_outputs:  # a failure from here on drops the session (dispatch.py)

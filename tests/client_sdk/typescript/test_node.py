@@ -263,27 +263,30 @@ def test_zeromq_curve_and_keys(zmq_server, monkeypatch):
     )
 
 
-def _said_protocol(url: str, tmp_path: Path, **connect_options) -> int:
+def _said_protocol(srv: ServerProcess, transport: str, tmp_path: Path, **connect_options) -> int:
     """test/protocol.test.mjs against `url`; the client_protocol its recorded session's
     CreateSessionRequest reached the server with (the recording's first entry)."""
     from camdirector.worker.recording import read_entries
 
     out = tmp_path / "protocol.json"
     node_test(
-        "protocol", CAMDIRECTOR_TEST_URL=url, CAMDIRECTOR_TEST_OUT=str(out), CAMDIRECTOR_TEST_CONNECT=json.dumps(connect_options)
+        "protocol",
+        CAMDIRECTOR_TEST_URL=srv.url(transport),
+        CAMDIRECTOR_TEST_OUT=str(out),
+        CAMDIRECTOR_TEST_CONNECT=json.dumps(connect_options),
     )
     said = json.loads(out.read_text())
     assert said["protocol"] == PROTOCOL, "the SDK's PROTOCOL (src/wire.ts) is the server's"
-    return next(read_entries(Path(said["recordingPath"]))).create.client_protocol
+    return next(read_entries(srv.data_dir / "recordings" / said["recordingPath"])).create.client_protocol
 
 
 def test_create_session_says_the_protocol_over_grpc(server, tmp_path):
-    assert _said_protocol(server.url("grpc"), tmp_path) == PROTOCOL
+    assert _said_protocol(server, "grpc", tmp_path) == PROTOCOL
 
 
 def test_create_session_says_the_protocol_over_zeromq(zmq_server, tmp_path, monkeypatch):
     monkeypatch.delenv(wire.KEY_ENV, raising=False)
-    said = _said_protocol(zmq_server.url("zmq"), tmp_path, key=zmq_server.admin_key, zmqServerKey=zmq_server.zmq_server_key)
+    said = _said_protocol(zmq_server, "zmq", tmp_path, key=zmq_server.admin_key, zmqServerKey=zmq_server.zmq_server_key)
     assert said == PROTOCOL
 
 

@@ -2,17 +2,18 @@
 director's dashboard (static files under /dashboard/ that read those routes).
 
 Every route but `/healthz` (balancers probe it) and the dashboard's static files asks for a key
-(auth.py); `/metrics` wants an admin's."""
+(auth.py); `/metrics` wants an admin's. Without keys, only this server's own address and pages
+may use it (own_origin.py)."""
 
 from __future__ import annotations
 
-import secrets
 from pathlib import Path
 from typing import Annotated
 
 from fastapi import Depends, FastAPI, Request, Response
 from fastapi.exception_handlers import http_exception_handler
-from fastapi.responses import PlainTextResponse, RedirectResponse
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, PlainTextResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -21,6 +22,8 @@ from starlette.routing import compile_path
 from camdirector.access.guard import Identity
 from camdirector.access.roles import Verb
 from camdirector.front.http.auth import CookieSigner, require
+from camdirector.front.http.body_limits import install_request_gate
+from camdirector.front.http.own_origin import OwnOriginOnly
 from camdirector.front.http.routes.access import build_access_router
 from camdirector.front.http.routes.directors import build_director_router
 from camdirector.front.http.routes.monitors import build_view_router
@@ -40,17 +43,25 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
         title="camdirector",
         version=VERSION,
         description="Automated cinematographer: health, metrics, sessions, monitors, and offline jobs.",
+        # No Swagger UI or ReDoc: FastAPI's pages load their scripts from a CDN, unpinned, into the
+        # origin that holds the login cookie. The document itself is an admin's (openapi_document).
+        docs_url=None,
+        redoc_url=None,
+        openapi_url=None,
     )
     app.state.views = ViewHub(router, router.metrics)
     app.state.guard = guard = router.guard
-    app.state.cookies = CookieSigner(
-        guard.key_store().shared_secret("dashboard-cookie") if guard.enabled else secrets.token_bytes(32)
-    )
+    app.state.cookies = CookieSigner(lambda: guard.login_secret)
+    install_request_gate(app, router.settings.max_json_body_bytes)
+    if not guard.enabled:  # added after the gate, so outside it: a request it refuses reaches nothing
+        app.add_middleware(OwnOriginOnly, bound=transports["http"], configured=router.settings.http_addr)
 
     @app.get("/healthz")
     def healthz() -> dict:
         """Liveness and a short status: version and protocol, open sessions, worker processes, bound
-        transports (a cluster upgraded node by node shows which node runs what)."""
+        transports (a cluster upgraded node by node shows which node runs what), and whether keys
+        are checked (`auth`: false under --no-auth) and plaintext beyond loopback allowed
+        (`insecure`), so a node started unsafely shows it."""
         return {
             "status": "ok",
             "version": VERSION,
@@ -58,6 +69,8 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
             "sessions": len(router.sessions),
             "workers": router.pool.size,
             "transports": transports,
+            "auth": guard.enabled,
+            "insecure": router.settings.insecure,
         }
 
     @app.exception_handler(StarletteHTTPException)
@@ -77,6 +90,13 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
                 exc = StarletteHTTPException(405, exc.detail, headers={"Allow": ", ".join(allowed)})
         return await http_exception_handler(request, exc)
 
+    @app.exception_handler(RequestValidationError)
+    async def validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        """FastAPI's 422 without the `input` (and `ctx`) it copies from the request: an error
+        never echoes what was sent (a body, a key sent in the wrong place)."""
+        errors = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
+        return JSONResponse({"detail": errors}, status_code=422)
+
     @app.get("/metrics", response_class=PlainTextResponse)
     def metrics(_: Annotated[Identity, Depends(require(Verb.METRICS_READ))]) -> Response:
         """Prometheus text exposition."""
@@ -93,13 +113,19 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
     def root() -> RedirectResponse:
         return RedirectResponse("/dashboard/")
 
+    @app.get("/openapi.json", include_in_schema=False)
+    def openapi_document(_: Annotated[Identity, Depends(require(Verb.SCHEMA_READ))]) -> JSONResponse:
+        """The REST API's OpenAPI document, for an admin's tools (schemathesis, client generators)."""
+        return JSONResponse(app.openapi())
+
     _document_key_answers(app)
     return app
 
 
 def _document_key_answers(app: FastAPI) -> None:
     """Every operation that takes a key (its `security`, auth.py's scheme) documents the 401 and
-    403 it answers, routes installed later included (the document is built on first request)."""
+    403 it answers, and every one that takes a body the 413 of its limit (body_limits.py), routes
+    installed later included (the document is built on first request)."""
     build = app.openapi
 
     def openapi() -> dict:
@@ -110,6 +136,8 @@ def _document_key_answers(app: FastAPI) -> None:
                     responses = operation.setdefault("responses", {})
                     responses.setdefault("401", {"description": "no key, an unknown one or a revoked one"})
                     responses.setdefault("403", {"description": "the key's role may not do this"})
+                if "requestBody" in operation:
+                    operation["responses"].setdefault("413", {"description": "the body is larger than the route's limit"})
         return schema
 
     app.openapi = openapi  # type: ignore[method-assign]  # FastAPI's documented way to extend its schema

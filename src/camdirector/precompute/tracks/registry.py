@@ -49,7 +49,9 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.infra.postgres import PostgresStore, advisory_lock, is_unique_violation, redacted
+from camdirector.infra.postgres import PostgresStore, advisory_lock, is_unique_violation
+from camdirector.infra.redaction import redacted
+from camdirector.infra.sqlite import create_private
 from camdirector.infra.tenants import DEFAULT_TENANT, check_tenant
 from camdirector.precompute.tracks.artifact import FORMAT_VERSION, LevelArtifact, load_artifact, save_artifact
 from camdirector.precompute.tracks.level_mesh import load_level_mesh
@@ -130,8 +132,6 @@ class LevelIndex:
     something with `execute(sql, args) -> cursor`), `_read()` (the same for one read),
     `_is_duplicate(exc)` and `close()`."""
 
-    where: str  # for messages: where the rows live
-
     def _tx(self) -> contextlib.AbstractContextManager:
         raise NotImplementedError
 
@@ -187,7 +187,7 @@ class SqliteLevelIndex(LevelIndex):
 
     def __init__(self, levels_dir: Path) -> None:
         self._db_path = Path(levels_dir) / self.DB_NAME
-        self.where = str(self._db_path)
+        create_private(self._db_path)
         with contextlib.closing(self._connect()) as db:
             db.execute("PRAGMA journal_mode=WAL")
             db.execute(_SCHEMA.format(real="REAL"))
@@ -231,7 +231,6 @@ class PostgresLevelIndex(PostgresStore, LevelIndex):
     when the database cannot be reached."""
 
     def __init__(self, url: str) -> None:
-        self.where = f"{redacted(url)} (table levels)"
         PostgresStore.__init__(
             self,
             url,
@@ -252,7 +251,7 @@ def open_level_index(records_url: str, levels_dir: Path) -> LevelIndex:
         return SqliteLevelIndex(levels_dir)
     if records_url.startswith(("postgresql://", "postgres://")):
         return PostgresLevelIndex(records_url)
-    raise ValueError(f"level index {records_url!r}: expected empty (SQLite) or a postgresql:// URL")
+    raise ValueError(f"level index {redacted(records_url)!r}: expected empty (SQLite) or a postgresql:// URL")
 
 
 # -- the registry -----------------------------------------------------------------------------------
@@ -269,13 +268,6 @@ class LevelRegistry:
         self.levels_dir.mkdir(parents=True, exist_ok=True)
         self.records_url = records_url
         self.index = open_level_index(records_url, self.levels_dir)
-
-    @property
-    def where(self) -> str:
-        """For messages: the index, and the artifacts' folder when the index is elsewhere."""
-        if isinstance(self.index, SqliteLevelIndex):
-            return str(self.data_dir)
-        return f"{self.index.where}, artifacts in {self.levels_dir}"
 
     def close(self) -> None:
         self.index.close()

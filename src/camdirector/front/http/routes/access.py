@@ -1,11 +1,12 @@
 """REST routes of keys, logins and the audit trail (access/, docs/security.md).
 
 POST   /v1/login        body {"key": KEY} -> the caller; sets the dashboard's login cookie
-POST   /v1/logout       clears it
+POST   /v1/logout       ends the login (on every node) and clears the cookie
 GET    /v1/whoami       the caller: key id, role, tenant (and the CSRF token with the cookie)
 GET    /v1/keys         the tenant's keys (admin)
 POST   /v1/keys         body {"role", "name"} -> 201 the new key, shown this once (admin)
 DELETE /v1/keys/{id}    revoke one of the tenant's keys (admin): refused at once on every node
+(Without keys, `--no-auth`, both writes answer 403: a key made then would outlive the run.)
 GET    /v1/audit?after_seq=&limit=   the tenant's takes, releases, style, level and key changes (admin)
 """
 
@@ -85,6 +86,18 @@ def _caller(request: Request, identity: Identity, cookie: str | None) -> dict:
     }
 
 
+def _keys_on(guard: Guard) -> None:
+    """403 for a change of keys on a server without keys: a key made by a caller nobody checked
+    would stay valid once keys are turned on (and, an admin's, stop the first start with keys
+    from writing admin.key); a key revoked so could lock out the real admin."""
+    if not guard.enabled:
+        raise HTTPException(
+            403,
+            "this server runs without keys (--no-auth): keys are made and revoked only with "
+            "authentication on (an admin key, or `camdirector keys` on the server's machine)",
+        )
+
+
 def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     routes = APIRouter(prefix="/v1", tags=["access"])
 
@@ -105,8 +118,12 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
         return _caller(request, identity, cookie)
 
     @routes.post("/logout", status_code=204, response_class=Response)
-    def logout() -> Response:
-        """Forgets the login cookie."""
+    def logout(request: Request) -> Response:
+        """Ends the login its cookie names, on every node (a copy of the cookie is refused too), and
+        has the browser forget the cookie."""
+        login = request.app.state.cookies.login(request.cookies.get(COOKIE, ""))
+        if login is not None:  # a valid cookie: only logins made with keys on have one
+            guard.end_login(login.login_id, login.expires_s)
         response = Response(status_code=204)
         response.delete_cookie(COOKIE, path="/", httponly=True, samesite="strict", secure=secure_cookie)
         return response
@@ -125,6 +142,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     @routes.post("/keys", status_code=201, response_model=KeyCreated, responses={400: _NOT_JSON})
     def create_key(identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))], body: Annotated[NewKey, Body()]) -> dict:
         """A new key of the caller's tenant."""
+        _keys_on(guard)
         record, text = guard.key_store().create_key(body.role, identity.tenant, body.name)
         guard.audit(identity, "key.create", None, {"key_id": record.key_id, "role": body.role, "name": body.name})
         return {**record.as_public(), "key": text}
@@ -132,6 +150,7 @@ def build_access_router(guard: Guard, secure_cookie: bool) -> APIRouter:
     @routes.delete("/keys/{key_id}", response_model=KeyOut, responses={404: {"description": "no such key"}})
     def revoke_key(key_id: str, identity: Annotated[Identity, Depends(require(Verb.KEY_MANAGE))]) -> dict:
         """Revokes one of the tenant's keys: refused from now on by every node."""
+        _keys_on(guard)
         try:
             record = guard.key_store().revoke(key_id, identity.tenant)
         except KeyNotFound:

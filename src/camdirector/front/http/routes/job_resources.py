@@ -1,6 +1,6 @@
 """What every job resource's routes share: the status models, submitting, looking up, listing and
-cancelling a job of one kind, the answer when the job store or queue is down, and the upload limit
-(one runner, or one queue client, and one job store serve every kind). The routes are the same in
+cancelling a job of one kind, and the answer when the job store or queue is down (one runner, or one
+queue client, and one job store serve every kind). The routes are the same in
 both modes (jobs/__init__.py): `Jobs` is either.
 
 Every job belongs to the tenant of the key that submitted it: a route's caller sees, cancels and
@@ -9,7 +9,7 @@ gets (access/roles.py)."""
 
 from __future__ import annotations
 
-import json
+import logging
 from collections.abc import Callable
 
 from fastapi import FastAPI, HTTPException, Request
@@ -20,6 +20,8 @@ from camdirector.front.job_runner import JobRunner
 from camdirector.jobs import Job, JobNotFound, JobState, JobsUnavailable, QueueClient, QueueFull, TenantLimitReached
 
 Jobs = JobRunner | QueueClient
+
+log = logging.getLogger("camdirector.front.http")
 
 
 class JobCreated(BaseModel):
@@ -67,26 +69,31 @@ async def known_form_fields(request: Request) -> None:
 
 def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], tenant: str) -> Job:
     """POST of a job route: the job queued, `tenant`'s; HTTPException 429 when the queue is full
-    or the tenant holds its share of jobs or uploads (JobSettings), 503 when the job queue cannot
-    take it (the job is failed then)."""
+    or the tenant holds its share of jobs or uploads (JobSettings); JobsUnavailable (503 through
+    answer_unavailable_jobs) when the job queue cannot take it (the job is failed then)."""
     try:
         return runner.submit(kind, params, files, tenant)
     except QueueFull as exc:
         raise HTTPException(status_code=429, detail=f"job queue full: {exc}", headers={"Retry-After": "10"}) from None
     except TenantLimitReached as exc:
         raise HTTPException(status_code=429, detail=str(exc), headers={"Retry-After": "10"}) from None
-    except JobsUnavailable as exc:
-        raise HTTPException(status_code=503, detail=str(exc), headers={"Retry-After": "10"}) from None
+
+
+def answer_unavailable(app: FastAPI, error: type[Exception], what: str) -> None:
+    """Any route that raises `error` (a database or queue that `what` names is down) answers 503,
+    not 500, in words that name no URL, host or path; the reason, the URL's secrets hidden
+    (infra/redaction.py), goes to the server's log."""
+
+    async def unavailable(request: Request, exc: Exception) -> JSONResponse:
+        log.warning("%s %s: %s", request.method, request.url.path, exc)
+        return JSONResponse({"detail": f"{what} is unreachable; retry later"}, status_code=503, headers={"Retry-After": "10"})
+
+    app.add_exception_handler(error, unavailable)
 
 
 def answer_unavailable_jobs(app: FastAPI) -> None:
-    """Any route that finds the job store (PostgreSQL) or queue (Redis) down answers 503 with
-    the reason, not 500."""
-
-    async def unavailable(request: Request, exc: Exception) -> JSONResponse:  # exc: JobsUnavailable
-        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
-
-    app.add_exception_handler(JobsUnavailable, unavailable)
+    """The job store (PostgreSQL) or queue (Redis) down: 503 (answer_unavailable)."""
+    answer_unavailable(app, JobsUnavailable, "the job store or queue")
 
 
 MAX_LISTED_JOBS = 1000
@@ -112,60 +119,3 @@ def cancel_job(runner: Jobs, job_id: str, noun: str = "job"):
     if job.state in (JobState.SUCCEEDED, JobState.FAILED):
         raise HTTPException(status_code=409, detail=f"{noun} {job_id} already {job.state.value}")
     return job
-
-
-class UploadLimit:
-    """ASGI middleware: answers 413 to a POST under `path_prefix` whose body is larger than
-    `max_body_bytes`, from Content-Length before reading, or while streaming a chunked body, so
-    a huge upload is never spooled to disk."""
-
-    def __init__(self, app, max_body_bytes: int, path_prefix: str = "/v1/overview-jobs") -> None:
-        self.app = app
-        self.max_body_bytes = max_body_bytes
-        self.path_prefix = path_prefix
-
-    async def __call__(self, scope, receive, send):
-        if scope["type"] != "http" or scope["method"] != "POST" or not scope["path"].startswith(self.path_prefix):
-            return await self.app(scope, receive, send)
-        for name, value in scope.get("headers", []):
-            if name == b"content-length":
-                try:
-                    too_big = int(value) > self.max_body_bytes
-                except ValueError:
-                    too_big = False
-                if too_big:
-                    return await self._reject(send)
-        seen = 0
-
-        async def limited_receive():
-            nonlocal seen
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > self.max_body_bytes:
-                    raise _TooLarge()
-            return message
-
-        try:
-            await self.app(scope, limited_receive, send)
-        except _TooLarge:
-            await self._reject(send)
-
-    async def _reject(self, send) -> None:
-        body = json.dumps({"detail": f"upload larger than the limit of {self.max_body_bytes} bytes"}).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 413,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                    (b"connection", b"close"),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
-
-
-class _TooLarge(Exception):
-    pass

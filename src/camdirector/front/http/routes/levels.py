@@ -57,12 +57,13 @@ from pydantic import BaseModel, Field
 from camdirector.access.guard import Identity
 from camdirector.access.roles import Verb
 from camdirector.front.http.auth import require
+from camdirector.front.http.body_limits import allow_body
 from camdirector.front.http.routes.job_resources import (
     MAX_LISTED_JOBS,
     JobCreated,
     Jobs,
     JobStatus,
-    UploadLimit,
+    answer_unavailable,
     answer_unavailable_jobs,
     cancel_job,
     job_of_kind,
@@ -330,11 +331,5 @@ def install_level_routes(app: FastAPI, runner: Jobs, data_dir: str | Path, setti
     service's job kinds), with an upload limit of two files plus the form."""
     app.include_router(build_level_router(runner, settings, Path(data_dir)))
     answer_unavailable_jobs(app)
-
-    async def levels_unavailable(request: Request, exc: Exception) -> JSONResponse:  # exc: LevelsUnavailable
-        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "10"})
-
-    app.add_exception_handler(LevelsUnavailable, levels_unavailable)
-    app.add_middleware(
-        UploadLimit, max_body_bytes=2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES, path_prefix=LEVELS_PREFIX
-    )
+    answer_unavailable(app, LevelsUnavailable, "the level index")
+    allow_body(app, LEVELS_PREFIX, 2 * settings.max_upload_bytes + _FORM_OVERHEAD_BYTES)

@@ -21,8 +21,8 @@ direction is all a monitor needs. Its cost is a connection per stream (a browser
 host), so the dashboard streams the program monitor only and refreshes the others as pictures.
 
 Errors: an unknown or closed session 404; a size over its limit or an unknown shot 422; more
-than MAX_STREAMS live streams 429; a render that fails or takes more than RENDER_TIMEOUT_S, or a
-worker lost, 503.
+than MAX_STREAMS live streams, or than the tenant's share of them, 429; a render that fails or
+takes more than RENDER_TIMEOUT_S, or a worker lost, 503.
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ def build_view_router(hub: ViewHub) -> APIRouter:
         response_class=StreamingResponse,
         responses={
             200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}": {}}},
-            429: {"description": "too many live streams"},
+            429: {"description": "too many live streams, on the node or of the caller's tenant"},
             **_ERRORS,
         },
     )
@@ -138,7 +138,7 @@ def build_view_router(hub: ViewHub) -> APIRouter:
         query = _query(shot, subjects, width, height, "jpeg")
         first = await picture(session_id, query, 0.5 / fps, identity)  # a 404 before the stream starts
         try:
-            hub.check_stream_room()
+            hub.check_stream_room(identity.tenant)
         except DirectorError as exc:
             raise http_error(exc) from None
 

@@ -34,12 +34,12 @@ from pydantic import BaseModel, Field
 from camdirector.access.guard import Identity
 from camdirector.access.roles import Verb
 from camdirector.front.http.auth import require
+from camdirector.front.http.body_limits import allow_body
 from camdirector.front.http.routes.job_resources import (
     MAX_LISTED_JOBS,
     JobCreated,
     Jobs,
     JobStatus,
-    UploadLimit,
     answer_unavailable_jobs,
     cancel_job,
     job_of_kind,
@@ -98,7 +98,7 @@ def _status(job) -> JSONResponse:
 
 def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
     """The /v1/overview-jobs routes over `runner` (which must have the "overview" kind)."""
-    router = APIRouter(prefix="/v1/overview-jobs", tags=["overview jobs"])
+    router = APIRouter(prefix=PREFIX, tags=["overview jobs"])
     limit = job_settings.max_upload_bytes
 
     def job_or_404(job_id: str, identity: Identity):
@@ -270,6 +270,7 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
     return router
 
 
+PREFIX = "/v1/overview-jobs"  # POST here takes the upload
 # Multipart framing around the file: boundaries, part headers and the small form fields.
 _FORM_OVERHEAD_BYTES = 64 * 1024
 
@@ -279,4 +280,4 @@ def install_overview_routes(app: FastAPI, runner: Jobs, settings: JobSettings = 
     a client of the job queue, opened by front/main.py with the service's job kinds)."""
     app.include_router(build_overview_router(runner, settings))
     answer_unavailable_jobs(app)
-    app.add_middleware(UploadLimit, max_body_bytes=settings.max_upload_bytes + _FORM_OVERHEAD_BYTES)
+    allow_body(app, PREFIX, settings.max_upload_bytes + _FORM_OVERHEAD_BYTES)
