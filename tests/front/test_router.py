@@ -1,17 +1,26 @@
-"""The session router's memory of sessions lost with their worker, and the front's metrics of a frame."""
+"""The session router's memory of sessions lost with their worker, a session whose owner cannot be
+recorded, and the front's metrics of a frame."""
 
 from __future__ import annotations
+
+import asyncio
+import uuid
 
 import grpc
 import pytest
 
 from camdirector.access.guard import Guard
-from camdirector.access.keys import SqliteAccessStore
+from camdirector.access.keys import AccessUnavailable, PostgresAccessStore, SqliteAccessStore
+from camdirector.demo.client import frame_updates, session_request
+from camdirector.demo.scene import build_demo_scene
+from camdirector.deploy.services import PostgresServer
 from camdirector.errors import DirectorError
 from camdirector.front import router as router_module
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionEntry, SessionRouter
+from camdirector.geometry.camera import Lens
 from camdirector.server_settings import ServerSettings
+from tests.conftest import service_or_skip
 
 
 def _code_and_message(router: SessionRouter, session_id: str) -> tuple[grpc.StatusCode, str]:
@@ -78,6 +87,38 @@ def test_with_keys_a_node_adopts_only_a_session_the_records_say_is_the_callers(t
     with pytest.raises(DirectorError):
         router._entry("s-unknown", "alpha", adopt=True)  # no owner on record: nobody's
     store.close()
+
+
+def test_a_session_whose_owner_cannot_be_recorded_is_dropped_by_its_worker(tmp_path, monkeypatch):
+    """CreateSession with the records database gone between the key's check and the owner's record:
+    UNAVAILABLE to the caller (who retries), and no session left on the worker that nobody could
+    reach again."""
+    postgres = service_or_skip(lambda: PostgresServer(tmp_path / "postgres").start())
+    session_id = "0123456789abcdef0123456789abcdef"
+    monkeypatch.setattr(router_module.uuid, "uuid4", lambda: uuid.UUID(session_id))
+    settings = ServerSettings(workers=1, data_dir=str(tmp_path / "data"), checkpoint_store="off")
+    router = SessionRouter(settings, Metrics(), guard=Guard(PostgresAccessStore(postgres.url)))
+    scene = build_demo_scene(seed=7, duration_s=1.0)
+    frame = next(frame_updates(scene, 1))
+    frame.session_id = session_id
+
+    async def create_then_frame() -> DirectorError:
+        await router.pool.start()
+        try:
+            postgres.stop()
+            with pytest.raises(AccessUnavailable):
+                await router.create(session_request(scene, Lens()).SerializeToString(), "grpc")
+            with pytest.raises(DirectorError) as unknown:
+                await router.pool.call(0, "frame", session_id, frame.SerializeToString())
+            return unknown.value
+        finally:
+            await router.pool.stop()
+
+    try:
+        unknown = asyncio.run(create_then_frame())
+    finally:
+        postgres.stop()
+    assert router.sessions == {} and unknown.code == grpc.StatusCode.NOT_FOUND, unknown
 
 
 def _sample(metrics: Metrics, name: str, labels: dict) -> float:

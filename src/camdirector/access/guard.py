@@ -15,6 +15,11 @@ secret that signs them (`login_secret`; rotated by `camdirector keys rotate-secr
 made before is refused) and the logins ended by logout on any node (`login_ended`).
 
 With authentication off (`--no-auth`) every caller is `OPEN`: tenant `default`, role `admin`.
+
+The records database down (PostgreSQL, `AccessUnavailable`): keys already in this node's cache keep
+streaming frames; every call that must read or write a record answers UNAVAILABLE (HTTP 503) in
+words naming only the kind of store (`RECORDS_DOWN`), and the reason goes to the log once per
+outage (`records_down`; the poll notes its end).
 """
 
 from __future__ import annotations
@@ -30,14 +35,16 @@ from typing import Any
 
 import grpc
 
-from camdirector.access.keys import LOGIN_SECRET, AccessStore, ApiKey, secret_matches, split_key
+from camdirector.access.keys import LOGIN_SECRET, AccessStore, AccessUnavailable, ApiKey, secret_matches, split_key
 from camdirector.access.roles import Verb, allows
-from camdirector.errors import DirectorError
+from camdirector.errors import DirectorError, unavailable
 
 log = logging.getLogger("camdirector.access")
 
 REVOCATION_POLL_S = 0.25  # how often each node looks for keys revoked elsewhere, s
 CLOCK_SKEW_S = 30.0  # revocations are read this far back from the last poll (nodes' clocks differ)
+RECORDS = "the records database"  # what a client is told of it: any caller reads it, so no URL or host
+RECORDS_DOWN = f"{RECORDS} is unreachable; retry later"
 
 
 @dataclass(frozen=True)
@@ -89,6 +96,7 @@ class Guard:
         self._watcher: asyncio.Task[None] | None = None
         self._ended_logins: dict[str, float] = {}  # login id -> when its cookie expires, s
         self._ended_lock = threading.Lock()  # the poll's thread and the routes' threads note ended logins
+        self._records_down = False  # an outage was logged and the poll has not reached the database since
         # Without keys no login is made: a secret of this process's own signs nothing anyone uses.
         self.login_secret = secrets.token_bytes(32)
         if self.enabled:
@@ -171,6 +179,9 @@ class Guard:
         self._note_ended_logins(store.ended_logins(self._polled_s - CLOCK_SKEW_S))
         login_secret = store.shared_secret(LOGIN_SECRET)
         self._polled_s = now
+        if self._records_down:
+            self._records_down = False
+            log.warning("%s is reachable again", RECORDS)
         if login_secret != self.login_secret:
             self.login_secret = login_secret
             log.info("the dashboard's login secret was replaced: every login made before is refused")
@@ -205,8 +216,19 @@ class Guard:
             try:
                 for key_id in await asyncio.to_thread(self.poll_revocations):
                     log.info("key %s revoked: refused from now on", key_id)
-            except Exception as exc:  # the database away for a moment: keep the last known keys
+            except AccessUnavailable as exc:  # keep the last known keys
+                self.records_down(exc)
+            except Exception as exc:  # a bug: the poll goes on with the last known keys
                 log.warning("polling revoked keys: %s", exc)
+
+    def records_down(self, exc: AccessUnavailable) -> DirectorError:
+        """The answer to a call that needed the records database while it is down: UNAVAILABLE
+        (the SDKs retry it), naming no URL or host; the reason (its URL's secrets hidden,
+        infra/postgres.py) is logged once per outage, not per call or poll."""
+        if not self._records_down:
+            self._records_down = True
+            log.warning("%s; keys already known here keep streaming frames until it is back", exc)
+        return unavailable(RECORDS_DOWN)
 
     def start(self) -> None:
         if self.enabled:

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import orjson
 
 from camdirector.access.guard import Guard
+from camdirector.access.keys import AccessUnavailable
 from camdirector.errors import DirectorError, exhausted, invalid, not_found, unavailable
 from camdirector.front.metrics import Metrics
 from camdirector.front.worker_pool import WorkerPool
@@ -156,7 +157,11 @@ class SessionRouter:
             self._reserved -= 1
             self._reserved_by[tenant] -= 1
         if self.guard.enabled:
-            self.guard.key_store().set_session_owner(session_id, tenant)
+            try:
+                self.guard.key_store().set_session_owner(session_id, tenant)
+            except AccessUnavailable:  # a session nobody could find again: dropped, and the caller retries
+                await self.pool.call(slot, "drop", session_id, b"")
+                raise
         now = self.clock()
         self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport}, tenant=tenant)
         self.metrics.sessions.set(len(self.sessions))

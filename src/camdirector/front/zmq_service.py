@@ -26,6 +26,7 @@ import zmq.asyncio
 import zmq.auth
 
 from camdirector.access.guard import Guard
+from camdirector.access.keys import AccessUnavailable
 from camdirector.errors import DirectorError, exhausted, internal, invalid, unimplemented
 from camdirector.front.router import SessionRouter, named_session
 from camdirector.front.session_calls import RPCS, SessionCalls
@@ -98,6 +99,10 @@ class ZmqTransport:
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
 
+    def _error_reply(self, error: DirectorError) -> list[bytes]:
+        self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
+        return [str(error.code.value[0]).encode(), error.message.encode()]
+
     async def _handle(self, parts: list[bytes]) -> None:
         identity, body = parts[0], parts[1:]
         envelope = [identity]
@@ -121,13 +126,14 @@ class ZmqTransport:
             caller = self.guard.authorize(authorization, need.verb, fresh=need.fresh)  # before the payload is parsed
             reply = [b"0", await call(payload, caller)]
         except DirectorError as exc:
-            self.metrics.labelled(self.metrics.errors, TRANSPORT, exc.code.name).inc()
-            reply = [str(exc.code.value[0]).encode(), exc.message.encode()]
+            reply = self._error_reply(exc)
+        except AccessUnavailable as exc:  # UNAVAILABLE, as over gRPC: the SDKs retry it
+            reply = self._error_reply(self.guard.records_down(exc))
         except Exception as exc:  # never let one request end the loop; INTERNAL, as over gRPC
             rpc_name = rpc[:64].decode(errors="replace")
-            error = internal(exc, rpc_name, named_session(rpc_name, body[1]) if len(body) in (2, 3) else None, log)
-            self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
-            reply = [str(error.code.value[0]).encode(), error.message.encode()]
+            reply = self._error_reply(
+                internal(exc, rpc_name, named_session(rpc_name, body[1]) if len(body) in (2, 3) else None, log)
+            )
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set
         self.metrics.labelled(self.metrics.request, TRANSPORT, label).observe(time.perf_counter() - t0)
         try:

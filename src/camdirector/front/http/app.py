@@ -19,13 +19,15 @@ from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 
-from camdirector.access.guard import Identity
+from camdirector.access.guard import RECORDS, Identity
+from camdirector.access.keys import AccessUnavailable
 from camdirector.access.roles import Verb
 from camdirector.front.http.auth import CookieSigner, require
 from camdirector.front.http.body_limits import install_request_gate
 from camdirector.front.http.own_origin import OwnOriginOnly
 from camdirector.front.http.routes.access import build_access_router
 from camdirector.front.http.routes.directors import build_director_router
+from camdirector.front.http.routes.job_resources import answer_unavailable
 from camdirector.front.http.routes.monitors import build_view_router
 from camdirector.front.http.routes.sessions import build_session_router
 from camdirector.front.router import SessionRouter
@@ -103,6 +105,7 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
         return Response(generate_latest(router.metrics.registry), media_type=CONTENT_TYPE_LATEST)
 
     app.include_router(build_access_router(guard, secure_cookie))
+    answer_unavailable(app, AccessUnavailable, RECORDS, guard.records_down)  # logins, keys, audit: 503
     app.include_router(build_session_router(router))
     app.include_router(build_director_router())
     app.include_router(build_view_router(app.state.views))

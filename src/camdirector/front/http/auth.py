@@ -14,7 +14,8 @@ A request proves itself one of two ways:
 
 Answers: 401 (with `WWW-Authenticate: Bearer`) without a valid key or login, 403 for a role
 without the verb or a change without its CSRF token and origin, whatever bytes the cookie, token or
-Origin hold; another tenant's things answer 404 in the routes themselves.
+Origin hold; another tenant's things answer 404 in the routes themselves. 503 (with `Retry-After`)
+while the records database that holds the keys is down (access/guard.py).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from camdirector.access.guard import Guard, Identity, denied, unauthenticated
+from camdirector.access.keys import AccessUnavailable
 from camdirector.access.roles import Verb
 from camdirector.errors import DirectorError
 
@@ -100,6 +102,8 @@ class CookieSigner:
 def _http(exc: DirectorError) -> HTTPException:
     if exc.code.name == "UNAUTHENTICATED":
         return HTTPException(401, exc.message, headers={"WWW-Authenticate": "Bearer"})
+    if exc.code.name == "UNAVAILABLE":  # the records database down (Guard.records_down)
+        return HTTPException(503, exc.message, headers={"Retry-After": "10"})  # as routes/job_resources.py's 503s
     return HTTPException(403, exc.message)
 
 
@@ -138,6 +142,8 @@ def identify(request: Request) -> Identity:
         return guard.identify_key_id(login.key_id)
     except DirectorError as exc:
         raise _http(exc) from None
+    except AccessUnavailable as exc:  # here, not the app's handler: the request gate calls this before any route
+        raise _http(guard.records_down(exc)) from None
 
 
 def require(verb: Verb):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.responses import JSONResponse
@@ -79,13 +80,17 @@ def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], t
         raise HTTPException(status_code=429, detail=str(exc), headers={"Retry-After": "10"}) from None
 
 
-def answer_unavailable(app: FastAPI, error: type[Exception], what: str) -> None:
+def answer_unavailable(app: FastAPI, error: type[Exception], what: str, note: Callable[[Any], object] | None = None) -> None:
     """Any route that raises `error` (a database or queue that `what` names is down) answers 503,
     not 500, in words that name no URL, host or path; the reason, the URL's secrets hidden
-    (infra/redaction.py), goes to the server's log."""
+    (infra/redaction.py), goes to the server's log: per request, or through `note` (given the
+    exception) where the store's owner logs it once per outage."""
 
     async def unavailable(request: Request, exc: Exception) -> JSONResponse:
-        log.warning("%s %s: %s", request.method, request.url.path, exc)
+        if note is None:
+            log.warning("%s %s: %s", request.method, request.url.path, exc)
+        else:
+            note(exc)
         return JSONResponse({"detail": f"{what} is unreachable; retry later"}, status_code=503, headers={"Retry-After": "10"})
 
     app.add_exception_handler(error, unavailable)
