@@ -37,6 +37,7 @@ class MakeRig(Protocol):
         dynamic: DynamicObjects,
         rng: np.random.Generator,
         clock: Callable[[], float],
+        /,
     ) -> CameraRig: ...
 
 
@@ -50,17 +51,6 @@ class RigEntry:
     description: str  # one line: what the rig does
 
 
-def _make_toric(
-    scene: SceneSpec,
-    ray_scene: RayScene,
-    static_meshes_world: list[TriMesh],
-    dynamic: DynamicObjects,
-    rng: np.random.Generator,
-    clock: Callable[[], float],
-) -> CameraRig:
-    return ToricRig(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
-
-
 def _make_tracks(
     scene: SceneSpec,
     ray_scene: RayScene,
@@ -68,26 +58,19 @@ def _make_tracks(
     dynamic: DynamicObjects,
     rng: np.random.Generator,
     clock: Callable[[], float],
+    /,
 ) -> CameraRig:
     if scene.level is None:  # worker/codec.py gives every TRACKS scene its level
         raise ValueError("the TRACKS rig needs the scene's level")
     return TracksRig(scene.level, scene.lens, scene.style, ray_scene, rng, clock)
 
 
-def _make_match(
-    scene: SceneSpec,
-    ray_scene: RayScene,
-    static_meshes_world: list[TriMesh],
-    dynamic: DynamicObjects,
-    rng: np.random.Generator,
-    clock: Callable[[], float],
-) -> CameraRig:
-    return MatchRig(scene, ray_scene, rng, clock)
-
-
 RIGS: tuple[RigEntry, ...] = (
     RigEntry(
-        Rig.TORIC, "toric", _make_toric, "frames one or two targets on the Toric manifold, moving by the style's visibility mode"
+        Rig.TORIC,
+        "toric",
+        lambda scene, ray_scene, static, dynamic, rng, clock: ToricRig(scene, ray_scene, static, dynamic, rng, clock),
+        "frames one or two targets on the Toric manifold, moving by the style's visibility mode",
     ),
     RigEntry(
         Rig.TRACKS,
@@ -98,7 +81,7 @@ RIGS: tuple[RigEntry, ...] = (
     RigEntry(
         Rig.MATCH,
         "match",
-        _make_match,
+        lambda scene, ray_scene, static, dynamic, rng, clock: MatchRig(scene, ray_scene, rng, clock),
         "directs a match among its players behind a broadcast delay, by the style's match director",
     ),
 )
