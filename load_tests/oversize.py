@@ -14,8 +14,11 @@ runs' frame round trips (p50/p99/max, ms) and their ratio, and per kind of attac
 sent, how they were answered and how long the answer took: the HTTP status, or "closed" when the
 server closed the connection (its answer sent, the rest of the body unread) before the attacker
 read the answer; for ZeroMQ "dropped" when no answer came within ZMQ_WAIT_MS (libzmq refused the
-message as its length arrived). The attacker's CPU is on the same machine, so the ratio includes it as well as the
-server's.
+message as its length arrived). The attacker's CPU is on the same machine, so a third run is the floor: the same attacker, at the
+same pace, aimed at a sink in a process of its own that refuses everything it is sent the cheapest
+way (reads an HTTP request's head, answers 401 and closes; a ZeroMQ socket with the server's size
+limit and CURVE). `rtt_ratio_attacked_vs_sink` is the server's own share of the cost: 1 when the
+frames see no more of the attack than of the machine it runs on.
 """
 
 from __future__ import annotations
@@ -36,12 +39,14 @@ from pathlib import Path
 import zmq
 
 from camdirector.deploy.server_process import ServerProcess
+from camdirector.front.zmq_service import ENVELOPE_SLACK_BYTES
 from load_tests import stream
 from load_tests.report import emit, percentiles
 
 SERVER_LIMIT_BYTES = 4 * 1024 * 1024  # the server's max_message_bytes and max_upload_bytes
 _PIECE_BYTES = 64 * 1024
 ZMQ_WAIT_MS = 200
+KINDS = ("http_login", "http_login_chunked", "http_upload_without_key", "zmq_without_key")
 
 
 def _http_attack(http: str, head: bytes, body_bytes: int, chunked: bool) -> tuple[str, float]:
@@ -81,7 +86,7 @@ def _zmq_attack(address: str, server_key: str, payload: bytes) -> tuple[str, flo
     return f"code {outcome}" if answered else outcome, time.perf_counter() - t0
 
 
-def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, pause_s: float, stop, out) -> None:
+def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, pause_s: float, only, stop, out) -> None:
     """The attacker, in a process of its own: one thread per kind of attack until `stop` is set;
     sends {kind: (Counter of outcomes, answer latencies in ms)} through `out`."""
     login = b"POST /v1/login HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
@@ -95,6 +100,7 @@ def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, p
         ),
         "zmq_without_key": lambda: _zmq_attack(zmq_address, server_key, b"\x00" * oversize_bytes),
     }
+    kinds = {kind: send for kind, send in kinds.items() if not only or kind in only}
     results = {kind: (Counter(), []) for kind in kinds}
 
     def loop(kind):
@@ -113,12 +119,56 @@ def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, p
     out.send({kind: (dict(outcomes), latencies) for kind, (outcomes, latencies) in results.items()})
 
 
+def _sink(out) -> None:
+    """The floor's target, in a process of its own until killed: an HTTP listener that reads a
+    request's head, answers 401 and closes, and a ZeroMQ ROUTER with CURVE and the server's size
+    limit; sends (http HOST:PORT, zmq address, its CURVE public key) through `out`."""
+    listener = socket.create_server(("127.0.0.1", 0), backlog=64)
+    public, secret = zmq.curve_keypair()
+    router = zmq.Context.instance().socket(zmq.ROUTER)
+    router.curve_server, router.curve_secretkey = True, secret
+    router.setsockopt(zmq.MAXMSGSIZE, SERVER_LIMIT_BYTES + ENVELOPE_SLACK_BYTES)
+    port = router.bind_to_random_port("tcp://127.0.0.1")
+    out.send((f"127.0.0.1:{listener.getsockname()[1]}", f"tcp://127.0.0.1:{port}", public.decode()))
+
+    def answer_zmq() -> None:  # nothing gets through the size limit; answered if it did
+        while True:
+            peer, *_ = router.recv_multipart()
+            router.send_multipart([peer, b"3", b"refused"])
+
+    threading.Thread(target=answer_zmq, daemon=True).start()
+    while True:
+        connection, _ = listener.accept()
+        with connection:
+            head = b""
+            while b"\r\n\r\n" not in head and (piece := connection.recv(4096)):
+                head += piece
+            with contextlib.suppress(OSError):
+                connection.sendall(b"HTTP/1.1 401 Unauthorized\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+
+
+@contextlib.contextmanager
+def _sink_process():
+    """Starts _sink; yields its (http, zmq, zmq public key) and kills it on leaving."""
+    context = multiprocessing.get_context("spawn")
+    receive, send = context.Pipe(duplex=False)
+    process = context.Process(target=_sink, args=(send,), daemon=True)
+    process.start()
+    try:
+        yield receive.recv()
+    finally:
+        process.kill()
+        process.join()
+
+
 @contextlib.asynccontextmanager
-async def _attacker(server: ServerProcess, oversize_bytes: int, pause_s: float, report: dict):
+async def _attacker(target: tuple[str, str, str], oversize_bytes: int, pause_s: float, only: list[str], report: dict):
+    """The attacker process aimed at `target` (http HOST:PORT, zmq address, zmq public key) while
+    the context is entered; its outcomes land in `report`."""
     context = multiprocessing.get_context("spawn")
     stop = context.Event()
     receive, send = context.Pipe(duplex=False)
-    args = (server.http, server.zmq, server.zmq_server_key, oversize_bytes, pause_s, stop, send)
+    args = (*target, oversize_bytes, pause_s, only, stop, send)
     process = context.Process(target=_attack, args=args, daemon=True)
     process.start()
     try:
@@ -146,6 +196,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--oversize-mib", type=float, default=12.0, help="size of each attack's body or message, MiB")
     parser.add_argument("--pause-s", type=float, default=0.05, help="each attacker's pause between two requests, s")
+    parser.add_argument("--only", action="append", default=[], choices=KINDS, help="this kind of attack only (repeatable)")
     parser.add_argument("--workers", type=int, default=None, help="server worker processes (default: cores)")
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
@@ -153,21 +204,26 @@ def main(argv=None) -> int:
     oversize_bytes = int(args.oversize_mib * 1024 * 1024)
     limit = str(SERVER_LIMIT_BYTES)
     attacks: dict = {}
-    with ServerProcess("--workers", str(workers), "--max-message-bytes", limit, "--max-upload-bytes", limit, auth=True) as server:
-        quiet = asyncio.run(stream.run("grpc", server.grpc, args.sessions, args.rate, args.seconds, key=server.admin_key))
-        attacked = asyncio.run(
-            stream.run(
-                "grpc",
-                server.grpc,
-                args.sessions,
-                args.rate,
-                args.seconds,
-                alongside=lambda _: _attacker(server, oversize_bytes, args.pause_s, attacks),
-                key=server.admin_key,
-            )
+    floor_attacks: dict = {}
+
+    def frames(alongside=None) -> dict:
+        return asyncio.run(
+            stream.run("grpc", server.grpc, args.sessions, args.rate, args.seconds, alongside=alongside, key=server.admin_key)
         )
+
+    def attacking(target: tuple[str, str, str], report: dict):
+        return lambda _: _attacker(target, oversize_bytes, args.pause_s, args.only, report)
+
+    with ServerProcess("--workers", str(workers), "--max-message-bytes", limit, "--max-upload-bytes", limit, auth=True) as server:
+        quiet = frames()
+        with _sink_process() as sink:
+            floor = frames(attacking(sink, floor_attacks))
+        attacked = frames(attacking((server.http, server.zmq, server.zmq_server_key), attacks))
         alive = server.alive()
-    ratio = {k: attacked["rtt_ms"][k] / quiet["rtt_ms"][k] for k in ("p50", "p99", "max") if quiet["rtt_ms"][k]}
+
+    def ratio(over: dict, under: dict) -> dict:
+        return {k: over["rtt_ms"][k] / under["rtt_ms"][k] for k in ("p50", "p99", "max") if under["rtt_ms"][k]}
+
     result = {
         "sessions": args.sessions,
         "rate_hz": args.rate,
@@ -176,14 +232,18 @@ def main(argv=None) -> int:
         "server_limit_bytes": SERVER_LIMIT_BYTES,
         "server_workers": workers,
         "quiet": _frames(quiet),
+        "attacker_at_sink": _frames(floor),
         "attacked": _frames(attacked),
-        "rtt_ratio_attacked_vs_quiet": ratio,
+        "rtt_ratio_attacked_vs_quiet": ratio(attacked, quiet),
+        "rtt_ratio_attacked_vs_sink": ratio(attacked, floor),
         "attacks": attacks,
+        "attacks_at_sink": {kind: report["sent"] for kind, report in floor_attacks.items()},
         "cpus": os.cpu_count(),
     }
     emit(result, args.json)
-    ok = alive and not quiet["errors"] and not attacked["errors"] and all(a["sent"] for a in attacks.values())
-    return 0 if ok and quiet["dropped_frames"] == attacked["dropped_frames"] == 0 else 1
+    runs = (quiet, floor, attacked)
+    ok = alive and all(a["sent"] for a in attacks.values()) and not any(run["errors"] or run["dropped_frames"] for run in runs)
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -37,6 +37,7 @@ from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.geometry.camera import Lens
+from camdirector.infra.heap import freeze_startup_heap
 from camdirector.v1 import director_pb2 as pb
 from load_tests.report import emit, percentiles
 
@@ -166,6 +167,7 @@ async def run(
     driver = GrpcDriver(address, key) if transport == "grpc" else ZmqDriver(address)
     session_ids = [await driver.open_session(session_request(scene, lens, visibility)) for _ in range(sessions)]
     period = 1.0 / rate_hz if rate_hz else 0.0
+    freeze_startup_heap()  # this generator's own full collections (about 30 ms here) would read as round trips
     rtt_ms, compute_ms, received, late, stale = [], [], [0] * sessions, [0], [0]
 
     def recorder(k: int):

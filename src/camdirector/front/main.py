@@ -23,6 +23,7 @@ from camdirector.front.job_runner import open_jobs
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
 from camdirector.front.zmq_service import ZmqTransport, curve_server_keys
+from camdirector.infra.heap import freeze_startup_heap
 from camdirector.infra.plugins import import_plugins
 from camdirector.infra.private_files import make_private
 from camdirector.jobs import JobSettings, JobsUnavailable, service_kinds
@@ -115,6 +116,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             )
             http_server = uvicorn.Server(config)
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
+        freeze_startup_heap()  # before the first frame: full collections walk only what comes after
         print(json.dumps({"event": "ready", **bound, "workers": settings.workers, "tls": settings.tls, **announce}), flush=True)
         await stop.wait()
     finally:

@@ -14,6 +14,7 @@ import threading
 
 from camdirector.errors import DirectorError
 from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_request
+from camdirector.infra.heap import freeze_startup_heap
 from camdirector.infra.plugins import import_plugins
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.dispatch import Dispatcher
@@ -36,6 +37,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
     table = SessionTable(settings, defer_snapshots=True)  # snapshots taken below, when no request waits (idle_work)
     requests = Dispatcher(table)
     sending = threading.Lock()  # views are answered from the render process's reader thread
+    freeze_startup_heap()  # before the first request: full collections walk only what comes after
 
     def send(data: bytes) -> None:
         with sending:
