@@ -348,7 +348,7 @@ class ObjectState(_message.Message):
     def __init__(self, id: _Optional[str] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ...) -> None: ...
 
 class FrameUpdate(_message.Message):
-    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms", "events", "player_stats")
+    __slots__ = ("session_id", "frame", "time_s", "states", "packed_ids", "packed_transforms", "events", "player_stats", "answered_frame")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_S_FIELD_NUMBER: _ClassVar[int]
@@ -357,6 +357,7 @@ class FrameUpdate(_message.Message):
     PACKED_TRANSFORMS_FIELD_NUMBER: _ClassVar[int]
     EVENTS_FIELD_NUMBER: _ClassVar[int]
     PLAYER_STATS_FIELD_NUMBER: _ClassVar[int]
+    ANSWERED_FRAME_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     frame: int
     time_s: float
@@ -365,7 +366,8 @@ class FrameUpdate(_message.Message):
     packed_transforms: _containers.RepeatedScalarFieldContainer[float]
     events: _containers.RepeatedCompositeFieldContainer[GameEvent]
     player_stats: _containers.RepeatedCompositeFieldContainer[PlayerStats]
-    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ..., events: _Optional[_Iterable[_Union[GameEvent, _Mapping]]] = ..., player_stats: _Optional[_Iterable[_Union[PlayerStats, _Mapping]]] = ...) -> None: ...
+    answered_frame: int
+    def __init__(self, session_id: _Optional[str] = ..., frame: _Optional[int] = ..., time_s: _Optional[float] = ..., states: _Optional[_Iterable[_Union[ObjectState, _Mapping]]] = ..., packed_ids: _Optional[_Iterable[str]] = ..., packed_transforms: _Optional[_Iterable[float]] = ..., events: _Optional[_Iterable[_Union[GameEvent, _Mapping]]] = ..., player_stats: _Optional[_Iterable[_Union[PlayerStats, _Mapping]]] = ..., answered_frame: _Optional[int] = ...) -> None: ...
 
 class PlayerStats(_message.Message):
     __slots__ = ("id", "health", "armor", "items", "frags")
