@@ -67,6 +67,12 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         type=int,
         help="frames between two snapshots of a session's state",
     )
+    p.add_argument(
+        "--checkpoint-wait-ms",
+        dest="checkpoint_wait_ms",
+        type=float,
+        help="how long a frame waits for its checkpoint write before it goes on without it (docs/protocol.md)",
+    )
     p.add_argument("--node-id", dest="node_id", help="this node's name (default: host name and pid)")
     p.add_argument(
         "--no-auth",

@@ -44,6 +44,10 @@ def unavailable(message: str) -> DirectorError:
     return DirectorError(grpc.StatusCode.UNAVAILABLE, message)
 
 
+def data_loss(message: str) -> DirectorError:
+    return DirectorError(grpc.StatusCode.DATA_LOSS, message)
+
+
 def internal(exc: Exception, what: str, session_id: str | None, logger: logging.Logger) -> DirectorError:
     """An unexpected failure while handling one request (a bug, a full disk), answered the same
     way wherever it is caught (a worker's session table, the gRPC and ZeroMQ transports): INTERNAL

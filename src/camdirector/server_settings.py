@@ -49,6 +49,7 @@ class ServerSettings:
     checkpoint_store: str = ""
     checkpoint_every_frames: int = 60        # a session's state is snapshotted every this many frames. [1, 100000]
     checkpoint_keep_s: float = 600.0         # a checkpoint no node has written for this long is removed, s. [1, 1e7]
+    checkpoint_wait_ms: float = 10.0         # a write's result is waited for this long, then the frame goes on without it, ms. [0, 1000]
     node_id: str = ""                        # this node's name in checkpoints' ownership ("": host name and pid)
     # Access (access/, docs/security.md). Keys live in the records database: SQLite in data_dir, or job_store's PostgreSQL.
     auth: bool = True                        # every call needs a key; False (--no-auth) lets anyone in
@@ -85,6 +86,7 @@ class ServerSettings:
              "checkpoint_store must be empty (a folder in data_dir), off, or a redis:// URL"),
             (1 <= self.checkpoint_every_frames <= 100_000, "checkpoint_every_frames must be in [1, 100000]"),
             (1 <= self.checkpoint_keep_s <= 1e7, "checkpoint_keep_s must be in [1, 1e7]"),
+            (0 <= self.checkpoint_wait_ms <= 1000, "checkpoint_wait_ms must be in [0, 1000]"),
             (not self.job_store or self.job_store.startswith(("postgresql://", "postgres://")),
              "job_store must be empty (SQLite in data_dir) or a postgresql:// URL"),
             (not self.job_queue or self.job_queue.startswith("redis://"),

@@ -42,7 +42,13 @@ def test_connect_validates_arguments():
 
 def test_grpc_channel_options():
     options = dict(wire.grpc_channel_options(1000, [("grpc.max_receive_message_length", 5), ("grpc.x", 1)]))
-    assert options == {"grpc.max_send_message_length": 1000, "grpc.max_receive_message_length": 5, "grpc.x": 1}
+    assert options == {
+        "grpc.max_send_message_length": 1000,
+        "grpc.max_receive_message_length": 5,
+        "grpc.x": 1,
+        **wire.DEFAULT_RETRY.grpc_options(),  # reconnecting and pinging as often as calls are tried again
+    }
+    assert options["grpc.initial_reconnect_backoff_ms"] == 100 and options["grpc.keepalive_time_ms"] == 1000
 
 
 def test_create_session_request_from_keywords():

@@ -5,7 +5,7 @@ model), a node that joins breaks no live stream, a node that dies is marked down
 its route keys going to the others; with no node left, UNAVAILABLE. An API key revoked through one
 node is refused by the others: at once for every call but a frame, and a stream on another node
 is ended within a second. The tests run in order on one cluster: the join adds node-3, the last
-test kills nodes."""
+test kills nodes and the very last starts one again."""
 
 from __future__ import annotations
 
@@ -267,3 +267,12 @@ def test_a_killed_node_is_marked_down_and_its_keys_go_to_the_others(cluster, stu
     with pytest.raises(grpc.RpcError) as failed:
         create(stub, keys[0])
     assert failed.value.code() == grpc.StatusCode.UNAVAILABLE  # HAProxy's 503, as gRPC maps it
+
+
+def test_a_killed_node_started_again_is_back_on_its_ports(cluster, stub):
+    """After the test above every node is dead. `restart_node` (the chaos benchmark's) starts one
+    where HAProxy knows it; it is marked UP and takes every call (the only node up)."""
+    before = cluster.nodes[0]
+    after = cluster.restart_node(0)
+    assert (after.grpc, after.http, after.zmq) == (before.grpc, before.http, before.zmq) and after.pid != before.pid
+    create(stub, new_keys(1)[0])

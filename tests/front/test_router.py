@@ -57,7 +57,7 @@ def test_with_checkpoints_sessions_of_a_lost_worker_go_to_the_least_loaded_other
 
 def test_with_checkpoints_a_client_request_for_an_unknown_session_is_given_to_a_worker_to_restore(tmp_path):
     router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics())
-    entry = router._entry("from-elsewhere", "default", adopt=True)
+    entry = asyncio.run(router._client_entry("from-elsewhere", "default"))
     assert entry.restoring and router.sessions["from-elsewhere"] is entry
     code, message = _code_and_message(router, "never-asked-by-its-client")  # the dashboard's asks adopt nothing
     assert code == grpc.StatusCode.NOT_FOUND and "never-asked-by-its-client" not in router.sessions
@@ -81,11 +81,11 @@ def test_with_keys_a_node_adopts_only_a_session_the_records_say_is_the_callers(t
     store.set_session_owner("s-alpha", "alpha")  # written by the node that created it
     router = SessionRouter(ServerSettings(workers=2, data_dir=str(tmp_path)), Metrics(), guard=Guard(store))
     with pytest.raises(DirectorError) as refused:
-        router._entry("s-alpha", "beta", adopt=True)
+        asyncio.run(router._client_entry("s-alpha", "beta"))
     assert refused.value.code == grpc.StatusCode.NOT_FOUND and "s-alpha" not in router.sessions
-    assert router._entry("s-alpha", "alpha", adopt=True).restoring
+    assert asyncio.run(router._client_entry("s-alpha", "alpha")).restoring
     with pytest.raises(DirectorError):
-        router._entry("s-unknown", "alpha", adopt=True)  # no owner on record: nobody's
+        asyncio.run(router._client_entry("s-unknown", "alpha"))  # no owner on record: nobody's
     store.close()
 
 

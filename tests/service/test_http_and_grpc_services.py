@@ -24,6 +24,7 @@ def test_healthz_metrics_and_sessions(server):
     client.stream(list(walk(session_id, 12)))
     health = json.loads(_get(server, "/healthz"))
     assert health["status"] == "ok" and health["workers"] == 2 and health["sessions"] >= 1
+    assert health["loop_lag_ms"] >= 0.0  # the frame loop's health (front/loop_watch.py)
     sessions = json.loads(_get(server, "/v1/sessions"))["sessions"]
     mine = next(s for s in sessions if s["session_id"] == session_id)
     assert mine["frames"] == 12 and mine["transports"] == ["grpc"]

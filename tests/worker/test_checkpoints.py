@@ -4,6 +4,8 @@ them (a new worker, another node), with the failures a store can have."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from camdirector.errors import DirectorError
@@ -203,6 +205,7 @@ def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoi
         RedisStore(redis_server.url, keep_s=60.0)  # a node started now refuses to (front/main.py)
     restarted = RedisServer(tmp_path / "redis", port=redis_server.port).start()
     try:
+        _until(lambda: requests.table.checkpoints.writer.healthy)  # the writer's probe has seen Redis back
         requests.table.held["s"].checkpoint.retry_s = 0.0  # do not wait out the retry interval
         assert not requests.handle_bytes("frame", "s", updates[20])[1].checkpoint_failed
         for payload in updates[21:30]:
@@ -218,6 +221,14 @@ def test_with_redis_down_frames_are_still_answered_and_flagged_then_the_checkpoi
         )
     finally:
         restarted.stop()
+
+
+def _until(condition, timeout_s: float = 20.0) -> None:
+    """Waits for `condition()` (another thread's doing), polling; fails after `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "the condition never held"
+        time.sleep(0.01)
 
 
 def test_deferred_snapshots_wait_for_idle_work_but_never_past_twice_their_period(tmp_path):
@@ -252,3 +263,66 @@ def test_an_input_a_bypassed_table_computes_after_restoring_is_in_the_checkpoint
     answered += _answers(a, requests[45:50])  # bypassed, then asked again
     answered += _answers(_requests(tmp_path, store_url, "node-c/3"), requests[50:])
     assert answered == expected
+
+
+def test_a_session_restored_from_a_checkpoint_left_behind_says_what_was_lost_and_a_resend_makes_it_exact(tmp_path):
+    """Node A answers while Redis is paused (its checkpoint behind), then is lost; B restores the
+    older checkpoint. The client, answered up to frame 20, is told DATA_LOSS with the frame to
+    resend from; its updates from there, sent again, give the answers it had and then the
+    undisturbed ones."""
+    import os
+    import re
+    import signal
+
+    from camdirector.deploy.services import RedisServer
+
+    redis_server = RedisServer(tmp_path / "redis").start()
+    try:
+        create = two_target_request(style=pb.Style(visibility=pb.FRAMING_ONLY), seed=7)
+        updates = [("frame", "s", f.SerializeToString()) for f in walk("s", 40)]
+        reference = _reference(tmp_path / "ref")
+        reference.handle_bytes("create", "s", create.SerializeToString())
+        expected = _answers(reference, updates)
+
+        a = _requests(tmp_path, redis_server.url, "node-a/1", every=1000)
+        a.handle_bytes("create", "s", create.SerializeToString())
+        assert _answers(a, updates[:10]) == expected[:10]
+        os.kill(redis_server.proc.pid, signal.SIGSTOP)
+        try:
+            assert _answers(a, updates[10:20]) == expected[10:20]  # answered; the checkpoint stops at frame 10
+        finally:
+            os.kill(redis_server.proc.pid, signal.SIGCONT)
+        a.table.checkpoints.writer.close()  # A is lost: what it had given the store is made, nothing more
+
+        b = _requests(tmp_path, redis_server.url, "node-b/2")
+        _, _, payload = updates[20]
+        update = pb.FrameUpdate.FromString(payload)
+        update.answered_frame = pb.FrameUpdate.FromString(updates[19][2]).frame
+        with pytest.raises(DirectorError) as lost:
+            b.handle_bytes("frame", "s", update.SerializeToString())
+        assert lost.value.code.name == "DATA_LOSS"
+        resend_from = int(re.search(r"resend from (\d+)", lost.value.message).group(1))
+        first = next(i for i, (_, _, p) in enumerate(updates) if pb.FrameUpdate.FromString(p).frame == resend_from)
+        assert 10 <= first <= 11  # frame 10's input was written; frame 11's, in flight at the pause, may have been
+        resent = []
+        for _, _, p in updates[first:]:
+            again = pb.FrameUpdate.FromString(p)
+            again.answered_frame = update.answered_frame
+            resent.append(("frame", "s", again.SerializeToString()))
+        assert _answers(b, resent) == expected[first:]
+    finally:
+        redis_server.stop()
+
+
+def test_a_frame_sent_again_is_answered_stale_with_its_own_pose_here_and_after_a_restore(tmp_path, store_url):
+    """A stream cut with frames in flight (a node slow to answer, then lost) sends them again: each
+    is answered with the pose it had, not the newest one, by the table that answered it and by one
+    that restored the session from its checkpoint."""
+    a = _requests(tmp_path, store_url, "node-a/1")
+    a.handle_bytes("create", "s", two_target_request().SerializeToString())
+    updates = [u.SerializeToString() for u in walk("s", 12)]
+    first = [pb.CameraUpdate.FromString(a.handle_bytes("frame", "s", p)[0]) for p in updates]
+    assert first[8].pose != first[11].pose  # the camera moves: a wrong pose would show
+    for table in (a, _requests(tmp_path, store_url, "node-b/2")):
+        again = pb.CameraUpdate.FromString(table.handle_bytes("frame", "s", updates[8])[0])
+        assert again.stale and again.frame == first[8].frame and again.pose == first[8].pose

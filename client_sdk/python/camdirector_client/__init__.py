@@ -44,6 +44,7 @@ from camdirector_client.convert import (
     vec3,
 )
 from camdirector_client.errors import DirectorError
+from camdirector_client.wire import RetryPolicy
 
 __version__ = _version("camdirector-client")
 
@@ -53,6 +54,7 @@ __all__ = [
     "Client",
     "DirectorError",
     "Pose",
+    "RetryPolicy",
     "Session",
     "camera_pose_to_unity",
     "camera_pose_to_unreal",

@@ -6,7 +6,7 @@
             update = await session.frame(1, 0.016, packed=pack_states(ids, positions, rotations))
 
 Same methods as the sync client (:mod:`camdirector_client.client`), awaited, with the same
-behaviour when a node or worker is lost: every gRPC call of a session carries its route key
+behaviour when a node or worker is lost or hangs: every gRPC call of a session carries its route key
 (``wire.ROUTE_HEADER``) and the client's key, and a call or stream answered UNAVAILABLE or
 CANCELLED is tried again with the same session id (see :class:`AsyncSession`). Create and use
 an :class:`AsyncClient` inside one running event loop. Over ZeroMQ each request borrows a DEALER
@@ -60,10 +60,19 @@ class _AsyncTransport(Protocol):
 
 
 class _AioGrpcTransport:
-    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. Every call carries
-    the session's route key and the client's key (``wire.Security.grpc_metadata``)."""
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. A frame, streamed or
+    unary, left unanswered for ``retry.frame_timeout_s`` (when shorter) ends its call with
+    UNAVAILABLE: a hung node, to be tried again. Every call carries the session's route key and
+    the client's key (``wire.Security.grpc_metadata``)."""
 
-    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]], security: wire.Security) -> None:
+    def __init__(
+        self,
+        target: str,
+        timeout_s: float,
+        options: list[tuple[str, Any]],
+        security: wire.Security,
+        retry: wire.RetryPolicy = wire.DEFAULT_RETRY,
+    ) -> None:
         if security.credentials is None:
             self._channel = grpc.aio.insecure_channel(target, options=options)
         else:
@@ -75,6 +84,7 @@ class _AioGrpcTransport:
             _FRAME_METHOD, response_deserializer=pb.CameraUpdate.FromString, _registered_method=True
         )
         self._timeout_s = timeout_s
+        self._frame_timeout_s = retry.frame_timeout_s
         self.closed = False
 
     async def _unary(self, method, request, route: str):
@@ -83,30 +93,49 @@ class _AioGrpcTransport:
         except grpc.RpcError as error:
             raise self._security.grpc_error(error) from None
 
+    async def _frame(self, method, request, route: str) -> pb.CameraUpdate:
+        hang_s = self._frame_timeout_s
+        if hang_s is None or hang_s >= self._timeout_s:
+            return await self._unary(method, request, route)
+        try:
+            return await method(request, timeout=hang_s, metadata=self._security.grpc_metadata(route))
+        except grpc.RpcError as error:
+            raise wire.frame_error(self._security.grpc_error(error), hang_s) from None
+
     async def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
         return await self._unary(self._stub.CreateSession, request, route)
 
     async def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate:
-        return await self._unary(self._stub.Frame, update, route)
+        return await self._frame(self._stub.Frame, update, route)
 
     async def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate:
-        return await self._unary(self._frame_encoded, update, route)
+        return await self._frame(self._frame_encoded, update, route)
 
     async def stream(self, updates: AsyncIterable[pb.FrameUpdate], route: str) -> AsyncIterator[pb.CameraUpdate]:
-        pump = _AsyncRequestPump(updates)
+        deadlines = None if self._frame_timeout_s is None else wire.FrameDeadlines(self._frame_timeout_s)
+        pump = _AsyncRequestPump(updates, deadlines)
         call = self._stub.StreamFrames(pump.iterate(), metadata=self._security.grpc_metadata(route))
+        watchdog = None if deadlines is None else asyncio.ensure_future(_watch(call, deadlines))
         try:
             async for update in call:
+                if deadlines is not None:
+                    deadlines.answered()
                 yield update
         except grpc.RpcError as error:
             if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
                 raise pump.error from None
+            if deadlines is not None and deadlines.expired is not None:
+                raise deadlines.expired from None
             raise _stream_error(error, self._security) from None
         except asyncio.CancelledError:
             if pump.error is not None:  # grpc.aio cancels the call when the request iterator fails
                 raise pump.error from None
+            if deadlines is not None and deadlines.expired is not None:  # the watchdog cancelled the call
+                raise deadlines.expired from None
             raise
         finally:
+            if watchdog is not None:
+                watchdog.cancel()
             call.cancel()
         if pump.error is not None:
             raise pump.error
@@ -144,16 +173,27 @@ def _stream_error(error: grpc.RpcError, security: wire.Security) -> DirectorErro
     return security.grpc_error(error)
 
 
-class _AsyncRequestPump:
-    """Iterates the caller's updates for grpc.aio and keeps what they raised, if anything."""
+async def _watch(call: grpc.aio.Call, deadlines: wire.FrameDeadlines) -> None:
+    """Cancels ``call`` when a frame on it is left unanswered past its deadline (a hung node)."""
+    while deadlines.expired is None:
+        await asyncio.sleep(deadlines.wait_s())
+    call.cancel()
 
-    def __init__(self, updates: AsyncIterable[pb.FrameUpdate]) -> None:
+
+class _AsyncRequestPump:
+    """Iterates the caller's updates for grpc.aio, noting when each is sent (``deadlines``), and
+    keeps what they raised, if anything."""
+
+    def __init__(self, updates: AsyncIterable[pb.FrameUpdate], deadlines: wire.FrameDeadlines | None = None) -> None:
         self._updates = updates
+        self._deadlines = deadlines
         self.error: BaseException | None = None
 
     async def iterate(self) -> AsyncIterator[pb.FrameUpdate]:
         try:
             async for update in self._updates:
+                if self._deadlines is not None:
+                    self._deadlines.sent(update.frame)
                 yield update
         except Exception as error:
             self.error = error
@@ -237,8 +277,8 @@ _END = object()  # what a pull answers when the caller's updates are over
 
 class _AsyncResumable:
     """The caller's updates for a stream that may take several calls: a call that ended with a
-    RETRYABLE code is followed by one that sends its unanswered updates again, then goes on with
-    the caller's.
+    RETRYABLE code is followed by one that sends its unanswered updates again (after DATA_LOSS,
+    the session's kept updates from the frame asked for), then goes on with the caller's.
 
     Each read of the caller's iterator is a task of its own (``_pull``), awaited through
     ``asyncio.shield``, for two reasons. grpc.aio reads a call's requests on a task of its own
@@ -251,20 +291,22 @@ class _AsyncResumable:
     leaves it to the next one instead of losing it.
     """
 
-    def __init__(self, updates: AsyncIterable[pb.FrameUpdate]) -> None:
+    def __init__(self, updates: AsyncIterable[pb.FrameUpdate], session: AsyncSession) -> None:
         self._updates = updates.__aiter__()
+        self._session = session
         self._pull: asyncio.Future[Any] | None = None  # the read under way, or done and not yet taken
         self._call = 0
-        self.unanswered: deque[pb.FrameUpdate] = deque()  # sent on the current call, oldest first
+        self._last_seq = 0  # the newest update this stream sent
+        self.in_flight: deque[wire.Sent] = deque()  # sent on the current call and not answered, oldest first
 
     def requests(self) -> AsyncIterator[pb.FrameUpdate]:
         """A new call's requests; from now on the calls before it take no more updates."""
         self._call += 1
-        return self._requests(self._call, list(self.unanswered))
+        return self._requests(self._call, list(self.in_flight))
 
-    async def _requests(self, call: int, resend: list[pb.FrameUpdate]) -> AsyncIterator[pb.FrameUpdate]:
-        for update in resend:
-            yield update
+    async def _requests(self, call: int, resend: list[wire.Sent]) -> AsyncIterator[pb.FrameUpdate]:
+        for sent in resend:
+            yield self._stamped(sent)
         while call == self._call:
             if self._pull is None:
                 self._pull = asyncio.ensure_future(self._next_update())
@@ -272,8 +314,21 @@ class _AsyncResumable:
             if update is _END or call != self._call:
                 return  # over; or this call ended meanwhile and the update is the next call's
             self._pull = None
-            self.unanswered.append(update)
-            yield update
+            sent = self._session.history.add(update.frame, update)
+            self._last_seq = sent.seq
+            self.in_flight.append(sent)
+            yield self._stamped(sent)
+
+    def _stamped(self, sent: wire.Sent) -> pb.FrameUpdate:
+        sent.update.answered_frame = self._session._to_send(sent)
+        return sent.update
+
+    def resend_after(self, error: DirectorError) -> None:
+        """After the call ended with ``error``: a DATA_LOSS's updates to send again are the next
+        call's first (raises ``error`` when they are no longer kept)."""
+        resend = self._session._resend(error, self._last_seq)
+        if resend is not None:
+            self.in_flight = deque(resend)
 
     async def _next_update(self) -> Any:
         try:
@@ -290,23 +345,47 @@ class _AsyncResumable:
 class AsyncSession(wire.SessionBase):
     """One director session; closes itself at the end of an ``async with`` block (see wire.SessionBase).
 
-    As in the sync client: a call answered UNAVAILABLE (or reset by a balancer: CANCELLED) is
-    tried again by itself after ``asyncio.sleep`` (wire.retry_delays_s), with the same session id,
-    since the server restores the session from its checkpoint when its worker or node was lost;
-    so is a stream, from its first unanswered update. ``retries`` counts them. CreateSession is
-    not tried again (a second session could be made), nor is a call of a closed client, nor one
-    whose key was refused (UNAUTHENTICATED, PERMISSION_DENIED)."""
+    As in the sync client (:class:`camdirector_client.Session`): a call answered UNAVAILABLE (or
+    reset by a balancer: CANCELLED), or a frame left unanswered for ``retry.frame_timeout_s`` over
+    gRPC (a hung node), is tried again by itself after ``asyncio.sleep`` (jittered waits from
+    0.1 s up, for up to ``retry.retry_window_s``), with the same session id, since the server
+    restores the session from its checkpoint when its worker or node was lost; so is a stream,
+    from its first unanswered update; a DATA_LOSS "resend from K" sends the kept updates from
+    frame K again. ``retries`` counts the tries. CreateSession is not tried again (a second
+    session could be made), nor is a call of a closed client, nor one whose key was refused
+    (UNAUTHENTICATED, PERMISSION_DENIED)."""
 
     __slots__ = ()
 
     async def _retrying(self, call, *args):
-        delays = wire.retry_delays_s()
+        backoff = None
         while True:
             try:
                 return await call(*args, self.route)
             except DirectorError as error:
-                delay = self._retry_after(error, delays)  # raises it when not to be tried again
+                delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
+                resend = self._resend(error)
+                if resend:  # the frames the session lost first
+                    await self._frame_call(resend[-1], resend)
             await asyncio.sleep(delay)
+
+    async def _frame_call(self, sent: wire.Sent, pending: list[wire.Sent] | None = None) -> pb.CameraUpdate:
+        """A unary Frame of ``sent`` (after those ``pending`` before it); see Session._frame_call."""
+        pending = pending or [sent]
+        backoff = None
+        while True:
+            try:
+                method, request = self._frame_request(pending[0])
+                reply = await method(request, self.route)
+            except DirectorError as error:
+                delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
+                pending = self._resend(error, sent.seq) or pending
+                await asyncio.sleep(delay)
+                continue
+            backoff = None
+            if pending.pop(0) is sent:
+                self._take_answer(sent, reply)
+                return reply
 
     async def frame(
         self,
@@ -319,36 +398,38 @@ class AsyncSession(wire.SessionBase):
     ) -> pb.CameraUpdate:
         """Sends one frame and waits for its camera; see :meth:`camdirector_client.Session.frame`."""
         update = wire.encode_frame_update(self.id, frame, time_s, states, packed, player_stats)
-        return await self._retrying(self._transport.frame_encoded, update)
+        return await self._frame_call(self.history.add(frame, update))
 
     async def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
-        """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""
+        """Sends a prebuilt ``FrameUpdate``; see :meth:`camdirector_client.Session.send`."""
         if not update.session_id:
             update.session_id = self.id
-        return await self._retrying(self._transport.frame, update)
+        return await self._frame_call(self.history.add(update.frame, update))
 
     async def stream(self, frame_updates: FrameUpdates) -> AsyncIterator[pb.CameraUpdate]:
         """One ``CameraUpdate`` per update, in order: ``async for update in session.stream(...)``.
 
         ``frame_updates`` may be a sync or an async iterable. Over gRPC this is one StreamFrames
         call; over ZeroMQ, one Frame request per update. Updates with an empty session_id get this
-        session's. Leaving the loop early cancels the stream (close the iterator with ``aclose()``).
-        A stream ended by UNAVAILABLE or CANCELLED is opened again from its first unanswered update
-        (class docstring; _AsyncResumable).
+        session's; each gets its answered_frame and is kept for a DATA_LOSS resend (do not reuse
+        a message). Leaving the loop early cancels the stream (close the iterator with
+        ``aclose()``). A stream ended by UNAVAILABLE, CANCELLED, an unanswered frame or DATA_LOSS
+        is opened again (class docstring; _AsyncResumable).
         """
-        feed = _AsyncResumable(wire.with_session_id_async(frame_updates, self.id))
-        delays = wire.retry_delays_s()
+        feed = _AsyncResumable(wire.with_session_id_async(frame_updates, self.id), self)
+        backoff = None
         try:
             while True:
                 try:
                     async with contextlib.aclosing(self._transport.stream(feed.requests(), self.route)) as replies:
                         async for reply in replies:
-                            feed.unanswered.popleft()
-                            delays = wire.retry_delays_s()  # answered again: a later loss gets every try anew
-                            yield reply
+                            backoff = None  # answered again: a later loss gets a whole window anew
+                            if self._take_answer(feed.in_flight.popleft(), reply):
+                                yield reply
                     return
                 except DirectorError as error:
-                    delay = self._retry_after(error, delays)  # raises it when not to be tried again
+                    delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
+                    feed.resend_after(error)
                 await asyncio.sleep(delay)
         finally:
             feed.close()
@@ -409,9 +490,10 @@ class _SessionOpening:
 class AsyncClient:
     """A connection to a director server; see :func:`connect_async`."""
 
-    def __init__(self, transport: _AsyncTransport, url: str) -> None:
+    def __init__(self, transport: _AsyncTransport, url: str, retry: wire.RetryPolicy = wire.DEFAULT_RETRY) -> None:
         self._transport = transport
         self.url = url
+        self.retry = retry
 
     def __repr__(self) -> str:
         return f"AsyncClient({self.url!r})"
@@ -447,7 +529,7 @@ class AsyncClient:
 
     async def _open_session(self, request: pb.CreateSessionRequest) -> AsyncSession:
         route = wire.new_route_key()  # before the session exists: CreateSession carries it too
-        return AsyncSession(self._transport, await self._transport.create_session(request, route), route)
+        return AsyncSession(self._transport, await self._transport.create_session(request, route), route, self.retry)
 
     async def close(self) -> None:
         """Closes the channel or sockets. Sessions stay open on the server until their timeout."""
@@ -470,6 +552,7 @@ def connect_async(
     max_message_bytes: int = wire.DEFAULT_MAX_MESSAGE_BYTES,
     grpc_options: Sequence[tuple[str, Any]] | None = None,
     zmq_context: zmq.asyncio.Context | None = None,
+    retry: wire.RetryPolicy = wire.DEFAULT_RETRY,
 ) -> AsyncClient:
     """An :class:`AsyncClient` for ``grpc://host:port``, ``grpcs://host:port`` or
     ``tcp://host:port``; call it inside a running event loop. Arguments as in
@@ -481,8 +564,8 @@ def connect_async(
     security = wire.security(endpoint, key, ca_file, zmq_server_key)
     transport: _AsyncTransport
     if endpoint.transport == "grpc":
-        options = wire.grpc_channel_options(max_message_bytes, grpc_options)
-        transport = _AioGrpcTransport(endpoint.address, timeout_s, options, security)
+        options = wire.grpc_channel_options(max_message_bytes, grpc_options, retry)
+        transport = _AioGrpcTransport(endpoint.address, timeout_s, options, security, retry)
     else:
         transport = _AioZmqTransport(endpoint.address, timeout_s, zmq_context, security)
-    return AsyncClient(transport, url)
+    return AsyncClient(transport, url, retry)

@@ -51,10 +51,19 @@ class _Transport(Protocol):
 
 
 class _GrpcTransport:
-    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. Every call carries
-    the session's route key and the client's key (``wire.Security.grpc_metadata``)."""
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. A frame, streamed or
+    unary, left unanswered for ``retry.frame_timeout_s`` (when shorter) ends its call with
+    UNAVAILABLE: a hung node, to be tried again. Every call carries the session's route key and
+    the client's key (``wire.Security.grpc_metadata``)."""
 
-    def __init__(self, target: str, timeout_s: float, options: list[tuple[str, Any]], security: wire.Security) -> None:
+    def __init__(
+        self,
+        target: str,
+        timeout_s: float,
+        options: list[tuple[str, Any]],
+        security: wire.Security,
+        retry: wire.RetryPolicy = wire.DEFAULT_RETRY,
+    ) -> None:
         if security.credentials is None:
             self._channel = grpc.insecure_channel(target, options=options)
         else:
@@ -66,6 +75,7 @@ class _GrpcTransport:
             _FRAME_METHOD, response_deserializer=pb.CameraUpdate.FromString, _registered_method=True
         )
         self._timeout_s = timeout_s
+        self._frame_timeout_s = retry.frame_timeout_s
 
     def _unary(self, method, request, route: str):
         try:
@@ -73,25 +83,44 @@ class _GrpcTransport:
         except grpc.RpcError as error:
             raise self._security.grpc_error(error) from None
 
+    def _frame(self, method, request, route: str) -> pb.CameraUpdate:
+        hang_s = self._frame_timeout_s
+        if hang_s is None or hang_s >= self._timeout_s:
+            return self._unary(method, request, route)
+        try:
+            return method(request, timeout=hang_s, metadata=self._security.grpc_metadata(route))
+        except grpc.RpcError as error:
+            raise wire.frame_error(self._security.grpc_error(error), hang_s) from None
+
     def create_session(self, request: pb.CreateSessionRequest, route: str) -> pb.CreateSessionResponse:
         return self._unary(self._stub.CreateSession, request, route)
 
     def frame(self, update: pb.FrameUpdate, route: str) -> pb.CameraUpdate:
-        return self._unary(self._stub.Frame, update, route)
+        return self._frame(self._stub.Frame, update, route)
 
     def frame_encoded(self, update: bytes, route: str) -> pb.CameraUpdate:
-        return self._unary(self._frame_encoded, update, route)
+        return self._frame(self._frame_encoded, update, route)
 
     def stream(self, updates: Iterable[pb.FrameUpdate], route: str) -> Iterator[pb.CameraUpdate]:
-        pump = _RequestPump(updates)
+        deadlines = None if self._frame_timeout_s is None else wire.FrameDeadlines(self._frame_timeout_s)
+        pump = _RequestPump(updates, deadlines)
         call = self._stub.StreamFrames(iter(pump), metadata=self._security.grpc_metadata(route))
+        watched = threading.Event()  # set: the stream is over, the watchdog stops
+        if deadlines is not None:
+            threading.Thread(target=_watch, args=(call, deadlines, watched), name="camdirector-frame-watch", daemon=True).start()
         try:
-            yield from call
+            for reply in call:
+                if deadlines is not None:
+                    deadlines.answered()
+                yield reply
         except grpc.RpcError as error:
             if pump.error is not None:  # the caller's iterator failed: grpc only saw a cancel
                 raise pump.error from None
+            if deadlines is not None and deadlines.expired is not None:  # the watchdog cancelled it
+                raise deadlines.expired from None
             raise self._security.grpc_error(error) from None
         finally:
+            watched.set()
             call.cancel()
         if pump.error is not None:
             raise pump.error
@@ -114,16 +143,29 @@ class _GrpcTransport:
         self._channel.close()
 
 
-class _RequestPump:
-    """Iterates the caller's updates on grpc's thread and keeps what they raised, if anything."""
+def _watch(call: grpc.Future, deadlines: wire.FrameDeadlines, over: threading.Event) -> None:
+    """Cancels ``call`` when a frame on it is left unanswered past its deadline (a hung node)."""
+    while not over.wait(deadlines.wait_s()):
+        if deadlines.expired is not None:
+            call.cancel()
+            return
 
-    def __init__(self, updates: Iterable[pb.FrameUpdate]) -> None:
+
+class _RequestPump:
+    """Iterates the caller's updates on grpc's thread, noting when each is sent (``deadlines``),
+    and keeps what they raised, if anything."""
+
+    def __init__(self, updates: Iterable[pb.FrameUpdate], deadlines: wire.FrameDeadlines | None = None) -> None:
         self._updates = updates
+        self._deadlines = deadlines
         self.error: BaseException | None = None
 
     def __iter__(self) -> Iterator[pb.FrameUpdate]:
         try:
-            yield from self._updates
+            for update in self._updates:
+                if self._deadlines is not None:
+                    self._deadlines.sent(update.frame)
+                yield update
         except Exception as error:
             self.error = error
             raise
@@ -210,23 +252,27 @@ class _ZmqTransport:
 
 class _Resumable:
     """The caller's updates for a stream that may take several gRPC calls: a call that ended with
-    UNAVAILABLE is followed by one that sends its unanswered updates again, then goes on with the
-    caller's. The caller's iterator is read by one call at a time (a lock): an ended call that
-    was waiting in it for the next update hands that update to the next call."""
+    a RETRYABLE code is followed by one that sends its unanswered updates again (after DATA_LOSS,
+    the session's kept updates from the frame asked for), then goes on with the caller's. The
+    caller's iterator is read by one call at a time (a lock): an ended call that was waiting in
+    it for the next update hands that update to the next call."""
 
-    def __init__(self, updates: Iterable[pb.FrameUpdate]) -> None:
+    def __init__(self, updates: Iterable[pb.FrameUpdate], session: Session) -> None:
         self._updates = iter(updates)
+        self._session = session
         self._lock = threading.Lock()
         self._handoff: deque[pb.FrameUpdate] = deque()
         self._call = 0
-        self.unanswered: deque[pb.FrameUpdate] = deque()  # sent on the current call, oldest first
+        self._last_seq = 0  # the newest update this stream sent
+        self.in_flight: deque[wire.Sent] = deque()  # sent on the current call and not answered, oldest first
 
     def requests(self) -> Iterator[pb.FrameUpdate]:
         """A new call's requests."""
         with self._lock:  # after the ended call's last read of the caller's iterator, if it was in one
             self._call += 1
-            call, resend = self._call, list(self.unanswered)
-        yield from resend
+            call, resend = self._call, list(self.in_flight)
+        for sent in resend:
+            yield self._stamped(sent)
         while True:
             with self._lock:
                 if self._handoff:
@@ -238,29 +284,70 @@ class _Resumable:
                 if call != self._call:
                     self._handoff.appendleft(update)
                     return
-                self.unanswered.append(update)
-            yield update
+                sent = self._session.history.add(update.frame, update)
+                self._last_seq = sent.seq
+                self.in_flight.append(sent)
+            yield self._stamped(sent)
+
+    def _stamped(self, sent: wire.Sent) -> pb.FrameUpdate:
+        sent.update.answered_frame = self._session._to_send(sent)
+        return sent.update
+
+    def resend_after(self, error: DirectorError) -> None:
+        """After the call ended with ``error``: a DATA_LOSS's updates to send again are the next
+        call's first (raises ``error`` when they are no longer kept)."""
+        with self._lock:
+            resend = self._session._resend(error, self._last_seq)
+            if resend is not None:
+                self.in_flight = deque(resend)
 
 
 class Session(wire.SessionBase):
     """One director session; closes itself at the end of a ``with`` block (see wire.SessionBase).
 
-    A call answered UNAVAILABLE (or reset by a balancer: CANCELLED) is tried again by itself,
-    with the same session id (the server restores the session from its checkpoint when its worker
-    or node was lost); so is a stream, from its first unanswered update. ``retries`` counts them.
-    A refused key (UNAUTHENTICATED: none, unknown or revoked; PERMISSION_DENIED: its role lacks
-    the call) is raised at once: trying again would be refused the same."""
+    A call answered UNAVAILABLE (or reset by a balancer: CANCELLED), or a frame left unanswered
+    for ``retry.frame_timeout_s`` over gRPC (a hung node), is tried again by itself with the same
+    session id (the server restores the session from its checkpoint when its worker or node was
+    lost), after jittered waits from 0.1 s up, for up to ``retry.retry_window_s`` since the first
+    failure (wire.RetryPolicy); so is a stream, from its first unanswered update. A DATA_LOSS
+    "resend from K" (a restore whose checkpoint was behind) sends the kept updates from frame K
+    again, their answers not given twice. ``retries`` counts the tries. A refused key
+    (UNAUTHENTICATED: none, unknown or revoked; PERMISSION_DENIED: its role lacks the call) is
+    raised at once: trying again would be refused the same."""
 
     __slots__ = ()
 
     def _retrying(self, call, *args):
-        delays = wire.retry_delays_s()
+        backoff = None
         while True:
             try:
                 return call(*args, self.route)
             except DirectorError as error:
-                delay = self._retry_after(error, delays)  # raises it when not to be tried again
+                delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
+                resend = self._resend(error)
+                if resend:  # the frames the session lost first
+                    self._frame_call(resend[-1], resend)
             time.sleep(delay)
+
+    def _frame_call(self, sent: wire.Sent, pending: list[wire.Sent] | None = None) -> pb.CameraUpdate:
+        """A unary Frame of ``sent`` (after those ``pending`` before it), tried again as
+        ``_retrying``; after DATA_LOSS the kept updates from the frame asked for are sent first,
+        their answers dropped."""
+        pending = pending or [sent]
+        backoff = None
+        while True:
+            try:
+                method, request = self._frame_request(pending[0])
+                reply = method(request, self.route)
+            except DirectorError as error:
+                delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
+                pending = self._resend(error, sent.seq) or pending
+                time.sleep(delay)
+                continue
+            backoff = None
+            if pending.pop(0) is sent:
+                self._take_answer(sent, reply)
+                return reply
 
     def frame(
         self,
@@ -289,33 +376,38 @@ class Session(wire.SessionBase):
             ``MATCH_DIRECTOR_AUTOTRACK`` ranks players by them.
         """
         update = wire.encode_frame_update(self.id, frame, time_s, states, packed, player_stats)
-        return self._retrying(self._transport.frame_encoded, update)
+        return self._frame_call(self.history.add(frame, update))
 
     def send(self, update: pb.FrameUpdate) -> pb.CameraUpdate:
-        """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty); waits for its camera."""
+        """Sends a prebuilt ``FrameUpdate`` (its session_id filled in when empty, its
+        answered_frame set); waits for its camera. The message is kept for a DATA_LOSS resend:
+        do not change it afterwards."""
         if not update.session_id:
             update.session_id = self.id
-        return self._retrying(self._transport.frame, update)
+        return self._frame_call(self.history.add(update.frame, update))
 
     def stream(self, frame_updates: Iterable[pb.FrameUpdate]) -> Iterator[pb.CameraUpdate]:
         """One ``CameraUpdate`` per update, in order, as they come.
 
         Over gRPC this is one StreamFrames call (the updates are read on grpc's thread as the
         stream has room); over ZeroMQ, one Frame request per update. Updates with an empty
-        session_id get this session's. Stopping the iteration early cancels the stream. A stream
-        ended by UNAVAILABLE is opened again from its first unanswered update (class docstring).
+        session_id get this session's; each gets its answered_frame, and is kept for a DATA_LOSS
+        resend (do not reuse a message). Stopping the iteration early cancels the stream. A
+        stream ended by UNAVAILABLE, CANCELLED, an unanswered frame or DATA_LOSS is opened again
+        (class docstring).
         """
-        feed = _Resumable(wire.with_session_id(frame_updates, self.id))
-        delays = wire.retry_delays_s()
+        feed = _Resumable(wire.with_session_id(frame_updates, self.id), self)
+        backoff = None
         while True:
             try:
                 for reply in self._transport.stream(feed.requests(), self.route):
-                    feed.unanswered.popleft()
-                    delays = wire.retry_delays_s()  # answered again: a later loss gets every try anew
-                    yield reply
+                    backoff = None  # answered again: a later loss gets a whole window anew
+                    if self._take_answer(feed.in_flight.popleft(), reply):
+                        yield reply
                 return
             except DirectorError as error:
-                delay = self._retry_after(error, delays)  # raises it when not to be tried again
+                delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
+                feed.resend_after(error)
             time.sleep(delay)
 
     def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:
@@ -351,9 +443,10 @@ class Session(wire.SessionBase):
 class Client:
     """A connection to a director server; see :func:`connect`."""
 
-    def __init__(self, transport: _Transport, url: str) -> None:
+    def __init__(self, transport: _Transport, url: str, retry: wire.RetryPolicy = wire.DEFAULT_RETRY) -> None:
         self._transport = transport
         self.url = url
+        self.retry = retry
 
     def __repr__(self) -> str:
         return f"Client({self.url!r})"
@@ -384,7 +477,7 @@ class Client:
             delay_s=delay_s,
         )
         route = wire.new_route_key()
-        return Session(self._transport, self._transport.create_session(msg, route), route)
+        return Session(self._transport, self._transport.create_session(msg, route), route, self.retry)
 
     def close(self) -> None:
         """Closes the channel or sockets. Sessions stay open on the server until their timeout."""
@@ -407,6 +500,7 @@ def connect(
     max_message_bytes: int = wire.DEFAULT_MAX_MESSAGE_BYTES,
     grpc_options: Sequence[tuple[str, Any]] | None = None,
     zmq_context: zmq.Context | None = None,
+    retry: wire.RetryPolicy = wire.DEFAULT_RETRY,
 ) -> Client:
     """A :class:`Client` for ``grpc://host:port`` (gRPC), ``grpcs://host:port`` (gRPC over TLS)
     or ``tcp://host:port`` (ZeroMQ).
@@ -435,6 +529,10 @@ def connect(
         More gRPC channel arguments; they override the ones above.
     zmq_context : zmq.Context, optional
         Context for the ZeroMQ sockets; default the process-wide ``zmq.Context.instance()``.
+    retry : RetryPolicy
+        How long failed calls are tried again (``retry_window_s``, 30 s), how long a frame may go
+        unanswered before its node is taken as hung (``frame_timeout_s``, 1 s, gRPC) and how many
+        sent updates are kept for a DATA_LOSS resend (``resend_history_frames``, 600).
 
     Connecting is lazy: an unreachable server shows at the first call (UNAVAILABLE over gRPC,
     DEADLINE_EXCEEDED over ZeroMQ), and so does a refused key (UNAUTHENTICATED, PERMISSION_DENIED).
@@ -444,8 +542,8 @@ def connect(
     security = wire.security(endpoint, key, ca_file, zmq_server_key)
     transport: _Transport
     if endpoint.transport == "grpc":
-        options = wire.grpc_channel_options(max_message_bytes, grpc_options)
-        transport = _GrpcTransport(endpoint.address, timeout_s, options, security)
+        options = wire.grpc_channel_options(max_message_bytes, grpc_options, retry)
+        transport = _GrpcTransport(endpoint.address, timeout_s, options, security, retry)
     else:
         transport = _ZmqTransport(endpoint.address, timeout_s, zmq_context, security)
-    return Client(transport, url)
+    return Client(transport, url, retry)

@@ -12,11 +12,16 @@ call (docs/security.md).
 from __future__ import annotations
 
 import os
+import random
+import re
+import threading
+import time
 import uuid
-from collections.abc import AsyncIterable, AsyncIterator, Iterable, Iterator, Mapping, Sequence
+from collections import deque
+from collections.abc import AsyncIterable, AsyncIterator, Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import grpc
 import numpy as np
@@ -29,26 +34,34 @@ from camdirector_client.errors import DirectorError
 
 __all__ = [
     "DEFAULT_MAX_MESSAGE_BYTES",
+    "DEFAULT_RETRY",
     "DEFAULT_TIMEOUT_S",
     "Endpoint",
     "KEY_ENV",
     "PackedStates",
     "PlayerStatsLike",
     "RETRYABLE",
+    "Backoff",
+    "FrameDeadlines",
+    "RetryPolicy",
+    "Sent",
+    "SentHistory",
     "Security",
     "States",
     "ClosedStub",
     "check_timeout",
     "create_session_request",
     "encode_frame_update",
+    "frame_error",
     "frame_update",
     "grpc_channel_options",
     "open_dealer",
     "parse_url",
-    "retry_delays_s",
+    "resend_from",
     "security",
     "style_msg",
     "with_session_id",
+    "with_answered_frame",
     "with_session_id_async",
     "zmq_no_reply",
     "zmq_reply_payload",
@@ -79,14 +92,187 @@ def new_route_key() -> str:
 # What a session's call or stream is tried again after, by the sync and asyncio clients alike:
 # the server restoring the session (its worker was lost) answers UNAVAILABLE; a balancer whose
 # node died resets the call's HTTP/2 stream, which gRPC reports as CANCELLED (a client cancels a
-# call itself only when its caller has stopped reading it: nothing is left to retry then).
+# call itself only when its caller has stopped reading it: nothing is left to retry then). A frame
+# left unanswered for RetryPolicy.frame_timeout_s (a hung node) counts as UNAVAILABLE.
 RETRYABLE = (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED)
 
+_RESEND_FROM = re.compile(r"resend from (\d+)")
 
-def retry_delays_s() -> Iterator[float]:
-    """Waits before the tries after a RETRYABLE answer: the server is restoring the session (its
-    worker or node was lost) or restarting; about 3 s in all."""
-    yield from (0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.5)
+
+def resend_from(error: DirectorError) -> int | None:
+    """The frame a DATA_LOSS answer asks the client to send again from ("state lost after frame N:
+    resend from N+1": its node was lost while the checkpoint store was behind); None for any other
+    error."""
+    if error.code is not grpc.StatusCode.DATA_LOSS:
+        return None
+    found = _RESEND_FROM.search(error.message)
+    return int(found.group(1)) if found else None
+
+
+@dataclass(frozen=True, slots=True)
+class RetryPolicy:
+    """How a session rides out a lost node, a restarting balancer and a hung node.
+
+    A call or stream that fails with a RETRYABLE code is tried again after waits that start near
+    ``initial_backoff_s`` and double up to ``max_backoff_s``, each with equal jitter (half fixed,
+    half drawn from ``random``), until ``retry_window_s`` has passed since its first failure; an
+    answer starts the count again. A stream is opened again from its first unanswered update.
+    """
+
+    retry_window_s: float = 30.0  # a failing call is tried again until this long after its first failure, s
+    initial_backoff_s: float = 0.1  # the first wait, s; each next one doubles
+    max_backoff_s: float = 1.0  # the longest wait, s: a balancer back is found within it
+    # gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call is
+    # cancelled and tried again (through a balancer, on a live node), s; None: frames wait forever
+    # on a stream, timeout_s on a unary Frame
+    frame_timeout_s: float | None = 1.0
+    resend_history_frames: int = 600  # updates kept for a DATA_LOSS resend (10 s at 60 Hz)
+    random: Callable[[], float] = random.random  # jitter in [0, 1); e.g. random.Random(seed).random
+
+    def __post_init__(self) -> None:
+        for name in ("retry_window_s", "initial_backoff_s", "max_backoff_s"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.frame_timeout_s is not None and not self.frame_timeout_s > 0.0:
+            raise ValueError(f"frame_timeout_s must be > 0 or None, got {self.frame_timeout_s}")
+        if self.resend_history_frames < 0:
+            raise ValueError(f"resend_history_frames must be >= 0, got {self.resend_history_frames}")
+
+    def grpc_options(self) -> dict[str, int]:
+        """Channel arguments: the channel reconnects as often as calls are tried again (gRPC's own
+        first wait is 1 s, growing to 120 s: a balancer back after 6 s was found after 10 s), and
+        pings its server every second while a call is open, closing a connection that does not
+        answer within a second."""
+        return {
+            "grpc.initial_reconnect_backoff_ms": max(1, round(self.initial_backoff_s * 1000.0)),
+            "grpc.min_reconnect_backoff_ms": max(1, round(self.initial_backoff_s * 1000.0)),
+            "grpc.max_reconnect_backoff_ms": max(1, round(self.max_backoff_s * 1000.0)),
+            "grpc.keepalive_time_ms": 1000,
+            "grpc.keepalive_timeout_ms": 1000,
+        }
+
+
+DEFAULT_RETRY = RetryPolicy()
+
+
+class Backoff:
+    """The waits of one call's tries after its first failure (made then); see RetryPolicy."""
+
+    __slots__ = ("_clock", "_policy", "_started_s", "_tries")
+
+    def __init__(self, policy: RetryPolicy, clock: Callable[[], float] = time.monotonic) -> None:
+        self._policy = policy
+        self._clock = clock
+        self._started_s = clock()
+        self._tries = 0
+
+    def next_delay_s(self, at_once: bool = False) -> float | None:
+        """The wait before the next try; None when the window is spent. ``at_once``: no wait (a
+        DATA_LOSS resend), the window still counted."""
+        left_s = self._policy.retry_window_s - (self._clock() - self._started_s)
+        if left_s <= 0.0:
+            return None
+        if at_once:
+            return 0.0
+        cap_s = min(self._policy.max_backoff_s, self._policy.initial_backoff_s * 2.0**self._tries)
+        self._tries += 1
+        return min(left_s, cap_s * (0.5 + 0.5 * self._policy.random()))
+
+
+class Sent(NamedTuple):
+    """A frame update a session sent: its order among the session's updates, the frame of the one
+    sent before it (0: none), its frame, and the update (a FrameUpdate, or its bytes)."""
+
+    seq: int
+    previous_frame: int
+    frame: int
+    update: Any
+
+
+class SentHistory:
+    """The frame updates a session sent, oldest first, up to ``limit`` of them: what it sends
+    again when the server answers DATA_LOSS "resend from K". Shared by a session's unary calls
+    and streams, from any thread."""
+
+    __slots__ = ("_kept", "_last_frame", "_lock", "_seq", "_dropped_through")
+
+    def __init__(self, limit: int) -> None:
+        self._kept: deque[Sent] = deque(maxlen=limit)
+        self._lock = threading.Lock()
+        self._seq = 0
+        self._last_frame = 0
+        self._dropped_through = 0  # the newest frame sent and no longer kept (0: none)
+
+    def add(self, frame: int, update: Any) -> Sent:
+        """Keeps ``update``, the session's newest, and answers its entry."""
+        with self._lock:
+            self._seq += 1
+            sent = Sent(self._seq, self._last_frame, frame, update)
+            self._last_frame = frame
+            if len(self._kept) == self._kept.maxlen:
+                dropped = self._kept[0].frame if self._kept else frame
+                self._dropped_through = max(self._dropped_through, dropped)
+            self._kept.append(sent)
+            return sent
+
+    def since(self, frame: int, through_seq: int | None, error: DirectorError) -> list[Sent]:
+        """The kept updates from ``frame`` on, up to sequence number ``through_seq`` (None: all); ``error``
+        (the DATA_LOSS), with a word added, when an update from ``frame`` on is no longer kept."""
+        with self._lock:
+            if frame <= self._dropped_through:
+                raise DirectorError(
+                    error.code,
+                    f"{error.message} (this client kept the last {self._kept.maxlen} updates it sent, "
+                    f"resend_history_frames: frame {frame} is no longer among them)",
+                )
+            last = self._seq if through_seq is None else through_seq
+            return [s for s in self._kept if s.seq <= last and s.frame >= frame]
+
+
+def frame_error(error: DirectorError, frame_timeout_s: float) -> DirectorError:
+    """A unary Frame's error, its deadline of ``frame_timeout_s`` passed taken as a hung node
+    (UNAVAILABLE, tried again) rather than DEADLINE_EXCEEDED."""
+    if error.code is not grpc.StatusCode.DEADLINE_EXCEEDED:
+        return error
+    return DirectorError(
+        grpc.StatusCode.UNAVAILABLE,
+        f"the frame was not answered within {frame_timeout_s:g} s (frame_timeout_s): the node may be hung",
+    )
+
+
+class FrameDeadlines:
+    """When each frame in flight on a stream call was sent, oldest first: a hung node is one that
+    leaves the oldest unanswered past ``timeout_s``. Written by the thread or task sending, read
+    by the watchdog (deque appends and pops are atomic)."""
+
+    __slots__ = ("_sent", "expired", "timeout_s")
+
+    def __init__(self, timeout_s: float) -> None:
+        self.timeout_s = timeout_s
+        self._sent: deque[tuple[float, int]] = deque()  # (time.monotonic() when sent, frame)
+        self.expired: DirectorError | None = None  # set when a frame was left unanswered
+
+    def sent(self, frame: int) -> None:
+        self._sent.append((time.monotonic(), frame))
+
+    def answered(self) -> None:
+        if self._sent:
+            self._sent.popleft()
+
+    def wait_s(self) -> float:
+        """How long until the oldest frame's deadline (the whole timeout when none is in flight);
+        0 when it has passed, which sets ``expired``."""
+        if not self._sent:
+            return self.timeout_s
+        sent_s, frame = self._sent[0]
+        left_s = sent_s + self.timeout_s - time.monotonic()
+        if left_s <= 0.0:
+            self.expired = DirectorError(
+                grpc.StatusCode.UNAVAILABLE,
+                f"frame {frame} was not answered within {self.timeout_s:g} s (frame_timeout_s): the node may be hung",
+            )
+            return 0.0
+        return left_s
 
 
 RPC_CREATE_SESSION = b"CreateSession"
@@ -282,12 +468,15 @@ def zmq_no_reply(rpc: bytes, endpoint: str, timeout_s: float, curve: bool) -> Di
     )
 
 
-def grpc_channel_options(max_message_bytes: int, extra: Sequence[tuple[str, Any]] | None) -> list[tuple[str, Any]]:
+def grpc_channel_options(
+    max_message_bytes: int, extra: Sequence[tuple[str, Any]] | None, retry: RetryPolicy = DEFAULT_RETRY
+) -> list[tuple[str, Any]]:
     if max_message_bytes <= 0:
         raise ValueError(f"max_message_bytes must be > 0, got {max_message_bytes}")
     options: dict[str, Any] = {
         "grpc.max_send_message_length": max_message_bytes,
         "grpc.max_receive_message_length": max_message_bytes,
+        **retry.grpc_options(),
     }
     options.update(extra or ())
     return list(options.items())
@@ -399,6 +588,15 @@ def encode_frame_update(
 
 
 _PACKED_TRANSFORMS_TAG = bytes([6 << 3 | 2])  # FrameUpdate.packed_transforms, length-delimited
+_ANSWERED_FRAME_TAG = bytes([9 << 3 | 0])  # FrameUpdate.answered_frame, varint
+
+
+def with_answered_frame(payload: bytes, answered_frame: int) -> bytes:
+    """A serialized FrameUpdate with ``answered_frame`` set: a scalar field given twice takes its
+    last value, so the field is appended (nothing when 0, the default)."""
+    return payload + _ANSWERED_FRAME_TAG + _varint(answered_frame) if answered_frame else payload
+
+
 _LITTLE_ENDIAN_DOUBLE = np.dtype("<f8")
 
 
@@ -492,28 +690,79 @@ class SessionBase:
         path on the server); empty unless ``record=True`` and it records.
     """
 
-    __slots__ = ("_closed_frames", "_transport", "id", "recording_path", "retries", "route")
+    __slots__ = (
+        "_answered_seq",
+        "_closed_frames",
+        "_transport",
+        "answered_frame",
+        "history",
+        "id",
+        "recording_path",
+        "retries",
+        "retry",
+        "route",
+    )
 
-    def __init__(self, transport, response: pb.CreateSessionResponse, route: str = "") -> None:
+    def __init__(
+        self, transport, response: pb.CreateSessionResponse, route: str = "", retry: RetryPolicy = DEFAULT_RETRY
+    ) -> None:
         self._transport = transport
         self.id: str = response.session_id
         self.recording_path: str = response.recording_path
         self.route = route  # the ROUTE_HEADER key of every call of this session (new_route_key)
-        self.retries = 0  # calls and streams tried again after UNAVAILABLE (the server restoring the session)
+        self.retry = retry
+        self.retries = 0  # calls and streams tried again (UNAVAILABLE, CANCELLED, DATA_LOSS)
+        self.history = SentHistory(retry.resend_history_frames)
+        self.answered_frame = 0  # the frame of the newest answer given to the application
+        self._answered_seq = 0  # the SentHistory sequence number of that answer's update
         self._closed_frames: int | None = None
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(id={self.id!r}, closed={self._closed_frames is not None})"
 
-    def _retry_after(self, error: DirectorError, delays: Iterator[float]) -> float:
-        """How long to wait before trying again after `error` (from retry_delays_s), the retry
-        counted; raises `error` instead when it is not RETRYABLE, the tries are used up, or the
-        client is closed (its CANCELLED is its own)."""
-        delay = None if error.code not in RETRYABLE or self._transport.closed else next(delays, None)
+    def _retry_after(self, error: DirectorError, backoff: Backoff | None) -> tuple[float, Backoff]:
+        """How long to wait before trying again after ``error``, and the backoff of the call's
+        tries (``backoff``, or one started now, at the first failure), the retry counted; raises
+        ``error`` instead when it is not RETRYABLE nor a DATA_LOSS to resend, the retry window is
+        spent, or the client is closed (its CANCELLED is its own)."""
+        data_loss = resend_from(error) is not None
+        if (error.code not in RETRYABLE and not data_loss) or self._transport.closed:
+            raise error
+        backoff = backoff or Backoff(self.retry)
+        delay = backoff.next_delay_s(at_once=data_loss)
         if delay is None:
             raise error
         self.retries += 1
-        return delay
+        return delay, backoff
+
+    def _to_send(self, sent: Sent) -> int:
+        """The answered_frame a sent update carries: the newest answer received, but never past
+        the update sent before it (resent after DATA_LOSS, it says where the session stood when
+        it was first sent)."""
+        return min(self.answered_frame, sent.previous_frame)
+
+    def _frame_request(self, sent: Sent) -> tuple[Callable[..., Any], Any]:
+        """The transport's unary Frame method and its argument for ``sent``, answered_frame set."""
+        answered = self._to_send(sent)
+        if isinstance(sent.update, bytes):
+            return self._transport.frame_encoded, with_answered_frame(sent.update, answered)
+        sent.update.answered_frame = answered
+        return self._transport.frame, sent.update
+
+    def _resend(self, error: DirectorError, through_seq: int | None = None) -> list[Sent] | None:
+        """After ``error``: the updates to send again from a DATA_LOSS's "resend from K", up to
+        sequence number ``through_seq`` (the call's newest; None: all); None when it asks for none. Raises
+        ``error`` when an update from K on is no longer kept."""
+        frame = resend_from(error)
+        return None if frame is None else self.history.since(frame, through_seq, error) or None
+
+    def _take_answer(self, sent: Sent, reply: pb.CameraUpdate) -> bool:
+        """Notes the answer to ``sent``; False when the application already had it (a resend
+        after DATA_LOSS) and it is to be dropped."""
+        if sent.seq <= self._answered_seq:
+            return False
+        self._answered_seq, self.answered_frame = sent.seq, reply.frame
+        return True
 
     def frame_update(
         self,

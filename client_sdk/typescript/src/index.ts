@@ -12,9 +12,10 @@
 export { connect, Client, Session, type ConnectOptions, type StreamInput } from "./client.js";
 export { DirectorError, statusName, type StatusName } from "./errors.js";
 export {
-  DEFAULT_MAX_MESSAGE_BYTES, DEFAULT_TIMEOUT_MS, EncodedFrame, KEY_ENV, PACKED_WIDTH, PROTOCOL, PROTOCOL_HEADER,
-  RETRYABLE, RETRY_DELAYS_MS, ROUTE_HEADER, encodeFrameUpdate, frameUpdate, parseUrl,
-  type FrameOptions, type Packed, type StatesInit,
+  Backoff, DEFAULT_MAX_MESSAGE_BYTES, DEFAULT_RETRY, DEFAULT_TIMEOUT_MS, EncodedFrame, FrameDeadlines, KEY_ENV,
+  PACKED_WIDTH, PROTOCOL, PROTOCOL_HEADER, RETRYABLE, ROUTE_HEADER, SentHistory, encodeFrameUpdate, frameUpdate,
+  parseUrl, resendFrom, retryChannelOptions, retryPolicy, withAnsweredFrame,
+  type FrameOptions, type Packed, type RetryPolicy, type Sent, type StatesInit,
 } from "./wire.js";
 export * from "./convert.js";
 export * as pb from "./gen/camdirector/v1/director_pb.js";

@@ -18,8 +18,10 @@ export interface Transport {
   readonly closed: boolean;
   /** True: `stream` opens a StreamFrames call; false: a stream is one Frame request per update. */
   readonly streams: boolean;
-  /** One request/reply RPC (`method`: "Frame", "CreateSession", ...) of the serialized `request`. */
-  unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, route: string): Promise<MessageShape<D>>;
+  /** One request/reply RPC (`method`: "Frame", "CreateSession", ...) of the serialized `request`.
+   * `frameTimeoutMs` (gRPC, a Frame): a shorter deadline, whose passing is a hung node (UNAVAILABLE). */
+  unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, route: string,
+                               frameTimeoutMs?: number): Promise<MessageShape<D>>;
   /** A StreamFrames call; only where `streams`. */
   stream(route: string): grpc.ClientDuplexStream<Uint8Array, CameraUpdate>;
   /** `error` as a DirectorError (a grpc-js ServiceError's code and details). */
@@ -92,15 +94,21 @@ export class GrpcTransport implements Transport {
     return new DirectorError(code, hint ? `${message} (${hint})` : message);
   }
 
-  unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, route: string): Promise<MessageShape<D>> {
+  unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, route: string,
+                               frameTimeoutMs?: number): Promise<MessageShape<D>> {
     if (this.closed) return Promise.reject(new DirectorError("CANCELLED", "the client is closed"));
+    const hung = frameTimeoutMs !== undefined && frameTimeoutMs < this.#timeoutMs;
     return new Promise((resolve, reject) => {
-      const call = this.#channel.createCall(SERVICE + method, Date.now() + this.#timeoutMs, null, null, null);
+      const call = this.#channel.createCall(SERVICE + method, Date.now() + (hung ? frameTimeoutMs : this.#timeoutMs), null, null, null);
       let reply: Buffer | null = null;
       call.start(this.metadata(route), {
         onReceiveMetadata() {},
         onReceiveMessage(message: Buffer) { reply = message; },
         onReceiveStatus: (status) => {
+          if (hung && status.code === grpc.status.DEADLINE_EXCEEDED) {
+            return reject(new DirectorError("UNAVAILABLE",
+              `the frame was not answered within ${frameTimeoutMs} ms (frameTimeoutMs): the node may be hung`));
+          }
           if (status.code !== grpc.status.OK) return reject(this.#statusError(status.code, status.details));
           if (reply === null) return reject(new DirectorError("UNIMPLEMENTED", `no reply message to ${method}`));
           try { resolve(fromBinary(response, reply)); } catch (error) {

@@ -1,5 +1,6 @@
 /**
- * What the transports share: endpoint URLs, the session and protocol headers, the retry policy,
+ * What the transports share: endpoint URLs, the session and protocol headers, the retry policy
+ * (backoff, the sent-update history a DATA_LOSS resend reads, per-frame deadlines),
  * and the FrameUpdate encoder with packed transforms copied as raw little-endian doubles.
  */
 import { randomBytes } from "node:crypto";
@@ -32,8 +33,161 @@ export const PACKED_WIDTH = 10;
  */
 export const RETRYABLE: ReadonlySet<StatusName> = new Set<StatusName>(["UNAVAILABLE", "CANCELLED"]);
 
-/** Waits before the tries after a RETRYABLE answer, about 3 s in all (as the Python SDK). */
-export const RETRY_DELAYS_MS: readonly number[] = [20, 50, 100, 200, 400, 800, 1500];
+/**
+ * How a session rides out a lost node, a restarting balancer and a hung node (the Python SDK's
+ * RetryPolicy). A call or stream that fails with a RETRYABLE code is tried again after waits that
+ * start near `initialBackoffMs` and double up to `maxBackoffMs`, each with equal jitter (half
+ * fixed, half drawn from `random`), until `retryWindowMs` has passed since its first failure; an
+ * answer starts the count again. A stream is opened again from its first unanswered update.
+ */
+export interface RetryPolicy {
+  /** A failing call is tried again until this long after its first failure, ms (default 30 000). */
+  retryWindowMs: number;
+  /** The first wait, ms (default 100); each next one doubles. */
+  initialBackoffMs: number;
+  /** The longest wait, ms (default 1000): a balancer back is found within it. */
+  maxBackoffMs: number;
+  /** gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call
+   * is cancelled and tried again, ms (default 1000); null: frames wait forever on a stream,
+   * timeoutMs on a unary Frame. */
+  frameTimeoutMs: number | null;
+  /** Sent updates kept for a DATA_LOSS resend (default 600: 10 s at 60 Hz). */
+  resendHistoryFrames: number;
+  /** The jitter's source, in [0, 1) (default Math.random). */
+  random: () => number;
+}
+
+export const DEFAULT_RETRY: Readonly<RetryPolicy> = Object.freeze({
+  retryWindowMs: 30_000, initialBackoffMs: 100, maxBackoffMs: 1000, frameTimeoutMs: 1000, resendHistoryFrames: 600,
+  random: Math.random,
+});
+
+/** `given` over DEFAULT_RETRY; DirectorError(INVALID_ARGUMENT) for a setting out of range. */
+export function retryPolicy(given: Partial<RetryPolicy> = {}): RetryPolicy {
+  const policy: RetryPolicy = { ...DEFAULT_RETRY, ...given };
+  for (const name of ["retryWindowMs", "initialBackoffMs", "maxBackoffMs"] as const) {
+    if (!(policy[name] >= 0)) throw new DirectorError("INVALID_ARGUMENT", `retry.${name} must be >= 0, got ${policy[name]}`);
+  }
+  if (policy.frameTimeoutMs !== null && !(policy.frameTimeoutMs > 0)) {
+    throw new DirectorError("INVALID_ARGUMENT", `retry.frameTimeoutMs must be > 0 or null, got ${policy.frameTimeoutMs}`);
+  }
+  if (!Number.isInteger(policy.resendHistoryFrames) || policy.resendHistoryFrames < 0) {
+    throw new DirectorError("INVALID_ARGUMENT", `retry.resendHistoryFrames must be an integer >= 0, got ${policy.resendHistoryFrames}`);
+  }
+  if (typeof policy.random !== "function") throw new DirectorError("INVALID_ARGUMENT", "retry.random must be a function");
+  return policy;
+}
+
+/** Channel options: the channel reconnects as often as calls are tried again (grpc-js's own first
+ * wait is 1 s, growing to 120 s), and pings its server every second, closing a connection that
+ * does not answer within a second. */
+export function retryChannelOptions(policy: RetryPolicy): Record<string, number> {
+  return {
+    "grpc.initial_reconnect_backoff_ms": Math.max(1, Math.round(policy.initialBackoffMs)),
+    "grpc.min_reconnect_backoff_ms": Math.max(1, Math.round(policy.initialBackoffMs)),
+    "grpc.max_reconnect_backoff_ms": Math.max(1, Math.round(policy.maxBackoffMs)),
+    "grpc.keepalive_time_ms": 1000,
+    "grpc.keepalive_timeout_ms": 1000,
+  };
+}
+
+/** The waits of one call's tries after its first failure (made then); see RetryPolicy. */
+export class Backoff {
+  readonly #startedMs: number;
+  #tries = 0;
+
+  constructor(private readonly policy: RetryPolicy, private readonly clock: () => number = () => performance.now()) {
+    this.#startedMs = clock();
+  }
+
+  /** The wait before the next try, ms; undefined when the window is spent. `atOnce`: no wait (a
+   * DATA_LOSS resend), the window still counted. */
+  nextDelayMs(atOnce = false): number | undefined {
+    const leftMs = this.policy.retryWindowMs - (this.clock() - this.#startedMs);
+    if (leftMs <= 0) return undefined;
+    if (atOnce) return 0;
+    const capMs = Math.min(this.policy.maxBackoffMs, this.policy.initialBackoffMs * 2 ** this.#tries);
+    this.#tries++;
+    return Math.min(leftMs, capMs * (0.5 + 0.5 * this.policy.random()));
+  }
+}
+
+/** The frame a DATA_LOSS answer asks the client to send again from ("state lost after frame N:
+ * resend from N+1"); undefined for any other error. */
+export function resendFrom(error: DirectorError): bigint | undefined {
+  if (error.code !== "DATA_LOSS") return undefined;
+  const found = /resend from (\d+)/.exec(error.message);
+  return found ? BigInt(found[1]!) : undefined;
+}
+
+/** A frame update a session sent: its order among the session's updates, the frame of the one
+ * sent before it (0: none), its frame, and its bytes (answered_frame not set). */
+export interface Sent {
+  readonly seq: number;
+  readonly previousFrame: bigint;
+  readonly frame: bigint;
+  readonly bytes: Uint8Array;
+}
+
+/** The frame updates a session sent, oldest first, up to `limit` of them: what it sends again when
+ * the server answers DATA_LOSS "resend from K". Shared by a session's unary calls and streams. */
+export class SentHistory {
+  readonly #kept: Sent[] = [];
+  #seq = 0;
+  #lastFrame = 0n;
+  #droppedThrough = 0n; // the newest frame sent and no longer kept (0: none)
+
+  constructor(readonly limit: number) {}
+
+  /** Keeps the session's newest update and answers its entry. */
+  add(update: EncodedFrame): Sent {
+    const sent: Sent = { seq: ++this.#seq, previousFrame: this.#lastFrame, frame: update.frame, bytes: update.bytes };
+    this.#lastFrame = update.frame;
+    this.#kept.push(sent);
+    while (this.#kept.length > this.limit) {
+      const dropped = this.#kept.shift()!.frame;
+      if (dropped > this.#droppedThrough) this.#droppedThrough = dropped;
+    }
+    return sent;
+  }
+
+  /** The kept updates from `frame` on, up to sequence number `throughSeq` (undefined: all);
+   * throws `error` (the DATA_LOSS), with a word added, when an update from `frame` on is no longer kept. */
+  since(frame: bigint, throughSeq: number | undefined, error: DirectorError): Sent[] {
+    if (frame <= this.#droppedThrough) {
+      throw new DirectorError(error.code, `${error.message} (this client kept the last ${this.limit} updates it sent, `
+        + `resendHistoryFrames: frame ${frame} is no longer among them)`);
+    }
+    const last = throughSeq ?? this.#seq;
+    return this.#kept.filter((s) => s.seq <= last && s.frame >= frame);
+  }
+}
+
+/** When each frame in flight on a stream call was sent, oldest first: a hung node is one that
+ * leaves the oldest unanswered past `timeoutMs`. */
+export class FrameDeadlines {
+  readonly #sent: Array<[number, bigint]> = []; // (performance.now() when sent, frame)
+  /** Set when a frame was left unanswered. */
+  expired: DirectorError | undefined;
+
+  constructor(readonly timeoutMs: number) {}
+
+  sent(frame: bigint): void { this.#sent.push([performance.now(), frame]); }
+
+  answered(): void { this.#sent.shift(); }
+
+  /** How long until the oldest frame's deadline (the whole timeout when none is in flight), ms; 0
+   * when it has passed, which sets `expired`. */
+  waitMs(): number {
+    const oldest = this.#sent[0];
+    if (oldest === undefined) return this.timeoutMs;
+    const leftMs = oldest[0] + this.timeoutMs - performance.now();
+    if (leftMs > 0) return leftMs;
+    this.expired = new DirectorError("UNAVAILABLE",
+      `frame ${oldest[1]} was not answered within ${this.timeoutMs} ms (frameTimeoutMs): the node may be hung`);
+    return 0;
+  }
+}
 
 /** A session's ROUTE_HEADER value, picked by the client before the session exists. */
 export function newRouteKey(): string {
@@ -125,6 +279,22 @@ function writeVarint(out: Uint8Array, at: number, value: number): number {
   while (value > 0x7f) { out[at++] = (value & 0x7f) | 0x80; value = Math.floor(value / 128); }
   out[at++] = value;
   return at;
+}
+
+const ANSWERED_FRAME_TAG = 9 << 3; // FrameUpdate.answered_frame, varint
+
+/** A serialized FrameUpdate with answered_frame set: a scalar field given twice takes its last
+ * value, so the field is appended (nothing when 0, the default). */
+export function withAnsweredFrame(bytes: Uint8Array, answeredFrame: bigint): Uint8Array {
+  if (answeredFrame === 0n) return bytes;
+  const tail: number[] = [ANSWERED_FRAME_TAG];
+  let value = answeredFrame;
+  while (value > 0x7fn) { tail.push(Number(value & 0x7fn) | 0x80); value >>= 7n; }
+  tail.push(Number(value));
+  const out = new Uint8Array(bytes.length + tail.length);
+  out.set(bytes, 0);
+  out.set(tail, bytes.length);
+  return out;
 }
 
 export function toFrameNumber(frame: number | bigint): bigint {

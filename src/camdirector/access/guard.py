@@ -19,19 +19,24 @@ With authentication off (`--no-auth`) every caller is `OPEN`: tenant `default`, 
 The records database down (PostgreSQL, `AccessUnavailable`): keys already in this node's cache keep
 streaming frames; every call that must read or write a record answers UNAVAILABLE (HTTP 503) in
 words naming only the kind of store (`RECORDS_DOWN`), and the reason goes to the log once per
-outage (`records_down`; the poll notes its end).
+outage (`records_down`; the poll notes its end). A hung one (infra/postgres.py bounds each call)
+must not stall the front's event loop, which answers every stream's frames: a caller on the loop
+reads and writes records through `off_loop` (a few threads of the guard's own) and awaits them,
+and `authorize_async` reads a key there only when it must (fresh, or not cached).
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import secrets
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import grpc
 
@@ -45,6 +50,9 @@ REVOCATION_POLL_S = 0.25  # how often each node looks for keys revoked elsewhere
 CLOCK_SKEW_S = 30.0  # revocations are read this far back from the last poll (nodes' clocks differ)
 RECORDS = "the records database"  # what a client is told of it: any caller reads it, so no URL or host
 RECORDS_DOWN = f"{RECORDS} is unreachable; retry later"
+RECORDS_THREADS = 4  # records calls the event loop has in flight at once (the database takes one at a time)
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -97,6 +105,7 @@ class Guard:
         self._ended_logins: dict[str, float] = {}  # login id -> when its cookie expires, s
         self._ended_lock = threading.Lock()  # the poll's thread and the routes' threads note ended logins
         self._records_down = False  # an outage was logged and the poll has not reached the database since
+        self._records_threads = ThreadPoolExecutor(RECORDS_THREADS, thread_name_prefix="records")
         # Without keys no login is made: a secret of this process's own signs nothing anyone uses.
         self.login_secret = secrets.token_bytes(32)
         if self.enabled:
@@ -108,23 +117,54 @@ class Guard:
         assert self.store is not None, "authentication is off: there is no key store"
         return self.store
 
+    async def off_loop(self, call: Callable[..., T], *args: Any) -> T:
+        """`call(*args)`, a call to the records database, run in one of the guard's threads and
+        awaited: the event loop goes on answering frames while the database takes its time."""
+        return await asyncio.get_running_loop().run_in_executor(self._records_threads, functools.partial(call, *args))
+
     # -- identity
     def identify(self, authorization: str | None, *, fresh: bool = True) -> Identity:
+        """The caller (in a thread: a key not read from the cache is read from the records database)."""
         if not self.enabled:
             return OPEN
+        key_id, secret = self._key(authorization)
+        found = (None if fresh else self._cache.get(key_id)) or self._lookup(key_id)
+        return self._identity(key_id, secret, found)
+
+    async def authorize_async(self, authorization: str | None, verb: Verb, *, fresh: bool = True) -> Identity:
+        """`authorize` for a caller on the event loop: a key found in the cache (`fresh` False)
+        costs no wait; one read from the records database is read through `off_loop`."""
+        identity = OPEN
+        if self.enabled:
+            key_id, secret = self._key(authorization)
+            found = None if fresh else self._cache.get(key_id)
+            if found is None:
+                found = await self.off_loop(self._lookup, key_id)
+            identity = self._identity(key_id, secret, found)
+        self.check(identity, verb)
+        return identity
+
+    @staticmethod
+    def _key(authorization: str | None) -> tuple[str, str]:
+        """(id, secret) of the key an Authorization value carries; UNAUTHENTICATED without one."""
         token = bearer(authorization)
         if token is None:
             raise unauthenticated("no key: send 'authorization: Bearer KEY' (docs/security.md)")
         parts = split_key(token)
         if parts is None:
             raise unauthenticated("the key is not a camdirector key (cdk_...)")
-        key_id, secret = parts
-        found = None if fresh else self._cache.get(key_id)
+        return parts
+
+    def _lookup(self, key_id: str) -> tuple[ApiKey, str]:
+        """The key's record read from the records database, and cached; UNAUTHENTICATED when unknown."""
+        found = self.key_store().lookup(key_id)
         if found is None:
-            found = self.key_store().lookup(key_id)
-            if found is None:
-                raise unauthenticated("unknown key")
-            self._cache[key_id] = found
+            raise unauthenticated("unknown key")
+        self._cache[key_id] = found
+        return found
+
+    @staticmethod
+    def _identity(key_id: str, secret: str, found: tuple[ApiKey, str]) -> Identity:
         record, stored_hash = found
         if not secret_matches(secret, stored_hash):
             raise unauthenticated("unknown key")
@@ -214,7 +254,7 @@ class Guard:
         while True:
             await asyncio.sleep(self.poll_s)
             try:
-                for key_id in await asyncio.to_thread(self.poll_revocations):
+                for key_id in await self.off_loop(self.poll_revocations):
                     log.info("key %s revoked: refused from now on", key_id)
             except AccessUnavailable as exc:  # keep the last known keys
                 self.records_down(exc)
@@ -237,6 +277,7 @@ class Guard:
     def stop(self) -> None:
         if self._watcher is not None:
             self._watcher.cancel()
+        self._records_threads.shutdown(wait=False)
 
     # -- the audit trail (module docstring of keys.py)
     def audit(self, identity: Identity, action: str, session_id: str | None = None, detail: dict[str, Any] | None = None) -> None:

@@ -20,7 +20,10 @@ ready, and find both (nodes started together would each make their own).
 `ca_file`, `admin_key_file` (a path: the key itself is never printed), `zmq_server_key`, ...) and
 returns with everything running; the same object is kept in DIR/cluster.json, which `down`,
 `add-node` and `status` read. From Python, `Cluster.up(nodes, folder)` gives the same cluster with
-`kill_node`, `add_node` and `down` (the failover benchmark's handle).
+`kill_node`, `restart_node`, `add_node` and `down` (the failover benchmark's handle), and the
+faults of load_tests/chaos.py: `pause`/`resume` (SIGSTOP/SIGCONT) of Redis, PostgreSQL or a node,
+`stop_redis`/`start_redis` and `stop_postgres`/`start_postgres` keeping their data, and
+`kill_balancer`/`start_balancer` (the same configuration and ports).
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from camdirector.deploy.services import (
     _tail,
     descendants,
     is_running,
+    signal_tree,
     stop_processes,
 )
 from camdirector.deploy.tls import TlsFiles, make_tls_files
@@ -266,21 +270,23 @@ class Cluster:
         self._save()
         haproxy.wait_until({n.node_id: "UP" for n in self.nodes}, self.settings.healthy_timeout_s)
 
-    def _start_nodes(self, numbers) -> list[NodeInfo]:
-        """Starts nodes node-K for K in numbers all at once; returns them once each is ready."""
+    def _start_nodes(self, numbers, addresses: NodeInfo | None = None) -> list[NodeInfo]:
+        """Starts nodes node-K for K in numbers all at once; returns them once each is ready.
+        `addresses`: the one node of `numbers` listens where this one did (a restart)."""
         launched = []
         for k in numbers:
             name = f"node-{k}"
             out, log = self.folder / f"{name}.out", self.folder / f"{name}.log"
+            out.unlink(missing_ok=True)  # a restarted node's ready line is a new one
             cmd = [
                 *_serve_command(),
                 "serve",
                 "--grpc",
-                "127.0.0.1:0",
+                addresses.grpc if addresses else "127.0.0.1:0",
                 "--zmq",
-                "tcp://127.0.0.1:*",
+                addresses.zmq if addresses else "tcp://127.0.0.1:*",
                 "--http",
-                "127.0.0.1:0",
+                addresses.http if addresses else "127.0.0.1:0",
                 "--workers",
                 str(self.settings.workers_per_node),
                 "--node-id",
@@ -421,6 +427,86 @@ class Cluster:
         except ChildProcessError:
             pass
         return pid
+
+    def restart_node(self, index: int) -> NodeInfo:
+        """Starts node `index` again (after `kill_node`) on the same ports, as its host's
+        supervisor would; returns it once HAProxy has seen it healthy."""
+        old = self.nodes[index]
+        if is_running(old.pid, str(self.folder)):
+            raise ClusterError(f"{old.node_id} still runs (pid {old.pid}): kill it first")
+        (node,) = self._start_nodes([old.server_id], addresses=old)
+        self.state["nodes"][index] = dataclasses.asdict(node)
+        self._save()
+        if self.haproxy is not None:
+            self.haproxy.wait_until({node.node_id: "UP"}, self.settings.healthy_timeout_s)
+        return node
+
+    def pause(self, part: str) -> list[int]:
+        """SIGSTOPs "redis", "postgres" or a node ("node-K") with every process below it: a hung
+        process or machine, whose connections stay open and silent. Returns the pids; `resume`."""
+        return signal_tree([self._pid_of(part)], signal.SIGSTOP)
+
+    def resume(self, part: str) -> list[int]:
+        """SIGCONTs what `pause(part)` stopped (the processes below it as they are now)."""
+        return signal_tree([self._pid_of(part)], signal.SIGCONT)
+
+    def _pid_of(self, part: str) -> int:
+        if part == "redis":
+            return self.state["redis_pid"]
+        if part == "postgres":
+            pid = self._postgres().postmaster_pid()
+            if pid is None:
+                raise ClusterError(f"PostgreSQL of {self.folder} does not run")
+            return pid
+        for node in self.nodes:
+            if node.node_id == part:
+                return node.pid
+        raise ValueError(f"no part {part!r}: redis, postgres or one of {[n.node_id for n in self.nodes]}")
+
+    def _postgres(self) -> PostgresServer:
+        return PostgresServer(Path(self.state["postgres_folder"]), self.state["postgres_port"], existing=True)
+
+    def stop_redis(self) -> None:
+        """Stops Redis (SIGTERM: it writes its append-only file out); `start_redis` brings it back."""
+        signal_tree([self.state["redis_pid"]], signal.SIGCONT)  # a paused Redis cannot act on SIGTERM
+        stop_processes([(self.state["redis_pid"], f"redis-server {urlsplit(self.redis).netloc}")], timeout_s=5.0)
+
+    def start_redis(self) -> None:
+        """Starts Redis again on its port, from its append-only file (the checkpoints and the job
+        queue it held at `stop_redis`, up to the last second's writes)."""
+        redis = RedisServer(self.folder / "redis", urlsplit(self.redis).port or 0, persist=True).start()
+        assert redis.proc is not None  # start() launched it
+        self._children.append(redis.proc)
+        self.state["redis_pid"] = redis.proc.pid
+        self._save()
+
+    def stop_postgres(self) -> None:
+        """Stops PostgreSQL (fast shutdown), keeping its data; `start_postgres` brings it back."""
+        self._postgres().stop(keep_data=True)
+
+    def start_postgres(self) -> None:
+        """Starts PostgreSQL again on its port, with the data it had."""
+        self._postgres().start()
+
+    def kill_balancer(self) -> None:
+        """SIGKILLs HAProxy: every client connection through it breaks at once."""
+        balancer = self.balancer()
+        assert balancer.pid is not None  # started or attached: it has one
+        os.kill(balancer.pid, signal.SIGKILL)
+        try:
+            os.waitpid(balancer.pid, 0)
+        except ChildProcessError:
+            pass  # started by another process
+
+    def start_balancer(self) -> None:
+        """Starts HAProxy again with the same configuration and ports (after `kill_balancer`);
+        returns once it listens."""
+        balancer = self.balancer()
+        balancer.start(balancer.backends)
+        assert balancer.proc is not None  # start() launched it
+        self._children.append(balancer.proc)
+        self.state["balancer"]["pid"] = balancer.pid
+        self._save()
 
     def add_node(self) -> NodeInfo:
         """Starts one more node and adds it to the running HAProxy (runtime API, no reload: every

@@ -52,11 +52,20 @@ class BalancerSettings:
     host: str = "127.0.0.1"  # where the frontends listen (loopback: nothing else reaches them)
     grpc_port: int = 0  # the gRPC frontend's port; 0 picks a free one
     http_port: int = 0  # the REST frontend's port; 0 picks a free one
-    check_interval_s: float = 1.0  # between two health checks of a node in a steady state, s. [0.05, 60]
-    check_fast_interval_s: float = 0.25  # between checks while a node is going up or down, s. [0.05, 60]
-    check_timeout_s: float = 1.0  # a check unanswered this long fails, s. [0.05, 60]
-    fall: int = 2  # failed checks in a row that mark a node down. [1, 100]
+    # A node that stops answering (hung, SIGSTOPped, its machine lost) is out after
+    # check_interval_s + fall x check_timeout_s + (fall - 1) x check_fast_interval_s at worst:
+    # 1.4 s with these, 0.9 s at best (docs/scaling.md, "Faults").
+    check_interval_s: float = 0.5  # between two health checks of a node in a steady state, s. [0.05, 60]
+    check_fast_interval_s: float = 0.1  # between checks while a node is going up or down, s. [0.05, 60]
+    # A check unanswered this long fails, s: far above a loaded node's answer (p99 10 ms on 2 busy
+    # cores), below a hung node's silence. The checks ask neither Redis nor PostgreSQL, but a node
+    # whose event loop waits on one fails them (docs/scaling.md, "Faults"). [0.05, 60]
+    check_timeout_s: float = 0.4
+    fall: int = 2  # failed checks in a row that mark a node down: one slow check alone does not. [1, 100]
     rise: int = 2  # passed checks in a row that mark it up again. [1, 100]
+    # After a reload (`haproxy -sf`) the old process keeps its open streams at most this long, then
+    # cuts them (the SDKs reopen them on the new one), s. [1, 3600]
+    hard_stop_after_s: float = 5.0
     # Every node's weight. HAProxy puts 16 points per unit of weight on the hash ring: at weight 1
     # (its default) the busiest node's share of the ring is 1.34x the mean at 10 nodes and 1.44x at
     # 100; at 256 (4096 points) 1.02x and 1.03x (load_tests/ring_sim.py). [1, 256]
@@ -75,6 +84,7 @@ class BalancerSettings:
             (0.05 <= self.check_fast_interval_s <= 60, "check_fast_interval_s must be in [0.05, 60]"),
             (0.05 <= self.check_timeout_s <= 60, "check_timeout_s must be in [0.05, 60]"),
             (1 <= self.fall <= 100 and 1 <= self.rise <= 100, "fall and rise must be in [1, 100]"),
+            (1 <= self.hard_stop_after_s <= 3600, "hard_stop_after_s must be in [1, 3600]"),
             (1 <= self.weight <= 256, "weight must be in [1, 256] (HAProxy's range)"),
             (1 <= self.idle_timeout_s <= 86_400, "idle_timeout_s must be in [1, 86400]"),
             (0.05 <= self.connect_timeout_s <= 60, "connect_timeout_s must be in [0.05, 60]"),
@@ -142,11 +152,15 @@ def _ms(seconds: float) -> str:
 
 def _server_args(s: BalancerSettings, tls: TlsFiles, grpc: bool) -> str:
     """A node's TLS, health check and weight: the traffic and the checks over TLS to a node that
-    proves itself with the CA's certificate, gRPC's (`grpc`) as HTTP/2."""
+    proves itself with the CA's certificate, gRPC's (`grpc`) as HTTP/2. A node marked down has its
+    open streams cut (`on-marked-down shutdown-sessions`): a stream on a hung node would otherwise
+    wait for it as long as it hangs; cut, the SDK opens it again through the balancer, which sends
+    it to a live node (that restores the session from its checkpoint)."""
     args = (
         f"ssl verify required ca-file {tls.ca_cert} verifyhost {s.node_tls_name} "
         f"check check-ssl inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
-        f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight}"
+        f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight} "
+        "on-marked-down shutdown-sessions"
     )
     return args + " proto h2 alpn h2 check-alpn h2" if grpc else args
 
@@ -178,6 +192,7 @@ def render_config(
         f"    stats socket {stats_socket} mode 600 level admin",
         # node up/down and abnormal requests only: a 60 Hz stream must not write a line per frame
         "    log stderr format raw local0 notice",
+        f"    hard-stop-after {_ms(settings.hard_stop_after_s)}",
         *([f"    user {user}", f"    group {user}"] if user else []),
         "",
     ]

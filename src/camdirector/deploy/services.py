@@ -99,6 +99,18 @@ def stop_processes(processes: list[tuple[int, str]], timeout_s: float = 15.0, gr
     _wait_exit(running, 5.0)
 
 
+def signal_tree(pids: list[int], sig: int) -> list[int]:
+    """Sends `sig` to each pid and every process below them, parents first; returns the pids
+    signalled. SIGSTOP and SIGCONT of a whole service (a hung machine, the chaos benchmark's): a
+    service's children (PostgreSQL's backends, a node's workers) serve its connections too."""
+    signalled = []
+    for pid in [*pids, *descendants(pids)]:
+        with contextlib.suppress(ProcessLookupError):  # ended since it was looked at
+            os.kill(pid, sig)
+            signalled.append(pid)
+    return signalled
+
+
 def descendants(pids: list[int]) -> list[int]:
     """Every process below the given ones (children, their children, ...), from /proc."""
     children: dict[int, list[int]] = {}
@@ -161,7 +173,10 @@ class RedisServer:
         return self
 
     def stop(self) -> None:
+        """SIGTERM (Redis writes its append-only file out and exits), SIGKILL after 5 s. `start`
+        again serves on the same port, with the same data where `persist` kept it."""
         if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGCONT)  # a paused Redis cannot act on SIGTERM
             self.proc.terminate()
             try:
                 self.proc.wait(5)
@@ -232,7 +247,18 @@ class PostgresServer:
             raise ServiceError(f"createdb failed: {done.stderr[-2000:]}")
         return self
 
-    def stop(self) -> None:
+    def postmaster_pid(self) -> int | None:
+        """The running server's pid (its postmaster.pid file's first line), None when stopped."""
+        try:
+            return int((self.data / "postmaster.pid").read_text().split()[0])
+        except (OSError, IndexError, ValueError):
+            return None
+
+    def stop(self, keep_data: bool = False) -> None:
+        """Stops the server (fast shutdown: open connections are cut). As root its folder is
+        removed too, unless `keep_data`: then `start` serves the same databases again."""
+        if (pid := self.postmaster_pid()) is not None:
+            signal_tree([pid], signal.SIGCONT)  # a paused server cannot shut down
         if (self.data / "postmaster.pid").exists():
             try:
                 self._run(
@@ -240,5 +266,5 @@ class PostgresServer:
                 )
             except ServiceError:
                 pass
-        if self._as_postgres:
+        if self._as_postgres and not keep_data:
             shutil.rmtree(self.folder, ignore_errors=True)

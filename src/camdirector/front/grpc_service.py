@@ -69,7 +69,7 @@ class DirectorGrpc:
         try:
             await context.send_initial_metadata(SERVER_METADATA)
             need = RPCS[rpc]
-            identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
+            identity = await self.guard.authorize_async(_authorization(context), need.verb, fresh=need.fresh)
             if rpc == "CreateSession":
                 check_protocol_metadata(_metadata(context, "camdirector-protocol"))
             return await self.calls.by_rpc[rpc](payload, identity)
@@ -100,13 +100,13 @@ class DirectorGrpc:
         try:
             await context.send_initial_metadata(SERVER_METADATA)
             need = RPCS["StreamFrames"]
-            identity = self.guard.authorize(_authorization(context), need.verb, fresh=need.fresh)
+            identity = await self.guard.authorize_async(_authorization(context), need.verb, fresh=need.fresh)
             async for payload in request_iterator:
                 t0 = time.perf_counter()
                 self.guard.still_valid(identity)
                 frame_session = session_id_of(pb.FrameUpdate, payload)
                 if session_id is None:
-                    self.router.stream_opened(frame_session, identity.tenant)
+                    await self.router.stream_opened(frame_session, identity.tenant)
                     session_id = frame_session
                 elif frame_session != session_id:
                     raise DirectorError(

@@ -7,6 +7,10 @@ front process died while they ran) are queued again and rerun, or failed with a 
 have been started `max_attempts` times. A runner stopped cleanly puts its running jobs back in the
 queue without counting the attempt. One runner owns a data directory (runner.lock).
 
+A record store that goes down (PostgreSQL, `job_store`) stops nothing: running jobs run on and
+their outcomes are recorded when it is back (executor.py), and no queued job is claimed until it
+answers again, asked every `RECORD_RETRY_S[1]` at most.
+
 `open_jobs` gives the front its jobs: this runner, or a client of the shared queue
 (jobs/queue.py) when `job_queue` is set; front/main.py opens them with the service's kinds
 (jobs/kinds.py) and hands them to the job routes.
@@ -25,11 +29,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
-from camdirector.jobs.executor import POLL_S, PURGE_INTERVAL_S, Attempt, JobExecutor, purge_expired
+from camdirector.jobs.executor import POLL_S, PURGE_INTERVAL_S, RECORD_RETRY_S, Attempt, JobExecutor, purge_expired
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobRegistry
 from camdirector.jobs.queue import QueueClient
-from camdirector.jobs.records import Job, open_store
+from camdirector.jobs.records import Job, JobsUnavailable, open_store
 
 log = logging.getLogger("camdirector.jobs")
 
@@ -63,6 +67,7 @@ class JobRunner:
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
         self._lock_file: TextIO | None = None
+        self._store_back_at = 0.0  # time.monotonic() before which a store found down is not asked to claim
 
     # -- lifetime -----------------------------------------------------------------------------
 
@@ -161,10 +166,15 @@ class JobRunner:
                 for job_id, a in list(self._running.items()):
                     if self._executor.step(a):
                         del self._running[job_id]
-                self._start_queued()
-                if time.monotonic() >= next_purge:
-                    self.purge_expired()
-                    next_purge = time.monotonic() + PURGE_INTERVAL_S
+                if time.monotonic() >= self._store_back_at:
+                    try:
+                        self._start_queued()
+                        if time.monotonic() >= next_purge:
+                            next_purge = time.monotonic() + PURGE_INTERVAL_S
+                            self.purge_expired()
+                    except JobsUnavailable as exc:  # claims wait for the store (module docstring)
+                        log.warning("no job is started until the job store is back: %s", exc)
+                        self._store_back_at = time.monotonic() + RECORD_RETRY_S[1]
                 waitables = [self._wake_r]
                 for a in self._running.values():
                     waitables += a.waitables()

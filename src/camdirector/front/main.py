@@ -20,6 +20,7 @@ from camdirector.front.http.app import build_app
 from camdirector.front.http.routes.levels import install_level_routes
 from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
+from camdirector.front.loop_watch import LoopWatch
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
 from camdirector.front.zmq_service import ZmqTransport, curve_server_keys
@@ -82,6 +83,8 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
     guard, announce = open_guard(settings)
     router = SessionRouter(settings, metrics, guard=guard)
     await router.start()
+    loop_watch = LoopWatch(metrics.loop_lag)
+    loop_watch.start()
     guard.start()
     bound: dict[str, str] = {}
     grpc_server = zmq_transport = http_server = http_task = jobs = None
@@ -98,7 +101,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
         if settings.http_addr:
             sock = _bind_http(settings.http_addr)
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
-            app = build_app(router, bound, secure_cookie=settings.tls)
+            app = build_app(router, bound, secure_cookie=settings.tls, loop_watch=loop_watch)
             job_settings = JobSettings.for_server(settings)
             jobs = open_jobs(Path(settings.data_dir), service_kinds(), job_settings)
             install_overview_routes(app, jobs, job_settings)
@@ -132,6 +135,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             await grpc_server.stop(grace=1.0)
         if zmq_transport is not None:
             await zmq_transport.stop()
+        loop_watch.stop()
         await router.stop()
         guard.stop()
         if guard.store is not None:

@@ -47,6 +47,12 @@ class Metrics:
             "camdirector_view_renders", "Monitor pictures rendered (asks answered from a shared render are not)", registry=r
         )
         self.view_streams = Gauge("camdirector_view_streams", "Live monitor streams open", registry=r)
+        self.loop_lag = Histogram(
+            "camdirector_loop_lag_seconds",
+            "How late the front's event loop ran a timer (front/loop_watch.py)",
+            buckets=_SECONDS_BUCKETS,
+            registry=r,
+        )
         self.request = Histogram(
             "camdirector_request_seconds",
             "Front-process time per request, routing included",

@@ -11,7 +11,9 @@ restores it from the checkpoint store or answers NOT_FOUND.
 Every session belongs to a tenant (access/roles.py): the tenant of the key that created it. A
 request naming another tenant's session is answered NOT_FOUND with the words an unknown id gets.
 With authentication on, each session's tenant is also written to the records database, so a node
-that adopts the session after its first node died knows whose it is.
+that adopts the session after its first node died knows whose it is. Those records are read and
+written off the event loop (Guard.off_loop): a hung database delays the requests that need it, never
+the frames of the sessions held here.
 """
 
 from __future__ import annotations
@@ -80,40 +82,54 @@ class SessionRouter:
             self._reaper.cancel()
         await self.pool.stop()
 
-    def _entry(self, session_id: str, tenant: str, adopt: bool = False) -> SessionEntry:
-        """The session's entry, when it is `tenant`'s. With `adopt` (a request of the session's
-        client) and checkpoints, an unknown session of the tenant is given to the least loaded
-        worker to restore (module docstring); other requests (the dashboard's) never move a
-        session here. An id that is not the tenant's, unknown or another tenant's (held here, or
-        lost with its worker), takes one path: the same owner lookup, the same NOT_FOUND, so
-        neither its answer nor its time tells which it was."""
+    def _entry(self, session_id: str, tenant: str) -> SessionEntry:
+        """The session's entry, when this node holds it for `tenant` (the dashboard's requests,
+        which never move a session here); else `_refused`."""
         entry = self.sessions.get(session_id)
         if entry is not None and entry.tenant == tenant:
             return entry
-        owner = self._owner(session_id) if adopt and self.checkpoints else None
-        if entry is None and owner == tenant:
-            now = self.clock()
-            entry = self.sessions[session_id] = SessionEntry(
-                slot=self._least_loaded_slot(), created_s=now, last_seen_s=now, restoring=True, tenant=tenant
-            )
+        raise self._refused(session_id, tenant)
+
+    async def _client_entry(self, session_id: str, tenant: str) -> SessionEntry:
+        """The session's entry for a request of its client. With checkpoints, an unknown session
+        of the tenant is given to the least loaded worker to restore (module docstring). An id
+        that is not the tenant's, unknown or another tenant's (held here, or lost with its
+        worker), takes one path: the same owner lookup, the same NOT_FOUND, so neither its answer
+        nor its time tells which it was."""
+        entry = self.sessions.get(session_id)
+        if entry is not None and entry.tenant == tenant:
             return entry
+        if self.checkpoints and await self._owner(session_id) == tenant:
+            entry = self.sessions.get(session_id)  # another request may have adopted it while the owner was read
+            if entry is None:
+                now = self.clock()
+                entry = self.sessions[session_id] = SessionEntry(
+                    slot=self._least_loaded_slot(), created_s=now, last_seen_s=now, restoring=True, tenant=tenant
+                )
+            if entry.tenant == tenant:
+                return entry
+        raise self._refused(session_id, tenant)
+
+    def _refused(self, session_id: str, tenant: str) -> DirectorError:
+        """The answer to a request naming a session that is not the tenant's here: UNAVAILABLE for
+        one of its own lost with its worker, NOT_FOUND for any other."""
         lost = self._lost.get(session_id)
         if lost is not None and lost[1] == tenant:
-            raise unavailable(
+            return unavailable(
                 f"session {session_id!r} was lost: the worker process holding it (worker {lost[0]}) died; create a new session"
             )
-        raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
+        return not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
 
-    def _owner(self, session_id: str) -> str | None:
+    async def _owner(self, session_id: str) -> str | None:
         """The tenant of a session this node does not hold: from the records database with
         authentication on (None: no such session), `default` without."""
         if not self.guard.enabled:
             return "default"
-        return self.guard.key_store().session_owner(session_id)
+        return await self.guard.off_loop(self.guard.key_store().session_owner, session_id)
 
-    def _forget(self, session_id: str) -> None:
+    async def _forget(self, session_id: str) -> None:
         if self.guard.enabled:
-            self.guard.key_store().forget_session(session_id)
+            await self.guard.off_loop(self.guard.key_store().forget_session, session_id)
 
     def _least_loaded_slot(self, exclude: int | None = None) -> int:
         load = [0] * self.pool.slots
@@ -149,27 +165,29 @@ class SessionRouter:
                 )
         session_id = uuid.uuid4().hex
         slot = self._least_loaded_slot()
-        self._reserved += 1
+        self._reserved += 1  # until the session is in `sessions`: both limits count it across every await
         self._reserved_by[tenant] = self._reserved_by.get(tenant, 0) + 1
         try:
             body, _ = await self.pool.call(slot, "create", session_id, encode_create(tenant, payload))
+            if self.guard.enabled:
+                try:
+                    await self.guard.off_loop(self.guard.key_store().set_session_owner, session_id, tenant)
+                except BaseException:  # unrecorded (the database down, the caller gone): nobody could find it again
+                    await self.pool.call(slot, "drop", session_id, b"")
+                    raise
+            now = self.clock()
+            self.sessions[session_id] = SessionEntry(
+                slot=slot, created_s=now, last_seen_s=now, transport={transport}, tenant=tenant
+            )
         finally:
             self._reserved -= 1
             self._reserved_by[tenant] -= 1
-        if self.guard.enabled:
-            try:
-                self.guard.key_store().set_session_owner(session_id, tenant)
-            except AccessUnavailable:  # a session nobody could find again: dropped, and the caller retries
-                await self.pool.call(slot, "drop", session_id, b"")
-                raise
-        now = self.clock()
-        self.sessions[session_id] = SessionEntry(slot=slot, created_s=now, last_seen_s=now, transport={transport}, tenant=tenant)
         self.metrics.sessions.set(len(self.sessions))
         self.metrics.sessions_created.inc()
         return body
 
     async def frame(self, payload: bytes, session_id: str, transport: str, tenant: str = "default") -> bytes:
-        entry = self._entry(session_id, tenant, adopt=True)
+        entry = await self._client_entry(session_id, tenant)
         if self.guard.enabled:
             self._admit_frame(entry, session_id)
         entry.last_seen_s = self.clock()
@@ -196,7 +214,7 @@ class SessionRouter:
         """A serialized request of the session it names (a client's: it keeps the session alive)
         to that session's worker; the serialized answer back."""
         session_id = session_id_of(message_type, payload)
-        entry = self._entry(session_id, tenant, adopt=True)
+        entry = await self._client_entry(session_id, tenant)
         entry.last_seen_s = self.clock()
         body, _ = await self._call(entry, op, session_id, payload)
         return body
@@ -210,15 +228,15 @@ class SessionRouter:
 
     async def close(self, payload: bytes, tenant: str = "default") -> bytes:
         session_id = session_id_of(pb.CloseSessionRequest, payload)
-        entry = self._entry(session_id, tenant, adopt=True)
+        entry = await self._client_entry(session_id, tenant)
         body, _ = await self._call(entry, "close", session_id, payload)
         self.sessions.pop(session_id, None)
-        self._forget(session_id)
         self.metrics.sessions.set(len(self.sessions))
+        await self._forget(session_id)
         return body
 
-    def stream_opened(self, session_id: str, tenant: str = "default") -> None:
-        self._entry(session_id, tenant, adopt=True).streams += 1
+    async def stream_opened(self, session_id: str, tenant: str = "default") -> None:
+        (await self._client_entry(session_id, tenant)).streams += 1
 
     def stream_closed(self, session_id: str) -> None:
         entry = self.sessions.get(session_id)
@@ -234,7 +252,10 @@ class SessionRouter:
         ]
         for session_id in idle:
             entry = self.sessions.pop(session_id)
-            self._forget(session_id)
+            try:
+                await self._forget(session_id)
+            except AccessUnavailable as exc:  # the worker drops it all the same: nobody may come back to it
+                log.warning("forgetting the owner of session %s: %s", session_id, exc)
             try:
                 await self.pool.call(entry.slot, "drop", session_id, b"")
             except DirectorError as exc:

@@ -10,6 +10,9 @@ trail of style changes, takes and releases.
     TakeShot       session.take     the records database
     CloseSession   session.close    the records database
 
+The records database is read and written off the event loop (Guard.authorize_async, off_loop): a
+hung one delays these calls, never another session's frames.
+
 CreateSession is refused FAILED_PRECONDITION, on every transport, when its client_protocol says
 the client speaks a newer protocol than this server (version.py; docs/protocol.md, "Versions").
 """
@@ -101,7 +104,8 @@ class SessionCalls:
     async def update_style(self, payload: bytes, identity: Identity) -> bytes:
         reply = await self.router.update_style(payload, identity.tenant)
         request = pb.UpdateStyleRequest.FromString(payload)  # the worker took it: it parses
-        self.guard.audit(identity, "style", request.session_id, {"style": _as_dict(request.style), "via": self.transport})
+        detail = {"style": _as_dict(request.style), "via": self.transport}
+        await self.guard.off_loop(self.guard.audit, identity, "style", request.session_id, detail)
         return reply
 
     async def take_shot(self, payload: bytes, identity: Identity) -> bytes:
@@ -110,7 +114,8 @@ class SessionCalls:
         detail: dict[str, Any] = {"via": self.transport}  # JSON, into the audit trail
         if not request.release:
             detail.update(subject_ids=list(request.subject_ids), kind=pb.ShotKind.Name(request.kind))
-        self.guard.audit(identity, "release" if request.release else "take", request.session_id, detail)
+        action = "release" if request.release else "take"
+        await self.guard.off_loop(self.guard.audit, identity, action, request.session_id, detail)
         return reply
 
     async def close(self, payload: bytes, identity: Identity) -> bytes:

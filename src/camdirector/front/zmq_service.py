@@ -123,7 +123,7 @@ class ZmqTransport:
             if len(payload) > self.router.settings.max_message_bytes:  # the size first: it costs nothing
                 raise exhausted(f"message of {len(payload)} bytes exceeds the limit of {self.router.settings.max_message_bytes}")
             need, call = handler
-            caller = self.guard.authorize(authorization, need.verb, fresh=need.fresh)  # before the payload is parsed
+            caller = await self.guard.authorize_async(authorization, need.verb, fresh=need.fresh)  # before the payload is parsed
             reply = [b"0", await call(payload, caller)]
         except DirectorError as exc:
             reply = self._error_reply(exc)

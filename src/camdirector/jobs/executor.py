@@ -10,6 +10,13 @@ from a pipe, checks the job's record (cancelled? taken over by another worker? t
 records the outcome of the attempt it started, by compare-and-set (records.py): the result folder
 is renamed into `<id>/result/` inside the transaction that marks the attempt succeeded.
 
+The record store down (JobsUnavailable) is no failure of the job: the process runs on (only the
+job timeout ends it then; cancel is seen once the store is back), progress is not written, and the
+outcome is kept, its folder with it, and recorded once the store answers again, tried every
+`RECORD_RETRY_S` (doubling), so the attempt counts once and the job is not run again. Recording is
+idempotent: the compare-and-set changes nothing the second time, and a result folder moved in a
+transaction whose commit was lost is not moved again. Every path removes the attempt's `.tmp-*`.
+
 Retention: a finished job (its record, inputs and results) is removed `job_retention_s` after it
 ended, checked at start and every `PURGE_INTERVAL_S` (by the runner, or by every queue worker).
 """
@@ -31,12 +38,15 @@ from pathlib import Path
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobRegistry
 from camdirector.jobs.main import job_main
-from camdirector.jobs.records import Job, JobNotFound, JobState, JobStore
+from camdirector.jobs.records import Job, JobNotFound, JobState, JobStore, JobsUnavailable
 
 log = logging.getLogger("camdirector.jobs")
 
 PURGE_INTERVAL_S = 60.0  # how often finished jobs past their retention are looked for
 POLL_S = 0.25  # a running job's record is checked at least this often (cancel, take-over), s
+# The record store down: first and longest wait before it is asked again for an attempt (its
+# progress, cancel, outcome), doubling in between, s.
+RECORD_RETRY_S = (0.5, 10.0)
 
 
 def purge_expired(store: JobStore, settings: JobSettings, now_s: float) -> list[str]:
@@ -66,9 +76,14 @@ class Attempt:
     terminating_since: float | None = None
     stop_reason: str | None = None  # "cancelled", "superseded", "timeout"
     next_check: float = 0.0  # time.monotonic() of the next look at the record
+    record: Callable[[], object] | None = None  # writes the outcome once the process ended (idempotent)
+    store_back_at: float = 0.0  # time.monotonic() before which the store, found down, is not asked
+    store_wait_s: float = 0.0  # the wait after the next failed call (0: the store answered last)
+    moved: bool = False  # the work folder was renamed to result/ (maybe in a transaction not confirmed)
 
     def waitables(self) -> list:
-        return [self.conn, self.process.sentinel]
+        """What to wait on: nothing once the process ended (an outcome waiting for the store)."""
+        return [] if self.record is not None else [self.conn, self.process.sentinel]
 
 
 class JobExecutor:
@@ -151,22 +166,28 @@ class JobExecutor:
 
     def step(self, a: Attempt) -> bool:
         """Read the attempt's messages, end its process when the job was cancelled, taken over
-        or ran too long, and record the outcome once the process ended. True when it is over."""
-        self._read_messages(a)
-        now = time.monotonic()
-        if a.stop_reason is None and now >= a.next_check:
-            a.next_check = now + POLL_S
-            a.stop_reason = self._stop_reason(a, now)
-            if a.stop_reason is not None and a.process.is_alive():
-                a.process.terminate()
-                a.terminating_since = now
-        if a.process.is_alive():
-            if a.terminating_since is not None and now - a.terminating_since > self.settings.cancel_grace_s:
-                a.process.kill()
+        or ran too long, and record the outcome once the process ended (again later while the
+        store is down). True when it is over and recorded."""
+        if a.record is None:
+            self._read_messages(a)
+            now = time.monotonic()
+            if a.stop_reason is None and now >= a.next_check:
+                a.next_check = now + POLL_S
+                a.stop_reason = self._stop_reason(a, now)
+                if a.stop_reason is not None and a.process.is_alive():
+                    a.process.terminate()
+                    a.terminating_since = now
+            if a.process.is_alive():
+                if a.terminating_since is not None and now - a.terminating_since > self.settings.cancel_grace_s:
+                    a.process.kill()
+                return False
+            a.process.join()
+            self._read_messages(a)
+            a.conn.close()
+            a.record = self._outcome(a)
+        if not self._store_call(a, a.record):
             return False
-        a.process.join()
-        self._read_messages(a)
-        self._settle(a)
+        shutil.rmtree(a.work_dir, ignore_errors=True)  # gone when it became the result
         return True
 
     def run(self, job: Job, stopping: threading.Event, hand_back: Callable[[], object]) -> None:
@@ -176,106 +197,157 @@ class JobExecutor:
         a = self.launch(job)
         if a is None:
             return
-        while not self.step(a):
-            if stopping.is_set():
-                self.end([a], before_requeue=hand_back)
-                return
-            multiprocessing.connection.wait(a.waitables(), timeout=POLL_S)
+        try:
+            while not self.step(a):
+                if stopping.is_set():
+                    self.end([a], before_requeue=hand_back)
+                    return
+                multiprocessing.connection.wait(a.waitables(), timeout=POLL_S)
+        except BaseException:
+            self._abandon(a)  # no process or folder outlives an error here
+            raise
 
     def end(self, attempts: list[Attempt], before_requeue: Callable[[], object] | None = None) -> None:
         """Shutdown: end the attempts' processes (SIGTERM, SIGKILL after `cancel_grace_s`) and
-        queue their jobs again without counting the attempt (`before_requeue()` first)."""
+        queue their jobs again without counting the attempt (`before_requeue()` first). An
+        attempt whose outcome waits for the store is recorded now if the store answers; one whose
+        record cannot be requeued (the store down) is left `running` for the next claim."""
         for a in attempts:
             if a.process.is_alive():
                 a.process.terminate()
         deadline = time.monotonic() + self.settings.cancel_grace_s
         for a in attempts:
-            a.process.join(max(0.0, deadline - time.monotonic()))
-            if a.process.is_alive():
-                a.process.kill()
-                a.process.join()
-            a.conn.close()
-            shutil.rmtree(a.work_dir, ignore_errors=True)
+            a.store_back_at = 0.0  # one last try, whatever the backoff
+            if a.record is not None and self.step(a):
+                continue
+            self._abandon(a, deadline)
             if before_requeue is not None:
                 before_requeue()
-            self.store.requeue(a.job.id, uncount_attempt=True, attempt=a.job.attempts)
+            try:
+                self.store.requeue(a.job.id, uncount_attempt=True, attempt=a.job.attempts)
+            except JobsUnavailable as exc:
+                log.warning("job %s: not requeued: %s", a.job.id, exc)
+
+    @staticmethod
+    def _abandon(a: Attempt, deadline: float = 0.0) -> None:
+        """End the attempt's process (SIGKILL past `deadline`, a time.monotonic()) and remove
+        its work folder."""
+        if a.process.is_alive():
+            a.process.terminate()
+        a.process.join(max(0.0, deadline - time.monotonic()))
+        if a.process.is_alive():
+            a.process.kill()
+            a.process.join()
+        a.conn.close()
+        shutil.rmtree(a.work_dir, ignore_errors=True)
+
+    def _store_call(self, a: Attempt, call: Callable[[], object]) -> bool:
+        """Run `call` (a store call of this attempt) unless the store was found down and its wait
+        has not passed. False when the store is down: the wait before the next try doubles, up
+        to RECORD_RETRY_S[1], and the outage is logged once."""
+        now = time.monotonic()
+        if now < a.store_back_at:
+            return False
+        try:
+            call()
+        except JobsUnavailable as exc:
+            if a.store_wait_s == 0.0:
+                log.warning("job %s: %s; it runs on and its outcome is recorded when the store is back", a.job.id, exc)
+            a.store_wait_s = min(max(a.store_wait_s * 2, RECORD_RETRY_S[0]), RECORD_RETRY_S[1])
+            a.store_back_at = now + a.store_wait_s
+            return False
+        if a.store_wait_s:
+            log.info("job %s: the job store answers again", a.job.id)
+        a.store_wait_s = 0.0
+        return True
 
     def _stop_reason(self, a: Attempt, now: float) -> str | None:
-        try:
-            current = self.store.get(a.job.id)
-        except JobNotFound:
-            return "superseded"
-        if current.state is JobState.CANCELLED:
-            return "cancelled"
-        if current.state is not JobState.RUNNING or current.attempts != a.job.attempts:
-            return "superseded"  # another worker took over this job after a redelivery
+        found: list[Job | None] = []
+
+        def look() -> None:
+            try:
+                found.append(self.store.get(a.job.id))
+            except JobNotFound:
+                found.append(None)
+
+        if self._store_call(a, look):  # the store down: only the timeout can stop the job
+            current = found[0]
+            if current is None:
+                return "superseded"
+            if current.state is JobState.CANCELLED:
+                return "cancelled"
+            if current.state is not JobState.RUNNING or current.attempts != a.job.attempts:
+                return "superseded"  # another worker took over this job after a redelivery
         if now - a.started_monotonic > self.settings.job_timeout_s:
             return "timeout"
         return None
 
     def _read_messages(self, a: Attempt) -> None:
+        """Take the process's messages; the latest progress is written once (skipped while the
+        store is down: the outcome sets it)."""
+        progress = None
         with contextlib.suppress(EOFError, OSError):
             while a.conn.poll():
                 kind, value = a.conn.recv()
                 if kind == "progress":
-                    self.store.set_progress(a.job.id, value, attempt=a.job.attempts)
+                    progress = value
                 elif kind == "started":
                     a.process_start_ms = max(0.0, (value - a.started_wall) * 1e3)
                 else:
                     a.outcome = (kind, value)
+        if progress is not None:
+            self._store_call(a, lambda: self.store.set_progress(a.job.id, progress, attempt=a.job.attempts))
 
-    def _settle(self, a: Attempt) -> None:
-        a.conn.close()
+    def _outcome(self, a: Attempt) -> Callable[[], object]:
+        """What to record of the ended process: a store call that may be made again (the
+        compare-and-set on the attempt changes nothing the second time)."""
         job_id, attempt = a.job.id, a.job.attempts
         run_ms = (time.monotonic() - a.started_monotonic) * 1e3
-        try:
-            if a.stop_reason in ("cancelled", "superseded"):
-                return
-            if a.stop_reason == "timeout":
-                self.store.finish(
-                    job_id,
-                    JobState.FAILED,
-                    only_if=JobState.RUNNING,
-                    attempt=attempt,
-                    error=f"timed out after {self.settings.job_timeout_s:g} s",
-                )
-                return
-            if a.outcome is not None and a.outcome[0] == "ok":
-                timings = dict(a.outcome[1])
-                timings["queued"] = a.queued_ms
-                timings["job_process_total"] = run_ms
-                if a.process_start_ms is not None:
-                    timings["job_process_start"] = a.process_start_ms
-                self._publish(a, timings)
-                return
-            if a.outcome is not None:
-                error = str(a.outcome[1])
-            else:
-                error = f"the job process exited with code {a.process.exitcode} without a result"
-            self.store.finish(
-                job_id,
-                JobState.FAILED,
-                error=error,
-                only_if=JobState.RUNNING,
-                attempt=attempt,
-                timings_ms={"job_process_total": run_ms, "queued": a.queued_ms},
-            )
-        finally:
-            shutil.rmtree(a.work_dir, ignore_errors=True)
+        if a.stop_reason in ("cancelled", "superseded"):
+            return lambda: None
+        if a.stop_reason == "timeout":
+            error = f"timed out after {self.settings.job_timeout_s:g} s"
+            return lambda: self.store.finish(job_id, JobState.FAILED, only_if=JobState.RUNNING, attempt=attempt, error=error)
+        if a.outcome is not None and a.outcome[0] == "ok":
+            timings = dict(a.outcome[1])
+            timings["queued"] = a.queued_ms
+            timings["job_process_total"] = run_ms
+            if a.process_start_ms is not None:
+                timings["job_process_start"] = a.process_start_ms
+            return lambda: self._publish(a, timings)
+        if a.outcome is not None:
+            error = str(a.outcome[1])
+        else:
+            error = f"the job process exited with code {a.process.exitcode} without a result"
+        failed_timings = {"job_process_total": run_ms, "queued": a.queued_ms}
+        return lambda: self.store.finish(
+            job_id, JobState.FAILED, error=error, only_if=JobState.RUNNING, attempt=attempt, timings_ms=failed_timings
+        )
 
     def _publish(self, a: Attempt, timings: dict[str, float]) -> None:
         """Succeed the attempt and rename its folder to `<id>/result/` in one transaction; an
-        attempt that was cancelled or taken over meanwhile changes nothing."""
+        attempt that was cancelled or taken over meanwhile changes nothing. Called again after
+        the store was down: a folder already moved is not moved again, and is removed when the
+        record, once readable, shows the job did not succeed (the commit was lost, and the job
+        was cancelled since)."""
         result = self.store.result_dir(a.job.id)
 
         def rename() -> None:
+            if a.moved:
+                return
             shutil.rmtree(result, ignore_errors=True)  # a folder left by a rolled-back attempt
             os.rename(a.work_dir, result)
+            a.moved = True
 
         try:
-            self.store.finish(
+            changed = self.store.finish(
                 a.job.id, JobState.SUCCEEDED, timings_ms=timings, only_if=JobState.RUNNING, attempt=a.job.attempts, publish=rename
             )
+            if a.moved and not changed:
+                with contextlib.suppress(JobNotFound):
+                    if self.store.get(a.job.id).state is JobState.SUCCEEDED:
+                        return
+                shutil.rmtree(result, ignore_errors=True)
         except OSError as exc:  # the rename failed: the transaction was rolled back
             log.error("job %s: cannot store the result: %s", a.job.id, exc)  # names paths: the log's, not the client's
             self.store.finish(

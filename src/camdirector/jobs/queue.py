@@ -38,12 +38,16 @@ to start). Redis down at a submit: the job is failed ("could not be queued") and
 JobsUnavailable (HTTP 503). PostgreSQL down while a worker takes a message: the message is retried
 with Dramatiq's Retries (backoff 1 s to 30 s, up to `STORE_RETRIES` times). Redis keeps the queue
 in memory: a Redis that restarts without persistence loses queued messages (their records stay
-queued); run the queue's Redis with `appendonly yes` in production.
+queued); run the queue's Redis with `appendonly yes` in production. PostgreSQL down while a job
+runs: the job runs on and its outcome is recorded when the store is back (executor.py), its
+attempt counted once. Every Redis call is bounded: the connect (REDIS_CONNECT_TIMEOUT_S), each
+reply (REDIS_READ_TIMEOUT_S) and a silent peer (TCP keepalives, REDIS_KEEPALIVE).
 """
 
 from __future__ import annotations
 
 import logging
+import socket
 from pathlib import Path
 
 import dramatiq
@@ -62,6 +66,11 @@ QUEUE_NAME = "camdirector-jobs"
 ACTOR_NAME = "camdirector_run_job"
 STORE_RETRIES = 100  # times a message is retried while the record store is unreachable
 _RETRY_BACKOFF_MS = (1000, 30_000)
+REDIS_CONNECT_TIMEOUT_S = 5.0  # a connection to Redis not made in this long: the queue is down, s
+REDIS_READ_TIMEOUT_S = 5.0  # a command's reply not read in this long: the queue is down (none of ours blocks), s
+# TCP keepalive of an idle connection: first probe after 5 s, then every 2 s, dropped after 3 unanswered.
+REDIS_KEEPALIVE = {socket.TCP_KEEPIDLE: 5, socket.TCP_KEEPINTVL: 2, socket.TCP_KEEPCNT: 3}
+REDIS_HEALTH_CHECK_S = 15  # a connection idle this long is checked with a PING before it is used, s
 
 
 def redis_reason(exc: Exception) -> str:
@@ -73,13 +82,20 @@ def broker_for(settings: JobSettings, *, worker: bool) -> RedisBroker:
     does not answer). Only workers run the maintenance step that requeues dead workers' messages
     (a client's heartbeat timeout is not the workers')."""
     url = settings.job_queue
+    # the pool made here, not from `url` by Dramatiq, which would drop these bounds
+    pool = redis.ConnectionPool.from_url(
+        url,
+        socket_connect_timeout=REDIS_CONNECT_TIMEOUT_S,
+        socket_timeout=REDIS_READ_TIMEOUT_S,
+        socket_keepalive=True,
+        socket_keepalive_options=REDIS_KEEPALIVE,
+        health_check_interval=REDIS_HEALTH_CHECK_S,
+    )
     broker = RedisBroker(
-        url=url,
+        connection_pool=pool,
         middleware=[Retries(min_backoff=_RETRY_BACKOFF_MS[0], max_backoff=_RETRY_BACKOFF_MS[1])] if worker else [],
         heartbeat_timeout=int(settings.worker_heartbeat_timeout_s * 1000),
         maintenance_chance=MAINTENANCE_SCALE if worker else 0,
-        socket_connect_timeout=5,
-        socket_timeout=30,
     )
     try:
         broker.client.ping()

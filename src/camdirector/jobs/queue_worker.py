@@ -84,9 +84,12 @@ class QueueWorker:
             while not self._stopping.wait(beat_s):
                 self._beat()
                 if time.monotonic() >= next_purge:
-                    purge_expired(self.store, self.settings, self._clock())
-                    self.store.remove_orphans(self.settings.job_timeout_s + _ORPHAN_GRACE_S)
                     next_purge = time.monotonic() + PURGE_INTERVAL_S
+                    try:
+                        purge_expired(self.store, self.settings, self._clock())
+                        self.store.remove_orphans(self.settings.job_timeout_s + _ORPHAN_GRACE_S)
+                    except JobsUnavailable as exc:  # the store down stops no worker: retried next interval
+                        log.warning("retention: %s", exc)
         finally:
             worker.stop(timeout=int((self.settings.cancel_grace_s + 10.0) * 1000))
             self._broker.client.close()

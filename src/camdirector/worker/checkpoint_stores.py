@@ -72,7 +72,11 @@ def decode_entry(data: bytes) -> tuple[int, str, bytes]:
 
 class CheckpointStore(Protocol):
     """Where checkpoints live. Writes name their `owner` (node/pid); False means another owner
-    has claimed the session since (the caller's copy is stale). Errors: CheckpointError."""
+    has claimed the session since (the caller's copy is stale). Errors: CheckpointError.
+    `may_hang`: a call can wait on another machine (its writes are then made off the frame path,
+    checkpoint_writer.py)."""
+
+    may_hang: bool
 
     def begin(self, session_id: str, owner: str, create: bytes) -> None:
         """A new session: its creation request, no snapshot, an empty log; `owner` owns it."""
@@ -92,6 +96,9 @@ class CheckpointStore(Protocol):
 
     def forget(self, session_id: str) -> None:
         """Lets go of what this process keeps open for the session (files); the checkpoint stays."""
+
+    def ping(self) -> bool:
+        """Whether the store answers now (its cheapest call; never raises)."""
 
     def close(self) -> None: ...
 
@@ -159,6 +166,8 @@ class DirectoryStore:
     whose open log file has been replaced that way (its link count is 0) no longer owns the
     session. A checkpoint whose owner process is gone and whose files are older than `keep_s` is
     removed when a store opens the folder."""
+
+    may_hang = False  # a local folder
 
     def __init__(self, root: Path, keep_s: float):
         self.root = Path(root)
@@ -249,6 +258,9 @@ class DirectoryStore:
         if fd is not None:
             os.close(fd)
 
+    def ping(self) -> bool:
+        return self.root.is_dir()
+
     def close(self) -> None:
         for session_id in list(self._logs):
             self.forget(session_id)
@@ -319,13 +331,20 @@ return 1
 class RedisStore:
     """Checkpoints in Redis, under `camdirector:ck:{<session id>}:meta` and `...:log` (module
     docstring). Keys expire `keep_s` after their session's last write. Calls time out after
-    `timeout_s`, so a Redis that hangs delays a frame by at most that."""
+    `timeout_s`; they are made by the writer's thread (checkpoint_writer.py), so a Redis that
+    hangs delays no frame by more than `checkpoint_wait_ms`."""
+
+    may_hang = True
 
     def __init__(self, url: str, keep_s: float, timeout_s: float = 0.5, check: bool = True):
         import redis  # only a node given a redis:// URL needs the client
 
         self._errors = (redis.RedisError, OSError)
-        self._client = redis.Redis.from_url(url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s)
+        # Keepalives notice a vanished host; the timeouts bound a Redis that hangs (paused). Off the
+        # frame path either way (checkpoint_writer.py).
+        self._client = redis.Redis.from_url(
+            url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s, socket_keepalive=True, health_check_interval=0
+        )
         self._keep_ms = str(int(keep_s * 1000))
         if check:
             try:
@@ -378,6 +397,12 @@ class RedisStore:
 
     def forget(self, session_id: str) -> None:
         pass  # nothing held per session
+
+    def ping(self) -> bool:
+        try:
+            return bool(self._client.ping())
+        except self._errors:
+            return False
 
     def close(self) -> None:
         self._client.close()

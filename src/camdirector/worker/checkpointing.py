@@ -25,9 +25,20 @@ creation payload, the snapshot, the inputs since); the rebuild is driven from ab
 `restore` and `replay`). Sessions are deterministic (recordings replay bit for bit), so the
 restored session answers its next frame as the lost one would have.
 
-A write that fails (Redis down, a full disk) fails no frame: the session goes on, each answer's
-metrics say so (`FrameMetrics.checkpoint_failed`), and once the store answers again (tried every
+A store that may hang (Redis) has its calls made off the frame path, in order, by a thread of the
+table's (checkpoint_writer.py); a write's result is waited for at most `checkpoint_wait_ms`, which a store
+that answers meets, so the fence above holds. A write that fails (Redis down, a full disk) or that
+the store does not answer within that (Redis paused) fails no frame: the session goes on, its
+checkpoint behind, each answer's metrics say so (`FrameMetrics.checkpoint_failed`), no input of
+it is queued meanwhile, and once the store answers again (the writer's probe; tried at most every
 CHECKPOINT_RETRY_S) the checkpoint is written again whole: begun anew, then a snapshot.
+
+A checkpoint behind can meet the loss of its node: the session restored elsewhere is then older
+than what its client was answered. The client says which frame it was last answered
+(`FrameUpdate.answered_frame`); a session that has not taken that frame answers DATA_LOSS "state
+lost after frame N: resend from N+1" (`check_answered`), and the client's updates from N+1 on,
+sent again, bring it to exactly where it was (sessions are deterministic). A frame at or before
+the client's `answered_frame` is such a resend and is not checked.
 """
 
 from __future__ import annotations
@@ -37,8 +48,9 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar, cast
 
-from camdirector.errors import unavailable
+from camdirector.errors import data_loss, unavailable
 from camdirector.infra.channels import encode_create
 from camdirector.pipeline.session import CreationName
 from camdirector.server_settings import ServerSettings
@@ -51,8 +63,11 @@ from camdirector.worker.checkpoint_stores import (
     encode_entry,
     open_store,
 )
+from camdirector.worker.checkpoint_writer import CheckpointWriter, InlineWriter
 
 log = logging.getLogger("camdirector.sessions")
+
+T = TypeVar("T")
 
 CHECKPOINT_RETRY_S = 1.0  # a session whose checkpoint write failed tries again this often (a full snapshot), s
 
@@ -91,6 +106,11 @@ class Checkpointing:
             store if store is not None else open_store(settings.checkpoint_store, settings.data_dir, settings.checkpoint_keep_s)
         )
         self.owner = f"{settings.node_name}/{os.getpid()}"  # this process, in checkpoints' ownership
+        self.wait_s = settings.checkpoint_wait_ms * 1e-3
+        self.writer: CheckpointWriter | InlineWriter | None = None
+        if self.store is not None:
+            self.writer = CheckpointWriter(self.store.ping) if self.store.may_hang else InlineWriter()
+        self._taken_over: set[str] = set()  # sessions a write was refused for after its frame went on (the writer's thread adds)
 
     @property
     def enabled(self) -> bool:
@@ -104,34 +124,46 @@ class Checkpointing:
         if self.store is None:
             return
         checkpoint.create_payload = payload if payload is not None else encode_create(tenant, req.SerializeToString())
-        try:
-            self.store.begin(session_id, self.owner, checkpoint.create_payload)
-        except CheckpointError as exc:
-            self._failed(session_id, checkpoint, exc)
+        self._write(session_id, checkpoint, self.store.begin, session_id, self.owner, checkpoint.create_payload)
 
     def write_input(self, session_id: str, checkpoint: SessionCheckpoint, op: str, payload: bytes) -> None:
         """Writes one input before it is computed. Raises TakenOver when another process has
-        taken the session over: the input is then computed on the newer state, restored."""
+        taken the session over (the store refused this write, or one whose result came after its
+        frame went on): the input is then computed on the newer state, restored."""
         if self.store is None:
             return
+        if session_id in self._taken_over:
+            self._taken_over.discard(session_id)
+            raise TakenOver(session_id)
         checkpoint.seq += 1
         if checkpoint.failed:
             return  # the snapshot after this input repairs the checkpoint (snapshot_due)
-        try:
-            owned = self.store.append(session_id, self.owner, encode_entry(checkpoint.seq, op, payload))
-        except CheckpointError as exc:
-            self._failed(session_id, checkpoint, exc)
-            return
-        if not owned:
+        entry = encode_entry(checkpoint.seq, op, payload)
+        owned = self._write(session_id, checkpoint, self.store.append, session_id, self.owner, entry)
+        if owned is False:
+            self._taken_over.discard(session_id)
             raise TakenOver(session_id)
+
+    @staticmethod
+    def check_answered(session_id: str, update: pb.FrameUpdate, last_frame: int | None) -> None:
+        """DATA_LOSS when the client was answered a frame that the session, `last_frame` the
+        newest it took (None: none), has not taken: restored from a checkpoint that was behind
+        (module docstring). A frame at or before `answered_frame` is a resend, not checked."""
+        answered = update.answered_frame
+        taken = last_frame or 0
+        if taken < answered < update.frame:
+            raise data_loss(
+                f"session {session_id}: state lost after frame {taken}: resend from {taken + 1} (its node was lost "
+                f"while its checkpoint was behind; the client was answered up to frame {answered})"
+            )
 
     def snapshot_due(self, checkpoint: SessionCheckpoint) -> bool:
         """Whether an input just computed calls for a snapshot: every `every_frames` inputs, or
-        once a failed write is to be repaired (its retry time has come)."""
-        if self.store is None:
+        once a failed write is to be repaired (its retry time has come and the store answers)."""
+        if self.writer is None:
             return False
         if checkpoint.retry_s is not None:
-            return self.clock() >= checkpoint.retry_s
+            return self.clock() >= checkpoint.retry_s and self.writer.healthy and not self.writer.stuck(self.wait_s)
         return checkpoint.seq - checkpoint.snapshot_seq >= self.every_frames
 
     def may_wait(self, checkpoint: SessionCheckpoint) -> bool:
@@ -153,17 +185,22 @@ class Checkpointing:
         begun again first (the store may have lost it: Redis restarted)."""
         if self.store is None:
             return
-        try:
-            data = dumps_state(state, creation_objects)
-            if checkpoint.failed:
-                self.store.begin(session_id, self.owner, checkpoint.create_payload)
-            self.store.snapshot(session_id, self.owner, checkpoint.seq, data, claim=claim)
-        except CheckpointError as exc:
-            self._failed(session_id, checkpoint, exc)
+        data = dumps_state(state, creation_objects)
+        create_again = checkpoint.create_payload if checkpoint.failed else None
+        written = self._write(session_id, checkpoint, self._rewrite, session_id, create_again, checkpoint.seq, data, claim)
+        if written is None:
             return
         if checkpoint.failed:
             log.warning("session %s: checkpoint written again after a failure", session_id)
         checkpoint.snapshot_seq, checkpoint.retry_s = checkpoint.seq, None
+
+    def _rewrite(self, session_id: str, create_again: bytes | None, seq: int, data: bytes, claim: bool) -> bool:
+        """On the writer's thread: a snapshot, after beginning the checkpoint again with
+        `create_again` when its writes had failed."""
+        assert self.store is not None
+        if create_again is not None:
+            self.store.begin(session_id, self.owner, create_again)
+        return self.store.snapshot(session_id, self.owner, seq, data, claim=claim)
 
     def load(self, session_id: str) -> Checkpoint | None:
         """What rebuilds the session (module docstring), or None when none is kept (or no store).
@@ -179,9 +216,15 @@ class Checkpointing:
     def end(self, session_id: str, keep_checkpoint: bool) -> None:
         """A session the table no longer holds: its checkpoint is deleted, or with
         `keep_checkpoint` only let go of (the process is stopping, or another one has taken the
-        session over)."""
-        if self.store is None:
+        session over). Not waited for."""
+        if self.store is None or self.writer is None:
             return
+        self._taken_over.discard(session_id)
+        self.writer.call(self._let_go, session_id, keep_checkpoint)
+
+    def _let_go(self, session_id: str, keep_checkpoint: bool) -> None:
+        """On the writer's thread: end's store call; a failure only logged (the checkpoint expires)."""
+        assert self.store is not None
         try:
             if keep_checkpoint:
                 self.store.forget(session_id)
@@ -191,17 +234,44 @@ class Checkpointing:
             log.warning("session %s: its checkpoint stays behind: %s", session_id, exc)
 
     def close(self) -> None:
+        """The writes given so far made (checkpoint_writer.CLOSE_WAIT_S at most), then the store closed."""
+        if self.writer is not None:
+            self.writer.close()
         if self.store is not None:
             self.store.close()
 
-    def _failed(self, session_id: str, checkpoint: SessionCheckpoint, exc: CheckpointError) -> None:
+    def _write(self, session_id: str, checkpoint: SessionCheckpoint, fn: Callable[..., T], *args: object) -> T | None:
+        """`fn(*args)` (a store call) made by the writer, its result waited for up to the budget;
+        None, the checkpoint marked behind, when the store failed, did not answer in time, or is
+        known not to answer (then nothing is given to it). A refusal (False) whose result comes
+        after the budget is noted, and the session's next input raises TakenOver."""
+        assert self.writer is not None
+        if not self.writer.healthy or self.writer.stuck(self.wait_s):
+            self._failed(session_id, checkpoint, "the store does not answer")
+            return None
+        pending = self.writer.call(self._noting_refusal, session_id, fn, *args)
+        try:
+            return cast("T", pending.result(self.wait_s))
+        except TimeoutError:
+            self._failed(session_id, checkpoint, f"the store did not answer within {self.wait_s * 1e3:g} ms")
+        except CheckpointError as exc:
+            self._failed(session_id, checkpoint, str(exc))
+        return None
+
+    def _noting_refusal(self, session_id: str, fn: Callable[..., T], *args: object) -> T:
+        value = fn(*args)
+        if value is False:
+            self._taken_over.add(session_id)
+        return value
+
+    def _failed(self, session_id: str, checkpoint: SessionCheckpoint, reason: str) -> None:
         """The session goes on; its checkpoint is written whole again once the store answers."""
         if not checkpoint.failed:
             log.error(
-                "session %s: %s; frames are still answered, the checkpoint is written again when the "
-                "store answers (tried every %.0f s)",
+                "session %s: its checkpoint is behind (%s); frames are still answered, the checkpoint is "
+                "written again when the store answers (tried every %.0f s)",
                 session_id,
-                exc,
+                reason,
                 CHECKPOINT_RETRY_S,
             )
         checkpoint.retry_s = self.clock() + CHECKPOINT_RETRY_S

@@ -4,8 +4,9 @@ Used the same way inside a worker process and inline in the front process (worke
 requests' parsing (dispatch.py, which calls this table's typed methods and knows how to rebuild a
 session it does not hold). The table creates, runs, restyles, shows and ends its sessions, with
 what it keeps beside each (`HeldSession`). Each input is written to the session's checkpoint
-(checkpointing.py) before it is computed (`TakenOver` when the store says another process has the
-session now: dispatch.py restores the newer state and asks again), and a snapshot taken when one
+(checkpointing.py: within a budget where the store may hang) before it is computed (`TakenOver`
+when the store says another process has the session now: dispatch.py restores the newer state and
+asks again), and a snapshot taken when one
 is due (at once, or with `defer_snapshots` in `idle_work`). A session it does not hold is
 NOT_FOUND here: rebuilding one is `restore` and `replay`, driven from dispatch.py.
 """
@@ -13,6 +14,7 @@ NOT_FOUND here: rebuilding one is `restore` and `replay`, driven from dispatch.p
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -38,6 +40,8 @@ from camdirector.worker.pose_out import PoseSender
 from camdirector.worker.recording import RecordingWriter
 from camdirector.worker.timeline import Timeline
 
+ANSWERS_KEPT = 128  # a session's last answers kept for frames sent again (HeldSession.answers), frames
+
 
 @dataclass
 class HeldSession:
@@ -51,6 +55,9 @@ class HeldSession:
     recorder: RecordingWriter | None = None
     pose_sender: PoseSender | None = None
     checkpoint: SessionCheckpoint = field(default_factory=SessionCheckpoint)
+    # The last ANSWERS_KEPT frames' answers, by frame: a frame sent again (its answer was lost with
+    # a stream or a node) is answered stale with its own pose, not the newest one.
+    answers: OrderedDict[int, pb.CameraUpdate] = field(default_factory=OrderedDict)
 
 
 class SessionTable:
@@ -156,6 +163,9 @@ class SessionTable:
         taken from the frame's state rather than read back out of the reply."""
         t0 = self.clock()
         held = self.get(msg.session_id)
+        if msg.answered_frame:  # restored from a checkpoint that was behind: DATA_LOSS, resend from (checkpointing.py)
+            last = held.session.last_input
+            self.checkpoints.check_answered(msg.session_id, msg, None if last is None else last[0])
         if not held.session.is_stale(msg.frame):
             self.checkpoints.write_input(msg.session_id, held.checkpoint, "frame", payload)
         reply, state = self._frame(held, msg, t0)
@@ -173,6 +183,13 @@ class SessionTable:
         """The frame's reply, and its state when it was computed (None: stale, the last pose repeated)."""
         session = held.session
         if session.is_stale(msg.frame):
+            kept = held.answers.get(msg.frame)
+            if kept is not None:  # sent again: its own answer, marked stale
+                reply = pb.CameraUpdate()
+                reply.CopyFrom(kept)
+                reply.stale, reply.compute_ms = True, (self.clock() - t0) * 1e3
+                reply.message = f"frame {msg.frame} was answered before: its answer repeated, rig not advanced"
+                return reply, None
             last = session.last_state
             assert last is not None  # a frame is stale only after one was answered
             reply = codec.camera_update_msg(
@@ -193,6 +210,9 @@ class SessionTable:
         reply = codec.camera_update_msg(state, compute_ms=0.0)
         reply.compute_ms = (self.clock() - t0) * 1e3
         held.timeline.add(state, reply.compute_ms)
+        held.answers[msg.frame] = reply
+        if len(held.answers) > ANSWERS_KEPT:
+            held.answers.popitem(last=False)
         return reply, state
 
     def update_style(self, msg: pb.UpdateStyleRequest, payload: bytes | None = None) -> pb.UpdateStyleResponse:

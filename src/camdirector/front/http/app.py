@@ -30,6 +30,7 @@ from camdirector.front.http.routes.directors import build_director_router
 from camdirector.front.http.routes.job_resources import answer_unavailable
 from camdirector.front.http.routes.monitors import build_view_router
 from camdirector.front.http.routes.sessions import build_session_router
+from camdirector.front.loop_watch import LoopWatch
 from camdirector.front.router import SessionRouter
 from camdirector.front.view_hub import ViewHub
 from camdirector.version import PROTOCOL, VERSION
@@ -37,10 +38,13 @@ from camdirector.version import PROTOCOL, VERSION
 DASHBOARD_DIR = Path(__file__).with_name("dashboard")
 
 
-def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: bool = False) -> FastAPI:
+def build_app(
+    router: SessionRouter, transports: dict[str, str], secure_cookie: bool = False, loop_watch: LoopWatch | None = None
+) -> FastAPI:
     """The app; `app.state.views` is its ViewHub, which the server closes before stopping (its
     live streams would hold the HTTP server open). The router's guard checks every caller;
-    `secure_cookie`: the login cookie is sent over TLS only."""
+    `secure_cookie`: the login cookie is sent over TLS only; `loop_watch`: the front loop's lag,
+    shown by /healthz."""
     app = FastAPI(
         title="camdirector",
         version=VERSION,
@@ -63,7 +67,9 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
         """Liveness and a short status: version and protocol, open sessions, worker processes, bound
         transports (a cluster upgraded node by node shows which node runs what), and whether keys
         are checked (`auth`: false under --no-auth) and plaintext beyond loopback allowed
-        (`insecure`), so a node started unsafely shows it."""
+        (`insecure`), so a node started unsafely shows it; `loop_lag_ms`, the largest lag of the
+        loop that answers frames over the last 10 s (front/loop_watch.py)."""
+        lag = {} if loop_watch is None else {"loop_lag_ms": round(loop_watch.recent_max_ms(), 1)}
         return {
             "status": "ok",
             "version": VERSION,
@@ -73,6 +79,7 @@ def build_app(router: SessionRouter, transports: dict[str, str], secure_cookie: 
             "transports": transports,
             "auth": guard.enabled,
             "insecure": router.settings.insecure,
+            **lag,
         }
 
     @app.exception_handler(StarletteHTTPException)

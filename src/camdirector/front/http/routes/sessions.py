@@ -233,7 +233,7 @@ def build_session_router(router: SessionRouter) -> APIRouter:
             )
         except DirectorError as exc:
             raise http_error(exc) from None
-        router.guard.audit(identity, "style", session_id, {"style": style, "via": "http"})
+        await router.guard.off_loop(router.guard.audit, identity, "style", session_id, {"style": style, "via": "http"})
         return {"session_id": session_id, "style": json_format.MessageToDict(msg)}
 
     @routes.post(
@@ -271,7 +271,8 @@ def build_session_router(router: SessionRouter) -> APIRouter:
             reply = pb.TakeShotResponse.FromString(await router.take_shot(msg.SerializeToString(), identity.tenant))
         except DirectorError as exc:
             raise http_error(exc) from None
-        router.guard.audit(
+        await router.guard.off_loop(
+            router.guard.audit,
             identity,
             "release" if msg.release else "take",
             session_id,
