@@ -116,10 +116,11 @@ def test_repeated_and_late_frames_are_answered_stale(raw):
     updates = raw.stream(list(walk(session_id, 10)))
     late = list(walk(session_id, 1, start_frame=5))[0]
     repeated = list(walk(session_id, 1, start_frame=10))[0]
-    for frame in (late, repeated):
+    for frame in (late, repeated):  # each answered with its own answer (worker/table.py's answers kept)
         reply = raw.call("Frame", frame)
         assert reply.stale and reply.frame == frame.frame and "not newer" in reply.message
-        assert reply.pose == updates[-1].pose
+        assert reply.pose == updates[frame.frame - 1].pose
+    assert updates[4].pose != updates[-1].pose  # the late frame's own pose is not the newest
     nxt = raw.call("Frame", list(walk(session_id, 1, start_frame=11))[0])
     assert not nxt.stale and nxt.frame == 11
 

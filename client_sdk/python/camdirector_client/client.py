@@ -531,7 +531,7 @@ def connect(
         Context for the ZeroMQ sockets; default the process-wide ``zmq.Context.instance()``.
     retry : RetryPolicy
         How long failed calls are tried again (``retry_window_s``, 30 s), how long a frame may go
-        unanswered before its node is taken as hung (``frame_timeout_s``, 1 s, gRPC) and how many
+        unanswered before its node is taken as hung (``frame_timeout_s``, 3 s, gRPC) and how many
         sent updates are kept for a DATA_LOSS resend (``resend_history_frames``, 600).
 
     Connecting is lazy: an unreachable server shows at the first call (UNAVAILABLE over gRPC,

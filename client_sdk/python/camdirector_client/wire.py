@@ -124,8 +124,11 @@ class RetryPolicy:
     max_backoff_s: float = 1.0  # the longest wait, s: a balancer back is found within it
     # gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call is
     # cancelled and tried again (through a balancer, on a live node), s; None: frames wait forever
-    # on a stream, timeout_s on a unary Frame
-    frame_timeout_s: float | None = 1.0
+    # on a stream, timeout_s on a unary Frame. The last resort: a balancer's checks take a hung node
+    # out within 1.4 s and cut its streams, and keepalive pings find a hung server reached directly
+    # within 2 s; a frame that is only slow (a TRACKS session's first, a restore on a loaded
+    # machine) can take over 1 s, and a cut would have it answered stale.
+    frame_timeout_s: float | None = 3.0
     resend_history_frames: int = 600  # updates kept for a DATA_LOSS resend (10 s at 60 Hz)
     random: Callable[[], float] = random.random  # jitter in [0, 1); e.g. random.Random(seed).random
 

@@ -183,6 +183,13 @@ export class Session {
     this.history = new SentHistory(retry.resendHistoryFrames);
   }
 
+  /** What JSON.stringify shows of a session: its ids and counts (frame numbers are bigints, which
+   * JSON cannot write, and the kept updates are the application's data, not the session's). */
+  toJSON(): object {
+    return { id: this.id, recordingPath: this.recordingPath, route: this.route, retries: this.retries,
+             answeredFrame: this.answeredFrame.toString() };
+  }
+
   /** The wait before the next try after `error` and the backoff of the call's tries (`backoff`, or
    * one started now, at the first failure), the retry counted; throws `error` when it is neither
    * RETRYABLE nor a DATA_LOSS to resend, the window is spent, or the client is closed. */

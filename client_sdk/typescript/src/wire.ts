@@ -48,7 +48,7 @@ export interface RetryPolicy {
   /** The longest wait, ms (default 1000): a balancer back is found within it. */
   maxBackoffMs: number;
   /** gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call
-   * is cancelled and tried again, ms (default 1000); null: frames wait forever on a stream,
+   * is cancelled and tried again, ms (default 3000: a balancer's checks take a hung node out sooner); null: frames wait forever on a stream,
    * timeoutMs on a unary Frame. */
   frameTimeoutMs: number | null;
   /** Sent updates kept for a DATA_LOSS resend (default 600: 10 s at 60 Hz). */
@@ -58,7 +58,7 @@ export interface RetryPolicy {
 }
 
 export const DEFAULT_RETRY: Readonly<RetryPolicy> = Object.freeze({
-  retryWindowMs: 30_000, initialBackoffMs: 100, maxBackoffMs: 1000, frameTimeoutMs: 1000, resendHistoryFrames: 600,
+  retryWindowMs: 30_000, initialBackoffMs: 100, maxBackoffMs: 1000, frameTimeoutMs: 3000, resendHistoryFrames: 600,
   random: Math.random,
 });
 

@@ -51,7 +51,7 @@ test("a bad policy is refused, and the defaults are the issue's", () => {
   }
   const policy = retryPolicy();
   assert.deepEqual([policy.retryWindowMs, policy.initialBackoffMs, policy.maxBackoffMs, policy.frameTimeoutMs, policy.resendHistoryFrames],
-    [30_000, 100, 1000, 1000, 600]);
+    [30_000, 100, 1000, 3000, 600]);
   assert.equal(retryPolicy({ frameTimeoutMs: null }).frameTimeoutMs, null);
 });
 

@@ -183,15 +183,15 @@ class SessionTable:
         """The frame's reply, and its state when it was computed (None: stale, the last pose repeated)."""
         session = held.session
         if session.is_stale(msg.frame):
+            last = session.last_state
+            assert last is not None  # a frame is stale only after one was answered
             kept = held.answers.get(msg.frame)
             if kept is not None:  # sent again: its own answer, marked stale
                 reply = pb.CameraUpdate()
                 reply.CopyFrom(kept)
                 reply.stale, reply.compute_ms = True, (self.clock() - t0) * 1e3
-                reply.message = f"frame {msg.frame} was answered before: its answer repeated, rig not advanced"
+                reply.message = f"frame {msg.frame} is not newer than frame {last.frame}: its first answer repeated"
                 return reply, None
-            last = session.last_state
-            assert last is not None  # a frame is stale only after one was answered
             reply = codec.camera_update_msg(
                 last,
                 compute_ms=(self.clock() - t0) * 1e3,
