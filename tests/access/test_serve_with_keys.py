@@ -177,6 +177,7 @@ def test_tenants_limits_answer_resource_exhausted_with_a_message(tmp_path):
             for update in wc.walk(first, 60):  # as fast as it goes: far above 20 a second
                 alpha.call("Frame", update)
         assert fast.value.code == grpc.StatusCode.RESOURCE_EXHAUSTED and "20 frames a second" in fast.value.message
+        _after_data_loss_the_updates_since_are_taken_at_once(beta)  # its second session: alpha has its two
         time.sleep(0.2)
         alpha.call("Frame", next(wc.walk(first, 1, start_frame=100)))  # the session goes on at its pace
         alpha.close()
@@ -328,3 +329,18 @@ def test_another_tenants_session_live_or_lost_answers_as_a_made_up_id(tmp_path):
         assert own.value.code == grpc.StatusCode.UNAVAILABLE and "died" in own.value.message
         alpha.close()
         beta.close()
+
+
+def _after_data_loss_the_updates_since_are_taken_at_once(client: wc.GrpcRaw) -> None:
+    """A session whose client was answered frames it has not taken (restored from a checkpoint that
+    fell behind) answers DATA_LOSS, and its client sends the updates since again at once: far more
+    than the tenant's 20 frames a second, and every one is answered (front/router.py's resend burst)."""
+    resent = client.call("CreateSession", wc.two_target_request()).session_id
+    ahead = next(wc.walk(resent, 1, start_frame=40))
+    ahead.answered_frame = 30  # answered up to frame 30: this session has taken none
+    with pytest.raises(wc.RpcFailed) as lost:
+        client.call("Frame", ahead)
+    assert lost.value.code == grpc.StatusCode.DATA_LOSS and "resend from 1" in lost.value.message
+    for update in wc.walk(resent, 30):
+        update.answered_frame = update.frame - 1
+        assert client.call("Frame", update).frame == update.frame

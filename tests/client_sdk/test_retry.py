@@ -36,12 +36,12 @@ class FakeClock:
         return self.now_s
 
 
-def test_backoff_doubles_from_0_1_s_with_equal_jitter_up_to_the_cap():
+def test_backoff_doubles_from_0_1_s_with_equal_jitter_up_to_the_0_5_s_cap():
     draws = random.Random(7)
     policy = cd.RetryPolicy(random=random.Random(7).random)
     backoff = wire.Backoff(policy, FakeClock())
     delays = [backoff.next_delay_s() for _ in range(7)]
-    caps = [0.1, 0.2, 0.4, 0.8, 1.0, 1.0, 1.0]
+    caps = [0.1, 0.2, 0.4, 0.5, 0.5, 0.5, 0.5]
     assert delays == [cap * (0.5 + 0.5 * draws.random()) for cap in caps]
     assert all(cap / 2 <= d <= cap for d, cap in zip(delays, caps, strict=True))
 

@@ -121,7 +121,7 @@ class RetryPolicy:
 
     retry_window_s: float = 30.0  # a failing call is tried again until this long after its first failure, s
     initial_backoff_s: float = 0.1  # the first wait, s; each next one doubles
-    max_backoff_s: float = 1.0  # the longest wait, s: a balancer back is found within it
+    max_backoff_s: float = 0.5  # the longest wait, s: a balancer back is found within it (and a connection made)
     # gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call is
     # cancelled and tried again (through a balancer, on a live node), s; None: frames wait forever
     # on a stream, timeout_s on a unary Frame. The last resort: a balancer's checks take a hung node

@@ -58,7 +58,7 @@ export interface RetryPolicy {
 }
 
 export const DEFAULT_RETRY: Readonly<RetryPolicy> = Object.freeze({
-  retryWindowMs: 30_000, initialBackoffMs: 100, maxBackoffMs: 1000, frameTimeoutMs: 3000, resendHistoryFrames: 600,
+  retryWindowMs: 30_000, initialBackoffMs: 100, maxBackoffMs: 500, frameTimeoutMs: 3000, resendHistoryFrames: 600,
   random: Math.random,
 });
 

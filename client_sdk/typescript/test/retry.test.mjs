@@ -24,11 +24,11 @@ function seeded(seed) {
   };
 }
 
-test("backoff doubles from 100 ms with equal jitter up to the 1 s cap", () => {
+test("backoff doubles from 100 ms with equal jitter up to the 500 ms cap", () => {
   const draws = seeded(7);
   const backoff = new Backoff(retryPolicy({ random: seeded(7) }), () => 5000);
   const delays = Array.from({ length: 7 }, () => backoff.nextDelayMs());
-  const caps = [100, 200, 400, 800, 1000, 1000, 1000];
+  const caps = [100, 200, 400, 500, 500, 500, 500];
   assert.deepEqual(delays, caps.map((cap) => cap * (0.5 + 0.5 * draws())));
   caps.forEach((cap, i) => assert.ok(cap / 2 <= delays[i] && delays[i] <= cap, `${delays[i]} for ${cap}`));
 });
@@ -51,7 +51,7 @@ test("a bad policy is refused, and the defaults are the issue's", () => {
   }
   const policy = retryPolicy();
   assert.deepEqual([policy.retryWindowMs, policy.initialBackoffMs, policy.maxBackoffMs, policy.frameTimeoutMs, policy.resendHistoryFrames],
-    [30_000, 100, 1000, 3000, 600]);
+    [30_000, 100, 500, 3000, 600]);
   assert.equal(retryPolicy({ frameTimeoutMs: null }).frameTimeoutMs, null);
 });
 

@@ -40,6 +40,7 @@ from camdirector.v1 import director_pb2 as pb
 log = logging.getLogger("camdirector.sessions")
 
 LOST_IDS_KEPT = 10_000  # ids of sessions lost with their worker, remembered to say so (oldest forgotten first)
+RESEND_BURST_S = 20.0  # a session may send again this many seconds of frames (at tenant_max_fps) beyond its rate, s
 
 
 @dataclass
@@ -53,6 +54,7 @@ class SessionEntry:
     restoring: bool = False  # given to a worker that has to restore it from its checkpoint first
     tenant: str = "default"  # the tenant of the key that created it
     frame_tokens: float = 0.0  # frames it may still send at once (the tenant's rate limit, _admit_frame)
+    resend_tokens: float = 0.0  # frames it may send beyond those after a DATA_LOSS (_admit_frame)
     tokens_at_s: float = 0.0
 
 
@@ -191,7 +193,12 @@ class SessionRouter:
         if self.guard.enabled:
             self._admit_frame(entry, session_id)
         entry.last_seen_s = self.clock()
-        body, frame_metrics = await self._call(entry, "frame", session_id, payload)
+        try:
+            body, frame_metrics = await self._call(entry, "frame", session_id, payload)
+        except DirectorError as exc:
+            if exc.code.name == "DATA_LOSS":  # the updates since are on their way again, at once
+                entry.resend_tokens = self.settings.tenant_max_fps * RESEND_BURST_S
+            raise
         entry.frames += 1
         entry.transport.add(transport)
         self.metrics.frame_answered(
@@ -201,14 +208,20 @@ class SessionRouter:
 
     def _admit_frame(self, entry: SessionEntry, session_id: str) -> None:
         """The tenant's frame rate per session as a token bucket holding one second's frames:
-        RESOURCE_EXHAUSTED (the frame is not answered, the session goes on) when it is empty."""
+        RESOURCE_EXHAUSTED (the frame is not answered, the session goes on) when it is empty.
+        After its worker answered DATA_LOSS (restored from a checkpoint that fell behind), the
+        session may send RESEND_BURST_S of frames more at once: its client sends the updates since
+        again, seconds of them. Only the server's own DATA_LOSS grants them."""
         rate = self.settings.tenant_max_fps
         now = self.clock()
         entry.frame_tokens = min(rate, entry.frame_tokens + (now - entry.tokens_at_s) * rate) if entry.tokens_at_s else rate
         entry.tokens_at_s = now
-        if entry.frame_tokens < 1.0:
+        if entry.frame_tokens >= 1.0:
+            entry.frame_tokens -= 1.0
+        elif entry.resend_tokens >= 1.0:
+            entry.resend_tokens -= 1.0
+        else:
             raise exhausted(f"session {session_id} sends more than {rate:g} frames a second, its tenant's limit")
-        entry.frame_tokens -= 1.0
 
     async def _session_request(self, message_type, op: str, payload: bytes, tenant: str) -> bytes:
         """A serialized request of the session it names (a client's: it keeps the session alive)
