@@ -21,6 +21,7 @@ constexpr double kDefaultTimeoutS = 10.0;
 constexpr double kDestroyCloseTimeoutS = 1.0;
 constexpr uint32_t kMaxQueueCapacity = 1u << 16;
 constexpr uint32_t kMaxStates = 1u << 16;
+constexpr uint32_t kMaxResendHistoryFrames = 1u << 16;  // 18 min at 60 Hz
 
 const char* const kStatusNames[] = {
     "OK",          "CANCELLED",         "UNKNOWN",   "INVALID_ARGUMENT", "DEADLINE_EXCEEDED", "NOT_FOUND",
@@ -116,16 +117,26 @@ bool setup_of(const cd_config& in, Setup* out, std::string* error) {
   if (in.queue_capacity) c.queue_capacity = in.queue_capacity;
   if (in.max_states) c.max_states = in.max_states;
   if (in.max_in_flight) c.max_in_flight = in.max_in_flight;
-  if (in.stall_timeout_s > 0.0) c.stall_timeout_s = in.stall_timeout_s;
   if (in.reconnect_max_s > 0.0) c.reconnect_max_s = in.reconnect_max_s;
+  if (in.retry_window_s > 0.0) c.retry_window_s = in.retry_window_s;
+  if (in.initial_backoff_s > 0.0) c.initial_backoff_s = in.initial_backoff_s;
+  if (in.frame_timeout_s > 0.0) c.frame_timeout_s = in.frame_timeout_s;
+  if (in.stall_timeout_s > 0.0) c.frame_timeout_s = in.stall_timeout_s;  // its former name wins where set
+  if (in.resend_history_frames) c.resend_history_frames = in.resend_history_frames;
+  c.random = in.random;
+  c.random_user = in.random_user;
   if (in.max_message_bytes) c.max_message_bytes = in.max_message_bytes;
   c.io_poll_interval_ms = std::min<uint32_t>(in.io_poll_interval_ms, 1000);
   c.wait_for_server = in.wait_for_server;
   if (!camdirector::sdk::parse_address(in.address, &out->target, &out->tls, error)) return false;
   if (c.queue_capacity > kMaxQueueCapacity || c.max_states > kMaxStates ||
-      static_cast<uint64_t>(c.queue_capacity) * c.max_states > (1u << 22) || !std::isfinite(c.stall_timeout_s) ||
-      !std::isfinite(c.reconnect_max_s)) {
+      static_cast<uint64_t>(c.queue_capacity) * c.max_states > (1u << 22) || !std::isfinite(c.frame_timeout_s) ||
+      !std::isfinite(c.reconnect_max_s) || !std::isfinite(c.retry_window_s) || !std::isfinite(c.initial_backoff_s)) {
     *error = "queue_capacity or max_states over 65536 (or their product over 4194304), or a timeout not finite";
+    return false;
+  }
+  if (c.resend_history_frames > kMaxResendHistoryFrames) {
+    *error = "resend_history_frames over " + std::to_string(kMaxResendHistoryFrames);
     return false;
   }
   const bool given = in.key != nullptr && *in.key != '\0';
@@ -215,7 +226,8 @@ cd_status open_with(cd_client* client, pb::CreateSessionRequest request, double 
   client->recreated_unanswered = false;
   client->unavailable_while_ready = 0;
   client->recreate_presumed = false;
-  client->backoff_s = camdirector::sdk::kFirstBackoffS;
+  client->retrying = false;
+  client->forget_sent_locked();
   client->retry_at = Clock::now();
   client->phase = Phase::kStream;
   client->io_cv.notify_one();
@@ -253,7 +265,7 @@ void cd_client::reset_session_locked() {
   route_key.clear();
   ring_head = 0;
   ring_size = 0;
-  in_flight = 0;
+  forget_sent_locked();
   has_pose = false;
   cut_pending = false;
   any_submitted = false;
@@ -283,8 +295,14 @@ void cd_config_init(cd_config* config) {
   config->queue_capacity = 8;
   config->max_states = 64;
   config->max_in_flight = 2;
-  config->stall_timeout_s = 5.0;
-  config->reconnect_max_s = 1.0;
+  config->reconnect_max_s = 0.5;  // a balancer back is found within it (the Python SDK's max_backoff_s)
+  config->retry_window_s = 30.0;
+  config->initial_backoff_s = 0.1;
+  // The last resort against a hung node: a balancer's checks take one out within 1.4 s and
+  // keepalive pings find a hung server reached directly within 2 s; a frame that is only slow
+  // (a RIG_TRACKS session's first, a restore on a loaded machine) can take over 1 s.
+  config->frame_timeout_s = 3.0;
+  config->resend_history_frames = 600;  // 10 s at 60 Hz
   config->wait_for_server = 0;
   config->max_message_bytes = 64u << 20;
 }
@@ -338,9 +356,16 @@ cd_status cd_client_create(const cd_config* config, cd_client** out) {
     grpc::ChannelArguments args;
     args.SetMaxReceiveMessageSize(static_cast<int>(std::min<uint32_t>(c.max_message_bytes, INT32_MAX)));
     args.SetMaxSendMessageSize(static_cast<int>(std::min<uint32_t>(c.max_message_bytes, INT32_MAX)));
-    args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, std::max(100, static_cast<int>(c.reconnect_max_s * 1000.0)));
+    // The channel reconnects as often as the I/O thread tries again (gRPC's own first wait is 1 s,
+    // growing to 120 s), and pings the server every second while a stream is open, closing a
+    // connection that does not answer within a second (a hung server reached directly).
+    const int initial_ms = std::max(1, static_cast<int>(std::lround(c.initial_backoff_s * 1000.0)));
+    args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, initial_ms);
+    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, initial_ms);
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+                std::max(initial_ms, static_cast<int>(std::lround(std::min(c.reconnect_max_s, 3600.0) * 1000.0))));
+    args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 1000);
+    args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 1000);
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // this client's connection is its own
     args.SetInt(GRPC_ARG_ENABLE_RETRIES, 0);              // the SDK decides what to retry
     std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
@@ -356,6 +381,13 @@ cd_status cd_client_create(const cd_config* config, cd_client** out) {
     client->send_states.resize(c.max_states);
     client->carry_states.resize(c.max_states);
     client->send_session_id.reserve(64);
+    // Kept frames: at least those a stream may have in flight. Their messages grow on first use
+    // (on the I/O thread) and are reused after.
+    const size_t kept = std::max(c.resend_history_frames, c.max_in_flight);
+    client->history.resize(kept);
+    client->history_previous.resize(kept);
+    client->history_sent_at.resize(kept);
+    client->jitter.seed(std::random_device{}());
     cd_client* raw = client.get();
     client->io_thread = std::thread([raw] { raw->io_loop(); });
     *out = client.release();
@@ -483,7 +515,7 @@ cd_status cd_session_flush(cd_client* client, double timeout_s) {
   std::unique_lock<std::mutex> lock(client->mu);
   const bool done = client->caller_cv.wait_until(lock, deadline_of(timeout_s), [client] {
     const bool live = client->phase == Phase::kStream || client->phase == Phase::kRecreate;
-    return !live || (client->ring_size == 0 && client->in_flight == 0 && !client->write_busy);
+    return !live || (client->ring_size == 0 && client->unanswered() == 0 && !client->write_busy);
   });
   if (!done) {
     client->set_error_locked(CD_DEADLINE_EXCEEDED, "flush: frames still unanswered at the deadline");
@@ -640,7 +672,7 @@ void cd_client_stats(cd_client* client, cd_stats* out) {
   std::lock_guard<std::mutex> guard(client->mu);
   *out = client->stats;
   out->queued = client->ring_size;
-  out->in_flight = client->in_flight;
+  out->in_flight = client->in_flight();
   switch (client->phase) {
     case Phase::kIdle:
     case Phase::kClosing:

@@ -19,12 +19,14 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "camdirector/camdirector.h"
 #include "camdirector/v1/director.grpc.pb.h"
+#include "retry.h"
 
 namespace camdirector::sdk {
 
@@ -32,7 +34,6 @@ namespace pb = ::camdirector::v1;
 using Clock = std::chrono::steady_clock;
 
 constexpr size_t kEventCapacity = 64;
-constexpr double kFirstBackoffS = 0.05;
 constexpr double kRecreateTimeoutS = 10.0;
 constexpr double kConnectWaitS = 0.25;  // longest the I/O thread waits for a connection at once
 constexpr int kPackedWidth = 10;  // px py pz qx qy qz qw sx sy sz (FrameUpdate.packed_transforms)
@@ -139,10 +140,12 @@ struct cd_client {
   bool stream_done = false;           // OnDone ran; `stream` is gone
   grpc::Status done_status;
   bool stream_answered = false;       // the current stream has answered a frame
-  uint32_t in_flight = 0;
-  Clock::time_point progress_at{};    // last answer, or the write that started the wait
   Clock::time_point retry_at{};
-  double backoff_s = camdirector::sdk::kFirstBackoffS;
+  bool retrying = false;              // a failure since the last answer: the retry window runs
+  Clock::time_point retry_started{};  // the first failure of that run
+  int retry_tries = 0;                // waits drawn in that run (retry.h, backoff_delay_s)
+  std::minstd_rand jitter;            // the jitter's numbers when config.random is NULL
+  uint64_t hung_frame = 0;            // the frame whose frame_timeout_s cancelled the stream (0: none)
   bool outage = false;                // a stream broke and none has answered since
   bool ever_streamed = false;
   bool recreated_unanswered = false;  // recreated, and its stream has answered nothing yet
@@ -150,6 +153,23 @@ struct cd_client {
   Clock::time_point unavailable_since{};  // the first of those refusals in a row
   bool recreate_presumed = false;     // kRecreate from those refusals, not from NOT_FOUND
   grpc::ClientContext* io_call = nullptr;  // the I/O thread's CreateSession, to cancel it
+
+  // Frames sent, by sequence number (1 for the session's first): the last `history.size()` are
+  // kept at seq % history.size(), to be sent again on a new stream (those left unanswered) or
+  // from a DATA_LOSS's "resend from K". Answers come in order, one per frame written, so the
+  // answer read is always for `unanswered_seq`. The messages are the I/O thread's alone.
+  std::vector<camdirector::v1::FrameUpdate> history;
+  std::vector<uint64_t> history_previous;           // the frame sent before each (0: none)
+  std::vector<Clock::time_point> history_sent_at;   // when each was last written (frame_timeout_s)
+  uint64_t next_seq = 1;        // the next new frame's
+  uint64_t send_seq = 1;        // the next to write on this stream (below next_seq: sent again)
+  uint64_t unanswered_seq = 1;  // the oldest sent and not answered
+  uint64_t kept_from_seq = 1;   // the session's first (a recreated session keeps none before it)
+  uint64_t newest_answered_seq = 0;  // the newest frame whose answer was received
+  uint64_t answered_frame = 0;       // its frame: FrameUpdate.answered_frame
+  uint64_t last_sent_frame = 0;      // the frame of seq next_seq - 1 (0: none)
+  uint32_t in_flight() const { return static_cast<uint32_t>(send_seq - unanswered_seq); }
+  uint64_t unanswered() const { return next_seq - unanswered_seq; }  // sent or to send again
 
   // Results.
   bool has_pose = false;
@@ -178,7 +198,12 @@ struct cd_client {
   void recreate(std::unique_lock<std::mutex>& lock);
   void write_next(std::unique_lock<std::mutex>& lock);
   void build_frame(camdirector::v1::FrameUpdate* msg);
-  void retry_later_locked();
+  // The next try after a failure, within the retry window (SESSION_FAILED once it is spent);
+  // at_once: no wait (a DATA_LOSS resend), the window still counted.
+  void retry_later_locked(bool at_once = false);
+  void fail_session_locked(int code, const std::string& message);
+  void forget_sent_locked();
+  bool resend_from_locked(uint64_t frame);
   // Called by FrameStream on gRPC's threads.
   void on_answer(const camdirector::v1::CameraUpdate& update);
   void on_read_closed();

@@ -3,7 +3,10 @@
 // dropped connection, a lost worker or a server restart (same session id: a server with
 // checkpoints restores it) and creates the session again when the server no longer has it
 // (NOT_FOUND, or a run of UNAVAILABLE: handle_stream_done_locked), and gives the session up when
-// the server refuses the client's key. Every call carries the session's route key and the
+// the server refuses the client's key, a DATA_LOSS asks for frames no longer kept, or nothing
+// answered for the retry window (retry_later_locked). A new stream first sends again the frames
+// the last one left unanswered; a DATA_LOSS "resend from K" sends the kept ones from K again
+// (client_impl.h, history). Every call carries the session's route key and the
 // client's key (add_call_metadata).
 //
 // Ownership of a stream: the I/O thread creates a FrameStream, keeps a hold on it (so gRPC cannot
@@ -168,17 +171,21 @@ void cd_client::io_loop() {
         }
         wake = std::min(wake, retry_at);
       } else if (!stream_read_closed && !stream_cancelled) {
-        if (!write_busy && ring_size > 0 && in_flight < config.max_in_flight) {
+        if (!write_busy && (send_seq < next_seq || ring_size > 0) && in_flight() < config.max_in_flight) {
           write_next(lock);
           continue;
         }
-        if (in_flight > 0) {
-          const Clock::time_point stall_at = progress_at + camdirector::sdk::seconds(config.stall_timeout_s);
-          if (now >= stall_at) {  // the server or the network stopped answering: start over
+        if (in_flight() > 0) {
+          // The oldest frame in flight past its deadline: a hung node (or network). Start over,
+          // through a balancer on a live node; the frame is sent again on the new stream.
+          const size_t oldest = unanswered_seq % history.size();
+          const Clock::time_point due = history_sent_at[oldest] + camdirector::sdk::seconds(config.frame_timeout_s);
+          if (now >= due) {
+            hung_frame = history[oldest].frame();
             cancel_stream(lock);
             continue;
           }
-          wake = std::min(wake, stall_at);
+          wake = std::min(wake, due);
         }
       }
     } else if (phase == Phase::kRecreate) {
@@ -201,13 +208,62 @@ void cd_client::open_stream_locked() {
   stream_cancelled = false;
   write_busy = false;
   stream_answered = false;
-  in_flight = 0;
+  hung_frame = 0;
+  send_seq = unanswered_seq;  // the frames the last stream left unanswered go first
   stats.streams_opened += 1;
 }
 
-void cd_client::retry_later_locked() {
-  retry_at = Clock::now() + camdirector::sdk::seconds(backoff_s);
-  backoff_s = std::min(backoff_s * 2.0, config.reconnect_max_s);
+void cd_client::retry_later_locked(bool at_once) {
+  const Clock::time_point now = Clock::now();
+  if (!retrying) {  // the first failure since an answer: the window starts
+    retrying = true;
+    retry_started = now;
+    retry_tries = 0;
+  }
+  const double random01 = config.random != nullptr ? config.random(config.random_user)
+                                                   : std::generate_canonical<double, 32>(jitter);
+  const double elapsed_s = std::chrono::duration<double>(now - retry_started).count();
+  const double delay_s = camdirector::sdk::backoff_delay_s(config.initial_backoff_s, config.reconnect_max_s,
+                                                           config.retry_window_s, elapsed_s, retry_tries++, random01);
+  if (delay_s < 0.0) {
+    char window[32];
+    std::snprintf(window, sizeof window, "%g", config.retry_window_s);
+    fail_session_locked(CD_UNAVAILABLE, std::string("no answer for ") + window +
+                                            " s (retry_window_s) since the first failure; last: " +
+                                            cd_status_name(stats.last_stream_status) + " " +
+                                            done_status.error_message());
+    return;
+  }
+  retry_at = at_once ? now : now + camdirector::sdk::seconds(delay_s);
+}
+
+void cd_client::fail_session_locked(int code, const std::string& message) {
+  phase = Phase::kFailed;
+  ring_size = 0;
+  push_event_locked(CD_EVENT_SESSION_FAILED, code, message);
+  caller_cv.notify_all();
+}
+
+// A new session (opened or recreated) was sent nothing yet: nothing to send again, no answer.
+void cd_client::forget_sent_locked() {
+  stats.frames_lost += unanswered();
+  kept_from_seq = unanswered_seq = send_seq = next_seq;
+  newest_answered_seq = next_seq - 1;
+  answered_frame = 0;
+  last_sent_frame = 0;
+}
+
+// After a DATA_LOSS "resend from `frame`": the next stream sends the kept frames from it again.
+// False when a frame from `frame` on is no longer kept.
+bool cd_client::resend_from_locked(uint64_t frame) {
+  const uint64_t size = history.size();
+  const uint64_t oldest = std::max(kept_from_seq, next_seq > size ? next_seq - size : 1);
+  // A frame before the oldest kept was sent (and is gone) when the oldest is not the session's first.
+  if (oldest > kept_from_seq && frame <= history_previous[oldest % size]) return false;
+  uint64_t from = oldest;
+  while (from < unanswered_seq && history[from % size].frame() < frame) ++from;
+  unanswered_seq = send_seq = from;
+  return true;
 }
 
 void cd_client::cancel_stream(std::unique_lock<std::mutex>& lock) {
@@ -221,10 +277,16 @@ void cd_client::cancel_stream(std::unique_lock<std::mutex>& lock) {
 
 void cd_client::handle_stream_done_locked() {
   stream_done = false;
-  const grpc::StatusCode code = done_status.error_code();
-  const std::string message = done_status.error_message();
-  stats.frames_lost += in_flight;
-  in_flight = 0;
+  grpc::StatusCode code = done_status.error_code();
+  std::string message = done_status.error_message();
+  if (hung_frame != 0 && code == grpc::StatusCode::CANCELLED) {  // our own cancel, on frame_timeout_s
+    char timeout[32];
+    std::snprintf(timeout, sizeof timeout, "%g", config.frame_timeout_s);
+    code = grpc::StatusCode::UNAVAILABLE;
+    message = "frame " + std::to_string(hung_frame) + " was not answered within " + timeout +
+              " s (frame_timeout_s): the node may be hung";
+    done_status = grpc::Status(code, message);
+  }
   write_busy = false;
   stats.last_stream_status = static_cast<int>(code);
   caller_cv.notify_all();
@@ -259,14 +321,35 @@ void cd_client::handle_stream_done_locked() {
     outage = true;
     return;
   }
+  if (code == grpc::StatusCode::DATA_LOSS) {
+    // The session was restored from a checkpoint that fell behind what this client was answered
+    // (docs/protocol.md, Checkpoints): send the frames from K again, at once.
+    uint64_t from = 0;
+    if (!camdirector::sdk::parse_resend_from(message, &from)) {
+      fail_session_locked(CD_DATA_LOSS, message);
+      return;
+    }
+    if (!resend_from_locked(from)) {
+      fail_session_locked(CD_DATA_LOSS, message + " (this client kept the last " + std::to_string(history.size()) +
+                                            " frames it sent, resend_history_frames: frame " +
+                                            std::to_string(from) + " is no longer among them)");
+      return;
+    }
+  }
   if (frame_refused(code) || code == grpc::StatusCode::NOT_FOUND) {
-    // A bad frame ended the stream (NOT_FOUND after answers: an unknown object id); the session
+    // A bad frame ended the stream (NOT_FOUND after answers: an unknown object id): the oldest
+    // unanswered one, since the server takes frames in order. It is not sent again; the session
     // stays: go on with the next frames.
+    if (unanswered_seq < send_seq) {
+      unanswered_seq += 1;
+      stats.frames_lost += 1;
+    }
     push_event_locked(CD_EVENT_FRAME_REFUSED, static_cast<int>(code), message);
     retry_at = Clock::now();
     return;
   }
-  if (code == grpc::StatusCode::UNAVAILABLE && !answered && channel->GetState(false) == GRPC_CHANNEL_READY) {
+  if (code == grpc::StatusCode::UNAVAILABLE && hung_frame == 0 && !answered &&
+      channel->GetState(false) == GRPC_CHANNEL_READY) {
     // UNAVAILABLE over a working connection, before any answer. A server with checkpoints answers
     // it once while it restores the session (its worker died; the next stream is held until the
     // restore is done), a balancer while it has no healthy node, a server without checkpoints on
@@ -292,8 +375,7 @@ void cd_client::handle_stream_done_locked() {
     push_event_locked(CD_EVENT_DISCONNECTED, static_cast<int>(code), message);
   }
   outage = outage || ever_streamed || code != grpc::StatusCode::OK;
-  if (answered) backoff_s = camdirector::sdk::kFirstBackoffS;
-  retry_later_locked();
+  retry_later_locked(code == grpc::StatusCode::DATA_LOSS);  // a resend at once: the server waits for it
 }
 
 void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
@@ -333,6 +415,7 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
     retry_at = Clock::now();
     recreated_unanswered = true;
     send_all_known = true;
+    forget_sent_locked();  // the frames sent to the lost session are not the new one's
     push_event_locked(CD_EVENT_RECREATED, CD_OK,
                       "the server no longer knew session " + old_id + "; created it again as " + session_id);
     return;
@@ -348,28 +431,40 @@ void cd_client::recreate(std::unique_lock<std::mutex>& lock) {
     retry_later_locked();
     return;
   }
-  phase = Phase::kFailed;
-  ring_size = 0;
-  push_event_locked(CD_EVENT_SESSION_FAILED, static_cast<int>(status.error_code()),
-                    "creating the session again was refused: " + status.error_message());
-  caller_cv.notify_all();
+  fail_session_locked(static_cast<int>(status.error_code()),
+                      "creating the session again was refused: " + status.error_message());
 }
 
+// Writes the next frame: one the last stream left unanswered (or a DATA_LOSS asked for) from the
+// kept frames, else the queue's oldest, built into the kept frames first.
 void cd_client::write_next(std::unique_lock<std::mutex>& lock) {
-  const camdirector::sdk::QueuedFrame& head = ring[ring_head];
-  send_frame = head;
-  std::copy_n(ring_states.begin() + static_cast<size_t>(ring_head) * config.max_states, head.count,
-              send_states.begin());
-  ring_head = (ring_head + 1) % config.queue_capacity;
-  ring_size -= 1;
+  const size_t index = send_seq % history.size();
+  const bool again = send_seq < next_seq;
+  if (!again) {
+    const camdirector::sdk::QueuedFrame& head = ring[ring_head];
+    send_frame = head;
+    std::copy_n(ring_states.begin() + static_cast<size_t>(ring_head) * config.max_states, head.count,
+                send_states.begin());
+    ring_head = (ring_head + 1) % config.queue_capacity;
+    ring_size -= 1;
+    history_previous[index] = last_sent_frame;
+    last_sent_frame = send_frame.frame;
+    next_seq += 1;
+    send_session_id = session_id;
+  }
+  // The newest answer, but never past the frame sent before this one: sent again after a
+  // DATA_LOSS, a frame says where the session stood when it was first sent.
+  const uint64_t answered = std::min(answered_frame, history_previous[index]);
+  send_seq += 1;
   write_busy = true;
-  in_flight += 1;
-  if (in_flight == 1) progress_at = Clock::now();
+  history_sent_at[index] = Clock::now();
   stats.frames_sent += 1;
-  send_session_id = session_id;
   FrameStream* s = stream;
   lock.unlock();
-  build_frame(&s->out);
+  pb::FrameUpdate& kept = history[index];
+  if (!again) build_frame(&kept);
+  s->out.CopyFrom(kept);  // reuses out's storage
+  s->out.set_answered_frame(answered);
   s->StartWrite(&s->out);
   lock.lock();
 }
@@ -427,11 +522,16 @@ void cd_client::on_answer(const pb::CameraUpdate& update) {
 
   std::lock_guard<std::mutex> guard(mu);
   stats.frames_answered += 1;
-  if (in_flight > 0) in_flight -= 1;
-  progress_at = Clock::now();
+  const uint64_t seq = unanswered_seq;  // answers come in order, one per frame written
+  if (unanswered_seq < send_seq) unanswered_seq += 1;
+  const bool fresh = seq > newest_answered_seq;  // not sent again after a DATA_LOSS: the game has not had it
+  if (fresh) {
+    newest_answered_seq = seq;
+    answered_frame = update.frame();
+  }
   if (update.stale()) {
     stats.frames_stale += 1;
-  } else if (!update.buffering() && update.has_pose()) {
+  } else if (fresh && !update.buffering() && update.has_pose()) {
     pose.generation = generation;
     latest = pose;
     has_pose = true;
@@ -449,7 +549,7 @@ void cd_client::on_answer(const pb::CameraUpdate& update) {
     ever_streamed = true;
     recreated_unanswered = false;
     unavailable_while_ready = 0;
-    backoff_s = camdirector::sdk::kFirstBackoffS;
+    retrying = false;  // an answer: a later failure starts a new retry window
   }
   io_cv.notify_one();
   caller_cv.notify_all();

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "camdirector/camdirector.h"
+#include "retry.h"
 
 namespace {
 
@@ -123,9 +124,55 @@ void game_thread_without_a_session() {
   cd_client_destroy(client);
 }
 
+// Issue 40: waits from 0.1 s doubling to the 0.5 s cap, each half fixed and half jitter, never past
+// the retry window, which once spent says give up (the Python SDK's test_retry.py, same numbers).
+void backoff_within_a_window() {
+  using camdirector::sdk::backoff_delay_s;
+  const double low[] = {0.05, 0.1, 0.2, 0.25, 0.25};
+  const double high[] = {0.1, 0.2, 0.4, 0.5, 0.5};
+  for (int tries = 0; tries < 5; ++tries) {
+    check(near(backoff_delay_s(0.1, 0.5, 30.0, 1.0, tries, 0.0), low[tries]), "backoff, no jitter drawn: half the cap");
+    check(near(backoff_delay_s(0.1, 0.5, 30.0, 1.0, tries, 1.0), high[tries]), "backoff, all jitter drawn: the cap");
+  }
+  check(near(backoff_delay_s(0.1, 0.5, 30.0, 1.0, 1, 0.5), 0.15), "equal jitter: 0.1 + 0.5 * 0.1");
+  check(near(backoff_delay_s(0.1, 0.5, 30.0, 29.95, 4, 1.0), 0.05, 1e-9), "a wait ends with the window");
+  check(backoff_delay_s(0.1, 0.5, 30.0, 30.0, 4, 1.0) < 0.0, "a spent window: give up");
+  check(backoff_delay_s(0.1, 0.5, 30.0, 1.0, 1000, 1.0) == 0.5, "many tries stay at the cap");
+  check(near(backoff_delay_s(0.1, 0.5, 30.0, 1.0, 0, std::nan("")), 0.075), "a NaN from the random source: no jitter");
+}
+
+void resend_from_of_a_data_loss() {
+  uint64_t frame = 0;
+  check(camdirector::sdk::parse_resend_from("session s: state lost after frame 20: resend from 21 (its node was lost)",
+                                            &frame) && frame == 21,
+        "the server's DATA_LOSS message gives K");
+  check(!camdirector::sdk::parse_resend_from("checksum mismatch", &frame), "a DATA_LOSS without a resend");
+  check(!camdirector::sdk::parse_resend_from("resend from here", &frame), "no number: no resend");
+}
+
+void retry_defaults_and_refusals() {
+  cd_config config;
+  cd_config_init(&config);
+  check(config.retry_window_s == 30.0 && config.initial_backoff_s == 0.1 && config.reconnect_max_s == 0.5 &&
+            config.frame_timeout_s == 3.0 && config.resend_history_frames == 600 && config.random == nullptr,
+        "retry defaults: 30 s window, 0.1 s first wait, 0.5 s cap, 3 s frame deadline, 600 frames kept");
+  config.address = "127.0.0.1:50051";
+  char reason[256];
+  config.retry_window_s = std::numeric_limits<double>::infinity();
+  check(cd_check_config(&config, reason, sizeof reason) == CD_INVALID_ARGUMENT, "an infinite retry window is refused");
+  config.retry_window_s = 30.0;
+  config.resend_history_frames = 1u << 20;
+  check(cd_check_config(&config, reason, sizeof reason) == CD_INVALID_ARGUMENT &&
+            std::strstr(reason, "resend_history_frames") != nullptr,
+        "too many frames to keep is refused, named");
+}
+
 }  // namespace
 
 int main() {
+  backoff_within_a_window();
+  resend_from_of_a_data_loss();
+  retry_defaults_and_refusals();
   known_values();
   round_trips();
   addresses();

@@ -14,6 +14,9 @@
 //   sdk_check protocol HOST:PORT         a recorded session (the test reads the protocol it said
 //       from the server's recording), then a request claiming cd_protocol() + 1 (refused), then
 //       another session on the same client
+//   sdk_check retry ADDRESS N WINDOW_S   frames 1..N, each flushed before the next, with a retry
+//       window of WINDOW_S, for a test server that breaks streams or answers DATA_LOSS on demand:
+//       the pose's frame after each flush, the events, the stats; stops early once the session failed
 //   sdk_check stream ADDRESS --until resumed|recreated|failed [--after N] [--timeout S] [--ca-file PEM]
 //       a 60 Hz loop; prints {"ready": ...} once streaming, then keeps going until the event came
 //       and N more frames (default 60) were answered on the session after it, or S seconds
@@ -518,6 +521,39 @@ int scenario_protocol(const char* address) {
   return close_and_print(client, out);
 }
 
+int scenario_retry(const char* address, uint64_t n, double retry_window_s) {
+  cd_config config;
+  cd_config_init(&config);
+  config.address = address;
+  config.retry_window_s = retry_window_s;
+  cd_client* client = nullptr;
+  Scene scene;
+  if (cd_client_create(&config, &client) != CD_OK || !open_or_say(client, scene)) return 1;
+  const std::string first_id = session_of(client);
+  cd_state states[3];
+  std::string out = "{\"pose_frames\": [";
+  for (uint64_t f = 1; f <= n; ++f) {
+    states_at(f, states);
+    cd_frame_submit(client, f, static_cast<double>(f) / 60.0, states, 3);
+    cd_session_flush(client, 5.0);  // returns early once the session failed
+    cd_pose pose{};
+    cd_pose_poll(client, &pose);
+    out += std::string(f > 1 ? ", " : "") + u64(pose.frame);
+    cd_stats stats;
+    cd_client_stats(client, &stats);
+    if (stats.state == CD_STATE_FAILED) break;
+  }
+  out += "], \"events\": [";
+  cd_event event;
+  for (int i = 0; cd_event_poll(client, &event) == CD_OK; ++i) {
+    out += std::string(i ? ", " : "") + "{\"kind\": " + q(event_name(event.kind)) + ", \"status\": " +
+           q(cd_status_name(event.status)) + ", \"message\": " + q(event.message) + "}";
+  }
+  out += "], \"first_session_id\": " + q(first_id) + ", \"last_session_id\": " + q(session_of(client));
+  out += ", \"stats\": " + stats_json(client);
+  return close_and_print(client, out);
+}
+
 int scenario_stream(const char* address, const std::string& until, uint64_t after, double timeout_s,
                     const char* ca_file) {
   Scene scene;
@@ -606,6 +642,7 @@ int main(int argc, char** argv) {
   if (scenario == "pose_output" && argc > 3) return scenario_pose_output(address, argv[3]);
   if (scenario == "calls") return scenario_calls(address);
   if (scenario == "protocol") return scenario_protocol(address);
+  if (scenario == "retry" && argc > 4) return scenario_retry(address, std::strtoull(argv[3], nullptr, 10), std::atof(argv[4]));
   if (scenario == "flood") return scenario_flood(address, argc > 3 ? std::strtoull(argv[3], nullptr, 10) : 3000);
   if (scenario == "stream") {
     std::string until = "resumed";

@@ -33,6 +33,19 @@
  * held TakeShot and the recording are not carried over. Frames submitted meanwhile wait in the
  * bounded queue, which drops the oldest.
  *
+ * Retries (issue 40). Every wait before trying again (a stream reopened, a session recreated) is
+ * drawn with equal jitter from a cap that starts at cd_config.initial_backoff_s (0.1 s) and doubles
+ * up to reconnect_max_s (0.5 s). A session that has had no answer for retry_window_s (30 s) since
+ * its first failure ends: CD_EVENT_SESSION_FAILED with CD_UNAVAILABLE. A frame left unanswered for
+ * frame_timeout_s (3 s) counts as a hung node: the stream is reopened (a balancer sends it to a
+ * live node). A new stream on the same session first sends again the frames the broken one left
+ * unanswered (the server answers a frame it already took with its first answer, marked stale), so
+ * no object transform is lost with them. Every frame says the newest frame answered
+ * (FrameUpdate.answered_frame); a session restored from a checkpoint that fell behind answers
+ * DATA_LOSS "resend from K", and the I/O thread sends its kept frames from K again (their answers
+ * do not replace the newer pose); a K older than the resend_history_frames kept ends the session:
+ * CD_EVENT_SESSION_FAILED with CD_DATA_LOSS.
+ *
  * Routing. Every gRPC call of a session carries the metadata header x-camdirector-route: a random
  * key (32 lowercase hex characters, 128 bits from std::random_device) that cd_session_open picks
  * and that CreateSession, every frame stream, UpdateStyle, TakeShot, CloseSession (cd_session_close
@@ -116,8 +129,8 @@ typedef struct cd_config {
   uint32_t queue_capacity;  /* frames waiting to be sent; when full the oldest is dropped. 8 */
   uint32_t max_states;      /* object states per frame. 64 */
   uint32_t max_in_flight;   /* frames sent and not yet answered; more wait in the queue. 2 */
-  double stall_timeout_s;   /* no answer this long while frames are in flight: reconnect. 5 */
-  double reconnect_max_s;   /* longest wait between reconnection attempts (from 0.05 s up). 1 */
+  double stall_timeout_s;   /* the former name of frame_timeout_s: when > 0 it is used instead. 0 */
+  double reconnect_max_s;   /* longest wait between tries (reconnect, recreate), s. 0.5 */
   int wait_for_server;      /* 1: cd_session_open waits for an unreachable server until its
                                deadline (DEADLINE_EXCEEDED); 0: fails at once (UNAVAILABLE). 0 */
   uint32_t max_message_bytes; /* gRPC message size limit both ways. 64 MiB */
@@ -128,6 +141,19 @@ typedef struct cd_config {
                                the CAMDIRECTOR_KEY environment variable, else no key */
   const char* ca_file;      /* grpcs:// only: a PEM file of the certificate authorities to trust
                                for the server's certificate; NULL or "": the system's roots */
+  /* Appended in 0.2 (issue 40; Retries below). Zero takes the default, as above. */
+  double retry_window_s;    /* a broken session is tried again (streams reopened, the session
+                               recreated) until this long after the first failure since its last
+                               answer; then CD_EVENT_SESSION_FAILED (UNAVAILABLE). 30 */
+  double initial_backoff_s; /* the first wait before trying again; each next one doubles up to
+                               reconnect_max_s, with equal jitter (half fixed, half random). 0.1 */
+  double frame_timeout_s;   /* a frame in flight unanswered this long: the node is taken as hung,
+                               the stream reopened and its unanswered frames sent again. 3 */
+  uint32_t resend_history_frames; /* frames sent kept to send again: the unanswered ones on a new
+                                     stream, and those a DATA_LOSS "resend from K" asks for. 600 */
+  double (*random)(void* user); /* the jitter's random numbers in [0, 1) (e.g. seeded, for a
+                                   replay); NULL: the SDK's own generator */
+  void* random_user;        /* passed to random */
 } cd_config;
 
 void cd_config_init(cd_config* config);
@@ -296,7 +322,8 @@ cd_status cd_session_take_shot(cd_client* client, const char* const* subject_ids
                                int kind, int release, cd_shot* out, double timeout_s);
 
 /* BLOCKING: waits until every frame submitted so far has been answered or given up (dropped from
- * the queue, lost on a broken stream). CD_DEADLINE_EXCEEDED if that takes over timeout_s. */
+ * the queue, refused, or the session recreated or failed); a frame a broken stream left unanswered
+ * is sent again and waited for. CD_DEADLINE_EXCEEDED if that takes over timeout_s. */
 cd_status cd_session_flush(cd_client* client, double timeout_s);
 
 /* BLOCKING: ends the stream (frames not yet answered are given up) and closes the session;
@@ -386,10 +413,11 @@ typedef struct cd_stats {
   uint64_t frames_submitted;   /* accepted by cd_frame_submit */
   uint64_t frames_refused;     /* refused by cd_frame_submit (NaN, order, slot, size) */
   uint64_t frames_dropped;     /* pushed out of the full queue by newer ones */
-  uint64_t frames_sent;
+  uint64_t frames_sent;        /* frames written on a stream, those sent again included */
   uint64_t frames_answered;    /* answers received, stale ones included */
   uint64_t frames_stale;
-  uint64_t frames_lost;        /* sent but unanswered when a stream broke */
+  uint64_t frames_lost;        /* sent but unanswered when a stream broke, and not sent again
+                                  (refused by the server, or the session was recreated) */
   uint64_t streams_opened;
   uint64_t disconnects;
   uint64_t resumes;
