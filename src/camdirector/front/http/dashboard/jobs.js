@@ -38,6 +38,9 @@ function showJob(jobId) {
 export async function submitOverview(event) {
   event.preventDefault();
   const result = document.getElementById("overview-result");
+  // Cleared first so the last answer is never read as this one's.
+  result.className = "";
+  result.textContent = "submitting…";
   try {
     const job = await api("/v1/overview-jobs", { method: "POST", body: new FormData(event.target) });
     result.className = "ok";
