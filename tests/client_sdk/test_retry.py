@@ -238,11 +238,13 @@ def _stopped(server, stop_s: float) -> None:
         os.kill(pid, signal.SIGCONT)
 
 
+@pytest.mark.parametrize("transport", ["grpc", "zmq"])
 @pytest.mark.parametrize("flavour", ["sync", "async"])
-def test_a_stream_of_a_hung_server_is_reopened_and_answers_every_frame_once(server_factory, flavour):
+def test_a_stream_of_a_hung_server_is_reopened_and_answers_every_frame_once(server_factory, flavour, transport):
     """A server stopped for 3 s mid-stream: the frame in flight goes unanswered for
-    frame_timeout_s, the stream is cancelled and opened again (and again, while the server stays
-    stopped), and after SIGCONT every update is answered once, in order, none lost."""
+    frame_timeout_s, the stream is cancelled and opened again (over ZeroMQ: the frame is sent
+    again on a new socket), again while the server stays stopped, and after SIGCONT every update
+    is answered once, in order, none lost."""
     server = server_factory("--workers", "1")
     quick = cd.RetryPolicy(frame_timeout_s=1.0)  # shorter than the stop (the default, 3 s, is not)
     frames, stop_at = 120, 40
@@ -267,14 +269,14 @@ def test_a_stream_of_a_hung_server_is_reopened_and_answers_every_frame_once(serv
     try:
         stopper = threading.Timer(0.0, _stopped, (server, 3.0))
         if flavour == "sync":
-            with cd.connect(server.url("grpc"), retry=quick) as client:
+            with cd.connect(server.url(transport), retry=quick) as client:
                 session = client.create_session(create)
                 answers = [a.frame for a in session.stream(paced(session.id))]
                 closed = session.close()
         else:
 
             async def main():
-                async with cd.connect_async(server.url("grpc"), retry=quick) as client:
+                async with cd.connect_async(server.url(transport), retry=quick) as client:
                     session = await client.create_session(create)
                     answers = [a.frame async for a in session.stream(paced(session.id))]
                     return session, answers, await session.close()

@@ -1,7 +1,8 @@
 """The record store (jobs/records.py), every test on SQLite and on PostgreSQL: records,
 files renamed into place, a full queue, recovery, retention, the compare-and-set of attempts
-that lets a job succeed once when a redelivered message runs it twice, tenants and their shares,
-and a table from before tenants gaining them."""
+that lets a job succeed once when a redelivered message runs it twice, the claims' tokens and
+leases (a duplicate waits while the holder lives; a lost reply and a hand-back count no attempt),
+tenants and their shares, and a table from before tenants gaining them."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import time
 import pytest
 
 from camdirector.jobs import (
+    JobHeldElsewhere,
     JobNotFound,
     JobState,
     JobsUnavailable,
@@ -24,6 +26,11 @@ from camdirector.jobs import (
 
 def job_dirs(store) -> set[str]:
     return {p.name for p in store.root.iterdir() if p.is_dir()}
+
+
+def claim_as_dead(store, job_id: str, max_attempts: int, token: str = "w/1"):
+    """A queue worker's claim that finds any holder dead (a lease timeout of 0 s)."""
+    return store.claim(job_id, max_attempts, token=token, lease_timeout_s=0.0)
 
 
 def test_submit_claim_finish_and_files(store):
@@ -141,8 +148,8 @@ def test_a_redelivered_job_succeeds_once_with_the_latest_attempt(store):
     """Worker 1 claims the job and is taken for dead; its message runs again on worker 2. Only
     worker 2's outcome is recorded, and only its result is renamed into place."""
     job = store.submit("echo", {}, {})
-    first = store.claim(job.id, max_attempts=3)
-    second = store.claim(job.id, max_attempts=3)  # the same message, delivered again
+    first = claim_as_dead(store, job.id, 3, "w1/a")
+    second = claim_as_dead(store, job.id, 3, "w2/b")  # the same message, delivered again
     assert (first.attempts, second.attempts) == (1, 2) and second.state is JobState.RUNNING
     published = []
     assert not store.finish(
@@ -154,20 +161,20 @@ def test_a_redelivered_job_succeeds_once_with_the_latest_attempt(store):
         job.id, JobState.SUCCEEDED, attempt=second.attempts, only_if=JobState.RUNNING, publish=lambda: published.append(2)
     )
     assert published == [2] and store.get(job.id).state is JobState.SUCCEEDED
-    assert store.claim(job.id, max_attempts=3) is None  # a late duplicate runs nothing
+    assert claim_as_dead(store, job.id, 3, "w3/c") is None  # a late duplicate runs nothing
     assert not store.finish(job.id, JobState.FAILED, attempt=second.attempts, only_if=JobState.RUNNING)
 
 
 def test_claim_fails_a_job_interrupted_too_often_and_skips_cancelled_ones(store):
     job = store.submit("echo", {}, {})
-    store.claim(job.id, max_attempts=1)
-    assert store.claim(job.id, max_attempts=1) is None  # its worker died once: limit 1
+    claim_as_dead(store, job.id, 1, "w1/a")
+    assert claim_as_dead(store, job.id, 1, "w2/b") is None  # its worker died once: limit 1
     failed = store.get(job.id)
     assert failed.state is JobState.FAILED and "interrupted" in failed.error
     other = store.submit("echo", {}, {})
     store.cancel(other.id)
-    assert store.claim(other.id, max_attempts=2) is None and store.get(other.id).attempts == 0
-    assert store.claim("0" * 32, max_attempts=2) is None  # purged meanwhile
+    assert claim_as_dead(store, other.id, 2) is None and store.get(other.id).attempts == 0
+    assert claim_as_dead(store, "0" * 32, 2) is None  # purged meanwhile
 
 
 def test_a_failed_publish_changes_nothing(store):
@@ -184,13 +191,51 @@ def test_a_failed_publish_changes_nothing(store):
 
 def test_requeue_is_compare_and_set_on_the_attempt(store):
     job = store.submit("echo", {}, {})
-    store.claim(job.id, max_attempts=3)
-    store.claim(job.id, max_attempts=3)  # taken over: attempt 2
+    claim_as_dead(store, job.id, 3, "w1/a")
+    claim_as_dead(store, job.id, 3, "w2/b")  # taken over: attempt 2
     store.requeue(job.id, uncount_attempt=True, attempt=1)  # the old attempt's stop: no effect
     assert store.get(job.id).state is JobState.RUNNING
     store.requeue(job.id, uncount_attempt=True, attempt=2)
     again = store.get(job.id)
-    assert again.state is JobState.QUEUED and again.attempts == 1
+    assert again.state is JobState.QUEUED and again.attempts == 1 and again.claimed_by is None
+
+
+def test_a_duplicate_waits_while_the_holder_renews_its_lease(store):
+    """Worker 1 runs the job and renews its lease; a duplicate of the message (worker 1 taken
+    for dead by the queue while Redis was away) is refused without an attempt; once worker 1's
+    lease is older than the timeout (it died), the duplicate takes the job over, counted."""
+    job = store.submit("echo", {}, {})
+    first = store.claim(job.id, 3, token="w1/a", lease_timeout_s=30.0)
+    assert first.attempts == 1 and first.claimed_by == "w1/a"
+    assert store.renew(job.id, "w1/a")
+    with pytest.raises(JobHeldElsewhere, match="runs on another worker"):
+        store.claim(job.id, 3, token="w2/b", lease_timeout_s=30.0)
+    assert store.get(job.id).attempts == 1 and store.get(job.id).claimed_by == "w1/a"
+    time.sleep(0.05)
+    second = store.claim(job.id, 3, token="w2/b", lease_timeout_s=0.01)  # the lease ran out
+    assert second.attempts == 2 and second.claimed_by == "w2/b"
+    assert not store.renew(job.id, "w1/a"), "a superseded holder renewed the lease"
+
+
+def test_a_claim_whose_reply_was_lost_is_found_again_by_its_token(store):
+    job = store.submit("echo", {}, {})
+    store.claim(job.id, 3, token="w1/a", lease_timeout_s=30.0)  # committed, its answer never read
+    again = store.claim(job.id, 3, token="w1/a", lease_timeout_s=30.0)
+    assert again.state is JobState.RUNNING and again.attempts == 1 and again.claimed_by == "w1/a"
+
+
+def test_a_job_handed_back_without_its_record_requeued_is_taken_over_uncounted(store):
+    """Worker 1 stopped while the store was down: its message went back carrying its token, the
+    record stayed `running` under that token. The message's next claim takes it over as attempt
+    1 again; another delivery carrying the same old token then finds the new holder alive."""
+    job = store.submit("echo", {}, {})
+    store.claim(job.id, 3, token="w1/a", lease_timeout_s=30.0)
+    taken = store.claim(job.id, 3, token="w2/b", lease_timeout_s=30.0, handed_back_from="w1/a")
+    assert taken.attempts == 1 and taken.claimed_by == "w2/b" and taken.state is JobState.RUNNING
+    with pytest.raises(JobHeldElsewhere):
+        store.claim(job.id, 3, token="w3/c", lease_timeout_s=30.0, handed_back_from="w1/a")
+    store.requeue(job.id, uncount_attempt=True, attempt=1)  # worker 1 had requeued it after all
+    assert store.claim(job.id, 3, token="w3/c", lease_timeout_s=30.0, handed_back_from="w1/a").attempts == 1
 
 
 def test_two_stores_on_one_folder_see_the_same_records(make_store):
@@ -198,7 +243,7 @@ def test_two_stores_on_one_folder_see_the_same_records(make_store):
     one, two = make_store(), make_store()
     job = one.submit("echo", {}, {"in.txt": b"x"})
     assert two.get(job.id) == one.get(job.id)
-    assert two.claim(job.id, max_attempts=2).attempts == 1
+    assert claim_as_dead(two, job.id, 2).attempts == 1
     assert one.get(job.id).state is JobState.RUNNING
 
 

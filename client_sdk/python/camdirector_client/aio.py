@@ -204,11 +204,20 @@ class _AioZmqTransport:
     """Request/reply over zmq.asyncio DEALER sockets: one request outstanding per socket, LINGER 0.
 
     A socket that timed out (or whose task was cancelled) while waiting is closed, never reused,
-    so a late reply can not be taken for the answer to a later request.
+    so a late reply can not be taken for the answer to a later request. A frame waits
+    ``retry.frame_timeout_s`` when shorter, then UNAVAILABLE: a hung node, tried again.
     """
 
-    def __init__(self, endpoint: str, timeout_s: float, context: zmq.asyncio.Context | None, security: wire.Security) -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        timeout_s: float,
+        context: zmq.asyncio.Context | None,
+        security: wire.Security,
+        retry: wire.RetryPolicy = wire.DEFAULT_RETRY,
+    ) -> None:
         self._endpoint = endpoint
+        self._frame_timeout_s = wire.zmq_frame_timeout_s(timeout_s, retry)
         self._timeout_s = timeout_s
         self._timeout_ms = max(1, round(timeout_s * 1000.0))
         self._context = context if context is not None else zmq.asyncio.Context.instance()
@@ -223,14 +232,16 @@ class _AioZmqTransport:
         if self.closed:
             raise DirectorError(grpc.StatusCode.CANCELLED, "the client is closed")
         sock = self._idle.pop() if self._idle else self._open()
+        hang_s = self._frame_timeout_s if rpc == wire.RPC_FRAME else None
         try:
+            sock.rcvtimeo = self._timeout_ms if hang_s is None else max(1, round(hang_s * 1000.0))
             await sock.send_multipart(self._security.zmq_request(rpc, payload))
             reply = await sock.recv_multipart()
         except zmq.Again:
             sock.close(linger=0)
             if not self.closed:  # a fresh socket, already connecting, for the next call
                 self._idle.append(self._open())
-            raise wire.zmq_no_reply(rpc, self._endpoint, self._timeout_s, self._security.curve is not None) from None
+            raise wire.zmq_no_reply(rpc, self._endpoint, self._timeout_s, self._security.curve is not None, hang_s) from None
         except BaseException:
             sock.close(linger=0)
             raise
@@ -567,5 +578,5 @@ def connect_async(
         options = wire.grpc_channel_options(max_message_bytes, grpc_options, retry)
         transport = _AioGrpcTransport(endpoint.address, timeout_s, options, security, retry)
     else:
-        transport = _AioZmqTransport(endpoint.address, timeout_s, zmq_context, security)
+        transport = _AioZmqTransport(endpoint.address, timeout_s, zmq_context, security, retry)
     return AsyncClient(transport, url, retry)

@@ -175,11 +175,20 @@ class _ZmqTransport:
     """Request/reply over DEALER sockets: one request outstanding per socket, LINGER 0.
 
     A socket that timed out (or was interrupted) while waiting is closed, never reused, so a late
-    reply can not be taken for the answer to a later request.
+    reply can not be taken for the answer to a later request. A frame waits
+    ``retry.frame_timeout_s`` when shorter, then UNAVAILABLE: a hung node, tried again.
     """
 
-    def __init__(self, endpoint: str, timeout_s: float, context: zmq.Context | None, security: wire.Security) -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        timeout_s: float,
+        context: zmq.Context | None,
+        security: wire.Security,
+        retry: wire.RetryPolicy = wire.DEFAULT_RETRY,
+    ) -> None:
         self._endpoint = endpoint
+        self._frame_timeout_s = wire.zmq_frame_timeout_s(timeout_s, retry)
         self._timeout_s = timeout_s
         self._timeout_ms = max(1, round(timeout_s * 1000.0))
         self._context = context if context is not None else zmq.Context.instance()
@@ -197,14 +206,16 @@ class _ZmqTransport:
             sock = self._idle.pop()
         except IndexError:
             sock = self._open()
+        hang_s = self._frame_timeout_s if rpc == wire.RPC_FRAME else None
         try:
+            sock.rcvtimeo = self._timeout_ms if hang_s is None else max(1, round(hang_s * 1000.0))
             sock.send_multipart(self._security.zmq_request(rpc, payload))
             reply = sock.recv_multipart()
         except zmq.Again:
             sock.close(linger=0)
             if not self._closed:  # a fresh socket, already connecting, for the next call
                 self._idle.append(self._open())
-            raise wire.zmq_no_reply(rpc, self._endpoint, self._timeout_s, self._security.curve is not None) from None
+            raise wire.zmq_no_reply(rpc, self._endpoint, self._timeout_s, self._security.curve is not None, hang_s) from None
         except BaseException:
             sock.close(linger=0)
             raise
@@ -531,7 +542,7 @@ def connect(
         Context for the ZeroMQ sockets; default the process-wide ``zmq.Context.instance()``.
     retry : RetryPolicy
         How long failed calls are tried again (``retry_window_s``, 30 s), how long a frame may go
-        unanswered before its node is taken as hung (``frame_timeout_s``, 3 s, gRPC) and how many
+        unanswered before its node is taken as hung (``frame_timeout_s``, 3 s) and how many
         sent updates are kept for a DATA_LOSS resend (``resend_history_frames``, 600).
 
     Connecting is lazy: an unreachable server shows at the first call (UNAVAILABLE over gRPC,
@@ -545,5 +556,5 @@ def connect(
         options = wire.grpc_channel_options(max_message_bytes, grpc_options, retry)
         transport = _GrpcTransport(endpoint.address, timeout_s, options, security, retry)
     else:
-        transport = _ZmqTransport(endpoint.address, timeout_s, zmq_context, security)
+        transport = _ZmqTransport(endpoint.address, timeout_s, zmq_context, security, retry)
     return Client(transport, url, retry)

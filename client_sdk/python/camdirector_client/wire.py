@@ -63,6 +63,7 @@ __all__ = [
     "with_session_id",
     "with_answered_frame",
     "with_session_id_async",
+    "zmq_frame_timeout_s",
     "zmq_no_reply",
     "zmq_reply_payload",
 ]
@@ -457,9 +458,20 @@ def open_dealer(context: zmq.Context, endpoint: str, timeout_ms: int, curve: tup
     return sock
 
 
-def zmq_no_reply(rpc: bytes, endpoint: str, timeout_s: float, curve: bool) -> DirectorError:
-    """DEADLINE_EXCEEDED for a ZeroMQ request left unanswered. A CURVE server drops a client that
-    does not know its key (or a plaintext one) without a word, so the message says what to check."""
+def zmq_frame_timeout_s(timeout_s: float, retry: RetryPolicy) -> float | None:
+    """How long a ZeroMQ Frame waits for its reply before its node is taken as hung: the retry
+    policy's ``frame_timeout_s`` when shorter than the client's ``timeout_s``; None: ``timeout_s``."""
+    hang_s = retry.frame_timeout_s
+    return hang_s if hang_s is not None and hang_s < timeout_s else None
+
+
+def zmq_no_reply(rpc: bytes, endpoint: str, timeout_s: float, curve: bool, frame_timeout_s: float | None = None) -> DirectorError:
+    """DEADLINE_EXCEEDED for a ZeroMQ request left unanswered; for a Frame that waited
+    ``frame_timeout_s``, UNAVAILABLE (frame_error: a hung node, tried again). A CURVE server drops
+    a client that does not know its key (or a plaintext one) without a word, so the message says
+    what to check: a session is created first, so a wrong key shows there."""
+    if frame_timeout_s is not None:
+        return frame_error(DirectorError(grpc.StatusCode.DEADLINE_EXCEEDED, ""), frame_timeout_s)
     hint = (
         "is zmq_server_key the server's public key?"
         if curve

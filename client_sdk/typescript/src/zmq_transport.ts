@@ -125,18 +125,29 @@ export class ZmqTransport implements Transport {
     socket.close();
   }
 
-  async unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, _route: string): Promise<MessageShape<D>> {
+  /** `frameTimeoutMs` (a Frame): a shorter wait for the reply, whose passing is a hung node
+   * (UNAVAILABLE, tried again), as over gRPC. */
+  async unary<D extends DescMessage>(method: string, request: Uint8Array, response: D, _route: string,
+                                     frameTimeoutMs?: number): Promise<MessageShape<D>> {
     if (this.closed) throw new DirectorError("CANCELLED", "the client is closed");
     const socket = await this.#socket();
+    const hung = frameTimeoutMs !== undefined && frameTimeoutMs < this.#timeoutMs;
     let reply: Buffer[];
     try {
+      socket.receiveTimeout = hung ? frameTimeoutMs : this.#timeoutMs;
       const frames = [method, request];
       await socket.send(this.#auth === undefined ? frames : [...frames, this.#auth]);
       reply = await socket.receive();
     } catch (error) {
       this.#close(socket);
       if (this.closed) throw new DirectorError("CANCELLED", "the client is closed");
-      if ((error as { code?: string }).code === "EAGAIN") throw this.#noReply(method);
+      if ((error as { code?: string }).code === "EAGAIN") {
+        if (hung) {
+          throw new DirectorError("UNAVAILABLE",
+            `the frame was not answered within ${frameTimeoutMs} ms (frameTimeoutMs): the node may be hung`);
+        }
+        throw this.#noReply(method);
+      }
       throw new DirectorError("UNAVAILABLE", `${method} to ${this.#endpoint} failed: ${(error as Error).message}`);
     }
     if (this.closed || this.#idle.length >= IDLE_SOCKETS) this.#close(socket);

@@ -2,11 +2,13 @@
 // within a window with jittered backoff, a hung node's frames tried again, and DATA_LOSS "resend
 // from K" answered by sending the kept updates again. The backoff is checked with an injected
 // clock and random source; the rest against a Director served in this process (grpc-js), which
-// answers DATA_LOSS, UNAVAILABLE or nothing on demand, as a real server cannot be made to.
+// answers DATA_LOSS, UNAVAILABLE or nothing on demand, as a real server cannot be made to; over
+// ZeroMQ, a ROUTER socket of this process that leaves the first frame unanswered.
 // Needs no environment: tests/client_sdk/typescript/test_ts_retry.py runs it after the build.
 import assert from "node:assert/strict";
 import { after, before, test } from "node:test";
 import * as grpc from "@grpc/grpc-js";
+import { Router } from "zeromq";
 import {
   Backoff, DirectorError, SentHistory, connect, create, fromBinary, pb, resendFrom, retryPolicy, toBinary, withAnsweredFrame,
 } from "../dist/index.js";
@@ -267,4 +269,37 @@ test("a unary frame left unanswered is tried again, as UNAVAILABLE", { timeout: 
   director.hangs.add(1); // no frame timeout: the call's own deadline, not tried again
   await assert.rejects(off.session.frame(1, 0), (e) => e.code === "DEADLINE_EXCEEDED");
   off.client.close();
+});
+
+test("over ZeroMQ, a frame left unanswered is sent again on a new socket, as UNAVAILABLE", { timeout: 8000 }, async () => {
+  const router = new Router({ linger: 0 });
+  await router.bind("tcp://127.0.0.1:*");
+  const seen = [];
+  const serve = (async () => {
+    for await (const [peer, method, request] of router) {
+      let reply;
+      if (method.toString() === "CreateSession") {
+        reply = toBinary(pb.CreateSessionResponseSchema, create(pb.CreateSessionResponseSchema, { sessionId: "s1" }));
+      } else {
+        const update = fromBinary(pb.FrameUpdateSchema, request);
+        seen.push(Number(update.frame));
+        if (seen.length === 1) continue; // the hung node: never answered
+        reply = toBinary(pb.CameraUpdateSchema, create(pb.CameraUpdateSchema, { frame: update.frame }));
+      }
+      await router.send([peer, "0", Buffer.from(reply)]);
+    }
+  })();
+  const client = connect(router.lastEndpoint, { retry: { frameTimeoutMs: 300 }, timeoutMs: 10_000 });
+  try {
+    const session = await client.createSession({});
+    const started = Date.now();
+    assert.equal((await session.frame(1, 0)).frame, 1n);
+    assert.ok(Date.now() - started < 5000, "waited for the call's own 10 s deadline");
+    assert.equal(session.retries, 1);
+    assert.deepEqual(seen, [1, 1]);
+  } finally {
+    client.close();
+    router.close();
+    await serve.catch(() => undefined);
+  }
 });

@@ -37,6 +37,7 @@ from camdirector.jobs.queue import QueueClient
 from camdirector.jobs.queue_worker import QueueWorker, run_job_worker
 from camdirector.jobs.records import (
     Job,
+    JobHeldElsewhere,
     JobNotFound,
     JobState,
     JobStore,
@@ -57,6 +58,7 @@ __all__ = [
     "JobSettings",
     "JobState",
     "JobStore",
+    "JobHeldElsewhere",
     "JobsUnavailable",
     "PostgresJobStore",
     "QueueClient",

@@ -8,7 +8,9 @@ threads), so no event loop or broker thread ever runs a job, and a cancelled or 
 ended by terminating its process. `JobExecutor` starts the process (main.py), reads its progress
 from a pipe, checks the job's record (cancelled? taken over by another worker? too long?) and
 records the outcome of the attempt it started, by compare-and-set (records.py): the result folder
-is renamed into `<id>/result/` inside the transaction that marks the attempt succeeded.
+is renamed into `<id>/result/` inside the transaction that marks the attempt succeeded. A queue
+worker's attempt renews its lease every quarter of `worker_heartbeat_timeout_s` (records.py,
+"Claims"), so a duplicate of its message waits instead of running the job a second time.
 
 The record store down (JobsUnavailable) is no failure of the job: the process runs on (only the
 job timeout ends it then; cancel is seen once the store is back), progress is not written, and the
@@ -60,6 +62,11 @@ def purge_expired(store: JobStore, settings: JobSettings, now_s: float) -> list[
     return purged
 
 
+class NotHandedBack(Exception):
+    """A stopping worker could not send its job's message again (the queue down): its own
+    delivery must stay unacknowledged, for the broker to send it again (queue_worker.py)."""
+
+
 @dataclass
 class Attempt:
     """One attempt of a claimed job in its process (job.attempts is the attempt's number)."""
@@ -76,6 +83,7 @@ class Attempt:
     terminating_since: float | None = None
     stop_reason: str | None = None  # "cancelled", "superseded", "timeout"
     next_check: float = 0.0  # time.monotonic() of the next look at the record
+    next_renew: float = 0.0  # time.monotonic() of the next renewal of a queue worker's lease
     record: Callable[[], object] | None = None  # writes the outcome once the process ended (idempotent)
     store_back_at: float = 0.0  # time.monotonic() before which the store, found down, is not asked
     store_wait_s: float = 0.0  # the wait after the next failed call (0: the store answered last)
@@ -190,10 +198,11 @@ class JobExecutor:
         shutil.rmtree(a.work_dir, ignore_errors=True)  # gone when it became the result
         return True
 
-    def run(self, job: Job, stopping: threading.Event, hand_back: Callable[[], object]) -> None:
+    def run(self, job: Job, stopping: threading.Event, hand_back: Callable[[], bool]) -> None:
         """Run a claimed job to its end in this thread (a queue worker's). When `stopping` is set
-        first, `hand_back()` (the job's message sent again), then the process is ended and the
-        record queued again, the attempt not counted."""
+        first, the process is ended, `hand_back()` sends the job's message again (False: it
+        could not; NotHandedBack is raised after the record was requeued) and the record is
+        queued again, the attempt not counted."""
         a = self.launch(job)
         if a is None:
             return
@@ -207,11 +216,13 @@ class JobExecutor:
             self._abandon(a)  # no process or folder outlives an error here
             raise
 
-    def end(self, attempts: list[Attempt], before_requeue: Callable[[], object] | None = None) -> None:
+    def end(self, attempts: list[Attempt], before_requeue: Callable[[], bool] | None = None) -> None:
         """Shutdown: end the attempts' processes (SIGTERM, SIGKILL after `cancel_grace_s`) and
-        queue their jobs again without counting the attempt (`before_requeue()` first). An
-        attempt whose outcome waits for the store is recorded now if the store answers; one whose
-        record cannot be requeued (the store down) is left `running` for the next claim."""
+        queue their jobs again without counting the attempt (`before_requeue()` first: False
+        when it failed, and NotHandedBack is raised once the record was requeued). An attempt
+        whose outcome waits for the store is recorded now if the store answers; one whose record
+        cannot be requeued (the store down) is left `running`, for the message sent back to take
+        over uncounted (records.py, "Claims")."""
         for a in attempts:
             if a.process.is_alive():
                 a.process.terminate()
@@ -221,12 +232,15 @@ class JobExecutor:
             if a.record is not None and self.step(a):
                 continue
             self._abandon(a, deadline)
+            handed_back = True
             if before_requeue is not None:
-                before_requeue()
+                handed_back = bool(before_requeue())
             try:
                 self.store.requeue(a.job.id, uncount_attempt=True, attempt=a.job.attempts)
             except JobsUnavailable as exc:
                 log.warning("job %s: not requeued: %s", a.job.id, exc)
+            if not handed_back:
+                raise NotHandedBack(a.job.id)
 
     @staticmethod
     def _abandon(a: Attempt, deadline: float = 0.0) -> None:
@@ -270,13 +284,17 @@ class JobExecutor:
             except JobNotFound:
                 found.append(None)
 
+        token = a.job.claimed_by
+        if token is not None and now >= a.next_renew:
+            a.next_renew = now + self.settings.worker_heartbeat_timeout_s / 4
+            self._store_call(a, lambda: self.store.renew(a.job.id, token))  # whether it still holds: `look` says
         if self._store_call(a, look):  # the store down: only the timeout can stop the job
             current = found[0]
             if current is None:
                 return "superseded"
             if current.state is JobState.CANCELLED:
                 return "cancelled"
-            if current.state is not JobState.RUNNING or current.attempts != a.job.attempts:
+            if current.state is not JobState.RUNNING or (current.attempts, current.claimed_by) != (a.job.attempts, token):
                 return "superseded"  # another worker took over this job after a redelivery
         if now - a.started_monotonic > self.settings.job_timeout_s:
             return "timeout"

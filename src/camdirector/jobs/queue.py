@@ -24,9 +24,11 @@ worker killed mid-run stays in that worker's acknowledgement set and is queued a
 worker has been silent `worker_heartbeat_timeout_s`; a surviving worker takes it at its next job.
 Every worker beats and runs the maintenance step every quarter of that timeout from a thread of its
 own (`broker.do_qsize` on the jobs queue: the broker's consumers stop beating on a queue while their
-worker is busy). The new attempt claims the record (attempts + 1); only the latest attempt may record
-an outcome (compare-and-set, records.py), so a worker that was only slow, not dead, finds its job
-taken over, ends its process and records nothing. A job interrupted `max_attempts` times fails.
+worker is busy). The new attempt claims the record (attempts + 1), unless the holder's lease in the record store
+is fresh (records.py, "Claims": a live worker that Redis lost sight of), when the message waits
+instead; only the latest attempt may record an outcome (compare-and-set, records.py), so a worker
+that was only slow, not dead, finds its job taken over, ends its process and records nothing. A
+job interrupted `max_attempts` times fails.
 Cancel: the record is cancelled; the worker running it sees that within 0.25 s and ends the
 process; a queued job's message is dropped when it comes.
 
@@ -35,8 +37,8 @@ never holds a job that an idle one could run, and a killed worker holds only the
 
 Failures: Redis or PostgreSQL unreachable at start: `JobsUnavailable`, one line (the node refuses
 to start). Redis down at a submit: the job is failed ("could not be queued") and the submit raises
-JobsUnavailable (HTTP 503). PostgreSQL down while a worker takes a message: the message is retried
-with Dramatiq's Retries (backoff 1 s to 30 s, up to `STORE_RETRIES` times). Redis keeps the queue
+JobsUnavailable (HTTP 503). PostgreSQL down while a worker takes a message: the worker asks again
+until it answers (queue_worker.py), keeping the message. Redis keeps the queue
 in memory: a Redis that restarts without persistence loses queued messages (their records stay
 queued); run the queue's Redis with `appendonly yes` in production. PostgreSQL down while a job
 runs: the job runs on and its outcome is recorded when the store is back (executor.py), its
@@ -64,7 +66,7 @@ log = logging.getLogger("camdirector.jobs.queue")
 
 QUEUE_NAME = "camdirector-jobs"
 ACTOR_NAME = "camdirector_run_job"
-STORE_RETRIES = 100  # times a message is retried while the record store is unreachable
+STORE_RETRIES = 100  # times a message is retried when the record store fails past its claim (a launch that cannot record)
 _RETRY_BACKOFF_MS = (1000, 30_000)
 REDIS_CONNECT_TIMEOUT_S = 5.0  # a connection to Redis not made in this long: the queue is down, s
 REDIS_READ_TIMEOUT_S = 5.0  # a command's reply not read in this long: the queue is down (none of ours blocks), s

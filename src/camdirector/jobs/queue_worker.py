@@ -10,6 +10,7 @@ import logging
 import signal
 import threading
 import time
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,17 +19,18 @@ import redis
 
 from camdirector.infra.private_files import make_private
 from camdirector.infra.redaction import redacted
-from camdirector.jobs.executor import PURGE_INTERVAL_S, JobExecutor, purge_expired
+from camdirector.jobs.executor import PURGE_INTERVAL_S, RECORD_RETRY_S, JobExecutor, NotHandedBack, purge_expired
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobRegistry, service_kinds
 from camdirector.jobs.queue import ACTOR_NAME, QUEUE_NAME, STORE_RETRIES, broker_for, redis_reason
-from camdirector.jobs.records import JobStore, JobsUnavailable, open_store
+from camdirector.jobs.records import Job, JobHeldElsewhere, JobStore, JobsUnavailable, open_store
 
 log = logging.getLogger("camdirector.jobs")
 
 # Orphaned files (a folder without a record, an abandoned .tmp-*) are removed by queue workers only
 # once untouched this long past the job timeout: other nodes submit and run jobs meanwhile, s.
 _ORPHAN_GRACE_S = 3600.0
+HAND_BACK_S = 5.0  # a stopping worker tries this long to send its job's message back to a queue that is down, s
 
 
 class QueueWorker:
@@ -56,7 +58,7 @@ class QueueWorker:
             broker=self._broker,
             actor_name=ACTOR_NAME,
             queue_name=QUEUE_NAME,
-            retry_when=lambda retries, exc: isinstance(exc, JobsUnavailable) and retries < STORE_RETRIES,
+            retry_when=_retry_when,
         )(self._run_message)
         self._stopping = threading.Event()
         self.worker_id = self._broker.broker_id
@@ -106,14 +108,74 @@ class QueueWorker:
         except redis.RedisError as exc:
             log.warning("job queue %s: %s", redacted(self.settings.job_queue), redis_reason(exc))
 
-    def _run_message(self, job_id: str) -> None:
-        """One message: claim its job and run it here; when this worker stops first, the message
-        is sent again before the record goes back to queued, so neither is ever lost."""
-        job = self.store.claim(job_id, self.settings.max_attempts)
-        if job is None:
-            return
-        log.info("job %s (%s): attempt %d on worker %s", job.id, job.kind, job.attempts, self.worker_id)
-        self._executor.run(job, self._stopping, hand_back=lambda: self._actor.send(job_id))
+    def _run_message(self, job_id: str, handed_back_from: str | None = None) -> None:
+        """One delivery of a job's message: claim its job under a token of this delivery and run
+        it here (records.py, "Claims"; `handed_back_from`: the token of the worker that sent it
+        back when it stopped). When this worker stops first, the message is sent again, carrying
+        the token, before the record goes back to queued, so neither is ever lost and the attempt
+        is not counted even when the record cannot be requeued. When the message cannot be sent
+        again (Redis down too), this delivery is never acknowledged: the broker sends it again
+        once this worker is gone."""
+        token = f"{self.worker_id}/{uuid.uuid4().hex}"
+        try:
+            job = self._claim(job_id, token, handed_back_from)
+            if job is None:
+                return
+            log.info("job %s (%s): attempt %d on worker %s", job.id, job.kind, job.attempts, self.worker_id)
+            self._executor.run(job, self._stopping, hand_back=lambda: self._hand_back(job_id, token))
+        except JobHeldElsewhere as exc:
+            # not an error (Dramatiq logs a Retry quietly): back when the lease of a dead holder ran out
+            log.info("%s: its message is tried again later", exc)
+            raise dramatiq.Retry(str(exc), delay=int(self.settings.worker_heartbeat_timeout_s * 500)) from None
+        except NotHandedBack:
+            log.error("job %s: could not be sent back to the queue; it runs again once this worker is gone", job_id)
+            threading.Event().wait()  # a daemon thread: the process ends without acknowledging it
+
+    def _claim(self, job_id: str, token: str, handed_back_from: str | None) -> Job | None:
+        """The claim, asked again while the store is down (doubling up to RECORD_RETRY_S[1]):
+        a claim whose commit was made but whose reply was lost is found again by its token,
+        where a delivery retried later would count a second attempt. The worker stopping
+        meanwhile sends the message back and claims nothing."""
+        wait_s = 0.0
+        while True:
+            try:
+                return self.store.claim(
+                    job_id,
+                    self.settings.max_attempts,
+                    token=token,
+                    lease_timeout_s=self.settings.worker_heartbeat_timeout_s,
+                    handed_back_from=handed_back_from,
+                )
+            except JobsUnavailable as exc:
+                if wait_s == 0.0:
+                    log.warning("job %s: cannot claim it: %s; asked again until the store answers", job_id, exc)
+                wait_s = min(max(2 * wait_s, RECORD_RETRY_S[0]), RECORD_RETRY_S[1])
+                if self._stopping.wait(wait_s):
+                    if not self._hand_back(job_id, token):
+                        raise NotHandedBack(job_id) from None
+                    return None
+
+    def _hand_back(self, job_id: str, token: str) -> bool:
+        """The job's message sent again, carrying `token`; False when Redis does not take it
+        within HAND_BACK_S."""
+        deadline = time.monotonic() + HAND_BACK_S
+        while True:
+            try:
+                self._actor.send(job_id, token)
+                return True
+            except redis.RedisError as exc:
+                if time.monotonic() > deadline:
+                    log.warning("job %s: not sent back to the queue: %s", job_id, redis_reason(exc))
+                    return False
+                time.sleep(0.5)
+
+
+def _retry_when(retries: int, exc: Exception) -> bool:
+    """Dramatiq's retry rule for a job's message: a duplicate of a job another worker runs
+    (dramatiq.Retry), as long as it runs; the store down, up to STORE_RETRIES times."""
+    if isinstance(exc, dramatiq.Retry):
+        return True
+    return isinstance(exc, JobsUnavailable) and retries < STORE_RETRIES
 
 
 def run_job_worker(data_dir: str | Path, settings: JobSettings) -> int:

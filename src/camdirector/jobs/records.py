@@ -18,6 +18,16 @@ redelivered job). That compare-and-set is what makes a job succeed once even whe
 it: only the latest attempt's outcome is recorded, and its result folder is renamed into place
 inside that same transaction.
 
+Claims (queue workers): a claim writes who holds the job (`claimed_by`, a token of that one
+delivery of its message) and a lease (`lease_s`, Unix s) that the running worker renews
+(`renew`). A message for a job that another worker holds with a fresh lease is a duplicate (the
+broker took that worker for dead while Redis was unreachable, or a message sent twice):
+`JobHeldElsewhere`, and the message is tried again later, so the job is not run twice; a stale
+lease means the holder died, and the claim counts a new attempt. A claim whose reply was lost
+is found again by its own token, and a job handed back by a stopping worker that could not
+requeue its record (the store down) is taken over by the token its message carries: neither
+counts an attempt.
+
 Tenants: every job belongs to the tenant of the key that submitted it (access/roles.py; `default`
 without keys). `list` filters by tenant, and the REST routes answer another tenant's job as an
 unknown one. A submit can be held to the tenant's share in the same transaction as the node-wide
@@ -74,6 +84,12 @@ class JobNotFound(KeyError):
     """No job with this id."""
 
 
+class JobHeldElsewhere(RuntimeError):
+    """A claim of a job that another queue worker runs, its lease fresh: the message is a
+    duplicate, to be tried again later (once the job ended it is dropped; once the lease ran out,
+    the holder having died, it runs the job)."""
+
+
 class JobsUnavailable(RuntimeError):
     """The record store (PostgreSQL) or the queue (Redis) cannot be reached: a node refuses to
     start, a submit answers HTTP 503. The message is one line that says which and why."""
@@ -95,6 +111,7 @@ class Job:
     finished_s: float | None
     timings_ms: dict[str, float] = field(default_factory=dict)
     tenant: str = DEFAULT_TENANT
+    claimed_by: str | None = None  # the claim token of the queue worker's delivery that runs it
 
     def as_public(self) -> dict:
         """The REST view: id, status, progress, error (only when set), timings (ms), and the
@@ -113,13 +130,16 @@ class Job:
         return out
 
 
-_COLUMNS = "id, kind, params, state, progress, error, attempts, created_s, started_s, finished_s, timings, tenant"
-# Columns added since the first release: (name, SQL type and default, with {int} SQLite's INTEGER
-# or PostgreSQL's BIGINT); each store adds those its table lacks (module docstring).
+_COLUMNS = "id, kind, params, state, progress, error, attempts, created_s, started_s, finished_s, timings, tenant, claimed_by"
+# Columns added since the first release: (name, SQL type and default, with {int} and {real}
+# SQLite's INTEGER and REAL or PostgreSQL's BIGINT and DOUBLE PRECISION); each store adds those its
+# table lacks (module docstring).
 _ADDED_COLUMNS = (
     ("tenant", "TEXT NOT NULL DEFAULT 'default'"),
-    ("input_bytes", "{int} NOT NULL DEFAULT 0"),
-)  # bytes of the job's input files
+    ("input_bytes", "{int} NOT NULL DEFAULT 0"),  # bytes of the job's input files
+    ("claimed_by", "TEXT"),  # the claim token of the running attempt (queue workers; NULL otherwise)
+    ("lease_s", "{real}"),  # Unix s when its holder last showed it was alive
+)
 _UNFINISHED = (JobState.QUEUED.value, JobState.RUNNING.value)
 
 
@@ -137,6 +157,7 @@ def _row_to_job(row) -> Job:
         finished_s=row[9],
         timings_ms=json.loads(row[10]),
         tenant=row[11],
+        claimed_by=row[12],
     )
 
 
@@ -225,7 +246,7 @@ class JobStore:
                 os.rename(tmp, self.root / job_id)
                 try:
                     db.execute(
-                        f"INSERT INTO jobs ({_COLUMNS}, input_bytes, seq) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
+                        f"INSERT INTO jobs ({_COLUMNS}, input_bytes, seq) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
                         (
                             job_id,
                             kind,
@@ -239,6 +260,7 @@ class JobStore:
                             None,
                             "{}",
                             tenant,
+                            None,  # claimed_by
                             input_bytes,
                         ),
                     )
@@ -309,10 +331,12 @@ class JobStore:
         with self._read() as db:
             return int(db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (state.value,)).fetchone()[0])
 
-    def _start_attempt(self, db, job_id: str) -> None:
+    def _start_attempt(self, db, job_id: str, token: str | None = None, *, counted: bool = True) -> None:
+        now = time.time()
         db.execute(
-            "UPDATE jobs SET state = ?, attempts = attempts + 1, started_s = ?, progress = 0, error = NULL WHERE id = ?",
-            (JobState.RUNNING.value, time.time(), job_id),
+            "UPDATE jobs SET state = ?, attempts = attempts + ?, started_s = ?, progress = 0, error = NULL, "
+            "claimed_by = ?, lease_s = ? WHERE id = ?",
+            (JobState.RUNNING.value, 1 if counted else 0, now, token, now if token else None, job_id),
         )
 
     def claim_next(self) -> Job | None:
@@ -324,24 +348,50 @@ class JobStore:
             self._start_attempt(db, row[0])
         return self.get(row[0])
 
-    def claim(self, job_id: str, max_attempts: int) -> Job | None:
-        """A queue worker's claim of the job its message names: a queued job, or a running one
-        whose message came again (the worker running it died, or is taken over), becomes
-        `running` with one more attempt. A running job started `max_attempts` times already is
-        failed instead. None when there is nothing to run (finished, cancelled, failed here, or
-        removed)."""
+    def claim(
+        self, job_id: str, max_attempts: int, *, token: str, lease_timeout_s: float, handed_back_from: str | None = None
+    ) -> Job | None:
+        """A queue worker's claim of the job its message names, as the delivery `token` (module
+        docstring, "Claims"). A queued job becomes `running` with one more attempt; so does a
+        running one whose holder's lease is older than `lease_timeout_s` (it died), or it fails
+        once started `max_attempts` times. A running job held under `token` already (a claim
+        whose reply was lost) is returned as it is; one held under `handed_back_from` (its
+        stopping worker's token, carried by the message it sent back) is taken over without
+        counting. Raises JobHeldElsewhere when another holder's lease is fresh. None when there
+        is nothing to run (finished, cancelled, failed here, or removed)."""
         with self._tx() as db:
-            row = db.execute("SELECT state, attempts FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            row = db.execute("SELECT state, attempts, claimed_by, lease_s FROM jobs WHERE id = ?", (job_id,)).fetchone()
             if row is None or JobState(row[0]).finished:
                 return None
-            if row[0] == JobState.RUNNING.value and row[1] >= max_attempts:
-                db.execute(
-                    "UPDATE jobs SET state = ?, error = ?, finished_s = ? WHERE id = ?",
-                    (JobState.FAILED.value, interrupted_error(row[1], max_attempts), time.time(), job_id),
-                )
-                return None
-            self._start_attempt(db, job_id)
+            state, attempts, holder, lease_s = row
+            if state == JobState.RUNNING.value and holder != token:
+                if handed_back_from is not None and holder == handed_back_from:
+                    self._start_attempt(db, job_id, token, counted=False)
+                elif holder is not None and lease_s is not None and (age_s := time.time() - lease_s) < lease_timeout_s:
+                    raise JobHeldElsewhere(f"job {job_id} runs on another worker (its lease renewed {age_s:.1f} s ago)")
+                elif attempts >= max_attempts:
+                    db.execute(
+                        "UPDATE jobs SET state = ?, error = ?, finished_s = ? WHERE id = ?",
+                        (JobState.FAILED.value, interrupted_error(attempts, max_attempts), time.time(), job_id),
+                    )
+                    return None
+                else:
+                    self._start_attempt(db, job_id, token)
+            elif state == JobState.QUEUED.value:
+                self._start_attempt(db, job_id, token)
         return self.get(job_id)
+
+    def renew(self, job_id: str, token: str) -> bool:
+        """The lease of the attempt claimed as `token`, renewed now. False when the job is no
+        longer running under that token (cancelled, finished, taken over)."""
+        with self._tx() as db:
+            return (
+                db.execute(
+                    "UPDATE jobs SET lease_s = ? WHERE id = ? AND state = ? AND claimed_by = ?",
+                    (time.time(), job_id, JobState.RUNNING.value, token),
+                ).rowcount
+                > 0
+            )
 
     def set_progress(self, job_id: str, progress: float, *, attempt: int | None = None) -> None:
         sql = "UPDATE jobs SET progress = ? WHERE id = ? AND state = ?"
@@ -414,7 +464,10 @@ class JobStore:
 
     def requeue(self, job_id: str, *, uncount_attempt: bool, attempt: int | None = None) -> None:
         """A running job (of this attempt, when given) goes back to `queued`."""
-        sql = "UPDATE jobs SET state = ?, progress = 0, started_s = NULL, attempts = attempts - ? WHERE id = ? AND state = ?"
+        sql = (
+            "UPDATE jobs SET state = ?, progress = 0, started_s = NULL, attempts = attempts - ?, claimed_by = NULL, "
+            "lease_s = NULL WHERE id = ? AND state = ?"
+        )
         args = [JobState.QUEUED.value, 1 if uncount_attempt else 0, job_id, JobState.RUNNING.value]
         if attempt is not None:
             sql += " AND attempts = ?"
@@ -492,7 +545,7 @@ class SqliteJobStore(SqliteStore, JobStore):
             present = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
             for name, sql_type in _ADDED_COLUMNS:
                 if name not in present:
-                    db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {sql_type.format(int='INTEGER')}")
+                    db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {sql_type.format(int='INTEGER', real='REAL')}")
             db.execute(_TENANT_INDEX)
 
 
@@ -514,7 +567,10 @@ _POSTGRES_SCHEMA = (
         seq BIGSERIAL NOT NULL
     )""",
     "CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq)",
-    *(f"ALTER TABLE jobs ADD COLUMN IF NOT EXISTS {name} {sql_type.format(int='BIGINT')}" for name, sql_type in _ADDED_COLUMNS),
+    *(
+        f"ALTER TABLE jobs ADD COLUMN IF NOT EXISTS {name} {sql_type.format(int='BIGINT', real='DOUBLE PRECISION')}"
+        for name, sql_type in _ADDED_COLUMNS
+    ),
     _TENANT_INDEX,
 )
 # Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
