@@ -1,7 +1,8 @@
 """The C/C++ SDK's I/O thread recovering in the background while a 60 Hz loop streams: a dropped
 connection resumes the same session; so do a server restarted on the same data directory and a
 worker killed mid-stream, the server restoring the session from its checkpoint
-(worker/checkpointing.py); a session that expired meanwhile, or one lost by a server
+(worker/checkpointing.py), and a server hung (stopped) for longer than the frame timeout; a
+session that expired meanwhile, or one lost by a server
 without checkpoints (`--checkpoint-store off`: a restart, a dead worker), gets the session
 created again (new id, reported as an event)."""
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 import time
 
 from tests.client_sdk.cpp.conftest import StreamRun, free_port
+from tests.client_sdk.test_retry import _stopped
 
 
 def _kinds(report: dict) -> list[str]:
@@ -130,3 +132,19 @@ def test_a_server_killed_and_restarted_without_checkpoints_gets_the_session_agai
     assert report["stats"]["recreations"] == 1 and report["stats"]["disconnects"] == 1
     # Retries against the dead server waited for a connection instead of spending queued frames.
     assert report["stats"]["frames_lost"] <= 4, report["stats"]
+
+
+def test_a_server_hung_mid_stream_resumes_the_same_session(sdk_bin, server_factory):
+    """A real server and its worker stopped (SIGSTOP) for 4 s, longer than the 3 s frame timeout:
+    the I/O thread takes the node as hung (the frame timeout, or the channel's keepalive pings
+    first), waits for the server without spending queued frames, and resumes the same session
+    once it wakes; no frame is answered twice to the game."""
+    srv = server_factory("--workers", "1")
+    run = StreamRun(sdk_bin / "sdk_check", srv.grpc, "resumed")
+    ready = run.wait_ready()
+    _stopped(srv, 4.0)
+    report = run.report()
+    _assert_same_session(report, ready)
+    disconnected = report["events"][1]
+    # seen first by the keepalive pings (1 s, 1 s to answer): "keepalive watchdog timeout"
+    assert disconnected["status"] == "UNAVAILABLE", disconnected
