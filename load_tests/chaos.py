@@ -5,6 +5,7 @@
     python -m load_tests.chaos --short          (make test's size: tests/load_tests/test_chaos.py)
     python -m load_tests.chaos --faults haproxy-6s --grpc-option grpc.initial_reconnect_backoff_ms=100
                                                 (an SDK change tried: a channel argument of its clients)
+    python -m load_tests.chaos --clip CLIP.bvh  (the overview jobs' clip; default the shared run clip)
 
 A cluster as load_tests/failover.py builds it (deploy/cluster.py: HAProxy, TLS, keys, Redis with
 its append-only file, PostgreSQL, a queue worker, --nodes nodes). Each fault gets its own
@@ -12,7 +13,12 @@ its append-only file, PostgreSQL, a queue worker, --nodes nodes). Each fault get
 (the demo scene, FRAMING_ONLY): --quiet-s undisturbed, then the fault, then --settle-s of recovery
 and --quiet-s undisturbed again. Fresh sessions per fault keep one fault's damage out of the next
 one's figures. The application reopens a stream that the SDK gave up on (an error raised to it)
-with the frames that follow, as a game would; it never sends a frame twice itself.
+with the frames that follow, as a game would; it never sends a frame twice itself. Beside the
+sessions, a director's tool submits a motion-overview job (--clip, through the balancer's REST
+API, a `director` key) every `job_interval_s` from the phase's start to the fault's end plus
+--settle-s, so that jobs are queued and running on the queue worker while the fault happens; a
+submit answered 502, 503 or 504, or cut, is sent again after min(Retry-After, 1 s), for up to
+30 s, as a client would.
 
 The faults (--faults, a comma-separated list, in this order by default):
   pg-pause       PostgreSQL and its backends SIGSTOPped for --fault-s, one CreateSession
@@ -42,8 +48,16 @@ runtime API polled every 0.1 s from the fault's start to the phase's end: second
 either backend), and how long the runtime API did not answer. Plus the floor (a health check's
 round trip through the balancer, measured in the same run, before the faults), whether every
 node was UP at the end, and `goals`: for each fault what issue 40 asks (no frame lost or answered
-twice, no error raised, no divergence, no healthy node out of the balancer, the stall under 1 s),
-printed, never the exit status: that is 0 once the run completed.
+twice, no error raised, no divergence, no healthy node out of the balancer, the stall under 1 s;
+no job lost, failed or run again), printed, never the exit status: that is 0 once the run
+completed.
+
+Jobs, per fault (after the streams end, each accepted job is waited for, up to JOBS_WAIT_S):
+submitted (jobs the tool wanted), accepted (answered 202), the statuses met on the way (non-2xx
+answers and cut connections, by name), succeeded, failed (and their errors), lost (accepted but not
+finished in time, or gone), run again (`attempts` > 1 in the job records: read from PostgreSQL,
+as an operator would; the REST view does not show attempts), and the accepted jobs' time from
+submit to their end, p50 and max.
 """
 
 from __future__ import annotations
@@ -51,6 +65,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import signal
+import ssl
 import sys
 import tempfile
 import threading
@@ -58,7 +73,9 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import httpx
 import numpy as np
+import psycopg
 
 import camdirector_client as cd
 from camdirector.demo.client import frame_updates, session_request
@@ -68,7 +85,7 @@ from camdirector.deploy.haproxy import GRPC_BACKEND
 from camdirector.geometry.camera import Lens
 from camdirector.v1 import director_pb2 as pb
 from load_tests.failover import _admin_call, _health_floor_ms, _pose_difference, _undisturbed
-from load_tests.report import emit, percentiles
+from load_tests.report import SHARED_DATA_DIR, emit, percentiles
 from load_tests.ring_sim import Ring, key_hashes
 
 FAULTS = (
@@ -83,6 +100,9 @@ FAULTS = (
 )
 POLL_S = 0.1  # between two looks at HAProxy's server states, s
 DRAIN_S = 20.0  # the longest the application waits for its last frames' answers after it stops sending, s
+DEFAULT_CLIP = SHARED_DATA_DIR / "mocap" / "bandai_namco" / "dataset-1_run_active_001.bvh"  # 72 frames
+JOBS_WAIT_S = 180.0  # the longest a phase's accepted jobs are waited for after its streams end, s
+SUBMIT_RETRY_S = 30.0  # how long a submit answered 502/503/504 (or cut) is sent again, s
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,9 +110,10 @@ class Timing:
     quiet_s: float = 4.0  # undisturbed streaming before and after each fault, s
     fault_s: float = 10.0  # how long a pause or an outage lasts, s (the HAProxy faults have their own)
     settle_s: float = 2.0  # after the fault's end, still counted as "during" it, s
+    job_interval_s: float = 1.5  # between two overview jobs submitted, s (a 72-frame clip's job takes about 2-4 s here)
 
 
-SHORT = Timing(quiet_s=1.5, fault_s=4.0, settle_s=1.0)  # make test's (--short)
+SHORT = Timing(quiet_s=1.5, fault_s=4.0, settle_s=1.0, job_interval_s=2.0)  # make test's (--short)
 
 
 class _Balancer(threading.Thread):
@@ -188,6 +209,81 @@ def _stream(session: cd.Session, frames: _Frames, record: _Record) -> None:
             continue
         if frames.exhausted():
             return
+
+
+class _Jobs(threading.Thread):
+    """A director's tool submitting an overview job every `interval_s` until `stop` is set (the
+    module docstring); `report()` waits for the accepted ones and says what became of them."""
+
+    def __init__(self, cluster: Cluster, key: str, clip: bytes, interval_s: float):
+        super().__init__(daemon=True)
+        self.cluster, self.clip, self.interval_s = cluster, clip, interval_s
+        self.http = httpx.Client(
+            base_url=f"https://{cluster.http}",
+            headers={"Authorization": f"Bearer {key}"},
+            timeout=10,
+            verify=ssl.create_default_context(cafile=str(cluster.ca_file)),
+        )
+        self.submitted = 0
+        self.accepted: dict[str, float] = {}  # job id -> time.monotonic() of its submit
+        self.statuses: Counter[str] = Counter()
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        while not self.stop.is_set():
+            self.submitted += 1
+            self._submit()
+            self.stop.wait(self.interval_s)
+
+    def _submit(self) -> None:
+        started = time.monotonic()
+        while True:
+            wait_s = 1.0
+            try:
+                answer = self.http.post("/v1/overview-jobs", files={"file": ("run.bvh", self.clip)}, data={"seed": "1"})
+            except httpx.HTTPError as error:
+                self.statuses[type(error).__name__] += 1
+            else:
+                if answer.status_code == 202:
+                    self.accepted[answer.json()["id"]] = started
+                    return
+                self.statuses[str(answer.status_code)] += 1
+                if answer.status_code not in (502, 503, 504):
+                    return
+                wait_s = min(float(answer.headers.get("Retry-After", "1")), 1.0)
+            if time.monotonic() - started > SUBMIT_RETRY_S:
+                return
+            time.sleep(wait_s)
+
+    def report(self) -> dict:
+        """Waits (up to JOBS_WAIT_S) for every accepted job to end; what became of them."""
+        ended: dict[str, tuple[float, dict]] = {}
+        deadline = time.monotonic() + JOBS_WAIT_S
+        while len(ended) < len(self.accepted) and time.monotonic() < deadline:
+            for job_id in set(self.accepted) - set(ended):
+                try:
+                    answer = self.http.get(f"/v1/overview-jobs/{job_id}")
+                except httpx.HTTPError:
+                    continue
+                if answer.status_code == 200 and answer.json()["status"] in ("succeeded", "failed", "cancelled"):
+                    ended[job_id] = (time.monotonic(), answer.json())
+            time.sleep(0.5)
+        self.http.close()
+        with psycopg.connect(self.cluster.state["postgres"], connect_timeout=10) as db:
+            attempts = dict(db.execute("SELECT id, attempts FROM jobs WHERE id = ANY(%s)", (list(self.accepted),)).fetchall())
+        failed = [job for _, job in ended.values() if job["status"] != "succeeded"]
+        took = [(t - self.accepted[job_id]) for job_id, (t, _) in ended.items()]
+        return {
+            "jobs_submitted": self.submitted,
+            "jobs_accepted": len(self.accepted),
+            "jobs_submit_statuses": dict(self.statuses),
+            "jobs_succeeded": len(ended) - len(failed),
+            "jobs_failed": len(failed),
+            "jobs_failed_errors": sorted({job.get("error", job["status"]) for job in failed}),
+            "jobs_lost": len(self.accepted) - len(ended),
+            "jobs_run_again": sum(attempts.get(job_id, 0) > 1 for job_id in self.accepted),
+            "jobs_s_p50_max": [round(float(np.median(took)), 2), round(max(took), 2)] if took else None,
+        }
 
 
 def _owner(cluster: Cluster, routes: list[str]) -> list[str]:
@@ -305,6 +401,8 @@ def _phase(
     timing: Timing,
     balancer: _Balancer,
     grpc_options: tuple[tuple[str, int], ...],
+    director: str,
+    clip: bytes | None,
 ) -> dict:
     """One fault with its quiet periods (the module docstring); its figures."""
     client = cd.connect(f"grpcs://{cluster.grpc}", key=engine, ca_file=cluster.ca_file, grpc_options=grpc_options)
@@ -321,11 +419,17 @@ def _phase(
     threads = [threading.Thread(target=_stream, args=(s, f, r), daemon=True) for s, f, r in zip(opened, feeds, records)]
     for thread in threads:
         thread.start()
+    jobs = None if clip is None else _Jobs(cluster, director, clip, timing.job_interval_s)
+    if jobs is not None:
+        jobs.start()
     time.sleep(max(0.0, start_s + timing.quiet_s - time.monotonic()))
     fault_start = time.monotonic()
     noted = _fault(name, cluster, timing, victim, engine, create)
     fault_end = time.monotonic()
-    time.sleep(timing.settle_s + timing.quiet_s)
+    time.sleep(timing.settle_s)
+    if jobs is not None:
+        jobs.stop.set()
+    time.sleep(timing.quiet_s)
     stop = time.monotonic()
     for feed in feeds:
         feed.stop.set()
@@ -341,6 +445,8 @@ def _phase(
     for thread in threads:
         thread.join(5)
     during = (fault_start, fault_end + timing.settle_s)
+    if jobs is not None:
+        jobs.join(SUBMIT_RETRY_S + 15)
     return {
         "fault_s": round(fault_end - fault_start, 2),
         "sessions": len(opened),
@@ -351,6 +457,7 @@ def _phase(
         "streams_hung_at_end": hung,
         "retries": sum(s.retries for s in opened),
         "balancer": balancer.between(fault_start, stop),
+        "jobs": "not measured: no clip" if jobs is None else jobs.report(),
     }
 
 
@@ -419,6 +526,11 @@ def _goals(name: str, figures: dict) -> dict:
     }
     if name == "node-pause":  # taken out in about a second: its sessions go on elsewhere
         goals["paused_node_left_the_balancer"] = hit_node in figures["balancer"]["nodes_out_s"]
+    jobs = figures["jobs"]
+    if isinstance(jobs, dict):
+        goals["no_job_lost"] = jobs["jobs_lost"] == 0
+        goals["no_job_failed"] = jobs["jobs_failed"] == 0
+        goals["no_job_run_again"] = jobs["jobs_run_again"] == 0
     return goals
 
 
@@ -430,9 +542,11 @@ def run(
     timing: Timing = Timing(),
     folder: Path | None = None,
     grpc_options: tuple[tuple[str, int], ...] = (),
+    clip: Path | None = None,
 ) -> dict:
     """The benchmark (the module docstring). `grpc_options`: more channel arguments for the
-    streaming clients (what the SDK's `connect` takes), to try a change of the SDK's."""
+    streaming clients (what the SDK's `connect` takes), to try a change of the SDK's. `clip`: the
+    overview jobs' BVH clip; None: no jobs (their figures say so)."""
     unknown = set(faults) - set(FAULTS)
     if unknown:
         raise ValueError(f"unknown faults {sorted(unknown)}: one of {', '.join(FAULTS)}")
@@ -448,14 +562,31 @@ def run(
     balancer = _Balancer(cluster)
     try:
         floor_ms = _health_floor_ms(cluster.grpc, cluster.ca_file)
-        engine = _admin_call(
-            cluster, "POST", f"https://{cluster.http}/v1/keys", json={"role": "engine", "name": "load_tests.chaos"}
-        )["key"]
+        keys_url = f"https://{cluster.http}/v1/keys"
+        engine, director = (
+            _admin_call(cluster, "POST", keys_url, json={"role": role, "name": f"load_tests.chaos {role}"})["key"]
+            for role in ("engine", "director")
+        )
+        clip_bytes = None if clip is None else clip.read_bytes()
         balancer.start()
         report = {}
         for name in faults:
             print(f"chaos: {name}", file=sys.stderr, flush=True)
-            figures = _phase(name, cluster, engine, create, updates, expected, sessions, rate_hz, timing, balancer, grpc_options)
+            figures = _phase(
+                name,
+                cluster,
+                engine,
+                create,
+                updates,
+                expected,
+                sessions,
+                rate_hz,
+                timing,
+                balancer,
+                grpc_options,
+                director,
+                clip_bytes,
+            )
             figures["goals"] = _goals(name, figures)
             report[name] = figures
         balancer.done.set()
@@ -502,6 +633,10 @@ def main() -> None:
         help="a gRPC channel argument for the streaming clients, e.g. grpc.initial_reconnect_backoff_ms=100",
     )
     parser.add_argument("--dir", type=Path, help="the cluster's folder (default a new temporary one)")
+    parser.add_argument(
+        "--clip", type=Path, default=DEFAULT_CLIP, help="the overview jobs' BVH clip (default the shared run clip)"
+    )
+    parser.add_argument("--no-jobs", dest="no_jobs", action="store_true", help="submit no overview jobs")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     faults = tuple(f for f in args.faults.split(",") if f)
@@ -516,7 +651,13 @@ def main() -> None:
     else:
         nodes, sessions = args.nodes, args.sessions
         timing = Timing(quiet_s=args.quiet_s, fault_s=args.fault_s, settle_s=args.settle_s)
-    report = run(faults, nodes, sessions, args.rate, timing, args.dir, tuple(options))
+    if args.no_jobs:
+        clip = None
+    elif not args.clip.is_file():
+        parser.error(f"--clip {args.clip}: no such file (pass --clip, or --no-jobs)")
+    else:
+        clip = args.clip
+    report = run(faults, nodes, sessions, args.rate, timing, args.dir, tuple(options), clip)
     emit(report, args.json)
 
 

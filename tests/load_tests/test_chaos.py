@@ -3,8 +3,9 @@ through each fault, 4 s faults. Asserted is only what holds whatever the machine
 completes, every node is back up at the end, no stream still hangs, no frame is answered twice to
 the application, and a SIGSTOPped node leaves the balancer (its checks time out within 1.4 s:
 deploy/haproxy.py), and what issue 40 fixed: a PostgreSQL pause neither freezes the streams nor
-takes a node out, a balancer down for 6 s costs the application nothing, and a node lost during
-a Redis outage rewinds no session. The other figures are printed, never asserted."""
+takes a node out, a balancer down for 6 s costs the application nothing, a node lost during
+a Redis outage rewinds no session, and the overview jobs submitted through every fault are
+neither lost nor run twice. The other figures are printed, never asserted."""
 
 from __future__ import annotations
 
@@ -17,8 +18,11 @@ from tests.conftest import service_or_skip
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory) -> dict:
-    result = service_or_skip(lambda: run(FAULTS, nodes=2, sessions=2, timing=SHORT, folder=tmp_path_factory.mktemp("chaos")))
+def report(tmp_path_factory, shared_data) -> dict:
+    clip = shared_data / "mocap" / "bandai_namco" / "dataset-1_run_active_001.bvh"
+    result = service_or_skip(
+        lambda: run(FAULTS, nodes=2, sessions=2, timing=SHORT, folder=tmp_path_factory.mktemp("chaos"), clip=clip)
+    )
     print(json.dumps(result, indent=1))
     return result
 
@@ -60,3 +64,17 @@ def test_a_balancer_down_for_6_s_raises_nothing_and_loses_no_frame(report):
 
 def test_a_node_lost_during_a_redis_outage_rewinds_no_session(report):
     assert report["faults"]["node-kill-redis-down"]["frames_pose_differs"] == 0
+
+
+def test_every_job_submitted_through_a_fault_is_accounted_for(report):
+    for name, fault in report["faults"].items():
+        jobs = fault["jobs"]
+        assert jobs["jobs_accepted"] > 0, (name, jobs)
+        assert jobs["jobs_succeeded"] + jobs["jobs_failed"] + jobs["jobs_lost"] == jobs["jobs_accepted"], (name, jobs)
+
+
+def test_no_job_is_lost_failed_or_run_twice_through_any_fault(report):
+    jobs = {name: f["jobs"] for name, f in report["faults"].items()}
+    assert {n: (j["jobs_lost"], j["jobs_failed"], j["jobs_run_again"]) for n, j in jobs.items()} == dict.fromkeys(
+        FAULTS, (0, 0, 0)
+    ), jobs
