@@ -152,11 +152,15 @@ def test_submit_with_redis_down_fails_the_job_and_says_why(tmp_path, settings, r
     redis_server.stop()
     try:
         with pytest.raises(JobsUnavailable, match=f"job queue redis://127.0.0.1:{redis_port}/0 is unreachable"):
-            client.submit("echo", {}, {"in.txt": b"x"})
+            client.submit("echo", {}, {"in.txt": b"x"}, idempotency_key="k-1")
         (job,) = client.store.list()
         assert job.state is JobState.FAILED and job.error == "could not be queued: the job queue is unreachable"
     finally:
         redis_server.start()
+    try:  # the client's retry with the same key makes a new job: the refused one freed its key
+        again = client.submit("echo", {}, {"in.txt": b"x"}, idempotency_key="k-1")
+        assert again.id != job.id and not again.replayed and again.state is JobState.QUEUED
+    finally:
         client.close()
 
 
@@ -227,3 +231,12 @@ def test_serve_refuses_to_start_when_a_service_is_down(tmp_path, redis_url, post
     what = "job queue" if down == "redis" else "records database (keys)"  # the first to reach PostgreSQL
     assert done.returncode != 0 and done.stdout == "", done.stdout
     assert done.stderr.splitlines()[-1].startswith(f"camdirector serve: {what} {dead} is unreachable: "), done.stderr
+
+
+def test_a_submit_sent_again_with_its_idempotency_key_sends_no_second_message(client):
+    from camdirector.jobs.queue import QUEUE_NAME
+
+    first = client.submit("echo", {}, {"in.txt": b"hi"}, idempotency_key="k-1")
+    again = client.submit("echo", {}, {"in.txt": b"hi"}, idempotency_key="k-1")
+    assert again.id == first.id and again.replayed
+    assert client._broker.do_qsize(QUEUE_NAME) == 1

@@ -13,6 +13,7 @@ import time
 import pytest
 
 from camdirector.jobs import (
+    IdempotencyConflict,
     JobHeldElsewhere,
     JobNotFound,
     JobState,
@@ -329,3 +330,22 @@ def test_a_table_from_before_tenants_gains_them(make_store, records_url, tmp_pat
     new = store.submit("echo", {}, {"in.txt": b"abc"}, tenant="acme", tenant_max_upload_bytes=3)
     assert [j.id for j in store.list()] == ["0ld", new.id] and store.list(tenant="acme") == [store.get(new.id)]
     assert make_store().get("0ld") == old  # opened again: migrated once
+
+
+def test_a_submit_sent_again_with_its_idempotency_key_answers_the_first_job(store):
+    """A client that lost a submit's answer sends it again with the same key: the first job is
+    answered, marked replayed, and nothing new is created; another request with that key is
+    refused; another tenant's key is its own."""
+    first = store.submit("echo", {"x": 1}, {"in.txt": b"abc"}, idempotency_key="k-1")
+    again = store.submit("echo", {"x": 1}, {"in.txt": b"abc"}, idempotency_key="k-1", max_queued=1)  # full: still the replay
+    assert again.id == first.id and again.replayed and not first.replayed
+    assert [j.id for j in store.list()] == [first.id] and job_dirs(store) == {first.id}
+    with pytest.raises(IdempotencyConflict, match="k-1"):
+        store.submit("echo", {"x": 2}, {"in.txt": b"abc"}, idempotency_key="k-1")
+    with pytest.raises(IdempotencyConflict):
+        store.submit("echo", {"x": 1}, {"in.txt": b"abd"}, idempotency_key="k-1")
+    assert store.earlier_submit("default", "k-1", "echo", {"x": 1}, {"in.txt": b"abc"}).id == first.id
+    assert store.earlier_submit("default", "k-2", "echo", {"x": 1}, {"in.txt": b"abc"}) is None
+    other = store.submit("echo", {"x": 1}, {"in.txt": b"abc"}, idempotency_key="k-1", tenant="studio-b")
+    assert other.id != first.id and not other.replayed
+    assert not list(store.root.glob(".tmp-*"))

@@ -75,6 +75,6 @@ def test_every_job_submitted_through_a_fault_is_accounted_for(report):
 
 def test_no_job_is_lost_failed_or_run_twice_through_any_fault(report):
     jobs = {name: f["jobs"] for name, f in report["faults"].items()}
-    assert {n: (j["jobs_lost"], j["jobs_failed"], j["jobs_run_again"]) for n, j in jobs.items()} == dict.fromkeys(
-        FAULTS, (0, 0, 0)
-    ), jobs
+    assert {
+        n: (j["jobs_lost"], j["jobs_failed"], j["jobs_run_again"], j["jobs_made_twice"]) for n, j in jobs.items()
+    } == dict.fromkeys(FAULTS, (0, 0, 0, 0)), jobs

@@ -118,11 +118,16 @@ class JobRunner:
 
     # -- API ----------------------------------------------------------------------------------
 
-    def submit(self, kind: str, params: dict, files: dict[str, bytes], tenant: str = "default") -> Job:
-        """Queue a job of `tenant`. Raises KeyError for an unknown kind, QueueFull when the queue
-        is full, TenantLimitReached beyond the tenant's share (JobSettings)."""
+    def submit(
+        self, kind: str, params: dict, files: dict[str, bytes], tenant: str = "default", idempotency_key: str | None = None
+    ) -> Job:
+        """Queue a job of `tenant` (or answer the earlier one with `idempotency_key`: records.py,
+        "Idempotency"). Raises KeyError for an unknown kind, QueueFull when the queue is full,
+        TenantLimitReached beyond the tenant's share (JobSettings), IdempotencyConflict."""
         self.registry.get(kind)
-        job = self.store.submit(kind, params, files, tenant=tenant, **self.settings.submit_limits())
+        job = self.store.submit(
+            kind, params, files, tenant=tenant, idempotency_key=idempotency_key, **self.settings.submit_limits()
+        )
         self._wake()
         return job
 

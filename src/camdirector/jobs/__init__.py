@@ -36,6 +36,7 @@ from camdirector.jobs.kinds import JobKind, JobRegistry, service_kinds
 from camdirector.jobs.queue import QueueClient
 from camdirector.jobs.queue_worker import QueueWorker, run_job_worker
 from camdirector.jobs.records import (
+    IdempotencyConflict,
     Job,
     JobHeldElsewhere,
     JobNotFound,
@@ -50,6 +51,7 @@ from camdirector.jobs.records import (
 )
 
 __all__ = [
+    "IdempotencyConflict",
     "Job",
     "JobExecutor",
     "JobKind",

@@ -128,19 +128,30 @@ class QueueClient:
         self._broker.client.close()
         self.store.close()
 
-    def submit(self, kind: str, params: dict, files: dict[str, bytes], tenant: str = "default") -> Job:
-        """Record a job of `tenant` and queue its message. Raises KeyError for an unknown kind,
-        QueueFull when `max_queued_jobs` jobs are queued on the whole cluster, TenantLimitReached
-        beyond the tenant's share (JobSettings), JobsUnavailable when Redis does not take the
-        message (the job is failed then)."""
+    def submit(
+        self, kind: str, params: dict, files: dict[str, bytes], tenant: str = "default", idempotency_key: str | None = None
+    ) -> Job:
+        """Record a job of `tenant` and queue its message (none for a replayed submit: records.py,
+        "Idempotency"). Raises KeyError for an unknown kind, QueueFull when `max_queued_jobs` jobs
+        are queued on the whole cluster, TenantLimitReached beyond the tenant's share
+        (JobSettings), IdempotencyConflict, JobsUnavailable when Redis does not take the message
+        (the job is failed then)."""
         self.registry.get(kind)
-        job = self.store.submit(kind, params, files, tenant=tenant, **self.settings.submit_limits())
+        job = self.store.submit(
+            kind, params, files, tenant=tenant, idempotency_key=idempotency_key, **self.settings.submit_limits()
+        )
+        if job.replayed:
+            return job
         try:
             self._actor.send(job.id)
         except redis.RedisError as exc:
             # the job's error is the client's to read: it names no URL or host (the log does)
             self.store.finish(
-                job.id, JobState.FAILED, error="could not be queued: the job queue is unreachable", only_if=JobState.QUEUED
+                job.id,
+                JobState.FAILED,
+                error="could not be queued: the job queue is unreachable",
+                only_if=JobState.QUEUED,
+                forget_key=True,
             )
             raise JobsUnavailable(f"job queue {redacted(self.settings.job_queue)} is unreachable: {redis_reason(exc)}") from None
         return job

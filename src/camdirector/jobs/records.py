@@ -34,6 +34,12 @@ unknown one. A submit can be held to the tenant's share in the same transaction 
 queue check (TenantLimitReached): jobs queued or running, and bytes of inputs its jobs keep (the
 `input_bytes` column; inputs stay until the job is purged).
 
+Idempotency: a submit may carry the client's key for it (HTTP `Idempotency-Key`); a second submit
+of the tenant with that key and the same request (kind, parameters, files: `request_sha256`)
+answers the first one's job (`Job.replayed`) and creates nothing, so a client that sends again a
+submit whose answer it lost (a cut connection, a node lost mid-request) does not run the job
+twice; with another request it raises IdempotencyConflict. A unique index holds it across nodes.
+
 Columns added after the first release (`_ADDED_COLUMNS`) are added to a table that lacks them
 when a store opens it, so a data directory or database from before keeps its jobs (as tenant
 `default`, their inputs counted as 0 bytes).
@@ -43,6 +49,8 @@ from __future__ import annotations
 
 import builtins
 import contextlib
+import dataclasses
+import hashlib
 import json
 import os
 import shutil
@@ -84,6 +92,11 @@ class JobNotFound(KeyError):
     """No job with this id."""
 
 
+class IdempotencyConflict(Exception):
+    """A submit's Idempotency-Key names an earlier submit of the tenant with another request
+    (HTTP 422); the message says so."""
+
+
 class JobHeldElsewhere(RuntimeError):
     """A claim of a job that another queue worker runs, its lease fresh: the message is a
     duplicate, to be tried again later (once the job ended it is dropped; once the lease ran out,
@@ -112,6 +125,7 @@ class Job:
     timings_ms: dict[str, float] = field(default_factory=dict)
     tenant: str = DEFAULT_TENANT
     claimed_by: str | None = None  # the claim token of the queue worker's delivery that runs it
+    replayed: bool = False  # this answer is an earlier submit's, found by its Idempotency-Key (not stored)
 
     def as_public(self) -> dict:
         """The REST view: id, status, progress, error (only when set), timings (ms), and the
@@ -139,6 +153,8 @@ _ADDED_COLUMNS = (
     ("input_bytes", "{int} NOT NULL DEFAULT 0"),  # bytes of the job's input files
     ("claimed_by", "TEXT"),  # the claim token of the running attempt (queue workers; NULL otherwise)
     ("lease_s", "{real}"),  # Unix s when its holder last showed it was alive
+    ("idempotency_key", "TEXT"),  # the client's key for its submit (module docstring, "Idempotency")
+    ("request_sha256", "TEXT"),  # request_digest() of that submit
 )
 _UNFINISHED = (JobState.QUEUED.value, JobState.RUNNING.value)
 
@@ -159,6 +175,15 @@ def _row_to_job(row) -> Job:
         tenant=row[11],
         claimed_by=row[12],
     )
+
+
+def request_digest(kind: str, params: dict, files: dict[str, bytes]) -> str:
+    """SHA-256 (hex) of what a submit asks: its kind, parameters and files (names and contents)."""
+    digest = hashlib.sha256(json.dumps([kind, params], sort_keys=True).encode())
+    for name in sorted(files):
+        digest.update(b"\0%s\0%d\0" % (name.encode(), len(files[name])))
+        digest.update(files[name])
+    return digest.hexdigest()
 
 
 def interrupted_error(attempts: int, max_attempts: int) -> str:
@@ -220,14 +245,18 @@ class JobStore:
         tenant: str = DEFAULT_TENANT,
         tenant_max_queued_jobs: int | None = None,
         tenant_max_upload_bytes: int | None = None,
+        idempotency_key: str | None = None,
     ) -> Job:
         """A new queued job of `tenant` with `files` (name -> content) in its input folder, as
-        created (state queued, whatever a runner did since).
+        created (state queued, whatever a runner did since); with an `idempotency_key` the tenant
+        used before for the same request, that job as it is now, `replayed` (module docstring).
         Raises QueueFull when `max_queued` jobs are queued already (all tenants), and
         TenantLimitReached when the tenant has `tenant_max_queued_jobs` jobs queued or running,
-        or its jobs' inputs and these would pass `tenant_max_upload_bytes` (None: no such limit).
-        Nothing is left behind on any failure."""
+        or its jobs' inputs and these would pass `tenant_max_upload_bytes` (None: no such limit);
+        IdempotencyConflict for a key used before for another request. Nothing is left behind on
+        any failure."""
         job_id = uuid.uuid4().hex
+        digest = request_digest(kind, params, files) if idempotency_key is not None else None
         params_text = json.dumps(params, sort_keys=True)
         input_bytes = sum(len(data) for data in files.values())
         tmp = self.temp_dir()
@@ -238,6 +267,9 @@ class JobStore:
                     raise ValueError(f"bad input file name {name!r}")
                 (tmp / "input" / name).write_bytes(data)
             with self._tx() as db:
+                earlier = self._earlier(db, tenant, idempotency_key, digest)
+                if earlier is not None:
+                    return earlier
                 if max_queued is not None:
                     (queued,) = db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (JobState.QUEUED.value,)).fetchone()
                     if queued >= max_queued:
@@ -246,7 +278,8 @@ class JobStore:
                 os.rename(tmp, self.root / job_id)
                 try:
                     db.execute(
-                        f"INSERT INTO jobs ({_COLUMNS}, input_bytes, seq) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
+                        f"INSERT INTO jobs ({_COLUMNS}, input_bytes, idempotency_key, request_sha256, seq) "
+                        f"VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,{self._NEXT_SEQ})",
                         (
                             job_id,
                             kind,
@@ -262,6 +295,8 @@ class JobStore:
                             tenant,
                             None,  # claimed_by
                             input_bytes,
+                            idempotency_key,
+                            digest,
                         ),
                     )
                     # read in the same transaction: the job as created, before a runner claims it
@@ -272,6 +307,29 @@ class JobStore:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         return created
+
+    def earlier_submit(self, tenant: str, idempotency_key: str, kind: str, params: dict, files: dict[str, bytes]) -> Job | None:
+        """The job of `tenant`'s earlier submit with `idempotency_key`, `replayed`, when it asked
+        the same; None when the key is new. Raises IdempotencyConflict when it asked otherwise.
+        For a route that must answer a replay before checks of its own (a level's name)."""
+        with self._read() as db:
+            return self._earlier(db, tenant, idempotency_key, request_digest(kind, params, files))
+
+    @staticmethod
+    def _earlier(db, tenant: str, idempotency_key: str | None, digest: str | None) -> Job | None:
+        if idempotency_key is None:
+            return None
+        row = db.execute(
+            f"SELECT {_COLUMNS}, request_sha256 FROM jobs WHERE tenant = ? AND idempotency_key = ?", (tenant, idempotency_key)
+        ).fetchone()
+        if row is None:
+            return None
+        if row[-1] != digest:
+            raise IdempotencyConflict(
+                f"Idempotency-Key {idempotency_key!r} was sent before with another request (job {row[0]}); "
+                "use a new key for a new request"
+            )
+        return dataclasses.replace(_row_to_job(row[:-1]), replayed=True)
 
     @staticmethod
     def _check_tenant_share(db, tenant: str, input_bytes: int, max_jobs: int | None, max_bytes: int | None) -> None:
@@ -412,11 +470,14 @@ class JobStore:
         only_if: JobState | None = None,
         attempt: int | None = None,
         publish: Callable[[], None] | None = None,
+        forget_key: bool = False,
     ) -> bool:
         """Set a final state (and progress 1 on success). only_if: change nothing unless the job
         is in that state now; attempt: nor unless this is its latest attempt. publish: called
         inside the transaction once the record changed (the runner renames the result folder
-        into place there; if it raises, nothing changes). Returns whether the record changed."""
+        into place there; if it raises, nothing changes). forget_key: the job's Idempotency-Key
+        is freed (a submit refused after its record was made: the client's retry makes a new
+        job). Returns whether the record changed."""
         assert state.finished
         sql = (
             "UPDATE jobs SET state = ?, error = ?, finished_s = ?, timings = ?, "
@@ -426,6 +487,8 @@ class JobStore:
         if timings_ms is None:
             sql = sql.replace("timings = ?, ", "")
             del args[3]
+        if forget_key:
+            sql = sql.replace("SET state = ?, ", "SET state = ?, idempotency_key = NULL, ")
         for column, value in (("state", only_if.value if only_if else None), ("attempts", attempt)):
             if value is not None:
                 sql += f" AND {column} = ?"
@@ -529,6 +592,9 @@ CREATE TABLE IF NOT EXISTS jobs (
 CREATE INDEX IF NOT EXISTS jobs_state_seq ON jobs (state, seq);
 """
 _TENANT_INDEX = "CREATE INDEX IF NOT EXISTS jobs_tenant_state ON jobs (tenant, state)"  # after the migration
+_IDEMPOTENCY_INDEX = (  # after the migration; one key per tenant, on every node
+    "CREATE UNIQUE INDEX IF NOT EXISTS jobs_idempotency ON jobs (tenant, idempotency_key) WHERE idempotency_key IS NOT NULL"
+)
 
 
 class SqliteJobStore(SqliteStore, JobStore):
@@ -547,6 +613,7 @@ class SqliteJobStore(SqliteStore, JobStore):
                 if name not in present:
                     db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {sql_type.format(int='INTEGER', real='REAL')}")
             db.execute(_TENANT_INDEX)
+            db.execute(_IDEMPOTENCY_INDEX)
 
 
 # -- PostgreSQL ---------------------------------------------------------------------------------
@@ -572,6 +639,7 @@ _POSTGRES_SCHEMA = (
         for name, sql_type in _ADDED_COLUMNS
     ),
     _TENANT_INDEX,
+    _IDEMPOTENCY_INDEX,
 )
 # Key of the transaction-scoped advisory lock that serializes writes, as BEGIN IMMEDIATE does in
 # SQLite (any constant that no other user of the database takes; these are "camd" in ASCII).

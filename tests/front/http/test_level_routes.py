@@ -183,6 +183,24 @@ def test_duplicate_names_need_replace(level_server, canary):
     raw.close()
 
 
+def test_a_level_submit_sent_again_with_its_idempotency_key_answers_the_first_job(level_server, canary):
+    """The name is being added by the first submit: a replay with its key is answered that job,
+    not 409; the key with another level is 422."""
+    key = {"Idempotency-Key": "add-hall-1"}
+    post = lambda content: level_server.http_client.post(  # noqa: E731
+        "/v1/levels", data={"name": "hall"}, files={"level": ("level.obj", content)}, headers=key
+    )
+    first = post(obj_text(l_room()).encode())
+    assert first.status_code == 202, first.text
+    again = post(obj_text(l_room()).encode())
+    assert again.status_code == 202 and again.json()["id"] == first.json()["id"]
+    assert again.headers["idempotent-replayed"] == "true"
+    other = post(obj_text(corridor()).encode())
+    assert other.status_code == 422 and "another request" in other.json()["detail"]
+    assert wait_job(level_server, first.json()["id"])[0]["status"] == "succeeded"
+    assert post(obj_text(l_room()).encode()).json()["id"] == first.json()["id"]  # the level exists now: still the replay
+
+
 def test_cancelled_jobs_and_removed_levels(level_server, canary):
     http = level_server.http_client
     added = post_level(level_server, "gone", obj_text(l_room()).encode())

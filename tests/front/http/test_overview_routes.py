@@ -253,3 +253,27 @@ def test_openapi_lists_the_routes(service):
     form = paths["/v1/overview-jobs"]["post"]["requestBody"]["content"]["multipart/form-data"]
     assert client.get("/docs").status_code == 200
     assert form["schema"]["$ref"]
+
+
+def test_a_submit_sent_again_with_its_idempotency_key_answers_the_first_job(tmp_path, run_bvh):
+    app = FastAPI()
+    app.state.guard = Guard(None)
+    settings = JobSettings(max_queued_jobs=1)
+    runner = open_jobs(tmp_path, service_kinds(), settings)  # not started: the job stays queued
+    install_overview_routes(app, runner, settings)
+    client = TestClient(app)
+    post = lambda key, **data: client.post(  # noqa: E731
+        "/v1/overview-jobs", files={"file": ("run.bvh", run_bvh)}, data=data, headers={"Idempotency-Key": key}
+    )
+    first = post("lost-answer-1")
+    assert first.status_code == 202 and "idempotent-replayed" not in first.headers
+    again = post("lost-answer-1")  # the queue is full now: a replay is answered all the same
+    assert again.status_code == 202 and again.json() == first.json(), again.text
+    assert again.headers["idempotent-replayed"] == "true" and again.headers["location"] == first.headers["location"]
+    assert len(client.get("/v1/overview-jobs").json()["jobs"]) == 1
+    other = post("lost-answer-1", seed="9")
+    assert other.status_code == 422 and "another request" in other.json()["detail"]
+    assert post("x" * 129).status_code == 422  # longer than 128
+    assert post("tab\there").status_code == 422  # not printable ASCII
+    assert post("new-key").status_code == 429  # a new key is a new job: the queue is full
+    runner.close()

@@ -11,16 +11,41 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import FastAPI, HTTPException, Request
+from fastapi import FastAPI, Header, HTTPException, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
 from camdirector.front.job_runner import JobRunner
-from camdirector.jobs import Job, JobNotFound, JobState, JobsUnavailable, QueueClient, QueueFull, TenantLimitReached
+from camdirector.jobs import (
+    IdempotencyConflict,
+    Job,
+    JobNotFound,
+    JobState,
+    JobsUnavailable,
+    QueueClient,
+    QueueFull,
+    TenantLimitReached,
+)
 
 Jobs = JobRunner | QueueClient
+
+# A job POST's optional key: the same key and request again answer the first job (jobs/records.py,
+# "Idempotency"), so a client may send again a submit whose answer it lost.
+IdempotencyKey = Annotated[
+    str | None,
+    Header(
+        alias="Idempotency-Key",
+        min_length=1,
+        max_length=128,
+        pattern=r"^[\x21-\x7e]+$",
+        description=(
+            "1-128 printable ASCII characters, new for each new job: sent again with the same request, "
+            "the first job is answered (header Idempotent-Replayed: true) and nothing is run twice"
+        ),
+    ),
+]
 
 log = logging.getLogger("camdirector.front.http")
 
@@ -68,16 +93,38 @@ async def known_form_fields(request: Request) -> None:
         )
 
 
-def submit_job(runner: Jobs, kind: str, params: dict, files: dict[str, bytes], tenant: str) -> Job:
-    """POST of a job route: the job queued, `tenant`'s; HTTPException 429 when the queue is full
-    or the tenant holds its share of jobs or uploads (JobSettings); JobsUnavailable (503 through
-    answer_unavailable_jobs) when the job queue cannot take it (the job is failed then)."""
+def submit_job(
+    runner: Jobs, kind: str, params: dict, files: dict[str, bytes], tenant: str, idempotency_key: str | None = None
+) -> Job:
+    """POST of a job route: the job queued, `tenant`'s, or the earlier one its `idempotency_key`
+    names (`replayed`); HTTPException 429 when the queue is full or the tenant holds its share of
+    jobs or uploads (JobSettings), 422 for a key sent before with another request;
+    JobsUnavailable (503 through answer_unavailable_jobs) when the job queue cannot take it (the
+    job is failed then)."""
     try:
-        return runner.submit(kind, params, files, tenant)
+        return runner.submit(kind, params, files, tenant, idempotency_key)
+    except IdempotencyConflict as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
     except QueueFull as exc:
         raise HTTPException(status_code=429, detail=f"job queue full: {exc}", headers={"Retry-After": "10"}) from None
     except TenantLimitReached as exc:
         raise HTTPException(status_code=429, detail=str(exc), headers={"Retry-After": "10"}) from None
+
+
+def earlier_job(runner: Jobs, tenant: str, idempotency_key: str | None, kind: str, params: dict, files: dict[str, bytes]):
+    """The job an earlier POST with `idempotency_key` made (submit_job's replay, for a route whose
+    own checks would refuse the replay); None for a new or absent key; 422 as submit_job."""
+    if idempotency_key is None:
+        return None
+    try:
+        return runner.store.earlier_submit(tenant, idempotency_key, kind, params, files)
+    except IdempotencyConflict as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
+
+
+def created_headers(job: Job, location: str) -> dict[str, str]:
+    """A job POST's 202 headers: where the job is, and whether this answer is a replay."""
+    return {"Location": location, **({"Idempotent-Replayed": "true"} if job.replayed else {})}
 
 
 def answer_unavailable(app: FastAPI, error: type[Exception], what: str, note: Callable[[Any], object] | None = None) -> None:

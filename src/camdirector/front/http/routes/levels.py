@@ -60,12 +60,15 @@ from camdirector.front.http.auth import require
 from camdirector.front.http.body_limits import allow_body
 from camdirector.front.http.routes.job_resources import (
     MAX_LISTED_JOBS,
+    IdempotencyKey,
     JobCreated,
     Jobs,
     JobStatus,
     answer_unavailable,
     answer_unavailable_jobs,
     cancel_job,
+    created_headers,
+    earlier_job,
     job_of_kind,
     known_form_fields,
     list_jobs,
@@ -186,7 +189,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
             400: {"description": "a file is not a usable .obj/.glb mesh or .bsp map (detail says why)"},
             409: {"description": "the name is taken (registered or being added) and replace is false"},
             413: {"description": "an upload is larger than the server's limit"},
-            422: {"description": "a bad name, or scale or agent out of range"},
+            422: {"description": "a bad name, scale or agent out of range, or an Idempotency-Key used for another request"},
             429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
             503: {"description": "the job store or queue is unreachable; retry later"},
         },
@@ -208,6 +211,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         agent_radius: Annotated[float, Form(description="agent radius, m, [0, 50]")] = 0.6,
         replace: Annotated[bool, Form(description="replace a level of that name when the job succeeds")] = False,
         seed: Annotated[int, Form(ge=0, le=2**63 - 1, description="random seed of the precompute")] = 0,
+        idempotency_key: IdempotencyKey = None,
     ) -> JSONResponse:
         """Submit a level for precompute (a job with progress). The files are checked now: a bad
         upload answers 4xx with the reason and never becomes a job."""
@@ -240,11 +244,18 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
             "tenant": identity.tenant,
         }
         with submit_lock:
+            job = earlier_job(runner, identity.tenant, idempotency_key, KIND, params, files)
+            if job is not None:  # sent again: its level is this job's, not a name taken
+                return JSONResponse(
+                    {"id": job.id, "status": job.state.value, "name": name},
+                    status_code=202,
+                    headers=created_headers(job, f"{JOBS_PREFIX}/{job.id}"),
+                )
             if not replace and (registry.get(name, identity.tenant) is not None or name in pending_names(identity.tenant)):
                 raise HTTPException(
                     status_code=409, detail=(f"level {name!r} exists or is being added; send replace=true to replace it")
                 )
-            job = submit_job(runner, KIND, params, files, identity.tenant)
+            job = submit_job(runner, KIND, params, files, identity.tenant, idempotency_key)
         request.app.state.guard.audit(
             identity,
             "level.add",
@@ -259,7 +270,7 @@ def build_level_router(runner: Jobs, job_settings: JobSettings, data_dir: Path) 
         return JSONResponse(
             {"id": job.id, "status": job.state.value, "name": name},
             status_code=202,
-            headers={"Location": f"{JOBS_PREFIX}/{job.id}"},
+            headers=created_headers(job, f"{JOBS_PREFIX}/{job.id}"),
         )
 
     @router.get(JOBS_PREFIX, response_model=LevelJobList)

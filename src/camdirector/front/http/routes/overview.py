@@ -37,11 +37,13 @@ from camdirector.front.http.auth import require
 from camdirector.front.http.body_limits import allow_body
 from camdirector.front.http.routes.job_resources import (
     MAX_LISTED_JOBS,
+    IdempotencyKey,
     JobCreated,
     Jobs,
     JobStatus,
     answer_unavailable_jobs,
     cancel_job,
+    created_headers,
     job_of_kind,
     known_form_fields,
     list_jobs,
@@ -127,7 +129,7 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
         responses={
             400: {"description": "the upload is not a usable BVH clip (detail says why)"},
             413: {"description": "the upload is larger than the server's limit"},
-            422: {"description": "a form field is out of range"},
+            422: {"description": "a form field is out of range, or an Idempotency-Key sent before with another request"},
             429: {"description": "the job queue is full, or the tenant holds its share of jobs or uploads"},
             503: {"description": "the job store or queue is unreachable; retry later"},
         },
@@ -152,6 +154,7 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
         min_shot_s: Annotated[float | None, Form(description="shortest shot, s (2)")] = None,
         max_shots_per_1000_frames: Annotated[float | None, Form(description="shot cap per 1000 frames (6)")] = None,
         analysis_rate_hz: Annotated[float | None, Form(description="rate the stages run at, Hz (15)")] = None,
+        idempotency_key: IdempotencyKey = None,
     ) -> JSONResponse:
         """Submit a BVH clip for a multi-shot overview camera path. The clip is parsed now: a
         bad upload answers 4xx with the reason and never becomes a job."""
@@ -193,9 +196,11 @@ def build_overview_router(runner: Jobs, job_settings: JobSettings) -> APIRouter:
             raise HTTPException(status_code=400, detail=str(exc)) from None
         params["frames"] = clip.frame_count
         params["file_name"] = os.path.basename(file.filename or CLIP_FILE)[:200]
-        job = submit_job(runner, KIND, params, {CLIP_FILE: data}, identity.tenant)
+        job = submit_job(runner, KIND, params, {CLIP_FILE: data}, identity.tenant, idempotency_key)
         return JSONResponse(
-            {"id": job.id, "status": job.state.value}, status_code=202, headers={"Location": f"/v1/overview-jobs/{job.id}"}
+            {"id": job.id, "status": job.state.value},
+            status_code=202,
+            headers=created_headers(job, f"/v1/overview-jobs/{job.id}"),
         )
 
     @router.get("", response_model=OverviewJobList)
