@@ -470,7 +470,7 @@ def test_the_program_monitor_shows_the_camera_view_live(server, page):
         before = wait_for_picture(program, lambda p: difference(p, first) < SAME_PICTURE, "the monitor never showed frame 60")
         assert before.shape == MONITOR_SHAPE
         playwright.expect(page.locator("#cut-caption")).to_have_text(  # the first pose has nothing before it
-            "Nothing to show: no cut yet."
+            "Frame 1 began the first shot: the session's first pose, with no frame before it to cut from."
         )
 
         streamed = list(walk(session_id, 60, start_frame=61))

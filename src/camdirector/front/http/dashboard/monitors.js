@@ -14,7 +14,7 @@ export function watch(sessionId) {   // the monitors of a newly selected session
   program.src = `${sessionPath(sessionId)}/view.mjpeg?fps=${PROGRAM_FPS}&width=${MONITOR_WIDTH_PX}`;
   document.getElementById("program-view-status").textContent = "";
   state.cutShown = null;
-  for (const id of ["cut-before", "cut-after"]) document.getElementById(id).removeAttribute("src");
+  showCutPictures([]);
   document.getElementById("cut-caption").textContent = "No cut yet.";
   state.candidatesShown = "";
   state.candidatesPictured = { frame: null, ms: 0 };
@@ -32,18 +32,27 @@ async function picture(url) {   // a monitor's picture as an object URL, with th
            placeholder: reply.headers.get("X-Camdirector-Placeholder") };
 }
 
+const FIRST_SHOT_ID = 1;   // shot ids count a session's cuts, its first pose the first (pipeline/session.py)
+
 // The last cut's before and after, asked for when a newer cut appears in the frames (and once per
 // session, for a cut older than the frames kept). Fetched rather than set as src: the headers say
-// which cut the server holds (the session's first pose is a cut with nothing before it).
+// which cut the server holds. The session's first pose is a cut with nothing before it: the server
+// holds no pictures of it, and the caption says what it is rather than "no cut yet".
 export async function showLastCut(frames) {
   const sessionId = state.selected;
   const cuts = frames.filter((f) => f.cut && f.camera);
-  const newest = cuts.length ? cuts[cuts.length - 1].frame : "none";
-  const key = `${sessionId} ${newest}`;
+  const newest = cuts.length ? cuts[cuts.length - 1] : null;
+  const key = `${sessionId} ${newest ? newest.frame : "none"}`;
   if (key === state.cutShown) return;
   state.cutShown = key;
+  if (newest && newest.shot_id === FIRST_SHOT_ID) {
+    showCutPictures([]);
+    document.getElementById("cut-caption").textContent =
+      `Frame ${newest.frame} began the first shot: the session's first pose, with no frame before it to cut from.`;
+    return;
+  }
   // The cut's frame in the address: a new picture per cut, never a cached one.
-  const base = `${sessionPath(sessionId)}/view?width=${MONITOR_WIDTH_PX}&frame=${newest}&shot=`;
+  const base = `${sessionPath(sessionId)}/view?width=${MONITOR_WIDTH_PX}&frame=${newest ? newest.frame : "none"}&shot=`;
   let before, after;
   try {
     [before, after] = await Promise.all([picture(base + "cut_before"), picture(base + "cut_after")]);
@@ -51,16 +60,27 @@ export async function showLastCut(frames) {
     if (state.cutShown === key) state.cutShown = null;   // asked again on the next poll
     return;
   }
-  if (state.cutShown !== key) {   // another session was picked, or a newer cut asked for, meanwhile
+  // The server shares a picture made a moment ago, or still being made, with whoever asks for the
+  // same view (front/view_hub.py): one asked for before this cut may answer. Another cut's pictures
+  // (or "no cut yet") are not shown as this one's: asked again on the next poll.
+  if (newest && after.frame !== String(newest.frame) && state.cutShown === key) state.cutShown = null;
+  if (state.cutShown !== key) {   // that, or another session was picked, or a newer cut asked for, meanwhile
     URL.revokeObjectURL(before.url);
     URL.revokeObjectURL(after.url);
     return;
   }
-  state.cutPictures.forEach((url) => URL.revokeObjectURL(url));
-  state.cutPictures = [before.url, after.url];
-  document.getElementById("cut-before").src = before.url;
-  document.getElementById("cut-after").src = after.url;
+  showCutPictures([before.url, after.url]);
   document.getElementById("cut-caption").textContent = cutCaption(before, after, frames);
+}
+
+function showCutPictures(urls) {   // [before, after] as object URLs, or [] to empty both monitors
+  state.cutPictures.forEach((url) => URL.revokeObjectURL(url));
+  state.cutPictures = urls;
+  ["cut-before", "cut-after"].forEach((id, k) => {
+    const img = document.getElementById(id);
+    if (urls.length) img.src = urls[k];
+    else img.removeAttribute("src");
+  });
 }
 
 function cutCaption(before, after, frames) {

@@ -1,5 +1,6 @@
 // The polls: each runs every so often while someone is logged in, and all of them at once right
-// after a login. A poll's failure shows in the header.
+// after a login; one still running when its time comes again is not started twice. A poll's
+// failure shows in the header.
 import { refreshJobs } from "./jobs.js";
 import { refreshSession } from "./session.js";
 import { refreshSessions } from "./sessions.js";
@@ -17,8 +18,12 @@ const POLLS = [
   [POLL_SESSIONS_MS, loadDirectors],
 ];
 
+const running = new Set();   // the polls whose last run has not ended: a slow server is not asked again meanwhile
+
 function run(task) {
-  if (state.caller) task().catch(showTrouble);
+  if (!state.caller || running.has(task)) return;
+  running.add(task);
+  task().catch(showTrouble).finally(() => running.delete(task));
 }
 
 export function startPolls() {

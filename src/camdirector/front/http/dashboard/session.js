@@ -30,6 +30,10 @@ export async function refreshSession() {
   }
   const buffered = state.buffered;
   if (buffered.session !== sessionId) return;   // another session was picked meanwhile
+  // Asks overlap (a slow answer outlasts the poll's period; a click or a style applied asks at
+  // once): an answer asked for before another one was added holds frames the buffer has now, and
+  // added too would count and list their cuts and events once per answer. The next poll asks anew.
+  if (buffered.frames[buffered.frames.length - 1] !== newest) return;
   const fresh = detail.frames.flatMap((f) => f.events || []);
   if (seen === null) {
     buffered.frames = detail.frames;
