@@ -29,6 +29,7 @@ from camdirector.matches.cs2_demo import (
     source_points_to_world,
     view_rotation,
 )
+from tests.evaluation.match.test_match_file import assert_stands_and_aims
 
 CS2_DEMOS = Path(__file__).resolve().parents[1] / "data" / "real_matches" / "cs2"
 REAL_DEMOS = sorted(CS2_DEMOS.glob("*.dem.gz"))
@@ -148,6 +149,14 @@ def test_players_are_who_played_on_t_or_ct_in_order_of_appearance():
     assert match.level == "de_test" and len(match.time_s) == 8
     np.testing.assert_allclose(match.time_s, np.arange(1, 9) / 64.0)
     np.testing.assert_allclose(match.players[0].height_m, 72 * 0.0254)
+
+
+def test_a_player_looking_down_stands_upright_and_keeps_its_aim():
+    rows = [{"tick": t, "steamid": int(ALICE), "name": "alice", "team_num": 2, "pitch": 60.0, "yaw": 30.0} for t in (1, 2)]
+    match = match_from_tables(_ticks(rows), {}, {}, level="de_test")
+    for frame in range(2):
+        assert_stands_and_aims(match, frame, 0, 60.0, 30.0)
+    assert match.aim_pitch_deg.tolist() == [[60.0], [60.0]]
 
 
 def test_feet_facing_alive_and_stats_per_frame():

@@ -22,7 +22,9 @@ from camdirector.__main__ import main
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.evaluation.match.match_file import load_match, save_match
 from camdirector.evaluation.match.session_feed import Feed, frame_updates, match_session_fields
+from camdirector.geometry.transforms import quat_rotate
 from camdirector.matches.playback import lap_feeds
+from tests.evaluation.match.test_match_file import save_views
 from tests.evaluation.match.test_sim import arena
 from tests.service.tracks_sessions import ROOT, cli_add_level, obj_text
 
@@ -287,3 +289,26 @@ def test_bad_input_exits_2_with_one_line(registry, arena_server, make_file, serv
 def test_bad_arguments_exit_2(registry, args, message, capsys):
     assert main(["play-match", str(registry / "m.npz"), "--server", "grpc://127.0.0.1:1", *args]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_demo_is_refused_in_one_line_naming_it_and_what_was_expected(tmp_path, capsys):
+    """A demo is no match file: say so and how to make one, not numpy's advice to load it unsafely."""
+    demo = tmp_path / "duel.mvd.gz"
+    demo.write_bytes((ROOT / "tests" / "data" / "real_matches" / "1on1_milton_vs_mushi_tron_20240616-1719.mvd.gz").read_bytes())
+    assert main(["play-match", str(demo), "--server", "grpc://127.0.0.1:1"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1, err
+    assert err.startswith(f"camdirector play-match: {demo}: not a match file") and "import-match" in err, err
+    assert "pickle" not in err
+
+
+def test_a_match_file_of_views_is_played_with_upright_bodies(tmp_path):
+    """A file imported before bodies stood holds the views as the bodies: the server's targets stand."""
+    save_views(tmp_path / "old.npz")
+    match = load_match(tmp_path / "old.npz")
+    targets = match_session_fields(match, "planned", 2.0, 0)["targets"]
+    for target in targets:
+        rotation = target.transform.rotation
+        up = quat_rotate([rotation.x, rotation.y, rotation.z, rotation.w], [0.0, 1.0, 0.0])
+        np.testing.assert_allclose(up, [0.0, 1.0, 0.0], rtol=0.0, atol=1e-9)
+    assert len(targets) == 2

@@ -16,9 +16,11 @@ import pytest
 from camdirector.__main__ import main
 from camdirector.evaluation.match.match_file import STAT_COLUMNS, load_match
 from camdirector.geometry import quake_frame
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.matches.mvd_wire import quake_text
 from camdirector.matches.quakeworld_mvd import STEP_SPEED_UNITS_S, MvdError, import_mvd, match_from_mvd, parse_mvd
 from camdirector.matches.quakeworld_obituaries import Obituary, parse_obituary
+from tests.evaluation.match.test_match_file import assert_stands_and_aims
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "real_matches"
 DEMOS = {
@@ -60,10 +62,10 @@ def _block(target: int, body: bytes, msec: int = 0, to: int = 0) -> bytes:
     return bytes([msec, target | (to << 3)]) + struct.pack("<I", len(body)) + body
 
 
-def _tiny_demo() -> tuple[bytes, list[int]]:
+def _tiny_demo(pitch_angle16: int = 0) -> tuple[bytes, list[int]]:
     """serverdata, one player "ab" of team "red", its stats and frags, two playerinfo frames 0.1 s
-    apart (origin (0, 0, 24) -> (32, 0, 24) units, looking along yaw 90), then "ab suicides".
-    Returns the bytes and the offsets where its blocks end."""
+    apart (origin (0, 0, 24) -> (32, 0, 24) units, looking along yaw 90 and pitch_angle16 * 360 /
+    65536 deg), then "ab suicides". Returns the bytes and the offsets where its blocks end."""
     serverdata = (
         bytes([11])
         + struct.pack("<ii", 28, 7)
@@ -81,7 +83,7 @@ def _tiny_demo() -> tuple[bytes, list[int]]:
         + bytes([42, 0])
         + struct.pack("<H", 0b11111)
         + bytes([0])
-        + struct.pack("<hhhhh", 0, 0, 24 * 8, 0, 16384)
+        + struct.pack("<hhhhh", 0, 0, 24 * 8, pitch_angle16, 16384)
     )
     second = bytes([42, 0]) + struct.pack("<H", 0b1) + bytes([0]) + struct.pack("<h", 32 * 8)
     obituary = bytes([8, 1]) + b"ab suicides\n\0"
@@ -112,6 +114,22 @@ def test_a_hand_built_demo_imports_exactly():
     assert match.alive[:, 0].tolist() == [True, True, False]  # dead from the kill on: no respawn follows
 
 
+def test_a_player_looking_down_stands_upright_and_keeps_its_aim():
+    """Pitch 60 deg (the nearest 16-bit angle): the body turns by the yaw alone, the aim has both."""
+    angle16 = round(60.0 * 65536 / 360.0)
+    match = import_mvd(_tiny_demo(angle16)[0], rate_hz=20.0)
+    for frame in range(len(match.time_s)):
+        assert_stands_and_aims(match, frame, 0, angle16 * 360.0 / 65536.0, 90.0)
+    np.testing.assert_allclose(match.aim_pitch_deg[:, 0], angle16 * 360.0 / 65536.0, rtol=0.0, atol=1e-12)
+
+
+def test_every_real_players_body_stands(demos):
+    for key, (_, _, imported) in demos.items():
+        up = np.einsum("fpij,j->fpi", quat_to_matrix(imported.match.rotations_xyzw), [0.0, 1.0, 0.0])
+        assert np.abs(up - [0.0, 1.0, 0.0]).max() <= 1e-9, key
+        assert np.abs(imported.match.aim_pitch_deg).max() > 30.0, key  # the players did look up and down
+
+
 def test_a_demo_cut_anywhere_is_an_mvd_error_or_a_shorter_demo():
     data, ends = _tiny_demo()
     for cut in range(len(data)):
@@ -136,12 +154,29 @@ def test_unknown_messages_and_bad_blocks_name_their_offset():
         parse_mvd(bytes([0, 0]) + data)
 
 
-def test_random_bytes_are_an_mvd_error():
+def _begins_with_serverdata(data: bytes) -> bool:
+    """Whether data's first block is one of messages whose first is svc_serverdata (11)."""
+    if len(data) < 2 or data[1] & 7 in (0, 2, 7):
+        return False
+    first = 2 + (4 if data[1] & 7 == 3 else 0) + 4
+    return len(data) > first and data[first] == 11
+
+
+def test_random_bytes_are_an_mvd_error_that_says_not_an_mvd_demo():
     rng = np.random.default_rng(29)
+    said = 0
     for _ in range(200):
         junk = rng.integers(0, 256, int(rng.integers(1, 4000)), dtype=np.uint8).tobytes()
-        with pytest.raises(MvdError):
+        with pytest.raises(MvdError) as refused:
             parse_mvd(junk)
+        if junk[1:2] and junk[1] & 7 == 0:
+            assert "a client's .qwd demo" in str(refused.value)
+        elif not _begins_with_serverdata(junk):
+            assert str(refused.value).startswith("offset 0: not an MVD demo (") and "truncated" not in str(refused.value)
+            said += 1
+    assert said >= 150
+    with pytest.raises(MvdError, match=r"^offset 0: not an MVD demo \(its first message is of type 255; "):
+        parse_mvd(b"\x05\x06\xff\xff\xff\x7f" + bytes([255]))
 
 
 def test_obituaries_name_both_sides_and_the_weapon():
@@ -272,5 +307,5 @@ def test_the_cli_answers_bad_input_with_status_2_and_no_traceback(tmp_path, caps
     junk.write_bytes(b"\x05\x06\xff\xff\xff\x7f")
     assert main(["import-match", str(junk), "--out", str(tmp_path / "m.npz")]) == 2
     err = capsys.readouterr().err
-    assert "offset 6: truncated block" in err and "Traceback" not in err
+    assert f"{junk}: offset 0: not an MVD demo (it ends at byte 6, before its first message" in err and "Traceback" not in err
     assert main(["import-match", str(tmp_path / "missing.mvd.gz"), "--out", str(tmp_path / "m.npz")]) == 2

@@ -29,9 +29,14 @@ def obj_text(mesh: TriMesh) -> str:
 
 
 def cli_add_level(data_dir: Path, name: str, level_file: Path) -> dict:
-    """`camdirector level add NAME FILE --data-dir DIR` in a child process; its JSON record."""
+    """`camdirector level add NAME FILE --data-dir DIR` in a child process, for the 2.0 m, 0.6 m
+    agent these tests' levels and tests/data/recordings were made with (the command's own default
+    is the match importers' player since issue 41); its JSON record."""
     done = subprocess.run(
-        [sys.executable, "-m", "camdirector.__main__", "level", "add", name, str(level_file), "--data-dir", str(data_dir)],
+        [
+            *(sys.executable, "-m", "camdirector.__main__", "level", "add", name, str(level_file)),
+            *("--data-dir", str(data_dir), "--agent-height", "2.0", "--agent-radius", "0.6"),
+        ],
         capture_output=True,
         text=True,
         cwd=ROOT,

@@ -7,7 +7,9 @@ conversion alone, over plain columns, so it runs without the package.
 
 Units and axes. Source measures in units with +Z up and yaw turning +X toward +Y, as Quake does,
 so quake_frame's axis map (x, y, z) -> (x, z, -y) and its view_rotation apply unchanged; only the
-scale differs. The player's hull is 32 x 32 x 72 units standing (54 crouching) with the origin at
+scale differs. A player's body stands, turned by its eye angles' yaw alone; their pitch is its aim
+(evaluation/match/match_file.py: a player looking down does not lie down). The player's hull is
+32 x 32 x 72 units standing (54 crouching) with the origin at
 its feet (Valve Developer Community, "Counter-Strike: Global Offensive Mapper's Reference", Player
 Dimensions; CS2 keeps CS:GO's movement hull). One unit = one inch (0.0254 m) makes that player
 1.83 m tall and its 250 units/s knife run 6.35 m/s: a grown person at a sprint, so the player's
@@ -330,10 +332,11 @@ def match_from_tables(
         players=players,
         time_s=time_s,
         positions_world=positions,
-        rotations_xyzw=view_rotation(angles[..., 0], angles[..., 1]),
+        rotations_xyzw=view_rotation(np.zeros_like(angles[..., 1]), angles[..., 1]),
         alive=alive,
         events=events,
         stats=stats,
+        aim_pitch_deg=angles[..., 0].copy(),
     )
 
 

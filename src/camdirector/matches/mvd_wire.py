@@ -21,7 +21,10 @@ slot (STAT_HEALTH 0, STAT_ARMOR 4, STAT_ITEMS 15); frags as svc_updatefrags; dea
 mod's obituary lines (matches/quakeworld_obituaries.py). Text is Quake's character set: the high
 bit only colours a character, 0x12..0x1b are digits, 0x10/0x11 brackets (`quake_text`).
 
-Anything that is not this format raises MvdError with the byte offset and what was wrong.
+Anything that is not this format raises MvdError with the byte offset and what was wrong. A file
+that does not begin as every MVD does, with a block of messages whose first is svc_serverdata (the
+writer's SV_MVD_Record sends the connection's serverdata first), is "not an MVD demo" however its
+bytes would read on: random bytes are no truncated demo.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from camdirector.matches.quakeworld_obituaries import parse_obituary
 
 # Block targets (protocol.h dem_*).
 DEM_CMD, DEM_READ, DEM_SET, DEM_MULTIPLE, DEM_SINGLE, DEM_STATS, DEM_ALL = range(7)
+SVC_SERVERDATA = 11  # protocol.h svc_serverdata: every MVD's first message
 # Protocol extension markers in svc_serverdata and the bits we honour.
 PROTOCOL_VERSION_FTE = 0x58455446  # "FTEX"
 PROTOCOL_VERSION_FTE2 = 0x32455446  # "FTE2"
@@ -276,7 +280,7 @@ class _Reader:
             8: self._print,
             9: self._stufftext,
             10: self._setangle,
-            11: self._serverdata,
+            SVC_SERVERDATA: self._serverdata,
             12: self._lightstyle,
             14: self._updatefrags,
             19: self._damage,
@@ -310,6 +314,7 @@ class _Reader:
         data, n, pos = self.data, len(self.data), 0
         if n == 0:
             raise MvdError(0, "empty file")
+        self._check_start()
         while pos < n:
             if n - pos < 2:
                 raise MvdError(pos, f"truncated block header (needs 2 bytes, {n - pos} left)")
@@ -346,6 +351,26 @@ class _Reader:
             pos += size
         if not self.saw_serverdata:
             raise MvdError(0, "no svc_serverdata: not an MVD")
+
+    def _check_start(self) -> None:
+        """MvdError "not an MVD demo" unless the data begins with a block of messages whose first is
+        svc_serverdata (module docstring); a client's .qwd is left to run()'s own message."""
+        data = self.data
+        kind = data[1] & 7 if len(data) >= 2 else None
+        if kind == DEM_CMD:
+            return
+        first = 2 + (4 if kind == DEM_MULTIPLE else 0) + 4  # block header, slot mask, length
+        if kind is None:
+            problem = "it is 1 byte long"
+        elif kind in (DEM_SET, 7):
+            problem = f"its first block is of type {kind}, which carries no messages"
+        elif len(data) <= first:
+            problem = f"it ends at byte {len(data)}, before its first message"
+        elif data[first] != SVC_SERVERDATA:
+            problem = f"its first message is of type {data[first]}"
+        else:
+            return
+        raise MvdError(0, f"not an MVD demo ({problem}; an MVD begins with svc_serverdata, type {SVC_SERVERDATA})")
 
     def _messages(self, start: int, end: int) -> None:
         cur, data, handlers = self.cur, self.data, self.handlers

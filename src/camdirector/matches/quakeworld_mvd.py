@@ -3,7 +3,9 @@
 `import_mvd` reads the demo (matches/mvd_wire.py) and puts every playing slot onto a uniform time
 grid at rate_hz from the demo's first player sample to its end:
 
-- feet and facing: quake_frame.feet_world(origin), quake_frame.view_rotation(pitch, yaw), linearly
+- feet, facing and aim: quake_frame.feet_world(origin); the body upright, turned by the yaw alone
+  (quake_frame.view_rotation at pitch 0); the aim's pitch, the view's (match_file.py: a player
+  looking down does not lie down), in [-180, 180); all linearly
   interpolated between the demo's samples (yaw and pitch the short way round), EXCEPT into a
   sample that jumped: one the server marked (svc_setangle for a teleport or respawn, DF_DEAD
   cleared) or one reached faster than anything can move, STEP_SPEED_UNITS_S (QuakeWorld caps each
@@ -129,10 +131,11 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
         players=players,
         time_s=time_s,
         positions_world=quake_frame.feet_world(origin),
-        rotations_xyzw=quake_frame.view_rotation(angles[..., 0], angles[..., 1]),
+        rotations_xyzw=quake_frame.view_rotation(0.0, angles[..., 1]),
         alive=alive,
         events=events,
         stats=stats.astype(np.int32),
+        aim_pitch_deg=np.mod(angles[..., 0] + 180.0, 360.0) - 180.0,  # unwrapped, it may have gone round
     )
     return MvdImport(match=match, steps=steps)
 

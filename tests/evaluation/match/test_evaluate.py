@@ -172,3 +172,34 @@ def test_a_match_whose_players_respawn_near_where_they_fell_streams_through(regi
     arena_match(registry, 3)
     done = eval_match(registry, "--delay", "2", "--json", str(registry / "r3.json"), seed=3)
     assert done.returncode == 0, done.stderr
+
+
+def _figures(kills: int, coverage: float) -> dict:
+    """The figures plot_result reads, for a director that measured `kills` kills."""
+    return {"kills": kills, "kill_coverage": coverage, "lead_s": {"values": [1.0]}, "shots": {"values": [3.0], "median": 3.0}}
+
+
+@pytest.mark.parametrize(
+    "measured, title",
+    [
+        ({"planned": 35, "hltv": 35}, "arena, delay 10 s, 35 kills measured (41 in the match)"),
+        ({"planned": 35, "hltv": 34}, "arena, delay 10 s, kills measured: planned 35, hltv 34 (41 in the match)"),
+    ],
+)
+def test_the_plots_title_counts_the_kills_measured(tmp_path, monkeypatch, measured, title):
+    """The match's kills include suicides and deaths to the world, which no director can cover
+    and kill coverage leaves out (measure.py): the title counts what the bars measure."""
+    from matplotlib.figure import Figure
+
+    from camdirector.evaluation.match.evaluate import plot_result
+
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda figure, *args, **kwargs: saved.append(figure))
+    result = {
+        "match": {"level": "arena", "kills": 41},
+        "delay_s": 10.0,
+        "directors": {name: _figures(kills, 0.5) for name, kills in measured.items()},
+    }
+    plot_result(result, tmp_path / "r.png")
+    [figure] = saved
+    assert figure.axes[0].get_title() == title

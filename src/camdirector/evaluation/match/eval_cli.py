@@ -33,7 +33,9 @@ def add_parser(subparsers) -> None:
         help="stream a match file through our match director and the baselines, and measure them",
         description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        add_help=False,
     )
+    p.add_argument("-h", "--help", action=_HelpWithDirectors, help="show this help message, with the directors, and exit")
     p.add_argument("file", type=Path, help="match file (camdirector match-sim --out)")
     p.add_argument("--delay", type=float, required=True, help="broadcast delay, s, 0 to 300")
     p.add_argument("--json", type=Path, required=True, help="write the result here")
@@ -42,7 +44,7 @@ def add_parser(subparsers) -> None:
         dest="directors",
         action="append",
         metavar="NAME",
-        help="a registered match director to run (repeatable; default: every registered one)",
+        help="a registered match director to run (repeatable; default: every registered one, listed below)",
     )
     p.add_argument(
         "--plugin",
@@ -70,6 +72,23 @@ def add_parser(subparsers) -> None:
     p.add_argument("--minutes", type=float, help="only the match's first minutes (default: all of it)")
     p.add_argument("--seed", type=int, default=0, help="seed of the sessions and the body sample points (default 0)")
     p.set_defaults(handler=run_eval_match)
+
+
+class _HelpWithDirectors(argparse.Action):
+    """-h/--help, ending with every registered match director (name: label), the plugins' that are
+    imported too: read from the registry when help is asked, since importing it imports every
+    director, which this module leaves until the command runs (module docstring)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from camdirector.pipeline.match.director_registry import registered
+
+        lines = [f"  {entry.name}: {entry.label}" for entry in registered()]
+        parser.epilog = "\n".join(["registered match directors (--director NAME; default: all of them):", *lines])
+        parser.print_help()
+        parser.exit()
 
 
 def _progress(text: str) -> None:

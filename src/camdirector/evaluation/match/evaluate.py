@@ -283,6 +283,19 @@ def evaluate_match(
     return result, runs
 
 
+def _kills_measured(result: dict) -> str:
+    """The kills the coverage bars count, for the plot's title: kill coverage leaves out suicides,
+    deaths to the world and kills after a program's end (measure.py), so it measures fewer than the
+    match has; each director's count where they differ."""
+    counts = {name: figures["kills"] for name, figures in result["directors"].items()}
+    measured = (
+        f"{next(iter(counts.values()))} kills measured"
+        if len(set(counts.values())) == 1
+        else "kills measured: " + ", ".join(f"{name} {kills}" for name, kills in counts.items())
+    )
+    return f"{measured} ({result['match']['kills']} in the match)"
+
+
 def plot_result(result: dict, out_png: Path) -> None:
     """Coverage and lead per director, and the shot-length histograms, in one PNG."""
     import matplotlib
@@ -296,7 +309,7 @@ def plot_result(result: dict, out_png: Path) -> None:
     ax_cov.bar(names, [f["kill_coverage"] for f in figures], color=["tab:blue", "tab:orange", "tab:green"][: len(names)])
     ax_cov.set_ylim(0, 1)
     ax_cov.set_ylabel("kill coverage")
-    ax_cov.set_title(f"{result['match']['level']}, delay {result['delay_s']:g} s, {result['match']['kills']} kills")
+    ax_cov.set_title(f"{result['match']['level']}, delay {result['delay_s']:g} s, {_kills_measured(result)}")
     ax_lead.boxplot([f["lead_s"]["values"] or [np.nan] for f in figures], tick_labels=names)
     ax_lead.set_ylabel("lead before a covered kill, s")
     bins = np.arange(0.0, max([12.0] + [max(f["shots"]["values"] or [0]) + 1 for f in figures]), 0.5)

@@ -2,7 +2,9 @@
 
     camdirector level add NAME LEVEL.(obj|glb|bsp) [--navmesh NAV.(obj|glb)] [--scale M_PER_UNIT]
                           [--agent-height M] [--agent-radius M] [--tenant T] [--data-dir DIR] [--records-url URL]
-        precomputes the level into the registry; prints the record (JSON) with stage timings.
+        precomputes the level into the registry; prints the record (JSON) with stage timings. The
+        agent is the players the level is for: by default the one size `import-match --map` uses
+        too (track_settings.py, PLAYER_HEIGHT_M and PLAYER_RADIUS_M), so a map gets one camera graph.
     camdirector level list [--tenant T] [--data-dir DIR] [--records-url URL]
         prints one JSON object per level.
     camdirector level remove NAME [--tenant T] [--data-dir DIR] [--records-url URL]
@@ -26,6 +28,8 @@ import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from camdirector.precompute.tracks.track_settings import PLAYER_HEIGHT_M, PLAYER_RADIUS_M
 
 if TYPE_CHECKING:  # the registry is imported where a command needs it
     from camdirector.precompute.tracks.registry import LevelRecord, LevelRegistry
@@ -68,8 +72,20 @@ def add_parsers(subparsers: argparse._SubParsersAction[argparse.ArgumentParser])
         default=1.0,
         help="metres per level unit (default 1; a .bsp is read in metres already, so it multiplies those)",
     )
-    p.add_argument("--agent-height", dest="agent_height", type=float, default=2.0, help="m (default 2.0)")
-    p.add_argument("--agent-radius", dest="agent_radius", type=float, default=0.6, help="m (default 0.6)")
+    p.add_argument(
+        "--agent-height",
+        dest="agent_height",
+        type=float,
+        default=PLAYER_HEIGHT_M,
+        help=f"the players' height, m (default {PLAYER_HEIGHT_M:g}, as import-match --map: track_settings.py)",
+    )
+    p.add_argument(
+        "--agent-radius",
+        dest="agent_radius",
+        type=float,
+        default=PLAYER_RADIUS_M,
+        help=f"the players' radius, m (default {PLAYER_RADIUS_M:g}, as import-match --map)",
+    )
     p.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder (default: per-user data dir)")
     add_records_url_argument(p)
     _add_tenant_argument(p)

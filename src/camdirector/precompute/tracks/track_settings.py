@@ -12,6 +12,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# The player a level is sized for where its command is not told (`camdirector level add`'s
+# --agent-height and --agent-radius, `camdirector import-match --map`), m: a grown person, 1.75 m
+# tall and 0.5 m in radius, which is QuakeWorld's player (56 x 32 units) at the scale its maps and
+# demos are read in (geometry/quake_frame.py chose that scale so). One size for both commands: the
+# size changes the navigation mesh and the cameras' eye height, so one map added by each would get
+# two camera graphs. TrackSettings keeps Recast's 2.0 m and 0.6 m as the registry's and the HTTP
+# API's defaults.
+PLAYER_HEIGHT_M = 1.75
+PLAYER_RADIUS_M = 0.5
+
 
 def check(checks: list[tuple[bool, str]]) -> None:
     for ok, message in checks:
