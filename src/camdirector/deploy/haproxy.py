@@ -54,13 +54,13 @@ class BalancerSettings:
     http_port: int = 0  # the REST frontend's port; 0 picks a free one
     # A node that stops answering (hung, SIGSTOPped, its machine lost) is out after
     # check_interval_s + fall x check_timeout_s + (fall - 1) x check_fast_interval_s at worst:
-    # 1.1 s with these, 0.7 s at best (docs/scaling.md, "Faults").
-    check_interval_s: float = 0.4  # between two health checks of a node in a steady state, s. [0.05, 60]
+    # 1.4 s with these, 0.9 s at best (docs/scaling.md, "Faults").
+    check_interval_s: float = 0.5  # between two health checks of a node in a steady state, s. [0.05, 60]
     check_fast_interval_s: float = 0.1  # between checks while a node is going up or down, s. [0.05, 60]
     # A check unanswered this long fails, s: far above a loaded node's answer (p99 10 ms on 2 busy
     # cores), below a hung node's silence. The checks ask neither Redis nor PostgreSQL, but a node
     # whose event loop waits on one fails them (docs/scaling.md, "Faults"). [0.05, 60]
-    check_timeout_s: float = 0.3
+    check_timeout_s: float = 0.4
     fall: int = 2  # failed checks in a row that mark a node down: one slow check alone does not. [1, 100]
     rise: int = 2  # passed checks in a row that mark it up again. [1, 100]
     # After a reload (`haproxy -sf`) the old process keeps its open streams at most this long, then
