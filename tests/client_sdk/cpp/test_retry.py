@@ -61,23 +61,33 @@ def test_a_data_loss_beyond_the_kept_frames_fails_the_session(sdk_bin):
     assert report["pose_frames"][-1] == 649 and report["stats"]["state"] == 5  # CD_STATE_FAILED
 
 
-class HangingDirector(FlakyDirector):
+class _ArrivalDirector(FlakyDirector):
+    """FlakyDirector whose streams pass each update to `arrived` before answering it."""
+
+    async def arrived(self, update, context) -> None:
+        raise NotImplementedError
+
+    async def StreamFrames(self, request_iterator, context):
+        async def watched():
+            async for update in request_iterator:
+                await self.arrived(update, context)
+                yield update
+
+        async for answer in super().StreamFrames(watched(), context):
+            yield answer
+
+
+class HangingDirector(_ArrivalDirector):
     """Leaves frame 10 unanswered on the first stream that receives it: a hung node."""
 
     def __init__(self) -> None:
         super().__init__()
         self.hung = False
 
-    async def StreamFrames(self, request_iterator, context):
-        async def hanging():
-            async for update in request_iterator:
-                if update.frame == 10 and not self.hung:
-                    self.hung = True
-                    await asyncio.sleep(60)
-                yield update
-
-        async for answer in super().StreamFrames(hanging(), context):
-            yield answer
+    async def arrived(self, update, context) -> None:
+        if update.frame == 10 and not self.hung:
+            self.hung = True
+            await asyncio.sleep(60)
 
 
 def test_a_hung_stream_is_reopened_after_the_frame_timeout_and_the_frame_answered(sdk_bin):
@@ -91,19 +101,13 @@ def test_a_hung_stream_is_reopened_after_the_frame_timeout_and_the_frame_answere
     assert "frame_timeout_s" in disconnected["message"]
 
 
-class DeadAfterDirector(FlakyDirector):
+class DeadAfterDirector(_ArrivalDirector):
     """Every stream ends UNAVAILABLE on frame 5 and later: a node lost for good."""
 
-    async def StreamFrames(self, request_iterator, context):
-        async def dying():
-            async for update in request_iterator:
-                if update.frame >= 5:
-                    self.streamed.append([update.frame])
-                    await context.abort(grpc.StatusCode.UNAVAILABLE, "no node holds this session")
-                yield update
-
-        async for answer in super().StreamFrames(dying(), context):
-            yield answer
+    async def arrived(self, update, context) -> None:
+        if update.frame >= 5:
+            self.streamed.append([update.frame])
+            await context.abort(grpc.StatusCode.UNAVAILABLE, "no node holds this session")
 
 
 def test_a_session_unanswered_for_its_retry_window_fails(sdk_bin):
