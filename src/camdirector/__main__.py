@@ -22,6 +22,11 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--grpc", dest="grpc_addr", help="gRPC HOST:PORT ('' turns it off; port 0 picks one)")
     p.add_argument("--zmq", dest="zmq_addr", help="ZeroMQ tcp://HOST:PORT ('' turns it off; port * picks one)")
     p.add_argument("--http", dest="http_addr", help="HTTP HOST:PORT for /healthz, /metrics, REST ('' turns it off)")
+    p.add_argument(
+        "--live",
+        dest="live_addr",
+        help="HOST:PORT of the liveness port a balancer checks (plain HTTP GET /live; '' the default: none)",
+    )
     p.add_argument("--workers", type=int, help="worker processes (0: sessions in the front process)")
     p.add_argument("--max-sessions", dest="max_sessions", type=int)
     p.add_argument("--max-objects", dest="max_objects", type=int)

@@ -24,6 +24,9 @@ class ServerSettings:
     grpc_addr: str = "127.0.0.1:50051"       # HOST:PORT
     zmq_addr: str = "tcp://127.0.0.1:5555"   # tcp://HOST:PORT
     http_addr: str = "127.0.0.1:8080"        # HOST:PORT, /healthz, /metrics, REST
+    # HOST:PORT of the liveness port a balancer checks (front/live_check.py: plain HTTP, GET /live);
+    # "" (the default) serves none. Bind it where the balancer reaches it and clients do not.
+    live_addr: str = ""
     # Worker processes holding sessions; 0 runs sessions inside the front process. [0, 256]
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     max_sessions: int = 64                   # open sessions at once, all workers together. [1, 100000]

@@ -126,7 +126,7 @@ class RetryPolicy:
     # gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call is
     # cancelled and tried again (through a balancer, on a live node), s; None: frames wait forever
     # on a stream, timeout_s on a unary Frame. The last resort: a balancer's checks take a hung node
-    # out within 1.4 s and cut its streams, and keepalive pings find a hung server reached directly
+    # out within 0.8 s and cut its streams, and keepalive pings find a hung server reached directly
     # within 2 s; a frame that is only slow (a TRACKS session's first, a restore on a loaded
     # machine) can take over 1 s, and a cut would have it answered stale.
     frame_timeout_s: float | None = 3.0

@@ -102,10 +102,12 @@ class NodeInfo:
     grpc: str  # HOST:PORT
     http: str  # HOST:PORT
     zmq: str  # tcp://HOST:PORT, for ZeroMQ clients, which connect to a node directly
+    live: str  # HOST:PORT of its liveness port, which the balancer checks (front/live_check.py)
 
     @property
     def backend(self) -> Backend:
-        return Backend(name=self.node_id, server_id=self.server_id, grpc=self.grpc, http=self.http)
+        live_port = int(self.live.rpartition(":")[2])
+        return Backend(name=self.node_id, server_id=self.server_id, grpc=self.grpc, http=self.http, live_port=live_port)
 
 
 def _serve_command() -> list[str]:
@@ -287,6 +289,8 @@ class Cluster:
                 addresses.zmq if addresses else "tcp://127.0.0.1:*",
                 "--http",
                 addresses.http if addresses else "127.0.0.1:0",
+                "--live",
+                addresses.live if addresses else "127.0.0.1:0",
                 "--workers",
                 str(self.settings.workers_per_node),
                 "--node-id",
@@ -321,7 +325,15 @@ class Cluster:
                     other.wait()
                 raise
             nodes.append(
-                NodeInfo(node_id=name, server_id=k, pid=proc.pid, grpc=ready["grpc"], http=ready["http"], zmq=ready["zmq"])
+                NodeInfo(
+                    node_id=name,
+                    server_id=k,
+                    pid=proc.pid,
+                    grpc=ready["grpc"],
+                    http=ready["http"],
+                    zmq=ready["zmq"],
+                    live=ready["live"],
+                )
             )
         return nodes
 

@@ -18,16 +18,17 @@ the wire every hop is encrypted. Keys pass through untouched: HAProxy forwards t
 `authorization` header and checks nothing, and every node checks every call against the keys
 the nodes share in PostgreSQL (access/).
 
-Health checks call the gRPC health service (grpc.health.v1.Health/Check) every node serves on its
-gRPC port. HAProxy 2.6 cannot send that request as an HTTP check: a gRPC request body starts with
-a 5-byte header that always holds NUL bytes (a compressed flag and a 4-byte length), and
-`http-check send body`/`body-lf` are C strings that stop at the first NUL (checked: with
-`body-lf %[bin(0000000000)]` HAProxy sends an empty body and `content-length: 0`). So the check
-is a TCP check that speaks the HTTP/2 itself: `tcp-check send-binary` sends the connection
-preface, an empty SETTINGS frame, the HEADERS of a POST to /grpc.health.v1.Health/Check and one
-DATA frame holding the empty HealthCheckRequest, and `tcp-check expect binary` waits for the
-HealthCheckResponse{status: SERVING} message in the reply. NOT_SERVING, an unknown service, a
-refused connection or silence all fail it.
+Health checks ask each node's liveness port (front/live_check.py: `GET /live` over TLS, the node's
+certificate verified as for its traffic, answered by a thread of the node's own, not by the event
+loop that answers frames), both backends the same port. Before, they went over TLS to the gRPC and
+HTTP ports themselves (a hand-built HTTP/2 call of grpc.health.v1.Health/Check for the gRPC
+backend), answered by the loop: their timeout had to stay above a busy loop's slowest answer plus a
+handshake (400 ms), and a hung node stayed in for up to 1.4 s. The thread answers in about a
+millisecond however busy the node, so the timeout is 200 ms and a hung node is out within 0.8 s
+(docs/scaling.md, "The balancer's checks"). The liveness port still fails a node whose loop is
+blocked for seconds (it answers 503 then). What it does not see is a node whose gRPC or HTTP port
+alone stopped answering while its loop runs: both are served by that loop, and a node whose server
+fails to start exits.
 """
 
 from __future__ import annotations
@@ -54,13 +55,12 @@ class BalancerSettings:
     http_port: int = 0  # the REST frontend's port; 0 picks a free one
     # A node that stops answering (hung, SIGSTOPped, its machine lost) is out after
     # check_interval_s + fall x check_timeout_s + (fall - 1) x check_fast_interval_s at worst:
-    # 1.4 s with these, 0.9 s at best (docs/scaling.md, "Faults").
-    check_interval_s: float = 0.5  # between two health checks of a node in a steady state, s. [0.05, 60]
+    # 0.8 s with these, 0.5 s at best (docs/scaling.md, "The balancer's checks").
+    check_interval_s: float = 0.3  # between two health checks of a node in a steady state, s. [0.05, 60]
     check_fast_interval_s: float = 0.1  # between checks while a node is going up or down, s. [0.05, 60]
-    # A check unanswered this long fails, s: far above a loaded node's answer (p99 10 ms on 2 busy
-    # cores), below a hung node's silence. The checks ask neither Redis nor PostgreSQL, but a node
-    # whose event loop waits on one fails them (docs/scaling.md, "Faults"). [0.05, 60]
-    check_timeout_s: float = 0.4
+    # A check unanswered this long fails, s: far above the liveness thread's answer (a few ms on 2
+    # busy cores, front/live_check.py), below a hung node's silence. [0.05, 60]
+    check_timeout_s: float = 0.2
     fall: int = 2  # failed checks in a row that mark a node down: one slow check alone does not. [1, 100]
     rise: int = 2  # passed checks in a row that mark it up again. [1, 100]
     # After a reload (`haproxy -sf`) the old process keeps its open streams at most this long, then
@@ -103,46 +103,17 @@ class Backend:
     # so the same id gives the same sessions on every balancer and after a restart
     grpc: str  # the node's gRPC HOST:PORT
     http: str  # the node's HTTP HOST:PORT
+    live_port: int  # the node's liveness port (`serve --live`), on the same host: both backends' checks
 
 
-def _h2_frame(kind: int, flags: int, stream: int, payload: bytes) -> bytes:
-    """One HTTP/2 frame (RFC 9113 section 4.1): 24-bit length, type, flags, 31-bit stream id."""
-    return len(payload).to_bytes(3, "big") + bytes([kind, flags]) + stream.to_bytes(4, "big") + payload
-
-
-def _hpack_literal(name_index: int, value: bytes) -> bytes:
-    """A header field 'literal without indexing' whose name is HPACK static table entry name_index
-    (< 15), its value a plain string shorter than 127 bytes (RFC 7541 sections 6.2.2 and 5.2)."""
-    return bytes([name_index, len(value)]) + value
-
-
-def grpc_health_check_request() -> bytes:
-    """The bytes of a whole gRPC call of grpc.health.v1.Health/Check for the server's overall
-    health (service ""), from the connection preface on, as `tcp-check send-binary` sends them
-    (over the TLS connection that `check-ssl` opens)."""
-    headers = (
-        bytes([0x83, 0x87])  # :method POST, :scheme https
-        + _hpack_literal(4, b"/grpc.health.v1.Health/Check")  # :path
-        + _hpack_literal(1, b"localhost")  # :authority
-        + bytes([0x0F, 0x10])
-        + bytes([16])
-        + b"application/grpc"  # content-type (static entry 31)
-        + bytes([0x00, 2])
-        + b"te"
-        + bytes([8])
-        + b"trailers"
-    )  # te: trailers (a new name)
-    empty_request = bytes(5)  # not compressed, length 0: HealthCheckRequest{service: ""}
-    return (
-        b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
-        + _h2_frame(0x4, 0x0, 0, b"")  # SETTINGS, all defaults
-        + _h2_frame(0x1, 0x4, 1, headers)  # HEADERS, END_HEADERS, stream 1
-        + _h2_frame(0x0, 0x1, 1, empty_request)
-    )  # DATA, END_STREAM
-
-
-# The reply's message: not compressed, length 2, HealthCheckResponse{status: SERVING (field 1 = 1)}.
-SERVING_REPLY = bytes([0, 0, 0, 0, 2, 0x08, 0x01])
+# Both backends' check: GET /live as HTTP/1.1 over TLS. `connect default` takes the server's address,
+# `port` and TLS; `proto h1` because the gRPC backend's `proto h2` would otherwise carry its checks too.
+LIVE_CHECK = [
+    "    option httpchk",
+    "    http-check connect default proto h1",
+    "    http-check send meth GET uri /live",
+    "    http-check expect status 200",
+]
 
 
 def _ms(seconds: float) -> str:
@@ -151,18 +122,26 @@ def _ms(seconds: float) -> str:
 
 
 def _server_args(s: BalancerSettings, tls: TlsFiles, grpc: bool) -> str:
-    """A node's TLS, health check and weight: the traffic and the checks over TLS to a node that
-    proves itself with the CA's certificate, gRPC's (`grpc`) as HTTP/2. A node marked down has its
-    open streams cut (`on-marked-down shutdown-sessions`): a stream on a hung node would otherwise
-    wait for it as long as it hangs; cut, the SDK opens it again through the balancer, which sends
-    it to a live node (that restores the session from its checkpoint)."""
+    """A node's TLS, health check and weight, all nodes the same: the traffic and the checks over TLS
+    to a node that proves itself with the CA's certificate, gRPC's traffic (`grpc`) as HTTP/2, the
+    checks as HTTP/1.1 to its liveness port (`_server_line` names it). A node marked down has its open streams cut
+    (`on-marked-down shutdown-sessions`): a stream on a hung node would otherwise wait for it as long
+    as it hangs; cut, the SDK opens it again through the balancer, which sends it to a live node
+    (that restores the session from its checkpoint)."""
     args = (
         f"ssl verify required ca-file {tls.ca_cert} verifyhost {s.node_tls_name} "
         f"check check-ssl inter {_ms(s.check_interval_s)} fastinter {_ms(s.check_fast_interval_s)} "
         f"downinter {_ms(s.check_interval_s)} fall {s.fall} rise {s.rise} weight {s.weight} "
         "on-marked-down shutdown-sessions"
     )
-    return args + " proto h2 alpn h2 check-alpn h2" if grpc else args
+    return args + " proto h2 alpn h2" if grpc else args
+
+
+def _server_line(backend: Backend, grpc: bool) -> str:
+    """What `server` (or `add server`) says of one node in one backend beyond `_server_args`: its
+    name, address, ring id and the port its checks go to (`port`)."""
+    address = backend.grpc if grpc else backend.http
+    return f"{backend.name} {address} id {backend.server_id} port {backend.live_port}"
 
 
 def render_config(
@@ -222,11 +201,9 @@ def render_config(
         f"backend {GRPC_BACKEND}",
         f"    balance hdr({ROUTE_HEADER})",
         "    hash-type consistent",
-        "    option tcp-check",
-        f"    tcp-check send-binary {grpc_health_check_request().hex()}",
-        f"    tcp-check expect binary {SERVING_REPLY.hex()}",
+        *LIVE_CHECK,
         f"    default-server {grpc_server}",
-        *(f"    server {b.name} {b.grpc} id {b.server_id}" for b in backends),
+        *(f"    server {_server_line(b, grpc=True)}" for b in backends),
         "",
         "frontend http",
         f"    bind {settings.host}:{http_port} ssl crt {tls.bundle}",
@@ -235,10 +212,9 @@ def render_config(
         f"backend {HTTP_BACKEND}",
         f"    balance hdr({ROUTE_HEADER})",
         "    hash-type consistent",
-        "    option httpchk GET /healthz",
-        "    http-check expect status 200",
+        *LIVE_CHECK,
         f"    default-server {http_server}",
-        *(f"    server {b.name} {b.http} id {b.server_id}" for b in backends),
+        *(f"    server {_server_line(b, grpc=False)}" for b in backends),
         "",
     ]
     return "\n".join(lines)
@@ -376,9 +352,9 @@ class HAProxy(RuntimeApi):
         if any(b.name == backend.name or b.server_id == backend.server_id for b in self.backends):
             raise ServiceError(f"haproxy: a server named {backend.name} or with id {backend.server_id} exists")
         # a dynamic server takes nothing from `default-server`: the same arguments, spelt out
-        for name, address, grpc in ((GRPC_BACKEND, backend.grpc, True), (HTTP_BACKEND, backend.http, False)):
+        for name, grpc in ((GRPC_BACKEND, True), (HTTP_BACKEND, False)):
             answer = self.command(
-                f"add server {name}/{backend.name} {address} id {backend.server_id} {_server_args(self.settings, self.tls, grpc)}"
+                f"add server {name}/{_server_line(backend, grpc)} {_server_args(self.settings, self.tls, grpc)}"
             )
             if "New server registered" not in answer:
                 raise ServiceError(f"haproxy: add server {name}/{backend.name}: {answer.strip()}")
@@ -394,14 +370,15 @@ class HAProxy(RuntimeApi):
 
 # Where docker/compose.cluster.yaml mounts the files of `python -m camdirector.deploy.tls docker/tls`.
 COMPOSE_TLS_DIR = Path("/etc/camdirector/tls")
+COMPOSE_LIVE_PORT = 8081  # each node container's liveness port (`serve --live 0.0.0.0:8081`), not published
 
 
 def compose_config(nodes: int) -> str:
     """haproxy.cfg for docker/compose.cluster.yaml: services node-1..node-N (gRPC on 50051, HTTP on
-    8080) found through the container network's DNS; the balancer on 50051 and 8080 of its container. HAProxy
-    starts as root there to read the bundle (its key is its owner's alone, mode 0600), then
-    becomes the image's `haproxy` user."""
-    backends = [Backend(f"node-{k}", k, f"node-{k}:50051", f"node-{k}:8080") for k in range(1, nodes + 1)]
+    8080, liveness on COMPOSE_LIVE_PORT) found through the container network's DNS; the balancer on
+    50051 and 8080 of its container. HAProxy starts as root there to read the bundle (its key is its
+    owner's alone, mode 0600), then becomes the image's `haproxy` user."""
+    backends = [Backend(f"node-{k}", k, f"node-{k}:50051", f"node-{k}:8080", COMPOSE_LIVE_PORT) for k in range(1, nodes + 1)]
     return render_config(
         BalancerSettings(host="0.0.0.0"),
         backends,

@@ -1,9 +1,10 @@
 """How late the front's event loop runs: the loop that answers every frame of the node (gRPC,
 ZeroMQ, HTTP). A task asks to wake every PERIOD_S and notes how much later it woke; /healthz shows
 the largest lag of the last WINDOW_S, and /metrics the distribution (`camdirector_loop_lag_seconds`).
-A balancer's check is answered by the same loop, so a node whose loop is blocked fails its check
-by itself; the lag says how close a node came to that, and a records database or a Redis that is
-slow does not show in it (their calls are made off the loop: access/guard.py, worker/checkpoint_writer.py).
+The balancer's checks are answered by a thread of the node's own (front/live_check.py), which
+reads `last_wake_s` and answers "stalled" once the loop has not woken for seconds; the lag says how
+close a node came to that, and a records database or a Redis that is slow does not show in it
+(their calls are made off the loop: access/guard.py, worker/checkpoint_writer.py).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ class LoopWatch:
         self._clock = clock
         self._recent: collections.deque[tuple[float, float]] = collections.deque()  # (when, lag), s
         self._task: asyncio.Task | None = None
+        # when the loop last woke, s on `clock`'s time line; read by another thread (one float: atomic)
+        self.last_wake_s = clock()
 
     def start(self) -> None:
         self._task = asyncio.create_task(self._watch())
@@ -45,6 +48,7 @@ class LoopWatch:
             due = self._clock() + PERIOD_S
             await asyncio.sleep(PERIOD_S)
             now = self._clock()
+            self.last_wake_s = now
             lag = max(0.0, now - due)
             self._histogram.observe(lag)
             self._recent.append((now, lag))

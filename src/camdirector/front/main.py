@@ -7,6 +7,7 @@ import json
 import logging
 import signal
 import socket
+import ssl
 import sys
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from camdirector.front.http.app import build_app
 from camdirector.front.http.routes.levels import install_level_routes
 from camdirector.front.http.routes.overview import install_overview_routes
 from camdirector.front.job_runner import open_jobs
+from camdirector.front.live_check import LiveCheck
 from camdirector.front.loop_watch import LoopWatch
 from camdirector.front.metrics import Metrics
 from camdirector.front.router import SessionRouter
@@ -70,11 +72,20 @@ def _tls_credentials(settings: ServerSettings) -> grpc.ServerCredentials | None:
     return grpc.ssl_server_credentials([(Path(settings.tls_key).read_bytes(), Path(settings.tls_cert).read_bytes())])
 
 
+def _live_tls(settings: ServerSettings) -> ssl.SSLContext | None:
+    """The liveness port's TLS: the node's certificate, as its gRPC and HTTP ports show it."""
+    if not settings.tls:
+        return None
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    context.load_cert_chain(settings.tls_cert, settings.tls_key)
+    return context
+
+
 async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> None:
     """Runs until `stop` is set or SIGINT/SIGTERM arrives. Prints one JSON line when ready:
     {"event": "ready", "grpc": ..., "zmq": ..., "http": ..., "auth": bool} with the bound
-    addresses, and with authentication on the ZeroMQ server's CURVE public key ("zmq_server_key")
-    and, when one was made, "admin_key_file"."""
+    addresses (and "live", the liveness port's, when it has one), and with authentication on the
+    ZeroMQ server's CURVE public key ("zmq_server_key") and, when one was made, "admin_key_file"."""
     stop = stop or asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -87,7 +98,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
     loop_watch.start()
     guard.start()
     bound: dict[str, str] = {}
-    grpc_server = zmq_transport = http_server = http_task = jobs = None
+    grpc_server = zmq_transport = http_server = http_task = jobs = live = None
     try:
         if settings.grpc_addr:
             grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr, guard, _tls_credentials(settings))
@@ -119,11 +130,17 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             )
             http_server = uvicorn.Server(config)
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
+        if settings.live_addr:  # last: the balancer sends nothing here before every transport listens
+            live = LiveCheck(settings.live_addr, lambda: loop_watch.last_wake_s, tls=_live_tls(settings))
+            live.start()
+            bound["live"] = live.address
         freeze_startup_heap()  # before the first frame: full collections walk only what comes after
         print(json.dumps({"event": "ready", **bound, "workers": settings.workers, "tls": settings.tls, **announce}), flush=True)
         await stop.wait()
     finally:
         log.info("stopping")
+        if live is not None:  # first: the balancer takes the node out while it stops
+            live.stop()
         if http_server is not None:
             app.state.views.close()
             http_server.should_exit = True
