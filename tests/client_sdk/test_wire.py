@@ -126,3 +126,39 @@ def test_encode_frame_update_parses_as_frame_update(frame, time_s, ids, data):
     assert pb.FrameUpdate.FromString(encoded) == expected
     unpacked = wire.frame_update("s1", frame, time_s, states).SerializeToString()
     assert wire.encode_frame_update("s1", frame, time_s, states) == unpacked
+
+
+def test_frame_deadlines_expire_when_a_stream_answers_nothing_for_the_timeout_not_when_frames_queue(monkeypatch):
+    """A live server answering a backlog of frames is not hung however long its oldest frame has
+    waited; one that answers nothing for timeout_s with frames in flight is (issue 41: the watchdog
+    timing each frame from its sending cut unpaced streams of live servers)."""
+    now = [100.0]
+    monkeypatch.setattr(wire.time, "monotonic", lambda: now[0])
+    deadlines = wire.FrameDeadlines(1.0)
+    assert deadlines.wait_s() == 1.0  # nothing in flight
+    for frame in range(1, 301):  # a caller ahead of the server: 300 frames queued at once
+        deadlines.sent(frame)
+    for _ in range(200):  # answered one every 10 ms: the oldest waits 2 s, but answers keep coming
+        now[0] += 0.01
+        deadlines.answered()
+        assert deadlines.wait_s() == pytest.approx(1.0)
+    assert deadlines.expired is None
+    now[0] += 0.6
+    assert deadlines.wait_s() == pytest.approx(0.4)
+    now[0] += 0.4  # 1 s without an answer, frames in flight: hung
+    assert deadlines.wait_s() == 0.0
+    assert deadlines.expired is not None and "frame 201 was not answered" in deadlines.expired.message
+
+
+def test_frame_deadlines_count_a_frame_sent_after_the_last_answer_from_its_sending(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr(wire.time, "monotonic", lambda: now[0])
+    deadlines = wire.FrameDeadlines(3.0)
+    deadlines.sent(1)
+    now[0] = 1.0
+    deadlines.answered()
+    now[0] = 10.0  # a paced caller's next frame, long after the last answer
+    deadlines.sent(2)
+    now[0] = 12.0
+    assert deadlines.wait_s() == pytest.approx(1.0)
+    assert deadlines.expired is None

@@ -161,6 +161,7 @@ struct cd_client {
   std::vector<camdirector::v1::FrameUpdate> history;
   std::vector<uint64_t> history_previous;           // the frame sent before each (0: none)
   std::vector<Clock::time_point> history_sent_at;   // when each was last written (frame_timeout_s)
+  Clock::time_point last_answer_at{};                // when the last answer was read (frame_timeout_s)
   uint64_t next_seq = 1;        // the next new frame's
   uint64_t send_seq = 1;        // the next to write on this stream (below next_seq: sent again)
   uint64_t unanswered_seq = 1;  // the oldest sent and not answered

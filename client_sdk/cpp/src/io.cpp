@@ -176,10 +176,13 @@ void cd_client::io_loop() {
           continue;
         }
         if (in_flight() > 0) {
-          // The oldest frame in flight past its deadline: a hung node (or network). Start over,
-          // through a balancer on a live node; the frame is sent again on the new stream.
+          // Frames in flight and nothing answered for frame_timeout_s (since the oldest was sent
+          // or, if later, since the last answer: frames queued on a live node are not a hang): a
+          // hung node (or network). Start over, through a balancer on a live node; the frame is
+          // sent again on the new stream.
           const size_t oldest = unanswered_seq % history.size();
-          const Clock::time_point due = history_sent_at[oldest] + camdirector::sdk::seconds(config.frame_timeout_s);
+          const Clock::time_point due =
+              std::max(history_sent_at[oldest], last_answer_at) + camdirector::sdk::seconds(config.frame_timeout_s);
           if (now >= due) {
             hung_frame = history[oldest].frame();
             cancel_stream(lock);
@@ -522,6 +525,7 @@ void cd_client::on_answer(const pb::CameraUpdate& update) {
 
   std::lock_guard<std::mutex> guard(mu);
   stats.frames_answered += 1;
+  last_answer_at = Clock::now();
   const uint64_t seq = unanswered_seq;  // answers come in order, one per frame written
   if (unanswered_seq < send_seq) unanswered_seq += 1;
   const bool fresh = seq > newest_answered_seq;  // not sent again after a DATA_LOSS: the game has not had it

@@ -51,9 +51,10 @@ class _Transport(Protocol):
 
 
 class _GrpcTransport:
-    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. A frame, streamed or
-    unary, left unanswered for ``retry.frame_timeout_s`` (when shorter) ends its call with
-    UNAVAILABLE: a hung node, to be tried again. Every call carries the session's route key and
+    """Unary RPCs with a deadline of ``timeout_s``; StreamFrames without one. A unary frame left
+    unanswered for ``retry.frame_timeout_s`` (when shorter), or a stream that answers none of its
+    frames in flight for that long (wire.FrameDeadlines), ends its call with UNAVAILABLE: a hung
+    node, to be tried again. Every call carries the session's route key and
     the client's key (``wire.Security.grpc_metadata``)."""
 
     def __init__(

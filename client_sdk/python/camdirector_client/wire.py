@@ -11,6 +11,7 @@ call (docs/security.md).
 
 from __future__ import annotations
 
+import math
 import os
 import random
 import re
@@ -123,10 +124,11 @@ class RetryPolicy:
     retry_window_s: float = 30.0  # a failing call is tried again until this long after its first failure, s
     initial_backoff_s: float = 0.1  # the first wait, s; each next one doubles
     max_backoff_s: float = 0.5  # the longest wait, s: a balancer back is found within it (and a connection made)
-    # gRPC: a frame (streamed, or a unary Frame) unanswered this long means a hung node: the call is
-    # cancelled and tried again (through a balancer, on a live node), s; None: frames wait forever
-    # on a stream, timeout_s on a unary Frame. The last resort: a balancer's checks take a hung node
-    # out within 0.8 s and cut its streams, and keepalive pings find a hung server reached directly
+    # gRPC: a stream with frames in flight that answers nothing this long (FrameDeadlines), or a
+    # unary Frame unanswered this long, means a hung node: the call is cancelled and tried again
+    # (through a balancer, on a live node), s; None: frames wait forever on a stream, timeout_s on
+    # a unary Frame. The last resort: a balancer's checks take a hung node out within 0.8 s and cut
+    # its streams, and keepalive pings find a hung server reached directly
     # within 2 s; a frame that is only slow (a TRACKS session's first, a restore on a loaded
     # machine) can take over 1 s, and a cut would have it answered stale.
     frame_timeout_s: float | None = 3.0
@@ -245,35 +247,43 @@ def frame_error(error: DirectorError, frame_timeout_s: float) -> DirectorError:
 
 
 class FrameDeadlines:
-    """When each frame in flight on a stream call was sent, oldest first: a hung node is one that
-    leaves the oldest unanswered past ``timeout_s``. Written by the thread or task sending, read
-    by the watchdog (deque appends and pops are atomic)."""
+    """When each frame in flight on a stream call was sent, oldest first, and when the last answer
+    came: a hung node is one that, with frames in flight, answers nothing for ``timeout_s`` (since
+    the oldest unanswered frame was sent or, if later, since its last answer). Not the oldest
+    frame's age alone: a caller that sends faster than the server answers (a recorded match
+    streamed unpaced) queues seconds of frames on a live node, and cutting its call then had frames
+    it had answered resent and answered stale, a program with frames missing that differed from
+    run to run (issue 41). Written by the thread or task sending and the one reading, read by the
+    watchdog (deque appends and pops and a float's assignment are atomic)."""
 
-    __slots__ = ("_sent", "expired", "timeout_s")
+    __slots__ = ("_answered_s", "_sent", "expired", "timeout_s")
 
     def __init__(self, timeout_s: float) -> None:
         self.timeout_s = timeout_s
         self._sent: deque[tuple[float, int]] = deque()  # (time.monotonic() when sent, frame)
+        self._answered_s = -math.inf  # time.monotonic() of the last answer
         self.expired: DirectorError | None = None  # set when a frame was left unanswered
 
     def sent(self, frame: int) -> None:
         self._sent.append((time.monotonic(), frame))
 
     def answered(self) -> None:
+        self._answered_s = time.monotonic()
         if self._sent:
             self._sent.popleft()
 
     def wait_s(self) -> float:
-        """How long until the oldest frame's deadline (the whole timeout when none is in flight);
-        0 when it has passed, which sets ``expired``."""
+        """How long until the call's deadline (the whole timeout when no frame is in flight); 0
+        when it has passed, which sets ``expired``."""
         if not self._sent:
             return self.timeout_s
         sent_s, frame = self._sent[0]
-        left_s = sent_s + self.timeout_s - time.monotonic()
+        left_s = max(sent_s, self._answered_s) + self.timeout_s - time.monotonic()
         if left_s <= 0.0:
             self.expired = DirectorError(
                 grpc.StatusCode.UNAVAILABLE,
-                f"frame {frame} was not answered within {self.timeout_s:g} s (frame_timeout_s): the node may be hung",
+                f"frame {frame} was not answered within {self.timeout_s:g} s (frame_timeout_s) of the last answer: "
+                "the node may be hung",
             )
             return 0.0
         return left_s

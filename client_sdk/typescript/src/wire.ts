@@ -163,10 +163,14 @@ export class SentHistory {
   }
 }
 
-/** When each frame in flight on a stream call was sent, oldest first: a hung node is one that
- * leaves the oldest unanswered past `timeoutMs`. */
+/** When each frame in flight on a stream call was sent, oldest first, and when the last answer
+ * came: a hung node is one that, with frames in flight, answers nothing for `timeoutMs` (since the
+ * oldest unanswered frame was sent or, if later, since its last answer). Not the oldest frame's age
+ * alone: a caller that sends faster than the server answers queues seconds of frames on a live
+ * node, and cutting its call had answered frames resent and answered stale (issue 41). */
 export class FrameDeadlines {
   readonly #sent: Array<[number, bigint]> = []; // (performance.now() when sent, frame)
+  #answeredMs = -Infinity; // performance.now() of the last answer
   /** Set when a frame was left unanswered. */
   expired: DirectorError | undefined;
 
@@ -174,17 +178,21 @@ export class FrameDeadlines {
 
   sent(frame: bigint): void { this.#sent.push([performance.now(), frame]); }
 
-  answered(): void { this.#sent.shift(); }
+  answered(): void {
+    this.#answeredMs = performance.now();
+    this.#sent.shift();
+  }
 
-  /** How long until the oldest frame's deadline (the whole timeout when none is in flight), ms; 0
-   * when it has passed, which sets `expired`. */
+  /** How long until the call's deadline (the whole timeout when no frame is in flight), ms; 0 when
+   * it has passed, which sets `expired`. */
   waitMs(): number {
     const oldest = this.#sent[0];
     if (oldest === undefined) return this.timeoutMs;
-    const leftMs = oldest[0] + this.timeoutMs - performance.now();
+    const leftMs = Math.max(oldest[0], this.#answeredMs) + this.timeoutMs - performance.now();
     if (leftMs > 0) return leftMs;
     this.expired = new DirectorError("UNAVAILABLE",
-      `frame ${oldest[1]} was not answered within ${this.timeoutMs} ms (frameTimeoutMs): the node may be hung`);
+      `frame ${oldest[1]} was not answered within ${this.timeoutMs} ms (frameTimeoutMs) of the last answer: ` +
+      "the node may be hung");
     return 0;
   }
 }

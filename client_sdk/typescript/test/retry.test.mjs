@@ -92,13 +92,15 @@ test("answered_frame is appended to an encoded update and read back", () => {
  * - `frameFaults`: codes the next unary Frames end with, one each;
  * - `losses`: frame -> K, as a node whose restore ended at frame K - 1: that frame's call ends
  *   with DATA_LOSS "state lost after frame K-1: resend from K", and so does every call until frame K comes;
- * - `hangs`: frames left unanswered the first time they come (a stream stops answering at one).
+ * - `hangs`: frames left unanswered the first time they come (a stream stops answering at one);
+ * - `answerDelayMs`: a stream's answers come this long after each other (a server with a backlog).
  * Records every update's [frame, answered_frame] (`seen`) and the frames answered (`answered`).
  */
 class Director {
   frameFaults = [];
   losses = new Map();
   hangs = new Set();
+  answerDelayMs = 0;
   awaiting = undefined;
   seen = [];
   answered = [];
@@ -140,6 +142,9 @@ class Director {
       },
       StreamFrames: (call) => {
         let hung = false;
+        let ended = false;
+        let pending = 0; // answers not yet written (answerDelayMs)
+        let nextAnswerMs = 0;
         call.on("data", (bytes) => {
           if (hung) return;
           const update = decode(bytes);
@@ -151,9 +156,20 @@ class Director {
             return;
           }
           hung = this.#hung(update);
-          if (!hung) call.write(this.#answer(update));
+          if (hung) return;
+          if (this.answerDelayMs === 0) return call.write(this.#answer(update));
+          nextAnswerMs = Math.max(nextAnswerMs, performance.now()) + this.answerDelayMs;
+          pending += 1;
+          setTimeout(() => {
+            call.write(this.#answer(update));
+            pending -= 1;
+            if (ended && pending === 0) call.end();
+          }, nextAnswerMs - performance.now());
         });
-        call.on("end", () => { if (!hung) call.end(); });
+        call.on("end", () => {
+          ended = true;
+          if (!hung && pending === 0) call.end();
+        });
         call.on("error", () => undefined);
       },
     };
@@ -257,6 +273,16 @@ test("a streamed frame left unanswered reopens the stream, every frame answered 
   assert.deepEqual(answers, frames(1, 10));
   assert.equal(director.seen.filter(([f]) => f === 5).length, 2);
   assert.equal(session.retries, 1);
+});
+
+test("frames queued on a node that answers them, however long they wait, are not a hang", { timeout: 8000 }, async () => {
+  const { client, session } = await open({ frameTimeoutMs: 300 });
+  director.answerDelayMs = 100; // 12 frames sent at once: the last waits 1.2 s, answers 0.1 s apart
+  const answers = (await collect(session.stream(updates(12)))).map((a) => Number(a.frame));
+  client.close();
+  assert.deepEqual(answers, frames(1, 12));
+  assert.deepEqual(director.seen.map(([f]) => f), frames(1, 12)); // none sent again: the stream was never cut
+  assert.equal(session.retries, 0);
 });
 
 test("a unary frame left unanswered is tried again, as UNAVAILABLE", { timeout: 4000 }, async () => {
