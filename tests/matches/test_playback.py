@@ -107,6 +107,7 @@ def test_a_match_played_fast_has_every_frame_answered_and_its_cuts_printed(regis
     head, cuts, summary = lines[0], [line["cut"] for line in lines[1:-1]], lines[-1]["summary"]
     session_id = (tmp_path / "sid").read_text().strip()
     assert head["session_id"] == session_id and head["level"] == "arena" and head["players"] == 6
+    assert head["roster"] == [{"id": p.id, "name": "", "team": p.team, "team_name": ""} for p in match.players]  # bots
 
     feed = Feed.of(match, RATE_HZ, delay_s)
     assert head["frames_per_lap"] == len(feed.rows)
@@ -126,6 +127,7 @@ def test_a_match_played_fast_has_every_frame_answered_and_its_cuts_printed(regis
     assert [c["frame"] for c in cuts] == sorted({c["frame"] for c in cuts})
     assert [c["shot_id"] for c in cuts] == sorted({c["shot_id"] for c in cuts})
     assert len({tuple(c["subjects"]) for c in cuts}) >= 3
+    assert all(c["subject_names"] == c["subjects"] for c in cuts)  # bots have no names: their ids stand in
     ids = {p.id for p in match.players}
     assert all(
         set(c["subjects"]) <= ids and c["kind"] in ("DUEL", "FOLLOW", "GROUP", "OVERVIEW") and c["reason"] and not c["held"]

@@ -214,6 +214,13 @@ def test_the_4on4_has_eight_players_in_two_teams_of_four(demos):
     assert teamkills and all(team[e.actor_id] == team[e.other_actor_id] and e.actor_id != e.other_actor_id for e in teamkills)
 
 
+def test_a_team_game_names_its_teams_and_a_duel_none(demos):
+    four = demos["4on4"][2].match
+    names = {(p.team, p.team_name) for p in four.players}  # one name per team, as its userinfo says
+    assert len(names) == 2 and len({name for _, name in names}) == 2 and all(name for _, name in names)
+    assert [p.team_name for p in demos["1on1"][2].match.players] == ["", ""]
+
+
 def test_frags_at_the_end_are_the_last_scoreboard_and_the_obituaries_sum(demos):
     """The last frame's frags are each slot's last svc_updatefrags; in the demos that score as
     KTX's ClientObituary does they are also its sum over the obituaries: +1 a frag, -1 a death to

@@ -207,6 +207,8 @@ bool build_request(const cd_session_desc& d, pb::CreateSessionRequest* out, std:
     pb::Target* msg = out->add_targets();
     msg->set_id(t.id);
     msg->set_team(t.team);
+    if (t.display_name != nullptr) msg->set_display_name(t.display_name);
+    if (t.team_name != nullptr) msg->set_team_name(t.team_name);
     set_transform(t.transform, msg->mutable_transform());
     set_vec3(t.aim_offset, msg->mutable_aim_offset());
     if (!set_mesh(t.mesh, msg->mutable_mesh(), what, error)) return false;

@@ -106,7 +106,7 @@ std::string session_of(cd_client* client) {
 }
 
 // The scene of tests/server/wire_client.two_target_request: targets a and b, a static pillar,
-// a dynamic cart. Slots: a 0, b 1, cart 2.
+// a dynamic cart. Slots: a 0, b 1, cart 2. Target a has a display name (UTF-8), b none (NULL).
 struct Scene {
   cd_target targets[2] = {};
   cd_object objects[2] = {};
@@ -120,6 +120,7 @@ struct Scene {
       targets[i].aim_offset = {0.0, 0.6, 0.0};
     }
     targets[0].id = "a";
+    targets[0].display_name = "\xc3\x85sa <b>";  // "Åsa <b>"
     targets[0].transform.position = {0.0, 0.9, 0.0};
     targets[1].id = "b";
     targets[1].transform.position = {3.0, 0.9, 1.0};

@@ -224,18 +224,22 @@ class SceneObject(_message.Message):
     def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., dynamic: _Optional[bool] = ...) -> None: ...
 
 class Target(_message.Message):
-    __slots__ = ("id", "mesh", "transform", "aim_offset", "team")
+    __slots__ = ("id", "mesh", "transform", "aim_offset", "team", "display_name", "team_name")
     ID_FIELD_NUMBER: _ClassVar[int]
     MESH_FIELD_NUMBER: _ClassVar[int]
     TRANSFORM_FIELD_NUMBER: _ClassVar[int]
     AIM_OFFSET_FIELD_NUMBER: _ClassVar[int]
     TEAM_FIELD_NUMBER: _ClassVar[int]
+    DISPLAY_NAME_FIELD_NUMBER: _ClassVar[int]
+    TEAM_NAME_FIELD_NUMBER: _ClassVar[int]
     id: str
     mesh: Mesh
     transform: Transform
     aim_offset: Vec3
     team: int
-    def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., aim_offset: _Optional[_Union[Vec3, _Mapping]] = ..., team: _Optional[int] = ...) -> None: ...
+    display_name: str
+    team_name: str
+    def __init__(self, id: _Optional[str] = ..., mesh: _Optional[_Union[Mesh, _Mapping]] = ..., transform: _Optional[_Union[Transform, _Mapping]] = ..., aim_offset: _Optional[_Union[Vec3, _Mapping]] = ..., team: _Optional[int] = ..., display_name: _Optional[str] = ..., team_name: _Optional[str] = ...) -> None: ...
 
 class Lens(_message.Message):
     __slots__ = ("vertical_fov_deg", "aspect")

@@ -43,6 +43,7 @@ class View:
     render_ms: float  # in the render process
     bounds_m: list[float] | None  # the top view's world rectangle [x0, z0, x1, z1], m
     made_s: float  # when the hub got it, on its clock
+    labels: list[str]  # the names labelled on a camera view, nearest last (geometry/labels.py)
 
 
 class ViewHub:
@@ -85,6 +86,7 @@ class ViewHub:
                 header["render_ms"],
                 header["bounds_m"],
                 self.clock(),
+                header["labels"],
             )
             self._views[key] = view
             self._views.move_to_end(key)

@@ -7,8 +7,9 @@
         level: camdirector level add) with the broadcast delay, and streams the match over one
         gRPC StreamFrames stream in real time, --speed times as fast (matches/playback.py); with
         --loop it plays the match again and again until Ctrl-C. Prints JSON lines: first the
-        session id (open it in the dashboard; --session-id-file writes it there too), then one
-        line per cut, then the summary: frames sent, answered, cuts, late frames (sent more than a
+        session id and the players (id, name, team, team name; open it in the dashboard;
+        --session-id-file writes the id there too), then one line per cut (its subjects by id
+        and by name), then the summary: frames sent, answered, cuts, late frames (sent more than a
         frame period after due). Ctrl-C (SIGINT) stops sending: the server answers what was sent,
         the stream ends and the session is closed; a second Ctrl-C stops at once. The key is
         read from --key-file (a file holding it, or - for stdin), else the CAMDIRECTOR_KEY
@@ -117,6 +118,7 @@ def run_play_match(args: argparse.Namespace) -> int:
                 "session_id": session_id,
                 "level": match.level,
                 "players": len(match.players),
+                "roster": [{"id": p.id, "name": p.name, "team": p.team, "team_name": p.team_name} for p in match.players],
                 "director": args.director,
                 "frames_per_lap": len(lap.rows),
                 "rate_hz": round(lap.rate_hz, 2),

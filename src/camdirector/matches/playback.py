@@ -116,14 +116,16 @@ def paced_updates(
             yield update
 
 
-def cut_line(reply: cd.pb.CameraUpdate) -> dict:
-    """A cut as one JSON-ready object: the program moment (frame, time_s, s) and its new shot."""
+def cut_line(reply: cd.pb.CameraUpdate, names: dict[str, str]) -> dict:
+    """A cut as one JSON-ready object: the program moment (frame, time_s, s) and its new shot, its
+    subjects by id and by name (names: id -> the player's name; the id where it has none)."""
     shot = reply.shot
     return {
         "frame": reply.frame,
         "time_s": round(reply.time_s, 3),
         "shot_id": reply.shot_id,
         "subjects": list(shot.subject_ids),
+        "subject_names": [names.get(pid) or pid for pid in shot.subject_ids],
         "kind": cd.pb.ShotKind.Name(shot.kind).removeprefix("SHOT_"),
         "reason": shot.reason,
         "held": shot.held,
@@ -154,6 +156,7 @@ def play_match(
     can leave its channel unable to close: grpc/grpc#19973). DirectorError: the server refused
     the session or the stream failed."""
     result = PlaybackResult()
+    names = {p.id: p.name for p in match.players}
     stop = threading.Event() if stop is None else stop
     start_s = clock()
     with client.create_session(**match_session_fields(match, director, delay_s, seed)) as session:
@@ -169,7 +172,7 @@ def play_match(
                 result.compute_ms.append(reply.compute_ms)
                 if reply.cut:
                     result.counts.cuts += 1
-                    on_cut(cut_line(reply))
+                    on_cut(cut_line(reply, names))
             result.interrupted = stop.is_set()
         except KeyboardInterrupt:
             result.interrupted = True

@@ -22,7 +22,8 @@ grid at rate_hz from the demo's first player sample to its end:
   is the teammate whose health (victim) or frags (killer) fell within TEAMKILL_WINDOW_S of it, else
   the victim's nearest teammate (killer). Position: the victim's feet then.
 - teams: with teamplay on and team names set, team names in slot order of first appearance -> 0,
-  1, ...; otherwise (a duel, free for all) each player its own team.
+  1, ..., each player keeping its team's name; otherwise (a duel, free for all) each player its
+  own team, with no team name (a duel's userinfo "team" is a leftover, not a side).
 """
 
 from __future__ import annotations
@@ -121,8 +122,15 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
         _dead_until_jump(alive[:, victim], time_s, t, track.time_s[jumps[death.victim] & ~limbo[death.victim]])
 
     players = [
-        MatchPlayer(id=pid, team=team, height_m=quake_frame.PLAYER_HEIGHT_M, radius_m=quake_frame.PLAYER_RADIUS_M, name=p.name)
-        for pid, team, p in zip(ids, _teams(demo), demo.players)
+        MatchPlayer(
+            id=pid,
+            team=team,
+            height_m=quake_frame.PLAYER_HEIGHT_M,
+            radius_m=quake_frame.PLAYER_RADIUS_M,
+            name=p.name,
+            team_name=team_name,
+        )
+        for pid, (team, team_name), p in zip(ids, _teams(demo), demo.players)
     ]
     match = MatchRecording(
         level=level or demo.map_name or name,
@@ -189,13 +197,13 @@ def _dead_until_jump(alive: np.ndarray, time_s: np.ndarray, kill_s: float, jump_
     alive[(time_s >= kill_s) & (time_s < until)] = False
 
 
-def _teams(demo: MvdDemo) -> list[int]:
-    """Team index per player (module docstring)."""
+def _teams(demo: MvdDemo) -> list[tuple[int, str]]:
+    """Team index and team name per player (module docstring)."""
     names = [p.team for p in demo.players]
     if demo.teamplay == 0 or not all(names):
-        return list(range(len(names)))
+        return [(k, "") for k in range(len(names))]
     order = list(dict.fromkeys(names))
-    return [order.index(t) for t in names]
+    return [(order.index(t), t) for t in names]
 
 
 def _resolved_deaths(demo: MvdDemo, column: dict[int, int], origin: np.ndarray, time_s: np.ndarray):

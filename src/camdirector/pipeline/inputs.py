@@ -44,6 +44,9 @@ class TargetSpec:
     transform: RigidTransform
     aim_offset_local: npt.NDArray[np.float64]  # (3,)
     team: int = 0  # MATCH: the player's team; players of different teams are opponents
+    # Shown to people only (dashboard, monitor labels), never an identity: "" shows the id instead
+    display_name: str = ""
+    team_name: str = ""  # MATCH: the team's name, "" when the game gives none
 
 
 @dataclass

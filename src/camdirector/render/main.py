@@ -22,9 +22,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from camdirector.geometry.labels import draw_labels
 from camdirector.infra.channels import encode_view, read_message, write_message
 from camdirector.render.monitor import OK, UNAVAILABLE
-from camdirector.render.snapshots import TOP_VIEW_LONG_SIDE_PX, RenderJob, SceneGeometry, rigid_matrices
+from camdirector.render.snapshots import TOP_VIEW_LONG_SIDE_PX, RenderJob, SceneGeometry, label_heads, rigid_matrices
 
 if TYPE_CHECKING:  # imported where it is used: only the render process loads GL
     import moderngl
@@ -68,14 +69,20 @@ class Painter:
     def render(self, job: RenderJob) -> bytes:
         """The view's bytes (encode_view) for one job."""
         t0 = time.perf_counter()
-        header: dict[str, object] = {"frame": job.frame, "placeholder": job.placeholder, "note": job.note, "bounds_m": None}
+        header: dict[str, object] = {
+            "frame": job.frame,
+            "placeholder": job.placeholder,
+            "note": job.note,
+            "bounds_m": None,
+            "labels": [],
+        }
         if job.query.shot == "top":
             image, header["bounds_m"], header["placeholder"] = self._top_view(job.session_id)
             media_type = "image/png"
         else:
             fmt = job.query.image_format
             if job.placeholder is None:
-                pixels = self._camera_view(job)
+                pixels, header["labels"] = self._labelled(job, self._camera_view(job))
                 if job.note is not None:
                     pixels = banner(pixels, job.note)
             else:
@@ -109,6 +116,15 @@ class Painter:
             renderer.set_transforms(list(job.moving_ids), rigid_matrices(job))
         assert job.pose is not None  # a job without a pose has a placeholder instead (snapshots.py)
         return renderer.render(job.pose, job.lens)
+
+    def _labelled(self, job: RenderJob, pixels: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """The camera view with its targets' name labels, and the texts of those drawn, nearest last."""
+        labels = self._geometry[job.session_id].labels
+        assert job.pose is not None  # a camera view (render)
+        bar_rgb = (255 * np.array([label.rgb for label in labels]).reshape(-1, 3)).round().astype(np.uint8)
+        texts = [label.text for label in labels]
+        pixels, placed = draw_labels(pixels, job.pose, job.lens, label_heads(job, labels), texts, bar_rgb)
+        return pixels, [p.text for p in placed]
 
     def _top_view(self, session_id: str) -> tuple[bytes, list[float] | None, str | None]:
         """(PNG, world bounds [x0, z0, x1, z1] m, placeholder reason), made once per session."""

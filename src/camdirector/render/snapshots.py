@@ -17,7 +17,9 @@ to that process once per session (`scene_geometry`). A view that cannot be drawn
 a delay still filling, no such candidate, no cut yet; a top view of a world with no geometry) is
 a placeholder image that says why, not an error: a monitor keeps its place on a director's wall.
 A camera view of a session whose scene has no world at all (no object, no level: only targets)
-is drawn, the targets against the sky, under a banner that says so (`note`).
+is drawn, the targets against the sky, under a banner that says so (`note`). A camera view labels
+its targets with their names (`TargetLabel`, drawn by geometry/labels.py), and says which it
+labelled.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.infra.channels import MAX_HEIGHT_PX, MIN_SIDE_PX, ViewQuery
 from camdirector.pipeline.session import Session
+from camdirector.pipeline.style import Rig
 
 TOP_VIEW_LONG_SIDE_PX = 512  # the top view's longer side; the other follows the world's extent
 NO_WORLD_NOTE = "no world geometry: the scene has no object and no level, only its targets"
@@ -63,10 +66,22 @@ class MeshPart:
 
 
 @dataclass(frozen=True)
+class TargetLabel:
+    """The name label over one target (geometry/labels.py): its display name, or in a MATCH
+    session its id when it has none; targets of other rigs without a name have no label."""
+
+    part_id: str  # the target's moving part, `target:<id>`
+    text: str
+    head_local: np.ndarray  # (3,) float64 m: the top of the target's mesh, in its local frame
+    rgb: tuple[float, float, float]  # its team's colour, as its mesh's
+
+
+@dataclass(frozen=True)
 class SceneGeometry:
-    """Every mesh of a session, sent to the render process once per session."""
+    """Every mesh of a session, and its targets' labels, sent to the render process once per session."""
 
     parts: tuple[MeshPart, ...]
+    labels: tuple[TargetLabel, ...] = ()
 
     @property
     def has_world(self) -> bool:
@@ -117,17 +132,18 @@ def scene_geometry(session: Session) -> SceneGeometry:
         parts.append(MeshPart("level", _f32(mesh.vertices), _i32(mesh.faces), LEVEL_RGB, checker_m=LEVEL_CHECKER_M))
     for object_id, (mesh, _) in session.dynamic.items():
         parts.append(MeshPart(f"object:{object_id}", _f32(mesh.vertices), _i32(mesh.faces), MOVING_RGB, moving=True))
+    labels = []
+    match = session.style.rig == Rig.MATCH
     for target in session.targets:
-        parts.append(
-            MeshPart(
-                f"target:{target.id}",
-                _f32(target.mesh.vertices),
-                _i32(target.mesh.faces),
-                TEAM_RGB[target.team % len(TEAM_RGB)],
-                moving=True,
-            )
-        )
-    return SceneGeometry(tuple(parts))
+        rgb = TEAM_RGB[target.team % len(TEAM_RGB)]
+        parts.append(MeshPart(f"target:{target.id}", _f32(target.mesh.vertices), _i32(target.mesh.faces), rgb, moving=True))
+        text = target.display_name or (target.id if match else "")
+        if text:
+            vertices = target.mesh.vertices
+            low, high = vertices.min(axis=0), vertices.max(axis=0)
+            head = np.array([0.5 * (low[0] + high[0]), high[1], 0.5 * (low[2] + high[2])])
+            labels.append(TargetLabel(f"target:{target.id}", text, head, rgb))
+    return SceneGeometry(tuple(parts), tuple(labels))
 
 
 def render_job(session: Session, query: ViewQuery) -> RenderJob:
@@ -196,6 +212,15 @@ def _f32(vertices: np.ndarray) -> np.ndarray:
 
 def _i32(faces: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(faces, dtype=np.int32)
+
+
+def label_heads(job: RenderJob, labels: tuple[TargetLabel, ...]) -> np.ndarray:
+    """(n, 3) float64 m: where each label's head is in the job's snapshot (its target's transform)."""
+    if not labels:
+        return np.zeros((0, 3))
+    matrices = rigid_matrices(job)
+    row = {part_id: k for k, part_id in enumerate(job.moving_ids)}
+    return np.stack([matrices[row[label.part_id]] @ np.append(label.head_local, 1.0) for label in labels])[:, :3]
 
 
 def rigid_matrices(job: RenderJob) -> np.ndarray:

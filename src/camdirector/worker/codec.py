@@ -9,6 +9,8 @@ refused rather than ignored. The rig cannot change during a session (UpdateStyle
 TRACKS would need a level the session was not created with, and TRACKS to TORIC a second framing
 setup for a scene built around one actor; a new session does either.
 
+Any target's `display_name`, and a MATCH target's `team_name`, is at most 64 code points with no
+control character: shown to people, never an identity.
 A MATCH session (`RIG_MATCH`) has 2 to 64 targets, the players, each with its `team`; its
 `level_id` is optional; `delay_s` in [0, 300] is the broadcast delay (refused for the other rigs,
 as are `events` and the MATCH style fields). A frame's events name players of the session
@@ -33,6 +35,7 @@ from __future__ import annotations
 import ipaddress
 import math
 import socket
+import unicodedata
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any
@@ -74,6 +77,7 @@ _MASKS = {
 _RIGS = {pb.RIG_UNSPECIFIED: Rig.TORIC} | {entry.rig.value: entry.rig for entry in RIGS}  # Rig has the wire's numbers
 MAX_PLAYERS = 64  # players of a MATCH session (the wire contract)
 MAX_DELAY_S = 300.0  # broadcast delay of a MATCH session, s (the wire contract)
+MAX_NAME_CHARS = 64  # a target's display_name and team_name, Unicode code points (the wire contract)
 MAX_PRIORITY = 15  # a game event's priority (HLTV's scale)
 _SHOT_SIZES = {
     pb.SHOT_SIZE_UNSPECIFIED: ShotSize.LONG,
@@ -284,6 +288,17 @@ def _check_id(object_id: str, what: str, seen: set[str]) -> None:
     seen.add(object_id)
 
 
+def _checked_name(name: str, what: str) -> str:
+    """A name shown to people (a target's display_name, team_name): at most MAX_NAME_CHARS code
+    points and no control character, which would break a label's line or a log's."""
+    if len(name) > MAX_NAME_CHARS:
+        raise invalid(f"{what} has {len(name)} characters; at most {MAX_NAME_CHARS} are allowed")
+    control = next((c for c in name if unicodedata.category(c) == "Cc"), None)
+    if control is not None:
+        raise invalid(f"{what} holds the control character U+{ord(control):04X}; a name is one line of text")
+    return name
+
+
 def scene_from_request(
     req: pb.CreateSessionRequest, settings: ServerSettings, levels: LevelCache | None = None, tenant: str = DEFAULT_TENANT
 ) -> SceneSpec:
@@ -294,8 +309,11 @@ def scene_from_request(
         raise invalid(f"a RIG_MATCH session has 2 to {MAX_PLAYERS} players as targets, got {len(req.targets)}")
     if not match and not 1 <= len(req.targets) <= 2:
         raise invalid(f"a session frames one or two targets, got {len(req.targets)}")
-    if not match and (req.delay_s or any(t.team for t in req.targets)):
-        raise invalid("delay_s and targets[].team are for a RIG_MATCH session; set style.rig = RIG_MATCH or leave them unset")
+    if not match and (req.delay_s or any(t.team or t.team_name for t in req.targets)):
+        raise invalid(
+            "delay_s, targets[].team and targets[].team_name are for a RIG_MATCH session; "
+            "set style.rig = RIG_MATCH or leave them unset"
+        )
     if not (math.isfinite(req.delay_s) and 0.0 <= req.delay_s <= MAX_DELAY_S):
         raise invalid(f"delay_s must be in [0, {MAX_DELAY_S:g}] s, got {req.delay_s}")
     if len(req.objects) > settings.max_objects:
@@ -325,6 +343,8 @@ def scene_from_request(
                 transform_from_msg(target.transform, f"{what}.transform"),
                 _vec3(target.aim_offset, f"{what}.aim_offset"),
                 team=int(target.team),
+                display_name=_checked_name(target.display_name, f"{what}.display_name"),
+                team_name=_checked_name(target.team_name, f"{what}.team_name"),
             )
         )
     lens = lens_from_msg(req.lens)

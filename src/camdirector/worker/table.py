@@ -272,10 +272,19 @@ class SessionTable:
     def timeline(self, session_id: str, last: int | None = None, after_frame: int | None = None) -> dict:
         """The session's style (protobuf JSON of `camdirector.v1.Style`, as the client sent it, a
         MATCH style's director by the name it resolved to: codec.shown_style),
-        its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first, and
-        with pose outputs their counts (`pose_outputs`: format, address, sent, dropped, last_error)."""
+        its newest `last` answered frames after `after_frame` (`timeline.py`), oldest first, its
+        targets as people see them (`roster`: id, display_name, team, team_name in target order;
+        here once per ask, where the frames name targets by id only), and with pose outputs their
+        counts (`pose_outputs`: format, address, sent, dropped, last_error)."""
         held = self.get(session_id)
-        detail = {"style": json_format.MessageToDict(held.style_msg), "frames": held.timeline.as_json(last, after_frame)}
+        detail = {
+            "style": json_format.MessageToDict(held.style_msg),
+            "frames": held.timeline.as_json(last, after_frame),
+            "roster": [
+                {"id": t.id, "display_name": t.display_name, "team": t.team, "team_name": t.team_name}
+                for t in held.session.targets
+            ],
+        }
         if held.pose_sender is not None:  # each output's datagrams sent and dropped (pose_out.py)
             detail["pose_outputs"] = held.pose_sender.status()
         return detail

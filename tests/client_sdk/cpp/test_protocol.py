@@ -1,6 +1,7 @@
 """The protocol the C/C++ SDK speaks: CD_PROTOCOL and cd_protocol() (from C, tools/c_api_check.c)
 are the server's; against a real server (`sdk_check protocol`) cd_session_open says it in
-CreateSessionRequest.client_protocol (read back from the server's recording of the session), a
+CreateSessionRequest.client_protocol (read back from the server's recording of the session, with
+the targets' display names: cd_target.display_name, NULL as empty), a
 request claiming a newer one is CD_FAILED_PRECONDITION with the server's words in cd_last_error,
 and the same client then opens another session."""
 
@@ -23,7 +24,9 @@ def test_sessions_say_the_protocol_and_a_newer_claim_is_refused(sdk_bin, tmp_pat
     assert report["protocol"] == report["header_protocol"] == PROTOCOL, report
     assert report["recorded_close"] == "OK", report
     recording = tmp_path / "recordings" / f"{report['recorded_session_id']}.cdrec"
-    assert next(read_entries(recording)).create.client_protocol == PROTOCOL
+    create = next(read_entries(recording)).create
+    assert create.client_protocol == PROTOCOL
+    assert [t.display_name for t in create.targets] == ["Åsa <b>", ""]  # cd_target.display_name, NULL for b
     assert report["newer"] == "FAILED_PRECONDITION", report
     assert report["newer_error"] == (
         f"CreateSession on {server.grpc}: this client speaks camdirector protocol {PROTOCOL + 1}, this server "

@@ -229,6 +229,10 @@ typedef struct cd_target {
   cd_transform transform;
   cd_vec3 aim_offset; /* the framed point, in the target's local frame */
   uint32_t team;      /* RIG_MATCH only */
+  /* Shown to people only, never an identity; UTF-8, at most 64 code points, no control
+   * character; NULL or "" shows the id. team_name is RIG_MATCH's. */
+  const char* display_name;
+  const char* team_name;
 } cd_target;
 
 /* Enum fields take the proto's numbers (0 is the default); the optional doubles and the screen

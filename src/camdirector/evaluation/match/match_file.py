@@ -1,14 +1,14 @@
 """A recorded match: every player's transform per frame and the game events, in one .npz file.
 
 The file is one compressed NumPy .npz archive. The member `metadata` holds UTF-8 JSON:
-`format_version`, `level`, `seed`, `rate_hz`, `players` (id, team, height_m, radius_m, name) and
+`format_version`, `level`, `seed`, `rate_hz`, `players` (id, team, height_m, radius_m, name, team_name) and
 `events` (one object per MatchEvent, in time order). The other members are the arrays of
 `MatchRecording`: `time_s` (F,) float64, `positions_world` (F, P, 3) float64, `rotations_xyzw`
 (F, P, 4) float64, `alive` (F, P) bool and, when the source recorded them, `stats` (F, P, 4) int32
 with the columns STAT_COLUMNS (a real match's health, armor, item bits and frags per frame), and
 `aim_pitch_deg` (F, P) float64 where the source recorded where players looked.
-`name`, `stats` and `aim_pitch_deg` came later without a new format version: a file without them
-loads with "", None and None. Conventions are the wire contract's (docs/protocol.md): metres,
+`name`, `team_name`, `stats` and `aim_pitch_deg` came later without a new format version: a file
+without them loads with "", "", None and None. Conventions are the wire contract's (docs/protocol.md): metres,
 seconds, +Y up; a player's position is its feet, its rotation turns its local +Z onto its facing
 with local +Y up.
 
@@ -46,13 +46,15 @@ _ZIP_MAGIC = b"PK\x03\x04"  # an .npz is a zip archive (numpy.lib.format, np.loa
 @dataclass(frozen=True)
 class MatchPlayer:
     """One player: id ("p00", ...), team (an index >= 0; players of one team share it), height_m
-    and radius_m of its body, name (what the game called it; "" for simulated bots)."""
+    and radius_m of its body, name (what the game called it; "" for simulated bots) and team_name
+    (what the game called its team; "" where it has none, a duel's or a free-for-all's player)."""
 
     id: str
     team: int
     height_m: float
     radius_m: float
     name: str = ""
+    team_name: str = ""
 
 
 @dataclass(frozen=True)
@@ -298,6 +300,7 @@ def load_match(path: Path) -> MatchRecording:
                 height_m=float(p["height_m"]),
                 radius_m=float(p["radius_m"]),
                 name=str(p.get("name", "")),
+                team_name=str(p.get("team_name", "")),  # absent from files written before team names
             )
             for p in meta["players"]
         ]

@@ -2,7 +2,9 @@
 
 Each program moment is drawn from its camera at VIDEO_SIZE_PX: the level mesh and the players'
 capsules coloured by team (dead players are left out: the match file keeps their bodies standing
-where they fell, which on screen would read as a player who is still fighting). A small top view
+where they fell, which on screen would read as a player who is still fighting), each living player
+in the picture labelled over its head with its name, or its id where the game gave none
+(geometry/labels.py, as the dashboard's monitors). A small top view
 of the level sits in the top right corner, with every living player as a dot of its team's colour
 and the program camera as a white dot. Frames play at the program's rate, so the video runs in
 game time.
@@ -18,6 +20,7 @@ import numpy as np
 from camdirector.evaluation.match.match_file import MatchRecording
 from camdirector.evaluation.match.measure import Program, player_mesh
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.labels import PlacedLabel, draw_labels
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
 from camdirector.precompute.tracks.registry import LevelRegistry
 
@@ -56,6 +59,22 @@ def _dots(image: np.ndarray, pose: CameraPose, lens: Lens, points_world: np.ndar
         image[max(row - 1, 0) : row + 2, max(col - 1, 0) : col + 2] = color
 
 
+def label_players(
+    frame: np.ndarray, match: MatchRecording, index: int, pose: CameraPose, lens: Lens
+) -> tuple[np.ndarray, list[PlacedLabel]]:
+    """The program frame (h, w, 3) uint8 of match frame `index` seen from pose with each living
+    player's name label over its head (its feet plus its height), and the labels drawn."""
+    alive = match.alive[index]
+    heads = match.positions_world[index] + np.array([[0.0, p.height_m, 0.0] for p in match.players])
+    texts = [(p.name or p.id) if shown else "" for p, shown in zip(match.players, alive.tolist())]
+    return draw_labels(frame, pose, lens, heads, texts, _team_rgb8(match))
+
+
+def _team_rgb8(match: MatchRecording) -> np.ndarray:
+    """(P, 3) uint8: each player's team colour."""
+    return (255 * np.array(TEAM_RGB)).astype(np.uint8)[[p.team % len(TEAM_RGB) for p in match.players]]
+
+
 def render_program(match: MatchRecording, program: Program, out_mp4: Path, seconds: float, data_dir: Path | None = None) -> dict:
     """Renders the program's first `seconds` to out_mp4; returns frames, fps and median ms per frame.
     Raises VideoUnavailable when EGL or the encoder cannot start."""
@@ -70,7 +89,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
     rows = np.flatnonzero(program.time_s <= program.time_s[0] + seconds)
     fps = float(1.0 / np.median(np.diff(program.time_s))) if len(program) > 1 else 30.0
     top = top_view_pose(artifact.level_vertices, lens)
-    team_rgb8 = (255 * np.array(TEAM_RGB)).astype(np.uint8)[[p.team % len(TEAM_RGB) for p in match.players]]
+    team_rgb8 = _team_rgb8(match)
     ids = [p.id for p in match.players]
     costs = []
     try:
@@ -104,7 +123,8 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
                 np.concatenate([match.positions_world[index][alive], program.position[row][None]]),
                 np.concatenate([team_rgb8[alive], np.full((1, 3), 255, dtype=np.uint8)]),
             )
-            frame = renderer.render(program.pose(int(row)), lens)
+            pose = program.pose(int(row))
+            frame, _ = label_players(renderer.render(pose, lens), match, index, pose, lens)
             frame[: inset.shape[0], width - inset.shape[1] :] = inset
             video.write(frame)
             costs.append((time.perf_counter() - start) * 1e3)

@@ -1,7 +1,8 @@
 """A recorded match as a RIG_MATCH session's input: the CreateSession fields and the FrameUpdates.
 
 Shared by `camdirector eval-match` (evaluate.py) and `camdirector play-match`
-(matches/playback.py). The players are capsule targets standing on their feet with their team and a
+(matches/playback.py). The players are capsule targets standing on their feet with their team, their
+names as the game gave them (display_name, team_name: shown to people, the ids stay the ids) and a
 chest-high aim point (measure.py's `player_mesh` and `aim_offset`), level_id = the match's level;
 the frames are the match subsampled to a rate (every k-th row of the file), the events of the
 skipped rows riding on the next sent one, as a game sending at that rate would announce them, and,
@@ -60,6 +61,8 @@ def player_targets(match: MatchRecording, player_ids: list[str] | None = None) -
             cd.pb.Target(
                 id=player.id,
                 team=player.team,
+                display_name=player.name,
+                team_name=player.team_name,
                 mesh=cd.mesh_from_arrays(body.vertices, body.faces),
                 transform=cd.transform_msg(match.positions_world[0, i], match.rotations_xyzw[0, i]),
                 aim_offset=cd.vec3(aim_offset(player)),

@@ -4,6 +4,7 @@
 import { sessionPath } from "./api.js";
 import { cell } from "./cells.js";
 import { MONITOR_WIDTH_PX } from "./monitors.js";
+import { playerNames, withNames } from "./names.js";
 import { gate } from "./roles.js";
 import { state } from "./state.js";
 import { take } from "./takes.js";
@@ -21,7 +22,7 @@ export function showCandidates(candidates, frame) {
   }
   candidates.forEach((c, i) => {
     const row = body.rows[i];
-    row.querySelector(".candidate-why").textContent = c.shot.reason;
+    row.querySelector(".candidate-why").textContent = withNames(c.shot.reason);
     row.querySelector(".candidate-interest").textContent = `interest ${c.score.toFixed(2)}`;
   });
   const now = Date.now();
@@ -43,14 +44,14 @@ function candidateRow(c) {
   row.dataset.subjects = c.shot.subject_ids.join(",");
   const img = document.createElement("img");
   img.className = "monitor";
-  img.alt = `what the candidate shot of ${c.shot.subject_ids.join(", ")} would show`;
+  img.alt = `what the candidate shot of ${playerNames(c.shot.subject_ids)} would show`;
   img.dataset.testid = "candidate-view";
   img.dataset.subjects = row.dataset.subjects;
   const monitor = cell(row, "");
   monitor.className = "candidate-monitor";
   monitor.appendChild(img);
   cell(row, c.shot.kind.replace("SHOT_", "")).className = "candidate-kind";
-  cell(row, c.shot.subject_ids.join(", "));
+  cell(row, playerNames(c.shot.subject_ids)).className = "candidate-players";
   cell(row, "").className = "candidate-why";
   cell(row, "").className = "candidate-interest";
   const button = document.createElement("button");

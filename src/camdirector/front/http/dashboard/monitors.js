@@ -3,6 +3,7 @@
 // live MJPEG stream holds one for as long as it runs: the program monitor alone streams, the others
 // are single pictures.
 import { send, sessionPath } from "./api.js";
+import { withNames } from "./names.js";
 import { state } from "./state.js";
 
 export const MONITOR_WIDTH_PX = 320;   // the pictures' width (the server's default); the height follows the lens
@@ -29,7 +30,8 @@ export function programStopped() {   // the stream ended (the session did) or wa
 async function picture(url) {   // a monitor's picture as an object URL, with the headers saying what it shows
   const reply = await send(url);
   return { url: URL.createObjectURL(await reply.blob()), frame: reply.headers.get("X-Camdirector-Frame"),
-           placeholder: reply.headers.get("X-Camdirector-Placeholder") };
+           placeholder: reply.headers.get("X-Camdirector-Placeholder"),
+           labels: JSON.parse(reply.headers.get("X-Camdirector-Labels") || "[]") };   // the names drawn over players
 }
 
 const FIRST_SHOT_ID = 1;   // shot ids count a session's cuts, its first pose the first (pipeline/session.py)
@@ -69,11 +71,14 @@ export async function showLastCut(frames) {
     URL.revokeObjectURL(after.url);
     return;
   }
-  showCutPictures([before.url, after.url]);
+  showCutPictures([before.url, after.url], after.labels);
   document.getElementById("cut-caption").textContent = cutCaption(before, after, frames);
 }
 
-function showCutPictures(urls) {   // [before, after] as object URLs, or [] to empty both monitors
+// [before, after] as object URLs, or [] to empty both monitors; labels: the names the cut's own
+// picture labels its players with (X-Camdirector-Labels), said under it.
+function showCutPictures(urls, labels = []) {
+  document.getElementById("cut-labels").textContent = labels.length ? `Labelled: ${labels.join(", ")}.` : "";
   state.cutPictures.forEach((url) => URL.revokeObjectURL(url));
   state.cutPictures = urls;
   ["cut-before", "cut-after"].forEach((id, k) => {
@@ -86,7 +91,7 @@ function showCutPictures(urls) {   // [before, after] as object URLs, or [] to e
 function cutCaption(before, after, frames) {
   if (after.placeholder) return `Nothing to show: ${after.placeholder}.`;
   const cut = frames.find((f) => String(f.frame) === after.frame);
-  const why = cut ? [cut.shot ? cut.shot.reason : null, ...cut.flags].filter(Boolean) : [];
+  const why = cut ? [cut.shot ? withNames(cut.shot.reason) : null, ...cut.flags].filter(Boolean) : [];
   return `Cut at frame ${after.frame} (from frame ${before.frame})` +
     (cut ? ` to shot ${cut.shot_id}: ${why.length ? why.join(", ") : "new shot"}.` : ".");
 }

@@ -1,9 +1,11 @@
 // The selected session, polled: GET /v1/sessions/{id} with only the frames not seen yet, kept in
-// the state's buffer, then shown by every panel of the session (monitors, top view, timeline, why
-// the camera moved, the match's program, the style and, in a map mode, the anticipation map).
+// the state's buffer, then shown by every panel of the session (its players' names, monitors, top
+// view, timeline, why the camera moved, the match's program, the style and, in a map mode, the
+// anticipation map).
 import { api, sessionPath } from "./api.js";
 import { showMatch } from "./match.js";
 import { showLastCut } from "./monitors.js";
+import { showRoster } from "./names.js";
 import { state } from "./state.js";
 import { showStyle } from "./style.js";
 import { drawTimeline } from "./timeline.js";
@@ -43,6 +45,7 @@ export async function refreshSession() {
     buffered.events = buffered.events.concat(fresh).slice(-EVENT_LOG_SIZE);
   }
   const frames = buffered.frames;
+  showRoster(detail.roster);   // first: every panel after it names the players
   loadTopView(sessionId);
   showLastCut(frames);
   drawTopView(frames);

@@ -9,6 +9,8 @@ export const state = {
   styleSentBySession: {},     // session id -> the style the form was last filled from (JSON text)
   currentStyle: {},           // the selected session's style, as the server reported it
   buffered: { session: null, frames: [], events: [] },   // the selected session's frames and game events seen
+  roster: new Map(),          // the selected session's targets by id: { id, display_name, team, team_name } (names.js)
+  rosterPattern: null,        // a RegExp of the named targets' ids, to show names in texts that use ids (names.js)
   candidatesShown: "",        // the candidate shots the table shows (JSON), rebuilt only when they change
   candidatesPictured: { frame: null, ms: 0 },   // the frame the candidate monitors last asked for, and when
   cutShown: null,             // the cut the before/after monitors show: "<session> <newest cut frame seen>"

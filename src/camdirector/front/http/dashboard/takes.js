@@ -1,10 +1,11 @@
 // A human's take in a match: POST /v1/sessions/{id}/take puts a shot on the program, held until
 // released (docs/protocol.md); the result shows by the release button.
 import { api, sessionPath } from "./api.js";
+import { playerNames } from "./names.js";
 import { state } from "./state.js";
 
-export function describeShot(shot) {
-  const who = shot.subject_ids.length ? shot.subject_ids.join(", ") : "the map";
+export function describeShot(shot) {   // with the players' names: show it as text
+  const who = shot.subject_ids.length ? playerNames(shot.subject_ids) : "the map";
   return `${shot.kind.replace("SHOT_", "")} ${who}`;
 }
 

@@ -1,5 +1,6 @@
 // Why the camera moved: the newest frame's flags, then every cut's in the window with its shot's
-// reason, and the scores the rig gave (docs/protocol.md).
+// reason (its players by name), and the scores the rig gave (docs/protocol.md).
+import { withNames } from "./names.js";
 
 export function showWhy(frames) {
   const list = document.getElementById("why");
@@ -14,7 +15,7 @@ export function showWhy(frames) {
   add(`frame ${last.frame}: ${last.flags.length ? last.flags.join(", ") : "on its preferred path (no flag)"}` +
       scored(last.scores));
   for (const f of frames.filter((f) => f.cut).reverse()) {
-    const why = [f.shot ? f.shot.reason : null, ...f.flags].filter(Boolean);
+    const why = [f.shot ? withNames(f.shot.reason) : null, ...f.flags].filter(Boolean);
     add(`cut at frame ${f.frame} to shot ${f.shot_id}: ${why.length ? why.join(", ") : "new shot"}` +
         scored(f.scores));
   }

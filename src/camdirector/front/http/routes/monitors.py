@@ -13,7 +13,9 @@ Pictures are rendered in the worker's render process (render/main.py), never in 
 path, and shared among viewers (front/view_hub.py). Headers: X-Camdirector-Frame (the session frame
 shown), X-Camdirector-Render-Ms, and X-Camdirector-Placeholder with the reason when the picture
 is a placeholder (no camera yet, a delay still filling, no such candidate, no cut yet, a world
-without geometry): still 200, so a monitor keeps its place.
+without geometry): still 200, so a monitor keeps its place. A camera view labels the players in it
+with their names (render/snapshots.py) and lists those labels, nearest last, in
+X-Camdirector-Labels: a JSON array of strings, non-ASCII escaped (a header is ASCII).
 
 The live stream is MJPEG rather than a WebSocket: an <img> shows it with no script, any HTTP
 client or video tool (ffmpeg, VLC) reads it, it passes every proxy that passes HTTP, and its one
@@ -27,6 +29,7 @@ takes more than RENDER_TIMEOUT_S, or a worker lost, 503.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Annotated, Any, Literal
 
@@ -72,6 +75,8 @@ def _headers(view: View) -> dict[str, str]:
         headers["X-Camdirector-Note"] = view.note
     if view.bounds_m is not None:
         headers["X-Camdirector-Bounds-M"] = ",".join(f"{v:.4f}" for v in view.bounds_m)
+    if view.labels:  # names from a game: JSON with every non-ASCII character escaped, as a header must be
+        headers["X-Camdirector-Labels"] = json.dumps(view.labels, ensure_ascii=True)
     return headers
 
 

@@ -1,7 +1,8 @@
 """REST routes of the live sessions, for the dashboard and operations tools.
 
     GET /v1/sessions                      {"sessions": [summary, ...]}
-    GET /v1/sessions/{id}?last=N&after_frame=F   {"session": summary, "style": Style, "frames": [...]}
+    GET /v1/sessions/{id}?last=N&after_frame=F   {"session": summary, "style": Style, "frames": [...],
+                                          "roster": [...]}
     GET /v1/sessions/{id}/amap.png        the map modes' anticipation map around the camera now
     PUT /v1/sessions/{id}/style           body: a camdirector.v1.Style in protobuf's JSON mapping
                                           -> {"session_id", "style"}; as UpdateStyle on the wire
@@ -15,10 +16,12 @@ session's timeline (`timeline.py`): camera position and view direction, target a
 shot id, visibility, framing error, the flags that say why the camera moved, compute time; a
 MATCH session's also the program's shot, the candidate shots, the players and their teams, the
 game events and the planned next cut (while its broadcast delay fills, frames without a camera).
-A style sent here replaces the session's whole style, exactly as `UpdateStyle` does (and is
-recorded the same way), so the client streaming the session sees the change on its next frame. A
-take (a MATCH session's, the dashboard's take button) holds a human's shot from the program's next
-frame until released.
+The frames name targets by id; the roster gives each its display name and team name once per
+answer (names are a game's text: a viewer shows them as text, never as markup). A style sent
+here replaces the session's whole style, exactly as `UpdateStyle` does (and is recorded the same
+way), so the client streaming the session sees the change on its next frame. A take (a MATCH
+session's, the dashboard's take button) holds a human's shot from the program's next frame until
+released.
 
 Errors as on the wire, with the same messages: an unknown session 404, a style the rig refuses 422
 (INVALID_ARGUMENT) or 409 (FAILED_PRECONDITION), a body that is not a Style 422, one that
@@ -129,10 +132,20 @@ class TimelineFrameOut(BaseModel):
     planned_cut: PlannedCutOut | None = Field(None, description="the director's next planned cut, if any")
 
 
+class RosterEntryOut(BaseModel):
+    id: str = Field(description="the target's id, as the frames name it")
+    display_name: str = Field(description="the name shown to people, as the client sent it; empty: show the id")
+    team: int = Field(ge=0, description="MATCH: the player's team")
+    team_name: str = Field(description="MATCH: the team's name as sent; may be empty")
+
+
 class SessionDetail(BaseModel):
     session: SessionSummary
     style: dict[str, Any] = Field(description="camdirector.v1.Style as last sent, protobuf JSON")
     frames: list[TimelineFrameOut] = Field(description="oldest first")
+    roster: list[RosterEntryOut] = Field(
+        description="the targets (MATCH: the players) in target order with their names: untrusted text, show it as text"
+    )
 
 
 class StyleChanged(BaseModel):
