@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from camdirector.access.cli import add_parsers as add_key_parsers
+from camdirector.bridges.cast_cli import add_parser as add_cast_parser
 from camdirector.evaluation.cli import add_parsers as add_eval_parsers
 from camdirector.matches.import_cli import add_parser as add_import_match_parser
 from camdirector.matches.play_cli import add_parser as add_play_match_parser
@@ -188,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     add_key_parsers(sub)
     add_play_match_parser(sub)
     add_import_match_parser(sub)
+    add_cast_parser(sub)
     p = sub.add_parser("replay", help="replay a session recording and check the poses bit for bit")
     p.add_argument("file", type=Path)
     p.add_argument(

@@ -1,0 +1,198 @@
+"""The players as the newest GSI payloads saw them, sampled at any moment (gsi_cast.py's clock).
+
+Payloads are offered as they arrive, stamped with the local monotonic clock: the game's own
+timestamp counts whole seconds, too coarse to place a payload sent every 0.1 s. A payload whose
+timestamp is older than the newest accepted one's came out of order and is dropped; one whose body
+is byte for byte one of the last accepted (the game resending after its timeout) is dropped as a
+duplicate; so time never runs backwards. Within one second the game's payloads are taken in their
+arrival order (it posts one at a time, the next after the answer or its timeout).
+
+Sampling at time t: each player's position and yaw are interpolated between the two newest
+payloads that carried it, at t - interp_delay_s (entity interpolation: the frame shows the players
+one payload period in the past, so that a payload lies on each side); beyond the newest, the
+newest is held (no extrapolation: a player that stopped is not carried on). Without any payload
+for hold_s, the sample says stale.
+
+The roster is the first payload's players on T or CT, ordered by observer slot (then Steam id):
+ids p00, p01, ... A player first seen later is not in the session (counted in `unknown`).
+
+Kills. GSI carries no death event and no victim's id: a kill is read off the scoreboard. A player
+whose match_stats.kills rose killed someone; one whose deaths rose, or whose health fell to 0, died.
+When one payload holds exactly one kill and one death on the other team, that is a KILL (attacker,
+victim, at the victim's feet). Otherwise the pairing is unknown and each death is a CUSTOM event
+"died" of the victim, each kill a CUSTOM event "kill, victim unknown" of the killer (a kill on the
+wire must name its victim). A suicide or a death to the world shows as a death alone.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from camdirector.bridges.gsi import TEAMS, GsiPayload, GsiPlayer
+from camdirector.evaluation.match.match_file import MatchPlayer
+from camdirector.matches.cs2_demo import ITEM_DEFUSER, ITEM_HELMET, PLAYER_HEIGHT_M, PLAYER_RADIUS_M, source_points_to_world
+
+RECENT_BODIES = 32  # digests of accepted bodies remembered to spot a resent payload
+
+
+@dataclass(frozen=True)
+class DerivedEvent:
+    """A game event read off two payloads: kind "kill" (actor killed other), "death" (actor died,
+    killer unknown) or "kill_unknown" (actor killed someone unknown); position_world (3,) m."""
+
+    kind: str
+    actor_id: str
+    other_id: str
+    position_world: np.ndarray
+
+
+@dataclass
+class Sample:
+    """The players at one moment: ids (n,), positions_world (n, 3) m at the feet, yaw_deg (n,)
+    Source yaw; stats: (id, health, armor, items, frags) of the players whose values changed since
+    the last sample; events since the last sample; stale: no payload for hold_s."""
+
+    ids: list[str]
+    positions_world: np.ndarray
+    yaw_deg: np.ndarray
+    stats: list[tuple[str, int, int, int, int]]
+    events: list[DerivedEvent]
+    stale: bool
+
+
+@dataclass
+class OfferCounts:
+    """What became of the payloads offered: accepted, duplicate, out_of_order, unknown (players
+    outside the roster, summed over payloads)."""
+
+    accepted: int = 0
+    duplicate: int = 0
+    out_of_order: int = 0
+    unknown: int = 0
+
+
+def _yaw_deg(forward: np.ndarray | None) -> float:
+    return 0.0 if forward is None else float(np.degrees(np.arctan2(forward[1], forward[0])))
+
+
+def _items(p: GsiPlayer) -> int:
+    return (ITEM_HELMET if p.helmet else 0) | (ITEM_DEFUSER if p.defusekit else 0)
+
+
+@dataclass
+class GsiTracks:
+    """The store (module docstring); thread-safe: the HTTP endpoint offers, the driver samples."""
+
+    interp_delay_s: float
+    hold_s: float
+    counts: OfferCounts = field(default_factory=OfferCounts)
+    roster: list[MatchPlayer] = field(default_factory=list)
+    _steamids: dict[str, int] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+    _has_roster: threading.Event = field(default_factory=threading.Event)
+    _recent: deque[bytes] = field(default_factory=lambda: deque(maxlen=RECENT_BODIES))
+    _newest_stamp_s: int = -1
+    _last_accept_s: float = float("-inf")
+    _t: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (n, 2) s: older, newer sample
+    _p: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))  # (n, 2, 3) m
+    _yaw: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (n, 2) deg
+    _last: dict[str, GsiPlayer] = field(default_factory=dict)
+    _stats_sent: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)
+    _events: list[DerivedEvent] = field(default_factory=list)
+
+    def offer(self, payload: GsiPayload, digest: bytes, arrival_s: float) -> str:
+        """Takes a payload that arrived at arrival_s (monotonic s) with the body's digest; returns
+        "accepted", "duplicate" or "out_of_order" (module docstring)."""
+        with self._lock:
+            if digest in self._recent:
+                self.counts.duplicate += 1
+                return "duplicate"
+            if payload.timestamp_s < self._newest_stamp_s:
+                self.counts.out_of_order += 1
+                return "out_of_order"
+            self._recent.append(digest)
+            self._newest_stamp_s = payload.timestamp_s
+            self._last_accept_s = arrival_s
+            self.counts.accepted += 1
+            if not self.roster:
+                self._start_roster(payload, arrival_s)
+            self._take(payload, arrival_s)
+            return "accepted"
+
+    def wait_roster(self, timeout_s: float | None = None) -> bool:
+        """Whether a payload with players came (waiting up to timeout_s)."""
+        return self._has_roster.wait(timeout_s)
+
+    def _start_roster(self, payload: GsiPayload, arrival_s: float) -> None:
+        placed = sorted(
+            (p for p in payload.players if p.position_units is not None),
+            key=lambda p: (p.observer_slot, p.steamid),
+        )
+        if not placed:
+            return
+        self.roster = [
+            MatchPlayer(f"p{i:02d}", TEAMS[p.team], PLAYER_HEIGHT_M, PLAYER_RADIUS_M, p.name, p.team)
+            for i, p in enumerate(placed)
+        ]
+        self._steamids = {p.steamid: i for i, p in enumerate(placed)}
+        feet = source_points_to_world(np.stack([np.asarray(p.position_units, dtype=np.float64) for p in placed]))
+        yaw = np.array([_yaw_deg(p.forward) for p in placed])
+        self._t = np.full((len(placed), 2), arrival_s)
+        self._p = np.repeat(feet[:, None, :], 2, axis=1)
+        self._yaw = np.repeat(yaw[:, None], 2, axis=1)
+        self._has_roster.set()
+
+    def _take(self, payload: GsiPayload, arrival_s: float) -> None:
+        killers, victims = [], []
+        for p in payload.players:
+            i = self._steamids.get(p.steamid)
+            if i is None:
+                self.counts.unknown += 1
+                continue
+            if p.position_units is not None and arrival_s > self._t[i, 1]:
+                self._t[i] = (self._t[i, 1], arrival_s)
+                self._p[i] = (self._p[i, 1], source_points_to_world(p.position_units))
+                self._yaw[i] = (self._yaw[i, 1], _yaw_deg(p.forward))
+            before = self._last.get(p.steamid)
+            if before is not None:
+                killers += [i] * max(0, p.kills - before.kills)
+                if p.deaths > before.deaths or (before.health > 0 and p.health <= 0):
+                    victims.append(i)
+            self._last[p.steamid] = p
+        self._events += self._kills(killers, victims)
+
+    def _kills(self, killers: list[int], victims: list[int]) -> list[DerivedEvent]:
+        ids = [m.id for m in self.roster]
+        if len(killers) == 1 and len(victims) == 1 and self.roster[killers[0]].team != self.roster[victims[0]].team:
+            return [DerivedEvent("kill", ids[killers[0]], ids[victims[0]], self._p[victims[0], 1].copy())]
+        return [DerivedEvent("death", ids[v], "", self._p[v, 1].copy()) for v in victims] + [
+            DerivedEvent("kill_unknown", ids[k], "", self._p[k, 1].copy()) for k in killers
+        ]
+
+    def sample(self, now_s: float) -> Sample:
+        """The players at now_s (monotonic s), module docstring; the events and changed stats since
+        the last sample go with it, once."""
+        with self._lock:
+            at_s = now_s - self.interp_delay_s
+            span = self._t[:, 1] - self._t[:, 0]
+            alpha = np.clip((at_s - self._t[:, 0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+            alpha = np.where(span > 0, alpha, 1.0)
+            positions = self._p[:, 0] + alpha[:, None] * (self._p[:, 1] - self._p[:, 0])
+            turn = (self._yaw[:, 1] - self._yaw[:, 0] + 180.0) % 360.0 - 180.0  # the short way round
+            yaw = self._yaw[:, 0] + alpha * turn
+            stats = []
+            for m, steamid in zip(self.roster, self._steamids):  # dicts keep the roster's order
+                p = self._last.get(steamid)
+                if p is None:
+                    continue
+                values = (p.health, p.armor, _items(p), p.kills)
+                if self._stats_sent.get(m.id) != values:
+                    self._stats_sent[m.id] = values
+                    stats.append((m.id, *values))
+            events, self._events = self._events, []
+            stale = now_s - self._last_accept_s > self.hold_s
+            return Sample([m.id for m in self.roster], positions, yaw, stats, events, stale)
