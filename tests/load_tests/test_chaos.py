@@ -51,6 +51,9 @@ def test_a_paused_node_leaves_the_balancer_and_its_streams_go_on_elsewhere(repor
     fault = report["faults"]["node-pause"]
     assert fault["node"] in fault["balancer"]["nodes_out_s"], fault["balancer"]
     assert fault["stall_s_max"] < SHORT.fault_s
+    # out of the balancer, and every session of the node answered elsewhere, while it still hangs
+    assert fault["out_after_hang_s"] is not None and fault["out_after_hang_s"] < SHORT.fault_s, fault
+    assert fault["resumed_after_hang_s_max"] is not None and fault["resumed_after_hang_s_max"] < SHORT.fault_s, fault
 
 
 def test_a_postgresql_pause_does_not_freeze_the_streams(report):
