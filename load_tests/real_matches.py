@@ -54,6 +54,17 @@ COLUMNS = (
     ("shot max s", lambda f: f["shots"]["max"]),
     (">20 s missing a kill", lambda f: f["long_shots_missing_kills"]),
     ("cuts/min", lambda f: f["cuts_per_min"]),
+    (
+        "outside / solid / swept: program; outside / solid: candidates",
+        lambda f: "{o} / {s} / {w}; {co} / {cs} of {cn}".format(
+            o=f["places"]["program"]["outside"],
+            s=f["places"]["program"]["solid"],
+            w=f["places"]["program"]["swept_through_walls"],
+            co=f["places"]["candidates"]["outside"],
+            cs=f["places"]["candidates"]["solid"],
+            cn=f["places"]["candidates"]["poses"],
+        ),
+    ),
     ("compute p50/p99 ms", lambda f: f"{f['compute_ms']['median']:.2f} / {f['compute_ms']['p99']:.1f}"),
 )
 

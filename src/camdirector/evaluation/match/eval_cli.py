@@ -8,8 +8,9 @@
         minutes with --minutes) through a RIG_MATCH session of each director named (default:
         every registered one, pipeline/match/director_registry.py, the plugins' too) with the
         broadcast delay D s, and a one-actor RIG_TRACKS session as the cost reference
-        (evaluation/match/evaluate.py); measures kill coverage, lead, shots, jump cuts and
-        visibility from the returned cameras (measure.py); prints the result as JSON and writes
+        (evaluation/match/evaluate.py); measures kill coverage, lead, shots, jump cuts,
+        visibility and the program's and candidates' poses outside the level or inside solid
+        from the returned cameras (measure.py); prints the result as JSON and writes
         it to OUT. --plot draws coverage, lead and shot lengths; --video renders our director's
         program (the first director's without ours) for its first S seconds (EGL; skipped with a
         message when unavailable).

@@ -38,9 +38,11 @@ from camdirector.evaluation.match.measure import (
     jump_cuts,
     kill_coverage,
     measure_shown,
+    places_count,
     program_visibility,
     shot_lengths_s,
     shown_heights,
+    sweeps_through_walls,
 )
 from camdirector.evaluation.match.session_feed import (
     Feed,
@@ -49,6 +51,7 @@ from camdirector.evaluation.match.session_feed import (
     player_targets,
 )
 from camdirector.geometry.camera import Lens
+from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.infra.plugins import import_plugins
@@ -62,10 +65,12 @@ LONG_SHOT_S = 20.0  # issue 29: no shot over 20 s while a kill happens outside i
 @dataclass(eq=False)
 class DirectorRun:
     """One director's session: its program, compute_ms (m,) of the replies with a program, the
-    count of buffering replies and the stream's wall time, s."""
+    positions (c, 3) m of the candidates offered beside the program moments, the count of
+    buffering replies and the stream's wall time, s."""
 
     program: Program
     compute_ms: np.ndarray
+    candidate_positions: np.ndarray
     buffering: int
     wall_s: float
 
@@ -97,15 +102,16 @@ def stream_director(
                         u.shot_id,
                         tuple(u.shot.subject_ids),
                         u.compute_ms,
+                        tuple((c.pose.position.x, c.pose.position.y, c.pose.position.z) for c in u.candidates),
                     ),
                 )
             )
     wall_s = time.perf_counter() - start
-    answered = [r for _, r in replies if r is not None and r[0] - 1 < len(match.time_s)]
-    answered = [r for i, r in enumerate(answered) if i == 0 or r[0] > answered[i - 1][0]]  # one row per moment
+    shown = [r for _, r in replies if r is not None and r[0] - 1 < len(match.time_s)]
+    answered = _one_row_per_moment(shown)
     if not answered:
         raise RuntimeError("the server answered no program frame (is the match shorter than the delay?)")
-    frame, time_s, position, rotation, fov, cut, shot_id, subjects, compute_ms = zip(*answered)
+    frame, time_s, position, rotation, fov, cut, shot_id, subjects, compute_ms, _ = zip(*answered)
     program = Program(
         index=np.array(frame, dtype=np.int64) - 1,
         time_s=np.array(time_s),
@@ -116,7 +122,23 @@ def stream_director(
         shot_id=np.array(shot_id, dtype=np.int64),
         subjects=list(subjects),
     )
-    return DirectorRun(program, np.array(compute_ms), sum(b for b, _ in replies), wall_s)
+    # every candidate offered, a moment's answered twice too: a monitor showed each
+    candidate_positions = np.array([p for r in shown for p in r[-1]], dtype=np.float64).reshape(-1, 3)
+    return DirectorRun(program, np.array(compute_ms), candidate_positions, sum(b for b, _ in replies), wall_s)
+
+
+def _one_row_per_moment(rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
+    """The replies (frame first, cut sixth), one per program moment in increasing frame order:
+    of a moment answered more than once (two input frames whose program moment is the same), the
+    last reply, which stayed on air, cutting if any of them cut (a viewer saw the cut; the
+    measures of moves and shots then see it too); a reply older than the one before is left out."""
+    out: list[tuple[Any, ...]] = []
+    for row in rows:
+        if out and row[0] == out[-1][0]:
+            out[-1] = (*row[:5], row[5] or out[-1][5], *row[6:])
+        elif not out or row[0] > out[-1][0]:
+            out.append(row)
+    return out
 
 
 def stream_tracks_reference(client: cd.Client, match: MatchRecording, feed: Feed) -> np.ndarray:
@@ -133,7 +155,9 @@ def stream_tracks_reference(client: cd.Client, match: MatchRecording, feed: Feed
         )
 
 
-def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens: Lens, level: RayScene) -> dict:
+def _figures(
+    match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens: Lens, level: RayScene, interior: LevelInterior
+) -> dict:
     program = run.program
     shown = measure_shown(program, bodies, lens, level)
     eyes = in_eyes_of(match, program)
@@ -165,6 +189,13 @@ def _figures(match: MatchRecording, run: DirectorRun, bodies: BodySampler, lens:
             "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None,
         },
         "long_shots_missing_kills": _long_shots_missing_kills(match, program, coverage),
+        "places": {
+            "program": {
+                **places_count(interior, program.position),
+                "swept_through_walls": sweeps_through_walls(interior, program),
+            },
+            "candidates": places_count(interior, run.candidate_positions),
+        },
         "program_sha256": program.digest(),
         "compute_ms": _timing(run.compute_ms),
         "program_moments": len(program),
@@ -235,7 +266,8 @@ def evaluate_match(
     names = [e.name for e in registered()] if directors is None else [director_entry(n).name for n in directors]
     registry = LevelRegistry(data_dir)
     artifact = registry.load(match.level)  # KeyError names an unknown level
-    level = RayScene([TriMesh(artifact.level_vertices, artifact.level_faces)])
+    level_mesh = TriMesh(artifact.level_vertices, artifact.level_faces)
+    level, interior = RayScene([level_mesh]), LevelInterior(level_mesh)
     bodies = BodySampler(match, np.random.default_rng(seed))
     lens = Lens()  # the server's default lens: the sessions send none
     feed = Feed.of(match, rate_hz, delay_s)
@@ -253,7 +285,7 @@ def evaluate_match(
     figures = {}
     for name, run in runs.items():
         progress(f"measuring {name}")
-        figures[name] = _figures(match, run, bodies, lens, level)
+        figures[name] = _figures(match, run, bodies, lens, level, interior)
     progress("measuring the ceilings")
     ceilings = match_ceilings(match, bodies, lens, level, SHORT_SHOT_S)
     tracks_median_ms = float(np.median(tracks_ms))

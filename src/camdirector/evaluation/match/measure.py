@@ -36,6 +36,11 @@ players' bodies as the match file has them, never from what the director says it
   the height on screen of its body's sample points, as a share of the frame's height; the median
   over all of them says whether players are large enough to read; the same over the players the
   shot names says whether its subjects are.
+- places: of the program's poses (one per program moment) and of the candidates' poses (every
+  candidate offered beside a program moment, as many times as offered), how many lie outside the
+  level (its mesh's bounding box) or inside solid (geometry/inside.py says how it decides), and
+  how many there are; and how many moves of the program camera between two moments with no cut
+  between them pass through level geometry (a sweep through a wall, where a cut belongs).
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ import numpy as np
 
 from camdirector.evaluation.match.match_file import MatchPlayer, MatchRecording
 from camdirector.geometry.camera import CameraPose, Lens, in_frame, project_to_screen
+from camdirector.geometry.inside import LevelInterior, Place
 from camdirector.geometry.meshes import TriMesh, capsule
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
@@ -259,3 +265,20 @@ def shown_heights(
         screen_y = screen_y.reshape(len(players), -1)
         heights.extend((np.nanmax(screen_y, axis=1) - np.nanmin(screen_y, axis=1)) / 2.0)  # [-1, 1] is the frame
     return np.array(heights, dtype=np.float64)
+
+
+def places_count(interior: LevelInterior, positions_world: np.ndarray) -> dict[str, int]:
+    """Of the camera positions (n, 3) m: how many are outside the level, how many inside solid,
+    and n (module docstring)."""
+    places = interior.places(positions_world) if len(positions_world) else np.zeros(0, dtype=np.int8)
+    return {"outside": int((places == Place.OUTSIDE).sum()), "solid": int((places == Place.SOLID).sum()), "poses": len(places)}
+
+
+def sweeps_through_walls(interior: LevelInterior, program: Program) -> int:
+    """Moves of the program camera from one moment to the next, with no cut at the next, whose
+    segment passes through level geometry (module docstring)."""
+    moves = np.flatnonzero(~program.cut[1:]) + 1
+    moves = moves[np.any(program.position[moves] != program.position[moves - 1], axis=1)]
+    if not len(moves):
+        return 0
+    return int((interior.reach(program.position[moves - 1], program.position[moves]) < 1.0).sum())

@@ -1,8 +1,9 @@
 """The camera worked out ahead: with a delay, the next frame's program moment is most likely the
 next buffered one, known already. After a frame the rig works out, in the worker's idle moments
 (its deferred work, before the drawn plan's slices), that moment's CAMERA and VISIBILITY from a
-copy of the shot's camera (program_camera.py), and the candidates' poses (those of the drawn plan
-too, once computed: the tick that applies it shows them). The frame takes them when they are its
+copy of the shot's camera (program_camera.py), and the candidates' poses, kept inside the level
+(in_level.py) as the program's are (those of the drawn plan too, once computed: the tick that
+applies it shows them). The frame takes them when they are its
 own: the same moment and time step, the same shot, style and pose shown before, and the camera's
 attributes the same objects (cameras change only by assigning them, program_shot.py, so a tick's
 new goal or pair window, or a cut, shows); otherwise it computes them as before. What a frame
@@ -19,9 +20,11 @@ from typing import Any
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.match.frame import Candidate
+from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_camera import ProgramCamera
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
+from camdirector.pipeline.match.shots import ToricCamera
 from camdirector.pipeline.style import Style
 
 
@@ -94,27 +97,37 @@ def step_ahead(
     )
 
 
-def candidate_poses(moment: Moment, lists: list[list[CandidateShot]]) -> list[CandidatePoses]:
+def contained_poses(moment: Moment, cameras: list[ToricCamera | None], in_level: InLevel) -> list[CameraPose | None]:
+    """The Toric cameras' poses at the moment (None for no camera or no pose), inside the level
+    (toward each one's anchor), their places tested in one call."""
+    poses = [None if cam is None else cam.pose(moment) for cam in cameras]
+    anchors = [None if cam is None else moment.aims_world[cam.anchor_index] for cam in cameras]
+    return in_level.contained_many(poses, anchors)
+
+
+def candidate_poses(moment: Moment, lists: list[list[CandidateShot]], in_level: InLevel) -> list[CandidatePoses]:
     """Each list's candidates' poses at the moment."""
-    return [CandidatePoses(moment, c, [None if cam is None else cam.pose(moment) for _, cam, _ in c]) for c in lists]
+    return [CandidatePoses(moment, c, contained_poses(moment, [cam for _, cam, _ in c], in_level)) for c in lists]
 
 
 def candidate_views(
-    moment: Moment, pose: CameraPose, candidates: list[CandidateShot], ahead: list[CandidatePoses], program: ShotCamera
+    moment: Moment,
+    pose: CameraPose,
+    candidates: list[CandidateShot],
+    ahead: list[CandidatePoses],
+    program: ShotCamera,
+    in_level: InLevel,
 ) -> list[Candidate]:
-    """The frame's candidates: each camera's pose at the moment (worked out ahead, or now; an
-    OVERVIEW candidate's is the program's pose)."""
+    """The frame's candidates: each camera's pose at the moment, inside the level (worked out
+    ahead, or now; an OVERVIEW candidate's is the program's pose)."""
     known_poses = next((a for a in ahead if a.moment is moment and a.candidates is candidates), None)
-    poses = known_poses.poses if known_poses is not None else [None] * len(candidates)
+    known = known_poses.poses if known_poses is not None else [None] * len(candidates)
+    # worked out now: the cameras without a pose ahead, and the one the program took
+    now = [cam if cam is not None and (k is None or cam is program) else None for (_, cam, _), k in zip(candidates, known)]
+    computed = contained_poses(moment, now, in_level)
     views = []
-    for (choice, cam, score), known in zip(candidates, poses):
-        shown: CameraPose | None
-        if cam is None:
-            shown = pose
-        elif known is not None and cam is not program:
-            shown = known
-        else:
-            shown = cam.pose(moment)
+    for (choice, cam, score), asked, now_pose, ahead_pose in zip(candidates, now, computed, known):
+        shown = pose if cam is None else now_pose if asked is not None else ahead_pose
         if shown is not None:
             views.append(Candidate(shown, choice, score))
     return views

@@ -1,8 +1,12 @@
 """CAMERA and VISIBILITY of the MATCH rig: every frame, the program shot's camera stepped to the
 program moment, a Toric camera whose first subject walls hide pulled in front of the wall
-(shots.py `pulled_in`, flagged `pulled_in_front_of_wall`), and the share of the framed subjects'
-sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of it, on a copy
-of the camera (camera_ahead.py): the same computation either way.
+(shots.py `pulled_in`, flagged `pulled_in_front_of_wall`), any director's pose that would lie
+outside the level or inside solid moved inside toward the player the shot keeps in view
+(in_level.py, flagged `moved_inside_level`), one that would move through a wall kept on that
+player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
+(`held_before_wall`), and the share of the framed subjects' sample points seen from the pose
+(visibility.py). In the frame (rig.py) or ahead of it, on a copy of the camera (camera_ahead.py):
+the same computation either way.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
@@ -22,8 +27,11 @@ from camdirector.pipeline.match.visibility import SubjectVisibility
 class ProgramCamera:
     """The CAMERA and VISIBILITY stages of one session (module docstring)."""
 
-    def __init__(self, settings: MatchSettings, visibility: SubjectVisibility, ray_scene: RayScene, lens: Lens):
+    def __init__(
+        self, settings: MatchSettings, visibility: SubjectVisibility, ray_scene: RayScene, lens: Lens, in_level: InLevel
+    ):
         self.settings, self.subject_visibility, self.ray_scene, self.lens = settings, visibility, ray_scene, lens
+        self.in_level = in_level
 
     def step(
         self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, response_time_s: float, last_pose: CameraPose | None
@@ -38,12 +46,35 @@ class ProgramCamera:
             pose, pulled = self._pulled_in(moment, pose, dt_s, camera, shot)
             if pulled:
                 flags.append("pulled_in_front_of_wall")
+        if pose is not None:
+            anchor = self._anchor(moment, camera, shot)
+            pose, moved = self.in_level.contained(pose, anchor)
+            if moved:
+                flags.append("moved_inside_level")
+            if dt_s > 0.0 and last_pose is not None:  # a move, not a cut's first frame
+                pose, kept = self.in_level.kept_this_side(last_pose.position_world, pose, anchor)
+                if kept:
+                    flags.append("kept_this_side_of_wall")
+                else:
+                    pose, held = self.in_level.held(
+                        last_pose.position_world, pose, anchor, self.lens, self.settings.wall_hold_max_m
+                    )
+                    if held:
+                        flags.append("held_before_wall")
         if pose is None:
             if last_pose is None:
                 return None
             pose = last_pose
             flags.append("pose_held")
         return pose, flags
+
+    @staticmethod
+    def _anchor(moment: Moment, camera: ShotCamera, shot: Shot) -> np.ndarray | None:
+        """(3,) m: the aim point of the player the shot keeps in view (a Toric camera's anchor,
+        else its first framed subject); None for a shot of nobody."""
+        framed = shot.framed(moment.time_s)
+        anchor = camera.anchor_index if isinstance(camera, ToricCamera) else framed[0] if framed else None
+        return None if anchor is None else np.asarray(moment.aims_world[anchor], dtype=np.float64)
 
     def visibility(self, moment: Moment, pose: CameraPose, shot: Shot) -> float:
         """VISIBILITY: the mean share of the shot's framed subjects seen from the pose (1 for none)."""

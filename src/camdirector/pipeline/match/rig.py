@@ -21,8 +21,11 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             draws the next. Every director's program offers the best other situations
             (situations.py) as candidates.
 3. camera   every frame, the shot's camera at the program moment; a Toric camera from whose place
-            walls hide most of its first subject comes in front of the wall (program_camera.py),
-            worked out ahead of the frame when it can be (camera_ahead.py).
+            walls hide most of its first subject comes in front of the wall, and any pose, the
+            candidates' too, that would lie outside the level or inside solid comes inside
+            (program_camera.py, in_level.py), worked out ahead of the frame when it can be
+            (camera_ahead.py); a camera that moved through a wall since the last frame cuts
+            there (`cut_through_wall`): cuts to places, never sweeps through walls.
 4. visibility  the share of the framed subjects' sample points seen from the camera.
 Every cut's `shot.reason` says why, its sub-scores go to `scores`, and degraded choices to `flags`.
 
@@ -48,6 +51,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.slices import SlicedRun
@@ -66,6 +70,7 @@ from camdirector.pipeline.match.director_registry import director_entry
 from camdirector.pipeline.match.drawn_plan import PLAN_SLICE_S, DrawnPlan, PlanResult
 from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
+from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_camera import ProgramCamera
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
@@ -108,7 +113,9 @@ class MatchRig(RigBase):
         )
         self.situations = Situations(self.players, self.teams, settings, ray_scene)
         self.takes = Takes(self.players, settings, self.builder, self.situations)
-        self.program_camera = ProgramCamera(settings, self.visibility, ray_scene, self.lens)
+        interior = LevelInterior.of(scene.level.mesh_world) if scene.level is not None else None
+        self.in_level = InLevel(interior, self.level_nodes, settings.pull_margin_m)
+        self.program_camera = ProgramCamera(settings, self.visibility, ray_scene, self.lens, self.in_level)
         self._stats: dict[str, PlayerStats] = {}  # each player's latest stats sent up to the program moment
         self._stats_ahead: deque[tuple[float, list[PlayerStats]]] = deque()  # (frame time s, stats) not yet on air
         # the directors' view, read only by its type (a mappingproxy would not pickle into the checkpoint)
@@ -272,9 +279,14 @@ class MatchRig(RigBase):
                 stepped = self._camera_step(moment, dt_s, self.shot.camera)
                 assert stepped is not None  # a static camera always has its pose
             pose, flags = stepped
+        if not cut and self._swept_through_wall(pose):
+            cut = True
+            flags = [*flags, "cut_through_wall"]
         state.flags.extend(flags)
         state.pose, state.cut = pose, cut
-        match.candidates = candidate_views(moment, pose, self._candidates, self._ahead_candidates, self.shot.camera)
+        match.candidates = candidate_views(
+            moment, pose, self._candidates, self._ahead_candidates, self.shot.camera, self.in_level
+        )
         self._last_pose, self._ahead_candidates = pose, []
         stages.done(MatchStage.CAMERA)
         state.visibility = (
@@ -299,6 +311,15 @@ class MatchRig(RigBase):
         stages.done(MatchStage.VISIBILITY)
 
     # -- the camera's step, in the frame or ahead of it -------------------------------------
+    def _swept_through_wall(self, pose: CameraPose) -> bool:
+        """Whether the camera moved from the last pose shown through level geometry (a wall between
+        the two centres, in_level.py `crossed`): the program cuts there instead of sweeping
+        through it."""
+        last = self._last_pose
+        if last is None or np.array_equal(last.position_world, pose.position_world):
+            return False
+        return self.in_level.crossed(last.position_world, pose.position_world)
+
     def _camera_step(self, moment: Moment, dt_s: float, camera: ShotCamera) -> tuple[CameraPose, list[str]] | None:
         """CAMERA of the shot by `camera` (its own, or a copy ahead), program_camera.py."""
         assert self.shot is not None
@@ -317,7 +338,7 @@ class MatchRig(RigBase):
         drawn = self._drawn
         if drawn is not None and drawn.run is None and drawn.result is not None:
             lists.append(drawn.result.candidates)
-        self._ahead_candidates = candidate_poses(moment, lists)
+        self._ahead_candidates = candidate_poses(moment, lists, self.in_level)
 
     # -- the planning tick ------------------------------------------------------------------
     def _tick(self, moment: Moment, flags: list[str]) -> bool:

@@ -117,6 +117,9 @@ class MatchSettings:
     pull_margin_m: float = 0.3           # and stops this far short of the wall (HLTV's wall margin), m. [0, 5]
     pull_regrow_m_s: float = 2.0         # and goes back out toward its place this fast (real players run 10 m/s past
                                          # corners; HLTV's 0.8 m/s held cameras pulled in for seconds), m/s. (0, 100]
+    wall_hold_max_m: float = 4.0         # a program camera whose move into a new frame passes through a wall, and that no
+                                         # place on its subject's side replaces, stays where it was (turning to frame)
+                                         # if the move is this short; a longer one is a cut, m. [0, 100]
     priorities: dict[EventKind, int] = field(default_factory=lambda: {
         EventKind.UNSPECIFIED: 1, EventKind.KILL: 7, EventKind.DAMAGE: 3, EventKind.OBJECTIVE: 5,
         EventKind.CUSTOM: 4})            # the kind's default priority (a death is 7 as in HLTV), [1, 15]
@@ -126,6 +129,8 @@ class MatchSettings:
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
                                       "respawn_walk_m", "engage_range_m", "join_spread_max_m", "reframe_s", "max_held_shot_s",
                                       "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
+        if not 0.0 <= self.wall_hold_max_m <= 100.0:
+            raise ValueError("MatchSettings: wall_hold_max_m in [0, 100] m")
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
             raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")
         if not 2 <= self.max_group <= 64 or not 1 <= self.samples_per_player <= 256 \
