@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import socket
 import ssl
+import struct
 import threading
 import time
 
@@ -106,6 +107,31 @@ def test_over_tls_it_shows_the_certificate_and_a_plain_request_gets_no_answer(tl
         except ConnectionResetError:
             plain = b""
         assert plain == b""
+        assert _ask(live.address, tls=client_context).startswith(b"HTTP/1.0 200 OK")
+    finally:
+        live.stop()
+
+
+def test_checks_left_behind_while_the_node_hung_do_not_stop_it(tls_files):
+    """A hung node's kernel takes the balancer's checks into its backlog; each sends its TLS hello
+    and gives up with a reset. When the node resumes, the thread takes them reset with data unread,
+    which a TLS wrap refuses (ssl.SSLError): the thread lives on and answers the next check (the chaos run's
+    paused node once stayed out of the balancer for good)."""
+    server_context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    server_context.load_cert_chain(tls_files.cert, tls_files.key)
+    live = LiveCheck("127.0.0.1:0", time.monotonic, tls=server_context)  # not started: the node hangs
+    host, _, port = live.address.rpartition(":")
+    client_context = ssl.create_default_context(cafile=str(tls_files.ca_cert))
+    for _ in range(3):
+        raw = socket.create_connection((host, int(port)), timeout=5)
+        hello = client_context.wrap_socket(raw, server_hostname="localhost", do_handshake_on_connect=False)
+        hello.setblocking(False)
+        with pytest.raises(ssl.SSLWantReadError):
+            hello.do_handshake()  # the hello is sent; no answer comes
+        hello.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # reset, as HAProxy ends a check
+        hello.close()
+    live.start()
+    try:
         assert _ask(live.address, tls=client_context).startswith(b"HTTP/1.0 200 OK")
     finally:
         live.stop()

@@ -27,12 +27,15 @@ floods it can make the checks fail and take the node out.
 
 from __future__ import annotations
 
+import logging
 import selectors
 import socket
 import ssl
 import threading
 import time
 from collections.abc import Callable
+
+log = logging.getLogger("camdirector.live")
 
 MAX_REQUEST_BYTES = 1024  # a check's request is one line and a few headers
 REQUEST_TIMEOUT_S = 1.0  # a connection without a whole request this long after it opened is closed, s
@@ -109,10 +112,13 @@ class LiveCheck:
                 if key.fileobj is self._stop_r:
                     self._listener.close()
                     return
-                if key.fileobj is self._listener:
-                    self._accept()
-                else:
-                    self._read(key.fileobj)  # type: ignore[arg-type]  # registered connections are sockets
+                try:
+                    if key.fileobj is self._listener:
+                        self._accept()
+                    elif key.fileobj in self._open:  # not closed by an earlier event of this batch
+                        self._read(key.fileobj)  # type: ignore[arg-type]  # registered connections are sockets
+                except Exception:  # one connection's fault: the thread must outlive it, or the node's checks stop
+                    log.exception("liveness port: a connection failed")
             now = self._clock()
             for sock in [s for s, (deadline, _) in self._open.items() if deadline < now]:
                 self._close(sock)
@@ -126,7 +132,11 @@ class LiveCheck:
             self._close(next(iter(self._open)))
         sock.setblocking(False)
         if self._tls is not None:  # the handshake is made by the first reads (_read)
-            sock = self._tls.wrap_socket(sock, server_side=True, do_handshake_on_connect=False)
+            try:
+                sock = self._tls.wrap_socket(sock, server_side=True, do_handshake_on_connect=False)
+            except OSError:  # closed by its peer before it was taken (a check that timed out while the node hung)
+                sock.close()
+                return
         self._open[sock] = (self._clock() + REQUEST_TIMEOUT_S, b"")
         self._selector.register(sock, selectors.EVENT_READ)
 
