@@ -102,6 +102,7 @@ FAULTS = (
     "node-kill-redis-down",
 )
 POLL_S = 0.05  # between two looks at HAProxy's server states, s
+HANG_GAP_S = 0.2  # a gap in a session's answers this long after a hang is its stall (a frame is 33 ms at 30 Hz), s
 DRAIN_S = 20.0  # the longest the application waits for its last frames' answers after it stops sending, s
 DEFAULT_CLIP = SHARED_DATA_DIR / "mocap" / "bandai_namco" / "dataset-1_run_active_001.bvh"  # 72 frames
 JOBS_WAIT_S = 180.0  # the longest a phase's accepted jobs are waited for after its streams end, s
@@ -481,15 +482,16 @@ def _phase(
 def _hang_figures(hung_at_s: float, victim: str, balancer: _Balancer, records: list[_Record]) -> dict:
     """A hung node's timeline (issue 40: its streams resume within 1.5 s of the hang): when the
     balancer had it out (the first look at HAProxy's states after the hang with it not UP, to within
-    POLL_S), and when each of its sessions was answered again (the end of its longest gap in
-    answers after the hang), both s after the hang."""
+    POLL_S), and when each of its sessions was answered again (the first answer after the hang that
+    ends a gap of HANG_GAP_S or more: not a later gap, such as the sessions' move back to the node
+    once it resumes), both s after the hang."""
     out = next((t for t, up in balancer.seen if t >= hung_at_s and up is not None and not up.get(victim, True)), None)
     resumed = []
     for r in records:
         times = sorted(t for _, t, _ in r.answers)
-        gaps = [(b - a, b) for a, b in zip(times, times[1:]) if b > hung_at_s]
-        if gaps:
-            resumed.append(max(gaps)[1] - hung_at_s)
+        ends = [b for a, b in zip(times, times[1:]) if b > hung_at_s and b - a >= HANG_GAP_S]
+        if ends:
+            resumed.append(ends[0] - hung_at_s)
     return {
         "out_after_hang_s": None if out is None else round(out - hung_at_s, 3),
         "resumed_after_hang_s_max": round(max(resumed), 3) if resumed else None,

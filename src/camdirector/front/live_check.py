@@ -116,7 +116,7 @@ class LiveCheck:
                     if key.fileobj is self._listener:
                         self._accept()
                     elif key.fileobj in self._open:  # not closed by an earlier event of this batch
-                        self._read(key.fileobj)  # type: ignore[arg-type]  # registered connections are sockets
+                        self._read(key.fileobj)
                 except Exception:  # one connection's fault: the thread must outlive it, or the node's checks stop
                     log.exception("liveness port: a connection failed")
             now = self._clock()
