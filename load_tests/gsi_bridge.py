@@ -7,7 +7,7 @@ The players are the ten of the recorded payload (tests/data/gsi). Measured in th
 server (what is measured is the bridge's side of the wire):
 - payload_us: one payload taken in: parse_payload of its body (JSON, ~12 KB) and GsiTracks.offer.
 - bridge_frame_us: one frame out of the bridge: GsiTracks.sample (interpolated positions) and
-  gsi_cast.frame_update, serialized (the bytes a StreamFrames message carries).
+  live_session.frame_update, serialized (the bytes a StreamFrames message carries).
 - play_match_frame_us: one frame out of play-match for the same ten players at the same positions:
   session_feed.frame_updates over a match file of them, serialized.
 - floor_frame_us: the least any frame costs: the same ten packed transforms alone (pack_states,
@@ -26,8 +26,8 @@ import numpy as np
 
 import camdirector_client as cd
 from camdirector.bridges.gsi import parse_payload
-from camdirector.bridges.gsi_cast import frame_update
 from camdirector.bridges.gsi_tracks import GsiTracks
+from camdirector.bridges.live_session import frame_update
 from camdirector.evaluation.match.match_file import MatchRecording
 from camdirector.evaluation.match.session_feed import Feed, frame_updates
 from camdirector.matches.cs2_demo import view_rotation

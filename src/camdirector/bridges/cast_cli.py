@@ -14,6 +14,21 @@
     camdirector cast gsi --print-config [--listen ...] --token T
         prints the gamestate_integration_camdirector.cfg to put in the game's cfg folder.
 
+    camdirector cast qtv qtv://HOST:PORT[/STREAM] (--level NAME | --map MAP.bsp) --server URL
+                         [--delay-s 10] [--rate-hz 30] [--director NAME] [--key-file PATH]
+                         [--ca-file CA] [--data-dir DIR]
+        connects to a QuakeWorld QTV source (mvdsv, or a QTV proxy's STREAM) as a QTV client,
+        decodes the live MVD stream as it comes and drives a RIG_MATCH session on the level
+        (bridges/qtv.py): players interpolated at rate_hz, frags as kill events, their stats;
+        reconnects with backoff when the source drops or sends a bad stream (one error line on
+        stderr each time), in the same session. --map MAP.bsp adds the map to the level registry
+        first, under its stem, as import-match --map does. Prints JSON lines: the session and
+        its players, one progress line a second (players, frags, the program's shot,
+        connections), then the summary. Ctrl-C stops. Exit status: 0 stopped by Ctrl-C after a
+        session ran, 1 the stream to the server failed or the level registry is unavailable, 2
+        bad arguments, map, server, key, or a QTV source that refused the stream or could not be
+        reached.
+
 Kept light at import, as play_cli.py: the client loads when the command runs. `cast` has
 subcommands so that other feeds join it.
 """
@@ -26,10 +41,11 @@ import logging
 import signal
 import sys
 import threading
+from pathlib import Path
 
 
 def add_parser(subparsers) -> None:
-    """Registers `cast` and its `gsi` subcommand; args.handler(args) runs it."""
+    """Registers `cast` and its `gsi` and `qtv` subcommands; args.handler(args) runs them."""
     cast = subparsers.add_parser("cast", help="direct a live game from its own feed", description=__doc__.split("\n\n")[0])
     feeds = cast.add_subparsers(dest="feed", required=True)
     p = feeds.add_parser(
@@ -56,9 +72,30 @@ def add_parser(subparsers) -> None:
     p.add_argument("--ca-file", dest="ca_file", help="grpcs:// only: PEM authorities to trust")
     p.set_defaults(handler=run_cast_gsi)
 
+    q = feeds.add_parser(
+        "qtv",
+        help="QuakeWorld over QTV (mvdsv or a QTV proxy)",
+        description=__doc__.split("\n\n")[2],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    q.add_argument("url", metavar="qtv://HOST:PORT[/STREAM]", help="the QTV source (port default 27500)")
+    where = q.add_mutually_exclusive_group(required=True)
+    where.add_argument("--level", help="the level the session runs on (camdirector level add)")
+    where.add_argument("--map", type=Path, help="the match's map (.bsp): added to the level registry under its stem first")
+    q.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder for --map (default: per-user data dir)")
+    q.add_argument("--server", required=True, help="the server, grpc://HOST:PORT or grpcs://HOST:PORT")
+    q.add_argument("--delay-s", dest="delay_s", type=float, default=10.0, help="broadcast delay, s, 0 to 300 (default 10)")
+    q.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0, help="frames per second sent (default 30)")
+    q.add_argument("--director", default="planned", metavar="NAME", help="a match director the server has (default planned)")
+    q.add_argument(
+        "--key-file", dest="key_file", metavar="PATH", help="a file holding the API key (-: stdin; default: CAMDIRECTOR_KEY)"
+    )
+    q.add_argument("--ca-file", dest="ca_file", help="grpcs:// only: PEM authorities to trust")
+    q.set_defaults(handler=run_cast_qtv)
 
-def _fail(message: str) -> int:
-    print(f"camdirector cast gsi: {' '.join(str(message).split())}", file=sys.stderr)
+
+def _fail(message: str, feed: str = "gsi") -> int:
+    print(f"camdirector cast {feed}: {' '.join(str(message).split())}", file=sys.stderr)
     return 2
 
 
@@ -176,6 +213,105 @@ def _run(args: argparse.Namespace, endpoint_settings, driver, netcon_settings) -
                 "cuts": counts.cuts,
                 "kills": counts.kills,
                 "spec_goto": None if netcon is None else netcon.sent,
+            }
+        }
+    )
+    return 0
+
+
+def run_cast_qtv(args: argparse.Namespace) -> int:
+    """Runs `camdirector cast qtv` from parsed arguments; returns the exit status."""
+    from camdirector.bridges.qtv import QtvSettings, parse_qtv_url
+
+    try:
+        parse_qtv_url(args.url)
+        if not args.server.startswith(("grpc://", "grpcs://")):
+            raise ValueError(f"--server {args.server!r}: give grpc://HOST:PORT or grpcs://HOST:PORT")
+        settings = QtvSettings(rate_hz=args.rate_hz, delay_s=args.delay_s)
+    except ValueError as exc:
+        return _fail(str(exc), "qtv")
+    level = args.level
+    if args.map is not None:
+        from camdirector.matches.import_cli import add_map, map_level_name
+        from camdirector.precompute.tracks.registry import LevelsUnavailable
+
+        level = map_level_name(args.map)
+        try:
+            add_map(args.map, level, args.data_dir)
+        except LevelsUnavailable as exc:
+            print(f"camdirector cast qtv: {exc}", file=sys.stderr)
+            return 1
+        except (OSError, ValueError) as exc:
+            return _fail(f"{args.map}: {exc}", "qtv")
+    return _run_qtv(args, settings, level)
+
+
+def _run_qtv(args: argparse.Namespace, settings, level: str) -> int:
+    import camdirector_client as cd
+    from camdirector.access.keys import read_key_file
+    from camdirector.bridges.qtv import QtvError, cast_qtv
+
+    logging.basicConfig(level=logging.WARNING, format="camdirector cast qtv: %(message)s", stream=sys.stderr)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda signum, frame: stop.set())
+    signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
+    try:
+        key = read_key_file(args.key_file) if args.key_file is not None else None
+        client = cd.connect(args.server, key=key, ca_file=args.ca_file)
+    except (OSError, ValueError) as exc:
+        return _fail(str(exc), "qtv")
+    _print({"source": args.url, "level": level, "director": args.director, "delay_s": settings.delay_s})
+    opened: list[str] = []
+
+    def on_session(session_id: str, roster) -> None:
+        opened.append(session_id)
+        players = [{"id": p.id, "name": p.name, "team": p.team, "team_name": p.team_name} for p in roster]
+        _print({"session_id": session_id, "players": len(players), "roster": players, "rate_hz": settings.rate_hz})
+
+    def on_progress(c, receiver, tracks) -> None:
+        _print(
+            {
+                "players": len(tracks.roster),
+                "frags": len(tracks.kills),
+                "shot": c.last_shot,
+                "frames": c.frames,
+                "stale_ticks": c.stale,
+                "connections": receiver.connections,
+            }
+        )
+
+    try:
+        with client:
+            done = cast_qtv(
+                client,
+                args.url,
+                settings,
+                level=level,
+                director=args.director,
+                stop=stop,
+                on_session=on_session,
+                on_progress=on_progress,
+            )
+    except QtvError as exc:
+        return _fail(str(exc), "qtv")
+    except cd.DirectorError as exc:
+        if not opened:
+            return _fail(f"the server at {args.server} refused the session: {exc}", "qtv")
+        print(f"camdirector cast qtv: the stream of session {opened[0]} failed: {exc}", file=sys.stderr)
+        return 1
+    c, r = done.session, done.receiver
+    _print(
+        {
+            "summary": {
+                "frames": c.frames,
+                "answered": c.answered,
+                "program_frames": c.program,
+                "cuts": c.cuts,
+                "kills": c.kills,
+                "connections": r.connections,
+                "drops": r.drops,
+                "bad_streams": r.bad_streams,
+                "bytes": r.bytes,
             }
         }
     )

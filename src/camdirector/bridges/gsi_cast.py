@@ -8,60 +8,20 @@ interpolated (gsi_tracks.Sample), its scoreboard values when they changed (healt
 time since the session opened. When payloads stop, players are held for hold_s, then no frame is
 sent (the program holds; a progress line says stale) until a payload comes again, game time then
 going on from the clock. Each program pose goes to the console when one is given (netcon.py).
+The session loop is live_session.py's, shared with the QTV bridge.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Generator, Iterator
-from dataclasses import dataclass
-
-import numpy as np
+from collections.abc import Callable
 
 import camdirector_client as cd
 from camdirector.bridges.gsi_settings import GsiDriverSettings
-from camdirector.bridges.gsi_tracks import DerivedEvent, GsiTracks, Sample
+from camdirector.bridges.gsi_tracks import GsiTracks
+from camdirector.bridges.live_session import CastCounts, drive_session
 from camdirector.bridges.netcon import NetconSender, spec_goto_line
-from camdirector.evaluation.match.measure import aim_offset, player_mesh
-from camdirector.matches.cs2_demo import view_rotation
-
-EVENT_LABELS = {"kill": "kill", "death": "died", "kill_unknown": "kill, victim unknown"}
-
-
-@dataclass
-class CastCounts:
-    """frames sent, answered, program (answers with a pose), cuts, kills (events sent), stale
-    (clock ticks without a frame: no payload for hold_s), last_shot (the program's shot: kind and
-    subjects' names)."""
-
-    frames: int = 0
-    answered: int = 0
-    program: int = 0
-    cuts: int = 0
-    kills: int = 0
-    stale: int = 0
-    last_shot: str = ""
-
-
-def event_msg(event: DerivedEvent) -> cd.pb.GameEvent:
-    kind = cd.pb.EVENT_KILL if event.kind == "kill" else cd.pb.EVENT_CUSTOM
-    return cd.pb.GameEvent(
-        kind=kind,
-        actor_id=event.actor_id,
-        other_actor_id=event.other_id,
-        label=EVENT_LABELS[event.kind],
-        position=cd.vec3(event.position_world),
-    )
-
-
-def frame_update(session: cd.Session, frame: int, time_s: float, sample: Sample) -> cd.pb.FrameUpdate:
-    """The FrameUpdate of a sample: bodies turned by their yaw alone, as the demo importer's."""
-    rotations = view_rotation(np.zeros_like(sample.yaw_deg), sample.yaw_deg)
-    update = session.frame_update(frame, time_s, packed=cd.pack_states(sample.ids, sample.positions_world, rotations))
-    update.player_stats.extend(cd.pb.PlayerStats(id=i, health=h, armor=a, items=it, frags=f) for i, h, a, it, f in sample.stats)
-    update.events.extend(event_msg(e) for e in sample.events)
-    return update
 
 
 def cast_gsi(
@@ -78,65 +38,26 @@ def cast_gsi(
     on_progress: Callable[[CastCounts], None] = lambda counts: None,
     progress_s: float = 1.0,
 ) -> CastCounts:
-    """Runs the session (module docstring) until `stop` is set; returns the counts. Waits for the
-    roster first (returns with no frames if stopped before). DirectorError: the server refused
-    the session or the stream failed."""
-    counts = CastCounts()
-    while not tracks.wait_roster(0.1):
-        if stop.is_set():
-            return counts
-    targets = [
-        cd.pb.Target(
-            id=p.id,
-            team=p.team,
-            display_name=p.name,
-            team_name=p.team_name,
-            mesh=cd.mesh_from_arrays(player_mesh(p).vertices, player_mesh(p).faces),
-            aim_offset=cd.vec3(aim_offset(p)),
-        )
-        for p in tracks.roster
-    ]
-    names = {p.id: p.name for p in tracks.roster}
-    style = cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director_name=director)
-    with client.create_session(targets=targets, level_id=level, delay_s=settings.delay_s, style=style) as session:
-        on_session(session.id)
-        start_s = clock()
+    """Runs the session (module docstring, live_session.py) until `stop` is set; returns the
+    counts. DirectorError: the server refused the session or the stream failed."""
 
-        def updates() -> Iterator[cd.pb.FrameUpdate]:
-            period_s = 1.0 / settings.rate_hz
-            due_s = clock()
-            while not stop.wait(max(0.0, due_s - clock())):
-                due_s = max(due_s + period_s, clock() - period_s)  # a late tick is not caught up twice
-                now_s = clock()
-                sample = tracks.sample(now_s)
-                if sample.stale:
-                    counts.stale += 1
-                    continue
-                counts.frames += 1
-                counts.kills += sum(e.kind == "kill" for e in sample.events)
-                yield frame_update(session, counts.frames, now_s - start_s, sample)
+    def to_console(pose: cd.pb.Pose, now_s: float) -> None:
+        if netcon is not None:
+            position = [pose.position.x, pose.position.y, pose.position.z]
+            rotation = [pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w]
+            netcon.offer(spec_goto_line(position, rotation), now_s)
 
-        replies = session.stream(updates())
-        next_progress_s = clock()
-        try:
-            for reply in replies:
-                counts.answered += 1
-                if not (reply.buffering or reply.stale) and reply.HasField("pose"):
-                    counts.program += 1
-                    counts.cuts += reply.cut
-                    shot = reply.shot
-                    who = ", ".join(names.get(i, i) for i in shot.subject_ids)
-                    counts.last_shot = f"{cd.pb.ShotKind.Name(shot.kind).removeprefix('SHOT_')} {who}".strip()
-                    if netcon is not None:
-                        pose = reply.pose
-                        position = [pose.position.x, pose.position.y, pose.position.z]
-                        rotation = [pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w]
-                        netcon.offer(spec_goto_line(position, rotation), clock())
-                if clock() >= next_progress_s:
-                    next_progress_s = clock() + progress_s
-                    on_progress(counts)
-        finally:
-            stop.set()
-            if isinstance(replies, Generator):  # ends the stream now, not when collected
-                replies.close()
-    return counts
+    return drive_session(
+        client,
+        tracks,
+        rate_hz=settings.rate_hz,
+        delay_s=settings.delay_s,
+        level=level,
+        director=director,
+        stop=stop,
+        on_pose=to_console,
+        clock=clock,
+        on_session=on_session,
+        on_progress=on_progress,
+        progress_s=progress_s,
+    )

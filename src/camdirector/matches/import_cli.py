@@ -55,7 +55,7 @@ def run_import_match(args: argparse.Namespace) -> int:
     from camdirector.evaluation.match.match_file import save_match
     from camdirector.precompute.tracks.registry import LevelsUnavailable, default_data_dir
 
-    level = args.level or (_level_name(args.map) if args.map else None)
+    level = args.level or (map_level_name(args.map) if args.map else None)
     part = args.out.with_name(args.out.name + ".part")  # the match, until the map is in
     made: list[Path] = []  # folders this run created (for OUT, for the registry), removed if it fails
     try:
@@ -68,7 +68,7 @@ def run_import_match(args: argparse.Namespace) -> int:
         if args.map:
             made += _missing_folders(args.data_dir or default_data_dir())  # the registry makes them
             with _failing_file(args.map):
-                _add_map(args.map, _level_name(args.map), args.data_dir)
+                add_map(args.map, map_level_name(args.map), args.data_dir)
         with _failing_file(args.out):
             part.replace(args.out)
     except LevelsUnavailable as exc:
@@ -133,12 +133,12 @@ def _games() -> str:
     return ", ".join(f"{importer.name} {'/'.join(importer.suffixes)}" for importer in IMPORTERS)
 
 
-def _level_name(map_path: Path) -> str:
+def map_level_name(map_path: Path) -> str:
     """The name --map registers the map under: its file's stem ("dm2" for dm2.bsp)."""
     return map_path.name.split(".")[0]
 
 
-def _add_map(map_path: Path, name: str, data_dir: Path | None) -> None:
+def add_map(map_path: Path, name: str, data_dir: Path | None) -> None:
     """Adds the map to the level registry under name, as `camdirector level add` does, for the
     same player (track_settings.py)."""
     from camdirector.precompute.tracks.registry import LevelRegistry

@@ -83,11 +83,12 @@ _QUAKE_LOW = "[]0123456789.<=>"  # characters 0x10..0x1f
 
 
 class MvdError(ValueError):
-    """A file that is not a readable MVD; `offset` is the byte where reading failed."""
+    """A file that is not a readable MVD; `offset` is the byte where reading failed, `reason` what
+    was wrong there."""
 
     def __init__(self, offset: int, message: str):
         super().__init__(f"offset {offset}: {message}")
-        self.offset = offset
+        self.offset, self.reason = offset, message
 
 
 def quake_text(raw: bytes) -> str:
@@ -157,6 +158,20 @@ class MvdDemo:
     tracks: dict[int, MvdTrack]
     stats: dict[int, MvdStats]
     deaths: list[MvdDeath]
+
+
+class _Short(Exception):
+    """A block that data cuts short at offset: the demo's end (whole file), or bytes yet to come
+    (live)."""
+
+    def __init__(self, offset: int, message: str):
+        super().__init__(message)
+        self.offset = offset
+
+
+def _need(data: bytes, pos: int, n: int, what: str) -> None:
+    if len(data) - pos < n:
+        raise _Short(pos, f"truncated {what} (needs {n} bytes, {len(data) - pos} left)")
 
 
 class _Cursor:
@@ -311,46 +326,57 @@ class _Reader:
     # ---------------------------------------------------------------- blocks
 
     def run(self) -> None:
-        data, n, pos = self.data, len(self.data), 0
-        if n == 0:
+        if not self.data:
             raise MvdError(0, "empty file")
         self._check_start()
-        while pos < n:
-            if n - pos < 2:
-                raise MvdError(pos, f"truncated block header (needs 2 bytes, {n - pos} left)")
-            self.time_ms += data[pos]
-            kind = data[pos + 1]
-            pos += 2
-            target = kind & 7
-            if target == DEM_SET:
-                if n - pos < 8:
-                    raise MvdError(pos, f"truncated dem_set block (needs 8 bytes, {n - pos} left)")
-                pos += 8
-                continue
-            if target == DEM_CMD:
-                raise MvdError(pos - 1, "dem_cmd block: a client's .qwd demo, not a server's MVD")
-            if target == 7:
-                raise MvdError(pos - 1, f"unknown block type {kind & 7} (byte {kind})")
-            if target == DEM_MULTIPLE:
-                if n - pos < 4:
-                    raise MvdError(pos, f"truncated dem_multiple block (needs 4 bytes, {n - pos} left)")
-                self.last_type, self.last_to = DEM_MULTIPLE, _U32.unpack_from(data, pos)[0]
-                pos += 4
-            elif target in (DEM_SINGLE, DEM_STATS):
-                self.last_type, self.last_to = target, kind >> 3
-            elif target == DEM_ALL:
-                self.last_type, self.last_to = DEM_ALL, 0
-            if n - pos < 4:
-                raise MvdError(pos, f"truncated block length (needs 4 bytes, {n - pos} left)")
-            size = _U32.unpack_from(data, pos)[0]
-            pos += 4
-            if size > n - pos:
-                raise MvdError(pos, f"truncated block (its messages need {size} bytes, {n - pos} left)")
-            if not (self.last_type == DEM_MULTIPLE and self.last_to == 0):  # hidden data, not messages
-                self._messages(pos, pos + size)
-            pos += size
+        self.blocks(self.data, final=True)
         if not self.saw_serverdata:
             raise MvdError(0, "no svc_serverdata: not an MVD")
+
+    def blocks(self, data: bytes, *, final: bool) -> int:
+        """Decodes data's whole blocks in order; returns where the first one data does not hold
+        whole begins (len(data) when none). final: data is all there is, so a block it cuts short
+        is a truncated demo (MvdError) rather than one whose rest has not come yet."""
+        n, pos = len(data), 0
+        while pos < n:
+            start = pos
+            try:
+                _need(data, pos, 2, "block header")
+                time_ms = self.time_ms + data[pos]
+                kind = data[pos + 1]
+                pos += 2
+                target, to = kind & 7, kind >> 3
+                if target == DEM_SET:
+                    _need(data, pos, 8, "dem_set block")
+                    self.time_ms = time_ms
+                    pos += 8
+                    continue
+                if target == DEM_CMD:
+                    raise MvdError(pos - 1, "dem_cmd block: a client's .qwd demo, not a server's MVD")
+                if target == 7:
+                    raise MvdError(pos - 1, f"unknown block type {kind & 7} (byte {kind})")
+                if target == DEM_MULTIPLE:
+                    _need(data, pos, 4, "dem_multiple block")
+                    to = _U32.unpack_from(data, pos)[0]
+                    pos += 4
+                elif target == DEM_ALL:
+                    to = 0
+                elif target == DEM_READ:  # goes to whom the block before went
+                    target, to = self.last_type, self.last_to
+                _need(data, pos, 4, "block length")
+                size = _U32.unpack_from(data, pos)[0]
+                pos += 4
+                if size > n - pos:
+                    raise _Short(pos, f"truncated block (its messages need {size} bytes, {n - pos} left)")
+            except _Short as short:
+                if final:
+                    raise MvdError(short.offset, short.args[0]) from None
+                return start
+            self.time_ms, self.last_type, self.last_to = time_ms, target, to
+            if not (target == DEM_MULTIPLE and to == 0):  # hidden data, not messages
+                self._messages(data, pos, pos + size)
+            pos += size
+        return n
 
     def _check_start(self) -> None:
         """MvdError "not an MVD demo" unless the data begins with a block of messages whose first is
@@ -372,9 +398,9 @@ class _Reader:
             return
         raise MvdError(0, f"not an MVD demo ({problem}; an MVD begins with svc_serverdata, type {SVC_SERVERDATA})")
 
-    def _messages(self, start: int, end: int) -> None:
-        cur, data, handlers = self.cur, self.data, self.handlers
-        cur.pos, cur.end = start, end
+    def _messages(self, data: bytes, start: int, end: int) -> None:
+        cur, handlers = self.cur, self.handlers
+        cur.data, cur.pos, cur.end = data, start, end
         while cur.pos < end:
             at = cur.pos
             cmd = data[at]
@@ -591,7 +617,8 @@ class _Reader:
                 )
 
     def _playerinfo(self) -> None:
-        cur, data = self.cur, self.data
+        cur = self.cur
+        data = cur.data
         slot = self._slot()
         at = cur.need(3)  # flags, animation frame
         flags = data[at] | data[at + 1] << 8
@@ -665,6 +692,12 @@ class _Reader:
 
     # ---------------------------------------------------------------- result
 
+    def teamplay(self) -> int:
+        try:
+            return int(self.serverinfo.get("teamplay", b"0") or 0)
+        except ValueError:
+            return 0
+
     def demo(self) -> MvdDemo:
         slots = sorted(s for s in self.ever_named if s in self.samples)
         if not slots:
@@ -684,21 +717,89 @@ class _Reader:
                 values=np.array([r[1:] for r in changes], dtype=np.int64),
             )
         deaths = [d for d in self.deaths if d.killer in tracks or d.victim in tracks]
-        try:
-            teamplay = int(self.serverinfo.get("teamplay", b"0") or 0)
-        except ValueError:
-            teamplay = 0
         map_name = self.map_name or self.serverinfo.get("map", b"").decode("latin-1")
         return MvdDemo(
             map_name=map_name,
             level_title=self.level_title,
-            teamplay=teamplay,
+            teamplay=self.teamplay(),
             duration_s=self.time_ms / 1000.0,
             players=players,
             tracks=tracks,
             stats=stats,
             deaths=deaths,
         )
+
+
+@dataclass(frozen=True)
+class MvdUpdate:
+    """What one MvdStream.feed decoded: time_s, the demo time of its last block; teamplay as
+    MvdDemo's; players, the
+    playing slots named so far that have been seen (MvdDemo.players' rule); and, new since the
+    feed before, each slot's samples (MvdTrack), stat changes (MvdStats without the time-0 row) and
+    the deaths."""
+
+    time_s: float
+    teamplay: int
+    players: list[MvdPlayer]
+    tracks: dict[int, MvdTrack]
+    stats: dict[int, MvdStats]
+    deaths: list[MvdDeath]
+
+
+class MvdStream:
+    """The live decoder: an MVD fed as it comes, in chunks cut anywhere (a QTV stream), read with
+    the same message decoding as parse_mvd; each feed answers what its whole blocks brought. A
+    stream that is not an MVD, or bytes that are not its blocks, raise MvdError with the offset in
+    the stream (the decoder is then spent: a new stream needs a new decoder)."""
+
+    def __init__(self) -> None:
+        self._reader = _Reader(b"")
+        self._buffer = b""
+        self._consumed = 0  # stream bytes before the buffer
+        self._started = False
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes of a block not whole yet (a stream that ends with some was cut mid-block)."""
+        return len(self._buffer)
+
+    def feed(self, chunk: bytes) -> MvdUpdate:
+        """Decodes the whole blocks chunk completes (class docstring)."""
+        reader = self._reader
+        self._buffer += chunk
+        try:
+            if not self._started:
+                reader.data = self._buffer
+                if len(self._buffer) < 11:  # the first block's header, slot mask, length, message
+                    return self._update()
+                reader._check_start()
+                self._started = True
+            used = reader.blocks(self._buffer, final=False)
+        except MvdError as exc:
+            raise MvdError(self._consumed + exc.offset, exc.reason) from None
+        self._consumed += used
+        self._buffer = self._buffer[used:]
+        return self._update()
+
+    def _update(self) -> MvdUpdate:
+        r = self._reader
+        slots = sorted(s for s in r.ever_named if s in r.samples)
+        tracks = {}
+        for s, rows in r.samples.items():
+            if rows:
+                a = np.array(rows, dtype=np.float64)
+                tracks[s] = MvdTrack(
+                    time_s=a[:, 0], origin_units=a[:, 1:4], angles_deg=a[:, 4:7], jump=a[:, 7] > 0, dead=a[:, 8] > 0
+                )
+                r.samples[s] = []  # the slot stays seen
+        stats = {
+            s: MvdStats(time_s=np.array([c[0] for c in rows]), values=np.array([c[1:] for c in rows], dtype=np.int64))
+            for s, rows in r.stat_changes.items()
+            if rows
+        }
+        r.stat_changes = {}
+        deaths, r.deaths = r.deaths, []
+        return MvdUpdate(r.time_ms / 1000.0, r.teamplay(), [MvdPlayer(s, *r.ever_named[s]) for s in slots], tracks, stats, deaths)
 
 
 def parse_mvd(data: bytes) -> MvdDemo:

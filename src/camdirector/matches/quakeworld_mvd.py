@@ -37,7 +37,7 @@ import numpy as np
 
 from camdirector.evaluation.match.match_file import MatchEvent, MatchPlayer, MatchRecording
 from camdirector.geometry import quake_frame
-from camdirector.matches.mvd_wire import MvdDemo, MvdError, MvdTrack, parse_mvd
+from camdirector.matches.mvd_wire import MvdDemo, MvdError, MvdTrack, MvdUpdate, parse_mvd
 
 __all__ = ["MvdError", "MvdImport", "import_mvd", "load_mvd_file", "match_from_mvd", "parse_mvd"]
 
@@ -130,7 +130,7 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
             name=p.name,
             team_name=team_name,
         )
-        for pid, (team, team_name), p in zip(ids, _teams(demo), demo.players)
+        for pid, (team, team_name), p in zip(ids, player_teams(demo), demo.players)
     ]
     match = MatchRecording(
         level=level or demo.map_name or name,
@@ -197,8 +197,9 @@ def _dead_until_jump(alive: np.ndarray, time_s: np.ndarray, kill_s: float, jump_
     alive[(time_s >= kill_s) & (time_s < until)] = False
 
 
-def _teams(demo: MvdDemo) -> list[tuple[int, str]]:
-    """Team index and team name per player (module docstring)."""
+def player_teams(demo: MvdDemo | MvdUpdate) -> list[tuple[int, str]]:
+    """Team index and team name per player (module docstring), of a demo or of a live stream's
+    players so far (bridges/qtv.py)."""
     names = [p.team for p in demo.players]
     if demo.teamplay == 0 or not all(names):
         return [(k, "") for k in range(len(names))]

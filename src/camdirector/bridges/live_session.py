@@ -1,0 +1,151 @@
+"""A RIG_MATCH session driven by a clock from a live feed's players, shared by the bridges
+(gsi_cast.py, qtv.py).
+
+Once the feed knows its roster, the session opens on `level` with the players as capsule targets
+(evaluation/match/measure.py's body and aim point) and one StreamFrames stream carries a frame
+every 1 / rate_hz s of the monotonic clock: every player as the feed samples it at that moment
+(interpolated or held, the feed's rule), its scoreboard values when they changed and the events
+since the last frame. Game time is the clock's time since the session opened. While the feed is
+stale no frame is sent (the program holds) and the tick is counted; frames go on when it comes
+back, game time going on from the clock, in the same session.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Generator, Iterator
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+import camdirector_client as cd
+from camdirector.bridges.gsi_tracks import DerivedEvent, Sample
+from camdirector.evaluation.match.match_file import MatchPlayer
+from camdirector.evaluation.match.measure import aim_offset, player_mesh
+from camdirector.matches.cs2_demo import view_rotation
+
+EVENT_LABELS = {"kill": "kill", "death": "died", "kill_unknown": "kill, victim unknown"}
+
+
+class LiveTracks(Protocol):
+    """A live feed's players as the driver reads them (gsi_tracks.GsiTracks, qtv.QtvTracks)."""
+
+    @property
+    def roster(self) -> list[MatchPlayer]: ...
+
+    def wait_roster(self, timeout_s: float) -> bool: ...
+
+    def sample(self, now_s: float) -> Sample: ...
+
+
+@dataclass
+class CastCounts:
+    """frames sent, answered, program (answers with a pose), cuts, kills (events sent), stale
+    (clock ticks without a frame: no payload for hold_s), last_shot (the program's shot: kind and
+    subjects' names)."""
+
+    frames: int = 0
+    answered: int = 0
+    program: int = 0
+    cuts: int = 0
+    kills: int = 0
+    stale: int = 0
+    last_shot: str = ""
+
+
+def event_msg(event: DerivedEvent) -> cd.pb.GameEvent:
+    kind = cd.pb.EVENT_KILL if event.kind == "kill" else cd.pb.EVENT_CUSTOM
+    return cd.pb.GameEvent(
+        kind=kind,
+        actor_id=event.actor_id,
+        other_actor_id=event.other_id,
+        label=EVENT_LABELS[event.kind],
+        position=cd.vec3(event.position_world),
+    )
+
+
+def frame_update(session: cd.Session, frame: int, time_s: float, sample: Sample) -> cd.pb.FrameUpdate:
+    """The FrameUpdate of a sample: bodies turned by their yaw alone, as the demo importer's."""
+    rotations = view_rotation(np.zeros_like(sample.yaw_deg), sample.yaw_deg)
+    update = session.frame_update(frame, time_s, packed=cd.pack_states(sample.ids, sample.positions_world, rotations))
+    update.player_stats.extend(cd.pb.PlayerStats(id=i, health=h, armor=a, items=it, frags=f) for i, h, a, it, f in sample.stats)
+    update.events.extend(event_msg(e) for e in sample.events)
+    return update
+
+
+def drive_session(
+    client: cd.Client,
+    tracks: LiveTracks,
+    *,
+    rate_hz: float,
+    delay_s: float,
+    level: str,
+    director: str,
+    stop: threading.Event,
+    on_pose: Callable[[cd.pb.Pose, float], None] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    on_session: Callable[[str], None] = lambda session_id: None,
+    on_progress: Callable[[CastCounts], None] = lambda counts: None,
+    progress_s: float = 1.0,
+) -> CastCounts:
+    """Runs the session (module docstring) until `stop` is set; returns the counts. Waits for the
+    roster first (returns with no frames if stopped before). on_pose: each program pose and the
+    clock's time. DirectorError: the server refused the session or the stream failed."""
+    counts = CastCounts()
+    while not tracks.wait_roster(0.1):
+        if stop.is_set():
+            return counts
+    targets = [
+        cd.pb.Target(
+            id=p.id,
+            team=p.team,
+            display_name=p.name,
+            team_name=p.team_name,
+            mesh=cd.mesh_from_arrays(player_mesh(p).vertices, player_mesh(p).faces),
+            aim_offset=cd.vec3(aim_offset(p)),
+        )
+        for p in tracks.roster
+    ]
+    names = {p.id: p.name for p in tracks.roster}
+    style = cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director_name=director)
+    with client.create_session(targets=targets, level_id=level, delay_s=delay_s, style=style) as session:
+        on_session(session.id)
+        start_s = clock()
+
+        def updates() -> Iterator[cd.pb.FrameUpdate]:
+            period_s = 1.0 / rate_hz
+            due_s = clock()
+            while not stop.wait(max(0.0, due_s - clock())):
+                due_s = max(due_s + period_s, clock() - period_s)  # a late tick is not caught up twice
+                now_s = clock()
+                sample = tracks.sample(now_s)
+                if sample.stale:
+                    counts.stale += 1
+                    continue
+                counts.frames += 1
+                counts.kills += sum(e.kind == "kill" for e in sample.events)
+                yield frame_update(session, counts.frames, now_s - start_s, sample)
+
+        replies = session.stream(updates())
+        next_progress_s = clock()
+        try:
+            for reply in replies:
+                counts.answered += 1
+                if not (reply.buffering or reply.stale) and reply.HasField("pose"):
+                    counts.program += 1
+                    counts.cuts += reply.cut
+                    shot = reply.shot
+                    who = ", ".join(names.get(i, i) for i in shot.subject_ids)
+                    counts.last_shot = f"{cd.pb.ShotKind.Name(shot.kind).removeprefix('SHOT_')} {who}".strip()
+                    if on_pose is not None:
+                        on_pose(reply.pose, clock())
+                if clock() >= next_progress_s:
+                    next_progress_s = clock() + progress_s
+                    on_progress(counts)
+        finally:
+            stop.set()
+            if isinstance(replies, Generator):  # ends the stream now, not when collected
+                replies.close()
+    return counts

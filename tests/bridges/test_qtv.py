@@ -1,0 +1,148 @@
+"""bridges/qtv.py: `cast qtv` (the library call) against a QTV source stand-in serving a real
+recorded match (tests/bridges/qtv_source.py; the stand-in, not a live mvdsv + KTX built from
+source, because this workplace allows no committed script that builds a fetched program, Debian
+packages neither, and CI cannot reach GitHub) and a real `camdirector serve` with the match's map
+added as `cast qtv --map` adds it: every player (with its name) and every frag of the slice
+arrive, the program's poses come back; a source that drops mid-block or sends garbage is
+reconnected in the same session; a source that refuses the stream is a clear error, exit status 2
+from the CLI."""
+
+from __future__ import annotations
+
+import gzip
+import logging
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+import camdirector_client as cd
+from camdirector.bridges.qtv import QtvRefused, QtvSettings, cast_qtv, parse_qtv_url, request_bytes
+from camdirector.deploy.server_process import ServerProcess
+from camdirector.matches.import_cli import add_map
+from tests.bridges.qtv_source import QtvSource
+
+DATA = Path(__file__).parents[1] / "data"
+DEMO = DATA / "real_matches" / "2on2_sf_vs_red_frobodm2_220104-0915.mvd.gz"
+ROOT = Path(__file__).parents[2]
+SLICE_END_S = 28.0  # the first 28 s: four frags (18.7, 22.5, 22.6 and 24.8 s)
+SPEED = 4.0
+
+
+@pytest.fixture(scope="module")
+def demo() -> bytes:
+    return gzip.decompress(DEMO.read_bytes())
+
+
+@pytest.fixture(scope="module")
+def frobodm2_server(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("qtv")
+    bsp = folder / "frobodm2.bsp"
+    bsp.write_bytes(gzip.decompress((DATA / "real_maps" / "frobodm2.bsp.gz").read_bytes()))
+    add_map(bsp, "frobodm2", folder / "data")
+    with ServerProcess("--workers", "1", "--data-dir", str(folder / "data"), transports=("grpc",)) as server:
+        yield server
+
+
+def _cast(server, source: QtvSource, until, timeout_s: float = 30.0):
+    """cast_qtv on a thread until until(counts, receiver, tracks) or timeout_s; the result, the
+    sessions opened and every progress (frames, connections)."""
+    stop = threading.Event()
+    sessions, progress, done = [], [], {}
+
+    def on_progress(c, r, tracks):
+        progress.append((c.frames, r.connections))
+        if until(c, r, tracks):
+            stop.set()
+
+    def run():
+        with cd.connect(server.url("grpc")) as client:
+            done["cast"] = cast_qtv(
+                client,
+                source.url,
+                QtvSettings(delay_s=1.0, backoff_s=0.1),
+                level="frobodm2",
+                director="planned",
+                stop=stop,
+                on_session=lambda sid, roster: sessions.append((sid, roster)),
+                on_progress=on_progress,
+                progress_s=0.2,
+            )
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join(timeout_s)
+    stop.set()
+    thread.join(10)
+    return done["cast"], sessions, progress
+
+
+def test_request_is_the_clients():
+    assert request_bytes(parse_qtv_url("qtv://h:28000"), "cd") == b"QTV\nVERSION: 1\nRECEIVE\nUSERINFO: \\name\\cd\n\n"
+    assert b"SOURCE: 3@h:27500\n" in request_bytes(parse_qtv_url("qtv://proxy:27599/3@h:27500"), "cd")
+    with pytest.raises(ValueError, match="qtv://"):
+        parse_qtv_url("http://h:1")
+
+
+def test_a_real_match_reaches_the_session_with_every_player_and_frag(frobodm2_server, demo):
+    kills = {}
+
+    def until(c, r, tracks):
+        kills["seen"] = list(tracks.kills)
+        return len(tracks.kills) >= 4 and c.program > 0 and r.bytes > 0 and c.kills >= 4
+
+    with QtvSource(demo, end_s=SLICE_END_S, speed=SPEED) as source:
+        cast, sessions, _ = _cast(frobodm2_server, source, until)
+    assert source.requests[0].split("\n")[:3] == ["QTV", "VERSION: 1", "RECEIVE"]
+    assert len(sessions) == 1
+    roster = sessions[0][1]
+    assert [(p.id, p.name, p.team_name) for p in roster] == [
+        ("p00", "Final", "=SF="),
+        ("p01", ": Timber", "red"),
+        ("p02", "> MrJustice", "=SF="),
+        ("p03", ": Sujoy", "red"),
+    ]
+    # slots 0, 1, 3, 4: Timber killed Final twice, Final Timber, Timber MrJustice (parse_mvd's deaths)
+    assert kills["seen"] == [("p01", "p00"), ("p01", "p00"), ("p00", "p01"), ("p01", "p02")]
+    assert cast.session.kills == 4
+    assert cast.session.program > 0 and cast.session.answered >= cast.session.program
+    assert cast.receiver.bad_streams == 0
+
+
+@pytest.mark.parametrize("knob, error", [("drop_after_s", "closed the stream, cut"), ("garbage_after_s", "bad stream from")])
+def test_a_source_that_fails_mid_match_is_reconnected_in_the_same_session(frobodm2_server, demo, caplog, knob, error):
+    with caplog.at_level(logging.WARNING, logger="camdirector.bridges.qtv"):
+        with QtvSource(demo, end_s=SLICE_END_S, speed=SPEED, **{knob: 1.5}) as source:
+            cast, sessions, progress = _cast(frobodm2_server, source, lambda c, r, t: r.connections >= 2 and c.frames > 150)
+    assert len(sessions) == 1
+    assert cast.receiver.connections >= 2 and cast.receiver.drops >= 1
+    assert cast.receiver.bad_streams == (1 if knob == "garbage_after_s" else 0)
+    assert any(error in m for m in caplog.messages)
+    before = max(f for f, n in progress if n == 1)
+    assert max(f for f, n in progress if n >= 2) > before  # frames went on after the reconnect
+
+
+def test_a_refused_stream_is_an_error(frobodm2_server, demo):
+    with QtvSource(demo, end_s=SLICE_END_S, refuse="no stream selected") as source:
+        with pytest.raises(QtvRefused, match="refused the stream: PERROR: no stream selected"):
+            _cast_raising(frobodm2_server, source)
+        done = subprocess.run(
+            [sys.executable, "-m", "camdirector.__main__", "cast", "qtv", source.url, "--level", "frobodm2"]
+            + ["--server", frobodm2_server.url("grpc")],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=60,
+            env=os.environ,
+        )
+    assert done.returncode == 2, done.stderr
+    assert f"camdirector cast qtv: {source.url} refused the stream: PERROR: no stream selected" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def _cast_raising(server, source):
+    with cd.connect(server.url("grpc")) as client:
+        cast_qtv(client, source.url, QtvSettings(), level="frobodm2", director="planned", stop=threading.Event())
