@@ -63,6 +63,7 @@ def program_of(
         cut=cut,
         shot_id=np.cumsum(cut),
         subjects=[tuple(subjects)] * n,
+        overview=np.zeros(n, dtype=bool),
     )
 
 

@@ -21,6 +21,7 @@ def program_at(positions: list[list[float]], cuts: list[bool]) -> Program:
         cut=np.array(cuts),
         shot_id=np.cumsum(cuts),
         subjects=[()] * n,
+        overview=np.zeros(n, dtype=bool),
     )
 
 

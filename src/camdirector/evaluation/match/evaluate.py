@@ -31,18 +31,23 @@ from camdirector.evaluation.match.ceilings import match_ceilings
 from camdirector.evaluation.match.match_file import MatchRecording
 from camdirector.evaluation.match.measure import (
     BodySampler,
+    Offered,
     Program,
+    candidates_showing_subjects,
     cuts_per_minute,
     framed_visibility,
     in_eyes_of,
     jump_cuts,
     kill_coverage,
     measure_shown,
+    nobody_shown,
     places_count,
     program_visibility,
     shot_lengths_s,
     shown_heights,
+    shown_heights_per_moment,
     sweeps_through_walls,
+    tallest_shown,
 )
 from camdirector.evaluation.match.session_feed import (
     Feed,
@@ -65,12 +70,12 @@ LONG_SHOT_S = 20.0  # issue 29: no shot over 20 s while a kill happens outside i
 @dataclass(eq=False)
 class DirectorRun:
     """One director's session: its program, compute_ms (m,) of the replies with a program, the
-    positions (c, 3) m of the candidates offered beside the program moments, the count of
-    buffering replies and the stream's wall time, s."""
+    candidates offered beside the program moments, the count of buffering replies and the
+    stream's wall time, s."""
 
     program: Program
     compute_ms: np.ndarray
-    candidate_positions: np.ndarray
+    candidates: Offered
     buffering: int
     wall_s: float
 
@@ -101,8 +106,17 @@ def stream_director(
                         u.cut,
                         u.shot_id,
                         tuple(u.shot.subject_ids),
+                        u.shot.kind == cd.pb.SHOT_OVERVIEW,
                         u.compute_ms,
-                        tuple((c.pose.position.x, c.pose.position.y, c.pose.position.z) for c in u.candidates),
+                        tuple(
+                            (
+                                (c.pose.position.x, c.pose.position.y, c.pose.position.z),
+                                (c.pose.rotation.x, c.pose.rotation.y, c.pose.rotation.z, c.pose.rotation.w),
+                                c.pose.vertical_fov_deg,
+                                tuple(c.shot.subject_ids),
+                            )
+                            for c in u.candidates
+                        ),
                     ),
                 )
             )
@@ -111,7 +125,7 @@ def stream_director(
     answered = _one_row_per_moment(shown)
     if not answered:
         raise RuntimeError("the server answered no program frame (is the match shorter than the delay?)")
-    frame, time_s, position, rotation, fov, cut, shot_id, subjects, compute_ms, _ = zip(*answered)
+    frame, time_s, position, rotation, fov, cut, shot_id, subjects, overview, compute_ms, _ = zip(*answered)
     program = Program(
         index=np.array(frame, dtype=np.int64) - 1,
         time_s=np.array(time_s),
@@ -121,10 +135,18 @@ def stream_director(
         cut=np.array(cut, dtype=bool),
         shot_id=np.array(shot_id, dtype=np.int64),
         subjects=list(subjects),
+        overview=np.array(overview, dtype=bool),
     )
     # every candidate offered, a moment's answered twice too: a monitor showed each
-    candidate_positions = np.array([p for r in shown for p in r[-1]], dtype=np.float64).reshape(-1, 3)
-    return DirectorRun(program, np.array(compute_ms), candidate_positions, sum(b for b, _ in replies), wall_s)
+    offered = [(r[0] - 1, *c) for r in shown for c in r[-1]]
+    candidates = Offered(
+        index=np.array([c[0] for c in offered], dtype=np.int64),
+        position=np.array([c[1] for c in offered], dtype=np.float64).reshape(-1, 3),
+        rotation=np.array([c[2] for c in offered], dtype=np.float64).reshape(-1, 4),
+        vertical_fov_deg=np.array([c[3] for c in offered], dtype=np.float64),
+        subjects=[c[4] for c in offered],
+    )
+    return DirectorRun(program, np.array(compute_ms), candidates, sum(b for b, _ in replies), wall_s)
 
 
 def _one_row_per_moment(rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
@@ -144,8 +166,11 @@ def _one_row_per_moment(rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
 def stream_tracks_reference(client: cd.Client, match: MatchRecording, feed: Feed) -> np.ndarray:
     """compute_ms (k,) of a one-actor RIG_TRACKS session on the match's level following its first
     player for the feed's frames: the per-frame cost reference of issue 12's "Done when"."""
+    targets = player_targets(match, [match.players[0].id])
+    for target in targets:  # teams are a RIG_MATCH session's: a TRACKS session refuses them
+        target.team, target.team_name = 0, ""
     with client.create_session(
-        targets=player_targets(match, [match.players[0].id]),
+        targets=targets,
         level_id=match.level,
         seed=1,
         style=cd.pb.Style(rig=cd.pb.RIG_TRACKS),
@@ -164,7 +189,11 @@ def _figures(
     coverage = kill_coverage(match, program, shown)
     first_person = kill_coverage(match, program, shown, eyes)
     lengths = shot_lengths_s(program)
-    heights = shown_heights(program, bodies, lens, shown, eyes)
+    per_moment = shown_heights_per_moment(program, bodies, lens, shown, eyes)
+    heights = np.concatenate([np.zeros(0), *per_moment])
+    tallest = tallest_shown(per_moment, eyes)
+    nobody = nobody_shown(program, shown, eyes)
+    showing = candidates_showing_subjects(run.candidates, bodies, lens, level)
     subject_heights = shown_heights(program, bodies, lens, shown, eyes, subjects_only=True)
     column = match.player_index()
     return {
@@ -187,6 +216,13 @@ def _figures(
             "median": round(float(np.median(heights)), 3) if len(heights) else None,
             "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None,
             "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None,
+            "max": None if tallest["max"] is None else round(tallest["max"], 3),
+            "over_60pc": None if tallest["over_60pc"] is None else round(tallest["over_60pc"], 4),
+        },
+        "nobody_shown": {"overview": round(nobody["overview"], 4), "other": round(nobody["other"], 4)},
+        "candidates_showing_half": {
+            **showing,
+            "share": round(showing["showing_half"] / showing["offered"], 3) if showing["offered"] else None,
         },
         "long_shots_missing_kills": _long_shots_missing_kills(match, program, coverage),
         "places": {
@@ -194,7 +230,7 @@ def _figures(
                 **places_count(interior, program.position),
                 "swept_through_walls": sweeps_through_walls(interior, program),
             },
-            "candidates": places_count(interior, run.candidate_positions),
+            "candidates": places_count(interior, run.candidates.position),
         },
         "program_sha256": program.digest(),
         "compute_ms": _timing(run.compute_ms),

@@ -35,7 +35,17 @@ players' bodies as the match file has them, never from what the director says it
 - shown height: per program moment and shown player (not the one in whose eyes the camera is),
   the height on screen of its body's sample points, as a share of the frame's height; the median
   over all of them says whether players are large enough to read; the same over the players the
-  shot names says whether its subjects are.
+  shot names says whether its subjects are. The tallest shown player per program moment (the
+  moments in someone's eyes left out: a first-person view is the game's own picture) says whether
+  one is pressed against the lens: the largest over the program, and the share of moments with
+  one taller than `TALL_HEIGHT` (issue 41: none).
+- nobody shown: the share of program moments at which no player is shown (nor is the camera in
+  anyone's eyes), split by whether the moment's shot is an OVERVIEW (the reply's `shot.kind`: the
+  only establishing view the directors have) or not (issue 41: at most 2% outside overviews).
+- candidates showing their subjects: of the candidates offered beside the program moments (each
+  as often as offered), those naming subjects, and how many of them show at least half of their
+  subjects (shown as above, from the candidate's own pose at the match frame of the moment it
+  was offered beside; issue 41: at least 95%).
 - places: of the program's poses (one per program moment) and of the candidates' poses (every
   candidate offered beside a program moment, as many times as offered), how many lie outside the
   level (its mesh's bounding box) or inside solid (geometry/inside.py says how it decides), and
@@ -64,6 +74,7 @@ JUMP_CUT_DEG = 30.0  # a cut between views of the same subjects closer than this
 AIM_HEIGHT_FRACTION = 0.6  # the aim point (chest) this far up a player: the simulator's chest_height_fraction
 EYE_HEIGHT_FRACTION = 46.0 / 56.0  # a Quake player's eye (origin + 22 units) over its 56-unit height
 EYE_TOLERANCE_M = 0.5  # a camera this near a player's eye point looks through its eyes, m
+TALL_HEIGHT = 0.6  # a shown player taller than this share of the frame's height is pressed against the lens (issue 41)
 
 
 def player_mesh(player: MatchPlayer) -> TriMesh:
@@ -85,7 +96,7 @@ class Program:
     index: (n,) int64 match frame (row of the match file's arrays) of each moment; time_s (n,) s;
     position (n, 3) m camera centre; rotation (n, 4) xyzw camera-to-world; vertical_fov_deg (n,);
     cut (n,) bool; shot_id (n,) int64; subjects: n tuples of player ids (the reply's
-    shot.subject_ids).
+    shot.subject_ids); overview (n,) bool: the moment's shot is an OVERVIEW (shot.kind).
     """
 
     index: np.ndarray
@@ -96,6 +107,7 @@ class Program:
     cut: np.ndarray
     shot_id: np.ndarray
     subjects: list[tuple[str, ...]]
+    overview: np.ndarray
 
     def __len__(self) -> int:
         return len(self.index)
@@ -244,27 +256,86 @@ def program_visibility(program: Program, shown: np.ndarray, column: dict[str, in
     return float(np.mean(values)) if values else float("nan")
 
 
-def shown_heights(
+def shown_heights_per_moment(
     program: Program, bodies: BodySampler, lens: Lens, shown: np.ndarray, eyes_of: np.ndarray, subjects_only: bool = False
-) -> np.ndarray:
-    """(m,) the on-screen heights, share of the frame's height, of every shown player at every
-    program moment but the one in whose eyes the camera is (module docstring); subjects_only:
-    of the players the moment's shot names alone (on open levels the players shown in the
-    background, far off, outnumber the shot's own)."""
+) -> list[np.ndarray]:
+    """Per program moment, (k,) the on-screen heights, share of the frame's height, of its shown
+    players but the one in whose eyes the camera is (module docstring); subjects_only: of the
+    players the moment's shot names alone (on open levels the players shown in the background,
+    far off, outnumber the shot's own)."""
     column = bodies.match.player_index()
-    heights = []
+    out = []
     for r in range(len(program)):
         named = {column[p] for p in program.subjects[r]}
         players = [p for p in np.flatnonzero(shown[r] >= SHOWN_FRACTION) if p != eyes_of[r] and (not subjects_only or p in named)]
         if not players:
+            out.append(np.zeros(0))
             continue
         pose = program.pose(r)
         points = bodies.points_world(int(program.index[r]))[players]  # (k, S, 3)
         frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
         screen_y = np.clip(project_to_screen(pose, frame_lens, points.reshape(-1, 3))[:, 1], -1.0, 1.0)
         screen_y = screen_y.reshape(len(players), -1)
-        heights.extend((np.nanmax(screen_y, axis=1) - np.nanmin(screen_y, axis=1)) / 2.0)  # [-1, 1] is the frame
-    return np.array(heights, dtype=np.float64)
+        out.append((np.nanmax(screen_y, axis=1) - np.nanmin(screen_y, axis=1)) / 2.0)  # [-1, 1] is the frame
+    return out
+
+
+def shown_heights(
+    program: Program, bodies: BodySampler, lens: Lens, shown: np.ndarray, eyes_of: np.ndarray, subjects_only: bool = False
+) -> np.ndarray:
+    """(m,) the heights of shown_heights_per_moment, every moment's together."""
+    return np.concatenate([np.zeros(0), *shown_heights_per_moment(program, bodies, lens, shown, eyes_of, subjects_only)])
+
+
+def tallest_shown(per_moment: list[np.ndarray], eyes_of: np.ndarray) -> dict[str, float | None]:
+    """The largest shown height (per_moment from shown_heights_per_moment) over the moments not in
+    anyone's eyes, None without any, and the share of those moments with a player taller than
+    TALL_HEIGHT (module docstring)."""
+    tallest = np.array([h.max(initial=0.0) for h, eyes in zip(per_moment, eyes_of) if eyes < 0])
+    if not len(tallest):
+        return {"max": None, "over_60pc": None}
+    return {"max": float(tallest.max()), "over_60pc": float((tallest > TALL_HEIGHT).mean())}
+
+
+def nobody_shown(program: Program, shown: np.ndarray, eyes_of: np.ndarray) -> dict[str, float]:
+    """The shares of program moments showing nobody in an OVERVIEW and in another shot (module
+    docstring); NaN without moments."""
+    nobody = (shown.max(axis=1, initial=0.0) < SHOWN_FRACTION) & (eyes_of < 0)
+    if not len(program):
+        return {"overview": float("nan"), "other": float("nan")}
+    return {"overview": float((nobody & program.overview).mean()), "other": float((nobody & ~program.overview).mean())}
+
+
+@dataclass(eq=False)
+class Offered:
+    """The candidates offered beside the program moments, each as often as offered: c of them.
+
+    index (c,) int64 match frame of the moment each was offered beside; position (c, 3) m;
+    rotation (c, 4) xyzw; vertical_fov_deg (c,); subjects: c tuples of player ids (the
+    candidate's shot.subject_ids)."""
+
+    index: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+    vertical_fov_deg: np.ndarray
+    subjects: list[tuple[str, ...]]
+
+
+def candidates_showing_subjects(offered: Offered, bodies: BodySampler, lens: Lens, level: RayScene) -> dict[str, int]:
+    """Of the candidates offered, how many name subjects and how many of those show at least half
+    of them (module docstring). Only the subjects' points are cast: a candidate's shown fraction of
+    the others does not matter here."""
+    column = bodies.match.player_index()
+    named = showing = 0
+    for k, subjects in enumerate(offered.subjects):
+        if not subjects:
+            continue
+        named += 1
+        pose = CameraPose(offered.position[k], offered.rotation[k], float(offered.vertical_fov_deg[k]))
+        points = bodies.points_world(int(offered.index[k]))[[column[p] for p in subjects]]
+        seen = shown_fractions(pose, lens, points, level) >= SHOWN_FRACTION
+        showing += bool(2 * int(seen.sum()) >= len(subjects))
+    return {"offered": named, "showing_half": showing}
 
 
 def places_count(interior: LevelInterior, positions_world: np.ndarray) -> dict[str, int]:

@@ -12,6 +12,7 @@ from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.planned import PlannedDirector
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shot_builder import within_band
 from camdirector.pipeline.match.shots import Place, ToricCamera, best_place, place_grid
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
@@ -81,7 +82,8 @@ def _better_place(
     _, seen = best_place(camera, [place], cover, subjects, visibility, weights=weights)
     if seen >= settings.min_visible:
         return None
-    better, score = best_place(camera, grid, cover, subjects, visibility, weights=weights)
+    band = within_band(visibility, camera.lens, settings, subjects, cover[0])  # issue 41: never closer than the band
+    better, score = best_place(camera, grid, cover, subjects, visibility, band, cover[0], weights)
     if score <= seen:
         return None
     flags.append("replaced_for_visibility")

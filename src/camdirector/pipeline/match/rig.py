@@ -432,8 +432,9 @@ class MatchRig(RigBase):
         )
 
     def _candidate_shots(self, moment: Moment, buffer: MomentBuffer, program: Shot | None) -> list[CandidateShot]:
-        """The best other situations, each with a Toric camera at the style's place (an OVERVIEW
-        candidate reuses the program pose until it is taken)."""
+        """The best other situations whose Toric camera at the style's place shows their subjects
+        (shot_builder.py `candidate_camera`; an OVERVIEW candidate reuses the program pose until
+        it is taken)."""
         out: list[CandidateShot] = []
         program_set = set(program.subjects) if program is not None else set()
         for option in self.situations.options(moment, buffer):
@@ -441,7 +442,9 @@ class MatchRig(RigBase):
                 break
             if set(option.subjects) == program_set or option.kind == ShotKind.OVERVIEW:
                 continue
-            camera = self.builder.cameras(option.kind, option.subjects, moment, default=True)[0][0]
+            camera = self.builder.candidate_camera(option.kind, option.subjects, moment)
+            if camera is None:  # it would show walls (issue 41): the next situation instead
+                continue
             out.append(
                 (ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, option.reason), camera, option.score)
             )

@@ -120,6 +120,18 @@ class MatchSettings:
     wall_hold_max_m: float = 4.0         # a program camera whose move into a new frame passes through a wall, and that no
                                          # place on its subject's side replaces, stays where it was (turning to frame)
                                          # if the move is this short; a longer one is a cut, m. [0, 100]
+    shown_height_max: float = 0.5        # the framing band's top: a shot's camera is placed where none of its subjects fills
+                                         # more of the frame's height than this, by distance (shot_builder.py): a whole body
+                                         # with room around it, a long shot; closer, a medium shot cuts the body (and in this
+                                         # measure, "taller than the frame"); issue 41 bars 0.6, share of frame height. (0, 1]
+    follow_shown_height: float = 0.35    # a FOLLOW at the style's place frames its player this share of the frame's height
+                                         # (its gaze room grows to put the camera that far: shot_builder.py); the style's
+                                         # 2.5 m put it 3.9 m off, a 1.75 m player at 0.48 (real duel: 40% of program frames
+                                         # had a player over 0.6), share of frame height. (0, shown_height_max]
+    candidate_seen: float = 0.5          # a candidate's subject is shown from its camera with this share of its points seen
+                                         # (eval-match's shown fraction). [0, 1]
+    candidate_min_shown: float = 0.5     # a candidate is offered only when it shows this share of its subjects at the
+                                         # moment it is offered (issue 41: at least half). [0, 1]
     priorities: dict[EventKind, int] = field(default_factory=lambda: {
         EventKind.UNSPECIFIED: 1, EventKind.KILL: 7, EventKind.DAMAGE: 3, EventKind.OBJECTIVE: 5,
         EventKind.CUSTOM: 4})            # the kind's default priority (a death is 7 as in HLTV), [1, 15]
@@ -139,6 +151,11 @@ class MatchSettings:
                              "beat_min_priority in [1, 15]")
         if not -1.0 <= self.facing_cos <= 1.0 or not 0.0 <= self.min_visible <= 1.0 or not 0.0 <= self.pull_below <= 1.0:
             raise ValueError("MatchSettings: facing_cos in [-1, 1], min_visible and pull_below in [0, 1]")
+        if not 0.0 < self.follow_shown_height <= self.shown_height_max:
+            raise ValueError("MatchSettings: need 0 < follow_shown_height <= shown_height_max")
+        if not 0.0 < self.shown_height_max <= 1.0 or not 0.0 <= self.candidate_seen <= 1.0 \
+                or not 0.0 <= self.candidate_min_shown <= 1.0:
+            raise ValueError("MatchSettings: shown_height_max in (0, 1], candidate_seen and candidate_min_shown in [0, 1]")
         if not 1e3 <= self.plan_work_per_tick <= 1e9:
             raise ValueError(f"MatchSettings: plan_work_per_tick in [1e3, 1e9] camera-point pairs, got {self.plan_work_per_tick}")
         if self.max_held_shot_s > 600.0:

@@ -10,10 +10,26 @@ subjects when one of its cameras (above them, or a node of the level's graph), a
 30-degree rule, sees them better; its reason says so ("wide: no level duel place sees both"). The
 level Toric pictures cannot show a pair far apart along a corridor, seen only from above it over a
 shoulder, one above the other (shots.py).
+
+Framing band: no FOLLOW, GROUP or OVERVIEW place, nor a replacement's place (replacement.py), is
+chosen from which a subject would stand taller on screen than `shown_height_max` of the frame's
+height at the cut (`within_band`, by distance: a body H m
+tall d m away fills H / (2 d tan(fov / 2)) of a level frame), and a FOLLOW's gaze room is
+stretched so that at the style's place its player fills `follow_shown_height`. Broadcast shot sizes name the
+band: a long (full) shot shows the whole body head to toe, an extreme long shot the body small
+in its surroundings; a medium shot cuts the body at the waist, too close for a player who runs
+and jumps in and out of it. So a shot here is a long to extreme long shot, never a medium one.
+A DUEL's places are left free: the place of a kill's pair is the one that sees both past the
+walls, often over a shoulder (on the real 4on4 and 2on2, held to the band too, kill coverage fell
+0.671 -> 0.603 and 0.643 -> 0.536; with DUELs free the 4on4 kept 0.671).
+
+Candidates (`candidate_camera`): a situation is offered beside the program only when its camera,
+at the style's place, shows at least `candidate_min_shown` of its subjects at that moment.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -32,6 +48,7 @@ from camdirector.pipeline.match.shots import (
     StaticCamera,
     ToricCamera,
     best_place,
+    framed_seen,
     overview_pose,
     place_grid,
 )
@@ -40,6 +57,28 @@ from camdirector.pipeline.style import Style
 
 ALONE_GAP_S = 0.6  # a killer alone this long before its pair's window is also placed for halfway, s
 ALONE_AFTER_S = 0.5  # and for this long after the window closes, s
+
+
+def within_band(
+    visibility: SubjectVisibility,
+    lens: Lens,
+    settings: MatchSettings,
+    subjects: tuple[int, ...],
+    moment: Moment,
+    allowed: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """(m, 3) camera centres at the moment -> (m,) bool: those `allowed` allows (None: all) from
+    which no subject stands taller on screen than shown_height_max (module docstring); a body's
+    height is its sample points' extent. The builder's places and the replacement's (replacement.py)."""
+    aims = moment.aims_world[list(subjects)]  # (s, 3)
+    heights_m = np.array([np.ptp(visibility.samples_local[i][:, 1]) for i in subjects])
+    nearest_m = heights_m / (2.0 * settings.shown_height_max * lens.tan_half_fov_y)
+
+    def within(positions: np.ndarray) -> np.ndarray:
+        far: np.ndarray = (np.linalg.norm(positions[:, None, :] - aims[None], axis=2) >= nearest_m).all(axis=1)
+        return far if allowed is None else far & allowed(positions)
+
+    return within
 
 
 class ShotBuilder:
@@ -58,6 +97,8 @@ class ShotBuilder:
         self.players, self.style, self.lens = players, style, lens
         self.settings, self.visibility, self.grammar = settings, visibility, grammar
         self.extra_overview_cameras = extra_overview_cameras
+        # (n,) m: each player's body height (its sample points' extent), for the framing band
+        self.body_heights_m = np.array([np.ptp(points[:, 1]) for points in visibility.samples_local])
 
     @property
     def upright(self) -> float:
@@ -73,12 +114,9 @@ class ShotBuilder:
     ) -> list[tuple[ToricCamera, Sequence[Place]]]:
         """The Toric cameras a shot may use, each with the places to try (default: the style's only)."""
         if kind == ShotKind.FOLLOW:
-            return [
-                (
-                    ToricCamera(kind, subjects[0], None, self.style, self.lens, self.default_place()),
-                    [self.default_place()] if default else place_grid(None),
-                )
-            ]
+            camera = ToricCamera(kind, subjects[0], None, self.style, self.lens, self.default_place())
+            camera.gaze_room_m = self._follow_gaze_room_m(camera, subjects[0], moment)
+            return [(camera, [self.default_place()] if default else place_grid(None))]
         if kind == ShotKind.DUEL:
             i, j = subjects
             left = self.grammar.duel_left(self.players[i], self.players[j])
@@ -93,6 +131,36 @@ class ShotBuilder:
             (ToricCamera(kind, a, b, self.style, self.lens, self.default_place()), grid)
             for a, b in (orders[:1] if default else orders)
         ]
+
+    def _follow_gaze_room_m(self, camera: ToricCamera, subject: int, moment: Moment) -> float:
+        """The gaze room, m, that puts a FOLLOW's camera at the style's place where its subject fills
+        follow_shown_height of the frame's height (module docstring), never less than the style's:
+        the torus, and the camera's distance with it, grows in proportion to the gaze room."""
+        positions = camera.positions(moment, [self.default_place()])
+        if positions is None:
+            return camera.gaze_room_m
+        distance_m = float(np.linalg.norm(positions[0] - moment.aims_world[subject]))
+        wanted_m = float(self.body_heights_m[subject]) / (2.0 * self.settings.follow_shown_height * self.lens.tan_half_fov_y)
+        return camera.gaze_room_m * max(1.0, wanted_m / max(distance_m, 1e-6))
+
+    def candidate_camera(self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment) -> ToricCamera | None:
+        """The camera a candidate situation is offered with (the style's place), None when at the
+        moment it shows under candidate_min_shown of its subjects, each shown with candidate_seen of
+        its points seen (module docstring): a preview of walls is no choice. One batch of
+        len(subjects) * samples_per_player ray casts per situation, at the planner's rate."""
+        camera = self.cameras(kind, subjects, moment, default=True)[0][0]
+        places = [camera.place]
+        positions = camera.positions(moment, places)
+        if positions is None:
+            return None
+        seen = framed_seen(self.visibility, moment, subjects, positions, camera.rotations(moment, positions, places), self.lens)
+        s = self.settings
+        return camera if float((seen[0] >= s.candidate_seen).mean()) >= s.candidate_min_shown else None
+
+    def _within_band(
+        self, subjects: tuple[int, ...], moment: Moment, allowed: Callable[[np.ndarray], np.ndarray] | None
+    ) -> Callable[[np.ndarray], np.ndarray]:
+        return within_band(self.visibility, self.lens, self.settings, subjects, moment, allowed)
 
     def _best(
         self,
@@ -175,9 +243,11 @@ class ShotBuilder:
         previous_world = None if previous_pose is None else previous_pose.position_world
 
         def allowed_after(framed: tuple[int, ...]) -> Callable[[np.ndarray], np.ndarray]:
-            """The 30-degree rule for a cut from the previous picture to one framing `framed`."""
+            """The 30-degree rule for a cut from the previous picture to one framing `framed`,
+            within the framing band but for a DUEL (module docstring)."""
             shared = list(previous_framed & set(framed))
-            return lambda positions: self.grammar.allows_cut(previous_world, moment.aims_world[shared], positions)
+            rule = functools.partial(self.grammar.allows_cut, previous_world, moment.aims_world[shared])
+            return rule if choice.kind == ShotKind.DUEL else self._within_band(framed, moment, rule)
 
         s = self.settings
         pair = (
@@ -187,7 +257,8 @@ class ShotBuilder:
         )
         alone = pair is not None and buffer is not None and pair.weight(moment.time_s) <= 0.0
         allowed = allowed_after(subjects)
-        camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, None if alone else allowed, pair)
+        band = None if choice.kind == ShotKind.DUEL else self._within_band(subjects, moment, None)
+        camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, band if alone else allowed, pair)
         if score < s.min_visible and not choice.held:  # a wide view of them may see them better
             pose, seen = self._overview(subjects, cover, [1.0] * len(cover) if weights is None else weights, allowed)
             # a killer shown alone until its kill sees more than a static view seeing the pair under min_visible
