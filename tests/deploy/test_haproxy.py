@@ -123,20 +123,19 @@ def test_a_hung_node_is_marked_down_and_the_streams_it_held_are_cut(balancer, tl
 
 def test_the_checks_take_a_silent_node_out_within_about_a_second(tls_files):
     """The worst case of a hung node's checks (the first one starting just before it hangs) leaves
-    the SDK's reopening and the session's restore on another node at least 0.5 s of issue 40's
-    1.5 s, each check's timeout is shorter than the steady interval, both backends check the
-    node's liveness port over TLS, and a restart's old process cannot hold streams for long
-    (hard-stop-after)."""
+    the SDK's reopening and the session's restore on another node (0.1-0.25 s measured) at least
+    0.25 s of issue 40's 1.5 s, both backends check the node's liveness port over TLS, and a
+    restart's old process cannot hold streams for long (hard-stop-after)."""
     s = BalancerSettings()
     worst_s = s.check_interval_s + s.fall * s.check_timeout_s + (s.fall - 1) * s.check_fast_interval_s
-    assert worst_s <= 1.0 and s.check_timeout_s < s.check_interval_s
+    assert worst_s <= 1.25
     text = render_config(
         s, [Backend("node-1", 1, "127.0.0.1:1", "127.0.0.1:2", 5)], tls=tls_files, stats_socket="s", grpc_port=3, http_port=4
     )
     assert text.count("on-marked-down shutdown-sessions") == 2  # both backends
     assert text.count("http-check send meth GET uri /live") == 2 and text.count("id 1 port 5") == 2
     assert "check check-ssl inter 300ms fastinter 100ms downinter 300ms fall 2 rise 2" in text
-    assert "timeout check 200ms" in text and "hard-stop-after 5s" in text
+    assert "timeout check 400ms" in text and "hard-stop-after 5s" in text
 
 
 def test_a_node_whose_certificate_is_not_of_the_ca_gets_nothing(balancer, tmp_path):

@@ -298,7 +298,7 @@ void cd_config_init(cd_config* config) {
   config->reconnect_max_s = 0.5;  // a balancer back is found within it (the Python SDK's max_backoff_s)
   config->retry_window_s = 30.0;
   config->initial_backoff_s = 0.1;
-  // The last resort against a hung node: a balancer's checks take one out within 0.8 s and
+  // The last resort against a hung node: a balancer's checks take one out within 1.2 s and
   // keepalive pings find a hung server reached directly within 2 s; a frame that is only slow
   // (a RIG_TRACKS session's first, a restore on a loaded machine) can take over 1 s.
   config->frame_timeout_s = 3.0;

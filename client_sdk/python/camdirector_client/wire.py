@@ -127,7 +127,7 @@ class RetryPolicy:
     # gRPC: a stream with frames in flight that answers nothing this long (FrameDeadlines), or a
     # unary Frame unanswered this long, means a hung node: the call is cancelled and tried again
     # (through a balancer, on a live node), s; None: frames wait forever on a stream, timeout_s on
-    # a unary Frame. The last resort: a balancer's checks take a hung node out within 0.8 s and cut
+    # a unary Frame. The last resort: a balancer's checks take a hung node out within 1.2 s and cut
     # its streams, and keepalive pings find a hung server reached directly
     # within 2 s; a frame that is only slow (a TRACKS session's first, a restore on a loaded
     # machine) can take over 1 s, and a cut would have it answered stale.
