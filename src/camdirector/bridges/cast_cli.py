@@ -63,13 +63,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--server", help="the server, grpc://HOST:PORT or grpcs://HOST:PORT")
     p.add_argument("--netcon", metavar="HOST:PORT", help="the game's console (-netconport): send it the program as spec_goto")
     p.add_argument("--netcon-rate-hz", dest="netcon_rate_hz", type=float, default=10.0, help="most spec_goto lines a second (10)")
-    p.add_argument("--delay-s", dest="delay_s", type=float, default=10.0, help="broadcast delay, s, 0 to 300 (default 10)")
-    p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0, help="frames per second sent (default 30)")
-    p.add_argument("--director", default="planned", metavar="NAME", help="a match director the server has (default planned)")
-    p.add_argument(
-        "--key-file", dest="key_file", metavar="PATH", help="a file holding the API key (-: stdin; default: CAMDIRECTOR_KEY)"
-    )
-    p.add_argument("--ca-file", dest="ca_file", help="grpcs:// only: PEM authorities to trust")
+    _add_session_args(p)
     p.set_defaults(handler=run_cast_gsi)
 
     q = feeds.add_parser(
@@ -84,14 +78,19 @@ def add_parser(subparsers) -> None:
     where.add_argument("--map", type=Path, help="the match's map (.bsp): added to the level registry under its stem first")
     q.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder for --map (default: per-user data dir)")
     q.add_argument("--server", required=True, help="the server, grpc://HOST:PORT or grpcs://HOST:PORT")
-    q.add_argument("--delay-s", dest="delay_s", type=float, default=10.0, help="broadcast delay, s, 0 to 300 (default 10)")
-    q.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0, help="frames per second sent (default 30)")
-    q.add_argument("--director", default="planned", metavar="NAME", help="a match director the server has (default planned)")
-    q.add_argument(
+    _add_session_args(q)
+    q.set_defaults(handler=run_cast_qtv)
+
+
+def _add_session_args(p: argparse.ArgumentParser) -> None:
+    """The RIG_MATCH session's flags every feed takes: delay, rate, director, key and CA."""
+    p.add_argument("--delay-s", dest="delay_s", type=float, default=10.0, help="broadcast delay, s, 0 to 300 (default 10)")
+    p.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0, help="frames per second sent (default 30)")
+    p.add_argument("--director", default="planned", metavar="NAME", help="a match director the server has (default planned)")
+    p.add_argument(
         "--key-file", dest="key_file", metavar="PATH", help="a file holding the API key (-: stdin; default: CAMDIRECTOR_KEY)"
     )
-    q.add_argument("--ca-file", dest="ca_file", help="grpcs:// only: PEM authorities to trust")
-    q.set_defaults(handler=run_cast_qtv)
+    p.add_argument("--ca-file", dest="ca_file", help="grpcs:// only: PEM authorities to trust")
 
 
 def _fail(message: str, feed: str = "gsi") -> int:

@@ -48,7 +48,7 @@ from camdirector.bridges.live_session import CastCounts, drive_session
 from camdirector.evaluation.match.match_file import MatchPlayer
 from camdirector.geometry import quake_frame
 from camdirector.matches.mvd_wire import MvdError, MvdStream, MvdUpdate
-from camdirector.matches.quakeworld_mvd import player_teams
+from camdirector.matches.quakeworld_mvd import player_teams, quake_player
 
 log = logging.getLogger(__name__)
 
@@ -244,16 +244,7 @@ class QtvTracks:
             pid = f"p{k:02d}"
             self._ids[p.slot] = pid
             self._players[p.slot] = _Player(p.slot)
-            self.roster.append(
-                MatchPlayer(
-                    id=pid,
-                    team=team,
-                    height_m=quake_frame.PLAYER_HEIGHT_M,
-                    radius_m=quake_frame.PLAYER_RADIUS_M,
-                    name=p.name,
-                    team_name=team_name,
-                )
-            )
+            self.roster.append(quake_player(pid, p.name, team, team_name))
         self._roster_ready.set()
 
     def _note_death(self, killer: int, victim: int) -> None:

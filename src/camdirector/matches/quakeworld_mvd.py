@@ -122,15 +122,7 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
         _dead_until_jump(alive[:, victim], time_s, t, track.time_s[jumps[death.victim] & ~limbo[death.victim]])
 
     players = [
-        MatchPlayer(
-            id=pid,
-            team=team,
-            height_m=quake_frame.PLAYER_HEIGHT_M,
-            radius_m=quake_frame.PLAYER_RADIUS_M,
-            name=p.name,
-            team_name=team_name,
-        )
-        for pid, (team, team_name), p in zip(ids, player_teams(demo), demo.players)
+        quake_player(pid, p.name, team, team_name) for pid, (team, team_name), p in zip(ids, player_teams(demo), demo.players)
     ]
     match = MatchRecording(
         level=level or demo.map_name or name,
@@ -146,6 +138,18 @@ def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 
         aim_pitch_deg=np.mod(angles[..., 0] + 180.0, 360.0) - 180.0,  # unwrapped, it may have gone round
     )
     return MvdImport(match=match, steps=steps)
+
+
+def quake_player(pid: str, name: str, team: int, team_name: str) -> MatchPlayer:
+    """A QuakeWorld player of a match: Quake's body (quake_frame's height and radius)."""
+    return MatchPlayer(
+        id=pid,
+        team=team,
+        height_m=quake_frame.PLAYER_HEIGHT_M,
+        radius_m=quake_frame.PLAYER_RADIUS_M,
+        name=name,
+        team_name=team_name,
+    )
 
 
 def _jumps(track: MvdTrack) -> np.ndarray:
