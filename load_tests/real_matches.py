@@ -4,9 +4,11 @@ has its map, imported (`import-match`), its map added as a level with the Quake 
 the same on a `match-sim` bot match of each shared level (../shared/data/levels: 10 players, seed
 1, as long as --minutes, default 3), named sim_<level>.
 
-    python -m load_tests.real_matches [--minutes 3] [--delay 10] [--rate-hz 30] [--twice]
+    python -m load_tests.real_matches [--minutes 3] [--delay 10] [--rate-hz 30] [--twice] [--paced]
                                       [--only 4on4_dm2,sim_zdm2,...] [--json out/rm.json] [--markdown out/rm.md]
 
+--paced sends the frames in real time (eval-match --paced: the same program, a live session's
+compute times; a 3-minute match takes 3 minutes and 10 s per director).
 --twice runs each match a second time from scratch (the level added anew in another folder, a new
 server) and reports whether every director's program digest is the same. The two held-out matches
 of the issue are not in this list and must never be: they judge the director.
@@ -115,6 +117,7 @@ def run_match(name: str, args) -> dict:
                 data_dir=Path(tmp) / "data",
                 rate_hz=args.rate_hz,
                 seed=0,
+                paced=args.paced,
                 progress=lambda text: print(f"{name}: {text}", file=sys.stderr, flush=True),
             )
             result["wall_s"] = round(time.perf_counter() - t0, 1)
@@ -148,6 +151,7 @@ def main(argv=None) -> int:
     parser.add_argument("--delay", type=float, default=10.0, help="broadcast delay, s (default 10)")
     parser.add_argument("--rate-hz", dest="rate_hz", type=float, default=30.0, help="frames a second sent (default 30)")
     parser.add_argument("--twice", action="store_true", help="run each match twice from scratch, compare programs")
+    parser.add_argument("--paced", action="store_true", help="send in real time at --rate-hz (issue 41's table; slow)")
     parser.add_argument("--only", default="", help="comma-separated match names (default: all of MATCHES)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--markdown", type=Path)

@@ -117,6 +117,24 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
     assert (folder / "r.png").stat().st_size > 10_000
 
 
+def test_paced_streaming_sends_in_real_time_and_gives_the_same_program(registry_and_match):
+    """--paced sends the frames at the game's rate, as a live game would (issue 41's table): the
+    stream lasts the match's time, and the program is the one sent as fast as the server answers."""
+    folder, _ = registry_and_match
+    runs = {}
+    for how in ("paced", "unpaced"):
+        out = folder / f"{how}.json"
+        flags = ["--paced"] if how == "paced" else []
+        done = eval_match(folder, "--delay", "2", "--director", "planned", "--minutes", "0.15", *flags, "--json", str(out))
+        assert done.returncode == 0, done.stderr
+        runs[how] = json.loads(out.read_text())
+    assert runs["paced"]["paced"] is True and runs["unpaced"]["paced"] is False
+    paced, unpaced = runs["paced"]["directors"]["planned"], runs["unpaced"]["directors"]["planned"]
+    match_s = runs["paced"]["frames_sent"] / 30.0
+    assert paced["stream_wall_s"] >= match_s - 0.2, "paced: no faster than the game"
+    assert paced["program_sha256"] == unpaced["program_sha256"]
+
+
 def test_video_of_the_program_or_a_clean_skip(registry_and_match):
     folder, _ = registry_and_match
     done = eval_match(

@@ -72,6 +72,12 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--minutes", type=float, help="only the match's first minutes (default: all of it)")
     p.add_argument("--seed", type=int, default=0, help="seed of the sessions and the body sample points (default 0)")
+    p.add_argument(
+        "--paced",
+        action="store_true",
+        help="send the frames in real time at --rate-hz, as a game would (default: as fast as the server answers; "
+        "the program is the same, the compute times are a live session's)",
+    )
     p.set_defaults(handler=run_eval_match)
 
 
@@ -123,6 +129,7 @@ def run_eval_match(args: argparse.Namespace) -> int:
             data_dir=args.data_dir,
             rate_hz=args.rate_hz,
             seed=args.seed,
+            paced=args.paced,
             progress=_progress,
         )
     except KeyError as exc:

@@ -9,7 +9,10 @@ feet with their team and a chest-high aim point, level_id = the match's level, d
 gRPC StreamFrames stream: the match subsampled to `rate_hz` (every k-th frame of the file, the
 events of the skipped frames riding on the next sent one, as a game sending at that rate would
 announce them), then D more seconds of the last frame so that the program reaches the match's
-end. Replies are aligned by their frame number (the program moment: frame = match row + 1);
+end; sent as fast as the server answers, or, `paced`, in real time as a game sends them
+(matches/playback.py's pacing: the program is the same, issue 41; the compute times are then a
+live session's, with the worker's idle moments between frames). Replies are aligned by their
+frame number (the program moment: frame = match row + 1);
 buffering and stale replies carry no program. The per-frame cost reference is a one-actor
 RIG_TRACKS session on the same level in the same server, following the match's first player for
 as many frames.
@@ -17,6 +20,7 @@ as many frames.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -60,6 +64,7 @@ from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.infra.plugins import import_plugins
+from camdirector.matches.playback import PlaybackCounts, paced_updates
 from camdirector.pipeline.match.director_registry import director_entry, registered
 from camdirector.precompute.tracks.registry import LevelRegistry
 
@@ -81,15 +86,21 @@ class DirectorRun:
 
 
 def stream_director(
-    client: cd.Client, match: MatchRecording, feed: Feed, director: str, delay_s: float, seed: int
+    client: cd.Client, match: MatchRecording, feed: Feed, director: str, delay_s: float, seed: int, paced: bool = False
 ) -> DirectorRun:
-    """Streams the match through one RIG_MATCH session of `director` (a registered name); its
+    """Streams the match through one RIG_MATCH session of `director` (a registered name), paced
+    in real time at the feed's rate (play-match's pacing) or as fast as the server answers; its
     program (module docstring)."""
     columns = list(range(len(match.players)))
     replies: list[tuple[bool, tuple[Any, ...] | None]] = []
     start = time.perf_counter()
     with client.create_session(**match_session_fields(match, director, delay_s, seed)) as session:
-        for u in session.stream(frame_updates(session, match, feed, columns, events=True)):
+        updates = (
+            paced_updates(session, match, [feed], 1.0, time.monotonic, threading.Event(), PlaybackCounts())
+            if paced
+            else frame_updates(session, match, feed, columns, events=True)
+        )
+        for u in session.stream(updates):
             if u.buffering or u.stale:
                 replies.append((u.buffering, None))
                 continue
@@ -291,6 +302,7 @@ def evaluate_match(
     data_dir: Path | None = None,
     rate_hz: float = 30.0,
     seed: int = 0,
+    paced: bool = False,
     progress=None,
 ) -> tuple[dict, dict[str, DirectorRun]]:
     """Runs the directors (registered names, default every one registered once the plugins are
@@ -315,7 +327,7 @@ def evaluate_match(
     ):
         for name in names:
             progress(f"streaming {len(feed.rows)} frames through {name}")
-            runs[name] = stream_director(client, match, feed, name, delay_s, seed)
+            runs[name] = stream_director(client, match, feed, name, delay_s, seed, paced)
         progress(f"streaming {len(feed.rows)} frames through the TRACKS reference")
         tracks_ms = stream_tracks_reference(client, match, feed)
     figures = {}
@@ -336,6 +348,7 @@ def evaluate_match(
         },
         "delay_s": delay_s,
         "rate_hz": round(feed.rate_hz, 2),
+        "paced": paced,
         "frames_sent": len(feed.rows),
         "directors": figures,
         "ceilings": ceilings.as_json(),
