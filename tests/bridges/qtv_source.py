@@ -15,7 +15,11 @@ stream), then the blocks from where the match is now on the source's own clock (
 while no one watches), each when its time comes, `speed` times faster than recorded. Knobs:
 refuse (answer this PERROR line instead), drop_after_s (close the connection this long into the
 first one, mid-block), garbage_after_s (send bytes that are no MVD this long into the first one,
-then close).
+then close), password (ask for it as mvdsv's qtv_password does, SV_MVD_RunPendingConnections:
+the strongest AUTH method offered that the source knows, `methods`; for MD4 or CCITT an AUTH and
+CHALLENGE answer, then the next request on the same connection must carry the PASSWORD; a
+wrong one "PERROR: Bad password.", none offered "PERROR: You need to provide a common auth
+method.", PLAIN without a PASSWORD "PERROR: You need to provide a password.").
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import socket
 import struct
 import threading
 import time
+
+from camdirector.bridges.qtv_auth import answer
 
 DEM_MULTIPLE, DEM_SET, DEM_ALL = 3, 2, 6
 SVC_PLAYERINFO = 42
@@ -63,6 +69,8 @@ class QtvSource:
         refuse: str = "",
         drop_after_s: float | None = None,
         garbage_after_s: float | None = None,
+        password: str = "",
+        methods: tuple[str, ...] = ("PLAIN", "CCITT", "MD4"),
     ):
         blocks = demo_blocks(demo)
         first_frame = next(k for k, (_, b) in enumerate(blocks) if _is_frame(b))
@@ -70,6 +78,8 @@ class QtvSource:
         self.frames = [(t, b) for t, b in blocks[first_frame:] if t <= end_s]
         self.speed, self.refuse = speed, refuse
         self.drop_after_s, self.garbage_after_s = drop_after_s, garbage_after_s
+        self.password, self.methods = password, methods
+        self.challenge = "2f6a1c0e9b8d4a7f3e5c1b0a9d8e7f6a"  # mvdsv's is random; CCITT wants 32 characters
         self.requests: list[str] = []
         self.connections = 0
         self._server = socket.create_server(("127.0.0.1", 0))
@@ -102,17 +112,27 @@ class QtvSource:
 
     def _serve(self, conn: socket.socket) -> None:
         with conn:
-            request = b""
-            while b"\n\n" not in request:
-                chunk = conn.recv(4096)
-                if not chunk:
+            pending = b""
+            while True:
+                while b"\n\n" not in pending:
+                    chunk = conn.recv(4096)
+                    if not chunk:
+                        return
+                    pending += chunk
+                head, pending = pending.split(b"\n\n", 1)
+                text = head.decode("latin-1")
+                self.requests.append(text)
+                lines = text.split("\n")
+                if lines[0].strip() != "QTV":
+                    return  # mvdsv drops a connection that is not QTV without a word
+                if not self.password:
+                    break
+                asked = self._password(conn, lines)
+                if asked is None:
+                    break  # authed
+                if asked:
+                    conn.sendall(asked.encode())
                     return
-                request += chunk
-            text = request.split(b"\n\n")[0].decode("latin-1")
-            self.requests.append(text)
-            lines = text.split("\n")
-            if lines[0].strip() != "QTV":
-                return  # mvdsv drops a connection that is not QTV without a word
             if "VERSION: 1" not in lines:
                 conn.sendall(b"QTVSV 1\nPERROR: Incompatible version (valid version is v1)\n\n")
                 return
@@ -126,6 +146,23 @@ class QtvSource:
                 self._stream(conn, first)
             except OSError:
                 return
+
+    def _password(self, conn: socket.socket, lines: list[str]) -> str | None:
+        """None when the request is authed; else the refusal to send, or "" after sending a
+        challenge (the next request follows on the connection)."""
+        fields = [(name.strip(), value.strip()) for name, _, value in (line.partition(":") for line in lines[1:])]
+        offered = [value for name, value in fields if name == "AUTH"]
+        known = [m for m in self.methods if m in offered or (m == "PLAIN" and "NONE" in offered)]
+        method = known[-1] if known else ""  # the strongest: methods go weakest first
+        given = next((value.strip('"') for name, value in fields if name == "PASSWORD"), None)
+        if not method:
+            return "QTVSV 1\nPERROR: You need to provide a common auth method.\n\n"
+        if given is None and method != "PLAIN":
+            conn.sendall(f"QTVSV 1\nAUTH: {method}\nCHALLENGE: {self.challenge}\n\n".encode())
+            return ""
+        if given is None:
+            return "QTVSV 1\nPERROR: You need to provide a password.\n\n"
+        return None if given == answer(method, self.challenge, self.password) else "QTVSV 1\nPERROR: Bad password.\n\n"
 
     def _stream(self, conn: socket.socket, first: bool) -> None:
         opened_s = time.monotonic()

@@ -21,6 +21,7 @@ import pytest
 
 import camdirector_client as cd
 from camdirector.bridges.qtv import QtvRefused, QtvSettings, cast_qtv, parse_qtv_url, request_bytes
+from camdirector.bridges.qtv_auth import answer, md4
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.matches.import_cli import add_map
 from tests.bridges.qtv_source import QtvSource
@@ -47,7 +48,7 @@ def frobodm2_server(tmp_path_factory):
         yield server
 
 
-def _cast(server, source: QtvSource, until, timeout_s: float = 30.0):
+def _cast(server, source: QtvSource, until, timeout_s: float = 30.0, password: str = ""):
     """cast_qtv on a thread until until(counts, receiver, tracks) or timeout_s; the result, the
     sessions opened and every progress (frames, connections)."""
     stop = threading.Event()
@@ -63,7 +64,7 @@ def _cast(server, source: QtvSource, until, timeout_s: float = 30.0):
             done["cast"] = cast_qtv(
                 client,
                 source.url,
-                QtvSettings(delay_s=1.0, backoff_s=0.1),
+                QtvSettings(delay_s=1.0, backoff_s=0.1, password=password),
                 level="frobodm2",
                 director="planned",
                 stop=stop,
@@ -146,3 +147,55 @@ def test_a_refused_stream_is_an_error(frobodm2_server, demo):
 def _cast_raising(server, source):
     with cd.connect(server.url("grpc")) as client:
         cast_qtv(client, source.url, QtvSettings(), level="frobodm2", director="planned", stop=threading.Event())
+
+
+def test_the_password_answers_are_ezquakes():
+    # RFC 1320's test suite; Quake's CRC is CRC-16/CCITT-FALSE, whose check value is 0x29B1
+    assert md4(b"").hex() == "31d6cfe0d16ae931b73c59d7e0c089c0"
+    assert md4(b"message digest").hex() == "d9130a8164549fe818874806e1c7014b"
+    assert md4(b"1234567890" * 8).hex() == "e33b4ddc9c38f2199c3e7b164fcc0536"
+    # MD4 of "abc" (a448017a af21d852 5fc10ae8 7aa6729d) as four little-endian words, "%X" each
+    assert answer("MD4", "ab", "c") == "7A0148A452D821AFE80AC15F9D72A67A"
+    assert answer("CCITT", "1234", "56789") == "0x29B1"
+    assert answer("PLAIN", "x", "secret") == "secret"
+    with pytest.raises(ValueError, match="SHA3_512"):
+        answer("SHA3_512", "x", "secret")
+
+
+@pytest.mark.parametrize("methods, method", [(("PLAIN", "CCITT", "MD4"), "MD4"), (("PLAIN", "CCITT"), "CCITT")])
+def test_a_passworded_source_is_answered(frobodm2_server, demo, methods, method):
+    with QtvSource(demo, end_s=SLICE_END_S, speed=SPEED, password="hunter2", methods=methods) as source:
+        cast, sessions, _ = _cast(frobodm2_server, source, lambda c, r, t: c.program > 0, password="hunter2")
+    assert len(sessions) == 1 and cast.session.program > 0
+    first, second = source.requests[0].split("\n"), source.requests[1].split("\n")
+    assert [line for line in first if line.startswith("AUTH")] == ["AUTH: MD4", "AUTH: CCITT", "AUTH: PLAIN"]
+    assert f"AUTH: {method}" in second
+    assert f'PASSWORD: "{answer(method, source.challenge, "hunter2")}"' in second
+
+
+@pytest.mark.parametrize(
+    "flags, said",
+    [
+        (["--password", "wrong"], "refused the stream: PERROR: Bad password."),
+        # mvdsv's words to a request that offers no AUTH method, then ours
+        (
+            [],
+            "refused the stream: PERROR: You need to provide a common auth method."
+            " (it asks for a password: give it with --password)",
+        ),
+    ],
+)
+def test_a_wrong_or_missing_password_is_a_clear_error(frobodm2_server, demo, flags, said):
+    with QtvSource(demo, end_s=SLICE_END_S, password="hunter2") as source:
+        done = subprocess.run(
+            [sys.executable, "-m", "camdirector.__main__", "cast", "qtv", source.url, "--level", "frobodm2"]
+            + ["--server", frobodm2_server.url("grpc"), *flags],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=60,
+            env=os.environ,
+        )
+    assert done.returncode == 2, done.stderr
+    assert f"camdirector cast qtv: {source.url} {said}" in done.stderr
+    assert "Traceback" not in done.stderr

@@ -16,7 +16,8 @@
 
     camdirector cast qtv qtv://HOST:PORT[/STREAM] (--level NAME | --map MAP.bsp) --server URL
                          [--delay-s 10] [--rate-hz 30] [--director NAME] [--key-file PATH]
-                         [--ca-file CA] [--data-dir DIR]
+                         [--ca-file CA] [--data-dir DIR] [--program-out FILE.jsonl]
+                         [--password PASSWORD]
         connects to a QuakeWorld QTV source (mvdsv, or a QTV proxy's STREAM) as a QTV client,
         decodes the live MVD stream as it comes and drives a RIG_MATCH session on the level
         (bridges/qtv.py): players interpolated at rate_hz, frags as kill events, their stats;
@@ -24,10 +25,14 @@
         stderr each time), in the same session. --map MAP.bsp adds the map to the level registry
         first, under its stem, as import-match --map does. Prints JSON lines: the session and
         its players, one progress line a second (players, frags, the program's shot,
-        connections), then the summary. Ctrl-C stops. Exit status: 0 stopped by Ctrl-C after a
-        session ran, 1 the stream to the server failed or the level registry is unavailable, 2
-        bad arguments, map, server, key, or a QTV source that refused the stream or could not be
-        reached.
+        connections), then the summary. --password answers a source that asks for one
+        (mvdsv's qtv_password; MD4, CCITT or PLAIN as ezQuake does, bridges/qtv_auth.py); a
+        wrong one is a refusal. --program-out writes the program received as it comes,
+        one JSON line a program moment with the demo time it shows (bridges/program_record.py),
+        for `camdirector eval-match MATCH --program FILE`. Ctrl-C stops. Exit status: 0 stopped
+        by Ctrl-C after a session ran, 1 the stream to the server failed or the level registry
+        is unavailable, 2 bad arguments, map, server, key, a --program-out that cannot be
+        written, or a QTV source that refused the stream or could not be reached.
 
 Kept light at import, as play_cli.py: the client loads when the command runs. `cast` has
 subcommands so that other feeds join it.
@@ -78,6 +83,14 @@ def add_parser(subparsers) -> None:
     where.add_argument("--map", type=Path, help="the match's map (.bsp): added to the level registry under its stem first")
     q.add_argument("--data-dir", dest="data_dir", type=Path, help="registry folder for --map (default: per-user data dir)")
     q.add_argument("--server", required=True, help="the server, grpc://HOST:PORT or grpcs://HOST:PORT")
+    q.add_argument("--password", default="", help="the source's qtv_password, if it asks for one")
+    q.add_argument(
+        "--program-out",
+        dest="program_out",
+        type=Path,
+        metavar="FILE.jsonl",
+        help="write the program received here, for eval-match --program",
+    )
     _add_session_args(q)
     q.set_defaults(handler=run_cast_qtv)
 
@@ -226,7 +239,7 @@ def run_cast_qtv(args: argparse.Namespace) -> int:
         parse_qtv_url(args.url)
         if not args.server.startswith(("grpc://", "grpcs://")):
             raise ValueError(f"--server {args.server!r}: give grpc://HOST:PORT or grpcs://HOST:PORT")
-        settings = QtvSettings(rate_hz=args.rate_hz, delay_s=args.delay_s)
+        settings = QtvSettings(rate_hz=args.rate_hz, delay_s=args.delay_s, password=args.password)
     except ValueError as exc:
         return _fail(str(exc), "qtv")
     level = args.level
@@ -290,9 +303,12 @@ def _run_qtv(args: argparse.Namespace, settings, level: str) -> int:
                 stop=stop,
                 on_session=on_session,
                 on_progress=on_progress,
+                program_out=args.program_out,
             )
     except QtvError as exc:
         return _fail(str(exc), "qtv")
+    except OSError as exc:  # --program-out cannot be written
+        return _fail(f"--program-out: {exc}", "qtv")
     except cd.DirectorError as exc:
         if not opened:
             return _fail(f"the server at {args.server} refused the session: {exc}", "qtv")
@@ -311,6 +327,7 @@ def _run_qtv(args: argparse.Namespace, settings, level: str) -> int:
                 "drops": r.drops,
                 "bad_streams": r.bad_streams,
                 "bytes": r.bytes,
+                "program_out": None if args.program_out is None else str(args.program_out),
             }
         }
     )

@@ -54,7 +54,9 @@ class DerivedEvent:
 class Sample:
     """The players at one moment: ids (n,), positions_world (n, 3) m at the feet, yaw_deg (n,)
     Source yaw; stats: (id, health, armor, items, frags) of the players whose values changed since
-    the last sample; events since the last sample; stale: no payload for hold_s."""
+    the last sample; events since the last sample; stale: no payload for hold_s; source_time_s:
+    the feed's own clock at the moment sampled, s, where it has one (QTV: the stream's demo time
+    the players were sampled at; program_record.py places a program on the match by it)."""
 
     ids: list[str]
     positions_world: np.ndarray
@@ -62,6 +64,7 @@ class Sample:
     stats: list[tuple[str, int, int, int, int]]
     events: list[DerivedEvent]
     stale: bool
+    source_time_s: float | None = None
 
 
 @dataclass

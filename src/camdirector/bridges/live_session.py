@@ -85,6 +85,8 @@ def drive_session(
     director: str,
     stop: threading.Event,
     on_pose: Callable[[cd.pb.Pose, float], None] | None = None,
+    on_frame: Callable[[int, float, Sample], None] | None = None,
+    on_reply: Callable[[cd.pb.CameraUpdate], None] | None = None,
     clock: Callable[[], float] = time.monotonic,
     on_session: Callable[[str], None] = lambda session_id: None,
     on_progress: Callable[[CastCounts], None] = lambda counts: None,
@@ -92,7 +94,9 @@ def drive_session(
 ) -> CastCounts:
     """Runs the session (module docstring) until `stop` is set; returns the counts. Waits for the
     roster first (returns with no frames if stopped before). on_pose: each program pose and the
-    clock's time. DirectorError: the server refused the session or the stream failed."""
+    clock's time; on_frame: each frame sent (its number, game time and the sample it carries), on
+    the stream's sending thread; on_reply: each reply. DirectorError: the server refused the
+    session or the stream failed."""
     counts = CastCounts()
     while not tracks.wait_roster(0.1):
         if stop.is_set():
@@ -126,6 +130,8 @@ def drive_session(
                     continue
                 counts.frames += 1
                 counts.kills += sum(e.kind == "kill" for e in sample.events)
+                if on_frame is not None:
+                    on_frame(counts.frames, now_s - start_s, sample)
                 yield frame_update(session, counts.frames, now_s - start_s, sample)
 
         replies = session.stream(updates())
@@ -133,6 +139,8 @@ def drive_session(
         try:
             for reply in replies:
                 counts.answered += 1
+                if on_reply is not None:
+                    on_reply(reply)
                 if not (reply.buffering or reply.stale) and reply.HasField("pose"):
                     counts.program += 1
                     counts.cuts += reply.cut

@@ -7,14 +7,19 @@ playing stream; QW-Group/qtv downstream_pending_request.go turns it into that SO
 sv_demo_qtv.c ignores both), its USERINFO and a blank line. The source answers "QTVSV 1" and
 header lines up to a blank line: BEGIN (alone or "BEGIN: server") says the MVD stream follows;
 PERROR (permanent), TERROR or ERROR say why not, and are a QtvRefused naming the source and its
-words. No password is sent: a source that asks for one (AUTH/CHALLENGE) is refused the same way.
+words. With a password (mvdsv's qtv_password) the request offers AUTH methods and a source that
+answers AUTH and CHALLENGE instead of BEGIN gets a second request on the same connection with the
+answer (qtv_auth.py); without one, a source that asks for a password is refused the same way.
 
 The stream is MVD blocks as a recorded demo's (mvdsv SV_MVD_Record to a stream destination),
 decoded as they come by matches/mvd_wire.py's MvdStream. QtvTracks keeps the players: each
 sample is placed on the local clock at its arrival less how far its demo time lies behind the
 newest block's, so a source's catch-up burst lands in the past and a live stream in real time;
 sampled at t - interp_delay_s, interpolated between the samples around it except into a jump
-(teleport, respawn: mvd_wire's), held beyond the newest; stale after hold_s without any.
+(teleport, respawn: mvd_wire's), held beyond the newest; stale after hold_s without any. Each
+sample also says the stream's demo time it shows (the samples' demo times interpolated the same
+way, held at the ends): a recorded program (program_record.py) is placed on the match file of the
+same demo by it.
 The roster is the first update's players (slot order: ids p00, p01, ..., the demo importer's;
 teams by quakeworld_mvd.player_teams); a slot that starts playing later is not in the session.
 Obituaries become events: a kill (attacker, victim; a suicide or a death to the world names the
@@ -30,6 +35,7 @@ A refusal, or a first connection that cannot be made, ends the cast with that er
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import socket
@@ -38,13 +44,16 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from urllib.parse import urlsplit
 
 import numpy as np
 
 import camdirector_client as cd
+from camdirector.bridges import qtv_auth
 from camdirector.bridges.gsi_tracks import DerivedEvent, Sample
 from camdirector.bridges.live_session import CastCounts, drive_session
+from camdirector.bridges.program_record import ProgramRecorder
 from camdirector.evaluation.match.match_file import MatchPlayer
 from camdirector.geometry import quake_frame
 from camdirector.matches.mvd_wire import MvdError, MvdStream, MvdUpdate
@@ -70,6 +79,7 @@ class QtvSettings:
     backoff_s: float = 0.25  # first wait before reconnecting, doubled each failure, s. [0.01, 60]
     backoff_max_s: float = 5.0  # longest wait between reconnects, s. [backoff_s, 300]
     client_name: str = "camdirector"  # the USERINFO name the source shows for us; 1 to 31 printable characters
+    password: str = ""  # the source's qtv_password; "" sends none. At most 255 printable characters, no quote
 
     def __post_init__(self):
         checks = [
@@ -84,6 +94,10 @@ class QtvSettings:
             (
                 1 <= len(self.client_name) <= 31 and self.client_name.isprintable() and not set(self.client_name) & set('\\"\n'),
                 "client_name must be 1 to 31 printable characters, no backslash or quote",
+            ),
+            (
+                len(self.password) <= 255 and self.password.isprintable() and '"' not in self.password,
+                "password must be at most 255 printable characters, no quote",
             ),
         ]
         bad = [message for ok, message in checks if not ok]
@@ -126,21 +140,22 @@ def parse_qtv_url(url: str) -> QtvAddress:
     return QtvAddress(parts.hostname, port, stream)
 
 
-def request_bytes(address: QtvAddress, client_name: str) -> bytes:
-    """The client's request (module docstring)."""
+def request_bytes(address: QtvAddress, client_name: str, auth: list[str] | None = None) -> bytes:
+    """The client's request (module docstring); auth: the AUTH (and PASSWORD) lines to add."""
     lines = [
         "QTV",
         "VERSION: 1",
         f"SOURCE: {address.stream}" if address.stream else "RECEIVE",
         f"USERINFO: \\name\\{client_name}",
+        *(auth or []),
     ]
     return ("\n".join(lines) + "\n\n").encode("latin-1")
 
 
-def read_answer(sock: socket.socket, address: QtvAddress) -> bytes:
-    """Reads the source's answer header (module docstring); returns the stream bytes that came
-    after it. QtvRefused for an error answer or no BEGIN, QtvError for anything that is no QTV
-    answer, OSError when the connection fails."""
+def read_answer(sock: socket.socket, address: QtvAddress) -> tuple[dict[str, str], bytes]:
+    """Reads the source's answer header (module docstring): its fields (name: value; BEGIN's
+    value may be empty) and the stream bytes that came after it. QtvRefused for an error answer,
+    QtvError for anything that is no QTV answer, OSError when the connection fails."""
     data = b""
     while b"\n\n" not in data:
         if len(data) > HEADER_LIMIT_BYTES:
@@ -165,20 +180,37 @@ def read_answer(sock: socket.socket, address: QtvAddress) -> bytes:
     errors = [f"{name}: {value}" for name, value in fields if name in ("PERROR", "TERROR", "ERROR")]
     if errors:
         raise QtvRefused(f"{address} refused the stream: {'; '.join(errors)}")
-    if not any(name == "BEGIN" for name, _ in fields):
-        asked = [value for name, value in fields if name == "AUTH"]
-        why = f"it asks for a password (AUTH: {asked[0]})" if asked else f"its answer holds no BEGIN ({header[:80]!r})"
-        raise QtvRefused(f"{address} sent no stream: {why}")
-    return rest
+    return dict(fields), rest
 
 
 def open_stream(address: QtvAddress, settings: QtvSettings) -> tuple[socket.socket, bytes]:
-    """Connects, requests the stream and reads the answer: the connected socket (read timeout
-    set) and the first stream bytes. QtvError/QtvRefused as read_answer; OSError."""
+    """Connects, requests the stream (answering a password challenge: module docstring) and
+    reads the answer: the connected socket (read timeout set) and the first stream bytes.
+    QtvRefused for a refusal, a password asked and not given, or no BEGIN; QtvError as
+    read_answer; OSError."""
     sock = socket.create_connection((address.host, address.port), timeout=settings.connect_timeout_s)
     try:
-        sock.sendall(request_bytes(address, settings.client_name))
-        rest = read_answer(sock, address)
+        offer = [f"AUTH: {method}" for method in qtv_auth.METHODS] if settings.password else []
+        sock.sendall(request_bytes(address, settings.client_name, offer))
+        try:
+            fields, rest = read_answer(sock, address)
+        except QtvRefused as exc:
+            if settings.password or not any(word in str(exc).lower() for word in ("password", "auth")):
+                raise
+            raise QtvRefused(f"{exc} (it asks for a password: give it with --password)") from None
+        if "BEGIN" not in fields and "AUTH" in fields:
+            if not settings.password:
+                raise QtvRefused(
+                    f"{address} sent no stream: it asks for a password (AUTH: {fields['AUTH']}); give it (--password)"
+                )
+            try:
+                reply = qtv_auth.answer(fields["AUTH"], fields.get("CHALLENGE", ""), settings.password)
+            except ValueError as exc:
+                raise QtvRefused(f"{address}: {exc}") from None
+            sock.sendall(request_bytes(address, settings.client_name, [f"AUTH: {fields['AUTH']}", f'PASSWORD: "{reply}"']))
+            fields, rest = read_answer(sock, address)
+        if "BEGIN" not in fields:
+            raise QtvRefused(f"{address} sent no stream: its answer holds no BEGIN ({sorted(fields)})")
         sock.settimeout(settings.read_timeout_s)
     except BaseException:
         sock.close()
@@ -209,6 +241,7 @@ class QtvTracks:
         self._changed: set[int] = set()
         self._events: list[DerivedEvent] = []
         self._last_offer_s = -math.inf
+        self._demo_clock: deque = deque(maxlen=RECENT_SAMPLES)  # (local t, demo time), s, of the newest samples
         self.kills: list[tuple[str, str]] = []  # (attacker, victim) ids of every kill event, in order
 
     def wait_roster(self, timeout_s: float) -> bool:
@@ -231,6 +264,8 @@ class QtvTracks:
                     if player.rows and t <= player.rows[-1][0]:
                         continue  # a reconnect's burst of what was already had
                     player.rows.append((t, *feet[k], float(track.angles_deg[k, 1]), bool(track.jump[k])))
+                    if not self._demo_clock or t > self._demo_clock[-1][0]:
+                        self._demo_clock.append((t, float(track.time_s[k])))
             for slot, stats in update.stats.items():
                 if slot in self._players:
                     health, armor, items, frags = (int(v) for v in stats.values[-1])
@@ -277,6 +312,8 @@ class QtvTracks:
                 yaws.append(yaw)
             stats = [(self._ids[s], *self._players[s].stats) for s in sorted(self._changed)]
             events = self._events
+            clock = np.array(self._demo_clock).reshape(-1, 2)
+            demo_s = float(np.interp(at, clock[:, 0], clock[:, 1])) if len(clock) else None
             if not stale:
                 self._changed, self._events = set(), []
             return Sample(
@@ -286,6 +323,7 @@ class QtvTracks:
                 stats=stats if not stale else [],
                 events=events if not stale else [],
                 stale=stale or not ids,
+                source_time_s=demo_s,
             )
 
 
@@ -419,27 +457,52 @@ def cast_qtv(
     on_session: Callable[[str, list[MatchPlayer]], None] = lambda session_id, roster: None,
     on_progress: Callable[[CastCounts, ReceiverCounts, QtvTracks], None] = lambda counts, receiver, tracks: None,
     progress_s: float = 1.0,
+    program_out: Path | None = None,
 ) -> QtvCast:
     """The bridge as a library call: reads the QTV source at url and drives a RIG_MATCH session
-    on level until `stop` is set (module docstring). ValueError: a bad url; QtvError: the source
-    refused the stream or could not be reached first; DirectorError: the server refused the
-    session or its stream failed."""
+    on level until `stop` is set (module docstring). program_out: write the program received
+    there as it comes (program_record.py). ValueError: a bad url; OSError: program_out cannot be
+    written; QtvError: the source refused the stream or could not be reached first;
+    DirectorError: the server refused the session or its stream failed."""
     address = parse_qtv_url(url)
     tracks = QtvTracks(settings.interp_delay_s, settings.hold_s)
-    with QtvReceiver(address, settings, tracks, stop, clock) as receiver:
-        counts = drive_session(
-            client,
-            tracks,
-            rate_hz=settings.rate_hz,
-            delay_s=settings.delay_s,
-            level=level,
-            director=director,
-            stop=stop,
-            clock=clock,
-            on_session=lambda session_id: on_session(session_id, list(tracks.roster)),
-            on_progress=lambda c: on_progress(c, receiver.counts, tracks),
-            progress_s=progress_s,
-        )
+    recorder = None if program_out is None else ProgramRecorder(program_out)
+
+    def opened(session_id: str) -> None:
+        roster = list(tracks.roster)
+        if recorder is not None:
+            recorder.begin(
+                {
+                    "program_of": str(address),
+                    "level": level,
+                    "director": director,
+                    "delay_s": settings.delay_s,
+                    "rate_hz": settings.rate_hz,
+                    "roster": [dataclasses.asdict(p) for p in roster],
+                }
+            )
+        on_session(session_id, roster)
+
+    try:
+        with QtvReceiver(address, settings, tracks, stop, clock) as receiver:
+            counts = drive_session(
+                client,
+                tracks,
+                rate_hz=settings.rate_hz,
+                delay_s=settings.delay_s,
+                level=level,
+                director=director,
+                stop=stop,
+                clock=clock,
+                on_frame=None if recorder is None else recorder.sent,
+                on_reply=None if recorder is None else recorder.reply,
+                on_session=opened,
+                on_progress=lambda c: on_progress(c, receiver.counts, tracks),
+                progress_s=progress_s,
+            )
+    finally:
+        if recorder is not None:
+            recorder.close()
     if receiver.error is not None:
         raise receiver.error
     return QtvCast(counts, receiver.counts)

@@ -15,6 +15,15 @@
         program (the first director's without ours) for its first S seconds (EGL; skipped with a
         message when unavailable).
         Exit status: 0 ok, 1 the run failed, 2 bad arguments, match file, level, director or plugin.
+    camdirector eval-match FILE --program P.jsonl --json OUT [--delay D] [--plot P.png]
+                           [--video V.mp4] [--video-seconds 20] [--data-dir DIR] [--seed 0]
+        measures a program recorded elsewhere (`camdirector cast qtv --program-out P.jsonl`: the
+        program a live cast received) against the match file imported from the same demo, with
+        no server: each moment on the match row of the demo time it shows, the match cut to the
+        program's span (bridges/program_record.py), then the same figures as above
+        (evaluate.py's measure_program; the candidates are not recorded, so theirs are empty).
+        The delay is the recorded one; --delay, if given, must be it. Exit status: 0 ok, 2 bad
+        arguments, match file, program file or level.
 
 Kept light at import, as evaluation/cli.py: numpy, the client and the server load when it runs.
 """
@@ -38,7 +47,10 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("-h", "--help", action=_HelpWithDirectors, help="show this help message, with the directors, and exit")
     p.add_argument("file", type=Path, help="match file (camdirector match-sim --out)")
-    p.add_argument("--delay", type=float, required=True, help="broadcast delay, s, 0 to 300")
+    p.add_argument("--delay", type=float, help="broadcast delay, s, 0 to 300 (required without --program)")
+    p.add_argument(
+        "--program", type=Path, metavar="P.jsonl", help="measure this recorded program (cast qtv --program-out) instead"
+    )
     p.add_argument("--json", type=Path, required=True, help="write the result here")
     p.add_argument(
         "--director",
@@ -104,12 +116,15 @@ def _progress(text: str) -> None:
 
 def run_eval_match(args: argparse.Namespace) -> int:
     """Runs `camdirector eval-match` from parsed arguments; returns the exit status."""
-    from camdirector.evaluation.match.evaluate import evaluate_match, plot_result
+    from camdirector.evaluation.match.evaluate import evaluate_match
     from camdirector.evaluation.match.match_file import load_match
-    from camdirector.evaluation.match.program_video import VideoUnavailable, render_program
     from camdirector_client import DirectorError
 
+    if args.program is not None:
+        return _run_recorded(args)
     try:
+        if args.delay is None:
+            raise ValueError("--delay is required (unless --program)")
         if not 0.0 <= args.delay <= 300.0:
             raise ValueError("--delay must be in [0, 300] s")
         if not args.rate_hz > 0 or not args.video_seconds > 0:
@@ -142,6 +157,82 @@ def run_eval_match(args: argparse.Namespace) -> int:
         print(f"camdirector eval-match: {exc}", file=sys.stderr)
         return 1
     result["match"]["file"] = str(args.file)
+    return _emit(args, match, result, runs)
+
+
+def _run_recorded(args: argparse.Namespace) -> int:
+    """eval-match FILE --program P (module docstring): the recorded program's figures."""
+    import numpy as np
+
+    from camdirector.bridges.program_record import program_on_match, read_program
+    from camdirector.evaluation.match.evaluate import DirectorRun, measure_program
+    from camdirector.evaluation.match.match_file import load_match
+    from camdirector.evaluation.match.measure import Offered
+
+    if args.directors or args.plugins or args.minutes is not None:
+        print(
+            "camdirector eval-match: --program measures the recorded program: no --director, --plugin or --minutes",
+            file=sys.stderr,
+        )
+        return 2
+    try:
+        recorded = read_program(args.program)
+        header = recorded.header
+        if args.delay is not None and args.delay != header["delay_s"]:
+            raise ValueError(f"--delay {args.delay:g}: the program was cast with a {header['delay_s']:g} s delay")
+        if not args.video_seconds > 0:
+            raise ValueError("--video-seconds must be positive")
+        placed = program_on_match(recorded, load_match(args.file))
+        match, program = placed.match, placed.program
+        no_candidates = Offered(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 4)), np.zeros(0), [])
+        run = DirectorRun(
+            program,
+            placed.compute_ms,
+            no_candidates,
+            buffering=0 if recorded.end is None else recorded.end["buffering"],
+            wall_s=recorded.moments[-1]["time_s"] - recorded.moments[0]["time_s"],
+        )
+        _progress(f"measuring the {len(program)} program moments of {args.program}")
+        figures = measure_program(match, run, data_dir=args.data_dir, seed=args.seed)
+    except KeyError as exc:
+        print(f"camdirector eval-match: {exc.args[0]}", file=sys.stderr)
+        return 2
+    except (OSError, ValueError) as exc:
+        print(f"camdirector eval-match: {exc}", file=sys.stderr)
+        return 2
+    director = header["director"]
+    result = {
+        "match": {
+            "file": str(args.file),
+            "level": match.level,
+            "seed": match.seed,
+            "players": len(match.players),
+            "kills": sum(e.kind == "kill" for e in match.events),
+            "minutes": round(float(program.time_s[-1] - program.time_s[0]) / 60.0, 2),
+        },
+        "delay_s": header["delay_s"],
+        "rate_hz": header["rate_hz"],
+        "program": {
+            "file": str(args.program),
+            "of": header["program_of"],
+            "director": director,
+            "moments_recorded": len(recorded.moments),
+            "moments_left_out": placed.left_out,
+            "shift_s": round(placed.shift_s, 3),
+            "align_m": round(placed.align_m, 3),
+            "ended": recorded.end is not None,
+            "frames_sent": None if recorded.end is None else recorded.end["frames"],
+        },
+        "directors": {director: figures},
+    }
+    return _emit(args, match, result, {director: run})
+
+
+def _emit(args: argparse.Namespace, match, result: dict, runs: dict) -> int:
+    """The plot and the video where asked, then the result printed and written to --json."""
+    from camdirector.evaluation.match.evaluate import plot_result
+    from camdirector.evaluation.match.program_video import VideoUnavailable, render_program
+
     if args.plot:
         plot_result(result, args.plot)
     if args.video:

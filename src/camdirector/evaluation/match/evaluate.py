@@ -313,10 +313,7 @@ def evaluate_match(
     import_plugins(plugins)
     names = [e.name for e in registered()] if directors is None else [director_entry(n).name for n in directors]
     registry = LevelRegistry(data_dir)
-    artifact = registry.load(match.level)  # KeyError names an unknown level
-    level_mesh = TriMesh(artifact.level_vertices, artifact.level_faces)
-    level, interior = RayScene([level_mesh]), LevelInterior(level_mesh)
-    bodies = BodySampler(match, np.random.default_rng(seed))
+    level, interior, bodies = _measuring(match, registry, seed)
     lens = Lens()  # the server's default lens: the sessions send none
     feed = Feed.of(match, rate_hz, delay_s)
     runs: dict[str, DirectorRun] = {}
@@ -404,3 +401,19 @@ def plot_result(result: dict, out_png: Path) -> None:
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=100)
     plt.close(fig)
+
+
+def measure_program(match: MatchRecording, run: DirectorRun, *, data_dir: Path | None = None, seed: int = 0) -> dict:
+    """One program measured against the match as evaluate_match measures each director's, with no
+    server: a program recorded elsewhere (`cast qtv --program-out`, `eval-match --program`).
+    KeyError names a level the registry does not hold."""
+    level, interior, bodies = _measuring(match, LevelRegistry(data_dir), seed)
+    return _figures(match, run, bodies, Lens(), level, interior)
+
+
+def _measuring(match: MatchRecording, registry: LevelRegistry, seed: int) -> tuple[RayScene, LevelInterior, BodySampler]:
+    """What the measures read: the match's level from the registry (KeyError names an unknown
+    one) as a ray scene and as the places test, and the players' body points (seeded)."""
+    artifact = registry.load(match.level)
+    level_mesh = TriMesh(artifact.level_vertices, artifact.level_faces)
+    return RayScene([level_mesh]), LevelInterior(level_mesh), BodySampler(match, np.random.default_rng(seed))

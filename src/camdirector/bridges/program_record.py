@@ -1,0 +1,237 @@
+"""The program a cast received, written as it comes (`camdirector cast qtv --program-out FILE`) and
+read back as evaluation/match/measure.py's Program on the match file imported from the same demo
+(`camdirector eval-match MATCH --program FILE`): issue 42's program measured afterwards on the
+recorded demo of the same match.
+
+The file is JSON lines, each written as it comes (a cast stopped any way leaves a file that
+reads): first the header {"program_of": the source, "level", "director", "delay_s", "rate_hz",
+"roster": [{"id", "name", "team", "team_name", ...}]}; then one line per program reply (neither
+buffering nor stale): frame, time_s (the session's game time of its moment), source_time_s (the
+feed's clock at that frame: for QTV the stream's demo time its players were sampled at,
+qtv.QtvTracks), players ({id: feet [3] m} as that frame carried them), position [3] m, rotation
+[4] xyzw camera-to-world, vertical_fov_deg, cut, shot_id, kind (ShotKind less SHOT_), subjects
+(ids), compute_ms; last, when the cast ended by itself, {"end": {"frames": sent, "buffering":
+replies buffering}}. The candidates are not kept (hours of a cast would weigh too much), so their
+measures come out empty.
+
+Read against a match. A QTV stream's demo time is not the recorded demo's: MVD blocks carry
+time deltas, and a stream begins where the match was when the client joined. So the program is
+first aligned: the shift of its clock onto the match's is the one, among every row of the match,
+at which the players' feet the program's frames carried lie nearest the match's (median distance
+over ALIGN_MOMENTS moments spread over the program, each the median over its players); a program
+whose best shift leaves them more than ALIGN_LIMIT_M apart is not of this match. Then each moment
+goes to the match row of its shifted source time, and the program's clock is the match's (shot
+lengths in match seconds); moments beyond the match's ends by more than a row's step are left out
+(counted); two moments on one row (the cast's frames jitter against the file's grid) keep the
+later, cutting if either cut, as eval-match keeps the replies of one moment (and a moment older
+than the one before is left out). The match's kills before the program's first moment were not
+its to show and are left out, as measure.py leaves out those after its last.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import threading
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import camdirector_client as cd
+from camdirector.bridges.gsi_tracks import Sample
+from camdirector.evaluation.match.match_file import MatchRecording
+from camdirector.evaluation.match.measure import Program
+
+MOMENT_KEYS = {
+    "frame",
+    "time_s",
+    "source_time_s",
+    "players",
+    "position",
+    "rotation",
+    "vertical_fov_deg",
+    "cut",
+    "shot_id",
+    "subjects",
+}
+ALIGN_MOMENTS = 32  # program moments whose players' feet place the program on the match
+ALIGN_LIMIT_M = 1.0  # feet further apart than this at the best shift: not the same match, m
+
+
+class ProgramRecorder:
+    """Writes the program file (module docstring) as a cast runs: opened at once (OSError where it
+    cannot be), begin() with the header once the session is open, then sent() from the stream's
+    sending thread and reply() from the one reading its replies; close() writes the end line."""
+
+    def __init__(self, path: Path):
+        self._file = open(path, "w", encoding="utf-8", buffering=1)  # line-buffered: each line lands whole
+        self._lock = threading.Lock()
+        self._sent: deque[tuple[int, float | None, dict]] = deque()  # (frame, source time, feet) not answered yet
+        self.frames = self.buffering = self.moments = 0
+        self._begun = False
+
+    def begin(self, header: dict[str, Any]) -> None:
+        self._write(header)
+        self._begun = True
+
+    def _write(self, line: dict[str, Any]) -> None:
+        with self._lock:
+            self._file.write(json.dumps(line) + "\n")
+
+    def sent(self, frame: int, time_s: float, sample: Sample) -> None:
+        feet = {pid: [round(float(v), 3) for v in xyz] for pid, xyz in zip(sample.ids, sample.positions_world)}
+        self._sent.append((frame, sample.source_time_s, feet))
+        self.frames += 1
+
+    def reply(self, reply: cd.pb.CameraUpdate) -> None:
+        if reply.buffering:
+            self.buffering += 1
+            return
+        if reply.stale or not reply.HasField("pose"):
+            return
+        while self._sent and self._sent[0][0] < reply.frame:  # moments gone by are never answered again
+            self._sent.popleft()
+        _, source_s, feet = self._sent[0] if self._sent and self._sent[0][0] == reply.frame else (0, None, {})
+        p, q = reply.pose.position, reply.pose.rotation
+        self.moments += 1
+        self._write(
+            {
+                "frame": reply.frame,
+                "time_s": round(reply.time_s, 4),
+                "source_time_s": None if source_s is None else round(source_s, 4),
+                "players": feet,
+                "position": [p.x, p.y, p.z],
+                "rotation": [q.x, q.y, q.z, q.w],
+                "vertical_fov_deg": reply.pose.vertical_fov_deg,
+                "cut": reply.cut,
+                "shot_id": reply.shot_id,
+                "kind": cd.pb.ShotKind.Name(reply.shot.kind).removeprefix("SHOT_"),
+                "subjects": list(reply.shot.subject_ids),
+                "compute_ms": round(reply.compute_ms, 3),
+            }
+        )
+
+    def close(self) -> None:
+        if self._begun:  # a cast that opened no session leaves an empty file
+            self._write({"end": {"frames": self.frames, "buffering": self.buffering}})
+        self._file.close()
+
+
+@dataclass(frozen=True)
+class RecordedProgram:
+    """A program file read back: its header, its moments (dicts as written) and its end line
+    (None where the cast did not end by itself)."""
+
+    header: dict[str, Any]
+    moments: list[dict[str, Any]]
+    end: dict[str, Any] | None
+
+
+def read_program(path: Path) -> RecordedProgram:
+    """The program file at path; OSError, or ValueError saying what is wrong with it."""
+    lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    try:
+        rows = [json.loads(line) for line in lines]
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not a program file (line {exc.lineno}: {exc.msg})") from None
+    if not rows or not isinstance(rows[0], dict) or "program_of" not in rows[0]:
+        raise ValueError(f"{path}: not a program file (`cast qtv --program-out` writes one)")
+    end = rows[-1].get("end") if isinstance(rows[-1], dict) else None
+    moments = rows[1 : len(rows) - (end is not None)]
+    bad = next((k for k, m in enumerate(moments) if not isinstance(m, dict) or not MOMENT_KEYS <= set(m)), None)
+    if bad is not None:
+        raise ValueError(f"{path}: line {bad + 2} is no program moment")
+    if not moments:
+        raise ValueError(f"{path}: the program has no moment (was the cast shorter than its delay?)")
+    return RecordedProgram(rows[0], moments, end)
+
+
+@dataclass(frozen=True)
+class ProgramOnMatch:
+    """A recorded program on a match (module docstring): the program, compute_ms (n,) of its
+    moments, the match cut to the program's span (its kills before the first moment left out),
+    how many moments were left out (with no source time, or beyond the match's ends), shift_s
+    (the match's time at a source time of 0, s) and align_m (the median distance, m, of the
+    players' feet at that shift)."""
+
+    program: Program
+    compute_ms: np.ndarray
+    match: MatchRecording
+    left_out: int
+    shift_s: float
+    align_m: float
+
+
+def align(moments: list[dict[str, Any]], match: MatchRecording) -> tuple[float, float]:
+    """(shift_s, align_m) of moments with a source time (module docstring): the shift of their
+    clock onto the match's, a whole number of the match's rows, and the median distance of the
+    players' feet there."""
+    column = match.player_index()
+    picks = [moments[k] for k in np.linspace(0, len(moments) - 1, min(ALIGN_MOMENTS, len(moments))).round().astype(int)]
+    rows = len(match.time_s)
+    shifts = np.arange(-rows, rows)  # the match row of a source time of 0
+    per_moment = np.full((len(picks), len(shifts)), np.inf)
+    for k, moment in enumerate(picks):
+        ids = [pid for pid in moment["players"] if pid in column]
+        if not ids:
+            continue
+        at = shifts + int(np.rint(moment["source_time_s"] * match.rate_hz))
+        ok = (at >= 0) & (at < rows)
+        feet = match.positions_world[at[ok]][:, [column[pid] for pid in ids]]  # (s, p, 3)
+        apart = np.linalg.norm(feet - np.array([moment["players"][pid] for pid in ids]), axis=2)
+        per_moment[k, ok] = np.median(apart, axis=1)
+    distance = np.median(per_moment, axis=0)
+    best = int(np.argmin(distance))
+    return float(shifts[best] / match.rate_hz + match.time_s[0]), float(distance[best])
+
+
+def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> ProgramOnMatch:
+    """Places the recorded program on the match (module docstring). ValueError where the program
+    names players the match does not have, or it is not of this match."""
+    missing = sorted({pid for m in recorded.moments for pid in m["subjects"]} - set(match.player_index()))
+    if missing:
+        raise ValueError(f"the program shows players the match does not have: {', '.join(missing)}")
+    timed = [m for m in recorded.moments if m["source_time_s"] is not None and m["players"]]
+    if not timed:
+        raise ValueError("no moment of the program says where the players were")
+    shift_s, align_m = align(timed, match)
+    if not align_m <= ALIGN_LIMIT_M:
+        raise ValueError(
+            f"the program is not of this match: its players' feet are {align_m:.1f} m from the match's at best"
+            f" (over {ALIGN_LIMIT_M:g} m)"
+        )
+    step_s = 1.0 / match.rate_hz
+    at_s = np.array([m["source_time_s"] for m in timed]) + shift_s
+    inside = (at_s >= match.time_s[0] - step_s) & (at_s <= match.time_s[-1] + step_s)
+    placed = [m for m, ok in zip(timed, inside) if ok]
+    row = np.clip(np.rint((at_s[inside] - match.time_s[0]) * match.rate_hz).astype(np.int64), 0, len(match.time_s) - 1)
+    kept: list[dict[str, Any]] = []
+    rows: list[int] = []
+    cuts: list[bool] = []
+    for moment, r in zip(placed, row.tolist()):
+        if rows and r == rows[-1]:  # the moments of one row: the last stays, cutting if any cut
+            kept[-1], cuts[-1] = moment, cuts[-1] or bool(moment["cut"])
+        elif not rows or r > rows[-1]:  # one older than the one before is left out
+            kept.append(moment)
+            rows.append(r)
+            cuts.append(bool(moment["cut"]))
+    index = np.array(rows, dtype=np.int64)
+    program = Program(
+        index=index,
+        time_s=match.time_s[index],
+        position=np.array([m["position"] for m in kept], dtype=np.float64),
+        rotation=np.array([m["rotation"] for m in kept], dtype=np.float64),
+        vertical_fov_deg=np.array([m["vertical_fov_deg"] for m in kept], dtype=np.float64),
+        cut=np.array(cuts, dtype=bool),
+        shot_id=np.array([m["shot_id"] for m in kept], dtype=np.int64),
+        subjects=[tuple(m["subjects"]) for m in kept],
+        overview=np.array([m.get("kind") == "OVERVIEW" for m in kept], dtype=bool),
+    )
+    first_s, last_s = float(program.time_s[0]), float(program.time_s[-1])
+    cut_match = match.until(last_s)
+    cut_match = dataclasses.replace(cut_match, events=[e for e in cut_match.events if e.time_s >= first_s])
+    compute_ms = np.array([m.get("compute_ms", np.nan) for m in kept], dtype=np.float64)
+    return ProgramOnMatch(program, compute_ms, cut_match, len(recorded.moments) - len(placed), shift_s, align_m)
