@@ -58,6 +58,15 @@ COLUMNS = (
     ("shot median s", lambda f: f["shots"]["median"]),
     ("shot max s", lambda f: f["shots"]["max"]),
     (">20 s missing a kill", lambda f: f["long_shots_missing_kills"]),
+    (
+        "replays: shown / kills with room replayed of with room / live kills missed",
+        lambda f: "{s} / {r} of {k} / {m}".format(
+            s=f["replays"]["shown"],
+            r=f["replays"]["kills_with_room_replayed"],
+            k=f["replays"]["kills_with_room"],
+            m=f["replays"]["live_kills_missed_for_replay"],
+        ),
+    ),
     ("cuts/min", lambda f: f["cuts_per_min"]),
     (
         "outside / solid / swept: program; outside / solid: candidates",

@@ -10,7 +10,15 @@ import pytest
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.inputs import EventKind, GameEvent
-from camdirector.pipeline.match.frame import Candidate, MatchFrame, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import (
+    Candidate,
+    MatchFrame,
+    PlannedCut,
+    Replay,
+    ReplayedMoment,
+    ShotChoice,
+    ShotKind,
+)
 from camdirector.pipeline.state import FrameState
 from camdirector.worker.timeline import Timeline, dumps
 
@@ -100,10 +108,16 @@ def test_a_match_frame_as_json():
     assert frame["targets"] == [[0.0, 1.5, 0.0], [4.0, 1.5, 0.0]]
     assert frame["players"] == ["a0", "b0"] and frame["teams"] == [0, 1] and frame["buffering"] is False
     assert frame["framing_error"] is None  # the MATCH rig does not measure it
-    assert frame["shot"] == {"subject_ids": ["a0", "b0"], "kind": "SHOT_DUEL", "reason": "fight: a0 vs b0", "held": False}
+    assert frame["shot"] == {
+        "subject_ids": ["a0", "b0"],
+        "kind": "SHOT_DUEL",
+        "reason": "fight: a0 vs b0",
+        "held": False,
+        "replay": None,
+    }
     assert frame["candidates"] == [
         {
-            "shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0", "held": False},
+            "shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0", "held": False, "replay": None},
             "score": 0.4123,
             "camera": [2.0, 3.0, -5.0],
             "forward": [-0.0, -0.0, -1.0],
@@ -114,8 +128,29 @@ def test_a_match_frame_as_json():
     ]
     assert frame["planned_cut"] == {
         "time_s": 2.75,
-        "shot": {"subject_ids": ["a0"], "kind": "SHOT_FOLLOW", "reason": "planned objective in 2.2 s: a0", "held": False},
+        "shot": {
+            "subject_ids": ["a0"],
+            "kind": "SHOT_FOLLOW",
+            "reason": "planned objective in 2.2 s: a0",
+            "held": False,
+            "replay": None,
+        },
     }
+
+
+def test_a_replay_and_a_replay_candidate_name_the_moment_they_show():
+    timeline = Timeline()
+    s = match_state(30)
+    replay = Replay(kill_time_s=0.4, from_s=-1.6, until_s=0.9)
+    s.match.shot = ShotChoice(("a0", "b0"), ShotKind.REPLAY, "replay of the kill: a0 -> b0", replay=replay)
+    s.match.replay_of = ReplayedMoment(12, -1.4)
+    pose = CameraPose(np.array([2.0, 3.0, -5.0]), np.array([0.0, 0.0, 0.0, 1.0]), 50.0)
+    s.match.candidates = [Candidate(pose, s.match.shot, 0.5, ReplayedMoment(36, 0.4))]
+    timeline.add(s, compute_ms=1.0)
+    (frame,) = orjson.loads(dumps(timeline.as_json()))
+    assert frame["shot"]["kind"] == "SHOT_REPLAY"
+    assert frame["shot"]["replay"] == {"frame": 12, "time_s": -1.4, "kill_time_s": 0.4}
+    assert frame["candidates"][0]["shot"]["replay"] == {"frame": 36, "time_s": 0.4, "kill_time_s": 0.4}
 
 
 def test_candidates_keep_to_their_frames():

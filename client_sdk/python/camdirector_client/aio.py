@@ -454,7 +454,9 @@ class AsyncSession(wire.SessionBase):
     async def take_shot(self, subject_ids: Iterable[str] = (), kind: int = 0, *, release: bool = False) -> pb.ShotInfo:
         """A human director's shot in a ``RIG_MATCH`` session: ``subject_ids`` (players) as ``kind``
         (a ``pb.ShotKind``; 0: a duel for two, a follow for one, a group for more), held until a call
-        with ``release=True``. Answers the shot now held (empty after a release)."""
+        with ``release=True``; ``SHOT_REPLAY`` of two players shows their latest kill again and gives
+        the program back at its end. Answers the shot now held (empty after a release). An update's
+        ``shot.replay_frame`` (non-zero during a replay) names the game frame its picture shows."""
         return (await self._retrying(self._transport.take_shot, wire.take_shot_request(self.id, subject_ids, kind, release))).shot
 
     async def close(self) -> int:

@@ -79,6 +79,7 @@ class ShotKind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     SHOT_FOLLOW: _ClassVar[ShotKind]
     SHOT_GROUP: _ClassVar[ShotKind]
     SHOT_OVERVIEW: _ClassVar[ShotKind]
+    SHOT_REPLAY: _ClassVar[ShotKind]
 VISIBILITY_MODE_UNSPECIFIED: VisibilityMode
 ANTICIPATION: VisibilityMode
 NO_ANTICIPATION: VisibilityMode
@@ -122,6 +123,7 @@ SHOT_DUEL: ShotKind
 SHOT_FOLLOW: ShotKind
 SHOT_GROUP: ShotKind
 SHOT_OVERVIEW: ShotKind
+SHOT_REPLAY: ShotKind
 
 class Vec3(_message.Message):
     __slots__ = ("x", "y", "z")
@@ -406,16 +408,22 @@ class GameEvent(_message.Message):
     def __init__(self, kind: _Optional[_Union[EventKind, str]] = ..., actor_id: _Optional[str] = ..., other_actor_id: _Optional[str] = ..., priority: _Optional[int] = ..., time_s: _Optional[float] = ..., label: _Optional[str] = ..., position: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
 
 class ShotInfo(_message.Message):
-    __slots__ = ("subject_ids", "kind", "reason", "held")
+    __slots__ = ("subject_ids", "kind", "reason", "held", "replay_frame", "replay_time_s", "replay_kill_time_s")
     SUBJECT_IDS_FIELD_NUMBER: _ClassVar[int]
     KIND_FIELD_NUMBER: _ClassVar[int]
     REASON_FIELD_NUMBER: _ClassVar[int]
     HELD_FIELD_NUMBER: _ClassVar[int]
+    REPLAY_FRAME_FIELD_NUMBER: _ClassVar[int]
+    REPLAY_TIME_S_FIELD_NUMBER: _ClassVar[int]
+    REPLAY_KILL_TIME_S_FIELD_NUMBER: _ClassVar[int]
     subject_ids: _containers.RepeatedScalarFieldContainer[str]
     kind: ShotKind
     reason: str
     held: bool
-    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ..., held: _Optional[bool] = ...) -> None: ...
+    replay_frame: int
+    replay_time_s: float
+    replay_kill_time_s: float
+    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ..., held: _Optional[bool] = ..., replay_frame: _Optional[int] = ..., replay_time_s: _Optional[float] = ..., replay_kill_time_s: _Optional[float] = ...) -> None: ...
 
 class CandidateShot(_message.Message):
     __slots__ = ("pose", "shot", "score")

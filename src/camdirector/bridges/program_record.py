@@ -10,7 +10,8 @@ buffering nor stale): frame, time_s (the session's game time of its moment), sou
 feed's clock at that frame: for QTV the stream's demo time its players were sampled at,
 qtv.QtvTracks), players ({id: feet [3] m} as that frame carried them), position [3] m, rotation
 [4] xyzw camera-to-world, vertical_fov_deg, cut, shot_id, kind (ShotKind less SHOT_), subjects
-(ids), compute_ms; last, when the cast ended by itself, {"end": {"frames": sent, "buffering":
+(ids), replay_time_s (a REPLAY's: the session's game time of the moment it shows; else null),
+compute_ms; last, when the cast ended by itself, {"end": {"frames": sent, "buffering":
 replies buffering}}. The candidates are not kept (hours of a cast would weigh too much), so their
 measures come out empty.
 
@@ -110,6 +111,7 @@ class ProgramRecorder:
                 "shot_id": reply.shot_id,
                 "kind": cd.pb.ShotKind.Name(reply.shot.kind).removeprefix("SHOT_"),
                 "subjects": list(reply.shot.subject_ids),
+                "replay_time_s": round(reply.shot.replay_time_s, 4) if reply.shot.kind == cd.pb.SHOT_REPLAY else None,
                 "compute_ms": round(reply.compute_ms, 3),
             }
         )
@@ -219,6 +221,11 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
             rows.append(r)
             cuts.append(bool(moment["cut"]))
     index = np.array(rows, dtype=np.int64)
+    # a REPLAY shows an earlier moment: the same offset from the session's clock to the match's row
+    shown = [
+        r if m.get("replay_time_s") is None else r + int(np.rint((m["replay_time_s"] - m["time_s"]) * match.rate_hz))
+        for m, r in zip(kept, rows)
+    ]
     program = Program(
         index=index,
         time_s=match.time_s[index],
@@ -229,6 +236,8 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
         shot_id=np.array([m["shot_id"] for m in kept], dtype=np.int64),
         subjects=[tuple(m["subjects"]) for m in kept],
         overview=np.array([m.get("kind") == "OVERVIEW" for m in kept], dtype=bool),
+        shown_index=np.clip(np.array(shown, dtype=np.int64), 0, len(match.time_s) - 1),
+        replay=np.array([m.get("kind") == "REPLAY" for m in kept], dtype=bool),
     )
     first_s, last_s = float(program.time_s[0]), float(program.time_s[-1])
     cut_match = match.until(last_s)

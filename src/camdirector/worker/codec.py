@@ -51,7 +51,7 @@ from camdirector.geometry.transforms import IDENTITY_QUAT, RigidTransform
 from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, PlayerStats, SceneSpec, TargetSpec
 from camdirector.pipeline.match.director_registry import DEFAULT_DIRECTOR, director_by_wire, director_entry
-from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import ReplayedMoment, ShotChoice, ShotKind
 from camdirector.pipeline.rigs import RIGS
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import (
@@ -568,8 +568,14 @@ def pose_msg(pose: CameraPose) -> pb.CameraPose:
     )
 
 
-def shot_msg(shot: ShotChoice) -> pb.ShotInfo:
-    return pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason, held=shot.held)
+def shot_msg(shot: ShotChoice, replay_of: ReplayedMoment | None = None) -> pb.ShotInfo:
+    """The wire's shot; a REPLAY's with the moment its picture shows (replay_of) and its kill."""
+    out = pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason, held=shot.held)
+    if replay_of is not None:
+        out.replay_frame, out.replay_time_s = replay_of.frame, replay_of.time_s
+    if shot.replay is not None:
+        out.replay_kill_time_s = shot.replay.kill_time_s
+    return out
 
 
 def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False, message: str = "") -> pb.CameraUpdate:
@@ -600,7 +606,9 @@ def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False,
     d.scores.update(state.scores)
     if match is not None:
         if match.shot is not None:
-            out.shot.CopyFrom(shot_msg(match.shot))
+            out.shot.CopyFrom(shot_msg(match.shot, match.replay_of))
         for candidate in match.candidates:
-            out.candidates.add(pose=pose_msg(candidate.pose), shot=shot_msg(candidate.shot), score=candidate.score)
+            out.candidates.add(
+                pose=pose_msg(candidate.pose), shot=shot_msg(candidate.shot, candidate.replay_of), score=candidate.score
+            )
     return out

@@ -26,7 +26,7 @@ import orjson
 
 from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.inputs import EventKind
-from camdirector.pipeline.match.frame import MatchFrame, ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import MatchFrame, ReplayedMoment, ShotChoice, ShotKind
 from camdirector.pipeline.state import FrameState
 
 TIMELINE_FRAMES = 600  # frames kept per session: 10 s at 60 Hz
@@ -148,13 +148,30 @@ _SHOT_KINDS = {kind: f"SHOT_{kind.name}" for kind in ShotKind}  # as camdirector
 _EVENT_KINDS = {kind: f"EVENT_{kind.name}" for kind in EventKind}
 
 
-def _shot_json(shot: ShotChoice) -> dict:
-    return {"subject_ids": shot.subject_ids, "kind": _SHOT_KINDS[shot.kind], "reason": shot.reason, "held": shot.held}
+def _shot_json(shot: ShotChoice, replay_of: ReplayedMoment | None = None) -> dict:
+    """A shot as the wire's ShotInfo; replay {frame, time_s, kill_time_s}: the moment a REPLAY's
+    picture shows and its kill (null for a live shot)."""
+    replay = (
+        None
+        if shot.replay is None
+        else {
+            "frame": None if replay_of is None else replay_of.frame,
+            "time_s": None if replay_of is None else replay_of.time_s,
+            "kill_time_s": shot.replay.kill_time_s,
+        }
+    )
+    return {
+        "subject_ids": shot.subject_ids,
+        "kind": _SHOT_KINDS[shot.kind],
+        "reason": shot.reason,
+        "held": shot.held,
+        "replay": replay,
+    }
 
 
 def _match_json(parts: list[MatchFrame], rows: list[dict]) -> None:
     """Adds the MATCH fields to each row (kinds named as in camdirector.v1: SHOT_DUEL, EVENT_KILL):
-    shot {subject_ids, kind, reason, held} or null; candidates [{shot, score, camera, forward}] (as the
+    shot {subject_ids, kind, reason, held, replay} or null; candidates [{shot, score, camera, forward}] (as the
     wire's CandidateShot); players (ids) and teams in target order; events [{time_s, kind,
     actor_id, other_actor_id, priority, label}]; planned_cut {time_s, shot} or null."""
     candidates = [c for m in parts for c in m.candidates]
@@ -166,9 +183,14 @@ def _match_json(parts: list[MatchFrame], rows: list[dict]) -> None:
             roster, ids, teams = m.players, [p for p, _ in m.players], [team for _, team in m.players]
         row.update(
             buffering=m.buffering,
-            shot=None if m.shot is None else _shot_json(m.shot),
+            shot=None if m.shot is None else _shot_json(m.shot, m.replay_of),
             candidates=[
-                {"shot": _shot_json(c.shot), "score": round(c.score, 4), "camera": next(camera), "forward": next(forward)}
+                {
+                    "shot": _shot_json(c.shot, c.replay_of),
+                    "score": round(c.score, 4),
+                    "camera": next(camera),
+                    "forward": next(forward),
+                }
                 for c in m.candidates
             ],
             players=ids,

@@ -30,6 +30,7 @@ DIRECTOR_FIGURES = {
     "first_person_share",
     "shown_height",
     "long_shots_missing_kills",
+    "replays",
     "program_sha256",
     "compute_ms",
     "program_moments",

@@ -64,6 +64,8 @@ def program_of(
         shot_id=np.cumsum(cut),
         subjects=[tuple(subjects)] * n,
         overview=np.zeros(n, dtype=bool),
+        shown_index=np.arange(n),
+        replay=np.zeros(n, dtype=bool),
     )
 
 

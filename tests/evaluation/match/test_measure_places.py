@@ -22,6 +22,8 @@ def program_at(positions: list[list[float]], cuts: list[bool]) -> Program:
         shot_id=np.cumsum(cuts),
         subjects=[()] * n,
         overview=np.zeros(n, dtype=bool),
+        shown_index=np.arange(n),
+        replay=np.zeros(n, dtype=bool),
     )
 
 

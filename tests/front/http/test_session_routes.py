@@ -179,6 +179,7 @@ def test_a_match_session_shows_its_program_candidates_and_events(match):
             "kind": pb.ShotKind.Name(reply.shot.kind),
             "reason": reply.shot.reason,
             "held": reply.shot.held,
+            "replay": None,  # a live shot
         }
         assert [c["shot"]["subject_ids"] for c in frame["candidates"]] == [list(c.shot.subject_ids) for c in reply.candidates]
         for candidate, sent in zip(frame["candidates"], reply.candidates):

@@ -47,6 +47,7 @@ from camdirector.evaluation.match.measure import (
     nobody_shown,
     places_count,
     program_visibility,
+    replay_figures,
     shot_lengths_s,
     shown_heights,
     shown_heights_per_moment,
@@ -66,10 +67,16 @@ from camdirector.geometry.raycast import RayScene
 from camdirector.infra.plugins import import_plugins
 from camdirector.matches.playback import PlaybackCounts, paced_updates
 from camdirector.pipeline.match.director_registry import director_entry, registered
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.style import Style
 from camdirector.precompute.tracks.registry import LevelRegistry
 
 SHORT_SHOT_S = 2.0  # issue 12: no shot under 2 s (the film rules' default minimum)
 LONG_SHOT_S = 20.0  # issue 29: no shot over 20 s while a kill happens outside it
+_OURS = MatchSettings()  # our director's defaults
+# a kill leaves room for a replay when no kill follows within this (measure.py): the wait after it, the
+# shortest replay (the style's min_shot_s) and the next kill's lead, s
+REPLAY_ROOM_S = _OURS.replay_after_s + Style().min_shot_s + _OURS.lead_s
 
 
 @dataclass(eq=False)
@@ -118,9 +125,12 @@ def stream_director(
                         u.shot_id,
                         tuple(u.shot.subject_ids),
                         u.shot.kind == cd.pb.SHOT_OVERVIEW,
+                        u.shot.replay_frame if u.shot.kind == cd.pb.SHOT_REPLAY else u.frame,
+                        u.shot.kind == cd.pb.SHOT_REPLAY,
                         u.compute_ms,
                         tuple(
                             (
+                                c.shot.replay_frame - 1 if c.shot.kind == cd.pb.SHOT_REPLAY else u.frame - 1,
                                 (c.pose.position.x, c.pose.position.y, c.pose.position.z),
                                 (c.pose.rotation.x, c.pose.rotation.y, c.pose.rotation.z, c.pose.rotation.w),
                                 c.pose.vertical_fov_deg,
@@ -136,7 +146,7 @@ def stream_director(
     answered = _one_row_per_moment(shown)
     if not answered:
         raise RuntimeError("the server answered no program frame (is the match shorter than the delay?)")
-    frame, time_s, position, rotation, fov, cut, shot_id, subjects, overview, compute_ms, _ = zip(*answered)
+    frame, time_s, position, rotation, fov, cut, shot_id, subjects, overview, shown_frame, replay, compute_ms, _ = zip(*answered)
     program = Program(
         index=np.array(frame, dtype=np.int64) - 1,
         time_s=np.array(time_s),
@@ -147,9 +157,11 @@ def stream_director(
         shot_id=np.array(shot_id, dtype=np.int64),
         subjects=list(subjects),
         overview=np.array(overview, dtype=bool),
+        shown_index=np.array(shown_frame, dtype=np.int64) - 1,
+        replay=np.array(replay, dtype=bool),
     )
-    # every candidate offered, a moment's answered twice too: a monitor showed each
-    offered = [(r[0] - 1, *c) for r in shown for c in r[-1]]
+    # every candidate offered, a moment's answered twice too: a monitor showed each (at its own frame)
+    offered = [c for r in shown for c in r[-1]]
     candidates = Offered(
         index=np.array([c[0] for c in offered], dtype=np.int64),
         position=np.array([c[1] for c in offered], dtype=np.float64).reshape(-1, 3),
@@ -204,6 +216,7 @@ def _figures(
     heights = np.concatenate([np.zeros(0), *per_moment])
     tallest = tallest_shown(per_moment, eyes)
     nobody = nobody_shown(program, shown, eyes)
+    replays = replay_figures(match, program, shown, REPLAY_ROOM_S)
     showing = candidates_showing_subjects(run.candidates, bodies, lens, level)
     subject_heights = shown_heights(program, bodies, lens, shown, eyes, subjects_only=True)
     column = match.player_index()
@@ -236,6 +249,7 @@ def _figures(
             "share": round(showing["showing_half"] / showing["offered"], 3) if showing["offered"] else None,
         },
         "long_shots_missing_kills": _long_shots_missing_kills(match, program, coverage),
+        "replays": replays,
         "places": {
             "program": {
                 **places_count(interior, program.position),

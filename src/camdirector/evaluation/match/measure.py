@@ -1,8 +1,10 @@
 """Measurement of a match program, independent of the director that chose it (issue 12, item 5).
 
 The program is what a RIG_MATCH session answered: one camera per program moment (the match frame
-its reply names). Everything here is measured from that camera against the level mesh and the
-players' bodies as the match file has them, never from what the director says it shows:
+its reply names), showing that frame's world, or during a REPLAY the frame it replays (the reply's
+`shot.replay_frame`): every measure of bodies below reads the frame the picture shows. Everything
+here is measured from that camera against the level mesh and the players' bodies as the match file
+has them, never from what the director says it shows:
 
 - shown fraction, per program moment and player: the share of the player's body sample points
   (`SAMPLES_PER_PLAYER` points drawn uniformly over its capsule's surface, fixed for the run) that
@@ -11,7 +13,8 @@ players' bodies as the match file has them, never from what the director says it
   camera centre crosses no level geometry (Embree ray casts, geometry.raycast.RayScene). Players do
   not occlude each other, as in evaluation/toric/measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
 - kill coverage: the share of kills at whose moment (the first program moment at or after the
-  kill's frame) both the attacker and the victim are shown. Kill coverage *first person* also
+  kill's frame) both the attacker and the victim are shown (live: a moment of a replay covers no
+  kill). Kill coverage *first person* also
   counts a kill whose moment the program shows from the attacker's eyes (the camera within
   `EYE_TOLERANCE_M` of its eye point, `EYE_HEIGHT_FRACTION` of its height above its feet: what a
   QuakeWorld spectator tracking the attacker sees) with the victim shown.
@@ -26,7 +29,16 @@ players' bodies as the match file has them, never from what the director says it
 - jump cuts: a cut between two views of the same non-empty subject set (`CameraUpdate.shot.
   subject_ids`) whose directions from the two cameras to the subjects' centroid (their aim points
   at the cut's moment) differ by less than `JUMP_CUT_DEG` (issue 12's film rule, measured: the
-  director's own grammar is not consulted). Overviews name no subjects and are never jump cuts.
+  director's own grammar is not consulted). Overviews name no subjects and are never jump cuts;
+  nor are cuts into or out of a replay (a cut in time).
+- replays (issue 41): a replay is a run of program moments of REPLAY shots of the same subjects
+  whose replayed frames go forward (a cut within it, through a wall, does not start another); it is *shown* when
+  the kill it replays (of its first subject by its second, its frame among the replayed ones) has
+  both players shown at the replay's moment of the kill. A kill *leaves room* when no other kill
+  follows it within `room_s` (the director's wait after a kill, the shortest replay and the next
+  kill's lead: replay_after_s + the style's min_shot_s + lead_s of MatchSettings) and the program goes
+  on that long; kills with room replayed: those of them with a replay shown. A live kill missed
+  for a replay is a kill whose moment is a replay's (issue 41: none).
 - visibility of the framed subjects: per program moment with subjects, the mean shown fraction of
   the players it names; averaged over those moments.
 - program visibility: the same over *every* program moment, a moment that names nobody counting
@@ -96,7 +108,9 @@ class Program:
     index: (n,) int64 match frame (row of the match file's arrays) of each moment; time_s (n,) s;
     position (n, 3) m camera centre; rotation (n, 4) xyzw camera-to-world; vertical_fov_deg (n,);
     cut (n,) bool; shot_id (n,) int64; subjects: n tuples of player ids (the reply's
-    shot.subject_ids); overview (n,) bool: the moment's shot is an OVERVIEW (shot.kind).
+    shot.subject_ids); overview (n,) bool: the moment's shot is an OVERVIEW (shot.kind);
+    shown_index (n,) int64: the match frame whose world the picture shows (a REPLAY's replayed
+    moment, shot.replay_frame; else index); replay (n,) bool: the moment's shot is a REPLAY.
     """
 
     index: np.ndarray
@@ -108,6 +122,8 @@ class Program:
     shot_id: np.ndarray
     subjects: list[tuple[str, ...]]
     overview: np.ndarray
+    shown_index: np.ndarray
+    replay: np.ndarray
 
     def __len__(self) -> int:
         return len(self.index)
@@ -116,10 +132,11 @@ class Program:
         return CameraPose(self.position[row], self.rotation[row], float(self.vertical_fov_deg[row]))
 
     def digest(self) -> str:
-        """SHA-256 (hex) of every moment's frame, pose, cut and subjects: two runs gave the same
-        program, pose for pose, exactly when their digests are equal."""
+        """SHA-256 (hex) of every moment's frame, pose, cut, replayed frame and subjects: two runs
+        gave the same program, pose for pose, exactly when their digests are equal."""
         h = hashlib.sha256()
-        for array in (self.index, self.position, self.rotation, self.vertical_fov_deg, self.cut, self.shot_id):
+        arrays = (self.index, self.position, self.rotation, self.vertical_fov_deg, self.cut, self.shot_id, self.shown_index)
+        for array in arrays:
             h.update(np.ascontiguousarray(array).tobytes())
         h.update("\n".join(",".join(s) for s in self.subjects).encode("utf-8"))
         return h.hexdigest()
@@ -159,7 +176,10 @@ def shown_fractions(pose: CameraPose, lens: Lens, points_world: np.ndarray, leve
 def measure_shown(program: Program, bodies: BodySampler, lens: Lens, level: RayScene) -> np.ndarray:
     """(n, P) shown fraction of every player at every program moment (module docstring)."""
     return np.stack(
-        [shown_fractions(program.pose(r), lens, bodies.points_world(int(program.index[r])), level) for r in range(len(program))]
+        [
+            shown_fractions(program.pose(r), lens, bodies.points_world(int(program.shown_index[r])), level)
+            for r in range(len(program))
+        ]
     ).reshape(len(program), len(bodies.match.players))
 
 
@@ -180,7 +200,7 @@ def in_eyes_of(match: MatchRecording, program: Program) -> np.ndarray:
     """(n,) int64: the column of the player in whose eyes the camera is at each program moment
     (module docstring), -1 where none."""
     heights = np.array([p.height_m for p in match.players])
-    eyes = match.positions_world[program.index].copy()  # (n, P, 3) feet
+    eyes = match.positions_world[program.shown_index].copy()  # (n, P, 3) feet
     eyes[..., 1] += EYE_HEIGHT_FRACTION * heights
     distance = np.linalg.norm(eyes - program.position[:, None, :], axis=2)  # (n, P)
     nearest = distance.argmin(axis=1)
@@ -193,9 +213,7 @@ def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray, ey
     covers the kill too (kill coverage first person)."""
     column = match.player_index()
     covered, leads = [], []
-    for event in match.events:
-        if event.kind != "kill" or event.actor_id == event.other_actor_id:
-            continue  # a suicide or a death by the world has no attacker to show
+    for event in _kills(match):
         row = int(np.searchsorted(program.index, np.searchsorted(match.time_s, event.time_s), side="left"))
         if row >= len(program):
             continue  # after the program's last moment
@@ -203,6 +221,7 @@ def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray, ey
         both_shown = shown[:, pair].min(axis=1) >= SHOWN_FRACTION  # (n,)
         if eyes_of is not None:
             both_shown |= (eyes_of == pair[0]) & (shown[:, pair[1]] >= SHOWN_FRACTION)
+        both_shown &= ~program.replay  # a replay shows another moment: the live kill is missed
         ok = bool(both_shown[row])
         covered.append(ok)
         if ok:
@@ -211,6 +230,60 @@ def kill_coverage(match: MatchRecording, program: Program, shown: np.ndarray, ey
                 start -= 1
             leads.append(float(program.time_s[row] - program.time_s[start]))
     return KillCoverage(len(covered), np.array(covered, dtype=bool), np.array(leads, dtype=np.float64))
+
+
+def _kills(match: MatchRecording) -> list:
+    """The kills by one player of another (a suicide or a death by the world has no attacker to show)."""
+    return [e for e in match.events if e.kind == "kill" and e.actor_id != e.other_actor_id]
+
+
+def replay_figures(match: MatchRecording, program: Program, shown: np.ndarray, room_s: float) -> dict[str, int]:
+    """The program's replays (module docstring): replays, shown, kills_with_room,
+    kills_with_room_replayed, live_kills_missed_for_replay; shown (n, P) from measure_shown."""
+    column = match.player_index()
+    before = np.arange(len(program)) - 1
+    goes_on = (
+        (before >= 0)
+        & program.replay
+        & program.replay[before]
+        & (program.shown_index >= program.shown_index[before])
+        & np.array([a == b for a, b in zip(program.subjects, program.subjects[-1:] + program.subjects[:-1])], dtype=bool)
+    )
+    starts = np.flatnonzero(program.replay & ~goes_on)  # each replay's first moment
+    replayed: set[int] = set()  # kills (their order in _kills) a shown replay shows
+    shown_replays = 0
+    kills = _kills(match)
+    frames = np.searchsorted(match.time_s, [e.time_s for e in kills])
+    for start in starts.tolist():
+        end = start + 1
+        while end < len(program) and goes_on[end]:
+            end += 1
+        subjects, rows = program.subjects[start], np.arange(start, end)
+        for k, event in enumerate(kills):
+            inside = (program.shown_index[rows] >= frames[k]).nonzero()[0]
+            if subjects != (event.actor_id, event.other_actor_id) or not len(inside) or program.shown_index[start] > frames[k]:
+                continue
+            row = rows[inside[0]]
+            if shown[row, [column[event.actor_id], column[event.other_actor_id]]].min() >= SHOWN_FRACTION:
+                replayed.add(k)
+                shown_replays += 1
+                break
+    end_s = program.time_s[-1] if len(program) else -np.inf
+    all_kill_s = np.array([e.time_s for e in match.events if e.kind == "kill"])
+    with_room = [
+        k
+        for k, event in enumerate(kills)
+        if event.time_s + room_s <= end_s and not np.any((all_kill_s > event.time_s) & (all_kill_s <= event.time_s + room_s))
+    ]
+    kill_rows = np.searchsorted(program.index, frames, side="left")
+    live = kill_rows[kill_rows < len(program)]
+    return {
+        "replays": len(starts),
+        "shown": shown_replays,
+        "kills_with_room": len(with_room),
+        "kills_with_room_replayed": len(replayed & set(with_room)),
+        "live_kills_missed_for_replay": int(program.replay[live].sum()),
+    }
 
 
 def shot_lengths_s(program: Program) -> np.ndarray:
@@ -230,8 +303,8 @@ def jump_cuts(program: Program, bodies: BodySampler, threshold_deg: float = JUMP
     count = 0
     for row in np.flatnonzero(program.cut[1:]) + 1:
         before, after = program.subjects[row - 1], program.subjects[row]
-        if not after or set(before) != set(after):
-            continue
+        if not after or set(before) != set(after) or program.replay[row - 1] or program.replay[row]:
+            continue  # a cut into or out of a replay is a cut in time
         centroid = bodies.aims_world(int(program.index[row]), [column[p] for p in after]).mean(axis=0)
         a, b = centroid - program.position[row - 1], centroid - program.position[row]
         cosine = a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-12)
@@ -272,7 +345,7 @@ def shown_heights_per_moment(
             out.append(np.zeros(0))
             continue
         pose = program.pose(r)
-        points = bodies.points_world(int(program.index[r]))[players]  # (k, S, 3)
+        points = bodies.points_world(int(program.shown_index[r]))[players]  # (k, S, 3)
         frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
         screen_y = np.clip(project_to_screen(pose, frame_lens, points.reshape(-1, 3))[:, 1], -1.0, 1.0)
         screen_y = screen_y.reshape(len(players), -1)
@@ -310,7 +383,8 @@ def nobody_shown(program: Program, shown: np.ndarray, eyes_of: np.ndarray) -> di
 class Offered:
     """The candidates offered beside the program moments, each as often as offered: c of them.
 
-    index (c,) int64 match frame of the moment each was offered beside; position (c, 3) m;
+    index (c,) int64 match frame each shows (of the moment it was offered beside; a REPLAY
+    candidate's, its kill's: shot.replay_frame); position (c, 3) m;
     rotation (c, 4) xyzw; vertical_fov_deg (c,); subjects: c tuples of player ids (the
     candidate's shot.subject_ids)."""
 

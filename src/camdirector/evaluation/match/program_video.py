@@ -1,6 +1,7 @@
 """The video of `camdirector eval-match`: a director's program rendered offscreen with EGL.
 
-Each program moment is drawn from its camera at VIDEO_SIZE_PX: the level mesh and the players'
+Each program moment is drawn from its camera at VIDEO_SIZE_PX (a replay's at the match frame it
+shows again): the level mesh and the players'
 capsules coloured by team (dead players are left out: the match file keeps their bodies standing
 where they fell, which on screen would read as a player who is still fighting), each living player
 in the picture labelled over its head with its name, or its id where the game gave none
@@ -109,7 +110,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
             renderer.add_mesh(player.id, body.vertices, body.faces, TEAM_RGB[player.team % len(TEAM_RGB)], closed=True)
         for row in rows:
             start = time.perf_counter()
-            index = int(program.index[row])
+            index = int(program.shown_index[row])  # a replay's picture is of its replayed moment
             alive = match.alive[index]
             feet = match.positions_world[index] + np.where(alive[:, None], 0.0, HIDDEN_OFFSET_M)
             renderer.set_transforms(

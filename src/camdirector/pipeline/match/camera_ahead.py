@@ -1,7 +1,8 @@
 """The camera worked out ahead: with a delay, the next frame's program moment is most likely the
 next buffered one, known already. After a frame the rig works out, in the worker's idle moments
 (its deferred work, before the drawn plan's slices), that moment's CAMERA and VISIBILITY from a
-copy of the shot's camera (program_camera.py), and the candidates' poses, kept inside the level
+copy of the shot's camera (program_camera.py; a REPLAY's at the moment it replays then), and the
+candidates' poses (a REPLAY candidate's at its kill), kept inside the level
 (in_level.py) as the program's are (those of the drawn plan too, once computed: the tick that
 applies it shows them). The frame takes them when they are its
 own: the same moment and time step, the same shot, style and pose shown before, and the camera's
@@ -15,11 +16,12 @@ What it saved the frames: docs/casting.md.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from camdirector.geometry.camera import CameraPose
-from camdirector.pipeline.match.frame import Candidate
+from camdirector.pipeline.match.frame import Candidate, ReplayedMoment, ShotChoice
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_camera import ProgramCamera
@@ -97,17 +99,26 @@ def step_ahead(
     )
 
 
-def contained_poses(moment: Moment, cameras: list[ToricCamera | None], in_level: InLevel) -> list[CameraPose | None]:
-    """The Toric cameras' poses at the moment (None for no camera or no pose), inside the level
-    (toward each one's anchor), their places tested in one call."""
-    poses = [None if cam is None else cam.pose(moment) for cam in cameras]
-    anchors = [None if cam is None else moment.aims_world[cam.anchor_index] for cam in cameras]
+# the moment a candidate's monitor shows beside a program moment (a REPLAY candidate's is its kill's: rig.py)
+MomentOf = Callable[[ShotChoice, Moment], Moment]
+
+
+def contained_poses(moments: list[Moment], cameras: list[ToricCamera | None], in_level: InLevel) -> list[CameraPose | None]:
+    """The Toric cameras' poses, each at its moment (None for no camera or no pose), inside the
+    level (toward each one's anchor), their places tested in one call."""
+    poses = [None if cam is None else cam.pose(m) for cam, m in zip(cameras, moments)]
+    anchors = [None if cam is None else m.aims_world[cam.anchor_index] for cam, m in zip(cameras, moments)]
     return in_level.contained_many(poses, anchors)
 
 
-def candidate_poses(moment: Moment, lists: list[list[CandidateShot]], in_level: InLevel) -> list[CandidatePoses]:
-    """Each list's candidates' poses at the moment."""
-    return [CandidatePoses(moment, c, contained_poses(moment, [cam for _, cam, _ in c], in_level)) for c in lists]
+def candidate_poses(
+    moment: Moment, lists: list[list[CandidateShot]], in_level: InLevel, moment_of: MomentOf
+) -> list[CandidatePoses]:
+    """Each list's candidates' poses beside the program moment."""
+    return [
+        CandidatePoses(moment, c, contained_poses([moment_of(ch, moment) for ch, _, _ in c], [cam for _, cam, _ in c], in_level))
+        for c in lists
+    ]
 
 
 def candidate_views(
@@ -117,17 +128,19 @@ def candidate_views(
     ahead: list[CandidatePoses],
     program: ShotCamera,
     in_level: InLevel,
+    moment_of: MomentOf,
 ) -> list[Candidate]:
-    """The frame's candidates: each camera's pose at the moment, inside the level (worked out
-    ahead, or now; an OVERVIEW candidate's is the program's pose)."""
+    """The frame's candidates: each camera's pose beside the moment (moment_of), inside the level
+    (worked out ahead, or now; an OVERVIEW candidate's is the program's pose)."""
     known_poses = next((a for a in ahead if a.moment is moment and a.candidates is candidates), None)
     known = known_poses.poses if known_poses is not None else [None] * len(candidates)
     # worked out now: the cameras without a pose ahead, and the one the program took
     now = [cam if cam is not None and (k is None or cam is program) else None for (_, cam, _), k in zip(candidates, known)]
-    computed = contained_poses(moment, now, in_level)
+    computed = contained_poses([moment_of(choice, moment) for choice, _, _ in candidates], now, in_level)
     views = []
     for (choice, cam, score), asked, now_pose, ahead_pose in zip(candidates, now, computed, known):
         shown = pose if cam is None else now_pose if asked is not None else ahead_pose
+        at = moment_of(choice, moment)
         if shown is not None:
-            views.append(Candidate(shown, choice, score))
+            views.append(Candidate(shown, choice, score, None if at is moment else ReplayedMoment(at.frame, at.time_s)))
     return views

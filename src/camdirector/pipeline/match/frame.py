@@ -1,6 +1,7 @@
 """The MATCH rig's part of a frame's state (`FrameState.match`, pipeline/state.py), and what it
-says about shots: whom a shot shows and how (`ShotChoice`, `ShotKind`), the other shots the
-director could cut to (`Candidate`), and its next planned cut (`PlannedCut`).
+says about shots: whom a shot shows and how (`ShotChoice`, `ShotKind`), what a REPLAY shows again
+(`Replay`, and the moment its picture shows, `ReplayedMoment`), the other shots the director could
+cut to (`Candidate`), and its next planned cut (`PlannedCut`).
 
 rig.py makes a new part every frame and shares only constant values between frames (the roster),
 so a reader may keep a frame's part (the dashboard's timeline does) without copying it.
@@ -22,6 +23,26 @@ class ShotKind(enum.IntEnum):
     FOLLOW = 2  # one player
     GROUP = 3  # several players
     OVERVIEW = 4  # a high static view of the action
+    REPLAY = 5  # a kill shown again from another angle, within the delay (replays.py)
+
+
+@dataclass(frozen=True)
+class Replay:
+    """What a REPLAY shot shows again: the game moments from from_s to until_s around a kill at
+    kill_time_s (game time, s), played at the program's pace from the shot's start."""
+
+    kill_time_s: float
+    from_s: float
+    until_s: float
+
+    @property
+    def length_s(self) -> float:
+        return self.until_s - self.from_s
+
+    def replayed_s(self, shot_start_s: float, time_s: float) -> float:
+        """The game time shown at program time time_s of a replay on air since shot_start_s, s (on
+        past until_s, not frozen, should the cut back come a frame or two late: a plan applied late)."""
+        return self.from_s + max(0.0, time_s - shot_start_s)
 
 
 @dataclass(frozen=True)
@@ -32,6 +53,15 @@ class ShotChoice:
     kind: ShotKind
     reason: str
     held: bool = False  # a human's take (or its fallback), kept until released
+    replay: Replay | None = None  # a REPLAY shot's kill and moments (None: live)
+
+
+@dataclass(frozen=True)
+class ReplayedMoment:
+    """The game moment a REPLAY shot's picture shows: its frame number and time, s."""
+
+    frame: int
+    time_s: float
 
 
 @dataclass(frozen=True)
@@ -41,6 +71,7 @@ class Candidate:
     pose: CameraPose
     shot: ShotChoice
     score: float  # the director's interest in it, >= 0 (comparable within one frame)
+    replay_of: ReplayedMoment | None = None  # a REPLAY candidate: the moment its monitor shows (its kill)
 
 
 @dataclass(frozen=True)
@@ -59,3 +90,4 @@ class MatchFrame:
     candidates: list[Candidate] = field(default_factory=list)  # the best other shots now
     events: list[GameEvent] = field(default_factory=list)  # the game events at the program moment
     planned_cut: PlannedCut | None = None  # the director's next planned cut, if it has one
+    replay_of: ReplayedMoment | None = None  # during a REPLAY: the moment its picture shows (None: live)

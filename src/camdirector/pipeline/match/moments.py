@@ -92,7 +92,8 @@ TIME_EPSILON_S = 1e-6  # frame times this close are the same instant (floating-p
 
 
 class MomentBuffer:
-    """The moments from the program's moment to the newest frame, and the match's events."""
+    """The moments from `replay_past_s` before the program's moment (what a replay shows again,
+    replays.py) to the newest frame, and the match's events."""
 
     def __init__(self, player_ids: list[str], settings: MatchSettings):
         self.player_ids = player_ids
@@ -105,7 +106,7 @@ class MomentBuffer:
         self._event_times: list[float] = []
         self._pending: list[GameEvent] = []  # announced before their time, not yet applied
         self.killed_by: dict[str, str] = {}  # victim -> attacker of its last death
-        self._start = 0  # moments before this index are gone
+        self._start = 0  # the program moment's index: moments before it are past, kept for replays
 
     @property
     def newest(self) -> Moment | None:
@@ -159,11 +160,11 @@ class MomentBuffer:
 
     def view(self) -> MomentBuffer:
         """What the buffer holds now, as a buffer that later frames leave as it is, for a plan
-        drawn now and computed in slices later (rig.py): the lists and the killers copied from
-        the program's moment on, the moments themselves shared (a moment never changes once
-        pushed). Read it only (at, horizon_s, events_between, killed_by)."""
+        drawn now and computed in slices later (rig.py): the lists and the killers copied, the
+        moments themselves shared (a moment never changes once pushed). Read it only (at,
+        horizon_s, program_s, events_between, killed_by)."""
         view = copy.copy(self)
-        view.moments, view.times, view._start = self.moments[self._start :], self.times[self._start :], 0
+        view.moments, view.times = list(self.moments), list(self.times)
         view.events, view._event_times = list(self.events), list(self._event_times)
         view.killed_by, view._pending = dict(self.killed_by), []
         return view
@@ -183,18 +184,25 @@ class MomentBuffer:
         elif i + 1 < len(self.times) and self.times[i + 1] - time_s < time_s - self.times[i]:
             i += 1
         self._start = i
-        # compact now and then, not every frame: moments before the program's are never read
-        # again, but a session's snapshot pickles what the buffer holds (at 4096, up to 9 MB
-        # that took 1.5 s every 60 frames) and the garbage collector walks it
-        if self._start > COMPACT_AFTER:
-            del self.moments[: self._start], self.times[: self._start]
-            self._start = 0
+        # compact now and then, not every frame: moments more than replay_past_s before the
+        # program's are never read again, but a session's snapshot pickles what the buffer holds
+        # (at 4096, up to 9 MB that took 1.5 s every 60 frames) and the garbage collector walks it
+        gone = bisect.bisect_left(self.times, self.times[i] - self.settings.replay_past_s, hi=i)
+        if gone > COMPACT_AFTER:
+            del self.moments[:gone], self.times[:gone]
+            self._start -= gone
         return self.moments[self._start]
 
     def at(self, time_s: float) -> Moment:
-        """The buffered moment nearest at or before time_s, clamped to the buffer's ends."""
-        i = bisect.bisect_right(self.times, time_s, lo=self._start) - 1
-        return self.moments[min(max(i, self._start), len(self.moments) - 1)]
+        """The buffered moment nearest at or before time_s, clamped to the buffer's ends (the
+        past kept for replays included)."""
+        i = bisect.bisect_right(self.times, time_s) - 1
+        return self.moments[min(max(i, 0), len(self.moments) - 1)]
+
+    @property
+    def oldest_s(self) -> float:
+        """Time of the oldest moment kept (the past a replay can show), s."""
+        return self.times[0]
 
     def following(self, moment: Moment) -> Moment | None:
         """The moment buffered after `moment`, the program's (program_moment), None when it is the

@@ -38,6 +38,9 @@ an occluded camera of its shot (replacement.py, `replaces_occluded_places`), and
 at one tick and applied at the next, computed off the frame path (drawn_plan.py, `plans_ahead`).
 `PlannedDirector` implements `MatchDirector` (director_contract.py) with every capability; it is
 registered as "planned" (director_registry.py).
+
+Instant replays: where the live decision keeps the shot a moment after a kill and the live
+timeline has room, the director shows the kill again from another angle (a REPLAY, replays.py).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ from camdirector.pipeline.match.frame import PlannedCut, ShotChoice, ShotKind
 from camdirector.pipeline.match.interest import event_priority
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.replays import DirectorReplays, Replays, is_replay
 from camdirector.pipeline.style import Style
 
 OPTION_COVER_S = (1.0, 2.0, 3.0)  # a discretionary shot is placed for now and these times ahead (as far
@@ -97,6 +101,7 @@ class PlannedDirector(DirectorBase):
         self.dead_since: dict[int, float] = {}
         self.plan: list[Beat] = []  # the beats of the last decision (planned_cuts)
         self._seen: dict[tuple[ShotKind, tuple[int, ...], tuple[float, ...]], bool] = {}  # _shot_sees' answers
+        self.replays = DirectorReplays(Replays(self.players, self.builder))
 
     @property
     def style(self) -> Style:
@@ -251,7 +256,22 @@ class PlannedDirector(DirectorBase):
     def decide(
         self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
     ) -> Shot | None:
-        """The shot to cut to now, or None to keep the current one."""
+        """The shot to cut to now, or None to keep the current one: the live decision, a REPLAY
+        where it keeps the shot and the timeline has room, and a replay held to its end (replays.py)."""
+        self.replays.saw(moment, current_pose, current)
+        if is_replay(current):
+            assert current is not None  # is_replay names a shot
+            if not self.replays.ends(moment, buffer, current):
+                self.plan = []  # the live plan is made again when the replay ends
+                return None
+            current = None  # the replay gives the program back: the live decision starts afresh
+        shot = self.live_decision(moment, buffer, current, current_pose, flags)
+        return shot if shot is not None else self.replays.insert(moment, buffer, current, flags)
+
+    def live_decision(
+        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
+    ) -> Shot | None:
+        """The live shot to cut to now, or None to keep the current one."""
         s, style = self.settings, self.style
         now = moment.time_s
         for i in range(len(self.players)):

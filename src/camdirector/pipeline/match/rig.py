@@ -27,6 +27,12 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             (camera_ahead.py); a camera that moved through a wall since the last frame cuts
             there (`cut_through_wall`): cuts to places, never sweeps through walls.
 4. visibility  the share of the framed subjects' sample points seen from the camera.
+During a REPLAY shot (replays.py) CAMERA and VISIBILITY are of the replayed moment (the buffer keeps
+the past it shows), and so are `program_transforms` and the frame's `replay_of`, while
+`state.frame` and `time_s` stay the program moment's; a cut into or out of a replay is a cut in
+time, never a jump cut; a replay is not re-placed (replacement.py). Beside the program, the latest
+kill shown live and not yet replayed is offered as a REPLAY candidate from `replay_after_s` after it,
+its monitor at the kill.
 Every cut's `shot.reason` says why, its sub-scores go to `scores`, and degraded choices to `flags`.
 
 A style that names another director makes it anew from its registry entry at the next tick; the
@@ -57,7 +63,7 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.slices import SlicedRun
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.camera_rig import RigBase
-from camdirector.pipeline.inputs import FrameInput, PlayerStats, SceneSpec
+from camdirector.pipeline.inputs import FrameInput, GameEvent, PlayerStats, SceneSpec
 from camdirector.pipeline.match.camera_ahead import (
     CameraStep,
     CandidatePoses,
@@ -68,13 +74,14 @@ from camdirector.pipeline.match.camera_ahead import (
 from camdirector.pipeline.match.director_contract import DirectorContext, MatchDirector
 from camdirector.pipeline.match.director_registry import director_entry
 from camdirector.pipeline.match.drawn_plan import PLAN_SLICE_S, DrawnPlan, PlanResult
-from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ReplayedMoment, ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_camera import ProgramCamera
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
 from camdirector.pipeline.match.replacement import replaced_places
+from camdirector.pipeline.match.replays import Replays, is_replay, replayed_moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import ShotBuilder
 from camdirector.pipeline.match.shots import ToricCamera
@@ -112,7 +119,12 @@ class MatchRig(RigBase):
             self.players, self.style, self.lens, settings, self.visibility, Grammar(settings.jump_cut_deg), self.level_nodes
         )
         self.situations = Situations(self.players, self.teams, settings, ray_scene)
-        self.takes = Takes(self.players, settings, self.builder, self.situations)
+        self.replays = Replays(self.players, self.builder)  # the REPLAY candidate's and takes'
+        self.takes = Takes(self.players, settings, self.builder, self.situations, self.replays)
+        # the kills shown live, each with the live camera's centre (3,) m and the moment that showed it,
+        # and the kills replayed (s)
+        self._kills_shown: deque[tuple[GameEvent, np.ndarray, Moment]] = deque(maxlen=8)
+        self._replayed: deque[float] = deque(maxlen=8)
         interior = LevelInterior.of(scene.level.mesh_world) if scene.level is not None else None
         self.in_level = InLevel(interior, self.level_nodes, settings.pull_margin_m)
         self.program_camera = ProgramCamera(settings, self.visibility, ray_scene, self.lens, self.in_level)
@@ -241,8 +253,8 @@ class MatchRig(RigBase):
         if moment is not None:
             self._stats_to(moment.time_s)
         stages.done(MatchStage.BUFFER)
-        self.program_transforms = None if moment is None else moment.transforms
         if moment is None:
+            self.program_transforms = None
             match.buffering, state.pose, state.visibility = True, None, 0.0
             state.flags.append("buffering")
             return
@@ -257,13 +269,17 @@ class MatchRig(RigBase):
         stages.done(MatchStage.PLAN)
         assert self.shot is not None  # the first tick always makes one
         dt_s = 0.0 if cut else state.dt_s
+        shown = self._shown(moment)  # a REPLAY's camera and visibility are of the replayed moment
+        self.program_transforms = shown.transforms
+        if shown is not moment:
+            match.replay_of = ReplayedMoment(shown.frame, shown.time_s)
         ahead, self._ahead = self._ahead, None
-        worked_out = ahead is not None and ahead.holds(moment, dt_s, self.shot, self.style, self._last_pose)
+        worked_out = ahead is not None and ahead.holds(shown, dt_s, self.shot, self.style, self._last_pose)
         if ahead is not None and worked_out:
             vars(self.shot.camera).update(ahead.camera_after)
             pose, flags = ahead.pose, ahead.flags
         else:
-            stepped = self._camera_step(moment, dt_s, self.shot.camera)
+            stepped = self._camera_step(shown, dt_s, self.shot.camera)
             if stepped is None:  # a degenerate first shot: look from the overview
                 overview = self.builder.build(
                     ShotChoice((), ShotKind.OVERVIEW, "overview: degenerate framing"),
@@ -285,12 +301,14 @@ class MatchRig(RigBase):
         state.flags.extend(flags)
         state.pose, state.cut = pose, cut
         match.candidates = candidate_views(
-            moment, pose, self._candidates, self._ahead_candidates, self.shot.camera, self.in_level
+            moment, pose, self._candidates, self._ahead_candidates, self.shot.camera, self.in_level, self._candidate_moment
         )
         self._last_pose, self._ahead_candidates = pose, []
+        if shown is moment:
+            self._kills_shown.extend((e, pose.position_world, moment) for e in moment.events if self.replays.pair(e) is not None)
         stages.done(MatchStage.CAMERA)
         state.visibility = (
-            ahead.visibility if ahead is not None and worked_out else self.program_camera.visibility(moment, pose, self.shot)
+            ahead.visibility if ahead is not None and worked_out else self.program_camera.visibility(shown, pose, self.shot)
         )
         # the next frame's moment is most likely the next buffered one: its camera is worked out
         # in the worker's idle moments (a session whose ray scene moves every frame cannot)
@@ -311,6 +329,21 @@ class MatchRig(RigBase):
         stages.done(MatchStage.VISIBILITY)
 
     # -- the camera's step, in the frame or ahead of it -------------------------------------
+    def _shown(self, moment: Moment) -> Moment:
+        """The moment the program's picture shows at the program moment: the replayed one during
+        a REPLAY (replays.py), else the program moment itself."""
+        shot = self.shot
+        return replayed_moment(self.buffer, shot, moment.time_s) if shot is not None and is_replay(shot) else moment
+
+    def _candidate_moment(self, choice: ShotChoice, moment: Moment) -> Moment:
+        """The moment a candidate's monitor shows beside the program moment: a REPLAY candidate's
+        kill, as the program showed it (kept with the kill: a plan applied late may offer it after
+        the buffer let it go)."""
+        if choice.replay is None:
+            return moment
+        kill_s = choice.replay.kill_time_s
+        return next((m for e, _, m in self._kills_shown if e.time_s == kill_s), None) or self.buffer.at(kill_s)
+
     def _swept_through_wall(self, pose: CameraPose) -> bool:
         """Whether the camera moved from the last pose shown through level geometry (a wall between
         the two centres, in_level.py `crossed`): the program cuts there instead of sweeping
@@ -333,12 +366,12 @@ class MatchRig(RigBase):
         if self.shot is None or self._last_time_s is None:
             return
         dt_s = max(0.0, moment.time_s - self._last_time_s)
-        self._ahead = step_ahead(self.program_camera, moment, dt_s, self.shot, self.style, self._last_pose)
+        self._ahead = step_ahead(self.program_camera, self._shown(moment), dt_s, self.shot, self.style, self._last_pose)
         lists = [self._candidates]
         drawn = self._drawn
         if drawn is not None and drawn.run is None and drawn.result is not None:
             lists.append(drawn.result.candidates)
-        self._ahead_candidates = candidate_poses(moment, lists, self.in_level)
+        self._ahead_candidates = candidate_poses(moment, lists, self.in_level, self._candidate_moment)
 
     # -- the planning tick ------------------------------------------------------------------
     def _tick(self, moment: Moment, flags: list[str]) -> bool:
@@ -348,7 +381,7 @@ class MatchRig(RigBase):
         if self.takes.pending or self.shot is None or not (self._defer_plans and self.director.plans_ahead):
             if drawn is not None:
                 drawn.finish()  # a take overrides it; finished, so that it never depends on the moment of the take
-            result = self._plan(moment, self.buffer, self.shot, None, self._last_pose)
+            result = self._plan(moment, self.buffer, self.shot, None, self._last_pose, self._replayable())
             self.takes.pending = False
             return self._apply(result, moment, flags)
         if drawn is not None and not drawn.due(self.settings.plan_work_per_tick):
@@ -359,7 +392,10 @@ class MatchRig(RigBase):
         # planned for the moment it goes on air, the next tick's (buffered: the delay's future)
         on_air = self.buffer.at(moment.time_s + self.settings.plan_interval_s)
         current, camera, buffer, last_pose = self.shot, copy.copy(self.shot.camera), self.buffer.view(), self._last_pose
-        self._drawn = DrawnPlan(current, SlicedRun(lambda: self._plan(on_air, buffer, current, camera, last_pose), self.clock))
+        replayable = self._replayable()
+        self._drawn = DrawnPlan(
+            current, SlicedRun(lambda: self._plan(on_air, buffer, current, camera, last_pose, replayable), self.clock)
+        )
         return cut
 
     def _apply(self, result: PlanResult, moment: Moment, flags: list[str], drawn_on: Shot | None = None) -> bool:
@@ -371,6 +407,9 @@ class MatchRig(RigBase):
             flags.append("cut_refused_jump")  # the next plan, drawn now, judges it from the picture now on air
             return False
         if result.shot is not None:
+            if result.shot.choice.replay is not None:  # its length counts from now too
+                self._replayed.append(result.shot.choice.replay.kill_time_s)
+                result.shot.hold_until_s += moment.time_s - result.shot.start_s
             result.shot.start_s = moment.time_s  # on air from now: the shot's length counts from here
             self.shot = result.shot
             return True
@@ -394,6 +433,8 @@ class MatchRig(RigBase):
         drawn plan judged it against the pose of the tick that drew it (or earlier, applied late),
         and the camera has moved since (the real wipeout and 4on4 each had one such jump cut)."""
         assert self.shot is not None  # a drawn plan is drawn on a shot
+        if is_replay(self.shot) or is_replay(shot):  # a cut into or out of a replay is a cut in time
+            return False
         shared = sorted(set(self.shot.framed(moment.time_s)) & set(shot.framed(moment.time_s)))
         pose = shot.camera.pose(moment)
         if not shared or pose is None or self._last_pose is None:
@@ -403,21 +444,31 @@ class MatchRig(RigBase):
         )[0]
 
     def _plan(
-        self, moment: Moment, buffer: MomentBuffer, current: Shot | None, camera: ShotCamera | None, last_pose: CameraPose | None
+        self,
+        moment: Moment,
+        buffer: MomentBuffer,
+        current: Shot | None,
+        camera: ShotCamera | None,
+        last_pose: CameraPose | None,
+        replayable: tuple[GameEvent, np.ndarray] | None,
     ) -> PlanResult:
         """The cut decision of a tick (take, else the director), the re-placement of an occluded
         camera (a director that asks for it, or a take) and the candidates, from the moment, a
-        buffer, the current shot, a copy of its camera (None: the shot's own) and the last pose."""
+        buffer, the current shot, a copy of its camera (None: the shot's own), the last pose and
+        the kill a REPLAY candidate would show (with the live camera's centre at it)."""
         flags: list[str] = []
         held = self.takes.held
         if held is not None:
             new, held = self.takes.held_shot(moment, buffer, current, self._candidates, flags)
+            if held is None:  # a human's replay is over (the director starts afresh) or refused
+                new = self.director.decide(moment, buffer, None if current is None or current.held else current, last_pose, flags)
         else:
             new = self.director.decide(moment, buffer, None if current is None or current.held else current, last_pose, flags)
             if new is None and current is not None and current.held:  # released: the director starts afresh
                 new = self.director.decide(moment, buffer, None, last_pose, flags)
         goal = pair_place = None
-        if new is None and current is not None and (self.director.replaces_occluded_places or held is not None):
+        replaces = self.director.replaces_occluded_places or held is not None
+        if new is None and current is not None and replaces and not is_replay(current):
             goal, pair_place = replaced_places(
                 moment, buffer, current, camera or current.camera, self.visibility, self.settings, flags
             )
@@ -426,15 +477,25 @@ class MatchRig(RigBase):
             goal,
             pair_place,
             held,
-            self._candidate_shots(moment, buffer, new or current),
+            self._candidate_shots(moment, buffer, new or current, replayable),
             self.director.planned_cuts(),
             flags,
         )
 
-    def _candidate_shots(self, moment: Moment, buffer: MomentBuffer, program: Shot | None) -> list[CandidateShot]:
+    def _replayable(self) -> tuple[GameEvent, np.ndarray] | None:
+        """The latest kill shown live, unless replayed, with the live camera's centre (3,) m at it."""
+        if not self._kills_shown or self._kills_shown[-1][0].time_s in self._replayed:
+            return None
+        kill, live_world, _ = self._kills_shown[-1]
+        return kill, live_world
+
+    def _candidate_shots(
+        self, moment: Moment, buffer: MomentBuffer, program: Shot | None, replayable: tuple[GameEvent, np.ndarray] | None
+    ) -> list[CandidateShot]:
         """The best other situations whose Toric camera at the style's place shows their subjects
         (shot_builder.py `candidate_camera`; an OVERVIEW candidate reuses the program pose until
-        it is taken)."""
+        it is taken), and a REPLAY of the replayable kill (replays.py) from replay_after_s after it
+        while it can be shown, in the last one's place when they are as many as `candidates`."""
         out: list[CandidateShot] = []
         program_set = set(program.subjects) if program is not None else set()
         for option in self.situations.options(moment, buffer):
@@ -448,4 +509,16 @@ class MatchRig(RigBase):
             out.append(
                 (ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, option.reason), camera, option.score)
             )
+        if replayable is None or is_replay(program) or not self.settings.candidates:
+            return out
+        kill, live_world = replayable
+        # offered once the live shot has followed the survivor a moment, as our director replays (and its place
+        # search does not weigh on the kill's own tick, when a take's fallback or the next beat is decided)
+        later = moment.time_s >= kill.time_s + self.settings.replay_after_s
+        if later and any(k is kill for k in self.replays.kills(buffer, moment.time_s)):
+            replay = self.replays.shot(kill, buffer, live_world, moment.time_s, "replay candidate")
+            if replay is not None:
+                assert isinstance(replay.camera, ToricCamera)  # a replay's camera is a DUEL's
+                # in the last situation's place when they fill the monitors
+                out = [*out[: self.settings.candidates - 1], (replay.choice, replay.camera, replay.scores["place_visibility"])]
         return out

@@ -94,6 +94,13 @@ class MatchSettings:
                                          # killer alone: shots.py PairWindow), s. [0, 30]
     pair_after_s: float = 0.25           # to this long after it, s. [0, 30]
     reframe_s: float = 0.5               # easing between the pair and the killer alone, s. (0, 10]
+    replay_pre_s: float = 2.0            # a REPLAY shows its kill again from this long before it (the build-up: replays.py), s.
+                                         # [0, 10]
+    replay_post_s: float = 0.5           # to this long after it; with replay_pre_s at least the style's min_shot_s, s. [0, 10]
+    replay_after_s: float = 1.0          # and no sooner than this after it: the live shot first follows the survivor once the
+                                         # pair's window closes (pair_after_s and reframe_s), s. [0, replay_within_s]
+    replay_within_s: float = 4.0         # a kill is replayed only this soon after it (later, the program has moved on; the
+                                         # buffer keeps replay_within_s + replay_pre_s of past for it), s. [0, 30]
     dead_hold_s: float = 1.5             # after that long on a dead subject the director cuts away, s. [0, 10]
     respawn_speed_m_s: float = 30.0      # a dead player's feet moving faster than this between two frames teleported: a respawn
                                          # (runners 5-8 m/s, a body falling 45 m reaches 30 m/s), m/s. (0, 10000]
@@ -162,12 +169,25 @@ class MatchSettings:
             raise ValueError("MatchSettings: max_held_shot_s in (0, 600] s")
         if self.pair_before_s > 30.0 or self.pair_after_s > 30.0 or self.reframe_s > 10.0:
             raise ValueError("MatchSettings: pair_before_s and pair_after_s in [0, 30] s, reframe_s in (0, 10] s")
+        if not (self.replay_pre_s <= 10.0 and self.replay_post_s <= 10.0 and self.replay_after_s <= self.replay_within_s <= 30.0):
+            raise ValueError("MatchSettings: replay_pre_s and replay_post_s in [0, 10] s, "
+                             "replay_after_s <= replay_within_s <= 30 s")
         if set(self.priorities) != set(EventKind) or not all(1 <= p <= 15 for p in self.priorities.values()):
             raise ValueError("MatchSettings: one priority in [1, 15] per EventKind")
 
     @property
     def plan_interval_s(self) -> float:
         return 1.0 / self.plan_rate_hz
+
+    @property
+    def replay_length_s(self) -> float:
+        """A REPLAY shot's length, s."""
+        return self.replay_pre_s + self.replay_post_s
+
+    @property
+    def replay_past_s(self) -> float:
+        """How much past, before the program's moment, the buffer keeps for replays, s."""
+        return self.replay_within_s + self.replay_pre_s
 
 
 def _check_positive_finite(settings: MatchSettings | HltvSettings, positive: tuple[str, ...]) -> None:

@@ -7,6 +7,11 @@ a candidate matches it (the candidate's own camera and place), else built anew. 
 Toric camera of it is re-placed for visibility (replacement.py). A take whose held subject dies
 (at the program moment) falls back, still held: to the player who killed it, else the nearest
 fight to where it died, else an overview; `shot.reason` says so.
+
+A take of a REPLAY names killer and victim (either order) and replays their latest kill the buffer
+still reaches (replays.py): as its candidate offered it when one does, else placed anew. It is
+held while it plays and released at its end (the director takes the program back); with no such
+kill, or no place that sees both, it is released at once (flag `take_replay_refused`).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import numpy as np
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot
+from camdirector.pipeline.match.replays import Replays
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import ShotBuilder
 from camdirector.pipeline.match.situations import Situations
@@ -27,8 +33,11 @@ class Takes:
     """The takes of one session's players (target order): the one held, and whether a take or a
     release waits for the next tick (module docstring)."""
 
-    def __init__(self, players: list[str], settings: MatchSettings, builder: ShotBuilder, situations: Situations):
+    def __init__(
+        self, players: list[str], settings: MatchSettings, builder: ShotBuilder, situations: Situations, replays: Replays
+    ):
         self.players, self.settings, self.builder, self.situations = players, settings, builder, situations
+        self.replays = replays
         self.index = {p: i for i, p in enumerate(players)}
         self.held: ShotChoice | None = None
         self.pending = False
@@ -52,6 +61,7 @@ class Takes:
             ShotKind.DUEL: n == 2,
             ShotKind.GROUP: 2 <= n <= self.settings.max_group,
             ShotKind.OVERVIEW: True,
+            ShotKind.REPLAY: n == 2,
         }[ShotKind(kind)]
         if not fits:
             raise ValueError(f"take: a {ShotKind(kind).name} shot cannot show {n} players")
@@ -61,11 +71,13 @@ class Takes:
 
     def held_shot(
         self, moment: Moment, buffer: MomentBuffer, current: Shot | None, candidates: list[CandidateShot], flags: list[str]
-    ) -> tuple[Shot | None, ShotChoice]:
+    ) -> tuple[Shot | None, ShotChoice | None]:
         """The held take as a shot when it must be (re)built: just taken, or a held subject died;
-        and the take held from now on (the fallback's, when one died)."""
+        and the take held from now on (the fallback's, when one died; None: a replay is over)."""
         held = self.held
         assert held is not None  # asked only while a take is held
+        if held.kind == ShotKind.REPLAY:
+            return self._replay(held, moment, buffer, current, candidates, flags)
         subjects = tuple(self.index[s] for s in held.subject_ids)
         dead = [i for i in subjects if not moment.alive[i]]
         if not dead and not self.pending and current is not None and current.held:
@@ -98,6 +110,38 @@ class Takes:
             shot.held = True
             return shot
         return None
+
+    def _replay(
+        self,
+        held: ShotChoice,
+        moment: Moment,
+        buffer: MomentBuffer,
+        current: Shot | None,
+        candidates: list[CandidateShot],
+        flags: list[str],
+    ) -> tuple[Shot | None, ShotChoice | None]:
+        """A REPLAY take (module docstring): its shot when just taken, held while it plays, and
+        None when it is over or refused."""
+        now = moment.time_s
+        if not self.pending:
+            playing = current is not None and current.held and current.choice.replay is not None
+            return None, held if playing and current is not None and now < current.hold_until_s else None
+        pair = set(held.subject_ids)
+        for candidate, camera, _ in candidates:
+            if candidate.replay is not None and camera is not None and set(candidate.subject_ids) == pair:
+                subjects = tuple(self.index[s] for s in candidate.subject_ids)
+                previewed = Shot(
+                    dataclasses.replace(candidate, held=True), subjects, camera, now, now + candidate.replay.length_s
+                )
+                previewed.held = True
+                return previewed, held
+        kill = next((k for k in reversed(self.replays.kills(buffer, now)) if {k.actor_id, k.other_actor_id} == pair), None)
+        shot = None if kill is None else self.replays.shot(kill, buffer, None, now, "take: a human's replay", held=True)
+        if shot is None:
+            flags.append("take_replay_refused")
+            return None, None
+        shot.held = True
+        return shot, held
 
     def _fallback(self, moment: Moment, buffer: MomentBuffer, dead: int) -> tuple[ShotChoice, tuple[int, ...]]:
         who = self.players[dead]

@@ -6,7 +6,9 @@ import { state } from "./state.js";
 
 export function describeShot(shot) {   // with the players' names: show it as text
   const who = shot.subject_ids.length ? playerNames(shot.subject_ids) : "the map";
-  return `${shot.kind.replace("SHOT_", "")} ${who}`;
+  // a replay says which kill it shows again (worker/timeline.py: shot.replay)
+  const kill = shot.replay ? ` (the kill at ${shot.replay.kill_time_s.toFixed(1)} s)` : "";
+  return `${shot.kind.replace("SHOT_", "")} ${who}${kill}`;
 }
 
 export async function take(body) {   // { subject_ids, kind } to take a shot, { release: true } to release it

@@ -1,0 +1,219 @@
+"""Instant replays (issue 41, item 4): within the broadcast delay, a kill shown again from another angle.
+
+A REPLAY shot (ShotKind.REPLAY, its `ShotChoice.replay`) plays a kill's game moments from
+`replay_pre_s` before it to `replay_post_s` after it (longer before it when that is shorter than
+the style's `min_shot_s`; shorter before it, down to `min_shot_s` in all, where the live timeline
+has no more room), at the program's pace, while the program's own time goes on: the rig
+steps its camera and measures its visibility at the replayed moment (rig.py), and the buffer keeps
+`replay_past_s` of past for it (moments.py). Its camera is a Toric DUEL of killer and victim,
+placed for the kill (its moment, the next frame's, and with less weight its build-up) at
+the place that sees both best among those that turn the view of the pair by `jump_cut_deg` from
+the live camera at the kill (grammar.py: a replay from the same angle shows nothing new); none
+that sees both with `min_visible` of their points over those moments: no replay (at
+`candidate_seen`, 0.5, the real wipeout's replays showed nobody for a second of build-up and
+nobody-shown frames outside overviews rose from 7.7% to 10.7%).
+
+Our director (planned.py, `DirectorReplays`) inserts one when its own live decision keeps the
+shot, the shot is `min_shot_s` old, the kill is `replay_after_s` past (the live shot has held it
+and followed the survivor a moment; a hold for a later event gives way, as that event's beat has
+its cut after the replay), and the live timeline
+has room: no event of priority >= `beat_min_priority` in the program time a replay of at least
+`min_shot_s` covers plus the next beat's `lead_s`, all of it within the buffered future (so never
+with no delay). It
+replays the latest kill of the last `replay_within_s` (never an older one once another came),
+once; a replay on air ends at its length, or at once should an event come within `min_lead_s`
+(and a planning tick) of its end (a plan applied late): the next beat still gets its cut.
+The rig offers the latest kill shown live and not yet replayed as a REPLAY candidate, and a
+human's take of a REPLAY of killer and victim replays their latest kill (takes.py). Every choice
+here reads the buffer and the poses the rig gave, never a clock: the same inputs make the same
+replays.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
+from camdirector.pipeline.match.interest import event_priority
+from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
+from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shot_builder import ShotBuilder
+from camdirector.pipeline.match.shots import Place, ToricCamera, best_place
+
+AFTER_KILL_S = 0.1  # the replay's camera is placed for the kill's moment and this long after it (the next frame), s
+BUILD_UP_STEP_S = 1.0  # and for the build-up, a moment this often from the replay's first on (each costs a tick's
+# share of place-search work), s
+BUILD_UP_WEIGHT = 0.5  # with this weight each against 1 for the kill's (placed for the kill alone, the program camera,
+# finding the killer behind a wall in the build-up, pulled in toward it and still stood close at the kill:
+# on the real wipeout, 1 of 2 replays showed both at the kill)
+PLACED_KEPT = 16  # replay places remembered (per kill and live angle: a candidate asks at every tick)
+
+
+def replayed_moment(buffer: MomentBuffer, shot: Shot, time_s: float) -> Moment:
+    """The moment a REPLAY shot on air shows at program time time_s, s (its frame nearest: replayed
+    times fall on frame times, up to rounding)."""
+    replay = shot.choice.replay
+    assert replay is not None  # asked of a replay only
+    return buffer.at(replay.replayed_s(shot.start_s, time_s) + TIME_EPSILON_S)
+
+
+def is_replay(shot: Shot | None) -> bool:
+    return shot is not None and shot.choice.replay is not None
+
+
+class Replays:
+    """The REPLAY shots of one session's players (target order): which kill, from which place
+    (module docstring)."""
+
+    def __init__(self, players: list[str], builder: ShotBuilder):
+        self.players, self.builder = players, builder
+        self.index = {p: i for i, p in enumerate(players)}
+        self._placed: dict[tuple[float, float, str, str, bytes], tuple[tuple[int, int], Place, float] | None] = {}
+
+    @property
+    def settings(self) -> MatchSettings:
+        return self.builder.settings
+
+    def pair(self, kill: GameEvent) -> tuple[int, int] | None:
+        """(killer, victim) indices of a kill by one player of another, else None."""
+        killer, victim = self.index.get(kill.actor_id), self.index.get(kill.other_actor_id)
+        if kill.kind != EventKind.KILL or killer is None or victim is None or killer == victim:
+            return None
+        return killer, victim
+
+    def kills(self, buffer: MomentBuffer, now_s: float) -> list[GameEvent]:
+        """The kills (by one player of another) a replay can show at program time now_s, oldest
+        first: within replay_within_s before it, their replay's first moment still buffered."""
+        s = self.settings
+        start_s = max(now_s - s.replay_within_s, buffer.oldest_s + s.replay_pre_s)
+        return [e for e in buffer.events_between(start_s, now_s) if self.pair(e) is not None]
+
+    def replay(self, kill: GameEvent, min_shot_s: float, room_s: float = math.inf) -> Replay:
+        """The moments a replay of the kill shows: at least min_shot_s of them, at most room_s, s,
+        when that is more (module docstring)."""
+        s = self.settings
+        length_s = max(min(s.replay_length_s, room_s), min_shot_s)
+        return Replay(kill.time_s, kill.time_s + s.replay_post_s - length_s, kill.time_s + s.replay_post_s)
+
+    def shot(
+        self,
+        kill: GameEvent,
+        buffer: MomentBuffer,
+        live_world: np.ndarray | None,
+        start_s: float,
+        reason: str,
+        held: bool = False,
+        room_s: float = math.inf,
+    ) -> Shot | None:
+        """A REPLAY shot of the kill (room_s: at most that long, s), on air from start_s, s, its
+        camera turned jump_cut_deg from the live camera's centre (3,) m at the kill (None: any
+        place); None when no such place sees both (module docstring)."""
+        pair = self.pair(kill)
+        assert pair is not None  # a replay is of a kill of one player by another
+        replay = self.replay(kill, self.builder.style.min_shot_s, room_s)
+        key = (
+            kill.time_s,
+            replay.from_s,
+            kill.actor_id,
+            kill.other_actor_id,
+            b"" if live_world is None else live_world.tobytes(),
+        )
+        if key not in self._placed:
+            if len(self._placed) >= PLACED_KEPT:
+                del self._placed[next(iter(self._placed))]  # the oldest asked
+            self._placed[key] = self._place(pair, replay, buffer, live_world)
+        placed = self._placed[key]
+        if placed is None:
+            return None
+        (a, b), place, score = placed
+        camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
+        names = tuple(self.players[i] for i in pair)
+        choice = ShotChoice(names, ShotKind.REPLAY, f"{reason}: {names[0]} -> {names[1]}", held, replay)
+        shot = Shot(choice, pair, camera, start_s)
+        shot.hold_until_s, shot.scores = start_s + replay.length_s, {"place_visibility": score}
+        return shot
+
+    def _place(
+        self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None
+    ) -> tuple[tuple[int, int], Place, float] | None:
+        """Which of the builder's DUEL cameras (its players A and B), its place and score, seeing
+        the pair best at the kill past the live angle; None under min_visible."""
+        s = self.settings
+        kill_moment = buffer.at(replay.kill_time_s)
+        build_up = np.arange(replay.from_s, replay.kill_time_s, BUILD_UP_STEP_S)
+        cover = [*(buffer.at(t) for t in build_up), kill_moment, buffer.at(replay.kill_time_s + AFTER_KILL_S)]
+        weights = [BUILD_UP_WEIGHT] * len(build_up) + [1.0, 1.0]
+
+        def other_angle(positions_world: np.ndarray) -> np.ndarray:
+            return self.builder.grammar.allows_cut(live_world, kill_moment.aims_world[list(pair)], positions_world)
+
+        best: tuple[tuple[int, int], Place, float] | None = None
+        for camera, places in self.builder.cameras(ShotKind.DUEL, pair, kill_moment, default=False):
+            assert camera.b_index is not None  # a DUEL's camera frames two
+            place, score = best_place(camera, places, cover, pair, self.builder.visibility, other_angle, kill_moment, weights)
+            if best is None or score > best[2]:
+                best = ((camera.a_index, camera.b_index), place, score)
+        return best if best is not None and best[2] >= s.min_visible else None
+
+
+class DirectorReplays:
+    """When our director inserts a replay (module docstring); the live camera's centres it saw at
+    its decisions, to tell the live angle at a kill."""
+
+    def __init__(self, replays: Replays):
+        self.replays = replays
+        self.tried: deque[float] = deque(maxlen=PLACED_KEPT)  # kill times replayed or found without a place
+        self._live: deque[tuple[float, np.ndarray]] = deque()  # (program time s, live camera centre (3,) m)
+
+    def saw(self, moment: Moment, pose: CameraPose | None, current: Shot | None) -> None:
+        """Remembers the live camera's centre at a decision (none during a replay), replay_past_s long."""
+        if pose is not None and not is_replay(current):
+            self._live.append((moment.time_s, pose.position_world))
+        while self._live and self._live[0][0] < moment.time_s - self.replays.settings.replay_past_s:
+            self._live.popleft()
+
+    def live_at(self, time_s: float) -> np.ndarray | None:
+        """The live camera's centre (3,) m seen nearest time_s, s; None when none was."""
+        if not self._live:
+            return None
+        return min(self._live, key=lambda seen: abs(seen[0] - time_s))[1]
+
+    def ends(self, moment: Moment, buffer: MomentBuffer, current: Shot) -> bool:
+        """Whether the replay on air gives the program back now: at its length, or for an event
+        within min_lead_s and a planning tick of its end (module docstring)."""
+        s = self.replays.settings
+        end_s = current.hold_until_s
+        return (
+            moment.time_s >= end_s - 1e-9 or self._next_beat_s(buffer, moment.time_s) <= end_s + s.min_lead_s + s.plan_interval_s
+        )
+
+    def _next_beat_s(self, buffer: MomentBuffer, now_s: float) -> float:
+        """Time of the next event after now_s that gets a planned beat, s (inf: none buffered)."""
+        s = self.replays.settings
+        events = buffer.events_between(now_s, buffer.horizon_s)
+        return next((e.time_s for e in events if event_priority(e, s) >= s.beat_min_priority), math.inf)
+
+    def insert(self, moment: Moment, buffer: MomentBuffer, current: Shot | None, flags: list[str]) -> Shot | None:
+        """A REPLAY to cut to now in place of holding the live shot, or None (module docstring)."""
+        s, style = self.replays.settings, self.replays.builder.style
+        now = moment.time_s
+        # a hold for a later event (the pair of a duel is in every kill) gives way: that event's own cut has room after
+        if current is None or is_replay(current) or now - current.start_s < style.min_shot_s:
+            return None
+        kill = next(reversed(self.replays.kills(buffer, now)), None)  # only the latest: an older one is old news
+        if kill is None or now < kill.time_s + s.replay_after_s or kill.time_s in self.tried:
+            return None
+        room_s = self._next_beat_s(buffer, now) - s.lead_s - now
+        if now + self.replays.replay(kill, style.min_shot_s).length_s + s.lead_s > buffer.horizon_s or room_s < style.min_shot_s:
+            return None
+        self.tried.append(kill.time_s)
+        shot = self.replays.shot(kill, buffer, self.live_at(kill.time_s), now, "replay of the kill", room_s=room_s)
+        if shot is None:
+            flags.append("replay_no_place")
+        return shot

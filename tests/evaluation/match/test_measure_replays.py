@@ -1,0 +1,64 @@
+"""eval-match's replays (measure.py): a replay's moments are measured against the bodies of the
+moment they show, a replay showing both at the kill counts as shown, a kill followed by another
+within the room leaves none, and a live kill that falls in a replay is missed and counted."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from camdirector.evaluation.match.match_file import MatchEvent
+from camdirector.evaluation.match.measure import BodySampler, kill_coverage, measure_shown, replay_figures
+from camdirector.geometry.camera import Lens
+from tests.evaluation.match.test_measure import duel, floor, side_view
+
+KILL_ROW = 20  # duel(): the kill at 2.0 s, 10 Hz
+ROOM_S = 1.0
+
+
+def replayed(program, rows: slice, shown_rows: np.ndarray):
+    """The program with `rows` a REPLAY of the match frames shown_rows, cut into and out of."""
+    program.replay[rows] = True
+    program.shown_index[rows] = shown_rows
+    program.cut[rows.start] = program.cut[rows.stop] = True
+    program.shot_id[:] = np.cumsum(program.cut)
+    return program
+
+
+def test_a_replay_is_measured_at_the_moment_it_shows_and_counts_as_shown():
+    match = duel()
+    match.positions_world[KILL_ROW + 5 :, 1] += [100.0, 0.0, 0.0]  # b's body is carried far off after the kill
+    program = replayed(side_view(match), slice(25, 35), np.arange(15, 25))
+    bodies = BodySampler(match, np.random.default_rng(0))
+    shown = measure_shown(program, bodies, Lens(), floor())
+    assert shown[25:35, 1].min() >= 0.5 and shown[35:, 1].max() < 0.5  # b where the replayed moment has it
+    assert kill_coverage(match, program, shown).covered.tolist() == [True]  # the kill itself was live
+    assert replay_figures(match, program, shown, ROOM_S) == {
+        "replays": 1,
+        "shown": 1,
+        "kills_with_room": 1,
+        "kills_with_room_replayed": 1,
+        "live_kills_missed_for_replay": 0,
+    }
+    assert program.digest() != side_view(match).digest()  # the replayed frames are in the digest
+    program.cut[30] = True  # a cut within it (through a wall) goes on with the same replay
+    assert replay_figures(match, program, shown, ROOM_S)["replays"] == 1
+
+
+def test_a_replay_over_the_live_kill_misses_it_and_one_not_reaching_the_kill_is_not_shown():
+    match = duel()
+    program = replayed(side_view(match), slice(18, 28), np.arange(5, 15))  # the moments before the kill, during it
+    shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
+    assert kill_coverage(match, program, shown).covered.tolist() == [False]
+    figures = replay_figures(match, program, shown, ROOM_S)
+    assert figures["live_kills_missed_for_replay"] == 1 and figures["replays"] == 1 and figures["shown"] == 0
+
+
+def test_a_kill_followed_by_another_within_the_room_leaves_none():
+    match = duel()
+    match = dataclasses.replace(match, events=[*match.events, MatchEvent("kill", "b", "a", 0, 2.5, "", np.zeros(3))])
+    program = side_view(match)
+    shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
+    assert replay_figures(match, program, shown, ROOM_S)["kills_with_room"] == 1  # the second alone
+    assert replay_figures(match, program, shown, 0.4)["kills_with_room"] == 2

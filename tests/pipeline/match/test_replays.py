@@ -1,0 +1,188 @@
+"""Instant replays (replays.py) on tiny hand-built matches: a kill with room is shown again from
+another angle at the replayed moments while the program's own time goes on, kills close together
+get none between them, a replay never covers a live kill, the candidate and the take of a REPLAY,
+and the same program on two runs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from camdirector.pipeline.match.camera_ahead import CameraStep
+from camdirector.pipeline.match.frame import ShotKind
+from camdirector.pipeline.match.grammar import view_turn_deg
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.session import Session
+from camdirector.pipeline.state import FrameState
+from tests.pipeline.match.scenes import EYE_M, Match, at_time, facing, kill, melee, on_screen, run_session
+
+TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
+KILL_S = 25.0
+WALK_M_S = 0.2  # a2 walks along x: the replayed moment's positions differ from the live one's
+
+
+def two_fronts(t: float):
+    """a1 and b1 face each other 8 m apart; a2 walks slowly 15 m from b2 (it kills b2 at KILL_S)."""
+    return {
+        "a1": ((0.0, 0.0), facing((0, 0), (0, 8))),
+        "b1": ((0.0, 8.0), facing((0, 8), (0, 0))),
+        "a2": ((40.0 + WALK_M_S * t, 0.0), 0.0),
+        "b2": ((40.0, 15.0), 0.0),
+    }
+
+
+def run_with_views(match: Match, duration_s: float) -> tuple[Session, list[FrameState], list[np.ndarray]]:
+    """The session's answers and, per answer, a2's position where the monitors see it (view_target_transforms)."""
+    session = Session("s", match.scene())
+    states, a2 = [], []
+    for update in match.frames(duration_s):
+        states.append(session.frame(update))
+        a2.append(session.view_target_transforms()[2].position_world.copy())
+    return session, states, a2
+
+
+def replays(states: list[FrameState]) -> list[list[FrameState]]:
+    """The program's REPLAY shots, each as its states in order."""
+    out: list[list[FrameState]] = []
+    for s in states:
+        if s.match.buffering or s.match.shot is None or s.match.shot.kind != ShotKind.REPLAY:
+            continue
+        if not out or s.cut or out[-1][-1].frame != s.frame - 1:
+            out.append([])
+        out[-1].append(s)
+    return out
+
+
+def test_a_kill_with_room_is_replayed_from_another_angle_at_the_replayed_moments():
+    settings = MatchSettings()
+    match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0)
+    _, states, a2 = run_with_views(match, 40.0)
+    shown = replays(states)
+    assert len(shown) == 1
+    replay = shown[0]
+    first = replay[0]
+    assert first.cut and first.match.shot.subject_ids == ("a2", "b2") and first.match.shot.replay.kill_time_s == KILL_S
+    # after the live shot held its kill and followed the survivor a moment, and before the next could come
+    assert KILL_S + settings.replay_after_s <= first.time_s <= KILL_S + settings.replay_within_s
+    assert at_time(states, KILL_S).match.shot.kind == ShotKind.DUEL  # the kill itself was live
+    # the program's own time goes on frame by frame; the picture shows the kill's moments again
+    frames = [s.frame for s in replay]
+    assert frames == list(range(frames[0], frames[0] + len(frames)))
+    replayed = np.array([s.match.replay_of.time_s for s in replay])
+    assert abs(replayed[0] - (KILL_S - settings.replay_pre_s)) <= 1.0 / 30 + 1e-9
+    assert np.all(np.diff(replayed) > 0) and replayed[-1] >= KILL_S + settings.replay_post_s - 1.0 / 30 - 1e-9
+    assert abs(len(replay) / 30.0 - settings.replay_length_s) <= 0.15  # its length, to a planning tick
+    # the monitors see the replayed moment's players, not the live one's
+    index = [i for i, s in enumerate(states) if s in replay]
+    for i, s in zip(index, replay):
+        assert abs(a2[i][0] - (40.0 + WALK_M_S * s.match.replay_of.time_s)) < 1e-9
+    # at the replayed kill both are on screen, from a view turned past the 30-degree rule from the live one
+    at_kill = min(replay, key=lambda s: abs(s.match.replay_of.time_s - KILL_S))
+    aims = np.array([[40.0 + WALK_M_S * KILL_S, EYE_M, 0.0], [40.0, EYE_M, 15.0]])
+    assert np.all(np.abs(on_screen(at_kill, aims)) <= 1.0) and at_kill.visibility > 0.5
+    live = at_time(states, KILL_S).pose.position_world
+    assert view_turn_deg(live, at_kill.pose.position_world, aims.mean(axis=0))[0] >= settings.jump_cut_deg
+    # and the program is live again after it
+    after = states[states.index(replay[-1]) + 1]
+    assert after.cut and after.match.shot.kind != ShotKind.REPLAY and after.match.replay_of is None
+
+
+def test_kills_close_together_get_no_replay_between_them():
+    """Kills 3 s apart leave no room (replay_after_s + its length + the next beat's lead_s) between
+    them; the second, with room after it, is replayed."""
+    second_s = KILL_S + 3.0
+    match = Match(TEAMS, two_fronts, [kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)], delay_s=10.0)
+    _, states = run_session(match, 45.0)
+    shown = replays(states)
+    assert [r[0].match.shot.replay.kill_time_s for r in shown] == [second_s]
+    assert shown[0][0].time_s > second_s
+
+
+def test_a_replay_never_covers_a_live_kill_and_kills_with_room_get_one():
+    match = melee(seed=4, duration_s=60.0, delay_s=10.0, kill_every_s=7.0)
+    _, states = run_session(match, 60.0)
+    shown = replays(states)
+    replay_frames = {s.frame for r in shown for s in r}
+    end_s = max(s.time_s for s in states if not s.match.buffering)
+    kill_times = [e.time_s for e in match.events if e.time_s <= end_s]
+    assert all(at_time(states, t).frame not in replay_frames for t in kill_times)  # every kill live
+    assert len(shown) >= len(kill_times) // 2  # 7 s apart, every kill leaves room
+
+
+def test_the_same_match_gives_the_same_replays_pose_for_pose():
+    runs = [run_session(melee(seed=4, duration_s=40.0, delay_s=10.0, kill_every_s=7.0), 40.0)[1] for _ in range(2)]
+    poses = [np.array([s.pose.position_world for s in states if s.pose is not None]) for states in runs]
+    assert np.array_equal(poses[0], poses[1])
+    shots = [[(s.frame, s.match.shot, s.match.replay_of) for s in states if s.match.shot] for states in runs]
+    assert shots[0] == shots[1] and any(shot.kind == ShotKind.REPLAY for _, shot, _ in shots[0])
+
+
+def test_a_replay_candidate_is_offered_with_its_kill_moment_after_the_kill_is_shown():
+    """The director has no room to replay the first of two kills 3 s apart: a human is offered it,
+    from replay_after_s after it until the next kill, its monitor at the kill."""
+    settings = MatchSettings()
+    match = Match(TEAMS, two_fronts, [kill("a1", "b1", KILL_S), kill("a2", "b2", KILL_S + 3.0)], delay_s=10.0)
+    _, states = run_session(match, 10.0 + KILL_S + 2.9)
+    offered = [(s, c) for s in states if not s.match.buffering for c in s.match.candidates if c.shot.kind == ShotKind.REPLAY]
+    assert offered and all(s.time_s >= KILL_S + settings.replay_after_s for s, _ in offered)
+    assert all(c.shot.subject_ids == ("a1", "b1") and abs(c.replay_of.time_s - KILL_S) < 1.0 / 30 + 1e-9 for _, c in offered)
+    assert all(len(s.match.candidates) <= settings.candidates for s, _ in offered)
+
+
+def test_a_take_of_a_replay_plays_the_pairs_latest_kill_then_gives_the_program_back():
+    settings = MatchSettings()
+    match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0)
+    frames = list(match.frames(45.0))
+    session = Session("s", match.scene())
+    taken_at = next(i for i, u in enumerate(frames) if u.time_s >= KILL_S + 10.0 + 0.5)  # the kill is 0.5 s past on air
+    before = [session.frame(u) for u in frames[:taken_at]]
+    assert not any(s.match.shot is not None and s.match.shot.kind == ShotKind.REPLAY for s in before)
+    choice = session.rig.take(["b2", "a2"], ShotKind.REPLAY, release=False)
+    assert choice.kind == ShotKind.REPLAY and choice.held
+    after = [session.frame(u) for u in frames[taken_at:]]
+    playing = [s for s in after if s.match.shot.kind == ShotKind.REPLAY]
+    assert playing[0] is after[0] and playing[0].cut and all(s.match.shot.held for s in playing)
+    assert playing[0].match.shot.replay.kill_time_s == KILL_S
+    assert abs(len(playing) / 30.0 - settings.replay_length_s) <= 0.15
+    back = after[len(playing)]
+    assert back.cut and not back.match.shot.held and back.match.shot.kind != ShotKind.REPLAY
+
+
+def test_a_take_of_a_replay_with_no_kill_to_show_is_refused():
+    match = Match(TEAMS, two_fronts, [], delay_s=10.0)
+    frames = list(match.frames(14.0))
+    session = Session("s", match.scene())
+    for u in frames[:390]:
+        session.frame(u)
+    session.rig.take(["a1", "b1"], ShotKind.REPLAY, release=False)
+    state = session.frame(frames[390])
+    assert "take_replay_refused" in state.flags and state.match.shot.kind != ShotKind.REPLAY
+
+
+def test_a_replay_worked_out_ahead_answers_as_one_computed_in_the_frame(monkeypatch):
+    """The camera worked out ahead in the idle moments (camera_ahead.py) steps a replay's camera at
+    its replayed moment, as the frame does: the same program with or without the idle work, and
+    replay frames took their step from it."""
+    worked_out: list[tuple[bool, bool]] = []  # (the frame's step was worked out ahead, it was a replay's)
+    holds = CameraStep.holds
+
+    def counted(step: CameraStep, moment, dt_s, shot, style, last_pose) -> bool:
+        worked_out.append((holds(step, moment, dt_s, shot, style, last_pose), shot.choice.replay is not None))
+        return worked_out[-1][0]
+
+    monkeypatch.setattr(CameraStep, "holds", counted)
+    programs = []
+    for idle in (False, True):
+        match = melee(seed=4, duration_s=40.0, delay_s=10.0, kill_every_s=7.0)
+        session = Session("s", match.scene())
+        program = []
+        for update in match.frames(40.0):
+            state = session.frame(update)
+            if state.pose is not None:
+                candidates = [(c.shot, c.pose.position_world.tolist(), c.replay_of) for c in state.match.candidates]
+                program.append((state.pose.position_world.tolist(), state.visibility, state.match.replay_of, candidates))
+            if idle:
+                session.do_deferred_work()
+        programs.append(program)
+    assert programs[0] == programs[1]
+    assert any(replay_of is not None for _, _, replay_of, _ in programs[0])
+    assert any(ahead and replay for ahead, replay in worked_out)
