@@ -3,10 +3,13 @@ view, and the placeholders that say why there is no picture."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from camdirector.infra.channels import ViewQuery
+from camdirector.pipeline.match.frame import ReplayedMoment
 from camdirector.render.snapshots import TARGET_RGB, TEAM_RGB, render_job, rigid_matrices, scene_geometry
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
@@ -105,6 +108,16 @@ def test_a_match_candidate_view_is_the_candidates_camera_and_players_show_at_the
     rows = [job.moving_ids.index(f"target:{t.id}") for t in session.targets]
     np.testing.assert_array_equal(job.positions_world[rows], [tf.position_world for tf in program])
     assert not np.allclose(job.positions_world[rows], [tf.position_world for tf in latest])
+    # a REPLAY candidate's monitor shows its kill's moment: its frame and the players there
+    kill_moment = session.rig.buffer.at(state.time_s - 0.5)
+    replay = dataclasses.replace(
+        candidate, replay_of=ReplayedMoment(kill_moment.frame, kill_moment.time_s), transforms=kill_moment.transforms
+    )
+    state.match.candidates[0] = replay
+    job = render_job(session, ViewQuery(shot="candidate", subjects=candidate.shot.subject_ids))
+    assert job.frame == kill_moment.frame and job.frame != state.frame
+    np.testing.assert_array_equal(job.positions_world[rows], [tf.position_world for tf in kill_moment.transforms])
+    assert not np.allclose(job.positions_world[rows], [tf.position_world for tf in program])
     gone = render_job(session, ViewQuery(shot="candidate", subjects=("a0", "nobody")))
     assert gone.placeholder == "no candidate shot of a0, nobody now"
     assert {p.rgb for p in scene_geometry(session).parts} == {TEAM_RGB[0], TEAM_RGB[1]}

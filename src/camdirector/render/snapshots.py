@@ -165,8 +165,10 @@ def render_job(session: Session, query: ViewQuery) -> RenderJob:
     elif query.shot == "candidate":
         wanted = set(query.subjects)
         found = [] if match is None else [c for c in match.candidates if set(c.shot.subject_ids) == wanted]
-        if found:
-            frame, pose = state.frame, found[0].pose
+        if found:  # drawn at its own moment: a REPLAY candidate's is its kill's, the others' the program's
+            view = found[0]
+            frame, pose = state.frame if view.replay_of is None else view.replay_of.frame, view.pose
+            targets = targets if view.transforms is None else view.transforms
         else:
             placeholder = (
                 f"no candidate shot of {', '.join(query.subjects)} now"

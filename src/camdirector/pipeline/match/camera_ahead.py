@@ -142,5 +142,6 @@ def candidate_views(
         shown = pose if cam is None else now_pose if asked is not None else ahead_pose
         at = moment_of(choice, moment)
         if shown is not None:
-            views.append(Candidate(shown, choice, score, None if at is moment else ReplayedMoment(at.frame, at.time_s)))
+            replay = None if at is moment else ReplayedMoment(at.frame, at.time_s)
+            views.append(Candidate(shown, choice, score, replay, at.transforms))
     return views

@@ -13,6 +13,7 @@ import enum
 from dataclasses import dataclass, field
 
 from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import GameEvent
 
 
@@ -72,6 +73,7 @@ class Candidate:
     shot: ShotChoice
     score: float  # the director's interest in it, >= 0 (comparable within one frame)
     replay_of: ReplayedMoment | None = None  # a REPLAY candidate: the moment its monitor shows (its kill)
+    transforms: list[RigidTransform] | None = None  # the players where its monitor shows them (its moment's)
 
 
 @dataclass(frozen=True)
