@@ -7,7 +7,7 @@ same match).
 The match: the first `seconds` of the 2on2 frobodm2 development demo (tests/data/real_matches),
 sent at 30 frames a second. The bridge's frames come from the demo's bytes as a QTV stream brings
 them (1460-byte segments, a TCP segment's payload), decoded by mvd_wire.MvdStream into
-qtv.QtvTracks on the demo's own clock (the stream arriving in real time) and sampled 0.1 s behind
+qtv.QtvTracks on the demo's own clock (the stream arriving in real time) and sampled interp_delay_s (0.15 s) behind
 at each frame; play-match's from the match file import-match makes of the same demo at 30 Hz
 (session_feed.frame_updates, as play-match sends them). Measured:
 - in this process, no server, medians, means and p99 over `reps` passes over the frames, microseconds:

@@ -5,7 +5,8 @@ packages neither, and CI cannot reach GitHub) and a real `camdirector serve` wit
 added as `cast qtv --map` adds it: every player (with its name) and every frag of the slice
 arrive, the program's poses come back; a source that drops mid-block or sends garbage is
 reconnected in the same session; a source that refuses the stream is a clear error, exit status 2
-from the CLI."""
+from the CLI. QtvTracks alone: the players are timed by the stream's demo time, so segments that
+arrive late or bunched leave the frames' demo times as evenly spaced as the driver's ticks."""
 
 from __future__ import annotations
 
@@ -17,13 +18,16 @@ import sys
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import camdirector_client as cd
-from camdirector.bridges.qtv import QtvRefused, QtvSettings, cast_qtv, parse_qtv_url, request_bytes
+from camdirector.bridges.qtv import QtvRefused, QtvSettings, QtvTracks, cast_qtv, parse_qtv_url, request_bytes
 from camdirector.bridges.qtv_auth import answer, md4
 from camdirector.deploy.server_process import ServerProcess
+from camdirector.geometry import quake_frame
 from camdirector.matches.import_cli import add_map
+from camdirector.matches.mvd_wire import MvdDeath, MvdPlayer, MvdStats, MvdTrack, MvdUpdate
 from tests.bridges.qtv_source import QtvSource
 
 DATA = Path(__file__).parents[1] / "data"
@@ -79,6 +83,66 @@ def _cast(server, source: QtvSource, until, timeout_s: float = 30.0, password: s
     stop.set()
     thread.join(10)
     return done["cast"], sessions, progress
+
+
+def _update(source_s: np.ndarray, died: bool = False) -> MvdUpdate:
+    """One segment's samples of a player running along x at 300 units a second; died: it dies at
+    its last sample (an obituary and its health at 0 then)."""
+    origin = np.column_stack([300.0 * source_s, np.zeros_like(source_s), np.zeros_like(source_s)])
+    track = MvdTrack(
+        time_s=source_s,
+        origin_units=origin,
+        angles_deg=np.zeros((len(source_s), 3)),
+        jump=np.zeros(len(source_s), dtype=bool),
+        dead=np.zeros(len(source_s), dtype=bool),
+    )
+    end_s = float(source_s[-1])
+    stats = {0: MvdStats(time_s=np.array([end_s]), values=np.array([[0, 0, 0, -1]]))} if died else {}
+    deaths = [MvdDeath(end_s, -1, 0, "died")] if died else []
+    return MvdUpdate(end_s, 0, [MvdPlayer(0, "runner", "")], {0: track}, stats, deaths)
+
+
+def _drive(segments: list[tuple[float, MvdUpdate]], ticks_s: np.ndarray) -> list:
+    """QtvTracks (playout 0.15 s) sampled at the driver's ticks, each segment (arrival local time,
+    update) offered once its time comes: the samples."""
+    tracks = QtvTracks(interp_delay_s=0.15, hold_s=2.0)
+    pending = iter(segments)
+    segment = next(pending, None)
+    samples = []
+    for now_s in ticks_s:
+        while segment is not None and segment[0] <= now_s:
+            tracks.offer(segment[1], float(segment[0]))
+            segment = next(pending, None)
+        samples.append(tracks.sample(float(now_s)))
+    return samples
+
+
+def test_late_and_bunched_segments_leave_the_frames_evenly_spaced_in_demo_time():
+    frames_s = np.arange(0.0, 4.0, 0.013)  # the server's frames, demo time, one a segment
+    arrival_s = frames_s + 5.0  # on time: 5 s after the demo's clock
+    late = (frames_s > 1.0) & (frames_s < 1.6)
+    arrival_s[late] += 0.12 * np.abs(np.sin(40.0 * frames_s[late]))  # late, each by its own amount
+    bunched = (frames_s > 2.0) & (frames_s < 2.1)
+    arrival_s[bunched] = 2.1 + 5.0 + 0.02  # a stall, then 0.1 s of frames at once
+    segments = [(float(a), _update(np.array([t]))) for a, t in zip(arrival_s, frames_s)]
+    samples = _drive(segments, np.arange(5.5, 8.9, 1.0 / 30.0))
+    shown_s = np.array([s.source_time_s for s in samples])
+    assert np.diff(shown_s) == pytest.approx(np.full(len(shown_s) - 1, 1.0 / 30.0), abs=1e-6)
+    expected = quake_frame.feet_world(np.column_stack([300.0 * shown_s, np.zeros((len(shown_s), 2))]))
+    assert np.array([s.positions_world[0] for s in samples]) == pytest.approx(expected, abs=1e-6)
+
+
+def test_a_death_goes_out_with_the_frame_that_shows_its_moment():
+    frames_s = np.arange(0.0, 3.0, 0.013)
+    death_s = float(frames_s[150])
+    segments = [(death_s + 5.0, _update(frames_s[:151], died=True))]  # a catch-up burst up to the death
+    segments += [(float(t) + 5.0, _update(np.array([t]))) for t in frames_s[151:]]
+    samples = _drive(segments, np.arange(death_s + 5.0, 7.8, 1.0 / 30.0))
+    sent = next(k for k, s in enumerate(samples) if s.events)
+    assert [(e.kind, e.actor_id) for e in samples[sent].events] == [("death", "p00")]
+    assert samples[sent].stats == [("p00", 0, 0, 0, -1)]
+    assert samples[sent - 1].source_time_s < death_s <= samples[sent].source_time_s
+    assert sum(len(s.events) for s in samples) == 1
 
 
 def test_request_is_the_clients():

@@ -3,15 +3,19 @@
 
 Once the feed knows its roster, the session opens on `level` with the players as capsule targets
 (evaluation/match/measure.py's body and aim point) and one StreamFrames stream carries a frame
-every 1 / rate_hz s of the monotonic clock: every player as the feed samples it at that moment
+every 1 / rate_hz s of the monotonic clock: every player as the feed samples it at that tick
 (interpolated or held, the feed's rule), its scoreboard values when they changed and the events
-since the last frame. Game time is the clock's time since the session opened. While the feed is
-stale no frame is sent (the program holds) and the tick is counted; frames go on when it comes
-back, game time going on from the clock, in the same session.
+since the last frame. Game time is the tick's time since the session opened: each tick is sampled
+at its own time on the 1 / rate_hz grid however late its thread woke (a busy machine), so the
+frames lie whole periods apart in game time as in the feed's time; a thread that woke late sends
+its tick, then the latest tick since at once, skipping any between. While the feed is stale no
+frame is sent (the program holds) and the tick is counted; frames go on when it comes back, game
+time going on from the clock, in the same session.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable, Generator, Iterator
@@ -94,9 +98,9 @@ def drive_session(
 ) -> CastCounts:
     """Runs the session (module docstring) until `stop` is set; returns the counts. Waits for the
     roster first (returns with no frames if stopped before). on_pose: each program pose and the
-    clock's time; on_frame: each frame sent (its number, game time and the sample it carries), on
-    the stream's sending thread; on_reply: each reply. DirectorError: the server refused the
-    session or the stream failed."""
+    clock's time; on_frame: each frame sent (its number, game time and the sample it carries), and
+    on_progress: the counts every progress_s, stale or not, both on the stream's sending thread;
+    on_reply: each reply. DirectorError: the server refused the session or the stream failed."""
     counts = CastCounts()
     while not tracks.wait_roster(0.1):
         if stop.is_set():
@@ -120,10 +124,13 @@ def drive_session(
 
         def updates() -> Iterator[cd.pb.FrameUpdate]:
             period_s = 1.0 / rate_hz
-            due_s = clock()
+            due_s = next_progress_s = start_s
             while not stop.wait(max(0.0, due_s - clock())):
-                due_s = max(due_s + period_s, clock() - period_s)  # a late tick is not caught up twice
-                now_s = clock()
+                now_s = due_s  # the tick's own time (module docstring), however late this runs
+                due_s += period_s * max(1, math.floor((clock() - now_s) / period_s))  # the latest missed tick, no other
+                if now_s >= next_progress_s:  # on the tick, not a reply: none comes while stale
+                    next_progress_s = now_s + progress_s
+                    on_progress(counts)
                 sample = tracks.sample(now_s)
                 if sample.stale:
                     counts.stale += 1
@@ -135,7 +142,6 @@ def drive_session(
                 yield frame_update(session, counts.frames, now_s - start_s, sample)
 
         replies = session.stream(updates())
-        next_progress_s = clock()
         try:
             for reply in replies:
                 counts.answered += 1
@@ -149,9 +155,6 @@ def drive_session(
                     counts.last_shot = f"{cd.pb.ShotKind.Name(shot.kind).removeprefix('SHOT_')} {who}".strip()
                     if on_pose is not None:
                         on_pose(reply.pose, clock())
-                if clock() >= next_progress_s:
-                    next_progress_s = clock() + progress_s
-                    on_progress(counts)
         finally:
             stop.set()
             if isinstance(replies, Generator):  # ends the stream now, not when collected

@@ -12,14 +12,20 @@ answers AUTH and CHALLENGE instead of BEGIN gets a second request on the same co
 answer (qtv_auth.py); without one, a source that asks for a password is refused the same way.
 
 The stream is MVD blocks as a recorded demo's (mvdsv SV_MVD_Record to a stream destination),
-decoded as they come by matches/mvd_wire.py's MvdStream. QtvTracks keeps the players: each
-sample is placed on the local clock at its arrival less how far its demo time lies behind the
-newest block's, so a source's catch-up burst lands in the past and a live stream in real time;
-sampled at t - interp_delay_s, interpolated between the samples around it except into a jump
-(teleport, respawn: mvd_wire's), held beyond the newest; stale after hold_s without any. Each
-sample also says the stream's demo time it shows (the samples' demo times interpolated the same
-way, held at the ends): a recorded program (program_record.py) is placed on the match file of the
-same demo by it.
+decoded as they come by matches/mvd_wire.py's MvdStream. QtvTracks keeps the players, timed by
+the stream's own clock (the demo time its blocks' time deltas add up to), not by when their
+bytes arrived: stream_clock.py maps demo time onto the local clock by the least delay of the
+recent arrivals, rising slowly (a jitter buffer), so a segment that comes late or several that
+come bunched keep the players' motion at the pace the server recorded it; a catch-up burst
+brings the mapping down to its newest block at once (the burst lands in the past), and each new
+connection, whose demo time starts anew, re-anchors it. Each sample is placed at its demo time's local time;
+the players are sampled at t - interp_delay_s (the playout delay: a late segment's margin),
+interpolated between the samples around it except into a jump (teleport, respawn: mvd_wire's),
+held beyond the newest; stale after hold_s without any arrival. Each sample also says the
+stream's demo time it shows (the samples' demo times interpolated the same way, held at the
+ends): a recorded program (program_record.py) is placed on the match file of the same demo by it.
+Stat changes and obituaries are placed by their demo time the same way and go out with the first
+frame that shows their moment.
 The roster is the first update's players (slot order: ids p00, p01, ..., the demo importer's;
 teams by quakeworld_mvd.player_teams); a slot that starts playing later is not in the session.
 Obituaries become events: a kill (attacker, victim; a suicide or a death to the world names the
@@ -54,6 +60,7 @@ from camdirector.bridges import qtv_auth
 from camdirector.bridges.gsi_tracks import DerivedEvent, Sample
 from camdirector.bridges.live_session import CastCounts, drive_session
 from camdirector.bridges.program_record import ProgramRecorder
+from camdirector.bridges.stream_clock import StreamClock, StreamClockSettings
 from camdirector.evaluation.match.match_file import MatchPlayer
 from camdirector.geometry import quake_frame
 from camdirector.matches.mvd_wire import MvdError, MvdStream, MvdUpdate
@@ -72,7 +79,7 @@ class QtvSettings:
 
     rate_hz: float = 30.0  # frames sent to the server a second. [1, 120]
     delay_s: float = 10.0  # the broadcast delay the caster sets, s. [0, 300]
-    interp_delay_s: float = 0.1  # players shown this far behind the newest sample, s: a server frame or more on each side. [0, 2]
+    interp_delay_s: float = 0.15  # players shown this far behind the stream clock (stream_clock.py): jitter absorbed, s. [0, 2]
     hold_s: float = 2.0  # players held this long without a sample, then stale (no frame sent), s. [0.1, 60]
     connect_timeout_s: float = 5.0  # TCP connect and the answer's header, s. [0.1, 60]
     read_timeout_s: float = 10.0  # no byte for this long: the source is gone, reconnect, s. [0.1, 300]
@@ -80,6 +87,7 @@ class QtvSettings:
     backoff_max_s: float = 5.0  # longest wait between reconnects, s. [backoff_s, 300]
     client_name: str = "camdirector"  # the USERINFO name the source shows for us; 1 to 31 printable characters
     password: str = ""  # the source's qtv_password; "" sends none. At most 255 printable characters, no quote
+    stream_clock: StreamClockSettings = field(default_factory=StreamClockSettings)  # demo time onto the local clock
 
     def __post_init__(self):
         checks = [
@@ -231,15 +239,16 @@ class QtvTracks:
     """The live players (module docstring): offer(update, now_s) from the receiver's thread,
     sample(now_s) from the driver's."""
 
-    def __init__(self, interp_delay_s: float, hold_s: float):
+    def __init__(self, interp_delay_s: float, hold_s: float, stream_clock: StreamClockSettings = StreamClockSettings()):
         self.interp_delay_s, self.hold_s = interp_delay_s, hold_s
+        self.clock = StreamClock(stream_clock)
         self._lock = threading.Lock()
         self._roster_ready = threading.Event()
         self.roster: list[MatchPlayer] = []
         self._players: dict[int, _Player] = {}  # slot -> state
         self._ids: dict[int, str] = {}
-        self._changed: set[int] = set()
-        self._events: list[DerivedEvent] = []
+        self._stats_due: list[tuple[float, int, tuple[int, int, int, int]]] = []  # (local t, slot, values) not shown yet
+        self._events_due: list[tuple[float, DerivedEvent]] = []  # (local t, event) not sent yet
         self._last_offer_s = -math.inf
         self._demo_clock: deque = deque(maxlen=RECENT_SAMPLES)  # (local t, demo time), s, of the newest samples
         self.kills: list[tuple[str, str]] = []  # (attacker, victim) ids of every kill event, in order
@@ -247,12 +256,20 @@ class QtvTracks:
     def wait_roster(self, timeout_s: float) -> bool:
         return self._roster_ready.wait(timeout_s)
 
+    def new_stream(self) -> None:
+        """A new connection's stream follows: its demo time starts anew (re-anchors the clock)."""
+        with self._lock:
+            self.clock.reanchor()
+
     def offer(self, update: MvdUpdate, now_s: float) -> None:
+        """Takes in what a segment that arrived at local time now_s decoded."""
         with self._lock:
             if not self.roster and update.players:
                 self._fix_roster(update)
             if not self.roster:
                 return
+            if update.tracks:
+                self.clock.arrive(update.time_s, now_s)
             for slot, track in update.tracks.items():
                 player = self._players.get(slot)
                 if player is None:
@@ -260,7 +277,7 @@ class QtvTracks:
                 self._last_offer_s = now_s
                 feet = quake_frame.feet_world(track.origin_units)
                 for k in range(len(track.time_s)):
-                    t = now_s - (update.time_s - float(track.time_s[k]))
+                    t = self.clock.local_of(float(track.time_s[k]))
                     if player.rows and t <= player.rows[-1][0]:
                         continue  # a reconnect's burst of what was already had
                     player.rows.append((t, *feet[k], float(track.angles_deg[k, 1]), bool(track.jump[k])))
@@ -268,11 +285,10 @@ class QtvTracks:
                         self._demo_clock.append((t, float(track.time_s[k])))
             for slot, stats in update.stats.items():
                 if slot in self._players:
-                    health, armor, items, frags = (int(v) for v in stats.values[-1])
-                    self._players[slot].stats = (health, armor, items, frags)
-                    self._changed.add(slot)
+                    for time_s, (health, armor, items, frags) in zip(stats.time_s.tolist(), stats.values.tolist()):
+                        self._stats_due.append((self.clock.local_of(time_s), slot, (health, armor, items, frags)))
             for death in update.deaths:
-                self._note_death(death.killer, death.victim)
+                self._note_death(death.killer, death.victim, self.clock.local_of(death.time_s))
 
     def _fix_roster(self, update: MvdUpdate) -> None:
         for k, ((team, team_name), p) in enumerate(zip(player_teams(update), update.players, strict=True)):
@@ -282,7 +298,8 @@ class QtvTracks:
             self.roster.append(quake_player(pid, p.name, team, team_name))
         self._roster_ready.set()
 
-    def _note_death(self, killer: int, victim: int) -> None:
+    def _note_death(self, killer: int, victim: int, t: float) -> None:
+        """The death's event, due at local time t (sent with the frame that shows its moment)."""
         killer_id, victim_id = self._ids.get(killer), self._ids.get(victim)
         if victim_id is not None and killer_id is not None:
             kind, actor, other = "kill", killer_id, victim_id
@@ -295,8 +312,8 @@ class QtvTracks:
         if kind == "kill":
             self.kills.append((actor, other))
         rows = self._players[victim if victim_id is not None else killer].rows
-        where = np.array(rows[-1][1:4]) if rows else np.zeros(3)
-        self._events.append(DerivedEvent(kind, actor, other, where))
+        where = _at(rows, t)[0] if rows else np.zeros(3)
+        self._events_due.append((t, DerivedEvent(kind, actor, other, where)))
 
     def sample(self, now_s: float) -> Sample:
         with self._lock:
@@ -310,18 +327,24 @@ class QtvTracks:
                 position, yaw = _at(player.rows, at)
                 positions.append(position)
                 yaws.append(yaw)
-            stats = [(self._ids[s], *self._players[s].stats) for s in sorted(self._changed)]
-            events = self._events
+            stats, events = [], []
+            if not stale:  # while stale, what is due waits for the frames to go on
+                changed = set()
+                for _, slot, values in [d for d in self._stats_due if d[0] <= at]:
+                    self._players[slot].stats = values
+                    changed.add(slot)
+                self._stats_due = [d for d in self._stats_due if d[0] > at]
+                stats = [(self._ids[s], *self._players[s].stats) for s in sorted(changed)]
+                events = [e for t, e in self._events_due if t <= at]
+                self._events_due = [(t, e) for t, e in self._events_due if t > at]
             clock = np.array(self._demo_clock).reshape(-1, 2)
             demo_s = float(np.interp(at, clock[:, 0], clock[:, 1])) if len(clock) else None
-            if not stale:
-                self._changed, self._events = set(), []
             return Sample(
                 ids=ids,
                 positions_world=np.array(positions, dtype=np.float64).reshape(-1, 3),
                 yaw_deg=np.array(yaws, dtype=np.float64),
-                stats=stats if not stale else [],
-                events=events if not stale else [],
+                stats=stats,
+                events=events,
                 stale=stale or not ids,
                 source_time_s=demo_s,
             )
@@ -418,6 +441,7 @@ class QtvReceiver:
     def _read(self, sock: socket.socket, first: bytes) -> str:
         """Feeds the stream to the tracks until it ends; what ended it, as an error line."""
         decoder = MvdStream()
+        self.tracks.new_stream()
         chunk = first
         try:
             while True:
@@ -465,7 +489,7 @@ def cast_qtv(
     written; QtvError: the source refused the stream or could not be reached first;
     DirectorError: the server refused the session or its stream failed."""
     address = parse_qtv_url(url)
-    tracks = QtvTracks(settings.interp_delay_s, settings.hold_s)
+    tracks = QtvTracks(settings.interp_delay_s, settings.hold_s, settings.stream_clock)
     recorder = None if program_out is None else ProgramRecorder(program_out)
 
     def opened(session_id: str) -> None:

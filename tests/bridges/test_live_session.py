@@ -1,0 +1,109 @@
+"""bridges/live_session.py: the driver's progress goes on while the feed is stale (no frame is
+sent then, so no reply comes to carry it), counting the stale ticks."""
+
+from __future__ import annotations
+
+import threading
+import time
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+
+import camdirector_client as cd
+from camdirector.bridges.gsi_tracks import Sample
+from camdirector.bridges.live_session import drive_session
+from camdirector.matches.quakeworld_mvd import quake_player
+
+FRESH_SAMPLES = 3  # the feed goes stale after this many samples
+
+
+class _Tracks:
+    """One player, fresh for FRESH_SAMPLES samples, then stale for good."""
+
+    roster = [quake_player("p00", "runner", 0, "")]
+
+    def __init__(self):
+        self.samples = 0
+
+    def wait_roster(self, timeout_s: float) -> bool:
+        return True
+
+    def sample(self, now_s: float) -> Sample:
+        self.samples += 1
+        stale = self.samples > FRESH_SAMPLES
+        return Sample(["p00"], np.zeros((1, 3)), np.zeros(1), [], [], stale)
+
+
+class _Session:
+    """A session that answers each frame with an empty reply."""
+
+    id = "s1"
+
+    def frame_update(self, frame: int, time_s: float, *, packed) -> cd.pb.FrameUpdate:
+        return cd.wire.frame_update(self.id, frame, time_s, packed=packed)
+
+    def stream(self, updates):
+        for update in updates:
+            yield cd.pb.CameraUpdate(frame=update.frame)
+
+
+class _Client:
+    @contextmanager
+    def create_session(self, **kwargs):
+        yield _Session()
+
+
+def test_progress_goes_on_while_the_feed_is_stale():
+    stop = threading.Event()
+    seen: list[tuple[int, int]] = []  # (frames, stale ticks) at each progress
+
+    def on_progress(counts) -> None:
+        seen.append((counts.frames, counts.stale))
+        if counts.stale >= 5:
+            stop.set()
+
+    guard = threading.Timer(20.0, stop.set)  # a driver that never reports would hang the test
+    guard.start()
+    try:
+        counts = drive_session(
+            _Client(),
+            _Tracks(),
+            rate_hz=100.0,
+            delay_s=1.0,
+            level="any",
+            director="planned",
+            stop=stop,
+            on_progress=on_progress,
+            progress_s=0.0,
+        )
+    finally:
+        guard.cancel()
+    assert counts.frames == FRESH_SAMPLES
+    assert seen[-1] == (FRESH_SAMPLES, 5)
+
+
+def test_frames_lie_on_the_tick_grid_in_game_time_however_late_the_driver_wakes():
+    stop = threading.Event()
+    stalled_s = [0.0]  # added to the clock: the driver's thread "slept" that much more
+    sent: list[float] = []
+
+    def clock() -> float:
+        return time.monotonic() + stalled_s[0]
+
+    def on_frame(frame: int, game_s: float, sample) -> None:
+        sent.append(game_s)
+        if frame in (5, 9):
+            stalled_s[0] += 0.123  # woke 3.69 periods late
+        if frame == 20:
+            stop.set()
+
+    tracks = _Tracks()
+    tracks.samples = -1000  # fresh throughout
+    drive_session(
+        _Client(), tracks, rate_hz=30.0, delay_s=1.0, level="any", director="planned", stop=stop, clock=clock, on_frame=on_frame
+    )
+    ticks = np.array(sent) * 30.0
+    assert ticks == pytest.approx(np.round(ticks), abs=1e-6)  # every frame on the 1/30 s grid
+    assert np.all(np.diff(np.round(ticks)) >= 1)
+    assert np.round(ticks).max() > len(sent)  # the ticks missed while stalled were skipped
