@@ -194,18 +194,23 @@ def test_a_refused_stream_is_an_error(frobodm2_server, demo):
     with QtvSource(demo, end_s=SLICE_END_S, refuse="no stream selected") as source:
         with pytest.raises(QtvRefused, match="refused the stream: PERROR: no stream selected"):
             _cast_raising(frobodm2_server, source)
-        done = subprocess.run(
-            [sys.executable, "-m", "camdirector.__main__", "cast", "qtv", source.url, "--level", "frobodm2"]
-            + ["--server", frobodm2_server.url("grpc")],
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-            timeout=60,
-            env=os.environ,
-        )
+        done = _cast_cli(frobodm2_server, source)
     assert done.returncode == 2, done.stderr
     assert f"camdirector cast qtv: {source.url} refused the stream: PERROR: no stream selected" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def _cast_cli(server, source, *flags: str) -> subprocess.CompletedProcess:
+    """`camdirector cast qtv` of the source on the frobodm2 level, run to its end."""
+    return subprocess.run(
+        [sys.executable, "-m", "camdirector.__main__", "cast", "qtv", source.url, "--level", "frobodm2"]
+        + ["--server", server.url("grpc"), *flags],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+        env=os.environ,
+    )
 
 
 def _cast_raising(server, source):
@@ -251,15 +256,7 @@ def test_a_passworded_source_is_answered(frobodm2_server, demo, methods, method)
 )
 def test_a_wrong_or_missing_password_is_a_clear_error(frobodm2_server, demo, flags, said):
     with QtvSource(demo, end_s=SLICE_END_S, password="hunter2") as source:
-        done = subprocess.run(
-            [sys.executable, "-m", "camdirector.__main__", "cast", "qtv", source.url, "--level", "frobodm2"]
-            + ["--server", frobodm2_server.url("grpc"), *flags],
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-            timeout=60,
-            env=os.environ,
-        )
+        done = _cast_cli(frobodm2_server, source, *flags)
     assert done.returncode == 2, done.stderr
     assert f"camdirector cast qtv: {source.url} {said}" in done.stderr
     assert "Traceback" not in done.stderr
