@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from camdirector.geometry.bsp import bsp_entities, from_bsp
-from camdirector.geometry.inside import LevelInterior, Place, sphere_directions
+from camdirector.geometry.inside import LevelInterior, Place, open_above, sphere_directions
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.geometry.quake_frame import points_to_world
 
@@ -76,6 +76,29 @@ def test_an_open_level_reads_inside_above_its_floor_though_most_rays_escape():
         Place.SOLID,  # in the floor
         Place.SOLID,  # in the wall
     ]
+
+
+def terrain() -> TriMesh:
+    """An outdoor terrain: a 40 x 40 m ground with a 6 m hill (a pyramid), every face turned up,
+    nothing above it (Recast's undulating is such a level)."""
+    vertices = np.array(
+        [[-20.0, 0.0, -20.0], [20.0, 0.0, -20.0], [20.0, 0.0, 20.0], [-20.0, 0.0, 20.0], [0.0, 6.0, 0.0]], dtype=np.float64
+    )
+    faces = np.array([[0, 4, 1], [1, 4, 2], [2, 4, 3], [3, 4, 0]], dtype=np.int32)  # counter-clockwise seen from above
+    return TriMesh(vertices, faces)
+
+
+def test_a_level_open_to_the_sky_has_no_top_but_one_with_ceilings_keeps_its_box():
+    sky = LevelInterior(terrain())
+    assert open_above(terrain()) and not open_above(room_with_slab())
+    # above the hill's top: the sky a camera may stand in; below the ground or beside the level: outside
+    assert sky.places([[10.0, 9.0, 10.0], [0.0, 8.0, 0.0], [10.0, -1.0, 10.0], [30.0, 2.0, 0.0]]).tolist() == [
+        Place.INSIDE,
+        Place.INSIDE,
+        Place.OUTSIDE,
+        Place.OUTSIDE,
+    ]
+    assert LevelInterior(room_with_slab()).places([[0.0, 6.0, 0.0]]).tolist() == [Place.OUTSIDE]
 
 
 def test_directions_are_unit_and_spread_over_the_sphere():
