@@ -3,8 +3,13 @@
 
 use pyo3::prelude::*;
 
+mod rotation;
+mod toric;
+mod toric_py;
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    toric_py::register(m)?;
     Ok(())
 }
