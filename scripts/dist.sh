@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # scripts/dist.sh OUT_DIR (make dist): the release artifacts of this checkout, each named with the
 # project's one version (CHANGELOG.md):
-#   camdirector-V.tar.gz, camdirector-V-py3-none-any.whl                 the server
+#   camdirector-V.tar.gz, camdirector-V-cp311-abi3-linux_ARCH.whl        the server, camdirector._native
+#                                                                        compiled (native/: cargo on PATH)
 #   camdirector_proto-V.tar.gz, camdirector_proto-V-py3-none-any.whl     the wire code
 #   camdirector_client-V.tar.gz, camdirector_client-V-py3-none-any.whl   the Python SDK
 #   camdirector-cpp-sdk-V-linux-ARCH.tar.gz                              the C/C++ SDK's install tree
@@ -22,7 +23,8 @@ VERSION=$("$PYTHON" -c "import tomllib; print(tomllib.load(open('$ROOT/pyproject
 STAGE=$(mktemp -d)
 trap 'rm -rf "$STAGE"' EXIT
 tar -C "$ROOT" --exclude='*.egg-info' --exclude=__pycache__ --exclude=build \
-    -cf - pyproject.toml README.md CHANGELOG.md src proto client_sdk | tar -C "$STAGE" -xf -
+    --exclude=native/target --exclude='src/camdirector/_native*.so' \
+    -cf - pyproject.toml MANIFEST.in README.md CHANGELOG.md src native proto client_sdk | tar -C "$STAGE" -xf -
 for project in "$STAGE/proto" "$STAGE/client_sdk/python" "$STAGE"; do
   "$PYTHON" -m build --outdir "$OUT" "$project"
 done

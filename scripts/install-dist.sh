@@ -3,7 +3,8 @@
 # and installs it (not editable) into PYTHON's environment with its pip. DIST_DIR (made if missing;
 # must be empty) gets wheels of proto/ (camdirector-proto) and client_sdk/python/ (camdirector-client),
 # and the main project's sdist plus its wheel built FROM that sdist (so a file the sdist leaves out
-# fails here). docker/Dockerfile runs it (tests/deploy/test_image.py builds that image).
+# fails here; that wheel compiles camdirector._native from native/, so cargo must be on PATH).
+# docker/Dockerfile runs it (tests/deploy/test_image.py builds that image).
 #
 # --prebuilt: nothing is built; DIST_DIR already holds the three wheels (scripts/dist.sh's output,
 # where every wheel is built from its sdist; other files there are ignored) and only the install step
@@ -33,8 +34,11 @@ if [ "$PREBUILT" = 0 ]; then
 
   STAGE=$(mktemp -d)
   trap 'rm -rf "$STAGE"' EXIT
+  # native/: the crate the main wheel compiles (a Rust toolchain: cargo); not its cargo output, nor
+  # the module an editable install built into src/
   tar -C "$ROOT" --exclude='*.egg-info' --exclude=__pycache__ --exclude=build \
-      -cf - pyproject.toml README.md src proto client_sdk/python | tar -C "$STAGE" -xf -
+      --exclude=native/target --exclude='src/camdirector/_native*.so' \
+      -cf - pyproject.toml MANIFEST.in README.md src native proto client_sdk/python | tar -C "$STAGE" -xf -
 
   "$BUILD_PYTHON" -m build --wheel --outdir "$DIST" "$STAGE/proto"
   "$BUILD_PYTHON" -m build --wheel --outdir "$DIST" "$STAGE/client_sdk/python"

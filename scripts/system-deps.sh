@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # System libraries the project needs beyond PyPI: Mesa's EGL (offscreen OpenGL, llvmpipe on
-# machines without a GPU). Installs them with apt-get when missing and we are root.
+# machines without a GPU). Installs them with apt-get when missing and we are root. A Rust
+# toolchain (cargo) must be there already: without it this fails at once, naming rustup.
 # `system-deps.sh --tests` (make test) also wants what the tests drive: Debian's Chromium for the
 # dashboard's browser tests, and the C/C++ SDK's toolchain (client_sdk/cpp: CMake, g++, gRPC and
 # protobuf for C++; `--cpp` asks for that one alone); without root those are only reported
@@ -10,6 +11,24 @@
 # runc and debootstrap, and podman-compose for the cluster in containers (deploy/compose.py); and
 # Node with npm for the TypeScript SDK.
 set -euo pipefail
+# camdirector._native (native/) compiles on every install from source (make's editable install,
+# scripts/install-dist.sh): cargo must be on PATH, at least pyo3 0.30's rust-version (1.85; the
+# locked crates ask no more). Debian's Rust is too old (bookworm has 1.63), so it is not installed
+# here: the user installs it with rustup. `--cpp` and `--cluster` alone build nothing of it.
+RUST_MIN=1.85
+if [ $# -eq 0 ] || [ "$1" = "--tests" ]; then
+  if ! command -v cargo >/dev/null; then
+    echo "cargo is missing: camdirector's compiled module (native/) needs a Rust toolchain, $RUST_MIN or later;" \
+         "install it with rustup (https://rustup.rs) and put ~/.cargo/bin on PATH" >&2
+    exit 1
+  fi
+  cargo_version=$(cargo --version | cut -d' ' -f2)
+  if [ "$(printf '%s\n' "$RUST_MIN" "$cargo_version" | sort -V | head -1)" != "$RUST_MIN" ]; then
+    echo "cargo $cargo_version is older than $RUST_MIN, which camdirector's compiled module (native/) needs;" \
+         "update it with rustup (rustup update stable; https://rustup.rs)" >&2
+    exit 1
+  fi
+fi
 need=()
 ldconfig -p | grep -q 'libEGL.so.1' || need+=(libegl1)
 ldconfig -p | grep -q 'libEGL_mesa.so.0' || need+=(libegl-mesa0 libgl1-mesa-dri libgbm1)

@@ -172,11 +172,14 @@ def release_dist(tmp_path_factory) -> Path:
     assert not out.resolve().is_relative_to(ROOT), "the distributions must be built outside the checkout"
     # the image only where podman runs (root); tests/test_dist.py says so where it is left out
     no_image = {"NO_IMAGE": "1"} if why_no_image() else {}
+    # cargo's folder too (rustup puts it in ~/.cargo/bin): the server's wheel compiles camdirector._native
+    cargo = shutil.which("cargo")
+    path = "/usr/bin:/bin:/usr/sbin:/sbin" + (f":{Path(cargo).parent}" if cargo else "")
     done = subprocess.run(
         ["bash", str(ROOT / "scripts" / "dist.sh"), str(out)],
         capture_output=True,
         text=True,
-        env={"PATH": "/usr/bin:/bin:/usr/sbin:/sbin", "PYTHON": sys.executable, **no_image},
+        env={"PATH": path, "PYTHON": sys.executable, **no_image},
     )
     assert done.returncode == 0, f"scripts/dist.sh failed:\n{done.stdout[-5000:]}\n{done.stderr[-5000:]}"
     return out

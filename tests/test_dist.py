@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tarfile
 import zipfile
+from pathlib import Path
 
 import pytest
 
@@ -22,6 +23,7 @@ from camdirector.version import VERSION
 from tests.conftest import why_no_image
 
 IMAGE = f"camdirector-image-{VERSION}-linux-{platform.machine()}.tar"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def image_or_skip() -> None:
@@ -33,13 +35,16 @@ def image_or_skip() -> None:
         pytest.skip(f"make dist left the image out: {why}")
 
 
+# The server's wheel carries camdirector._native compiled for the stable ABI (CPython 3.11 and
+# later) on this platform; the other two are pure Python.
+SERVER_WHEEL = f"camdirector-{VERSION}-cp311-abi3-linux_{platform.machine()}.whl"
+PURE_WHEELS = {name: f"{name}-{VERSION}-py3-none-any.whl" for name in ("camdirector_proto", "camdirector_client")}
+
+
 def test_every_artifact_is_named_with_the_version_and_checksummed(release_dist):
     sdk = f"camdirector-cpp-sdk-{VERSION}-linux-{platform.machine()}.tar.gz"
-    expected = {
-        f"{name}-{VERSION}{suffix}"
-        for name in ("camdirector", "camdirector_proto", "camdirector_client")
-        for suffix in (".tar.gz", "-py3-none-any.whl")
-    } | {sdk, "SHA256SUMS"}
+    sdists = {f"{name}-{VERSION}.tar.gz" for name in ("camdirector", "camdirector_proto", "camdirector_client")}
+    expected = sdists | set(PURE_WHEELS.values()) | {SERVER_WHEEL, sdk, "SHA256SUMS"}
     if why_no_image() is None:
         expected.add(IMAGE)
     assert {p.name for p in release_dist.iterdir()} == expected
@@ -54,14 +59,32 @@ def test_every_artifact_is_named_with_the_version_and_checksummed(release_dist):
 
 
 def test_the_wheels_and_sdists_hold_their_sources_at_the_version(release_dist):
-    for name in ("camdirector", "camdirector_proto", "camdirector_client"):
-        with zipfile.ZipFile(release_dist / f"{name}-{VERSION}-py3-none-any.whl") as wheel:
+    for name, wheel_name in {"camdirector": SERVER_WHEEL, **PURE_WHEELS}.items():
+        with zipfile.ZipFile(release_dist / wheel_name) as wheel:
             metadata = wheel.read(f"{name}-{VERSION}.dist-info/METADATA").decode()
         assert f"\nVersion: {VERSION}\n" in metadata
     with tarfile.open(release_dist / f"camdirector-{VERSION}.tar.gz") as sdist:
         names = sdist.getnames()
     assert f"camdirector-{VERSION}/src/camdirector/access/guard.py" in names
     assert not [n for n in names if "__pycache__" in n]  # staged sources, not the checkout's leftovers
+
+
+def test_the_server_sdist_holds_the_crate_and_its_wheel_the_compiled_module(release_dist):
+    """The wheel is built from the sdist, so the crate's sources must be in it (MANIFEST.in), and
+    never cargo's output nor a module compiled in the checkout."""
+    top = f"camdirector-{VERSION}/"
+    with tarfile.open(release_dist / f"camdirector-{VERSION}.tar.gz") as sdist:
+        names = sdist.getnames()
+        crate = {m.name.removeprefix(top) for m in sdist.getmembers() if m.name.startswith(top + "native/") and m.isfile()}
+    checkout = {p.relative_to(ROOT).as_posix() for p in (ROOT / "native").rglob("*") if p.is_file() and "target" not in p.parts}
+    assert crate == checkout and {"native/Cargo.toml", "native/Cargo.lock", "native/src/lib.rs"} <= crate
+    assert not [n for n in names if n.endswith(".so")]
+    with zipfile.ZipFile(release_dist / SERVER_WHEEL) as wheel:
+        modules = [n for n in wheel.namelist() if n.startswith("camdirector/_native")]
+        wheel_file = wheel.read(f"camdirector-{VERSION}.dist-info/WHEEL").decode()
+    tags = [line for line in wheel_file.splitlines() if line.startswith("Tag:")]
+    assert modules == ["camdirector/_native.abi3.so"]
+    assert tags == [f"Tag: cp311-abi3-linux_{platform.machine()}"]
 
 
 def test_the_cpp_sdk_archive_is_an_install_tree_whose_library_says_its_version(release_dist, tmp_path):

@@ -122,10 +122,22 @@ print(json.dumps({"files": files, "path": list(camdirector.__path__),
         assert Path(where).is_relative_to(installed.site_packages), f"{where} is not in the venv's site-packages"
         assert not Path(where).resolve().is_relative_to(ROOT), where
     for name, direct_url in found["direct_url"].items():
-        wheel = installed.dist / f"{name.replace('-', '_')}-{VERSION}-py3-none-any.whl"  # built from its sdist
+        (wheel,) = installed.dist.glob(f"{name.replace('-', '_')}-{VERSION}-*.whl")  # built from its sdist
         assert "archive_info" in direct_url and direct_url["url"] == wheel.as_uri(), f"{name}: {direct_url}"
         assert not direct_url.get("dir_info", {}).get("editable"), f"{name} is an editable install"
     assert (installed.venv / "bin" / "camdirector").is_file()
+
+
+def test_the_compiled_module_is_imported_from_the_venv(installed):
+    """camdirector._native, compiled into the wheel (abi3), loads from the venv's site-packages:
+    not the module an editable install built into the checkout's src/."""
+    found = installed.python_json("""
+import json
+import camdirector._native as native
+print(json.dumps({"file": native.__file__, "version": native.__version__}))
+""")
+    assert Path(found["file"]) == installed.site_packages / "camdirector" / "_native.abi3.so", found
+    assert found["version"] == VERSION
 
 
 def test_every_module_imports_with_the_declared_dependencies_only(installed):

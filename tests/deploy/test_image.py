@@ -178,6 +178,16 @@ def test_grpc_health_and_the_image_health_check(served):
     assert served.container.exec("id", "-u").strip() == str(USER_ID)
 
 
+def test_the_compiled_module_is_in_the_venv_and_no_toolchain_in_the_image(served):
+    """The build stage compiled camdirector._native into the wheel; the final stage copied only the
+    venv, so neither Rust nor a C compiler came with it."""
+    where = served.container.exec("python", "-c", "import camdirector._native as n; print(n.__file__, n.__version__)").split()
+    assert where == ["/opt/camdirector/venv/lib/python3.11/site-packages/camdirector/_native.abi3.so", VERSION]
+    tools = "cargo rustc rustup gcc cc"
+    found = served.container.exec("sh", "-c", f"for t in {tools}; do command -v $t; done; ls -d /opt/*")
+    assert found.split() == ["/opt/camdirector"], found
+
+
 def test_a_level_added_over_rest_is_listed(served, corridor_level):
     assert [level["name"] for level in served.client.get("/v1/levels").json()["levels"]] == [corridor_level]
     checks.tracks_session_on(served, corridor_level)
