@@ -3,6 +3,8 @@
 
 use pyo3::prelude::*;
 
+mod bvh;
+mod bvh_py;
 mod rotation;
 mod toric;
 mod toric_py;
@@ -11,5 +13,6 @@ mod toric_py;
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     toric_py::register(m)?;
+    bvh_py::register(m)?;
     Ok(())
 }

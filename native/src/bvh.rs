@@ -1,0 +1,467 @@
+//! A deterministic ray-casting BVH over one triangle soup: the compiled frame path's stand-in for
+//! Embree (docs/frame_path.md, "Rust through PyO3"). Embree picks kernels, builders and traversal
+//! by CPU at run time, so its hit distances may differ in the last bits between machines; this
+//! one gives the same bits on every x86-64 machine for the same inputs:
+//!
+//! - scalar f64 arithmetic everywhere (the Python reference is float64, and step 3 compares with
+//!   it to 1e-9 m; f32 would be no more deterministic, only less precise; node boxes are stored
+//!   in f32 rounded outward, to halve the tree's memory, and widened exactly to f64 when tested),
+//!   no `mul_add`, no threads, no CPU-specific code; Rust never contracts `a * b + c` into an FMA;
+//! - a binned SAH build over the centres of the triangles' boxes, in a fixed order: triangles keep
+//!   their index order inside every node (stable partitions; a node whose centres all coincide is
+//!   halved in that order), ties between split candidates go to the lowest axis, then lowest bin;
+//! - the closest hit is the least (t, triangle index): a hit at the same t as the best one is
+//!   still visited, so the answer does not depend on the traversal order.
+//!
+//! The ray/triangle test is Woop, Benthin and Wald's watertight test ("Watertight Ray/Triangle
+//! Intersection", JCGT 2(1), 2013, section 3, figure 3's algorithm without backface culling). A
+//! vertex is moved into the ray's frame alone (shear so the ray runs along +z), so two triangles
+//! that share an edge see its endpoints with the same bits, and the edge function of that edge is
+//! the same products in the other order (u = cx by - cy bx against -(bx cy - by cx)): exactly
+//! opposite. A ray through the shared edge gets a zero on both sides and hits both, never neither.
+//! No epsilon anywhere: an edge function of exactly 0 counts as inside, a determinant of exactly 0
+//! (a ray in the triangle's plane, or a degenerate triangle) as a miss. The paper's fallback to
+//! double precision when an edge function is 0 in float is moot here: the test already runs in
+//! f64. Boxes are met with Ize's conservative slab test ("Robust BVH Ray Traversal", JCGT 2(2),
+//! 2013): each slab's exit scaled by 1 + 2 gamma(3), so rounding never culls a box the ray enters.
+//! Traversal tests both children's boxes at their parent and goes to the nearer first.
+//!
+//! Distances are ray parameters in units of the direction's length (Embree's convention): the hit
+//! point is o + t d. A hit needs 0 <= t <= t_max: a face through the origin is met at t = 0, as
+//! Embree's (tnear = 0, inclusive) is.
+
+use std::ops::Range;
+
+/// Triangles per leaf at most (past it a node is split whatever the SAH says), and the fewest a
+/// node must hold to be considered for a split. Leaf sizes 4-8 and traversal costs 0.3-1 measured
+/// the same on zdm2 (load_tests/bvh_native.py): memory, not the tree's shape, bounds the speed.
+const MAX_LEAF: usize = 8;
+const MIN_SPLIT: usize = 3;
+/// SAH bins per axis: 16 is the usual trade between build time and tree quality.
+const BINS: usize = 16;
+/// SAH cost of one traversal step relative to one triangle test.
+const TRAVERSAL_COST: f64 = 1.0;
+/// Ize's 1 + 2 gamma(3) for f64 (unit roundoff 2^-53): the widening of each slab's exit.
+const SLAB_WIDEN: f64 = 1.0 + 2.0 * (3.0 * f64::EPSILON * 0.5) / (1.0 - 3.0 * f64::EPSILON * 0.5);
+
+#[derive(Clone, Copy)]
+struct Aabb {
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Aabb {
+    const EMPTY: Aabb = Aabb {
+        lo: [f64::INFINITY; 3],
+        hi: [f64::NEG_INFINITY; 3],
+    };
+
+    fn grow(&mut self, other: &Aabb) {
+        for a in 0..3 {
+            self.lo[a] = self.lo[a].min(other.lo[a]);
+            self.hi[a] = self.hi[a].max(other.hi[a]);
+        }
+    }
+
+    fn grow_point(&mut self, p: &[f64; 3]) {
+        self.grow(&Aabb { lo: *p, hi: *p });
+    }
+
+    /// Half the surface area (the SAH only compares areas); 0 for an empty box.
+    fn half_area(&self) -> f64 {
+        let d = [
+            self.hi[0] - self.lo[0],
+            self.hi[1] - self.lo[1],
+            self.hi[2] - self.lo[2],
+        ];
+        if d[0] < 0.0 {
+            return 0.0;
+        }
+        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+}
+
+/// A node: its box in f32 rounded outward (32 bytes a node, two to a cache line: the levels' trees
+/// outgrow the caches), then either a leaf (`count` > 0 triangles from slot `first`) or an inner
+/// node (`count` = 0, children at `first` and `first + 1`).
+#[derive(Clone, Copy)]
+struct Node {
+    lo: [f32; 3],
+    hi: [f32; 3],
+    first: u32,
+    count: u32,
+}
+
+impl Node {
+    const EMPTY: Node = Node {
+        lo: [0.0; 3],
+        hi: [0.0; 3],
+        first: 0,
+        count: 0,
+    };
+
+    /// The f32 box that holds `bounds`: each bound rounded to the nearest f32, then one step
+    /// outward if that went inward (conversions round the same way on every machine).
+    fn bound(&mut self, bounds: &Aabb) {
+        for a in 0..3 {
+            let (lo, hi) = (bounds.lo[a] as f32, bounds.hi[a] as f32);
+            self.lo[a] = if lo as f64 > bounds.lo[a] {
+                lo.next_down()
+            } else {
+                lo
+            };
+            self.hi[a] = if (hi as f64) < bounds.hi[a] {
+                hi.next_up()
+            } else {
+                hi
+            };
+        }
+    }
+}
+
+/// A triangle during the build: its box, its box's centre and its index in the input.
+struct Prim {
+    bounds: Aabb,
+    centre: [f64; 3],
+    id: u32,
+}
+
+/// The traversal's stack of (node, parameter at which the ray enters its box), kept by the
+/// caller across rays so a batch allocates once.
+pub type Stack = Vec<(u32, f64)>;
+
+pub struct Bvh {
+    nodes: Vec<Node>,
+    /// Per slot (leaf order): the triangle's three vertices, and its index in the input.
+    triangles: Vec<[[f64; 3]; 3]>,
+    ids: Vec<u32>,
+}
+
+/// A ray set up once for every test along it: Woop's shear (kx, ky, kz, sx, sy, sz) and the
+/// inverse direction for the slab test.
+struct Ray {
+    origin: [f64; 3],
+    inverse: [f64; 3],
+    negative: [bool; 3],
+    k: [usize; 3],
+    shear: [f64; 3],
+}
+
+impl Ray {
+    /// None for a zero direction (it meets nothing).
+    fn new(origin: [f64; 3], direction: [f64; 3]) -> Option<Ray> {
+        let abs = [direction[0].abs(), direction[1].abs(), direction[2].abs()];
+        let kz = if abs[0] >= abs[1] && abs[0] >= abs[2] {
+            0
+        } else if abs[1] >= abs[2] {
+            1
+        } else {
+            2
+        };
+        if direction[kz] == 0.0 {
+            return None;
+        }
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if direction[kz] < 0.0 {
+            // keeps the winding, so det's sign still tells front from back (not used yet)
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let inverse = [1.0 / direction[0], 1.0 / direction[1], 1.0 / direction[2]];
+        Some(Ray {
+            origin,
+            inverse,
+            // 1 / -0.0 is -inf: a negative zero goes the negative way, consistently
+            negative: [inverse[0] < 0.0, inverse[1] < 0.0, inverse[2] < 0.0],
+            k: [kx, ky, kz],
+            shear: [
+                direction[kx] / direction[kz],
+                direction[ky] / direction[kz],
+                1.0 / direction[kz],
+            ],
+        })
+    }
+
+    /// The parameter at which the ray enters the box, if it meets it within [0, t_max]
+    /// (conservatively: see the module's note on Ize's slab test).
+    fn enters(&self, node: &Node, t_max: f64) -> Option<f64> {
+        let (mut t0, mut t1) = (0.0f64, t_max);
+        for a in 0..3 {
+            let (near, far) = if self.negative[a] {
+                (node.hi[a] as f64, node.lo[a] as f64)
+            } else {
+                (node.lo[a] as f64, node.hi[a] as f64)
+            };
+            // A zero direction component with the origin on the slab's plane gives 0 * inf = NaN:
+            // f64::max and min return the other operand then, so that slab does not cull.
+            t0 = t0.max((near - self.origin[a]) * self.inverse[a]);
+            t1 = t1.min((far - self.origin[a]) * self.inverse[a] * SLAB_WIDEN);
+        }
+        (t0 <= t1).then_some(t0)
+    }
+
+    /// Woop et al.'s watertight test: the ray parameter of the hit, if 0 <= t <= t_max (+0.0 for
+    /// -0.0, so a hit at the origin has one sign of zero).
+    fn hits(&self, triangle: &[[f64; 3]; 3], t_max: f64) -> Option<f64> {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.shear;
+        let o = &self.origin;
+        let sheared = |v: &[f64; 3]| {
+            let (x, y, z) = (v[kx] - o[kx], v[ky] - o[ky], v[kz] - o[kz]);
+            (x - sx * z, y - sy * z, sz * z)
+        };
+        let (ax, ay, az) = sheared(&triangle[0]);
+        let (bx, by, bz) = sheared(&triangle[1]);
+        let (cx, cy, cz) = sheared(&triangle[2]);
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let t = (u * az + v * bz + w * cz) / det + 0.0;
+        (t >= 0.0 && t <= t_max).then_some(t)
+    }
+}
+
+impl Bvh {
+    /// The BVH of triangles `faces` (indices into `vertices`, all in range: the caller checks).
+    pub fn new(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Bvh {
+        let mut prims: Vec<Prim> = faces
+            .iter()
+            .enumerate()
+            .map(|(id, face)| {
+                let mut bounds = Aabb::EMPTY;
+                for &index in face {
+                    bounds.grow_point(&vertices[index as usize]);
+                }
+                let centre = [0, 1, 2].map(|a| (bounds.lo[a] + bounds.hi[a]) * 0.5);
+                Prim {
+                    bounds,
+                    centre,
+                    id: id as u32,
+                }
+            })
+            .collect();
+        let mut nodes = vec![Node::EMPTY];
+        let mut scratch: Vec<Prim> = Vec::with_capacity(prims.len());
+        // (node, first prim, end prim), depth first: the same order, and so the same tree, every run
+        let mut todo = vec![(0usize, 0usize, prims.len())];
+        while let Some((node, start, end)) = todo.pop() {
+            let span = &mut prims[start..end];
+            let mut bounds = Aabb::EMPTY;
+            let mut centres = Aabb::EMPTY;
+            for p in span.iter() {
+                bounds.grow(&p.bounds);
+                centres.grow_point(&p.centre);
+            }
+            nodes[node].bound(&bounds);
+            let split = if span.len() < MIN_SPLIT {
+                None
+            } else {
+                split_of(span, &bounds, &centres)
+            };
+            let mut left_count = match split {
+                Some((axis, bin)) => partition(span, &mut scratch, |p| {
+                    bin_of(p.centre[axis], &centres, axis) <= bin
+                }),
+                None => 0,
+            };
+            if left_count == 0 && span.len() > MAX_LEAF {
+                // every centre the same: halves in index order, so no leaf grows past MAX_LEAF
+                left_count = span.len() / 2;
+            }
+            if left_count == 0 {
+                nodes[node].first = start as u32;
+                nodes[node].count = span.len() as u32;
+                continue;
+            }
+            let left = nodes.len();
+            nodes[node].first = left as u32;
+            nodes.extend([Node::EMPTY; 2]);
+            // right pushed first, so the left subtree is built (and numbered) first
+            todo.push((left + 1, start + left_count, end));
+            todo.push((left, start, start + left_count));
+        }
+        let triangles = prims
+            .iter()
+            .map(|p| faces[p.id as usize].map(|i| vertices[i as usize]))
+            .collect();
+        let ids = prims.iter().map(|p| p.id).collect();
+        Bvh {
+            nodes,
+            triangles,
+            ids,
+        }
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Whether the ray o + t d meets a triangle at some 0 <= t <= t_max.
+    pub fn occluded(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        t_max: f64,
+        stack: &mut Stack,
+    ) -> bool {
+        let Some(ray) = Ray::new(origin, direction) else {
+            return false;
+        };
+        let mut hit = false;
+        self.walk(&ray, t_max, stack, |slots| {
+            hit = self.triangles[slots]
+                .iter()
+                .any(|tri| ray.hits(tri, t_max).is_some());
+            (!hit).then_some(t_max)
+        });
+        hit
+    }
+
+    /// The least ray parameter t >= 0 at which the ray o + t d meets a triangle (inf: none), with
+    /// the index of that triangle (the lowest of those hit at that t).
+    pub fn first_hit(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        stack: &mut Stack,
+    ) -> (f64, Option<u32>) {
+        let mut best = (f64::INFINITY, None::<u32>);
+        let Some(ray) = Ray::new(origin, direction) else {
+            return best;
+        };
+        self.walk(&ray, f64::INFINITY, stack, |slots| {
+            for slot in slots {
+                if let Some(t) = ray.hits(&self.triangles[slot], best.0) {
+                    let id = self.ids[slot];
+                    // t <= best.0 here: a nearer hit, or one as near with a lower index
+                    if t < best.0 || best.1.is_none_or(|b| id < b) {
+                        best = (t, Some(id));
+                    }
+                }
+            }
+            Some(best.0)
+        });
+        best
+    }
+
+    /// Hands `leaf` the slots of every leaf whose box the ray enters within [0, t_max], nearer
+    /// boxes first (by entry, the left child on a tie). `leaf` returns None to stop, or the new
+    /// t_max: boxes entered beyond it are skipped, those entered exactly at it still visited (a
+    /// hit there may have a lower triangle index).
+    fn walk(
+        &self,
+        ray: &Ray,
+        mut t_max: f64,
+        stack: &mut Stack,
+        mut leaf: impl FnMut(Range<usize>) -> Option<f64>,
+    ) {
+        let Some(entry) = ray.enters(&self.nodes[0], t_max) else {
+            return;
+        };
+        stack.clear();
+        stack.push((0, entry));
+        while let Some((index, entry)) = stack.pop() {
+            if entry > t_max {
+                continue;
+            }
+            let node = &self.nodes[index as usize];
+            let first = node.first as usize;
+            if node.count > 0 {
+                match leaf(first..first + node.count as usize) {
+                    Some(t) => t_max = t,
+                    None => return,
+                }
+                continue;
+            }
+            let right = node.first + 1;
+            let near_left = ray.enters(&self.nodes[first], t_max);
+            let near_right = ray.enters(&self.nodes[first + 1], t_max);
+            match (near_left, near_right) {
+                (Some(l), Some(r)) if r < l => stack.extend([(node.first, l), (right, r)]),
+                (Some(l), Some(r)) => stack.extend([(right, r), (node.first, l)]),
+                (Some(l), None) => stack.push((node.first, l)),
+                (None, Some(r)) => stack.push((right, r)),
+                (None, None) => {}
+            }
+        }
+    }
+}
+
+/// The bin of a centre along an axis, 0..BINS, from the node's centre bounds.
+fn bin_of(centre: f64, centres: &Aabb, axis: usize) -> usize {
+    let extent = centres.hi[axis] - centres.lo[axis];
+    let bin = ((centre - centres.lo[axis]) * (BINS as f64 / extent)) as usize;
+    bin.min(BINS - 1)
+}
+
+/// The binned SAH's best split of a node: (axis, last bin of the left side), or None when no
+/// split costs less than a leaf of `MAX_LEAF` or fewer triangles (or every centre is the same).
+fn split_of(span: &[Prim], bounds: &Aabb, centres: &Aabb) -> Option<(usize, usize)> {
+    let mut best: Option<(f64, usize, usize)> = None;
+    for axis in 0..3 {
+        if centres.hi[axis] - centres.lo[axis] <= 0.0 {
+            continue;
+        }
+        let mut counts = [0usize; BINS];
+        let mut boxes = [Aabb::EMPTY; BINS];
+        for p in span {
+            let bin = bin_of(p.centre[axis], centres, axis);
+            counts[bin] += 1;
+            boxes[bin].grow(&p.bounds);
+        }
+        // area * count of the left side for each split after bin i, then the right side's added
+        let mut costs = [0.0f64; BINS - 1];
+        let (mut side, mut count) = (Aabb::EMPTY, 0usize);
+        for i in 0..BINS - 1 {
+            side.grow(&boxes[i]);
+            count += counts[i];
+            costs[i] = side.half_area() * count as f64;
+        }
+        let (mut side, mut count) = (Aabb::EMPTY, 0usize);
+        for i in (0..BINS - 1).rev() {
+            side.grow(&boxes[i + 1]);
+            count += counts[i + 1];
+            costs[i] += side.half_area() * count as f64;
+        }
+        for (bin, &cost) in costs.iter().enumerate() {
+            if best.is_none_or(|(b, _, _)| cost < b) {
+                best = Some((cost, axis, bin));
+            }
+        }
+    }
+    let (cost, axis, bin) = best?;
+    let area = bounds.half_area();
+    let split_cost = TRAVERSAL_COST + if area > 0.0 { cost / area } else { 0.0 };
+    // a leaf costs one test per triangle; past MAX_LEAF the split is taken whatever it costs
+    (split_cost < span.len() as f64 || span.len() > MAX_LEAF).then_some((axis, bin))
+}
+
+/// Moves the prims for which `left` holds to the front, both sides in their former order (so
+/// ties keep index order); returns how many. Returns 0 when either side would be empty.
+fn partition(span: &mut [Prim], scratch: &mut Vec<Prim>, left: impl Fn(&Prim) -> bool) -> usize {
+    let count = span.iter().filter(|p| left(p)).count();
+    if count == 0 || count == span.len() {
+        return 0;
+    }
+    scratch.clear();
+    scratch.extend(span.iter().filter(|p| left(p)).map(copy_prim));
+    scratch.extend(span.iter().filter(|p| !left(p)).map(copy_prim));
+    for (slot, p) in span.iter_mut().zip(scratch.drain(..)) {
+        *slot = p;
+    }
+    count
+}
+
+fn copy_prim(p: &Prim) -> Prim {
+    Prim {
+        bounds: p.bounds,
+        centre: p.centre,
+        id: p.id,
+    }
+}
