@@ -5,7 +5,10 @@ use pyo3::prelude::*;
 
 mod bvh;
 mod bvh_py;
+mod framing;
+mod motion;
 mod rotation;
+mod stages_py;
 mod toric;
 mod toric_py;
 
@@ -14,5 +17,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     toric_py::register(m)?;
     bvh_py::register(m)?;
+    stages_py::register(m)?;
     Ok(())
 }

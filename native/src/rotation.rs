@@ -119,3 +119,27 @@ pub fn level_rotation_batched(world_dir: &Vec3, camera_dir: &Vec3) -> Mat3 {
     }
     yaw_pitch_matrix(yaw_for(world_dir, camera_dir, pitch), pitch)
 }
+
+/// Rotation matrix of the quaternion q (x, y, z, w) (transforms.quat_to_matrix, its per-frame
+/// scalar form; q need not be unit): camera-to-world for a camera's rotation, its axes in the
+/// columns.
+pub fn quat_to_matrix(q: &[f64; 4]) -> Mat3 {
+    let [x, y, z, w] = *q;
+    [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]
+}

@@ -48,7 +48,7 @@ fn float_array<'py>(obj: &Bound<'py, PyAny>) -> PyResult<ArrayD<f64>> {
 
 /// N floats (a point (3,), a screen point (2,)) from a float64 ndarray of N elements, a sequence
 /// of N numbers, or any array-like numpy converts to N floats.
-fn floats<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
+pub(crate) fn floats<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
     if !obj.is_instance_of::<PyArrayDyn<f64>>() {
         if let Ok(values) = obj.extract::<[f64; N]>() {
             return Ok(values); // the per-frame case: a tuple or list, no array made
@@ -64,7 +64,7 @@ fn floats<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 
 }
 
 /// The lens: a tuple (vertical_fov_deg, aspect) or an object with those attributes (camera.Lens).
-fn lens_of(obj: &Bound<'_, PyAny>) -> PyResult<Lens> {
+pub(crate) fn lens_of(obj: &Bound<'_, PyAny>) -> PyResult<Lens> {
     let (vertical_fov_deg, aspect): (f64, f64) = match obj.cast::<PyTuple>() {
         Ok(tuple) => tuple.extract()?,
         Err(_) => (
@@ -76,7 +76,7 @@ fn lens_of(obj: &Bound<'_, PyAny>) -> PyResult<Lens> {
 }
 
 /// A (n,) float64 array made here.
-type Array1<'py> = Bound<'py, PyArray1<f64>>;
+pub(crate) type Array1<'py> = Bound<'py, PyArray1<f64>>;
 
 /// (theta (n,), phi (n,)) radians.
 type Angles<'py> = (Array1<'py>, Array1<'py>);
@@ -84,7 +84,7 @@ type Angles<'py> = (Array1<'py>, Array1<'py>);
 /// camera.CameraPose's fields: position_world (3,), rotation_xyzw (4,), vertical_fov_deg.
 type Pose<'py> = (Array1<'py>, Array1<'py>, f64);
 
-fn vec3<'py>(py: Python<'py>, v: &Vec3) -> Array1<'py> {
+pub(crate) fn vec3<'py>(py: Python<'py>, v: &Vec3) -> Array1<'py> {
     PyArray1::from_slice(py, v)
 }
 
@@ -93,7 +93,7 @@ fn vec3<'py>(py: Python<'py>, v: &Vec3) -> Array1<'py> {
 /// directions unit); basis: (3, 3) rows axis, ref, side; alpha: radians. Arrays are fresh copies.
 #[pyclass(name = "Torus", frozen, module = "camdirector._native")]
 pub struct PyTorus {
-    inner: toric::Torus,
+    pub(crate) inner: toric::Torus,
 }
 
 #[pymethods]
@@ -277,7 +277,7 @@ fn torus_angles(torus: &PyTorus, position_world: &Bound<'_, PyAny>) -> PyResult<
 }
 
 /// Rows of an (n, 3) array-like (or one (3,) point: atleast_2d), metres.
-fn points(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Vec3>> {
+pub(crate) fn points(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Vec3>> {
     let array = float_array(obj)?;
     let shape = array.shape();
     if !(shape.len() <= 2 && shape.last() == Some(&3)) {
