@@ -227,6 +227,19 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             "sessions_lost": len(lost),
             "errors": [r["error"] for r in lost][:3],
             "frames_not_answered": unanswered,
+            # where a session lacks answers: which frames, its retries and its stale answers (a rare
+            # failure of the node-container test lost 5-7 frames with no error; this says where)
+            "unanswered_per_session": [
+                {
+                    "session": i,
+                    "missing_frames": sorted({u.frame for u in updates} - {a.frame for a in r["answers"]}),
+                    "retries": session.retries,
+                    "stale_answers": sum(a.stale for a in r["answers"]),
+                    "error": r.get("error"),
+                }
+                for i, (session, r) in enumerate(zip(opened, results))
+                if len(r["answers"]) < len(updates)
+            ],
             "frames_expected": sessions * len(updates),
             "retries": sum(s.retries for s in opened),
             "recovery_s_p50": float(np.percentile(recoveries, 50)) if recoveries else None,

@@ -60,7 +60,8 @@ def test_a_killed_node_container_loses_no_session(cluster):
         "node-container", nodes=3, sessions=12, rate_hz=30.0, seconds=8.0, kill_after_s=3.0, compose_cluster=cluster
     )
     assert report["sessions_on_killed"] > 0, report
-    assert report["sessions_lost"] == 0 and report["frames_not_answered"] == 0, report
+    lost = {k: report[k] for k in ("sessions_lost", "errors", "frames_not_answered", "unanswered_per_session")}
+    assert report["sessions_lost"] == 0 and report["frames_not_answered"] == 0, lost
     assert report["max_pose_difference"] == 0.0, report["max_pose_difference_per_session"]
     assert report["interrupted_sessions"] > 0, report  # the kill broke streams, which the SDK resumed elsewhere
     assert report["killed_container_rejoined_s"] is not None  # started again, HAProxy sees it UP
