@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from camdirector import _native as native
 from camdirector.demo.scene import build_demo_scene
 from camdirector.geometry.camera import Lens
 from camdirector.pipeline.state import FrameState
@@ -34,7 +35,7 @@ from camdirector.pipeline.style import Style
 from camdirector.pipeline.toric.camera_motion import ToricMotion
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.framing import Framing
-from load_tests.report import emit, summary
+from load_tests.report import emit, speedup, summary
 
 DT_S = 1.0 / 60.0
 
@@ -92,16 +93,8 @@ def measure(native, aims: list[list[np.ndarray]], rotation: np.ndarray) -> dict[
 
 
 def ratios(per_frame: dict[str, dict]) -> dict[str, dict]:
-    """Per measure: python median / native median, raw and above each side's floor."""
-    floor_py, floor_native = per_frame["empty_python"]["median"], per_frame["empty_native"]["median"]
-    out = {}
-    for measure_name in ("stages", "error"):
-        py, nat = per_frame[f"{measure_name}_python"]["median"], per_frame[f"{measure_name}_native"]["median"]
-        out[measure_name] = {
-            "python_over_native": round(py / max(nat, 1e-9), 2),
-            "above_floor_python_over_native": round((py - floor_py) / max(nat - floor_native, 1e-9), 2),
-        }
-    return out
+    """Per measure: its speed-up (report.speedup)."""
+    return {name: speedup(per_frame, name) for name in ("stages", "error")}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -109,11 +102,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=3000, help="timed frames per case")
     parser.add_argument("--json", type=Path, help="also write the JSON here")
     args = parser.parse_args(argv)
-    try:
-        from camdirector import _native as native
-    except ImportError as err:
-        print(f"framing_motion_native: camdirector._native is not built ({err}); build native/ first", file=sys.stderr)
-        return 2
     rotation = build_demo_scene(seed=7).avatar.transform.rotation_xyzw
     result: dict = {"benchmark": "framing_motion_native", "frames": args.frames, "cases": {}}
     for case, targets in (("one_target", 1), ("two_targets", 2)):

@@ -43,3 +43,15 @@ def percentiles(values) -> dict:
         return {"p50": None, "p99": None, "max": None}
     a = np.asarray(values, dtype=np.float64)
     return {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+
+def speedup(timings: dict[str, dict], case: str) -> dict:
+    """The Python twin's median time over the compiled one's for `case` (timings holds summary()s
+    named CASE_python and CASE_native, and the floors empty_python and empty_native): raw, and with
+    each side's floor taken off first. Above 1 the compiled one is faster."""
+    py, native = timings[f"{case}_python"]["median"], timings[f"{case}_native"]["median"]
+    floor_py, floor_native = timings["empty_python"]["median"], timings["empty_native"]["median"]
+    return {
+        "python_over_native": round(py / max(native, 1e-9), 2),
+        "above_floor_python_over_native": round((py - floor_py) / max(native - floor_native, 1e-9), 2),
+    }

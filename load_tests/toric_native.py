@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from camdirector import _native as native
 from camdirector.geometry import toric
 from camdirector.geometry.camera import Lens
-from load_tests.report import emit, summary
+from load_tests.report import emit, speedup, summary
 
 PLACES = 390  # torus_position's batched case: a shot's place search
 
@@ -77,18 +78,12 @@ def measure(calls: dict[str, Callable[[], object]], blocks: int, per_block: int)
 
 
 def ratios(per_call: dict[str, dict]) -> dict[str, dict]:
-    """Per case: python median / native median, raw and above each side's floor."""
-    floor_py, floor_native = per_call["empty_python"]["median"], per_call["empty_native"]["median"]
-    out = {}
-    for name in per_call:
-        if name.endswith("_python") and not name.startswith("empty"):
-            case = name.removesuffix("_python")
-            py, nat = per_call[name]["median"], per_call[f"{case}_native"]["median"]
-            out[case] = {
-                "python_over_native": round(py / max(nat, 1e-9), 2),
-                "above_floor_python_over_native": round((py - floor_py) / max(nat - floor_native, 1e-9), 2),
-            }
-    return out
+    """Per case: its speed-up (report.speedup)."""
+    return {
+        name.removesuffix("_python"): speedup(per_call, name.removesuffix("_python"))
+        for name in per_call
+        if name.endswith("_python") and not name.startswith("empty")
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,11 +92,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--calls", type=int, default=50, help="calls per timed block")
     parser.add_argument("--json", type=Path, help="also write the JSON here")
     args = parser.parse_args(argv)
-    try:
-        from camdirector import _native as native
-    except ImportError as err:
-        print(f"toric_native: camdirector._native is not built ({err}); build native/ first", file=sys.stderr)
-        return 2
     per_call = measure(cases(native), args.blocks, args.calls)
     emit(
         {
