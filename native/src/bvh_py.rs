@@ -11,10 +11,10 @@ use crate::bvh::{Bvh, Stack};
 
 /// Where a segment stops, as a share of origin -> target: RayScene.occluded's 1 - 1e-4, so a
 /// target on a surface does not occlude itself.
-const SEGMENT_END: f64 = 1.0 - 1e-4;
+pub(crate) const SEGMENT_END: f64 = 1.0 - 1e-4;
 
 /// Rows of an (n, 3) array, refused unless (n, 3) and finite (NaN would slip through every test).
-fn rows(name: &str, array: ArrayView2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
+pub(crate) fn rows(name: &str, array: ArrayView2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
     if array.ncols() != 3 {
         return Err(PyValueError::new_err(format!(
             "{name} must be (n, 3), got {:?}",
@@ -35,9 +35,9 @@ fn rows(name: &str, array: ArrayView2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
 }
 
 /// Two (n, 3) arrays of the same n, as rows.
-type RowPairs = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+pub(crate) type RowPairs = (Vec<[f64; 3]>, Vec<[f64; 3]>);
 
-fn pairs(
+pub(crate) fn pairs(
     names: [&str; 2],
     first: &PyReadonlyArray2<'_, f64>,
     second: &PyReadonlyArray2<'_, f64>,
@@ -57,7 +57,7 @@ fn pairs(
 }
 
 /// Faces as int32 (TriMesh's) or int64 (numpy's default) (m, 3) indices, all into `n` vertices.
-fn faces_of(faces: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<[u32; 3]>> {
+pub(crate) fn faces_of(faces: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<[u32; 3]>> {
     let (shape, indices): (Vec<usize>, Vec<i64>) =
         if let Ok(a) = faces.extract::<PyReadonlyArray2<'_, i32>>() {
             (

@@ -8,6 +8,8 @@ mod bvh_py;
 mod framing;
 mod motion;
 mod rotation;
+mod scene;
+mod scene_py;
 mod stages_py;
 mod toric;
 mod toric_py;
@@ -18,5 +20,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     toric_py::register(m)?;
     bvh_py::register(m)?;
     stages_py::register(m)?;
+    scene_py::register(m)?;
     Ok(())
 }
