@@ -14,6 +14,7 @@
 use std::collections::HashMap;
 
 use crate::bvh::{Bvh, Stack};
+use crate::rotation::quat_to_matrix;
 
 type Vec3 = [f64; 3];
 
@@ -39,24 +40,7 @@ impl Object {
     /// A, b and the sphere of `pose`, with quat_to_matrix's and inverse_matrix's arithmetic
     /// (the quaternion is used as given, not normalized: RayScene does not normalize it either).
     fn place(&mut self, pose: &Pose) {
-        let [x, y, z, w] = pose.rotation_xyzw;
-        let r = [
-            [
-                1.0 - 2.0 * (y * y + z * z),
-                2.0 * (x * y - w * z),
-                2.0 * (x * z + w * y),
-            ],
-            [
-                2.0 * (x * y + w * z),
-                1.0 - 2.0 * (x * x + z * z),
-                2.0 * (y * z - w * x),
-            ],
-            [
-                2.0 * (x * z - w * y),
-                2.0 * (y * z + w * x),
-                1.0 - 2.0 * (x * x + y * y),
-            ],
-        ];
+        let r = quat_to_matrix(&pose.rotation_xyzw);
         let s = pose.scale;
         self.linear = [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[j][i] / s[i]));
         self.translation = [0, 1, 2].map(|i| -dot(&self.linear[i], &pose.position));
