@@ -256,6 +256,7 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             "retries_per_session": [s.retries for s in opened],
             "sessions_per_node_before_kill": counts if kill != "worker" else None,
             "killed_container_rejoined_s": rejoined_s,
+            "killed_node": victim if kill == "node-container" else None,
             "create_s_max": max(create_s),
             "floor_health_ms_p50": floor_ms,
         }
