@@ -17,6 +17,7 @@ pub struct MotionSettings {
     pub theta_margin_rad: f64,
     pub side_hysteresis: f64,
     pub side_recheck_axis_dot: f64,
+    pub side_tie: f64,
 }
 
 /// The style fields MOTION reads (pipeline/style.py's Style).
@@ -108,7 +109,12 @@ impl Motion {
             )?;
             *up = quat_to_matrix(&rotation)[1][1]; // quat_rotate(rotation, UP_WORLD) @ UP_WORLD
         }
-        let best = if ups[0] >= ups[1] { 1.0 } else { -1.0 };
+        // a tie within side_tie goes to +1: rounding (the last bit of sin and cos) never chooses
+        let best = if ups[0] >= ups[1] - self.settings.side_tie {
+            1.0
+        } else {
+            -1.0
+        };
         let index = |side: f64| if side > 0.0 { 0 } else { 1 };
         if self.side == 0.0
             || ups[index(best)] > ups[index(self.side)] + self.settings.side_hysteresis

@@ -32,7 +32,12 @@ fn mesh_of(mesh: &Bound<'_, PyAny>) -> PyResult<Mesh> {
 /// A RigidTransform's fields (position_world (3,), rotation_xyzw (4,), scale (3,)), finite.
 fn pose_of(transform: &Bound<'_, PyAny>) -> PyResult<Pose> {
     let field = |name: &str, n: usize| -> PyResult<Vec<f64>> {
-        let values: Vec<f64> = transform.getattr(name)?.extract()?;
+        let value = transform.getattr(name)?;
+        // a float64 ndarray (a RigidTransform's) read at once, not element by element as a sequence
+        let values: Vec<f64> = match value.extract::<PyReadonlyArray1<'_, f64>>() {
+            Ok(array) => array.as_array().to_vec(),
+            Err(_) => value.extract()?,
+        };
         if values.len() != n || values.iter().any(|x| !x.is_finite()) {
             return Err(PyValueError::new_err(format!(
                 "transform.{name} must be {n} finite numbers, got {values:?}"

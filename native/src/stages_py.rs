@@ -86,6 +86,7 @@ fn motion_settings(settings: Option<&Bound<'_, PyAny>>) -> PyResult<MotionSettin
             theta_margin_rad: attr(s, "theta_margin_rad")?,
             side_hysteresis: attr(s, "side_hysteresis")?,
             side_recheck_axis_dot: attr(s, "side_recheck_axis_dot")?,
+            side_tie: attr(s, "side_tie")?,
         },
         None => MotionSettings {
             max_substep_s: 1.0 / 60.0,
@@ -93,6 +94,7 @@ fn motion_settings(settings: Option<&Bound<'_, PyAny>>) -> PyResult<MotionSettin
             theta_margin_rad: 0.02,
             side_hysteresis: 0.2,
             side_recheck_axis_dot: 0.02,
+            side_tie: 1e-9,
         },
     })
 }
@@ -215,10 +217,21 @@ impl FramingCore {
         self.inner.alpha
     }
 
+    #[setter]
+    fn set_heading_rad(&mut self, heading_rad: f64) {
+        self.inner.heading_rad = heading_rad;
+    }
+
     /// The last aim point the heading saw (3,), metres; None before the first.
     #[getter]
     fn last_aim<'py>(&self, py: Python<'py>) -> Option<Array1<'py>> {
         self.inner.last_aim.map(|p| vec3(py, &p))
+    }
+
+    #[setter]
+    fn set_last_aim(&mut self, last_aim: Option<Bound<'_, PyAny>>) -> PyResult<()> {
+        self.inner.last_aim = last_aim.map(|p| floats::<3>(&p, "last_aim")).transpose()?;
+        Ok(())
     }
 }
 
@@ -288,15 +301,28 @@ impl MotionCore {
         ))
     }
 
+    // The state kept between frames, each with a setter: a rig hands the camera to the Python
+    // stages and back (pipeline/toric/compiled_rig.py) by copying these to and from ToricMotion's.
+
     /// The camera's theta, radians; None before the first torus.
     #[getter]
     fn theta(&self) -> Option<f64> {
         self.inner.theta
     }
 
+    #[setter]
+    fn set_theta(&mut self, theta: Option<f64>) {
+        self.inner.theta = theta;
+    }
+
     #[getter]
     fn phi(&self) -> f64 {
         self.inner.phi
+    }
+
+    #[setter]
+    fn set_phi(&mut self, phi: f64) {
+        self.inner.phi = phi;
     }
 
     /// (dtheta/dt, dphi/dt), rad/s.
@@ -305,16 +331,47 @@ impl MotionCore {
         PyArray1::from_slice(py, &self.inner.rate)
     }
 
+    #[setter]
+    fn set_rate(&mut self, rate: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.inner.rate = floats::<2>(rate, "rate")?;
+        Ok(())
+    }
+
     /// The last pose's position (3,), metres; None before the first.
     #[getter]
     fn position_world<'py>(&self, py: Python<'py>) -> Option<Array1<'py>> {
         self.inner.position_world.map(|p| vec3(py, &p))
     }
 
+    #[setter]
+    fn set_position_world(&mut self, position_world: Option<Bound<'_, PyAny>>) -> PyResult<()> {
+        self.inner.position_world = position_world
+            .map(|p| floats::<3>(&p, "position_world"))
+            .transpose()?;
+        Ok(())
+    }
+
     /// +1 or -1: the upright half of the torus (0 before the first choice).
     #[getter]
     fn side(&self) -> f64 {
         self.inner.side
+    }
+
+    #[setter]
+    fn set_side(&mut self, side: f64) {
+        self.inner.side = side;
+    }
+
+    /// The A-B axis's elevation (dot with world up) the side was chosen at; None: re-choose it
+    /// on the next frame (ToricMotion._side_key).
+    #[getter]
+    fn side_key(&self) -> Option<f64> {
+        self.inner.side_key
+    }
+
+    #[setter]
+    fn set_side_key(&mut self, side_key: Option<f64>) {
+        self.inner.side_key = side_key;
     }
 }
 

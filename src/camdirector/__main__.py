@@ -14,7 +14,7 @@ from camdirector.matches.import_cli import add_parser as add_import_match_parser
 from camdirector.matches.play_cli import add_parser as add_play_match_parser
 from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
-from camdirector.server_settings import ServerSettings
+from camdirector.server_settings import FRAME_PATHS, ServerSettings
 from camdirector.version import PROTOCOL, VERSION
 
 
@@ -124,6 +124,13 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         action="append",
         metavar="CIDR",
         help="an IPv4 network sessions' pose outputs may send to (default: 127.0.0.0/8 only); repeatable",
+    )
+    p.add_argument(
+        "--frame-path",
+        dest="frame_path",
+        choices=FRAME_PATHS,
+        help="where sessions' per-frame work runs: python (the reference, the default) or compiled "
+        "(so far the TORIC rig's FRAMING_ONLY frames; docs/frame_path.md)",
     )
     p.add_argument(
         "--plugin",

@@ -18,6 +18,9 @@ def _default_data_dir() -> str:
     return os.path.join(base, "camdirector")
 
 
+FRAME_PATHS = ("python", "compiled")  # ServerSettings.frame_path's values
+
+
 @dataclass(frozen=True)
 class ServerSettings:
     # Transport addresses; an empty string turns that transport off.
@@ -72,6 +75,10 @@ class ServerSettings:
     # Python modules imported at start by the front and every worker (infra/plugins.py): a studio's own
     # match director registers itself (pipeline/match/director_registry.py). Comma-separated in the environment.
     plugins: tuple[str, ...] = ()
+    # Where a session's per-frame work runs: "python", the reference, or "compiled" (camdirector._native;
+    # so far the TORIC rig's FRAMING_ONLY frames, every other frame in Python: docs/frame_path.md).
+    # Recordings replay bit for bit on the path that made them.
+    frame_path: str = "python"
 
     def __post_init__(self):
         checks = [
@@ -104,10 +111,16 @@ class ServerSettings:
              "pose_output_allow must be 1 to 64 IPv4 networks (CIDR, like 127.0.0.0/8 or 10.1.2.3/32)"),
             (all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", m) for m in self.plugins),
              "plugins must be Python module names (a.b.c)"),
+            (self.frame_path in FRAME_PATHS, f"frame_path must be one of {', '.join(FRAME_PATHS)}, not {self.frame_path!r}"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+
+    @property
+    def compiled_frame_path(self) -> bool:
+        """Whether sessions run their rigs' compiled twins (frame_path "compiled")."""
+        return self.frame_path == "compiled"
 
     @property
     def tls(self) -> bool:

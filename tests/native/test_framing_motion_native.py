@@ -353,6 +353,64 @@ def test_set_style(lens, first, second, a, b_offset, dt_s):
     assert state_diff(core, motion_core, framing, motion) <= TOL
 
 
+@FAST
+@given(
+    lens=lenses,
+    style=styles(),
+    a=point,
+    height=st.one_of(st.floats(0.05, 8.0), st.floats(-8.0, -0.05)),
+    moves=st.lists(st.tuples(st.floats(-0.3, 0.3), dts), min_size=1, max_size=4),
+    level=st.booleans(),
+)
+def test_motion_core_breaks_the_side_tie_of_b_straight_above_a_as_the_python(lens, style, a, height, moves, level):
+    """B straight above or below A: the torus is symmetric about world up, both halves equally
+    upright up to rounding, and both sides take +1 (MotionSettings.side_tie); then every frame,
+    B moving straight up and down, agrees."""
+    alpha = toric.composition_angle(style.screen_a, style.screen_b, lens)
+    assume(toric.MIN_ALPHA_RAD <= alpha <= math.pi - toric.MIN_ALPHA_RAD)
+    motion, core = ToricMotion(style, lens), native.MotionCore(style, lens)
+    for rise, dt_s in moves:
+        b = a + np.array([0.0, height + rise, 0.0])
+        state, toric_frame = FrameState(frame=0, time_s=0.0, dt_s=dt_s), ToricFrame(b_is_gaze_point=level)
+        toric_frame.torus = toric.make_torus(a, b, alpha)
+        motion.run(state, toric_frame)
+        theta, phi, pose, flags = core.run(native.make_torus(a, b, alpha), level, dt_s)
+        assert core.side == motion.side == 1.0
+        assert state.pose is not None and flags == state.flags == []
+        assert max(abs(theta - toric_frame.theta), angle_diff(phi, toric_frame.phi), pose_diff(pose, state.pose)) <= TOL
+
+
+def test_motion_core_breaks_the_side_tie_of_mirror_images_as_the_python():
+    """The tie of the drawn styles' exclusions: screen points one above the other, the halves
+    mirror images. Rounding chooses nothing (with MotionSettings.side_tie 0 the compiled side takes
+    -1 for the second B, the Python +1)."""
+    lens, style = Lens(), Style(screen_a=(0.1, -0.3), screen_b=(0.1, 0.3))
+    a = np.array([1.0, 0.5, -2.0])
+    for b in (a + [3.0, 0.0, 1.0], a + [0.0, 2.0, 0.0], a + [0.5, -1.0, 2.0]):
+        alpha = toric.composition_angle(style.screen_a, style.screen_b, lens)
+        motion, core = ToricMotion(style, lens), native.MotionCore(style, lens)
+        want, got = motion.preferred_place(toric.make_torus(a, b, alpha)), core.preferred_place(native.make_torus(a, b, alpha))
+        assert core.side == motion.side == 1.0 and max(abs(g - w) for g, w in zip(got, want)) <= TOL
+
+
+def test_the_cores_state_is_set_as_it_is_read():
+    """What a rig copies between the Python stages and the cores (compiled_rig.py), back as given."""
+    framing, motion = native.FramingCore(Lens(), Style(), np.array([0.0, 0.0, 0.0, 1.0])), native.MotionCore(Style(), Lens())
+    framing.heading_rad, framing.last_aim = 0.25, np.array([1.0, 2.0, 3.0])
+    assert framing.heading_rad == 0.25 and framing.last_aim.tolist() == [1.0, 2.0, 3.0]
+    framing.last_aim = None
+    assert framing.last_aim is None
+    motion.theta, motion.phi, motion.rate, motion.position_world = 0.5, -1.0, np.array([0.1, 0.2]), (4.0, 5.0, 6.0)
+    motion.side, motion.side_key = -1.0, 0.3
+    assert (motion.theta, motion.phi, motion.rate.tolist()) == (0.5, -1.0, [0.1, 0.2])
+    assert motion.position_world.tolist() == [4.0, 5.0, 6.0]
+    assert (motion.side, motion.side_key) == (-1.0, 0.3)
+    motion.theta, motion.position_world, motion.side_key = None, None, None
+    assert (motion.theta, motion.position_world, motion.side_key) == (None, None, None)
+    with pytest.raises(ValueError, match="rate must have shape"):
+        motion.rate = np.zeros(3)
+
+
 def test_motion_core_holds_its_place_without_a_torus():
     motion, core = ToricMotion(Style(), Lens()), native.MotionCore(Style(), Lens())
     state, toric_frame = FrameState(frame=0, time_s=0.0, dt_s=0.1), ToricFrame()

@@ -97,6 +97,11 @@ class RayScene:
         objects = [(object_id, self._meshes_local[row], self._transforms[row]) for object_id, row in self._index.items()]
         return _rebuilt, (self._static_meshes, self._solo_max, objects)
 
+    @property
+    def static_meshes_world(self) -> list[TriMesh]:
+        """The static meshes it was built from (world frame): what a twin of it is built from."""
+        return list(self._static_meshes)
+
     def add_dynamic(self, object_id: str, mesh_local: TriMesh, transform: RigidTransform) -> None:
         if object_id in self._index:
             raise ValueError(f"dynamic object {object_id!r} already added")

@@ -2,7 +2,8 @@
 contract (pipeline/camera_rig.py) a session created from a scene gets, for its whole life.
 
 `RIGS` holds one `RigEntry` per rig: its `Rig` value (pipeline/style.py, the wire's numbers), its
-name, how it is made from a session's scene, and a line saying what it is. `make_rig` chooses
+name, how it is made from a session's scene, how its compiled twin is made where it has one
+(the server's `frame_path`, server_settings.py), and a line saying what it is. `make_rig` chooses
 through it and nothing else does; code that lists the rigs (the codec's table of the wire's
 values) reads it. A new rig is its folder and one entry here (docs/architecture.md, "where a change goes").
 """
@@ -22,6 +23,7 @@ from camdirector.pipeline.camera_rig import CameraRig
 from camdirector.pipeline.inputs import DynamicObjects, SceneSpec
 from camdirector.pipeline.match.rig import MatchRig
 from camdirector.pipeline.style import Rig
+from camdirector.pipeline.toric.compiled_rig import CompiledToricRig
 from camdirector.pipeline.toric.rig import ToricRig
 from camdirector.pipeline.tracks.rig import TracksRig
 
@@ -49,6 +51,7 @@ class RigEntry:
     name: str  # lower case, as the rig's folder under pipeline/
     make: MakeRig
     description: str  # one line: what the rig does
+    make_compiled: MakeRig | None = None  # its compiled twin (`make_rig`'s compiled); None: Python only
 
 
 def _make_tracks(
@@ -71,6 +74,7 @@ RIGS: tuple[RigEntry, ...] = (
         "toric",
         lambda scene, ray_scene, static, dynamic, rng, clock: ToricRig(scene, ray_scene, static, dynamic, rng, clock),
         "frames one or two targets on the Toric manifold, moving by the style's visibility mode",
+        lambda scene, ray_scene, static, dynamic, rng, clock: CompiledToricRig(scene, ray_scene, static, dynamic, rng, clock),
     ),
     RigEntry(
         Rig.TRACKS,
@@ -95,10 +99,14 @@ def make_rig(
     dynamic: DynamicObjects,
     rng: np.random.Generator,
     clock: Callable[[], float] = time.perf_counter,
+    compiled: bool = False,
 ) -> CameraRig:
     """The rig of a session created from `scene`, for its whole life (worker/codec.py refuses a
     change of rig): the entry of `scene.style.rig` makes it (the codec gives a level to a TRACKS
     scene always, to a MATCH scene optionally, to no other). ray_scene, static_meshes_world and
     dynamic are the session's, which INGEST keeps current; rng its seeded generator, clock what
-    the stages are timed on."""
-    return _BY_RIG[scene.style.rig].make(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
+    the stages are timed on; `compiled` makes the rig's compiled twin where it has one (the
+    server's frame path, server_settings.py), else the rig itself."""
+    entry = _BY_RIG[scene.style.rig]
+    make = entry.make_compiled if compiled and entry.make_compiled is not None else entry.make
+    return make(scene, ray_scene, static_meshes_world, dynamic, rng, clock)

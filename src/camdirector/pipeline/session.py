@@ -50,7 +50,8 @@ class CutRecord:
 
 
 class Session:
-    def __init__(self, session_id: str, scene: SceneSpec, clock: Callable[[], float] = time.perf_counter):
+    def __init__(self, session_id: str, scene: SceneSpec, clock: Callable[[], float] = time.perf_counter, compiled: bool = False):
+        """compiled: the rig's compiled twin where it has one (`make_rig`; the server's frame path)."""
         self.id = session_id
         self.clock = clock
         self.rng = np.random.default_rng(scene.seed)
@@ -72,7 +73,7 @@ class Session:
         for object_id, (mesh, transform) in self.dynamic.items():
             self.ray_scene.add_dynamic(object_id, mesh, transform)
         # The stages after INGEST: one rig for the session's life (worker/codec.py refuses a change of rig).
-        self.rig: CameraRig = make_rig(scene, self.ray_scene, static_meshes_world, self.dynamic, self.rng, clock)
+        self.rig: CameraRig = make_rig(scene, self.ray_scene, static_meshes_world, self.dynamic, self.rng, clock, compiled)
         self.last_state: FrameState | None = None
         # The newest frame received, (frame, time_s): a MATCH session with a delay answers for an
         # earlier moment, so staleness and dt_s go by what arrived, not by what was answered.

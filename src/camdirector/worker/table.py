@@ -143,7 +143,8 @@ class SessionTable:
     def _build(self, session_id: str, req: pb.CreateSessionRequest, tenant: str) -> HeldSession:
         pose_outputs = codec.pose_outputs_from_request(req, self.settings.pose_output_allow)  # cheap checks before the meshes
         scene = codec.scene_from_request(req, self.settings, self.levels, tenant)
-        held = self.held[session_id] = HeldSession(Session(session_id, scene, clock=self.clock), req.style)
+        session = Session(session_id, scene, self.clock, compiled=self.settings.compiled_frame_path)
+        held = self.held[session_id] = HeldSession(session, req.style)
         if pose_outputs:  # a failure from here on drops the session (dispatch.py)
             held.pose_sender = PoseSender(session_id, pose_outputs, scene.lens.aspect)
         return held

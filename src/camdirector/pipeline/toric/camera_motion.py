@@ -33,6 +33,9 @@ class MotionSettings:
     theta_margin_rad: float = 0.02  # keep theta this far inside its open range, rad. (0, 0.5]
     side_hysteresis: float = 0.2  # the upright side changes only when the other is better by this (up-vector dot). [0, 2]
     side_recheck_axis_dot: float = 0.02  # re-choose the side when the A-B axis elevation (dot with up) moves this much. [0, 1]
+    # Sides whose up-vector dots are closer than this are a tie, which +1 takes: where the two halves
+    # are mirror images (B straight above A) rounding must not choose, or no two libms agree. [0, 0.1]
+    side_tie: float = 1e-9
 
 
 class ToricMotion:
@@ -70,7 +73,7 @@ class ToricMotion:
         for sign in (1.0, -1.0):
             pose = compose_pose(torus, theta, sign * phi, self.style.screen_a, self.style.screen_b, self.lens)
             ups.append(float(quat_rotate(pose.rotation_xyzw, UP_WORLD) @ UP_WORLD))
-        best = 1.0 if ups[0] >= ups[1] else -1.0
+        best = 1.0 if ups[0] >= ups[1] - self.settings.side_tie else -1.0
         if self.side == 0.0 or ups[0 if best > 0 else 1] > ups[0 if self.side > 0 else 1] + self.settings.side_hysteresis:
             self.side = best
         return self.side

@@ -130,7 +130,7 @@ class ToricRig(RigBase):
         this frame a cut."""
         toric = state.toric = ToricFrame()
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
-        self.framing.run(state, toric)
+        self._frame(state, toric)
         if self.maps is not None:
             self.maps.ingest(update.states, update.time_s)
         stages.done(Stage.FRAMING)
@@ -139,11 +139,27 @@ class ToricRig(RigBase):
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
         assert state.pose is not None  # this rig answers a pose on every frame
         stages.done(Stage.MOTION)
-        self.visibility.run(state, target_transforms)
-        state.framing_error = self.framing.error(state.pose, toric)
+        self._see(state, toric, target_transforms)
         stages.done(Stage.VISIBILITY)
         state.cut = state.cut or self._style_cut
         self._style_cut = False
+
+    def _frame(self, state: FrameState, toric: ToricFrame) -> None:
+        """FRAMING: A, B and the torus into `toric`."""
+        self.framing.run(state, toric)
+
+    def _see(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform]) -> None:
+        """VISIBILITY, from the frame's final pose: the targets' estimated visibility and the
+        framing error."""
+        assert state.pose is not None  # run() answers a pose before VISIBILITY
+        self.visibility.run(state, target_transforms)
+        state.framing_error = self.framing.error(state.pose, toric)
+
+    def _end_search(self, last: FrameState | None) -> None:
+        """Hands the camera's place back from the search to the toric motion (a search mode left)."""
+        assert last is not None and last.pose is not None  # the search ran on an earlier frame
+        self.motion.theta, self.motion.position_world = self.search.theta, last.pose.position_world
+        self._searching = False
 
     def _move(
         self,
@@ -158,10 +174,8 @@ class ToricRig(RigBase):
         AMAP lapped on `stages` in the map modes when the maps are due."""
         mode = self.style.visibility
         if mode not in SEARCH_MODES or toric.torus is None:
-            if self._searching:  # hand the camera's place back to the toric rig
-                assert last is not None and last.pose is not None  # the search ran on an earlier frame
-                self.motion.theta, self.motion.position_world = self.search.theta, last.pose.position_world
-                self._searching = False
+            if self._searching:
+                self._end_search(last)
             self.motion.run(state, toric)
             if mode == VisibilityMode.REACTIVE and state.pose is not None:
                 assert toric.a_world is not None  # FRAMING placed it

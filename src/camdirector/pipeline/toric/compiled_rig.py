@@ -1,0 +1,176 @@
+"""The TORIC rig with its FRAMING_ONLY frames compiled (issue 43; `--frame-path compiled`).
+
+`CompiledToricRig` is `ToricRig` (rig.py) whose FRAMING, MOTION and VISIBILITY run in
+camdirector._native while the style's visibility mode is FRAMING_ONLY: FRAMING in `FramingCore`
+(framing.py's twin), MOTION in `MotionCore` (camera_motion.py's), VISIBILITY's ray casts in a
+`Scene` (geometry/raycast.py RayScene's), built from the session's RayScene on the first compiled
+frame and moved with the session's moving objects. Python stays the reference: it answers the
+same FrameState within 1e-9 m and 1e-9 rad, with the same flags and cuts
+(tests/pipeline/toric/test_compiled_rig.py), and draws nothing of its own from the session's
+generator (VISIBILITY's sample points are the Python stage's, carried by the targets in Python).
+
+In any other visibility mode the Python stages run. Whichever side runs holds the stages' state
+between frames (the one-target heading; the camera's place, rates and upright side): entering
+FRAMING_ONLY copies it from the Python stages into the cores (after the search hands the camera
+back, as rig.py does), leaving it copies it back, so a change of mode moves the camera no more
+than the Python rig would. A pickled rig (a checkpoint's snapshot) carries the state in its
+Python stages and builds its cores and Scene again on its next compiled frame.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+import camdirector._native as native
+from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.meshes import TriMesh
+from camdirector.geometry.raycast import RayScene
+from camdirector.geometry.toric import Torus
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.infra.stage_clock import StageClock
+from camdirector.pipeline.inputs import DynamicObjects, FrameInput, SceneSpec
+from camdirector.pipeline.state import FrameState
+from camdirector.pipeline.style import Style, VisibilityMode
+from camdirector.pipeline.toric.frame import ToricFrame
+from camdirector.pipeline.toric.rig import ToricRig
+
+_NO_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])  # a core's initial facing, which its copied heading replaces
+
+
+class CompiledToricRig(ToricRig):
+    """`ToricRig` with FRAMING_ONLY's stages compiled (module docstring); the same arguments."""
+
+    def __init__(
+        self,
+        scene: SceneSpec,
+        ray_scene: RayScene,
+        static_meshes_world: list[TriMesh],
+        dynamic: DynamicObjects,
+        rng: np.random.Generator,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        super().__init__(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
+        self.ray_scene = ray_scene
+        self._cores: tuple[Any, Any] | None = None  # (FramingCore, MotionCore) while they hold the state
+        self._scene: Any = None  # the Scene, made on the first compiled frame
+        self._scene_transforms: dict[str, RigidTransform] = {}  # what the Scene's objects were moved to
+        self._torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the compiled stages hold the camera (the last frame, or the next, is FRAMING_ONLY)."""
+        return self._cores is not None
+
+    def set_style(self, style: Style) -> None:
+        super().set_style(style)
+        if self._cores is not None:
+            for core in self._cores:
+                core.set_style(style)
+
+    def __getstate__(self) -> dict[str, object]:
+        """The rig's state with the stages' state in its Python stages; no native object."""
+        if self._cores is not None:
+            self._python_from_cores()
+        state = self.__dict__.copy()
+        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None)
+        return state
+
+    def run(
+        self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
+    ) -> None:
+        """ToricRig.run, on the side of the style's visibility mode (module docstring)."""
+        compiled = self.style.visibility == VisibilityMode.FRAMING_ONLY
+        if compiled and self._cores is None:
+            if self._searching:
+                self._end_search(last)
+            self._cores = self._cores_from_python()
+        elif not compiled and self._cores is not None:
+            self._python_from_cores()
+            self._cores = None
+        super().run(state, update, target_transforms, last)
+
+    def _cores_from_python(self) -> tuple[Any, Any]:
+        framing, motion = self.framing, self.motion
+        framing_core = native.FramingCore(self.lens, self.style, _NO_ROTATION, framing.settings)
+        framing_core.heading_rad, framing_core.last_aim = framing.heading_rad, framing._last_aim
+        motion_core = native.MotionCore(self.style, self.lens, motion.settings)
+        motion_core.theta, motion_core.phi, motion_core.rate = motion.theta, motion.phi, motion.rate
+        motion_core.position_world, motion_core.side, motion_core.side_key = motion.position_world, motion.side, motion._side_key
+        return framing_core, motion_core
+
+    def _python_from_cores(self) -> None:
+        assert self._cores is not None
+        (framing_core, motion_core), framing, motion = self._cores, self.framing, self.motion
+        framing.heading_rad, framing._last_aim = framing_core.heading_rad, framing_core.last_aim
+        motion.theta, motion.phi, motion.rate = motion_core.theta, motion_core.phi, motion_core.rate
+        motion.position_world, motion.side, motion._side_key = motion_core.position_world, motion_core.side, motion_core.side_key
+
+    def _frame(self, state: FrameState, toric: ToricFrame) -> None:
+        if self._cores is None:
+            return super()._frame(state, toric)
+        a, b, toric.b_is_gaze_point, self._torus, flags = self._cores[0].run(state.aim_points_world, state.dt_s)
+        toric.a_world, toric.b_world = a, b
+        toric.torus = None if self._torus is None else _python_torus(self._torus)
+        state.flags.extend(flags)
+
+    def _move(
+        self,
+        state: FrameState,
+        toric: ToricFrame,
+        target_transforms: list[RigidTransform],
+        last: FrameState | None,
+        stages: StageClock,
+    ) -> None:
+        if self._cores is None:
+            return super()._move(state, toric, target_transforms, last, stages)
+        toric.theta, toric.phi, pose, flags = self._cores[1].run(self._torus, toric.b_is_gaze_point, state.dt_s)
+        self._torus = None
+        state.flags.extend(flags)
+        if pose is not None:
+            state.pose = CameraPose(*pose)
+
+    def _see(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform]) -> None:
+        if self._cores is None:
+            return super()._see(state, toric, target_transforms)
+        pose = state.pose
+        assert pose is not None and toric.a_world is not None and toric.b_world is not None  # run() and FRAMING
+        points = self.visibility.points_world(target_transforms)
+        state.visibility = self._moved_scene().visible_share(pose.position_world, points)
+        state.framing_error = self._cores[0].error(
+            pose.position_world, pose.rotation_xyzw, toric.a_world, toric.b_world, toric.b_is_gaze_point
+        )
+
+    def _moved_scene(self) -> Any:
+        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's)."""
+        if self._scene is None:
+            self._scene = native.Scene(self.ray_scene.static_meshes_world)
+            for object_id, (mesh, transform) in self.dynamic.items():
+                self._scene.add_dynamic(object_id, mesh, transform)
+                self._scene_transforms[object_id] = transform
+        for object_id, (_, transform) in self.dynamic.items():
+            if self._scene_transforms[object_id] is not transform:
+                self._scene.set_transform(object_id, transform)
+                self._scene_transforms[object_id] = transform
+        return self._scene
+
+
+def _python_torus(torus: Any) -> Torus:
+    """geometry.toric's Torus of a compiled one: what the frame's state carries (the wire's
+    composition angle; snapshots pickle it). Its arrays are fresh copies, its own."""
+    return Torus(
+        torus.a_world,
+        torus.b_world,
+        torus.alpha,
+        torus.axis_world,
+        torus.ref_world,
+        torus.side_world,
+        torus.length_ab_m,
+        torus.arc_radius_m,
+        torus.mid_world,
+        torus.basis,
+        torus.center_offset_m,
+    )

@@ -1,0 +1,201 @@
+"""The TORIC rig with FRAMING_ONLY compiled (pipeline/toric/compiled_rig.py) against ToricRig, the
+reference: whole demo sessions through a SessionTable on each frame path (a server's
+`frame_path`) answer every frame alike (poses within 1e-9 m and 1e-9 rad; the same flags, cuts,
+shots and stale answers; the framing error and the toric place within 1e-9; the same stage laps),
+through a frame gap, a frame sent again, and changes of visibility mode that hand the camera to
+the Python stages and back; a compiled run repeats bit for bit, also across a snapshot; and the
+setting reaches the rig from the command line and the environment, a bad value refused."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+import camdirector.__main__ as cli
+import camdirector.front.main
+from camdirector.demo.client import frame_updates, session_request
+from camdirector.demo.scene import build_demo_scene
+from camdirector.geometry.camera import Lens
+from camdirector.pipeline.state import FrameState
+from camdirector.pipeline.toric.compiled_rig import CompiledToricRig
+from camdirector.pipeline.toric.rig import ToricRig
+from camdirector.server_settings import ServerSettings
+from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.checkpoint_stores import dumps_state, loads_state
+from camdirector.worker.table import SessionTable
+
+TOL = 1e-9  # metres for positions, radians for angles, unit for quaternions and screen errors
+FRAMES = 900  # 15 s of the demo at 60 Hz: the walker passes the moving obstacles
+
+
+@dataclass
+class Answer:
+    """What one frame answered: the reply's stale mark and, when it was computed, its state."""
+
+    stale: bool
+    cut: bool
+    shot_id: int
+    state: FrameState | None
+
+
+def _inputs(styles: dict[int, int]) -> list[pb.FrameUpdate | pb.UpdateStyleRequest]:
+    """The demo's frames with a gap (frames 301-330 never sent: half a second in one step), frame
+    500 sent again after 501, and at frame i the style's visibility changed to styles[i]."""
+    scene = build_demo_scene(seed=7, duration_s=FRAMES / 60.0 + 1.0)
+    frames = [f for f in frame_updates(scene, FRAMES) if not 300 < f.frame <= 330]
+    out: list[pb.FrameUpdate | pb.UpdateStyleRequest] = []
+    for update in frames:
+        update.session_id = "s"
+        if update.frame in styles:
+            out.append(pb.UpdateStyleRequest(session_id="s", style=pb.Style(visibility=styles[update.frame])))
+        out.append(update)
+        if update.frame == 501:
+            out.append(next(f for f in frames if f.frame == 500))
+    return out
+
+
+def _run(frame_path: str, inputs, tmp_path, snapshot_at: int | None = None) -> tuple[list[Answer], SessionTable]:
+    """Every answer of a session of the demo scene fed `inputs`, on a table whose clock ticks 1 ms a
+    reading (so the stage laps compare); snapshots every 60 inputs into tmp_path. With snapshot_at,
+    the session is replaced there by its snapshot unpickled (as a restore does)."""
+    ticks = itertools.count()
+    settings = ServerSettings(data_dir=str(tmp_path / frame_path), frame_path=frame_path)
+    table = SessionTable(settings, clock=lambda: next(ticks) * 1e-3)
+    table.create("s", session_request(build_demo_scene(seed=7, duration_s=FRAMES / 60.0 + 1.0), Lens()))
+    answers = []
+    for msg in inputs:
+        if isinstance(msg, pb.UpdateStyleRequest):
+            table.update_style(msg)
+            continue
+        reply = table.frame(msg)
+        held = table.get("s")
+        state = None if reply.stale else held.session.last_state
+        answers.append(Answer(reply.stale, reply.cut, reply.shot_id, state))
+        if msg.frame == snapshot_at:
+            objects = held.session.creation_objects()
+            held.session = loads_state(dumps_state(held.session, objects), objects)
+    return answers, table
+
+
+def _angle(a: float, b: float) -> float:
+    return abs(math.remainder(a - b, math.tau))
+
+
+def _differences(got: list[Answer], want: list[Answer]) -> dict[str, float]:
+    """The largest difference of each compared quantity over the frames; asserts what must be equal."""
+    assert len(got) == len(want)
+    worst = {"position_m": 0.0, "rotation": 0.0, "theta_phi_rad": 0.0, "framing_error": 0.0, "torus": 0.0}
+    visibility_frames = 0
+    for i, (g, w) in enumerate(zip(got, want)):
+        assert (g.stale, g.cut, g.shot_id) == (w.stale, w.cut, w.shot_id), i
+        assert (g.state is None) == (w.state is None), i
+        if g.state is None or w.state is None:
+            continue
+        gs, ws = g.state, w.state
+        assert gs.flags == ws.flags, i
+        assert gs.stage_ms == ws.stage_ms, i
+        assert gs.pose is not None and ws.pose is not None
+        assert gs.pose.vertical_fov_deg == ws.pose.vertical_fov_deg
+        worst["position_m"] = max(worst["position_m"], float(np.abs(gs.pose.position_world - ws.pose.position_world).max()))
+        q, r = gs.pose.rotation_xyzw, ws.pose.rotation_xyzw
+        worst["rotation"] = max(worst["rotation"], float(min(np.abs(q - r).max(), np.abs(q + r).max())))
+        worst["framing_error"] = max(worst["framing_error"], abs(gs.framing_error - ws.framing_error))
+        visibility_frames += gs.visibility != ws.visibility
+        gt, wt = gs.toric, ws.toric
+        assert gt is not None and wt is not None and gt.b_is_gaze_point == wt.b_is_gaze_point
+        worst["theta_phi_rad"] = max(worst["theta_phi_rad"], abs(gt.theta - wt.theta), _angle(gt.phi, wt.phi))
+        assert (gt.torus is None) == (wt.torus is None)
+        if gt.torus is not None and wt.torus is not None:
+            fields = ("a_world", "b_world", "axis_world", "ref_world", "mid_world")
+            gaps = [float(np.abs(getattr(gt.torus, f) - getattr(wt.torus, f)).max()) for f in fields]
+            worst["torus"] = max(worst["torus"], abs(gt.torus.alpha - wt.torus.alpha), *gaps)
+    assert visibility_frames == 0  # the Scene and Embree agree on every sample segment of these sessions
+    return worst
+
+
+def _agree(got: list[Answer], want: list[Answer]) -> None:
+    worst = _differences(got, want)
+    print(worst)  # pytest -s: the margins
+    assert all(value <= TOL for value in worst.values()), worst
+
+
+def _same_bits(got: list[Answer], want: list[Answer]) -> None:
+    assert _differences(got, want) == dict.fromkeys(("position_m", "rotation", "theta_phi_rad", "framing_error", "torus"), 0.0)
+
+
+@pytest.fixture(scope="module")
+def framing_only(tmp_path_factory):
+    """The python and the compiled answers of a FRAMING_ONLY session, and the compiled table."""
+    tmp_path = tmp_path_factory.mktemp("framing_only")
+    inputs = _inputs({})
+    python, _ = _run("python", inputs, tmp_path)
+    compiled, table = _run("compiled", inputs, tmp_path)
+    return inputs, python, compiled, table
+
+
+def test_a_framing_only_session_agrees_frame_by_frame(framing_only):
+    _, python, compiled, table = framing_only
+    assert isinstance(table.get("s").session.rig, CompiledToricRig)
+    assert sum(a.stale for a in compiled) == 1 and sum(a.cut for a in compiled) >= 1
+    _agree(compiled, python)
+
+
+def test_a_compiled_session_repeats_bit_for_bit_also_across_a_snapshot(framing_only, tmp_path):
+    inputs, _, compiled, _ = framing_only
+    again, _ = _run("compiled", inputs, tmp_path)
+    _same_bits(again, compiled)
+    restored, table = _run("compiled", inputs, tmp_path / "restored", snapshot_at=400)
+    assert table.get("s").session.rig.compiled  # its cores made again after the snapshot
+    _same_bits(restored, compiled)
+
+
+def test_changes_of_visibility_mode_hand_the_camera_over_without_a_jump(tmp_path):
+    """FRAMING_ONLY, then REACTIVE (the Python stages), back, then RAYCAST (the search), back:
+    every frame as the Python rig's. The search stays only while it coasts: from frame 436 on it
+    chooses among candidates so close that a difference of 1e-14 m in where it starts chooses
+    another (so does the Python rig alone, its camera moved 1e-14 m at frame 419), and the two
+    paths' FRAMING_ONLY frames differ by that much."""
+    styles = {150: pb.REACTIVE, 260: pb.FRAMING_ONLY, 420: pb.RAYCAST, 432: pb.FRAMING_ONLY}
+    inputs = _inputs(styles)
+    python, _ = _run("python", inputs, tmp_path)
+    compiled, table = _run("compiled", inputs, tmp_path)
+    flags = {f for a in compiled if a.state is not None for f in a.state.flags}
+    assert any(f.startswith("search_") for f in flags)  # the search ran, and handed the camera back
+    _agree(compiled, python)
+    assert table.get("s").session.rig.compiled  # FRAMING_ONLY again
+
+
+def test_the_python_path_is_the_default_and_the_setting_reaches_the_rig(tmp_path, monkeypatch):
+    assert ServerSettings().frame_path == "python"
+    scene = build_demo_scene(seed=7, duration_s=1.0)
+    served: list[ServerSettings] = []
+    monkeypatch.setattr(camdirector.front.main, "run", lambda settings: served.append(settings) or 0)
+    monkeypatch.setenv("CAMDIRECTOR_DATA_DIR", str(tmp_path))
+    assert cli.main(["serve", "--frame-path", "compiled"]) == 0
+    monkeypatch.setenv("CAMDIRECTOR_FRAME_PATH", "compiled")
+    assert cli.main(["serve"]) == 0
+    assert cli.main(["serve", "--frame-path", "python"]) == 0  # the flag over the environment
+    rigs = []
+    for settings in [ServerSettings(data_dir=str(tmp_path)), *served]:
+        table = SessionTable(settings)
+        table.create("s", session_request(scene, Lens()))
+        rigs.append(type(table.get("s").session.rig))
+        table.close_all()
+    assert rigs == [ToricRig, CompiledToricRig, CompiledToricRig, ToricRig]
+
+
+def test_a_bad_frame_path_is_refused_with_its_values(monkeypatch, capsys):
+    with pytest.raises(ValueError, match="frame_path must be one of python, compiled, not 'rust'"):
+        ServerSettings(frame_path="rust")
+    monkeypatch.setattr(camdirector.front.main, "run", lambda settings: pytest.fail("served with a bad frame path"))
+    with pytest.raises(SystemExit):
+        cli.main(["serve", "--frame-path", "rust"])
+    assert "argument --frame-path: invalid choice: 'rust'" in capsys.readouterr().err
+    monkeypatch.setenv("CAMDIRECTOR_FRAME_PATH", "fast")
+    with pytest.raises(SystemExit):
+        cli.main(["serve"])
+    assert "frame_path must be one of python, compiled, not 'fast'" in capsys.readouterr().err
