@@ -321,12 +321,16 @@ class JobExecutor:
         compare-and-set on the attempt changes nothing the second time)."""
         job_id, attempt = a.job.id, a.job.attempts
         run_ms = (time.monotonic() - a.started_monotonic) * 1e3
+        succeeded = a.stop_reason is None and a.outcome is not None and a.outcome[0] == "ok"
+        if not succeeded:  # nothing of the folder is kept: gone before the record says the job ended
+            shutil.rmtree(a.work_dir, ignore_errors=True)
         if a.stop_reason in ("cancelled", "superseded"):
             return lambda: None
         if a.stop_reason == "timeout":
             error = f"timed out after {self.settings.job_timeout_s:g} s"
             return lambda: self.store.finish(job_id, JobState.FAILED, only_if=JobState.RUNNING, attempt=attempt, error=error)
-        if a.outcome is not None and a.outcome[0] == "ok":
+        if succeeded:
+            assert a.outcome is not None  # for mypy: `succeeded` says so
             timings = dict(a.outcome[1])
             timings["queued"] = a.queued_ms
             timings["job_process_total"] = run_ms
