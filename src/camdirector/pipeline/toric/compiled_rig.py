@@ -19,20 +19,16 @@ Python stages and builds its cores and Scene again on its next compiled frame.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 import camdirector._native as native
 from camdirector.geometry.camera import CameraPose
-from camdirector.geometry.meshes import TriMesh
-from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.toric import Torus
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
-from camdirector.pipeline.inputs import DynamicObjects, FrameInput, SceneSpec
+from camdirector.pipeline.inputs import FrameInput
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style, VisibilityMode
 from camdirector.pipeline.toric.frame import ToricFrame
@@ -44,21 +40,11 @@ _NO_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])  # a core's initial facing, which 
 class CompiledToricRig(ToricRig):
     """`ToricRig` with FRAMING_ONLY's stages compiled (module docstring); the same arguments."""
 
-    def __init__(
-        self,
-        scene: SceneSpec,
-        ray_scene: RayScene,
-        static_meshes_world: list[TriMesh],
-        dynamic: DynamicObjects,
-        rng: np.random.Generator,
-        clock: Callable[[], float] = time.perf_counter,
-    ) -> None:
-        super().__init__(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
-        self.ray_scene = ray_scene
-        self._cores: tuple[Any, Any] | None = None  # (FramingCore, MotionCore) while they hold the state
-        self._scene: Any = None  # the Scene, made on the first compiled frame
-        self._scene_transforms: dict[str, RigidTransform] = {}  # what the Scene's objects were moved to
-        self._torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
+    # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no native object.
+    _cores: tuple[Any, Any] | None = None  # (FramingCore, MotionCore) while they hold the state
+    _scene: Any = None  # the Scene, made on the first compiled frame
+    _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
+    _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
 
     @property
     def compiled(self) -> bool:
@@ -147,7 +133,7 @@ class CompiledToricRig(ToricRig):
     def _moved_scene(self) -> Any:
         """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's)."""
         if self._scene is None:
-            self._scene = native.Scene(self.ray_scene.static_meshes_world)
+            self._scene, self._scene_transforms = native.Scene(self.ray_scene.static_meshes_world), {}
             for object_id, (mesh, transform) in self.dynamic.items():
                 self._scene.add_dynamic(object_id, mesh, transform)
                 self._scene_transforms[object_id] = transform

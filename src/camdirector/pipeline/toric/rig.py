@@ -66,6 +66,7 @@ class ToricRig(RigBase):
         self.target_ids = [t.id for t in scene.targets]
         self.static_meshes_world = static_meshes_world
         self.dynamic = dynamic
+        self.ray_scene = ray_scene
         self.rng = rng
         self.clock = clock
         self.framing = Framing(self.lens, self.style, scene.targets[0].transform.rotation_xyzw)
