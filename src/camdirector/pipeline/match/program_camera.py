@@ -4,7 +4,9 @@ program moment, a Toric camera whose first subject walls hide pulled in front of
 outside the level or inside solid moved inside toward the player the shot keeps in view
 (in_level.py, flagged `moved_inside_level`), one that would move through a wall kept on that
 player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
-(`held_before_wall`), and the share of the framed subjects' sample points seen from the pose
+(`held_before_wall`), its lens widened where a player would stand taller than the framing band
+(lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too), and the share
+of the framed subjects' sample points seen from the pose
 (visibility.py). In the frame (rig.py) or ahead of it, on a copy of the camera (camera_ahead.py):
 the same computation either way.
 """
@@ -17,6 +19,7 @@ from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.match.in_level import InLevel
+from camdirector.pipeline.match.lens_width import widened_fov_deg
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
@@ -66,6 +69,13 @@ class ProgramCamera:
                 return None
             pose = last_pose
             flags.append("pose_held")
+            return pose, flags
+        last_fov_deg = last_pose.vertical_fov_deg if dt_s > 0.0 and last_pose is not None else None  # None: a cut
+        fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s)
+        if fov_deg != pose.vertical_fov_deg:
+            pose = CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
+            if fov_deg > self.lens.vertical_fov_deg:
+                flags.append("lens_widened")
         return pose, flags
 
     @staticmethod

@@ -135,6 +135,11 @@ class MatchSettings:
                                          # (its gaze room grows to put the camera that far: shot_builder.py); the style's
                                          # 2.5 m put it 3.9 m off, a 1.75 m player at 0.48 (real duel: 40% of program frames
                                          # had a player over 0.6), share of frame height. (0, shown_height_max]
+    widen_max_fov_deg: float = 90.0     # a program pose whose player would stand taller than shown_height_max goes this wide
+                                         # at most (lens_width.py; 80 deg vertical is 112 deg across 16:9, what Quake
+                                         # players play with); the lens's own to keep it, deg. [lens's, 170)
+    narrow_deg_s: float = 20.0           # and zooms back toward the lens's no faster than this, so a camera that comes and
+                                         # goes near a wall does not pump, deg/s. (0, 1000]
     candidate_seen: float = 0.5          # a candidate's subject is shown from its camera with this share of its points seen
                                          # (eval-match's shown fraction). [0, 1]
     candidate_min_shown: float = 0.5     # a candidate is offered only when it shows this share of its subjects at the
@@ -163,6 +168,8 @@ class MatchSettings:
         if not 0.0 < self.shown_height_max <= 1.0 or not 0.0 <= self.candidate_seen <= 1.0 \
                 or not 0.0 <= self.candidate_min_shown <= 1.0:
             raise ValueError("MatchSettings: shown_height_max in (0, 1], candidate_seen and candidate_min_shown in [0, 1]")
+        if not 1.0 < self.widen_max_fov_deg < 170.0 or not 0.0 < self.narrow_deg_s <= 1000.0:
+            raise ValueError("MatchSettings: widen_max_fov_deg in (1, 170) deg, narrow_deg_s in (0, 1000] deg/s")
         if not 1e3 <= self.plan_work_per_tick <= 1e9:
             raise ValueError(f"MatchSettings: plan_work_per_tick in [1e3, 1e9] camera-point pairs, got {self.plan_work_per_tick}")
         if self.max_held_shot_s > 600.0:

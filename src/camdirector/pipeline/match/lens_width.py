@@ -1,0 +1,84 @@
+"""The program camera's lens: widened where a player would stand taller than the framing band.
+
+A camera that walls pull in toward its subject (program_camera.py), a replay's close angle or a
+DUEL's over-the-shoulder place can come within 2-3 m of a player, where a 1.4-1.8 m body fills
+60-85% of a 50-degree frame (issue 41: the real duel's tall frames stood 1.8-3.4 m from the
+camera, 95% of them the shot's own subjects). An operator in a tight corridor does not back
+through the wall: they go wider. So after CAMERA has placed the pose, its vertical field of view
+is the narrowest from the lens's up to `MatchSettings.widen_max_fov_deg` at which no player whose
+sample points the pose sees (at least `SHOWN_SEEN` of them, ray cast; eval-match counts a player
+shown from half of its own points, so a margin) stands taller than `MatchSettings.shown_height_max` of the frame's height, on a
+one-degree grid. Going back to the lens's is a zoom at `MatchSettings.narrow_deg_s`, never faster,
+so a camera that comes and goes near a wall does not pump; a cut starts at what it needs.
+Heights as eval-match measures them (evaluation/match/measure.py): the extent of a player's
+sample points on the screen's vertical axis, clipped to the frame, over the frame's height.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens
+from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.visibility import SubjectVisibility
+
+SHOWN_SEEN = 0.25  # a player this much of whose points the pose sees may be shown (eval-match: half of its own points)
+FOV_STEP_DEG = 1.0  # the widths tried, from the lens's up, deg
+
+
+def widened_fov_deg(
+    pose: CameraPose,
+    moment: Moment,
+    visibility: SubjectVisibility,
+    lens: Lens,
+    settings: MatchSettings,
+    last_fov_deg: float | None,
+    dt_s: float,
+) -> float:
+    """The pose's vertical field of view, deg (module docstring): at least the lens's, at most
+    settings.widen_max_fov_deg; `last_fov_deg` the last frame's when this one moves on from it
+    (None on a cut), narrowed from by at most narrow_deg_s * dt_s."""
+    base_deg, max_deg = lens.vertical_fov_deg, max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
+    floor_deg = base_deg if last_fov_deg is None else max(base_deg, last_fov_deg - settings.narrow_deg_s * dt_s)
+    floor_deg = min(floor_deg, max_deg)
+    if max_deg <= base_deg:
+        return base_deg
+    widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,)
+    tan_half = np.tan(np.radians(widths_deg) / 2.0)  # (T,)
+    players = range(len(moment.transforms))
+    points = np.stack([moment.transforms[i].apply(visibility.samples_local[i]) for i in players])  # (P, S, 3)
+    camera = (points - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)  # (P, S, 3) camera frame, -Z ahead
+    depth = -camera[..., 2]
+    ahead = depth >= NEAR_PLANE_M
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope_y = np.where(ahead, camera[..., 1] / depth, np.nan)  # (P, S) tan of the elevation on screen
+        slope_x = np.where(ahead, camera[..., 0] / depth, np.nan)
+    heights = _screen_heights(slope_y, slope_x, tan_half, lens.aspect)  # (P, T)
+    tall = np.flatnonzero(heights[:, 0] > settings.shown_height_max)
+    if not len(tall):
+        return float(widths_deg[0])
+    seen = visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= SHOWN_SEEN
+    tall = tall[seen]
+    if not len(tall):
+        return float(widths_deg[0])
+    fits = (heights[tall] <= settings.shown_height_max).all(axis=0)  # (T,)
+    return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
+
+
+def _screen_heights(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:
+    """(P, T) each player's on-screen height, share of the frame's height, at each width
+    (tan_half (T,) of the half vertical field of view): the extent of its points in the frame
+    (those behind the near plane are NaN), clipped to the frame; 0 with no point in the frame."""
+    t = tan_half[None, None, :]  # (1, 1, T)
+    y, x = slope_y[..., None], slope_x[..., None]  # (P, S, 1)
+    with np.errstate(invalid="ignore"):
+        inside = (np.abs(y) <= t) & (np.abs(x) <= t * aspect)  # NaN compares False
+    any_inside = inside.any(axis=1)  # (P, T)
+    clipped = np.clip(np.where(np.isnan(y), 0.0, y), -t, t)  # (P, S, T)
+    valid = ~np.isnan(y)
+    top = np.where(valid, clipped, -np.inf).max(axis=1)
+    bottom = np.where(valid, clipped, np.inf).min(axis=1)
+    heights = np.where(any_inside, (top - bottom) / (2.0 * tan_half[None, :]), 0.0)
+    return np.asarray(heights)

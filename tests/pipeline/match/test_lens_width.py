@@ -1,0 +1,102 @@
+"""The program camera's lens widened where a player would stand taller than the framing band
+(lens_width.py): a player close in front goes wide enough to fit, one far off or behind a wall
+does not, the widest lens is the limit, the zoom back is paced, and the program's poses carry it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.lens_width import widened_fov_deg
+from camdirector.pipeline.match.look_along import look_along
+from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import StaticCamera
+from tests.pipeline.match.test_framing_band import rig_of
+from tests.pipeline.match.test_match_places import block
+
+SETTINGS = MatchSettings()
+
+
+def _looking_at_a(distance_m: float, walls=(), settings: MatchSettings = SETTINGS):
+    """A rig of test_framing_band's two players, its newest moment, and a level camera distance_m
+    in front of a (at its chest's height) looking at it."""
+    rig = rig_of(walls, settings)
+    moment = rig.rig.buffer.moments[-1]
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    camera = chest + [distance_m, 0.0, 0.0]
+    return rig, moment, look_along(camera, chest - camera, Lens().vertical_fov_deg)
+
+
+def _height_share(pose: CameraPose, fov_deg: float, points_world: np.ndarray) -> float:
+    """eval-match's height of a player's points: their vertical extent on screen, clipped, over the frame's."""
+    y = np.clip(project_to_screen(pose, Lens(vertical_fov_deg=fov_deg), points_world)[:, 1], -1.0, 1.0)
+    return float((y.max() - y.min()) / 2.0)
+
+
+def _widened(rig, moment, pose, last_fov_deg=None, dt_s=0.0, settings=SETTINGS) -> float:
+    return widened_fov_deg(pose, moment, rig.rig.program_camera.subject_visibility, Lens(), settings, last_fov_deg, dt_s)
+
+
+@pytest.mark.parametrize("distance_m", [1.8, 2.5, 3.0])
+def test_a_player_close_in_front_goes_wide_enough_to_stand_inside_the_band(distance_m):
+    rig, moment, pose = _looking_at_a(distance_m)
+    points = rig.rig.program_camera.subject_visibility.points_world(moment, (0,))
+    assert _height_share(pose, Lens().vertical_fov_deg, points) > SETTINGS.shown_height_max  # too tall at the lens's
+    fov_deg = _widened(rig, moment, pose)
+    assert Lens().vertical_fov_deg < fov_deg <= SETTINGS.widen_max_fov_deg
+    assert _height_share(pose, fov_deg, points) <= SETTINGS.shown_height_max
+    assert _height_share(pose, fov_deg - 1.0, points) > SETTINGS.shown_height_max  # the narrowest that fits, by degree
+
+
+def test_a_player_far_off_keeps_the_lens():
+    rig, moment, pose = _looking_at_a(8.0)
+    assert _widened(rig, moment, pose) == Lens().vertical_fov_deg
+
+
+def test_a_player_behind_a_wall_widens_nothing():
+    wall = block((-0.8, 1.5, 0.0), (0.1, 3.0, 3.0))  # between a (x = 0) and the camera 1.8 m along +x
+    rig, moment, pose = _looking_at_a(-1.8, walls=[wall])
+    assert _widened(rig, moment, pose) == Lens().vertical_fov_deg
+
+
+def test_the_widest_lens_is_the_limit():
+    rig, moment, pose = _looking_at_a(0.6)
+    assert _widened(rig, moment, pose) == SETTINGS.widen_max_fov_deg
+
+
+def test_going_back_to_the_lens_is_a_paced_zoom():
+    rig, moment, pose = _looking_at_a(8.0)
+    assert _widened(rig, moment, pose, last_fov_deg=80.0, dt_s=0.5) == pytest.approx(80.0 - 0.5 * SETTINGS.narrow_deg_s)
+    assert _widened(rig, moment, pose, last_fov_deg=52.0, dt_s=0.5) == Lens().vertical_fov_deg
+
+
+def test_settings_that_keep_the_lens_widen_nothing():
+    rig, moment, pose = _looking_at_a(1.8)
+    assert (
+        _widened(rig, moment, pose, settings=MatchSettings(widen_max_fov_deg=Lens().vertical_fov_deg)) == Lens().vertical_fov_deg
+    )
+
+
+@pytest.mark.parametrize("bad", [dict(widen_max_fov_deg=170.0), dict(widen_max_fov_deg=1.0), dict(narrow_deg_s=0.0)])
+def test_settings_out_of_range_are_refused(bad):
+    with pytest.raises(ValueError, match="widen_max_fov_deg|narrow_deg_s"):
+        MatchSettings(**bad)
+
+
+def test_the_program_cameras_step_carries_the_width_and_its_flag_and_zooms_back_at_its_pace():
+    rig, moment, close = _looking_at_a(1.8)
+    _, _, far = _looking_at_a(8.0)
+    program_camera = rig.rig.program_camera
+    overview = Shot(ShotChoice((), ShotKind.OVERVIEW, "test"), (), StaticCamera(close), 0.0)
+    pose, flags = program_camera.step(moment, 0.0, overview.camera, overview, 0.0, None)
+    assert pose.vertical_fov_deg == _widened(rig, moment, close) > Lens().vertical_fov_deg
+    assert "lens_widened" in flags
+    assert np.array_equal(pose.position_world, close.position_world) and np.array_equal(pose.rotation_xyzw, close.rotation_xyzw)
+    away = Shot(ShotChoice((), ShotKind.OVERVIEW, "test"), (), StaticCamera(far), 0.0)
+    after, _ = program_camera.step(moment, 0.1, away.camera, away, 0.0, pose)
+    assert after.vertical_fov_deg == pytest.approx(pose.vertical_fov_deg - 0.1 * SETTINGS.narrow_deg_s)
+    cut, cut_flags = program_camera.step(moment, 0.0, away.camera, away, 0.0, pose)
+    assert cut.vertical_fov_deg == Lens().vertical_fov_deg and "lens_widened" not in cut_flags
