@@ -371,12 +371,17 @@ pub fn checked_rows(
 }
 
 /// A protobuf message being written, fields in ascending number (as upb writes them).
-#[derive(Default)]
 pub struct Writer {
     pub buf: Vec<u8>,
 }
 
 impl Writer {
+    pub fn with_capacity(bytes: usize) -> Self {
+        Writer {
+            buf: Vec::with_capacity(bytes),
+        }
+    }
+
     fn varint(&mut self, mut value: u64) {
         while value >= 0x80 {
             self.buf.push((value as u8) | 0x80);
@@ -425,7 +430,7 @@ impl Writer {
 
     /// A message field, written even when empty (it is set).
     pub fn message(&mut self, number: u32, write: impl FnOnce(&mut Writer)) {
-        let mut inner = Writer::default();
+        let mut inner = Writer::with_capacity(128);
         write(&mut inner);
         self.bytes(number, &inner.buf);
     }
@@ -476,7 +481,7 @@ pub struct CameraUpdate {
 impl CameraUpdate {
     /// (fields 1-6, fields 10-13): the reply's bytes are the first, compute_ms, the second.
     pub fn pieces(mut self) -> (Vec<u8>, Vec<u8>) {
-        let mut head = Writer::default();
+        let mut head = Writer::with_capacity(128);
         head.unsigned(1, self.frame);
         head.double(2, self.time_s);
         if let Some(pose) = &self.pose {
@@ -491,7 +496,7 @@ impl CameraUpdate {
         head.boolean(4, self.cut);
         head.unsigned(5, self.shot_id);
         head.double(6, self.visibility);
-        let mut tail = Writer::default();
+        let mut tail = Writer::with_capacity(256);
         let d = &mut self.diagnostics;
         tail.message(10, |w| {
             if let Some((theta, phi, alpha)) = d.toric {
@@ -512,9 +517,7 @@ impl CameraUpdate {
 
 /// The whole reply: `head`, compute_ms, `tail` (CameraUpdate::pieces).
 pub fn reply_bytes(head: &[u8], compute_ms: f64, tail: &[u8]) -> Vec<u8> {
-    let mut w = Writer {
-        buf: Vec::with_capacity(head.len() + 9 + tail.len()),
-    };
+    let mut w = Writer::with_capacity(head.len() + 9 + tail.len());
     w.buf.extend_from_slice(head);
     w.double(7, compute_ms);
     w.buf.extend_from_slice(tail);

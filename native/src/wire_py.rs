@@ -13,6 +13,7 @@ use std::cell::RefCell;
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
+use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyString};
 
@@ -150,35 +151,43 @@ fn entries(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(String, f64)>> {
 }
 
 fn pose_of(pose: &Bound<'_, PyAny>) -> PyResult<wire::Pose> {
+    let py = pose.py();
     Ok(wire::Pose {
-        position_world: floats(&pose.getattr("position_world")?, "pose.position_world")?,
-        rotation_xyzw: floats(&pose.getattr("rotation_xyzw")?, "pose.rotation_xyzw")?,
-        vertical_fov_deg: pose.getattr("vertical_fov_deg")?.extract()?,
+        position_world: floats(
+            &pose.getattr(intern!(py, "position_world"))?,
+            "pose.position_world",
+        )?,
+        rotation_xyzw: floats(
+            &pose.getattr(intern!(py, "rotation_xyzw"))?,
+            "pose.rotation_xyzw",
+        )?,
+        vertical_fov_deg: pose.getattr(intern!(py, "vertical_fov_deg"))?.extract()?,
     })
 }
 
 fn diagnostics_of(state: &Bound<'_, PyAny>) -> PyResult<wire::Diagnostics> {
-    let toric = state.getattr("toric")?;
+    let py = state.py();
+    let toric = state.getattr(intern!(py, "toric"))?;
     let toric = if toric.is_none() {
         None
     } else {
-        let torus = toric.getattr("torus")?;
+        let torus = toric.getattr(intern!(py, "torus"))?;
         let alpha = if torus.is_none() {
             None
         } else {
-            Some(torus.getattr("alpha")?.extract()?)
+            Some(torus.getattr(intern!(py, "alpha"))?.extract()?)
         };
         Some((
-            toric.getattr("theta")?.extract()?,
-            toric.getattr("phi")?.extract()?,
+            toric.getattr(intern!(py, "theta"))?.extract()?,
+            toric.getattr(intern!(py, "phi"))?.extract()?,
             alpha,
         ))
     };
     Ok(wire::Diagnostics {
         toric,
-        stage_ms: entries(&state.getattr("stage_ms")?)?,
-        flags: state.getattr("flags")?.extract()?,
-        scores: entries(&state.getattr("scores")?)?,
+        stage_ms: entries(&state.getattr(intern!(py, "stage_ms"))?)?,
+        flags: state.getattr(intern!(py, "flags"))?.extract()?,
+        scores: entries(&state.getattr(intern!(py, "scores"))?)?,
     })
 }
 
@@ -199,23 +208,24 @@ pub struct PyCameraUpdateWire {
 impl PyCameraUpdateWire {
     #[new]
     fn new(state: &Bound<'_, PyAny>) -> PyResult<Self> {
-        if !state.getattr("match")?.is_none() {
+        let py = state.py(); // attribute names interned: no string made and hashed per frame
+        if !state.getattr(intern!(py, "match"))?.is_none() {
             return Err(PyValueError::new_err(
                 "a state with a MATCH part is answered by codec.camera_update_msg",
             ));
         }
-        let pose = state.getattr("pose")?;
+        let pose = state.getattr(intern!(py, "pose"))?;
         let reply = wire::CameraUpdate {
-            frame: state.getattr("frame")?.extract()?,
-            time_s: state.getattr("time_s")?.extract()?,
+            frame: state.getattr(intern!(py, "frame"))?.extract()?,
+            time_s: state.getattr(intern!(py, "time_s"))?.extract()?,
             pose: if pose.is_none() {
                 None
             } else {
                 Some(pose_of(&pose)?)
             },
-            cut: state.getattr("cut")?.extract()?,
-            shot_id: u64::from(state.getattr("shot_id")?.extract::<u32>()?),
-            visibility: state.getattr("visibility")?.extract()?,
+            cut: state.getattr(intern!(py, "cut"))?.extract()?,
+            shot_id: u64::from(state.getattr(intern!(py, "shot_id"))?.extract::<u32>()?),
+            visibility: state.getattr(intern!(py, "visibility"))?.extract()?,
             diagnostics: diagnostics_of(state)?,
         };
         let (head, tail) = reply.pieces();
