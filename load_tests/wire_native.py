@@ -4,10 +4,10 @@ replies (camera_update_msg and SerializeToString against camera_update_wire and
 SerializeToString), and what a FRAMING_ONLY demo session costs through a SessionTable on each
 frame path.
 
-    python -m load_tests.wire_native [--frames 3000] [--json FILE]
+    python -m load_tests.wire_native [--frames 2000] [--json FILE]
 
-Two sessions of the demo scene (its walker and 5 moving obstacles: 6 packed states a frame, 565
-bytes; FRAMING_ONLY) on two SessionTables, one per frame path (the server's `frame_path`;
+Two sessions of the demo scene load_tests.frame_profile streams (its walker and the moving
+obstacles of a 34.7 s walk: 10 packed states a frame; FRAMING_ONLY) on two SessionTables, one per frame path (the server's `frame_path`;
 checkpoints and recording off), fed the same frames at 60 Hz through the worker's Dispatcher
 (bytes in, bytes out), one frame to each in turn. Per frame, timed alone with perf_counter_ns:
 
@@ -49,6 +49,10 @@ from camdirector.worker.table import SessionTable
 from load_tests.report import emit, speedup, summary
 
 WARM_UP_FRAMES = 100  # imports, caches, the compiled Scene's build on its first frame
+# The walk of load_tests.frame_profile's scene (its 2,000 frames and 20 warm-up, and a second),
+# s: how many obstacles the demo scene has depends on it; frames past its end hold the walker still.
+SCENE_S = 2020 / 60.0 + 1.0
+SESSION_ID = "5f0c0d6a9c8e4a7f8a1b2c3d4e5f6a7b"  # 32 hex digits, as the server names a session
 SIDES = {"python": "python", "native": "compiled"}  # the report's side -> the frame path
 
 
@@ -74,31 +78,32 @@ def _encode_native(state, compute_ms: float) -> bytes:
     return reply.SerializeToString()
 
 
-def measure(frames: int, data_dir: Path) -> tuple[dict[str, list[float]], int]:
-    """(name -> per-frame microseconds over `frames` frames after the warm-up, the last frame's bytes)."""
-    scene = build_demo_scene(seed=7, duration_s=(frames + WARM_UP_FRAMES) / 60.0 + 1.0)
+def measure(frames: int, data_dir: Path) -> tuple[dict[str, list[float]], tuple[int, int]]:
+    """(name -> per-frame microseconds over `frames` frames after the warm-up, (the last frame's
+    states, its bytes))."""
+    scene = build_demo_scene(seed=7, duration_s=SCENE_S)
     tables: dict[str, SessionTable] = {}
     for side, frame_path in SIDES.items():
         settings = ServerSettings(data_dir=str(data_dir / side), checkpoint_store="off", frame_path=frame_path)
         tables[side] = SessionTable(settings)
-        tables[side].create("s", session_request(scene, Lens()))
-    session = tables["native"].get("s").session
+        tables[side].create(SESSION_ID, session_request(scene, Lens()))
+    session = tables["native"].get(SESSION_ID).session
     movable, static = session.movable_ids, session.static_ids
     names = [f"{what}_{side}" for what in ("decode", "encode", "compute", "compute_minus_stages", "table_wall") for side in SIDES]
     times_us: dict[str, list[float]] = {name: [] for name in [*names, "empty_python", "empty_native"]}
     for update in frame_updates(scene, frames + WARM_UP_FRAMES):
-        update.session_id = "s"
+        update.session_id = SESSION_ID
         payload = update.SerializeToString()
         sample: dict[str, float] = {}
         for side, table in tables.items():
             requests = Dispatcher(table)
             start = time.perf_counter_ns()
-            body, _ = requests.handle_bytes("frame", "s", payload)
+            body, _ = requests.handle_bytes("frame", SESSION_ID, payload)
             sample[f"table_wall_{side}"] = (time.perf_counter_ns() - start) / 1e3
             reply = pb.CameraUpdate.FromString(body)
             sample[f"compute_{side}"] = reply.compute_ms * 1e3
             sample[f"compute_minus_stages_{side}"] = (reply.compute_ms - sum(reply.diagnostics.stage_ms.values())) * 1e3
-        state = tables["native"].get("s").session.last_state
+        state = tables["native"].get(SESSION_ID).session.last_state
         ns = {
             "decode_python": _timed_ns(codec.frame_from_msg, update, movable, static),
             "decode_native": _timed_ns(codec.frame_from_wire, payload, update, movable, static),
@@ -112,21 +117,22 @@ def measure(frames: int, data_dir: Path) -> tuple[dict[str, list[float]], int]:
             times_us[name].append(value)
     for table in tables.values():
         table.close_all()
-    return {name: values[WARM_UP_FRAMES:] for name, values in times_us.items()}, len(payload)
+    return {name: values[WARM_UP_FRAMES:] for name, values in times_us.items()}, (len(update.packed_ids), len(payload))
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=3000, help="timed frames")
+    parser.add_argument("--frames", type=int, default=2000, help="timed frames")
     parser.add_argument("--json", type=Path, help="also write the JSON here")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as data_dir:
-        per_frame_us, request_bytes = measure(args.frames, Path(data_dir))
+        per_frame_us, (states, request_bytes) = measure(args.frames, Path(data_dir))
     per_frame = {name: summary(values) for name, values in per_frame_us.items()}
     cases = ("decode", "encode", "compute", "compute_minus_stages", "table_wall")
     result = {
         "benchmark": "wire_native",
         "frames": args.frames,
+        "states_per_frame": states,
         "request_bytes": request_bytes,
         "per_frame_us": per_frame,
         "speedup": {case: speedup(per_frame, case) for case in cases},
