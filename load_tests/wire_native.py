@@ -7,9 +7,10 @@ frame path.
     python -m load_tests.wire_native [--frames 2000] [--json FILE]
 
 Two sessions of the demo scene load_tests.frame_profile streams (its walker and the moving
-obstacles of a 34.7 s walk: 10 packed states a frame; FRAMING_ONLY) on two SessionTables, one per frame path (the server's `frame_path`;
-checkpoints and recording off), fed the same frames at 60 Hz through the worker's Dispatcher
-(bytes in, bytes out), one frame to each in turn. Per frame, timed alone with perf_counter_ns:
+obstacles of a 34.7 s walk: 10 packed states, 965 bytes a frame; FRAMING_ONLY) on two
+SessionTables, one per frame path (the server's `frame_path`; checkpoints and recording off), fed
+the same frames at 60 Hz through the worker's Dispatcher (bytes in, bytes out), one frame to each
+in turn. Per frame, timed alone with perf_counter_ns:
 
 - decode_python / decode_native: frame_from_msg on the parsed frame, and frame_from_wire on its
   bytes (which the worker has already parsed, as here);
