@@ -132,7 +132,7 @@ def _tracks_requests(data_dir) -> tuple[pb.CreateSessionRequest, list]:
 @pytest.mark.parametrize(
     "kind, frame_path",
     [(kind, "python") for kind in ("FRAMING_ONLY", "REACTIVE", "RAYCAST", "ANTICIPATION", "MATCH", "TRACKS")]
-    + [("FRAMING_ONLY", "compiled"), ("MATCH", "compiled")],
+    + [("FRAMING_ONLY", "compiled"), ("MATCH", "compiled"), ("TRACKS", "compiled")],
 )
 def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, store_url, kind, frame_path):
     """A table that checkpoints answers part of the inputs; a second table (another worker or
