@@ -316,18 +316,20 @@ def field(number: int, wire_type: int, value: bytes | int) -> bytes:
     return tag + (varint(len(value)) + value if wire_type == LEN else value)
 
 
+# Known fields of another wire type than their own, which upb keeps among the unknown fields
+FRAME_MISMATCHES = [(1, VARINT), (2, I64), (2, LEN), (3, VARINT), (3, I32), (3, LEN), (4, VARINT), (5, I64), (6, I32), (9, I64)]
+OBJECT_STATE_MISMATCHES = [(1, VARINT), (1, I64), (2, VARINT), (2, I32)]
+TRANSFORM_MISMATCHES = [(1, I64), (2, VARINT), (3, I32)]
+VEC_MISMATCHES = [(1, VARINT), (2, I32), (3, LEN), (4, VARINT)]  # a Vec3's or a Quat's
+
+
 @st.composite
-def stray_fields(draw) -> bytes:
-    """Fields a FrameUpdate reader skips: unknown numbers, or known ones of another wire type
-    (upb keeps both among the unknown fields)."""
+def stray_fields(draw, mismatches: list[tuple[int, int]]) -> bytes:
+    """Fields a reader of a message skips: unknown numbers, or known ones of another wire type."""
+    unknown = st.tuples(st.sampled_from([10, 15, 16, 100, 2**29 - 1]), st.sampled_from([VARINT, I64, LEN, I32]))
     out = b""
     for _ in range(draw(st.integers(0, 3))):
-        number, wire_type = draw(
-            st.one_of(
-                st.tuples(st.sampled_from([10, 15, 16, 100, 2**29 - 1]), st.sampled_from([VARINT, I64, LEN, I32])),
-                st.sampled_from([(1, VARINT), (2, I64), (3, VARINT), (3, I32), (4, VARINT), (5, I64), (6, I32), (9, I64)]),
-            )
-        )
+        number, wire_type = draw(st.one_of(unknown, st.sampled_from(mismatches)))
         size = {I64: 8, I32: 4}.get(wire_type, draw(st.integers(0, 12)))
         value = draw(st.integers(0, 2**64 - 1)) if wire_type == VARINT else draw(st.binary(min_size=size, max_size=size))
         out += field(number, wire_type, value)
@@ -342,8 +344,25 @@ def merged_state(draw) -> bytes:
     first, second = draw(frames(good=True).filter(lambda f: len(f.states) >= 2)).states[:2]
     if draw(st.booleans()):
         second.ClearField("id")
-    inner = first.SerializeToString() + draw(stray_fields()) + second.SerializeToString()
+    inner = first.SerializeToString() + draw(stray_fields(OBJECT_STATE_MISMATCHES)) + second.SerializeToString()
     return field(4, LEN, inner)
+
+
+@st.composite
+def strayed_state(draw) -> bytes:
+    """A `states` field whose transform, and each part of it, hold stray fields, each part maybe
+    given twice (merged number by number)."""
+    (state,) = draw(frames(good=True).filter(lambda f: len(f.states) >= 1)).states[:1]
+    transform = b""
+    for number, name in ((1, "position"), (2, "rotation"), (3, "scale")):
+        if state.transform.HasField(name):
+            part = getattr(state.transform, name).SerializeToString()
+            transform += field(number, LEN, part + draw(stray_fields(VEC_MISMATCHES)))
+            if draw(st.booleans()):
+                again = draw(st.sampled_from([b"", part[: len(part) // 9 * 9]]))  # none, or the first numbers again
+                transform += field(number, LEN, again)
+        transform += draw(stray_fields(TRANSFORM_MISMATCHES))
+    return field(4, LEN, field(1, LEN, state.id.encode()) + field(2, LEN, transform))
 
 
 @st.composite
@@ -360,8 +379,9 @@ def unpacked(draw) -> bytes:
         st.one_of(
             frames(good=True).map(lambda f: f.SerializeToString()),
             merged_state(),
+            strayed_state(),
             unpacked(),
-            stray_fields(),
+            stray_fields(FRAME_MISMATCHES),
             st.builds(lambda n: field(2, VARINT, n), st.integers(2**64, 2**70 - 1)),  # a frame past 64 bits: truncated
         ),
         min_size=1,
