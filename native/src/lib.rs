@@ -13,6 +13,8 @@ mod scene_py;
 mod stages_py;
 mod toric;
 mod toric_py;
+mod wire;
+mod wire_py;
 
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -21,5 +23,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bvh_py::register(m)?;
     stages_py::register(m)?;
     scene_py::register(m)?;
+    wire_py::register(m)?;
     Ok(())
 }

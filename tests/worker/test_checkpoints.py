@@ -33,19 +33,21 @@ def store_url(request, tmp_path):
     return request.getfixturevalue("redis_url") if request.param == "redis" else ""
 
 
-def _requests(tmp_path, store_url: str, owner: str, every: int = 20, defer_snapshots: bool = False) -> Dispatcher:
+def _requests(
+    tmp_path, store_url: str, owner: str, every: int = 20, defer_snapshots: bool = False, frame_path: str = "python"
+) -> Dispatcher:
     """A session table that checkpoints, with the requests' dispatch a worker puts above it."""
     table = SessionTable(
-        ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url, checkpoint_every_frames=every),
+        ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url, checkpoint_every_frames=every, frame_path=frame_path),
         defer_snapshots=defer_snapshots,
     )
     table.checkpoints.owner = owner  # one process plays several: each table its own owner
     return Dispatcher(table)
 
 
-def _reference(data_dir) -> Dispatcher:
+def _reference(data_dir, frame_path: str = "python") -> Dispatcher:
     """A session table that keeps no checkpoints."""
-    return Dispatcher(SessionTable(ServerSettings(data_dir=str(data_dir), checkpoint_store="off")))
+    return Dispatcher(SessionTable(ServerSettings(data_dir=str(data_dir), checkpoint_store="off", frame_path=frame_path)))
 
 
 def _store(tmp_path, store_url: str):
@@ -127,11 +129,16 @@ def _tracks_requests(data_dir) -> tuple[pb.CreateSessionRequest, list]:
     return tracks_request("corridor", feet[0]), [("frame", "s", f.SerializeToString()) for f in actor_frames("s", times, feet)]
 
 
-@pytest.mark.parametrize("kind", ["FRAMING_ONLY", "REACTIVE", "RAYCAST", "ANTICIPATION", "MATCH", "TRACKS"])
-def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, store_url, kind):
+@pytest.mark.parametrize(
+    "kind, frame_path",
+    [(kind, "python") for kind in ("FRAMING_ONLY", "REACTIVE", "RAYCAST", "ANTICIPATION", "MATCH", "TRACKS")]
+    + [("FRAMING_ONLY", "compiled"), ("MATCH", "compiled"), ("TRACKS", "compiled")],
+)
+def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, store_url, kind, frame_path):
     """A table that checkpoints answers part of the inputs; a second table (another worker or
     node) is asked the rest: it restores the session (creation, snapshot, inputs since) and every
-    answer equals the one of a table that ran all the inputs without checkpoints."""
+    answer equals the one of a table that ran all the inputs without checkpoints, on either frame
+    path (the compiled one decodes a replayed input from its bytes written again)."""
     create, requests = (
         _match_requests(120)
         if kind == "MATCH"
@@ -140,15 +147,15 @@ def test_a_session_restored_elsewhere_answers_as_if_nothing_happened(tmp_path, s
         else _toric_requests(getattr(pb, kind), 100)
     )
     # the reference reads the same level registry (TRACKS) but keeps no checkpoints
-    reference = _reference(tmp_path)
+    reference = _reference(tmp_path, frame_path)
     reference.handle_bytes("create", "s", create.SerializeToString())
     expected = _answers(reference, requests)
 
-    first = _requests(tmp_path, store_url, "node-a/1")
+    first = _requests(tmp_path, store_url, "node-a/1", frame_path=frame_path)
     first.handle_bytes("create", "s", create.SerializeToString())
     cut = 67  # past three snapshots (every 20 inputs) and seven inputs into the log
     answered = _answers(first, requests[:cut])
-    second = _requests(tmp_path, store_url, "node-b/2")
+    second = _requests(tmp_path, store_url, "node-b/2", frame_path=frame_path)
     answered += _answers(second, requests[cut:])
     assert answered == expected
     # the first table is now a stale copy: its next frame restores the newer state before answering

@@ -38,10 +38,11 @@ import socket
 import unicodedata
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+import camdirector._native as native
 from camdirector.errors import exhausted, invalid, not_found, precondition
 from camdirector.geometry import meshes
 from camdirector.geometry.camera import CameraPose, Lens
@@ -559,6 +560,36 @@ def frame_from_msg(
     )
 
 
+_REFUSALS = {"INVALID_ARGUMENT": invalid, "NOT_FOUND": not_found, "FAILED_PRECONDITION": precondition}
+
+
+def frame_from_wire(
+    payload: bytes,
+    msg: pb.FrameUpdate,
+    movable: set[str],
+    static: set[str],
+    player_ids: frozenset[str] | None = None,
+    delay_s: float = 0.0,
+) -> FrameInput:
+    """frame_from_msg on the compiled frame path (ServerSettings.frame_path "compiled"): the
+    frame's bytes as received (`payload`, whose parse is `msg`) read and checked in
+    camdirector._native (native/src/wire.rs), with frame_from_msg's checks in its order and its
+    errors. A quaternion is normalised there with its squares summed in order, which may differ
+    from numpy's norm in the last bit (numpy's depends on the machine). A frame with game events
+    or player stats goes through frame_from_msg."""
+    try:
+        decoded = native.decode_frame(payload, movable, static)
+    except native.FrameRefused as exc:
+        status, message = exc.args
+        raise _REFUSALS[status](message) from None
+    if decoded is None:
+        return frame_from_msg(msg, movable, static, player_ids, delay_s)
+    session_id, frame, time_s, ids, rows = decoded  # rows (n, PACKED_STRIDE) float64, as transforms_from_packed's
+    # Rows of the one array, as transforms_from_packed makes them; map over its columns is the cheapest way (3 us for 6).
+    transforms = map(RigidTransform, rows[:, 0:3], rows[:, 3:7], rows[:, 7:10])
+    return FrameInput(session_id, frame, time_s, list(zip(ids, transforms)))
+
+
 def pose_msg(pose: CameraPose) -> pb.CameraPose:
     p, q = pose.position_world, pose.rotation_xyzw
     return pb.CameraPose(
@@ -576,6 +607,28 @@ def shot_msg(shot: ShotChoice, replay_of: ReplayedMoment | None = None) -> pb.Sh
     if shot.replay is not None:
         out.replay_kill_time_s = shot.replay.kill_time_s
     return out
+
+
+class Reply(Protocol):
+    """What the session table reads and sets of a frame's reply: a pb.CameraUpdate, or on the
+    compiled frame path a computed frame's camera_update_wire."""
+
+    compute_ms: float
+
+    @property
+    def stale(self) -> bool: ...
+
+    def SerializeToString(self) -> bytes: ...
+
+
+def camera_update_wire(state: FrameState) -> Reply:
+    """camera_update_msg(state, compute_ms=0.0) on the compiled frame path, for a state without a
+    MATCH part: written in camdirector._native (native/src/wire.rs), the same bytes as the
+    message's but for the order of the map entries (stage_ms, scores), there by key; upb's is
+    its hash table's, which changes from one process to the next. Set compute_ms before
+    serializing."""
+    reply: Reply = native.CameraUpdateWire(state)
+    return reply
 
 
 def camera_update_msg(state: FrameState, compute_ms: float, stale: bool = False, message: str = "") -> pb.CameraUpdate:

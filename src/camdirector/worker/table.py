@@ -57,7 +57,7 @@ class HeldSession:
     checkpoint: SessionCheckpoint = field(default_factory=SessionCheckpoint)
     # The last ANSWERS_KEPT frames' answers, by frame: a frame sent again (its answer was lost with
     # a stream or a node) is answered stale with its own pose, not the newest one.
-    answers: OrderedDict[int, pb.CameraUpdate] = field(default_factory=OrderedDict)
+    answers: OrderedDict[int, codec.Reply] = field(default_factory=OrderedDict)
 
 
 class SessionTable:
@@ -169,7 +169,7 @@ class SessionTable:
             self.checkpoints.check_answered(msg.session_id, msg, None if last is None else last[0])
         if not held.session.is_stale(msg.frame):
             self.checkpoints.write_input(msg.session_id, held.checkpoint, "frame", payload)
-        reply, state = self._frame(held, msg, t0)
+        reply, state = self._frame(held, msg, t0, payload)
         body = reply.SerializeToString()
         if state is not None:
             self._after_input(held)
@@ -180,8 +180,12 @@ class SessionTable:
         stage_ms = {} if state is None else state.stage_ms
         return body, FrameMetrics(reply.compute_ms, stage_ms, reply.stale, checkpoint_failed=held.checkpoint.failed)
 
-    def _frame(self, held: HeldSession, msg: pb.FrameUpdate, t0: float) -> tuple[pb.CameraUpdate, FrameState | None]:
-        """The frame's reply, and its state when it was computed (None: stale, the last pose repeated)."""
+    def _frame(
+        self, held: HeldSession, msg: pb.FrameUpdate, t0: float, payload: bytes | None = None
+    ) -> tuple[codec.Reply, FrameState | None]:
+        """The frame's reply, and its state when it was computed (None: stale, the last pose
+        repeated). payload: msg's bytes as received, which the compiled frame path decodes
+        (serialized again when not given: a checkpoint's input replayed)."""
         session = held.session
         if session.is_stale(msg.frame):
             last = session.last_state
@@ -189,7 +193,10 @@ class SessionTable:
             kept = held.answers.get(msg.frame)
             if kept is not None:  # sent again: its own answer, marked stale
                 reply = pb.CameraUpdate()
-                reply.CopyFrom(kept)
+                if isinstance(kept, pb.CameraUpdate):
+                    reply.CopyFrom(kept)
+                else:  # the compiled frame path's (codec.camera_update_wire)
+                    reply.ParseFromString(kept.SerializeToString())
                 reply.stale, reply.compute_ms = True, (self.clock() - t0) * 1e3
                 reply.message = f"frame {msg.frame} is not newer than frame {last.frame}: its first answer repeated"
                 return reply, None
@@ -202,19 +209,27 @@ class SessionTable:
             reply.frame, reply.time_s = msg.frame, msg.time_s
             return reply, None
         inputs = session.rig.player_inputs  # whom the frame's game events may name, if the rig takes any
-        update = codec.frame_from_msg(
-            msg, session.movable_ids, session.static_ids, None if inputs is None else inputs.player_ids, session.delay_s
-        )
+        player_ids = None if inputs is None else inputs.player_ids
+        compiled = self.settings.compiled_frame_path  # the frame's wire in camdirector._native
+        if compiled:
+            payload = msg.SerializeToString() if payload is None else payload
+            update = codec.frame_from_wire(payload, msg, session.movable_ids, session.static_ids, player_ids, session.delay_s)
+        else:
+            update = codec.frame_from_msg(msg, session.movable_ids, session.static_ids, player_ids, session.delay_s)
         state = session.frame(update)
         if session.has_deferred_work:
             self._deferred[session.id] = held
-        reply = codec.camera_update_msg(state, compute_ms=0.0)
-        reply.compute_ms = (self.clock() - t0) * 1e3
-        held.timeline.add(state, reply.compute_ms)
-        held.answers[msg.frame] = reply
+        answer: codec.Reply  # on the compiled frame path, written in camdirector._native but for a MATCH state
+        if compiled and state.match is None:
+            answer = codec.camera_update_wire(state)
+        else:
+            answer = codec.camera_update_msg(state, compute_ms=0.0)
+        answer.compute_ms = (self.clock() - t0) * 1e3
+        held.timeline.add(state, answer.compute_ms)
+        held.answers[msg.frame] = answer
         if len(held.answers) > ANSWERS_KEPT:
             held.answers.popitem(last=False)
-        return reply, state
+        return answer, state
 
     def update_style(self, msg: pb.UpdateStyleRequest, payload: bytes | None = None) -> pb.UpdateStyleResponse:
         held = self.get(msg.session_id)

@@ -1,10 +1,14 @@
-"""The TORIC rig with FRAMING_ONLY compiled (pipeline/toric/compiled_rig.py) against ToricRig, the
-reference: whole demo sessions through a SessionTable on each frame path (a server's
-`frame_path`) answer every frame alike (poses within 1e-9 m and 1e-9 rad; the same flags, cuts,
-shots and stale answers; the framing error and the toric place within 1e-9; the same stage laps),
-through a frame gap, a frame sent again, and changes of visibility mode that hand the camera to
-the Python stages and back; a compiled run repeats bit for bit, also across a snapshot; and the
-setting reaches the rig from the command line and the environment, a bad value refused."""
+"""The compiled frame path (a server's `frame_path`) against the Python one, the reference: the
+TORIC rig with FRAMING_ONLY compiled (pipeline/toric/compiled_rig.py) against ToricRig, and the
+frame's wire decoded and its reply written in camdirector._native (worker/codec.py
+frame_from_wire, camera_update_wire). Whole demo sessions through a SessionTable on each path
+answer every frame alike (poses within 1e-9 m and 1e-9 rad; the same flags, cuts, shots and
+stale answers; the framing error and the toric place within 1e-9; the same stage laps; replies
+with the same fields, their numbers within the same margins), through a frame gap, a frame sent
+again, and changes of visibility mode that hand the camera to the Python stages and back; the
+compiled path's replies are the bytes the Python codec writes for the same state; a compiled run
+repeats bit for bit, also across a snapshot; and the setting reaches the rig from the command line
+and the environment, a bad value refused."""
 
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ from camdirector.pipeline.toric.compiled_rig import CompiledToricRig
 from camdirector.pipeline.toric.rig import ToricRig
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker import codec
 from camdirector.worker.checkpoint_stores import dumps_state, loads_state
 from camdirector.worker.table import SessionTable
 
@@ -34,12 +39,15 @@ FRAMES = 900  # 15 s of the demo at 60 Hz: the walker passes the moving obstacle
 
 @dataclass
 class Answer:
-    """What one frame answered: the reply's stale mark and, when it was computed, its state."""
+    """What one frame answered: the reply's stale mark, the reply as sent and parsed, and when it
+    was computed, its state."""
 
     stale: bool
     cut: bool
     shot_id: int
     state: FrameState | None
+    body: bytes
+    reply: pb.CameraUpdate
 
 
 def _inputs(styles: dict[int, int]) -> list[pb.FrameUpdate | pb.UpdateStyleRequest]:
@@ -71,10 +79,11 @@ def _run(frame_path: str, inputs, tmp_path, snapshot_at: int | None = None) -> t
         if isinstance(msg, pb.UpdateStyleRequest):
             table.update_style(msg)
             continue
-        reply = table.frame(msg)
+        body, _ = table.frame_bytes(msg, msg.SerializeToString())
+        reply = pb.CameraUpdate.FromString(body)
         held = table.get("s")
         state = None if reply.stale else held.session.last_state
-        answers.append(Answer(reply.stale, reply.cut, reply.shot_id, state))
+        answers.append(Answer(reply.stale, reply.cut, reply.shot_id, state, body, reply))
         if msg.frame == snapshot_at:
             objects = held.session.creation_objects()
             held.session = loads_state(dumps_state(held.session, objects), objects)
@@ -93,6 +102,7 @@ def _differences(got: list[Answer], want: list[Answer]) -> dict[str, float]:
     for i, (g, w) in enumerate(zip(got, want)):
         assert (g.stale, g.cut, g.shot_id) == (w.stale, w.cut, w.shot_id), i
         assert (g.state is None) == (w.state is None), i
+        _reply_differences(g.reply, w.reply, worst)
         if g.state is None or w.state is None:
             continue
         gs, ws = g.state, w.state
@@ -115,6 +125,24 @@ def _differences(got: list[Answer], want: list[Answer]) -> dict[str, float]:
             worst["torus"] = max(worst["torus"], abs(gt.torus.alpha - wt.torus.alpha), *gaps)
     assert visibility_frames == 0  # the Scene and Embree agree on every sample segment of these sessions
     return worst
+
+
+def _reply_differences(got: pb.CameraUpdate, want: pb.CameraUpdate, worst: dict[str, float]) -> None:
+    """Two replies' largest differences into `worst` (their poses and toric places); asserts the
+    rest is equal, the stage laps and compute_ms included (the tables' clocks tick per reading)."""
+    fields = ("frame", "time_s", "cut", "shot_id", "visibility", "compute_ms", "stale", "message", "buffering")
+    assert [getattr(got, f) for f in fields] == [getattr(want, f) for f in fields]
+    gd, wd = got.diagnostics, want.diagnostics
+    assert (list(gd.flags), dict(gd.stage_ms), dict(gd.scores)) == (list(wd.flags), dict(wd.stage_ms), dict(wd.scores))
+    assert [m.HasField(f) for m in (got, want) for f in ("pose", "diagnostics", "shot")] == [True, True, False] * 2
+    assert not got.candidates and not want.candidates
+    gp, wp = got.pose, want.pose
+    assert gp.vertical_fov_deg == wp.vertical_fov_deg
+    worst["position_m"] = max(worst["position_m"], *(abs(getattr(gp.position, a) - getattr(wp.position, a)) for a in "xyz"))
+    q, r = (np.array([getattr(p.rotation, a) for a in "xyzw"]) for p in (gp, wp))
+    worst["rotation"] = max(worst["rotation"], float(min(np.abs(q - r).max(), np.abs(q + r).max())))
+    worst["theta_phi_rad"] = max(worst["theta_phi_rad"], abs(gd.theta - wd.theta), _angle(gd.phi, wd.phi))
+    worst["torus"] = max(worst["torus"], abs(gd.alpha - wd.alpha))
 
 
 def _agree(got: list[Answer], want: list[Answer]) -> None:
@@ -142,6 +170,22 @@ def test_a_framing_only_session_agrees_frame_by_frame(framing_only):
     assert isinstance(table.get("s").session.rig, CompiledToricRig)
     assert sum(a.stale for a in compiled) == 1 and sum(a.cut for a in compiled) >= 1
     _agree(compiled, python)
+
+
+def test_the_compiled_wire_sends_the_python_codecs_bytes(framing_only):
+    """Each computed frame's reply is what camera_update_msg writes for its state (map entries by
+    key: upb's own order is its hash table's, seeded per process); a frame sent again repeats its
+    first answer, marked stale."""
+    _, _, compiled, _ = framing_only
+    for answer in compiled:
+        if answer.state is not None:
+            want = codec.camera_update_msg(answer.state, compute_ms=answer.reply.compute_ms)
+            assert answer.body == want.SerializeToString(deterministic=True)
+    (again,) = [a for a in compiled if a.stale]
+    (first,) = [a for a in compiled if a.reply.frame == again.reply.frame and not a.stale]
+    repeated = pb.CameraUpdate.FromString(first.body)
+    repeated.stale, repeated.compute_ms, repeated.message = again.reply.stale, again.reply.compute_ms, again.reply.message
+    assert again.reply == repeated and "its first answer repeated" in again.reply.message
 
 
 def test_a_compiled_session_repeats_bit_for_bit_also_across_a_snapshot(framing_only, tmp_path):
