@@ -43,7 +43,7 @@ def _widened(rig, moment, pose, last_fov_deg=None, dt_s=0.0, settings=SETTINGS) 
 @pytest.mark.parametrize("distance_m", [1.8, 2.5, 3.0])
 def test_a_player_close_in_front_goes_wide_enough_to_stand_inside_the_band(distance_m):
     rig, moment, pose = _looking_at_a(distance_m)
-    points = rig.rig.program_camera.subject_visibility.points_world(moment, (0,))
+    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.outlines_local[0])  # head to feet
     assert _height_share(pose, Lens().vertical_fov_deg, points) > SETTINGS.shown_height_max  # too tall at the lens's
     fov_deg = _widened(rig, moment, pose)
     assert Lens().vertical_fov_deg < fov_deg <= SETTINGS.widen_max_fov_deg
@@ -69,8 +69,8 @@ def test_the_widest_lens_is_the_limit():
 
 def test_going_back_to_the_lens_is_a_paced_zoom():
     rig, moment, pose = _looking_at_a(8.0)
-    assert _widened(rig, moment, pose, last_fov_deg=80.0, dt_s=0.5) == pytest.approx(80.0 - 0.5 * SETTINGS.narrow_deg_s)
-    assert _widened(rig, moment, pose, last_fov_deg=52.0, dt_s=0.5) == Lens().vertical_fov_deg
+    assert _widened(rig, moment, pose, last_fov_deg=80.0, dt_s=0.1) == pytest.approx(80.0 - 0.1 * SETTINGS.narrow_deg_s)
+    assert _widened(rig, moment, pose, last_fov_deg=52.0, dt_s=0.1) == Lens().vertical_fov_deg
 
 
 def test_settings_that_keep_the_lens_widen_nothing():
@@ -100,3 +100,13 @@ def test_the_program_cameras_step_carries_the_width_and_its_flag_and_zooms_back_
     assert after.vertical_fov_deg == pytest.approx(pose.vertical_fov_deg - 0.1 * SETTINGS.narrow_deg_s)
     cut, cut_flags = program_camera.step(moment, 0.0, away.camera, away, 0.0, pose)
     assert cut.vertical_fov_deg == Lens().vertical_fov_deg and "lens_widened" not in cut_flags
+
+
+def test_a_first_person_view_keeps_the_lens():
+    rig, moment, _ = _looking_at_a(8.0)
+    eye = moment.feet_world[0] + [0.0, 1.6, 0.0]
+    in_eyes = look_along(eye, moment.feet_world[1] + [0.0, 1.6, 0.0] - eye, Lens().vertical_fov_deg)
+    assert _widened(rig, moment, in_eyes) == Lens().vertical_fov_deg
+    near = eye + [0.0, -0.6, 1.5]
+    beside = look_along(near, moment.feet_world[0] + [0.0, 1.0, 0.0] - near, Lens().vertical_fov_deg)
+    assert _widened(rig, moment, beside) > Lens().vertical_fov_deg  # the same player 1.5 m off, looked at, is sized

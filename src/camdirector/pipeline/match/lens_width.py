@@ -6,12 +6,17 @@ DUEL's over-the-shoulder place can come within 2-3 m of a player, where a 1.4-1.
 camera, 95% of them the shot's own subjects). An operator in a tight corridor does not back
 through the wall: they go wider. So after CAMERA has placed the pose, its vertical field of view
 is the narrowest from the lens's up to `MatchSettings.widen_max_fov_deg` at which no player whose
-sample points the pose sees (at least `SHOWN_SEEN` of them, ray cast; eval-match counts a player
-shown from half of its own points, so a margin) stands taller than `MatchSettings.shown_height_max` of the frame's height, on a
-one-degree grid. Going back to the lens's is a zoom at `MatchSettings.narrow_deg_s`, never faster,
-so a camera that comes and goes near a wall does not pump; a cut starts at what it needs.
-Heights as eval-match measures them (evaluation/match/measure.py): the extent of a player's
-sample points on the screen's vertical axis, clipped to the frame, over the frame's height.
+sample points the pose sees (at least `SHOWN_SEEN` of them, ray cast, as eval-match counts a
+player shown) stands taller than `MatchSettings.shown_height_max` of the frame's height, on a
+one-degree grid. Going back to the lens's is a zoom at `MatchSettings.narrow_deg_s`, never
+faster, so a camera that comes and goes near a wall does not pump; a cut starts at what it
+needs. A camera in a player's eyes (HLTV's and the autotrack's first-person views) keeps the
+lens: a first-person view is the game's own picture (eval-match leaves it out of its heights).
+A player's height on screen is eval-match's (evaluation/match/measure.py): the extent of its
+points on the screen's vertical axis, clipped to the frame, over the frame's height; its points
+here are its outline (SubjectVisibility.outlines_local: the samples and its mesh's lowest and
+highest vertices), since 16 samples fall short of the head and feet (sized by them, 7.7% of
+nav_test's bot match's frames still had a player over 0.6; by the outline, 2.7%).
 """
 
 from __future__ import annotations
@@ -24,8 +29,9 @@ from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
-SHOWN_SEEN = 0.25  # a player this much of whose points the pose sees may be shown (eval-match: half of its own points)
+SHOWN_SEEN = 0.5  # a player with this share of its points seen from the pose is shown (eval-match's SHOWN_FRACTION)
 FOV_STEP_DEG = 1.0  # the widths tried, from the lens's up, deg
+EYES_RADIUS_M = 0.6  # a camera this near a player's upright axis, within its height, looks through its eyes, m
 
 
 def widened_fov_deg(
@@ -48,7 +54,7 @@ def widened_fov_deg(
     widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,)
     tan_half = np.tan(np.radians(widths_deg) / 2.0)  # (T,)
     players = range(len(moment.transforms))
-    points = np.stack([moment.transforms[i].apply(visibility.samples_local[i]) for i in players])  # (P, S, 3)
+    points = np.stack([moment.transforms[i].apply(visibility.outlines_local[i]) for i in players])  # (P, S, 3)
     camera = (points - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)  # (P, S, 3) camera frame, -Z ahead
     depth = -camera[..., 2]
     ahead = depth >= NEAR_PLANE_M
@@ -56,6 +62,8 @@ def widened_fov_deg(
         slope_y = np.where(ahead, camera[..., 1] / depth, np.nan)  # (P, S) tan of the elevation on screen
         slope_x = np.where(ahead, camera[..., 0] / depth, np.nan)
     heights = _screen_heights(slope_y, slope_x, tan_half, lens.aspect)  # (P, T)
+    if _looked_through(pose, moment, points).any():
+        return base_deg
     tall = np.flatnonzero(heights[:, 0] > settings.shown_height_max)
     if not len(tall):
         return float(widths_deg[0])
@@ -65,6 +73,14 @@ def widened_fov_deg(
         return float(widths_deg[0])
     fits = (heights[tall] <= settings.shown_height_max).all(axis=0)  # (T,)
     return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
+
+
+def _looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) -> np.ndarray:
+    """(P,) bool: the players the camera stands in (within EYES_RADIUS_M of the upright line
+    through their feet, between their feet and head): a first-person view."""
+    offset = pose.position_world - moment.feet_world  # (P, 3)
+    top_m = points_world[..., 1].max(axis=1) - moment.feet_world[:, 1]  # (P,) the body's height above its feet
+    return np.asarray((np.hypot(offset[:, 0], offset[:, 2]) < EYES_RADIUS_M) & (offset[:, 1] >= 0.0) & (offset[:, 1] <= top_m))
 
 
 def _screen_heights(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:

@@ -136,10 +136,12 @@ class MatchSettings:
                                          # 2.5 m put it 3.9 m off, a 1.75 m player at 0.48 (real duel: 40% of program frames
                                          # had a player over 0.6), share of frame height. (0, shown_height_max]
     widen_max_fov_deg: float = 90.0     # a program pose whose player would stand taller than shown_height_max goes this wide
-                                         # at most (lens_width.py; 80 deg vertical is 112 deg across 16:9, what Quake
-                                         # players play with); the lens's own to keep it, deg. [lens's, 170)
-    narrow_deg_s: float = 20.0           # and zooms back toward the lens's no faster than this, so a camera that comes and
-                                         # goes near a wall does not pump, deg/s. (0, 1000]
+                                         # at most (lens_width.py; 90 deg vertical is 121 deg across 16:9; Quake players
+                                         # play at 90-120 across 4:3, 74-104 vertical); the lens's own to keep it, deg. (1, 170)
+    narrow_deg_s: float = 90.0           # and zooms back toward the lens's no faster than this, deg/s: half a second from the
+                                         # widest, so a camera near a wall does not pump frame to frame; at 20 deg/s the wide
+                                         # frames lasted and showed more far-off players (nav_test's median height
+                                         # 0.138 -> 0.130). (0, 1000]
     candidate_seen: float = 0.5          # a candidate's subject is shown from its camera with this share of its points seen
                                          # (eval-match's shown fraction). [0, 1]
     candidate_min_shown: float = 0.5     # a candidate is offered only when it shows this share of its subjects at the

@@ -20,6 +20,12 @@ class SubjectVisibility:
     def __init__(self, ray_scene: RayScene, player_meshes: list[TriMesh], samples_per_player: int, rng: np.random.Generator):
         self.ray_scene = ray_scene
         self.samples_local = [SurfaceSampler(m).sample(samples_per_player, rng) for m in player_meshes]
+        # the samples and the mesh's lowest and highest vertices: a body's whole height (16 samples
+        # fall short of the head and feet by 10-20%), for sizing it on screen (lens_width.py)
+        self.outlines_local = [
+            np.concatenate([samples, m.vertices[[np.argmin(m.vertices[:, 1]), np.argmax(m.vertices[:, 1])]]])
+            for samples, m in zip(self.samples_local, player_meshes)
+        ]  # (k + 2, 3) each
         self.k = samples_per_player
 
     def points_world(self, moment: Moment, subjects: tuple[int, ...]) -> np.ndarray:
