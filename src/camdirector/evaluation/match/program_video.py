@@ -125,7 +125,8 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
                 np.concatenate([team_rgb8[alive], np.full((1, 3), 255, dtype=np.uint8)]),
             )
             pose = program.pose(int(row))
-            frame, _ = label_players(renderer.render(pose, lens), match, index, pose, lens)
+            frame_lens = Lens(pose.vertical_fov_deg, lens.aspect)  # the program's own width (a widened lens: lens_width.py)
+            frame, _ = label_players(renderer.render(pose, frame_lens), match, index, pose, frame_lens)
             frame[: inset.shape[0], width - inset.shape[1] :] = inset
             video.write(frame)
             costs.append((time.perf_counter() - start) * 1e3)
