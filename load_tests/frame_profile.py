@@ -32,9 +32,11 @@ loop up to SessionRouter.frame), front in (the router and the pool up to the soc
 worker (the socket pair and the worker's wake-up; a worker still busy with deferred work, its
 idle_work, when the frame came is counted apart as `worker deferred work in the way`), worker loop,
 worker decode (the FrameUpdate parsed once, dispatch.parse_routed), dispatch, checkpoint log
-append, codec decode (codec.frame_from_msg), each stage of `stage_ms` (the reply carries them; the
-wrapper reads them off the frame's state), session (Session.frame beyond its stages), codec encode
-(codec.camera_update_msg), timeline, snapshot check (SessionTable._after_input), recording, table
+append, codec decode (codec.frame_from_msg; --frame-path compiled: codec.frame_from_wire), each
+stage of `stage_ms` (the reply carries them; the wrapper reads them off the frame's state),
+session (Session.frame beyond its stages), codec encode (codec.camera_update_msg; on the compiled
+path also codec.camera_update_wire), timeline, snapshot check (SessionTable._after_input),
+recording, table
 (the rest of SessionTable.frame_bytes: the session's lookup, the reply's SerializeToString, the
 answers kept), reply framing (infra/channels.encode_reply), worker -> front (the socket pair and the
 front's reader task), front out (the reply's metrics, the router's counters and histograms),
@@ -81,6 +83,9 @@ from typing import Any
 
 import numpy as np
 
+from camdirector.server_settings import FRAME_PATHS
+
+FRAME_PATH_ENV = "CAMDIRECTOR_FRAME_PATH"  # ServerSettings.frame_path from the environment: the plugin wraps that path's codec
 PROFILE_DIR_ENV = "CAMDIRECTOR_FRAME_PROFILE_DIR"  # the folder the server's processes write their stamps to
 PLUGIN = "load_tests.frame_profile"
 ROOT = Path(__file__).resolve().parents[1]
@@ -221,8 +226,12 @@ def _install_worker(stamps: _Stamps) -> None:
     SessionTable.idle_work = idle_stamped
     SessionTable._after_input = _adding(stamps, "snapshot_check", SessionTable._after_input)
     Checkpointing.write_input = _adding(stamps, "checkpoint_append", Checkpointing.write_input)
-    codec.frame_from_msg = _adding(stamps, "codec_decode", codec.frame_from_msg)
-    codec.camera_update_msg = _adding(stamps, "codec_encode", codec.camera_update_msg)
+    if os.environ.get(FRAME_PATH_ENV) == "compiled":  # the wire in camdirector._native; its decode falls back on frame_from_msg
+        codec.frame_from_wire = _adding(stamps, "codec_decode", codec.frame_from_wire)
+        codec.camera_update_wire = _adding(stamps, "codec_encode", codec.camera_update_wire)
+    else:
+        codec.frame_from_msg = _adding(stamps, "codec_decode", codec.frame_from_msg)
+    codec.camera_update_msg = _adding(stamps, "codec_encode", codec.camera_update_msg)  # MATCH's on either path
     Session.frame = frame_stamped
     Timeline.add = _adding(stamps, "timeline", Timeline.add)
     RecordingWriter.write_frame_and_camera = _adding(stamps, "recording", RecordingWriter.write_frame_and_camera)
@@ -725,9 +734,11 @@ def run(
     record: bool,
     bare_frames: int,
     rate_hz: float = 0.0,
+    frame_path: str = "python",
 ) -> dict:
     """The profile (module docstring); then, with bare_frames > 0, that many frames of each
-    configuration against a server without the plugin: what the stamps cost."""
+    configuration against a server without the plugin: what the stamps cost. frame_path: the
+    servers' (`serve --frame-path`)."""
     from camdirector.deploy.server_process import ServerProcess
 
     t0 = time.perf_counter()
@@ -737,7 +748,11 @@ def run(
         match = _prepared_match(folder, n_frames + warmup) if {"TRACKS", "MATCH"} & set(rigs) else None
         works = list(workloads(rigs, n_frames, warmup, match, record))
         serve_args = ("--workers", str(workers), "--data-dir", str(folder / "data"))
-        env = {PROFILE_DIR_ENV: str(stamps_dir), "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        env = {
+            PROFILE_DIR_ENV: str(stamps_dir),
+            FRAME_PATH_ENV: frame_path,
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        }
         with ServerProcess(*serve_args, "--plugin", PLUGIN, env=env) as server:
             runs = _stream_all(server, works, transports, rate_hz)
             server_workers = server.ready.get("workers")
@@ -747,13 +762,14 @@ def run(
         bare: list[Streamed | None] = [None] * len(runs)
         if bare_frames > 0:
             short = [Workload(w.rig, w.request, w.frames[: w.warmup + bare_frames], w.warmup) for w in works]
-            with ServerProcess(*serve_args) as server:
+            with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
                 bare = list(_stream_all(server, short, transports, rate_hz))
         configs = [_config(r, front[r.session_id], worker[r.session_id], floor, b) for r, floor, b in zip(runs, floors, bare)]
     return {
         "benchmark": "frame_profile",
         "frames_per_config": n_frames,
         "rate_hz": rate_hz or None,  # None: closed loop
+        "frame_path": frame_path,
         "recording": record,
         "server_workers": server_workers,
         "cpus": os.cpu_count(),
@@ -780,6 +796,7 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="server worker processes (>= 1)")
     parser.add_argument("--rate", type=float, default=0.0, help="frames a second of wall time (0: closed loop)")
     parser.add_argument("--no-record", action="store_true", help="sessions that do not record")
+    parser.add_argument("--frame-path", dest="frame_path", choices=FRAME_PATHS, default="python", help="the servers' frame path")
     parser.add_argument(
         "--bare-frames", type=int, default=500, help="frames per configuration against a server without the plugin (0: none)"
     )
@@ -797,7 +814,18 @@ def main(argv=None) -> int:
     if args.frames < 1 or args.warmup < 0 or args.workers < 1 or args.bare_frames < 0 or args.rate < 0:
         parser.error("--frames and --workers must be positive, --warmup, --bare-frames and --rate not negative")
     emit(
-        run(rigs, transports, args.frames, args.warmup, args.workers, not args.no_record, args.bare_frames, args.rate), args.json
+        run(
+            rigs,
+            transports,
+            args.frames,
+            args.warmup,
+            args.workers,
+            not args.no_record,
+            args.bare_frames,
+            args.rate,
+            args.frame_path,
+        ),
+        args.json,
     )
     return 0
 

@@ -22,9 +22,22 @@ STAGES = {
 }
 
 
-def _profile(tmp_path, rigs: str) -> dict:
+def _profile(tmp_path, rigs: str, frame_path: str = "python") -> dict:
     out = tmp_path / "out.json"
-    args = ["--rigs", rigs, "--frames", "12", "--warmup", "3", "--bare-frames", "5", "--json", str(out)]
+    args = [
+        "--rigs",
+        rigs,
+        "--frames",
+        "12",
+        "--warmup",
+        "3",
+        "--bare-frames",
+        "5",
+        "--frame-path",
+        frame_path,
+        "--json",
+        str(out),
+    ]
     assert frame_profile.main(args) == 0
     return json.loads(out.read_text())
 
@@ -54,6 +67,14 @@ def test_profile_of_toric_frames_over_both_transports(tmp_path):
     result = _profile(tmp_path, "TORIC_FRAMING_ONLY,TORIC_ANTICIPATION")
     assert result["recording"] is True and result["rate_hz"] is None
     _check_configs(result, ["TORIC_FRAMING_ONLY", "TORIC_ANTICIPATION"])
+
+
+def test_profile_on_the_compiled_frame_path_stamps_its_wire(tmp_path):
+    result = _profile(tmp_path, "TORIC_FRAMING_ONLY", "compiled")
+    assert result["frame_path"] == "compiled"
+    _check_configs(result, ["TORIC_FRAMING_ONLY"])
+    for config in result["configs"]:  # the compiled wire's decode and encode wrapped, not left to "table"
+        assert config["hops"]["codec_decode"]["mean_us"] > 0 and config["hops"]["codec_encode"]["mean_us"] > 0
 
 
 @pytest.mark.shared_data
