@@ -5,6 +5,8 @@ use pyo3::prelude::*;
 
 mod bvh;
 mod bvh_py;
+mod carry;
+mod carry_py;
 mod framing;
 mod motion;
 mod rotation;
@@ -21,5 +23,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bvh_py::register(m)?;
     stages_py::register(m)?;
     scene_py::register(m)?;
+    carry_py::register(m)?;
     Ok(())
 }
