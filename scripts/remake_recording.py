@@ -1,13 +1,15 @@
 """Makes a session recording (`.cdrec`, worker/recording.py) again from its inputs, on a frame path.
 
-    .venv/bin/python scripts/remake_recording.py SOURCE OUT [--frame-path compiled|python]
-    .venv/bin/python scripts/remake_recording.py --tumbling OUT [--frame-path ...]
+    .venv/bin/python scripts/remake_recording.py SOURCE OUT [--frame-path compiled|python] [--states]
+    .venv/bin/python scripts/remake_recording.py --tumbling OUT [--frame-path ...] [--states]
 
 The first form reads SOURCE's inputs (its creation request, then its frames, style changes and
 takes in the order they came) and runs them through a fresh session table of this checkout that
 records, as a server with `record = true` would: OUT is what today's code on that frame path
 answers to the same inputs (the recorded frames' bytes are passed through unchanged). SOURCE
 may be OUT. The second form makes the `tumbling` inputs (`tumbling_inputs`) and records them.
+With --states, frames that carry `packed_transforms` carry the same numbers as `states` instead
+(`as_states`): the codec decodes those otherwise (tests/data/recordings/README.md says why it matters).
 
 This is how tests/data/recordings/compiled/ was made (its README.md): a change that means to
 change what a camera does makes them again with this script and says so.
@@ -26,6 +28,7 @@ from pathlib import Path
 import camdirector_client as cd
 from camdirector.server_settings import FRAME_PATHS, ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.codec import PACKED_STRIDE
 from camdirector.worker.recording import read_entries
 from camdirector.worker.table import SessionTable
 
@@ -47,6 +50,28 @@ def inputs_of(path: Path) -> tuple[pb.CreateSessionRequest, list[Input]]:
         elif kind == "take":
             inputs.append(entry.take)
     return entries[0].create, inputs
+
+
+def as_states(inputs: Iterable[Input]) -> list[Input]:
+    """The inputs with each frame's `packed_transforms` sent as `states` (ObjectState per packed id,
+    its position, rotation and scale the packed numbers)."""
+    out: list[Input] = []
+    for msg in inputs:
+        if isinstance(msg, pb.FrameUpdate) and msg.packed_ids:
+            values = list(msg.packed_transforms)
+            frame = pb.FrameUpdate()
+            frame.CopyFrom(msg)
+            frame.ClearField("packed_ids")
+            frame.ClearField("packed_transforms")
+            for i, object_id in enumerate(msg.packed_ids):
+                x, y, z, qx, qy, qz, qw, sx, sy, sz = values[PACKED_STRIDE * i : PACKED_STRIDE * (i + 1)]
+                transform = pb.Transform(
+                    position=pb.Vec3(x=x, y=y, z=z), rotation=pb.Quat(x=qx, y=qy, z=qz, w=qw), scale=pb.Vec3(x=sx, y=sy, z=sz)
+                )
+                frame.states.add(id=object_id, transform=transform)
+            msg = frame
+        out.append(msg)
+    return out
 
 
 def record(create: pb.CreateSessionRequest, inputs: Iterable[Input], out: Path, frame_path: str) -> None:
@@ -146,10 +171,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("out", type=Path)
     parser.add_argument("--tumbling", action="store_true", help="record the tumbling inputs instead of a recording's")
     parser.add_argument("--frame-path", dest="frame_path", choices=FRAME_PATHS, default=ServerSettings.frame_path)
+    parser.add_argument("--states", action="store_true", help="send packed transforms as states (as_states)")
     args = parser.parse_args(argv)
     if args.tumbling == (args.source is not None):
         parser.error("give either SOURCE or --tumbling")
     create, inputs = tumbling_inputs() if args.tumbling else inputs_of(args.source)
+    if args.states:
+        inputs = as_states(inputs)
     record(create, inputs, args.out, args.frame_path)
     print(f"{args.out}: {sum(isinstance(i, pb.FrameUpdate) for i in inputs)} frames on the {args.frame_path} path")
     return 0
