@@ -18,10 +18,13 @@ from numpy._core._multiarray_umath import __cpu_features__
 
 from camdirector.worker.recording import read_entries
 from camdirector.worker.replay import _comparable, replay
+from tests.precompute.tracks.tiny_levels import corridor
+from tests.service.tracks_sessions import cli_add_level, obj_text
 from tests.worker.machine_kinds import KINDS, ROOT, MachineKind, played, replay_as
 
-COMPILED = Path(__file__).resolve().parents[1] / "data" / "recordings" / "compiled"
-RECORDINGS = ["framing_only", "tumbling"]  # the old framing_only's inputs; a tumbling target (README.md)
+RECORDINGS = Path(__file__).resolve().parents[1] / "data" / "recordings"
+COMPILED = RECORDINGS / "compiled"
+COMPILED_NAMES = ["framing_only", "tumbling"]  # the old framing_only's inputs; a tumbling target (README.md)
 REMAKE = ROOT / "scripts" / "remake_recording.py"
 
 
@@ -31,7 +34,7 @@ def _kind(kind: MachineKind) -> MachineKind:
     return kind
 
 
-@pytest.mark.parametrize("name", RECORDINGS)
+@pytest.mark.parametrize("name", COMPILED_NAMES)
 def test_a_compiled_recording_replays_bit_for_bit_here(name, tmp_path):
     path = COMPILED / f"{name}.cdrec"
     kinds = [entry.WhichOneof("entry") for entry in read_entries(path)]
@@ -43,7 +46,7 @@ def test_a_compiled_recording_replays_bit_for_bit_here(name, tmp_path):
 @pytest.mark.parametrize("kind", KINDS, ids=lambda k: k.name)
 def test_compiled_recordings_replay_bit_for_bit_on_every_kind_of_machine(kind, tmp_path):
     kind = _kind(kind)
-    for name in RECORDINGS:
+    for name in COMPILED_NAMES:
         report = replay_as(kind, COMPILED / f"{name}.cdrec", "compiled", tmp_path)
         assert report["ok"] and report["frames"] == 240, (name, report)
 
@@ -86,6 +89,20 @@ def test_the_script_makes_the_compiled_recordings_again(name, source, tmp_path):
         return [_comparable(e.camera) for e in read_entries(path) if e.WhichOneof("entry") == "camera"]
 
     assert answers(again) == answers(COMPILED / f"{name}.cdrec")
+
+
+@pytest.mark.parametrize("name", ["match", "tracks"])
+def test_a_rig_without_a_compiled_twin_answers_the_same_bits_on_both_paths(name, tmp_path):
+    """TRACKS and MATCH run in Python on either path (rigs.runs_compiled): the inputs of their
+    recordings (tests/data/recordings/, made elsewhere) answer here alike, bit for bit, on both."""
+    if name == "tracks":
+        level_file = tmp_path / "corridor.obj"
+        level_file.write_text(obj_text(corridor()))
+        cli_add_level(tmp_path, "corridor", level_file)
+    answers: dict[str, list[bytes]] = {"python": [], "compiled": []}
+    for frame_path, kept in answers.items():
+        replay(RECORDINGS / f"{name}.cdrec", lambda _, got, kept=kept: kept.append(_comparable(got)), tmp_path, frame_path)
+    assert len(answers["python"]) >= 120 and answers["compiled"] == answers["python"]
 
 
 @pytest.mark.xfail(
