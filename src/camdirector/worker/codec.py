@@ -112,14 +112,17 @@ def _vec3(msg: pb.Vec3, what: str) -> np.ndarray:
     return v
 
 
-def transform_from_msg(msg: pb.Transform, what: str) -> RigidTransform:
+def transform_from_msg(msg: pb.Transform, what: str, portable: bool = False) -> RigidTransform:
+    """portable: the quaternion's length summed in one order, the same bits on every machine (the
+    compiled frame path's creation request), not by np.linalg.norm, a BLAS dot whose kernel is the CPU's."""
     position = _vec3(msg.position, f"{what}.position")
     rotation = IDENTITY_QUAT.copy()
     if msg.HasField("rotation"):
-        q = np.array([msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w])
+        x, y, z, w = msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w
+        q = np.array([x, y, z, w])
         if not np.all(np.isfinite(q)):
             raise invalid(f"{what}.rotation has a NaN or infinite component")
-        norm = float(np.linalg.norm(q))
+        norm = math.sqrt(x * x + y * y + z * z + w * w) if portable else float(np.linalg.norm(q))
         if norm < 1e-6:
             raise invalid(f"{what}.rotation is a zero-length quaternion")
         rotation = q / norm
@@ -322,7 +325,8 @@ def scene_from_request(
         raise exhausted(f"{len(req.objects)} scene objects exceed the limit of {settings.max_objects}")
     lens = lens_from_msg(req.lens)
     style = style_from_msg(req.style, lens)
-    portable = runs_compiled(style.rig, settings.compiled_frame_path)  # primitives stood up exactly (meshes.py)
+    # the compiled path's: primitives stood up exactly (meshes.py), quaternions normalised without BLAS
+    portable = runs_compiled(style.rig, settings.compiled_frame_path)
     seen: set[str] = set()
     triangles = 0
     objects, targets = [], []
@@ -333,7 +337,7 @@ def scene_from_request(
         triangles += mesh.triangle_count
         if triangles > settings.max_triangles:
             raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
-        objects.append(ObjectSpec(obj.id, mesh, transform_from_msg(obj.transform, f"{what}.transform"), obj.dynamic))
+        objects.append(ObjectSpec(obj.id, mesh, transform_from_msg(obj.transform, f"{what}.transform", portable), obj.dynamic))
     for i, target in enumerate(req.targets):
         what = f"targets[{i}]"
         _check_id(target.id, what, seen)
@@ -345,7 +349,7 @@ def scene_from_request(
             TargetSpec(
                 target.id,
                 mesh,
-                transform_from_msg(target.transform, f"{what}.transform"),
+                transform_from_msg(target.transform, f"{what}.transform", portable),
                 _vec3(target.aim_offset, f"{what}.aim_offset"),
                 team=int(target.team),
                 display_name=_checked_name(target.display_name, f"{what}.display_name"),
