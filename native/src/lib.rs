@@ -5,6 +5,8 @@ use pyo3::prelude::*;
 
 mod bvh;
 mod bvh_py;
+mod carry;
+mod carry_py;
 mod framing;
 mod motion;
 mod rotation;
@@ -24,5 +26,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     stages_py::register(m)?;
     scene_py::register(m)?;
     wire_py::register(m)?;
+    carry_py::register(m)?;
     Ok(())
 }

@@ -30,7 +30,7 @@ fn mesh_of(mesh: &Bound<'_, PyAny>) -> PyResult<Mesh> {
 }
 
 /// A RigidTransform's fields (position_world (3,), rotation_xyzw (4,), scale (3,)), finite.
-fn pose_of(transform: &Bound<'_, PyAny>) -> PyResult<Pose> {
+pub(crate) fn pose_of(transform: &Bound<'_, PyAny>) -> PyResult<Pose> {
     let field = |name: &str, n: usize| -> PyResult<Vec<f64>> {
         let value = transform.getattr(name)?;
         // a float64 ndarray (a RigidTransform's) read at once, not element by element as a sequence
@@ -63,7 +63,7 @@ fn pose_of(transform: &Bound<'_, PyAny>) -> PyResult<Pose> {
 }
 
 /// Points (n, 3) float64, or one point (3,) as a row (then `true`).
-fn points_of(name: &str, points: &Bound<'_, PyAny>) -> PyResult<(Vec<[f64; 3]>, bool)> {
+pub(crate) fn points_of(name: &str, points: &Bound<'_, PyAny>) -> PyResult<(Vec<[f64; 3]>, bool)> {
     if let Ok(one) = points.extract::<PyReadonlyArray1<'_, f64>>() {
         return Ok((rows(name, one.as_array().insert_axis(Axis(0)))?, true));
     }

@@ -129,8 +129,8 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "--frame-path",
         dest="frame_path",
         choices=FRAME_PATHS,
-        help="where sessions' per-frame work runs: python (the reference, the default) or compiled "
-        "(so far the TORIC rig's FRAMING_ONLY frames; docs/frame_path.md)",
+        help="where sessions' per-frame work runs: compiled (the default; so far the TORIC rig's FRAMING_ONLY "
+        "frames, every other frame in Python; docs/frame_path.md) or python (the reference)",
     )
     p.add_argument(
         "--plugin",
@@ -205,6 +205,14 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         help="where a TRACKS session's level is registered (default: the folder the recording is in)",
     )
+    p.add_argument(
+        "--frame-path",
+        dest="frame_path",
+        choices=FRAME_PATHS,
+        default=ServerSettings.frame_path,
+        help=f"the frame path of the server that made the recording (default: {ServerSettings.frame_path}, "
+        "the server's default): a recording replays bit for bit only on the path that made it",
+    )
     p = sub.add_parser("demo", help="server plus demo client on a built-in scene; writes a video")
     p.add_argument("--out", type=Path, default=Path("out"))
     p.add_argument("--seconds", type=float, default=20.0)
@@ -229,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         from camdirector.worker.replay import replay
 
         try:
-            report = replay(args.file, data_dir=args.data_dir)
+            report = replay(args.file, data_dir=args.data_dir, frame_path=args.frame_path)
         except (OSError, ValueError) as exc:
             print(f"camdirector replay: {exc}", file=sys.stderr)
             return 2

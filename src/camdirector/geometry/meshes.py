@@ -100,6 +100,18 @@ _rotation_matrix: Callable[[float, list[float]], npt.NDArray[np.float64]] = trim
 _Z_TO_Y = _rotation_matrix(-np.pi / 2.0, [1.0, 0.0, 0.0])
 
 
+def _stood_up(m: trimesh.Trimesh, portable: bool) -> TriMesh:
+    """A +Z mesh of trimesh's turned to stand along +Y. `portable` (the compiled frame path) turns
+    it exactly, (x, y, z) -> (x, z, -y), the same bits on every machine; otherwise by _Z_TO_Y's
+    product, as always (its cos(-pi/2) is 6e-17, not 0, and the product goes through OpenBLAS,
+    whose kernel, and so the last bits, is the CPU's)."""
+    if portable:
+        v = m.vertices
+        return from_arrays(np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1), m.faces)
+    m.apply_transform(_Z_TO_Y)
+    return from_arrays(m.vertices, m.faces)
+
+
 def box(size_xyz: Iterable[float]) -> TriMesh:
     """Axis-aligned box of full extents size_xyz (3,) metres, centred on the origin."""
     sx, sy, sz = (float(s) for s in size_xyz)
@@ -114,18 +126,15 @@ def sphere(radius_m: float) -> TriMesh:
     return from_arrays(m.vertices, m.faces)
 
 
-def cylinder(radius_m: float, height_m: float, sections: int = 24) -> TriMesh:
+def cylinder(radius_m: float, height_m: float, sections: int = 24, portable: bool = False) -> TriMesh:
+    """Cylinder along +Y; portable: stood up exactly (`_stood_up`)."""
     _positive(radius=radius_m, height=height_m)
-    m = trimesh.creation.cylinder(radius=radius_m, height=height_m, sections=sections)
-    m.apply_transform(_Z_TO_Y)
-    return from_arrays(m.vertices, m.faces)
+    return _stood_up(trimesh.creation.cylinder(radius=radius_m, height=height_m, sections=sections), portable)
 
 
-def capsule(radius_m: float, height_m: float) -> TriMesh:
-    """Capsule of total height height_m (caps included) along +Y."""
+def capsule(radius_m: float, height_m: float, portable: bool = False) -> TriMesh:
+    """Capsule of total height height_m (caps included) along +Y; portable: stood up exactly (`_stood_up`)."""
     _positive(radius=radius_m, height=height_m)
     if height_m < 2.0 * radius_m:
         raise MeshError("capsule height must be at least twice its radius")
-    m = trimesh.creation.capsule(height=height_m - 2.0 * radius_m, radius=radius_m, count=[16, 8])
-    m.apply_transform(_Z_TO_Y)
-    return from_arrays(m.vertices, m.faces)
+    return _stood_up(trimesh.creation.capsule(height=height_m - 2.0 * radius_m, radius=radius_m, count=[16, 8]), portable)

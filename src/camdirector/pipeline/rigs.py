@@ -110,3 +110,9 @@ def make_rig(
     entry = _BY_RIG[scene.style.rig]
     make = entry.make_compiled if compiled and entry.make_compiled is not None else entry.make
     return make(scene, ray_scene, static_meshes_world, dynamic, rng, clock)
+
+
+def runs_compiled(rig: Rig, compiled: bool) -> bool:
+    """Whether a session of `rig` on the compiled frame path (`compiled`) gets its compiled twin
+    (`make_rig`'s choice); a rig without one runs in Python on either path, its bits the same."""
+    return compiled and _BY_RIG[rig].make_compiled is not None

@@ -7,6 +7,11 @@ never raises inside the frame loop for a geometric difficulty: it degrades (hold
 frames one target) and flags it in the diagnostics. `Session.close` releases what the rig holds
 outside Python's memory (the occlusion maps' GL objects or Embree scenes); whoever ends a session
 calls it.
+
+A session whose rig runs compiled (the compiled frame path, `runs_compiled`) carries points by
+transforms (the static meshes into the world, INGEST's aim points) with camdirector._native's
+`carry`, the same bits on every x86-64 machine; the Python path keeps `RigidTransform.apply`,
+whose numpy product goes through OpenBLAS, whose kernel (and so the last bits) is the CPU's.
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
+import camdirector._native as native
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
@@ -24,7 +31,7 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.camera_rig import CameraRig
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
-from camdirector.pipeline.rigs import make_rig
+from camdirector.pipeline.rigs import make_rig, runs_compiled
 from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
@@ -50,9 +57,12 @@ class CutRecord:
 
 
 class Session:
+    portable = False  # whether points are carried by camdirector._native (module docstring); a class default for older snapshots
+
     def __init__(self, session_id: str, scene: SceneSpec, clock: Callable[[], float] = time.perf_counter, compiled: bool = False):
         """compiled: the rig's compiled twin where it has one (`make_rig`; the server's frame path)."""
         self.id = session_id
+        self.portable = runs_compiled(scene.style.rig, compiled)
         self.clock = clock
         self.rng = np.random.default_rng(scene.seed)
         self.lens = scene.lens
@@ -63,7 +73,7 @@ class Session:
         self.static_ids = {o.id for o in scene.objects if not o.dynamic}
         self.movable_ids = {o.id for o in scene.objects if o.dynamic} | set(self.target_index)
         self.delay_s = scene.delay_s  # MATCH: the broadcast delay, which a game event's time may run ahead by
-        static_meshes_world = [_to_world(o.mesh, o.transform) for o in scene.objects if not o.dynamic]
+        static_meshes_world = [_to_world(o.mesh, o.transform, self.portable) for o in scene.objects if not o.dynamic]
         self.static_meshes_world = static_meshes_world  # and the level's, what the monitors draw (render/snapshots.py)
         self.level = scene.level
         self.level_mesh_world = scene.level.mesh_world if scene.level is not None else None
@@ -141,7 +151,9 @@ class Session:
                 self.dynamic[object_id] = (self.dynamic[object_id][0], transform)
             else:
                 self.target_transforms[index] = transform
-        state.aim_points_world = [tf.apply(t.aim_offset_local[None, :])[0] for tf, t in zip(self.target_transforms, self.targets)]
+        state.aim_points_world = [
+            _carried(tf, t.aim_offset_local[None, :], self.portable)[0] for tf, t in zip(self.target_transforms, self.targets)
+        ]
         stages.done(Stage.INGEST)
         self.rig.run(state, update, self.target_transforms, last)  # the stages after INGEST, timed by the rig
         # The first pose is a cut (a MATCH session answers without a pose while its delay fills).
@@ -164,5 +176,13 @@ class Session:
         return state
 
 
-def _to_world(mesh: TriMesh, transform: RigidTransform) -> TriMesh:
-    return TriMesh(transform.apply(mesh.vertices), mesh.faces)
+def _carried(transform: RigidTransform, points_local: npt.NDArray[np.float64], portable: bool) -> npt.NDArray[np.float64]:
+    """(n, 3) world points of (n, 3) local ones: by camdirector._native when `portable` (module docstring)."""
+    if portable:
+        carried: npt.NDArray[np.float64] = native.carry(points_local, transform)
+        return carried
+    return transform.apply(points_local)
+
+
+def _to_world(mesh: TriMesh, transform: RigidTransform, portable: bool) -> TriMesh:
+    return TriMesh(_carried(transform, mesh.vertices, portable), mesh.faces)

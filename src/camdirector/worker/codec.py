@@ -53,7 +53,7 @@ from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.inputs import EventKind, FrameInput, GameEvent, ObjectSpec, PlayerStats, SceneSpec, TargetSpec
 from camdirector.pipeline.match.director_registry import DEFAULT_DIRECTOR, director_by_wire, director_entry
 from camdirector.pipeline.match.frame import ReplayedMoment, ShotChoice, ShotKind
-from camdirector.pipeline.rigs import RIGS
+from camdirector.pipeline.rigs import RIGS, runs_compiled
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import (
     MapBackendChoice,
@@ -113,14 +113,17 @@ def _vec3(msg: pb.Vec3, what: str) -> np.ndarray:
     return v
 
 
-def transform_from_msg(msg: pb.Transform, what: str) -> RigidTransform:
+def transform_from_msg(msg: pb.Transform, what: str, portable: bool = False) -> RigidTransform:
+    """portable: the quaternion's length summed in one order, the same bits on every machine (the
+    compiled frame path's creation request), not by np.linalg.norm, a BLAS dot whose kernel is the CPU's."""
     position = _vec3(msg.position, f"{what}.position")
     rotation = IDENTITY_QUAT.copy()
     if msg.HasField("rotation"):
-        q = np.array([msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w])
+        x, y, z, w = msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w
+        q = np.array([x, y, z, w])
         if not np.all(np.isfinite(q)):
             raise invalid(f"{what}.rotation has a NaN or infinite component")
-        norm = float(np.linalg.norm(q))
+        norm = math.sqrt(x * x + y * y + z * z + w * w) if portable else float(np.linalg.norm(q))
         if norm < 1e-6:
             raise invalid(f"{what}.rotation is a zero-length quaternion")
         rotation = q / norm
@@ -148,7 +151,9 @@ def transforms_from_packed(values: np.ndarray, ids) -> list[RigidTransform]:
     return [RigidTransform(p, q, s) for p, q, s in zip(values[:, 0:3].copy(), rotations, values[:, 7:10].copy())]
 
 
-def mesh_from_msg(msg: pb.Mesh, what: str) -> TriMesh:
+def mesh_from_msg(msg: pb.Mesh, what: str, portable: bool = False) -> TriMesh:
+    """portable: a primitive stood up the same on every machine (meshes.py's `_stood_up`: the
+    compiled frame path's)."""
     kind = msg.WhichOneof("source")
     try:
         if kind == "triangles":
@@ -160,22 +165,22 @@ def mesh_from_msg(msg: pb.Mesh, what: str) -> TriMesh:
         if kind == "obj":
             return meshes.from_obj(msg.obj)
         if kind == "primitive":
-            return _primitive(msg.primitive)
+            return _primitive(msg.primitive, portable)
     except MeshError as exc:
         raise invalid(f"{what}: {exc}") from None
     raise invalid(f"{what} is empty: set one of glb, obj, triangles, primitive")
 
 
-def _primitive(msg: pb.Primitive) -> TriMesh:
+def _primitive(msg: pb.Primitive, portable: bool) -> TriMesh:
     shape = msg.WhichOneof("shape")
     if shape == "box":
         return meshes.box([msg.box.size.x, msg.box.size.y, msg.box.size.z])
     if shape == "sphere":
         return meshes.sphere(msg.sphere.radius)
     if shape == "cylinder":
-        return meshes.cylinder(msg.cylinder.radius, msg.cylinder.height)
+        return meshes.cylinder(msg.cylinder.radius, msg.cylinder.height, portable=portable)
     if shape == "capsule":
-        return meshes.capsule(msg.capsule.radius, msg.capsule.height)
+        return meshes.capsule(msg.capsule.radius, msg.capsule.height, portable=portable)
     raise MeshError("primitive has no shape")
 
 
@@ -319,21 +324,25 @@ def scene_from_request(
         raise invalid(f"delay_s must be in [0, {MAX_DELAY_S:g}] s, got {req.delay_s}")
     if len(req.objects) > settings.max_objects:
         raise exhausted(f"{len(req.objects)} scene objects exceed the limit of {settings.max_objects}")
+    lens = lens_from_msg(req.lens)
+    style = style_from_msg(req.style, lens)
+    # the compiled path's: primitives stood up exactly (meshes.py), quaternions normalised without BLAS
+    portable = runs_compiled(style.rig, settings.compiled_frame_path)
     seen: set[str] = set()
     triangles = 0
     objects, targets = [], []
     for i, obj in enumerate(req.objects):
         what = f"objects[{i}]"
         _check_id(obj.id, what, seen)
-        mesh = mesh_from_msg(obj.mesh, f"{what}.mesh")
+        mesh = mesh_from_msg(obj.mesh, f"{what}.mesh", portable)
         triangles += mesh.triangle_count
         if triangles > settings.max_triangles:
             raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
-        objects.append(ObjectSpec(obj.id, mesh, transform_from_msg(obj.transform, f"{what}.transform"), obj.dynamic))
+        objects.append(ObjectSpec(obj.id, mesh, transform_from_msg(obj.transform, f"{what}.transform", portable), obj.dynamic))
     for i, target in enumerate(req.targets):
         what = f"targets[{i}]"
         _check_id(target.id, what, seen)
-        mesh = mesh_from_msg(target.mesh, f"{what}.mesh")
+        mesh = mesh_from_msg(target.mesh, f"{what}.mesh", portable)
         triangles += mesh.triangle_count
         if triangles > settings.max_triangles:
             raise exhausted(f"scene exceeds the limit of {settings.max_triangles} triangles")
@@ -341,15 +350,13 @@ def scene_from_request(
             TargetSpec(
                 target.id,
                 mesh,
-                transform_from_msg(target.transform, f"{what}.transform"),
+                transform_from_msg(target.transform, f"{what}.transform", portable),
                 _vec3(target.aim_offset, f"{what}.aim_offset"),
                 team=int(target.team),
                 display_name=_checked_name(target.display_name, f"{what}.display_name"),
                 team_name=_checked_name(target.team_name, f"{what}.team_name"),
             )
         )
-    lens = lens_from_msg(req.lens)
-    style = style_from_msg(req.style, lens)
     level = None
     if style.rig == Rig.TRACKS:
         if len(targets) != 1:

@@ -50,17 +50,23 @@ def _comparable(update: pb.CameraUpdate) -> bytes:
 
 
 def replay(
-    path: Path, on_frame: Callable[[pb.CameraUpdate, pb.CameraUpdate | None], None] | None = None, data_dir: Path | None = None
+    path: Path,
+    on_frame: Callable[[pb.CameraUpdate, pb.CameraUpdate | None], None] | None = None,
+    data_dir: Path | None = None,
+    frame_path: str = ServerSettings.frame_path,
 ) -> ReplayReport:
     """Runs a recording through a fresh in-process session and compares every answer.
 
     on_frame: called with each recorded answer and the replayed one (None: no frame was replayed
     before it). data_dir: where the recording's TRACKS level is registered; by default the data
-    directory the recording lies in (`<data_dir>/recordings/<session>.cdrec`), else the server's default."""
+    directory the recording lies in (`<data_dir>/recordings/<session>.cdrec`), else the server's default.
+    frame_path: the server's (server_settings.py) that made the recording, which the file does not
+    say: a recording replays bit for bit only on the path that made it (the paths agree within
+    1e-9, not to the bit)."""
     if data_dir is None and Path(path).resolve().parent.name == "recordings":
         data_dir = Path(path).resolve().parent.parent
     # A replay keeps no checkpoints, and takes whatever scene the recording holds.
-    settings = ServerSettings(max_objects=1_000_000, max_triangles=100_000_000, checkpoint_store="off")
+    settings = ServerSettings(max_objects=1_000_000, max_triangles=100_000_000, checkpoint_store="off", frame_path=frame_path)
     if data_dir is not None:
         settings = dataclasses.replace(settings, data_dir=str(data_dir))
     table = SessionTable(settings)

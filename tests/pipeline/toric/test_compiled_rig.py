@@ -1,20 +1,22 @@
-"""The compiled frame path (a server's `frame_path`) against the Python one, the reference: the
-TORIC rig with FRAMING_ONLY compiled (pipeline/toric/compiled_rig.py) against ToricRig, and the
-frame's wire decoded and its reply written in camdirector._native (worker/codec.py
-frame_from_wire, camera_update_wire). Whole demo sessions through a SessionTable on each path
-answer every frame alike (poses within 1e-9 m and 1e-9 rad; the same flags, cuts, shots and
-stale answers; the framing error and the toric place within 1e-9; the same stage laps; replies
-with the same fields, their numbers within the same margins), through a frame gap, a frame sent
-again, and changes of visibility mode that hand the camera to the Python stages and back; the
-compiled path's replies are the bytes the Python codec writes for the same state; a compiled run
-repeats bit for bit, also across a snapshot; and the setting reaches the rig from the command line
-and the environment, a bad value refused."""
+"""The compiled frame path (a server's `frame_path`, compiled by default) against the Python one,
+the reference: the TORIC rig with FRAMING_ONLY compiled (pipeline/toric/compiled_rig.py) against
+ToricRig, and the frame's wire decoded and its reply written in camdirector._native
+(worker/codec.py frame_from_wire, camera_update_wire). Whole demo sessions through a SessionTable
+on each path answer every frame alike (poses within 1e-9 m and 1e-9 rad; the same flags, cuts,
+shots and stale answers; the framing error and the toric place within 1e-9; the same stage laps;
+replies with the same fields, their numbers within the same margins), through a frame gap, a frame
+sent again, and changes of visibility mode that hand the camera to the Python stages and back; the
+suite's TORIC recordings' inputs, each visibility mode, alike on both paths; the compiled path's
+replies are the bytes the Python codec writes for the same state; a compiled run repeats bit for
+bit, also across a snapshot; and the setting reaches the rig from the command line and the
+environment, a bad value refused."""
 
 from __future__ import annotations
 
 import itertools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,8 +33,10 @@ from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker import codec
 from camdirector.worker.checkpoint_stores import dumps_state, loads_state
+from camdirector.worker.recording import read_entries
 from camdirector.worker.table import SessionTable
 
+RECORDINGS = Path(__file__).resolve().parents[2] / "data" / "recordings"
 TOL = 1e-9  # metres for positions, radians for angles, unit for quaternions and screen errors
 FRAMES = 900  # 15 s of the demo at 60 Hz: the walker passes the moving obstacles
 
@@ -66,14 +70,19 @@ def _inputs(styles: dict[int, int]) -> list[pb.FrameUpdate | pb.UpdateStyleReque
     return out
 
 
-def _run(frame_path: str, inputs, tmp_path, snapshot_at: int | None = None) -> tuple[list[Answer], SessionTable]:
-    """Every answer of a session of the demo scene fed `inputs`, on a table whose clock ticks 1 ms a
-    reading (so the stage laps compare); snapshots every 60 inputs into tmp_path. With snapshot_at,
-    the session is replaced there by its snapshot unpickled (as a restore does)."""
+def _run(
+    frame_path: str, inputs, tmp_path, snapshot_at: int | None = None, create: pb.CreateSessionRequest | None = None
+) -> tuple[list[Answer], SessionTable]:
+    """Every answer of a session "s" created by `create` (default: the demo scene's) fed `inputs`,
+    on a table whose clock ticks 1 ms a reading (so the stage laps compare); snapshots every 60
+    inputs into tmp_path. With snapshot_at, the session is replaced there by its snapshot
+    unpickled (as a restore does)."""
     ticks = itertools.count()
     settings = ServerSettings(data_dir=str(tmp_path / frame_path), frame_path=frame_path)
     table = SessionTable(settings, clock=lambda: next(ticks) * 1e-3)
-    table.create("s", session_request(build_demo_scene(seed=7, duration_s=FRAMES / 60.0 + 1.0), Lens()))
+    if create is None:
+        create = session_request(build_demo_scene(seed=7, duration_s=FRAMES / 60.0 + 1.0), Lens())
+    table.create("s", create)
     answers = []
     for msg in inputs:
         if isinstance(msg, pb.UpdateStyleRequest):
@@ -213,23 +222,42 @@ def test_changes_of_visibility_mode_hand_the_camera_over_without_a_jump(tmp_path
     assert table.get("s").session.rig.compiled  # FRAMING_ONLY again
 
 
-def test_the_python_path_is_the_default_and_the_setting_reaches_the_rig(tmp_path, monkeypatch):
-    assert ServerSettings().frame_path == "python"
+@pytest.mark.parametrize("name", ["framing_only", "reactive", "raycast", "anticipation"])
+def test_the_suites_toric_recordings_agree_on_both_paths(name, tmp_path):
+    """The inputs of each TORIC recording (tests/data/recordings/, each visibility mode, a style
+    change half way) answered on both paths: every frame as above. Only FRAMING_ONLY frames run
+    compiled; the other modes' agree because both paths run them in Python."""
+    entries = list(read_entries(RECORDINGS / f"{name}.cdrec"))
+    create, inputs = (
+        entries[0].create,
+        [getattr(e, e.WhichOneof("entry")) for e in entries[1:] if e.WhichOneof("entry") != "camera"],
+    )
+    create.record = False
+    for msg in inputs:
+        msg.session_id = "s"
+    python, _ = _run("python", inputs, tmp_path, create=create)
+    compiled, table = _run("compiled", inputs, tmp_path, create=create)
+    assert isinstance(table.get("s").session.rig, CompiledToricRig) and len(compiled) == 240
+    _agree(compiled, python)
+
+
+def test_the_compiled_path_is_the_default_and_the_setting_reaches_the_rig(tmp_path, monkeypatch):
+    assert ServerSettings().frame_path == "compiled"
     scene = build_demo_scene(seed=7, duration_s=1.0)
     served: list[ServerSettings] = []
     monkeypatch.setattr(camdirector.front.main, "run", lambda settings: served.append(settings) or 0)
     monkeypatch.setenv("CAMDIRECTOR_DATA_DIR", str(tmp_path))
-    assert cli.main(["serve", "--frame-path", "compiled"]) == 0
-    monkeypatch.setenv("CAMDIRECTOR_FRAME_PATH", "compiled")
+    assert cli.main(["serve", "--frame-path", "python"]) == 0
+    monkeypatch.setenv("CAMDIRECTOR_FRAME_PATH", "python")
     assert cli.main(["serve"]) == 0
-    assert cli.main(["serve", "--frame-path", "python"]) == 0  # the flag over the environment
+    assert cli.main(["serve", "--frame-path", "compiled"]) == 0  # the flag over the environment
     rigs = []
     for settings in [ServerSettings(data_dir=str(tmp_path)), *served]:
         table = SessionTable(settings)
         table.create("s", session_request(scene, Lens()))
         rigs.append(type(table.get("s").session.rig))
         table.close_all()
-    assert rigs == [ToricRig, CompiledToricRig, CompiledToricRig, ToricRig]
+    assert rigs == [CompiledToricRig, ToricRig, ToricRig, CompiledToricRig]
 
 
 def test_a_bad_frame_path_is_refused_with_its_values(monkeypatch, capsys):

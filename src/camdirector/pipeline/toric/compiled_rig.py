@@ -7,7 +7,10 @@ camdirector._native while the style's visibility mode is FRAMING_ONLY: FRAMING i
 frame and moved with the session's moving objects. Python stays the reference: it answers the
 same FrameState within 1e-9 m and 1e-9 rad, with the same flags and cuts
 (tests/pipeline/toric/test_compiled_rig.py), and draws nothing of its own from the session's
-generator (VISIBILITY's sample points are the Python stage's, carried by the targets in Python).
+generator (VISIBILITY's sample points are the Python stage's, drawn at creation). What it computes
+has the same bits on every x86-64 machine (tests/worker/test_recordings_across_machines.py): the
+sample points are carried by the targets with camdirector._native's `carry`, not numpy's product
+(OpenBLAS's kernel is the CPU's), and the one-target heading starts as `FramingCore` computes it.
 
 In any other visibility mode the Python stages run. Whichever side runs holds the stages' state
 between frames (the one-target heading; the camera's place, rates and upright side): entering
@@ -28,7 +31,7 @@ from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.toric import Torus
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
-from camdirector.pipeline.inputs import FrameInput
+from camdirector.pipeline.inputs import FrameInput, SceneSpec
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style, VisibilityMode
 from camdirector.pipeline.toric.frame import ToricFrame
@@ -45,6 +48,15 @@ class CompiledToricRig(ToricRig):
     _scene: Any = None  # the Scene, made on the first compiled frame
     _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
     _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
+
+    def __init__(self, scene: SceneSpec, *rest: Any) -> None:
+        """ToricRig's arguments. The one-target heading starts as `FramingCore` computes it from
+        the target's rotation (the libm crate's atan2), not as Framing does (numpy's product through
+        OpenBLAS, then the system's libm: the CPU's bits), so a compiled session starts the same on
+        every machine; the two agree within rounding."""
+        super().__init__(scene, *rest)
+        first = native.FramingCore(self.lens, self.style, scene.targets[0].transform.rotation_xyzw, self.framing.settings)
+        self.framing.heading_rad = first.heading_rad
 
     @property
     def compiled(self) -> bool:
@@ -124,7 +136,9 @@ class CompiledToricRig(ToricRig):
             return super()._see(state, toric, target_transforms)
         pose = state.pose
         assert pose is not None and toric.a_world is not None and toric.b_world is not None  # run() and FRAMING
-        points = self.visibility.points_world(target_transforms)
+        # VisibilityEstimate.points_world's points, carried by camdirector._native (session.py says why)
+        samples = self.visibility.samples_local
+        points = np.concatenate([native.carry(local, transform) for transform, local in zip(target_transforms, samples)])
         state.visibility = self._moved_scene().visible_share(pose.position_world, points)
         state.framing_error = self._cores[0].error(
             pose.position_world, pose.rotation_xyzw, toric.a_world, toric.b_world, toric.b_is_gaze_point
