@@ -3,6 +3,7 @@
 
 use pyo3::prelude::*;
 
+mod amap;
 mod bvh;
 mod bvh_py;
 mod framing;
@@ -10,6 +11,8 @@ mod motion;
 mod rotation;
 mod scene;
 mod scene_py;
+mod search;
+mod search_py;
 mod stages_py;
 mod toric;
 mod toric_py;
@@ -21,5 +24,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bvh_py::register(m)?;
     stages_py::register(m)?;
     scene_py::register(m)?;
+    search_py::register(m)?;
     Ok(())
 }

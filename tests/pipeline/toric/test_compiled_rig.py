@@ -30,6 +30,7 @@ from camdirector.worker.table import SessionTable
 
 TOL = 1e-9  # metres for positions, radians for angles, unit for quaternions and screen errors
 FRAMES = 900  # 15 s of the demo at 60 Hz: the walker passes the moving obstacles
+SEEN_TOL = 0.01  # share of the targets' samples (and of frames) a compiled search session may lose
 
 
 @dataclass
@@ -167,6 +168,30 @@ def test_changes_of_visibility_mode_hand_the_camera_over_without_a_jump(tmp_path
     assert any(f.startswith("search_") for f in flags)  # the search ran, and handed the camera back
     _agree(compiled, python)
     assert table.get("s").session.rig.compiled  # FRAMING_ONLY again
+
+
+@pytest.mark.parametrize("mode", [pb.ANTICIPATION, pb.RAYCAST], ids=["ANTICIPATION", "RAYCAST"])
+def test_a_compiled_search_session_repeats_bit_for_bit_and_sees_as_well_as_the_python_one(mode, tmp_path):
+    """A whole demo session in a search mode, from its first frame: the compiled search (tested
+    call by call in tests/native/test_search_native.py) parts from the Python one at its first
+    near-tie, so the sessions are compared by what they show: the share of the targets' samples
+    seen, over the session, and the frames that see less than half (VISIBILITY's own estimate,
+    by the Scene on the compiled path, by Embree on the Python one)."""
+    inputs = _inputs({1: mode})
+    python, _ = _run("python", inputs, tmp_path)
+    compiled, _ = _run("compiled", inputs, tmp_path)
+    _same_bits(_run("compiled", inputs, tmp_path)[0], compiled)
+    restored, table = _run("compiled", inputs, tmp_path / "restored", snapshot_at=400)
+    _same_bits(restored, compiled)
+    assert isinstance(table.get("s").session.rig, CompiledToricRig)
+
+    def seen(answers: list[Answer]) -> tuple[float, float]:
+        visibility = np.array([a.state.visibility for a in answers if a.state is not None])
+        return float(visibility.mean()), float((visibility < 0.5).mean())
+
+    (python_mean, python_poor), (compiled_mean, compiled_poor) = seen(python), seen(compiled)
+    print(pb.VisibilityMode.Name(mode), "python", (python_mean, python_poor), "compiled", (compiled_mean, compiled_poor))
+    assert compiled_mean >= python_mean - SEEN_TOL and compiled_poor <= python_poor + SEEN_TOL
 
 
 def test_the_python_path_is_the_default_and_the_setting_reaches_the_rig(tmp_path, monkeypatch):
