@@ -7,7 +7,11 @@ mod amap;
 mod bvh;
 mod bvh_py;
 mod framing;
+mod maps;
+mod maps_py;
 mod motion;
+mod prediction;
+mod prediction_py;
 mod rotation;
 mod scene;
 mod scene_py;
@@ -25,5 +29,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     stages_py::register(m)?;
     scene_py::register(m)?;
     search_py::register(m)?;
+    prediction_py::register(m)?;
+    maps_py::register(m)?;
     Ok(())
 }

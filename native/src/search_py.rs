@@ -119,7 +119,7 @@ fn search_settings(s: &Bound<'_, PyAny>) -> PyResult<SearchSettings> {
 }
 
 /// A _native Torus, or geometry.toric's Torus read field by field (no arithmetic: the same bits).
-fn torus_of(torus: &Bound<'_, PyAny>) -> PyResult<Torus> {
+pub(crate) fn torus_of(torus: &Bound<'_, PyAny>) -> PyResult<Torus> {
     if let Ok(native) = torus.cast::<PyTorus>() {
         return Ok(native.get().inner.clone());
     }
@@ -145,6 +145,17 @@ fn torus_of(torus: &Bound<'_, PyAny>) -> PyResult<Torus> {
     })
 }
 
+/// A MapWindow's fields.
+pub(crate) fn window_of(window: &Bound<'_, PyAny>) -> PyResult<Window> {
+    Ok(Window {
+        theta_min_rad: attr(window, "theta_min_rad")?,
+        phi_min_rad: attr(window, "phi_min_rad")?,
+        theta_step_rad: attr(window, "theta_step_rad")?,
+        phi_step_rad: attr(window, "phi_step_rad")?,
+        resolution: window.getattr("resolution")?.extract()?,
+    })
+}
+
 /// An AnticipationMap's masked A-map (a_map (res, res) float32, window a MapWindow), or None
 /// before its first update; read with `outside` 1 (OcclusionMaps.risk).
 fn amap_view<'py>(
@@ -155,13 +166,7 @@ fn amap_view<'py>(
         return Ok(None);
     }
     let a_map: PyReadonlyArray2<'py, f32> = a_map.extract()?;
-    let window = Window {
-        theta_min_rad: attr(&window, "theta_min_rad")?,
-        phi_min_rad: attr(&window, "phi_min_rad")?,
-        theta_step_rad: attr(&window, "theta_step_rad")?,
-        phi_step_rad: attr(&window, "phi_step_rad")?,
-        resolution: window.getattr("resolution")?.extract()?,
-    };
+    let window = window_of(&window)?;
     let n = window.resolution;
     if a_map.shape() != [n, n] {
         return Err(PyValueError::new_err(format!(

@@ -6,9 +6,10 @@
   `FramingCore` (framing.py's twin), MOTION in `MotionCore` (camera_motion.py's).
 - In the search modes (ANTICIPATION, NO_ANTICIPATION, RAYCAST), MOTION's search in `SearchCore`
   (occlusion_search.py's `OcclusionSearch.step` and the pose at its answer), reading the A-map
-  the Python maps made (occlusion_maps.py: PROJECTION and AMAP stay Python) or ray casts, and
-  drawing its candidates from the session's generator as the Python draws them; the particle
-  stays in the Python `OcclusionSearch`, which the core moves each frame.
+  or ray casts, and drawing its candidates from the session's generator as the Python draws
+  them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame.
+- In the map modes, PROJECTION's ray casts and AMAP's per-sample predictions
+  (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
 - In FRAMING_ONLY and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
   (geometry/raycast.py RayScene's twin), built from the session's RayScene on the first compiled
   frame and moved with the session's moving objects.
@@ -42,6 +43,7 @@ from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
+from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.occlusion_search import SearchResult
 from camdirector.pipeline.toric.rig import ToricRig
@@ -133,6 +135,9 @@ class CompiledToricRig(ToricRig):
         state.flags.extend(flags)
         if pose is not None:
             state.pose = CameraPose(*pose)
+
+    def _build_maps(self) -> None:
+        self.maps = CompiledOcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 
     def _search_step(
         self, torus: Torus, state: FrameState, points_world: npt.NDArray[np.float64], side: float, level: bool

@@ -225,11 +225,15 @@ class OcclusionMaps:
                 stages.done(Stage.PROJECTION)
             if not whole:
                 return True
-        update.predicted = self.amap.predict(update.maps)
+        update.predicted = self._predict(update.maps)
         update.maps = None
         if stages is not None:
             stages.done(Stage.AMAP)
         return True
+
+    def _predict(self, maps: ShadowVelocityMaps) -> npt.NDArray[np.float32]:
+        """A_s (k, res, res) of freshly computed maps (AnticipationMap.predict)."""
+        return self.amap.predict(maps)
 
     def _apply_deferred(self, stages: StageClock, count: bool = True) -> None:
         """One frame nearer for the deferred update (with `count`); on its frame, it is computed
