@@ -130,7 +130,7 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         dest="frame_path",
         choices=FRAME_PATHS,
         help="where sessions' per-frame work runs: python (the reference, the default) or compiled "
-        "(so far the TORIC rig's FRAMING_ONLY frames; docs/frame_path.md)",
+        "(so far the TORIC rig's FRAMING_ONLY frames and its search and maps; docs/frame_path.md)",
     )
     p.add_argument(
         "--plugin",

@@ -76,7 +76,8 @@ class ServerSettings:
     # match director registers itself (pipeline/match/director_registry.py). Comma-separated in the environment.
     plugins: tuple[str, ...] = ()
     # Where a session's per-frame work runs: "python", the reference, or "compiled" (camdirector._native;
-    # so far the TORIC rig's FRAMING_ONLY frames, every other frame in Python: docs/frame_path.md).
+    # so far the TORIC rig's FRAMING_ONLY frames and its search and maps, every other frame in
+    # Python: docs/frame_path.md).
     # Recordings replay bit for bit on the path that made them.
     frame_path: str = "python"
 
