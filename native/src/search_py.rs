@@ -68,9 +68,18 @@ fn with_stream<R>(
     let pointer = capsule.pointer_checked(Some(c"BitGenerator"))?;
     let lock = bit_generator.getattr("lock")?;
     lock.call_method0("acquire")?;
-    let result = f(&mut NumpyStream(pointer.cast()));
-    lock.call_method0("release")?;
-    result
+    let _held = Held(lock); // released however `f` ends
+    f(&mut NumpyStream(pointer.cast()))
+}
+
+/// A held threading.Lock, released when dropped.
+struct Held<'py>(Bound<'py, PyAny>);
+
+impl Drop for Held<'_> {
+    fn drop(&mut self) {
+        // the GIL is held (the lock's owner is alive): a failed release has nothing to undo
+        let _ = self.0.call_method0("release");
+    }
 }
 
 /// The share of the target sample points hidden from a camera place, by the Scene's segments

@@ -20,13 +20,12 @@ import numpy as np
 import numpy.typing as npt
 
 import camdirector._native as native
-from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.toric_maps.base import ShadowVelocityMaps
-from camdirector.pipeline.inputs import DynamicObjects
 from camdirector.pipeline.style import MapBackendChoice, Style
+from camdirector.pipeline.toric.anticipation_map import AnticipationMap
 from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
-from camdirector.pipeline.toric.target_sampling import TargetSampler
+from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 
 
 @functools.lru_cache(maxsize=8)
@@ -36,23 +35,11 @@ def compiled_bank(settings: AnticipationSettings) -> Any:
 
 
 class CompiledOcclusionMaps(OcclusionMaps):
-    """OcclusionMaps with PROJECTION's rays and AMAP's predictions compiled (module docstring); its
-    kernel bank is built with it (and with a new A-map), as the Python's is, not on a frame."""
+    """OcclusionMaps with PROJECTION's rays and AMAP's predictions compiled (module docstring)."""
 
-    def __init__(
-        self,
-        static_meshes_world: list[TriMesh],
-        dynamic: DynamicObjects,
-        sampler: TargetSampler,
-        style: Style,
-        rng: np.random.Generator,
-    ) -> None:
-        super().__init__(static_meshes_world, dynamic, sampler, style, rng)
-        compiled_bank(self.amap.settings)
-
-    def set_style(self, style: Style) -> None:
-        super().set_style(style)
-        compiled_bank(self.amap.settings)
+    def _anticipation_map(self, settings: AnticipationSettings, mask: StyleMaskSettings) -> AnticipationMap:
+        compiled_bank(settings)  # built with the A-map, as the Python bank is, not on a frame
+        return super()._anticipation_map(settings, mask)
 
     def _backend_of(self, style: Style) -> str:
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend, "native")
