@@ -1,6 +1,7 @@
 """Moving objects benchmark: what a frame costs as the number of moving rigid objects grows.
 
-    python -m load_tests.movers_bench --json FILE [--frames N] [--movers 0,10,50,100]
+    python -m load_tests.movers_bench --json FILE [--frames N] [--movers 0,10,50,100] [--modes M,...]
+        [--frame-path python|compiled]
 
 Scene: about 2,000 static triangles (a floor and 160 crates in a ring), one actor walking a circle
 of 6 m radius, and 0, 10, 50 or 100 moving boxes (1 x 2 x 1 m) circling the actor at 3-14 m, each
@@ -25,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.server_settings import ServerSettings
+from camdirector.server_settings import FRAME_PATHS, ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.table import SessionTable
@@ -145,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=600, help="timed frames per case (after --warmup)")
     parser.add_argument("--warmup", type=int, default=60, help="frames run before timing, per case")
     parser.add_argument("--movers", default="0,10,50,100", help="comma-separated mover counts")
+    parser.add_argument("--modes", default=",".join(MODES), help=f"comma-separated visibility modes, of {', '.join(MODES)}")
+    parser.add_argument("--frame-path", choices=FRAME_PATHS, default="python", help="the server's frame path (ServerSettings)")
     parser.add_argument("--json", type=Path, help="also write the JSON here")
     args = parser.parse_args(argv)
     try:
@@ -152,18 +155,23 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print(f"movers_bench: --movers must be comma-separated integers, got {args.movers!r}", file=sys.stderr)
         return 2
-    table = SessionTable(ServerSettings(max_objects=10_000, checkpoint_store="off"))
-    cases = [run_case(table, mode, n, args.frames, args.warmup) for mode in MODES for n in counts]
+    modes = args.modes.split(",")
+    if not set(modes) <= set(MODES):
+        print(f"movers_bench: --modes must be of {', '.join(MODES)}, got {args.modes!r}", file=sys.stderr)
+        return 2
+    table = SessionTable(ServerSettings(max_objects=10_000, checkpoint_store="off", frame_path=args.frame_path))
+    cases = [run_case(table, mode, n, args.frames, args.warmup) for mode in modes for n in counts]
     table.close_all()
     floor = summary([c["stale_frame_wall_ms"]["median"] for c in cases])
     ratios = {}
-    for mode in MODES:
+    for mode in modes:
         by_count = {c["movers"]: c["compute_ms"]["median"] for c in cases if c["mode"] == mode}
         if 0 in by_count:
             ratios[mode] = {f"{n}_over_0": round(ms / max(by_count[0], 1e-9), 3) for n, ms in by_count.items() if n}
     emit(
         {
             "benchmark": "movers_bench",
+            "frame_path": args.frame_path,
             "frames_per_case": args.frames,
             "rate_hz": RATE_HZ,
             "static_triangles": 2 + 160 * 12,

@@ -3,15 +3,22 @@
 
 use pyo3::prelude::*;
 
+mod amap;
 mod bvh;
 mod bvh_py;
 mod carry;
 mod carry_py;
 mod framing;
+mod maps;
+mod maps_py;
 mod motion;
+mod prediction;
+mod prediction_py;
 mod rotation;
 mod scene;
 mod scene_py;
+mod search;
+mod search_py;
 mod stages_py;
 mod toric;
 mod toric_py;
@@ -27,5 +34,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     scene_py::register(m)?;
     wire_py::register(m)?;
     carry_py::register(m)?;
+    search_py::register(m)?;
+    prediction_py::register(m)?;
+    maps_py::register(m)?;
     Ok(())
 }

@@ -27,13 +27,13 @@ pub struct Pose {
 
 /// A moving object: its local BVH and reach, and from its pose the world -> local map and the
 /// world bounding sphere.
-struct Object {
-    bvh: Bvh,
+pub(crate) struct Object {
+    pub(crate) bvh: Bvh,
     reach: f64,
     linear: [Vec3; 3],
     translation: Vec3,
-    centre: Vec3,
-    radius: f64,
+    pub(crate) centre: Vec3,
+    pub(crate) radius: f64,
 }
 
 impl Object {
@@ -49,7 +49,7 @@ impl Object {
     }
 
     /// The ray moved into the object's frame.
-    fn local(&self, origin: &Vec3, direction: &Vec3) -> (Vec3, Vec3) {
+    pub(crate) fn local(&self, origin: &Vec3, direction: &Vec3) -> (Vec3, Vec3) {
         let a = &self.linear;
         (
             [0, 1, 2].map(|i| dot(&a[i], origin) + self.translation[i]),
@@ -59,7 +59,7 @@ impl Object {
 
     /// The ray parameter at which o + t d (0 <= t <= t_max) enters the bounding sphere, or None
     /// when it stays outside it.
-    fn sphere_entry(&self, origin: &Vec3, direction: &Vec3, t_max: f64) -> Option<f64> {
+    pub(crate) fn sphere_entry(&self, origin: &Vec3, direction: &Vec3, t_max: f64) -> Option<f64> {
         let to_centre = sub(&self.centre, origin);
         let squared = dot(direction, direction);
         let r2 = self.radius * self.radius;
@@ -89,9 +89,9 @@ fn sub(a: &Vec3, b: &Vec3) -> Vec3 {
 
 pub struct Scene {
     /// every static triangle, world frame (None: there are none)
-    statics: Option<Bvh>,
+    pub(crate) statics: Option<Bvh>,
     index: HashMap<String, usize>,
-    objects: Vec<Object>,
+    pub(crate) objects: Vec<Object>,
 }
 
 impl Scene {

@@ -82,7 +82,7 @@ pub(crate) fn points_of(name: &str, points: &Bound<'_, PyAny>) -> PyResult<(Vec<
 /// Built from a list of TriMeshes or (vertices (n, 3) float64, faces (m, 3) int) pairs.
 #[pyclass(name = "Scene", module = "camdirector._native")]
 pub struct PyScene {
-    scene: Scene,
+    pub(crate) scene: Scene,
 }
 
 impl PyScene {

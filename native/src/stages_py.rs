@@ -25,7 +25,7 @@ use crate::toric_py::{floats, lens_of, points, vec3, Array1, PyTorus};
 type PyPose<'py> = (Array1<'py>, Array1<'py>, f64);
 
 /// The lens's tangents and its vertical field of view, degrees (a pose's field of view).
-fn lens_and_fov(obj: &Bound<'_, PyAny>) -> PyResult<(Lens, f64)> {
+pub(crate) fn lens_and_fov(obj: &Bound<'_, PyAny>) -> PyResult<(Lens, f64)> {
     let fov: f64 = match obj.cast::<PyTuple>() {
         Ok(tuple) => tuple.get_item(0)?.extract()?,
         Err(_) => obj.getattr("vertical_fov_deg")?.extract()?,
@@ -33,11 +33,11 @@ fn lens_and_fov(obj: &Bound<'_, PyAny>) -> PyResult<(Lens, f64)> {
     Ok((lens_of(obj)?, fov))
 }
 
-fn attr(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
+pub(crate) fn attr(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
     obj.getattr(name)?.extract()
 }
 
-fn screen(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 2]> {
+pub(crate) fn screen(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 2]> {
     floats::<2>(&obj.getattr(name)?, name)
 }
 

@@ -130,7 +130,7 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         dest="frame_path",
         choices=FRAME_PATHS,
         help="where sessions' per-frame work runs: compiled (the default; so far the TORIC rig's FRAMING_ONLY "
-        "frames, every other frame in Python; docs/frame_path.md) or python (the reference)",
+        "frames and its search and maps, every other frame in Python; docs/frame_path.md) or python (the reference)",
     )
     p.add_argument(
         "--plugin",

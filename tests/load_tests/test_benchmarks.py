@@ -182,6 +182,16 @@ def test_movers_bench_reports_every_mode_and_count_against_none(tmp_path):
     assert result["floor_stale_frame_wall_ms"]["median"] > 0 and all(c["median_over_floor"] > 0 for c in cases.values())
 
 
+def test_movers_bench_runs_the_modes_asked_on_the_frame_path_asked(tmp_path):
+    result = _run(
+        movers_bench.main, tmp_path, "--frames", "20", "--warmup", "5", "--movers", "3", "--modes", "ANTICIPATION",
+        "--frame-path", "compiled",
+    )  # fmt: skip
+    assert result["frame_path"] == "compiled"
+    assert [(c["mode"], c["movers"], c["map_backend"]) for c in result["cases"]] == [("ANTICIPATION", 3, "native")]
+    assert movers_bench.main(["--modes", "REACTIVE"]) == 2
+
+
 def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_program_twice(tmp_path):
     """A real duel's first 24 s (its first kill at 20 s), run twice from scratch (the level added anew, a new server):
     issue 29's "two runs of the same match give the same program, pose for pose"."""

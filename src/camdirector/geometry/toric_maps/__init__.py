@@ -1,9 +1,11 @@
-"""Toric-space visibility maps (S-maps and V-maps) with two interchangeable backends.
+"""Toric-space visibility maps (S-maps and V-maps) with three interchangeable backends.
 
 Paper: occlusion-anticipation-toric-space.md section 4.1. ``base`` holds the interface (MapWindow,
 OccluderScene, ShadowVelocityMaps, the MapBackend protocol); ``gl`` computes the maps by the
-paper's deferred projection through EGL (moderngl), ``embree`` by ray casting (embreex). Tests hold
-the two against each other (tests/geometry/toric_maps/test_backends.py).
+paper's deferred projection through EGL (moderngl), ``embree`` by ray casting (embreex), ``native``
+by ray casting in camdirector._native (the compiled frame path's: the same bits on every x86-64
+machine; `choose_backend` never picks it). Tests hold them against each other
+(tests/geometry/toric_maps/test_backends.py).
 
 Typical use, once per map update (pipeline/toric/anticipation_map.py consumes the result)::
 
@@ -99,7 +101,11 @@ def probe_gl_renderer() -> str | None:
 
 
 def make_backend(name: str, scene: OccluderScene, **settings: Unpack[GLMapSettingsArgs]) -> MapBackend:
-    """A backend by name ("gl" or "embree") over ``scene``; keyword settings go to GLMapSettings."""
+    """A backend by name ("gl", "embree" or "native") over ``scene``; keyword settings go to GLMapSettings."""
+    if name == "native":
+        from camdirector.geometry.toric_maps.native import NativeMapBackend
+
+        return NativeMapBackend(scene)
     if name == "embree":
         from camdirector.geometry.toric_maps.embree import EmbreeMapBackend
 
@@ -108,4 +114,4 @@ def make_backend(name: str, scene: OccluderScene, **settings: Unpack[GLMapSettin
         from camdirector.geometry.toric_maps.gl import GLMapBackend, GLMapSettings
 
         return GLMapBackend(scene, GLMapSettings(**settings))
-    raise ValueError(f"unknown map backend {name!r} (expected 'gl' or 'embree')")
+    raise ValueError(f"unknown map backend {name!r} (expected 'gl', 'embree' or 'native')")

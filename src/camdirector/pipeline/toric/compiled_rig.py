@@ -1,23 +1,35 @@
-"""The TORIC rig with its FRAMING_ONLY frames compiled (issue 43; `--frame-path compiled`).
+"""The TORIC rig with its FRAMING_ONLY frames and its search compiled (issue 43; `--frame-path compiled`).
 
-`CompiledToricRig` is `ToricRig` (rig.py) whose FRAMING, MOTION and VISIBILITY run in
-camdirector._native while the style's visibility mode is FRAMING_ONLY: FRAMING in `FramingCore`
-(framing.py's twin), MOTION in `MotionCore` (camera_motion.py's), VISIBILITY's ray casts in a
-`Scene` (geometry/raycast.py RayScene's), built from the session's RayScene on the first compiled
-frame and moved with the session's moving objects. Python stays the reference: it answers the
-same FrameState within 1e-9 m and 1e-9 rad, with the same flags and cuts
-(tests/pipeline/toric/test_compiled_rig.py), and draws nothing of its own from the session's
-generator (VISIBILITY's sample points are the Python stage's, drawn at creation). What it computes
-has the same bits on every x86-64 machine (tests/worker/test_recordings_across_machines.py): the
-sample points are carried by the targets with camdirector._native's `carry`, not numpy's product
-(OpenBLAS's kernel is the CPU's), and the one-target heading starts as `FramingCore` computes it.
+`CompiledToricRig` is `ToricRig` (rig.py) with parts of its stages run in camdirector._native:
 
-In any other visibility mode the Python stages run. Whichever side runs holds the stages' state
-between frames (the one-target heading; the camera's place, rates and upright side): entering
-FRAMING_ONLY copies it from the Python stages into the cores (after the search hands the camera
-back, as rig.py does), leaving it copies it back, so a change of mode moves the camera no more
-than the Python rig would. A pickled rig (a checkpoint's snapshot) carries the state in its
-Python stages and builds its cores and Scene again on its next compiled frame.
+- While the style's visibility mode is FRAMING_ONLY, FRAMING, MOTION and VISIBILITY: FRAMING in
+  `FramingCore` (framing.py's twin), MOTION in `MotionCore` (camera_motion.py's).
+- In the search modes (ANTICIPATION, NO_ANTICIPATION, RAYCAST), MOTION's search in `SearchCore`
+  (occlusion_search.py's `OcclusionSearch.step` and the pose at its answer), reading the A-map
+  or ray casts, and drawing its candidates from the session's generator as the Python draws
+  them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame.
+- In the map modes, PROJECTION's ray casts and AMAP's per-sample predictions
+  (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
+- In FRAMING_ONLY and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
+  (geometry/raycast.py RayScene's twin), built from the session's RayScene on the first compiled
+  frame and moved with the session's moving objects.
+
+Python stays the reference: it answers the same FrameState within 1e-9 m and 1e-9 rad, with the
+same flags and cuts (tests/pipeline/toric/test_compiled_rig.py; the search per call,
+tests/native/test_search_native.py), and the compiled stages draw from the session's generator
+exactly what the Python ones draw (VISIBILITY's sample points are the Python stage's). REACTIVE
+runs in Python. What a FRAMING_ONLY frame computes has the same
+bits on every x86-64 machine (tests/worker/test_recordings_across_machines.py): the sample points
+are carried by the targets with camdirector._native's `carry`, not numpy's product (OpenBLAS's
+kernel is the CPU's), and the one-target heading starts as `FramingCore` computes it; the search
+and map modes still compute parts in numpy (their frames agree on one machine, not yet across).
+
+FRAMING_ONLY's cores hold the stages' state between frames (the one-target heading; the camera's
+place, rates and upright side): entering FRAMING_ONLY copies it from the Python stages into the
+cores (after the search hands the camera back, as rig.py does), leaving it copies it back, so a
+change of mode moves the camera no more than the Python rig would. A pickled rig (a
+checkpoint's snapshot) carries the state in its Python stages and builds its cores and Scene
+again on its next compiled frame.
 """
 
 from __future__ import annotations
@@ -25,6 +37,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 import camdirector._native as native
 from camdirector.geometry.camera import CameraPose
@@ -33,8 +46,10 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
 from camdirector.pipeline.state import FrameState
-from camdirector.pipeline.style import Style, VisibilityMode
+from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
+from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps
 from camdirector.pipeline.toric.frame import ToricFrame
+from camdirector.pipeline.toric.occlusion_search import SearchResult
 from camdirector.pipeline.toric.rig import ToricRig
 
 _NO_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])  # a core's initial facing, which its copied heading replaces
@@ -48,6 +63,7 @@ class CompiledToricRig(ToricRig):
     _scene: Any = None  # the Scene, made on the first compiled frame
     _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
     _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
+    _search_core: Any = None  # the SearchCore, made on the first compiled search step
 
     def __init__(self, scene: SceneSpec, *rest: Any) -> None:
         """ToricRig's arguments. The one-target heading starts as `FramingCore` computes it from
@@ -68,13 +84,15 @@ class CompiledToricRig(ToricRig):
         if self._cores is not None:
             for core in self._cores:
                 core.set_style(style)
+        if self._search_core is not None:
+            self._search_core.set_style(style)
 
     def __getstate__(self) -> dict[str, object]:
         """The rig's state with the stages' state in its Python stages; no native object."""
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None)
+        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None, _search_core=None)
         return state
 
     def run(
@@ -131,8 +149,30 @@ class CompiledToricRig(ToricRig):
         if pose is not None:
             state.pose = CameraPose(*pose)
 
+    def _build_maps(self) -> None:
+        self.maps = CompiledOcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
+
+    def _search_step(
+        self, torus: Torus, state: FrameState, points_world: npt.NDArray[np.float64], side: float, level: bool
+    ) -> tuple[SearchResult, CameraPose]:
+        """ToricRig._search_step in the SearchCore, which moves the Python search's particle."""
+        search = self.search
+        assert search.theta is not None  # the search started in _move
+        if self._search_core is None:
+            self._search_core = native.SearchCore(search.settings, self.style, self.lens)
+        amap = None
+        if self.style.visibility in MAP_MODES:
+            assert self.maps is not None  # built when the style entered a map mode
+            amap = self.maps.amap
+        particle = (search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s)
+        theta, phi, cut, strategy, risk, particle, pose, _ = self._search_core.step(
+            torus, particle, state.dt_s, state.time_s, side, self._moved_scene(), points_world, search.rng, amap, level
+        )
+        search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s = particle
+        return SearchResult(theta, phi, cut, strategy, risk), CameraPose(*pose)
+
     def _see(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform]) -> None:
-        if self._cores is None:
+        if self._cores is None and self.style.visibility not in SEARCH_MODES:
             return super()._see(state, toric, target_transforms)
         pose = state.pose
         assert pose is not None and toric.a_world is not None and toric.b_world is not None  # run() and FRAMING
@@ -140,6 +180,9 @@ class CompiledToricRig(ToricRig):
         samples = self.visibility.samples_local
         points = np.concatenate([native.carry(local, transform) for transform, local in zip(target_transforms, samples)])
         state.visibility = self._moved_scene().visible_share(pose.position_world, points)
+        if self._cores is None:
+            state.framing_error = self.framing.error(pose, toric)
+            return
         state.framing_error = self._cores[0].error(
             pose.position_world, pose.rotation_xyzw, toric.a_world, toric.b_world, toric.b_is_gaze_point
         )

@@ -90,10 +90,7 @@ class OcclusionMaps:
         self.rng = rng
         self._previous: tuple[Torus, float] | None = None
         self._deferred: _DeferredUpdate | None = None
-        settings = self._settings(style)
-        self.amap = AnticipationMap(
-            self.sampler.target_count, settings, StyleMaskSettings(kind=style.mask), shared_bank(settings)
-        )
+        self.amap = self._anticipation_map(self._settings(style), StyleMaskSettings(kind=style.mask))
         self._backend_key = self._backend_of(style)
         self.backend: MapBackend | None = make_backend(self._backend_key, self.scene)  # None once closed
 
@@ -103,6 +100,10 @@ class OcclusionMaps:
             anticipate=style.visibility != VisibilityMode.NO_ANTICIPATION,
             window=WindowSettings(resolution=style.map_resolution),
         )
+
+    def _anticipation_map(self, settings: AnticipationSettings, mask: StyleMaskSettings) -> AnticipationMap:
+        """A new, empty A-map, its kernel bank warmed (shared_bank), not on a frame."""
+        return AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
 
     def _backend_of(self, style: Style) -> str:
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or choose_backend(
@@ -118,7 +119,7 @@ class OcclusionMaps:
         mask = StyleMaskSettings(kind=style.mask)
         if self.amap.settings != settings:
             self._deferred = None
-            self.amap = AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
+            self.amap = self._anticipation_map(settings, mask)
         else:
             self.amap.set_mask(mask)
         backend_name = self._backend_of(style)
@@ -225,11 +226,15 @@ class OcclusionMaps:
                 stages.done(Stage.PROJECTION)
             if not whole:
                 return True
-        update.predicted = self.amap.predict(update.maps)
+        update.predicted = self._predict(update.maps)
         update.maps = None
         if stages is not None:
             stages.done(Stage.AMAP)
         return True
+
+    def _predict(self, maps: ShadowVelocityMaps) -> npt.NDArray[np.float32]:
+        """A_s (k, res, res) of freshly computed maps (AnticipationMap.predict)."""
+        return self.amap.predict(maps)
 
     def _apply_deferred(self, stages: StageClock, count: bool = True) -> None:
         """One frame nearer for the deferred update (with `count`); on its frame, it is computed

@@ -29,7 +29,7 @@ import numpy.typing as npt
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
-from camdirector.geometry.toric import torus_angles
+from camdirector.geometry.toric import Torus, torus_angles
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
 from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.camera_rig import AnticipationView, RigBase
@@ -41,7 +41,13 @@ from camdirector.pipeline.toric.camera_motion import ToricMotion, pose_on_torus
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.framing import Framing
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
-from camdirector.pipeline.toric.occlusion_search import OcclusionSearch, RaycastRisk, RiskField, SearchSettings
+from camdirector.pipeline.toric.occlusion_search import (
+    OcclusionSearch,
+    RaycastRisk,
+    RiskField,
+    SearchResult,
+    SearchSettings,
+)
 from camdirector.pipeline.toric.reactive import Deoccluder
 from camdirector.pipeline.toric.target_sampling import TargetSampler
 from camdirector.pipeline.toric.visibility import VisibilityEstimate
@@ -192,30 +198,41 @@ class ToricRig(RigBase):
                 theta, phi = torus_angles(torus, self.motion.position_world)
             self.search.start(theta, phi, state.time_s)
             self._searching = True
-        points = self.sampler.points_world(target_transforms)
-
-        def occluded(cameras_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-            return self.visibility.occluded_fraction(cameras_world, points)
-
-        risk: RiskField
+        points = self.sampler.points_world(target_transforms)  # before the maps' update redraws some
         if mode in MAP_MODES:
             stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
             assert self.maps is not None  # built when the style entered a map mode
             assert self.search.theta is not None  # the search started above
             self.maps.update(torus, self.search.theta, self.search.phi, state.time_s, target_transforms, self.target_ids, stages)
-            risk = self.maps
-        else:
-            risk = RaycastRisk(torus, occluded)
         side = math.copysign(1.0, self.motion.preferred_place(torus)[1])  # upright half for cuts
-        result = self.search.step(
-            torus, state.dt_s, state.time_s, risk, occluded, side, self.style.max_speed_m_s, self.style.max_accel_m_s2
-        )
+        result, state.pose = self._search_step(torus, state, points, side, toric.b_is_gaze_point)
         toric.theta, toric.phi, state.cut = result.theta, result.phi, result.cut
         state.flags.append(f"search_{result.strategy}")
         if result.cut and self.maps is not None:
             self.maps.invalidate()
-        state.pose = pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, toric.b_is_gaze_point)
         self.motion.position_world = state.pose.position_world
+
+    def _search_step(
+        self, torus: Torus, state: FrameState, points_world: npt.NDArray[np.float64], side: float, level: bool
+    ) -> tuple[SearchResult, CameraPose]:
+        """MOTION's search for one frame (occlusion_search.py) against the mode's risk field (the
+        maps, or ray casts to the target sample points `points_world` (k, 3) metres), cut
+        candidates on the `side` half, and the camera's pose at its answer (`level`: B is only a
+        gaze-room point, pose_on_torus)."""
+
+        def occluded(cameras_world: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            return self.visibility.occluded_fraction(cameras_world, points_world)
+
+        risk: RiskField
+        if self.style.visibility in MAP_MODES:
+            assert self.maps is not None  # built when the style entered a map mode
+            risk = self.maps
+        else:
+            risk = RaycastRisk(torus, occluded)
+        result = self.search.step(
+            torus, state.dt_s, state.time_s, risk, occluded, side, self.style.max_speed_m_s, self.style.max_accel_m_s2
+        )
+        return result, pose_on_torus(torus, result.theta, result.phi, self.style, self.lens, level)
 
 
 def _fallback_pose(state: FrameState, fov_deg: float) -> CameraPose:

@@ -1,0 +1,190 @@
+//! The S-maps and V-maps of target sample points over a window of Toric texture space, by ray
+//! casting (the occlusion-anticipation paper, section 4.1.1, the target shadow map, and 4.1.2,
+//! the occluder velocity map): the twin of geometry/toric_maps/embree.py's
+//! `EmbreeMapBackend.compute`, on the Scene (scene.rs) and its deterministic BVH instead of Embree.
+//!
+//! For each sample point s and each texel, one segment from s to the texel's torus point P,
+//! starting SAMPLE_CLEARANCE_M from s and stopping SEGMENT_END_MARGIN short of P
+//! (geometry/toric_maps/base.py says why): the S-map is whether it meets anything but the
+//! sample's own object, the V-map the first hit's rigid velocity v + w x (p - c) minus the torus
+//! point's velocity (by finite difference at fixed (theta, phi), when the previous torus is
+//! given), in Toric angular rates, and the depth the distance from s to that hit. Embree casts
+//! in float32, this in float64: a texel may differ within rounding of an edge, a velocity or a
+//! depth by float32's rounding of the hit point.
+//!
+//! A moving object whose bounding sphere misses the box around all of one sample's segments is
+//! left out of that sample's casts: a cull that never changes an answer.
+
+use crate::amap::Window;
+use crate::bvh::Stack;
+use crate::rotation::Vec3;
+use crate::scene::Scene;
+use crate::toric::{tangent_frame, torus_position, Torus};
+
+/// base.py's SEGMENT_END_MARGIN (a share of s -> P) and SAMPLE_CLEARANCE_M (metres).
+pub const SEGMENT_END_MARGIN: f64 = 1e-4;
+pub const SAMPLE_CLEARANCE_M: f64 = 1e-3;
+
+/// A moving object's motion for the V-map (DynamicOccluder): where its origin is, world metres,
+/// its linear velocity, m/s, and its angular velocity about that origin, rad/s, world frame.
+pub struct Motion {
+    pub position: Vec3,
+    pub linear: Vec3,
+    pub angular: Vec3,
+}
+
+/// One sample point and the index of the moving object it ignores (its own target), if any.
+pub struct Sample {
+    pub point: Vec3,
+    pub ignores: Option<usize>,
+}
+
+/// ShadowVelocityMaps' arrays, k maps of res x res texels, row-major per map: shadow 0 or 1,
+/// velocity (d theta/dt, d phi/dt) rad/s, depth metres (inf where not occluded).
+pub struct Maps {
+    pub shadow: Vec<f32>,
+    pub velocity: Vec<[f32; 2]>,
+    pub depth: Vec<f32>,
+}
+
+fn sub(a: &Vec3, b: &Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: &Vec3, b: &Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(u: &Vec3, v: &Vec3) -> Vec3 {
+    [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ]
+}
+
+/// The texel centres' torus points, row-major (torus_points).
+fn torus_points(torus: &Torus, window: &Window) -> Vec<Vec3> {
+    let n = window.resolution;
+    let centre = |min: f64, step: f64, k: usize| min + (k as f64 + 0.5) * step;
+    (0..n * n)
+        .map(|t| {
+            let theta = centre(window.theta_min_rad, window.theta_step_rad, t / n);
+            let phi = centre(window.phi_min_rad, window.phi_step_rad, t % n);
+            torus_position(torus, theta, phi)
+        })
+        .collect()
+}
+
+/// Whether the sphere (centre, radius) meets the box [lo, hi].
+fn sphere_meets_box(centre: &Vec3, radius: f64, lo: &Vec3, hi: &Vec3) -> bool {
+    let gap: f64 = (0..3)
+        .map(|a| {
+            let d = (lo[a] - centre[a]).max(centre[a] - hi[a]).max(0.0);
+            d * d
+        })
+        .sum();
+    gap <= radius * radius
+}
+
+/// The maps of `samples` over `window` of `torus` (EmbreeMapBackend.compute); `motions` one per
+/// moving object of `scene`, in its order; `previous`: the torus dt_s earlier, for the torus
+/// points' own velocity (none: the torus is taken as still).
+pub fn shadow_velocity_maps(
+    scene: &Scene,
+    motions: &[Motion],
+    torus: &Torus,
+    window: &Window,
+    samples: &[Sample],
+    previous: Option<(&Torus, f64)>,
+) -> Maps {
+    let points = torus_points(torus, window);
+    let m = points.len();
+    let n = window.resolution;
+    let mut maps = Maps {
+        shadow: vec![0.0; samples.len() * m],
+        velocity: vec![[0.0; 2]; samples.len() * m],
+        depth: vec![f32::INFINITY; samples.len() * m],
+    };
+    let mut stack = Stack::with_capacity(64);
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &points {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    for (k, sample) in samples.iter().enumerate() {
+        let s = &sample.point;
+        let (lo, hi) = (
+            [0, 1, 2].map(|a| lo[a].min(s[a])),
+            [0, 1, 2].map(|a| hi[a].max(s[a])),
+        );
+        let near: Vec<usize> = (0..scene.objects.len())
+            .filter(|&i| sample.ignores != Some(i))
+            .filter(|&i| {
+                sphere_meets_box(&scene.objects[i].centre, scene.objects[i].radius, &lo, &hi)
+            })
+            .collect();
+        for (texel, p) in points.iter().enumerate() {
+            let rel = sub(p, s);
+            let length = dot(&rel, &rel).sqrt();
+            let t_start = (SAMPLE_CLEARANCE_M / length.max(1e-12)).min(0.5);
+            let start = [0, 1, 2].map(|a| s[a] + rel[a] * t_start);
+            let t_limit = (1.0 - SEGMENT_END_MARGIN) - t_start;
+            let mut best = t_limit;
+            let mut object = None;
+            if let Some(bvh) = &scene.statics {
+                if bvh.occluded(start, rel, t_limit, &mut stack) {
+                    best = best.min(bvh.first_hit(start, rel, &mut stack).0);
+                }
+            }
+            for &i in &near {
+                let o = &scene.objects[i];
+                if o.sphere_entry(&start, &rel, best).is_some() {
+                    let (origin, direction) = o.local(&start, &rel);
+                    let t = o.bvh.first_hit(origin, direction, &mut stack).0;
+                    if t < best {
+                        (best, object) = (t, Some(i));
+                    }
+                }
+            }
+            if best >= t_limit {
+                continue;
+            }
+            let t_total = t_start + best;
+            let mut velocity = match object {
+                Some(i) => {
+                    let hit = [0, 1, 2].map(|a| s[a] + rel[a] * t_total);
+                    let spin = cross(&motions[i].angular, &sub(&hit, &motions[i].position));
+                    [0, 1, 2].map(|a| motions[i].linear[a] + spin[a])
+                }
+                None => [0.0; 3],
+            };
+            let (theta, phi) = (
+                window.theta_min_rad + ((texel / n) as f64 + 0.5) * window.theta_step_rad,
+                window.phi_min_rad + ((texel % n) as f64 + 0.5) * window.phi_step_rad,
+            );
+            if let Some((before, dt_s)) = previous {
+                let moved = sub(p, &torus_position(before, theta, phi));
+                velocity = [0, 1, 2].map(|a| velocity[a] - moved[a] / dt_s);
+            }
+            let [d_theta, d_phi, _] = tangent_frame(torus, theta, phi);
+            let n_phi = dot(&d_phi, &d_phi);
+            let v_phi = if n_phi > 1e-18 {
+                dot(&velocity, &d_phi) / n_phi
+            } else {
+                0.0
+            };
+            let at = k * m + texel;
+            maps.shadow[at] = 1.0;
+            maps.velocity[at] = [
+                (dot(&velocity, &d_theta) / dot(&d_theta, &d_theta)) as f32,
+                v_phi as f32,
+            ];
+            maps.depth[at] = (t_total * length) as f32;
+        }
+    }
+    maps
+}
