@@ -142,7 +142,7 @@ def _recorded_calls(make: tuple[pb.CreateSessionRequest, list[pb.FrameUpdate]], 
         )
         return python_step(rig, torus, state, points_world, side, level)
 
-    table = SessionTable(ServerSettings(checkpoint_store="off"))
+    table = SessionTable(ServerSettings(checkpoint_store="off", frame_path="python"))  # the reference's steps
     table.create("s", request)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(ToricRig, "_search_step", recording)
