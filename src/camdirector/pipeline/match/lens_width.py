@@ -51,27 +51,26 @@ def widened_fov_deg(
     floor_deg = min(floor_deg, max_deg)
     if max_deg <= base_deg:
         return base_deg
-    widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,)
-    tan_half = np.tan(np.radians(widths_deg) / 2.0)  # (T,)
     players = range(len(moment.transforms))
     points = np.stack([moment.transforms[i].apply(visibility.outlines_local[i]) for i in players])  # (P, S, 3)
+    if _looked_through(pose, moment, points).any():
+        return base_deg
     camera = (points - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)  # (P, S, 3) camera frame, -Z ahead
     depth = -camera[..., 2]
     ahead = depth >= NEAR_PLANE_M
     with np.errstate(divide="ignore", invalid="ignore"):
         slope_y = np.where(ahead, camera[..., 1] / depth, np.nan)  # (P, S) tan of the elevation on screen
         slope_x = np.where(ahead, camera[..., 0] / depth, np.nan)
-    heights = _screen_heights(slope_y, slope_x, tan_half, lens.aspect)  # (P, T)
-    if _looked_through(pose, moment, points).any():
-        return base_deg
-    tall = np.flatnonzero(heights[:, 0] > settings.shown_height_max)
+    # most frames show nobody too tall at the floor's width: the grid of widths only for those who are
+    at_floor = _screen_heights(slope_y, slope_x, np.tan(np.radians([floor_deg]) / 2.0), lens.aspect)[:, 0]  # (P,)
+    tall = np.flatnonzero(at_floor > settings.shown_height_max)
+    if len(tall):
+        tall = tall[visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= SHOWN_SEEN]
     if not len(tall):
-        return float(widths_deg[0])
-    seen = visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= SHOWN_SEEN
-    tall = tall[seen]
-    if not len(tall):
-        return float(widths_deg[0])
-    fits = (heights[tall] <= settings.shown_height_max).all(axis=0)  # (T,)
+        return float(floor_deg)
+    widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,), the first the floor
+    heights = _screen_heights(slope_y[tall], slope_x[tall], np.tan(np.radians(widths_deg) / 2.0), lens.aspect)  # (tall, T)
+    fits = (heights <= settings.shown_height_max).all(axis=0)  # (T,)
     return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
 
 
