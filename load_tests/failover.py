@@ -29,13 +29,16 @@ the same run.
 from __future__ import annotations
 
 import argparse
+import logging
 import os
+import re
 import signal
 import ssl
 import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 import grpc
@@ -112,15 +115,50 @@ def _stream(session, updates, rate_hz: float, start_s: float, out: dict) -> None
     out.update(answers=answers, times=times)
 
 
-def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, kill_after_s: float, compose_cluster=None) -> dict:
+class _RetryReasons(logging.Handler):
+    """Counts the SDK's tries again by the error that caused each (camdirector_client logs every
+    one), session ids left out so that the same error counts once across sessions."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.counts: Counter[str] = Counter()
+        self.codes: Counter[str] = Counter()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if isinstance(record.args, tuple) and len(record.args) == 3:
+            error = record.args[1]
+            self.codes[getattr(getattr(error, "code", None), "name", "?")] += 1
+            self.counts[re.sub(r"[0-9a-f]{32}", "ID", str(error))[:160]] += 1
+
+
+def run(
+    kill: str,
+    nodes: int,
+    sessions: int,
+    rate_hz: float,
+    seconds: float,
+    kill_after_s: float,
+    compose_cluster=None,
+    store_paused_s: float = 0.0,
+) -> dict:
     """The benchmark (the module docstring). `compose_cluster`: a `ComposeCluster` already up for
-    `--kill node-container`, used and left up (a test's); by default one is brought up and down."""
+    `--kill node-container`, used and left up (a test's); by default one is brought up and down.
+    `store_paused_s` (`--kill node` only): the checkpoint store (Redis) is SIGSTOPped this long
+    before the kill and SIGCONTed as long after it, so the killed node's checkpoints are behind and
+    its sessions come back through a DATA_LOSS resend (what a loaded store does by chance)."""
+    if store_paused_s and kill != "node":
+        raise ValueError("store_paused_s needs --kill node (a cluster on this machine)")
     scene = build_demo_scene()
     create = session_request(scene, Lens(vertical_fov_deg=50.0, aspect=16 / 9), cd.pb.FRAMING_ONLY)
     updates = list(frame_updates(scene, int(seconds * rate_hz), rate_hz))
     expected = _undisturbed(create, updates)
     folder = Path(tempfile.mkdtemp(prefix="camdirector-failover-"))
     cluster = server = None
+    reasons = _RetryReasons()
+    sdk_log = logging.getLogger("camdirector_client")
+    sdk_log.addHandler(reasons)
+    sdk_level = sdk_log.level
+    sdk_log.setLevel(logging.INFO)
     try:
         if kill in ("node", "node-container"):
             if kill == "node-container":
@@ -184,8 +222,14 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             counts = [len(_admin_call(cluster, "GET", f"https://{node.http}/v1/sessions")["sessions"]) for node in cluster.nodes]
             victim = max(range(len(counts)), key=counts.__getitem__)
             held = counts[victim]
+            if store_paused_s:
+                cluster.pause("redis")
+                time.sleep(store_paused_s)
             killed_at = time.monotonic()
             cluster.kill_node(victim)
+            if store_paused_s:
+                time.sleep(store_paused_s)
+                cluster.resume("redis")
         else:
             held = None
             killed_at = time.monotonic()
@@ -254,6 +298,10 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             "first_differing_frame_per_session": first_differing,
             "frames_answered_at_kill_per_session": answered_at_kill,
             "retries_per_session": [s.retries for s in opened],
+            # why the SDK tried again, by error (a try that reaches a node still dying, the balancer
+            # not yet knowing, tells itself apart from a restore that fails)
+            "retry_reasons": dict(reasons.counts.most_common(8)),
+            "retries_by_code": dict(reasons.codes),
             "sessions_per_node_before_kill": counts if kill != "worker" else None,
             "killed_container_rejoined_s": rejoined_s,
             "killed_node": victim if kill == "node-container" else None,
@@ -261,6 +309,8 @@ def run(kill: str, nodes: int, sessions: int, rate_hz: float, seconds: float, ki
             "floor_health_ms_p50": floor_ms,
         }
     finally:
+        sdk_log.removeHandler(reasons)
+        sdk_log.setLevel(sdk_level)
         if cluster is not None and cluster is not compose_cluster:
             cluster.down()
         elif compose_cluster is not None:
@@ -291,9 +341,16 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=60.0)
     parser.add_argument("--seconds", type=float, default=40.0)
     parser.add_argument("--kill-after", dest="kill_after", type=float, default=15.0)
+    parser.add_argument(
+        "--store-paused",
+        dest="store_paused",
+        type=float,
+        default=0.0,
+        help="seconds the checkpoint store stops before and after the kill (--kill node)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    report = run(args.kill, args.nodes, args.sessions, args.rate, args.seconds, args.kill_after)
+    report = run(args.kill, args.nodes, args.sessions, args.rate, args.seconds, args.kill_after, store_paused_s=args.store_paused)
     emit(report, args.json)
 
 

@@ -213,6 +213,76 @@ def test_a_stream_answered_data_loss_resends_its_kept_updates_async():
     assert director.seen[-1] == (41, 40)
 
 
+class MaskingDirector(LosingDirector):
+    """A LosingDirector behind HAProxy 2.6: a stream it ends with DATA_LOSS while the client
+    still sends reaches the client as CANCELLED (the balancer's RST_STREAM(CANCEL) after the
+    node's trailers, haproxy/haproxy#1219; docs/scaling.md); a unary Frame's status arrives whole."""
+
+    async def StreamFrames(self, request_iterator, context):
+        async def checked():
+            async for update in request_iterator:
+                if self._lost(update) is not None:
+                    await context.abort(grpc.StatusCode.CANCELLED, "Received RST_STREAM with error code 8")
+                yield update
+
+        async for answer in FlakyDirector.StreamFrames(self, checked(), context):
+            yield answer
+
+
+def test_a_data_loss_a_balancer_masks_as_cancelled_is_resent_after_one_unary_try_sync():
+    # before: each new stream resent its unanswered updates, was answered DATA_LOSS again and cut
+    # again as CANCELLED, until the retry window ran out
+    director = MaskingDirector()
+    director.losses = {30: 21}
+    with serving(director) as url, cd.connect(url, retry=cd.RetryPolicy(retry_window_s=5.0)) as client:
+        session = client.create_session(targets=[pb.Target(id="a")])
+        answers = [a.frame for a in session.stream(pb.FrameUpdate(frame=f) for f in range(1, 41))]
+        assert answers == list(range(1, 41))
+        # the stream cut at 30 (CANCELLED); 30 alone as a unary Frame, answered DATA_LOSS whole;
+        # 21..29 resent (their answers dropped), then 30, then the stream from 31 on
+        assert director.answered[session.id] == list(range(1, 30)) + list(range(21, 41))
+        assert session.retries == 2
+        assert [frame for frame, _ in director.seen] == [*range(1, 31), 30, *range(21, 31), *range(31, 41)]
+        methods = [m for m, s, _ in director.calls if s == session.id]  # a call refused is not recorded
+        assert methods == ["CreateSession", "StreamFrames", *["Frame"] * 10, "StreamFrames"]
+
+
+def test_a_data_loss_a_balancer_masks_as_cancelled_is_resent_after_one_unary_try_async():
+    async def main():
+        director = MaskingDirector()
+        director.losses = {30: 21}
+        server = grpc.aio.server()
+        pb_grpc.add_DirectorServicer_to_server(director, server)
+        port = server.add_insecure_port("127.0.0.1:0")
+        await server.start()
+        try:
+            async with cd.connect_async(f"grpc://127.0.0.1:{port}", retry=cd.RetryPolicy(retry_window_s=5.0)) as client:
+                session = await client.create_session(targets=[pb.Target(id="a")])
+                return director, session, [a.frame async for a in session.stream(pb.FrameUpdate(frame=f) for f in range(1, 41))]
+        finally:
+            await server.stop(None)
+
+    director, session, answers = asyncio.run(asyncio.wait_for(main(), 20.0))
+    assert answers == list(range(1, 41)) and session.retries == 2
+    assert director.answered[session.id] == list(range(1, 30)) + list(range(21, 41))
+
+
+def test_a_refusal_behind_a_balancers_reset_is_raised_at_once():
+    # a revoked key: the node ends the stream UNAUTHENTICATED, the balancer shows CANCELLED; the
+    # oldest unanswered update alone gets the refusal itself, raised without further tries
+    director = FlakyDirector()
+    director.stream_faults = {5: grpc.StatusCode.CANCELLED}
+    director.frame_faults = [grpc.StatusCode.UNAUTHENTICATED]
+    with serving(director) as url, cd.connect(url) as client:
+        session = client.create_session(targets=[pb.Target(id="a")])
+        answers: list[int] = []
+        with pytest.raises(cd.DirectorError) as refused:
+            for answer in session.stream(pb.FrameUpdate(frame=f) for f in range(1, 41)):
+                answers.append(answer.frame)
+        assert refused.value.code is grpc.StatusCode.UNAUTHENTICATED
+        assert answers == [1, 2, 3, 4] and session.retries == 1
+
+
 def test_every_failure_is_tried_again_until_the_window_is_spent():
     director = FlakyDirector()
     retry = cd.RetryPolicy(retry_window_s=1.5, max_backoff_s=0.1)  # waits of 0.05 to 0.1 s: 15 or more tries

@@ -342,6 +342,12 @@ class _AsyncResumable:
         if resend is not None:
             self.in_flight = deque(resend)
 
+    def oldest_alone(self) -> wire.Sent | None:
+        """The oldest unanswered update, to go alone as a unary Frame before the next call (see
+        Session.stream); the ended calls take no more updates from now on. None: all answered."""
+        self._call += 1
+        return self.in_flight[0] if self.in_flight else None
+
     async def _next_update(self) -> Any:
         try:
             return await self._updates.__anext__()
@@ -430,8 +436,16 @@ class AsyncSession(wire.SessionBase):
         """
         feed = _AsyncResumable(wire.with_session_id_async(frame_updates, self.id), self)
         backoff = None
+        alone = False
         try:
             while True:
+                sent = feed.oldest_alone() if alone else None
+                if sent is not None:  # after a balancer's reset, as in Session.stream
+                    fresh = sent.seq > self._answered_seq
+                    reply = await self._frame_call(sent)
+                    feed.in_flight.popleft()
+                    if fresh:
+                        yield reply
                 try:
                     async with contextlib.aclosing(self._transport.stream(feed.requests(), self.route)) as replies:
                         async for reply in replies:
@@ -442,6 +456,7 @@ class AsyncSession(wire.SessionBase):
                 except DirectorError as error:
                     delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
                     feed.resend_after(error)
+                    alone = error.code == grpc.StatusCode.CANCELLED
                 await asyncio.sleep(delay)
         finally:
             feed.close()

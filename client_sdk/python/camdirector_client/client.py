@@ -313,6 +313,17 @@ class _Resumable:
             if resend is not None:
                 self.in_flight = deque(resend)
 
+    def oldest_alone(self) -> wire.Sent | None:
+        """The oldest unanswered update, to go alone as a unary Frame before the next call (see
+        Session.stream); the ended calls take no more updates from now on. None: all answered."""
+        with self._lock:
+            self._call += 1
+            return self.in_flight[0] if self.in_flight else None
+
+    def answered_oldest(self) -> None:
+        with self._lock:
+            self.in_flight.popleft()
+
 
 class Session(wire.SessionBase):
     """One director session; closes itself at the end of a ``with`` block (see wire.SessionBase).
@@ -410,7 +421,15 @@ class Session(wire.SessionBase):
         """
         feed = _Resumable(wire.with_session_id(frame_updates, self.id), self)
         backoff = None
+        alone = False
         while True:
+            sent = feed.oldest_alone() if alone else None
+            if sent is not None:
+                fresh = sent.seq > self._answered_seq  # not one a DATA_LOSS resend answered already
+                reply = self._frame_call(sent)  # tried again as a unary call; raises when spent
+                feed.answered_oldest()
+                if fresh:
+                    yield reply
             try:
                 for reply in self._transport.stream(feed.requests(), self.route):
                     backoff = None  # answered again: a later loss gets a whole window anew
@@ -420,6 +439,12 @@ class Session(wire.SessionBase):
             except DirectorError as error:
                 delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
                 feed.resend_after(error)
+                # A balancer's reset may hide the server's answer: HAProxy before 3.2 resets a
+                # stream (RST_STREAM CANCEL) right after the server ended it while the client
+                # still sends, and the client then reports CANCELLED, not the server's status
+                # (a DATA_LOSS "resend from K" among them, docs/scaling.md). The oldest
+                # unanswered update goes alone first: a unary call's status arrives whole.
+                alone = error.code == grpc.StatusCode.CANCELLED
             time.sleep(delay)
 
     def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:

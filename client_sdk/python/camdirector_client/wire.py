@@ -11,6 +11,7 @@ call (docs/security.md).
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import random
@@ -32,6 +33,9 @@ from zmq.utils import z85
 
 from camdirector.v1 import director_pb2 as pb
 from camdirector_client.errors import DirectorError
+
+# each try again is logged at INFO with the error that caused it (a flaky network shows here)
+log = logging.getLogger("camdirector_client")
 
 __all__ = [
     "DEFAULT_MAX_MESSAGE_BYTES",
@@ -758,6 +762,7 @@ class SessionBase:
         if delay is None:
             raise error
         self.retries += 1
+        log.info("session %s: %s; trying again in %.3f s", self.id, error, delay)
         return delay, backoff
 
     def _to_send(self, sent: Sent) -> int:

@@ -139,5 +139,10 @@ class ServerProcess:
     def __enter__(self) -> ServerProcess:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
+        if exc_type is not None and exc_type is not KeyboardInterrupt:
+            # what the server was doing when its caller failed goes with the failure (a test's
+            # captured stderr); the log itself is removed with its folder
+            state = "running" if self.alive() else f"exited with {self.proc.returncode}"
+            print(f"camdirector serve (pid {self.proc.pid}) {state}; its log ends:\n{self.log_tail()}", file=sys.stderr)
         self.stop()
