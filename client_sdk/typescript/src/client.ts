@@ -316,7 +316,22 @@ export class Session {
         feed.answered();
         yield reply;
       }
+      let alone = false;
       for (;;) {
+        if (alone) {
+          // After CANCELLED, the oldest unanswered update goes alone as a unary Frame first: HAProxy
+          // before 3.2 resets a stream right after the node ended it while the client still sent,
+          // hiding the node's status (a DATA_LOSS "resend from K", a revoked key) behind CANCELLED
+          // (haproxy/haproxy#1219; docs/scaling.md); a unary call's status arrives whole.
+          alone = false;
+          const sent = await feed.get(feed.first);
+          if (sent !== undefined) {
+            const fresh = sent.seq > this.#answeredSeq; // not one a DATA_LOSS resend answered already
+            const reply = await this.#frameCall(sent);
+            feed.answered();
+            if (fresh) yield reply;
+          }
+        }
         const call = this.transport.stream(this.route);
         let over = false; // this call ended: its writer stops
         const end = () => { over = true; };
@@ -354,6 +369,7 @@ export class Session {
           [delay, backoff] = this.#retryAfter(error, backoff); // throws when not to be tried again
           const resend = this.#resend(error, feed.lastSeq);
           if (resend !== undefined) feed.resend(resend);
+          alone = error.code === "CANCELLED";
           over = true;
           call.cancel();
           await sleep(delay);

@@ -99,6 +99,7 @@ test("answered_frame is appended to an encoded update and read back", () => {
 class Director {
   frameFaults = [];
   losses = new Map();
+  masking = false; // a stream's DATA_LOSS reaches the client as CANCELLED (HAProxy 2.6, haproxy/haproxy#1219)
   hangs = new Set();
   answerDelayMs = 0;
   awaiting = undefined;
@@ -151,7 +152,7 @@ class Director {
           const lost = this.#lost(update);
           if (lost !== undefined) {
             hung = true;
-            call.emit("error", lost);
+            call.emit("error", this.masking ? { code: grpc.status.CANCELLED, details: "Received RST_STREAM with error code 8" } : lost);
             call.end();
             return;
           }
@@ -231,6 +232,22 @@ test("a stream answered DATA_LOSS resends its kept updates", { timeout: 20_000 }
   const lostAt = director.seen.findIndex(([frame]) => frame === 30);
   const resent = director.seen.slice(lostAt + 1, lostAt + 10);
   assert.deepEqual(resent, frames(21, 29).map((f) => [f, f - 1]));
+});
+
+test("a DATA_LOSS a balancer masks as CANCELLED is resent after one unary try", { timeout: 20_000 }, async () => {
+  // before: each new stream resent its unanswered updates, was answered DATA_LOSS again and cut
+  // again as CANCELLED, until the retry window ran out
+  const { client, session } = await open({ retryWindowMs: 5000 });
+  director.masking = true;
+  director.losses.set(30, 21);
+  const answers = (await collect(session.stream(updates(40)))).map((a) => Number(a.frame));
+  client.close();
+  assert.deepEqual(answers, frames(1, 40));
+  // cut at 30 (CANCELLED); 30 alone as a unary Frame, answered DATA_LOSS whole; 21..29 resent
+  // (their answers dropped), then 30, then the stream from 31 on
+  assert.deepEqual(director.seen.map(([frame]) => frame), [...frames(1, 30), 30, ...frames(21, 30), ...frames(31, 40)]);
+  assert.deepEqual(director.answered, [...frames(1, 29), ...frames(21, 40)]);
+  assert.equal(session.retries, 2);
 });
 
 test("a unary frame answered DATA_LOSS resends its kept updates", { timeout: 20_000 }, async () => {
