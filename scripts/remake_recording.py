@@ -1,7 +1,7 @@
 """Makes a session recording (`.cdrec`, worker/recording.py) again from its inputs, on a frame path.
 
     .venv/bin/python scripts/remake_recording.py SOURCE OUT [--frame-path compiled|python] [--states]
-    .venv/bin/python scripts/remake_recording.py --tumbling OUT [--frame-path ...] [--states]
+    .venv/bin/python scripts/remake_recording.py --tumbling OUT [--visibility MODE] [--frame-path ...] [--states]
 
 The first form reads SOURCE's inputs (its creation request, then its frames, style changes and
 takes in the order they came) and runs them through a fresh session table of this checkout that
@@ -97,7 +97,7 @@ def record(create: pb.CreateSessionRequest, inputs: Iterable[Input], out: Path, 
         shutil.copyfile(settings.recordings_dir / f"{session_id}.cdrec", out)
 
 
-def tumbling_inputs(frames: int = 240) -> tuple[pb.CreateSessionRequest, list[Input]]:
+def tumbling_inputs(frames: int = 240, visibility: int = pb.FRAMING_ONLY) -> tuple[pb.CreateSessionRequest, list[Input]]:
     """One capsule target tumbling about a tilted axis while it walks, its aim point off its axis;
     a tilted static box and a tilted static capsule; a cylinder that turns as it slides past;
     packed states; the composition changed half way. Every rotation is about a tilted axis, so
@@ -105,7 +105,8 @@ def tumbling_inputs(frames: int = 240) -> tuple[pb.CreateSessionRequest, list[In
     primitives stood up) has its last bits from a product of three terms, which numpy's matmul
     hands to OpenBLAS: the inputs on which the frame path's machine dependence shows. The creation
     request's three rotations are among those whose np.linalg.norm (OpenBLAS's dot) differs
-    between its SkylakeX and Haswell or Sandybridge kernels."""
+    between its SkylakeX and Haswell or Sandybridge kernels. `visibility`: the style's mode
+    throughout (a pb.VisibilityMode)."""
 
     def quat(axis: tuple[float, float, float], angle_rad: float) -> tuple[float, float, float, float]:
         norm = math.sqrt(sum(a * a for a in axis))
@@ -147,7 +148,7 @@ def tumbling_inputs(frames: int = 240) -> tuple[pb.CreateSessionRequest, list[In
             ),
         ],
         seed=11,
-        style=pb.Style(visibility=pb.FRAMING_ONLY),
+        style=pb.Style(visibility=visibility),
     )
     inputs: list[Input] = []
     for i in range(1, frames + 1):
@@ -161,9 +162,7 @@ def tumbling_inputs(frames: int = 240) -> tuple[pb.CreateSessionRequest, list[In
         )
         inputs.append(pb.FrameUpdate(frame=i, time_s=t, packed_ids=ids, packed_transforms=packed))
         if i == frames // 2:
-            inputs.append(
-                pb.UpdateStyleRequest(style=pb.Style(visibility=pb.FRAMING_ONLY, screen_a=pb.ScreenPoint(x=-0.25, y=0.1)))
-            )
+            inputs.append(pb.UpdateStyleRequest(style=pb.Style(visibility=visibility, screen_a=pb.ScreenPoint(x=-0.25, y=0.1))))
     return create, inputs
 
 
@@ -174,10 +173,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tumbling", action="store_true", help="record the tumbling inputs instead of a recording's")
     parser.add_argument("--frame-path", dest="frame_path", choices=FRAME_PATHS, default=ServerSettings.frame_path)
     parser.add_argument("--states", action="store_true", help="send packed transforms as states (as_states)")
+    parser.add_argument(
+        "--visibility", default="FRAMING_ONLY", choices=pb.VisibilityMode.keys()[1:], help="--tumbling: the style's mode"
+    )
     args = parser.parse_args(argv)
     if args.tumbling == (args.source is not None):
         parser.error("give either SOURCE or --tumbling")
-    create, inputs = tumbling_inputs() if args.tumbling else inputs_of(args.source)
+    if args.tumbling:
+        create, inputs = tumbling_inputs(visibility=pb.VisibilityMode.Value(args.visibility))
+    else:
+        create, inputs = inputs_of(args.source)
     if args.states:
         inputs = as_states(inputs)
     record(create, inputs, args.out, args.frame_path)

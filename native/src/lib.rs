@@ -8,6 +8,8 @@ mod bvh;
 mod bvh_py;
 mod carry;
 mod carry_py;
+mod deoccluder;
+mod deoccluder_py;
 mod framing;
 mod maps;
 mod maps_py;
@@ -37,5 +39,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     search_py::register(m)?;
     prediction_py::register(m)?;
     maps_py::register(m)?;
+    deoccluder_py::register(m)?;
     Ok(())
 }

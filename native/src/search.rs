@@ -128,31 +128,31 @@ pub enum Scored {
     },
 }
 
-fn add(a: &Vec3, b: &Vec3) -> Vec3 {
+pub(crate) fn add(a: &Vec3, b: &Vec3) -> Vec3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
-fn sub(a: &Vec3, b: &Vec3) -> Vec3 {
+pub(crate) fn sub(a: &Vec3, b: &Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-fn scale(a: &Vec3, k: f64) -> Vec3 {
+pub(crate) fn scale(a: &Vec3, k: f64) -> Vec3 {
     [a[0] * k, a[1] * k, a[2] * k]
 }
 
-fn div(a: &Vec3, k: f64) -> Vec3 {
+pub(crate) fn div(a: &Vec3, k: f64) -> Vec3 {
     [a[0] / k, a[1] / k, a[2] / k]
 }
 
-fn dot(a: &Vec3, b: &Vec3) -> f64 {
+pub(crate) fn dot(a: &Vec3, b: &Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-fn norm(a: &Vec3) -> f64 {
+pub(crate) fn norm(a: &Vec3) -> f64 {
     dot(a, a).sqrt()
 }
 
-fn cross(u: &Vec3, v: &Vec3) -> Vec3 {
+pub(crate) fn cross(u: &Vec3, v: &Vec3) -> Vec3 {
     [
         u[1] * v[2] - u[2] * v[1],
         u[2] * v[0] - u[0] * v[2],

@@ -5,7 +5,7 @@ Python path, the control, answers differently there. Also: the harness's childre
 they are told to, and the script that made the recordings makes them again.
 
 The kinds change numpy's SIMD loops, OpenBLAS's kernels and libm's FMA; what they cannot change
-(Embree's ISA) the compiled FRAMING_ONLY frame does not use."""
+(Embree's ISA) the compiled TORIC frame does not use, in any visibility mode."""
 
 from __future__ import annotations
 
@@ -24,7 +24,10 @@ from tests.worker.machine_kinds import KINDS, ROOT, MachineKind, played, replay_
 
 RECORDINGS = Path(__file__).resolve().parents[1] / "data" / "recordings"
 COMPILED = RECORDINGS / "compiled"
-COMPILED_NAMES = ["framing_only", "tumbling"]  # the old framing_only's inputs; a tumbling target (README.md)
+# each TORIC visibility mode's: the old recordings' inputs, and a tumbling target's (README.md)
+MODES = ("reactive", "raycast", "anticipation")
+COMPILED_NAMES = ["framing_only", "tumbling", *MODES, *(f"tumbling_{mode}" for mode in MODES)]
+SOURCES = {"framing_only": "../framing_only.cdrec"} | {mode: f"../{mode}.cdrec" for mode in MODES}  # where the inputs come from
 REMAKE = ROOT / "scripts" / "remake_recording.py"
 
 
@@ -79,9 +82,10 @@ def test_the_python_path_answers_differently_on_another_kind_of_machine(tmp_path
             assert not report["ok"], (kind.name, report)
 
 
-@pytest.mark.parametrize(("name", "source"), [("framing_only", "../framing_only.cdrec"), ("tumbling", "tumbling.cdrec")])
-def test_the_script_makes_the_compiled_recordings_again(name, source, tmp_path):
+@pytest.mark.parametrize("name", COMPILED_NAMES)
+def test_the_script_makes_the_compiled_recordings_again(name, tmp_path):
     """scripts/remake_recording.py, from the inputs README.md names, answers what was recorded."""
+    source = SOURCES.get(name, f"{name}.cdrec")
     again = tmp_path / f"{name}.cdrec"
     subprocess.run([sys.executable, str(REMAKE), str(COMPILED / source), str(again), "--frame-path", "compiled"], check=True)
 

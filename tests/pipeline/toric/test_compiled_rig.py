@@ -38,6 +38,12 @@ from camdirector.worker.table import SessionTable
 
 RECORDINGS = Path(__file__).resolve().parents[2] / "data" / "recordings"
 TOL = 1e-9  # metres for positions, radians for angles, unit for quaternions and screen errors
+# A REACTIVE camera pulled in front of an obstacle stands where a ray hit it: the Python rig's
+# RayScene casts in Embree's float32 (its distances within 1e-4 relative: test_scene_native.py),
+# the compiled rig's Scene in float64. Given the same hits the two deoccluders agree within 1e-12
+# (tests/native/test_deoccluder_native.py); here such frames agree within float32's rounding of a
+# hit some metres off.
+PULLED_TOL = 1e-5  # m, unit quaternion, screen error, on frames the deoccluder moved ("pulled_in"): 2^-24 of tens of metres
 FRAMES = 900  # 15 s of the demo at 60 Hz: the walker passes the moving obstacles
 SEEN_TOL = 0.01  # share of the targets' samples (and of frames) a compiled search session may lose
 
@@ -108,11 +114,13 @@ def _differences(got: list[Answer], want: list[Answer]) -> dict[str, float]:
     """The largest difference of each compared quantity over the frames; asserts what must be equal."""
     assert len(got) == len(want)
     worst = {"position_m": 0.0, "rotation": 0.0, "theta_phi_rad": 0.0, "framing_error": 0.0, "torus": 0.0}
+    worst |= {"pulled_position_m": 0.0, "pulled_rotation": 0.0, "pulled_framing_error": 0.0}
     visibility_frames = 0
     for i, (g, w) in enumerate(zip(got, want)):
         assert (g.stale, g.cut, g.shot_id) == (w.stale, w.cut, w.shot_id), i
         assert (g.state is None) == (w.state is None), i
-        _reply_differences(g.reply, w.reply, worst)
+        pulled = "pulled_in" in w.reply.diagnostics.flags
+        _reply_differences(g.reply, w.reply, worst, "pulled_" if pulled else "")
         if g.state is None or w.state is None:
             continue
         gs, ws = g.state, w.state
@@ -120,10 +128,12 @@ def _differences(got: list[Answer], want: list[Answer]) -> dict[str, float]:
         assert gs.stage_ms == ws.stage_ms, i
         assert gs.pose is not None and ws.pose is not None
         assert gs.pose.vertical_fov_deg == ws.pose.vertical_fov_deg
-        worst["position_m"] = max(worst["position_m"], float(np.abs(gs.pose.position_world - ws.pose.position_world).max()))
+        key = "pulled_" if pulled else ""
+        gap = float(np.abs(gs.pose.position_world - ws.pose.position_world).max())
+        worst[f"{key}position_m"] = max(worst[f"{key}position_m"], gap)
         q, r = gs.pose.rotation_xyzw, ws.pose.rotation_xyzw
-        worst["rotation"] = max(worst["rotation"], float(min(np.abs(q - r).max(), np.abs(q + r).max())))
-        worst["framing_error"] = max(worst["framing_error"], abs(gs.framing_error - ws.framing_error))
+        worst[f"{key}rotation"] = max(worst[f"{key}rotation"], float(min(np.abs(q - r).max(), np.abs(q + r).max())))
+        worst[f"{key}framing_error"] = max(worst[f"{key}framing_error"], abs(gs.framing_error - ws.framing_error))
         visibility_frames += gs.visibility != ws.visibility
         gt, wt = gs.toric, ws.toric
         assert gt is not None and wt is not None and gt.b_is_gaze_point == wt.b_is_gaze_point
@@ -137,9 +147,10 @@ def _differences(got: list[Answer], want: list[Answer]) -> dict[str, float]:
     return worst
 
 
-def _reply_differences(got: pb.CameraUpdate, want: pb.CameraUpdate, worst: dict[str, float]) -> None:
-    """Two replies' largest differences into `worst` (their poses and toric places); asserts the
-    rest is equal, the stage laps and compute_ms included (the tables' clocks tick per reading)."""
+def _reply_differences(got: pb.CameraUpdate, want: pb.CameraUpdate, worst: dict[str, float], key: str = "") -> None:
+    """Two replies' largest differences into `worst` (their poses and toric places; the poses
+    under `key` + their names); asserts the rest is equal, the stage laps and compute_ms included
+    (the tables' clocks tick per reading)."""
     fields = ("frame", "time_s", "cut", "shot_id", "visibility", "compute_ms", "stale", "message", "buffering")
     assert [getattr(got, f) for f in fields] == [getattr(want, f) for f in fields]
     gd, wd = got.diagnostics, want.diagnostics
@@ -148,9 +159,10 @@ def _reply_differences(got: pb.CameraUpdate, want: pb.CameraUpdate, worst: dict[
     assert not got.candidates and not want.candidates
     gp, wp = got.pose, want.pose
     assert gp.vertical_fov_deg == wp.vertical_fov_deg
-    worst["position_m"] = max(worst["position_m"], *(abs(getattr(gp.position, a) - getattr(wp.position, a)) for a in "xyz"))
+    gaps = (abs(getattr(gp.position, a) - getattr(wp.position, a)) for a in "xyz")
+    worst[f"{key}position_m"] = max(worst[f"{key}position_m"], *gaps)
     q, r = (np.array([getattr(p.rotation, a) for a in "xyzw"]) for p in (gp, wp))
-    worst["rotation"] = max(worst["rotation"], float(min(np.abs(q - r).max(), np.abs(q + r).max())))
+    worst[f"{key}rotation"] = max(worst[f"{key}rotation"], float(min(np.abs(q - r).max(), np.abs(q + r).max())))
     worst["theta_phi_rad"] = max(worst["theta_phi_rad"], abs(gd.theta - wd.theta), _angle(gd.phi, wd.phi))
     worst["torus"] = max(worst["torus"], abs(gd.alpha - wd.alpha))
 
@@ -158,11 +170,11 @@ def _reply_differences(got: pb.CameraUpdate, want: pb.CameraUpdate, worst: dict[
 def _agree(got: list[Answer], want: list[Answer]) -> None:
     worst = _differences(got, want)
     print(worst)  # pytest -s: the margins
-    assert all(value <= TOL for value in worst.values()), worst
+    assert all(value <= (PULLED_TOL if name.startswith("pulled_") else TOL) for name, value in worst.items()), worst
 
 
 def _same_bits(got: list[Answer], want: list[Answer]) -> None:
-    assert _differences(got, want) == dict.fromkeys(("position_m", "rotation", "theta_phi_rad", "framing_error", "torus"), 0.0)
+    assert not any(_differences(got, want).values())
 
 
 @pytest.fixture(scope="module")
@@ -208,7 +220,7 @@ def test_a_compiled_session_repeats_bit_for_bit_also_across_a_snapshot(framing_o
 
 
 def test_changes_of_visibility_mode_hand_the_camera_over_without_a_jump(tmp_path):
-    """FRAMING_ONLY, then REACTIVE (the Python stages), back, then RAYCAST (the search), back:
+    """FRAMING_ONLY, then REACTIVE (the deoccluder, compiled too), back, then RAYCAST (the search), back:
     every frame as the Python rig's. The search stays only while it coasts: from frame 436 on it
     chooses among candidates so close that a difference of 1e-14 m in where it starts chooses
     another (so does the Python rig alone, its camera moved 1e-14 m at frame 419), and the two
@@ -226,8 +238,8 @@ def test_changes_of_visibility_mode_hand_the_camera_over_without_a_jump(tmp_path
 @pytest.mark.parametrize("name", ["framing_only", "reactive"])
 def test_the_suites_toric_recordings_agree_on_both_paths(name, tmp_path):
     """The inputs of the TORIC recordings (tests/data/recordings/) of FRAMING_ONLY and REACTIVE (a
-    style change half way) answered on both paths: every frame as above (REACTIVE runs in Python
-    on both). The search modes' recordings (raycast, anticipation) part at their first near-tie:
+    style change half way) answered on both paths: every frame as above (a pulled REACTIVE camera
+    within PULLED_TOL). The search modes' recordings (raycast, anticipation) part at their first near-tie:
     the search's sessions are compared by what they show (the test below), its steps call by call
     (tests/native/test_search_native.py)."""
     entries = list(read_entries(RECORDINGS / f"{name}.cdrec"))

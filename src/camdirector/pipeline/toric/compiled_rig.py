@@ -2,30 +2,32 @@
 
 `CompiledToricRig` is `ToricRig` (rig.py) with parts of its stages run in camdirector._native:
 
-- While the style's visibility mode is FRAMING_ONLY, FRAMING, MOTION and VISIBILITY: FRAMING in
-  `FramingCore` (framing.py's twin), MOTION in `MotionCore` (camera_motion.py's).
+- While the style's visibility mode is FRAMING_ONLY or REACTIVE, FRAMING, MOTION and VISIBILITY:
+  FRAMING in `FramingCore` (framing.py's twin), MOTION in `MotionCore` (camera_motion.py's) and,
+  in REACTIVE, `DeoccluderCore` (reactive.py's Deoccluder, its ray casts in the `Scene`).
 - In the search modes (ANTICIPATION, NO_ANTICIPATION, RAYCAST), MOTION's search in `SearchCore`
   (occlusion_search.py's `OcclusionSearch.step` and the pose at its answer), reading the A-map
   or ray casts, and drawing its candidates from the session's generator as the Python draws
   them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame.
 - In the map modes, PROJECTION's ray casts and AMAP's per-sample predictions
   (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
-- In FRAMING_ONLY and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
+- In FRAMING_ONLY, REACTIVE and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
   (geometry/raycast.py RayScene's twin), built from the session's RayScene on the first compiled
   frame and moved with the session's moving objects.
 
 Python stays the reference: it answers the same FrameState within 1e-9 m and 1e-9 rad, with the
 same flags and cuts (tests/pipeline/toric/test_compiled_rig.py; the search per call,
 tests/native/test_search_native.py), and the compiled stages draw from the session's generator
-exactly what the Python ones draw (VISIBILITY's sample points are the Python stage's). REACTIVE
-runs in Python. What a FRAMING_ONLY frame computes has the same
+exactly what the Python ones draw (VISIBILITY's sample points are the Python stage's). What a
+FRAMING_ONLY or REACTIVE frame computes has the same
 bits on every x86-64 machine (tests/worker/test_recordings_across_machines.py): the sample points
 are carried by the targets with camdirector._native's `carry`, not numpy's product (OpenBLAS's
 kernel is the CPU's), and the one-target heading starts as `FramingCore` computes it; the search
 and map modes still compute parts in numpy (their frames agree on one machine, not yet across).
 
-FRAMING_ONLY's cores hold the stages' state between frames (the one-target heading; the camera's
-place, rates and upright side): entering FRAMING_ONLY copies it from the Python stages into the
+The cores hold the stages' state between frames (the one-target heading; the camera's place,
+rates and upright side; the deoccluder's last correction): entering FRAMING_ONLY or REACTIVE
+copies it from the Python stages into the
 cores (after the search hands the camera back, as rig.py does), leaving it copies it back, so a
 change of mode moves the camera no more than the Python rig would. A pickled rig (a
 checkpoint's snapshot) carries the state in its Python stages and builds its cores and Scene
@@ -53,13 +55,14 @@ from camdirector.pipeline.toric.occlusion_search import SearchResult
 from camdirector.pipeline.toric.rig import ToricRig
 
 _NO_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])  # a core's initial facing, which its copied heading replaces
+_COMPILED_MODES = (VisibilityMode.FRAMING_ONLY, VisibilityMode.REACTIVE)  # whose frames the cores run whole
 
 
 class CompiledToricRig(ToricRig):
     """`ToricRig` with FRAMING_ONLY's stages compiled (module docstring); the same arguments."""
 
     # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no native object.
-    _cores: tuple[Any, Any] | None = None  # (FramingCore, MotionCore) while they hold the state
+    _cores: tuple[Any, Any, Any] | None = None  # (FramingCore, MotionCore, DeoccluderCore) while they hold the state
     _scene: Any = None  # the Scene, made on the first compiled frame
     _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
     _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
@@ -76,13 +79,13 @@ class CompiledToricRig(ToricRig):
 
     @property
     def compiled(self) -> bool:
-        """Whether the compiled stages hold the camera (the last frame, or the next, is FRAMING_ONLY)."""
+        """Whether the compiled stages hold the camera (the last frame, or the next, is FRAMING_ONLY or REACTIVE)."""
         return self._cores is not None
 
     def set_style(self, style: Style) -> None:
         super().set_style(style)
         if self._cores is not None:
-            for core in self._cores:
+            for core in self._cores[:2]:  # the deoccluder's settings are not the style's
                 core.set_style(style)
         if self._search_core is not None:
             self._search_core.set_style(style)
@@ -99,7 +102,7 @@ class CompiledToricRig(ToricRig):
         self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
     ) -> None:
         """ToricRig.run, on the side of the style's visibility mode (module docstring)."""
-        compiled = self.style.visibility == VisibilityMode.FRAMING_ONLY
+        compiled = self.style.visibility in _COMPILED_MODES
         if compiled and self._cores is None:
             if self._searching:
                 self._end_search(last)
@@ -109,21 +112,27 @@ class CompiledToricRig(ToricRig):
             self._cores = None
         super().run(state, update, target_transforms, last)
 
-    def _cores_from_python(self) -> tuple[Any, Any]:
-        framing, motion = self.framing, self.motion
+    def _cores_from_python(self) -> tuple[Any, Any, Any]:
+        framing, motion, deoccluder = self.framing, self.motion, self.deoccluder
         framing_core = native.FramingCore(self.lens, self.style, _NO_ROTATION, framing.settings)
         framing_core.heading_rad, framing_core.last_aim = framing.heading_rad, framing._last_aim
         motion_core = native.MotionCore(self.style, self.lens, motion.settings)
         motion_core.theta, motion_core.phi, motion_core.rate = motion.theta, motion.phi, motion.rate
         motion_core.position_world, motion_core.side, motion_core.side_key = motion.position_world, motion.side, motion._side_key
-        return framing_core, motion_core
+        deoccluder_core = native.DeoccluderCore(deoccluder.settings)
+        deoccluder_core.offset_from_a, deoccluder_core.displacement = deoccluder._offset_from_a, deoccluder._displacement
+        deoccluder_core.damp_time_s, deoccluder_core.time_s = deoccluder._damp_time_s, deoccluder._time_s
+        return framing_core, motion_core, deoccluder_core
 
     def _python_from_cores(self) -> None:
         assert self._cores is not None
-        (framing_core, motion_core), framing, motion = self._cores, self.framing, self.motion
+        (framing_core, motion_core, deoccluder_core), framing, motion = self._cores, self.framing, self.motion
         framing.heading_rad, framing._last_aim = framing_core.heading_rad, framing_core.last_aim
         motion.theta, motion.phi, motion.rate = motion_core.theta, motion_core.phi, motion_core.rate
         motion.position_world, motion.side, motion._side_key = motion_core.position_world, motion_core.side, motion_core.side_key
+        deoccluder = self.deoccluder
+        deoccluder._offset_from_a, deoccluder._displacement = deoccluder_core.offset_from_a, deoccluder_core.displacement
+        deoccluder._damp_time_s, deoccluder._time_s = deoccluder_core.damp_time_s, deoccluder_core.time_s
 
     def _frame(self, state: FrameState, toric: ToricFrame) -> None:
         if self._cores is None:
@@ -148,6 +157,14 @@ class CompiledToricRig(ToricRig):
         state.flags.extend(flags)
         if pose is not None:
             state.pose = CameraPose(*pose)
+        if self.style.visibility == VisibilityMode.REACTIVE and state.pose is not None:
+            assert toric.a_world is not None  # FRAMING placed it
+            position, rotation, pulled = self._cores[2].run(
+                state.pose.position_world, state.pose.rotation_xyzw, toric.a_world, state.time_s, state.dt_s, self._moved_scene()
+            )
+            if pulled:
+                state.pose = CameraPose(position, rotation, state.pose.vertical_fov_deg)
+                state.flags.append("pulled_in")
 
     def _build_maps(self) -> None:
         self.maps = CompiledOcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
