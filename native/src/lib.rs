@@ -12,6 +12,7 @@ mod framing;
 mod maps;
 mod maps_py;
 mod motion;
+mod move_scene_py;
 mod prediction;
 mod prediction_py;
 mod rotation;
@@ -37,5 +38,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     search_py::register(m)?;
     prediction_py::register(m)?;
     maps_py::register(m)?;
+    move_scene_py::register(m)?;
     Ok(())
 }

@@ -64,6 +64,7 @@ class CompiledToricRig(ToricRig):
     _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
     _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
     _search_core: Any = None  # the SearchCore, made on the first compiled search step
+    _packed: tuple[list[str], npt.NDArray[np.float64]] | None = None  # the frame's FrameInput.packed, till the Scene takes it
 
     def __init__(self, scene: SceneSpec, *rest: Any) -> None:
         """ToricRig's arguments. The one-target heading starts as `FramingCore` computes it from
@@ -92,7 +93,7 @@ class CompiledToricRig(ToricRig):
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None, _search_core=None)
+        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None, _search_core=None, _packed=None)
         return state
 
     def run(
@@ -107,7 +108,9 @@ class CompiledToricRig(ToricRig):
         elif not compiled and self._cores is not None:
             self._python_from_cores()
             self._cores = None
+        self._packed = update.packed
         super().run(state, update, target_transforms, last)
+        self._packed = None
 
     def _cores_from_python(self) -> tuple[Any, Any]:
         framing, motion = self.framing, self.motion
@@ -188,12 +191,18 @@ class CompiledToricRig(ToricRig):
         )
 
     def _moved_scene(self) -> Any:
-        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's)."""
+        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's):
+        those the frame moved by its decoded rows in one call, when it has them (the transforms
+        INGEST put in `dynamic` were made of the same rows), any other moved since by its transform."""
         if self._scene is None:
             self._scene, self._scene_transforms = native.Scene(self.ray_scene.static_meshes_world), {}
             for object_id, (mesh, transform) in self.dynamic.items():
                 self._scene.add_dynamic(object_id, mesh, transform)
                 self._scene_transforms[object_id] = transform
+        elif self._packed is not None:
+            for object_id in native.move_scene(self._scene, *self._packed):
+                self._scene_transforms[object_id] = self.dynamic[object_id][1]
+        self._packed = None
         for object_id, (_, transform) in self.dynamic.items():
             if self._scene_transforms[object_id] is not transform:
                 self._scene.set_transform(object_id, transform)
