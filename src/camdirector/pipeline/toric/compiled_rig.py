@@ -34,6 +34,7 @@ again on its next compiled frame.
 
 from __future__ import annotations
 
+import copyreg
 from typing import Any
 
 import numpy as np
@@ -133,7 +134,9 @@ class CompiledToricRig(ToricRig):
             return super()._frame(state, toric)
         a, b, toric.b_is_gaze_point, self._torus, flags = self._cores[0].run(state.aim_points_world, state.dt_s)
         toric.a_world, toric.b_world = a, b
-        toric.torus = None if self._torus is None else _python_torus(self._torus)
+        # The compiled torus itself: the wire reads its alpha and nothing else reads it while the
+        # frame is computed; its fields are the Python Torus's, and pickled it is one (_reduce_torus).
+        toric.torus = self._torus
         state.flags.extend(flags)
 
     def _move(
@@ -210,10 +213,11 @@ class CompiledToricRig(ToricRig):
         return self._scene
 
 
-def _python_torus(torus: Any) -> Torus:
-    """geometry.toric's Torus of a compiled one: what the frame's state carries (the wire's
-    composition angle; snapshots pickle it). Its arrays are fresh copies, its own."""
-    return Torus(
+def _reduce_torus(torus: Any) -> tuple[type[Torus], tuple[Any, ...]]:
+    """A compiled torus pickled as geometry.toric's Torus (copyreg): what a frame's state held
+    before it kept the compiled one, so a snapshot holds and restores the same Torus as then.
+    Its arrays are fresh copies, its own."""
+    return Torus, (
         torus.a_world,
         torus.b_world,
         torus.alpha,
@@ -226,3 +230,6 @@ def _python_torus(torus: Any) -> Torus:
         torus.basis,
         torus.center_offset_m,
     )
+
+
+copyreg.pickle(native.Torus, _reduce_torus)
