@@ -184,7 +184,8 @@ class CompiledToricRig(ToricRig):
         assert pose is not None and toric.a_world is not None and toric.b_world is not None  # run() and FRAMING
         # VisibilityEstimate.points_world's points, carried by camdirector._native (session.py says why)
         samples = self.visibility.samples_local
-        points = np.concatenate([native.carry(local, transform) for transform, local in zip(target_transforms, samples)])
+        carried = [native.carry(local, transform) for transform, local in zip(target_transforms, samples)]
+        points = carried[0] if len(carried) == 1 else np.concatenate(carried)  # one target's: no copy
         state.visibility = self._moved_scene().visible_share(pose.position_world, points)
         if self._cores is None:
             state.framing_error = self.framing.error(pose, toric)
