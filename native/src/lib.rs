@@ -9,6 +9,7 @@ mod bvh_py;
 mod carry;
 mod carry_py;
 mod framing;
+mod log_append_py;
 mod maps;
 mod maps_py;
 mod motion;
@@ -39,5 +40,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     prediction_py::register(m)?;
     maps_py::register(m)?;
     move_scene_py::register(m)?;
+    log_append_py::register(m)?;
     Ok(())
 }
