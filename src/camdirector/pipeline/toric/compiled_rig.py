@@ -62,7 +62,8 @@ class CompiledToricRig(ToricRig):
     # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no native object.
     _cores: tuple[Any, Any] | None = None  # (FramingCore, MotionCore) while they hold the state
     _scene: Any = None  # the Scene, made on the first compiled frame
-    _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
+    _runs = 0  # frames run; the Scene was last moved in frame `_scene_run` of them (it holds `dynamic` as of then)
+    _scene_run = -1
     _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
     _search_core: Any = None  # the SearchCore, made on the first compiled search step
     _packed: tuple[list[str], npt.NDArray[np.float64]] | None = None  # the frame's FrameInput.packed, till the Scene takes it
@@ -94,7 +95,7 @@ class CompiledToricRig(ToricRig):
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None, _search_core=None, _packed=None)
+        state.update(_cores=None, _scene=None, _torus=None, _search_core=None, _packed=None)
         return state
 
     def run(
@@ -109,6 +110,7 @@ class CompiledToricRig(ToricRig):
         elif not compiled and self._cores is not None:
             self._python_from_cores()
             self._cores = None
+        self._runs += 1
         self._packed = update.packed
         super().run(state, update, target_transforms, last)
         self._packed = None
@@ -195,22 +197,21 @@ class CompiledToricRig(ToricRig):
         )
 
     def _moved_scene(self) -> Any:
-        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's):
-        those the frame moved by its decoded rows in one call, when it has them (the transforms
-        INGEST put in `dynamic` were made of the same rows), any other moved since by its transform."""
+        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's).
+        When it was moved the frame before, only this frame's states moved anything since: by the
+        frame's decoded rows in one call when it has them (INGEST made `dynamic`'s transforms of
+        the same rows). Otherwise (frames of another mode since, a frame decoded in Python) every
+        moving object by its transform."""
         if self._scene is None:
-            self._scene, self._scene_transforms = native.Scene(self.ray_scene.static_meshes_world), {}
+            self._scene = native.Scene(self.ray_scene.static_meshes_world)
             for object_id, (mesh, transform) in self.dynamic.items():
                 self._scene.add_dynamic(object_id, mesh, transform)
-                self._scene_transforms[object_id] = transform
-        elif self._packed is not None:
-            for object_id in native.move_scene(self._scene, *self._packed):
-                self._scene_transforms[object_id] = self.dynamic[object_id][1]
-        self._packed = None
-        for object_id, (_, transform) in self.dynamic.items():
-            if self._scene_transforms[object_id] is not transform:
+        elif self._scene_run == self._runs - 1 and self._packed is not None:
+            native.move_scene(self._scene, *self._packed)
+        elif self._scene_run != self._runs:
+            for object_id, (_, transform) in self.dynamic.items():
                 self._scene.set_transform(object_id, transform)
-                self._scene_transforms[object_id] = transform
+        self._packed, self._scene_run = None, self._runs
         return self._scene
 
 
