@@ -12,7 +12,8 @@
   (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
 - In FRAMING_ONLY and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
   (geometry/raycast.py RayScene's twin), built from the session's RayScene on the first compiled
-  frame and moved with the session's moving objects.
+  frame and moved with the session's moving objects (by the frame's decoded rows in one call,
+  `move_scene`). A FRAMING_ONLY frame's state keeps the compiled torus, pickled as the Python one.
 
 Python stays the reference: it answers the same FrameState within 1e-9 m and 1e-9 rad, with the
 same flags and cuts (tests/pipeline/toric/test_compiled_rig.py; the search per call,
