@@ -11,9 +11,11 @@ mod carry_py;
 mod deoccluder;
 mod deoccluder_py;
 mod framing;
+mod log_append_py;
 mod maps;
 mod maps_py;
 mod motion;
+mod move_scene_py;
 mod prediction;
 mod prediction_py;
 mod rotation;
@@ -40,5 +42,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     prediction_py::register(m)?;
     maps_py::register(m)?;
     deoccluder_py::register(m)?;
+    move_scene_py::register(m)?;
+    log_append_py::register(m)?;
     Ok(())
 }

@@ -72,6 +72,9 @@ class FrameInput:
     states: list[tuple[str, RigidTransform]]
     events: list[GameEvent] = field(default_factory=list)  # MATCH: the game's events since the last frame
     player_stats: list[PlayerStats] = field(default_factory=list)  # MATCH: the players whose stats changed
+    # The compiled decoder's (ids, rows (n, 10) float64) that `states` was made of, in its order
+    # (codec.frame_from_wire): the compiled rig moves its Scene by them in one call. None: decoded in Python.
+    packed: tuple[list[str], npt.NDArray[np.float64]] | None = None
 
 
 class EventKind(enum.IntEnum):

@@ -144,16 +144,20 @@ class Session:
         self.last_input = (update.frame, update.time_s)
         targets_before = list(self.view_target_transforms())  # a few references: the last cut's "before"
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
+        # looked up once a frame, not once a moved object
+        target_index, dynamic, set_transform = self.target_index, self.dynamic, self.ray_scene.set_transform
         for object_id, transform in update.states:
-            index = self.target_index.get(object_id)
+            index = target_index.get(object_id)
             if index is None:
-                self.ray_scene.set_transform(object_id, transform)
-                self.dynamic[object_id] = (self.dynamic[object_id][0], transform)
+                set_transform(object_id, transform)
+                dynamic[object_id] = (dynamic[object_id][0], transform)
             else:
                 self.target_transforms[index] = transform
-        state.aim_points_world = [
-            _carried(tf, t.aim_offset_local[None, :], self.portable)[0] for tf, t in zip(self.target_transforms, self.targets)
-        ]
+        placed = zip(self.target_transforms, self.targets)
+        if self.portable:  # one point each, (3,) in and out: the same sums as a row's
+            state.aim_points_world = [native.carry(t.aim_offset_local, tf) for tf, t in placed]
+        else:
+            state.aim_points_world = [_carried(tf, t.aim_offset_local[None, :], False)[0] for tf, t in placed]
         stages.done(Stage.INGEST)
         self.rig.run(state, update, self.target_transforms, last)  # the stages after INGEST, timed by the rig
         # The first pose is a cut (a MATCH session answers without a pose while its delay fills).

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+import camdirector._native as native
 from camdirector.infra.redaction import redacted
 
 log = logging.getLogger("camdirector.checkpoints")
@@ -210,13 +211,14 @@ class DirectoryStore:
             raise CheckpointError(f"cannot write the checkpoint of session {session_id}: {exc}") from None
 
     def append(self, session_id: str, owner: str, entry: bytes) -> bool:
-        if not self._owns(session_id):
+        fd = self._logs.get(session_id)
+        if fd is None:
             return False
         try:
-            os.write(self._logs[session_id], _LENGTH.pack(len(entry)) + entry)
+            # _owns's test and a write of _LENGTH.pack(len(entry)) + entry, in one call (the frame's path)
+            return bool(native.append_log(fd, entry))
         except OSError as exc:
             raise CheckpointError(f"cannot append to the checkpoint of session {session_id}: {exc}") from None
-        return True
 
     def snapshot(self, session_id: str, owner: str, seq: int, state: bytes, claim: bool = False) -> bool:
         if not claim and not self._owns(session_id):

@@ -54,20 +54,33 @@ class Pending:
         return self._value
 
 
+class Made:
+    """A call already made (InlineWriter's): Pending's `result`, with no event to wait on (making
+    a threading.Event cost a frame's append more than its write)."""
+
+    __slots__ = ("_error", "_value")
+
+    def __init__(self, value: Any, error: CheckpointError | None) -> None:
+        self._value = value
+        self._error = error
+
+    def result(self, timeout_s: float) -> Any:
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
 class InlineWriter:
     """Makes each call at once, on the caller's thread (module docstring). Always `healthy`: a
     failed write is simply tried again at its session's next retry."""
 
     healthy = True
 
-    def call(self, fn: Callable[..., Any], *args: Any) -> Pending:
-        pending = Pending()
+    def call(self, fn: Callable[..., Any], *args: Any) -> Made:
         try:
-            pending._value = fn(*args)
+            return Made(fn(*args), None)
         except CheckpointError as exc:
-            pending._error = exc
-        pending._done.set()
-        return pending
+            return Made(None, exc)
 
     def stuck(self, budget_s: float) -> bool:
         return False

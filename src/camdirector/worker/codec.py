@@ -594,7 +594,7 @@ def frame_from_wire(
     session_id, frame, time_s, ids, rows = decoded  # rows (n, PACKED_STRIDE) float64, as transforms_from_packed's
     # Rows of the one array, as transforms_from_packed makes them; map over its columns is the cheapest way (3 us for 6).
     transforms = map(RigidTransform, rows[:, 0:3], rows[:, 3:7], rows[:, 7:10])
-    return FrameInput(session_id, frame, time_s, list(zip(ids, transforms)))
+    return FrameInput(session_id, frame, time_s, list(zip(ids, transforms)), packed=(ids, rows))
 
 
 def pose_msg(pose: CameraPose) -> pb.CameraPose:

@@ -13,7 +13,8 @@
   (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
 - In FRAMING_ONLY, REACTIVE and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
   (geometry/raycast.py RayScene's twin), built from the session's RayScene on the first compiled
-  frame and moved with the session's moving objects.
+  frame and moved with the session's moving objects (by the frame's decoded rows in one call,
+  `move_scene`). A FRAMING_ONLY frame's state keeps the compiled torus, pickled as the Python one.
 
 Python stays the reference: it answers the same FrameState within 1e-9 m and 1e-9 rad, with the
 same flags and cuts (tests/pipeline/toric/test_compiled_rig.py; the search per call,
@@ -36,6 +37,7 @@ again on its next compiled frame.
 
 from __future__ import annotations
 
+import copyreg
 from typing import Any
 
 import numpy as np
@@ -64,9 +66,11 @@ class CompiledToricRig(ToricRig):
     # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no native object.
     _cores: tuple[Any, Any, Any] | None = None  # (FramingCore, MotionCore, DeoccluderCore) while they hold the state
     _scene: Any = None  # the Scene, made on the first compiled frame
-    _scene_transforms: dict[str, RigidTransform]  # what the Scene's objects were moved to, made with it
+    _runs = 0  # frames run; the Scene was last moved in frame `_scene_run` of them (it holds `dynamic` as of then)
+    _scene_run = -1
     _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
     _search_core: Any = None  # the SearchCore, made on the first compiled search step
+    _packed: tuple[list[str], npt.NDArray[np.float64]] | None = None  # the frame's FrameInput.packed, till the Scene takes it
 
     def __init__(self, scene: SceneSpec, *rest: Any) -> None:
         """ToricRig's arguments. The one-target heading starts as `FramingCore` computes it from
@@ -95,7 +99,7 @@ class CompiledToricRig(ToricRig):
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_cores=None, _scene=None, _scene_transforms={}, _torus=None, _search_core=None)
+        state.update(_cores=None, _scene=None, _torus=None, _search_core=None, _packed=None)
         return state
 
     def run(
@@ -110,7 +114,10 @@ class CompiledToricRig(ToricRig):
         elif not compiled and self._cores is not None:
             self._python_from_cores()
             self._cores = None
+        self._runs += 1
+        self._packed = update.packed
         super().run(state, update, target_transforms, last)
+        self._packed = None
 
     def _cores_from_python(self) -> tuple[Any, Any, Any]:
         framing, motion, deoccluder = self.framing, self.motion, self.deoccluder
@@ -139,7 +146,9 @@ class CompiledToricRig(ToricRig):
             return super()._frame(state, toric)
         a, b, toric.b_is_gaze_point, self._torus, flags = self._cores[0].run(state.aim_points_world, state.dt_s)
         toric.a_world, toric.b_world = a, b
-        toric.torus = None if self._torus is None else _python_torus(self._torus)
+        # The compiled torus itself: the wire reads its alpha and nothing else reads it while the
+        # frame is computed; its fields are the Python Torus's, and pickled it is one (_reduce_torus).
+        toric.torus = self._torus
         state.flags.extend(flags)
 
     def _move(
@@ -195,7 +204,8 @@ class CompiledToricRig(ToricRig):
         assert pose is not None and toric.a_world is not None and toric.b_world is not None  # run() and FRAMING
         # VisibilityEstimate.points_world's points, carried by camdirector._native (session.py says why)
         samples = self.visibility.samples_local
-        points = np.concatenate([native.carry(local, transform) for transform, local in zip(target_transforms, samples)])
+        carried = [native.carry(local, transform) for transform, local in zip(target_transforms, samples)]
+        points = carried[0] if len(carried) == 1 else np.concatenate(carried)  # one target's: no copy
         state.visibility = self._moved_scene().visible_share(pose.position_world, points)
         if self._cores is None:
             state.framing_error = self.framing.error(pose, toric)
@@ -205,23 +215,29 @@ class CompiledToricRig(ToricRig):
         )
 
     def _moved_scene(self) -> Any:
-        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's)."""
+        """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's).
+        When it was moved the frame before, only this frame's states moved anything since: by the
+        frame's decoded rows in one call when it has them (INGEST made `dynamic`'s transforms of
+        the same rows). Otherwise (frames of another mode since, a frame decoded in Python) every
+        moving object by its transform."""
         if self._scene is None:
-            self._scene, self._scene_transforms = native.Scene(self.ray_scene.static_meshes_world), {}
+            self._scene = native.Scene(self.ray_scene.static_meshes_world)
             for object_id, (mesh, transform) in self.dynamic.items():
                 self._scene.add_dynamic(object_id, mesh, transform)
-                self._scene_transforms[object_id] = transform
-        for object_id, (_, transform) in self.dynamic.items():
-            if self._scene_transforms[object_id] is not transform:
+        elif self._scene_run == self._runs - 1 and self._packed is not None:
+            native.move_scene(self._scene, *self._packed)
+        elif self._scene_run != self._runs:
+            for object_id, (_, transform) in self.dynamic.items():
                 self._scene.set_transform(object_id, transform)
-                self._scene_transforms[object_id] = transform
+        self._packed, self._scene_run = None, self._runs
         return self._scene
 
 
-def _python_torus(torus: Any) -> Torus:
-    """geometry.toric's Torus of a compiled one: what the frame's state carries (the wire's
-    composition angle; snapshots pickle it). Its arrays are fresh copies, its own."""
-    return Torus(
+def _reduce_torus(torus: Any) -> tuple[type[Torus], tuple[Any, ...]]:
+    """A compiled torus pickled as geometry.toric's Torus (copyreg): what a frame's state held
+    before it kept the compiled one, so a snapshot holds and restores the same Torus as then.
+    Its arrays are fresh copies, its own."""
+    return Torus, (
         torus.a_world,
         torus.b_world,
         torus.alpha,
@@ -234,3 +250,6 @@ def _python_torus(torus: Any) -> Torus:
         torus.basis,
         torus.center_offset_m,
     )
+
+
+copyreg.pickle(native.Torus, _reduce_torus)

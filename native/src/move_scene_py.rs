@@ -1,0 +1,63 @@
+//! camdirector._native.move_scene: a frame's moving objects put where its rows say, in the Scene,
+//! in one call: the compiled decoder's rows (codec.frame_from_wire) read as they are, where
+//! Scene.set_transform reads one RigidTransform's three arrays a call (about 0.9 us each).
+
+use numpy::PyReadonlyArray2;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyList, PyString};
+
+use crate::scene::Pose;
+use crate::scene_py::PyScene;
+
+/// Doubles a row: position (3), rotation xyzw (4), scale (3), as codec.PACKED_STRIDE.
+const STRIDE: usize = 10;
+
+/// move_scene(scene, ids, rows) -> list[str]: each object of ids (n,) str that the Scene holds as
+/// a moving object placed at its row of rows (n, 10) float64 (position, rotation xyzw, scale:
+/// the rows RigidTransform(rows[k, 0:3], rows[k, 3:7], rows[k, 7:10]) is made of), in order, as
+/// Scene.set_transform(ids[k], that transform) would; ids the Scene does not hold (a frame's
+/// targets) are passed over. Returns the ids moved, in order. ValueError, before anything is
+/// moved, for rows of another shape or a row set_transform would refuse (not finite, a zero scale).
+#[pyfunction]
+fn move_scene<'py>(
+    mut scene: PyRefMut<'_, PyScene>,
+    ids: &Bound<'py, PyList>,
+    rows: PyReadonlyArray2<'_, f64>,
+) -> PyResult<Vec<Bound<'py, PyString>>> {
+    let rows = rows.as_array();
+    if rows.ncols() != STRIDE || rows.nrows() != ids.len() {
+        return Err(PyValueError::new_err(format!(
+            "rows must be ({}, {STRIDE}) for {} ids, got {:?}",
+            ids.len(),
+            ids.len(),
+            rows.shape()
+        )));
+    }
+    let mut poses = Vec::with_capacity(rows.nrows());
+    for (k, row) in rows.outer_iter().enumerate() {
+        let r: Vec<f64> = row.iter().copied().collect();
+        if r.iter().any(|x| !x.is_finite()) || r[7..].contains(&0.0) {
+            return Err(PyValueError::new_err(format!(
+                "row {k} must be finite with no zero scale, got {r:?}"
+            )));
+        }
+        poses.push(Pose {
+            position: [r[0], r[1], r[2]],
+            rotation_xyzw: [r[3], r[4], r[5], r[6]],
+            scale: [r[7], r[8], r[9]],
+        });
+    }
+    let mut moved = Vec::with_capacity(poses.len());
+    for (id, pose) in ids.iter().zip(&poses) {
+        let id = id.cast_into::<PyString>()?;
+        if scene.scene.set_transform(id.to_str()?, pose).is_ok() {
+            moved.push(id);
+        }
+    }
+    Ok(moved)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(move_scene, m)?)
+}
