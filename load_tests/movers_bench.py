@@ -35,7 +35,7 @@ from load_tests.report import emit, summary
 RATE_HZ = 60.0
 ACTOR_RADIUS_M = 6.0
 ACTOR_SPEED_M_S = 1.5
-MODES = {"ANTICIPATION": pb.ANTICIPATION, "FRAMING_ONLY": pb.FRAMING_ONLY}
+MODES = {"ANTICIPATION": pb.ANTICIPATION, "REACTIVE": pb.REACTIVE, "FRAMING_ONLY": pb.FRAMING_ONLY}
 
 
 def _vec(x: float, y: float, z: float) -> pb.Vec3:
