@@ -129,8 +129,8 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "--frame-path",
         dest="frame_path",
         choices=FRAME_PATHS,
-        help="where sessions' per-frame work runs: compiled (the default; so far the TORIC rig's FRAMING_ONLY "
-        "frames and its search and maps, every other frame in Python; docs/frame_path.md) or python (the reference)",
+        help="where sessions' per-frame work runs: compiled (the default; so far the TORIC rig's frames in every "
+        "visibility mode, TRACKS and MATCH in Python; docs/frame_path.md) or python (the reference)",
     )
     p.add_argument(
         "--plugin",

@@ -76,8 +76,8 @@ class ServerSettings:
     # match director registers itself (pipeline/match/director_registry.py). Comma-separated in the environment.
     plugins: tuple[str, ...] = ()
     # Where a session's per-frame work runs: "compiled" (camdirector._native; so far the TORIC rig's
-    # FRAMING_ONLY frames, the same bits on any x86-64 machine, and its search and maps; every other
-    # frame in Python: docs/frame_path.md) or "python", the reference it agrees with within 1e-9 m
+    # frames in every visibility mode, the same bits on any x86-64 machine; TRACKS and MATCH in
+    # Python: docs/frame_path.md) or "python", the reference it agrees with within 1e-9 m
     # and rad. Recordings replay bit for bit on the path that made them (`camdirector replay --frame-path`).
     frame_path: str = "compiled"
 

@@ -20,11 +20,12 @@ Python stays the reference: it answers the same FrameState within 1e-9 m and 1e-
 same flags and cuts (tests/pipeline/toric/test_compiled_rig.py; the search per call,
 tests/native/test_search_native.py), and the compiled stages draw from the session's generator
 exactly what the Python ones draw (VISIBILITY's sample points are the Python stage's). What a
-FRAMING_ONLY or REACTIVE frame computes has the same
-bits on every x86-64 machine (tests/worker/test_recordings_across_machines.py): the sample points
-are carried by the targets with camdirector._native's `carry`, not numpy's product (OpenBLAS's
-kernel is the CPU's), and the one-target heading starts as `FramingCore` computes it; the search
-and map modes still compute parts in numpy (their frames agree on one machine, not yet across).
+FRAMING_ONLY or REACTIVE frame computes has the same bits on every x86-64 machine
+(tests/worker/test_recordings_across_machines.py): the sample points are carried by the targets
+with camdirector._native's `carry`, not numpy's product (OpenBLAS's kernel is the CPU's), and the
+one-target heading starts as `FramingCore` computes it. The search and map modes' recordings
+replay across machine kinds too, though their particle and their maps' schedule and aggregate
+stay numpy (docs/frame_path.md says what that leaves open).
 
 The cores hold the stages' state between frames (the one-target heading; the camera's place,
 rates and upright side; the deoccluder's last correction): entering FRAMING_ONLY or REACTIVE
