@@ -9,7 +9,7 @@ import pytest
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
-from camdirector.pipeline.match.lens_width import widened_fov_deg
+from camdirector.pipeline.match.lens_width import FRAMED_IN, widened_fov_deg
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
@@ -36,8 +36,9 @@ def _height_share(pose: CameraPose, fov_deg: float, points_world: np.ndarray) ->
     return float((y.max() - y.min()) / 2.0)
 
 
-def _widened(rig, moment, pose, last_fov_deg=None, dt_s=0.0, settings=SETTINGS) -> float:
-    return widened_fov_deg(pose, moment, rig.rig.program_camera.subject_visibility, Lens(), settings, last_fov_deg, dt_s)
+def _widened(rig, moment, pose, last_fov_deg=None, dt_s=0.0, settings=SETTINGS, subjects=()) -> float:
+    visibility = rig.rig.program_camera.subject_visibility
+    return widened_fov_deg(pose, moment, visibility, Lens(), settings, last_fov_deg, dt_s, subjects)
 
 
 @pytest.mark.parametrize("distance_m", [1.8, 2.5, 3.0])
@@ -110,3 +111,31 @@ def test_a_first_person_view_keeps_the_lens():
     near = eye + [0.0, -0.6, 1.5]
     beside = look_along(near, moment.feet_world[0] + [0.0, 1.0, 0.0] - near, Lens().vertical_fov_deg)
     assert _widened(rig, moment, beside) > Lens().vertical_fov_deg  # the same player 1.5 m off, looked at, is sized
+
+
+def _in_frame_share(pose: CameraPose, fov_deg: float, points_world: np.ndarray) -> float:
+    screen = project_to_screen(pose, Lens(vertical_fov_deg=fov_deg), points_world)
+    with np.errstate(invalid="ignore"):
+        return float((np.abs(screen) <= 1.0).all(axis=1).mean())
+
+
+def test_a_subject_the_frame_cuts_off_goes_wide_enough_to_be_shown_and_another_player_does_not():
+    # FRAMED_IN of its points in the frame, a margin over eval-match's half of its own samples
+    rig, moment, _ = _looking_at_a(5.0)  # 5 m off: short of the band's top, no player too tall
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    camera = chest + [5.0, 0.0, 0.0]
+    pose = look_along(camera, chest + [0.0, 2.9, 0.0] - camera, Lens().vertical_fov_deg)  # tilted 30 degrees over a
+    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.samples_local[0])
+    assert _in_frame_share(pose, Lens().vertical_fov_deg, points) < 0.5  # a mostly below the frame
+    assert _widened(rig, moment, pose) == Lens().vertical_fov_deg  # not framed by the shot: the lens kept
+    fov_deg = _widened(rig, moment, pose, subjects=(0,))
+    assert Lens().vertical_fov_deg < fov_deg < SETTINGS.widen_max_fov_deg
+    assert _in_frame_share(pose, fov_deg, points) >= FRAMED_IN > _in_frame_share(pose, fov_deg - 1.0, points)  # the narrowest
+
+
+def test_a_subject_cut_off_even_at_the_widest_lens_keeps_the_lens():
+    rig, moment, _ = _looking_at_a(5.0)
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    camera = chest + [5.0, 0.0, 0.0]
+    pose = look_along(camera, chest + [0.0, 20.0, 0.0] - camera, Lens().vertical_fov_deg)  # looking 76 degrees up
+    assert _widened(rig, moment, pose, subjects=(0,)) == Lens().vertical_fov_deg

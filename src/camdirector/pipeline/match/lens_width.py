@@ -17,6 +17,11 @@ points on the screen's vertical axis, clipped to the frame, over the frame's hei
 here are its outline (SubjectVisibility.outlines_local: the samples and its mesh's lowest and
 highest vertices), since 16 samples fall short of the head and feet (sized by them, 7.7% of
 nav_test's bot match's frames still had a player over 0.6; by the outline, 2.7%).
+
+A Toric camera's pose (our director's) also goes wide enough to show a framed subject that the
+frame cuts off (`_cut_off`): a camera pulled in front of a wall close over its subject looks down
+as steeply as a level camera can and has the subject below the frame; wider, it shows it without
+a cut. The baselines' cameras keep what they frame.
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
+FRAMED_IN = 0.75  # a framed subject cut off by the frame is widened for until this share of its points is in it and
+# seen (or as much as the widest lens shows): over eval-match's SHOWN_FRACTION, whose 32 points are not the rig's 16
 SHOWN_SEEN = 0.5  # a player with this share of its points seen from the pose is shown (eval-match's SHOWN_FRACTION)
 FOV_STEP_DEG = 1.0  # the widths tried, from the lens's up, deg
 EYES_RADIUS_M = 0.6  # a camera this near a player's upright axis, within its height, looks through its eyes, m
@@ -42,10 +49,12 @@ def widened_fov_deg(
     settings: MatchSettings,
     last_fov_deg: float | None,
     dt_s: float,
+    subjects: tuple[int, ...] = (),
 ) -> float:
     """The pose's vertical field of view, deg (module docstring): at least the lens's, at most
     settings.widen_max_fov_deg; `last_fov_deg` the last frame's when this one moves on from it
-    (None on a cut), narrowed from by at most narrow_deg_s * dt_s."""
+    (None on a cut), narrowed from by at most narrow_deg_s * dt_s. subjects: the players the
+    shot frames, each shown too where a width up to the widest shows it (`_cut_off`)."""
     base_deg, max_deg = lens.vertical_fov_deg, max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
     floor_deg = base_deg if last_fov_deg is None else max(base_deg, last_fov_deg - settings.narrow_deg_s * dt_s)
     floor_deg = min(floor_deg, max_deg)
@@ -66,12 +75,61 @@ def widened_fov_deg(
     tall = np.flatnonzero(at_floor > settings.shown_height_max)
     if len(tall):
         tall = tall[visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= SHOWN_SEEN]
-    if not len(tall):
+    cut_off = _cut_off(pose, moment, visibility, subjects, slope_y, slope_x, floor_deg, max_deg, lens.aspect)
+    if not len(tall) and not cut_off:
         return float(floor_deg)
     widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,), the first the floor
-    heights = _screen_heights(slope_y[tall], slope_x[tall], np.tan(np.radians(widths_deg) / 2.0), lens.aspect)  # (tall, T)
+    tan_half = np.tan(np.radians(widths_deg) / 2.0)
+    heights = _screen_heights(slope_y[tall], slope_x[tall], tan_half, lens.aspect)  # (tall, T)
     fits = (heights <= settings.shown_height_max).all(axis=0)  # (T,)
+    for subject, seen in cut_off:  # shown at a width: in its frame and seen
+        k = len(seen)
+        shown = (_in_frame(slope_y[subject, :k], slope_x[subject, :k], tan_half, lens.aspect) & seen[:, None]).mean(axis=0)
+        enough = shown >= min(FRAMED_IN, shown[-1])  # (T,) as much of it as the widest shows, up to FRAMED_IN
+        if (fits & enough).any():  # the band first: a subject too close to fit stays cut off
+            fits &= enough
     return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
+
+
+def _cut_off(
+    pose: CameraPose,
+    moment: Moment,
+    visibility: SubjectVisibility,
+    subjects: tuple[int, ...],
+    slope_y: np.ndarray,
+    slope_x: np.ndarray,
+    floor_deg: float,
+    max_deg: float,
+    aspect: float,
+) -> list[tuple[int, np.ndarray]]:
+    """The framed subjects that the frame cuts off at the floor's width, under FRAMED_IN of their
+    sample points in it and seen, and that the widest lens shows more of (at least SHOWN_SEEN): each with its sample points
+    seen (k,) bool (ray cast only for those the frame cuts off). A camera pulled in front of a
+    wall close over its subject, looking down as steeply as a level camera can, has it below the
+    frame (issue 41: on the real 4on4, 102 of 311 frames of nobody outside overviews had the shot's
+    subject seen but mostly out of frame, 1.8-3.0 m from the camera); a wider lens shows it
+    without a cut."""
+    out: list[tuple[int, np.ndarray]] = []
+    for subject in subjects:
+        k = visibility.k
+        y, x = slope_y[subject, :k], slope_x[subject, :k]
+        tans = np.tan(np.radians([floor_deg, max_deg]) / 2.0)
+        in_frame = _in_frame(y, x, tans, aspect).mean(axis=0)  # (2,) at the floor's width and the widest
+        if in_frame[0] >= FRAMED_IN or in_frame[1] <= in_frame[0]:
+            continue
+        seen = visibility.seen_points(pose.position_world, moment, (subject,))[0, 0]  # (k,)
+        shown = (seen[:, None] & _in_frame(y, x, tans, aspect)).mean(axis=0)  # (2,)
+        if shown[1] >= SHOWN_SEEN and shown[0] < min(FRAMED_IN, shown[1]):
+            out.append((subject, seen))
+    return out
+
+
+def _in_frame(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:
+    """(S, T) bool: which of S points (their screen slopes (S,), NaN behind the near plane) lie in
+    the frame at each width (tan_half (T,) of the half vertical field of view)."""
+    t = tan_half[None, :]
+    with np.errstate(invalid="ignore"):
+        return np.asarray((np.abs(slope_y[:, None]) <= t) & (np.abs(slope_x[:, None]) <= t * aspect))  # NaN: False
 
 
 def _looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) -> np.ndarray:

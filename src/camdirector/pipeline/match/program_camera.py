@@ -5,46 +5,66 @@ outside the level or inside solid moved inside toward the player the shot keeps 
 (in_level.py, flagged `moved_inside_level`), one that would move through a wall kept on that
 player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
 (`held_before_wall`), its lens widened where a player would stand taller than the framing band
-(lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too), and the share
-of the framed subjects' sample points seen from the pose
-(visibility.py). In the frame (rig.py) or ahead of it, on a copy of the camera (camera_ahead.py):
-the same computation either way.
+(lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
+Toric camera, where the frame cuts off a framed subject; a Toric pose that these degrades left
+showing none of its subjects replaced by the move a hold held (`hold_left_for_cut`) or by a cut
+to a place that shows them (`cut_to_seen_place`, `_seen_again`); and the share of the framed
+subjects' sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of
+it, on a copy of the camera (camera_ahead.py): the same computation either way.
 """
 
 from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
 
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.lens_width import widened_fov_deg
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.match.shots import ToricCamera, framed_seen
+from camdirector.pipeline.match.shot_builder import within_band
+from camdirector.pipeline.match.shots import ToricCamera, best_place, framed_seen, place_grid
 from camdirector.pipeline.match.visibility import SubjectVisibility
+
+CUT_TO_SEEN_PLACE = "cut_to_seen_place"  # a degraded pose showing nobody replaced by a cut to a new place
+HOLD_LEFT_FOR_CUT = "hold_left_for_cut"  # a hold before a wall showing nobody left for the cut through it
 
 
 class ProgramCamera:
     """The CAMERA and VISIBILITY stages of one session (module docstring)."""
 
     def __init__(
-        self, settings: MatchSettings, visibility: SubjectVisibility, ray_scene: RayScene, lens: Lens, in_level: InLevel
+        self,
+        settings: MatchSettings,
+        visibility: SubjectVisibility,
+        ray_scene: RayScene,
+        lens: Lens,
+        in_level: InLevel,
+        grammar: Grammar,
+        future: Callable[[float], Moment | None],
     ):
         self.settings, self.subject_visibility, self.ray_scene, self.lens = settings, visibility, ray_scene, lens
-        self.in_level = in_level
+        self.in_level, self.grammar, self.future = in_level, grammar, future  # future: the buffered moment at a time, s
 
     def step(
         self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, response_time_s: float, last_pose: CameraPose | None
     ) -> tuple[CameraPose, list[str]] | None:
         """CAMERA of `shot` by `camera` (its own, or a copy ahead) stepped dt_s to the moment: the
         pose and its flags; the last pose shown held when the camera has none. None when it has
-        no pose and none was shown before (a degenerate first shot)."""
+        no pose and none was shown before (a degenerate first shot). A pose that a degrade left
+        showing none of the shot's subjects is replaced by a cut (`_seen_again`)."""
         camera.advance(moment, dt_s, response_time_s)
         flags: list[str] = []
         pose = camera.pose(moment)
+        unheld: CameraPose | None = None  # the pose a hold before a wall replaced
         if pose is not None and isinstance(camera, ToricCamera):
             pose, pulled = self._pulled_in(moment, pose, dt_s, camera, shot)
             if pulled:
@@ -59,24 +79,108 @@ class ProgramCamera:
                 if kept:
                     flags.append("kept_this_side_of_wall")
                 else:
+                    before = pose
                     pose, held = self.in_level.held(
                         last_pose.position_world, pose, anchor, self.lens, self.settings.wall_hold_max_m
                     )
                     if held:
                         flags.append("held_before_wall")
+                        unheld = before
         if pose is None:
             if last_pose is None:
                 return None
-            pose = last_pose
             flags.append("pose_held")
-            return pose, flags
+            return last_pose, flags
+        # our director's cameras (Toric) widen to show a subject the frame cuts off too; the baselines' keep theirs
+        subjects = shot.framed(moment.time_s) if isinstance(camera, ToricCamera) else ()
         last_fov_deg = last_pose.vertical_fov_deg if dt_s > 0.0 and last_pose is not None else None  # None: a cut
-        fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s)
-        if fov_deg != pose.vertical_fov_deg:
-            pose = CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
-            if fov_deg > self.lens.vertical_fov_deg:
-                flags.append("lens_widened")
+        pose = self._widened(moment, pose, subjects, last_fov_deg, dt_s)
+        if flags and isinstance(camera, ToricCamera) and shot.choice.replay is None:
+            placed, seen_again = self._seen_again(moment, pose, unheld, camera, shot, anchor, last_pose)
+            if seen_again is not None:
+                flags.append(seen_again)
+                pose = self._widened(moment, placed, subjects, None, dt_s)  # a cut starts at what it needs
+        if pose.vertical_fov_deg > self.lens.vertical_fov_deg:
+            flags.append("lens_widened")
         return pose, flags
+
+    def _widened(
+        self, moment: Moment, pose: CameraPose, subjects: tuple[int, ...], last_fov_deg: float | None, dt_s: float
+    ) -> CameraPose:
+        """The pose with its lens widened (lens_width.py; last_fov_deg None on a cut)."""
+        fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s, subjects)
+        return pose if fov_deg == pose.vertical_fov_deg else CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
+
+    def _seen_again(
+        self,
+        moment: Moment,
+        pose: CameraPose,
+        unheld: CameraPose | None,
+        camera: ToricCamera,
+        shot: Shot,
+        anchor: np.ndarray | None,
+        last_pose: CameraPose | None,
+    ) -> tuple[CameraPose, str | None]:
+        """A Toric pose that a degrade (pulled in front of a wall, held before one, moved inside)
+        left showing none of the shot's framed subjects (framed_seen under `candidate_seen`, the
+        share eval-match counts a player shown by) is not kept on air (issue 41: frames of nobody
+        outside overviews; on the real 4on4's first 3 minutes 300 of its 311 such frames were
+        those degrades'). A held pose whose move it held shows them: that move, which the rig
+        cuts to as a move through a wall (flagged `hold_left_for_cut`). Else, at most once every
+        `seen_again_gap_s` of the program, the camera is re-placed at once at the place of its
+        grid that sees its subjects best now and `seen_again_lookahead_s` ahead (the buffered
+        future), within the framing band and the 30-degree rule
+        (shots.py best_place, as replacement.py re-places at a tick), and the rig cuts to it
+        (flagged `cut_to_seen_place`); a DUEL's pair window around its kill re-places the pair's
+        place too. Never in the planner's `min_lead_s` before a planned event of the shot (its
+        cuts keep off them too: on the real 4on4 re-placing there lost 2 more kills). Where no
+        place shows them, the pose is kept. The flag, None when the pose is kept."""
+        s, now = self.settings, moment.time_s
+        subjects = shot.framed(now)
+        if not subjects or any(0.0 <= t - now <= s.min_lead_s for t in shot.cover_times_s):
+            return pose, None  # no cut in the last moments before a planned event (the planner's min_lead_s)
+        tried = [pose] if unheld is None else [pose, unheld]
+        seen = framed_seen(
+            self.subject_visibility,
+            moment,
+            subjects,
+            np.array([p.position_world for p in tried]),
+            quat_to_matrix(np.array([p.rotation_xyzw for p in tried])),
+            Lens(pose.vertical_fov_deg, self.lens.aspect),
+        ).max(axis=1)  # (len(tried),) the best-shown subject
+        if seen[0] >= s.candidate_seen:
+            return pose, None
+        aims = moment.aims_world[list(subjects)]
+        shown_world = pose.position_world if last_pose is None else last_pose.position_world  # the cut is from it
+        turned = self.grammar.allows_cut
+        if unheld is not None and seen[1] >= s.candidate_seen and turned(shown_world, aims, unheld.position_world)[0]:
+            return unheld, HOLD_LEFT_FOR_CUT
+        if camera.seen_again_s is not None and moment.time_s - camera.seen_again_s < s.seen_again_gap_s:
+            return pose, None
+        band = within_band(self.subject_visibility, self.lens, s, subjects, moment)
+
+        def allowed(positions_world: np.ndarray) -> np.ndarray:
+            return np.asarray(band(positions_world) & turned(shown_world, aims, positions_world))
+
+        pair = camera.pair if camera.split and camera.pair is not None and camera.pair.weight(moment.time_s) > 0.0 else None
+        on_air = camera.place if pair is None or pair.place is None else pair.place  # around a kill, the pair's place
+        side = None if camera.b_index is None else math.copysign(1.0, on_air.phi_rad)  # a pair keeps its line of action
+        # judged now and a little ahead, in the buffered future, so that it is not lost again at once
+        ahead = self.future(moment.time_s + s.seen_again_lookahead_s)
+        cover = [moment] if ahead is None else [moment, ahead]
+        place, score = best_place(camera, place_grid(side), cover, subjects, self.subject_visibility, allowed, moment)
+        if score < s.candidate_seen:
+            return pose, None
+        kept = (camera.place, camera.goal, camera.pair, camera.reach_m, camera.seen_again_s)
+        camera.place = camera.goal = place
+        if pair is not None:  # the picture is the pair's place now: both re-placed
+            camera.pair = dataclasses.replace(pair, place=place)
+        camera.reach_m, camera.seen_again_s = None, moment.time_s
+        placed = camera.pose(moment)
+        if placed is None:  # degenerate now (scored ahead only): the camera as it was
+            camera.place, camera.goal, camera.pair, camera.reach_m, camera.seen_again_s = kept
+            return pose, None
+        return self.in_level.contained(placed, anchor)[0], CUT_TO_SEEN_PLACE
 
     @staticmethod
     def _anchor(moment: Moment, camera: ShotCamera, shot: Shot) -> np.ndarray | None:

@@ -78,7 +78,7 @@ from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ReplayedMom
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
-from camdirector.pipeline.match.program_camera import ProgramCamera
+from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, ProgramCamera
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
 from camdirector.pipeline.match.replacement import replaced_places
 from camdirector.pipeline.match.replays import Replays, is_replay, replayed_moment
@@ -127,7 +127,9 @@ class MatchRig(RigBase):
         self._replayed: deque[float] = deque(maxlen=8)
         interior = LevelInterior.of(scene.level.mesh_world) if scene.level is not None else None
         self.in_level = InLevel(interior, self.level_nodes, settings.pull_margin_m)
-        self.program_camera = ProgramCamera(settings, self.visibility, ray_scene, self.lens, self.in_level)
+        self.program_camera = ProgramCamera(
+            settings, self.visibility, ray_scene, self.lens, self.in_level, self.builder.grammar, self._future
+        )
         self._stats: dict[str, PlayerStats] = {}  # each player's latest stats sent up to the program moment
         self._stats_ahead: deque[tuple[float, list[PlayerStats]]] = deque()  # (frame time s, stats) not yet on air
         # the directors' view, read only by its type (a mappingproxy would not pickle into the checkpoint)
@@ -295,7 +297,9 @@ class MatchRig(RigBase):
                 stepped = self._camera_step(moment, dt_s, self.shot.camera)
                 assert stepped is not None  # a static camera always has its pose
             pose, flags = stepped
-        if not cut and self._swept_through_wall(pose):
+        if not cut and CUT_TO_SEEN_PLACE in flags:  # the camera re-placed to show its subjects (program_camera.py)
+            cut = True
+        elif not cut and self._swept_through_wall(pose):
             cut = True
             flags = [*flags, "cut_through_wall"]
         state.flags.extend(flags)
@@ -334,6 +338,10 @@ class MatchRig(RigBase):
         a REPLAY (replays.py), else the program moment itself."""
         shot = self.shot
         return replayed_moment(self.buffer, shot, moment.time_s) if shot is not None and is_replay(shot) else moment
+
+    def _future(self, time_s: float) -> Moment | None:
+        """The buffered moment at time_s, s, None past the newest (the program camera's look ahead)."""
+        return None if time_s > self.buffer.horizon_s else self.buffer.at(time_s)
 
     def _candidate_moment(self, choice: ShotChoice, moment: Moment) -> Moment:
         """The moment a candidate's monitor shows beside the program moment: a REPLAY candidate's

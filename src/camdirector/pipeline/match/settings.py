@@ -127,6 +127,12 @@ class MatchSettings:
     wall_hold_max_m: float = 4.0         # a program camera whose move into a new frame passes through a wall, and that no
                                          # place on its subject's side replaces, stays where it was (turning to frame)
                                          # if the move is this short; a longer one is a cut, m. [0, 100]
+    seen_again_gap_s: float = 1.0        # a program camera that a degrade (pulled in front of a wall, held before one) left
+                                         # showing none of its subjects is re-placed at once by a cut (program_camera.py), at
+                                         # most once in this long, so that a subject running past corners does not make a cut
+                                         # every frame; between, the degraded pose stays, s. [0, 60]
+    seen_again_lookahead_s: float = 1.0  # and its new place is the one that sees them best now and this far ahead (the
+                                         # buffered future; replacement.py looks as far), s. [0, 10]
     shown_height_max: float = 0.5        # the framing band's top: a shot's camera is placed where none of its subjects fills
                                          # more of the frame's height than this, by distance (shot_builder.py): a whole body
                                          # with room around it, a long shot; closer, a medium shot cuts the body (and in this
@@ -157,6 +163,8 @@ class MatchSettings:
                                       "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
         if not 0.0 <= self.wall_hold_max_m <= 100.0:
             raise ValueError("MatchSettings: wall_hold_max_m in [0, 100] m")
+        if self.seen_again_gap_s > 60.0 or self.seen_again_lookahead_s > 10.0:
+            raise ValueError("MatchSettings: seen_again_gap_s in [0, 60] s, seen_again_lookahead_s in [0, 10] s")
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:
             raise ValueError("MatchSettings: need min_lead_s <= lead_s <= max_lead_s")
         if not 2 <= self.max_group <= 64 or not 1 <= self.samples_per_player <= 256 \

@@ -177,6 +177,7 @@ class ToricCamera:
         self.place = self.goal = place
         self.heading: np.ndarray | None = None  # the anchor's smoothed facing (FOLLOW, and a pair framing one)
         self.reach_m: float | None = None  # pulled in front of a wall: how far from A it may stand now (None: free)
+        self.seen_again_s: float | None = None  # when program_camera.py last re-placed it to show its subjects, s
         self.pair: PairWindow | None = None  # a planned DUEL: when it frames the pair (None: always)
 
     @property

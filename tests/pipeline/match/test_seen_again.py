@@ -1,0 +1,112 @@
+"""A program pose that a degrade left showing none of its subjects is not kept on air
+(program_camera.py `_seen_again`, issue 41: frames of nobody outside overviews): a hold before a
+wall that hides the subject gives way to the move it held (the rig cuts through the wall), and a
+camera pulled so close that its subject leaves even the widest frame is re-placed by a cut, at most
+once every `seen_again_gap_s`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from camdirector.geometry.camera import Lens
+from camdirector.geometry.inside import LevelInterior
+from camdirector.geometry.meshes import TriMesh, box
+from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.grammar import view_turn_deg
+from camdirector.pipeline.match.in_level import InLevel
+from camdirector.pipeline.match.look_along import look_along
+from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, ProgramCamera
+from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import Place, framed_seen
+from tests.pipeline.match.test_framing_band import rig_of
+
+PLACE = Place(0.1, math.radians(45.0), 1.0)  # a's FOLLOW place 2.4 m off, 1.2 m over its chest, on -x
+DT_S = 1.0 / 30.0
+
+
+def _follow_of_a(rig):
+    """test_framing_band's a framed alone from PLACE at the rig's newest moment: the moment, camera and shot."""
+    moment = rig.rig.buffer.moments[-1]
+    camera = rig.rig.builder.cameras(ShotKind.FOLLOW, (0,), moment, default=True)[0][0]
+    camera.place = camera.goal = PLACE
+    return moment, camera, Shot(ShotChoice(("a",), ShotKind.FOLLOW, "test"), (0,), camera, 0.0)
+
+
+def _shows_a(rig, moment, pose) -> float:
+    """The share of a's sample points the pose sees in its frame (of the pose's width)."""
+    lens = Lens(pose.vertical_fov_deg, rig.rig.lens.aspect)
+    return float(
+        framed_seen(rig.rig.visibility, moment, (0,), pose.position_world[None], quat_to_matrix(pose.rotation_xyzw[None]), lens)[
+            0, 0
+        ]
+    )
+
+
+def _room_with_wall_at(z_m: float) -> TriMesh:
+    """A 30 x 8 x 70 m room round both players (faces inward) with a wall 0.5 m thick across z = z_m (solid)."""
+    room, wall = box((30.0, 8.0, 70.0)), box((30.0, 8.0, 0.5))
+    return TriMesh(
+        np.concatenate([room.vertices + [0.0, 4.0, 15.0], wall.vertices + [0.0, 4.0, z_m]]),
+        np.concatenate([room.faces[:, ::-1], wall.faces + len(room.vertices)]).astype(np.int32),
+    )
+
+
+def test_a_hold_behind_a_wall_that_hides_the_subject_gives_way_to_the_move_it_held():
+    bare = rig_of()
+    place = _follow_of_a(bare)[1].pose(bare.rig.buffer.moments[-1]).position_world
+    level = _room_with_wall_at(place[2] + 1.5)  # a wall beside the camera's place, away from a
+    rig = rig_of([level])
+    moment, camera, shot = _follow_of_a(rig)
+    in_level = InLevel(LevelInterior(level), np.zeros((0, 3)), MatchSettings().pull_margin_m)
+    r = rig.rig
+    program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
+    behind = place + [0.0, 0.0, 3.0]  # last frame's camera, beyond the wall: a 3 m move through it, 33 degrees round a
+    last = look_along(behind, moment.aims_world[0] - behind, r.lens.vertical_fov_deg)
+    assert _shows_a(rig, moment, last) == 0.0  # held there, the camera would show a wall
+    pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
+    assert "held_before_wall" in flags and HOLD_LEFT_FOR_CUT in flags
+    assert np.allclose(pose.position_world, place)  # the move, which the rig cuts to (a move through a wall)
+    assert in_level.crossed(behind, pose.position_world)
+    assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
+
+    nearer = place + [0.0, 0.0, 2.0]  # 2 m: a cut there would turn a's view under 30 degrees (a jump cut)
+    last = look_along(nearer, moment.aims_world[0] - nearer, r.lens.vertical_fov_deg)
+    pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
+    assert "held_before_wall" in flags and HOLD_LEFT_FOR_CUT not in flags and CUT_TO_SEEN_PLACE in flags
+    assert view_turn_deg(nearer, pose.position_world, moment.aims_world[0])[0] >= MatchSettings().jump_cut_deg
+    assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
+
+
+def test_a_camera_pulled_so_close_that_its_subject_leaves_the_widest_frame_is_re_placed_by_a_cut_once_a_gap():
+    rig = rig_of()
+    moment, camera, shot = _follow_of_a(rig)
+    program = rig.rig.program_camera
+    last = camera.pose(moment)
+    camera.reach_m = 0.1  # pulled in on earlier frames, going back out at pull_regrow_m_s: 0.17 m from a's chest now
+    pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
+    assert flags[0] == "pulled_in_front_of_wall" and CUT_TO_SEEN_PLACE in flags
+    assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
+    assert camera.reach_m is None and camera.seen_again_s == moment.time_s and camera.goal == camera.place != PLACE
+    assert np.linalg.norm(pose.position_world - moment.aims_world[0]) > 1.5  # within the band, not at a's chest
+    assert view_turn_deg(last.position_world, pose.position_world, moment.aims_world[0])[0] >= MatchSettings().jump_cut_deg
+
+    camera.place = camera.goal = PLACE  # the same again within seen_again_gap_s: the pulled pose stays
+    camera.reach_m = 0.1
+    pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
+    assert CUT_TO_SEEN_PLACE not in flags and camera.reach_m is not None
+    assert _shows_a(rig, moment, pose) < MatchSettings().candidate_seen
+
+
+def test_a_degraded_pose_that_shows_its_subject_is_kept():
+    rig = rig_of()
+    moment, camera, shot = _follow_of_a(rig)
+    last = camera.pose(moment)
+    camera.reach_m = 2.0  # pulled in a little: 2.07 m from a's chest, a in the frame
+    pose, flags = rig.rig.program_camera.step(moment, DT_S, camera, shot, 0.5, last)
+    assert flags[0] == "pulled_in_front_of_wall" and CUT_TO_SEEN_PLACE not in flags
+    assert camera.place == PLACE and camera.seen_again_s is None
+    assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
