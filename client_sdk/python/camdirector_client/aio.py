@@ -440,7 +440,7 @@ class AsyncSession(wire.SessionBase):
         try:
             while True:
                 sent = feed.oldest_alone() if alone else None
-                if sent is not None:  # after a balancer's reset, as in Session.stream
+                if sent is not None:  # after a break, as in Session.stream
                     fresh = sent.seq > self._answered_seq
                     reply = await self._frame_call(sent)
                     feed.in_flight.popleft()
@@ -456,7 +456,7 @@ class AsyncSession(wire.SessionBase):
                 except DirectorError as error:
                     delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
                     feed.resend_after(error)
-                    alone = error.code == grpc.StatusCode.CANCELLED
+                    alone = wire.resend_from(error) is None  # as in Session.stream
                 await asyncio.sleep(delay)
         finally:
             feed.close()

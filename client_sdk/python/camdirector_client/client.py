@@ -439,12 +439,14 @@ class Session(wire.SessionBase):
             except DirectorError as error:
                 delay, backoff = self._retry_after(error, backoff)  # raises it when not to be tried again
                 feed.resend_after(error)
-                # A balancer's reset may hide the server's answer: HAProxy before 3.2 resets a
+                # How a stream ended may hide the server's answer: HAProxy before 3.2 resets a
                 # stream (RST_STREAM CANCEL) right after the server ended it while the client
-                # still sends, and the client then reports CANCELLED, not the server's status
-                # (a DATA_LOSS "resend from K" among them, docs/scaling.md). The oldest
-                # unanswered update goes alone first: a unary call's status arrives whole.
-                alone = error.code == grpc.StatusCode.CANCELLED
+                # still sends, so the client reports CANCELLED, not the server's status (a
+                # DATA_LOSS "resend from K", a revoked key: docs/scaling.md); grpc.aio reports an
+                # end that meets a write as INTERNAL. So after any break but a DATA_LOSS (which
+                # names its resend) the oldest unanswered update goes alone first: a unary
+                # call's status arrives whole.
+                alone = wire.resend_from(error) is None
             time.sleep(delay)
 
     def update_style(self, style: pb.Style | Mapping[str, Any]) -> None:

@@ -319,10 +319,11 @@ export class Session {
       let alone = false;
       for (;;) {
         if (alone) {
-          // After CANCELLED, the oldest unanswered update goes alone as a unary Frame first: HAProxy
-          // before 3.2 resets a stream right after the node ended it while the client still sent,
-          // hiding the node's status (a DATA_LOSS "resend from K", a revoked key) behind CANCELLED
-          // (haproxy/haproxy#1219; docs/scaling.md); a unary call's status arrives whole.
+          // After a break (but a DATA_LOSS, which names its resend), the oldest unanswered update
+          // goes alone as a unary Frame first: HAProxy before 3.2 resets a stream right after the
+          // node ended it while the client still sent, hiding the node's status (a DATA_LOSS
+          // "resend from K", a revoked key) behind CANCELLED (haproxy/haproxy#1219;
+          // docs/scaling.md); a unary call's status arrives whole.
           alone = false;
           const sent = await feed.get(feed.first);
           if (sent !== undefined) {
@@ -369,7 +370,7 @@ export class Session {
           [delay, backoff] = this.#retryAfter(error, backoff); // throws when not to be tried again
           const resend = this.#resend(error, feed.lastSeq);
           if (resend !== undefined) feed.resend(resend);
-          alone = error.code === "CANCELLED";
+          alone = resendFrom(error) === undefined;
           over = true;
           call.cancel();
           await sleep(delay);
