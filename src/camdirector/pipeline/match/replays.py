@@ -44,7 +44,7 @@ from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuf
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import ShotBuilder
-from camdirector.pipeline.match.shots import Place, ToricCamera, best_place
+from camdirector.pipeline.match.shots import PairWindow, Place, ToricCamera, best_place
 
 AFTER_KILL_S = 0.1  # the replay's camera is placed for the kill's moment and this long after it (the next frame), s
 BUILD_UP_STEP_S = 1.0  # and for the build-up, a moment this often from the replay's first on (each costs a tick's
@@ -133,11 +133,19 @@ class Replays:
             return None
         (a, b), place, score = placed
         camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
+        camera.pair = self._window(pair[0], replay.kill_time_s)
         names = tuple(self.players[i] for i in pair)
         choice = ShotChoice(names, ShotKind.REPLAY, f"{reason}: {names[0]} -> {names[1]}", held, replay)
         shot = Shot(choice, pair, camera, start_s)
         shot.hold_until_s, shot.scores = start_s + replay.length_s, {"place_visibility": score}
+        shot.cover_times_s = [replay.kill_time_s]  # its pair window's event (the rig keeps a window to its shot's events)
         return shot
+
+    def _window(self, killer: int, kill_time_s: float) -> PairWindow:
+        """When a replay of a kill at kill_time_s, s, frames its pair: as a planned DUEL live, around
+        the kill only, the killer alone before it (module docstring)."""
+        s = self.settings
+        return PairWindow(killer, (kill_time_s,), s.pair_before_s, s.pair_after_s, s.reframe_s)
 
     def _place(
         self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None
@@ -154,8 +162,10 @@ class Replays:
             return self.builder.grammar.allows_cut(live_world, kill_moment.aims_world[list(pair)], positions_world)
 
         best: tuple[tuple[int, int], Place, float] | None = None
+        window = self._window(pair[0], replay.kill_time_s)
         for camera, places in self.builder.cameras(ShotKind.DUEL, pair, kill_moment, default=False):
             assert camera.b_index is not None  # a DUEL's camera frames two
+            camera.pair = window
             place, score = best_place(camera, places, cover, pair, self.builder.visibility, other_angle, kill_moment, weights)
             if best is None or score > best[2]:
                 best = ((camera.a_index, camera.b_index), place, score)
