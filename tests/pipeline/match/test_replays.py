@@ -14,7 +14,7 @@ from camdirector.pipeline.match.grammar import view_turn_deg
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.session import Session
 from camdirector.pipeline.state import FrameState
-from tests.pipeline.match.scenes import EYE_M, Match, at_time, facing, kill, melee, on_screen, run_session
+from tests.pipeline.match.scenes import EYE_M, BareRig, Match, at_time, facing, kill, melee, on_screen, run_session
 
 TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
 KILL_S = 25.0
@@ -120,6 +120,21 @@ def test_a_kill_whose_victim_is_hidden_in_the_build_up_is_replayed_with_the_kill
     at_kill = min(shown[0], key=lambda s: abs(s.match.replay_of.time_s - KILL_S))
     aims = np.array([[40.0, EYE_M, 0.0], [40.0, EYE_M, HUT_Z_M - 2.5]])
     assert at_kill.match.shot.subject_ids == ("a2", "b2") and np.all(np.abs(on_screen(at_kill, aims)) <= 1.0)
+
+
+def test_a_replay_comes_before_a_discretionary_cut_at_its_tick():
+    """When the live shot would cut away from the dead victim (dead_hold_s) at the very tick the
+    replay may come, the replay comes, straight from the live shot of the kill; the cut away waits
+    (before, the cut came first and the replay, once its shot was min_shot_s old, after a short
+    live shot)."""
+    settings = MatchSettings(dead_hold_s=MatchSettings().replay_after_s)
+    states = BareRig(Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0), settings).run(40.0)
+    shown = replays(states)
+    assert len(shown) == 1
+    first = shown[0][0]
+    assert first.time_s <= KILL_S + settings.replay_after_s + settings.plan_interval_s + 1e-9
+    live = states[states.index(at_time(states, KILL_S)) : states.index(first)]
+    assert live and not any(s.cut for s in live[1:]) and live[0].match.shot.subject_ids == ("a2", "b2")
 
 
 def test_kills_close_together_get_no_replay_between_them():

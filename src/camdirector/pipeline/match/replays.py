@@ -5,16 +5,22 @@ A REPLAY shot (ShotKind.REPLAY, its `ShotChoice.replay`) plays a kill's game mom
 the style's `min_shot_s`; shorter before it, down to `min_shot_s` in all, where the live timeline
 has no more room), at the program's pace, while the program's own time goes on: the rig
 steps its camera and measures its visibility at the replayed moment (rig.py), and the buffer keeps
-`replay_past_s` of past for it (moments.py). Its camera is a Toric DUEL of killer and victim,
-placed for the kill (its moment, the next frame's, and with less weight its build-up) at
-the place that sees both best among those that turn the view of the pair by `jump_cut_deg` from
+`replay_past_s` of past for it (moments.py). Its camera is a Toric DUEL of killer and victim that
+frames them as the live planned DUEL does (shots.py `PairWindow`): the pair from `pair_before_s`
+before the kill to `pair_after_s` after it, the killer alone before (the victim is mostly still
+behind walls then: framing both throughout, 6 of the real duel's 11 kills with room had no place
+seeing both over the build-up, 5 of them one seeing both at the kill). It is placed for the kill (its
+moment, the next frame's, and with less weight its build-up, each scored for whom it frames then)
+at the place that sees them best among those that turn the view of the pair by `jump_cut_deg` from
 the live camera at the kill (grammar.py: a replay from the same angle shows nothing new); none
-that sees both with `min_visible` of their points over those moments: no replay (at
+that sees them with `min_visible` of their points over those moments: no replay (at
 `candidate_seen`, 0.5, the real wipeout's replays showed nobody for a second of build-up and
-nobody-shown frames outside overviews rose from 7.7% to 10.7%).
+nobody-shown frames outside overviews rose from 7.7% to 10.7%). On the wire a replay names whom
+it frames at the replayed moment (rig.py), as a live DUEL's killer-alone frames do.
 
 Our director (planned.py, `DirectorReplays`) inserts one when its own live decision keeps the
-shot, the shot is `min_shot_s` old, the kill is `replay_after_s` past (the live shot has held it
+shot or cuts at its discretion (not for a planned beat: that discretionary shot can wait until
+after the replay), the shot is `min_shot_s` old, the kill is `replay_after_s` past (the live shot has held it
 and followed the survivor a moment; a hold for a later event gives way, as that event's beat has
 its cut after the replay), and the live timeline
 has room: no event of priority >= `beat_min_priority` in the program time a replay of at least
