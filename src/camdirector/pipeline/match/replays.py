@@ -14,8 +14,8 @@ where none does, as the live planned DUEL does (shots.py `PairWindow`): the pair
 `pair_before_s` before the kill to `pair_after_s` after it, the killer alone before (each moment
 scored for whom it frames then; the victim is mostly still behind walls in the build-up: 6 of the
 real duel's 11 kills with room had no place seeing both over it, 5 of them one seeing both at the
-kill). The pair first: a replay that reframes moves its camera through walls (cuts) more often,
-and its program visibility was lower on 7 of 8 matches. None that sees them with `min_visible`
+kill). The pair first, so that a kill some place sees throughout is replayed as before (the
+reframe's move can cross walls: cuts within the replay). None that sees them with `min_visible`
 either way: no replay (at `candidate_seen`, 0.5, the real wipeout's replays showed nobody for a
 second of build-up and nobody-shown frames outside overviews rose from 7.7% to 10.7%). On the
 wire a replay names whom it frames at the replayed moment (rig.py), as a live DUEL's killer-alone
