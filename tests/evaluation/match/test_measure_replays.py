@@ -62,3 +62,18 @@ def test_a_kill_followed_by_another_within_the_room_leaves_none():
     shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
     assert replay_figures(match, program, shown, ROOM_S)["kills_with_room"] == 1  # the second alone
     assert replay_figures(match, program, shown, 0.4)["kills_with_room"] == 2
+
+
+def test_a_replay_naming_its_killer_alone_before_the_kill_is_one_replay_of_its_pair():
+    """A replay frames its killer alone in the build-up, then the pair (replays.py): one replay,
+    of the pair's kill, shown; another pair's replay right after it is another."""
+    match = duel()
+    program = replayed(side_view(match), slice(25, 38), np.arange(10, 23))
+    for row in range(25, 30):  # replayed rows 10-14: a alone
+        program.subjects[row] = ("a",)
+    shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
+    figures = replay_figures(match, program, shown, ROOM_S)
+    assert figures["replays"] == 1 and figures["shown"] == 1 and figures["kills_with_room_replayed"] == 1
+    for row in (36, 37):  # not of its pair: a replay of its own from there
+        program.subjects[row] = ("b", "c")
+    assert replay_figures(match, program, shown, ROOM_S)["replays"] == 2

@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from camdirector.geometry.meshes import TriMesh, box
 from camdirector.pipeline.match.camera_ahead import CameraStep
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.session import Session
 from camdirector.pipeline.state import FrameState
-from tests.pipeline.match.scenes import EYE_M, Match, at_time, facing, kill, melee, on_screen, run_session
+from tests.pipeline.match.scenes import EYE_M, BareRig, Match, at_time, facing, kill, melee, on_screen, run_session
 
 TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
 KILL_S = 25.0
@@ -60,7 +61,9 @@ def test_a_kill_with_room_is_replayed_from_another_angle_at_the_replayed_moments
     assert len(shown) == 1
     replay = shown[0]
     first = replay[0]
-    assert first.cut and first.match.shot.subject_ids == ("a2", "b2") and first.match.shot.replay.kill_time_s == KILL_S
+    assert first.cut and first.match.shot.replay.kill_time_s == KILL_S
+    # a place sees both over the build-up (open ground): it frames and names the pair throughout
+    assert all(s.match.shot.subject_ids == ("a2", "b2") and s.match.shot.kind == ShotKind.REPLAY for s in replay)
     # after the live shot held its kill and followed the survivor a moment, and before the next could come
     assert KILL_S + settings.replay_after_s <= first.time_s <= KILL_S + settings.replay_within_s
     assert at_time(states, KILL_S).match.shot.kind == ShotKind.DUEL  # the kill itself was live
@@ -84,6 +87,51 @@ def test_a_kill_with_room_is_replayed_from_another_angle_at_the_replayed_moments
     # and the program is live again after it
     after = states[states.index(replay[-1]) + 1]
     assert after.cut and after.match.shot.kind != ShotKind.REPLAY and after.match.replay_of is None
+
+
+HUT_Z_M = 12.0  # the centre of a closed 3 m hut that hides b2 from every place until it steps out
+HUT_OUT_S = (KILL_S - 0.9, KILL_S - 0.6)  # b2 walks out of it over these times, s
+
+
+def from_the_hut(t: float):
+    """two_fronts, but a2 stands still facing b2's hut, and b2 is inside it through the kill's
+    build-up, stepping out 2.5 m toward a2 just before the kill."""
+    out = min(max((t - HUT_OUT_S[0]) / (HUT_OUT_S[1] - HUT_OUT_S[0]), 0.0), 1.0)
+    return two_fronts(t) | {
+        "a2": ((40.0, 0.0), facing((40, 0), (40, HUT_Z_M))),
+        "b2": ((40.0, HUT_Z_M - 2.5 * out), facing((40, HUT_Z_M), (40, 0))),
+    }
+
+
+def test_a_kill_whose_victim_is_hidden_in_the_build_up_is_replayed_with_the_killer_alone_before_it():
+    """No place sees b2 in the build-up (the hut is closed), so no place sees the pair throughout
+    with min_visible; framed as the live DUEL, the killer alone before the kill, one does: the
+    replay names and shows a2 alone in the build-up, both at the replayed kill."""
+    hut = TriMesh(box((3.0, 3.0, 3.0)).vertices + np.array([40.0, 1.5, HUT_Z_M]), box((3.0, 3.0, 3.0)).faces)
+    match = Match(TEAMS, from_the_hut, [kill("a2", "b2", KILL_S)], delay_s=10.0, walls=[hut])
+    _, states = run_session(match, 40.0)
+    shown = replays(states)
+    assert len(shown) == 1 and shown[0][0].match.shot.replay.kill_time_s == KILL_S
+    build_up = [s for s in shown[0] if s.match.replay_of.time_s < HUT_OUT_S[0]]
+    assert build_up and all(s.match.shot.subject_ids == ("a2",) and s.visibility >= 0.75 for s in build_up)
+    at_kill = min(shown[0], key=lambda s: abs(s.match.replay_of.time_s - KILL_S))
+    aims = np.array([[40.0, EYE_M, 0.0], [40.0, EYE_M, HUT_Z_M - 2.5]])
+    assert at_kill.match.shot.subject_ids == ("a2", "b2") and np.all(np.abs(on_screen(at_kill, aims)) <= 1.0)
+
+
+def test_a_replay_comes_before_a_discretionary_cut_at_its_tick():
+    """When the live shot would cut away from the dead victim (dead_hold_s) at the very tick the
+    replay may come, the replay comes, straight from the live shot of the kill; the cut away waits
+    (before, the cut came first and the replay, once its shot was min_shot_s old, after a short
+    live shot)."""
+    settings = MatchSettings(dead_hold_s=MatchSettings().replay_after_s)
+    states = BareRig(Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0), settings).run(40.0)
+    shown = replays(states)
+    assert len(shown) == 1
+    first = shown[0][0]
+    assert first.time_s <= KILL_S + settings.replay_after_s + settings.plan_interval_s + 1e-9
+    live = states[states.index(at_time(states, KILL_S)) : states.index(first)]
+    assert live and not any(s.cut for s in live[1:]) and live[0].match.shot.subject_ids == ("a2", "b2")
 
 
 def test_kills_close_together_get_no_replay_between_them():

@@ -32,8 +32,9 @@ has them, never from what the director says it shows:
   director's own grammar is not consulted). Overviews name no subjects and are never jump cuts;
   nor are cuts into or out of a replay (a cut in time).
 - replays (issue 41): a replay is a run of program moments of REPLAY shots of the same subjects
-  whose replayed frames go forward (a cut within it, through a wall, does not start another); it is *shown* when
-  the kill it replays (of its first subject by its second, its frame among the replayed ones) has
+  (or its pair and, before the kill, its killer alone) whose replayed frames go forward (a cut
+  within it, through a wall, does not start another); it is *shown* when the kill it replays (of
+  the first subject of its pair by the second, its frame among the replayed ones) has
   both players shown at the replay's moment of the kill. A kill *leaves room* when no other kill
   follows it within `room_s` (the director's wait after a kill, the shortest replay and the next
   kill's lead: replay_after_s + the style's min_shot_s + lead_s of MatchSettings) and the program goes
@@ -237,6 +238,11 @@ def _kills(match: MatchRecording) -> list:
     return [e for e in match.events if e.kind == "kill" and e.actor_id != e.other_actor_id]
 
 
+def _one_of(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
+    """Whether two moments' subjects are of one replay: the same, or its pair and its killer alone."""
+    return set(a) <= set(b) or set(b) <= set(a)
+
+
 def replay_figures(match: MatchRecording, program: Program, shown: np.ndarray, room_s: float) -> dict[str, int]:
     """The program's replays (module docstring): replays, shown, kills_with_room,
     kills_with_room_replayed, live_kills_missed_for_replay; shown (n, P) from measure_shown."""
@@ -247,7 +253,7 @@ def replay_figures(match: MatchRecording, program: Program, shown: np.ndarray, r
         & program.replay
         & program.replay[before]
         & (program.shown_index >= program.shown_index[before])
-        & np.array([a == b for a, b in zip(program.subjects, program.subjects[-1:] + program.subjects[:-1])], dtype=bool)
+        & np.array([_one_of(a, b) for a, b in zip(program.subjects, program.subjects[-1:] + program.subjects[:-1])], dtype=bool)
     )
     starts = np.flatnonzero(program.replay & ~goes_on)  # each replay's first moment
     replayed: set[int] = set()  # kills (their order in _kills) a shown replay shows
@@ -258,7 +264,8 @@ def replay_figures(match: MatchRecording, program: Program, shown: np.ndarray, r
         end = start + 1
         while end < len(program) and goes_on[end]:
             end += 1
-        subjects, rows = program.subjects[start], np.arange(start, end)
+        rows = np.arange(start, end)
+        subjects = max((program.subjects[r] for r in rows.tolist()), key=len)  # the pair (its killer alone before the kill)
         for k, event in enumerate(kills):
             inside = (program.shown_index[rows] >= frames[k]).nonzero()[0]
             if subjects != (event.actor_id, event.other_actor_id) or not len(inside) or program.shown_index[start] > frames[k]:

@@ -39,8 +39,9 @@ at one tick and applied at the next, computed off the frame path (drawn_plan.py,
 `PlannedDirector` implements `MatchDirector` (director_contract.py) with every capability; it is
 registered as "planned" (director_registry.py).
 
-Instant replays: where the live decision keeps the shot a moment after a kill and the live
-timeline has room, the director shows the kill again from another angle (a REPLAY, replays.py).
+Instant replays: where the live decision keeps the shot a moment after a kill, or cuts at its
+discretion (not for a planned beat), and the live timeline has room, the director shows the kill
+again from another angle (a REPLAY, replays.py).
 """
 
 from __future__ import annotations
@@ -266,7 +267,12 @@ class PlannedDirector(DirectorBase):
                 return None
             current = None  # the replay gives the program back: the live decision starts afresh
         shot = self.live_decision(moment, buffer, current, current_pose, flags)
-        return shot if shot is not None else self.replays.insert(moment, buffer, current, flags)
+        if shot is not None and shot.cover_times_s:
+            return shot  # a planned beat's cut
+        # where the live decision keeps the shot or cuts at its discretion, a replay may come first
+        # (its discretionary shot waits: the live decision starts afresh after the replay)
+        replay = self.replays.insert(moment, buffer, current, flags)
+        return replay if replay is not None else shot
 
     def live_decision(
         self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]

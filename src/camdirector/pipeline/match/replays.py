@@ -6,15 +6,24 @@ the style's `min_shot_s`; shorter before it, down to `min_shot_s` in all, where 
 has no more room), at the program's pace, while the program's own time goes on: the rig
 steps its camera and measures its visibility at the replayed moment (rig.py), and the buffer keeps
 `replay_past_s` of past for it (moments.py). Its camera is a Toric DUEL of killer and victim,
-placed for the kill (its moment, the next frame's, and with less weight its build-up) at
-the place that sees both best among those that turn the view of the pair by `jump_cut_deg` from
-the live camera at the kill (grammar.py: a replay from the same angle shows nothing new); none
-that sees both with `min_visible` of their points over those moments: no replay (at
-`candidate_seen`, 0.5, the real wipeout's replays showed nobody for a second of build-up and
-nobody-shown frames outside overviews rose from 7.7% to 10.7%).
+placed for the kill (its moment, the next frame's, and with less weight its build-up) at the place
+that sees them best among those that turn the view of the pair by `jump_cut_deg` from the live
+camera at the kill (grammar.py: a replay from the same angle shows nothing new). It frames the
+pair throughout where a place sees both with `min_visible` of their points over those moments;
+where none does, as the live planned DUEL does (shots.py `PairWindow`): the pair from
+`pair_before_s` before the kill to `pair_after_s` after it, the killer alone before (each moment
+scored for whom it frames then; the victim is mostly still behind walls in the build-up: 6 of the
+real duel's 11 kills with room had no place seeing both over it, 5 of them one seeing both at the
+kill). The pair first, so that a kill some place sees throughout is replayed as before (the
+reframe's move can cross walls: cuts within the replay). None that sees them with `min_visible`
+either way: no replay (at `candidate_seen`, 0.5, the real wipeout's replays showed nobody for a
+second of build-up and nobody-shown frames outside overviews rose from 7.7% to 10.7%). On the
+wire a replay names whom it frames at the replayed moment (rig.py), as a live DUEL's killer-alone
+frames do.
 
 Our director (planned.py, `DirectorReplays`) inserts one when its own live decision keeps the
-shot, the shot is `min_shot_s` old, the kill is `replay_after_s` past (the live shot has held it
+shot or cuts at its discretion (not for a planned beat: that discretionary shot can wait until
+after the replay), the shot is `min_shot_s` old, the kill is `replay_after_s` past (the live shot has held it
 and followed the survivor a moment; a hold for a later event gives way, as that event's beat has
 its cut after the replay), and the live timeline
 has room: no event of priority >= `beat_min_priority` in the program time a replay of at least
@@ -44,7 +53,7 @@ from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuf
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import ShotBuilder
-from camdirector.pipeline.match.shots import Place, ToricCamera, best_place
+from camdirector.pipeline.match.shots import PairWindow, Place, ToricCamera, best_place
 
 AFTER_KILL_S = 0.1  # the replay's camera is placed for the kill's moment and this long after it (the next frame), s
 BUILD_UP_STEP_S = 1.0  # and for the build-up, a moment this often from the replay's first on (each costs a tick's
@@ -74,7 +83,9 @@ class Replays:
     def __init__(self, players: list[str], builder: ShotBuilder):
         self.players, self.builder = players, builder
         self.index = {p: i for i, p in enumerate(players)}
-        self._placed: dict[tuple[float, float, str, str, bytes], tuple[tuple[int, int], Place, float] | None] = {}
+        self._placed: dict[
+            tuple[float, float, str, str, bytes], tuple[tuple[int, int], Place, float, PairWindow | None] | None
+        ] = {}
 
     @property
     def settings(self) -> MatchSettings:
@@ -131,19 +142,30 @@ class Replays:
         placed = self._placed[key]
         if placed is None:
             return None
-        (a, b), place, score = placed
+        (a, b), place, score, window = placed
         camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
+        camera.pair = window
         names = tuple(self.players[i] for i in pair)
         choice = ShotChoice(names, ShotKind.REPLAY, f"{reason}: {names[0]} -> {names[1]}", held, replay)
         shot = Shot(choice, pair, camera, start_s)
         shot.hold_until_s, shot.scores = start_s + replay.length_s, {"place_visibility": score}
+        if window is not None:
+            shot.cover_times_s = [replay.kill_time_s]  # its pair window's event (the rig keeps a window to its shot's events)
         return shot
+
+    def _window(self, killer: int, kill_time_s: float) -> PairWindow:
+        """When a replay of a kill at kill_time_s, s, frames its pair: as a planned DUEL live, around
+        the kill only, the killer alone before it (module docstring)."""
+        s = self.settings
+        return PairWindow(killer, (kill_time_s,), s.pair_before_s, s.pair_after_s, s.reframe_s)
 
     def _place(
         self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None
-    ) -> tuple[tuple[int, int], Place, float] | None:
-        """Which of the builder's DUEL cameras (its players A and B), its place and score, seeing
-        the pair best at the kill past the live angle; None under min_visible."""
+    ) -> tuple[tuple[int, int], Place, float, PairWindow | None] | None:
+        """Which of the builder's DUEL cameras (its players A and B), its place, score and pair
+        window (None: the pair throughout), seeing the pair best at the kill past the live angle;
+        the killer alone before the kill only where no place sees the pair throughout with
+        min_visible; None where neither does (module docstring)."""
         s = self.settings
         kill_moment = buffer.at(replay.kill_time_s)
         build_up = np.arange(replay.from_s, replay.kill_time_s, BUILD_UP_STEP_S)
@@ -153,13 +175,17 @@ class Replays:
         def other_angle(positions_world: np.ndarray) -> np.ndarray:
             return self.builder.grammar.allows_cut(live_world, kill_moment.aims_world[list(pair)], positions_world)
 
-        best: tuple[tuple[int, int], Place, float] | None = None
-        for camera, places in self.builder.cameras(ShotKind.DUEL, pair, kill_moment, default=False):
-            assert camera.b_index is not None  # a DUEL's camera frames two
-            place, score = best_place(camera, places, cover, pair, self.builder.visibility, other_angle, kill_moment, weights)
-            if best is None or score > best[2]:
-                best = ((camera.a_index, camera.b_index), place, score)
-        return best if best is not None and best[2] >= s.min_visible else None
+        for window in (None, self._window(pair[0], replay.kill_time_s)):
+            best: tuple[tuple[int, int], Place, float, PairWindow | None] | None = None
+            for camera, places in self.builder.cameras(ShotKind.DUEL, pair, kill_moment, default=False):
+                assert camera.b_index is not None  # a DUEL's camera frames two
+                camera.pair = window
+                place, score = best_place(camera, places, cover, pair, self.builder.visibility, other_angle, kill_moment, weights)
+                if best is None or score > best[2]:
+                    best = ((camera.a_index, camera.b_index), place, score, window)
+            if best is not None and best[2] >= s.min_visible:
+                return best
+        return None
 
 
 class DirectorReplays:

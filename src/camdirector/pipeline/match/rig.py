@@ -317,14 +317,14 @@ class MatchRig(RigBase):
         # the next frame's moment is most likely the next buffered one: its camera is worked out
         # in the worker's idle moments (a session whose ray scene moves every frame cannot)
         self._ahead_for = self.buffer.following(moment) if self._defer_plans else None
-        subjects = self.shot.framed(moment.time_s)
+        subjects = self.shot.framed(shown.time_s)  # a REPLAY frames its killer alone before the replayed kill (replays.py)
         match.shot = (
             self.shot.choice
             if subjects == self.shot.subjects
             else dataclasses.replace(
                 self.shot.choice,
                 subject_ids=tuple(self.players[i] for i in subjects),
-                kind=ShotKind.FOLLOW,
+                kind=ShotKind.REPLAY if is_replay(self.shot) else ShotKind.FOLLOW,
                 reason=f"{self.shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills",
             )
         )
