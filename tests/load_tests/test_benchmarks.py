@@ -189,7 +189,7 @@ def test_movers_bench_runs_the_modes_asked_on_the_frame_path_asked(tmp_path):
     )  # fmt: skip
     assert result["frame_path"] == "compiled"
     assert [(c["mode"], c["movers"], c["map_backend"]) for c in result["cases"]] == [("ANTICIPATION", 3, "native")]
-    assert movers_bench.main(["--modes", "REACTIVE"]) == 2
+    assert movers_bench.main(["--modes", "RAYCAST"]) == 2  # a mode it does not offer
 
 
 def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_program_twice(tmp_path):
