@@ -130,6 +130,7 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             )
             http_server = uvicorn.Server(config)
             http_task = asyncio.create_task(http_server.serve(sockets=[sock]))
+            http_task.add_done_callback(lambda task: _http_ended(task, http_server, stop))
         if settings.live_addr:  # last: the balancer sends nothing here before every transport listens
             live = LiveCheck(settings.live_addr, lambda: loop_watch.last_wake_s, tls=_live_tls(settings))
             live.start()
@@ -157,6 +158,22 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
         guard.stop()
         if guard.store is not None:
             guard.store.close()
+
+
+def _http_ended(task: asyncio.Task, http_server: uvicorn.Server, stop: asyncio.Event) -> None:
+    """The HTTP server's task ended. Before `stop`, a node whose HTTP port is gone while its gRPC
+    port answers is worse than a stopped one (a balancer's checks and the dashboard go on seeing
+    half a node): logged with why, and the whole node stops. uvicorn ends by itself on a SIGINT or
+    SIGTERM it caught (its own handlers replace the loop's while it serves) or an error."""
+    if stop.is_set():
+        return
+    signals = [signal.Signals(s).name for s in getattr(http_server, "_captured_signals", [])]
+    if signals:  # a stop asked for: the loop's handler would have set `stop`
+        log.info("%s received (caught by the HTTP server)", ", ".join(signals))
+    else:
+        error = None if task.cancelled() else task.exception()
+        log.error("the HTTP server ended by itself (%r); stopping the node", error)
+    stop.set()
 
 
 def _warn_unsafe(settings: ServerSettings, exposed: list[str]) -> None:
