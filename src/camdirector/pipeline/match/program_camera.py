@@ -104,6 +104,12 @@ class ProgramCamera:
             flags.append("lens_widened")
         return pose, flags
 
+    def _seen_from(self, moment: Moment, subjects: tuple[int, ...], poses: list[CameraPose], lens: Lens) -> np.ndarray:
+        """(len(poses), len(subjects)): each subject's share framed and seen from each pose (framed_seen)."""
+        positions_world = np.array([p.position_world for p in poses])
+        rotations = quat_to_matrix(np.array([p.rotation_xyzw for p in poses]))
+        return framed_seen(self.subject_visibility, moment, subjects, positions_world, rotations, lens)
+
     def _widened(
         self, moment: Moment, pose: CameraPose, subjects: tuple[int, ...], last_fov_deg: float | None, dt_s: float
     ) -> CameraPose:
@@ -140,14 +146,8 @@ class ProgramCamera:
         if not subjects or any(0.0 <= t - now <= s.min_lead_s for t in shot.cover_times_s):
             return pose, None  # no cut in the last moments before a planned event (the planner's min_lead_s)
         tried = [pose] if unheld is None else [pose, unheld]
-        seen = framed_seen(
-            self.subject_visibility,
-            moment,
-            subjects,
-            np.array([p.position_world for p in tried]),
-            quat_to_matrix(np.array([p.rotation_xyzw for p in tried])),
-            Lens(pose.vertical_fov_deg, self.lens.aspect),
-        ).max(axis=1)  # (len(tried),) the best-shown subject
+        # (len(tried),) the best-shown subject
+        seen = self._seen_from(moment, subjects, tried, Lens(pose.vertical_fov_deg, self.lens.aspect)).max(axis=1)
         if seen[0] >= s.candidate_seen:
             return pose, None
         aims = moment.aims_world[list(subjects)]
@@ -209,15 +209,7 @@ class ProgramCamera:
         pulled, moved = camera.pulled_in(moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m, s.pull_regrow_m_s)
         if not moved or not subjects:
             return pulled, moved
-        both = [pose, pulled]
-        seen = framed_seen(
-            self.subject_visibility,
-            moment,
-            subjects,
-            np.array([p.position_world for p in both]),
-            quat_to_matrix(np.array([p.rotation_xyzw for p in both])),
-            self.lens,
-        ).mean(axis=1)
+        seen = self._seen_from(moment, subjects, [pose, pulled], self.lens).mean(axis=1)
         if seen[1] > seen[0] or (reach_before is not None and not hidden):  # going back out: at its pace
             return pulled, True
         camera.reach_m = None
