@@ -213,8 +213,8 @@ def test_a_replay_worked_out_ahead_answers_as_one_computed_in_the_frame(monkeypa
     worked_out: list[tuple[bool, bool]] = []  # (the frame's step was worked out ahead, it was a replay's)
     holds = CameraStep.holds
 
-    def counted(step: CameraStep, moment, dt_s, shot, style, last_pose) -> bool:
-        worked_out.append((holds(step, moment, dt_s, shot, style, last_pose), shot.choice.replay is not None))
+    def counted(step: CameraStep, moment, dt_s, shot, style, last_pose, cut_short) -> bool:
+        worked_out.append((holds(step, moment, dt_s, shot, style, last_pose, cut_short), shot.choice.replay is not None))
         return worked_out[-1][0]
 
     monkeypatch.setattr(CameraStep, "holds", counted)

@@ -46,14 +46,16 @@ class CameraStep:
     pose: CameraPose
     flags: list[str]
     visibility: float  # mean share of the framed subjects seen
+    cut_short: bool  # whether a cut within the shot would have been short (rig.py, program_camera.py)
 
-    def holds(self, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None) -> bool:
-        """Whether it is this frame's step: the same moment, time step, style and pose before,
-        from the shot's camera exactly as it is (every camera changes by assigning its
-        attributes, so identity tells any change: a tick's new goal or pair window, a cut)."""
+    def holds(self, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None, cut_short: bool) -> bool:
+        """Whether it is this frame's step: the same moment, time step, style, pose before and
+        answer to whether a cut would be short, from the shot's camera exactly as it is (every camera changes by assigning
+        its attributes, so identity tells any change: a tick's new goal or pair window, a cut)."""
         camera = shot.camera
         return (
             self.moment is moment
+            and self.cut_short == cut_short
             and self.dt_s == dt_s
             and self.shot is shot
             and self.camera is camera
@@ -74,13 +76,19 @@ class CandidatePoses:
 
 
 def step_ahead(
-    program_camera: ProgramCamera, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None
+    program_camera: ProgramCamera,
+    moment: Moment,
+    dt_s: float,
+    shot: Shot,
+    style: Style,
+    last_pose: CameraPose | None,
+    cut_short: bool,
 ) -> CameraStep | None:
-    """The shot's camera's step to the moment, from a copy of it; None when it has no pose and
-    none was shown before."""
+    """The shot's camera's step to the moment, from a copy of it, knowing whether a cut within
+    the shot would be short (rig.py); None when it has no pose and none was shown before."""
     camera = shot.camera
     ahead = copy.copy(camera)
-    stepped = program_camera.step(moment, dt_s, ahead, shot, style.response_time_s, last_pose)
+    stepped = program_camera.step(moment, dt_s, ahead, shot, style.response_time_s, last_pose, cut_short)
     if stepped is None:
         return None
     pose, flags = stepped
@@ -96,6 +104,7 @@ def step_ahead(
         pose,
         flags,
         program_camera.visibility(moment, pose, shot),
+        cut_short,
     )
 
 

@@ -55,17 +55,27 @@ class ProgramCamera:
         self.in_level, self.grammar, self.future = in_level, grammar, future  # future: the buffered moment at a time, s
 
     def step(
-        self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, response_time_s: float, last_pose: CameraPose | None
+        self,
+        moment: Moment,
+        dt_s: float,
+        camera: ShotCamera,
+        shot: Shot,
+        response_time_s: float,
+        last_pose: CameraPose | None,
+        cut_short: bool = False,
     ) -> tuple[CameraPose, list[str]] | None:
         """CAMERA of `shot` by `camera` (its own, or a copy ahead) stepped dt_s to the moment: the
         pose and its flags; the last pose shown held when the camera has none. None when it has
         no pose and none was shown before (a degenerate first shot). A pose that a degrade left
-        showing none of the shot's subjects is replaced by a cut (`_seen_again`)."""
+        showing none of the shot's subjects is replaced by a cut (`_seen_again`). Where a cut now
+        would leave a shot shorter than the style's `min_shot_s` (`cut_short`, rig.py), a move
+        through a wall is held before the wall however far while the hold shows every framed
+        subject (`held_before_wall`); it is a cut only where the hold would not."""
         camera.advance(moment, dt_s, response_time_s)
         flags: list[str] = []
         pose = camera.pose(moment)
         unheld: CameraPose | None = None  # the pose a hold before a wall replaced
-        if pose is not None and isinstance(camera, ToricCamera):
+        if pose is not None and isinstance(camera, ToricCamera) and camera.stand_world is None:  # a stand never moves
             pose, pulled = self._pulled_in(moment, pose, dt_s, camera, shot)
             if pulled:
                 flags.append("pulled_in_front_of_wall")
@@ -83,6 +93,8 @@ class ProgramCamera:
                     pose, held = self.in_level.held(
                         last_pose.position_world, pose, anchor, self.lens, self.settings.wall_hold_max_m
                     )
+                    if not held and cut_short:
+                        pose, held = self._held_showing_all(moment, last_pose, pose, anchor, shot)
                     if held:
                         flags.append("held_before_wall")
                         unheld = before
@@ -95,7 +107,8 @@ class ProgramCamera:
         subjects = shot.framed(moment.time_s) if isinstance(camera, ToricCamera) else ()
         last_fov_deg = last_pose.vertical_fov_deg if dt_s > 0.0 and last_pose is not None else None  # None: a cut
         pose = self._widened(moment, pose, subjects, last_fov_deg, dt_s)
-        if flags and isinstance(camera, ToricCamera) and shot.choice.replay is None:
+        standing = isinstance(camera, ToricCamera) and camera.stand_world is not None  # a stand that lost them is left too
+        if (flags or standing) and isinstance(camera, ToricCamera) and shot.choice.replay is None:
             placed, seen_again = self._seen_again(moment, pose, unheld, camera, shot, anchor, last_pose)
             if seen_again is not None:
                 flags.append(seen_again)
@@ -103,6 +116,19 @@ class ProgramCamera:
         if pose.vertical_fov_deg > self.lens.vertical_fov_deg:
             flags.append("lens_widened")
         return pose, flags
+
+    def _held_showing_all(
+        self, moment: Moment, last_pose: CameraPose, pose: CameraPose, anchor: np.ndarray | None, shot: Shot
+    ) -> tuple[CameraPose, bool]:
+        """The pose's move through a wall held however far (in_level.py `held`) where the hold
+        shows every framed subject (framed_seen at least `candidate_seen`: a kill's pair both),
+        and whether it was; else the pose as it is, which the rig cuts to."""
+        held_pose, held = self.in_level.held(last_pose.position_world, pose, anchor, self.lens, math.inf)
+        subjects = shot.framed(moment.time_s)
+        if not held or not subjects:
+            return pose, False
+        seen = self._seen_from(moment, subjects, [held_pose], Lens(held_pose.vertical_fov_deg, self.lens.aspect))
+        return (held_pose, True) if seen.min() >= self.settings.candidate_seen else (pose, False)
 
     def _seen_from(self, moment: Moment, subjects: tuple[int, ...], poses: list[CameraPose], lens: Lens) -> np.ndarray:
         """(len(poses), len(subjects)): each subject's share framed and seen from each pose (framed_seen)."""
@@ -171,14 +197,15 @@ class ProgramCamera:
         place, score = best_place(camera, place_grid(side), cover, subjects, self.subject_visibility, allowed, moment)
         if score < s.candidate_seen:
             return pose, None
-        kept = (camera.place, camera.goal, camera.pair, camera.reach_m, camera.seen_again_s)
+        kept = (camera.place, camera.goal, camera.pair, camera.reach_m, camera.seen_again_s, camera.stand_world)
         camera.place = camera.goal = place
+        camera.stand_world = None  # on its torus again
         if pair is not None:  # the picture is the pair's place now: both re-placed
             camera.pair = dataclasses.replace(pair, place=place)
         camera.reach_m, camera.seen_again_s = None, moment.time_s
         placed = camera.pose(moment)
         if placed is None:  # degenerate now (scored ahead only): the camera as it was
-            camera.place, camera.goal, camera.pair, camera.reach_m, camera.seen_again_s = kept
+            camera.place, camera.goal, camera.pair, camera.reach_m, camera.seen_again_s, camera.stand_world = kept
             return pose, None
         return self.in_level.contained(placed, anchor)[0], CUT_TO_SEEN_PLACE
 

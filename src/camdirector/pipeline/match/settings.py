@@ -133,6 +133,16 @@ class MatchSettings:
                                          # every frame; between, the degraded pose stays, s. [0, 60]
     seen_again_lookahead_s: float = 1.0  # and its new place is the one that sees them best now and this far ahead (the
                                          # buffered future; replacement.py looks as far), s. [0, 10]
+    stand_reach_m: float = 20.0          # a planned shot's camera may stand at a level camera node this near its kept player
+                                         # at the cut (stand.py), m. (0, 200]
+    stand_step_s: float = 0.25           # a stand is judged at the shot's moments this far apart (and at its events), s.
+                                         # [0.05, 5]
+    stand_event_weight: float = 2.0      # an event's moment weighs this against 1 for the others (the kill must be seen).
+                                         # (0, 100]
+    stand_shown_height_min: float = 0.15  # a stand frames its kept player at least this share of the frame's height (issue
+                                         # 41's median bar is 0.15), share. (0, shown_height_max]
+    stand_margin: float = 0.0            # and must see at least this much better than the Toric place (stand.py), share.
+                                         # [0, 1]
     shown_height_max: float = 0.5        # the framing band's top: a shot's camera is placed where none of its subjects fills
                                          # more of the frame's height than this, by distance (shot_builder.py): a whole body
                                          # with room around it, a long shot; closer, a medium shot cuts the body (and in this
@@ -160,7 +170,12 @@ class MatchSettings:
     def __post_init__(self) -> None:
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
                                       "respawn_walk_m", "engage_range_m", "join_spread_max_m", "reframe_s", "max_held_shot_s",
-                                      "group_radius_m", "overview_height_m", "pull_regrow_m_s"))
+                                      "group_radius_m", "overview_height_m", "pull_regrow_m_s", "stand_reach_m",
+                                      "stand_event_weight", "stand_shown_height_min"))
+        if not (self.stand_reach_m <= 200.0 and 0.05 <= self.stand_step_s <= 5.0 and self.stand_event_weight <= 100.0
+                and self.stand_shown_height_min <= self.shown_height_max and self.stand_margin <= 1.0):
+            raise ValueError("MatchSettings: stand_reach_m in (0, 200] m, stand_step_s in [0.05, 5] s, stand_event_weight "
+                             "in (0, 100], stand_shown_height_min in (0, shown_height_max], stand_margin in [0, 1]")
         if not 0.0 <= self.wall_hold_max_m <= 100.0:
             raise ValueError("MatchSettings: wall_hold_max_m in [0, 100] m")
         if self.seen_again_gap_s > 60.0 or self.seen_again_lookahead_s > 10.0:

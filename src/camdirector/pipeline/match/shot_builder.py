@@ -52,6 +52,7 @@ from camdirector.pipeline.match.shots import (
     overview_pose,
     place_grid,
 )
+from camdirector.pipeline.match.stand import best_stand
 from camdirector.pipeline.match.visibility import SubjectVisibility
 from camdirector.pipeline.style import Style
 
@@ -287,6 +288,22 @@ class ShotBuilder:
         if score < 0.0:
             return None, -1.0
         camera.place = camera.goal = place
+        if events_s and buffer is not None:  # a planned shot: where it stands, when a level node sees it through
+            framed_at_cut = camera.framed(moment.time_s) or subjects
+            camera.stand_world = best_stand(
+                camera,
+                subjects,
+                buffer,
+                moment,
+                events_s,
+                self.extra_overview_cameras,
+                self.visibility,
+                self.body_heights_m,
+                s,
+                allowed_after(framed_at_cut),
+            )
+            if camera.stand_world is not None:
+                choice = replace(choice, reason=f"{choice.reason}; standing where it sees them through")
         if choice.kind == ShotKind.DUEL:
             assert camera.b_index is not None  # a DUEL's camera frames two
             self.grammar.remember_duel(self.players[camera.a_index], self.players[camera.b_index])

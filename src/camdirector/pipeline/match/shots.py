@@ -166,7 +166,10 @@ def _composition(
 
 class ToricCamera:
     """DUEL, FOLLOW or GROUP: the camera on the torus of points A and B (module docstring).
-    a_index, b_index: players; b_index None frames A with gaze room."""
+    a_index, b_index: players; b_index None frames A with gaze room. With `stand_world` (3,) m
+    set, the camera stands there and turns to frame them as it would from its torus (stand.py)."""
+
+    stand_world: np.ndarray | None = None  # a class default: a camera pickled before stands existed has none
 
     def __init__(self, kind: ShotKind, a_index: int, b_index: int | None, style: Style, lens: Lens, place: Place):
         self.kind, self.a_index, self.b_index = kind, a_index, b_index
@@ -270,6 +273,8 @@ class ToricCamera:
 
     def pose(self, moment: Moment) -> CameraPose | None:
         place = self.place_at(moment.time_s)
+        if self.stand_world is not None:
+            return self.pose_from(moment, self.stand_world, place.width)
         positions = self.positions(moment, [place])
         return None if positions is None else self.pose_from(moment, positions[0], place.width)
 
