@@ -81,6 +81,44 @@ def within_band(
     return within
 
 
+def readable_clearance(
+    visibility: SubjectVisibility, lens: Lens, settings: MatchSettings, subjects: tuple[int, ...], moment: Moment
+) -> Callable[[np.ndarray], np.ndarray]:
+    """(m, 3) camera centres at the moment -> (m,) m: how much farther each stands from the nearest
+    of the subjects' bodies than that body's readable distance (negative: too near for any lens
+    the rig goes to). A body is an upright cylinder about its feet, from its outline's lowest to
+    highest point (SubjectVisibility.outlines_local), as wide as the outline's farthest point from
+    its axis (bodies turn by yaw alone); the distance is to its nearest point.
+
+    The readable distance: a body H m tall whose nearest point is rho m from the camera subtends
+    at most 2 atan(H / 2 rho) (square to the line of sight and centred on it); centred in a frame
+    of vertical field of view F it fills tan(alpha / 2) / tan(F / 2) <= H / (2 rho tan(F / 2)) of
+    the frame's height. So at rho >= H / (2 shown_height_max tan(F_max / 2)), F_max the widest lens
+    (widen_max_fov_deg, lens_width.py), no lens width can show it over the band's top (0.5: 1.75 m
+    for a 1.75 m player at 90 deg), and it stays under issue 41's 0.6 with its centre up to about
+    21 deg off the frame's middle (off centre, perspective stretches it: tan(c + alpha / 2) -
+    tan(c - alpha / 2)). Nearer, the widest lens cannot save the picture (issue 41: on the real
+    4on4, 190 of 201 frames with a player over 0.6 had the shot's own subject 1.5-2.3 m from the
+    camera, about 1 m from its upright axis, the lens at 90 deg)."""
+    widest = math.tan(math.radians(max(settings.widen_max_fov_deg, lens.vertical_fov_deg)) / 2.0)
+    feet_world = moment.feet_world[list(subjects)]  # (s, 3) m
+    outlines = [moment.transforms[i].apply(visibility.outlines_local[i]) - f for i, f in zip(subjects, feet_world)]
+    bottom_y = feet_world[:, 1] + np.array([o[:, 1].min() for o in outlines])  # (s,) m
+    top_y = feet_world[:, 1] + np.array([o[:, 1].max() for o in outlines])
+    radius_m = np.array([np.hypot(o[:, 0], o[:, 2]).max() for o in outlines])  # (s,) its girth about its axis
+    nearest_m = (top_y - bottom_y) / (2.0 * settings.shown_height_max * widest)  # (s,)
+
+    def clearance(positions_world: np.ndarray) -> np.ndarray:
+        offset = positions_world[:, None, [0, 2]] - feet_world[None, :, [0, 2]]  # (m, s, 2)
+        across = np.maximum(0.0, np.linalg.norm(offset, axis=2) - radius_m[None])  # (m, s) to its girth
+        height = positions_world[:, None, 1]
+        along = np.maximum(0.0, np.maximum(bottom_y[None] - height, height - top_y[None]))  # (m, s) above or below it
+        spare: np.ndarray = (np.hypot(across, along) - nearest_m[None]).min(axis=1, initial=np.inf)
+        return spare
+
+    return clearance
+
+
 class ShotBuilder:
     """Makes a shot's camera for a kind and subjects, placed by ray casts and the grammar."""
 
