@@ -18,7 +18,7 @@ from camdirector.pipeline.match.shot_builder import readable_clearance
 from camdirector.pipeline.match.shots import Place, ToricCamera
 from camdirector.pipeline.match.visibility import SubjectVisibility
 from camdirector.pipeline.style import Rig, Style
-from tests.pipeline.match.scenes import LENS, player_mesh
+from tests.pipeline.match.scenes import LENS, BareRig, Match, facing, player_mesh
 from tests.pipeline.match.test_match_places import block
 from tests.pipeline.match.test_match_real_maps import moment_of, pulled_camera
 
@@ -103,3 +103,25 @@ def test_a_camera_far_enough_is_not_moved():
     camera.place = camera.goal = Place(0.5, math.radians(45.0), 1.0)  # halfway along the arc, beside the pair
     pose = camera.pose(moment)
     assert camera.stepped_back(moment, pose, OPEN, 0.3, clearance_of(OPEN, moment, (0, 1))) is pose
+
+
+def face_off(t: float):
+    """a and b face each other 8 m apart along +z."""
+    return {"a": ((0.0, 0.0), facing((0, 0), (0, 8))), "b": ((0.0, 8.0), facing((0, 8), (0, 0)))}
+
+
+def test_a_duels_place_is_readable_or_steps_back_to_it_before_a_wall():
+    # a corridor 3 m wide and 3 m high along the pair, closed 0.6 m behind each: the places that see
+    # both best are over a shoulder, under a metre from a player, with no room to step back
+    walls = [block((x, 1.5, 4.0), (0.2, 6.0, 12.0)) for x in (-1.5, 1.5)]
+    walls += [block((0.0, 1.5, z), (3.2, 6.0, 0.2)) for z in (-0.6, 8.6)]
+    walls.append(block((0.0, 3.0, 4.0), (3.2, 0.2, 12.0)))
+    rig = BareRig(Match({"a": 1, "b": 2}, face_off, walls=walls), SETTINGS)
+    rig.run(0.5)
+    builder, moment = rig.rig.builder, rig.rig.buffer.moments[-1]
+    shot, _ = builder.build(ShotChoice(("a", "b"), ShotKind.DUEL, "test"), (0, 1), moment, [moment], None, None, 0.0)
+    assert shot is not None and isinstance(shot.camera, ToricCamera)
+    pose = shot.camera.pose(moment)
+    clearance = readable_clearance(builder.visibility, LENS, SETTINGS, (0, 1), moment)
+    back = shot.camera.stepped_back(moment, pose, rig.rig.ray_scene, SETTINGS.pull_margin_m, clearance)
+    assert clearance(back.position_world[None])[0] >= 0.0

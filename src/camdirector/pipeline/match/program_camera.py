@@ -206,7 +206,7 @@ class ProgramCamera:
         Pulled in or not, the camera keeps a readable distance from the framed subjects
         (shot_builder.py readable_clearance): it comes in no nearer, and a place that has come
         nearer steps back (shots.py `stepped_back`, not flagged: the place's own camera, farther
-        along its line). Whether it was pulled in."""
+        along its line) where the level's places test accepts the point. Whether it was pulled in."""
         s, subjects = self.settings, shot.framed(moment.time_s)
         clearance = readable_clearance(self.subject_visibility, self.lens, s, subjects or (camera.anchor_index,), moment)
         hidden = self.subject_visibility.visible_share(pose.position_world, moment, (camera.anchor_index,))[0, 0] < s.pull_below
@@ -219,4 +219,6 @@ class ProgramCamera:
             if not (seen[1] > seen[0] or (reach_before is not None and not hidden)):  # going back out: at its pace
                 camera.reach_m = None
                 pulled, moved = pose, False
-        return camera.stepped_back(moment, pulled, self.ray_scene, s.pull_margin_m, clearance), moved
+        back = camera.stepped_back(moment, pulled, self.ray_scene, s.pull_margin_m, clearance)
+        # a step back out of the level (above an open level's box) would be moved in again, nearer (in_level.py)
+        return (back if back is pulled or self.in_level.inside(back.position_world) else pulled), moved
