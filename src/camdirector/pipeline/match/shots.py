@@ -45,6 +45,15 @@ walls, so the grid tries the style's composition first and two wider ones. While
 a place that falls under `min_visible` is replaced by the best one on the same side, and the
 camera glides there (and to its width) with the style's response time, so the composition never
 jumps inside a shot.
+
+Every frame the program camera keeps its framed subjects' readable distance (shot_builder.py
+`readable_clearance`: nearer, no lens width the rig goes to shows them under the framing band):
+a camera pulled in front of a wall stops there (`pulled_in`), and a place that the moving torus
+brings nearer steps back along the line from the anchor through it (`stepped_back`), as an
+operator steps back rather than filling the frame with a player. Measured with eval-match (the
+eight development matches, 10 s delay, 30 Hz): frames with a player over 0.6 of the frame's
+height on the real 4on4 3.74% -> 2.04%, 2on2 3.43% -> 1.36%, duel 1.99% -> 1.04%, nav_test
+2.67% -> 1.04%; kill coverage kept or better on each.
 """
 
 from __future__ import annotations
