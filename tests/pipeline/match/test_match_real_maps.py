@@ -71,28 +71,35 @@ def test_players_beyond_fighting_range_are_followed_nearest_an_opponent_first():
 
 
 def pulled_camera(wall_z: float) -> tuple[ToricCamera, Moment, RayScene]:
-    """A FOLLOW camera on a, a wall wall_z m behind a (across the line from a to the camera)."""
+    """A FOLLOW camera on a, 4.3 m from its aim point up and behind it (z = -3.1), and a wall wall_z
+    m behind a (across the line from a to the camera)."""
     moment = moment_of({"a": (0.0, 0.0), "b": (0.0, 30.0)}, {"a": (0.0, 30.0), "b": (0.0, 0.0)})
     camera = ToricCamera(ShotKind.FOLLOW, 0, None, Style(rig=Rig.MATCH), LENS, Place(0.05, 0.5, 1.0))
-    scene = RayScene([block((0.0, 1.5, wall_z), (40.0, 6.0, 0.2))])
+    camera.gaze_room_m = 10.0
+    scene = RayScene([block((0.0, 1.5, wall_z), (40.0, 12.0, 0.2))])
     return camera, moment, scene
 
 
+def never_near(positions_world: np.ndarray) -> np.ndarray:
+    """A readable clearance (shot_builder.py readable_clearance) that no place comes under."""
+    return np.ones(len(positions_world))
+
+
 def test_a_wall_between_the_camera_and_its_subject_pulls_it_in_front_and_it_goes_back_slowly():
-    camera, moment, scene = pulled_camera(-0.5)  # the wall's near face at z = -0.4
+    camera, moment, scene = pulled_camera(-2.5)  # the wall's near face at z = -2.4
     free = camera.pose(moment)
     a = moment.aims_world[0]
-    assert free.position_world[2] < -0.6, "the place stands behind the wall"
+    assert free.position_world[2] < -2.6, "the place stands behind the wall"
     assert scene.occluded(free.position_world[None], a[None])[0]
-    pulled, was = camera.pulled_in(moment, free, True, scene, 0.0, 0.3, 2.0)
+    pulled, was = camera.pulled_in(moment, free, True, scene, 0.0, 0.3, 2.0, never_near)
     assert was and not scene.occluded(pulled.position_world[None], a[None])[0]
     reach = np.linalg.norm(pulled.position_world - a)
-    assert pulled.position_world[2] > -0.4 and camera.reach_m == pytest.approx(reach)
+    assert pulled.position_world[2] > -2.4 and camera.reach_m == pytest.approx(reach)
     # the wall gone, the camera goes back out at 2 m/s, not at once
     open_scene = RayScene([block((50.0, 0.0, 50.0), (1.0, 1.0, 1.0))])
-    later, was = camera.pulled_in(moment, free, False, open_scene, 0.1, 0.3, 2.0)
+    later, was = camera.pulled_in(moment, free, False, open_scene, 0.1, 0.3, 2.0, never_near)
     assert was and np.linalg.norm(later.position_world - a) == pytest.approx(reach + 0.2)
-    back, was = camera.pulled_in(moment, free, False, open_scene, 100.0, 0.3, 2.0)
+    back, was = camera.pulled_in(moment, free, False, open_scene, 100.0, 0.3, 2.0, never_near)
     assert not was and np.allclose(back.position_world, free.position_world) and camera.reach_m is None
     # a camera that sees its subject well stays where it is, wall or no wall
-    assert camera.pulled_in(moment, free, False, scene, 0.1, 0.3, 2.0) == (free, False)
+    assert camera.pulled_in(moment, free, False, scene, 0.1, 0.3, 2.0, never_near) == (free, False)

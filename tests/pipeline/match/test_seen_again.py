@@ -1,8 +1,8 @@
 """A program pose that a degrade left showing none of its subjects is not kept on air
 (program_camera.py `_seen_again`, issue 41: frames of nobody outside overviews): a hold before a
 wall that hides the subject gives way to the move it held (the rig cuts through the wall), and a
-camera pulled so close that its subject leaves even the widest frame is re-placed by a cut, at most
-once every `seen_again_gap_s`."""
+camera moved inside the level so close that its subject leaves the frame is re-placed by a cut, at
+most once every `seen_again_gap_s`."""
 
 from __future__ import annotations
 
@@ -81,23 +81,32 @@ def test_a_hold_behind_a_wall_that_hides_the_subject_gives_way_to_the_move_it_he
     assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
 
 
-def test_a_camera_pulled_so_close_that_its_subject_leaves_the_widest_frame_is_re_placed_by_a_cut_once_a_gap():
-    rig = rig_of()
+def _room_behind_a(x_m: float) -> TriMesh:
+    """A 30 x 8 x 70 m room (faces inward) whose -x wall stands at x = x_m, a little behind a's back."""
+    room = box((30.0, 8.0, 70.0))
+    return TriMesh(room.vertices + [x_m + 15.0, 4.0, 15.0], room.faces[:, ::-1].astype(np.int32))
+
+
+def test_a_camera_moved_inside_so_close_that_its_subject_leaves_the_frame_is_re_placed_by_a_cut_once_a_gap():
+    # PLACE is outside the room: no pull-in comes nearer than a's readable distance (shots.py pulled_in), so the
+    # level's containment moves the camera in to the wall's margin, 0.16 m from a's chest, inside its body
+    level = _room_behind_a(-0.4)
+    rig = rig_of([level])
     moment, camera, shot = _follow_of_a(rig)
-    program = rig.rig.program_camera
+    in_level = InLevel(LevelInterior(level), np.zeros((0, 3)), MatchSettings().pull_margin_m)
+    r = rig.rig
+    program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
     last = camera.pose(moment)
-    camera.reach_m = 0.1  # pulled in on earlier frames, going back out at pull_regrow_m_s: 0.17 m from a's chest now
     pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
-    assert flags[0] == "pulled_in_front_of_wall" and CUT_TO_SEEN_PLACE in flags
+    assert flags[0] == "moved_inside_level" and CUT_TO_SEEN_PLACE in flags
     assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
     assert camera.reach_m is None and camera.seen_again_s == moment.time_s and camera.goal == camera.place != PLACE
     assert np.linalg.norm(pose.position_world - moment.aims_world[0]) > 1.5  # within the band, not at a's chest
     assert view_turn_deg(last.position_world, pose.position_world, moment.aims_world[0])[0] >= MatchSettings().jump_cut_deg
 
-    camera.place = camera.goal = PLACE  # the same again within seen_again_gap_s: the pulled pose stays
-    camera.reach_m = 0.1
+    camera.place = camera.goal = PLACE  # the same again within seen_again_gap_s: the degraded pose stays
     pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
-    assert CUT_TO_SEEN_PLACE not in flags and camera.reach_m is not None
+    assert flags[0] == "moved_inside_level" and CUT_TO_SEEN_PLACE not in flags
     assert _shows_a(rig, moment, pose) < MatchSettings().candidate_seen
 
 

@@ -30,7 +30,7 @@ from camdirector.pipeline.match.lens_width import widened_fov_deg
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.match.shot_builder import within_band
+from camdirector.pipeline.match.shot_builder import readable_clearance, within_band
 from camdirector.pipeline.match.shots import ToricCamera, best_place, framed_seen, place_grid
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
@@ -229,15 +229,23 @@ class ProgramCamera:
         most of its first subject, kept only if it frames the shot's subjects better (their mean
         seen share, framed_seen): close to A, a pair far apart may no longer fit. On 90 s of the
         4on4 on dm2 this kept program visibility 0.58 and kill coverage 0.60 (0.38 and 0.53 with no
-        pull; 0.52 and 0.63 judging by the worst-seen subject; 0.56 and 0.57 pulling always)."""
+        pull; 0.52 and 0.63 judging by the worst-seen subject; 0.56 and 0.57 pulling always).
+        Pulled in or not, the camera keeps a readable distance from the framed subjects
+        (shot_builder.py readable_clearance): it comes in no nearer, and a place that has come
+        nearer steps back (shots.py `stepped_back`, not flagged: the place's own camera, farther
+        along its line) where the level's places test accepts the point. Whether it was pulled in."""
         s, subjects = self.settings, shot.framed(moment.time_s)
+        clearance = readable_clearance(self.subject_visibility, self.lens, s, subjects or (camera.anchor_index,), moment)
         hidden = self.subject_visibility.visible_share(pose.position_world, moment, (camera.anchor_index,))[0, 0] < s.pull_below
         reach_before = camera.reach_m
-        pulled, moved = camera.pulled_in(moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m, s.pull_regrow_m_s)
-        if not moved or not subjects:
-            return pulled, moved
-        seen = self._seen_from(moment, subjects, [pose, pulled], self.lens).mean(axis=1)
-        if seen[1] > seen[0] or (reach_before is not None and not hidden):  # going back out: at its pace
-            return pulled, True
-        camera.reach_m = None
-        return pose, False
+        pulled, moved = camera.pulled_in(
+            moment, pose, bool(hidden), self.ray_scene, dt_s, s.pull_margin_m, s.pull_regrow_m_s, clearance
+        )
+        if moved and subjects:
+            seen = self._seen_from(moment, subjects, [pose, pulled], self.lens).mean(axis=1)
+            if not (seen[1] > seen[0] or (reach_before is not None and not hidden)):  # going back out: at its pace
+                camera.reach_m = None
+                pulled, moved = pose, False
+        back = camera.stepped_back(moment, pulled, self.ray_scene, s.pull_margin_m, clearance)
+        # a step back out of the level (above an open level's box) would be moved in again, nearer (in_level.py)
+        return (back if back is pulled or self.in_level.inside(back.position_world) else pulled), moved

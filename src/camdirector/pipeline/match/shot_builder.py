@@ -19,9 +19,13 @@ stretched so that at the style's place its player fills `follow_shown_height`. B
 band: a long (full) shot shows the whole body head to toe, an extreme long shot the body small
 in its surroundings; a medium shot cuts the body at the waist, too close for a player who runs
 and jumps in and out of it. So a shot here is a long to extreme long shot, never a medium one.
-A DUEL's places are left free: the place of a kill's pair is the one that sees both past the
+A DUEL's places are held to less: the place of a kill's pair is the one that sees both past the
 walls, often over a shoulder (on the real 4on4 and 2on2, held to the band too, kill coverage fell
-0.671 -> 0.603 and 0.643 -> 0.536; with DUELs free the 4on4 kept 0.671).
+0.671 -> 0.603 and 0.643 -> 0.536; with DUELs free the 4on4 kept 0.671), so a DUEL's place is
+only one at its subjects' readable distance (`readable_clearance`: from nearer, no lens the rig
+goes to shows them under the band's top) or one the program camera can step back from to it
+before a wall (shots.py stepped_back). Refusing those too cost the open nav_test's bot match
+kill coverage 0.721 -> 0.623: there, every over-the-shoulder place can step back.
 
 Candidates (`candidate_camera`): a situation is offered beside the program only when its camera,
 at the style's place, shows at least `candidate_min_shown` of its subjects at that moment.
@@ -43,6 +47,8 @@ from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import (
+    READABLE_STEP_M,
+    STEP_BACK_MAX_M,
     PairWindow,
     Place,
     StaticCamera,
@@ -80,6 +86,44 @@ def within_band(
         return far if allowed is None else far & allowed(positions)
 
     return within
+
+
+def readable_clearance(
+    visibility: SubjectVisibility, lens: Lens, settings: MatchSettings, subjects: tuple[int, ...], moment: Moment
+) -> Callable[[np.ndarray], np.ndarray]:
+    """(m, 3) camera centres at the moment -> (m,) m: how much farther each stands from the nearest
+    of the subjects' bodies than that body's readable distance (negative: too near for any lens
+    the rig goes to). A body is an upright cylinder about its feet, from its outline's lowest to
+    highest point (SubjectVisibility.outlines_local), as wide as the outline's farthest point from
+    its axis (bodies turn by yaw alone); the distance is to its nearest point.
+
+    The readable distance: a body H m tall whose nearest point is rho m from the camera subtends
+    at most 2 atan(H / 2 rho) (square to the line of sight and centred on it); centred in a frame
+    of vertical field of view F it fills tan(alpha / 2) / tan(F / 2) <= H / (2 rho tan(F / 2)) of
+    the frame's height. So at rho >= H / (2 shown_height_max tan(F_max / 2)), F_max the widest lens
+    (widen_max_fov_deg, lens_width.py), no lens width can show it over the band's top (0.5: 1.75 m
+    for a 1.75 m player at 90 deg), and it stays under issue 41's 0.6 with its centre up to about
+    21 deg off the frame's middle (off centre, perspective stretches it: tan(c + alpha / 2) -
+    tan(c - alpha / 2)). Nearer, the widest lens cannot save the picture (issue 41: on the real
+    4on4, 190 of 201 frames with a player over 0.6 had the shot's own subject 1.5-2.3 m from the
+    camera, about 1 m from its upright axis, the lens at 90 deg)."""
+    widest = math.tan(math.radians(max(settings.widen_max_fov_deg, lens.vertical_fov_deg)) / 2.0)
+    feet_world = moment.feet_world[list(subjects)]  # (s, 3) m
+    outlines = [moment.transforms[i].apply(visibility.outlines_local[i]) - f for i, f in zip(subjects, feet_world)]
+    bottom_y = feet_world[:, 1] + np.array([o[:, 1].min() for o in outlines])  # (s,) m
+    top_y = feet_world[:, 1] + np.array([o[:, 1].max() for o in outlines])
+    radius_m = np.array([np.hypot(o[:, 0], o[:, 2]).max() for o in outlines])  # (s,) its girth about its axis
+    nearest_m = (top_y - bottom_y) / (2.0 * settings.shown_height_max * widest)  # (s,)
+
+    def clearance(positions_world: np.ndarray) -> np.ndarray:
+        offset = positions_world[:, None, [0, 2]] - feet_world[None, :, [0, 2]]  # (m, s, 2)
+        across = np.maximum(0.0, np.linalg.norm(offset, axis=2) - radius_m[None])  # (m, s) to its girth
+        height = positions_world[:, None, 1]
+        along = np.maximum(0.0, np.maximum(bottom_y[None] - height, height - top_y[None]))  # (m, s) above or below it
+        spare: np.ndarray = (np.hypot(across, along) - nearest_m[None]).min(axis=1, initial=np.inf)
+        return spare
+
+    return clearance
 
 
 class ShotBuilder:
@@ -159,9 +203,41 @@ class ShotBuilder:
         return camera if float((seen[0] >= s.candidate_seen).mean()) >= s.candidate_min_shown else None
 
     def _within_band(
-        self, subjects: tuple[int, ...], moment: Moment, allowed: Callable[[np.ndarray], np.ndarray] | None
+        self, kind: ShotKind, subjects: tuple[int, ...], moment: Moment, allowed: Callable[[np.ndarray], np.ndarray] | None
     ) -> Callable[[np.ndarray], np.ndarray]:
-        return within_band(self.visibility, self.lens, self.settings, subjects, moment, allowed)
+        """The band of a kind's places (module docstring): a DUEL's, its readable distance alone."""
+        if kind != ShotKind.DUEL:
+            return within_band(self.visibility, self.lens, self.settings, subjects, moment, allowed)
+        clearance = readable_clearance(self.visibility, self.lens, self.settings, subjects, moment)
+        aims = moment.aims_world[list(subjects)]  # (s, 3)
+
+        def readable(positions_world: np.ndarray) -> np.ndarray:
+            ok = np.asarray(clearance(positions_world) >= 0.0)
+            near = np.flatnonzero(~ok)
+            if len(near):  # those whose step back (program_camera.py) reaches the readable distance before a wall
+                ok[near] = self._steppable(positions_world[near], aims, clearance)
+            return ok if allowed is None else ok & allowed(positions_world)
+
+        return readable
+
+    def _steppable(
+        self, positions_world: np.ndarray, aims_world: np.ndarray, clearance: Callable[[np.ndarray], np.ndarray]
+    ) -> np.ndarray:
+        """(m,) bool: which of m camera centres (m, 3) too near their subjects reach a readable one
+        (`clearance` >= 0) stepping back along the line from the nearest subject's aim point (aims
+        (s, 3)) within STEP_BACK_MAX_M and pull_margin_m short of the first wall (shots.py
+        stepped_back, which steps back from the shot's anchor: mostly the one it stands too near)."""
+        nearest = np.linalg.norm(positions_world[:, None] - aims_world[None], axis=2).argmin(axis=1)
+        origins = aims_world[nearest]  # (m, 3)
+        offsets = positions_world - origins
+        full_m = np.maximum(np.linalg.norm(offsets, axis=1), 1e-6)
+        directions = offsets / full_m[:, None]
+        back_m = READABLE_STEP_M * np.arange(1, round(STEP_BACK_MAX_M / READABLE_STEP_M) + 1)  # (t,)
+        tried = positions_world[:, None] + back_m[None, :, None] * directions[:, None]  # (m, t, 3)
+        clear = clearance(tried.reshape(-1, 3)).reshape(len(positions_world), len(back_m)) >= 0.0
+        needed_m = full_m + back_m[clear.argmax(axis=1)]  # (m,) the first readable point's distance
+        free_m = self.visibility.ray_scene.first_hit(origins, directions) - self.settings.pull_margin_m
+        return np.asarray(clear.any(axis=1) & (needed_m <= free_m))
 
     def _best(
         self,
@@ -245,10 +321,10 @@ class ShotBuilder:
 
         def allowed_after(framed: tuple[int, ...]) -> Callable[[np.ndarray], np.ndarray]:
             """The 30-degree rule for a cut from the previous picture to one framing `framed`,
-            within the framing band but for a DUEL (module docstring)."""
+            within the framing band (a DUEL: its readable distance; module docstring)."""
             shared = list(previous_framed & set(framed))
             rule = functools.partial(self.grammar.allows_cut, previous_world, moment.aims_world[shared])
-            return rule if choice.kind == ShotKind.DUEL else self._within_band(framed, moment, rule)
+            return self._within_band(choice.kind, framed, moment, rule)
 
         s = self.settings
         pair = (
@@ -258,7 +334,7 @@ class ShotBuilder:
         )
         alone = pair is not None and buffer is not None and pair.weight(moment.time_s) <= 0.0
         allowed = allowed_after(subjects)
-        band = None if choice.kind == ShotKind.DUEL else self._within_band(subjects, moment, None)
+        band = self._within_band(choice.kind, subjects, moment, None)
         camera, place, score = self._best(choice.kind, subjects, moment, cover, weights, band if alone else allowed, pair)
         if score < s.min_visible and not choice.held:  # a wide view of them may see them better
             pose, seen = self._overview(subjects, cover, [1.0] * len(cover) if weights is None else weights, allowed)
