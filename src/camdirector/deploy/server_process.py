@@ -15,6 +15,8 @@ from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
+from camdirector.deploy.services import tcp_state
+
 
 def worker_pids(server_pid: int) -> list[int]:
     """The server's worker processes: its children started by multiprocessing's `spawn` (which
@@ -32,23 +34,6 @@ def worker_pids(server_pid: int) -> list[int]:
         if parent == server_pid and b"spawn_main" in cmdline:
             pids.append(int(entry))
     return sorted(pids)
-
-
-# /proc/net/tcp's states (include/net/tcp_states.h) a failing test's report names
-_TCP_STATES = {"01": "ESTABLISHED", "06": "TIME_WAIT", "08": "CLOSE_WAIT", "0A": "LISTEN"}
-
-
-def _tcp_state(address: str) -> str:
-    """Whether a socket listens on HOST:PORT's port (from /proc/net/tcp and tcp6: gRPC listens on
-    an IPv6 socket for 127.0.0.1): "LISTEN", the states of the sockets on it, or "nothing" (a port
-    refused: closed, or shut down)."""
-    port = f"{int(address.rpartition(':')[2]):04X}"
-    try:
-        rows = [line.split() for table in ("tcp", "tcp6") for line in Path(f"/proc/net/{table}").read_text().splitlines()[1:]]
-    except OSError:
-        return "unknown"
-    states = sorted({_TCP_STATES.get(row[3], row[3]) for row in rows if row[1].endswith(f":{port}")})
-    return "LISTEN" if "LISTEN" in states else ", ".join(states) or "nothing"
 
 
 class ServerProcess:
@@ -161,7 +146,7 @@ class ServerProcess:
             # what the server was doing when its caller failed goes with the failure (a test's
             # captured stderr); the log itself is removed with its folder
             state = "running" if self.alive() else f"exited with {self.proc.returncode}"
-            ports = {name: _tcp_state(address) for name, address in (("grpc", self.grpc), ("http", self.http)) if address}
+            ports = {name: tcp_state(address) for name, address in (("grpc", self.grpc), ("http", self.http)) if address}
             print(
                 f"camdirector serve (pid {self.proc.pid}) {state}, its ports {ports}; its log ends:\n{self.log_tail()}",
                 file=sys.stderr,

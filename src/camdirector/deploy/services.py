@@ -39,6 +39,34 @@ def _binary(name: str, package: str, folder: Path | None = None) -> str:
     return path
 
 
+# /proc/net/tcp's states (include/net/tcp_states.h) a failing test's report names
+_TCP_STATES = {"01": "ESTABLISHED", "06": "TIME_WAIT", "08": "CLOSE_WAIT", "0A": "LISTEN"}
+
+
+def tcp_state(address: str) -> str:
+    """Whether a socket listens on HOST:PORT's port (from /proc/net/tcp and tcp6: gRPC listens on
+    an IPv6 socket for 127.0.0.1): "LISTEN", the states of the sockets on it, or "nothing" (a port
+    refused: closed, or shut down)."""
+    port = f"{int(address.rpartition(':')[2]):04X}"
+    try:
+        rows = [line.split() for table in ("tcp", "tcp6") for line in Path(f"/proc/net/{table}").read_text().splitlines()[1:]]
+    except OSError:
+        return "unknown"
+    states = sorted({_TCP_STATES.get(row[3], row[3]) for row in rows if row[1].endswith(f":{port}")})
+    return "LISTEN" if "LISTEN" in states else ", ".join(states) or "nothing"
+
+
+def process_state(pid: int) -> str:
+    """A process's scheduler state and the kernel function it sleeps in (/proc: "S (sleeping) in
+    do_epoll_wait"), or "gone", for a failing start's report."""
+    try:
+        state = next(line for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("State:"))
+        wchan = Path(f"/proc/{pid}/wchan").read_text().strip()
+    except (OSError, StopIteration):
+        return "gone"
+    return f"{state.split(':', 1)[1].strip()} in {wchan or '-'}"
+
+
 def _wait_port(port: int, proc: subprocess.Popen | None, timeout_s: float, what: str, log: Path) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -49,7 +77,9 @@ def _wait_port(port: int, proc: subprocess.Popen | None, timeout_s: float, what:
                 return
         except OSError:
             time.sleep(0.05)
-    raise ServiceError(f"{what} did not listen on 127.0.0.1:{port} within {timeout_s:g} s: {_tail(log)}")
+    # a CI run's HAProxy ran and logged nothing while its port refused for 10 s: say what it was doing
+    running = "" if proc is None else f" (pid {proc.pid}: {process_state(proc.pid)}; the port: {tcp_state(f':{port}')})"
+    raise ServiceError(f"{what} did not listen on 127.0.0.1:{port} within {timeout_s:g} s{running}: {_tail(log)}")
 
 
 def _tail(path: Path, chars: int = 2000) -> str:
