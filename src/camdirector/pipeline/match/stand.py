@@ -65,19 +65,15 @@ def scores_from(
     """(n,) the weighted mean over the moments of the worst-seen framed subject's share, from n
     fixed stands (n, 3) m, or (1,) from the camera's own place on its torus (stands_world None);
     0 at a moment where the framing is degenerate."""
-    total = None
+    total = np.zeros(1 if stands_world is None else len(stands_world))
     for moment, weight in zip(moments, weights):
         place = camera.place_at(moment.time_s)
         positions = camera.positions(moment, [place]) if stands_world is None else stands_world
-        n = 1 if stands_world is None else len(stands_world)
-        if total is None:
-            total = np.zeros(n)
         if positions is None:
             continue
         rotations = camera.rotations(moment, positions, [place] * len(positions))
         framed = camera.framed(moment.time_s) or subjects
         total += weight * framed_seen(visibility, moment, framed, positions, rotations, camera.lens).min(axis=1)
-    assert total is not None  # at least the cut's moment
     out: np.ndarray = total / max(sum(weights), 1e-9)
     return out
 
