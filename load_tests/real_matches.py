@@ -50,6 +50,7 @@ COLUMNS = (
     ("first person", lambda f: f["kill_coverage_first_person"]),
     ("program vis.", lambda f: f["program_visibility"]),
     ("height", lambda f: f["shown_height"]["median"]),
+    ("height, third person", lambda f: f["shown_height"].get("median_third_person")),
     ("subjects' height", lambda f: f["shown_height"].get("subjects_median")),
     ("tallest / >60%", lambda f: f"{f['shown_height']['max']} / {f['shown_height']['over_60pc']}"),
     ("nobody: overview / other", lambda f: f"{f['nobody_shown']['overview']} / {f['nobody_shown']['other']}"),

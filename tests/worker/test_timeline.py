@@ -98,7 +98,7 @@ def match_state(frame: int, buffering: bool = False) -> FrameState:
 def test_a_match_frame_as_json():
     timeline = Timeline()
     s = match_state(30)
-    s.match.shot = ShotChoice(("a0", "b0"), ShotKind.DUEL, "fight: a0 vs b0")
+    s.match.shot = ShotChoice(("a0", "b0"), ShotKind.DUEL, "fight: a0 vs b0; through a0's eyes", eyes_id="a0")
     preview = CameraPose(np.array([2.0, 3.0, -5.0]), np.array([0.0, 0.0, 0.0, 1.0]), 50.0)  # looking down -Z
     s.match.candidates = [Candidate(preview, ShotChoice(("b0",), ShotKind.FOLLOW, "fighter: b0"), 0.41234)]
     s.match.events = [GameEvent(EventKind.KILL, "a0", "b0", 0, 0.5, "headshot")]
@@ -111,13 +111,21 @@ def test_a_match_frame_as_json():
     assert frame["shot"] == {
         "subject_ids": ["a0", "b0"],
         "kind": "SHOT_DUEL",
-        "reason": "fight: a0 vs b0",
+        "reason": "fight: a0 vs b0; through a0's eyes",
         "held": False,
         "replay": None,
+        "eyes_id": "a0",
     }
     assert frame["candidates"] == [
         {
-            "shot": {"subject_ids": ["b0"], "kind": "SHOT_FOLLOW", "reason": "fighter: b0", "held": False, "replay": None},
+            "shot": {
+                "subject_ids": ["b0"],
+                "kind": "SHOT_FOLLOW",
+                "reason": "fighter: b0",
+                "held": False,
+                "replay": None,
+                "eyes_id": "",
+            },
             "score": 0.4123,
             "camera": [2.0, 3.0, -5.0],
             "forward": [-0.0, -0.0, -1.0],
@@ -134,6 +142,7 @@ def test_a_match_frame_as_json():
             "reason": "planned objective in 2.2 s: a0",
             "held": False,
             "replay": None,
+            "eyes_id": "",
         },
     }
 

@@ -408,7 +408,7 @@ class GameEvent(_message.Message):
     def __init__(self, kind: _Optional[_Union[EventKind, str]] = ..., actor_id: _Optional[str] = ..., other_actor_id: _Optional[str] = ..., priority: _Optional[int] = ..., time_s: _Optional[float] = ..., label: _Optional[str] = ..., position: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
 
 class ShotInfo(_message.Message):
-    __slots__ = ("subject_ids", "kind", "reason", "held", "replay_frame", "replay_time_s", "replay_kill_time_s")
+    __slots__ = ("subject_ids", "kind", "reason", "held", "replay_frame", "replay_time_s", "replay_kill_time_s", "eyes_id")
     SUBJECT_IDS_FIELD_NUMBER: _ClassVar[int]
     KIND_FIELD_NUMBER: _ClassVar[int]
     REASON_FIELD_NUMBER: _ClassVar[int]
@@ -416,6 +416,7 @@ class ShotInfo(_message.Message):
     REPLAY_FRAME_FIELD_NUMBER: _ClassVar[int]
     REPLAY_TIME_S_FIELD_NUMBER: _ClassVar[int]
     REPLAY_KILL_TIME_S_FIELD_NUMBER: _ClassVar[int]
+    EYES_ID_FIELD_NUMBER: _ClassVar[int]
     subject_ids: _containers.RepeatedScalarFieldContainer[str]
     kind: ShotKind
     reason: str
@@ -423,7 +424,8 @@ class ShotInfo(_message.Message):
     replay_frame: int
     replay_time_s: float
     replay_kill_time_s: float
-    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ..., held: _Optional[bool] = ..., replay_frame: _Optional[int] = ..., replay_time_s: _Optional[float] = ..., replay_kill_time_s: _Optional[float] = ...) -> None: ...
+    eyes_id: str
+    def __init__(self, subject_ids: _Optional[_Iterable[str]] = ..., kind: _Optional[_Union[ShotKind, str]] = ..., reason: _Optional[str] = ..., held: _Optional[bool] = ..., replay_frame: _Optional[int] = ..., replay_time_s: _Optional[float] = ..., replay_kill_time_s: _Optional[float] = ..., eyes_id: _Optional[str] = ...) -> None: ...
 
 class CandidateShot(_message.Message):
     __slots__ = ("pose", "shot", "score")

@@ -608,7 +608,7 @@ def pose_msg(pose: CameraPose) -> pb.CameraPose:
 
 def shot_msg(shot: ShotChoice, replay_of: ReplayedMoment | None = None) -> pb.ShotInfo:
     """The wire's shot; a REPLAY's with the moment its picture shows (replay_of) and its kill."""
-    out = pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason, held=shot.held)
+    out = pb.ShotInfo(subject_ids=shot.subject_ids, kind=int(shot.kind), reason=shot.reason, held=shot.held, eyes_id=shot.eyes_id)
     if replay_of is not None:
         out.replay_frame, out.replay_time_s = replay_of.frame, replay_of.time_s
     if shot.replay is not None:

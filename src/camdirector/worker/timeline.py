@@ -166,12 +166,13 @@ def _shot_json(shot: ShotChoice, replay_of: ReplayedMoment | None = None) -> dic
         "reason": shot.reason,
         "held": shot.held,
         "replay": replay,
+        "eyes_id": shot.eyes_id,
     }
 
 
 def _match_json(parts: list[MatchFrame], rows: list[dict]) -> None:
     """Adds the MATCH fields to each row (kinds named as in camdirector.v1: SHOT_DUEL, EVENT_KILL):
-    shot {subject_ids, kind, reason, held, replay} or null; candidates [{shot, score, camera, forward}] (as the
+    shot {subject_ids, kind, reason, held, replay, eyes_id} or null; candidates [{shot, score, camera, forward}] (as the
     wire's CandidateShot); players (ids) and teams in target order; events [{time_s, kind,
     actor_id, other_actor_id, priority, label}]; planned_cut {time_s, shot} or null."""
     candidates = [c for m in parts for c in m.candidates]

@@ -17,6 +17,7 @@ from camdirector.evaluation.match.measure import (
     nobody_shown,
     shown_heights_per_moment,
     tallest_shown,
+    third_person_heights,
 )
 from camdirector.geometry.camera import Lens, level_look_rotation
 from tests.evaluation.match.test_measure import duel, first_person_of_a, floor, program_of, side_view
@@ -68,6 +69,12 @@ def test_first_person_moments_are_left_out_of_the_tallest(match):
     heights = shown_heights_per_moment(program, bodies, Lens(), measure_shown(program, bodies, Lens(), floor()), eyes)
     assert all(len(h) == 1 for h in heights)  # b is shown at every moment
     assert tallest_shown(heights, eyes) == {"max": None, "over_60pc": None}
+    # and out of the director's own framing's heights: half the moments in a's eyes, half not
+    half = eyes.copy()
+    half[::2] = -1
+    kept = third_person_heights(heights, half)
+    assert len(kept) == len(heights[::2]) and np.array_equal(kept, np.concatenate(heights[::2]))
+    assert len(third_person_heights(heights, eyes)) == 0
 
 
 def offered(match, views: list[tuple[list[float], list[float], tuple[str, ...]]]) -> Offered:

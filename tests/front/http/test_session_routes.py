@@ -180,6 +180,7 @@ def test_a_match_session_shows_its_program_candidates_and_events(match):
             "reason": reply.shot.reason,
             "held": reply.shot.held,
             "replay": None,  # a live shot
+            "eyes_id": reply.shot.eyes_id,
         }
         assert [c["shot"]["subject_ids"] for c in frame["candidates"]] == [list(c.shot.subject_ids) for c in reply.candidates]
         for candidate, sent in zip(frame["candidates"], reply.candidates):

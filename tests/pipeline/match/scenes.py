@@ -119,6 +119,16 @@ def on_screen(state: FrameState, points_world: np.ndarray) -> np.ndarray:
     return project_to_screen(state.pose, LENS, np.atleast_2d(points_world))
 
 
+def shows(state: FrameState, ids: list[str], column: int) -> bool:
+    """Whether the state's picture shows the player of that column: its aim point inside the frame
+    of the pose (at the pose's own field of view), or the camera in its eyes (a first-person shot,
+    first_person.py: the viewer sees what it sees)."""
+    if state.match.shot.eyes_id == ids[column]:
+        return True
+    lens = Lens(state.pose.vertical_fov_deg, LENS.aspect)
+    return bool(np.all(np.abs(project_to_screen(state.pose, lens, state.aim_points_world[column][None])) <= 1.0))
+
+
 def shots(states: list[FrameState]) -> list[tuple[float, float, FrameState]]:
     """(start_s, end_s, first state) of each shot of the program, in order (the last one open-ended)."""
     shown = [s for s in states if not s.match.buffering]

@@ -34,9 +34,11 @@ from tests.pipeline.match.scenes import (
     on_screen,
     run_session,
     shots,
+    shows,
 )
 
 TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
+IDS = list(TEAMS)
 KILL_S = 25.0
 
 
@@ -51,11 +53,14 @@ def two_fronts(t: float):
     }
 
 
-def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it():
+@pytest.mark.parametrize("first_person", [True, False])
+def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it(first_person):
     """The cut comes 1-4 s before the kill, on the killer alone (the pair only around the kill:
-    shots.py PairWindow); at the kill the shot is the DUEL of both, both on screen."""
+    shots.py PairWindow); at the kill the shot is the DUEL of both, both shown: a Toric camera
+    frames them, a first-person one is a2's eyes, b2 in its frame (a2 faces it)."""
     match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0)
-    _, states = run_session(match, 40.0)
+    # b2, 15 m from a2, fills under 0.1 of its frame (the default floor): a lower one lets a2's eyes show it
+    states = BareRig(match, MatchSettings(first_person=first_person, eyes_shown_height_min=0.05)).run(40.0)
     covering = [(start, s) for start, end, s in shots(states) if start <= KILL_S < end]
     assert len(covering) == 1
     start, first = covering[0]
@@ -64,17 +69,19 @@ def test_buffered_kill_gets_a_duel_cut_one_to_four_seconds_before_it():
     assert KILL_S - 4.0 <= start <= KILL_S - 1.0
     at_kill = at_time(states, KILL_S)
     assert at_kill.match.shot.kind == ShotKind.DUEL and set(at_kill.match.shot.subject_ids) == {"a2", "b2"}
-    xy = on_screen(at_kill, np.array(at_kill.aim_points_world)[[2, 3]])
-    assert np.all(np.abs(xy) <= 1.0)
+    assert shows(at_kill, IDS, 2) and shows(at_kill, IDS, 3)
+    assert (at_kill.match.shot.eyes_id == "a2") == first_person
 
 
-def test_a_planned_duel_frames_the_pair_only_around_its_kill_and_reframes_without_a_jump():
+@pytest.mark.parametrize("first_person", [True, False])
+def test_a_planned_duel_frames_the_pair_only_around_its_kill_and_reframes_without_a_jump(first_person):
     """Before the pair's window (pair_before_s plus the easing) and after it, the program names the
-    killer alone and frames it; between, both; the camera moves from one framing to the other
-    within the shot, never by more than a cut's jump between two frames."""
-    settings = MatchSettings()
+    killer alone and shows it; between, both; the camera moves from one framing to the other
+    within the shot, never by more than a cut's jump between two frames (through a2's eyes it
+    does not move: a2 stands still)."""
+    settings = MatchSettings(first_person=first_person, eyes_shown_height_min=0.05)  # b2 is 15 m from a2
     match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0)
-    _, states = run_session(match, 40.0)
+    states = BareRig(match, settings).run(40.0)
     start, end, _ = next((a, b, s) for a, b, s in shots(states) if a <= KILL_S < b)
     shot = [s for s in states if not s.match.buffering and start <= s.time_s < end]
     opens, closes = KILL_S - settings.pair_before_s, KILL_S + settings.pair_after_s
@@ -84,7 +91,7 @@ def test_a_planned_duel_frames_the_pair_only_around_its_kill_and_reframes_withou
             assert set(names) == {"a2", "b2"}
         elif state.time_s < opens - 0.5 * settings.reframe_s or state.time_s > closes + 0.5 * settings.reframe_s:
             assert names == ("a2",)
-            assert np.all(np.abs(on_screen(state, state.aim_points_world[2])) <= 1.0)
+            assert shows(state, IDS, 2)
     alone = [s for s in shot if s.match.shot.subject_ids == ("a2",)]
     assert alone and any(s.time_s < opens for s in alone) and any(s.time_s > closes for s in alone)
     steps_m = [np.linalg.norm(b.pose.position_world - a.pose.position_world) for a, b in zip(shot, shot[1:])]
@@ -140,8 +147,7 @@ def test_kills_in_a_melee_are_framed_with_a_delay_and_not_all_without():
         hits = []
         for event in (e for e in match.events if e.time_s <= 60.0):
             s = at_time(states, event.time_s)
-            xy = on_screen(s, np.array(s.aim_points_world)[[ids.index(event.actor_id), ids.index(event.other_actor_id)]])
-            hits.append(bool(np.all(np.abs(xy) <= 1.0)))
+            hits.append(shows(s, ids, ids.index(event.actor_id)) and shows(s, ids, ids.index(event.other_actor_id)))
         framed[delay_s] = np.mean(hits)
     assert framed[10.0] == 1.0
     assert framed[0.0] < framed[10.0]

@@ -123,8 +123,10 @@ def test_a_replay_comes_before_a_discretionary_cut_at_its_tick():
     """When the live shot would cut away from the dead victim (dead_hold_s) at the very tick the
     replay may come, the replay comes, straight from the live shot of the kill; the cut away waits
     (before, the cut came first and the replay, once its shot was min_shot_s old, after a short
-    live shot)."""
-    settings = MatchSettings(dead_hold_s=MatchSettings().replay_after_s)
+    live shot). The live shot is a Toric one: through the killer's eyes, the replay's place
+    search from a live camera at the killer's eye outgrew the tick's plan work (plan_late), and
+    the replay came a tick later."""
+    settings = MatchSettings(dead_hold_s=MatchSettings().replay_after_s, first_person=False)
     states = BareRig(Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S)], delay_s=10.0), settings).run(40.0)
     shown = replays(states)
     assert len(shown) == 1

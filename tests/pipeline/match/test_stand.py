@@ -36,7 +36,8 @@ def approach(t: float):
 
 def _kill_rig(walls=()) -> BareRig:
     """4 s of `approach` in a bare rig whose buffer holds all of it (a 4 s delay)."""
-    rig = BareRig(Match({"a": 1, "b": 2}, approach, delay_s=4.0, walls=list(walls)), MatchSettings())
+    # a Toric camera's stand (our director would otherwise look through a's eyes: first_person.py)
+    rig = BareRig(Match({"a": 1, "b": 2}, approach, delay_s=4.0, walls=list(walls)), MatchSettings(first_person=False))
     rig.run(4.0)
     return rig
 

@@ -53,6 +53,7 @@ from camdirector.evaluation.match.measure import (
     shown_heights_per_moment,
     sweeps_through_walls,
     tallest_shown,
+    third_person_heights,
 )
 from camdirector.evaluation.match.session_feed import (
     Feed,
@@ -214,6 +215,7 @@ def _figures(
     lengths = shot_lengths_s(program)
     per_moment = shown_heights_per_moment(program, bodies, lens, shown, eyes)
     heights = np.concatenate([np.zeros(0), *per_moment])
+    third_person = third_person_heights(per_moment, eyes)
     tallest = tallest_shown(per_moment, eyes)
     nobody = nobody_shown(program, shown, eyes)
     replays = replay_figures(match, program, shown, REPLAY_ROOM_S)
@@ -238,6 +240,7 @@ def _figures(
         "first_person_share": round(float((eyes >= 0).mean()), 3),
         "shown_height": {
             "median": round(float(np.median(heights)), 3) if len(heights) else None,
+            "median_third_person": round(float(np.median(third_person)), 3) if len(third_person) else None,
             "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None,
             "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None,
             "max": None if tallest["max"] is None else round(tallest["max"], 3),

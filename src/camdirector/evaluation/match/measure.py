@@ -48,8 +48,10 @@ has them, never from what the director says it shows:
 - shown height: per program moment and shown player (not the one in whose eyes the camera is),
   the height on screen of its body's sample points, as a share of the frame's height; the median
   over all of them says whether players are large enough to read; the same over the players the
-  shot names says whether its subjects are. The tallest shown player per program moment (the
-  moments in someone's eyes left out: a first-person view is the game's own picture) says whether
+  shot names says whether its subjects are; the same over the moments in no one's eyes says it of
+  the director's own framing (a first-person view shows players as the game does). The tallest
+  shown player per program moment (the moments in someone's eyes left out: a first-person view is
+  the game's own picture) says whether
   one is pressed against the lens: the largest over the program, and the share of moments with
   one taller than `TALL_HEIGHT` (issue 41: none).
 - nobody shown: the share of program moments at which no player is shown (nor is the camera in
@@ -365,6 +367,12 @@ def shown_heights(
 ) -> np.ndarray:
     """(m,) the heights of shown_heights_per_moment, every moment's together."""
     return np.concatenate([np.zeros(0), *shown_heights_per_moment(program, bodies, lens, shown, eyes_of, subjects_only)])
+
+
+def third_person_heights(per_moment: list[np.ndarray], eyes_of: np.ndarray) -> np.ndarray:
+    """(m,) the shown heights (per_moment from shown_heights_per_moment) of the moments in no
+    one's eyes, together: the director's own framing (module docstring)."""
+    return np.concatenate([np.zeros(0), *(h for h, eyes in zip(per_moment, eyes_of) if eyes < 0)])
 
 
 def tallest_shown(per_moment: list[np.ndarray], eyes_of: np.ndarray) -> dict[str, float | None]:

@@ -3,7 +3,8 @@
 Each program moment is drawn from its camera at VIDEO_SIZE_PX (a replay's at the match frame it
 shows again): the level mesh and the players'
 capsules coloured by team (dead players are left out: the match file keeps their bodies standing
-where they fell, which on screen would read as a player who is still fighting), each living player
+where they fell, which on screen would read as a player who is still fighting; so is the player
+in whose eyes a first-person moment is, measure.py `in_eyes_of`, as the game's own view), each living player
 in the picture labelled over its head with its name, or its id where the game gave none
 (geometry/labels.py, as the dashboard's monitors). A small top view
 of the level sits in the top right corner, with every living player as a dot of its team's colour
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from camdirector.evaluation.match.match_file import MatchRecording
-from camdirector.evaluation.match.measure import Program, player_mesh
+from camdirector.evaluation.match.measure import Program, in_eyes_of, player_mesh
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.labels import PlacedLabel, draw_labels
 from camdirector.geometry.transforms import RigidTransform, matrix_to_quat
@@ -61,11 +62,14 @@ def _dots(image: np.ndarray, pose: CameraPose, lens: Lens, points_world: np.ndar
 
 
 def label_players(
-    frame: np.ndarray, match: MatchRecording, index: int, pose: CameraPose, lens: Lens
+    frame: np.ndarray, match: MatchRecording, index: int, pose: CameraPose, lens: Lens, eyes_of: int = -1
 ) -> tuple[np.ndarray, list[PlacedLabel]]:
     """The program frame (h, w, 3) uint8 of match frame `index` seen from pose with each living
-    player's name label over its head (its feet plus its height), and the labels drawn."""
-    alive = match.alive[index]
+    player's name label over its head (its feet plus its height), and the labels drawn; none over
+    the player in whose eyes the camera is (column eyes_of, -1: none)."""
+    alive = match.alive[index].copy()
+    if eyes_of >= 0:
+        alive[eyes_of] = False
     heads = match.positions_world[index] + np.array([[0.0, p.height_m, 0.0] for p in match.players])
     texts = [(p.name or p.id) if shown else "" for p, shown in zip(match.players, alive.tolist())]
     return draw_labels(frame, pose, lens, heads, texts, _team_rgb8(match))
@@ -92,6 +96,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
     top = top_view_pose(artifact.level_vertices, lens)
     team_rgb8 = _team_rgb8(match)
     ids = [p.id for p in match.players]
+    eyes = in_eyes_of(match, program)  # (n,) a first-person moment's player: its body is left out, as the game's view
     costs = []
     try:
         # The level does not move: its top view is drawn once, and its GL context released before
@@ -112,7 +117,10 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
             start = time.perf_counter()
             index = int(program.shown_index[row])  # a replay's picture is of its replayed moment
             alive = match.alive[index]
-            feet = match.positions_world[index] + np.where(alive[:, None], 0.0, HIDDEN_OFFSET_M)
+            drawn = alive.copy()
+            if eyes[row] >= 0:
+                drawn[eyes[row]] = False
+            feet = match.positions_world[index] + np.where(drawn[:, None], 0.0, HIDDEN_OFFSET_M)
             renderer.set_transforms(
                 ids, np.stack([RigidTransform(p, q).matrix() for p, q in zip(feet, match.rotations_xyzw[index])])
             )
@@ -126,7 +134,7 @@ def render_program(match: MatchRecording, program: Program, out_mp4: Path, secon
             )
             pose = program.pose(int(row))
             frame_lens = Lens(pose.vertical_fov_deg, lens.aspect)  # the program's own width (a widened lens: lens_width.py)
-            frame, _ = label_players(renderer.render(pose, frame_lens), match, index, pose, frame_lens)
+            frame, _ = label_players(renderer.render(pose, frame_lens), match, index, pose, frame_lens, int(eyes[row]))
             frame[: inset.shape[0], width - inset.shape[1] :] = inset
             video.write(frame)
             costs.append((time.perf_counter() - start) * 1e3)

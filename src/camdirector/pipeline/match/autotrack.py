@@ -26,11 +26,13 @@ src/cl_view.c; settings with their cvar names and defaults in `AutotrackSettings
 - The camera is what a spectator in track mode sees (cl_cam.c Cam_Track with cl_chasecam 1:
   the tracked player's origin and view angles): the player's first-person view, the eye
   DEFAULT_VIEWHEIGHT (22 units) above its origin, 16 below it for a corpse (cl_view.c
-  V_CalcRefdef), looking along the player's rotation (local +Z: pitch and yaw for imported
-  demos), through the level camera of look_along.py (as HLTV's views; the corpse's 80-degree
-  roll is left out: the MATCH rig keeps the horizon level). A cut is instant, as the client's `track`.
-  Players' transforms are their feet (the wire's contract): the origin is 24 units above them
-  (geometry/quake_frame.py), so the eye stands 46 units (1.44 m) above the feet of any game.
+  V_CalcRefdef), looking along the player's facing (the wire carries the body's yaw; the view's
+  pitch stays in the match file), through the level camera of look_along.py (as HLTV's views;
+  the corpse's 80-degree roll is left out: the MATCH rig keeps the horizon level):
+  first_person.py's `FirstPersonCamera`, which our director's first-person shots use too. A cut
+  is instant, as the client's `track`. Players' transforms are their feet (the wire's contract):
+  the origin is 24 units above them (geometry/quake_frame.py), so the eye stands 46 units
+  (1.44 m) above the feet of any game.
 - It reads no future: it needs no broadcast delay (with one it runs at the program moment as
   live), plans nothing and offers the rig's usual candidates.
 
@@ -51,12 +53,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
-from camdirector.geometry.quake_frame import M_PER_UNIT, ORIGIN_ABOVE_FEET_UNITS
-from camdirector.geometry.transforms import quat_rotate
 from camdirector.pipeline.inputs import EventKind, PlayerStats
 from camdirector.pipeline.match.director_contract import DirectorBase
+from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
-from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
 
@@ -89,10 +89,6 @@ VARIABLES = {
     "h": "health",
     "u": "player number",
 }  # of MVD_Var_Vals, those the wire carries
-VIEWHEIGHT_UNITS = 22.0  # DEFAULT_VIEWHEIGHT: the eye above a living player's origin
-CORPSE_VIEWHEIGHT_UNITS = -16.0  # cl_view.c: a corpse's eye below its origin
-EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + VIEWHEIGHT_UNITS) * M_PER_UNIT
-CORPSE_EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + CORPSE_VIEWHEIGHT_UNITS) * M_PER_UNIT
 NO_STATS_FLAG = "autotrack_no_stats"
 EXPRESSION_ERROR_FLAG = "autotrack_expression_error"  # a value divided by zero: that player ranks last
 
@@ -249,27 +245,6 @@ def stats_variables(stats: PlayerStats, number: int, values: tuple[float, ...], 
     }
 
 
-class FirstPersonCamera:
-    """The tracked player's own view (module docstring): eye above its feet, looking along its rotation."""
-
-    kind = ShotKind.FOLLOW
-
-    def __init__(self, player: int, lens: Lens):
-        self.player, self.lens = player, lens
-
-    def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
-        """Nothing to smooth: the view is the player's own."""
-
-    def pose(self, moment: Moment) -> CameraPose:
-        transform = moment.transforms[self.player]
-        height = EYE_ABOVE_FEET_M if moment.alive[self.player] else CORPSE_EYE_ABOVE_FEET_M
-        eye = transform.position_world + np.array([0.0, height, 0.0])
-        forward = quat_rotate(transform.rotation_xyzw, np.array([0.0, 0.0, 1.0]))
-        if math.hypot(forward[0], forward[2]) < 1e-6:  # straight up or down: a level camera needs a heading
-            forward = moment.forward_world[self.player]
-        return look_along(eye, forward, self.lens.vertical_fov_deg)
-
-
 class AutotrackDirector(DirectorBase):
     """ezQuake's mvd_autotrack (module docstring) over the rig's players (target order), their
     teams (n,) and the read-only view of their latest stats by id."""
@@ -379,6 +354,6 @@ class AutotrackDirector(DirectorBase):
             reason = f"autotrack ({self.mode_name}, {why}): {name} ranks best, {values[best]:g}"
         else:
             reason = f"autotrack (no stats): {name} has the most frags from kill events, {int(values[best])}"
-        shot = Shot(ShotChoice((name,), ShotKind.FOLLOW, reason), (best,), FirstPersonCamera(best, self.lens), now)
+        shot = Shot(ShotChoice((name,), ShotKind.FOLLOW, reason, eyes_id=name), (best,), FirstPersonCamera(best, self.lens), now)
         shot.scores = {"autotrack_value": float(values[best])}
         return shot

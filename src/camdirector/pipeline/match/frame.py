@@ -55,6 +55,7 @@ class ShotChoice:
     reason: str
     held: bool = False  # a human's take (or its fallback), kept until released
     replay: Replay | None = None  # a REPLAY shot's kill and moments (None: live)
+    eyes_id: str = ""  # the player through whose eyes the picture is (first_person.py); "": none
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.lens_width import widened_fov_deg
@@ -70,9 +71,18 @@ class ProgramCamera:
         showing none of the shot's subjects is replaced by a cut (`_seen_again`). Where a cut now
         would leave a shot shorter than the style's `min_shot_s` (`cut_short`, rig.py), a move
         through a wall is held before the wall however far while the hold shows every framed
-        subject (`held_before_wall`); it is a cut only where the hold would not."""
+        subject (`held_before_wall`); it is a cut only where the hold would not. A first-person
+        camera's pose is its player's eye as it is (first_person.py), the last pose held while the
+        eye is out of the level (`eye_outside_level_held`)."""
         camera.advance(moment, dt_s, response_time_s)
         flags: list[str] = []
+        if isinstance(camera, FirstPersonCamera):  # a player's eye is where the game let it be (first_person.py),
+            eye = camera.pose(moment)
+            if self.in_level.inside(eye.position_world) or last_pose is None:
+                return eye, flags
+            # but for the frames of a teleport a demo interpolates through a wall (2on2_frobodm2: 13 of
+            # 43,204 eyes in solid): the picture stays, and the rig cuts where the eye comes out
+            return last_pose, ["eye_outside_level_held"]
         pose = camera.pose(moment)
         unheld: CameraPose | None = None  # the pose a hold before a wall replaced
         if pose is not None and isinstance(camera, ToricCamera) and camera.stand_world is None:  # a stand never moves

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from camdirector.geometry.camera import CameraPose
+from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotChoice
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.shots import ToricCamera
@@ -49,7 +50,7 @@ class Shot:
 
     def framed(self, time_s: float) -> tuple[int, ...]:
         """The players its picture frames at time_s, s: its subjects, or the one its pair window keeps (shots.py)."""
-        framed = self.camera.framed(time_s) if isinstance(self.camera, ToricCamera) else None
+        framed = self.camera.framed(time_s) if isinstance(self.camera, (ToricCamera, FirstPersonCamera)) else None
         return self.subjects if framed is None else framed
 
 

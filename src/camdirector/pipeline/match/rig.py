@@ -24,8 +24,11 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             walls hide most of its first subject comes in front of the wall, and any pose, the
             candidates' too, that would lie outside the level or inside solid comes inside
             (program_camera.py, in_level.py), worked out ahead of the frame when it can be
-            (camera_ahead.py); a camera that moved through a wall since the last frame cuts
-            there (`cut_through_wall`): cuts to places, never sweeps through walls.
+            (camera_ahead.py); a first-person camera (first_person.py) is its player's eye
+            wherever the game puts it, never moved; a camera that moved through a wall since the
+            last frame cuts there (`cut_through_wall`): cuts to places, never sweeps through walls.
+            A new shot through the eyes the shot on air looks through is no cut: the same
+            picture goes on (`same_eyes_no_cut`), and so does its length.
 4. visibility  the share of the framed subjects' sample points seen from the camera.
 During a REPLAY shot (replays.py) CAMERA and VISIBILITY are of the replayed moment (the buffer keeps
 the past it shows), and so are `program_transforms` and the frame's `replay_of`, while
@@ -74,6 +77,7 @@ from camdirector.pipeline.match.camera_ahead import (
 from camdirector.pipeline.match.director_contract import DirectorContext, MatchDirector
 from camdirector.pipeline.match.director_registry import director_entry
 from camdirector.pipeline.match.drawn_plan import PLAN_SLICE_S, DrawnPlan, PlanResult
+from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ReplayedMoment, ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
@@ -435,16 +439,21 @@ class MatchRig(RigBase):
         camera gets the new goal); whether it cut."""
         flags.extend(result.flags)
         self.takes.held, self._candidates, self._planned_cuts = result.held, result.candidates, result.planned_cuts
-        if result.shot is not None and drawn_on is not None and self._jump_cut(result.shot, moment):
+        seen_through = result.shot is not None and self._same_eyes(result.shot)
+        if result.shot is not None and not seen_through and drawn_on is not None and self._jump_cut(result.shot, moment):
             flags.append("cut_refused_jump")  # the next plan, drawn now, judges it from the picture now on air
             return False
         if result.shot is not None:
             if result.shot.choice.replay is not None:  # its length counts from now too
                 self._replayed.append(result.shot.choice.replay.kill_time_s)
                 result.shot.hold_until_s += moment.time_s - result.shot.start_s
-            result.shot.start_s = moment.time_s  # on air from now: the shot's length counts from here
+            # on air from now: the shot's length counts from here; through the same eyes, the picture
+            # goes on uncut (a cut to the very same view is none to a viewer) and so does its length
+            result.shot.start_s = self.shot.start_s if self.shot is not None and seen_through else moment.time_s
             self.shot = result.shot
-            return True
+            if seen_through:
+                flags.append("same_eyes_no_cut")
+            return not seen_through
         assert self.shot is not None  # a tick without a cut keeps the shot on air
         if drawn_on is None or self.shot is drawn_on:
             camera = self.shot.camera
@@ -459,6 +468,17 @@ class MatchRig(RigBase):
                     if pair != camera.pair:
                         camera.pair = pair
         return False
+
+    def _same_eyes(self, shot: Shot) -> bool:
+        """Whether the shot is through the eyes of the player through whose eyes the shot on air
+        is (first_person.py): the same picture, which the program goes on with uncut."""
+        current = self.shot
+        return (
+            current is not None
+            and isinstance(current.camera, FirstPersonCamera)
+            and isinstance(shot.camera, FirstPersonCamera)
+            and current.camera.player == shot.camera.player
+        )
 
     def _jump_cut(self, shot: Shot, moment: Moment) -> bool:
         """Whether cutting to the shot now breaks the 30-degree rule against the pose on air: a

@@ -143,6 +143,16 @@ class MatchSettings:
                                          # 41's median bar is 0.15), share. (0, shown_height_max]
     stand_margin: float = 0.0            # and must see at least this much better than the Toric place (stand.py), share.
                                          # [0, 1]
+    first_person: bool = True            # our director may take a shot through its kept player's eyes (first_person.py)
+    eyes_fov_deg: float = 73.74          # a first-person shot's vertical field of view: QuakeWorld's default fov 90 across
+                                         # 4:3 (ezQuake keeps the vertical angle on wider screens), deg. (1, 170)
+    eyes_seen: float = 0.5               # a planned shot goes through its kept player's eyes when from there each of its
+                                         # other subjects is seen this share of its points at each of its events
+                                         # (eval-match's shown fraction), share. [0, 1]
+    eyes_shown_height_min: float = 0.1  # and only where each is near enough to read from there: this share of the frame's
+                                         # height, by distance (first_person.py), share. [0, 1]
+    eyes_lead_s: float = 1.0             # or, where its Toric camera would meet a wall within the shot, at some moment this
+                                         # long before each event (first_person.py), s. [0, 10]
     shown_height_max: float = 0.5        # the framing band's top: a shot's camera is placed where none of its subjects fills
                                          # more of the frame's height than this, by distance (shot_builder.py): a whole body
                                          # with room around it, a long shot; closer, a medium shot cuts the body (and in this
@@ -178,6 +188,10 @@ class MatchSettings:
                              "in (0, 100], stand_shown_height_min in (0, shown_height_max], stand_margin in [0, 1]")
         if not 0.0 <= self.wall_hold_max_m <= 100.0:
             raise ValueError("MatchSettings: wall_hold_max_m in [0, 100] m")
+        if not (1.0 < self.eyes_fov_deg < 170.0 and 0.0 <= self.eyes_seen <= 1.0 and 0.0 <= self.eyes_lead_s <= 10.0
+                and 0.0 <= self.eyes_shown_height_min <= 1.0):
+            raise ValueError("MatchSettings: eyes_fov_deg in (1, 170) deg, eyes_seen and eyes_shown_height_min in [0, 1], "
+                             "eyes_lead_s in [0, 10] s")
         if self.seen_again_gap_s > 60.0 or self.seen_again_lookahead_s > 10.0:
             raise ValueError("MatchSettings: seen_again_gap_s in [0, 60] s, seen_again_lookahead_s in [0, 10] s")
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:

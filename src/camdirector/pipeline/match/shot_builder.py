@@ -27,6 +27,12 @@ goes to shows them under the band's top) or one the program camera can step back
 before a wall (shots.py stepped_back). Refusing those too cost the open nav_test's bot match
 kill coverage 0.721 -> 0.623: there, every over-the-shoulder place can step back.
 
+Through a player's eyes (first_person.py): a shot our director plans for its events, or a
+discretionary FOLLOW of one player, not a human's take nor a replay, is taken through its kept
+player's eyes when from there it shows its other subjects at each event (`through_eyes`); its
+reason ends "through P's eyes" and its choice names P (`eyes_id`). Else a planned shot may stand
+at a level node (stand.py), else it rides its torus.
+
 Candidates (`candidate_camera`): a situation is offered beside the program only when its camera,
 at the style's place, shows at least `candidate_min_shown` of its subjects at that moment.
 """
@@ -41,6 +47,7 @@ from dataclasses import replace
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.pipeline.match.first_person import FirstPersonCamera, through_eyes
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
@@ -142,8 +149,9 @@ class ShotBuilder:
         self.players, self.style, self.lens = players, style, lens
         self.settings, self.visibility, self.grammar = settings, visibility, grammar
         self.extra_overview_cameras = extra_overview_cameras
-        # (n,) m: each player's body height (its sample points' extent), for the framing band
-        self.body_heights_m = np.array([np.ptp(points[:, 1]) for points in visibility.samples_local])
+        # (n,) m: each player's body height (its mesh's extent: the sample points fall short of the head and
+        # feet, 1.39 m of a real 1.75-m player), for the framing band and the eye of a first-person shot
+        self.body_heights_m = np.array([np.ptp(points[:, 1]) for points in visibility.outlines_local])
 
     @property
     def upright(self) -> float:
@@ -364,12 +372,20 @@ class ShotBuilder:
         if score < 0.0:
             return None, -1.0
         camera.place = camera.goal = place
-        if events_s and buffer is not None:  # a planned shot: where it stands, when a level node sees it through
+        planned = buffer if events_s else None  # a planned shot: its events and the buffer that holds them
+        if s.first_person and not choice.held and choice.replay is None and (planned is not None or len(subjects) == 1):
+            eyes = through_eyes(camera, subjects, buffer, moment, events_s, self.visibility, self.body_heights_m, s)
+            if eyes is not None and self._eyes_allowed(eyes, previous, previous_framed, previous_world, moment, subjects):
+                # first_person.py: no wall to meet, no cut within the shot
+                who = self.players[eyes.player]
+                choice = replace(choice, reason=f"{choice.reason}; through {who}'s eyes", eyes_id=who)
+                return Shot(choice, subjects, eyes, start_s), score
+        if planned is not None:  # where it stands, when a level node sees it through
             framed_at_cut = camera.framed(moment.time_s) or subjects
             camera.stand_world = best_stand(
                 camera,
                 subjects,
-                buffer,
+                planned,
                 moment,
                 events_s,
                 self.extra_overview_cameras,
@@ -384,6 +400,23 @@ class ShotBuilder:
             assert camera.b_index is not None  # a DUEL's camera frames two
             self.grammar.remember_duel(self.players[camera.a_index], self.players[camera.b_index])
         return Shot(choice, subjects, camera, start_s), score
+
+    def _eyes_allowed(
+        self,
+        eyes: FirstPersonCamera,
+        previous: Shot | None,
+        previous_framed: set[int],
+        previous_world: np.ndarray | None,
+        moment: Moment,
+        subjects: tuple[int, ...],
+    ) -> bool:
+        """Whether a cut to the eyes keeps the 30-degree rule against the previous picture (not a
+        cut at all through the eyes the previous shot looked through: rig.py goes on with it)."""
+        if previous is not None and isinstance(previous.camera, FirstPersonCamera) and previous.camera.player == eyes.player:
+            return True
+        shared = list(previous_framed & set(eyes.framed(moment.time_s) or subjects))
+        eye_world = eyes.pose(moment).position_world
+        return bool(self.grammar.allows_cut(previous_world, moment.aims_world[shared], eye_world)[0])
 
     @staticmethod
     def _alone_cover(pair: PairWindow, moment: Moment, buffer: MomentBuffer) -> list[Moment]:

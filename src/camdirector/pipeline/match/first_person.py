@@ -1,0 +1,216 @@
+"""Through a player's eyes: the first-person view, the autotrack's camera and a shot our director
+may take (issue 41, item 3: a rhythm casters use).
+
+A QuakeWorld spectator who tracks a player sees that player's own view, the eye DEFAULT_VIEWHEIGHT
+(22 units) above its origin, 16 below it for a corpse (ezQuake cl_cam.c Cam_Track with
+cl_chasecam 1, cl_view.c V_CalcRefdef). `FirstPersonCamera` is that view through the level camera
+of look_along.py (the horizon kept level, as every MATCH camera: the wire carries the body's yaw,
+not the view's pitch), at the eye height of the body's own height (Quake's 46 of 56 units, 1.44 m
+for its 1.75-m player). It needs nothing of the level: a player's eye is where the game let it be,
+so it is never pulled in, held before a wall or moved inside (program_camera.py); a teleport or a
+respawn moves it through walls, and the rig cuts there as for any camera. Only where a demo puts
+the eye inside solid (the frames it interpolates across a teleport) does the picture stay where
+it was until the eye is back in the level.
+
+Why our director takes it: a Toric camera (shots.py) follows its player from outside, and in the
+real matches' corridors every wall between its last place and its next was a cut within the shot:
+on the real 4on4's first 3 minutes the director's own 55 shots (median 3.1 s, none under 2 s)
+were cut into 147 by 89 such cuts, median 0.8 s. A player's own view never meets a wall, and it
+is how QuakeWorld and Counter-Strike broadcasts show most of a match (the casters' spectator
+tracks a player; HLTV's director and GOTV's observers sit in a player's eyes between fights).
+From the killer's eyes, the victim is in the frame and unhidden at the moment of the kill in
+0.78-0.93 of the real matches' kills (level view, 16:9 at 73.7 degrees vertical).
+
+`through_eyes` decides it for a shot at its cut, with the buffered future: a planned shot (a
+DUEL, GROUP or FOLLOW for its events) is taken through its kept player's eyes (the Toric camera's
+anchor: a DUEL's killer) when from there each of its other subjects is shown: near enough to read
+(`eyes_shown_height_min` of the frame's height: a kill seen from 20 m away in first person is a
+speck; on the eight development matches, without it, the median shown height fell under 0.15 on
+five of them, the duel's from 0.28 to 0.13), its aim point (the chest) inside the frame and
+`eyes_seen` of its points in the frame and unhidden, at every event's moment and the next frame's
+(the moment eval-match judges the kill at). It is also taken when
+its Toric camera would meet a wall (its place, carried by the players over the shot's moments,
+passes through level geometry: a cut within the shot) and the eyes show the others at some moment
+of the `eyes_lead_s` before each event: the fight is seen, if not always its very moment. A
+discretionary FOLLOW of one player (no event to show) always is.
+The picture then names the kept player alone away from a DUEL's events, as its Toric camera would
+(its `PairWindow`, shots.py), and the pair around them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose, Lens, project_from_cameras, project_to_screen
+from camdirector.geometry.quake_frame import M_PER_UNIT, ORIGIN_ABOVE_FEET_UNITS, PLAYER_HEIGHT_M
+from camdirector.geometry.transforms import quat_rotate, quat_to_matrix
+from camdirector.pipeline.match.look_along import look_along
+from camdirector.pipeline.match.moments import Moment, MomentBuffer
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import PairWindow, ToricCamera
+from camdirector.pipeline.match.stand import shot_moments
+from camdirector.pipeline.match.visibility import SubjectVisibility
+
+VIEWHEIGHT_UNITS = 22.0  # DEFAULT_VIEWHEIGHT: the eye above a living player's origin
+CORPSE_VIEWHEIGHT_UNITS = -16.0  # cl_view.c: a corpse's eye below its origin
+EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + VIEWHEIGHT_UNITS) * M_PER_UNIT
+CORPSE_EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + CORPSE_VIEWHEIGHT_UNITS) * M_PER_UNIT
+EYE_HEIGHT_FRACTION = EYE_ABOVE_FEET_M / PLAYER_HEIGHT_M  # of a body's height: Quake's 46 / 56
+CORPSE_EYE_FRACTION = CORPSE_EYE_ABOVE_FEET_M / PLAYER_HEIGHT_M
+NEXT_FRAME_S = 0.1  # an event's next frame, judged with it (planned.py POST_EVENT_S), s
+
+
+class FirstPersonCamera:
+    """A player's own view (module docstring): the eye eye_above_feet_m over its feet (a corpse's
+    corpse_eye_above_feet_m), looking along its facing through `lens`; `pair`: the planned DUEL
+    window that names the pair around its events and the kept player alone elsewhere (None: its
+    shot names its subjects throughout)."""
+
+    # class defaults: an autotrack camera pickled into a checkpoint before these existed has none
+    pair: PairWindow | None = None
+    eye_above_feet_m: float = EYE_ABOVE_FEET_M
+    corpse_eye_above_feet_m: float = CORPSE_EYE_ABOVE_FEET_M
+
+    def __init__(
+        self,
+        player: int,
+        lens: Lens,
+        eye_above_feet_m: float = EYE_ABOVE_FEET_M,
+        corpse_eye_above_feet_m: float = CORPSE_EYE_ABOVE_FEET_M,
+        pair: PairWindow | None = None,
+    ):
+        self.player, self.lens, self.pair = player, lens, pair
+        self.eye_above_feet_m, self.corpse_eye_above_feet_m = eye_above_feet_m, corpse_eye_above_feet_m
+
+    def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
+        """Nothing to smooth: the view is the player's own."""
+
+    def pose(self, moment: Moment) -> CameraPose:
+        transform = moment.transforms[self.player]
+        height = self.eye_above_feet_m if moment.alive[self.player] else self.corpse_eye_above_feet_m
+        eye = transform.position_world + np.array([0.0, height, 0.0])
+        forward = quat_rotate(transform.rotation_xyzw, np.array([0.0, 0.0, 1.0]))
+        if math.hypot(forward[0], forward[2]) < 1e-6:  # straight up or down: a level camera needs a heading
+            forward = moment.forward_world[self.player]
+        return look_along(eye, forward, self.lens.vertical_fov_deg)
+
+    def framed(self, time_s: float) -> tuple[int, ...] | None:
+        """The player the picture names alone at time_s, s, away from its pair's events; None: all its subjects."""
+        if self.pair is None or self.pair.weight(time_s) >= 0.5:
+            return None
+        return (self.player,)
+
+
+def eyes_camera(
+    player: int, body_height_m: float, lens: Lens, settings: MatchSettings, pair: PairWindow | None = None
+) -> FirstPersonCamera:
+    """Our director's first-person camera of a player whose body is body_height_m tall: Quake's eye
+    heights scaled to it, the lens's aspect at `eyes_fov_deg`."""
+    return FirstPersonCamera(
+        player,
+        Lens(settings.eyes_fov_deg, lens.aspect),
+        EYE_HEIGHT_FRACTION * body_height_m,
+        CORPSE_EYE_FRACTION * body_height_m,
+        pair,
+    )
+
+
+def seen_through(
+    visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...], pose: CameraPose, lens: Lens
+) -> np.ndarray:
+    """(len(subjects),) the share of each subject's sample points in the frame of `pose` and
+    unhidden by the level (eval-match's shown fraction; no floor rule: an eye looks down on a
+    player below as the game shows it)."""
+    position = pose.position_world[None]
+    screen = project_from_cameras(
+        position, quat_to_matrix(pose.rotation_xyzw[None]), lens, visibility.points_world(moment, subjects)
+    )
+    with np.errstate(invalid="ignore"):
+        asked = np.asarray((np.abs(screen) <= 1.0).all(axis=2))  # (1, s * k); NaN (behind) is False
+    share: np.ndarray = visibility.seen_points(position, moment, subjects, asked).mean(axis=2)[0]
+    return share
+
+
+def through_eyes(
+    toric: ToricCamera,
+    subjects: tuple[int, ...],
+    buffer: MomentBuffer | None,
+    cut: Moment,
+    events_s: tuple[float, ...],
+    visibility: SubjectVisibility,
+    body_heights_m: np.ndarray,
+    settings: MatchSettings,
+) -> FirstPersonCamera | None:
+    """The shot's camera through its kept player's eyes (module docstring), or None (`toric` is
+    the camera the shot would otherwise have from the cut: its anchor, pair window and torus)."""
+    eyes = toric.anchor_index
+    camera = eyes_camera(eyes, float(body_heights_m[eyes]), toric.lens, settings, toric.pair)
+    others = tuple(i for i in subjects if i != eyes)
+    if not others:
+        return camera
+    if buffer is None or not events_s:
+        return None
+    if all(
+        _shows_at(camera, others, buffer.at(min(t, buffer.horizon_s)), visibility, body_heights_m, settings)
+        for t in _event_moments_s(events_s)
+    ):
+        return camera
+    if not _meets_a_wall(toric, subjects, buffer, cut, events_s, visibility, settings):
+        return None
+    lead = np.arange(0.0, settings.eyes_lead_s + 1e-9, settings.stand_step_s / 2.0)
+    for event_s in events_s:
+        moments = [buffer.at(min(event_s - dt, buffer.horizon_s)) for dt in lead]
+        if not any(_shows_at(camera, others, moment, visibility, body_heights_m, settings) for moment in moments):
+            return None
+    return camera
+
+
+def _event_moments_s(events_s: tuple[float, ...]) -> list[float]:
+    """Each event's moment and the next frame's, s (eval-match judges a kill at the first program
+    moment at or after it)."""
+    return [t + dt for t in events_s for dt in (0.0, NEXT_FRAME_S)]
+
+
+def _shows_at(
+    camera: FirstPersonCamera,
+    others: tuple[int, ...],
+    moment: Moment,
+    visibility: SubjectVisibility,
+    body_heights_m: np.ndarray,
+    settings: MatchSettings,
+) -> bool:
+    """Whether the eye shows every one of the others at the moment: near enough to read
+    (eyes_shown_height_min of the frame's height, by distance: a body H m tall d m away fills
+    H / (2 d tan(fov / 2)) of a level frame), its chest inside the frame and eyes_seen of its
+    points seen."""
+    pose = camera.pose(moment)
+    distance_m = np.linalg.norm(moment.aims_world[list(others)] - pose.position_world, axis=1)
+    with np.errstate(divide="ignore"):  # no floor: every distance reads
+        readable_m = body_heights_m[list(others)] / (2.0 * settings.eyes_shown_height_min * camera.lens.tan_half_fov_y)
+    if np.any(distance_m > readable_m):
+        return False
+    chests = project_to_screen(pose, camera.lens, moment.aims_world[list(others)])
+    with np.errstate(invalid="ignore"):
+        if not np.all(np.abs(chests) <= 1.0):  # NaN: behind the eye
+            return False
+    return bool(seen_through(visibility, moment, others, pose, camera.lens).min() >= settings.eyes_seen)
+
+
+def _meets_a_wall(
+    toric: ToricCamera,
+    subjects: tuple[int, ...],
+    buffer: MomentBuffer,
+    cut: Moment,
+    events_s: tuple[float, ...],
+    visibility: SubjectVisibility,
+    settings: MatchSettings,
+) -> bool:
+    """Whether the Toric camera's place, carried by its players from the cut over the shot's
+    moments (stand.py `shot_moments`: every stand_step_s to its last event's pair window), passes
+    through level geometry between two of them: a cut within the shot."""
+    moments, _ = shot_moments(toric, buffer, cut.time_s, events_s, settings)
+    ordered = sorted({m.time_s: m for m in moments}.values(), key=lambda m: m.time_s)
+    path = [p[0] for p in (toric.positions(m, [toric.place_at(m.time_s)]) for m in ordered) if p is not None]
+    return len(path) > 1 and bool(visibility.ray_scene.occluded(np.array(path[:-1]), np.array(path[1:])).any())
