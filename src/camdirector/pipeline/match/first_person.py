@@ -43,13 +43,13 @@ import math
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose, Lens, project_from_cameras, project_to_screen
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.quake_frame import M_PER_UNIT, ORIGIN_ABOVE_FEET_UNITS, PLAYER_HEIGHT_M
 from camdirector.geometry.transforms import quat_rotate, quat_to_matrix
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.match.shots import PairWindow, ToricCamera
+from camdirector.pipeline.match.shots import PairWindow, ToricCamera, seen_in_frame
 from camdirector.pipeline.match.stand import shot_moments
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
@@ -123,13 +123,8 @@ def seen_through(
     """(len(subjects),) the share of each subject's sample points in the frame of `pose` and
     unhidden by the level (eval-match's shown fraction; no floor rule: an eye looks down on a
     player below as the game shows it)."""
-    position = pose.position_world[None]
-    screen = project_from_cameras(
-        position, quat_to_matrix(pose.rotation_xyzw[None]), lens, visibility.points_world(moment, subjects)
-    )
-    with np.errstate(invalid="ignore"):
-        asked = np.asarray((np.abs(screen) <= 1.0).all(axis=2))  # (1, s * k); NaN (behind) is False
-    share: np.ndarray = visibility.seen_points(position, moment, subjects, asked).mean(axis=2)[0]
+    rotation = quat_to_matrix(pose.rotation_xyzw[None])
+    share: np.ndarray = seen_in_frame(visibility, moment, subjects, pose.position_world[None], rotation, lens, from_below=True)[0]
     return share
 
 
@@ -157,7 +152,7 @@ def through_eyes(
         for t in _event_moments_s(events_s)
     ):
         return camera
-    if not _meets_a_wall(toric, subjects, buffer, cut, events_s, visibility, settings):
+    if not _meets_a_wall(toric, buffer, cut, events_s, visibility, settings):
         return None
     lead = np.arange(0.0, settings.eyes_lead_s + 1e-9, settings.stand_step_s / 2.0)
     for event_s in events_s:
@@ -200,7 +195,6 @@ def _shows_at(
 
 def _meets_a_wall(
     toric: ToricCamera,
-    subjects: tuple[int, ...],
     buffer: MomentBuffer,
     cut: Moment,
     events_s: tuple[float, ...],

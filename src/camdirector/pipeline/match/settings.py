@@ -149,7 +149,7 @@ class MatchSettings:
     eyes_seen: float = 0.5               # a planned shot goes through its kept player's eyes when from there each of its
                                          # other subjects is seen this share of its points at each of its events
                                          # (eval-match's shown fraction), share. [0, 1]
-    eyes_shown_height_min: float = 0.1  # and only where each is near enough to read from there: this share of the frame's
+    eyes_shown_height_min: float = 0.1   # and only where each is near enough to read from there: this share of the frame's
                                          # height, by distance (first_person.py), share. [0, 1]
     eyes_lead_s: float = 1.0             # or, where its Toric camera would meet a wall within the shot, at some moment this
                                          # long before each event (first_person.py), s. [0, 10]

@@ -474,11 +474,26 @@ def framed_seen(
     slices (infra/slices.py): one batch of ray casts, 0.2-20 ms, whose work is its m * len(subjects)
     * k camera-point pairs. Only the points inside a frame are ray-cast."""
     pause(len(positions_world) * len(subjects) * visibility.k)
+    return seen_in_frame(visibility, moment, subjects, positions_world, rotations, lens, from_below=False)
+
+
+def seen_in_frame(
+    visibility: SubjectVisibility,
+    moment: Moment,
+    subjects: tuple[int, ...],
+    positions_world: np.ndarray,
+    rotations: np.ndarray,
+    lens: Lens,
+    from_below: bool,
+) -> np.ndarray:
+    """framed_seen's shares without its pause; from_below: a camera under the subjects' ground
+    sees them too (a player's eye looking down on players below, first_person.py)."""
     screen = project_from_cameras(positions_world, rotations, lens, visibility.points_world(moment, subjects))
     with np.errstate(invalid="ignore"):
         asked = np.asarray((np.abs(screen) <= 1.0).all(axis=2))  # (m, s * k); NaN (behind, degenerate) is False
-    ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
-    asked[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
+    if not from_below:
+        ground_m = moment.feet_world[list(subjects), 1].min() + MIN_CAMERA_HEIGHT_M
+        asked[positions_world[:, 1] < ground_m] = False  # phi past 90 degrees looks from below: not through a floor
     share: np.ndarray = visibility.seen_points(positions_world, moment, subjects, asked).mean(axis=2)
     return share
 
