@@ -251,7 +251,8 @@ def test_async_streams_survive_a_worker_sigkill(server_factory, tmp_path):
             await running.wait()
             # stopped 0.5 s before the kill, so that each of its sessions, on either transport, has a
             # frame in flight to it (at the default 0.1 s a clean-clone CI run once had only gRPC's)
-            server.kill_worker_mid_request(stopped_s=0.5)
+            # (in a thread: a sleep on this loop would hold back the very frames that are to wait)
+            await asyncio.to_thread(server.kill_worker_mid_request, stopped_s=0.5)
 
         await asyncio.gather(kill(), *(drive(s) for s in sessions))
         closed = [await s.close() for s in sessions]

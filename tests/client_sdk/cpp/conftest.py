@@ -94,7 +94,8 @@ class StreamRun:
         )
         self.lines: list[str] = []
         self._ready = threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
 
     def _read(self) -> None:
         for line in self.proc.stdout:
@@ -115,6 +116,8 @@ class StreamRun:
             self.proc.kill()
             pytest.fail(f"sdk_check stream did not finish: {self.lines}")
         assert self.proc.returncode == 0, self.proc.stderr.read()
+        # the process has exited, but its last lines may still be in the pipe, unread
+        self._reader.join(10.0)
         return json.loads(self.lines[-1])
 
 
