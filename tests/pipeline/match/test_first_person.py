@@ -105,6 +105,26 @@ def test_a_discretionary_follow_of_one_player_is_through_its_eyes():
     assert isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == 1 and shot.choice.eyes_id == "b"
 
 
+@pytest.mark.parametrize(
+    "players, eyes",
+    [
+        (approach, True),  # b in front of a at the cut and 1-3 s on
+        (lambda t: approach(t, a_looks_at_b=t < 2.0), False),  # a turns its back on b 1.5 s after the cut
+    ],
+)
+def test_a_discretionary_fight_is_through_the_eyes_that_show_the_other_at_every_moment_it_is_placed_for(players, eyes):
+    rig = BareRig(Match({"a": 1, "b": 2}, players, delay_s=4.0), MatchSettings())
+    rig.run(4.0)
+    r = rig.rig
+    cover = [r.buffer.at(CUT_S + dt) for dt in (0.0, 1.0, 2.0, 3.0)]  # planned.py OPTION_COVER_S
+    shot, _ = r.builder.build(ShotChoice(("a", "b"), ShotKind.DUEL, "fight"), (0, 1), cover[0], cover, None, None, CUT_S)
+    assert shot is not None
+    if eyes:
+        assert isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == 0 and shot.choice.eyes_id == "a"
+    else:
+        assert isinstance(shot.camera, ToricCamera) and shot.choice.eyes_id == ""
+
+
 def test_a_first_person_camera_goes_where_its_player_goes_through_walls_and_all():
     """A Toric camera's 6 m move through a wall is held when a cut would be short (test_stand.py);
     an eye is where the game put it: never pulled in, held or moved inside, so a teleport is a cut
@@ -258,3 +278,18 @@ def test_a_cut_to_the_eyes_keeps_the_30_degree_rule(previous_world, eyes):
     )
     assert shot is not None and shot.framed(cut_s) == (0, 1)
     assert isinstance(shot.camera, FirstPersonCamera) == eyes
+
+
+def test_a_fight_held_through_one_players_eyes_is_not_chosen_again_at_every_tick():
+    """a and b face off for 30 s: the director's max-shot-length cut finds the same eyes best, and
+    the picture goes on; its clock restarts with each choice (rig.py), so the choice is made once
+    per max_shot_s, not at every planning tick (160 of 781 frames before)."""
+
+    def face_off(t: float):
+        return {"a": ((0.0, 0.0), facing((0, 0), (0, 8))), "b": ((0.0, 8.0), facing((0, 8), (0, 0)))}
+
+    states = BareRig(Match({"a": 1, "b": 2}, face_off, delay_s=4.0), MatchSettings()).run(30.0)
+    shown = [s for s in states if not s.match.buffering]
+    assert all(s.match.shot.eyes_id == "a" for s in shown) and sum(s.cut for s in shown) == 1
+    chosen_again = sum("same_eyes_no_cut" in s.flags for s in shown)
+    assert 1 <= chosen_again <= 30.0 / 4.0  # no more often than every 4 s (the style's max_shot_s is 8)

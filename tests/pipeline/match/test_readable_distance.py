@@ -22,7 +22,7 @@ from tests.pipeline.match.scenes import LENS, BareRig, Match, facing, player_mes
 from tests.pipeline.match.test_match_places import block
 from tests.pipeline.match.test_match_real_maps import moment_of, pulled_camera
 
-SETTINGS = MatchSettings()
+SETTINGS = MatchSettings(first_person=False)  # the Toric camera's distances (not a player's eyes: first_person.py)
 OPEN = RayScene([block((50.0, 0.0, 50.0), (1.0, 1.0, 1.0))])  # nothing near the players
 
 

@@ -32,7 +32,10 @@ five of them, the duel's from 0.28 to 0.13), its aim point (the chest) inside th
 its Toric camera would meet a wall (its place, carried by the players over the shot's moments,
 passes through level geometry: a cut within the shot) and the eyes show the others at some moment
 of the `eyes_lead_s` before each event: the fight is seen, if not always its very moment. A
-discretionary FOLLOW of one player (no event to show) always is.
+discretionary FOLLOW of one player (no event to show) always is; a discretionary shot of several
+(a fight) when the eyes show the others at every moment it is placed for (the cut and up to 3 s
+ahead: planned.py OPTION_COVER_S): on the real duel's first 3 minutes its Toric fights were
+behind 6 of its 30 shots under 2 s.
 The picture then names the kept player alone away from a DUEL's events, as its Toric camera would
 (its `PairWindow`, shots.py), and the pair around them.
 """
@@ -40,6 +43,7 @@ The picture then names the kept player alone away from a DUEL's events, as its T
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -137,15 +141,19 @@ def through_eyes(
     visibility: SubjectVisibility,
     body_heights_m: np.ndarray,
     settings: MatchSettings,
+    cover: Sequence[Moment] = (),
 ) -> FirstPersonCamera | None:
     """The shot's camera through its kept player's eyes (module docstring), or None (`toric` is
-    the camera the shot would otherwise have from the cut: its anchor, pair window and torus)."""
+    the camera the shot would otherwise have from the cut: its anchor, pair window and torus;
+    `cover`, the moments a discretionary shot is placed for)."""
     eyes = toric.anchor_index
     camera = eyes_camera(eyes, float(body_heights_m[eyes]), toric.lens, settings, toric.pair)
     others = tuple(i for i in subjects if i != eyes)
     if not others:
         return camera
-    if buffer is None or not events_s:
+    if not events_s:  # a discretionary shot: the others shown at every moment it is placed for
+        return camera if all(_shows_at(camera, others, m, visibility, body_heights_m, settings) for m in cover) else None
+    if buffer is None:
         return None
     if all(
         _shows_at(camera, others, buffer.at(min(t, buffer.horizon_s)), visibility, body_heights_m, settings)

@@ -70,8 +70,8 @@ class ProgramCamera:
         no pose and none was shown before (a degenerate first shot). A pose that a degrade left
         showing none of the shot's subjects is replaced by a cut (`_seen_again`). Where a cut now
         would leave a shot shorter than the style's `min_shot_s` (`cut_short`, rig.py), a move
-        through a wall is held before the wall however far while the hold shows every framed
-        subject (`held_before_wall`); it is a cut only where the hold would not. A first-person
+        through a wall is held before the wall however far while the hold shows one of the framed
+        subjects (`held_before_wall`); it is a cut only where the hold would not. A first-person
         camera's pose is its player's eye as it is (first_person.py), the last pose held while the
         eye is out of the level (`eye_outside_level_held`)."""
         camera.advance(moment, dt_s, response_time_s)
@@ -131,14 +131,17 @@ class ProgramCamera:
         self, moment: Moment, last_pose: CameraPose, pose: CameraPose, anchor: np.ndarray | None, shot: Shot
     ) -> tuple[CameraPose, bool]:
         """The pose's move through a wall held however far (in_level.py `held`) where the hold
-        shows every framed subject (framed_seen at least `candidate_seen`: a kill's pair both),
-        and whether it was; else the pose as it is, which the rig cuts to."""
+        shows one of the framed subjects (framed_seen at least `candidate_seen`): a pan on one of
+        a pair rather than a shot under min_shot_s (issue 41: on the real 4on4's first 3 minutes,
+        holding only where the pair were both shown left 48 shots under 2 s; where either is, 30,
+        at the same kill coverage and visibility), and whether it was; else the pose as it is,
+        which the rig cuts to."""
         held_pose, held = self.in_level.held(last_pose.position_world, pose, anchor, self.lens, math.inf)
         subjects = shot.framed(moment.time_s)
         if not held or not subjects:
             return pose, False
         seen = self._seen_from(moment, subjects, [held_pose], Lens(held_pose.vertical_fov_deg, self.lens.aspect))
-        return (held_pose, True) if seen.min() >= self.settings.candidate_seen else (pose, False)
+        return (held_pose, True) if seen.max() >= self.settings.candidate_seen else (pose, False)
 
     def _seen_from(self, moment: Moment, subjects: tuple[int, ...], poses: list[CameraPose], lens: Lens) -> np.ndarray:
         """(len(poses), len(subjects)): each subject's share framed and seen from each pose (framed_seen)."""

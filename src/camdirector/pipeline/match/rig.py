@@ -28,7 +28,7 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             wherever the game puts it, never moved; a camera that moved through a wall since the
             last frame cuts there (`cut_through_wall`): cuts to places, never sweeps through walls.
             A new shot through the eyes the shot on air looks through is no cut: the same
-            picture goes on (`same_eyes_no_cut`), and so does its length.
+            picture goes on (`same_eyes_no_cut`).
 4. visibility  the share of the framed subjects' sample points seen from the camera.
 During a REPLAY shot (replays.py) CAMERA and VISIBILITY are of the replayed moment (the buffer keeps
 the past it shows), and so are `program_transforms` and the frame's `replay_of`, while
@@ -380,7 +380,7 @@ class MatchRig(RigBase):
         """Whether a cut within the shot at now_s, s (through a wall, to a seen place) would leave
         a shot on air shorter than the style's `min_shot_s`: under it after the picture's last
         cut, or before the next planned cut or a replay's end. The camera is then held before a
-        wall however far while the hold shows every framed subject (program_camera.py), rather
+        wall however far while the hold shows one of the framed subjects (program_camera.py), rather
         than cut (issue 41: on the real 4on4's first 3 minutes, 94 cuts within shots, half of
         them under 0.6 s after the cut before, made 111 of its 148 shots shorter than 2 s)."""
         min_shot_s = self.style.min_shot_s
@@ -447,9 +447,11 @@ class MatchRig(RigBase):
             if result.shot.choice.replay is not None:  # its length counts from now too
                 self._replayed.append(result.shot.choice.replay.kill_time_s)
                 result.shot.hold_until_s += moment.time_s - result.shot.start_s
-            # on air from now: the shot's length counts from here; through the same eyes, the picture
-            # goes on uncut (a cut to the very same view is none to a viewer) and so does its length
-            result.shot.start_s = self.shot.start_s if self.shot is not None and seen_through else moment.time_s
+            # on air from now: the shot's length counts from here, through the same eyes too, where
+            # the picture goes on uncut (a cut to the very same view is none to a viewer): the
+            # director chose it anew, and its clock (min and max shot) restarts, else a shot held
+            # past max_shot_s through one player's eyes would be chosen again at every tick
+            result.shot.start_s = moment.time_s
             self.shot = result.shot
             if seen_through:
                 flags.append("same_eyes_no_cut")

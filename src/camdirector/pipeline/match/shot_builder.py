@@ -373,8 +373,8 @@ class ShotBuilder:
             return None, -1.0
         camera.place = camera.goal = place
         planned = buffer if events_s else None  # a planned shot: its events and the buffer that holds them
-        if s.first_person and not choice.held and choice.replay is None and (planned is not None or len(subjects) == 1):
-            eyes = through_eyes(camera, subjects, buffer, moment, events_s, self.visibility, self.body_heights_m, s)
+        if s.first_person and not choice.held and choice.replay is None:
+            eyes = through_eyes(camera, subjects, buffer, moment, events_s, self.visibility, self.body_heights_m, s, cover)
             if eyes is not None and self._eyes_allowed(eyes, previous, previous_framed, previous_world, moment, subjects):
                 # first_person.py: no wall to meet, no cut within the shot
                 who = self.players[eyes.player]
