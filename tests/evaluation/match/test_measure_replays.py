@@ -1,6 +1,7 @@
 """eval-match's replays (measure.py): a replay's moments are measured against the bodies of the
 moment they show, a replay showing both at the kill counts as shown, a kill followed by another
-within the room leaves none, and a live kill that falls in a replay is missed and counted."""
+within the room leaves none, and a live kill that falls in a replay is missed and counted; a
+replay in the killer's eyes showing the victim at the kill counts as shown (the kill cam)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ import dataclasses
 import numpy as np
 
 from camdirector.evaluation.match.match_file import MatchEvent
-from camdirector.evaluation.match.measure import BodySampler, kill_coverage, measure_shown, replay_figures
+from camdirector.evaluation.match.measure import BodySampler, in_eyes_of, kill_coverage, measure_shown, replay_figures
 from camdirector.geometry.camera import Lens
-from tests.evaluation.match.test_measure import duel, floor, side_view
+from tests.evaluation.match.test_measure import duel, first_person_of_a, floor, side_view
 
 KILL_ROW = 20  # duel(): the kill at 2.0 s, 10 Hz
 ROOM_S = 1.0
@@ -77,3 +78,15 @@ def test_a_replay_naming_its_killer_alone_before_the_kill_is_one_replay_of_its_p
     for row in (36, 37):  # not of its pair: a replay of its own from there
         program.subjects[row] = ("b", "c")
     assert replay_figures(match, program, shown, ROOM_S)["replays"] == 2
+
+
+def test_a_replay_in_the_killers_eyes_showing_the_victim_counts_as_shown_with_the_eyes_rule():
+    match = duel()  # a kills b at KILL_ROW, standing still: a's eye is the same at every moment
+    program = replayed(first_person_of_a(match), slice(25, 35), np.arange(15, 25))
+    program.subjects[25:35] = [("a", "b")] * 10  # a replay names the pair around the kill
+    shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
+    eyes = in_eyes_of(match, program)
+    assert eyes[25:35].tolist() == [0] * 10 and shown[25:35, 1].min() >= 0.5 and shown[25:35, 0].max() < 0.5
+    assert replay_figures(match, program, shown, ROOM_S)["shown"] == 0  # a's body is not in the picture
+    figures = replay_figures(match, program, shown, ROOM_S, eyes)
+    assert figures["shown"] == 1 and figures["kills_with_room_replayed"] == 1

@@ -1,7 +1,7 @@
 """Instant replays (replays.py) on tiny hand-built matches: a kill with room is shown again from
 another angle at the replayed moments while the program's own time goes on, kills close together
 get none between them, a replay never covers a live kill, the candidate and the take of a REPLAY,
-and the same program on two runs."""
+the kill cam (a replay through the killer's eyes), and the same program on two runs."""
 
 from __future__ import annotations
 
@@ -9,9 +9,11 @@ import numpy as np
 
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.pipeline.match.camera_ahead import CameraStep
+from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
 from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import ToricCamera
 from camdirector.pipeline.session import Session
 from camdirector.pipeline.state import FrameState
 from tests.pipeline.match.scenes import EYE_M, BareRig, Match, at_time, facing, kill, melee, on_screen, run_session
@@ -236,3 +238,26 @@ def test_a_replay_worked_out_ahead_answers_as_one_computed_in_the_frame(monkeypa
     assert programs[0] == programs[1]
     assert any(replay_of is not None for _, _, replay_of, _ in programs[0])
     assert any(ahead and replay for ahead, replay in worked_out)
+
+
+def face_to_face(t: float):
+    """two_fronts, but a2 stands 6 m from b2 looking at it: its eyes show b2 at the kill."""
+    return two_fronts(t) | {"a2": ((40.0, 9.0), facing((40, 9), (40, 15))), "b2": ((40.0, 15.0), facing((40, 15), (40, 9)))}
+
+
+def test_a_kill_the_killers_eyes_saw_is_replayed_through_them_unless_the_live_picture_was_there():
+    """The kill cam: replayed through a2's eyes where they show b2 at the kill and the live camera
+    was elsewhere (a Toric view from the side); where the live picture was a2's eyes already, the
+    replay is a Toric camera turned past the 30-degree rule from it."""
+    rig = BareRig(Match(TEAMS, face_to_face, [kill("a2", "b2", KILL_S)], delay_s=10.0), MatchSettings())
+    rig.run(KILL_S + 3.0)
+    replays = rig.rig.director.replays.replays
+    event = next(e for e in rig.rig.buffer.events_between(KILL_S - 1.0, KILL_S + 1.0) if e.kind.name == "KILL")
+    side_world = np.array([48.0, EYE_M, 12.0])  # beside the pair
+    kill_cam = replays.shot(event, rig.rig.buffer, side_world, KILL_S + 2.0, "replay")
+    assert kill_cam is not None and isinstance(kill_cam.camera, FirstPersonCamera) and kill_cam.camera.player == 2
+    assert kill_cam.choice.eyes_id == "a2" and kill_cam.choice.kind == ShotKind.REPLAY
+    assert kill_cam.choice.subject_ids == ("a2", "b2") and "through a2's eyes" in kill_cam.choice.reason
+    eye_world = kill_cam.camera.pose(rig.rig.buffer.at(KILL_S)).position_world
+    toric = replays.shot(event, rig.rig.buffer, eye_world, KILL_S + 2.0, "replay")
+    assert toric is not None and isinstance(toric.camera, ToricCamera) and toric.choice.eyes_id == ""

@@ -218,7 +218,7 @@ def _figures(
     third_person = third_person_heights(per_moment, eyes)
     tallest = tallest_shown(per_moment, eyes)
     nobody = nobody_shown(program, shown, eyes)
-    replays = replay_figures(match, program, shown, REPLAY_ROOM_S)
+    replays = replay_figures(match, program, shown, REPLAY_ROOM_S, eyes)
     showing = candidates_showing_subjects(run.candidates, bodies, lens, level)
     subject_heights = shown_heights(program, bodies, lens, shown, eyes, subjects_only=True)
     column = match.player_index()

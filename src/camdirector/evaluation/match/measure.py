@@ -245,9 +245,13 @@ def _one_of(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
     return set(a) <= set(b) or set(b) <= set(a)
 
 
-def replay_figures(match: MatchRecording, program: Program, shown: np.ndarray, room_s: float) -> dict[str, int]:
+def replay_figures(
+    match: MatchRecording, program: Program, shown: np.ndarray, room_s: float, eyes_of: np.ndarray | None = None
+) -> dict[str, int]:
     """The program's replays (module docstring): replays, shown, kills_with_room,
-    kills_with_room_replayed, live_kills_missed_for_replay; shown (n, P) from measure_shown."""
+    kills_with_room_replayed, live_kills_missed_for_replay; shown (n, P) from measure_shown.
+    With eyes_of (n,) from in_eyes_of, a replay in the killer's eyes that shows the victim at the
+    kill is shown too (as kill_coverage counts a live kill)."""
     column = match.player_index()
     before = np.arange(len(program)) - 1
     goes_on = (
@@ -273,7 +277,9 @@ def replay_figures(match: MatchRecording, program: Program, shown: np.ndarray, r
             if subjects != (event.actor_id, event.other_actor_id) or not len(inside) or program.shown_index[start] > frames[k]:
                 continue
             row = rows[inside[0]]
-            if shown[row, [column[event.actor_id], column[event.other_actor_id]]].min() >= SHOWN_FRACTION:
+            killer, victim = column[event.actor_id], column[event.other_actor_id]
+            in_eyes = eyes_of is not None and eyes_of[row] == killer
+            if min(1.0 if in_eyes else shown[row, killer], shown[row, victim]) >= SHOWN_FRACTION:
                 replayed.add(k)
                 shown_replays += 1
                 break

@@ -152,11 +152,11 @@ def through_eyes(
     if not others:
         return camera
     if not events_s:  # a discretionary shot: the others shown at every moment it is placed for
-        return camera if all(_shows_at(camera, others, m, visibility, body_heights_m, settings) for m in cover) else None
+        return camera if all(shows_at(camera, others, m, visibility, body_heights_m, settings) for m in cover) else None
     if buffer is None:
         return None
     if all(
-        _shows_at(camera, others, buffer.at(min(t, buffer.horizon_s)), visibility, body_heights_m, settings)
+        shows_at(camera, others, buffer.at(min(t, buffer.horizon_s)), visibility, body_heights_m, settings)
         for t in _event_moments_s(events_s)
     ):
         return camera
@@ -165,7 +165,7 @@ def through_eyes(
     lead = np.arange(0.0, settings.eyes_lead_s + 1e-9, settings.stand_step_s / 2.0)
     for event_s in events_s:
         moments = [buffer.at(min(event_s - dt, buffer.horizon_s)) for dt in lead]
-        if not any(_shows_at(camera, others, moment, visibility, body_heights_m, settings) for moment in moments):
+        if not any(shows_at(camera, others, moment, visibility, body_heights_m, settings) for moment in moments):
             return None
     return camera
 
@@ -176,7 +176,7 @@ def _event_moments_s(events_s: tuple[float, ...]) -> list[float]:
     return [t + dt for t in events_s for dt in (0.0, NEXT_FRAME_S)]
 
 
-def _shows_at(
+def shows_at(
     camera: FirstPersonCamera,
     others: tuple[int, ...],
     moment: Moment,

@@ -5,7 +5,12 @@ A REPLAY shot (ShotKind.REPLAY, its `ShotChoice.replay`) plays a kill's game mom
 the style's `min_shot_s`; shorter before it, down to `min_shot_s` in all, where the live timeline
 has no more room), at the program's pace, while the program's own time goes on: the rig
 steps its camera and measures its visibility at the replayed moment (rig.py), and the buffer keeps
-`replay_past_s` of past for it (moments.py). Its camera is a Toric DUEL of killer and victim,
+`replay_past_s` of past for it (moments.py). Its camera is the killer's eyes (the kill cam of
+games' own replays: first_person.py) where they show the victim at the kill and its next frame
+(readable, chest in frame, `eyes_seen` of it seen) and stand past `jump_cut_deg` from the live
+camera (a kill shown live through those eyes is replayed from elsewhere): an eye never meets a
+wall, where a Toric replay in a corridor was cut within itself (on the real duel's first 3
+minutes, 7 of its 26 shots under 2 s began or ended in a replay). Else it is a Toric DUEL of killer and victim,
 placed for the kill (its moment, the next frame's, and with less weight its build-up) at the place
 that sees them best among those that turn the view of the pair by `jump_cut_deg` from the live
 camera at the kill (grammar.py: a replay from the same angle shows nothing new). It frames the
@@ -32,7 +37,8 @@ with no delay). It
 replays the latest kill of the last `replay_within_s` (never an older one once another came),
 once; a replay on air ends at its length, or at once should an event come within `min_lead_s`
 (and a planning tick) of its end (a plan applied late): the next beat still gets its cut.
-The rig offers the latest kill shown live and not yet replayed as a REPLAY candidate, and a
+The rig offers the latest kill shown live and not yet replayed as a REPLAY candidate (a Toric
+one: the monitors preview Toric cameras, and a take airs what its monitor showed), and a
 human's take of a REPLAY of killer and victim replays their latest kill (takes.py). Every choice
 here reads the buffer and the poses the rig gave, never a clock: the same inputs make the same
 replays.
@@ -47,10 +53,11 @@ import numpy as np
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.first_person import eyes_camera, shows_at
 from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
 from camdirector.pipeline.match.interest import event_priority
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
-from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import ShotBuilder
 from camdirector.pipeline.match.shots import PairWindow, Place, ToricCamera, best_place
@@ -83,8 +90,9 @@ class Replays:
     def __init__(self, players: list[str], builder: ShotBuilder):
         self.players, self.builder = players, builder
         self.index = {p: i for i, p in enumerate(players)}
+        # Place None: through the killer's eyes
         self._placed: dict[
-            tuple[float, float, str, str, bytes], tuple[tuple[int, int], Place, float, PairWindow | None] | None
+            tuple[float, float, str, str, bytes, bool], tuple[tuple[int, int], Place | None, float, PairWindow | None] | None
         ] = {}
 
     @property
@@ -121,10 +129,12 @@ class Replays:
         reason: str,
         held: bool = False,
         room_s: float = math.inf,
+        eyes: bool = True,
     ) -> Shot | None:
         """A REPLAY shot of the kill (room_s: at most that long, s), on air from start_s, s, its
         camera turned jump_cut_deg from the live camera's centre (3,) m at the kill (None: any
-        place); None when no such place sees both (module docstring)."""
+        place), through the killer's eyes where they show it (`eyes`: may be) and the style allows
+        first person; None when no such place sees both (module docstring)."""
         pair = self.pair(kill)
         assert pair is not None  # a replay is of a kill of one player by another
         replay = self.replay(kill, self.builder.style.min_shot_s, room_s)
@@ -134,19 +144,26 @@ class Replays:
             kill.actor_id,
             kill.other_actor_id,
             b"" if live_world is None else live_world.tobytes(),
+            eyes,
         )
         if key not in self._placed:
             if len(self._placed) >= PLACED_KEPT:
                 del self._placed[next(iter(self._placed))]  # the oldest asked
-            self._placed[key] = self._place(pair, replay, buffer, live_world)
+            self._placed[key] = self._place(pair, replay, buffer, live_world, eyes)
         placed = self._placed[key]
         if placed is None:
             return None
         (a, b), place, score, window = placed
-        camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
-        camera.pair = window
         names = tuple(self.players[i] for i in pair)
-        choice = ShotChoice(names, ShotKind.REPLAY, f"{reason}: {names[0]} -> {names[1]}", held, replay)
+        camera: ShotCamera
+        if place is None:  # the kill cam
+            camera = eyes_camera(a, float(self.builder.body_heights_m[a]), self.builder.lens, self.settings, window)
+            reason = f"{reason} through {self.players[a]}'s eyes"
+        else:
+            camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
+            camera.pair = window
+        eyes_id = self.players[a] if place is None else ""
+        choice = ShotChoice(names, ShotKind.REPLAY, f"{reason}: {names[0]} -> {names[1]}", held, replay, eyes_id=eyes_id)
         shot = Shot(choice, pair, camera, start_s)
         shot.hold_until_s, shot.scores = start_s + replay.length_s, {"place_visibility": score}
         if window is not None:
@@ -160,20 +177,31 @@ class Replays:
         return PairWindow(killer, (kill_time_s,), s.pair_before_s, s.pair_after_s, s.reframe_s)
 
     def _place(
-        self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None
-    ) -> tuple[tuple[int, int], Place, float, PairWindow | None] | None:
-        """Which of the builder's DUEL cameras (its players A and B), its place, score and pair
-        window (None: the pair throughout), seeing the pair best at the kill past the live angle;
-        the killer alone before the kill only where no place sees the pair throughout with
-        min_visible; None where neither does (module docstring)."""
+        self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None, eyes: bool
+    ) -> tuple[tuple[int, int], Place | None, float, PairWindow | None] | None:
+        """Through the killer's eyes (Place None) where they show the victim at the kill from
+        past the live angle; else which of the builder's DUEL cameras (its players A and B), its
+        place, score and pair window (None: the pair throughout), seeing the pair best at the
+        kill past the live angle; the killer alone before the kill only where no place sees the
+        pair throughout with min_visible; None where neither does (module docstring)."""
         s = self.settings
         kill_moment = buffer.at(replay.kill_time_s)
+        after = buffer.at(replay.kill_time_s + AFTER_KILL_S)
         build_up = np.arange(replay.from_s, replay.kill_time_s, BUILD_UP_STEP_S)
-        cover = [*(buffer.at(t) for t in build_up), kill_moment, buffer.at(replay.kill_time_s + AFTER_KILL_S)]
+        cover = [*(buffer.at(t) for t in build_up), kill_moment, after]
         weights = [BUILD_UP_WEIGHT] * len(build_up) + [1.0, 1.0]
 
         def other_angle(positions_world: np.ndarray) -> np.ndarray:
             return self.builder.grammar.allows_cut(live_world, kill_moment.aims_world[list(pair)], positions_world)
+
+        if eyes and s.first_person:
+            killer, victim = pair
+            alone_before = self._window(killer, replay.kill_time_s)
+            kill_cam = eyes_camera(killer, float(self.builder.body_heights_m[killer]), self.builder.lens, s, alone_before)
+            visibility, heights = self.builder.visibility, self.builder.body_heights_m
+            turned = bool(other_angle(kill_cam.pose(kill_moment).position_world[None])[0])
+            if turned and all(shows_at(kill_cam, (victim,), m, visibility, heights, s) for m in (kill_moment, after)):
+                return pair, None, 1.0, alone_before
 
         for window in (None, self._window(pair[0], replay.kill_time_s)):
             best: tuple[tuple[int, int], Place, float, PairWindow | None] | None = None

@@ -570,7 +570,8 @@ class MatchRig(RigBase):
         # search does not weigh on the kill's own tick, when a take's fallback or the next beat is decided)
         later = moment.time_s >= kill.time_s + self.settings.replay_after_s
         if later and any(k is kill for k in self.replays.kills(buffer, moment.time_s)):
-            replay = self.replays.shot(kill, buffer, live_world, moment.time_s, "replay candidate")
+            # a Toric camera (the monitors' and takes' kind), never the kill cam our director may replay through
+            replay = self.replays.shot(kill, buffer, live_world, moment.time_s, "replay candidate", eyes=False)
             if replay is not None:
                 assert isinstance(replay.camera, ToricCamera)  # a replay's camera is a DUEL's
                 # in the last situation's place when they fill the monitors
