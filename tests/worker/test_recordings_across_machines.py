@@ -13,9 +13,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from numpy._core._multiarray_umath import __cpu_features__
 
+from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.recording import read_entries
 from camdirector.worker.replay import _comparable, replay
 from tests.precompute.tracks.tiny_levels import corridor
@@ -95,10 +97,29 @@ def test_the_script_makes_the_compiled_recordings_again(name, tmp_path):
     assert answers(again) == answers(COMPILED / f"{name}.cdrec")
 
 
+def _pose_apart(a: bytes, b: bytes) -> tuple[float, bytes, bytes]:
+    """The largest difference between two answers' pose floats (position m, rotation, fov deg),
+    and each answer without its pose."""
+    first, second = pb.CameraUpdate.FromString(a), pb.CameraUpdate.FromString(b)
+    floats = [
+        np.array([p.position.x, p.position.y, p.position.z, p.rotation.x, p.rotation.y, p.rotation.z, p.rotation.w])
+        for p in (first.pose, second.pose)
+    ]
+    apart = float(np.abs(floats[0] - floats[1]).max(initial=0.0))
+    apart = max(apart, abs(first.pose.vertical_fov_deg - second.pose.vertical_fov_deg))
+    first.ClearField("pose")
+    second.ClearField("pose")
+    return apart, first.SerializeToString(deterministic=True), second.SerializeToString(deterministic=True)
+
+
 @pytest.mark.parametrize("name", ["match", "tracks"])
 def test_a_rig_without_a_compiled_twin_answers_the_same_bits_on_both_paths(name, tmp_path):
     """TRACKS and MATCH run in Python on either path (rigs.runs_compiled): the inputs of their
-    recordings (tests/data/recordings/, made elsewhere) answer here alike, bit for bit, on both."""
+    recordings (tests/data/recordings/, made elsewhere) answer here alike on both, bit for bit but
+    for MATCH's poses, which agree within 1e-9 (issue 43's bar) with every other field the same
+    bits (cuts, shots, visibility): the compiled decoder normalises a quaternion with its squares
+    summed in order, numpy's norm by the CPU's kernel (worker/codec.py), and a camera through a
+    player's eyes (first_person.py) carries the player's rotation, last bit and all, into its pose."""
     if name == "tracks":
         level_file = tmp_path / "corridor.obj"
         level_file.write_text(obj_text(corridor()))
@@ -106,7 +127,13 @@ def test_a_rig_without_a_compiled_twin_answers_the_same_bits_on_both_paths(name,
     answers: dict[str, list[bytes]] = {"python": [], "compiled": []}
     for frame_path, kept in answers.items():
         replay(RECORDINGS / f"{name}.cdrec", lambda _, got, kept=kept: kept.append(_comparable(got)), tmp_path, frame_path)
-    assert len(answers["python"]) >= 120 and answers["compiled"] == answers["python"]
+    assert len(answers["python"]) >= 120 and len(answers["compiled"]) == len(answers["python"])
+    if name == "tracks":
+        assert answers["compiled"] == answers["python"]
+        return
+    for compiled, python in zip(answers["compiled"], answers["python"]):
+        apart, compiled_rest, python_rest = _pose_apart(compiled, python)
+        assert apart <= 1e-9 and compiled_rest == python_rest
 
 
 def test_frames_sent_as_states_replay_bit_for_bit_on_every_kind_of_machine(tmp_path):

@@ -377,6 +377,7 @@ def test_a_match_with_a_delay_shows_the_cut_it_plans(server, page):
 
 MONITOR_SHAPE = (180, 320, 3)  # monitors.js MONITOR_WIDTH_PX (the dashboard), at the default lens's 16:9
 SAME_PICTURE = 4.0  # mean absolute difference (0-255) under which two pictures show one frame: JPEG's own is ~1-2
+ANOTHER_PICTURE = 1.5 * SAME_PICTURE  # and over which they show two views (of a small scene against the sky)
 
 
 def shown_pixels(img) -> np.ndarray:
@@ -538,7 +539,9 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         # circle as a0 and b0 do, 8 m away) is filmed from the program's own place, the same
         # picture as now, and with the horizon level (match/shots.py) a duelist followed from beside
         # the duel shows much of what the duel shows. Level pictures of four capsules against the
-        # sky differ less than the rolled duel did: "another picture" is 2 SAME_PICTURE here.
+        # sky differ less than the rolled duel did, and since the program looks through a0's eyes
+        # (match/first_person.py), with b0 8 m off and the sky, less again (the most different
+        # candidate 7.6 from it, JPEG's own noise 1-2): "another picture" is ANOTHER_PICTURE here.
         pictures = [
             served_view(http, session_id, frame["frame"], shot="candidate", subjects=",".join(c["shot"]["subject_ids"]))
             for c in listed
@@ -548,7 +551,7 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         candidate_monitor = rows.nth(chosen).locator("img")
         candidate = pictures[chosen]
         assert difference(shown_pixels(candidate_monitor), candidate) < SAME_PICTURE
-        assert difference(candidate, before) > 2 * SAME_PICTURE
+        assert difference(candidate, before) > ANOTHER_PICTURE
 
         rows.nth(chosen).locator("button").click()
         playwright.expect(page.locator("#take-result")).to_contain_text("held until released")
@@ -562,7 +565,7 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
         after = wait_for_picture(
             program, lambda p: difference(p, now) < SAME_PICTURE, "the program monitor never showed the take"
         )
-        assert difference(after, before) > 2 * SAME_PICTURE
+        assert difference(after, before) > ANOTHER_PICTURE
         assert difference(after, candidate) < difference(after, before)
 
         player = taken[0]
@@ -588,8 +591,8 @@ def test_each_candidate_has_a_monitor_and_taking_one_changes_the_program_view(se
                 f"the {shot} monitor does not show frame {shown_frame}",
             )
         # The program's camera as it was (the players drawn as of the cut: a frame on, render/snapshots.py).
-        assert difference(pair["cut_before"], before) < 2 * SAME_PICTURE
-        assert difference(pair["cut_after"], before) > 2 * SAME_PICTURE
+        assert difference(pair["cut_before"], before) < ANOTHER_PICTURE
+        assert difference(pair["cut_after"], before) > ANOTHER_PICTURE
     finally:
         raw.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         raw.close()
