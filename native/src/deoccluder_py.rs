@@ -16,7 +16,7 @@ type Corrected<'py> = (Array1<'py>, Array1<'py>, bool);
 /// (or an object with its fields). The state starts as a new Deoccluder's.
 #[pyclass(name = "DeoccluderCore", module = "camdirector._native")]
 pub struct DeoccluderCore {
-    inner: Deoccluder,
+    pub(crate) inner: Deoccluder,
 }
 
 #[pymethods]

@@ -25,6 +25,7 @@ mod search;
 mod search_py;
 mod stages_py;
 mod toric;
+mod toric_frame_py;
 mod toric_py;
 mod wire;
 mod wire_py;
@@ -44,5 +45,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     deoccluder_py::register(m)?;
     move_scene_py::register(m)?;
     log_append_py::register(m)?;
+    toric_frame_py::register(m)?;
     Ok(())
 }

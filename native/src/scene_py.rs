@@ -3,14 +3,16 @@
 //! stage's query as one call (visible_share). Arrays are copied in with the GIL held, then every
 //! ray is cast with it released.
 
-use numpy::ndarray::Axis;
+use numpy::ndarray::{ArrayView2, Axis};
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 
 use crate::bvh::Stack;
 use crate::bvh_py::{faces_of, rows, SEGMENT_END};
+use crate::carry::carry;
 use crate::scene::{Pose, Scene};
+use crate::toric_py::floats;
 
 type Mesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
@@ -86,6 +88,49 @@ pub struct PyScene {
 }
 
 impl PyScene {
+    /// The share of the targets' sample points seen from camera (3,) metres, the TORIC
+    /// VISIBILITY stage's estimate: each target's points_local (k, 3) carried by its
+    /// RigidTransform as `carry` carries them (pairs taken as zip takes them), all of them in
+    /// target order as one (n, 3), then `visible_share`'s count. ValueError for no points.
+    pub(crate) fn carried_share(
+        &self,
+        py: Python<'_>,
+        camera: &[f64; 3],
+        samples_local: &Bound<'_, PyAny>,
+        target_transforms: &Bound<'_, PyAny>,
+    ) -> PyResult<f64> {
+        let camera = rows(
+            "camera_world",
+            ArrayView2::from_shape((1, 3), camera).expect("one row of 3"),
+        )?;
+        let mut points = Vec::new();
+        for (local, transform) in samples_local.try_iter()?.zip(target_transforms.try_iter()?) {
+            let (local, _) = points_of("points_local", &local?)?;
+            points.extend(carry(&pose_of(&transform?)?, &local));
+        }
+        self.share_seen(py, &camera, &points)
+    }
+
+    /// 1 - the share of points hidden from camera (one row), as visible_share answers it.
+    fn share_seen(
+        &self,
+        py: Python<'_>,
+        camera: &[[f64; 3]],
+        points: &[[f64; 3]],
+    ) -> PyResult<f64> {
+        if points.is_empty() {
+            return Err(PyValueError::new_err(
+                "points_world is empty: no share to take",
+            ));
+        }
+        let hidden = self
+            .segments_occluded(py, camera, points)
+            .iter()
+            .filter(|&&h| h)
+            .count();
+        Ok(1.0 - hidden as f64 / points.len() as f64)
+    }
+
     /// (n,) whether each segment origin -> target meets geometry (RayScene.occluded's rule).
     fn segments_occluded(
         &self,
@@ -207,17 +252,23 @@ impl PyScene {
     ) -> PyResult<f64> {
         let camera = rows("camera_world", camera_world.as_array().insert_axis(Axis(0)))?;
         let points = rows("points_world", points_world.as_array())?;
-        if points.is_empty() {
-            return Err(PyValueError::new_err(
-                "points_world is empty: no share to take",
-            ));
-        }
-        let hidden = self
-            .segments_occluded(py, &camera, &points)
-            .iter()
-            .filter(|&&h| h)
-            .count();
-        Ok(1.0 - hidden as f64 / points.len() as f64)
+        self.share_seen(py, &camera, &points)
+    }
+
+    /// visible_share_of(camera_world (3,), samples_local, target_transforms) -> float: the TORIC
+    /// VISIBILITY stage's share in one call (carried_share): each target's sample points
+    /// (k, 3) float64 in `samples_local` carried by its RigidTransform in `target_transforms`,
+    /// seen from camera_world metres; what `visible_share` answers for those points carried
+    /// one `carry` call each and concatenated in target order. ValueError for no points.
+    fn visible_share_of(
+        &self,
+        py: Python<'_>,
+        camera_world: &Bound<'_, PyAny>,
+        samples_local: &Bound<'_, PyAny>,
+        target_transforms: &Bound<'_, PyAny>,
+    ) -> PyResult<f64> {
+        let camera = floats::<3>(camera_world, "camera_world")?;
+        self.carried_share(py, &camera, samples_local, target_transforms)
     }
 }
 

@@ -22,7 +22,7 @@ use crate::toric::Lens;
 use crate::toric_py::{floats, lens_of, points, vec3, Array1, PyTorus};
 
 /// camera.CameraPose's fields: position_world (3,), rotation_xyzw (4,), vertical_fov_deg.
-type PyPose<'py> = (Array1<'py>, Array1<'py>, f64);
+pub(crate) type PyPose<'py> = (Array1<'py>, Array1<'py>, f64);
 
 /// The lens's tangents and its vertical field of view, degrees (a pose's field of view).
 pub(crate) fn lens_and_fov(obj: &Bound<'_, PyAny>) -> PyResult<(Lens, f64)> {
@@ -100,7 +100,7 @@ fn motion_settings(settings: Option<&Bound<'_, PyAny>>) -> PyResult<MotionSettin
 }
 
 /// The frame's aim points: a list of (3,) array-likes (FrameState.aim_points_world) or (k, 3).
-fn aim_points(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
+pub(crate) fn aim_points(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
     if obj.is_instance_of::<PyArrayDyn<f64>>() {
         return points(obj, "aim_points_world");
     }
@@ -109,7 +109,7 @@ fn aim_points(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
         .collect()
 }
 
-fn py_pose<'py>(py: Python<'py>, pose: &motion::Pose, fov_deg: f64) -> PyPose<'py> {
+pub(crate) fn py_pose<'py>(py: Python<'py>, pose: &motion::Pose, fov_deg: f64) -> PyPose<'py> {
     (
         vec3(py, &pose.0),
         PyArray1::from_slice(py, &pose.1),
@@ -131,7 +131,7 @@ type Framed<'py> = (
 /// Keeps the one-target heading between frames; `run` fills a frame's A, B and torus.
 #[pyclass(name = "FramingCore", module = "camdirector._native")]
 pub struct FramingCore {
-    inner: Framing,
+    pub(crate) inner: Framing,
 }
 
 #[pymethods]
@@ -242,8 +242,8 @@ type Placed<'py> = (f64, f64, Option<PyPose<'py>>, Vec<&'static str>);
 /// camera's place on the torus and its rates between frames; `run` moves it for one frame.
 #[pyclass(name = "MotionCore", module = "camdirector._native")]
 pub struct MotionCore {
-    inner: Motion,
-    fov_deg: f64,
+    pub(crate) inner: Motion,
+    pub(crate) fov_deg: f64,
 }
 
 #[pymethods]

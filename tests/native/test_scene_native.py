@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from camdirector._native import Scene
+from camdirector._native import Scene, carry
 from camdirector.demo.scene import DemoScene, build_demo_scene
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.geometry.raycast import RayScene
@@ -193,6 +193,29 @@ def test_visible_share_is_the_visibility_stage_answer():
             assert abs(native.visible_share(camera, points) - expected) <= 1.0 / len(points)  # one edge ray at most
     with pytest.raises(ValueError, match="empty"):
         native.visible_share(np.zeros(3), np.zeros((0, 3)))
+
+
+def test_visible_share_of_carries_each_targets_samples_as_carry_does():
+    """visible_share_of(camera, samples, transforms) is visible_share of the samples carried one
+    `carry` call a target and concatenated in target order, to the bit; pairs as zip takes them."""
+    demo, native, _ = _demo(7)
+    rng = np.random.default_rng(11)
+    samples = [rng.normal(size=(16, 3)) * 0.4, rng.normal(size=(9, 3)) * 0.3]
+    for time_s in np.linspace(0.0, 19.0, 12):
+        placed = demo.transforms_at(time_s)
+        for object_id, transform in placed.items():
+            if object_id != demo.avatar.id:
+                native.set_transform(object_id, transform)
+        first = placed[demo.avatar.id]
+        second = RigidTransform(first.position_world + rng.normal(size=3), _yaw(rng.uniform(0.0, 6.0)), np.array([1.0, 1.2, 0.8]))
+        transforms = [first, second]
+        points = np.concatenate([carry(local, transform) for local, transform in zip(samples, transforms)])
+        for camera in _camera_segments(demo, time_s, rng)[0][:6]:
+            share = native.visible_share_of(camera, samples, transforms)
+            assert share == native.visible_share(camera, points)
+            assert native.visible_share_of(camera, samples, transforms[:1]) == native.visible_share(camera, points[:16])
+    with pytest.raises(ValueError, match="empty"):
+        native.visible_share_of(np.zeros(3), [], [])
 
 
 def test_arrays_as_the_toric_rig_passes_them_and_bad_ones_refused():

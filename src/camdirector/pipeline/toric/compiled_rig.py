@@ -4,7 +4,8 @@
 
 - While the style's visibility mode is FRAMING_ONLY or REACTIVE, FRAMING, MOTION and VISIBILITY:
   FRAMING in `FramingCore` (framing.py's twin), MOTION in `MotionCore` (camera_motion.py's) and,
-  in REACTIVE, `DeoccluderCore` (reactive.py's Deoccluder, its ray casts in the `Scene`).
+  in REACTIVE, `DeoccluderCore` (reactive.py's Deoccluder, its ray casts in the `Scene`), the
+  three stages in one call (`toric_frame`), lapped where ToricRig.run laps them.
 - In the search modes (ANTICIPATION, NO_ANTICIPATION, RAYCAST), MOTION's search in `SearchCore`
   (occlusion_search.py's `OcclusionSearch.step` and the pose at its answer), reading the A-map
   or ray casts, and drawing its candidates from the session's generator as the Python draws
@@ -48,14 +49,13 @@ import camdirector._native as native
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.toric import Torus
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
 from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.occlusion_search import SearchResult
-from camdirector.pipeline.toric.rig import ToricRig
+from camdirector.pipeline.toric.rig import ToricRig, _fallback_pose
 
 _NO_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])  # a core's initial facing, which its copied heading replaces
 _COMPILED_MODES = (VisibilityMode.FRAMING_ONLY, VisibilityMode.REACTIVE)  # whose frames the cores run whole
@@ -69,7 +69,6 @@ class CompiledToricRig(ToricRig):
     _scene: Any = None  # the Scene, made on the first compiled frame
     _runs = 0  # frames run; the Scene was last moved in frame `_scene_run` of them (it holds `dynamic` as of then)
     _scene_run = -1
-    _torus: Any = None  # the frame's compiled torus, from FRAMING to MOTION
     _search_core: Any = None  # the SearchCore, made on the first compiled search step
     _packed: tuple[list[str], npt.NDArray[np.float64]] | None = None  # the frame's FrameInput.packed, till the Scene takes it
 
@@ -100,7 +99,7 @@ class CompiledToricRig(ToricRig):
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_cores=None, _scene=None, _torus=None, _search_core=None, _packed=None)
+        state.update(_cores=None, _scene=None, _search_core=None, _packed=None)
         return state
 
     def run(
@@ -117,8 +116,58 @@ class CompiledToricRig(ToricRig):
             self._cores = None
         self._runs += 1
         self._packed = update.packed
-        super().run(state, update, target_transforms, last)
+        if compiled:
+            self._run_cores(state, update, target_transforms, last)
+        else:
+            super().run(state, update, target_transforms, last)
         self._packed = None
+
+    def _run_cores(
+        self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
+    ) -> None:
+        """ToricRig.run for a frame of the cores (FRAMING_ONLY, REACTIVE): FRAMING, MOTION and
+        VISIBILITY in one native call (`toric_frame`, the cores' code in the order ToricRig.run's
+        stage methods call it), lapped on the session's clock at the same readings as ToricRig.run's
+        StageClock (a clock that ticks per reading laps both the same). The Scene is moved first,
+        inside FRAMING's lap (ToricRig.run moves it in MOTION in REACTIVE, in VISIBILITY otherwise)."""
+        assert self._cores is not None  # run() made them for this mode
+        toric = state.toric = ToricFrame()
+        start_s = self.clock()
+        if self.maps is not None:  # a map mode's maps, kept after it, take every frame's objects (ToricRig.run)
+            self.maps.ingest(update.states, update.time_s)
+        # the pose the frame keeps when MOTION answers none (a degenerate torus), as ToricRig.run's
+        held = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
+        framing, motion, deoccluder = self._cores
+        (
+            toric.a_world,
+            toric.b_world,
+            toric.b_is_gaze_point,
+            toric.torus,  # the compiled torus: the wire reads its alpha; pickled, it is a Torus (_reduce_torus)
+            toric.theta,
+            toric.phi,
+            pose,
+            flags,
+            state.visibility,
+            state.framing_error,
+        ) = native.toric_frame(
+            framing,
+            motion,
+            deoccluder if self.style.visibility == VisibilityMode.REACTIVE else None,
+            self._moved_scene(),
+            state.aim_points_world,
+            self.visibility.samples_local,
+            target_transforms,
+            held,
+            state.time_s,
+            state.dt_s,
+            self.clock,
+            start_s,
+            state.stage_ms,
+        )
+        state.pose = held if pose is None else CameraPose(*pose)
+        state.flags.extend(flags)
+        state.cut = state.cut or self._style_cut
+        self._style_cut = False
 
     def _cores_from_python(self) -> tuple[Any, Any, Any]:
         framing, motion, deoccluder = self.framing, self.motion, self.deoccluder
@@ -141,40 +190,6 @@ class CompiledToricRig(ToricRig):
         deoccluder = self.deoccluder
         deoccluder._offset_from_a, deoccluder._displacement = deoccluder_core.offset_from_a, deoccluder_core.displacement
         deoccluder._damp_time_s, deoccluder._time_s = deoccluder_core.damp_time_s, deoccluder_core.time_s
-
-    def _frame(self, state: FrameState, toric: ToricFrame) -> None:
-        if self._cores is None:
-            return super()._frame(state, toric)
-        a, b, toric.b_is_gaze_point, self._torus, flags = self._cores[0].run(state.aim_points_world, state.dt_s)
-        toric.a_world, toric.b_world = a, b
-        # The compiled torus itself: the wire reads its alpha and nothing else reads it while the
-        # frame is computed; its fields are the Python Torus's, and pickled it is one (_reduce_torus).
-        toric.torus = self._torus
-        state.flags.extend(flags)
-
-    def _move(
-        self,
-        state: FrameState,
-        toric: ToricFrame,
-        target_transforms: list[RigidTransform],
-        last: FrameState | None,
-        stages: StageClock,
-    ) -> None:
-        if self._cores is None:
-            return super()._move(state, toric, target_transforms, last, stages)
-        toric.theta, toric.phi, pose, flags = self._cores[1].run(self._torus, toric.b_is_gaze_point, state.dt_s)
-        self._torus = None
-        state.flags.extend(flags)
-        if pose is not None:
-            state.pose = CameraPose(*pose)
-        if self.style.visibility == VisibilityMode.REACTIVE and state.pose is not None:
-            assert toric.a_world is not None  # FRAMING placed it
-            position, rotation, pulled = self._cores[2].run(
-                state.pose.position_world, state.pose.rotation_xyzw, toric.a_world, state.time_s, state.dt_s, self._moved_scene()
-            )
-            if pulled:
-                state.pose = CameraPose(position, rotation, state.pose.vertical_fov_deg)
-                state.flags.append("pulled_in")
 
     def _build_maps(self) -> None:
         self.maps = CompiledOcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
@@ -199,21 +214,16 @@ class CompiledToricRig(ToricRig):
         return SearchResult(theta, phi, cut, strategy, risk), CameraPose(*pose)
 
     def _see(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform]) -> None:
-        if self._cores is None and self.style.visibility not in SEARCH_MODES:
+        """VISIBILITY in the search modes: the share seen in the Scene of VisibilityEstimate's sample
+        points, carried by camdirector._native (session.py says why); the framing error Framing's."""
+        if self.style.visibility not in SEARCH_MODES:
             return super()._see(state, toric, target_transforms)
         pose = state.pose
-        assert pose is not None and toric.a_world is not None and toric.b_world is not None  # run() and FRAMING
-        # VisibilityEstimate.points_world's points, carried by camdirector._native (session.py says why)
-        samples = self.visibility.samples_local
-        carried = [native.carry(local, transform) for transform, local in zip(target_transforms, samples)]
-        points = carried[0] if len(carried) == 1 else np.concatenate(carried)  # one target's: no copy
-        state.visibility = self._moved_scene().visible_share(pose.position_world, points)
-        if self._cores is None:
-            state.framing_error = self.framing.error(pose, toric)
-            return
-        state.framing_error = self._cores[0].error(
-            pose.position_world, pose.rotation_xyzw, toric.a_world, toric.b_world, toric.b_is_gaze_point
+        assert pose is not None  # run() answers a pose before VISIBILITY
+        state.visibility = self._moved_scene().visible_share_of(
+            pose.position_world, self.visibility.samples_local, target_transforms
         )
+        state.framing_error = self.framing.error(pose, toric)
 
     def _moved_scene(self) -> Any:
         """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's).
