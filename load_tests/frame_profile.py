@@ -89,7 +89,8 @@ FRAME_PATH_ENV = "CAMDIRECTOR_FRAME_PATH"  # ServerSettings.frame_path from the 
 PROFILE_DIR_ENV = "CAMDIRECTOR_FRAME_PROFILE_DIR"  # the folder the server's processes write their stamps to
 PLUGIN = "load_tests.frame_profile"
 ROOT = Path(__file__).resolve().parents[1]
-ECHO_PATH = "/camdirector.profile.Echo/Stream"
+ECHO_SERVICE = "camdirector.profile.Echo"  # the bare echo's gRPC service, one stream method
+ECHO_PATH = f"/{ECHO_SERVICE}/Stream"
 RIGS = ("TORIC_FRAMING_ONLY", "TORIC_ANTICIPATION", "TRACKS", "MATCH")
 TRANSPORTS = ("grpc", "zmq")
 MATCH_DELAY_S = 1.0  # the MATCH session's broadcast delay: its first second of frames fills the buffer, s
@@ -300,33 +301,46 @@ def echo_request(request_bytes: int, reply_bytes: int) -> bytes:
     return struct.pack("<I", reply_bytes) + b"\0" * max(0, request_bytes - 4)
 
 
+_replies: dict[int, bytes] = {}  # the echo's replies by size, made once
+
+
+def _echo_reply(request: bytes) -> bytes:
+    """The echo's answer to an echo_request: as many bytes as it asks for."""
+    size = struct.unpack_from("<I", request)[0]
+    return _replies.setdefault(size, b"\1" * size)
+
+
+def echo_grpc_handler():
+    """The echo's gRPC service (ECHO_PATH): a stream answering each message with _echo_reply."""
+    import grpc
+
+    async def stream(requests, context):
+        async for request in requests:
+            yield _echo_reply(request)
+
+    handler = grpc.stream_stream_rpc_method_handler(stream)
+    return grpc.method_handlers_generic_handler(ECHO_SERVICE, {"Stream": handler})
+
+
 async def _echo_serve() -> None:
     import grpc
     import zmq
     import zmq.asyncio
 
-    replies: dict[int, bytes] = {}
-
-    def reply_to(request: bytes) -> bytes:
-        size = struct.unpack_from("<I", request)[0]
-        return replies.setdefault(size, b"\1" * size)
-
-    async def stream(requests, context):
-        async for request in requests:
-            yield reply_to(request)
-
-    server = grpc.aio.server()
-    handler = grpc.stream_stream_rpc_method_handler(stream)
-    server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler("camdirector.profile.Echo", {"Stream": handler}),))
+    # Without SO_REUSEPORT, as the front's server (front/grpc_service.py): the port is this echo's alone.
+    server = grpc.aio.server(options=[("grpc.so_reuseport", 0)])
+    server.add_generic_rpc_handlers((echo_grpc_handler(),))
     port = server.add_insecure_port("127.0.0.1:0")
-    await server.start()
+    if port == 0:
+        raise OSError("the echo could not bind gRPC to 127.0.0.1")
+    await server.start()  # listening since add_insecure_port: the ready line below follows it
     sock = zmq.asyncio.Context.instance().socket(zmq.ROUTER)
     sock.setsockopt(zmq.LINGER, 0)
     sock.bind("tcp://127.0.0.1:*")
     print(json.dumps({"grpc": f"127.0.0.1:{port}", "zmq": sock.getsockopt_string(zmq.LAST_ENDPOINT)}), flush=True)
     while True:
         identity, _, payload = await sock.recv_multipart()
-        await sock.send_multipart([identity, b"0", reply_to(payload)])
+        await sock.send_multipart([identity, b"0", _echo_reply(payload)])
 
 
 class EchoServer:
@@ -352,7 +366,14 @@ class _Grpc:
     def __init__(self, address: str):
         import grpc
 
-        self.channel = grpc.aio.insecure_channel(address, options=[("grpc.max_send_message_length", 64 << 20)])
+        # A channel of its own to the address: with gRPC's global subchannel pool a new channel
+        # takes over the connection of any channel of this process still open to the same address,
+        # with its state; one that met a server gone from that port (a port the echo or a server
+        # was later given again) is in its reconnect backoff, and the first call fails at once
+        # UNAVAILABLE "Connection refused" though the new server listens (how a CI run's echo
+        # floor once failed right after the echo's ready line).
+        options = [("grpc.max_send_message_length", 64 << 20), ("grpc.use_local_subchannel_pool", 1)]
+        self.channel = grpc.aio.insecure_channel(address, options=options)
         self.stream_method = self.channel.stream_stream("/camdirector.v1.Director/StreamFrames")
 
     async def unary(self, rpc: str, payload: bytes) -> bytes:

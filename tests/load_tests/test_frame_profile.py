@@ -3,8 +3,10 @@ than the round trip, and a plugin that is inert unless asked. Tiny runs; no timi
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -121,3 +123,38 @@ def test_the_plugin_wraps_nothing_unless_its_folder_is_named(tmp_path):
     env[frame_profile.PROFILE_DIR_ENV] = str(tmp_path)
     done = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, cwd=ROOT, env=env, check=True)
     assert done.stdout.strip() == "False"
+
+
+def test_a_grpc_client_does_not_take_over_another_channels_failed_connection():
+    """A channel of this process that met a closed port and is still open (with the arguments of
+    load_tests.stream's and auth_bench's channels, the profile's own before), then a server on that
+    port (the kernel gives ports out again): the profile's client reaches the server at once. With
+    gRPC's global subchannel pool it took over the old channel's connection, in its reconnect
+    backoff, and its first call failed UNAVAILABLE "Connection refused": the echo floor's flaky
+    failure."""
+    import grpc
+
+    async def check() -> bytes:
+        with socket.socket() as probe:  # a port nobody listens on, for the stale channel to meet
+            probe.bind(("127.0.0.1", 0))
+            address = f"127.0.0.1:{probe.getsockname()[1]}"
+        stale = grpc.aio.insecure_channel(address, options=[("grpc.max_send_message_length", 64 << 20)])
+        with pytest.raises(grpc.aio.AioRpcError) as refused:
+            await stale.unary_unary(frame_profile.ECHO_PATH)(b"", timeout=5)
+        assert refused.value.code() == grpc.StatusCode.UNAVAILABLE
+        server = grpc.aio.server(options=[("grpc.so_reuseport", 0)])
+        server.add_generic_rpc_handlers((frame_profile.echo_grpc_handler(),))
+        assert server.add_insecure_port(address) != 0
+        await server.start()
+        client = frame_profile._Grpc(address)
+        try:
+            round_trip, done = client.frames(frame_profile.ECHO_PATH)
+            reply = await round_trip(frame_profile.echo_request(16, 7))
+            await done()
+        finally:
+            await client.close()
+            await stale.close()
+            await server.stop(None)
+        return reply
+
+    assert asyncio.run(check()) == b"\1" * 7
