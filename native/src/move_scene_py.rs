@@ -2,13 +2,15 @@
 //! in one call: the compiled decoder's rows (codec.frame_from_wire) read as they are, where
 //! Scene.set_transform reads one RigidTransform's three arrays a call (about 0.9 us each).
 
-use numpy::PyReadonlyArray2;
+use numpy::ndarray::ArrayView2;
+use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyString};
 
 use crate::scene::Pose;
 use crate::scene_py::PyScene;
+use crate::toric_py::c_order_values;
 
 /// Doubles a row: position (3), rotation xyzw (4), scale (3), as codec.PACKED_STRIDE.
 const STRIDE: usize = 10;
@@ -23,9 +25,22 @@ const STRIDE: usize = 10;
 fn move_scene<'py>(
     mut scene: PyRefMut<'_, PyScene>,
     ids: &Bound<'py, PyList>,
-    rows: PyReadonlyArray2<'_, f64>,
+    rows: &Bound<'py, PyAny>,
 ) -> PyResult<Vec<Bound<'py, PyString>>> {
-    let rows = rows.as_array();
+    // the decoder's own C-order array read without a borrow (toric_py::c_order_values); anything
+    // else as before
+    let copied = rows
+        .cast::<PyArray2<f64>>()
+        .ok()
+        .and_then(|array| c_order_values(array.to_dyn()).map(|values| (array.dims(), values)));
+    let borrowed;
+    let rows = match &copied {
+        Some((dims, values)) => ArrayView2::from_shape(*dims, values).expect("its own shape"),
+        None => {
+            borrowed = rows.extract::<PyReadonlyArray2<'_, f64>>()?;
+            borrowed.as_array()
+        }
+    };
     if rows.ncols() != STRIDE || rows.nrows() != ids.len() {
         return Err(PyValueError::new_err(format!(
             "rows must be ({}, {STRIDE}) for {} ids, got {:?}",

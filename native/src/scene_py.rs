@@ -4,7 +4,9 @@
 //! ray is cast with it released.
 
 use numpy::ndarray::{ArrayView2, Axis};
-use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 
@@ -12,7 +14,7 @@ use crate::bvh::Stack;
 use crate::bvh_py::{faces_of, rows, SEGMENT_END};
 use crate::carry::carry;
 use crate::scene::{Pose, Scene};
-use crate::toric_py::floats;
+use crate::toric_py::{c_order_values, floats};
 
 type Mesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
@@ -36,9 +38,12 @@ pub(crate) fn pose_of(transform: &Bound<'_, PyAny>) -> PyResult<Pose> {
     let field = |name: &str, n: usize| -> PyResult<Vec<f64>> {
         let value = transform.getattr(name)?;
         // a float64 ndarray (a RigidTransform's) read at once, not element by element as a sequence
-        let values: Vec<f64> = match value.extract::<PyReadonlyArray1<'_, f64>>() {
-            Ok(array) => array.as_array().to_vec(),
-            Err(_) => value.extract()?,
+        let values: Vec<f64> = match value.cast::<PyArrayDyn<f64>>() {
+            Ok(array) if array.ndim() == 1 => match c_order_values(array) {
+                Some(values) => values,
+                None => array.try_readonly()?.as_array().iter().copied().collect(),
+            },
+            _ => value.extract()?,
         };
         if values.len() != n || values.iter().any(|x| !x.is_finite()) {
             return Err(PyValueError::new_err(format!(
@@ -66,6 +71,18 @@ pub(crate) fn pose_of(transform: &Bound<'_, PyAny>) -> PyResult<Pose> {
 
 /// Points (n, 3) float64, or one point (3,) as a row (then `true`).
 pub(crate) fn points_of(name: &str, points: &Bound<'_, PyAny>) -> PyResult<(Vec<[f64; 3]>, bool)> {
+    if let Ok(array) = points.cast::<PyArrayDyn<f64>>() {
+        let shape = array.shape().to_vec();
+        if let (1 | 2, Some(values)) = (shape.len(), c_order_values(array)) {
+            let (n, k) = match shape[..] {
+                [k] => (1, k), // one point, as a row
+                [n, k] => (n, k),
+                _ => unreachable!("one or two dimensions"),
+            };
+            let view = ArrayView2::from_shape((n, k), &values).expect("its own shape");
+            return Ok((rows(name, view)?, n == 1 && shape.len() == 1));
+        }
+    }
     if let Ok(one) = points.extract::<PyReadonlyArray1<'_, f64>>() {
         return Ok((rows(name, one.as_array().insert_axis(Axis(0)))?, true));
     }

@@ -10,6 +10,7 @@
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{
     AllowTypeChange, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -37,9 +38,24 @@ impl From<NoRotation> for PyErr {
     }
 }
 
+/// A float64 ndarray's values in C order, copied without a borrow: None unless it is C-contiguous.
+/// The copy is made with the GIL held and no Rust reference to the array kept, so nothing can
+/// write it meanwhile; rust-numpy's borrow registry (a shared hash map, entered and left per read)
+/// cost the frame's few small reads more than the reads (docs/frame_path.md).
+pub(crate) fn c_order_values(array: &Bound<'_, PyArrayDyn<f64>>) -> Option<Vec<f64>> {
+    if array.is_c_contiguous() {
+        array.to_vec().ok()
+    } else {
+        None
+    }
+}
+
 /// Any array-like as a float64 array: a float64 ndarray as it is, anything else through numpy.
 fn float_array<'py>(obj: &Bound<'py, PyAny>) -> PyResult<ArrayD<f64>> {
     if let Ok(array) = obj.cast::<PyArrayDyn<f64>>() {
+        if let Some(values) = c_order_values(array) {
+            return Ok(ArrayD::from_shape_vec(IxDyn(array.shape()), values).expect("its own shape"));
+        }
         return Ok(array.try_readonly()?.as_array().to_owned());
     }
     let array: PyArrayLikeDyn<'py, f64, AllowTypeChange> = obj.extract()?;
@@ -49,10 +65,12 @@ fn float_array<'py>(obj: &Bound<'py, PyAny>) -> PyResult<ArrayD<f64>> {
 /// N floats (a point (3,), a screen point (2,)) from a float64 ndarray of N elements, a sequence
 /// of N numbers, or any array-like numpy converts to N floats.
 pub(crate) fn floats<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
-    if !obj.is_instance_of::<PyArrayDyn<f64>>() {
-        if let Ok(values) = obj.extract::<[f64; N]>() {
-            return Ok(values); // the per-frame case: a tuple or list, no array made
+    if let Ok(array) = obj.cast::<PyArrayDyn<f64>>() {
+        if let Some(Ok(values)) = c_order_values(array).map(<[f64; N]>::try_from) {
+            return Ok(values); // the per-frame case: N float64 values, one copy
         }
+    } else if let Ok(values) = obj.extract::<[f64; N]>() {
+        return Ok(values); // a tuple or list, no array made
     }
     let array = float_array(obj)?;
     <[f64; N]>::try_from(array.iter().copied().collect::<Vec<f64>>()).map_err(|_| {

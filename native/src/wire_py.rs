@@ -17,6 +17,7 @@ use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyString};
 
+use crate::toric_py::c_order_values;
 use crate::wire::{self, Known, Status, STRIDE};
 
 pyo3::create_exception!(
@@ -129,8 +130,10 @@ fn decode_frame<'py>(
 /// N floats from a float64 array (read at once) or a sequence of N numbers.
 fn floats<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
     if let Ok(array) = obj.cast::<PyArray1<f64>>() {
-        let array = array.try_readonly()?;
-        let values = array.as_array();
+        let values = match c_order_values(array.to_dyn()) {
+            Some(values) => values,
+            None => array.try_readonly()?.as_array().to_vec(),
+        };
         if values.len() == N {
             return Ok(std::array::from_fn(|k| values[k]));
         }
