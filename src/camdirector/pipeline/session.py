@@ -16,6 +16,7 @@ whose numpy product goes through OpenBLAS, whose kernel (and so the last bits) i
 
 from __future__ import annotations
 
+import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -28,13 +29,15 @@ from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.meshes import TriMesh
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.camera_rig import CameraRig
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
 from camdirector.pipeline.rigs import make_rig, runs_compiled
 from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
+
+_INGEST = Stage.INGEST.value  # its stage_ms key, read once: an enum member's value is a Python-level property
+_AIM_OFFSET = operator.attrgetter("aim_offset_local")  # a TargetSpec's (3,) aim point in its frame
 
 # A creation object's name (Session.creation_objects): "clock", "level", "level_mesh", or a kind
 # ("static", "target", "dynamic") with the object's index or id.
@@ -143,7 +146,10 @@ class Session:
             state.flags.append("time_went_back")
         self.last_input = (update.frame, update.time_s)
         targets_before = list(self.view_target_transforms())  # a few references: the last cut's "before"
-        stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
+        # INGEST's lap, the frame's first, read off the clock as a StageClock's first lap into a fresh
+        # dict is (the same readings, the same value), without making one: in a worker its object and
+        # its enum lookups cost a compiled frame about as much as carrying the aim points.
+        start_s = self.clock()
         # looked up once a frame, not once a moved object
         target_index, dynamic, set_transform = self.target_index, self.dynamic, self.ray_scene.set_transform
         for object_id, transform in update.states:
@@ -153,12 +159,12 @@ class Session:
                 dynamic[object_id] = (dynamic[object_id][0], transform)
             else:
                 self.target_transforms[index] = transform
-        placed = zip(self.target_transforms, self.targets)
-        if self.portable:  # one point each, (3,) in and out: the same sums as a row's
-            state.aim_points_world = [native.carry(t.aim_offset_local, tf) for tf, t in placed]
+        if self.portable:  # one point each, (3,) in and out: the same sums as a row's (map: no Python frame a target)
+            state.aim_points_world = list(map(native.carry, map(_AIM_OFFSET, self.targets), self.target_transforms))
         else:
+            placed = zip(self.target_transforms, self.targets)
             state.aim_points_world = [_carried(tf, t.aim_offset_local[None, :], False)[0] for tf, t in placed]
-        stages.done(Stage.INGEST)
+        state.stage_ms[_INGEST] = (self.clock() - start_s) * 1e3
         self.rig.run(state, update, self.target_transforms, last)  # the stages after INGEST, timed by the rig
         # The first pose is a cut (a MATCH session answers without a pose while its delay fills).
         state.cut = state.pose is not None and (state.cut or last is None or last.pose is None)

@@ -26,7 +26,9 @@ With `style.rig = MATCH` (pipeline/match/rig.py, the casting director) a frame i
 VISIBILITY.
 The state passed along the stages, `FrameState`, is pipeline/state.py's: a core every rig fills
 and the part of the rig that ran the frame.
-Each stage is lapped by one `infra.stage_clock.StageClock` on the session's injected clock.
+Each stage is lapped on the session's injected clock: INGEST by the session itself, the rig's by
+an `infra.stage_clock.StageClock` (the compiled TORIC rig's FRAMING_ONLY and REACTIVE frames by
+`camdirector._native.toric_frame`, at the same readings).
 Building the reply (worker/codec.py) is no stage: it happens after `stage_ms` has been read
 into the reply, so it is counted only in the frame's `compute_ms`, which the session table
 measures around the whole frame.
