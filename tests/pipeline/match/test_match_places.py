@@ -15,11 +15,13 @@ from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import MomentBuffer
+from camdirector.pipeline.match.planned import JUMP_TICKS
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, ToricCamera
 from camdirector.pipeline.toric.target_sampling import SurfaceSampler
 from tests.pipeline.match.scenes import (
     LENS,
+    RATE_HZ,
     BareRig,
     Match,
     at_time,
@@ -174,11 +176,61 @@ def test_a_kill_soon_after_another_gets_a_later_cut_so_that_the_shot_before_last
         assert state.match.shot.kind == ShotKind.DUEL and set(state.match.shot.subject_ids) == pair
 
 
-def _kills_after_one_elsewhere(places, second_s: float, settings: MatchSettings) -> list:
+def _teleported(who: str, at_s: float, away_s: float = 0.3):
+    """two_duels_side_by_side, but `who` stands 14 m south of its place, behind a wall, for
+    away_s before at_s, s: two teleports through the wall (moments.py: jumps no run makes), the
+    last at at_s. Returns the script and the wall."""
+
+    def script(t: float):
+        places = two_duels_side_by_side(t)
+        if at_s - away_s <= t < at_s:
+            (x, z), yaw = places[who]
+            places[who] = ((x, z - 14.0), yaw)
+        return places
+
+    (x, z), _ = two_duels_side_by_side(0.0)[who]
+    return script, block((x, 1.5, z - 7.0), (2.0, 3.0, 0.2))
+
+
+def _cuts_between(states: list, start_s: float, end_s: float) -> list[float]:
+    return [s.time_s for s in states if s.cut and start_s < s.time_s <= end_s]
+
+
+def test_a_kill_cut_to_comes_after_its_killers_teleport_and_not_before_it():
+    # the cut for a1's kill at 25 s would come at 22.5 s (lead_s); a1 teleports at 23.5 s, where
+    # a camera on a1 (its eyes, its anchor) would cut again a second into the shot
+    teleport_s = KILL_S - 1.5
+    settings = MatchSettings()
+    places, wall = _teleported("a1", teleport_s)
+    states = _kills_after_one_elsewhere(places, KILL_S + 2.5, settings, [wall])
+    cuts = _cuts_between(states, KILL_S - 4.0, KILL_S)
+    assert len(cuts) == 1 and teleport_s <= cuts[0] <= KILL_S - settings.min_lead_s, cuts
+    assert set(at_time(states, KILL_S).match.shot.subject_ids) == {"a1", "b1"}
+
+
+def test_a_kill_cut_to_comes_before_the_shot_on_air_meets_its_players_teleport():
+    # the program is on e1 and f1 for e1's kill at 21 s, a camera on e1; e1 teleports away at
+    # 22.0 s (and back at 22.3 s), before the cut for a1's kill at 25 s would come (22.5 s): that
+    # cut comes before the teleport instead, two planning ticks early (it is made at the first
+    # tick at or after its time)
+    away_s = KILL_S - 3.0
+    settings = MatchSettings()
+    kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S)]
+    places, wall = _teleported("e1", away_s + 0.3)
+    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, places, kills, delay_s=10.0, walls=[wall])
+    states = [s for s in BareRig(match, settings).run(KILL_S + 10.0 + 2.0) if not s.match.buffering]
+    assert "e1" in at_time(states, KILL_S - 3.5).match.shot.subject_ids
+    cuts = _cuts_between(states, KILL_S - 3.5, KILL_S)
+    assert len(cuts) == 1 and away_s - JUMP_TICKS * settings.plan_interval_s - 1.0 / RATE_HZ <= cuts[0] < away_s, cuts
+    assert set(at_time(states, KILL_S).match.shot.subject_ids) == {"a1", "b1"}
+
+
+def _kills_after_one_elsewhere(places, second_s: float, settings: MatchSettings, walls: list | None = None) -> list:
     """The program (past buffering) of e1's kill of f1 at KILL_S - 4 s, then a1's of b1 at KILL_S
-    and a2's of b2 at second_s, the players standing at `places`."""
+    and a2's of b2 at second_s, the players standing at `places` (among `walls`)."""
     kills = [kill("e1", "f1", KILL_S - 4.0), kill("a1", "b1", KILL_S), kill("a2", "b2", second_s)]
-    match = Match({"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}, places, kills, delay_s=10.0)
+    teams = {"a1": 1, "b1": 2, "a2": 1, "b2": 2, "e1": 1, "f1": 2}
+    match = Match(teams, places, kills, delay_s=10.0, walls=walls or [])
     return [s for s in BareRig(match, settings).run(KILL_S + 10.0 + 4.0) if not s.match.buffering]
 
 

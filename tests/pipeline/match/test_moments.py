@@ -58,6 +58,25 @@ def test_a_player_respawned_where_it_fell_is_alive_once_it_walks_away():
     assert walked_m == pytest.approx(settings.respawn_walk_m, abs=walk_m_s / RATE_HZ)
 
 
+def test_jumps_are_the_moments_a_player_teleports_or_respawns_not_those_it_runs_or_falls():
+    # b runs at 10 m/s, teleports 20 m at frame 40, falls (up to 20 m/s) from frame 70; a stands still
+    def path(f):
+        run = min(f, 40) / RATE_HZ * 10.0
+        drop = 0.5 * 9.81 * (max(f - 70, 0) / RATE_HZ) ** 2
+        return (run + (20.0 if f >= 40 else 0.0), -min(drop, 20.0), 0.0)
+
+    buffer = MomentBuffer(["a", "b"], MatchSettings())
+    feed(buffer, path, kill_at_frame=1000)
+    assert buffer.jumps_s([1], 0.0, 2.0) == [40 / RATE_HZ]
+    assert buffer.jumps_s([0, 1], 0.0, 2.0) == [40 / RATE_HZ]
+    assert buffer.jumps_s([0], 0.0, 2.0) == []
+    assert buffer.jumps_s([1], 40 / RATE_HZ, 2.0) == []  # (start, end]: the jump's own moment is at start
+    assert buffer.jumps_s([1], 0.0, 39.5 / RATE_HZ) == []
+    # with the level: only a jump with a wall between its two aim points (a jump pad's has none)
+    assert buffer.jumps_s([1], 0.0, 2.0, crosses=lambda a, b: np.ones(len(a), dtype=bool)) == [40 / RATE_HZ]
+    assert buffer.jumps_s([1], 0.0, 2.0, crosses=lambda a, b: np.zeros(len(a), dtype=bool)) == []
+
+
 def test_respawn_settings_are_validated():
     for name in ("respawn_speed_m_s", "respawn_min_jump_m", "respawn_walk_m"):
         with pytest.raises(ValueError, match=name):

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import bisect
 import copy
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -91,6 +91,14 @@ COMPACT_AFTER = 32  # moments gone (before the program's) that the buffer drops 
 TIME_EPSILON_S = 1e-6  # frame times this close are the same instant (floating-point rounding of t - D), s
 
 
+def _jumped(step_world: np.ndarray, dt_s: float | np.ndarray, settings: MatchSettings) -> np.ndarray:
+    """(..., 3) feet steps over dt_s, s -> (...) bool: moved at least respawn_min_jump_m and
+    faster than respawn_speed_m_s (a teleport, not a run: module docstring)."""
+    step_m = np.linalg.norm(step_world, axis=-1)
+    jumped: np.ndarray = (step_m >= settings.respawn_min_jump_m) & (step_m > settings.respawn_speed_m_s * dt_s)
+    return jumped
+
+
 class MomentBuffer:
     """The moments from `replay_past_s` before the program's moment (what a replay shows again,
     replays.py) to the newest frame, and the match's events."""
@@ -123,8 +131,7 @@ class MomentBuffer:
         alive = np.ones(len(transforms), dtype=bool) if last is None else last.alive.copy()
         if last is not None and not alive.all():
             s = self.settings
-            step_m = np.linalg.norm(feet - last.feet_world, axis=1)
-            teleported = (step_m >= s.respawn_min_jump_m) & (step_m > s.respawn_speed_m_s * (time_s - last.time_s))
+            teleported = _jumped(feet - last.feet_world, time_s - last.time_s, s)
             # across the ground: a body that falls off a ledge has not walked
             walked_away = np.linalg.norm((feet - self._fell_world)[:, [0, 2]], axis=1) >= s.respawn_walk_m  # NaN: False
             alive |= teleported | walked_away
@@ -216,6 +223,32 @@ class MomentBuffer:
     def horizon_s(self) -> float:
         """Time of the newest moment (the end of the known future)."""
         return self.times[-1]
+
+    def jumps_s(
+        self,
+        players: Sequence[int],
+        start_s: float,
+        end_s: float,
+        crosses: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    ) -> list[float]:
+        """Times of the moments in (start_s, end_s], s, at which one of the players jumped from
+        the moment before: a teleport or a respawn (module docstring). With `crosses` ((n, 3)
+        from, (n, 3) to, m -> (n,) bool: the level between them), only a jump whose aim points
+        have level geometry between them: where a camera through that player's eyes or anchored
+        on it passes through a wall, a cut within its shot (rig.py); a jump pad's is none."""
+        lo = max(bisect.bisect_right(self.times, start_s), 1)
+        hi = bisect.bisect_right(self.times, end_s)
+        if hi <= lo or not players:
+            return []
+        columns = list(players)
+        feet = np.array([m.feet_world[columns] for m in self.moments[lo - 1 : hi]])  # (k + 1, p, 3)
+        dt_s = np.diff(self.times[lo - 1 : hi])[:, None]  # (k, 1)
+        steps, movers = np.nonzero(_jumped(np.diff(feet, axis=0), dt_s, self.settings))
+        if crosses is not None and len(steps):
+            before = np.array([self.moments[lo - 1 + k].aims_world[columns[p]] for k, p in zip(steps, movers)])
+            after = np.array([self.moments[lo + k].aims_world[columns[p]] for k, p in zip(steps, movers)])
+            steps = steps[crosses(before, after)]
+        return [self.times[lo + k] for k in sorted(set(steps.tolist()))]
 
     def events_between(self, start_s: float, end_s: float) -> list[GameEvent]:
         """Events with start_s < time_s <= end_s, in time order."""
