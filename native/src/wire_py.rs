@@ -10,7 +10,7 @@
 
 use std::cell::RefCell;
 
-use numpy::ndarray::Array2;
+use numpy::ndarray::{s, Array2};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::intern;
@@ -67,27 +67,34 @@ impl wire::Objects for SessionIds<'_, '_> {
     }
 }
 
-/// A frame's (session_id, frame, time_s, ids, rows): `rows` (n, 10) float64 for the n `ids`
-/// (the states' in order, then the packed ones), rotations normalised.
+/// A frame's (session_id, frame, time_s, ids, rows, states): `rows` (n, 10) float64 for the n
+/// `ids` (the states' in order, then the packed ones), rotations normalised; `states` a list of
+/// (id, transform(position (3,), rotation_xyzw (4,), scale (3,))) in the same order, the arrays
+/// views of `rows`.
 type Decoded<'py> = (
     String,
     u64,
     f64,
     Bound<'py, PyList>,
     Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyList>,
 );
 
-/// decode_frame(payload, movable, static_ids) -> (session_id, frame, time_s, ids, rows) | None:
-/// a FrameUpdate's bytes checked as codec.frame_from_msg checks it, in its order and with its
-/// messages (FrameRefused otherwise); None for a frame with game events or player stats, which
-/// the Python codec reads (wire.rs). `movable`: the ids of targets and dynamic objects;
-/// `static_ids`: those of static objects.
+/// decode_frame(payload, movable, static_ids, transform) -> (session_id, frame, time_s, ids,
+/// rows, states) | None: a FrameUpdate's bytes checked as codec.frame_from_msg checks it, in its
+/// order and with its messages (FrameRefused otherwise); None for a frame with game events or
+/// player stats, which the Python codec reads (wire.rs). `movable`: the ids of targets and
+/// dynamic objects; `static_ids`: those of static objects; `transform`: what each row is made
+/// into (RigidTransform), called with three views of `rows`, the row's columns 0:3, 3:7 and
+/// 7:10, as `map(transform, rows[:, 0:3], rows[:, 3:7], rows[:, 7:10])` makes them: made here,
+/// the views cost no numpy indexing and the list no Python loop.
 #[pyfunction]
 fn decode_frame<'py>(
     py: Python<'py>,
     payload: &[u8],
     movable: &Bound<'py, PyAny>,
     static_ids: &Bound<'py, PyAny>,
+    transform: &Bound<'py, PyAny>,
 ) -> PyResult<Option<Decoded<'py>>> {
     let Some(msg) = wire::FrameUpdate::parse(payload) else {
         return Ok(None);
@@ -118,12 +125,34 @@ fn decode_frame<'py>(
     let names = &objects.names;
     let flat: Vec<f64> = rows.into_iter().flatten().collect();
     let rows = Array2::from_shape_vec((names.len(), STRIDE), flat).expect("STRIDE values a row");
+    let rows = PyArray2::from_owned_array(py, rows);
+    // SAFETY: only the new array's data pointer and strides are read through this view (where
+    // each row's views start), never its values.
+    let values = unsafe { rows.as_array() };
+    let view = |k: usize, columns: std::ops::Range<usize>| {
+        // SAFETY: a view of `rows`, its base: the array's memory never moves (it owns it, and
+        // nothing resizes it) and lives as long as the view keeps `rows` alive.
+        unsafe {
+            PyArray1::borrow_from_array(&values.slice(s![k, columns]), rows.clone().into_any())
+        }
+    };
+    let states = names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            Ok((
+                name.clone(),
+                transform.call1((view(k, 0..3), view(k, 3..7), view(k, 7..STRIDE)))?,
+            ))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
     Ok(Some((
         msg.session_id.to_string(),
         msg.frame,
         msg.time_s,
         PyList::new(py, names)?,
-        PyArray2::from_owned_array(py, rows),
+        rows,
+        PyList::new(py, states)?,
     )))
 }
 

@@ -34,6 +34,7 @@ from camdirector.demo.scene import build_demo_scene
 from camdirector.errors import DirectorError
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.toric import make_torus
+from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import FrameInput
 from camdirector.pipeline.match.frame import MatchFrame
 from camdirector.pipeline.state import FrameState
@@ -155,6 +156,11 @@ def assert_same(got, want) -> int:
     assert type(got.frame) is int and type(got.time_s) is float
     assert (got.events, got.player_stats) == (want.events, want.player_stats)
     assert [i for i, _ in got.states] == [i for i, _ in want.states]
+    if got.packed is not None:  # the rows the compiled rig moves its Scene by: the transforms' own values
+        ids, rows = got.packed
+        assert ids == [i for i, _ in got.states] and rows.shape == (len(ids), 10)
+        made = [np.concatenate([t.position_world, t.rotation_xyzw, t.scale]) for _, t in got.states]
+        assert all(same_bits(row, values) for row, values in zip(rows, made))
     worst = 0
     for (_, g), (_, w) in zip(got.states, want.states):
         assert same_bits(g.position_world, w.position_world) and same_bits(g.scale, w.scale)
@@ -288,7 +294,7 @@ def test_a_frame_with_game_input_goes_through_the_python_codec():
     want = python(payload, PLAYERS)
     assert isinstance(want, FrameInput) and len(want.events) == 1 and len(want.player_stats) == 1
     assert_same(wire(payload, PLAYERS), want)
-    assert native.decode_frame(payload, MOVABLE, STATIC) is None
+    assert native.decode_frame(payload, MOVABLE, STATIC, RigidTransform) is None
 
 
 # -- the same over bytes that protobuf's own writer never makes ---------------------------------

@@ -585,16 +585,15 @@ def frame_from_wire(
     from numpy's norm in the last bit (numpy's depends on the machine). A frame with game events
     or player stats goes through frame_from_msg."""
     try:
-        decoded = native.decode_frame(payload, movable, static)
+        decoded = native.decode_frame(payload, movable, static, RigidTransform)
     except native.FrameRefused as exc:
         status, message = exc.args
         raise _REFUSALS[status](message) from None
     if decoded is None:
         return frame_from_msg(msg, movable, static, player_ids, delay_s)
-    session_id, frame, time_s, ids, rows = decoded  # rows (n, PACKED_STRIDE) float64, as transforms_from_packed's
-    # Rows of the one array, as transforms_from_packed makes them; map over its columns is the cheapest way (3 us for 6).
-    transforms = map(RigidTransform, rows[:, 0:3], rows[:, 3:7], rows[:, 7:10])
-    return FrameInput(session_id, frame, time_s, list(zip(ids, transforms)), packed=(ids, rows))
+    # rows (n, PACKED_STRIDE) float64, as transforms_from_packed's; states (id, RigidTransform of its row)
+    session_id, frame, time_s, ids, rows, states = decoded
+    return FrameInput(session_id, frame, time_s, states, packed=(ids, rows))
 
 
 def pose_msg(pose: CameraPose) -> pb.CameraPose:
