@@ -80,7 +80,7 @@ pub(crate) fn points_of(name: &str, points: &Bound<'_, PyAny>) -> PyResult<(Vec<
                 _ => unreachable!("one or two dimensions"),
             };
             let view = ArrayView2::from_shape((n, k), &values).expect("its own shape");
-            return Ok((rows(name, view)?, n == 1 && shape.len() == 1));
+            return Ok((rows(name, view)?, shape.len() == 1));
         }
     }
     if let Ok(one) = points.extract::<PyReadonlyArray1<'_, f64>>() {
