@@ -4,7 +4,9 @@ chooses among the situations of the moment by interest.
 Planned beats (delay > 0): the events of priority >= `beat_min_priority` (kills, objectives) in
 the buffered future, in time order, each with the shot that shows it (a kill: DUEL of attacker and
 victim). A beat is shown by cutting `lead_s` before it (never earlier than `max_lead_s`, never in
-the last `min_lead_s`), held `event_hold_s` after it, and no shot under the style's `min_shot_s`.
+the last `min_lead_s`), held `event_hold_s` after it, and no shot under the style's `min_shot_s`;
+within those bounds the cut moves off the players' jumps through walls, where a camera on them
+cuts within its shot (`_around_jumps`).
 An event whose players the previous beat's shot already shows extends that beat; one that cannot
 get its own cut (too close after the previous) joins the previous beat as a GROUP when the players
 fit in `max_group`, stand within `join_spread_max_m` of each other (a shot of players farther apart
