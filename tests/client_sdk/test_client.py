@@ -5,6 +5,7 @@ Every behaviour is checked over both transports: a grpc server and a ZeroMQ ROUT
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 
@@ -184,3 +185,23 @@ def test_sessions_on_threads(client):
     for thread in threads:
         thread.join()
     assert errors == []
+
+
+def test_a_new_client_reaches_a_server_started_where_another_client_was_refused():
+    """A client of this process meets a closed port and stays open; a server then starts on that
+    port (a node restarted on its port, a port given out again): a new client reaches it at once.
+    With gRPC's process-wide subchannel pool the new client took over the first one's connection,
+    waiting to reconnect, and its first call was refused (UNAVAILABLE "Connection refused")."""
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    stale = cd.connect(f"grpc://127.0.0.1:{port}", timeout_s=5.0)
+    try:
+        with pytest.raises(cd.DirectorError) as refused:
+            stale.create_session(targets=TARGETS)
+        assert refused.value.code == grpc.StatusCode.UNAVAILABLE
+        with FakeGrpcServer(port=port) as server, cd.connect(server.url, timeout_s=5.0) as fresh:
+            session = fresh.create_session(targets=TARGETS)
+            assert session.id in server.core.sessions
+    finally:
+        stale.close()

@@ -46,6 +46,7 @@ def test_grpc_channel_options():
         "grpc.max_send_message_length": 1000,
         "grpc.max_receive_message_length": 5,
         "grpc.x": 1,
+        "grpc.use_local_subchannel_pool": 1,  # its own connections (test_client.py: a new client and a restarted server)
         **wire.DEFAULT_RETRY.grpc_options(),  # reconnecting and pinging as often as calls are tried again
     }
     assert options["grpc.initial_reconnect_backoff_ms"] == 100 and options["grpc.keepalive_time_ms"] == 1000

@@ -505,6 +505,10 @@ def grpc_channel_options(
     options: dict[str, Any] = {
         "grpc.max_send_message_length": max_message_bytes,
         "grpc.max_receive_message_length": max_message_bytes,
+        # each client its own connections: with gRPC's process-wide pool a new client took over
+        # another's connection to the same address while it waited to reconnect, and a server
+        # started since on that port (a node restarted, a port given out again) was refused
+        "grpc.use_local_subchannel_pool": 1,
         **retry.grpc_options(),
     }
     options.update(extra or ())
