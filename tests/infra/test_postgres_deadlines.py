@@ -18,6 +18,7 @@ import pytest
 from camdirector.deploy.services import PostgresServer, descendants
 from camdirector.infra.postgres import HUNG_RETRY_S, PostgresDatabase, advisory_lock
 from tests.conftest import service_or_skip
+from tests.infra.test_host_address import ScriptedLookup
 
 RETURNS_WITHIN_S = 20.0  # a call that has not come back by then hangs (the deadline is 2 s)
 
@@ -104,3 +105,35 @@ def test_a_call_to_a_stopped_server_comes_back_unavailable_and_the_next_after_it
     finally:
         connected.close()
         fresh.close()
+
+
+def test_connections_go_to_the_address_found_and_a_stalled_lookup_delays_none(postgres):
+    """The URL names the server by a name only the test's lookup knows: connecting again after the
+    server dropped the connection waits on no lookup (one is under way, and stalls); before any
+    lookup answered, a call comes back Down naming the host."""
+    url = postgres.url.replace("127.0.0.1", "records.test")
+    lookup = ScriptedLookup()
+    db = PostgresDatabase(url, "test records", Down, deadline_s=0.1, lookup=lookup)
+    try:
+        answer = outcome(lambda: read_one(db))
+        assert isinstance(answer, Down) and "no address of records.test is known" in str(answer)
+        lookup.give(["127.0.0.1"])
+        assert read_one(db) == 1
+        other = PostgresDatabase(postgres.url, "test records", Down)
+        with other.read() as conn:  # the first one's connection ended, as a restarted server ends it
+            conn.execute(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+                " WHERE pid <> pg_backend_pid() AND datname = current_database()"
+            )
+        other.close()
+        db.address.refresh()
+        deadline = time.monotonic() + RETURNS_WITHIN_S
+        while lookup.calls < 2:
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        first = outcome(lambda: read_one(db))  # may meet the dropped connection: Down, and it is closed
+        assert first == 1 or isinstance(first, Down), first
+        assert read_one(db) == 1  # connected again while the lookup stalls
+    finally:
+        lookup.give(["127.0.0.1"])
+        db.close()

@@ -21,6 +21,7 @@ from camdirector.worker.checkpoint_stores import (
 from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.replay import _comparable
 from camdirector.worker.table import SessionTable
+from tests.infra.test_host_address import ScriptedLookup
 from tests.service.test_match_sessions import frames as match_frames
 from tests.service.test_match_sessions import match_request
 from tests.service.tracks_sessions import tracks_request
@@ -333,3 +334,39 @@ def test_a_frame_sent_again_is_answered_stale_with_its_own_pose_here_and_after_a
     for table in (a, _requests(tmp_path, store_url, "node-b/2")):
         again = pb.CameraUpdate.FromString(table.handle_bytes("frame", "s", updates[8])[0])
         assert again.stale and again.frame == first[8].frame and again.pose == first[8].pose
+
+
+def test_redis_connections_go_to_the_address_found_and_never_wait_on_a_lookup_again(redis_url):
+    port = redis_url.rsplit(":", 1)[1].split("/")[0]
+    lookup = ScriptedLookup(["127.0.0.1"])
+    store = RedisStore(f"redis://checkpoints.test:{port}/0", keep_s=60.0, check=False, lookup=lookup)
+    store.begin("s", "n/1", b"create")
+    import redis
+
+    admin = redis.from_url(redis_url)
+    admin.client_kill_filter(_type="normal", skipme=True)  # the store's connection dropped (Redis restarted, say)
+    store.address.refresh()  # a lookup is under way, and stalls (_Lookup has no answer to give)
+    _until(lambda: lookup.calls == 2)
+    assert store.append("s", "n/1", encode_entry(1, "frame", b"f"))  # connected again, to the address found
+    assert store.load("s").entries == [(1, "frame", b"f")] and store.ping()
+    lookup.give(["127.0.0.1"])
+    admin.close()
+    store.close()
+
+
+def test_redis_calls_before_any_lookup_answered_fail_at_once_and_a_moved_store_is_found_again(redis_url):
+    port = redis_url.rsplit(":", 1)[1].split("/")[0]
+    lookup = ScriptedLookup()
+    store = RedisStore(f"redis://checkpoints.test:{port}/0", keep_s=60.0, timeout_s=0.05, check=False, lookup=lookup)
+    with pytest.raises(CheckpointError, match="no address of checkpoints.test is known"):
+        store.begin("s", "n/1", b"create")
+    assert not store.ping()
+    lookup.give(["127.0.0.2"])  # nothing listens there: refused
+    _until(lambda: store.address.current == "127.0.0.2")
+    with pytest.raises(CheckpointError):
+        store.begin("s", "n/1", b"create")
+    lookup.give(["127.0.0.1"])  # the lookup that failure started finds where Redis is now
+    _until(lambda: store.address.current == "127.0.0.1")
+    store.begin("s", "n/1", b"create")
+    assert store.load("s").create == b"create"
+    store.close()

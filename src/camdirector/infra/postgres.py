@@ -14,7 +14,11 @@ still has its kernel accept and acknowledge, so only that last bound ends a call
 answer: a watchdog thread shuts down the connection's socket, psycopg returns at once with an
 error, and the next call connects again. A call that found the database hung makes the calls of
 the next HUNG_RETRY_S fail at once: those queued behind it do not each wait their deadline in turn.
-psycopg is imported only when used: a single node on SQLite never loads it."""
+A URL's one host name is looked up off the calls' path (infra/host_address.py says why: a lookup
+cannot be bounded), and connections go to the address found (libpq's `hostaddr`; `host` still
+names the server to TLS): a connect waits for the first lookup up to `deadline_s`, and a failed
+one looks the name up again. psycopg is imported only when used: a single node on SQLite never
+loads it."""
 
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ import time
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+from camdirector.infra.host_address import HostAddress, Lookup, lookup_stream_addresses
 from camdirector.infra.redaction import redacted
 
 RECORDS_DEADLINE_S = 2.0  # the longest one call waits for its turn at the connection, and again for its answers, s
@@ -50,13 +55,15 @@ class QmarkConnection:
         return self._conn.execute(sql.replace("?", "%s"), tuple(args))
 
 
-def _conninfo(url: str) -> str:
-    """`url` with the bounds of the module docstring added (options the URL gives are kept)."""
+def _conninfo(url: str, hostaddr: str | None = None) -> str:
+    """`url` with the bounds of the module docstring added (options the URL gives are kept), and
+    `hostaddr`, the address to connect to, when given."""
     from psycopg.conninfo import conninfo_to_dict, make_conninfo
 
     options = f"-c statement_timeout={STATEMENT_TIMEOUT_MS} -c idle_in_transaction_session_timeout={IDLE_IN_TRANSACTION_MS}"
     return make_conninfo(
         url,
+        **({"hostaddr": hostaddr} if hostaddr is not None else {}),
         options=f"{conninfo_to_dict(url).get('options') or ''} {options}".strip(),
         connect_timeout=CONNECT_TIMEOUT_S,
         keepalives=1,
@@ -115,12 +122,33 @@ class _Watchdog:
 _WATCHDOG = _Watchdog()
 
 
+def _host_address(url: str, lookup: Lookup) -> HostAddress | None:
+    """The URL's host name to look up off the calls' path (the module docstring); None where libpq
+    is to connect as it would (a socket folder, several hosts, a `hostaddr` given, no host)."""
+    from psycopg.conninfo import conninfo_to_dict
+
+    parts = conninfo_to_dict(url)
+    host, port = str(parts.get("host") or ""), str(parts.get("port") or "5432")
+    if not host or host.startswith("/") or "," in host or "," in port or parts.get("hostaddr"):
+        return None
+    return HostAddress(host, int(port), lookup)
+
+
 class PostgresDatabase:
     """The database at `url`; `what` names it in messages ("job store"), `unavailable` is the
     exception type raised when it cannot be reached or does not answer within `deadline_s`."""
 
-    def __init__(self, url: str, what: str, unavailable: type[Exception], deadline_s: float = RECORDS_DEADLINE_S) -> None:
+    def __init__(
+        self,
+        url: str,
+        what: str,
+        unavailable: type[Exception],
+        deadline_s: float = RECORDS_DEADLINE_S,
+        lookup: Lookup = lookup_stream_addresses,
+    ) -> None:
+        """lookup: how the URL's host name is looked up (tests stall it)."""
         self.url = url
+        self.address = _host_address(url, lookup)
         self.deadline_s = deadline_s
         self._what = what
         self._unavailable = unavailable
@@ -135,7 +163,18 @@ class PostgresDatabase:
         import psycopg
 
         if self._conn is None or self._conn.closed or self._conn.broken:
-            self._conn = psycopg.connect(_conninfo(self.url), autocommit=True)
+            hostaddr = None
+            if self.address is not None:
+                hostaddr = self.address.wait(self.deadline_s)
+                if hostaddr is None:
+                    reason = self.address.last_error or "its lookup has not answered yet"
+                    raise self._down(f"no address of {self.address.host} is known ({reason})")
+            try:
+                self._conn = psycopg.connect(_conninfo(self.url, hostaddr), autocommit=True)
+            except psycopg.OperationalError:
+                if self.address is not None:
+                    self.address.failed()
+                raise
         return self._conn
 
     @contextlib.contextmanager

@@ -1,0 +1,106 @@
+"""A service's host name looked up off its callers' path: new connections go to the addresses last
+found, and a lookup runs on a thread of its own when a connection fails (the service may have
+moved: a restarted container's new address).
+
+Why: a name lookup cannot be bounded or cancelled (glibc's getaddrinfo waits its resolver's 5 s
+per try, per name server), and in a container network lookups do stall. In the compose cluster
+(docker/compose.cluster.yaml under podman) a node's lookups of `redis` took 5, 10 and 20 s while
+other nodes' took 1 ms (podman's aardvark-dns drops queries around a container joining or leaving
+the network: containers/aardvark-dns#389). A checkpoint writer that connected by name then sat in
+one lookup for those seconds: every session created meanwhile had no checkpoint, and the node's
+loss lost them (tests/deploy/test_compose_cluster.py, docs/scaling.md). With this, a lookup that
+stalls delays nothing but itself.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections.abc import Callable
+
+Lookup = Callable[[str, int], list[str]]
+
+
+def lookup_stream_addresses(host: str, port: int) -> list[str]:
+    """`host`'s addresses for a TCP connection to `port`, in the resolver's order (duplicates
+    dropped). Raises OSError (socket.gaierror) when the name is not found."""
+    found = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    return list(dict.fromkeys(str(info[4][0]) for info in found))
+
+
+class HostAddress:
+    """`host`'s addresses, looked up by `lookup` on a daemon thread, one lookup at a time.
+    `current` is the address a new connection is to use; None until a lookup has answered."""
+
+    def __init__(self, host: str, port: int, lookup: Lookup = lookup_stream_addresses):
+        self.host = host
+        self.port = port
+        self._lookup = lookup
+        self._lock = threading.Condition()  # notified when a lookup answers
+        self._addresses: list[str] = []
+        self._next = 0  # which of _addresses new connections use: the next one after a failure
+        self._looking: threading.Thread | None = None
+        self._answers = 0  # lookups answered so far
+        self.last_error: OSError | None = None  # the last lookup's failure, None once one answers
+
+    @property
+    def current(self) -> str | None:
+        with self._lock:
+            return self._addresses[self._next] if self._addresses else None
+
+    def refresh(self) -> None:
+        """Starts a lookup unless one is running; its addresses replace those known (a failed one
+        keeps them)."""
+        with self._lock:
+            if self._looking is not None:
+                return
+            self._looking = threading.Thread(target=self._look_up, name=f"lookup-{self.host}", daemon=True)
+            self._looking.start()
+
+    def failed(self) -> None:
+        """A connection to `current` failed: the next address known is tried first from now on,
+        and the name is looked up again."""
+        with self._lock:
+            if self._addresses:
+                self._next = (self._next + 1) % len(self._addresses)
+        self.refresh()
+
+    def wait(self, timeout_s: float) -> str | None:
+        """`current`, waiting up to `timeout_s` for a lookup to answer when no address is known yet
+        (a lookup is started if none runs)."""
+        with self._lock:
+            if self._addresses:
+                return self._addresses[self._next]
+            answers = self._answers
+        self.refresh()
+        with self._lock:
+            self._lock.wait_for(lambda: self._answers > answers, timeout_s)
+            return self._addresses[self._next] if self._addresses else None
+
+    def look_up_now(self) -> None:
+        """Looks the name up on the caller's thread (a process starting, which may wait); raises
+        OSError when the lookup fails."""
+        self._answered(*self._ask())
+        if self.last_error is not None:
+            raise self.last_error
+
+    def _look_up(self) -> None:
+        addresses, error = self._ask()
+        with self._lock:
+            self._looking = None
+        self._answered(addresses, error)
+
+    def _ask(self) -> tuple[list[str], OSError | None]:
+        try:
+            addresses = self._lookup(self.host, self.port)
+        except OSError as exc:
+            return [], exc
+        return addresses, None if addresses else OSError(f"no address found for {self.host}")
+
+    def _answered(self, addresses: list[str], error: OSError | None) -> None:
+        with self._lock:
+            self.last_error = error
+            if addresses and set(addresses) != set(self._addresses):
+                self._addresses, self._next = addresses, 0
+            self._answers += 1
+            self._lock.notify_all()
