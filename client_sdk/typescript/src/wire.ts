@@ -79,8 +79,10 @@ export function retryPolicy(given: Partial<RetryPolicy> = {}): RetryPolicy {
 }
 
 /** Channel options: the channel reconnects as often as calls are tried again (grpc-js's own first
- * wait is 1 s, growing to 120 s), and pings its server every second, closing a connection that
- * does not answer within a second. */
+ * wait is 1 s, growing to 120 s), pings its server every second, closing a connection that does
+ * not answer within a second, and keeps its connections to itself: from grpc-js's process-wide
+ * pool a new client took over another client's refused connection, waiting to reconnect, and its
+ * first call was refused although a server listened there by then (test/retry.test.mjs). */
 export function retryChannelOptions(policy: RetryPolicy): Record<string, number> {
   return {
     "grpc.initial_reconnect_backoff_ms": Math.max(1, Math.round(policy.initialBackoffMs)),
@@ -88,6 +90,7 @@ export function retryChannelOptions(policy: RetryPolicy): Record<string, number>
     "grpc.max_reconnect_backoff_ms": Math.max(1, Math.round(policy.maxBackoffMs)),
     "grpc.keepalive_time_ms": 1000,
     "grpc.keepalive_timeout_ms": 1000,
+    "grpc.use_local_subchannel_pool": 1,
   };
 }
 

@@ -6,6 +6,7 @@
 // ZeroMQ, a ROUTER socket of this process that leaves the first frame unanswered.
 // Needs no environment: tests/client_sdk/typescript/test_ts_retry.py runs it after the build.
 import assert from "node:assert/strict";
+import { createServer } from "node:net";
 import { after, before, test } from "node:test";
 import * as grpc from "@grpc/grpc-js";
 import { Router } from "zeromq";
@@ -213,6 +214,38 @@ async function open(retry = {}, options = {}) {
   const client = connect(url, { retry, ...options });
   return { client, session: await client.createSession({}) };
 }
+
+test("a new client reaches a server started where another client was refused", { timeout: 20_000 }, async () => {
+  // A node restarted on its port, a port given out again. With grpc-js's process-wide subchannel
+  // pool the new client took over the first one's connection, waiting to reconnect, and its first
+  // call was refused (as in the Python SDK: tests/client_sdk/test_client.py).
+  const port = await new Promise((resolve) => {
+    const probe = createServer().listen(0, "127.0.0.1", () => {
+      const { port: free } = probe.address();
+      probe.close(() => resolve(free));
+    });
+  });
+  const at = `grpc://127.0.0.1:${port}`;
+  const stale = connect(at, { retry: { retryWindowMs: 0 } });
+  const restarted = new grpc.Server();
+  try {
+    await assert.rejects(stale.createSession({}), (e) => e.code === "UNAVAILABLE");
+    director = new Director();
+    restarted.addService(SERVICE, { CreateSession: (call, callback) => director.handlers().CreateSession(call, callback) });
+    await new Promise((resolve, reject) => {
+      restarted.bindAsync(`127.0.0.1:${port}`, grpc.ServerCredentials.createInsecure(), (error) => (error ? reject(error) : resolve()));
+    });
+    const fresh = connect(at, { retry: { retryWindowMs: 0 } });
+    try {
+      assert.ok((await fresh.createSession({})).id);
+    } finally {
+      fresh.close();
+    }
+  } finally {
+    stale.close();
+    restarted.forceShutdown();
+  }
+});
 
 const frames = (from, to) => Array.from({ length: to - from + 1 }, (_, i) => from + i);
 const updates = (n) => frames(1, n).map((frame) => ({ frame: BigInt(frame) }));
