@@ -10,13 +10,19 @@ the network: containers/aardvark-dns#389). A checkpoint writer that connected by
 one lookup for those seconds: every session created meanwhile had no checkpoint, and the node's
 loss lost them (tests/deploy/test_compose_cluster.py, docs/scaling.md). With this, a lookup that
 stalls delays nothing but itself.
+
+`redis_pool` makes redis-py's connections use one (RedisStore, the job queue); PostgreSQL's use
+libpq's `hostaddr` (infra/postgres.py).
 """
 
 from __future__ import annotations
 
+import functools
 import socket
 import threading
 from collections.abc import Callable
+from typing import Any
+from urllib.parse import urlsplit
 
 Lookup = Callable[[str, int], list[str]]
 
@@ -104,3 +110,48 @@ class HostAddress:
                 self._addresses, self._next = addresses, 0
             self._answers += 1
             self._lock.notify_all()
+
+
+def redis_pool(url: str, lookup: Lookup = lookup_stream_addresses, **kwargs: Any) -> tuple[Any, HostAddress | None]:
+    """A redis-py ConnectionPool for `url` (`kwargs` as ConnectionPool.from_url's) and its
+    HostAddress, whose first lookup is started here: a `redis://` URL's connections go to the
+    address it found. None, and connections made as redis-py makes them, for `rediss://` (TLS
+    checks the name) and `unix://`."""
+    import redis  # only a process given a Redis URL needs the client
+
+    parts = urlsplit(url)
+    if parts.scheme != "redis" or not parts.hostname:
+        return redis.ConnectionPool.from_url(url, **kwargs), None
+    address = HostAddress(parts.hostname, parts.port or 6379, lookup)
+    address.refresh()
+    return redis.ConnectionPool.from_url(url, connection_class=_pinned_connection_class(), address=address, **kwargs), address
+
+
+@functools.cache
+def _pinned_connection_class() -> type:
+    """redis-py's TCP connection, connecting to the address its HostAddress last found rather than
+    looking the host name up itself, and having the name looked up again when a connect fails;
+    made when first used, so that only a process given a Redis URL imports the client."""
+    import redis
+
+    class PinnedConnection(redis.connection.Connection):
+        def __init__(self, address: HostAddress, **kwargs: Any) -> None:
+            self.address = address
+            super().__init__(**kwargs)  # type: ignore[no-untyped-call]  # redis-py's own signature is untyped
+
+        @property
+        def host(self) -> str:  # what redis-py's connect looks up: an address literal, found already
+            return self.address.current or self.address.host
+
+        @host.setter
+        def host(self, name: str) -> None:
+            pass  # the name is the HostAddress's
+
+        def _connect(self) -> Any:  # redis-py's TCP connect, reconnects included (since redis-py 3)
+            try:
+                return super()._connect()  # type: ignore[no-untyped-call]
+            except OSError:
+                self.address.failed()  # moved, maybe: a restarted container's new address
+                raise
+
+    return PinnedConnection

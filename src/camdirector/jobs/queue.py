@@ -57,6 +57,7 @@ import redis
 from dramatiq.brokers.redis import MAINTENANCE_SCALE, RedisBroker
 from dramatiq.middleware import Retries
 
+from camdirector.infra.host_address import redis_pool
 from camdirector.infra.redaction import redacted
 from camdirector.jobs.job_settings import JobSettings
 from camdirector.jobs.kinds import JobRegistry
@@ -84,8 +85,9 @@ def broker_for(settings: JobSettings, *, worker: bool) -> RedisBroker:
     does not answer). Only workers run the maintenance step that requeues dead workers' messages
     (a client's heartbeat timeout is not the workers')."""
     url = settings.job_queue
-    # the pool made here, not from `url` by Dramatiq, which would drop these bounds
-    pool = redis.ConnectionPool.from_url(
+    # the pool made here, not from `url` by Dramatiq, which would drop these bounds; its host name
+    # looked up off the calls' path (infra/host_address.py)
+    pool, _ = redis_pool(
         url,
         socket_connect_timeout=REDIS_CONNECT_TIMEOUT_S,
         socket_timeout=REDIS_READ_TIMEOUT_S,

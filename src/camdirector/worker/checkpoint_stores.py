@@ -24,7 +24,6 @@ Two stores behind `CheckpointStore`, tested against each other (tests/worker/tes
 
 from __future__ import annotations
 
-import functools
 import io
 import logging
 import os
@@ -36,10 +35,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
-from urllib.parse import urlsplit
 
 import camdirector._native as native
-from camdirector.infra.host_address import HostAddress, Lookup, lookup_stream_addresses
+from camdirector.infra.host_address import Lookup, lookup_stream_addresses, redis_pool
 from camdirector.infra.redaction import redacted
 
 log = logging.getLogger("camdirector.checkpoints")
@@ -333,37 +331,14 @@ return 1
 """
 
 
-@functools.cache
-def _pinned_connection_class() -> type:
-    """redis-py's TCP connection, connecting to the address its HostAddress last found rather than
-    looking its host name up itself (RedisStore's docstring); made when first used, so that only a
-    node given a redis:// URL imports the client."""
-    import redis
-
-    class PinnedConnection(redis.connection.Connection):
-        def __init__(self, address: HostAddress, **kwargs):
-            self.address = address
-            super().__init__(**kwargs)
-
-        @property
-        def host(self) -> str:  # what redis-py's connect looks up: an address literal, found already
-            return self.address.current or self.address.host
-
-        @host.setter
-        def host(self, name: str) -> None:
-            pass  # the name is the HostAddress's
-
-    return PinnedConnection
-
-
 class RedisStore:
     """Checkpoints in Redis, under `camdirector:ck:{<session id>}:meta` and `...:log` (module
     docstring). Keys expire `keep_s` after their session's last write. Calls time out after
     `timeout_s`; they are made by the writer's thread (checkpoint_writer.py), so a Redis that
     hangs delays no frame by more than `checkpoint_wait_ms`.
 
-    A `redis://` URL's host name is looked up off the calls' path (infra/host_address.py says
-    why): its connections go to the address last found, a call made before any lookup answered
+    A `redis://` URL's host name is looked up off the calls' path (infra/host_address.py's
+    `redis_pool`, which says why): its connections go to the address last found, a call made before any lookup answered
     waits for one up to `timeout_s` and then fails (the session's checkpoint is then behind, and
     repaired once the writer's probe reaches Redis), and a failed connection looks the name up
     again. With `check` (a node starting) the first lookup is waited for. `rediss://` (TLS checks
@@ -371,29 +346,24 @@ class RedisStore:
 
     may_hang = True
 
-    def __init__(self, url: str, keep_s: float, timeout_s: float = 0.5, check: bool = True, lookup: Lookup | None = None):
+    def __init__(
+        self, url: str, keep_s: float, timeout_s: float = 0.5, check: bool = True, lookup: Lookup = lookup_stream_addresses
+    ):
         """lookup: how the host name is looked up (tests stall it); socket.getaddrinfo's by default."""
         import redis  # only a node given a redis:// URL needs the client
 
-        self._connection_errors = (redis.ConnectionError, redis.TimeoutError, OSError)
         self._errors = (redis.RedisError, OSError)
         self.url = url
         self._timeout_s = timeout_s
-        self.address: HostAddress | None = None
-        pinned: dict[str, object] = {}
-        parts = urlsplit(url)
-        if parts.scheme == "redis" and parts.hostname:
-            self.address = HostAddress(parts.hostname, parts.port or 6379, lookup or lookup_stream_addresses)
-            pinned = {"connection_class": _pinned_connection_class(), "address": self.address}
         # Keepalives notice a vanished host; the timeouts bound a Redis that hangs (paused). Off the
         # frame path either way (checkpoint_writer.py).
-        pool = redis.ConnectionPool.from_url(
+        pool, self.address = redis_pool(
             url,
+            lookup,
             socket_timeout=timeout_s,
             socket_connect_timeout=timeout_s,
             socket_keepalive=True,
             health_check_interval=0,
-            **pinned,
         )
         self._client = redis.Redis(connection_pool=pool)
         self._keep_ms = str(int(keep_s * 1000))
@@ -404,8 +374,6 @@ class RedisStore:
                 self._client.ping()
             except self._errors as exc:
                 raise CheckpointError(f"the checkpoint store {redacted(url)} does not answer: {exc}") from None
-        elif self.address is not None:
-            self.address.refresh()
         self._append = self._client.register_script(_APPEND)
         self._snapshot = self._client.register_script(_SNAPSHOT)
         self._begin = self._client.register_script(_BEGIN)
@@ -419,10 +387,6 @@ class RedisStore:
         reason = self.address.last_error or "its lookup has not answered yet"
         raise CheckpointError(f"{what} in {redacted(self.url)} failed: no address of {self.address.host} is known ({reason})")
 
-    def _connection_failed(self, exc: Exception) -> None:
-        if self.address is not None and isinstance(exc, self._connection_errors):
-            self.address.failed()
-
     @staticmethod
     def _keys(session_id: str) -> list[str]:
         return [f"camdirector:ck:{{{session_id}}}:meta", f"camdirector:ck:{{{session_id}}}:log"]
@@ -432,7 +396,6 @@ class RedisStore:
         try:
             return script(keys=self._keys(session_id), args=args)
         except self._errors as exc:
-            self._connection_failed(exc)
             raise CheckpointError(f"{what} of session {session_id}'s checkpoint in {redacted(self.url)} failed: {exc}") from None
 
     def begin(self, session_id: str, owner: str, create: bytes) -> None:
@@ -454,7 +417,6 @@ class RedisStore:
                 pipe.lrange(log_key, 0, -1)
                 meta, log_entries = pipe.execute()
         except self._errors as exc:
-            self._connection_failed(exc)
             raise CheckpointError(f"reading session {session_id}'s checkpoint in {redacted(self.url)} failed: {exc}") from None
         if b"create" not in meta:
             return None
@@ -472,10 +434,7 @@ class RedisStore:
         try:
             self._address_known("a ping")
             return bool(self._client.ping())
-        except CheckpointError:
-            return False
-        except self._errors as exc:
-            self._connection_failed(exc)
+        except (CheckpointError, *self._errors):
             return False
 
     def close(self) -> None:
