@@ -178,9 +178,10 @@ def run(
             engine = _admin_call(
                 cluster, "POST", f"https://{cluster.http}/v1/keys", json={"role": "engine", "name": "load_tests.failover"}
             )["key"]
-            # in containers a create sometimes waits 10, 20 or 30 s (nothing logged by HAProxy or the
-            # nodes; podman's DNS, which fails lookups while a container starts on the network, is
-            # the suspect): the calls get 60 s there, and the slowest create is reported
+            # in containers a create used to wait 10, 20 or 30 s at times: podman's DNS stalls
+            # lookups for 5-20 s (docs/scaling.md), which the nodes now make off the calls' path
+            # (infra/host_address.py; the slowest create in 8 runs since: 26 ms). The calls keep
+            # 60 s there, and the slowest create is reported
             client = cd.connect(
                 f"grpcs://{cluster.grpc}",
                 key=engine,
