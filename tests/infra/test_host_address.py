@@ -95,3 +95,29 @@ def test_looking_up_now_raises_what_the_lookup_raised():
 def test_the_default_lookup_answers_each_address_once():
     addresses = lookup_stream_addresses("localhost", 6379)
     assert "127.0.0.1" in addresses and len(addresses) == len(set(addresses))
+
+
+def test_a_failing_slow_or_moved_lookup_is_logged_once_for_the_operator(caplog):
+    resolver = ScriptedLookup(["10.0.0.2"])
+    ticks = iter([0.0, 0.001, 10.0, 10.002, 20.0, 20.001, 30.0, 35.0, 40.0, 40.001])  # each lookup's start and end, s
+    address = HostAddress("redis", 6379, resolver, clock=lambda: next(ticks))
+    caplog.set_level("WARNING", logger="camdirector.lookups")
+    address.look_up_now()
+    assert caplog.messages == []
+    for _ in range(2):
+        resolver.give(OSError("Temporary failure in name resolution"))
+        with pytest.raises(OSError):
+            address.look_up_now()
+    assert caplog.messages == [
+        "looking up redis failed (Temporary failure in name resolution): new connections still go to 10.0.0.2"
+    ]  # once, however many fail
+    resolver.give(["10.0.0.7"])
+    address.look_up_now()  # 5 s, and elsewhere now
+    assert caplog.messages[1:] == [
+        "looking up redis took 5.0 s (no connection waited for it)",
+        "looking up redis works again: 10.0.0.7",
+        "redis moved: 10.0.0.2 -> 10.0.0.7",
+    ]
+    resolver.give(["10.0.0.7"])
+    address.look_up_now()
+    assert len(caplog.messages) == 4 and address.current == "10.0.0.7"

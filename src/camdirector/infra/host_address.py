@@ -18,13 +18,19 @@ libpq's `hostaddr` (infra/postgres.py).
 from __future__ import annotations
 
 import functools
+import logging
 import socket
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 from urllib.parse import urlsplit
 
+log = logging.getLogger("camdirector.lookups")
+
 Lookup = Callable[[str, int], list[str]]
+
+SLOW_LOOKUP_S = 1.0  # a lookup that took longer is logged (the callers never waited for it), s
 
 
 def lookup_stream_addresses(host: str, port: int) -> list[str]:
@@ -36,12 +42,17 @@ def lookup_stream_addresses(host: str, port: int) -> list[str]:
 
 class HostAddress:
     """`host`'s addresses, looked up by `lookup` on a daemon thread, one lookup at a time.
-    `current` is the address a new connection is to use; None until a lookup has answered."""
+    `current` is the address a new connection is to use; None until a lookup has answered. What an
+    operator needs to know is logged: a lookup that fails (once, until one answers again), one
+    slower than SLOW_LOOKUP_S, and an address that changed."""
 
-    def __init__(self, host: str, port: int, lookup: Lookup = lookup_stream_addresses):
+    def __init__(
+        self, host: str, port: int, lookup: Lookup = lookup_stream_addresses, clock: Callable[[], float] = time.monotonic
+    ):
         self.host = host
         self.port = port
         self._lookup = lookup
+        self._clock = clock
         self._lock = threading.Condition()  # notified when a lookup answers
         self._addresses: list[str] = []
         self._next = 0  # which of _addresses new connections use: the next one after a failure
@@ -97,19 +108,33 @@ class HostAddress:
         self._answered(addresses, error)
 
     def _ask(self) -> tuple[list[str], OSError | None]:
+        started_s = self._clock()
         try:
             addresses = self._lookup(self.host, self.port)
+            error = None if addresses else OSError(f"no address found for {self.host}")
         except OSError as exc:
-            return [], exc
-        return addresses, None if addresses else OSError(f"no address found for {self.host}")
+            addresses, error = [], exc
+        took_s = self._clock() - started_s
+        if took_s > SLOW_LOOKUP_S:
+            log.warning("looking up %s took %.1f s (no connection waited for it)", self.host, took_s)
+        return addresses, error
 
     def _answered(self, addresses: list[str], error: OSError | None) -> None:
         with self._lock:
+            failing_before, known_before = self.last_error is not None, list(self._addresses)
             self.last_error = error
             if addresses and set(addresses) != set(self._addresses):
                 self._addresses, self._next = addresses, 0
             self._answers += 1
             self._lock.notify_all()
+            current = self._addresses[self._next] if self._addresses else None
+        if error is not None and not failing_before:
+            kept = f"new connections still go to {current}" if current else "no connection can be made until one answers"
+            log.warning("looking up %s failed (%s): %s", self.host, error, kept)
+        elif error is None and failing_before:
+            log.warning("looking up %s works again: %s", self.host, ", ".join(addresses))
+        if known_before and addresses and set(addresses) != set(known_before):
+            log.warning("%s moved: %s -> %s", self.host, ", ".join(known_before), ", ".join(addresses))
 
 
 def redis_pool(url: str, lookup: Lookup = lookup_stream_addresses, **kwargs: Any) -> tuple[Any, HostAddress | None]:
