@@ -94,6 +94,13 @@ class HostAddress:
             self._lock.wait_for(lambda: self._answers > answers, timeout_s)
             return self._addresses[self._next] if self._addresses else None
 
+    def known(self, timeout_s: float) -> str:
+        """`wait`'s address; OSError naming the host, and why, when no lookup has found one."""
+        address = self.wait(timeout_s)
+        if address is None:
+            raise OSError(f"no address of {self.host} is known ({self.last_error or 'its lookup has not answered yet'})")
+        return address
+
     def look_up_now(self) -> None:
         """Looks the name up on the caller's thread (a process starting, which may wait); raises
         OSError when the lookup fails."""

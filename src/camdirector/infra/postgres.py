@@ -165,10 +165,10 @@ class PostgresDatabase:
         if self._conn is None or self._conn.closed or self._conn.broken:
             hostaddr = None
             if self.address is not None:
-                hostaddr = self.address.wait(self.deadline_s)
-                if hostaddr is None:
-                    reason = self.address.last_error or "its lookup has not answered yet"
-                    raise self._down(f"no address of {self.address.host} is known ({reason})")
+                try:
+                    hostaddr = self.address.known(self.deadline_s)
+                except OSError as exc:
+                    raise self._down(str(exc)) from None
             try:
                 self._conn = psycopg.connect(_conninfo(self.url, hostaddr), autocommit=True)
             except psycopg.OperationalError:

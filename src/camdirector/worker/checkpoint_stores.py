@@ -338,11 +338,11 @@ class RedisStore:
     hangs delays no frame by more than `checkpoint_wait_ms`.
 
     A `redis://` URL's host name is looked up off the calls' path (infra/host_address.py's
-    `redis_pool`, which says why): its connections go to the address last found, a call made before any lookup answered
-    waits for one up to `timeout_s` and then fails (the session's checkpoint is then behind, and
-    repaired once the writer's probe reaches Redis), and a failed connection looks the name up
-    again. With `check` (a node starting) the first lookup is waited for. `rediss://` (TLS checks
-    the name) and `unix://` connect as redis-py does."""
+    `redis_pool`, which says why): its connections go to the address last found, a call made
+    before any lookup answered waits for one up to `timeout_s` and then fails (the session's
+    checkpoint is then behind, and repaired once the writer's probe reaches Redis), and a failed
+    connection looks the name up again. With `check` (a node starting) the first lookup is waited
+    for. `rediss://` (TLS checks the name) and `unix://` connect as redis-py does."""
 
     may_hang = True
 
@@ -382,10 +382,12 @@ class RedisStore:
     def _address_known(self, what: str) -> None:
         """Raises CheckpointError when no lookup of the host name has answered, after waiting for
         one up to the calls' timeout."""
-        if self.address is None or self.address.wait(self._timeout_s) is not None:
+        if self.address is None:
             return
-        reason = self.address.last_error or "its lookup has not answered yet"
-        raise CheckpointError(f"{what} in {redacted(self.url)} failed: no address of {self.address.host} is known ({reason})")
+        try:
+            self.address.known(self._timeout_s)
+        except OSError as exc:
+            raise CheckpointError(f"{what} in {redacted(self.url)} failed: {exc}") from None
 
     @staticmethod
     def _keys(session_id: str) -> list[str]:
