@@ -3,7 +3,8 @@ p99 <= 10 ms and no late frame, for FRAMING_ONLY and ANTICIPATION on the demo sc
 and ZeroMQ.
 
     python -m load_tests.capacity --json FILE [--seconds S] [--max-sessions N] [--modes A,B]
-        [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--server-python PATH] [--server-arg ARG ...]
+        [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--generator python|native]
+        [--server-python PATH] [--server-arg ARG ...]
 
 For each mode and transport a fresh server is started (an idle session is reclaimed one second
 after its stream ends, so one step's sessions do not weigh on the next), and session counts are
@@ -25,6 +26,10 @@ own CPU while streaming (on a 2-core machine the generator shares the cores with
 and `cpu_us_per_frame`: the CPU microseconds per answered frame of the server's front process,
 of its workers together (from /proc; the step's session creations included) and of this load
 generator, which say where a frame's CPU goes when the cores run out.
+The sessions are streamed by the compiled driver (load_tests/native_generator.py) unless
+`--generator python`: it takes about 0.3 of the Python generator's CPU a frame over gRPC and about
+0.45 over ZeroMQ (libzmq's I/O thread wakes for every message), leaving those cores to the server
+(docs/frame_path.md, "A load generator cheap enough").
 `--server-python` runs the server of another checkout with that checkout's interpreter (e.g. the
 venv of a `git worktree` of an older commit) while this checkout drives it, so the same command
 measures both; the JSON names the server's checkout and commit.
@@ -182,6 +187,7 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
                         args.seconds,
                         visibility=pb.VisibilityMode.Value(mode),
                         warmup_frames=args.warmup_frames,
+                        generator=args.generator,
                     )
                 )
                 passed = step_passes(result, args.p99_ms)
@@ -250,6 +256,13 @@ def main(argv=None) -> int:
         help="one more argument of `camdirector serve` (repeat it), e.g. --server-arg=--checkpoint-store "
         "--server-arg=off to measure without checkpoints",
     )
+    parser.add_argument(
+        "--generator",
+        choices=stream.GENERATORS,
+        default="native",
+        help="what streams the sessions: the compiled driver (native_generator.py; it needs CMake, gRPC for C++ and "
+        "libzmq: scripts/system-deps.sh --tests), or this process (asyncio)",
+    )
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     try:
@@ -267,6 +280,7 @@ def main(argv=None) -> int:
         "rate_hz": args.rate,
         "seconds_per_step": args.seconds,
         "warmup_frames_per_session": args.warmup_frames,
+        "generator": args.generator,
         "counts_tried_up_to": counts,
         "cpus": os.cpu_count(),
         "server": _server_checkout(args.server_python),

@@ -1,6 +1,7 @@
 """Streaming benchmark: N concurrent sessions at a fixed frame rate against a server it starts.
 
-    python -m load_tests.stream --transport grpc|zmq --sessions N --rate 60 --seconds S --json FILE
+    python -m load_tests.stream --transport grpc|zmq --sessions N --rate 60 --seconds S
+        [--generator python|native] --json FILE
 
 Each session streams the demo scene (about 2,100 triangles, an avatar and 3-6 moving obstacles,
 packed states) paced by wall-clock time, one frame in flight per session, as a game loop does.
@@ -11,6 +12,8 @@ round trip after 16 ms idle costs about 10x one made while busy).
 Measured: frames sent and received, dropped frames (sent, never answered), late frames (answered
 after the next was due), round trip p50/p99 at the client, the server's own compute_ms p50/p99, and
 this load generator's own CPU while streaming (seconds, and as a fraction of one core).
+`--generator native` streams with the compiled driver (native_generator.py) instead of this
+process, at a small part of its CPU; the sessions are opened and the baseline measured here alike.
 The baseline, measured in the same run against the same server process, is the transport alone:
 a gRPC health check (served by the front process) or a ZeroMQ request the front answers at once
 with an error; `rtt_ratio_vs_baseline` divides our round trip by it.
@@ -39,7 +42,10 @@ from camdirector.deploy.server_process import ServerProcess
 from camdirector.geometry.camera import Lens
 from camdirector.infra.heap import freeze_startup_heap
 from camdirector.v1 import director_pb2 as pb
+from load_tests import native_generator
 from load_tests.report import emit, percentiles
+
+GENERATORS = ("python", "native")  # run()'s generator: this process's asyncio, or native_generator's driver
 
 
 def _frames(scene, n_frames: int, rate_hz: float) -> list[bytes]:
@@ -148,6 +154,7 @@ async def run(
     warmup_frames: int = 0,
     alongside: Callable[[list[str]], AbstractAsyncContextManager] | None = None,
     key: str | None = None,
+    generator: str = "python",
 ) -> dict:
     """warmup_frames: each session's first frames, answered and counted as received but left out of
     the round trips, compute times, late and stale counts (a session's first frame sets up what
@@ -156,14 +163,21 @@ async def run(
     before the baseline and the streams and left when they end, so both are measured with it
     running (load_tests.monitors_bench: a live monitor on each session).
     key: the key gRPC sends (a server with keys: load_tests.oversize); ZeroMQ's would need the
-    server's CURVE key as well, so it takes none."""
+    server's CURVE key as well, so it takes none.
+    generator: what streams the frames, "python" (this process's asyncio) or "native" (the
+    compiled driver, native_generator.py: the sessions are opened and the floor measured here all
+    the same, and `client_cpu_s` is then the driver's)."""
     if key is not None and transport != "grpc":
         raise ValueError("only the gRPC driver sends a key")
+    if generator not in GENERATORS:
+        raise ValueError(f"generator must be one of {', '.join(GENERATORS)}, not {generator!r}")
     scene = build_demo_scene(seed=7, duration_s=max(seconds, 1.0))
     lens = Lens()
     nominal_hz = rate_hz or 60.0
     n_frames = int(round(seconds * nominal_hz))
     frames = _frames(scene, n_frames, nominal_hz)
+    if generator == "native":
+        native_generator.build()  # before anything is timed: a first build takes about 25 s
     driver = GrpcDriver(address, key) if transport == "grpc" else ZmqDriver(address)
     session_ids = [await driver.open_session(session_request(scene, lens, visibility)) for _ in range(sessions)]
     period = 1.0 / rate_hz if rate_hz else 0.0
@@ -185,19 +199,27 @@ async def run(
     async with alongside(session_ids) if alongside is not None else contextlib.nullcontext():
         baseline_s = [await driver.baseline() for _ in range(20)]  # warm-up
         baseline_s = [await driver.baseline() for _ in range(500)]
-        start = time.perf_counter() + 0.1
-        cpu_start_s = time.process_time()
-        # sessions start staggered over one frame period, as independent game clients would
-        results = await asyncio.gather(
-            *(
-                driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
-                for k, sid in enumerate(session_ids)
-            ),
-            return_exceptions=True,
-        )
-        wall_s = time.perf_counter() - start
-        client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
-    errors = [repr(r) for r in results if isinstance(r, BaseException)]
+        if generator == "native":
+            streamed = await asyncio.to_thread(
+                native_generator.stream, transport, address, session_ids, frames, period, warmup_frames, key
+            )
+            received, rtt_ms, compute_ms = streamed["received"], streamed["rtt_ms"], streamed["compute_ms"]
+            late[0], stale[0], errors = streamed["late"], streamed["stale"], streamed["errors"]
+            wall_s, client_cpu_s = streamed["wall_s"], streamed["cpu_s"]
+        else:
+            start = time.perf_counter() + 0.1
+            cpu_start_s = time.process_time()
+            # sessions start staggered over one frame period, as independent game clients would
+            results = await asyncio.gather(
+                *(
+                    driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
+                    for k, sid in enumerate(session_ids)
+                ),
+                return_exceptions=True,
+            )
+            wall_s = time.perf_counter() - start
+            client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
+            errors = [repr(r) for r in results if isinstance(r, BaseException)]
     await driver.close()
     sent = sessions * n_frames
     rtt = percentiles(rtt_ms)
@@ -222,6 +244,7 @@ async def run(
             "p99": rtt["p99"] / base["p99"] if rtt["p99"] else None,
         },
         "errors": errors,
+        "generator": generator,
         "cpus": os.cpu_count(),
         "client_cpu_s": round(client_cpu_s, 3),
         "client_cpu_fraction_of_core": round(client_cpu_s / wall_s, 3),
@@ -235,12 +258,15 @@ def main(argv=None) -> int:
     parser.add_argument("--rate", type=float, default=60.0, help="frames per second per session (0: closed loop)")
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--workers", type=int, default=None, help="server worker processes (default: cores)")
+    parser.add_argument(
+        "--generator", choices=GENERATORS, default="python", help="what streams: this process, or the compiled driver"
+    )
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     with ServerProcess("--workers", str(workers), "--max-sessions", str(max(64, args.sessions))) as server:
         address = server.grpc if args.transport == "grpc" else server.zmq
-        result = asyncio.run(run(args.transport, address, args.sessions, args.rate, args.seconds))
+        result = asyncio.run(run(args.transport, address, args.sessions, args.rate, args.seconds, generator=args.generator))
         result["server_workers"] = server.ready["workers"]
     emit(result, args.json)
     return 0 if result["dropped_frames"] == 0 and not result["errors"] else 1

@@ -90,6 +90,8 @@ def test_capacity_reports_the_last_count_that_held_with_its_floor_and_load_gener
         "0",
         "--workers",
         "1",
+        "--generator",
+        "python",  # the compiled driver's run: tests/load_tests/test_native_generator.py
     )
     (case,) = result["cases"]
     assert (case["mode"], case["transport"], case["server_workers"]) == ("FRAMING_ONLY", "zmq", 1)

@@ -1,0 +1,441 @@
+// load_driver: the compiled load generator of load_tests.stream and load_tests.capacity
+// (`--generator native`; issue 43, docs/frame_path.md "The order of work", step 6).
+//
+// The Python generator costs about 140 us of CPU a frame, on the same two cores as the server it
+// measures: at 60 sessions it took a third of the machine. This program streams the same frames
+// the same way (one frame in flight per session, paced by the wall clock, sessions staggered over
+// one period, over one gRPC channel or one ZeroMQ DEALER socket per session) at a small part of
+// that cost, so that capacity measures the server. It knows nothing of the schema beyond what the
+// Python side tells it: the frames come serialized, and the reply's compute_ms and stale are read
+// by the field numbers it is given.
+//
+//   load_driver --transport grpc|zmq --address ADDR --frames FILE --sessions ID,ID,...
+//       --period-s P --start-s T --warmup N --compute-field F --stale-field S [--key KEY]
+//
+// FILE holds the frames without a session id, each as a 4-byte little-endian length and its bytes;
+// each session sends them in order, its id prepended as field 1 (as load_tests.stream does).
+// T: when session 0 sends its first frame, on CLOCK_MONOTONIC (Python's time.perf_counter).
+// P: the period, s (0: closed loop, each frame sent as soon as the last is answered).
+// Prints one JSON object: per-session frames answered, the judged frames' round trips and
+// compute_ms (ms), late (a round trip over P) and stale counts, errors, wall and CPU seconds.
+// A bad argument exits 2 with the reason on stderr.
+
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <sys/resource.h>
+#include <zmq.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+const char kStreamMethod[] = "/camdirector.v1.Director/StreamFrames";
+
+double now_s() {  // CLOCK_MONOTONIC, as Python's time.perf_counter on Linux
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
+}
+
+double cpu_s() {
+  rusage usage;
+  getrusage(RUSAGE_SELF, &usage);
+  return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) + double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec) * 1e-6;
+}
+
+struct Options {
+  std::string transport, address, frames_path, key;
+  std::vector<std::string> sessions;
+  double period_s = -1.0, start_s = 0.0;
+  long warmup = 0;
+  int compute_field = 0, stale_field = 0;
+};
+
+[[noreturn]] void usage_error(const std::string& why) {
+  std::fprintf(stderr, "load_driver: %s\n", why.c_str());
+  std::exit(2);
+}
+
+Options parse_options(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; i += 2) {
+    std::string name = argv[i];
+    if (i + 1 >= argc) usage_error("no value after " + name);
+    std::string value = argv[i + 1];
+    try {
+      if (name == "--transport") o.transport = value;
+      else if (name == "--address") o.address = value;
+      else if (name == "--frames") o.frames_path = value;
+      else if (name == "--key") o.key = value;
+      else if (name == "--period-s") o.period_s = std::stod(value);
+      else if (name == "--start-s") o.start_s = std::stod(value);
+      else if (name == "--warmup") o.warmup = std::stol(value);
+      else if (name == "--compute-field") o.compute_field = std::stoi(value);
+      else if (name == "--stale-field") o.stale_field = std::stoi(value);
+      else if (name == "--sessions") {
+        std::stringstream ids(value);
+        for (std::string id; std::getline(ids, id, ',');)
+          if (!id.empty()) o.sessions.push_back(id);
+      } else usage_error("unknown option " + name);
+    } catch (const std::exception&) {
+      usage_error("not a number: " + name + " " + value);
+    }
+  }
+  if (o.transport != "grpc" && o.transport != "zmq") usage_error("--transport must be grpc or zmq");
+  if (o.address.empty() || o.frames_path.empty()) usage_error("--address and --frames are required");
+  if (o.sessions.empty()) usage_error("--sessions names no session");
+  if (o.period_s < 0) usage_error("--period-s must be given, >= 0");
+  if (o.compute_field <= 0 || o.stale_field <= 0) usage_error("--compute-field and --stale-field must be field numbers");
+  if (o.transport == "zmq" && !o.key.empty()) usage_error("only the gRPC driver sends a key");
+  for (const auto& id : o.sessions)
+    if (id.size() > 127) usage_error("a session id longer than 127 bytes");
+  return o;
+}
+
+std::vector<std::string> read_frames(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) usage_error("cannot read " + path);
+  std::vector<std::string> frames;
+  unsigned char head[4];
+  while (in.read(reinterpret_cast<char*>(head), 4)) {
+    uint32_t size = uint32_t(head[0]) | uint32_t(head[1]) << 8 | uint32_t(head[2]) << 16 | uint32_t(head[3]) << 24;
+    std::string frame(size, '\0');
+    if (!in.read(frame.data(), size)) usage_error(path + ": a frame cut short");
+    frames.push_back(std::move(frame));
+  }
+  if (frames.empty()) usage_error(path + " holds no frame");
+  return frames;
+}
+
+// The reply's compute_ms (a double) and stale (a bool) read from the protobuf wire format; fields
+// it does not know are skipped by their wire type. False when the bytes are not a message.
+bool read_reply(const std::string& reply, int compute_field, int stale_field, double* compute_ms, bool* stale) {
+  size_t at = 0;
+  auto varint = [&](uint64_t* value) {
+    *value = 0;
+    for (int shift = 0; shift < 64; shift += 7) {
+      if (at >= reply.size()) return false;
+      uint8_t byte = uint8_t(reply[at++]);
+      *value |= uint64_t(byte & 0x7F) << shift;
+      if (byte < 0x80) return true;
+    }
+    return false;
+  };
+  *compute_ms = 0.0;
+  *stale = false;
+  while (at < reply.size()) {
+    uint64_t key, value;
+    if (!varint(&key)) return false;
+    int field = int(key >> 3), type = int(key & 7);
+    if (type == 0) {
+      if (!varint(&value)) return false;
+      if (field == stale_field) *stale = value != 0;
+    } else if (type == 1) {
+      if (at + 8 > reply.size()) return false;
+      if (field == compute_field) std::memcpy(compute_ms, reply.data() + at, 8);
+      at += 8;
+    } else if (type == 2) {
+      if (!varint(&value) || value > reply.size() - at) return false;
+      at += value;
+    } else if (type == 5) {
+      at += 4;
+    } else {
+      return false;
+    }
+  }
+  return at == reply.size();
+}
+
+// What one session measured; each is written by one thread at a time (its reply's).
+struct Tally {
+  long received = 0, late = 0, stale = 0;
+  std::vector<double> rtt_ms, compute_ms;
+  std::string error;
+};
+
+struct Run {
+  Options options;
+  std::vector<std::string> frames;
+  std::vector<Tally> tallies;
+
+  double due_s(size_t session, size_t frame) const {  // staggered over one period, as independent clients
+    double period = options.period_s;
+    return options.start_s + double(session) * period / double(options.sessions.size()) + double(frame) * period;
+  }
+
+  std::string payload(size_t session, size_t frame) const {
+    const std::string& id = options.sessions[session];
+    std::string out;
+    out.reserve(2 + id.size() + frames[frame].size());
+    out.push_back('\x0a');  // field 1, length-delimited: the session id, first (parsers take fields in any order)
+    out.push_back(char(id.size()));
+    out += id;
+    out += frames[frame];
+    return out;
+  }
+
+  void record(size_t session, size_t frame, double sent_s, double answered_s, const std::string& reply) {
+    Tally& t = tallies[session];
+    t.received++;
+    if (long(frame) < options.warmup) return;
+    double compute_ms;
+    bool stale;
+    if (!read_reply(reply, options.compute_field, options.stale_field, &compute_ms, &stale)) {
+      t.error = "a reply that is not a CameraUpdate";
+      return;
+    }
+    double rtt_s = answered_s - sent_s;
+    t.rtt_ms.push_back(rtt_s * 1e3);
+    t.compute_ms.push_back(compute_ms);
+    t.late += options.period_s > 0 && rtt_s > options.period_s;
+    t.stale += stale;
+  }
+};
+
+// --- gRPC: one channel, one StreamFrames per session, all on this thread: the completion queue's
+// own thread polls the sockets, so a frame costs no wake-up beyond its send's and its reply's
+// (the callback API's executor threads and a pacing thread cost two more a frame, measured:
+// about 130 us of CPU a frame against about 100 here, at 32-48 sessions).
+
+struct GrpcSession {
+  enum Op : uintptr_t { kStarted, kWritten, kRead, kWritesDone, kFinished, kOps };
+  grpc::ClientContext context;
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call;
+  grpc::ByteBuffer request, reply;
+  grpc::Status status;
+  size_t next = 0;  // the frame to send next, or whose reply is awaited
+  bool started = false, writing = false, reading = false, ending = false, finished = false;
+  double sent_s = 0.0;
+};
+
+void* grpc_tag(size_t session, GrpcSession::Op op) { return reinterpret_cast<void*>(session * GrpcSession::kOps + op); }
+
+void run_grpc(Run& run) {
+  grpc::ChannelArguments args;
+  args.SetMaxSendMessageSize(64 << 20);
+  auto channel = grpc::CreateCustomChannel(run.options.address, grpc::InsecureChannelCredentials(), args);
+  grpc::GenericStub stub(channel);
+  grpc::CompletionQueue queue;
+  size_t count = run.options.sessions.size(), left = count;
+  std::vector<GrpcSession> sessions(count);
+  for (size_t k = 0; k < count; k++) {
+    GrpcSession& s = sessions[k];
+    if (!run.options.key.empty()) s.context.AddMetadata("authorization", "Bearer " + run.options.key);
+    s.call = stub.PrepareCall(&s.context, kStreamMethod, &queue);
+    s.call->StartCall(grpc_tag(k, GrpcSession::kStarted));
+  }
+  auto finish = [&](size_t k) {  // the stream's status, asked once: kFinished ends the session
+    GrpcSession& s = sessions[k];
+    if (s.ending) return;
+    s.ending = true;
+    s.call->Finish(&s.status, grpc_tag(k, GrpcSession::kFinished));
+  };
+  auto send_due = [&](size_t k, double now) {  // the session's next frame, when it is due and may go
+    GrpcSession& s = sessions[k];
+    if (!s.started || s.writing || s.reading || s.ending || s.next >= run.frames.size()) return 1e300;
+    double due = run.options.period_s > 0 ? run.due_s(k, s.next) : 0.0;
+    if (due > now) return due;
+    std::string payload = run.payload(k, s.next);
+    grpc::Slice slice(payload);
+    s.request = grpc::ByteBuffer(&slice, 1);
+    s.sent_s = now_s();
+    s.writing = s.reading = true;
+    s.call->Write(s.request, grpc_tag(k, GrpcSession::kWritten));
+    s.call->Read(&s.reply, grpc_tag(k, GrpcSession::kRead));
+    return 1e300;
+  };
+  while (left > 0) {
+    double now = now_s(), soonest = 1e300;
+    for (size_t k = 0; k < count; k++) soonest = std::min(soonest, send_due(k, now));
+    void* tag;
+    bool ok;
+    gpr_timespec deadline = gpr_inf_future(GPR_CLOCK_MONOTONIC);  // only replies to wait for
+    if (soonest < 1e300)
+      deadline = gpr_time_add(gpr_now(GPR_CLOCK_MONOTONIC), gpr_time_from_nanos(int64_t((soonest - now_s()) * 1e9), GPR_TIMESPAN));
+    auto got = queue.AsyncNext(&tag, &ok, deadline);
+    while (got == grpc::CompletionQueue::GOT_EVENT) {
+      double answered_s = now_s();
+      size_t k = reinterpret_cast<uintptr_t>(tag) / GrpcSession::kOps;
+      auto op = GrpcSession::Op(reinterpret_cast<uintptr_t>(tag) % GrpcSession::kOps);
+      GrpcSession& s = sessions[k];
+      if (op == GrpcSession::kStarted) {
+        s.started = ok;
+        if (!ok) finish(k);
+      } else if (op == GrpcSession::kWritten) {
+        s.writing = false;
+        if (!ok) finish(k);
+        else if (s.next >= run.frames.size()) s.call->WritesDone(grpc_tag(k, GrpcSession::kWritesDone));
+      } else if (op == GrpcSession::kRead) {
+        s.reading = false;
+        if (!ok) {
+          finish(k);
+        } else {
+          std::string reply;
+          std::vector<grpc::Slice> slices;
+          if (s.reply.Dump(&slices).ok())
+            for (const auto& slice : slices) reply.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
+          run.record(k, s.next, s.sent_s, answered_s, reply);
+          // the last answered: done writing, once its write has completed (one write op at a time)
+          if (++s.next >= run.frames.size() && !s.writing) s.call->WritesDone(grpc_tag(k, GrpcSession::kWritesDone));
+        }
+      } else if (op == GrpcSession::kWritesDone) {
+        finish(k);
+      } else if (op == GrpcSession::kFinished) {
+        if (!s.status.ok())
+          run.tallies[k].error = "gRPC status " + std::to_string(int(s.status.error_code())) + ": " + s.status.error_message();
+        s.finished = true;
+        left--;
+      }
+      // what else is ready, before sending: replies already here are stamped now, not after the sends
+      got = queue.AsyncNext(&tag, &ok, gpr_time_0(GPR_CLOCK_MONOTONIC));
+    }
+  }
+  queue.Shutdown();
+  void* tag;
+  bool ok;
+  while (queue.Next(&tag, &ok)) {
+  }
+}
+
+// --- ZeroMQ: one DEALER socket per session, all on this thread (zmq_poll).
+
+void run_zmq(Run& run) {
+  size_t count = run.options.sessions.size();
+  void* context = zmq_ctx_new();
+  std::vector<void*> sockets(count);
+  std::vector<zmq_pollitem_t> items(count);
+  std::vector<size_t> next(count, 0);
+  std::vector<double> sent_s(count, 0.0);
+  std::vector<bool> in_flight(count, false), finished(count, false);
+  for (size_t k = 0; k < count; k++) {
+    sockets[k] = zmq_socket(context, ZMQ_DEALER);
+    int linger = 0;
+    zmq_setsockopt(sockets[k], ZMQ_LINGER, &linger, sizeof linger);
+    if (zmq_connect(sockets[k], run.options.address.c_str()) != 0) usage_error("cannot connect to " + run.options.address);
+    items[k] = {sockets[k], 0, ZMQ_POLLIN, 0};
+  }
+  size_t left = count;
+  auto finish = [&](size_t k, const std::string& error) {
+    if (!error.empty()) run.tallies[k].error = error;
+    finished[k] = true;
+    in_flight[k] = false;
+    left--;
+  };
+  auto receive = [&](size_t k) {
+    std::string parts[2];
+    int n = 0;
+    for (int more = 1; more;) {
+      zmq_msg_t part;
+      zmq_msg_init(&part);
+      if (zmq_msg_recv(&part, sockets[k], ZMQ_DONTWAIT) < 0) {
+        zmq_msg_close(&part);
+        return;  // nothing after all
+      }
+      if (n < 2) parts[n].assign(static_cast<const char*>(zmq_msg_data(&part)), zmq_msg_size(&part));
+      n++;
+      more = zmq_msg_more(&part);
+      zmq_msg_close(&part);
+    }
+    double answered_s = now_s();
+    if (n != 2 || parts[0] != "0") {
+      finish(k, "ZeroMQ status " + parts[0] + ": " + parts[1]);
+      return;
+    }
+    run.record(k, next[k], sent_s[k], answered_s, parts[1]);
+    in_flight[k] = false;
+    if (++next[k] >= run.frames.size()) finish(k, "");
+  };
+  while (left > 0) {
+    double now = now_s(), soonest = 1e300;
+    for (size_t k = 0; k < count; k++) {
+      if (finished[k] || in_flight[k]) continue;
+      double due = run.options.period_s > 0 ? run.due_s(k, next[k]) : 0.0;
+      if (due <= now) {
+        std::string payload = run.payload(k, next[k]);
+        sent_s[k] = now_s();
+        zmq_send(sockets[k], "Frame", 5, ZMQ_SNDMORE);
+        zmq_send(sockets[k], payload.data(), payload.size(), 0);
+        in_flight[k] = true;
+      } else {
+        soonest = std::min(soonest, due);
+      }
+    }
+    if (left == 0) break;
+    long timeout_ms = -1;  // only replies to wait for
+    if (soonest < 1e300) timeout_ms = std::max(0L, long(std::ceil((soonest - now_s()) * 1e3)));
+    int ready = zmq_poll(items.data(), int(count), timeout_ms);
+    if (ready < 0 && zmq_errno() != EINTR) usage_error(std::string("zmq_poll: ") + zmq_strerror(zmq_errno()));
+    for (size_t k = 0; ready > 0 && k < count; k++)
+      if (items[k].revents & ZMQ_POLLIN) receive(k);
+  }
+  for (void* socket : sockets) zmq_close(socket);
+  zmq_ctx_term(context);
+}
+
+void write_json(const Run& run, double wall_s, double cpu_used_s) {
+  std::string out = "{\"received\": [";
+  auto numbers = [&out](const std::vector<double>& values, bool first) {
+    char text[32];
+    for (double v : values) {
+      std::snprintf(text, sizeof text, "%s%.6f", first ? "" : ", ", v);
+      out += text;
+      first = false;
+    }
+    return first;
+  };
+  for (size_t k = 0; k < run.tallies.size(); k++) out += (k ? ", " : "") + std::to_string(run.tallies[k].received);
+  out += "], \"rtt_ms\": [";
+  bool first = true;
+  for (const auto& t : run.tallies) first = numbers(t.rtt_ms, first);
+  out += "], \"compute_ms\": [";
+  first = true;
+  for (const auto& t : run.tallies) first = numbers(t.compute_ms, first);
+  long late = 0, stale = 0;
+  for (const auto& t : run.tallies) late += t.late, stale += t.stale;
+  out += "], \"late\": " + std::to_string(late) + ", \"stale\": " + std::to_string(stale) + ", \"errors\": [";
+  first = true;
+  for (const auto& t : run.tallies) {
+    if (t.error.empty()) continue;
+    out += first ? "\"" : ", \"";
+    for (char c : t.error) {  // a JSON string: quotes, backslashes and control bytes escaped
+      if (c == '"' || c == '\\') out += '\\', out += c;
+      else if (uint8_t(c) < 0x20) {
+        char text[8];
+        std::snprintf(text, sizeof text, "\\u%04x", c);
+        out += text;
+      } else out += c;
+    }
+    out += "\"";
+    first = false;
+  }
+  char tail[96];
+  std::snprintf(tail, sizeof tail, "], \"wall_s\": %.6f, \"cpu_s\": %.6f}\n", wall_s, cpu_used_s);
+  out += tail;
+  std::fwrite(out.data(), 1, out.size(), stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Run run;
+  run.options = parse_options(argc, argv);
+  run.frames = read_frames(run.options.frames_path);
+  run.tallies.resize(run.options.sessions.size());
+  double cpu_start_s = cpu_s(), start_s = run.options.start_s;
+  if (run.options.transport == "grpc") run_grpc(run);
+  else run_zmq(run);
+  write_json(run, now_s() - start_s, cpu_s() - cpu_start_s);
+  return 0;
+}
