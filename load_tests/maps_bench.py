@@ -1,11 +1,12 @@
-"""Visibility-map benchmark: both backends, map resolutions 64-512, the A-map update, the backend rule.
+"""Visibility-map benchmark: the backends, map resolutions 64-512, the A-map update, the backend rule.
 
     python -m load_tests.maps_bench --json FILE [--quick]
 
 Scene: a forest, as in the paper's stress test (section 6, Figure 11): 100 cylinders of 12 sections
 (4,800 triangles), 30 of them moving in random directions at 1 m/s, around two targets walking +X
 at 1.5 m/s; the camera at the default style's place on the torus (theta at 0.35 of its range,
-phi = 70 deg). Timed per backend and resolution: computing all 2r = 10 maps (the paper's
+phi = 70 deg). Timed per backend (Embree, GL, and the compiled frame path's native one) and
+resolution: computing all 2r = 10 maps (the paper's
 per-update cost without amortization) and the 2 maps of one amortized update (section 6); then the
 A-map update of an amortized step (predict 2 maps, aggregate 10, apply a mask); then a sweep of
 scene sizes at 64 x 64 that locates where ray casting overtakes GL on this machine, which is the
@@ -123,7 +124,7 @@ def _reps(resolution: int, quick: bool) -> int:
 def bench_maps(quick: bool) -> dict:
     rng = np.random.default_rng(1)
     out = {}
-    for name in ("embree", "gl"):
+    for name in ("embree", "gl", "native"):
         forest = Forest()
         backend = make_backend(name, forest.scene)
         try:
@@ -187,11 +188,15 @@ def bench_anticipation(quick: bool) -> dict:
             maps = backend.compute(
                 forest.torus, window, points, exclude_ids=owners, previous_torus=forest.previous_torus, dt_s=FRAME_S
             )
-            t0 = time.perf_counter()
-            amap.refresh(forest.time_s, slots, maps, forest.torus)
+            t0 = time.perf_counter()  # AnticipationMap.refresh, its steps timed apart
+            amap.schedule(forest.time_s, slots)
+            t_predict = time.perf_counter()
+            predicted = amap.predict(maps)
+            t_predicted = time.perf_counter()
+            amap.store(forest.time_s, slots, predicted, maps.window, forest.torus)
             if rep >= 2:  # after the first fill of all 10 slots
                 times.append(time.perf_counter() - t0)
-                predict.append(amap.last_refresh_ms["predict"] / 1e3)
+                predict.append(t_predicted - t_predict)
                 occluded.append(float(maps.shadow.mean()))
         backend.close()
         out[str(resolution)] = {

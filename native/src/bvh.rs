@@ -405,19 +405,23 @@ impl Bvh {
         hit
     }
 
-    /// The least ray parameter t >= 0 at which the ray o + t d meets a triangle (inf: none), with
-    /// the index of that triangle (the lowest of those hit at that t).
-    pub fn first_hit(
+    /// The least ray parameter t, 0 <= t <= t_max, at which the ray o + t d meets a triangle, with
+    /// the index of that triangle (the lowest of those hit at that t); (t_max, None) when there is
+    /// none. Boxes entered beyond t_max, or beyond the nearest hit so far, are not visited, so a
+    /// bound (a segment's end, the nearest hit on another tree) saves the walk past it, and an
+    /// `occluded` test first would walk the same boxes twice. t_max may be inf.
+    pub fn first_hit_within(
         &self,
         origin: [f64; 3],
         direction: [f64; 3],
+        t_max: f64,
         stack: &mut Stack,
     ) -> (f64, Option<u32>) {
-        let mut best = (f64::INFINITY, None::<u32>);
+        let mut best = (t_max, None::<u32>);
         let Some(ray) = Ray::new(origin, direction, self.reach) else {
             return best;
         };
-        self.walk(&ray, f64::INFINITY, stack, |slots| {
+        self.walk(&ray, t_max, stack, |slots| {
             for slot in slots {
                 if let Some(t) = ray.hits(&self.triangles[slot], best.0) {
                     let id = self.ids[slot];

@@ -145,11 +145,14 @@ impl PyBvh {
 
     /// (k,) float64: the ray parameter t >= 0 of the nearest hit along each ray o + t d, origins and
     /// directions (k, 3) float64 (not necessarily unit: t is in units of |d|); inf where none.
+    /// t_max: only hits at t <= t_max count (Bvh::first_hit_within, what the maps cast).
+    #[pyo3(signature = (origins, directions, t_max = f64::INFINITY))]
     fn first_hit<'py>(
         &self,
         py: Python<'py>,
         origins: PyReadonlyArray2<'py, f64>,
         directions: PyReadonlyArray2<'py, f64>,
+        t_max: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let (origins, directions) = pairs(["origins", "directions"], &origins, &directions)?;
         let t: Vec<f64> = py.detach(|| {
@@ -157,7 +160,12 @@ impl PyBvh {
             origins
                 .iter()
                 .zip(&directions)
-                .map(|(o, d)| self.bvh.first_hit(*o, *d, &mut stack).0)
+                .map(
+                    |(o, d)| match self.bvh.first_hit_within(*o, *d, t_max, &mut stack) {
+                        (t, Some(_)) => t,
+                        (_, None) => f64::INFINITY,
+                    },
+                )
                 .collect()
         });
         Ok(PyArray1::from_vec(py, t))

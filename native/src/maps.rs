@@ -136,15 +136,17 @@ pub fn shadow_velocity_maps(
             let mut best = t_limit;
             let mut object = None;
             if let Some(bvh) = &scene.statics {
-                if bvh.occluded(start, rel, t_limit, &mut stack) {
-                    best = best.min(bvh.first_hit(start, rel, &mut stack).0);
-                }
+                best = bvh.first_hit_within(start, rel, t_limit, &mut stack).0;
             }
             for &i in &near {
                 let o = &scene.objects[i];
                 if o.sphere_entry(&start, &rel, best).is_some() {
                     let (origin, direction) = o.local(&start, &rel);
-                    let t = o.bvh.first_hit(origin, direction, &mut stack).0;
+                    // o.local is affine: the local ray's parameter is the world one's
+                    let t = o
+                        .bvh
+                        .first_hit_within(origin, direction, best, &mut stack)
+                        .0;
                     if t < best {
                         (best, object) = (t, Some(i));
                     }

@@ -165,17 +165,38 @@ impl Scene {
 
     /// The least t >= 0 at which o + t d meets any geometry (inf: none).
     pub fn first_hit(&self, origin: &Vec3, direction: &Vec3, stack: &mut Stack) -> f64 {
-        let mut best = match &self.statics {
-            Some(bvh) => bvh.first_hit(*origin, *direction, stack).0,
-            None => f64::INFINITY,
+        self.first_hit_within(origin, direction, f64::INFINITY, stack)
+    }
+
+    /// first_hit among the hits at 0 <= t <= t_max (inf: none), each tree walked only as far as
+    /// the nearest hit so far (Bvh::first_hit_within): first_hit's t wherever that is at most t_max.
+    pub fn first_hit_within(
+        &self,
+        origin: &Vec3,
+        direction: &Vec3,
+        t_max: f64,
+        stack: &mut Stack,
+    ) -> f64 {
+        let (mut best, mut found) = match &self.statics {
+            Some(bvh) => {
+                let (t, triangle) = bvh.first_hit_within(*origin, *direction, t_max, stack);
+                (t, triangle.is_some())
+            }
+            None => (t_max, false),
         };
         for object in &self.objects {
             // an object entered beyond the nearest hit so far cannot be nearer
             if object.sphere_entry(origin, direction, best).is_some() {
-                let (o, d) = object.local(origin, direction);
-                best = best.min(object.bvh.first_hit(o, d, stack).0);
+                let (o, d) = object.local(origin, direction); // affine: the same ray parameter
+                if let (t, Some(_)) = object.bvh.first_hit_within(o, d, best, stack) {
+                    (best, found) = (best.min(t), true);
+                }
             }
         }
-        best
+        if found {
+            best
+        } else {
+            f64::INFINITY
+        }
     }
 }

@@ -50,7 +50,8 @@ def _every_triangle(
 
 
 def _assert_same_bits(mesh: TriMesh, origins: npt.NDArray[np.float64], directions: npt.NDArray[np.float64]) -> None:
-    """first_hit along each ray, and occluded on the segment to o + d, equal the loop's to the bit."""
+    """first_hit along each ray (unbounded, and within a bound), and occluded on the segment to o +
+    d, equal the loop's to the bit."""
     bvh = Bvh(mesh.vertices, mesh.faces)
     triangles = mesh.vertices[mesh.faces]
     t = bvh.first_hit(origins, directions)
@@ -59,6 +60,11 @@ def _assert_same_bits(mesh: TriMesh, origins: npt.NDArray[np.float64], direction
     assert wrong.size == 0, (
         f"first_hit differs on {wrong.size} of {len(t)} rays, first {wrong[:5]}: {t[wrong[:5]]} != {expected[wrong[:5]]}"
     )
+    for t_max in (0.5, 2.0 / 3.0, 1.0):  # bounded, as the maps cast: a hit at exactly t_max counts
+        bounded = bvh.first_hit(origins, directions, t_max)
+        expected_bounded = np.where(expected <= t_max, expected, np.inf)
+        wrong = np.flatnonzero(bounded.view(np.int64) != expected_bounded.view(np.int64))
+        assert wrong.size == 0, f"first_hit within {t_max} differs on {wrong.size} of {len(t)} rays, first {wrong[:5]}"
     targets = origins + directions
     occluded = bvh.occluded(origins, targets)
     expected_occluded = np.array(
