@@ -144,9 +144,9 @@ impl Deoccluder {
         let ray = scale(&direction, length);
         let mut nearest: Option<f64> = None; // sphere centre at first contact, from start
         for (offset, depth) in offsets.iter().zip(&depth) {
-            // only contacts within the segment count: the walk stops at its end
+            // only contacts within the segment count: the walk stops at its end (inf: none)
             let t = scene.first_hit_within(&add(&base, offset), &ray, 1.0, &mut self.stack);
-            if t.is_finite() && t <= 1.0 {
+            if t.is_finite() {
                 let along = t * length - depth;
                 nearest = Some(nearest.map_or(along, |n: f64| n.min(along)));
             }

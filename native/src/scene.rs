@@ -189,7 +189,7 @@ impl Scene {
             if object.sphere_entry(origin, direction, best).is_some() {
                 let (o, d) = object.local(origin, direction); // affine: the same ray parameter
                 if let (t, Some(_)) = object.bvh.first_hit_within(o, d, best, stack) {
-                    (best, found) = (best.min(t), true);
+                    (best, found) = (t, true); // a hit is never beyond the bound it was given
                 }
             }
         }
