@@ -10,6 +10,7 @@ import logging
 import grpc
 import pytest
 import zmq
+import zmq.asyncio
 
 from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError
@@ -81,7 +82,7 @@ def test_an_unexpected_exception_is_internal_over_zeromq_and_logged_with_its_ses
 
         transport._handlers[b"Frame"] = (transport._handlers[b"Frame"][0], broken)
         transport.start()
-        client = transport.ctx.socket(zmq.DEALER)
+        client = zmq.asyncio.Context.instance().socket(zmq.DEALER)
         client.setsockopt(zmq.LINGER, 0)
         client.connect(transport.address)
         try:

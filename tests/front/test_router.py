@@ -137,4 +137,8 @@ def test_a_frame_answered_is_counted_with_its_stage_times():
     assert _sample(metrics, "camdirector_frame_compute_seconds_count", {}) == 3.0
     assert _sample(metrics, "camdirector_stage_seconds_count", {"stage": "ingest"}) == 2.0
     assert _sample(metrics, "camdirector_stage_seconds_sum", {"stage": "motion"}) == pytest.approx(0.13e-3)
-    assert metrics.labelled(metrics.stage, "ingest") is metrics.stage.labels("ingest")
+    assert _sample(metrics, "camdirector_stage_seconds_bucket", {"stage": "motion", "le": "0.0002"}) == 1.0  # 0.13 ms
+    assert _sample(metrics, "camdirector_stage_seconds_bucket", {"stage": "motion", "le": "0.0001"}) == 0.0
+    assert _sample(metrics, "camdirector_frame_compute_seconds_bucket", {"le": "0.0005"}) == 3.0  # a bound is in its bucket
+    assert _sample(metrics, "camdirector_frame_compute_seconds_bucket", {"le": "0.0002"}) == 1.0
+    assert metrics.labelled(metrics.request, "grpc", "Frame") is metrics.request.labels("grpc", "Frame")

@@ -1,6 +1,7 @@
 """The front's end of the socket pair against a real worker process: requests, replies, a frame's
-metrics and errors cross the binary framing (worker/main.py) intact, and a request far
-larger than the pool's stream buffer gets its answer without blocking the other calls."""
+metrics and errors cross the binary framing (worker/main.py) intact, a request far larger than
+the socket's buffer gets its answer without blocking the other calls, and the requests of one turn
+of the event loop go in one write; the channel's reply parser fed by hand, cut anywhere."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ import pytest
 from camdirector.demo.client import frame_updates, session_request
 from camdirector.demo.scene import build_demo_scene
 from camdirector.errors import DirectorError
-from camdirector.front.worker_pool import WorkerPool
+from camdirector.front.worker_pool import WorkerPool, _Channel
 from camdirector.geometry.camera import Lens
+from camdirector.infra.channels import REPLY, decode_reply_tail, encode_reply
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.table import FrameMetrics
@@ -56,3 +58,51 @@ def test_requests_replies_metrics_and_errors_cross_to_a_real_worker(tmp_path):
     assert unknown.code == grpc.StatusCode.NOT_FOUND and "unknown session" in unknown.message
     assert isinstance(big, DirectorError) and big.code == grpc.StatusCode.INVALID_ARGUMENT
     assert ping == (b"", None)
+
+
+def _replies(count: int, body_bytes: int) -> tuple[list[tuple[int, bytes]], bytes]:
+    """`count` replies (request id, body), and their bytes on the wire."""
+    replies = [(i, bytes([i % 251]) * (body_bytes + i)) for i in range(count)]
+    return replies, b"".join(encode_reply(i, 0, body, None) for i, body in replies)
+
+
+@pytest.mark.parametrize("cut", [1, 7, REPLY.size, REPLY.size + 1, 1000, 1 << 20])
+def test_the_channel_reads_replies_however_the_bytes_arrive(cut):
+    """Replies split anywhere, several in one arrival, one of 300 KB over hundreds of arrivals:
+    each read whole, once, in order (the channel's parser alone, fed by hand)."""
+    replies, wire = _replies(5, 100)
+    large, large_wire = _replies(1, 300_000)
+    wire += large_wire.replace(REPLY.pack(0, 0, 0, 0.0, 0, 0, 300_000), REPLY.pack(5, 0, 0, 0.0, 0, 0, 300_000), 1)
+    replies.append((5, large[0][1]))
+    read: list[tuple[int, bytes]] = []
+    channel = _Channel(lambda header, tail: read.append((header[0], decode_reply_tail(header, tail)[0])), lambda: None)
+    for at in range(0, len(wire), cut):
+        channel.data_received(wire[at : at + cut])
+    assert read == replies
+
+
+def test_requests_of_one_turn_go_in_one_write_and_are_all_answered(tmp_path):
+    """200 requests made in one turn of the event loop reach a real worker in one write, and
+    each gets its own answer."""
+
+    async def run():
+        pool = WorkerPool(ServerSettings(workers=1, data_dir=str(tmp_path)))
+        await pool.start()
+        try:
+            channel = pool._workers[0].channel
+            assert channel.transport is not None
+            writes = []
+            write = channel.transport.writelines
+            channel.transport.writelines = lambda buffers: (writes.append(len(buffers)), write(buffers))  # type: ignore[method-assign]
+            scene = build_demo_scene(seed=7, duration_s=1.0)
+            unknown = [pool.call(0, "frame", f"{i:032x}", _first_frame(scene, f"{i:032x}")) for i in range(100)]
+            pings = [pool.call(0, "ping", "", b"") for _ in range(100)]
+            results = await asyncio.gather(*unknown, *pings, return_exceptions=True)
+            return list(writes), results  # before stop() writes its own request
+        finally:
+            await pool.stop()
+
+    writes, results = asyncio.run(run())
+    assert writes == [600]  # 200 requests, three buffers each, one write
+    assert all(isinstance(r, DirectorError) and r.code == grpc.StatusCode.NOT_FOUND for r in results[:100])
+    assert results[100:] == [(b"", None)] * 100

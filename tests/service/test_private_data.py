@@ -26,7 +26,7 @@ WRITTEN = (
     "access.sqlite3-shm",
     "admin.key",
     "zmq/server.key_secret",
-    "checkpoints/*/snapshot",
+    "checkpoints/*/log",  # a session's inputs and, past 60 of them, its snapshot (checkpoint_stores.py)
     "jobs/jobs.sqlite3-wal",
     "jobs/*/input/clip.bvh",  # an upload
     "jobs/*/result/preview.mp4",  # a result

@@ -11,6 +11,7 @@ import pytest
 from camdirector.errors import DirectorError
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker import checkpoint_stores
 from camdirector.worker.checkpoint_stores import (
     CheckpointError,
     DirectoryStore,
@@ -90,6 +91,45 @@ def test_a_torn_last_write_is_ignored(tmp_path):
     with open(tmp_path / "s" / "log", "ab") as log:
         log.write(b"\x00\x00\x00\x40torn")  # a length of 64, then 4 bytes: the process died mid-write
     assert store.load("s").entries == [(1, "frame", b"whole")]
+
+
+def test_snapshots_go_in_the_log_until_it_is_long_then_start_a_new_one(tmp_path, monkeypatch):
+    """DirectoryStore appends a snapshot to the log (one write) while the log is short, and only
+    then writes the snapshot file and starts an empty log: the newest snapshot wins either way,
+    with the inputs after it, and the log stays bounded."""
+    monkeypatch.setattr(checkpoint_stores, "LOG_ROTATE_BYTES", 4096)
+    store = DirectoryStore(tmp_path, keep_s=60.0)
+    store.begin("s", "n/1", b"c")
+    log = tmp_path / "s" / "log"
+    seq, sizes, rotations = 0, [], 0
+    for k in range(40):
+        for _ in range(3):
+            seq += 1
+            assert store.append("s", "n/1", encode_entry(seq, "frame", b"f" * 100))
+        before = log.stat().st_size
+        assert store.snapshot("s", "n/1", seq, f"state {k}".encode() * 20)
+        rotations += log.stat().st_size == 0
+        if log.stat().st_size:
+            assert log.stat().st_size > before  # appended: the log kept the inputs before it
+        sizes.append(log.stat().st_size)
+        seq += 1
+        assert store.append("s", "n/1", encode_entry(seq, "style", b"after"))
+        loaded = store.load("s")
+        assert (loaded.snapshot, loaded.seq, loaded.entries) == (f"state {k}".encode() * 20, seq - 1, [(seq, "style", b"after")])
+    assert rotations >= 3 and max(sizes) < 4096 + 1024  # started anew several times, never long
+    assert (tmp_path / "s" / "snapshot").exists()  # where a new log's first snapshot went
+
+
+def test_a_torn_snapshot_in_the_log_leaves_the_one_before_and_the_inputs_since(tmp_path):
+    store = DirectoryStore(tmp_path, keep_s=60.0)
+    store.begin("s", "n/1", b"c")
+    store.append("s", "n/1", encode_entry(1, "frame", b"f1"))
+    assert store.snapshot("s", "n/1", 1, b"first")
+    store.append("s", "n/1", encode_entry(2, "frame", b"f2"))
+    with open(tmp_path / "s" / "log", "ab") as log:  # the process died writing its next snapshot
+        log.write(b"\x00\x00\x10\x00" + b"\x00" * 7 + b"\x02\xffpart")
+    loaded = store.load("s")
+    assert (loaded.snapshot, loaded.seq, loaded.entries) == (b"first", 1, [(2, "frame", b"f2")])
 
 
 def _answers(dispatcher: Dispatcher, requests: list[tuple[str, str, bytes]]) -> list[bytes]:
@@ -175,7 +215,7 @@ def test_a_checkpoint_that_does_not_restore_is_unavailable_and_the_others_restor
         first.handle_bytes("create", session_id, two_target_request().SerializeToString())
         for update in walk(session_id, 12):
             first.handle_bytes("frame", session_id, update.SerializeToString())
-    (tmp_path / "checkpoints" / "bad" / "snapshot").write_bytes(b"\x00" * 8 + b"not a pickle")
+    assert _store(tmp_path, "").snapshot("bad", "n/x", 12, b"not a pickle", claim=True)  # the snapshot kept is not one
     second = _requests(tmp_path, "", "n/2")
     nxt = {sid: list(walk(sid, 1, start_frame=13))[0].SerializeToString() for sid in ("bad", "good")}
     with pytest.raises(DirectorError) as err:

@@ -3,10 +3,13 @@
 The front process talks to each worker over one socket pair (`multiprocessing.Pipe`), in the
 binary framing of infra/channels.py: a struct header, then the raw bytes (the session id
 and the client's serialized request; the serialized reply and a frame's metrics as packed
-numbers). The front end of the pair is an asyncio stream, so a large scene never blocks the event
-loop; the worker reads it blocking. A plain socket pair costs one wake-up per direction, where a
-ZeroMQ pair costs three (its I/O threads on both sides): about 150 us against 370 us per round
-trip after 16 ms idle on this kind of VM.
+numbers). The front end of the pair is an asyncio protocol (`_Channel`), so a large scene never
+blocks the event loop; the worker reads it blocking. A plain socket pair costs one wake-up per
+direction, where a ZeroMQ pair costs three (its I/O threads on both sides): about 150 us against
+370 us per round trip after 16 ms idle on this kind of VM. The wake-up is most of what a request
+costs the front to send, so the requests one turn of the event loop makes for a worker go in one
+write at the end of the turn (under load, several sessions' frames a write), and the replies are
+read off each arrival in the callback, with no task between the socket and a request's future.
 
 Workers are started with the "spawn" method: forking a process that already runs gRPC is unsafe.
 A worker that dies is noticed at once (its end of the socket pair closes): its requests in flight
@@ -29,7 +32,15 @@ from collections.abc import Callable
 import grpc
 
 from camdirector.errors import DirectorError
-from camdirector.infra.channels import REPLY, REQUEST_ID_MODULUS, FrameMetrics, decode_reply_tail, encode_request, tail_length
+from camdirector.infra.channels import (
+    REPLY,
+    REQUEST_ID_MODULUS,
+    FrameMetrics,
+    ReplyHeader,
+    decode_reply_tail,
+    encode_request,
+    tail_length,
+)
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.main import worker_main
@@ -39,6 +50,85 @@ log = logging.getLogger("camdirector.workers")
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 WORKER_START_WAIT_S = 30.0  # a request for a restarting worker waits this long for it, s
+# a request this large is written at once and its write waited for, not held to the turn's end, bytes
+WRITE_AT_ONCE_BYTES = 1 << 16
+
+
+class _Channel(asyncio.Protocol):
+    """The front's end of one worker's socket pair (module docstring). `on_reply(header, tail)`
+    for each whole reply, in order; `on_lost()` once when the pair closes."""
+
+    def __init__(self, on_reply: Callable[[ReplyHeader, bytes], None], on_lost: Callable[[], None]):
+        self.on_reply = on_reply
+        self.on_lost = on_lost
+        self.transport: asyncio.Transport | None = None
+        self._held: list[bytes] = []  # requests of this turn of the loop, written at its end
+        self._buffer = b""  # a reply's first bytes, until the rest arrives
+        self._chunks: list[bytes] = []  # a large reply's arrivals after _buffer's, joined once it is whole
+        self._buffer_bytes = 0  # bytes in _buffer and _chunks
+        self._reply_bytes = 0  # bytes of the reply begun in _buffer, all told; 0: its header is not all there
+        self._writable: asyncio.Future[None] | None = None  # while the transport's buffer is over its mark
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._writable is not None and not self._writable.done():
+            self._writable.set_result(None)
+        self.on_lost()
+
+    def pause_writing(self) -> None:
+        self._writable = asyncio.get_running_loop().create_future()
+
+    def resume_writing(self) -> None:
+        if self._writable is not None and not self._writable.done():
+            self._writable.set_result(None)
+
+    def closed(self) -> bool:
+        return self.transport is None or self.transport.is_closing()
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+
+    async def write(self, buffers: list[bytes]) -> None:
+        """Sends a request's buffers: held to the end of this turn of the loop when small; at
+        once, after the held ones, when large, and then waits while the socket's buffer is full."""
+        assert self.transport is not None
+        if not self._held:
+            asyncio.get_running_loop().call_soon(self._flush)
+        self._held.extend(buffers)
+        if sum(map(len, buffers)) >= WRITE_AT_ONCE_BYTES:
+            self._flush()
+            if self._writable is not None:
+                await self._writable
+
+    def _flush(self) -> None:
+        if self._held and self.transport is not None and not self.transport.is_closing():
+            self.transport.writelines(self._held)  # one send for them all
+        self._held = []
+
+    def data_received(self, data: bytes) -> None:
+        if self._buffer:
+            self._buffer_bytes += len(data)
+            if self._buffer_bytes < self._reply_bytes:  # a large reply still arriving: joined once, when whole
+                self._chunks.append(data)
+                return
+            data = self._buffer + b"".join(self._chunks) + data
+            self._buffer, self._chunks = b"", []
+        at, size, end = 0, REPLY.size, len(data)
+        self._reply_bytes = 0
+        while end - at >= size:
+            header = REPLY.unpack_from(data, at)
+            after = at + size + tail_length(header)
+            if after > end:
+                self._reply_bytes = after - at
+                break
+            self.on_reply(header, data[at + size : after])
+            at = after
+        self._buffer = data[at:]
+        self._buffer_bytes = end - at
 
 
 class _Worker:
@@ -46,8 +136,7 @@ class _Worker:
         self.index = index
         # its process and socket, set by WorkerPool._spawn before any use (and again for each successor)
         self.process: multiprocessing.process.BaseProcess
-        self.writer: asyncio.StreamWriter
-        self.reader_task: asyncio.Task[None]
+        self.channel: _Channel
         self.ready = asyncio.Event()  # started and answering; cleared from its death to its successor's start
         self.replacing: asyncio.Task[None] | None = None
 
@@ -94,26 +183,26 @@ class WorkerPool:
         worker_end.close()
         sock = socket.socket(fileno=os.dup(front_end.fileno()))
         front_end.close()
-        reader, worker.writer = await asyncio.open_unix_connection(sock=sock, limit=2**20)
-        worker.reader_task = asyncio.create_task(self._read(worker, reader))
+        channel = _Channel(self._reply, lambda: self._closed(worker, channel))
+        await asyncio.get_running_loop().create_unix_connection(lambda: channel, sock=sock)
+        worker.channel = channel
 
-    async def _read(self, worker: _Worker, reader: asyncio.StreamReader) -> None:
-        try:
-            while True:
-                header = REPLY.unpack(await reader.readexactly(REPLY.size))
-                body, metrics = decode_reply_tail(header, await reader.readexactly(tail_length(header)))
-                request_id, code = header[0], header[1]
-                pending = self._pending.pop(request_id, None)
-                if pending is None or pending[0].done():
-                    continue
-                future = pending[0]
-                if code == 0:
-                    future.set_result((body, metrics))
-                else:
-                    future.set_exception(DirectorError(_CODES.get(code, grpc.StatusCode.UNKNOWN), body.decode()))
-        except (asyncio.IncompleteReadError, ConnectionError):
-            if not self._stopping:  # the worker went away: at once, not at _watch's next look
-                self._lost(worker)
+    def _reply(self, header: ReplyHeader, tail: bytes) -> None:
+        """A worker's reply: its request's future settled."""
+        pending = self._pending.pop(header[0], None)
+        if pending is None or pending[0].done():
+            return
+        body, metrics = decode_reply_tail(header, tail)
+        if header[1] == 0:
+            pending[0].set_result((body, metrics))
+        else:
+            pending[0].set_exception(DirectorError(_CODES.get(header[1], grpc.StatusCode.UNKNOWN), body.decode()))
+
+    def _closed(self, worker: _Worker, channel: _Channel) -> None:
+        """A worker's socket pair closed: it went away (at once, not at _watch's next look). A
+        channel that is no longer the worker's (its successor's is) says nothing of the worker."""
+        if not self._stopping and getattr(worker, "channel", None) is channel:
+            self._lost(worker)
 
     def _lost(self, worker: _Worker) -> None:
         """A worker died: fail what it had in flight, tell the router, start its successor."""
@@ -121,7 +210,7 @@ class WorkerPool:
             return
         log.error("worker %d died (exit code %s); restarting it", worker.index, worker.process.exitcode)
         worker.ready.clear()
-        worker.writer.close()
+        worker.channel.close()
         for request_id, (future, worker_index) in list(self._pending.items()):
             if worker_index == worker.index and not future.done():
                 future.set_exception(
@@ -157,17 +246,13 @@ class WorkerPool:
         return await self._send(worker, op, session_id, payload, timeout_s)
 
     async def _send(self, worker: _Worker, op: str, session_id: str, payload: bytes, timeout_s: float | None = None):
-        if worker.writer.is_closing():  # died just now; _lost is starting its successor
+        if worker.channel.closed():  # died just now; _lost is starting its successor
             raise DirectorError(grpc.StatusCode.UNAVAILABLE, f"worker {worker.index} died and is restarting")
         request_id = next(self._ids) % REQUEST_ID_MODULUS
         future: asyncio.Future[tuple[bytes, FrameMetrics | None]] = asyncio.get_running_loop().create_future()
         self._pending[request_id] = (future, worker.index)
         try:
-            worker.writer.writelines(encode_request(request_id, op, session_id, payload))
-            try:
-                await worker.writer.drain()  # backpressure on large payloads, immediate otherwise
-            except ConnectionError:  # it died before _watch noticed
-                raise DirectorError(grpc.StatusCode.UNAVAILABLE, "the worker holding this session died") from None
+            await worker.channel.write(encode_request(request_id, op, session_id, payload))
             if timeout_s is None:
                 return await future
             return await asyncio.wait_for(future, timeout_s)
@@ -217,8 +302,7 @@ class WorkerPool:
                 await self._send(worker, "stop", "", b"", timeout_s=2.0)
             except (TimeoutError, DirectorError, ConnectionError):
                 pass
-            worker.reader_task.cancel()
-            worker.writer.close()
+            worker.channel.close()
             worker.process.join(timeout=2.0)
             if worker.process.is_alive():
                 worker.process.kill()

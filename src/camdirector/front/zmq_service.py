@@ -10,6 +10,11 @@ answer) and never disturbs the loop.
 With authentication on the socket is a CURVE server (RFC 26): traffic is encrypted and clients
 must know the server's public key, `DIR/zmq/server.key` (made at the first start; the secret half
 beside it, mode 0600). Clients are not told apart by CURVE keys: the bearer key says who calls.
+
+The socket is read straight off the event loop (its ZMQ_FD, which is edge-triggered: each wake-up
+reads every message waiting, and a send that leaves messages waiting schedules another read)
+rather than through `zmq.asyncio`, whose futures and flag enums cost the front about 40 us a frame.
+Sends never wait: a ROUTER socket queues the reply or, past its high-water mark, drops it.
 """
 
 from __future__ import annotations
@@ -20,9 +25,9 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import cast
 
 import zmq
-import zmq.asyncio
 import zmq.auth
 
 from camdirector.access.guard import Guard
@@ -37,6 +42,9 @@ TRANSPORT = "zmq"
 
 ENVELOPE_SLACK_BYTES = 64 * 1024  # over max_message_bytes a frame may be and still get an answer, bytes
 CURVE_DIR = "zmq"  # in the data directory: server.key (public) and server.key_secret
+READ_BATCH = 64  # messages read in one turn of the event loop before the others get theirs
+# plain ints: pyzmq's enums cost a call each
+_EVENTS, _POLLIN, _RCVMORE, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq.RCVMORE), int(zmq.NOBLOCK)
 
 
 def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
@@ -68,7 +76,7 @@ class ZmqTransport:
         self.guard = guard
         self.calls = SessionCalls(router, guard, TRANSPORT)
         self.metrics = router.metrics
-        self.ctx = zmq.asyncio.Context.instance()
+        self.ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context.instance()
         self.socket = self.ctx.socket(zmq.ROUTER)
         self.socket.setsockopt(zmq.LINGER, 0)
         if curve is not None:
@@ -80,24 +88,49 @@ class ZmqTransport:
         self.socket.setsockopt(zmq.MAXMSGSIZE, router.settings.max_message_bytes + ENVELOPE_SLACK_BYTES)
         self.socket.bind(address)
         self.address = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
-        self._loop_task: asyncio.Task | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._read_scheduled = False
         self._tasks: set[asyncio.Task] = set()
         self._handlers = {name.encode(): (RPCS[name], call) for name, call in self.calls.by_rpc.items()}
 
     def start(self) -> None:
-        self._loop_task = asyncio.create_task(self._serve())
+        self._loop = asyncio.get_running_loop()
+        self._loop.add_reader(self.socket.FD, self._read)
+        self._read_soon()  # messages may wait already, and the descriptor only tells of new ones
 
     async def stop(self) -> None:
-        if self._loop_task is not None:
-            self._loop_task.cancel()
+        if self._loop is not None:
+            self._loop.remove_reader(self.socket.FD)
+            self._loop = None
         self.socket.close()
 
-    async def _serve(self) -> None:
-        while True:
-            parts = await self.socket.recv_multipart(copy=True)
-            task = asyncio.create_task(self._handle(parts))  # parsing before the first await keeps order
+    def _read_soon(self) -> None:
+        if not self._read_scheduled and self._loop is not None:
+            self._read_scheduled = True
+            self._loop.call_soon(self._read)
+
+    def _waiting(self) -> bool:
+        """Whether a message waits to be read (ZMQ_EVENTS; asking also clears the descriptor's signal)."""
+        return bool(cast("int", self.socket.get(_EVENTS)) & _POLLIN)
+
+    def _read(self) -> None:
+        """Reads up to READ_BATCH waiting messages, each handled by its own task (in arrival
+        order: a task runs up to its first await before the next starts); more waiting, reads
+        again on the next turn."""
+        self._read_scheduled = False
+        sock = self.socket
+        if sock.closed:
+            return
+        for _ in range(READ_BATCH):
+            if not self._waiting():
+                return
+            parts = [sock.recv(_NOBLOCK)]
+            while sock.get(_RCVMORE):
+                parts.append(sock.recv(_NOBLOCK))
+            task = asyncio.create_task(self._handle(parts))
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
+        self._read_soon()
 
     def _error_reply(self, error: DirectorError) -> list[bytes]:
         self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
@@ -137,6 +170,8 @@ class ZmqTransport:
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set
         self.metrics.labelled(self.metrics.request, TRANSPORT, label).observe(time.perf_counter() - t0)
         try:
-            await self.socket.send_multipart(envelope + reply)
-        except zmq.ZMQError as exc:  # the peer went away
+            self.socket.send_multipart(envelope + reply, _NOBLOCK)
+            if self._waiting():  # the send took the descriptor's signal of messages waiting
+                self._read_soon()
+        except zmq.ZMQError as exc:  # the socket closed (stopping)
             log.debug("zmq reply dropped: %s", exc)

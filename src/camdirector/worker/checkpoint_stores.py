@@ -8,7 +8,7 @@ What the session was built from and never changes (meshes, the level, the clock:
 `Session.creation_objects`) is pickled by name and taken from the freshly built session on restore
 (`loads_state`), so a snapshot holds state, not geometry; classes that hold native handles (Embree
 scenes, GL objects) pickle as what rebuilds them (geometry/raycast.py, geometry/toric_maps/). A
-snapshot replaces the input log, so a session's checkpoint is bounded.
+snapshot supersedes the inputs before it, and each store keeps a session's checkpoint bounded.
 
 Every write names its owner (node and process); a store refuses a write by a process that is no
 longer the owner, and `snapshot(..., claim=True)` makes a restoring process the owner: the fence
@@ -47,6 +47,8 @@ OP_CODES = {name: code for code, name in enumerate(OPS)}
 _ENTRY = struct.Struct("!QB")  # sequence number, op code; then the request's bytes
 _LENGTH = struct.Struct("!I")  # DirectoryStore's log: each entry's length first
 _SEQ = struct.Struct("!Q")  # DirectoryStore's snapshot file: its sequence number first
+_SNAPSHOT_CODE = 255  # DirectoryStore's log: an entry with this op code is a snapshot (its bytes the state)
+LOG_ROTATE_BYTES = 1 << 20  # DirectoryStore: a snapshot is appended to a log shorter than this, else starts a new one, bytes
 
 
 class CheckpointError(RuntimeError):
@@ -164,10 +166,18 @@ class DirectoryStore:
     state), `log` (length-prefixed entries, appended with one write each: a killed process's
     whole writes are in the page cache, a torn last one is ignored) and `owner`.
 
-    A snapshot replaces the log with a new file (written aside, renamed into place); a process
-    whose open log file has been replaced that way (its link count is 0) no longer owns the
-    session. A checkpoint whose owner process is gone and whose files are older than `keep_s` is
-    removed when a store opens the folder."""
+    A snapshot is appended to the log as an entry of its own (op code _SNAPSHOT_CODE), one
+    write like an input's, while the log is under LOG_ROTATE_BYTES; then, and for a claim, it
+    is written to `snapshot` and the log replaced by an empty file (each written aside, renamed
+    into place). The newest snapshot, in the log or the file, is the checkpoint's; a torn one
+    leaves the one before and the inputs since. Appending rather than replacing files takes a
+    snapshot from three files created and two renamed (on ext4 with `discard`, about 0.3 ms
+    when idle, more under load) to one write: a FRAMING_ONLY worker spent about 10% less CPU a
+    frame and its round trips' p99 fell by a third (docs/frame_path.md). A process whose open log
+    file has been replaced (its link count is 0) no longer owns the session. A checkpoint whose
+    owner process is gone and whose files are older than `keep_s` is removed when a store opens
+    the folder. A camdirector from before this layout cannot restore from a log holding a snapshot
+    (its reader knows only inputs); this one reads the older layout."""
 
     may_hang = False  # a local folder
 
@@ -222,8 +232,18 @@ class DirectoryStore:
             raise CheckpointError(f"cannot append to the checkpoint of session {session_id}: {exc}") from None
 
     def snapshot(self, session_id: str, owner: str, seq: int, state: bytes, claim: bool = False) -> bool:
-        if not claim and not self._owns(session_id):
-            return False
+        if not claim:
+            fd = self._logs.get(session_id)
+            if fd is None:
+                return False
+            try:
+                if os.fstat(fd).st_size + len(state) < LOG_ROTATE_BYTES:
+                    # the owner's test and the write in one call, as an input's (append)
+                    return bool(native.append_log(fd, _ENTRY.pack(seq, _SNAPSHOT_CODE) + state))
+            except OSError as exc:
+                raise CheckpointError(f"cannot write the checkpoint of session {session_id}: {exc}") from None
+            if not self._owns(session_id):
+                return False
         try:
             folder = self._dir(session_id)
             self._write_aside(folder / "snapshot", _SEQ.pack(seq) + state)
@@ -246,10 +266,17 @@ class DirectoryStore:
         except FileNotFoundError:
             seq, snapshot = 0, None
         try:
-            entries = [e for e in map(decode_entry, _read_log((folder / "log").read_bytes())) if e[0] > seq]
+            logged = list(_read_log((folder / "log").read_bytes()))
         except FileNotFoundError:
-            entries = []
-        return Checkpoint(create, snapshot, seq, entries)
+            logged = []
+        inputs = []
+        for entry in logged:
+            entry_seq, code = _ENTRY.unpack_from(entry)
+            if code != _SNAPSHOT_CODE:
+                inputs.append(entry)
+            elif entry_seq >= seq:  # the newest snapshot so far
+                seq, snapshot = entry_seq, entry[_ENTRY.size :]
+        return Checkpoint(create, snapshot, seq, [e for e in map(decode_entry, inputs) if e[0] > seq])
 
     def delete(self, session_id: str, owner: str) -> None:
         if self._owns(session_id):
