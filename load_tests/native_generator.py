@@ -38,9 +38,8 @@ def missing_toolchain() -> str | None:
     for tool in ("cmake", "c++", "pkg-config"):
         if shutil.which(tool) is None:
             return f"no {tool}"
-    for package in ("grpc++", "libzmq"):
-        if subprocess.run(["pkg-config", "--exists", package]).returncode != 0:
-            return f"no pkg-config package {package}"
+    if subprocess.run(["pkg-config", "--exists", "grpc++"]).returncode != 0:
+        return "no pkg-config package grpc++"
     return None
 
 

@@ -8,8 +8,8 @@
 # (their tests then skip, CI fails). `--cluster` (also part of `--tests`) wants the engines a
 # cluster runs on (scripts/cluster.sh): redis-server, haproxy and postgresql. `--tests` also wants
 # what builds and runs the service image (tests/deploy/test_image.py, deploy/image.py): podman,
-# runc and debootstrap, and podman-compose for the cluster in containers (deploy/compose.py);
-# Node with npm for the TypeScript SDK; and libzmq's headers for the compiled load generator.
+# runc and debootstrap, and podman-compose for the cluster in containers (deploy/compose.py), and
+# Node with npm for the TypeScript SDK.
 set -euo pipefail
 # camdirector._native (native/) compiles on every install from source (make's editable install,
 # scripts/install-dist.sh): cargo must be on PATH, at least pyo3 0.30's rust-version (1.85; the
@@ -59,8 +59,6 @@ if [ "${1:-}" = "--tests" ]; then
   [ -x /usr/sbin/runc ] || optional+=(runc)
   command -v debootstrap >/dev/null || [ -x /usr/sbin/debootstrap ] || optional+=(debootstrap)
   command -v podman-compose >/dev/null || optional+=(podman-compose)
-  # libzmq's headers for load_tests' compiled load generator (load_tests/driver; its test in make test)
-  { command -v pkg-config >/dev/null && pkg-config --exists libzmq; } || optional+=(libzmq3-dev)
 fi
 if [ ${#optional[@]} -gt 0 ]; then
   if [ "$(id -u)" -ne 0 ]; then
