@@ -176,7 +176,8 @@ struct Run {
   std::vector<std::string> frames;
   std::vector<Tally> tallies;
 
-  double due_s(size_t session, size_t frame) const {  // staggered over one period, as independent clients
+  // staggered over one period, as independent clients; closed loop (period 0): every frame due at T
+  double due_s(size_t session, size_t frame) const {
     double period = options.period_s;
     return options.start_s + double(session) * period / double(options.sessions.size()) + double(frame) * period;
   }
@@ -251,7 +252,7 @@ void run_grpc(Run& run) {
   auto send_due = [&](size_t k, double now) {  // the session's next frame, when it is due and may go
     GrpcSession& s = sessions[k];
     if (!s.started || s.writing || s.reading || s.ending || s.next >= run.frames.size()) return 1e300;
-    double due = run.options.period_s > 0 ? run.due_s(k, s.next) : run.options.start_s;  // closed loop: from T on
+    double due = run.due_s(k, s.next);
     if (due > now) return due;
     std::string payload = run.payload(k, s.next);
     grpc::Slice slice(payload);
@@ -472,7 +473,7 @@ void run_zmq(Run& run) {
     for (size_t k = 0; k < count; k++) {
       ZmtpSession& s = sessions[k];
       if (s.finished || s.in_flight || !s.ready) continue;
-      double due = run.options.period_s > 0 ? run.due_s(k, s.next) : run.options.start_s;  // closed loop: from T on
+      double due = run.due_s(k, s.next);
       if (due <= now) {
         std::string payload = run.payload(k, s.next);
         zmtp_frame(s.out, "Frame", 5, 1);

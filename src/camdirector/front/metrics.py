@@ -26,7 +26,7 @@ class FrameFigures(Collector):
         self.frames: dict[str, int] = {}  # by transport
         self.stale = 0
         self.checkpoint_failures = 0
-        self.compute = [0] * len(_BUCKET_NAMES) + [0.0]
+        self.compute = _histogram()
         self.stages: dict[str, list] = {}  # by stage name: as `compute`
 
     def add(self, transport: str, compute_ms: float, stage_ms: dict[str, float], stale: bool, checkpoint_failed: bool) -> None:
@@ -38,7 +38,7 @@ class FrameFigures(Collector):
         for stage, ms in stage_ms.items():
             histogram = stages.get(stage)
             if histogram is None:
-                histogram = stages[stage] = [0] * len(_BUCKET_NAMES) + [0.0]
+                histogram = stages[stage] = _histogram()
             _observe(histogram, ms * 1e-3)
 
     def collect(self) -> Iterator[Metric]:
@@ -61,6 +61,11 @@ class FrameFigures(Collector):
         for stage, histogram in list(self.stages.items()):
             stages.add_metric([stage], *_exposed(histogram))
         yield stages
+
+
+def _histogram() -> list:
+    """An empty histogram as FrameFigures keeps one: [count per bucket ..., sum]."""
+    return [0] * len(_BUCKET_NAMES) + [0.0]
 
 
 def _observe(histogram: list, value_s: float) -> None:
