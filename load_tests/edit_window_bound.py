@@ -10,7 +10,9 @@ given to the shot before it or to the one after, whichever shows its subjects (e
 shown fraction) on more of those frames: through the same eyes where that shot was in a player's
 eyes and the player does not jump there (its eye carried on), else that shot's last or first pose
 held still. A held pose is worse than the moving camera a real window would carry on, so the
-figures bound the design from below; a shot next to a replay (a cut in time) is left as it is.
+figures bound the design from below. A replay's piece goes only to a piece of the same replay
+(its replayed frames go on), a live shot only to a live one (a cut into or out of a replay is a
+cut in time).
 Prints eval-match's figures before and after, per match.
 """
 
@@ -34,6 +36,7 @@ Poses = tuple[np.ndarray, np.ndarray, np.ndarray]
 # (program, the short shot's rows, the neighbour's row) -> (the share of the rows showing its subjects, its poses)
 Judge = Callable[[Program, np.ndarray, int], tuple[float, Poses]]
 
+REPLAY_GAP_FRAMES = 2  # a replay's pieces whose replayed frames are this close across a cut are one replay going on
 JUMP_M = 2.0  # a player's feet moving this far between two frames jumped (teleport, respawn): no eye carried across it, m
 FIGURES = (
     ("shots <2 s", lambda f: f["shots"]["under_2s"]),
@@ -49,8 +52,9 @@ FIGURES = (
 def repaired(program: Program, judge: Judge, short_s: float) -> tuple[Program, dict[str, int]]:
     """A copy of `program` (evaluation/match/measure.py Program) with each shot under short_s, s,
     in time order, given to the shot before it (its cut removed) or the one after (the next cut
-    removed), whichever `judge` says shows its subjects more (ties to the shot before); the
-    first shot and any next to a replay are left. And the counts of each."""
+    removed), whichever `judge` says shows its subjects more (ties to the shot before), among
+    the neighbours of its kind (`_donors`); the first shot and one with none are left. And the
+    counts of each."""
     p = dataclasses.replace(
         program,
         position=program.position.copy(),
@@ -68,20 +72,36 @@ def repaired(program: Program, judge: Judge, short_s: float) -> tuple[Program, d
         if not short:
             return p, counts
         a, b = short[0]
-        if a == 0 or p.replay[a - 1] or p.replay[a] or p.replay[b]:
+        rows = np.arange(a, b)
+        donors = _donors(p, a, b)
+        if not donors:
             left.add(a)
             counts["left"] += 1
             continue
-        rows = np.arange(a, b)
-        before, before_poses = judge(p, rows, a - 1)
-        after, after_poses = judge(p, rows, b)
-        donor, poses = (a - 1, before_poses) if before >= after else (b, after_poses)
+        judged = [(judge(p, rows, d), d) for d in donors]
+        (_, poses), donor = max(judged, key=lambda j: j[0][0])  # the first of equals: the shot before
         p.position[rows], p.rotation[rows], p.vertical_fov_deg[rows] = poses
         for r in rows:
             p.subjects[r] = p.subjects[donor]
         p.overview[rows] = p.overview[donor]
         p.cut[a if donor == a - 1 else b] = False
         counts["to_the_shot_before" if donor == a - 1 else "to_the_shot_after"] += 1
+
+
+def _donors(p: Program, a: int, b: int) -> list[int]:
+    """The rows of the neighbours the short shot [a, b) may go to, the shot before first: of its
+    kind (live, or the same replay going on: its replayed frames at most REPLAY_GAP_FRAMES apart
+    across the cut)."""
+    if a == 0 or p.replay[a:b].any() != p.replay[a:b].all():
+        return []
+    replay = bool(p.replay[a])
+
+    def goes_on(before: int, after: int) -> bool:
+        if p.replay[before] != replay or p.replay[after] != replay:
+            return False
+        return not replay or abs(int(p.shown_index[after]) - int(p.shown_index[before])) <= REPLAY_GAP_FRAMES
+
+    return [d for d, (x, y) in ((a - 1, (a - 1, a)), (b, (b - 1, b))) if goes_on(x, y)]
 
 
 def eval_match_judge(match, bodies, lens, level) -> Judge:
@@ -100,12 +120,12 @@ def eval_match_judge(match, bodies, lens, level) -> Judge:
         eyes = int(in_eyes_of(match, program)[row])
         fov = np.repeat(program.vertical_fov_deg[row], k)
         if eyes >= 0:
-            feet = match.positions_world[program.index[np.append(row, rows)], eyes]
+            feet = match.positions_world[program.shown_index[np.append(row, rows)], eyes]
             if np.all(np.linalg.norm(np.diff(feet, axis=0), axis=1) < JUMP_M):
                 lift = np.array([0.0, EYE_HEIGHT_FRACTION * match.players[eyes].height_m, 0.0])
                 seen = [
                     look_along(f + lift, quat_rotate(q, np.array([0.0, 0.0, 1.0])), float(fov[0]))
-                    for f, q in zip(feet[1:], aims[program.index[rows], eyes])
+                    for f, q in zip(feet[1:], aims[program.shown_index[rows], eyes])
                 ]
                 return (np.array([s.position_world for s in seen]), np.array([s.rotation_xyzw for s in seen]), fov), True
         return (np.repeat(program.position[row][None], k, 0), np.repeat(program.rotation[row][None], k, 0), fov), False
@@ -125,8 +145,8 @@ def eval_match_judge(match, bodies, lens, level) -> Judge:
             shot_id=program.shot_id[rows],
             subjects=[program.subjects[row]] * len(rows),
             overview=program.overview[rows],
-            shown_index=program.index[rows],
-            replay=np.zeros(len(rows), dtype=bool),
+            shown_index=program.shown_index[rows],
+            replay=program.replay[rows],
         )
         shown = measure_shown(held, bodies, lens, level)  # (k, P)
         subjects = [column[s] for s in program.subjects[row]]

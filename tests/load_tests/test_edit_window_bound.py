@@ -66,7 +66,19 @@ def test_repairs_go_on_until_no_shot_is_short():
     assert np.flatnonzero(fixed.cut).tolist() == [5, 8]
 
 
-def test_a_short_shot_next_to_a_replay_is_left():
-    fixed, counts = repaired(program([3, 4, 8], replay=[4, 5, 6, 7]), judge_preferring("before"), 2.0)
-    assert counts == {"to_the_shot_before": 0, "to_the_shot_after": 0, "left": 1}
-    assert np.flatnonzero(fixed.cut).tolist() == [3, 4, 8]
+def test_a_live_short_shot_goes_only_to_a_live_neighbour():
+    # [3, 4) live, [4, 8) a replay: the judge would take the replay, the live shot before gets it
+    fixed, counts = repaired(program([3, 4, 8], replay=[4, 5, 6, 7]), judge_preferring("after"), 2.0)
+    assert counts == {"to_the_shot_before": 1, "to_the_shot_after": 0, "left": 0}
+    assert np.flatnonzero(fixed.cut).tolist() == [4, 8]
+
+
+def test_a_replays_piece_goes_to_the_same_replay_going_on_and_no_other():
+    p = program([3, 4, 8], replay=[3, 4, 5, 6, 7])  # a replay cut within at 4 (its frames go on)
+    p.shown_index[3:8] = np.arange(100, 105)
+    fixed, counts = repaired(p, judge_preferring("before"), 2.0)  # before it, live: not its kind
+    assert counts == {"to_the_shot_before": 0, "to_the_shot_after": 1, "left": 0}
+    assert np.flatnonzero(fixed.cut).tolist() == [3, 8]
+    other = program([3, 4, 8], replay=[3, 4, 5, 6, 7])
+    other.shown_index[3:8] = [100, 200, 201, 202, 203]  # [4, 8) replays another kill
+    assert repaired(other, judge_preferring("before"), 2.0)[1] == {"to_the_shot_before": 0, "to_the_shot_after": 0, "left": 1}
