@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.evaluation.match.measure import Program
+from camdirector.evaluation.match.measure import SHOWN_FRACTION, Program
 from load_tests.real_matches import MATCHES, prepare
 from load_tests.report import emit
 
@@ -151,7 +151,7 @@ def eval_match_judge(match, bodies, lens, level) -> Judge:
         shown = measure_shown(held, bodies, lens, level)  # (k, P)
         subjects = [column[s] for s in program.subjects[row]]
         showing = shown[:, subjects].max(axis=1) if subjects else shown.max(axis=1)
-        return float((showing >= 0.5).mean()), poses
+        return float((showing >= SHOWN_FRACTION).mean()), poses
 
     return judge
 
