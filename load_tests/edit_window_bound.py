@@ -1,6 +1,7 @@
 """An offline bound for an edit window (issue 41, item 3: docs/casting.md, "Where the short shots
 come from"): what the real matches' programs would measure if every shot under 2 s were given to
-a neighbour, as a rig working `min_shot_s` ahead of the program it answers could.
+a neighbour, as a rig working `min_shot_s` ahead of the program it answers could (built since:
+pipeline/match/edit_window.py; on its programs this bounds what is left of the short shots).
 
     python -m load_tests.edit_window_bound [--only 4on4_dm2,...] [--minutes 3] [--delay 10] [--json out.json]
 

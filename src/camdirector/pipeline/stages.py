@@ -22,8 +22,9 @@ order (Section 5), with its own `stage_ms` keys (`TracksStage`; no FRAMING, PROJ
   camera_update  the camera jumps on a cut or follows the target by the force model; the
                  actor's visibility from the new position
 With `style.rig = MATCH` (pipeline/match/rig.py, the casting director) a frame is INGEST, then
-`MatchStage`: BUFFER (the delay buffer; while it fills, no pose), PLAN (on planning ticks), CAMERA,
-VISIBILITY.
+`MatchStage`: BUFFER (the delay buffer; while it fills, no pose), then for each frame the edit
+window works out ahead of the program moment PLAN (on planning ticks), CAMERA, VISIBILITY and EDIT,
+then EDIT again for the program moment's frame answered.
 The state passed along the stages, `FrameState`, is pipeline/state.py's: a core every rig fills
 and the part of the rig that ran the frame.
 Each stage is lapped on the session's injected clock: INGEST by the session itself, the rig's by
@@ -66,3 +67,4 @@ class MatchStage(enum.Enum):
     PLAN = "plan"  # a planning tick: takes, the director's cut decision, candidates
     CAMERA = "camera"  # the program camera's motion and pose, the candidates' poses
     VISIBILITY = "visibility"  # the framed subjects' visibility by ray casts
+    EDIT = "edit"  # the edit window: a short shot given to a neighbour, the program moment's frame answered (edit_window.py)

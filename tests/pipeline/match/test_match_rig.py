@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
+import pickle
 
 import numpy as np
 import pytest
@@ -183,6 +185,40 @@ def test_taking_a_candidate_puts_its_previewed_camera_on_air():
     forward = [2.0 * np.array(q[:3]) for q in (after[0].pose.rotation_xyzw, candidate.pose.rotation_xyzw)]
     assert np.linalg.norm(forward[0] - forward[1]) < 0.1
     assert not any(s.cut for s in after[1:])
+
+
+def test_a_take_goes_on_air_at_the_next_program_frame_with_the_window_full():
+    """With a 10 s delay the rig works 2 s ahead; a take drops those frames and is on air at once."""
+    match = Match(TEAMS, two_fronts, [], delay_s=10.0)
+    session, states = run_session(match, 14.0)
+    last = states[-1]
+    assert math.isclose(session.rig.window_s, 2.0) and len(session.rig.window.frames) >= 55  # the window is full
+    candidate = last.match.candidates[0]
+    session.rig.take(list(candidate.shot.subject_ids), candidate.shot.kind, release=False)
+    after = [session.frame(u) for u in list(match.frames(16.0))[14 * 30 + 1 :]]
+    assert after[0].cut and after[0].match.shot.held
+    assert set(after[0].match.shot.subject_ids) == set(candidate.shot.subject_ids)
+    assert math.isclose(after[0].time_s, last.time_s + (1.0 / 30.0), abs_tol=1e-6)  # the program's time goes on
+    assert np.linalg.norm(after[0].pose.position_world - candidate.pose.position_world) < 0.5
+    assert not any(s.cut for s in after[1:]) and all(s.match.shot.held for s in after)
+    assert [round(s.time_s - t.time_s, 6) for s, t in zip(after[1:], after)] == [round((1.0 / 30.0), 6)] * (len(after) - 1)
+
+
+def test_a_rig_checkpointed_before_the_edit_window_works_on_and_refills_it():
+    """A checkpoint of an earlier version (no window in the rig) restores, answers the next
+    program moment and works the window out again."""
+    match = Match(TEAMS, two_fronts, [], delay_s=10.0)
+    session, states = run_session(match, 12.0)
+    while session.rig.do_deferred_work(True):  # as a snapshot does: no plan half computed
+        pass
+    session.rig._rewind()  # as an earlier version left it: working at the moment it last answered
+    old = copy.copy(session.rig)
+    for name in ("window", "_head", "_answered_s", "_body_heights_m"):
+        del old.__dict__[name]
+    session.rig = pickle.loads(pickle.dumps(old))
+    after = [session.frame(u) for u in list(match.frames(15.0))[12 * 30 + 1 :]]
+    assert math.isclose(after[0].time_s, states[-1].time_s + 1.0 / 30.0, abs_tol=1e-6) and after[0].pose is not None
+    assert len(session.rig.window.frames) >= 55  # refilled, one more frame a frame
 
 
 def test_take_falls_back_to_the_attacker_when_the_held_player_dies():

@@ -200,6 +200,22 @@ class MomentBuffer:
             self._start -= gone
         return self.moments[self._start]
 
+    def nearest(self, time_s: float) -> Moment | None:
+        """The moment nearest time_s among those kept (program_moment's rule, moving nothing);
+        None while none is that old."""
+        if not self.times or self.times[0] - time_s > TIME_EPSILON_S:
+            return None
+        i = max(bisect.bisect_right(self.times, time_s) - 1, 0)
+        if i + 1 < len(self.times) and self.times[i + 1] - time_s < time_s - self.times[i]:
+            i += 1
+        return self.moments[i]
+
+    def rewind(self, moment: Moment) -> None:
+        """The program moment back to `moment`, a kept one (the edit window's, rig.py)."""
+        i = bisect.bisect_left(self.times, moment.time_s)
+        assert self.moments[i] is moment  # kept: the window is shorter than the past kept for replays
+        self._start = i
+
     def at(self, time_s: float) -> Moment:
         """The buffered moment nearest at or before time_s, clamped to the buffer's ends (the
         past kept for replays included)."""

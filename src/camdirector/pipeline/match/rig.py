@@ -1,14 +1,20 @@
 """The MATCH rig of a session: the program of a whole match, chosen among the players by
 events and interest, shown with the broadcast delay (issue 12).
 
-Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera`, `visibility`):
+Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera`, `visibility`,
+`edit`):
 1. buffer   the frame's players and events join the buffered moments (moments.py); the program's
-            moment is the newest one at or before `time_s - delay_s`. Until one exists the
+            moment is the one nearest `time_s - delay_s`. Until one exists the
             answer is `buffering` with no pose. `state.frame`, `time_s`, `dt_s` and
             `aim_points_world` become the program moment's (the input frame's number stays the
             Session's business: Session.is_stale compares with the last answered state, whose
             frame is now the program's, so a re-sent input frame is also refused here, by the
             buffer, and flagged `match_stale_frame`).
+The rig works the program `window_s` (2 s at a 10 s delay) ahead of the program moment: stages
+2-4 run for each buffered moment up to then, at most HEAD_STEPS a frame, each frame they work out
+joining the edit window (edit_window.py: 5.), which answers the program moment's. Everything below
+("the program moment", the director's ticks, the buffered future it plans on) is that worked-out
+moment's; a human's take drops the window's frames and goes on air at the program moment itself.
 2. plan     at `plan_rate_hz` (and at once after a take), the director of the style decides
             whether to cut: any registered director (director_registry.py): ours (planned.py),
             the HLTV baseline (hltv.py), ezQuake's autotrack (autotrack.py: it ranks by the
@@ -30,6 +36,10 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             A new shot through the eyes the shot on air looks through is no cut: the same
             picture goes on (`same_eyes_no_cut`).
 4. visibility  the share of the framed subjects' sample points seen from the camera.
+5. edit     the frame joins the edit window; a cut under the style's min_shot_s after the one
+            before gives the short shot between to the shot before (its camera carried on) or
+            the one after (edit_window.py). The program moment's frame is answered, its
+            candidates' poses worked out at its moment.
 During a REPLAY shot (replays.py) CAMERA and VISIBILITY are of the replayed moment (the buffer keeps
 the past it shows), and so are `program_transforms` and the frame's `replay_of`, while
 `state.frame` and `time_s` stay the program moment's; a cut into or out of a replay is a cut in
@@ -59,7 +69,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.camera import CameraPose, in_frame
 from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
@@ -77,11 +87,12 @@ from camdirector.pipeline.match.camera_ahead import (
 from camdirector.pipeline.match.director_contract import DirectorContext, MatchDirector
 from camdirector.pipeline.match.director_registry import director_entry
 from camdirector.pipeline.match.drawn_plan import PLAN_SLICE_S, DrawnPlan, PlanResult
+from camdirector.pipeline.match.edit_window import EditWindow, Judges, WorkedFrame, shadow_of
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ReplayedMoment, ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
-from camdirector.pipeline.match.moments import Moment, MomentBuffer
+from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
 from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, ProgramCamera
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
 from camdirector.pipeline.match.replacement import replaced_places
@@ -95,6 +106,9 @@ from camdirector.pipeline.match.visibility import SubjectVisibility
 from camdirector.pipeline.stages import MatchStage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
+
+SHOWN_SHARE = 0.5  # a player with this share of its points in the frame and seen is shown (eval-match's SHOWN_FRACTION)
+HEAD_STEPS = 2  # frames worked out per frame answered at most: one, and one more while the window refills (a take)
 
 
 class MatchRig(RigBase):
@@ -118,6 +132,7 @@ class MatchRig(RigBase):
         self.ray_scene, self.rng, self.clock, self.settings = ray_scene, rng, clock, settings
         self.buffer = MomentBuffer(self.players, settings)
         self.visibility = SubjectVisibility(ray_scene, [t.mesh for t in scene.targets], settings.samples_per_player, rng)
+        self._body_heights_m = np.array([np.ptp(o[:, 1]) for o in self.visibility.outlines_local])  # (n,) each body's, m
         self.level_nodes = scene.level.artifact.nodes_world if scene.level is not None else np.zeros((0, 3))
         self.builder = ShotBuilder(
             self.players, self.style, self.lens, settings, self.visibility, Grammar(settings.jump_cut_deg), self.level_nodes
@@ -145,7 +160,10 @@ class MatchRig(RigBase):
         # a session whose objects move every frame plans in the frame (its ray scene is the frame's)
         self._defer_plans = not any(o.dynamic for o in scene.objects)
         self._next_plan_s = -math.inf
-        self._last_time_s: float | None = None
+        self._last_time_s: float | None = None  # the moment of the newest frame worked out, s
+        self._head: Moment | None = None  # that moment: the edit window's end (edit_window.py)
+        self._answered_s: float | None = None  # the program moment last answered, s
+        self.window = EditWindow(self.style.min_shot_s, self.players)
         self._last_pose: CameraPose | None = None
         self._last_cut_s = -math.inf  # program time of the picture's last cut, s
         self._candidates: list[CandidateShot] = []
@@ -153,6 +171,15 @@ class MatchRig(RigBase):
         self._ahead: CameraStep | None = None  # the camera's step to it, worked out ahead
         self._ahead_candidates: list[CandidatePoses] = []  # the candidates' poses at it
         self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """A rig from a checkpoint; one written before the edit window (an earlier version, a
+        rolling upgrade) works on from its program moment, the window refilling."""
+        self.__dict__.update(state)
+        if "window" not in state:
+            self.window = EditWindow(self.style.min_shot_s, self.players)
+            self._head, self._answered_s = None, self._last_time_s
+            self._body_heights_m = np.array([np.ptp(o[:, 1]) for o in self.visibility.outlines_local])
 
     def _director(self, name: str) -> MatchDirector:
         """The director of that registry name, made for this session (ValueError for a name the
@@ -189,6 +216,13 @@ class MatchRig(RigBase):
             self.director = self._director(style.match_director)
             self._planned_cuts = []  # the last director's
         self.style = self.builder.style = style
+        self.window.min_shot_s = style.min_shot_s
+
+    @property
+    def window_s(self) -> float:
+        """How far ahead of the program moment the rig works (edit_window.py), s: the settings',
+        at most the style's min_shot_s and a quarter of the delay (the director plans on the rest)."""
+        return min(self.settings.edit_window_s, self.style.min_shot_s, self.delay_s / 4.0)
 
     @property
     def player_inputs(self) -> MatchRig:
@@ -248,7 +282,8 @@ class MatchRig(RigBase):
     def run(
         self, state: FrameState, update: FrameInput, target_transforms: list[RigidTransform], last: FrameState | None
     ) -> None:
-        """BUFFER, PLAN, CAMERA and VISIBILITY (module docstring) into state and its part
+        """BUFFER, then PLAN, CAMERA and VISIBILITY of the frames the edit window works out ahead,
+        then the program moment's frame answered (module docstring) into state and its part
         `state.match`, timed into state.stage_ms."""
         match = state.match = MatchFrame(self.roster)
         stages = StageClock(clock=self.clock, timings_ms=state.stage_ms)
@@ -256,36 +291,79 @@ class MatchRig(RigBase):
             state.flags.append("match_stale_frame")
         elif update.player_stats:
             self._stats_ahead.append((update.time_s, update.player_stats))
-        moment = self.buffer.program_moment(update.time_s - self.delay_s)
-        if moment is not None:
-            self._stats_to(moment.time_s)
+        program_s = update.time_s - self.delay_s
+        moment = self.buffer.nearest(program_s)
         stages.done(MatchStage.BUFFER)
         if moment is None:
             self.program_transforms = None
             match.buffering, state.pose, state.visibility = True, None, 0.0
             state.flags.append("buffering")
             return
-        state.frame, state.time_s = moment.frame, moment.time_s
-        state.dt_s = 0.0 if self._last_time_s is None else max(0.0, moment.time_s - self._last_time_s)
-        state.aim_points_world = list(moment.aims_world)
-        self._last_time_s = moment.time_s
+        if self.takes.pending and self.window.frames:
+            self._rewind()  # a take applies at once, from the program moment
+        # the program moment worked out first, then the window refilled, HEAD_STEPS frames a call at most
+        ahead = self.buffer.nearest(program_s + self.window_s)
+        assert ahead is not None  # a later moment than the program's, which exists
+        steps = 0
+        while self._head is None or self._head.time_s < ahead.time_s - TIME_EPSILON_S:
+            behind = self._head is None or self._head.time_s < moment.time_s - TIME_EPSILON_S
+            if steps >= HEAD_STEPS and not behind:  # the program moment is worked out: the rest at later frames
+                break
+            head = self.buffer.program_moment(moment.time_s) if self._head is None else self.buffer.following(self._head)
+            if head is None:
+                break
+            self.buffer.program_moment(head.time_s)  # the buffer's program moment is the head's (its past kept for replays)
+            self._work(head, stages)
+            steps += 1
+        frame, cut = self.window.answer(moment)
+        answered = frame.moment.time_s
+        state.frame, state.time_s = frame.moment.frame, answered
+        state.dt_s = 0.0 if self._answered_s is None else max(0.0, answered - self._answered_s)
+        self._answered_s = answered
+        state.aim_points_world = list(frame.moment.aims_world)
+        state.pose, state.cut, state.visibility = frame.pose, cut, frame.visibility
+        state.flags.extend(frame.flags)
+        self.program_transforms = frame.shown.transforms
+        if frame.shown is not frame.moment:
+            match.replay_of = ReplayedMoment(frame.shown.frame, frame.shown.time_s)
+        match.candidates = candidate_views(
+            frame.moment,
+            frame.pose,
+            frame.candidates,
+            self._ahead_candidates,
+            frame.shot.camera,
+            self.in_level,
+            self._candidate_moment,
+        )
+        self._ahead_candidates = []
+        match.shot, match.events = frame.choice, frame.moment.events
+        # the next cut worked out, else the director's next beyond the window
+        match.planned_cut = self.window.next_cut() or self.planned_cut(self._head.time_s if self._head else answered)
+        state.scores = dict(frame.shot.scores, visibility=frame.visibility, shot_length_s=answered - self.window.last_cut_s)
+        stages.done(MatchStage.EDIT)
+
+    def _work(self, moment: Moment, stages: StageClock) -> None:
+        """PLAN, CAMERA and VISIBILITY of the frame at the moment, worked out into the edit window
+        (edit_window.py), which may give a short shot before its cut to a neighbour."""
+        self._stats_to(moment.time_s)
+        flags: list[str] = []
+        moment_dt_s = 0.0 if self._last_time_s is None else max(0.0, moment.time_s - self._last_time_s)
+        self._last_time_s, self._head = moment.time_s, moment
+        before = shadow_of(self.shot) if self.shot is not None else None
         cut = False
         if self.takes.pending or self.shot is None or moment.time_s >= self._next_plan_s:
             self._next_plan_s = moment.time_s + self.settings.plan_interval_s
-            cut = self._tick(moment, state.flags)
+            cut = self._tick(moment, flags)
         stages.done(MatchStage.PLAN)
         assert self.shot is not None  # the first tick always makes one
-        dt_s = 0.0 if cut else state.dt_s
+        dt_s = 0.0 if cut else moment_dt_s
         cut_short = self._cut_short(moment.time_s)
         shown = self._shown(moment)  # a REPLAY's camera and visibility are of the replayed moment
-        self.program_transforms = shown.transforms
-        if shown is not moment:
-            match.replay_of = ReplayedMoment(shown.frame, shown.time_s)
         ahead, self._ahead = self._ahead, None
         worked_out = ahead is not None and ahead.holds(shown, dt_s, self.shot, self.style, self._last_pose, cut_short)
         if ahead is not None and worked_out:
             vars(self.shot.camera).update(ahead.camera_after)
-            pose, flags = ahead.pose, ahead.flags
+            pose, step_flags = ahead.pose, ahead.flags
         else:
             stepped = self._camera_step(shown, dt_s, self.shot.camera, cut_short)
             if stepped is None:  # a degenerate first shot: look from the overview
@@ -302,43 +380,104 @@ class MatchRig(RigBase):
                 self.shot = overview
                 stepped = self._camera_step(moment, dt_s, self.shot.camera, cut_short)
                 assert stepped is not None  # a static camera always has its pose
-            pose, flags = stepped
-        if not cut and CUT_TO_SEEN_PLACE in flags:  # the camera re-placed to show its subjects (program_camera.py)
+            pose, step_flags = stepped
+        if not cut and CUT_TO_SEEN_PLACE in step_flags:  # the camera re-placed to show its subjects (program_camera.py)
             cut = True
         elif not cut and self._swept_through_wall(pose):
             cut = True
-            flags = [*flags, "cut_through_wall"]
+            step_flags = [*step_flags, "cut_through_wall"]
         if cut:
             self._last_cut_s = moment.time_s
-        state.flags.extend(flags)
-        state.pose, state.cut = pose, cut
-        match.candidates = candidate_views(
-            moment, pose, self._candidates, self._ahead_candidates, self.shot.camera, self.in_level, self._candidate_moment
-        )
-        self._last_pose, self._ahead_candidates = pose, []
+        flags.extend(step_flags)
+        self._last_pose = pose
         if shown is moment:
             self._kills_shown.extend((e, pose.position_world, moment) for e in moment.events if self.replays.pair(e) is not None)
         stages.done(MatchStage.CAMERA)
-        state.visibility = (
+        visibility = (
             ahead.visibility if ahead is not None and worked_out else self.program_camera.visibility(shown, pose, self.shot)
         )
         # the next frame's moment is most likely the next buffered one: its camera is worked out
         # in the worker's idle moments (a session whose ray scene moves every frame cannot)
         self._ahead_for = self.buffer.following(moment) if self._defer_plans else None
-        subjects = self.shot.framed(shown.time_s)  # a REPLAY frames its killer alone before the replayed kill (replays.py)
-        match.shot = (
-            self.shot.choice
-            if subjects == self.shot.subjects
-            else dataclasses.replace(
-                self.shot.choice,
-                subject_ids=tuple(self.players[i] for i in subjects),
-                kind=ShotKind.REPLAY if is_replay(self.shot) else ShotKind.FOLLOW,
-                reason=f"{self.shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills",
-            )
+        frame = WorkedFrame(
+            moment, shown, pose, cut, flags, visibility, self.shot, self._choice(self.shot, shown.time_s), self._candidates
         )
-        match.events, match.planned_cut = moment.events, self.planned_cut(moment.time_s)
-        state.scores = dict(self.shot.scores, visibility=state.visibility, shot_length_s=moment.time_s - self.shot.start_s)
         stages.done(MatchStage.VISIBILITY)
+        judges = Judges(
+            self._shown_by,
+            self._shadow_step,
+            self.program_camera.visibility,
+            self._players_seen,
+            self._shown_height,
+            self._choice,
+            self.in_level.inside,
+            self.in_level.crossed,
+        )
+        self.window.push(frame, before, judges)
+        self.window.step_shadow(moment, moment_dt_s, judges)
+        stages.done(MatchStage.EDIT)
+
+    def _choice(self, shot: Shot, shown_s: float) -> ShotChoice:
+        """What `MatchFrame.shot` names of the shot at the shown moment's time, s: a REPLAY frames its
+        killer alone before the replayed kill, a pair window its kept player alone away from its
+        events (replays.py, shots.py)."""
+        subjects = shot.framed(shown_s)
+        if subjects == shot.subjects:
+            return shot.choice
+        return dataclasses.replace(
+            shot.choice,
+            subject_ids=tuple(self.players[i] for i in subjects),
+            kind=ShotKind.REPLAY if is_replay(shot) else ShotKind.FOLLOW,
+            reason=f"{shot.choice.reason}; framing {self.players[subjects[0]]} alone away from the pair's kills",
+        )
+
+    def _players_seen(self, pose: CameraPose, moment: Moment, players: tuple[int, ...]) -> np.ndarray:
+        """(k,) the share of each player's sample points in the pose's frame and seen from it
+        (eval-match's shown fraction, evaluation/match/measure.py)."""
+        asked = in_frame(pose, self.lens, self.visibility.points_world(moment, players))[None]
+        seen: np.ndarray = self.visibility.seen_points(pose.position_world, moment, players, asked)[0].mean(axis=1)
+        return seen
+
+    def _shown_height(self, pose: CameraPose, moment: Moment, shot: Shot) -> float:
+        """About the median share of the frame's height the players shown from the pose stand (as
+        eval-match measures it: each one with half its points in the frame and seen, but the one
+        whose eyes a first-person view is; its body's height over the frame's at its aim point's
+        distance); NaN: none shown."""
+        eyes = shot.camera.player if isinstance(shot.camera, FirstPersonCamera) else -1
+        everyone = tuple(i for i in range(len(self.players)) if i != eyes)
+        shown = [i for i, seen in zip(everyone, self._players_seen(pose, moment, everyone)) if seen >= SHOWN_SHARE]
+        if not shown:
+            return math.nan
+        distance_m = np.linalg.norm(moment.aims_world[shown] - pose.position_world, axis=1)
+        frame_m = 2.0 * np.maximum(distance_m, 0.1) * math.tan(math.radians(pose.vertical_fov_deg) / 2.0)
+        return float(np.median(self._body_heights_m[shown] / frame_m))
+
+    def _shown_by(self, shot: Shot, moment: Moment) -> Moment:
+        """The moment the shot's picture shows at the program moment (a REPLAY's replayed one)."""
+        return replayed_moment(self.buffer, shot, moment.time_s) if is_replay(shot) else moment
+
+    def _shadow_step(
+        self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, last_pose: CameraPose
+    ) -> tuple[CameraPose, list[str]] | None:
+        """The edit window's shadow stepped on (edit_window.py): held before walls rather than cut."""
+        return self.program_camera.step(moment, dt_s, camera, shot, self.style.response_time_s, last_pose, True)
+
+    def _rewind(self) -> None:
+        """The rig back at the last frame answered, the window's frames dropped (a take: its shot
+        on air from the program moment, not the window's end)."""
+        answered = self.window.answered
+        self.window.drop()
+        self._ahead = self._ahead_for = None
+        self._ahead_candidates = []
+        self._next_plan_s = -math.inf
+        if answered is None:
+            self._head = None
+            return
+        self.buffer.rewind(answered.moment)
+        self._head, self._last_time_s = answered.moment, answered.moment.time_s
+        self._last_pose, self._last_cut_s, self.shot = answered.pose, self.window.last_cut_s, answered.shot
+        kept = [k for k in self._kills_shown if k[2].time_s <= answered.moment.time_s]
+        self._kills_shown = deque(kept, maxlen=8)
 
     # -- the camera's step, in the frame or ahead of it -------------------------------------
     def _shown(self, moment: Moment) -> Moment:
@@ -403,11 +542,12 @@ class MatchRig(RigBase):
         self._ahead = step_ahead(
             self.program_camera, self._shown(moment), dt_s, self.shot, self.style, self._last_pose, self._cut_short(moment.time_s)
         )
-        lists = [self._candidates]
-        drawn = self._drawn
-        if drawn is not None and drawn.run is None and drawn.result is not None:
-            lists.append(drawn.result.candidates)
-        self._ahead_candidates = candidate_poses(moment, lists, self.in_level, self._candidate_moment)
+        # the candidates are shown with the program moment they were worked out for: the window's next to answer
+        if self.window.frames:
+            following = self.window.frames[0]
+            self._ahead_candidates = candidate_poses(
+                following.moment, [following.candidates], self.in_level, self._candidate_moment
+            )
 
     # -- the planning tick ------------------------------------------------------------------
     def _tick(self, moment: Moment, flags: list[str]) -> bool:

@@ -116,6 +116,9 @@ class MatchSettings:
     samples_per_player: int = 16         # surface points ray-cast per framed player (8 misjudged half-hidden players). [1, 256]
     min_visible: float = 0.75            # a framed place under this visible share looks for a better one. [0, 1]
     candidates: int = 3                  # preview shots offered beside the program. [0, 16]
+    edit_window_s: float = 2.0           # the rig works the program this far ahead of the moment it answers, at most the
+                                         # style's min_shot_s and a quarter of the delay, and gives a shot shorter than
+                                         # min_shot_s to a neighbour there (edit_window.py); 0: none, s. [0, 10]
     jump_cut_deg: float = 30.0           # the 30-degree rule: a cut on a shared subject turns the view this much, deg. [0, 180]
     overview_height_m: float = 12.0      # the bounding-box overview's height above the players, m. (0, 1000]
     pull_below: float = 0.5              # a camera that sees less than this share of its first subject's points (the rest
@@ -192,6 +195,8 @@ class MatchSettings:
                 and 0.0 <= self.eyes_shown_height_min <= 1.0):
             raise ValueError("MatchSettings: eyes_fov_deg in (1, 170) deg, eyes_seen and eyes_shown_height_min in [0, 1], "
                              "eyes_lead_s in [0, 10] s")
+        if self.edit_window_s > 10.0:
+            raise ValueError("MatchSettings: edit_window_s in [0, 10] s")
         if self.seen_again_gap_s > 60.0 or self.seen_again_lookahead_s > 10.0:
             raise ValueError("MatchSettings: seen_again_gap_s in [0, 60] s, seen_again_lookahead_s in [0, 10] s")
         if not self.min_lead_s <= self.lead_s <= self.max_lead_s:

@@ -1,0 +1,241 @@
+"""The edit window (pipeline/match/edit_window.py): a short shot given to the shot before or the
+one after, by hand-built frames whose shots' cameras are plain objects and whose visibility is
+given (the window alone, isolated from the rig's cameras; the rig's use of it, a take with the
+window full: test_match_rig.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.transforms import RigidTransform
+from camdirector.pipeline.inputs import EventKind, GameEvent
+from camdirector.pipeline.match.edit_window import CARRIED_ON, SHORT_LEFT, STARTED_EARLY, EditWindow, Judges, WorkedFrame
+from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
+from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.program_shot import Shot
+
+PLAYERS = ["a", "b", "c"]
+DT_S = 1.0 / 30.0
+
+
+class Still:
+    """A camera standing at x metres along the x axis, looking down +z."""
+
+    def __init__(self, x_m: float):
+        self.x_m = x_m
+
+    def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
+        pass
+
+    def pose(self, moment: Moment) -> CameraPose:
+        return pose_at(self.x_m)
+
+
+def pose_at(x_m: float) -> CameraPose:
+    return CameraPose(np.array([x_m, 1.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]), 60.0)
+
+
+def moment(k: int, events: list[GameEvent] | None = None) -> Moment:
+    n = len(PLAYERS)
+    transforms = [RigidTransform(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])) for _ in range(n)]
+    return Moment(
+        k,
+        k * DT_S,
+        transforms,
+        np.zeros((n, 3)),
+        np.zeros((n, 3)),
+        np.tile([0.0, 0.0, 1.0], (n, 1)),
+        np.ones(n, bool),
+        events or [],
+    )
+
+
+def shot(subjects: tuple[int, ...], x_m: float, replay: Replay | None = None) -> Shot:
+    choice = ShotChoice(
+        tuple(PLAYERS[i] for i in subjects), ShotKind.DUEL if len(subjects) == 2 else ShotKind.FOLLOW, "test", replay=replay
+    )
+    return Shot(choice, subjects, Still(x_m), 0.0)
+
+
+class Program:
+    """A window fed hand-built frames: `seen[shot x]` is each shot's visibility, `sees[shot x]`
+    the players its camera shows whole (none unless named), a shadow stepping on unless
+    `shadow_dies_at` (a frame number)."""
+
+    def __init__(
+        self,
+        seen: dict[float, float],
+        shadow_dies_at: int | None = None,
+        sees: dict[float, set[int]] | None = None,
+        heights: dict[float, float] | None = None,
+    ):
+        self.window = EditWindow(2.0, PLAYERS)
+        self.seen, self.shadow_dies_at, self.sees, self.heights = seen, shadow_dies_at, sees or {}, heights or {}
+        self.judges = Judges(
+            lambda sh, mo: mo,
+            self.step,
+            self.visibility,
+            lambda pose, mo, players: np.array([float(i in self.sees.get(float(pose.position_world[0]), ())) for i in players]),
+            lambda pose, mo, sh: self.heights.get(float(pose.position_world[0]), math.nan),
+            lambda sh, t: sh.choice,
+            lambda point: True,
+            lambda a, b: False,
+        )
+        self.on_air: Shot | None = None
+        self.k = 0
+
+    def visibility(self, shown: Moment, pose: CameraPose, s: Shot) -> float:
+        return self.seen[float(pose.position_world[0])]
+
+    def frames(self, s: Shot, count: int, events: dict[int, list[GameEvent]] | None = None) -> None:
+        for i in range(count):
+            m = moment(self.k, (events or {}).get(i))
+            cut = self.on_air is not s
+            before = None if self.on_air is None else (self.on_air, self.on_air.camera)
+            pose = s.camera.pose(m)
+            frame = WorkedFrame(m, m, pose, cut, [], self.visibility(m, pose, s), s, s.choice, [])
+            self.window.push(frame, before, self.judges)
+            self.window.step_shadow(m, DT_S, self.judges)
+            self.on_air = s
+            self.k += 1
+
+    def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose):
+        if self.shadow_dies_at is not None and m.frame >= self.shadow_dies_at:
+            return pose_at(camera.x_m), ["cut_to_seen_place"]
+        return camera.pose(m), []
+
+    def program(self) -> list[WorkedFrame]:
+        return list(self.window.frames)
+
+
+def cuts(frames: list[WorkedFrame]) -> list[int]:
+    return [f.moment.frame for f in frames if f.cut]
+
+
+def test_a_short_shot_goes_to_the_shot_before_that_carries_on_showing_its_subjects():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
+    p.frames(a, 90)
+    p.frames(x, 30)  # 1 s: short
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, 120]  # a's cut away at frame 90 is gone: a goes on to b's cut
+    assert all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:120])
+    assert all(f.pose.position_world[0] == 0.0 for f in frames[90:120])
+
+
+def test_a_short_shot_goes_to_the_shot_after_where_the_shot_before_met_a_wall():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, 90]  # b starts at x's cut, held at its first pose
+    assert all(f.shot is b and STARTED_EARLY in f.flags and f.pose.position_world[0] == 20.0 for f in frames[90:120])
+
+
+def test_the_neighbour_that_shows_its_subjects_more_takes_the_short_shot():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.6, 10.0: 0.5, 20.0: 0.8})
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90] and p.program()[100].shot is b
+
+
+def test_a_kill_the_short_shot_shows_stays_with_a_neighbour_that_shows_it_or_the_shot_stays():
+    kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
+    a, x, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((0,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}})
+    p.frames(a, 90)
+    p.frames(x, 30, events={10: [kill]})
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, 90, 120]  # neither a nor b shows b and c: the short shot stays, flagged
+    assert SHORT_LEFT in frames[90].flags and all(f.shot is x for f in frames[90:120])
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}, 20.0: {1, 2}})
+    p.frames(a, 90)
+    p.frames(x, 30, events={10: [kill]})
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90]  # b shows them from its first pose: it starts at x's cut
+
+
+def test_a_live_short_shot_goes_to_a_replay_only_where_no_kill_happens_in_it():
+    replay = Replay(kill_time_s=1.0, from_s=0.0, until_s=1.5)
+    kill = GameEvent(EventKind.KILL, "a", "c", 0, 100 * DT_S, "kill")
+    for events, expected in (({10: [kill]}, [0, 90, 120]), (None, [0, 120])):
+        a, x, b = shot((0,), 0.0, replay), shot((1,), 10.0), shot((2,), 20.0, replay)
+        p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
+        p.frames(a, 90)
+        p.frames(x, 30, events=events)
+        p.frames(b, 10)
+        assert cuts(p.program()) == expected
+
+
+def test_a_replays_piece_goes_to_a_live_shot_only_where_the_replay_goes_on_beside_it():
+    replay = Replay(kill_time_s=1.0, from_s=0.0, until_s=1.5)
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0, replay), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
+    p.frames(a, 90)
+    p.frames(x, 30)  # the whole replay: left, never left out
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90, 120]
+    a, x, y, b = shot((0,), 0.0), shot((1,), 10.0, replay), shot((1,), 30.0, replay), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.5, 20.0: 0.6})
+    p.frames(a, 90)
+    p.frames(x, 30)  # the replay's first piece, cut by a wall
+    p.frames(y, 60)
+    assert cuts(p.program()) == [0, 120] and p.program()[100].shot is a  # the live shot goes on: the replay starts later
+
+
+def test_a_neighbour_that_would_show_nobody_where_the_short_shot_showed_its_subjects_may_not_take_it():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.1, 10.0: 0.8, 20.0: 0.2})
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90, 120] and SHORT_LEFT in p.program()[90].flags
+
+
+def test_a_neighbour_that_shows_its_subjects_too_small_to_read_may_not_take_it():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.8, 20.0: 0.6}, heights={0.0: 0.08, 10.0: 0.3, 20.0: 0.2})
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90] and p.program()[100].shot is b  # a would show its player 8% tall
+
+
+def test_a_human_take_is_never_given_away():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    x.held = True
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90, 120] and SHORT_LEFT not in p.program()[90].flags
+
+
+def test_shots_of_min_shot_s_and_longer_are_left_as_they_are():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
+    p.frames(a, 90)
+    p.frames(x, 60)  # exactly 2 s
+    p.frames(b, 10)
+    assert cuts(p.program()) == [0, 90, 150]
+
+
+def test_the_answered_frame_is_the_program_moments_and_counts_a_cut_passed_over():
+    a, b = shot((0,), 0.0), shot((1,), 10.0)
+    p = Program({0.0: 0.9, 10.0: 0.5})
+    p.frames(a, 70)
+    p.frames(b, 3)
+    first, cut = p.window.answer(moment(0))
+    assert first.moment.frame == 0 and cut and p.window.next_cut().time_s == 70 * DT_S
+    frame, cut = p.window.answer(moment(71))  # frame 70's cut passed over
+    assert frame.moment.frame == 71 and cut and p.window.last_cut_s == 70 * DT_S
+    assert p.window.next_cut() is None and len(p.window.frames) == 1
