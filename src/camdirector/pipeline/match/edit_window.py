@@ -176,8 +176,9 @@ class EditWindow:
         return self.answered, cut
 
     def next_cut(self) -> PlannedCut | None:
-        """The next cut already worked out, not yet answered."""
-        return next((PlannedCut(f.moment.time_s, f.choice) for f in self.frames if f.cut), None)
+        """The next cut already worked out, not yet answered, to the shot the director chose (its
+        picture may frame one of it first: `WorkedFrame.choice`)."""
+        return next((PlannedCut(f.moment.time_s, f.shot.choice) for f in self.frames if f.cut), None)
 
     # -- the repairs ----------------------------------------------------------------------
     def _repaired(self, frame: WorkedFrame, judges: Judges) -> bool:
