@@ -111,6 +111,14 @@ class Program:
         return list(self.window.frames)
 
 
+def short_between(p: Program, a: Shot, x: Shot, b: Shot, events: dict[int, list[GameEvent]] | None = None) -> list[WorkedFrame]:
+    """a for 3 s, x for 1 s (short: its events by frame), b for a third of a second; the window's frames."""
+    p.frames(a, 90)
+    p.frames(x, 30, events)
+    p.frames(b, 10)
+    return p.program()
+
+
 def cuts(frames: list[WorkedFrame]) -> list[int]:
     return [f.moment.frame for f in frames if f.cut]
 
@@ -118,9 +126,7 @@ def cuts(frames: list[WorkedFrame]) -> list[int]:
 def test_a_short_shot_goes_to_the_shot_before_that_carries_on_showing_its_subjects():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
-    p.frames(a, 90)
-    p.frames(x, 30)  # 1 s: short
-    p.frames(b, 10)
+    short_between(p, a, x, b)  # 1 s: short
     frames = p.program()
     assert cuts(frames) == [0, 120]  # a's cut away at frame 90 is gone: a goes on to b's cut
     assert all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:120])
@@ -130,10 +136,7 @@ def test_a_short_shot_goes_to_the_shot_before_that_carries_on_showing_its_subjec
 def test_a_short_shot_goes_to_the_shot_after_where_the_shot_before_met_a_wall():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
-    p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 10)
-    frames = p.program()
+    frames = short_between(p, a, x, b)
     assert cuts(frames) == [0, 90]  # b starts at x's cut, held at its first pose
     assert all(f.shot is b and STARTED_EARLY in f.flags and f.pose.position_world[0] == 20.0 for f in frames[90:120])
 
@@ -141,9 +144,7 @@ def test_a_short_shot_goes_to_the_shot_after_where_the_shot_before_met_a_wall():
 def test_the_neighbour_that_shows_its_subjects_more_takes_the_short_shot():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.6, 10.0: 0.5, 20.0: 0.8})
-    p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 10)
+    short_between(p, a, x, b)
     assert cuts(p.program()) == [0, 90] and p.program()[100].shot is b
 
 
@@ -151,16 +152,11 @@ def test_a_kill_the_short_shot_shows_stays_with_a_neighbour_that_shows_it_or_the
     kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
     a, x, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((0,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}})
-    p.frames(a, 90)
-    p.frames(x, 30, events={10: [kill]})
-    p.frames(b, 10)
-    frames = p.program()
+    frames = short_between(p, a, x, b, {10: [kill]})
     assert cuts(frames) == [0, 90, 120]  # neither a nor b shows b and c: the short shot stays, flagged
     assert SHORT_LEFT in frames[90].flags and all(f.shot is x for f in frames[90:120])
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}, 20.0: {1, 2}})
-    p.frames(a, 90)
-    p.frames(x, 30, events={10: [kill]})
-    p.frames(b, 10)
+    short_between(p, a, x, b, {10: [kill]})
     assert cuts(p.program()) == [0, 90]  # b shows them from its first pose: it starts at x's cut
 
 
@@ -170,19 +166,14 @@ def test_a_live_short_shot_goes_to_a_replay_only_where_no_kill_happens_in_it():
     for events, expected in (({10: [kill]}, [0, 90, 120]), (None, [0, 120])):
         a, x, b = shot((0,), 0.0, replay), shot((1,), 10.0), shot((2,), 20.0, replay)
         p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
-        p.frames(a, 90)
-        p.frames(x, 30, events=events)
-        p.frames(b, 10)
-        assert cuts(p.program()) == expected
+        assert cuts(short_between(p, a, x, b, events)) == expected
 
 
 def test_a_replays_piece_goes_to_a_live_shot_only_where_the_replay_goes_on_beside_it():
     replay = Replay(kill_time_s=1.0, from_s=0.0, until_s=1.5)
     a, x, b = shot((0,), 0.0), shot((1,), 10.0, replay), shot((2,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
-    p.frames(a, 90)
-    p.frames(x, 30)  # the whole replay: left, never left out
-    p.frames(b, 10)
+    short_between(p, a, x, b)  # the whole replay: left, never left out
     assert cuts(p.program()) == [0, 90, 120]
     a, x, y, b = shot((0,), 0.0), shot((1,), 10.0, replay), shot((1,), 30.0, replay), shot((2,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.5, 20.0: 0.6})
@@ -195,18 +186,14 @@ def test_a_replays_piece_goes_to_a_live_shot_only_where_the_replay_goes_on_besid
 def test_a_neighbour_that_would_show_nobody_where_the_short_shot_showed_its_subjects_may_not_take_it():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.1, 10.0: 0.8, 20.0: 0.2})
-    p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 10)
+    short_between(p, a, x, b)
     assert cuts(p.program()) == [0, 90, 120] and SHORT_LEFT in p.program()[90].flags
 
 
 def test_a_neighbour_that_shows_its_subjects_too_small_to_read_may_not_take_it():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.8, 20.0: 0.6}, heights={0.0: 0.08, 10.0: 0.3, 20.0: 0.2})
-    p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 10)
+    short_between(p, a, x, b)
     assert cuts(p.program()) == [0, 90] and p.program()[100].shot is b  # a would show its player 8% tall
 
 
@@ -214,9 +201,7 @@ def test_a_human_take_is_never_given_away():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     x.held = True
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
-    p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 10)
+    short_between(p, a, x, b)
     assert cuts(p.program()) == [0, 90, 120] and SHORT_LEFT not in p.program()[90].flags
 
 

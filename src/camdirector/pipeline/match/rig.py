@@ -483,8 +483,7 @@ class MatchRig(RigBase):
     def _shown(self, moment: Moment) -> Moment:
         """The moment the program's picture shows at the program moment: the replayed one during
         a REPLAY (replays.py), else the program moment itself."""
-        shot = self.shot
-        return replayed_moment(self.buffer, shot, moment.time_s) if shot is not None and is_replay(shot) else moment
+        return moment if self.shot is None else self._shown_by(self.shot, moment)
 
     def _future(self, time_s: float) -> Moment | None:
         """The buffered moment at time_s, s, None past the newest (the program camera's look ahead)."""
