@@ -60,18 +60,12 @@ def widened_fov_deg(
     floor_deg = min(floor_deg, max_deg)
     if max_deg <= base_deg:
         return base_deg
-    players = range(len(moment.transforms))
-    points = np.stack([moment.transforms[i].apply(visibility.outlines_local[i]) for i in players])  # (P, S, 3)
-    if _looked_through(pose, moment, points).any():
+    points = outline_points(moment, visibility)
+    if looked_through(pose, moment, points).any():
         return base_deg
-    camera = (points - pose.position_world) @ quat_to_matrix(pose.rotation_xyzw)  # (P, S, 3) camera frame, -Z ahead
-    depth = -camera[..., 2]
-    ahead = depth >= NEAR_PLANE_M
-    with np.errstate(divide="ignore", invalid="ignore"):
-        slope_y = np.where(ahead, camera[..., 1] / depth, np.nan)  # (P, S) tan of the elevation on screen
-        slope_x = np.where(ahead, camera[..., 0] / depth, np.nan)
+    slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
     # most frames show nobody too tall at the floor's width: the grid of widths only for those who are
-    at_floor = _screen_heights(slope_y, slope_x, np.tan(np.radians([floor_deg]) / 2.0), lens.aspect)[:, 0]  # (P,)
+    at_floor = screen_heights(slope_y, slope_x, np.tan(np.radians([floor_deg]) / 2.0), lens.aspect)[:, 0]  # (P,)
     tall = np.flatnonzero(at_floor > settings.shown_height_max)
     if len(tall):
         tall = tall[visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= SHOWN_SEEN]
@@ -80,7 +74,7 @@ def widened_fov_deg(
         return float(floor_deg)
     widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,), the first the floor
     tan_half = np.tan(np.radians(widths_deg) / 2.0)
-    heights = _screen_heights(slope_y[tall], slope_x[tall], tan_half, lens.aspect)  # (tall, T)
+    heights = screen_heights(slope_y[tall], slope_x[tall], tan_half, lens.aspect)  # (tall, T)
     fits = (heights <= settings.shown_height_max).all(axis=0)  # (T,)
     for subject, seen in cut_off:  # shown at a width: in its frame and seen
         k = len(seen)
@@ -124,6 +118,22 @@ def _cut_off(
     return out
 
 
+def outline_points(moment: Moment, visibility: SubjectVisibility) -> np.ndarray:
+    """(P, S, 3) m every player's outline (SubjectVisibility.outlines_local) at the moment."""
+    return np.stack([moment.transforms[i].apply(visibility.outlines_local[i]) for i in range(len(moment.transforms))])
+
+
+def screen_slopes(points_world: np.ndarray, positions_world: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+    """(2, m, P, S): the screen slopes (tan of the elevation, y, and of the bearing, x) of points
+    (P, S, 3) m seen from m cameras, centres (m, 3) m and camera-to-world rotations (m, 3, 3);
+    NaN for a point behind the near plane."""
+    camera = np.einsum("mpsi,mij->mpsj", points_world[None] - positions_world[:, None, None], rotations)  # -Z ahead
+    depth = -camera[..., 2]
+    ahead = depth >= NEAR_PLANE_M
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.stack([np.where(ahead, camera[..., 1] / depth, np.nan), np.where(ahead, camera[..., 0] / depth, np.nan)])
+
+
 def _in_frame(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:
     """(S, T) bool: which of S points (their screen slopes (S,), NaN behind the near plane) lie in
     the frame at each width (tan_half (T,) of the half vertical field of view)."""
@@ -132,7 +142,7 @@ def _in_frame(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, as
         return np.asarray((np.abs(slope_y[:, None]) <= t) & (np.abs(slope_x[:, None]) <= t * aspect))  # NaN: False
 
 
-def _looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) -> np.ndarray:
+def looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) -> np.ndarray:
     """(P,) bool: the players the camera stands in (within EYES_RADIUS_M of the upright line
     through their feet, between their feet and head): a first-person view."""
     offset = pose.position_world - moment.feet_world  # (P, 3)
@@ -140,7 +150,7 @@ def _looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) 
     return np.asarray((np.hypot(offset[:, 0], offset[:, 2]) < EYES_RADIUS_M) & (offset[:, 1] >= 0.0) & (offset[:, 1] <= top_m))
 
 
-def _screen_heights(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:
+def screen_heights(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:
     """(P, T) each player's on-screen height, share of the frame's height, at each width
     (tan_half (T,) of the half vertical field of view): the extent of its points in the frame
     (those behind the near plane are NaN), clipped to the frame; 0 with no point in the frame."""

@@ -6,7 +6,9 @@ outside the level or inside solid moved inside toward the player the shot keeps 
 player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
 (`held_before_wall`), its lens widened where a player would stand taller than the framing band
 (lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
-Toric camera, where the frame cuts off a framed subject; a Toric pose that these degrades left
+Toric camera, where the frame cuts off a framed subject; our director's pose (Toric or fixed) that
+the widest lens leaves with a player too tall stepped back from it (step_back.py, flagged
+`stepped_back_from_player`); a Toric pose that these degrades left
 showing none of its subjects replaced by the move a hold held (`hold_left_for_cut`) or by a cut
 to a place that shows them (`cut_to_seen_place`, `_seen_again`); and the share of the framed
 subjects' sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of
@@ -32,11 +34,13 @@ from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import readable_clearance, within_band
-from camdirector.pipeline.match.shots import ToricCamera, best_place, framed_seen, place_grid
+from camdirector.pipeline.match.shots import StaticCamera, ToricCamera, best_place, framed_seen, place_grid
+from camdirector.pipeline.match.step_back import stepped_back
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
 CUT_TO_SEEN_PLACE = "cut_to_seen_place"  # a degraded pose showing nobody replaced by a cut to a new place
 HOLD_LEFT_FOR_CUT = "hold_left_for_cut"  # a hold before a wall showing nobody left for the cut through it
+STEPPED_BACK = "stepped_back_from_player"  # a pose moved back from a player too near for the widest lens
 
 
 class ProgramCamera:
@@ -94,10 +98,12 @@ class ProgramCamera:
             pose, moved = self.in_level.contained(pose, anchor)
             if moved:
                 flags.append("moved_inside_level")
+            pose = self._stepped_back(moment, pose, camera, shot, flags)  # before the move's wall tests, which judge it too
             if dt_s > 0.0 and last_pose is not None:  # a move, not a cut's first frame
                 pose, kept = self.in_level.kept_this_side(last_pose.position_world, pose, anchor)
                 if kept:
                     flags.append("kept_this_side_of_wall")
+                    pose = self._stepped_back(moment, pose, camera, shot, flags)  # kept nearer its anchor: again
                 else:
                     before = pose
                     pose, held = self.in_level.held(
@@ -108,6 +114,7 @@ class ProgramCamera:
                     if held:
                         flags.append("held_before_wall")
                         unheld = before
+                        pose = self._stepped_back(moment, pose, camera, shot, flags)
         if pose is None:
             if last_pose is None:
                 return None
@@ -126,6 +133,19 @@ class ProgramCamera:
         if pose.vertical_fov_deg > self.lens.vertical_fov_deg:
             flags.append("lens_widened")
         return pose, flags
+
+    def _stepped_back(self, moment: Moment, pose: CameraPose, camera: ShotCamera, shot: Shot, flags: list[str]) -> CameraPose:
+        """Our director's pose (Toric or fixed) stepped back from a player too near for the widest
+        lens (step_back.py), flagged `stepped_back_from_player` once; the baselines' as they are."""
+        if not isinstance(camera, (ToricCamera, StaticCamera)):
+            return pose
+        framed = shot.framed(moment.time_s)
+        stepped = stepped_back(pose, moment, self.subject_visibility, self.lens, self.settings, self.in_level, framed)
+        if stepped is None:
+            return pose
+        if STEPPED_BACK not in flags:
+            flags.append(STEPPED_BACK)
+        return stepped
 
     def _held_showing_all(
         self, moment: Moment, last_pose: CameraPose, pose: CameraPose, anchor: np.ndarray | None, shot: Shot

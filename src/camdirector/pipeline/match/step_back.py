@@ -1,0 +1,130 @@
+"""The program camera stepped back from a player that no lens shows within the framing band.
+
+lens_width.py goes as wide as `MatchSettings.widen_max_fov_deg` to keep every shown player under
+`shown_height_max` of the frame's height; a player nearer the camera than its readable distance
+(shot_builder.py `readable_clearance`: about 1.75 m for a 1.75 m body at 90 degrees) fills more
+than that even there. The degrades that move a pose toward the player it keeps (program_camera.py:
+moved inside the level, held before a wall, pulled in front of one), a replay's close angle and
+an OVERVIEW's fixed camera that a player runs past left such frames on 1-2% of the third-person
+frames of the real matches' first 3 minutes (issue 41, whose bar is none over 0.6: 23 of 1,117
+on the 4on4, 46 on the duel, 25 on the 2on2, every one at 90 degrees with the player 0.8-2.0 m
+from the camera). An operator steps back. So where a player the pose sees (`SHOWN_SEEN` of its
+points) stands taller than the band at the widest lens, the pose moves to the nearest of
+`BACK_STEPS_M` along the camera's own backward line (a dolly: the framing holds) or away from the
+nearest such player, straight or turned by `TURNS_DEG`, panning as it goes to keep the framed
+subjects' bearing (a step aside that kept its rotation would leave the player as near in depth,
+so as tall), where:
+- no player it sees stands taller than the band at the widest lens,
+- the places test accepts the point and the move crosses no wall (in_level.py),
+- each of the shot's framed subjects stays framed and seen (shots.py `framed_seen`, at the
+  widest lens) as much as before or `candidate_seen`, whichever is less.
+No such point: the pose stays. The shot's camera keeps its own state (its place, its damping), so
+the step is taken again each frame the player stays near and ends when it leaves; the lens
+narrows back at lens_width.py's pace.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
+from camdirector.pipeline.match.in_level import InLevel
+from camdirector.pipeline.match.lens_width import SHOWN_SEEN, looked_through, outline_points, screen_heights, screen_slopes
+from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import framed_seen
+from camdirector.pipeline.match.visibility import SubjectVisibility
+
+BACK_STEPS_M = np.arange(1, 9) * 0.25  # the distances tried, nearest first: up to 2 m, a readable distance's worth, m
+NEAR_M = 5.0  # only a player whose feet are this near is asked about (a 2 m body at 90 deg fills half the frame at 2 m), m
+TURNS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # the directions tried away from the player, after the backward line
+
+
+def stepped_back(
+    pose: CameraPose,
+    moment: Moment,
+    visibility: SubjectVisibility,
+    lens: Lens,
+    settings: MatchSettings,
+    in_level: InLevel,
+    subjects: tuple[int, ...],
+) -> CameraPose | None:
+    """The pose stepped back (module docstring) with the widest lens, for lens_width.py to narrow;
+    None where no player it sees is too near for the widest lens, or no step helps. subjects: the
+    shot's framed players, kept in the picture."""
+    widest_deg = max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
+    tan_widest = np.array([math.tan(math.radians(widest_deg) / 2.0)])
+    if np.linalg.norm(moment.feet_world - pose.position_world, axis=1).min(initial=np.inf) > NEAR_M:
+        return None  # most frames: nobody near enough to ask
+    points = outline_points(moment, visibility)  # (P, S, 3)
+    if looked_through(pose, moment, points).any():  # a first-person view keeps its player's size
+        return None
+    rotation = quat_to_matrix(pose.rotation_xyzw)  # (3, 3) camera-to-world, -Z ahead
+
+    def too_tall(positions_world: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+        """(m, P) bool: the players over the band at the widest lens from each of (m, 3) centres
+        turned by (m, 3, 3) rotations."""
+        slopes = screen_slopes(points, positions_world, rotations)
+        m, p, s = slopes.shape[1:]
+        heights = screen_heights(slopes[0].reshape(m * p, s), slopes[1].reshape(m * p, s), tan_widest, lens.aspect)
+        return np.asarray(heights.reshape(m, p) > settings.shown_height_max)
+
+    def seen_tall(position_world: np.ndarray, tall: np.ndarray) -> bool:
+        players = tuple(int(i) for i in np.flatnonzero(tall))
+        return bool(players) and bool((visibility.visible_share(position_world, moment, players)[0] >= SHOWN_SEEN).any())
+
+    here = too_tall(pose.position_world[None], rotation[None])[0]
+    if not seen_tall(pose.position_world, here):
+        return None
+    nearest = min(np.flatnonzero(here), key=lambda i: float(np.linalg.norm(moment.feet_world[i] - pose.position_world)))
+    directions = _directions(pose.position_world - moment.feet_world[nearest], rotation[:, 2])  # (D, 3)
+    tried = (pose.position_world + BACK_STEPS_M[:, None, None] * directions[None]).reshape(-1, 3)  # nearest first
+    # a step aside pans to keep the framed subjects where they were across the frame
+    target = moment.aims_world[list(subjects)].mean(axis=0) if subjects else None
+    rotations = _panned(rotation, pose.position_world, tried, target)  # (m, 3, 3)
+    tall = too_tall(tried, rotations)  # (m, P)
+    widest = Lens(vertical_fov_deg=widest_deg, aspect=lens.aspect)
+    before = framed_seen(visibility, moment, subjects, pose.position_world[None], rotation[None], widest)[0] if subjects else None
+    for position, turned, tall_there in zip(tried, rotations, tall):
+        if not in_level.inside(position) or in_level.crossed(pose.position_world, position) or seen_tall(position, tall_there):
+            continue
+        if before is not None:
+            seen = framed_seen(visibility, moment, subjects, position[None], turned[None], widest)[0]
+            if (seen < np.minimum(before, settings.candidate_seen)).any():
+                continue
+        return CameraPose(position, matrix_to_quat(turned), widest_deg)
+    return None
+
+
+def _panned(rotation: np.ndarray, from_world: np.ndarray, to_world: np.ndarray, target_world: np.ndarray | None) -> np.ndarray:
+    """(m, 3, 3) the camera-to-world rotation (3, 3) turned about the vertical, for a camera moved
+    from from_world (3,) to each of to_world (m, 3), so that the level bearing of target_world
+    (3,) from it is as it was; unturned without a target."""
+    if target_world is None:
+        return np.broadcast_to(rotation, (len(to_world), 3, 3)).copy()
+    before, after = target_world - from_world, target_world - to_world  # (3,), (m, 3)
+    turn = np.arctan2(after[:, 0], after[:, 2]) - math.atan2(before[0], before[2])  # (m,) rad about +Y
+    c, s = np.cos(turn), np.sin(turn)
+    yaw = np.zeros((len(to_world), 3, 3))
+    yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 1, 1], yaw[:, 2, 0], yaw[:, 2, 2] = c, s, 1.0, -s, c
+    return np.asarray(yaw @ rotation)
+
+
+def _directions(away_world: np.ndarray, backward_world: np.ndarray) -> np.ndarray:
+    """(D, 3) level unit vectors: the camera's backward line, then away from the player (away_world
+    (3,), from its feet to the camera) turned by each of TURNS_DEG about the vertical; a line with
+    no level part (straight down) is left out."""
+    out = []
+    for vector, turns in ((backward_world, (0.0,)), (away_world, TURNS_DEG)):
+        level = np.array([vector[0], 0.0, vector[2]])
+        norm = float(np.linalg.norm(level))
+        if norm < 1e-6:
+            continue
+        x, z = level[0] / norm, level[2] / norm
+        for turn in np.radians(turns):
+            c, s = math.cos(turn), math.sin(turn)
+            out.append((c * x + s * z, 0.0, -s * x + c * z))
+    return np.array(out, dtype=np.float64).reshape(-1, 3)

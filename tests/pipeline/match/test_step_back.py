@@ -1,0 +1,118 @@
+"""The program camera stepped back from a player too near for the widest lens (step_back.py): in
+the open it dollies back along its own line to the nearest step that fits the band, before a wall
+it steps aside instead and never through the wall, a far player or a view through a player's eyes
+moves nothing, and the program camera's step carries it with its flag."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.inside import LevelInterior
+from camdirector.geometry.meshes import TriMesh, box
+from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.in_level import InLevel
+from camdirector.pipeline.match.look_along import look_along
+from camdirector.pipeline.match.program_camera import STEPPED_BACK, ProgramCamera
+from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.settings import MatchSettings
+from camdirector.pipeline.match.shots import StaticCamera
+from camdirector.pipeline.match.step_back import BACK_STEPS_M, stepped_back
+from tests.pipeline.match.test_framing_band import rig_of
+
+SETTINGS = MatchSettings()
+WIDEST = Lens(vertical_fov_deg=SETTINGS.widen_max_fov_deg)
+
+
+def _room(low, high) -> TriMesh:
+    """A room (faces inward) from corner low (3,) to corner high (3,), m."""
+    low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+    room = box(tuple(high - low))
+    return TriMesh(room.vertices + (low + high) / 2.0, room.faces[:, ::-1].astype(np.int32))
+
+
+def _setup(distance_m: float, behind_m: float = 20.0, side_m: float = 20.0):
+    """a of test_framing_band's rig in a room whose +x wall stands behind_m behind a camera
+    distance_m in front of a (along +x, at its chest's height) looking at it, its side walls side_m
+    either side of it: the rig, its newest moment, the room's InLevel and the pose."""
+    feet = rig_of().rig.buffer.moments[-1].feet_world[0]
+    wall_x = feet[0] + distance_m + behind_m
+    level = _room([wall_x - 40.0, feet[1], feet[2] - side_m], [wall_x, feet[1] + 8.0, feet[2] + side_m])
+    rig = rig_of([level])
+    moment = rig.rig.buffer.moments[-1]
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    camera = chest + [distance_m, 0.0, 0.0]
+    pose = look_along(camera, chest - camera, SETTINGS.widen_max_fov_deg)
+    return rig, moment, InLevel(LevelInterior(level), np.zeros((0, 3)), SETTINGS.pull_margin_m), pose
+
+
+def _height_at_widest(rig, moment, pose: CameraPose) -> float:
+    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.outlines_local[0])
+    y = np.clip(project_to_screen(pose, WIDEST, points)[:, 1], -1.0, 1.0)
+    return float((y.max() - y.min()) / 2.0)
+
+
+def _stepped(rig, moment, in_level, pose, subjects=(0,)):
+    visibility = rig.rig.program_camera.subject_visibility
+    return stepped_back(pose, moment, visibility, Lens(), SETTINGS, in_level, subjects)
+
+
+def test_in_the_open_the_camera_dollies_back_to_the_nearest_step_that_fits_the_band():
+    rig, moment, in_level, pose = _setup(1.0)
+    assert _height_at_widest(rig, moment, pose) > SETTINGS.shown_height_max  # too near for any lens
+    stepped = _stepped(rig, moment, in_level, pose)
+    assert stepped is not None and np.allclose(stepped.rotation_xyzw, pose.rotation_xyzw)
+    moved = stepped.position_world - pose.position_world
+    assert moved[0] > 0.0 and np.allclose(moved[1:], 0.0)  # straight back along its own line
+    assert _height_at_widest(rig, moment, stepped) <= SETTINGS.shown_height_max
+    one_less = CameraPose(stepped.position_world - [BACK_STEPS_M[0], 0.0, 0.0], pose.rotation_xyzw, pose.vertical_fov_deg)
+    assert _height_at_widest(rig, moment, one_less) > SETTINGS.shown_height_max  # the nearest step that fits
+
+
+def test_before_a_wall_the_camera_steps_aside_panning_to_keep_its_subject_and_never_through_the_wall():
+    rig, moment, in_level, pose = _setup(1.0, behind_m=0.5)
+    stepped = _stepped(rig, moment, in_level, pose)
+    assert stepped is not None
+    assert in_level.inside(stepped.position_world) and not in_level.crossed(pose.position_world, stepped.position_world)
+    assert stepped.position_world[0] <= pose.position_world[0] + 0.5 - SETTINGS.pull_margin_m  # short of the wall
+    assert abs(stepped.position_world[2] - pose.position_world[2]) >= 1.0  # aside
+    assert _height_at_widest(rig, moment, stepped) <= SETTINGS.shown_height_max
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    before, after = (project_to_screen(p, WIDEST, chest[None])[0] for p in (pose, stepped))
+    assert after == pytest.approx(before, abs=0.05)  # panned: a where it was in the frame
+    # a player the shot does not frame is not panned after: aside it would stand as near in depth, so the wall stops it
+    assert _stepped(rig, moment, in_level, pose, subjects=()) is None
+
+
+def test_a_camera_with_no_room_to_step_stays():
+    rig, moment, in_level, pose = _setup(1.0, behind_m=0.2, side_m=0.2)  # a closet open toward a
+    assert _height_at_widest(rig, moment, pose) > SETTINGS.shown_height_max
+    assert _stepped(rig, moment, in_level, pose) is None
+
+
+@pytest.mark.parametrize("distance_m", [3.0, 6.0])
+def test_a_player_far_enough_moves_nothing(distance_m):
+    rig, moment, in_level, pose = _setup(distance_m)
+    assert _stepped(rig, moment, in_level, pose) is None
+
+
+def test_a_view_through_a_players_eyes_moves_nothing():
+    rig, moment, in_level, _ = _setup(1.0)
+    eye = moment.feet_world[0] + [0.0, 1.6, 0.0]
+    in_eyes = look_along(eye, moment.feet_world[1] + [0.0, 1.6, 0.0] - eye, SETTINGS.widen_max_fov_deg)
+    assert _stepped(rig, moment, in_level, in_eyes) is None
+
+
+def test_the_program_cameras_step_carries_the_step_and_its_flag():
+    rig, moment, in_level, pose = _setup(1.0)
+    r = rig.rig
+    program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
+    overview = Shot(ShotChoice(("a",), ShotKind.OVERVIEW, "test"), (0,), StaticCamera(pose), 0.0)
+    shown, flags = program.step(moment, 0.0, overview.camera, overview, 0.0, None)
+    assert STEPPED_BACK in flags and shown.position_world[0] > pose.position_world[0]
+    assert SETTINGS.shown_height_max >= _height_at_widest(rig, moment, shown)
+    assert shown.vertical_fov_deg <= SETTINGS.widen_max_fov_deg
+    _, _, _, far = _setup(6.0)
+    away = Shot(ShotChoice(("a",), ShotKind.OVERVIEW, "test"), (0,), StaticCamera(far), 0.0)
+    assert STEPPED_BACK not in program.step(moment, 0.0, away.camera, away, 0.0, None)[1]
