@@ -53,6 +53,13 @@ def moment(k: int, events: list[GameEvent] | None = None) -> Moment:
     )
 
 
+class Moving(Still):
+    """A camera at x metres along the x axis at frame 0 that moves 1 cm a frame along it."""
+
+    def pose(self, moment: Moment) -> CameraPose:
+        return pose_at(self.x_m + 0.01 * moment.frame)
+
+
 def shot(subjects: tuple[int, ...], x_m: float, replay: Replay | None = None) -> Shot:
     choice = ShotChoice(
         tuple(PLAYERS[i] for i in subjects), ShotKind.DUEL if len(subjects) == 2 else ShotKind.FOLLOW, "test", replay=replay
@@ -88,7 +95,7 @@ class Program:
         self.k = 0
 
     def visibility(self, shown: Moment, pose: CameraPose, s: Shot) -> float:
-        return self.seen[float(pose.position_world[0])]
+        return self.seen.get(float(pose.position_world[0]), self.seen.get(float(s.camera.x_m), 0.0))
 
     def frames(self, s: Shot, count: int, events: dict[int, list[GameEvent]] | None = None) -> None:
         for i in range(count):
@@ -102,8 +109,8 @@ class Program:
             self.on_air = s
             self.k += 1
 
-    def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose):
-        if self.shadow_dies_at is not None and m.frame >= self.shadow_dies_at:
+    def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose | None):
+        if self.shadow_dies_at is not None and m.frame >= self.shadow_dies_at and type(camera) is Still:
             return pose_at(camera.x_m), ["cut_to_seen_place"]
         return camera.pose(m), []
 
@@ -139,6 +146,37 @@ def test_a_short_shot_goes_to_the_shot_after_where_the_shot_before_met_a_wall():
     frames = short_between(p, a, x, b)
     assert cuts(frames) == [0, 90]  # b starts at x's cut, held at its first pose
     assert all(f.shot is b and STARTED_EARLY in f.flags and f.pose.position_world[0] == 20.0 for f in frames[90:120])
+
+
+def moving(subjects: tuple[int, ...], x_m: float) -> Shot:
+    return Shot(ShotChoice(tuple(PLAYERS[i] for i in subjects), ShotKind.FOLLOW, "test"), subjects, Moving(x_m), 0.0)
+
+
+def test_a_moving_shot_after_starts_earlier_moving_as_it_would_have():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), moving((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
+    frames = short_between(p, a, x, b)
+    assert cuts(frames) == [0, 90]
+    assert all(f.shot is b and STARTED_EARLY in f.flags for f in frames[90:120])
+    xs = [float(f.pose.position_world[0]) for f in frames[90:130]]
+    assert xs == [20.0 + 0.01 * k for k in range(90, 130)]  # stepped from x's first frame into its own first pose
+
+
+class WallBefore(Program):
+    """b's copy, stepped before b's own first frame (120), meets a wall."""
+
+    def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose | None):
+        if type(camera) is Moving and m.frame < 120:
+            return camera.pose(m), ["held_before_wall"]
+        return super().step(m, dt_s, camera, s, last)
+
+
+def test_a_moving_shot_after_whose_copy_meets_a_wall_on_the_way_is_held_at_its_first_pose():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), moving((2,), 20.0)
+    p = WallBefore({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
+    frames = short_between(p, a, x, b)
+    assert cuts(frames) == [0, 90]
+    assert all(f.shot is b and STARTED_EARLY in f.flags and f.pose.position_world[0] == 21.2 for f in frames[90:120])
 
 
 def test_the_neighbour_that_shows_its_subjects_more_takes_the_short_shot():

@@ -9,7 +9,8 @@ happens; here the frames before it are still the rig's to change. Where a cut co
   for `window_s` after it (the `Shadow`, as camera_ahead.py steps one for a frame), and holds its
   poses where it met no wall, re-placed nothing and jumped nowhere over the short shot's frames;
 - or to the shot after, started earlier: through the same eyes where it is a first-person shot
-  whose player does not jump there, else its first pose held still;
+  whose player does not jump there, a copy of its camera stepped from the short shot's first frame
+  where it moves (a Toric camera) and meets no wall on the way, else its first pose held still;
 
 whichever shows its subjects more over those frames (the share of their points seen, visibility.py;
 ties to the shot before), among the neighbours that
@@ -46,6 +47,7 @@ from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import PlannedCut, ShotChoice
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
+from camdirector.pipeline.match.shots import StaticCamera
 
 JUMP_M = 2.0  # a camera or an eye moving this far between two frames jumped (a teleport, a respawn): no carrying across, m
 KILL_SEEN = 0.5  # a kill in a short shot's frames is shown where killer and victim each have this share of points seen
@@ -94,7 +96,7 @@ class Judges(NamedTuple):
 
     shown_of: Callable[[Shot, Moment], Moment]  # the moment a shot's picture shows at a program moment (a REPLAY's)
     # a shot's camera stepped dt_s to a moment from the pose before, held before walls: (pose, flags), None for none
-    step: Callable[[Moment, float, ShotCamera, Shot, CameraPose], tuple[CameraPose, list[str]] | None]
+    step: Callable[[Moment, float, ShotCamera, Shot, CameraPose | None], tuple[CameraPose, list[str]] | None]
     visibility: Callable[[Moment, CameraPose, Shot], float]  # the mean share of a shot's framed subjects seen from a pose
     # the (k,) share of each of k players' sample points in a pose's frame and seen from it
     seen: Callable[[CameraPose, Moment, tuple[int, ...]], np.ndarray]
@@ -263,25 +265,19 @@ class EditWindow:
         after = frame.shot
         if not _may_take(after, short, other, rows):
             return None
-        camera = after.camera
-        poses: list[CameraPose] = []
         shown = [judges.shown_of(after, r.moment) for r in rows]  # a replay started earlier shows earlier moments
-        if isinstance(camera, FirstPersonCamera):
-            eyes = [camera.pose(m) for m in shown]
-            path = np.array([e.position_world for e in [*eyes, frame.pose]])
-            if np.all(np.linalg.norm(np.diff(path, axis=0), axis=1) < JUMP_M) and all(
-                judges.inside(e.position_world) for e in eyes
+        for poses in (_moving_earlier(after, shown, frame.pose, judges), [frame.pose] * len(rows)):
+            if poses is None:
+                continue
+            judged = {k: judges.visibility(shown[k], poses[k], after) for k in range(0, len(rows), JUDGED_EVERY)}
+            seen = [judged[k - k % JUDGED_EVERY] for k in range(len(rows))]
+            if (
+                _keeps_kills(rows, kills, poses, judges)
+                and _keeps_seen(rows, seen)
+                and _keeps_height(rows, poses, shown, after, judges)
             ):
-                poses = eyes
-        if not poses:
-            poses = [frame.pose] * len(rows)
-        judged = {k: judges.visibility(shown[k], poses[k], after) for k in range(0, len(rows), JUDGED_EVERY)}
-        seen = [judged[k - k % JUDGED_EVERY] for k in range(len(rows))]
-        if not _keeps_kills(rows, kills, poses, judges) or not _keeps_seen(rows, seen):
-            return None
-        if not _keeps_height(rows, poses, shown, after, judges):
-            return None
-        return float(np.mean(list(judged.values()))), poses, seen
+                return float(np.mean(list(judged.values()))), poses, seen
+        return None
 
     def _kills(self, rows: list[WorkedFrame], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
         """The kills the short shot shows: (row, (killer, victim)) where both are seen at least
@@ -296,6 +292,34 @@ class EditWindow:
                 if row.shown is row.moment and np.all(judges.seen(row.pose, row.moment, pair) >= KILL_SEEN):
                     out.append((k, pair))
         return out
+
+
+def _moving_earlier(after: Shot, shown: list[Moment], first: CameraPose, judges: Judges) -> list[CameraPose] | None:
+    """The poses of the shot after's camera at the short shot's moments (shown), started earlier and
+    moving as it would have, into `first`, its first pose: a first-person camera's eyes; a moving
+    camera (a Toric one), a copy of it as it is now stepped from the first of them (the rig's
+    CAMERA stage: walls, the level, the lens); None for a fixed camera, or where the copy met a wall or was
+    re-placed, or the path jumps JUMP_M in a frame, left the level or (but an eye's, which goes
+    where its player went) crosses a wall (then its first pose is held)."""
+    camera = after.camera
+    if isinstance(camera, FirstPersonCamera):
+        poses = [camera.pose(m) for m in shown]
+    elif not isinstance(camera, StaticCamera):
+        camera, poses, last = copy.copy(camera), [], None
+        for k, moment in enumerate(shown):
+            stepped = judges.step(moment, 0.0 if last is None else moment.time_s - shown[k - 1].time_s, camera, after, last)
+            if stepped is None or any(f in stepped[1] for f in ("cut_to_seen_place", "held_before_wall", "hold_left_for_cut")):
+                return None
+            last = stepped[0]
+            poses.append(last)
+    else:
+        return None
+    path = [p.position_world for p in [*poses, first]]
+    if not all(judges.inside(p) for p in path[:-1]) or np.any(np.linalg.norm(np.diff(path, axis=0), axis=1) >= JUMP_M):
+        return None
+    if not isinstance(camera, FirstPersonCamera) and any(judges.crossed(a, b) for a, b in zip(path, path[1:])):
+        return None
+    return poses
 
 
 def _keeps_kills(

@@ -457,9 +457,10 @@ class MatchRig(RigBase):
         return replayed_moment(self.buffer, shot, moment.time_s) if is_replay(shot) else moment
 
     def _shadow_step(
-        self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, last_pose: CameraPose
+        self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, last_pose: CameraPose | None
     ) -> tuple[CameraPose, list[str]] | None:
-        """The edit window's shadow stepped on (edit_window.py): held before walls rather than cut."""
+        """The edit window's copy of a camera stepped (edit_window.py; last_pose None: its first
+        frame): held before walls rather than cut."""
         return self.program_camera.step(moment, dt_s, camera, shot, self.style.response_time_s, last_pose, True)
 
     def _rewind(self) -> None:
