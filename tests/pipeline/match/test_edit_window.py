@@ -8,13 +8,23 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import EventKind, GameEvent
-from camdirector.pipeline.match.edit_window import CARRIED_ON, SHORT_LEFT, STARTED_EARLY, EditWindow, Judges, WorkedFrame
+from camdirector.pipeline.match.edit_window import (
+    CARRIED_ON,
+    ENDS_A_COPY,
+    SHORT_LEFT,
+    STARTED_EARLY,
+    EditWindow,
+    Judges,
+    WorkedFrame,
+)
 from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
 from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE
 from camdirector.pipeline.match.program_shot import Shot
 
 PLAYERS = ["a", "b", "c"]
@@ -93,6 +103,7 @@ class Program:
         )
         self.on_air: Shot | None = None
         self.k = 0
+        self.death = CUT_TO_SEEN_PLACE  # the flag the shadow's step ends with at shadow_dies_at
 
     def visibility(self, shown: Moment, pose: CameraPose, s: Shot) -> float:
         return self.seen.get(float(pose.position_world[0]), self.seen.get(float(s.camera.x_m), 0.0))
@@ -111,7 +122,7 @@ class Program:
 
     def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose | None):
         if self.shadow_dies_at is not None and m.frame >= self.shadow_dies_at and type(camera) is Still:
-            return pose_at(camera.x_m), ["cut_to_seen_place"]
+            return pose_at(camera.x_m), [self.death]
         return camera.pose(m), []
 
     def program(self) -> list[WorkedFrame]:
@@ -140,9 +151,11 @@ def test_a_short_shot_goes_to_the_shot_before_that_carries_on_showing_its_subjec
     assert all(f.pose.position_world[0] == 0.0 for f in frames[90:120])
 
 
-def test_a_short_shot_goes_to_the_shot_after_where_the_shot_before_met_a_wall():
+@pytest.mark.parametrize("death", ENDS_A_COPY)
+def test_a_short_shot_goes_to_the_shot_after_where_the_shot_before_met_a_wall(death):
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
+    p.death = death
     frames = short_between(p, a, x, b)
     assert cuts(frames) == [0, 90]  # b starts at x's cut, held at its first pose
     assert all(f.shot is b and STARTED_EARLY in f.flags and f.pose.position_world[0] == 20.0 for f in frames[90:120])

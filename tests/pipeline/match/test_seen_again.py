@@ -18,7 +18,7 @@ from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.look_along import look_along
-from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, ProgramCamera
+from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST, ProgramCamera
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, framed_seen
@@ -119,3 +119,18 @@ def test_a_degraded_pose_that_shows_its_subject_is_kept():
     assert flags[0] == "pulled_in_front_of_wall" and CUT_TO_SEEN_PLACE not in flags
     assert camera.place == PLACE and camera.seen_again_s is None
     assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
+
+
+def test_a_copy_of_the_camera_that_may_not_be_re_placed_is_flagged_as_losing_its_subjects_and_left_as_it_was():
+    # the edit window's copies (edit_window.py) end where they would be re-placed: no place search for them
+    level = _room_behind_a(-0.4)
+    rig = rig_of([level])
+    moment, camera, shot = _follow_of_a(rig)
+    in_level = InLevel(LevelInterior(level), np.zeros((0, 3)), MatchSettings().pull_margin_m)
+    r = rig.rig
+    program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
+    last = camera.pose(moment)
+    pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last, re_place=False)
+    assert flags[0] == "moved_inside_level" and SUBJECTS_LOST in flags and CUT_TO_SEEN_PLACE not in flags
+    assert camera.seen_again_s is None and camera.place == camera.goal == PLACE  # not re-placed
+    assert _shows_a(rig, moment, pose) < MatchSettings().candidate_seen

@@ -7,7 +7,7 @@ happens; here the frames before it are still the rig's to change. Where a cut co
 
 - to the shot before, carried on: a copy of the camera that went off air at a cut is stepped on
   for `window_s` after it (the `Shadow`, as camera_ahead.py steps one for a frame), and holds its
-  poses where it met no wall, re-placed nothing and jumped nowhere over the short shot's frames;
+  poses where it met no wall, lost its subjects nowhere (it is never re-placed) and jumped nowhere over the short shot's frames;
 - or to the shot after, started earlier: through the same eyes where it is a first-person shot
   whose player does not jump there, a copy of its camera stepped from the short shot's first frame
   where it moves (a Toric camera) and meets no wall on the way, else its first pose held still;
@@ -46,6 +46,7 @@ from camdirector.pipeline.inputs import EventKind
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import PlannedCut, ShotChoice
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment
+from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
 from camdirector.pipeline.match.shots import StaticCamera
 
@@ -58,6 +59,8 @@ JUDGED_EVERY = 3  # a neighbour's visibility over a short shot is judged at ever
 CARRIED_ON = "edit_window_carried_on"  # a short shot's frames given to the shot before
 STARTED_EARLY = "edit_window_started_early"  # a short shot's frames given to the shot after
 SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take
+# a copy of a camera stepped on goes no further where it would cut, or shows its subjects no more (program_camera.py)
+ENDS_A_COPY = (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST)
 
 
 @dataclass
@@ -88,7 +91,7 @@ class Shadow:
     last_pose: CameraPose
     until_s: float  # stepped until this program time, s
     steps: list[tuple[Moment, CameraPose, float]] = field(default_factory=list)  # (moment, pose, visibility) from the cut
-    alive: bool = True  # False once it met a wall, was re-placed or jumped
+    alive: bool = True  # False once it met a wall, lost its subjects or jumped
 
 
 class Judges(NamedTuple):
@@ -143,7 +146,7 @@ class EditWindow:
         pose, flags = stepped
         moved = pose.position_world - shadow.last_pose.position_world
         if (
-            "cut_to_seen_place" in flags
+            any(f in flags for f in ENDS_A_COPY)
             or float(np.linalg.norm(moved)) >= JUMP_M
             or judges.crossed(shadow.last_pose.position_world, pose.position_world)
         ):
@@ -308,7 +311,7 @@ def _moving_earlier(after: Shot, shown: list[Moment], first: CameraPose, judges:
         camera, poses, last = copy.copy(camera), [], None
         for k, moment in enumerate(shown):
             stepped = judges.step(moment, 0.0 if last is None else moment.time_s - shown[k - 1].time_s, camera, after, last)
-            if stepped is None or any(f in stepped[1] for f in ("cut_to_seen_place", "held_before_wall", "hold_left_for_cut")):
+            if stepped is None or any(f in stepped[1] for f in (*ENDS_A_COPY, "held_before_wall")):
                 return None
             last = stepped[0]
             poses.append(last)

@@ -40,6 +40,7 @@ from camdirector.pipeline.match.visibility import SubjectVisibility
 
 CUT_TO_SEEN_PLACE = "cut_to_seen_place"  # a degraded pose showing nobody replaced by a cut to a new place
 HOLD_LEFT_FOR_CUT = "hold_left_for_cut"  # a hold before a wall showing nobody left for the cut through it
+SUBJECTS_LOST = "subjects_lost"  # a degraded pose showing nobody where no re-placement was looked for
 STEPPED_BACK = "stepped_back_from_player"  # a pose moved back from a player too near for the widest lens
 
 
@@ -68,6 +69,7 @@ class ProgramCamera:
         response_time_s: float,
         last_pose: CameraPose | None,
         cut_short: bool = False,
+        re_place: bool = True,
     ) -> tuple[CameraPose, list[str]] | None:
         """CAMERA of `shot` by `camera` (its own, or a copy ahead) stepped dt_s to the moment: the
         pose and its flags; the last pose shown held when the camera has none. None when it has
@@ -77,7 +79,10 @@ class ProgramCamera:
         through a wall is held before the wall however far while the hold shows one of the framed
         subjects (`held_before_wall`); it is a cut only where the hold would not. A first-person
         camera's pose is its player's eye as it is (first_person.py), the last pose held while the
-        eye is out of the level (`eye_outside_level_held`)."""
+        eye is out of the level (`eye_outside_level_held`). Not `re_place` (the edit window's copies
+        of a camera, edit_window.py, which a re-placement ends anyway): where a cut to a new place
+        would be looked for, the pose is flagged `subjects_lost` instead (a place search costs a
+        frame's budget, and one that found nothing was tried again every frame)."""
         camera.advance(moment, dt_s, response_time_s)
         flags: list[str] = []
         if isinstance(camera, FirstPersonCamera):  # a player's eye is where the game let it be (first_person.py),
@@ -126,9 +131,10 @@ class ProgramCamera:
         pose = self._widened(moment, pose, subjects, last_fov_deg, dt_s)
         standing = isinstance(camera, ToricCamera) and camera.stand_world is not None  # a stand that lost them is left too
         if (flags or standing) and isinstance(camera, ToricCamera) and shot.choice.replay is None:
-            placed, seen_again = self._seen_again(moment, pose, unheld, camera, shot, anchor, last_pose)
+            placed, seen_again = self._seen_again(moment, pose, unheld, camera, shot, anchor, last_pose, re_place)
             if seen_again is not None:
                 flags.append(seen_again)
+            if seen_again in (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT):
                 pose = self._widened(moment, placed, subjects, None, dt_s)  # a cut starts at what it needs
         if pose.vertical_fov_deg > self.lens.vertical_fov_deg:
             flags.append("lens_widened")
@@ -185,6 +191,7 @@ class ProgramCamera:
         shot: Shot,
         anchor: np.ndarray | None,
         last_pose: CameraPose | None,
+        re_place: bool = True,
     ) -> tuple[CameraPose, str | None]:
         """A Toric pose that a degrade (pulled in front of a wall, held before one, moved inside)
         left showing none of the shot's framed subjects (framed_seen under `candidate_seen`, the
@@ -216,6 +223,8 @@ class ProgramCamera:
             return unheld, HOLD_LEFT_FOR_CUT
         if camera.seen_again_s is not None and moment.time_s - camera.seen_again_s < s.seen_again_gap_s:
             return pose, None
+        if not re_place:
+            return pose, SUBJECTS_LOST
         band = within_band(self.subject_visibility, self.lens, s, subjects, moment)
 
         def allowed(positions_world: np.ndarray) -> np.ndarray:

@@ -460,8 +460,8 @@ class MatchRig(RigBase):
         self, moment: Moment, dt_s: float, camera: ShotCamera, shot: Shot, last_pose: CameraPose | None
     ) -> tuple[CameraPose, list[str]] | None:
         """The edit window's copy of a camera stepped (edit_window.py; last_pose None: its first
-        frame): held before walls rather than cut."""
-        return self.program_camera.step(moment, dt_s, camera, shot, self.style.response_time_s, last_pose, True)
+        frame): held before walls rather than cut, never re-placed (flagged `subjects_lost`)."""
+        return self.program_camera.step(moment, dt_s, camera, shot, self.style.response_time_s, last_pose, True, re_place=False)
 
     def _rewind(self) -> None:
         """The rig back at the last frame answered, the window's frames dropped (a take: its shot
