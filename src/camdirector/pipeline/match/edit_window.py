@@ -7,7 +7,8 @@ happens; here the frames before it are still the rig's to change. Where a cut co
 
 - to the shot before, carried on: a copy of the camera that went off air at a cut is stepped on
   for `window_s` after it (the `Shadow`, as camera_ahead.py steps one for a frame), and holds its
-  poses where it met no wall, lost its subjects nowhere (it is never re-placed) and jumped nowhere over the short shot's frames;
+  poses where it met no wall, lost its subjects nowhere (a copy is never re-placed) and jumped
+  nowhere over the short shot's frames;
 - or to the shot after, started earlier: through the same eyes where it is a first-person shot
   whose player does not jump there, a copy of its camera stepped from the short shot's first frame
   where it moves (a Toric camera) and meets no wall on the way, else its first pose held still;
@@ -301,9 +302,9 @@ def _moving_earlier(after: Shot, shown: list[Moment], first: CameraPose, judges:
     """The poses of the shot after's camera at the short shot's moments (shown), started earlier and
     moving as it would have, into `first`, its first pose: a first-person camera's eyes; a moving
     camera (a Toric one), a copy of it as it is now stepped from the first of them (the rig's
-    CAMERA stage: walls, the level, the lens); None for a fixed camera, or where the copy met a wall or was
-    re-placed, or the path jumps JUMP_M in a frame, left the level or (but an eye's, which goes
-    where its player went) crosses a wall (then its first pose is held)."""
+    CAMERA stage: walls, the level, the lens); None for a fixed camera, or where the copy met a
+    wall or lost its subjects, or the path jumps JUMP_M in a frame, leaves the level or (but an
+    eye's, which goes where its player went) crosses a wall (then its first pose is held)."""
     camera = after.camera
     if isinstance(camera, FirstPersonCamera):
         poses = [camera.pose(m) for m in shown]
