@@ -87,16 +87,22 @@ def _room_behind_a(x_m: float) -> TriMesh:
     return TriMesh(room.vertices + [x_m + 15.0, 4.0, 15.0], room.faces[:, ::-1].astype(np.int32))
 
 
-def test_a_camera_moved_inside_so_close_that_its_subject_leaves_the_frame_is_re_placed_by_a_cut_once_a_gap():
-    # PLACE is outside the room: no pull-in comes nearer than a's readable distance (shots.py pulled_in), so the
-    # level's containment moves the camera in to the wall's margin, 0.16 m from a's chest, inside its body
+def _follow_before_the_wall_behind_a():
+    """a's FOLLOW from PLACE, outside a room whose -x wall stands 0.4 m behind a's back: no pull-in
+    comes nearer than a's readable distance (shots.py pulled_in), so the level's containment moves
+    the camera in to the wall's margin, 0.16 m from a's chest, inside its body. The rig, moment,
+    camera, shot, the room's ProgramCamera and the camera's pose before the step."""
     level = _room_behind_a(-0.4)
     rig = rig_of([level])
     moment, camera, shot = _follow_of_a(rig)
     in_level = InLevel(LevelInterior(level), np.zeros((0, 3)), MatchSettings().pull_margin_m)
     r = rig.rig
     program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
-    last = camera.pose(moment)
+    return rig, moment, camera, shot, program, camera.pose(moment)
+
+
+def test_a_camera_moved_inside_so_close_that_its_subject_leaves_the_frame_is_re_placed_by_a_cut_once_a_gap():
+    rig, moment, camera, shot, program, last = _follow_before_the_wall_behind_a()
     pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last)
     assert flags[0] == "moved_inside_level" and CUT_TO_SEEN_PLACE in flags
     assert _shows_a(rig, moment, pose) >= MatchSettings().candidate_seen
@@ -123,13 +129,7 @@ def test_a_degraded_pose_that_shows_its_subject_is_kept():
 
 def test_a_copy_of_the_camera_that_may_not_be_re_placed_is_flagged_as_losing_its_subjects_and_left_as_it_was():
     # the edit window's copies (edit_window.py) end where they would be re-placed: no place search for them
-    level = _room_behind_a(-0.4)
-    rig = rig_of([level])
-    moment, camera, shot = _follow_of_a(rig)
-    in_level = InLevel(LevelInterior(level), np.zeros((0, 3)), MatchSettings().pull_margin_m)
-    r = rig.rig
-    program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
-    last = camera.pose(moment)
+    rig, moment, camera, shot, program, last = _follow_before_the_wall_behind_a()
     pose, flags = program.step(moment, DT_S, camera, shot, 0.5, last, re_place=False)
     assert flags[0] == "moved_inside_level" and SUBJECTS_LOST in flags and CUT_TO_SEEN_PLACE not in flags
     assert camera.seen_again_s is None and camera.place == camera.goal == PLACE  # not re-placed

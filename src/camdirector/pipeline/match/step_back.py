@@ -55,10 +55,10 @@ def stepped_back(
     """The pose stepped back (module docstring) with the widest lens, for lens_width.py to narrow;
     None where no player it sees is too near for the widest lens, or no step helps. subjects: the
     shot's framed players, kept in the picture."""
-    widest_deg = max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
-    tan_widest = np.array([math.tan(math.radians(widest_deg) / 2.0)])
     if np.linalg.norm(moment.feet_world - pose.position_world, axis=1).min(initial=np.inf) > NEAR_M:
         return None  # most frames: nobody near enough to ask
+    widest_deg = max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
+    tan_widest = np.array([math.tan(math.radians(widest_deg) / 2.0)])
     points = outline_points(moment, visibility)  # (P, S, 3)
     if looked_through(pose, moment, points).any():  # a first-person view keeps its player's size
         return None
@@ -106,11 +106,7 @@ def _panned(rotation: np.ndarray, from_world: np.ndarray, to_world: np.ndarray, 
     if target_world is None:
         return np.broadcast_to(rotation, (len(to_world), 3, 3)).copy()
     before, after = target_world - from_world, target_world - to_world  # (3,), (m, 3)
-    turn = np.arctan2(after[:, 0], after[:, 2]) - math.atan2(before[0], before[2])  # (m,) rad about +Y
-    c, s = np.cos(turn), np.sin(turn)
-    yaw = np.zeros((len(to_world), 3, 3))
-    yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 1, 1], yaw[:, 2, 0], yaw[:, 2, 2] = c, s, 1.0, -s, c
-    return np.asarray(yaw @ rotation)
+    return np.asarray(_yaw(np.arctan2(after[:, 0], after[:, 2]) - math.atan2(before[0], before[2])) @ rotation)
 
 
 def _directions(away_world: np.ndarray, backward_world: np.ndarray) -> np.ndarray:
@@ -121,10 +117,15 @@ def _directions(away_world: np.ndarray, backward_world: np.ndarray) -> np.ndarra
     for vector, turns in ((backward_world, (0.0,)), (away_world, TURNS_DEG)):
         level = np.array([vector[0], 0.0, vector[2]])
         norm = float(np.linalg.norm(level))
-        if norm < 1e-6:
-            continue
-        x, z = level[0] / norm, level[2] / norm
-        for turn in np.radians(turns):
-            c, s = math.cos(turn), math.sin(turn)
-            out.append((c * x + s * z, 0.0, -s * x + c * z))
-    return np.array(out, dtype=np.float64).reshape(-1, 3)
+        if norm >= 1e-6:
+            out.append(_yaw(np.radians(turns)) @ (level / norm))
+    return np.concatenate([np.zeros((0, 3)), *out])
+
+
+def _yaw(turn_rad: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) rotations about the world's vertical (+Y) by each of (m,) angles, rad: (x, z)
+    goes to (x cos + z sin, z cos - x sin)."""
+    c, s = np.cos(turn_rad), np.sin(turn_rad)
+    yaw = np.zeros((len(turn_rad), 3, 3))
+    yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 1, 1], yaw[:, 2, 0], yaw[:, 2, 2] = c, s, 1.0, -s, c
+    return yaw
