@@ -1,11 +1,13 @@
 """The edit window (pipeline/match/edit_window.py): a short shot given to the shot before or the
 one after, by hand-built frames whose shots' cameras are plain objects and whose visibility is
 given (the window alone, isolated from the rig's cameras; the rig's use of it, a take with the
-window full: test_match_rig.py)."""
+window full: test_match_rig.py); a repair drawn at a cut and applied when its short shot is
+answered or the next cut joins, the same program however it was worked out."""
 
 from __future__ import annotations
 
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -88,8 +90,12 @@ class Program:
         shadow_dies_at: int | None = None,
         sees: dict[float, set[int]] | None = None,
         heights: dict[float, float] | None = None,
+        defer: bool = True,
+        sliced: bool = False,
     ):
-        self.window = EditWindow(2.0, PLAYERS)
+        self.window = EditWindow(2.0, PLAYERS, defer)
+        self.sliced = sliced  # what waits (shadow steps, a repair) worked on in the smallest slices after each frame
+        self.slices = 0
         self.seen, self.shadow_dies_at, self.sees, self.heights = seen, shadow_dies_at, sees or {}, heights or {}
         self.judges = Judges(
             lambda sh, mo: mo,
@@ -117,6 +123,9 @@ class Program:
             frame = WorkedFrame(m, m, pose, cut, [], self.visibility(m, pose, s), s, s.choice, [])
             self.window.push(frame, before, self.judges)
             self.window.step_shadow(m, DT_S, self.judges)
+            if self.sliced and self.window.waiting:
+                self.window.work(self.judges, 1e-9)
+                self.slices += 1
             self.on_air = s
             self.k += 1
 
@@ -126,6 +135,8 @@ class Program:
         return camera.pose(m), []
 
     def program(self) -> list[WorkedFrame]:
+        """The window's frames, the repair waiting applied."""
+        self.window.settle(self.judges)
         return list(self.window.frames)
 
 
@@ -270,8 +281,84 @@ def test_the_answered_frame_is_the_program_moments_and_counts_a_cut_passed_over(
     p = Program({0.0: 0.9, 10.0: 0.5})
     p.frames(a, 70)
     p.frames(b, 3)
-    first, cut = p.window.answer(moment(0))
+    first, cut = p.window.answer(moment(0), p.judges)
     assert first.moment.frame == 0 and cut and p.window.next_cut().time_s == 70 * DT_S
-    frame, cut = p.window.answer(moment(71))  # frame 70's cut passed over
+    frame, cut = p.window.answer(moment(71), p.judges)  # frame 70's cut passed over
     assert frame.moment.frame == 71 and cut and p.window.last_cut_s == 70 * DT_S
     assert p.window.next_cut() is None and len(p.window.frames) == 1
+
+
+def test_a_repair_is_applied_when_its_short_shot_is_answered_not_before():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6})
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    assert p.window.repair is not None and p.window.frames[90].cut  # drawn at b's cut, not applied
+    frame, cut = p.window.answer(moment(89), p.judges)
+    assert cut and p.window.repair is not None and p.window.next_cut().time_s == 90 * DT_S
+    frame, cut = p.window.answer(moment(90), p.judges)  # x's first frame: the repair applied first
+    assert not cut and frame.shot is a and CARRIED_ON in frame.flags and p.window.repair is None
+    assert p.window.next_cut().time_s == 120 * DT_S
+
+
+def test_a_repair_waiting_is_applied_before_the_next_cut_is_judged():
+    """x keeps its kill (no neighbour shows it): left; y, short after it, is carried on by x's
+    shadow, which stepped on from x's cut while x's repair waited."""
+    kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
+    a, x, y, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((1,), 30.0), shot((0,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.4, 20.0: 0.3}, sees={10.0: {1, 2}})
+    p.frames(a, 90)
+    p.frames(x, 30, {10: [kill]})
+    p.frames(y, 30)
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, 90, 150] and SHORT_LEFT in frames[90].flags
+    assert all(f.shot is x and CARRIED_ON in f.flags for f in frames[120:150])
+
+
+def programs(p: Program) -> list[tuple[int, bool, tuple[float, ...], tuple[str, ...]]]:
+    return [(f.moment.frame, f.cut, tuple(f.pose.position_world), tuple(f.flags)) for f in p.program()]
+
+
+def test_a_repair_worked_out_in_slices_at_once_or_at_the_cut_gives_the_same_program():
+    runs = {}
+    for how in ("waited", "sliced", "at the cut"):
+        a, x, b = shot((0,), 0.0), shot((1,), 10.0), moving((2,), 20.0)
+        p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100, defer=how != "at the cut", sliced=how == "sliced")
+        p.frames(a, 90)
+        p.frames(x, 30)
+        shadow = p.window.shadow  # a's: its steps wait for a repair to read them, or for the slices (it dies at frame 100)
+        assert (len(shadow.due), len(shadow.steps)) == ((30, 0) if how == "waited" else (0, 10))
+        p.frames(b, 10)
+        assert (p.window.repair is None) == (how == "at the cut")
+        assert how != "sliced" or p.slices > 1  # a copy's steps, a slice each
+        runs[how] = programs(p)
+    assert runs["waited"] == runs["sliced"] == runs["at the cut"]
+    assert cuts(p.program()) == [0, 90]  # b started early, moving
+
+
+def test_a_window_with_a_repair_waiting_pickles_and_goes_on_to_the_same_program():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), moving((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    assert p.window.waiting and p.window.repair.run is not None
+    copied = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, shadow_dies_at=100)
+    copied.window = pickle.loads(pickle.dumps(p.window))
+    assert copied.window.repair is not None and copied.window.repair.run is None  # worked out to be pickled
+    assert programs(copied) == programs(p)
+
+
+def test_the_shadow_that_may_carry_a_short_shot_steps_on_past_its_end_while_the_repair_waits():
+    """x (10 frames) goes to a; y, short after x, too: a's shadow, stepped on from x's cut for
+    min_shot_s after y's first frame (not its own cut's), covers y up to b at frame 155."""
+    a, x, y, b = shot((0,), 0.0), shot((1,), 10.0), shot((1,), 30.0), shot((0,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.4, 20.0: 0.3})
+    p.frames(a, 90)
+    p.frames(x, 10)
+    p.frames(y, 55)
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, 155] and all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:155])

@@ -26,6 +26,16 @@ ties to the shot before), among the neighbours that
   short shot did, or as tall as it did.
 A short shot that has none stays, flagged; a human's take is never given away.
 
+Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
+stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
+which set the rig's compute p99) is drawn at the cut that made the shot short, with what it reads
+taken then (`Repair`), worked out in the worker's idle moments (infra/slices.py, as a drawn plan
+is) and applied (`settle`) when the short shot's first frame is answered, the next cut joins the
+window, or at once in a session whose ray scene moves every frame (the idle moments would see
+another scene). Applied at those frames whatever the idle moments did, the program does not
+depend on when or in how many slices a repair was worked out; until then the shadow of the cut
+before it steps on as if it carried the short shot, and the one this cut starts beside it.
+
 The offline bound that led to it (load_tests/edit_window_bound.py) gave every short shot of the
 real matches' programs to a neighbour, a held pose where no eyes carried on; here the shot before
 goes on moving.
@@ -34,7 +44,9 @@ goes on moving.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -43,6 +55,7 @@ from typing import NamedTuple
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose
+from camdirector.infra.slices import SlicedRun, pause
 from camdirector.pipeline.inputs import EventKind
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import PlannedCut, ShotChoice
@@ -85,7 +98,10 @@ class WorkedFrame:
 @dataclass
 class Shadow:
     """The camera that went off air at the program's last cut, stepped on from a copy (module
-    docstring): its poses and visibility at each worked frame from the cut, until `until_s`."""
+    docstring): its poses and visibility at each worked frame from the cut, until `until_s`. A
+    frame's step waits in `due` (off the frame path, as a repair: `EditWindow.work`) until a
+    repair reads the steps; it reads the copy and the moments alone, so when it runs does not
+    change it."""
 
     shot: Shot
     camera: ShotCamera  # a copy, as it was before the cut's frame
@@ -93,6 +109,70 @@ class Shadow:
     until_s: float  # stepped until this program time, s
     steps: list[tuple[Moment, CameraPose, float]] = field(default_factory=list)  # (moment, pose, visibility) from the cut
     alive: bool = True  # False once it met a wall, lost its subjects or jumped
+    due: list[tuple[Moment, Moment, float]] = field(default_factory=list)  # frames to step: (moment, shown, dt_s)
+
+    @property
+    def judged(self) -> Shot:
+        """The shot with the copy as its camera (whom a step frames: the copy's pair window)."""
+        return dataclasses.replace(self.shot, camera=self.camera)
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """A shadow from a checkpoint (one written before its steps waited: none due)."""
+        self.__dict__.update({"due": [], **state})
+
+
+class Decision(NamedTuple):
+    """What a repair decided: the neighbour the short shot's frames go to (BEFORE, AFTER; None:
+    neither, the short shot stays) and the pose and visibility each of them gets there."""
+
+    neighbour: str | None
+    poses: list[CameraPose]
+    seen: list[float]
+
+
+BEFORE, AFTER = "before", "after"
+
+
+class Side(NamedTuple):
+    """A neighbour of a short shot as its repair reads it, taken at the cut (what the rig goes on
+    changing meanwhile, it reads as it was): the shot, given the frames; a copy of it with a copy
+    of its camera, judged; the moments its picture shows at the short shot's frames (a replay's:
+    the buffer lets the earliest go as the program moves on)."""
+
+    shot: Shot
+    judged: Shot
+    shown: list[Moment]
+
+
+def side(shot: Shot, rows: list[WorkedFrame], judges: Judges) -> Side:
+    judged = dataclasses.replace(shot, camera=copy.copy(shot.camera))
+    return Side(shot, judged, [judges.shown_of(judged, r.moment) for r in rows])
+
+
+@dataclass
+class Repair:
+    """A short shot's repair, drawn at the cut that made it short and applied by `settle`
+    (module docstring, "Off the frame path")."""
+
+    rows: list[WorkedFrame]  # the short shot's frames
+    frame: WorkedFrame  # the cut after it
+    run: SlicedRun[Decision] | None  # None once worked out (a snapshot pickles the window: worked out first)
+    before: Side | None  # the shot before, where a shadow may carry it on
+    after: Side  # the shot after
+    carried: Shadow | None  # the shadow of the cut before the short shot, stepped on as if it carried it
+    carried_until_s: float  # that shadow's own end where it does not, program time, s
+    started: Shadow | None  # the shadow this cut starts, where the short shot is not given to the shot before
+    decision: Decision | None = None
+
+    def work_out(self, budget_s: float | None = None) -> None:
+        """Works the decision out, whole (budget_s None) or for about budget_s more."""
+        run = self.run
+        if run is not None and (budget_s is None or run.step(budget_s)):
+            self.decision, self.run = run.finish(), None
+
+    def __getstate__(self) -> dict[str, object]:
+        self.work_out()  # a greenlet cannot be pickled; worked out now or later, the decision is the same
+        return self.__dict__
 
 
 class Judges(NamedTuple):
@@ -116,18 +196,37 @@ class EditWindow:
     """The frames worked out and not yet answered, the shadow of the last cut, and the repairs
     (module docstring). `window_s` 0 answers each frame as it is worked out: no repairs."""
 
-    def __init__(self, min_shot_s: float, players: list[str]):
+    def __init__(self, min_shot_s: float, players: list[str], defer: bool = True):
         self.min_shot_s = min_shot_s
         self.players = players
+        self.defer = defer  # repairs worked out off the frame path (module docstring); False: a moving ray scene
         self.frames: deque[WorkedFrame] = deque()
         self.shadow: Shadow | None = None
+        self.repair: Repair | None = None  # the repair drawn and not yet applied
         self.answered: WorkedFrame | None = None  # the last frame answered
         self.last_cut_s = -math.inf  # program time of the last cut answered, s
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """A window from a checkpoint (one written before repairs were drawn: none waiting)."""
+        self.__dict__.update({"defer": True, "repair": None, **state})
 
     def drop(self) -> None:
         """Forgets the frames not yet answered (a take applies at once: rig.py)."""
         self.frames.clear()
-        self.shadow = None
+        self.shadow = self.repair = None
+
+    @property
+    def waiting(self) -> bool:
+        """Whether a shadow's steps or a repair drawn wait to be worked out (the rig's deferred work)."""
+        return any(s.due and s.alive for s in self._shadows()) or (self.repair is not None and self.repair.run is not None)
+
+    def work(self, judges: Judges, budget_s: float | None = None, clock: Callable[[], float] = time.perf_counter) -> None:
+        """Works on what waits, the shadows' steps first (a repair drawn reads them), whole
+        (budget_s None) or for about budget_s more, s; what the program gets from it, and when,
+        does not change (module docstring)."""
+        deadline_s = math.inf if budget_s is None else clock() + budget_s
+        if all(self._caught_up(s, judges, deadline_s, clock) for s in self._shadows()) and self.repair is not None:
+            self.repair.work_out(None if budget_s is None else max(deadline_s - clock(), 0.0))
 
     def last_pose(self) -> CameraPose | None:
         """The pose of the newest frame worked out (or answered)."""
@@ -135,42 +234,100 @@ class EditWindow:
         return None if last is None else last.pose
 
     def step_shadow(self, moment: Moment, dt_s: float, judges: Judges) -> None:
-        """The shadow stepped to the worked frame's moment while it lives and its window lasts."""
-        shadow = self.shadow
-        if shadow is None or not shadow.alive or moment.time_s > shadow.until_s + TIME_EPSILON_S:
-            return
-        shown = judges.shown_of(shadow.shot, moment)
-        stepped = judges.step(shown, dt_s, shadow.camera, shadow.shot, shadow.last_pose)
-        if stepped is None:
-            shadow.alive = False
-            return
-        pose, flags = stepped
-        moved = pose.position_world - shadow.last_pose.position_world
-        if (
-            any(f in flags for f in ENDS_A_COPY)
-            or float(np.linalg.norm(moved)) >= JUMP_M
-            or judges.crossed(shadow.last_pose.position_world, pose.position_world)
-        ):
-            shadow.alive = False
-            return
-        shadow.steps.append((moment, pose, judges.visibility(shown, pose, shadow.shot)))
-        shadow.last_pose = pose
+        """The shadow's step to the worked frame's moment, while it lives and its window lasts
+        (and, while a repair waits, the one its cut started beside it): due, taken at once where
+        the window does not defer (Shadow)."""
+        for shadow in self._shadows():
+            if shadow.alive and moment.time_s <= shadow.until_s + TIME_EPSILON_S:
+                shadow.due.append((moment, judges.shown_of(shadow.judged, moment), dt_s))
+                if not self.defer:
+                    self._caught_up(shadow, judges)
+
+    def _shadows(self) -> list[Shadow]:
+        started = None if self.repair is None else self.repair.started
+        return [s for s in (self.shadow, started) if s is not None]
+
+    @staticmethod
+    def _caught_up(
+        shadow: Shadow, judges: Judges, deadline_s: float = math.inf, clock: Callable[[], float] = time.perf_counter
+    ) -> bool:
+        """The shadow's due steps taken, one at least, until the clock reads deadline_s; whether
+        none is left."""
+        judged = shadow.judged
+        while shadow.due and shadow.alive:
+            moment, shown, dt_s = shadow.due.pop(0)
+            stepped = judges.step(shown, dt_s, shadow.camera, judged, shadow.last_pose)
+            if stepped is None:
+                shadow.alive = False
+                break
+            pose, flags = stepped
+            moved = pose.position_world - shadow.last_pose.position_world
+            if (
+                any(f in flags for f in ENDS_A_COPY)
+                or float(np.linalg.norm(moved)) >= JUMP_M
+                or judges.crossed(shadow.last_pose.position_world, pose.position_world)
+            ):
+                shadow.alive = False
+                break
+            shadow.steps.append((moment, pose, judges.visibility(shown, pose, judged)))
+            shadow.last_pose = pose
+            if shadow.due and clock() >= deadline_s:
+                return False
+        shadow.due.clear()  # a shadow that died steps no more
+        return True
 
     def push(self, frame: WorkedFrame, before: tuple[Shot, ShotCamera] | None, judges: Judges) -> None:
-        """A newly worked frame joins the window; a cut under min_shot_s after the last one in the
-        window gives the short shot to a neighbour (module docstring); a cut left a cut starts a
-        shadow of the camera `before` it (the shot on air and a copy of its camera as they were
-        before the frame), its last pose the newest frame's."""
-        carried = frame.cut and self._repaired(frame, judges)
-        if frame.cut and not carried and before is not None:
+        """A newly worked frame joins the window. A cut first applies the repair waiting; then,
+        under min_shot_s after the last cut in the window, it draws the repair that gives the
+        short shot to a neighbour (module docstring), applied at once where the window does not
+        defer; a cut left a cut starts a shadow of the camera `before` it (the shot on air and a
+        copy of its camera as they were before the frame), its last pose the newest frame's."""
+        if frame.cut:
+            self.settle(judges)  # this cut's short shot is judged on the program as repaired before it
             last = self.last_pose()
-            if last is not None:
-                self.shadow = Shadow(before[0], before[1], last, frame.moment.time_s + self.min_shot_s)
+            started = None
+            if before is not None and last is not None:
+                started = Shadow(before[0], before[1], last, frame.moment.time_s + self.min_shot_s)
+            repair = self._drawn(frame, started, judges)
+            if repair is None:
+                self.shadow = started or self.shadow
+            else:
+                self.repair = repair
+                if not self.defer:
+                    self.settle(judges)
         self.frames.append(frame)
 
-    def answer(self, moment: Moment) -> tuple[WorkedFrame, bool]:
+    def settle(self, judges: Judges) -> None:
+        """Applies the repair waiting, worked out first where it is not yet: its frames given to
+        the neighbour it chose (flagged), the cut it removes cleared, the shadow that goes on
+        kept (module docstring)."""
+        repair, self.repair = self.repair, None
+        if repair is None:
+            return
+        repair.work_out()
+        decision, rows, frame = repair.decision, repair.rows, repair.frame
+        assert decision is not None  # worked out above
+        if decision.neighbour == BEFORE:
+            assert repair.carried is not None and repair.before is not None  # only a shadow carries a short shot on
+            self._give(rows, repair.before, decision, CARRIED_ON, judges)
+            rows[0].cut = False
+            self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's min_shot_s
+            return
+        if repair.carried is not None:
+            repair.carried.until_s = repair.carried_until_s
+        if decision.neighbour == AFTER:
+            self._give(rows, repair.after, decision, STARTED_EARLY, judges)
+            frame.cut = False  # the cut before the short shot stays, and its shadow
+            return
+        rows[0].flags.append(SHORT_LEFT)
+        self.shadow = repair.started or self.shadow
+
+    def answer(self, moment: Moment, judges: Judges) -> tuple[WorkedFrame, bool]:
         """The frame of the program moment (the newest worked out at or before it), and whether
-        the program cuts there (a frame passed over with a cut counts: the picture changed)."""
+        the program cuts there (a frame passed over with a cut counts: the picture changed); a
+        repair whose short shot starts there applied first."""
+        if self.repair is not None and self.repair.rows[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
+            self.settle(judges)
         cut = False
         while self.frames and self.frames[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
             frame = self.frames.popleft()
@@ -187,115 +344,138 @@ class EditWindow:
         return next((PlannedCut(f.moment.time_s, f.shot.choice) for f in self.frames if f.cut), None)
 
     # -- the repairs ----------------------------------------------------------------------
-    def _repaired(self, frame: WorkedFrame, judges: Judges) -> bool:
-        """Whether the short shot before the frame's cut, if any, was given to the shot before
-        (the cut before removed; True) or to the shot after (this frame's cut removed, False, and
-        frame.cut cleared); False with nothing to repair or none to give it to."""
+    def _drawn(self, frame: WorkedFrame, started: Shadow | None, judges: Judges) -> Repair | None:
+        """The repair of the short shot before the frame's cut, with what it reads taken now (the
+        shot after's camera as it is at the cut, the shadow's steps so far); None with no short
+        shot, or a human's take on air in it."""
         start = next((i for i in range(len(self.frames) - 1, -1, -1) if self.frames[i].cut), None)
         if start is None or frame.moment.time_s - self.frames[start].moment.time_s >= self.min_shot_s - TIME_EPSILON_S:
-            return False
+            return None
         rows = list(self.frames)[start:]
-        short = rows[0].shot
-        if short.held:  # a human's take is on air as long as the human held it
-            return False
-        kills = self._kills(rows, judges)
+        if rows[0].shot.held:  # a human's take is on air as long as the human held it
+            return None
         previous = self.frames[start - 1].shot if start > 0 else self.answered.shot if self.answered is not None else None
-        before = self._before(rows, short, kills, frame.shot, judges)
-        after = self._after(rows, frame, short, kills, previous, judges)
-        judged = [
-            (share, k)
-            for k, share in (("before", before[0] if before else None), ("after", after[0] if after else None))
-            if share is not None
-        ]
-        if not judged:
-            rows[0].flags.append(SHORT_LEFT)
-            return False
-        best = max(judged, key=lambda j: j[0])[1]  # the first of equals: the shot before
-        if best == "before":
-            assert before is not None and self.shadow is not None
-            for row, (_, pose, seen) in zip(rows, before[1]):
-                self._give(row, self.shadow.shot, pose, seen, CARRIED_ON, judges)
-            rows[0].cut = False
-            self.shadow.until_s = frame.moment.time_s + self.min_shot_s  # it goes off air at this frame's cut now
-            return True
-        assert after is not None
-        for row, pose, seen in zip(rows, after[1], after[2]):
-            self._give(row, frame.shot, pose, seen, STARTED_EARLY, judges)
-        frame.cut = False
-        return False
+        carried, steps = self.shadow, None
+        if carried is not None:
+            self._caught_up(carried, judges)
+            # from the short shot's first frame: a shadow carried on over an earlier short shot stepped from before it
+            first = next((k for k, (m, _, _) in enumerate(carried.steps) if m is rows[0].moment), None)
+            steps = None if first is None else carried.steps[first : first + len(rows)]
+        before = None if carried is None else side(carried.shot, rows, judges)
+        after = side(frame.shot, rows, judges)
+        players = {p: i for i, p in enumerate(self.players)}
+        run = SlicedRun(lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges))
+        until_s = -math.inf if carried is None else carried.until_s
+        if carried is not None:  # stepped on as if it carried the short shot: it goes off air at this cut then
+            carried.until_s = frame.moment.time_s + self.min_shot_s
+        return Repair(rows, frame, run, before, after, carried, until_s, started)
 
     @staticmethod
-    def _give(row: WorkedFrame, shot: Shot, pose: CameraPose, seen: float, flag: str, judges: Judges) -> None:
-        row.shot, row.pose, row.visibility = shot, pose, seen
-        row.shown = judges.shown_of(shot, row.moment)
-        row.choice = judges.choice_of(shot, row.shown.time_s)
-        row.flags.append(flag)
+    def _give(rows: list[WorkedFrame], neighbour: Side, decision: Decision, flag: str, judges: Judges) -> None:
+        for row, shown, pose, seen in zip(rows, neighbour.shown, decision.poses, decision.seen):
+            row.shot, row.shown, row.pose, row.visibility = neighbour.shot, shown, pose, seen
+            row.choice = judges.choice_of(neighbour.judged, shown.time_s)
+            row.flags.append(flag)
 
-    def _before(
-        self, rows: list[WorkedFrame], short: Shot, kills: list[tuple[int, tuple[int, ...]]], other: Shot, judges: Judges
-    ) -> tuple[float, list[tuple[Moment, CameraPose, float]]] | None:
-        """The shadow's mean visibility and steps over the short shot's frames, where it carries
-        on over every one of them as a neighbour of the short shot's kind keeping its kills."""
-        shadow = self.shadow
-        if shadow is None:
-            return None
-        # from the short shot's first frame: a shadow carried on over an earlier short shot stepped from before it
-        first = next((k for k, (m, _, _) in enumerate(shadow.steps) if m is rows[0].moment), None)
-        steps = [] if first is None else shadow.steps[first : first + len(rows)]
-        if len(steps) < len(rows) or any(m is not r.moment for (m, _, _), r in zip(steps, rows)):
-            return None
-        if not _may_take(shadow.shot, short, other, rows) or not _keeps_kills(
-            rows, kills, [pose for _, pose, _ in steps], judges
-        ):
-            return None
-        if not _keeps_seen(rows, [seen for _, _, seen in steps]):
-            return None
-        shown = [judges.shown_of(shadow.shot, r.moment) for r in rows]
-        if not _keeps_height(rows, [pose for _, pose, _ in steps], shown, shadow.shot, judges):
-            return None
-        return float(np.mean([seen for _, _, seen in steps])), steps
 
-    @staticmethod
-    def _after(
-        rows: list[WorkedFrame],
-        frame: WorkedFrame,
-        short: Shot,
-        kills: list[tuple[int, tuple[int, ...]]],
-        other: Shot | None,
-        judges: Judges,
-    ) -> tuple[float, list[CameraPose], list[float]] | None:
-        """The shot after's mean visibility, poses and visibilities over the short shot's frames,
-        started there (module docstring), where it is a neighbour of its kind keeping its kills."""
-        after = frame.shot
-        if not _may_take(after, short, other, rows):
-            return None
-        shown = [judges.shown_of(after, r.moment) for r in rows]  # a replay started earlier shows earlier moments
-        for poses in (_moving_earlier(after, shown, frame.pose, judges), [frame.pose] * len(rows)):
-            if poses is None:
-                continue
-            judged = {k: judges.visibility(shown[k], poses[k], after) for k in range(0, len(rows), JUDGED_EVERY)}
-            seen = [judged[k - k % JUDGED_EVERY] for k in range(len(rows))]
-            if (
-                _keeps_kills(rows, kills, poses, judges)
-                and _keeps_seen(rows, seen)
-                and _keeps_height(rows, poses, shown, after, judges)
-            ):
-                return float(np.mean(list(judged.values()))), poses, seen
+def _decided(
+    rows: list[WorkedFrame],
+    first: CameraPose,
+    before: Side | None,
+    steps: list[tuple[Moment, CameraPose, float]] | None,
+    after: Side,
+    previous: Shot | None,
+    players: dict[str, int],
+    judges: Judges,
+) -> Decision:
+    """Which neighbour takes the short shot's frames (rows), and how (module docstring): the shot
+    before, carried on by its shadow (its steps over the rows, None where it has none), or the shot
+    after, started at them into its first pose; whichever shows its subjects more (ties to the
+    shot before), among those that may take it; `previous` is the shot before the short one. It
+    reads only what its arguments held when the repair was drawn (moments, poses, copies)."""
+    short = rows[0].shot
+    kills = _kills(rows, players, judges)
+    judged: list[tuple[float, Decision]] = []
+    if before is not None and steps is not None:
+        carried = _before(rows, before, steps, short, kills, after.judged, judges)
+        if carried is not None:
+            judged.append(carried)
+    later = _after(rows, first, after, short, kills, previous, judges)
+    if later is not None:
+        judged.append(later)
+    if not judged:
+        return Decision(None, [], [])
+    return max(judged, key=lambda j: j[0])[1]  # the first of equals: the shot before
+
+
+def _before(
+    rows: list[WorkedFrame],
+    before: Side,
+    steps: list[tuple[Moment, CameraPose, float]],
+    short: Shot,
+    kills: list[tuple[int, tuple[int, ...]]],
+    other: Shot,
+    judges: Judges,
+) -> tuple[float, Decision] | None:
+    """The shadow's mean visibility and steps over the short shot's frames, where it carries on
+    over every one of them as a neighbour of the short shot's kind keeping its kills."""
+    if len(steps) < len(rows) or any(m is not r.moment for (m, _, _), r in zip(steps, rows)):
         return None
+    poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
+    if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, judges):
+        return None
+    if not _keeps_seen(rows, seen):
+        return None
+    if not _keeps_height(rows, poses, before.shown, before.judged, judges):
+        return None
+    return float(np.mean(seen)), Decision(BEFORE, poses, seen)
 
-    def _kills(self, rows: list[WorkedFrame], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
-        """The kills the short shot shows: (row, (killer, victim)) where both are seen at least
-        KILL_SEEN from its pose at the kill's frame (a neighbour must show them as well)."""
-        index = {p: i for i, p in enumerate(self.players)}
-        out: list[tuple[int, tuple[int, ...]]] = []
-        for k, row in enumerate(rows):
-            for event in row.moment.events:
-                if event.kind != EventKind.KILL or event.actor_id not in index or event.other_actor_id not in index:
-                    continue
-                pair = (index[event.actor_id], index[event.other_actor_id])
-                if row.shown is row.moment and np.all(judges.seen(row.pose, row.moment, pair) >= KILL_SEEN):
-                    out.append((k, pair))
-        return out
+
+def _after(
+    rows: list[WorkedFrame],
+    first: CameraPose,
+    after: Side,
+    short: Shot,
+    kills: list[tuple[int, tuple[int, ...]]],
+    other: Shot | None,
+    judges: Judges,
+) -> tuple[float, Decision] | None:
+    """The shot after's mean visibility, poses and visibilities over the short shot's frames,
+    started there into its first pose (module docstring), where it is a neighbour of its kind
+    keeping its kills."""
+    if not _may_take(after.judged, short, other, rows):
+        return None
+    shot, shown = after.judged, after.shown  # a replay started earlier shows earlier moments
+    for poses in (_moving_earlier(shot, shown, first, judges), [first] * len(rows)):
+        if poses is None:
+            continue
+        judged = {}
+        for k in range(0, len(rows), JUDGED_EVERY):
+            pause()
+            judged[k] = judges.visibility(shown[k], poses[k], shot)
+        seen = [judged[k - k % JUDGED_EVERY] for k in range(len(rows))]
+        if (
+            _keeps_kills(rows, kills, poses, judges)
+            and _keeps_seen(rows, seen)
+            and _keeps_height(rows, poses, shown, shot, judges)
+        ):
+            return float(np.mean(list(judged.values()))), Decision(AFTER, poses, seen)
+    return None
+
+
+def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
+    """The kills the short shot shows: (row, (killer, victim)) where both are seen at least
+    KILL_SEEN from its pose at the kill's frame (a neighbour must show them as well); players:
+    each player's index by id."""
+    out: list[tuple[int, tuple[int, ...]]] = []
+    for k, row in enumerate(rows):
+        for event in row.moment.events:
+            if event.kind != EventKind.KILL or event.actor_id not in players or event.other_actor_id not in players:
+                continue
+            pair = (players[event.actor_id], players[event.other_actor_id])
+            if row.shown is row.moment and np.all(judges.seen(row.pose, row.moment, pair) >= KILL_SEEN):
+                out.append((k, pair))
+    return out
 
 
 def _moving_earlier(after: Shot, shown: list[Moment], first: CameraPose, judges: Judges) -> list[CameraPose] | None:
@@ -311,6 +491,7 @@ def _moving_earlier(after: Shot, shown: list[Moment], first: CameraPose, judges:
     elif not isinstance(camera, StaticCamera):
         camera, poses, last = copy.copy(camera), [], None
         for k, moment in enumerate(shown):
+            pause()  # a step is the rig's CAMERA stage: a sliced repair hands back between them
             stepped = judges.step(moment, 0.0 if last is None else moment.time_s - shown[k - 1].time_s, camera, after, last)
             if stepped is None or any(f in stepped[1] for f in (*ENDS_A_COPY, "held_before_wall")):
                 return None

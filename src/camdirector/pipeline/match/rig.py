@@ -163,7 +163,7 @@ class MatchRig(RigBase):
         self._last_time_s: float | None = None  # the moment of the newest frame worked out, s
         self._head: Moment | None = None  # that moment: the edit window's end (edit_window.py)
         self._answered_s: float | None = None  # the program moment last answered, s
-        self.window = EditWindow(self.style.min_shot_s, self.players)
+        self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans)
         self._last_pose: CameraPose | None = None
         self._last_cut_s = -math.inf  # program time of the picture's last cut, s
         self._candidates: list[CandidateShot] = []
@@ -176,8 +176,10 @@ class MatchRig(RigBase):
         """A rig from a checkpoint; one written before the edit window (an earlier version, a
         rolling upgrade) works on from its program moment, the window refilling."""
         self.__dict__.update(state)
-        if "window" not in state:
-            self.window = EditWindow(self.style.min_shot_s, self.players)
+        if "window" in state:
+            self.window.defer = self._defer_plans  # a window written before repairs were drawn defers by default
+        else:
+            self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans)
             self._head, self._answered_s = None, self._last_time_s
             self._body_heights_m = np.array([np.ptp(o[:, 1]) for o in self.visibility.outlines_local])
 
@@ -212,6 +214,7 @@ class MatchRig(RigBase):
     def set_style(self, style: Style) -> None:
         """From the next frame on; the current shot goes on (a new director decides at its next tick)."""
         self._finish_drawn()  # the drawn plan reads the style
+        self.window.work(self._judges())  # and the edit window's copies of cameras (their response time)
         if style.match_director != self.style.match_director:
             self.director = self._director(style.match_director)
             self._planned_cuts = []  # the last director's
@@ -231,9 +234,9 @@ class MatchRig(RigBase):
 
     @property
     def has_deferred_work(self) -> bool:
-        """CameraRig: whether the next frame's camera is to be worked out ahead, or a drawn plan
-        waits to be computed."""
-        return self._ahead_for is not None or self.plan_waiting
+        """CameraRig: whether the next frame's camera is to be worked out ahead, an edit window's
+        repair or a drawn plan waits to be computed."""
+        return self._ahead_for is not None or self.window.waiting or self.plan_waiting
 
     @property
     def plan_waiting(self) -> bool:
@@ -241,11 +244,16 @@ class MatchRig(RigBase):
         return self._drawn is not None and self._drawn.run is not None
 
     def do_deferred_work(self, whole: bool = True) -> bool:
-        """CameraRig: works the next frame's camera out ahead (first: it is due soonest), else
-        computes the drawn plan, whole or for PLAN_SLICE_S; whether there was any."""
+        """CameraRig: works the next frame's camera out ahead (first: it is due soonest), else the
+        edit window's shadow steps and repair (due within min_shot_s), else computes the drawn
+        plan, whole or for PLAN_SLICE_S each; whether there was any."""
         if self._ahead_for is not None:
             self._work_ahead(self._ahead_for)
             self._ahead_for = None
+            if not whole:
+                return True
+        if self.window.waiting:
+            self.window.work(self._judges(), None if whole else PLAN_SLICE_S, self.clock)
             if not whole:
                 return True
         drawn = self._drawn
@@ -315,7 +323,7 @@ class MatchRig(RigBase):
             self.buffer.program_moment(head.time_s)  # the buffer's program moment is the head's (its past kept for replays)
             self._work(head, stages)
             steps += 1
-        frame, cut = self.window.answer(moment)
+        frame, cut = self.window.answer(moment, self._judges())
         answered = frame.moment.time_s
         state.frame, state.time_s = frame.moment.frame, answered
         state.dt_s = 0.0 if self._answered_s is None else max(0.0, answered - self._answered_s)
@@ -403,7 +411,14 @@ class MatchRig(RigBase):
             moment, shown, pose, cut, flags, visibility, self.shot, self._choice(self.shot, shown.time_s), self._candidates
         )
         stages.done(MatchStage.VISIBILITY)
-        judges = Judges(
+        judges = self._judges()
+        self.window.push(frame, before, judges)
+        self.window.step_shadow(moment, moment_dt_s, judges)
+        stages.done(MatchStage.EDIT)
+
+    def _judges(self) -> Judges:
+        """What the edit window asks of the rig (edit_window.py)."""
+        return Judges(
             self._shown_by,
             self._shadow_step,
             self.program_camera.visibility,
@@ -413,9 +428,6 @@ class MatchRig(RigBase):
             self.in_level.inside,
             self.in_level.crossed,
         )
-        self.window.push(frame, before, judges)
-        self.window.step_shadow(moment, moment_dt_s, judges)
-        stages.done(MatchStage.EDIT)
 
     def _choice(self, shot: Shot, shown_s: float) -> ShotChoice:
         """What `MatchFrame.shot` names of the shot at the shown moment's time, s: a REPLAY frames its
