@@ -1,12 +1,16 @@
 """What real maps asked of our director (issue 29): no fight through a wall, a player on the move
-rather than an overview of walls, and a camera that a wall comes between it and its subject pulled
-in front of the wall (and back out no faster than pull_regrow_m_s)."""
+rather than an overview of walls (and an overview of nobody on air worth only what it shows,
+issue 41), and a camera that a wall comes between it and its subject pulled in front of the wall
+(and back out no faster than pull_regrow_m_s)."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
+from camdirector.geometry.camera import CameraPose, level_look_rotation
 from camdirector.geometry.raycast import RayScene
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.match.frame import ShotKind
@@ -15,7 +19,7 @@ from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, ToricCamera
 from camdirector.pipeline.style import Rig, Style
-from tests.pipeline.match.scenes import EYE_M, LENS, Match, facing, run_session, yaw_quat
+from tests.pipeline.match.scenes import EYE_M, LENS, BareRig, Match, facing, run_session, yaw_quat
 from tests.pipeline.match.test_match_places import block
 
 
@@ -68,6 +72,31 @@ def test_players_beyond_fighting_range_are_followed_nearest_an_opponent_first():
     assert {s.match.shot.kind for s in states} == {ShotKind.FOLLOW}
     assert states[0].match.shot.subject_ids in (("a",), ("b",))  # 60 m from an opponent; c is 90 m from b
     assert all("on the move" in s.match.shot.reason for s in states)
+
+
+def looking(from_world: tuple[float, float, float], at_world: tuple[float, float, float]) -> CameraPose:
+    position = np.array(from_world, dtype=float)
+    return CameraPose(position, level_look_rotation(position, at_world, (0.0, 0.0), LENS), LENS.vertical_fov_deg)
+
+
+def test_an_overview_of_nobody_on_air_is_worth_the_share_of_its_best_shown_living_player():
+    """What the planner scales an overview of nobody's interest by (planned.py `_overview_shows`):
+    the best-shown living player's share framed and seen; a wall, a look away or death shows
+    nobody."""
+
+    def script(t: float):
+        return {"a": ((0.0, 0.0), 0.0), "b": ((0.0, 30.0), 0.0)}
+
+    wall = block((0.0, 1.5, 6.0), (40.0, 12.0, 0.2))  # across the level between a (z 0) and z 12
+    director = BareRig(Match({"a": 1, "b": 2}, script, walls=[wall]), MatchSettings()).rig.director
+    moment = moment_of({"a": (0.0, 0.0), "b": (0.0, 30.0)}, {"a": (0.0, 30.0), "b": (0.0, 0.0)})
+    assert director._overview_shows(moment, looking((0.0, 6.0, -10.0), (0.0, 1.0, 0.0))) == 1.0  # a, whole
+    assert director._overview_shows(moment, looking((0.0, 6.0, -10.0), (0.0, 1.0, -30.0))) == 0.0  # looking away
+    assert director._overview_shows(moment, looking((0.0, 3.0, 14.0), (0.0, 1.0, 0.0))) == 0.0  # a behind the wall
+    b_dead = dataclasses.replace(moment, alive=np.array([True, False]))
+    assert director._overview_shows(b_dead, looking((0.0, 3.0, 24.0), (0.0, 1.0, 30.0))) == 0.0  # only b, dead, framed
+    nobody = dataclasses.replace(moment, alive=np.zeros(2, dtype=bool))
+    assert director._overview_shows(nobody, looking((0.0, 6.0, -10.0), (0.0, 1.0, -30.0))) == 1.0  # nobody to show
 
 
 def pulled_camera(wall_z: float) -> tuple[ToricCamera, Moment, RayScene]:

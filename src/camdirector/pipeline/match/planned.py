@@ -53,7 +53,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.director_contract import DirectorBase, DirectorContext
 from camdirector.pipeline.match.first_person import FirstPersonCamera
@@ -62,7 +63,7 @@ from camdirector.pipeline.match.interest import event_priority
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.replays import DirectorReplays, Replays, is_replay
-from camdirector.pipeline.match.shots import ToricCamera
+from camdirector.pipeline.match.shots import ToricCamera, framed_seen
 from camdirector.pipeline.style import Style
 
 OPTION_COVER_S = (1.0, 2.0, 3.0)  # a discretionary shot is placed for now and these times ahead (as far
@@ -151,6 +152,22 @@ class PlannedDirector(DirectorBase):
             for b in self.plan
             if b.cut_s is not None
         ]
+
+    def _overview_shows(self, moment: Moment, pose: CameraPose) -> float:
+        """The share of its sample points the best-shown living player has in an overview's frame
+        and seen from its pose now (framed_seen; 1 with nobody alive). An overview of nobody in
+        particular on air is worth that share of its interest: one that shows nobody gives way to
+        a roaming FOLLOW once it has settled (an overview framing a beat's players is the plan's).
+        Issue 41: on the real duel's first 3 minutes its overviews showed their best player 0.43
+        of their frames, two thirds of the program's lost visibility, and no FOLLOW's interest
+        bettered an overview's by the switch margin, so each lasted max_shot_s."""
+        living = tuple(int(i) for i in np.flatnonzero(moment.alive))
+        if not living:
+            return 1.0
+        lens = Lens(pose.vertical_fov_deg, self.builder.lens.aspect)
+        rotation = quat_to_matrix(np.asarray(pose.rotation_xyzw)[None])
+        seen = framed_seen(self.builder.visibility, moment, living, np.asarray(pose.position_world)[None], rotation, lens)
+        return float(seen.max())
 
     # -- planned beats ----------------------------------------------------------------------
     def _event_shot(self, event: GameEvent) -> tuple[ShotKind, tuple[int, ...]] | None:
@@ -394,6 +411,8 @@ class PlannedDirector(DirectorBase):
         current_set = set(current.subjects) if current is not None else None
         current_kind = current.choice.kind if current is not None else None
         current_score = next((o.score for o in options if set(o.subjects) == current_set and o.kind == current_kind), 0.0)
+        if current is not None and current_kind == ShotKind.OVERVIEW and not current.subjects and current_pose is not None:
+            current_score *= self._overview_shows(moment, current_pose)  # an overview of nobody: of whom it shows
         dead_too_long = current is not None and any(
             now - self.dead_since.get(i, math.inf) >= s.dead_hold_s for i in current.subjects
         )
