@@ -130,7 +130,7 @@ class Decision(NamedTuple):
     seen: list[float]
 
 
-BEFORE, AFTER = "before", "after"
+BEFORE, AFTER = "before", "after"  # Decision.neighbour: the shot before (carried on), the shot after (started early)
 
 
 class Side(NamedTuple):
@@ -144,7 +144,8 @@ class Side(NamedTuple):
     shown: list[Moment]
 
 
-def side(shot: Shot, rows: list[WorkedFrame], judges: Judges) -> Side:
+def _side(shot: Shot, rows: list[WorkedFrame], judges: Judges) -> Side:
+    """The shot as a neighbour of the short shot's frames (rows), taken now (Side)."""
     judged = dataclasses.replace(shot, camera=copy.copy(shot.camera))
     return Side(shot, judged, [judges.shown_of(judged, r.moment) for r in rows])
 
@@ -361,8 +362,8 @@ class EditWindow:
             # from the short shot's first frame: a shadow carried on over an earlier short shot stepped from before it
             first = next((k for k, (m, _, _) in enumerate(carried.steps) if m is rows[0].moment), None)
             steps = None if first is None else carried.steps[first : first + len(rows)]
-        before = None if carried is None else side(carried.shot, rows, judges)
-        after = side(frame.shot, rows, judges)
+        before = None if carried is None else _side(carried.shot, rows, judges)
+        after = _side(frame.shot, rows, judges)
         players = {p: i for i, p in enumerate(self.players)}
         run = SlicedRun(lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges))
         until_s = -math.inf if carried is None else carried.until_s
