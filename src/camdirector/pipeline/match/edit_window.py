@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import time
 from collections import deque
@@ -111,9 +112,10 @@ class Shadow:
     alive: bool = True  # False once it met a wall, lost its subjects or jumped
     due: list[tuple[Moment, Moment, float]] = field(default_factory=list)  # frames to step: (moment, shown, dt_s)
 
-    @property
+    @functools.cached_property
     def judged(self) -> Shot:
-        """The shot with the copy as its camera (whom a step frames: the copy's pair window)."""
+        """The shot with the copy as its camera (whom a step frames: the copy's pair window); made
+        once, as the shadow's shot and copy are never replaced."""
         return dataclasses.replace(self.shot, camera=self.camera)
 
     def __setstate__(self, state: dict[str, object]) -> None:

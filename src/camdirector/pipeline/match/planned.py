@@ -54,7 +54,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
-from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.director_contract import DirectorBase, DirectorContext
 from camdirector.pipeline.match.first_person import FirstPersonCamera
@@ -63,7 +62,7 @@ from camdirector.pipeline.match.interest import event_priority
 from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.replays import DirectorReplays, Replays, is_replay
-from camdirector.pipeline.match.shots import ToricCamera, framed_seen
+from camdirector.pipeline.match.shots import ToricCamera, poses_seen
 from camdirector.pipeline.style import Style
 
 OPTION_COVER_S = (1.0, 2.0, 3.0)  # a discretionary shot is placed for now and these times ahead (as far
@@ -165,9 +164,7 @@ class PlannedDirector(DirectorBase):
         if not living:
             return 1.0
         lens = Lens(pose.vertical_fov_deg, self.builder.lens.aspect)
-        rotation = quat_to_matrix(np.asarray(pose.rotation_xyzw)[None])
-        seen = framed_seen(self.builder.visibility, moment, living, np.asarray(pose.position_world)[None], rotation, lens)
-        return float(seen.max())
+        return float(poses_seen(self.builder.visibility, moment, living, [pose], lens).max())
 
     # -- planned beats ----------------------------------------------------------------------
     def _event_shot(self, event: GameEvent) -> tuple[ShotKind, tuple[int, ...]] | None:

@@ -25,7 +25,6 @@ import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.raycast import RayScene
-from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
@@ -34,7 +33,7 @@ from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_shot import Shot, ShotCamera
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shot_builder import readable_clearance, within_band
-from camdirector.pipeline.match.shots import StaticCamera, ToricCamera, best_place, framed_seen, place_grid
+from camdirector.pipeline.match.shots import StaticCamera, ToricCamera, best_place, place_grid, poses_seen
 from camdirector.pipeline.match.step_back import stepped_back
 from camdirector.pipeline.match.visibility import SubjectVisibility
 
@@ -170,10 +169,8 @@ class ProgramCamera:
         return (held_pose, True) if seen.max() >= self.settings.candidate_seen else (pose, False)
 
     def _seen_from(self, moment: Moment, subjects: tuple[int, ...], poses: list[CameraPose], lens: Lens) -> np.ndarray:
-        """(len(poses), len(subjects)): each subject's share framed and seen from each pose (framed_seen)."""
-        positions_world = np.array([p.position_world for p in poses])
-        rotations = quat_to_matrix(np.array([p.rotation_xyzw for p in poses]))
-        return framed_seen(self.subject_visibility, moment, subjects, positions_world, rotations, lens)
+        """(len(poses), len(subjects)): each subject's share framed and seen from each pose (shots.py poses_seen)."""
+        return poses_seen(self.subject_visibility, moment, subjects, poses, lens)
 
     def _widened(
         self, moment: Moment, pose: CameraPose, subjects: tuple[int, ...], last_fov_deg: float | None, dt_s: float

@@ -77,7 +77,7 @@ from camdirector.geometry.toric import (
     theta_max,
     torus_position,
 )
-from camdirector.geometry.transforms import UP_WORLD
+from camdirector.geometry.transforms import UP_WORLD, quat_to_matrix
 from camdirector.infra.slices import pause
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import Moment
@@ -475,6 +475,15 @@ def framed_seen(
     * k camera-point pairs. Only the points inside a frame are ray-cast."""
     pause(len(positions_world) * len(subjects) * visibility.k)
     return seen_in_frame(visibility, moment, subjects, positions_world, rotations, lens, from_below=False)
+
+
+def poses_seen(
+    visibility: SubjectVisibility, moment: Moment, subjects: tuple[int, ...], poses: Sequence[CameraPose], lens: Lens
+) -> np.ndarray:
+    """(len(poses), len(subjects)): each subject's share framed and seen from each pose (framed_seen) through the lens."""
+    positions_world = np.array([p.position_world for p in poses])
+    rotations = quat_to_matrix(np.array([p.rotation_xyzw for p in poses]))
+    return framed_seen(visibility, moment, subjects, positions_world, rotations, lens)
 
 
 def seen_in_frame(
