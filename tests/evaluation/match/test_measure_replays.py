@@ -1,13 +1,15 @@
 """eval-match's replays (measure.py): a replay's moments are measured against the bodies of the
 moment they show, a replay showing both at the kill counts as shown, a kill followed by another
 within the room leaves none, and a live kill that falls in a replay is missed and counted; a
-replay in the killer's eyes showing the victim at the kill counts as shown (the kill cam)."""
+replay in the killer's eyes showing the victim at the kill counts as shown (the kill cam), as does
+one in the victim's eyes showing the killer."""
 
 from __future__ import annotations
 
 import dataclasses
 
 import numpy as np
+import pytest
 
 from camdirector.evaluation.match.match_file import MatchEvent
 from camdirector.evaluation.match.measure import BodySampler, in_eyes_of, kill_coverage, measure_shown, replay_figures
@@ -80,13 +82,19 @@ def test_a_replay_naming_its_killer_alone_before_the_kill_is_one_replay_of_its_p
     assert replay_figures(match, program, shown, ROOM_S)["replays"] == 2
 
 
-def test_a_replay_in_the_killers_eyes_showing_the_victim_counts_as_shown_with_the_eyes_rule():
+@pytest.mark.parametrize("killer", ["a", "b"])
+def test_a_replay_in_either_ones_eyes_showing_the_other_counts_as_shown_with_the_eyes_rule(killer):
+    """In a's eyes looking at b: the kill cam where a killed b, the victim's view where b killed a.
+    Live, only the attacker's eyes cover the kill."""
     match = duel()  # a kills b at KILL_ROW, standing still: a's eye is the same at every moment
+    victim = "b" if killer == "a" else "a"
+    match.events[0] = dataclasses.replace(match.events[0], actor_id=killer, other_actor_id=victim)
     program = replayed(first_person_of_a(match), slice(25, 35), np.arange(15, 25))
-    program.subjects[25:35] = [("a", "b")] * 10  # a replay names the pair around the kill
+    program.subjects[25:35] = [(killer, victim)] * 10  # a replay names the pair around the kill, killer first
     shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
     eyes = in_eyes_of(match, program)
     assert eyes[25:35].tolist() == [0] * 10 and shown[25:35, 1].min() >= 0.5 and shown[25:35, 0].max() < 0.5
     assert replay_figures(match, program, shown, ROOM_S)["shown"] == 0  # a's body is not in the picture
     figures = replay_figures(match, program, shown, ROOM_S, eyes)
     assert figures["shown"] == 1 and figures["kills_with_room_replayed"] == 1
+    assert kill_coverage(match, program, shown, eyes).covered.tolist() == [killer == "a"]

@@ -5,13 +5,17 @@ the kill cam (a replay through the killer's eyes), and the same program on two r
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 
+from camdirector.geometry.camera import project_to_screen
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.pipeline.match.camera_ahead import CameraStep
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
+from camdirector.pipeline.match.replays import Replays
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import ToricCamera
 from camdirector.pipeline.session import Session
@@ -261,3 +265,69 @@ def test_a_kill_the_killers_eyes_saw_is_replayed_through_them_unless_the_live_pi
     eye_world = kill_cam.camera.pose(rig.rig.buffer.at(KILL_S)).position_world
     toric = replays.shot(event, rig.rig.buffer, eye_world, KILL_S + 2.0, "replay")
     assert toric is not None and isinstance(toric.camera, ToricCamera) and toric.choice.eyes_id == ""
+
+
+ROOM_HALF_WIDTH_M = 1.5  # a closed room 3 m wide, 3 m high, 9 m long around a2 and b2: no DUEL place inside sees both
+
+
+def in_a_room(t: float):
+    """two_fronts, but a2 and b2 face each other 6 m apart in the closed room (room_walls)."""
+    a2, b2 = (40.0, 9.5), (40.0, 15.5)
+    return two_fronts(t) | {"a2": (a2, facing(a2, b2)), "b2": (b2, facing(b2, a2))}
+
+
+def room_walls() -> list[TriMesh]:
+    """The room's two sides, roof and two ends, 0.2 m thick, centred on x = 40, z = 12.5."""
+    w = ROOM_HALF_WIDTH_M
+    slabs = [
+        ((0.2, 3.0, 9.0), (40.0 - w, 1.5, 12.5)),
+        ((0.2, 3.0, 9.0), (40.0 + w, 1.5, 12.5)),
+        ((2.0 * w, 0.2, 9.0), (40.0, 3.0, 12.5)),
+        ((2.0 * w, 3.0, 0.2), (40.0, 1.5, 8.0)),
+        ((2.0 * w, 3.0, 0.2), (40.0, 1.5, 17.0)),
+    ]
+    return [TriMesh(box(size).vertices + np.array(centre), box(size).faces) for size, centre in slabs]
+
+
+def test_a_kill_no_place_sees_is_replayed_through_the_victims_eyes_where_the_killers_were_live():
+    """In a closed room no DUEL place sees the pair; the live picture was a2's own eyes, so the
+    kill cam would repeat it: the replay is b2's view of its killer. It names b2 alone in the
+    build-up (as a kill cam names its killer), the pair at the kill, and keeps b2's eye at a
+    living player's height after its death; from the side, the kill cam as before."""
+    settings = MatchSettings()
+    rig = BareRig(Match(TEAMS, in_a_room, [kill("a2", "b2", KILL_S)], delay_s=10.0, walls=room_walls()), settings)
+    rig.run(KILL_S + 3.0)
+    replays = rig.rig.director.replays.replays
+    buffer = rig.rig.buffer
+    event = next(e for e in buffer.events_between(KILL_S - 1.0, KILL_S + 1.0) if e.kind.name == "KILL")
+    a2_eye_world = np.array([40.0, 1.44, 9.5])
+    assert replays.shot(event, buffer, a2_eye_world, KILL_S + 2.0, "replay", eyes=False) is None  # no place
+    shot = replays.shot(event, buffer, a2_eye_world, KILL_S + 2.0, "replay")
+    assert shot is not None and isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == 3
+    assert shot.choice.eyes_id == "b2" and shot.choice.subject_ids == ("a2", "b2") and "through b2's eyes" in shot.choice.reason
+    assert shot.camera.framed(KILL_S - 1.5) == (3,) and shot.camera.framed(KILL_S) is None
+    at_kill, dead = (shot.camera.pose(buffer.at(t)) for t in (KILL_S, KILL_S + 0.4))
+    assert not buffer.at(KILL_S + 0.4).alive[3]
+    assert abs(dead.position_world[1] - at_kill.position_world[1]) < 1e-9 and at_kill.position_world[1] > 1.0
+    aims = np.array([[40.0, EYE_M, 9.5]])  # a2 on b2's screen at the kill
+    assert np.all(np.abs(project_to_screen(at_kill, shot.camera.lens, aims)) <= 1.0)
+    side = replays.shot(event, buffer, np.array([39.0, 1.44, 12.5]), KILL_S + 2.0, "replay")
+    assert side is not None and side.choice.eyes_id == "a2"
+
+
+def test_a_replay_fills_the_room_before_the_next_beat_where_a_live_shot_there_would_be_under_a_shot():
+    """Its usual 2.5 s where the room leaves a live shot of min_shot_s before the next beat; all the
+    room where it would leave less (a longer build-up, from no earlier than the buffer's oldest
+    moment); min_shot_s where the room is shorter still."""
+    settings = MatchSettings()
+    replays = Replays(list(TEAMS), types.SimpleNamespace(settings=settings))  # replay() reads the settings alone
+    event = kill("a2", "b2", KILL_S)
+    usual = settings.replay_length_s
+    assert replays.replay(event, 2.0).length_s == usual  # no beat ahead
+    assert replays.replay(event, 2.0, room_s=usual + 2.0).length_s == usual  # a 2 s live shot fits after it
+    filled = replays.replay(event, 2.0, room_s=usual + 1.5)
+    assert abs(filled.length_s - (usual + 1.5)) < 1e-9 and filled.until_s == KILL_S + settings.replay_post_s
+    oldest = KILL_S - 2.5
+    capped = replays.replay(event, 2.0, room_s=usual + 1.5, oldest_s=oldest)
+    assert abs(capped.from_s - oldest) < 1e-9 and capped.until_s == KILL_S + settings.replay_post_s
+    assert replays.replay(event, 2.0, room_s=1.0).length_s == 2.0

@@ -32,10 +32,11 @@ has them, never from what the director says it shows:
   director's own grammar is not consulted). Overviews name no subjects and are never jump cuts;
   nor are cuts into or out of a replay (a cut in time).
 - replays (issue 41): a replay is a run of program moments of REPLAY shots of the same subjects
-  (or its pair and, before the kill, its killer alone) whose replayed frames go forward (a cut
-  within it, through a wall, does not start another); it is *shown* when the kill it replays (of
-  the first subject of its pair by the second, its frame among the replayed ones) has
-  both players shown at the replay's moment of the kill. A kill *leaves room* when no other kill
+  (or its pair and, before the kill, one of them alone: a kill cam's killer, a victim's view's
+  victim) whose replayed frames go forward (a cut within it, through a wall, does not start
+  another); it is *shown* when the kill it replays (of the first subject of its pair by the
+  second, its frame among the replayed ones) has both players shown at the replay's moment of
+  the kill, the one through whose eyes the picture is (either) counting as shown. A kill *leaves room* when no other kill
   follows it within `room_s` (the director's wait after a kill, the shortest replay and the next
   kill's lead: replay_after_s + the style's min_shot_s + lead_s of MatchSettings) and the program goes
   on that long; kills with room replayed: those of them with a replay shown. A live kill missed
@@ -251,7 +252,8 @@ def replay_figures(
     """The program's replays (module docstring): replays, shown, kills_with_room,
     kills_with_room_replayed, live_kills_missed_for_replay; shown (n, P) from measure_shown.
     With eyes_of (n,) from in_eyes_of, a replay in the killer's eyes that shows the victim at the
-    kill is shown too (as kill_coverage counts a live kill)."""
+    kill is shown too (as kill_coverage counts a live kill), and one in the victim's eyes that
+    shows the killer: the kill seen from its other end."""
     column = match.player_index()
     before = np.arange(len(program)) - 1
     goes_on = (
@@ -278,8 +280,10 @@ def replay_figures(
                 continue
             row = rows[inside[0]]
             killer, victim = column[event.actor_id], column[event.other_actor_id]
-            in_eyes = eyes_of is not None and eyes_of[row] == killer
-            if min(1.0 if in_eyes else shown[row, killer], shown[row, victim]) >= SHOWN_FRACTION:
+            seen = shown[row, [killer, victim]].copy()
+            if eyes_of is not None and eyes_of[row] in (killer, victim):  # through one's eyes: that one counts 1
+                seen[[killer, victim].index(int(eyes_of[row]))] = 1.0
+            if seen.min() >= SHOWN_FRACTION:
                 replayed.add(k)
                 shown_replays += 1
                 break

@@ -3,7 +3,9 @@
 A REPLAY shot (ShotKind.REPLAY, its `ShotChoice.replay`) plays a kill's game moments from
 `replay_pre_s` before it to `replay_post_s` after it (longer before it when that is shorter than
 the style's `min_shot_s`; shorter before it, down to `min_shot_s` in all, where the live timeline
-has no more room), at the program's pace, while the program's own time goes on: the rig
+has no more room; longer before it, filling the room, where the live shot it would leave before
+the next beat is under `min_shot_s`: on the real 2on2 such a shot was 2.3 s, and the beat's own
+cut waited for it to be `min_shot_s` old), at the program's pace, while the program's own time goes on: the rig
 steps its camera and measures its visibility at the replayed moment (rig.py), and the buffer keeps
 `replay_past_s` of past for it (moments.py). Its camera is the killer's eyes (the kill cam of
 games' own replays: first_person.py) where they show the victim at the kill and its next frame
@@ -21,8 +23,14 @@ scored for whom it frames then; the victim is mostly still behind walls in the b
 real duel's 11 kills with room had no place seeing both over it, 5 of them one seeing both at the
 kill). The pair first, so that a kill some place sees throughout is replayed as before (the
 reframe's move can cross walls: cuts within the replay). None that sees them with `min_visible`
-either way: no replay (at `candidate_seen`, 0.5, the real wipeout's replays showed nobody for a
-second of build-up and nobody-shown frames outside overviews rose from 7.7% to 10.7%). On the
+either way: through the victim's eyes where they show the killer at the kill and its next frame
+and stand past `jump_cut_deg` from the live camera (the kill seen from its other end, as a
+broadcast shows "what the victim saw"; on the real 2on2, 4 of 5 kills with room left unreplayed
+had been shown live through the killer's eyes in corridors where no place saw both). Its eye
+stays at a living player's height past the death: QuakeWorld drops a corpse's view to the floor,
+which in a replay reads as the camera falling. Else no replay (at `candidate_seen`, 0.5, the real
+wipeout's replays showed nobody for a second of build-up and nobody-shown frames outside
+overviews rose from 7.7% to 10.7%). On the
 wire a replay names whom it frames at the replayed moment (rig.py), as a live DUEL's killer-alone
 frames do.
 
@@ -53,7 +61,7 @@ import numpy as np
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.inputs import EventKind, GameEvent
-from camdirector.pipeline.match.first_person import eyes_camera, shows_at
+from camdirector.pipeline.match.first_person import FirstPersonCamera, eyes_camera, shows_at
 from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
 from camdirector.pipeline.match.interest import event_priority
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
@@ -90,9 +98,9 @@ class Replays:
     def __init__(self, players: list[str], builder: ShotBuilder):
         self.players, self.builder = players, builder
         self.index = {p: i for i, p in enumerate(players)}
-        # Place None: through the killer's eyes
+        # a place of the pair's DUEL camera, or an int: through that player's eyes (the killer's or the victim's)
         self._placed: dict[
-            tuple[float, float, str, str, bytes, bool], tuple[tuple[int, int], Place | None, float, PairWindow | None] | None
+            tuple[float, float, str, str, bytes, bool], tuple[tuple[int, int], Place | int, float, PairWindow | None] | None
         ] = {}
 
     @property
@@ -113,11 +121,14 @@ class Replays:
         start_s = max(now_s - s.replay_within_s, buffer.oldest_s + s.replay_pre_s)
         return [e for e in buffer.events_between(start_s, now_s) if self.pair(e) is not None]
 
-    def replay(self, kill: GameEvent, min_shot_s: float, room_s: float = math.inf) -> Replay:
+    def replay(self, kill: GameEvent, min_shot_s: float, room_s: float = math.inf, oldest_s: float = -math.inf) -> Replay:
         """The moments a replay of the kill shows: at least min_shot_s of them, at most room_s, s,
-        when that is more (module docstring)."""
+        when that is more; all of room_s where the live shot it leaves before the next beat would
+        be under min_shot_s, from no earlier than oldest_s, s (module docstring)."""
         s = self.settings
         length_s = max(min(s.replay_length_s, room_s), min_shot_s)
+        if room_s - length_s < min_shot_s:  # no live shot between it and the beat: a longer build-up
+            length_s = max(length_s, min(room_s, kill.time_s + s.replay_post_s - oldest_s))
         return Replay(kill.time_s, kill.time_s + s.replay_post_s - length_s, kill.time_s + s.replay_post_s)
 
     def shot(
@@ -137,7 +148,7 @@ class Replays:
         first person; None when no such place sees both (module docstring)."""
         pair = self.pair(kill)
         assert pair is not None  # a replay is of a kill of one player by another
-        replay = self.replay(kill, self.builder.style.min_shot_s, room_s)
+        replay = self.replay(kill, self.builder.style.min_shot_s, room_s, buffer.oldest_s)
         key = (
             kill.time_s,
             replay.from_s,
@@ -156,13 +167,16 @@ class Replays:
         (a, b), place, score, window = placed
         names = tuple(self.players[i] for i in pair)
         camera: ShotCamera
-        if place is None:  # the kill cam
-            camera = eyes_camera(a, float(self.builder.body_heights_m[a]), self.builder.lens, self.settings, window)
-            reason = f"{reason} through {self.players[a]}'s eyes"
-        else:
+        if isinstance(place, Place):
             camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
             camera.pair = window
-        eyes_id = self.players[a] if place is None else ""
+        elif place == a:  # the kill cam
+            camera = eyes_camera(a, float(self.builder.body_heights_m[a]), self.builder.lens, self.settings, window)
+        else:
+            camera = self._victim_camera(place, replay.kill_time_s)
+        eyes_id = "" if isinstance(place, Place) else self.players[place]
+        if eyes_id:
+            reason = f"{reason} through {eyes_id}'s eyes"
         choice = ShotChoice(names, ShotKind.REPLAY, f"{reason}: {names[0]} -> {names[1]}", held, replay, eyes_id=eyes_id)
         shot = Shot(choice, pair, camera, start_s)
         shot.hold_until_s, shot.scores = start_s + replay.length_s, {"place_visibility": score}
@@ -178,16 +192,19 @@ class Replays:
 
     def _place(
         self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None, eyes: bool
-    ) -> tuple[tuple[int, int], Place | None, float, PairWindow | None] | None:
-        """Through the killer's eyes (Place None) where they show the victim at the kill from
-        past the live angle; else which of the builder's DUEL cameras (its players A and B), its
-        place, score and pair window (None: the pair throughout), seeing the pair best at the
-        kill past the live angle; the killer alone before the kill only where no place sees the
-        pair throughout with min_visible; None where neither does (module docstring)."""
+    ) -> tuple[tuple[int, int], Place | int, float, PairWindow | None] | None:
+        """Through the killer's eyes (its index for the place) where they show the victim at the
+        kill from past the live angle; else which of the builder's DUEL cameras (its players A and
+        B), its place, score and pair window (None: the pair throughout), seeing the pair best at
+        the kill past the live angle; the killer alone before the kill only where no place sees
+        the pair throughout with min_visible; else through the victim's eyes (its index) where
+        they show the killer at the kill from past the live angle; None where none does (module
+        docstring)."""
         s = self.settings
         kill_moment = buffer.at(replay.kill_time_s)
         after = buffer.at(replay.kill_time_s + AFTER_KILL_S)
-        build_up = np.arange(replay.from_s, replay.kill_time_s, BUILD_UP_STEP_S)
+        # placed for the usual build-up: a replay filling its room shows more of it, weighed no more
+        build_up = np.arange(max(replay.from_s, replay.kill_time_s - s.replay_pre_s), replay.kill_time_s, BUILD_UP_STEP_S)
         cover = [*(buffer.at(t) for t in build_up), kill_moment, after]
         weights = [BUILD_UP_WEIGHT] * len(build_up) + [1.0, 1.0]
 
@@ -201,7 +218,7 @@ class Replays:
             visibility, heights = self.builder.visibility, self.builder.body_heights_m
             turned = bool(other_angle(kill_cam.pose(kill_moment).position_world[None])[0])
             if turned and all(shows_at(kill_cam, (victim,), m, visibility, heights, s) for m in (kill_moment, after)):
-                return pair, None, 1.0, alone_before
+                return pair, killer, 1.0, alone_before
 
         for window in (None, self._window(pair[0], replay.kill_time_s)):
             best: tuple[tuple[int, int], Place, float, PairWindow | None] | None = None
@@ -213,7 +230,23 @@ class Replays:
                     best = ((camera.a_index, camera.b_index), place, score, window)
             if best is not None and best[2] >= s.min_visible:
                 return best
+        if eyes and s.first_person:  # no place: the victim's view of its killer, where it saw it
+            killer, victim = pair
+            victim_cam = self._victim_camera(victim, replay.kill_time_s)
+            turned = bool(other_angle(victim_cam.pose(kill_moment).position_world[None])[0])
+            visibility, heights = self.builder.visibility, self.builder.body_heights_m
+            if turned and all(shows_at(victim_cam, (killer,), m, visibility, heights, s) for m in (kill_moment, after)):
+                return pair, victim, 1.0, victim_cam.pair
         return None
+
+    def _victim_camera(self, victim: int, kill_time_s: float) -> FirstPersonCamera:
+        """The victim's eyes for a replay of its death at kill_time_s, s: naming it alone in the
+        build-up as a kill cam names its killer; its eye kept at a living player's height past its
+        death (QuakeWorld drops a corpse's view to the floor: in a replay, a fall of the camera)."""
+        height_m = float(self.builder.body_heights_m[victim])
+        camera = eyes_camera(victim, height_m, self.builder.lens, self.settings, self._window(victim, kill_time_s))
+        camera.corpse_eye_above_feet_m = camera.eye_above_feet_m
+        return camera
 
 
 class DirectorReplays:
