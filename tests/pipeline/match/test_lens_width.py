@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.pipeline.match.first_person import CORPSE_EYE_FRACTION, EYE_HEIGHT_FRACTION
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
-from camdirector.pipeline.match.lens_width import FRAMED_IN, widened_fov_deg
+from camdirector.pipeline.match.lens_width import FRAMED_IN, looked_through, outline_points, widened_fov_deg
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
@@ -139,3 +140,33 @@ def test_a_subject_cut_off_even_at_the_widest_lens_keeps_the_lens():
     camera = chest + [5.0, 0.0, 0.0]
     pose = look_along(camera, chest + [0.0, 20.0, 0.0] - camera, Lens().vertical_fov_deg)  # looking 76 degrees up
     assert _widened(rig, moment, pose, subjects=(0,)) == Lens().vertical_fov_deg
+
+
+def test_only_a_camera_at_a_players_eye_point_looks_through_its_eyes():
+    """At the eye (living or dead: first_person.py's heights) a first-person view; elsewhere in
+    the body, midway between the two, a camera like any other."""
+    rig, moment, _ = _looking_at_a(8.0)
+    points = outline_points(moment, rig.rig.program_camera.subject_visibility)
+    top_m = points[0, :, 1].max() - moment.feet_world[0, 1]
+    midway = (EYE_HEIGHT_FRACTION + CORPSE_EYE_FRACTION) / 2.0
+    for fraction, through in ((EYE_HEIGHT_FRACTION, True), (CORPSE_EYE_FRACTION, True), (midway, False)):
+        at = moment.feet_world[0] + [0.0, fraction * top_m, 0.0]
+        pose = look_along(at, moment.feet_world[1] - moment.feet_world[0], Lens().vertical_fov_deg)
+        assert looked_through(pose, moment, points).tolist() == [through, False]
+
+
+def test_the_answered_pose_is_widened_at_its_moment_never_narrowed_and_zooms_back_from_the_last_answered():
+    """A pose made for another moment (held) is checked where it is answered: widened for a
+    player near it, kept where it is already wide, and narrowed no faster than the lens's pace
+    from the last answered pose."""
+    rig, moment, close = _looking_at_a(1.8)
+    _, _, far = _looking_at_a(8.0)
+    program_camera = rig.rig.program_camera
+    answered = program_camera.widened_for_answer(moment, close, None, 0.0)
+    assert answered.vertical_fov_deg == _widened(rig, moment, close) > close.vertical_fov_deg
+    assert np.array_equal(answered.position_world, close.position_world)
+    wide = CameraPose(far.position_world, far.rotation_xyzw, 80.0)
+    assert program_camera.widened_for_answer(moment, wide, None, 0.0) is wide  # never narrowed
+    paced = program_camera.widened_for_answer(moment, far, 80.0, 0.1)
+    assert paced.vertical_fov_deg == pytest.approx(80.0 - 0.1 * SETTINGS.narrow_deg_s)
+    assert program_camera.widened_for_answer(moment, far, None, 0.0) is far  # a cut: the lens's own

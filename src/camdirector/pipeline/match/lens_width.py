@@ -12,6 +12,9 @@ one-degree grid. Going back to the lens's is a zoom at `MatchSettings.narrow_deg
 faster, so a camera that comes and goes near a wall does not pump; a cut starts at what it
 needs. A camera in a player's eyes (HLTV's and the autotrack's first-person views) keeps the
 lens: a first-person view is the game's own picture (eval-match leaves it out of its heights).
+The pose the program answers is checked again at the moment its picture shows, widened only
+(program_camera.py `widened_for_answer`): a pose made for another moment, as the edit window's
+held first pose of a shot, was sized for that one.
 A player's height on screen is eval-match's (evaluation/match/measure.py): the extent of its
 points on the screen's vertical axis, clipped to the frame, over the frame's height; its points
 here are its outline (SubjectVisibility.outlines_local: the samples and its mesh's lowest and
@@ -30,6 +33,7 @@ import numpy as np
 
 from camdirector.geometry.camera import NEAR_PLANE_M, CameraPose, Lens
 from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match.first_person import CORPSE_EYE_FRACTION, EYE_HEIGHT_FRACTION
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.visibility import SubjectVisibility
@@ -38,7 +42,7 @@ FRAMED_IN = 0.75  # a framed subject cut off by the frame is widened for until t
 # seen (or as much as the widest lens shows): over eval-match's SHOWN_FRACTION, whose 32 points are not the rig's 16
 SHOWN_SEEN = 0.5  # a player with this share of its points seen from the pose is shown (eval-match's SHOWN_FRACTION)
 FOV_STEP_DEG = 1.0  # the widths tried, from the lens's up, deg
-EYES_RADIUS_M = 0.6  # a camera this near a player's upright axis, within its height, looks through its eyes, m
+EYES_RADIUS_M = 0.5  # a camera this near a player's eye point looks through its eyes (eval-match's EYE_TOLERANCE_M), m
 
 
 def widened_fov_deg(
@@ -143,11 +147,18 @@ def _in_frame(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, as
 
 
 def looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) -> np.ndarray:
-    """(P,) bool: the players the camera stands in (within EYES_RADIUS_M of the upright line
-    through their feet, between their feet and head): a first-person view."""
-    offset = pose.position_world - moment.feet_world  # (P, 3)
-    top_m = points_world[..., 1].max(axis=1) - moment.feet_world[:, 1]  # (P,) the body's height above its feet
-    return np.asarray((np.hypot(offset[:, 0], offset[:, 2]) < EYES_RADIUS_M) & (offset[:, 1] >= 0.0) & (offset[:, 1] <= top_m))
+    """(P,) bool: the players through whose eyes the camera looks (within EYES_RADIUS_M of a
+    living or a dead one's eye point, first_person.py, at its body's height): a first-person view.
+    A camera elsewhere in a body is not one: eval-match measures its picture as any other (on the
+    real wipeout a replay's camera inside a third player's body kept a 50-degree lens while its
+    subject, 3 m off, filled 0.63 of the frame)."""
+    feet = moment.feet_world  # (P, 3)
+    top_m = points_world[..., 1].max(axis=1) - feet[:, 1]  # (P,) the body's height above its feet
+    near = np.zeros(len(feet), dtype=bool)
+    for fraction in (EYE_HEIGHT_FRACTION, CORPSE_EYE_FRACTION):
+        eyes = feet + np.outer(fraction * top_m, [0.0, 1.0, 0.0])
+        near |= np.linalg.norm(eyes - pose.position_world, axis=1) < EYES_RADIUS_M
+    return near
 
 
 def screen_heights(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, aspect: float) -> np.ndarray:

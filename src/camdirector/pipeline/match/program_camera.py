@@ -179,6 +179,19 @@ class ProgramCamera:
         fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s, subjects)
         return pose if fov_deg == pose.vertical_fov_deg else CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
 
+    def widened_for_answer(self, moment: Moment, pose: CameraPose, last_fov_deg: float | None, dt_s: float) -> CameraPose:
+        """The pose the program answers at the moment its picture shows, its lens widened (never
+        narrowed) where a player it shows stands taller than the band there, zooming back from
+        the last answered lens (last_fov_deg; None on a cut) at lens_width.py's pace. A pose
+        worked at its own moment was widened in `step`; one made for another moment was not: an
+        edit window's held first pose of the shot after, a pose held from the frame before
+        (`pose_held`). On the real 4on4, 4 of its 9 frames over 0.6 of the frame's height were a
+        held first pose at 65 degrees, made for a moment 0.1-1.5 s later."""
+        fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s)
+        if fov_deg <= pose.vertical_fov_deg:
+            return pose
+        return CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
+
     def _seen_again(
         self,
         moment: Moment,
