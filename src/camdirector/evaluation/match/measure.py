@@ -280,10 +280,9 @@ def replay_figures(
                 continue
             row = rows[inside[0]]
             killer, victim = column[event.actor_id], column[event.other_actor_id]
-            seen = shown[row, [killer, victim]].copy()
-            if eyes_of is not None and eyes_of[row] in (killer, victim):  # through one's eyes: that one counts 1
-                seen[[killer, victim].index(int(eyes_of[row]))] = 1.0
-            if seen.min() >= SHOWN_FRACTION:
+            # through one's eyes, that one counts as shown
+            seen = [1.0 if eyes_of is not None and eyes_of[row] == p else shown[row, p] for p in (killer, victim)]
+            if min(seen) >= SHOWN_FRACTION:
                 replayed.add(k)
                 shown_replays += 1
                 break

@@ -170,10 +170,8 @@ class Replays:
         if isinstance(place, Place):
             camera = ToricCamera(ShotKind.DUEL, a, b, self.builder.style, self.builder.lens, place)
             camera.pair = window
-        elif place == a:  # the kill cam
-            camera = eyes_camera(a, float(self.builder.body_heights_m[a]), self.builder.lens, self.settings, window)
-        else:
-            camera = self._victim_camera(place, replay.kill_time_s)
+        else:  # the kill cam, or the victim's view
+            camera = self._eyes(place, a, replay.kill_time_s)
         eyes_id = "" if isinstance(place, Place) else self.players[place]
         if eyes_id:
             reason = f"{reason} through {eyes_id}'s eyes"
@@ -184,11 +182,12 @@ class Replays:
             shot.cover_times_s = [replay.kill_time_s]  # its pair window's event (the rig keeps a window to its shot's events)
         return shot
 
-    def _window(self, killer: int, kill_time_s: float) -> PairWindow:
+    def _window(self, kept: int, kill_time_s: float) -> PairWindow:
         """When a replay of a kill at kill_time_s, s, frames its pair: as a planned DUEL live, around
-        the kill only, the killer alone before it (module docstring)."""
+        the kill only, its kept player (the killer; the victim in the victim's view) alone before
+        it (module docstring)."""
         s = self.settings
-        return PairWindow(killer, (kill_time_s,), s.pair_before_s, s.pair_after_s, s.reframe_s)
+        return PairWindow(kept, (kill_time_s,), s.pair_before_s, s.pair_after_s, s.reframe_s)
 
     def _place(
         self, pair: tuple[int, int], replay: Replay, buffer: MomentBuffer, live_world: np.ndarray | None, eyes: bool
@@ -211,14 +210,19 @@ class Replays:
         def other_angle(positions_world: np.ndarray) -> np.ndarray:
             return self.builder.grammar.allows_cut(live_world, kill_moment.aims_world[list(pair)], positions_world)
 
-        if eyes and s.first_person:
-            killer, victim = pair
-            alone_before = self._window(killer, replay.kill_time_s)
-            kill_cam = eyes_camera(killer, float(self.builder.body_heights_m[killer]), self.builder.lens, s, alone_before)
+        def through(player: int, other: int) -> tuple[tuple[int, int], int, float, PairWindow | None] | None:
+            """Through the player's eyes where they show the other at the kill and its next frame
+            from past the live angle."""
+            camera = self._eyes(player, pair[0], replay.kill_time_s)
+            if not other_angle(camera.pose(kill_moment).position_world[None])[0]:
+                return None
             visibility, heights = self.builder.visibility, self.builder.body_heights_m
-            turned = bool(other_angle(kill_cam.pose(kill_moment).position_world[None])[0])
-            if turned and all(shows_at(kill_cam, (victim,), m, visibility, heights, s) for m in (kill_moment, after)):
-                return pair, killer, 1.0, alone_before
+            shown = all(shows_at(camera, (other,), m, visibility, heights, s) for m in (kill_moment, after))
+            return (pair, player, 1.0, camera.pair) if shown else None
+
+        kill_cam = through(*pair) if eyes and s.first_person else None
+        if kill_cam is not None:
+            return kill_cam
 
         for window in (None, self._window(pair[0], replay.kill_time_s)):
             best: tuple[tuple[int, int], Place, float, PairWindow | None] | None = None
@@ -230,22 +234,17 @@ class Replays:
                     best = ((camera.a_index, camera.b_index), place, score, window)
             if best is not None and best[2] >= s.min_visible:
                 return best
-        if eyes and s.first_person:  # no place: the victim's view of its killer, where it saw it
-            killer, victim = pair
-            victim_cam = self._victim_camera(victim, replay.kill_time_s)
-            turned = bool(other_angle(victim_cam.pose(kill_moment).position_world[None])[0])
-            visibility, heights = self.builder.visibility, self.builder.body_heights_m
-            if turned and all(shows_at(victim_cam, (killer,), m, visibility, heights, s) for m in (kill_moment, after)):
-                return pair, victim, 1.0, victim_cam.pair
-        return None
+        return through(pair[1], pair[0]) if eyes and s.first_person else None  # no place: the victim's view
 
-    def _victim_camera(self, victim: int, kill_time_s: float) -> FirstPersonCamera:
-        """The victim's eyes for a replay of its death at kill_time_s, s: naming it alone in the
-        build-up as a kill cam names its killer; its eye kept at a living player's height past its
-        death (QuakeWorld drops a corpse's view to the floor: in a replay, a fall of the camera)."""
-        height_m = float(self.builder.body_heights_m[victim])
-        camera = eyes_camera(victim, height_m, self.builder.lens, self.settings, self._window(victim, kill_time_s))
-        camera.corpse_eye_above_feet_m = camera.eye_above_feet_m
+    def _eyes(self, player: int, killer: int, kill_time_s: float) -> FirstPersonCamera:
+        """A replay's camera through the player's eyes, of a kill by `killer` at kill_time_s, s:
+        naming the player alone in the build-up (the kill cam its killer, the victim's view its
+        victim). The victim's eye stays at a living player's height past its death (QuakeWorld
+        drops a corpse's view to the floor: in a replay, a fall of the camera)."""
+        height_m = float(self.builder.body_heights_m[player])
+        camera = eyes_camera(player, height_m, self.builder.lens, self.settings, self._window(player, kill_time_s))
+        if player != killer:
+            camera.corpse_eye_above_feet_m = camera.eye_above_feet_m
         return camera
 
 
