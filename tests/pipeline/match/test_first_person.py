@@ -204,10 +204,11 @@ def turning_away(t: float):
     return approach(t, a_looks_at_b=t < KILL_S - 0.3)
 
 
-def test_where_its_toric_camera_would_meet_a_wall_a_kill_seen_just_before_goes_through_the_eyes():
-    """From a's eyes b is not in the frame at the kill (a turned away), so the kill alone does not
-    take them; but a wall across the Toric camera's way (a cut within the shot) does, as long as
-    a saw b within eyes_lead_s before it."""
+def _turning_away_with_walls(hide_the_kill_from_the_toric_place: bool):
+    """turning_away's kill, its DUEL's Toric camera, and a visibility with a thin panel across that
+    camera's longest step between two of the shot's moments (a cut within the shot), and another
+    between the camera's place at the kill and b where asked; with a check that a still sees b
+    past them 0.5 s before the kill."""
     settings = MatchSettings()
     rig = BareRig(Match({"a": 1, "b": 2}, turning_away, delay_s=4.0), settings)
     rig.run(4.0)
@@ -215,28 +216,45 @@ def test_where_its_toric_camera_would_meet_a_wall_a_kill_seen_just_before_goes_t
     cut = r.buffer.at(CUT_S)
     toric = r.builder.cameras(ShotKind.DUEL, (0, 1), cut, default=True)[0][0]
     toric.pair = PairWindow(0, (KILL_S,), settings.pair_before_s, settings.pair_after_s, settings.reframe_s)
-    heights = r.builder.body_heights_m
-
-    def eyes(visibility, s=settings):
-        return through_eyes(toric, (0, 1), r.buffer, cut, (KILL_S,), visibility, heights, s)
-
-    assert eyes(r.visibility) is None  # no wall: its Toric camera shows the kill
-    # a thin panel across the camera's longest step between two of the shot's moments
     moments, _ = shot_moments(toric, r.buffer, CUT_S, (KILL_S,), settings)
     path = np.array([toric.positions(m, [toric.place_at(m.time_s)])[0] for m in sorted(moments, key=lambda m: m.time_s)])
     step = int(np.argmax(np.linalg.norm(np.diff(path, axis=0), axis=1)))
     axis = int(np.argmax(np.abs(path[step + 1] - path[step])))
     size = np.full(3, 1.0)
     size[axis] = 0.1
-    panel = block(0.5 * (path[step] + path[step + 1]), size)
+    panels = [block(0.5 * (path[step] + path[step + 1]), size)]
+    at_kill = r.buffer.at(KILL_S)
+    if hide_the_kill_from_the_toric_place:
+        place = toric.positions(at_kill, [toric.place_at(KILL_S)])[0]
+        panels.append(block(place + 0.3 * (at_kill.aims_world[1] - place), np.full(3, 0.6)))
     walled = SubjectVisibility(
-        RayScene([panel]), [t.mesh for t in rig.scene.targets], settings.samples_per_player, np.random.default_rng(0)
+        RayScene(panels), [t.mesh for t in rig.scene.targets], settings.samples_per_player, np.random.default_rng(0)
     )
     lead = r.buffer.at(KILL_S - 0.5)
-    assert not walled.ray_scene.occluded(lead.aims_world[0], lead.aims_world[1][None])[0]  # a still sees b past it
+    assert not walled.ray_scene.occluded(lead.aims_world[0], lead.aims_world[1][None])[0]  # a still sees b past them
+
+    def eyes(visibility, s=settings):
+        return through_eyes(toric, (0, 1), r.buffer, cut, (KILL_S,), visibility, r.builder.body_heights_m, s)
+
+    return eyes, r.visibility, walled
+
+
+def test_where_its_toric_camera_would_meet_a_wall_a_kill_seen_just_before_goes_through_the_eyes():
+    """From a's eyes b is not in the frame at the kill (a turned away), so the kill alone does not
+    take them; but a wall across the Toric camera's way (a cut within the shot) does, as long as
+    a saw b within eyes_lead_s before it and the Toric camera's place does not see the kill either."""
+    eyes, open_level, walled = _turning_away_with_walls(hide_the_kill_from_the_toric_place=True)
+    assert eyes(open_level) is None  # no wall: its Toric camera shows the kill
     camera = eyes(walled)
     assert isinstance(camera, FirstPersonCamera) and camera.player == 0
-    assert eyes(walled, dataclasses.replace(settings, eyes_lead_s=0.0)) is None  # it is the lead that admits it
+    assert eyes(walled, dataclasses.replace(MatchSettings(), eyes_lead_s=0.0)) is None  # it is the lead that admits it
+
+
+def test_a_kill_the_eyes_do_not_see_and_the_toric_place_does_is_the_toric_cameras_walls_and_all():
+    """The same wall across the Toric camera's way, but from its place at the kill the pair is in
+    view: the eyes, turned away at the kill, would miss it (the real 2on2 missed 5 kills so)."""
+    eyes, _, walled = _turning_away_with_walls(hide_the_kill_from_the_toric_place=False)
+    assert eyes(walled) is None
 
 
 def test_an_eye_inside_solid_is_not_shown_the_last_picture_stays():
