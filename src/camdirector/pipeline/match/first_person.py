@@ -162,14 +162,12 @@ def through_eyes(
         return camera if all(shows_at(camera, others, m, visibility, body_heights_m, settings) for m in cover) else None
     if buffer is None:
         return None
-    if all(
-        shows_at(camera, others, buffer.at(min(t, buffer.horizon_s)), visibility, body_heights_m, settings)
-        for t in _event_moments_s(events_s)
-    ):
+    at_events = [buffer.at(min(t, buffer.horizon_s)) for t in _event_moments_s(events_s)]
+    if all(shows_at(camera, others, m, visibility, body_heights_m, settings) for m in at_events):
         return camera
     if not _meets_a_wall(toric, buffer, cut, events_s, visibility, settings):
         return None
-    if _only_toric_sees(camera, toric, subjects, others, buffer, events_s, visibility, settings):
+    if _only_toric_sees(camera, toric, subjects, others, at_events, visibility, settings):
         return None
     lead = np.arange(0.0, settings.eyes_lead_s + 1e-9, settings.stand_step_s / 2.0)
     for event_s in events_s:
@@ -184,15 +182,13 @@ def _only_toric_sees(
     toric: ToricCamera,
     subjects: tuple[int, ...],
     others: tuple[int, ...],
-    buffer: MomentBuffer,
-    events_s: tuple[float, ...],
+    moments: list[Moment],
     visibility: SubjectVisibility,
     settings: MatchSettings,
 ) -> bool:
-    """Whether, at some event's moment or the next frame's, the eyes see the others under
-    eyes_seen (in the frame and unhidden, whatever their distance) while at every one of them the
-    Toric camera's own place sees its framed subjects with eyes_seen (module docstring)."""
-    moments = [buffer.at(min(t, buffer.horizon_s)) for t in _event_moments_s(events_s)]
+    """Whether, at some of the moments (each event's and the next frame's), the eyes see the
+    others under eyes_seen (in the frame and unhidden, whatever their distance) while at every one
+    of them the Toric camera's own place sees its framed subjects with eyes_seen (module docstring)."""
     if all(seen_through(visibility, m, others, camera.pose(m), camera.lens).min() >= settings.eyes_seen for m in moments):
         return False
     return all(scores_from(toric, subjects, [m], [1.0], None, visibility)[0] >= settings.eyes_seen for m in moments)
