@@ -5,10 +5,13 @@ the same on a `match-sim` bot match of each shared level (../shared/data/levels:
 1, as long as --minutes, default 3), named sim_<level>.
 
     python -m load_tests.real_matches [--minutes 3] [--delay 10] [--rate-hz 30] [--twice] [--paced]
-                                      [--only 4on4_dm2,sim_zdm2,...] [--json out/rm.json] [--markdown out/rm.md]
+                                      [--only 4on4_dm2,sim_zdm2,...] [--directors planned,...]
+                                      [--json out/rm.json] [--markdown out/rm.md]
 
 --paced sends the frames in real time (eval-match --paced: the same program, a live session's
 compute times; a 3-minute match takes 3 minutes and 10 s per director).
+--directors runs only the named directors (registered names; default every one): `--directors
+planned` is how docs/casting.md's before/after tables of our director are measured.
 --twice runs each match a second time from scratch (the level added anew in another folder, a new
 server) and reports whether every director's program digest is the same. The two held-out matches
 of the issue are not in this list and must never be: they judge the director.
@@ -124,6 +127,7 @@ def run_match(name: str, args) -> dict:
             result, _ = evaluate_match(
                 match,
                 args.delay,
+                directors=args.directors,
                 data_dir=Path(tmp) / "data",
                 rate_hz=args.rate_hz,
                 seed=0,
@@ -163,9 +167,18 @@ def main(argv=None) -> int:
     parser.add_argument("--twice", action="store_true", help="run each match twice from scratch, compare programs")
     parser.add_argument("--paced", action="store_true", help="send in real time at --rate-hz (issue 41's table; slow)")
     parser.add_argument("--only", default="", help="comma-separated match names (default: all of MATCHES)")
+    parser.add_argument("--directors", default="", help="comma-separated director names (default: every one registered)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--markdown", type=Path)
     args = parser.parse_args(argv)
+    from camdirector.pipeline.match.director_registry import registered
+
+    registered_names = [e.name for e in registered()]
+    args.directors = [n for n in args.directors.split(",") if n] or None
+    strangers = [n for n in args.directors or () if n not in registered_names]
+    if strangers:
+        print(f"real_matches: unknown director {strangers}; registered: {registered_names}", file=sys.stderr)
+        return 2
     known = [*MATCHES, *SIM_MATCHES]
     names = [n for n in args.only.split(",") if n] or known
     unknown = [n for n in names if n not in known]

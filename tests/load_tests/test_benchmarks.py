@@ -218,6 +218,19 @@ def test_real_matches_report_every_director_beside_the_ceilings_and_the_same_pro
     assert len(table) == 2 + 4 and table[2].startswith("| duel_bravado | planned |")
 
 
+def test_real_matches_runs_only_the_directors_named(tmp_path):
+    """--directors planned: our director alone (docs/casting.md's before/after tables), the ceilings still beside it."""
+    args = ("--only", "duel_bravado", "--minutes", "0.4", "--rate-hz", "15", "--directors", "planned")
+    result = _run(real_matches.main, tmp_path, *args)
+    duel = result["matches"]["duel_bravado"]
+    assert set(duel["directors"]) == {"planned"} and duel["ceilings"]["kills"] >= 1
+
+
+def test_real_matches_refuses_a_director_it_does_not_know(tmp_path, capsys):
+    assert real_matches.main(["--only", "duel_bravado", "--directors", "planned,nobody", "--json", str(tmp_path / "o.json")]) == 2
+    assert "unknown director ['nobody']" in capsys.readouterr().err and not (tmp_path / "o.json").exists()
+
+
 def test_oversize_bench_reports_frames_quiet_and_attacked_and_every_attack_answered(tmp_path):
     result = _run(oversize.main, tmp_path, "--sessions", "1", "--seconds", "1", "--workers", "1", "--oversize-mib", "6")
     assert result["quiet"]["dropped_frames"] == result["attacked"]["dropped_frames"] == 0

@@ -105,6 +105,45 @@ def test_a_discretionary_follow_of_one_player_is_through_its_eyes():
     assert isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == 1 and shot.choice.eyes_id == "b"
 
 
+def running_away(t: float):
+    """b runs away from a along +z at 2 m/s, facing its run: a, standing at the origin, is behind b's back."""
+    z = 8.0 + 2.0 * min(t, 3.5)
+    return {"a": ((0.0, 0.0), facing((0, 0), (0, z))), "b": ((0.0, z), facing((0, z), (0, z + 8)))}
+
+
+def _follow_of_b(walls=(), events=()):
+    """The discretionary FOLLOW of b our director builds at CUT_S, placed for it and 1-3 s on
+    (planned.py OPTION_COVER_S), with the buffer."""
+    rig = BareRig(Match({"a": 1, "b": 2}, running_away, list(events), delay_s=4.0, walls=list(walls)), MatchSettings())
+    rig.run(4.0)
+    r = rig.rig
+    cover = [r.buffer.at(CUT_S + dt) for dt in (0.0, 1.0, 2.0, 3.0)]
+    choice = ShotChoice(("b",), ShotKind.FOLLOW, "fighter")
+    shot, _ = r.builder.build(choice, (1,), cover[0], cover, None, None, CUT_S, buffer=r.buffer)
+    assert shot is not None
+    return r, shot, cover
+
+
+def test_a_follow_whose_eyes_show_nobody_is_its_toric_cameras_where_that_meets_no_wall_else_the_eyes():
+    r, shot, cover = _follow_of_b()
+    assert isinstance(shot.camera, ToricCamera) and shot.choice.eyes_id == ""  # b's eyes show nobody; open ground
+    # a panel across the way that Toric camera goes between 1 and 2 s on: its place would pass through it
+    camera = shot.camera
+    start, end = (camera.positions(m, [camera.place_at(m.time_s)])[0] for m in cover[1:3])
+    assert np.linalg.norm(end - start) > 1.0  # the camera moves with b
+    along = np.abs(end - start) / np.linalg.norm(end - start)
+    across = np.abs(np.cross(along, [0.0, 1.0, 0.0]))
+    panel = block((start + end) / 2.0, across / np.linalg.norm(across) * 2.0 + along * 0.1 + [0.0, 4.0, 0.0])
+    _, walled, _ = _follow_of_b([panel])
+    assert isinstance(walled.camera, FirstPersonCamera) and walled.camera.player == 1 and walled.choice.eyes_id == "b"
+
+
+def test_a_follow_whose_player_kills_in_the_buffered_future_stays_in_its_eyes():
+    """Its planned shot of the kill will likely be through the same eyes: the picture goes on uncut (rig.py)."""
+    _, shot, _ = _follow_of_b(events=[kill("b", "a", 3.5)])
+    assert isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == 1
+
+
 @pytest.mark.parametrize(
     "players, eyes",
     [
@@ -299,12 +338,13 @@ def test_a_cut_to_the_eyes_keeps_the_30_degree_rule(previous_world, eyes):
 
 
 def test_a_fight_held_through_one_players_eyes_is_not_chosen_again_at_every_tick():
-    """a and b face off for 30 s: the director's max-shot-length cut finds the same eyes best, and
-    the picture goes on; its clock restarts with each choice (rig.py), so the choice is made once
-    per max_shot_s, not at every planning tick (160 of 781 frames before)."""
+    """a and b face off 6 m apart for 30 s (near enough that b reads in a's eyes: a FOLLOW of a is
+    through them): the director's max-shot-length cut finds the same eyes best, and the picture
+    goes on; its clock restarts with each choice (rig.py), so the choice is made once per
+    max_shot_s, not at every planning tick (160 of 781 frames before)."""
 
     def face_off(t: float):
-        return {"a": ((0.0, 0.0), facing((0, 0), (0, 8))), "b": ((0.0, 8.0), facing((0, 8), (0, 0)))}
+        return {"a": ((0.0, 0.0), facing((0, 0), (0, 6))), "b": ((0.0, 6.0), facing((0, 6), (0, 0)))}
 
     states = BareRig(Match({"a": 1, "b": 2}, face_off, delay_s=4.0), MatchSettings()).run(30.0)
     shown = [s for s in states if not s.match.buffering]

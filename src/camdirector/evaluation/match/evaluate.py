@@ -238,11 +238,12 @@ def _figures(
         "framed_visibility": round(framed_visibility(program, shown, column), 3),
         "program_visibility": round(program_visibility(program, shown, column, eyes), 3),
         "first_person_share": round(float((eyes >= 0).mean()), 3),
+        # 4 decimals: at 3, the real wipeout's 0.1496 and sim_zdm2's 0.1495 read as issue 41's bar of 0.15
         "shown_height": {
-            "median": round(float(np.median(heights)), 3) if len(heights) else None,
-            "median_third_person": round(float(np.median(third_person)), 3) if len(third_person) else None,
-            "p10": round(float(np.percentile(heights, 10)), 3) if len(heights) else None,
-            "subjects_median": round(float(np.median(subject_heights)), 3) if len(subject_heights) else None,
+            "median": round(float(np.median(heights)), 4) if len(heights) else None,
+            "median_third_person": round(float(np.median(third_person)), 4) if len(third_person) else None,
+            "p10": round(float(np.percentile(heights, 10)), 4) if len(heights) else None,
+            "subjects_median": round(float(np.median(subject_heights)), 4) if len(subject_heights) else None,
             "max": None if tallest["max"] is None else round(tallest["max"], 3),
             "over_60pc": None if tallest["over_60pc"] is None else round(tallest["over_60pc"], 4),
         },

@@ -42,7 +42,15 @@ on the duel, for more cuts within those shots (shots under 2 s 7 -> 10, 5 -> 11,
 discretionary FOLLOW of one player (no event to show) always is; a discretionary shot of several
 (a fight) when the eyes show the others at every moment it is placed for (the cut and up to 3 s
 ahead: planned.py OPTION_COVER_S): on the real duel's first 3 minutes its Toric fights were
-behind 6 of its 30 shots under 2 s.
+behind 6 of its 30 shots under 2 s. A discretionary FOLLOW whose eyes show no other player
+readable (`follow_eyes_height_min` of the frame's height, median over the moments it is placed
+for, players shown at half of them or more) is the Toric camera's instead, where that camera,
+carried by its player to the buffer's horizon, meets no wall and sees its player with
+`min_visible` at every `stand_step_s`; unless its player kills or dies within the buffered future
+(its planned shot will likely be through the same eyes, and the picture goes on uncut). A view
+through a player's eyes does not show that player, and on an open level the others are far off in
+it: on sim_zdm2 the median shown height went 0.1495 -> 0.2185, on sim_undulating 0.106 -> 0.120,
+with the real matches' programs unchanged (their corridors meet a wall within the horizon).
 The picture then names the kept player alone away from a DUEL's events, as its Toric camera would
 (its `PairWindow`, shots.py), and the pair around them.
 """
@@ -149,15 +157,25 @@ def through_eyes(
     body_heights_m: np.ndarray,
     settings: MatchSettings,
     cover: Sequence[Moment] = (),
+    kills_ahead: bool = False,
 ) -> FirstPersonCamera | None:
     """The shot's camera through its kept player's eyes (module docstring), or None (`toric` is
     the camera the shot would otherwise have from the cut: its anchor, pair window and torus;
-    `cover`, the moments a discretionary shot is placed for)."""
+    `cover`, the moments a discretionary shot is placed for; `kills_ahead`, whether the kept
+    player kills or dies in the buffered future)."""
     eyes = toric.anchor_index
     camera = eyes_camera(eyes, float(body_heights_m[eyes]), toric.lens, settings, toric.pair)
     others = tuple(i for i in subjects if i != eyes)
     if not others:
-        return camera
+        if events_s or kills_ahead or buffer is None or not cover:
+            return camera
+        if _shows_readable(camera, cover, visibility, body_heights_m, settings):
+            return camera
+        ahead = [buffer.at(t) for t in np.arange(cover[0].time_s, buffer.horizon_s + 1e-9, settings.stand_step_s)]
+        if _path_meets_a_wall(toric, ahead, visibility):
+            return camera
+        seen = [scores_from(toric, subjects, [m], [1.0], None, visibility)[0] for m in ahead]
+        return None if min(seen) >= settings.min_visible else camera
     if not events_s:  # a discretionary shot: the others shown at every moment it is placed for
         return camera if all(shows_at(camera, others, m, visibility, body_heights_m, settings) for m in cover) else None
     if buffer is None:
@@ -237,6 +255,35 @@ def _meets_a_wall(
     moments (stand.py `shot_moments`: every stand_step_s to its last event's pair window), passes
     through level geometry between two of them: a cut within the shot."""
     moments, _ = shot_moments(toric, buffer, cut.time_s, events_s, settings)
+    return _path_meets_a_wall(toric, moments, visibility)
+
+
+def _path_meets_a_wall(toric: ToricCamera, moments: Sequence[Moment], visibility: SubjectVisibility) -> bool:
+    """Whether the Toric camera's place, carried by its players over the moments (in time order
+    once sorted), passes through level geometry between two of them."""
     ordered = sorted({m.time_s: m for m in moments}.values(), key=lambda m: m.time_s)
     path = [p[0] for p in (toric.positions(m, [toric.place_at(m.time_s)]) for m in ordered) if p is not None]
     return len(path) > 1 and bool(visibility.ray_scene.occluded(np.array(path[:-1]), np.array(path[1:])).any())
+
+
+def _shows_readable(
+    camera: FirstPersonCamera,
+    moments: Sequence[Moment],
+    visibility: SubjectVisibility,
+    body_heights_m: np.ndarray,
+    settings: MatchSettings,
+) -> bool:
+    """Whether the eyes show the players in their frame readable: the median, over the moments
+    where they show any (eyes_seen of its points in the frame and unhidden), of their shown
+    heights (eval-match's: the body over the frame's height at its chest's distance) is at least
+    follow_eyes_height_min, with players shown at half of the moments or more."""
+    everyone = tuple(i for i in range(len(body_heights_m)) if i != camera.player)
+    medians = []
+    for moment in moments:
+        pose = camera.pose(moment)
+        seen = seen_through(visibility, moment, everyone, pose, camera.lens)
+        shown = [i for i, share in zip(everyone, seen) if share >= settings.eyes_seen]
+        if shown:
+            distance_m = np.maximum(np.linalg.norm(moment.aims_world[shown] - pose.position_world, axis=1), 0.1)
+            medians.append(float(np.median(body_heights_m[shown] / (2.0 * distance_m * camera.lens.tan_half_fov_y))))
+    return 2 * len(medians) >= len(moments) and float(np.median(medians)) >= settings.follow_eyes_height_min

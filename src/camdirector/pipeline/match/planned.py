@@ -431,7 +431,8 @@ class PlannedDirector(DirectorBase):
             if len(option.subjects) > 1 and skipped >= MAX_UNSEEN_FIGHTS:
                 continue  # a plan's cost stays bounded: each try is a place search
             cover = [moment] + [buffer.at(now + ahead_s) for ahead_s in OPTION_COVER_S if now + ahead_s <= buffer.horizon_s]
-            shot, seen = self.builder.build(choice, option.subjects, moment, cover, current, current_pose, now)
+            # the buffer: a FOLLOW's eyes give way to its Toric camera where that meets no wall (first_person.py)
+            shot, seen = self.builder.build(choice, option.subjects, moment, cover, current, current_pose, now, buffer=buffer)
             if shot is not None and seen < s.min_visible and len(option.subjects) > 1:
                 # a fight no place sees (no kill to wait for): one of its players, a later option, shows more
                 # (on the real 4on4, such DUELs were 7% of the program, their players shown 0.54)

@@ -154,6 +154,9 @@ class MatchSettings:
                                          # (eval-match's shown fraction), share. [0, 1]
     eyes_shown_height_min: float = 0.1   # and only where each is near enough to read from there: this share of the frame's
                                          # height, by distance (first_person.py), share. [0, 1]
+    follow_eyes_height_min: float = 0.15  # a discretionary FOLLOW goes through its player's eyes only where they show the
+                                         # others this share of the frame's height (median), or its Toric camera would meet
+                                         # a wall (first_person.py; issue 41's median bar), share. [0, 1]
     eyes_lead_s: float = 1.0             # or, where its Toric camera would meet a wall within the shot, at some moment this
                                          # long before each event (first_person.py), s. [0, 10]
     shown_height_max: float = 0.5        # the framing band's top: a shot's camera is placed where none of its subjects fills
@@ -192,8 +195,9 @@ class MatchSettings:
         if not 0.0 <= self.wall_hold_max_m <= 100.0:
             raise ValueError("MatchSettings: wall_hold_max_m in [0, 100] m")
         if not (1.0 < self.eyes_fov_deg < 170.0 and 0.0 <= self.eyes_seen <= 1.0 and 0.0 <= self.eyes_lead_s <= 10.0
-                and 0.0 <= self.eyes_shown_height_min <= 1.0):
-            raise ValueError("MatchSettings: eyes_fov_deg in (1, 170) deg, eyes_seen and eyes_shown_height_min in [0, 1], "
+                and 0.0 <= self.eyes_shown_height_min <= 1.0 and 0.0 <= self.follow_eyes_height_min <= 1.0):
+            raise ValueError("MatchSettings: eyes_fov_deg in (1, 170) deg, eyes_seen, eyes_shown_height_min and "
+                             "follow_eyes_height_min in [0, 1], "
                              "eyes_lead_s in [0, 10] s")
         if self.edit_window_s > 10.0:
             raise ValueError("MatchSettings: edit_window_s in [0, 10] s")

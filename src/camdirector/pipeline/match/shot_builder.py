@@ -47,6 +47,7 @@ from dataclasses import replace
 import numpy as np
 
 from camdirector.geometry.camera import CameraPose, Lens
+from camdirector.pipeline.inputs import EventKind
 from camdirector.pipeline.match.first_person import FirstPersonCamera, through_eyes
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import Grammar
@@ -374,7 +375,10 @@ class ShotBuilder:
         camera.place = camera.goal = place
         planned = buffer if events_s else None  # a planned shot: its events and the buffer that holds them
         if s.first_person and not choice.held and choice.replay is None:
-            eyes = through_eyes(camera, subjects, buffer, moment, events_s, self.visibility, self.body_heights_m, s, cover)
+            kills_ahead = self._kills_ahead(camera.anchor_index, moment, buffer)
+            eyes = through_eyes(
+                camera, subjects, buffer, moment, events_s, self.visibility, self.body_heights_m, s, cover, kills_ahead
+            )
             if eyes is not None and self._eyes_allowed(eyes, previous, previous_framed, previous_world, moment, subjects):
                 # first_person.py: no wall to meet, no cut within the shot
                 who = self.players[eyes.player]
@@ -400,6 +404,16 @@ class ShotBuilder:
             assert camera.b_index is not None  # a DUEL's camera frames two
             self.grammar.remember_duel(self.players[camera.a_index], self.players[camera.b_index])
         return Shot(choice, subjects, camera, start_s), score
+
+    def _kills_ahead(self, player: int, moment: Moment, buffer: MomentBuffer | None) -> bool:
+        """Whether the player kills or dies in the buffered future after the moment."""
+        if buffer is None:
+            return False
+        who = self.players[player]
+        return any(
+            e.kind == EventKind.KILL and who in (e.actor_id, e.other_actor_id)
+            for e in buffer.events_between(moment.time_s, buffer.horizon_s)
+        )
 
     def _eyes_allowed(
         self,
