@@ -155,8 +155,9 @@ class MatchSettings:
     eyes_shown_height_min: float = 0.1   # and only where each is near enough to read from there: this share of the frame's
                                          # height, by distance (first_person.py), share. [0, 1]
     follow_eyes_height_min: float = 0.15  # a discretionary FOLLOW goes through its player's eyes only where they show the
-                                         # others this share of the frame's height (median), or its Toric camera would meet
-                                         # a wall (first_person.py; issue 41's median bar), share. [0, 1]
+                                         # others this share of the frame's height (median), its Toric camera would meet a
+                                         # wall or lose it, or it kills or dies in the buffer (first_person.py; issue 41's
+                                         # median bar), share. [0, 1]
     eyes_lead_s: float = 1.0             # or, where its Toric camera would meet a wall within the shot, at some moment this
                                          # long before each event (first_person.py), s. [0, 10]
     shown_height_max: float = 0.5        # the framing band's top: a shot's camera is placed where none of its subjects fills
