@@ -375,7 +375,7 @@ class ShotBuilder:
         camera.place = camera.goal = place
         planned = buffer if events_s else None  # a planned shot: its events and the buffer that holds them
         if s.first_person and not choice.held and choice.replay is None:
-            kills_ahead = self._kills_ahead(camera.anchor_index, moment, buffer)
+            kills_ahead = not events_s and self._kills_ahead(camera.anchor_index, moment, buffer)  # read by a FOLLOW alone
             eyes = through_eyes(
                 camera, subjects, buffer, moment, events_s, self.visibility, self.body_heights_m, s, cover, kills_ahead
             )
