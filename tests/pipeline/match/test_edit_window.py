@@ -18,6 +18,7 @@ from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.edit_window import (
     CARRIED_ON,
     ENDS_A_COPY,
+    HELD_ON,
     SHORT_LEFT,
     STARTED_EARLY,
     EditWindow,
@@ -216,7 +217,7 @@ def test_a_kill_the_short_shot_shows_stays_with_a_neighbour_that_shows_it_or_the
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}})
     frames = short_between(p, a, x, b, {10: [kill]})
     assert cuts(frames) == [0, 90, 120]  # neither a nor b shows b and c: the short shot stays, flagged
-    assert SHORT_LEFT in frames[90].flags and all(f.shot is x for f in frames[90:120])
+    assert all(f.shot is x for f in frames[90:120])
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}, 20.0: {1, 2}})
     short_between(p, a, x, b, {10: [kill]})
     assert cuts(p.program()) == [0, 90]  # b shows them from its first pose: it starts at x's cut
@@ -249,7 +250,7 @@ def test_a_neighbour_that_would_show_nobody_where_the_short_shot_showed_its_subj
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     p = Program({0.0: 0.1, 10.0: 0.8, 20.0: 0.2})
     short_between(p, a, x, b)
-    assert cuts(p.program()) == [0, 90, 120] and SHORT_LEFT in p.program()[90].flags
+    assert cuts(p.program()) == [0, 90, 120] and all(f.shot is x for f in p.program()[90:120])
 
 
 def test_a_neighbour_that_shows_its_subjects_too_small_to_read_may_not_take_it():
@@ -257,6 +258,82 @@ def test_a_neighbour_that_shows_its_subjects_too_small_to_read_may_not_take_it()
     p = Program({0.0: 0.9, 10.0: 0.8, 20.0: 0.6}, heights={0.0: 0.08, 10.0: 0.3, 20.0: 0.2})
     short_between(p, a, x, b)
     assert cuts(p.program()) == [0, 90] and p.program()[100].shot is b  # a would show its player 8% tall
+
+
+class DiesAt(Program):
+    """The copies of the cameras standing at x metres die at a frame: `dies` {x: frame}."""
+
+    dies: dict[float, int] = {0.0: 100}
+
+    def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose | None):
+        if m.frame >= self.dies.get(camera.x_m, math.inf):
+            return camera.pose(m), [self.death]
+        return camera.pose(m), []
+
+
+def held_on(p: Program, a: Shot, x: Shot, b: Shot, b_frames: int = 40, after: Shot | None = None) -> list[WorkedFrame]:
+    """a for 3 s, x for 1 s, b for b_frames, `after` for 1 s; x's repair applied at frame 140
+    (about when x's first frame is answered: the rig works 2 s ahead); the window's frames."""
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 20)
+    p.window.settle(p.judges)
+    p.frames(b, b_frames - 20)
+    if after is not None:
+        p.frames(after, 30)
+    return p.program()
+
+
+def test_a_short_shot_no_neighbour_takes_holds_on_over_the_shot_afters_first_frames():
+    """a's copy dies at a wall, b's first pose shows its subject 0.2 where x showed its own 0.8:
+    x goes on, its copy, over b's first frames until it is 2 s long, and b starts there, the hold
+    judged when the window reaches frame 150."""
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    frames = held_on(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2}), a, x, b)
+    assert cuts(frames) == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
+    assert all(f.shot is x and HELD_ON in f.flags and f.pose.position_world[0] == 10.0 for f in frames[120:150])
+    assert frames[150].shot is b and HELD_ON not in frames[150].flags
+
+
+def test_a_short_shot_held_on_whose_copy_meets_a_wall_holds_its_last_pose():
+    a, x, b = shot((0,), 0.0), moving((1,), 10.0), shot((2,), 20.0)
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2})
+    p.dies = {0.0: 100, 10.0: 135}
+    frames = held_on(p, a, x, b)
+    xs = [float(f.pose.position_world[0]) for f in frames[120:150]]
+    assert cuts(frames) == [0, 90, 150] and all(f.shot is x and HELD_ON in f.flags for f in frames[120:150])
+    assert xs == pytest.approx([10.0 + 0.01 * min(k, 134) for k in range(120, 150)])
+
+
+def test_a_window_with_a_hold_waiting_pickles_and_goes_on_to_the_same_program():
+    runs = []
+    for copied in (False, True):
+        a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+        p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2})
+        p.frames(a, 90)
+        p.frames(x, 30)
+        p.frames(b, 20)
+        p.window.settle(p.judges)
+        assert p.window.holding is not None
+        if copied:
+            p.window = pickle.loads(pickle.dumps(p.window))
+        p.frames(b, 20)
+        runs.append(programs(p))
+    assert runs[0] == runs[1] and cuts(p.program()) == [0, 90, 150]
+
+
+@pytest.mark.parametrize(
+    "case, b_frames, heights",
+    [
+        ("b cuts before x is 2 s long", 25, {}),
+        ("x's copy shows b's players too small", 40, {0.0: 0.3, 10.0: 0.1, 20.0: 0.3}),
+    ],
+)
+def test_a_short_shot_stays_short_where_it_cannot_hold_on(case, b_frames, heights):
+    a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
+    frames = held_on(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}, heights=heights), a, x, b, b_frames, c)
+    assert SHORT_LEFT in frames[120].flags and not any(HELD_ON in f.flags for f in frames)
+    assert cuts(frames)[:3] == [0, 90, 120]
 
 
 def test_a_human_take_is_never_given_away():
@@ -313,7 +390,7 @@ def test_a_repair_waiting_is_applied_before_the_next_cut_is_judged():
     p.frames(y, 30)
     p.frames(b, 10)
     frames = p.program()
-    assert cuts(frames) == [0, 90, 150] and SHORT_LEFT in frames[90].flags
+    assert cuts(frames) == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
     assert all(f.shot is x and CARRIED_ON in f.flags for f in frames[120:150])
 
 

@@ -24,7 +24,13 @@ ties to the shot before), among the neighbours that
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
   short shot did, or as tall as it did.
-A short shot that has none stays, flagged; a human's take is never given away.
+A short shot that has none holds on instead, where it can (`_hold`): the copy of its own camera
+(the shadow its cut started) takes the shot after's first frames until the short shot is
+`min_shot_s` long, the copy's last pose held where it met a wall or lost its subjects, and the cut
+moves there, when the window reaches that frame (the shot after's frames may not cut before it,
+and are kept as a neighbour keeps a short shot's: kills, subjects seen, players readable). The
+neighbours first, as they move no cut later than the director chose it. One that cannot stays
+short, flagged at the cut that ends it; a human's take is never given away.
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -34,7 +40,9 @@ is) and applied (`settle`) when the short shot's first frame is answered, the ne
 window, or at once in a session whose ray scene moves every frame (the idle moments would see
 another scene). Applied at those frames whatever the idle moments did, the program does not
 depend on when or in how many slices a repair was worked out; until then the shadow of the cut
-before it steps on as if it carried the short shot, and the one this cut starts beside it.
+before it steps on as if it carried the short shot, and the one this cut starts beside it. A hold
+is judged on the frame path, at the frame it would end on (what remains of its copy's steps, and
+the visibility of a held pose at every JUDGED_EVERY-th frame): a few frames a match.
 
 The offline bound that led to it (load_tests/edit_window_bound.py) gave every short shot of the
 real matches' programs to a neighbour, a held pose where no eyes carried on; here the shot before
@@ -73,7 +81,8 @@ HEIGHT_FLOOR = 0.15  # the median shown height issue 41 bars, share of the frame
 JUDGED_EVERY = 3  # a neighbour's visibility over a short shot is judged at every this-th frame (a frame's ray budget)
 CARRIED_ON = "edit_window_carried_on"  # a short shot's frames given to the shot before
 STARTED_EARLY = "edit_window_started_early"  # a short shot's frames given to the shot after
-SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take
+HELD_ON = "edit_window_held_on"  # the shot after's first frames given to a short shot neither neighbour could take
+SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take nor hold on
 # a copy of a camera stepped on goes no further where it would cut, or shows its subjects no more (program_camera.py)
 ENDS_A_COPY = (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST)
 
@@ -206,17 +215,18 @@ class EditWindow:
         self.frames: deque[WorkedFrame] = deque()
         self.shadow: Shadow | None = None
         self.repair: Repair | None = None  # the repair drawn and not yet applied
+        self.holding: Repair | None = None  # a short shot no neighbour took, that may hold on (_hold)
         self.answered: WorkedFrame | None = None  # the last frame answered
         self.last_cut_s = -math.inf  # program time of the last cut answered, s
 
     def __setstate__(self, state: dict[str, object]) -> None:
         """A window from a checkpoint (one written before repairs were drawn: none waiting)."""
-        self.__dict__.update({"defer": True, "repair": None, **state})
+        self.__dict__.update({"defer": True, "repair": None, "holding": None, **state})
 
     def drop(self) -> None:
         """Forgets the frames not yet answered (a take applies at once: rig.py)."""
         self.frames.clear()
-        self.shadow = self.repair = None
+        self.shadow = self.repair = self.holding = None
 
     @property
     def waiting(self) -> bool:
@@ -285,6 +295,12 @@ class EditWindow:
         short shot to a neighbour (module docstring), applied at once where the window does not
         defer; a cut left a cut starts a shadow of the camera `before` it (the shot on air and a
         copy of its camera as they were before the frame), its last pose the newest frame's."""
+        if self.holding is not None and self._hold(frame, judges):
+            before = None  # the short shot held on goes off air here: its shadow (the window's) steps on
+            if not frame.cut:
+                frame.cut = True
+                self.frames.append(frame)
+                return
         if frame.cut:
             self.settle(judges)  # this cut's short shot is judged on the program as repaired before it
             last = self.last_pose()
@@ -314,6 +330,8 @@ class EditWindow:
             assert repair.carried is not None and repair.before is not None  # only a shadow carries a short shot on
             self._give(rows, repair.before, decision, CARRIED_ON, judges)
             rows[0].cut = False
+            if SHORT_LEFT in rows[0].flags:  # the shot before, left short at this cut, goes on now
+                rows[0].flags.remove(SHORT_LEFT)
             self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's min_shot_s
             return
         if repair.carried is not None:
@@ -322,7 +340,10 @@ class EditWindow:
             self._give(rows, repair.after, decision, STARTED_EARLY, judges)
             frame.cut = False  # the cut before the short shot stays, and its shadow
             return
-        rows[0].flags.append(SHORT_LEFT)
+        if repair.started is None:
+            frame.flags.append(SHORT_LEFT)
+        else:  # judged when the window reaches min_shot_s past the short shot's start (_hold)
+            self.holding = repair
         self.shadow = repair.started or self.shadow
 
     def answer(self, moment: Moment, judges: Judges) -> tuple[WorkedFrame, bool]:
@@ -331,6 +352,8 @@ class EditWindow:
         repair whose short shot starts there applied first."""
         if self.repair is not None and self.repair.rows[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
             self.settle(judges)
+        if self.holding is not None and self.holding.frame.moment.time_s <= moment.time_s + TIME_EPSILON_S:
+            self._left(self.holding)  # its cut answered before the frames it needs were worked out (the match's end)
         cut = False
         while self.frames and self.frames[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
             frame = self.frames.popleft()
@@ -340,6 +363,62 @@ class EditWindow:
             self.answered = frame
         assert self.answered is not None  # the rig works the program moment out before it answers it
         return self.answered, cut
+
+    def _hold(self, frame: WorkedFrame, judges: Judges) -> bool:
+        """Whether the short shot no neighbour took (`holding`) goes on until the new frame, now
+        that it is min_shot_s long there (the frame then cuts, flagged HELD_ON): the frames of the
+        shot after from its cut (the frame at which, with its camera's copy, the shadow the cut
+        started: Shadow) carried on over them, the copy's last pose held after it stops (it met a
+        wall, lost its subjects), where they keep those frames as a neighbour keeps a short shot's
+        (their kills, subjects seen and players readable). A cut before the frame leaves it short
+        (flagged SHORT_LEFT); a frame short of min_shot_s, it waits."""
+        repair = self.holding
+        assert repair is not None and repair.started is not None  # held only with a shadow (settle)
+        if not repair.frame.cut:  # the shadow carried the short shot on over the shot after (a repair of its own)
+            self.holding = None
+            return False
+        if frame.moment.time_s < repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S:
+            if frame.cut:
+                self._left(repair)
+            return False
+        self.holding = None
+        first = next((i for i, f in enumerate(self.frames) if f is repair.frame), None)
+        rows = [] if first is None else list(self.frames)[first:]
+        if not rows or any(f.cut for f in rows[1:]) or rows[0].shot.held:
+            self._left(repair)
+            return False
+        started = repair.started
+        self._caught_up(started, judges)
+        side = _side(started.shot, rows, judges)
+        steps = [(m, pose, seen) for m, pose, seen in started.steps if m.time_s < frame.moment.time_s - TIME_EPSILON_S]
+        steps = [step for step, row in zip(steps, rows) if step[0] is row.moment]
+        held = steps[-1][1] if steps else started.last_pose if not started.steps else None
+        if held is None:  # the copy's first step was worked from a later pose
+            self._left(repair)
+            return False
+        poses = [pose for _, pose, _ in steps] + [held] * (len(rows) - len(steps))
+        seen = [s for _, _, s in steps]
+        judged = {k: judges.visibility(side.shown[k], held, side.judged) for k in range(len(steps), len(rows), JUDGED_EVERY)}
+        seen += [judged[k - (k - len(steps)) % JUDGED_EVERY] for k in range(len(steps), len(rows))]
+        players = {p: i for i, p in enumerate(self.players)}
+        if (
+            not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
+            or not _keeps_kills(rows, _kills(rows, players, judges), poses, judges)
+            or not _keeps_seen(rows, seen)
+            or not _keeps_height(rows, poses, side.shown, side.judged, judges)
+        ):
+            self._left(repair)
+            return False
+        self._give(rows, side, Decision(None, poses, seen), HELD_ON, judges)
+        rows[0].cut = False
+        started.until_s = frame.moment.time_s + self.min_shot_s  # off air at the frame: stepped on from there
+        self.shadow = started
+        return True
+
+    def _left(self, repair: Repair) -> None:
+        """The short shot of a repair stays short, flagged at the cut that ends it."""
+        repair.frame.flags.append(SHORT_LEFT)
+        self.holding = None
 
     def next_cut(self) -> PlannedCut | None:
         """The next cut already worked out, not yet answered, to the shot the director chose (its
