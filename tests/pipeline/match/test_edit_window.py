@@ -284,35 +284,6 @@ def held_on(p: Program, a: Shot, x: Shot, b: Shot, b_frames: int = 40, after: Sh
     return p.program()
 
 
-class Arriving(DiesAt):
-    """b's camera (at 20 m) shows its subject 0.2 until frame `arrives`, 0.9 from there."""
-
-    arrives = 99
-
-    def visibility(self, shown: Moment, pose: CameraPose, s: Shot) -> float:
-        if float(pose.position_world[0]) == 20.0:
-            return 0.9 if shown.frame >= self.arrives else 0.2
-        return super().visibility(shown, pose, s)
-
-
-def test_a_short_shot_neither_neighbour_takes_whole_is_split_between_them_the_cut_moved():
-    """a's copy meets a wall 10 frames into x; b's first pose shows its subject only from frame 99
-    (its players arrive): a carries x on to frame 100, b starts there."""
-    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
-    frames = short_between(Arriving({0.0: 0.9, 10.0: 0.8}), a, x, b)
-    assert cuts(frames) == [0, 100]
-    assert all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:100])
-    assert all(f.shot is b and STARTED_EARLY in f.flags and f.pose.position_world[0] == 20.0 for f in frames[100:120])
-
-
-def test_no_split_where_the_shot_after_shows_its_subjects_only_after_the_shot_befores_copy_stopped():
-    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
-    p = Arriving({0.0: 0.9, 10.0: 0.8})
-    p.arrives = 106  # the frames 100-105 between: neither shows its subject
-    frames = short_between(p, a, x, b)
-    assert cuts(frames)[:3] == [0, 90, 120] and all(f.shot is x for f in frames[90:120])
-
-
 def test_a_short_shot_no_neighbour_takes_holds_on_over_the_shot_afters_first_frames():
     """a's copy dies at a wall, b's first pose shows its subject 0.2 where x showed its own 0.8:
     x goes on, its copy, over b's first frames until it is 2 s long, and b starts there, the hold

@@ -24,10 +24,7 @@ ties to the shot before), among the neighbours that
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
   short shot did, or as tall as it did.
-Where neither takes all of them, the two may share them (`_split`): the shot before carried on as
-far as its copy stepped, the shot after from there, its first pose held (the players it shows
-arrive in it late in the short shot), the cut moved between them, each part kept as above. A
-short shot that has none holds on instead, where it can (`_hold`): the copy of its own camera
+A short shot that has none holds on instead, where it can (`_hold`): the copy of its own camera
 (the shadow its cut started) takes the shot after's first frames until the short shot is
 `min_shot_s` long, the copy's last pose held where it met a wall or lost its subjects, and the cut
 moves there, when the window reaches that frame (the shot after's frames may not cut before it,
@@ -136,18 +133,15 @@ class Shadow:
 
 
 class Decision(NamedTuple):
-    """What a repair decided: the neighbour the short shot's frames go to (BEFORE, AFTER, SPLIT:
-    the first `at` of them to the shot before, the rest to the shot after; None: neither, the
-    short shot stays) and the pose and visibility each of them gets there."""
+    """What a repair decided: the neighbour the short shot's frames go to (BEFORE, AFTER; None:
+    neither, the short shot stays) and the pose and visibility each of them gets there."""
 
     neighbour: str | None
     poses: list[CameraPose]
     seen: list[float]
-    at: int = 0
 
 
-# Decision.neighbour: the shot before (carried on), the shot after (started early), both (the cut moved between them)
-BEFORE, AFTER, SPLIT = "before", "after", "split"
+BEFORE, AFTER = "before", "after"  # Decision.neighbour: the shot before (carried on), the shot after (started early)
 
 
 class Side(NamedTuple):
@@ -346,19 +340,6 @@ class EditWindow:
             self._give(rows, repair.after, decision, STARTED_EARLY, judges)
             frame.cut = False  # the cut before the short shot stays, and its shadow
             return
-        if decision.neighbour == SPLIT:
-            assert repair.before is not None  # only a shadow carries a short shot's first frames on
-            k, before, after = decision.at, repair.before, repair.after
-            self._give(rows[:k], before._replace(shown=before.shown[:k]), decision, CARRIED_ON, judges)
-            self._give(
-                rows[k:],
-                after._replace(shown=after.shown[k:]),
-                Decision(SPLIT, decision.poses[k:], decision.seen[k:]),
-                STARTED_EARLY,
-                judges,
-            )
-            rows[0].cut, rows[k].cut, frame.cut = False, True, False
-            return
         if repair.started is None:
             frame.flags.append(SHORT_LEFT)
         else:  # judged when the window reaches min_shot_s past the short shot's start (_hold)
@@ -505,8 +486,7 @@ def _decided(
     if later is not None:
         judged.append(later)
     if not judged:
-        split = None if before is None or not steps else _split(rows, first, before, steps, after, short, kills, previous, judges)
-        return Decision(None, [], []) if split is None else split
+        return Decision(None, [], [])
     return max(judged, key=lambda j: j[0])[1]  # the first of equals: the shot before
 
 
@@ -563,67 +543,6 @@ def _after(
         ):
             return float(np.mean(list(judged.values()))), Decision(AFTER, poses, seen)
     return None
-
-
-def _split(
-    rows: list[WorkedFrame],
-    first: CameraPose,
-    before: Side,
-    steps: list[tuple[Moment, CameraPose, float]],
-    after: Side,
-    short: Shot,
-    kills: list[tuple[int, tuple[int, ...]]],
-    previous: Shot | None,
-    judges: Judges,
-) -> Decision | None:
-    """Where neither neighbour takes the whole short shot: its first frames to the shot before,
-    carried on by its shadow as far as it stepped (steps: it met a wall), the rest to the shot
-    after, its first pose held (the players it shows may arrive in it only then), the cut moved
-    between them; each part kept as a neighbour keeps a short shot's frames (its kills, subjects
-    seen, players readable, `_may_take`). The split where both parts show their subjects most
-    (the latest of equals), None where none keeps both."""
-    steps = [step for step, row in zip(steps, rows) if step[0] is row.moment][: len(rows) - 1]
-    if not steps:
-        return None
-    n, grid = len(rows), range(0, len(rows), JUDGED_EVERY)
-    seen_before = [s for _, _, s in steps]
-    seen_after_at = {}
-    for j in grid:
-        pause()
-        seen_after_at[j] = judges.visibility(after.shown[j], first, after.judged)
-    seen_after = [seen_after_at[j - j % JUDGED_EVERY] for j in range(n)]
-    short_h = {j: judges.height(rows[j].pose, rows[j].shown, rows[j].shot) for j in grid}
-    before_h = {j: judges.height(steps[j][1], before.shown[j], before.judged) for j in grid if j < len(steps)}
-    after_h = {j: judges.height(first, after.shown[j], after.judged) for j in grid}
-
-    def readable(part: range, mine: dict[int, float]) -> bool:
-        theirs = [short_h[j] for j in part if j in short_h and math.isfinite(short_h[j])]
-        own = [mine[j] for j in part if j in mine and math.isfinite(mine[j])]
-        return not theirs or not own or float(np.median(own)) >= min(HEIGHT_FLOOR, float(np.median(theirs)))
-
-    # each kill the short shot shows, whether the shadow (where it stepped) and the held pose show it as well
-    kept_before = [
-        r < len(steps) and _keeps_kills(rows, [(r, pair)], [p for _, p, _ in steps] + [first] * n, judges) for r, pair in kills
-    ]
-    kept_after = [_keeps_kills(rows, [(r, pair)], [first] * n, judges) for r, pair in kills]
-    best: tuple[float, int] | None = None
-    for k in range(len(steps), 0, -1):
-        head, tail = rows[:k], rows[k:]
-        if not all(kb if r < k else ka for (r, _), kb, ka in zip(kills, kept_before, kept_after)):
-            continue
-        if not (_may_take(before.judged, short, after.judged, head) and _may_take(after.judged, short, previous, tail)):
-            continue
-        if not (_keeps_seen(head, seen_before[:k]) and _keeps_seen(tail, seen_after[k:])):
-            continue
-        if not (readable(range(k), before_h) and readable(range(k, n), after_h)):
-            continue
-        score = (sum(seen_before[:k]) + sum(seen_after[k:])) / n
-        if best is None or score > best[0]:
-            best = (score, k)
-    if best is None:
-        return None
-    k = best[1]
-    return Decision(SPLIT, [pose for _, pose, _ in steps[:k]] + [first] * (n - k), seen_before[:k] + seen_after[k:], k)
 
 
 def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
