@@ -397,9 +397,7 @@ class EditWindow:
             self._left(repair)
             return False
         poses = [pose for _, pose, _ in steps] + [held] * (len(rows) - len(steps))
-        seen = [s for _, _, s in steps]
-        judged = {k: judges.visibility(side.shown[k], held, side.judged) for k in range(len(steps), len(rows), JUDGED_EVERY)}
-        seen += [judged[k - (k - len(steps)) % JUDGED_EVERY] for k in range(len(steps), len(rows))]
+        seen = [s for _, _, s in steps] + _judged_seen(side.shown, poses, side.judged, judges, len(steps))[0]
         players = {p: i for i, p in enumerate(self.players)}
         if (
             not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
@@ -531,18 +529,29 @@ def _after(
     for poses in (_moving_earlier(shot, shown, first, judges), [first] * len(rows)):
         if poses is None:
             continue
-        judged = {}
-        for k in range(0, len(rows), JUDGED_EVERY):
-            pause()
-            judged[k] = judges.visibility(shown[k], poses[k], shot)
-        seen = [judged[k - k % JUDGED_EVERY] for k in range(len(rows))]
+        seen, judged_mean = _judged_seen(shown, poses, shot, judges)
         if (
             _keeps_kills(rows, kills, poses, judges)
             and _keeps_seen(rows, seen)
             and _keeps_height(rows, poses, shown, shot, judges)
         ):
-            return float(np.mean(list(judged.values()))), Decision(AFTER, poses, seen)
+            return judged_mean, Decision(AFTER, poses, seen)
     return None
+
+
+def _judged_seen(
+    shown: list[Moment], poses: list[CameraPose], shot: Shot, judges: Judges, start: int = 0
+) -> tuple[list[float], float]:
+    """The visibility of the shot's framed subjects from each of the poses at the moments shown,
+    from `start` on ((len(poses) - start,) values), judged at every JUDGED_EVERY-th of them and
+    carried to the frames between, and the mean of those judged (NaN: none; a sliced repair
+    hands back between them)."""
+    judged = {}
+    for k in range(start, len(poses), JUDGED_EVERY):
+        pause()
+        judged[k] = judges.visibility(shown[k], poses[k], shot)
+    mean = float(np.mean(list(judged.values()))) if judged else math.nan
+    return [judged[k - (k - start) % JUDGED_EVERY] for k in range(start, len(poses))], mean
 
 
 def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
