@@ -161,12 +161,16 @@ def test_the_answered_pose_is_widened_at_its_moment_never_narrowed_and_zooms_bac
     from the last answered pose."""
     rig, moment, close = _looking_at_a(1.8)
     _, _, far = _looking_at_a(8.0)
-    program_camera = rig.rig.program_camera
-    answered = program_camera.widened_for_answer(moment, close, None, 0.0)
+    shot = Shot(ShotChoice(("a",), ShotKind.OVERVIEW, "test"), (0,), StaticCamera(close), 0.0)
+
+    def answer(pose: CameraPose, last_fov_deg: float | None, dt_s: float) -> CameraPose:
+        return rig.rig.program_camera.widened_for_answer(moment, pose, last_fov_deg, dt_s, shot, [])
+
+    answered = answer(close, None, 0.0)
     assert answered.vertical_fov_deg == _widened(rig, moment, close) > close.vertical_fov_deg
     assert np.array_equal(answered.position_world, close.position_world)
     wide = CameraPose(far.position_world, far.rotation_xyzw, 80.0)
-    assert program_camera.widened_for_answer(moment, wide, None, 0.0) is wide  # never narrowed
-    paced = program_camera.widened_for_answer(moment, far, 80.0, 0.1)
+    assert answer(wide, None, 0.0) is wide  # never narrowed
+    paced = answer(far, 80.0, 0.1)
     assert paced.vertical_fov_deg == pytest.approx(80.0 - 0.1 * SETTINGS.narrow_deg_s)
-    assert program_camera.widened_for_answer(moment, far, None, 0.0) is far  # a cut: the lens's own
+    assert answer(far, None, 0.0) is far  # a cut: the lens's own

@@ -7,9 +7,10 @@ player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, hel
 (`held_before_wall`), its lens widened where a player would stand taller than the framing band
 (lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
 Toric camera, where the frame cuts off a framed subject; our director's pose (Toric or fixed) that
-the widest lens leaves with a player too tall stepped back from it (step_back.py, flagged
-`stepped_back_from_player`); a Toric pose that these degrades left
-showing none of its subjects replaced by the move a hold held (`hold_left_for_cut`) or by a cut
+the widest lens leaves with a player too tall stepped back from it, or with no room to step
+panned off the player (step_back.py, flagged `stepped_back_from_player`, `panned_off_player`: no
+cut for the subjects such a pan lets go); a Toric pose that these degrades left showing none of
+its subjects replaced by the move a hold held (`hold_left_for_cut`) or by a cut
 to a place that shows them (`cut_to_seen_place`, `_seen_again`); and the share of the framed
 subjects' sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of
 it, on a copy of the camera (camera_ahead.py): the same computation either way.
@@ -41,6 +42,7 @@ CUT_TO_SEEN_PLACE = "cut_to_seen_place"  # a degraded pose showing nobody replac
 HOLD_LEFT_FOR_CUT = "hold_left_for_cut"  # a hold before a wall showing nobody left for the cut through it
 SUBJECTS_LOST = "subjects_lost"  # a degraded pose showing nobody where no re-placement was looked for
 STEPPED_BACK = "stepped_back_from_player"  # a pose moved back from a player too near for the widest lens
+PANNED_OFF = "panned_off_player"  # a pose with no room to step back panned off the player instead, for a few frames
 
 
 class ProgramCamera:
@@ -129,7 +131,8 @@ class ProgramCamera:
         last_fov_deg = last_pose.vertical_fov_deg if dt_s > 0.0 and last_pose is not None else None  # None: a cut
         pose = self._widened(moment, pose, subjects, last_fov_deg, dt_s)
         standing = isinstance(camera, ToricCamera) and camera.stand_world is not None  # a stand that lost them is left too
-        if (flags or standing) and isinstance(camera, ToricCamera) and shot.choice.replay is None:
+        # a pan off a player at the lens loses the subjects on purpose, for the frames it passes: no cut for it
+        if (flags or standing) and PANNED_OFF not in flags and isinstance(camera, ToricCamera) and shot.choice.replay is None:
             placed, seen_again = self._seen_again(moment, pose, unheld, camera, shot, anchor, last_pose, re_place)
             if seen_again is not None:
                 flags.append(seen_again)
@@ -139,18 +142,23 @@ class ProgramCamera:
             flags.append("lens_widened")
         return pose, flags
 
-    def _stepped_back(self, moment: Moment, pose: CameraPose, camera: ShotCamera, shot: Shot, flags: list[str]) -> CameraPose:
+    def _stepped_back(
+        self, moment: Moment, pose: CameraPose, camera: ShotCamera, shot: Shot, flags: list[str], held_eye: bool = False
+    ) -> CameraPose:
         """Our director's pose (Toric or fixed) stepped back from a player too near for the widest
-        lens (step_back.py), flagged `stepped_back_from_player` once; the baselines' as they are."""
-        if not isinstance(camera, (ToricCamera, StaticCamera)):
+        lens (step_back.py), flagged `stepped_back_from_player` once (`panned_off_player` where it
+        could not step and panned off the player where it stands); the baselines' as they are,
+        but for held_eye: a first-person camera's pose held where the eye no longer is."""
+        if not isinstance(camera, (ToricCamera, StaticCamera)) and not (held_eye and isinstance(camera, FirstPersonCamera)):
             return pose
         framed = shot.framed(moment.time_s)
         stepped = stepped_back(pose, moment, self.subject_visibility, self.lens, self.settings, self.in_level, framed)
         if stepped is None:
             return pose
-        if STEPPED_BACK not in flags:
-            flags.append(STEPPED_BACK)
-        return stepped
+        flag = PANNED_OFF if stepped[1] else STEPPED_BACK
+        if flag not in flags:
+            flags.append(flag)
+        return stepped[0]
 
     def _held_showing_all(
         self, moment: Moment, last_pose: CameraPose, pose: CameraPose, anchor: np.ndarray | None, shot: Shot
@@ -179,18 +187,29 @@ class ProgramCamera:
         fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s, subjects)
         return pose if fov_deg == pose.vertical_fov_deg else CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
 
-    def widened_for_answer(self, moment: Moment, pose: CameraPose, last_fov_deg: float | None, dt_s: float) -> CameraPose:
+    def widened_for_answer(
+        self, moment: Moment, pose: CameraPose, last_fov_deg: float | None, dt_s: float, shot: Shot, flags: list[str]
+    ) -> CameraPose:
         """The pose the program answers at the moment its picture shows, its lens widened (never
         narrowed) where a player it shows stands taller than the band there, zooming back from
         the last answered lens (last_fov_deg; None on a cut) at lens_width.py's pace. A pose
         worked at its own moment was widened in `step`; one made for another moment was not: an
         edit window's held first pose of the shot after, a pose held from the frame before
         (`pose_held`). On the real 4on4, 4 of its 9 frames over 0.6 of the frame's height were a
-        held first pose at 65 degrees, made for a moment 0.1-1.5 s later."""
+        held first pose at 65 degrees, made for a moment 0.1-1.5 s later. Where even the widest
+        lens leaves a player too tall, the pose of the shot (its camera our director's) steps back
+        as `step` does (flags takes `stepped_back_from_player`): on the real wipeout, 5 frames over
+        0.6 were a pose held from 0.1 s before, as a player ran at the camera. A first-person
+        camera's pose is a view through the eyes only where the eye is (step_back.py leaves such
+        a view as it is); one held (`eye_outside_level_held`, an edit window's hold) is a camera
+        like the others, every director's: the hold is the rig's, not the director's."""
         fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s)
         if fov_deg <= pose.vertical_fov_deg:
             return pose
-        return CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
+        widened = CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)
+        if fov_deg < max(self.settings.widen_max_fov_deg, self.lens.vertical_fov_deg):
+            return widened
+        return self._stepped_back(moment, widened, shot.camera, shot, flags, held_eye=True)
 
     def _seen_again(
         self,

@@ -330,7 +330,9 @@ class MatchRig(RigBase):
         state.dt_s = 0.0 if self._answered_s is None else max(0.0, answered - self._answered_s)
         if frame is not previous:  # the lens checked at the moment answered (program_camera.py widened_for_answer)
             last_fov_deg = None if cut or previous is None else previous.pose.vertical_fov_deg
-            frame.pose = self.program_camera.widened_for_answer(frame.shown, frame.pose, last_fov_deg, state.dt_s)
+            frame.pose = self.program_camera.widened_for_answer(
+                frame.shown, frame.pose, last_fov_deg, state.dt_s, frame.shot, frame.flags
+            )
         self._answered_s = answered
         state.aim_points_world = list(frame.moment.aims_world)
         state.pose, state.cut, state.visibility = frame.pose, cut, frame.visibility

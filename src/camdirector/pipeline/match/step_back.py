@@ -18,9 +18,14 @@ so as tall), where:
 - the places test accepts the point and the move crosses no wall (in_level.py),
 - each of the shot's framed subjects stays framed and seen (shots.py `framed_seen`, at the
   widest lens) as much as before or `candidate_seen`, whichever is less.
-No such point: the pose stays. The shot's camera keeps its own state (its place, its damping), so
-the step is taken again each frame the player stays near and ends when it leaves; the lens
-narrows back at lens_width.py's pace.
+No such point (a camera in a corner the player runs into): the pose pans off the player where it
+stands, the least of AWAY_TURNS_DEG either way, keeping the other framed subjects where a pan
+can; no pan off it either: the pose stays. On the real matches' first 3 minutes, after the steps,
+2-6 frames a match still had a player over 0.6 (issue 41's bar: none), each 1-3 frames long, as a
+player ran past a camera at a wall or in a corridor; the pan is the operator letting the player
+go by the lens. The shot's camera keeps its own state (its place, its damping), so the step is
+taken again each frame the player stays near and ends when it leaves; the lens narrows back at
+lens_width.py's pace.
 """
 
 from __future__ import annotations
@@ -41,6 +46,9 @@ from camdirector.pipeline.match.visibility import SubjectVisibility
 BACK_STEPS_M = np.arange(1, 9) * 0.25  # the distances tried, nearest first: up to 2 m, a readable distance's worth, m
 NEAR_M = 5.0  # only a player whose feet are this near is asked about (a 2 m body at 90 deg fills half the frame at 2 m), m
 TURNS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # the directions tried away from the player, after the backward line
+AWAY_TURNS_DEG = np.arange(1, 19) * 10.0  # where no step helps, the pans tried either way, nearest first: up to 180 deg, deg
+AWAY_SEEN = 0.25  # a player panned from is framed and seen at under this share of its points: half of SHOWN_SEEN, as the
+# rig's 16 points are not eval-match's 32
 
 
 def stepped_back(
@@ -51,10 +59,11 @@ def stepped_back(
     settings: MatchSettings,
     in_level: InLevel,
     subjects: tuple[int, ...],
-) -> CameraPose | None:
-    """The pose stepped back (module docstring) with the widest lens, for lens_width.py to narrow;
-    None where no player it sees is too near for the widest lens, or no step helps. subjects: the
-    shot's framed players, kept in the picture."""
+) -> tuple[CameraPose, bool] | None:
+    """The pose stepped back (module docstring) with the widest lens, for lens_width.py to narrow,
+    and whether it was panned off the player where it stands rather than stepped (`_turned_away`,
+    where no step helps); None where no player it sees is too near for the widest lens, or
+    neither helps. subjects: the shot's framed players, kept in the picture."""
     if np.linalg.norm(moment.feet_world - pose.position_world, axis=1).min(initial=np.inf) > NEAR_M:
         return None  # most frames: nobody near enough to ask
     widest_deg = max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
@@ -95,8 +104,49 @@ def stepped_back(
             seen = framed_seen(visibility, moment, subjects, position[None], turned[None], widest)[0]
             if (seen < np.minimum(before, settings.candidate_seen)).any():
                 continue
-        return CameraPose(position, matrix_to_quat(turned), widest_deg)
-    return None
+        return CameraPose(position, matrix_to_quat(turned), widest_deg), False
+    panned = _turned_away(
+        pose,
+        moment,
+        visibility,
+        rotation,
+        widest,
+        tuple(int(i) for i in np.flatnonzero(here)),
+        subjects,
+        None if before is None else np.minimum(before, settings.candidate_seen),
+    )
+    return None if panned is None else (panned, True)
+
+
+def _turned_away(
+    pose: CameraPose,
+    moment: Moment,
+    visibility: SubjectVisibility,
+    rotation: np.ndarray,
+    widest: Lens,
+    tall: tuple[int, ...],
+    subjects: tuple[int, ...],
+    keep: np.ndarray | None,
+) -> CameraPose | None:
+    """The pose where it stands, panned the least of AWAY_TURNS_DEG either way so that no player
+    too tall at the widest lens (tall) is framed and seen at AWAY_SEEN of its points, and each
+    framed subject but those keeps its share (keep, (len(subjects),): as stepping back) where a
+    pan does, else the least pan off the tall ones alone; None where none is off them.
+    Where no step back helps, an operator a player brushes past lets it go by the lens rather
+    than hold it pressed against it: issue 41's bar is no frame with a player over 0.6 of its
+    height, and its frames of nobody (a lone subject panned from) have a budget of 2%."""
+    turns = np.radians(np.stack([AWAY_TURNS_DEG, -AWAY_TURNS_DEG], axis=1).ravel())  # nearest first
+    rotations = _yaw(turns) @ rotation  # (m, 3, 3)
+    positions = np.broadcast_to(pose.position_world, (len(turns), 3))
+    away = framed_seen(visibility, moment, tall, positions, rotations, widest).max(axis=1) < AWAY_SEEN
+    if not away.any():
+        return None
+    kept = [k for k, s in enumerate(subjects) if s not in tall]
+    if kept and keep is not None:
+        seen = framed_seen(visibility, moment, tuple(subjects[k] for k in kept), positions, rotations, widest)
+        keeping = away & (seen >= keep[kept]).all(axis=1)
+        away = keeping if keeping.any() else away  # else the others are let go too: the bar is on the player at the lens
+    return CameraPose(pose.position_world, matrix_to_quat(rotations[int(np.argmax(away))]), widest.vertical_fov_deg)
 
 
 def _panned(rotation: np.ndarray, from_world: np.ndarray, to_world: np.ndarray, target_world: np.ndarray | None) -> np.ndarray:
