@@ -14,7 +14,7 @@ import threading
 
 from camdirector.errors import DirectorError
 from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_request
-from camdirector.infra.heap import freeze_startup_heap
+from camdirector.infra.heap import collect_ahead, freeze_startup_heap
 from camdirector.infra.plugins import import_plugins
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.dispatch import Dispatcher
@@ -73,3 +73,5 @@ def worker_main(conn, settings: ServerSettings) -> None:
         send(reply)
         while _idle(sock) and table.idle_work():
             pass
+        if _idle(sock):  # the collector's next run, where it holds no frame up
+            collect_ahead()
