@@ -70,7 +70,8 @@ def test_collect_ahead_runs_the_collection_the_next_trigger_would(young_made, ge
         gc.callbacks.append(seen)
         collect_ahead()
     finally:
-        gc.callbacks.remove(seen) if seen in gc.callbacks else None
+        if seen in gc.callbacks:
+            gc.callbacks.remove(seen)
         gc.set_threshold(*thresholds)
     assert collected == ([] if expected is None else [expected])
     del made

@@ -96,25 +96,21 @@ def stepped_back(
     rotations = _panned(rotation, pose.position_world, tried, target)  # (m, 3, 3)
     tall = too_tall(tried, rotations)  # (m, P)
     widest = Lens(vertical_fov_deg=widest_deg, aspect=lens.aspect)
-    before = framed_seen(visibility, moment, subjects, pose.position_world[None], rotation[None], widest)[0] if subjects else None
+    # each framed subject's share to keep: as much as before or candidate_seen, whichever is less
+    keep = None
+    if subjects:
+        before = framed_seen(visibility, moment, subjects, pose.position_world[None], rotation[None], widest)[0]
+        keep = np.minimum(before, settings.candidate_seen)
     for position, turned, tall_there in zip(tried, rotations, tall):
         if not in_level.inside(position) or in_level.crossed(pose.position_world, position) or seen_tall(position, tall_there):
             continue
-        if before is not None:
+        if keep is not None:
             seen = framed_seen(visibility, moment, subjects, position[None], turned[None], widest)[0]
-            if (seen < np.minimum(before, settings.candidate_seen)).any():
+            if (seen < keep).any():
                 continue
         return CameraPose(position, matrix_to_quat(turned), widest_deg), False
-    panned = _turned_away(
-        pose,
-        moment,
-        visibility,
-        rotation,
-        widest,
-        tuple(int(i) for i in np.flatnonzero(here)),
-        subjects,
-        None if before is None else np.minimum(before, settings.candidate_seen),
-    )
+    tall_here = tuple(int(i) for i in np.flatnonzero(here))
+    panned = _turned_away(pose, moment, visibility, rotation, widest, tall_here, subjects, keep)
     return None if panned is None else (panned, True)
 
 
