@@ -47,7 +47,8 @@ def test_no_place_puts_a_subject_taller_than_the_bands_top(top):
     # over a's shoulder close to it see it best
     walls = [block((2.0, 1.5, z), (30.0, 3.0, 0.2)) for z in (-1.0, 1.0)]
     # the Toric place (a FOLLOW through a's eyes has no place: first_person.py)
-    settings = MatchSettings(shown_height_max=top, follow_shown_height=min(top, 0.35), first_person=False)
+    sizes = {"follow_shown_height": min(top, 0.35), "zoom_shown_height": min(top, 0.35)}  # under the band's top
+    settings = MatchSettings(shown_height_max=top, first_person=False, **sizes)
     rig = rig_of(walls, settings)
     builder, moment = rig.rig.builder, rig.rig.buffer.moments[-1]
     shot, score = builder.build(ShotChoice(("a",), ShotKind.FOLLOW, "test"), (0,), moment, [moment], None, None, 0.0)

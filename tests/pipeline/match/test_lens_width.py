@@ -1,6 +1,7 @@
 """The program camera's lens widened where a player would stand taller than the framing band
 (lens_width.py): a player close in front goes wide enough to fit, one far off or behind a wall
-does not, the widest lens is the limit, the zoom back is paced, and the program's poses carry it."""
+does not, the widest lens is the limit, the zoom back is paced, and the program's poses carry it;
+zoomed in on framed subjects that stand small, as far as the safe area and the FOLLOW's size let it."""
 
 from __future__ import annotations
 
@@ -8,9 +9,17 @@ import numpy as np
 import pytest
 
 from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
+from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.match.first_person import CORPSE_EYE_FRACTION, EYE_HEIGHT_FRACTION
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
-from camdirector.pipeline.match.lens_width import FRAMED_IN, looked_through, outline_points, widened_fov_deg
+from camdirector.pipeline.match.lens_width import (
+    FRAMED_IN,
+    looked_through,
+    outline_points,
+    screen_slopes,
+    widened_fov_deg,
+    zoomed_fov_deg,
+)
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
@@ -174,3 +183,89 @@ def test_the_answered_pose_is_widened_at_its_moment_never_narrowed_and_zooms_bac
     paced = answer(far, 80.0, 0.1)
     assert paced.vertical_fov_deg == pytest.approx(80.0 - 0.1 * SETTINGS.narrow_deg_s)
     assert answer(far, None, 0.0) is far  # a cut: the lens's own
+
+
+def _zoomed(rig, moment, pose, subjects=(0,), settings=SETTINGS) -> float:
+    points = outline_points(moment, rig.rig.program_camera.subject_visibility)[list(subjects)]
+    slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
+    return zoomed_fov_deg(slope_y, slope_x, Lens(), settings)
+
+
+def _safe_share(pose: CameraPose, fov_deg: float, points_world: np.ndarray) -> float:
+    """How far from the frame's centre the farthest of the points lies, a share of the half-frame (1: its edge)."""
+    return float(np.abs(project_to_screen(pose, Lens(vertical_fov_deg=fov_deg), points_world)).max())
+
+
+@pytest.mark.parametrize("distance_m", [8.0, 12.0])
+def test_a_framed_subject_far_off_is_zoomed_in_on_to_the_follows_size(distance_m):
+    rig, moment, pose = _looking_at_a(distance_m)
+    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.outlines_local[0])
+    assert _height_share(pose, Lens().vertical_fov_deg, points) < SETTINGS.zoom_shown_height  # small at the lens's
+    fov_deg = _zoomed(rig, moment, pose)
+    assert SETTINGS.zoom_min_fov_deg < fov_deg < Lens().vertical_fov_deg
+    assert _height_share(pose, fov_deg, points) == pytest.approx(SETTINGS.zoom_shown_height, abs=1e-6)  # the size, no more
+    assert _widened(rig, moment, pose, subjects=(0,)) == pytest.approx(fov_deg)  # the program's width on a cut
+    assert _widened(rig, moment, pose) == Lens().vertical_fov_deg  # not framed by the shot (a baseline's): the lens kept
+
+
+def test_the_zoom_stops_at_the_narrowest_lens_and_at_the_safe_area():
+    rig, moment, pose = _looking_at_a(40.0)
+    assert _zoomed(rig, moment, pose) == pytest.approx(SETTINGS.zoom_min_fov_deg)  # far enough that the size is never reached
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    camera = chest + [12.0, 0.0, 0.0]
+    aside = look_along(camera, chest + [0.0, 0.0, 5.0] - camera, Lens().vertical_fov_deg)  # a composed off-centre
+    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.outlines_local[0])
+    fov_deg = _zoomed(rig, moment, aside)
+    assert fov_deg > _zoomed(rig, moment, pose)  # less zoom than centred at that distance
+    assert _height_share(aside, fov_deg, points) < SETTINGS.zoom_shown_height  # not stopped by the size
+    assert _safe_share(aside, fov_deg, points) == pytest.approx(SETTINGS.zoom_safe, abs=1e-6)  # at the safe area's edge
+    beyond = look_along(camera, chest + [0.0, 0.0, 10.0] - camera, Lens().vertical_fov_deg)
+    assert _safe_share(beyond, Lens().vertical_fov_deg, points) > SETTINGS.zoom_safe
+    assert _zoomed(rig, moment, beyond) == Lens().vertical_fov_deg  # outside it at the lens's already: no zoom
+
+
+def test_every_framed_subject_bounds_the_zoom():
+    """The pair 30 m apart seen side by side from 30 m, a nearer the frame's centre than b: zoomed
+    in on less than on a alone, to the safe area's edge."""
+    rig, moment, _ = _looking_at_a(12.0)
+    chest_a, chest_b = moment.feet_world[0] + [0.0, 1.0, 0.0], moment.feet_world[1] + [0.0, 1.0, 0.0]
+    across = np.cross(chest_b - chest_a, [0.0, 1.0, 0.0])
+    middle = (chest_a + chest_b) / 2.0
+    camera = middle + across / np.linalg.norm(across) * 30.0
+    pose = look_along(camera, middle + (chest_a - middle) / 3.0 - camera, Lens().vertical_fov_deg)
+    points = outline_points(moment, rig.rig.program_camera.subject_visibility)
+    assert max(_safe_share(pose, Lens().vertical_fov_deg, p) for p in points) < SETTINGS.zoom_safe  # both in the frame
+    alone, both = _zoomed(rig, moment, pose, subjects=(0,)), _zoomed(rig, moment, pose, subjects=(0, 1))
+    assert alone < both < Lens().vertical_fov_deg
+    assert max(_safe_share(pose, both, p) for p in points) == pytest.approx(SETTINGS.zoom_safe, abs=1e-6)
+
+
+def test_the_zoom_in_is_paced_and_the_zoom_out_is_at_once():
+    rig, moment, pose = _looking_at_a(12.0)
+    target = _zoomed(rig, moment, pose)
+    paced = _widened(rig, moment, pose, last_fov_deg=Lens().vertical_fov_deg, dt_s=0.1, subjects=(0,))
+    assert paced == pytest.approx(Lens().vertical_fov_deg - 0.1 * SETTINGS.zoom_deg_s)
+    assert _widened(rig, moment, pose, last_fov_deg=target - 5.0, dt_s=0.1, subjects=(0,)) == pytest.approx(target)
+    from_wide = _widened(rig, moment, pose, last_fov_deg=80.0, dt_s=0.1, subjects=(0,))
+    assert from_wide == pytest.approx(80.0 - 0.1 * SETTINGS.narrow_deg_s)  # back from a widening at the lens's pace
+
+
+def test_a_player_near_the_camera_keeps_the_zoomed_lens_inside_the_band():
+    """A far subject zoomed on, with b 6 m in front of the camera: b, enlarged, must stay under the band's top."""
+    rig, moment, _ = _looking_at_a(8.0)
+    chest_a, chest_b = moment.feet_world[0] + [0.0, 1.0, 0.0], moment.feet_world[1] + [0.0, 1.0, 0.0]
+    camera = chest_b + (chest_b - chest_a) / np.linalg.norm(chest_b - chest_a) * 4.0
+    pose = look_along(camera, chest_a - camera, Lens().vertical_fov_deg)  # a far, b near in line
+    points = outline_points(moment, rig.rig.program_camera.subject_visibility)
+    fov_deg = _widened(rig, moment, pose, subjects=(0,))
+    assert _height_share(pose, fov_deg, points[1]) <= SETTINGS.shown_height_max
+    assert fov_deg >= _zoomed(rig, moment, pose)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [{"zoom_min_fov_deg": 0.5}, {"zoom_shown_height": 0.0}, {"zoom_shown_height": 0.6}, {"zoom_safe": 1.5}, {"zoom_deg_s": 0.0}],
+)
+def test_zoom_settings_out_of_range_are_refused(bad):
+    with pytest.raises(ValueError, match="zoom_"):
+        MatchSettings(**bad)

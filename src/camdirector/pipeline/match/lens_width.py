@@ -21,6 +21,18 @@ here are its outline (SubjectVisibility.outlines_local: the samples and its mesh
 highest vertices), since 16 samples fall short of the head and feet (sized by them, 7.7% of
 nav_test's bot match's frames still had a player over 0.6; by the outline, 2.7%).
 
+A Toric camera's pose (our director's) whose framed subjects stand small zooms in
+(`zoomed_fov_deg`): the narrowest width down to `MatchSettings.zoom_min_fov_deg` at which every
+framed subject's outline stays inside the action-safe area (`zoom_safe`) and none stands taller
+than `zoom_shown_height` (the style's FOLLOW size), reached at `zoom_deg_s` and left at once where
+the framing needs it. A camera operator on a far subject zooms in rather than walk up to it: the
+position is the Toric solve's, so what it sees (visibility, walls) is unchanged, and the frame
+narrows about its centre, which pushes subjects composed off-centre outward, hence the safe area.
+On open levels a pair 20-30 m apart, composed at the lens's 50 degrees, stood 0.06-0.09 of the
+frame (issue 41: nav_test's median shown height 0.10 against a bar of 0.15); at the width that
+fits them the same picture shows them and the players about them larger. The widening below
+starts from the zoom's width: a player near the camera, enlarged by it, is still kept in the band.
+
 A Toric camera's pose (our director's) also goes wide enough to show a framed subject that the
 frame cuts off (`_cut_off`): a camera pulled in front of a wall close over its subject looks down
 as steeply as a level camera can and has the subject below the frame; wider, it shows it without
@@ -28,6 +40,8 @@ a cut. The baselines' cameras keep what they frame.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -55,19 +69,29 @@ def widened_fov_deg(
     dt_s: float,
     subjects: tuple[int, ...] = (),
 ) -> float:
-    """The pose's vertical field of view, deg (module docstring): at least the lens's, at most
+    """The pose's vertical field of view, deg (module docstring): at least the lens's, or the
+    zoom's for the players the shot frames (`subjects`; `zoomed_fov_deg`), at most
     settings.widen_max_fov_deg; `last_fov_deg` the last frame's when this one moves on from it
-    (None on a cut), narrowed from by at most narrow_deg_s * dt_s. subjects: the players the
-    shot frames, each shown too where a width up to the widest shows it (`_cut_off`)."""
-    base_deg, max_deg = lens.vertical_fov_deg, max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
-    floor_deg = base_deg if last_fov_deg is None else max(base_deg, last_fov_deg - settings.narrow_deg_s * dt_s)
-    floor_deg = min(floor_deg, max_deg)
-    if max_deg <= base_deg:
-        return base_deg
+    (None on a cut), narrowed from by at most narrow_deg_s * dt_s (zoom_deg_s below the lens's).
+    Each subject is shown too where a width up to the widest shows it (`_cut_off`)."""
+    lens_deg, max_deg = lens.vertical_fov_deg, max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
+    zooms = bool(subjects) and settings.zoom_min_fov_deg < lens_deg
+    if max_deg <= lens_deg and not zooms:
+        return lens_deg
     points = outline_points(moment, visibility)
     if looked_through(pose, moment, points).any():
-        return base_deg
+        return lens_deg
     slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
+    framed = list(subjects)
+    base_deg = zoomed_fov_deg(slope_y[framed], slope_x[framed], lens, settings) if zooms else lens_deg
+    if last_fov_deg is None:
+        floor_deg = base_deg
+    else:  # narrowed at a pace: back from a widening at narrow_deg_s, on into a zoom at zoom_deg_s
+        rate_deg_s = settings.zoom_deg_s if base_deg < lens_deg and last_fov_deg <= lens_deg else settings.narrow_deg_s
+        floor_deg = max(base_deg, last_fov_deg - rate_deg_s * dt_s)
+    floor_deg = min(floor_deg, max_deg)
+    if max_deg <= lens_deg:  # settings that never widen
+        return float(floor_deg)
     # most frames show nobody too tall at the floor's width: the grid of widths only for those who are
     at_floor = screen_heights(slope_y, slope_x, np.tan(np.radians([floor_deg]) / 2.0), lens.aspect)[:, 0]  # (P,)
     tall = np.flatnonzero(at_floor > settings.shown_height_max)
@@ -87,6 +111,22 @@ def widened_fov_deg(
         if (fits & enough).any():  # the band first: a subject too close to fit stays cut off
             fits &= enough
     return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
+
+
+def zoomed_fov_deg(slope_y: np.ndarray, slope_x: np.ndarray, lens: Lens, settings: MatchSettings) -> float:
+    """The narrowest vertical field of view, deg, from the lens's down to settings.zoom_min_fov_deg,
+    at which every framed subject's outline lies inside zoom_safe of the frame about its centre and
+    none stands taller than zoom_shown_height of the frame's height (module docstring): slope_y,
+    slope_x (s, S) the screen slopes of the s subjects' outline points (`screen_slopes`, NaN behind
+    the near plane). The lens's where a point is behind the camera or outside that area already."""
+    lens_deg = lens.vertical_fov_deg
+    if np.isnan(slope_y).any():
+        return lens_deg
+    # tan of the half-width each bound needs: the outlines inside the safe area, the tallest no taller than the size
+    fits = max(float(np.abs(slope_y).max()), float(np.abs(slope_x).max()) / lens.aspect) / settings.zoom_safe
+    sized = float((slope_y.max(axis=1) - slope_y.min(axis=1)).max()) / (2.0 * settings.zoom_shown_height)
+    tan_half = max(fits, sized, math.tan(math.radians(settings.zoom_min_fov_deg) / 2.0))
+    return min(lens_deg, math.degrees(2.0 * math.atan(tan_half)))
 
 
 def _cut_off(

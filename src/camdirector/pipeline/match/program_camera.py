@@ -6,7 +6,8 @@ outside the level or inside solid moved inside toward the player the shot keeps 
 player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
 (`held_before_wall`), its lens widened where a player would stand taller than the framing band
 (lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
-Toric camera, where the frame cuts off a framed subject; our director's pose (Toric or fixed) that
+Toric camera, where the frame cuts off a framed subject, and a Toric camera's zoomed in where its
+framed subjects stand small (flagged `lens_zoomed`); our director's pose (Toric or fixed) that
 the widest lens leaves with a player too tall stepped back from it, or with no room to step
 panned off the player (step_back.py, flagged `stepped_back_from_player`, `panned_off_player`: no
 cut for the subjects such a pan lets go); a Toric pose that these degrades left showing none of
@@ -140,6 +141,8 @@ class ProgramCamera:
                 pose = self._widened(moment, placed, subjects, None, dt_s)  # a cut starts at what it needs
         if pose.vertical_fov_deg > self.lens.vertical_fov_deg:
             flags.append("lens_widened")
+        elif pose.vertical_fov_deg < self.lens.vertical_fov_deg:
+            flags.append("lens_zoomed")
         return pose, flags
 
     def _stepped_back(
@@ -203,7 +206,8 @@ class ProgramCamera:
         camera's pose is a view through the eyes only where the eye is (step_back.py leaves such
         a view as it is); one held (`eye_outside_level_held`, an edit window's hold) is a camera
         like the others, every director's: the hold is the rig's, not the director's."""
-        fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s)
+        subjects = (shot.framed(moment.time_s) or ()) if isinstance(shot.camera, ToricCamera) else ()  # as `step` zooms
+        fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s, subjects)
         if fov_deg <= pose.vertical_fov_deg:
             return pose
         widened = CameraPose(pose.position_world, pose.rotation_xyzw, fov_deg)

@@ -175,6 +175,16 @@ class MatchSettings:
                                          # widest, so a camera near a wall does not pump frame to frame; at 20 deg/s the wide
                                          # frames lasted and showed more far-off players (nav_test's median height
                                          # 0.138 -> 0.130). (0, 1000]
+    zoom_min_fov_deg: float = 15.0       # a Toric pose whose framed subjects stand small zooms in, down to this (lens_width.py
+                                         # `zoomed_fov_deg`; on open levels players in the shot stood 0.06-0.15 of the frame
+                                         # at the lens's 50), deg; the lens's own or wider to keep it. (1, 170)
+    zoom_shown_height: float = 0.35      # until its tallest framed subject stands this share of the frame's height (a
+                                         # FOLLOW's follow_shown_height: the style's own size for one player), share.
+                                         # (0, shown_height_max]
+    zoom_safe: float = 0.93              # keeping every framed subject's outline inside this share of the frame about its
+                                         # centre (SMPTE ST 2046-1's action-safe area, 93%), share. (0, 1]
+    zoom_deg_s: float = 30.0             # zooming in no faster than this (zooming out is at once, as the framing needs),
+                                         # deg/s: 50 -> 15 degrees in a little over a second, a push-in, not a snap. (0, 1000]
     candidate_seen: float = 0.5          # a candidate's subject is shown from its camera with this share of its points seen
                                          # (eval-match's shown fraction). [0, 1]
     candidate_min_shown: float = 0.5     # a candidate is offered only when it shows this share of its subjects at the
@@ -219,6 +229,10 @@ class MatchSettings:
             raise ValueError("MatchSettings: shown_height_max in (0, 1], candidate_seen and candidate_min_shown in [0, 1]")
         if not 1.0 < self.widen_max_fov_deg < 170.0 or not 0.0 < self.narrow_deg_s <= 1000.0:
             raise ValueError("MatchSettings: widen_max_fov_deg in (1, 170) deg, narrow_deg_s in (0, 1000] deg/s")
+        if not 1.0 < self.zoom_min_fov_deg < 170.0 or not 0.0 < self.zoom_shown_height <= self.shown_height_max \
+                or not 0.0 < self.zoom_safe <= 1.0 or not 0.0 < self.zoom_deg_s <= 1000.0:
+            raise ValueError("MatchSettings: zoom_min_fov_deg in (1, 170) deg, zoom_shown_height in (0, shown_height_max], "
+                             "zoom_safe in (0, 1], zoom_deg_s in (0, 1000] deg/s")
         if not 1e3 <= self.plan_work_per_tick <= 1e9:
             raise ValueError(f"MatchSettings: plan_work_per_tick in [1e3, 1e9] camera-point pairs, got {self.plan_work_per_tick}")
         if self.max_held_shot_s > 600.0:
