@@ -269,3 +269,23 @@ def test_a_player_near_the_camera_keeps_the_zoomed_lens_inside_the_band():
 def test_zoom_settings_out_of_range_are_refused(bad):
     with pytest.raises(ValueError, match="zoom_"):
         MatchSettings(**bad)
+
+
+@pytest.mark.parametrize("held", [False, True])
+def test_a_far_follow_is_zoomed_on_at_its_cut_and_a_take_pushes_in_from_its_monitors_width(held):
+    """A style whose FOLLOW frames its player at 0.1 of the frame's height: the program's pose
+    zooms in on it at the cut; a human's take (held) starts at the lens's width, as its
+    candidate's monitor showed it, and zooms in at zoom_deg_s from there."""
+    rig, moment, _ = _looking_at_a(8.0, settings=MatchSettings(follow_shown_height=0.1, first_person=False))
+    program_camera = rig.rig.program_camera
+    choice = ShotChoice(("a",), ShotKind.FOLLOW, "test", held=held)
+    shot = rig.rig.builder.build(choice, (0,), moment, [moment], None, None, 0.0)[0]
+    assert shot is not None
+    cut, flags = program_camera.step(moment, 0.0, shot.camera, shot, 0.5, None)
+    if not held:
+        assert cut.vertical_fov_deg < Lens().vertical_fov_deg and "lens_zoomed" in flags
+        return
+    assert cut.vertical_fov_deg == Lens().vertical_fov_deg
+    after, after_flags = program_camera.step(moment, 0.1, shot.camera, shot, 0.5, cut)
+    assert after.vertical_fov_deg == pytest.approx(Lens().vertical_fov_deg - 0.1 * SETTINGS.zoom_deg_s)
+    assert "lens_zoomed" in after_flags

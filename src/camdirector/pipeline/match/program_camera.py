@@ -130,6 +130,8 @@ class ProgramCamera:
         # our director's cameras (Toric) widen to show a subject the frame cuts off too; the baselines' keep theirs
         subjects = shot.framed(moment.time_s) if isinstance(camera, ToricCamera) else ()
         last_fov_deg = last_pose.vertical_fov_deg if dt_s > 0.0 and last_pose is not None else None  # None: a cut
+        if last_fov_deg is None and shot.choice.held:  # a take starts as its candidate's monitor showed it, then zooms
+            last_fov_deg = self.lens.vertical_fov_deg
         pose = self._widened(moment, pose, subjects, last_fov_deg, dt_s)
         standing = isinstance(camera, ToricCamera) and camera.stand_world is not None  # a stand that lost them is left too
         # a pan off a player at the lens loses the subjects on purpose, for the frames it passes: no cut for it
