@@ -82,8 +82,7 @@ def widened_fov_deg(
     if looked_through(pose, moment, points).any():
         return lens_deg
     slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
-    framed = list(subjects)
-    base_deg = zoomed_fov_deg(slope_y[framed], slope_x[framed], lens, settings) if zooms else lens_deg
+    base_deg = zoomed_fov_deg(slope_y[list(subjects)], slope_x[list(subjects)], lens, settings) if zooms else lens_deg
     if last_fov_deg is None:
         floor_deg = base_deg
     else:  # narrowed at a pace: back from a widening at narrow_deg_s, on into a zoom at zoom_deg_s

@@ -127,8 +127,7 @@ class ProgramCamera:
                 return None
             flags.append("pose_held")
             return last_pose, flags
-        # our director's cameras (Toric) widen to show a subject the frame cuts off too; the baselines' keep theirs
-        subjects = shot.framed(moment.time_s) if isinstance(camera, ToricCamera) else ()
+        subjects = _zoomed_for(camera, shot, moment.time_s)
         last_fov_deg = last_pose.vertical_fov_deg if dt_s > 0.0 and last_pose is not None else None  # None: a cut
         if last_fov_deg is None and shot.choice.held:  # a take starts as its candidate's monitor showed it, then zooms
             last_fov_deg = self.lens.vertical_fov_deg
@@ -208,7 +207,7 @@ class ProgramCamera:
         camera's pose is a view through the eyes only where the eye is (step_back.py leaves such
         a view as it is); one held (`eye_outside_level_held`, an edit window's hold) is a camera
         like the others, every director's: the hold is the rig's, not the director's."""
-        subjects = (shot.framed(moment.time_s) or ()) if isinstance(shot.camera, ToricCamera) else ()  # as `step` zooms
+        subjects = _zoomed_for(shot.camera, shot, moment.time_s)
         fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s, subjects)
         if fov_deg <= pose.vertical_fov_deg:
             return pose
@@ -326,3 +325,10 @@ class ProgramCamera:
         back = camera.stepped_back(moment, pulled, self.ray_scene, s.pull_margin_m, clearance)
         # a step back out of the level (above an open level's box) would be moved in again, nearer (in_level.py)
         return (back if back is pulled or self.in_level.inside(back.position_world) else pulled), moved
+
+
+def _zoomed_for(camera: ShotCamera, shot: Shot, time_s: float) -> tuple[int, ...]:
+    """The players the lens zooms on and widens to show when the frame cuts them off (lens_width.py):
+    those a Toric camera (our director's) frames at time_s; none for the baselines' and the eyes,
+    which keep what they frame."""
+    return (shot.framed(time_s) or ()) if isinstance(camera, ToricCamera) else ()
