@@ -6,8 +6,8 @@ and ZeroMQ.
         [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--generator python|native]
         [--server-python PATH] [--server-arg ARG ...]
 
-For each mode and transport a fresh server is started (an idle session is reclaimed one second
-after its stream ends, so one step's sessions do not weigh on the next), and session counts are
+For each mode and transport a fresh server is started (each step closes its sessions when its
+streams end, so one step's sessions do not weigh on the next), and session counts are
 tried upward (1, 2, 4, 8, 16, then every 8 up to --max-sessions), then the gap between the
 last count that passed and the first that failed is halved until they are neighbours (16 passed
 and 24 failed: 20, then 18 or 22, ...), each count a short paced run of
@@ -166,8 +166,11 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
         str(args.workers),
         "--max-sessions",
         str(max(counts) * 2),
+        # stream.run closes its sessions; a step's sessions wait for their streams through the
+        # floor's 520 health checks, which took over a second on a loaded machine (a window of
+        # 1 s reclaimed them before they streamed)
         "--session-resume-s",
-        "1",
+        "60",
         *args.server_arg,
         python=args.server_python,
     ) as server:
@@ -200,7 +203,7 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
                         },
                     }
                 )
-                time.sleep(args.settle_s)  # the step's sessions are reclaimed before the next starts
+                time.sleep(args.settle_s)  # the server settles (closed sessions' state freed) before the next step
                 if passed:
                     return True
             return False
@@ -243,7 +246,7 @@ def main(argv=None) -> int:
     parser.add_argument("--modes", default=",".join(MODES), help="visibility modes, comma-separated")
     parser.add_argument("--transports", default=",".join(TRANSPORTS), help="grpc, zmq or both, comma-separated")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="server worker processes")
-    parser.add_argument("--settle-s", type=float, default=1.5, help="pause after a step while its sessions are reclaimed, s")
+    parser.add_argument("--settle-s", type=float, default=1.5, help="pause after a step while the server settles, s")
     parser.add_argument(
         "--server-python",
         default=sys.executable,

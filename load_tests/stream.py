@@ -70,11 +70,19 @@ class GrpcDriver:
             request_serializer=pb.CreateSessionRequest.SerializeToString,
             response_deserializer=pb.CreateSessionResponse.FromString,
         )
+        self.close_call = self.channel.unary_unary(
+            "/camdirector.v1.Director/CloseSession",
+            request_serializer=pb.CloseSessionRequest.SerializeToString,
+            response_deserializer=pb.CloseSessionResponse.FromString,
+        )
         self.stream = self.channel.stream_stream("/camdirector.v1.Director/StreamFrames")  # bytes in, bytes out
         self.health = health_pb2_grpc.HealthStub(self.channel)
 
     async def open_session(self, request) -> str:
         return (await self.create(request, metadata=self.metadata)).session_id
+
+    async def close_session(self, session_id: str) -> None:
+        await self.close_call(pb.CloseSessionRequest(session_id=session_id), metadata=self.metadata)
 
     async def run_session(self, session_id: str, frames: list[bytes], period_s: float, start: float, record):
         call = self.stream(metadata=self.metadata)
@@ -116,6 +124,13 @@ class ZmqDriver:
         if code != b"0":
             raise RuntimeError(body.decode())
         return pb.CreateSessionResponse.FromString(body).session_id
+
+    async def close_session(self, session_id: str) -> None:
+        code, body = await self._call(
+            self.control, b"CloseSession", pb.CloseSessionRequest(session_id=session_id).SerializeToString()
+        )
+        if code != b"0":
+            raise RuntimeError(body.decode())
 
     async def run_session(self, session_id, frames, period_s, start, record):
         sock = self._socket()
@@ -220,6 +235,11 @@ async def run(
             wall_s = time.perf_counter() - start
             client_cpu_s = time.process_time() - cpu_start_s  # this load generator's own CPU while streaming
             errors = [repr(r) for r in results if isinstance(r, BaseException)]
+    for sid in session_ids:  # closed, not left to the server's reclaim: the next run starts on an idle server
+        try:
+            await driver.close_session(sid)
+        except Exception as e:  # a session the server reclaimed or lost is the run's error, not a crash here
+            errors.append(f"closing {sid}: {e!r}")
     await driver.close()
     sent = sessions * n_frames
     rtt = percentiles(rtt_ms)

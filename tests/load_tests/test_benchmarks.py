@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 
 import pytest
 
+from camdirector.deploy.server_process import ServerProcess
 from load_tests import (
     capacity,
     dashboard_bench,
@@ -70,6 +72,17 @@ def test_tracks_bench_reports_a_level_and_its_routes(shared_data, tmp_path):
 def test_stream_bench_reports_round_trips(tmp_path):
     result = _run(stream.main, tmp_path, "--transport", "zmq", "--sessions", "1", "--seconds", "1")
     assert result["dropped_frames"] == 0 and not result["errors"]
+
+
+@pytest.mark.parametrize("transport", ["grpc", "zmq"])
+def test_a_stream_run_closes_its_sessions(transport):
+    # a server with room for 2: the second run opens its sessions only where the first closed its
+    # own (the server's reclaim window, 60 s by default, would otherwise still hold them)
+    with ServerProcess("--workers", "1", "--max-sessions", "2") as server:
+        address = server.grpc if transport == "grpc" else server.zmq
+        for _ in range(2):
+            result = asyncio.run(stream.run(transport, address, 2, 60.0, 0.2))
+            assert result["dropped_frames"] == 0 and not result["errors"]
 
 
 def test_capacity_reports_the_last_count_that_held_with_its_floor_and_load_generator(tmp_path):
