@@ -17,7 +17,9 @@ from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.moments import MomentBuffer
 from camdirector.pipeline.match.planned import JUMP_TICKS
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.match.shots import Place, ToricCamera
+from camdirector.pipeline.match.shots import Place, ToricCamera, best_place, place_grid, wall_free
+from camdirector.pipeline.match.visibility import SubjectVisibility
+from camdirector.pipeline.style import Style
 from camdirector.pipeline.toric.target_sampling import SurfaceSampler
 from tests.pipeline.match.scenes import (
     LENS,
@@ -301,3 +303,34 @@ def test_kills_of_players_far_apart_never_share_a_shot_that_would_show_them_smal
         assert any("plan_events_left_out" in f for s in states for f in s.flags)
     else:
         assert shown.kind in (ShotKind.GROUP, ShotKind.OVERVIEW) and set(shown.subject_ids) == {"a1", "b1", "a2", "b2"}
+
+
+def test_a_place_whose_camera_would_cross_a_wall_in_the_shots_first_seconds_gives_way():
+    # a pair 8 m apart along z walks 4 m along +x: every place's camera moves by (4, 0, 0); a wall
+    # across x = 2 (its slab 1.9-2.1 m) is met by exactly the cameras whose move overlaps it, and a
+    # place seen as well from beyond the wall's reach wins the tie it would lose (shots.py wall_free)
+    from tests.pipeline.match.test_match_real_maps import moment_of  # which imports this module's block
+
+    def at(x: float):
+        return moment_of({"a": (x, 0.0), "b": (x, 8.0)}, {"a": (x, 8.0), "b": (x, 0.0)})
+
+    scene = RayScene([block((2.0, 0.0, 4.0), (0.2, 100.0, 100.0))])
+    visibility = SubjectVisibility(scene, [player_mesh(), player_mesh()], 16, np.random.default_rng(0))
+    path = [at(0.0), at(2.0), at(4.0)]
+    camera = ToricCamera(ShotKind.DUEL, 0, 1, Style(), LENS, Place(0.5, math.radians(90.0)))
+    places = place_grid(None)
+    start = camera.positions(path[0], places)[:, 0]
+    assert np.allclose(camera.positions(path[-1], places)[:, 0], start + 4.0)  # the torus moves with the pair
+    crossing = (start < 2.1) & (start + 4.0 > 1.9)  # the move overlaps the slab
+    assert crossing.any() and not crossing.all()
+    assert np.array_equal(wall_free(camera, places, path, visibility), ~crossing)
+    # two places this side of the wall that see both at the cut: the first crosses it on the way
+    seen = np.array([best_place(camera, [p], path[:1], (0, 1), visibility)[1] for p in places])
+    near = next(k for k in np.flatnonzero(crossing & (start < -0.5) & (seen == 1.0)))
+    far = next(k for k in np.flatnonzero(~crossing & (start < -2.5) & (seen == 1.0)))
+    pair = [places[near], places[far]]
+    assert best_place(camera, pair, path[:1], (0, 1), visibility)[0] == places[near]
+    assert best_place(camera, pair, path[:1], (0, 1), visibility, path=path) == (places[far], 1.0)  # its score unchanged
+    # where the place seeing more crosses the wall by a margin over PATH_WALL_COST, it still wins
+    worse = next(k for k in np.flatnonzero(~crossing & (seen < 0.7) & (seen > 0.0)))
+    assert best_place(camera, [places[near], places[worse]], path[:1], (0, 1), visibility, path=path)[0] == places[near]

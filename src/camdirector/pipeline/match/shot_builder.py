@@ -35,6 +35,12 @@ at a level node (stand.py), else it rides its torus.
 
 Candidates (`candidate_camera`): a situation is offered beside the program only when its camera,
 at the style's place, shows at least `candidate_min_shown` of its subjects at that moment.
+
+A killer framed alone at the cut (a planned DUEL's pair window, shots.py `PairWindow`) is on air
+from the cut: its place is ranked by its camera's path over the shot's first `min_shot_s` too
+(shots.py `wall_free`), a place whose camera would cross a wall on the way ranked PATH_WALL_COST
+lower. On the real duel's first 3 minutes, 3 of its 7 shots under 2 s were one such killer's
+camera meeting walls in corridors every 1.2-1.8 s (issue 41, item 3): 3 shots under 2 s after.
 """
 
 from __future__ import annotations
@@ -55,6 +61,7 @@ from camdirector.pipeline.match.moments import Moment, MomentBuffer
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import (
+    PATH_STEP_S,
     READABLE_STEP_M,
     STEP_BACK_MAX_M,
     PairWindow,
@@ -368,6 +375,7 @@ class ShotBuilder:
                 self.visibility,
                 allowed_after(keep),
                 moment,
+                path=self._path(moment, buffer),  # on air from the cut: a wall on its way would cut it short
             )
             score = score if alone_score >= 0.0 else -1.0
         if score < 0.0:
@@ -431,6 +439,12 @@ class ShotBuilder:
         shared = list(previous_framed & set(eyes.framed(moment.time_s) or subjects))
         eye_world = eyes.pose(moment).position_world
         return bool(self.grammar.allows_cut(previous_world, moment.aims_world[shared], eye_world)[0])
+
+    def _path(self, moment: Moment, buffer: MomentBuffer) -> list[Moment]:
+        """The moments of a new shot's first min_shot_s, every PATH_STEP_S, as far as the buffer
+        reaches (best_place's `path`)."""
+        times = moment.time_s + PATH_STEP_S * np.arange(math.floor(self.style.min_shot_s / PATH_STEP_S) + 1)
+        return [buffer.at(float(t)) for t in times if t <= buffer.horizon_s]
 
     @staticmethod
     def _alone_cover(pair: PairWindow, moment: Moment, buffer: MomentBuffer) -> list[Moment]:

@@ -96,6 +96,11 @@ THETA_MARGIN = 0.04  # keep the camera off A and B, ratio of the arc
 PLACE_RATIOS = np.array([0.01, 0.03, 0.06, 0.1, 0.15, 0.3, 0.5, 0.7, 0.85, 0.9, 0.94, 0.97, 0.99])
 PLACE_PHI_RAD = np.radians([5.0, 10.0, 20.0, 30.0, 45.0, 65.0, 80.0, 95.0, 110.0, 125.0])
 PLACE_WIDTHS = (1.0, 1.8, 2.6)
+# A new shot's camera rides its place for at least the style's min_shot_s: its path over that
+# time, sampled every PATH_STEP_S, crossing a wall costs a place PATH_WALL_COST of its seen share
+# (a camera that meets a wall under 2 s after its cut makes a shot under 2 s: issue 41, item 3)
+PATH_STEP_S = 0.25
+PATH_WALL_COST = 0.25
 MAX_SCREEN = 0.9  # a widened screen point stays this far inside the frame
 MIN_CAMERA_HEIGHT_M = 0.5  # a place lower than this above the lowest subject's feet is under the ground: never chosen
 HEADING_TIME_CONSTANT_S = 0.6  # FOLLOW: smoothing of the facing, as framing.py
@@ -516,11 +521,14 @@ def best_place(
     allowed: Callable[[np.ndarray], np.ndarray] | None = None,
     cut_moment: Moment | None = None,
     weights: list[float] | None = None,
+    path: list[Moment] | None = None,
 ) -> tuple[Place, float]:
     """The place of `places` whose worst-seen subject is best seen (framed_seen), a mean over
     `moments` with `weights` (default equal), and that score in [0, 1]; at a moment where the
     camera's pair window frames its kept player alone, that player is the subject. allowed: (m, 3) positions
-    at cut_moment -> (m,) bool (the cut's grammar); places it refuses score -1. Ties go to the
+    at cut_moment -> (m,) bool (the cut's grammar); places it refuses score -1. path: the moments
+    (in time order) of the shot's first min_shot_s, over which a place whose camera would cross a
+    wall ranks PATH_WALL_COST lower (`wall_free`; its score stays what it sees). Ties go to the
     earlier place."""
     weights = [1.0] * len(moments) if weights is None else weights
     score = np.zeros(len(places))
@@ -537,8 +545,30 @@ def best_place(
         first = camera.positions(cut_moment, places)
         if first is not None:
             score = np.where(allowed(first), score, -1.0)
-    best = int(np.argmax(score))
+    ranked = score
+    if path:  # the path chooses among the places; the score stays what the place sees
+        ranked = np.where((score < 0.0) | wall_free(camera, places, path, visibility), score, score - PATH_WALL_COST)
+    best = int(np.argmax(ranked))
     return places[best], float(score[best])
+
+
+def wall_free(camera: ToricCamera, places: Sequence[Place], path: list[Moment], visibility: SubjectVisibility) -> np.ndarray:
+    """(len(places),) bool: which places' camera centres at the path's moments (in time order) are
+    joined by segments that meet no level geometry (one cast each, from the earlier centre). A
+    moment whose framing is degenerate is skipped."""
+    free = np.ones(len(places), dtype=bool)
+    last = None
+    for moment in path:
+        positions = camera.positions(moment, places)
+        if positions is None:
+            continue
+        if last is not None:
+            rows = np.flatnonzero(free & (np.abs(positions - last).max(axis=1) > 0.0))
+            pause(len(rows))
+            # ray parameter in units of the move: under 1, the wall is before the next centre
+            free[rows[visibility.ray_scene.first_hit(last[rows], positions[rows] - last[rows]) < 1.0]] = False
+        last = positions
+    return free
 
 
 def overview_pose(
