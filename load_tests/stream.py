@@ -119,18 +119,19 @@ class ZmqDriver:
         await sock.send_multipart([rpc, payload])
         return tuple(await sock.recv_multipart())
 
-    async def open_session(self, request) -> str:
-        code, body = await self._call(self.control, b"CreateSession", request.SerializeToString())
+    async def _control_call(self, rpc: bytes, payload: bytes) -> bytes:
+        """A call on the control socket: the reply's body, a RuntimeError with the server's message where refused."""
+        code, body = await self._call(self.control, rpc, payload)
         if code != b"0":
             raise RuntimeError(body.decode())
+        return body
+
+    async def open_session(self, request) -> str:
+        body = await self._control_call(b"CreateSession", request.SerializeToString())
         return pb.CreateSessionResponse.FromString(body).session_id
 
     async def close_session(self, session_id: str) -> None:
-        code, body = await self._call(
-            self.control, b"CloseSession", pb.CloseSessionRequest(session_id=session_id).SerializeToString()
-        )
-        if code != b"0":
-            raise RuntimeError(body.decode())
+        await self._control_call(b"CloseSession", pb.CloseSessionRequest(session_id=session_id).SerializeToString())
 
     async def run_session(self, session_id, frames, period_s, start, record):
         sock = self._socket()

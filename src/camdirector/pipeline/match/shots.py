@@ -563,10 +563,11 @@ def wall_free(camera: ToricCamera, places: Sequence[Place], path: list[Moment], 
         if positions is None:
             continue
         if last is not None:
-            rows = np.flatnonzero(free & (np.abs(positions - last).max(axis=1) > 0.0))
+            move = positions - last
+            rows = np.flatnonzero(free & move.any(axis=1))
             pause(len(rows))
             # ray parameter in units of the move: under 1, the wall is before the next centre
-            free[rows[visibility.ray_scene.first_hit(last[rows], positions[rows] - last[rows]) < 1.0]] = False
+            free[rows[visibility.ray_scene.first_hit(last[rows], move[rows]) < 1.0]] = False
         last = positions
     return free
 
