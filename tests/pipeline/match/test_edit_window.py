@@ -19,6 +19,7 @@ from camdirector.pipeline.match.edit_window import (
     CARRIED_ON,
     ENDS_A_COPY,
     HELD_ON,
+    MOVED_EARLIER,
     SHORT_LEFT,
     STARTED_EARLY,
     EditWindow,
@@ -83,7 +84,8 @@ def shot(subjects: tuple[int, ...], x_m: float, replay: Replay | None = None) ->
 class Program:
     """A window fed hand-built frames: `seen[shot x]` is each shot's visibility, `sees[shot x]`
     the players its camera shows whole (none unless named), a shadow stepping on unless
-    `shadow_dies_at` (a frame number)."""
+    `shadow_dies_at` (a frame number); the rig working `window_s` ahead (None: min_shot_s, no
+    room to start a short shot earlier)."""
 
     def __init__(
         self,
@@ -93,8 +95,9 @@ class Program:
         heights: dict[float, float] | None = None,
         defer: bool = True,
         sliced: bool = False,
+        window_s: float | None = None,
     ):
-        self.window = EditWindow(2.0, PLAYERS, defer)
+        self.window = EditWindow(2.0, PLAYERS, defer, window_s)
         self.sliced = sliced  # what waits (shadow steps, a repair) worked on in the smallest slices after each frame
         self.slices = 0
         self.seen, self.shadow_dies_at, self.sees, self.heights = seen, shadow_dies_at, sees or {}, heights or {}
@@ -221,6 +224,65 @@ def test_a_kill_the_short_shot_shows_stays_with_a_neighbour_that_shows_it_or_the
     p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}, 20.0: {1, 2}})
     short_between(p, a, x, b, {10: [kill]})
     assert cuts(p.program()) == [0, 90]  # b shows them from its first pose: it starts at x's cut
+
+
+def test_a_short_shot_no_neighbour_takes_starts_earlier_in_the_shot_before_where_the_window_holds_it():
+    kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
+    for window_s, before_frames, expected in ((2.5, 90, [0, 60, 120]), (2.0, 90, [0, 90, 120]), (2.5, 70, [0, 70, 100])):
+        a, x, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((0,), 20.0)
+        p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}}, window_s=window_s)
+        p.frames(a, before_frames)
+        p.frames(x, 30, {10: [kill]})  # neither a nor b shows the kill x shows
+        p.frames(b, 10)
+        frames = p.program()
+        # the window holds a's last second, and a stays 2 s long: x's cut moves to it, x held at its first pose;
+        # a window of min_shot_s holds none of it, and a of 70 frames would be left under 2 s: x stays short
+        assert cuts(frames) == expected
+        if expected[1] == 60:
+            assert all(f.shot is x and MOVED_EARLIER in f.flags and f.pose.position_world[0] == 10.0 for f in frames[60:90])
+            assert not any(SHORT_LEFT in f.flags for f in frames)
+        else:
+            assert all(f.shot is x for f in frames[expected[1] : expected[2]])
+
+
+def test_a_moving_short_shot_started_earlier_moves_as_its_camera_would_have_from_its_first_frame():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    x.camera = Moving(10.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.2}, window_s=2.5, shadow_dies_at=100)
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, 60, 120]
+    assert all(
+        MOVED_EARLIER in f.flags and math.isclose(f.pose.position_world[0], 10.0 + 0.01 * k)
+        for k, f in enumerate(frames[60:90], 60)
+    )
+
+
+def test_a_short_shot_does_not_start_earlier_over_a_kill_the_shot_before_shows():
+    kill = GameEvent(EventKind.KILL, "b", "c", 0, 70 * DT_S, "kill")
+    for events, expected in (({0: [kill]}, [0, 90, 120]), (None, [0, 60, 120])):
+        a, x, b = shot((1, 2), 0.0), shot((0,), 10.0), shot((2,), 20.0)
+        p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.2}, sees={0.0: {1, 2}}, window_s=2.5, shadow_dies_at=100)
+        p.frames(a, 70)
+        p.frames(a, 20, events)  # a shows b kill c at frame 70, in the last second x would take: x does not
+        p.frames(x, 30)
+        p.frames(b, 10)
+        assert cuts(p.program()) == expected
+
+
+def test_a_short_shot_started_earlier_is_applied_before_the_frames_it_takes_are_answered():
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.2}, window_s=2.5, shadow_dies_at=100)
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 10)
+    frame, cut = p.window.answer(moment(59), p.judges)
+    assert frame.shot is a and p.window.repair is not None  # drawn at b's cut, not applied yet
+    frame, cut = p.window.answer(moment(60), p.judges)  # the first frame x takes: the repair applied first
+    assert cut and frame.shot is x and MOVED_EARLIER in frame.flags and p.window.repair is None
+    assert p.window.next_cut().time_s == 120 * DT_S
 
 
 def test_a_live_short_shot_goes_to_a_replay_only_where_no_kill_happens_in_it():

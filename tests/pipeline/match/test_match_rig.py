@@ -188,11 +188,11 @@ def test_taking_a_candidate_puts_its_previewed_camera_on_air():
 
 
 def test_a_take_goes_on_air_at_the_next_program_frame_with_the_window_full():
-    """With a 10 s delay the rig works 2 s ahead; a take drops those frames and is on air at once."""
+    """With a 10 s delay the rig works 2.5 s ahead; a take drops those frames and is on air at once."""
     match = Match(TEAMS, two_fronts, [], delay_s=10.0)
     session, states = run_session(match, 14.0)
     last = states[-1]
-    assert math.isclose(session.rig.window_s, 2.0) and len(session.rig.window.frames) >= 55  # the window is full
+    assert math.isclose(session.rig.window_s, 2.5) and len(session.rig.window.frames) >= 70  # the window is full
     candidate = last.match.candidates[0]
     session.rig.take(list(candidate.shot.subject_ids), candidate.shot.kind, release=False)
     after = [session.frame(u) for u in list(match.frames(16.0))[14 * 30 + 1 :]]

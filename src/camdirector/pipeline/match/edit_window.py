@@ -1,6 +1,7 @@
 """EDIT WINDOW of the MATCH rig (issue 41, item 3; docs/casting.md, "The edit window"): the rig
-works the program `window_s` (the style's `min_shot_s`, 2 s) ahead of the moment it answers, on
-the broadcast delay's own buffer, and keeps the frames it has worked out and not yet answered.
+works the program `window_s` (2.5 s: the style's `min_shot_s` and half a second more) ahead of the
+moment it answers, on the broadcast delay's own buffer, and keeps the frames it has worked out and
+not yet answered.
 A cut within a shot (a camera met a wall, its player teleported: rig.py) is found the frame it
 happens; here the frames before it are still the rig's to change. Where a cut comes under
 `min_shot_s` after the one before, the short shot between is given to a neighbour:
@@ -24,7 +25,14 @@ ties to the shot before), among the neighbours that
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
   short shot did, or as tall as it did.
-A short shot that has none holds on instead, where it can (`_hold`): the copy of its own camera
+A short shot that has none starts earlier instead, where the window still holds the shot before's
+last frames that make it `min_shot_s` long and the shot before stays as long (`_earlier`, docs/
+casting.md "A short shot starts earlier"): its cut moves to the first of them, the short shot's
+camera as it was at its first frame (a copy the window keeps of each cut's) stepped over them, else
+held at its first pose (through its player's eyes, a first-person shot), kept as a neighbour
+keeps a short shot's frames (`_may_take` with the shot before as the short one, its kills, subjects
+seen, players readable); applied before the first of them is answered. Failing that, it holds on
+(`_hold`): the copy of its own camera
 (the shadow its cut started) takes the shot after's first frames until the short shot is
 `min_shot_s` long, the copy's last pose held where it met a wall or lost its subjects, and the cut
 moves there, when the window reaches that frame (the shot after's frames may not cut before it,
@@ -82,6 +90,7 @@ JUDGED_EVERY = 3  # a neighbour's visibility over a short shot is judged at ever
 CARRIED_ON = "edit_window_carried_on"  # a short shot's frames given to the shot before
 STARTED_EARLY = "edit_window_started_early"  # a short shot's frames given to the shot after
 HELD_ON = "edit_window_held_on"  # the shot after's first frames given to a short shot neither neighbour could take
+MOVED_EARLIER = "edit_window_moved_earlier"  # the shot before's last frames given to a short shot neither neighbour took
 SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take nor hold on
 # a copy of a camera stepped on goes no further where it would cut, or shows its subjects no more (program_camera.py)
 ENDS_A_COPY = (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST)
@@ -141,7 +150,9 @@ class Decision(NamedTuple):
     seen: list[float]
 
 
-BEFORE, AFTER = "before", "after"  # Decision.neighbour: the shot before (carried on), the shot after (started early)
+# Decision.neighbour: the shot before (carried on), the shot after (started early), or neither, the short shot's cut
+# moved earlier into the shot before (`_earlier`)
+BEFORE, AFTER, EARLIER = "before", "after", "earlier"
 
 
 class Side(NamedTuple):
@@ -153,11 +164,13 @@ class Side(NamedTuple):
     shot: Shot
     judged: Shot
     shown: list[Moment]
+    stepped: bool = True  # whether a copy of its camera may step over the frames (False: it is as it was after them)
 
 
-def _side(shot: Shot, rows: list[WorkedFrame], judges: Judges) -> Side:
-    """The shot as a neighbour of the short shot's frames (rows), taken now (Side)."""
-    judged = dataclasses.replace(shot, camera=copy.copy(shot.camera))
+def _side(shot: Shot, rows: list[WorkedFrame], judges: Judges, camera: ShotCamera | None = None) -> Side:
+    """The shot as a neighbour of the short shot's frames (rows), taken now, or with a copy of
+    `camera`, its camera as it was at its first frame (Side)."""
+    judged = dataclasses.replace(shot, camera=copy.copy(shot.camera if camera is None else camera))
     return Side(shot, judged, [judges.shown_of(judged, r.moment) for r in rows])
 
 
@@ -175,6 +188,8 @@ class Repair:
     carried_until_s: float  # that shadow's own end where it does not, program time, s
     started: Shadow | None  # the shadow this cut starts, where the short shot is not given to the shot before
     decision: Decision | None = None
+    back: list[WorkedFrame] = field(default_factory=list)  # the shot before's last frames the short shot may start at
+    earlier: Side | None = None  # the short shot as their neighbour (`_back`, `_earlier`)
 
     def work_out(self, budget_s: float | None = None) -> None:
         """Works the decision out, whole (budget_s None) or for about budget_s more."""
@@ -185,6 +200,10 @@ class Repair:
     def __getstate__(self) -> dict[str, object]:
         self.work_out()  # a greenlet cannot be pickled; worked out now or later, the decision is the same
         return self.__dict__
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """A repair from a checkpoint (one written before a short shot could start earlier: it does not)."""
+        self.__dict__.update({"back": [], "earlier": None, **state})
 
 
 class Judges(NamedTuple):
@@ -208,9 +227,12 @@ class EditWindow:
     """The frames worked out and not yet answered, the shadow of the last cut, and the repairs
     (module docstring). `window_s` 0 answers each frame as it is worked out: no repairs."""
 
-    def __init__(self, min_shot_s: float, players: list[str], defer: bool = True):
+    def __init__(self, min_shot_s: float, players: list[str], defer: bool = True, window_s: float | None = None):
         self.min_shot_s = min_shot_s
         self.players = players
+        # how far ahead of the frame it answers the rig works, s: a short shot starts no earlier than a new cut's frame
+        # less this (the frames before are answered: `_back`); None: min_shot_s, no room to start one earlier
+        self.window_s = min_shot_s if window_s is None else window_s
         self.defer = defer  # repairs worked out off the frame path (module docstring); False: a moving ray scene
         self.frames: deque[WorkedFrame] = deque()
         self.shadow: Shadow | None = None
@@ -218,15 +240,20 @@ class EditWindow:
         self.holding: Repair | None = None  # a short shot no neighbour took, that may hold on (_hold)
         self.answered: WorkedFrame | None = None  # the last frame answered
         self.last_cut_s = -math.inf  # program time of the last cut answered, s
+        # the newest cut's frame and a copy of the camera it put on air as it was there (a short shot started earlier
+        # steps it from there: `_earlier`)
+        self.cut_camera: tuple[WorkedFrame, ShotCamera] | None = None
 
     def __setstate__(self, state: dict[str, object]) -> None:
-        """A window from a checkpoint (one written before repairs were drawn: none waiting)."""
-        self.__dict__.update({"defer": True, "repair": None, "holding": None, **state})
+        """A window from a checkpoint (one written before repairs were drawn: none waiting; before
+        a short shot could start earlier: no room for it)."""
+        defaults = {"defer": True, "repair": None, "holding": None, "window_s": state["min_shot_s"], "cut_camera": None}
+        self.__dict__.update({**defaults, **state})
 
     def drop(self) -> None:
         """Forgets the frames not yet answered (a take applies at once: rig.py)."""
         self.frames.clear()
-        self.shadow = self.repair = self.holding = None
+        self.shadow = self.repair = self.holding = self.cut_camera = None
 
     @property
     def waiting(self) -> bool:
@@ -308,6 +335,7 @@ class EditWindow:
             if before is not None and last is not None:
                 started = Shadow(before[0], before[1], last, frame.moment.time_s + self.min_shot_s)
             repair = self._drawn(frame, started, judges)
+            self.cut_camera = (frame, copy.copy(frame.shot.camera))
             if repair is None:
                 self.shadow = started or self.shadow
             else:
@@ -340,6 +368,12 @@ class EditWindow:
             self._give(rows, repair.after, decision, STARTED_EARLY, judges)
             frame.cut = False  # the cut before the short shot stays, and its shadow
             return
+        if decision.neighbour == EARLIER:
+            assert repair.back and repair.earlier is not None  # decided only with them (_decided)
+            self._give(repair.back, repair.earlier, decision, MOVED_EARLIER, judges)
+            repair.back[0].cut, rows[0].cut = True, False
+            self.shadow = repair.started or self.shadow
+            return
         if repair.started is None:
             frame.flags.append(SHORT_LEFT)
         else:  # judged when the window reaches min_shot_s past the short shot's start (_hold)
@@ -349,9 +383,14 @@ class EditWindow:
     def answer(self, moment: Moment, judges: Judges) -> tuple[WorkedFrame, bool]:
         """The frame of the program moment (the newest worked out at or before it), and whether
         the program cuts there (a frame passed over with a cut counts: the picture changed); a
-        repair whose short shot starts there applied first."""
-        if self.repair is not None and self.repair.rows[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
+        repair whose short shot starts there, or starts earlier from there (`_earlier`), applied first."""
+        repair = self.repair
+        if repair is not None and repair.rows[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
             self.settle(judges)
+        elif repair is not None and repair.back and repair.back[0].moment.time_s <= moment.time_s + TIME_EPSILON_S:
+            repair.work_out()  # the frames it may move the cut to are answered now: applied first where it does
+            if repair.decision is not None and repair.decision.neighbour == EARLIER:
+                self.settle(judges)
         if self.holding is not None and self.holding.frame.moment.time_s <= moment.time_s + TIME_EPSILON_S:
             self._left(self.holding)  # its cut answered before the frames it needs were worked out (the match's end)
         cut = False
@@ -443,12 +482,39 @@ class EditWindow:
             steps = None if first is None else carried.steps[first : first + len(rows)]
         before = None if carried is None else _side(carried.shot, rows, judges)
         after = _side(frame.shot, rows, judges)
+        back = self._back(start, frame)
+        earlier = None
+        if back:  # the short shot's camera as it was at its first frame, where the window kept it (else held there)
+            cut = self.cut_camera
+            camera = cut[1] if cut is not None and cut[0] is rows[0] else None
+            earlier = _side(rows[0].shot, back, judges, camera)._replace(stepped=camera is not None)
         players = {p: i for i, p in enumerate(self.players)}
-        run = SlicedRun(lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges))
+        run = SlicedRun(lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges, back, earlier))
         until_s = -math.inf if carried is None else carried.until_s
         if carried is not None:  # stepped on as if it carried the short shot: it goes off air at this cut then
             carried.until_s = frame.moment.time_s + self.min_shot_s
-        return Repair(rows, frame, run, before, after, carried, until_s, started)
+        return Repair(rows, frame, run, before, after, carried, until_s, started, back=back, earlier=earlier)
+
+    def _back(self, start: int, frame: WorkedFrame) -> list[WorkedFrame]:
+        """The last frames of the shot before the short one (its cut at `start` in the window, the
+        next at `frame`) that make the short shot min_shot_s long where its cut moves to the first
+        of them (`_earlier`); none where the window holds too few (window_s), the shot before would
+        be left shorter than min_shot_s, is a human's take, or a short shot before waits to hold on."""
+        if self.holding is not None:
+            return []
+        frames = list(self.frames)
+        start_by_s = frame.moment.time_s - self.min_shot_s  # the short shot min_shot_s long from here on
+        for j in range(start - 1, -1, -1):
+            if frames[j].cut or frames[j].moment.time_s <= frame.moment.time_s - self.window_s + TIME_EPSILON_S:
+                return []
+            if frames[j].moment.time_s <= start_by_s + TIME_EPSILON_S:
+                break
+        else:
+            return []
+        cut_s = next((f.moment.time_s for f in reversed(frames[:j]) if f.cut), self.last_cut_s)
+        if frames[j].moment.time_s - cut_s < self.min_shot_s - TIME_EPSILON_S or frames[j].shot.held:
+            return []
+        return frames[j:start]
 
     @staticmethod
     def _give(rows: list[WorkedFrame], neighbour: Side, decision: Decision, flag: str, judges: Judges) -> None:
@@ -467,12 +533,16 @@ def _decided(
     previous: Shot | None,
     players: dict[str, int],
     judges: Judges,
+    back: list[WorkedFrame],
+    earlier: Side | None,
 ) -> Decision:
     """Which neighbour takes the short shot's frames (rows), and how (module docstring): the shot
     before, carried on by its shadow (its steps over the rows, None where it has none), or the shot
     after, started at them into its first pose; whichever shows its subjects more (ties to the
-    shot before), among those that may take it; `previous` is the shot before the short one. It
-    reads only what its arguments held when the repair was drawn (moments, poses, copies)."""
+    shot before), among those that may take it; `previous` is the shot before the short one. Where
+    neither may, the short shot itself, started earlier over the shot before's last frames (back,
+    as `earlier` shows them: `_earlier`). It reads only what its arguments held when the repair
+    was drawn (moments, poses, copies)."""
     short = rows[0].shot
     kills = _kills(rows, players, judges)
     judged: list[tuple[float, Decision]] = []
@@ -484,7 +554,8 @@ def _decided(
     if later is not None:
         judged.append(later)
     if not judged:
-        return Decision(None, [], [])
+        moved = None if earlier is None else _earlier(back, rows[0].pose, earlier, players, judges)
+        return Decision(None, [], []) if moved is None else moved
     return max(judged, key=lambda j: j[0])[1]  # the first of equals: the shot before
 
 
@@ -519,14 +590,15 @@ def _after(
     kills: list[tuple[int, tuple[int, ...]]],
     other: Shot | None,
     judges: Judges,
+    step_copy: bool = True,
 ) -> tuple[float, Decision] | None:
     """The shot after's mean visibility, poses and visibilities over the short shot's frames,
     started there into its first pose (module docstring), where it is a neighbour of its kind
-    keeping its kills."""
+    keeping its kills (step_copy: a moving camera's copy, as it is now, may step there)."""
     if not _may_take(after.judged, short, other, rows):
         return None
     shot, shown = after.judged, after.shown  # a replay started earlier shows earlier moments
-    for poses in (_moving_earlier(shot, shown, first, judges), [first] * len(rows)):
+    for poses in (_moving_earlier(shot, shown, first, judges, step_copy), [first] * len(rows)):
         if poses is None:
             continue
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
@@ -537,6 +609,20 @@ def _after(
         ):
             return judged_mean, Decision(AFTER, poses, seen)
     return None
+
+
+def _earlier(back: list[WorkedFrame], first: CameraPose, short: Side, players: dict[str, int], judges: Judges) -> Decision | None:
+    """The short shot started earlier, its cut moved to the first of the shot before's last frames
+    (back), min_shot_s before the cut that ends it: through its player's eyes where it is a
+    first-person shot, a copy of its camera as it was at its first frame stepped from the first of
+    them (`_moving_earlier`: where the window kept that copy, the copy meets no wall and joins the
+    first pose), else held at its first pose, where it takes those frames as a neighbour of the shot
+    before would (`_after`: a replay's piece not showing its kill, a live shot's with no kill in
+    them for a replay; their kills, subjects seen and players readable). None where it may not."""
+    before = back[0].shot  # its frames before `back` stay its own: a replay there goes on
+    kills = _kills(back, players, judges)
+    moved = _after(back, first, short, before, kills, before, judges, step_copy=short.stepped)
+    return None if moved is None else moved[1]._replace(neighbour=EARLIER)
 
 
 def _judged_seen(
@@ -569,17 +655,20 @@ def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> 
     return out
 
 
-def _moving_earlier(after: Shot, shown: list[Moment], first: CameraPose, judges: Judges) -> list[CameraPose] | None:
+def _moving_earlier(
+    after: Shot, shown: list[Moment], first: CameraPose, judges: Judges, step_copy: bool = True
+) -> list[CameraPose] | None:
     """The poses of the shot after's camera at the short shot's moments (shown), started earlier and
     moving as it would have, into `first`, its first pose: a first-person camera's eyes; a moving
     camera (a Toric one), a copy of it as it is now stepped from the first of them (the rig's
     CAMERA stage: walls, the level, the lens); None for a fixed camera, or where the copy met a
     wall or lost its subjects, or the path jumps JUMP_M in a frame, leaves the level or (but an
-    eye's, which goes where its player went) crosses a wall (then its first pose is held)."""
+    eye's, which goes where its player went) crosses a wall (then its first pose is held); None
+    for a moving camera too without step_copy."""
     camera = after.camera
     if isinstance(camera, FirstPersonCamera):
         poses = [camera.pose(m) for m in shown]
-    elif not isinstance(camera, StaticCamera):
+    elif step_copy and not isinstance(camera, StaticCamera):
         camera, poses, last = copy.copy(camera), [], None
         for k, moment in enumerate(shown):
             pause()  # a step is the rig's CAMERA stage: a sliced repair hands back between them

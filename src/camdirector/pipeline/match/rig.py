@@ -10,7 +10,7 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             Session's business: Session.is_stale compares with the last answered state, whose
             frame is now the program's, so a re-sent input frame is also refused here, by the
             buffer, and flagged `match_stale_frame`).
-The rig works the program `window_s` (2 s at a 10 s delay) ahead of the program moment: stages
+The rig works the program `window_s` (2.5 s at a 10 s delay) ahead of the program moment: stages
 2-4 run for each buffered moment up to then, at most HEAD_STEPS a frame, each frame they work out
 joining the edit window (edit_window.py: 5.), which answers the program moment's. Everything below
 ("the program moment", the director's ticks, the buffered future it plans on) is that worked-out
@@ -163,7 +163,7 @@ class MatchRig(RigBase):
         self._last_time_s: float | None = None  # the moment of the newest frame worked out, s
         self._head: Moment | None = None  # that moment: the edit window's end (edit_window.py)
         self._answered_s: float | None = None  # the program moment last answered, s
-        self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans)
+        self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans, self.window_s)
         self._last_pose: CameraPose | None = None
         self._last_cut_s = -math.inf  # program time of the picture's last cut, s
         self._candidates: list[CandidateShot] = []
@@ -179,7 +179,7 @@ class MatchRig(RigBase):
         if "window" in state:
             self.window.defer = self._defer_plans  # a window written before repairs were drawn defers by default
         else:
-            self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans)
+            self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans, self.window_s)
             self._head, self._answered_s = None, self._last_time_s
             self._body_heights_m = np.array([np.ptp(o[:, 1]) for o in self.visibility.outlines_local])
 
@@ -224,8 +224,8 @@ class MatchRig(RigBase):
     @property
     def window_s(self) -> float:
         """How far ahead of the program moment the rig works (edit_window.py), s: the settings',
-        at most the style's min_shot_s and a quarter of the delay (the director plans on the rest)."""
-        return min(self.settings.edit_window_s, self.style.min_shot_s, self.delay_s / 4.0)
+        at most a quarter of the delay (the director plans on the rest)."""
+        return min(self.settings.edit_window_s, self.delay_s / 4.0)
 
     @property
     def player_inputs(self) -> MatchRig:

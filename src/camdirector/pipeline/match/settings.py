@@ -116,9 +116,10 @@ class MatchSettings:
     samples_per_player: int = 16         # surface points ray-cast per framed player (8 misjudged half-hidden players). [1, 256]
     min_visible: float = 0.75            # a framed place under this visible share looks for a better one. [0, 1]
     candidates: int = 3                  # preview shots offered beside the program. [0, 16]
-    edit_window_s: float = 2.0           # the rig works the program this far ahead of the moment it answers, at most the
-                                         # style's min_shot_s and a quarter of the delay, and gives a shot shorter than
-                                         # min_shot_s to a neighbour there (edit_window.py); 0: none, s. [0, 10]
+    edit_window_s: float = 2.5           # the rig works the program this far ahead of the moment it answers, at most a
+                                         # quarter of the delay, and gives a shot shorter than the style's min_shot_s
+                                         # to a neighbour there, or starts it earlier in what the window holds beyond
+                                         # min_shot_s (edit_window.py); 0: none, s. [0, 10]
     jump_cut_deg: float = 30.0           # the 30-degree rule: a cut on a shared subject turns the view this much, deg. [0, 180]
     overview_height_m: float = 12.0      # the bounding-box overview's height above the players, m. (0, 1000]
     pull_below: float = 0.5              # a camera that sees less than this share of its first subject's points (the rest
