@@ -225,7 +225,7 @@ class Judges(NamedTuple):
 
 class EditWindow:
     """The frames worked out and not yet answered, the shadow of the last cut, and the repairs
-    (module docstring). `window_s` 0 answers each frame as it is worked out: no repairs."""
+    (module docstring). The rig's `window_s` 0 answers each frame as it is worked out: no repairs."""
 
     def __init__(self, min_shot_s: float, players: list[str], defer: bool = True, window_s: float | None = None):
         self.min_shot_s = min_shot_s

@@ -38,7 +38,8 @@ moment's; a human's take drops the window's frames and goes on air at the progra
 4. visibility  the share of the framed subjects' sample points seen from the camera.
 5. edit     the frame joins the edit window; a cut under the style's min_shot_s after the one
             before gives the short shot between to the shot before (its camera carried on) or
-            the one after (edit_window.py). The program moment's frame is answered, its
+            the one after, or starts it earlier in the shot before's last frames (edit_window.py).
+            The program moment's frame is answered, its
             candidates' poses worked out at its moment.
 During a REPLAY shot (replays.py) CAMERA and VISIBILITY are of the replayed moment (the buffer keeps
 the past it shows), and so are `program_transforms` and the frame's `replay_of`, while
