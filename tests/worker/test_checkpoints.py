@@ -36,11 +36,26 @@ def store_url(request, tmp_path):
 
 
 def _requests(
-    tmp_path, store_url: str, owner: str, every: int = 20, defer_snapshots: bool = False, frame_path: str = "python"
+    tmp_path,
+    store_url: str,
+    owner: str,
+    every: int = 20,
+    defer_snapshots: bool = False,
+    frame_path: str = "python",
+    wait_ms: float = 1000.0,
 ) -> Dispatcher:
-    """A session table that checkpoints, with the requests' dispatch a worker puts above it."""
+    """A session table that checkpoints, with the requests' dispatch a worker puts above it.
+    wait_ms: its writes' budget; by default the longest allowed, so that a Redis write slowed by a
+    busy machine (CI's two cores) is not taken for a store that does not answer: with the default
+    10 ms, a late write left the checkpoint behind and the restored session answered otherwise."""
     table = SessionTable(
-        ServerSettings(data_dir=str(tmp_path), checkpoint_store=store_url, checkpoint_every_frames=every, frame_path=frame_path),
+        ServerSettings(
+            data_dir=str(tmp_path),
+            checkpoint_store=store_url,
+            checkpoint_every_frames=every,
+            frame_path=frame_path,
+            checkpoint_wait_ms=wait_ms,
+        ),
         defer_snapshots=defer_snapshots,
     )
     table.checkpoints.owner = owner  # one process plays several: each table its own owner
@@ -332,7 +347,7 @@ def test_a_session_restored_from_a_checkpoint_left_behind_says_what_was_lost_and
         reference.handle_bytes("create", "s", create.SerializeToString())
         expected = _answers(reference, updates)
 
-        a = _requests(tmp_path, redis_server.url, "node-a/1", every=1000)
+        a = _requests(tmp_path, redis_server.url, "node-a/1", every=1000, wait_ms=ServerSettings().checkpoint_wait_ms)
         a.handle_bytes("create", "s", create.SerializeToString())
         assert _answers(a, updates[:10]) == expected[:10]
         os.kill(redis_server.proc.pid, signal.SIGSTOP)
