@@ -35,7 +35,9 @@ class _HangingStore(DirectoryStore):
 
 def test_a_store_that_stops_answering_holds_up_no_frame_and_catches_up_when_it_answers(tmp_path):
     store = _HangingStore(tmp_path / "checkpoints", keep_s=60.0)
-    settings = ServerSettings(data_dir=str(tmp_path), checkpoint_every_frames=1000, checkpoint_wait_ms=10.0)
+    # 100 ms, not the default 10: a write to a folder that answers must never be taken for a hung
+    # store on a busy machine (CI's two cores); a hung one still holds up only the first frame
+    settings = ServerSettings(data_dir=str(tmp_path), checkpoint_every_frames=1000, checkpoint_wait_ms=100.0)
     requests = Dispatcher(SessionTable(settings, store=store))
     requests.handle_bytes("create", "s", two_target_request().SerializeToString())
     updates = [u.SerializeToString() for u in walk("s", 30)]
