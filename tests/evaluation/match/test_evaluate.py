@@ -54,12 +54,18 @@ def arena_match(folder, seed: int):
     return match
 
 
+# kills, and our director's program through a killer's eyes for some of it (0.26) and Toric
+# elsewhere; seed 1's only shot through eyes was of an objective taken alone, now its Toric camera
+# (first_person.py)
+MATCH_SEED = 4
+
+
 @pytest.fixture(scope="module")
 def registry_and_match(registry):
-    return registry, arena_match(registry, 1)
+    return registry, arena_match(registry, MATCH_SEED)
 
 
-def eval_match(folder, *args: str, seed: int = 1) -> subprocess.CompletedProcess:
+def eval_match(folder, *args: str, seed: int = MATCH_SEED) -> subprocess.CompletedProcess:
     return subprocess.run(
         [
             sys.executable,
@@ -172,7 +178,7 @@ def test_bad_arguments_and_unknown_level_exit_2(registry_and_match, tmp_path):
             "-m",
             "camdirector.__main__",
             "eval-match",
-            str(folder / "m1.npz"),
+            str(folder / f"m{MATCH_SEED}.npz"),
             "--delay",
             "0",
             "--json",

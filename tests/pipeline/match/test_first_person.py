@@ -111,30 +111,35 @@ def running_away(t: float):
     return {"a": ((0.0, 0.0), facing((0, 0), (0, z))), "b": ((0.0, z), facing((0, z), (0, z + 8)))}
 
 
-def _follow_of_b(walls=(), events=()):
-    """The discretionary FOLLOW of b our director builds at CUT_S, placed for it and 1-3 s on
-    (planned.py OPTION_COVER_S), with the buffer."""
+def _follow_of_b(walls=(), events=(), events_s=()):
+    """The FOLLOW of b our director builds at CUT_S, placed for it and 1-3 s on (planned.py
+    OPTION_COVER_S), with the buffer: discretionary, or planned for events at events_s, s."""
     rig = BareRig(Match({"a": 1, "b": 2}, running_away, list(events), delay_s=4.0, walls=list(walls)), MatchSettings())
     rig.run(4.0)
     r = rig.rig
     cover = [r.buffer.at(CUT_S + dt) for dt in (0.0, 1.0, 2.0, 3.0)]
-    choice = ShotChoice(("b",), ShotKind.FOLLOW, "fighter")
-    shot, _ = r.builder.build(choice, (1,), cover[0], cover, None, None, CUT_S, buffer=r.buffer)
+    choice = ShotChoice(("b",), ShotKind.FOLLOW, "objective" if events_s else "fighter")
+    shot, _ = r.builder.build(choice, (1,), cover[0], cover, None, None, CUT_S, None, tuple(events_s), r.buffer)
     assert shot is not None
     return r, shot, cover
 
 
-def test_a_follow_whose_eyes_show_nobody_is_its_toric_cameras_where_that_meets_no_wall_else_the_eyes():
-    r, shot, cover = _follow_of_b()
-    assert isinstance(shot.camera, ToricCamera) and shot.choice.eyes_id == ""  # b's eyes show nobody; open ground
-    # a panel across the way that Toric camera goes between 1 and 2 s on: its place would pass through it
-    camera = shot.camera
+def _panel_across_the_way(camera: ToricCamera, cover):
+    """A panel across the way the Toric camera goes between 1 and 2 s on: its place would pass through it."""
     start, end = (camera.positions(m, [camera.place_at(m.time_s)])[0] for m in cover[1:3])
     assert np.linalg.norm(end - start) > 1.0  # the camera moves with b
     along = np.abs(end - start) / np.linalg.norm(end - start)
     across = np.abs(np.cross(along, [0.0, 1.0, 0.0]))
-    panel = block((start + end) / 2.0, across / np.linalg.norm(across) * 2.0 + along * 0.1 + [0.0, 4.0, 0.0])
-    _, walled, _ = _follow_of_b([panel])
+    return block((start + end) / 2.0, across / np.linalg.norm(across) * 2.0 + along * 0.1 + [0.0, 4.0, 0.0])
+
+
+@pytest.mark.parametrize("events_s", [(), (3.0,)], ids=["discretionary", "planned for b's objective"])
+def test_a_follow_whose_eyes_show_nobody_is_its_toric_cameras_where_that_meets_no_wall_else_the_eyes(events_s):
+    """A planned shot of one player (an objective taken, a suicide) as a discretionary FOLLOW:
+    through its eyes the viewer would not see who takes the objective."""
+    _, shot, cover = _follow_of_b(events_s=events_s)
+    assert isinstance(shot.camera, ToricCamera) and shot.choice.eyes_id == ""  # b's eyes show nobody; open ground
+    _, walled, _ = _follow_of_b([_panel_across_the_way(shot.camera, cover)], events_s=events_s)
     assert isinstance(walled.camera, FirstPersonCamera) and walled.camera.player == 1 and walled.choice.eyes_id == "b"
 
 

@@ -44,7 +44,9 @@ discretionary FOLLOW of one player (no event to show) always is; a discretionary
 ahead: planned.py OPTION_COVER_S): on the real duel's first 3 minutes its Toric fights were
 behind 6 of its 30 shots under 2 s. A discretionary FOLLOW whose eyes show no other player
 readable (`follow_eyes_height_min` of the frame's height, median over the moments it is placed
-for, players shown at half of them or more) is the Toric camera's instead, where that camera,
+for, players shown at half of them or more) is the Toric camera's instead, and so is a planned
+shot of one player alone (an objective it takes, a suicide: there is no other subject to show,
+and through its eyes the viewer sees the objective but not who takes it), where that camera,
 carried by its player to the buffer's horizon, meets no wall and sees its player with
 `min_visible` at every `stand_step_s`; unless its player kills or dies within the buffered future
 (its planned shot will likely be through the same eyes, and the picture goes on uncut). A view
@@ -167,7 +169,7 @@ def through_eyes(
     camera = eyes_camera(eyes, float(body_heights_m[eyes]), toric.lens, settings, toric.pair)
     others = tuple(i for i in subjects if i != eyes)
     if not others:
-        if events_s or kills_ahead or buffer is None or not cover:
+        if kills_ahead or buffer is None or not cover:
             return camera
         if _shows_readable(camera, cover, visibility, body_heights_m, settings):
             return camera
