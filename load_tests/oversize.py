@@ -86,9 +86,10 @@ def _zmq_attack(address: str, server_key: str, payload: bytes) -> tuple[str, flo
     return f"code {outcome}" if answered else outcome, time.perf_counter() - t0
 
 
-def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, pause_s: float, only, stop, out) -> None:
-    """The attacker, in a process of its own: one thread per kind of attack until `stop` is set;
-    sends {kind: (Counter of outcomes, answer latencies in ms)} through `out`."""
+def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, pause_s: float, only, stop, ready, out) -> None:
+    """The attacker, in a process of its own: one thread per kind of attack, each sending at least
+    one, until `stop` is set; sets `ready` once every kind has sent its first; sends {kind: (Counter
+    of outcomes, answer latencies in ms)} through `out`."""
     login = b"POST /v1/login HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
     upload = b"POST /v1/levels HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; boundary=b\r\n"
     length = b"Content-Length: %d\r\n" % oversize_bytes
@@ -102,14 +103,18 @@ def _attack(http: str, zmq_address: str, server_key: str, oversize_bytes: int, p
     }
     kinds = {kind: send for kind, send in kinds.items() if not only or kind in only}
     results = {kind: (Counter(), []) for kind in kinds}
+    first_sent = threading.Barrier(len(kinds), action=ready.set)
 
     def loop(kind):
         outcomes, latencies_ms = results[kind]
-        while not stop.is_set():
+        while True:
             outcome, seconds = kinds[kind]()
             outcomes[outcome] += 1
             latencies_ms.append(seconds * 1e3)
-            stop.wait(pause_s)
+            if len(latencies_ms) == 1:
+                first_sent.wait()
+            if stop.wait(pause_s):
+                break
 
     threads = [threading.Thread(target=loop, args=(kind,)) for kind in kinds]
     for thread in threads:
@@ -166,12 +171,16 @@ async def _attacker(target: tuple[str, str, str], oversize_bytes: int, pause_s: 
     """The attacker process aimed at `target` (http HOST:PORT, zmq address, zmq public key) while
     the context is entered; its outcomes land in `report`."""
     context = multiprocessing.get_context("spawn")
-    stop = context.Event()
+    stop, ready = context.Event(), context.Event()
     receive, send = context.Pipe(duplex=False)
-    args = (*target, oversize_bytes, pause_s, only, stop, send)
+    args = (*target, oversize_bytes, pause_s, only, stop, ready, send)
     process = context.Process(target=_attack, args=args, daemon=True)
     process.start()
     try:
+        # the frames start once every kind of attack has sent one: a spawned process's start took
+        # longer than a 1-s run on a busy machine, which then saw no attack
+        if not await asyncio.to_thread(ready.wait, 60):
+            raise RuntimeError("the attacker process did not start its attacks within 60 s")
         yield
     finally:
         stop.set()
