@@ -12,7 +12,8 @@ frame path: 8-12 ms at some ticks); and ours paced again last (`planned_live_war
 session of a fresh worker pays the process's first calls (imports, caches, first ray casts; on the
 real wipeout at 30 Hz, 85 frames over 5 ms in 40 s of a first session, 39 in the same server's
 second), which a server that runs for hours pays once. Medians, p99 and max in ms, frames over
-5 ms; `p99_ratio_to_floor` = ours paced / autotrack paced, both sessions of ours. A 10 s delay. The
+5 ms; `p99_ratio_to_floor` = ours paced / autotrack paced (`warm_p99_ratio_to_floor`: the warm
+session's). A 10 s delay. The
 programs' cuts say whether the pacing changed the program (it must not).
 """
 

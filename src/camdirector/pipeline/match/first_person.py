@@ -48,9 +48,9 @@ for, players shown at half of them or more) is the Toric camera's instead, and s
 shot of one player alone (an objective it takes, a suicide: there is no other subject to show,
 and through its eyes the viewer sees the objective but not who takes it), where that camera,
 carried by its player to the buffer's horizon, meets no wall and sees its player with
-`min_visible` at every `stand_step_s`; unless its player kills or dies within the buffered future
-(its planned shot will likely be through the same eyes, and the picture goes on uncut). A view
-through a player's eyes does not show that player, and on an open level the others are far off in
+`min_visible` at every `stand_step_s`; unless (a discretionary FOLLOW) its player kills or dies
+within the buffered future (its planned shot will likely be through the same eyes, and the
+picture goes on uncut). A view through a player's eyes does not show that player, and on an open level the others are far off in
 it: on sim_zdm2 the median shown height went 0.1495 -> 0.2185, on sim_undulating 0.106 -> 0.120,
 with the real matches' programs unchanged (their corridors meet a wall within the horizon).
 The picture then names the kept player alone away from a DUEL's events, as its Toric camera would
