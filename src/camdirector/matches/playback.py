@@ -47,12 +47,14 @@ class PlaybackCounts:
 class PlaybackResult:
     """How a playback ended: its counts, wall_s (s, from opening the session to closing it),
     whether Ctrl-C stopped it, and the server's compute_ms of each program frame (whether the
-    director kept up with the game: a frame it answers late is late on air)."""
+    director kept up with the game: a frame it answers late is late on air) and of each buffering
+    reply (the MATCH rig works its edit window out while the delay fills: its first plan is there)."""
 
     counts: PlaybackCounts = field(default_factory=PlaybackCounts)
     wall_s: float = 0.0
     interrupted: bool = False
     compute_ms: list[float] = field(default_factory=list)
+    buffering_compute_ms: list[float] = field(default_factory=list)
 
     def summary(self) -> dict:
         c = self.counts
@@ -166,6 +168,8 @@ def play_match(
         try:
             for reply in replies:
                 result.counts.answered += 1
+                if reply.buffering and not reply.stale:
+                    result.buffering_compute_ms.append(reply.compute_ms)
                 if reply.buffering or reply.stale:
                     continue
                 result.counts.program += 1

@@ -23,6 +23,7 @@ from camdirector.pipeline.match.edit_window import (
     SHORT_LEFT,
     STARTED_EARLY,
     EditWindow,
+    HoldAhead,
     Judges,
     WorkedFrame,
 )
@@ -113,6 +114,8 @@ class Program:
         )
         self.on_air: Shot | None = None
         self.k = 0
+        self.hold_ahead = False  # each frame's hold verdict worked out after the frame before, as idle moments do
+        self.upcoming: Moment | None = None  # the next frame's moment, made ahead for that
         self.death = CUT_TO_SEEN_PLACE  # the flag the shadow's step ends with at shadow_dies_at
 
     def visibility(self, shown: Moment, pose: CameraPose, s: Shot) -> float:
@@ -120,7 +123,8 @@ class Program:
 
     def frames(self, s: Shot, count: int, events: dict[int, list[GameEvent]] | None = None) -> None:
         for i in range(count):
-            m = moment(self.k, (events or {}).get(i))
+            ahead = self.upcoming if self.upcoming is not None and not (events or {}).get(i) else None
+            m = ahead if ahead is not None else moment(self.k, (events or {}).get(i))
             cut = self.on_air is not s
             before = None if self.on_air is None else (self.on_air, self.on_air.camera)
             pose = s.camera.pose(m)
@@ -132,6 +136,9 @@ class Program:
                 self.slices += 1
             self.on_air = s
             self.k += 1
+            self.upcoming = moment(self.k) if self.hold_ahead else None
+            if self.upcoming is not None and self.window.hold_due(self.upcoming):
+                self.window.work_hold(self.upcoming, self.judges)
 
     def step(self, m: Moment, dt_s: float, camera: Still, s: Shot, last: CameraPose | None):
         if self.shadow_dies_at is not None and m.frame >= self.shadow_dies_at and type(camera) is Still:
@@ -365,6 +372,33 @@ def test_a_short_shot_held_on_whose_copy_meets_a_wall_holds_its_last_pose():
     xs = [float(f.pose.position_world[0]) for f in frames[120:150]]
     assert cuts(frames) == [0, 90, 150] and all(f.shot is x and HELD_ON in f.flags for f in frames[120:150])
     assert xs == pytest.approx([10.0 + 0.01 * min(k, 134) for k in range(120, 150)])
+
+
+@pytest.mark.parametrize("b_frames, heights", [(40, {}), (40, {0.0: 0.3, 10.0: 0.1, 20.0: 0.3})])
+def test_a_hold_judged_ahead_of_its_frame_gives_the_same_program(b_frames, heights):
+    """The verdict on a hold worked out after the frame before the one it ends on (the worker's
+    idle moments) is the one that frame gives, held on or left short, and that frame takes it."""
+    (judged_then, _), (judged_ahead, taken) = (_held_on_judged(ahead, b_frames, heights) for ahead in (False, True))
+    assert judged_then == judged_ahead and taken == 1
+
+
+def _held_on_judged(ahead: bool, b_frames: int, heights: dict[float, float]) -> tuple[list, int]:
+    """held_on's program, the hold's verdict worked out ahead or not, and how many verdicts
+    worked out ahead its frame took."""
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2}, heights=heights)
+    p.hold_ahead = ahead
+    taken = []
+    holds = HoldAhead.holds
+
+    def counted(hold: HoldAhead, *args) -> bool:
+        taken.append(holds(hold, *args))
+        return taken[-1]
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(HoldAhead, "holds", counted)
+        held_on(p, a, x, b, b_frames)
+    return programs(p), taken.count(True)
 
 
 def test_a_window_with_a_hold_waiting_pickles_and_goes_on_to_the_same_program():

@@ -14,7 +14,7 @@ import pytest
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.infra.slices import SlicedRun, pause
-from camdirector.pipeline.match.camera_ahead import CameraStep
+from camdirector.pipeline.match.camera_ahead import AnswerLens, CameraStep
 from camdirector.pipeline.match.director_registry import registered
 from camdirector.pipeline.match.drawn_plan import DrawnPlan, PlanResult
 from camdirector.pipeline.match.frame import ShotKind
@@ -283,32 +283,46 @@ def test_style_refuses_a_max_shot_under_the_min_shot():
         Style(rig=Rig.MATCH, min_shot_s=5.0, max_shot_s=4.0)
 
 
-def _program_with_idle_work(idle: str, work_per_tick: float | None = None) -> tuple[list[tuple], int, tuple[int, int], int, int]:
+def _program_with_idle_work(
+    idle: str, work_per_tick: float | None = None
+) -> tuple[list[tuple], int, tuple[int, int], int, int, int, int]:
     """The melee's program through a Session whose clock ticks 1 ms a read, with the worker's idle
     moments after each frame: none, a seeded-random number of slices, or all the deferred work.
     Returns each shown frame's pose (7,), visibility, flags and candidates' poses; how many frames
     left a drawn plan; in "slices" how many slices left it unfinished and how many plans idle
     moments finished; how many ticks found their plan late (work_per_tick: the rig's
     plan_work_per_tick, default MatchSettings'); and how many frames took their camera's step
-    as worked out ahead."""
+    as worked out ahead, how many did not though their shot went on (a tick's new goal), and how
+    many answered the lens checked ahead."""
     ticks = iter(range(10**9))
     session = Session("s", melee(seed=3, duration_s=40.0, delay_s=10.0).scene(), clock=lambda: next(ticks) * 1e-3)
     rig = session.rig
     if work_per_tick is not None:  # a Session takes the default settings; the rig reads this one field at its ticks
         rig.settings = dataclasses.replace(rig.settings, plan_work_per_tick=work_per_tick)
-    worked_out: list[bool] = []
+    worked_out: list[tuple[bool, bool]] = []  # (held, the same shot went on)
     holds = CameraStep.holds
 
-    def counted(step: CameraStep, *args) -> bool:
-        worked_out.append(holds(step, *args))
-        return worked_out[-1]
+    def counted(step: CameraStep, moment, dt_s, shot, *args) -> bool:
+        worked_out.append((holds(step, moment, dt_s, shot, *args), step.shot is shot and step.moment is moment))
+        return worked_out[-1][0]
+
+    lens_holds = AnswerLens.holds
+    lenses: list[bool] = []
+
+    def lens_counted(lens: AnswerLens, *args) -> bool:
+        lenses.append(lens_holds(lens, *args))
+        return lenses[-1]
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(CameraStep, "holds", counted)
-        return _program_of(session, idle, worked_out)
+        patch.setattr(AnswerLens, "holds", lens_counted)
+        program = _program_of(session, idle, worked_out)
+    return *program, sum(lenses)
 
 
-def _program_of(session: Session, idle: str, worked_out: list[bool]) -> tuple[list[tuple], int, tuple[int, int], int, int]:
+def _program_of(
+    session: Session, idle: str, worked_out: list[tuple[bool, bool]]
+) -> tuple[list[tuple], int, tuple[int, int], int, int, int]:
     rig = session.rig
     rng = np.random.default_rng(11)
     program, drawn, partial, finished, late = [], 0, 0, 0, 0
@@ -332,7 +346,8 @@ def _program_of(session: Session, idle: str, worked_out: list[bool]) -> tuple[li
                 if session.do_deferred_work(whole=False):
                     partial += rig.plan_waiting
                     finished += not rig.plan_waiting
-    return program, drawn, (partial, finished), late, sum(worked_out)
+    held = sum(h for h, _ in worked_out)
+    return program, drawn, (partial, finished), late, held, sum(not h and same for h, same in worked_out)
 
 
 @pytest.mark.parametrize("work_per_tick", [None, 2e3])
@@ -342,10 +357,14 @@ def test_the_program_does_not_depend_on_when_or_in_how_many_slices_the_plan_was_
     whether no idle moment came (each tick computes it up to its work), some slices ran, or all
     the deferred work was done at once; also when most plans need more than one tick's work (2e3
     camera-point pairs). So with the camera's steps worked out ahead in the idle moments, which
-    most frames took."""
-    none, drawn, _, late, ahead_none = _program_with_idle_work("none", work_per_tick)
-    sliced, _, (partial, finished), late_sliced, ahead_sliced = _program_with_idle_work("slices", work_per_tick)
-    whole, _, _, late_whole, ahead_whole = _program_with_idle_work("whole", work_per_tick)
+    most frames took: with the idle moments' work all done, every frame whose shot went on, a
+    tick's new goal too (worked out again with it once the plan was computed), and most answers'
+    lens checks (camera_ahead.py)."""
+    none, drawn, _, late, ahead_none, _, lens_none = _program_with_idle_work("none", work_per_tick)
+    sliced, _, (partial, finished), late_sliced, ahead_sliced, _, _ = _program_with_idle_work("slices", work_per_tick)
+    whole, _, _, late_whole, ahead_whole, missed_whole, lens_whole = _program_with_idle_work("whole", work_per_tick)
+    assert missed_whole == 0
+    assert lens_none == 0 and lens_whole > len(whole) * 0.9
     assert drawn > 50  # ours defers: a plan was waiting after many frames
     assert partial > 0 and finished > 0  # slices of 2 ms (a clock ticking 1 ms a read) left some unfinished
     if work_per_tick is not None:
@@ -411,14 +430,15 @@ def test_a_drawn_cut_that_breaks_the_30_degree_rule_against_the_pose_on_air_is_r
     for update in match.frames(30.0):
         state = session.frame(update)
         rig = session.rig
-        if state.pose is not None and isinstance(rig.shot.camera, ToricCamera) and not state.cut:
+        # the rig's shot and pose are those of the window's end (the newest frame worked out)
+        if state.pose is not None and isinstance(rig.shot.camera, ToricCamera) and not rig.window.frames[-1].cut:
             break
-    moment = rig.buffer.at(state.time_s)
+    moment, pose = rig._head, rig._last_pose
     on_air = rig.shot
     framed = on_air.framed(moment.time_s)
     same = Shot(on_air.choice, on_air.subjects, copy.deepcopy(on_air.camera), moment.time_s)
     centre = moment.aims_world[list(framed)].mean(axis=0)
-    behind = StaticCamera(CameraPose(2.0 * centre - state.pose.position_world, state.pose.rotation_xyzw, 50.0))
+    behind = StaticCamera(CameraPose(2.0 * centre - pose.position_world, pose.rotation_xyzw, 50.0))
     opposite = Shot(on_air.choice, on_air.subjects, behind, moment.time_s)
 
     def result(shot: Shot) -> PlanResult:

@@ -7,9 +7,15 @@ candidates' poses (a REPLAY candidate's at its kill), kept inside the level
 applies it shows them). The frame takes them when they are its
 own: the same moment and time step, the same shot, style and pose shown before, and the camera's
 attributes the same objects (cameras change only by assigning them, program_shot.py, so a tick's
-new goal or pair window, or a cut, shows); otherwise it computes them as before. What a frame
+new goal or pair window, or a cut, shows); otherwise it computes them as before. A tick that
+applies a drawn plan computed by then, keeping the shot, gives the camera its new goal or pair
+window before the step: the step ahead is worked out again with them once the plan is computed,
+and the tick assigns the very objects it assumed (on the real wipeout's first minute at 30 Hz, 53
+of the 67 steps ahead that did not hold were a tick's new goal, at 2-17 ms a frame). What a frame
 answers does not depend on whether they were worked out ahead
 (tests/pipeline/match/test_match_rig.py). A session with dynamic objects does not look ahead.
+So is the lens checked where the window's next frame is answered (`AnswerLens`: about 1 ms a
+frame, and up to 20 ms where a pose an edit window gave a frame steps back from a player).
 What it saved the frames: docs/casting.md.
 """
 
@@ -47,6 +53,8 @@ class CameraStep:
     flags: list[str]
     visibility: float  # mean share of the framed subjects seen
     cut_short: bool  # whether a cut within the shot would have been short (rig.py, program_camera.py)
+    # the camera's attributes the moment's planning tick assigns before the step (a drawn plan's new goal), by name
+    assigned: dict[str, Any]
 
     def holds(self, moment: Moment, dt_s: float, shot: Shot, style: Style, last_pose: CameraPose | None, cut_short: bool) -> bool:
         """Whether it is this frame's step: the same moment, time step, style, pose before and
@@ -83,11 +91,14 @@ def step_ahead(
     style: Style,
     last_pose: CameraPose | None,
     cut_short: bool,
+    assigned: dict[str, Any],
 ) -> CameraStep | None:
-    """The shot's camera's step to the moment, from a copy of it, knowing whether a cut within
-    the shot would be short (rig.py); None when it has no pose and none was shown before."""
+    """The shot's camera's step to the moment, from a copy of it with the attributes `assigned`
+    (those the moment's tick assigns: rig.py), knowing whether a cut within the shot would be
+    short (rig.py); None when it has no pose and none was shown before."""
     camera = shot.camera
     ahead = copy.copy(camera)
+    vars(ahead).update(assigned)
     stepped = program_camera.step(moment, dt_s, ahead, shot, style.response_time_s, last_pose, cut_short)
     if stepped is None:
         return None
@@ -97,7 +108,7 @@ def step_ahead(
         dt_s,
         shot,
         camera,
-        dict(vars(camera)),
+        {**vars(camera), **assigned},
         dict(vars(ahead)),
         last_pose,
         style,
@@ -105,6 +116,61 @@ def step_ahead(
         flags,
         program_camera.visibility(moment, pose, shot),
         cut_short,
+        assigned,
+    )
+
+
+@dataclass
+class AnswerLens:
+    """The lens checked where the next frame is answered (program_camera.py widened_for_answer),
+    worked out ahead for the window's next frame (module docstring): what it read (the frame's
+    pose and flags, the lens answered before, the time step, the shot, and of its camera, which
+    goes on moving with the window's end, the camera itself and whom it frames) and what it made
+    of them."""
+
+    shown: Moment
+    pose_before: CameraPose
+    last_fov_deg: float | None
+    dt_s: float
+    shot: Shot
+    camera: ShotCamera
+    framed: tuple[int, ...]
+    flags_before: list[str]
+    pose: CameraPose
+    flags: list[str]  # flags_before and those it added
+
+    def holds(
+        self, shown: Moment, pose: CameraPose, last_fov_deg: float | None, dt_s: float, shot: Shot, flags: list[str]
+    ) -> bool:
+        """Whether it is the check of this answer: the same frame's pose and flags (a repair
+        settled when answering replaces them), lens before, time step, shot, camera and whom it
+        frames at the moment shown."""
+        return (
+            self.shown is shown
+            and self.pose_before is pose
+            and self.last_fov_deg == last_fov_deg
+            and self.dt_s == dt_s
+            and self.shot is shot
+            and self.flags_before == flags
+            and shot.camera is self.camera
+            and shot.framed(shown.time_s) == self.framed
+        )
+
+
+def answer_lens_ahead(
+    program_camera: ProgramCamera,
+    shown: Moment,
+    pose: CameraPose,
+    last_fov_deg: float | None,
+    dt_s: float,
+    shot: Shot,
+    flags: list[str],
+) -> AnswerLens:
+    """The lens check of a frame to answer (program_camera.py widened_for_answer), on a copy of its flags."""
+    flags_after = list(flags)
+    widened = program_camera.widened_for_answer(shown, pose, last_fov_deg, dt_s, shot, flags_after)
+    return AnswerLens(
+        shown, pose, last_fov_deg, dt_s, shot, shot.camera, shot.framed(shown.time_s), list(flags), widened, flags_after
     )
 
 

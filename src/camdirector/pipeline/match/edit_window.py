@@ -49,8 +49,9 @@ window, or at once in a session whose ray scene moves every frame (the idle mome
 another scene). Applied at those frames whatever the idle moments did, the program does not
 depend on when or in how many slices a repair was worked out; until then the shadow of the cut
 before it steps on as if it carried the short shot, and the one this cut starts beside it. A hold
-is judged on the frame path, at the frame it would end on (what remains of its copy's steps, and
-the visibility of a held pose at every JUDGED_EVERY-th frame): a few frames a match.
+is judged at the frame it would end on (what remains of its copy's steps, and the visibility of a
+held pose at every JUDGED_EVERY-th frame: 4-8 ms, a few frames a match), worked out ahead in the
+idle moments before that frame where nothing it reads changed since (`HoldAhead`), else then.
 
 The offline bound that led to it (load_tests/edit_window_bound.py) gave every short shot of the
 real matches' programs to a neighbour, a held pose where no eyes carried on; here the shot before
@@ -206,6 +207,38 @@ class Repair:
         self.__dict__.update({"back": [], "earlier": None, **state})
 
 
+@dataclass
+class HoldAhead:
+    """`EditWindow._hold`'s verdict for the frame of a moment, worked out ahead (`work_hold`), with
+    what it read: the repair held, the window's frames (their count and the newest, by identity)
+    and the short shot's camera's attributes (by identity, as camera_ahead.py's steps)."""
+
+    repair: Repair
+    moment: Moment
+    count: int
+    newest: WorkedFrame | None
+    camera: dict[str, object]
+    verdict: tuple[list[WorkedFrame], Side, Decision] | None
+
+    @classmethod
+    def of(cls, window: EditWindow, moment: Moment, verdict: tuple[list[WorkedFrame], Side, Decision] | None) -> HoldAhead:
+        repair = window.holding
+        assert repair is not None and repair.started is not None  # held only with a shadow (settle)
+        newest = window.frames[-1] if window.frames else None
+        return cls(repair, moment, len(window.frames), newest, dict(vars(repair.started.shot.camera)), verdict)
+
+    def holds(self, window: EditWindow, moment: Moment) -> bool:
+        """Whether it is the verdict the window would give at the frame of the moment now."""
+        repair = window.holding
+        if repair is not self.repair or moment is not self.moment or len(window.frames) != self.count:
+            return False
+        if (window.frames[-1] if window.frames else None) is not self.newest:
+            return False
+        assert repair is not None and repair.started is not None  # held only with a shadow (settle)
+        camera = vars(repair.started.shot.camera)
+        return camera.keys() == self.camera.keys() and all(camera[k] is v for k, v in self.camera.items())
+
+
 class Judges(NamedTuple):
     """What the window asks of the rig (rig.py, program_camera.py, in_level.py)."""
 
@@ -238,6 +271,7 @@ class EditWindow:
         self.shadow: Shadow | None = None
         self.repair: Repair | None = None  # the repair drawn and not yet applied
         self.holding: Repair | None = None  # a short shot no neighbour took, that may hold on (_hold)
+        self.hold_ahead: HoldAhead | None = None  # its verdict at the next frame, worked out ahead (work_hold)
         self.answered: WorkedFrame | None = None  # the last frame answered
         self.last_cut_s = -math.inf  # program time of the last cut answered, s
         # the newest cut's frame and a copy of the camera it put on air as it was there (a short shot started earlier
@@ -247,13 +281,20 @@ class EditWindow:
     def __setstate__(self, state: dict[str, object]) -> None:
         """A window from a checkpoint (one written before repairs were drawn: none waiting; before
         a short shot could start earlier: no room for it)."""
-        defaults = {"defer": True, "repair": None, "holding": None, "window_s": state["min_shot_s"], "cut_camera": None}
+        defaults = {
+            "defer": True,
+            "repair": None,
+            "holding": None,
+            "window_s": state["min_shot_s"],
+            "cut_camera": None,
+            "hold_ahead": None,
+        }
         self.__dict__.update({**defaults, **state})
 
     def drop(self) -> None:
         """Forgets the frames not yet answered (a take applies at once: rig.py)."""
         self.frames.clear()
-        self.shadow = self.repair = self.holding = self.cut_camera = None
+        self.shadow = self.repair = self.holding = self.cut_camera = self.hold_ahead = None
 
     @property
     def waiting(self) -> bool:
@@ -420,21 +461,58 @@ class EditWindow:
             if frame.cut:
                 self._left(repair)
             return False
+        ahead, self.hold_ahead = self.hold_ahead, None
+        if ahead is not None and ahead.holds(self, frame.moment):
+            verdict = ahead.verdict
+        else:
+            verdict = self._hold_verdict(repair, frame.moment, judges)
         self.holding = None
+        if verdict is None:
+            self._left(repair)
+            return False
+        rows, side, decision = verdict
+        self._give(rows, side, decision, HELD_ON, judges)
+        rows[0].cut = False
+        started = repair.started
+        started.until_s = frame.moment.time_s + self.min_shot_s  # off air at the frame: stepped on from there
+        self.shadow = started
+        return True
+
+    def hold_due(self, following: Moment | None) -> bool:
+        """Whether the short shot held waits to be judged at the following frame (the window's
+        next moment), and its verdict is not yet worked out ahead (`work_hold`)."""
+        repair = self.holding
+        return (
+            repair is not None
+            and following is not None
+            and repair.frame.cut
+            and following.time_s >= repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S
+            and (self.hold_ahead is None or not self.hold_ahead.holds(self, following))
+        )
+
+    def work_hold(self, following: Moment, judges: Judges) -> None:
+        """The verdict `_hold` gives at the following frame, worked out ahead (in the worker's idle
+        moments): it reads only what the window holds already (`HoldAhead`)."""
+        assert self.holding is not None  # hold_due
+        self.hold_ahead = HoldAhead.of(self, following, self._hold_verdict(self.holding, following, judges))
+
+    def _hold_verdict(self, repair: Repair, at: Moment, judges: Judges) -> tuple[list[WorkedFrame], Side, Decision] | None:
+        """`_hold`'s verdict on the repair held at the frame of the moment `at`: the frames the
+        short shot holds on over, the neighbour it is over them and its poses and visibility
+        there; None where it stays short."""
+        assert repair.started is not None  # held only with a shadow (settle)
         first = next((i for i, f in enumerate(self.frames) if f is repair.frame), None)
         rows = [] if first is None else list(self.frames)[first:]
         if not rows or any(f.cut for f in rows[1:]) or rows[0].shot.held:
-            self._left(repair)
-            return False
+            return None
         started = repair.started
         self._caught_up(started, judges)
         side = _side(started.shot, rows, judges)
-        steps = [(m, pose, seen) for m, pose, seen in started.steps if m.time_s < frame.moment.time_s - TIME_EPSILON_S]
+        steps = [(m, pose, seen) for m, pose, seen in started.steps if m.time_s < at.time_s - TIME_EPSILON_S]
         steps = [step for step, row in zip(steps, rows) if step[0] is row.moment]
         held = steps[-1][1] if steps else started.last_pose if not started.steps else None
         if held is None:  # the copy's first step was worked from a later pose
-            self._left(repair)
-            return False
+            return None
         poses = [pose for _, pose, _ in steps] + [held] * (len(rows) - len(steps))
         seen = [s for _, _, s in steps] + _judged_seen(side.shown, poses, side.judged, judges, len(steps))[0]
         players = {p: i for i, p in enumerate(self.players)}
@@ -444,13 +522,8 @@ class EditWindow:
             or not _keeps_seen(rows, seen)
             or not _keeps_height(rows, poses, side.shown, side.judged, judges)
         ):
-            self._left(repair)
-            return False
-        self._give(rows, side, Decision(None, poses, seen), HELD_ON, judges)
-        rows[0].cut = False
-        started.until_s = frame.moment.time_s + self.min_shot_s  # off air at the frame: stepped on from there
-        self.shadow = started
-        return True
+            return None
+        return rows, side, Decision(None, poses, seen)
 
     def _left(self, repair: Repair) -> None:
         """The short shot of a repair stays short, flagged at the cut that ends it."""

@@ -206,7 +206,9 @@ class ProgramCamera:
         0.6 were a pose held from 0.1 s before, as a player ran at the camera. A first-person
         camera's pose is a view through the eyes only where the eye is (step_back.py leaves such
         a view as it is); one held (`eye_outside_level_held`, an edit window's hold) is a camera
-        like the others, every director's: the hold is the rig's, not the director's."""
+        like the others, every director's: the hold is the rig's, not the director's. Of the
+        shot's camera it reads only its kind and whom the shot frames (camera_ahead.py
+        AnswerLens, worked out ahead, keys on them)."""
         subjects = _zoomed_for(shot.camera, shot, moment.time_s)
         fov_deg = widened_fov_deg(pose, moment, self.subject_visibility, self.lens, self.settings, last_fov_deg, dt_s, subjects)
         if fov_deg <= pose.vertical_fov_deg:

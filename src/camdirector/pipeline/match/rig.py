@@ -12,7 +12,10 @@ Per frame `MatchRig.run` (stage timings in `stage_ms`: `buffer`, `plan`, `camera
             buffer, and flagged `match_stale_frame`).
 The rig works the program `window_s` (2.5 s at a 10 s delay) ahead of the program moment: stages
 2-4 run for each buffered moment up to then, at most HEAD_STEPS a frame, each frame they work out
-joining the edit window (edit_window.py: 5.), which answers the program moment's. Everything below
+joining the edit window (edit_window.py: 5.), which answers the program moment's. The window
+fills while the delay does (its first moment is worked out at the frame `delay_s - window_s`
+after the first), so every moment is worked out with the same span of buffered future after it,
+the delay less the window. Everything below
 ("the program moment", the director's ticks, the buffered future it plans on) is that worked-out
 moment's; a human's take drops the window's frames and goes on air at the program moment itself.
 2. plan     at `plan_rate_hz` (and at once after a take), the director of the style decides
@@ -79,8 +82,10 @@ from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.camera_rig import RigBase
 from camdirector.pipeline.inputs import FrameInput, GameEvent, PlayerStats, SceneSpec
 from camdirector.pipeline.match.camera_ahead import (
+    AnswerLens,
     CameraStep,
     CandidatePoses,
+    answer_lens_ahead,
     candidate_poses,
     candidate_views,
     step_ahead,
@@ -171,12 +176,13 @@ class MatchRig(RigBase):
         self._ahead_for: Moment | None = None  # the next frame's likely moment, not yet worked out ahead
         self._ahead: CameraStep | None = None  # the camera's step to it, worked out ahead
         self._ahead_candidates: list[CandidatePoses] = []  # the candidates' poses at it
+        self._answer_lens: AnswerLens | None = None  # the lens of the window's next frame to answer, worked out ahead
         self.program_transforms: list[RigidTransform] | None = None  # the players at the program's moment (None: buffering)
 
     def __setstate__(self, state: dict[str, object]) -> None:
         """A rig from a checkpoint; one written before the edit window (an earlier version, a
         rolling upgrade) works on from its program moment, the window refilling."""
-        self.__dict__.update(state)
+        self.__dict__.update({"_answer_lens": None, **state})
         if "window" in state:
             self.window.defer = self._defer_plans  # a window written before repairs were drawn defers by default
         else:
@@ -236,8 +242,8 @@ class MatchRig(RigBase):
     @property
     def has_deferred_work(self) -> bool:
         """CameraRig: whether the next frame's camera is to be worked out ahead, an edit window's
-        repair or a drawn plan waits to be computed."""
-        return self._ahead_for is not None or self.window.waiting or self.plan_waiting
+        repair or hold or a drawn plan waits to be computed."""
+        return self._ahead_for is not None or self.window.waiting or self.plan_waiting or self.window.hold_due(self._following())
 
     @property
     def plan_waiting(self) -> bool:
@@ -246,11 +252,19 @@ class MatchRig(RigBase):
 
     def do_deferred_work(self, whole: bool = True) -> bool:
         """CameraRig: works the next frame's camera out ahead (first: it is due soonest), else the
+        verdict on a short shot's hold due at the next frame, else the
         edit window's shadow steps and repair (due within min_shot_s), else computes the drawn
-        plan, whole or for PLAN_SLICE_S each; whether there was any."""
+        plan, whole or for PLAN_SLICE_S each, and once it is computed the camera ahead again
+        where the next frame's tick gives it the plan's new goal (camera_ahead.py); whether there
+        was any."""
         if self._ahead_for is not None:
             self._work_ahead(self._ahead_for)
             self._ahead_for = None
+            if not whole:
+                return True
+        following = self._following()
+        if following is not None and self.window.hold_due(following):  # a short shot's hold, judged at the next frame
+            self.window.work_hold(following, self._judges())
             if not whole:
                 return True
         if self.window.waiting:
@@ -260,11 +274,17 @@ class MatchRig(RigBase):
         drawn = self._drawn
         if drawn is None or drawn.run is None:
             return False
-        if whole:
+        if whole or drawn.run.step(PLAN_SLICE_S):
             drawn.finish()
-        elif drawn.run.step(PLAN_SLICE_S):
-            drawn.finish()
+            if following is not None and self._tick_assigns(following):
+                self._ahead_for = following
+                if whole:
+                    self.do_deferred_work()
         return True
+
+    def _following(self) -> Moment | None:
+        """The moment the next frame most likely works out: the buffered one after the window's end."""
+        return None if self._head is None else self.buffer.following(self._head)
 
     def _finish_drawn(self) -> None:
         if self._drawn is not None:
@@ -278,9 +298,7 @@ class MatchRig(RigBase):
         """The next cut the director planned at its last tick that is still ahead of now_s; None
         while a take is held, or with nothing planned (a director without planned cuts; no delay:
         no known future)."""
-        if self.takes.held is not None:
-            return None
-        return next((cut for cut in self._planned_cuts if cut.time_s > now_s), None)
+        return _next_cut(self.takes.held, self._planned_cuts, now_s)
 
     def take(self, subject_ids: list[str], kind: ShotKind | None, release: bool) -> ShotChoice | None:
         """PlayerInputs: a human's take (takes.py), from the next frame until released."""
@@ -304,26 +322,14 @@ class MatchRig(RigBase):
         moment = self.buffer.nearest(program_s)
         stages.done(MatchStage.BUFFER)
         if moment is None:
+            self._work_window(program_s, None, stages)
             self.program_transforms = None
             match.buffering, state.pose, state.visibility = True, None, 0.0
             state.flags.append("buffering")
             return
-        if self.takes.pending and self.window.frames:
-            self._rewind()  # a take applies at once, from the program moment
-        # the program moment worked out first, then the window refilled, HEAD_STEPS frames a call at most
-        ahead = self.buffer.nearest(program_s + self.window_s)
-        assert ahead is not None  # a later moment than the program's, which exists
-        steps = 0
-        while self._head is None or self._head.time_s < ahead.time_s - TIME_EPSILON_S:
-            behind = self._head is None or self._head.time_s < moment.time_s - TIME_EPSILON_S
-            if steps >= HEAD_STEPS and not behind:  # the program moment is worked out: the rest at later frames
-                break
-            head = self.buffer.program_moment(moment.time_s) if self._head is None else self.buffer.following(self._head)
-            if head is None:
-                break
-            self.buffer.program_moment(head.time_s)  # the buffer's program moment is the head's (its past kept for replays)
-            self._work(head, stages)
-            steps += 1
+        if self.takes.pending and self.window.frames and self.window.answered is not None:
+            self._rewind()  # a take applies at once, from the program moment (before its first, from the window's end)
+        self._work_window(program_s, moment, stages)
         previous = self.window.answered
         frame, cut = self.window.answer(moment, self._judges())
         answered = frame.moment.time_s
@@ -331,9 +337,14 @@ class MatchRig(RigBase):
         state.dt_s = 0.0 if self._answered_s is None else max(0.0, answered - self._answered_s)
         if frame is not previous:  # the lens checked at the moment answered (program_camera.py widened_for_answer)
             last_fov_deg = None if cut or previous is None else previous.pose.vertical_fov_deg
-            frame.pose = self.program_camera.widened_for_answer(
-                frame.shown, frame.pose, last_fov_deg, state.dt_s, frame.shot, frame.flags
-            )
+            lens = self._answer_lens
+            if lens is not None and lens.holds(frame.shown, frame.pose, last_fov_deg, state.dt_s, frame.shot, frame.flags):
+                frame.pose, frame.flags[:] = lens.pose, lens.flags
+            else:
+                frame.pose = self.program_camera.widened_for_answer(
+                    frame.shown, frame.pose, last_fov_deg, state.dt_s, frame.shot, frame.flags
+                )
+        self._answer_lens = None
         self._answered_s = answered
         state.aim_points_world = list(frame.moment.aims_world)
         state.pose, state.cut, state.visibility = frame.pose, cut, frame.visibility
@@ -356,6 +367,31 @@ class MatchRig(RigBase):
         match.planned_cut = self.window.next_cut() or self.planned_cut(self._head.time_s if self._head else answered)
         state.scores = dict(frame.shot.scores, visibility=frame.visibility, shot_length_s=answered - self.window.last_cut_s)
         stages.done(MatchStage.EDIT)
+
+    def _work_window(self, program_s: float, moment: Moment | None, stages: StageClock) -> None:
+        """The window worked out to `window_s` past the program time program_s, s: the program
+        moment first (None: none yet, the delay still filling), then HEAD_STEPS frames a call at
+        most. The window fills while the delay does, from the first buffered moment: each frame
+        then works out one, seeing the buffered future a frame in steady state sees (the delay
+        less the window), and the program's first frames wait for none (before, the window refilled from
+        the program's first moment at HEAD_STEPS a frame, its first 2.5 s at 5-9 ms a frame)."""
+        ahead = self.buffer.nearest(program_s + self.window_s)
+        if ahead is None:  # the delay's first moments still to come
+            return
+        steps = 0
+        while self._head is None or self._head.time_s < ahead.time_s - TIME_EPSILON_S:
+            behind = moment is not None and (self._head is None or self._head.time_s < moment.time_s - TIME_EPSILON_S)
+            if steps >= HEAD_STEPS and not behind:  # the program moment is worked out: the rest at later frames
+                break
+            if self._head is not None:
+                head = self.buffer.following(self._head)
+            else:
+                head = self.buffer.program_moment(self.buffer.oldest_s if moment is None else moment.time_s)
+            if head is None:
+                break
+            self.buffer.program_moment(head.time_s)  # the buffer's program moment is the head's (its past kept for replays)
+            self._work(head, stages)
+            steps += 1
 
     def _work(self, moment: Moment, stages: StageClock) -> None:
         """PLAN, CAMERA and VISIBILITY of the frame at the moment, worked out into the edit window
@@ -486,13 +522,11 @@ class MatchRig(RigBase):
         """The rig back at the last frame answered, the window's frames dropped (a take: its shot
         on air from the program moment, not the window's end)."""
         answered = self.window.answered
+        assert answered is not None  # before the first frame answered a take applies from the window's end (run)
         self.window.drop()
-        self._ahead = self._ahead_for = None
+        self._ahead = self._ahead_for = self._answer_lens = None
         self._ahead_candidates = []
         self._next_plan_s = -math.inf
-        if answered is None:
-            self._head = None
-            return
         self.buffer.rewind(answered.moment)
         self._head, self._last_time_s = answered.moment, answered.moment.time_s
         self._last_pose, self._last_cut_s, self.shot = answered.pose, self.window.last_cut_s, answered.shot
@@ -534,7 +568,7 @@ class MatchRig(RigBase):
         assert self.shot is not None
         return self.program_camera.step(moment, dt_s, camera, self.shot, self.style.response_time_s, self._last_pose, cut_short)
 
-    def _cut_short(self, now_s: float) -> bool:
+    def _cut_short(self, now_s: float, applied: PlanResult | None = None) -> bool:
         """Whether a cut within the shot at now_s, s (through a wall, to a seen place) would leave
         a shot on air shorter than the style's `min_shot_s`: under it after the picture's last
         cut, or before the next planned cut or a replay's end. The camera is then held before a
@@ -544,7 +578,7 @@ class MatchRig(RigBase):
         min_shot_s = self.style.min_shot_s
         if now_s - self._last_cut_s < min_shot_s:
             return True
-        planned = self.planned_cut(now_s)
+        planned = self.planned_cut(now_s) if applied is None else _next_cut(applied.held, applied.planned_cuts, now_s)
         if planned is not None and planned.time_s - now_s < min_shot_s:
             return True
         shot = self.shot
@@ -558,8 +592,17 @@ class MatchRig(RigBase):
         if self.shot is None or self._last_time_s is None:
             return
         dt_s = max(0.0, moment.time_s - self._last_time_s)
+        applied = self._applied_at(moment)
+        assigned = {} if applied is None else self._assigned(applied, self._drawn.current if self._drawn else None)
         self._ahead = step_ahead(
-            self.program_camera, self._shown(moment), dt_s, self.shot, self.style, self._last_pose, self._cut_short(moment.time_s)
+            self.program_camera,
+            self._shown(moment),
+            dt_s,
+            self.shot,
+            self.style,
+            self._last_pose,
+            self._cut_short(moment.time_s, applied),
+            assigned,
         )
         # the candidates are shown with the program moment they were worked out for: the window's next to answer
         if self.window.frames:
@@ -567,6 +610,58 @@ class MatchRig(RigBase):
             self._ahead_candidates = candidate_poses(
                 following.moment, [following.candidates], self.in_level, self._candidate_moment
             )
+            answered = self.window.answered
+            if answered is not None and self._answered_s is not None:  # its lens, answered after the last one
+                last_fov_deg = None if following.cut else answered.pose.vertical_fov_deg
+                dt_s = max(0.0, following.moment.time_s - self._answered_s)
+                self._answer_lens = answer_lens_ahead(
+                    self.program_camera, following.shown, following.pose, last_fov_deg, dt_s, following.shot, following.flags
+                )
+
+    def _applied_at(self, moment: Moment) -> PlanResult | None:
+        """The drawn plan the tick at the moment will apply, where that is known already: the
+        moment's frame a tick, the plan computed and due then, keeping the shot (`_tick`); None
+        otherwise (no tick, a plan at once, one not computed yet or late, a cut)."""
+        drawn = self._drawn
+        if (
+            drawn is None
+            or drawn.run is not None
+            or drawn.result is None
+            or drawn.result.shot is not None
+            or self.takes.pending
+            or self.shot is None
+            or moment.time_s < self._next_plan_s
+            or drawn.work > (drawn.ticks + 1) * self.settings.plan_work_per_tick  # DrawnPlan.due at that tick
+        ):
+            return None
+        return drawn.result
+
+    def _tick_assigns(self, moment: Moment) -> bool:
+        """Whether the tick at the moment will give the camera a new goal or pair window (`_applied_at`)."""
+        applied = self._applied_at(moment)
+        return applied is not None and bool(self._assigned(applied, self._drawn.current if self._drawn else None))
+
+    def _assigned(self, result: PlanResult, drawn_on: Shot | None) -> dict[str, object]:
+        """The attributes of the shot's camera a plan that keeps the shot assigns, by name: a
+        Toric camera's new goal and pair window (re-placed for visibility, held for more events),
+        only those that change; the objects a step worked out ahead assumed where equal (so that
+        it holds: camera_ahead.py)."""
+        assert self.shot is not None  # a plan keeps a shot on air
+        camera = self.shot.camera
+        # only a Toric camera is re-placed (replacement.py), and only the shot the plan was drawn on
+        if not isinstance(camera, ToricCamera) or (drawn_on is not None and self.shot is not drawn_on):
+            return {}
+        assigned: dict[str, object] = {}
+        if result.goal is not None and result.goal != camera.goal:
+            assigned["goal"] = result.goal
+        if camera.pair is not None:  # the plan may have held it for more events
+            pair = dataclasses.replace(
+                camera.pair, times_s=tuple(self.shot.cover_times_s), place=result.pair_place or camera.pair.place
+            )
+            if pair != camera.pair:
+                assigned["pair"] = pair
+        known = {} if self._ahead is None or self._ahead.camera is not camera else self._ahead.assigned
+        return {k: known[k] if k in known and known[k] == v else v for k, v in assigned.items()}
 
     # -- the planning tick ------------------------------------------------------------------
     def _tick(self, moment: Moment, flags: list[str]) -> bool:
@@ -616,18 +711,9 @@ class MatchRig(RigBase):
                 flags.append("same_eyes_no_cut")
             return not seen_through
         assert self.shot is not None  # a tick without a cut keeps the shot on air
-        if drawn_on is None or self.shot is drawn_on:
-            camera = self.shot.camera
-            # assigned only when changed: the camera's step worked out ahead holds while its attributes do
-            if isinstance(camera, ToricCamera):  # only a Toric camera is re-placed (replacement.py)
-                if result.goal is not None and result.goal != camera.goal:
-                    camera.goal = result.goal
-                if camera.pair is not None:  # the plan may have held it for more events
-                    pair = dataclasses.replace(
-                        camera.pair, times_s=tuple(self.shot.cover_times_s), place=result.pair_place or camera.pair.place
-                    )
-                    if pair != camera.pair:
-                        camera.pair = pair
+        # assigned only when changed: the camera's step worked out ahead holds while its attributes do
+        for name, value in self._assigned(result, drawn_on).items():
+            setattr(self.shot.camera, name, value)
         return False
 
     def _same_eyes(self, shot: Shot) -> bool:
@@ -736,3 +822,8 @@ class MatchRig(RigBase):
                 # in the last situation's place when they fill the monitors
                 out = [*out[: self.settings.candidates - 1], (replay.choice, replay.camera, replay.scores["place_visibility"])]
         return out
+
+
+def _next_cut(held: ShotChoice | None, planned_cuts: list[PlannedCut], now_s: float) -> PlannedCut | None:
+    """The first of the planned cuts after now_s, s; None while a take is held (MatchRig.planned_cut)."""
+    return None if held is not None else next((cut for cut in planned_cuts if cut.time_s > now_s), None)
