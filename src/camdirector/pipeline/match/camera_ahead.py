@@ -31,7 +31,7 @@ from camdirector.pipeline.match.frame import Candidate, ReplayedMoment, ShotChoi
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_camera import ProgramCamera
-from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
+from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera, unchanged
 from camdirector.pipeline.match.shots import ToricCamera
 from camdirector.pipeline.style import Style
 
@@ -69,8 +69,7 @@ class CameraStep:
             and self.camera is camera
             and self.style is style
             and self.last_pose is last_pose
-            and vars(camera).keys() == self.camera_before.keys()
-            and all(vars(camera)[k] is v for k, v in self.camera_before.items())
+            and unchanged(camera, self.camera_before)
         )
 
 

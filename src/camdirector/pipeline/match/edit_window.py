@@ -79,7 +79,7 @@ from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import PlannedCut, ShotChoice
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment
 from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST
-from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
+from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera, unchanged
 from camdirector.pipeline.match.shots import StaticCamera
 
 JUMP_M = 2.0  # a camera or an eye moving this far between two frames jumped (a teleport, a respawn): no carrying across, m
@@ -235,8 +235,7 @@ class HoldAhead:
         if (window.frames[-1] if window.frames else None) is not self.newest:
             return False
         assert repair is not None and repair.started is not None  # held only with a shadow (settle)
-        camera = vars(repair.started.shot.camera)
-        return camera.keys() == self.camera.keys() and all(camera[k] is v for k, v in self.camera.items())
+        return unchanged(repair.started.shot.camera, self.camera)
 
 
 class Judges(NamedTuple):

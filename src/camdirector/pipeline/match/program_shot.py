@@ -34,6 +34,13 @@ class ShotCamera(Protocol):
         ...
 
 
+def unchanged(camera: ShotCamera, attributes: dict[str, object]) -> bool:
+    """Whether the camera's attributes are still those objects (`vars()` taken before, by name):
+    a camera changes only by assigning them (module docstring)."""
+    now = vars(camera)
+    return now.keys() == attributes.keys() and all(now[k] is v for k, v in attributes.items())
+
+
 @dataclass
 class Shot:
     """The program's shot: whom and how (choice), the player indices, its camera, when it started

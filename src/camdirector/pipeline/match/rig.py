@@ -593,7 +593,7 @@ class MatchRig(RigBase):
             return
         dt_s = max(0.0, moment.time_s - self._last_time_s)
         applied = self._applied_at(moment)
-        assigned = {} if applied is None else self._assigned(applied, self._drawn.current if self._drawn else None)
+        assigned = self._drawn_assigns(applied)
         self._ahead = step_ahead(
             self.program_camera,
             self._shown(moment),
@@ -638,8 +638,11 @@ class MatchRig(RigBase):
 
     def _tick_assigns(self, moment: Moment) -> bool:
         """Whether the tick at the moment will give the camera a new goal or pair window (`_applied_at`)."""
-        applied = self._applied_at(moment)
-        return applied is not None and bool(self._assigned(applied, self._drawn.current if self._drawn else None))
+        return bool(self._drawn_assigns(self._applied_at(moment)))
+
+    def _drawn_assigns(self, applied: PlanResult | None) -> dict[str, object]:
+        """What the drawn plan a tick applies (`_applied_at`) assigns the shot's camera; none for none."""
+        return {} if applied is None or self._drawn is None else self._assigned(applied, self._drawn.current)
 
     def _assigned(self, result: PlanResult, drawn_on: Shot | None) -> dict[str, object]:
         """The attributes of the shot's camera a plan that keeps the shot assigns, by name: a
