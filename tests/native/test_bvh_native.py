@@ -65,7 +65,8 @@ def test_a_ray_through_the_shared_diagonal_meets_the_quad():
     origins = np.stack([x, x, np.ones_like(x)], axis=1)  # above points of the diagonal, corners included
     down = np.tile([0.0, 0.0, -1.0], (len(x), 1))
     np.testing.assert_array_equal(bvh.first_hit(origins, down), 1.0)
-    np.testing.assert_array_equal(embree.first_hit(origins, down), 1.0)
+    # Embree's float32 meets it too, exactly or a rounding short, as the CPU's instruction set has it
+    np.testing.assert_allclose(embree.first_hit(origins, down), 1.0, rtol=DISTANCE_RTOL)
     # Slanted segments through points of the diagonal, from either side of it.
     on_edge = origins - [0.0, 0.0, 1.0]
     slant = np.stack([x - 0.5, 0.5 - x, -np.ones_like(x)], axis=1)

@@ -46,6 +46,10 @@ TOL = 1e-9  # metres for positions, radians for angles, unit for quaternions and
 PULLED_TOL = 1e-5  # m, unit quaternion, screen error, on frames the deoccluder moved ("pulled_in"): 2^-24 of tens of metres
 FRAMES = 900  # 15 s of the demo at 60 Hz: the walker passes the moving obstacles
 SEEN_TOL = 0.01  # share of the targets' samples (and of frames) a compiled search session may lose
+# Demo scenes, besides the seed-7 inputs with a gap, whose search sessions are compared by what
+# they show: each session parts from its Python twin at its first near-tie, and the share seen
+# then differs by up to 0.07 either way from seed to seed (on this demo, both modes).
+SEEN_SEEDS = (1, 2, 3, 4, 5, 6)
 
 
 @dataclass
@@ -61,26 +65,32 @@ class Answer:
     reply: pb.CameraUpdate
 
 
-def _inputs(styles: dict[int, int]) -> list[pb.FrameUpdate | pb.UpdateStyleRequest]:
-    """The demo's frames with a gap (frames 301-330 never sent: half a second in one step), frame
-    500 sent again after 501, and at frame i the style's visibility changed to styles[i]."""
-    scene = build_demo_scene(seed=7, duration_s=FRAMES / 60.0 + 1.0)
-    frames = [f for f in frame_updates(scene, FRAMES) if not 300 < f.frame <= 330]
+def _inputs(styles: dict[int, int], seed: int = 7, gap: bool = True) -> list[pb.FrameUpdate | pb.UpdateStyleRequest]:
+    """The frames of the demo scene of `seed` with a gap (frames 301-330 never sent: half a second
+    in one step) and frame 500 sent again after 501 (unless not `gap`), and at frame i the style's
+    visibility changed to styles[i]."""
+    scene = build_demo_scene(seed=seed, duration_s=FRAMES / 60.0 + 1.0)
+    frames = [f for f in frame_updates(scene, FRAMES) if not (gap and 300 < f.frame <= 330)]
     out: list[pb.FrameUpdate | pb.UpdateStyleRequest] = []
     for update in frames:
         update.session_id = "s"
         if update.frame in styles:
             out.append(pb.UpdateStyleRequest(session_id="s", style=pb.Style(visibility=styles[update.frame])))
         out.append(update)
-        if update.frame == 501:
+        if gap and update.frame == 501:
             out.append(next(f for f in frames if f.frame == 500))
     return out
 
 
 def _run(
-    frame_path: str, inputs, tmp_path, snapshot_at: int | None = None, create: pb.CreateSessionRequest | None = None
+    frame_path: str,
+    inputs,
+    tmp_path,
+    snapshot_at: int | None = None,
+    create: pb.CreateSessionRequest | None = None,
+    seed: int = 7,
 ) -> tuple[list[Answer], SessionTable]:
-    """Every answer of a session "s" created by `create` (default: the demo scene's) fed `inputs`,
+    """Every answer of a session "s" created by `create` (default: the demo scene of `seed`) fed `inputs`,
     on a table whose clock ticks 1 ms a reading (so the stage laps compare); snapshots every 60
     inputs into tmp_path. With snapshot_at, the session is replaced there by its snapshot
     unpickled (as a restore does)."""
@@ -88,7 +98,7 @@ def _run(
     settings = ServerSettings(data_dir=str(tmp_path / frame_path), frame_path=frame_path)
     table = SessionTable(settings, clock=lambda: next(ticks) * 1e-3)
     if create is None:
-        create = session_request(build_demo_scene(seed=7, duration_s=FRAMES / 60.0 + 1.0), Lens())
+        create = session_request(build_demo_scene(seed=seed, duration_s=FRAMES / 60.0 + 1.0), Lens())
     table.create("s", create)
     answers = []
     for msg in inputs:
@@ -258,11 +268,19 @@ def test_the_suites_toric_recordings_agree_on_both_paths(name, tmp_path):
 
 @pytest.mark.parametrize("mode", [pb.ANTICIPATION, pb.RAYCAST], ids=["ANTICIPATION", "RAYCAST"])
 def test_a_compiled_search_session_repeats_bit_for_bit_and_sees_as_well_as_the_python_one(mode, tmp_path):
-    """A whole demo session in a search mode, from its first frame: the compiled search (tested
+    """Whole demo sessions in a search mode, from their first frame: the compiled search (tested
     call by call in tests/native/test_search_native.py) parts from the Python one at its first
     near-tie, so the sessions are compared by what they show: the share of the targets' samples
-    seen, over the session, and the frames that see less than half (VISIBILITY's own estimate,
-    by the Scene on the compiled path, by Embree on the Python one)."""
+    seen, over a session, and of its frames that see less than half (VISIBILITY's own estimate,
+    by the Scene on the compiled path, by Embree on the Python one).
+
+    After parting, one session's share is a draw: it differs from its Python twin's by up to 0.07
+    either way from one demo scene to another, and which way on a given scene depends on the
+    machine's Embree (float32, its code chosen by the CPU's instruction set). So the sessions of
+    seven scenes are compared pairwise: the compiled path may lose on average no more than
+    SEEN_TOL beyond twice the standard error of the pairs' mean (what seven draws cannot tell
+    from nothing). It catches a compiled search that sees systematically worse, not one scene's
+    luck."""
     inputs = _inputs({1: mode})
     python, _ = _run("python", inputs, tmp_path)
     compiled, _ = _run("compiled", inputs, tmp_path)
@@ -275,9 +293,17 @@ def test_a_compiled_search_session_repeats_bit_for_bit_and_sees_as_well_as_the_p
         visibility = np.array([a.state.visibility for a in answers if a.state is not None])
         return float(visibility.mean()), float((visibility < 0.5).mean())
 
-    (python_mean, python_poor), (compiled_mean, compiled_poor) = seen(python), seen(compiled)
-    print(pb.VisibilityMode.Name(mode), "python", (python_mean, python_poor), "compiled", (compiled_mean, compiled_poor))
-    assert compiled_mean >= python_mean - SEEN_TOL and compiled_poor <= python_poor + SEEN_TOL
+    pairs = [(seen(python), seen(compiled))]
+    for seed in SEEN_SEEDS:
+        plain = _inputs({1: mode}, seed=seed, gap=False)
+        path = tmp_path / f"seed{seed}"
+        pairs.append((seen(_run("python", plain, path, seed=seed)[0]), seen(_run("compiled", plain, path, seed=seed)[0])))
+    # (scenes, 2) of the compiled path's gain over the Python one: in the share seen, in poor frames
+    gain = np.array([[c_mean - p_mean, p_poor - c_poor] for (p_mean, p_poor), (c_mean, c_poor) in pairs])
+    margin = SEEN_TOL + 2.0 * gain.std(axis=0, ddof=1) / math.sqrt(len(gain))
+    print(pb.VisibilityMode.Name(mode), "python, compiled (share seen, poor frames) per scene", pairs)
+    print("compiled's mean gain", gain.mean(axis=0), "allowed loss", margin)
+    assert (gain.mean(axis=0) >= -margin).all()
 
 
 def test_the_compiled_path_is_the_default_and_the_setting_reaches_the_rig(tmp_path, monkeypatch):
