@@ -4,11 +4,15 @@ them (a new worker, another node), with the failures a store can have."""
 
 from __future__ import annotations
 
+import io
+import pickle
 import time
 
+import numpy as np
 import pytest
 
 from camdirector.errors import DirectorError
+from camdirector.geometry.meshes import box
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker import checkpoint_stores
@@ -17,7 +21,9 @@ from camdirector.worker.checkpoint_stores import (
     DirectoryStore,
     RedisStore,
     decode_entry,
+    dumps_state,
     encode_entry,
+    loads_state,
 )
 from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.replay import _comparable
@@ -97,6 +103,39 @@ def test_both_stores_keep_the_same_checkpoint_and_refuse_a_stale_owner(tmp_path,
 
 def test_an_entry_keeps_its_number_kind_and_bytes():
     assert decode_entry(encode_entry(2**40, "take", b"\x00\xff")) == (2**40, "take", b"\x00\xff")
+
+
+def test_a_snapshot_refers_to_the_creation_objects_by_name_also_as_written_before():
+    """dumps_state writes each creation object as a reference by its name, and loads_state gives
+    the rebuilt session's object of that name (by identity, wherever the state holds it); a name
+    the rebuilt session lacks is refused by name; a snapshot written with persistent ids (before
+    2026-12-02) reads the same; a builtin value as a creation object is refused (a pickler would
+    copy it without asking)."""
+    mesh, other = box((1.0, 1.0, 1.0)), box((2.0, 1.0, 1.0))
+    state = {"level": mesh, "again": [mesh, other], "x": np.arange(3.0)}
+    written = {"level": mesh, ("target", 0): other}
+    rebuilt = {"level": box((1.0, 1.0, 1.0)), ("target", 0): box((2.0, 1.0, 1.0))}
+
+    def as_before() -> bytes:
+        class Named(pickle.Pickler):
+            def persistent_id(self, obj):
+                return {id(mesh): "level", id(other): ("target", 0)}.get(id(obj))
+
+        buffer = io.BytesIO()
+        Named(buffer, protocol=5).dump(state)
+        return buffer.getvalue()
+
+    for data in (dumps_state(state, written), as_before()):
+        back = loads_state(data, rebuilt)
+        assert back["level"] is rebuilt["level"] and back["again"][0] is rebuilt["level"]
+        assert back["again"][1] is rebuilt[("target", 0)] and np.array_equal(back["x"], state["x"])
+        with pytest.raises(pickle.UnpicklingError, match=r"no creation object \('target', 0\)"):
+            loads_state(data, {"level": rebuilt["level"]})
+    assert len(dumps_state(state, written)) < len(pickle.dumps(state, protocol=5))  # the meshes not copied
+    with pytest.raises(pickle.UnpicklingError, match="read by loads_state"):
+        pickle.loads(dumps_state(state, written))
+    with pytest.raises(TypeError, match=r"\['clock'\] are builtin values"):
+        dumps_state(state, {"clock": [1.0]})
 
 
 def test_a_torn_last_write_is_ignored(tmp_path):

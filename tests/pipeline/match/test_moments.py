@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import pickle
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.pipeline.match.moments import COMPACT_AFTER, MomentBuffer
+from camdirector.pipeline.match.moments import COMPACT_AFTER, Moment, MomentBuffer, _unpacked_moment
 from camdirector.pipeline.match.settings import MatchSettings
 from tests.pipeline.match.scenes import kill
 
@@ -101,8 +102,9 @@ def test_the_program_shows_each_moment_once_delay_seconds_late(rate_hz, delay_s)
 def test_the_buffer_holds_the_delay_and_little_more_and_a_moment_pickles_back_exactly():
     """Moments more than replay_past_s before the program's are dropped within COMPACT_AFTER frames
     (a session's snapshot pickles the buffer: kept up to 4096 of them, a snapshot of the 4on4 grew
-    to 9 MB), those within it are kept for replays; a moment pickled (as three arrays,
-    Moment.__reduce__) comes back bit for bit, float64."""
+    to 9 MB), those within it are kept for replays; a moment pickled (its floats as bytes,
+    packed once: Moment.__reduce__) comes back bit for bit, float64, also from a snapshot of the
+    format before."""
     rng = np.random.default_rng(5)
     settings = MatchSettings()
     buffer = MomentBuffer(["a", "b"], settings)
@@ -119,12 +121,39 @@ def test_the_buffer_holds_the_delay_and_little_more_and_a_moment_pickles_back_ex
     assert buffer.oldest_s <= program_s - settings.replay_past_s  # the past a replay shows is kept
     assert buffer.at(program_s - settings.replay_past_s).time_s <= program_s - settings.replay_past_s + 1e-9
     for moment in (buffer.newest, buffer.at(2990 / rate_hz)):
-        back = pickle.loads(pickle.dumps(moment))
-        assert (back.frame, back.time_s, back.events) == (moment.frame, moment.time_s, moment.events)
-        for name in ("aims_world", "feet_world", "forward_world", "alive"):
-            a, b = getattr(moment, name), getattr(back, name)
-            assert a.dtype == b.dtype and np.array_equal(a, b)
-        for t, u in zip(moment.transforms, back.transforms, strict=True):
-            for name in ("position_world", "rotation_xyzw", "scale"):
-                assert getattr(u, name).dtype == np.float64 and np.array_equal(getattr(t, name), getattr(u, name))
+        data = pickle.dumps(moment)
+        back = pickle.loads(data)
+        _same_moment(back, moment)
+        # packed once: pickled again, and its copy pickled, the same bytes; the copy's arrays its own
+        assert pickle.dumps(moment) == data and pickle.dumps(back) == data
+        back.feet_world[0, 0] += 1.0
+        back.transforms[0].position_world[0] += 1.0
+        assert not np.array_equal(back.feet_world, moment.feet_world)
+        assert not np.array_equal(back.transforms[0].position_world, moment.transforms[0].position_world)
+        # a snapshot written before 2026-12-02 (each moment as three arrays) restores the same moment
+        _same_moment(pickle.loads(pickle.dumps(_ThreeArrays(moment))), moment)
     assert buffer.at(2990 / rate_hz).events  # the kill's moment, with its event, came back above
+
+
+@dataclass
+class _ThreeArrays:
+    """A moment as snapshots pickled it before 2026-12-02: transforms (n, 10), points (3, n, 3), alive."""
+
+    moment: Moment
+
+    def __reduce__(self):
+        m = self.moment
+        rows = np.array([np.concatenate([t.position_world, t.rotation_xyzw, t.scale]) for t in m.transforms])
+        points = np.stack([m.aims_world, m.feet_world, m.forward_world])
+        return _unpacked_moment, (m.frame, m.time_s, rows, points, m.alive, m.events)
+
+
+def _same_moment(back: Moment, moment: Moment) -> None:
+    """Bit for bit, float64 (and the alive flags)."""
+    assert (back.frame, back.time_s, back.events) == (moment.frame, moment.time_s, moment.events)
+    for name in ("aims_world", "feet_world", "forward_world", "alive"):
+        a, b = getattr(moment, name), getattr(back, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    for t, u in zip(moment.transforms, back.transforms, strict=True):
+        for name in ("position_world", "rotation_xyzw", "scale"):
+            assert getattr(u, name).dtype == np.float64 and np.array_equal(getattr(t, name), getattr(u, name))
