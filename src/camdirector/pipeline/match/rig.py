@@ -251,38 +251,40 @@ class MatchRig(RigBase):
         return self._drawn is not None and self._drawn.run is not None
 
     def do_deferred_work(self, whole: bool = True) -> bool:
-        """CameraRig: the deferred work, soonest due first (one piece unless whole): the next
-        frame's camera worked out ahead, the verdict on a short shot's hold due at the next frame,
-        the drawn plan (due at the next tick, within 1 / plan_rate_hz; for PLAN_SLICE_S a piece),
-        and once it is computed the camera ahead again where the next frame's tick gives it the
-        plan's new goal (camera_ahead.py), then the edit window's shadow steps and repair (due
-        when the window's next cut or the short shot's first frame comes, usually later); whether
-        there was any."""
+        """CameraRig: the deferred work, soonest due first (`_deferred_piece`), one piece or all of
+        it; whether there was any."""
+        if not whole:
+            return self._deferred_piece(PLAN_SLICE_S)
+        worked = False
+        while self._deferred_piece(None):
+            worked = True
+        return worked
+
+    def _deferred_piece(self, budget_s: float | None) -> bool:
+        """One piece of the deferred work, whole where budget_s is None, else for about budget_s,
+        s, soonest due first: the next frame's camera worked out ahead, the verdict on a short
+        shot's hold due at the next frame, the drawn plan (due at the next tick, within
+        1 / plan_rate_hz), and once it is computed the camera ahead again where the next frame's
+        tick gives it the plan's new goal (camera_ahead.py), then the edit window's shadow steps
+        and repair (due when the window's next cut or the short shot's first frame comes, usually
+        later); whether there was any."""
         if self._ahead_for is not None:
             self._work_ahead(self._ahead_for)
             self._ahead_for = None
-            if not whole:
-                return True
-            self.do_deferred_work()
             return True
         following = self._following()
         if following is not None and self.window.hold_due(following):  # a short shot's hold, judged at the next frame
             self.window.work_hold(following, self._judges())
-            if not whole:
-                return True
-            self.do_deferred_work()
             return True
         drawn = self._drawn
         if drawn is not None and drawn.run is not None:
-            if whole or drawn.run.step(PLAN_SLICE_S):
+            if budget_s is None or drawn.run.step(budget_s):
                 drawn.finish()
                 if following is not None and self._tick_assigns(following):
                     self._ahead_for = following
-            if whole:
-                self.do_deferred_work()
             return True
         if self.window.waiting:
-            self.window.work(self._judges(), None if whole else PLAN_SLICE_S, self.clock)
+            self.window.work(self._judges(), budget_s, self.clock)
             return True
         return False
 
