@@ -314,11 +314,18 @@ def test_every_search_step_of_a_session_agrees_call_by_call(name):
 
 
 @pytest.mark.parametrize("scene_name", ["demo", "walls"])
-def test_each_scene_exercises_every_move_and_the_stuck_rule(scene_name):
+def test_each_scene_makes_a_cut_and_watches_the_stuck_rule(scene_name):
     names = [name for name in SESSIONS if name.startswith(scene_name)]
     compared = Counter(s for name in names for s, clear in _session(name)[2] if clear)
-    assert compared["look_ahead"] and compared["cut"], compared
+    assert compared["cut"], compared
     assert any(call.particle[4] is not None for name in names for call in _session(name)[0])  # stuck watched
+
+
+def test_the_sessions_together_compare_every_move():
+    # Together, not each scene: which moves a session makes follows the CPU's float kernels (on an
+    # AVX-512 machine the walls' sessions made no look-ahead step where an AVX2 one made some).
+    compared = Counter(s for name in SESSIONS for s, clear in _session(name)[2] if clear)
+    assert all(compared[move] for move in ("coast", "single_frame", "look_ahead", "cut")), compared
 
 
 def test_no_time_step_stays_and_draws_nothing():
