@@ -66,6 +66,23 @@ def test_a_move_across_the_slab_crosses_the_level_and_one_within_the_room_does_n
     assert not in_level.crossed(np.array([1.0, 2.0, 0.0]), np.array([-3.0, 1.0, 2.0]))
 
 
+def test_many_places_and_moves_tested_in_one_call_answer_as_each_one_alone(in_level):
+    # a step back's places at one distance (step_back.py): inside the room, in the slab, above the
+    # room, beyond the slab, one asked twice; and the moves to them from one centre, across the slab or not
+    places = np.array([[-1.0, 1.0, 2.0], [2.0, 2.0, 0.0], [0.0, 7.0, 0.0], [3.0, 2.0, 0.0], [-1.0, 1.0, 2.0], [-3.0, 1.0, 2.0]])
+    alone = InLevel(in_level.interior, in_level.nodes_world, in_level.margin_m)
+    expected_inside = [alone.inside(p) for p in places]
+    assert expected_inside == [True, False, False, True, True, True]
+    fresh = InLevel(in_level.interior, in_level.nodes_world, in_level.margin_m)
+    fresh.inside(places[2])  # one remembered before the call
+    assert fresh.inside_many(places).tolist() == expected_inside
+    start = np.array([1.0, 2.0, 0.0])
+    expected_crossed = [alone.crossed(start, p) for p in places]
+    assert expected_crossed == [False, True, True, True, False, False]  # the slab, the ceiling, the slab
+    assert fresh.crossed_many(start, places).tolist() == expected_crossed
+    assert fresh.crossed_many(start, np.zeros((0, 3))).tolist() == fresh.inside_many(np.zeros((0, 3))).tolist() == []
+
+
 def test_a_move_through_the_slab_stays_on_the_anchors_side_or_is_left_to_a_cut(in_level):
     start = np.array([1.0, 2.0, 1.0])
     kept, was_kept = in_level.kept_this_side(start, pose_at([3.0, 2.0, 1.0]), CENTRE)  # the anchor this side of the slab

@@ -59,25 +59,43 @@ class InLevel:
         if len(self._answers) > REMEMBERED:
             self._answers.popitem(last=False)
 
+    def inside_many(self, positions_world: np.ndarray) -> np.ndarray:
+        """(n,) bool: `inside` of each of (n, 3) points m, those not remembered tested in one call
+        (a frame's candidates, a step back's places at one distance)."""
+        keys = [np.asarray(p, dtype=np.float64).tobytes() for p in positions_world]
+        if self.interior is None:
+            return np.ones(len(keys), dtype=bool)
+        new = [i for i, key in enumerate(keys) if key not in self._answers]
+        answers = dict(self._answers)
+        if new:
+            for i, bad in zip(new, self.interior.bad(np.asarray(positions_world)[new]).tolist()):
+                answers[keys[i]] = not bad
+                self._remember(positions_world[i], not bad)
+        return np.array([answers[key] for key in keys], dtype=bool)
+
     def contained_many(self, poses: list[CameraPose | None], anchors: list[np.ndarray | None]) -> list[CameraPose | None]:
         """`contained` of each pose with its anchor (None stays None), the new centres tested in
         one call (a frame's candidates)."""
         centres = [p.position_world for p in poses if p is not None]
-        new = [c for c in centres if np.asarray(c, dtype=np.float64).tobytes() not in self._answers]
-        if new and self.interior is not None:
-            for centre, bad in zip(new, self.interior.bad(np.array(new)).tolist()):
-                self._remember(centre, not bad)
+        if centres:
+            self.inside_many(np.array(centres))
         return [None if p is None else self.contained(p, a)[0] for p, a in zip(poses, anchors)]
 
     def crossed(self, from_world: np.ndarray, to_world: np.ndarray) -> bool:
-        """Whether the segment between two camera centres (3,) m meets level geometry, cast both
-        ways: a segment grazing an edge can hit one way and miss the other (Embree's single-ray
-        and packet kernels round apart), and a move that might touch a wall is treated as one
-        that does (eval-match casts the whole program's moves in one call)."""
-        if self.interior is None:
-            return False
-        ends = np.array([from_world, to_world], dtype=np.float64)
-        return bool((self.interior.reach(ends, ends[::-1]) < 1.0).any())
+        """Whether the segment between two camera centres (3,) m meets level geometry (crossed_many)."""
+        return bool(self.crossed_many(from_world, np.asarray(to_world)[None])[0])
+
+    def crossed_many(self, from_world: np.ndarray, to_world: np.ndarray) -> np.ndarray:
+        """(n,) bool: whether the segment from one camera centre (3,) m to each of (n, 3) meets
+        level geometry, cast both ways: a segment grazing an edge can hit one way and miss the
+        other (Embree's single-ray and packet kernels round apart), and a move that might touch a
+        wall is treated as one that does (eval-match casts the whole program's moves in one call)."""
+        to = np.asarray(to_world, dtype=np.float64).reshape(-1, 3)
+        if self.interior is None or not len(to):
+            return np.zeros(len(to), dtype=bool)
+        start = np.broadcast_to(np.asarray(from_world, dtype=np.float64), to.shape)
+        reach = self.interior.reach(np.concatenate([start, to]), np.concatenate([to, start]))
+        return np.asarray((reach < 1.0).reshape(2, len(to)).any(axis=0))
 
     def contained(self, pose: CameraPose, anchor_world: np.ndarray | None) -> tuple[CameraPose, bool]:
         """The pose, moved inside toward the anchor (3,) m if the test rejects it (module

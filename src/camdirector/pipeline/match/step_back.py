@@ -26,6 +26,13 @@ player ran past a camera at a wall or in a corridor; the pan is the operator let
 go by the lens. The shot's camera keeps its own state (its place, its damping), so the step is
 taken again each frame the player stays near and ends when it leaves; the lens narrows back at
 lens_width.py's pace.
+
+Costs: nothing where no player's feet are within NEAR_M. Otherwise the places at one distance are
+judged together, one batch of casts per test (the places test, the wall test, the too-tall
+players' shares, the framed subjects' shares), nearest distance first, and the first place at
+that distance that passes them all is taken: the place one by one would take, in four calls per
+distance instead of up to four per place (the real 4on4's first 3 minutes in eval-match: the
+same answer in each of 2,500 calls; the calls over 5 ms one by one, 6.5 ms on average, 3.0 ms).
 """
 
 from __future__ import annotations
@@ -81,12 +88,17 @@ def stepped_back(
         heights = screen_heights(slopes[0].reshape(m * p, s), slopes[1].reshape(m * p, s), tan_widest, lens.aspect)
         return np.asarray(heights.reshape(m, p) > settings.shown_height_max)
 
-    def seen_tall(position_world: np.ndarray, tall: np.ndarray) -> bool:
-        players = tuple(int(i) for i in np.flatnonzero(tall))
-        return bool(players) and bool((visibility.visible_share(position_world, moment, players)[0] >= SHOWN_SEEN).any())
+    def seen_tall(positions_world: np.ndarray, tall: np.ndarray) -> np.ndarray:
+        """(m,) bool: whether from each of (m, 3) centres a player too tall there, (m, P) bool,
+        is seen at SHOWN_SEEN of its points; one batch of casts for all of them."""
+        players = tuple(int(i) for i in np.flatnonzero(tall.any(axis=0)))
+        if not players:
+            return np.zeros(len(positions_world), dtype=bool)
+        seen = visibility.visible_share(positions_world, moment, players) >= SHOWN_SEEN  # (m, len(players))
+        return np.asarray((seen & tall[:, list(players)]).any(axis=1))
 
     here = too_tall(pose.position_world[None], rotation[None])[0]
-    if not seen_tall(pose.position_world, here):
+    if not seen_tall(pose.position_world[None], here[None])[0]:
         return None
     nearest = min(np.flatnonzero(here), key=lambda i: float(np.linalg.norm(moment.feet_world[i] - pose.position_world)))
     directions = _directions(pose.position_world - moment.feet_world[nearest], rotation[:, 2])  # (D, 3)
@@ -101,14 +113,17 @@ def stepped_back(
     if subjects:
         before = framed_seen(visibility, moment, subjects, pose.position_world[None], rotation[None], widest)[0]
         keep = np.minimum(before, settings.candidate_seen)
-    for position, turned, tall_there in zip(tried, rotations, tall):
-        if not in_level.inside(position) or in_level.crossed(pose.position_world, position) or seen_tall(position, tall_there):
-            continue
-        if keep is not None:
-            seen = framed_seen(visibility, moment, subjects, position[None], turned[None], widest)[0]
-            if (seen < keep).any():
-                continue
-        return CameraPose(position, matrix_to_quat(turned), widest_deg), False
+    # the places at one distance tested together, nearest distance first: a batch of casts per
+    # test, not one per place (up to 64 places one by one took 13-30 ms of a frame near players)
+    for rows in np.arange(len(tried)).reshape(len(BACK_STEPS_M), -1):
+        ok = in_level.inside_many(tried[rows])
+        ok[ok] = ~in_level.crossed_many(pose.position_world, tried[rows[ok]])
+        ok[ok] = ~seen_tall(tried[rows[ok]], tall[rows[ok]])
+        if keep is not None and ok.any():
+            ok[ok] = (framed_seen(visibility, moment, subjects, tried[rows[ok]], rotations[rows[ok]], widest) >= keep).all(axis=1)
+        if ok.any():
+            first = rows[int(np.argmax(ok))]
+            return CameraPose(tried[first], matrix_to_quat(rotations[first]), widest_deg), False
     tall_here = tuple(int(i) for i in np.flatnonzero(here))
     panned = _turned_away(pose, moment, visibility, rotation, widest, tall_here, subjects, keep)
     return None if panned is None else (panned, True)
