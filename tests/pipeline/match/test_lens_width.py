@@ -262,6 +262,24 @@ def test_a_player_near_the_camera_keeps_the_zoomed_lens_inside_the_band():
     assert fov_deg >= _zoomed(rig, moment, pose)
 
 
+def test_an_overview_of_named_players_zooms_in_on_them_and_one_of_nobody_stays_wide():
+    """A wide view of a fight (a GROUP no level place sees, shot_builder.py) frames its players: a
+    high camera's operator zooms in on them as on a Toric shot's; an establishing view names
+    nobody and keeps the lens."""
+    rig, moment, far = _looking_at_a(12.0)
+    program_camera = rig.rig.program_camera
+    fight = Shot(ShotChoice(("a",), ShotKind.OVERVIEW, "test"), (0,), StaticCamera(far), 0.0)
+    pose, flags = program_camera.step(moment, 0.0, fight.camera, fight, 0.0, None)
+    assert _zoomed(rig, moment, far) < Lens().vertical_fov_deg
+    assert pose.vertical_fov_deg == pytest.approx(_zoomed(rig, moment, far))
+    assert "lens_zoomed" in flags and np.array_equal(pose.position_world, far.position_world)
+    answered = program_camera.widened_for_answer(moment, far, None, 0.0, fight, [])
+    assert answered is far  # the answer's check widens only: the zoom is the step's
+    establishing = Shot(ShotChoice((), ShotKind.OVERVIEW, "test"), (), StaticCamera(far), 0.0)
+    pose, flags = program_camera.step(moment, 0.0, establishing.camera, establishing, 0.0, None)
+    assert pose.vertical_fov_deg == Lens().vertical_fov_deg and "lens_zoomed" not in flags
+
+
 @pytest.mark.parametrize(
     "bad",
     [{"zoom_min_fov_deg": 0.5}, {"zoom_shown_height": 0.0}, {"zoom_shown_height": 0.6}, {"zoom_safe": 1.5}, {"zoom_deg_s": 0.0}],

@@ -6,8 +6,8 @@ outside the level or inside solid moved inside toward the player the shot keeps 
 player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
 (`held_before_wall`), its lens widened where a player would stand taller than the framing band
 (lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
-Toric camera, where the frame cuts off a framed subject, and a Toric camera's zoomed in where its
-framed subjects stand small (flagged `lens_zoomed`); our director's pose (Toric or fixed) that
+Toric camera or a wide view of named players (our director's), where the frame cuts off a framed
+subject, and zoomed in where those framed subjects stand small (flagged `lens_zoomed`); our director's pose (Toric or fixed) that
 the widest lens leaves with a player too tall stepped back from it, or with no room to step
 panned off the player (step_back.py, flagged `stepped_back_from_player`, `panned_off_player`: no
 cut for the subjects such a pan lets go); a Toric pose that these degrades left showing none of
@@ -331,6 +331,6 @@ class ProgramCamera:
 
 def _zoomed_for(camera: ShotCamera, shot: Shot, time_s: float) -> tuple[int, ...]:
     """The players the lens zooms on and widens to show when the frame cuts them off (lens_width.py):
-    those a Toric camera (our director's) frames at time_s; none for the baselines' and the eyes,
-    which keep what they frame."""
-    return (shot.framed(time_s) or ()) if isinstance(camera, ToricCamera) else ()
+    those our director's Toric camera or wide view (an OVERVIEW's, none where it names nobody)
+    frames at time_s; none for the baselines' and the eyes, which keep what they frame."""
+    return (shot.framed(time_s) or ()) if isinstance(camera, (ToricCamera, StaticCamera)) else ()

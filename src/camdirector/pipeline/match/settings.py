@@ -176,7 +176,7 @@ class MatchSettings:
                                          # widest, so a camera near a wall does not pump frame to frame; at 20 deg/s the wide
                                          # frames lasted and showed more far-off players (nav_test's median height
                                          # 0.138 -> 0.130). (0, 1000]
-    zoom_min_fov_deg: float = 15.0       # a Toric pose whose framed subjects stand small zooms in, down to this (lens_width.py
+    zoom_min_fov_deg: float = 15.0       # a Toric or wide view whose framed subjects stand small zooms in, to this (lens_width.py
                                          # `zoomed_fov_deg`; on open levels players in the shot stood 0.06-0.15 of the frame
                                          # at the lens's 50), deg; the lens's own or wider to keep it. (1, 170)
     zoom_shown_height: float = 0.35      # until its tallest framed subject stands this share of the frame's height (a
