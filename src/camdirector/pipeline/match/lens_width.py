@@ -28,19 +28,20 @@ than `zoom_shown_height` (the style's FOLLOW size), reached at `zoom_deg_s` and 
 the framing needs it. A camera operator on a far subject zooms in rather than walk up to it: the
 position is the Toric solve's, so what it sees (visibility, walls) is unchanged, and the frame
 narrows about its centre, which pushes subjects composed off-centre outward, hence the safe area.
-A wide view of named players (an OVERVIEW of a fight no level place sees, shot_builder.py) zooms
-on them the same way, as the operator of a high camera does; one that names nobody (an
-establishing view) keeps the lens. On nav_test's bot match such views showed their players at a
-median 0.065 of the frame's height (issue 41).
 On open levels a pair 20-30 m apart, composed at the lens's 50 degrees, stood 0.06-0.09 of the
 frame (issue 41: nav_test's median shown height 0.10 against a bar of 0.15); at the width that
 fits them the same picture shows them and the players about them larger. The widening below
 starts from the zoom's width: a player near the camera, enlarged by it, is still kept in the band.
 
-A Toric camera's pose (our director's) also goes wide enough to show a framed subject that the
-frame cuts off (`_cut_off`): a camera pulled in front of a wall close over its subject looks down
-as steeply as a level camera can and has the subject below the frame; wider, it shows it without
-a cut. The baselines' cameras keep what they frame.
+A wide view of named players (an OVERVIEW of a fight no level place sees, shot_builder.py) zooms
+on them the same way, as the operator of a high camera does; one that names nobody (an
+establishing view) keeps the lens. On nav_test's bot match such views showed their players at a
+median 0.065 of the frame's height (issue 41).
+
+A Toric camera's pose (our director's, and its wide view of named players) also goes wide enough
+to show a framed subject that the frame cuts off (`_cut_off`): a camera pulled in front of a wall
+close over its subject looks down as steeply as a level camera can and has the subject below the
+frame; wider, it shows it without a cut. The baselines' cameras keep what they frame.
 """
 
 from __future__ import annotations

@@ -7,12 +7,12 @@ player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, hel
 (`held_before_wall`), its lens widened where a player would stand taller than the framing band
 (lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
 Toric camera or a wide view of named players (our director's), where the frame cuts off a framed
-subject, and zoomed in where those framed subjects stand small (flagged `lens_zoomed`); our director's pose (Toric or fixed) that
-the widest lens leaves with a player too tall stepped back from it, or with no room to step
-panned off the player (step_back.py, flagged `stepped_back_from_player`, `panned_off_player`: no
-cut for the subjects such a pan lets go); a Toric pose that these degrades left showing none of
-its subjects replaced by the move a hold held (`hold_left_for_cut`) or by a cut
-to a place that shows them (`cut_to_seen_place`, `_seen_again`); and the share of the framed
+subject, and zoomed in where those framed subjects stand small (flagged `lens_zoomed`); our
+director's pose (Toric or fixed) that the widest lens leaves with a player too tall stepped back
+from it, or with no room to step panned off the player (step_back.py, flagged
+`stepped_back_from_player`, `panned_off_player`: no cut for the subjects such a pan lets go); a
+Toric pose that these degrades left showing none of its subjects replaced by the move a hold held
+(`hold_left_for_cut`) or by a cut to a place that shows them (`cut_to_seen_place`, `_seen_again`); and the share of the framed
 subjects' sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of
 it, on a copy of the camera (camera_ahead.py): the same computation either way.
 """
