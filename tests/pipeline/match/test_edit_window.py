@@ -19,6 +19,7 @@ from camdirector.pipeline.match.edit_window import (
     CARRIED_ON,
     ENDS_A_COPY,
     HELD_ON,
+    LAST_RESORT_FLAG,
     MOVED_EARLIER,
     SHORT_LEFT,
     STARTED_EARLY,
@@ -430,6 +431,47 @@ def test_a_short_shot_stays_short_where_it_cannot_hold_on(case, b_frames, height
     frames = held_on(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}, heights=heights), a, x, b, b_frames, c)
     assert SHORT_LEFT in frames[120].flags and not any(HELD_ON in f.flags for f in frames)
     assert cuts(frames)[:3] == [0, 90, 120]
+
+
+@pytest.mark.parametrize(
+    "case, b_sees, b_height, given",
+    [
+        ("b shows x's player 12% tall: readable, under the strict 15%", {2}, 0.12, True),
+        ("b shows x's player 8% tall", {2}, 0.08, False),
+        ("b's first pose reaches its subject but does not frame it", set(), 0.12, False),
+    ],
+)
+def test_a_short_shot_that_cannot_hold_on_goes_to_a_neighbour_the_last_resort_allows(case, b_sees, b_height, given):
+    """a's copy dies at a wall and b cuts before x is 2 s long (no hold): x's frames go to b,
+    started early, where b shows its players readable at all (READABLE_HEIGHT) and its subject
+    in its frame; else x is not given to b (x's copy carries it on over b's frames then). (c,
+    which shows its subject 0.1, takes none of b's.)"""
+    a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
+    heights = {0.0: 0.3, 10.0: 0.3, 20.0: b_height, 30.0: 0.3}
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: b_sees}, heights=heights)
+    frames = held_on(p, a, x, b, 25, c)
+    if given:
+        assert cuts(frames)[:3] == [0, 90, 145] and not any(SHORT_LEFT in f.flags for f in frames[90:120])
+        assert all(f.shot is b and LAST_RESORT_FLAG in f.flags and STARTED_EARLY in f.flags for f in frames[90:120])
+    else:
+        assert all(f.shot is x for f in frames[90:120]) and not any(LAST_RESORT_FLAG in f.flags for f in frames)
+
+
+def test_a_short_shot_whose_hold_would_lose_a_kill_goes_to_the_last_resort_before_it_is_answered():
+    """a's copy dies at a wall, b shows x's player 12% tall (under the strict floor) and shows a
+    kill at frame 125 that x's copy, held on over b's first frames, would not: when x's repair is
+    applied, the window holding frame 150 (where x would be 2 s long), the hold is judged then,
+    and x's frames go to b at once by the last resort, before x's first frame is answered."""
+    kill = GameEvent(EventKind.KILL, "a", "c", 0, 125 * DT_S, "kill")
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    heights = {0.0: 0.3, 10.0: 0.3, 20.0: 0.12}
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9}, sees={20.0: {0, 2}}, heights=heights)
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 40, {5: [kill]})
+    frames = p.program()
+    assert cuts(frames) == [0, 90] and p.window.holding is None
+    assert all(f.shot is b and LAST_RESORT_FLAG in f.flags for f in frames[90:120])
 
 
 def test_a_human_take_is_never_given_away():

@@ -37,8 +37,13 @@ seen, players readable); applied before the first of them is answered. Failing t
 `min_shot_s` long, the copy's last pose held where it met a wall or lost its subjects, and the cut
 moves there, when the window reaches that frame (the shot after's frames may not cut before it,
 and are kept as a neighbour keeps a short shot's: kills, subjects seen, players readable). The
-neighbours first, as they move no cut later than the director chose it. One that cannot stays
-short, flagged at the cut that ends it; a human's take is never given away.
+neighbours first, as they move no cut later than the director chose it. One that cannot hold on
+either (the shot after cut before, or its frames kept nothing) goes, where its frames are still
+the window's, to the neighbour that takes it under the last resort's floors (`LAST_RESORT`,
+flagged `edit_window_last_resort`: the players READABLE_HEIGHT tall rather than HEIGHT_FLOOR, its
+subjects under SEEN_FLOOR on at most SEEN_MISSES of its frames and never under half of it, every
+kill kept); with none, it stays short, flagged at the cut that ends it. A human's take is never
+given away.
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -87,12 +92,17 @@ KILL_SEEN = 0.5  # a kill in a short shot's frames is shown where killer and vic
 SEEN_FLOOR = 0.5  # a neighbour may not show its subjects less than this (eval-match's shown fraction) where the short
 # shot showed its own more
 HEIGHT_FLOOR = 0.15  # the median shown height issue 41 bars, share of the frame's height
+# the last resort's floors (`LAST_RESORT`): the players readable at all, the floor the eyes are held to (settings.py
+# eyes_shown_height_min), share of the frame's height
+READABLE_HEIGHT = 0.1
+SEEN_MISSES = 0.1  # and the share of the short shot's frames it may show its subjects under SEEN_FLOOR (never under half)
 JUDGED_EVERY = 3  # a neighbour's visibility over a short shot is judged at every this-th frame (a frame's ray budget)
 CARRIED_ON = "edit_window_carried_on"  # a short shot's frames given to the shot before
 STARTED_EARLY = "edit_window_started_early"  # a short shot's frames given to the shot after
 HELD_ON = "edit_window_held_on"  # the shot after's first frames given to a short shot neither neighbour could take
 MOVED_EARLIER = "edit_window_moved_earlier"  # the shot before's last frames given to a short shot neither neighbour took
 SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take nor hold on
+LAST_RESORT_FLAG = "edit_window_last_resort"  # a short shot's frames given to a neighbour by the last resort's floors
 # a copy of a camera stepped on goes no further where it would cut, or shows its subjects no more (program_camera.py)
 ENDS_A_COPY = (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST)
 
@@ -144,11 +154,34 @@ class Shadow:
 
 class Decision(NamedTuple):
     """What a repair decided: the neighbour the short shot's frames go to (BEFORE, AFTER; None:
-    neither, the short shot stays) and the pose and visibility each of them gets there."""
+    neither, the short shot stays) and the pose and visibility each of them gets there; with
+    None, the neighbour the last resort's floors allow, taken where the short shot cannot hold on
+    either (`LAST_RESORT`)."""
 
     neighbour: str | None
     poses: list[CameraPose]
     seen: list[float]
+    last_resort: Decision | None = None
+
+
+class Floors(NamedTuple):
+    """What a neighbour must keep of a short shot's picture: its subjects seen SEEN_FLOOR on
+    every frame where the short shot showed them so, but for a `misses` share of its frames
+    (never under half the floor there), and its players `height` of the frame's height (median)
+    where the short shot showed them as tall; `in_frame`: its subjects' points counted seen only
+    inside its frame (eval-match's shown share: a held pose looks where its subject was), else
+    wherever a ray reaches them (the program's visibility)."""
+
+    misses: float  # [0, 1)
+    height: float  # share of the frame's height
+    in_frame: bool
+
+
+STRICT = Floors(0.0, HEIGHT_FLOOR, False)
+# where neither neighbour keeps the strict floors nor the short shot can start earlier or hold on, a short shot is
+# jarring for longer than a wider picture is (issue 41: none under 2 s): players readable at all, subjects seen on
+# nearly every frame; kills are never given up
+LAST_RESORT = Floors(SEEN_MISSES, READABLE_HEIGHT, True)
 
 
 # Decision.neighbour: the shot before (carried on), the shot after (started early), or neither, the short shot's cut
@@ -394,6 +427,10 @@ class EditWindow:
         repair.work_out()
         decision, rows, frame = repair.decision, repair.rows, repair.frame
         assert decision is not None  # worked out above
+        if decision.neighbour is None and decision.last_resort is not None and not self._may_hold(repair, judges):
+            decision = decision.last_resort  # the last chance for it: the short shot's first frame is answered next
+            for row in rows:
+                row.flags.append(LAST_RESORT_FLAG)
         if decision.neighbour == BEFORE:
             assert repair.carried is not None and repair.before is not None  # only a shadow carries a short shot on
             self._give(rows, repair.before, decision, CARRIED_ON, judges)
@@ -449,16 +486,17 @@ class EditWindow:
         shot after from its cut (the frame at which, with its camera's copy, the shadow the cut
         started: Shadow) carried on over them, the copy's last pose held after it stops (it met a
         wall, lost its subjects), where they keep those frames as a neighbour keeps a short shot's
-        (their kills, subjects seen and players readable). A cut before the frame leaves it short
-        (flagged SHORT_LEFT); a frame short of min_shot_s, it waits."""
+        (their kills, subjects seen and players readable). A cut before the frame, or frames that
+        keep none of that, leave it to the last resort (`_last_resort`); a frame short of
+        min_shot_s, it waits."""
         repair = self.holding
         assert repair is not None and repair.started is not None  # held only with a shadow (settle)
         if not repair.frame.cut:  # the shadow carried the short shot on over the shot after (a repair of its own)
             self.holding = None
             return False
         if frame.moment.time_s < repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S:
-            if frame.cut:
-                self._left(repair)
+            if frame.cut:  # the shot after is cut short too: the last resort, before that cut's own repair is drawn
+                self._last_resort(repair, judges)
             return False
         ahead, self.hold_ahead = self.hold_ahead, None
         if ahead is not None and ahead.holds(self, frame.moment):
@@ -467,7 +505,7 @@ class EditWindow:
             verdict = self._hold_verdict(repair, frame.moment, judges)
         self.holding = None
         if verdict is None:
-            self._left(repair)
+            self._last_resort(repair, judges)
             return False
         rows, side, decision = verdict
         self._give(rows, side, decision, HELD_ON, judges)
@@ -501,7 +539,7 @@ class EditWindow:
         there; None where it stays short."""
         assert repair.started is not None  # held only with a shadow (settle)
         first = next((i for i, f in enumerate(self.frames) if f is repair.frame), None)
-        rows = [] if first is None else list(self.frames)[first:]
+        rows = [] if first is None else [f for f in list(self.frames)[first:] if f.moment.time_s < at.time_s - TIME_EPSILON_S]
         if not rows or any(f.cut for f in rows[1:]) or rows[0].shot.held:
             return None
         started = repair.started
@@ -523,6 +561,42 @@ class EditWindow:
         ):
             return None
         return rows, side, Decision(None, poses, seen)
+
+    def _may_hold(self, repair: Repair, judges: Judges) -> bool:
+        """Whether the short shot of a repair being applied may hold on (`_hold`), judged now at
+        the window's frame min_shot_s past its start (the hold is judged again there); True where
+        the window does not reach that far yet (judged there alone)."""
+        if repair.started is None:
+            return False
+        end_s = repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S
+        at = next((f.moment for f in self.frames if f.moment.time_s >= end_s), None)
+        return at is None or self._hold_verdict(repair, at, judges) is not None
+
+    def _last_resort(self, repair: Repair, judges: Judges) -> None:
+        """The short shot that could not hold on given to the neighbour its repair's last resort
+        chose (`LAST_RESORT`, flagged), where its frames are still the window's; else left short.
+        The shadow ends: the camera that went off air at the short shot's end is no longer the
+        one it copied."""
+        decision = repair.decision
+        last = None if decision is None else decision.last_resort
+        frames = list(self.frames)
+        end = next((i for i, f in enumerate(frames) if f is repair.frame), None)
+        # its frames and the shot after's as the repair judged them: none answered, no cut (no repair) after it since
+        if last is None or end is None or not any(f is repair.rows[0] for f in frames) or any(f.cut for f in frames[end + 1 :]):
+            self._left(repair)
+            return
+        for row in repair.rows:
+            row.flags.append(LAST_RESORT_FLAG)
+        if last.neighbour == BEFORE:
+            assert repair.before is not None  # only a shadow carries a short shot on
+            self._give(repair.rows, repair.before, last, CARRIED_ON, judges)
+            repair.rows[0].cut = False
+            if SHORT_LEFT in repair.rows[0].flags:  # the shot before, left short at this cut, goes on now
+                repair.rows[0].flags.remove(SHORT_LEFT)
+        else:
+            self._give(repair.rows, repair.after, last, STARTED_EARLY, judges)
+            repair.frame.cut = False
+        self.shadow = self.holding = None
 
     def _left(self, repair: Repair) -> None:
         """The short shot of a repair stays short, flagged at the cut that ends it."""
@@ -617,18 +691,23 @@ def _decided(
     was drawn (moments, poses, copies)."""
     short = rows[0].shot
     kills = _kills(rows, players, judges)
-    judged: list[tuple[float, Decision]] = []
-    if before is not None and steps is not None:
-        carried = _before(rows, before, steps, short, kills, after.judged, judges)
-        if carried is not None:
-            judged.append(carried)
-    later = _after(rows, first, after, short, kills, previous, judges)
-    if later is not None:
-        judged.append(later)
-    if not judged:
-        moved = None if earlier is None else _earlier(back, rows[0].pose, earlier, players, judges)
-        return Decision(None, [], []) if moved is None else moved
-    return max(judged, key=lambda j: j[0])[1]  # the first of equals: the shot before
+
+    def neighbour(floors: Floors) -> Decision | None:
+        judged: list[tuple[float, Decision]] = []
+        if before is not None and steps is not None:
+            carried = _before(rows, before, steps, short, kills, after.judged, judges, floors)
+            if carried is not None:
+                judged.append(carried)
+        later = _after(rows, first, after, short, kills, previous, judges, floors=floors)
+        if later is not None:
+            judged.append(later)
+        return max(judged, key=lambda j: j[0])[1] if judged else None  # the first of equals: the shot before
+
+    strict = neighbour(STRICT)
+    if strict is not None:
+        return strict
+    moved = None if earlier is None else _earlier(back, rows[0].pose, earlier, players, judges)
+    return Decision(None, [], [], neighbour(LAST_RESORT)) if moved is None else moved
 
 
 def _before(
@@ -639,17 +718,19 @@ def _before(
     kills: list[tuple[int, tuple[int, ...]]],
     other: Shot,
     judges: Judges,
+    floors: Floors = STRICT,
 ) -> tuple[float, Decision] | None:
     """The shadow's mean visibility and steps over the short shot's frames, where it carries on
-    over every one of them as a neighbour of the short shot's kind keeping its kills."""
+    over every one of them as a neighbour of the short shot's kind keeping its kills and the
+    floors."""
     if len(steps) < len(rows) or any(m is not r.moment for (m, _, _), r in zip(steps, rows)):
         return None
     poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
     if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, judges):
         return None
-    if not _keeps_seen(rows, seen):
+    if not _keeps_seen(rows, _framed_seen(before.shown, poses, before.judged, judges) if floors.in_frame else seen, floors):
         return None
-    if not _keeps_height(rows, poses, before.shown, before.judged, judges):
+    if not _keeps_height(rows, poses, before.shown, before.judged, judges, floors):
         return None
     return float(np.mean(seen)), Decision(BEFORE, poses, seen)
 
@@ -663,10 +744,12 @@ def _after(
     other: Shot | None,
     judges: Judges,
     step_copy: bool = True,
+    floors: Floors = STRICT,
 ) -> tuple[float, Decision] | None:
     """The shot after's mean visibility, poses and visibilities over the short shot's frames,
     started there into its first pose (module docstring), where it is a neighbour of its kind
-    keeping its kills (step_copy: a moving camera's copy, as it is now, may step there)."""
+    keeping its kills and the floors (step_copy: a moving camera's copy, as it is now, may step
+    there)."""
     if not _may_take(after.judged, short, other, rows):
         return None
     shot, shown = after.judged, after.shown  # a replay started earlier shows earlier moments
@@ -676,8 +759,8 @@ def _after(
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
         if (
             _keeps_kills(rows, kills, poses, judges)
-            and _keeps_seen(rows, seen)
-            and _keeps_height(rows, poses, shown, shot, judges)
+            and _keeps_seen(rows, _framed_seen(shown, poses, shot, judges) if floors.in_frame else seen, floors)
+            and _keeps_height(rows, poses, shown, shot, judges, floors)
         ):
             return judged_mean, Decision(AFTER, poses, seen)
     return None
@@ -710,6 +793,18 @@ def _judged_seen(
         judged[k] = judges.visibility(shown[k], poses[k], shot)
     mean = float(np.mean(list(judged.values()))) if judged else math.nan
     return [judged[k - (k - start) % JUDGED_EVERY] for k in range(start, len(poses))], mean
+
+
+def _framed_seen(shown: list[Moment], poses: list[CameraPose], shot: Shot, judges: Judges) -> list[float]:
+    """The mean share of the shot's framed subjects' points inside the frame of each pose and seen
+    from it at the moments shown ((len(poses),) values), judged at every JUDGED_EVERY-th and carried
+    to the frames between; 1 where it frames nobody."""
+    judged = {}
+    for k in range(0, len(poses), JUDGED_EVERY):
+        pause()
+        framed = shot.framed(shown[k].time_s)
+        judged[k] = float(judges.seen(poses[k], shown[k], framed).mean()) if framed else 1.0
+    return [judged[k - k % JUDGED_EVERY] for k in range(len(poses))]
 
 
 def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
@@ -766,21 +861,25 @@ def _keeps_kills(
     return all(np.all(judges.seen(poses[k], rows[k].moment, pair) >= KILL_SEEN) for k, pair in kills)
 
 
-def _keeps_seen(rows: list[WorkedFrame], seen: list[float]) -> bool:
+def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STRICT) -> bool:
     """Whether a neighbour's visibility over the short shot's frames (seen) falls under
-    SEEN_FLOOR on no frame where the short shot's did not (a picture of nobody for a shot's length)."""
-    return all(s >= SEEN_FLOOR or s >= r.visibility for r, s in zip(rows, seen))
+    SEEN_FLOOR where the short shot's did not (a picture of nobody for a shot's length) on no
+    frame, or on no more than the floors' `misses` share of them and never under half of it."""
+    missed = [s for r, s in zip(rows, seen) if s < SEEN_FLOOR and s < r.visibility]
+    return len(missed) <= floors.misses * len(rows) and all(s >= SEEN_FLOOR / 2.0 for s in missed)
 
 
-def _keeps_height(rows: list[WorkedFrame], poses: list[CameraPose], shown: list[Moment], other: Shot, judges: Judges) -> bool:
+def _keeps_height(
+    rows: list[WorkedFrame], poses: list[CameraPose], shown: list[Moment], other: Shot, judges: Judges, floors: Floors = STRICT
+) -> bool:
     """Whether the neighbour (its poses at the moments it shows) shows the players in its frame
-    readable, HEIGHT_FLOOR of the frame's height (median over the judged frames), where the short
-    shot showed its own so, or at least as tall as it did."""
+    readable, the floors' height share of the frame's height (median over the judged frames),
+    where the short shot showed its own so, or at least as tall as it did."""
     judged = range(0, len(rows), JUDGED_EVERY)
     short = [judges.height(rows[k].pose, rows[k].shown, rows[k].shot) for k in judged]
     mine = [judges.height(poses[k], shown[k], other) for k in judged]
     short, mine = [h for h in short if math.isfinite(h)], [h for h in mine if math.isfinite(h)]
-    return not short or not mine or float(np.median(mine)) >= min(HEIGHT_FLOOR, float(np.median(short)))
+    return not short or not mine or float(np.median(mine)) >= min(floors.height, float(np.median(short)))
 
 
 def _may_take(donor: Shot, short: Shot, other: Shot | None, rows: list[WorkedFrame]) -> bool:
