@@ -427,23 +427,19 @@ class EditWindow:
         repair.work_out()
         decision, rows, frame = repair.decision, repair.rows, repair.frame
         assert decision is not None  # worked out above
-        if decision.neighbour is None and decision.last_resort is not None and not self._may_hold(repair, judges):
-            decision = decision.last_resort  # the last chance for it: the short shot's first frame is answered next
-            for row in rows:
-                row.flags.append(LAST_RESORT_FLAG)
+        last_resort = decision.neighbour is None and decision.last_resort is not None and not self._may_hold(repair, judges)
+        if last_resort:  # the last chance for it: the short shot's first frame is answered next
+            assert decision.last_resort is not None  # tested above
+            decision = decision.last_resort
         if decision.neighbour == BEFORE:
-            assert repair.carried is not None and repair.before is not None  # only a shadow carries a short shot on
-            self._give(rows, repair.before, decision, CARRIED_ON, judges)
-            rows[0].cut = False
-            if SHORT_LEFT in rows[0].flags:  # the shot before, left short at this cut, goes on now
-                rows[0].flags.remove(SHORT_LEFT)
+            assert repair.carried is not None  # only a shadow carries a short shot on
+            self._to_neighbour(repair, decision, last_resort, judges)
             self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's min_shot_s
             return
         if repair.carried is not None:
             repair.carried.until_s = repair.carried_until_s
         if decision.neighbour == AFTER:
-            self._give(rows, repair.after, decision, STARTED_EARLY, judges)
-            frame.cut = False  # the cut before the short shot stays, and its shadow
+            self._to_neighbour(repair, decision, last_resort, judges)  # the cut before the short shot stays, and its shadow
             return
         if decision.neighbour == EARLIER:
             assert repair.back and repair.earlier is not None  # decided only with them (_decided)
@@ -585,18 +581,25 @@ class EditWindow:
         if last is None or end is None or not any(f is repair.rows[0] for f in frames) or any(f.cut for f in frames[end + 1 :]):
             self._left(repair)
             return
-        for row in repair.rows:
-            row.flags.append(LAST_RESORT_FLAG)
-        if last.neighbour == BEFORE:
+        self._to_neighbour(repair, last, True, judges)
+        self.shadow = self.holding = None
+
+    def _to_neighbour(self, repair: Repair, decision: Decision, last_resort: bool, judges: Judges) -> None:
+        """The short shot's frames given to the shot before (BEFORE: the cut that starts it
+        cleared) or the shot after (AFTER: the cut that ends it cleared), flagged, and
+        `edit_window_last_resort` too where the last resort chose it."""
+        if last_resort:
+            for row in repair.rows:
+                row.flags.append(LAST_RESORT_FLAG)
+        if decision.neighbour == BEFORE:
             assert repair.before is not None  # only a shadow carries a short shot on
-            self._give(repair.rows, repair.before, last, CARRIED_ON, judges)
+            self._give(repair.rows, repair.before, decision, CARRIED_ON, judges)
             repair.rows[0].cut = False
             if SHORT_LEFT in repair.rows[0].flags:  # the shot before, left short at this cut, goes on now
                 repair.rows[0].flags.remove(SHORT_LEFT)
         else:
-            self._give(repair.rows, repair.after, last, STARTED_EARLY, judges)
+            self._give(repair.rows, repair.after, decision, STARTED_EARLY, judges)
             repair.frame.cut = False
-        self.shadow = self.holding = None
 
     def _left(self, repair: Repair) -> None:
         """The short shot of a repair stays short, flagged at the cut that ends it."""
@@ -728,7 +731,9 @@ def _before(
     poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
     if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, judges):
         return None
-    if not _keeps_seen(rows, _framed_seen(before.shown, poses, before.judged, judges) if floors.in_frame else seen, floors):
+    if not _keeps_seen(
+        rows, _judged_seen(before.shown, poses, before.judged, judges, in_frame=True)[0] if floors.in_frame else seen, floors
+    ):
         return None
     if not _keeps_height(rows, poses, before.shown, before.judged, judges, floors):
         return None
@@ -759,7 +764,7 @@ def _after(
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
         if (
             _keeps_kills(rows, kills, poses, judges)
-            and _keeps_seen(rows, _framed_seen(shown, poses, shot, judges) if floors.in_frame else seen, floors)
+            and _keeps_seen(rows, _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if floors.in_frame else seen, floors)
             and _keeps_height(rows, poses, shown, shot, judges, floors)
         ):
             return judged_mean, Decision(AFTER, poses, seen)
@@ -781,30 +786,24 @@ def _earlier(back: list[WorkedFrame], first: CameraPose, short: Side, players: d
 
 
 def _judged_seen(
-    shown: list[Moment], poses: list[CameraPose], shot: Shot, judges: Judges, start: int = 0
+    shown: list[Moment], poses: list[CameraPose], shot: Shot, judges: Judges, start: int = 0, in_frame: bool = False
 ) -> tuple[list[float], float]:
     """The visibility of the shot's framed subjects from each of the poses at the moments shown,
     from `start` on ((len(poses) - start,) values), judged at every JUDGED_EVERY-th of them and
     carried to the frames between, and the mean of those judged (NaN: none; a sliced repair
-    hands back between them)."""
+    hands back between them). in_frame: the mean share of their points inside the pose's frame
+    and seen from it (eval-match's shown share; 1 where it frames nobody), not the program's."""
     judged = {}
     for k in range(start, len(poses), JUDGED_EVERY):
         pause()
-        judged[k] = judges.visibility(shown[k], poses[k], shot)
+        if not in_frame:
+            judged[k] = judges.visibility(shown[k], poses[k], shot)
+        elif framed := shot.framed(shown[k].time_s):
+            judged[k] = float(judges.seen(poses[k], shown[k], framed).mean())
+        else:
+            judged[k] = 1.0
     mean = float(np.mean(list(judged.values()))) if judged else math.nan
     return [judged[k - (k - start) % JUDGED_EVERY] for k in range(start, len(poses))], mean
-
-
-def _framed_seen(shown: list[Moment], poses: list[CameraPose], shot: Shot, judges: Judges) -> list[float]:
-    """The mean share of the shot's framed subjects' points inside the frame of each pose and seen
-    from it at the moments shown ((len(poses),) values), judged at every JUDGED_EVERY-th and carried
-    to the frames between; 1 where it frames nobody."""
-    judged = {}
-    for k in range(0, len(poses), JUDGED_EVERY):
-        pause()
-        framed = shot.framed(shown[k].time_s)
-        judged[k] = float(judges.seen(poses[k], shown[k], framed).mean()) if framed else 1.0
-    return [judged[k - k % JUDGED_EVERY] for k in range(len(poses))]
 
 
 def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
