@@ -1,7 +1,8 @@
 """Instant replays (replays.py) on tiny hand-built matches: a kill with room is shown again from
 another angle at the replayed moments while the program's own time goes on, kills close together
 get none between them, a replay never covers a live kill, the candidate and the take of a REPLAY,
-the kill cam (a replay through the killer's eyes), and the same program on two runs."""
+the kill cam (a replay through the killer's eyes), a replay moved past a teleport in its build-up,
+and the same program on two runs."""
 
 from __future__ import annotations
 
@@ -15,12 +16,23 @@ from camdirector.pipeline.match.camera_ahead import CameraStep
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
-from camdirector.pipeline.match.replays import Replays
+from camdirector.pipeline.match.replays import AFTER_KILL_S, Replays
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import ToricCamera
 from camdirector.pipeline.session import Session
 from camdirector.pipeline.state import FrameState
-from tests.pipeline.match.scenes import EYE_M, BareRig, Match, at_time, facing, kill, melee, on_screen, run_session
+from tests.pipeline.match.scenes import (
+    EYE_M,
+    RATE_HZ,
+    BareRig,
+    Match,
+    at_time,
+    facing,
+    kill,
+    melee,
+    on_screen,
+    run_session,
+)
 
 TEAMS = {"a1": 1, "b1": 2, "a2": 1, "b2": 2}
 KILL_S = 25.0
@@ -123,6 +135,70 @@ def test_a_kill_whose_victim_is_hidden_in_the_build_up_is_replayed_with_the_kill
     at_kill = min(shown[0], key=lambda s: abs(s.match.replay_of.time_s - KILL_S))
     aims = np.array([[40.0, EYE_M, 0.0], [40.0, EYE_M, HUT_Z_M - 2.5]])
     assert at_kill.match.shot.subject_ids == ("a2", "b2") and np.all(np.abs(on_screen(at_kill, aims)) <= 1.0)
+
+
+TELEPORT_S = KILL_S - 1.1  # a2 is back from behind the wall then, 1.1 s before its kill
+# walls 200 m wide and 100 m tall, clear of a1 and b1: no camera sees over or round them
+SOUTH_WALL = TriMesh(box((200.0, 100.0, 0.2)).vertices + np.array([40.0, 50.0, -7.0]), box((200.0, 100.0, 0.2)).faces)
+NORTH_WALL = TriMesh(box((200.0, 100.0, 0.2)).vertices + np.array([40.0, 50.0, 25.0]), box((200.0, 100.0, 0.2)).faces)
+RESPAWN_S = KILL_S + 1.2  # b2 comes back to life behind the north wall
+# the most a replay's camera moves in a frame here without a jump: its pair window's reframe swings it
+# up to 2.6 m a frame; following a2 through its teleport it moved 21 m in one, m
+SWING_MAX_M = 3.0
+
+
+def teleported(t: float):
+    """two_fronts, but a2 stands 14 m south of its place, behind SOUTH_WALL, for 3 s until
+    TELEPORT_S (a jump through it: a teleporter's, moments.py), and b2 respawns 20 m north,
+    behind NORTH_WALL, at RESPAWN_S."""
+    places = two_fronts(t)
+    if TELEPORT_S - 3.0 <= t < TELEPORT_S:
+        (x, z), yaw = places["a2"]
+        places["a2"] = ((x, z - 14.0), yaw)
+    if t >= RESPAWN_S:
+        places["b2"] = ((40.0, 35.0), 0.0)
+    return places
+
+
+def _one_piece(states: list[FrameState]) -> list[FrameState]:
+    """The program's one REPLAY, checked whole: as long as its replayed moments, uncut, its camera
+    jumping nowhere (a hand-built scene has no level, so the rig flags no cut where the camera
+    passes through a wall: the jump is what such a cut would be, rig.py)."""
+    shown = replays(states)
+    assert len(shown) == 1, [(r[0].time_s, len(r)) for r in shown]  # a cut within it splits it
+    replay = shown[0][0].match.shot.replay
+    assert replay.kill_time_s == KILL_S and len(shown[0]) >= round(replay.length_s * RATE_HZ) - 1
+    steps_m = np.linalg.norm(np.diff([s.pose.position_world for s in shown[0]], axis=0), axis=1)
+    assert steps_m.max() < SWING_MAX_M, (float(steps_m.max()), shown[0][int(steps_m.argmax())].time_s)
+    return shown[0]
+
+
+def test_a_replay_starts_after_its_killers_teleport_in_the_build_up():
+    """a2 teleports through a wall 1.1 s before its kill, within the replay's usual build-up (2 s):
+    every camera of the pair (a2's eyes, a Toric camera anchored on it) passes through the wall
+    there, a cut within the replay. The replay shows as many moments, from just after the
+    teleport, and is one shot; it still shows the kill."""
+    settings = MatchSettings()
+    match = Match(TEAMS, teleported, [kill("a2", "b2", KILL_S)], delay_s=10.0, walls=[SOUTH_WALL, NORTH_WALL])
+    replay = _one_piece([s for s in BareRig(match, settings).run(40.0) if not s.match.buffering])
+    shown = replay[0].match.shot.replay
+    assert TELEPORT_S <= shown.from_s <= TELEPORT_S + 1.0 / RATE_HZ
+    assert shown.length_s == settings.replay_pre_s + settings.replay_post_s
+    assert any(abs(s.match.replay_of.time_s - KILL_S) <= 1.0 / RATE_HZ for s in replay)
+
+
+def test_a_replay_past_its_victims_respawn_frames_the_killer_alone_by_then():
+    """Moved past a2's teleport, the replay shows b2's respawn behind the north wall 1.2 s after
+    the kill: a Toric camera framing the pair throughout goes on framing b2 there (pulled in
+    front of the south wall, here; in a level, past the walls, a cut). The pair window's camera
+    (the pair around the kill, a2 alone after it) comes first there: the replay is one shot,
+    showing a2 alone, undegraded, by the respawn."""
+    settings = MatchSettings(first_person=False)  # a Toric replay
+    match = Match(TEAMS, teleported, [kill("a2", "b2", KILL_S)], delay_s=10.0, walls=[SOUTH_WALL, NORTH_WALL])
+    replay = _one_piece([s for s in BareRig(match, settings).run(40.0) if not s.match.buffering])
+    after = [s for s in replay if s.match.replay_of.time_s >= RESPAWN_S - AFTER_KILL_S]
+    assert after and all(s.match.shot.subject_ids == ("a2",) for s in after)
+    assert not any("pulled_in_front_of_wall" in s.flags for s in after)
 
 
 def test_a_replay_comes_before_a_discretionary_cut_at_its_tick():

@@ -30,7 +30,13 @@ had been shown live through the killer's eyes in corridors where no place saw bo
 stays at a living player's height past the death: QuakeWorld drops a corpse's view to the floor,
 which in a replay reads as the camera falling. Else no replay (at `candidate_seen`, 0.5, the real
 wipeout's replays showed nobody for a second of build-up and nobody-shown frames outside
-overviews rose from 7.7% to 10.7%). On the
+overviews rose from 7.7% to 10.7%). A replay whose build-up holds a jump of killer or victim
+through the level (a teleport: moments.py `jumps_s`), where every camera of the pair passes through
+a wall (a cut within the replay: on the real 2on2 a killer's teleport 0.8 s before its kill cut
+its replay into shots of 1.17 and 0.03 s), shows as many moments from just after the jump instead
+(`_after_jumps`), so more after the kill; where those show the victim's respawn (a jump through
+the level too), the pair window's camera, which frames the killer alone by then, comes before the
+pair's throughout. On the
 wire a replay names whom it frames at the replayed moment (rig.py), as a live DUEL's killer-alone
 frames do.
 
@@ -148,20 +154,8 @@ class Replays:
         first person; None when no such place sees both (module docstring)."""
         pair = self.pair(kill)
         assert pair is not None  # a replay is of a kill of one player by another
-        replay = self.replay(kill, self.builder.style.min_shot_s, room_s, buffer.oldest_s)
-        key = (
-            kill.time_s,
-            replay.from_s,
-            kill.actor_id,
-            kill.other_actor_id,
-            b"" if live_world is None else live_world.tobytes(),
-            eyes,
-        )
-        if key not in self._placed:
-            if len(self._placed) >= PLACED_KEPT:
-                del self._placed[next(iter(self._placed))]  # the oldest asked
-            self._placed[key] = self._place(pair, replay, buffer, live_world, eyes)
-        placed = self._placed[key]
+        replay = self._after_jumps(self.replay(kill, self.builder.style.min_shot_s, room_s, buffer.oldest_s), pair, buffer)
+        placed = self._placed_for(kill, pair, replay, buffer, live_world, eyes)
         if placed is None:
             return None
         (a, b), place, score, window = placed
@@ -181,6 +175,52 @@ class Replays:
         if window is not None:
             shot.cover_times_s = [replay.kill_time_s]  # its pair window's event (the rig keeps a window to its shot's events)
         return shot
+
+    def _placed_for(
+        self,
+        kill: GameEvent,
+        pair: tuple[int, int],
+        replay: Replay,
+        buffer: MomentBuffer,
+        live_world: np.ndarray | None,
+        eyes: bool,
+    ) -> tuple[tuple[int, int], Place | int, float, PairWindow | None] | None:
+        """`_place` of the replay, remembered per kill, first moment, live angle and `eyes` (a
+        candidate asks at every tick)."""
+        key = (
+            kill.time_s,
+            replay.from_s,
+            kill.actor_id,
+            kill.other_actor_id,
+            b"" if live_world is None else live_world.tobytes(),
+            eyes,
+        )
+        if key not in self._placed:
+            if len(self._placed) >= PLACED_KEPT:
+                del self._placed[next(iter(self._placed))]  # the oldest asked
+            self._placed[key] = self._place(pair, replay, buffer, live_world, eyes)
+        return self._placed[key]
+
+    def _jumps(self, players: tuple[int, ...], start_s: float, end_s: float, buffer: MomentBuffer) -> list[float]:
+        """The players' jumps through the level in (start_s, end_s], s (MomentBuffer.jumps_s)."""
+        return buffer.jumps_s(players, start_s, end_s, self.builder.visibility.ray_scene.occluded)
+
+    def _after_jumps(self, replay: Replay, pair: tuple[int, int], buffer: MomentBuffer) -> Replay:
+        """The replay's moments moved past the pair's jumps through the level before the kill
+        (module docstring): as long, from just after the first such jump that is AFTER_KILL_S or
+        more before the kill, past which they hold no jump of the pair up to the kill's next
+        frame nor of the killer after it, and are buffered; else as they were. The victim's
+        respawn after the kill is `_place`'s to keep out of the picture."""
+        jumps = self._jumps(pair, replay.from_s, replay.kill_time_s + AFTER_KILL_S, buffer)
+        for jump_s in jumps:
+            start_s = jump_s + TIME_EPSILON_S
+            moved = Replay(replay.kill_time_s, start_s, start_s + replay.length_s)
+            if start_s > replay.kill_time_s - AFTER_KILL_S or moved.until_s > buffer.horizon_s:
+                break
+            before_kill = self._jumps(pair, start_s, replay.kill_time_s + AFTER_KILL_S, buffer)
+            if not before_kill and not self._jumps(pair[:1], start_s, moved.until_s, buffer):
+                return moved
+        return replay
 
     def _window(self, kept: int, kill_time_s: float) -> PairWindow:
         """When a replay of a kill at kill_time_s, s, frames its pair: as a planned DUEL live, around
@@ -224,7 +264,15 @@ class Replays:
         if kill_cam is not None:
             return kill_cam
 
-        for window in (None, self._window(pair[0], replay.kill_time_s)):
+        # a camera framing the pair throughout meets the victim's respawn where the replay shows it
+        # (a jump through the level: a cut within the replay); a pair window's frames the killer
+        # alone by then, and comes first there
+        alone = self._window(pair[0], replay.kill_time_s)
+        alone_s = replay.kill_time_s + s.pair_after_s + s.reframe_s
+        windows: tuple[PairWindow | None, ...] = (None, alone)
+        if self._jumps((pair[1],), alone_s, replay.until_s, buffer):
+            windows = (alone, None)
+        for window in windows:
             best: tuple[tuple[int, int], Place, float, PairWindow | None] | None = None
             for camera, places in self.builder.cameras(ShotKind.DUEL, pair, kill_moment, default=False):
                 assert camera.b_index is not None  # a DUEL's camera frames two
