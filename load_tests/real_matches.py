@@ -73,11 +73,12 @@ COLUMNS = (
     ),
     ("cuts/min", lambda f: f["cuts_per_min"]),
     (
-        "outside / solid / swept: program; outside / solid: candidates",
-        lambda f: "{o} / {s} / {w}; {co} / {cs} of {cn}".format(
+        "outside / solid / swept / jumped: program; outside / solid: candidates",
+        lambda f: "{o} / {s} / {w} / {j}; {co} / {cs} of {cn}".format(
             o=f["places"]["program"]["outside"],
             s=f["places"]["program"]["solid"],
             w=f["places"]["program"]["swept_through_walls"],
+            j=f["places"]["program"]["jumped_without_cut"],
             co=f["places"]["candidates"]["outside"],
             cs=f["places"]["candidates"]["solid"],
             cn=f["places"]["candidates"]["poses"],

@@ -42,6 +42,7 @@ from camdirector.evaluation.match.measure import (
     framed_visibility,
     in_eyes_of,
     jump_cuts,
+    jumps_without_cut,
     kill_coverage,
     measure_shown,
     nobody_shown,
@@ -258,6 +259,7 @@ def _figures(
             "program": {
                 **places_count(interior, program.position),
                 "swept_through_walls": sweeps_through_walls(interior, program),
+                "jumped_without_cut": jumps_without_cut(program),
             },
             "candidates": places_count(interior, run.candidates.position),
         },

@@ -66,7 +66,9 @@ has them, never from what the director says it shows:
   candidate offered beside a program moment, as many times as offered), how many lie outside the
   level (its mesh's bounding box) or inside solid (geometry/inside.py says how it decides), and
   how many there are; and how many moves of the program camera between two moments with no cut
-  between them pass through level geometry (a sweep through a wall, where a cut belongs).
+  between them pass through level geometry (a sweep through a wall, where a cut belongs), and how
+  many are faster than JUMP_SPEED_M_S (a jump no wall lies across: to a viewer a cut, which the
+  program does not flag, so that the shots it splits are counted as one).
 """
 
 from __future__ import annotations
@@ -91,6 +93,9 @@ AIM_HEIGHT_FRACTION = 0.6  # the aim point (chest) this far up a player: the sim
 EYE_HEIGHT_FRACTION = 46.0 / 56.0  # a Quake player's eye (origin + 22 units) over its 56-unit height
 EYE_TOLERANCE_M = 0.5  # a camera this near a player's eye point looks through its eyes, m
 TALL_HEIGHT = 0.6  # a shown player taller than this share of the frame's height is pressed against the lens (issue 41)
+# a program camera moving faster than this between two moments jumped: 2 m between two 30-Hz frames, the
+# edit window's JUMP_M (a teleport, a respawn), and twice a rocket-jumping player's speed, m/s
+JUMP_SPEED_M_S = 60.0
 
 
 def player_mesh(player: MatchPlayer) -> TriMesh:
@@ -441,6 +446,15 @@ def places_count(interior: LevelInterior, positions_world: np.ndarray) -> dict[s
     and n (module docstring)."""
     places = interior.places(positions_world) if len(positions_world) else np.zeros(0, dtype=np.int8)
     return {"outside": int((places == Place.OUTSIDE).sum()), "solid": int((places == Place.SOLID).sum()), "poses": len(places)}
+
+
+def jumps_without_cut(program: Program) -> int:
+    """Moves of the program camera from one moment to the next, with no cut at the next, faster
+    than JUMP_SPEED_M_S (module docstring)."""
+    moves = np.flatnonzero(~program.cut[1:]) + 1
+    distance_m = np.linalg.norm(program.position[moves] - program.position[moves - 1], axis=1)
+    dt_s = np.maximum(program.time_s[moves] - program.time_s[moves - 1], 1e-9)
+    return int((distance_m > JUMP_SPEED_M_S * dt_s).sum())
 
 
 def sweeps_through_walls(interior: LevelInterior, program: Program) -> int:
