@@ -207,20 +207,18 @@ class Replays:
 
     def _after_jumps(self, replay: Replay, pair: tuple[int, int], buffer: MomentBuffer) -> Replay:
         """The replay's moments moved past the pair's jumps through the level before the kill
-        (module docstring): as long, from just after the first such jump that is AFTER_KILL_S or
-        more before the kill, past which they hold no jump of the pair up to the kill's next
-        frame nor of the killer after it, and are buffered; else as they were. The victim's
-        respawn after the kill is `_place`'s to keep out of the picture."""
+        (module docstring): as long, from just after the last such jump up to the kill's next
+        frame, where that is AFTER_KILL_S or more before the kill, they hold no jump of the
+        killer after it and are buffered; else as they were. The victim's respawn after the
+        kill is `_place`'s to keep out of the picture."""
         jumps = self._jumps(pair, replay.from_s, replay.kill_time_s + AFTER_KILL_S, buffer)
-        for jump_s in jumps:
-            start_s = jump_s + TIME_EPSILON_S
-            moved = Replay(replay.kill_time_s, start_s, start_s + replay.length_s)
-            if start_s > replay.kill_time_s - AFTER_KILL_S or moved.until_s > buffer.horizon_s:
-                break
-            before_kill = self._jumps(pair, start_s, replay.kill_time_s + AFTER_KILL_S, buffer)
-            if not before_kill and not self._jumps(pair[:1], start_s, moved.until_s, buffer):
-                return moved
-        return replay
+        if not jumps:
+            return replay
+        start_s = jumps[-1] + TIME_EPSILON_S
+        moved = Replay(replay.kill_time_s, start_s, start_s + replay.length_s)
+        if start_s > replay.kill_time_s - AFTER_KILL_S or moved.until_s > buffer.horizon_s:
+            return replay
+        return replay if self._jumps(pair[:1], start_s, moved.until_s, buffer) else moved
 
     def _window(self, kept: int, kill_time_s: float) -> PairWindow:
         """When a replay of a kill at kill_time_s, s, frames its pair: as a planned DUEL live, around
