@@ -21,7 +21,7 @@ from camdirector.pipeline.match.first_person import (
     eyes_camera,
     through_eyes,
 )
-from camdirector.pipeline.match.frame import ShotChoice, ShotKind
+from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.program_camera import ProgramCamera
@@ -340,6 +340,20 @@ def test_a_cut_to_the_eyes_keeps_the_30_degree_rule(previous_world, eyes):
     )
     assert shot is not None and shot.framed(cut_s) == (0, 1)
     assert isinstance(shot.camera, FirstPersonCamera) == eyes
+
+
+def test_a_replay_through_the_eyes_on_air_is_a_cut_in_time():
+    """The program goes on uncut into a new shot through the eyes on air (the same picture), but not
+    into or out of a replay through them: its picture is of another moment (the real 2on2 jumped
+    7.8 m uncut into one)."""
+    rig, shot = _planned_kill()
+    r = rig.rig
+    r.shot = shot
+    again = dataclasses.replace(shot, choice=dataclasses.replace(shot.choice, reason="chosen again"))
+    replay = dataclasses.replace(shot, choice=dataclasses.replace(shot.choice, replay=Replay(KILL_S, KILL_S - 2.0, KILL_S + 1.0)))
+    assert r._same_eyes(again) and not r._same_eyes(replay)
+    r.shot = replay
+    assert not r._same_eyes(shot)
 
 
 def test_a_fight_held_through_one_players_eyes_is_not_chosen_again_at_every_tick():

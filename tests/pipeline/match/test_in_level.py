@@ -9,6 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from camdirector.evaluation.match.measure import JUMP_SPEED_M_S
 from camdirector.geometry.camera import CameraPose, level_look_rotation, project_to_screen
 from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.meshes import TriMesh, box
@@ -106,6 +107,19 @@ def test_a_short_move_through_the_slab_holds_the_camera_turned_to_its_anchor_and
     assert in_level.held(start, pose_at([-1.0, 2.0, -3.0]), beyond, LENS, hold_max_m=4.0)[1] is False  # no wall
 
 
+def test_a_fast_move_within_the_room_is_paced_turned_to_its_anchor_and_one_through_the_slab_is_left_to_a_cut(in_level):
+    start = np.array([-4.0, 2.0, -3.0])
+    position = np.array([-4.0, 2.0, 3.0])  # 6 m along the wall, nothing between
+    pose = CameraPose(position, level_look_rotation(position, CENTRE, (0.2, 0.1), LENS), LENS.vertical_fov_deg)
+    paced, was_paced = in_level.paced(start, pose, CENTRE, LENS, step_max_m=1.5)
+    assert was_paced and np.allclose(paced.position_world, [-4.0, 2.0, -1.5], atol=1e-9)  # 1.5 m along the move
+    assert np.allclose(project_to_screen(paced, LENS, CENTRE)[0], [0.2, 0.1], atol=1e-6)  # the anchor where the pose has it
+    assert paced.vertical_fov_deg == pose.vertical_fov_deg and in_level.inside(paced.position_world)
+    assert in_level.paced(start, pose, CENTRE, LENS, step_max_m=6.5) == (pose, False)  # slow enough: as it is
+    across = pose_at([3.0, 2.0, -3.0])  # 4.2 m through the slab at x = 1.5
+    assert in_level.paced(np.array([-1.2, 2.0, -3.0]), across, CENTRE, LENS, step_max_m=1.5) == (across, False)
+
+
 def low_hall() -> TriMesh:
     """The melee's 40 m square under a 4.5 m ceiling (faces inward) with its four pillars (solid):
     a place the style would take 6-12 m from a pair lies beyond the walls or above the ceiling."""
@@ -134,3 +148,8 @@ def test_a_match_in_a_low_hall_keeps_every_program_and_candidate_camera_inside_a
     assert not interior.bad(candidates).any(), int(interior.bad(candidates).sum())
     moves = [k for k in range(1, len(shown)) if not shown[k].cut]
     assert (interior.reach(program[[k - 1 for k in moves]], program[moves]) == 1.0).all()
+    # and no jump a viewer sees as a cut (eval-match's): a move with no cut, but through a player's eyes (they go
+    # where the player goes), at most the speed eval-match counts a jump over
+    step_max_m = JUMP_SPEED_M_S * (shown[1].time_s - shown[0].time_s)
+    moved_m = [np.linalg.norm(program[k] - program[k - 1]) for k in moves if not shown[k].match.shot.eyes_id]
+    assert len(moved_m) > 300 and max(moved_m) <= step_max_m + 1e-6, max(moved_m)

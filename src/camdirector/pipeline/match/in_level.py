@@ -15,7 +15,9 @@ A program camera that moves through level geometry from one frame to the next (i
 a subject carried past a wall) is kept on its anchor's side the same way (`kept_this_side`);
 where that fails, a short move (`wall_hold_max_m`: a corner passed) holds the camera where it
 was, turned to keep its anchor where the frame had it (`held`), and a longer one is a cut (rig.py):
-cuts to places, never sweeps through walls.
+cuts to places, never sweeps through walls. A move with no geometry across it that is faster than
+the settings' top speed goes that far along its line, turned the same way (`paced`; program_camera.py
+decides which moves are paced and which are cuts): no jump a viewer would take for a cut.
 
 Costs: one places test (RAYS rays) per new camera centre; the last few centres' answers are kept,
 so a static camera is tested once; two rays per program frame that moves (the sweep); more rays
@@ -150,13 +152,24 @@ class InLevel:
         moved_m = float(np.linalg.norm(pose.position_world - from_world))
         if moved_m > hold_max_m or not self.crossed(from_world, pose.position_world):
             return pose, False
-        rotation = pose.rotation_xyzw
-        if anchor_world is not None:
-            frame_lens = Lens(pose.vertical_fov_deg, lens.aspect)
-            screen = project_to_screen(pose, frame_lens, anchor_world)[0]
-            if np.all(np.isfinite(screen)) and np.linalg.norm(anchor_world - from_world) > 1e-6:
-                rotation = level_look_rotation(from_world, anchor_world, screen.tolist(), frame_lens)
-        return CameraPose(np.array(from_world, dtype=np.float64), rotation, pose.vertical_fov_deg), True
+        return _turned_from(from_world, pose, anchor_world, lens), True
+
+    def paced(
+        self, from_world: np.ndarray, pose: CameraPose, anchor_world: np.ndarray | None, lens: Lens, step_max_m: float
+    ) -> tuple[CameraPose, bool]:
+        """A camera moving from `from_world` (3,) m to the pose farther than step_max_m, m, with no
+        level geometry between: moved step_max_m along that line, turned to show its anchor (3,)
+        m where the pose shows it (as `held` turns), and whether it was; else the pose as it is (a
+        move through a wall is the rig's cut). Between two frames a jump no wall lies across (a
+        pull in front of a wall let go, a hold released, an orbit's reframe swing) is to a viewer
+        a cut that the program never flagged (eval-match `jumped_without_cut`); paced, it is a
+        move. On the segment of two centres inside the level that meets no geometry, the point is
+        inside too."""
+        offset = pose.position_world - from_world
+        moved_m = float(np.linalg.norm(offset))
+        if moved_m <= step_max_m or self.crossed(from_world, pose.position_world):
+            return pose, False
+        return _turned_from(from_world + offset * (step_max_m / moved_m), pose, anchor_world, lens), True
 
     def _before_wall(self, anchor: np.ndarray, position: np.ndarray) -> np.ndarray | None:
         """(3,) m: the point margin_m short of where the line from the anchor (3,) to the position
@@ -172,6 +185,18 @@ class InLevel:
             return position
         point: np.ndarray = anchor + max(reach_m - self.margin_m, 0.0) / length_m * offset
         return point
+
+
+def _turned_from(position_world: np.ndarray, pose: CameraPose, anchor_world: np.ndarray | None, lens: Lens) -> CameraPose:
+    """The pose's lens at position_world (3,) m, turned to keep its anchor (3,) m where the pose's
+    frame has it (the pose's rotation where the anchor is behind it, or with none)."""
+    rotation = pose.rotation_xyzw
+    if anchor_world is not None:
+        frame_lens = Lens(pose.vertical_fov_deg, lens.aspect)
+        screen = project_to_screen(pose, frame_lens, anchor_world)[0]
+        if np.all(np.isfinite(screen)) and np.linalg.norm(anchor_world - position_world) > 1e-6:
+            rotation = level_look_rotation(position_world, anchor_world, screen.tolist(), frame_lens)
+    return CameraPose(np.array(position_world, dtype=np.float64), rotation, pose.vertical_fov_deg)
 
 
 def _box_exit(origin: np.ndarray, direction: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:

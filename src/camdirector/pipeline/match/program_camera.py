@@ -1,20 +1,23 @@
 """CAMERA and VISIBILITY of the MATCH rig: every frame, the program shot's camera stepped to the
-program moment, a Toric camera whose first subject walls hide pulled in front of the wall
-(shots.py `pulled_in`, flagged `pulled_in_front_of_wall`), any director's pose that would lie
-outside the level or inside solid moved inside toward the player the shot keeps in view
-(in_level.py, flagged `moved_inside_level`), one that would move through a wall kept on that
-player's side of it (flagged `kept_this_side_of_wall`) or, for a short move, held where it was
-(`held_before_wall`), its lens widened where a player would stand taller than the framing band
-(lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
+program moment, a Toric camera whose first subject walls hide pulled in front of the wall (shots.py
+`pulled_in`, flagged `pulled_in_front_of_wall`), any director's pose that would lie outside the
+level or inside solid moved inside toward the player the shot keeps in view (in_level.py, flagged
+`moved_inside_level`), one that would move through a wall kept on that player's side of it (flagged
+`kept_this_side_of_wall`) or, for a short move, held where it was (`held_before_wall`), our
+director's Toric pose faster than `move_speed_max_m_s` with no wall across it made over several
+frames (in_level.py `paced`, flagged `move_paced`) or, where that takes over `move_cut_s`, left to
+the rig's cut (`cut_long_move`), its lens widened where a player would stand taller than the framing
+band (lens_width.py, flagged `lens_widened`; every director's shots, the baselines' too) or, for a
 Toric camera or a wide view of named players (our director's), where the frame cuts off a framed
 subject, and zoomed in where those framed subjects stand small (flagged `lens_zoomed`); our
 director's pose (Toric or fixed) that the widest lens leaves with a player too tall stepped back
 from it, or with no room to step panned off the player (step_back.py, flagged
 `stepped_back_from_player`, `panned_off_player`: no cut for the subjects such a pan lets go); a
-Toric pose that these degrades left showing none of its subjects replaced by the move a hold held
-(`hold_left_for_cut`) or by a cut to a place that shows them (`cut_to_seen_place`, `_seen_again`); and the share of the framed
-subjects' sample points seen from the pose (visibility.py). In the frame (rig.py) or ahead of
-it, on a copy of the camera (camera_ahead.py): the same computation either way.
+Toric pose that these degrades left showing none of its subjects replaced by the move a hold held or
+a pace slowed (`hold_left_for_cut`) or by a cut to a place that shows them (`cut_to_seen_place`,
+`_seen_again`); and the share of the framed subjects' sample points seen from the pose
+(visibility.py). In the frame (rig.py) or ahead of it, on a copy of the camera (camera_ahead.py):
+the same computation either way.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ HOLD_LEFT_FOR_CUT = "hold_left_for_cut"  # a hold before a wall showing nobody l
 SUBJECTS_LOST = "subjects_lost"  # a degraded pose showing nobody where no re-placement was looked for
 STEPPED_BACK = "stepped_back_from_player"  # a pose moved back from a player too near for the widest lens
 PANNED_OFF = "panned_off_player"  # a pose with no room to step back panned off the player instead, for a few frames
+CUT_LONG_MOVE = "cut_long_move"  # a move pacing would make up in over move_cut_s, a cut instead (rig.py)
+PACED = "move_paced"  # a move faster than move_speed_max_m_s with no wall across it made up over the next frames
 
 
 class ProgramCamera:
@@ -95,7 +100,7 @@ class ProgramCamera:
             # 43,204 eyes in solid): the picture stays, and the rig cuts where the eye comes out
             return last_pose, ["eye_outside_level_held"]
         pose = camera.pose(moment)
-        unheld: CameraPose | None = None  # the pose a hold before a wall replaced
+        unheld: CameraPose | None = None  # the pose a hold before a wall, or a pace, replaced
         if pose is not None and isinstance(camera, ToricCamera) and camera.stand_world is None:  # a stand never moves
             pose, pulled = self._pulled_in(moment, pose, dt_s, camera, shot)
             if pulled:
@@ -122,6 +127,15 @@ class ProgramCamera:
                         flags.append("held_before_wall")
                         unheld = before
                         pose = self._stepped_back(moment, pose, camera, shot, flags)
+                # our director's moving camera; the baselines' (HLTV's chase camera) move as published
+                paced = (
+                    self._paced(last_pose, pose, anchor, dt_s, cut_short, flags, moment, shot)
+                    if isinstance(camera, ToricCamera)
+                    else pose
+                )
+                if paced is not pose:  # a nearer pose than the move's: a player may be at its lens
+                    unheld = pose
+                    pose = self._stepped_back(moment, paced, camera, shot, flags)
         if pose is None:
             if last_pose is None:
                 return None
@@ -163,6 +177,43 @@ class ProgramCamera:
         if flag not in flags:
             flags.append(flag)
         return stepped[0]
+
+    def _paced(
+        self,
+        last_pose: CameraPose,
+        pose: CameraPose,
+        anchor: np.ndarray | None,
+        dt_s: float,
+        cut_short: bool,
+        flags: list[str],
+        moment: Moment,
+        shot: Shot,
+    ) -> CameraPose:
+        """A move faster than `move_speed_max_m_s` with no wall across it (a plan's new place for
+        the pair around a kill, a hold or a pull in front of a wall let go, an orbit's reframe
+        swing): to a viewer a cut, which the program did not flag (on the real duel a 35.6 m jump
+        in a frame). One that pacing would make up in `move_cut_s` or less, or where a cut now
+        would leave a shot under min_shot_s (cut_short, rig.py) and no event the shot covers
+        comes before the pace would, is paced (in_level.py `paced`, flagged `move_paced`); a
+        longer one is the rig's cut to where the camera goes (flagged `cut_long_move`): a dolly
+        across the arena at that speed shows the kill from nowhere (a hand-built melee's kill, a
+        31 m move 0.3 s before it). A paced pose that shows none of the framed subjects where
+        the move's does is left for the cut to the move's (`_seen_again`, `hold_left_for_cut`)."""
+        s = self.settings
+        moved_m = float(np.linalg.norm(pose.position_world - last_pose.position_world))
+        arrived_s = moment.time_s + moved_m / s.move_speed_max_m_s
+        first = any(moment.time_s <= t <= arrived_s for t in shot.cover_times_s)  # an event before the pace is done
+        if (
+            (first or not cut_short)
+            and moved_m > s.move_speed_max_m_s * s.move_cut_s
+            and not self.in_level.crossed(last_pose.position_world, pose.position_world)
+        ):
+            flags.append(CUT_LONG_MOVE)
+            return pose
+        paced, was_paced = self.in_level.paced(last_pose.position_world, pose, anchor, self.lens, s.move_speed_max_m_s * dt_s)
+        if was_paced:
+            flags.append(PACED)
+        return paced
 
     def _held_showing_all(
         self, moment: Moment, last_pose: CameraPose, pose: CameraPose, anchor: np.ndarray | None, shot: Shot
@@ -233,9 +284,9 @@ class ProgramCamera:
         left showing none of the shot's framed subjects (framed_seen under `candidate_seen`, the
         share eval-match counts a player shown by) is not kept on air (issue 41: frames of nobody
         outside overviews; on the real 4on4's first 3 minutes 300 of its 311 such frames were
-        those degrades'). A held pose whose move it held shows them: that move, which the rig
-        cuts to as a move through a wall (flagged `hold_left_for_cut`). Else, at most once every
-        `seen_again_gap_s` of the program, the camera is re-placed at once at the place of its
+        those degrades'). A held pose whose move it held shows them (or a paced pose whose
+        whole move does): that move, which the rig cuts to (flagged `hold_left_for_cut`). Else,
+        at most once every `seen_again_gap_s` of the program, the camera is re-placed at once at the place of its
         grid that sees its subjects best now and `seen_again_lookahead_s` ahead (the buffered
         future), within the framing band and the 30-degree rule
         (shots.py best_place, as replacement.py re-places at a tick), and the rig cuts to it

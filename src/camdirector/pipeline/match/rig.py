@@ -35,9 +35,11 @@ moment's; a human's take drops the window's frames and goes on air at the progra
             (program_camera.py, in_level.py), worked out ahead of the frame when it can be
             (camera_ahead.py); a first-person camera (first_person.py) is its player's eye
             wherever the game puts it, never moved; a camera that moved through a wall since the
-            last frame cuts there (`cut_through_wall`): cuts to places, never sweeps through walls.
-            A new shot through the eyes the shot on air looks through is no cut: the same
-            picture goes on (`same_eyes_no_cut`).
+            last frame cuts there (`cut_through_wall`): cuts to places, never sweeps through walls;
+            one that would jump farther than its pace makes up in `move_cut_s` cuts too
+            (`cut_long_move`, program_camera.py). A new shot through the eyes the shot on air
+            looks through is no cut, but for a replay: the same picture goes on
+            (`same_eyes_no_cut`).
 4. visibility  the share of the framed subjects' sample points seen from the camera.
 5. edit     the frame joins the edit window; a cut under the style's min_shot_s after the one
             before gives the short shot between to the shot before (its camera carried on) or
@@ -99,7 +101,7 @@ from camdirector.pipeline.match.frame import MatchFrame, PlannedCut, ReplayedMom
 from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
-from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, ProgramCamera
+from camdirector.pipeline.match.program_camera import CUT_LONG_MOVE, CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, ProgramCamera
 from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
 from camdirector.pipeline.match.replacement import replaced_places
 from camdirector.pipeline.match.replays import Replays, is_replay, replayed_moment
@@ -438,11 +440,13 @@ class MatchRig(RigBase):
                 stepped = self._camera_step(moment, dt_s, self.shot.camera, cut_short)
                 assert stepped is not None  # a static camera always has its pose
             pose, step_flags = stepped
-        if not cut and CUT_TO_SEEN_PLACE in step_flags:  # the camera re-placed to show its subjects (program_camera.py)
+        if not cut and (CUT_TO_SEEN_PLACE in step_flags or CUT_LONG_MOVE in step_flags):  # re-placed (program_camera.py)
             cut = True
         elif not cut and self._swept_through_wall(pose):
             cut = True
             step_flags = [*step_flags, "cut_through_wall"]
+        elif not cut and HOLD_LEFT_FOR_CUT in step_flags:  # a paced move's whole (program_camera.py): no wall across it
+            cut = True
         if cut:
             self._last_cut_s = moment.time_s
         flags.extend(step_flags)
@@ -727,10 +731,12 @@ class MatchRig(RigBase):
 
     def _same_eyes(self, shot: Shot) -> bool:
         """Whether the shot is through the eyes of the player through whose eyes the shot on air
-        is (first_person.py): the same picture, which the program goes on with uncut."""
+        is (first_person.py): the same picture, which the program goes on with uncut; but where
+        either is a replay, a cut in time (the real 2on2 jumped 7.8 m uncut into one)."""
         current = self.shot
         return (
             current is not None
+            and not (is_replay(current) or is_replay(shot))
             and isinstance(current.camera, FirstPersonCamera)
             and isinstance(shot.camera, FirstPersonCamera)
             and current.camera.player == shot.camera.player

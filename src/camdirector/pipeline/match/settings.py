@@ -131,6 +131,13 @@ class MatchSettings:
     wall_hold_max_m: float = 4.0         # a program camera whose move into a new frame passes through a wall, and that no
                                          # place on its subject's side replaces, stays where it was (turning to frame)
                                          # if the move is this short; a longer one is a cut, m. [0, 100]
+    move_speed_max_m_s: float = 40.0     # our director's Toric camera moving with no cut goes no faster than this (but for
+                                         # a step back from a player then at its lens), the rest of a farther move made up
+                                         # over the next frames (in_level.py `paced`): eval-match counts a move over
+                                         # 60 m/s a cut no flag names; players run 10 m/s, rocket-jump 20-30, m/s. (0, 1000]
+    move_cut_s: float = 0.25             # a farther move than this speed makes in this long is a cut instead where the shot
+                                         # on air is min_shot_s long (a dolly across the arena shows a kill from nowhere;
+                                         # 10 m at 40 m/s), s. [0, 10]
     seen_again_gap_s: float = 1.0        # a program camera that a degrade (pulled in front of a wall, held before one) left
                                          # showing none of its subjects is re-placed at once by a cut (program_camera.py), at
                                          # most once in this long, so that a subject running past corners does not make a cut
@@ -198,7 +205,8 @@ class MatchSettings:
     def __post_init__(self) -> None:
         _check_positive_finite(self, ("plan_rate_hz", "lookahead_s", "respawn_speed_m_s", "respawn_min_jump_m",
                                       "respawn_walk_m", "engage_range_m", "join_spread_max_m", "reframe_s", "max_held_shot_s",
-                                      "group_radius_m", "overview_height_m", "pull_regrow_m_s", "stand_reach_m",
+                                      "group_radius_m", "overview_height_m", "pull_regrow_m_s", "move_speed_max_m_s",
+                                      "stand_reach_m",
                                       "stand_event_weight", "stand_shown_height_min"))
         if not (self.stand_reach_m <= 200.0 and 0.05 <= self.stand_step_s <= 5.0 and self.stand_event_weight <= 100.0
                 and self.stand_shown_height_min <= self.shown_height_max and self.stand_margin <= 1.0):
@@ -206,6 +214,8 @@ class MatchSettings:
                              "in (0, 100], stand_shown_height_min in (0, shown_height_max], stand_margin in [0, 1]")
         if not 0.0 <= self.wall_hold_max_m <= 100.0:
             raise ValueError("MatchSettings: wall_hold_max_m in [0, 100] m")
+        if self.move_speed_max_m_s > 1000.0 or not 0.0 <= self.move_cut_s <= 10.0:
+            raise ValueError("MatchSettings: move_speed_max_m_s in (0, 1000] m/s, move_cut_s in [0, 10] s")
         if not (1.0 < self.eyes_fov_deg < 170.0 and 0.0 <= self.eyes_seen <= 1.0 and 0.0 <= self.eyes_lead_s <= 10.0
                 and 0.0 <= self.eyes_shown_height_min <= 1.0 and 0.0 <= self.follow_eyes_height_min <= 1.0):
             raise ValueError("MatchSettings: eyes_fov_deg in (1, 170) deg, eyes_seen, eyes_shown_height_min and "
