@@ -201,15 +201,12 @@ class ProgramCamera:
         the move's does is left for the cut to the move's (`_seen_again`, `hold_left_for_cut`)."""
         s = self.settings
         moved_m = float(np.linalg.norm(pose.position_world - last_pose.position_world))
-        arrived_s = moment.time_s + moved_m / s.move_speed_max_m_s
-        first = any(moment.time_s <= t <= arrived_s for t in shot.cover_times_s)  # an event before the pace is done
-        if (
-            (first or not cut_short)
-            and moved_m > s.move_speed_max_m_s * s.move_cut_s
-            and not self.in_level.crossed(last_pose.position_world, pose.position_world)
-        ):
-            flags.append(CUT_LONG_MOVE)
-            return pose
+        if moved_m > s.move_speed_max_m_s * s.move_cut_s:
+            arrived_s = moment.time_s + moved_m / s.move_speed_max_m_s
+            first = any(moment.time_s <= t <= arrived_s for t in shot.cover_times_s)  # an event before the pace is done
+            if (first or not cut_short) and not self.in_level.crossed(last_pose.position_world, pose.position_world):
+                flags.append(CUT_LONG_MOVE)
+                return pose
         paced, was_paced = self.in_level.paced(last_pose.position_world, pose, anchor, self.lens, s.move_speed_max_m_s * dt_s)
         if was_paced:
             flags.append(PACED)
