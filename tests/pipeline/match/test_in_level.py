@@ -5,6 +5,7 @@ outside the level or inside solid, and no move through a wall without a cut."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.pipeline.inputs import LoadedLevel
 from camdirector.pipeline.match.in_level import InLevel
+from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.session import Session
 from camdirector.precompute.tracks.pipeline import precompute_level
 from camdirector.precompute.tracks.track_settings import TrackSettings
@@ -118,6 +120,14 @@ def test_a_fast_move_within_the_room_is_paced_turned_to_its_anchor_and_one_throu
     assert in_level.paced(start, pose, CENTRE, LENS, step_max_m=6.5) == (pose, False)  # slow enough: as it is
     across = pose_at([3.0, 2.0, -3.0])  # 4.2 m through the slab at x = 1.5
     assert in_level.paced(np.array([-1.2, 2.0, -3.0]), across, CENTRE, LENS, step_max_m=1.5) == (across, False)
+
+
+@pytest.mark.parametrize(
+    "speed_m_s, cut_s", [(0.0, 0.25), (-1.0, 0.25), (1001.0, 0.25), (math.inf, 0.25), (40.0, -0.1), (40.0, 11.0)]
+)
+def test_pace_settings_out_of_their_limits_are_refused(speed_m_s, cut_s):
+    with pytest.raises(ValueError, match="move_speed_max_m_s|move_cut_s"):
+        MatchSettings(move_speed_max_m_s=speed_m_s, move_cut_s=cut_s)
 
 
 def low_hall() -> TriMesh:

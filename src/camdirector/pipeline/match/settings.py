@@ -136,8 +136,8 @@ class MatchSettings:
                                          # over the next frames (in_level.py `paced`): eval-match counts a move over
                                          # 60 m/s a cut no flag names; players run 10 m/s, rocket-jump 20-30, m/s. (0, 1000]
     move_cut_s: float = 0.25             # a farther move than this speed makes in this long is a cut instead where the shot
-                                         # on air is min_shot_s long (a dolly across the arena shows a kill from nowhere;
-                                         # 10 m at 40 m/s), s. [0, 10]
+                                         # on air is min_shot_s long or an event it covers comes before the pace is done
+                                         # (a dolly across the arena shows a kill from nowhere; 10 m at 40 m/s), s. [0, 10]
     seen_again_gap_s: float = 1.0        # a program camera that a degrade (pulled in front of a wall, held before one) left
                                          # showing none of its subjects is re-placed at once by a cut (program_camera.py), at
                                          # most once in this long, so that a subject running past corners does not make a cut
