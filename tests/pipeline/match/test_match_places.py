@@ -227,6 +227,42 @@ def test_a_kill_cut_to_comes_before_the_shot_on_air_meets_its_players_teleport()
     assert set(at_time(states, KILL_S).match.shot.subject_ids) == {"a1", "b1"}
 
 
+def _fights_apart(jump_s: float):
+    """e1 and f1 fight 60 m east of a1 and b1, who face away from each other until 14 s and
+    fight from then on; at jump_s, s, e1 teleports 14 m south, behind a wall, for good."""
+    wall = block((60.0, 1.5, -7.0), (30.0, 3.0, 0.2))
+
+    def script(t: float):
+        e = (60.0, -14.0) if t >= jump_s else (60.0, 0.0)
+        facing_a = (0, 6) if t >= 14.0 else (0, -6)
+        facing_b = (0, 0) if t >= 14.0 else (0, 12)
+        return {
+            "e1": (e, facing(e, (60, 6))),
+            "f1": ((60.0, 6.0), facing((60, 6), (60, 0))),
+            "a1": ((0.0, 0.0), facing((0, 0), facing_a)),
+            "b1": ((0.0, 6.0), facing((0, 6), facing_b)),
+        }
+
+    return script, wall
+
+
+@pytest.mark.parametrize("frame", [0, 1, 2])  # every phase of the planning ticks (a tick every third frame)
+def test_where_the_live_cameras_player_teleports_the_director_cuts_there_to_the_best_situation(frame):
+    # the program is on e1 and f1 (the first fight); e1 teleports away through a wall, which its
+    # eyes or the camera anchored on it would pass through: the cut that makes is the director's,
+    # to a1 and b1's fight, at that very frame, not a tick or a settle later
+    jump_s = 15.0 + (frame + 0.5) / RATE_HZ
+    script, wall = _fights_apart(jump_s)
+    settings = MatchSettings()
+    match = Match({"a1": 1, "b1": 2, "e1": 1, "f1": 2}, script, delay_s=10.0, walls=[wall])
+    states = [s for s in BareRig(match, settings).run(jump_s + 10.0 + 3.0) if not s.match.buffering]
+    assert set(at_time(states, jump_s - 0.5).match.shot.subject_ids) == {"e1", "f1"}
+    landed = next(s for s in states if s.time_s >= jump_s)  # the first frame with e1 behind the wall
+    assert landed.cut and set(landed.match.shot.subject_ids) == {"a1", "b1"}, (landed.time_s, landed.match.shot)
+    assert "its camera's player jumped" in landed.match.shot.reason
+    assert not _cuts_between(states, landed.time_s, landed.time_s + match.style.min_shot_s)
+
+
 def _kills_after_one_elsewhere(places, second_s: float, settings: MatchSettings, walls: list | None = None) -> list:
     """The program (past buffering) of e1's kill of f1 at KILL_S - 4 s, then a1's of b1 at KILL_S
     and a2's of b2 at second_s, the players standing at `places` (among `walls`)."""

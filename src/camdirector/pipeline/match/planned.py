@@ -33,7 +33,11 @@ Between beats the director may cut at its discretion, once the shot is `min_shot
 planned cut is nearer than `min_shot_s` (the new shot would be too short), and only when the shot
 is `max_shot_s` old, or shows a subject dead for `dead_hold_s`, or a situation is better than the
 shot's by `switch_margin` and the shot is `settle_s` old (hysteresis: without a delay, interest
-flickers as players turn, and a cut at every flicker makes 2-s shots). Its situations: situations.py.
+flickers as players turn, and a cut at every flicker makes 2-s shots). Where the player whose jump
+moves the shot's camera (its eyes, its Toric anchor) jumps through the level, the rig cuts within
+the shot anyway and asks at once (rig.py `_mover_jumped`): then any situation at least as good as
+the shot's is taken, however young the shot, unless it holds for its events
+(`_camera_jumps_now`). Its situations: situations.py.
 
 Its shots' cameras come from the shot builder (shot_builder.py); between cuts the rig re-places
 an occluded camera of its shot (replacement.py, `replaces_occluded_places`), and its plan is drawn
@@ -56,13 +60,12 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.director_contract import DirectorBase, DirectorContext
-from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import PlannedCut, ShotChoice, ShotKind
 from camdirector.pipeline.match.interest import event_priority
-from camdirector.pipeline.match.moments import Moment, MomentBuffer
-from camdirector.pipeline.match.program_shot import Shot
+from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
+from camdirector.pipeline.match.program_shot import Shot, camera_movers
 from camdirector.pipeline.match.replays import DirectorReplays, Replays, is_replay
-from camdirector.pipeline.match.shots import ToricCamera, poses_seen
+from camdirector.pipeline.match.shots import poses_seen
 from camdirector.pipeline.style import Style
 
 OPTION_COVER_S = (1.0, 2.0, 3.0)  # a discretionary shot is placed for now and these times ahead (as far
@@ -105,16 +108,6 @@ class _OnAir:
     free_s: float
     shows: set[int]
     movers: tuple[int, ...]
-
-
-def camera_movers(camera: object) -> tuple[int, ...]:
-    """The players whose jump (a teleport, a respawn) moves a shot's camera through walls: a
-    first-person camera's player, a Toric camera's anchor; none for a fixed or overview camera."""
-    if isinstance(camera, FirstPersonCamera):
-        return (camera.player,)
-    if isinstance(camera, ToricCamera):
-        return (camera.anchor_index,)
-    return ()
 
 
 def beat_movers(beat: Beat) -> tuple[int, ...]:
@@ -365,6 +358,19 @@ class PlannedDirector(DirectorBase):
         replay = self.replays.insert(moment, buffer, current, flags)
         return replay if replay is not None else shot
 
+    def _camera_jumps_now(self, current: Shot, buffer: MomentBuffer, now_s: float) -> bool:
+        """Whether the player whose jump moves the shot on air's camera (camera_movers: its eyes,
+        its Toric anchor) jumps through the level at the moment now_s, s (a teleport, a respawn:
+        MomentBuffer.jumps_s), where the rig cuts within the shot anyway (`cut_through_wall`)
+        and asks for a decision at once (rig.py `_mover_jumped`): the cut goes to the best
+        situation then, not on into the same shot from wherever the jump took its camera (on the
+        real 4on4, a pair's DUEL that the match's start split 50 m apart went on into three cuts
+        through walls in 2 s)."""
+        if is_replay(current):
+            return False
+        crosses = self.builder.visibility.ray_scene.occluded
+        return bool(buffer.jumps_s(camera_movers(current.camera), now_s - TIME_EPSILON_S, now_s, crosses))
+
     def live_decision(
         self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]
     ) -> Shot | None:
@@ -398,7 +404,9 @@ class PlannedDirector(DirectorBase):
                 return shot
             flags.append("plan_no_place_for_grammar")
         length_s = math.inf if current is None else now - current.start_s
-        if current is not None and (length_s < style.min_shot_s or now < current.hold_until_s):
+        jumped = current is not None and self._camera_jumps_now(current, buffer, now)
+        # a shot whose camera cuts now anyway is as short kept as left (but one holding for its events)
+        if current is not None and ((length_s < style.min_shot_s and not jumped) or now < current.hold_until_s):
             return None
         next_cut = min((b.cut_s for b in beats if b.cut_s is not None), default=math.inf)
         if current is not None and next_cut - now < style.min_shot_s:
@@ -418,6 +426,8 @@ class PlannedDirector(DirectorBase):
             if current is not None and set(option.subjects) == current_set and option.kind == current_kind:
                 continue
             better = option.score > current_score * (1.0 + s.switch_margin) + MIN_SWITCH_GAIN and length_s >= s.settle_s
+            if jumped:  # its camera cuts now anyway: no hysteresis to pay for
+                better = option.score >= current_score
             if not (current is None or length_s >= style.max_shot_s or dead_too_long or better):
                 return None
             why = (
@@ -425,6 +435,8 @@ class PlannedDirector(DirectorBase):
                 if current is not None and length_s >= style.max_shot_s
                 else "subject dead"
                 if dead_too_long
+                else "its camera's player jumped"
+                if jumped
                 else "better situation"
             )
             choice = ShotChoice(tuple(self.players[i] for i in option.subjects), option.kind, f"{option.reason} ({why})")

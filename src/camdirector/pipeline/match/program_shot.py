@@ -64,3 +64,13 @@ class Shot:
 # A candidate for the preview monitors: whom and how, its Toric camera at the style's place (None:
 # an OVERVIEW candidate, shown from the program's pose until taken), and its interest.
 CandidateShot = tuple[ShotChoice, ToricCamera | None, float]
+
+
+def camera_movers(camera: object) -> tuple[int, ...]:
+    """The players whose jump (a teleport, a respawn) moves a shot's camera through walls: a
+    first-person camera's player, a Toric camera's anchor; none for a fixed or overview camera."""
+    if isinstance(camera, FirstPersonCamera):
+        return (camera.player,)
+    if isinstance(camera, ToricCamera):
+        return (camera.anchor_index,)
+    return ()

@@ -18,7 +18,8 @@ after the first), so every moment is worked out with the same span of buffered f
 the delay less the window. Everything below
 ("the program moment", the director's ticks, the buffered future it plans on) is that worked-out
 moment's; a human's take drops the window's frames and goes on air at the program moment itself.
-2. plan     at `plan_rate_hz` (and at once after a take), the director of the style decides
+2. plan     at `plan_rate_hz` (and at once after a take, or where the player whose jump moves the
+            live camera jumps through the level: `_mover_jumped`), the director of the style decides
             whether to cut: any registered director (director_registry.py): ours (planned.py),
             the HLTV baseline (hltv.py), ezQuake's autotrack (autotrack.py: it ranks by the
             players' stats, `player_stats`, each player's latest sent with a frame up to the
@@ -102,7 +103,7 @@ from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
 from camdirector.pipeline.match.program_camera import CUT_LONG_MOVE, CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, ProgramCamera
-from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera
+from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera, camera_movers
 from camdirector.pipeline.match.replacement import replaced_places
 from camdirector.pipeline.match.replays import Replays, is_replay, replayed_moment
 from camdirector.pipeline.match.settings import MatchSettings
@@ -116,6 +117,7 @@ from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import Style
 
 SHOWN_SHARE = 0.5  # a player with this share of its points in the frame and seen is shown (eval-match's SHOWN_FRACTION)
+PLANNED_AT_JUMP = "planned_at_jump"  # a tick at once where the live camera's player jumped (_mover_jumped)
 HEAD_STEPS = 2  # frames worked out per frame answered at most: one, and one more while the window refills (a take)
 
 
@@ -410,9 +412,12 @@ class MatchRig(RigBase):
         self._last_time_s, self._head = moment.time_s, moment
         before = shadow_of(self.shot) if self.shot is not None else None
         cut = False
-        if self.takes.pending or self.shot is None or moment.time_s >= self._next_plan_s:
+        jumped = self._mover_jumped(moment, moment_dt_s)
+        if self.takes.pending or self.shot is None or moment.time_s >= self._next_plan_s or jumped:
             self._next_plan_s = moment.time_s + self.settings.plan_interval_s
-            cut = self._tick(moment, flags)
+            cut = self._tick(moment, flags, at_once=jumped)
+            if jumped:
+                flags.append(PLANNED_AT_JUMP)
         stages.done(MatchStage.PLAN)
         assert self.shot is not None  # the first tick always makes one
         dt_s = 0.0 if cut else moment_dt_s
@@ -677,11 +682,30 @@ class MatchRig(RigBase):
         return {k: known[k] if k in known and known[k] == v else v for k, v in assigned.items()}
 
     # -- the planning tick ------------------------------------------------------------------
-    def _tick(self, moment: Moment, flags: list[str]) -> bool:
+    def _mover_jumped(self, moment: Moment, dt_s: float) -> bool:
+        """Whether the player whose jump moves the live shot's camera (program_shot.py
+        camera_movers: its eyes, its Toric anchor) jumped through the level since the last
+        moment, dt_s, s, before (a teleport, a respawn: MomentBuffer.jumps_s), under our
+        director: the camera cuts there anyway (`cut_through_wall`), so the director decides
+        what it cuts to (`_tick` at once). On the real 4on4, a pair's DUEL that the match's
+        start split 50 m apart went on from its torus into three cuts through walls in 2 s."""
+        shot = self.shot
+        if shot is None or dt_s <= 0.0 or is_replay(shot) or not self.director.replaces_occluded_places:
+            return False
+        movers = camera_movers(shot.camera)
+        crosses = self.visibility.ray_scene.occluded
+        return bool(movers) and bool(self.buffer.jumps_s(movers, moment.time_s - dt_s, moment.time_s, crosses))
+
+    def _tick(self, moment: Moment, flags: list[str], at_once: bool = False) -> bool:
         """A planning tick (module docstring): the drawn plan applied and the next drawn, or a
-        plan made and applied at once; whether it cut."""
+        plan made and applied at once (a take, a first shot, a director that does not plan
+        ahead, or at_once: the live camera's player jumped, `_mover_jumped`); whether it cut."""
         drawn, self._drawn = self._drawn, None
-        if self.takes.pending or self.shot is None or not (self._defer_plans and self.director.plans_ahead):
+        if at_once and not self.takes.pending and drawn is not None:  # the plan drawn for now first: it knew the jump
+            if self._apply(drawn.finish(), moment, flags, drawn.current):
+                return True
+            drawn = None  # applied: a plan made now decides what the jump cuts to
+        if at_once or self.takes.pending or self.shot is None or not (self._defer_plans and self.director.plans_ahead):
             if drawn is not None:
                 drawn.finish()  # a take overrides it; finished, so that it never depends on the moment of the take
             result = self._plan(moment, self.buffer, self.shot, None, self._last_pose, self._replayable())
