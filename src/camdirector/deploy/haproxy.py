@@ -359,9 +359,31 @@ class HAProxy(RuntimeApi):
                 [binary, "-f", str(self.config_path)], stdin=subprocess.DEVNULL, stdout=log, stderr=log, start_new_session=True
             )
         self.pid = self.proc.pid
+        deadline = time.monotonic() + timeout_s
         _wait_port(self.grpc_port, self.proc, timeout_s, "haproxy", self.log_path)
         _wait_port(self.http_port, self.proc, timeout_s, "haproxy", self.log_path)
+        self._wait_runtime_api(deadline)
         return self
+
+    def _wait_runtime_api(self, deadline: float) -> None:
+        """Waits until the runtime API's socket takes a connection: HAProxy binds it after the
+        frontends (on a loaded CI machine a cluster's first `show stat` came before the socket
+        existed: FileNotFoundError at connect). ServiceError at the deadline (time.monotonic)."""
+        assert self.proc is not None  # started
+        while True:
+            if self.proc.poll() is not None:
+                raise ServiceError(f"haproxy exited with code {self.proc.returncode}: {_tail(self.log_path)}")
+            try:
+                with socket.socket(socket.AF_UNIX) as sock:
+                    sock.settimeout(0.2)
+                    sock.connect(str(self.socket_path))
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise ServiceError(
+                        f"haproxy's runtime API {self.socket_path} took no connection: {_tail(self.log_path)}"
+                    ) from None
+                time.sleep(0.05)
 
     def failure_context(self) -> str:
         return _tail(self.log_path)

@@ -12,7 +12,7 @@ import pickle
 import numpy as np
 import pytest
 
-from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.transforms import RigidTransform
 from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.edit_window import (
@@ -28,6 +28,7 @@ from camdirector.pipeline.match.edit_window import (
     Judges,
     WorkedFrame,
 )
+from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE
@@ -455,6 +456,35 @@ def test_a_short_shot_that_cannot_hold_on_goes_to_a_neighbour_the_last_resort_al
         assert all(f.shot is b and LAST_RESORT_FLAG in f.flags and STARTED_EARLY in f.flags for f in frames[90:120])
     else:
         assert all(f.shot is x for f in frames[90:120]) and not any(LAST_RESORT_FLAG in f.flags for f in frames)
+
+
+class StillEyes(FirstPersonCamera):
+    """A player's eyes standing at x metres along the x axis, looking down +z (a Still through the eyes)."""
+
+    def __init__(self, x_m: float, player: int):
+        super().__init__(player, Lens())
+        self.x_m = x_m
+
+    def pose(self, moment: Moment) -> CameraPose:
+        return pose_at(self.x_m)
+
+
+@pytest.mark.parametrize("eyes", [True, False], ids=["b through the eyes", "b a camera of its own"])
+def test_a_shot_through_the_eyes_takes_a_short_shot_showing_its_players_as_small_as_it_does_from_its_cut(eyes):
+    """a's copy dies at a wall and b cuts before x is 2 s long; b shows x's player 8% tall, as
+    it does from its own first frame on: through a player's eyes (the director took it by the
+    eyes' own floor, and the viewer gets that picture at its cut anyway) it takes x's frames,
+    started early; a camera of its own showing them that small may not (READABLE_HEIGHT)."""
+    a, x, c = shot((0,), 0.0), shot((1,), 10.0), shot((0,), 30.0)
+    b = Shot(ShotChoice(("c",), ShotKind.FOLLOW, "test"), (2,), StillEyes(20.0, 1) if eyes else Still(20.0), 0.0)
+    heights = {0.0: 0.3, 10.0: 0.3, 20.0: 0.08, 30.0: 0.3}
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: {2}}, heights=heights)
+    frames = held_on(p, a, x, b, 25, c)
+    if eyes:
+        assert all(f.shot is b and STARTED_EARLY in f.flags for f in frames[90:120]) and cuts(frames)[:2] == [0, 90]
+        assert not any(SHORT_LEFT in f.flags for f in frames)
+    else:
+        assert all(f.shot is x for f in frames[90:120])
 
 
 def test_a_short_shot_whose_hold_would_lose_a_kill_goes_to_the_last_resort_before_it_is_answered():

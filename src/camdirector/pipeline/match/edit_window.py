@@ -24,7 +24,8 @@ ties to the shot before), among the neighbours that
 - show their subjects at least SEEN_FLOOR on every frame the short shot showed its own so (no
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
-  short shot did, or as tall as it did.
+  short shot did, or as tall as it did; a shot through a player's eyes started early, or as tall
+  as it shows them from its own cut (`_keeps_height`).
 A short shot that has none starts earlier instead, where the window still holds the shot before's
 last frames that make it `min_shot_s` long and the shot before stays as long (`_earlier`, docs/
 casting.md "A short shot starts earlier"): its cut moves to the first of them, the short shot's
@@ -758,6 +759,8 @@ def _after(
     if not _may_take(after.judged, short, other, rows):
         return None
     shot, shown = after.judged, after.shown  # a replay started earlier shows earlier moments
+    # through the eyes, as tall as it shows them from its cut on anyway (`_keeps_height`)
+    own_height = judges.height(first, shown[-1], shot) if isinstance(shot.camera, FirstPersonCamera) else math.nan
     for poses in (_moving_earlier(shot, shown, first, judges, step_copy), [first] * len(rows)):
         if poses is None:
             continue
@@ -765,7 +768,7 @@ def _after(
         if (
             _keeps_kills(rows, kills, poses, judges)
             and _keeps_seen(rows, _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if floors.in_frame else seen, floors)
-            and _keeps_height(rows, poses, shown, shot, judges, floors)
+            and _keeps_height(rows, poses, shown, shot, judges, floors, own_height)
         ):
             return judged_mean, Decision(AFTER, poses, seen)
     return None
@@ -869,16 +872,30 @@ def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STR
 
 
 def _keeps_height(
-    rows: list[WorkedFrame], poses: list[CameraPose], shown: list[Moment], other: Shot, judges: Judges, floors: Floors = STRICT
+    rows: list[WorkedFrame],
+    poses: list[CameraPose],
+    shown: list[Moment],
+    other: Shot,
+    judges: Judges,
+    floors: Floors = STRICT,
+    own_height: float = math.nan,
 ) -> bool:
     """Whether the neighbour (its poses at the moments it shows) shows the players in its frame
     readable, the floors' height share of the frame's height (median over the judged frames),
-    where the short shot showed its own so, or at least as tall as it did."""
+    where the short shot showed its own so, or at least as tall as it did; or, a shot through a
+    player's eyes started early, at least as tall as it shows them at its own first frame
+    (own_height, NaN: none): the picture the viewer gets at its cut anyway, which the director
+    took by the eyes' own floor (first_person.py `eyes_shown_height_min`). On the real duel a
+    replay through the killer's eyes, its victim far off, was refused the 0.2 s of a shot cut by
+    a wall before it; on the real 4on4 an eyes shot the 1.0 s of one before it."""
     judged = range(0, len(rows), JUDGED_EVERY)
     short = [judges.height(rows[k].pose, rows[k].shown, rows[k].shot) for k in judged]
     mine = [judges.height(poses[k], shown[k], other) for k in judged]
     short, mine = [h for h in short if math.isfinite(h)], [h for h in mine if math.isfinite(h)]
-    return not short or not mine or float(np.median(mine)) >= min(floors.height, float(np.median(short)))
+    if not short or not mine:
+        return True
+    median = float(np.median(mine))
+    return median >= min(floors.height, float(np.median(short))) or median >= own_height
 
 
 def _may_take(donor: Shot, short: Shot, other: Shot | None, rows: list[WorkedFrame]) -> bool:
