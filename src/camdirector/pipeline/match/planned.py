@@ -62,8 +62,8 @@ from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.director_contract import DirectorBase, DirectorContext
 from camdirector.pipeline.match.frame import PlannedCut, ShotChoice, ShotKind
 from camdirector.pipeline.match.interest import event_priority
-from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
-from camdirector.pipeline.match.program_shot import Shot, camera_movers
+from camdirector.pipeline.match.moments import Moment, MomentBuffer
+from camdirector.pipeline.match.program_shot import Shot, camera_jumps_at, camera_movers
 from camdirector.pipeline.match.replays import DirectorReplays, Replays, is_replay
 from camdirector.pipeline.match.shots import poses_seen
 from camdirector.pipeline.style import Style
@@ -366,10 +366,8 @@ class PlannedDirector(DirectorBase):
         situation then, not on into the same shot from wherever the jump took its camera (on the
         real 4on4, a pair's DUEL that the match's start split 50 m apart went on into three cuts
         through walls in 2 s)."""
-        if is_replay(current):
-            return False
         crosses = self.builder.visibility.ray_scene.occluded
-        return bool(buffer.jumps_s(camera_movers(current.camera), now_s - TIME_EPSILON_S, now_s, crosses))
+        return not is_replay(current) and camera_jumps_at(current.camera, buffer, now_s, crosses)
 
     def live_decision(
         self, moment: Moment, buffer: MomentBuffer, current: Shot | None, current_pose: CameraPose | None, flags: list[str]

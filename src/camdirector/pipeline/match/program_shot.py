@@ -11,13 +11,16 @@ changes only by assigning its attributes, so the rig tells a changed camera by t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
+
+import numpy as np
 
 from camdirector.geometry.camera import CameraPose
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotChoice
-from camdirector.pipeline.match.moments import Moment
+from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
 from camdirector.pipeline.match.shots import ToricCamera
 
 
@@ -74,3 +77,12 @@ def camera_movers(camera: object) -> tuple[int, ...]:
     if isinstance(camera, ToricCamera):
         return (camera.anchor_index,)
     return ()
+
+
+def camera_jumps_at(
+    camera: object, buffer: MomentBuffer, time_s: float, crosses: Callable[[np.ndarray, np.ndarray], np.ndarray]
+) -> bool:
+    """Whether a player whose jump moves the camera (camera_movers) jumps through the level at the
+    buffered moment time_s, s, from the moment before (MomentBuffer.jumps_s with `crosses`)."""
+    movers = camera_movers(camera)
+    return bool(movers) and bool(buffer.jumps_s(movers, time_s - TIME_EPSILON_S, time_s, crosses))

@@ -103,7 +103,7 @@ from camdirector.pipeline.match.grammar import Grammar
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.moments import TIME_EPSILON_S, Moment, MomentBuffer
 from camdirector.pipeline.match.program_camera import CUT_LONG_MOVE, CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, ProgramCamera
-from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera, camera_movers
+from camdirector.pipeline.match.program_shot import CandidateShot, Shot, ShotCamera, camera_jumps_at
 from camdirector.pipeline.match.replacement import replaced_places
 from camdirector.pipeline.match.replays import Replays, is_replay, replayed_moment
 from camdirector.pipeline.match.settings import MatchSettings
@@ -684,17 +684,15 @@ class MatchRig(RigBase):
     # -- the planning tick ------------------------------------------------------------------
     def _mover_jumped(self, moment: Moment, dt_s: float) -> bool:
         """Whether the player whose jump moves the live shot's camera (program_shot.py
-        camera_movers: its eyes, its Toric anchor) jumped through the level since the last
-        moment, dt_s, s, before (a teleport, a respawn: MomentBuffer.jumps_s), under our
+        camera_movers: its eyes, its Toric anchor) jumped through the level at this moment from
+        the one worked out dt_s, s, before (a teleport, a respawn: camera_jumps_at), under our
         director: the camera cuts there anyway (`cut_through_wall`), so the director decides
         what it cuts to (`_tick` at once). On the real 4on4, a pair's DUEL that the match's
         start split 50 m apart went on from its torus into three cuts through walls in 2 s."""
         shot = self.shot
         if shot is None or dt_s <= 0.0 or is_replay(shot) or not self.director.replaces_occluded_places:
             return False
-        movers = camera_movers(shot.camera)
-        crosses = self.visibility.ray_scene.occluded
-        return bool(movers) and bool(self.buffer.jumps_s(movers, moment.time_s - dt_s, moment.time_s, crosses))
+        return camera_jumps_at(shot.camera, self.buffer, moment.time_s, self.visibility.ray_scene.occluded)
 
     def _tick(self, moment: Moment, flags: list[str], at_once: bool = False) -> bool:
         """A planning tick (module docstring): the drawn plan applied and the next drawn, or a
