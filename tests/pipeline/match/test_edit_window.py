@@ -19,6 +19,7 @@ from camdirector.pipeline.match.edit_window import (
     CARRIED_ON,
     ENDS_A_COPY,
     HELD_ON,
+    KILLS_ONLY_FLAG,
     LAST_RESORT_FLAG,
     MOVED_EARLIER,
     SHORT_LEFT,
@@ -119,6 +120,7 @@ class Program:
         self.hold_ahead = False  # each frame's hold verdict worked out after the frame before, as idle moments do
         self.upcoming: Moment | None = None  # the next frame's moment, made ahead for that
         self.death = CUT_TO_SEEN_PLACE  # the flag the shadow's step ends with at shadow_dies_at
+        self.b_events: dict[int, list[GameEvent]] | None = None  # held_on's b's, by its frame
 
     def visibility(self, shown: Moment, pose: CameraPose, s: Shot) -> float:
         return self.seen.get(float(pose.position_world[0]), self.seen.get(float(s.camera.x_m), 0.0))
@@ -342,12 +344,22 @@ class DiesAt(Program):
         return camera.pose(m), []
 
 
-def held_on(p: Program, a: Shot, x: Shot, b: Shot, b_frames: int = 40, after: Shot | None = None) -> list[WorkedFrame]:
-    """a for 3 s, x for 1 s, b for b_frames, `after` for 1 s; x's repair applied at frame 140
-    (about when x's first frame is answered: the rig works 2 s ahead); the window's frames."""
+def held_on(
+    p: Program,
+    a: Shot,
+    x: Shot,
+    b: Shot,
+    b_frames: int = 40,
+    after: Shot | None = None,
+    x_events: dict[int, list[GameEvent]] | None = None,
+    b_events: dict[int, list[GameEvent]] | None = None,
+) -> list[WorkedFrame]:
+    """a for 3 s, x for 1 s, b for b_frames, `after` for 1 s (their events by frame from their
+    first); x's repair applied at frame 140 (about when x's first frame is answered: the rig
+    works 2 s ahead); the window's frames."""
     p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 20)
+    p.frames(x, 30, x_events)
+    p.frames(b, 20, b_events)
     p.window.settle(p.judges)
     p.frames(b, b_frames - 20)
     if after is not None:
@@ -420,42 +432,79 @@ def test_a_window_with_a_hold_waiting_pickles_and_goes_on_to_the_same_program():
     assert runs[0] == runs[1] and cuts(p.program()) == [0, 90, 150]
 
 
-@pytest.mark.parametrize(
-    "case, b_frames, heights",
-    [
-        ("b cuts before x is 2 s long", 25, {}),
-        ("x's copy shows b's players too small", 40, {0.0: 0.3, 10.0: 0.1, 20.0: 0.3}),
-    ],
-)
-def test_a_short_shot_stays_short_where_it_cannot_hold_on(case, b_frames, heights):
+KILL_X_SHOWS = GameEvent(EventKind.KILL, "a", "c", 0, 100 * DT_S, "kill")  # seen from x alone (sees={10.0: {0, 2}})
+
+
+KILL_B_SHOWS = GameEvent(EventKind.KILL, "a", "b", 0, 130 * DT_S, "kill")  # seen from b alone (b_showing_a_kill)
+
+
+def held_on_over_a_kill(p: Program, a: Shot, x: Shot, b: Shot, b_frames: int, c: Shot) -> list[WorkedFrame]:
+    """held_on, x showing a kill at frame 100 that neither a nor b shows."""
+    p.sees = {**p.sees, 10.0: {0, 2}}
+    return held_on(p, a, x, b, b_frames, c, x_events={10: [KILL_X_SHOWS]}, b_events=p.b_events)
+
+
+def b_showing_a_kill(p: Program) -> Program:
+    """b (at 20 m) shows a kill at frame 130 that no other camera shows: b's frames, short where b
+    cuts at frame 145, go to no neighbour."""
+    p.sees = {**p.sees, 20.0: p.sees.get(20.0, set()) | {0, 1}}
+    p.b_events = {10: [KILL_B_SHOWS]}
+    return p
+
+
+def test_a_short_shot_stays_short_where_no_neighbour_keeps_its_kill_and_it_cannot_hold_on():
+    """x shows a kill neither a (its copy dies at a wall) nor b shows, and b cuts before x is
+    2 s long: x stays short, flagged."""
     a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
-    frames = held_on(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}, heights=heights), a, x, b, b_frames, c)
+    frames = held_on_over_a_kill(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}), a, x, b, 25, c)
     assert SHORT_LEFT in frames[120].flags and not any(HELD_ON in f.flags for f in frames)
-    assert cuts(frames)[:3] == [0, 90, 120]
+    assert cuts(frames)[:3] == [0, 90, 120] and all(f.shot is x for f in frames[90:120])
 
 
 @pytest.mark.parametrize(
-    "case, b_sees, b_height, given",
+    "case, heights, seen_from_b",
+    [("x's copy shows b's players too small", {0.0: 0.3, 10.0: 0.1, 20.0: 0.3}, 0.8), ("x's copy shows nobody", {}, 0.8)],
+)
+def test_a_short_shot_no_neighbour_keeps_the_kill_of_holds_on_keeping_its_kills_alone(case, heights, seen_from_b):
+    """x shows a kill that neither neighbour shows; x's copy, held on over b's first 30 frames,
+    shows b's players too small (x's own height floor) or nobody (b's subjects 0.8 seen where x's
+    copy shows them 0): no floor but the kills' allows it, and x holds on, flagged, rather than
+    stay 1 s long."""
+    a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
+    seen = {0.0: 0.9, 10.0: 0.8 if heights else 0.0, 20.0: seen_from_b, 30.0: 0.9}
+    p = DiesAt(seen, heights=heights)
+    frames = held_on_over_a_kill(p, a, x, b, 40, c)
+    assert cuts(frames)[:3] == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
+    assert all(f.shot is x and HELD_ON in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[120:150])
+    assert not any(KILLS_ONLY_FLAG in f.flags for f in frames[:120])
+
+
+@pytest.mark.parametrize(
+    "case, b_sees, b_height, floors",
     [
-        ("b shows x's player 12% tall: readable, under the strict 15%", {2}, 0.12, True),
-        ("b shows x's player 8% tall", {2}, 0.08, False),
-        ("b's first pose reaches its subject but does not frame it", set(), 0.12, False),
+        ("b shows x's player 12% tall: readable, under the strict 15%", {2}, 0.12, "last resort"),
+        ("b shows x's player 8% tall", {2}, 0.08, "kills only"),
+        ("b's first pose reaches its subject but does not frame it", set(), 0.12, "kills only"),
+        ("b does not frame c, killed in x", set(), 0.12, None),
     ],
 )
-def test_a_short_shot_that_cannot_hold_on_goes_to_a_neighbour_the_last_resort_allows(case, b_sees, b_height, given):
+def test_a_short_shot_that_cannot_hold_on_goes_to_a_neighbour_the_last_resort_allows(case, b_sees, b_height, floors):
     """a's copy dies at a wall and b cuts before x is 2 s long (no hold): x's frames go to b,
     started early, where b shows its players readable at all (READABLE_HEIGHT) and its subject
-    in its frame; else x is not given to b (x's copy carries it on over b's frames then). (c,
-    which shows its subject 0.1, takes none of b's.)"""
+    in its frame (the last resort); else, where b keeps x's kills, by its kills alone (flagged
+    too); else x is not given to b and stays short. (c, which shows its subject 0.1, takes none
+    of b's.)"""
     a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
     heights = {0.0: 0.3, 10.0: 0.3, 20.0: b_height, 30.0: 0.3}
-    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: b_sees}, heights=heights)
-    frames = held_on(p, a, x, b, 25, c)
-    if given:
+    p = b_showing_a_kill(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: b_sees}, heights=heights))
+    frames = held_on(p, a, x, b, 25, c, b_events=p.b_events) if floors else held_on_over_a_kill(p, a, x, b, 25, c)
+    if floors is not None:
         assert cuts(frames)[:3] == [0, 90, 145] and not any(SHORT_LEFT in f.flags for f in frames[90:120])
         assert all(f.shot is b and LAST_RESORT_FLAG in f.flags and STARTED_EARLY in f.flags for f in frames[90:120])
+        assert all((KILLS_ONLY_FLAG in f.flags) == (floors == "kills only") for f in frames[90:120])
     else:
         assert all(f.shot is x for f in frames[90:120]) and not any(LAST_RESORT_FLAG in f.flags for f in frames)
+        assert SHORT_LEFT in frames[120].flags
 
 
 class StillEyes(FirstPersonCamera):
@@ -474,17 +523,16 @@ def test_a_shot_through_the_eyes_takes_a_short_shot_showing_its_players_as_small
     """a's copy dies at a wall and b cuts before x is 2 s long; b shows x's player 8% tall, as
     it does from its own first frame on: through a player's eyes (the director took it by the
     eyes' own floor, and the viewer gets that picture at its cut anyway) it takes x's frames,
-    started early; a camera of its own showing them that small may not (READABLE_HEIGHT)."""
+    started early; a camera of its own showing them that small may not (READABLE_HEIGHT), but
+    by the kills alone (KILLS_ONLY)."""
     a, x, c = shot((0,), 0.0), shot((1,), 10.0), shot((0,), 30.0)
     b = Shot(ShotChoice(("c",), ShotKind.FOLLOW, "test"), (2,), StillEyes(20.0, 1) if eyes else Still(20.0), 0.0)
     heights = {0.0: 0.3, 10.0: 0.3, 20.0: 0.08, 30.0: 0.3}
-    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: {2}}, heights=heights)
-    frames = held_on(p, a, x, b, 25, c)
-    if eyes:
-        assert all(f.shot is b and STARTED_EARLY in f.flags for f in frames[90:120]) and cuts(frames)[:2] == [0, 90]
-        assert not any(SHORT_LEFT in f.flags for f in frames)
-    else:
-        assert all(f.shot is x for f in frames[90:120])
+    p = b_showing_a_kill(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: {2}}, heights=heights))
+    frames = held_on(p, a, x, b, 25, c, b_events=p.b_events)
+    assert all(f.shot is b and STARTED_EARLY in f.flags for f in frames[90:120]) and cuts(frames)[:2] == [0, 90]
+    assert not any(SHORT_LEFT in f.flags for f in frames)
+    assert all((KILLS_ONLY_FLAG in f.flags) != eyes for f in frames[90:120])
 
 
 def test_a_short_shot_whose_hold_would_lose_a_kill_goes_to_the_last_resort_before_it_is_answered():

@@ -43,8 +43,9 @@ either (the shot after cut before, or its frames kept nothing) goes, where its f
 the window's, to the neighbour that takes it under the last resort's floors (`LAST_RESORT`,
 flagged `edit_window_last_resort`: the players READABLE_HEIGHT tall rather than HEIGHT_FLOOR, its
 subjects under SEEN_FLOOR on at most SEEN_MISSES of its frames and never under half of it, every
-kill kept); with none, it stays short, flagged at the cut that ends it. A human's take is never
-given away.
+kill kept); with none, to the neighbour that keeps its kills whatever else it shows (`KILLS_ONLY`,
+flagged `edit_window_kills_only` too), else it holds on keeping its kills alone; failing all, it
+stays short, flagged at the cut that ends it. A human's take is never given away.
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -104,6 +105,7 @@ HELD_ON = "edit_window_held_on"  # the shot after's first frames given to a shor
 MOVED_EARLIER = "edit_window_moved_earlier"  # the shot before's last frames given to a short shot neither neighbour took
 SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take nor hold on
 LAST_RESORT_FLAG = "edit_window_last_resort"  # a short shot's frames given to a neighbour by the last resort's floors
+KILLS_ONLY_FLAG = "edit_window_kills_only"  # and by its kills alone (`KILLS_ONLY`), to a neighbour or held on
 # a copy of a camera stepped on goes no further where it would cut, or shows its subjects no more (program_camera.py)
 ENDS_A_COPY = (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST)
 
@@ -157,25 +159,27 @@ class Decision(NamedTuple):
     """What a repair decided: the neighbour the short shot's frames go to (BEFORE, AFTER; None:
     neither, the short shot stays) and the pose and visibility each of them gets there; with
     None, the neighbour the last resort's floors allow, taken where the short shot cannot hold on
-    either (`LAST_RESORT`)."""
+    either (`LAST_RESORT`, else `KILLS_ONLY`: kills_only)."""
 
     neighbour: str | None
     poses: list[CameraPose]
     seen: list[float]
     last_resort: Decision | None = None
+    kills_only: bool = False
 
 
 class Floors(NamedTuple):
     """What a neighbour must keep of a short shot's picture: its subjects seen SEEN_FLOOR on
     every frame where the short shot showed them so, but for a `misses` share of its frames
-    (never under half the floor there), and its players `height` of the frame's height (median)
+    (never under `seen_min` there), and its players `height` of the frame's height (median)
     where the short shot showed them as tall; `in_frame`: its subjects' points counted seen only
     inside its frame (eval-match's shown share: a held pose looks where its subject was), else
     wherever a ray reaches them (the program's visibility)."""
 
-    misses: float  # [0, 1)
+    misses: float  # [0, 1]
     height: float  # share of the frame's height
     in_frame: bool
+    seen_min: float = SEEN_FLOOR / 2.0  # [0, SEEN_FLOOR]
 
 
 STRICT = Floors(0.0, HEIGHT_FLOOR, False)
@@ -183,6 +187,10 @@ STRICT = Floors(0.0, HEIGHT_FLOOR, False)
 # jarring for longer than a wider picture is (issue 41: none under 2 s): players readable at all, subjects seen on
 # nearly every frame; kills are never given up
 LAST_RESORT = Floors(SEEN_MISSES, READABLE_HEIGHT, True)
+# and where none keeps even those, the neighbour (else the hold) that keeps its kills, whatever else it shows: a
+# picture that lingers where its subjects went, or waits where they come, for under 2 s is what a broadcast shows
+# when a player runs behind a wall; a cut under 2 s after the one before is not (docs/casting.md, "Kills only")
+KILLS_ONLY = Floors(1.0, 0.0, True, 0.0)
 
 
 # Decision.neighbour: the shot before (carried on), the shot after (started early), or neither, the short shot's cut
@@ -492,8 +500,9 @@ class EditWindow:
             self.holding = None
             return False
         if frame.moment.time_s < repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S:
-            if frame.cut:  # the shot after is cut short too: the last resort, before that cut's own repair is drawn
-                self._last_resort(repair, judges)
+            # the shot after is cut short too: the last resort, before that cut's own repair is drawn
+            if frame.cut and not self._last_resort(repair, judges):
+                self._left(repair)
             return False
         ahead, self.hold_ahead = self.hold_ahead, None
         if ahead is not None and ahead.holds(self, frame.moment):
@@ -501,11 +510,17 @@ class EditWindow:
         else:
             verdict = self._hold_verdict(repair, frame.moment, judges)
         self.holding = None
+        if verdict is None and not self._last_resort(repair, judges):
+            verdict = self._hold_verdict(repair, frame.moment, judges, KILLS_ONLY)  # no neighbour for it either
+            if verdict is None:
+                self._left(repair)
         if verdict is None:
-            self._last_resort(repair, judges)
             return False
         rows, side, decision = verdict
         self._give(rows, side, decision, HELD_ON, judges)
+        if decision.kills_only:
+            for row in rows:
+                row.flags.append(KILLS_ONLY_FLAG)
         rows[0].cut = False
         started = repair.started
         started.until_s = frame.moment.time_s + self.min_shot_s  # off air at the frame: stepped on from there
@@ -530,10 +545,13 @@ class EditWindow:
         assert self.holding is not None  # hold_due
         self.hold_ahead = HoldAhead.of(self, following, self._hold_verdict(self.holding, following, judges))
 
-    def _hold_verdict(self, repair: Repair, at: Moment, judges: Judges) -> tuple[list[WorkedFrame], Side, Decision] | None:
+    def _hold_verdict(
+        self, repair: Repair, at: Moment, judges: Judges, floors: Floors = STRICT
+    ) -> tuple[list[WorkedFrame], Side, Decision] | None:
         """`_hold`'s verdict on the repair held at the frame of the moment `at`: the frames the
         short shot holds on over, the neighbour it is over them and its poses and visibility
-        there; None where it stays short."""
+        there, kept to the floors (KILLS_ONLY: its kills alone, flagged kills_only); None where
+        it stays short."""
         assert repair.started is not None  # held only with a shadow (settle)
         first = next((i for i, f in enumerate(self.frames) if f is repair.frame), None)
         rows = [] if first is None else [f for f in list(self.frames)[first:] if f.moment.time_s < at.time_s - TIME_EPSILON_S]
@@ -553,11 +571,11 @@ class EditWindow:
         if (
             not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
             or not _keeps_kills(rows, _kills(rows, players, judges), poses, judges)
-            or not _keeps_seen(rows, seen)
-            or not _keeps_height(rows, poses, side.shown, side.judged, judges)
+            or not _keeps_seen(rows, seen, floors)
+            or not _keeps_height(rows, poses, side.shown, side.judged, judges, floors)
         ):
             return None
-        return rows, side, Decision(None, poses, seen)
+        return rows, side, Decision(None, poses, seen, kills_only=floors is KILLS_ONLY)
 
     def _may_hold(self, repair: Repair, judges: Judges) -> bool:
         """Whether the short shot of a repair being applied may hold on (`_hold`), judged now at
@@ -569,9 +587,9 @@ class EditWindow:
         at = next((f.moment for f in self.frames if f.moment.time_s >= end_s), None)
         return at is None or self._hold_verdict(repair, at, judges) is not None
 
-    def _last_resort(self, repair: Repair, judges: Judges) -> None:
+    def _last_resort(self, repair: Repair, judges: Judges) -> bool:
         """The short shot that could not hold on given to the neighbour its repair's last resort
-        chose (`LAST_RESORT`, flagged), where its frames are still the window's; else left short.
+        chose (`LAST_RESORT`, flagged), where its frames are still the window's; whether it was.
         The shadow ends: the camera that went off air at the short shot's end is no longer the
         one it copied."""
         decision = repair.decision
@@ -580,10 +598,10 @@ class EditWindow:
         end = next((i for i, f in enumerate(frames) if f is repair.frame), None)
         # its frames and the shot after's as the repair judged them: none answered, no cut (no repair) after it since
         if last is None or end is None or not any(f is repair.rows[0] for f in frames) or any(f.cut for f in frames[end + 1 :]):
-            self._left(repair)
-            return
+            return False
         self._to_neighbour(repair, last, True, judges)
         self.shadow = self.holding = None
+        return True
 
     def _to_neighbour(self, repair: Repair, decision: Decision, last_resort: bool, judges: Judges) -> None:
         """The short shot's frames given to the shot before (BEFORE: the cut that starts it
@@ -591,7 +609,7 @@ class EditWindow:
         `edit_window_last_resort` too where the last resort chose it."""
         if last_resort:
             for row in repair.rows:
-                row.flags.append(LAST_RESORT_FLAG)
+                row.flags.extend((LAST_RESORT_FLAG, KILLS_ONLY_FLAG) if decision.kills_only else (LAST_RESORT_FLAG,))
         if decision.neighbour == BEFORE:
             assert repair.before is not None  # only a shadow carries a short shot on
             self._give(repair.rows, repair.before, decision, CARRIED_ON, judges)
@@ -711,7 +729,12 @@ def _decided(
     if strict is not None:
         return strict
     moved = None if earlier is None else _earlier(back, rows[0].pose, earlier, players, judges)
-    return Decision(None, [], [], neighbour(LAST_RESORT)) if moved is None else moved
+    if moved is not None:
+        return moved
+    last_resort = neighbour(LAST_RESORT)
+    if last_resort is None and (last_resort := neighbour(KILLS_ONLY)) is not None:
+        last_resort = last_resort._replace(kills_only=True)
+    return Decision(None, [], [], last_resort)
 
 
 def _before(
@@ -868,7 +891,7 @@ def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STR
     SEEN_FLOOR where the short shot's did not (a picture of nobody for a shot's length) on no
     frame, or on no more than the floors' `misses` share of them and never under half of it."""
     missed = [s for r, s in zip(rows, seen) if s < SEEN_FLOOR and s < r.visibility]
-    return len(missed) <= floors.misses * len(rows) and all(s >= SEEN_FLOOR / 2.0 for s in missed)
+    return len(missed) <= floors.misses * len(rows) and all(s >= floors.seen_min for s in missed)
 
 
 def _keeps_height(
