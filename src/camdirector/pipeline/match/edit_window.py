@@ -518,9 +518,6 @@ class EditWindow:
             return False
         rows, side, decision = verdict
         self._give(rows, side, decision, HELD_ON, judges)
-        if decision.kills_only:
-            for row in rows:
-                row.flags.append(KILLS_ONLY_FLAG)
         rows[0].cut = False
         started = repair.started
         started.until_s = frame.moment.time_s + self.min_shot_s  # off air at the frame: stepped on from there
@@ -609,7 +606,7 @@ class EditWindow:
         `edit_window_last_resort` too where the last resort chose it."""
         if last_resort:
             for row in repair.rows:
-                row.flags.extend((LAST_RESORT_FLAG, KILLS_ONLY_FLAG) if decision.kills_only else (LAST_RESORT_FLAG,))
+                row.flags.append(LAST_RESORT_FLAG)
         if decision.neighbour == BEFORE:
             assert repair.before is not None  # only a shadow carries a short shot on
             self._give(repair.rows, repair.before, decision, CARRIED_ON, judges)
@@ -689,7 +686,7 @@ class EditWindow:
         for row, shown, pose, seen in zip(rows, neighbour.shown, decision.poses, decision.seen):
             row.shot, row.shown, row.pose, row.visibility = neighbour.shot, shown, pose, seen
             row.choice = judges.choice_of(neighbour.judged, shown.time_s)
-            row.flags.append(flag)
+            row.flags.extend((flag, KILLS_ONLY_FLAG) if decision.kills_only else (flag,))
 
 
 def _decided(
@@ -723,7 +720,8 @@ def _decided(
         later = _after(rows, first, after, short, kills, previous, judges, floors=floors)
         if later is not None:
             judged.append(later)
-        return max(judged, key=lambda j: j[0])[1] if judged else None  # the first of equals: the shot before
+        # the first of equals: the shot before
+        return max(judged, key=lambda j: j[0])[1]._replace(kills_only=floors is KILLS_ONLY) if judged else None
 
     strict = neighbour(STRICT)
     if strict is not None:
@@ -731,10 +729,7 @@ def _decided(
     moved = None if earlier is None else _earlier(back, rows[0].pose, earlier, players, judges)
     if moved is not None:
         return moved
-    last_resort = neighbour(LAST_RESORT)
-    if last_resort is None and (last_resort := neighbour(KILLS_ONLY)) is not None:
-        last_resort = last_resort._replace(kills_only=True)
-    return Decision(None, [], [], last_resort)
+    return Decision(None, [], [], neighbour(LAST_RESORT) or neighbour(KILLS_ONLY))
 
 
 def _before(
@@ -889,7 +884,7 @@ def _keeps_kills(
 def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STRICT) -> bool:
     """Whether a neighbour's visibility over the short shot's frames (seen) falls under
     SEEN_FLOOR where the short shot's did not (a picture of nobody for a shot's length) on no
-    frame, or on no more than the floors' `misses` share of them and never under half of it."""
+    frame, or on no more than the floors' `misses` share of them and never under its `seen_min`."""
     missed = [s for r, s in zip(rows, seen) if s < SEEN_FLOOR and s < r.visibility]
     return len(missed) <= floors.misses * len(rows) and all(s >= floors.seen_min for s in missed)
 
