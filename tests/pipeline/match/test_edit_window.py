@@ -163,6 +163,13 @@ def short_between(p: Program, a: Shot, x: Shot, b: Shot, events: dict[int, list[
     return p.program()
 
 
+def played(p: Program, *runs: tuple[Shot, int]) -> list[WorkedFrame]:
+    """Each shot on air for its count of frames, in turn; the window's frames, the repair waiting applied."""
+    for s, count in runs:
+        p.frames(s, count)
+    return p.program()
+
+
 def cuts(frames: list[WorkedFrame]) -> list[int]:
     return [f.moment.frame for f in frames if f.cut]
 
@@ -432,6 +439,37 @@ def test_a_window_with_a_hold_waiting_pickles_and_goes_on_to_the_same_program():
     assert runs[0] == runs[1] and cuts(p.program()) == [0, 90, 150]
 
 
+@pytest.mark.parametrize("x_copy_sees, kills_only", [(0.8, False), (0.3, True)], ids=["strict", "by its kills alone"])
+def test_a_short_shot_holds_on_over_the_shot_after_whose_own_short_piece_goes_to_the_shot_after_it(x_copy_sees, kills_only):
+    """a's copy dies at a wall and b (its subject 0.2 seen where x's 0.8 or 0.3) may not take x's
+    frames but by its kills alone, so x waits to hold on; b itself is cut after 6 frames, its
+    piece going to b2 (0.9: more than x's copy carrying it on). The repair of b's piece is applied
+    before x's hold is judged at frame 150: x holds on over b2's first frames (by the strict
+    floors where its copy shows b2's subjects 0.8, by its kills alone at 0.3), never left short
+    for a cut that goes a few frames later, nor given to b, whose first pose b2's took since."""
+    a, x, b, b2 = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((2,), 25.0)
+    p = DiesAt({0.0: 0.9, 10.0: x_copy_sees, 20.0: 0.2, 25.0: 0.9})
+    p.frames(a, 90)
+    p.frames(x, 30)
+    p.frames(b, 6)
+    p.frames(b2, 40)
+    frames = list(p.window.frames)
+    assert cuts(frames) == [0, 90, 150] and not any(SHORT_LEFT in f.flags or LAST_RESORT_FLAG in f.flags for f in frames)
+    assert all(f.shot is x and HELD_ON in f.flags and (KILLS_ONLY_FLAG in f.flags) == kills_only for f in frames[120:150])
+    assert all(f.shot is b2 for f in frames[150:])
+
+
+def test_a_hold_set_after_the_window_passed_the_frame_it_ends_on_is_judged_there():
+    """x's repair is applied only when c's cut joins the window at frame 160 (no frame answered
+    in between), after the window passed frame 150, where x would be 2 s long: x holds on over
+    b's first frames to frame 150 at once, not judged at the next frame (whose cut at 160 would
+    refuse it) and left short; b's 10 frames left go to a neighbour."""
+    a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
+    frames = played(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}), (a, 90), (x, 30), (b, 40), (c, 30))
+    assert cuts(frames)[:3] == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
+    assert all(f.shot is x and HELD_ON in f.flags for f in frames[120:150]) and frames[150].shot is not x
+
+
 KILL_X_SHOWS = GameEvent(EventKind.KILL, "a", "c", 0, 100 * DT_S, "kill")  # seen from x alone (sees={10.0: {0, 2}})
 
 
@@ -493,13 +531,15 @@ def test_a_short_shot_that_cannot_hold_on_goes_to_a_neighbour_the_last_resort_al
     started early, where b shows its players readable at all (READABLE_HEIGHT) and its subject
     in its frame (the last resort); else, where b keeps x's kills, by its kills alone (flagged
     too); else x is not given to b and stays short. (c, which shows its subject 0.1, takes none
-    of b's.)"""
+    of b's: b holds on over c's first frames, judged when the program is read, the window
+    holding the frame it ends on.)"""
     a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
     heights = {0.0: 0.3, 10.0: 0.3, 20.0: b_height, 30.0: 0.3}
     p = b_showing_a_kill(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9, 30.0: 0.1}, sees={20.0: b_sees}, heights=heights))
     frames = held_on(p, a, x, b, 25, c, b_events=p.b_events) if floors else held_on_over_a_kill(p, a, x, b, 25, c)
-    if floors is not None:
-        assert cuts(frames)[:3] == [0, 90, 145] and not any(SHORT_LEFT in f.flags for f in frames[90:120])
+    if floors is not None:  # b, 55 frames long from x's cut, then holds on over c's first 5
+        assert cuts(frames)[:3] == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames[90:120])
+        assert all(f.shot is b and HELD_ON in f.flags for f in frames[145:150])
         assert all(f.shot is b and LAST_RESORT_FLAG in f.flags and STARTED_EARLY in f.flags for f in frames[90:120])
         assert all((KILLS_ONLY_FLAG in f.flags) == (floors == "kills only") for f in frames[90:120])
     else:
@@ -648,10 +688,5 @@ def test_the_shadow_that_may_carry_a_short_shot_steps_on_past_its_end_while_the_
     """x (10 frames) goes to a; y, short after x, too: a's shadow, stepped on from x's cut for
     min_shot_s after y's first frame (not its own cut's), covers y up to b at frame 155."""
     a, x, y, b = shot((0,), 0.0), shot((1,), 10.0), shot((1,), 30.0), shot((0,), 20.0)
-    p = Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.4, 20.0: 0.3})
-    p.frames(a, 90)
-    p.frames(x, 10)
-    p.frames(y, 55)
-    p.frames(b, 10)
-    frames = p.program()
+    frames = played(Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.4, 20.0: 0.3}), (a, 90), (x, 10), (y, 55), (b, 10))
     assert cuts(frames) == [0, 155] and all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:155])

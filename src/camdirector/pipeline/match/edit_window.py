@@ -45,7 +45,11 @@ flagged `edit_window_last_resort`: the players READABLE_HEIGHT tall rather than 
 subjects under SEEN_FLOOR on at most SEEN_MISSES of its frames and never under half of it, every
 kill kept); with none, to the neighbour that keeps its kills whatever else it shows (`KILLS_ONLY`,
 flagged `edit_window_kills_only` too), else it holds on keeping its kills alone; failing all, it
-stays short, flagged at the cut that ends it. A human's take is never given away.
+stays short, flagged at the cut that ends it. A hold is judged on the program as repaired: a
+repair waiting that gives a short piece of the shot after to the shot after it is applied first
+(`_settle_inside`), and a hold set once the window is past the frame it ends on is judged there
+at once (`_hold_reached`); the last resort applies only where the shot after still starts at the
+pose it judged. A human's take is never given away.
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -233,6 +237,7 @@ class Repair:
     decision: Decision | None = None
     back: list[WorkedFrame] = field(default_factory=list)  # the shot before's last frames the short shot may start at
     earlier: Side | None = None  # the short shot as their neighbour (`_back`, `_earlier`)
+    first: CameraPose | None = None  # the shot after's first pose as the decision read it (None: a checkpoint's, unknown)
 
     def work_out(self, budget_s: float | None = None) -> None:
         """Works the decision out, whole (budget_s None) or for about budget_s more."""
@@ -246,7 +251,7 @@ class Repair:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         """A repair from a checkpoint (one written before a short shot could start earlier: it does not)."""
-        self.__dict__.update({"back": [], "earlier": None, **state})
+        self.__dict__.update({"back": [], "earlier": None, "first": None, **state})
 
 
 @dataclass
@@ -461,6 +466,21 @@ class EditWindow:
         else:  # judged when the window reaches min_shot_s past the short shot's start (_hold)
             self.holding = repair
         self.shadow = repair.started or self.shadow
+        if self.holding is repair:
+            self._hold_reached(judges)
+
+    def _hold_reached(self, judges: Judges) -> None:
+        """The hold just set judged at once where the window already holds the frame it ends on
+        (min_shot_s past the short shot's start: the repair was applied when the next cut joined,
+        or its first frame was answered, after the window passed it), the cut moved there; else
+        at the next frame, whose own cut would refuse it (on the real 4on4 a shot showing a kill,
+        left 1.23 s long where the shot after was cut 1.0 s after it)."""
+        repair = self.holding
+        assert repair is not None  # set by settle
+        end_s = repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S
+        at = next((f for f in self.frames if f.moment.time_s >= end_s), None)
+        if at is not None and self._hold(at, judges):
+            at.cut = True
 
     def answer(self, moment: Moment, judges: Judges) -> tuple[WorkedFrame, bool]:
         """The frame of the program moment (the newest worked out at or before it), and whether
@@ -505,6 +525,8 @@ class EditWindow:
                 self._left(repair)
             return False
         ahead, self.hold_ahead = self.hold_ahead, None
+        if self._settle_inside(repair, judges):
+            ahead = None  # worked out on the frames before the repair changed them
         if ahead is not None and ahead.holds(self, frame.moment):
             verdict = ahead.verdict
         else:
@@ -522,6 +544,24 @@ class EditWindow:
         started = repair.started
         started.until_s = frame.moment.time_s + self.min_shot_s  # off air at the frame: stepped on from there
         self.shadow = started
+        return True
+
+    def _settle_inside(self, held: Repair, judges: Judges) -> bool:
+        """Applies the repair waiting where it gives a short piece of the shot after the short
+        shot held (from the held one's cut on) to the shot after it, before the hold is judged:
+        its cut would refuse the hold, the last resort and the kills alone alike, though it goes
+        when the repair is applied a few frames later (on the real 4on4 and wipeout: all four
+        shots left under 2 s). Any other waits for its own frame (one carried on by the held
+        shot's copy ends the hold; one held on itself, a single hold at a time); whether one was
+        applied."""
+        repair = self.repair
+        if repair is None or held.frame.moment.time_s > repair.rows[0].moment.time_s + TIME_EPSILON_S:
+            return False
+        repair.work_out()
+        assert repair.decision is not None  # worked out above
+        if repair.decision.neighbour != AFTER:
+            return False
+        self.settle(judges)
         return True
 
     def hold_due(self, following: Moment | None) -> bool:
@@ -596,6 +636,8 @@ class EditWindow:
         # its frames and the shot after's as the repair judged them: none answered, no cut (no repair) after it since
         if last is None or end is None or not any(f is repair.rows[0] for f in frames) or any(f.cut for f in frames[end + 1 :]):
             return False
+        if repair.first is not None and repair.frame.pose is not repair.first:  # the shot after's first frame given since
+            return False
         self._to_neighbour(repair, last, True, judges)
         self.shadow = self.holding = None
         return True
@@ -658,7 +700,7 @@ class EditWindow:
         until_s = -math.inf if carried is None else carried.until_s
         if carried is not None:  # stepped on as if it carried the short shot: it goes off air at this cut then
             carried.until_s = frame.moment.time_s + self.min_shot_s
-        return Repair(rows, frame, run, before, after, carried, until_s, started, back=back, earlier=earlier)
+        return Repair(rows, frame, run, before, after, carried, until_s, started, back=back, earlier=earlier, first=frame.pose)
 
     def _back(self, start: int, frame: WorkedFrame) -> list[WorkedFrame]:
         """The last frames of the shot before the short one (its cut at `start` in the window, the
