@@ -475,10 +475,8 @@ class EditWindow:
         or its first frame was answered, after the window passed it), the cut moved there; else
         at the next frame, whose own cut would refuse it (on the real 4on4 a shot showing a kill,
         left 1.23 s long where the shot after was cut 1.0 s after it)."""
-        repair = self.holding
-        assert repair is not None  # set by settle
-        end_s = repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S
-        at = next((f for f in self.frames if f.moment.time_s >= end_s), None)
+        assert self.holding is not None  # set by settle
+        at = self._hold_end(self.holding)
         if at is not None and self._hold(at, judges):
             at.cut = True
 
@@ -620,9 +618,14 @@ class EditWindow:
         the window does not reach that far yet (judged there alone)."""
         if repair.started is None:
             return False
+        at = self._hold_end(repair)
+        return at is None or self._hold_verdict(repair, at.moment, judges) is not None
+
+    def _hold_end(self, repair: Repair) -> WorkedFrame | None:
+        """The window's frame a hold of the repair's short shot ends on, min_shot_s past its
+        start; None where the window does not reach it yet."""
         end_s = repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S
-        at = next((f.moment for f in self.frames if f.moment.time_s >= end_s), None)
-        return at is None or self._hold_verdict(repair, at, judges) is not None
+        return next((f for f in self.frames if f.moment.time_s >= end_s), None)
 
     def _last_resort(self, repair: Repair, judges: Judges) -> bool:
         """The short shot that could not hold on given to the neighbour its repair's last resort
