@@ -592,6 +592,31 @@ def test_a_short_shot_whose_hold_would_lose_a_kill_goes_to_the_last_resort_befor
     assert all(f.shot is b and LAST_RESORT_FLAG in f.flags for f in frames[90:120])
 
 
+@pytest.mark.parametrize("x_subject, held", [(2, True), (1, False)])
+def test_a_short_shot_holds_on_by_its_kills_alone_before_a_neighbour_by_them_that_loses_its_subjects_on_more_frames(
+    x_subject, held
+):
+    """a's copy dies at a wall; b keeps x's kill (frames killer and victim, players 0 and 2) but
+    not its own subject (1), which a ray reaches 0.2 where x showed its own 0.8; x's copy, held on
+    over b's first 30 frames, shows b's players 5% tall: neither keeps the strict floors, nor b
+    the last resort's, both only their kills. b, started early, would lose its subject on all of
+    x's 30 frames: where x's copy frames x's subject (2), losing none, x holds on (flagged
+    kills_only); where it does not either (1), losing as many, b takes x's frames, the neighbour
+    first."""
+    a, x, b = shot((0,), 0.0), shot((x_subject,), 10.0), shot((1,), 20.0)
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2}, sees={10.0: {0, 2}, 20.0: {0, 2}}, heights={0.0: 0.3, 10.0: 0.05, 20.0: 0.3})
+    p.frames(a, 90)
+    p.frames(x, 30, {10: [KILL_X_SHOWS]})
+    p.frames(b, 40)
+    frames = p.program()
+    if held:
+        assert cuts(frames) == [0, 90, 150] and all(f.shot is x and not f.flags for f in frames[90:120])
+        assert all(f.shot is x and HELD_ON in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[120:150])
+    else:
+        assert cuts(frames) == [0, 90] and not any(HELD_ON in f.flags for f in frames)
+        assert all(f.shot is b and STARTED_EARLY in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[90:120])
+
+
 def test_a_human_take_is_never_given_away():
     a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
     x.held = True

@@ -44,8 +44,10 @@ the window's, to the neighbour that takes it under the last resort's floors (`LA
 flagged `edit_window_last_resort`: the players READABLE_HEIGHT tall rather than HEIGHT_FLOOR, its
 subjects under SEEN_FLOOR on at most SEEN_MISSES of its frames and never under half of it, every
 kill kept); with none, to the neighbour that keeps its kills whatever else it shows (`KILLS_ONLY`,
-flagged `edit_window_kills_only` too), else it holds on keeping its kills alone; failing all, it
-stays short, flagged at the cut that ends it. A hold is judged on the program as repaired: a
+flagged `edit_window_kills_only` too), else it holds on keeping its kills alone, and before that
+neighbour where the hold loses its subjects on fewer frames (`_alone_first`: each counted where it
+shows its subjects under SEEN_FLOOR in its frame and the picture it replaces showed them more);
+failing all, it stays short, flagged at the cut that ends it. A hold is judged on the program as repaired: a
 repair waiting that gives a short piece of the shot after to the shot after it is applied first
 (`_settle_inside`), and a hold set once the window is past the frame it ends on is judged there
 at once (`_hold_reached`); the last resort applies only where the shot after still starts at the
@@ -170,6 +172,9 @@ class Decision(NamedTuple):
     seen: list[float]
     last_resort: Decision | None = None
     kills_only: bool = False
+    # the frames on which it shows its subjects under SEEN_FLOOR (judged as its floors judge them) where the frames it
+    # takes showed theirs more (`_missed`), count
+    lost: int = 0
 
 
 class Floors(NamedTuple):
@@ -510,8 +515,9 @@ class EditWindow:
         started: Shadow) carried on over them, the copy's last pose held after it stops (it met a
         wall, lost its subjects), where they keep those frames as a neighbour keeps a short shot's
         (their kills, subjects seen and players readable). A cut before the frame, or frames that
-        keep none of that, leave it to the last resort (`_last_resort`); a frame short of
-        min_shot_s, it waits."""
+        keep none of that, leave it to the last resort (`_last_resort`), but where the hold by its
+        kills alone loses fewer frames than a last resort by the kills alone (`_alone_first`); a
+        frame short of min_shot_s, it waits."""
         repair = self.holding
         assert repair is not None and repair.started is not None  # held only with a shadow (settle)
         if not repair.frame.cut:  # the shadow carried the short shot on over the shot after (a repair of its own)
@@ -530,12 +536,13 @@ class EditWindow:
         else:
             verdict = self._hold_verdict(repair, frame.moment, judges)
         self.holding = None
-        if verdict is None and not self._last_resort(repair, judges):
-            verdict = self._hold_verdict(repair, frame.moment, judges, KILLS_ONLY)  # no neighbour for it either
+        if verdict is None:
+            verdict = self._hold_verdict(repair, frame.moment, judges, KILLS_ONLY)
+            if not _alone_first(repair, verdict) and self._last_resort(repair, judges):
+                return False
             if verdict is None:
                 self._left(repair)
-        if verdict is None:
-            return False
+                return False
         rows, side, decision = verdict
         self._give(rows, side, decision, HELD_ON, judges)
         rows[0].cut = False
@@ -585,8 +592,9 @@ class EditWindow:
     ) -> tuple[list[WorkedFrame], Side, Decision] | None:
         """`_hold`'s verdict on the repair held at the frame of the moment `at`: the frames the
         short shot holds on over, the neighbour it is over them and its poses and visibility
-        there, kept to the floors (KILLS_ONLY: its kills alone, flagged kills_only); None where
-        it stays short."""
+        there, kept to the floors (KILLS_ONLY: its kills alone, flagged kills_only; its subjects
+        seen in its frame where they say so), and the frames it loses them on; None where it
+        stays short."""
         assert repair.started is not None  # held only with a shadow (settle)
         first = next((i for i, f in enumerate(self.frames) if f is repair.frame), None)
         rows = [] if first is None else [f for f in list(self.frames)[first:] if f.moment.time_s < at.time_s - TIME_EPSILON_S]
@@ -602,24 +610,30 @@ class EditWindow:
             return None
         poses = [pose for _, pose, _ in steps] + [held] * (len(rows) - len(steps))
         seen = [s for _, _, s in steps] + _judged_seen(side.shown, poses, side.judged, judges, len(steps))[0]
+        judged = _judged_seen(side.shown, poses, side.judged, judges, in_frame=True)[0] if floors.in_frame else seen
         players = {p: i for i, p in enumerate(self.players)}
         if (
             not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
             or not _keeps_kills(rows, _kills(rows, players, judges), poses, judges)
-            or not _keeps_seen(rows, seen, floors)
+            or not _keeps_seen(rows, judged, floors)
             or not _keeps_height(rows, poses, side.shown, side.judged, judges, floors)
         ):
             return None
-        return rows, side, Decision(None, poses, seen, kills_only=floors is KILLS_ONLY)
+        return rows, side, Decision(None, poses, seen, kills_only=floors is KILLS_ONLY, lost=len(_missed(rows, judged)))
 
     def _may_hold(self, repair: Repair, judges: Judges) -> bool:
         """Whether the short shot of a repair being applied may hold on (`_hold`), judged now at
-        the window's frame min_shot_s past its start (the hold is judged again there); True where
+        the window's frame min_shot_s past its start (the hold is judged again there): keeping the
+        strict floors, or by its kills alone before its last resort (`_alone_first`); True where
         the window does not reach that far yet (judged there alone)."""
         if repair.started is None:
             return False
         at = self._hold_end(repair)
-        return at is None or self._hold_verdict(repair, at.moment, judges) is not None
+        return (
+            at is None
+            or self._hold_verdict(repair, at.moment, judges) is not None
+            or _alone_first(repair, self._hold_verdict(repair, at.moment, judges, KILLS_ONLY))
+        )
 
     def _hold_end(self, repair: Repair) -> WorkedFrame | None:
         """The window's frame a hold of the repair's short shot ends on, min_shot_s past its
@@ -734,6 +748,15 @@ class EditWindow:
             row.flags.extend((flag, KILLS_ONLY_FLAG) if decision.kills_only else (flag,))
 
 
+def _alone_first(repair: Repair, alone: tuple[list[WorkedFrame], Side, Decision] | None) -> bool:
+    """Whether the short shot holds on by its kills alone (the verdict `alone`) before its
+    last resort: where that is a neighbour by the kills alone too, and the hold loses its
+    subjects on fewer frames (on the real 4on4 a shot after started 1.5 s early, its first
+    pose held where nobody was yet, over a hold of 0.4 s)."""
+    last = None if repair.decision is None else repair.decision.last_resort
+    return alone is not None and last is not None and last.kills_only and alone[2].lost < last.lost
+
+
 def _decided(
     rows: list[WorkedFrame],
     first: CameraPose,
@@ -795,13 +818,12 @@ def _before(
     poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
     if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, judges):
         return None
-    if not _keeps_seen(
-        rows, _judged_seen(before.shown, poses, before.judged, judges, in_frame=True)[0] if floors.in_frame else seen, floors
-    ):
+    judged = _judged_seen(before.shown, poses, before.judged, judges, in_frame=True)[0] if floors.in_frame else seen
+    if not _keeps_seen(rows, judged, floors):
         return None
     if not _keeps_height(rows, poses, before.shown, before.judged, judges, floors):
         return None
-    return float(np.mean(seen)), Decision(BEFORE, poses, seen)
+    return float(np.mean(seen)), Decision(BEFORE, poses, seen, lost=len(_missed(rows, judged)))
 
 
 def _after(
@@ -828,12 +850,13 @@ def _after(
         if poses is None:
             continue
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
+        judged = _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if floors.in_frame else seen
         if (
             _keeps_kills(rows, kills, poses, judges)
-            and _keeps_seen(rows, _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if floors.in_frame else seen, floors)
+            and _keeps_seen(rows, judged, floors)
             and _keeps_height(rows, poses, shown, shot, judges, floors, own_height)
         ):
-            return judged_mean, Decision(AFTER, poses, seen)
+            return judged_mean, Decision(AFTER, poses, seen, lost=len(_missed(rows, judged)))
     return None
 
 
@@ -930,8 +953,14 @@ def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STR
     """Whether a neighbour's visibility over the short shot's frames (seen) falls under
     SEEN_FLOOR where the short shot's did not (a picture of nobody for a shot's length) on no
     frame, or on no more than the floors' `misses` share of them and never under its `seen_min`."""
-    missed = [s for r, s in zip(rows, seen) if s < SEEN_FLOOR and s < r.visibility]
+    missed = _missed(rows, seen)
     return len(missed) <= floors.misses * len(rows) and all(s >= floors.seen_min for s in missed)
+
+
+def _missed(rows: list[WorkedFrame], seen: list[float]) -> list[float]:
+    """A neighbour's visibility (seen) on the short shot's frames (rows) where it falls under
+    SEEN_FLOOR and under the short shot's own."""
+    return [s for r, s in zip(rows, seen) if s < SEEN_FLOOR and s < r.visibility]
 
 
 def _keeps_height(
