@@ -12,8 +12,8 @@ import pickle
 import numpy as np
 import pytest
 
-from camdirector.geometry.camera import CameraPose, Lens
-from camdirector.geometry.transforms import RigidTransform
+from camdirector.geometry.camera import CameraPose, Lens, level_rotation, project_to_screen
+from camdirector.geometry.transforms import RigidTransform, matrix_to_quat, quat_to_matrix
 from camdirector.pipeline.inputs import EventKind, GameEvent
 from camdirector.pipeline.match.edit_window import (
     CARRIED_ON,
@@ -24,10 +24,12 @@ from camdirector.pipeline.match.edit_window import (
     MOVED_EARLIER,
     SHORT_LEFT,
     STARTED_EARLY,
+    TURN_DEG_S,
     EditWindow,
     HoldAhead,
     Judges,
     WorkedFrame,
+    _turned_toward,
 )
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import Replay, ShotChoice, ShotKind
@@ -575,6 +577,33 @@ def test_a_shot_through_the_eyes_takes_a_short_shot_showing_its_players_as_small
     assert all((KILLS_ONLY_FLAG in f.flags) != eyes for f in frames[90:120])
 
 
+class ArrivingEyes(StillEyes):
+    """StillEyes whose player stands 30 m further along before frame 120 (where b starts): its eyes
+    jump there, and b started early holds its first pose."""
+
+    def pose(self, moment: Moment) -> CameraPose:
+        return pose_at(self.x_m + (30.0 if moment.frame < 120 else 0.0))
+
+
+@pytest.mark.parametrize("b_frames_its_subject", [True, False])
+def test_a_shot_through_the_eyes_started_early_on_its_first_pose_held_counts_its_subjects_seen_in_its_frame(
+    b_frames_its_subject,
+):
+    """a's copy dies at a wall; b, through the eyes of a player who arrives at its place at b's cut,
+    started early over x's frames holds its first pose, which a ray reaches b's subject from 0.9.
+    That pose is no view of the player's: where it frames b's subject, b takes x's frames; where it
+    frames nobody, it may not, and x holds on over b's first frames instead."""
+    a, x = shot((0,), 0.0), shot((1,), 10.0)
+    b = Shot(ShotChoice(("c",), ShotKind.FOLLOW, "test"), (2,), ArrivingEyes(20.0, 1), 0.0)
+    sees = {10.0: {1}, 20.0: {2} if b_frames_its_subject else set()}
+    frames = held_on(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.9}, sees=sees), a, x, b)
+    if b_frames_its_subject:
+        assert cuts(frames) == [0, 90] and all(f.shot is b and STARTED_EARLY in f.flags for f in frames[90:120])
+        assert all(f.pose.position_world[0] == 20.0 for f in frames[90:120])
+    else:
+        assert cuts(frames) == [0, 90, 150] and all(f.shot is x and HELD_ON in f.flags for f in frames[120:150])
+
+
 def test_a_short_shot_whose_hold_would_lose_a_kill_goes_to_the_last_resort_before_it_is_answered():
     """a's copy dies at a wall, b shows x's player 12% tall (under the strict floor) and shows a
     kill at frame 125 that x's copy, held on over b's first frames, would not: when x's repair is
@@ -615,6 +644,49 @@ def test_a_short_shot_holds_on_by_its_kills_alone_before_a_neighbour_by_them_tha
     else:
         assert cuts(frames) == [0, 90] and not any(HELD_ON in f.flags for f in frames)
         assert all(f.shot is b and STARTED_EARLY in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[90:120])
+
+
+def walking(k: int, x_m: float, alive: bool = True) -> Moment:
+    """moment(k) with player 0's aim at (x_m, 1, -10): ahead of a camera at the origin looking down -z."""
+    m = moment(k)
+    m.aims_world[0] = (x_m, 1.0, -10.0)
+    m.alive[0] = alive
+    return m
+
+
+@pytest.mark.parametrize(
+    "case, xs_m, alive",
+    [
+        ("walking in from the left", [-6.0 + 0.2 * k for k in range(30)], [True] * 30),
+        ("running in from behind the lens, the turn paced", [30.0 - 1.0 * k for k in range(30)], [True] * 30),
+        ("dead for the first 10 frames", [-6.0 + 0.2 * k for k in range(30)], [False] * 10 + [True] * 20),
+    ],
+)
+def test_a_shot_started_early_at_its_first_place_turns_to_keep_its_subject_where_its_first_pose_shows_it(case, xs_m, alive):
+    """A shot after standing still, started over a short shot's 30 frames at its first place: it
+    turns with no roll, no faster than TURN_DEG_S, to show its subject where its first pose does
+    at the join (the last of them is the first pose); where it frames nobody alive it holds its
+    turn."""
+    first = CameraPose(
+        np.zeros(3), matrix_to_quat(level_rotation((0.3, 0.0, -1.0) / np.linalg.norm((0.3, 0.0, -1.0)), (0.0, 0.0, -1.0))), 60.0
+    )
+    shown = [walking(k, x, a) for k, (x, a) in enumerate(zip(xs_m, alive))]
+    poses = _turned_toward(shot((0,), 0.0), shown, first)
+    lens = Lens(60.0)
+    at_join = project_to_screen(first, lens, shown[-1].aims_world[:1])[0]
+    rotations = [quat_to_matrix(p.rotation_xyzw) for p in poses]
+    assert len(poses) == 30 and poses[-1] is first and all(np.array_equal(p.position_world, first.position_world) for p in poses)
+    assert all(abs(r[1, 0]) < 1e-9 for r in rotations)  # no roll: the camera's x axis level
+    turns_deg = [math.degrees(math.acos(np.clip(a[:, 2] @ b[:, 2], -1.0, 1.0))) for a, b in zip(rotations, rotations[1:])]
+    assert max(turns_deg) <= TURN_DEG_S * DT_S * math.sqrt(2.0) + 1e-6
+    for k, (pose, m) in enumerate(zip(poses, shown)):
+        reachable = all(t < TURN_DEG_S * DT_S - 1e-6 for t in turns_deg[k:])  # no paced turn after it
+        if m.alive[0] and reachable:
+            assert project_to_screen(pose, lens, m.aims_world[:1])[0] == pytest.approx(at_join, abs=1e-6)
+    if not all(alive):
+        assert all(np.array_equal(p.rotation_xyzw, poses[10].rotation_xyzw) for p in poses[:10])
+    if case.startswith("running"):
+        assert max(turns_deg) == pytest.approx(TURN_DEG_S * DT_S, rel=0.01)  # the yaw at its pace (the pitch turns little)
 
 
 def test_a_human_take_is_never_given_away():

@@ -85,7 +85,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose
+from camdirector.geometry.camera import CameraPose, level_rotation
+from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 from camdirector.infra.slices import SlicedRun, pause
 from camdirector.pipeline.inputs import EventKind
 from camdirector.pipeline.match.first_person import FirstPersonCamera
@@ -105,6 +106,9 @@ HEIGHT_FLOOR = 0.15  # the median shown height issue 41 bars, share of the frame
 READABLE_HEIGHT = 0.1
 SEEN_MISSES = 0.1  # and the share of the short shot's frames it may show its subjects under SEEN_FLOOR (never under half)
 JUDGED_EVERY = 3  # a neighbour's visibility over a short shot is judged at every this-th frame (a frame's ray budget)
+# a shot started early standing at its first place turns toward its subjects no faster than this (`_turned_toward`): a
+# quick pan, a quarter turn in a second, as the lens narrows back at its own pace (settings.py narrow_deg_s), deg/s
+TURN_DEG_S = 90.0
 CARRIED_ON = "edit_window_carried_on"  # a short shot's frames given to the shot before
 STARTED_EARLY = "edit_window_started_early"  # a short shot's frames given to the shot after
 HELD_ON = "edit_window_held_on"  # the shot after's first frames given to a short shot neither neighbour could take
@@ -845,12 +849,17 @@ def _after(
         return None
     shot, shown = after.judged, after.shown  # a replay started earlier shows earlier moments
     # through the eyes, as tall as it shows them from its cut on anyway (`_keeps_height`)
-    own_height = judges.height(first, shown[-1], shot) if isinstance(shot.camera, FirstPersonCamera) else math.nan
-    for poses in (_moving_earlier(shot, shown, first, judges, step_copy), [first] * len(rows)):
+    eyes = isinstance(shot.camera, FirstPersonCamera)
+    own_height = judges.height(first, shown[-1], shot) if eyes else math.nan
+    # an eye's first pose held is no view of its player's: its subjects count seen only in its frame
+    for poses, in_frame in (
+        (_moving_earlier(shot, shown, first, judges, step_copy), floors.in_frame),
+        (_turned_toward(shot, shown, first), floors.in_frame or eyes),
+    ):
         if poses is None:
             continue
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
-        judged = _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if floors.in_frame else seen
+        judged = _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if in_frame else seen
         if (
             _keeps_kills(rows, kills, poses, judges)
             and _keeps_seen(rows, judged, floors)
@@ -908,6 +917,49 @@ def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> 
             if row.shown is row.moment and np.all(judges.seen(row.pose, row.moment, pair) >= KILL_SEEN):
                 out.append((k, pair))
     return out
+
+
+def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[CameraPose]:
+    """The shot's first pose over the short shot's moments (shown) where no camera of it moves
+    there (`_after`): standing at its first place and turning, no roll, to keep its framed
+    subjects' aims where the first pose shows them at the last of them, as a camera operator at the
+    place pans onto the players coming in, no faster than TURN_DEG_S (worked back from the first
+    pose, which it joins). Held still where it frames nobody alive, the first pose rolls or shows
+    the subjects' aims at its own place, or is a player's eyes (they stand where their player will
+    be, `_after` judges them in their frame); a held pose looks where its subjects will be (on the real
+    wipeout a shot after started 1 s early framed nobody, by eval-match's shown share, on every
+    one of those frames, its subject seen only by a ray from behind the lens)."""
+    still = [first] * len(shown)
+    if isinstance(shot.camera, FirstPersonCamera) or not shown:  # the eyes stand where their player will be
+        return still
+    rotation, place = quat_to_matrix(first.rotation_xyzw), first.position_world
+    aim = _aim(shot, shown[-1], place)
+    if aim is None or abs(rotation[1, 0]) > 1e-9:  # level rotations only (camera.py level_rotation)
+        return still
+    toward = rotation.T @ aim  # where the first pose shows the subjects' aims, camera space
+    yaw, pitch = math.atan2(-rotation[2, 0], rotation[0, 0]), math.atan2(-rotation[1, 2], rotation[1, 1])
+    limit = math.radians(TURN_DEG_S) * (shown[-1].time_s - shown[0].time_s) / max(len(shown) - 1, 1)
+    poses = [first]
+    for m in reversed(shown[:-1]):
+        direction = _aim(shot, m, place)
+        if direction is not None:
+            level = level_rotation(direction, toward)
+            target_yaw, target_pitch = math.atan2(-level[2, 0], level[0, 0]), math.atan2(-level[1, 2], level[1, 1])
+            yaw += max(-limit, min(limit, math.remainder(target_yaw - yaw, math.tau)))
+            pitch += max(-limit, min(limit, target_pitch - pitch))
+        cw, sw, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+        turned = np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp)))
+        poses.append(CameraPose(place, matrix_to_quat(turned), first.vertical_fov_deg))
+    return poses[::-1]
+
+
+def _aim(shot: Shot, moment: Moment, place: np.ndarray) -> np.ndarray | None:
+    """The unit (3,) direction from a place to the mean aim of the shot's framed subjects alive at
+    the moment; None where it frames none, or they stand at the place."""
+    framed = [i for i in shot.framed(moment.time_s) if moment.alive[i]]
+    offset = moment.aims_world[framed].mean(axis=0) - place if framed else None
+    length = 0.0 if offset is None else float(np.linalg.norm(offset))
+    return None if offset is None or length < 1e-6 else offset / length
 
 
 def _moving_earlier(
