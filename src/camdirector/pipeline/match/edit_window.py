@@ -12,7 +12,9 @@ happens; here the frames before it are still the rig's to change. Where a cut co
   nowhere over the short shot's frames;
 - or to the shot after, started earlier: through the same eyes where it is a first-person shot
   whose player does not jump there, a copy of its camera stepped from the short shot's first frame
-  where it moves (a Toric camera) and meets no wall on the way, else its first pose held still;
+  where it moves (a Toric camera) and meets no wall on the way, else standing at its first place
+  and turning to keep its subjects where its first pose shows them (`_turned_toward`; a player's
+  eyes held still there, their subjects counted seen only in their frame);
 
 whichever shows its subjects more over those frames (the share of their points seen, visibility.py;
 ties to the shot before), among the neighbours that
@@ -47,11 +49,11 @@ kill kept); with none, to the neighbour that keeps its kills whatever else it sh
 flagged `edit_window_kills_only` too), else it holds on keeping its kills alone, and before that
 neighbour where the hold loses its subjects on fewer frames (`_alone_first`: each counted where it
 shows its subjects under SEEN_FLOOR in its frame and the picture it replaces showed them more);
-failing all, it stays short, flagged at the cut that ends it. A hold is judged on the program as repaired: a
-repair waiting that gives a short piece of the shot after to the shot after it is applied first
-(`_settle_inside`), and a hold set once the window is past the frame it ends on is judged there
-at once (`_hold_reached`); the last resort applies only where the shot after still starts at the
-pose it judged. A human's take is never given away.
+failing all, it stays short, flagged at the cut that ends it. A hold is judged on the program as
+repaired: a repair waiting that gives a short piece of the shot after to the shot after it is
+applied first (`_settle_inside`), and a hold set once the window is past the frame it ends on is
+judged there at once (`_hold_reached`); the last resort applies only where the shot after still
+starts at the pose it judged. A human's take is never given away.
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -924,10 +926,10 @@ def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[C
     there (`_after`): standing at its first place and turning, no roll, to keep its framed
     subjects' aims where the first pose shows them at the last of them, as a camera operator at the
     place pans onto the players coming in, no faster than TURN_DEG_S (worked back from the first
-    pose, which it joins). Held still where it frames nobody alive, the first pose rolls or shows
-    the subjects' aims at its own place, or is a player's eyes (they stand where their player will
-    be, `_after` judges them in their frame); a held pose looks where its subjects will be (on the real
-    wipeout a shot after started 1 s early framed nobody, by eval-match's shown share, on every
+    pose, which it joins), its turn held where it frames nobody alive. Held still where the first
+    pose rolls, frames nobody alive at the join or is a player's eyes (they stand where their
+    player will be: `_after` judges them in their frame). A pose held still looks where its
+    subjects will be (on the real wipeout a shot after started 1 s early framed nobody, by eval-match's shown share, on every
     one of those frames, its subject seen only by a ray from behind the lens)."""
     still = [first] * len(shown)
     if isinstance(shot.camera, FirstPersonCamera) or not shown:  # the eyes stand where their player will be
