@@ -149,10 +149,18 @@ def level_rotation(world_dir: Iterable[float], camera_dir: Iterable[float]) -> n
     delta = math.atan2(dz, dy)
     base = math.acos(max(-1.0, min(1.0, wy / rho)))
     pitch = min((base - delta, -base - delta), key=lambda p: abs(math.remainder(p, math.tau)))
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    yaw = math.atan2(wx, wz) - math.atan2(dx, dy * sp + dz * cp)
-    cw, sw = math.cos(yaw), math.sin(yaw)
+    return level_matrix(math.atan2(wx, wz) - math.atan2(dx, dy * math.sin(pitch) + dz * math.cos(pitch)), pitch)
+
+
+def level_matrix(yaw_rad: float, pitch_rad: float) -> npt.NDArray[np.float64]:
+    """(3, 3) camera-to-world rotation with no roll, R = Ry(yaw) Rx(pitch) (`level_rotations`)."""
+    cw, sw, cp, sp = math.cos(yaw_rad), math.sin(yaw_rad), math.cos(pitch_rad), math.sin(pitch_rad)
     return np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp)))
+
+
+def level_angles(rotation: npt.NDArray[np.float64]) -> tuple[float, float]:
+    """The yaw and pitch, radians, of a (3, 3) rotation with no roll: `level_matrix` inverted."""
+    return math.atan2(-rotation[2, 0], rotation[0, 0]), math.atan2(-rotation[1, 2], rotation[1, 1])
 
 
 def level_rotations(world_dirs: npt.ArrayLike, camera_dir: Iterable[float]) -> npt.NDArray[np.float64]:

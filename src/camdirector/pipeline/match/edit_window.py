@@ -87,7 +87,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from camdirector.geometry.camera import CameraPose, level_rotation
+from camdirector.geometry.camera import CameraPose, level_angles, level_matrix, level_rotation
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 from camdirector.infra.slices import SlicedRun, pause
 from camdirector.pipeline.inputs import EventKind
@@ -853,10 +853,11 @@ def _after(
     # through the eyes, as tall as it shows them from its cut on anyway (`_keeps_height`)
     eyes = isinstance(shot.camera, FirstPersonCamera)
     own_height = judges.height(first, shown[-1], shot) if eyes else math.nan
-    # an eye's first pose held is no view of its player's: its subjects count seen only in its frame
+    # a player's eyes stand where their player will be: held still, no view of the player's, their subjects counted
+    # seen only in their frame
     for poses, in_frame in (
         (_moving_earlier(shot, shown, first, judges, step_copy), floors.in_frame),
-        (_turned_toward(shot, shown, first), floors.in_frame or eyes),
+        ([first] * len(rows) if eyes else _turned_toward(shot, shown, first), floors.in_frame or eyes),
     ):
         if poses is None:
             continue
@@ -927,31 +928,24 @@ def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[C
     subjects' aims where the first pose shows them at the last of them, as a camera operator at the
     place pans onto the players coming in, no faster than TURN_DEG_S (worked back from the first
     pose, which it joins), its turn held where it frames nobody alive. Held still where the first
-    pose rolls, frames nobody alive at the join or is a player's eyes (they stand where their
-    player will be: `_after` judges them in their frame). A pose held still looks where its
-    subjects will be (on the real wipeout a shot after started 1 s early framed nobody, by eval-match's shown share, on every
-    one of those frames, its subject seen only by a ray from behind the lens)."""
-    still = [first] * len(shown)
-    if isinstance(shot.camera, FirstPersonCamera) or not shown:  # the eyes stand where their player will be
-        return still
+    pose rolls or frames nobody alive at the join. A pose held still looks where its subjects
+    will be (on the real 4on4 a shot after started 1.2 s early framed nobody, by eval-match's shown
+    share, on 25 of those frames, its subjects seen only by a ray)."""
     rotation, place = quat_to_matrix(first.rotation_xyzw), first.position_world
-    aim = _aim(shot, shown[-1], place)
+    aim = _aim(shot, shown[-1], place) if shown else None
     if aim is None or abs(rotation[1, 0]) > 1e-9:  # level rotations only (camera.py level_rotation)
-        return still
+        return [first] * len(shown)
     toward = rotation.T @ aim  # where the first pose shows the subjects' aims, camera space
-    yaw, pitch = math.atan2(-rotation[2, 0], rotation[0, 0]), math.atan2(-rotation[1, 2], rotation[1, 1])
+    yaw, pitch = level_angles(rotation)
     limit = math.radians(TURN_DEG_S) * (shown[-1].time_s - shown[0].time_s) / max(len(shown) - 1, 1)
     poses = [first]
     for m in reversed(shown[:-1]):
         direction = _aim(shot, m, place)
         if direction is not None:
-            level = level_rotation(direction, toward)
-            target_yaw, target_pitch = math.atan2(-level[2, 0], level[0, 0]), math.atan2(-level[1, 2], level[1, 1])
+            target_yaw, target_pitch = level_angles(level_rotation(direction, toward))
             yaw += max(-limit, min(limit, math.remainder(target_yaw - yaw, math.tau)))
             pitch += max(-limit, min(limit, target_pitch - pitch))
-        cw, sw, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
-        turned = np.array(((cw, sw * sp, sw * cp), (0.0, cp, -sp), (-sw, cw * sp, cw * cp)))
-        poses.append(CameraPose(place, matrix_to_quat(turned), first.vertical_fov_deg))
+        poses.append(CameraPose(place, matrix_to_quat(level_matrix(yaw, pitch)), first.vertical_fov_deg))
     return poses[::-1]
 
 
