@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from load_tests.real_matches import MATCHES, SIM_MATCHES, prepare
+from load_tests.real_matches import KNOWN_MATCHES, prepare
 from load_tests.report import emit, summary
 
 
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     from camdirector.matches.playback import play_match
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--match", default="4on4_dm2", choices=sorted({**MATCHES, **SIM_MATCHES}))
+    parser.add_argument("--match", default="4on4_dm2", choices=sorted(KNOWN_MATCHES))
     parser.add_argument("--seconds", type=float, default=60.0, help="the match's first seconds played (default 60)")
     parser.add_argument("--rates", default="30,60", help="comma-separated frame rates, Hz (default 30,60)")
     parser.add_argument("--delay", type=float, default=10.0, help="broadcast delay, s (default 10)")

@@ -47,6 +47,7 @@ SIM_MATCHES = {
     "sim_undulating": "recast/undulating.obj",
     "sim_zdm2": "sauerbraten/zdm2.obj",
 }
+KNOWN_MATCHES = (*MATCHES, *SIM_MATCHES)  # every name prepare() takes, the real matches first
 SIM_PLAYERS, SIM_SEED = 10, 1
 COLUMNS = (
     ("kill coverage", lambda f: f["kill_coverage"]),
@@ -180,7 +181,7 @@ def main(argv=None) -> int:
     if strangers:
         print(f"real_matches: unknown director {strangers}; registered: {registered_names}", file=sys.stderr)
         return 2
-    known = [*MATCHES, *SIM_MATCHES]
+    known = list(KNOWN_MATCHES)
     names = [n for n in args.only.split(",") if n] or known
     unknown = [n for n in names if n not in known]
     if unknown:
