@@ -22,7 +22,8 @@ ties to the shot before), among the neighbours that
   replay goes on on its other side and the piece does not show its kill (never left out); a live
   shot's to a live one, or to a replay starting earlier where no kill happens in its frames;
 - show each kill the short shot showed (killer and victim each with KILL_SEEN of their points in
-  the frame and seen at the kill's frame, as eval-match counts a kill covered);
+  the frame and seen at the kill's frame, or the victim so through the killer's eyes, as
+  eval-match counts a kill covered: `_shows_kill`);
 - show their subjects at least SEEN_FLOOR on every frame the short shot showed its own so (no
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
@@ -58,9 +59,10 @@ starts at the pose it judged. A human's take is never given away.
 A shot `min_shot_s` long or more but under `lengthen_s` (2.4 s: the settings' `edit_lengthen_s`,
 within the window) is given to a neighbour too, by the same rules but with its subjects counted
 seen only in the neighbour's frame (`SHOWN`: judged by a ray alone, a neighbour of the real 2on2
-showed nobody for 2 s), else left as it is: it is not short, so it neither holds on nor starts
-earlier. On the real 2on2, 13 of 48 shots were 2.0-2.13 s and its median 2.7 s (docs/casting.md,
-"Shots a little over min_shot_s").
+showed nobody for 2 s) and its kills only where both players are seen, else left as it is: it is
+not short, so it neither holds on nor starts earlier. On the real 2on2, 13 of 48 shots were
+2.0-2.13 s and its median 2.7 s; 3.13 s with it (docs/casting.md, "Shots a little over
+min_shot_s").
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
