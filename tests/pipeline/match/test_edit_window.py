@@ -91,8 +91,7 @@ class Program:
     """A window fed hand-built frames: `seen[shot x]` is each shot's visibility, `sees[shot x]`
     the players its camera shows whole (none unless named), a shadow stepping on unless
     `shadow_dies_at` (a frame number); the rig working `window_s` ahead (None: min_shot_s, no
-    room to start a short shot earlier), shots under `lengthen_s` given to a neighbour too (None:
-    none of min_shot_s or more)."""
+    room to start a short shot earlier)."""
 
     def __init__(
         self,
@@ -103,9 +102,8 @@ class Program:
         defer: bool = True,
         sliced: bool = False,
         window_s: float | None = None,
-        lengthen_s: float | None = None,
     ):
-        self.window = EditWindow(2.0, PLAYERS, defer, window_s, lengthen_s)
+        self.window = EditWindow(2.0, PLAYERS, defer, window_s)
         self.sliced = sliced  # what waits (shadow steps, a repair) worked on in the smallest slices after each frame
         self.slices = 0
         self.seen, self.shadow_dies_at, self.sees, self.heights = seen, shadow_dies_at, sees or {}, heights or {}
@@ -562,21 +560,6 @@ class StillEyes(FirstPersonCamera):
         return pose_at(self.x_m)
 
 
-@pytest.mark.parametrize("x_frames, expected", [(30, [0, 90, 120]), (66, [0, 156])], ids=["short", "lengthened"])
-def test_a_kill_shown_through_its_killers_eyes_stays_in_a_short_shot_not_in_one_lengthened(x_frames, expected):
-    """x is b's eyes (b's body behind the lens) seeing c at b's kill of c, which eval-match counts
-    covered. A short x (1 s) keeps it: a, showing its own subject but neither of them, may not carry
-    x on. An x of 2.2 s, under lengthen_s, counts a kill only where both are seen: a carries it on."""
-    kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
-    a, b = shot((0,), 0.0), shot((0,), 20.0)
-    x = Shot(ShotChoice(("b", "c"), ShotKind.DUEL, "test"), (1, 2), StillEyes(10.0, 1), 0.0)
-    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={0.0: {0}, 10.0: {2}}, lengthen_s=2.4)
-    p.frames(a, 90)
-    p.frames(x, x_frames, {10: [kill]})
-    p.frames(b, 10)
-    assert cuts(p.program()) == expected
-
-
 @pytest.mark.parametrize("eyes", [True, False], ids=["b through the eyes", "b a camera of its own"])
 def test_a_shot_through_the_eyes_takes_a_short_shot_showing_its_players_as_small_as_it_does_from_its_cut(eyes):
     """a's copy dies at a wall and b cuts before x is 2 s long; b shows x's player 8% tall, as
@@ -721,34 +704,6 @@ def test_shots_of_min_shot_s_and_longer_are_left_as_they_are():
     p.frames(x, 60)  # exactly 2 s
     p.frames(b, 10)
     assert cuts(p.program()) == [0, 90, 150]
-
-
-@pytest.mark.parametrize("sees, kept", [({0.0: {0, 1}}, True), ({}, False)])
-def test_a_shot_min_shot_s_long_under_lengthen_s_goes_to_a_neighbour_showing_its_subjects_in_its_frame(sees, kept):
-    """x is 2.2 s: long enough, under lengthen_s. a carries it on where a shows its subject in its
-    frame; where a's subjects are seen only by a ray (out of its frame), x stays as it is: not held
-    on, not started earlier, not flagged (a 1-s x is carried on by the ray alone: the first test)."""
-    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
-    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees=sees, window_s=2.5, lengthen_s=2.4)
-    frames = played(p, (a, 90), (x, 66), (b, 10))
-    if kept:
-        assert cuts(frames) == [0, 156] and all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:156])
-    else:
-        assert cuts(frames) == [0, 90, 156] and all(f.shot is x and not f.flags for f in frames[90:156])
-        assert not frames[156].flags
-
-
-@pytest.mark.parametrize("lengthen_s, moved_to", [(None, 120), (2.4, 108)])
-def test_a_short_shot_started_earlier_is_made_lengthen_s_long(lengthen_s, moved_to):
-    kill = GameEvent(EventKind.KILL, "b", "c", 0, 160 * DT_S, "kill")
-    a, x, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((0,), 20.0)
-    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}}, window_s=2.5, lengthen_s=lengthen_s)
-    p.frames(a, 150)
-    p.frames(x, 30, {10: [kill]})  # neither a nor b shows the kill x shows
-    p.frames(b, 10)
-    frames = p.program()
-    assert cuts(frames) == [0, moved_to, 180]  # x 2 s long, or lengthen_s: 72 frames
-    assert all(f.shot is x and MOVED_EARLIER in f.flags for f in frames[moved_to:150])
 
 
 def test_the_answered_frame_is_the_program_moments_and_counts_a_cut_passed_over():

@@ -22,15 +22,14 @@ ties to the shot before), among the neighbours that
   replay goes on on its other side and the piece does not show its kill (never left out); a live
   shot's to a live one, or to a replay starting earlier where no kill happens in its frames;
 - show each kill the short shot showed (killer and victim each with KILL_SEEN of their points in
-  the frame and seen at the kill's frame, or the victim so through the killer's eyes, as
-  eval-match counts a kill covered: `_shows_kill`);
+  the frame and seen at the kill's frame, as eval-match counts a kill covered);
 - show their subjects at least SEEN_FLOOR on every frame the short shot showed its own so (no
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
   short shot did, or as tall as it did; a shot through a player's eyes started early, or as tall
   as it shows them from its own cut (`_keeps_height`).
 A short shot that has none starts earlier instead, where the window still holds the shot before's
-last frames that make it `lengthen_s` long and the shot before stays as long (`_earlier`, docs/
+last frames that make it `min_shot_s` long and the shot before stays as long (`_earlier`, docs/
 casting.md "A short shot starts earlier"): its cut moves to the first of them, the short shot's
 camera as it was at its first frame (a copy the window keeps of each cut's) stepped over them, else
 held at its first pose (through its player's eyes, a first-person shot), kept as a neighbour
@@ -55,14 +54,6 @@ repaired: a repair waiting that gives a short piece of the shot after to the sho
 applied first (`_settle_inside`), and a hold set once the window is past the frame it ends on is
 judged there at once (`_hold_reached`); the last resort applies only where the shot after still
 starts at the pose it judged. A human's take is never given away.
-
-A shot `min_shot_s` long or more but under `lengthen_s` (2.4 s: the settings' `edit_lengthen_s`,
-within the window) is given to a neighbour too, by the same rules but with its subjects counted
-seen only in the neighbour's frame (`SHOWN`: judged by a ray alone, a neighbour of the real 2on2
-showed nobody for 2 s) and its kills only where both players are seen, else left as it is: it is
-not short, so it neither holds on nor starts earlier. On the real 2on2, 13 of 48 shots were
-2.0-2.13 s and its median 2.7 s; 3.13 s with it (docs/casting.md, "Shots a little over
-min_shot_s").
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -198,14 +189,12 @@ class Floors(NamedTuple):
     (never under `seen_min` there), and its players `height` of the frame's height (median)
     where the short shot showed them as tall; `in_frame`: its subjects' points counted seen only
     inside its frame (eval-match's shown share: a held pose looks where its subject was), else
-    wherever a ray reaches them (the program's visibility); `eyes_kills`: a kill counted shown
-    through its killer's eyes too (`_shows_kill`), else only where both players are seen."""
+    wherever a ray reaches them (the program's visibility)."""
 
     misses: float  # [0, 1]
     height: float  # share of the frame's height
     in_frame: bool
     seen_min: float = SEEN_FLOOR / 2.0  # [0, SEEN_FLOOR]
-    eyes_kills: bool = True
 
 
 STRICT = Floors(0.0, HEIGHT_FLOOR, False)
@@ -217,12 +206,6 @@ LAST_RESORT = Floors(SEEN_MISSES, READABLE_HEIGHT, True)
 # picture that lingers where its subjects went, or waits where they come, for under 2 s is what a broadcast shows
 # when a player runs behind a wall; a cut under 2 s after the one before is not (docs/casting.md, "Kills only")
 KILLS_ONLY = Floors(1.0, 0.0, True, 0.0)
-# a shot min_shot_s long but under the window's `lengthen_s` is given to a neighbour only where that one shows its
-# subjects in its frame as the shot did (eval-match's shown share: a neighbour judged by a ray alone showed nobody for
-# 2 s on the real 2on2), and its kills where both players are seen (through the killer's eyes too, the real 4on4 kept
-# a shot of 0.4 s: docs/casting.md); else it stays as it is, neither started earlier, held on nor given by a last
-# resort
-SHOWN = Floors(0.0, HEIGHT_FLOOR, True, eyes_kills=False)
 
 
 # Decision.neighbour: the shot before (carried on), the shot after (started early), or neither, the short shot's cut
@@ -266,7 +249,6 @@ class Repair:
     back: list[WorkedFrame] = field(default_factory=list)  # the shot before's last frames the short shot may start at
     earlier: Side | None = None  # the short shot as their neighbour (`_back`, `_earlier`)
     first: CameraPose | None = None  # the shot after's first pose as the decision read it (None: a checkpoint's, unknown)
-    long_enough: bool = False  # the short shot min_shot_s long already: given to a neighbour at SHOWN, else left as it is
 
     def work_out(self, budget_s: float | None = None) -> None:
         """Works the decision out, whole (budget_s None) or for about budget_s more."""
@@ -280,7 +262,7 @@ class Repair:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         """A repair from a checkpoint (one written before a short shot could start earlier: it does not)."""
-        self.__dict__.update({"back": [], "earlier": None, "first": None, "long_enough": False, **state})
+        self.__dict__.update({"back": [], "earlier": None, "first": None, **state})
 
 
 @dataclass
@@ -335,18 +317,8 @@ class EditWindow:
     """The frames worked out and not yet answered, the shadow of the last cut, and the repairs
     (module docstring). The rig's `window_s` 0 answers each frame as it is worked out: no repairs."""
 
-    def __init__(
-        self,
-        min_shot_s: float,
-        players: list[str],
-        defer: bool = True,
-        window_s: float | None = None,
-        lengthen_s: float | None = None,
-    ):
+    def __init__(self, min_shot_s: float, players: list[str], defer: bool = True, window_s: float | None = None):
         self.min_shot_s = min_shot_s
-        # a shot at least min_shot_s long but under this is given to a neighbour too, where that one shows its subjects
-        # in its frame as the shot did (SHOWN), s; None: min_shot_s, none
-        self.lengthen_s = min_shot_s if lengthen_s is None else lengthen_s
         self.players = players
         # how far ahead of the frame it answers the rig works, s: a short shot starts no earlier than a new cut's frame
         # less this (the frames before are answered: `_back`); None: min_shot_s, no room to start one earlier
@@ -371,17 +343,10 @@ class EditWindow:
             "repair": None,
             "holding": None,
             "window_s": state["min_shot_s"],
-            "lengthen_s": state["min_shot_s"],
             "cut_camera": None,
             "hold_ahead": None,
         }
         self.__dict__.update({**defaults, **state})
-
-    @property
-    def shot_s(self) -> float:
-        """How long a short shot started earlier is made (`_earlier`), and the longest given to a neighbour, s:
-        lengthen_s, at least min_shot_s (a hold makes one min_shot_s long)."""
-        return max(self.min_shot_s, self.lengthen_s)
 
     def drop(self) -> None:
         """Forgets the frames not yet answered (a take applies at once: rig.py)."""
@@ -466,7 +431,7 @@ class EditWindow:
             last = self.last_pose()
             started = None
             if before is not None and last is not None:
-                started = Shadow(before[0], before[1], last, frame.moment.time_s + self.shot_s)
+                started = Shadow(before[0], before[1], last, frame.moment.time_s + self.min_shot_s)
             repair = self._drawn(frame, started, judges)
             self.cut_camera = (frame, copy.copy(frame.shot.camera))
             if repair is None:
@@ -494,7 +459,7 @@ class EditWindow:
         if decision.neighbour == BEFORE:
             assert repair.carried is not None  # only a shadow carries a short shot on
             self._to_neighbour(repair, decision, last_resort, judges)
-            self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's shot_s
+            self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's min_shot_s
             return
         if repair.carried is not None:
             repair.carried.until_s = repair.carried_until_s
@@ -505,9 +470,6 @@ class EditWindow:
             assert repair.back and repair.earlier is not None  # decided only with them (_decided)
             self._give(repair.back, repair.earlier, decision, MOVED_EARLIER, judges)
             repair.back[0].cut, rows[0].cut = True, False
-            self.shadow = repair.started or self.shadow
-            return
-        if repair.long_enough:  # no neighbour shows it as well: it is not short, so it stays as it is
             self.shadow = repair.started or self.shadow
             return
         if repair.started is None:
@@ -658,9 +620,7 @@ class EditWindow:
         players = {p: i for i, p in enumerate(self.players)}
         if (
             not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
-            or not _keeps_kills(
-                rows, _kills(rows, players, judges, floors.eyes_kills), poses, side.judged, judges, floors.eyes_kills
-            )
+            or not _keeps_kills(rows, _kills(rows, players, judges), poses, judges)
             or not _keeps_seen(rows, judged, floors)
             or not _keeps_height(rows, poses, side.shown, side.judged, judges, floors)
         ):
@@ -738,12 +698,8 @@ class EditWindow:
         shot after's camera as it is at the cut, the shadow's steps so far); None with no short
         shot, or a human's take on air in it."""
         start = next((i for i in range(len(self.frames) - 1, -1, -1) if self.frames[i].cut), None)
-        if start is None:
+        if start is None or frame.moment.time_s - self.frames[start].moment.time_s >= self.min_shot_s - TIME_EPSILON_S:
             return None
-        length_s = frame.moment.time_s - self.frames[start].moment.time_s
-        if length_s >= self.shot_s - TIME_EPSILON_S:
-            return None
-        long_enough = length_s >= self.min_shot_s - TIME_EPSILON_S
         rows = list(self.frames)[start:]
         if rows[0].shot.held:  # a human's take is on air as long as the human held it
             return None
@@ -756,30 +712,28 @@ class EditWindow:
             steps = None if first is None else carried.steps[first : first + len(rows)]
         before = None if carried is None else _side(carried.shot, rows, judges)
         after = _side(frame.shot, rows, judges)
-        back = [] if long_enough else self._back(start, frame)
+        back = self._back(start, frame)
         earlier = None
         if back:  # the short shot's camera as it was at its first frame, where the window kept it (else held there)
             cut = self.cut_camera
             camera = cut[1] if cut is not None and cut[0] is rows[0] else None
             earlier = _side(rows[0].shot, back, judges, camera)._replace(stepped=camera is not None)
         players = {p: i for i, p in enumerate(self.players)}
-        run = SlicedRun(
-            lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges, back, earlier, long_enough)
-        )
+        run = SlicedRun(lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges, back, earlier))
         until_s = -math.inf if carried is None else carried.until_s
         if carried is not None:  # stepped on as if it carried the short shot: it goes off air at this cut then
-            carried.until_s = frame.moment.time_s + self.shot_s
-        return Repair(rows, frame, run, before, after, carried, until_s, started, None, back, earlier, frame.pose, long_enough)
+            carried.until_s = frame.moment.time_s + self.min_shot_s
+        return Repair(rows, frame, run, before, after, carried, until_s, started, back=back, earlier=earlier, first=frame.pose)
 
     def _back(self, start: int, frame: WorkedFrame) -> list[WorkedFrame]:
         """The last frames of the shot before the short one (its cut at `start` in the window, the
-        next at `frame`) that make the short shot lengthen_s long where its cut moves to the first
+        next at `frame`) that make the short shot min_shot_s long where its cut moves to the first
         of them (`_earlier`); none where the window holds too few (window_s), the shot before would
-        be left shorter than that, is a human's take, or a short shot before waits to hold on."""
+        be left shorter than min_shot_s, is a human's take, or a short shot before waits to hold on."""
         if self.holding is not None:
             return []
         frames = list(self.frames)
-        start_by_s = frame.moment.time_s - self.shot_s  # the short shot shot_s long from here on
+        start_by_s = frame.moment.time_s - self.min_shot_s  # the short shot min_shot_s long from here on
         for j in range(start - 1, -1, -1):
             if frames[j].cut or frames[j].moment.time_s <= frame.moment.time_s - self.window_s + TIME_EPSILON_S:
                 return []
@@ -788,7 +742,7 @@ class EditWindow:
         else:
             return []
         cut_s = next((f.moment.time_s for f in reversed(frames[:j]) if f.cut), self.last_cut_s)
-        if frames[j].moment.time_s - cut_s < self.shot_s - TIME_EPSILON_S or frames[j].shot.held:
+        if frames[j].moment.time_s - cut_s < self.min_shot_s - TIME_EPSILON_S or frames[j].shot.held:
             return []
         return frames[j:start]
 
@@ -820,18 +774,16 @@ def _decided(
     judges: Judges,
     back: list[WorkedFrame],
     earlier: Side | None,
-    long_enough: bool = False,
 ) -> Decision:
     """Which neighbour takes the short shot's frames (rows), and how (module docstring): the shot
     before, carried on by its shadow (its steps over the rows, None where it has none), or the shot
     after, started at them into its first pose; whichever shows its subjects more (ties to the
     shot before), among those that may take it; `previous` is the shot before the short one. Where
     neither may, the short shot itself, started earlier over the shot before's last frames (back,
-    as `earlier` shows them: `_earlier`). A shot min_shot_s long already (long_enough) goes to a
-    neighbour at SHOWN or stays. It reads only what its arguments held when the repair was drawn
-    (moments, poses, copies)."""
+    as `earlier` shows them: `_earlier`). It reads only what its arguments held when the repair
+    was drawn (moments, poses, copies)."""
     short = rows[0].shot
-    kills = _kills(rows, players, judges, eyes=not long_enough)
+    kills = _kills(rows, players, judges)
 
     def neighbour(floors: Floors) -> Decision | None:
         judged: list[tuple[float, Decision]] = []
@@ -845,8 +797,6 @@ def _decided(
         # the first of equals: the shot before
         return max(judged, key=lambda j: j[0])[1]._replace(kills_only=floors is KILLS_ONLY) if judged else None
 
-    if long_enough:
-        return neighbour(SHOWN) or Decision(None, [], [])
     strict = neighbour(STRICT)
     if strict is not None:
         return strict
@@ -872,9 +822,7 @@ def _before(
     if len(steps) < len(rows) or any(m is not r.moment for (m, _, _), r in zip(steps, rows)):
         return None
     poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
-    if not _may_take(before.judged, short, other, rows) or not _keeps_kills(
-        rows, kills, poses, before.judged, judges, floors.eyes_kills
-    ):
+    if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, judges):
         return None
     judged = _judged_seen(before.shown, poses, before.judged, judges, in_frame=True)[0] if floors.in_frame else seen
     if not _keeps_seen(rows, judged, floors):
@@ -916,7 +864,7 @@ def _after(
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
         judged = _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if in_frame else seen
         if (
-            _keeps_kills(rows, kills, poses, shot, judges, floors.eyes_kills)
+            _keeps_kills(rows, kills, poses, judges)
             and _keeps_seen(rows, judged, floors)
             and _keeps_height(rows, poses, shown, shot, judges, floors, own_height)
         ):
@@ -926,7 +874,7 @@ def _after(
 
 def _earlier(back: list[WorkedFrame], first: CameraPose, short: Side, players: dict[str, int], judges: Judges) -> Decision | None:
     """The short shot started earlier, its cut moved to the first of the shot before's last frames
-    (back), lengthen_s before the cut that ends it: through its player's eyes where it is a
+    (back), min_shot_s before the cut that ends it: through its player's eyes where it is a
     first-person shot, a copy of its camera as it was at its first frame stepped from the first of
     them (`_moving_earlier`: where the window kept that copy, the copy meets no wall and joins the
     first pose), else held at its first pose, where it takes those frames as a neighbour of the shot
@@ -959,31 +907,19 @@ def _judged_seen(
     return [judged[k - (k - start) % JUDGED_EVERY] for k in range(start, len(poses))], mean
 
 
-def _kills(
-    rows: list[WorkedFrame], players: dict[str, int], judges: Judges, eyes: bool = True
-) -> list[tuple[int, tuple[int, ...]]]:
-    """The kills the short shot shows: (row, (killer, victim)) where its pose at the kill's frame
-    shows them (`_shows_kill`, through the killer's eyes too where `eyes`; a neighbour must show
-    them as well); players: each player's index by id."""
+def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
+    """The kills the short shot shows: (row, (killer, victim)) where both are seen at least
+    KILL_SEEN from its pose at the kill's frame (a neighbour must show them as well); players:
+    each player's index by id."""
     out: list[tuple[int, tuple[int, ...]]] = []
     for k, row in enumerate(rows):
         for event in row.moment.events:
             if event.kind != EventKind.KILL or event.actor_id not in players or event.other_actor_id not in players:
                 continue
             pair = (players[event.actor_id], players[event.other_actor_id])
-            if row.shown is row.moment and _shows_kill(row.shot, row.pose, row.moment, pair, judges, eyes):
+            if row.shown is row.moment and np.all(judges.seen(row.pose, row.moment, pair) >= KILL_SEEN):
                 out.append((k, pair))
     return out
-
-
-def _shows_kill(shot: Shot, pose: CameraPose, moment: Moment, pair: tuple[int, ...], judges: Judges, eyes: bool = True) -> bool:
-    """Whether the shot's pose shows a kill (killer, victim) at its moment: both seen at least
-    KILL_SEEN, or with `eyes`, as eval-match counts it covered, the victim so through the killer's
-    own eyes (its body is behind the lens: on the real 2on2 a repair that did not count those gave
-    a kill shown through them to a shot of the killer alone). A shot lengthened (SHOWN) does not
-    count them: there they left the real 4on4 a shot of 0.4 s (docs/casting.md)."""
-    through = eyes and isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == pair[0]
-    return bool(np.all(judges.seen(pose, moment, pair[1:] if through else pair) >= KILL_SEEN))
 
 
 def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[CameraPose]:
@@ -1055,16 +991,10 @@ def _moving_earlier(
 
 
 def _keeps_kills(
-    rows: list[WorkedFrame],
-    kills: list[tuple[int, tuple[int, ...]]],
-    poses: list[CameraPose],
-    shot: Shot,
-    judges: Judges,
-    eyes: bool = True,
+    rows: list[WorkedFrame], kills: list[tuple[int, tuple[int, ...]]], poses: list[CameraPose], judges: Judges
 ) -> bool:
-    """Whether the neighbour's (shot's) poses over the short shot's frames show each of its kills
-    (`_shows_kill`, through the killer's eyes too where `eyes`)."""
-    return all(_shows_kill(shot, poses[k], rows[k].moment, pair, judges, eyes) for k, pair in kills)
+    """Whether the neighbour's poses over the short shot's frames show each of its kills as it did."""
+    return all(np.all(judges.seen(poses[k], rows[k].moment, pair) >= KILL_SEEN) for k, pair in kills)
 
 
 def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STRICT) -> bool:
