@@ -91,7 +91,8 @@ class Program:
     """A window fed hand-built frames: `seen[shot x]` is each shot's visibility, `sees[shot x]`
     the players its camera shows whole (none unless named), a shadow stepping on unless
     `shadow_dies_at` (a frame number); the rig working `window_s` ahead (None: min_shot_s, no
-    room to start a short shot earlier)."""
+    room to start a short shot earlier), shots under `lengthen_s` given to a neighbour too (None:
+    none of min_shot_s or more)."""
 
     def __init__(
         self,
@@ -102,8 +103,9 @@ class Program:
         defer: bool = True,
         sliced: bool = False,
         window_s: float | None = None,
+        lengthen_s: float | None = None,
     ):
-        self.window = EditWindow(2.0, PLAYERS, defer, window_s)
+        self.window = EditWindow(2.0, PLAYERS, defer, window_s, lengthen_s)
         self.sliced = sliced  # what waits (shadow steps, a repair) worked on in the smallest slices after each frame
         self.slices = 0
         self.seen, self.shadow_dies_at, self.sees, self.heights = seen, shadow_dies_at, sees or {}, heights or {}
@@ -461,6 +463,25 @@ def test_a_short_shot_holds_on_over_the_shot_after_whose_own_short_piece_goes_to
     assert all(f.shot is b2 for f in frames[150:])
 
 
+@pytest.mark.parametrize(
+    "b2_sees, x_copy_dies_at", [(0.05, 121), (0.2, None)], ids=["b's piece goes nowhere", "x's copy carries b's piece on"]
+)
+def test_a_short_shot_goes_to_its_last_resort_where_the_shot_after_is_cut_before_its_hold_ends(b2_sees, x_copy_dies_at):
+    """As above, but b's piece does not go to b2 (b2 shows b's subject 0.05 or 0.2, under x's
+    copy): nothing removes b2's cut at frame 126, before x's hold would end at 150. x goes to its
+    last resort as b2's cut joins the window (b by its kills alone), while its frames are still the
+    window's: not held on, then left 1 s long (b's piece going nowhere), nor carried on by its copy
+    to 1.2 s, unflagged (the real 4on4 kept a shot of 0.4 s so)."""
+    a, x, b, b2 = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((2,), 25.0)
+    p = DiesAt({0.0: 0.9, 10.0: 0.3, 20.0: 0.2, 25.0: b2_sees})
+    p.dies = {0.0: 100, 10.0: x_copy_dies_at or math.inf}
+    frames = played(p, (a, 90), (x, 30), (b, 6), (b2, 60))
+    at = cuts(frames)
+    assert all(later - cut >= 60 for cut, later in zip(at, at[1:])) and at[1] == 90
+    assert all(f.shot is not x and LAST_RESORT_FLAG in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[90:120])
+    assert not any(SHORT_LEFT in f.flags for f in frames)
+
+
 def test_a_hold_set_after_the_window_passed_the_frame_it_ends_on_is_judged_there():
     """x's repair is applied only when c's cut joins the window at frame 160 (no frame answered
     in between), after the window passed frame 150, where x would be 2 s long: x holds on over
@@ -558,6 +579,22 @@ class StillEyes(FirstPersonCamera):
 
     def pose(self, moment: Moment) -> CameraPose:
         return pose_at(self.x_m)
+
+
+@pytest.mark.parametrize("x_frames, expected", [(30, [0, 90, 120]), (66, [0, 90, 156])], ids=["short", "lengthened"])
+def test_a_kill_shown_through_its_killers_eyes_stays_in_its_shot_short_or_lengthened(x_frames, expected):
+    """x is b's eyes (b's body behind the lens) seeing c at b's kill of c, which eval-match counts
+    covered. a, showing its own subject but neither of them, may not carry x on: not a short x
+    (1 s), nor one of 2.2 s, under lengthen_s (the suite's objective lost its kill's DUEL through
+    the killer's eyes so: test_match_places.py)."""
+    kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
+    a, b = shot((0,), 0.0), shot((0,), 20.0)
+    x = Shot(ShotChoice(("b", "c"), ShotKind.DUEL, "test"), (1, 2), StillEyes(10.0, 1), 0.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={0.0: {0}, 10.0: {2}}, lengthen_s=2.4)
+    p.frames(a, 90)
+    p.frames(x, x_frames, {10: [kill]})
+    p.frames(b, 10)
+    assert cuts(p.program()) == expected
 
 
 @pytest.mark.parametrize("eyes", [True, False], ids=["b through the eyes", "b a camera of its own"])
@@ -704,6 +741,34 @@ def test_shots_of_min_shot_s_and_longer_are_left_as_they_are():
     p.frames(x, 60)  # exactly 2 s
     p.frames(b, 10)
     assert cuts(p.program()) == [0, 90, 150]
+
+
+@pytest.mark.parametrize("sees, kept", [({0.0: {0, 1}}, True), ({}, False)])
+def test_a_shot_min_shot_s_long_under_lengthen_s_goes_to_a_neighbour_showing_its_subjects_in_its_frame(sees, kept):
+    """x is 2.2 s: long enough, under lengthen_s. a carries it on where a shows its subject in its
+    frame; where a's subjects are seen only by a ray (out of its frame), x stays as it is: not held
+    on, not started earlier, not flagged (a 1-s x is carried on by the ray alone: the first test)."""
+    a, x, b = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees=sees, window_s=2.5, lengthen_s=2.4)
+    frames = played(p, (a, 90), (x, 66), (b, 10))
+    if kept:
+        assert cuts(frames) == [0, 156] and all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:156])
+    else:
+        assert cuts(frames) == [0, 90, 156] and all(f.shot is x and not f.flags for f in frames[90:156])
+        assert not frames[156].flags
+
+
+@pytest.mark.parametrize("lengthen_s, moved_to", [(None, 120), (2.4, 108)])
+def test_a_short_shot_started_earlier_is_made_lengthen_s_long(lengthen_s, moved_to):
+    kill = GameEvent(EventKind.KILL, "b", "c", 0, 160 * DT_S, "kill")
+    a, x, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((0,), 20.0)
+    p = Program({0.0: 0.9, 10.0: 0.5, 20.0: 0.6}, sees={10.0: {1, 2}}, window_s=2.5, lengthen_s=lengthen_s)
+    p.frames(a, 150)
+    p.frames(x, 30, {10: [kill]})  # neither a nor b shows the kill x shows
+    p.frames(b, 10)
+    frames = p.program()
+    assert cuts(frames) == [0, moved_to, 180]  # x 2 s long, or lengthen_s: 72 frames
+    assert all(f.shot is x and MOVED_EARLIER in f.flags for f in frames[moved_to:150])
 
 
 def test_the_answered_frame_is_the_program_moments_and_counts_a_cut_passed_over():

@@ -22,14 +22,15 @@ ties to the shot before), among the neighbours that
   replay goes on on its other side and the piece does not show its kill (never left out); a live
   shot's to a live one, or to a replay starting earlier where no kill happens in its frames;
 - show each kill the short shot showed (killer and victim each with KILL_SEEN of their points in
-  the frame and seen at the kill's frame, as eval-match counts a kill covered);
+  the frame and seen at the kill's frame, or the victim so through the killer's eyes, as
+  eval-match counts a kill covered: `_shows_kill`);
 - show their subjects at least SEEN_FLOOR on every frame the short shot showed its own so (no
   picture of nobody where there was one of somebody);
 - and show the players in their frame readable, HEIGHT_FLOOR of its height (median), where the
   short shot did, or as tall as it did; a shot through a player's eyes started early, or as tall
   as it shows them from its own cut (`_keeps_height`).
 A short shot that has none starts earlier instead, where the window still holds the shot before's
-last frames that make it `min_shot_s` long and the shot before stays as long (`_earlier`, docs/
+last frames that make it `lengthen_s` long and the shot before stays as long (`_earlier`, docs/
 casting.md "A short shot starts earlier"): its cut moves to the first of them, the short shot's
 camera as it was at its first frame (a copy the window keeps of each cut's) stepped over them, else
 held at its first pose (through its player's eyes, a first-person shot), kept as a neighbour
@@ -53,7 +54,16 @@ failing all, it stays short, flagged at the cut that ends it. A hold is judged o
 repaired: a repair waiting that gives a short piece of the shot after to the shot after it is
 applied first (`_settle_inside`), and a hold set once the window is past the frame it ends on is
 judged there at once (`_hold_reached`); the last resort applies only where the shot after still
-starts at the pose it judged. A human's take is never given away.
+starts at the pose it judged, and before the shot after's own cut joins the window where that cut
+comes before the hold's end and nothing removes it (`_hold_cut_short`). A human's take is never
+given away.
+
+A shot `min_shot_s` long or more but under `lengthen_s` (2.4 s: the settings' `edit_lengthen_s`,
+within the window) is given to a neighbour too, by the same rules but with its subjects counted
+seen only in the neighbour's frame (`SHOWN`: judged by a ray alone, a neighbour of the real 2on2
+showed nobody for 2 s), else left as it is: it is not short, so it neither holds on nor starts
+earlier. On the real 2on2, 13 of 48 shots were 2.0-2.13 s and its median 2.7 s; 3.13 s with it
+(docs/casting.md, "Shots a little over min_shot_s").
 
 Off the frame path: a repair (up to a `window_s` of a camera copy's steps, each the rig's CAMERA
 stage, and the visibility judged over them: a median 18 ms and up to 90 ms on the real wipeout,
@@ -206,6 +216,11 @@ LAST_RESORT = Floors(SEEN_MISSES, READABLE_HEIGHT, True)
 # picture that lingers where its subjects went, or waits where they come, for under 2 s is what a broadcast shows
 # when a player runs behind a wall; a cut under 2 s after the one before is not (docs/casting.md, "Kills only")
 KILLS_ONLY = Floors(1.0, 0.0, True, 0.0)
+# a shot min_shot_s long but under the window's `lengthen_s` is given to a neighbour only where that one shows its
+# subjects in its frame as the shot did (eval-match's shown share: a neighbour judged by a ray alone showed nobody for
+# 2 s on the real 2on2) and its kills as any repair does (`_shows_kill`); else it stays as it is, neither started
+# earlier, held on nor given by a last resort
+SHOWN = Floors(0.0, HEIGHT_FLOOR, True)
 
 
 # Decision.neighbour: the shot before (carried on), the shot after (started early), or neither, the short shot's cut
@@ -249,6 +264,7 @@ class Repair:
     back: list[WorkedFrame] = field(default_factory=list)  # the shot before's last frames the short shot may start at
     earlier: Side | None = None  # the short shot as their neighbour (`_back`, `_earlier`)
     first: CameraPose | None = None  # the shot after's first pose as the decision read it (None: a checkpoint's, unknown)
+    long_enough: bool = False  # the short shot min_shot_s long already: given to a neighbour at SHOWN, else left as it is
 
     def work_out(self, budget_s: float | None = None) -> None:
         """Works the decision out, whole (budget_s None) or for about budget_s more."""
@@ -262,7 +278,7 @@ class Repair:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         """A repair from a checkpoint (one written before a short shot could start earlier: it does not)."""
-        self.__dict__.update({"back": [], "earlier": None, "first": None, **state})
+        self.__dict__.update({"back": [], "earlier": None, "first": None, "long_enough": False, **state})
 
 
 @dataclass
@@ -317,8 +333,18 @@ class EditWindow:
     """The frames worked out and not yet answered, the shadow of the last cut, and the repairs
     (module docstring). The rig's `window_s` 0 answers each frame as it is worked out: no repairs."""
 
-    def __init__(self, min_shot_s: float, players: list[str], defer: bool = True, window_s: float | None = None):
+    def __init__(
+        self,
+        min_shot_s: float,
+        players: list[str],
+        defer: bool = True,
+        window_s: float | None = None,
+        lengthen_s: float | None = None,
+    ):
         self.min_shot_s = min_shot_s
+        # a shot at least min_shot_s long but under this is given to a neighbour too, where that one shows its subjects
+        # in its frame as the shot did (SHOWN), s; None: min_shot_s, none
+        self.lengthen_s = min_shot_s if lengthen_s is None else lengthen_s
         self.players = players
         # how far ahead of the frame it answers the rig works, s: a short shot starts no earlier than a new cut's frame
         # less this (the frames before are answered: `_back`); None: min_shot_s, no room to start one earlier
@@ -343,10 +369,17 @@ class EditWindow:
             "repair": None,
             "holding": None,
             "window_s": state["min_shot_s"],
+            "lengthen_s": state["min_shot_s"],
             "cut_camera": None,
             "hold_ahead": None,
         }
         self.__dict__.update({**defaults, **state})
+
+    @property
+    def shot_s(self) -> float:
+        """How long a short shot started earlier is made (`_earlier`), and the longest given to a neighbour, s:
+        lengthen_s, at least min_shot_s (a hold makes one min_shot_s long)."""
+        return max(self.min_shot_s, self.lengthen_s)
 
     def drop(self) -> None:
         """Forgets the frames not yet answered (a take applies at once: rig.py)."""
@@ -431,8 +464,10 @@ class EditWindow:
             last = self.last_pose()
             started = None
             if before is not None and last is not None:
-                started = Shadow(before[0], before[1], last, frame.moment.time_s + self.min_shot_s)
+                started = Shadow(before[0], before[1], last, frame.moment.time_s + self.shot_s)
             repair = self._drawn(frame, started, judges)
+            if repair is not None and self._hold_cut_short(repair, frame, judges):
+                repair = self._drawn(frame, started, judges)  # over the short shot its last resort made longer
             self.cut_camera = (frame, copy.copy(frame.shot.camera))
             if repair is None:
                 self.shadow = started or self.shadow
@@ -459,7 +494,7 @@ class EditWindow:
         if decision.neighbour == BEFORE:
             assert repair.carried is not None  # only a shadow carries a short shot on
             self._to_neighbour(repair, decision, last_resort, judges)
-            self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's min_shot_s
+            self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's shot_s
             return
         if repair.carried is not None:
             repair.carried.until_s = repair.carried_until_s
@@ -472,6 +507,9 @@ class EditWindow:
             repair.back[0].cut, rows[0].cut = True, False
             self.shadow = repair.started or self.shadow
             return
+        if repair.long_enough:  # no neighbour shows it as well: it is not short, so it stays as it is
+            self.shadow = repair.started or self.shadow
+            return
         if repair.started is None:
             frame.flags.append(SHORT_LEFT)
         else:  # judged when the window reaches min_shot_s past the short shot's start (_hold)
@@ -479,6 +517,38 @@ class EditWindow:
         self.shadow = repair.started or self.shadow
         if self.holding is repair:
             self._hold_reached(judges)
+
+    def _hold_cut_short(self, repair: Repair, frame: WorkedFrame, judges: Judges) -> bool:
+        """Whether the hold just set (`settle`, as the frame's cut joined) was given to its last
+        resort instead (`_last_resort`), with the repair the cut drew (of the shot after, short
+        too) worked out now: the cut comes before the hold's end, and that repair does not give the
+        shot after to the one after it, which alone removes the cut (`_settle_inside`). Once the cut
+        is the window's the last resort no longer applies, and the hold is left short: on the real
+        4on4 a shot of 0.4 s (docs/casting.md, "Shots a little over min_shot_s"). Where it was
+        given, the repair is to be drawn again (its short shot starts earlier now); its change to
+        the shadow it carries is undone."""
+        held = self.holding
+        if (
+            held is None
+            or held.decision is None
+            or held.decision.last_resort is None
+            or repair.rows[0] is not held.frame
+            or frame.moment.time_s >= held.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S
+        ):
+            return False
+        repair.work_out()
+        assert repair.decision is not None  # worked out above
+        if repair.decision.neighbour == AFTER:
+            return False
+        carried = repair.carried
+        drawn_until_s = math.nan if carried is None else carried.until_s
+        if carried is not None:
+            carried.until_s = repair.carried_until_s
+        if self._last_resort(held, judges):
+            return True
+        if carried is not None:  # the repair stands
+            carried.until_s = drawn_until_s
+        return False
 
     def _hold_reached(self, judges: Judges) -> None:
         """The hold just set judged at once where the window already holds the frame it ends on
@@ -620,7 +690,7 @@ class EditWindow:
         players = {p: i for i, p in enumerate(self.players)}
         if (
             not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
-            or not _keeps_kills(rows, _kills(rows, players, judges), poses, judges)
+            or not _keeps_kills(rows, _kills(rows, players, judges), poses, side.judged, judges)
             or not _keeps_seen(rows, judged, floors)
             or not _keeps_height(rows, poses, side.shown, side.judged, judges, floors)
         ):
@@ -698,8 +768,12 @@ class EditWindow:
         shot after's camera as it is at the cut, the shadow's steps so far); None with no short
         shot, or a human's take on air in it."""
         start = next((i for i in range(len(self.frames) - 1, -1, -1) if self.frames[i].cut), None)
-        if start is None or frame.moment.time_s - self.frames[start].moment.time_s >= self.min_shot_s - TIME_EPSILON_S:
+        if start is None:
             return None
+        length_s = frame.moment.time_s - self.frames[start].moment.time_s
+        if length_s >= self.shot_s - TIME_EPSILON_S:
+            return None
+        long_enough = length_s >= self.min_shot_s - TIME_EPSILON_S
         rows = list(self.frames)[start:]
         if rows[0].shot.held:  # a human's take is on air as long as the human held it
             return None
@@ -712,28 +786,30 @@ class EditWindow:
             steps = None if first is None else carried.steps[first : first + len(rows)]
         before = None if carried is None else _side(carried.shot, rows, judges)
         after = _side(frame.shot, rows, judges)
-        back = self._back(start, frame)
+        back = [] if long_enough else self._back(start, frame)
         earlier = None
         if back:  # the short shot's camera as it was at its first frame, where the window kept it (else held there)
             cut = self.cut_camera
             camera = cut[1] if cut is not None and cut[0] is rows[0] else None
             earlier = _side(rows[0].shot, back, judges, camera)._replace(stepped=camera is not None)
         players = {p: i for i, p in enumerate(self.players)}
-        run = SlicedRun(lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges, back, earlier))
+        run = SlicedRun(
+            lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges, back, earlier, long_enough)
+        )
         until_s = -math.inf if carried is None else carried.until_s
         if carried is not None:  # stepped on as if it carried the short shot: it goes off air at this cut then
-            carried.until_s = frame.moment.time_s + self.min_shot_s
-        return Repair(rows, frame, run, before, after, carried, until_s, started, back=back, earlier=earlier, first=frame.pose)
+            carried.until_s = frame.moment.time_s + self.shot_s
+        return Repair(rows, frame, run, before, after, carried, until_s, started, None, back, earlier, frame.pose, long_enough)
 
     def _back(self, start: int, frame: WorkedFrame) -> list[WorkedFrame]:
         """The last frames of the shot before the short one (its cut at `start` in the window, the
-        next at `frame`) that make the short shot min_shot_s long where its cut moves to the first
+        next at `frame`) that make the short shot lengthen_s long where its cut moves to the first
         of them (`_earlier`); none where the window holds too few (window_s), the shot before would
-        be left shorter than min_shot_s, is a human's take, or a short shot before waits to hold on."""
+        be left shorter than that, is a human's take, or a short shot before waits to hold on."""
         if self.holding is not None:
             return []
         frames = list(self.frames)
-        start_by_s = frame.moment.time_s - self.min_shot_s  # the short shot min_shot_s long from here on
+        start_by_s = frame.moment.time_s - self.shot_s  # the short shot shot_s long from here on
         for j in range(start - 1, -1, -1):
             if frames[j].cut or frames[j].moment.time_s <= frame.moment.time_s - self.window_s + TIME_EPSILON_S:
                 return []
@@ -742,7 +818,7 @@ class EditWindow:
         else:
             return []
         cut_s = next((f.moment.time_s for f in reversed(frames[:j]) if f.cut), self.last_cut_s)
-        if frames[j].moment.time_s - cut_s < self.min_shot_s - TIME_EPSILON_S or frames[j].shot.held:
+        if frames[j].moment.time_s - cut_s < self.shot_s - TIME_EPSILON_S or frames[j].shot.held:
             return []
         return frames[j:start]
 
@@ -774,14 +850,16 @@ def _decided(
     judges: Judges,
     back: list[WorkedFrame],
     earlier: Side | None,
+    long_enough: bool = False,
 ) -> Decision:
     """Which neighbour takes the short shot's frames (rows), and how (module docstring): the shot
     before, carried on by its shadow (its steps over the rows, None where it has none), or the shot
     after, started at them into its first pose; whichever shows its subjects more (ties to the
     shot before), among those that may take it; `previous` is the shot before the short one. Where
     neither may, the short shot itself, started earlier over the shot before's last frames (back,
-    as `earlier` shows them: `_earlier`). It reads only what its arguments held when the repair
-    was drawn (moments, poses, copies)."""
+    as `earlier` shows them: `_earlier`). A shot min_shot_s long already (long_enough) goes to a
+    neighbour at SHOWN or stays. It reads only what its arguments held when the repair was drawn
+    (moments, poses, copies)."""
     short = rows[0].shot
     kills = _kills(rows, players, judges)
 
@@ -797,6 +875,8 @@ def _decided(
         # the first of equals: the shot before
         return max(judged, key=lambda j: j[0])[1]._replace(kills_only=floors is KILLS_ONLY) if judged else None
 
+    if long_enough:
+        return neighbour(SHOWN) or Decision(None, [], [])
     strict = neighbour(STRICT)
     if strict is not None:
         return strict
@@ -822,7 +902,7 @@ def _before(
     if len(steps) < len(rows) or any(m is not r.moment for (m, _, _), r in zip(steps, rows)):
         return None
     poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
-    if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, judges):
+    if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, before.judged, judges):
         return None
     judged = _judged_seen(before.shown, poses, before.judged, judges, in_frame=True)[0] if floors.in_frame else seen
     if not _keeps_seen(rows, judged, floors):
@@ -864,7 +944,7 @@ def _after(
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
         judged = _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if in_frame else seen
         if (
-            _keeps_kills(rows, kills, poses, judges)
+            _keeps_kills(rows, kills, poses, shot, judges)
             and _keeps_seen(rows, judged, floors)
             and _keeps_height(rows, poses, shown, shot, judges, floors, own_height)
         ):
@@ -874,7 +954,7 @@ def _after(
 
 def _earlier(back: list[WorkedFrame], first: CameraPose, short: Side, players: dict[str, int], judges: Judges) -> Decision | None:
     """The short shot started earlier, its cut moved to the first of the shot before's last frames
-    (back), min_shot_s before the cut that ends it: through its player's eyes where it is a
+    (back), lengthen_s before the cut that ends it: through its player's eyes where it is a
     first-person shot, a copy of its camera as it was at its first frame stepped from the first of
     them (`_moving_earlier`: where the window kept that copy, the copy meets no wall and joins the
     first pose), else held at its first pose, where it takes those frames as a neighbour of the shot
@@ -908,18 +988,28 @@ def _judged_seen(
 
 
 def _kills(rows: list[WorkedFrame], players: dict[str, int], judges: Judges) -> list[tuple[int, tuple[int, ...]]]:
-    """The kills the short shot shows: (row, (killer, victim)) where both are seen at least
-    KILL_SEEN from its pose at the kill's frame (a neighbour must show them as well); players:
-    each player's index by id."""
+    """The kills the short shot shows: (row, (killer, victim)) where its pose at the kill's frame
+    shows them (`_shows_kill`; a neighbour must show them as well); players: each player's index
+    by id."""
     out: list[tuple[int, tuple[int, ...]]] = []
     for k, row in enumerate(rows):
         for event in row.moment.events:
             if event.kind != EventKind.KILL or event.actor_id not in players or event.other_actor_id not in players:
                 continue
             pair = (players[event.actor_id], players[event.other_actor_id])
-            if row.shown is row.moment and np.all(judges.seen(row.pose, row.moment, pair) >= KILL_SEEN):
+            if row.shown is row.moment and _shows_kill(row.shot, row.pose, row.moment, pair, judges):
                 out.append((k, pair))
     return out
+
+
+def _shows_kill(shot: Shot, pose: CameraPose, moment: Moment, pair: tuple[int, ...], judges: Judges) -> bool:
+    """Whether the shot's pose shows a kill (killer, victim) at its moment: both seen at least
+    KILL_SEEN, or, as eval-match counts it covered, the victim so through the killer's own eyes
+    (its body is behind the lens: on the real 2on2 and 4on4 a repair that did not count those
+    gave a kill shown through them to a shot of another player, and the suite's objective a
+    kill's DUEL through its killer's eyes: docs/casting.md)."""
+    through = isinstance(shot.camera, FirstPersonCamera) and shot.camera.player == pair[0]
+    return bool(np.all(judges.seen(pose, moment, pair[1:] if through else pair) >= KILL_SEEN))
 
 
 def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[CameraPose]:
@@ -991,10 +1081,11 @@ def _moving_earlier(
 
 
 def _keeps_kills(
-    rows: list[WorkedFrame], kills: list[tuple[int, tuple[int, ...]]], poses: list[CameraPose], judges: Judges
+    rows: list[WorkedFrame], kills: list[tuple[int, tuple[int, ...]]], poses: list[CameraPose], shot: Shot, judges: Judges
 ) -> bool:
-    """Whether the neighbour's poses over the short shot's frames show each of its kills as it did."""
-    return all(np.all(judges.seen(poses[k], rows[k].moment, pair) >= KILL_SEEN) for k, pair in kills)
+    """Whether the neighbour's (shot's) poses over the short shot's frames show each of its kills
+    (`_shows_kill`)."""
+    return all(_shows_kill(shot, poses[k], rows[k].moment, pair, judges) for k, pair in kills)
 
 
 def _keeps_seen(rows: list[WorkedFrame], seen: list[float], floors: Floors = STRICT) -> bool:

@@ -173,7 +173,7 @@ class MatchRig(RigBase):
         self._last_time_s: float | None = None  # the moment of the newest frame worked out, s
         self._head: Moment | None = None  # that moment: the edit window's end (edit_window.py)
         self._answered_s: float | None = None  # the program moment last answered, s
-        self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans, self.window_s)
+        self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans, self.window_s, self._lengthen_s)
         self._last_pose: CameraPose | None = None
         self._last_cut_s = -math.inf  # program time of the picture's last cut, s
         self._candidates: list[CandidateShot] = []
@@ -190,7 +190,7 @@ class MatchRig(RigBase):
         if "window" in state:
             self.window.defer = self._defer_plans  # a window written before repairs were drawn defers by default
         else:
-            self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans, self.window_s)
+            self.window = EditWindow(self.style.min_shot_s, self.players, self._defer_plans, self.window_s, self._lengthen_s)
             self._head, self._answered_s = None, self._last_time_s
             self._body_heights_m = np.array([np.ptp(o[:, 1]) for o in self.visibility.outlines_local])
 
@@ -237,6 +237,12 @@ class MatchRig(RigBase):
         """How far ahead of the program moment the rig works (edit_window.py), s: the settings',
         at most a quarter of the delay (the director plans on the rest)."""
         return min(self.settings.edit_window_s, self.delay_s / 4.0)
+
+    @property
+    def _lengthen_s(self) -> float:
+        """A shot under this, min_shot_s long, is given to a neighbour that shows it as well (edit_window.py), s: the
+        settings', within the window."""
+        return min(self.settings.edit_lengthen_s, self.window_s)
 
     @property
     def player_inputs(self) -> MatchRig:
