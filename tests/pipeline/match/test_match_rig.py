@@ -454,3 +454,10 @@ def test_a_drawn_cut_that_breaks_the_30_degree_rule_against_the_pose_on_air_is_r
 def test_plan_work_per_tick_is_validated():
     with pytest.raises(ValueError, match="plan_work_per_tick"):
         MatchSettings(plan_work_per_tick=10.0)
+
+
+@pytest.mark.parametrize("field", ["edit_window_s", "edit_lengthen_s"])
+@pytest.mark.parametrize("value", [10.5, -0.1, math.nan])
+def test_the_edit_windows_lengths_are_validated(field, value):
+    with pytest.raises(ValueError, match=field):
+        MatchSettings(**{field: value})
