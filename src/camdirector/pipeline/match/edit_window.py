@@ -525,7 +525,7 @@ class EditWindow:
         shot after to the one after it, which alone removes the cut (`_settle_inside`). Once the cut
         is the window's the last resort no longer applies, and the hold is left short: on the real
         4on4 a shot of 0.4 s (docs/casting.md, "Shots a little over min_shot_s"). Where it was
-        given, the repair is to be drawn again (its short shot starts earlier now); its change to
+        given, the repair is to be drawn again (its short shot starts earlier now) and its change to
         the shadow it carries is undone."""
         held = self.holding
         if (
@@ -540,15 +540,11 @@ class EditWindow:
         assert repair.decision is not None  # worked out above
         if repair.decision.neighbour == AFTER:
             return False
-        carried = repair.carried
-        drawn_until_s = math.nan if carried is None else carried.until_s
-        if carried is not None:
-            carried.until_s = repair.carried_until_s
-        if self._last_resort(held, judges):
-            return True
-        if carried is not None:  # the repair stands
-            carried.until_s = drawn_until_s
-        return False
+        if not self._last_resort(held, judges):  # it reads no shadow's end: the repair stands as drawn
+            return False
+        if repair.carried is not None:
+            repair.carried.until_s = repair.carried_until_s
+        return True
 
     def _hold_reached(self, judges: Judges) -> None:
         """The hold just set judged at once where the window already holds the frame it ends on
