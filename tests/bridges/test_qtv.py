@@ -10,6 +10,7 @@ arrive late or bunched leave the frames' demo times as evenly spaced as the driv
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import logging
 import os
@@ -22,6 +23,7 @@ import numpy as np
 import pytest
 
 import camdirector_client as cd
+from camdirector.bridges import qtv
 from camdirector.bridges.qtv import QtvRefused, QtvSettings, QtvTracks, cast_qtv, parse_qtv_url, request_bytes
 from camdirector.bridges.qtv_auth import answer, md4
 from camdirector.deploy.server_process import ServerProcess
@@ -260,3 +262,66 @@ def test_a_wrong_or_missing_password_is_a_clear_error(frobodm2_server, demo, fla
     assert done.returncode == 2, done.stderr
     assert f"camdirector cast qtv: {source.url} {said}" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+JOIN_SLOT, JOIN_AT_S = 4, 6.0  # Sujoy's slot, and when the stream below first shows him (before any frag)
+
+
+class _JoinsLater(qtv.MvdStream):
+    """The real stream as a source shows it when JOIN_SLOT starts playing only at JOIN_AT_S of
+    demo time (a player joining during the warm-up or the match): before then, nothing of the slot."""
+
+    def feed(self, chunk: bytes) -> MvdUpdate:
+        update = super().feed(chunk)
+        if update.time_s >= JOIN_AT_S:
+            return update
+        assert not any(JOIN_SLOT in (d.killer, d.victim) for d in update.deaths)
+        return dataclasses.replace(
+            update,
+            players=[p for p in update.players if p.slot != JOIN_SLOT],
+            tracks={s: t for s, t in update.tracks.items() if s != JOIN_SLOT},
+            stats={s: v for s, v in update.stats.items() if s != JOIN_SLOT},
+        )
+
+
+def test_a_player_who_joins_later_opens_the_next_session_with_every_player(frobodm2_server, demo, monkeypatch, caplog):
+    monkeypatch.setattr(qtv, "MvdStream", _JoinsLater)
+    with caplog.at_level(logging.WARNING, logger="camdirector.bridges.qtv"):
+        with QtvSource(demo, end_s=SLICE_END_S, speed=SPEED) as source:
+            cast, sessions, _ = _cast(frobodm2_server, source, lambda c, r, t: c.kills >= 4 and len(t.roster) == 4, 45.0)
+    assert cast.sessions == len(sessions) == 2
+    assert [(p.id, p.name) for p in sessions[0][1]] == [("p00", "Final"), ("p01", ": Timber"), ("p02", "> MrJustice")]
+    assert [(p.id, p.name, p.team, p.team_name) for p in sessions[1][1]] == [
+        ("p00", "Final", 0, "=SF="),
+        ("p01", ": Timber", 1, "red"),
+        ("p02", "> MrJustice", 0, "=SF="),
+        ("p03", ": Sujoy", 1, "red"),
+    ]
+    assert any("the roster changed (p03 : Sujoy): a new session with 4 players" in m for m in caplog.messages)
+    assert cast.session.kills == 4  # every frag reached a session: all four come after the new one opened
+    assert cast.receiver.connections == 1
+
+
+def test_the_roster_changes_when_a_slot_joins_or_is_taken_by_another_name():
+    tracks = QtvTracks(interp_delay_s=0.0, hold_s=2.0)
+    ones = _update(np.array([0.0, 0.1]))
+    tracks.offer(ones, 0.1)
+    assert [p.id for p in tracks.roster] == ["p00"] and not tracks.roster_changed.is_set()
+    joined = dataclasses.replace(
+        ones,
+        time_s=0.3,
+        players=[MvdPlayer(0, "runner", ""), MvdPlayer(5, "late", "")],
+        tracks={0: _update(np.array([0.2, 0.3])).tracks[0], 5: _update(np.array([0.2, 0.3])).tracks[0]},
+        deaths=[MvdDeath(0.3, 5, 0, "rocket")],
+    )
+    tracks.offer(joined, 0.3)
+    assert tracks.roster_changed.is_set()
+    before = tracks.sample(0.5)
+    assert before.ids == ["p00"] and before.events == []  # the session open knows no p01: its kill waits out
+    assert [(p.id, p.name, p.team) for p in tracks.reopen()] == [("p01", "late", 1)]
+    assert not tracks.roster_changed.is_set() and [p.id for p in tracks.roster] == ["p00", "p01"]
+    assert tracks.sample(0.6).ids == ["p00", "p01"]
+    renamed = dataclasses.replace(joined, time_s=0.4, players=[MvdPlayer(0, "other", ""), MvdPlayer(5, "late", "")], deaths=[])
+    tracks.offer(renamed, 0.4)
+    assert tracks.roster_changed.is_set()
+    assert [(p.id, p.name, p.team) for p in tracks.reopen()] == [("p00", "other", 0)]

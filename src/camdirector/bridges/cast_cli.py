@@ -22,14 +22,17 @@
         decodes the live MVD stream as it comes and drives a RIG_MATCH session on the level
         (bridges/qtv.py): players interpolated at rate_hz, frags as kill events, their stats;
         reconnects with backoff when the source drops or sends a bad stream (one error line on
-        stderr each time), in the same session. --map MAP.bsp adds the map to the level registry
-        first, under its stem, as import-match --map does. Prints JSON lines: the session and
-        its players, one progress line a second (players, frags, the program's shot,
-        connections), then the summary. --password answers a source that asks for one
+        stderr each time), in the same session. A player who joins (or takes a slot) later ends
+        the session and opens the next with every player (one warning line; the program starts
+        again after the delay). --map MAP.bsp adds the map to the level registry first, under its
+        stem, as import-match --map does. Prints JSON lines: each session and its players, one
+        progress line a second (players, frags, the program's shot, connections), then the
+        summary. --password answers a source that asks for one
         (mvdsv's qtv_password; MD4, CCITT or PLAIN as ezQuake does, bridges/qtv_auth.py); a
         wrong one is a refusal. --program-out writes the program received as it comes,
         one JSON line a program moment with the demo time it shows (bridges/program_record.py),
-        for `camdirector eval-match MATCH --program FILE`. Ctrl-C stops. Exit status: 0 stopped
+        for `camdirector eval-match MATCH --program FILE` (a later session's in FILE's stem.1.jsonl,
+        .2, ...). Ctrl-C stops. Exit status: 0 stopped
         by Ctrl-C after a session ran, 1 the stream to the server failed or the level registry
         is unavailable, 2 bad arguments, map, server, key, a --program-out that cannot be
         written, or a QTV source that refused the stream or could not be reached.
@@ -312,12 +315,13 @@ def _run_qtv(args: argparse.Namespace, settings, level: str) -> int:
     except cd.DirectorError as exc:
         if not opened:
             return _fail(f"the server at {args.server} refused the session: {exc}", "qtv")
-        print(f"camdirector cast qtv: the stream of session {opened[0]} failed: {exc}", file=sys.stderr)
+        print(f"camdirector cast qtv: the stream of session {opened[-1]} failed: {exc}", file=sys.stderr)
         return 1
     c, r = done.session, done.receiver
     _print(
         {
             "summary": {
+                "sessions": done.sessions,
                 "frames": c.frames,
                 "answered": c.answered,
                 "program_frames": c.program,

@@ -10,7 +10,8 @@ at its own time on the 1 / rate_hz grid however late its thread woke (a busy mac
 frames lie whole periods apart in game time as in the feed's time; a thread that woke late sends
 its tick, then the latest tick since at once, skipping any between. While the feed is stale no
 frame is sent (the program holds) and the tick is counted; frames go on when it comes back, game
-time going on from the clock, in the same session.
+time going on from the clock, in the same session. When `end` is set (a feed whose roster changed)
+the stream ends and the session closes, and the feed (not stopped) can drive the next one.
 """
 
 from __future__ import annotations
@@ -95,13 +96,17 @@ def drive_session(
     on_session: Callable[[str], None] = lambda session_id: None,
     on_progress: Callable[[CastCounts], None] = lambda counts: None,
     progress_s: float = 1.0,
+    end: threading.Event | None = None,
+    counts: CastCounts | None = None,
 ) -> CastCounts:
     """Runs the session (module docstring) until `stop` is set; returns the counts. Waits for the
     roster first (returns with no frames if stopped before). on_pose: each program pose and the
     clock's time; on_frame: each frame sent (its number, game time and the sample it carries), and
     on_progress: the counts every progress_s, stale or not, both on the stream's sending thread;
-    on_reply: each reply. DirectorError: the server refused the session or the stream failed."""
-    counts = CastCounts()
+    on_reply: each reply; end: ends this session only (module docstring); counts: go on counting
+    into these (a feed's sessions one after another). DirectorError: the server refused the
+    session or the stream failed."""
+    counts = CastCounts() if counts is None else counts
     while not tracks.wait_roster(0.1):
         if stop.is_set():
             return counts
@@ -125,7 +130,7 @@ def drive_session(
         def updates() -> Iterator[cd.pb.FrameUpdate]:
             period_s = 1.0 / rate_hz
             due_s = next_progress_s = start_s
-            while not stop.wait(max(0.0, due_s - clock())):
+            while not stop.wait(max(0.0, due_s - clock())) and not (end is not None and end.is_set()):
                 now_s = due_s  # the tick's own time (module docstring), however late this runs
                 due_s += period_s * max(1, math.floor((clock() - now_s) / period_s))  # the latest missed tick, no other
                 if now_s >= next_progress_s:  # on the tick, not a reply: none comes while stale
@@ -156,7 +161,8 @@ def drive_session(
                     if on_pose is not None:
                         on_pose(reply.pose, clock())
         finally:
-            stop.set()
+            if end is None or not end.is_set():  # the feed goes on only for the next session
+                stop.set()
             if isinstance(replies, Generator):  # ends the stream now, not when collected
                 replies.close()
     return counts

@@ -27,7 +27,12 @@ ends): a recorded program (program_record.py) is placed on the match file of the
 Stat changes and obituaries are placed by their demo time the same way and go out with the first
 frame that shows their moment.
 The roster is the first update's players (slot order: ids p00, p01, ..., the demo importer's;
-teams by quakeworld_mvd.player_teams); a slot that starts playing later is not in the session.
+teams by quakeworld_mvd.player_teams). A slot that starts playing later (a player joining during
+the warm-up or mid-match), or a slot now playing under another name (another player took it),
+changes the roster: its samples are kept from then on, `roster_changed` is set, and nothing of
+it reaches the session (a session's targets are fixed when it opens) until the driver opens the
+next session with `reopen()`'s roster (cast_qtv: the joiner gets the next id, its team the
+roster's index of its team name, or a new one).
 Obituaries become events: a kill (attacker, victim; a suicide or a death to the world names the
 victim twice, as the importer does), or, where a teamkill line leaves a side unsaid, "death" of
 the victim or "kill_unknown" of the killer.
@@ -63,7 +68,7 @@ from camdirector.bridges.program_record import ProgramRecorder
 from camdirector.bridges.stream_clock import StreamClock, StreamClockSettings
 from camdirector.evaluation.match.match_file import MatchPlayer
 from camdirector.geometry import quake_frame
-from camdirector.matches.mvd_wire import MvdError, MvdStream, MvdUpdate
+from camdirector.matches.mvd_wire import MvdError, MvdPlayer, MvdStream, MvdUpdate
 from camdirector.matches.quakeworld_mvd import player_teams, quake_player
 
 log = logging.getLogger(__name__)
@@ -252,6 +257,10 @@ class QtvTracks:
         self._last_offer_s = -math.inf
         self._demo_clock: deque = deque(maxlen=RECENT_SAMPLES)  # (local t, demo time), s, of the newest samples
         self.kills: list[tuple[str, str]] = []  # (attacker, victim) ids of every kill event, in order
+        self.roster_changed = threading.Event()  # a slot joined or was renamed: reopen() gives the next roster
+        self._in_session: set[str] = set()  # ids the open session knows: the others' stats and events wait
+        self._changes: dict[int, MvdPlayer] = {}  # slot -> the player joining or renamed there, not in the roster yet
+        self._teamplay = 0
 
     def wait_roster(self, timeout_s: float) -> bool:
         return self._roster_ready.wait(timeout_s)
@@ -268,6 +277,7 @@ class QtvTracks:
                 self._fix_roster(update)
             if not self.roster:
                 return
+            self._note_changes(update)
             if update.tracks:
                 self.clock.arrive(update.time_s, now_s)
             for slot, track in update.tracks.items():
@@ -291,12 +301,54 @@ class QtvTracks:
                 self._note_death(death.killer, death.victim, self.clock.local_of(death.time_s))
 
     def _fix_roster(self, update: MvdUpdate) -> None:
+        self._teamplay = update.teamplay
         for k, ((team, team_name), p) in enumerate(zip(player_teams(update), update.players, strict=True)):
             pid = f"p{k:02d}"
             self._ids[p.slot] = pid
             self._players[p.slot] = _Player(p.slot)
             self.roster.append(quake_player(pid, p.name, team, team_name))
+        self._in_session = {p.id for p in self.roster}
         self._roster_ready.set()
+
+    def _note_changes(self, update: MvdUpdate) -> None:
+        """A slot playing that the roster lacks, or names otherwise, is a change (module docstring);
+        a joiner's samples are kept from now on."""
+        slot_of = {pid: slot for slot, pid in self._ids.items()}
+        roster_names = {slot_of[p.id]: p.name for p in self.roster}  # slot -> its name in the roster
+        for p in update.players:
+            if roster_names.get(p.slot) == p.name:
+                self._changes.pop(p.slot, None)  # renamed back before the next session
+            elif self._changes.get(p.slot) != p:
+                self._changes[p.slot] = p
+                if p.slot not in self._players:
+                    self._ids[p.slot] = f"p{len(self._ids):02d}"
+                    self._players[p.slot] = _Player(p.slot)
+                self.roster_changed.set()
+
+    def reopen(self) -> list[MatchPlayer]:
+        """The roster with every change so far (module docstring), for the next session; the players
+        who joined or were renamed. Clears roster_changed."""
+        with self._lock:
+            teams = {p.team_name: p.team for p in self.roster if self._teamplay and p.team_name}
+            changed = []
+            for slot, p in sorted(self._changes.items()):
+                pid = self._ids[slot]
+                team_name = p.team if self._teamplay else ""
+                if team_name and team_name not in teams:
+                    teams[team_name] = max([*teams.values(), -1]) + 1
+                at = next((k for k, q in enumerate(self.roster) if q.id == pid), None)
+                own = len(self.roster) if at is None else self.roster[at].team  # without team names, a team of its own
+                team = teams[team_name] if team_name else own
+                player = quake_player(pid, p.name, team, team_name)
+                if at is None:
+                    self.roster.append(player)
+                else:
+                    self.roster[at] = player
+                changed.append(player)
+            self._changes.clear()
+            self._in_session = {p.id for p in self.roster}
+            self.roster_changed.clear()
+            return changed
 
     def _note_death(self, killer: int, victim: int, t: float) -> None:
         """The death's event, due at local time t (sent with the frame that shows its moment)."""
@@ -321,7 +373,7 @@ class QtvTracks:
             at = now_s - self.interp_delay_s
             ids, positions, yaws = [], [], []
             for slot, player in self._players.items():
-                if not player.rows:
+                if not player.rows or self._ids[slot] not in self._in_session:
                     continue
                 ids.append(self._ids[slot])
                 position, yaw = _at(player.rows, at)
@@ -334,8 +386,9 @@ class QtvTracks:
                     self._players[slot].stats = values
                     changed.add(slot)
                 self._stats_due = [d for d in self._stats_due if d[0] > at]
-                stats = [(self._ids[s], *self._players[s].stats) for s in sorted(changed)]
-                events = [e for t, e in self._events_due if t <= at]
+                stats = [(self._ids[s], *self._players[s].stats) for s in sorted(changed) if self._ids[s] in self._in_session]
+                # an event naming a player the session lacks is one it would refuse: left out
+                events = [e for t, e in self._events_due if t <= at and {e.actor_id, e.other_id} - {""} <= self._in_session]
                 self._events_due = [(t, e) for t, e in self._events_due if t > at]
             clock = np.array(self._demo_clock).reshape(-1, 2)
             demo_s = float(np.interp(at, clock[:, 0], clock[:, 1])) if len(clock) else None
@@ -463,10 +516,17 @@ class QtvReceiver:
 
 @dataclass
 class QtvCast:
-    """What a cast did: the session's counts and the receiver's."""
+    """What a cast did: the sessions' counts together, the receiver's, and how many sessions it
+    opened (one more each time the roster changed)."""
 
     session: CastCounts
     receiver: ReceiverCounts
+    sessions: int = 1
+
+
+def program_part(path: Path, k: int) -> Path:
+    """Where session k (from 0) of a cast writes its program: path itself, then NAME.k.SUFFIX."""
+    return path if k == 0 else path.with_name(f"{path.stem}.{k}{path.suffix}")
 
 
 def cast_qtv(
@@ -484,12 +544,16 @@ def cast_qtv(
     program_out: Path | None = None,
 ) -> QtvCast:
     """The bridge as a library call: reads the QTV source at url and drives a RIG_MATCH session
-    on level until `stop` is set (module docstring). program_out: write the program received
-    there as it comes (program_record.py). ValueError: a bad url; OSError: program_out cannot be
-    written; QtvError: the source refused the stream or could not be reached first;
-    DirectorError: the server refused the session or its stream failed."""
+    on level until `stop` is set (module docstring). When the roster changes (a player joins or
+    takes a slot) the session closes and the next opens with the new roster at once: the program
+    starts again after the delay (a session's players are fixed when it opens). program_out:
+    write the program received there as it comes (program_record.py), each later session's
+    beside it (program_part). ValueError: a bad url; OSError: program_out cannot be written;
+    QtvError: the source refused the stream or could not be reached first; DirectorError: the
+    server refused a session or its stream failed."""
     address = parse_qtv_url(url)
     tracks = QtvTracks(settings.interp_delay_s, settings.hold_s, settings.stream_clock)
+    counts, sessions = CastCounts(), 0
     recorder = None if program_out is None else ProgramRecorder(program_out)
 
     def opened(session_id: str) -> None:
@@ -509,24 +573,40 @@ def cast_qtv(
 
     try:
         with QtvReceiver(address, settings, tracks, stop, clock) as receiver:
-            counts = drive_session(
-                client,
-                tracks,
-                rate_hz=settings.rate_hz,
-                delay_s=settings.delay_s,
-                level=level,
-                director=director,
-                stop=stop,
-                clock=clock,
-                on_frame=None if recorder is None else recorder.sent,
-                on_reply=None if recorder is None else recorder.reply,
-                on_session=opened,
-                on_progress=lambda c: on_progress(c, receiver.counts, tracks),
-                progress_s=progress_s,
-            )
+            while True:
+                drive_session(
+                    client,
+                    tracks,
+                    rate_hz=settings.rate_hz,
+                    delay_s=settings.delay_s,
+                    level=level,
+                    director=director,
+                    stop=stop,
+                    clock=clock,
+                    on_frame=None if recorder is None else recorder.sent,
+                    on_reply=None if recorder is None else recorder.reply,
+                    on_session=opened,
+                    on_progress=lambda c: on_progress(c, receiver.counts, tracks),
+                    progress_s=progress_s,
+                    end=tracks.roster_changed,
+                    counts=counts,
+                )
+                sessions += 1
+                if stop.is_set() or not tracks.roster_changed.is_set():
+                    break
+                changed = tracks.reopen()
+                log.warning(
+                    "the roster changed (%s): a new session with %d players",
+                    ", ".join(f"{p.id} {p.name}" for p in changed) or "back as it was",
+                    len(tracks.roster),
+                )
+                if recorder is not None:
+                    assert program_out is not None
+                    recorder.close()
+                    recorder = ProgramRecorder(program_part(program_out, sessions))
     finally:
         if recorder is not None:
             recorder.close()
     if receiver.error is not None:
         raise receiver.error
-    return QtvCast(counts, receiver.counts)
+    return QtvCast(counts, receiver.counts, sessions)
