@@ -98,6 +98,28 @@ def test_a_recorded_program_is_aligned_on_the_match_by_its_players_and_lands_on_
         program_on_match(RecordedProgram({}, [_moment(match, 1, 0, subjects=("p09",))], None), match)
 
 
+def test_a_program_over_reconnects_is_placed_piece_by_piece(match):
+    # three connections: the second's stream clock starts anew (a reconnect: its demo time begins
+    # again), the third's feet are another match's; each piece is aligned on its own
+    row = int(np.rint((min(e.time_s for e in match.events if e.kind == "kill") - match.time_s[0]) * match.rate_hz))
+    first = [_moment(match, 1 + k, row - 60 + k) for k in range(40)]
+    again = [
+        {**_moment(match, 41 + k, row + 30 + k), "source_time_s": 0.4 + k / match.rate_hz} for k in range(40)
+    ]  # 30 rows later on the match, 2 s of drop and reconnect later on the session's clock
+    for m in again:
+        m["time_s"] += 2.0
+    other = [
+        {**m, "frame": m["frame"] + 40, "time_s": m["time_s"] + 3.0, "source_time_s": 9.0 + k / match.rate_hz}
+        for k, m in enumerate(again)
+    ]
+    for m in other:
+        m["players"] = {pid: [x + 5.0, y, z] for pid, (x, y, z) in m["players"].items()}
+    placed = program_on_match(RecordedProgram({"program_of": "qtv://x:1"}, first + again + other, None), match)
+    assert placed.pieces == (2, 3) and placed.left_out == len(other)
+    assert placed.program.index.tolist() == [*range(row - 60, row - 20), *range(row + 30, row + 70)]
+    assert placed.shift_s == pytest.approx(STREAM_BEGAN_S, abs=0.5 / match.rate_hz) and placed.align_m < 0.01
+
+
 def test_a_file_that_is_no_program_is_refused(tmp_path):
     bad = tmp_path / "bad.jsonl"
     bad.write_text('{"frame": 1}\n')
@@ -122,9 +144,12 @@ def _camdirector(*args: str, timeout_s: float = 300.0) -> subprocess.CompletedPr
     )
 
 
-def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, demo, match, tmp_path):
+@pytest.mark.parametrize("drop_after_s", [None, 1.5])  # 1.5 s: 6 s into the match, before its first frag
+def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, demo, match, tmp_path, drop_after_s):
     program_file, out, err = tmp_path / "program.jsonl", tmp_path / "cast.jsonl", tmp_path / "cast.err"
-    source = QtvSource(demo, end_s=SLICE_END_S, speed=SPEED)  # listening; its match starts when entered
+    # listening; its match starts when entered
+    source = QtvSource(demo, end_s=SLICE_END_S, speed=SPEED, drop_after_s=drop_after_s)
+    closes = 1 if drop_after_s is None else 2  # the drop mid-block, then the slice's end
     with (
         ServerProcess("--workers", "1", "--data-dir", str(registry), transports=("grpc",)) as server,
         open(out, "w") as stdout,
@@ -143,7 +168,7 @@ def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, de
                 # the slice played out (the source closed the stream at its end) and the program
                 # reached the players held at the last sample
                 deadline = time.monotonic() + 60.0
-                while "closed the stream" not in err.read_text() or not _program_held(program_file):
+                while err.read_text().count("closed the stream") < closes or not _program_held(program_file):
                     assert proc.poll() is None and time.monotonic() < deadline, err.read_text()
                     time.sleep(0.2)
             proc.send_signal(signal.SIGINT)
@@ -181,6 +206,9 @@ def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, de
     figures = result["directors"]["planned"]
     assert result["program"]["moments_left_out"] == 0 and result["program"]["ended"]
     assert result["program"]["align_m"] < 0.5  # the stream's clock found on the match by the players' feet
+    # each connection's stream starts its demo time anew: one piece each, every one placed
+    pieces = result["program"]["pieces"]
+    assert pieces["placed"] == pieces["of"] and pieces["of"] >= closes, pieces
     # every frag of the slice is a kill the program reached, and each is counted
     assert result["match"]["kills"] == FRAGS and figures["kills"] == FRAGS
     assert figures["kills_covered"] == round(figures["kill_coverage"] * FRAGS)

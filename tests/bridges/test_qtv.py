@@ -325,3 +325,17 @@ def test_the_roster_changes_when_a_slot_joins_or_is_taken_by_another_name():
     tracks.offer(renamed, 0.4)
     assert tracks.roster_changed.is_set()
     assert [(p.id, p.name, p.team) for p in tracks.reopen()] == [("p00", "other", 0)]
+
+
+def test_a_reconnect_is_reached_as_a_jump_with_its_demo_time_held_until_then():
+    tracks = QtvTracks(interp_delay_s=0.15, hold_s=5.0)
+    tracks.offer(_update(np.arange(0.0, 0.51, 0.1)), 1.0)  # the runner at 150 units when the stream drops
+    held = tracks.sample(1.2)
+    tracks.new_stream()
+    tracks.offer(_update(np.array([0.0, 0.1])), 2.0)  # the new stream: its demo time anew, the runner back at 0
+    between = tracks.sample(1.95)  # shows local 1.8, before the new stream's first sample
+    assert between.positions_world.tolist() == held.positions_world.tolist()  # held, not swept toward it
+    assert between.source_time_s == held.source_time_s == pytest.approx(0.5)
+    after = tracks.sample(2.3)
+    assert after.positions_world[0, 0] == pytest.approx(quake_frame.feet_world(np.array([[30.0, 0.0, 0.0]]))[0, 0])
+    assert after.source_time_s == pytest.approx(0.1)

@@ -16,12 +16,15 @@ replies buffering}}. The candidates are not kept (hours of a cast would weigh to
 measures come out empty.
 
 Read against a match. A QTV stream's demo time is not the recorded demo's: MVD blocks carry
-time deltas, and a stream begins where the match was when the client joined. So the program is
-first aligned: the shift of its clock onto the match's is the one, among every row of the match,
-at which the players' feet the program's frames carried lie nearest the match's (median distance
-over ALIGN_MOMENTS moments spread over the program, each the median over its players); a program
-whose best shift leaves them more than ALIGN_LIMIT_M apart is not of this match. Then each moment
-goes to the match row of its shifted source time, and the program's clock is the match's (shot
+time deltas, and a stream begins where the match was when the client joined, anew at each
+reconnect. So the program is cut into pieces where its source clock leaps against the session's
+(by over PIECE_LEAP_S between two moments: a reconnect, a re-anchored stream clock) and each
+piece is aligned on its own: its shift onto the match's clock is the one, among every row of the
+match, at which the players' feet its frames carried lie nearest the match's (median distance
+over ALIGN_MOMENTS moments spread over the piece, each the median over its players). A piece
+whose best shift leaves them more than ALIGN_LIMIT_M apart is left out (counted); a program with
+no piece within it is not of this match. Then each moment goes to the match row of its piece's
+shifted source time, and the program's clock is the match's (shot
 lengths in match seconds); moments beyond the match's ends by more than a row's step are left out
 (counted); two moments on one row (the cast's frames jitter against the file's grid) keep the
 later, cutting if either cut, as eval-match keeps the replies of one moment (and a moment older
@@ -60,6 +63,9 @@ MOMENT_KEYS = {
 }
 ALIGN_MOMENTS = 32  # program moments whose players' feet place the program on the match
 ALIGN_LIMIT_M = 1.0  # feet further apart than this at the best shift: not the same match, m
+# the source clock leaping this far against the session's between two moments starts a new piece, aligned on its own
+# (a reconnect's stream starts its demo time anew; within one, the stream clock moves 0.05 s a second at most), s
+PIECE_LEAP_S = 0.5
 
 
 class ProgramRecorder:
@@ -155,9 +161,10 @@ def read_program(path: Path) -> RecordedProgram:
 class ProgramOnMatch:
     """A recorded program on a match (module docstring): the program, compute_ms (n,) of its
     moments, the match cut to the program's span (its kills before the first moment left out),
-    how many moments were left out (with no source time, or beyond the match's ends), shift_s
-    (the match's time at a source time of 0, s) and align_m (the median distance, m, of the
-    players' feet at that shift)."""
+    how many moments were left out (with no source time, in a piece not of the match, or beyond
+    the match's ends), shift_s (the first placed piece's: the match's time at a source time of 0,
+    s), align_m (the largest of the placed pieces' median distances, m, of the players' feet at
+    their shifts) and pieces (placed, of all: module docstring)."""
 
     program: Program
     compute_ms: np.ndarray
@@ -165,6 +172,14 @@ class ProgramOnMatch:
     left_out: int
     shift_s: float
     align_m: float
+    pieces: tuple[int, int] = (1, 1)
+
+
+def pieces(moments: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """moments (each with a source time) cut where the source clock leaps (module docstring)."""
+    offset = np.array([m["source_time_s"] - m["time_s"] for m in moments])
+    starts = [0, *(np.flatnonzero(np.abs(np.diff(offset)) > PIECE_LEAP_S) + 1).tolist(), len(moments)]
+    return [moments[a:b] for a, b in zip(starts, starts[1:])]
 
 
 def align(moments: list[dict[str, Any]], match: MatchRecording) -> tuple[float, float]:
@@ -199,14 +214,18 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
     timed = [m for m in recorded.moments if m["source_time_s"] is not None and m["players"]]
     if not timed:
         raise ValueError("no moment of the program says where the players were")
-    shift_s, align_m = align(timed, match)
-    if not align_m <= ALIGN_LIMIT_M:
+    cut = pieces(timed)
+    aligned = [(piece, *align(piece, match)) for piece in cut]
+    fits = [(piece, shift_s, align_m) for piece, shift_s, align_m in aligned if align_m <= ALIGN_LIMIT_M]
+    if not fits:
+        best_m = min(align_m for _, _, align_m in aligned)
         raise ValueError(
-            f"the program is not of this match: its players' feet are {align_m:.1f} m from the match's at best"
+            f"the program is not of this match: its players' feet are {best_m:.1f} m from the match's at best"
             f" (over {ALIGN_LIMIT_M:g} m)"
         )
+    timed = [m for piece, _, _ in fits for m in piece]
     step_s = 1.0 / match.rate_hz
-    at_s = np.array([m["source_time_s"] for m in timed]) + shift_s
+    at_s = np.concatenate([np.array([m["source_time_s"] for m in piece]) + shift_s for piece, shift_s, _ in fits])
     inside = (at_s >= match.time_s[0] - step_s) & (at_s <= match.time_s[-1] + step_s)
     placed = [m for m, ok in zip(timed, inside) if ok]
     row = np.clip(np.rint((at_s[inside] - match.time_s[0]) * match.rate_hz).astype(np.int64), 0, len(match.time_s) - 1)
@@ -243,4 +262,12 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
     cut_match = match.until(last_s)
     cut_match = dataclasses.replace(cut_match, events=[e for e in cut_match.events if e.time_s >= first_s])
     compute_ms = np.array([m.get("compute_ms", np.nan) for m in kept], dtype=np.float64)
-    return ProgramOnMatch(program, compute_ms, cut_match, len(recorded.moments) - len(placed), shift_s, align_m)
+    return ProgramOnMatch(
+        program,
+        compute_ms,
+        cut_match,
+        len(recorded.moments) - len(placed),
+        fits[0][1],
+        max(align_m for _, _, align_m in fits),
+        (len(fits), len(cut)),
+    )

@@ -20,7 +20,8 @@ come bunched keep the players' motion at the pace the server recorded it; a catc
 brings the mapping down to its newest block at once (the burst lands in the past), and each new
 connection, whose demo time starts anew, re-anchors it. Each sample is placed at its demo time's local time;
 the players are sampled at t - interp_delay_s (the playout delay: a late segment's margin),
-interpolated between the samples around it except into a jump (teleport, respawn: mvd_wire's),
+interpolated between the samples around it except into a jump (teleport, respawn: mvd_wire's;
+a new connection's first sample),
 held beyond the newest; stale after hold_s without any arrival. Each sample also says the
 stream's demo time it shows (the samples' demo times interpolated the same way, held at the
 ends): a recorded program (program_record.py) is placed on the match file of the same demo by it.
@@ -255,7 +256,9 @@ class QtvTracks:
         self._stats_due: list[tuple[float, int, tuple[int, int, int, int]]] = []  # (local t, slot, values) not shown yet
         self._events_due: list[tuple[float, DerivedEvent]] = []  # (local t, event) not sent yet
         self._last_offer_s = -math.inf
-        self._demo_clock: deque = deque(maxlen=RECENT_SAMPLES)  # (local t, demo time), s, of the newest samples
+        # (local t, demo time s, first of its stream) of the newest samples
+        self._demo_clock: deque = deque(maxlen=RECENT_SAMPLES)
+        self._stream_start: set[int] = set()  # slots whose next sample is their first of a new connection's stream
         self.kills: list[tuple[str, str]] = []  # (attacker, victim) ids of every kill event, in order
         self.roster_changed = threading.Event()  # a slot joined or was renamed: reopen() gives the next roster
         self._in_session: set[str] = set()  # ids the open session knows: the others' stats and events wait
@@ -266,8 +269,10 @@ class QtvTracks:
         return self._roster_ready.wait(timeout_s)
 
     def new_stream(self) -> None:
-        """A new connection's stream follows: its demo time starts anew (re-anchors the clock)."""
+        """A new connection's stream follows: its demo time starts anew (re-anchors the clock), and
+        what it shows first is reached as a jump (held until then, never swept: a reconnect)."""
         with self._lock:
+            self._stream_start = set(self._players) | {-1}  # -1: the demo clock's
             self.clock.reanchor()
 
     def offer(self, update: MvdUpdate, now_s: float) -> None:
@@ -290,9 +295,12 @@ class QtvTracks:
                     t = self.clock.local_of(float(track.time_s[k]))
                     if player.rows and t <= player.rows[-1][0]:
                         continue  # a reconnect's burst of what was already had
-                    player.rows.append((t, *feet[k], float(track.angles_deg[k, 1]), bool(track.jump[k])))
+                    first = slot in self._stream_start
+                    self._stream_start.discard(slot)
+                    player.rows.append((t, *feet[k], float(track.angles_deg[k, 1]), bool(track.jump[k]) or first))
                     if not self._demo_clock or t > self._demo_clock[-1][0]:
-                        self._demo_clock.append((t, float(track.time_s[k])))
+                        self._demo_clock.append((t, float(track.time_s[k]), -1 in self._stream_start))
+                        self._stream_start.discard(-1)
             for slot, stats in update.stats.items():
                 if slot in self._players:
                     for time_s, (health, armor, items, frags) in zip(stats.time_s.tolist(), stats.values.tolist()):
@@ -390,8 +398,7 @@ class QtvTracks:
                 # an event naming a player the session lacks is one it would refuse: left out
                 events = [e for t, e in self._events_due if t <= at and {e.actor_id, e.other_id} - {""} <= self._in_session]
                 self._events_due = [(t, e) for t, e in self._events_due if t > at]
-            clock = np.array(self._demo_clock).reshape(-1, 2)
-            demo_s = float(np.interp(at, clock[:, 0], clock[:, 1])) if len(clock) else None
+            demo_s = _demo_at(self._demo_clock, at)
             return Sample(
                 ids=ids,
                 positions_world=np.array(positions, dtype=np.float64).reshape(-1, 3),
@@ -401,6 +408,20 @@ class QtvTracks:
                 stale=stale or not ids,
                 source_time_s=demo_s,
             )
+
+
+def _demo_at(clock: deque, t: float) -> float | None:
+    """The demo time shown at local time t: interpolated as the players are, held before a new
+    stream's first sample (module docstring); None before any."""
+    if not clock:
+        return None
+    after = next((k for k in range(len(clock)) if clock[k][0] > t), None)
+    if after is None:
+        return clock[-1][1]
+    if after == 0:
+        return clock[0][1]
+    (ta, da, _), (tb, db, jump) = clock[after - 1], clock[after]
+    return da if jump else da + (t - ta) / max(tb - ta, 1e-6) * (db - da)
 
 
 def _at(rows: deque, t: float) -> tuple[np.ndarray, float]:

@@ -220,6 +220,7 @@ def _run_recorded(args: argparse.Namespace) -> int:
             "moments_left_out": placed.left_out,
             "shift_s": round(placed.shift_s, 3),
             "align_m": round(placed.align_m, 3),
+            "pieces": {"placed": placed.pieces[0], "of": placed.pieces[1]},
             "ended": recorded.end is not None,
             "frames_sent": None if recorded.end is None else recorded.end["frames"],
         },
