@@ -152,3 +152,42 @@ def test_recorded_payloads_drive_a_session_and_its_program_reaches_the_console(m
     assert console.lines and all(line.startswith("spec_goto ") and len(line.split()) == 6 for _, line in console.lines)
     assert window_lines <= 5.0 * 1.0 + 1
     assert netcon.sent <= 5.0 * (counts.frames / driver.rate_hz + 1.0) + 1
+
+
+def test_a_player_first_seen_later_opens_the_next_session_with_him(mirage_server, caplog):
+    tracks = GsiTracks(interp_delay_s=0.1, hold_s=2.0)
+    driver = GsiDriverSettings(rate_hz=30.0, delay_s=0.5, hold_s=2.0)
+    stop = threading.Event()
+    done: dict = {}
+    sessions: list[str] = []
+    before, now = mirage_sequence(TOKEN)
+    late_id = max(now["allplayers"], key=lambda steamid: now["allplayers"][steamid]["observer_slot"])
+    before = {**before, "allplayers": {k: v for k, v in before["allplayers"].items() if k != late_id}}
+    with (
+        caplog.at_level(logging.WARNING, logger="camdirector.bridges.live_session"),
+        cd.connect(mirage_server.url("grpc")) as client,
+        GsiEndpoint(GsiEndpointSettings(port=0, token=TOKEN), tracks) as e,
+    ):
+        url = f"http://127.0.0.1:{e.port}/"
+
+        def run():
+            done["counts"] = cast_gsi(
+                client, tracks, driver, level="mirage_floor", director="planned", stop=stop, on_session=sessions.append
+            )
+
+        runner = threading.Thread(target=run)
+        runner.start()
+        assert httpx.post(url, content=json.dumps(before)).status_code == 200  # nine players: the first session's
+        time.sleep(1.0)
+        assert httpx.post(url, content=json.dumps(now)).status_code == 200  # the tenth connects
+        for beat in range(1, 3):
+            time.sleep(1.0)
+            now = {**now, "provider": {**now["provider"], "timestamp": now["provider"]["timestamp"] + beat}}
+            assert httpx.post(url, content=json.dumps(now)).status_code == 200
+        stop.set()
+        runner.join(timeout=30)
+    counts = done["counts"]
+    assert counts.sessions == len(sessions) == 2 and counts.program > 0
+    assert len(tracks.roster) == 10 and tracks.roster[-1].id == "p09"
+    assert tracks.roster[-1].name == now["allplayers"][late_id]["name"] and tracks.counts.unknown == 0
+    assert any("a new session with 10 players" in m for m in caplog.messages)

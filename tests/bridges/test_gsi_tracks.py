@@ -79,9 +79,26 @@ def test_players_are_stale_once_payloads_stop_for_hold_s():
     assert not tracks.sample(52.3).stale
 
 
-def test_the_roster_is_ordered_by_observer_slot_and_later_players_are_counted_out():
+def test_the_roster_is_ordered_by_observer_slot_and_a_later_player_joins_the_next_session():
     tracks = GsiTracks(interp_delay_s=0.0, hold_s=5.0)
     tracks.offer(payload(1, player("z", "CT", 2, 0), player("y", "T", 1, 0)), b"1", 0.0)
     assert [(m.id, m.name, m.team, m.team_name) for m in tracks.roster] == [("p00", "ny", 0, "T"), ("p01", "nz", 1, "CT")]
-    tracks.offer(payload(2, player("z", "CT", 2, 0), player("y", "T", 1, 0), player("new", "T", 3, 0)), b"2", 1.0)
-    assert tracks.counts.unknown == 1
+    assert not tracks.roster_changed.is_set()
+    newcomer = player("new", "T", 3, 300.0)
+    tracks.offer(payload(2, player("z", "CT", 2, 0), player("y", "T", 1, 0), newcomer), b"2", 1.0)
+    # he kills z: a kill naming him waits out of the open session, as he does
+    tracks.offer(
+        payload(3, player("z", "CT", 2, 0, deaths=1), player("y", "T", 1, 0), player("new", "T", 3, 300.0, kills=1)), b"3", 1.1
+    )
+    assert tracks.roster_changed.is_set() and tracks.counts.unknown == 0
+    before = tracks.sample(1.2)
+    assert before.ids == ["p00", "p01"] and before.positions_world.shape == (2, 3) and before.events == []
+    assert [(m.id, m.name, m.team, m.team_name) for m in tracks.reopen()] == [("p02", "nnew", 0, "T")]
+    assert not tracks.roster_changed.is_set() and [m.id for m in tracks.roster] == ["p00", "p01", "p02"]
+    after = tracks.sample(1.3)
+    assert after.ids == ["p00", "p01", "p02"]
+    np.testing.assert_allclose(after.positions_world[2], source_points_to_world(np.array([300.0, 0, 0])))
+    assert ("p02", 100, 0, 0, 1) in after.stats  # his scoreboard goes out with his first frame
+    spectator = GsiPlayer("s", "ns", "", 9, 100, 0, False, False, 0, 0, None, None)
+    tracks.offer(payload(4, player("z", "CT", 2, 0), player("y", "T", 1, 0), spectator), b"4", 2.0)
+    assert tracks.counts.unknown == 1 and not tracks.roster_changed.is_set()  # no team, no place: not a player

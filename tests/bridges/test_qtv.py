@@ -286,10 +286,10 @@ class _JoinsLater(qtv.MvdStream):
 
 def test_a_player_who_joins_later_opens_the_next_session_with_every_player(frobodm2_server, demo, monkeypatch, caplog):
     monkeypatch.setattr(qtv, "MvdStream", _JoinsLater)
-    with caplog.at_level(logging.WARNING, logger="camdirector.bridges.qtv"):
+    with caplog.at_level(logging.WARNING, logger="camdirector.bridges.live_session"):
         with QtvSource(demo, end_s=SLICE_END_S, speed=SPEED) as source:
             cast, sessions, _ = _cast(frobodm2_server, source, lambda c, r, t: c.kills >= 4 and len(t.roster) == 4, 45.0)
-    assert cast.sessions == len(sessions) == 2
+    assert cast.session.sessions == len(sessions) == 2
     assert [(p.id, p.name) for p in sessions[0][1]] == [("p00", "Final"), ("p01", ": Timber"), ("p02", "> MrJustice")]
     assert [(p.id, p.name, p.team, p.team_name) for p in sessions[1][1]] == [
         ("p00", "Final", 0, "=SF="),

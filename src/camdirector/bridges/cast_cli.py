@@ -209,7 +209,7 @@ def _run(args: argparse.Namespace, endpoint_settings, driver, netcon_settings) -
     except cd.DirectorError as exc:
         if not opened:
             return _fail(f"the server at {args.server} refused the session: {exc}")
-        print(f"camdirector cast gsi: the stream of session {opened[0]} failed: {exc}", file=sys.stderr)
+        print(f"camdirector cast gsi: the stream of session {opened[-1]} failed: {exc}", file=sys.stderr)
         return 1
     finally:
         if netcon is not None:
@@ -222,6 +222,7 @@ def _run(args: argparse.Namespace, endpoint_settings, driver, netcon_settings) -
                 "duplicates": c.duplicate,
                 "out_of_order": c.out_of_order,
                 "refused": endpoint.refused,
+                "sessions": counts.sessions,
                 "frames": counts.frames,
                 "answered": counts.answered,
                 "program_frames": counts.program,
@@ -321,7 +322,7 @@ def _run_qtv(args: argparse.Namespace, settings, level: str) -> int:
     _print(
         {
             "summary": {
-                "sessions": done.sessions,
+                "sessions": c.sessions,
                 "frames": c.frames,
                 "answered": c.answered,
                 "program_frames": c.program,

@@ -8,6 +8,7 @@ interpolated (gsi_tracks.Sample), its scoreboard values when they changed (healt
 time since the session opened. When payloads stop, players are held for hold_s, then no frame is
 sent (the program holds; a progress line says stale) until a payload comes again, game time then
 going on from the clock. Each program pose goes to the console when one is given (netcon.py).
+A player who joins later (gsi_tracks.py) ends the session and the next opens with him at once.
 The session loop is live_session.py's, shared with the QTV bridge.
 """
 
@@ -20,7 +21,7 @@ from collections.abc import Callable
 import camdirector_client as cd
 from camdirector.bridges.gsi_settings import GsiDriverSettings
 from camdirector.bridges.gsi_tracks import GsiTracks
-from camdirector.bridges.live_session import CastCounts, drive_session
+from camdirector.bridges.live_session import CastCounts, drive_sessions
 from camdirector.bridges.netcon import NetconSender, spec_goto_line
 
 
@@ -38,8 +39,8 @@ def cast_gsi(
     on_progress: Callable[[CastCounts], None] = lambda counts: None,
     progress_s: float = 1.0,
 ) -> CastCounts:
-    """Runs the session (module docstring, live_session.py) until `stop` is set; returns the
-    counts. DirectorError: the server refused the session or the stream failed."""
+    """Runs the sessions (module docstring, live_session.py) until `stop` is set; returns the
+    counts. DirectorError: the server refused a session or its stream failed."""
 
     def to_console(pose: cd.pb.Pose, now_s: float) -> None:
         if netcon is not None:
@@ -47,14 +48,14 @@ def cast_gsi(
             rotation = [pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w]
             netcon.offer(spec_goto_line(position, rotation), now_s)
 
-    return drive_session(
+    return drive_sessions(
         client,
         tracks,
+        stop=stop,
         rate_hz=settings.rate_hz,
         delay_s=settings.delay_s,
         level=level,
         director=director,
-        stop=stop,
         on_pose=to_console,
         clock=clock,
         on_session=on_session,

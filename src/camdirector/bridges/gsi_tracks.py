@@ -14,7 +14,12 @@ newest is held (no extrapolation: a player that stopped is not carried on). With
 for hold_s, the sample says stale.
 
 The roster is the first payload's players on T or CT, ordered by observer slot (then Steam id):
-ids p00, p01, ... A player first seen later is not in the session (counted in `unknown`).
+ids p00, p01, ... A player on T or CT with a position first seen later (one connecting in the
+warm-up or mid-match) joins: he gets the next id, his samples are kept from then on and
+`roster_changed` is set, but nothing of him is sampled (nor any event naming him) until
+`reopen()` takes him into the roster for the next session (live_session.drive_sessions: a
+session's players are fixed when it opens). One without a position, or on no team, is counted
+in `unknown`.
 
 Kills. GSI carries no death event and no victim's id: a kill is read off the scoreboard. A player
 whose match_stats.kills rose killed someone; one whose deaths rose, or whose health fell to 0, died.
@@ -97,6 +102,8 @@ class GsiTracks:
     _steamids: dict[str, int] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _has_roster: threading.Event = field(default_factory=threading.Event)
+    roster_changed: threading.Event = field(default_factory=threading.Event)  # a player joined: reopen() takes him in
+    _joined: list[MatchPlayer] = field(default_factory=list)  # after the roster, in the order they joined
     _recent: deque[bytes] = field(default_factory=lambda: deque(maxlen=RECENT_BODIES))
     _newest_stamp_s: int = -1
     _last_accept_s: float = float("-inf")
@@ -153,6 +160,8 @@ class GsiTracks:
         killers, victims = [], []
         for p in payload.players:
             i = self._steamids.get(p.steamid)
+            if i is None and p.position_units is not None and p.team in TEAMS:
+                i = self._join(p, arrival_s)
             if i is None:
                 self.counts.unknown += 1
                 continue
@@ -168,9 +177,30 @@ class GsiTracks:
             self._last[p.steamid] = p
         self._events += self._kills(killers, victims)
 
+    def _join(self, p: GsiPlayer, arrival_s: float) -> int:
+        """Takes p in as a joiner (module docstring); his index in the tracks."""
+        i = len(self._steamids)
+        self._joined.append(MatchPlayer(f"p{i:02d}", TEAMS[p.team], PLAYER_HEIGHT_M, PLAYER_RADIUS_M, p.name, p.team))
+        self._steamids[p.steamid] = i
+        feet = source_points_to_world(np.asarray(p.position_units, dtype=np.float64))
+        self._t = np.vstack([self._t, [arrival_s, arrival_s]])
+        self._p = np.concatenate([self._p, np.repeat(feet[None, None, :], 2, axis=1)])
+        self._yaw = np.vstack([self._yaw, [_yaw_deg(p.forward)] * 2])
+        self.roster_changed.set()
+        return i
+
+    def reopen(self) -> list[MatchPlayer]:
+        """The players who joined since (module docstring), now in the roster; clears roster_changed."""
+        with self._lock:
+            joined, self._joined = self._joined, []
+            self.roster = [*self.roster, *joined]
+            self.roster_changed.clear()
+            return joined
+
     def _kills(self, killers: list[int], victims: list[int]) -> list[DerivedEvent]:
-        ids = [m.id for m in self.roster]
-        if len(killers) == 1 and len(victims) == 1 and self.roster[killers[0]].team != self.roster[victims[0]].team:
+        players = [*self.roster, *self._joined]  # the tracks' order
+        ids = [m.id for m in players]
+        if len(killers) == 1 and len(victims) == 1 and players[killers[0]].team != players[victims[0]].team:
             return [DerivedEvent("kill", ids[killers[0]], ids[victims[0]], self._p[victims[0], 1].copy())]
         return [DerivedEvent("death", ids[v], "", self._p[v, 1].copy()) for v in victims] + [
             DerivedEvent("kill_unknown", ids[k], "", self._p[k, 1].copy()) for k in killers
@@ -196,6 +226,10 @@ class GsiTracks:
                 if self._stats_sent.get(m.id) != values:
                     self._stats_sent[m.id] = values
                     stats.append((m.id, *values))
-            events, self._events = self._events, []
+            in_session = {m.id for m in self.roster}
+            # a joiner's events wait out of the session, as he does (module docstring): the session would refuse them
+            events = [e for e in self._events if {e.actor_id, e.other_id} - {""} <= in_session]
+            self._events = []
             stale = now_s - self._last_accept_s > self.hold_s
-            return Sample([m.id for m in self.roster], positions, yaw, stats, events, stale)
+            n = len(self.roster)
+            return Sample([m.id for m in self.roster], positions[:n], yaw[:n], stats, events, stale)

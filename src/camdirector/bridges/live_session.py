@@ -11,17 +11,20 @@ frames lie whole periods apart in game time as in the feed's time; a thread that
 its tick, then the latest tick since at once, skipping any between. While the feed is stale no
 frame is sent (the program holds) and the tick is counted; frames go on when it comes back, game
 time going on from the clock, in the same session. When `end` is set (a feed whose roster changed)
-the stream ends and the session closes, and the feed (not stopped) can drive the next one.
+the stream ends and the session closes, and the feed (not stopped) can drive the next one:
+drive_sessions opens the next at once with the feed's new roster (a session's players are fixed
+when it opens), as long as the feed's roster changes.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
 from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -32,6 +35,8 @@ from camdirector.evaluation.match.measure import aim_offset, player_mesh
 from camdirector.matches.cs2_demo import view_rotation
 
 EVENT_LABELS = {"kill": "kill", "death": "died", "kill_unknown": "kill, victim unknown"}
+
+log = logging.getLogger(__name__)
 
 
 class LiveTracks(Protocol):
@@ -45,12 +50,24 @@ class LiveTracks(Protocol):
     def sample(self, now_s: float) -> Sample: ...
 
 
+class GrowingTracks(LiveTracks, Protocol):
+    """A live feed whose roster can change while a session runs: roster_changed is set when it
+    did, and reopen() takes the changes into the roster (the players who joined or changed) and
+    clears it; until then nothing of those players is sampled."""
+
+    @property
+    def roster_changed(self) -> threading.Event: ...
+
+    def reopen(self) -> list[MatchPlayer]: ...
+
+
 @dataclass
 class CastCounts:
-    """frames sent, answered, program (answers with a pose), cuts, kills (events sent), stale
+    """sessions opened, frames sent, answered, program (answers with a pose), cuts, kills (events sent), stale
     (clock ticks without a frame: no payload for hold_s), last_shot (the program's shot: kind and
     subjects' names)."""
 
+    sessions: int = 0
     frames: int = 0
     answered: int = 0
     program: int = 0
@@ -124,6 +141,7 @@ def drive_session(
     names = {p.id: p.name for p in tracks.roster}
     style = cd.pb.Style(rig=cd.pb.RIG_MATCH, match_director_name=director)
     with client.create_session(targets=targets, level_id=level, delay_s=delay_s, style=style) as session:
+        counts.sessions += 1
         on_session(session.id)
         start_s = clock()
 
@@ -166,3 +184,29 @@ def drive_session(
             if isinstance(replies, Generator):  # ends the stream now, not when collected
                 replies.close()
     return counts
+
+
+def drive_sessions(
+    client: cd.Client,
+    tracks: GrowingTracks,
+    *,
+    stop: threading.Event,
+    on_reopen: Callable[[list[MatchPlayer]], None] = lambda changed: None,
+    **drive: Any,
+) -> CastCounts:
+    """drive_session (its keywords in `drive`, but end and counts) until `stop` is set, a session
+    after another each time the feed's roster changes (module docstring): one warning line names
+    the players who joined or changed, then on_reopen hears them before the next session opens.
+    Returns the counts of all the sessions together."""
+    counts = CastCounts()
+    while True:
+        drive_session(client, tracks, stop=stop, end=tracks.roster_changed, counts=counts, **drive)
+        if stop.is_set() or not tracks.roster_changed.is_set():
+            return counts
+        changed = tracks.reopen()
+        log.warning(
+            "the roster changed (%s): a new session with %d players",
+            ", ".join(f"{p.id} {p.name}" for p in changed) or "back as it was",
+            len(tracks.roster),
+        )
+        on_reopen(changed)

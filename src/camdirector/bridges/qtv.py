@@ -47,6 +47,7 @@ A refusal, or a first connection that cannot be made, ends the cast with that er
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import logging
 import math
@@ -64,7 +65,7 @@ import numpy as np
 import camdirector_client as cd
 from camdirector.bridges import qtv_auth
 from camdirector.bridges.gsi_tracks import DerivedEvent, Sample
-from camdirector.bridges.live_session import CastCounts, drive_session
+from camdirector.bridges.live_session import CastCounts, drive_sessions
 from camdirector.bridges.program_record import ProgramRecorder
 from camdirector.bridges.stream_clock import StreamClock, StreamClockSettings
 from camdirector.evaluation.match.match_file import MatchPlayer
@@ -410,13 +411,17 @@ class QtvTracks:
             )
 
 
+def _local_t(row: tuple) -> float:
+    return row[0]
+
+
 def _demo_at(clock: deque, t: float) -> float | None:
     """The demo time shown at local time t: interpolated as the players are, held before a new
     stream's first sample (module docstring); None before any."""
     if not clock:
         return None
-    after = next((k for k in range(len(clock)) if clock[k][0] > t), None)
-    if after is None:
+    after = bisect.bisect_right(clock, t, key=_local_t)
+    if after == len(clock):
         return clock[-1][1]
     if after == 0:
         return clock[0][1]
@@ -429,7 +434,7 @@ def _at(rows: deque, t: float) -> tuple[np.ndarray, float]:
     newest = rows[-1]
     if t >= newest[0]:
         return np.array(newest[1:4]), newest[4]
-    after = next((k for k in range(len(rows)) if rows[k][0] > t), 0)
+    after = bisect.bisect_right(rows, t, key=_local_t)  # rows rise in t: the first after t
     if after == 0:
         return np.array(rows[0][1:4]), rows[0][4]
     a, b = rows[after - 1], rows[after]
@@ -537,12 +542,11 @@ class QtvReceiver:
 
 @dataclass
 class QtvCast:
-    """What a cast did: the sessions' counts together, the receiver's, and how many sessions it
-    opened (one more each time the roster changed)."""
+    """What a cast did: the sessions' counts together (one more session each time the roster
+    changed) and the receiver's."""
 
     session: CastCounts
     receiver: ReceiverCounts
-    sessions: int = 1
 
 
 def program_part(path: Path, k: int) -> Path:
@@ -574,7 +578,7 @@ def cast_qtv(
     server refused a session or its stream failed."""
     address = parse_qtv_url(url)
     tracks = QtvTracks(settings.interp_delay_s, settings.hold_s, settings.stream_clock)
-    counts, sessions = CastCounts(), 0
+    parts = 0  # the program file's parts: one per session
     recorder = None if program_out is None else ProgramRecorder(program_out)
 
     def opened(session_id: str) -> None:
@@ -592,42 +596,35 @@ def cast_qtv(
             )
         on_session(session_id, roster)
 
+    def next_part(changed: list[MatchPlayer]) -> None:
+        nonlocal recorder, parts
+        parts += 1
+        if recorder is not None:
+            assert program_out is not None
+            recorder.close()
+            recorder = ProgramRecorder(program_part(program_out, parts))
+
     try:
         with QtvReceiver(address, settings, tracks, stop, clock) as receiver:
-            while True:
-                drive_session(
-                    client,
-                    tracks,
-                    rate_hz=settings.rate_hz,
-                    delay_s=settings.delay_s,
-                    level=level,
-                    director=director,
-                    stop=stop,
-                    clock=clock,
-                    on_frame=None if recorder is None else recorder.sent,
-                    on_reply=None if recorder is None else recorder.reply,
-                    on_session=opened,
-                    on_progress=lambda c: on_progress(c, receiver.counts, tracks),
-                    progress_s=progress_s,
-                    end=tracks.roster_changed,
-                    counts=counts,
-                )
-                sessions += 1
-                if stop.is_set() or not tracks.roster_changed.is_set():
-                    break
-                changed = tracks.reopen()
-                log.warning(
-                    "the roster changed (%s): a new session with %d players",
-                    ", ".join(f"{p.id} {p.name}" for p in changed) or "back as it was",
-                    len(tracks.roster),
-                )
-                if recorder is not None:
-                    assert program_out is not None
-                    recorder.close()
-                    recorder = ProgramRecorder(program_part(program_out, sessions))
+            counts = drive_sessions(
+                client,
+                tracks,
+                stop=stop,
+                on_reopen=next_part,
+                rate_hz=settings.rate_hz,
+                delay_s=settings.delay_s,
+                level=level,
+                director=director,
+                clock=clock,
+                on_frame=lambda frame, time_s, sample: None if recorder is None else recorder.sent(frame, time_s, sample),
+                on_reply=lambda reply: None if recorder is None else recorder.reply(reply),
+                on_session=opened,
+                on_progress=lambda c: on_progress(c, receiver.counts, tracks),
+                progress_s=progress_s,
+            )
     finally:
         if recorder is not None:
             recorder.close()
     if receiver.error is not None:
         raise receiver.error
-    return QtvCast(counts, receiver.counts, sessions)
+    return QtvCast(counts, receiver.counts)
