@@ -54,6 +54,10 @@ class DerivedEvent:
     other_id: str
     position_world: np.ndarray
 
+    def names_only(self, ids: set[str]) -> bool:
+        """Whether every player it names is among ids (a session refuses an event naming another)."""
+        return {self.actor_id, self.other_id} - {""} <= ids
+
 
 @dataclass
 class Sample:
@@ -227,8 +231,7 @@ class GsiTracks:
                     self._stats_sent[m.id] = values
                     stats.append((m.id, *values))
             in_session = {m.id for m in self.roster}
-            # a joiner's events wait out of the session, as he does (module docstring): the session would refuse them
-            events = [e for e in self._events if {e.actor_id, e.other_id} - {""} <= in_session]
+            events = [e for e in self._events if e.names_only(in_session)]  # a joiner's wait out, as he does
             self._events = []
             stale = now_s - self._last_accept_s > self.hold_s
             n = len(self.roster)

@@ -214,8 +214,7 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
     timed = [m for m in recorded.moments if m["source_time_s"] is not None and m["players"]]
     if not timed:
         raise ValueError("no moment of the program says where the players were")
-    cut = pieces(timed)
-    aligned = [(piece, *align(piece, match)) for piece in cut]
+    aligned = [(piece, *align(piece, match)) for piece in pieces(timed)]
     fits = [(piece, shift_s, align_m) for piece, shift_s, align_m in aligned if align_m <= ALIGN_LIMIT_M]
     if not fits:
         best_m = min(align_m for _, _, align_m in aligned)
@@ -269,5 +268,5 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
         len(recorded.moments) - len(placed),
         fits[0][1],
         max(align_m for _, _, align_m in fits),
-        (len(fits), len(cut)),
+        (len(fits), len(aligned)),
     )

@@ -262,7 +262,6 @@ class QtvTracks:
         self._stream_start: set[int] = set()  # slots whose next sample is their first of a new connection's stream
         self.kills: list[tuple[str, str]] = []  # (attacker, victim) ids of every kill event, in order
         self.roster_changed = threading.Event()  # a slot joined or was renamed: reopen() gives the next roster
-        self._in_session: set[str] = set()  # ids the open session knows: the others' stats and events wait
         self._changes: dict[int, MvdPlayer] = {}  # slot -> the player joining or renamed there, not in the roster yet
         self._teamplay = 0
 
@@ -316,7 +315,6 @@ class QtvTracks:
             self._ids[p.slot] = pid
             self._players[p.slot] = _Player(p.slot)
             self.roster.append(quake_player(pid, p.name, team, team_name))
-        self._in_session = {p.id for p in self.roster}
         self._roster_ready.set()
 
     def _note_changes(self, update: MvdUpdate) -> None:
@@ -355,7 +353,6 @@ class QtvTracks:
                     self.roster[at] = player
                 changed.append(player)
             self._changes.clear()
-            self._in_session = {p.id for p in self.roster}
             self.roster_changed.clear()
             return changed
 
@@ -380,9 +377,10 @@ class QtvTracks:
         with self._lock:
             stale = now_s - self._last_offer_s > self.hold_s
             at = now_s - self.interp_delay_s
+            in_session = {p.id for p in self.roster}  # a joiner's samples, stats and events wait out (module docstring)
             ids, positions, yaws = [], [], []
             for slot, player in self._players.items():
-                if not player.rows or self._ids[slot] not in self._in_session:
+                if not player.rows or self._ids[slot] not in in_session:
                     continue
                 ids.append(self._ids[slot])
                 position, yaw = _at(player.rows, at)
@@ -395,9 +393,8 @@ class QtvTracks:
                     self._players[slot].stats = values
                     changed.add(slot)
                 self._stats_due = [d for d in self._stats_due if d[0] > at]
-                stats = [(self._ids[s], *self._players[s].stats) for s in sorted(changed) if self._ids[s] in self._in_session]
-                # an event naming a player the session lacks is one it would refuse: left out
-                events = [e for t, e in self._events_due if t <= at and {e.actor_id, e.other_id} - {""} <= self._in_session]
+                stats = [(self._ids[s], *self._players[s].stats) for s in sorted(changed) if self._ids[s] in in_session]
+                events = [e for t, e in self._events_due if t <= at and e.names_only(in_session)]
                 self._events_due = [(t, e) for t, e in self._events_due if t > at]
             demo_s = _demo_at(self._demo_clock, at)
             return Sample(
