@@ -19,7 +19,7 @@ use crate::amap::Window;
 use crate::bvh::Stack;
 use crate::rotation::Vec3;
 use crate::scene::Scene;
-use crate::toric::{tangent_frame, torus_position, Torus};
+use crate::toric::{arc_sincos, tangent_frame_of, torus_position_of, Torus};
 
 /// base.py's SEGMENT_END_MARGIN (a share of s -> P) and SAMPLE_CLEARANCE_M (metres).
 pub const SEGMENT_END_MARGIN: f64 = 1e-4;
@@ -63,15 +63,47 @@ fn cross(u: &Vec3, v: &Vec3) -> Vec3 {
     ]
 }
 
-/// The texel centres' torus points, row-major (torus_points).
-fn torus_points(torus: &Torus, window: &Window) -> Vec<Vec3> {
-    let n = window.resolution;
-    let centre = |min: f64, step: f64, k: usize| min + (k as f64 + 0.5) * step;
-    (0..n * n)
+/// The sines and cosines of a window's texel centres: arc_sincos of each row's theta on `torus`
+/// (row-major: texel t is in row t / n), sincos of each column's phi. The texels read these, one
+/// pair per row and per column rather than two per texel: on the demo scene's maps the sincos
+/// calls were about a sixth of a map's time (perf), for the same bits.
+struct TexelAngles {
+    theta: Vec<(f64, f64)>,
+    phi: Vec<(f64, f64)>,
+}
+
+impl TexelAngles {
+    fn of(torus: &Torus, window: &Window) -> Self {
+        let n = window.resolution;
+        let centre = |min: f64, step: f64, k: usize| min + (k as f64 + 0.5) * step;
+        TexelAngles {
+            theta: (0..n)
+                .map(|i| {
+                    arc_sincos(
+                        torus,
+                        centre(window.theta_min_rad, window.theta_step_rad, i),
+                    )
+                })
+                .collect(),
+            phi: (0..n)
+                .map(|j| libm::sincos(centre(window.phi_min_rad, window.phi_step_rad, j)))
+                .collect(),
+        }
+    }
+
+    /// Texel t's (theta, phi) sines and cosines, t row-major.
+    fn at(&self, t: usize) -> ((f64, f64), (f64, f64)) {
+        let n = self.phi.len();
+        (self.theta[t / n], self.phi[t % n])
+    }
+}
+
+/// The texel centres' torus points, row-major.
+fn torus_points(torus: &Torus, angles: &TexelAngles) -> Vec<Vec3> {
+    (0..angles.theta.len() * angles.phi.len())
         .map(|t| {
-            let theta = centre(window.theta_min_rad, window.theta_step_rad, t / n);
-            let phi = centre(window.phi_min_rad, window.phi_step_rad, t % n);
-            torus_position(torus, theta, phi)
+            let (theta, phi) = angles.at(t);
+            torus_position_of(torus, theta, phi)
         })
         .collect()
 }
@@ -98,9 +130,11 @@ pub fn shadow_velocity_maps(
     samples: &[Sample],
     previous: Option<(&Torus, f64)>,
 ) -> Maps {
-    let points = torus_points(torus, window);
+    let angles = TexelAngles::of(torus, window);
+    let points = torus_points(torus, &angles);
+    // the previous torus's rows (its alpha differs), for the torus points' own velocity
+    let before = previous.map(|(before, dt_s)| (before, TexelAngles::of(before, window), dt_s));
     let m = points.len();
-    let n = window.resolution;
     let mut maps = Maps {
         shadow: vec![0.0; samples.len() * m],
         velocity: vec![[0.0; 2]; samples.len() * m],
@@ -164,15 +198,13 @@ pub fn shadow_velocity_maps(
                 }
                 None => [0.0; 3],
             };
-            let (theta, phi) = (
-                window.theta_min_rad + ((texel / n) as f64 + 0.5) * window.theta_step_rad,
-                window.phi_min_rad + ((texel % n) as f64 + 0.5) * window.phi_step_rad,
-            );
-            if let Some((before, dt_s)) = previous {
-                let moved = sub(p, &torus_position(before, theta, phi));
+            let (theta, phi) = angles.at(texel);
+            if let Some((before, before_angles, dt_s)) = &before {
+                let (before_theta, before_phi) = before_angles.at(texel);
+                let moved = sub(p, &torus_position_of(before, before_theta, before_phi));
                 velocity = [0, 1, 2].map(|a| velocity[a] - moved[a] / dt_s);
             }
-            let [d_theta, d_phi, _] = tangent_frame(torus, theta, phi);
+            let [d_theta, d_phi, _] = tangent_frame_of(torus, theta, phi);
             let n_phi = dot(&d_phi, &d_phi);
             let v_phi = if n_phi > 1e-18 {
                 dot(&velocity, &d_phi) / n_phi

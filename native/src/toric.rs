@@ -168,10 +168,19 @@ fn to_world(torus: &Torus, local: &Vec3) -> Vec3 {
 /// arc's half-plane turned by phi about AB). A theta outside its open range continues around the
 /// arc's circle into the opposite half-plane.
 pub fn torus_position(torus: &Torus, theta: f64, phi: f64) -> Vec3 {
+    torus_position_of(torus, arc_sincos(torus, theta), libm::sincos(phi))
+}
+
+/// sin and cos of alpha + theta, the arc's angle of theta: what torus_position and tangent_frame
+/// read of theta (sincos: one argument reduction, the same bits as libm::sin and libm::cos).
+pub fn arc_sincos(torus: &Torus, theta: f64) -> (f64, f64) {
+    libm::sincos(torus.alpha + theta)
+}
+
+/// torus_position from arc_sincos(theta) and sincos(phi): a grid of (theta, phi) takes one
+/// sincos per row and per column instead of two per point, for the same bits (maps.rs).
+pub fn torus_position_of(torus: &Torus, (s, c): (f64, f64), (sp, cp): (f64, f64)) -> Vec3 {
     let r = torus.arc_radius_m;
-    // sincos: sin and cos from one argument reduction, the same bits as libm::sin and libm::cos
-    let (s, c) = libm::sincos(torus.alpha + theta);
-    let (sp, cp) = libm::sincos(phi);
     let radial = torus.center_offset_m - r * c;
     to_world(torus, &[-r * s, radial * cp, radial * sp])
 }
@@ -217,9 +226,12 @@ pub fn torus_angles(torus: &Torus, position: &Vec3) -> (f64, f64) {
 /// primer "Distortion"): metres per radian, |d/d theta| = arc_radius_m, |d/d phi| = the distance
 /// to the axis; the normal points away from the arc's circle centre.
 pub fn tangent_frame(torus: &Torus, theta: f64, phi: f64) -> [Vec3; 3] {
+    tangent_frame_of(torus, arc_sincos(torus, theta), libm::sincos(phi))
+}
+
+/// tangent_frame from arc_sincos(theta) and sincos(phi), as torus_position_of.
+pub fn tangent_frame_of(torus: &Torus, (s, c): (f64, f64), (sp, cp): (f64, f64)) -> [Vec3; 3] {
     let r = torus.arc_radius_m;
-    let (s, c) = libm::sincos(torus.alpha + theta);
-    let (sp, cp) = libm::sincos(phi);
     let radial = torus.center_offset_m - r * c;
     let local = [
         [-r * c, r * s * cp, r * s * sp],
