@@ -4,7 +4,7 @@ and ZeroMQ.
 
     python -m load_tests.capacity --json FILE [--seconds S] [--max-sessions N] [--modes A,B]
         [--transports grpc,zmq] [--workers W] [--p99-ms MS] [--generator python|native]
-        [--server-python PATH] [--server-arg ARG ...]
+        [--spread-s S] [--server-python PATH] [--server-arg ARG ...]
 
 For each mode and transport a fresh server is started (each step closes its sessions when its
 streams end, so one step's sessions do not weigh on the next), and session counts are
@@ -12,7 +12,10 @@ tried upward (1, 2, 4, 8, 16, then every 8 up to --max-sessions), then the gap b
 last count that passed and the first that failed is halved until they are neighbours (16 passed
 and 24 failed: 20, then 18 or 22, ...), each count a short paced run of
 load_tests.stream: one frame in flight per session at --rate Hz of wall-clock time, the sessions
-staggered over one period as independent game clients would be. A step passes when its round
+staggered over one period. They all stream the same demo frames, so the same moment of the game
+reaches every session within that period and they cut together (a map refill in every session
+on one frame: docs/frame_path.md, "ANTICIPATION's tail"); `--spread-s S` starts them S / sessions
+seconds apart in the demo instead, as independent games would be. A step passes when its round
 trip p99 is at most --p99-ms, no frame is late (answered after the next was due), none is dropped
 and no stream failed; each session's first --warmup-frames frames are answered but not judged
 (its first frame sets up what the session keeps: about 30 ms in ANTICIPATION, late by itself).
@@ -191,6 +194,7 @@ def measure_case(mode: str, transport: str, counts: list[int], args) -> dict:
                         visibility=pb.VisibilityMode.Value(mode),
                         warmup_frames=args.warmup_frames,
                         generator=args.generator,
+                        spread_s=args.spread_s,
                     )
                 )
                 passed = step_passes(result, args.p99_ms)
@@ -266,6 +270,13 @@ def main(argv=None) -> int:
         help="what streams the sessions: the compiled driver (native_generator.py; it needs CMake, gRPC for C++ and "
         "libzmq: scripts/system-deps.sh --tests), or this process (asyncio)",
     )
+    parser.add_argument(
+        "--spread-s",
+        type=float,
+        default=0.0,
+        help="sessions start this far apart in the demo, spread evenly (0, the default: all at the same moment, so a "
+        "cut in one is a cut in all; load_tests.stream)",
+    )
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     try:
@@ -275,6 +286,8 @@ def main(argv=None) -> int:
         parser.error(str(exc))
     if args.max_sessions < 1 or args.seconds <= 0 or args.rate <= 0:
         parser.error("--max-sessions, --seconds and --rate must be positive")
+    if args.spread_s < 0:
+        parser.error("--spread-s must be >= 0")
     counts = session_counts(args.max_sessions)
     t0 = time.perf_counter()
     cases = [measure_case(mode, transport, counts, args) for mode in modes for transport in transports]
@@ -284,6 +297,7 @@ def main(argv=None) -> int:
         "seconds_per_step": args.seconds,
         "warmup_frames_per_session": args.warmup_frames,
         "generator": args.generator,
+        "spread_s": args.spread_s,
         "counts_tried_up_to": counts,
         "cpus": os.cpu_count(),
         "server": _server_checkout(args.server_python),

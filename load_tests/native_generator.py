@@ -73,10 +73,12 @@ def stream(
     period_s: float,
     warmup_frames: int,
     key: str | None = None,
+    stride: int = 0,
 ) -> dict:
     """Streams `frames` (serialized FrameUpdates without a session id) into each session,
     `period_s` apart (0: closed loop), the first session's first frame START_IN_S after the
-    driver is started. Returns the driver's report: `received` (frames answered, per session), `rtt_ms` and
+    driver is started; session i from the (i * stride)-th frame on, each as many (the driver's
+    --stride). Returns the driver's report: `received` (frames answered, per session), `rtt_ms` and
     `compute_ms` of the frames after each session's first `warmup_frames`, `late`, `stale`,
     `errors` (one per failed session), `wall_s` and `cpu_s` (the driver's own CPU)."""
     driver = build()
@@ -97,7 +99,9 @@ def stream(
         ]  # fmt: skip
         if key is not None:
             cmd += ["--key", key]
-        duration_s = len(frames) * (period_s or 0.05)
+        if stride:
+            cmd += ["--stride", str(stride)]
+        duration_s = (len(frames) - (len(session_ids) - 1) * stride) * (period_s or 0.05)
         try:
             done = subprocess.run(cmd, capture_output=True, text=True, timeout=duration_s + RUN_SLACK_S)
         except subprocess.TimeoutExpired:

@@ -1,7 +1,7 @@
 """Streaming benchmark: N concurrent sessions at a fixed frame rate against a server it starts.
 
     python -m load_tests.stream --transport grpc|zmq --sessions N --rate 60 --seconds S
-        [--generator python|native] --json FILE
+        [--generator python|native] [--spread-s S] --json FILE
 
 Each session streams the demo scene (about 2,100 triangles, an avatar and 3-6 moving obstacles,
 packed states) paced by wall-clock time, one frame in flight per session, as a game loop does.
@@ -171,6 +171,7 @@ async def run(
     alongside: Callable[[list[str]], AbstractAsyncContextManager] | None = None,
     key: str | None = None,
     generator: str = "python",
+    spread_s: float = 0.0,
 ) -> dict:
     """warmup_frames: each session's first frames, answered and counted as received but left out of
     the round trips, compute times, late and stale counts (a session's first frame sets up what
@@ -182,16 +183,23 @@ async def run(
     server's CURVE key as well, so it takes none.
     generator: what streams the frames, "python" (this process's asyncio) or "native" (the
     compiled driver, native_generator.py: the sessions are opened and the floor measured here all
-    the same, and `client_cpu_s` is then the driver's)."""
+    the same, and `client_cpu_s` is then the driver's).
+    spread_s: 0 (the default), every session streams the same frames, staggered within one period,
+    so the same moment of the demo reaches every session at once (a cut in one is a cut in all: the
+    worst case); above 0, session k starts k * spread_s / sessions seconds into the demo, each its
+    own stretch of the same game, as independent clients would be (docs/frame_path.md)."""
     if key is not None and transport != "grpc":
         raise ValueError("only the gRPC driver sends a key")
     if generator not in GENERATORS:
         raise ValueError(f"generator must be one of {', '.join(GENERATORS)}, not {generator!r}")
-    scene = build_demo_scene(seed=7, duration_s=max(seconds, 1.0))
-    lens = Lens()
+    if spread_s < 0:
+        raise ValueError(f"spread_s must be >= 0, not {spread_s}")
     nominal_hz = rate_hz or 60.0
     n_frames = int(round(seconds * nominal_hz))
-    frames = _frames(scene, n_frames, nominal_hz)
+    stride = int(round(spread_s * nominal_hz / sessions))  # frames between two sessions' starts
+    scene = build_demo_scene(seed=7, duration_s=max(seconds + spread_s, 1.0))
+    lens = Lens()
+    frames = _frames(scene, n_frames + (sessions - 1) * stride, nominal_hz)
     if generator == "native":
         native_generator.build()  # before anything is timed: a first build takes about 25 s
     driver = GrpcDriver(address, key) if transport == "grpc" else ZmqDriver(address)
@@ -217,7 +225,7 @@ async def run(
         baseline_s = [await driver.baseline() for _ in range(500)]
         if generator == "native":
             streamed = await asyncio.to_thread(
-                native_generator.stream, transport, address, session_ids, frames, period, warmup_frames, key
+                native_generator.stream, transport, address, session_ids, frames, period, warmup_frames, key, stride
             )
             received, rtt_ms, compute_ms = streamed["received"], streamed["rtt_ms"], streamed["compute_ms"]
             late[0], stale[0], errors = streamed["late"], streamed["stale"], streamed["errors"]
@@ -225,10 +233,12 @@ async def run(
         else:
             start = time.perf_counter() + 0.1
             cpu_start_s = time.process_time()
-            # sessions start staggered over one frame period, as independent game clients would
+            # sessions start staggered over one frame period; with spread_s each from its own stretch of the demo
             results = await asyncio.gather(
                 *(
-                    driver.run_session(sid, frames, period, start + k * period / sessions, recorder(k))
+                    driver.run_session(
+                        sid, frames[k * stride : k * stride + n_frames], period, start + k * period / sessions, recorder(k)
+                    )
                     for k, sid in enumerate(session_ids)
                 ),
                 return_exceptions=True,
@@ -250,6 +260,7 @@ async def run(
         "sessions": sessions,
         "rate_hz": rate_hz,
         "seconds": seconds,
+        "spread_s": spread_s,
         "wall_s": round(wall_s, 3),
         "frames_sent": sent,
         "frames_received": sum(received),
@@ -282,12 +293,17 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--generator", choices=GENERATORS, default="python", help="what streams: this process, or the compiled driver"
     )
+    parser.add_argument(
+        "--spread-s", type=float, default=0.0, help="sessions start this far apart in the demo, spread evenly (0: all at once)"
+    )
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     with ServerProcess("--workers", str(workers), "--max-sessions", str(max(64, args.sessions))) as server:
         address = server.grpc if args.transport == "grpc" else server.zmq
-        result = asyncio.run(run(args.transport, address, args.sessions, args.rate, args.seconds, generator=args.generator))
+        result = asyncio.run(
+            run(args.transport, address, args.sessions, args.rate, args.seconds, generator=args.generator, spread_s=args.spread_s)
+        )
         result["server_workers"] = server.ready["workers"]
     emit(result, args.json)
     return 0 if result["dropped_frames"] == 0 and not result["errors"] else 1

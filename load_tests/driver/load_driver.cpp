@@ -11,9 +11,13 @@
 //
 //   load_driver --transport grpc|zmq --address ADDR --frames FILE --sessions ID,ID,...
 //       --period-s P --start-s T --warmup N --compute-field F --stale-field S [--key KEY]
+//       [--stride K]
 //
 // FILE holds the frames without a session id, each as a 4-byte little-endian length and its bytes;
 // each session sends them in order, its id prepended as field 1 (as load_tests.stream does).
+// K (default 0): session i sends FILE's frames from the (i * K)-th on, all sessions as many
+// (FILE's count less (sessions - 1) * K): each its own stretch of the game, not all the same
+// moment (load_tests.stream --spread-s).
 // T: when session 0 sends its first frame, on CLOCK_MONOTONIC (Python's time.perf_counter).
 // P: the period, s (0: closed loop from T on, each frame sent as soon as the last is answered).
 // Prints one JSON object: per-session frames answered, the judged frames' round trips and
@@ -66,6 +70,7 @@ struct Options {
   std::vector<std::string> sessions;
   double period_s = -1.0, start_s = 0.0;
   long warmup = 0;
+  size_t stride = 0;
   int compute_field = 0, stale_field = 0;
 };
 
@@ -88,6 +93,7 @@ Options parse_options(int argc, char** argv) {
       else if (name == "--period-s") o.period_s = std::stod(value);
       else if (name == "--start-s") o.start_s = std::stod(value);
       else if (name == "--warmup") o.warmup = std::stol(value);
+      else if (name == "--stride") o.stride = std::stoul(value);
       else if (name == "--compute-field") o.compute_field = std::stoi(value);
       else if (name == "--stale-field") o.stale_field = std::stoi(value);
       else if (name == "--sessions") {
@@ -174,6 +180,7 @@ struct Tally {
 struct Run {
   Options options;
   std::vector<std::string> frames;
+  size_t count = 0;  // frames each session sends (--stride)
   std::vector<Tally> tallies;
 
   // staggered over one period, as independent clients; closed loop (period 0): every frame due at T
@@ -185,11 +192,12 @@ struct Run {
   std::string payload(size_t session, size_t frame) const {
     const std::string& id = options.sessions[session];
     std::string out;
-    out.reserve(2 + id.size() + frames[frame].size());
+    const std::string& body = frames[session * options.stride + frame];
+    out.reserve(2 + id.size() + body.size());
     out.push_back('\x0a');  // field 1, length-delimited: the session id, first (parsers take fields in any order)
     out.push_back(char(id.size()));
     out += id;
-    out += frames[frame];
+    out += body;
     return out;
   }
 
@@ -251,7 +259,7 @@ void run_grpc(Run& run) {
   };
   auto send_due = [&](size_t k, double now) {  // the session's next frame, when it is due and may go
     GrpcSession& s = sessions[k];
-    if (!s.started || s.writing || s.reading || s.ending || s.next >= run.frames.size()) return 1e300;
+    if (!s.started || s.writing || s.reading || s.ending || s.next >= run.count) return 1e300;
     double due = run.due_s(k, s.next);
     if (due > now) return due;
     std::string payload = run.payload(k, s.next);
@@ -283,7 +291,7 @@ void run_grpc(Run& run) {
       } else if (op == GrpcSession::kWritten) {
         s.writing = false;
         if (!ok) finish(k);
-        else if (s.next >= run.frames.size()) s.call->WritesDone(grpc_tag(k, GrpcSession::kWritesDone));
+        else if (s.next >= run.count) s.call->WritesDone(grpc_tag(k, GrpcSession::kWritesDone));
       } else if (op == GrpcSession::kRead) {
         s.reading = false;
         if (!ok) {
@@ -295,7 +303,7 @@ void run_grpc(Run& run) {
             for (const auto& slice : slices) reply.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
           run.record(k, s.next, s.sent_s, answered_s, reply);
           // the last answered: done writing, once its write has completed (one write op at a time)
-          if (++s.next >= run.frames.size() && !s.writing) s.call->WritesDone(grpc_tag(k, GrpcSession::kWritesDone));
+          if (++s.next >= run.count && !s.writing) s.call->WritesDone(grpc_tag(k, GrpcSession::kWritesDone));
         }
       } else if (op == GrpcSession::kWritesDone) {
         finish(k);
@@ -415,7 +423,7 @@ void run_zmq(Run& run) {
     }
     run.record(k, s.next, s.sent_s, answered_s, s.parts[1]);
     s.in_flight = false;
-    if (++s.next >= run.frames.size()) finish(k, "");
+    if (++s.next >= run.count) finish(k, "");
   };
   auto receive = [&](size_t k) {
     ZmtpSession& s = sessions[k];
@@ -555,6 +563,9 @@ int main(int argc, char** argv) {
   Run run;
   run.options = parse_options(argc, argv);
   run.frames = read_frames(run.options.frames_path);
+  size_t skipped = (run.options.sessions.size() - 1) * run.options.stride;
+  if (skipped >= run.frames.size()) usage_error("--stride leaves the last session no frame to send");
+  run.count = run.frames.size() - skipped;
   run.tallies.resize(run.options.sessions.size());
   double cpu_start_s = cpu_s(), start_s = run.options.start_s;
   if (run.options.transport == "grpc") run_grpc(run);

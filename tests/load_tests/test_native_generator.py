@@ -53,10 +53,10 @@ def test_it_streams_every_frame_of_every_session_and_reports_as_the_python_gener
     assert native["client_cpu_s"] > 0
 
 
-def _session(server) -> tuple[list[bytes], str]:
-    """A FRAMING_ONLY session of the demo scene, and 30 of its frames."""
+def _session(server, n_frames: int = 30) -> tuple[list[bytes], str]:
+    """A FRAMING_ONLY session of the demo scene, and n_frames of its frames."""
     scene = build_demo_scene(seed=7, duration_s=1.0)
-    frames = stream._frames(scene, 30, 60.0)
+    frames = stream._frames(scene, n_frames, 60.0)
     driver = stream.ZmqDriver(server.zmq)
 
     async def open_one() -> str:
@@ -88,9 +88,32 @@ def test_an_unknown_session_is_reported_and_the_others_stream_on(server, transpo
     assert error.startswith(said) and result["received"] == [0, 30]
 
 
+@pytest.mark.parametrize("transport", ["grpc", "zmq"])
+def test_a_stride_gives_each_session_its_own_stretch_of_the_frames(server, transport):
+    frames, first = _session(server, 40)
+    _, second = _session(server)
+    address = _address(server, transport)
+    strided = native_generator.stream(transport, address, [first, second], frames, 0.0, 0, stride=10)
+    assert strided["received"] == [30, 30] and strided["stale"] == 0 and not strided["errors"]
+    # the first session answered frames 1-30, the second 11-40: frames 31-40 are new to the first alone
+    assert native_generator.stream(transport, address, [first], frames[30:], 0.0, 0)["stale"] == 0
+    assert native_generator.stream(transport, address, [second], frames[30:], 0.0, 0)["stale"] == 10
+
+
 def test_a_bad_argument_is_refused_with_the_reason(driver):
     with pytest.raises(RuntimeError, match="--transport must be grpc or zmq"):
         native_generator.stream("carrier-pigeon", "127.0.0.1:1", ["a"], [b"\x10\x01"], 0.0, 0)
+    with pytest.raises(RuntimeError, match="--stride leaves the last session no frame to send"):
+        native_generator.stream("grpc", "127.0.0.1:1", ["a", "b"], [b"\x10\x01"] * 3, 0.0, 0, stride=3)
+
+
+@pytest.mark.parametrize("generator", ["native", "python"])
+def test_sessions_spread_over_the_demo_each_stream_every_frame_in_order(server, generator):
+    spread = asyncio.run(stream.run("zmq", server.zmq, 3, 60.0, 0.5, generator=generator, spread_s=0.5))
+    assert spread["spread_s"] == 0.5 and spread["frames_sent"] == spread["frames_received"] == 3 * 30
+    assert spread["stale_frames"] == 0 and not spread["errors"]  # each session's frames newer than the one before
+    with pytest.raises(ValueError, match="spread_s must be >= 0"):
+        asyncio.run(stream.run("zmq", server.zmq, 1, 60.0, 0.5, spread_s=-1.0))
 
 
 def test_capacity_streams_with_it_by_default(driver, tmp_path):
