@@ -72,29 +72,37 @@ struct TexelAngles {
     phi: Vec<(f64, f64)>,
 }
 
+fn centre(min: f64, step: f64, k: usize) -> f64 {
+    min + (k as f64 + 0.5) * step
+}
+
+/// arc_sincos of each texel row's theta on `torus`.
+fn theta_rows(torus: &Torus, window: &Window) -> Vec<(f64, f64)> {
+    (0..window.resolution)
+        .map(|i| {
+            arc_sincos(
+                torus,
+                centre(window.theta_min_rad, window.theta_step_rad, i),
+            )
+        })
+        .collect()
+}
+
 impl TexelAngles {
     fn of(torus: &Torus, window: &Window) -> Self {
-        let n = window.resolution;
-        let centre = |min: f64, step: f64, k: usize| min + (k as f64 + 0.5) * step;
         TexelAngles {
-            theta: (0..n)
-                .map(|i| {
-                    arc_sincos(
-                        torus,
-                        centre(window.theta_min_rad, window.theta_step_rad, i),
-                    )
-                })
-                .collect(),
-            phi: (0..n)
+            theta: theta_rows(torus, window),
+            phi: (0..window.resolution)
                 .map(|j| libm::sincos(centre(window.phi_min_rad, window.phi_step_rad, j)))
                 .collect(),
         }
     }
 
-    /// Texel t's (theta, phi) sines and cosines, t row-major.
-    fn at(&self, t: usize) -> ((f64, f64), (f64, f64)) {
+    /// Texel t's (theta, phi) sines and cosines, t row-major; `theta` another torus's rows
+    /// (theta_rows) where given, the phi columns being the same on every torus.
+    fn at(&self, t: usize, theta: Option<&[(f64, f64)]>) -> ((f64, f64), (f64, f64)) {
         let n = self.phi.len();
-        (self.theta[t / n], self.phi[t % n])
+        (theta.unwrap_or(&self.theta)[t / n], self.phi[t % n])
     }
 }
 
@@ -102,7 +110,7 @@ impl TexelAngles {
 fn torus_points(torus: &Torus, angles: &TexelAngles) -> Vec<Vec3> {
     (0..angles.theta.len() * angles.phi.len())
         .map(|t| {
-            let (theta, phi) = angles.at(t);
+            let (theta, phi) = angles.at(t, None);
             torus_position_of(torus, theta, phi)
         })
         .collect()
@@ -133,7 +141,7 @@ pub fn shadow_velocity_maps(
     let angles = TexelAngles::of(torus, window);
     let points = torus_points(torus, &angles);
     // the previous torus's rows (its alpha differs), for the torus points' own velocity
-    let before = previous.map(|(before, dt_s)| (before, TexelAngles::of(before, window), dt_s));
+    let before = previous.map(|(before, dt_s)| (before, theta_rows(before, window), dt_s));
     let m = points.len();
     let mut maps = Maps {
         shadow: vec![0.0; samples.len() * m],
@@ -198,9 +206,9 @@ pub fn shadow_velocity_maps(
                 }
                 None => [0.0; 3],
             };
-            let (theta, phi) = angles.at(texel);
-            if let Some((before, before_angles, dt_s)) = &before {
-                let (before_theta, before_phi) = before_angles.at(texel);
+            let (theta, phi) = angles.at(texel, None);
+            if let Some((before, before_rows, dt_s)) = &before {
+                let (before_theta, before_phi) = angles.at(texel, Some(before_rows));
                 let moved = sub(p, &torus_position_of(before, before_theta, before_phi));
                 velocity = [0, 1, 2].map(|a| velocity[a] - moved[a] / dt_s);
             }

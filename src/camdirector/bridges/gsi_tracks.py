@@ -148,16 +148,7 @@ class GsiTracks:
         )
         if not placed:
             return
-        self.roster = [
-            MatchPlayer(f"p{i:02d}", TEAMS[p.team], PLAYER_HEIGHT_M, PLAYER_RADIUS_M, p.name, p.team)
-            for i, p in enumerate(placed)
-        ]
-        self._steamids = {p.steamid: i for i, p in enumerate(placed)}
-        feet = source_points_to_world(np.stack([np.asarray(p.position_units, dtype=np.float64) for p in placed]))
-        yaw = np.array([_yaw_deg(p.forward) for p in placed])
-        self._t = np.full((len(placed), 2), arrival_s)
-        self._p = np.repeat(feet[:, None, :], 2, axis=1)
-        self._yaw = np.repeat(yaw[:, None], 2, axis=1)
+        self.roster = [self._track(p, arrival_s) for p in placed]
         self._has_roster.set()
 
     def _take(self, payload: GsiPayload, arrival_s: float) -> None:
@@ -181,17 +172,22 @@ class GsiTracks:
             self._last[p.steamid] = p
         self._events += self._kills(killers, victims)
 
-    def _join(self, p: GsiPlayer, arrival_s: float) -> int:
-        """Takes p in as a joiner (module docstring); his index in the tracks."""
+    def _track(self, p: GsiPlayer, arrival_s: float) -> MatchPlayer:
+        """Tracks p from arrival_s on as the next id (his first sample twice: held until the next
+        comes); his player."""
         i = len(self._steamids)
-        self._joined.append(MatchPlayer(f"p{i:02d}", TEAMS[p.team], PLAYER_HEIGHT_M, PLAYER_RADIUS_M, p.name, p.team))
         self._steamids[p.steamid] = i
         feet = source_points_to_world(np.asarray(p.position_units, dtype=np.float64))
         self._t = np.vstack([self._t, [arrival_s, arrival_s]])
         self._p = np.concatenate([self._p, np.repeat(feet[None, None, :], 2, axis=1)])
         self._yaw = np.vstack([self._yaw, [_yaw_deg(p.forward)] * 2])
+        return MatchPlayer(f"p{i:02d}", TEAMS[p.team], PLAYER_HEIGHT_M, PLAYER_RADIUS_M, p.name, p.team)
+
+    def _join(self, p: GsiPlayer, arrival_s: float) -> int:
+        """Takes p in as a joiner (module docstring); his index in the tracks."""
+        self._joined.append(self._track(p, arrival_s))
         self.roster_changed.set()
-        return i
+        return len(self._steamids) - 1
 
     def reopen(self) -> list[MatchPlayer]:
         """The players who joined since (module docstring), now in the roster; clears roster_changed."""
