@@ -1,6 +1,10 @@
 """A worker process's main loop: answer the front's requests over the socket pair (framed by
 infra/channels.py) one at a time (dispatch.py, over the process's session table, table.py), and do
 the sessions' deferred work while none waits.
+
+"None waits" counts the requests already read into the loop's buffer, not only those still in the
+socket: under load one read can take in several (at 8 to 128 FRAMING_ONLY sessions, 1.25 requests
+a read on average), and deferred work or a collection run between them would hold them up.
 """
 
 from __future__ import annotations
@@ -11,20 +15,53 @@ import os
 import select
 import socket
 import threading
+from typing import TYPE_CHECKING
 
 from camdirector.errors import DirectorError
-from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_request
+from camdirector.infra.channels import READ_BUFFER_BYTES, REQUEST, encode_reply, read_request
 from camdirector.infra.heap import collect_ahead, freeze_startup_heap
 from camdirector.infra.plugins import import_plugins
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.table import SessionTable
 
+if TYPE_CHECKING:
+    from _typeshed import WriteableBuffer
 
-def _idle(sock: socket.socket) -> bool:
-    """Whether no request waits on the socket. (One already in the reader's buffer, read with the
-    one before it, is not seen: it then waits for at most one snapshot.)"""
-    return not select.select([sock], [], [], 0)[0]
+
+class _CountedSocketIO(socket.SocketIO):
+    """The socket's reads, counted."""
+
+    def __init__(self, sock: socket.socket):
+        super().__init__(sock, "rb")
+        self.bytes_read = 0
+
+    def readinto(self, b: WriteableBuffer) -> int | None:
+        n = super().readinto(b)
+        self.bytes_read += n or 0
+        return n
+
+
+class _Requests:
+    """The front's requests off the socket, through a buffered reader (one read system call takes
+    in a whole frame request, or several) that knows whether it holds more."""
+
+    def __init__(self, sock: socket.socket):
+        self.sock = sock
+        self.raw = _CountedSocketIO(sock)
+        self.reader = io.BufferedReader(self.raw, READ_BUFFER_BYTES)  # sock.makefile("rb", ...), counted
+        self.taken = 0  # bytes of the requests read so far; the reader holds the rest of raw.bytes_read
+
+    def read(self) -> tuple[int, str, str, bytes]:
+        """The next request (read_request); EOFError when the front has gone."""
+        request = read_request(self.reader)
+        _, _, session_id, payload = request
+        self.taken += REQUEST.size + len(session_id.encode()) + len(payload)
+        return request
+
+    def waiting(self) -> bool:
+        """Whether a request waits: in the reader's buffer, or on the socket."""
+        return self.raw.bytes_read > self.taken or bool(select.select([self.sock], [], [], 0)[0])
 
 
 def worker_main(conn, settings: ServerSettings) -> None:
@@ -33,7 +70,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
     import_plugins(settings.plugins)  # spawned: the front's imports are not inherited
     sock = socket.socket(fileno=os.dup(conn.fileno()))
     conn.close()
-    reader = io.BufferedReader(socket.SocketIO(sock, "rb"), READ_BUFFER_BYTES)  # sock.makefile("rb", ...)
+    incoming = _Requests(sock)
     table = SessionTable(settings, defer_snapshots=True)  # snapshots taken below, when no request waits (idle_work)
     requests = Dispatcher(table)
     sending = threading.Lock()  # views are answered from the render process's reader thread
@@ -48,7 +85,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
 
     while True:
         try:
-            request_id, op, session_id, payload = read_request(reader)
+            request_id, op, session_id, payload = incoming.read()
         except EOFError:  # the front died: do not linger as an orphan
             table.close_all()
             return
@@ -71,7 +108,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
         except DirectorError as exc:
             reply = encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
         send(reply)
-        while _idle(sock) and table.idle_work():
+        while not incoming.waiting() and table.idle_work():
             pass
-        if _idle(sock):  # the collector's next run, where it holds no frame up
+        if not incoming.waiting():  # the collector's next run, where it holds no frame up
             collect_ahead()
