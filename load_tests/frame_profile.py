@@ -2,7 +2,8 @@
 goes, for each rig and transport, against a real `camdirector serve` it starts.
 
     python -m load_tests.frame_profile [--frames 2000] [--rigs TORIC_FRAMING_ONLY,...]
-        [--transports grpc,zmq] [--workers W] [--rate HZ] [--no-record] [--bare-frames N] --json FILE
+        [--transports grpc,zmq] [--workers W] [--rate HZ] [--no-record] [--bare-frames N]
+        [--inline-frames N] --json FILE
 
 One session at a time, closed loop by default (each frame sent as soon as the last is answered, as
 load_tests.stream's `--rate 0`: the service's latency without an idle machine's wake-ups; `--rate`
@@ -50,7 +51,10 @@ size, and a ZeroMQ ROUTER that does the same, paced as the frames were. Its roun
 client's write to read, as the profile's `wire round trip` is.
 
 What the stamps cost: `--bare-frames` frames of each configuration are streamed again into a
-server started without the plugin, and their round trip is reported beside the profiled one.
+server started without the plugin, and their round trip is reported beside the profiled one
+(`uninstrumented`). What the hop to a worker costs: `--inline-frames` frames of each are streamed
+into a server without the plugin that holds its sessions in the front process (`serve --workers
+0`), reported the same way (`inline`).
 
 Printed JSON, per configuration: each hop's median, p99 and mean in us and its share of the round
 trip (mean over mean: means add up, medians do not), the round trip (client encode to client
@@ -699,10 +703,16 @@ def _stream_all(server, works: list[Workload], transports: list[str], rate_hz: f
 
 
 def _config(
-    run: Streamed, front: list[dict], worker: list[dict], floor_s: tuple[list[float], float | None], bare: Streamed | None
+    run: Streamed,
+    front: list[dict],
+    worker: list[dict],
+    floor_s: tuple[list[float], float | None],
+    bare: Streamed | None,
+    inline: Streamed | None = None,
 ) -> dict:
     """One configuration's report (module docstring) from its stamps, its echo floor and its
-    round trips against the server without the plugin (`bare`)."""
+    round trips against the server without the plugin (`bare`) and against one holding its
+    sessions in the front (`inline`)."""
     work, client = run.work, run.client
     if len(front) != len(client) or len(worker) != len(client):
         raise RuntimeError(
@@ -736,20 +746,28 @@ def _config(
         **result,
     }
     if bare is not None:
-        bare_rtt = _stats_us([c[3] - c[0] for c in bare.client[bare.work.warmup :]])
-        bare_compute_ms = bare.compute_ms[bare.work.warmup :]
-        report["uninstrumented"] = {
-            "frames": len(bare.client) - bare.work.warmup,
-            "round_trip_us": bare_rtt,
-            # without the stamps, a few of which (the checkpoint's, the codec's, the session's) run inside compute_ms
-            "compute_ms_reported": {
-                "median": round(float(np.median(bare_compute_ms)), 3),
-                "p99": round(float(np.percentile(bare_compute_ms, 99)), 3),
-            },
-            "round_trip_over_echo_p50": round(bare_rtt["median_us"] / floor["median_us"], 2),
-            "cpu_us_per_frame": {k: round(v / len(bare.client) * 1e6, 1) for k, v in bare.cpu_s.items()},
-        }
+        report["uninstrumented"] = _unstamped(bare, floor)
+    if inline is not None:
+        report["inline"] = _unstamped(inline, floor)
     return report
+
+
+def _unstamped(streamed: Streamed, floor: dict[str, float]) -> dict:
+    """The report of frames streamed into a server without the plugin: their round trip, its
+    ratio to the echo's, the compute_ms they reported and the CPU per frame."""
+    rtt = _stats_us([c[3] - c[0] for c in streamed.client[streamed.work.warmup :]])
+    compute_ms = streamed.compute_ms[streamed.work.warmup :]
+    return {
+        "frames": len(streamed.client) - streamed.work.warmup,
+        "round_trip_us": rtt,
+        # without the stamps, a few of which (the checkpoint's, the codec's, the session's) run inside compute_ms
+        "compute_ms_reported": {
+            "median": round(float(np.median(compute_ms)), 3),
+            "p99": round(float(np.percentile(compute_ms, 99)), 3),
+        },
+        "round_trip_over_echo_p50": round(rtt["median_us"] / floor["median_us"], 2),
+        "cpu_us_per_frame": {k: round(v / len(streamed.client) * 1e6, 1) for k, v in streamed.cpu_s.items()},
+    }
 
 
 def run(
@@ -762,10 +780,12 @@ def run(
     bare_frames: int,
     rate_hz: float = 0.0,
     frame_path: str = "python",
+    inline_frames: int = 0,
 ) -> dict:
     """The profile (module docstring); then, with bare_frames > 0, that many frames of each
-    configuration against a server without the plugin: what the stamps cost. frame_path: the
-    servers' (`serve --frame-path`)."""
+    configuration against a server without the plugin: what the stamps cost; with inline_frames >
+    0, that many against a server without the plugin holding its sessions in the front (`serve
+    --workers 0`): what the hop to a worker costs. frame_path: the servers' (`serve --frame-path`)."""
     from camdirector.deploy.server_process import ServerProcess
 
     t0 = time.perf_counter()
@@ -786,12 +806,13 @@ def run(
         front, worker = _server_stamps(stamps_dir)  # written as the server stopped
         with EchoServer() as echo:
             floors = [echo_floor(echo, r.transport, r.sizes[0], r.sizes[1], n_frames, rate_hz) for r in runs]
-        bare: list[Streamed | None] = [None] * len(runs)
-        if bare_frames > 0:
-            short = [Workload(w.rig, w.request, w.frames[: w.warmup + bare_frames], w.warmup) for w in works]
-            with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
-                bare = list(_stream_all(server, short, transports, rate_hz))
-        configs = [_config(r, front[r.session_id], worker[r.session_id], floor, b) for r, floor, b in zip(runs, floors, bare)]
+        bare = _unprofiled(works, transports, rate_hz, bare_frames, serve_args, frame_path, len(runs))
+        inline_args = ("--workers", "0", "--data-dir", str(folder / "data-inline"))
+        inline = _unprofiled(works, transports, rate_hz, inline_frames, inline_args, frame_path, len(runs))
+        configs = [
+            _config(r, front[r.session_id], worker[r.session_id], floor, b, i)
+            for r, floor, b, i in zip(runs, floors, bare, inline)
+        ]
     return {
         "benchmark": "frame_profile",
         "frames_per_config": n_frames,
@@ -803,6 +824,26 @@ def run(
         "wall_s": round(time.perf_counter() - t0, 1),
         "configs": configs,
     }
+
+
+def _unprofiled(
+    works: list[Workload],
+    transports: list[str],
+    rate_hz: float,
+    frames: int,
+    serve_args: tuple[str, ...],
+    frame_path: str,
+    n: int,
+) -> list[Streamed | None]:
+    """`frames` frames of each configuration (in the profile's order) streamed into a server started
+    with serve_args and without the plugin; n Nones when frames is 0."""
+    from camdirector.deploy.server_process import ServerProcess
+
+    if frames == 0:
+        return [None] * n
+    short = [Workload(w.rig, w.request, w.frames[: w.warmup + frames], w.warmup) for w in works]
+    with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
+        return list(_stream_all(server, short, transports, rate_hz))
 
 
 def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
@@ -827,6 +868,12 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--bare-frames", type=int, default=500, help="frames per configuration against a server without the plugin (0: none)"
     )
+    parser.add_argument(
+        "--inline-frames",
+        type=int,
+        default=0,
+        help="frames per configuration against a server holding its sessions in the front, without the plugin (0: none)",
+    )
     parser.add_argument("--echo-server", action="store_true", help=argparse.SUPPRESS)  # the floor's child process
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
@@ -838,8 +885,8 @@ def main(argv=None) -> int:
         transports = _names(args.transports, TRANSPORTS, "--transports")
     except argparse.ArgumentTypeError as exc:
         parser.error(str(exc))
-    if args.frames < 1 or args.warmup < 0 or args.workers < 1 or args.bare_frames < 0 or args.rate < 0:
-        parser.error("--frames and --workers must be positive, --warmup, --bare-frames and --rate not negative")
+    if args.frames < 1 or args.warmup < 0 or args.workers < 1 or min(args.bare_frames, args.inline_frames, args.rate) < 0:
+        parser.error("--frames and --workers must be positive, --warmup, --bare-frames, --inline-frames and --rate not negative")
     emit(
         run(
             rigs,
@@ -851,6 +898,7 @@ def main(argv=None) -> int:
             args.bare_frames,
             args.rate,
             args.frame_path,
+            args.inline_frames,
         ),
         args.json,
     )
