@@ -55,9 +55,10 @@ class HeldSession:
     recorder: RecordingWriter | None = None
     pose_sender: PoseSender | None = None
     checkpoint: SessionCheckpoint = field(default_factory=SessionCheckpoint)
-    # The last ANSWERS_KEPT frames' answers, by frame: a frame sent again (its answer was lost with
-    # a stream or a node) is answered stale with its own pose, not the newest one.
-    answers: OrderedDict[int, codec.Reply] = field(default_factory=OrderedDict)
+    # The last ANSWERS_KEPT frames' answers, by frame, serialized: a frame sent again (its answer was
+    # lost with a stream or a node) is answered stale with its own pose, not the newest one. Bytes,
+    # which the collector does not track (timeline.py's TimelineFrame says why that matters).
+    answers: OrderedDict[int, bytes] = field(default_factory=OrderedDict)
 
 
 class SessionTable:
@@ -130,7 +131,9 @@ class SessionTable:
         input raised then (a refused one is refused again)."""
         held = self.get(msg.session_id)
         if isinstance(msg, pb.FrameUpdate):
-            self._frame(held, msg, self.clock())
+            answer, state = self._frame(held, msg, self.clock())
+            if state is not None:
+                _keep_answer(held, msg.frame, answer.SerializeToString())
         elif isinstance(msg, pb.UpdateStyleRequest):
             self._set_style(held, msg, self._checked_style(held, msg))
         else:
@@ -172,6 +175,7 @@ class SessionTable:
         reply, state = self._frame(held, msg, t0, payload)
         body = reply.SerializeToString()
         if state is not None:
+            _keep_answer(held, msg.frame, body)
             self._after_input(held)
         if held.recorder is not None:
             held.recorder.write_frame_and_camera(payload, body)
@@ -192,11 +196,7 @@ class SessionTable:
             assert last is not None  # a frame is stale only after one was answered
             kept = held.answers.get(msg.frame)
             if kept is not None:  # sent again: its own answer, marked stale
-                reply = pb.CameraUpdate()
-                if isinstance(kept, pb.CameraUpdate):
-                    reply.CopyFrom(kept)
-                else:  # the compiled frame path's (codec.camera_update_wire)
-                    reply.ParseFromString(kept.SerializeToString())
+                reply = pb.CameraUpdate.FromString(kept)
                 reply.stale, reply.compute_ms = True, (self.clock() - t0) * 1e3
                 reply.message = f"frame {msg.frame} is not newer than frame {last.frame}: its first answer repeated"
                 return reply, None
@@ -226,9 +226,6 @@ class SessionTable:
             answer = codec.camera_update_msg(state, compute_ms=0.0)
         answer.compute_ms = (self.clock() - t0) * 1e3
         held.timeline.add(state, answer.compute_ms)
-        held.answers[msg.frame] = answer
-        if len(held.answers) > ANSWERS_KEPT:
-            held.answers.popitem(last=False)
         return answer, state
 
     def update_style(self, msg: pb.UpdateStyleRequest, payload: bytes | None = None) -> pb.UpdateStyleResponse:
@@ -398,3 +395,11 @@ class SessionTable:
         self._deferred.pop(session.id, None)
         # Not the dashboard's timeline: diagnostics, not state, up to 1 MB; a restored session's starts anew.
         self.checkpoints.snapshot(session.id, held.checkpoint, (session, held.style_msg), session.creation_objects(), claim)
+
+
+def _keep_answer(held: HeldSession, frame: int, answer: bytes) -> None:
+    """The frame's serialized answer kept for its resending (HeldSession.answers), the oldest
+    dropped past ANSWERS_KEPT."""
+    held.answers[frame] = answer
+    if len(held.answers) > ANSWERS_KEPT:
+        held.answers.popitem(last=False)
