@@ -36,17 +36,17 @@ class TimelineFrame(NamedTuple):
     """One answered frame, kept as computed (the JSON is made only when someone asks).
     camera_world: (3,) metres, None while buffering; rotation_xyzw: (4,) camera-to-world, None
     while buffering; targets_world: (k, 3) aim point per target; scores: the rig's own scoring of
-    its choice (FrameState.scores' items); framing_error: the
+    its choice (FrameState.scores' items, as (name, score) pairs); framing_error: the
     framed points from where the style puts them, normalised screen units (NaN: not measured);
     compute_ms: the server's time for the frame; match: the MATCH rig's part of the frame
     (`FrameState.match`, not copied: the rig makes it anew each frame), None for another rig.
 
-    The ring holds each frame as a plain tuple of these fields, made one when read: the collector
-    stops tracking a plain tuple at its first pass when nothing in it can hold a reference cycle
-    (numbers, strings, numpy arrays, such tuples; not a dict, not an instance of a class), and
-    never an instance of a class. A MATCH frame's part keeps its frame tracked. A worker holding 64 sessions kept
-    38,400 frames, three quarters of its tracked objects, and its full collections took 13-25 ms,
-    every frame waiting meanwhile."""
+    The ring holds each frame as a plain tuple of these fields, made a TimelineFrame when read. The
+    collector stops tracking a plain tuple at its first pass when it holds only objects of types
+    the collector never tracks (numbers, strings, numpy arrays) and such tuples; never a class's
+    instance, nor a tuple holding a dict: hence the scores as pairs. A MATCH frame's part keeps its frame tracked.
+    A worker holding 64 sessions kept 38,400 frames as instances, three quarters of its tracked
+    objects, and its full collections took 13-25 ms, every frame waiting meanwhile."""
 
     frame: int
     time_s: float
