@@ -806,9 +806,9 @@ def run(
         front, worker = _server_stamps(stamps_dir)  # written as the server stopped
         with EchoServer() as echo:
             floors = [echo_floor(echo, r.transport, r.sizes[0], r.sizes[1], n_frames, rate_hz) for r in runs]
-        bare = _unprofiled(works, transports, rate_hz, bare_frames, serve_args, frame_path, len(runs))
+        bare = _unprofiled(works, transports, rate_hz, bare_frames, serve_args, frame_path)
         inline_args = ("--workers", "0", "--data-dir", str(folder / "data-inline"))
-        inline = _unprofiled(works, transports, rate_hz, inline_frames, inline_args, frame_path, len(runs))
+        inline = _unprofiled(works, transports, rate_hz, inline_frames, inline_args, frame_path)
         configs = [
             _config(r, front[r.session_id], worker[r.session_id], floor, b, i)
             for r, floor, b, i in zip(runs, floors, bare, inline)
@@ -833,14 +833,13 @@ def _unprofiled(
     frames: int,
     serve_args: tuple[str, ...],
     frame_path: str,
-    n: int,
 ) -> list[Streamed | None]:
     """`frames` frames of each configuration (in the profile's order) streamed into a server started
-    with serve_args and without the plugin; n Nones when frames is 0."""
+    with serve_args and without the plugin; a None for each when frames is 0."""
     from camdirector.deploy.server_process import ServerProcess
 
     if frames == 0:
-        return [None] * n
+        return [None] * (len(works) * len(transports))
     short = [Workload(w.rig, w.request, w.frames[: w.warmup + frames], w.warmup) for w in works]
     with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
         return list(_stream_all(server, short, transports, rate_hz))

@@ -18,7 +18,7 @@ import threading
 from typing import TYPE_CHECKING
 
 from camdirector.errors import DirectorError
-from camdirector.infra.channels import READ_BUFFER_BYTES, REQUEST, encode_reply, read_request
+from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_request
 from camdirector.infra.heap import collect_ahead, freeze_startup_heap
 from camdirector.infra.plugins import import_plugins
 from camdirector.server_settings import ServerSettings
@@ -42,6 +42,17 @@ class _CountedSocketIO(socket.SocketIO):
         return n
 
 
+class _CountedReader(io.BufferedReader):
+    """A buffered reader whose reads are counted: less what its raw stream read, what it holds."""
+
+    bytes_taken = 0
+
+    def read(self, size: int | None = -1) -> bytes:
+        data = super().read(size)
+        self.bytes_taken += len(data)
+        return data
+
+
 class _Requests:
     """The front's requests off the socket, through a buffered reader (one read system call takes
     in a whole frame request, or several) that knows whether it holds more."""
@@ -49,19 +60,15 @@ class _Requests:
     def __init__(self, sock: socket.socket):
         self.sock = sock
         self.raw = _CountedSocketIO(sock)
-        self.reader = io.BufferedReader(self.raw, READ_BUFFER_BYTES)  # sock.makefile("rb", ...), counted
-        self.taken = 0  # bytes of the requests read so far; the reader holds the rest of raw.bytes_read
+        self.reader = _CountedReader(self.raw, READ_BUFFER_BYTES)  # sock.makefile("rb", ...), counted
 
     def read(self) -> tuple[int, str, str, bytes]:
         """The next request (read_request); EOFError when the front has gone."""
-        request = read_request(self.reader)
-        _, _, session_id, payload = request
-        self.taken += REQUEST.size + len(session_id.encode()) + len(payload)
-        return request
+        return read_request(self.reader)
 
     def waiting(self) -> bool:
         """Whether a request waits: in the reader's buffer, or on the socket."""
-        return self.raw.bytes_read > self.taken or bool(select.select([self.sock], [], [], 0)[0])
+        return self.raw.bytes_read > self.reader.bytes_taken or bool(select.select([self.sock], [], [], 0)[0])
 
 
 def worker_main(conn, settings: ServerSettings) -> None:
