@@ -54,7 +54,9 @@ What the stamps cost: `--bare-frames` frames of each configuration are streamed 
 server started without the plugin, and their round trip is reported beside the profiled one
 (`uninstrumented`). What the hop to a worker costs: `--inline-frames` frames of each are streamed
 into a server without the plugin that holds its sessions in the front process (`serve --workers
-0`), reported the same way (`inline`).
+0`), reported the same way (`inline`). What the compiled gRPC edge makes of it: `--edge-frames`
+frames of each into a server without the plugin whose gRPC port the edge serves (`serve
+--grpc-front compiled`; its ZeroMQ is the usual one), reported the same way (`edge`).
 
 Printed JSON, per configuration: each hop's median, p99 and mean in us and its share of the round
 trip (mean over mean: means add up, medians do not), the round trip (client encode to client
@@ -709,6 +711,7 @@ def _config(
     floor_s: tuple[list[float], float | None],
     bare: Streamed | None,
     inline: Streamed | None = None,
+    edge: Streamed | None = None,
 ) -> dict:
     """One configuration's report (module docstring) from its stamps, its echo floor and its
     round trips against the server without the plugin (`bare`) and against one holding its
@@ -749,6 +752,8 @@ def _config(
         report["uninstrumented"] = _unstamped(bare, floor)
     if inline is not None:
         report["inline"] = _unstamped(inline, floor)
+    if edge is not None:
+        report["edge"] = _unstamped(edge, floor)
     return report
 
 
@@ -781,11 +786,14 @@ def run(
     rate_hz: float = 0.0,
     frame_path: str = "python",
     inline_frames: int = 0,
+    edge_frames: int = 0,
 ) -> dict:
     """The profile (module docstring); then, with bare_frames > 0, that many frames of each
     configuration against a server without the plugin: what the stamps cost; with inline_frames >
     0, that many against a server without the plugin holding its sessions in the front (`serve
-    --workers 0`): what the hop to a worker costs. frame_path: the servers' (`serve --frame-path`)."""
+    --workers 0`): what the hop to a worker costs; with edge_frames > 0, that many against a server
+    without the plugin whose gRPC port the compiled edge serves. frame_path: the servers' (`serve
+    --frame-path`)."""
     from camdirector.deploy.server_process import ServerProcess
 
     t0 = time.perf_counter()
@@ -800,7 +808,8 @@ def run(
             FRAME_PATH_ENV: frame_path,
             "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
         }
-        with ServerProcess(*serve_args, "--plugin", PLUGIN, env=env) as server:
+        # the Python gRPC front, whose hops the plugin stamps (the compiled edge's are measured apart: --edge-frames)
+        with ServerProcess(*serve_args, "--plugin", PLUGIN, "--grpc-front", "python", env=env) as server:
             runs = _stream_all(server, works, transports, rate_hz)
             server_workers = server.ready.get("workers")
         front, worker = _server_stamps(stamps_dir)  # written as the server stopped
@@ -809,9 +818,11 @@ def run(
         bare = _unprofiled(works, transports, rate_hz, bare_frames, serve_args, frame_path)
         inline_args = ("--workers", "0", "--data-dir", str(folder / "data-inline"))
         inline = _unprofiled(works, transports, rate_hz, inline_frames, inline_args, frame_path)
+        edge_args = ("--workers", str(workers), "--data-dir", str(folder / "data-edge"), "--grpc-front", "compiled")
+        edge = _unprofiled(works, transports, rate_hz, edge_frames, edge_args, frame_path)
         configs = [
-            _config(r, front[r.session_id], worker[r.session_id], floor, b, i)
-            for r, floor, b, i in zip(runs, floors, bare, inline)
+            _config(r, front[r.session_id], worker[r.session_id], floor, b, i, e)
+            for r, floor, b, i, e in zip(runs, floors, bare, inline, edge)
         ]
     return {
         "benchmark": "frame_profile",
@@ -841,6 +852,8 @@ def _unprofiled(
     if frames == 0:
         return [None] * (len(works) * len(transports))
     short = [Workload(w.rig, w.request, w.frames[: w.warmup + frames], w.warmup) for w in works]
+    if "--grpc-front" not in serve_args:  # the front the stamped server ran
+        serve_args = (*serve_args, "--grpc-front", "python")
     with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
         return list(_stream_all(server, short, transports, rate_hz))
 
@@ -873,6 +886,12 @@ def main(argv=None) -> int:
         default=0,
         help="frames per configuration against a server holding its sessions in the front, without the plugin (0: none)",
     )
+    parser.add_argument(
+        "--edge-frames",
+        type=int,
+        default=0,
+        help="frames per configuration against a server whose gRPC port the compiled edge serves, without the plugin (0: none)",
+    )
     parser.add_argument("--echo-server", action="store_true", help=argparse.SUPPRESS)  # the floor's child process
     parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
@@ -884,8 +903,16 @@ def main(argv=None) -> int:
         transports = _names(args.transports, TRANSPORTS, "--transports")
     except argparse.ArgumentTypeError as exc:
         parser.error(str(exc))
-    if args.frames < 1 or args.warmup < 0 or args.workers < 1 or min(args.bare_frames, args.inline_frames, args.rate) < 0:
-        parser.error("--frames and --workers must be positive, --warmup, --bare-frames, --inline-frames and --rate not negative")
+    if (
+        args.frames < 1
+        or args.warmup < 0
+        or args.workers < 1
+        or min(args.bare_frames, args.inline_frames, args.edge_frames, args.rate) < 0
+    ):
+        parser.error(
+            "--frames and --workers must be positive; --warmup, --bare-frames, --inline-frames, --edge-frames and --rate "
+            "not negative"
+        )
     emit(
         run(
             rigs,
@@ -898,6 +925,7 @@ def main(argv=None) -> int:
             args.rate,
             args.frame_path,
             args.inline_frames,
+            args.edge_frames,
         ),
         args.json,
     )

@@ -10,6 +10,8 @@ mod carry;
 mod carry_py;
 mod deoccluder;
 mod deoccluder_py;
+mod edge;
+mod edge_py;
 mod framing;
 mod log_append_py;
 mod maps;
@@ -46,5 +48,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     move_scene_py::register(m)?;
     log_append_py::register(m)?;
     toric_frame_py::register(m)?;
+    edge_py::register(m)?;
     Ok(())
 }

@@ -523,3 +523,18 @@ pub fn reply_bytes(head: &[u8], compute_ms: f64, tail: &[u8]) -> Vec<u8> {
     w.buf.extend_from_slice(tail);
     w.buf
 }
+
+/// The session_id of a serialized request (field 1, a string, in every request that names a
+/// session), read as front/router.py's `session_id_of` reads it: the first field 1 of wire type
+/// LEN counts, the fields before it must be well formed and the rest is not read. Ok("") when it
+/// has none; Err(()) for bytes that are not fields before it, or a session_id that is not UTF-8.
+pub fn session_id(buf: &[u8]) -> Result<&str, ()> {
+    let mut r = Reader::new(buf);
+    while !r.done() {
+        match r.tag().ok_or(())? {
+            (1, LEN) => return utf8(r.len_delimited().ok_or(())?).ok_or(()),
+            (_, wire) => r.skip(wire).ok_or(())?,
+        }
+    }
+    Ok("")
+}

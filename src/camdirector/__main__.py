@@ -14,7 +14,7 @@ from camdirector.matches.import_cli import add_parser as add_import_match_parser
 from camdirector.matches.play_cli import add_parser as add_play_match_parser
 from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
-from camdirector.server_settings import FRAME_PATHS, ServerSettings
+from camdirector.server_settings import FRAME_PATHS, GRPC_FRONTS, ServerSettings
 from camdirector.version import PROTOCOL, VERSION
 
 
@@ -131,6 +131,13 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         choices=FRAME_PATHS,
         help="where sessions' per-frame work runs: compiled (the default; so far the TORIC rig's frames in every "
         "visibility mode, TRACKS and MATCH in Python; docs/frame_path.md) or python (the reference)",
+    )
+    p.add_argument(
+        "--grpc-front",
+        dest="grpc_front",
+        choices=GRPC_FRONTS,
+        help="what serves the gRPC port: compiled (the default: the gRPC edge in Rust, a session's frames straight "
+        "to its worker) or python (grpc.aio alone; docs/frame_path.md)",
     )
     p.add_argument(
         "--plugin",

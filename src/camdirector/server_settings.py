@@ -19,6 +19,7 @@ def _default_data_dir() -> str:
 
 
 FRAME_PATHS = ("python", "compiled")  # ServerSettings.frame_path's values
+GRPC_FRONTS = ("python", "compiled")  # ServerSettings.grpc_front's values
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,10 @@ class ServerSettings:
     # Python: docs/frame_path.md) or "python", the reference it agrees with within 1e-9 m
     # and rad. Recordings replay bit for bit on the path that made them (`camdirector replay --frame-path`).
     frame_path: str = "compiled"
+    # What serves the gRPC port: "compiled", the gRPC edge (native/src/edge.rs: HTTP/2 in Rust, TLS
+    # with tls_cert, a routed session's frames straight to its worker, every other call passed to
+    # grpc.aio; front/grpc_edge.py), or "python" (grpc.aio alone).
+    grpc_front: str = "compiled"
 
     def __post_init__(self):
         checks = [
@@ -113,6 +118,7 @@ class ServerSettings:
             (all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", m) for m in self.plugins),
              "plugins must be Python module names (a.b.c)"),
             (self.frame_path in FRAME_PATHS, f"frame_path must be one of {', '.join(FRAME_PATHS)}, not {self.frame_path!r}"),
+            (self.grpc_front in GRPC_FRONTS, f"grpc_front must be one of {', '.join(GRPC_FRONTS)}, not {self.grpc_front!r}"),
         ]
         for ok, message in checks:
             if not ok:
@@ -122,6 +128,11 @@ class ServerSettings:
     def compiled_frame_path(self) -> bool:
         """Whether sessions run their rigs' compiled twins (frame_path "compiled")."""
         return self.frame_path == "compiled"
+
+    @property
+    def grpc_edge(self) -> bool:
+        """Whether the compiled gRPC edge serves the gRPC port (grpc_front "compiled")."""
+        return bool(self.grpc_addr) and self.grpc_front == "compiled"
 
     @property
     def tls(self) -> bool:

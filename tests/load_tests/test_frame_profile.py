@@ -24,7 +24,7 @@ STAGES = {
 }
 
 
-def _profile(tmp_path, rigs: str, frame_path: str = "python", inline_frames: int = 0) -> dict:
+def _profile(tmp_path, rigs: str, frame_path: str = "python", inline_frames: int = 0, edge_frames: int = 0) -> dict:
     out = tmp_path / "out.json"
     args = [
         "--rigs",
@@ -39,6 +39,8 @@ def _profile(tmp_path, rigs: str, frame_path: str = "python", inline_frames: int
         frame_path,
         "--inline-frames",
         str(inline_frames),
+        "--edge-frames",
+        str(edge_frames),
         "--json",
         str(out),
     ]
@@ -71,17 +73,19 @@ def test_profile_of_toric_frames_over_both_transports(tmp_path):
     result = _profile(tmp_path, "TORIC_FRAMING_ONLY,TORIC_ANTICIPATION")
     assert result["recording"] is True and result["rate_hz"] is None
     _check_configs(result, ["TORIC_FRAMING_ONLY", "TORIC_ANTICIPATION"])
-    assert not any("inline" in config for config in result["configs"])  # --inline-frames 0: not streamed
+    assert not any("inline" in config or "edge" in config for config in result["configs"])  # 0 frames: not streamed
 
 
-def test_profile_on_the_compiled_frame_path_stamps_its_wire_and_prices_the_hop(tmp_path):
-    result = _profile(tmp_path, "TORIC_FRAMING_ONLY", "compiled", inline_frames=4)
+def test_profile_on_the_compiled_frame_path_stamps_its_wire_and_prices_the_hop_and_the_edge(tmp_path):
+    result = _profile(tmp_path, "TORIC_FRAMING_ONLY", "compiled", inline_frames=4, edge_frames=4)
     assert result["frame_path"] == "compiled"
     _check_configs(result, ["TORIC_FRAMING_ONLY"])
     for config in result["configs"]:  # the compiled wire's decode and encode wrapped, not left to "table"
         assert config["hops"]["codec_decode"]["mean_us"] > 0 and config["hops"]["codec_encode"]["mean_us"] > 0
         inline = config["inline"]  # streamed into a server whose front holds the session
         assert inline["frames"] == 4 and inline["round_trip_over_echo_p50"] > 0 and inline["cpu_us_per_frame"]["front"] > 0
+        edge = config["edge"]  # streamed into a server whose gRPC port the compiled edge serves
+        assert edge["frames"] == 4 and edge["round_trip_over_echo_p50"] > 0 and edge["cpu_us_per_frame"]["workers"] > 0
 
 
 @pytest.mark.shared_data

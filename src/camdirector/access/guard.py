@@ -106,6 +106,8 @@ class Guard:
         self._ended_lock = threading.Lock()  # the poll's thread and the routes' threads note ended logins
         self._records_down = False  # an outage was logged and the poll has not reached the database since
         self._records_threads = ThreadPoolExecutor(RECORDS_THREADS, thread_name_prefix="records")
+        # told each key id found revoked (`refresh`): the compiled gRPC edge, which checks its streams itself
+        self.on_revoked: list[Callable[[str], None]] = []
         # Without keys no login is made: a secret of this process's own signs nothing anyone uses.
         self.login_secret = secrets.token_bytes(32)
         if self.enabled:
@@ -209,6 +211,9 @@ class Guard:
                 self._cache.pop(key_id)
             else:
                 self._cache[key_id] = found
+            if found is not None and found[0].revoked:  # what still_valid refuses
+                for tell in self.on_revoked:
+                    tell(key_id)
 
     def poll_revocations(self) -> list[str]:
         """Learns what changed on any node since the last poll: keys revoked (marked in the cache;

@@ -16,6 +16,7 @@ import uvicorn
 
 from camdirector.access.guard import Guard
 from camdirector.access.keys import AccessUnavailable, ensure_admin_key, open_access_store
+from camdirector.front.grpc_edge import GrpcEdgeFront
 from camdirector.front.grpc_service import start_grpc
 from camdirector.front.http.app import build_app
 from camdirector.front.http.routes.levels import install_level_routes
@@ -98,9 +99,12 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
     loop_watch.start()
     guard.start()
     bound: dict[str, str] = {}
-    grpc_server = zmq_transport = http_server = http_task = jobs = live = None
+    grpc_server = grpc_edge = zmq_transport = http_server = http_task = jobs = live = None
     try:
-        if settings.grpc_addr:
+        if settings.grpc_edge:
+            grpc_edge = GrpcEdgeFront(router, guard)
+            bound["grpc"] = await grpc_edge.start(settings.grpc_addr)
+        elif settings.grpc_addr:
             grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr, guard, _tls_credentials(settings))
         if settings.zmq_addr:
             curve = curve_server_keys(settings.data_dir) if settings.auth else None
@@ -151,6 +155,8 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             jobs.close()  # running jobs go back to the queue
         if grpc_server is not None:
             await grpc_server.stop(grace=1.0)
+        if grpc_edge is not None:
+            await grpc_edge.stop()
         if zmq_transport is not None:
             await zmq_transport.stop()
         loop_watch.stop()

@@ -95,6 +95,11 @@ class Metrics:
         )
         self.frame_figures = FrameFigures()
         r.register(self.frame_figures)
+        self.edge_frames = Counter(
+            "camdirector_edge_frames",
+            "Frames the compiled gRPC edge answered with no Python in the front (grpc_front compiled)",
+            registry=r,
+        )
         self.errors = Counter("camdirector_errors", "Requests answered with an error status", ["transport", "code"], registry=r)
         self.sessions_restored = Counter(
             "camdirector_sessions_restored",

@@ -25,6 +25,7 @@ import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import orjson
 
@@ -43,6 +44,14 @@ LOST_IDS_KEPT = 10_000  # ids of sessions lost with their worker, remembered to 
 RESEND_BURST_S = 20.0  # a session may send again this many seconds of frames (at tenant_max_fps) beyond its rate, s
 
 
+class FrameRoutes(Protocol):
+    """Where a session's frames may be answered without the router (_native.GrpcEdge)."""
+
+    def route(self, session_id: str, slot: int, tenant: str, tokens: float, resend: float, age_s: float | None) -> None: ...
+
+    def unroute(self, session_id: str) -> tuple[float, float] | None: ...
+
+
 @dataclass
 class SessionEntry:
     slot: int
@@ -56,6 +65,7 @@ class SessionEntry:
     frame_tokens: float = 0.0  # frames it may still send at once (the tenant's rate limit, _admit_frame)
     resend_tokens: float = 0.0  # frames it may send beyond those after a DATA_LOSS (_admit_frame)
     tokens_at_s: float = 0.0
+    routed: bool = False  # its gRPC frames go from the compiled edge straight to its worker (attach_edge)
 
 
 class SessionRouter:
@@ -74,6 +84,47 @@ class SessionRouter:
         self._reserved = 0  # creations in flight, counted against max_sessions
         self._reserved_by: dict[str, int] = {}  # the same by tenant, against tenant_max_sessions
         self._reaper: asyncio.Task | None = None
+        self.edge: FrameRoutes | None = None  # the compiled gRPC edge, when it serves the gRPC port
+        self._edge_counts: Callable[[], None] = lambda: None  # brings the edge's frame counts here (edge_answered)
+
+    def attach_edge(self, edge: FrameRoutes, counts: Callable[[], None]) -> None:
+        """The compiled gRPC edge (front/grpc_edge.py) answers the frames of the sessions routed to
+        it (`route_to_edge`) without this router: a session is routed there after a frame of its
+        stream answered here, and taken back whenever its worker, its life or its state changes here.
+        `counts()` brings what it answered to `edge_answered`: called before sessions are described,
+        so a frame its client has had the answer to is counted."""
+        self.edge = edge
+        self._edge_counts = counts
+
+    def route_to_edge(self, session_id: str) -> None:
+        """Routes the session's frames to the edge, with its rate bucket (_admit_frame), unless it
+        is restoring (its next frame must come here) or already routed."""
+        entry = self.sessions.get(session_id)
+        if self.edge is None or entry is None or entry.routed or entry.restoring:
+            return
+        entry.routed = True
+        age_s = self.clock() - entry.tokens_at_s if entry.tokens_at_s else None
+        self.edge.route(session_id, entry.slot, entry.tenant, entry.frame_tokens, entry.resend_tokens, age_s)
+
+    def _unroute(self, session_id: str, entry: SessionEntry) -> None:
+        """Takes the session's frames back from the edge, with its rate bucket as the edge left it."""
+        if self.edge is None or not entry.routed:
+            return
+        entry.routed = False
+        bucket = self.edge.unroute(session_id)
+        if bucket is not None:
+            entry.frame_tokens, entry.resend_tokens = bucket
+            entry.tokens_at_s = self.clock()
+
+    def edge_answered(self, frames_by_session: list[tuple[str, int]]) -> None:
+        """Frames the edge answered since it was last asked: counted as answered here would be."""
+        now = self.clock()
+        for session_id, frames in frames_by_session:
+            entry = self.sessions.get(session_id)
+            if entry is not None:
+                entry.frames += frames
+                entry.last_seen_s = now
+                entry.transport.add("grpc")
 
     async def start(self) -> None:
         await self.pool.start()
@@ -148,6 +199,7 @@ class SessionRouter:
         except DirectorError as exc:
             if entry.restoring and exc.code.name == "NOT_FOUND" and self.sessions.get(session_id) is entry:
                 del self.sessions[session_id]
+                self._unroute(session_id, entry)
             raise
         if entry.restoring:
             entry.restoring = False
@@ -242,6 +294,7 @@ class SessionRouter:
     async def close(self, payload: bytes, tenant: str = "default") -> bytes:
         session_id = session_id_of(pb.CloseSessionRequest, payload)
         entry = await self._client_entry(session_id, tenant)
+        self._unroute(session_id, entry)  # before the worker closes it: no frame of the edge's follows
         body, _ = await self._call(entry, "close", session_id, payload)
         self.sessions.pop(session_id, None)
         self.metrics.sessions.set(len(self.sessions))
@@ -268,6 +321,7 @@ class SessionRouter:
         ]
         for session_id in idle:
             entry = self.sessions.pop(session_id)
+            self._unroute(session_id, entry)
             try:
                 await self._forget(session_id)
             except AccessUnavailable as exc:  # the worker drops it all the same: nobody may come back to it
@@ -294,11 +348,14 @@ class SessionRouter:
         if self.checkpoints:  # each to the least loaded other worker, which restores it on its next request
             for session_id in lost:
                 entry = self.sessions[session_id]
+                self._unroute(session_id, entry)
                 entry.slot, entry.restoring = self._least_loaded_slot(exclude=slot), True
             log.error("worker %d died; its %d sessions are restored from their checkpoints on other workers", slot, len(lost))
             return
         for session_id in lost:
-            self._lost[session_id] = (slot, self.sessions.pop(session_id).tenant)
+            entry = self.sessions.pop(session_id)
+            self._unroute(session_id, entry)
+            self._lost[session_id] = (slot, entry.tenant)
             self.metrics.sessions_reclaimed.inc()
         while len(self._lost) > LOST_IDS_KEPT:
             self._lost.popitem(last=False)
@@ -311,6 +368,7 @@ class SessionRouter:
         """The session's summary (as `describe`), style and newest `last` frames after
         `after_frame` (sessions.py); NOT_FOUND for an unknown id. Not a request of the session's
         client: it does not keep the session alive."""
+        self._edge_counts()
         entry = self._entry(session_id, tenant)
         body, _ = await self.pool.call(
             entry.slot, "timeline", session_id, orjson.dumps({"last": last, "after_frame": after_frame})
@@ -333,6 +391,7 @@ class SessionRouter:
         return body
 
     def describe(self, tenant: str = "default") -> list[dict]:
+        self._edge_counts()
         now = self.clock()
         return [self._describe(sid, e, now) for sid, e in self.sessions.items() if e.tenant == tenant]
 

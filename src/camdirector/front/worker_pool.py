@@ -17,6 +17,11 @@ fail with UNAVAILABLE, `on_worker_lost` is told (the router gives its sessions t
 which restore them from their checkpoints), and it is restarted; requests for it meanwhile wait
 for the new one. A worker whose front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
 the front process.
+
+With the compiled gRPC edge (ServerSettings.grpc_edge) each worker has a second socket pair, its
+frame socket: the edge (native/src/edge.rs) writes the frames of the sessions routed to it there and
+reads their replies, in the same framing, with no Python in the front. The pool makes it with the
+worker and hands its front end to `frame_sink` (front/grpc_edge.py), each successor's too.
 """
 
 from __future__ import annotations
@@ -138,6 +143,7 @@ class _Worker:
         self.process: multiprocessing.process.BaseProcess
         self.channel: _Channel
         self.ready = asyncio.Event()  # started and answering; cleared from its death to its successor's start
+        self.frame_socket: socket.socket | None = None  # its frame socket's front end, until frame_sink takes it
         self.replacing: asyncio.Task[None] | None = None
 
 
@@ -156,6 +162,19 @@ class WorkerPool:
         self._monitor: asyncio.Task[None] | None = None
         self._stopping = False
         self._mp = multiprocessing.get_context("spawn")
+        self._frame_sink: Callable[[int, socket.socket], None] | None = None
+
+    def attach_frame_sink(self, sink: Callable[[int, socket.socket], None]) -> None:
+        """Hands each worker's frame socket to `sink(slot, socket)`: those made so far at once,
+        each successor's when it starts."""
+        self._frame_sink = sink
+        for worker in self._workers:
+            self._hand_frame_socket(worker)
+
+    def _hand_frame_socket(self, worker: _Worker) -> None:
+        if self._frame_sink is not None and worker.frame_socket is not None:
+            sock, worker.frame_socket = worker.frame_socket, None
+            self._frame_sink(worker.index, sock)
 
     @property
     def slots(self) -> int:
@@ -172,17 +191,28 @@ class WorkerPool:
     async def _ping(self, worker: _Worker) -> None:
         """Waits until a just started worker answers (its imports done), then lets requests in."""
         await self._send(worker, "ping", "", b"", timeout_s=120.0)
+        self._hand_frame_socket(worker)
         worker.ready.set()
 
     async def _spawn(self, worker: _Worker) -> None:
         front_end, worker_end = self._mp.Pipe(duplex=True)
+        frames_front, frames_worker = self._mp.Pipe(duplex=True) if self.settings.grpc_edge else (None, None)
         worker.process = self._mp.Process(
-            target=worker_main, args=(worker_end, self.settings), name=f"camdirector-worker-{worker.index}", daemon=True
+            target=worker_main,
+            args=(worker_end, self.settings, frames_worker),
+            name=f"camdirector-worker-{worker.index}",
+            daemon=True,
         )
         worker.process.start()
         worker_end.close()
         sock = socket.socket(fileno=os.dup(front_end.fileno()))
         front_end.close()
+        if frames_front is not None and frames_worker is not None:
+            frames_worker.close()
+            if worker.frame_socket is not None:  # its predecessor's, never taken
+                worker.frame_socket.close()
+            worker.frame_socket = socket.socket(fileno=os.dup(frames_front.fileno()))
+            frames_front.close()
         channel = _Channel(self._reply, lambda: self._closed(worker, channel))
         await asyncio.get_running_loop().create_unix_connection(lambda: channel, sock=sock)
         worker.channel = channel
@@ -303,6 +333,8 @@ class WorkerPool:
             except (TimeoutError, DirectorError, ConnectionError):
                 pass
             worker.channel.close()
+            if worker.frame_socket is not None:
+                worker.frame_socket.close()
             worker.process.join(timeout=2.0)
             if worker.process.is_alive():
                 worker.process.kill()

@@ -93,19 +93,23 @@ ReplyHeader = tuple[int, int, int, float, int, int, int]  # REPLY unpacked
 _stage_names: dict[bytes, tuple[str, ...]] = {}  # a rig's stage names recur every frame: split once
 
 
+def frame_metrics(flags: int, compute_ms: float, names_blob: bytes, values: tuple[float, ...]) -> FrameMetrics:
+    """A reply's FrameMetrics from its flags, compute time, stage names' bytes and stage times."""
+    names = _stage_names.get(names_blob)
+    if names is None:
+        names = _stage_names[names_blob] = tuple(names_blob.decode("ascii").split(",")) if names_blob else ()
+    return FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE), bool(flags & CHECKPOINT_FAILED))
+
+
 def decode_reply_tail(header: ReplyHeader, tail: bytes) -> tuple[bytes, FrameMetrics | None]:
     """The body and metrics of a reply from its unpacked REPLY header and the bytes after it
     (stage names, their times, the body)."""
     _, _, flags, compute_ms, stages, names_len, _ = header
     if not flags & HAS_METRICS:
         return tail, None
-    blob = tail[:names_len]
-    names = _stage_names.get(blob)
-    if names is None:
-        names = _stage_names[blob] = tuple(blob.decode("ascii").split(",")) if blob else ()
     values = struct.unpack_from(f"!{stages}d", tail, names_len)
     body = tail[names_len + 8 * stages :]
-    return body, FrameMetrics(compute_ms, dict(zip(names, values)), bool(flags & STALE), bool(flags & CHECKPOINT_FAILED))
+    return body, frame_metrics(flags, compute_ms, tail[:names_len], values)
 
 
 def tail_length(header: ReplyHeader) -> int:

@@ -5,6 +5,10 @@ the sessions' deferred work while none waits.
 "None waits" counts the requests already read into the loop's buffer, not only those still in the
 socket: under load one read can take in several (at 8 to 128 FRAMING_ONLY sessions, 1.25 requests
 a read on average), and deferred work or a collection run between them would hold them up.
+
+With the compiled gRPC edge the worker has a second socket, its frame socket (front/worker_pool.py):
+the edge's frames come there and their replies go back there. The loop takes a request from either,
+the one whose requests are already read first, and answers each on the socket it came from.
 """
 
 from __future__ import annotations
@@ -66,34 +70,73 @@ class _Requests:
         """The next request (read_request); EOFError when the front has gone."""
         return read_request(self.reader)
 
+    def buffered(self) -> bool:
+        """Whether a request's first bytes are already in the reader's buffer."""
+        return self.raw.bytes_read > self.reader.bytes_taken
+
+
+class _Sockets:
+    """The front's socket and, with the compiled gRPC edge, the frame socket: which to read next."""
+
+    def __init__(self, front: _Requests, frames: _Requests | None):
+        self.front = front
+        self.all = [front] if frames is None else [front, frames]
+
+    def next(self) -> _Requests:
+        """A socket with a request: one already read into its buffer first, else the first ready."""
+        for requests in self.all:
+            if requests.buffered():
+                return requests
+        if len(self.all) == 1:
+            return self.front  # its read waits for the request
+        ready = select.select([r.sock for r in self.all], [], [])[0]
+        return next(r for r in self.all if r.sock in ready)
+
     def waiting(self) -> bool:
-        """Whether a request waits: in the reader's buffer, or on the socket."""
-        return self.raw.bytes_read > self.reader.bytes_taken or bool(select.select([self.sock], [], [], 0)[0])
+        """Whether a request waits on any socket: in a reader's buffer, or on the socket."""
+        if any(r.buffered() for r in self.all):
+            return True
+        return bool(select.select([r.sock for r in self.all], [], [], 0)[0])
+
+    def drop(self, requests: _Requests) -> None:
+        """A frame socket the edge closed (the front stopping it): the front's socket goes on."""
+        self.all.remove(requests)
 
 
-def worker_main(conn, settings: ServerSettings) -> None:
-    """Entry point of a worker process: answer requests until told to stop or the front goes.
-    `conn` is the worker's end of a multiprocessing socket pair, read and written as a plain socket."""
-    import_plugins(settings.plugins)  # spawned: the front's imports are not inherited
+def _socket_of(conn) -> socket.socket:
     sock = socket.socket(fileno=os.dup(conn.fileno()))
     conn.close()
-    incoming = _Requests(sock)
+    return sock
+
+
+def worker_main(conn, settings: ServerSettings, frames_conn=None) -> None:
+    """Entry point of a worker process: answer requests until told to stop or the front goes.
+    `conn` is the worker's end of a multiprocessing socket pair, read and written as a plain socket;
+    `frames_conn`, with the compiled gRPC edge, its frame socket's end (module docstring)."""
+    import_plugins(settings.plugins)  # spawned: the front's imports are not inherited
+    sock = _socket_of(conn)
+    front = _Requests(sock)
+    incoming = _Sockets(front, None if frames_conn is None else _Requests(_socket_of(frames_conn)))
     table = SessionTable(settings, defer_snapshots=True)  # snapshots taken below, when no request waits (idle_work)
     requests = Dispatcher(table)
     sending = threading.Lock()  # views are answered from the render process's reader thread
     freeze_startup_heap()  # before the first request: full collections walk only what comes after
 
-    def send(data: bytes) -> None:
+    def send(data: bytes, to: socket.socket = sock) -> None:
         with sending:
-            sock.sendall(data)
+            to.sendall(data)
 
     def send_view(request_id: int, status: int, body: bytes) -> None:
         send(encode_reply(request_id, status, body, None))
 
     while True:
+        source = incoming.next()
         try:
-            request_id, op, session_id, payload = incoming.read()
+            request_id, op, session_id, payload = source.read()
         except EOFError:  # the front died: do not linger as an orphan
+            if source is not front:
+                incoming.drop(source)
+                continue
             table.close_all()
             return
         if op in ("stop", "ping"):
@@ -114,7 +157,7 @@ def worker_main(conn, settings: ServerSettings) -> None:
             reply = encode_reply(request_id, 0, body, metrics)
         except DirectorError as exc:
             reply = encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
-        send(reply)
+        send(reply, source.sock)
         while not incoming.waiting() and table.idle_work():
             pass
         if not incoming.waiting():  # the collector's next run, where it holds no frame up

@@ -1,0 +1,219 @@
+//! camdirector._native's gRPC edge (edge.rs) for front/grpc_edge.py: `GrpcEdge` starts it and is
+//! the front's handle on it.
+//!
+//! What crosses: events as tuples ("auth", token, authorization | None), ("open" | "frame" |
+//! "unary", token, session id, tenant, payload bytes), ("closed", session id); answers as (token,
+//! status code, message, body, key id | None, tenant, opened); drained frames as (elapsed_s,
+//! compute_ms, flags, stage names bytes, stage times tuple, unary), errors as status codes,
+//! sessions as (id, frames).
+
+use bytes::Bytes;
+use pyo3::exceptions::PyOSError;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyTuple};
+
+use crate::edge::{self, Answer, Bucket, Config, Edge, Event, Status};
+
+#[pyclass(name = "GrpcEdge", module = "camdirector._native")]
+pub struct GrpcEdge {
+    edge: Edge,
+}
+
+#[pymethods]
+impl GrpcEdge {
+    /// Binds `address` and serves on the edge's own thread (edge.rs). `wake_fd`: a Unix socket's
+    /// end the edge writes a byte to when events wait (the edge owns it from now on); `tls`: the
+    /// certificate chain and key, PEM bytes, for a TLS port.
+    #[new]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (address, upstream_path, wake_fd, metadata, max_message_bytes, rate_limit, max_fps, resend_frames, tls=None))]
+    fn new(
+        py: Python<'_>,
+        address: &str,
+        upstream_path: String,
+        wake_fd: i32,
+        metadata: Vec<(String, String)>,
+        max_message_bytes: usize,
+        rate_limit: bool,
+        max_fps: f64,
+        resend_frames: f64,
+        tls: Option<(Vec<u8>, Vec<u8>)>,
+    ) -> PyResult<Self> {
+        let config = Config {
+            max_message_bytes,
+            metadata,
+            rate_limit,
+            max_fps,
+            resend_frames,
+        };
+        // SAFETY: Python hands over a socket it has detached (grpc_edge.py)
+        let wake = unsafe { edge::socket_from_fd(wake_fd) };
+        let edge = py
+            .detach(|| {
+                let tls = tls
+                    .as_ref()
+                    .map(|(cert, key)| (cert.as_slice(), key.as_slice()));
+                Edge::start(config, address, upstream_path, wake, tls)
+            })
+            .map_err(|e| PyOSError::new_err(format!("cannot serve gRPC on {address}: {e}")))?;
+        Ok(GrpcEdge { edge })
+    }
+
+    /// The bound port.
+    #[getter]
+    fn port(&self) -> u16 {
+        self.edge.address.port()
+    }
+
+    /// The frame socket of the worker in `slot` (a detached file descriptor the edge owns from now on).
+    fn set_worker(&self, slot: usize, fd: i32) -> PyResult<()> {
+        // SAFETY: Python hands over a socket it has detached (worker_pool.py)
+        let socket = unsafe { edge::socket_from_fd(fd) };
+        self.edge
+            .enter(|| self.edge.shared.set_worker(slot, socket))
+            .map_err(|e| PyOSError::new_err(e.to_string()))
+    }
+
+    /// Routes the session's frames to the worker in `slot`, with its rate bucket (router._admit_frame):
+    /// `tokens` and `resend` frames, last filled `age_s` ago (None: full).
+    #[pyo3(signature = (session_id, slot, tenant, tokens, resend, age_s))]
+    fn route(
+        &self,
+        session_id: String,
+        slot: usize,
+        tenant: String,
+        tokens: f64,
+        resend: f64,
+        age_s: Option<f64>,
+    ) {
+        let bucket = Bucket {
+            tokens,
+            resend,
+            age_s,
+        };
+        self.edge.shared.route(session_id, slot, tenant, bucket);
+    }
+
+    /// Stops routing the session here; its bucket (tokens, resend) when it was routed.
+    fn unroute(&self, session_id: &str) -> Option<(f64, f64)> {
+        self.edge.shared.unroute(session_id)
+    }
+
+    /// Streams of this key end at their next frame.
+    fn revoke(&self, key_id: String) {
+        self.edge.shared.revoke(key_id);
+    }
+
+    /// The events waiting for the front's answers, oldest first.
+    fn take_events<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyTuple>>> {
+        self.edge
+            .shared
+            .take_events()
+            .into_iter()
+            .map(|event| match event {
+                Event::Auth {
+                    token,
+                    authorization,
+                } => ("auth", token, authorization).into_pyobject(py),
+                Event::Open {
+                    token,
+                    session_id,
+                    tenant,
+                    payload,
+                } => (
+                    "open",
+                    token,
+                    session_id,
+                    tenant,
+                    PyBytes::new(py, &payload),
+                )
+                    .into_pyobject(py),
+                Event::Frame {
+                    unary,
+                    token,
+                    session_id,
+                    tenant,
+                    payload,
+                } => (
+                    if unary { "unary" } else { "frame" },
+                    token,
+                    session_id,
+                    tenant,
+                    PyBytes::new(py, &payload),
+                )
+                    .into_pyobject(py),
+                Event::Closed { session_id } => ("closed", session_id).into_pyobject(py),
+            })
+            .collect()
+    }
+
+    /// The front's answer to the event of `token`.
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (token, status, message, body, key_id, tenant, opened))]
+    fn answer(
+        &self,
+        token: u64,
+        status: u8,
+        message: String,
+        body: &[u8],
+        key_id: Option<String>,
+        tenant: String,
+        opened: bool,
+    ) {
+        let answer = Answer {
+            status: Status {
+                code: status,
+                message,
+            },
+            body: Bytes::copy_from_slice(body),
+            key_id,
+            tenant,
+            opened,
+        };
+        self.edge.shared.answer(token, answer);
+    }
+
+    /// What happened since the last call: (frames, error codes, (session id, frames) pairs).
+    #[allow(clippy::type_complexity)]
+    fn drain<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Vec<(f64, f64, u8, Bound<'py, PyBytes>, Bound<'py, PyTuple>, bool)>,
+        Vec<u8>,
+        Vec<(String, u64)>,
+    )> {
+        let drained = self.edge.shared.drain();
+        let frames = drained
+            .frames
+            .into_iter()
+            .map(|f| {
+                Ok((
+                    f.elapsed_s,
+                    f.compute_ms,
+                    f.flags,
+                    PyBytes::new(py, &f.names),
+                    PyTuple::new(py, f.values)?,
+                    f.unary,
+                ))
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        Ok((
+            frames,
+            drained.errors,
+            drained.sessions.into_iter().collect(),
+        ))
+    }
+
+    /// Stops listening and ends every stream (its thread is gone when this returns).
+    fn stop(&mut self, py: Python<'_>) {
+        py.detach(|| self.edge.stop());
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<GrpcEdge>()?;
+    m.add("EDGE_HAS_METRICS", edge::HAS_METRICS)?;
+    m.add("EDGE_STREAM_FRAMES", edge::STREAM_FRAMES)?;
+    Ok(())
+}
