@@ -6,6 +6,14 @@ import logging
 
 import grpc
 
+_STATUS_CODES = {code.value[0]: code for code in grpc.StatusCode}
+
+
+def status_code(number: int) -> grpc.StatusCode:
+    """The gRPC status code of its number (as a worker's reply or the gRPC edge gives it); UNKNOWN
+    for a number that is none."""
+    return _STATUS_CODES.get(number, grpc.StatusCode.UNKNOWN)
+
 
 class DirectorError(Exception):
     """An error answered to the client: a gRPC status code and a message for a person.

@@ -32,7 +32,7 @@ import grpc
 from camdirector import _native
 from camdirector.access.guard import Guard
 from camdirector.access.keys import AccessUnavailable
-from camdirector.errors import DirectorError, internal
+from camdirector.errors import DirectorError, internal, status_code
 from camdirector.front.grpc_service import SERVER_METADATA, TRANSPORT, start_grpc
 from camdirector.front.router import RESEND_BURST_S, SessionRouter
 from camdirector.front.session_calls import RPCS
@@ -41,7 +41,6 @@ from camdirector.infra.channels import frame_metrics
 log = logging.getLogger("camdirector.grpc_edge")
 
 DRAIN_S = 0.25  # how often what the edge answered alone reaches the metrics and the sessions' counts, s
-_CODES = {code.value[0]: code for code in grpc.StatusCode}
 _RPC = ("StreamFrames", "Frame")  # by whether the edge's frame was a Frame call's
 
 
@@ -63,12 +62,13 @@ class GrpcEdgeFront:
         """Serves `address` (HOST:PORT; port 0 picks one); returns the bound HOST:PORT."""
         settings = self.router.settings
         self._folder = tempfile.mkdtemp(prefix="camdirector-grpc-")  # mode 0700: the inner server is this user's
-        self._inner, _ = await start_grpc(self.router, f"unix:{os.path.join(self._folder, 'grpc.sock')}", self.guard)
+        inner_path = os.path.join(self._folder, "grpc.sock")
+        self._inner, _ = await start_grpc(self.router, f"unix:{inner_path}", self.guard)
         self._wake, edge_end = socket.socketpair()
         self._wake.setblocking(False)
         edge = self.edge = _native.GrpcEdge(
             address,
-            os.path.join(self._folder, "grpc.sock"),
+            inner_path,
             edge_end.detach(),
             list(SERVER_METADATA),
             settings.max_message_bytes,
@@ -168,5 +168,5 @@ class GrpcEdgeFront:
         if frames:
             self.metrics.edge_frames.inc(len(frames))
         for code in errors:
-            self.metrics.labelled(self.metrics.errors, TRANSPORT, _CODES.get(code, grpc.StatusCode.UNKNOWN).name).inc()
+            self.metrics.labelled(self.metrics.errors, TRANSPORT, status_code(code).name).inc()
         self.router.edge_answered(sessions)

@@ -36,7 +36,7 @@ from collections.abc import Callable
 
 import grpc
 
-from camdirector.errors import DirectorError
+from camdirector.errors import DirectorError, status_code
 from camdirector.infra.channels import (
     REPLY,
     REQUEST_ID_MODULUS,
@@ -53,7 +53,6 @@ from camdirector.worker.table import SessionTable
 
 log = logging.getLogger("camdirector.workers")
 
-_CODES = {code.value[0]: code for code in grpc.StatusCode}
 WORKER_START_WAIT_S = 30.0  # a request for a restarting worker waits this long for it, s
 # a request this large is written at once and its write waited for, not held to the turn's end, bytes
 WRITE_AT_ONCE_BYTES = 1 << 16
@@ -226,7 +225,7 @@ class WorkerPool:
         if header[1] == 0:
             pending[0].set_result((body, metrics))
         else:
-            pending[0].set_exception(DirectorError(_CODES.get(header[1], grpc.StatusCode.UNKNOWN), body.decode()))
+            pending[0].set_exception(DirectorError(status_code(header[1]), body.decode()))
 
     def _closed(self, worker: _Worker, channel: _Channel) -> None:
         """A worker's socket pair closed: it went away (at once, not at _watch's next look). A
@@ -311,7 +310,7 @@ class WorkerPool:
             if status == 0:
                 future.set_result((body, None))
             else:
-                future.set_exception(DirectorError(_CODES.get(status, grpc.StatusCode.UNKNOWN), body.decode()))
+                future.set_exception(DirectorError(status_code(status), body.decode()))
 
         def reply(status: int, body: bytes) -> None:  # from the render thread
             loop.call_soon_threadsafe(settle, status, body)
