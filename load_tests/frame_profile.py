@@ -54,9 +54,9 @@ What the stamps cost: `--bare-frames` frames of each configuration are streamed 
 server started without the plugin, and their round trip is reported beside the profiled one
 (`uninstrumented`). What the hop to a worker costs: `--inline-frames` frames of each are streamed
 into a server without the plugin that holds its sessions in the front process (`serve --workers
-0`), reported the same way (`inline`). What the compiled gRPC edge makes of it: `--edge-frames`
-frames of each into a server without the plugin whose gRPC port the edge serves (`serve
---grpc-front compiled`; its ZeroMQ is the usual one), reported the same way (`edge`).
+0`), reported the same way (`inline`). What the compiled edge makes of it: `--edge-frames`
+frames of each into a server without the plugin whose gRPC port and ZeroMQ socket the edge serves
+(`serve --grpc-front compiled --zmq-front compiled`), reported the same way (`edge`).
 
 Printed JSON, per configuration: each hop's median, p99 and mean in us and its share of the round
 trip (mean over mean: means add up, medians do not), the round trip (client encode to client
@@ -94,6 +94,8 @@ from camdirector.server_settings import FRAME_PATHS
 FRAME_PATH_ENV = "CAMDIRECTOR_FRAME_PATH"  # ServerSettings.frame_path from the environment: the plugin wraps that path's codec
 PROFILE_DIR_ENV = "CAMDIRECTOR_FRAME_PROFILE_DIR"  # the folder the server's processes write their stamps to
 PLUGIN = "load_tests.frame_profile"
+PYTHON_FRONTS = ("--grpc-front", "python", "--zmq-front", "python")  # the fronts whose hops the plugin stamps
+COMPILED_FRONTS = ("--grpc-front", "compiled", "--zmq-front", "compiled")  # the edge (front/edge.py)
 ROOT = Path(__file__).resolve().parents[1]
 ECHO_SERVICE = "camdirector.profile.Echo"  # the bare echo's gRPC service, one stream method
 ECHO_PATH = f"/{ECHO_SERVICE}/Stream"
@@ -808,8 +810,8 @@ def run(
             FRAME_PATH_ENV: frame_path,
             "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
         }
-        # the Python gRPC front, whose hops the plugin stamps (the compiled edge's are measured apart: --edge-frames)
-        with ServerProcess(*serve_args, "--plugin", PLUGIN, "--grpc-front", "python", env=env) as server:
+        # the Python fronts, whose hops the plugin stamps (the compiled edge's are measured apart: --edge-frames)
+        with ServerProcess(*serve_args, "--plugin", PLUGIN, *PYTHON_FRONTS, env=env) as server:
             runs = _stream_all(server, works, transports, rate_hz)
             server_workers = server.ready.get("workers")
         front, worker = _server_stamps(stamps_dir)  # written as the server stopped
@@ -818,7 +820,7 @@ def run(
         bare = _unprofiled(works, transports, rate_hz, bare_frames, serve_args, frame_path)
         inline_args = ("--workers", "0", "--data-dir", str(folder / "data-inline"))
         inline = _unprofiled(works, transports, rate_hz, inline_frames, inline_args, frame_path)
-        edge_args = ("--workers", str(workers), "--data-dir", str(folder / "data-edge"), "--grpc-front", "compiled")
+        edge_args = ("--workers", str(workers), "--data-dir", str(folder / "data-edge"), *COMPILED_FRONTS)
         edge = _unprofiled(works, transports, rate_hz, edge_frames, edge_args, frame_path)
         configs = [
             _config(r, front[r.session_id], worker[r.session_id], floor, b, i, e)
@@ -852,8 +854,8 @@ def _unprofiled(
     if frames == 0:
         return [None] * (len(works) * len(transports))
     short = [Workload(w.rig, w.request, w.frames[: w.warmup + frames], w.warmup) for w in works]
-    if "--grpc-front" not in serve_args:  # the front the stamped server ran
-        serve_args = (*serve_args, "--grpc-front", "python")
+    if "--grpc-front" not in serve_args:  # the fronts the stamped server ran
+        serve_args = (*serve_args, *PYTHON_FRONTS)
     with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
         return list(_stream_all(server, short, transports, rate_hz))
 

@@ -5,7 +5,7 @@
 //!   worker, its tenant, its rate) goes straight to that worker over the worker's frame socket
 //!   (infra/channels.py's framing, op `frame`) and its reply straight back to the client: no Python
 //!   in the front touches it. Everything else about a stream is asked of the front's Python
-//!   through `Event`s (front/grpc_edge.py answers them): the caller's key when the stream opens,
+//!   through `Event`s (front/edge.py answers them): the caller's key when the stream opens,
 //!   its first frame (the session adopted, restored, counted as streaming), any frame of a session
 //!   not routed here (restoring, moved), and the stream's end. Python stays the judge of who may
 //!   do what; this only repeats its per-frame checks (revoked key, one session a stream, the
@@ -42,7 +42,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, UnixStream};
 use tokio::sync::{mpsc, oneshot};
 
-use crate::wire;
+use crate::{wire, zmq_edge};
 
 pub const STREAM_FRAMES: &str = "/camdirector.v1.Director/StreamFrames";
 pub const UNARY_FRAME: &str = "/camdirector.v1.Director/Frame";
@@ -75,7 +75,7 @@ const WORKER_DIED: &str = "the worker holding this session died; retry: it is be
 type BoxError = Box<dyn std::error::Error + Send + Sync>;
 pub type EdgeBody = BoxBody<Bytes, BoxError>;
 
-/// The edge's settings, from ServerSettings (front/grpc_edge.py).
+/// The edge's settings, from ServerSettings (front/edge.py).
 pub struct Config {
     pub max_message_bytes: usize, // a larger message ends its stream RESOURCE_EXHAUSTED, bytes
     pub metadata: Vec<(String, String)>, // sent with every stream's headers (grpc_service.SERVER_METADATA)
@@ -124,6 +124,27 @@ pub enum Event {
     },
     /// A stream that had opened on its session ended.
     Closed { session_id: String },
+    /// A ZeroMQ request the edge does not answer itself (zmq_edge.rs), its frames as received:
+    /// answered with the reply's frames (`Answer::frames`).
+    Zmq { token: u64, parts: Vec<Bytes> },
+}
+
+/// Which call a frame answered here came by: a StreamFrames stream, a gRPC Frame call, a ZeroMQ Frame request.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Via {
+    Stream = 0,
+    Unary = 1,
+    Zmq = 2,
+}
+
+impl Via {
+    /// The transports a session's frames came by, as bits (Drained::sessions): 1 gRPC, 2 ZeroMQ.
+    fn transport_bit(self) -> u8 {
+        match self {
+            Via::Stream | Via::Unary => 1,
+            Via::Zmq => 2,
+        }
+    }
 }
 
 /// Python's answer to an `Event`.
@@ -133,6 +154,8 @@ pub struct Answer {
     pub key_id: Option<String>, // Auth: the caller's key (None: authentication off)
     pub tenant: String,         // Auth: the caller's tenant
     pub opened: bool, // Open: the stream counts as open on its session (Closed due at its end)
+    pub frames: Vec<Bytes>, // Zmq: the reply's frames, envelope included
+    pub let_in: bool, // Zmq: the caller (key_id, tenant) may send frames, remembered as Auth's are
 }
 
 impl Answer {
@@ -143,13 +166,15 @@ impl Answer {
             key_id: None,
             tenant: String::new(),
             opened: false,
+            frames: Vec::new(),
+            let_in: false,
         }
     }
 }
 
 /// One frame answered here, for the front's Prometheus histograms (front/metrics.py).
 pub struct FrameRecord {
-    pub unary: bool,    // a Frame call's, not a stream's
+    pub via: Via,
     pub elapsed_s: f64, // from its message read to its reply queued, s
     pub compute_ms: f64,
     pub flags: u8, // the reply's flags (infra/channels.py)
@@ -161,8 +186,8 @@ pub struct FrameRecord {
 #[derive(Default)]
 pub struct Drained {
     pub frames: Vec<FrameRecord>,
-    pub errors: Vec<u8>, // the status code of each stream ended here with an error
-    pub sessions: HashMap<String, u64>, // frames answered here, by session
+    pub errors: Vec<(u8, Via)>, // the status code of each call ended here with an error
+    pub sessions: HashMap<String, (u64, u8)>, // frames answered here, and the transports' bits (Via), by session
 }
 
 /// A session's rate bucket as the router hands it over (router._admit_frame): `tokens` and
@@ -323,7 +348,15 @@ async fn read_replies(
 }
 
 /// A caller let in, by the SHA-256 of its authorization metadata: (key id, tenant).
-type Caller = (Option<String>, String);
+pub(crate) type Caller = (Option<String>, String);
+
+/// A key's SHA-256: callers are remembered by it, not by the key itself.
+fn digest(key: &[u8]) -> [u8; 32] {
+    ring::digest::digest(&ring::digest::SHA256, key)
+        .as_ref()
+        .try_into()
+        .expect("SHA-256 is 32 bytes")
+}
 
 /// The edge's state, shared by its thread's tasks and the front's Python.
 pub struct Shared {
@@ -352,7 +385,7 @@ impl Shared {
         }
     }
 
-    async fn ask(&self, make: impl FnOnce(u64) -> Event) -> Answer {
+    pub(crate) async fn ask(&self, make: impl FnOnce(u64) -> Event) -> Answer {
         let token = self.next_token.fetch_add(1, Ordering::Relaxed);
         let (sender, answer) = oneshot::channel();
         self.asked.lock().unwrap().insert(token, sender);
@@ -409,10 +442,10 @@ impl Shared {
     }
 
     pub fn revoke(&self, key_id: String) {
-        self.callers
-            .lock()
-            .unwrap()
-            .retain(|_, (key, _)| key.as_deref() != Some(key_id.as_str()));
+        // under the callers' lock, as `let_in` checks: a caller let in while this runs is either
+        // forgotten here or refused there
+        let mut callers = self.callers.lock().unwrap();
+        callers.retain(|_, (key, _)| key.as_deref() != Some(key_id.as_str()));
         self.revoked.lock().unwrap().insert(key_id);
     }
 
@@ -420,15 +453,9 @@ impl Shared {
     /// (Guard.authorize_async, from its cache of keys) the first time, then remembered until the
     /// key is revoked. Err(the front's refusal) otherwise.
     async fn caller(&self, authorization: Option<String>) -> Result<Caller, Status> {
-        let digest: [u8; 32] = ring::digest::digest(
-            &ring::digest::SHA256,
-            authorization.as_deref().unwrap_or("").as_bytes(),
-        )
-        .as_ref()
-        .try_into()
-        .expect("SHA-256 is 32 bytes");
-        if let Some(known) = self.callers.lock().unwrap().get(&digest) {
-            return Ok(known.clone());
+        let key = authorization.as_deref().unwrap_or("").as_bytes().to_vec();
+        if let Some(known) = self.known_caller(&key) {
+            return Ok(known);
         }
         let answer = self
             .ask(|token| Event::Auth {
@@ -439,12 +466,29 @@ impl Shared {
         if answer.status.code != OK {
             return Err(answer.status);
         }
+        let caller = (answer.key_id, answer.tenant);
+        self.let_in(&key, caller.clone());
+        Ok(caller)
+    }
+
+    /// A caller let in before, by its key (gRPC's authorization metadata, ZeroMQ's key frame: the
+    /// same `Bearer KEY`); None when unknown.
+    pub(crate) fn known_caller(&self, key: &[u8]) -> Option<Caller> {
+        self.callers.lock().unwrap().get(&digest(key)).cloned()
+    }
+
+    /// Remembers a caller the front's Python let in (until its key is revoked).
+    pub(crate) fn let_in(&self, key: &[u8], caller: Caller) {
         let mut callers = self.callers.lock().unwrap();
+        if let Some(key_id) = &caller.0 {
+            if self.revoked.lock().unwrap().contains(key_id) {
+                return; // revoked while the front's answer was on its way
+            }
+        }
         if callers.len() >= CALLERS_KEPT {
             callers.clear();
         }
-        callers.insert(digest, (answer.key_id.clone(), answer.tenant.clone()));
-        Ok((answer.key_id, answer.tenant))
+        callers.insert(digest(key), caller);
     }
 
     /// The worker of `slot`'s frame socket (a successor's replaces its predecessor's).
@@ -472,19 +516,23 @@ impl Shared {
         Ok(())
     }
 
-    fn record_error(&self, code: u8) {
-        self.drained.lock().unwrap().errors.push(code);
+    pub(crate) fn record_error(&self, code: u8, via: Via) {
+        self.drained.lock().unwrap().errors.push((code, via));
+    }
+
+    pub(crate) fn max_message_bytes(&self) -> usize {
+        self.config.max_message_bytes
     }
 
     /// A frame of a session routed here, answered by its worker; None when it is not routed here
     /// for this tenant or its worker is gone (the front's Python answers it).
-    async fn routed_frame(
+    pub(crate) async fn routed_frame(
         &self,
         session_id: &str,
         tenant: &str,
         payload: &[u8],
         t0: Instant,
-        unary: bool,
+        via: Via,
     ) -> Option<Result<Bytes, Status>> {
         let link = {
             let mut routes = self.routes.lock().unwrap();
@@ -522,9 +570,14 @@ impl Shared {
             )));
         }
         let mut drained = self.drained.lock().unwrap();
-        *drained.sessions.entry(session_id.to_owned()).or_insert(0) += 1;
+        let session = drained
+            .sessions
+            .entry(session_id.to_owned())
+            .or_insert((0, 0));
+        session.0 += 1;
+        session.1 |= via.transport_bit();
         drained.frames.push(FrameRecord {
-            unary,
+            via,
             elapsed_s: t0.elapsed().as_secs_f64(),
             compute_ms: reply.compute_ms,
             flags: reply.flags,
@@ -791,9 +844,10 @@ impl Call<'_> {
                 Some(_) => {}
             }
         }
+        let via = if self.unary { Via::Unary } else { Via::Stream };
         match self
             .shared
-            .routed_frame(&session_id, &tenant, &payload, t0, self.unary)
+            .routed_frame(&session_id, &tenant, &payload, t0, via)
             .await
         {
             Some(Ok(body)) => Ok(body),
@@ -846,7 +900,7 @@ async fn run_call(
         shared.push(Event::Closed { session_id });
     }
     if status.code != OK && status.code != CANCELLED && !counted {
-        shared.record_error(status.code);
+        shared.record_error(status.code, if unary { Via::Unary } else { Via::Stream });
     }
     let _ = replies.send(Frame::trailers(trailers(&status))).await;
 }
@@ -928,6 +982,36 @@ where
         .await;
 }
 
+/// Accepts gRPC connections until the edge stops, each served in its own task.
+async fn accept(
+    shared: Arc<Shared>,
+    listener: TcpListener,
+    tls: Option<tokio_rustls::TlsAcceptor>,
+    mut stopped: oneshot::Receiver<()>,
+) {
+    loop {
+        let accepted = tokio::select! {
+            _ = &mut stopped => return,
+            accepted = listener.accept() => accepted,
+        };
+        let Ok((stream, _)) = accepted else { continue };
+        let _ = stream.set_nodelay(true);
+        let shared = shared.clone();
+        let tls = tls.clone();
+        tokio::spawn(async move {
+            match tls {
+                None => serve_connection(shared, stream).await,
+                Some(acceptor) => {
+                    let handshake = tokio::time::timeout(TLS_HANDSHAKE, acceptor.accept(stream));
+                    if let Ok(Ok(stream)) = handshake.await {
+                        serve_connection(shared, stream).await;
+                    }
+                }
+            }
+        });
+    }
+}
+
 /// The TLS side of the port: the node's certificate chain and key (PEM), ALPN h2.
 fn tls_acceptor(cert_pem: &[u8], key_pem: &[u8]) -> std::io::Result<tokio_rustls::TlsAcceptor> {
     use rustls::pki_types::pem::PemObject;
@@ -953,22 +1037,22 @@ fn tls_acceptor(cert_pem: &[u8], key_pem: &[u8]) -> std::io::Result<tokio_rustls
     Ok(tokio_rustls::TlsAcceptor::from(Arc::new(config)))
 }
 
-/// The edge: its thread, listening socket and shared state.
+/// The edge: its thread, its gRPC listening socket and its shared state.
 pub struct Edge {
     pub shared: Arc<Shared>,
-    pub address: SocketAddr,
+    pub address: Option<SocketAddr>, // the gRPC port's (None: gRPC is not served here)
     runtime: Option<tokio::runtime::Runtime>,
     stop: Option<oneshot::Sender<()>>,
 }
 
 impl Edge {
-    /// Binds `address` (HOST:PORT; port 0 picks one) and starts serving on the edge's thread.
-    /// `upstream_path`: the front's grpc.aio server's Unix socket; `wake`: the socket whose other
-    /// end the front's event loop reads (Shared::push); `tls`: the certificate chain and private
-    /// key, PEM, to serve TLS with.
+    /// Starts the edge's thread, serving gRPC on `address` (HOST:PORT; port 0 picks one) when
+    /// given. `upstream_path`: the front's grpc.aio server's Unix socket; `wake`: the socket whose
+    /// other end the front's event loop reads (Shared::push); `tls`: the certificate chain and
+    /// private key, PEM, to serve TLS with.
     pub fn start(
         config: Config,
-        address: &str,
+        address: Option<&str>,
         upstream_path: String,
         wake: StdUnixStream,
         tls: Option<(&[u8], &[u8])>,
@@ -980,8 +1064,10 @@ impl Edge {
             .thread_name("camdirector-edge")
             .enable_all()
             .build()?;
-        let listener = runtime.block_on(TcpListener::bind(address))?;
-        let address = listener.local_addr()?;
+        let listener = address
+            .map(|address| runtime.block_on(TcpListener::bind(address)))
+            .transpose()?;
+        let address = listener.as_ref().map(TcpListener::local_addr).transpose()?;
         let shared = Arc::new(Shared {
             config,
             routes: Mutex::new(HashMap::new()),
@@ -996,38 +1082,22 @@ impl Edge {
             upstream_path,
             upstream: tokio::sync::Mutex::new(None),
         });
-        let (stop, mut stopped) = oneshot::channel::<()>();
-        let accepting = shared.clone();
-        runtime.spawn(async move {
-            loop {
-                let accepted = tokio::select! {
-                    _ = &mut stopped => return,
-                    accepted = listener.accept() => accepted,
-                };
-                let Ok((stream, _)) = accepted else { continue };
-                let _ = stream.set_nodelay(true);
-                let shared = accepting.clone();
-                let tls = tls.clone();
-                tokio::spawn(async move {
-                    match tls {
-                        None => serve_connection(shared, stream).await,
-                        Some(acceptor) => {
-                            let handshake =
-                                tokio::time::timeout(TLS_HANDSHAKE, acceptor.accept(stream));
-                            if let Ok(Ok(stream)) = handshake.await {
-                                serve_connection(shared, stream).await;
-                            }
-                        }
-                    }
-                });
-            }
-        });
+        let (stop, stopped) = oneshot::channel::<()>();
+        if let Some(listener) = listener {
+            runtime.spawn(accept(shared.clone(), listener, tls, stopped));
+        }
         Ok(Edge {
             shared,
             address,
             runtime: Some(runtime),
             stop: Some(stop),
         })
+    }
+
+    /// Serves the front's ZeroMQ socket from now on (zmq_edge.rs).
+    pub fn serve_zmq(&self, socket: zmq_edge::Socket) {
+        let runtime = self.runtime.as_ref().expect("the edge has stopped");
+        runtime.spawn(zmq_edge::serve_socket(self.shared.clone(), socket));
     }
 
     /// Runs `f` inside the edge's runtime (tokio's sockets must be made there).

@@ -1,27 +1,29 @@
-//! camdirector._native's gRPC edge (edge.rs) for front/grpc_edge.py: `GrpcEdge` starts it and is
+//! camdirector._native's edge (edge.rs, zmq_edge.rs) for front/edge.py: `Edge` starts it and is
 //! the front's handle on it.
 //!
 //! What crosses: events as tuples ("auth", token, authorization | None), ("open" | "frame" |
-//! "unary", token, session id, tenant, payload bytes), ("closed", session id); answers as (token,
-//! status code, message, body, key id | None, tenant, opened); drained frames as (elapsed_s,
-//! compute_ms, flags, stage names bytes, stage times tuple, unary), errors as status codes,
-//! sessions as (id, frames).
+//! "unary", token, session id, tenant, payload bytes), ("closed", session id), ("zmq", token,
+//! [frame bytes]); answers as (token, status code, message, body, key id | None, tenant, opened),
+//! ZeroMQ's as (token, [reply frame bytes], (key id | None, tenant) | None); drained frames as
+//! (elapsed_s, compute_ms, flags, stage names bytes, stage times tuple, via: edge.rs's Via),
+//! errors as (status code, via), sessions as (id, frames, transport bits).
 
 use bytes::Bytes;
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
 
-use crate::edge::{self, Answer, Bucket, Config, Edge, Event, Status};
+use crate::edge::{self, Answer, Bucket, Config, Event, Status};
+use crate::zmq_edge;
 
-#[pyclass(name = "GrpcEdge", module = "camdirector._native")]
-pub struct GrpcEdge {
-    edge: Edge,
+#[pyclass(name = "Edge", module = "camdirector._native")]
+pub struct Edge {
+    edge: edge::Edge,
 }
 
 #[pymethods]
-impl GrpcEdge {
-    /// Binds `address` and serves on the edge's own thread (edge.rs). `wake_fd`: a Unix socket's
+impl Edge {
+    /// Starts the edge's own thread (edge.rs), serving gRPC on `address` when given. `wake_fd`: a Unix socket's
     /// end the edge writes a byte to when events wait (the edge owns it from now on); `tls`: the
     /// certificate chain and key, PEM bytes, for a TLS port.
     #[new]
@@ -29,7 +31,7 @@ impl GrpcEdge {
     #[pyo3(signature = (address, upstream_path, wake_fd, metadata, max_message_bytes, rate_limit, max_fps, resend_frames, tls=None))]
     fn new(
         py: Python<'_>,
-        address: &str,
+        address: Option<&str>,
         upstream_path: String,
         wake_fd: i32,
         metadata: Vec<(String, String)>,
@@ -46,23 +48,45 @@ impl GrpcEdge {
             max_fps,
             resend_frames,
         };
-        // SAFETY: Python hands over a socket it has detached (grpc_edge.py)
+        // SAFETY: Python hands over a socket it has detached (front/edge.py)
         let wake = unsafe { edge::socket_from_fd(wake_fd) };
         let edge = py
             .detach(|| {
                 let tls = tls
                     .as_ref()
                     .map(|(cert, key)| (cert.as_slice(), key.as_slice()));
-                Edge::start(config, address, upstream_path, wake, tls)
+                edge::Edge::start(config, address, upstream_path, wake, tls)
             })
-            .map_err(|e| PyOSError::new_err(format!("cannot serve gRPC on {address}: {e}")))?;
-        Ok(GrpcEdge { edge })
+            .map_err(|e| {
+                PyOSError::new_err(format!(
+                    "cannot serve gRPC on {}: {e}",
+                    address.unwrap_or("")
+                ))
+            })?;
+        Ok(Edge { edge })
     }
 
-    /// The bound port.
+    /// The bound gRPC port (None: gRPC is not served here).
     #[getter]
-    fn port(&self) -> u16 {
-        self.edge.address.port()
+    fn port(&self) -> Option<u16> {
+        self.edge.address.map(|a| a.port())
+    }
+
+    /// Serves the front's ZeroMQ ROUTER socket from now on: pyzmq's `Socket.underlying` at
+    /// `address`, through the libzmq loaded from `libzmq_path`, which must be of `version`
+    /// (zmq.zmq_version_info()). Python must not touch the socket again until `stop` returns.
+    fn serve_zmq(
+        &self,
+        address: usize,
+        libzmq_path: &str,
+        version: (i32, i32, i32),
+    ) -> PyResult<()> {
+        // SAFETY: front/edge.py hands over a live socket it no longer reads or writes, and closes
+        // it only after `stop`
+        let socket = unsafe { zmq_edge::Socket::adopt(address, libzmq_path, version) }
+            .map_err(PyOSError::new_err)?;
+        self.edge.serve_zmq(socket);
+        Ok(())
     }
 
     /// The frame socket of the worker in `slot` (a detached file descriptor the edge owns from now on).
@@ -143,6 +167,10 @@ impl GrpcEdge {
                 )
                     .into_pyobject(py),
                 Event::Closed { session_id } => ("closed", session_id).into_pyobject(py),
+                Event::Zmq { token, parts } => {
+                    let parts: Vec<_> = parts.iter().map(|p| PyBytes::new(py, p)).collect();
+                    ("zmq", token, parts).into_pyobject(py)
+                }
             })
             .collect()
     }
@@ -169,19 +197,48 @@ impl GrpcEdge {
             key_id,
             tenant,
             opened,
+            frames: Vec::new(),
+            let_in: false,
         };
         self.edge.shared.answer(token, answer);
     }
 
-    /// What happened since the last call: (frames, error codes, (session id, frames) pairs).
+    /// The front's reply frames to the ZeroMQ request of `token`; `caller`: (key id, tenant) when
+    /// the request was a Frame answered, whose caller the edge may then let in itself.
+    #[pyo3(signature = (token, frames, caller))]
+    fn answer_zmq(
+        &self,
+        token: u64,
+        frames: Vec<Vec<u8>>,
+        caller: Option<(Option<String>, String)>,
+    ) {
+        let let_in = caller.is_some();
+        let (key_id, tenant) = caller.unwrap_or_default();
+        let answer = Answer {
+            status: Status {
+                code: edge::OK,
+                message: String::new(),
+            },
+            body: Bytes::new(),
+            key_id,
+            tenant,
+            opened: false,
+            frames: frames.into_iter().map(Bytes::from).collect(),
+            let_in,
+        };
+        self.edge.shared.answer(token, answer);
+    }
+
+    /// What happened since the last call: (frames, (error code, via) pairs, (session id, frames,
+    /// transport bits) triples).
     #[allow(clippy::type_complexity)]
     fn drain<'py>(
         &self,
         py: Python<'py>,
     ) -> PyResult<(
-        Vec<(f64, f64, u8, Bound<'py, PyBytes>, Bound<'py, PyTuple>, bool)>,
-        Vec<u8>,
-        Vec<(String, u64)>,
+        Vec<(f64, f64, u8, Bound<'py, PyBytes>, Bound<'py, PyTuple>, u8)>,
+        Vec<(u8, u8)>,
+        Vec<(String, u64, u8)>,
     )> {
         let drained = self.edge.shared.drain();
         let frames = drained
@@ -194,14 +251,22 @@ impl GrpcEdge {
                     f.flags,
                     PyBytes::new(py, &f.names),
                     PyTuple::new(py, f.values)?,
-                    f.unary,
+                    f.via as u8,
                 ))
             })
             .collect::<PyResult<Vec<_>>>()?;
         Ok((
             frames,
-            drained.errors,
-            drained.sessions.into_iter().collect(),
+            drained
+                .errors
+                .into_iter()
+                .map(|(code, via)| (code, via as u8))
+                .collect(),
+            drained
+                .sessions
+                .into_iter()
+                .map(|(id, (frames, bits))| (id, frames, bits))
+                .collect(),
         ))
     }
 
@@ -212,7 +277,7 @@ impl GrpcEdge {
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<GrpcEdge>()?;
+    m.add_class::<Edge>()?;
     m.add("EDGE_HAS_METRICS", edge::HAS_METRICS)?;
     m.add("EDGE_STREAM_FRAMES", edge::STREAM_FRAMES)?;
     Ok(())

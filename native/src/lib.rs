@@ -31,6 +31,7 @@ mod toric_frame_py;
 mod toric_py;
 mod wire;
 mod wire_py;
+mod zmq_edge;
 
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -14,7 +14,7 @@ from camdirector.matches.import_cli import add_parser as add_import_match_parser
 from camdirector.matches.play_cli import add_parser as add_play_match_parser
 from camdirector.precompute.overview.cli import add_parsers as add_overview_parsers
 from camdirector.precompute.tracks.cli import add_parsers as add_track_parsers
-from camdirector.server_settings import FRAME_PATHS, GRPC_FRONTS, ServerSettings
+from camdirector.server_settings import FRAME_PATHS, FRONTS, ServerSettings
 from camdirector.version import PROTOCOL, VERSION
 
 
@@ -135,9 +135,16 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument(
         "--grpc-front",
         dest="grpc_front",
-        choices=GRPC_FRONTS,
-        help="what serves the gRPC port: compiled (the default: the gRPC edge in Rust, a session's frames straight "
+        choices=FRONTS,
+        help="what serves the gRPC port: compiled (the default: the edge in Rust, a session's frames straight "
         "to its worker) or python (grpc.aio alone; docs/frame_path.md)",
+    )
+    p.add_argument(
+        "--zmq-front",
+        dest="zmq_front",
+        choices=FRONTS,
+        help="what reads the ZeroMQ socket: compiled (the default: the same edge, a session's Frame requests "
+        "straight to its worker) or python (docs/frame_path.md)",
     )
     p.add_argument(
         "--plugin",

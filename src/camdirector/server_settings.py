@@ -19,7 +19,7 @@ def _default_data_dir() -> str:
 
 
 FRAME_PATHS = ("python", "compiled")  # ServerSettings.frame_path's values
-GRPC_FRONTS = ("python", "compiled")  # ServerSettings.grpc_front's values
+FRONTS = ("python", "compiled")  # ServerSettings.grpc_front's and zmq_front's values
 
 
 @dataclass(frozen=True)
@@ -83,8 +83,13 @@ class ServerSettings:
     frame_path: str = "compiled"
     # What serves the gRPC port: "compiled", the gRPC edge (native/src/edge.rs: HTTP/2 in Rust, TLS
     # with tls_cert, a routed session's frames straight to its worker, every other call passed to
-    # grpc.aio; front/grpc_edge.py), or "python" (grpc.aio alone).
+    # grpc.aio; front/edge.py), or "python" (grpc.aio alone).
     grpc_front: str = "compiled"
+    # What reads the ZeroMQ socket: "compiled", the same edge (native/src/zmq_edge.rs: a routed
+    # session's Frame requests straight to its worker, every other request to zmq_service.py), or
+    # "python" (zmq_service.py alone). Needs pyzmq's libzmq loaded as a shared library; where it
+    # is not (a static build), the socket stays Python's and the start says so in the log.
+    zmq_front: str = "compiled"
 
     def __post_init__(self):
         checks = [
@@ -118,7 +123,8 @@ class ServerSettings:
             (all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", m) for m in self.plugins),
              "plugins must be Python module names (a.b.c)"),
             (self.frame_path in FRAME_PATHS, f"frame_path must be one of {', '.join(FRAME_PATHS)}, not {self.frame_path!r}"),
-            (self.grpc_front in GRPC_FRONTS, f"grpc_front must be one of {', '.join(GRPC_FRONTS)}, not {self.grpc_front!r}"),
+            (self.grpc_front in FRONTS, f"grpc_front must be one of {', '.join(FRONTS)}, not {self.grpc_front!r}"),
+            (self.zmq_front in FRONTS, f"zmq_front must be one of {', '.join(FRONTS)}, not {self.zmq_front!r}"),
         ]
         for ok, message in checks:
             if not ok:
@@ -133,6 +139,16 @@ class ServerSettings:
     def grpc_edge(self) -> bool:
         """Whether the compiled gRPC edge serves the gRPC port (grpc_front "compiled")."""
         return bool(self.grpc_addr) and self.grpc_front == "compiled"
+
+    @property
+    def zmq_edge(self) -> bool:
+        """Whether the compiled edge reads the ZeroMQ socket (zmq_front "compiled")."""
+        return bool(self.zmq_addr) and self.zmq_front == "compiled"
+
+    @property
+    def edge(self) -> bool:
+        """Whether the compiled edge runs (for gRPC, ZeroMQ or both): workers get frame sockets."""
+        return self.grpc_edge or self.zmq_edge
 
     @property
     def tls(self) -> bool:

@@ -1,4 +1,4 @@
-"""The compiled gRPC edge (front/grpc_edge.py, native/src/edge.rs) answers as the Python front does:
+"""The compiled gRPC edge (front/edge.py, native/src/edge.rs) answers as the Python front does:
 the same camera for the same frames, streamed or sent as Frame calls, the same status and message
 for each kind of bad stream or call, keys, revocation and the tenant's frame rate, over TLS too,
 while a routed session's frames never reach the front's Python (camdirector_edge_frames)."""
@@ -16,21 +16,8 @@ import pytest
 
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
+from tests.front.fronts import FRONTS, metric, servers_on_each_front, without_timings
 from tests.service import wire_client as wc
-
-FRONTS = ("python", "compiled")
-
-
-def _metric(server: ServerProcess, name: str) -> float:
-    text = httpx.get(f"http://{server.http}/metrics").text
-    found = re.search(rf"^{name} (\S+)$", text, re.M)
-    return float(found.group(1)) if found else 0.0
-
-
-def _without_timings(update: pb.CameraUpdate) -> pb.CameraUpdate:
-    update.ClearField("compute_ms")
-    update.diagnostics.ClearField("stage_ms")
-    return update
 
 
 def _ended(client: wc.GrpcRaw, frames) -> tuple[str, str, int]:
@@ -46,15 +33,7 @@ def _ended(client: wc.GrpcRaw, frames) -> tuple[str, str, int]:
 
 @pytest.fixture(scope="module")
 def servers():
-    started = {
-        front: ServerProcess(
-            "--workers", "1", "--grpc-front", front, "--max-message-bytes", str(1 << 20), transports=("grpc", "http")
-        )
-        for front in FRONTS
-    }
-    yield started
-    for server in started.values():
-        server.stop()
+    yield from servers_on_each_front("--grpc-front", "--max-message-bytes", str(1 << 20), transports=("grpc", "http"))
 
 
 def test_a_session_streams_through_the_edge_as_through_the_python_front(servers):
@@ -62,13 +41,13 @@ def test_a_session_streams_through_the_edge_as_through_the_python_front(servers)
     for front, server in servers.items():
         client = wc.GrpcRaw(server.grpc)
         session_id = client.call("CreateSession", wc.two_target_request(seed=3)).session_id
-        before = _metric(server, "camdirector_edge_frames_total")
+        before = metric(server, "camdirector_edge_frames_total")
         first = client.stream(list(wc.walk(session_id, 40)))
         second = client.stream(list(wc.walk(session_id, 20, start_frame=41)))  # a second stream of the session
         unary = [client.call("Frame", update) for update in wc.walk(session_id, 10, start_frame=61)]
-        cameras[front] = [_without_timings(u) for u in first + second + unary]
+        cameras[front] = [without_timings(u) for u in first + second + unary]
         time.sleep(0.6)  # the edge's counts reach the front every 0.25 s
-        edge_frames = _metric(server, "camdirector_edge_frames_total") - before
+        edge_frames = metric(server, "camdirector_edge_frames_total") - before
         # each stream's first frame opens it through the front; the rest, and the Frame calls, go straight to the worker
         assert edge_frames == (68 if front == "compiled" else 0)
         described = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", params={"last": 1}).json()

@@ -42,7 +42,7 @@ import grpc
 
 from camdirector.access.keys import LOGIN_SECRET, AccessStore, AccessUnavailable, ApiKey, secret_matches, split_key
 from camdirector.access.roles import Verb, allows
-from camdirector.errors import DirectorError, unavailable
+from camdirector.errors import DirectorError, internal, unavailable
 
 log = logging.getLogger("camdirector.access")
 
@@ -265,6 +265,17 @@ class Guard:
                 self.records_down(exc)
             except Exception as exc:  # a bug: the poll goes on with the last known keys
                 log.warning("polling revoked keys: %s", exc)
+
+    def refusal(self, exc: Exception, what: str, session_id: Callable[[], str | None], logger: logging.Logger) -> DirectorError:
+        """The error a call that raised `exc` is answered with, the same on every transport (gRPC,
+        ZeroMQ, the compiled edge): a DirectorError as it is; UNAVAILABLE when the records database
+        was needed and is down (records_down); INTERNAL for anything else, a bug (errors.internal,
+        its traceback logged with `what` and the session `session_id()` names)."""
+        if isinstance(exc, DirectorError):
+            return exc
+        if isinstance(exc, AccessUnavailable):
+            return self.records_down(exc)
+        return internal(exc, what, session_id(), logger)
 
     def records_down(self, exc: AccessUnavailable) -> DirectorError:
         """The answer to a call that needed the records database while it is down: UNAVAILABLE

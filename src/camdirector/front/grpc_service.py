@@ -20,8 +20,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from camdirector.access.guard import Guard
-from camdirector.access.keys import AccessUnavailable
-from camdirector.errors import DirectorError, internal, invalid
+from camdirector.errors import DirectorError, invalid
 from camdirector.front.router import SessionRouter, named_session, session_id_of
 from camdirector.front.session_calls import RPCS, SessionCalls, check_client_protocol
 from camdirector.v1 import director_pb2 as pb
@@ -73,21 +72,14 @@ class DirectorGrpc:
             if rpc == "CreateSession":
                 check_protocol_metadata(_metadata(context, "camdirector-protocol"))
             return await self.calls.by_rpc[rpc](payload, identity)
-        except DirectorError as exc:
-            await self._abort(exc, context)
-        except AccessUnavailable as exc:
-            await self._abort(self.guard.records_down(exc), context)
         except Exception as exc:  # a bug: INTERNAL, as on ZeroMQ, never grpc's UNKNOWN
-            await self._abort_internal(rpc, exc, named_session(rpc, payload), context)
+            await self._abort(self.guard.refusal(exc, rpc, lambda: named_session(rpc, payload), log), context)
         finally:
             self.metrics.labelled(self.metrics.request, TRANSPORT, rpc).observe(time.perf_counter() - t0)
 
     async def _abort(self, error: DirectorError, context: grpc.aio.ServicerContext) -> None:
         self.metrics.labelled(self.metrics.errors, TRANSPORT, error.code.name).inc()
         await context.abort(error.code, error.message)
-
-    async def _abort_internal(self, rpc: str, exc: Exception, session_id: str | None, context: grpc.aio.ServicerContext) -> None:
-        await self._abort(internal(exc, rpc, session_id, log), context)
 
     def _unary_handler(self, rpc: str) -> grpc.RpcMethodHandler:
         async def handle(payload: bytes, context: grpc.aio.ServicerContext) -> bytes:
@@ -116,12 +108,8 @@ class DirectorGrpc:
                 reply = await self.router.frame(payload, session_id, TRANSPORT, identity.tenant)
                 self.metrics.labelled(self.metrics.request, TRANSPORT, "StreamFrames").observe(time.perf_counter() - t0)
                 yield reply
-        except DirectorError as exc:
-            await self._abort(exc, context)
-        except AccessUnavailable as exc:  # a session of this tenant not held here, its owner unread
-            await self._abort(self.guard.records_down(exc), context)
-        except Exception as exc:
-            await self._abort_internal("StreamFrames", exc, session_id, context)
+        except Exception as exc:  # AccessUnavailable: a session of this tenant not held here, its owner unread
+            await self._abort(self.guard.refusal(exc, "StreamFrames", lambda: session_id, log), context)
         finally:
             if session_id is not None:
                 self.router.stream_closed(session_id)

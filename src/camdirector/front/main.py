@@ -16,7 +16,7 @@ import uvicorn
 
 from camdirector.access.guard import Guard
 from camdirector.access.keys import AccessUnavailable, ensure_admin_key, open_access_store
-from camdirector.front.grpc_edge import GrpcEdgeFront
+from camdirector.front.edge import EdgeFront
 from camdirector.front.grpc_service import start_grpc
 from camdirector.front.http.app import build_app
 from camdirector.front.http.routes.levels import install_level_routes
@@ -99,20 +99,25 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
     loop_watch.start()
     guard.start()
     bound: dict[str, str] = {}
-    grpc_server = grpc_edge = zmq_transport = http_server = http_task = jobs = live = None
+    grpc_server = edge = zmq_transport = http_server = http_task = jobs = live = None
     try:
-        if settings.grpc_edge:
-            grpc_edge = GrpcEdgeFront(router, guard)
-            bound["grpc"] = await grpc_edge.start(settings.grpc_addr)
-        elif settings.grpc_addr:
-            grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr, guard, _tls_credentials(settings))
         if settings.zmq_addr:
             curve = curve_server_keys(settings.data_dir) if settings.auth else None
             zmq_transport = ZmqTransport(router, settings.zmq_addr, guard, curve)
-            zmq_transport.start()
             bound["zmq"] = zmq_transport.address
             if curve is not None:
                 announce["zmq_server_key"] = curve[0].decode()
+        if settings.edge:  # the compiled edge: gRPC's port, ZeroMQ's socket, or both (front/edge.py)
+            edge = EdgeFront(router, guard)
+            grpc_bound = await edge.start(
+                settings.grpc_addr if settings.grpc_edge else None, zmq_transport if settings.zmq_edge else None
+            )
+            if grpc_bound is not None:
+                bound["grpc"] = grpc_bound
+        if settings.grpc_addr and not settings.grpc_edge:
+            grpc_server, bound["grpc"] = await start_grpc(router, settings.grpc_addr, guard, _tls_credentials(settings))
+        if zmq_transport is not None and not settings.zmq_edge:
+            zmq_transport.start()
         if settings.http_addr:
             sock = _bind_http(settings.http_addr)
             bound["http"] = "{}:{}".format(*sock.getsockname()[:2])
@@ -155,8 +160,8 @@ async def serve(settings: ServerSettings, stop: asyncio.Event | None = None) -> 
             jobs.close()  # running jobs go back to the queue
         if grpc_server is not None:
             await grpc_server.stop(grace=1.0)
-        if grpc_edge is not None:
-            await grpc_edge.stop()
+        if edge is not None:
+            await edge.stop()  # before the ZeroMQ socket closes: the edge may be reading it
         if zmq_transport is not None:
             await zmq_transport.stop()
         loop_watch.stop()

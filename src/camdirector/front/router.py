@@ -45,7 +45,7 @@ RESEND_BURST_S = 20.0  # a session may send again this many seconds of frames (a
 
 
 class FrameRoutes(Protocol):
-    """Where a session's frames may be answered without the router (_native.GrpcEdge)."""
+    """Where a session's frames may be answered without the router (_native.Edge)."""
 
     def route(self, session_id: str, slot: int, tenant: str, tokens: float, resend: float, age_s: float | None) -> None: ...
 
@@ -84,13 +84,13 @@ class SessionRouter:
         self._reserved = 0  # creations in flight, counted against max_sessions
         self._reserved_by: dict[str, int] = {}  # the same by tenant, against tenant_max_sessions
         self._reaper: asyncio.Task | None = None
-        self.edge: FrameRoutes | None = None  # the compiled gRPC edge, when it serves the gRPC port
+        self.edge: FrameRoutes | None = None  # the compiled edge, when it serves gRPC or ZeroMQ
         self._edge_counts: Callable[[], None] = lambda: None  # brings the edge's frame counts here (edge_answered)
 
     def attach_edge(self, edge: FrameRoutes, counts: Callable[[], None]) -> None:
-        """The compiled gRPC edge (front/grpc_edge.py) answers the frames of the sessions routed to
-        it (`route_to_edge`) without this router: a session is routed there after a frame of its
-        stream answered here, and taken back whenever its worker, its life or its state changes here.
+        """The compiled edge (front/edge.py) answers the frames of the sessions routed to
+        it (`route_to_edge`) without this router: a session is routed there after a frame (of a stream,
+        or a Frame call) answered here, and taken back whenever its worker, its life or its state changes here.
         `counts()` brings what it answered to `edge_answered`: called before sessions are described,
         so a frame its client has had the answer to is counted."""
         self.edge = edge
@@ -116,15 +116,16 @@ class SessionRouter:
             entry.frame_tokens, entry.resend_tokens = bucket
             entry.tokens_at_s = self.clock()
 
-    def edge_answered(self, frames_by_session: list[tuple[str, int]]) -> None:
-        """Frames the edge answered since it was last asked: counted as answered here would be."""
+    def edge_answered(self, frames_by_session: list[tuple[str, int, tuple[str, ...]]]) -> None:
+        """Frames the edge answered since it was last asked, (session id, frames, transports):
+        counted as answered here would be."""
         now = self.clock()
-        for session_id, frames in frames_by_session:
+        for session_id, frames, transports in frames_by_session:
             entry = self.sessions.get(session_id)
             if entry is not None:
                 entry.frames += frames
                 entry.last_seen_s = now
-                entry.transport.add("grpc")
+                entry.transport.update(transports)
 
     async def start(self) -> None:
         await self.pool.start()

@@ -18,10 +18,11 @@ which restore them from their checkpoints), and it is restarted; requests for it
 for the new one. A worker whose front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
 the front process.
 
-With the compiled gRPC edge (ServerSettings.grpc_edge) each worker has a second socket pair, its
-frame socket: the edge (native/src/edge.rs) writes the frames of the sessions routed to it there and
-reads their replies, in the same framing, with no Python in the front. The pool makes it with the
-worker and hands its front end to `frame_sink` (front/grpc_edge.py), each successor's too.
+With the compiled edge (ServerSettings.edge: gRPC's, ZeroMQ's or both) each worker has a second
+socket pair, its frame socket: the edge (native/src/edge.rs) writes the frames of the sessions
+routed to it there and reads their replies, in the same framing, with no Python in the front. The
+pool makes it with the worker and hands its front end to `frame_sink` (front/edge.py), each
+successor's too.
 """
 
 from __future__ import annotations
@@ -195,7 +196,7 @@ class WorkerPool:
 
     async def _spawn(self, worker: _Worker) -> None:
         front_end, worker_end = self._mp.Pipe(duplex=True)
-        frames_front, frames_worker = self._mp.Pipe(duplex=True) if self.settings.grpc_edge else (None, None)
+        frames_front, frames_worker = self._mp.Pipe(duplex=True) if self.settings.edge else (None, None)
         worker.process = self._mp.Process(
             target=worker_main,
             args=(worker_end, self.settings, frames_worker),

@@ -15,6 +15,11 @@ The socket is read straight off the event loop (its ZMQ_FD, which is edge-trigge
 reads every message waiting, and a send that leaves messages waiting schedules another read)
 rather than through `zmq.asyncio`, whose futures and flag enums cost the front about 40 us a frame.
 Sends never wait: a ROUTER socket queues the reply or, past its high-water mark, drops it.
+
+With `zmq_front compiled` (the default) the socket is made and bound here but read and written by
+the compiled edge (front/edge.py, native/src/zmq_edge.rs) through pyzmq's own libzmq: it answers a
+routed session's Frame requests itself and hands every other request to `answer`, whose reply it
+sends. Where pyzmq's libzmq is not a shared library of the process, the socket stays here.
 """
 
 from __future__ import annotations
@@ -30,9 +35,9 @@ from typing import cast
 import zmq
 import zmq.auth
 
-from camdirector.access.guard import Guard
-from camdirector.access.keys import AccessUnavailable
-from camdirector.errors import DirectorError, exhausted, internal, invalid, unimplemented
+from camdirector import _native
+from camdirector.access.guard import Guard, Identity
+from camdirector.errors import DirectorError, exhausted, invalid, unimplemented
 from camdirector.front.router import SessionRouter, named_session
 from camdirector.front.session_calls import RPCS, SessionCalls
 
@@ -68,6 +73,20 @@ def curve_server_keys(data_dir: str | Path) -> tuple[bytes, bytes]:
     return public_key, secret_key
 
 
+def loaded_libzmq() -> str | None:
+    """The path of the libzmq pyzmq loaded into this process (a shared library), from
+    /proc/self/maps; None where there is none (pyzmq built with libzmq inside) or no /proc."""
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return None
+    for line in maps.splitlines():
+        path = line.split(maxsplit=5)[-1] if line.count(" ") >= 5 else ""
+        if os.path.basename(path).startswith("libzmq"):
+            return path
+    return None
+
+
 class ZmqTransport:
     """`curve`: the server's (public, secret) keys, None for a plaintext socket (`--no-auth`)."""
 
@@ -92,6 +111,21 @@ class ZmqTransport:
         self._read_scheduled = False
         self._tasks: set[asyncio.Task] = set()
         self._handlers = {name.encode(): (RPCS[name], call) for name, call in self.calls.by_rpc.items()}
+
+    def hand_over(self, edge: _native.Edge) -> bool:
+        """Lets the compiled edge read and write the socket from now on (zmq_front compiled;
+        native/src/zmq_edge.rs), through pyzmq's own libzmq; it asks `answer` for every request it
+        does not answer itself. False, logged, when that libzmq cannot be shared (then `start`)."""
+        path = loaded_libzmq()
+        if path is None:
+            log.warning("pyzmq's libzmq is not a shared library of this process: ZeroMQ stays with the Python front")
+            return False
+        try:
+            edge.serve_zmq(self.socket.underlying, path, zmq.zmq_version_info())
+        except OSError as exc:
+            log.warning("the compiled edge cannot read the ZeroMQ socket (%s): it stays with the Python front", exc)
+            return False
+        return True
 
     def start(self) -> None:
         self._loop = asyncio.get_running_loop()
@@ -137,12 +171,25 @@ class ZmqTransport:
         return [str(error.code.value[0]).encode(), error.message.encode()]
 
     async def _handle(self, parts: list[bytes]) -> None:
+        reply, _ = await self.answer(parts)
+        try:
+            self.socket.send_multipart(reply, _NOBLOCK)
+            if self._waiting():  # the send took the descriptor's signal of messages waiting
+                self._read_soon()
+        except zmq.ZMQError as exc:  # the socket closed (stopping)
+            log.debug("zmq reply dropped: %s", exc)
+
+    async def answer(self, parts: list[bytes]) -> tuple[list[bytes], tuple[Identity, str] | None]:
+        """The reply's frames (its envelope first) to a request's (its identity first); with them,
+        for a Frame answered, its caller and session (front/edge.py routes the session's next
+        frames straight to its worker)."""
         identity, body = parts[0], parts[1:]
         envelope = [identity]
         if len(body) in (3, 4) and body[0] == b"":  # REQ client
             envelope, body = [identity, b""], body[1:]
         t0 = time.perf_counter()
         rpc = body[0] if body else b""
+        answered = None
         try:
             if len(body) not in (2, 3):
                 raise invalid(f"expected 3 frames (RPC name, payload, key), got {len(body)}")
@@ -158,20 +205,13 @@ class ZmqTransport:
             need, call = handler
             caller = await self.guard.authorize_async(authorization, need.verb, fresh=need.fresh)  # before the payload is parsed
             reply = [b"0", await call(payload, caller)]
-        except DirectorError as exc:
-            reply = self._error_reply(exc)
-        except AccessUnavailable as exc:  # UNAVAILABLE, as over gRPC: the SDKs retry it
-            reply = self._error_reply(self.guard.records_down(exc))
-        except Exception as exc:  # never let one request end the loop; INTERNAL, as over gRPC
+            session_id = named_session("Frame", payload) if name == b"Frame" else None
+            if session_id:
+                answered = caller, session_id
+        except Exception as exc:  # never let one request end the loop; answered as over gRPC (Guard.refusal)
             rpc_name = rpc[:64].decode(errors="replace")
-            reply = self._error_reply(
-                internal(exc, rpc_name, named_session(rpc_name, body[1]) if len(body) in (2, 3) else None, log)
-            )
+            named = lambda: named_session(rpc_name, body[1]) if len(body) in (2, 3) else None  # noqa: E731
+            reply = self._error_reply(self.guard.refusal(exc, rpc_name, named, log))
         label = rpc.decode() if rpc in self._handlers else "invalid"  # bounded label set
         self.metrics.labelled(self.metrics.request, TRANSPORT, label).observe(time.perf_counter() - t0)
-        try:
-            self.socket.send_multipart(envelope + reply, _NOBLOCK)
-            if self._waiting():  # the send took the descriptor's signal of messages waiting
-                self._read_soon()
-        except zmq.ZMQError as exc:  # the socket closed (stopping)
-            log.debug("zmq reply dropped: %s", exc)
+        return envelope + reply, answered

@@ -1,19 +1,24 @@
-"""The compiled gRPC edge's Python side (issue 43, step 5; native/src/edge.rs; docs/frame_path.md).
+"""The compiled edge's Python side (issue 43, step 5; native/src/edge.rs, native/src/zmq_edge.rs;
+docs/frame_path.md).
 
-With `grpc_front compiled` the node's gRPC port is served by the edge, HTTP/2 in Rust on its own
-thread in this process. It answers StreamFrames and Frame itself: a frame of a session routed to it
-(SessionRouter.route_to_edge) goes straight to the session's worker over the worker's frame socket
-(front/worker_pool.py) and back, with no Python here. Every other call it passes through to the
-usual grpc.aio server (grpc_service.py), which listens on a Unix socket in a private folder. With
-the node's certificate (`--tls-cert`, `--tls-key`) the edge serves TLS itself.
+The edge runs Rust on its own thread in this process. With `grpc_front compiled` it serves the
+node's gRPC port (HTTP/2) and answers StreamFrames and Frame itself: a frame of a session routed to
+it (SessionRouter.route_to_edge) goes straight to the session's worker over the worker's frame
+socket (front/worker_pool.py) and back, with no Python here. Every other call it passes through to
+the usual grpc.aio server (grpc_service.py), which listens on a Unix socket in a private folder. With
+the node's certificate (`--tls-cert`, `--tls-key`) the edge serves TLS itself. With `zmq_front
+compiled` it also reads and writes the ZeroMQ socket zmq_service.py made: a Frame request of a
+session routed to it, from a caller let in, goes to the worker the same way; every other request
+is handed here whole and answered by ZmqTransport.answer.
 
 This module answers what the edge asks (its events, announced by a byte on a socket pair the loop
 watches): a caller, by its key (access/guard.py), the first time the edge sees its metadata (it
 remembers the callers let in until their key is revoked); a stream's first frame (the session
 adopted or restored, counted as streaming: SessionRouter.stream_opened), after which the session
-is routed to the edge; any frame of a session not routed there; a stream's end. Errors are answered
-as grpc_service.py answers them, with the same codes, messages and metrics. What the edge answered
-alone is read back every DRAIN_S into the front's metrics and the sessions' counts.
+is routed to the edge; any frame of a session not routed there; a stream's end; a ZeroMQ request
+(after a Frame answered, its caller is let in and its session routed). Errors are answered as
+grpc_service.py and zmq_service.py answer them, with the same codes, messages and metrics. What the
+edge answered alone is read back every DRAIN_S into the front's metrics and the sessions' counts.
 """
 
 from __future__ import annotations
@@ -31,43 +36,52 @@ import grpc
 
 from camdirector import _native
 from camdirector.access.guard import Guard
-from camdirector.access.keys import AccessUnavailable
-from camdirector.errors import DirectorError, internal, status_code
+from camdirector.errors import DirectorError, status_code
 from camdirector.front.grpc_service import SERVER_METADATA, TRANSPORT, start_grpc
 from camdirector.front.router import RESEND_BURST_S, SessionRouter
 from camdirector.front.session_calls import RPCS
+from camdirector.front.zmq_service import TRANSPORT as ZMQ
+from camdirector.front.zmq_service import ZmqTransport
 from camdirector.infra.channels import frame_metrics
 
-log = logging.getLogger("camdirector.grpc_edge")
+log = logging.getLogger("camdirector.edge")
 
 DRAIN_S = 0.25  # how often what the edge answered alone reaches the metrics and the sessions' counts, s
-_RPC = ("StreamFrames", "Frame")  # by whether the edge's frame was a Frame call's
+_RPC = ("StreamFrames", "Frame")  # by whether the edge's gRPC frame was a Frame call's
+# (transport, RPC) of a frame the edge answered, by its `via` (native/src/edge.rs's Via)
+_VIA = ((TRANSPORT, "StreamFrames"), (TRANSPORT, "Frame"), (ZMQ, "Frame"))
+_TRANSPORT_BITS = ((1, TRANSPORT), (2, ZMQ))  # Drained::sessions' transports
 
 
-class GrpcEdgeFront:
+class EdgeFront:
     """The edge, its grpc.aio server behind it, and the answers to its events."""
 
     def __init__(self, router: SessionRouter, guard: Guard):
         self.router = router
         self.guard = guard
         self.metrics = router.metrics
-        self.edge: _native.GrpcEdge | None = None
+        self.edge: _native.Edge | None = None
+        self.zmq: ZmqTransport | None = None  # the ZeroMQ socket's requests the edge hands here
         self._inner: grpc.aio.Server | None = None
         self._folder: str | None = None
         self._wake: socket.socket | None = None
         self._tasks: set[asyncio.Task] = set()
         self._drainer: asyncio.Task | None = None
 
-    async def start(self, address: str) -> str:
-        """Serves `address` (HOST:PORT; port 0 picks one); returns the bound HOST:PORT."""
+    async def start(self, grpc_address: str | None, zmq: ZmqTransport | None) -> str | None:
+        """Serves gRPC on `grpc_address` (HOST:PORT; port 0 picks one) when given, and `zmq`'s
+        socket when given and its libzmq can be shared (ZmqTransport.hand_over; otherwise that
+        socket is started as Python's). Returns the bound gRPC HOST:PORT."""
         settings = self.router.settings
-        self._folder = tempfile.mkdtemp(prefix="camdirector-grpc-")  # mode 0700: the inner server is this user's
-        inner_path = os.path.join(self._folder, "grpc.sock")
-        self._inner, _ = await start_grpc(self.router, f"unix:{inner_path}", self.guard)
+        inner_path = ""
+        if grpc_address is not None:
+            self._folder = tempfile.mkdtemp(prefix="camdirector-grpc-")  # mode 0700: the inner server is this user's
+            inner_path = os.path.join(self._folder, "grpc.sock")
+            self._inner, _ = await start_grpc(self.router, f"unix:{inner_path}", self.guard)
         self._wake, edge_end = socket.socketpair()
         self._wake.setblocking(False)
-        edge = self.edge = _native.GrpcEdge(
-            address,
+        edge = self.edge = _native.Edge(
+            grpc_address,
             inner_path,
             edge_end.detach(),
             list(SERVER_METADATA),
@@ -82,7 +96,14 @@ class GrpcEdgeFront:
         self.router.attach_edge(edge, self.drain)
         self.router.pool.attach_frame_sink(lambda slot, sock: edge.set_worker(slot, sock.detach()))
         self._drainer = asyncio.create_task(self._drain_forever())
-        host, _, _ = address.rpartition(":")
+        if zmq is not None:
+            if zmq.hand_over(edge):
+                self.zmq = zmq
+            else:
+                zmq.start()
+        if grpc_address is None:
+            return None
+        host, _, _ = grpc_address.rpartition(":")
         return f"{host}:{edge.port}"
 
     async def stop(self) -> None:
@@ -114,7 +135,7 @@ class GrpcEdgeFront:
             if event[0] == "closed":
                 self.router.stream_closed(event[1])
                 continue
-            task = asyncio.create_task(self._answer(event))
+            task = asyncio.create_task(self._answer_zmq(*event[1:]) if event[0] == "zmq" else self._answer(event))
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
 
@@ -138,12 +159,20 @@ class GrpcEdgeFront:
             self.router.route_to_edge(session_id)
             self.metrics.labelled(self.metrics.request, TRANSPORT, _RPC[kind == "unary"]).observe(time.perf_counter() - t0)
             self.edge.answer(token, 0, "", body, None, tenant, opened)
-        except DirectorError as exc:
-            self._refuse(token, exc, opened)
-        except AccessUnavailable as exc:  # a session of this tenant not held here, its owner unread
-            self._refuse(token, self.guard.records_down(exc), opened)
-        except Exception as exc:  # a bug: INTERNAL, as grpc_service.py answers it
-            self._refuse(token, internal(exc, _RPC[kind == "unary"], session_id, log), opened)
+        except Exception as exc:  # as grpc_service.py answers it (Guard.refusal)
+            self._refuse(token, self.guard.refusal(exc, _RPC[kind == "unary"], lambda: session_id, log), opened)
+
+    async def _answer_zmq(self, token: int, parts: list[bytes]) -> None:
+        """A ZeroMQ request the edge handed here, answered as the Python front answers it; after a
+        Frame answered, its caller is let in and its session routed to the edge."""
+        assert self.edge is not None and self.zmq is not None
+        reply, answered = await self.zmq.answer(parts)
+        caller = None
+        if answered is not None:
+            identity, session_id = answered
+            self.router.route_to_edge(session_id)
+            caller = (identity.key_id, identity.tenant)
+        self.edge.answer_zmq(token, reply, caller)
 
     def _refuse(self, token: int, error: DirectorError, opened: bool) -> None:
         assert self.edge is not None
@@ -159,14 +188,16 @@ class GrpcEdgeFront:
         """What the edge answered alone since the last call, into the metrics and the sessions' counts."""
         assert self.edge is not None
         frames, errors, sessions = self.edge.drain()
-        request = [self.metrics.labelled(self.metrics.request, TRANSPORT, rpc) for rpc in _RPC]
-        for elapsed_s, compute_ms, flags, names, values, unary in frames:
-            request[unary].observe(elapsed_s)
+        request = [self.metrics.labelled(self.metrics.request, transport, rpc) for transport, rpc in _VIA]
+        for elapsed_s, compute_ms, flags, names, values, via in frames:
+            request[via].observe(elapsed_s)
             if flags & _native.EDGE_HAS_METRICS:
                 m = frame_metrics(flags, compute_ms, names, values)
-                self.metrics.frame_answered(TRANSPORT, m.compute_ms, m.stage_ms, m.stale, m.checkpoint_failed)
+                self.metrics.frame_answered(_VIA[via][0], m.compute_ms, m.stage_ms, m.stale, m.checkpoint_failed)
         if frames:
             self.metrics.edge_frames.inc(len(frames))
-        for code in errors:
-            self.metrics.labelled(self.metrics.errors, TRANSPORT, status_code(code).name).inc()
-        self.router.edge_answered(sessions)
+        for code, via in errors:
+            self.metrics.labelled(self.metrics.errors, _VIA[via][0], status_code(code).name).inc()
+        self.router.edge_answered(
+            [(session_id, count, tuple(t for bit, t in _TRANSPORT_BITS if bits & bit)) for session_id, count, bits in sessions]
+        )
