@@ -370,11 +370,47 @@ pub struct Shared {
     asked: Mutex<HashMap<u64, oneshot::Sender<Answer>>>,
     next_token: AtomicU64,
     drained: Mutex<Drained>,
+    // frames handed to the front's Python and not yet answered, by session: while a session has
+    // any, its later frames go there too, so that none reaches the worker before an earlier one
+    with_python: Mutex<HashMap<String, u32>>,
     upstream_path: String,
     upstream: tokio::sync::Mutex<Option<SendRequest<EdgeBody>>>,
 }
 
+/// A frame of `session_id` with the front's Python, from its handover until this is dropped
+/// (answered, or the edge stopping): Shared::with_python.
+pub(crate) struct WithPython<'a> {
+    shared: &'a Shared,
+    session_id: String,
+}
+
+impl Drop for WithPython<'_> {
+    fn drop(&mut self) {
+        let mut held = self.shared.with_python.lock().unwrap();
+        if let Some(count) = held.get_mut(&self.session_id) {
+            *count -= 1;
+            if *count == 0 {
+                held.remove(&self.session_id);
+            }
+        }
+    }
+}
+
 impl Shared {
+    /// Notes a frame of `session_id` handed to the front's Python until the result is dropped.
+    pub(crate) fn hand_to_python(&self, session_id: &str) -> WithPython<'_> {
+        *self
+            .with_python
+            .lock()
+            .unwrap()
+            .entry(session_id.to_owned())
+            .or_insert(0) += 1;
+        WithPython {
+            shared: self,
+            session_id: session_id.to_owned(),
+        }
+    }
+
     fn push(&self, event: Event) {
         let mut events = self.events.lock().unwrap();
         let was_empty = events.is_empty();
@@ -534,6 +570,9 @@ impl Shared {
         t0: Instant,
         via: Via,
     ) -> Option<Result<Bytes, Status>> {
+        if self.with_python.lock().unwrap().contains_key(session_id) {
+            return None; // after its earlier frames, through the front's Python
+        }
         let link = {
             let mut routes = self.routes.lock().unwrap();
             let route = routes.get_mut(session_id).filter(|r| r.tenant == tenant)?;
@@ -817,6 +856,7 @@ impl Call<'_> {
         if !self.unary {
             match session.as_deref() {
                 None => {
+                    let _with_python = self.shared.hand_to_python(&session_id);
                     let answer = self
                         .shared
                         .ask(|token| Event::Open {
@@ -854,6 +894,7 @@ impl Call<'_> {
             Some(Err(status)) => ours(status),
             None => {
                 let unary = self.unary;
+                let _with_python = self.shared.hand_to_python(&session_id);
                 let answer = self
                     .shared
                     .ask(|token| Event::Frame {
@@ -1079,6 +1120,7 @@ impl Edge {
             asked: Mutex::new(HashMap::new()),
             next_token: AtomicU64::new(0),
             drained: Mutex::new(Drained::default()),
+            with_python: Mutex::new(HashMap::new()),
             upstream_path,
             upstream: tokio::sync::Mutex::new(None),
         });

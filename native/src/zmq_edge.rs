@@ -11,8 +11,9 @@
 //! A request is taken here only when the front's Python has already said yes to it: a Frame
 //! (docs/protocol.md's envelope, DEALER or REQ), within the message limit, from a caller Python let
 //! in (its key frame's SHA-256, as edge.rs remembers gRPC's callers), of a session routed here.
-//! Everything else (other RPCs, a first frame, unknown keys, malformed envelopes) goes to Python
-//! whole (`Event::Zmq`), and its reply frames are sent back as they come.
+//! Everything else (other RPCs, a first frame, unknown keys, malformed envelopes, a frame of a
+//! session that has a frame with Python: Shared::with_python keeps a session's frames in order) goes
+//! to Python whole (`Event::Zmq`), and its reply frames are sent back as they come.
 
 use std::ffi::{c_int, c_void, CString};
 use std::os::fd::{AsRawFd, RawFd};
@@ -322,6 +323,7 @@ async fn answer_message(
         None => {
             let (_, body) = split_envelope(&parts);
             let key = body.get(2).cloned().unwrap_or_default();
+            let _with_python = frame_session(body).map(|id| shared.hand_to_python(id));
             let answer = shared.ask(|token| Event::Zmq { token, parts }).await;
             if answer.let_in {
                 shared.let_in(&key, (answer.key_id, answer.tenant));
@@ -332,25 +334,27 @@ async fn answer_message(
     let _ = replier.send(reply);
 }
 
+/// The session a Frame request's body names; None for another request or an unreadable one.
+fn frame_session(body: &[Bytes]) -> Option<&str> {
+    if !matches!(body.len(), 2 | 3) || body[0] != FRAME_RPC {
+        return None;
+    }
+    wire::session_id(&body[1]).ok().filter(|id| !id.is_empty())
+}
+
 /// The reply to a Frame of a routed session from a caller let in; None for anything else.
 async fn routed(shared: &Shared, parts: &[Bytes], t0: Instant) -> Option<Vec<Bytes>> {
     if parts.len() < 3 {
         return None;
     }
     let (envelope, body) = split_envelope(parts);
-    if !matches!(body.len(), 2 | 3) || body[0] != FRAME_RPC {
-        return None;
-    }
+    let session_id = frame_session(body)?;
     let payload = &body[1];
     if payload.len() > shared.max_message_bytes() {
         return None;
     }
     let key: &[u8] = body.get(2).map_or(b"", |k| k);
     let (_, tenant) = shared.known_caller(key)?;
-    let session_id = match wire::session_id(payload) {
-        Ok(id) if !id.is_empty() => id,
-        _ => return None,
-    };
     let answered = shared
         .routed_frame(session_id, &tenant, payload, t0, Via::Zmq)
         .await?;
