@@ -137,16 +137,6 @@ pub enum Via {
     Zmq = 2,
 }
 
-impl Via {
-    /// The transports a session's frames came by, as bits (Drained::sessions): 1 gRPC, 2 ZeroMQ.
-    fn transport_bit(self) -> u8 {
-        match self {
-            Via::Stream | Via::Unary => 1,
-            Via::Zmq => 2,
-        }
-    }
-}
-
 /// Python's answer to an `Event`.
 pub struct Answer {
     pub status: Status,
@@ -187,7 +177,7 @@ pub struct FrameRecord {
 pub struct Drained {
     pub frames: Vec<FrameRecord>,
     pub errors: Vec<(u8, Via)>, // the status code of each call ended here with an error
-    pub sessions: HashMap<String, (u64, u8)>, // frames answered here, and the transports' bits (Via), by session
+    pub sessions: HashMap<String, (u64, u8)>, // frames answered here, and bit `1 << via` of each Via they came by, by session
 }
 
 /// A session's rate bucket as the router hands it over (router._admit_frame): `tokens` and
@@ -614,7 +604,7 @@ impl Shared {
             .entry(session_id.to_owned())
             .or_insert((0, 0));
         session.0 += 1;
-        session.1 |= via.transport_bit();
+        session.1 |= 1 << via as u8;
         drained.frames.push(FrameRecord {
             via,
             elapsed_s: t0.elapsed().as_secs_f64(),

@@ -6,7 +6,7 @@
 //! [frame bytes]); answers as (token, status code, message, body, key id | None, tenant, opened),
 //! ZeroMQ's as (token, [reply frame bytes], (key id | None, tenant) | None); drained frames as
 //! (elapsed_s, compute_ms, flags, stage names bytes, stage times tuple, via: edge.rs's Via),
-//! errors as (status code, via), sessions as (id, frames, transport bits).
+//! errors as (status code, via), sessions as (id, frames, bit 1 << via of each via).
 
 use bytes::Bytes;
 use pyo3::exceptions::PyOSError;
@@ -230,7 +230,7 @@ impl Edge {
     }
 
     /// What happened since the last call: (frames, (error code, via) pairs, (session id, frames,
-    /// transport bits) triples).
+    /// bits 1 << via) triples).
     #[allow(clippy::type_complexity)]
     fn drain<'py>(
         &self,

@@ -344,9 +344,6 @@ fn frame_session(body: &[Bytes]) -> Option<&str> {
 
 /// The reply to a Frame of a routed session from a caller let in; None for anything else.
 async fn routed(shared: &Shared, parts: &[Bytes], t0: Instant) -> Option<Vec<Bytes>> {
-    if parts.len() < 3 {
-        return None;
-    }
     let (envelope, body) = split_envelope(parts);
     let session_id = frame_session(body)?;
     let payload = &body[1];

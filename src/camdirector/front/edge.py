@@ -38,7 +38,7 @@ from camdirector import _native
 from camdirector.access.guard import Guard
 from camdirector.errors import DirectorError, status_code
 from camdirector.front.grpc_service import SERVER_METADATA, TRANSPORT, start_grpc
-from camdirector.front.router import RESEND_BURST_S, SessionRouter
+from camdirector.front.router import RESEND_BURST_S, SessionRouter, named_session
 from camdirector.front.session_calls import RPCS
 from camdirector.front.zmq_service import TRANSPORT as ZMQ
 from camdirector.front.zmq_service import ZmqTransport
@@ -47,10 +47,9 @@ from camdirector.infra.channels import frame_metrics
 log = logging.getLogger("camdirector.edge")
 
 DRAIN_S = 0.25  # how often what the edge answered alone reaches the metrics and the sessions' counts, s
-_RPC = ("StreamFrames", "Frame")  # by whether the edge's gRPC frame was a Frame call's
-# (transport, RPC) of a frame the edge answered, by its `via` (native/src/edge.rs's Via)
+# (transport, RPC) of a frame the edge answered, by its `via` (native/src/edge.rs's Via; a gRPC
+# frame's is whether it was a Frame call's)
 _VIA = ((TRANSPORT, "StreamFrames"), (TRANSPORT, "Frame"), (ZMQ, "Frame"))
-_TRANSPORT_BITS = ((1, TRANSPORT), (2, ZMQ))  # Drained::sessions' transports
 
 
 class EdgeFront:
@@ -157,21 +156,21 @@ class EdgeFront:
                 opened = True
             body = await self.router.frame(payload, session_id, TRANSPORT, tenant)
             self.router.route_to_edge(session_id)
-            self.metrics.labelled(self.metrics.request, TRANSPORT, _RPC[kind == "unary"]).observe(time.perf_counter() - t0)
+            self.metrics.labelled(self.metrics.request, TRANSPORT, _VIA[kind == "unary"][1]).observe(time.perf_counter() - t0)
             self.edge.answer(token, 0, "", body, None, tenant, opened)
         except Exception as exc:  # as grpc_service.py answers it (Guard.refusal)
-            self._refuse(token, self.guard.refusal(exc, _RPC[kind == "unary"], lambda: session_id, log), opened)
+            self._refuse(token, self.guard.refusal(exc, _VIA[kind == "unary"][1], lambda: session_id, log), opened)
 
     async def _answer_zmq(self, token: int, parts: list[bytes]) -> None:
         """A ZeroMQ request the edge handed here, answered as the Python front answers it; after a
         Frame answered, its caller is let in and its session routed to the edge."""
         assert self.edge is not None and self.zmq is not None
-        reply, answered = await self.zmq.answer(parts)
+        reply, framed = await self.zmq.answer(parts)
         caller = None
-        if answered is not None:
-            identity, session_id = answered
+        session_id = named_session("Frame", framed[1]) if framed is not None else None
+        if framed is not None and session_id:
             self.router.route_to_edge(session_id)
-            caller = (identity.key_id, identity.tenant)
+            caller = (framed[0].key_id, framed[0].tenant)
         self.edge.answer_zmq(token, reply, caller)
 
     def _refuse(self, token: int, error: DirectorError, opened: bool) -> None:
@@ -198,6 +197,5 @@ class EdgeFront:
             self.metrics.edge_frames.inc(len(frames))
         for code, via in errors:
             self.metrics.labelled(self.metrics.errors, _VIA[via][0], status_code(code).name).inc()
-        self.router.edge_answered(
-            [(session_id, count, tuple(t for bit, t in _TRANSPORT_BITS if bits & bit)) for session_id, count, bits in sessions]
-        )
+        transports = [{t for via, (t, _) in enumerate(_VIA) if bits >> via & 1} for _, _, bits in sessions]  # bit 1 << via
+        self.router.edge_answered([(sid, count, ts) for (sid, count, _), ts in zip(sessions, transports)])

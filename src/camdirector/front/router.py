@@ -116,7 +116,7 @@ class SessionRouter:
             entry.frame_tokens, entry.resend_tokens = bucket
             entry.tokens_at_s = self.clock()
 
-    def edge_answered(self, frames_by_session: list[tuple[str, int, tuple[str, ...]]]) -> None:
+    def edge_answered(self, frames_by_session: list[tuple[str, int, set[str]]]) -> None:
         """Frames the edge answered since it was last asked, (session id, frames, transports):
         counted as answered here would be."""
         now = self.clock()

@@ -179,10 +179,10 @@ class ZmqTransport:
         except zmq.ZMQError as exc:  # the socket closed (stopping)
             log.debug("zmq reply dropped: %s", exc)
 
-    async def answer(self, parts: list[bytes]) -> tuple[list[bytes], tuple[Identity, str] | None]:
+    async def answer(self, parts: list[bytes]) -> tuple[list[bytes], tuple[Identity, bytes] | None]:
         """The reply's frames (its envelope first) to a request's (its identity first); with them,
-        for a Frame answered, its caller and session (front/edge.py routes the session's next
-        frames straight to its worker)."""
+        for a Frame answered, its caller and payload (front/edge.py routes the session it names
+        straight to its worker)."""
         identity, body = parts[0], parts[1:]
         envelope = [identity]
         if len(body) in (3, 4) and body[0] == b"":  # REQ client
@@ -205,9 +205,8 @@ class ZmqTransport:
             need, call = handler
             caller = await self.guard.authorize_async(authorization, need.verb, fresh=need.fresh)  # before the payload is parsed
             reply = [b"0", await call(payload, caller)]
-            session_id = named_session("Frame", payload) if name == b"Frame" else None
-            if session_id:
-                answered = caller, session_id
+            if name == b"Frame":
+                answered = caller, payload
         except Exception as exc:  # never let one request end the loop; answered as over gRPC (Guard.refusal)
             rpc_name = rpc[:64].decode(errors="replace")
             named = lambda: named_session(rpc_name, body[1]) if len(body) in (2, 3) else None  # noqa: E731
