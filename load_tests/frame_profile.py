@@ -52,11 +52,12 @@ client's write to read, as the profile's `wire round trip` is.
 
 What the stamps cost: `--bare-frames` frames of each configuration are streamed again into a
 server started without the plugin, and their round trip is reported beside the profiled one
-(`uninstrumented`). What the hop to a worker costs: `--inline-frames` frames of each are streamed
-into a server without the plugin that holds its sessions in the front process (`serve --workers
-0`), reported the same way (`inline`). What the compiled edge makes of it: `--edge-frames`
-frames of each into a server without the plugin whose gRPC port and ZeroMQ socket the edge serves
-(`serve --grpc-front compiled --zmq-front compiled`), reported the same way (`edge`).
+(`uninstrumented`). What the compiled edge makes of it: `--edge-frames` frames of each into a
+server without the plugin whose gRPC port and ZeroMQ socket the edge serves (`serve --grpc-front
+compiled --zmq-front compiled`), reported the same way (`edge`). What the hop to a worker costs:
+`--inline-frames` frames of each into such a server that holds its sessions in the front process
+(`serve --workers 0`), where the edge computes a routed session's frame on its own thread,
+reported the same way (`inline`).
 
 Printed JSON, per configuration: each hop's median, p99 and mean in us and its share of the round
 trip (mean over mean: means add up, medians do not), the round trip (client encode to client
@@ -175,7 +176,7 @@ def _install_worker(stamps: _Stamps) -> None:
     from camdirector.worker.table import SessionTable
     from camdirector.worker.timeline import Timeline
 
-    read_request, encode_reply = main.read_request, main.encode_reply
+    read_request, encode_reply = main.read_request, dispatch.encode_reply  # a frame's reply is framed in dispatch.py
 
     @functools.wraps(read_request)
     def read_stamped(reader):
@@ -228,7 +229,7 @@ def _install_worker(stamps: _Stamps) -> None:
         stamps.idle.append((t0, time.perf_counter()))
         return more
 
-    main.read_request, main.encode_reply = read_stamped, encode_stamped
+    main.read_request, dispatch.encode_reply = read_stamped, encode_stamped
     dispatch.parse_routed = _adding(stamps, "worker_decode", dispatch.parse_routed)
     dispatch.Dispatcher.handle_bytes = edges("handle", dispatch.Dispatcher.handle_bytes)
     SessionTable.frame_bytes = edges("table", SessionTable.frame_bytes)
@@ -793,8 +794,9 @@ def run(
     """The profile (module docstring); then, with bare_frames > 0, that many frames of each
     configuration against a server without the plugin: what the stamps cost; with inline_frames >
     0, that many against a server without the plugin holding its sessions in the front (`serve
-    --workers 0`): what the hop to a worker costs; with edge_frames > 0, that many against a server
-    without the plugin whose gRPC port the compiled edge serves. frame_path: the servers' (`serve
+    --workers 0`) behind the compiled edge: what the hop to a worker costs; with edge_frames > 0,
+    that many against a server without the plugin whose gRPC port and ZeroMQ socket the compiled
+    edge serves. frame_path: the servers' (`serve
     --frame-path`)."""
     from camdirector.deploy.server_process import ServerProcess
 
@@ -818,7 +820,7 @@ def run(
         with EchoServer() as echo:
             floors = [echo_floor(echo, r.transport, r.sizes[0], r.sizes[1], n_frames, rate_hz) for r in runs]
         bare = _unprofiled(works, transports, rate_hz, bare_frames, serve_args, frame_path)
-        inline_args = ("--workers", "0", "--data-dir", str(folder / "data-inline"))
+        inline_args = ("--workers", "0", "--data-dir", str(folder / "data-inline"), *COMPILED_FRONTS)
         inline = _unprofiled(works, transports, rate_hz, inline_frames, inline_args, frame_path)
         edge_args = ("--workers", str(workers), "--data-dir", str(folder / "data-edge"), *COMPILED_FRONTS)
         edge = _unprofiled(works, transports, rate_hz, edge_frames, edge_args, frame_path)

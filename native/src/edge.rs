@@ -4,8 +4,9 @@
 //! - `StreamFrames` and the unary `Frame` are answered here. A frame of a session the front has *routed* here (its
 //!   worker, its tenant, its rate) goes straight to that worker over the worker's frame socket
 //!   (infra/channels.py's framing, op `frame`) and its reply straight back to the client: no Python
-//!   in the front touches it. Everything else about a stream is asked of the front's Python
-//!   through `Event`s (front/edge.py answers them): the caller's key when the stream opens,
+//!   in the front touches it. Where the front holds the sessions itself (`serve --workers 0`), this
+//!   thread computes the frame through the front's table (`InlineTable`), with no hop at all.
+//!   Everything else about a stream is asked of the front's Python through `Event`s (front/edge.py answers them): the caller's key when the stream opens,
 //!   its first frame (the session adopted, restored, counted as streaming), any frame of a session
 //!   not routed here (restoring, moved), and the stream's end. Python stays the judge of who may
 //!   do what; this only repeats its per-frame checks (revoked key, one session a stream, the
@@ -222,6 +223,12 @@ impl Route {
         }
         Ok(())
     }
+
+    /// Gives back the frame `admit` took: a frame the front's Python answers after all, which
+    /// takes it from its own bucket (router._admit_frame).
+    fn refund(&mut self, config: &Config) {
+        self.tokens = (self.tokens + 1.0).min(config.max_fps);
+    }
 }
 
 /// A float as Python's `{:g}` writes the usual rates (60 -> "60", 7.5 -> "7.5").
@@ -241,6 +248,57 @@ struct WorkerReply {
     names: Bytes,
     values: Vec<f64>,
     body: Bytes,
+}
+
+impl WorkerReply {
+    /// A whole reply (header, stage names, stage times, body) and its request's id.
+    fn parse(mut reply: Bytes) -> Result<(u32, WorkerReply), String> {
+        if reply.len() < REPLY_HEADER_BYTES {
+            return Err(format!("a reply of {} bytes has no header", reply.len()));
+        }
+        let stages = reply[14] as usize;
+        let names_len = u16::from_be_bytes([reply[15], reply[16]]) as usize;
+        let body_len = u64::from_be_bytes(reply[17..25].try_into().unwrap()) as usize;
+        if reply.len() != REPLY_HEADER_BYTES + names_len + 8 * stages + body_len {
+            return Err(format!(
+                "a reply of {} bytes is not what its header says",
+                reply.len()
+            ));
+        }
+        let id = reply.get_u32();
+        let status = reply.get_u8();
+        let flags = reply.get_u8();
+        let compute_ms = reply.get_f64();
+        reply.advance(3 + 8); // stages, names length, body length: read above
+        let names = reply.split_to(names_len);
+        let values = (0..stages).map(|_| reply.get_f64()).collect();
+        Ok((
+            id,
+            WorkerReply {
+                status,
+                flags,
+                compute_ms,
+                names,
+                values,
+                body: reply,
+            },
+        ))
+    }
+}
+
+/// The front's own session table (`serve --workers 0`), answering a frame on the edge's thread:
+/// no hop, no wake-up of another process (front/worker_pool.py, WorkerPool.answer_inline).
+pub trait InlineTable: Send + Sync {
+    /// The reply to a frame request of `session_id`, in a worker's framing; Ok(None) when the
+    /// front's loop must answer it (its session is not held, or is bound to the loop's thread);
+    /// Err(what went wrong) when the call itself failed.
+    fn frame(&self, session_id: &str, payload: &[u8]) -> Result<Option<Bytes>, String>;
+}
+
+/// Where a slot's sessions are held: a worker process, or the front's own table.
+enum Host {
+    Worker(Link),
+    Inline(Box<dyn InlineTable>),
 }
 
 /// The edge's end of one worker's frame socket.
@@ -308,24 +366,11 @@ async fn read_replies(
                 buffer.reserve(total - buffer.len());
                 break;
             }
-            let mut reply = buffer.split_to(total).freeze();
-            let id = reply.get_u32();
-            let status = reply.get_u8();
-            let flags = reply.get_u8();
-            let compute_ms = reply.get_f64();
-            reply.advance(3 + 8); // stages, names length, body length: read above
-            let names = reply.split_to(names_len);
-            let values = (0..stages).map(|_| reply.get_f64()).collect();
+            let (id, reply) = WorkerReply::parse(buffer.split_to(total).freeze())
+                .expect("a reply cut at its header's length");
             let settled = pending.lock().unwrap().remove(&id);
             if let Some(sender) = settled {
-                let _ = sender.send(WorkerReply {
-                    status,
-                    flags,
-                    compute_ms,
-                    names,
-                    values,
-                    body: reply,
-                });
+                let _ = sender.send(reply);
             }
         }
         match socket.read_buf(&mut buffer).await {
@@ -352,7 +397,7 @@ fn digest(key: &[u8]) -> [u8; 32] {
 pub struct Shared {
     config: Config,
     routes: Mutex<HashMap<String, Route>>,
-    links: Mutex<Vec<Option<Arc<Link>>>>,
+    hosts: Mutex<Vec<Option<Arc<Host>>>>,
     revoked: Mutex<HashSet<String>>,
     callers: Mutex<HashMap<[u8; 32], Caller>>,
     events: Mutex<Vec<Event>>,
@@ -522,24 +567,33 @@ impl Shared {
         socket.set_nonblocking(true)?;
         let (reader, writer) = UnixStream::from_std(socket)?.into_split();
         let (requests, queued) = mpsc::unbounded_channel();
-        let link = Arc::new(Link {
+        let link = Link {
             requests,
             pending: Arc::new(Mutex::new(HashMap::new())),
             alive: Arc::new(AtomicBool::new(true)),
             next_id: AtomicU32::new(0),
-        });
+        };
         tokio::spawn(write_requests(writer, queued));
         tokio::spawn(read_replies(
             reader,
             link.pending.clone(),
             link.alive.clone(),
         ));
-        let mut links = self.links.lock().unwrap();
-        if links.len() <= slot {
-            links.resize(slot + 1, None);
-        }
-        links[slot] = Some(link);
+        self.set_host(slot, Host::Worker(link));
         Ok(())
+    }
+
+    /// The front's own table holds the sessions of `slot` (`serve --workers 0`).
+    pub fn set_inline(&self, slot: usize, table: Box<dyn InlineTable>) {
+        self.set_host(slot, Host::Inline(table));
+    }
+
+    fn set_host(&self, slot: usize, host: Host) {
+        let mut hosts = self.hosts.lock().unwrap();
+        if hosts.len() <= slot {
+            hosts.resize(slot + 1, None);
+        }
+        hosts[slot] = Some(Arc::new(host));
     }
 
     pub(crate) fn record_error(&self, code: u8, via: Via) {
@@ -563,28 +617,50 @@ impl Shared {
         if self.with_python.lock().unwrap().contains_key(session_id) {
             return None; // after its earlier frames, through the front's Python
         }
-        let link = {
+        let host = {
             let mut routes = self.routes.lock().unwrap();
             let route = routes.get_mut(session_id).filter(|r| r.tenant == tenant)?;
-            let link = self
-                .links
+            let host = self
+                .hosts
                 .lock()
                 .unwrap()
                 .get(route.slot)
                 .cloned()
                 .flatten()?;
-            if !link.alive.load(Ordering::Acquire) {
-                return None;
+            if let Host::Worker(link) = &*host {
+                if !link.alive.load(Ordering::Acquire) {
+                    return None;
+                }
             }
             if self.config.rate_limit {
                 if let Err(status) = route.admit(&self.config, session_id) {
                     return Some(Err(status));
                 }
             }
-            link
+            host
         };
-        let Some(reply) = link.frame(session_id, payload).await else {
-            return Some(Err(Status::new(UNAVAILABLE, WORKER_DIED)));
+        let reply = match &*host {
+            Host::Worker(link) => match link.frame(session_id, payload).await {
+                Some(reply) => reply,
+                None => return Some(Err(Status::new(UNAVAILABLE, WORKER_DIED))),
+            },
+            // on this thread, with no route's lock held: the table takes Python's lock, and
+            // Python's thread may be waiting on one of ours
+            Host::Inline(table) => match table.frame(session_id, payload) {
+                Ok(Some(bytes)) => match WorkerReply::parse(bytes) {
+                    Ok((_, reply)) => reply,
+                    Err(message) => return Some(Err(Status::new(INTERNAL, message))),
+                },
+                Ok(None) => {
+                    if self.config.rate_limit {
+                        if let Some(route) = self.routes.lock().unwrap().get_mut(session_id) {
+                            route.refund(&self.config);
+                        }
+                    }
+                    return None;
+                }
+                Err(message) => return Some(Err(Status::new(INTERNAL, message))),
+            },
         };
         if reply.status != OK {
             if reply.status == DATA_LOSS {
@@ -1102,7 +1178,7 @@ impl Edge {
         let shared = Arc::new(Shared {
             config,
             routes: Mutex::new(HashMap::new()),
-            links: Mutex::new(Vec::new()),
+            hosts: Mutex::new(Vec::new()),
             revoked: Mutex::new(HashSet::new()),
             callers: Mutex::new(HashMap::new()),
             events: Mutex::new(Vec::new()),

@@ -98,6 +98,16 @@ impl Edge {
             .map_err(|e| PyOSError::new_err(e.to_string()))
     }
 
+    /// The front's own session table holds the sessions of `slot` (`serve --workers 0`): the
+    /// edge answers their frames on its own thread through `answer(session_id, payload)`, which
+    /// returns the reply in a worker's framing, or None for the front's loop to answer it
+    /// (WorkerPool.answer_inline).
+    fn set_inline(&self, slot: usize, answer: Py<PyAny>) {
+        self.edge
+            .shared
+            .set_inline(slot, Box::new(InlineAnswer(answer)));
+    }
+
     /// Routes the session's frames to the worker in `slot`, with its rate bucket (router._admit_frame):
     /// `tokens` and `resend` frames, last filled `age_s` ago (None: full).
     #[pyo3(signature = (session_id, slot, tenant, tokens, resend, age_s))]
@@ -273,6 +283,27 @@ impl Edge {
     /// Stops listening and ends every stream (its thread is gone when this returns).
     fn stop(&mut self, py: Python<'_>) {
         py.detach(|| self.edge.stop());
+    }
+}
+
+/// WorkerPool.answer_inline, called on the edge's thread with the GIL taken there.
+struct InlineAnswer(Py<PyAny>);
+
+impl edge::InlineTable for InlineAnswer {
+    fn frame(&self, session_id: &str, payload: &[u8]) -> Result<Option<Bytes>, String> {
+        Python::attach(|py| {
+            let reply = self
+                .0
+                .call1(py, (session_id, PyBytes::new(py, payload)))
+                .map_err(|err| format!("the front's table failed: {err}"))?;
+            if reply.is_none(py) {
+                return Ok(None);
+            }
+            let bytes = reply
+                .cast_bound::<PyBytes>(py)
+                .map_err(|err| format!("the front's table answered no bytes: {err}"))?;
+            Ok(Some(Bytes::copy_from_slice(bytes.as_bytes())))
+        })
     }
 }
 

@@ -49,13 +49,13 @@ def test_a_session_streams_through_the_edge_as_through_the_python_front(servers)
         time.sleep(0.6)  # the edge's counts reach the front every 0.25 s
         edge_frames = metric(server, "camdirector_edge_frames_total") - before
         # each stream's first frame opens it through the front; the rest, and the Frame calls, go straight to the worker
-        assert edge_frames == (68 if front == "compiled" else 0)
+        assert edge_frames == (0 if front == "python" else 68)
         described = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", params={"last": 1}).json()
         assert described["session"]["frames"] == 70 and described["session"]["transports"] == ["grpc"]
         client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         client.close()
     assert [u.frame for u in cameras["compiled"]] == list(range(1, 71))
-    assert cameras["compiled"] == cameras["python"]
+    assert cameras["compiled"] == cameras["inline"] == cameras["python"]
 
 
 def test_each_kind_of_bad_stream_gets_the_python_fronts_status_and_message(servers):
@@ -111,7 +111,7 @@ def test_each_kind_of_bad_stream_gets_the_python_fronts_status_and_message(serve
         assert [u.frame for u in client.stream(list(wc.walk(first, 3, start_frame=20)))] == [20, 21, 22]
         assert [u.frame for u in client.stream(list(wc.walk(second, 2, start_frame=2)))] == [2, 3]
         client.close()
-    assert answers["compiled"] == answers["python"]
+    assert answers["compiled"] == answers["inline"] == answers["python"]
     assert answers["compiled"]["two sessions"][0] == "INVALID_ARGUMENT"
     assert answers["compiled"]["garbage after routing"][0] == "INVALID_ARGUMENT"
     assert answers["compiled"]["over the message limit"][0] == "RESOURCE_EXHAUSTED"

@@ -8,6 +8,7 @@ two fronts of four players (MATCH, tests/pipeline/match/scenes.py)."""
 from __future__ import annotations
 
 import inspect
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from camdirector.pipeline.inputs import FrameInput, LoadedLevel, SceneSpec, Targ
 from camdirector.pipeline.match.frame import MatchFrame, ShotKind
 from camdirector.pipeline.match.rig import MatchRig
 from camdirector.pipeline.session import Session
-from camdirector.pipeline.style import Rig, Style, VisibilityMode
+from camdirector.pipeline.style import MapBackendChoice, Rig, Style, VisibilityMode
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.rig import ToricRig
 from camdirector.pipeline.tracks.rig import TracksRig
@@ -33,7 +34,7 @@ from tests.service.tracks_sessions import corridor_walk
 
 RIGS = (ToricRig, TracksRig, MatchRig)  # the classes the registry's entries make, in its order
 METHODS = ("run", "set_style", "close", "do_deferred_work", "anticipation_map")
-PROPERTIES = ("has_deferred_work", "program_transforms", "player_inputs")  # looked for on built rigs
+PROPERTIES = ("has_deferred_work", "program_transforms", "player_inputs", "thread_bound")  # looked for on built rigs
 OPTIONAL_METHODS = ("do_deferred_work", "anticipation_map")  # RigBase answers them
 
 
@@ -97,6 +98,7 @@ def test_a_rig_that_does_not_override_gets_the_defaults_and_one_entry_makes_it_a
     assert not session.rig.has_deferred_work and session.rig.do_deferred_work() is False
     assert session.rig.do_deferred_work(whole=False) is False
     assert session.rig.program_transforms is None and session.rig.player_inputs is None
+    assert session.rig.thread_bound is False
     assert session.view_target_transforms() is session.target_transforms
     session.close()
 
@@ -182,9 +184,14 @@ def test_toric_draws_the_a_map_in_a_map_mode_and_defers_its_updates():
     assert states[-1].toric.torus is not None
     assert session.rig.program_transforms is None and session.rig.player_inputs is None
     assert session.view_target_transforms() is session.target_transforms
+    session.set_style(replace(session.style, map_backend=MapBackendChoice.EMBREE))
+    assert session.rig.thread_bound is False  # Embree's scenes serve any thread
+    session.set_style(replace(session.style, map_backend=MapBackendChoice.GL))
+    assert session.rig.thread_bound is True  # GL's, in this thread's EGL context
     session.close()
     session.close()  # idempotent
     assert session.rig.anticipation_map(session.last_state) is None
+    assert session.rig.thread_bound is False
 
 
 def test_tracks_has_none_of_the_optional_capabilities(corridor_level):
@@ -195,6 +202,7 @@ def test_tracks_has_none_of_the_optional_capabilities(corridor_level):
     assert session.rig.anticipation_map(session.last_state) is None
     assert not session.rig.has_deferred_work and session.rig.do_deferred_work() is False
     assert session.rig.program_transforms is None and session.rig.player_inputs is None
+    assert session.rig.thread_bound is False
     assert session.view_target_transforms() is session.target_transforms
     session.close()
 
@@ -223,4 +231,5 @@ def test_match_takes_player_inputs_and_shows_a_delayed_program():
     assert session.rig.do_deferred_work() is True and not session.rig.has_deferred_work
     assert session.rig.do_deferred_work() is False
     assert inputs.take([], None, release=True) is None
+    assert session.rig.thread_bound is False
     session.close()

@@ -4,12 +4,14 @@ docs/frame_path.md).
 The edge runs Rust on its own thread in this process. With `grpc_front compiled` it serves the
 node's gRPC port (HTTP/2) and answers StreamFrames and Frame itself: a frame of a session routed to
 it (SessionRouter.route_to_edge) goes straight to the session's worker over the worker's frame
-socket (front/worker_pool.py) and back, with no Python here. Every other call it passes through to
-the usual grpc.aio server (grpc_service.py), which listens on a Unix socket in a private folder. With
-the node's certificate (`--tls-cert`, `--tls-key`) the edge serves TLS itself. With `zmq_front
-compiled` it also reads and writes the ZeroMQ socket zmq_service.py made: a Frame request of a
-session routed to it, from a caller let in, goes to the worker the same way; every other request
-is handed here whole and answered by ZmqTransport.answer.
+socket (front/worker_pool.py) and back, with no Python here; with `--workers 0`, where this
+process holds the sessions, the edge computes it on its own thread (WorkerPool.answer_inline), with
+no hop. Every other call it passes through to the usual grpc.aio server (grpc_service.py), which
+listens on a Unix socket in a private folder. With the node's certificate (`--tls-cert`,
+`--tls-key`) the edge serves TLS itself. With `zmq_front compiled` it also reads and writes the
+ZeroMQ socket zmq_service.py made: a Frame request of a session routed to it, from a caller let
+in, goes to the worker the same way; every other request is handed here whole and answered by
+ZmqTransport.answer.
 
 This module answers what the edge asks (its events, announced by a byte on a socket pair the loop
 watches): a caller, by its key (access/guard.py), the first time the edge sees its metadata (it
@@ -93,7 +95,11 @@ class EdgeFront:
         asyncio.get_running_loop().add_reader(self._wake.fileno(), self._pump)
         self.guard.on_revoked.append(edge.revoke)
         self.router.attach_edge(edge, self.drain)
-        self.router.pool.attach_frame_sink(lambda slot, sock: edge.set_worker(slot, sock.detach()))
+        pool = self.router.pool
+        if pool.inline:  # the front holds the sessions: the edge computes their frames on its thread
+            edge.set_inline(0, pool.answer_inline)
+        else:
+            pool.attach_frame_sink(lambda slot, sock: edge.set_worker(slot, sock.detach()))
         self._drainer = asyncio.create_task(self._drain_forever())
         if zmq is not None:
             if zmq.hand_over(edge):

@@ -16,7 +16,9 @@ A worker that dies is noticed at once (its end of the socket pair closes): its r
 fail with UNAVAILABLE, `on_worker_lost` is told (the router gives its sessions to other workers,
 which restore them from their checkpoints), and it is restarted; requests for it meanwhile wait
 for the new one. A worker whose front goes away sees end-of-file and exits. With `workers=0` the same SessionTable runs inline in
-the front process.
+the front process; with the compiled edge too, the edge answers the frames of the sessions routed
+to it on its own thread (`answer_inline`: no hop, no other process woken), so the table is used
+from two threads, one at a time (`_inline_lock`).
 
 With the compiled edge (ServerSettings.edge: gRPC's, ZeroMQ's or both) each worker has a second
 socket pair, its frame socket: the edge (native/src/edge.rs) writes the frames of the sessions
@@ -33,6 +35,7 @@ import logging
 import multiprocessing
 import os
 import socket
+import threading
 from collections.abc import Callable
 
 import grpc
@@ -155,6 +158,7 @@ class WorkerPool:
         self.size = settings.workers
         self.on_worker_lost = on_worker_lost
         self._inline = Dispatcher(SessionTable(settings)) if self.size == 0 else None
+        self._inline_lock = threading.Lock()  # the inline table's callers: the loop's thread and the edge's
         self._workers = [_Worker(i) for i in range(self.size)]
         # request id -> (its reply's future, the index of the worker it was sent to)
         self._pending: dict[int, tuple[asyncio.Future[tuple[bytes, FrameMetrics | None]], int]] = {}
@@ -297,7 +301,8 @@ class WorkerPool:
         if self._inline is not None:
             if op == "view":
                 return await asyncio.wait_for(self._inline_view(self._inline, session_id, payload), timeout_s)
-            return self._inline.handle_bytes(op, session_id, payload)
+            with self._inline_lock:
+                return self._inline.handle_bytes(op, session_id, payload)
         return await self._call_worker(self._workers[slot], op, session_id, payload, timeout_s)
 
     async def _inline_view(self, inline: Dispatcher, session_id: str, payload: bytes) -> tuple[bytes, None]:
@@ -316,13 +321,31 @@ class WorkerPool:
         def reply(status: int, body: bytes) -> None:  # from the render thread
             loop.call_soon_threadsafe(settle, status, body)
 
-        inline.view(session_id, payload, reply)
+        with self._inline_lock:
+            inline.view(session_id, payload, reply)
         return await future
+
+    @property
+    def inline(self) -> bool:
+        """Whether the sessions are held in this process (`workers=0`)."""
+        return self._inline is not None
+
+    def answer_inline(self, session_id: str, payload: bytes) -> bytes | None:
+        """A frame of an inline session, answered on the calling thread (the compiled edge's):
+        its reply in the workers' framing (infra/channels.py), or None for a session this thread
+        must not compute (not held: restored on the loop's thread; or bound to the thread that
+        made it, CameraRig.thread_bound), which the edge hands to the loop."""
+        assert self._inline is not None
+        with self._inline_lock:
+            if not self._inline.table.answers_anywhere(session_id):
+                return None
+            return self._inline.answer(0, "frame", session_id, payload)
 
     async def stop(self) -> None:
         self._stopping = True
         if self._inline is not None:
-            self._inline.table.close_all()
+            with self._inline_lock:
+                self._inline.table.close_all()
         if self._monitor is not None:
             self._monitor.cancel()
         for worker in self._workers:

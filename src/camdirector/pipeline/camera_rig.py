@@ -12,6 +12,7 @@ contract too, declared as such, and every rig answers it:
   MATCH's drawn plan); a rig that never defers has none;
 - a question has a "none" answer, which a rig without the capability always gives:
   `anticipation_map` (TORIC in a map mode) and `program_transforms` (MATCH) answer None;
+- a rig bound to its thread says so (`thread_bound`: TORIC's GL maps);
 - an input only some rigs take is a capability object, None on a rig that takes no such input:
   `player_inputs` (MATCH: a frame's game events and a human director's takes, both naming its
   players), so that the session table refuses such an input before it writes it anywhere.
@@ -110,6 +111,13 @@ class CameraRig(Protocol):
         a frame with events and a TakeShot are refused."""
         ...
 
+    @property
+    def thread_bound(self) -> bool:
+        """TORIC with GL occlusion maps: the rig holds objects of an EGL context, which is current
+        on the thread that made it, so its frames must run on that thread (a front that holds
+        sessions answers them on its loop's thread, not the edge's). False: any thread will do."""
+        ...
+
 
 class RigBase:
     """What a rig answers of what only some rigs do when it does none of it (the "as written" of
@@ -136,3 +144,8 @@ class RigBase:
     def player_inputs(self) -> PlayerInputs | None:
         """CameraRig: None, the rig takes no game events and no takes."""
         return None
+
+    @property
+    def thread_bound(self) -> bool:
+        """CameraRig: False, the rig holds nothing bound to a thread."""
+        return False

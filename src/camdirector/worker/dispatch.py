@@ -25,7 +25,7 @@ import orjson
 from google.protobuf.message import Message
 
 from camdirector.errors import DirectorError, internal, invalid, unavailable
-from camdirector.infra.channels import FrameMetrics, ViewQuery, decode_create
+from camdirector.infra.channels import FrameMetrics, ViewQuery, decode_create, encode_reply
 from camdirector.render.monitor import Reply
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.checkpoint_stores import Checkpoint
@@ -93,6 +93,15 @@ class Dispatcher:
             if op == "create":
                 table.drop(session_id)
             raise internal(exc, op, session_id, log) from exc
+
+    def answer(self, request_id: int, op: str, session_id: str, payload: bytes) -> bytes:
+        """One request (handle_bytes) answered in the workers' framing (infra/channels.py): its
+        reply, or its DirectorError's code and message."""
+        try:
+            body, metrics = self.handle_bytes(op, session_id, payload)
+            return encode_reply(request_id, 0, body, metrics)
+        except DirectorError as exc:
+            return encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
 
     def view(self, session_id: str, payload: bytes, reply: Reply) -> None:
         """A monitor's picture of the session (payload: a ViewQuery's JSON, infra/channels.py),

@@ -152,12 +152,7 @@ def worker_main(conn, settings: ServerSettings, frames_conn=None) -> None:
             except DirectorError as exc:
                 send(encode_reply(request_id, exc.code.value[0], exc.message.encode(), None))
             continue
-        try:
-            body, metrics = requests.handle_bytes(op, session_id, payload)
-            reply = encode_reply(request_id, 0, body, metrics)
-        except DirectorError as exc:
-            reply = encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
-        send(reply, source.sock)
+        send(requests.answer(request_id, op, session_id, payload), source.sock)
         while not incoming.waiting() and table.idle_work():
             pass
         if not incoming.waiting():  # the collector's next run, where it holds no frame up

@@ -94,6 +94,12 @@ class SessionTable:
             raise not_found(f"unknown session id {session_id!r} (closed, reclaimed, or never created)")
         return held
 
+    def answers_anywhere(self, session_id: str) -> bool:
+        """Whether a frame of the session may be computed on any thread: it is held here, not
+        restored first, and its rig is not bound to the thread that made it (CameraRig.thread_bound)."""
+        held = self.held.get(session_id)
+        return held is not None and not held.session.rig.thread_bound
+
     def create(
         self, session_id: str, req: pb.CreateSessionRequest, payload: bytes | None = None, tenant: str = DEFAULT_TENANT
     ) -> pb.CreateSessionResponse:

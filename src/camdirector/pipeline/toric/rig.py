@@ -111,6 +111,11 @@ class ToricRig(RigBase):
         i, j = amap.window.texel_coords(state.toric.theta, state.toric.phi)
         return amap.a_map, (float(i), float(j))
 
+    @property
+    def thread_bound(self) -> bool:
+        """Whether the maps' backend is GL's (its objects in the making thread's EGL context)."""
+        return self.maps is not None and self.maps.backend_name == "gl"
+
     def _build_maps(self) -> None:
         self.maps = OcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 
