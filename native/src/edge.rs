@@ -6,9 +6,10 @@
 //!   (infra/channels.py's framing, op `frame`) and its reply straight back to the client: no Python
 //!   in the front touches it. Where the front holds the sessions itself (`serve --workers 0`), this
 //!   thread computes the frame through the front's table (`InlineTable`), with no hop at all.
-//!   Everything else about a stream is asked of the front's Python through `Event`s (front/edge.py answers them): the caller's key when the stream opens,
-//!   its first frame (the session adopted, restored, counted as streaming), any frame of a session
-//!   not routed here (restoring, moved), and the stream's end. Python stays the judge of who may
+//!   Everything else about a stream is asked of the front's Python through `Event`s (front/edge.py
+//!   answers them): the caller's key when the stream opens, its first frame (the session adopted,
+//!   restored, counted as streaming), any frame of a session not routed here (restoring, moved, or
+//!   one the front's table hands back), and the stream's end. Python stays the judge of who may
 //!   do what; this only repeats its per-frame checks (revoked key, one session a stream, the
 //!   tenant's frame rate) with the state Python hands it.
 //! - Every other call (the unary RPCs, health, reflection) is passed through, headers, messages

@@ -6,7 +6,9 @@
 //! [frame bytes]); answers as (token, status code, message, body, key id | None, tenant, opened),
 //! ZeroMQ's as (token, [reply frame bytes], (key id | None, tenant) | None); drained frames as
 //! (elapsed_s, compute_ms, flags, stage names bytes, stage times tuple, via: edge.rs's Via),
-//! errors as (status code, via), sessions as (id, frames, bit 1 << via of each via).
+//! errors as (status code, via), sessions as (id, frames, bit 1 << via of each via); with the
+//! front's own table (`set_inline`), a frame as (session id, payload bytes), called on the edge's
+//! thread, and its reply as bytes in a worker's framing, or None.
 
 use bytes::Bytes;
 use pyo3::exceptions::PyOSError;
