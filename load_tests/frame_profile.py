@@ -796,8 +796,7 @@ def run(
     0, that many against a server without the plugin holding its sessions in the front (`serve
     --workers 0`) behind the compiled edge: what the hop to a worker costs; with edge_frames > 0,
     that many against a server without the plugin whose gRPC port and ZeroMQ socket the compiled
-    edge serves. frame_path: the servers' (`serve
-    --frame-path`)."""
+    edge serves. frame_path: the servers' (`serve --frame-path`)."""
     from camdirector.deploy.server_process import ServerProcess
 
     t0 = time.perf_counter()

@@ -5,6 +5,7 @@ counter read off its /metrics, and a camera without its timings (which differ ru
 from __future__ import annotations
 
 import re
+import time
 from collections.abc import Iterator
 
 import httpx
@@ -35,6 +36,19 @@ def metric(server: ServerProcess, name: str, headers: dict | None = None) -> flo
     text = httpx.get(f"http://{server.http}/metrics", headers=headers).text
     found = re.search(rf"^{name} (\S+)$", text, re.M)
     return float(found.group(1)) if found else 0.0
+
+
+def edge_frames(server: ServerProcess) -> float:
+    """camdirector_edge_frames_total once what the edge answered has reached the front's metrics
+    (front/edge.py drains it every DRAIN_S)."""
+    time.sleep(0.6)
+    return metric(server, "camdirector_edge_frames_total")
+
+
+def counted(server: ServerProcess, session_id: str) -> tuple[int, list[str]]:
+    """The session's frames answered and the transports they came by, as the server describes it."""
+    session = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", params={"last": 1}).json()["session"]
+    return session["frames"], session["transports"]
 
 
 def without_timings(update: pb.CameraUpdate) -> pb.CameraUpdate:

@@ -8,13 +8,11 @@ server too: fronts.SERVERS' "inline".)"""
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
-from tests.front.fronts import metric, without_timings
+from tests.front.fronts import edge_frames, without_timings
 from tests.service import wire_client as wc
 
 GL = pb.Style(visibility=pb.ANTICIPATION, map_backend=pb.MAP_BACKEND_GL)
@@ -29,29 +27,24 @@ def servers():
         server.stop()
 
 
-def _edge_frames(server: ServerProcess) -> float:
-    time.sleep(0.6)  # the edge's counts reach the front every 0.25 s
-    return metric(server, "camdirector_edge_frames_total")
-
-
 def test_a_session_on_gl_maps_is_answered_on_the_loops_thread_and_as_with_a_worker(servers):
     cameras: dict[str, list[pb.CameraUpdate]] = {}
-    edge_frames: dict[str, list[float]] = {}
+    answered: dict[str, list[float]] = {}
     for workers, server in servers.items():
         client = wc.ZmqRaw(server.zmq)
         session_id = client.call("CreateSession", wc.two_target_request(seed=5, style=NATIVE)).session_id
-        counts = [_edge_frames(server)]
+        counts = [edge_frames(server)]
         first = client.stream(list(wc.walk(session_id, 12)))
-        counts.append(_edge_frames(server))
+        counts.append(edge_frames(server))
         client.call("UpdateStyle", pb.UpdateStyleRequest(session_id=session_id, style=GL))
         second = client.stream(list(wc.walk(session_id, 12, start_frame=13)))
-        counts.append(_edge_frames(server))
+        counts.append(edge_frames(server))
         gl_session = client.call("CreateSession", wc.two_target_request(seed=6, style=GL)).session_id
         third = client.stream(list(wc.walk(gl_session, 12)))
-        counts.append(_edge_frames(server))
+        counts.append(edge_frames(server))
         assert any("projection" in u.diagnostics.stage_ms for u in second + third)  # the GL backend computed maps
         cameras[workers] = [without_timings(u) for u in first + second + third]
-        edge_frames[workers] = [b - a for a, b in zip(counts, counts[1:])]
+        answered[workers] = [b - a for a, b in zip(counts, counts[1:])]
         for session in (session_id, gl_session):
             client.call("CloseSession", pb.CloseSessionRequest(session_id=session))
         client.close()
@@ -59,5 +52,5 @@ def test_a_session_on_gl_maps_is_answered_on_the_loops_thread_and_as_with_a_work
     assert cameras["0"] == cameras["1"]
     # the first frame goes through the front, which routes the session; on GL maps, a worker's
     # session is answered by the edge (its worker's thread made the context), the front's is not
-    assert edge_frames["1"] == [11, 12, 11]
-    assert edge_frames["0"] == [11, 0, 0]
+    assert answered["1"] == [11, 12, 11]
+    assert answered["0"] == [11, 0, 0]

@@ -16,7 +16,7 @@ import pytest
 
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
-from tests.front.fronts import FRONTS, metric, servers_on_each_front, without_timings
+from tests.front.fronts import FRONTS, counted, edge_frames, metric, servers_on_each_front, without_timings
 from tests.service import wire_client as wc
 
 
@@ -46,12 +46,9 @@ def test_a_session_streams_through_the_edge_as_through_the_python_front(servers)
         second = client.stream(list(wc.walk(session_id, 20, start_frame=41)))  # a second stream of the session
         unary = [client.call("Frame", update) for update in wc.walk(session_id, 10, start_frame=61)]
         cameras[front] = [without_timings(u) for u in first + second + unary]
-        time.sleep(0.6)  # the edge's counts reach the front every 0.25 s
-        edge_frames = metric(server, "camdirector_edge_frames_total") - before
         # each stream's first frame opens it through the front; the rest, and the Frame calls, go straight to the worker
-        assert edge_frames == (0 if front == "python" else 68)
-        described = httpx.get(f"http://{server.http}/v1/sessions/{session_id}", params={"last": 1}).json()
-        assert described["session"]["frames"] == 70 and described["session"]["transports"] == ["grpc"]
+        assert edge_frames(server) - before == (0 if front == "python" else 68)
+        assert counted(server, session_id) == (70, ["grpc"])
         client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
         client.close()
     assert [u.frame for u in cameras["compiled"]] == list(range(1, 71))

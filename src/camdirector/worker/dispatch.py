@@ -101,7 +101,7 @@ class Dispatcher:
             body, metrics = self.handle_bytes(op, session_id, payload)
             return encode_reply(request_id, 0, body, metrics)
         except DirectorError as exc:
-            return encode_reply(request_id, exc.code.value[0], exc.message.encode(), None)
+            return refusal(request_id, exc)
 
     def view(self, session_id: str, payload: bytes, reply: Reply) -> None:
         """A monitor's picture of the session (payload: a ViewQuery's JSON, infra/channels.py),
@@ -167,6 +167,11 @@ class Dispatcher:
             raise
         except Exception as exc:
             raise internal(exc, op, session_id, log) from exc
+
+
+def refusal(request_id: int, error: DirectorError) -> bytes:
+    """The reply refusing a request, in the workers' framing: the error's code and message."""
+    return encode_reply(request_id, error.code.value[0], error.message.encode(), None)
 
 
 def parse(message_type: type[M], payload: bytes | memoryview) -> M:

@@ -26,7 +26,7 @@ from camdirector.infra.channels import READ_BUFFER_BYTES, encode_reply, read_req
 from camdirector.infra.heap import collect_ahead, freeze_startup_heap
 from camdirector.infra.plugins import import_plugins
 from camdirector.server_settings import ServerSettings
-from camdirector.worker.dispatch import Dispatcher
+from camdirector.worker.dispatch import Dispatcher, refusal
 from camdirector.worker.table import SessionTable
 
 if TYPE_CHECKING:
@@ -150,7 +150,7 @@ def worker_main(conn, settings: ServerSettings, frames_conn=None) -> None:
             try:
                 requests.view(session_id, payload, functools.partial(send_view, request_id))
             except DirectorError as exc:
-                send(encode_reply(request_id, exc.code.value[0], exc.message.encode(), None))
+                send(refusal(request_id, exc))
             continue
         send(requests.answer(request_id, op, session_id, payload), source.sock)
         while not incoming.waiting() and table.idle_work():
