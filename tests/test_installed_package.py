@@ -28,6 +28,7 @@ import pytest
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.version import VERSION
 from tests import served_checks as checks
+from tests.front.fronts import edge_frames
 from tests.precompute.tracks.tiny_levels import corridor, l_room
 from tests.service.tracks_sessions import obj_text
 
@@ -242,3 +243,27 @@ def test_the_dashboard_and_its_assets_are_served(server):
 
 def test_a_monitor_picture_of_a_live_session(server):
     checks.monitor_picture(served(server))
+
+
+def test_the_front_holding_its_sessions_answers_their_frames_on_the_edges_thread(installed):
+    """`--workers 0` in the installed package: the compiled module calls back into the installed
+    Python's session table from the edge's own thread (WorkerPool.answer_inline)."""
+    srv = ServerProcess(
+        "--workers",
+        "0",
+        "--data-dir",
+        str(installed.cwd / "inline-data"),
+        command=[str(installed.venv / "bin" / "camdirector"), "serve"],
+        base_env=outside_env(),
+        cwd=installed.cwd,
+    )
+    srv.client = httpx.Client(base_url=f"http://{srv.http}", timeout=30.0)
+    try:
+        for transport in ("grpc", "zmq"):
+            checks.session_of_rig(served(srv), "toric", transport)
+        # each session's first frame goes through the front's loop, which routes it to the edge
+        assert edge_frames(srv) == 2 * (checks.FRAMES - 1)
+    finally:
+        srv.client.close()
+        log = srv.log_tail()
+        assert srv.stop() == 0, f"the installed server did not exit cleanly:\n{log}"
