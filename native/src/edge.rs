@@ -27,7 +27,7 @@ use std::os::fd::FromRawFd;
 use std::os::unix::net::UnixStream as StdUnixStream;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
@@ -294,6 +294,10 @@ pub trait InlineTable: Send + Sync {
     /// front's loop must answer it (its session is not held, or is bound to the loop's thread);
     /// Err(what went wrong) when the call itself failed.
     fn frame(&self, session_id: &str, payload: &[u8]) -> Result<Option<Bytes>, String>;
+    /// One piece of the table's idle work (a deferred map update's maps, a snapshot due, the
+    /// collector's next run), done when this thread has nothing else to do, as a worker does it
+    /// between requests; whether more waits.
+    fn idle(&self) -> bool;
 }
 
 /// Where a slot's sessions are held: a worker process, or the front's own table.
@@ -411,6 +415,10 @@ pub struct Shared {
     with_python: Mutex<HashMap<String, u32>>,
     upstream_path: String,
     upstream: tokio::sync::Mutex<Option<SendRequest<EdgeBody>>>,
+    // an inline table may have idle work: set by each frame one answers, cleared when they say
+    // none waits, and while a piece is done until the thread has looked at its sockets again
+    idle_ready: AtomicBool,
+    stopping: AtomicBool, // Edge::stop has begun: no more calls into the front's Python from idle moments
 }
 
 /// A frame of `session_id` with the front's Python, from its handover until this is dropped
@@ -597,6 +605,39 @@ impl Shared {
         hosts[slot] = Some(Arc::new(host));
     }
 
+    /// Called by the edge's thread whenever it is about to sleep: one piece of each inline table's
+    /// idle work (InlineTable::idle). A frame that arrives meanwhile waits for that piece at most,
+    /// as a worker's does (worker/main.py). When more waits, the next piece comes only after the
+    /// thread has polled its sockets again (a task that yields once), so frames already there go
+    /// first.
+    fn idle_moment(self: &Arc<Self>) {
+        if self.stopping.load(Ordering::Acquire) || !self.idle_ready.swap(false, Ordering::AcqRel) {
+            return;
+        }
+        let tables: Vec<Arc<Host>> = self
+            .hosts
+            .lock()
+            .unwrap()
+            .iter()
+            .flatten()
+            .filter(|host| matches!(***host, Host::Inline(_)))
+            .cloned()
+            .collect();
+        let mut more = false;
+        for host in &tables {
+            if let Host::Inline(table) = &**host {
+                more |= table.idle();
+            }
+        }
+        if more {
+            let shared = self.clone();
+            tokio::spawn(async move {
+                tokio::task::yield_now().await; // after the sockets' poll (tokio's defer list)
+                shared.idle_ready.store(true, Ordering::Release);
+            });
+        }
+    }
+
     pub(crate) fn record_error(&self, code: u8, via: Via) {
         self.drained.lock().unwrap().errors.push((code, via));
     }
@@ -647,7 +688,9 @@ impl Shared {
             },
             // on this thread, with no route's lock held: the table takes Python's lock, and
             // Python's thread may be waiting on one of ours
-            Host::Inline(table) => match table.frame(session_id, payload) {
+            Host::Inline(table) => match table.frame(session_id, payload).inspect(|_| {
+                self.idle_ready.store(true, Ordering::Release) // the frame may have left work for later
+            }) {
                 Ok(Some(bytes)) => match WorkerReply::parse(bytes) {
                     Ok((_, reply)) => reply,
                     Err(message) => return Some(Err(Status::new(INTERNAL, message))),
@@ -1167,9 +1210,18 @@ impl Edge {
     ) -> std::io::Result<Edge> {
         let tls = tls.map(|(cert, key)| tls_acceptor(cert, key)).transpose()?;
         wake.set_nonblocking(true)?;
+        let parked: Arc<OnceLock<Arc<Shared>>> = Arc::new(OnceLock::new());
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .thread_name("camdirector-edge")
+            .on_thread_park({
+                let parked = parked.clone();
+                move || {
+                    if let Some(shared) = parked.get() {
+                        shared.idle_moment();
+                    }
+                }
+            })
             .enable_all()
             .build()?;
         let listener = address
@@ -1190,7 +1242,10 @@ impl Edge {
             with_python: Mutex::new(HashMap::new()),
             upstream_path,
             upstream: tokio::sync::Mutex::new(None),
+            idle_ready: AtomicBool::new(false),
+            stopping: AtomicBool::new(false),
         });
+        let _ = parked.set(shared.clone());
         let (stop, stopped) = oneshot::channel::<()>();
         if let Some(listener) = listener {
             runtime.spawn(accept(shared.clone(), listener, tls, stopped));
@@ -1217,6 +1272,7 @@ impl Edge {
 
     /// Stops listening and ends every connection: the edge's thread is gone when this returns.
     pub fn stop(&mut self) {
+        self.shared.stopping.store(true, Ordering::Release);
         if let Some(stop) = self.stop.take() {
             let _ = stop.send(());
         }

@@ -103,11 +103,12 @@ impl Edge {
     /// The front's own session table holds the sessions of `slot` (`serve --workers 0`): the
     /// edge answers their frames on its own thread through `answer(session_id, payload)`, which
     /// returns the reply in a worker's framing, or None for the front's loop to answer it
-    /// (WorkerPool.answer_inline).
-    fn set_inline(&self, slot: usize, answer: Py<PyAny>) {
+    /// (WorkerPool.answer_inline); and, whenever the thread is about to sleep, `idle()` does one
+    /// piece of the table's idle work and says whether more waits (WorkerPool.idle_inline).
+    fn set_inline(&self, slot: usize, answer: Py<PyAny>, idle: Py<PyAny>) {
         self.edge
             .shared
-            .set_inline(slot, Box::new(InlineAnswer(answer)));
+            .set_inline(slot, Box::new(InlineAnswer { answer, idle }));
     }
 
     /// Routes the session's frames to the worker in `slot`, with its rate bucket (router._admit_frame):
@@ -288,14 +289,18 @@ impl Edge {
     }
 }
 
-/// WorkerPool.answer_inline, called on the edge's thread with the GIL taken there.
-struct InlineAnswer(Py<PyAny>);
+/// WorkerPool.answer_inline and WorkerPool.idle_inline, called on the edge's thread with the GIL
+/// taken there.
+struct InlineAnswer {
+    answer: Py<PyAny>,
+    idle: Py<PyAny>,
+}
 
 impl edge::InlineTable for InlineAnswer {
     fn frame(&self, session_id: &str, payload: &[u8]) -> Result<Option<Bytes>, String> {
         Python::attach(|py| {
             let reply = self
-                .0
+                .answer
                 .call1(py, (session_id, PyBytes::new(py, payload)))
                 .map_err(|err| format!("the front's table failed: {err}"))?;
             if reply.is_none(py) {
@@ -305,6 +310,17 @@ impl edge::InlineTable for InlineAnswer {
                 .cast_bound::<PyBytes>(py)
                 .map_err(|err| format!("the front's table answered no bytes: {err}"))?;
             Ok(Some(Bytes::copy_from_slice(bytes.as_bytes())))
+        })
+    }
+
+    fn idle(&self) -> bool {
+        Python::attach(|py| match self.idle.call0(py) {
+            Ok(more) => more.is_truthy(py).unwrap_or(false),
+            Err(err) => {
+                // a bug in idle work must not stop the edge's thread; Python's unraisable hook logs it
+                err.write_unraisable(py, None);
+                false
+            }
         })
     }
 }

@@ -15,6 +15,8 @@
 //! A moving object whose bounding sphere misses the box around all of one sample's segments is
 //! left out of that sample's casts: a cull that never changes an answer.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use crate::amap::Window;
 use crate::bvh::Stack;
 use crate::rotation::Vec3;
@@ -127,9 +129,68 @@ fn sphere_meets_box(centre: &Vec3, radius: f64, lo: &Vec3, hi: &Vec3) -> bool {
     gap <= radius * radius
 }
 
+/// Threads one call may use (set_threads); 1 until a process says otherwise.
+static THREADS: AtomicUsize = AtomicUsize::new(1);
+/// Texels a thread takes at least: below, a thread's start costs more than it saves.
+const TEXELS_PER_THREAD_MIN: usize = 512;
+
+/// How many threads each later call may share its texels among (1: the caller's alone). Every
+/// texel is computed the same way whichever thread takes it, so the maps' bits do not depend on it.
+pub fn set_threads(threads: usize) {
+    THREADS.store(threads.max(1), Ordering::Relaxed);
+}
+
+/// The previous torus, its rows' sines and cosines (its alpha differs) and dt_s, for the torus
+/// points' own velocity.
+type Before<'a> = (&'a Torus, Vec<(f64, f64)>, f64);
+
+/// What every texel of one call reads, worked out once.
+struct Call<'a> {
+    scene: &'a Scene,
+    motions: &'a [Motion],
+    torus: &'a Torus,
+    samples: &'a [Sample],
+    angles: TexelAngles,
+    points: Vec<Vec3>, // the texels' torus points, row-major
+    before: Option<Before<'a>>,
+    near: Vec<Vec<usize>>, // by sample: the moving objects its segments may meet
+}
+
+/// The maps' texels from `from` on (index: sample * texels + texel), as many as the slices hold.
+struct Texels<'m> {
+    from: usize,
+    shadow: &'m mut [f32],
+    velocity: &'m mut [[f32; 2]],
+    depth: &'m mut [f32],
+}
+
+impl Texels<'_> {
+    /// The first `n` texels, and the rest.
+    fn split(self, n: usize) -> (Self, Self) {
+        let (shadow, shadow_rest) = self.shadow.split_at_mut(n);
+        let (velocity, velocity_rest) = self.velocity.split_at_mut(n);
+        let (depth, depth_rest) = self.depth.split_at_mut(n);
+        (
+            Texels {
+                from: self.from,
+                shadow,
+                velocity,
+                depth,
+            },
+            Texels {
+                from: self.from + n,
+                shadow: shadow_rest,
+                velocity: velocity_rest,
+                depth: depth_rest,
+            },
+        )
+    }
+}
+
 /// The maps of `samples` over `window` of `torus` (EmbreeMapBackend.compute); `motions` one per
 /// moving object of `scene`, in its order; `previous`: the torus dt_s earlier, for the torus
-/// points' own velocity (none: the torus is taken as still).
+/// points' own velocity (none: the torus is taken as still). The texels are shared among up to
+/// set_threads' threads, in contiguous runs.
 pub fn shadow_velocity_maps(
     scene: &Scene,
     motions: &[Motion],
@@ -140,15 +201,7 @@ pub fn shadow_velocity_maps(
 ) -> Maps {
     let angles = TexelAngles::of(torus, window);
     let points = torus_points(torus, &angles);
-    // the previous torus's rows (its alpha differs), for the torus points' own velocity
     let before = previous.map(|(before, dt_s)| (before, theta_rows(before, window), dt_s));
-    let m = points.len();
-    let mut maps = Maps {
-        shadow: vec![0.0; samples.len() * m],
-        velocity: vec![[0.0; 2]; samples.len() * m],
-        depth: vec![f32::INFINITY; samples.len() * m],
-    };
-    let mut stack = Stack::with_capacity(64);
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in &points {
@@ -157,76 +210,144 @@ pub fn shadow_velocity_maps(
             hi[a] = hi[a].max(p[a]);
         }
     }
-    for (k, sample) in samples.iter().enumerate() {
-        let s = &sample.point;
-        let (lo, hi) = (
-            [0, 1, 2].map(|a| lo[a].min(s[a])),
-            [0, 1, 2].map(|a| hi[a].max(s[a])),
-        );
-        let near: Vec<usize> = (0..scene.objects.len())
-            .filter(|&i| sample.ignores != Some(i))
-            .filter(|&i| {
-                sphere_meets_box(&scene.objects[i].centre, scene.objects[i].radius, &lo, &hi)
-            })
-            .collect();
-        for (texel, p) in points.iter().enumerate() {
-            let rel = sub(p, s);
-            let length = dot(&rel, &rel).sqrt();
-            let t_start = (SAMPLE_CLEARANCE_M / length.max(1e-12)).min(0.5);
-            let start = [0, 1, 2].map(|a| s[a] + rel[a] * t_start);
-            let t_limit = (1.0 - SEGMENT_END_MARGIN) - t_start;
-            let mut best = t_limit;
-            let mut object = None;
-            if let Some(bvh) = &scene.statics {
-                best = bvh.first_hit_within(start, rel, t_limit, &mut stack).0;
+    let near = samples
+        .iter()
+        .map(|sample| {
+            let s = &sample.point;
+            let (lo, hi) = (
+                [0, 1, 2].map(|a| lo[a].min(s[a])),
+                [0, 1, 2].map(|a| hi[a].max(s[a])),
+            );
+            (0..scene.objects.len())
+                .filter(|&i| sample.ignores != Some(i))
+                .filter(|&i| {
+                    sphere_meets_box(&scene.objects[i].centre, scene.objects[i].radius, &lo, &hi)
+                })
+                .collect()
+        })
+        .collect();
+    let call = Call {
+        scene,
+        motions,
+        torus,
+        samples,
+        angles,
+        points,
+        before,
+        near,
+    };
+    let n = samples.len() * call.points.len();
+    let mut maps = Maps {
+        shadow: vec![0.0; n],
+        velocity: vec![[0.0; 2]; n],
+        depth: vec![f32::INFINITY; n],
+    };
+    let all = Texels {
+        from: 0,
+        shadow: &mut maps.shadow,
+        velocity: &mut maps.velocity,
+        depth: &mut maps.depth,
+    };
+    let threads = THREADS
+        .load(Ordering::Relaxed)
+        .min(n / TEXELS_PER_THREAD_MIN)
+        .max(1);
+    if threads == 1 {
+        call.fill(all);
+    } else {
+        let run = n.div_ceil(threads);
+        std::thread::scope(|scope| {
+            let mut rest = all;
+            for _ in 1..threads {
+                let (mine, others) = rest.split(run);
+                let call = &call;
+                scope.spawn(move || call.fill(mine));
+                rest = others;
             }
-            for &i in &near {
-                let o = &scene.objects[i];
-                if o.sphere_entry(&start, &rel, best).is_some() {
-                    let (origin, direction) = o.local(&start, &rel);
-                    // o.local is affine: the local ray's parameter is the world one's
-                    let t = o
-                        .bvh
-                        .first_hit_within(origin, direction, best, &mut stack)
-                        .0;
-                    if t < best {
-                        (best, object) = (t, Some(i));
-                    }
-                }
-            }
-            if best >= t_limit {
-                continue;
-            }
-            let t_total = t_start + best;
-            let mut velocity = match object {
-                Some(i) => {
-                    let hit = [0, 1, 2].map(|a| s[a] + rel[a] * t_total);
-                    let spin = cross(&motions[i].angular, &sub(&hit, &motions[i].position));
-                    [0, 1, 2].map(|a| motions[i].linear[a] + spin[a])
-                }
-                None => [0.0; 3],
-            };
-            let (theta, phi) = angles.at(texel, None);
-            if let Some((before, before_rows, dt_s)) = &before {
-                let (before_theta, before_phi) = angles.at(texel, Some(before_rows));
-                let moved = sub(p, &torus_position_of(before, before_theta, before_phi));
-                velocity = [0, 1, 2].map(|a| velocity[a] - moved[a] / dt_s);
-            }
-            let [d_theta, d_phi, _] = tangent_frame_of(torus, theta, phi);
-            let n_phi = dot(&d_phi, &d_phi);
-            let v_phi = if n_phi > 1e-18 {
-                dot(&velocity, &d_phi) / n_phi
-            } else {
-                0.0
-            };
-            let at = k * m + texel;
-            maps.shadow[at] = 1.0;
-            maps.velocity[at] = [
-                (dot(&velocity, &d_theta) / dot(&d_theta, &d_theta)) as f32,
-                v_phi as f32,
-            ];
-            maps.depth[at] = (t_total * length) as f32;
-        }
+            call.fill(rest); // the last run, on the caller's thread
+        });
     }
     maps
+}
+
+impl Call<'_> {
+    /// Computes `texels` (module docstring).
+    fn fill(&self, texels: Texels<'_>) {
+        let m = self.points.len();
+        let mut stack = Stack::with_capacity(64);
+        for (offset, ((shadow, velocity), depth)) in texels
+            .shadow
+            .iter_mut()
+            .zip(texels.velocity.iter_mut())
+            .zip(texels.depth.iter_mut())
+            .enumerate()
+        {
+            let at = texels.from + offset;
+            let (k, texel) = (at / m, at % m);
+            if let Some(hit) = self.texel(k, texel, &mut stack) {
+                (*shadow, *velocity, *depth) = (1.0, hit.0, hit.1);
+            }
+        }
+    }
+
+    /// Sample k's segment to the texel's torus point: its V-map value and depth, None when it
+    /// meets nothing.
+    fn texel(&self, k: usize, texel: usize, stack: &mut Stack) -> Option<([f32; 2], f32)> {
+        let (scene, motions, torus) = (self.scene, self.motions, self.torus);
+        let s = &self.samples[k].point;
+        let p = &self.points[texel];
+        let rel = sub(p, s);
+        let length = dot(&rel, &rel).sqrt();
+        let t_start = (SAMPLE_CLEARANCE_M / length.max(1e-12)).min(0.5);
+        let start = [0, 1, 2].map(|a| s[a] + rel[a] * t_start);
+        let t_limit = (1.0 - SEGMENT_END_MARGIN) - t_start;
+        let mut best = t_limit;
+        let mut object = None;
+        if let Some(bvh) = &scene.statics {
+            best = bvh.first_hit_within(start, rel, t_limit, stack).0;
+        }
+        for &i in &self.near[k] {
+            let o = &scene.objects[i];
+            if o.sphere_entry(&start, &rel, best).is_some() {
+                let (origin, direction) = o.local(&start, &rel);
+                // o.local is affine: the local ray's parameter is the world one's
+                let t = o.bvh.first_hit_within(origin, direction, best, stack).0;
+                if t < best {
+                    (best, object) = (t, Some(i));
+                }
+            }
+        }
+        if best >= t_limit {
+            return None;
+        }
+        let t_total = t_start + best;
+        let mut velocity = match object {
+            Some(i) => {
+                let hit = [0, 1, 2].map(|a| s[a] + rel[a] * t_total);
+                let spin = cross(&motions[i].angular, &sub(&hit, &motions[i].position));
+                [0, 1, 2].map(|a| motions[i].linear[a] + spin[a])
+            }
+            None => [0.0; 3],
+        };
+        let (theta, phi) = self.angles.at(texel, None);
+        if let Some((before, before_rows, dt_s)) = &self.before {
+            let (before_theta, before_phi) = self.angles.at(texel, Some(before_rows));
+            let moved = sub(p, &torus_position_of(before, before_theta, before_phi));
+            velocity = [0, 1, 2].map(|a| velocity[a] - moved[a] / dt_s);
+        }
+        let [d_theta, d_phi, _] = tangent_frame_of(torus, theta, phi);
+        let n_phi = dot(&d_phi, &d_phi);
+        let v_phi = if n_phi > 1e-18 {
+            dot(&velocity, &d_phi) / n_phi
+        } else {
+            0.0
+        };
+        Some((
+            [
+                (dot(&velocity, &d_theta) / dot(&d_theta, &d_theta)) as f32,
+                v_phi as f32,
+            ],
+            (t_total * length) as f32,
+        ))
+    }
 }

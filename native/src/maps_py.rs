@@ -110,7 +110,16 @@ fn shadow_velocity_maps<'py>(
     ))
 }
 
-/// Adds shadow_velocity_maps.
+/// set_map_threads(threads): how many threads each later shadow_velocity_maps call of this
+/// process may share its texels among (1, the default: the caller's alone; maps.rs set_threads).
+/// The maps are the same bits whatever the count.
+#[pyfunction]
+fn set_map_threads(threads: usize) {
+    crate::maps::set_threads(threads);
+}
+
+/// Adds shadow_velocity_maps and set_map_threads.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(shadow_velocity_maps, m)?)
+    m.add_function(wrap_pyfunction!(shadow_velocity_maps, m)?)?;
+    m.add_function(wrap_pyfunction!(set_map_threads, m)?)
 }

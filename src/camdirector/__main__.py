@@ -30,6 +30,12 @@ def _serve_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     p.add_argument("--workers", type=int, help="worker processes (0: sessions in the front process)")
     p.add_argument("--max-sessions", dest="max_sessions", type=int)
+    p.add_argument(
+        "--map-threads",
+        dest="map_threads",
+        type=int,
+        help="threads one ANTICIPATION map update shares (0: the cores with --workers 0, else 1)",
+    )
     p.add_argument("--max-objects", dest="max_objects", type=int)
     p.add_argument("--max-triangles", dest="max_triangles", type=int)
     p.add_argument("--max-message-bytes", dest="max_message_bytes", type=int)

@@ -34,6 +34,10 @@ class ServerSettings:
     # Worker processes holding sessions; 0 runs sessions inside the front process. [0, 256]
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     max_sessions: int = 64                   # open sessions at once, all workers together. [1, 100000]
+    # Threads one ANTICIPATION map update may share (native/src/maps.rs; the maps' bits do not
+    # depend on it); 0: the machine's cores with workers 0 (the front holds the sessions on one
+    # thread), else 1 (the workers already share the cores). [0, 64]
+    map_threads: int = 0
     max_objects: int = 4096                  # scene objects per session. [1, 1e6]
     max_triangles: int = 2_000_000           # triangles per session scene, all meshes. [1, 1e8]
     max_message_bytes: int = 64 * 1024 * 1024  # largest request on any transport, bytes. [1 KiB, 1 GiB]
@@ -95,6 +99,7 @@ class ServerSettings:
         checks = [
             (0 <= self.workers <= 256, "workers must be in [0, 256]"),
             (1 <= self.max_sessions <= 100_000, "max_sessions must be in [1, 100000]"),
+            (0 <= self.map_threads <= 64, "map_threads must be in [0, 64]"),
             (1 <= self.max_objects <= 1_000_000, "max_objects must be in [1, 1000000]"),
             (1 <= self.max_triangles <= 100_000_000, "max_triangles must be in [1, 1e8]"),
             (1024 <= self.max_message_bytes <= 1 << 30, "max_message_bytes must be in [1 KiB, 1 GiB]"),
@@ -134,6 +139,13 @@ class ServerSettings:
     def compiled_frame_path(self) -> bool:
         """Whether sessions run their rigs' compiled twins (frame_path "compiled")."""
         return self.frame_path == "compiled"
+
+    @property
+    def map_threads_per_update(self) -> int:
+        """The threads one map update shares (map_threads, 0 resolved)."""
+        if self.map_threads:
+            return self.map_threads
+        return (os.cpu_count() or 1) if self.workers == 0 else 1
 
     @property
     def grpc_edge(self) -> bool:

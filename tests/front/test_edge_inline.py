@@ -8,10 +8,13 @@ server too: fronts.SERVERS' "inline".)"""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.v1 import director_pb2 as pb
+from camdirector.worker.checkpoint_stores import open_store
 from tests.front.fronts import edge_frames, without_timings
 from tests.service import wire_client as wc
 
@@ -54,3 +57,22 @@ def test_a_session_on_gl_maps_is_answered_on_the_loops_thread_and_as_with_a_work
     # session is answered by the edge (its worker's thread made the context), the front's is not
     assert answered["1"] == [11, 12, 11]
     assert answered["0"] == [11, 0, 0]
+
+
+def test_the_edges_thread_takes_a_snapshot_due_when_it_has_nothing_else_to_do():
+    """The front's table leaves a snapshot due for an idle moment (WorkerPool.hand_inline_to); the
+    edge's thread takes it when it is about to sleep (native/src/edge.rs, idle_moment), after the
+    deferred maps of that session. With nothing calling the table's idle work, the snapshot would
+    wait for the 20th input."""
+    with ServerProcess("--workers", "0", "--checkpoint-every-frames", "10", transports=("zmq", "http")) as server:
+        client = wc.ZmqRaw(server.zmq)
+        session_id = client.call("CreateSession", wc.two_target_request(seed=5, style=NATIVE)).session_id
+        assert len(client.stream(list(wc.walk(session_id, 12)))) == 12
+        assert edge_frames(server) == 11  # all but the first, which routed the session
+        store = open_store("", server.data_dir, keep_s=600.0)
+        deadline = time.monotonic() + 10.0
+        while (checkpoint := store.load(session_id)).seq < 10 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        # taken in a moment after the 10th frame's answer, of the session as it was then
+        assert checkpoint.seq >= 10 and checkpoint.seq + len(checkpoint.entries) == 12
+        client.close()

@@ -15,7 +15,7 @@ from camdirector.demo.scene import build_demo_scene
 from camdirector.errors import DirectorError
 from camdirector.front.worker_pool import WorkerPool, _Channel
 from camdirector.geometry.camera import Lens
-from camdirector.infra.channels import REPLY, decode_reply_tail, encode_reply
+from camdirector.infra.channels import REPLY, decode_reply_tail, encode_create, encode_reply
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.table import FrameMetrics
@@ -106,3 +106,38 @@ def test_requests_of_one_turn_go_in_one_write_and_are_all_answered(tmp_path):
     assert writes == [600]  # 200 requests, three buffers each, one write
     assert all(isinstance(r, DirectorError) and r.code == grpc.StatusCode.NOT_FOUND for r in results[:100])
     assert results[100:] == [(b"", None)] * 100
+
+
+def test_the_front_tables_idle_work_waits_for_the_edges_idle_moments(tmp_path):
+    """With `workers=0` and the compiled edge, the front's table leaves a snapshot due and an
+    ANTICIPATION session's deferred maps for the moments the edge's thread has nothing else to do
+    (WorkerPool.idle_inline, called from native/src/edge.rs as it is about to sleep), as a worker
+    does between requests; never while the loop's thread holds the table."""
+    pool = WorkerPool(ServerSettings(workers=0, data_dir=str(tmp_path), checkpoint_every_frames=10))
+    handed = []
+
+    class Edge:  # the one call hand_inline_to makes of the compiled edge
+        def set_inline(self, slot, answer, idle):
+            handed.append((slot, answer, idle))
+
+    pool.hand_inline_to(Edge())
+    assert handed == [(0, pool.answer_inline, pool.idle_inline)]
+    scene = build_demo_scene(seed=7, duration_s=1.0)
+    request = session_request(scene, Lens(), pb.ANTICIPATION).SerializeToString()
+    asyncio.run(pool.call(0, "create", SESSION_ID, encode_create("default", request)))
+    for update in frame_updates(scene, 10):
+        update.session_id = SESSION_ID
+        assert pool.answer_inline(SESSION_ID, update.SerializeToString()) is not None
+    table = pool._inline.table
+    assert table.checkpoints.load(SESSION_ID).seq == 0  # the snapshot due at the 10th frame waits
+    with pool._inline_lock:  # the loop's thread has the table: the edge's moment does nothing
+        assert pool.idle_inline() is False
+    assert table.checkpoints.load(SESSION_ID).seq == 0
+    pieces = 1
+    while pool.idle_inline():
+        pieces += 1
+    assert pieces >= 2  # the deferred maps (ANTICIPATION), then the snapshot
+    checkpoint = table.checkpoints.load(SESSION_ID)
+    assert (checkpoint.seq, checkpoint.entries) == (10, [])
+    assert not table.idle_work()
+    asyncio.run(pool.stop())

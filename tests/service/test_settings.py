@@ -26,10 +26,19 @@ def test_environment_then_flags():
     ({"CAMDIRECTOR_POSE_OUTPUT_ALLOW": "::1/128"}, "pose_output_allow"),
     ({"CAMDIRECTOR_POSE_OUTPUT_ALLOW": ""}, "pose_output_allow"),
     ({"CAMDIRECTOR_TENANT_MAX_LIVE_VIEWS": "65"}, "tenant_max_live_views"),
+    ({"CAMDIRECTOR_MAP_THREADS": "65"}, "map_threads"),
+    ({"CAMDIRECTOR_MAP_THREADS": "-1"}, "map_threads"),
 ])
 def test_bad_settings_are_refused(env, message):
     with pytest.raises(ValueError, match=message):
         ServerSettings.from_env(env)
+
+
+def test_map_threads_default_to_the_cores_only_where_the_front_holds_the_sessions(monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 6)
+    assert ServerSettings(workers=0).map_threads_per_update == 6
+    assert ServerSettings(workers=2).map_threads_per_update == 1  # the workers already share the cores
+    assert ServerSettings(workers=2, map_threads=3).map_threads_per_update == 3
 
 
 def test_serve_refuses_a_bad_flag_with_a_message():

@@ -97,7 +97,7 @@ class EdgeFront:
         self.router.attach_edge(edge, self.drain)
         pool = self.router.pool
         if pool.inline:  # the front holds the sessions: the edge computes their frames on its thread
-            edge.set_inline(0, pool.answer_inline)
+            pool.hand_inline_to(edge)
         else:
             pool.attach_frame_sink(lambda slot, sock: edge.set_worker(slot, sock.detach()))
         self._drainer = asyncio.create_task(self._drain_forever())

@@ -37,6 +37,7 @@ import os
 import socket
 import threading
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import grpc
 
@@ -50,10 +51,14 @@ from camdirector.infra.channels import (
     encode_request,
     tail_length,
 )
+from camdirector.infra.heap import collect_ahead
 from camdirector.server_settings import ServerSettings
 from camdirector.worker.dispatch import Dispatcher
 from camdirector.worker.main import worker_main
 from camdirector.worker.table import SessionTable
+
+if TYPE_CHECKING:
+    from camdirector import _native
 
 log = logging.getLogger("camdirector.workers")
 
@@ -329,6 +334,30 @@ class WorkerPool:
     def inline(self) -> bool:
         """Whether the sessions are held in this process (`workers=0`)."""
         return self._inline is not None
+
+    def hand_inline_to(self, edge: _native.Edge) -> None:
+        """The compiled edge answers the inline sessions' frames on its thread (`answer_inline`)
+        and, when it would otherwise sleep, does the table's idle work (`idle_inline`); from now on
+        the table's snapshots due wait for those moments, as a worker's do."""
+        assert self._inline is not None
+        self._inline.table.defer_snapshots = True
+        edge.set_inline(0, self.answer_inline, self.idle_inline)
+
+    def idle_inline(self) -> bool:
+        """One piece of the inline table's idle work (SessionTable.idle_work), else the collector's
+        next run (infra/heap.py), as a worker does them when no request waits; called on the edge's
+        thread when it has nothing else to do. Whether more waits: False too while the loop's thread
+        holds the table (the edge asks again after its next frame) or the pool is stopping."""
+        assert self._inline is not None
+        if self._stopping or not self._inline_lock.acquire(blocking=False):
+            return False
+        try:
+            if self._inline.table.idle_work():
+                return True
+        finally:
+            self._inline_lock.release()
+        collect_ahead()
+        return False
 
     def answer_inline(self, session_id: str, payload: bytes) -> bytes | None:
         """A frame of an inline session, answered on the calling thread (the compiled edge's):

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from google.protobuf import json_format
 
 from camdirector.errors import invalid, not_found, precondition
+from camdirector.geometry.toric_maps.native import share_texels
 from camdirector.infra.channels import FrameMetrics, ViewQuery
 from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
@@ -81,6 +82,7 @@ class SessionTable:
         self.monitor: Monitor | None = None  # the render process of the sessions' views, started on the first
         self.checkpoints = Checkpointing(settings, clock, store)
         self.defer_snapshots = defer_snapshots
+        share_texels(settings.map_threads_per_update)  # per process: this table holds its sessions
         # Sessions whose rig left work for later (Session.has_deferred_work), then those whose
         # snapshot waits for idle time: idle_work's two queues, in that order.
         self._deferred: dict[str, HeldSession] = {}

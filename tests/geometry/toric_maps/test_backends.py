@@ -24,6 +24,7 @@ from camdirector.geometry.toric_maps import (
 )
 from camdirector.geometry.toric_maps.base import texture_velocity, torus_points, torus_tangents
 from camdirector.geometry.toric_maps.embree import EmbreeMapBackend, EmbreeMapSettings
+from camdirector.geometry.toric_maps.native import share_texels
 from camdirector.geometry.transforms import RigidTransform
 
 RES = 64
@@ -315,6 +316,27 @@ def test_the_compiled_backend_repeats_bit_for_bit_and_survives_a_pickle():
     for maps in (second, again):
         for name in ("shadow", "velocity_rad_s", "depth_m"):
             assert getattr(maps, name).tobytes() == getattr(first, name).tobytes()
+
+
+@pytest.mark.parametrize("threads", [2, 3, 7])
+def test_the_compiled_backend_gives_the_same_bits_on_any_number_of_threads(threads):
+    """The texels (3 samples' 64 x 64) shared among threads in contiguous runs
+    (ServerSettings.map_threads): runs that end inside a sample's map with 2 and 7 threads, on its
+    edges with 3. Each texel is the one the caller's thread alone makes."""
+    scene, points, owners = _moving_scene()
+    before = make_torus(A_WORLD - [0.2, 0.05, 0.0], B_WORLD - [0.2, 0.0, 0.1], ALPHA)
+    kwargs = {"exclude_ids": owners, "previous_torus": before, "dt_s": 0.1}
+    backend = make_backend("native", scene)
+    try:
+        share_texels(1)
+        alone = backend.compute(TORUS, WINDOW, points, **kwargs)
+        share_texels(threads)
+        shared = backend.compute(TORUS, WINDOW, points, **kwargs)
+    finally:
+        share_texels(1)
+    assert 0.05 < alone.shadow.mean() < 0.95
+    for name in ("shadow", "velocity_rad_s", "depth_m"):
+        assert getattr(shared, name).tobytes() == getattr(alone, name).tobytes()
 
 
 def test_set_motions_rejects_bad_velocities():

@@ -28,6 +28,12 @@ from camdirector.geometry.toric_maps.base import MapWindow, OccluderScene, Shado
 from camdirector.geometry.transforms import RigidTransform
 
 
+def share_texels(threads: int) -> None:
+    """Lets each later map update of this process share its texels among `threads` threads (1: the
+    caller's alone). The maps are the same bits whatever the count (native/src/maps.rs)."""
+    native.set_map_threads(threads)
+
+
 class NativeMapBackend:
     """MapBackend by compiled ray casting; holds a _native.Scene mirroring an OccluderScene."""
 
