@@ -271,31 +271,40 @@ pub fn shadow_velocity_maps(
 }
 
 impl Call<'_> {
-    /// Computes `texels` (module docstring).
+    /// Computes `texels` (module docstring), a sample's run of them at a time.
     fn fill(&self, texels: Texels<'_>) {
         let m = self.points.len();
         let mut stack = Stack::with_capacity(64);
-        for (offset, ((shadow, velocity), depth)) in texels
-            .shadow
-            .iter_mut()
-            .zip(texels.velocity.iter_mut())
-            .zip(texels.depth.iter_mut())
-            .enumerate()
-        {
-            let at = texels.from + offset;
-            let (k, texel) = (at / m, at % m);
-            if let Some(hit) = self.texel(k, texel, &mut stack) {
-                (*shadow, *velocity, *depth) = (1.0, hit.0, hit.1);
+        let (from, n) = (texels.from, texels.shadow.len());
+        let mut done = 0;
+        while done < n {
+            let (k, first) = ((from + done) / m, (from + done) % m);
+            let last = m.min(first + n - done);
+            let (s, near) = (&self.samples[k].point, &self.near[k][..]);
+            for (texel, p) in self.points[first..last].iter().enumerate() {
+                if let Some(hit) = self.texel(s, near, p, first + texel, &mut stack) {
+                    let at = done + texel;
+                    (texels.shadow[at], texels.velocity[at], texels.depth[at]) =
+                        (1.0, hit.0, hit.1);
+                }
             }
+            done += last - first;
         }
     }
 
-    /// Sample k's segment to the texel's torus point: its V-map value and depth, None when it
-    /// meets nothing.
-    fn texel(&self, k: usize, texel: usize, stack: &mut Stack) -> Option<([f32; 2], f32)> {
+    /// The segment from sample point `s` (`near`: the moving objects it may meet) to the texel's
+    /// torus point `p`: its V-map value and depth, None when it meets nothing. (fill's loop body:
+    /// always inlined, as it was written there before the texels were shared among threads.)
+    #[inline(always)]
+    fn texel(
+        &self,
+        s: &Vec3,
+        near: &[usize],
+        p: &Vec3,
+        texel: usize,
+        stack: &mut Stack,
+    ) -> Option<([f32; 2], f32)> {
         let (scene, motions, torus) = (self.scene, self.motions, self.torus);
-        let s = &self.samples[k].point;
-        let p = &self.points[texel];
         let rel = sub(p, s);
         let length = dot(&rel, &rel).sqrt();
         let t_start = (SAMPLE_CLEARANCE_M / length.max(1e-12)).min(0.5);
@@ -306,7 +315,7 @@ impl Call<'_> {
         if let Some(bvh) = &scene.statics {
             best = bvh.first_hit_within(start, rel, t_limit, stack).0;
         }
-        for &i in &self.near[k] {
+        for &i in near {
             let o = &scene.objects[i];
             if o.sphere_entry(&start, &rel, best).is_some() {
                 let (origin, direction) = o.local(&start, &rel);
