@@ -141,3 +141,28 @@ def test_the_front_tables_idle_work_waits_for_the_edges_idle_moments(tmp_path):
     assert (checkpoint.seq, checkpoint.entries) == (10, [])
     assert not table.idle_work()
     asyncio.run(pool.stop())
+
+
+def test_the_edges_idle_moments_leave_a_session_bound_to_the_loops_thread_alone(tmp_path):
+    """A session on GL occlusion maps (their EGL context is the making thread's: thread_bound) is
+    computed on the loop's thread; the edge's idle moments neither compute its deferred maps nor
+    count them as waiting (which would call the edge back at once, again and again)."""
+    pool = WorkerPool(ServerSettings(workers=0, data_dir=str(tmp_path)))
+    pool.hand_inline_to(type("Edge", (), {"set_inline": lambda self, slot, answer, idle: None})())
+    scene = build_demo_scene(seed=7, duration_s=1.0)
+    request = session_request(scene, Lens(), pb.ANTICIPATION)
+    request.style.map_backend = pb.MAP_BACKEND_GL
+    asyncio.run(pool.call(0, "create", SESSION_ID, encode_create("default", request.SerializeToString())))
+    session = pool._inline.table.held[SESSION_ID].session
+    assert session.rig.thread_bound
+    waited = []
+    for update in frame_updates(scene, 40):
+        update.session_id = SESSION_ID
+        payload = update.SerializeToString()
+        assert pool.answer_inline(SESSION_ID, payload) is None  # the edge hands its frames to the loop
+        asyncio.run(pool.call(0, "frame", SESSION_ID, payload))
+        waited.append(session.has_deferred_work)
+        assert pool.idle_inline() is False
+        assert session.has_deferred_work == waited[-1]
+    assert any(waited)  # there was deferred work to leave alone
+    asyncio.run(pool.stop())

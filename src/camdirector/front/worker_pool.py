@@ -352,7 +352,7 @@ class WorkerPool:
         if self._stopping or not self._inline_lock.acquire(blocking=False):
             return False
         try:
-            if self._inline.table.idle_work():
+            if self._inline.table.idle_work(anywhere=True):  # not the thread that made the sessions
                 return True
         finally:
             self._inline_lock.release()

@@ -369,21 +369,30 @@ class SessionTable:
             self.monitor.close()
         self.checkpoints.close()
 
-    def idle_work(self) -> bool:
+    def idle_work(self, anywhere: bool = False) -> bool:
         """Does one piece of deferred work: a part of a session's deferred map update (its maps or
         their A_s, about 1 ms each) or of its drawn match plan (2 ms; Session.has_deferred_work),
         else the oldest snapshot due
         (0.5-1 ms; checkpointing.py); answers whether more is waiting.
         A worker calls this between requests when none is waiting, so that neither delays a
-        frame's answer. What a session answers does not depend on whether this ran."""
-        if self._deferred:
-            held = self._deferred.pop(next(iter(self._deferred)))
+        frame's answer. What a session answers does not depend on whether this ran.
+        With `anywhere` (the caller is not the thread that made the sessions: the front's edge)
+        sessions bound to that thread (CameraRig.thread_bound) are left out, and not counted as
+        waiting: their deferred work is done in the frame that needs it, their snapshot once it
+        may no longer wait."""
+
+        def here(held: HeldSession) -> bool:
+            return not (anywhere and held.session.rig.thread_bound)
+
+        if (held := next(filter(here, self._deferred.values()), None)) is not None:
+            del self._deferred[held.session.id]
             held.session.do_deferred_work(whole=False)
             if held.session.has_deferred_work:  # its other part, after the others' waiting parts
                 self._deferred[held.session.id] = held
-        elif self._snapshots_due:
-            self._snapshot(self._snapshots_due.pop(next(iter(self._snapshots_due))))
-        return bool(self._deferred) or bool(self._snapshots_due)
+        elif (held := next(filter(here, self._snapshots_due.values()), None)) is not None:
+            del self._snapshots_due[held.session.id]
+            self._snapshot(held)
+        return any(map(here, self._deferred.values())) or any(map(here, self._snapshots_due.values()))
 
     def _after_input(self, held: HeldSession) -> None:
         """A snapshot when one is due (checkpointing.py): taken at once, or with `defer_snapshots`
