@@ -507,6 +507,7 @@ int scenario_protocol(const char* address) {
   if (!open_or_say(client, scene)) return 1;
   const std::string recorded_id = session_of(client);
   const cd_status closed = cd_session_close(client, nullptr, 5.0);
+  const std::string close_error = closed == CD_OK ? "" : error_of(client);
   // A CreateSessionRequest of nothing but client_protocol (field 10, a one-byte varint while the
   // protocol is under 127): the server refuses it for the protocol before it looks at the scene.
   const uint32_t newer = cd_protocol() + 1;
@@ -517,7 +518,8 @@ int scenario_protocol(const char* address) {
   const bool reopened = open_or_say(client, again);
   std::string out = "{\"protocol\": " + std::to_string(cd_protocol()) + ", \"header_protocol\": " +
                     std::to_string(CD_PROTOCOL) + ", \"recorded_session_id\": " + q(recorded_id) +
-                    ", \"recorded_close\": " + q(cd_status_name(closed)) + ", \"newer\": " + q(cd_status_name(refused)) +
+                    ", \"recorded_close\": " + q(cd_status_name(closed)) + ", \"recorded_close_error\": " +
+                    q(close_error) + ", \"newer\": " + q(cd_status_name(refused)) +
                     ", \"newer_error\": " + q(refused_error) + ", \"reopened\": " + (reopened ? "true" : "false");
   return close_and_print(client, out);
 }
