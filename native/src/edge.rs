@@ -614,18 +614,13 @@ impl Shared {
         if self.stopping.load(Ordering::Acquire) || !self.idle_ready.swap(false, Ordering::AcqRel) {
             return;
         }
-        let tables: Vec<Arc<Host>> = self
-            .hosts
-            .lock()
-            .unwrap()
-            .iter()
-            .flatten()
-            .filter(|host| matches!(***host, Host::Inline(_)))
-            .cloned()
-            .collect();
         let mut more = false;
-        for host in &tables {
-            if let Host::Inline(table) = &**host {
+        for slot in 0.. {
+            // one slot's host at a time, its lock let go before the call into Python
+            let Some(host) = self.hosts.lock().unwrap().get(slot).cloned() else {
+                break;
+            };
+            if let Some(Host::Inline(table)) = host.as_deref() {
                 more |= table.idle();
             }
         }
@@ -688,23 +683,25 @@ impl Shared {
             },
             // on this thread, with no route's lock held: the table takes Python's lock, and
             // Python's thread may be waiting on one of ours
-            Host::Inline(table) => match table.frame(session_id, payload).inspect(|_| {
-                self.idle_ready.store(true, Ordering::Release) // the frame may have left work for later
-            }) {
-                Ok(Some(bytes)) => match WorkerReply::parse(bytes) {
-                    Ok((_, reply)) => reply,
-                    Err(message) => return Some(Err(Status::new(INTERNAL, message))),
-                },
-                Ok(None) => {
-                    if self.config.rate_limit {
-                        if let Some(route) = self.routes.lock().unwrap().get_mut(session_id) {
-                            route.refund(&self.config);
+            Host::Inline(table) => {
+                let answered = table.frame(session_id, payload);
+                self.idle_ready.store(true, Ordering::Release); // the frame may have left work for later
+                match answered {
+                    Ok(Some(bytes)) => match WorkerReply::parse(bytes) {
+                        Ok((_, reply)) => reply,
+                        Err(message) => return Some(Err(Status::new(INTERNAL, message))),
+                    },
+                    Ok(None) => {
+                        if self.config.rate_limit {
+                            if let Some(route) = self.routes.lock().unwrap().get_mut(session_id) {
+                                route.refund(&self.config);
+                            }
                         }
+                        return None;
                     }
-                    return None;
+                    Err(message) => return Some(Err(Status::new(INTERNAL, message))),
                 }
-                Err(message) => return Some(Err(Status::new(INTERNAL, message))),
-            },
+            }
         };
         if reply.status != OK {
             if reply.status == DATA_LOSS {

@@ -293,8 +293,8 @@ impl Call<'_> {
     }
 
     /// The segment from sample point `s` (`near`: the moving objects it may meet) to the texel's
-    /// torus point `p`: its V-map value and depth, None when it meets nothing. (fill's loop body:
-    /// always inlined, as it was written there before the texels were shared among threads.)
+    /// torus point `p`: its V-map value and depth, None when it meets nothing. fill's loop body,
+    /// inlined into the loop.
     #[inline(always)]
     fn texel(
         &self,

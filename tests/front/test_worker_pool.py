@@ -108,20 +108,25 @@ def test_requests_of_one_turn_go_in_one_write_and_are_all_answered(tmp_path):
     assert results[100:] == [(b"", None)] * 100
 
 
+class _Edge:
+    """The one call WorkerPool.hand_inline_to makes of the compiled edge, recorded."""
+
+    def __init__(self):
+        self.handed = []
+
+    def set_inline(self, slot, answer, idle):
+        self.handed.append((slot, answer, idle))
+
+
 def test_the_front_tables_idle_work_waits_for_the_edges_idle_moments(tmp_path):
     """With `workers=0` and the compiled edge, the front's table leaves a snapshot due and an
     ANTICIPATION session's deferred maps for the moments the edge's thread has nothing else to do
     (WorkerPool.idle_inline, called from native/src/edge.rs as it is about to sleep), as a worker
     does between requests; never while the loop's thread holds the table."""
     pool = WorkerPool(ServerSettings(workers=0, data_dir=str(tmp_path), checkpoint_every_frames=10))
-    handed = []
-
-    class Edge:  # the one call hand_inline_to makes of the compiled edge
-        def set_inline(self, slot, answer, idle):
-            handed.append((slot, answer, idle))
-
-    pool.hand_inline_to(Edge())
-    assert handed == [(0, pool.answer_inline, pool.idle_inline)]
+    edge = _Edge()
+    pool.hand_inline_to(edge)
+    assert edge.handed == [(0, pool.answer_inline, pool.idle_inline)]
     scene = build_demo_scene(seed=7, duration_s=1.0)
     request = session_request(scene, Lens(), pb.ANTICIPATION).SerializeToString()
     asyncio.run(pool.call(0, "create", SESSION_ID, encode_create("default", request)))
@@ -148,7 +153,7 @@ def test_the_edges_idle_moments_leave_a_session_bound_to_the_loops_thread_alone(
     computed on the loop's thread; the edge's idle moments neither compute its deferred maps nor
     count them as waiting (which would call the edge back at once, again and again)."""
     pool = WorkerPool(ServerSettings(workers=0, data_dir=str(tmp_path)))
-    pool.hand_inline_to(type("Edge", (), {"set_inline": lambda self, slot, answer, idle: None})())
+    pool.hand_inline_to(_Edge())
     scene = build_demo_scene(seed=7, duration_s=1.0)
     request = session_request(scene, Lens(), pb.ANTICIPATION)
     request.style.map_backend = pb.MAP_BACKEND_GL
