@@ -370,8 +370,8 @@ class SessionTable:
         self.checkpoints.close()
 
     def idle_work(self, anywhere: bool = False) -> bool:
-        """Does one piece of deferred work: a part of a session's deferred map update (its maps or
-        their A_s, about 1 ms each) or of its drawn match plan (2 ms; Session.has_deferred_work),
+        """Does one piece of deferred work: a part of a session's deferred map update (its maps,
+        their A_s, about 1 ms each, or their aggregate) or of its drawn match plan (2 ms; Session.has_deferred_work),
         else the oldest snapshot due
         (0.5-1 ms; checkpointing.py); answers whether more is waiting.
         A worker calls this between requests when none is waiting, so that neither delays a

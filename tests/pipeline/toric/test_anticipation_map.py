@@ -112,6 +112,34 @@ def test_older_maps_are_shifted_into_the_newest_window():
     assert np.isnan(amap.lookup(moved.theta_min_rad - 1.0, phi[0, 0]))
 
 
+def test_an_aggregate_made_ahead_is_the_one_store_makes_and_is_dropped_once_the_map_changed():
+    """`prepare` (a deferred update's aggregate, made in idle time) gives `store` the bits it would
+    form itself; made before a change of the map (here its mask), it is not used."""
+    base = _window(16)
+    moved = MapWindow(base.theta_min_rad + 3 * base.theta_step_rad, base.phi_min_rad, base.theta_step_rad, base.phi_step_rad, 16)
+    r = SMALL.samples_per_target
+    rng = np.random.default_rng(5)
+    first = _maps(base, r, 0.0)
+    first.shadow[:] = rng.random(first.shadow.shape, dtype=np.float32)
+    later = _maps(moved, 1, 0.0)
+    later.shadow[:] = rng.random(later.shadow.shape, dtype=np.float32)
+    ahead, inline, stale = (AnticipationMap(1, SMALL) for _ in range(3))
+    for amap in (ahead, inline, stale):
+        amap.refresh(0.0, amap.next_slots(), first, TORUS)
+    predicted = ahead.predict(later)
+    prepared = ahead.prepare([2], predicted, moved, TORUS)
+    assert ahead.window == base  # the map itself unchanged
+    ahead.store(0.1, [2], predicted, moved, TORUS, prepared)
+    inline.store(0.1, [2], predicted, moved, TORUS)
+    assert ahead.a_map.tobytes() == inline.a_map.tobytes() and ahead.coverage.tobytes() == inline.coverage.tobytes()
+    assert ahead.a_map is prepared.a_map
+    made_before = stale.prepare([2], predicted, moved, TORUS)
+    stale.set_mask(StyleMaskSettings(kind=MaskKind.HARD_BEHIND))
+    stale.store(0.1, [2], predicted, moved, TORUS, made_before)
+    assert stale.a_map is not made_before.a_map and not np.array_equal(stale.a_map, made_before.a_map)
+    assert np.all(stale.a_map[moved.grid()[0] < behind_theta_rad(TORUS.alpha)] == 1.0)
+
+
 def test_settings_are_validated():
     with pytest.raises(ValueError):
         AnticipationSettings(samples_per_target=0)

@@ -1,6 +1,7 @@
-"""OcclusionMaps moves its occluder scene only on the frames that build maps, with velocities by
-finite differences between the latest frame and the one before it; an amortized update's maps are
-computed apart (do_deferred_work) and applied apply_after_frames frames later, a refill's at once."""
+"""OcclusionMaps moves its occluder scene only for the updates that build maps, to the poses of the
+frame that drew the update, with velocities by finite differences between that frame and the one
+before it; an amortized update's maps are computed apart (do_deferred_work, the scene's move with
+them) and applied apply_after_frames frames later, a refill's at once."""
 
 from __future__ import annotations
 
@@ -49,10 +50,14 @@ def _update(maps: OcclusionMaps, time_s: float) -> dict[str, float]:
     return timings
 
 
-def _drawn(maps: OcclusionMaps, time_s: float) -> bool:
-    """Whether the update at time_s was due (the scene moved for it; its maps deferred)."""
+def _drawn(maps: OcclusionMaps, time_s: float, compute: bool = True) -> bool:
+    """Whether the update at time_s was due (its maps deferred); with `compute` its maps are
+    computed then, the scene moved for them, as an idle moment would."""
     _update(maps, time_s)
-    return maps.has_deferred_work
+    drawn = maps.has_deferred_work
+    if drawn and compute:
+        maps.do_deferred_work(whole=False)
+    return drawn
 
 
 def test_scene_moves_on_map_builds_only_with_the_last_step_as_velocity(maps):
@@ -89,9 +94,12 @@ def test_velocity_of_the_latest_step_reaches_the_scene(maps):
             + ([("stopper", _pose(0.2 * frame))] if frame == 1 else []),
             time_s,
         )
-        built = _drawn(maps, time_s)
+        built = _drawn(maps, time_s, compute=False)
     assert frame > 1  # maps are built one frame in several
     scene = maps.scene.dynamic
+    assert scene["slider"].transform.position_world[0] == 0.0  # drawn, not computed: the scene has not moved
+    maps.ingest([("slider", _pose(-5.0)), ("spinner", _pose(0.0, -1.0))], time_s + DT_S)  # a later frame
+    assert maps.do_deferred_work(whole=False)  # the maps, the scene moved for them: to the drawing frame's poses
     np.testing.assert_allclose(scene["slider"].transform.position_world, [0.6 * frame, 1.0, 2.0])
     np.testing.assert_allclose(scene["slider"].linear_velocity_m_s, [0.6 / DT_S, 0.0, 0.0], rtol=1e-9)
     np.testing.assert_allclose(scene["spinner"].angular_velocity_rad_s, [0.0, 0.3 / DT_S, 0.0], rtol=1e-9)
@@ -109,7 +117,8 @@ def test_an_amortized_update_is_computed_apart_and_applied_on_a_later_frame_a_re
         assert "projection" not in _update(maps, time_s)
     drawn_s = time_s
     assert maps.do_deferred_work(whole=False) and maps.has_deferred_work  # its maps: A_s still to do
-    assert maps.do_deferred_work(whole=False) and not maps.has_deferred_work  # A_s
+    assert maps.do_deferred_work(whole=False) and maps.has_deferred_work  # A_s: the aggregate still to do
+    assert maps.do_deferred_work(whole=False) and not maps.has_deferred_work  # the aggregate, made ahead
     assert not maps.do_deferred_work()
     for _ in range(maps.amap.settings.apply_after_frames - 1):  # computed, not yet the search's
         time_s += DT_S

@@ -22,7 +22,8 @@ with geometry.toric_maps and pipeline/toric/target_sampling.py::
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any, SupportsInt
 
 import numpy as np
@@ -35,6 +36,17 @@ from camdirector.pipeline.toric.occlusion_prediction import KernelBank, kernel_k
 from camdirector.pipeline.toric.style_masks import StyleMaskSettings, apply_style_mask, style_mask
 
 
+@dataclass(frozen=True)
+class PreparedAggregate:
+    """An update's aggregate made ahead of its `store` (AnticipationMap.prepare): what `store`
+    would form, valid while the map is as it was (`version`)."""
+
+    version: int  # AnticipationMap.version when it was made
+    a_map: npt.NDArray[np.float32]  # (res, res), masked A
+    coverage: npt.NDArray[np.floating[Any]]  # (res, res) float32
+    alpha_rad: float  # the update's torus's, which places the mask
+
+
 class AnticipationMap:
     """The 2r per-sample predictions A_s and their masked aggregate A, on the paper's schedule.
 
@@ -44,6 +56,10 @@ class AnticipationMap:
     MapWindow.around). A texel's A is the mean over the slots whose maps cover it (the paper's
     1 / (2r) sum when all do); texels no map covers read 0 with coverage 0.
     """
+
+    # One more at every change of the maps, their windows or the mask: what a PreparedAggregate was
+    # made on. A class default, so that a snapshot of a map from before it counts from 0.
+    version = 0
 
     def __init__(
         self,
@@ -99,12 +115,14 @@ class AnticipationMap:
         self._windows = [None] * self.slot_count
         self.computed_at_s[:] = np.nan
         self._next_due_s = None
+        self.version += 1
 
     def set_mask(self, mask: StyleMaskSettings) -> None:
         """Takes effect at once on a_map (the style can change live)."""
         self.mask = mask
+        self.version += 1
         if self.window is not None:
-            self._aggregate(self.window)
+            self.a_map, self.coverage = self._aggregate(self._windows, self._a_s, self.window, self._alpha_rad)
 
     # -- updates -------------------------------------------------------------------------------
 
@@ -145,35 +163,64 @@ class AnticipationMap:
             raise ValueError("AnticipationMap: maps have another resolution than the settings")
         return predict_occlusion(maps.shadow, maps.velocity_rad_s, maps.window, self.settings, self.bank)
 
-    def store(self, time_s: float, slots: list[int], predicted: npt.NDArray[np.float32], window: MapWindow, torus: Torus) -> None:
+    def store(
+        self,
+        time_s: float,
+        slots: list[int],
+        predicted: npt.NDArray[np.float32],
+        window: MapWindow,
+        torus: Torus,
+        prepared: PreparedAggregate | None = None,
+    ) -> None:
         """Keeps the predictions (k, res, res) of `slots`, made at time_s on `window`, which becomes
-        the aggregate's, and re-aggregates."""
+        the aggregate's, and re-aggregates; or takes `prepared`, this update's aggregate made by
+        `prepare` while the map was as it is now (the same numbers)."""
+        if prepared is None or prepared.version != self.version:
+            prepared = self.prepare(slots, predicted, window, torus)
         for slot, a_s in zip(slots, predicted):
             self._a_s[slot] = a_s
             self._windows[slot] = window
             self.computed_at_s[slot] = time_s
         self.window = window
-        self._alpha_rad = torus.alpha
-        self._aggregate(window)
+        self._alpha_rad = prepared.alpha_rad
+        self.a_map, self.coverage = prepared.a_map, prepared.coverage
+        self.version += 1
 
-    def _aggregate(self, newest: MapWindow) -> None:
-        """Forms a_map and coverage on `newest`, the window of the latest update."""
+    def prepare(
+        self, slots: Sequence[int], predicted: npt.NDArray[np.float32], window: MapWindow, torus: Torus
+    ) -> PreparedAggregate:
+        """The aggregate `store` would form with these predictions stored, the map left as it is:
+        made ahead, in idle time (occlusion_maps.py)."""
+        windows, a_s = list(self._windows), list(self._a_s)
+        for slot, values in zip(slots, predicted):
+            windows[slot], a_s[slot] = window, np.asarray(values, dtype=np.float32)  # as stored: float32
+        a_map, coverage = self._aggregate(windows, a_s, window, torus.alpha)
+        return PreparedAggregate(self.version, a_map, coverage, torus.alpha)
+
+    def _aggregate(
+        self,
+        windows: Sequence[MapWindow | None],
+        a_s: Sequence[npt.NDArray[np.float32]] | npt.NDArray[np.float32],
+        newest: MapWindow,
+        alpha_rad: float,
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.floating[Any]]]:
+        """(a_map, coverage), each (res, res) float32, of the slots' `windows` and A_s `a_s` on
+        `newest`, the window of the latest update, masked for a torus of `alpha_rad`."""
         n = self.settings.window.resolution
         total = np.zeros((n, n), dtype=np.float32)
         count = np.zeros((n, n), dtype=np.float32)
-        for slot, window in enumerate(self._windows):
+        for slot, window in enumerate(windows):
             if window is None:
                 continue
             if window == newest:
-                total += self._a_s[slot]
+                total += a_s[slot]
                 count += 1.0
             else:
-                values, covered = window.resample(self._a_s[slot], newest)
+                values, covered = window.resample(a_s[slot], newest)
                 total += values
                 count += covered
         a = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
-        self.coverage = count / self.slot_count
-        self.a_map = apply_style_mask(a, style_mask(self.mask, newest, self._alpha_rad))
+        return apply_style_mask(a, style_mask(self.mask, newest, alpha_rad)), count / self.slot_count
 
     # -- reading -------------------------------------------------------------------------------
 

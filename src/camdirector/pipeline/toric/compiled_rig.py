@@ -2,14 +2,18 @@
 
 `CompiledToricRig` is `ToricRig` (rig.py) with parts of its stages run in camdirector._native:
 
-- While the style's visibility mode is FRAMING_ONLY or REACTIVE, FRAMING, MOTION and VISIBILITY:
-  FRAMING in `FramingCore` (framing.py's twin), MOTION in `MotionCore` (camera_motion.py's) and,
-  in REACTIVE, `DeoccluderCore` (reactive.py's Deoccluder, its ray casts in the `Scene`), the
-  three stages in one call (`toric_frame`), lapped where ToricRig.run laps them.
+- In every mode, FRAMING in `FramingCore` (framing.py's twin), which holds the one-target heading,
+  and the framing error VISIBILITY measures (`FramingCore.error`, Framing.error's twin).
+- While the style's visibility mode is FRAMING_ONLY or REACTIVE, MOTION and VISIBILITY too:
+  MOTION in `MotionCore` (camera_motion.py's) and, in REACTIVE, `DeoccluderCore` (reactive.py's
+  Deoccluder, its ray casts in the `Scene`), the three stages in one call (`toric_frame`), lapped
+  where ToricRig.run laps them.
 - In the search modes (ANTICIPATION, NO_ANTICIPATION, RAYCAST), MOTION's search in `SearchCore`
   (occlusion_search.py's `OcclusionSearch.step` and the pose at its answer), reading the A-map
   or ray casts, and drawing its candidates from the session's generator as the Python draws
-  them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame.
+  them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame. The
+  targets' sample points it and the maps read are carried by camdirector._native's `carry`
+  (`CarriedTargetSampler`), a call per target.
 - In the map modes, PROJECTION's ray casts and AMAP's per-sample predictions
   (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
 - In FRAMING_ONLY, REACTIVE and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
@@ -28,18 +32,19 @@ one-target heading starts as `FramingCore` computes it. The search and map modes
 replay across machine kinds too, though their particle and their maps' schedule and aggregate
 stay numpy (docs/frame_path.md says what that leaves open).
 
-The cores hold the stages' state between frames (the one-target heading; the camera's place,
-rates and upright side; the deoccluder's last correction): entering FRAMING_ONLY or REACTIVE
-copies it from the Python stages into the
-cores (after the search hands the camera back, as rig.py does), leaving it copies it back, so a
-change of mode moves the camera no more than the Python rig would. A pickled rig (a
-checkpoint's snapshot) carries the state in its Python stages and builds its cores and Scene
-again on its next compiled frame.
+The cores hold the stages' state between frames. The FramingCore holds the one-target heading on
+every frame. The motion and deoccluder cores hold the camera's place, rates and upright side and
+the deoccluder's last correction while the mode is FRAMING_ONLY or REACTIVE: entering it copies
+that from the Python stages into the cores (after the search hands the camera back, as rig.py
+does), leaving it copies it back, so a change of mode moves the camera no more than the Python
+rig would. A pickled rig (a checkpoint's snapshot) carries the state in its Python stages and
+builds its cores and Scene again on its next compiled frame.
 """
 
 from __future__ import annotations
 
 import copyreg
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -56,16 +61,40 @@ from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps
 from camdirector.pipeline.toric.frame import ToricFrame
 from camdirector.pipeline.toric.occlusion_search import SearchResult
 from camdirector.pipeline.toric.rig import ToricRig, _fallback_pose
+from camdirector.pipeline.toric.target_sampling import TargetSampler
 
 _NO_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])  # a core's initial facing, which its copied heading replaces
 _COMPILED_MODES = (VisibilityMode.FRAMING_ONLY, VisibilityMode.REACTIVE)  # whose frames the cores run whole
 
 
-class CompiledToricRig(ToricRig):
-    """`ToricRig` with FRAMING_ONLY's stages compiled (module docstring); the same arguments."""
+class CarriedTargetSampler(TargetSampler):
+    """TargetSampler whose points are carried by camdirector._native's `carry` (RigidTransform.apply's
+    twin within rounding, the same bits on every x86-64 machine): all slots in one call per target."""
 
-    # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no native object.
-    _cores: tuple[Any, Any, Any] | None = None  # (FramingCore, MotionCore, DeoccluderCore) while they hold the state
+    def points_world(
+        self, target_transforms: Sequence[RigidTransform], slots: Sequence[int] | None = None
+    ) -> npt.NDArray[np.float64]:
+        """(len(slots), 3) world metres: the slots' points (all slots if None) under the targets' transforms."""
+        if len(target_transforms) != self.target_count:
+            raise ValueError("points_world: one transform per target")
+        r = self.settings.samples_per_target
+        if slots is None:
+            return np.concatenate(
+                [native.carry(self.points_local[t * r : (t + 1) * r], transform) for t, transform in enumerate(target_transforms)]
+            )
+        out = np.empty((len(slots), 3))
+        for row, slot in enumerate(slots):
+            out[row] = native.carry(self.points_local[slot], target_transforms[self.target_of(int(slot))])
+        return out
+
+
+class CompiledToricRig(ToricRig):
+    """`ToricRig` with its stages compiled as the module docstring says; the same arguments."""
+
+    _sampler_class = CarriedTargetSampler
+    # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no motion core.
+    _framing_core: Any = None  # the FramingCore, on every frame; made again after a restore
+    _cores: tuple[Any, Any] | None = None  # (MotionCore, DeoccluderCore) while they hold the state
     _scene: Any = None  # the Scene, made on the first compiled frame
     _runs = 0  # frames run; the Scene was last moved in frame `_scene_run` of them (it holds `dynamic` as of then)
     _scene_run = -1
@@ -78,8 +107,10 @@ class CompiledToricRig(ToricRig):
         OpenBLAS, then the system's libm: the CPU's bits), so a compiled session starts the same on
         every machine; the two agree within rounding."""
         super().__init__(scene, *rest)
-        first = native.FramingCore(self.lens, self.style, scene.targets[0].transform.rotation_xyzw, self.framing.settings)
-        self.framing.heading_rad = first.heading_rad
+        self._framing_core = native.FramingCore(
+            self.lens, self.style, scene.targets[0].transform.rotation_xyzw, self.framing.settings
+        )
+        self.framing.heading_rad = self._framing_core.heading_rad
 
     @property
     def compiled(self) -> bool:
@@ -88,18 +119,21 @@ class CompiledToricRig(ToricRig):
 
     def set_style(self, style: Style) -> None:
         super().set_style(style)
+        if self._framing_core is not None:
+            self._framing_core.set_style(style)
         if self._cores is not None:
-            for core in self._cores[:2]:  # the deoccluder's settings are not the style's
-                core.set_style(style)
+            self._cores[0].set_style(style)  # the deoccluder's settings are not the style's
         if self._search_core is not None:
             self._search_core.set_style(style)
 
     def __getstate__(self) -> dict[str, object]:
         """The rig's state with the stages' state in its Python stages; no native object."""
+        if self._framing_core is not None:
+            self.framing.heading_rad, self.framing._last_aim = self._framing_core.heading_rad, self._framing_core.last_aim
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_cores=None, _scene=None, _search_core=None, _packed=None)
+        state.update(_framing_core=None, _cores=None, _scene=None, _search_core=None, _packed=None)
         return state
 
     def run(
@@ -137,7 +171,7 @@ class CompiledToricRig(ToricRig):
             self.maps.ingest(update.states, update.time_s)
         # the pose the frame keeps when MOTION answers none (a degenerate torus), as ToricRig.run's
         held = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
-        framing, motion, deoccluder = self._cores
+        motion, deoccluder = self._cores
         (
             toric.a_world,
             toric.b_world,
@@ -150,7 +184,7 @@ class CompiledToricRig(ToricRig):
             state.visibility,
             state.framing_error,
         ) = native.toric_frame(
-            framing,
+            self._framing(),
             motion,
             deoccluder if self.style.visibility == VisibilityMode.REACTIVE else None,
             self._moved_scene(),
@@ -169,22 +203,28 @@ class CompiledToricRig(ToricRig):
         state.cut = state.cut or self._style_cut
         self._style_cut = False
 
-    def _cores_from_python(self) -> tuple[Any, Any, Any]:
-        framing, motion, deoccluder = self.framing, self.motion, self.deoccluder
-        framing_core = native.FramingCore(self.lens, self.style, _NO_ROTATION, framing.settings)
-        framing_core.heading_rad, framing_core.last_aim = framing.heading_rad, framing._last_aim
+    def _framing(self) -> Any:
+        """The FramingCore; after a restore, made again from the Python Framing's heading."""
+        if self._framing_core is None:
+            framing = self.framing
+            core = native.FramingCore(self.lens, self.style, _NO_ROTATION, framing.settings)
+            core.heading_rad, core.last_aim = framing.heading_rad, framing._last_aim
+            self._framing_core = core
+        return self._framing_core
+
+    def _cores_from_python(self) -> tuple[Any, Any]:
+        motion, deoccluder = self.motion, self.deoccluder
         motion_core = native.MotionCore(self.style, self.lens, motion.settings)
         motion_core.theta, motion_core.phi, motion_core.rate = motion.theta, motion.phi, motion.rate
         motion_core.position_world, motion_core.side, motion_core.side_key = motion.position_world, motion.side, motion._side_key
         deoccluder_core = native.DeoccluderCore(deoccluder.settings)
         deoccluder_core.offset_from_a, deoccluder_core.displacement = deoccluder._offset_from_a, deoccluder._displacement
         deoccluder_core.damp_time_s, deoccluder_core.time_s = deoccluder._damp_time_s, deoccluder._time_s
-        return framing_core, motion_core, deoccluder_core
+        return motion_core, deoccluder_core
 
     def _python_from_cores(self) -> None:
         assert self._cores is not None
-        (framing_core, motion_core, deoccluder_core), framing, motion = self._cores, self.framing, self.motion
-        framing.heading_rad, framing._last_aim = framing_core.heading_rad, framing_core.last_aim
+        (motion_core, deoccluder_core), motion = self._cores, self.motion
         motion.theta, motion.phi, motion.rate = motion_core.theta, motion_core.phi, motion_core.rate
         motion.position_world, motion.side, motion._side_key = motion_core.position_world, motion_core.side, motion_core.side_key
         deoccluder = self.deoccluder
@@ -213,17 +253,25 @@ class CompiledToricRig(ToricRig):
         search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s = particle
         return SearchResult(theta, phi, cut, strategy, risk), CameraPose(*pose)
 
+    def _frame(self, state: FrameState, toric: ToricFrame) -> None:
+        """FRAMING in the FramingCore (Framing.run's twin): A, B and the compiled torus into `toric`."""
+        toric.a_world, toric.b_world, toric.b_is_gaze_point, toric.torus, flags = self._framing().run(
+            state.aim_points_world, state.dt_s
+        )
+        state.flags.extend(flags)
+
     def _see(self, state: FrameState, toric: ToricFrame, target_transforms: list[RigidTransform]) -> None:
-        """VISIBILITY in the search modes: the share seen in the Scene of VisibilityEstimate's sample
-        points, carried by camdirector._native (session.py says why); the framing error Framing's."""
-        if self.style.visibility not in SEARCH_MODES:
-            return super()._see(state, toric, target_transforms)
+        """VISIBILITY in the search modes (the only ones ToricRig.run runs here): the share seen in
+        the Scene of VisibilityEstimate's sample points, carried by camdirector._native (session.py
+        says why); the framing error the FramingCore's (Framing.error's twin)."""
         pose = state.pose
-        assert pose is not None  # run() answers a pose before VISIBILITY
+        assert pose is not None and self.style.visibility in SEARCH_MODES  # run() answers a pose before VISIBILITY
         state.visibility = self._moved_scene().visible_share_of(
             pose.position_world, self.visibility.samples_local, target_transforms
         )
-        state.framing_error = self.framing.error(pose, toric)
+        state.framing_error = self._framing().error(
+            pose.position_world, pose.rotation_xyzw, toric.a_world, toric.b_world, toric.b_is_gaze_point
+        )
 
     def _moved_scene(self) -> Any:
         """The Scene, its moving objects where the session's are now (INGEST moves the RayScene's).

@@ -11,10 +11,13 @@ object the latest frame does not mention has not moved: velocity zero). So many 
 cost the frames between map builds nearly nothing.
 
 An amortized update (2 of the 2r maps, every slot already holding one) is computed apart from
-the frame it is due on: that frame draws its sample points, moves the scene and schedules the next
-update; its maps and A_s are computed when the session's worker is idle (`do_deferred_work`,
-called by worker/table.py's `idle_work`) or, at the latest, by the update that applies
-them, `AnticipationSettings.apply_after_frames` (1) frames later. Why: an update costs a few
+the frame it is due on: that frame draws its sample points, keeps the objects' poses and schedules
+the next update; the scene's move to those poses, its maps, their A_s and the aggregate A they
+make are computed when the session's worker is idle (`do_deferred_work`, called by
+worker/table.py's `idle_work`, a piece at a time) or, at the latest, by the update that applies
+them, `AnticipationSettings.apply_after_frames` (1) frames later. The same numbers either way:
+the scene is moved from the poses kept, and an aggregate made ahead is used only if the A-map has
+not changed since (`AnticipationMap.prepare`). Why: an update costs a few
 frames' worth of computing, and a worker's sessions created together update in the same period;
 computed inline, their updates queued the frames behind them. Apart, the frame that draws an
 update answers as fast as the others, and the maps are computed while its worker waits for
@@ -42,11 +45,15 @@ from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import DynamicObjects
 from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.style import MapBackendChoice, Style, VisibilityMode
-from camdirector.pipeline.toric.anticipation_map import AnticipationMap
+from camdirector.pipeline.toric.anticipation_map import AnticipationMap, PreparedAggregate
 from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
 from camdirector.pipeline.toric.occlusion_prediction import shared_bank
 from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 from camdirector.pipeline.toric.target_sampling import TargetSampler
+
+_SceneMotion = tuple[
+    list[tuple[str, RigidTransform]], dict[str, RigidTransform], dict[str, RigidTransform], tuple[float | None, float | None]
+]
 
 
 @dataclass
@@ -62,8 +69,13 @@ class _DeferredUpdate:
     previous_torus: Torus | None
     dt_s: float
     frames_left: int  # updates (one a frame) until it is applied
+    # The scene's motion as of the frame it was drawn on: that frame's moved (id, transform) pairs,
+    # every object's pose then and the frame before, the two frames' times (_move_scene's inputs);
+    # None once the scene has been moved (or in a snapshot of an older version, which moved it at once).
+    scene_motion: _SceneMotion | None = None
     maps: ShadowVelocityMaps | None = None  # once computed, until A_s is
     predicted: npt.NDArray[np.float32] | None = None  # (k, res, res) A_s, once computed
+    aggregate: PreparedAggregate | None = None  # the A-map's aggregate with A_s stored, once made ahead
 
 
 class OcclusionMaps:
@@ -140,18 +152,23 @@ class OcclusionMaps:
         self._moved = moved
         self._times_s = (time_s, self._times_s[0])
 
-    def _move_scene(self) -> None:
-        """Every dynamic object at its latest pose with its velocity (module docstring), in the
-        occluder scene, in one call, before a map build."""
+    def _scene_motion(self) -> _SceneMotion:
+        """What `_move_scene` reads, kept as of this frame (the next frame's ingest replaces
+        _moved, _before and _times_s, and updates _latest in place)."""
+        return self._moved, dict(self._latest), self._before, self._times_s
+
+    def _move_scene(self, motion: _SceneMotion) -> None:
+        """Every dynamic object at its pose of `motion`'s frame with its velocity (module
+        docstring), in the occluder scene, in one call, before a map build."""
+        moved, latest, before_poses, (now_s, before_s) = motion
         ids = list(self.scene.dynamic)
         linear, angular = np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
-        now_s, before_s = self._times_s
-        moving = [object_id for object_id, _ in self._moved if object_id in self.scene.dynamic]
+        moving = [object_id for object_id, _ in moved if object_id in self.scene.dynamic]
         if moving and now_s is not None and before_s is not None and now_s > before_s:
             row = {object_id: k for k, object_id in enumerate(ids)}
             rows = [row[object_id] for object_id in moving]
-            now = [self._latest[object_id] for object_id in moving]
-            before = [self._before[object_id] for object_id in moving]
+            now = [latest[object_id] for object_id in moving]
+            before = [before_poses[object_id] for object_id in moving]
             turn = (
                 Rotation.from_quat([tf.rotation_xyzw for tf in now])
                 * Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
@@ -160,7 +177,7 @@ class OcclusionMaps:
                 now_s - before_s
             )
             angular[rows] = turn.as_rotvec() / (now_s - before_s)
-        self.scene.set_motions(ids, [self._latest[object_id] for object_id in ids], linear, angular)
+        self.scene.set_motions(ids, [latest[object_id] for object_id in ids], linear, angular)
 
     def update(
         self,
@@ -180,7 +197,6 @@ class OcclusionMaps:
         amap = self.amap
         if amap.due(time_s):
             refill = not amap.filled
-            self._move_scene()
             slots = amap.next_slots()
             self.sampler.redraw(slots, self.rng)
             amap.schedule(time_s, slots)
@@ -195,39 +211,48 @@ class OcclusionMaps:
                 previous_torus if dt_s > 0 else None,
                 max(dt_s, 0.0),
                 frames_left=0 if refill else amap.settings.apply_after_frames,
+                scene_motion=self._scene_motion(),
             )
             self._apply_deferred(stages, count=False)
         self._previous = (torus, time_s)
 
     @property
     def has_deferred_work(self) -> bool:
-        """Whether a deferred update waits to be computed (or to be predicted from its maps)."""
-        return self._deferred is not None and self._deferred.predicted is None
+        """Whether a deferred update waits to be computed (its maps, their A_s, or its aggregate)."""
+        return self._deferred is not None and self._deferred.aggregate is None
 
     def do_deferred_work(self, stages: StageClock | None = None, whole: bool = True) -> bool:
-        """Computes the deferred update's maps and A_s, without applying them (they reach the
-        search on their frame); laps PROJECTION and AMAP on `stages` when given. Without `whole`
-        only one of the two (the maps, else A_s), so that a worker's idle moment
-        delays a request that arrives meanwhile by less. Answers whether there was work to do."""
+        """Computes the deferred update's maps, their A_s and the aggregate A they make, without
+        applying them (they reach the search on their frame); laps PROJECTION and AMAP on `stages`
+        when given. Without `whole` only one of the three (the scene's move and the maps, else A_s,
+        else the aggregate), so that a worker's idle moment delays a request that arrives meanwhile
+        by less. Answers whether there was work to do."""
         update = self._deferred
-        if update is None or update.predicted is not None:
+        if update is None or update.aggregate is not None:
             return False
-        if update.maps is None:
-            assert self.backend is not None  # closing drops the deferred update with the backend
-            update.maps = self.backend.compute(
-                update.torus,
-                update.window,
-                update.points_world,
-                exclude_ids=update.exclude_ids,
-                previous_torus=update.previous_torus,
-                dt_s=update.dt_s,
-            )
-            if stages is not None:
-                stages.done(Stage.PROJECTION)
+        if update.predicted is None:
+            if update.maps is None:
+                assert self.backend is not None  # closing drops the deferred update with the backend
+                if update.scene_motion is not None:
+                    self._move_scene(update.scene_motion)
+                    update.scene_motion = None
+                update.maps = self.backend.compute(
+                    update.torus,
+                    update.window,
+                    update.points_world,
+                    exclude_ids=update.exclude_ids,
+                    previous_torus=update.previous_torus,
+                    dt_s=update.dt_s,
+                )
+                if stages is not None:
+                    stages.done(Stage.PROJECTION)
+                if not whole:
+                    return True
+            update.predicted = self._predict(update.maps)
+            update.maps = None
             if not whole:
                 return True
-        update.predicted = self._predict(update.maps)
-        update.maps = None
+        update.aggregate = self.amap.prepare(update.slots, update.predicted, update.window, update.torus)
         if stages is not None:
             stages.done(Stage.AMAP)
         return True
@@ -249,7 +274,7 @@ class OcclusionMaps:
         self.do_deferred_work(stages)
         self._deferred = None
         assert update.predicted is not None  # do_deferred_work computed it, whole
-        self.amap.store(update.time_s, update.slots, update.predicted, update.window, update.torus)
+        self.amap.store(update.time_s, update.slots, update.predicted, update.window, update.torus, update.aggregate)
         stages.done(Stage.AMAP)
 
     def invalidate(self) -> None:

@@ -58,6 +58,8 @@ class ToricRig(RigBase):
     static_meshes_world and dynamic (object id -> (mesh, latest transform)) are the session's,
     kept current by INGEST."""
 
+    _sampler_class = TargetSampler  # the maps' and the search's sample points (the compiled rig's carries them)
+
     def __init__(
         self,
         scene: SceneSpec,
@@ -78,7 +80,7 @@ class ToricRig(RigBase):
         self.framing = Framing(self.lens, self.style, scene.targets[0].transform.rotation_xyzw)
         self.motion = ToricMotion(self.style, self.lens)
         self.visibility = VisibilityEstimate(ray_scene, [t.mesh for t in scene.targets], rng)
-        self.sampler = TargetSampler([t.mesh for t in scene.targets], rng)  # the paper's 2r points
+        self.sampler = self._sampler_class([t.mesh for t in scene.targets], rng)  # the paper's 2r points
         self.search = OcclusionSearch(SearchSettings(), rng)
         self.deoccluder = Deoccluder(ray_scene)
         self._searching = False  # whether the search particle holds the camera's place
