@@ -15,7 +15,7 @@
   targets' sample points it and the maps read are carried by camdirector._native's `carry`
   (`CarriedTargetSampler`), a call per target.
 - In the map modes, PROJECTION's ray casts and AMAP's per-sample predictions
-  (compiled_maps.py); their schedule, sample points, window and aggregate stay Python.
+  (compiled_maps.py); their schedule, window and aggregate stay Python.
 - In FRAMING_ONLY, REACTIVE and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
   (geometry/raycast.py RayScene's twin), built from the session's RayScene on the first compiled
   frame and moved with the session's moving objects (by the frame's decoded rows in one call,
@@ -92,8 +92,8 @@ class CompiledToricRig(ToricRig):
     """`ToricRig` with its stages compiled as the module docstring says; the same arguments."""
 
     _sampler_class = CarriedTargetSampler
+    _framing_core: Any = None  # the FramingCore, on every frame: made at creation, and again after a restore
     # Made on demand, never at creation: a rig that never runs FRAMING_ONLY builds no motion core.
-    _framing_core: Any = None  # the FramingCore, on every frame; made again after a restore
     _cores: tuple[Any, Any] | None = None  # (MotionCore, DeoccluderCore) while they hold the state
     _scene: Any = None  # the Scene, made on the first compiled frame
     _runs = 0  # frames run; the Scene was last moved in frame `_scene_run` of them (it holds `dynamic` as of then)
