@@ -44,7 +44,6 @@ class PreparedAggregate:
     version: int  # AnticipationMap.version when it was made
     a_map: npt.NDArray[np.float32]  # (res, res), masked A
     coverage: npt.NDArray[np.floating[Any]]  # (res, res) float32
-    alpha_rad: float  # the update's torus's, which places the mask
 
 
 class AnticipationMap:
@@ -182,7 +181,7 @@ class AnticipationMap:
             self._windows[slot] = window
             self.computed_at_s[slot] = time_s
         self.window = window
-        self._alpha_rad = prepared.alpha_rad
+        self._alpha_rad = torus.alpha
         self.a_map, self.coverage = prepared.a_map, prepared.coverage
         self.version += 1
 
@@ -195,7 +194,7 @@ class AnticipationMap:
         for slot, values in zip(slots, predicted):
             windows[slot], a_s[slot] = window, np.asarray(values, dtype=np.float32)  # as stored: float32
         a_map, coverage = self._aggregate(windows, a_s, window, torus.alpha)
-        return PreparedAggregate(self.version, a_map, coverage, torus.alpha)
+        return PreparedAggregate(self.version, a_map, coverage)
 
     def _aggregate(
         self,

@@ -230,24 +230,25 @@ class OcclusionMaps:
         update = self._deferred
         if update is None or update.aggregate is not None:
             return False
+        if update.predicted is None and update.maps is None:
+            assert self.backend is not None  # closing drops the deferred update with the backend
+            if update.scene_motion is not None:
+                self._move_scene(update.scene_motion)
+                update.scene_motion = None
+            update.maps = self.backend.compute(
+                update.torus,
+                update.window,
+                update.points_world,
+                exclude_ids=update.exclude_ids,
+                previous_torus=update.previous_torus,
+                dt_s=update.dt_s,
+            )
+            if stages is not None:
+                stages.done(Stage.PROJECTION)
+            if not whole:
+                return True
         if update.predicted is None:
-            if update.maps is None:
-                assert self.backend is not None  # closing drops the deferred update with the backend
-                if update.scene_motion is not None:
-                    self._move_scene(update.scene_motion)
-                    update.scene_motion = None
-                update.maps = self.backend.compute(
-                    update.torus,
-                    update.window,
-                    update.points_world,
-                    exclude_ids=update.exclude_ids,
-                    previous_torus=update.previous_torus,
-                    dt_s=update.dt_s,
-                )
-                if stages is not None:
-                    stages.done(Stage.PROJECTION)
-                if not whole:
-                    return True
+            assert update.maps is not None  # computed above, or by an earlier piece
             update.predicted = self._predict(update.maps)
             update.maps = None
             if not whole:
