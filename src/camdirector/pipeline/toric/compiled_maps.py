@@ -9,11 +9,24 @@ numpy's sums on the CPU. The schedule, the sample points, the window, the aggreg
 style mask stay Python (occlusion_maps.py, anticipation_map.py), so what a session draws from its
 generator, and when, is the Python's. A style that names a backend (GL, EMBREE) gets it; AUTO
 gets the compiled one.
+
+The compiled backend's amortized update is handed to the process's maps thread (`_start`): the
+scene's move, the rays and A_s with the GIL released, and the aggregate, while the session's
+thread answers other frames. That thread takes an update back that the maps thread has not begun
+(an idle moment, or the update's frame), so under a burst of updates both cores compute them, and
+waits on its frame for one that it has. The inputs are fixed on the frame that drew the update,
+so the numbers are those of computing it on the session's thread. Why: with every session in the
+front (`serve --workers 0`), the rays were a fifth of the front thread's time under 16
+ANTICIPATION sessions (py-spy), and that thread is what the sessions queue for; the figures are in
+docs/frame_path.md. GL's contexts belong to their thread and Embree's calls hold the GIL, so those
+backends' updates stay on the session's thread.
 """
 
 from __future__ import annotations
 
 import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -21,10 +34,11 @@ import numpy.typing as npt
 
 import camdirector._native as native
 from camdirector.geometry.toric_maps.base import ShadowVelocityMaps
+from camdirector.geometry.toric_maps.native import NativeMapBackend
 from camdirector.pipeline.style import MapBackendChoice, Style
 from camdirector.pipeline.toric.anticipation_map import AnticipationMap
 from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
-from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
+from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps, _DeferredUpdate
 from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 
 
@@ -32,6 +46,17 @@ from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 def compiled_bank(settings: AnticipationSettings) -> Any:
     """One _native.KernelBank per process and settings (about 20 ms to build), shared by sessions."""
     return native.KernelBank(settings)
+
+
+@functools.cache
+def maps_thread() -> ThreadPoolExecutor:
+    """The process's one maps thread (module docstring), started on its first update: one, so that
+    the updates of a worker's sessions take one core between them, in the order they were drawn."""
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="camdirector-maps")
+
+
+# A forked child has no maps thread (threads do not fork): it starts its own.
+os.register_at_fork(after_in_child=maps_thread.cache_clear)
 
 
 class CompiledOcclusionMaps(OcclusionMaps):
@@ -43,6 +68,10 @@ class CompiledOcclusionMaps(OcclusionMaps):
 
     def _backend_of(self, style: Style) -> str:
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend, "native")
+
+    def _start(self, update: _DeferredUpdate) -> None:
+        if isinstance(self.backend, NativeMapBackend):
+            update.computing = maps_thread().submit(self._compute, update, None, True)
 
     def _predict(self, maps: ShadowVelocityMaps) -> npt.NDArray[np.float32]:
         predicted: npt.NDArray[np.float32] = compiled_bank(self.amap.settings).predict(

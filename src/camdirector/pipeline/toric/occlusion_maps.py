@@ -15,7 +15,9 @@ the frame it is due on: that frame draws its sample points, keeps the objects' p
 the next update; the scene's move to those poses, its maps, their A_s and the aggregate A they
 make are computed when the session's worker is idle (`do_deferred_work`, called by
 worker/table.py's `idle_work`, a piece at a time) or, at the latest, by the update that applies
-them, `AnticipationSettings.apply_after_frames` (1) frames later. The same numbers either way:
+them, `AnticipationSettings.apply_after_frames` (1) frames later; the compiled maps hand it to
+their process's maps thread instead, which it is taken back from if that has not begun it
+(compiled_maps.py). The same numbers either way:
 the scene is moved from the poses kept, and an aggregate made ahead is used only if the A-map has
 not changed since (`AnticipationMap.prepare`). Why: an update costs a few
 frames' worth of computing, and a worker's sessions created together update in the same period;
@@ -30,6 +32,7 @@ cut) is computed and applied at once: the search has no A-map without it.
 
 from __future__ import annotations
 
+from concurrent.futures import Future, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,6 +79,27 @@ class _DeferredUpdate:
     maps: ShadowVelocityMaps | None = None  # once computed, until A_s is
     predicted: npt.NDArray[np.float32] | None = None  # (k, res, res) A_s, once computed
     aggregate: PreparedAggregate | None = None  # the A-map's aggregate with A_s stored, once made ahead
+    # The maps thread's task computing the fields above (CompiledOcclusionMaps._start), until it is
+    # joined or taken back; None when they are computed on the session's own thread.
+    computing: Future[bool] | None = None
+
+    def take_back(self) -> bool:
+        """Whether this update is the caller's to compute: never handed to the maps thread, or
+        taken back from it before it began."""
+        if self.computing is not None and self.computing.cancel():
+            self.computing = None
+        return self.computing is None
+
+    def join(self) -> None:
+        """Waits for the maps thread, if it computes this update; raises what it raised."""
+        computing, self.computing = self.computing, None
+        if computing is not None:
+            computing.result()
+
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled computed, with no thread: the same numbers as waiting for it on its frame."""
+        self.join()
+        return self.__dict__.copy()
 
 
 class OcclusionMaps:
@@ -201,6 +225,7 @@ class OcclusionMaps:
             self.sampler.redraw(slots, self.rng)
             amap.schedule(time_s, slots)
             previous_torus, dt_s = (self._previous[0], time_s - self._previous[1]) if self._previous else (None, 0.0)
+            self._settle()  # one update at a time uses the scene and the backend
             self._deferred = _DeferredUpdate(
                 time_s,
                 slots,
@@ -213,23 +238,49 @@ class OcclusionMaps:
                 frames_left=0 if refill else amap.settings.apply_after_frames,
                 scene_motion=self._scene_motion(),
             )
-            self._apply_deferred(stages, count=False)
+            if self._deferred.frames_left > 0:
+                self._start(self._deferred)
+            else:
+                self._apply_deferred(stages, count=False)
         self._previous = (torus, time_s)
+
+    def _start(self, update: _DeferredUpdate) -> None:
+        """Where an amortized update is computed, once drawn: here, in the session's thread's idle
+        moments or on its frame (do_deferred_work); CompiledOcclusionMaps hands it to a thread."""
+
+    def _settle(self) -> None:
+        """The deferred update taken back from the maps thread, or waited for if that has begun
+        it, before the scene, the backend or the A-map change or go."""
+        if self._deferred is not None and not self._deferred.take_back():
+            self._deferred.join()
 
     @property
     def has_deferred_work(self) -> bool:
-        """Whether a deferred update waits to be computed (its maps, their A_s, or its aggregate)."""
-        return self._deferred is not None and self._deferred.aggregate is None
+        """Whether a deferred update waits to be computed (its maps, their A_s, or its aggregate)
+        that this thread may compute: not one the maps thread has begun."""
+        update = self._deferred
+        if update is None or update.aggregate is not None:
+            return False
+        return update.computing is None or not (update.computing.running() or update.computing.done())
 
     def do_deferred_work(self, stages: StageClock | None = None, whole: bool = True) -> bool:
         """Computes the deferred update's maps, their A_s and the aggregate A they make, without
         applying them (they reach the search on their frame); laps PROJECTION and AMAP on `stages`
         when given. Without `whole` only one of the three (the scene's move and the maps, else A_s,
         else the aggregate), so that a worker's idle moment delays a request that arrives meanwhile
-        by less. Answers whether there was work to do."""
+        by less. An update handed to the maps thread is taken back if that has not begun it, else
+        waited for with `whole` (and left to it without). Answers whether there was work to do."""
         update = self._deferred
         if update is None or update.aggregate is not None:
             return False
+        if not update.take_back():
+            if whole:
+                update.join()
+            return whole
+        return self._compute(update, stages, whole)
+
+    def _compute(self, update: _DeferredUpdate, stages: StageClock | None, whole: bool) -> bool:
+        """do_deferred_work's pieces, on this thread or the maps thread (there whole, without stages)."""
         if update.predicted is None and update.maps is None:
             assert self.backend is not None  # closing drops the deferred update with the backend
             if update.scene_motion is not None:
@@ -280,6 +331,7 @@ class OcclusionMaps:
 
     def invalidate(self) -> None:
         """After a cut: the old window is elsewhere (a deferred update of it is dropped)."""
+        self._settle()
         self._deferred = None
         self.amap.invalidate()
 
@@ -289,6 +341,9 @@ class OcclusionMaps:
 
     def close(self) -> None:
         """Releases the backend (its GL objects, or its Embree scenes); idempotent."""
+        if self._deferred is not None and not self._deferred.take_back():
+            assert self._deferred.computing is not None  # begun: its outcome no longer matters, but the backend is in use
+            wait([self._deferred.computing])
         self._deferred = None
         if self.backend is not None:
             self.backend.close()
