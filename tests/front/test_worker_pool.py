@@ -6,6 +6,7 @@ of the event loop go in one write; the channel's reply parser fed by hand, cut a
 from __future__ import annotations
 
 import asyncio
+import threading
 
 import grpc
 import pytest
@@ -16,6 +17,7 @@ from camdirector.errors import DirectorError
 from camdirector.front.worker_pool import WorkerPool, _Channel
 from camdirector.geometry.camera import Lens
 from camdirector.infra.channels import REPLY, decode_reply_tail, encode_create, encode_reply
+from camdirector.pipeline.toric.compiled_maps import maps_thread
 from camdirector.server_settings import ServerSettings
 from camdirector.v1 import director_pb2 as pb
 from camdirector.worker.table import FrameMetrics
@@ -122,7 +124,9 @@ def test_the_front_tables_idle_work_waits_for_the_edges_idle_moments(tmp_path):
     """With `workers=0` and the compiled edge, the front's table leaves a snapshot due and an
     ANTICIPATION session's deferred maps for the moments the edge's thread has nothing else to do
     (WorkerPool.idle_inline, called from native/src/edge.rs as it is about to sleep), as a worker
-    does between requests; never while the loop's thread holds the table."""
+    does between requests; never while the loop's thread holds the table. (The compiled maps hand
+    a deferred update to their maps thread; kept busy here, it has not begun this one, which the
+    edge's moments take back: compiled_maps.py.)"""
     pool = WorkerPool(ServerSettings(workers=0, data_dir=str(tmp_path), checkpoint_every_frames=10))
     edge = _Edge()
     pool.hand_inline_to(edge)
@@ -130,18 +134,24 @@ def test_the_front_tables_idle_work_waits_for_the_edges_idle_moments(tmp_path):
     scene = build_demo_scene(seed=7, duration_s=1.0)
     request = session_request(scene, Lens(), pb.ANTICIPATION).SerializeToString()
     asyncio.run(pool.call(0, "create", SESSION_ID, encode_create("default", request)))
-    for update in frame_updates(scene, 10):
-        update.session_id = SESSION_ID
-        assert pool.answer_inline(SESSION_ID, update.SerializeToString()) is not None
-    table = pool._inline.table
-    assert table.checkpoints.load(SESSION_ID).seq == 0  # the snapshot due at the 10th frame waits
-    with pool._inline_lock:  # the loop's thread has the table: the edge's moment does nothing
-        assert pool.idle_inline() is False
-    assert table.checkpoints.load(SESSION_ID).seq == 0
-    pieces = 1
-    while pool.idle_inline():
-        pieces += 1
-    assert pieces >= 2  # the deferred maps (ANTICIPATION), then the snapshot
+    busy = threading.Event()
+    blocker = maps_thread().submit(busy.wait)
+    try:
+        for update in frame_updates(scene, 10):
+            update.session_id = SESSION_ID
+            assert pool.answer_inline(SESSION_ID, update.SerializeToString()) is not None
+        table = pool._inline.table
+        assert table.checkpoints.load(SESSION_ID).seq == 0  # the snapshot due at the 10th frame waits
+        with pool._inline_lock:  # the loop's thread has the table: the edge's moment does nothing
+            assert pool.idle_inline() is False
+        assert table.checkpoints.load(SESSION_ID).seq == 0
+        pieces = 1
+        while pool.idle_inline():
+            pieces += 1
+        assert pieces >= 2  # the deferred maps (ANTICIPATION), then the snapshot
+    finally:
+        busy.set()
+    blocker.result()
     checkpoint = table.checkpoints.load(SESSION_ID)
     assert (checkpoint.seq, checkpoint.entries) == (10, [])
     assert not table.idle_work()
