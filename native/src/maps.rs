@@ -15,6 +15,7 @@
 //! A moving object whose bounding sphere misses the box around all of one sample's segments is
 //! left out of that sample's casts: a cull that never changes an answer.
 
+use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::amap::Window;
@@ -134,10 +135,21 @@ static THREADS: AtomicUsize = AtomicUsize::new(1);
 /// Texels a thread takes at least: below, a thread's start costs more than it saves.
 const TEXELS_PER_THREAD_MIN: usize = 512;
 
+thread_local! {
+    /// The calling thread's own count (set_threads_here), over THREADS.
+    static THREADS_HERE: Cell<Option<usize>> = const { Cell::new(None) };
+}
+
 /// How many threads each later call may share its texels among (1: the caller's alone). Every
 /// texel is computed the same way whichever thread takes it, so the maps' bits do not depend on it.
 pub fn set_threads(threads: usize) {
     THREADS.store(threads.max(1), Ordering::Relaxed);
+}
+
+/// set_threads for the calling thread's later calls alone: a thread computing maps beside the
+/// one that answers frames keeps to its own core (compiled_maps.py's maps thread).
+pub fn set_threads_here(threads: usize) {
+    THREADS_HERE.with(|here| here.set(Some(threads.max(1))));
 }
 
 /// The previous torus, its rows' sines and cosines (its alpha differs) and dt_s, for the torus
@@ -248,8 +260,9 @@ pub fn shadow_velocity_maps(
         velocity: &mut maps.velocity,
         depth: &mut maps.depth,
     };
-    let threads = THREADS
-        .load(Ordering::Relaxed)
+    let threads = THREADS_HERE
+        .with(Cell::get)
+        .unwrap_or_else(|| THREADS.load(Ordering::Relaxed))
         .min(n / TEXELS_PER_THREAD_MIN)
         .max(1);
     if threads == 1 {

@@ -118,8 +118,16 @@ fn set_map_threads(threads: usize) {
     crate::maps::set_threads(threads);
 }
 
-/// Adds shadow_velocity_maps and set_map_threads.
+/// set_map_threads_here(threads): set_map_threads for the calling thread's later calls alone, over
+/// the process's count (maps.rs set_threads_here).
+#[pyfunction]
+fn set_map_threads_here(threads: usize) {
+    crate::maps::set_threads_here(threads);
+}
+
+/// Adds shadow_velocity_maps, set_map_threads and set_map_threads_here.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shadow_velocity_maps, m)?)?;
-    m.add_function(wrap_pyfunction!(set_map_threads, m)?)
+    m.add_function(wrap_pyfunction!(set_map_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(set_map_threads_here, m)?)
 }

@@ -7,18 +7,20 @@ from __future__ import annotations
 
 import pickle
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from camdirector.geometry.meshes import box, capsule
+from camdirector.geometry.toric_maps.native import share_texels
 from camdirector.pipeline.style import MaskKind, Style, VisibilityMode
 from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps, maps_thread
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
 from camdirector.pipeline.toric.target_sampling import TargetSampler
 from tests.pipeline.toric.test_occlusion_maps import DT_S, _pose, _update
 
-STYLE = Style(visibility=VisibilityMode.ANTICIPATION, map_resolution=16)
+STYLE = Style(visibility=VisibilityMode.ANTICIPATION, map_resolution=32)  # 2 maps of 32 x 32: rays enough to share
 
 
 class _OnItsThread(CompiledOcclusionMaps):
@@ -55,6 +57,7 @@ def threaded():
 def test_the_maps_thread_makes_the_numbers_the_sessions_thread_makes(threaded):
     own = _made(_OnItsThread)
     handed = 0
+    share_texels(2)  # the session's thread shares its rays with another; the maps thread keeps to one
     try:
         for frame in range(90):
             _frame(threaded, frame)
@@ -65,6 +68,7 @@ def test_the_maps_thread_makes_the_numbers_the_sessions_thread_makes(threaded):
             np.testing.assert_array_equal(threaded.amap.a_map, own.amap.a_map)
             np.testing.assert_array_equal(threaded.amap.computed_at_s, own.amap.computed_at_s)
     finally:
+        share_texels(1)
         own.close()
     assert handed >= 10  # every amortized update went to the thread
     assert 0.0 < float(threaded.amap.a_map.max())  # the walls were seen: the numbers compared are not all zero
@@ -91,7 +95,7 @@ def test_a_snapshot_a_cut_and_a_style_wait_for_the_maps_thread(threaded):
     assert computing.done() and threaded._deferred is None
 
     frame, computing = _drawn(threaded, frame)
-    threaded.set_style(Style(visibility=VisibilityMode.ANTICIPATION, map_resolution=16, mask=MaskKind.HARD_BEHIND))
+    threaded.set_style(replace(STYLE, mask=MaskKind.HARD_BEHIND))
     assert computing.done() and threaded._deferred.aggregate is not None
 
 

@@ -34,6 +34,12 @@ def share_texels(threads: int) -> None:
     native.set_map_threads(threads)
 
 
+def share_texels_here(threads: int) -> None:
+    """share_texels for the calling thread's later map updates alone, over the process's count
+    (pipeline/toric/compiled_maps.py: the maps thread keeps to one core)."""
+    native.set_map_threads_here(threads)
+
+
 class NativeMapBackend:
     """MapBackend by compiled ray casting; holds a _native.Scene mirroring an OccluderScene."""
 

@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 import camdirector._native as native
 from camdirector.geometry.toric_maps.base import ShadowVelocityMaps
-from camdirector.geometry.toric_maps.native import NativeMapBackend
+from camdirector.geometry.toric_maps.native import NativeMapBackend, share_texels_here
 from camdirector.pipeline.style import MapBackendChoice, Style
 from camdirector.pipeline.toric.anticipation_map import AnticipationMap
 from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
@@ -51,8 +51,10 @@ def compiled_bank(settings: AnticipationSettings) -> Any:
 @functools.cache
 def maps_thread() -> ThreadPoolExecutor:
     """The process's one maps thread (module docstring), started on its first update: one, so that
-    the updates of a worker's sessions take one core between them, in the order they were drawn."""
-    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="camdirector-maps")
+    the updates of a worker's sessions take one core between them, in the order they were drawn;
+    its rays on that core alone (the process's texel threads, `map_threads`, would take the core
+    of the thread answering frames)."""
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="camdirector-maps", initializer=share_texels_here, initargs=(1,))
 
 
 # A forked child has no maps thread (threads do not fork): it starts its own.
