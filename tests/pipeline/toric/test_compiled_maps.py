@@ -36,10 +36,11 @@ def _made(cls: type[CompiledOcclusionMaps]) -> CompiledOcclusionMaps:
     return cls([box((20.0, 0.1, 20.0))], dynamic, TargetSampler([capsule(0.3, 1.8)], rng), STYLE, rng)
 
 
-def _frame(maps: CompiledOcclusionMaps, frame: int) -> None:
+def _frame(maps: CompiledOcclusionMaps, frame: int) -> dict[str, float]:
+    """The frame's stage laps."""
     time_s = frame * DT_S
     maps.ingest([("slider", _pose(-1.0 + 0.05 * frame)), ("spinner", _pose(1.5 - 0.03 * frame, 0.1 * frame))], time_s)
-    _update(maps, time_s)
+    return _update(maps, time_s)
 
 
 def _in_flight(maps: CompiledOcclusionMaps):
@@ -114,6 +115,23 @@ def test_an_update_the_maps_thread_has_not_begun_is_taken_back_by_an_idle_moment
     finally:
         busy.set()
     blocker.result()
+
+
+def test_the_updates_frame_laps_the_same_stages_whichever_thread_computed_it(threaded):
+    """A frame's laps are its diagnostics: they must not depend on the threads' timing."""
+    frame, computing = _drawn(threaded, 0)
+    computing.exception()  # computed on the maps thread
+    joined = _frame(threaded, frame + 1)
+    busy = threading.Event()
+    blocker = maps_thread().submit(busy.wait)
+    try:
+        frame, computing = _drawn(threaded, frame + 1)
+        taken_back = _frame(threaded, frame + 1)  # computed on this frame
+        assert computing.cancelled()
+    finally:
+        busy.set()
+    blocker.result()
+    assert set(joined) == set(taken_back) == {"amap"}
 
 
 def test_an_error_on_the_maps_thread_is_raised_on_the_updates_frame_and_the_thread_goes_on(threaded, monkeypatch):

@@ -73,7 +73,7 @@ class CompiledOcclusionMaps(OcclusionMaps):
 
     def _start(self, update: _DeferredUpdate) -> None:
         if isinstance(self.backend, NativeMapBackend):
-            update.computing = maps_thread().submit(self._compute, update, None, True)
+            update.computing, update.handed = maps_thread().submit(self._compute, update, None, True), True
 
     def _predict(self, maps: ShadowVelocityMaps) -> npt.NDArray[np.float32]:
         predicted: npt.NDArray[np.float32] = compiled_bank(self.amap.settings).predict(

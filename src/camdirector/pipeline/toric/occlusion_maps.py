@@ -82,6 +82,9 @@ class _DeferredUpdate:
     # The maps thread's task computing the fields above (CompiledOcclusionMaps._start), until it is
     # joined or taken back; None when they are computed on the session's own thread.
     computing: Future[bool] | None = None
+    # Once handed to the maps thread, its frame laps no stage of the computing, whichever thread did
+    # it: the frame's laps (its diagnostics) do not depend on the threads' timing.
+    handed: bool = False
 
     def take_back(self) -> bool:
         """Whether this update is the caller's to compute: never handed to the maps thread, or
@@ -315,7 +318,8 @@ class OcclusionMaps:
 
     def _apply_deferred(self, stages: StageClock, count: bool = True) -> None:
         """One frame nearer for the deferred update (with `count`); on its frame, it is computed
-        if no idle moment did, and stored in the A-map."""
+        if no idle moment (nor the maps thread) did, and stored in the A-map; AMAP lapped, and
+        PROJECTION too when this frame computed the maps of an update never handed to that thread."""
         update = self._deferred
         if update is None:
             return
@@ -323,7 +327,7 @@ class OcclusionMaps:
             update.frames_left -= 1
         if update.frames_left > 0:
             return
-        self.do_deferred_work(stages)
+        self.do_deferred_work(None if update.handed else stages)
         self._deferred = None
         assert update.predicted is not None  # do_deferred_work computed it, whole
         self.amap.store(update.time_s, update.slots, update.predicted, update.window, update.torus, update.aggregate)
