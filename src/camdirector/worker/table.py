@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from google.protobuf import json_format
 
 from camdirector.errors import invalid, not_found, precondition
-from camdirector.geometry.toric_maps.native import share_texels
+from camdirector.geometry.toric_maps.native import hand_updates_apart, share_texels
 from camdirector.infra.channels import FrameMetrics, ViewQuery
 from camdirector.infra.tenants import DEFAULT_TENANT
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
@@ -83,6 +83,7 @@ class SessionTable:
         self.checkpoints = Checkpointing(settings, clock, store)
         self.defer_snapshots = defer_snapshots
         share_texels(settings.map_threads_per_update)  # per process: this table holds its sessions
+        hand_updates_apart(settings.workers == 0)  # the front's table, its frames on one thread
         # Sessions whose rig left work for later (Session.has_deferred_work), then those whose
         # snapshot waits for idle time: idle_work's two queues, in that order.
         self._deferred: dict[str, HeldSession] = {}

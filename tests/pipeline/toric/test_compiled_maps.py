@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from camdirector.geometry.meshes import box, capsule
-from camdirector.geometry.toric_maps.native import share_texels
+from camdirector.geometry.toric_maps.native import hand_updates_apart, share_texels
 from camdirector.pipeline.style import MaskKind, Style, VisibilityMode
 from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps, maps_thread
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps
@@ -50,9 +50,22 @@ def _in_flight(maps: CompiledOcclusionMaps):
 
 @pytest.fixture
 def threaded():
+    hand_updates_apart(True)  # as the front's table of `serve --workers 0` says
     made = _made(CompiledOcclusionMaps)
     yield made
     made.close()
+    hand_updates_apart(False)
+
+
+def test_a_process_that_does_not_say_so_computes_its_updates_on_the_sessions_thread():
+    made = _made(CompiledOcclusionMaps)  # a worker process's: its cores are its workers'
+    try:
+        for frame in range(12):
+            _frame(made, frame)
+            assert _in_flight(made) is None
+        assert made.amap.computed_at_s.max() > 0.0  # an amortized update came and went
+    finally:
+        made.close()
 
 
 def test_the_maps_thread_makes_the_numbers_the_sessions_thread_makes(threaded):

@@ -34,6 +34,14 @@ def share_texels(threads: int) -> None:
     native.set_map_threads(threads)
 
 
+def hand_updates_apart(on: bool) -> None:
+    """Whether this process's sessions compute their amortized map updates on a thread of their own
+    (pipeline/toric/compiled_maps.py): on where one thread answers every session's frames
+    (`serve --workers 0`), whose other core that thread takes; off in worker processes, whose
+    cores the workers already fill (there it cost ANTICIPATION capacity: docs/frame_path.md)."""
+    NativeMapBackend.apart = on
+
+
 def share_texels_here(threads: int) -> None:
     """share_texels for the calling thread's later map updates alone, over the process's count
     (pipeline/toric/compiled_maps.py: the maps thread keeps to one core)."""
@@ -44,6 +52,7 @@ class NativeMapBackend:
     """MapBackend by compiled ray casting; holds a _native.Scene mirroring an OccluderScene."""
 
     name = "native"
+    apart = False  # the process's hand_updates_apart
 
     def __init__(self, scene: OccluderScene) -> None:
         self.scene = scene

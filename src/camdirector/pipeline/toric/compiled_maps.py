@@ -10,7 +10,8 @@ style mask stay Python (occlusion_maps.py, anticipation_map.py), so what a sessi
 generator, and when, is the Python's. A style that names a backend (GL, EMBREE) gets it; AUTO
 gets the compiled one.
 
-The compiled backend's amortized update is handed to the process's maps thread (`_start`): the
+Where the process says so (`hand_updates_apart`: the front's table of `serve --workers 0`), the
+compiled backend's amortized update is handed to the process's maps thread (`_start`): the
 scene's move, the rays and A_s with the GIL released, and the aggregate, while the session's
 thread answers other frames. That thread takes an update back that the maps thread has not begun
 (an idle moment, or the update's frame), so under a burst of updates both cores compute them, and
@@ -72,7 +73,7 @@ class CompiledOcclusionMaps(OcclusionMaps):
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend, "native")
 
     def _start(self, update: _DeferredUpdate) -> None:
-        if isinstance(self.backend, NativeMapBackend):
+        if isinstance(self.backend, NativeMapBackend) and self.backend.apart:
             update.computing, update.handed = maps_thread().submit(self._compute, update, None, True), True
 
     def _predict(self, maps: ShadowVelocityMaps) -> npt.NDArray[np.float32]:
