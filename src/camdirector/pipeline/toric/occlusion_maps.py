@@ -15,9 +15,9 @@ the frame it is due on: that frame draws its sample points, keeps the objects' p
 the next update; the scene's move to those poses, its maps, their A_s and the aggregate A they
 make are computed when the session's worker is idle (`do_deferred_work`, called by
 worker/table.py's `idle_work`, a piece at a time) or, at the latest, by the update that applies
-them, `AnticipationSettings.apply_after_frames` (1) frames later; the compiled maps hand it to
-their process's maps thread instead, which it is taken back from if that has not begun it
-(compiled_maps.py). The same numbers either way:
+them, `AnticipationSettings.apply_after_frames` (1) frames later; on `serve --workers 0` the
+compiled maps hand it to the front's maps thread instead, which it is taken back from if that has
+not begun it (compiled_maps.py). The same numbers either way:
 the scene is moved from the poses kept, and an aggregate made ahead is used only if the A-map has
 not changed since (`AnticipationMap.prepare`). Why: an update costs a few
 frames' worth of computing, and a worker's sessions created together update in the same period;
