@@ -24,6 +24,7 @@ mod rotation;
 mod scene;
 mod scene_py;
 mod search;
+mod search_frame_py;
 mod search_py;
 mod stages_py;
 mod toric;
@@ -49,6 +50,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     move_scene_py::register(m)?;
     log_append_py::register(m)?;
     toric_frame_py::register(m)?;
+    search_frame_py::register(m)?;
     edge_py::register(m)?;
     Ok(())
 }

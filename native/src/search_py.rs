@@ -28,7 +28,7 @@ use crate::rotation::Vec3;
 use crate::scene::Scene;
 use crate::scene_py::PyScene;
 use crate::search::{
-    Frame, Occlusion, Particle, RaycastRisk, Risk, Scored, Search, SearchSettings, Uniform,
+    Frame, Occlusion, Particle, RaycastRisk, Risk, Scored, Search, SearchSettings, Step, Uniform,
 };
 use crate::stages_py::{attr, lens_and_fov, screen};
 use crate::toric::{Lens, Torus};
@@ -195,7 +195,7 @@ fn contiguous<'a>(array: &'a PyReadonlyArray2<'_, f32>) -> Cow<'a, [f32]> {
 }
 
 /// The particle: (theta, phi, velocity_world (3,), shot_start_s, occluded_since_s or None).
-type PyParticle<'py> = (f64, f64, Array1<'py>, f64, Option<f64>);
+pub(crate) type PyParticle<'py> = (f64, f64, Array1<'py>, f64, Option<f64>);
 
 /// What SearchCore.step answers: (theta, phi, cut, strategy, risk, particle, pose, trace).
 type Stepped<'py> = (
@@ -255,10 +255,103 @@ pub struct SearchCore {
     max_speed_m_s: f64,
     max_accel_m_s2: f64,
     lens: Lens,
-    fov_deg: f64,
+    pub(crate) fov_deg: f64,
 }
 
 impl SearchCore {
+    /// One frame of the search from `particle` (moved), and pose_on_torus's pose at its answer
+    /// (position_world, rotation_xyzw): `step`'s work, for it and for search_frame
+    /// (search_frame_py.rs). `frame`: (dt_s, time_s, side); the rest as `step` takes them.
+    #[allow(clippy::too_many_arguments)] // step's inputs, read from Python by its callers
+    pub(crate) fn answer(
+        &self,
+        torus: &Torus,
+        particle: &mut Particle,
+        (dt_s, time_s, side): (f64, f64, f64),
+        scene: &Scene,
+        points: &[Vec3],
+        rng: &Bound<'_, PyAny>,
+        amap: Option<&Bound<'_, PyAny>>,
+        level: bool,
+        record: Option<&mut Vec<Scored>>,
+    ) -> PyResult<(Step, motion::Pose)> {
+        if points.is_empty() {
+            return Err(PyValueError::new_err("points_world is empty"));
+        }
+        let frame = Frame {
+            dt_s,
+            time_s,
+            side,
+            max_speed_m_s: self.max_speed_m_s,
+            max_accel_m_s2: self.max_accel_m_s2,
+        };
+        let view = amap.map(amap_view).transpose()?.flatten();
+        let mut sighting = Sighting {
+            scene,
+            points_world: points,
+            stack: Stack::with_capacity(64),
+        };
+        let step = with_stream(rng, |stream| {
+            Ok(match (&view, amap) {
+                (_, None) => {
+                    // the risk's ray casts and the cut's share one Scene and point set
+                    let mut casts = Sighting {
+                        scene,
+                        points_world: points,
+                        stack: Stack::with_capacity(64),
+                    };
+                    let mut risk = RaycastRisk(&mut casts);
+                    self.search.step(
+                        particle,
+                        torus,
+                        &frame,
+                        &mut risk,
+                        &mut sighting,
+                        stream,
+                        record,
+                    )
+                }
+                (view, Some(_)) => {
+                    let values = view.as_ref().map(|(a, w)| (contiguous(a), *w));
+                    let mut risk = AMap {
+                        map: values.as_ref().map(|(a, w)| (a.as_ref(), *w)),
+                        outside: 1.0,
+                    };
+                    self.search.step(
+                        particle,
+                        torus,
+                        &frame,
+                        &mut risk as &mut dyn Risk,
+                        &mut sighting,
+                        stream,
+                        record,
+                    )
+                }
+            })
+        })?;
+        let pose = motion::pose_on_torus(
+            torus,
+            step.theta,
+            step.phi,
+            &self.screen_a,
+            &self.screen_b,
+            &self.lens,
+            level,
+        )?;
+        Ok((step, pose))
+    }
+
+    /// The particle as the Python search keeps it: (theta, phi, velocity_world, shot_start_s, occluded_since_s).
+    pub(crate) fn py_particle<'py>(py: Python<'py>, particle: &Particle) -> PyParticle<'py> {
+        (
+            particle.theta,
+            particle.phi,
+            vec3(py, &particle.velocity_world),
+            particle.shot_start_s,
+            particle.occluded_since_s,
+        )
+    }
+
     fn read_style(&mut self, style: &Bound<'_, PyAny>) -> PyResult<()> {
         self.screen_a = screen(style, "screen_a")?;
         self.screen_b = screen(style, "screen_b")?;
@@ -328,9 +421,6 @@ impl SearchCore {
     ) -> PyResult<Stepped<'py>> {
         let torus = torus_of(torus)?;
         let points = rows("points_world", points_world.as_array())?;
-        if points.is_empty() {
-            return Err(PyValueError::new_err("points_world is empty"));
-        }
         let (theta, phi, velocity, shot_start_s, occluded_since_s) = particle;
         let mut particle = Particle {
             theta,
@@ -339,67 +429,17 @@ impl SearchCore {
             shot_start_s,
             occluded_since_s,
         };
-        let frame = Frame {
-            dt_s,
-            time_s,
-            side,
-            max_speed_m_s: self.max_speed_m_s,
-            max_accel_m_s2: self.max_accel_m_s2,
-        };
-        let view = amap.map(amap_view).transpose()?.flatten();
-        let mut sighting = Sighting {
-            scene: &scene.scene,
-            points_world: &points,
-            stack: Stack::with_capacity(64),
-        };
         let mut scored = Vec::new();
-        let step = with_stream(rng, |stream| {
-            let record = trace.then_some(&mut scored);
-            Ok(match (&view, amap) {
-                (_, None) => {
-                    // the risk's ray casts and the cut's share one Scene and point set
-                    let mut casts = Sighting {
-                        scene: sighting.scene,
-                        points_world: sighting.points_world,
-                        stack: Stack::with_capacity(64),
-                    };
-                    let mut risk = RaycastRisk(&mut casts);
-                    self.search.step(
-                        &mut particle,
-                        &torus,
-                        &frame,
-                        &mut risk,
-                        &mut sighting,
-                        stream,
-                        record,
-                    )
-                }
-                (view, Some(_)) => {
-                    let values = view.as_ref().map(|(a, w)| (contiguous(a), *w));
-                    let mut risk = AMap {
-                        map: values.as_ref().map(|(a, w)| (a.as_ref(), *w)),
-                        outside: 1.0,
-                    };
-                    self.search.step(
-                        &mut particle,
-                        &torus,
-                        &frame,
-                        &mut risk as &mut dyn Risk,
-                        &mut sighting,
-                        stream,
-                        record,
-                    )
-                }
-            })
-        })?;
-        let (position, rotation) = motion::pose_on_torus(
+        let (step, (position, rotation)) = self.answer(
             &torus,
-            step.theta,
-            step.phi,
-            &self.screen_a,
-            &self.screen_b,
-            &self.lens,
+            &mut particle,
+            (dt_s, time_s, side),
+            &scene.scene,
+            &points,
+            rng,
+            amap,
             level,
+            trace.then_some(&mut scored),
         )?;
         Ok((
             step.theta,
@@ -407,13 +447,7 @@ impl SearchCore {
             step.cut,
             step.strategy.name(),
             step.risk,
-            (
-                particle.theta,
-                particle.phi,
-                vec3(py, &particle.velocity_world),
-                particle.shot_start_s,
-                particle.occluded_since_s,
-            ),
+            SearchCore::py_particle(py, &particle),
             (
                 vec3(py, &position),
                 PyArray1::from_slice(py, &rotation),

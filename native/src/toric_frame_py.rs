@@ -33,14 +33,14 @@ type Frame<'py> = (
 );
 
 /// StageClock.done on a frame's stage_ms: the time since `last_s` added to `key`'s laps, ms.
-struct Laps<'a, 'py> {
-    clock: &'a Bound<'py, PyAny>,
-    stage_ms: &'a Bound<'py, PyDict>,
-    last_s: f64,
+pub(crate) struct Laps<'a, 'py> {
+    pub(crate) clock: &'a Bound<'py, PyAny>,
+    pub(crate) stage_ms: &'a Bound<'py, PyDict>,
+    pub(crate) last_s: f64,
 }
 
 impl Laps<'_, '_> {
-    fn done(&mut self, key: &Bound<'_, PyString>) -> PyResult<()> {
+    pub(crate) fn done(&mut self, key: &Bound<'_, PyString>) -> PyResult<()> {
         let now_s: f64 = self.clock.call0()?.extract()?;
         let before: f64 = match self.stage_ms.get_item(key)? {
             Some(ms) => ms.extract()?,

@@ -35,6 +35,11 @@ class StageClock:
         self._now = clock
         self._last_s = clock()
 
+    @property
+    def last_s(self) -> float:
+        """The clock's reading at the last `done` (or at construction), s: where the next lap starts."""
+        return self._last_s
+
     def done(self, stage: enum.Enum) -> None:
         now_s = self._now()
         self.timings_ms[stage.value] = self.timings_ms.get(stage.value, 0.0) + (now_s - self._last_s) * 1e3

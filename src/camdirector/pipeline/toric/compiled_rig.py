@@ -54,12 +54,13 @@ import camdirector._native as native
 from camdirector.geometry.camera import CameraPose
 from camdirector.geometry.toric import Torus
 from camdirector.geometry.transforms import RigidTransform
+from camdirector.infra.stage_clock import StageClock
 from camdirector.pipeline.inputs import FrameInput, SceneSpec
+from camdirector.pipeline.stages import Stage
 from camdirector.pipeline.state import FrameState
 from camdirector.pipeline.style import MAP_MODES, SEARCH_MODES, Style, VisibilityMode
 from camdirector.pipeline.toric.compiled_maps import CompiledOcclusionMaps
 from camdirector.pipeline.toric.frame import ToricFrame
-from camdirector.pipeline.toric.occlusion_search import SearchResult
 from camdirector.pipeline.toric.rig import ToricRig, _fallback_pose
 from camdirector.pipeline.toric.target_sampling import TargetSampler
 
@@ -99,6 +100,7 @@ class CompiledToricRig(ToricRig):
     _runs = 0  # frames run; the Scene was last moved in frame `_scene_run` of them (it holds `dynamic` as of then)
     _scene_run = -1
     _search_core: Any = None  # the SearchCore, made on the first compiled search step
+    _side_core: Any = None  # a MotionCore that chooses the search's upright side (ToricMotion's side kept in Python)
     _packed: tuple[list[str], npt.NDArray[np.float64]] | None = None  # the frame's FrameInput.packed, till the Scene takes it
 
     def __init__(self, scene: SceneSpec, *rest: Any) -> None:
@@ -125,6 +127,8 @@ class CompiledToricRig(ToricRig):
             self._cores[0].set_style(style)  # the deoccluder's settings are not the style's
         if self._search_core is not None:
             self._search_core.set_style(style)
+        if self._side_core is not None:
+            self._side_core.set_style(style)
 
     def __getstate__(self) -> dict[str, object]:
         """The rig's state with the stages' state in its Python stages; no native object."""
@@ -133,7 +137,7 @@ class CompiledToricRig(ToricRig):
         if self._cores is not None:
             self._python_from_cores()
         state = self.__dict__.copy()
-        state.update(_framing_core=None, _cores=None, _scene=None, _search_core=None, _packed=None)
+        state.update(_framing_core=None, _cores=None, _scene=None, _search_core=None, _side_core=None, _packed=None)
         return state
 
     def run(
@@ -234,24 +238,76 @@ class CompiledToricRig(ToricRig):
     def _build_maps(self) -> None:
         self.maps = CompiledOcclusionMaps(self.static_meshes_world, self.dynamic, self.sampler, self.style, self.rng)
 
-    def _search_step(
-        self, torus: Torus, state: FrameState, points_world: npt.NDArray[np.float64], side: float, level: bool
-    ) -> tuple[SearchResult, CameraPose]:
-        """ToricRig._search_step in the SearchCore, which moves the Python search's particle."""
-        search = self.search
-        assert search.theta is not None  # the search started in _move
+    def _move_and_see(
+        self,
+        state: FrameState,
+        toric: ToricFrame,
+        target_transforms: list[RigidTransform],
+        last: FrameState | None,
+        stages: StageClock,
+    ) -> None:
+        """ToricRig._move_and_see for a frame of a search mode: the maps' update (map modes) in
+        Python, then the search's MOTION (the points, the upright side, the SearchCore's step and
+        pose, which moves the Python search's particle) and VISIBILITY in one native call
+        (`search_frame`), lapped where ToricRig laps them. A degenerate torus holds the camera as
+        ToricRig's does."""
+        torus = toric.torus
+        if self.style.visibility not in SEARCH_MODES or torus is None:
+            super()._move_and_see(state, toric, target_transforms, last, stages)
+            return
+        self._begin_search(torus, state.time_s)
+        search, motion, sampler = self.search, self.motion, self.sampler
+        points_local, amap = sampler.points_local, None
+        if self.style.visibility in MAP_MODES:
+            stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
+            assert self.maps is not None and search.theta is not None  # built with the mode; started above
+            points_local = points_local.copy()  # the update may redraw some, after the frame's points were taken
+            self.maps.update(torus, search.theta, search.phi, state.time_s, target_transforms, self.target_ids, stages)
+            amap = self.maps.amap
         if self._search_core is None:
             self._search_core = native.SearchCore(search.settings, self.style, self.lens)
-        amap = None
-        if self.style.visibility in MAP_MODES:
-            assert self.maps is not None  # built when the style entered a map mode
-            amap = self.maps.amap
-        particle = (search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s)
-        theta, phi, cut, strategy, risk, particle, pose, _ = self._search_core.step(
-            torus, particle, state.dt_s, state.time_s, side, self._moved_scene(), points_world, search.rng, amap, level
+        if self._side_core is None:
+            self._side_core = native.MotionCore(self.style, self.lens, motion.settings)
+        (
+            toric.theta,
+            toric.phi,
+            cut,
+            strategy,
+            (search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s),
+            pose,
+            motion.side,
+            motion._side_key,
+            state.visibility,
+            state.framing_error,
+        ) = native.search_frame(
+            self._search_core,
+            self._side_core,
+            self._framing(),
+            self._moved_scene(),
+            torus,
+            (search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s),
+            motion.side,
+            motion._side_key,
+            points_local,
+            target_transforms,
+            search.rng,
+            amap,
+            self.visibility.samples_local,
+            toric.a_world,
+            toric.b_world,
+            toric.b_is_gaze_point,
+            state.time_s,
+            state.dt_s,
+            self.clock,
+            stages.last_s,
+            state.stage_ms,
         )
-        search.theta, search.phi, search.velocity_world, search.shot_start_s, search._occluded_since_s = particle
-        return SearchResult(theta, phi, cut, strategy, risk), CameraPose(*pose)
+        state.cut = cut
+        state.flags.append(f"search_{strategy}")
+        if cut and self.maps is not None:
+            self.maps.invalidate()  # after VISIBILITY's lap: it computes nothing the frame shows
+        state.pose = CameraPose(*pose)
+        motion.position_world = state.pose.position_world
 
     def _frame(self, state: FrameState, toric: ToricFrame) -> None:
         """FRAMING in the FramingCore (Framing.run's twin): A, B and the compiled torus into `toric`."""

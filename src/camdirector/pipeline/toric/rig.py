@@ -148,6 +148,19 @@ class ToricRig(RigBase):
         if self.maps is not None:
             self.maps.ingest(update.states, update.time_s)
         stages.done(Stage.FRAMING)
+        self._move_and_see(state, toric, target_transforms, last, stages)
+        state.cut = state.cut or self._style_cut
+        self._style_cut = False
+
+    def _move_and_see(
+        self,
+        state: FrameState,
+        toric: ToricFrame,
+        target_transforms: list[RigidTransform],
+        last: FrameState | None,
+        stages: StageClock,
+    ) -> None:
+        """MOTION (with the maps' stages in the map modes), then VISIBILITY, lapped on `stages`."""
         self._move(state, toric, target_transforms, last, stages)
         if state.pose is None:
             state.pose = last.pose if last is not None else _fallback_pose(state, self.lens.vertical_fov_deg)
@@ -155,8 +168,6 @@ class ToricRig(RigBase):
         stages.done(Stage.MOTION)
         self._see(state, toric, target_transforms)
         stages.done(Stage.VISIBILITY)
-        state.cut = state.cut or self._style_cut
-        self._style_cut = False
 
     def _frame(self, state: FrameState, toric: ToricFrame) -> None:
         """FRAMING: A, B and the torus into `toric`."""
@@ -198,13 +209,7 @@ class ToricRig(RigBase):
                     state.flags.append("pulled_in")
             return
         torus = toric.torus
-        if not self._searching:
-            if self.motion.position_world is None:
-                theta, phi, _, _ = self.motion.preferred_place(torus)
-            else:
-                theta, phi = torus_angles(torus, self.motion.position_world)
-            self.search.start(theta, phi, state.time_s)
-            self._searching = True
+        self._begin_search(torus, state.time_s)
         points = self.sampler.points_world(target_transforms)  # before the maps' update redraws some
         if mode in MAP_MODES:
             stages.done(Stage.MOTION)  # the search's set-up; the maps lap their own stages
@@ -218,6 +223,18 @@ class ToricRig(RigBase):
         if result.cut and self.maps is not None:
             self.maps.invalidate()
         self.motion.position_world = state.pose.position_world
+
+    def _begin_search(self, torus: Torus, time_s: float) -> None:
+        """Starts the search's particle where the camera is (at the preferred place before any
+        pose) on the first frame of a search mode; nothing while it searches."""
+        if self._searching:
+            return
+        if self.motion.position_world is None:
+            theta, phi, _, _ = self.motion.preferred_place(torus)
+        else:
+            theta, phi = torus_angles(torus, self.motion.position_world)
+        self.search.start(theta, phi, time_s)
+        self._searching = True
 
     def _search_step(
         self, torus: Torus, state: FrameState, points_world: npt.NDArray[np.float64], side: float, level: bool
