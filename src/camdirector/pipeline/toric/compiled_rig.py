@@ -11,9 +11,12 @@
 - In the search modes (ANTICIPATION, NO_ANTICIPATION, RAYCAST), MOTION's search in `SearchCore`
   (occlusion_search.py's `OcclusionSearch.step` and the pose at its answer), reading the A-map
   or ray casts, and drawing its candidates from the session's generator as the Python draws
-  them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame. The
-  targets' sample points it and the maps read are carried by camdirector._native's `carry`
-  (`CarriedTargetSampler`), a call per target.
+  them; the particle stays in the Python `OcclusionSearch`, which the core moves each frame.
+  After FRAMING and the maps' update, the search's MOTION and VISIBILITY are one native call
+  (`search_frame`): the targets' sample points carried, the upright side (a MotionCore's
+  `preferred_place` from ToricMotion's side, kept in Python), the step, the share seen and the
+  framing error, lapped where ToricRig.run laps them. The points the maps read are carried by
+  camdirector._native's `carry` (`CarriedTargetSampler`), a call per target.
 - In the map modes, PROJECTION's ray casts and AMAP's per-sample predictions
   (compiled_maps.py); their schedule, window and aggregate stay Python.
 - In FRAMING_ONLY, REACTIVE and the search modes, VISIBILITY's ray casts, and the search's, in a `Scene`
