@@ -1,13 +1,16 @@
 //! camdirector._native.move_scene: a frame's moving objects put where its rows say, in the Scene,
 //! in one call: the compiled decoder's rows (codec.frame_from_wire) read as they are, where
-//! Scene.set_transform reads one RigidTransform's three arrays a call (about 0.9 us each).
+//! Scene.set_transform reads one RigidTransform's three arrays a call (about 0.9 us each). And
+//! turn_rates: the angular velocities the maps' scene moves its objects with (occlusion_maps.py's
+//! `_turn_rates`), compiled.
 
-use numpy::ndarray::ArrayView2;
+use numpy::ndarray::{ArrayView1, ArrayView2};
 use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyString};
 
+use crate::rotation::turn_rotvec;
 use crate::scene::Pose;
 use crate::scene_py::PyScene;
 use crate::toric_py::c_order_values;
@@ -73,6 +76,51 @@ fn move_scene<'py>(
     Ok(moved)
 }
 
+/// turn_rates(before_xyzw, now_xyzw, dt_s) -> (m, 3) float64: the angular velocities, rad/s in
+/// the world frame, of m objects turned from before_xyzw to now_xyzw, each (m, 4) float64
+/// quaternions (x, y, z, w), in dt_s seconds: occlusion_maps.py's scipy
+/// `(Rotation.from_quat(now) * Rotation.from_quat(before).inv()).as_rotvec() / dt_s` within
+/// rounding, the same bits on every x86-64 machine (rotation.rs turn_rotvec). ValueError for
+/// arrays of another shape, a zero or non-finite quaternion, or dt_s not positive.
+#[pyfunction]
+fn turn_rates<'py>(
+    py: Python<'py>,
+    before_xyzw: PyReadonlyArray2<'py, f64>,
+    now_xyzw: PyReadonlyArray2<'py, f64>,
+    dt_s: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let (before, now) = (before_xyzw.as_array(), now_xyzw.as_array());
+    if before.ncols() != 4 || before.shape() != now.shape() {
+        return Err(PyValueError::new_err(format!(
+            "before_xyzw and now_xyzw must both be (m, 4), got {:?} and {:?}",
+            before.shape(),
+            now.shape()
+        )));
+    }
+    if !(dt_s > 0.0 && dt_s.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "dt_s must be a positive number of seconds, got {dt_s}"
+        )));
+    }
+    let mut rates = Vec::with_capacity(before.nrows());
+    for (k, (b, n)) in before.outer_iter().zip(now.outer_iter()).enumerate() {
+        let quat = |row: ArrayView1<'_, f64>| [row[0], row[1], row[2], row[3]];
+        let turn = turn_rotvec(&quat(b), &quat(n)).ok_or_else(|| {
+            PyValueError::new_err(format!(
+                "object {k}: a quaternion must be finite and nonzero, got {:?} and {:?}",
+                quat(b),
+                quat(n)
+            ))
+        })?;
+        rates.push(turn.map(|c| c / dt_s).to_vec());
+    }
+    if rates.is_empty() {
+        return Ok(PyArray2::zeros(py, [0, 3], false));
+    }
+    PyArray2::from_vec2(py, &rates).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(move_scene, m)?)
+    m.add_function(wrap_pyfunction!(move_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(turn_rates, m)?)
 }

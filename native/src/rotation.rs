@@ -143,3 +143,38 @@ pub fn quat_to_matrix(q: &[f64; 4]) -> Mat3 {
         ],
     ]
 }
+
+/// The rotation vector (axis times angle, radians, world frame) of the turn from `before` to `now`,
+/// quaternions (x, y, z, w) of any nonzero length: scipy's `(Rotation.from_quat(now) *
+/// Rotation.from_quat(before).inv()).as_rotvec()` (each quaternion normalised, the turn
+/// now * conj(before), taken with w >= 0, then 2 atan2(|v|, w) about v; the same series below 1e-3
+/// rad), its numbers within rounding, its bits the libm crate's on every machine. None for a zero
+/// quaternion, which from_quat refuses.
+pub fn turn_rotvec(before: &[f64; 4], now: &[f64; 4]) -> Option<Vec3> {
+    let unit = |q: &[f64; 4]| {
+        let norm = libm::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        (norm > 0.0 && norm.is_finite()).then(|| q.map(|c| c / norm))
+    };
+    let [ax, ay, az, aw] = unit(now)?;
+    let [bx, by, bz, bw] = unit(before)?.map(|c| -c); // the inverse's vector part, negated below for w
+    let bw = -bw;
+    // Hamilton product now * conj(before): (aw b + bw a + a x b, aw bw - a . b), b the conjugate's vector
+    let mut turn = [
+        aw * bx + bw * ax + (ay * bz - az * by),
+        aw * by + bw * ay + (az * bx - ax * bz),
+        aw * bz + bw * az + (ax * by - ay * bx),
+        aw * bw - (ax * bx + ay * by + az * bz),
+    ];
+    if turn[3] < 0.0 {
+        turn = turn.map(|c| -c);
+    }
+    let sine = libm::sqrt(turn[0] * turn[0] + turn[1] * turn[1] + turn[2] * turn[2]);
+    let angle = 2.0 * libm::atan2(sine, turn[3]);
+    let scale = if angle <= 1e-3 {
+        let angle2 = angle * angle;
+        2.0 + angle2 / 12.0 + 7.0 * angle2 * angle2 / 2880.0
+    } else {
+        angle / libm::sin(angle / 2.0)
+    };
+    Some([scale * turn[0], scale * turn[1], scale * turn[2]])
+}

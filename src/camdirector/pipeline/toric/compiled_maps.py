@@ -76,6 +76,14 @@ class CompiledOcclusionMaps(OcclusionMaps):
         if isinstance(self.backend, NativeMapBackend) and self.backend.apart:
             update.computing, update.handed = maps_thread().submit(self._compute, update, None, True), True
 
+    def _turn_rates(
+        self, before_xyzw: npt.NDArray[np.float64], now_xyzw: npt.NDArray[np.float64], dt_s: float
+    ) -> npt.NDArray[np.float64]:
+        """OcclusionMaps._turn_rates in camdirector._native (`turn_rates`): scipy's within rounding,
+        the same bits on every machine, and no scipy call on the maps thread."""
+        rates: npt.NDArray[np.float64] = native.turn_rates(before_xyzw, now_xyzw, dt_s)
+        return rates
+
     def _predict(self, maps: ShadowVelocityMaps) -> npt.NDArray[np.float32]:
         predicted: npt.NDArray[np.float32] = compiled_bank(self.amap.settings).predict(
             maps.shadow, maps.velocity_rad_s, maps.window

@@ -196,15 +196,22 @@ class OcclusionMaps:
             rows = [row[object_id] for object_id in moving]
             now = [latest[object_id] for object_id in moving]
             before = [before_poses[object_id] for object_id in moving]
-            turn = (
-                Rotation.from_quat([tf.rotation_xyzw for tf in now])
-                * Rotation.from_quat([tf.rotation_xyzw for tf in before]).inv()
-            )
             linear[rows] = (np.array([tf.position_world for tf in now]) - np.array([tf.position_world for tf in before])) / (
                 now_s - before_s
             )
-            angular[rows] = turn.as_rotvec() / (now_s - before_s)
+            angular[rows] = self._turn_rates(
+                np.array([tf.rotation_xyzw for tf in before]), np.array([tf.rotation_xyzw for tf in now]), now_s - before_s
+            )
         self.scene.set_motions(ids, [latest[object_id] for object_id in ids], linear, angular)
+
+    def _turn_rates(
+        self, before_xyzw: npt.NDArray[np.float64], now_xyzw: npt.NDArray[np.float64], dt_s: float
+    ) -> npt.NDArray[np.float64]:
+        """(m, 3) rad/s, world frame: the angular velocities of m objects turned from before_xyzw to
+        now_xyzw, (m, 4) quaternions each, in dt_s > 0 seconds (scipy's rotation vector of the turn)."""
+        turn = Rotation.from_quat(now_xyzw) * Rotation.from_quat(before_xyzw).inv()
+        rates: npt.NDArray[np.float64] = turn.as_rotvec() / dt_s
+        return rates
 
     def update(
         self,
