@@ -66,9 +66,9 @@ def _smoothstep(edge0: float, edge1: float, x: npt.NDArray[np.float64]) -> npt.N
 
 def style_mask(mask: StyleMaskSettings, window: MapWindow, alpha_rad: float) -> npt.NDArray[np.float32]:
     """(res, res) float32 in [0, 1] over the window: 1 where viewpoints are allowed."""
+    if mask.kind is MaskKind.EMPTY:  # the default: no texel grid to make (a map update's aggregate makes one mask)
+        return np.ones((window.resolution, window.resolution), dtype=np.float32)
     theta, phi = window.grid()
-    if mask.kind is MaskKind.EMPTY:
-        return np.ones(theta.shape, dtype=np.float32)
     behind = behind_theta_rad(alpha_rad)
     if mask.kind is MaskKind.HARD_BEHIND:
         return (theta >= behind).astype(np.float32)
