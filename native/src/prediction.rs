@@ -28,9 +28,37 @@ pub struct PredictionSettings {
     pub length_bins: usize,
 }
 
-/// One travel length's kernels: per direction, its non-zero entries (texel offset di, dj and
-/// weight, normalised to unit sum) in KernelBank.table's order.
-type Table = Vec<Vec<(i64, i64, f64)>>;
+/// A kernel's entries on one row, at consecutive columns: texel offset (di, dj) of the first,
+/// and the weights from there on.
+struct Run {
+    di: i64,
+    dj: i64,
+    weights: Vec<f64>,
+}
+
+/// One travel length's kernels: per direction, its non-zero entries (weights normalised to unit
+/// sum) in KernelBank.table's order, as runs along its rows. A texel's kernel adds to each cell
+/// once, so the runs change no sum's order: each cell's sum still takes the texels in texel
+/// order. They let `predict` clip a row once and add a run as one loop over contiguous cells.
+type Table = Vec<Vec<Run>>;
+
+/// A kernel's entries (di, dj, weight), row-major, as runs of consecutive columns.
+fn runs(entries: Vec<(i64, i64, f64)>) -> Vec<Run> {
+    let mut runs: Vec<Run> = Vec::new();
+    for (di, dj, w) in entries {
+        match runs.last_mut() {
+            Some(run) if run.di == di && run.dj + run.weights.len() as i64 == dj => {
+                run.weights.push(w)
+            }
+            _ => runs.push(Run {
+                di,
+                dj,
+                weights: vec![w],
+            }),
+        }
+    }
+    runs
+}
 
 /// U(v1, v2) = U_l(delta) U_a(gamma) for travel v1 and offset v2, texels (uncertainty).
 fn uncertainty(
@@ -104,12 +132,14 @@ impl KernelBank {
                     .filter(|&(_, _, w)| w > 0.0)
                     .collect();
                 if kept.is_empty() {
-                    return vec![(0, 0, 1.0)];
+                    return runs(vec![(0, 0, 1.0)]);
                 }
                 let total: f64 = kept.iter().map(|k| k.2).sum();
-                kept.into_iter()
-                    .map(|(di, dj, w)| (di, dj, w / total))
-                    .collect()
+                runs(
+                    kept.into_iter()
+                        .map(|(di, dj, w)| (di, dj, w / total))
+                        .collect(),
+                )
             })
             .collect()
     }
@@ -164,11 +194,18 @@ impl KernelBank {
                 sum[texel] += value;
                 continue;
             };
-            let base = map * per_map;
-            for &(di, dj, w) in &self.tables[k_len][k_dir] {
-                let (i, j) = (row as i64 + di, col as i64 + dj);
-                if (0..res as i64).contains(&i) && (0..res as i64).contains(&j) {
-                    sum[base + i as usize * res + j as usize] += w * value;
+            let (base, n) = (map * per_map, res as i64);
+            for run in &self.tables[k_len][k_dir] {
+                let (i, j) = (row as i64 + run.di, col as i64 + run.dj);
+                // the run's entries that land inside the window: columns j + lo .. j + hi
+                let (lo, hi) = ((-j).max(0), (n - j).min(run.weights.len() as i64));
+                if !(0..n).contains(&i) || lo >= hi {
+                    continue;
+                }
+                let start = base + (i * n + j + lo) as usize;
+                let cells = &mut sum[start..start + (hi - lo) as usize];
+                for (cell, &w) in cells.iter_mut().zip(&run.weights[lo as usize..hi as usize]) {
+                    *cell += w * value;
                 }
             }
         }

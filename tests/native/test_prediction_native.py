@@ -3,9 +3,13 @@ pipeline/toric/occlusion_prediction.py's KernelBank and predict_occlusion: over 
 V-maps (whole and partial occlusion, rigid-looking and scattered travels, still and clamped ones,
 settings drawn), A_s agrees with the Python's to float32 rounding (the sums' order and libm's last
 bits differ; a travel within rounding of a bin's edge could snap to the neighbour, which random
-maps never hit); the same bits every time; bad shapes refused."""
+maps never hit); the same bits every time, and the bits of the entry-by-entry sums it was first
+written with (a digest of its answers, kept when the kernels became runs of columns); bad shapes
+refused."""
 
 from __future__ import annotations
+
+import hashlib
 
 import numpy as np
 import pytest
@@ -30,6 +34,23 @@ def test_the_compiled_prediction_equals_the_python_one(case):
     assert compiled.shape == shadow.shape and compiled.dtype == np.float32
     np.testing.assert_allclose(compiled, predict_occlusion(shadow, velocity, window, settings), atol=A_S_TOL, rtol=0)
     assert bank.predict(shadow, velocity, window).tobytes() == compiled.tobytes()
+
+
+# sha256 of the A_s below, from the prediction that added each kernel entry on its own (060516d's
+# prediction.rs); a sum's order is a texel's, so adding a kernel's row as a run keeps every bit.
+ENTRY_BY_ENTRY_SHA256 = "08fdd4f6c56526171ef955eeedc63cb5b05a094a35e1953a6f04c7bf36857d6e"
+
+
+def test_the_prediction_keeps_the_bits_of_its_entry_by_entry_sums():
+    bank = native.KernelBank(AnticipationSettings())
+    window = MapWindow(theta_min_rad=0.2, phi_min_rad=-0.5, theta_step_rad=0.01, phi_step_rad=0.012, resolution=64)
+    rng = np.random.default_rng(3)
+    answers = []
+    for scale in (0.05, 0.5, 2.0):  # still to clamped travels, kernels reaching past the window's edges
+        shadow = (rng.random((10, 64, 64)) < 0.35).astype(np.float32)
+        velocity = (rng.normal(size=(10, 64, 64, 2)) * scale).astype(np.float32)
+        answers.append(bank.predict(shadow, velocity, window))
+    assert hashlib.sha256(np.stack(answers).tobytes()).hexdigest() == ENTRY_BY_ENTRY_SHA256
 
 
 def test_the_default_bank_on_full_windows_and_without_anticipation():
