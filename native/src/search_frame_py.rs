@@ -15,8 +15,7 @@ use pyo3::types::PyDict;
 
 use crate::carry::carry;
 use crate::scene_py::{points_of, pose_of, PyScene};
-use crate::search::Particle;
-use crate::search_py::{PyParticle, SearchCore};
+use crate::search_py::{ParticleIn, PyParticle, SearchCore};
 use crate::stages_py::{py_pose, FramingCore, MotionCore, PyPose};
 use crate::toric_frame_py::Laps;
 use crate::toric_py::{floats, PyTorus};
@@ -91,7 +90,7 @@ fn search_frame<'py>(
     framing: PyRef<'py, FramingCore>,
     scene: PyRef<'py, PyScene>,
     torus: PyRef<'py, PyTorus>,
-    particle: (f64, f64, Bound<'py, PyAny>, f64, Option<f64>),
+    particle: ParticleIn<'py>,
     side: f64,
     side_key: Option<f64>,
     points_local: &Bound<'py, PyAny>,
@@ -119,14 +118,7 @@ fn search_frame<'py>(
     let motion = &mut side_motion.inner;
     (motion.side, motion.side_key) = (side, side_key);
     let upright = 1f64.copysign(motion.preferred_place(torus)?[1]);
-    let (theta, phi, velocity, shot_start_s, occluded_since_s) = particle;
-    let mut particle = Particle {
-        theta,
-        phi,
-        velocity_world: floats(&velocity, "velocity_world")?,
-        shot_start_s,
-        occluded_since_s,
-    };
+    let mut particle = SearchCore::particle_of(particle)?;
     let (step, (position, rotation)) = search.answer(
         torus,
         &mut particle,

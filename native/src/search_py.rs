@@ -197,6 +197,9 @@ fn contiguous<'a>(array: &'a PyReadonlyArray2<'_, f32>) -> Cow<'a, [f32]> {
 /// The particle: (theta, phi, velocity_world (3,), shot_start_s, occluded_since_s or None).
 pub(crate) type PyParticle<'py> = (f64, f64, Array1<'py>, f64, Option<f64>);
 
+/// A particle as a caller hands it in: PyParticle with the velocity as any (3,) sequence.
+pub(crate) type ParticleIn<'py> = (f64, f64, Bound<'py, PyAny>, f64, Option<f64>);
+
 /// What SearchCore.step answers: (theta, phi, cut, strategy, risk, particle, pose, trace).
 type Stepped<'py> = (
     f64,
@@ -341,6 +344,18 @@ impl SearchCore {
         Ok((step, pose))
     }
 
+    /// The particle the Python search keeps (py_particle's tuple), read.
+    pub(crate) fn particle_of(particle: ParticleIn<'_>) -> PyResult<Particle> {
+        let (theta, phi, velocity, shot_start_s, occluded_since_s) = particle;
+        Ok(Particle {
+            theta,
+            phi,
+            velocity_world: floats(&velocity, "velocity_world")?,
+            shot_start_s,
+            occluded_since_s,
+        })
+    }
+
     /// The particle as the Python search keeps it: (theta, phi, velocity_world, shot_start_s, occluded_since_s).
     pub(crate) fn py_particle<'py>(py: Python<'py>, particle: &Particle) -> PyParticle<'py> {
         (
@@ -408,7 +423,7 @@ impl SearchCore {
         &self,
         py: Python<'py>,
         torus: &Bound<'py, PyAny>,
-        particle: (f64, f64, Bound<'py, PyAny>, f64, Option<f64>),
+        particle: ParticleIn<'py>,
         dt_s: f64,
         time_s: f64,
         side: f64,
@@ -421,14 +436,7 @@ impl SearchCore {
     ) -> PyResult<Stepped<'py>> {
         let torus = torus_of(torus)?;
         let points = rows("points_world", points_world.as_array())?;
-        let (theta, phi, velocity, shot_start_s, occluded_since_s) = particle;
-        let mut particle = Particle {
-            theta,
-            phi,
-            velocity_world: floats(&velocity, "velocity_world")?,
-            shot_start_s,
-            occluded_since_s,
-        };
+        let mut particle = SearchCore::particle_of(particle)?;
         let mut scored = Vec::new();
         let (step, (position, rotation)) = self.answer(
             &torus,
