@@ -158,6 +158,147 @@ struct Prim {
 /// allocates once.
 pub type Stack = Vec<(u32, u32, f64)>;
 
+/// Bounds on what the slab test computes for every ray of a bundle (the segments of one tile of
+/// map texels, maps.rs), so that one test of a box for the whole bundle says when none of its rays
+/// would enter it: interval arithmetic over the rays (Boulos et al., "Packet-based Whitted and
+/// distribution ray tracing", GI 2007, section 3.1), made exact for the computed values rather
+/// than the real ones. Every step of `Ray::enters` (a subtraction, a product, a product by
+/// SLAB_WIDEN) rounds monotonically in each operand, so over a box of operands its result is least
+/// and greatest at corners; the bounds below are those corners computed with the same operations.
+/// On an axis the rays go both ways along, those going each way are bounded apart (a box ahead
+/// of one group is behind the other), and the bundle misses a box when every combination of the
+/// axes' groups does. A box the bundle misses is one `enters` rejects for every ray of the
+/// bundle, so skipping it changes no answer. An axis along which some ray's direction is 0, or
+/// an inverse not finite, culls nothing.
+pub struct Bundle {
+    /// Per axis, the rays going + and those going - along it (None: no such ray).
+    axes: [[Option<BundleGroup>; 2]; 3],
+    /// The largest t_max of the bundle's rays.
+    t_max: f64,
+}
+
+/// One axis's bounds for the rays going one way along it.
+#[derive(Clone, Copy)]
+struct BundleGroup {
+    negative: bool,
+    /// [least, greatest] of the rays' `near_origin`, `far_origin` and `inverse` on this axis.
+    near_origin: [f64; 2],
+    far_origin: [f64; 2],
+    inverse: [f64; 2],
+}
+
+impl BundleGroup {
+    /// The least near and the greatest far `enters` computes on this axis, for box [lo, hi].
+    #[inline(always)]
+    fn slab(&self, lo: f64, hi: f64) -> (f64, f64) {
+        let (near, far) = if self.negative { (hi, lo) } else { (lo, hi) };
+        let [i0, i1] = self.inverse;
+        // enters: near = (near - near_origin) * inverse, far = (far - far_origin) * inverse * W
+        let (x0, x1) = (near - self.near_origin[1], near - self.near_origin[0]);
+        let least = (x0 * i0).min(x0 * i1).min(x1 * i0).min(x1 * i1);
+        let (y0, y1) = (far - self.far_origin[1], far - self.far_origin[0]);
+        let greatest = (y0 * i0 * SLAB_WIDEN)
+            .max(y0 * i1 * SLAB_WIDEN)
+            .max(y1 * i0 * SLAB_WIDEN)
+            .max(y1 * i1 * SLAB_WIDEN);
+        (least, greatest)
+    }
+}
+
+impl Bundle {
+    /// The bundle of `rays` (origin, direction), each cast within its own t_max of at most
+    /// `t_max`, on `bvh` (whose reach pads its boxes) or, without one, with no padding.
+    pub fn new(
+        rays: impl Iterator<Item = ([f64; 3], [f64; 3])>,
+        t_max: f64,
+        bvh: Option<&Bvh>,
+    ) -> Bundle {
+        let mut origin = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        // per axis: [least, greatest] of the positive directions, of the negative ones; any zero
+        let mut ranges = [[[f64::INFINITY, f64::NEG_INFINITY]; 2]; 3];
+        let mut zero = [false; 3];
+        for (o, d) in rays {
+            for a in 0..3 {
+                origin[0][a] = origin[0][a].min(o[a]);
+                origin[1][a] = origin[1][a].max(o[a]);
+                let side = &mut ranges[a][(d[a] < 0.0) as usize];
+                side[0] = side[0].min(d[a]);
+                side[1] = side[1].max(d[a]);
+                zero[a] |= d[a] == 0.0;
+            }
+        }
+        let reach = bvh.map_or(0.0, |bvh| bvh.reach);
+        // Ray::new's pad is (reach + the origin's largest |coordinate|) * PAD_SHARE: at most this,
+        // at least 0
+        let largest = (0..3).fold(0.0f64, |m, a| {
+            m.max(origin[0][a].abs()).max(origin[1][a].abs())
+        });
+        let pad = (reach + largest) * PAD_SHARE;
+        let axes = std::array::from_fn(|a| {
+            std::array::from_fn(|side| {
+                let [lo, hi] = ranges[a][side];
+                // 1 / d falls as d rises, on either side of 0
+                let inverse = [1.0 / hi, 1.0 / lo];
+                if zero[a] || lo > hi || !(inverse[0].is_finite() && inverse[1].is_finite()) {
+                    return None;
+                }
+                let (o_lo, o_hi) = (origin[0][a], origin[1][a]);
+                let (up, down) = ([o_lo, o_hi + pad], [o_lo - pad, o_hi]);
+                // Ray::new: near_origin = origin + pad (- pad when negative), far_origin the other way
+                let negative = side == 1;
+                let (near_origin, far_origin) = if negative { (down, up) } else { (up, down) };
+                Some(BundleGroup {
+                    negative,
+                    near_origin,
+                    far_origin,
+                    inverse,
+                })
+            })
+        });
+        Bundle { axes, t_max }
+    }
+
+    /// Whether no ray of the bundle enters the box [lo, hi] within its t_max (conservatively: a
+    /// false answer says nothing).
+    pub fn misses(&self, lo: &[f64; 3], hi: &[f64; 3]) -> bool {
+        let (mut t0, mut t1) = (0.0f64, self.t_max);
+        // the axes the rays go both ways along: each group's (least near, greatest far)
+        let mut split = [((0.0, 0.0), (0.0, 0.0)); 3];
+        let mut k = 0;
+        for a in 0..3 {
+            match self.axes[a] {
+                [Some(one), None] | [None, Some(one)] => {
+                    let (least, greatest) = one.slab(lo[a], hi[a]);
+                    t0 = t0.max(least);
+                    t1 = t1.min(greatest);
+                    if t0 > t1 {
+                        return true;
+                    }
+                }
+                [Some(up), Some(down)] => {
+                    split[k] = (up.slab(lo[a], hi[a]), down.slab(lo[a], hi[a]));
+                    k += 1;
+                }
+                [None, None] => {}
+            }
+        }
+        // every combination of the split axes' groups must miss
+        (0..1usize << k).all(|combination| {
+            let (mut c0, mut c1) = (t0, t1);
+            for (j, &(up, down)) in split[..k].iter().enumerate() {
+                let (least, greatest) = if combination >> j & 1 == 0 { up } else { down };
+                c0 = c0.max(least);
+                c1 = c1.min(greatest);
+            }
+            c0 > c1
+        })
+    }
+}
+
+/// A bundle's share of a tree: the wide nodes with a leaf the bundle may enter, and which of their
+/// lanes (a bit each), in the order the tree is walked.
+pub type Leaves = Vec<(u32, u8)>;
+
 /// Children per wide node.
 const WIDTH: usize = 4;
 
@@ -380,6 +521,20 @@ impl Bvh {
         }
     }
 
+    /// The box [lo, hi] that holds every triangle (the root's lanes' f32 boxes, which hold them
+    /// exactly).
+    pub fn bounds(&self) -> [[f64; 3]; 2] {
+        let root = &self.nodes[0];
+        let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        for c in 0..WIDTH {
+            for (a, (lo, hi)) in root.lo.iter().zip(&root.hi).enumerate() {
+                bounds[0][a] = bounds[0][a].min(lo[c] as f64);
+                bounds[1][a] = bounds[1][a].max(hi[c] as f64);
+            }
+        }
+        bounds
+    }
+
     pub fn triangle_count(&self) -> usize {
         self.ids.len()
     }
@@ -422,17 +577,79 @@ impl Bvh {
             return best;
         };
         self.walk(&ray, t_max, stack, |slots| {
-            for slot in slots {
-                if let Some(t) = ray.hits(&self.triangles[slot], best.0) {
-                    let id = self.ids[slot];
-                    // t <= best.0 here: a nearer hit, or one as near with a lower index
-                    if t < best.0 || best.1.is_none_or(|b| id < b) {
-                        best = (t, Some(id));
-                    }
-                }
-            }
+            self.nearest_in(&ray, slots, &mut best);
             Some(best.0)
         });
+        best
+    }
+
+    /// Lowers `best` to the nearest hit among the triangles in `slots`, if nearer (or as near,
+    /// with a lower index).
+    #[inline(always)]
+    fn nearest_in(&self, ray: &Ray, slots: Range<usize>, best: &mut (f64, Option<u32>)) {
+        for slot in slots {
+            if let Some(t) = ray.hits(&self.triangles[slot], best.0) {
+                let id = self.ids[slot];
+                // t <= best.0 here: a nearer hit, or one as near with a lower index
+                if t < best.0 || best.1.is_none_or(|b| id < b) {
+                    *best = (t, Some(id));
+                }
+            }
+        }
+    }
+
+    /// Sets `leaves` to the leaves some ray of `bundle` may enter (`Bundle::misses` of each box on
+    /// the way down is false), `stack` the walk's.
+    pub fn leaves_met(&self, bundle: &Bundle, leaves: &mut Leaves, stack: &mut Vec<u32>) {
+        leaves.clear();
+        stack.clear();
+        stack.push(0);
+        while let Some(index) = stack.pop() {
+            let node = &self.nodes[index as usize];
+            let mut lanes = 0u8;
+            for c in 0..WIDTH {
+                let lo = [0, 1, 2].map(|a| node.lo[a][c] as f64);
+                let hi = [0, 1, 2].map(|a| node.hi[a][c] as f64);
+                if lo[0] > hi[0] || bundle.misses(&lo, &hi) {
+                    continue; // an unused lane, or a box no ray enters
+                }
+                if node.count[c] > 0 {
+                    lanes |= 1 << c;
+                } else {
+                    stack.push(node.child[c]);
+                }
+            }
+            if lanes != 0 {
+                leaves.push((index, lanes));
+            }
+        }
+    }
+
+    /// first_hit_within for a ray of a bundle whose `leaves` (leaves_met) are given: each leaf's
+    /// box is tested for this ray as the walk would, with the nearest hit so far as its bound.
+    /// The leaves the bundle misses hold no triangle this ray meets within t_max, and the
+    /// nearest hit is a minimum over triangles, so the answer is first_hit_within's, to the bit.
+    pub fn first_hit_among(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        t_max: f64,
+        leaves: &[(u32, u8)],
+    ) -> (f64, Option<u32>) {
+        let mut best = (t_max, None::<u32>);
+        let Some(ray) = Ray::new(origin, direction, self.reach) else {
+            return best;
+        };
+        for &(index, lanes) in leaves {
+            let node = &self.nodes[index as usize];
+            let (_, met) = ray.enters(node, best.0);
+            for (c, met) in met.into_iter().enumerate() {
+                if lanes & (1 << c) != 0 && met {
+                    let first = node.child[c] as usize;
+                    self.nearest_in(&ray, first..first + node.count[c] as usize, &mut best);
+                }
+            }
+        }
         best
     }
 

@@ -34,6 +34,10 @@ pub(crate) struct Object {
     translation: Vec3,
     pub(crate) centre: Vec3,
     pub(crate) radius: f64,
+    /// A world box [lo, hi] around the object: its local box's corners placed by the pose, grown
+    /// by far more than their rounding, and clipped to its bounding sphere's box. Tighter than
+    /// the sphere for a long object whose origin is at one end (the demo's obstacles).
+    pub(crate) bounds: [Vec3; 2],
 }
 
 impl Object {
@@ -46,6 +50,36 @@ impl Object {
         self.translation = [0, 1, 2].map(|i| -dot(&self.linear[i], &pose.position));
         self.centre = pose.position;
         self.radius = self.reach * s[0].abs().max(s[1].abs()).max(s[2].abs());
+        let local = self.bvh.bounds();
+        let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        for corner in 0..8 {
+            let c = [0, 1, 2].map(|a| local[(corner >> a) & 1][a] * s[a]);
+            for (i, row) in r.iter().enumerate() {
+                let x = pose.position[i] + dot(row, &c);
+                bounds[0][i] = bounds[0][i].min(x);
+                bounds[1][i] = bounds[1][i].max(x);
+            }
+        }
+        // the corners' rounding and the local frame's (the ray's move into it, the triangle test)
+        // are a few 2^-53 of these magnitudes
+        let size = (0..3).fold(self.radius, |m, a| {
+            m.max(bounds[0][a].abs()).max(bounds[1][a].abs())
+        });
+        let grow = size * (1.0 / 1073741824.0); // 2^-30
+        self.bounds = [0, 1].map(|side| {
+            [0, 1, 2].map(|a| {
+                let sphere = if side == 0 {
+                    self.centre[a] - self.radius
+                } else {
+                    self.centre[a] + self.radius
+                };
+                if side == 0 {
+                    (bounds[0][a] - grow).max(sphere - grow)
+                } else {
+                    (bounds[1][a] + grow).min(sphere + grow)
+                }
+            })
+        });
     }
 
     /// The ray moved into the object's frame.
@@ -131,6 +165,7 @@ impl Scene {
             translation: [0.0; 3],
             centre: [0.0; 3],
             radius: 0.0,
+            bounds: [[0.0; 3]; 2],
         };
         object.place(pose);
         self.index.insert(id.to_owned(), self.objects.len());
