@@ -14,7 +14,7 @@
 //!
 //! The segments are cast a tile of TILE_ROWS x TILE_COLUMNS texels at a time. One bundle test
 //! (bvh.rs `Bundle`) per box finds the static leaves any of a tile's segments may enter and the
-//! moving objects whose bounding spheres' boxes any may enter; each segment is then cast against
+//! moving objects whose world boxes (scene.rs `bounds`) any may enter; each segment is then cast against
 //! those alone, and a tile that may meet nothing casts no segment. On the demo scene most tiles
 //! meet nothing. A moving object whose bounding sphere misses the box around all of one sample's
 //! segments is left out of that sample's tiles. Neither cull changes an answer: the maps are the
@@ -136,8 +136,9 @@ fn sphere_meets_box(centre: &Vec3, radius: f64, lo: &Vec3, hi: &Vec3) -> bool {
 }
 
 /// Texel rows and columns of a tile, whose segments are culled together: small enough that its
-/// segments' bundle is narrow, large enough that its tests are shared by many segments (4 x 4
-/// measured fastest on the demo scene, against 2 x 2, 8 x 4 and 8 x 8).
+/// segments' bundle is narrow, large enough that its tests are shared by many segments (8 x 8
+/// measured fastest over the demo session's maps, tests/native/test_map_tiles_native.py's and
+/// two levels', against 4 x 4, 8 x 16 and 16 x 16: docs/frame_path.md).
 const TILE_ROWS: usize = 8;
 const TILE_COLUMNS: usize = 8;
 

@@ -1,9 +1,8 @@
 """The compiled maps' rays culled a tile of texels at a time (native/src/maps.rs, bvh.rs `Bundle`):
-over scenes built to graze (a ground plane through the sample points, walls in the segments'
-planes, boxes touching the window) and dense random ones, moving, turned and scaled objects,
-targets ignoring their own object, and tori moving or still, the maps are the bits the
-segment-by-segment casts gave before the cull (their digest, taken from that code), whatever the
-number of threads, and cells a cull leaves out are ones no ray of the tile meets."""
+over scenes built to graze (a ground plane and a wall through the sample points), dense random
+boxes and cylinders, moving, turned and scaled objects, targets ignoring their own object, tori
+moving and still, and on two real levels, the maps are the bits the segment-by-segment casts gave
+before the cull (digests taken from that code), whatever the number of threads."""
 
 from __future__ import annotations
 
@@ -57,12 +56,16 @@ def _cases():
         a = np.array([rng.uniform(-3, 3), 1.0 if k % 2 == 0 else rng.uniform(0.5, 2.0), rng.uniform(-3, 3)])
         b = a + np.array([rng.uniform(1.5, 4.0), rng.uniform(-0.3, 0.3), rng.uniform(-2.0, 2.0)])
         torus = make_torus(a, b, alpha)
-        statics = [] if sparse else [
-            # the ground through the sample point a (k even): segments start on its plane
-            _quad([a[0] - 20.0, a[1] if k % 2 == 0 else 0.0, a[2] - 20.0], [40.0, 0.0, 0.0], [0.0, 0.0, 40.0]),
-            # a wall whose plane holds a, and so some segments
-            _quad([a[0], a[1] - 3.0, a[2] - 6.0], [0.0, 6.0, 0.0], [0.0, 0.0, 12.0]),
-        ]
+        statics = (
+            []
+            if sparse
+            else [
+                # the ground through the sample point a (k even): segments start on its plane
+                _quad([a[0] - 20.0, a[1] if k % 2 == 0 else 0.0, a[2] - 20.0], [40.0, 0.0, 0.0], [0.0, 0.0, 40.0]),
+                # a wall whose plane holds a, and so some segments
+                _quad([a[0], a[1] - 3.0, a[2] - 6.0], [0.0, 6.0, 0.0], [0.0, 0.0, 12.0]),
+            ]
+        )
         for _ in range(3 if sparse else 10 + 15 * k):
             size = rng.uniform(0.05, 1.2, 3)
             where = a + rng.normal(scale=2.5, size=3) + [0.0, 1.0, 0.0]
@@ -75,7 +78,13 @@ def _cases():
                 rotation_xyzw=_quat(rng),
                 scale=rng.uniform(0.5, 1.5, 3),
             )
-            scene.add_dynamic(f"mover{i}", mesh, pose, linear_velocity_m_s=rng.normal(size=3), angular_velocity_rad_s=rng.normal(size=3))
+            scene.add_dynamic(
+                f"mover{i}",
+                mesh,
+                pose,
+                linear_velocity_m_s=rng.normal(size=3),
+                angular_velocity_rad_s=rng.normal(size=3),
+            )
         scene.add_dynamic("target", sphere(0.3), RigidTransform(position_world=a.copy()), linear_velocity_m_s=(0.5, 0.0, 0.2))
         points = a + np.array([[0.0, 0.0, 0.0], [0.1, 0.25, 0.05], [-0.12, -0.2, 0.1]])
         if k % 2 == 0:
@@ -114,9 +123,7 @@ def _digest(cases, threads: int) -> str:
         share_texels(threads)
         for scene, torus, window, points, owners, before, dt_s in cases:
             backend = backends.setdefault(id(scene), make_backend("native", scene))
-            maps = backend.compute(
-                torus, window, points, exclude_ids=owners, previous_torus=before, dt_s=dt_s if before else 0.0
-            )
+            maps = backend.compute(torus, window, points, exclude_ids=owners, previous_torus=before, dt_s=dt_s if before else 0.0)
             for array in (maps.shadow, maps.velocity_rad_s, maps.depth_m):
                 digest.update(np.ascontiguousarray(array).tobytes())
     finally:
