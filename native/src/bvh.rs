@@ -235,25 +235,32 @@ impl Bundle {
         });
         let pad = (reach + largest) * PAD_SHARE;
         let axes = std::array::from_fn(|a| {
-            std::array::from_fn(|side| {
+            let groups: [_; 2] = std::array::from_fn(|side| {
                 let [lo, hi] = ranges[a][side];
                 // 1 / d falls as d rises, on either side of 0
                 let inverse = [1.0 / hi, 1.0 / lo];
-                if zero[a] || lo > hi || !(inverse[0].is_finite() && inverse[1].is_finite()) {
-                    return None;
-                }
                 let (o_lo, o_hi) = (origin[0][a], origin[1][a]);
                 let (up, down) = ([o_lo, o_hi + pad], [o_lo - pad, o_hi]);
                 // Ray::new: near_origin = origin + pad (- pad when negative), far_origin the other way
                 let negative = side == 1;
                 let (near_origin, far_origin) = if negative { (down, up) } else { (up, down) };
-                Some(BundleGroup {
-                    negative,
-                    near_origin,
-                    far_origin,
-                    inverse,
+                // None for no ray going this way; Err for rays it cannot bound
+                (lo <= hi).then_some(if inverse.iter().all(|i| i.is_finite()) {
+                    Ok(BundleGroup {
+                        negative,
+                        near_origin,
+                        far_origin,
+                        inverse,
+                    })
+                } else {
+                    Err(())
                 })
-            })
+            });
+            // a group left unbounded would let the other's bounds stand for its rays too
+            if zero[a] || groups.iter().any(|g| matches!(g, Some(Err(())))) {
+                return [None, None];
+            }
+            groups.map(|g| g.and_then(Result::ok))
         });
         Bundle { axes, t_max }
     }

@@ -14,8 +14,8 @@
 //!
 //! The segments are cast a tile of TILE_ROWS x TILE_COLUMNS texels at a time. One bundle test
 //! (bvh.rs `Bundle`) per box finds the static leaves any of a tile's segments may enter and the
-//! moving objects whose world boxes (scene.rs `bounds`) any may enter; each segment is then cast against
-//! those alone, and a tile that may meet nothing casts no segment. On the demo scene most tiles
+//! moving objects whose world boxes (scene.rs `bounds`) any may enter; each segment is then cast
+//! against those alone, and a tile that may meet nothing casts no segment. On the demo scene most tiles
 //! meet nothing. A moving object whose bounding sphere misses the box around all of one sample's
 //! segments is left out of that sample's tiles. Neither cull changes an answer: the maps are the
 //! bits each segment's own walk of the whole scene gives (tests/native/test_map_tiles_native.py).
@@ -340,45 +340,37 @@ pub fn shadow_velocity_maps(
 impl Call<'_> {
     /// Computes `texels` (module docstring), which are whole bands of TILE_ROWS rows of a sample's
     /// texels (the last band of a map may be fewer rows), a tile at a time.
-    fn fill(&self, texels: Texels<'_>) {
+    fn fill(&self, mut texels: Texels<'_>) {
         let (m, res) = (self.points.len(), self.angles.phi.len());
         let mut scratch = Scratch::default();
-        let mut texels = texels;
         let n = texels.shadow.len();
         let mut done = 0;
         while done < n {
             let (k, first) = ((texels.from + done) / m, (texels.from + done) % m);
-            let row = first / res;
-            let rows = TILE_ROWS.min(res - row);
+            let rows = first / res..(first / res + TILE_ROWS).min(res);
             for column in (0..res).step_by(TILE_COLUMNS) {
-                let columns = TILE_COLUMNS.min(res - column);
-                let mut tile = std::mem::take(&mut scratch.tile);
-                tile.clear();
-                tile.extend(
-                    (row..row + rows)
-                        .flat_map(|r| (column..column + columns).map(move |c| r * res + c)),
-                );
-                self.tile(k, &tile, done - first, &mut texels, &mut scratch);
-                scratch.tile = tile;
+                let columns = column..(column + TILE_COLUMNS).min(res);
+                let tile = rows
+                    .clone()
+                    .flat_map(|r| columns.clone().map(move |c| r * res + c));
+                scratch.tile.clear();
+                scratch.tile.extend(tile);
+                self.tile(k, done - first, &mut texels, &mut scratch);
             }
-            done += rows * res;
+            done += rows.len() * res;
         }
     }
 
-    /// The texels `tile` (row-major indices into a map) of sample `k`'s map, written at `offset` +
-    /// texel in `texels`: its segments culled together, then each cast against what is left.
-    fn tile(
-        &self,
-        k: usize,
-        tile: &[usize],
-        offset: usize,
-        texels: &mut Texels<'_>,
-        scratch: &mut Scratch,
-    ) {
+    /// The texels `scratch.tile` (row-major indices into a map) of sample `k`'s map, written at
+    /// `offset` + texel in `texels`: its segments culled together, then each cast against what is
+    /// left.
+    fn tile(&self, k: usize, offset: usize, texels: &mut Texels<'_>, scratch: &mut Scratch) {
         let (s, near) = (&self.samples[k].point, &self.near[k][..]);
         scratch.segments.clear();
         scratch.segments.extend(
-            tile.iter()
+            scratch
+                .tile
+                .iter()
                 .map(|&texel| Segment::of(s, &self.points[texel])),
         );
         let t_max = scratch
@@ -402,7 +394,7 @@ impl Call<'_> {
         if scratch.leaves.is_empty() && scratch.objects.is_empty() {
             return; // no segment of the tile meets anything: the maps' defaults
         }
-        for (segment, &texel) in scratch.segments.iter().zip(tile) {
+        for (segment, &texel) in scratch.segments.iter().zip(&scratch.tile) {
             if let Some(hit) = self.texel(
                 s,
                 segment,

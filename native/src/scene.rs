@@ -66,20 +66,11 @@ impl Object {
             m.max(bounds[0][a].abs()).max(bounds[1][a].abs())
         });
         let grow = size * (1.0 / 1073741824.0); // 2^-30
-        self.bounds = [0, 1].map(|side| {
-            [0, 1, 2].map(|a| {
-                let sphere = if side == 0 {
-                    self.centre[a] - self.radius
-                } else {
-                    self.centre[a] + self.radius
-                };
-                if side == 0 {
-                    (bounds[0][a] - grow).max(sphere - grow)
-                } else {
-                    (bounds[1][a] + grow).min(sphere + grow)
-                }
-            })
-        });
+        let sphere = [-self.radius, self.radius].map(|r| self.centre.map(|c| c + r));
+        self.bounds = [
+            [0, 1, 2].map(|a| bounds[0][a].max(sphere[0][a]) - grow),
+            [0, 1, 2].map(|a| bounds[1][a].min(sphere[1][a]) + grow),
+        ];
     }
 
     /// The ray moved into the object's frame.
