@@ -4,6 +4,7 @@
 use pyo3::prelude::*;
 
 mod amap;
+mod amap_py;
 mod bvh;
 mod bvh_py;
 mod carry;
@@ -27,6 +28,7 @@ mod search;
 mod search_frame_py;
 mod search_py;
 mod stages_py;
+mod style_mask;
 mod toric;
 mod toric_frame_py;
 mod toric_py;
@@ -52,5 +54,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     toric_frame_py::register(m)?;
     search_frame_py::register(m)?;
     edge_py::register(m)?;
+    amap_py::register(m)?;
     Ok(())
 }

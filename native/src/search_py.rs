@@ -187,7 +187,7 @@ fn amap_view<'py>(
 }
 
 /// An array's values in row order, borrowed when it is C-contiguous (an A-map is).
-fn contiguous<'a>(array: &'a PyReadonlyArray2<'_, f32>) -> Cow<'a, [f32]> {
+pub(crate) fn contiguous<'a>(array: &'a PyReadonlyArray2<'_, f32>) -> Cow<'a, [f32]> {
     match array.as_slice() {
         Ok(values) => Cow::Borrowed(values),
         Err(_) => Cow::Owned(array.as_array().iter().copied().collect()),

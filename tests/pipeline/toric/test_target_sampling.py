@@ -59,6 +59,20 @@ def test_slots_are_numbered_per_target_and_redrawn_one_by_one():
         sampler.target_of(10)
 
 
+def test_a_redraw_is_a_one_point_sample_per_slot_in_order_from_one_draw():
+    """redraw draws each slot's face, u and v at once, as sample(1) drew them one call at a time:
+    the same points, bit for bit, and the generator left where those calls left it."""
+    meshes = [sphere(0.5), box(SIZE)]
+    one_call, one_by_one = TargetSampler(meshes, np.random.default_rng(1)), TargetSampler(meshes, np.random.default_rng(1))
+    rng_a, rng_b = np.random.default_rng(9), np.random.default_rng(9)
+    for slots in ([0, 5], [3], list(range(10)), [9, 2]):
+        one_call.redraw(slots, rng_a)
+        for slot in slots:
+            one_by_one.points_local[slot] = one_by_one._samplers[one_by_one.target_of(slot)].sample(1, rng_b)[0]
+        assert one_call.points_local.tobytes() == one_by_one.points_local.tobytes()
+    assert rng_a.random() == rng_b.random()
+
+
 def test_points_follow_the_targets_transforms():
     sampler = TargetSampler([box(SIZE)], np.random.default_rng(3))
     quarter_turn_y = np.array([0.0, np.sin(np.pi / 4), 0.0, np.cos(np.pi / 4)])

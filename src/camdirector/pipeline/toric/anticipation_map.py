@@ -205,7 +205,21 @@ class AnticipationMap:
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.floating[Any]]]:
         """(a_map, coverage), each (res, res) float32, of the slots' `windows` and A_s `a_s` on
         `newest`, the window of the latest update, masked for a torus of `alpha_rad`."""
-        n = self.settings.window.resolution
+        return self.aggregate(list(a_s), list(windows), newest, self.mask, alpha_rad)
+
+    @staticmethod
+    def aggregate(
+        a_s: list[npt.NDArray[np.float32]],
+        windows: list[MapWindow | None],
+        newest: MapWindow,
+        mask: StyleMaskSettings,
+        alpha_rad: float,
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.floating[Any]]]:
+        """The aggregate: (a_map, coverage), each (res, res) float32 on `newest`, of the slots' A_s
+        (res, res) float32 on their `windows` (None: a slot without a map, its A_s not read),
+        masked by `mask` for a torus of `alpha_rad`. A class's choice: CompiledAnticipationMap's
+        is camdirector._native's twin, the same bits."""
+        n = newest.resolution
         total = np.zeros((n, n), dtype=np.float32)
         count = np.zeros((n, n), dtype=np.float32)
         for slot, window in enumerate(windows):
@@ -219,7 +233,7 @@ class AnticipationMap:
                 total += values
                 count += covered
         a = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
-        return apply_style_mask(a, style_mask(self.mask, newest, alpha_rad)), count / self.slot_count
+        return apply_style_mask(a, style_mask(mask, newest, alpha_rad)), count / len(windows)
 
     # -- reading -------------------------------------------------------------------------------
 

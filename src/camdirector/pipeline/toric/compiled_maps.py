@@ -40,6 +40,7 @@ from camdirector.pipeline.style import MapBackendChoice, Style
 from camdirector.pipeline.toric.anticipation_map import AnticipationMap
 from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps, _DeferredUpdate
+from camdirector.pipeline.toric.occlusion_prediction import shared_bank
 from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 
 
@@ -62,12 +63,20 @@ def maps_thread() -> ThreadPoolExecutor:
 os.register_at_fork(after_in_child=maps_thread.cache_clear)
 
 
+class CompiledAnticipationMap(AnticipationMap):
+    """AnticipationMap whose aggregate A and style mask are formed in camdirector._native
+    (`aggregate_amap`, native/src/amap.rs and style_mask.rs) with the GIL released: the numpy
+    code's bits, and no Python on the maps thread while it forms them."""
+
+    aggregate = staticmethod(native.aggregate_amap)
+
+
 class CompiledOcclusionMaps(OcclusionMaps):
     """OcclusionMaps with PROJECTION's rays and AMAP's predictions compiled (module docstring)."""
 
     def _anticipation_map(self, settings: AnticipationSettings, mask: StyleMaskSettings) -> AnticipationMap:
         compiled_bank(settings)  # built with the A-map, as the Python bank is, not on a frame
-        return super()._anticipation_map(settings, mask)
+        return CompiledAnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
 
     def _backend_of(self, style: Style) -> str:
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend, "native")

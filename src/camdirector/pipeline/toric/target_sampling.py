@@ -54,6 +54,15 @@ class SurfaceSampler:
         points: npt.NDArray[np.float64] = self._corner[face] + u[:, None] * self._edge1[face] + v[:, None] * self._edge2[face]
         return points
 
+    def point_at(self, face_draw: float, u: float, v: float) -> npt.NDArray[np.float64]:
+        """(3,) float64, local frame: what sample(1, rng) makes of the draws face_draw, u, v in
+        [0, 1), the same bits."""
+        face = min(int(np.searchsorted(self._cdf, face_draw, side="right")), len(self._cdf) - 1)
+        if u + v > 1.0:
+            u, v = 1.0 - u, 1.0 - v
+        point: npt.NDArray[np.float64] = self._corner[face] + u * self._edge1[face] + v * self._edge2[face]
+        return point
+
 
 @dataclass(frozen=True)
 class TargetSamplingSettings:
@@ -95,9 +104,11 @@ class TargetSampler:
         return slot // self.settings.samples_per_target
 
     def redraw(self, slots: Sequence[int], rng: np.random.Generator) -> None:
-        """Fresh uniform points for these slots (the others keep theirs)."""
-        for slot in slots:
-            self.points_local[slot] = self._samplers[self.target_of(int(slot))].sample(1, rng)[0]
+        """Fresh uniform points for these slots (the others keep theirs): each slot's point is
+        SurfaceSampler.sample(1, rng)'s, the slots in order, from one draw of the generator."""
+        draws = rng.random((len(slots), 3))  # per slot: face, u, v, as sample(1) draws them one by one
+        for slot, (face_draw, u, v) in zip(slots, draws.tolist()):
+            self.points_local[slot] = self._samplers[self.target_of(int(slot))].point_at(face_draw, u, v)
 
     def points_world(
         self, target_transforms: Sequence[RigidTransform], slots: Sequence[int] | None = None
