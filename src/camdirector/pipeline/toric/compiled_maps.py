@@ -2,12 +2,14 @@
 compiled_rig.py): occlusion_maps.py's `OcclusionMaps` whose S-maps and V-maps are ray cast in
 camdirector._native (geometry/toric_maps/native.py: the paper's section 4.1 by rays, as the
 Embree backend casts them) and whose per-sample predictions A_s are its `KernelBank`'s
-(native/src/prediction.rs: section 4.2, occlusion_prediction.py's model).
+(native/src/prediction.rs: section 4.2, occlusion_prediction.py's model), and whose aggregate A
+and style mask are `aggregate_amap`'s (native/src/amap.rs, style_mask.rs: sections 4.2 and 5.2,
+the numpy code's bits).
 
 Both give the same bits on every x86-64 machine, where GL's maps depend on the renderer and
-numpy's sums on the CPU. The schedule, the sample points, the window, the aggregate A and its
-style mask stay Python (occlusion_maps.py, anticipation_map.py), so what a session draws from its
-generator, and when, is the Python's. A style that names a backend (GL, EMBREE) gets it; AUTO
+numpy's sums on the CPU. The schedule, the sample points and the window stay Python
+(occlusion_maps.py, anticipation_map.py), so what a session draws from its generator, and when,
+is the Python's. A style that names a backend (GL, EMBREE) gets it; AUTO
 gets the compiled one.
 
 Where the process says so (`hand_updates_apart`: the front's table of `serve --workers 0`), the
