@@ -77,7 +77,7 @@ impl Risk for AMap<'_> {
 impl Window {
     /// The lower edge of row (theta) or column (phi) 0 plus k + 1/2 texels: the centre of texel
     /// k along that axis (MapWindow.theta_centers_rad and phi_centers_rad).
-    fn centre(min_rad: f64, step_rad: f64, k: usize) -> f64 {
+    pub(crate) fn centre(min_rad: f64, step_rad: f64, k: usize) -> f64 {
         min_rad + (k as f64 + 0.5) * step_rad
     }
 

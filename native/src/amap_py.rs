@@ -1,7 +1,8 @@
-//! camdirector._native.aggregate_amap: the A-map's aggregate and style mask (amap.rs, style_mask.rs)
-//! for Python, the twin of pipeline/toric/anticipation_map.py's `AnticipationMap.aggregate`: the
-//! compiled maps' (pipeline/toric/compiled_maps.py's CompiledAnticipationMap). Windows are MapWindows, the mask a
-//! StyleMaskSettings; the aggregate is formed with the GIL released.
+//! camdirector._native.aggregate_amap: the A-map's aggregate and style mask (amap.rs,
+//! style_mask.rs) for Python, the twin of pipeline/toric/anticipation_map.py's
+//! `AnticipationMap.aggregate` that pipeline/toric/compiled_maps.py's CompiledAnticipationMap
+//! uses. Windows are MapWindows, the mask a StyleMaskSettings; the aggregate is formed with the
+//! GIL released.
 
 use std::borrow::Cow;
 

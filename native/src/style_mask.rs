@@ -41,10 +41,9 @@ pub fn style_mask(mask: &MaskSettings, window: &Window, alpha_rad: f64) -> Vec<f
     if mask.kind == MaskKind::Empty {
         return vec![1.0; n * n];
     }
-    let centre = |min_rad: f64, step_rad: f64, k: usize| min_rad + (k as f64 + 0.5) * step_rad;
     let behind = PI - 2.0 * alpha_rad; // style_masks.behind_theta_rad
     let rows: Vec<f64> = (0..n)
-        .map(|i| centre(window.theta_min_rad, window.theta_step_rad, i))
+        .map(|i| Window::centre(window.theta_min_rad, window.theta_step_rad, i))
         .collect();
     if mask.kind == MaskKind::HardBehind {
         let allowed = |theta: f64| if theta >= behind { 1.0f32 } else { 0.0 };
@@ -67,7 +66,7 @@ pub fn style_mask(mask: &MaskSettings, window: &Window, alpha_rad: f64) -> Vec<f
     let (top_deg, bottom_deg) = (mask.top_view_phi_deg, mask.bottom_view_phi_deg);
     let views: Vec<(f64, f64)> = (0..n)
         .map(|j| {
-            let phi = centre(window.phi_min_rad, window.phi_step_rad, j);
+            let phi = Window::centre(window.phi_min_rad, window.phi_step_rad, j);
             let abs_phi = (floor_mod(phi + PI, TAU) - PI).abs() * (180.0 / PI); // np.degrees
             let top = smoothstep(top_deg - half, top_deg + half, abs_phi);
             let bottom = 1.0 - smoothstep(bottom_deg - half, bottom_deg + half, abs_phi);

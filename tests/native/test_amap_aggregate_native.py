@@ -63,6 +63,7 @@ def aggregate_cases(draw):
     values = rng.random((slots, n, n), dtype=np.float32)
     values[rng.random((slots, n, n)) < 0.2] = 0.0
     values[rng.random((slots, n, n)) < 0.05] = 1.0
+    values[rng.random((slots, n, n)) < 0.05] = -0.0  # where a sum's sign could show
     mask = StyleMaskSettings(
         kind=draw(st.sampled_from(list(MaskKind))),
         soft_width_rad=draw(st.floats(0.01, 3.0)),
