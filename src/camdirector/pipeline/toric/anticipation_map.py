@@ -121,7 +121,7 @@ class AnticipationMap:
         self.mask = mask
         self.version += 1
         if self.window is not None:
-            self.a_map, self.coverage = self._aggregate(self._windows, self._a_s, self.window, self._alpha_rad)
+            self.a_map, self.coverage = self.aggregate(list(self._a_s), self._windows, self.window, self.mask, self._alpha_rad)
 
     # -- updates -------------------------------------------------------------------------------
 
@@ -193,19 +193,8 @@ class AnticipationMap:
         windows, a_s = list(self._windows), list(self._a_s)
         for slot, values in zip(slots, predicted):
             windows[slot], a_s[slot] = window, np.asarray(values, dtype=np.float32)  # as stored: float32
-        a_map, coverage = self._aggregate(windows, a_s, window, torus.alpha)
+        a_map, coverage = self.aggregate(a_s, windows, window, self.mask, torus.alpha)
         return PreparedAggregate(self.version, a_map, coverage)
-
-    def _aggregate(
-        self,
-        windows: Sequence[MapWindow | None],
-        a_s: Sequence[npt.NDArray[np.float32]] | npt.NDArray[np.float32],
-        newest: MapWindow,
-        alpha_rad: float,
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.floating[Any]]]:
-        """(a_map, coverage), each (res, res) float32, of the slots' `windows` and A_s `a_s` on
-        `newest`, the window of the latest update, masked for a torus of `alpha_rad`."""
-        return self.aggregate(list(a_s), list(windows), newest, self.mask, alpha_rad)
 
     @staticmethod
     def aggregate(

@@ -42,7 +42,6 @@ from camdirector.pipeline.style import MapBackendChoice, Style
 from camdirector.pipeline.toric.anticipation_map import AnticipationMap
 from camdirector.pipeline.toric.anticipation_settings import AnticipationSettings
 from camdirector.pipeline.toric.occlusion_maps import OcclusionMaps, _DeferredUpdate
-from camdirector.pipeline.toric.occlusion_prediction import shared_bank
 from camdirector.pipeline.toric.style_masks import StyleMaskSettings
 
 
@@ -74,11 +73,14 @@ class CompiledAnticipationMap(AnticipationMap):
 
 
 class CompiledOcclusionMaps(OcclusionMaps):
-    """OcclusionMaps with PROJECTION's rays and AMAP's predictions compiled (module docstring)."""
+    """OcclusionMaps with PROJECTION's rays and AMAP's predictions and aggregate compiled (module
+    docstring)."""
+
+    _amap_class = CompiledAnticipationMap
 
     def _anticipation_map(self, settings: AnticipationSettings, mask: StyleMaskSettings) -> AnticipationMap:
         compiled_bank(settings)  # built with the A-map, as the Python bank is, not on a frame
-        return CompiledAnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
+        return super()._anticipation_map(settings, mask)
 
     def _backend_of(self, style: Style) -> str:
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend, "native")

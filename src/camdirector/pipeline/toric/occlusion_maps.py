@@ -108,6 +108,8 @@ class _DeferredUpdate:
 class OcclusionMaps:
     """The map modes' state for one session: occluder scene, backend, sampler and A-map."""
 
+    _amap_class: type[AnticipationMap] = AnticipationMap  # whose aggregate the A-map forms
+
     def __init__(
         self,
         static_meshes_world: list[TriMesh],
@@ -141,8 +143,8 @@ class OcclusionMaps:
         )
 
     def _anticipation_map(self, settings: AnticipationSettings, mask: StyleMaskSettings) -> AnticipationMap:
-        """A new, empty A-map, its kernel bank warmed (shared_bank), not on a frame."""
-        return AnticipationMap(self.sampler.target_count, settings, mask, shared_bank(settings))
+        """A new, empty A-map of `_amap_class`, its kernel bank warmed (shared_bank), not on a frame."""
+        return self._amap_class(self.sampler.target_count, settings, mask, shared_bank(settings))
 
     def _backend_of(self, style: Style) -> str:
         return {MapBackendChoice.GL: "gl", MapBackendChoice.EMBREE: "embree"}.get(style.map_backend) or choose_backend(

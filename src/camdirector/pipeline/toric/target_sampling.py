@@ -56,7 +56,8 @@ class SurfaceSampler:
 
     def point_at(self, face_draw: float, u: float, v: float) -> npt.NDArray[np.float64]:
         """(3,) float64, local frame: what sample(1, rng) makes of the draws face_draw, u, v in
-        [0, 1), the same bits."""
+        [0, 1), the same bits, in scalars (a map update's one point a slot: numpy's arrays of one
+        cost it 31 µs for two slots against 8)."""
         face = min(int(np.searchsorted(self._cdf, face_draw, side="right")), len(self._cdf) - 1)
         if u + v > 1.0:
             u, v = 1.0 - u, 1.0 - v
