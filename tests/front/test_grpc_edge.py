@@ -179,12 +179,14 @@ def test_keys_revocation_and_the_tenants_frame_rate_hold_on_the_edge(front, tmp_
         code, message, _ = _ended(wc.GrpcRaw(server.grpc, key=key("viewer")["key"]), wc.walk(session_id, 2))
         assert code == "PERMISSION_DENIED" and "viewer" in message
         # a burst beyond 30 frames a second: the bucket holds one second's frames
+        start_s = time.monotonic()
         code, message, replies = _ended(client, wc.walk(session_id, 60))
         assert (code, message) == (
             "RESOURCE_EXHAUSTED",
             f"session {session_id} sends more than 30 frames a second, its tenant's limit",
         )
-        assert 30 <= replies < 40
+        # the bucket refills while the burst runs, as fast as this machine streams it
+        assert 30 <= replies <= 30 + 30 * (time.monotonic() - start_s)
         time.sleep(1.1)
 
         def paced(first: int):
