@@ -803,8 +803,10 @@ def run(
     with tempfile.TemporaryDirectory(prefix="frame-profile-") as tmp:
         folder, stamps_dir = Path(tmp), Path(tmp) / "stamps"
         stamps_dir.mkdir()
-        match = _prepared_match(folder, n_frames + warmup) if {"TRACKS", "MATCH"} & set(rigs) else None
-        works = list(workloads(rigs, n_frames, warmup, match, record))
+        # as many frames as the longest run takes: each run streams its own count of them
+        longest = max(n_frames, bare_frames, inline_frames, edge_frames)
+        match = _prepared_match(folder, longest + warmup) if {"TRACKS", "MATCH"} & set(rigs) else None
+        works = list(workloads(rigs, longest, warmup, match, record))
         serve_args = ("--workers", str(workers), "--data-dir", str(folder / "data"))
         env = {
             PROFILE_DIR_ENV: str(stamps_dir),
@@ -813,7 +815,7 @@ def run(
         }
         # the Python fronts, whose hops the plugin stamps (the compiled edge's are measured apart: --edge-frames)
         with ServerProcess(*serve_args, "--plugin", PLUGIN, *PYTHON_FRONTS, env=env) as server:
-            runs = _stream_all(server, works, transports, rate_hz)
+            runs = _stream_all(server, _first(works, n_frames), transports, rate_hz)
             server_workers = server.ready.get("workers")
         front, worker = _server_stamps(stamps_dir)  # written as the server stopped
         with EchoServer() as echo:
@@ -854,11 +856,15 @@ def _unprofiled(
 
     if frames == 0:
         return [None] * (len(works) * len(transports))
-    short = [Workload(w.rig, w.request, w.frames[: w.warmup + frames], w.warmup) for w in works]
     if "--grpc-front" not in serve_args:  # the fronts the stamped server ran
         serve_args = (*serve_args, *PYTHON_FRONTS)
     with ServerProcess(*serve_args, env={FRAME_PATH_ENV: frame_path}) as server:
-        return list(_stream_all(server, short, transports, rate_hz))
+        return list(_stream_all(server, _first(works, frames), transports, rate_hz))
+
+
+def _first(works: list[Workload], frames: int) -> list[Workload]:
+    """Each workload's warmup and its first `frames` frames after it."""
+    return [Workload(w.rig, w.request, w.frames[: w.warmup + frames], w.warmup) for w in works]
 
 
 def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
