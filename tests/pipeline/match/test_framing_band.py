@@ -1,6 +1,7 @@
 """Issue 41's framing band and candidate check in the shot builder (shot_builder.py): a FOLLOW
 frames its player as a long shot, no place puts a subject taller than the band's top, and a
-candidate whose camera shows none of its subjects is not offered."""
+candidate whose camera shows none of its subjects is not offered (when its shot is chosen, and
+on each frame it would be offered: rig.py `_offerable`)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from camdirector.geometry.camera import in_frame
+from camdirector.geometry.raycast import RayScene
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.settings import MatchSettings
-from tests.pipeline.match.scenes import BareRig, Match, facing
+from camdirector.pipeline.session import Session
+from tests.pipeline.match.scenes import LENS, BareRig, Match, facing, melee, player_mesh
 from tests.pipeline.match.test_match_places import block
 
 BODY_M = 1.8  # scenes.py's box players
@@ -85,3 +89,55 @@ def _box_around(centre: np.ndarray) -> list:
 def test_settings_refuse_a_follow_height_over_the_bands_top():
     with pytest.raises(ValueError):
         dataclasses.replace(MatchSettings(), follow_shown_height=0.6, shown_height_max=0.5)
+
+
+def _offered(match: Match, duration_s: float, ahead: bool) -> list:
+    """Each answered frame and its candidates, streamed through a real Session; with `ahead`, the
+    rig's idle work done between frames (camera_ahead.py: the candidates' poses worked out there)."""
+    session = Session("s", match.scene())
+    out = []
+    for update in match.frames(duration_s):
+        state = session.frame(update)
+        if state.match is not None and not state.match.buffering:
+            out.append(state)
+        while ahead and session.rig.do_deferred_work(False):
+            pass
+    return out
+
+
+def _shown_shares(candidate, columns: list[int], walls: RayScene) -> np.ndarray:
+    """(len(columns),) the share of each player's box points (its corners drawn 10% in, and five
+    points up its middle) inside the candidate's frame and not behind a wall: this test's own
+    judge of what its monitor shows."""
+    mesh = player_mesh()
+    middle = np.array([[0.0, y, 0.0] for y in (0.2, 0.6, 0.9, 1.2, 1.6)])
+    local = np.vstack([0.9 * mesh.vertices + 0.1 * mesh.vertices.mean(axis=0), middle])
+    shares = []
+    for column in columns:
+        points = candidate.transforms[column].apply(local)
+        inside = in_frame(candidate.pose, LENS, points)
+        hidden = walls.occluded(np.repeat(candidate.pose.position_world[None], len(points), axis=0), points)
+        shares.append(float((inside & ~hidden).mean()))
+    return np.array(shares)
+
+
+@pytest.mark.parametrize("seed", [2, 5])  # melees where the code before offered such poses (6 and 1 of 543)
+def test_a_candidate_is_offered_only_on_frames_its_pose_shows_half_its_subjects(seed):
+    """Issue 41: candidates are offered only when their camera shows their subjects at the moment
+    offered. Their shot is chosen and its place checked at a plan's tick; between ticks the
+    players run on past the pillars, and a pose that lost them is not offered on those frames.
+    The same candidates whether their poses were worked out in idle moments or on the frame."""
+    match = melee(seed=seed, duration_s=16.0, delay_s=10.0)
+    ids, walls = list(match.teams), RayScene(match.walls)
+    states = _offered(match, 16.0, ahead=True)
+    offered = [(s, c) for s in states for c in s.match.candidates if c.shot.subject_ids]
+    assert len(offered) > 300
+    for state, candidate in offered:
+        columns = [ids.index(p) for p in candidate.shot.subject_ids]
+        shares = _shown_shares(candidate, columns, walls)
+        # the rig's sample points are not these: a margin of a quarter of a body's points
+        assert 2 * int((shares >= 0.25).sum()) >= len(columns), (state.time_s, candidate.shot, shares)
+    on_the_frame = _offered(match, 16.0, ahead=False)
+    assert [[(c.shot, c.pose.position_world.tolist()) for c in s.match.candidates] for s in on_the_frame] == [
+        [(c.shot, c.pose.position_world.tolist()) for c in s.match.candidates] for s in states
+    ]

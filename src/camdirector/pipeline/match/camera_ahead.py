@@ -3,8 +3,8 @@ next buffered one, known already. After a frame the rig works out, in the worker
 (its deferred work, before the drawn plan's slices), that moment's CAMERA and VISIBILITY from a
 copy of the shot's camera (program_camera.py; a REPLAY's at the moment it replays then), and the
 candidates' poses (a REPLAY candidate's at its kill), kept inside the level
-(in_level.py) as the program's are (those of the drawn plan too, once computed: the tick that
-applies it shows them). The frame takes them when they are its
+(in_level.py) as the program's are, and whether each shows its subjects there (those of the
+drawn plan too, once computed: the tick that applies it shows them). The frame takes them when they are its
 own: the same moment and time step, the same shot, style and pose shown before, and the camera's
 attributes the same objects (cameras change only by assigning them, program_shot.py, so a tick's
 new goal or pair window, or a cut, shows); otherwise it computes them as before. A tick that
@@ -75,11 +75,13 @@ class CameraStep:
 
 @dataclass
 class CandidatePoses:
-    """The candidates' cameras' poses at a moment (None: an OVERVIEW candidate's, the program's)."""
+    """The candidates' cameras' poses at a moment (None: an OVERVIEW candidate's, the program's),
+    and whether each may be offered from it (`Offerable`)."""
 
     moment: Moment
     candidates: list[CandidateShot]  # the list they are of (by identity)
     poses: list[CameraPose | None]
+    offerable: list[bool]
 
 
 def step_ahead(
@@ -175,6 +177,9 @@ def answer_lens_ahead(
 
 # the moment a candidate's monitor shows beside a program moment (a REPLAY candidate's is its kill's: rig.py)
 MomentOf = Callable[[ShotChoice, Moment], Moment]
+# whether a candidate's pose shows enough of its subjects at the moment its monitor shows (the rig's
+# `_offerable`): one is offered only then (issue 41)
+Offerable = Callable[[CameraPose, ShotChoice, Moment], bool]
 
 
 def contained_poses(moments: list[Moment], cameras: list[ToricCamera | None], in_level: InLevel) -> list[CameraPose | None]:
@@ -186,13 +191,16 @@ def contained_poses(moments: list[Moment], cameras: list[ToricCamera | None], in
 
 
 def candidate_poses(
-    moment: Moment, lists: list[list[CandidateShot]], in_level: InLevel, moment_of: MomentOf
+    moment: Moment, lists: list[list[CandidateShot]], in_level: InLevel, moment_of: MomentOf, offerable: Offerable
 ) -> list[CandidatePoses]:
-    """Each list's candidates' poses beside the program moment."""
-    return [
-        CandidatePoses(moment, c, contained_poses([moment_of(ch, moment) for ch, _, _ in c], [cam for _, cam, _ in c], in_level))
-        for c in lists
-    ]
+    """Each list's candidates' poses beside the program moment, and whether each may be offered."""
+    out = []
+    for c in lists:
+        shown_at = [moment_of(ch, moment) for ch, _, _ in c]
+        poses = contained_poses(shown_at, [cam for _, cam, _ in c], in_level)
+        offered = [p is None or offerable(p, ch, at) for p, (ch, _, _), at in zip(poses, c, shown_at)]
+        out.append(CandidatePoses(moment, c, poses, offered))
+    return out
 
 
 def candidate_views(
@@ -203,19 +211,31 @@ def candidate_views(
     program: ShotCamera,
     in_level: InLevel,
     moment_of: MomentOf,
+    offerable: Offerable,
 ) -> list[Candidate]:
-    """The frame's candidates: each camera's pose beside the moment (moment_of), inside the level
-    (worked out ahead, or now; an OVERVIEW candidate's is the program's pose)."""
+    """The frame's candidates that may be offered: each camera's pose beside the moment
+    (moment_of), inside the level (worked out ahead, or now; an OVERVIEW candidate's is the
+    program's pose), offered where it shows its subjects (`Offerable`, judged with the pose)."""
     known_poses = next((a for a in ahead if a.moment is moment and a.candidates is candidates), None)
     known = known_poses.poses if known_poses is not None else [None] * len(candidates)
+    known_offerable = known_poses.offerable if known_poses is not None else [True] * len(candidates)
     # worked out now: the cameras without a pose ahead, and the one the program took
     now = [cam if cam is not None and (k is None or cam is program) else None for (_, cam, _), k in zip(candidates, known)]
     computed = contained_poses([moment_of(choice, moment) for choice, _, _ in candidates], now, in_level)
     views = []
-    for (choice, cam, score), asked, now_pose, ahead_pose in zip(candidates, now, computed, known):
-        shown = pose if cam is None else now_pose if asked is not None else ahead_pose
+    for (choice, cam, score), asked, now_pose, ahead_pose, ahead_offerable in zip(
+        candidates, now, computed, known, known_offerable
+    ):
         at = moment_of(choice, moment)
-        if shown is not None:
+        shown: CameraPose | None
+        if cam is None:  # an OVERVIEW's: the level, from the program's pose
+            shown, offered = pose, True
+        elif asked is not None:
+            shown = now_pose
+            offered = shown is not None and offerable(shown, choice, at)
+        else:
+            shown, offered = ahead_pose, ahead_offerable
+        if shown is not None and offered:
             replay = None if at is moment else ReplayedMoment(at.frame, at.time_s)
             views.append(Candidate(shown, choice, score, replay, at.transforms))
     return views

@@ -376,6 +376,7 @@ class MatchRig(RigBase):
             frame.shot.camera,
             self.in_level,
             self._candidate_moment,
+            self._offerable,
         )
         self._ahead_candidates = []
         match.shot, match.events = frame.choice, frame.moment.events
@@ -573,6 +574,17 @@ class MatchRig(RigBase):
         kill_s = choice.replay.kill_time_s
         return next((m for e, _, m in self._kills_shown if e.time_s == kill_s), None) or self.buffer.at(kill_s)
 
+    def _offerable(self, pose: CameraPose, choice: ShotChoice, shown: Moment) -> bool:
+        """Whether a candidate's pose shows at least half of its subjects at the moment its monitor
+        shows (issue 41: offered only when its camera shows them then; eval-match's measure,
+        `_players_seen`). Its place was checked when its situation was chosen, at a plan's tick;
+        the players move on between ticks."""
+        subjects = tuple(self.index[p] for p in choice.subject_ids)
+        if not subjects:
+            return True
+        seen = self._players_seen(pose, shown, subjects)
+        return 2 * int((seen >= SHOWN_SHARE).sum()) >= len(subjects)
+
     def _swept_through_wall(self, pose: CameraPose) -> bool:
         """Whether the camera moved from the last pose shown through level geometry (a wall between
         the two centres, in_level.py `crossed`): the program cuts there instead of sweeping
@@ -629,7 +641,7 @@ class MatchRig(RigBase):
         if self.window.frames:
             following = self.window.frames[0]
             self._ahead_candidates = candidate_poses(
-                following.moment, [following.candidates], self.in_level, self._candidate_moment
+                following.moment, [following.candidates], self.in_level, self._candidate_moment, self._offerable
             )
             answered = self.window.answered
             if answered is not None and self._answered_s is not None:  # its lens, answered after the last one
