@@ -83,10 +83,17 @@ def _transform(xz: tuple[float, float], yaw: float) -> RigidTransform:
     return RigidTransform(np.array([xz[0], 0.0, xz[1]]), yaw_quat(yaw))
 
 
-def run_session(match: Match, duration_s: float) -> tuple[Session, list[FrameState]]:
-    """Streams the match through a real Session; its answers in order."""
+def run_session(match: Match, duration_s: float, idle: bool = False) -> tuple[Session, list[FrameState]]:
+    """Streams the match through a real Session; its answers in order. With `idle`, the session's
+    deferred work is done between frames, a slice at a time until none is left (a worker's idle
+    moments: camera_ahead.py's work ahead among it)."""
     session = Session("s", match.scene())
-    return session, [session.frame(update) for update in match.frames(duration_s)]
+    states = []
+    for update in match.frames(duration_s):
+        states.append(session.frame(update))
+        while idle and session.do_deferred_work(whole=False):
+            pass
+    return session, states
 
 
 class BareRig:

@@ -14,8 +14,7 @@ from camdirector.geometry.camera import in_frame
 from camdirector.geometry.raycast import RayScene
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.settings import MatchSettings
-from camdirector.pipeline.session import Session
-from tests.pipeline.match.scenes import LENS, BareRig, Match, facing, melee, player_mesh
+from tests.pipeline.match.scenes import LENS, BareRig, Match, facing, melee, player_mesh, run_session
 from tests.pipeline.match.test_match_places import block
 
 BODY_M = 1.8  # scenes.py's box players
@@ -92,17 +91,9 @@ def test_settings_refuse_a_follow_height_over_the_bands_top():
 
 
 def _offered(match: Match, duration_s: float, ahead: bool) -> list:
-    """Each answered frame and its candidates, streamed through a real Session; with `ahead`, the
+    """The answered frames past the delay, streamed through a real Session; with `ahead`, the
     rig's idle work done between frames (camera_ahead.py: the candidates' poses worked out there)."""
-    session = Session("s", match.scene())
-    out = []
-    for update in match.frames(duration_s):
-        state = session.frame(update)
-        if state.match is not None and not state.match.buffering:
-            out.append(state)
-        while ahead and session.rig.do_deferred_work(False):
-            pass
-    return out
+    return [s for s in run_session(match, duration_s, idle=ahead)[1] if s.match is not None and not s.match.buffering]
 
 
 def _shown_shares(candidate, columns: list[int], walls: RayScene) -> np.ndarray:

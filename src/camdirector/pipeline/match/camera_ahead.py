@@ -190,15 +190,29 @@ def contained_poses(moments: list[Moment], cameras: list[ToricCamera | None], in
     return in_level.contained_many(poses, anchors)
 
 
+def _judged_poses(
+    choices: list[ShotChoice],
+    cameras: list[ToricCamera | None],
+    shown_at: list[Moment],
+    in_level: InLevel,
+    offerable: Offerable,
+) -> tuple[list[CameraPose | None], list[bool]]:
+    """The cameras' poses at the moments their monitors show, inside the level (contained_poses),
+    and whether each may be offered from its pose (True where there is none)."""
+    poses = contained_poses(shown_at, cameras, in_level)
+    return poses, [p is None or offerable(p, choice, at) for p, choice, at in zip(poses, choices, shown_at)]
+
+
 def candidate_poses(
     moment: Moment, lists: list[list[CandidateShot]], in_level: InLevel, moment_of: MomentOf, offerable: Offerable
 ) -> list[CandidatePoses]:
     """Each list's candidates' poses beside the program moment, and whether each may be offered."""
     out = []
     for c in lists:
-        shown_at = [moment_of(ch, moment) for ch, _, _ in c]
-        poses = contained_poses(shown_at, [cam for _, cam, _ in c], in_level)
-        offered = [p is None or offerable(p, ch, at) for p, (ch, _, _), at in zip(poses, c, shown_at)]
+        choices = [choice for choice, _, _ in c]
+        poses, offered = _judged_poses(
+            choices, [cam for _, cam, _ in c], [moment_of(choice, moment) for choice in choices], in_level, offerable
+        )
         out.append(CandidatePoses(moment, c, poses, offered))
     return out
 
@@ -221,20 +235,19 @@ def candidate_views(
     known_offerable = known_poses.offerable if known_poses is not None else [True] * len(candidates)
     # worked out now: the cameras without a pose ahead, and the one the program took
     now = [cam if cam is not None and (k is None or cam is program) else None for (_, cam, _), k in zip(candidates, known)]
-    computed = contained_poses([moment_of(choice, moment) for choice, _, _ in candidates], now, in_level)
+    shown_at = [moment_of(choice, moment) for choice, _, _ in candidates]
+    computed, now_offerable = _judged_poses([choice for choice, _, _ in candidates], now, shown_at, in_level, offerable)
     views = []
-    for (choice, cam, score), asked, now_pose, ahead_pose, ahead_offerable in zip(
-        candidates, now, computed, known, known_offerable
+    for (choice, cam, score), at, asked, now_pose, now_offered, ahead_pose, ahead_offered in zip(
+        candidates, shown_at, now, computed, now_offerable, known, known_offerable
     ):
-        at = moment_of(choice, moment)
         shown: CameraPose | None
         if cam is None:  # an OVERVIEW's: the level, from the program's pose
             shown, offered = pose, True
         elif asked is not None:
-            shown = now_pose
-            offered = shown is not None and offerable(shown, choice, at)
+            shown, offered = now_pose, now_offered
         else:
-            shown, offered = ahead_pose, ahead_offerable
+            shown, offered = ahead_pose, ahead_offered
         if shown is not None and offered:
             replay = None if at is moment else ReplayedMoment(at.frame, at.time_s)
             views.append(Candidate(shown, choice, score, replay, at.transforms))
