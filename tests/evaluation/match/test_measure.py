@@ -91,7 +91,7 @@ def test_a_camera_seeing_both_covers_the_kill_and_leads_by_the_whole_shot(match)
     result = kill_coverage(match, program, shown)
     assert result.kills == 1 and result.covered.tolist() == [True] and result.coverage == 1.0
     np.testing.assert_allclose(result.lead_s, [2.0])  # the shot began at 0 s, the kill is at 2 s
-    assert framed_visibility(program, shown, match.player_index()) >= 0.5
+    assert framed_visibility(program, shown, match.player_index(), in_eyes_of(match, program)) >= 0.5
 
 
 def test_a_wall_between_camera_and_victim_uncovers_the_kill(match):
@@ -166,6 +166,7 @@ def test_the_attackers_eyes_seeing_the_victim_cover_the_kill_first_person_only(m
     assert eyes.tolist() == [0] * FRAMES and shown[:, 1].min() >= 0.5
     assert kill_coverage(match, program, shown).covered.tolist() == [False]  # a's body is not in the picture
     assert kill_coverage(match, program, shown, eyes).covered.tolist() == [True]
+    assert framed_visibility(program, shown, match.player_index(), eyes) == 1.0  # it names a: a's view, not a's body
     # In the victim's eyes instead, the attacker's eyes rule does not apply.
     swapped = duel()
     swapped.events[0] = dataclasses.replace(swapped.events[0], actor_id="b", other_actor_id="a")
@@ -176,6 +177,23 @@ def test_a_camera_half_a_metre_off_the_eye_is_in_nobodys_eyes(match):
     program = first_person_of_a(match)
     program.position = program.position + [0.0, 0.0, 0.51]
     assert in_eyes_of(match, program).tolist() == [-1] * FRAMES
+
+
+def test_a_body_that_holds_the_camera_shows_none_of_itself(match):
+    """A camera low in a's body (a corpse's eye) looking at b: a's surface about it faces away
+    (a renderer culls it; no game draws the body whose eyes it shows), so a is not shown there;
+    a little behind a's body, a's back is."""
+    n = len(match.time_s)
+    bodies = BodySampler(match, np.random.default_rng(0))
+    shares = []
+    for behind_m in (0.0, 0.45):  # a's radius is 0.3 m
+        camera = match.positions_world[0, 0] + [-behind_m, 0.3, 0.0]
+        program = program_of(match, np.tile(camera, (n, 1)), np.tile(match.positions_world[0, 1] + CHEST, (n, 1)))
+        assert bodies.holding(0, camera).tolist() == [behind_m == 0.0, False]
+        shares.append(measure_shown(program, bodies, Lens(), floor()))
+    inside, behind = shares
+    assert inside[:, 0].max() == 0.0 and behind[:, 0].min() > 0.0
+    assert inside[:, 1].min() >= 0.5  # b is
 
 
 def test_program_visibility_counts_every_moment_and_the_eyes_as_seen(match):

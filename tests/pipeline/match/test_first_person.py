@@ -205,6 +205,31 @@ def test_the_eye_stands_at_quakes_height_over_the_body_and_looks_along_its_facin
     assert np.allclose(forward, moment.forward_world[0], atol=1e-9)
 
 
+def test_a_dead_players_eye_looks_at_its_living_killer_and_the_games_own_view_along_its_body():
+    """Our director's eye of a corpse (eyes_camera) turns to its killer, level and from the
+    corpse's eye, while the killer lives; the autotrack's (FirstPersonCamera's default) keeps the
+    body's facing, as the game shows it; a suicide, or a killer dead too, leaves the facing."""
+    rig = BareRig(Match({"a": 1, "b": 2}, turning_away, [kill("b", "a", KILL_S)], delay_s=0.0), MatchSettings())
+    rig.run(KILL_S + 0.5)
+    dead = rig.rig.buffer.moments[-1]
+    assert not dead.alive[0] and dead.killers is not None and dead.killers.tolist() == [1, -1]
+    ours = eyes_camera(0, 1.75, rig.rig.lens, rig.rig.settings)
+    games = FirstPersonCamera(0, ours.lens, ours.eye_above_feet_m, ours.corpse_eye_above_feet_m)
+
+    def forward(camera: FirstPersonCamera, moment) -> np.ndarray:
+        return quat_rotate(camera.pose(moment).rotation_xyzw, np.array([0.0, 0.0, -1.0]))
+
+    eye = ours.pose(dead).position_world
+    assert eye[1] == pytest.approx(dead.feet_world[0, 1] + ours.corpse_eye_above_feet_m)
+    at_killer = (dead.aims_world[1] - eye) / np.linalg.norm(dead.aims_world[1] - eye)
+    np.testing.assert_allclose(forward(ours, dead), at_killer, atol=1e-9)
+    np.testing.assert_allclose(forward(games, dead), dead.forward_world[0], atol=1e-9)  # a turns away from b: not at b
+    assert forward(games, dead) @ at_killer < 0.0
+    for killers, alive in (([-1, -1], [False, True]), ([1, -1], [False, False])):  # a suicide; the killer dead too
+        other = dataclasses.replace(dead, killers=np.array(killers), alive=np.array(alive))
+        np.testing.assert_allclose(forward(ours, other), dead.forward_world[0], atol=1e-9)
+
+
 def test_the_wire_names_the_player_through_whose_eyes_the_picture_is():
     _, shot = _planned_kill()
     assert shot_msg(shot.choice).eyes_id == "a"

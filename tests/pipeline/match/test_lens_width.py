@@ -17,6 +17,7 @@ from camdirector.pipeline.match.lens_width import (
     looked_through,
     outline_points,
     screen_slopes,
+    silhouette_points,
     widened_fov_deg,
     zoomed_fov_deg,
 )
@@ -51,15 +52,34 @@ def _widened(rig, moment, pose, last_fov_deg=None, dt_s=0.0, settings=SETTINGS, 
     return widened_fov_deg(pose, moment, visibility, Lens(), settings, last_fov_deg, dt_s, subjects)
 
 
-@pytest.mark.parametrize("distance_m", [1.8, 2.5, 3.0])
+@pytest.mark.parametrize("distance_m", [2.2, 2.5, 3.0])  # nearer, a scenes.py body (a cylinder's rims) needs over 90 degrees
 def test_a_player_close_in_front_goes_wide_enough_to_stand_inside_the_band(distance_m):
     rig, moment, pose = _looking_at_a(distance_m)
-    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.outlines_local[0])  # head to feet
+    points = silhouette_points(moment, rig.rig.program_camera.subject_visibility)[0]  # head to feet, and its width
     assert _height_share(pose, Lens().vertical_fov_deg, points) > SETTINGS.shown_height_max  # too tall at the lens's
     fov_deg = _widened(rig, moment, pose)
     assert Lens().vertical_fov_deg < fov_deg <= SETTINGS.widen_max_fov_deg
     assert _height_share(pose, fov_deg, points) <= SETTINGS.shown_height_max
     assert _height_share(pose, fov_deg - 1.0, points) > SETTINGS.shown_height_max  # the narrowest that fits, by degree
+
+
+@pytest.mark.parametrize("above_m, back_m", [(2.0, 1.0), (2.5, 0.8), (1.5, 1.5)])
+def test_a_player_below_a_camera_looking_down_on_it_is_sized_by_its_width_too(above_m, back_m):
+    """Looked down on from near, a body's width stands on the screen's vertical: the outline's
+    rims (visibility.py `_rims`) size it, so the lens widens until every vertex of its mesh fits
+    the band (on the real 2on2 a camera 2.9 m off looked down on a player the axis's ends and the
+    samples sized at 0.47 of the frame, eval-match at 0.63)."""
+    rig = rig_of()
+    moment = rig.rig.buffer.moments[-1]
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    camera = chest + [back_m, above_m, 0.0]
+    pose = look_along(camera, chest - camera, Lens().vertical_fov_deg)
+    body = moment.transforms[0].apply(rig.scene.targets[0].mesh.vertices)  # (V, 3) every vertex, the rims' included
+    fov_deg = _widened(rig, moment, pose)
+    assert _height_share(pose, fov_deg, body) <= SETTINGS.shown_height_max + 0.02  # the rims' 8 points are within 8% of r
+    visibility = rig.rig.program_camera.subject_visibility
+    silhouette, outline = silhouette_points(moment, visibility)[0], outline_points(moment, visibility)[0]
+    assert _height_share(pose, fov_deg, silhouette) > _height_share(pose, fov_deg, outline)  # the width counts
 
 
 def test_a_player_far_off_keeps_the_lens():
@@ -98,7 +118,7 @@ def test_settings_out_of_range_are_refused(bad):
 
 
 def test_the_program_cameras_step_carries_the_width_and_its_flag_and_zooms_back_at_its_pace():
-    rig, moment, close = _looking_at_a(1.8)
+    rig, moment, close = _looking_at_a(2.2)  # near, as near as a lens up to the widest fits
     _, _, far = _looking_at_a(8.0)
     program_camera = rig.rig.program_camera
     overview = Shot(ShotChoice((), ShotKind.OVERVIEW, "test"), (), StaticCamera(close), 0.0)
@@ -168,7 +188,7 @@ def test_the_answered_pose_is_widened_at_its_moment_never_narrowed_and_zooms_bac
     """A pose made for another moment (held) is checked where it is answered: widened for a
     player near it, kept where it is already wide, and narrowed no faster than the lens's pace
     from the last answered pose."""
-    rig, moment, close = _looking_at_a(1.8)
+    rig, moment, close = _looking_at_a(2.2)
     _, _, far = _looking_at_a(8.0)
     shot = Shot(ShotChoice(("a",), ShotKind.OVERVIEW, "test"), (0,), StaticCamera(close), 0.0)
 

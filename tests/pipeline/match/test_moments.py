@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from camdirector.geometry.transforms import RigidTransform
-from camdirector.pipeline.match.moments import COMPACT_AFTER, Moment, MomentBuffer, _unpacked_moment
+from camdirector.pipeline.match.moments import COMPACT_AFTER, Moment, MomentBuffer, _moment_of_bytes, _unpacked_moment
 from camdirector.pipeline.match.settings import MatchSettings
 from tests.pipeline.match.scenes import kill
 
@@ -57,6 +57,24 @@ def test_a_player_respawned_where_it_fell_is_alive_once_it_walks_away():
     first_alive = flags.index(True, 10)
     walked_m = (first_alive - 60) / RATE_HZ * walk_m_s
     assert walked_m == pytest.approx(settings.respawn_walk_m, abs=walk_m_s / RATE_HZ)
+
+
+@pytest.mark.parametrize("attacker, killer", [("a", 0), ("b", -1), ("world", -1)])
+def test_a_dead_players_killer_is_known_until_it_respawns(attacker, killer):
+    """Moment.killers: the attacker of a dead player's last KILL (-1 for a suicide or the world's),
+    from the kill's moment until the respawn; -1 for the living."""
+    buffer = MomentBuffer(["a", "b"], MatchSettings())
+    killers = []
+    for f in range(120):
+        poses = [
+            RigidTransform(np.zeros(3), np.array([0, 0, 0, 1.0])),
+            RigidTransform(np.array([5.0 if f < 60 else 30.0, 0.0, 0.0]), np.array([0, 0, 0, 1.0])),  # respawned at 60
+        ]
+        buffer.push(
+            f, f / RATE_HZ, poses, [p.position_world for p in poses], [kill(attacker, "b", f / RATE_HZ)] if f == 10 else []
+        )
+        killers.append(buffer.newest.killers.tolist())
+    assert killers[:10] == [[-1, -1]] * 10 and killers[10:60] == [[-1, killer]] * 50 and killers[60:] == [[-1, -1]] * 60
 
 
 def test_jumps_are_the_moments_a_player_teleports_or_respawns_not_those_it_runs_or_falls():
@@ -130,8 +148,10 @@ def test_the_buffer_holds_the_delay_and_little_more_and_a_moment_pickles_back_ex
         back.transforms[0].position_world[0] += 1.0
         assert not np.array_equal(back.feet_world, moment.feet_world)
         assert not np.array_equal(back.transforms[0].position_world, moment.transforms[0].position_world)
-        # a snapshot written before 2026-12-02 (each moment as three arrays) restores the same moment
-        _same_moment(pickle.loads(pickle.dumps(_ThreeArrays(moment))), moment)
+        # a snapshot written before 2026-12-02 (each moment as three arrays) restores the same moment, and one
+        # written before 2026-12-06 (no killers) too: with no killer known
+        _same_moment(pickle.loads(pickle.dumps(_ThreeArrays(moment))), moment, killers=False)
+        _same_moment(_moment_of_bytes(*moment.__reduce__()[1][:6]), moment, killers=False)
     assert buffer.at(2990 / rate_hz).events  # the kill's moment, with its event, came back above
 
 
@@ -148,9 +168,14 @@ class _ThreeArrays:
         return _unpacked_moment, (m.frame, m.time_s, rows, points, m.alive, m.events)
 
 
-def _same_moment(back: Moment, moment: Moment) -> None:
-    """Bit for bit, float64 (and the alive flags)."""
+def _same_moment(back: Moment, moment: Moment, killers: bool = True) -> None:
+    """Bit for bit, float64 (and the alive flags, and the killers: none known where not `killers`)."""
     assert (back.frame, back.time_s, back.events) == (moment.frame, moment.time_s, moment.events)
+    if killers:
+        assert moment.killers is not None and back.killers is not None
+        assert back.killers.dtype == np.int64 and np.array_equal(back.killers, moment.killers)
+    else:
+        assert back.killers is None
     for name in ("aims_world", "feet_world", "forward_world", "alive"):
         a, b = getattr(moment, name), getattr(back, name)
         assert a.dtype == b.dtype and np.array_equal(a, b)

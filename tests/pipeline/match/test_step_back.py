@@ -17,7 +17,7 @@ from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 from camdirector.pipeline.match.first_person import FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.in_level import InLevel
-from camdirector.pipeline.match.lens_width import SHOWN_SEEN
+from camdirector.pipeline.match.lens_width import SHOWN_SEEN, silhouette_points
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.program_camera import PANNED_OFF, STEPPED_BACK, ProgramCamera
 from camdirector.pipeline.match.program_shot import Shot
@@ -53,7 +53,7 @@ def _setup(distance_m: float, behind_m: float = 20.0, side_m: float = 20.0):
 
 
 def _height_at_widest(rig, moment, pose: CameraPose) -> float:
-    points = moment.transforms[0].apply(rig.rig.program_camera.subject_visibility.outlines_local[0])
+    points = silhouette_points(moment, rig.rig.program_camera.subject_visibility)[0]  # its outline and rims
     y = np.clip(project_to_screen(pose, WIDEST, points)[:, 1], -1.0, 1.0)
     return float((y.max() - y.min()) / 2.0)
 

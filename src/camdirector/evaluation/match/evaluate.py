@@ -236,7 +236,7 @@ def _figures(
         },
         "cuts_per_min": round(cuts_per_minute(program), 2),
         "jump_cuts": jump_cuts(program, bodies),
-        "framed_visibility": round(framed_visibility(program, shown, column), 3),
+        "framed_visibility": round(framed_visibility(program, shown, column, eyes), 3),
         "program_visibility": round(program_visibility(program, shown, column, eyes), 3),
         "first_person_share": round(float((eyes >= 0).mean()), 3),
         # 4 decimals: at 3, the real wipeout's 0.1496 and sim_zdm2's 0.1495 read as issue 41's bar of 0.15

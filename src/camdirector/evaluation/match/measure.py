@@ -12,6 +12,10 @@ has them, never from what the director says it shows:
   the frame's edges at the pose's field of view and the lens's aspect) and whose segment from the
   camera centre crosses no level geometry (Embree ray casts, geometry.raycast.RayScene). Players do
   not occlude each other, as in evaluation/toric/measure.py. A player is *shown* at >= `SHOWN_FRACTION`.
+  A player whose body (its capsule) holds the camera shows none of it: its surface faces away from
+  a camera inside (a renderer culls it), and no game draws the body whose eyes it looks through
+  (a dead player's camera at its corpse's eye looked at its own body's inside, 0.5 of its points
+  "shown" and 1.0 of the frame tall).
 - kill coverage: the share of kills at whose moment (the first program moment at or after the
   kill's frame) both the attacker and the victim are shown (live: a moment of a replay covers no
   kill). Kill coverage *first person* also
@@ -42,7 +46,8 @@ has them, never from what the director says it shows:
   on that long; kills with room replayed: those of them with a replay shown. A live kill missed
   for a replay is a kill whose moment is a replay's (issue 41: none).
 - visibility of the framed subjects: per program moment with subjects, the mean shown fraction of
-  the players it names; averaged over those moments.
+  the players it names, the player in whose eyes the camera is counting 1 (its body is not in
+  its picture: see shown fraction); averaged over those moments.
 - program visibility: the same over *every* program moment, a moment that names nobody counting
   the shown fraction of its best-shown player (an overview of nobody counts 0), the player in
   whose eyes the camera is counting 1.
@@ -164,6 +169,16 @@ class BodySampler:
         rotation = quat_to_matrix(self.match.rotations_xyzw[index])  # (P, 3, 3)
         return np.einsum("pij,psj->psi", rotation, self.points_local) + self.match.positions_world[index][:, None, :]
 
+    def holding(self, index: int, point_world: np.ndarray) -> np.ndarray:
+        """(P,) bool: whose body, at match frame `index`, holds the point (3,) m: within its radius
+        of its capsule's axis (player_mesh: from radius to height - radius above its feet)."""
+        rotation = quat_to_matrix(self.match.rotations_xyzw[index])  # (P, 3, 3) local-to-world
+        local = np.einsum("pji,pj->pi", rotation, point_world - self.match.positions_world[index])  # (P, 3)
+        radius = np.array([p.radius_m for p in self.match.players])
+        height = np.array([p.height_m for p in self.match.players])
+        along = np.clip(local[:, 1], radius, np.maximum(radius, height - radius))
+        return np.asarray(np.hypot(np.hypot(local[:, 0], local[:, 1] - along), local[:, 2]) < radius)
+
     def aims_world(self, index: int, players: list[int]) -> np.ndarray:
         """(k, 3) m: the aim points of the players (columns) at match frame `index`."""
         rotation = quat_to_matrix(self.match.rotations_xyzw[index, players])
@@ -183,13 +198,14 @@ def shown_fractions(pose: CameraPose, lens: Lens, points_world: np.ndarray, leve
 
 
 def measure_shown(program: Program, bodies: BodySampler, lens: Lens, level: RayScene) -> np.ndarray:
-    """(n, P) shown fraction of every player at every program moment (module docstring)."""
-    return np.stack(
-        [
-            shown_fractions(program.pose(r), lens, bodies.points_world(int(program.shown_index[r])), level)
-            for r in range(len(program))
-        ]
-    ).reshape(len(program), len(bodies.match.players))
+    """(n, P) shown fraction of every player at every program moment (module docstring): none of
+    a body that holds the camera."""
+    rows = []
+    for r in range(len(program)):
+        index = int(program.shown_index[r])
+        shown = shown_fractions(program.pose(r), lens, bodies.points_world(index), level)
+        rows.append(np.where(bodies.holding(index, program.position[r]), 0.0, shown))
+    return np.stack(rows).reshape(len(program), len(bodies.match.players))
 
 
 @dataclass(frozen=True)
@@ -335,9 +351,16 @@ def jump_cuts(program: Program, bodies: BodySampler, threshold_deg: float = JUMP
     return count
 
 
-def framed_visibility(program: Program, shown: np.ndarray, column: dict[str, int]) -> float:
-    """Mean over the moments that name subjects of their subjects' mean shown fraction; NaN if none."""
-    values = [shown[r, [column[p] for p in subjects]].mean() for r, subjects in enumerate(program.subjects) if subjects]
+def framed_visibility(program: Program, shown: np.ndarray, column: dict[str, int], eyes_of: np.ndarray) -> float:
+    """Mean over the moments that name subjects of their subjects' mean shown fraction, the player
+    in whose eyes the camera is counting 1 (module docstring); NaN if none."""
+    values = []
+    for r, subjects in enumerate(program.subjects):
+        if subjects:
+            row = shown[r].copy()
+            if eyes_of[r] >= 0:
+                row[eyes_of[r]] = 1.0
+            values.append(row[[column[p] for p in subjects]].mean())
     return float(np.mean(values)) if values else float("nan")
 
 

@@ -87,12 +87,23 @@ class FirstPersonCamera:
     """A player's own view (module docstring): the eye eye_above_feet_m over its feet (a corpse's
     corpse_eye_above_feet_m), looking along its facing through `lens`; `pair`: the planned DUEL
     window that names the pair around its events and the kept player alone elsewhere (None: its
-    shot names its subjects throughout)."""
+    shot names its subjects throughout); `faces_killer`: a corpse's eye looks at its killer.
+
+    The corpse's view: QuakeWorld's spectator keeps looking where the body faced (rolled 80
+    degrees, cl_view.c), so the picture after a followed player's death is usually a floor or a
+    wall: on the real 2on2 at 31 Hz, 14 frames of nobody after a rocket, its killer 4-10 m off
+    the corpse's line of sight and seen whole from its eye. Games since look at the killer (Quake
+    II's LookAtKiller turns the dead player's view yaw to the attacker; Source's death cam turns
+    to it over half of DEATH_ANIMATION_TIME), and so does our director's camera through the eyes
+    (`eyes_camera`): from the corpse's eye, level, at the killer's aim point while the killer
+    lives (Moment.killers), at once as the game's own view changes at death. The autotrack's
+    camera is the game's picture and keeps the body's facing."""
 
     # class defaults: an autotrack camera pickled into a checkpoint before these existed has none
     pair: PairWindow | None = None
     eye_above_feet_m: float = EYE_ABOVE_FEET_M
     corpse_eye_above_feet_m: float = CORPSE_EYE_ABOVE_FEET_M
+    faces_killer: bool = False
 
     def __init__(
         self,
@@ -101,9 +112,11 @@ class FirstPersonCamera:
         eye_above_feet_m: float = EYE_ABOVE_FEET_M,
         corpse_eye_above_feet_m: float = CORPSE_EYE_ABOVE_FEET_M,
         pair: PairWindow | None = None,
+        faces_killer: bool = False,
     ):
         self.player, self.lens, self.pair = player, lens, pair
         self.eye_above_feet_m, self.corpse_eye_above_feet_m = eye_above_feet_m, corpse_eye_above_feet_m
+        self.faces_killer = faces_killer
 
     def advance(self, moment: Moment, dt_s: float, response_time_s: float) -> None:
         """Nothing to smooth: the view is the player's own."""
@@ -113,9 +126,20 @@ class FirstPersonCamera:
         height = self.eye_above_feet_m if moment.alive[self.player] else self.corpse_eye_above_feet_m
         eye = transform.position_world + np.array([0.0, height, 0.0])
         forward = quat_rotate(transform.rotation_xyzw, np.array([0.0, 0.0, 1.0]))
+        killer = self._killer(moment)
+        if killer is not None:
+            forward = moment.aims_world[killer] - eye
         if math.hypot(forward[0], forward[2]) < 1e-6:  # straight up or down: a level camera needs a heading
             forward = moment.forward_world[self.player]
         return look_along(eye, forward, self.lens.vertical_fov_deg)
+
+    def _killer(self, moment: Moment) -> int | None:
+        """The living killer a dead player's eye looks at (class docstring), None where it looks
+        along the body: alive, no killer known, or the killer dead too."""
+        if not self.faces_killer or moment.alive[self.player] or moment.killers is None:
+            return None
+        killer = int(moment.killers[self.player])
+        return killer if killer >= 0 and moment.alive[killer] else None
 
     def framed(self, time_s: float) -> tuple[int, ...] | None:
         """The player the picture names alone at time_s, s, away from its pair's events; None: all its subjects."""
@@ -128,13 +152,14 @@ def eyes_camera(
     player: int, body_height_m: float, lens: Lens, settings: MatchSettings, pair: PairWindow | None = None
 ) -> FirstPersonCamera:
     """Our director's first-person camera of a player whose body is body_height_m tall: Quake's eye
-    heights scaled to it, the lens's aspect at `eyes_fov_deg`."""
+    heights scaled to it, the lens's aspect at `eyes_fov_deg`, a corpse's eye on its killer."""
     return FirstPersonCamera(
         player,
         Lens(settings.eyes_fov_deg, lens.aspect),
         EYE_HEIGHT_FRACTION * body_height_m,
         CORPSE_EYE_FRACTION * body_height_m,
         pair,
+        faces_killer=True,
     )
 
 

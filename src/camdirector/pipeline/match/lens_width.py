@@ -19,7 +19,10 @@ A player's height on screen is eval-match's (evaluation/match/measure.py): the e
 points on the screen's vertical axis, clipped to the frame, over the frame's height; its points
 here are its outline (SubjectVisibility.outlines_local: the samples and its mesh's lowest and
 highest vertices), since 16 samples fall short of the head and feet (sized by them, 7.7% of
-nav_test's bot match's frames still had a player over 0.6; by the outline, 2.7%).
+nav_test's bot match's frames still had a player over 0.6; by the outline, 2.7%), and its rims
+(visibility.py `_rims`): looked down on from near, a body's width stands on the screen's
+vertical (on the real 2on2 at 29 and 31 Hz, a player 2.9 m below a DUEL's camera was 0.47 of
+the frame by the outline, 0.63-0.645 by eval-match; by the rims too, the lens went wider).
 
 A Toric camera's pose (our director's) whose framed subjects stand small zooms in
 (`zoomed_fov_deg`): the narrowest width down to `MatchSettings.zoom_min_fov_deg` at which every
@@ -83,11 +86,13 @@ def widened_fov_deg(
     zooms = bool(subjects) and settings.zoom_min_fov_deg < lens_deg
     if max_deg <= lens_deg and not zooms:
         return lens_deg
-    points = outline_points(moment, visibility)
+    points = silhouette_points(moment, visibility)
     if looked_through(pose, moment, points).any():
         return lens_deg
     slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
-    base_deg = zoomed_fov_deg(slope_y[list(subjects)], slope_x[list(subjects)], lens, settings) if zooms else lens_deg
+    outline = slice(0, visibility.k + 2)  # the zoom frames the outline (outline_points); the band holds the rims too
+    framed = list(subjects)
+    base_deg = zoomed_fov_deg(slope_y[framed, outline], slope_x[framed, outline], lens, settings) if zooms else lens_deg
     if last_fov_deg is None:
         floor_deg = base_deg
     else:  # narrowed at a pace: back from a widening at narrow_deg_s, on into a zoom at zoom_deg_s
@@ -167,8 +172,14 @@ def _cut_off(
 
 
 def outline_points(moment: Moment, visibility: SubjectVisibility) -> np.ndarray:
-    """(P, S, 3) m every player's outline (SubjectVisibility.outlines_local) at the moment."""
+    """(P, k + 2, 3) m every player's outline (SubjectVisibility.outlines_local) at the moment."""
     return np.stack([moment.transforms[i].apply(visibility.outlines_local[i]) for i in range(len(moment.transforms))])
+
+
+def silhouette_points(moment: Moment, visibility: SubjectVisibility) -> np.ndarray:
+    """(P, S, 3) m every player's outline and rims (SubjectVisibility.silhouettes_local: its
+    outline_points first) at the moment."""
+    return np.stack([moment.transforms[i].apply(visibility.silhouettes_local[i]) for i in range(len(moment.transforms))])
 
 
 def screen_slopes(points_world: np.ndarray, positions_world: np.ndarray, rotations: np.ndarray) -> np.ndarray:

@@ -42,6 +42,9 @@ class Moment:
     forward_world: np.ndarray  # (n, 3) horizontal unit facing (local +Z), metres/metre
     alive: np.ndarray  # (n,) bool
     events: list[GameEvent] = field(default_factory=list)  # applied at this moment
+    # (n,) int64: each dead player's killer (its last KILL event's attacker), -1 where alive, killed by
+    # itself or the world; None: nobody's known (a moment made without a buffer)
+    killers: np.ndarray | None = None
     # its floats packed for pickling, once: a moment never changes once pushed (MomentBuffer.push)
     _floats: bytes | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -65,14 +68,19 @@ class Moment:
             self._floats,
             self.alive.tobytes(),
             self.events,
+            None if self.killers is None else self.killers.astype(np.int64, copy=False).tobytes(),
         )
 
 
-def _moment_of_bytes(frame: int, time_s: float, n: int, floats: bytes, alive: bytes, events: list[GameEvent]) -> Moment:
-    """Moment.__reduce__'s moment again, n players: its arrays are copies (writable, their own)."""
+def _moment_of_bytes(
+    frame: int, time_s: float, n: int, floats: bytes, alive: bytes, events: list[GameEvent], killers: bytes | None = None
+) -> Moment:
+    """Moment.__reduce__'s moment again, n players: its arrays are copies (writable, their own).
+    A snapshot written before 2026-12-06 has no killers: none known."""
     values = np.frombuffer(floats, dtype=np.float64)
     rows, points = values[: n * 10].reshape(n, 10), values[n * 10 :].reshape(3, n, 3)
     moment = _unpacked_moment(frame, time_s, rows, points, np.frombuffer(alive, dtype=bool).copy(), events)
+    moment.killers = None if killers is None else np.frombuffer(killers, dtype=np.int64).copy()
     moment._floats = floats  # packed already: the next snapshot writes these bytes again
     return moment
 
@@ -149,12 +157,14 @@ class MomentBuffer:
             return False
         feet = np.array([t.position_world for t in transforms], dtype=np.float64)
         alive = np.ones(len(transforms), dtype=bool) if last is None else last.alive.copy()
+        killers = np.full(len(transforms), -1, dtype=np.int64) if last is None or last.killers is None else last.killers.copy()
         if last is not None and not alive.all():
             s = self.settings
             teleported = _jumped(feet - last.feet_world, time_s - last.time_s, s)
             # across the ground: a body that falls off a ledge has not walked
             walked_away = np.linalg.norm((feet - self._fell_world)[:, [0, 2]], axis=1) >= s.respawn_walk_m  # NaN: False
             alive |= teleported | walked_away
+            killers[alive] = -1
         for event in sorted(events, key=lambda e: e.time_s):
             position = bisect.bisect_right(self._event_times, event.time_s)
             self._event_times.insert(position, event.time_s)
@@ -167,8 +177,10 @@ class MomentBuffer:
                 victim = self.index[event.other_actor_id]
                 self._fell_world[victim] = feet[victim]
                 alive[victim] = False
+                killers[victim] = -1
                 if event.actor_id in self.index and event.actor_id != event.other_actor_id:
                     self.killed_by[event.other_actor_id] = event.actor_id
+                    killers[victim] = self.index[event.actor_id]
         rotations = np.array([t.rotation_xyzw for t in transforms], dtype=np.float64)
         self.moments.append(
             Moment(
@@ -180,6 +192,7 @@ class MomentBuffer:
                 horizontal_forward(rotations),
                 alive,
                 due,
+                killers,
             )
         )
         self.times.append(time_s)

@@ -44,7 +44,7 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 from camdirector.pipeline.match.in_level import InLevel
-from camdirector.pipeline.match.lens_width import SHOWN_SEEN, looked_through, outline_points, screen_heights, screen_slopes
+from camdirector.pipeline.match.lens_width import SHOWN_SEEN, looked_through, screen_heights, screen_slopes, silhouette_points
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import framed_seen
@@ -75,7 +75,7 @@ def stepped_back(
         return None  # most frames: nobody near enough to ask
     widest_deg = max(settings.widen_max_fov_deg, lens.vertical_fov_deg)
     tan_widest = np.array([math.tan(math.radians(widest_deg) / 2.0)])
-    points = outline_points(moment, visibility)  # (P, S, 3)
+    points = silhouette_points(moment, visibility)  # (P, S, 3)
     if looked_through(pose, moment, points).any():  # a first-person view keeps its player's size
         return None
     rotation = quat_to_matrix(pose.rotation_xyzw)  # (3, 3) camera-to-world, -Z ahead
