@@ -163,6 +163,8 @@ class BodySampler:
         self.match = match
         self.points_local = np.stack([SurfaceSampler(player_mesh(p)).sample(count, rng) for p in match.players])  # (P, S, 3)
         self.aims_local = np.stack([aim_offset(p) for p in match.players])  # (P, 3)
+        self.radius_m = np.array([p.radius_m for p in match.players])  # (P,) each capsule's, for `holding`
+        self.height_m = np.array([p.height_m for p in match.players])  # (P,)
 
     def points_world(self, index: int) -> np.ndarray:
         """(P, S, 3) m: every player's sample points at match frame `index`."""
@@ -174,9 +176,8 @@ class BodySampler:
         of its capsule's axis (player_mesh: from radius to height - radius above its feet)."""
         rotation = quat_to_matrix(self.match.rotations_xyzw[index])  # (P, 3, 3) local-to-world
         local = np.einsum("pji,pj->pi", rotation, point_world - self.match.positions_world[index])  # (P, 3)
-        radius = np.array([p.radius_m for p in self.match.players])
-        height = np.array([p.height_m for p in self.match.players])
-        along = np.clip(local[:, 1], radius, np.maximum(radius, height - radius))
+        radius = self.radius_m
+        along = np.clip(local[:, 1], radius, np.maximum(radius, self.height_m - radius))
         return np.asarray(np.hypot(np.hypot(local[:, 0], local[:, 1] - along), local[:, 2]) < radius)
 
     def aims_world(self, index: int, players: list[int]) -> np.ndarray:
@@ -354,25 +355,28 @@ def jump_cuts(program: Program, bodies: BodySampler, threshold_deg: float = JUMP
 def framed_visibility(program: Program, shown: np.ndarray, column: dict[str, int], eyes_of: np.ndarray) -> float:
     """Mean over the moments that name subjects of their subjects' mean shown fraction, the player
     in whose eyes the camera is counting 1 (module docstring); NaN if none."""
-    values = []
-    for r, subjects in enumerate(program.subjects):
-        if subjects:
-            row = shown[r].copy()
-            if eyes_of[r] >= 0:
-                row[eyes_of[r]] = 1.0
-            values.append(row[[column[p] for p in subjects]].mean())
+    seen = _eyes_seen(shown, eyes_of)
+    values = [seen[r, [column[p] for p in subjects]].mean() for r, subjects in enumerate(program.subjects) if subjects]
     return float(np.mean(values)) if values else float("nan")
 
 
 def program_visibility(program: Program, shown: np.ndarray, column: dict[str, int], eyes_of: np.ndarray) -> float:
     """Mean over every program moment of its program visibility (module docstring); NaN without moments."""
-    values = []
-    for r, subjects in enumerate(program.subjects):
-        row = shown[r].copy()
-        if eyes_of[r] >= 0:
-            row[eyes_of[r]] = 1.0
-        values.append(row[[column[p] for p in subjects]].mean() if subjects else row.max(initial=0.0))
+    seen = _eyes_seen(shown, eyes_of)
+    values = [
+        seen[r, [column[p] for p in subjects]].mean() if subjects else seen[r].max(initial=0.0)
+        for r, subjects in enumerate(program.subjects)
+    ]
     return float(np.mean(values)) if values else float("nan")
+
+
+def _eyes_seen(shown: np.ndarray, eyes_of: np.ndarray) -> np.ndarray:
+    """(n, P) shown (from measure_shown) with the player in whose eyes the camera is (eyes_of (n,),
+    -1 where none) counted 1 at each moment: its view, not its body."""
+    seen = shown.copy()
+    rows = np.flatnonzero(eyes_of >= 0)
+    seen[rows, eyes_of[rows]] = 1.0
+    return seen
 
 
 def shown_heights_per_moment(

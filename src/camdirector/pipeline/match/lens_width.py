@@ -90,7 +90,7 @@ def widened_fov_deg(
     if looked_through(pose, moment, points).any():
         return lens_deg
     slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
-    outline = slice(0, visibility.k + 2)  # the zoom frames the outline (outline_points); the band holds the rims too
+    outline = slice(0, visibility.outline_count)  # the zoom frames the outline (outline_points); the band holds the rims too
     framed = list(subjects)
     base_deg = zoomed_fov_deg(slope_y[framed, outline], slope_x[framed, outline], lens, settings) if zooms else lens_deg
     if last_fov_deg is None:
@@ -173,7 +173,7 @@ def _cut_off(
 
 def outline_points(moment: Moment, visibility: SubjectVisibility) -> np.ndarray:
     """(P, k + 2, 3) m every player's outline (SubjectVisibility.outlines_local) at the moment."""
-    return np.stack([moment.transforms[i].apply(visibility.outlines_local[i]) for i in range(len(moment.transforms))])
+    return silhouette_points(moment, visibility)[:, : visibility.outline_count]
 
 
 def silhouette_points(moment: Moment, visibility: SubjectVisibility) -> np.ndarray:

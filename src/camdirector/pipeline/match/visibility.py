@@ -28,6 +28,7 @@ class SubjectVisibility:
             np.concatenate([samples, m.vertices[[np.argmin(m.vertices[:, 1]), np.argmax(m.vertices[:, 1])]]])
             for samples, m in zip(self.samples_local, player_meshes)
         ]  # (k + 2, 3) each
+        self.outline_count = samples_per_player + 2  # an outline's points, first in its silhouette
         # and its rims (`_rims`): its width, which a camera looking down on it sees on the screen's
         # vertical, for keeping it under the framing band's top (lens_width.py, step_back.py)
         self.silhouettes_local = [np.concatenate([o, _rims(m)]) for o, m in zip(self.outlines_local, player_meshes)]
