@@ -29,6 +29,7 @@ from camdirector.pipeline.match.edit_window import (
     HoldAhead,
     Judges,
     WorkedFrame,
+    _panned_on,
     _turned_toward,
 )
 from camdirector.pipeline.match.first_person import FirstPersonCamera
@@ -724,6 +725,69 @@ def test_a_shot_started_early_at_its_first_place_turns_to_keep_its_subject_where
         assert all(np.array_equal(p.rotation_xyzw, poses[10].rotation_xyzw) for p in poses[:10])
     if case.startswith("running"):
         assert max(turns_deg) == pytest.approx(TURN_DEG_S * DT_S, rel=0.01)  # the yaw at its pace (the pitch turns little)
+
+
+@pytest.mark.parametrize(
+    "case, xs_m, alive",
+    [
+        ("running off to the right", [1.0 + 0.4 * k for k in range(40)], [True] * 40),
+        ("out of the frame at the hold, brought to the centre at the pace", [12.0 + 0.1 * k for k in range(40)], [True] * 40),
+        ("dead from the hold on", [1.0 + 0.4 * k for k in range(40)], [False] * 40),
+    ],
+)
+def test_a_held_pose_pans_after_its_subject_running_out_of_it(case, xs_m, alive):
+    """A hold's last pose (its copy met a wall at the first moment) over the 39 frames after: it
+    stands at its place and turns with no roll, no faster than TURN_DEG_S, to keep its subject
+    where the held pose shows it (inside the frame), else to bring it to the centre; where it
+    frames nobody alive it stays as it was. Held still, the player running off at 12 m/s 10 m
+    away leaves its frame (the test fails there)."""
+    held = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 60.0)  # looking down -z
+    shown = [walking(k, x, a) for k, (x, a) in enumerate(zip(xs_m, alive))]
+    poses = _panned_on(shot((0,), 0.0), shown[1:], held, shown[0])
+    lens = Lens(60.0)
+    rotations = [quat_to_matrix(p.rotation_xyzw) for p in [held, *poses]]
+    assert len(poses) == 39 and all(np.array_equal(p.position_world, held.position_world) for p in poses)
+    assert all(abs(r[1, 0]) < 1e-9 for r in rotations)  # no roll
+    turns_deg = [math.degrees(math.acos(np.clip(a[:, 2] @ b[:, 2], -1.0, 1.0))) for a, b in zip(rotations, rotations[1:])]
+    assert max(turns_deg) <= TURN_DEG_S * DT_S * math.sqrt(2.0) + 1e-6
+    screen = [project_to_screen(p, lens, m.aims_world[:1])[0] for p, m in zip(poses, shown[1:])]
+    if not any(alive):
+        assert all(np.array_equal(p.rotation_xyzw, held.rotation_xyzw) for p in poses)
+        return
+    assert all(np.all(np.abs(xy) <= 1.0) for xy in screen[-10:])  # in the frame at the end
+    assert not np.all(np.abs(project_to_screen(held, lens, shown[-1].aims_world[:1])[0]) <= 1.0)  # held still: out of it
+    if case.startswith("running"):  # kept where the held pose showed it, each frame (its turn within the pace)
+        at_hold = project_to_screen(held, lens, shown[0].aims_world[:1])[0]
+        assert all(xy == pytest.approx(at_hold, abs=1e-6) for xy in screen)
+    else:  # out of the frame at the hold: onto the centre, reached once the paced turn is done
+        assert turns_deg[2:5] == pytest.approx([TURN_DEG_S * DT_S] * 3, rel=0.01)  # the yaw at its pace (the pitch done)
+        assert screen[-1] == pytest.approx((0.0, 0.0), abs=1e-6)
+
+
+def test_a_held_pose_through_the_eyes_stays_as_it_was():
+    """A first-person camera's hold keeps the eye's last pose: the eye is its player's, no camera
+    of ours to turn."""
+    held = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 60.0)
+    eyes = Shot(ShotChoice(("a",), ShotKind.FOLLOW, "test"), (0,), StillEyes(0.0, 1), 0.0)
+    shown = [walking(k, 1.0 + 0.4 * k) for k in range(40)]
+    assert all(p is held for p in _panned_on(eyes, shown[1:], held, shown[0]))
+
+
+def test_a_short_shot_held_on_pans_its_held_pose_after_its_subject():
+    """The hold of test_a_short_shot_held_on_whose_copy_meets_a_wall_holds_its_last_pose, x's
+    player standing off to its side (every player at the origin, x's camera at 10 m along x
+    looking down -z): from the frame its copy met the wall, the held pose turns toward it at
+    TURN_DEG_S, no roll, at the same place (held still, the code before, it does not turn)."""
+    a, x, b = shot((0,), 0.0), moving((1,), 10.0), shot((2,), 20.0)
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2})
+    p.dies = {0.0: 100, 10.0: 135}
+    frames = held_on(p, a, x, b)
+    held = [f.pose for f in frames[134:150]]
+    rotations = [quat_to_matrix(pose.rotation_xyzw) for pose in held]
+    assert all(np.array_equal(pose.position_world, held[0].position_world) for pose in held)
+    turns_deg = [math.degrees(math.acos(np.clip(a[:, 2] @ b[:, 2], -1.0, 1.0))) for a, b in zip(rotations, rotations[1:])]
+    assert all(abs(r[1, 0]) < 1e-9 for r in rotations) and max(turns_deg) <= TURN_DEG_S * DT_S * math.sqrt(2.0) + 1e-6
+    assert turns_deg[2:] == pytest.approx([TURN_DEG_S * DT_S] * 13, rel=0.01)  # the yaw at its pace (the pitch done)
 
 
 def test_a_human_take_is_never_given_away():

@@ -680,7 +680,8 @@ class EditWindow:
         held = steps[-1][1] if steps else started.last_pose if not started.steps else None
         if held is None:  # the copy's first step was worked from a later pose
             return None
-        poses = [pose for _, pose, _ in steps] + [held] * (len(rows) - len(steps))
+        held_moment = side.shown[max(len(steps) - 1, 0)]  # a replay's: the moment its picture shows
+        poses = [pose for _, pose, _ in steps] + _panned_on(side.judged, side.shown[len(steps) :], held, held_moment)
         seen = [s for _, _, s in steps] + _judged_seen(side.shown, poses, side.judged, judges, len(steps))[0]
         judged = _judged_seen(side.shown, poses, side.judged, judges, in_frame=True)[0] if floors.in_frame else seen
         players = {p: i for i, p in enumerate(self.players)}
@@ -1017,22 +1018,53 @@ def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[C
     pose rolls or frames nobody alive at the join. A pose held still looks where its subjects
     will be (on the real 4on4 a shot after started 1.2 s early framed nobody, by eval-match's shown
     share, on 25 of those frames, its subjects seen only by a ray)."""
-    rotation, place = quat_to_matrix(first.rotation_xyzw), first.position_world
-    aim = _aim(shot, shown[-1], place) if shown else None
+    rotation = quat_to_matrix(first.rotation_xyzw)
+    aim = _aim(shot, shown[-1], first.position_world) if shown else None
     if aim is None or abs(rotation[1, 0]) > 1e-9:  # level rotations only (camera.py level_rotation)
         return [first] * len(shown)
-    toward = rotation.T @ aim  # where the first pose shows the subjects' aims, camera space
-    yaw, pitch = level_angles(rotation)
-    limit = math.radians(TURN_DEG_S) * (shown[-1].time_s - shown[0].time_s) / max(len(shown) - 1, 1)
-    poses = [first]
-    for m in reversed(shown[:-1]):
+    # where the first pose shows the subjects' aims, camera space
+    step_s = (shown[-1].time_s - shown[0].time_s) / max(len(shown) - 1, 1)
+    return [*_panned(shot, shown[-2::-1], first, rotation.T @ aim, step_s)[::-1], first]
+
+
+def _panned_on(shot: Shot, shown: list[Moment], held: CameraPose, held_moment: Moment) -> list[CameraPose]:
+    """A hold's last pose (`_hold_verdict`: its copy met a wall or lost its subjects at
+    held_moment) over the moments after it (shown): standing at its place and turning, no roll,
+    onto its framed subjects alive as a camera operator there pans after the players running off,
+    no faster than TURN_DEG_S, keeping them where the held pose shows them when that is inside the
+    frame's height, else bringing them to its centre. Held still through a player's eyes, where
+    the pose rolls, or while it frames nobody alive. On the real 2on2 at 31 Hz, two holds by the
+    kills alone (issue 41's last resort for a shot under 2 s) held a pose still for 25 and 35
+    frames while their player ran out of it: frames of nobody (docs/casting.md, "A held camera pans
+    after its player")."""
+    rotation = quat_to_matrix(held.rotation_xyzw)
+    if isinstance(shot.camera, FirstPersonCamera) or abs(rotation[1, 0]) > 1e-9:
+        return [held] * len(shown)
+    aim = _aim(shot, held_moment, held.position_world)
+    toward = np.array((0.0, 0.0, -1.0)) if aim is None else rotation.T @ aim  # the camera looks down -z
+    if math.degrees(math.acos(max(-1.0, min(1.0, -float(toward[2]))))) > 0.5 * held.vertical_fov_deg:
+        toward = np.array((0.0, 0.0, -1.0))  # out of the frame: onto its centre
+    step_s = (shown[-1].time_s - held_moment.time_s) / len(shown) if shown else 0.0
+    return _panned(shot, shown, held, toward, step_s)
+
+
+def _panned(shot: Shot, moments: list[Moment], start: CameraPose, toward: np.ndarray, step_s: float) -> list[CameraPose]:
+    """The poses over `moments` (in the order turned through, step_s apart, s) of a camera
+    standing at the level start pose's place and turning from it, no roll, to bring its framed
+    subjects' mean aim to the unit camera-space direction `toward` (3,), no faster than
+    TURN_DEG_S, its turn held at a moment where it frames nobody alive."""
+    place = start.position_world
+    yaw, pitch = level_angles(quat_to_matrix(start.rotation_xyzw))
+    limit = math.radians(TURN_DEG_S) * step_s
+    poses = []
+    for m in moments:
         direction = _aim(shot, m, place)
         if direction is not None:
             target_yaw, target_pitch = level_angles(level_rotation(direction, toward))
             yaw += max(-limit, min(limit, math.remainder(target_yaw - yaw, math.tau)))
             pitch += max(-limit, min(limit, target_pitch - pitch))
-        poses.append(CameraPose(place, matrix_to_quat(level_matrix(yaw, pitch)), first.vertical_fov_deg))
-    return poses[::-1]
+        poses.append(CameraPose(place, matrix_to_quat(level_matrix(yaw, pitch)), start.vertical_fov_deg))
+    return poses
 
 
 def _aim(shot: Shot, moment: Moment, place: np.ndarray) -> np.ndarray | None:
