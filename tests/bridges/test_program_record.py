@@ -21,6 +21,7 @@ import pytest
 from camdirector.bridges.program_record import RecordedProgram, program_on_match, read_program
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.evaluation.match.match_file import save_match
+from camdirector.evaluation.match.measure import shot_lengths_s
 from camdirector.matches.import_cli import add_map
 from camdirector.matches.quakeworld_mvd import import_mvd
 from tests.bridges.qtv_source import QtvSource
@@ -120,6 +121,17 @@ def test_a_program_over_reconnects_is_placed_piece_by_piece(match):
     assert placed.shift_s == pytest.approx(STREAM_BEGAN_S, abs=0.5 / match.rate_hz) and placed.align_m < 0.01
 
 
+def test_the_shots_on_air_are_timed_by_the_sessions_clock(match):
+    """The stream clock holds the demo's first sample over the cast's first 4 frames, then plays
+    the match at its pace: the first shot is 60 frames on air (2.0 s), 57 rows of the match
+    (1.9 s); the last shot, cut short by the program's end, is not counted."""
+    row = int(np.rint((min(e.time_s for e in match.events if e.kind == "kill") - match.time_s[0]) * match.rate_hz))
+    moments = [_moment(match, 1 + k, row + max(0, k - 3), cut=k in (60, 150)) for k in range(170)]
+    placed = program_on_match(RecordedProgram({"program_of": "qtv://x:1"}, moments, None), match)
+    assert placed.on_air_lengths_s.tolist() == pytest.approx([2.0, 3.0])
+    assert shot_lengths_s(placed.program).tolist() == pytest.approx([57 / match.rate_hz, 3.0])
+
+
 def test_a_file_that_is_no_program_is_refused(tmp_path):
     bad = tmp_path / "bad.jsonl"
     bad.write_text('{"frame": 1}\n')
@@ -216,3 +228,11 @@ def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, de
         assert 0.0 <= figures[name] <= 1.0, (name, figures[name])
     assert figures["program_moments"] > 100 and figures["compute_ms"]["n"] == figures["program_moments"]
     assert figures["candidates_showing_half"]["offered"] == 0  # candidates are not recorded
+    # the shots on air, timed by the session's clock: as many as on the match's, each the match's at the source's SPEED
+    # within the stream clock's slew (and a frame or two of the cast's grid)
+    on_air, on_match = result["program"]["shots_on_air"], figures["shots"]
+    assert on_air["count"] == on_match["count"] and on_air["under_2s"] == sum(v < 2.0 - 1e-6 for v in on_air["values"])
+    assert all(abs(a - b / SPEED) <= 0.06 * b / SPEED + 0.1 for a, b in zip(on_air["values"], on_match["values"])), (
+        on_air,
+        on_match,
+    )

@@ -24,12 +24,20 @@ match, at which the players' feet its frames carried lie nearest the match's (me
 over ALIGN_MOMENTS moments spread over the piece, each the median over its players). A piece
 whose best shift leaves them more than ALIGN_LIMIT_M apart is left out (counted); a program with
 no piece within it is not of this match. Then each moment goes to the match row of its piece's
-shifted source time, and the program's clock is the match's (shot
-lengths in match seconds); moments beyond the match's ends by more than a row's step are left out
-(counted); two moments on one row (the cast's frames jitter against the file's grid) keep the
+shifted source time, and the program's clock is the match's (shot lengths in match seconds;
+beside them, as they went on air: `on_air_lengths_s`, below); moments beyond the match's ends by
+more than a row's step are left out (counted); two moments on one row (the cast's frames jitter against the file's grid) keep the
 later, cutting if either cut, as eval-match keeps the replies of one moment (and a moment older
 than the one before is left out). The match's kills before the program's first moment were not
 its to show and are left out, as measure.py leaves out those after its last.
+
+The shots as they went on air are timed by the session's clock instead (time_s: the cast's
+monotonic clock on its 1 / rate_hz grid, live_session.py), each placed moment counted. The two
+clocks part where the stream clock plays the match slower to absorb a late segment (up to 5%,
+stream_clock.py's slew), leaps ahead after a catch-up burst, or holds the demo's first sample over
+the first frames (a cast of the 2on2 began with four moments at one demo time: its first shot
+2.03 s on air, 1.93 s of the match). A viewer sees the on-air length; the match's clock is the
+one eval-match's other measures read.
 """
 
 from __future__ import annotations
@@ -164,7 +172,7 @@ class ProgramOnMatch:
     how many moments were left out (with no source time, in a piece not of the match, or beyond
     the match's ends), shift_s (the first placed piece's: the match's time at a source time of 0,
     s), align_m (the largest of the placed pieces' median distances, m, of the players' feet at
-    their shifts) and pieces (placed, of all: module docstring)."""
+    their shifts), the shots' lengths on air and pieces (placed, of all: module docstring)."""
 
     program: Program
     compute_ms: np.ndarray
@@ -172,7 +180,16 @@ class ProgramOnMatch:
     left_out: int
     shift_s: float
     align_m: float
+    on_air_lengths_s: np.ndarray  # (k,) s: the complete shots on the session's clock (`on_air_lengths_s`)
     pieces: tuple[int, int] = (1, 1)
+
+
+def on_air_lengths_s(moments: list[dict[str, Any]]) -> np.ndarray:
+    """(k,) s: the lengths of the complete shots of moments (in the order sent) on the session's
+    clock, from the first moment and each cut to the next cut (module docstring); the last, cut
+    short by the program's end, left out (measure.py shot_lengths_s on the match's clock)."""
+    starts = [m["time_s"] for k, m in enumerate(moments) if k == 0 or m["cut"]]
+    return np.diff(np.array(starts, dtype=np.float64))
 
 
 def pieces(moments: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
@@ -268,5 +285,6 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
         len(recorded.moments) - len(placed),
         fits[0][1],
         max(align_m for _, _, align_m in fits),
+        on_air_lengths_s(placed),
         (len(fits), len(aligned)),
     )

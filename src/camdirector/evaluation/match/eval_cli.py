@@ -21,7 +21,8 @@
         program a live cast received) against the match file imported from the same demo, with
         no server: each moment on the match row of the demo time it shows, the match cut to the
         program's span (bridges/program_record.py), then the same figures as above
-        (evaluate.py's measure_program; the candidates are not recorded, so theirs are empty).
+        (evaluate.py's measure_program; the candidates are not recorded, so theirs are empty),
+        and the shots as they went on air, on the session's clock (program.shots_on_air).
         The delay is the recorded one; --delay, if given, must be it. Exit status: 0 ok, 2 bad
         arguments, match file, program file or level.
 
@@ -165,7 +166,7 @@ def _run_recorded(args: argparse.Namespace) -> int:
     import numpy as np
 
     from camdirector.bridges.program_record import program_on_match, read_program
-    from camdirector.evaluation.match.evaluate import DirectorRun, measure_program
+    from camdirector.evaluation.match.evaluate import DirectorRun, measure_program, shot_figures
     from camdirector.evaluation.match.match_file import load_match
     from camdirector.evaluation.match.measure import Offered
 
@@ -223,6 +224,8 @@ def _run_recorded(args: argparse.Namespace) -> int:
             "pieces": {"placed": placed.pieces[0], "of": placed.pieces[1]},
             "ended": recorded.end is not None,
             "frames_sent": None if recorded.end is None else recorded.end["frames"],
+            # the shots as they went on air, on the session's clock (the director's figures time them on the match's)
+            "shots_on_air": shot_figures(placed.on_air_lengths_s),
         },
         "directors": {director: figures},
     }

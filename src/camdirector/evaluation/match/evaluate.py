@@ -229,11 +229,7 @@ def _figures(
         "kills": coverage.kills,
         "kills_covered": int(coverage.covered.sum()),
         "lead_s": {**_spread(coverage.lead_s), "values": [round(v, 2) for v in coverage.lead_s.tolist()]},
-        "shots": {
-            **_spread(lengths),
-            "under_2s": int((lengths < SHORT_SHOT_S - 1e-6).sum()),
-            "values": [round(v, 2) for v in lengths.tolist()],
-        },
+        "shots": shot_figures(lengths),
         "cuts_per_min": round(cuts_per_minute(program), 2),
         "jump_cuts": jump_cuts(program, bodies),
         "framed_visibility": round(framed_visibility(program, shown, column, eyes), 3),
@@ -288,6 +284,16 @@ def _long_shots_missing_kills(match: MatchRecording, program: Program, coverage)
         if program.time_s[end - 1] - program.time_s[start] > LONG_SHOT_S:
             count += bool(np.any((missed_rows >= start) & (missed_rows < end)))
     return count
+
+
+def shot_figures(lengths_s: np.ndarray) -> dict:
+    """The shots' figures of a program: the spread of their lengths (k,) s, how many are under
+    SHORT_SHOT_S and the lengths, 2 decimals."""
+    return {
+        **_spread(lengths_s),
+        "under_2s": int((lengths_s < SHORT_SHOT_S - 1e-6).sum()),
+        "values": [round(v, 2) for v in lengths_s.tolist()],
+    }
 
 
 def _spread(values: np.ndarray) -> dict:
