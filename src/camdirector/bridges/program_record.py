@@ -26,9 +26,9 @@ whose best shift leaves them more than ALIGN_LIMIT_M apart is left out (counted)
 no piece within it is not of this match. Then each moment goes to the match row of its piece's
 shifted source time, and the program's clock is the match's (shot lengths in match seconds;
 beside them, as they went on air: `on_air_lengths_s`, below); moments beyond the match's ends by
-more than a row's step are left out (counted); two moments on one row (the cast's frames jitter against the file's grid) keep the
-later, cutting if either cut, as eval-match keeps the replies of one moment (and a moment older
-than the one before is left out). The match's kills before the program's first moment were not
+more than a row's step are left out (counted); two moments on one row (the cast's frames jitter
+against the file's grid) keep the later, cutting if either cut, as eval-match keeps the replies
+of one moment (and a moment older than the one before is left out). The match's kills before the program's first moment were not
 its to show and are left out, as measure.py leaves out those after its last.
 
 The shots as they went on air are timed by the session's clock instead (time_s: the cast's

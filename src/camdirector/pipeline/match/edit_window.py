@@ -1031,8 +1031,9 @@ def _panned_on(shot: Shot, shown: list[Moment], held: CameraPose, held_moment: M
     """A hold's last pose (`_hold_verdict`: its copy met a wall or lost its subjects at
     held_moment) over the moments after it (shown): standing at its place and turning, no roll,
     onto its framed subjects alive as a camera operator there pans after the players running off,
-    no faster than TURN_DEG_S, keeping them where the held pose shows them when that is inside the
-    frame's height, else bringing them to its centre. Held still through a player's eyes, where
+    no faster than TURN_DEG_S, keeping them where the held pose shows them when that is within half
+    its vertical field of view of its axis, else bringing them to its centre (an aim behind a wall
+    or out of the frame: the pan brings them into it). Held still through a player's eyes, where
     the pose rolls, or while it frames nobody alive. On the real 2on2 at 31 Hz, two holds by the
     kills alone (issue 41's last resort for a shot under 2 s) held a pose still for 25 and 35
     frames while their player ran out of it: frames of nobody (docs/casting.md, "A held camera pans
@@ -1043,7 +1044,7 @@ def _panned_on(shot: Shot, shown: list[Moment], held: CameraPose, held_moment: M
     aim = _aim(shot, held_moment, held.position_world)
     toward = np.array((0.0, 0.0, -1.0)) if aim is None else rotation.T @ aim  # the camera looks down -z
     if math.degrees(math.acos(max(-1.0, min(1.0, -float(toward[2]))))) > 0.5 * held.vertical_fov_deg:
-        toward = np.array((0.0, 0.0, -1.0))  # out of the frame: onto its centre
+        toward = np.array((0.0, 0.0, -1.0))  # off the frame's middle: onto its centre
     step_s = (shown[-1].time_s - held_moment.time_s) / len(shown) if shown else 0.0
     return _panned(shot, shown, held, toward, step_s)
 
