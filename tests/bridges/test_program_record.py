@@ -228,11 +228,11 @@ def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, de
         assert 0.0 <= figures[name] <= 1.0, (name, figures[name])
     assert figures["program_moments"] > 100 and figures["compute_ms"]["n"] == figures["program_moments"]
     assert figures["candidates_showing_half"]["offered"] == 0  # candidates are not recorded
-    # the shots on air, timed by the session's clock: as many as on the match's, each the match's at the source's SPEED
-    # within the stream clock's slew (and a frame or two of the cast's grid)
-    on_air, on_match = result["program"]["shots_on_air"], figures["shots"]
-    assert on_air["count"] == on_match["count"] and on_air["under_2s"] == sum(v < 2.0 - 1e-6 for v in on_air["values"])
-    assert all(abs(a - b / SPEED) <= 0.06 * b / SPEED + 0.1 for a, b in zip(on_air["values"], on_match["values"])), (
-        on_air,
-        on_match,
-    )
+    # the shots on air, timed by the session's clock: one a cut, at least a frame each, and together
+    # the session's time from the program's first moment to its last cut (the stand-in's SPEED and the stream clock's
+    # catch-ups part them from the match's clock, so no ratio holds between the two)
+    on_air = result["program"]["shots_on_air"]
+    cuts_s = [m["time_s"] for m in recorded.moments[1:] if m["cut"]]
+    assert on_air["count"] == len(cuts_s) and min(on_air["values"]) >= 1.0 / 30.0 - 0.01
+    assert sum(on_air["values"]) == pytest.approx(cuts_s[-1] - recorded.moments[0]["time_s"], abs=0.01 * len(cuts_s))
+    assert on_air["under_2s"] == sum(v < 2.0 - 1e-6 for v in on_air["values"])
