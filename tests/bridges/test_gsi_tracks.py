@@ -5,6 +5,7 @@ GSI allows, and players are stale once payloads stop."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from camdirector.bridges.gsi import GsiPayload, GsiPlayer
 from camdirector.bridges.gsi_tracks import GsiTracks
@@ -102,3 +103,15 @@ def test_the_roster_is_ordered_by_observer_slot_and_a_later_player_joins_the_nex
     spectator = GsiPlayer("s", "ns", "", 9, 100, 0, False, False, 0, 0, None, None)
     tracks.offer(payload(4, player("z", "CT", 2, 0), player("y", "T", 1, 0), spectator), b"4", 2.0)
     assert tracks.counts.unknown == 1 and not tracks.roster_changed.is_set()  # no team, no place: not a player
+
+
+def test_the_first_payload_is_not_sampled_before_it_is_due():
+    tracks = GsiTracks(interp_delay_s=0.1, hold_s=2.0)
+    tracks.offer(payload(1, player("a", "T", 1, 0.0)), b"1", 50.0)
+    early = tracks.sample(50.05)
+    assert not early.started and early.ids == [] and not early.stale
+    tracks.offer(payload(1, player("a", "T", 1, 100.0)), b"2", 50.1)
+    due = tracks.sample(50.1)
+    assert due.started and due.ids == ["p00"]
+    np.testing.assert_allclose(due.positions_world[0], source_points_to_world(np.array([0.0, 0, 0])))
+    assert tracks.sample(50.15).positions_world[0] == pytest.approx(source_points_to_world(np.array([50.0, 0, 0])))

@@ -1,5 +1,6 @@
 """bridges/live_session.py: the driver's progress goes on while the feed is stale (no frame is
-sent then, so no reply comes to carry it), counting the stale ticks."""
+sent then, so no reply comes to carry it), counting the stale ticks; frames lie on the tick grid;
+none goes before the feed's first sample is due, and those ticks are not counted stale."""
 
 from __future__ import annotations
 
@@ -19,19 +20,22 @@ FRESH_SAMPLES = 3  # the feed goes stale after this many samples
 
 
 class _Tracks:
-    """One player, fresh for FRESH_SAMPLES samples, then stale for good."""
+    """One player, not started for `waiting` samples, then fresh for `fresh` samples, then stale
+    for good."""
 
     roster = [quake_player("p00", "runner", 0, "")]
 
-    def __init__(self):
-        self.samples = 0
+    def __init__(self, waiting: int = 0, fresh: int = FRESH_SAMPLES):
+        self.samples, self.fresh = -waiting, fresh
 
     def wait_roster(self, timeout_s: float) -> bool:
         return True
 
     def sample(self, now_s: float) -> Sample:
         self.samples += 1
-        stale = self.samples > FRESH_SAMPLES
+        if self.samples <= 0:
+            return Sample([], np.zeros((0, 3)), np.zeros(0), [], [], False, started=False)
+        stale = self.samples > self.fresh
         return Sample(["p00"], np.zeros((1, 3)), np.zeros(1), [], [], stale)
 
 
@@ -54,6 +58,19 @@ class _Client:
         yield _Session()
 
 
+def _drive(tracks: _Tracks, stop: threading.Event, rate_hz: float, **kwargs):
+    """drive_session of the tracks into the answering client until `stop` (or 20 s: a driver
+    that never reports would hang the test); its counts."""
+    guard = threading.Timer(20.0, stop.set)
+    guard.start()
+    try:
+        return drive_session(
+            _Client(), tracks, rate_hz=rate_hz, delay_s=1.0, level="any", director="planned", stop=stop, **kwargs
+        )
+    finally:
+        guard.cancel()
+
+
 def test_progress_goes_on_while_the_feed_is_stale():
     stop = threading.Event()
     seen: list[tuple[int, int]] = []  # (frames, stale ticks) at each progress
@@ -63,22 +80,7 @@ def test_progress_goes_on_while_the_feed_is_stale():
         if counts.stale >= 5:
             stop.set()
 
-    guard = threading.Timer(20.0, stop.set)  # a driver that never reports would hang the test
-    guard.start()
-    try:
-        counts = drive_session(
-            _Client(),
-            _Tracks(),
-            rate_hz=100.0,
-            delay_s=1.0,
-            level="any",
-            director="planned",
-            stop=stop,
-            on_progress=on_progress,
-            progress_s=0.0,
-        )
-    finally:
-        guard.cancel()
+    counts = _drive(_Tracks(), stop, 100.0, on_progress=on_progress, progress_s=0.0)
     assert counts.frames == FRESH_SAMPLES
     assert seen[-1] == (FRESH_SAMPLES, 5)
 
@@ -98,12 +100,26 @@ def test_frames_lie_on_the_tick_grid_in_game_time_however_late_the_driver_wakes(
         if frame == 20:
             stop.set()
 
-    tracks = _Tracks()
-    tracks.samples = -1000  # fresh throughout
-    drive_session(
-        _Client(), tracks, rate_hz=30.0, delay_s=1.0, level="any", director="planned", stop=stop, clock=clock, on_frame=on_frame
-    )
+    _drive(_Tracks(fresh=1000), stop, 30.0, clock=clock, on_frame=on_frame)
     ticks = np.array(sent) * 30.0
     assert ticks == pytest.approx(np.round(ticks), abs=1e-6)  # every frame on the 1/30 s grid
     assert np.all(np.diff(np.round(ticks)) >= 1)
     assert np.round(ticks).max() > len(sent)  # the ticks missed while stalled were skipped
+
+
+def test_no_frame_goes_before_the_feeds_first_sample_is_due():
+    stop = threading.Event()
+    sent: list[float] = []
+
+    def on_frame(frame: int, game_s: float, sample) -> None:
+        sent.append(game_s)
+        assert sample.started and sample.ids == ["p00"]
+
+    def on_progress(counts) -> None:
+        if counts.stale >= 2:
+            stop.set()
+
+    counts = _drive(_Tracks(waiting=4), stop, 30.0, on_frame=on_frame, on_progress=on_progress, progress_s=0.0)
+    assert counts.frames == len(sent) == FRESH_SAMPLES
+    assert counts.stale >= 2  # the stale ticks after the fresh ones, and only those
+    assert sent[0] * 30.0 >= 4 - 1e-6  # the four ticks before it sent nothing

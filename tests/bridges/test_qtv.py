@@ -134,6 +134,19 @@ def test_late_and_bunched_segments_leave_the_frames_evenly_spaced_in_demo_time()
     assert np.array([s.positions_world[0] for s in samples]) == pytest.approx(expected, abs=1e-6)
 
 
+def test_the_frames_begin_where_the_first_sample_is_due_not_holding_it_over_the_playout_delay():
+    frames_s = np.arange(0.0, 2.0, 0.013)
+    segments = [(float(t) + 5.0, _update(np.array([t]))) for t in frames_s]  # the first arrives at local 5.0
+    samples = _drive(segments, np.arange(5.0, 6.5, 1.0 / 30.0))
+    waiting = [s for s in samples if not s.started]
+    assert len(waiting) == 5  # the ticks before 5.0 + 0.15
+    assert all(s.ids == [] and s.events == [] and not s.stale for s in waiting)
+    assert all(s.started for s in samples[len(waiting) :])  # once due, for good
+    shown_s = np.array([s.source_time_s for s in samples[len(waiting) :]])
+    assert 0.0 < shown_s[0] < 1.0 / 30.0
+    assert np.diff(shown_s) == pytest.approx(np.full(len(shown_s) - 1, 1.0 / 30.0), abs=1e-6)  # no demo time held twice
+
+
 def test_a_death_goes_out_with_the_frame_that_shows_its_moment():
     frames_s = np.arange(0.0, 3.0, 0.013)
     death_s = float(frames_s[150])

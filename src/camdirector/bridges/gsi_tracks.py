@@ -11,7 +11,9 @@ Sampling at time t: each player's position and yaw are interpolated between the 
 payloads that carried it, at t - interp_delay_s (entity interpolation: the frame shows the players
 one payload period in the past, so that a payload lies on each side); beyond the newest, the
 newest is held (no extrapolation: a player that stopped is not carried on). Without any payload
-for hold_s, the sample says stale.
+for hold_s, the sample says stale. Before the roster's payload is due (interp_delay_s after it came)
+the sample says not started: the frames begin where the players begin to move, not holding the
+first payload over the delay.
 
 The roster is the first payload's players on T or CT, ordered by observer slot (then Steam id):
 ids p00, p01, ... A player on T or CT with a position first seen later (one connecting in the
@@ -65,7 +67,9 @@ class Sample:
     Source yaw; stats: (id, health, armor, items, frags) of the players whose values changed since
     the last sample; events since the last sample; stale: no payload for hold_s; source_time_s:
     the feed's own clock at the moment sampled, s, where it has one (QTV: the stream's demo time
-    the players were sampled at; program_record.py places a program on the match by it)."""
+    the players were sampled at; program_record.py places a program on the match by it); started:
+    False before the feed's first sample is due (the playout delay after it came): nothing moves
+    yet, so the driver sends no frame (live_session.py), and none of the rest is taken."""
 
     ids: list[str]
     positions_world: np.ndarray
@@ -74,6 +78,7 @@ class Sample:
     events: list[DerivedEvent]
     stale: bool
     source_time_s: float | None = None
+    started: bool = True
 
 
 @dataclass
@@ -111,6 +116,7 @@ class GsiTracks:
     _recent: deque[bytes] = field(default_factory=lambda: deque(maxlen=RECENT_BODIES))
     _newest_stamp_s: int = -1
     _last_accept_s: float = float("-inf")
+    _first_s: float = float("inf")  # arrival of the roster's payload (the first sampled), monotonic s
     _t: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (n, 2) s: older, newer sample
     _p: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))  # (n, 2, 3) m
     _yaw: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (n, 2) deg
@@ -149,6 +155,7 @@ class GsiTracks:
         if not placed:
             return
         self.roster = [self._track(p, arrival_s) for p in placed]
+        self._first_s = arrival_s
         self._has_roster.set()
 
     def _take(self, payload: GsiPayload, arrival_s: float) -> None:
@@ -211,6 +218,9 @@ class GsiTracks:
         the last sample go with it, once."""
         with self._lock:
             at_s = now_s - self.interp_delay_s
+            stale = now_s - self._last_accept_s > self.hold_s
+            if at_s < self._first_s:  # the first payload's own moment not yet due
+                return Sample([], np.zeros((0, 3)), np.zeros(0), [], [], stale, started=False)
             span = self._t[:, 1] - self._t[:, 0]
             alpha = np.clip((at_s - self._t[:, 0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
             alpha = np.where(span > 0, alpha, 1.0)
@@ -229,6 +239,5 @@ class GsiTracks:
             in_session = {m.id for m in self.roster}
             events = [e for e in self._events if e.names_only(in_session)]  # a joiner's wait out, as he does
             self._events = []
-            stale = now_s - self._last_accept_s > self.hold_s
             n = len(self.roster)
             return Sample([m.id for m in self.roster], positions[:n], yaw[:n], stats, events, stale)

@@ -10,10 +10,12 @@ at its own time on the 1 / rate_hz grid however late its thread woke (a busy mac
 frames lie whole periods apart in game time as in the feed's time; a thread that woke late sends
 its tick, then the latest tick since at once, skipping any between. While the feed is stale no
 frame is sent (the program holds) and the tick is counted; frames go on when it comes back, game
-time going on from the clock, in the same session. When `end` is set (a feed whose roster changed)
-the stream ends and the session closes, and the feed (not stopped) can drive the next one:
-drive_sessions opens the next at once with the feed's new roster (a session's players are fixed
-when it opens), as long as the feed's roster changes.
+time going on from the clock, in the same session. Nor is one sent before the feed's first sample
+is due (the sample says not started), nor counted: the first frame's game time is then the delay
+that took. When `end` is set (a feed whose roster changed) the stream ends and the session closes,
+and the feed (not stopped) can drive the next one: drive_sessions opens the next at once with the
+feed's new roster (a session's players are fixed when it opens), as long as the feed's roster
+changes.
 """
 
 from __future__ import annotations
@@ -157,6 +159,8 @@ def drive_session(
                 sample = tracks.sample(now_s)
                 if sample.stale:
                     counts.stale += 1
+                    continue
+                if not sample.started:  # the feed's first sample not yet due: nothing moves to show
                     continue
                 counts.frames += 1
                 counts.kills += sum(e.kind == "kill" for e in sample.events)

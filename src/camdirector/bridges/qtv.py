@@ -18,13 +18,14 @@ bytes arrived: stream_clock.py maps demo time onto the local clock by the least 
 recent arrivals, rising slowly (a jitter buffer), so a segment that comes late or several that
 come bunched keep the players' motion at the pace the server recorded it; a catch-up burst
 brings the mapping down to its newest block at once (the burst lands in the past), and each new
-connection, whose demo time starts anew, re-anchors it. Each sample is placed at its demo time's local time;
-the players are sampled at t - interp_delay_s (the playout delay: a late segment's margin),
-interpolated between the samples around it except into a jump (teleport, respawn: mvd_wire's;
-a new connection's first sample),
-held beyond the newest; stale after hold_s without any arrival. Each sample also says the
-stream's demo time it shows (the samples' demo times interpolated the same way, held at the
-ends): a recorded program (program_record.py) is placed on the match file of the same demo by it.
+connection, whose demo time starts anew, re-anchors it. Each sample is placed at its demo time's
+local time; the players are sampled at t - interp_delay_s (the playout delay: a late segment's
+margin), interpolated between the samples around it except into a jump (teleport, respawn:
+mvd_wire's; a new connection's first sample), held beyond the newest; stale after hold_s without
+any arrival; not started before the first sample of all (the frames begin with the players'
+motion, not holding it over the playout delay). Each sample also says the stream's demo time it
+shows (the samples' demo times interpolated the same way, held at the ends): a recorded program
+(program_record.py) is placed on the match file of the same demo by it.
 Stat changes and obituaries are placed by their demo time the same way and go out with the first
 frame that shows their moment.
 The roster is the first update's players (slot order: ids p00, p01, ..., the demo importer's;
@@ -259,6 +260,7 @@ class QtvTracks:
         self._last_offer_s = -math.inf
         # (local t, demo time s, first of its stream) of the newest samples
         self._demo_clock: deque = deque(maxlen=RECENT_SAMPLES)
+        self._first_due_s = math.inf  # local t of the first sample of all (a new connection's come later), s
         self._stream_start: set[int] = set()  # slots whose next sample is their first of a new connection's stream
         self.kills: list[tuple[str, str]] = []  # (attacker, victim) ids of every kill event, in order
         self.roster_changed = threading.Event()  # a slot joined or was renamed: reopen() gives the next roster
@@ -298,6 +300,8 @@ class QtvTracks:
                     first = slot in self._stream_start
                     self._stream_start.discard(slot)
                     player.rows.append((t, *feet[k], float(track.angles_deg[k, 1]), bool(track.jump[k]) or first))
+                    if not self._demo_clock:
+                        self._first_due_s = t
                     if not self._demo_clock or t > self._demo_clock[-1][0]:
                         self._demo_clock.append((t, float(track.time_s[k]), -1 in self._stream_start))
                         self._stream_start.discard(-1)
@@ -377,6 +381,8 @@ class QtvTracks:
         with self._lock:
             stale = now_s - self._last_offer_s > self.hold_s
             at = now_s - self.interp_delay_s
+            if not self._demo_clock or at < self._first_due_s:  # the stream's first sample not yet due
+                return Sample([], np.zeros((0, 3)), np.zeros(0), [], [], stale, started=False)
             in_session = {p.id for p in self.roster}  # a joiner's samples, stats and events wait out (module docstring)
             ids, positions, yaws = [], [], []
             for slot, player in self._players.items():
