@@ -138,6 +138,10 @@ def test_a_first_person_view_keeps_the_lens():
     eye = moment.feet_world[0] + [0.0, 1.6, 0.0]
     in_eyes = look_along(eye, moment.feet_world[1] + [0.0, 1.6, 0.0] - eye, Lens().vertical_fov_deg)
     assert _widened(rig, moment, in_eyes) == Lens().vertical_fov_deg
+    # a camera that passes through the head from a widened lens narrows back at its pace, not in one frame
+    assert _widened(rig, moment, in_eyes, last_fov_deg=71.0, dt_s=0.1) == pytest.approx(71.0 - 0.1 * SETTINGS.narrow_deg_s)
+    assert _widened(rig, moment, in_eyes, last_fov_deg=52.0, dt_s=0.1) == Lens().vertical_fov_deg
+    assert _widened(rig, moment, in_eyes, last_fov_deg=45.0, dt_s=0.1) == Lens().vertical_fov_deg  # out of a zoom at once
     near = eye + [0.0, -0.6, 1.5]
     beside = look_along(near, moment.feet_world[0] + [0.0, 1.0, 0.0] - near, Lens().vertical_fov_deg)
     assert _widened(rig, moment, beside) > Lens().vertical_fov_deg  # the same player 1.5 m off, looked at, is sized

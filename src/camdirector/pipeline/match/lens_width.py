@@ -11,7 +11,9 @@ player shown) stands taller than `MatchSettings.shown_height_max` of the frame's
 one-degree grid. Going back to the lens's is a zoom at `MatchSettings.narrow_deg_s`, never
 faster, so a camera that comes and goes near a wall does not pump; a cut starts at what it
 needs. A camera in a player's eyes (HLTV's and the autotrack's first-person views) keeps the
-lens: a first-person view is the game's own picture (eval-match leaves it out of its heights).
+lens: a first-person view is the game's own picture (eval-match leaves it out of its heights); a
+camera that comes into one from a widened lens (a Toric camera passing through a player's head)
+goes back to it at the same pace.
 The pose the program answers is checked again at the moment its picture shows, widened only
 (program_camera.py `widened_for_answer`): a pose made for another moment, as the edit window's
 held first pose of a shot, was sized for that one.
@@ -88,7 +90,11 @@ def widened_fov_deg(
         return lens_deg
     points = silhouette_points(moment, visibility)
     if looked_through(pose, moment, points).any():
-        return lens_deg
+        if last_fov_deg is None or last_fov_deg <= lens_deg:
+            return lens_deg
+        # a camera passing through a player's head from a widened lens (a Toric camera's) narrows at its pace, not in a
+        # frame: a FOLLOW's lens went 71 -> 50 -> 62 degrees over three frames in a cast of the 2on2
+        return float(min(max(lens_deg, last_fov_deg - settings.narrow_deg_s * dt_s), max_deg))
     slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
     outline = slice(0, visibility.outline_count)  # the zoom frames the outline (outline_points); the band holds the rims too
     framed = list(subjects)
