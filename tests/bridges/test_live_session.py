@@ -34,7 +34,7 @@ class _Tracks:
     def sample(self, now_s: float) -> Sample:
         self.samples += 1
         if self.samples <= 0:
-            return Sample([], np.zeros((0, 3)), np.zeros(0), [], [], False, started=False)
+            return Sample.not_started(False)
         stale = self.samples > self.fresh
         return Sample(["p00"], np.zeros((1, 3)), np.zeros(1), [], [], stale)
 

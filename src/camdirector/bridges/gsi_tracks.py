@@ -80,6 +80,11 @@ class Sample:
     source_time_s: float | None = None
     started: bool = True
 
+    @classmethod
+    def not_started(cls, stale: bool) -> Sample:
+        """A sample before the feed's first is due: no players, nothing else taken."""
+        return cls([], np.zeros((0, 3)), np.zeros(0), [], [], stale, started=False)
+
 
 @dataclass
 class OfferCounts:
@@ -220,7 +225,7 @@ class GsiTracks:
             at_s = now_s - self.interp_delay_s
             stale = now_s - self._last_accept_s > self.hold_s
             if at_s < self._first_s:  # the first payload's own moment not yet due
-                return Sample([], np.zeros((0, 3)), np.zeros(0), [], [], stale, started=False)
+                return Sample.not_started(stale)
             span = self._t[:, 1] - self._t[:, 0]
             alpha = np.clip((at_s - self._t[:, 0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
             alpha = np.where(span > 0, alpha, 1.0)

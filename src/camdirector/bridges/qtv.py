@@ -381,8 +381,8 @@ class QtvTracks:
         with self._lock:
             stale = now_s - self._last_offer_s > self.hold_s
             at = now_s - self.interp_delay_s
-            if not self._demo_clock or at < self._first_due_s:  # the stream's first sample not yet due
-                return Sample([], np.zeros((0, 3)), np.zeros(0), [], [], stale, started=False)
+            if at < self._first_due_s:  # the stream's first sample not yet due (inf before any)
+                return Sample.not_started(stale)
             in_session = {p.id for p in self.roster}  # a joiner's samples, stats and events wait out (module docstring)
             ids, positions, yaws = [], [], []
             for slot, player in self._players.items():

@@ -90,21 +90,14 @@ def widened_fov_deg(
         return lens_deg
     points = silhouette_points(moment, visibility)
     if looked_through(pose, moment, points).any():
-        if last_fov_deg is None or last_fov_deg <= lens_deg:
-            return lens_deg
-        # a camera passing through a player's head from a widened lens (a Toric camera's) narrows at its pace, not in a
-        # frame: a FOLLOW's lens went 71 -> 50 -> 62 degrees over three frames in a cast of the 2on2
-        return float(min(max(lens_deg, last_fov_deg - settings.narrow_deg_s * dt_s), max_deg))
+        # the lens, reached at its pace from a widened one (a Toric camera passing through a player's head: a FOLLOW's
+        # lens went 71 -> 50 -> 62 degrees over three frames in a cast of the 2on2)
+        return _paced_deg(lens_deg, lens_deg, max_deg, last_fov_deg, dt_s, settings)
     slope_y, slope_x = screen_slopes(points, pose.position_world[None], quat_to_matrix(pose.rotation_xyzw)[None])[:, 0]
     outline = slice(0, visibility.outline_count)  # the zoom frames the outline (outline_points); the band holds the rims too
     framed = list(subjects)
     base_deg = zoomed_fov_deg(slope_y[framed, outline], slope_x[framed, outline], lens, settings) if zooms else lens_deg
-    if last_fov_deg is None:
-        floor_deg = base_deg
-    else:  # narrowed at a pace: back from a widening at narrow_deg_s, on into a zoom at zoom_deg_s
-        rate_deg_s = settings.zoom_deg_s if base_deg < lens_deg and last_fov_deg <= lens_deg else settings.narrow_deg_s
-        floor_deg = max(base_deg, last_fov_deg - rate_deg_s * dt_s)
-    floor_deg = min(floor_deg, max_deg)
+    floor_deg = _paced_deg(base_deg, lens_deg, max_deg, last_fov_deg, dt_s, settings)
     if max_deg <= lens_deg:  # settings that never widen
         return float(floor_deg)
     # most frames show nobody too tall at the floor's width: the grid of widths only for those who are
@@ -126,6 +119,18 @@ def widened_fov_deg(
         if (fits & enough).any():  # the band first: a subject too close to fit stays cut off
             fits &= enough
     return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
+
+
+def _paced_deg(
+    base_deg: float, lens_deg: float, max_deg: float, last_fov_deg: float | None, dt_s: float, settings: MatchSettings
+) -> float:
+    """The narrowest width a frame may have on its way to base_deg (the lens's or its zoom's), deg,
+    at most max_deg: base_deg on a cut (last_fov_deg None), else narrowed from the last frame's at a
+    pace, back from a widening at narrow_deg_s, on into a zoom at zoom_deg_s."""
+    if last_fov_deg is None:
+        return float(min(base_deg, max_deg))
+    rate_deg_s = settings.zoom_deg_s if base_deg < lens_deg and last_fov_deg <= lens_deg else settings.narrow_deg_s
+    return float(min(max(base_deg, last_fov_deg - rate_deg_s * dt_s), max_deg))
 
 
 def zoomed_fov_deg(slope_y: np.ndarray, slope_x: np.ndarray, lens: Lens, settings: MatchSettings) -> float:
