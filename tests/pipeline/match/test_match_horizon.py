@@ -103,3 +103,27 @@ def test_the_search_ray_casts_only_the_points_inside_each_frame_and_judges_as_ca
     assert 0.0 < expected.mean() < 1.0 and (~every).any()  # some points are hidden by walls, some outside
     np.testing.assert_array_equal(judged, expected)
     assert rays == int((inside & above[:, None, None]).sum()) < inside.size
+
+
+@pytest.mark.parametrize("kind", [ShotKind.DUEL, ShotKind.FOLLOW])
+def test_a_place_that_rides_under_its_players_ground_is_raised_to_the_searchs_lowest_camera(kind):
+    # the search never chooses a place under the ground; a place chosen beside a pair rides under
+    # it once the pair's axis tilts (b 2.5 m up a stair): the pose stands MIN_CAMERA_HEIGHT_M over
+    # the lower feet, straight above the torus's point, and still frames what it frames
+    camera = ToricCamera(
+        kind, 0, None if kind == ShotKind.FOLLOW else 1, Style(rig=Rig.MATCH), LENS, Place(0.5, math.radians(125.0))
+    )
+    level = moment_of([(0.0, 0.0), (0.0, 8.0)])
+    raw = camera.positions(level, [camera.place])[0]
+    assert raw[1] < MIN_CAMERA_HEIGHT_M  # so the test can fail: phi past 90 degrees is below the axis
+    pose = camera.pose(level)
+    np.testing.assert_array_equal(pose.position_world, [raw[0], MIN_CAMERA_HEIGHT_M, raw[2]])
+    framed = level.aims_world[[0] if kind == ShotKind.FOLLOW else [0, 1]]
+    assert np.all(np.abs(project_to_screen(pose, LENS, framed)) <= 1.0)
+    high = ToricCamera(
+        kind, 0, None if kind == ShotKind.FOLLOW else 1, Style(rig=Rig.MATCH), LENS, Place(0.5, math.radians(70.0))
+    )
+    np.testing.assert_array_equal(high.pose(level).position_world, high.positions(level, [high.place])[0])
+    if kind == ShotKind.DUEL:  # the lower of the pair's feet is the ground
+        tilted = moment_of([(0.0, 0.0), (0.0, 8.0)], [-1.0, 1.5])
+        assert camera.pose(tilted).position_world[1] >= -1.0 + MIN_CAMERA_HEIGHT_M - 1e-12

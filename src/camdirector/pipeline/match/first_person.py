@@ -289,7 +289,11 @@ def _path_meets_a_wall(toric: ToricCamera, moments: Sequence[Moment], visibility
     """Whether the Toric camera's place, carried by its players over the moments (in time order
     once sorted), passes through level geometry between two of them."""
     ordered = sorted({m.time_s: m for m in moments}.values(), key=lambda m: m.time_s)
-    path = [p[0] for p in (toric.positions(m, [toric.place_at(m.time_s)]) for m in ordered) if p is not None]
+    path = []
+    for moment in ordered:
+        centres = toric.positions(moment, [toric.place_at(moment.time_s)])
+        if centres is not None:
+            path.append(toric.above_ground(moment, centres[0]))  # where the pose stands (shots.py)
     return len(path) > 1 and bool(visibility.ray_scene.occluded(np.array(path[:-1]), np.array(path[1:])).any())
 
 

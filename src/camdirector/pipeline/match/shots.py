@@ -294,7 +294,23 @@ class ToricCamera:
         if self.stand_world is not None:
             return self.pose_from(moment, self.stand_world, place.width)
         positions = self.positions(moment, [place])
-        return None if positions is None else self.pose_from(moment, positions[0], place.width)
+        return None if positions is None else self.pose_from(moment, self.above_ground(moment, positions[0]), place.width)
+
+    def above_ground(self, moment: Moment, position_world: np.ndarray) -> np.ndarray:
+        """The camera centre (3,) raised straight up to MIN_CAMERA_HEIGHT_M above the lowest feet of
+        the players it frames at the moment where its place rides lower. The search never chooses a
+        place under the ground (`seen_in_frame`), but a place rides with its players: a pair's
+        axis that tilts after the cut (one player jumping or on a stair) carries a phi past 90
+        degrees under the floor, where the pull in front of a wall then stopped the camera at
+        the floor itself (the cast 2on2's replay of its first kill: 0.13 m over the floor, 2 m
+        from the killer, who stood 0.82 of the frame's height at 82 degrees)."""
+        framed = self.framed(moment.time_s)
+        if framed is None:
+            framed = (self.a_index,) if self.b_index is None else (self.a_index, self.b_index)
+        ground_m = float(moment.feet_world[list(framed), 1].min()) + MIN_CAMERA_HEIGHT_M
+        if position_world[1] >= ground_m:
+            return position_world
+        return np.array([position_world[0], ground_m, position_world[2]])
 
     def place_at(self, time_s: float) -> Place:
         """The place the picture is taken from at time_s, s: the camera's own, or, where its pair
