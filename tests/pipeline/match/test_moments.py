@@ -118,7 +118,7 @@ def test_the_program_shows_each_moment_once_delay_seconds_late(rate_hz, delay_s)
 
 
 def test_the_buffer_holds_the_delay_and_little_more_and_a_moment_pickles_back_exactly():
-    """Moments more than replay_past_s before the program's are dropped within COMPACT_AFTER frames
+    """Moments more than kept_past_s before the program's are dropped within COMPACT_AFTER frames
     (a session's snapshot pickles the buffer: kept up to 4096 of them, a snapshot of the 4on4 grew
     to 9 MB), those within it are kept for replays; a moment pickled (its floats as bytes,
     packed once: Moment.__reduce__) comes back bit for bit, float64, also from a snapshot of the
@@ -134,10 +134,10 @@ def test_the_buffer_holds_the_delay_and_little_more_and_a_moment_pickles_back_ex
         buffer.push(f, f / rate_hz, poses, [p.position_world + 1.0 for p in poses], events)
         buffer.program_moment(f / rate_hz - delay_s)
         held.append(len(buffer.moments))
-    assert COMPACT_AFTER <= 64 and max(held) <= (delay_s + settings.replay_past_s) * rate_hz + 1 + COMPACT_AFTER + 1
+    assert COMPACT_AFTER <= 64 and max(held) <= (delay_s + settings.kept_past_s) * rate_hz + 1 + COMPACT_AFTER + 1
     program_s = buffer.program_moment((2999 / rate_hz) - delay_s).time_s
-    assert buffer.oldest_s <= program_s - settings.replay_past_s  # the past a replay shows is kept
-    assert buffer.at(program_s - settings.replay_past_s).time_s <= program_s - settings.replay_past_s + 1e-9
+    assert buffer.oldest_s <= program_s - settings.kept_past_s  # the past a replay shows is kept
+    assert buffer.at(program_s - settings.kept_past_s).time_s <= program_s - settings.kept_past_s + 1e-9
     for moment in (buffer.newest, buffer.at(2990 / rate_hz)):
         data = pickle.dumps(moment)
         back = pickle.loads(data)

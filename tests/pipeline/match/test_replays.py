@@ -407,3 +407,37 @@ def test_a_replay_fills_the_room_before_the_next_beat_where_a_live_shot_there_wo
     capped = replays.replay(event, 2.0, room_s=usual + 1.5, oldest_s=oldest)
     assert abs(capped.from_s - oldest) < 1e-9 and capped.until_s == KILL_S + settings.replay_post_s
     assert replays.replay(event, 2.0, room_s=1.0).length_s == 2.0
+
+
+def test_a_late_replay_filling_its_room_shows_a_new_moment_every_frame():
+    """A replay decided 3.5 s after its kill, with room before the next beat that a 2.5 s replay
+    would leave under min_shot_s, fills it with build-up, but from no earlier than the past the
+    buffer keeps for its whole time on air (replay_past_s before its start): the buffer's oldest
+    moment runs up to COMPACT_AFTER frames older and is dropped as the program goes on, and a
+    replay from it showed the oldest kept moment still, a step every 32 frames (casts of the
+    2on2: 97-160 such frames)."""
+    settings = MatchSettings(replay_after_s=3.5, first_person=False)
+    match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S), kill("a1", "b1", KILL_S + 9.5)], delay_s=10.0)
+    shown = replays(BareRig(match, settings).run(KILL_S + 9.5 + 12.0))
+    assert [r[0].match.shot.replay.kill_time_s for r in shown] == [KILL_S]
+    replay = shown[0]
+    filled = replay[0].match.shot.replay
+    assert filled.length_s > settings.replay_length_s  # the room filled (so the test can fail)
+    assert filled.from_s >= replay[0].time_s - settings.replay_past_s - 1e-9
+    replayed = np.array([s.match.replay_of.time_s for s in replay])
+    assert np.all(np.diff(replayed) > 0)
+
+
+def test_a_replay_the_edit_window_starts_early_shows_the_moments_before_its_first():
+    """The edit window gives a short live shot's frames to the replay after it, started early
+    (edit_window.py): the replay shows the moments before its first there, one new each frame,
+    as the window judged it (the code before held its first moment still: a frozen picture)."""
+    settings = MatchSettings(replay_after_s=2.5, first_person=False)
+    match = Match(TEAMS, two_fronts, [kill("a2", "b2", KILL_S), kill("a1", "b1", KILL_S + 8.0)], delay_s=10.0)
+    shown = replays(BareRig(match, settings).run(KILL_S + 8.0 + 12.0))
+    early = [r for r in shown if "edit_window_started_early" in r[0].flags]
+    assert early  # so the test can fail: the window started one early
+    for replay in early:
+        replayed = np.array([s.match.replay_of.time_s for s in replay])
+        assert replayed[0] < replay[0].match.shot.replay.from_s - 0.5
+        assert np.all(np.diff(replayed) > 0)

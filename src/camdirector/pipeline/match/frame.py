@@ -41,9 +41,11 @@ class Replay:
         return self.until_s - self.from_s
 
     def replayed_s(self, shot_start_s: float, time_s: float) -> float:
-        """The game time shown at program time time_s of a replay on air since shot_start_s, s (on
-        past until_s, not frozen, should the cut back come a frame or two late: a plan applied late)."""
-        return self.from_s + max(0.0, time_s - shot_start_s)
+        """The game time shown at program time time_s of a replay on air since shot_start_s, s: on
+        past until_s, not frozen, should the cut back come a frame or two late (a plan applied
+        late), and before from_s where the edit window starts the replay early (edit_window.py:
+        its first moment held still there froze the picture for up to 0.8 s in casts of the 2on2)."""
+        return self.from_s + (time_s - shot_start_s)
 
 
 @dataclass(frozen=True)

@@ -128,8 +128,9 @@ def _jumped(step_world: np.ndarray, dt_s: float | np.ndarray, settings: MatchSet
 
 
 class MomentBuffer:
-    """The moments from `replay_past_s` before the program's moment (what a replay shows again,
-    replays.py) to the newest frame, and the match's events."""
+    """The moments from `kept_past_s` before the program's moment (what a replay shows again,
+    replays.py, and a replay the edit window starts early before it) to the newest frame, and the
+    match's events."""
 
     def __init__(self, player_ids: list[str], settings: MatchSettings):
         self.player_ids = player_ids
@@ -224,10 +225,10 @@ class MomentBuffer:
         elif i + 1 < len(self.times) and self.times[i + 1] - time_s < time_s - self.times[i]:
             i += 1
         self._start = i
-        # compact now and then, not every frame: moments more than replay_past_s before the
+        # compact now and then, not every frame: moments more than kept_past_s before the
         # program's are never read again, but a session's snapshot pickles what the buffer holds
         # (at 4096, up to 9 MB that took 1.5 s every 60 frames) and the garbage collector walks it
-        gone = bisect.bisect_left(self.times, self.times[i] - self.settings.replay_past_s, hi=i)
+        gone = bisect.bisect_left(self.times, self.times[i] - self.settings.kept_past_s, hi=i)
         if gone > COMPACT_AFTER:
             del self.moments[:gone], self.times[:gone]
             self._start -= gone

@@ -7,7 +7,7 @@ has no more room; longer before it, filling the room, where the live shot it wou
 the next beat is under `min_shot_s`: on the real 2on2 such a shot was 2.3 s, and the beat's own
 cut waited for it to be `min_shot_s` old), at the program's pace, while the program's own time goes on: the rig
 steps its camera and measures its visibility at the replayed moment (rig.py), and the buffer keeps
-`replay_past_s` of past for it (moments.py). Its camera is the killer's eyes (the kill cam of
+`kept_past_s` of past for it (moments.py). Its camera is the killer's eyes (the kill cam of
 games' own replays: first_person.py) where they show the victim at the kill and its next frame
 (readable, chest in frame, `eyes_seen` of it seen) and stand past `jump_cut_deg` from the live
 camera (a kill shown live through those eyes is replayed from elsewhere): an eye never meets a
@@ -154,7 +154,13 @@ class Replays:
         first person; None when no such place sees both (module docstring)."""
         pair = self.pair(kill)
         assert pair is not None  # a replay is of a kill of one player by another
-        replay = self._after_jumps(self.replay(kill, self.builder.style.min_shot_s, room_s, buffer.oldest_s), pair, buffer)
+        # from no earlier than replay_past_s before its start: the buffer drops what is older than
+        # kept_past_s before the program's moment as the program goes on (oldest_s runs up to
+        # COMPACT_AFTER frames older), and keeps the edit window's length more for a replay it
+        # starts early; a replay reaching into the dropped moments showed the oldest kept one still,
+        # a step every 32 frames
+        oldest_s = max(buffer.oldest_s, start_s - self.settings.replay_past_s)
+        replay = self._after_jumps(self.replay(kill, self.builder.style.min_shot_s, room_s, oldest_s), pair, buffer)
         placed = self._placed_for(kill, pair, replay, buffer, live_world, eyes)
         if placed is None:
             return None

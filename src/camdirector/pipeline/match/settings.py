@@ -272,8 +272,15 @@ class MatchSettings:
 
     @property
     def replay_past_s(self) -> float:
-        """How much past, before the program's moment, the buffer keeps for replays, s."""
+        """How far before its start a replay may reach back, s."""
         return self.replay_within_s + self.replay_pre_s
+
+    @property
+    def kept_past_s(self) -> float:
+        """How much past, before the moment the rig works (the edit window's head), the buffer
+        keeps, s: a replay's reach, and the edit window's length more for a replay the window
+        starts early, which shows the moments before its first (edit_window.py)."""
+        return self.replay_past_s + self.edit_window_s
 
 
 def _check_positive_finite(settings: MatchSettings | HltvSettings, positive: tuple[str, ...]) -> None:
