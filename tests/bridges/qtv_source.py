@@ -11,8 +11,13 @@ It reads the client's request up to its blank line; the first line must be "QTV"
 "VERSION: 1" line must be there (else "PERROR: Incompatible version"), then answers "QTVSV 1" with
 "BEGIN" and sends the demo: on each connection first its opening blocks (up to the first
 svc_playerinfo frame: serverdata, lists, baselines, userinfo, as a server sends its state to a new
-stream), then the blocks from where the match is now on the source's own clock (the match goes on
-while no one watches), each when its time comes, `speed` times faster than recorded. Knobs:
+stream), then, as mvdsv's SV_MVD_SendInitialGamestate does for a stream that joins a match under
+way, every player's whole state as the match has it now (svc_playerinfo with each origin and
+angle, and its frags, in a dem_all block; its stats in dem_stats blocks: a demo's playerinfo sends
+only what changed, so a client that joined after a player's last change of height would never
+learn it; the frags as parse_mvd reads them, the rest from the blocks' own bytes),
+then the blocks from where the match is now on the source's own clock (the match goes on while no
+one watches), each when its time comes, `speed` times faster than recorded. Knobs:
 refuse (answer this PERROR line instead), drop_after_s (close the connection this long into the
 first one, mid-block), garbage_after_s (send bytes that are no MVD this long into the first one,
 then close), password (ask for it as mvdsv's qtv_password does, SV_MVD_RunPendingConnections:
@@ -29,10 +34,20 @@ import struct
 import threading
 import time
 
-from camdirector.bridges.qtv_auth import answer
+import numpy as np
 
-DEM_MULTIPLE, DEM_SET, DEM_ALL = 3, 2, 6
-SVC_PLAYERINFO = 42
+from camdirector.bridges.qtv_auth import answer
+from camdirector.matches.mvd_wire import parse_mvd
+
+DEM_MULTIPLE, DEM_SET, DEM_STATS, DEM_ALL = 3, 2, 5, 6
+SVC_UPDATESTAT, SVC_SERVERDATA, SVC_UPDATEFRAGS, SVC_UPDATESTATLONG, SVC_PLAYERINFO = 3, 11, 14, 38, 42
+DF_ORIGIN, DF_ANGLES, DF_EFFECTS, DF_SKINNUM = 1, 1 << 3, 1 << 6, 1 << 7
+DF_DEAD, DF_GIB, DF_WEAPONFRAME, DF_MODEL = 1 << 8, 1 << 9, 1 << 10, 1 << 11
+FULL_FLAGS = 0x3F | DF_EFFECTS | DF_SKINNUM | DF_WEAPONFRAME | DF_MODEL  # mvdsv's initial gamestate's
+FTE_PROTOCOL_EXTENSION, FTE_PEXT_FLOATCOORDS = 0x58455446, 0x00008000
+EXTENSIONS = (FTE_PROTOCOL_EXTENSION, 0x32455446, 0x3144564D)  # FTEX, FTE2, MVD1
+# a playerinfo's one-byte fields after its angles, in the order mvdsv writes them
+PLAYER_BYTES = (("model", DF_MODEL), ("skin", DF_SKINNUM), ("effects", DF_EFFECTS), ("weaponframe", DF_WEAPONFRAME))
 
 
 def demo_blocks(data: bytes) -> list[tuple[float, bytes]]:
@@ -50,6 +65,62 @@ def demo_blocks(data: bytes) -> list[tuple[float, bytes]]:
             pos += 4 + struct.unpack_from("<I", data, pos)[0]
         blocks.append((t_ms / 1000.0, data[start:pos]))
     return blocks
+
+
+def coord_bytes(first_block: bytes) -> int:
+    """A coordinate's size on the wire, 2 or 4 (FTE_PEXT_FLOATCOORDS), from the demo's first
+    block, whose first message is svc_serverdata: its extension pairs (a magic long, a bits long:
+    FTEX, FTE2, MVD1) come before the protocol version (ezQuake's CL_ParseServerData)."""
+    assert first_block[6] == SVC_SERVERDATA, "an MVD begins with svc_serverdata"
+    at, size = 7, 2
+    while True:
+        word, bits = struct.unpack_from("<II", first_block, at)
+        if word not in EXTENSIONS:
+            return size
+        if word == FTE_PROTOCOL_EXTENSION and bits & FTE_PEXT_FLOATCOORDS:
+            size = 4
+        at += 8
+
+
+def playerinfos(block: bytes, coord_size: int) -> list[tuple[int, int, dict[str, bytes]]]:
+    """The svc_playerinfo messages a frame block starts with (mvdsv's SV_MVDWritePackets writes a
+    frame's players first), as (slot, flags, the raw bytes of each field present)."""
+    out, at = [], 6
+    while at < len(block) and block[at] == SVC_PLAYERINFO:
+        slot, flags = block[at + 1], block[at + 2] | block[at + 3] << 8
+        fields = {"frame": block[at + 4 : at + 5]}
+        at += 5
+        for i in range(3):
+            if flags & (DF_ORIGIN << i):
+                fields[f"origin{i}"], at = block[at : at + coord_size], at + coord_size
+        for i in range(3):
+            if flags & (DF_ANGLES << i):
+                fields[f"angle{i}"], at = block[at : at + 2], at + 2
+        for name, bit in PLAYER_BYTES:
+            if flags & bit:
+                fields[name], at = block[at : at + 1], at + 1
+        out.append((slot, flags, fields))
+    return out
+
+
+def stat_updates(block: bytes) -> list[tuple[int, int]]:
+    """(stat, value) of a dem_stats block's svc_updatestat / svc_updatestatlong messages."""
+    out, at = [], 6
+    while at < len(block):
+        if block[at] == SVC_UPDATESTAT:
+            out.append((block[at + 1], block[at + 2]))
+            at += 3
+        elif block[at] == SVC_UPDATESTATLONG:
+            out.append((block[at + 1], struct.unpack_from("<i", block, at + 2)[0]))
+            at += 6
+        else:
+            break
+    return out
+
+
+def _block(kind: int, payload: bytes, to: int = 0) -> bytes:
+    """One demo block at the time of the one before (mvdsv's SV_WriteRecordMVDMessage)."""
+    return bytes([0, kind | to << 3]) + struct.pack("<I", len(payload)) + payload
 
 
 def _is_frame(block: bytes) -> bool:
@@ -75,6 +146,9 @@ class QtvSource:
         blocks = demo_blocks(demo)
         first_frame = next(k for k, (_, b) in enumerate(blocks) if _is_frame(b))
         self.opening = b"".join(b for _, b in blocks[:first_frame])
+        self._opening_blocks = [b for _, b in blocks[:first_frame]]
+        self.coord_size = coord_bytes(blocks[0][1])
+        self._stats = parse_mvd(demo).stats  # the frags a join is told (svc_updatefrags)
         self.frames = [(t, b) for t, b in blocks[first_frame:] if t <= end_s]
         self.speed, self.refuse = speed, refuse
         self.drop_after_s, self.garbage_after_s = drop_after_s, garbage_after_s
@@ -164,10 +238,50 @@ class QtvSource:
             return "QTVSV 1\nPERROR: You need to provide a password.\n\n"
         return None if given == answer(method, self.challenge, self.password) else "QTVSV 1\nPERROR: Bad password.\n\n"
 
+    def state_at(self, k: int) -> bytes:
+        """Every player's whole state after the first k blocks of the match (module docstring):
+        a dem_all block of svc_playerinfo with every field (FULL_FLAGS, and DF_DEAD / DF_GIB as
+        last sent) and svc_updatefrags, then a dem_stats block per player of its stats as last sent."""
+        fields: dict[int, dict[str, bytes]] = {}
+        flags: dict[int, int] = {}
+        stats: dict[int, dict[int, int]] = {}
+        for block in self._opening_blocks + [b for _, b in self.frames[:k]]:
+            if _is_frame(block):
+                for slot, sent, present in playerinfos(block, self.coord_size):
+                    fields.setdefault(slot, {}).update(present)
+                    flags[slot] = sent
+            elif block[1] & 7 == DEM_STATS:
+                stats.setdefault(block[1] >> 3, {}).update(stat_updates(block))
+        order = ["frame", *(f"origin{i}" for i in range(3)), *(f"angle{i}" for i in range(3)), *(n for n, _ in PLAYER_BYTES)]
+        size = {"origin": self.coord_size, "angle": 2}
+        zero = {name: bytes(size.get(name.rstrip("012"), 1)) for name in order}  # a field never sent: 0
+        players = b""
+        for slot in sorted(fields):
+            known = zero | fields[slot]
+            players += bytes([SVC_PLAYERINFO, slot]) + struct.pack("<H", FULL_FLAGS | flags[slot] & (DF_DEAD | DF_GIB))
+            players += b"".join(known[name] for name in order)
+        now_s = self.frames[k - 1][0] if k else 0.0
+        for slot in sorted(fields):
+            if slot in self._stats:
+                stats_of = self._stats[slot]
+                frags = int(stats_of.values[max(int(np.searchsorted(stats_of.time_s, now_s, side="right")) - 1, 0), 3])
+                players += bytes([SVC_UPDATEFRAGS, slot]) + struct.pack("<h", frags)
+        out = _block(DEM_ALL, players) if players else b""
+        for slot in sorted(stats):
+            updates = b"".join(
+                bytes([SVC_UPDATESTAT, stat, value])
+                if 0 <= value <= 255
+                else bytes([SVC_UPDATESTATLONG, stat]) + struct.pack("<i", value)
+                for stat, value in sorted(stats[slot].items())
+            )
+            out += _block(DEM_STATS, updates, slot)
+        return out
+
     def _stream(self, conn: socket.socket, first: bool) -> None:
         opened_s = time.monotonic()
         now_demo_s = (opened_s - self._start_s) * self.speed
         k = next((k for k, (t, _) in enumerate(self.frames) if t >= now_demo_s), len(self.frames))
+        conn.sendall(self.state_at(k))
         while k < len(self.frames) and not self._stop.is_set():
             t, block = self.frames[k]
             wait_s = self._start_s + t / self.speed - time.monotonic()

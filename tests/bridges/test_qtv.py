@@ -29,8 +29,8 @@ from camdirector.bridges.qtv_auth import answer, md4
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.geometry import quake_frame
 from camdirector.matches.import_cli import add_map
-from camdirector.matches.mvd_wire import MvdDeath, MvdPlayer, MvdStats, MvdTrack, MvdUpdate
-from tests.bridges.qtv_source import QtvSource
+from camdirector.matches.mvd_wire import MvdDeath, MvdPlayer, MvdStats, MvdTrack, MvdUpdate, parse_mvd
+from tests.bridges.qtv_source import SVC_PLAYERINFO, QtvSource
 
 DATA = Path(__file__).parents[1] / "data"
 DEMO = DATA / "real_matches" / "2on2_sf_vs_red_frobodm2_220104-0915.mvd.gz"
@@ -158,6 +158,35 @@ def test_a_death_goes_out_with_the_frame_that_shows_its_moment():
     assert samples[sent].stats == [("p00", 0, 0, 0, -1)]
     assert samples[sent - 1].source_time_s < death_s <= samples[sent].source_time_s
     assert sum(len(s.events) for s in samples) == 1
+
+
+@pytest.mark.parametrize("k", [1, 777, 3000, 9000])
+def test_the_stand_in_tells_a_stream_that_joins_late_every_players_whole_state(demo, k):
+    """As mvdsv's SV_MVD_SendInitialGamestate does: a join after k blocks reads, from the opening
+    and the state alone, every player where the whole stream up to there leaves it (origin, angles,
+    dead, stats and frags; a demo's playerinfo sends only what changed)."""
+    source = QtvSource(demo, end_s=200.0)
+    whole = parse_mvd(source.opening + b"".join(block for _, block in source.frames[:k]))
+    joined = parse_mvd(source.opening + source.state_at(k))
+    assert [p.slot for p in joined.players] == [p.slot for p in whole.players] and len(whole.players) == 4
+    for player in whole.players:
+        track, told = whole.tracks[player.slot], joined.tracks[player.slot]
+        np.testing.assert_array_equal(told.origin_units[-1], track.origin_units[-1])
+        np.testing.assert_array_equal(told.angles_deg[-1, :2], track.angles_deg[-1, :2])  # mvdsv sends no roll
+        assert told.dead[-1] == track.dead[-1]
+        np.testing.assert_array_equal(joined.stats[player.slot].values[-1], whole.stats[player.slot].values[-1])
+    # so the test can fail: a join told nothing misplaces a player in its first frame (a coordinate it never sends)
+    first = next(j for j in range(k, len(source.frames)) if source.frames[j][1][6] == SVC_PLAYERINFO)
+    after = b"".join(block for _, block in source.frames[k : first + 1])
+    truth = parse_mvd(source.opening + b"".join(block for _, block in source.frames[: first + 1])).tracks
+
+    def where(demo: bytes) -> list[bool]:  # per player: its origin in the first frame after the join is the truth's
+        tracks = parse_mvd(demo).tracks
+        return [np.array_equal(tracks[p.slot].origin_units[-1], truth[p.slot].origin_units[-1]) for p in whole.players]
+
+    assert all(where(source.opening + source.state_at(k) + after))
+    if k > 1:
+        assert not all(where(source.opening + after))
 
 
 def test_request_is_the_clients():
