@@ -37,15 +37,30 @@ import time
 import numpy as np
 
 from camdirector.bridges.qtv_auth import answer
-from camdirector.matches.mvd_wire import parse_mvd
+from camdirector.matches.mvd_wire import (
+    DEM_ALL,
+    DEM_MULTIPLE,
+    DEM_SET,
+    DEM_STATS,
+    DF_ANGLES,
+    DF_DEAD,
+    DF_EFFECTS,
+    DF_GIB,
+    DF_MODEL,
+    DF_ORIGIN,
+    DF_SKINNUM,
+    DF_WEAPONFRAME,
+    FTE_PEXT_FLOATCOORDS,
+    PROTOCOL_VERSION_FTE,
+    PROTOCOL_VERSION_FTE2,
+    PROTOCOL_VERSION_MVD1,
+    SVC_SERVERDATA,
+    parse_mvd,
+)
 
-DEM_MULTIPLE, DEM_SET, DEM_STATS, DEM_ALL = 3, 2, 5, 6
-SVC_UPDATESTAT, SVC_SERVERDATA, SVC_UPDATEFRAGS, SVC_UPDATESTATLONG, SVC_PLAYERINFO = 3, 11, 14, 38, 42
-DF_ORIGIN, DF_ANGLES, DF_EFFECTS, DF_SKINNUM = 1, 1 << 3, 1 << 6, 1 << 7
-DF_DEAD, DF_GIB, DF_WEAPONFRAME, DF_MODEL = 1 << 8, 1 << 9, 1 << 10, 1 << 11
+SVC_UPDATESTAT, SVC_UPDATEFRAGS, SVC_UPDATESTATLONG, SVC_PLAYERINFO = 3, 14, 38, 42
 FULL_FLAGS = 0x3F | DF_EFFECTS | DF_SKINNUM | DF_WEAPONFRAME | DF_MODEL  # mvdsv's initial gamestate's
-FTE_PROTOCOL_EXTENSION, FTE_PEXT_FLOATCOORDS = 0x58455446, 0x00008000
-EXTENSIONS = (FTE_PROTOCOL_EXTENSION, 0x32455446, 0x3144564D)  # FTEX, FTE2, MVD1
+EXTENSIONS = (PROTOCOL_VERSION_FTE, PROTOCOL_VERSION_FTE2, PROTOCOL_VERSION_MVD1)
 # a playerinfo's one-byte fields after its angles, in the order mvdsv writes them
 PLAYER_BYTES = (("model", DF_MODEL), ("skin", DF_SKINNUM), ("effects", DF_EFFECTS), ("weaponframe", DF_WEAPONFRAME))
 
@@ -77,7 +92,7 @@ def coord_bytes(first_block: bytes) -> int:
         word, bits = struct.unpack_from("<II", first_block, at)
         if word not in EXTENSIONS:
             return size
-        if word == FTE_PROTOCOL_EXTENSION and bits & FTE_PEXT_FLOATCOORDS:
+        if word == PROTOCOL_VERSION_FTE and bits & FTE_PEXT_FLOATCOORDS:
             size = 4
         at += 8
 
@@ -145,8 +160,8 @@ class QtvSource:
     ):
         blocks = demo_blocks(demo)
         first_frame = next(k for k, (_, b) in enumerate(blocks) if _is_frame(b))
-        self.opening = b"".join(b for _, b in blocks[:first_frame])
         self._opening_blocks = [b for _, b in blocks[:first_frame]]
+        self.opening = b"".join(self._opening_blocks)
         self.coord_size = coord_bytes(blocks[0][1])
         self._stats = parse_mvd(demo).stats  # the frags a join is told (svc_updatefrags)
         self.frames = [(t, b) for t, b in blocks[first_frame:] if t <= end_s]
