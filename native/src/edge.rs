@@ -44,6 +44,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, UnixStream};
 use tokio::sync::{mpsc, oneshot};
 
+use crate::idle_resets::IdleResetsDropped;
 use crate::{wire, zmq_edge};
 
 pub const STREAM_FRAMES: &str = "/camdirector.v1.Director/StreamFrames";
@@ -1123,11 +1124,38 @@ where
     // A fixed window, not an adaptive one: h2 allows a connection's unread small DATA frames an
     // overhead of half its window (data_frame_budget), and a client streaming small frames ahead
     // of their answers (as grpc's do) tripped an adaptive window's first 64 KiB.
-    let _ = hyper::server::conn::http2::Builder::new(TokioExecutor::new())
+    let served = hyper::server::conn::http2::Builder::new(TokioExecutor::new())
         .initial_connection_window_size(CONNECTION_WINDOW_BYTES)
         .initial_stream_window_size(STREAM_WINDOW_BYTES)
-        .serve_connection(TokioIo::new(stream), service)
+        .serve_connection(TokioIo::new(IdleResetsDropped::new(stream)), service)
         .await;
+    // A client that hangs up is routine; any other end (an HTTP/2 protocol error, h2's limits on
+    // reset streams) sent the client a GOAWAY, and the server's log is the one place that says why.
+    match served {
+        Err(error) if !hung_up(&error) => {
+            eprintln!("camdirector gRPC edge: a client's connection ended on an error: {error:?}")
+        }
+        _ => {}
+    }
+}
+
+/// Whether a connection's error is its client hanging up (closed, reset, cut mid-message).
+fn hung_up(error: &hyper::Error) -> bool {
+    use std::io::ErrorKind::{BrokenPipe, ConnectionAborted, ConnectionReset, UnexpectedEof};
+    if error.is_closed() || error.is_incomplete_message() || error.is_canceled() {
+        return true;
+    }
+    let mut source = std::error::Error::source(error);
+    while let Some(cause) = source {
+        if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+            return matches!(
+                io.kind(),
+                BrokenPipe | ConnectionAborted | ConnectionReset | UnexpectedEof
+            );
+        }
+        source = cause.source();
+    }
+    false
 }
 
 /// Accepts gRPC connections until the edge stops, each served in its own task.

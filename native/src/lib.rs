@@ -14,6 +14,7 @@ mod deoccluder_py;
 mod edge;
 mod edge_py;
 mod framing;
+mod idle_resets;
 mod log_append_py;
 mod maps;
 mod maps_py;

@@ -6,6 +6,7 @@ while a routed session's frames never reach the front's Python (camdirector_edge
 from __future__ import annotations
 
 import re
+import socket
 import ssl
 import threading
 import time
@@ -144,6 +145,38 @@ def test_unary_calls_health_and_reflection_pass_through_the_edge(servers):
     client.call("CloseSession", pb.CloseSessionRequest(session_id=session_id))
     client.close()
     channel.close()
+
+
+def _h2_frame(kind: int, stream: int, payload: bytes = b"", flags: int = 0) -> bytes:
+    """One HTTP/2 frame: length (24 bits), type, flags, stream id, payload (RFC 9113 section 4.1)."""
+    return len(payload).to_bytes(3, "big") + bytes((kind, flags)) + stream.to_bytes(4, "big") + payload
+
+
+@pytest.mark.parametrize("front", FRONTS)
+def test_a_reset_of_a_stream_the_client_never_opened_leaves_its_connection_up(servers, front):
+    # gRPC's C core resets a call cancelled before its HEADERS went out (grpc/grpc 38758): h2 took
+    # that for a protocol error and sent GOAWAY, failing the C++ SDK's CloseSession on the same
+    # connection; grpc.aio ignores it, and the edge must too. The reset arrives split mid-header.
+    host, port = servers[front].grpc.rsplit(":", 1)
+    ping = b"camdir42"
+    with socket.create_connection((host, int(port)), timeout=10) as conn:
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        reset = _h2_frame(0x3, 3, (0x8).to_bytes(4, "big"))  # RST_STREAM CANCEL on idle stream 3
+        conn.sendall(b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + _h2_frame(0x4, 0) + reset[:5])
+        time.sleep(0.1)
+        conn.sendall(reset[5:] + _h2_frame(0x6, 0, ping))
+        received, frames = b"", []
+        while not any((kind == 0x6 and flags & 1) or kind == 0x7 for kind, flags, _ in frames):  # a PING's ACK, or GOAWAY
+            chunk = conn.recv(65536)
+            assert chunk, f"the {front} front closed the connection after {frames}"
+            received += chunk
+            while len(received) >= 9 and len(received) >= 9 + int.from_bytes(received[:3], "big"):
+                length = int.from_bytes(received[:3], "big")
+                frames.append((received[3], received[4], received[9 : 9 + length]))
+                received = received[9 + length :]
+    goaway = [payload for kind, _, payload in frames if kind == 0x7]
+    assert not goaway, f"GOAWAY, error code {int.from_bytes(goaway[0][4:8], 'big')}"
+    assert (0x6, 1, ping) in frames  # the PING sent after the reset answered on the same connection
 
 
 @pytest.mark.parametrize("front", FRONTS)

@@ -21,8 +21,9 @@ def test_the_c_interface_says_the_servers_protocol(sdk_bin):
 def test_sessions_say_the_protocol_and_a_newer_claim_is_refused(sdk_bin, tmp_path):
     with ServerProcess("--workers", "1", "--data-dir", str(tmp_path), transports=("grpc",)) as server:
         report = run_json(sdk_bin / "sdk_check", "protocol", server.grpc)
+        log = server.log_tail()  # an edge that ended the client's connection says why there
     assert report["protocol"] == report["header_protocol"] == PROTOCOL, report
-    assert report["recorded_close"] == "OK", report["recorded_close_error"]  # the whole report's repr is cut short
+    assert report["recorded_close"] == "OK", (report["recorded_close_error"], log)  # the whole report's repr is cut short
     recording = tmp_path / "recordings" / f"{report['recorded_session_id']}.cdrec"
     create = next(read_entries(recording)).create
     assert create.client_protocol == PROTOCOL
@@ -32,4 +33,4 @@ def test_sessions_say_the_protocol_and_a_newer_claim_is_refused(sdk_bin, tmp_pat
         f"CreateSession on {server.grpc}: this client speaks camdirector protocol {PROTOCOL + 1}, this server "
         f"(camdirector {VERSION}) protocol {PROTOCOL}: upgrade the server, or use a client of release {VERSION}"
     ), report
-    assert report["reopened"] and report["close"] == "OK", report
+    assert report["reopened"] and report["close"] == "OK", (report, log)
