@@ -2,7 +2,8 @@
 (program_camera.py `_seen_again`, issue 41: frames of nobody outside overviews): a hold before a
 wall that hides the subject gives way to the move it held (the rig cuts through the wall), and a
 camera moved inside the level so close that its subject leaves the frame is re-placed by a cut, at
-most once every `seen_again_gap_s`."""
+most once every `seen_again_gap_s`, and the new place, moved inside the level in its turn, is
+stepped back from a player too near for the widest lens as any pose is."""
 
 from __future__ import annotations
 
@@ -18,11 +19,13 @@ from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.look_along import look_along
-from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST, ProgramCamera
+from camdirector.pipeline.match import program_camera
+from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, STEPPED_BACK, SUBJECTS_LOST, ProgramCamera
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, framed_seen
 from tests.pipeline.match.test_framing_band import rig_of
+from tests.pipeline.match.test_step_back import _height_at_widest, _room
 
 PLACE = Place(0.1, math.radians(45.0), 1.0)  # a's FOLLOW place 2.4 m off, 1.2 m over its chest, on -x
 DT_S = 1.0 / 30.0
@@ -134,3 +137,29 @@ def test_a_copy_of_the_camera_that_may_not_be_re_placed_is_flagged_as_losing_its
     assert flags[0] == "moved_inside_level" and SUBJECTS_LOST in flags and CUT_TO_SEEN_PLACE not in flags
     assert camera.seen_again_s is None and camera.place == camera.goal == PLACE  # not re-placed
     assert _shows_a(rig, moment, pose) < MatchSettings().candidate_seen
+
+
+def test_a_re_placed_pose_moved_inside_near_its_player_is_stepped_back(monkeypatch):
+    # a cast's re-placement cut stood 0.74 m from p01's chest at 90 degrees (p01 the whole frame's
+    # height) for one frame, stepped back the next: the new place, moved inside the level, skipped
+    # the step back every other pose takes
+    feet = rig_of().rig.buffer.moments[-1].feet_world[0]
+    room = _room(feet + [-1.1, 0.0, -20.0], feet + [20.0, 8.0, 20.0])  # its -x wall 1.1 m behind a's back
+    block = box((0.3, 0.3, 0.3))  # hides a from where the camera's own place is moved inside
+    level = TriMesh(
+        np.concatenate([room.vertices, block.vertices + [-0.45, 1.7, 0.4]]),
+        np.concatenate([room.faces, block.faces + len(room.vertices)]).astype(np.int32),
+    )
+    rig = rig_of([level])
+    moment, camera, shot = _follow_of_a(rig)
+    r = rig.rig
+    in_level = InLevel(LevelInterior(room), np.zeros((0, 3)), MatchSettings().pull_margin_m)
+    program = ProgramCamera(r.settings, r.visibility, r.ray_scene, r.lens, in_level, r.builder.grammar, lambda time_s: None)
+    beyond_the_wall = Place(0.1, math.radians(150.0), 1.0)  # low behind a, outside: moved inside 1.2 m from its chest
+    # the place search isolated: it answers that place (its own choice depends on the whole level)
+    monkeypatch.setattr(program_camera, "best_place", lambda *args, **kwargs: (beyond_the_wall, 1.0))
+    pose, flags = program.step(moment, 0.0, camera, shot, 0.5, None)
+    assert flags[:2] == ["moved_inside_level", CUT_TO_SEEN_PLACE] and camera.place == beyond_the_wall
+    assert STEPPED_BACK in flags  # before: 1.23 m from a's chest, a 0.66 of the frame's height at the widest lens
+    assert _height_at_widest(rig, moment, pose) <= MatchSettings().shown_height_max
+    assert in_level.inside(pose.position_world)

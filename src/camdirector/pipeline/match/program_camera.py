@@ -152,6 +152,8 @@ class ProgramCamera:
             placed, seen_again = self._seen_again(moment, pose, unheld, camera, shot, anchor, last_pose, re_place)
             if seen_again is not None:
                 flags.append(seen_again)
+            if seen_again == CUT_TO_SEEN_PLACE:  # moved inside the level toward its player, as any pose: maybe too near
+                placed = self._stepped_back(moment, placed, camera, shot, flags)
             if seen_again in (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT):
                 pose = self._widened(moment, placed, subjects, None, dt_s)  # a cut starts at what it needs
         if pose.vertical_fov_deg > self.lens.vertical_fov_deg:
