@@ -684,6 +684,11 @@ def test_a_short_shot_holds_on_by_its_kills_alone_before_a_neighbour_by_them_tha
         assert all(f.shot is b and STARTED_EARLY in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[90:120])
 
 
+def open_field(from_world: np.ndarray, to_world: np.ndarray) -> bool:
+    """No level between any two points: every player in sight."""
+    return False
+
+
 def walking(k: int, x_m: float, alive: bool = True) -> Moment:
     """moment(k) with player 0's aim at (x_m, 1, -10): ahead of a camera at the origin looking down -z."""
     m = moment(k)
@@ -743,7 +748,7 @@ def test_a_held_pose_pans_after_its_subject_running_out_of_it(case, xs_m, alive)
     away leaves its frame (the test fails there)."""
     held = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 60.0)  # looking down -z
     shown = [walking(k, x, a) for k, (x, a) in enumerate(zip(xs_m, alive))]
-    poses = _panned_on(shot((0,), 0.0), shown[1:], held, shown[0])
+    poses = _panned_on(shot((0,), 0.0), shown[1:], held, shown[0], open_field)
     lens = Lens(60.0)
     rotations = [quat_to_matrix(p.rotation_xyzw) for p in [held, *poses]]
     assert len(poses) == 39 and all(np.array_equal(p.position_world, held.position_world) for p in poses)
@@ -764,13 +769,45 @@ def test_a_held_pose_pans_after_its_subject_running_out_of_it(case, xs_m, alive)
         assert screen[-1] == pytest.approx((0.0, 0.0), abs=1e-6)
 
 
+def test_a_held_pose_whose_subject_runs_behind_a_wall_pans_onto_a_player_in_sight():
+    """The hold of test_a_held_pose_pans_after_its_subject_running_out_of_it, its player running
+    off to the right behind a wall (every segment from the place to its aim point meets the level)
+    while b stands in sight ahead on the left: the held pose turns onto b, the nearest player in
+    sight, at the same pace (toward its player, the code before, it shows nobody: a wall). With b
+    behind the wall too, it turns after its own player as before."""
+    held = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 60.0)  # looking down -z
+    shown = [walking(k, 1.0 + 0.4 * k) for k in range(40)]
+    far_c = (30.0, 1.0, -12.0)  # c in sight too, but farther than b
+    for m in shown:
+        m.aims_world[1], m.aims_world[2] = (-12.0, 1.0, -8.0), far_c
+
+    def behind_wall(*players: int):
+        def crossed(from_world: np.ndarray, to_world: np.ndarray) -> bool:
+            return any(np.allclose(to_world, m.aims_world[i]) for m in shown for i in players)
+
+        return crossed
+
+    lens = Lens(60.0)
+    poses = _panned_on(shot((0,), 0.0), shown[1:], held, shown[0], behind_wall(0))
+    b_on_screen = [project_to_screen(p, lens, m.aims_world[1:2])[0] for p, m in zip(poses, shown[1:])]
+    assert not np.all(np.abs(project_to_screen(held, lens, shown[0].aims_world[1:2])[0]) <= 1.0)  # out of the held frame
+    assert np.all(np.abs(b_on_screen[-1]) <= 1.0)  # then in it
+    rotations = [quat_to_matrix(p.rotation_xyzw) for p in [held, *poses]]
+    turns_deg = [math.degrees(math.acos(np.clip(a[:, 2] @ b[:, 2], -1.0, 1.0))) for a, b in zip(rotations, rotations[1:])]
+    assert max(turns_deg) <= TURN_DEG_S * DT_S * math.sqrt(2.0) + 1e-6
+    after_a = _panned_on(shot((0,), 0.0), shown[1:], held, shown[0], open_field)
+    assert [p.rotation_xyzw.tolist() for p in _panned_on(shot((0,), 0.0), shown[1:], held, shown[0], behind_wall(0, 1, 2))] == [
+        p.rotation_xyzw.tolist() for p in after_a
+    ]
+
+
 def test_a_held_pose_through_the_eyes_stays_as_it_was():
     """A first-person camera's hold keeps the eye's last pose: the eye is its player's, no camera
     of ours to turn."""
     held = CameraPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), 60.0)
     eyes = Shot(ShotChoice(("a",), ShotKind.FOLLOW, "test"), (0,), StillEyes(0.0, 1), 0.0)
     shown = [walking(k, 1.0 + 0.4 * k) for k in range(40)]
-    assert all(p is held for p in _panned_on(eyes, shown[1:], held, shown[0]))
+    assert all(p is held for p in _panned_on(eyes, shown[1:], held, shown[0], open_field))
 
 
 def test_a_short_shot_held_on_pans_its_held_pose_after_its_subject():

@@ -15,12 +15,18 @@ from camdirector.geometry.camera import Lens
 from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.geometry.transforms import quat_to_matrix
+from camdirector.pipeline.match import program_camera
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.grammar import view_turn_deg
 from camdirector.pipeline.match.in_level import InLevel
 from camdirector.pipeline.match.look_along import look_along
-from camdirector.pipeline.match import program_camera
-from camdirector.pipeline.match.program_camera import CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, STEPPED_BACK, SUBJECTS_LOST, ProgramCamera
+from camdirector.pipeline.match.program_camera import (
+    CUT_TO_SEEN_PLACE,
+    HOLD_LEFT_FOR_CUT,
+    STEPPED_BACK,
+    SUBJECTS_LOST,
+    ProgramCamera,
+)
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import Place, framed_seen

@@ -681,7 +681,8 @@ class EditWindow:
         if held is None:  # the copy's first step was worked from a later pose
             return None
         held_moment = side.shown[max(len(steps) - 1, 0)]  # a replay's: the moment its picture shows
-        poses = [pose for _, pose, _ in steps] + _panned_on(side.judged, side.shown[len(steps) :], held, held_moment)
+        after = _panned_on(side.judged, side.shown[len(steps) :], held, held_moment, judges.crossed)
+        poses = [pose for _, pose, _ in steps] + after
         seen = [s for _, _, s in steps] + _judged_seen(side.shown, poses, side.judged, judges, len(steps))[0]
         judged = _judged_seen(side.shown, poses, side.judged, judges, in_frame=True)[0] if floors.in_frame else seen
         players = {p: i for i, p in enumerate(self.players)}
@@ -1027,7 +1028,9 @@ def _turned_toward(shot: Shot, shown: list[Moment], first: CameraPose) -> list[C
     return [*_panned(shot, shown[-2::-1], first, rotation.T @ aim, step_s)[::-1], first]
 
 
-def _panned_on(shot: Shot, shown: list[Moment], held: CameraPose, held_moment: Moment) -> list[CameraPose]:
+def _panned_on(
+    shot: Shot, shown: list[Moment], held: CameraPose, held_moment: Moment, crossed: Callable[[np.ndarray, np.ndarray], bool]
+) -> list[CameraPose]:
     """A hold's last pose (`_hold_verdict`: its copy met a wall or lost its subjects at
     held_moment) over the moments after it (shown): standing at its place and turning, no roll,
     onto its framed subjects alive as a camera operator there pans after the players running off,
@@ -1037,7 +1040,11 @@ def _panned_on(shot: Shot, shown: list[Moment], held: CameraPose, held_moment: M
     the pose rolls, or while it frames nobody alive. On the real 2on2 at 31 Hz, two holds by the
     kills alone (issue 41's last resort for a shot under 2 s) held a pose still for 25 and 35
     frames while their player ran out of it: frames of nobody (docs/casting.md, "A held camera pans
-    after its player")."""
+    after its player"). Where every framed subject stands behind a wall from the place (crossed:
+    the segment to its aim point meets the level), it pans onto the nearest other player alive in
+    sight instead, as an operator whose player ran off finds the play it can see (`_aim_in_sight`):
+    in casts of the 2on2, 42-103 frames a cast showed nobody in holds by the kills alone
+    (docs/casting.md, "Where a cast's frames of nobody come from")."""
     rotation = quat_to_matrix(held.rotation_xyzw)
     if isinstance(shot.camera, FirstPersonCamera) or abs(rotation[1, 0]) > 1e-9:
         return [held] * len(shown)
@@ -1046,20 +1053,27 @@ def _panned_on(shot: Shot, shown: list[Moment], held: CameraPose, held_moment: M
     if math.degrees(math.acos(max(-1.0, min(1.0, -float(toward[2]))))) > 0.5 * held.vertical_fov_deg:
         toward = np.array((0.0, 0.0, -1.0))  # off the frame's middle: onto its centre
     step_s = (shown[-1].time_s - held_moment.time_s) / len(shown) if shown else 0.0
-    return _panned(shot, shown, held, toward, step_s)
+    return _panned(shot, shown, held, toward, step_s, functools.partial(_aim_in_sight, crossed=crossed))
 
 
-def _panned(shot: Shot, moments: list[Moment], start: CameraPose, toward: np.ndarray, step_s: float) -> list[CameraPose]:
+def _panned(
+    shot: Shot,
+    moments: list[Moment],
+    start: CameraPose,
+    toward: np.ndarray,
+    step_s: float,
+    aim: Callable[[Shot, Moment, np.ndarray], np.ndarray | None] | None = None,
+) -> list[CameraPose]:
     """The poses over `moments` (in the order turned through, step_s apart, s) of a camera
     standing at the level start pose's place and turning from it, no roll, to bring its framed
-    subjects' mean aim to the unit camera-space direction `toward` (3,), no faster than
-    TURN_DEG_S, its turn held at a moment where it frames nobody alive."""
+    subjects' mean aim (`aim`, default `_aim`) to the unit camera-space direction `toward` (3,),
+    no faster than TURN_DEG_S, its turn held at a moment where it frames nobody alive."""
     place = start.position_world
     yaw, pitch = level_angles(quat_to_matrix(start.rotation_xyzw))
     limit = math.radians(TURN_DEG_S) * step_s
     poses = []
     for m in moments:
-        direction = _aim(shot, m, place)
+        direction = (aim or _aim)(shot, m, place)
         if direction is not None:
             target_yaw, target_pitch = level_angles(level_rotation(direction, toward))
             yaw += max(-limit, min(limit, math.remainder(target_yaw - yaw, math.tau)))
@@ -1075,6 +1089,22 @@ def _aim(shot: Shot, moment: Moment, place: np.ndarray) -> np.ndarray | None:
     offset = moment.aims_world[framed].mean(axis=0) - place if framed else None
     length = 0.0 if offset is None else float(np.linalg.norm(offset))
     return None if offset is None or length < 1e-6 else offset / length
+
+
+def _aim_in_sight(
+    shot: Shot, moment: Moment, place: np.ndarray, crossed: Callable[[np.ndarray, np.ndarray], bool]
+) -> np.ndarray | None:
+    """`_aim`'s direction where a framed subject alive is in sight from the place (the segment
+    to its aim point meets no wall: crossed), else the unit (3,) direction to the nearest other
+    player alive in sight; `_aim`'s where nobody is."""
+    framed = [i for i in shot.framed(moment.time_s) if moment.alive[i]]
+    if any(not crossed(place, moment.aims_world[i]) for i in framed):
+        return _aim(shot, moment, place)
+    others = [i for i in range(len(moment.alive)) if moment.alive[i] and i not in framed]
+    offsets = {i: moment.aims_world[i] - place for i in others}
+    near = sorted((float(np.linalg.norm(o)), i) for i, o in offsets.items())
+    seen = next((i for length, i in near if length >= 1e-6 and not crossed(place, moment.aims_world[i])), None)
+    return _aim(shot, moment, place) if seen is None else offsets[seen] / float(np.linalg.norm(offsets[seen]))
 
 
 def _moving_earlier(
