@@ -1086,9 +1086,14 @@ def _aim(shot: Shot, moment: Moment, place: np.ndarray) -> np.ndarray | None:
     """The unit (3,) direction from a place to the mean aim of the shot's framed subjects alive at
     the moment; None where it frames none, or they stand at the place."""
     framed = [i for i in shot.framed(moment.time_s) if moment.alive[i]]
-    offset = moment.aims_world[framed].mean(axis=0) - place if framed else None
-    length = 0.0 if offset is None else float(np.linalg.norm(offset))
-    return None if offset is None or length < 1e-6 else offset / length
+    return _toward(place, moment.aims_world[framed].mean(axis=0)) if framed else None
+
+
+def _toward(place: np.ndarray, point: np.ndarray) -> np.ndarray | None:
+    """The unit (3,) direction from a place to a point (3,), m; None where the point is at the place."""
+    offset = point - place
+    length = float(np.linalg.norm(offset))
+    return None if length < 1e-6 else offset / length
 
 
 def _aim_in_sight(
@@ -1101,10 +1106,11 @@ def _aim_in_sight(
     if any(not crossed(place, moment.aims_world[i]) for i in framed):
         return _aim(shot, moment, place)
     others = [i for i in range(len(moment.alive)) if moment.alive[i] and i not in framed]
-    offsets = {i: moment.aims_world[i] - place for i in others}
-    near = sorted((float(np.linalg.norm(o)), i) for i, o in offsets.items())
-    seen = next((i for length, i in near if length >= 1e-6 and not crossed(place, moment.aims_world[i])), None)
-    return _aim(shot, moment, place) if seen is None else offsets[seen] / float(np.linalg.norm(offsets[seen]))
+    for i in sorted(others, key=lambda i: float(np.linalg.norm(moment.aims_world[i] - place))):
+        direction = _toward(place, moment.aims_world[i])
+        if direction is not None and not crossed(place, moment.aims_world[i]):
+            return direction
+    return _aim(shot, moment, place)
 
 
 def _moving_earlier(
