@@ -121,6 +121,21 @@ def test_a_program_over_reconnects_is_placed_piece_by_piece(match):
     assert placed.shift_s == pytest.approx(STREAM_BEGAN_S, abs=0.5 / match.rate_hz) and placed.align_m < 0.01
 
 
+def test_a_program_whose_clock_runs_half_a_row_off_the_files_lands_on_the_rows_its_players_were_at(match):
+    """A stream clock half a row off the file's grid: every source time at k + 0.5 rows, where
+    rounding goes either way (to the even row), each moment carrying the feet of the row after.
+    Each lands on the row its players' feet are: no two on one row, none a row off."""
+    row = int(np.rint((min(e.time_s for e in match.events if e.kind == "kill") - match.time_s[0]) * match.rate_hz))
+    moments = []
+    for k in range(60):
+        moment = _moment(match, 1 + k, row - 40 + k + 1)  # the feet of the row after
+        moment["source_time_s"] = round(float(match.time_s[0] + (row - 40 + k + 0.5) / match.rate_hz - STREAM_BEGAN_S), 4)
+        moments.append(moment)
+    placed = program_on_match(RecordedProgram({"program_of": "qtv://x:1"}, moments, None), match)
+    assert placed.program.index.tolist() == list(range(row - 39, row + 21))
+    assert placed.program.position[:, 2].tolist() == [float(1 + k) for k in range(60)]  # every moment kept
+
+
 def test_the_shots_on_air_are_timed_by_the_sessions_clock(match):
     """The stream clock holds the demo's first sample over the cast's first 4 frames, then plays
     the match at its pace: the first shot is 60 frames on air (2.0 s), 57 rows of the match
