@@ -14,6 +14,8 @@ from camdirector.pipeline.match.first_person import CORPSE_EYE_FRACTION, EYE_HEI
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.lens_width import (
     FRAMED_IN,
+    SHOWN_SEEN,
+    TALL_SEEN,
     looked_through,
     outline_points,
     screen_slopes,
@@ -331,3 +333,21 @@ def test_a_far_follow_is_zoomed_on_at_its_cut_and_a_take_pushes_in_from_its_moni
     after, after_flags = program_camera.step(moment, 0.1, shot.camera, shot, 0.5, cut)
     assert after.vertical_fov_deg == pytest.approx(Lens().vertical_fov_deg - 0.1 * SETTINGS.zoom_deg_s)
     assert "lens_zoomed" in after_flags
+
+
+def test_a_player_seen_at_under_half_its_points_near_the_camera_is_kept_in_the_band_too():
+    """A player near the camera behind a low wall, seen at under half of the rig's points
+    (SHOWN_SEEN) but over TALL_SEEN, may be shown by another set of points (eval-match's 32: a
+    cast's p01, seen at 0.40 by 2,000 points and under half by the rig's 16, was shown at 0.53,
+    1.0 of the frame's height): the lens widens to keep it in the band as it does a player in the
+    open; behind a wall that hides it all (`test_a_player_behind_a_wall_widens_nothing`), not."""
+    rig = rig_of()
+    feet = rig.rig.buffer.moments[-1].feet_world[0]
+    wall = block(feet + [1.1, 0.0, 0.0], (0.05, 2.3, 3.0))  # half way to the camera, its top 1.15 m over a's feet
+    rig, moment, pose = _looking_at_a(2.2, walls=[wall])
+    visibility = rig.rig.program_camera.subject_visibility
+    share = visibility.visible_share(pose.position_world, moment, (0,))[0, 0]
+    assert TALL_SEEN <= share < SHOWN_SEEN
+    points = silhouette_points(moment, visibility)[0]
+    fov_deg = _widened(rig, moment, pose)
+    assert Lens().vertical_fov_deg < fov_deg and _height_share(pose, fov_deg, points) <= SETTINGS.shown_height_max

@@ -6,14 +6,14 @@ DUEL's over-the-shoulder place can come within 2-3 m of a player, where a 1.4-1.
 camera, 95% of them the shot's own subjects). An operator in a tight corridor does not back
 through the wall: they go wider. So after CAMERA has placed the pose, its vertical field of view
 is the narrowest from the lens's up to `MatchSettings.widen_max_fov_deg` at which no player whose
-sample points the pose sees (at least `SHOWN_SEEN` of them, ray cast, as eval-match counts a
-player shown) stands taller than `MatchSettings.shown_height_max` of the frame's height, on a
-one-degree grid. Going back to the lens's is a zoom at `MatchSettings.narrow_deg_s`, never
-faster, so a camera that comes and goes near a wall does not pump; a cut starts at what it
-needs. A camera in a player's eyes (HLTV's and the autotrack's first-person views) keeps the
-lens: a first-person view is the game's own picture (eval-match leaves it out of its heights); a
-camera that comes into one from a widened lens (a Toric camera passing through a player's head)
-goes back to it at the same pace.
+sample points the pose sees (at least `TALL_SEEN` of them, ray cast: eval-match counts a player
+shown at half of its 32, and two sets of points tell a body's share only to about 0.1) stands
+taller than `MatchSettings.shown_height_max` of the frame's height, on a one-degree grid. Going
+back to the lens's is a zoom at `MatchSettings.narrow_deg_s`, never faster, so a camera that
+comes and goes near a wall does not pump; a cut starts at what it needs. A camera in a player's
+eyes (HLTV's and the autotrack's first-person views) keeps the lens: a first-person view is the
+game's own picture (eval-match leaves it out of its heights); a camera that comes into one from a
+widened lens (a Toric camera passing through a player's head) goes back to it at the same pace.
 The pose the program answers is checked again at the moment its picture shows, widened only
 (program_camera.py `widened_for_answer`): a pose made for another moment, as the edit window's
 held first pose of a shot, was sized for that one.
@@ -65,6 +65,10 @@ from camdirector.pipeline.match.visibility import SubjectVisibility
 FRAMED_IN = 0.75  # a framed subject cut off by the frame is widened for until this share of its points is in it and
 # seen (or as much as the widest lens shows): over eval-match's SHOWN_FRACTION, whose 32 points are not the rig's 16
 SHOWN_SEEN = 0.5  # a player with this share of its points seen from the pose is shown (eval-match's SHOWN_FRACTION)
+# a player seen at this share of its points is kept in the band: half of SHOWN_SEEN, as 16 points and eval-match's 32 each
+# tell a body's share only to about 0.1 (a cast's p01 seen at 0.40 by 2,000 points, under 0.5 by these 16, was shown at
+# 0.53 by eval-match's 32: 1.0 of the frame's height)
+TALL_SEEN = 0.25
 FOV_STEP_DEG = 1.0  # the widths tried, from the lens's up, deg
 EYES_RADIUS_M = 0.5  # a camera this near a player's eye point looks through its eyes (eval-match's EYE_TOLERANCE_M), m
 
@@ -104,7 +108,7 @@ def widened_fov_deg(
     at_floor = screen_heights(slope_y, slope_x, np.tan(np.radians([floor_deg]) / 2.0), lens.aspect)[:, 0]  # (P,)
     tall = np.flatnonzero(at_floor > settings.shown_height_max)
     if len(tall):
-        tall = tall[visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= SHOWN_SEEN]
+        tall = tall[visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in tall))[0] >= TALL_SEEN]
     cut_off = _cut_off(pose, moment, visibility, subjects, slope_y, slope_x, floor_deg, max_deg, lens.aspect)
     if not len(tall) and not cut_off:
         return float(floor_deg)

@@ -8,7 +8,7 @@ moved inside the level, held before a wall, pulled in front of one), a replay's 
 an OVERVIEW's fixed camera that a player runs past left such frames on 1-2% of the third-person
 frames of the real matches' first 3 minutes (issue 41, whose bar is none over 0.6: 23 of 1,117
 on the 4on4, 46 on the duel, 25 on the 2on2, every one at 90 degrees with the player 0.8-2.0 m
-from the camera). An operator steps back. So where a player the pose sees (`SHOWN_SEEN` of its
+from the camera). An operator steps back. So where a player the pose sees (`TALL_SEEN` of its
 points) stands taller than the band at the widest lens, the pose moves to the nearest of
 `BACK_STEPS_M` along the camera's own backward line (a dolly: the framing holds) or away from the
 nearest such player, straight or turned by `TURNS_DEG`, panning as it goes to keep the framed
@@ -44,7 +44,7 @@ import numpy as np
 from camdirector.geometry.camera import CameraPose, Lens
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
 from camdirector.pipeline.match.in_level import InLevel
-from camdirector.pipeline.match.lens_width import SHOWN_SEEN, looked_through, screen_heights, screen_slopes, silhouette_points
+from camdirector.pipeline.match.lens_width import TALL_SEEN, looked_through, screen_heights, screen_slopes, silhouette_points
 from camdirector.pipeline.match.moments import Moment
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import framed_seen
@@ -54,8 +54,8 @@ BACK_STEPS_M = np.arange(1, 9) * 0.25  # the distances tried, nearest first: up 
 NEAR_M = 5.0  # only a player whose feet are this near is asked about (a 2 m body at 90 deg fills half the frame at 2 m), m
 TURNS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # the directions tried away from the player, after the backward line
 AWAY_TURNS_DEG = np.arange(1, 19) * 10.0  # where no step helps, the pans tried either way, nearest first: up to 180 deg, deg
-AWAY_SEEN = 0.25  # a player panned from is framed and seen at under this share of its points: half of SHOWN_SEEN, as the
-# rig's 16 points are not eval-match's 32
+AWAY_SEEN = TALL_SEEN  # a player panned from is framed and seen at under this share of its points: half of eval-match's
+# SHOWN_FRACTION, as the rig's 16 points are not eval-match's 32
 
 
 def stepped_back(
@@ -90,11 +90,11 @@ def stepped_back(
 
     def seen_tall(positions_world: np.ndarray, tall: np.ndarray) -> np.ndarray:
         """(m,) bool: whether from each of (m, 3) centres a player too tall there, (m, P) bool,
-        is seen at SHOWN_SEEN of its points; one batch of casts for all of them."""
+        is seen at TALL_SEEN of its points; one batch of casts for all of them."""
         players = tuple(int(i) for i in np.flatnonzero(tall.any(axis=0)))
         if not players:
             return np.zeros(len(positions_world), dtype=bool)
-        seen = visibility.visible_share(positions_world, moment, players) >= SHOWN_SEEN  # (m, len(players))
+        seen = visibility.visible_share(positions_world, moment, players) >= TALL_SEEN  # (m, len(players))
         return np.asarray((seen & tall[:, list(players)]).any(axis=1))
 
     here = too_tall(pose.position_world[None], rotation[None])[0]
