@@ -46,10 +46,7 @@ median 0.065 of the frame's height (issue 41).
 A Toric camera's pose (our director's, and its wide view of named players) also goes wide enough
 to show a framed subject that the frame cuts off (`_cut_off`): a camera pulled in front of a wall
 close over its subject looks down as steeply as a level camera can and has the subject below the
-frame; wider, it shows it without a cut. The band first: every player is judged at every width
-tried, so a subject that a wider frame would show taller than the band stays cut off (a cast's
-OVERVIEW camera, a subject 1.4 m off beside it and out of its 50-degree frame, went to 90 degrees
-to show it: 1.0 of the frame). The baselines' cameras keep what they frame.
+frame; wider, it shows it without a cut. The baselines' cameras keep what they frame.
 """
 
 from __future__ import annotations
@@ -117,13 +114,8 @@ def widened_fov_deg(
         return float(floor_deg)
     widths_deg = np.append(np.arange(floor_deg, max_deg, FOV_STEP_DEG), max_deg)  # (T,), the first the floor
     tan_half = np.tan(np.radians(widths_deg) / 2.0)
-    # every player at every width: a wider frame takes in a player the floor's cut off, who may stand taller there (a
-    # cast's OVERVIEW widened to 90 degrees to show a framed subject 1.4 m off, out of the frame at 50: 1.0 of the frame)
-    heights = screen_heights(slope_y, slope_x, tan_half, lens.aspect)  # (P, T)
-    wider = np.setdiff1d(np.flatnonzero((heights > settings.shown_height_max).any(axis=1)), tall)
-    if len(wider):
-        wider = wider[visibility.visible_share(pose.position_world, moment, tuple(int(i) for i in wider))[0] >= TALL_SEEN]
-    fits = (heights[np.union1d(tall, wider)] <= settings.shown_height_max).all(axis=0)  # (T,)
+    heights = screen_heights(slope_y[tall], slope_x[tall], tan_half, lens.aspect)  # (tall, T)
+    fits = (heights <= settings.shown_height_max).all(axis=0)  # (T,)
     for subject, seen in cut_off:  # shown at a width: in its frame and seen
         k = len(seen)
         shown = (_in_frame(slope_y[subject, :k], slope_x[subject, :k], tan_half, lens.aspect) & seen[:, None]).mean(axis=0)
