@@ -46,9 +46,8 @@ from camdirector.bridges.program_record import program_on_match, read_program
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.evaluation.match.evaluate import evaluate_match
 from camdirector.evaluation.match.match_file import load_match, save_match
-from camdirector.matches.import_cli import add_map
 from camdirector.matches.quakeworld_mvd import import_mvd
-from load_tests.qtv_bridge import DEMO, MAP, RATE_HZ
+from load_tests.qtv_bridge import DEMO, RATE_HZ, map_data_dir
 from load_tests.report import emit
 from tests.bridges.qtv_source import QtvSource
 
@@ -153,10 +152,7 @@ def bars(result: dict, against: dict | None) -> list[dict]:
 
 def run(end_s: float, casts: int, with_baselines: bool, folder: Path) -> dict:
     demo = gzip.decompress(DEMO.read_bytes())
-    bsp = folder / "frobodm2.bsp"
-    bsp.write_bytes(gzip.decompress(MAP.read_bytes()))
-    data_dir = folder / "data"
-    add_map(bsp, "frobodm2", data_dir)
+    data_dir = map_data_dir(folder)
     match_file = folder / "match.npz"
     save_match(import_mvd(demo, level="frobodm2", rate_hz=RATE_HZ), match_file)
     runs, against = [], None

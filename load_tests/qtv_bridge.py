@@ -184,6 +184,14 @@ def end_to_end(demo: bytes, match: MatchRecording, data_dir: Path) -> dict:
     }
 
 
+def map_data_dir(folder: Path) -> Path:
+    """folder / "data": a data folder holding the demo's map as frobodm2, added as `cast qtv --map` adds it."""
+    bsp = folder / "frobodm2.bsp"
+    bsp.write_bytes(gzip.decompress(MAP.read_bytes()))
+    add_map(bsp, "frobodm2", folder / "data")
+    return folder / "data"
+
+
 def run(seconds: float, reps: int, server: bool) -> dict:
     raw = gzip.decompress(DEMO.read_bytes())
     full = import_mvd(raw, level="frobodm2", rate_hz=RATE_HZ)
@@ -197,10 +205,7 @@ def run(seconds: float, reps: int, server: bool) -> dict:
     }
     if server:
         with tempfile.TemporaryDirectory() as folder:
-            bsp = Path(folder) / "frobodm2.bsp"
-            bsp.write_bytes(gzip.decompress(MAP.read_bytes()))
-            add_map(bsp, "frobodm2", Path(folder) / "data")
-            result["end_to_end"] = end_to_end(raw, match, Path(folder) / "data")
+            result["end_to_end"] = end_to_end(raw, match, map_data_dir(Path(folder)))
     return result
 
 
