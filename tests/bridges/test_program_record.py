@@ -136,6 +136,23 @@ def test_a_program_whose_clock_runs_half_a_row_off_the_files_lands_on_the_rows_i
     assert placed.program.position[:, 2].tolist() == [float(1 + k) for k in range(60)]  # every moment kept
 
 
+def test_each_live_moment_carries_the_feet_its_director_saw_and_a_replays_none(match):
+    """Program.feet_world: a live moment's feet as it carried them, in the match's columns (a player
+    it lacks NaN); a REPLAY's moment NaN throughout (its picture is of another moment)."""
+    row = int(np.rint((min(e.time_s for e in match.events if e.kind == "kill") - match.time_s[0]) * match.rate_hz))
+    moments = [_moment(match, 1 + k, row - 40 + k) for k in range(40)]
+    moments[5]["players"]["p01"] = [1.0, 2.0, 3.0]  # p01 a teleport ahead of the match's row
+    del moments[6]["players"]["p02"]
+    moments[7] = {**moments[7], "kind": "REPLAY", "replay_time_s": moments[7]["time_s"] - 1.0}
+    feet = program_on_match(RecordedProgram({"program_of": "qtv://x:1"}, moments, None), match).program.feet_world
+    column = match.player_index()
+    assert feet.shape == (40, len(column), 3)
+    np.testing.assert_array_equal(feet[0], match.positions_world[row - 40])
+    assert feet[5, column["p01"]].tolist() == [1.0, 2.0, 3.0]
+    assert np.isnan(feet[6, column["p02"]]).all() and np.isfinite(feet[6, column["p00"]]).all()
+    assert np.isnan(feet[7]).all()
+
+
 def test_the_shots_on_air_are_timed_by_the_sessions_clock(match):
     """The stream clock holds the demo's first sample over the cast's first 4 frames, then plays
     the match at its pace: the first shot is 60 frames on air (2.0 s), 57 rows of the match

@@ -30,7 +30,9 @@ beside them, as they went on air: `on_air_lengths_s`, below); moments beyond the
 more than a row's step are left out (counted); two moments on one row (the cast's frames jitter
 against the file's grid) keep the later, cutting if either cut, as eval-match keeps the replies
 of one moment (and a moment older than the one before is left out). The match's kills before the program's first moment were not
-its to show and are left out, as measure.py leaves out those after its last.
+its to show and are left out, as measure.py leaves out those after its last. The feet a live
+moment carried tell whose eyes its camera is in (`Program.feet_world`, measure.py `in_eyes_of`):
+a player through a teleport can be a row apart from the others.
 
 The shots as they went on air are timed by the session's clock instead (time_s: the cast's
 monotonic clock on its 1 / rate_hz grid, live_session.py), each placed moment counted. The two
@@ -247,6 +249,19 @@ def _rows_of(moments: list[dict[str, Any]], at_rows: np.ndarray, match: MatchRec
     return rows
 
 
+def _feet_of(moments: list[dict[str, Any]], match: MatchRecording) -> np.ndarray:
+    """(n, P, 3) float64 the players' feet each moment carried, m, in the match's columns; NaN
+    for a player it did not carry and for a REPLAY's moment (it shows another moment's world)."""
+    column = match.player_index()
+    feet = np.full((len(moments), len(column), 3), np.nan)
+    for k, moment in enumerate(moments):
+        if moment.get("replay_time_s") is None:
+            for pid, at in moment["players"].items():
+                if pid in column:
+                    feet[k, column[pid]] = at
+    return feet
+
+
 def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> ProgramOnMatch:
     """Places the recorded program on the match (module docstring). ValueError where the program
     names players the match does not have, or it is not of this match."""
@@ -298,6 +313,7 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
         overview=np.array([m.get("kind") == "OVERVIEW" for m in kept], dtype=bool),
         shown_index=np.clip(np.array(shown, dtype=np.int64), 0, len(match.time_s) - 1),
         replay=np.array([m.get("kind") == "REPLAY" for m in kept], dtype=bool),
+        feet_world=_feet_of(kept, match),
     )
     first_s, last_s = float(program.time_s[0]), float(program.time_s[-1])
     cut_match = match.until(last_s)

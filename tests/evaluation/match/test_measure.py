@@ -179,6 +179,21 @@ def test_a_camera_half_a_metre_off_the_eye_is_in_nobodys_eyes(match):
     assert in_eyes_of(match, program).tolist() == [-1] * FRAMES
 
 
+def test_the_feet_the_program_carries_tell_whose_eyes_the_camera_is_in(match):
+    """A cast's moment through a's eyes where a stood a metre from the match file's row (a teleport
+    sampled half a row apart): in a's eyes by the feet its director saw, and the match file's where
+    it carried none (NaN)."""
+    program = first_person_of_a(match)
+    program.position = program.position + [1.0, 0.0, 0.0]
+    assert in_eyes_of(match, program).tolist() == [-1] * FRAMES
+    feet = np.broadcast_to(match.positions_world[0], (FRAMES, 2, 3)).copy()
+    feet[:, 0, 0] += 1.0
+    program.feet_world = feet
+    assert in_eyes_of(match, program).tolist() == [0] * FRAMES
+    program.feet_world[1:, 0] = np.nan  # carried for the first moment only
+    assert in_eyes_of(match, program).tolist() == [0] + [-1] * (FRAMES - 1)
+
+
 def test_a_body_that_holds_the_camera_shows_none_of_itself(match):
     """A camera low in a's body (a corpse's eye) looking at b: a's surface about it faces away
     (a renderer culls it; no game draws the body whose eyes it shows), so a is not shown there;

@@ -22,7 +22,8 @@ has them, never from what the director says it shows:
   counts a kill whose moment the program shows from the attacker's eyes (the camera within
   `EYE_TOLERANCE_M` of its eye point, `EYE_HEIGHT_FRACTION` of its height above its feet: what a
   QuakeWorld spectator tracking the attacker sees) with the victim shown.
-- in the eyes of: the player whose eye point the camera is at (within EYE_TOLERANCE_M), if any.
+- in the eyes of: the player whose eye point the camera is at (within EYE_TOLERANCE_M), if any;
+  where a cast's program carries the players' feet its director saw, the eye point is theirs.
   A first-person program shows that player's view, not its body: the measures below count the
   player as shown at those moments.
 - lead, per covered kill: how long the program had been on the same shot (no cut) with both shown
@@ -124,7 +125,10 @@ class Program:
     cut (n,) bool; shot_id (n,) int64; subjects: n tuples of player ids (the reply's
     shot.subject_ids); overview (n,) bool: the moment's shot is an OVERVIEW (shot.kind);
     shown_index (n,) int64: the match frame whose world the picture shows (a REPLAY's replayed
-    moment, shot.replay_frame; else index); replay (n,) bool: the moment's shot is a REPLAY.
+    moment, shot.replay_frame; else index); replay (n,) bool: the moment's shot is a REPLAY;
+    feet_world (n, P, 3) float64 m or None: the players' feet the moment's director saw, where a
+    cast's program file carries them (NaN where it did not: a replay's moment, a player it lacks),
+    which tell whose eyes the camera is in (`in_eyes_of`); None: the match file's at index.
     """
 
     index: np.ndarray
@@ -138,6 +142,7 @@ class Program:
     overview: np.ndarray
     shown_index: np.ndarray
     replay: np.ndarray
+    feet_world: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.index)
@@ -224,9 +229,15 @@ class KillCoverage:
 
 def in_eyes_of(match: MatchRecording, program: Program) -> np.ndarray:
     """(n,) int64: the column of the player in whose eyes the camera is at each program moment
-    (module docstring), -1 where none."""
+    (module docstring), -1 where none. Where the program carries the feet its director saw
+    (`Program.feet_world`), at those: a stream sampled half a row off the match file's grid can
+    show a player through a teleport a row before the others (a cast's first-person moment through
+    p02's eyes measured as a camera 4.4 m from p02, and p03 2.5 m off 0.73 of the frame tall)."""
     heights = np.array([p.height_m for p in match.players])
     eyes = match.positions_world[program.shown_index].copy()  # (n, P, 3) feet
+    if program.feet_world is not None:
+        carried = np.isfinite(program.feet_world)
+        eyes[carried] = program.feet_world[carried]
     eyes[..., 1] += EYE_HEIGHT_FRACTION * heights
     distance = np.linalg.norm(eyes - program.position[:, None, :], axis=2)  # (n, P)
     nearest = distance.argmin(axis=1)
