@@ -1,5 +1,6 @@
 """load_tests/cast_program.py judges a cast's eval-match result by issue 41's program bars: each bar
-met on figures inside its limit, and each failing alone on its figure past it. (The cast itself, a
+met on figures inside its limit, and each failing alone on its figure past it; a match's result
+through eval-match (load_tests/program_phases.py) by the same bars, its shots on the match's clock. (The cast itself, a
 real-time run of minutes, is not run here: tests/bridges/test_program_record.py runs a cast into
 eval-match end to end.)"""
 
@@ -73,3 +74,17 @@ def test_a_figure_past_its_bar_fails_that_bar_alone(bar, path, value):
 def test_kill_coverage_under_the_better_baseline_fails_that_bar():
     against = {**AGAINST, "first_person": {"hltv": 0.214, "autotrack": 0.5}}  # 0.633 < 0.5 + 0.15
     assert [b["bar"] for b in bars(_result(), against) if not b["met"]] == [BETTER]
+
+
+def test_a_result_of_a_match_through_eval_match_is_judged_on_its_directors_figures_alone():
+    """No `program` in it (eval-match of a match file, not of a recorded program): the director
+    named, the shots under 2 s on the match's clock only."""
+    result = copy.deepcopy(_result())
+    del result["program"]
+    checked = bars(result, AGAINST, "planned")
+    assert all(b["met"] for b in checked) and len(checked) == 13
+    assert [b["value"] for b in checked if b["bar"] == "shots under 2 s"] == [[0]]
+    result["directors"]["planned"]["shots"]["under_2s"] = 2
+    assert [b["bar"] for b in bars(result, AGAINST, "planned") if not b["met"]] == ["shots under 2 s"]
+    with pytest.raises(KeyError):
+        bars(result, AGAINST, "hltv")  # a director the result does not hold

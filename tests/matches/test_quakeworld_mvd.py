@@ -114,6 +114,18 @@ def test_a_hand_built_demo_imports_exactly():
     assert match.alive[:, 0].tolist() == [True, True, False]  # dead from the kill on: no respawn follows
 
 
+def test_a_grid_a_phase_of_a_row_later_samples_between_the_rows():
+    """phase_rows 0.5 at 20 Hz: the 40 Hz grid's odd rows, the same interpolation there."""
+    data, _ = _tiny_demo()
+    half, fine = import_mvd(data, rate_hz=20.0, phase_rows=0.5), import_mvd(data, rate_hz=40.0)
+    np.testing.assert_allclose(half.time_s[:2], fine.time_s[1::2][:2], rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(half.positions_world[:2], fine.positions_world[1::2][:2], rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(half.positions_world[:2, 0, 0], [0.25, 0.75], atol=1e-12)
+    for phase in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="phase_rows"):
+            import_mvd(data, rate_hz=20.0, phase_rows=phase)
+
+
 def test_a_player_looking_down_stands_upright_and_keeps_its_aim():
     """Pitch 60 deg (the nearest 16-bit angle): the body turns by the yaw alone, the aim has both."""
     angle16 = round(60.0 * 65536 / 360.0)

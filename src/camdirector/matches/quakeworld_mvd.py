@@ -1,7 +1,8 @@
 """A real QuakeWorld match from an MVD demo, as a match file (evaluation/match/match_file.py).
 
 `import_mvd` reads the demo (matches/mvd_wire.py) and puts every playing slot onto a uniform time
-grid at rate_hz from the demo's first player sample to its end:
+grid at rate_hz from the demo's first player sample to its end (or `phase_rows` of a row after
+it: a live feed samples the game at a phase nobody chooses, load_tests/program_phases.py):
 
 - feet, facing and aim: quake_frame.feet_world(origin); the body upright, turned by the yaw alone
   (quake_frame.view_rotation at pitch 0); the aim's pitch, the view's (match_file.py: a player
@@ -56,10 +57,13 @@ class MvdImport:
     steps: np.ndarray
 
 
-def import_mvd(data: bytes, *, level: str | None = None, rate_hz: float = 60.0, name: str = "") -> MatchRecording:
+def import_mvd(
+    data: bytes, *, level: str | None = None, rate_hz: float = 60.0, name: str = "", phase_rows: float = 0.0
+) -> MatchRecording:
     """The match an MVD recorded (module docstring). level: the match file's level (default the
-    demo's map, "dm2", else name, the demo's own name). MvdError (a ValueError) on a bad file."""
-    return match_from_mvd(parse_mvd(data), level=level, rate_hz=rate_hz, name=name).match
+    demo's map, "dm2", else name, the demo's own name); phase_rows: the grid starts this share of a
+    row after the demo's first player sample, [0, 1). MvdError (a ValueError) on a bad file."""
+    return match_from_mvd(parse_mvd(data), level=level, rate_hz=rate_hz, name=name, phase_rows=phase_rows).match
 
 
 def load_mvd_file(path: Path, *, level: str | None, rate_hz: float) -> MatchRecording:
@@ -71,12 +75,16 @@ def load_mvd_file(path: Path, *, level: str | None, rate_hz: float) -> MatchReco
     return import_mvd(data, level=level, rate_hz=rate_hz, name=path.name)
 
 
-def match_from_mvd(demo: MvdDemo, *, level: str | None = None, rate_hz: float = 60.0, name: str = "") -> MvdImport:
+def match_from_mvd(
+    demo: MvdDemo, *, level: str | None = None, rate_hz: float = 60.0, name: str = "", phase_rows: float = 0.0
+) -> MvdImport:
     """A parsed demo on a uniform grid (module docstring), with where each player stepped."""
     if not (rate_hz > 0 and math.isfinite(rate_hz)):
         raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+    if not 0.0 <= phase_rows < 1.0:
+        raise ValueError(f"phase_rows must be in [0, 1), got {phase_rows}")
     slots = [p.slot for p in demo.players]
-    start_s = min(float(demo.tracks[s].time_s[0]) for s in slots)
+    start_s = min(float(demo.tracks[s].time_s[0]) for s in slots) + phase_rows / rate_hz
     end_s = max(demo.duration_s, max(float(demo.tracks[s].time_s[-1]) for s in slots))
     n_frames = int(math.ceil((end_s - start_s) * rate_hz - 1e-9)) + 1
     time_s = start_s + np.arange(n_frames, dtype=np.float64) / rate_hz

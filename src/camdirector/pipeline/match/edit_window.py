@@ -50,7 +50,12 @@ kill kept); with none, to the neighbour that keeps its kills whatever else it sh
 flagged `edit_window_kills_only` too), else it holds on keeping its kills alone, and before that
 neighbour where the hold loses its subjects on fewer frames (`_alone_first`: each counted where it
 shows its subjects under SEEN_FLOOR in its frame and the picture it replaces showed them more);
-failing all, it stays short, flagged at the cut that ends it. A hold is judged on the program as
+with none either, to the neighbour that takes it whatever it shows, a kill in its frames given up
+(`ANY`, flagged `edit_window_kill_given_up` too; the hold by its kills alone first where there is
+one): issue 41 bars every shot under 2 s and kill coverage is a share (on the 2on2 imported half a
+row late, a DUEL cut by a wall 0.4 s before an OVERVIEW, with a kill in those frames that the
+OVERVIEW showed at 0.38-0.5 of its players' points); failing all, it stays short, flagged at the cut
+that ends it. A hold is judged on the program as
 repaired: a repair waiting that gives a short piece of the shot after to the shot after it is
 applied first (`_settle_inside`), and a hold set once the window is past the frame it ends on is
 judged there at once (`_hold_reached`); the last resort applies only where the shot after still
@@ -128,6 +133,7 @@ MOVED_EARLIER = "edit_window_moved_earlier"  # the shot before's last frames giv
 SHORT_LEFT = "edit_window_short_left"  # a short shot neither neighbour could take nor hold on
 LAST_RESORT_FLAG = "edit_window_last_resort"  # a short shot's frames given to a neighbour by the last resort's floors
 KILLS_ONLY_FLAG = "edit_window_kills_only"  # and by its kills alone (`KILLS_ONLY`), to a neighbour or held on
+KILL_GIVEN_UP_FLAG = "edit_window_kill_given_up"  # and to a neighbour whatever it shows (`ANY`), a kill in its frames lost
 # a copy of a camera stepped on goes no further where it would cut, or shows its subjects no more (program_camera.py)
 ENDS_A_COPY = (CUT_TO_SEEN_PLACE, HOLD_LEFT_FOR_CUT, SUBJECTS_LOST)
 
@@ -188,6 +194,7 @@ class Decision(NamedTuple):
     seen: list[float]
     last_resort: Decision | None = None
     kills_only: bool = False
+    kill_given_up: bool = False  # by the floors `ANY`: a kill in its frames not shown
     # the frames on which it shows its subjects under SEEN_FLOOR (judged as its floors judge them) where the frames it
     # takes showed theirs more (`_missed`), count
     lost: int = 0
@@ -205,6 +212,7 @@ class Floors(NamedTuple):
     height: float  # share of the frame's height
     in_frame: bool
     seen_min: float = SEEN_FLOOR / 2.0  # [0, SEEN_FLOOR]
+    kills: bool = True  # each kill in the short shot's frames shown (`_shows_kill`)
 
 
 STRICT = Floors(0.0, HEIGHT_FLOOR, False)
@@ -216,6 +224,9 @@ LAST_RESORT = Floors(SEEN_MISSES, READABLE_HEIGHT, True)
 # picture that lingers where its subjects went, or waits where they come, for under 2 s is what a broadcast shows
 # when a player runs behind a wall; a cut under 2 s after the one before is not (docs/casting.md, "Kills only")
 KILLS_ONLY = Floors(1.0, 0.0, True, 0.0)
+# and where none keeps its kills either (nor holds on by them), the neighbour that takes it whatever it shows: issue 41
+# bars every shot under 2 s, while a kill missed is a share of the kill coverage (module docstring)
+ANY = Floors(1.0, 0.0, True, 0.0, kills=False)
 # a shot min_shot_s long but under the window's `lengthen_s` is given to a neighbour only where that one shows its
 # subjects in its frame as the shot did (eval-match's shown share: a neighbour judged by a ray alone showed nobody for
 # 2 s on the real 2on2) and its kills as any repair does (`_shows_kill`); else it stays as it is, neither started
@@ -826,15 +837,19 @@ class EditWindow:
             row.shot, row.shown, row.pose, row.visibility = neighbour.shot, shown, pose, seen
             row.choice = judges.choice_of(neighbour.judged, shown.time_s)
             row.flags.extend((flag, KILLS_ONLY_FLAG) if decision.kills_only else (flag,))
+            if decision.kill_given_up:
+                row.flags.append(KILL_GIVEN_UP_FLAG)
 
 
 def _alone_first(repair: Repair, alone: tuple[list[WorkedFrame], Side, Decision] | None) -> bool:
     """Whether the short shot holds on by its kills alone (the verdict `alone`) before its
     last resort: where that is a neighbour by the kills alone too, and the hold loses its
     subjects on fewer frames (on the real 4on4 a shot after started 1.5 s early, its first
-    pose held where nobody was yet, over a hold of 0.4 s)."""
+    pose held where nobody was yet, over a hold of 0.4 s); or a neighbour that gives up a kill."""
     last = None if repair.decision is None else repair.decision.last_resort
-    return alone is not None and last is not None and last.kills_only and alone[2].lost < last.lost
+    if alone is None or last is None:
+        return False
+    return last.kill_given_up or (last.kills_only and alone[2].lost < last.lost)
 
 
 def _decided(
@@ -871,7 +886,9 @@ def _decided(
         if later is not None:
             judged.append(later)
         # the first of equals: the shot before
-        return max(judged, key=lambda j: j[0])[1]._replace(kills_only=floors is KILLS_ONLY) if judged else None
+        if not judged:
+            return None
+        return max(judged, key=lambda j: j[0])[1]._replace(kills_only=floors is KILLS_ONLY, kill_given_up=floors is ANY)
 
     if long_enough:
         return neighbour(SHOWN) or Decision(None, [], [])
@@ -881,7 +898,7 @@ def _decided(
     moved = None if earlier is None else _earlier(back, rows[0].pose, earlier, players, judges)
     if moved is not None:
         return moved
-    return Decision(None, [], [], neighbour(LAST_RESORT) or neighbour(KILLS_ONLY))
+    return Decision(None, [], [], neighbour(LAST_RESORT) or neighbour(KILLS_ONLY) or neighbour(ANY))
 
 
 def _before(
@@ -900,7 +917,9 @@ def _before(
     if len(steps) < len(rows) or any(m is not r.moment for (m, _, _), r in zip(steps, rows)):
         return None
     poses, seen = [pose for _, pose, _ in steps], [s for _, _, s in steps]
-    if not _may_take(before.judged, short, other, rows) or not _keeps_kills(rows, kills, poses, before.judged, judges):
+    if not _may_take(before.judged, short, other, rows):
+        return None
+    if floors.kills and not _keeps_kills(rows, kills, poses, before.judged, judges):
         return None
     judged = _judged_seen(before.shown, poses, before.judged, judges, in_frame=True)[0] if floors.in_frame else seen
     if not _keeps_seen(rows, judged, floors):
@@ -942,7 +961,7 @@ def _after(
         seen, judged_mean = _judged_seen(shown, poses, shot, judges)
         judged = _judged_seen(shown, poses, shot, judges, in_frame=True)[0] if in_frame else seen
         if (
-            _keeps_kills(rows, kills, poses, shot, judges)
+            (not floors.kills or _keeps_kills(rows, kills, poses, shot, judges))
             and _keeps_seen(rows, judged, floors)
             and _keeps_height(rows, poses, shown, shot, judges, floors, own_height)
         ):
