@@ -22,6 +22,7 @@ from camdirector.evaluation.match.measure import (
     program_visibility,
     shot_lengths_s,
     shown_heights,
+    shown_heights_per_moment,
 )
 from camdirector.geometry.camera import Lens, level_look_rotation
 from camdirector.geometry.raycast import RayScene
@@ -92,6 +93,23 @@ def test_a_camera_seeing_both_covers_the_kill_and_leads_by_the_whole_shot(match)
     assert result.kills == 1 and result.covered.tolist() == [True] and result.coverage == 1.0
     np.testing.assert_allclose(result.lead_s, [2.0])  # the shot began at 0 s, the kill is at 2 s
     assert framed_visibility(program, shown, match.player_index(), in_eyes_of(match, program)) >= 0.5
+
+
+def test_a_casts_moment_stands_its_bodies_on_the_feet_it_carried(match):
+    """Program.feet_world: b carried 30 m aside (out of the frame) on the first moment, b's own
+    (NaN) on the others; b's shown share and on-screen height follow."""
+    program = side_view(match)
+    bodies = BodySampler(match, np.random.default_rng(0))
+    before = measure_shown(program, bodies, Lens(), floor())
+    feet = np.full((FRAMES, 2, 3), np.nan)
+    feet[0, 1] = match.positions_world[0, 1] + [30.0, 0.0, 0.0]
+    program.feet_world = feet
+    after = measure_shown(program, bodies, Lens(), floor())
+    assert before[0, 1] >= 0.5 and after[0, 1] == 0.0
+    np.testing.assert_array_equal(after[1:], before[1:])
+    np.testing.assert_array_equal(after[:, 0], before[:, 0])
+    heights = shown_heights_per_moment(program, bodies, Lens(), after, in_eyes_of(match, program))
+    assert len(heights[0]) == 1 and len(heights[1]) == 2  # only a on the first moment
 
 
 def test_a_wall_between_camera_and_victim_uncovers_the_kill(match):

@@ -4,7 +4,11 @@ The program is what a RIG_MATCH session answered: one camera per program moment 
 its reply names), showing that frame's world, or during a REPLAY the frame it replays (the reply's
 `shot.replay_frame`): every measure of bodies below reads the frame the picture shows. Everything
 here is measured from that camera against the level mesh and the players' bodies as the match file
-has them, never from what the director says it shows:
+has them, never from what the director says it shows; but a cast's live moment (its program file
+carries the players' feet its stream sampled: `Program.feet_world`) stands each body on those
+feet, turned as the frame has it: a cast samples the stream half a row off the file's grid, and a
+player running at 10 m/s is 0.17 m from either row (1.5 m from the camera, a tenth of its height
+on the screen), one through a teleport metres off:
 
 - shown fraction, per program moment and player: the share of the player's body sample points
   (`SAMPLES_PER_PLAYER` points drawn uniformly over its capsule's surface, fixed for the run) that
@@ -22,8 +26,8 @@ has them, never from what the director says it shows:
   counts a kill whose moment the program shows from the attacker's eyes (the camera within
   `EYE_TOLERANCE_M` of its eye point, `EYE_HEIGHT_FRACTION` of its height above its feet: what a
   QuakeWorld spectator tracking the attacker sees) with the victim shown.
-- in the eyes of: the player whose eye point the camera is at (within EYE_TOLERANCE_M), if any;
-  where a cast's program carries the players' feet its director saw, the eye point is theirs.
+- in the eyes of: the player whose eye point the camera is at (within EYE_TOLERANCE_M), if any
+  (on a cast's carried feet where it has them).
   A first-person program shows that player's view, not its body: the measures below count the
   player as shown at those moments.
 - lead, per covered kill: how long the program had been on the same shot (no cut) with both shown
@@ -128,7 +132,8 @@ class Program:
     moment, shot.replay_frame; else index); replay (n,) bool: the moment's shot is a REPLAY;
     feet_world (n, P, 3) float64 m or None: the players' feet the moment's director saw, where a
     cast's program file carries them (NaN where it did not: a replay's moment, a player it lacks),
-    which tell whose eyes the camera is in (`in_eyes_of`); None: the match file's at index.
+    where the moment's bodies stand (`feet_at`) and so whose eyes the camera is in (`in_eyes_of`);
+    None: the match file's at index.
     """
 
     index: np.ndarray
@@ -149,6 +154,10 @@ class Program:
 
     def pose(self, row: int) -> CameraPose:
         return CameraPose(self.position[row], self.rotation[row], float(self.vertical_fov_deg[row]))
+
+    def feet_at(self, row: int) -> np.ndarray | None:
+        """(P, 3) m the players' feet the moment at `row` carried (NaN: the match file's), or None."""
+        return None if self.feet_world is None else self.feet_world[row]
 
     def digest(self) -> str:
         """SHA-256 (hex) of every moment's frame, pose, cut, replayed frame and subjects: two runs
@@ -171,16 +180,22 @@ class BodySampler:
         self.radius_m = np.array([p.radius_m for p in match.players])  # (P,) each capsule's, for `holding`
         self.height_m = np.array([p.height_m for p in match.players])  # (P,)
 
-    def points_world(self, index: int) -> np.ndarray:
-        """(P, S, 3) m: every player's sample points at match frame `index`."""
+    def points_world(self, index: int, feet_world: np.ndarray | None = None) -> np.ndarray:
+        """(P, S, 3) m: every player's sample points at match frame `index`, standing on feet_world
+        (P, 3) m where given and finite (Program.feet_at) rather than the frame's."""
         rotation = quat_to_matrix(self.match.rotations_xyzw[index])  # (P, 3, 3)
-        return np.einsum("pij,psj->psi", rotation, self.points_local) + self.match.positions_world[index][:, None, :]
+        return np.einsum("pij,psj->psi", rotation, self.points_local) + self._feet(index, feet_world)[:, None, :]
 
-    def holding(self, index: int, point_world: np.ndarray) -> np.ndarray:
-        """(P,) bool: whose body, at match frame `index`, holds the point (3,) m: within its radius
-        of its capsule's axis (player_mesh: from radius to height - radius above its feet)."""
+    def _feet(self, index: int, feet_world: np.ndarray | None) -> np.ndarray:
+        feet = self.match.positions_world[index]
+        return feet if feet_world is None else np.where(np.isfinite(feet_world), feet_world, feet)
+
+    def holding(self, index: int, point_world: np.ndarray, feet_world: np.ndarray | None = None) -> np.ndarray:
+        """(P,) bool: whose body, at match frame `index` (standing on feet_world as points_world
+        does), holds the point (3,) m: within its radius of its capsule's axis (player_mesh: from
+        radius to height - radius above its feet)."""
         rotation = quat_to_matrix(self.match.rotations_xyzw[index])  # (P, 3, 3) local-to-world
-        local = np.einsum("pji,pj->pi", rotation, point_world - self.match.positions_world[index])  # (P, 3)
+        local = np.einsum("pji,pj->pi", rotation, point_world - self._feet(index, feet_world))  # (P, 3)
         radius = self.radius_m
         along = np.clip(local[:, 1], radius, np.maximum(radius, self.height_m - radius))
         return np.asarray(np.hypot(np.hypot(local[:, 0], local[:, 1] - along), local[:, 2]) < radius)
@@ -208,9 +223,9 @@ def measure_shown(program: Program, bodies: BodySampler, lens: Lens, level: RayS
     a body that holds the camera."""
     rows = []
     for r in range(len(program)):
-        index = int(program.shown_index[r])
-        shown = shown_fractions(program.pose(r), lens, bodies.points_world(index), level)
-        rows.append(np.where(bodies.holding(index, program.position[r]), 0.0, shown))
+        index, feet = int(program.shown_index[r]), program.feet_at(r)
+        shown = shown_fractions(program.pose(r), lens, bodies.points_world(index, feet), level)
+        rows.append(np.where(bodies.holding(index, program.position[r], feet), 0.0, shown))
     return np.stack(rows).reshape(len(program), len(bodies.match.players))
 
 
@@ -406,7 +421,7 @@ def shown_heights_per_moment(
             out.append(np.zeros(0))
             continue
         pose = program.pose(r)
-        points = bodies.points_world(int(program.shown_index[r]))[players]  # (k, S, 3)
+        points = bodies.points_world(int(program.shown_index[r]), program.feet_at(r))[players]  # (k, S, 3)
         frame_lens = Lens(vertical_fov_deg=pose.vertical_fov_deg, aspect=lens.aspect)
         screen_y = np.clip(project_to_screen(pose, frame_lens, points.reshape(-1, 3))[:, 1], -1.0, 1.0)
         screen_y = screen_y.reshape(len(players), -1)
