@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 import camdirector_client as cd
-from camdirector.bridges.gsi_tracks import Sample
-from camdirector.bridges.live_session import drive_session
+from camdirector.bridges.gsi_tracks import DerivedEvent, Sample
+from camdirector.bridges.live_session import ONE_SIDED_PRIORITY, drive_session, event_msg
 from camdirector.matches.quakeworld_mvd import quake_player
+from camdirector.pipeline.inputs import EventKind
+from camdirector.pipeline.match.settings import MatchSettings
 
 FRESH_SAMPLES = 3  # the feed goes stale after this many samples
 
@@ -123,3 +125,16 @@ def test_no_frame_goes_before_the_feeds_first_sample_is_due():
     assert counts.frames == len(sent) == FRESH_SAMPLES
     assert counts.stale >= 2  # the stale ticks after the fresh ones, and only those
     assert sent[0] * 30.0 >= 4 - 1e-6  # the four ticks before it sent nothing
+
+
+def test_a_kill_goes_at_its_kinds_priority_and_a_one_sided_death_rated_as_a_kill():
+    """A kill of one player by another is a KILL at the kind's own priority (0); a death whose
+    other side the feed left unsaid is a CUSTOM event rated as the director rates a kill, so that
+    it gets a beat and no replay covers it."""
+    at = np.zeros(3)
+    kill = event_msg(DerivedEvent("kill", "p00", "p01", at))
+    assert (kill.kind, kill.priority, kill.actor_id, kill.other_actor_id) == (cd.pb.EVENT_KILL, 0, "p00", "p01")
+    for kind, label in (("death", "died"), ("kill_unknown", "kill, victim unknown")):
+        event = event_msg(DerivedEvent(kind, "p02", "", at))
+        assert (event.kind, event.priority, event.label) == (cd.pb.EVENT_CUSTOM, ONE_SIDED_PRIORITY, label)
+    assert ONE_SIDED_PRIORITY == MatchSettings().priorities[EventKind.KILL] >= MatchSettings().beat_min_priority

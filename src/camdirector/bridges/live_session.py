@@ -37,6 +37,11 @@ from camdirector.evaluation.match.measure import aim_offset, player_mesh
 from camdirector.matches.cs2_demo import view_rotation
 
 EVENT_LABELS = {"kill": "kill", "death": "died", "kill_unknown": "kill, victim unknown"}
+# a death whose other side the feed leaves unsaid (a QuakeWorld teamkill's obituary names one side; a GSI payload's
+# dead player with no killer in it) goes as a CUSTOM event rated as a kill is (MatchSettings.priorities, HLTV's 7): news
+# the director gives a beat and keeps replays off, as eval-match counts the kill the demo resolved (a cast's replay
+# covered a teamkill at 147.6 s, rated 4 as a CUSTOM event: a live kill missed for a replay)
+ONE_SIDED_PRIORITY = 7
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +90,7 @@ def event_msg(event: DerivedEvent) -> cd.pb.GameEvent:
         kind=kind,
         actor_id=event.actor_id,
         other_actor_id=event.other_id,
+        priority=0 if event.kind == "kill" else ONE_SIDED_PRIORITY,  # 0: the kind's own (a kill's)
         label=EVENT_LABELS[event.kind],
         position=cd.vec3(event.position_world),
     )
