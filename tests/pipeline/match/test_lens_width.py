@@ -177,6 +177,23 @@ def test_a_subject_cut_off_even_at_the_widest_lens_keeps_the_lens():
     assert _widened(rig, moment, pose, subjects=(0,)) == Lens().vertical_fov_deg
 
 
+def test_a_subject_cut_off_and_too_near_to_fit_the_band_when_shown_stays_cut_off():
+    """The band first: a framed subject out of the frame at the lens's width (so not too tall
+    there), which a wider frame would show taller than the band, keeps the lens (a cast's
+    OVERVIEW widened to 90 degrees to show a subject 1.4 m off beside it: 1.0 of the frame)."""
+    rig, moment, _ = _looking_at_a(1.5)
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    turned = np.radians(55.0)  # level, looking 55 degrees away from a
+    pose = look_along(chest + [1.5, 0.0, 0.0], np.array([-np.cos(turned), 0.0, np.sin(turned)]), Lens().vertical_fov_deg)
+    visibility = rig.rig.program_camera.subject_visibility
+    samples = moment.transforms[0].apply(visibility.samples_local[0])
+    assert _in_frame_share(pose, Lens().vertical_fov_deg, samples) == 0.0  # out of the frame
+    assert _in_frame_share(pose, SETTINGS.widen_max_fov_deg, samples) >= SHOWN_SEEN  # the widest would show it
+    silhouette = silhouette_points(moment, visibility)[0]
+    assert _height_share(pose, SETTINGS.widen_max_fov_deg, silhouette) > SETTINGS.shown_height_max  # over the band there
+    assert _widened(rig, moment, pose, subjects=(0,)) == Lens().vertical_fov_deg
+
+
 def test_only_a_camera_at_a_players_eye_point_looks_through_its_eyes():
     """At the eye (living or dead: first_person.py's heights) a first-person view; elsewhere in
     the body, midway between the two, a camera like any other."""

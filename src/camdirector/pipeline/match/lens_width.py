@@ -46,7 +46,9 @@ median 0.065 of the frame's height (issue 41).
 A Toric camera's pose (our director's, and its wide view of named players) also goes wide enough
 to show a framed subject that the frame cuts off (`_cut_off`): a camera pulled in front of a wall
 close over its subject looks down as steeply as a level camera can and has the subject below the
-frame; wider, it shows it without a cut. The baselines' cameras keep what they frame.
+frame; wider, it shows it without a cut, at a width where it stands within the band (a subject
+too close to fit stays cut off: a cast's OVERVIEW camera went to 90 degrees for a subject spawned
+1.4 m beside it, 1.0 of the frame). The baselines' cameras keep what they frame.
 """
 
 from __future__ import annotations
@@ -120,6 +122,10 @@ def widened_fov_deg(
         k = len(seen)
         shown = (_in_frame(slope_y[subject, :k], slope_x[subject, :k], tan_half, lens.aspect) & seen[:, None]).mean(axis=0)
         enough = shown >= min(FRAMED_IN, shown[-1])  # (T,) as much of it as the widest shows, up to FRAMED_IN
+        # within the band itself where the width shows it (`tall` holds only those tall at the floor's width, where the
+        # frame cut it off: an OVERVIEW's fixed camera widened to 90 degrees for a subject spawned 1.4 m beside it)
+        own_heights = screen_heights(slope_y[subject][None], slope_x[subject][None], tan_half, lens.aspect)[0]  # (T,)
+        enough &= own_heights <= settings.shown_height_max
         if (fits & enough).any():  # the band first: a subject too close to fit stays cut off
             fits &= enough
     return float(widths_deg[int(np.argmax(fits))] if fits.any() else max_deg)
