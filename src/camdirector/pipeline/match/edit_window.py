@@ -194,10 +194,11 @@ class Decision(NamedTuple):
     seen: list[float]
     last_resort: Decision | None = None
     kills_only: bool = False
-    kill_given_up: bool = False  # by the floors `ANY`: a kill in its frames not shown
     # the frames on which it shows its subjects under SEEN_FLOOR (judged as its floors judge them) where the frames it
     # takes showed theirs more (`_missed`), count
     lost: int = 0
+    kill_given_up: bool = False  # by the floors `ANY`: a kill in its frames not shown (last: a checkpoint's older
+    # decisions, pickled as tuples, read on)
 
 
 class Floors(NamedTuple):
