@@ -110,6 +110,12 @@ def baselines(match_file: Path, program: Path, data_dir: Path) -> dict:
     last moment, its kills those from its first (program_on_match's cut)."""
     placed = program_on_match(read_program(program), load_match(match_file))
     result, _ = evaluate_match(placed.match, DELAY_S, directors=BASELINES, data_dir=data_dir, rate_hz=RATE_HZ)
+    return against_of(result)
+
+
+def against_of(result: dict) -> dict:
+    """The kill coverage bars' references in an eval-match result that ran the BASELINES: its kills,
+    the greedy 2-s bound and the baselines' first-person kill coverage."""
     return {
         "kills": result["match"]["kills"],
         "greedy_2s_kill_coverage": result["ceilings"]["greedy_2s_kill_coverage"],

@@ -34,7 +34,7 @@ from pathlib import Path
 
 from camdirector.evaluation.match.match_file import save_match
 from camdirector.matches.quakeworld_mvd import import_mvd
-from load_tests.cast_program import BASELINES, DELAY_S, ROOT, bars
+from load_tests.cast_program import BASELINES, DELAY_S, ROOT, against_of, bars
 from load_tests.qtv_bridge import DEMO, map_data_dir
 from load_tests.report import emit
 
@@ -67,13 +67,7 @@ def judged(
     if done.returncode != 0:
         raise RuntimeError(f"eval-match exited {done.returncode}: {done.stderr[-2000:]}")
     result = json.loads(out.read_text())
-    against = None
-    if with_baselines:
-        against = {
-            "kills": result["match"]["kills"],
-            "greedy_2s_kill_coverage": result["ceilings"]["greedy_2s_kill_coverage"],
-            "first_person": {name: result["directors"][name]["kill_coverage_first_person"] for name in BASELINES},
-        }
+    against = against_of(result) if with_baselines else None
     checked = [b for b in bars(result, against, DIRECTOR) if b["bar"] != UNPACED_BAR]
     return {
         "rate_hz": rate_hz,

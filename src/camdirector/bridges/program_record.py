@@ -31,8 +31,8 @@ more than a row's step are left out (counted); two moments on one row (the cast'
 against the file's grid) keep the later, cutting if either cut, as eval-match keeps the replies
 of one moment (and a moment older than the one before is left out). The match's kills before the program's first moment were not
 its to show and are left out, as measure.py leaves out those after its last. The feet a live
-moment carried tell whose eyes its camera is in (`Program.feet_world`, measure.py `in_eyes_of`):
-a player through a teleport can be a row apart from the others.
+moment carried are where measure.py stands its bodies and tells whose eyes its camera is in
+(`Program.feet_world`): a player through a teleport can be a row apart from the others.
 
 The shots as they went on air are timed by the session's clock instead (time_s: the cast's
 monotonic clock on its 1 / rate_hz grid, live_session.py), each placed moment counted. The two

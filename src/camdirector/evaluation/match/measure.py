@@ -187,8 +187,7 @@ class BodySampler:
         return np.einsum("pij,psj->psi", rotation, self.points_local) + self._feet(index, feet_world)[:, None, :]
 
     def _feet(self, index: int, feet_world: np.ndarray | None) -> np.ndarray:
-        feet = self.match.positions_world[index]
-        return feet if feet_world is None else np.where(np.isfinite(feet_world), feet_world, feet)
+        return on_feet(self.match.positions_world[index], feet_world)
 
     def holding(self, index: int, point_world: np.ndarray, feet_world: np.ndarray | None = None) -> np.ndarray:
         """(P,) bool: whose body, at match frame `index` (standing on feet_world as points_world
@@ -204,6 +203,12 @@ class BodySampler:
         """(k, 3) m: the aim points of the players (columns) at match frame `index`."""
         rotation = quat_to_matrix(self.match.rotations_xyzw[index, players])
         return np.einsum("pij,pj->pi", rotation, self.aims_local[players]) + self.match.positions_world[index, players]
+
+
+def on_feet(file_feet: np.ndarray, carried: np.ndarray | None) -> np.ndarray:
+    """(..., 3) m a new array of the feet to measure on: the carried ones (Program.feet_world, same
+    shape) where given and finite, else the match file's."""
+    return file_feet.copy() if carried is None else np.where(np.isfinite(carried), carried, file_feet)
 
 
 def shown_fractions(pose: CameraPose, lens: Lens, points_world: np.ndarray, level: RayScene) -> np.ndarray:
@@ -249,10 +254,7 @@ def in_eyes_of(match: MatchRecording, program: Program) -> np.ndarray:
     show a player through a teleport a row before the others (a cast's first-person moment through
     p02's eyes measured as a camera 4.4 m from p02, and p03 2.5 m off 0.73 of the frame tall)."""
     heights = np.array([p.height_m for p in match.players])
-    eyes = match.positions_world[program.shown_index].copy()  # (n, P, 3) feet
-    if program.feet_world is not None:
-        carried = np.isfinite(program.feet_world)
-        eyes[carried] = program.feet_world[carried]
+    eyes = on_feet(match.positions_world[program.shown_index], program.feet_world)  # (n, P, 3) feet
     eyes[..., 1] += EYE_HEIGHT_FRACTION * heights
     distance = np.linalg.norm(eyes - program.position[:, None, :], axis=2)  # (n, P)
     nearest = distance.argmin(axis=1)
