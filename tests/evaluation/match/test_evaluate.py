@@ -23,6 +23,8 @@ DIRECTOR_FIGURES = {
     "kills_covered",
     "lead_s",
     "shots",
+    "short_shots",
+    "nobody_runs",
     "cuts_per_min",
     "jump_cuts",
     "framed_visibility",
@@ -111,6 +113,9 @@ def test_eval_match_reports_every_figure_for_both_directors(registry_and_match):
         assert figures["buffering_replies"] == 2 * 30  # the first 2 s of game answer no program
         assert figures["program_s"] == pytest.approx(20.0, abs=0.05), "the program reaches the match's end"
         assert figures["shots"]["count"] == len(figures["shots"]["values"]) >= 1
+        assert len(figures["short_shots"]) == figures["shots"]["under_2s"]
+        nobody = sum(run["moments"] for run in figures["nobody_runs"]) / figures["program_moments"]
+        assert nobody == pytest.approx(figures["nobody_shown"]["other"], abs=1e-4)
         assert figures["jump_cuts"] >= 0 and figures["cuts_per_min"] > 0
         assert 0.0 < figures["framed_visibility"] <= 1.0 and 0.0 < figures["program_visibility"] <= 1.0
         assert figures["kill_coverage"] <= figures["kill_coverage_first_person"]

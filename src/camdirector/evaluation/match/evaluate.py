@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,7 @@ from camdirector.evaluation.match.measure import (
     jumps_without_cut,
     kill_coverage,
     measure_shown,
+    nobody_moments,
     nobody_shown,
     places_count,
     program_visibility,
@@ -84,14 +86,16 @@ REPLAY_ROOM_S = _OURS.replay_after_s + Style().min_shot_s + _OURS.lead_s
 @dataclass(eq=False)
 class DirectorRun:
     """One director's session: its program, compute_ms (m,) of the replies with a program, the
-    candidates offered beside the program moments, the count of buffering replies and the
-    stream's wall time, s."""
+    candidates offered beside the program moments, the count of buffering replies, the
+    stream's wall time, s, and the flags of each program moment's reply (its Diagnostics.flags:
+    why the camera is where it is; none for a program file, which carries none)."""
 
     program: Program
     compute_ms: np.ndarray
     candidates: Offered
     buffering: int
     wall_s: float
+    flags: list[tuple[str, ...]] = field(default_factory=list)
 
 
 def stream_director(
@@ -130,6 +134,7 @@ def stream_director(
                         u.shot.replay_frame if u.shot.kind == cd.pb.SHOT_REPLAY else u.frame,
                         u.shot.kind == cd.pb.SHOT_REPLAY,
                         u.compute_ms,
+                        tuple(u.diagnostics.flags),
                         tuple(
                             (
                                 c.shot.replay_frame - 1 if c.shot.kind == cd.pb.SHOT_REPLAY else u.frame - 1,
@@ -148,7 +153,9 @@ def stream_director(
     answered = _one_row_per_moment(shown)
     if not answered:
         raise RuntimeError("the server answered no program frame (is the match shorter than the delay?)")
-    frame, time_s, position, rotation, fov, cut, shot_id, subjects, overview, shown_frame, replay, compute_ms, _ = zip(*answered)
+    frame, time_s, position, rotation, fov, cut, shot_id, subjects, overview, shown_frame, replay, compute_ms, flags, _ = zip(
+        *answered
+    )
     program = Program(
         index=np.array(frame, dtype=np.int64) - 1,
         time_s=np.array(time_s),
@@ -171,7 +178,7 @@ def stream_director(
         vertical_fov_deg=np.array([c[3] for c in offered], dtype=np.float64),
         subjects=[c[4] for c in offered],
     )
-    return DirectorRun(program, np.array(compute_ms), candidates, sum(b for b, _ in replies), wall_s)
+    return DirectorRun(program, np.array(compute_ms), candidates, sum(b for b, _ in replies), wall_s, list(flags))
 
 
 def _one_row_per_moment(rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
@@ -219,6 +226,7 @@ def _figures(
     third_person = third_person_heights(per_moment, eyes)
     tallest = tallest_shown(per_moment, eyes)
     nobody = nobody_shown(program, shown, eyes)
+    nobody_rows = np.flatnonzero(nobody_moments(shown, eyes) & ~program.overview)
     replays = replay_figures(match, program, shown, REPLAY_ROOM_S, eyes)
     showing = candidates_showing_subjects(run.candidates, bodies, lens, level)
     subject_heights = shown_heights(program, bodies, lens, shown, eyes, subjects_only=True)
@@ -230,6 +238,7 @@ def _figures(
         "kills_covered": int(coverage.covered.sum()),
         "lead_s": {**_spread(coverage.lead_s), "values": [round(v, 2) for v in coverage.lead_s.tolist()]},
         "shots": shot_figures(lengths),
+        "short_shots": _short_shots(program, run.flags),
         "cuts_per_min": round(cuts_per_minute(program), 2),
         "jump_cuts": jump_cuts(program, bodies),
         "framed_visibility": round(framed_visibility(program, shown, column, eyes), 3),
@@ -245,6 +254,7 @@ def _figures(
             "over_60pc": None if tallest["over_60pc"] is None else round(tallest["over_60pc"], 4),
         },
         "nobody_shown": {"overview": round(nobody["overview"], 4), "other": round(nobody["other"], 4)},
+        "nobody_runs": _runs_of(program, nobody_rows, run.flags),
         "candidates_showing_half": {
             **showing,
             "share": round(showing["showing_half"] / showing["offered"], 3) if showing["offered"] else None,
@@ -266,6 +276,47 @@ def _figures(
         "buffering_replies": run.buffering,
         "stream_wall_s": round(run.wall_s, 1),
     }
+
+
+def _short_shots(program: Program, flags: list[tuple[str, ...]]) -> list[dict]:
+    """Each complete shot under SHORT_SHOT_S, in program order: its first moment's time, s, its
+    length, s, its subjects, and the flags of the replies at the cut that starts it and at the one
+    that ends it (why the rig cut there: `cut_through_wall`, `cut_to_seen_place`, an edit
+    window's `edit_window_short_left`; empty lists for a program file)."""
+    starts = np.flatnonzero(program.cut | (np.arange(len(program)) == 0))
+    short = []
+    for start, end in zip(starts.tolist(), starts[1:].tolist()):
+        length_s = float(program.time_s[end] - program.time_s[start])
+        if length_s < SHORT_SHOT_S - 1e-6:
+            short.append(
+                {
+                    "time_s": round(float(program.time_s[start]), 3),
+                    "length_s": round(length_s, 3),
+                    "subjects": list(program.subjects[start]),
+                    "flags_at_cut": list(flags[start]) if flags else [],
+                    "flags_at_end": list(flags[end]) if flags else [],
+                }
+            )
+    return short
+
+
+def _runs_of(program: Program, rows: np.ndarray, flags: list[tuple[str, ...]]) -> list[dict]:
+    """The program moments `rows` (k,) int, increasing, as runs of consecutive moments: each run's
+    first moment's time, s, its moments, the subjects of its first, and how many of its moments'
+    replies carried each flag, most first (empty for a program file)."""
+    runs = np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1) if len(rows) else []
+    out = []
+    for run in runs:
+        counted = Counter(f for row in run.tolist() for f in flags[row]) if flags else Counter()
+        out.append(
+            {
+                "time_s": round(float(program.time_s[run[0]]), 3),
+                "moments": len(run),
+                "subjects": list(program.subjects[run[0]]),
+                "flags": dict(counted.most_common()),
+            }
+        )
+    return out
 
 
 def _long_shots_missing_kills(match: MatchRecording, program: Program, coverage) -> int:

@@ -454,10 +454,17 @@ def tallest_shown(per_moment: list[np.ndarray], eyes_of: np.ndarray) -> dict[str
     return {"max": float(tallest.max()), "over_60pc": float((tallest > TALL_HEIGHT).mean())}
 
 
+def nobody_moments(shown: np.ndarray, eyes_of: np.ndarray) -> np.ndarray:
+    """(n,) bool: the program moments showing nobody (module docstring), from shown (n, P) and
+    eyes_of (n,) (in_eyes_of: a view through a player's eyes is that player's)."""
+    nobody: np.ndarray = (shown.max(axis=1, initial=0.0) < SHOWN_FRACTION) & (eyes_of < 0)
+    return nobody
+
+
 def nobody_shown(program: Program, shown: np.ndarray, eyes_of: np.ndarray) -> dict[str, float]:
     """The shares of program moments showing nobody in an OVERVIEW and in another shot (module
     docstring); NaN without moments."""
-    nobody = (shown.max(axis=1, initial=0.0) < SHOWN_FRACTION) & (eyes_of < 0)
+    nobody = nobody_moments(shown, eyes_of)
     if not len(program):
         return {"overview": float("nan"), "other": float("nan")}
     return {"overview": float((nobody & program.overview).mean()), "other": float((nobody & ~program.overview).mean())}
