@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from camdirector.evaluation.match.measure import SHOWN_FRACTION, Program
+from camdirector.evaluation.match.measure import SHOWN_FRACTION, Program, shot_starts
 from load_tests.real_matches import MATCHES, prepare
 from load_tests.report import emit
 
@@ -68,7 +68,7 @@ def repaired(program: Program, judge: Judge, short_s: float) -> tuple[Program, d
     counts = {"to_the_shot_before": 0, "to_the_shot_after": 0, "left": 0}
     left: set[int] = set()
     while True:
-        starts = np.flatnonzero(p.cut | (np.arange(len(p)) == 0)).tolist()
+        starts = shot_starts(p).tolist()
         short = [(a, b) for a, b in zip(starts, starts[1:]) if p.time_s[b] - p.time_s[a] < short_s - 1e-6 and a not in left]
         if not short:
             return p, counts

@@ -52,6 +52,7 @@ from camdirector.evaluation.match.measure import (
     program_visibility,
     replay_figures,
     shot_lengths_s,
+    shot_starts,
     shown_heights,
     shown_heights_per_moment,
     sweeps_through_walls,
@@ -283,7 +284,7 @@ def _short_shots(program: Program, flags: list[tuple[str, ...]]) -> list[dict]:
     length, s, its subjects, and the flags of the replies at the cut that starts it and at the one
     that ends it (why the rig cut there: `cut_through_wall`, `cut_to_seen_place`, an edit
     window's `edit_window_short_left`; empty lists for a program file)."""
-    starts = np.flatnonzero(program.cut | (np.arange(len(program)) == 0))
+    starts = shot_starts(program)
     short = []
     for start, end in zip(starts.tolist(), starts[1:].tolist()):
         length_s = float(program.time_s[end] - program.time_s[start])
@@ -322,7 +323,7 @@ def _runs_of(program: Program, rows: np.ndarray, flags: list[tuple[str, ...]]) -
 def _long_shots_missing_kills(match: MatchRecording, program: Program, coverage) -> int:
     """Shots over LONG_SHOT_S during which a kill happened that the shot did not cover (issue 29:
     no shot over 20 s while a kill happens outside it)."""
-    starts = np.flatnonzero(program.cut | (np.arange(len(program)) == 0))
+    starts = shot_starts(program)
     ends = np.append(starts[1:], len(program))
     kill_rows = np.searchsorted(
         program.index,

@@ -354,10 +354,15 @@ def replay_figures(
     }
 
 
+def shot_starts(program: Program) -> np.ndarray:
+    """(k,) int64: the program moment each shot starts at (its first, and every cut)."""
+    starts: np.ndarray = np.flatnonzero(program.cut | (np.arange(len(program)) == 0))
+    return starts
+
+
 def shot_lengths_s(program: Program) -> np.ndarray:
     """(k,) s: the lengths of the complete shots (the last one, cut short by the match's end, left out)."""
-    starts = program.time_s[np.flatnonzero(program.cut | (np.arange(len(program)) == 0))]
-    return np.diff(starts)
+    return np.diff(program.time_s[shot_starts(program)])
 
 
 def cuts_per_minute(program: Program) -> float:
