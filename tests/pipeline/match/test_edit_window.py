@@ -445,24 +445,60 @@ def test_a_window_with_a_hold_waiting_pickles_and_goes_on_to_the_same_program():
     assert runs[0] == runs[1] and cuts(p.program()) == [0, 90, 150]
 
 
-@pytest.mark.parametrize("x_copy_sees, kills_only", [(0.8, False), (0.3, True)], ids=["strict", "by its kills alone"])
-def test_a_short_shot_holds_on_over_the_shot_after_whose_own_short_piece_goes_to_the_shot_after_it(x_copy_sees, kills_only):
+@pytest.mark.parametrize(
+    "x_copy_sees, x_frames, x_to",
+    [(0.8, 30, "held on"), (0.3, 45, "held on by its kills alone"), (0.3, 30, "b2 by its kills alone")],
+)
+def test_a_short_shot_holds_on_over_the_shot_after_whose_own_short_piece_goes_to_the_shot_after_it(x_copy_sees, x_frames, x_to):
     """a's copy dies at a wall and b (its subject 0.2 seen where x's 0.8 or 0.3) may not take x's
     frames but by its kills alone, so x waits to hold on; b itself is cut after 6 frames, its
     piece going to b2 (0.9: more than x's copy carrying it on). The repair of b's piece is applied
-    before x's hold is judged at frame 150: x holds on over b2's first frames (by the strict
-    floors where its copy shows b2's subjects 0.8, by its kills alone at 0.3), never left short
-    for a cut that goes a few frames later, nor given to b, whose first pose b2's took since."""
+    before x's hold is judged at frame 150, and x's last resort, b, whose first pose b2's took
+    since, judged again on b2 (by its kills alone: b2 frames nobody's points). x holds on over
+    b2's first frames by the strict floors where its copy shows b2's subjects 0.8; at 0.3 by its
+    kills alone where that loses its subjects on fewer frames than b2 started early would on x's
+    (15 against 45), else b2 takes x's frames (30 and 30); never left short for a cut that goes
+    a few frames later."""
     a, x, b, b2 = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((2,), 25.0)
     p = DiesAt({0.0: 0.9, 10.0: x_copy_sees, 20.0: 0.2, 25.0: 0.9})
-    p.frames(a, 90)
-    p.frames(x, 30)
-    p.frames(b, 6)
-    p.frames(b2, 40)
-    frames = list(p.window.frames)
-    assert cuts(frames) == [0, 90, 150] and not any(SHORT_LEFT in f.flags or LAST_RESORT_FLAG in f.flags for f in frames)
-    assert all(f.shot is x and HELD_ON in f.flags and (KILLS_ONLY_FLAG in f.flags) == kills_only for f in frames[120:150])
-    assert all(f.shot is b2 for f in frames[150:])
+    frames = played(p, (a, 90), (x, x_frames), (b, 6), (b2, 40))
+    assert not any(SHORT_LEFT in f.flags for f in frames)
+    held = frames[90 + x_frames : 150]
+    if x_to == "b2 by its kills alone":
+        assert cuts(frames) == [0, 90] and all(f.shot is b2 for f in frames[90:])
+        assert all(LAST_RESORT_FLAG in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[90:120])
+    else:
+        assert cuts(frames) == [0, 90, 150] and not any(LAST_RESORT_FLAG in f.flags for f in frames)
+        kills_only = x_to == "held on by its kills alone"
+        assert all(f.shot is x and HELD_ON in f.flags and (KILLS_ONLY_FLAG in f.flags) == kills_only for f in held)
+        assert all(f.shot is b2 for f in frames[150:])
+
+
+@pytest.mark.parametrize("x_to", ["b2", "b2 by its kills alone", "a"])
+def test_a_short_shot_whose_shot_after_went_to_the_next_goes_to_its_last_resort_where_a_cut_comes_before_its_hold_ends(x_to):
+    """As above (x waits to hold on, its last resort b by its kills alone; b's 6 frames go to b2,
+    started early), but c cuts b2 at frame 136, before x's hold would end at 150. b's piece goes
+    to b2 first (its cut at 126 would refuse any last resort), then x to its last resort: b's first
+    frame is b2's now, so a last resort to b is judged again on b2, started at x's frames into the
+    pose b2 shows at frame 120 (by the last resort's floors where b2 shows x's subject, else by
+    its kills alone, flagged); one to the shot before (a carried on, showing x's subject 12% tall:
+    readable, under the strict 15%) reads nothing of b. The shot left short from x's cut or b's to
+    c's goes to c, started early. Before, x was left 1 s long: on program_phases' 12 programs of
+    the 2on2, five of the eight shots under 2 s were left so, among cuts through walls within a
+    second of each other."""
+    a, x, b, b2, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((2,), 25.0), shot((0,), 30.0)
+    sees = {10.0: {1}, 25.0: set() if x_to == "b2 by its kills alone" else {2}}
+    p = DiesAt({0.0: 0.9, 10.0: 0.3, 20.0: 0.2, 25.0: 0.9, 30.0: 0.9}, sees=sees, heights={0.0: 0.12, 10.0: 0.3})
+    if x_to == "a":
+        p.dies, p.sees[0.0] = {}, {0, 1}
+    frames = played(p, (a, 90), (x, 30), (b, 6), (b2, 10), (c, 60))
+    assert not any(SHORT_LEFT in f.flags for f in frames) and all(LAST_RESORT_FLAG in f.flags for f in frames[90:120])
+    if x_to == "a":
+        assert cuts(frames) == [0, 120] and all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:120])
+    else:
+        assert cuts(frames) == [0, 90] and all(f.shot is c and STARTED_EARLY in f.flags for f in frames[90:120])
+        assert all((KILLS_ONLY_FLAG in f.flags) == (x_to == "b2 by its kills alone") for f in frames[90:120])
+    assert all(f.shot is c and STARTED_EARLY in f.flags for f in frames[120:136])
 
 
 @pytest.mark.parametrize(

@@ -59,8 +59,12 @@ that ends it. A hold is judged on the program as
 repaired: a repair waiting that gives a short piece of the shot after to the shot after it is
 applied first (`_settle_inside`), and a hold set once the window is past the frame it ends on is
 judged there at once (`_hold_reached`); the last resort applies only where the shot after still
-starts at the pose it judged, and before the shot after's own cut joins the window where that cut
-comes before the hold's end and nothing removes it (`_hold_cut_short`). A human's take is never
+starts at the pose it judged, or, where that pose was given since to the shot after it (a short
+piece's repair), judged again on that one (`_judged_again`: by its floors or the kills alone,
+never a kill given up), and before the shot after's own cut joins the window where that cut
+comes before the hold's end and nothing removes it (`_hold_cut_short`); a cut that comes before
+the hold's end applies the repair waiting of the shot after's short piece first (its cut would
+refuse the last resort). A human's take is never
 given away.
 
 A shot `min_shot_s` long or more but under `lengthen_s` (2.4 s: the settings' `edit_lengthen_s`,
@@ -608,9 +612,13 @@ class EditWindow:
             self.holding = None
             return False
         if frame.moment.time_s < repair.rows[0].moment.time_s + self.min_shot_s - TIME_EPSILON_S:
-            # the shot after is cut short too: the last resort, before that cut's own repair is drawn
-            if frame.cut and not self._last_resort(repair, judges):
-                self._left(repair)
+            # the shot after is cut short too: the last resort, before that cut's own repair is drawn, but after the
+            # repair waiting that gives the shot after's short piece to the shot after it (whose cut would refuse it)
+            if frame.cut:
+                self._settle_inside(repair, judges)
+                self._judged_again(repair, judges)
+                if not self._last_resort(repair, judges):
+                    self._left(repair)
             return False
         ahead, self.hold_ahead = self.hold_ahead, None
         if self._settle_inside(repair, judges):
@@ -622,6 +630,7 @@ class EditWindow:
         self.holding = None
         if verdict is None:
             verdict = self._hold_verdict(repair, frame.moment, judges, KILLS_ONLY)
+            self._judged_again(repair, judges)  # before the hold by the kills alone is weighed against it
             if not _alone_first(repair, verdict) and self._last_resort(repair, judges):
                 return False
             if verdict is None:
@@ -739,11 +748,44 @@ class EditWindow:
         # its frames and the shot after's as the repair judged them: none answered, no cut (no repair) after it since
         if last is None or end is None or not any(f is repair.rows[0] for f in frames) or any(f.cut for f in frames[end + 1 :]):
             return False
-        if repair.first is not None and repair.frame.pose is not repair.first:  # the shot after's first frame given since
+        # the shot after's first frame given since, and not judged again (`_judged_again`; the shot before carried on
+        # reads none of it)
+        if last.neighbour == AFTER and repair.first is not None and repair.frame.pose is not repair.first:
             return False
         self._to_neighbour(repair, last, True, judges)
         self.shadow = self.holding = None
         return True
+
+    def _judged_again(self, repair: Repair, judges: Judges) -> None:
+        """A held short shot's last resort to the shot after, whose first frame was given since to the
+        shot after that one (its own short shot's repair, started early), judged again on that one
+        (`_after_again`; None where it keeps nothing), before the hold is weighed against it or it
+        is applied: as drawn it no longer applies (`_last_resort`)."""
+        decision = repair.decision
+        last = None if decision is None else decision.last_resort
+        if last is None or last.neighbour != AFTER or repair.first is None or repair.frame.pose is repair.first:
+            return
+        assert decision is not None  # it has a last resort
+        repair.decision = decision._replace(last_resort=self._after_again(repair, judges))
+
+    def _after_again(self, repair: Repair, judges: Judges) -> Decision | None:
+        """The last resort of a short shot whose shot after's first frame was given since to the shot
+        after that one, started early (`_last_resort`): that shot as the shot after now, started at
+        the short shot's frames into the pose it shows at the cut now, by the last resort's floors,
+        else by the kills alone (`_decided`), never giving a kill up (on program_phases' 2on2,
+        giving them up too left a kill and 43 frames of nobody for one shot under 2 s); None where
+        none keeps them. `repair.after` becomes that shot."""
+        rows, frame = repair.rows, repair.frame
+        after = _side(frame.shot, rows, judges)
+        previous = None if repair.before is None else repair.before.shot
+        players = {p: i for i, p in enumerate(self.players)}
+        kills = _kills(rows, players, judges)
+        for floors in (LAST_RESORT, KILLS_ONLY):
+            later = _after(rows, frame.pose, after, rows[0].shot, kills, previous, judges, floors=floors)
+            if later is not None:
+                repair.after, repair.first = after, frame.pose
+                return later[1]._replace(kills_only=floors is KILLS_ONLY)
+        return None
 
     def _to_neighbour(self, repair: Repair, decision: Decision, last_resort: bool, judges: Judges) -> None:
         """The short shot's frames given to the shot before (BEFORE: the cut that starts it
