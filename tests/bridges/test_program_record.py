@@ -18,7 +18,8 @@ import time
 import numpy as np
 import pytest
 
-from camdirector.bridges.program_record import RecordedProgram, program_on_match, read_program
+import camdirector_client as cd
+from camdirector.bridges.program_record import ProgramRecorder, RecordedProgram, program_on_match, read_program
 from camdirector.deploy.server_process import ServerProcess
 from camdirector.evaluation.match.match_file import save_match
 from camdirector.evaluation.match.measure import shot_lengths_s
@@ -153,6 +154,30 @@ def test_each_live_moment_carries_the_feet_its_director_saw_and_a_replays_none(m
     assert np.isnan(feet[7]).all()
 
 
+def test_each_moment_keeps_its_replys_flags_and_a_file_written_before_them_gives_none(match, tmp_path):
+    """The recorder writes each reply's Diagnostics.flags; placed on the match, each kept moment's
+    (of two on one row, the later's: the one kept, as eval-match keeps one row's replies); a file
+    written before flags were kept gives none (eval-match's lists then name times and subjects
+    alone)."""
+    path = tmp_path / "program.jsonl"
+    recorder = ProgramRecorder(path)
+    recorder.begin({"program_of": "qtv://x:1"})
+    update = cd.pb.CameraUpdate(frame=1, time_s=0.5, cut=True, shot_id=3)
+    update.pose.rotation.w, update.pose.vertical_fov_deg = 1.0, 50.0
+    update.diagnostics.flags.extend(["held_before_wall", "cut_through_wall"])
+    recorder.reply(update)
+    recorder.close()
+    assert read_program(path).moments[0]["flags"] == ["held_before_wall", "cut_through_wall"]
+
+    row = int(np.rint((min(e.time_s for e in match.events if e.kind == "kill") - match.time_s[0]) * match.rate_hz))
+    rows = [0, 1, 2, 3, 4, 5, 5, 6, 7, 8]  # the fifth and sixth moments on one row
+    moments = [{**_moment(match, 1 + k, row + r), "flags": [f"f{k}"]} for k, r in enumerate(rows)]
+    placed = program_on_match(RecordedProgram({"program_of": "qtv://x:1"}, moments, None), match)
+    assert placed.flags == [(f"f{k}",) for k in (0, 1, 2, 3, 4, 6, 7, 8, 9)]
+    older = [{key: v for key, v in m.items() if key != "flags"} for m in moments]
+    assert program_on_match(RecordedProgram({"program_of": "qtv://x:1"}, older, None), match).flags == []
+
+
 def test_the_shots_on_air_are_timed_by_the_sessions_clock(match):
     """The stream clock holds the demo's first sample over the cast's first 4 frames, then plays
     the match at its pace: the first shot is 60 frames on air (2.0 s), 57 rows of the match
@@ -258,6 +283,11 @@ def test_the_cast_program_is_measured_on_the_match_of_the_same_demo(registry, de
     assert figures["kills_covered"] == round(figures["kill_coverage"] * FRAGS)
     for name in ("kill_coverage", "kill_coverage_first_person", "framed_visibility", "program_visibility"):
         assert 0.0 <= figures[name] <= 1.0, (name, figures[name])
+    # the replies' flags (why the camera is where it is) kept, and what eval-match's lists name of them
+    kept = {flag for m in recorded.moments for flag in m["flags"]}
+    named = {flag for run in figures["nobody_runs"] for flag in run["flags"]}
+    named |= {flag for short in figures["short_shots"] for flag in short["flags_at_cut"] + short["flags_at_end"]}
+    assert kept and named <= kept, (kept, named)
     assert figures["program_moments"] > 100 and figures["compute_ms"]["n"] == figures["program_moments"]
     assert figures["candidates_showing_half"]["offered"] == 0  # candidates are not recorded
     # the shots on air, timed by the session's clock: one a cut, at least a frame each, and together

@@ -11,9 +11,10 @@ feed's clock at that frame: for QTV the stream's demo time its players were samp
 qtv.QtvTracks), players ({id: feet [3] m} as that frame carried them), position [3] m, rotation
 [4] xyzw camera-to-world, vertical_fov_deg, cut, shot_id, kind (ShotKind less SHOT_), subjects
 (ids), replay_time_s (a REPLAY's: the session's game time of the moment it shows; else null),
-compute_ms; last, when the cast ended by itself, {"end": {"frames": sent, "buffering":
-replies buffering}}. The candidates are not kept (hours of a cast would weigh too much), so their
-measures come out empty.
+compute_ms, flags (the reply's Diagnostics.flags: why the camera is where it is, which eval-match's
+short_shots and nobody_runs name; a file written before they were kept has none); last, when the
+cast ended by itself, {"end": {"frames": sent, "buffering": replies buffering}}. The candidates
+are not kept (hours of a cast would weigh too much), so their measures come out empty.
 
 Read against a match. A QTV stream's demo time is not the recorded demo's: MVD blocks carry
 time deltas, and a stream begins where the match was when the client joined, anew at each
@@ -132,6 +133,7 @@ class ProgramRecorder:
                 "subjects": list(reply.shot.subject_ids),
                 "replay_time_s": round(reply.shot.replay_time_s, 4) if reply.shot.kind == cd.pb.SHOT_REPLAY else None,
                 "compute_ms": round(reply.compute_ms, 3),
+                "flags": list(reply.diagnostics.flags),
             }
         )
 
@@ -177,7 +179,8 @@ class ProgramOnMatch:
     how many moments were left out (with no source time, in a piece not of the match, or beyond
     the match's ends), shift_s (the first placed piece's: the match's time at a source time of 0,
     s), align_m (the largest of the placed pieces' median distances, m, of the players' feet at
-    their shifts), the shots' lengths on air and pieces (placed, of all: module docstring)."""
+    their shifts), the shots' lengths on air, pieces (placed, of all: module docstring) and each
+    moment's reply flags."""
 
     program: Program
     compute_ms: np.ndarray
@@ -187,6 +190,8 @@ class ProgramOnMatch:
     align_m: float
     on_air_lengths_s: np.ndarray  # (k,) s: the complete shots on the session's clock (`on_air_lengths_s`)
     pieces: tuple[int, int] = (1, 1)
+    # each program moment's reply flags (of one row's moments, the one kept); empty where the file carries none
+    flags: list[tuple[str, ...]] = dataclasses.field(default_factory=list)
 
 
 def on_air_lengths_s(moments: list[dict[str, Any]]) -> np.ndarray:
@@ -319,6 +324,7 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
     cut_match = match.until(last_s)
     cut_match = dataclasses.replace(cut_match, events=[e for e in cut_match.events if e.time_s >= first_s])
     compute_ms = np.array([m.get("compute_ms", np.nan) for m in kept], dtype=np.float64)
+    flags = [tuple(m["flags"]) for m in kept] if all("flags" in m for m in kept) else []
     return ProgramOnMatch(
         program,
         compute_ms,
@@ -328,4 +334,5 @@ def program_on_match(recorded: RecordedProgram, match: MatchRecording) -> Progra
         max(align_m for _, _, align_m in fits),
         on_air_lengths_s(placed),
         (len(fits), len(aligned)),
+        flags,
     )

@@ -192,6 +192,7 @@ def _run_recorded(args: argparse.Namespace) -> int:
             no_candidates,
             buffering=0 if recorded.end is None else recorded.end["buffering"],
             wall_s=recorded.moments[-1]["time_s"] - recorded.moments[0]["time_s"],
+            flags=placed.flags,
         )
         _progress(f"measuring the {len(program)} program moments of {args.program}")
         figures = measure_program(match, run, data_dir=args.data_dir, seed=args.seed)

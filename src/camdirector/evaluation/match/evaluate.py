@@ -89,7 +89,7 @@ class DirectorRun:
     """One director's session: its program, compute_ms (m,) of the replies with a program, the
     candidates offered beside the program moments, the count of buffering replies, the
     stream's wall time, s, and the flags of each program moment's reply (its Diagnostics.flags:
-    why the camera is where it is; none for a program file, which carries none)."""
+    why the camera is where it is; a program file's as it kept them, none where it kept none)."""
 
     program: Program
     compute_ms: np.ndarray
