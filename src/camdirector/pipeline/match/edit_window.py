@@ -282,6 +282,11 @@ class Repair:
     first: CameraPose | None = None  # the shot after's first pose as the decision read it (None: a checkpoint's, unknown)
     long_enough: bool = False  # the short shot min_shot_s long already: given to a neighbour at SHOWN, else left as it is
 
+    def after_moved(self) -> bool:
+        """Whether the shot after's first frame was given since the decision read it (to the shot after
+        that one, started early: its own short piece's repair); False where unknown (a checkpoint's)."""
+        return self.first is not None and self.frame.pose is not self.first
+
     def work_out(self, budget_s: float | None = None) -> None:
         """Works the decision out, whole (budget_s None) or for about budget_s more."""
         run = self.run
@@ -390,6 +395,11 @@ class EditWindow:
             "hold_ahead": None,
         }
         self.__dict__.update({**defaults, **state})
+
+    @functools.cached_property
+    def columns(self) -> dict[str, int]:
+        """Each player's index in the moments, by id (the kills' pairs, `_kills`)."""
+        return {p: i for i, p in enumerate(self.players)}
 
     @property
     def shot_s(self) -> float:
@@ -706,10 +716,9 @@ class EditWindow:
         poses = [pose for _, pose, _ in steps] + after
         seen = [s for _, _, s in steps] + _judged_seen(side.shown, poses, side.judged, judges, len(steps))[0]
         judged = _judged_seen(side.shown, poses, side.judged, judges, in_frame=True)[0] if floors.in_frame else seen
-        players = {p: i for i, p in enumerate(self.players)}
         if (
             not _may_take(side.judged, rows[0].shot, rows[0].shot, rows)
-            or not _keeps_kills(rows, _kills(rows, players, judges), poses, side.judged, judges)
+            or not _keeps_kills(rows, _kills(rows, self.columns, judges), poses, side.judged, judges)
             or not _keeps_seen(rows, judged, floors)
             or not _keeps_height(rows, poses, side.shown, side.judged, judges, floors)
         ):
@@ -748,44 +757,39 @@ class EditWindow:
         # its frames and the shot after's as the repair judged them: none answered, no cut (no repair) after it since
         if last is None or end is None or not any(f is repair.rows[0] for f in frames) or any(f.cut for f in frames[end + 1 :]):
             return False
-        # the shot after's first frame given since, and not judged again (`_judged_again`; the shot before carried on
+        # not judged again since the shot after's first frame was given (`_judged_again`; the shot before carried on
         # reads none of it)
-        if last.neighbour == AFTER and repair.first is not None and repair.frame.pose is not repair.first:
+        if last.neighbour == AFTER and repair.after_moved():
             return False
         self._to_neighbour(repair, last, True, judges)
         self.shadow = self.holding = None
         return True
 
     def _judged_again(self, repair: Repair, judges: Judges) -> None:
-        """A held short shot's last resort to the shot after, whose first frame was given since to the
-        shot after that one (its own short shot's repair, started early), judged again on that one
-        (`_after_again`; None where it keeps nothing), before the hold is weighed against it or it
-        is applied: as drawn it no longer applies (`_last_resort`)."""
+        """A held short shot's last resort to the shot after, whose first frame was given since
+        (`Repair.after_moved`), judged again before the hold is weighed against it or it is
+        applied (as drawn it no longer applies: `_last_resort`): the shot that starts there now as
+        the shot after (`repair.after`, `repair.first`), started at the short shot's frames into
+        the pose it shows at the cut, by the last resort's floors, else by the kills alone
+        (`_decided`), never giving a kill up (on program_phases' 2on2, giving them up too left a
+        kill and 43 frames of nobody for one shot under 2 s); none where none keeps them. The
+        short shot's other neighbour is read as the shot its shadow carried."""
         decision = repair.decision
         last = None if decision is None else decision.last_resort
-        if last is None or last.neighbour != AFTER or repair.first is None or repair.frame.pose is repair.first:
+        if decision is None or last is None or last.neighbour != AFTER or not repair.after_moved():
             return
-        assert decision is not None  # it has a last resort
-        repair.decision = decision._replace(last_resort=self._after_again(repair, judges))
-
-    def _after_again(self, repair: Repair, judges: Judges) -> Decision | None:
-        """The last resort of a short shot whose shot after's first frame was given since to the shot
-        after that one, started early (`_last_resort`): that shot as the shot after now, started at
-        the short shot's frames into the pose it shows at the cut now, by the last resort's floors,
-        else by the kills alone (`_decided`), never giving a kill up (on program_phases' 2on2,
-        giving them up too left a kill and 43 frames of nobody for one shot under 2 s); None where
-        none keeps them. `repair.after` becomes that shot."""
         rows, frame = repair.rows, repair.frame
         after = _side(frame.shot, rows, judges)
         previous = None if repair.before is None else repair.before.shot
-        players = {p: i for i, p in enumerate(self.players)}
-        kills = _kills(rows, players, judges)
+        kills = _kills(rows, self.columns, judges)
+        again = None
         for floors in (LAST_RESORT, KILLS_ONLY):
             later = _after(rows, frame.pose, after, rows[0].shot, kills, previous, judges, floors=floors)
             if later is not None:
                 repair.after, repair.first = after, frame.pose
-                return later[1]._replace(kills_only=floors is KILLS_ONLY)
-        return None
+                again = later[1]._replace(kills_only=floors is KILLS_ONLY)
+                break
+        repair.decision = decision._replace(last_resort=again)
 
     def _to_neighbour(self, repair: Repair, decision: Decision, last_resort: bool, judges: Judges) -> None:
         """The short shot's frames given to the shot before (BEFORE: the cut that starts it
@@ -844,7 +848,7 @@ class EditWindow:
             cut = self.cut_camera
             camera = cut[1] if cut is not None and cut[0] is rows[0] else None
             earlier = _side(rows[0].shot, back, judges, camera)._replace(stepped=camera is not None)
-        players = {p: i for i, p in enumerate(self.players)}
+        players = self.columns  # the run reads no window state
         run = SlicedRun(
             lambda: _decided(rows, frame.pose, before, steps, after, previous, players, judges, back, earlier, long_enough)
         )
