@@ -2,7 +2,8 @@
 moment they show, a replay showing both at the kill counts as shown, a kill followed by another
 within the room leaves none, and a live kill that falls in a replay is missed and counted; a
 replay in the killer's eyes showing the victim at the kill counts as shown (the kill cam), as does
-one in the victim's eyes showing the killer."""
+one in the victim's eyes showing the killer; a replay over two kills of its pair replays each it
+shows."""
 
 from __future__ import annotations
 
@@ -65,6 +66,22 @@ def test_a_kill_followed_by_another_within_the_room_leaves_none():
     shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
     assert replay_figures(match, program, shown, ROOM_S)["kills_with_room"] == 1  # the second alone
     assert replay_figures(match, program, shown, 0.4)["kills_with_room"] == 2
+
+
+def test_a_replay_reaching_back_over_two_kills_of_its_pair_replays_each_it_shows():
+    """a kills b twice, 0.5 s apart; one replay shows both kills again: the second, with room
+    (the first has none: the second follows within it), counts as replayed (the code before
+    credited the replay to the first kill of its pair alone)."""
+    match = duel()
+    second = dataclasses.replace(match.events[0], time_s=2.5)
+    match = dataclasses.replace(match, events=[*match.events, second])
+    program = replayed(side_view(match), slice(26, 39), np.arange(14, 27))  # replays frames 14-26: both kills
+    shown = measure_shown(program, BodySampler(match, np.random.default_rng(0)), Lens(), floor())
+    assert shown[26:39].min() >= 0.5
+    figures = replay_figures(match, program, shown, ROOM_S)
+    assert [figures[k] for k in ("replays", "shown", "kills_with_room", "kills_with_room_replayed")] == [1, 1, 1, 1]
+    program = replayed(side_view(match), slice(26, 39), np.arange(10, 23))  # up to frame 22: the first kill alone
+    assert replay_figures(match, program, shown, ROOM_S)["kills_with_room_replayed"] == 0
 
 
 def test_a_replay_naming_its_killer_alone_before_the_kill_is_one_replay_of_its_pair():

@@ -43,9 +43,12 @@ on the screen), one through a teleport metres off:
 - replays (issue 41): a replay is a run of program moments of REPLAY shots of the same subjects
   (or its pair and, before the kill, one of them alone: a kill cam's killer, a victim's view's
   victim) whose replayed frames go forward (a cut within it, through a wall, does not start
-  another); it is *shown* when the kill it replays (of the first subject of its pair by the
+  another); it is *shown* when a kill it replays (of the first subject of its pair by the
   second, its frame among the replayed ones) has both players shown at the replay's moment of
-  the kill, the one through whose eyes the picture is (either) counting as shown. A kill *leaves room* when no other kill
+  the kill, the one through whose eyes the picture is (either) counting as shown. A replay that
+  reaches back over two kills of its pair replays each it shows so: on a 30 Hz program of the
+  real 2on2, a replay of a pair's second kill (with room) began 2.4 s before it, at their first
+  (without), and was counted for the first alone. A kill *leaves room* when no other kill
   follows it within `room_s` (the director's wait after a kill, the shortest replay and the next
   kill's lead: replay_after_s + the style's min_shot_s + lead_s of MatchSettings) and the program goes
   on that long; kills with room replayed: those of them with a replay shown. A live kill missed
@@ -324,6 +327,7 @@ def replay_figures(
             end += 1
         rows = np.arange(start, end)
         subjects = max((program.subjects[r] for r in rows.tolist()), key=len)  # the pair (its killer alone before the kill)
+        shows: set[int] = set()  # the kills of its pair this replay shows
         for k, event in enumerate(kills):
             inside = (program.shown_index[rows] >= frames[k]).nonzero()[0]
             if subjects != (event.actor_id, event.other_actor_id) or not len(inside) or program.shown_index[start] > frames[k]:
@@ -333,9 +337,9 @@ def replay_figures(
             # through one's eyes, that one counts as shown
             seen = [1.0 if eyes_of is not None and eyes_of[row] == p else shown[row, p] for p in (killer, victim)]
             if min(seen) >= SHOWN_FRACTION:
-                replayed.add(k)
-                shown_replays += 1
-                break
+                shows.add(k)
+        replayed |= shows
+        shown_replays += bool(shows)
     end_s = program.time_s[-1] if len(program) else -np.inf
     all_kill_s = np.array([e.time_s for e in match.events if e.kind == "kill"])
     with_room = [
