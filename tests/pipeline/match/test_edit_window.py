@@ -474,31 +474,34 @@ def test_a_short_shot_holds_on_over_the_shot_after_whose_own_short_piece_goes_to
         assert all(f.shot is b2 for f in frames[150:])
 
 
-@pytest.mark.parametrize("x_to", ["b2", "b2 by its kills alone", "a"])
-def test_a_short_shot_whose_shot_after_went_to_the_next_goes_to_its_last_resort_where_a_cut_comes_before_its_hold_ends(x_to):
+@pytest.mark.parametrize("x_to", ["held on", "held on, b2 showing nobody", "a"])
+def test_a_short_shot_whose_shot_after_went_to_the_next_holds_on_where_the_cut_before_its_end_goes_too(x_to):
     """As above (x waits to hold on, its last resort b by its kills alone; b's 6 frames go to b2,
     started early), but c cuts b2 at frame 136, before x's hold would end at 150. b's piece goes
-    to b2 first (its cut at 126 would refuse any last resort), then x to its last resort: b's first
-    frame is b2's now, so a last resort to b is judged again on b2, started at x's frames into the
-    pose b2 shows at frame 120 (by the last resort's floors where b2 shows x's subject, else by
-    its kills alone, flagged); one to the shot before (a carried on, showing x's subject 12% tall:
-    readable, under the strict 15%) reads nothing of b. The shot left short from x's cut or b's to
-    c's goes to c, started early. Before, x was left 1 s long: on program_phases' 12 programs of
-    the 2on2, five of the eight shots under 2 s were left so, among cuts through walls within a
-    second of each other."""
+    to b2 first (its cut at 126 would refuse any last resort); b2's piece, short in turn, goes to
+    c, and c's cut at 136 with it (`_cut_goes`): x holds on over c's first frames to 150, judged
+    there as any hold (by its kills alone: its copy shows its subject 0.3, whatever b2 shows),
+    and c is on air from 150. Where x's last resort is the shot before (a carried on, showing x's
+    subject 12% tall: readable, under the strict 15%), x goes to a at c's cut as before, and b's
+    and b2's pieces to c, started early at x's cut. Before, x went to
+    its last resort at c's cut, judged again on b2 (x's subject lost where b2 shows nobody); on
+    program_phases' 12 programs of the 2on2, the two shots under 2 s left so (0.83 and 0.87 s
+    at 177.28 s) held a kill no neighbour kept."""
     a, x, b, b2, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((2,), 25.0), shot((0,), 30.0)
-    sees = {10.0: {1}, 25.0: set() if x_to == "b2 by its kills alone" else {2}}
+    sees = {10.0: {1}, 25.0: set() if x_to == "held on, b2 showing nobody" else {2}}
     p = DiesAt({0.0: 0.9, 10.0: 0.3, 20.0: 0.2, 25.0: 0.9, 30.0: 0.9}, sees=sees, heights={0.0: 0.12, 10.0: 0.3})
     if x_to == "a":
         p.dies, p.sees[0.0] = {}, {0, 1}
     frames = played(p, (a, 90), (x, 30), (b, 6), (b2, 10), (c, 60))
-    assert not any(SHORT_LEFT in f.flags for f in frames) and all(LAST_RESORT_FLAG in f.flags for f in frames[90:120])
+    assert not any(SHORT_LEFT in f.flags for f in frames)
     if x_to == "a":
         assert cuts(frames) == [0, 120] and all(f.shot is a and CARRIED_ON in f.flags for f in frames[90:120])
+        assert all(LAST_RESORT_FLAG in f.flags for f in frames[90:120])
+        assert all(f.shot is c and STARTED_EARLY in f.flags for f in frames[120:136])
     else:
-        assert cuts(frames) == [0, 90] and all(f.shot is c and STARTED_EARLY in f.flags for f in frames[90:120])
-        assert all((KILLS_ONLY_FLAG in f.flags) == (x_to == "b2 by its kills alone") for f in frames[90:120])
-    assert all(f.shot is c and STARTED_EARLY in f.flags for f in frames[120:136])
+        assert cuts(frames) == [0, 90, 150] and not any(LAST_RESORT_FLAG in f.flags for f in frames)
+        assert all(f.shot is x and HELD_ON in f.flags and KILLS_ONLY_FLAG in f.flags for f in frames[120:150])
+        assert all(f.shot is c for f in frames[150:])
 
 
 @pytest.mark.parametrize(
@@ -531,6 +534,21 @@ def test_a_hold_set_after_the_window_passed_the_frame_it_ends_on_is_judged_there
     assert all(f.shot is x and HELD_ON in f.flags for f in frames[120:150]) and frames[150].shot is not x
 
 
+@pytest.mark.parametrize("defer", [True, False])
+def test_a_hold_ending_at_the_cut_that_sets_it_is_judged_at_that_cut(defer):
+    """x (1 s) and b (1 s) are together 2 s long to c's cut at frame 150, whose joining applies
+    x's repair and sets its hold: x holds on over all of b's frames to that cut, and b's own
+    repair (drawn at the same cut) goes, b being gone. Judged at the next frame, the cut at 150
+    fell among the frames the hold takes: x and b were both left short (on a 30 Hz program of the
+    real 2on2, 1.77 and 0.23 s)."""
+    a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
+    p = DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}, defer=defer)
+    frames = played(p, (a, 90), (x, 30), (b, 30), (c, 60))
+    assert cuts(frames) == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
+    assert all(f.shot is x and HELD_ON in f.flags for f in frames[120:150])
+    assert all(f.shot is c and not f.flags for f in frames[150:])
+
+
 KILL_X_SHOWS = GameEvent(EventKind.KILL, "a", "c", 0, 100 * DT_S, "kill")  # seen from x alone (sees={10.0: {0, 2}})
 
 
@@ -551,16 +569,17 @@ def b_showing_a_kill(p: Program) -> Program:
     return p
 
 
-def test_a_short_shot_no_neighbour_keeps_the_kill_of_and_that_cannot_hold_on_goes_to_one_giving_the_kill_up():
-    """x shows a kill neither a (its copy dies at a wall) nor b shows, and b cuts before x is
-    2 s long: x's frames go to b all the same, started early, flagged (`ANY`: issue 41 bars every
-    shot under 2 s, a kill missed is a share of the coverage); b, short in turn, goes to c."""
+def test_a_short_shot_no_neighbour_keeps_the_kill_of_holds_on_where_the_cut_before_its_end_goes():
+    """x shows a kill neither a (its copy dies at a wall) nor b shows, and b cuts before x is 2 s
+    long, but b's piece goes to c (started early), and b's cut with it: x holds on over c's first
+    frames to 150, keeping its kill, c on air from there. Before, x's frames went to b at b's cut,
+    the kill given up (`ANY`), b's piece to c: its cut was judged as if it stayed (on
+    program_phases' 2on2, shots of 0.83 and 0.87 s left over a kill at 177.28 s)."""
     a, x, b, c = shot((0,), 0.0), shot((1,), 10.0), shot((2,), 20.0), shot((0,), 30.0)
     frames = held_on_over_a_kill(DiesAt({0.0: 0.9, 10.0: 0.8, 20.0: 0.2, 30.0: 0.9}), a, x, b, 25, c)
-    assert not any(SHORT_LEFT in f.flags for f in frames) and not any(f.shot is x for f in frames)
-    assert cuts(frames)[:2] == [0, 90] and 120 not in cuts(frames)
-    assert all(KILL_GIVEN_UP_FLAG in f.flags and LAST_RESORT_FLAG in f.flags for f in frames[90:120])
-    assert not any(KILL_GIVEN_UP_FLAG in f.flags for f in frames[120:])
+    assert cuts(frames)[:3] == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
+    assert all(f.shot is x and HELD_ON in f.flags for f in frames[120:150]) and frames[150].shot is c
+    assert not any(KILL_GIVEN_UP_FLAG in f.flags or LAST_RESORT_FLAG in f.flags for f in frames)
 
 
 @pytest.mark.parametrize(
@@ -938,8 +957,10 @@ def test_a_repair_is_applied_when_its_short_shot_is_answered_not_before():
 
 
 def test_a_repair_waiting_is_applied_before_the_next_cut_is_judged():
-    """x keeps its kill (no neighbour shows it): left; y, short after it, is carried on by x's
-    shadow, which stepped on from x's cut while x's repair waited."""
+    """x keeps its kill (no neighbour shows it); y, short after it, is taken over by x's shadow,
+    which stepped on from x's cut while x's repair waited: x holds on over y's frames (y's cut
+    at 150 is where x is 2 s long: judged there, `_held_to_cut`; before, the same shadow carried
+    y on, the same picture flagged `edit_window_carried_on`)."""
     kill = GameEvent(EventKind.KILL, "b", "c", 0, 100 * DT_S, "kill")
     a, x, y, b = shot((0,), 0.0), shot((1, 2), 10.0), shot((1,), 30.0), shot((0,), 20.0)
     p = Program({0.0: 0.9, 10.0: 0.5, 30.0: 0.4, 20.0: 0.3}, sees={10.0: {1, 2}})
@@ -949,7 +970,7 @@ def test_a_repair_waiting_is_applied_before_the_next_cut_is_judged():
     p.frames(b, 10)
     frames = p.program()
     assert cuts(frames) == [0, 90, 150] and not any(SHORT_LEFT in f.flags for f in frames)
-    assert all(f.shot is x and CARRIED_ON in f.flags for f in frames[120:150])
+    assert all(f.shot is x and HELD_ON in f.flags for f in frames[120:150])
 
 
 def programs(p: Program) -> list[tuple[int, bool, tuple[float, ...], tuple[str, ...]]]:
