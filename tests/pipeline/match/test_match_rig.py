@@ -170,6 +170,25 @@ def test_take_is_held_past_max_shot_until_released():
     assert after[0].cut and after[0].match.shot.subject_ids != ("a2",)
 
 
+def test_a_take_no_place_of_its_kind_frames_goes_wide_and_is_held(monkeypatch):
+    """A take of a DUEL that no DUEL place frames within the band (the builder finds none: isolated
+    here) goes to air as the wide view of its players, held and flagged `take_wide`; before, the
+    frame failed (an AssertionError: a live cast's dashboard take ended its stream)."""
+    match = Match(TEAMS, two_fronts, [], delay_s=0.0)
+    session, _ = run_session(match, 1.0)
+    build = session.rig.builder.build
+
+    def no_duel_place(choice, *args, **kwargs):
+        return (None, -1.0) if choice.kind == ShotKind.DUEL and choice.held else build(choice, *args, **kwargs)
+
+    monkeypatch.setattr(session.rig.builder, "build", no_duel_place)
+    session.rig.take(["a1", "b1"], ShotKind.DUEL, release=False)
+    held = [session.frame(u) for u in list(match.frames(3.0))[31:]]
+    shots = [s.match.shot for s in held]
+    assert all(shot.kind == ShotKind.OVERVIEW and shot.held and shot.subject_ids == ("a1", "b1") for shot in shots)
+    assert "take_wide" in held[0].flags and sum(s.cut for s in held) == 1
+
+
 def test_taking_a_candidate_puts_its_previewed_camera_on_air():
     """What the candidate's monitor showed is what the program cuts to: its camera and place, not
     a new search (which for a1/b1 would film the fight from wherever the program stood)."""

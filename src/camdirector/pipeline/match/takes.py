@@ -92,7 +92,12 @@ class Takes:
             if previewed is not None:
                 return previewed, held
         shot, _ = self.builder.build(choice, subjects, moment, [moment], current, None, moment.time_s)
-        assert shot is not None  # a take is built without the 30-degree rule
+        if shot is None:  # no place of its kind frames them within the band (a live cast's take of a DUEL did so)
+            reason = f"{choice.reason}; wide: no level place frames them"
+            wide = dataclasses.replace(choice, kind=ShotKind.OVERVIEW, reason=reason)
+            shot, _ = self.builder.build(wide, subjects, moment, [moment], current, None, moment.time_s)
+            flags.append("take_wide")
+        assert shot is not None  # an overview always has its pose
         shot.held = True
         return shot, held
 
