@@ -92,7 +92,7 @@ class Takes:
             if previewed is not None:
                 return previewed, held
         shot, _ = self.builder.build(choice, subjects, moment, [moment], current, None, moment.time_s)
-        if shot is None:  # no place of its kind frames them within the band (a live cast's take of a DUEL did so)
+        if shot is None:  # no place of its kind frames them within the band (a live cast's take from the dashboard met one)
             reason = f"{choice.reason}; wide: no level place frames them"
             wide = dataclasses.replace(choice, kind=ShotKind.OVERVIEW, reason=reason)
             shot, _ = self.builder.build(wide, subjects, moment, [moment], current, None, moment.time_s)
