@@ -289,6 +289,12 @@ class Repair:
         that one, started early: its own short piece's repair); False where unknown (a checkpoint's)."""
         return self.first is not None and self.frame.pose is not self.first
 
+    def carried_back(self) -> None:
+        """The shadow it carried stepped to that shadow's own end again (it does not carry the
+        short shot: `_drawn` stepped it on as if it did)."""
+        if self.carried is not None:
+            self.carried.until_s = self.carried_until_s
+
     def work_out(self, budget_s: float | None = None) -> None:
         """Works the decision out, whole (budget_s None) or for about budget_s more."""
         run = self.run
@@ -526,8 +532,7 @@ class EditWindow:
             self._to_neighbour(repair, decision, last_resort, judges)
             self.shadow = repair.carried  # stepped on meanwhile until this frame's cut's shot_s
             return
-        if repair.carried is not None:
-            repair.carried.until_s = repair.carried_until_s
+        repair.carried_back()
         if decision.neighbour == AFTER:
             self._to_neighbour(repair, decision, last_resort, judges)  # the cut before the short shot stays, and its shadow
             return
@@ -572,8 +577,7 @@ class EditWindow:
             return False
         if not self._last_resort(held, judges):  # it reads no shadow's end: the repair stands as drawn
             return False
-        if repair.carried is not None:
-            repair.carried.until_s = repair.carried_until_s
+        repair.carried_back()
         return True
 
     def _hold_reached(self, judges: Judges) -> None:
@@ -671,8 +675,7 @@ class EditWindow:
         drawn = self._drawn(frame, None, judges)
         if drawn is None:
             return False
-        if drawn.carried is not None:
-            drawn.carried.until_s = drawn.carried_until_s
+        drawn.carried_back()
         if drawn.rows[0] is not held.frame:
             return False
         drawn.work_out()
@@ -693,8 +696,8 @@ class EditWindow:
         frame.cut = True  # where the repair waiting gave the shot after to the one after it, its cut went (_settle_inside)
         if drawn is not None and self.repair is drawn:
             self.repair = None
-            if drawn.carried is not None and drawn.carried is not self.shadow:
-                drawn.carried.until_s = drawn.carried_until_s
+            if drawn.carried is not self.shadow:  # the hold's shadow steps on to the hold's end
+                drawn.carried_back()
 
     def _settle_inside(self, held: Repair, judges: Judges) -> bool:
         """Applies the repair waiting where it gives a short piece of the shot after the short
