@@ -83,6 +83,18 @@ def test_a_kill_the_killers_eyes_would_not_show_gets_a_toric_camera(players, wal
     assert isinstance(shot.camera, ToricCamera) and shot.choice.eyes_id == ""
 
 
+@pytest.mark.parametrize("turns_s, eyes", [(0.05, True), (-0.05, False)], ids=["after the judged frame", "before the kill"])
+def test_a_kill_is_through_the_killers_eyes_where_they_show_it_at_the_frame_eval_match_judges(turns_s, eyes):
+    """a looks at b through the kill and the frame eval-match judges it at (the first at or after
+    it; at 30 Hz the kill's own), then turns away 0.05 s after: the eyes show the kill. Judged a
+    fixed 0.1 s after it, a had turned away there and the kill went to a Toric camera (on the real
+    2on2 one that cut through walls four times in 2 s). Turned away before the kill, the Toric
+    camera's as before."""
+    _, shot = _planned_kill(lambda t: approach(t, a_looks_at_b=t < KILL_S + turns_s))
+    assert isinstance(shot.camera, FirstPersonCamera) == eyes
+    assert (shot.choice.eyes_id == "a") == eyes
+
+
 @pytest.mark.parametrize(
     "settings",
     [

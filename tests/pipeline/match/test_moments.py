@@ -182,3 +182,15 @@ def _same_moment(back: Moment, moment: Moment, killers: bool = True) -> None:
     for t, u in zip(moment.transforms, back.transforms, strict=True):
         for name in ("position_world", "rotation_xyzw", "scale"):
             assert getattr(u, name).dtype == np.float64 and np.array_equal(getattr(t, name), getattr(u, name))
+
+
+def test_the_moment_at_or_after_a_time_is_the_first_buffered_there_clamped_to_the_buffer():
+    """`at_or_after` is the program moment eval-match judges an event at (its first at or after
+    it); `at`, the one at or before it."""
+    buffer = MomentBuffer(["a", "b"], MatchSettings())
+    feed(buffer, lambda f: (0.0, 0.0, 5.0), frames=4)
+    times = buffer.times
+    assert buffer.at_or_after(0.01).time_s == times[1] and buffer.at(0.01).time_s == times[0]
+    assert buffer.at_or_after(times[2]).time_s == times[2] == buffer.at(times[2]).time_s
+    assert buffer.at_or_after(times[2] - 1e-12).time_s == times[2]  # within TIME_EPSILON_S: that moment
+    assert buffer.at_or_after(-1.0).time_s == times[0] and buffer.at_or_after(5.0).time_s == times[-1]

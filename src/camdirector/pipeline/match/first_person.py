@@ -27,14 +27,14 @@ anchor: a DUEL's killer) when from there each of its other subjects is shown: ne
 (`eyes_shown_height_min` of the frame's height: a kill seen from 20 m away in first person is a
 speck; on the eight development matches, without it, the median shown height fell under 0.15 on
 five of them, the duel's from 0.28 to 0.13), its aim point (the chest) inside the frame and
-`eyes_seen` of its points in the frame and unhidden, at every event's moment and the next frame's
-(the moment eval-match judges the kill at). It is also taken when
+`eyes_seen` of its points in the frame and unhidden, at every event's moment and the frame
+eval-match judges the kill at (the first at or after it: `_event_moments`). It is also taken when
 its Toric camera would meet a wall (its place, carried by the players over the shot's moments,
 passes through level geometry: a cut within the shot) and the eyes show the others at some moment
 of the `eyes_lead_s` before each event: the fight is seen, if not always its very moment. Not
 where the eyes do not see the others at an event at all (`eyes_seen` of their points in the frame
 and unhidden, however far) while the Toric camera's own place does (framed_seen, the worst-seen
-framed subject, at each event's moment and the next frame's): there the kill is the Toric
+framed subject, at each event's moment and the frame eval-match judges it at): there the kill is the Toric
 camera's, walls and all. On the real 2on2's first 3 minutes the lead took the eyes for 9 planned
 shots, and 5 of their kills were missed (the killer turned away, or the victim behind a corner at
 a rocket's splash): kill coverage 0.464 -> 0.679 there, 0.562 -> 0.589 on the 4on4, 0.929 -> 1.0
@@ -80,7 +80,6 @@ EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + VIEWHEIGHT_UNITS) * M_PER_UNIT
 CORPSE_EYE_ABOVE_FEET_M = (ORIGIN_ABOVE_FEET_UNITS + CORPSE_VIEWHEIGHT_UNITS) * M_PER_UNIT
 EYE_HEIGHT_FRACTION = EYE_ABOVE_FEET_M / PLAYER_HEIGHT_M  # of a body's height: Quake's 46 / 56
 CORPSE_EYE_FRACTION = CORPSE_EYE_ABOVE_FEET_M / PLAYER_HEIGHT_M
-NEXT_FRAME_S = 0.1  # an event's next frame, judged with it (planned.py POST_EVENT_S), s
 
 
 class FirstPersonCamera:
@@ -207,7 +206,7 @@ def through_eyes(
         return camera if all(shows_at(camera, others, m, visibility, body_heights_m, settings) for m in cover) else None
     if buffer is None:
         return None
-    at_events = [buffer.at(min(t, buffer.horizon_s)) for t in _event_moments_s(events_s)]
+    at_events = _event_moments(buffer, events_s)
     if all(shows_at(camera, others, m, visibility, body_heights_m, settings) for m in at_events):
         return camera
     if not _meets_a_wall(toric, buffer, cut, events_s, visibility, settings):
@@ -231,7 +230,7 @@ def _only_toric_sees(
     visibility: SubjectVisibility,
     settings: MatchSettings,
 ) -> bool:
-    """Whether, at some of the moments (each event's and the next frame's), the eyes see the
+    """Whether, at some of the moments (each event's and the one eval-match judges it at), the eyes see the
     others under eyes_seen (in the frame and unhidden, whatever their distance) while at every one
     of them the Toric camera's own place sees its framed subjects with eyes_seen (module docstring)."""
     if all(seen_through(visibility, m, others, camera.pose(m), camera.lens).min() >= settings.eyes_seen for m in moments):
@@ -239,10 +238,15 @@ def _only_toric_sees(
     return all(scores_from(toric, subjects, [m], [1.0], None, visibility)[0] >= settings.eyes_seen for m in moments)
 
 
-def _event_moments_s(events_s: tuple[float, ...]) -> list[float]:
-    """Each event's moment and the next frame's, s (eval-match judges a kill at the first program
-    moment at or after it)."""
-    return [t + dt for t in events_s for dt in (0.0, NEXT_FRAME_S)]
+def _event_moments(buffer: MomentBuffer, events_s: tuple[float, ...]) -> list[Moment]:
+    """Each event's moment (the buffered one at or before it) and the one eval-match judges it at
+    (the first at or after it: a kill's victim shown there counts it covered), up to the buffer's
+    horizon. Judged a fixed 0.1 s after it instead (three frames at 30 Hz), p03's eyes on the real
+    2on2 had lost p00 there though they showed his death, and the shot went to a Toric camera that
+    cut through walls four times in 2 s (docs/casting.md, "The killer's eyes judged at the frame
+    eval-match judges the kill at")."""
+    at = [min(t, buffer.horizon_s) for t in events_s]
+    return [m for t in at for m in (buffer.at(t), buffer.at_or_after(t))]
 
 
 def shows_at(

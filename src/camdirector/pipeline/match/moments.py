@@ -256,6 +256,13 @@ class MomentBuffer:
         i = bisect.bisect_right(self.times, time_s) - 1
         return self.moments[min(max(i, 0), len(self.moments) - 1)]
 
+    def at_or_after(self, time_s: float) -> Moment:
+        """The buffered moment nearest at or after time_s (within TIME_EPSILON_S), clamped to the
+        buffer's ends: the program moment eval-match judges an event of time_s at, its first at
+        or after it (one program moment a buffered one)."""
+        i = bisect.bisect_left(self.times, time_s - TIME_EPSILON_S)
+        return self.moments[min(i, len(self.moments) - 1)]
+
     @property
     def oldest_s(self) -> float:
         """Time of the oldest moment kept (the past a replay can show), s."""
