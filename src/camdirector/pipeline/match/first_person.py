@@ -34,8 +34,8 @@ passes through level geometry: a cut within the shot) and the eyes show the othe
 of the `eyes_lead_s` before each event: the fight is seen, if not always its very moment. Not
 where the eyes do not see the others at an event at all (`eyes_seen` of their points in the frame
 and unhidden, however far) while the Toric camera's own place does (framed_seen, the worst-seen
-framed subject, at each event's moment and the frame eval-match judges it at): there the kill is the Toric
-camera's, walls and all. On the real 2on2's first 3 minutes the lead took the eyes for 9 planned
+framed subject, at each event's moment and the frame eval-match judges it at): there the kill is
+the Toric camera's, walls and all. On the real 2on2's first 3 minutes the lead took the eyes for 9 planned
 shots, and 5 of their kills were missed (the killer turned away, or the victim behind a corner at
 a rocket's splash): kill coverage 0.464 -> 0.679 there, 0.562 -> 0.589 on the 4on4, 0.929 -> 1.0
 on the duel, for more cuts within those shots (shots under 2 s 7 -> 10, 5 -> 11, 9 -> 10). A
@@ -230,9 +230,10 @@ def _only_toric_sees(
     visibility: SubjectVisibility,
     settings: MatchSettings,
 ) -> bool:
-    """Whether, at some of the moments (each event's and the one eval-match judges it at), the eyes see the
-    others under eyes_seen (in the frame and unhidden, whatever their distance) while at every one
-    of them the Toric camera's own place sees its framed subjects with eyes_seen (module docstring)."""
+    """Whether, at some of the moments (each event's and the one eval-match judges it at), the
+    eyes see the others under eyes_seen (in the frame and unhidden, whatever their distance) while
+    at every one of them the Toric camera's own place sees its framed subjects with eyes_seen
+    (module docstring)."""
     if all(seen_through(visibility, m, others, camera.pose(m), camera.lens).min() >= settings.eyes_seen for m in moments):
         return False
     return all(scores_from(toric, subjects, [m], [1.0], None, visibility)[0] >= settings.eyes_seen for m in moments)
@@ -244,9 +245,12 @@ def _event_moments(buffer: MomentBuffer, events_s: tuple[float, ...]) -> list[Mo
     horizon. Judged a fixed 0.1 s after it instead (three frames at 30 Hz), p03's eyes on the real
     2on2 had lost p00 there though they showed his death, and the shot went to a Toric camera that
     cut through walls four times in 2 s (docs/casting.md, "The killer's eyes judged at the frame
-    eval-match judges the kill at")."""
-    at = [min(t, buffer.horizon_s) for t in events_s]
-    return [m for t in at for m in (buffer.at(t), buffer.at_or_after(t))]
+    eval-match judges the kill at"). One moment where the event falls on a buffered one."""
+    moments: list[Moment] = []
+    for t in (min(t, buffer.horizon_s) for t in events_s):
+        before, judged = buffer.at(t), buffer.at_or_after(t)
+        moments.extend((before,) if judged is before else (before, judged))
+    return moments
 
 
 def shows_at(
