@@ -13,6 +13,8 @@ from camdirector.geometry.transforms import quat_to_matrix
 from camdirector.pipeline.match.first_person import CORPSE_EYE_FRACTION, EYE_HEIGHT_FRACTION
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.lens_width import (
+    EYES_MARGIN_M,
+    EYES_RADIUS_M,
     FRAMED_IN,
     SHOWN_SEEN,
     TALL_SEEN,
@@ -205,6 +207,24 @@ def test_only_a_camera_at_a_players_eye_point_looks_through_its_eyes():
         at = moment.feet_world[0] + [0.0, fraction * top_m, 0.0]
         pose = look_along(at, moment.feet_world[1] - moment.feet_world[0], Lens().vertical_fov_deg)
         assert looked_through(pose, moment, points).tolist() == [through, False]
+
+
+@pytest.mark.parametrize("off_m", [EYES_RADIUS_M - 0.5 * EYES_MARGIN_M, EYES_RADIUS_M - 0.001])
+def test_a_camera_at_the_edge_of_eval_matchs_eye_radius_is_not_taken_for_the_eyes(off_m):
+    """A camera just inside eval-match's EYE_TOLERANCE_M of a's eye (as a cast's DUEL camera moved
+    inside the level stood 0.5 m from p02's, then 0.5001 m by the program file's feet, where
+    eval-match measured p02 at 1.0 of the frame) is a camera like any other: a's eye point by the
+    rig's reckoning and eval-match's can differ by the file's rounding; well inside it, the eyes."""
+    rig, moment, _ = _looking_at_a(8.0)
+    points = outline_points(moment, rig.rig.program_camera.subject_visibility)
+    eye = moment.feet_world[0] + [0.0, EYE_HEIGHT_FRACTION * (points[0, :, 1].max() - moment.feet_world[0, 1]), 0.0]
+    ahead = moment.feet_world[1] - moment.feet_world[0]
+    aside = np.cross(ahead, [0.0, 1.0, 0.0])
+    aside /= np.linalg.norm(aside)
+    edge = look_along(eye + off_m * aside, ahead, Lens().vertical_fov_deg)
+    assert looked_through(edge, moment, points).tolist() == [False, False]
+    inside = look_along(eye + (EYES_RADIUS_M - 2.0 * EYES_MARGIN_M) * aside, ahead, Lens().vertical_fov_deg)
+    assert looked_through(inside, moment, points).tolist() == [True, False]
 
 
 def test_the_answered_pose_is_widened_at_its_moment_never_narrowed_and_zooms_back_from_the_last_answered():

@@ -14,16 +14,16 @@ from camdirector.geometry.camera import CameraPose, Lens, project_to_screen
 from camdirector.geometry.inside import LevelInterior
 from camdirector.geometry.meshes import TriMesh, box
 from camdirector.geometry.transforms import matrix_to_quat, quat_to_matrix
-from camdirector.pipeline.match.first_person import FirstPersonCamera
+from camdirector.pipeline.match.first_person import EYE_HEIGHT_FRACTION, FirstPersonCamera
 from camdirector.pipeline.match.frame import ShotChoice, ShotKind
 from camdirector.pipeline.match.in_level import InLevel
-from camdirector.pipeline.match.lens_width import SHOWN_SEEN, silhouette_points
+from camdirector.pipeline.match.lens_width import EYES_RADIUS_M, SHOWN_SEEN, silhouette_points
 from camdirector.pipeline.match.look_along import look_along
 from camdirector.pipeline.match.program_camera import PANNED_OFF, STEPPED_BACK, ProgramCamera
 from camdirector.pipeline.match.program_shot import Shot
 from camdirector.pipeline.match.settings import MatchSettings
 from camdirector.pipeline.match.shots import StaticCamera, poses_seen
-from camdirector.pipeline.match.step_back import AWAY_SEEN, AWAY_TURNS_DEG, BACK_STEPS_M, stepped_back
+from camdirector.pipeline.match.step_back import AWAY_SEEN, AWAY_TILTS_DEG, AWAY_TURNS_DEG, BACK_STEPS_M, stepped_back
 from tests.pipeline.match.test_framing_band import rig_of
 
 SETTINGS = MatchSettings()
@@ -123,6 +123,30 @@ def test_a_camera_with_no_room_to_step_pans_off_the_player_where_it_stands_the_l
     assert _seen_at_widest(rig, moment, CameraPose(less.position_world, less.rotation_xyzw, WIDEST.vertical_fov_deg)) >= AWAY_SEEN
 
 
+def test_a_camera_looking_down_on_a_player_below_it_with_no_room_to_step_tilts_off_it():
+    """2.2 m above a's feet in a shaft 0.6 m wide, looking down on a's chest: no step leaves the
+    shaft, and a pan about the vertical keeps a in the 90-degree frame, so the camera tilts off
+    a where it stands, the least it must, upright, its bearing kept."""
+    rig, moment, in_level, _ = _setup(0.3, behind_m=0.2, side_m=0.3)
+    above = moment.feet_world[0] + [0.3, 2.2, 0.0]
+    pose = look_along(above, moment.feet_world[0] + [0.0, 1.0, 0.0] - above, SETTINGS.widen_max_fov_deg)
+    assert _height_at_widest(rig, moment, pose) > SETTINGS.shown_height_max
+    assert all(_seen_at_widest(rig, moment, _panned_by(pose, turn)) >= AWAY_SEEN for turn in (-180.0, -90.0, 90.0, 180.0))
+    stepped = stepped_back(pose, moment, rig.rig.program_camera.subject_visibility, Lens(), SETTINGS, in_level, (0,))
+    assert stepped is not None and stepped[1]  # turned where it stands, not stepped
+    tilted = stepped[0]
+    assert np.array_equal(tilted.position_world, pose.position_world)
+    assert _seen_at_widest(rig, moment, tilted) < AWAY_SEEN
+    before, after = quat_to_matrix(pose.rotation_xyzw), quat_to_matrix(tilted.rotation_xyzw)
+    assert after[1, 1] > 0.0 and after[:, 0] == pytest.approx(before[:, 0])  # upright, about its own right axis
+    tilt_deg = float(np.degrees(np.arcsin(-after[1, 2]) - np.arcsin(-before[1, 2])))
+    assert round(abs(tilt_deg)) in AWAY_TILTS_DEG
+    step_deg = AWAY_TILTS_DEG[1] - AWAY_TILTS_DEG[0]
+    less = Rotation.from_rotvec(np.radians(tilt_deg - np.sign(tilt_deg) * step_deg) * before[:, 0]).as_matrix() @ before
+    less_pose = CameraPose(pose.position_world, matrix_to_quat(less), WIDEST.vertical_fov_deg)
+    assert _seen_at_widest(rig, moment, less_pose) >= AWAY_SEEN
+
+
 @pytest.mark.parametrize("distance_m", [3.0, 6.0])
 def test_a_player_far_enough_moves_nothing(distance_m):
     rig, moment, in_level, pose = _setup(distance_m)
@@ -134,6 +158,22 @@ def test_a_view_through_a_players_eyes_moves_nothing():
     eye = moment.feet_world[0] + [0.0, 1.6, 0.0]
     in_eyes = look_along(eye, moment.feet_world[1] + [0.0, 1.6, 0.0] - eye, SETTINGS.widen_max_fov_deg)
     assert _stepped(rig, moment, in_level, in_eyes) is None
+
+
+def test_a_camera_in_a_players_head_short_of_its_eye_point_steps_back():
+    """A Toric camera moved 0.49 m from a's eye point (inside its head, short of the eye radius by
+    less than EYES_MARGIN_M: eval-match, reading the feet the program file rounds, can put it
+    outside and measure a at the frame's full height), looking down at a's chest, is no view through
+    a's eyes: it steps back until a fits the band."""
+    rig, moment, in_level, _ = _setup(1.0)
+    points = silhouette_points(moment, rig.rig.program_camera.subject_visibility)
+    eye = moment.feet_world[0] + [0.0, EYE_HEIGHT_FRACTION * (points[0, :, 1].max() - moment.feet_world[0, 1]), 0.0]
+    beside = eye + [0.0, 0.0, EYES_RADIUS_M - 0.01]
+    chest = moment.feet_world[0] + [0.0, 1.0, 0.0]
+    pose = look_along(beside, chest - beside, SETTINGS.widen_max_fov_deg)
+    stepped = _stepped(rig, moment, in_level, pose, subjects=())
+    assert stepped is not None and np.linalg.norm(stepped.position_world - eye) > EYES_RADIUS_M
+    assert _height_at_widest(rig, moment, stepped) <= SETTINGS.shown_height_max
 
 
 def test_the_program_cameras_step_carries_the_step_and_its_flag():

@@ -73,6 +73,8 @@ SHOWN_SEEN = 0.5  # a player with this share of its points seen from the pose is
 TALL_SEEN = 0.25
 FOV_STEP_DEG = 1.0  # the widths tried, from the lens's up, deg
 EYES_RADIUS_M = 0.5  # a camera this near a player's eye point looks through its eyes (eval-match's EYE_TOLERANCE_M), m
+EYES_MARGIN_M = 0.05  # but only this much nearer is taken for one here: eval-match measures the eye from the feet the
+# program file records (to the mm) and a camera at its boundary stands in the body, m (0 to EYES_RADIUS_M)
 
 
 def widened_fov_deg(
@@ -223,17 +225,20 @@ def _in_frame(slope_y: np.ndarray, slope_x: np.ndarray, tan_half: np.ndarray, as
 
 
 def looked_through(pose: CameraPose, moment: Moment, points_world: np.ndarray) -> np.ndarray:
-    """(P,) bool: the players through whose eyes the camera looks (within EYES_RADIUS_M of a
-    living or a dead one's eye point, first_person.py, at its body's height): a first-person view.
-    A camera elsewhere in a body is not one: eval-match measures its picture as any other (on the
-    real wipeout a replay's camera inside a third player's body kept a 50-degree lens while its
-    subject, 3 m off, filled 0.63 of the frame)."""
+    """(P,) bool: the players through whose eyes the camera looks (within EYES_RADIUS_M less
+    EYES_MARGIN_M of a living or a dead one's eye point, first_person.py, at its body's height): a
+    first-person view. A camera elsewhere in a body is not one: eval-match measures its picture as
+    any other (on the real wipeout a replay's camera inside a third player's body kept a 50-degree
+    lens while its subject, 3 m off, filled 0.63 of the frame). Nor is one at the radius's edge:
+    a cast's DUEL camera moved inside the level to 0.5 m from p02's eye kept its lens here and was
+    0.5001 m off by the program file's feet, where eval-match measured p02 at 1.0 of the frame.
+    A first-person camera stands at the eye itself."""
     feet = moment.feet_world  # (P, 3)
     top_m = points_world[..., 1].max(axis=1) - feet[:, 1]  # (P,) the body's height above its feet
     near = np.zeros(len(feet), dtype=bool)
     for fraction in (EYE_HEIGHT_FRACTION, CORPSE_EYE_FRACTION):
         eyes = feet + np.outer(fraction * top_m, [0.0, 1.0, 0.0])
-        near |= np.linalg.norm(eyes - pose.position_world, axis=1) < EYES_RADIUS_M
+        near |= np.linalg.norm(eyes - pose.position_world, axis=1) < EYES_RADIUS_M - EYES_MARGIN_M
     return near
 
 

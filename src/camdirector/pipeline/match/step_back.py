@@ -18,9 +18,11 @@ so as tall), where:
 - the places test accepts the point and the move crosses no wall (in_level.py),
 - each of the shot's framed subjects stays framed and seen (shots.py `framed_seen`, at the
   widest lens) as much as before or `candidate_seen`, whichever is less.
-No such point (a camera in a corner the player runs into): the pose pans off the player where it
-stands, the least of AWAY_TURNS_DEG either way, keeping the other framed subjects where a pan
-can; no pan off it either: the pose stays. On the real matches' first 3 minutes, after the steps,
+No such point (a camera in a corner the player runs into): the pose turns off the player where it
+stands, keeping the other framed subjects where a turn can: a pan, the least of AWAY_TURNS_DEG
+either way, or after the pans a tilt, the least of AWAY_TILTS_DEG up or down (a player straight
+below the camera stays in a 90-degree frame turned any way about the vertical); none off it: the
+pose stays. On the real matches' first 3 minutes, after the steps,
 2-6 frames a match still had a player over 0.6 (issue 41's bar: none), each 1-3 frames long, as a
 player ran past a camera at a wall or in a corridor; the pan is the operator letting the player
 go by the lens. The shot's camera keeps its own state (its place, its damping), so the step is
@@ -54,6 +56,7 @@ BACK_STEPS_M = np.arange(1, 9) * 0.25  # the distances tried, nearest first: up 
 NEAR_M = 5.0  # only a player whose feet are this near is asked about (a 2 m body at 90 deg fills half the frame at 2 m), m
 TURNS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # the directions tried away from the player, after the backward line
 AWAY_TURNS_DEG = np.arange(1, 19) * 10.0  # where no step helps, the pans tried either way, nearest first: up to 180 deg, deg
+AWAY_TILTS_DEG = np.arange(1, 10) * 10.0  # where no pan helps, the tilts tried up and down, nearest first: up to 90 deg, deg
 AWAY_SEEN = TALL_SEEN  # a player panned from is framed and seen at under this share of its points: half of eval-match's
 # SHOWN_FRACTION, as the rig's 16 points are not eval-match's 32
 
@@ -139,16 +142,23 @@ def _turned_away(
     subjects: tuple[int, ...],
     keep: np.ndarray | None,
 ) -> CameraPose | None:
-    """The pose where it stands, panned the least of AWAY_TURNS_DEG either way so that no player
-    too tall at the widest lens (tall) is framed and seen at AWAY_SEEN of its points, and each
-    framed subject but those keeps its share (keep, (len(subjects),): as stepping back) where a
-    pan does, else the least pan off the tall ones alone; None where none is off them.
+    """The pose where it stands, turned so that no player too tall at the widest lens (tall) is
+    framed and seen at AWAY_SEEN of its points: of the pans about the vertical (the least of
+    AWAY_TURNS_DEG either way) and then the tilts about its own right axis (the least of
+    AWAY_TILTS_DEG up or down, the camera kept upright), the first where each framed subject but
+    those keeps its share (keep, (len(subjects),): as stepping back), else the first off the tall
+    ones alone; None where none is off them. The tilts are for a player below: a 30 Hz program's
+    DUEL camera 2 m above a player fallen into a pit looked down on him at 90 degrees (0.75 of the
+    frame by the rig's outline, 0.675 by eval-match's), and no pan took him out of the frame.
     Where no step back helps, an operator a player brushes past lets it go by the lens rather
     than hold it pressed against it: issue 41's bar is no frame with a player over 0.6 of its
     height, and its frames of nobody (a lone subject panned from) have a budget of 2%."""
     turns = np.radians(np.stack([AWAY_TURNS_DEG, -AWAY_TURNS_DEG], axis=1).ravel())  # nearest first
-    rotations = _yaw(turns) @ rotation  # (m, 3, 3)
-    positions = np.broadcast_to(pose.position_world, (len(turns), 3))
+    tilts = np.radians(np.stack([AWAY_TILTS_DEG, -AWAY_TILTS_DEG], axis=1).ravel())
+    tilted = _about(rotation[:, 0], tilts) @ rotation
+    upright = tilted[:, 1, 1] > 0.0  # the camera's up still above its horizon: no tilt past the vertical
+    rotations = np.concatenate([_yaw(turns) @ rotation, tilted[upright]])  # (m, 3, 3), the pans first
+    positions = np.broadcast_to(pose.position_world, (len(rotations), 3))
     away = framed_seen(visibility, moment, tall, positions, rotations, widest).max(axis=1) < AWAY_SEEN
     if not away.any():
         return None
@@ -181,6 +191,15 @@ def _directions(away_world: np.ndarray, backward_world: np.ndarray) -> np.ndarra
         if norm >= 1e-6:
             out.append(_yaw(np.radians(turns)) @ (level / norm))
     return np.concatenate([np.zeros((0, 3)), *out])
+
+
+def _about(axis_world: np.ndarray, turn_rad: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) rotations about the unit axis_world (3,) by each of (m,) angles, rad (Rodrigues);
+    about the camera's right axis, a positive angle tilts its view up."""
+    x, y, z = axis_world
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])  # the cross product with the axis
+    s, c = np.sin(turn_rad)[:, None, None], np.cos(turn_rad)[:, None, None]
+    return np.asarray(np.eye(3) + s * k + (1.0 - c) * (k @ k))
 
 
 def _yaw(turn_rad: np.ndarray) -> np.ndarray:
