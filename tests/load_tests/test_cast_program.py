@@ -1,6 +1,7 @@
 """load_tests/cast_program.py judges a cast's eval-match result by issue 41's program bars: each bar
 met on figures inside its limit, and each failing alone on its figure past it; a match's result
-through eval-match (load_tests/program_phases.py) by the same bars, its shots on the match's clock. (The cast itself, a
+through eval-match (load_tests/program_phases.py) by the same bars, its shots on the match's clock;
+a server's floor is measured on a real server. (The cast itself, a
 real-time run of minutes, is not run here: tests/bridges/test_program_record.py runs a cast into
 eval-match end to end.)"""
 
@@ -10,7 +11,8 @@ import copy
 
 import pytest
 
-from load_tests.cast_program import bars
+from camdirector.deploy.server_process import ServerProcess
+from load_tests.cast_program import bars, compute_floor
 
 AGAINST = {"kills": 30, "greedy_2s_kill_coverage": 0.643, "first_person": {"hltv": 0.214, "autotrack": 0.286}}
 
@@ -88,3 +90,14 @@ def test_a_result_of_a_match_through_eval_match_is_judged_on_its_directors_figur
     assert [b["bar"] for b in bars(result, AGAINST, "planned") if not b["met"]] == ["shots under 2 s"]
     with pytest.raises(KeyError):
         bars(result, AGAINST, "hltv")  # a director the result does not hold
+
+
+def test_the_floor_is_the_servers_own_compute_of_framing_only_frames_and_a_health_check(tmp_path):
+    """A real server's floor: the frames asked for, each figure a positive time, the p99 not under
+    the median."""
+    with ServerProcess("--workers", "1", "--data-dir", str(tmp_path), transports=("grpc",)) as server:
+        assert server.grpc is not None
+        floor = compute_floor(server.grpc, frames=40)
+    assert floor["frames"] == 40
+    assert 0.0 < floor["compute_ms"]["median"] <= floor["compute_ms"]["p99"]
+    assert floor["health_rtt_ms_median"] > 0.0
