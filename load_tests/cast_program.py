@@ -65,8 +65,8 @@ from tests.bridges.qtv_source import QtvSource
 DELAY_S = 10.0  # the broadcast delay of issue 41's bars, s
 TAIL_S = 12.0  # after the stream's end: the delay's last program moments come back, s
 BASELINES = ("hltv", "autotrack")
-FLOOR_FRAMES = 300  # the floor session's frames, after 30 unmeasured (its start), at 60 Hz of scene time
-FLOOR_WARMUP = 30
+FLOOR_FRAMES = 300  # the floor session's frames measured, streamed unpaced, 60 Hz of scene time (5 s)
+FLOOR_WARMUP = 30  # its frames before those, not measured: a session's start (its scene, its first solves) is no floor
 ROOT = Path(__file__).resolve().parents[1]
 
 
